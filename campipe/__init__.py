@@ -1,0 +1,6 @@
+"""campipe: parametric studies of cam-driven valve-train dynamics.
+
+``import campipe`` stays light: rerun and dask.distributed are imported only where used.
+"""
+
+__version__ = "0.1.0"

@@ -1,0 +1,85 @@
+"""One pint registry for the whole package, and the parsing of quantities with units.
+
+Specs and ``--set`` write quantities as strings with units (``"9 in"``, ``"245 lbf/in"``,
+``"9524 rpm"``); the numerics work in SI floats. Parsing goes through pint's own parser, which
+never evaluates Python code.
+"""
+
+from __future__ import annotations
+
+import pint
+
+ureg = pint.UnitRegistry()
+Q_ = ureg.Quantity
+
+
+class QuantityError(ValueError):
+    """A quantity that is missing its units, has the wrong dimension, or does not parse."""
+
+
+def parse_quantity(
+    text: str | float | int, units: str, key: str, example_units: str | None = None
+) -> float:
+    """Parse ``text`` as a quantity and return its magnitude in ``units``.
+
+    Parameters
+    ----------
+    text : str, float or int
+        A quantity with units, such as ``"9 in"``. A bare number is accepted only where
+        ``units`` is dimensionless.
+    units : str
+        The units to convert to (pint spelling), ``""`` for dimensionless.
+    key : str
+        The key the value came from, named in any error.
+    example_units : str, optional
+        Units to suggest in error messages (defaults to ``units``).
+
+    Raises
+    ------
+    QuantityError
+        With the key, what was found and what is expected.
+    """
+    target = ureg.Unit(units) if units else ureg.dimensionless
+    dimensionless = target.dimensionless
+    example = example_units or _example_unit(target)
+    if isinstance(text, bool) or not isinstance(text, (str, int, float)):
+        raise QuantityError(
+            f"{key}: expected a quantity such as '1 {example}', found {text!r}"
+        )
+    if isinstance(text, (int, float)):
+        if dimensionless:
+            return float(text)
+        raise QuantityError(
+            f"{key}: found the bare number {text!r}; write it with units, "
+            f"e.g. '{text} {example}'"
+        )
+    try:
+        q = ureg.Quantity(text.strip())
+    except Exception as exc:  # pint raises several unrelated types on bad text
+        raise QuantityError(
+            f"{key}: cannot read {text!r} as a quantity ({exc}); "
+            f"write a number and a unit, e.g. '1 {example}'"
+        ) from None
+    if not isinstance(q, pint.Quantity):
+        q = Q_(float(q), "")
+    if q.dimensionless and not dimensionless:
+        raise QuantityError(
+            f"{key}: found {text!r} without units; write it with units, "
+            f"e.g. '{text.strip()} {example}'"
+        )
+    try:
+        return float(q.to(target).magnitude)
+    except pint.DimensionalityError:
+        raise QuantityError(
+            f"{key}: found {text!r} [{q.dimensionality}], expected a quantity convertible "
+            f"to {example} [{target.dimensionality}]"
+        ) from None
+
+
+def _example_unit(unit: pint.Unit) -> str:
+    return f"{unit:~}" if not unit.dimensionless else ""
+
+
+def convert(value: float, from_units: str, to_units: str) -> float:
+    """Convert a float between two pint unit spellings."""
+    return float(Q_(value, from_units).to(to_units).magnitude)
