@@ -1,0 +1,86 @@
+"""The four contact configurations and the quantities the integrators need from them.
+
+Thesis Ch. III and Table I: I cam contact (q1 prescribed by the cam), II free, III cam and seat
+(q1 and q7 prescribed), IV seat only (q7 prescribed). Pure numpy on one case's matrices.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from campipe.model.assembly import CONFIGURATIONS
+
+CAM, SEAT = 0, 6  # the two contact coordinates (q1, q7), 0-based
+
+#: HELD[c - 1, i]: coordinate i is prescribed in configuration c.
+HELD = np.array(
+    [[i not in CONFIGURATIONS[c] for i in range(7)] for c in (1, 2, 3, 4)], dtype=np.bool_
+)
+
+
+def configuration(cam: bool, seat: bool) -> int:
+    """The configuration number (1–4) for the contacts that hold."""
+    return {(True, False): 1, (False, False): 2, (True, True): 3, (False, True): 4}[(cam, seat)]
+
+
+def effective_mass_inverses(mass, damping, stiffness, dt: float) -> np.ndarray:
+    """(4, 7, 7): inverse of M + Δt/2·C + Δt²/6·K over each configuration's free coordinates,
+    zero in the held rows and columns (thesis Eq. 67, partitioned as in Appendix A)."""
+    meff = mass + 0.5 * dt * damping + dt * dt / 6.0 * stiffness
+    out = np.zeros((4, 7, 7))
+    for c in (1, 2, 3, 4):
+        free = list(CONFIGURATIONS[c])
+        out[c - 1][np.ix_(free, free)] = np.linalg.inv(meff[np.ix_(free, free)])
+    return out
+
+
+def impact_mass(mass: np.ndarray, struck: int, configuration_after: int) -> float:
+    """Effective mass [kg] at coordinate ``struck`` for an impulse there, the other held
+    coordinates of ``configuration_after`` fixed: M_pp − M_pf M_ff⁻¹ M_fp (Schur complement).
+
+    A perfectly plastic impact against an infinite mass that changes the struck coordinate's
+    velocity by Δv delivers the impulse m·Δv.
+    """
+    free = list(CONFIGURATIONS[configuration_after])
+    mpf = mass[struck, free]
+    return float(mass[struck, struck] - mpf @ np.linalg.solve(mass[np.ix_(free, free)], mpf))
+
+
+def impact_masses(mass: np.ndarray) -> np.ndarray:
+    """(4,) effective masses for: cam impact into I, cam impact into III, seat impact into IV,
+    seat impact into III."""
+    return np.array(
+        [
+            impact_mass(mass, CAM, 1),
+            impact_mass(mass, CAM, 3),
+            impact_mass(mass, SEAT, 4),
+            impact_mass(mass, SEAT, 3),
+        ]
+    )
+
+
+def quasi_static_state(
+    mass, damping, stiffness, load, held, held_q, held_v, held_a
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The static solution for the held coordinates' position, moving with the velocity that
+    solution has for their velocity; accelerations from the equation of motion (thesis
+    Appendix B, step 1).
+
+    Parameters
+    ----------
+    held : (7,) bool
+        Prescribed coordinates.
+    held_q, held_v, held_a : (7,) float
+        Their displacement [m], velocity [m/s] and acceleration [m/s²] (other entries ignored).
+    """
+    free = np.flatnonzero(~held)
+    fixed = np.flatnonzero(held)
+    q = np.where(held, held_q, 0.0)
+    v = np.where(held, held_v, 0.0)
+    a = np.where(held, held_a, 0.0)
+    kff = stiffness[np.ix_(free, free)]
+    q[free] = np.linalg.solve(kff, load[free] - stiffness[np.ix_(free, fixed)] @ q[fixed])
+    v[free] = np.linalg.solve(kff, -stiffness[np.ix_(free, fixed)] @ v[fixed])
+    rhs = load - stiffness @ q - damping @ v - mass[:, fixed] @ a[fixed]
+    a[free] = np.linalg.solve(mass[np.ix_(free, free)], rhs[free])
+    return q, v, a

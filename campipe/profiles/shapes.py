@@ -1,0 +1,186 @@
+"""The kinds of cam profile: the thesis's harmonic cam, polydyne rises and measured tables.
+
+Each constructor returns a :class:`~campipe.profiles.pieces.Profile` in the common piecewise
+form; angles in radians, lifts in metres.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import numpy.typing as npt
+from numpy.polynomial import Polynomial
+from scipy.interpolate import CubicSpline
+
+from campipe.profiles.pieces import (
+    BREAK_TOL,
+    N_COEFFS,
+    TWO_PI,
+    Profile,
+    format_angle,
+    format_length,
+    shift_polynomial,
+)
+
+#: Normalised polydyne rises P(u), P(0) = 0, P(1) = 1, ascending coefficients (thesis
+#: Eqs. 29–34): "345" matches lift, velocity and acceleration at both ends, "4567" also jerk.
+POLYDYNE_POLYNOMIALS: dict[str, tuple[float, ...]] = {
+    "345": (0.0, 0.0, 0.0, 10.0, -15.0, 6.0, 0.0, 0.0),
+    "4567": (0.0, 0.0, 0.0, 0.0, 35.0, -84.0, 70.0, -20.0),
+}
+
+#: Fewest table points a periodic cubic spline is built from.
+MIN_TABLE_POINTS = 4
+
+
+def _finite(name: str, value: float) -> float:
+    value = float(value)
+    if not math.isfinite(value):
+        raise ValueError(f"{name} must be finite, got {value!r}")
+    return value
+
+
+def harmonic(lift: float) -> Profile:
+    """The thesis's harmonic cam: lift = h/2·(1 − sin θ).
+
+    The thesis drives the pushrod foot with q1 = 0.5 sin ωt [in], q1 pointing down: mid-lift
+    at θ = 0, base circle (lift 0) at 90°, nose (lift h) at 270° (shared/thesis/NOTES.md).
+
+    Parameters
+    ----------
+    lift : float
+        Full lift h, peak to peak [m] (thesis: 1 in).
+    """
+    h = _finite("lift", lift)
+    if h <= 0.0:
+        raise ValueError(f"lift must be > 0, got {h!r} m")
+    poly = np.zeros((1, N_COEFFS))
+    poly[0, 0] = 0.5 * h
+    return Profile(
+        np.array([0.0, TWO_PI]), poly, np.array([[-0.5 * h, 0.0]]), f"harmonic {format_length(h)}"
+    )
+
+
+def polydyne(kind: str, lift: float, rise: float, dwell: float, fall: float) -> Profile:
+    """A polydyne cam: rise, dwell at full lift, fall, dwell on the base circle.
+
+    The rise from θ = 0 is h·P(θ/β), the fall h·P(1 − u) with u local to the fall, and the
+    base-circle dwell takes the rest of the turn (thesis Eqs. 29–34, Figures 35–36).
+
+    Parameters
+    ----------
+    kind : {"345", "4567"}
+        The normalised polynomial, see ``POLYDYNE_POLYNOMIALS``.
+    lift : float
+        Full lift h [m].
+    rise : float
+        Angle of the rise β [rad].
+    dwell : float
+        Angle of the dwell at full lift [rad]; 0 for none.
+    fall : float
+        Angle of the fall [rad].
+
+    Raises
+    ------
+    ValueError
+        For an unknown kind, lift ≤ 0, rise or fall ≤ 0, dwell < 0, or rise + dwell + fall
+        more than one turn (exactly one turn leaves no base-circle dwell).
+    """
+    kind = str(kind)
+    if kind not in POLYDYNE_POLYNOMIALS:
+        raise ValueError(f"kind must be one of {sorted(POLYDYNE_POLYNOMIALS)}, got {kind!r}")
+    h = _finite("lift", lift)
+    rise = _finite("rise", rise)
+    dwell = _finite("dwell", dwell)
+    fall = _finite("fall", fall)
+    if h <= 0.0:
+        raise ValueError(f"lift must be > 0, got {h!r} m")
+    if rise <= 0.0:
+        raise ValueError(f"rise must be > 0, got {rise!r} rad")
+    if fall <= 0.0:
+        raise ValueError(f"fall must be > 0, got {fall!r} rad")
+    if dwell < 0.0:
+        raise ValueError(f"dwell must be ≥ 0, got {dwell!r} rad")
+    total = rise + dwell + fall
+    if total > TWO_PI + BREAK_TOL:
+        raise ValueError(
+            f"rise + dwell + fall must be at most one turn (360 deg), got {format_angle(total)} deg"
+        )
+
+    p = np.array(POLYDYNE_POLYNOMIALS[kind])
+    k = np.arange(N_COEFFS)
+    q = Polynomial(p)(Polynomial([1.0, -1.0])).coef
+    fall_p = np.zeros(N_COEFFS)
+    fall_p[: q.size] = q
+
+    rows = [h * p / rise**k]
+    breaks = [0.0, rise]
+    # a dwell shorter than any break spacing would be a zero-length piece: leave it out
+    if dwell > BREAK_TOL:
+        rows.append(np.eye(1, N_COEFFS)[0] * h)
+        breaks.append(rise + dwell)
+    rows.append(h * fall_p / fall**k)
+    base = TWO_PI - total
+    if base > BREAK_TOL:
+        breaks.append(total)
+        rows.append(np.zeros(N_COEFFS))
+    breaks.append(TWO_PI)
+    poly = np.array(rows)
+    label = (
+        f"polydyne-{kind} {format_length(h)} {format_angle(rise)}/{format_angle(dwell)}/"
+        f"{format_angle(fall)}/{format_angle(max(base, 0.0))} deg"
+    )
+    return Profile(np.array(breaks), poly, np.zeros((poly.shape[0], 2)), label)
+
+
+def table(angles: npt.ArrayLike, lifts: npt.ArrayLike) -> Profile:
+    """A measured lift table over one turn, smoothed by a periodic cubic spline.
+
+    The spline makes lift, velocity and acceleration continuous everywhere, the wrap from
+    2π to 0 included; it passes through every point of the table.
+
+    Parameters
+    ----------
+    angles : array_like
+        (m,) cam angles [rad], strictly increasing within [0, 2π), m ≥ 4.
+    lifts : array_like
+        (m,) lifts at those angles [m].
+
+    Raises
+    ------
+    ValueError
+        For fewer than 4 points, mismatched lengths, non-finite values, angles outside
+        [0, 2π) or not strictly increasing.
+    """
+    a = np.asarray(angles, dtype=float)
+    y = np.asarray(lifts, dtype=float)
+    if a.ndim != 1 or y.ndim != 1 or a.shape != y.shape:
+        raise ValueError(
+            f"angles and lifts must be 1-D arrays of the same length, got {a.shape} and {y.shape}"
+        )
+    if a.size < MIN_TABLE_POINTS:
+        raise ValueError(f"a lift table needs at least {MIN_TABLE_POINTS} points, got {a.size}")
+    if not (np.isfinite(a).all() and np.isfinite(y).all()):
+        raise ValueError("lift table angles and lifts must be finite (found NaN or inf)")
+    if a[0] < 0.0 or a[-1] >= TWO_PI:
+        raise ValueError(f"lift table angles must lie within [0, 2π) rad, got {a[0]!r} … {a[-1]!r}")
+    if not np.all(np.diff(a) > 0.0):
+        raise ValueError("lift table angles must be strictly increasing")
+
+    spline = CubicSpline(np.append(a, a[0] + TWO_PI), np.append(y, y[0]), bc_type="periodic")
+    poly = np.zeros((a.size, N_COEFFS))
+    poly[:, :4] = spline.c[::-1].T  # PPoly holds descending powers of the local variable
+    breaks = np.append(a, TWO_PI)
+    if a[0] <= BREAK_TOL:
+        # first point at (or within round-off of) 0: re-expand its piece about 0 exactly
+        poly[0] = shift_polynomial(poly[0], -a[0])
+        breaks[0] = 0.0
+    else:
+        # the last spline piece runs from a[-1] through 2π to a[0] + 2π: its part past 2π is
+        # the first piece of the turn, re-expanded about 0
+        head = shift_polynomial(poly[-1], TWO_PI - a[-1])
+        poly = np.vstack([head, poly])
+        breaks = np.concatenate([[0.0], breaks])
+    label = f"table {a.size} points"
+    return Profile(breaks, poly, np.zeros((poly.shape[0], 2)), label)

@@ -1,0 +1,237 @@
+"""The thesis engine (newmark-linear) against the thesis's results and physical checks."""
+
+import math
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose, assert_array_equal
+
+from campipe.engine import (
+    Case,
+    RunSettings,
+    StabilityError,
+    member_loads,
+    run_batch,
+    stability_limit,
+)
+from campipe.engine.batch import _matrices, initial_state, valve_reference
+from campipe.engine.contact import impact_masses
+from campipe.engine.newmark import CAM_IMPACT, CAM_SEPARATION, EV_KIND, EV_TIME
+from campipe.model import thesis_train
+from campipe.profiles import flat, harmonic, polydyne
+from campipe.units import convert
+
+INCH = 0.0254
+LBF = convert(1.0, "lbf", "N")
+TRAIN = thesis_train()
+CAM = harmonic(1.0 * INCH)
+DT = 1e-6
+
+
+def rpm(r):
+    return r * 2 * math.pi / 60
+
+
+def run(cases, revolutions=4, dt=DT, **kw):
+    return run_batch(cases, RunSettings(revolutions=revolutions, dt=dt, **kw))
+
+
+@pytest.fixture(scope="module")
+def no_seat():
+    speeds = [9000, 9524, 11000, 20000]
+    res = run([Case(TRAIN, CAM, rpm(r)) for r in speeds])
+    return dict(zip(speeds, range(4), strict=True)), res
+
+
+def sep_deg(res, i):
+    return np.degrees(res.separation_per_rev[i])
+
+
+def test_no_separation_at_9000_rpm_after_the_first_revolution(no_seat):
+    idx, res = no_seat
+    i = idx[9000]
+    assert np.all(sep_deg(res, i)[1:] == 0.0)
+    ev = res.events[i]
+    assert not np.any(ev[:, EV_TIME] > 2 * math.pi / rpm(9000))
+    assert np.all(res.cam_force[i, 360:] > 0)  # the cam always pushes
+
+
+def test_separation_begins_between_9000_and_9524_rpm(no_seat):
+    idx, res = no_seat
+    assert sep_deg(res, idx[9524])[-1] > 0.0
+
+
+def test_45_to_60_degrees_of_separation_per_revolution_at_9524_rpm(no_seat):
+    idx, res = no_seat
+    last = sep_deg(res, idx[9524])[1:]
+    assert np.all((last >= 45.0) & (last <= 60.0)), last
+
+
+def test_more_than_150_degrees_with_a_rebounce_at_11000_rpm(no_seat):
+    idx, res = no_seat
+    i = idx[11000]
+    assert np.all(sep_deg(res, i)[1:] > 150.0)
+    ev = res.events[i]
+    period = 2 * math.pi / rpm(11000)
+    last_rev = ev[ev[:, EV_TIME] >= 3 * period]
+    # Thrown off, lands, bounces off again: two separations and two impacts per turn.
+    assert np.sum(last_rev[:, EV_KIND] == CAM_SEPARATION) >= 2
+    assert np.sum(last_rev[:, EV_KIND] == CAM_IMPACT) >= 2
+    # Thrown further than at 9524 rpm: visible separation between follower and cam.
+    gap = res.follower_lift[i] - res.cam_lift[i]
+    assert gap.max() > 0.05 * INCH
+
+
+def test_never_settles_at_20000_rpm(no_seat):
+    idx, res = no_seat
+    i = idx[20000]
+    period = 2 * math.pi / rpm(20000)
+    ev = res.events[i]
+    for rev in range(1, 4):
+        in_rev = ev[(ev[:, EV_TIME] >= rev * period) & (ev[:, EV_TIME] < (rev + 1) * period)]
+        # Every turn: lands on the cam and is thrown off again.
+        assert np.sum(in_rev[:, EV_KIND] == CAM_IMPACT) >= 1
+        assert np.sum(in_rev[:, EV_KIND] == CAM_SEPARATION) >= 1
+    # Never in contact for long: the longest contact stretch after the first turn is short.
+    state = "".join("c" if s == 1 else " " for s in res.contact_state[i, 360:])
+    assert max(len(stretch) for stretch in state.split()) < 90  # degrees
+    assert np.all(sep_deg(res, i)[1:] > 180.0)
+    assert res.max_cam_impact_velocity[i] > res.max_cam_impact_velocity[idx[11000]]
+
+
+def test_seat_bounce_visits_all_configurations():
+    seat = 0.1 * INCH
+    res = run([Case(TRAIN, CAM, rpm(r), seat=seat) for r in (1000, 5000, 13205)], revolutions=2)
+    for i in range(3):
+        assert res.seat_impacts[i] >= 1
+        assert res.cam_impacts[i] >= 1
+        visited = {int(x) for ev in res.events[i] for x in ev[2:4]}
+        assert visited == {1, 2, 3, 4}, visited
+        # The valve never goes through its seat by more than a step's travel.
+        assert res.valve_lift[i].min() > seat - 1e-3 * INCH
+        assert np.all(res.seat_force[i] >= 0)
+    # Seating gets harder with speed.
+    assert res.max_seating_velocity[2] > res.max_seating_velocity[0]
+
+
+def test_undamped_at_the_fundamental_the_contact_force_barely_swings():
+    """Figure 34: at 6485 rpm (ω1) the spring supplies the train's inertia, so the cam force
+    stays near its mean; off resonance it swings with the spring's full stroke."""
+    undamped = TRAIN.replace(damping_ratios=(0.0,) * 7)
+    omega1 = _matrices(undamped).frequencies[0]
+    res = run([Case(undamped, CAM, omega1), Case(undamped, CAM, rpm(3000))], revolutions=3)
+    swing = [np.ptp(res.cam_force[i, 720:]) / 2 / LBF for i in range(2)]
+    assert swing[0] < 15.0  # the thesis: "about 10 pounds"
+    assert swing[1] > 150.0
+
+
+@pytest.mark.parametrize(
+    "case",
+    [
+        Case(TRAIN, CAM, rpm(20000)),
+        Case(TRAIN, CAM, rpm(13205), seat=0.1 * INCH),
+        Case(TRAIN.replace(damping_ratios=(0.0,) * 7), CAM, rpm(11000)),
+        Case(TRAIN, flat(CAM, math.radians(268), math.radians(272)), rpm(15000)),
+    ],
+    ids=["20000rpm", "seat-13205rpm", "undamped", "flat-15000rpm"],
+)
+def test_hard_cases_finish_finite(case):
+    res = run([case], revolutions=3)
+    for a in (res.q, res.cam_force, res.seat_force):
+        assert np.isfinite(a).all()
+    # The follower never sinks into the cam by more than one step's travel (≈ v·Δt) …
+    gap = res.follower_lift - res.cam_lift
+    assert gap.min() > -res.max_cam_impact_velocity[0] * DT - 1e-9
+    # … nor the valve into its seat, and nothing flies off to infinity.
+    if case.has_seat:
+        assert res.valve_lift.min() > case.seat - res.max_seating_velocity[0] * DT - 1e-9
+    assert gap.max() < 3 * INCH
+
+
+def test_step_just_under_the_limit_runs_and_just_over_is_refused():
+    case = Case(TRAIN, CAM, rpm(13205), seat=0.1 * INCH)
+    limit = stability_limit(case)
+    assert_allclose(limit, 3.24e-6, rtol=2e-3)
+    res = run([case], revolutions=1, dt=0.99 * limit)
+    assert np.isfinite(res.q).all()
+    assert np.abs(res.valve_lift).max() < 2 * INCH
+    with pytest.raises(StabilityError, match=r"3\.2\d* µs"):
+        run([case], revolutions=1, dt=1.01 * limit)
+
+
+def test_a_mixed_batch_equals_each_case_alone():
+    cases = [
+        Case(TRAIN, CAM, rpm(9524)),
+        Case(TRAIN.replace(spring_preload=120 * LBF), CAM, rpm(11000), seat=0.05 * INCH),
+        Case(TRAIN, polydyne("4567", INCH, *np.radians([90, 90, 90])), rpm(9000),
+             closure="form"),
+        Case(TRAIN, flat(CAM, math.radians(268), math.radians(272)), rpm(15000)),
+    ]
+    together = run(cases, revolutions=2)
+    for i, case in enumerate(cases):
+        alone = run([case], revolutions=2)
+        assert_array_equal(together.q[i], alone.q[0])
+        assert_array_equal(together.cam_force[i], alone.cam_force[0])
+        assert_array_equal(together.events[i], alone.events[0])
+        assert_array_equal(together.separation_per_rev[i], alone.separation_per_rev[0])
+
+
+def test_form_closure_never_leaves_the_cam():
+    prof = polydyne("4567", INCH, *np.radians([90, 90, 90]))
+    res = run([Case(TRAIN, prof, rpm(20000), closure="form")], revolutions=2)
+    assert np.all(res.contact_state == 1)
+    assert_allclose(res.follower_lift, res.cam_lift, atol=1e-15)
+    assert res.separation_per_rev.max() == 0.0
+    assert res.cam_force.min() < 0  # at 20000 rpm the second cam has to pull
+
+
+@pytest.mark.parametrize("speed_rpm", [6000, 9000])
+def test_flat_edges_throw_the_follower_off_for_the_estimated_hop(speed_rpm):
+    """Across the nose both edges of the thesis's flat (268°–272°) are surfaces falling away:
+    the follower leaves with the velocity jump v and its own mass m at the cam (the mass an
+    impulse there meets) is brought back by the contact force F in 2·m·v/F."""
+    speed = rpm(speed_rpm)
+    start = math.radians(268)
+    prof = flat(CAM, start, math.radians(272))
+    res = run([Case(TRAIN, prof, speed)], revolutions=2)
+    ev = res.events[0]
+    ev = ev[ev[:, EV_TIME] > 2 * math.pi / speed]
+    assert ev[0, EV_KIND] == CAM_SEPARATION and ev[1, EV_KIND] == CAM_IMPACT
+    assert_allclose(ev[0, EV_TIME] * speed - 2 * math.pi, start, atol=1e-9)
+    v = speed * INCH / 2 * abs(math.cos(start))
+    assert_allclose(ev[0, 4], v, rtol=1e-9)  # the velocity jump, recorded with the event
+    m = impact_masses(_matrices(TRAIN).mass)[0]
+    ref = run([Case(TRAIN, CAM, speed)], revolutions=2)
+    force = ref.cam_force[0, 360 + 268]
+    estimate = 2 * m * v / force
+    hop = ev[1, EV_TIME] - ev[0, EV_TIME]
+    assert_allclose(hop, estimate, rtol=0.25)
+    # Both edges release the follower; the cam never pulls it (force ≥ 0 throughout).
+    assert np.sum(ev[:, EV_KIND] == CAM_SEPARATION) >= 2
+    assert res.cam_force.min() >= 0.0
+
+
+def test_initial_state_is_quasi_static():
+    sm = _matrices(TRAIN)
+    case = Case(TRAIN, CAM, rpm(9000))
+    q, v, a, cfg = initial_state(case, sm, valve_reference(sm))
+    assert cfg == 1
+    assert_allclose(-q[0], INCH / 2)  # θ = 0 is mid-lift
+    # Pushrod and stem rigid-ish: valve lift ≈ 1.5 × cam lift above the base-circle position.
+    assert_allclose(q[6] - valve_reference(sm), 1.5 * INCH / 2, rtol=0.01)
+    # Velocity of the static solution: the valve closes at 1.5× the cam's lift rate.
+    assert_allclose(v[6], -1.5 * rpm(9000) * INCH / 2, rtol=0.01)
+
+
+def test_member_loads_at_static_equilibrium():
+    sm = _matrices(TRAIN)
+    case = Case(TRAIN, CAM, rpm(1))
+    q, _, _, _ = initial_state(case, sm, valve_reference(sm))
+    loads = member_loads(TRAIN, q)
+    spring = TRAIN.spring_preload + TRAIN.spring_rate * (1.5 * INCH / 2)
+    ratio = TRAIN.rocker_valve_arm_length / TRAIN.rocker_pushrod_arm_length
+    assert_allclose(loads["spring_force"], spring, rtol=0.01)
+    assert_allclose(loads["pushrod_force"], ratio * loads["spring_force"], rtol=1e-6)
+    assert_allclose(loads["stem_force"], 0.0, atol=1e-9)
+    assert_allclose(abs(loads["rocker_moment"]),
+                    loads["spring_force"] * TRAIN.rocker_valve_arm_length, rtol=1e-6)
