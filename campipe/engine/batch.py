@@ -22,7 +22,7 @@ from campipe.engine.contact import (
     impact_masses,
     quasi_static_state,
 )
-from campipe.model import CONFIGURATIONS, ROMAN, ValveTrain, system_matrices
+from campipe.model import ROMAN, ValveTrain, system_matrices
 from campipe.model.assembly import SystemMatrices, configuration_frequencies
 from campipe.model.assembly import NEWMARK_LINEAR_OMEGA_DT
 from campipe.profiles import Profile, evaluate, pack
@@ -105,6 +105,33 @@ def _matrices(train: ValveTrain) -> SystemMatrices:
     return system_matrices(train)
 
 
+@dataclass(frozen=True)
+class Prepared:
+    """What a step size and a train fix for every case that shares them (cached)."""
+
+    matrices: SystemMatrices  # M, C, K, modes, preload
+    minv: np.ndarray  # (4, 7, 7) effective-mass inverses per configuration
+    impact_masses: np.ndarray  # (4,) see contact.impact_masses [kg]
+    valve_reference: float  # q7 at zero valve lift [m]
+    limits: np.ndarray  # (4,) newmark-linear stability limit per configuration [s]
+
+
+@functools.lru_cache(maxsize=256)
+def prepare(train: ValveTrain, dt: float) -> Prepared:
+    sm = _matrices(train)
+    limits = np.array([
+        NEWMARK_LINEAR_OMEGA_DT / configuration_frequencies(sm.mass, sm.stiffness, c).max()
+        for c in (1, 2, 3, 4)
+    ])
+    return Prepared(
+        sm,
+        effective_mass_inverses(sm.mass, sm.damping, sm.stiffness, dt),
+        impact_masses(sm.mass),
+        valve_reference(sm),
+        limits,
+    )
+
+
 def visited_configurations(case: Case) -> tuple[int, ...]:
     """The configurations a case can reach: no seat keeps it in I/II; form closure in I/III."""
     if case.closure == "form":
@@ -114,25 +141,17 @@ def visited_configurations(case: Case) -> tuple[int, ...]:
 
 def stability_limit(case: Case) -> float:
     """Largest stable step [s] of newmark-linear over the configurations the case can visit."""
-    sm = _matrices(case.train)
-    return min(
-        NEWMARK_LINEAR_OMEGA_DT / configuration_frequencies(sm.mass, sm.stiffness, c).max()
-        for c in visited_configurations(case)
-    )
+    limits = prepare(case.train, 0.0).limits
+    return float(min(limits[c - 1] for c in visited_configurations(case)))
 
 
 def check_stability(cases: Sequence[Case], settings: RunSettings) -> None:
     """Refuse a step beyond the stability limit of any configuration a case can visit."""
     for i, case in enumerate(cases):
-        limit = stability_limit(case)
+        limits = prepare(case.train, 0.0).limits
+        worst = min(visited_configurations(case), key=lambda c: limits[c - 1])
+        limit = limits[worst - 1]
         if settings.dt >= limit:
-            worst = min(
-                visited_configurations(case),
-                key=lambda c: NEWMARK_LINEAR_OMEGA_DT
-                / configuration_frequencies(
-                    _matrices(case.train).mass, _matrices(case.train).stiffness, c
-                ).max(),
-            )
             raise StabilityError(
                 f"run.dt: {settings.dt * 1e6:.4g} µs is beyond the stability limit of "
                 f"{settings.integrator} for case {i} ({limit * 1e6:.4g} µs, configuration "
@@ -204,24 +223,26 @@ def run_batch(cases: Sequence[Case], settings: RunSettings) -> BatchResult:
     n_out = angles.size
     n_rev = int(math.ceil(settings.revolutions - 1e-12))
 
-    M = np.empty((n, 7, 7))
-    C = np.empty((n, 7, 7))
-    K = np.empty((n, 7, 7))
-    load = np.empty((n, 7))
-    minv = np.empty((n, 4, 7, 7))
+    NP = newmark.NP
+    M = np.zeros((n, NP, NP))
+    C = np.zeros((n, NP, NP))
+    K = np.zeros((n, NP, NP))
+    load = np.zeros((n, NP))
+    minv = np.zeros((n, 4, NP, NP))
     meff = np.empty((n, 4))
-    q0 = np.empty((n, 7))
-    v0 = np.empty((n, 7))
-    a0 = np.empty((n, 7))
+    q0 = np.zeros((n, NP))
+    v0 = np.zeros((n, NP))
+    a0 = np.zeros((n, NP))
     cfg0 = np.empty(n, np.int64)
     seat_q = np.zeros(n)
     qref = np.empty(n)
     for i, case in enumerate(cases):
-        sm = _matrices(case.train)
+        prep = prepare(case.train, settings.dt)
+        sm = prep.matrices
         M[i], C[i], K[i], load[i] = sm.mass, sm.damping, sm.stiffness, sm.preload
-        minv[i] = effective_mass_inverses(sm.mass, sm.damping, sm.stiffness, settings.dt)
-        meff[i] = impact_masses(sm.mass)
-        qref[i] = valve_reference(sm)
+        minv[i] = prep.minv
+        meff[i] = prep.impact_masses
+        qref[i] = prep.valve_reference
         seat_q[i] = qref[i] + (case.seat if case.has_seat else 0.0)
         q0[i], v0[i], a0[i], cfg0[i] = initial_state(case, sm, seat_q[i])
     omega = np.array([c.speed for c in cases], dtype=float)

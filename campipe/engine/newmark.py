@@ -38,6 +38,11 @@ N_EVENT_FIELDS = 6
 OK, NONFINITE, EVENTS_TRUNCATED = 0, 1, 2
 
 TWO_PI = 2.0 * np.pi
+#: Let LLVM reassociate and fuse floating-point operations, but keep NaN and inf semantics:
+#: the kernel's finiteness check must keep working.
+FAST = {"contract", "reassoc", "nsz", "arcp"}
+#: Number of coordinates.
+NP = 7
 
 
 @njit(cache=True, nogil=True)
@@ -93,6 +98,19 @@ def _record(events, n_events, c, t, kind, c_from, c_to, velocity, impulse):
     n_events[c] = k + 1
 
 
+@njit(cache=True, nogil=True, fastmath=FAST)
+def _row_force(M, C, K, load, c, i, a, v, q):
+    """Contact force at coordinate i: row i of M·a + C·v + K·q − load (thesis Eqs. 26, 27)."""
+    fm = 0.0
+    fc = 0.0
+    fk = 0.0
+    for j in range(NP):
+        fm += M[c, i, j] * a[j]
+        fc += C[c, i, j] * v[j]
+        fk += K[c, i, j] * q[j]
+    return fm + fc + fk - load[c, i]
+
+
 @njit(cache=True, nogil=True)
 def _config(cam, seat):
     if cam:
@@ -100,7 +118,7 @@ def _config(cam, seat):
     return 4 if seat else 2
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, fastmath=FAST)
 def newmark_linear_batch(
     M, C, K, load, minv, meff, q0, v0, a0, cfg0,
     seat_q, has_seat, form, omega, dt, n_steps,
@@ -120,23 +138,27 @@ def newmark_linear_batch(
     n_cases = M.shape[0]
     n_out = q_out.shape[1]
     n_rev = sep_rev.shape[1]
-    q = np.empty(7)
-    v = np.empty(7)
-    a = np.empty(7)
-    qn = np.empty(7)
-    vn = np.empty(7)
-    an = np.empty(7)
-    qt = np.empty(7)
-    vt = np.empty(7)
-    at = np.empty(7)
-    al = np.empty(7)
-    ps = np.empty(7)
-    rhs = np.empty(7)
+    q = np.zeros(NP)
+    v = np.zeros(NP)
+    a = np.zeros(NP)
+    qn = np.zeros(NP)
+    vn = np.zeros(NP)
+    an = np.zeros(NP)
+    qt = np.zeros(NP)
+    vt = np.zeros(NP)
+    at = np.zeros(NP)
+    al = np.zeros(NP)
+    ps = np.zeros(NP)
+    rhs = np.zeros(NP)
     for c in range(n_cases):
         h = dt[c]
         w = omega[c]
+        Kc = K[c]
+        Cc = C[c]
+        Mc = M[c]
+        fc = load[c]
         qs = seat_q[c]
-        for i in range(7):
+        for i in range(NP):
             q[i] = q0[c, i]
             v[i] = v0[c, i]
             a[i] = a0[c, i]
@@ -147,6 +169,11 @@ def newmark_linear_batch(
         quiet_seat = 0
         k_out = 0
         t_sample = 0.0
+        rev, p = locate(breaks, n_pieces, c, 0.0)
+        sd = np.sin(w * h)
+        cd = np.cos(w * h)
+        sn = 0.0
+        cs = 1.0
         for n in range(n_steps[c]):
             t0 = n * h
             t1 = (n + 1) * h
@@ -154,48 +181,64 @@ def newmark_linear_batch(
             th1 = w * t1
             cam_held = cfg == 1 or cfg == 3
             seat_held = cfg == 3 or cfg == 4
-            # Velocity jumps of the profile inside this step (breaks crossed).
-            if cam_held:
-                rev0, p0 = locate(breaks, n_pieces, c, th0)
-                rev1, p1 = locate(breaks, n_pieces, c, th1)
-                if rev0 != rev1 or p0 != p1:
-                    rev = rev0
-                    p = p0
-                    while rev != rev1 or p != p1:
-                        pn = p + 1
-                        revn = rev
-                        if pn == n_pieces[c]:
-                            pn = 0
-                            revn = rev + 1
-                        thb = (revn * TWO_PI) + breaks[c, pn]
-                        _, dl_left, _ = piece_eval(breaks, poly, trig, c, p, rev, thb)
-                        _, dl_right, _ = piece_eval(breaks, poly, trig, c, pn, revn, thb)
-                        jump = w * (dl_right - dl_left)  # lift-rate jump [m/s]
-                        scale = 1e-9 * (abs(w * dl_left) + abs(w * dl_right) + 1e-12)
-                        if jump < -scale and not form[c]:
-                            # The surface falls away: the follower keeps its velocity.
-                            new = _config(False, seat_held)
-                            _record(events, n_events, c, thb / w, CAM_SEPARATION, cfg, new,
-                                    -jump, 0.0)
-                            cfg = new
-                            cam_held = False
-                            break
-                        elif abs(jump) > scale:
-                            # The surface jumps into the follower (or, form-closed, drags it).
-                            impulse_cam = True
-                            counts[c, 0] += 1
-                            vmax[c, 0] = max(vmax[c, 0], abs(jump))
-                            mi = 1 if seat_held else 0
-                            _record(events, n_events, c, thb / w, CAM_IMPACT, cfg, cfg,
-                                    abs(jump), meff[c, mi] * abs(jump))
-                        rev = revn
-                        p = pn
-            lift1, dl1, ddl1 = cam_eval(breaks, poly, trig, n_pieces, c, th1)
+            # sin θ1, cos θ1 by rotation, refreshed exactly every 256 steps.
+            if n % 256 == 0:
+                sn = np.sin(th1)
+                cs = np.cos(th1)
+            else:
+                sn, cs = sn * cd + cs * sd, cs * cd - sn * sd
+            # Move the piece cursor to θ1; a velocity jump of the profile is a break crossed.
+            while True:
+                pn = p + 1
+                revn = rev
+                if pn == n_pieces[c]:
+                    pn = 0
+                    revn = rev + 1
+                thb = revn * TWO_PI + breaks[c, pn]
+                if th1 < thb:
+                    break
+                if cam_held:
+                    l_left, dl_left, _ = piece_eval(breaks, poly, trig, c, p, rev, thb)
+                    l_right, dl_right, _ = piece_eval(breaks, poly, trig, c, pn, revn, thb)
+                    jump = w * (dl_right - dl_left)  # lift-rate jump [m/s]
+                    scale = 1e-9 * (abs(w * dl_left) + abs(w * dl_right) + 1e-12)
+                    drop = l_right < l_left - 1e-12  # a step down in lift (the engine refuses up)
+                    if (jump < -scale or drop) and not form[c]:
+                        # The surface falls away: the follower keeps its velocity.
+                        new = _config(False, seat_held)
+                        _record(events, n_events, c, thb / w, CAM_SEPARATION, cfg, new,
+                                -jump, 0.0)
+                        cfg = new
+                        cam_held = False
+                    elif abs(jump) > scale:
+                        # The surface jumps into the follower (or, form-closed, drags it).
+                        impulse_cam = True
+                        counts[c, 0] += 1
+                        vmax[c, 0] = max(vmax[c, 0], abs(jump))
+                        mi = 1 if seat_held else 0
+                        _record(events, n_events, c, thb / w, CAM_IMPACT, cfg, cfg,
+                                abs(jump), meff[c, mi] * abs(jump))
+                p = pn
+                rev = revn
+            x = th1 - rev * TWO_PI - breaks[c, p]
+            lift1 = 0.0
+            dl1 = 0.0
+            ddl1 = 0.0
+            for k in range(7, -1, -1):
+                ddl1 = ddl1 * x + 2.0 * dl1
+                dl1 = dl1 * x + lift1
+                lift1 = lift1 * x + poly[c, p, k]
+            ta = trig[c, p, 0]
+            tb = trig[c, p, 1]
+            if ta != 0.0 or tb != 0.0:
+                lift1 += ta * sn + tb * cs
+                dl1 += ta * cs - tb * sn
+                ddl1 -= ta * sn + tb * cs
             qc = -lift1
             vc = -w * dl1
             ac = -w * w * ddl1
             # Thesis Appendix B, steps 2–6, over the free coordinates of this configuration.
-            for i in range(7):
+            for i in range(NP):
                 al[i] = v[i] + 0.5 * h * a[i]
                 ps[i] = q[i] + h * v[i] + h * h / 3.0 * a[i]
                 qt[i] = ps[i]
@@ -209,35 +252,42 @@ def newmark_linear_batch(
                 qt[6] = qs
                 vt[6] = 0.0
                 at[6] = (0.0 - v[6]) / h if impulse_seat else 0.0
-            for i in range(7):
-                s = load[c, i]
-                for j in range(7):
-                    s -= K[c, i, j] * qt[j] + C[c, i, j] * vt[j] + M[c, i, j] * at[j]
-                rhs[i] = s
-            ci = cfg - 1
-            for i in range(7):
-                held = (i == 0 and cam_held) or (i == 6 and seat_held)
-                if held:
-                    qn[i] = qt[i]
-                    vn[i] = vt[i]
-                    an[i] = at[i]
-                else:
-                    s = 0.0
-                    for j in range(7):
-                        s += minv[c, ci, i, j] * rhs[j]
-                    an[i] = s
-                    vn[i] = al[i] + 0.5 * h * s
-                    qn[i] = ps[i] + h * h / 6.0 * s
+            # Column by column (the matrices are symmetric), so the seven row sums advance
+            # together instead of as seven serial chains. Only the contact coordinates can
+            # carry a prescribed acceleration.
+            a0h = at[0]
+            a6h = at[6]
+            for i in range(NP):
+                rhs[i] = fc[i] - Mc[0, i] * a0h - Mc[6, i] * a6h
+            for j in range(NP):
+                qj = qt[j]
+                vj = vt[j]
+                for i in range(NP):
+                    rhs[i] -= Kc[j, i] * qj + Cc[j, i] * vj
+            mi_c = minv[c, cfg - 1]
+            for i in range(NP):
+                an[i] = 0.0
+            for j in range(NP):
+                rj = rhs[j]
+                for i in range(NP):
+                    an[i] += mi_c[j, i] * rj
+            for i in range(NP):
+                vn[i] = al[i] + 0.5 * h * an[i]
+                qn[i] = ps[i] + h * h / 6.0 * an[i]
+            if cam_held:
+                qn[0] = qt[0]
+                vn[0] = vt[0]
+                an[0] = at[0]
+            if seat_held:
+                qn[6] = qt[6]
+                vn[6] = vt[6]
+                an[6] = at[6]
             f1 = 0.0
             f7 = 0.0
             if cam_held:
-                f1 = -load[c, 0]
-                for j in range(7):
-                    f1 += M[c, 0, j] * an[j] + C[c, 0, j] * vn[j] + K[c, 0, j] * qn[j]
+                f1 = _row_force(M, C, K, load, c, 0, an, vn, qn)
             if seat_held:
-                f7 = -load[c, 6]
-                for j in range(7):
-                    f7 += M[c, 6, j] * an[j] + C[c, 6, j] * vn[j] + K[c, 6, j] * qn[j]
+                f7 = _row_force(M, C, K, load, c, 6, an, vn, qn)
             if impulse_cam:
                 quiet_cam = 2
             if impulse_seat:
@@ -262,7 +312,7 @@ def newmark_linear_batch(
                 if k_out == 0:
                     tau = 0.0
                 r = tau / h
-                for i in range(7):
+                for i in range(NP):
                     da = an[i] - a[i]
                     qt[i] = q[i] + v[i] * tau + 0.5 * a[i] * tau * tau + da * tau * tau * r / 6.0
                     vt[i] = v[i] + a[i] * tau + 0.5 * da * tau * r
@@ -276,19 +326,12 @@ def newmark_linear_batch(
                     qt[6] = qs
                     vt[6] = 0.0
                     at[6] = 0.0
-                fs1 = 0.0
-                fs7 = 0.0
-                for j in range(7):
-                    if cam_held:
-                        fs1 += M[c, 0, j] * at[j] + C[c, 0, j] * vt[j] + K[c, 0, j] * qt[j]
-                    if seat_held:
-                        fs7 += M[c, 6, j] * at[j] + C[c, 6, j] * vt[j] + K[c, 6, j] * qt[j]
-                for i in range(7):
+                for i in range(NP):
                     q_out[c, k_out, i] = qt[i]
                 # A contact that the step end releases may show a little tension inside the
                 # step; a force-closed contact cannot pull, so it reports zero there.
-                fs1 = fs1 - load[c, 0] if cam_held else 0.0
-                fs7 = fs7 - load[c, 6] if seat_held else 0.0
+                fs1 = _row_force(M, C, K, load, c, 0, at, vt, qt) if cam_held else 0.0
+                fs7 = _row_force(M, C, K, load, c, 6, at, vt, qt) if seat_held else 0.0
                 force_out[c, k_out, 0] = fs1 if form[c] else min(fs1, 0.0)
                 force_out[c, k_out, 1] = max(fs7, 0.0)
                 cam_out[c, k_out] = ls
@@ -325,13 +368,13 @@ def newmark_linear_batch(
                 _record(events, n_events, c, t1, SEAT_IMPACT, cfg, _config(cam_next, True),
                         closing, meff[c, mi] * closing)
             cfg = _config(cam_next, seat_next)
-            for i in range(7):
+            for i in range(NP):
                 q[i] = qn[i]
                 v[i] = vn[i]
                 a[i] = an[i]
             if n % 1024 == 0 or n == n_steps[c] - 1:
                 finite = True
-                for i in range(7):
+                for i in range(NP):
                     if not (np.isfinite(q[i]) and np.isfinite(v[i]) and np.isfinite(a[i])):
                         finite = False
                 if not finite:
