@@ -29,8 +29,23 @@ from campipe.profiles import Profile, evaluate, pack
 
 log = logging.getLogger(__name__)
 
+#: Integrators by name; ``default`` in a spec means DEFAULT_INTEGRATOR.
 INTEGRATORS = ("newmark-linear",)
+DEFAULT_INTEGRATOR = "newmark-linear"
+#: The step an integrator uses when a run names none [s].
+DEFAULT_STEPS = {"newmark-linear": 1e-6}
 CLOSURES = ("force", "form")
+
+
+def resolve_integrator(name: str) -> str:
+    """``default`` → the default integrator's name; refuse an unknown name."""
+    resolved = DEFAULT_INTEGRATOR if name == "default" else name
+    if resolved not in INTEGRATORS:
+        raise ValueError(
+            f"run.integrator: unknown integrator {name!r}; known: default, "
+            + ", ".join(INTEGRATORS)
+        )
+    return resolved
 
 
 @dataclass(frozen=True)
@@ -53,10 +68,21 @@ class RunSettings:
     """How a batch is integrated and sampled."""
 
     revolutions: float = 4.0  # cam turns, starting at θ = 0
-    dt: float = 1e-6  # time step [s]
+    dt: float | None = None  # time step [s]; None: the integrator's DEFAULT_STEPS entry
     output_every: float = math.radians(1.0)  # output spacing in cam angle [rad]
-    integrator: str = "newmark-linear"  # see INTEGRATORS
+    integrator: str = "default"  # "default" or a name in INTEGRATORS
+    tolerance: float = 1e-12  # event-time tolerance of integrators that locate events [s]
     max_events: int = 4096  # events kept per case
+
+    @property
+    def method(self) -> str:
+        """The integrator's resolved name."""
+        return resolve_integrator(self.integrator)
+
+    @property
+    def step(self) -> float:
+        """The time step [s]."""
+        return DEFAULT_STEPS[self.method] if self.dt is None else self.dt
 
 
 class StabilityError(ValueError):
@@ -147,14 +173,15 @@ def stability_limit(case: Case) -> float:
 
 def check_stability(cases: Sequence[Case], settings: RunSettings) -> None:
     """Refuse a step beyond the stability limit of any configuration a case can visit."""
+    dt_run = settings.step
     for i, case in enumerate(cases):
         limits = prepare(case.train, 0.0).limits
         worst = min(visited_configurations(case), key=lambda c: limits[c - 1])
         limit = limits[worst - 1]
-        if settings.dt >= limit:
+        if dt_run >= limit:
             raise StabilityError(
-                f"run.dt: {settings.dt * 1e6:.4g} µs is beyond the stability limit of "
-                f"{settings.integrator} for case {i} ({limit * 1e6:.4g} µs, configuration "
+                f"run.dt: {dt_run * 1e6:.4g} µs is beyond the stability limit of "
+                f"{settings.method} for case {i} ({limit * 1e6:.4g} µs, configuration "
                 f"{ROMAN[worst]}); use a step below {limit * 1e6:.4g} µs"
             )
 
@@ -207,11 +234,9 @@ def run_batch(cases: Sequence[Case], settings: RunSettings) -> BatchResult:
     IntegrationError
         If a case's state became non-finite.
     """
-    if settings.integrator not in INTEGRATORS:
-        raise ValueError(
-            f"run.integrator: unknown integrator {settings.integrator!r}; "
-            f"known: {', '.join(INTEGRATORS)}"
-        )
+    dt_run = settings.step  # also refuses an unknown integrator
+    if not (dt_run > 0 and math.isfinite(dt_run)):
+        raise ValueError(f"run.dt: found {dt_run!r} s, expected a positive step")
     for i, case in enumerate(cases):
         if case.closure not in CLOSURES:
             raise ValueError(f"closure: case {i} has {case.closure!r}, expected force or form")
@@ -237,7 +262,7 @@ def run_batch(cases: Sequence[Case], settings: RunSettings) -> BatchResult:
     seat_q = np.zeros(n)
     qref = np.empty(n)
     for i, case in enumerate(cases):
-        prep = prepare(case.train, settings.dt)
+        prep = prepare(case.train, dt_run)
         sm = prep.matrices
         M[i], C[i], K[i], load[i] = sm.mass, sm.damping, sm.stiffness, sm.preload
         minv[i] = prep.minv
@@ -246,7 +271,7 @@ def run_batch(cases: Sequence[Case], settings: RunSettings) -> BatchResult:
         seat_q[i] = qref[i] + (case.seat if case.has_seat else 0.0)
         q0[i], v0[i], a0[i], cfg0[i] = initial_state(case, sm, seat_q[i])
     omega = np.array([c.speed for c in cases], dtype=float)
-    dt = np.full(n, settings.dt)
+    dt = np.full(n, dt_run)
     n_steps = np.ceil(settings.revolutions * 2 * np.pi / (omega * dt) - 1e-9).astype(np.int64)
     has_seat = np.array([c.has_seat for c in cases], dtype=np.bool_)
     form = np.array([c.closure == "form" for c in cases], dtype=np.bool_)
@@ -272,7 +297,7 @@ def run_batch(cases: Sequence[Case], settings: RunSettings) -> BatchResult:
     bad = np.flatnonzero(status == newmark.NONFINITE)
     if bad.size:
         raise IntegrationError(
-            f"cases {bad.tolist()} became non-finite; a step of {settings.dt:g} s is inside the "
+            f"cases {bad.tolist()} became non-finite; a step of {dt_run:g} s is inside the "
             "stability limit, so this is a defect: please report it with the case"
         )
     for i in np.flatnonzero(status == newmark.EVENTS_TRUNCATED):
