@@ -12,28 +12,37 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 
-from campipe.engine import newmark
+from campipe.engine import exact, newmark
 from campipe.engine.contact import (
     CAM,
     HELD,
     SEAT,
     effective_mass_inverses,
     impact_masses,
+    held_inverses,
+    quasi_static_batch,
     quasi_static_state,
 )
 from campipe.model import ROMAN, ValveTrain, system_matrices
-from campipe.model.assembly import SystemMatrices, configuration_frequencies
-from campipe.model.assembly import NEWMARK_LINEAR_OMEGA_DT
-from campipe.profiles import Profile, evaluate, pack
+from campipe.engine.modal import ModalData, harmonic_responses, modal_data
+from campipe.model.assembly import (
+    NEWMARK_LINEAR_OMEGA_DT,
+    SystemMatrices,
+    configuration_frequencies,
+)
+from campipe.profiles import Profile, evaluate, evaluate_packed, pack
 
 log = logging.getLogger(__name__)
 
 #: Integrators by name; ``default`` in a spec means DEFAULT_INTEGRATOR.
-INTEGRATORS = ("newmark-linear",)
-DEFAULT_INTEGRATOR = "newmark-linear"
-#: The step an integrator uses when a run names none [s].
-DEFAULT_STEPS = {"newmark-linear": 1e-6}
+INTEGRATORS = ("modal-exact", "newmark-linear")
+DEFAULT_INTEGRATOR = "modal-exact"
+#: The step an integrator uses when a run names none [s]: the thesis's 1 µs for its
+#: integrator; modal-exact is exact between events and sizes its own steps (a run's dt only
+#: caps them).
+DEFAULT_STEPS: dict[str, float | None] = {"newmark-linear": 1e-6, "modal-exact": None}
 CLOSURES = ("force", "form")
 
 
@@ -68,7 +77,7 @@ class RunSettings:
     """How a batch is integrated and sampled."""
 
     revolutions: float = 4.0  # cam turns, starting at θ = 0
-    dt: float | None = None  # time step [s]; None: the integrator's DEFAULT_STEPS entry
+    dt: float | None = None  # time step [s] (modal-exact: largest step); None: DEFAULT_STEPS
     output_every: float = math.radians(1.0)  # output spacing in cam angle [rad]
     integrator: str = "default"  # "default" or a name in INTEGRATORS
     tolerance: float = 1e-12  # event-time tolerance of integrators that locate events [s]
@@ -80,8 +89,8 @@ class RunSettings:
         return resolve_integrator(self.integrator)
 
     @property
-    def step(self) -> float:
-        """The time step [s]."""
+    def step(self) -> float | None:
+        """The time step [s] (modal-exact: the cap on its steps, None for none)."""
         return DEFAULT_STEPS[self.method] if self.dt is None else self.dt
 
 
@@ -139,23 +148,27 @@ class Prepared:
     minv: np.ndarray  # (4, 7, 7) effective-mass inverses per configuration
     impact_masses: np.ndarray  # (4,) see contact.impact_masses [kg]
     valve_reference: float  # q7 at zero valve lift [m]
-    limits: np.ndarray  # (4,) newmark-linear stability limit per configuration [s]
+    omega_max: np.ndarray  # (4,) highest natural frequency per configuration [rad/s]
 
 
 @functools.lru_cache(maxsize=256)
 def prepare(train: ValveTrain, dt: float) -> Prepared:
     sm = _matrices(train)
-    limits = np.array([
-        NEWMARK_LINEAR_OMEGA_DT / configuration_frequencies(sm.mass, sm.stiffness, c).max()
-        for c in (1, 2, 3, 4)
-    ])
+    omega_max = np.array(
+        [configuration_frequencies(sm.mass, sm.stiffness, c).max() for c in (1, 2, 3, 4)]
+    )
     return Prepared(
         sm,
         effective_mass_inverses(sm.mass, sm.damping, sm.stiffness, dt),
         impact_masses(sm.mass),
         valve_reference(sm),
-        limits,
+        omega_max,
     )
+
+
+@functools.lru_cache(maxsize=256)
+def _modal(train: ValveTrain) -> ModalData:
+    return modal_data(_matrices(train))
 
 
 def visited_configurations(case: Case) -> tuple[int, ...]:
@@ -165,23 +178,31 @@ def visited_configurations(case: Case) -> tuple[int, ...]:
     return (1, 2, 3, 4) if case.has_seat else (1, 2)
 
 
-def stability_limit(case: Case) -> float:
-    """Largest stable step [s] of newmark-linear over the configurations the case can visit."""
-    limits = prepare(case.train, 0.0).limits
-    return float(min(limits[c - 1] for c in visited_configurations(case)))
+def stability_limit(case: Case, integrator: str = "newmark-linear") -> float:
+    """Largest step [s] the integrator accepts for a case, over the configurations it can
+    visit: newmark-linear's stability limit √12/ω_max (thesis Appendix B); modal-exact has
+    none (inf): it is exact between events and sizes its own steps."""
+    if resolve_integrator(integrator) != "newmark-linear":
+        return math.inf
+    omega_max = prepare(case.train, 0.0).omega_max
+    return float(min(NEWMARK_LINEAR_OMEGA_DT / omega_max[c - 1]
+                     for c in visited_configurations(case)))
 
 
 def check_stability(cases: Sequence[Case], settings: RunSettings) -> None:
-    """Refuse a step beyond the stability limit of any configuration a case can visit."""
+    """Refuse a step beyond newmark-linear's stability limit in any configuration a case can
+    visit, naming the limit."""
+    if settings.method != "newmark-linear":
+        return
     dt_run = settings.step
     for i, case in enumerate(cases):
-        limits = prepare(case.train, 0.0).limits
-        worst = min(visited_configurations(case), key=lambda c: limits[c - 1])
-        limit = limits[worst - 1]
+        omega_max = prepare(case.train, 0.0).omega_max
+        worst = max(visited_configurations(case), key=lambda c: omega_max[c - 1])
+        limit = NEWMARK_LINEAR_OMEGA_DT / omega_max[worst - 1]
         if dt_run >= limit:
             raise StabilityError(
                 f"run.dt: {dt_run * 1e6:.4g} µs is beyond the stability limit of "
-                f"{settings.method} for case {i} ({limit * 1e6:.4g} µs, configuration "
+                f"newmark-linear for case {i} ({limit * 1e6:.4g} µs, configuration "
                 f"{ROMAN[worst]}); use a step below {limit * 1e6:.4g} µs"
             )
 
@@ -204,6 +225,59 @@ def initial_state(case: Case, sm: SystemMatrices, seat_q: float):
     return q, v, a, 1
 
 
+def _unique_trains(cases: Sequence[Case]) -> tuple[list[ValveTrain], np.ndarray]:
+    """The distinct trains of a batch and each case's index into them."""
+    index: dict[ValveTrain, int] = {}
+    which = np.empty(len(cases), np.int64)
+    for i, case in enumerate(cases):
+        which[i] = index.setdefault(case.train, len(index))
+    return list(index), which
+
+
+@njit(cache=True, nogil=True)
+def _cam_at(breaks, poly, trig, n_pieces, theta):
+    """(n, 3): lift [m] and its θ-derivatives of every packed profile at one angle."""
+    out = np.empty((n_pieces.shape[0], 3))
+    for c in range(n_pieces.shape[0]):
+        out[c, 0], out[c, 1], out[c, 2] = evaluate_packed(breaks, poly, trig, n_pieces, c, theta)
+    return out
+
+
+def initial_states(preps, which, packed, omega, has_seat, seat_q):
+    """Quasi-static start of every case at θ = 0 (see ``initial_state``): configuration I, or
+    III where the valve starts on its seat."""
+    n = which.size
+    cam = _cam_at(packed.breaks, packed.poly, packed.trig, packed.n_pieces, 0.0)
+    held_q = np.zeros((n, 7))
+    held_v = np.zeros((n, 7))
+    held_a = np.zeros((n, 7))
+    held_q[:, CAM] = -cam[:, 0]
+    held_v[:, CAM] = -omega * cam[:, 1]
+    held_a[:, CAM] = -omega**2 * cam[:, 2]
+    held_q[:, SEAT] = seat_q
+    mats = [p.matrices for p in preps]
+    M = np.stack([m.mass for m in mats])[which]
+    C = np.stack([m.damping for m in mats])[which]
+    K = np.stack([m.stiffness for m in mats])[which]
+    load = np.stack([m.preload for m in mats])[which]
+    q = np.empty((n, 7))
+    v = np.empty((n, 7))
+    a = np.empty((n, 7))
+    for cfg in (1, 3):
+        inv = [held_inverses(m.mass, m.stiffness, HELD[cfg - 1]) for m in mats]
+        kinv = np.stack([k for k, _ in inv])[which]
+        minv = np.stack([m for _, m in inv])[which]
+        held = np.broadcast_to(HELD[cfg - 1], (n, 7))
+        qc, vc, ac = np.empty((n, 7)), np.empty((n, 7)), np.empty((n, 7))
+        quasi_static_batch(kinv, minv, M, C, K, load, held, held_q, held_v, held_a, qc, vc, ac)
+        if cfg == 1:
+            q, v, a = qc, vc, ac
+            seated = has_seat & (q[:, SEAT] < seat_q)
+        else:
+            q[seated], v[seated], a[seated] = qc[seated], vc[seated], ac[seated]
+    return q, v, a, np.where(seated, 3, 1).astype(np.int64)
+
+
 def valve_reference(sm: SystemMatrices) -> float:
     """q7 with the cam on its base circle, no seat, in static equilibrium [m]."""
     q, _, _ = quasi_static_state(sm.mass, sm.damping, sm.stiffness, sm.preload, HELD[0],
@@ -215,6 +289,65 @@ def output_angles(settings: RunSettings) -> np.ndarray:
     """Sample angles 0 … 2π·revolutions at ``output_every`` [rad]."""
     n = int(math.floor(settings.revolutions * 2 * math.pi / settings.output_every + 1e-9)) + 1
     return np.arange(n) * settings.output_every
+
+
+class _Outputs:
+    """The arrays a kernel fills in place."""
+
+    def __init__(self, n: int, n_out: int, n_rev: int, max_events: int) -> None:
+        self.q = np.zeros((n, n_out, 7))
+        self.force = np.zeros((n, n_out, 2))
+        self.cam = np.zeros((n, n_out))
+        self.cfg = np.zeros((n, n_out), np.int8)
+        self.sep_rev = np.zeros((n, n_rev))
+        self.counts = np.zeros((n, 2), np.int64)
+        self.vmax = np.zeros((n, 2))
+        self.fmax = np.zeros((n, 2))
+        self.events = np.zeros((n, max_events, newmark.N_EVENT_FIELDS))
+        self.n_events = np.zeros(n, np.int64)
+        self.status = np.zeros(n, np.int64)
+
+    def tail(self) -> tuple:
+        return (self.q, self.force, self.cam, self.cfg, self.sep_rev, self.counts, self.vmax,
+                self.fmax, self.events, self.n_events, self.status)
+
+
+def _run_newmark(preps, which, settings, dt_run, meff, q0, v0, a0, cfg0, seat_q, has_seat,
+                 form, omega, packed, out) -> np.ndarray:
+    M = np.stack([p.matrices.mass for p in preps])[which]
+    C = np.stack([p.matrices.damping for p in preps])[which]
+    K = np.stack([p.matrices.stiffness for p in preps])[which]
+    load = np.stack([p.matrices.preload for p in preps])[which]
+    minv = np.stack([p.minv for p in preps])[which]
+    dt = np.full(len(which), dt_run)
+    n_steps = np.ceil(settings.revolutions * 2 * np.pi / (omega * dt) - 1e-9).astype(np.int64)
+    newmark.newmark_linear_batch(
+        M, C, K, load, minv, meff, q0, v0, a0, cfg0, seat_q, has_seat, form, omega, dt, n_steps,
+        packed.breaks, packed.poly, packed.trig, packed.n_pieces, settings.output_every,
+        *out.tail(),
+    )
+    return n_steps
+
+
+def _run_modal_exact(trains, preps, which, settings, dt_run, meff, q0, v0, a0, cfg0, seat_q,
+                     has_seat, form, omega, packed, out) -> np.ndarray:
+    fields = ("n_free", "free", "lam", "vec", "vec_inv", "a_inv", "b_in", "b_load", "rho",
+              "sigma", "sigma0", "impulse", "rho_vec", "vnorm")
+    data = [_modal(t) for t in trains]
+    stacked = {f: np.stack([getattr(d, f) for d in data])[which] for f in fields}
+    a_mat = np.stack([d.a_mat for d in data])[which]
+    zeta = harmonic_responses(stacked["n_free"], a_mat, stacked["b_in"], omega)
+    load = np.stack([p.matrices.preload for p in preps])[which]
+    M = np.stack([p.matrices.mass for p in preps])[which]
+    t_sample = settings.output_every / omega
+    t_end = settings.revolutions * 2 * np.pi / omega
+    steps_taken = np.zeros(len(which), np.int64)
+    exact.modal_exact_batch(
+        M, load, *(stacked[f] for f in fields), zeta, meff, q0, v0, cfg0, seat_q, has_seat, form,
+        omega, t_sample, t_end, dt_run or 0.0, settings.tolerance, steps_taken,
+        packed.breaks, packed.poly, packed.trig, packed.n_pieces, *out.tail(),
+    )
+    return steps_taken
 
 
 def run_batch(cases: Sequence[Case], settings: RunSettings) -> BatchResult:
@@ -235,7 +368,7 @@ def run_batch(cases: Sequence[Case], settings: RunSettings) -> BatchResult:
         If a case's state became non-finite.
     """
     dt_run = settings.step  # also refuses an unknown integrator
-    if not (dt_run > 0 and math.isfinite(dt_run)):
+    if dt_run is not None and not (dt_run > 0 and math.isfinite(dt_run)):
         raise ValueError(f"run.dt: found {dt_run!r} s, expected a positive step")
     for i, case in enumerate(cases):
         if case.closure not in CLOSURES:
@@ -248,62 +381,41 @@ def run_batch(cases: Sequence[Case], settings: RunSettings) -> BatchResult:
     n_out = angles.size
     n_rev = int(math.ceil(settings.revolutions - 1e-12))
 
-    NP = newmark.NP
-    M = np.zeros((n, NP, NP))
-    C = np.zeros((n, NP, NP))
-    K = np.zeros((n, NP, NP))
-    load = np.zeros((n, NP))
-    minv = np.zeros((n, 4, NP, NP))
-    meff = np.empty((n, 4))
-    q0 = np.zeros((n, NP))
-    v0 = np.zeros((n, NP))
-    a0 = np.zeros((n, NP))
-    cfg0 = np.empty(n, np.int64)
-    seat_q = np.zeros(n)
-    qref = np.empty(n)
-    for i, case in enumerate(cases):
-        prep = prepare(case.train, dt_run)
-        sm = prep.matrices
-        M[i], C[i], K[i], load[i] = sm.mass, sm.damping, sm.stiffness, sm.preload
-        minv[i] = prep.minv
-        meff[i] = prep.impact_masses
-        qref[i] = prep.valve_reference
-        seat_q[i] = qref[i] + (case.seat if case.has_seat else 0.0)
-        q0[i], v0[i], a0[i], cfg0[i] = initial_state(case, sm, seat_q[i])
-    omega = np.array([c.speed for c in cases], dtype=float)
-    dt = np.full(n, dt_run)
-    n_steps = np.ceil(settings.revolutions * 2 * np.pi / (omega * dt) - 1e-9).astype(np.int64)
+    trains, which = _unique_trains(cases)
+    preps = [prepare(t, dt_run or 0.0) for t in trains]
+    meff = np.stack([p.impact_masses for p in preps])[which]
+    qref = np.array([p.valve_reference for p in preps])[which]
     has_seat = np.array([c.has_seat for c in cases], dtype=np.bool_)
+    seat_q = qref + np.where(has_seat, [c.seat for c in cases], 0.0)
+    omega = np.array([c.speed for c in cases], dtype=float)
     form = np.array([c.closure == "form" for c in cases], dtype=np.bool_)
     packed = pack([c.profile for c in cases])
-
-    q_out = np.zeros((n, n_out, 7))
-    force_out = np.zeros((n, n_out, 2))
-    cam_out = np.zeros((n, n_out))
-    cfg_out = np.zeros((n, n_out), np.int8)
-    sep_rev = np.zeros((n, n_rev))
-    counts = np.zeros((n, 2), np.int64)
-    vmax = np.zeros((n, 2))
-    fmax = np.zeros((n, 2))
-    events = np.zeros((n, settings.max_events, newmark.N_EVENT_FIELDS))
-    n_events = np.zeros(n, np.int64)
-    status = np.zeros(n, np.int64)
-    newmark.newmark_linear_batch(
-        M, C, K, load, minv, meff, q0, v0, a0, cfg0, seat_q, has_seat, form, omega, dt, n_steps,
-        packed.breaks, packed.poly, packed.trig, packed.n_pieces,
-        settings.output_every, q_out, force_out, cam_out, cfg_out,
-        sep_rev, counts, vmax, fmax, events, n_events, status,
-    )
+    q0, v0, a0, cfg0 = initial_states(preps, which, packed, omega, has_seat, seat_q)
+    out = _Outputs(n, n_out, n_rev, settings.max_events)
+    common = (meff, q0, v0, a0, cfg0, seat_q, has_seat, form, omega, packed, out)
+    if settings.method == "newmark-linear":
+        n_steps = _run_newmark(preps, which, settings, dt_run, *common)
+    else:
+        n_steps = _run_modal_exact(trains, preps, which, settings, dt_run, *common)
+    status, n_events = out.status, out.n_events
     bad = np.flatnonzero(status == newmark.NONFINITE)
     if bad.size:
         raise IntegrationError(
             f"cases {bad.tolist()} became non-finite; a step of {dt_run:g} s is inside the "
             "stability limit, so this is a defect: please report it with the case"
         )
+    bad = np.flatnonzero(status == exact.CHATTER)
+    if bad.size:
+        raise IntegrationError(
+            f"cases {bad.tolist()}: contact events kept recurring at one instant (chatter); "
+            "integrate them with newmark-linear"
+        )
     for i in np.flatnonzero(status == newmark.EVENTS_TRUNCATED):
         log.warning("case %d: %d events, only the first %d kept (raise run.max_events)",
                     i, n_events[i], settings.max_events)
     kept = np.minimum(n_events, settings.max_events)
+    q_out, force_out, cam_out, cfg_out = out.q, out.force, out.cam, out.cfg
+    sep_rev, counts, vmax, fmax, events = out.sep_rev, out.counts, out.vmax, out.fmax, out.events
     return BatchResult(
         cam_angle=angles,
         time=angles[None, :] / omega[:, None],

@@ -7,6 +7,7 @@ Thesis Ch. III and Table I: I cam contact (q1 prescribed by the cam), II free, I
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from campipe.model.assembly import CONFIGURATIONS
 
@@ -84,3 +85,52 @@ def quasi_static_state(
     rhs = load - stiffness @ q - damping @ v - mass[:, fixed] @ a[fixed]
     a[free] = np.linalg.solve(mass[np.ix_(free, free)], rhs[free])
     return q, v, a
+
+
+
+def held_inverses(mass, stiffness, held) -> tuple[np.ndarray, np.ndarray]:
+    """K_ff⁻¹ and M_ff⁻¹ over the free coordinates, zero-padded to 7×7."""
+    free = np.flatnonzero(~held)
+    kinv = np.zeros((7, 7))
+    minv = np.zeros((7, 7))
+    kinv[np.ix_(free, free)] = np.linalg.inv(stiffness[np.ix_(free, free)])
+    minv[np.ix_(free, free)] = np.linalg.inv(mass[np.ix_(free, free)])
+    return kinv, minv
+
+
+@njit(cache=True, nogil=True)
+def quasi_static_batch(kinv, minv, M, C, K, load, held, held_q, held_v, held_a, q, v, a):
+    """``quasi_static_state`` for each case c (arrays with a leading case axis; kinv, minv
+    from ``held_inverses``), by plain loops so a case's result does not depend on its batch."""
+    for c in range(held_q.shape[0]):
+        for i in range(7):
+            q[c, i] = held_q[c, i] if held[c, i] else 0.0
+            v[c, i] = held_v[c, i] if held[c, i] else 0.0
+            a[c, i] = held_a[c, i] if held[c, i] else 0.0
+        rq = np.zeros(7)
+        rv = np.zeros(7)
+        for i in range(7):
+            rq[i] = load[c, i]
+            for j in range(7):
+                rq[i] -= K[c, i, j] * q[c, j]
+                rv[i] -= K[c, i, j] * v[c, j]
+        for i in range(7):
+            if not held[c, i]:
+                sq = 0.0
+                sv = 0.0
+                for j in range(7):
+                    sq += kinv[c, i, j] * rq[j]
+                    sv += kinv[c, i, j] * rv[j]
+                q[c, i] = sq
+                v[c, i] = sv
+        ra = np.zeros(7)
+        for i in range(7):
+            ra[i] = load[c, i]
+            for j in range(7):
+                ra[i] -= K[c, i, j] * q[c, j] + C[c, i, j] * v[c, j] + M[c, i, j] * a[c, j]
+        for i in range(7):
+            if not held[c, i]:
+                s = 0.0
+                for j in range(7):
+                    s += minv[c, i, j] * ra[j]
+                a[c, i] = s

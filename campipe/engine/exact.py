@@ -1,0 +1,683 @@
+"""``modal-exact``: closed-form propagation between events, events located inside the step.
+
+Between events the solution is exact (``campipe.engine.modal``): the state at any time is
+V·(y₀ ∘ e^{λτ}) plus the exact particular solution of the piece's polynomial and harmonic
+forcing. The integrator walks a grid of ``h`` (``dt`` rounded down so that the output angles
+fall on the grid), watches each configuration's monitors (thesis Table I) at the grid points,
+and on a sign change locates the event by a bracketed root search (Illinois) on the closed
+form, to ``tolerance`` in time. A segment ends at an event or at a break of the cam profile;
+the next starts from the exact state there.
+
+Monitors, each an event when it rises through zero (direction: upward only):
+
+- cam held (I, III), force closure: F1 (the cam would pull) → release the cam;
+- cam free (II, IV): q1 + lift(θ) (the follower reaches the cam surface) → cam impact;
+- seat free (I, II), with a seat: q7_seat − q7 (the valve reaches the seat) → seat impact;
+- seat held (III, IV): −F7 (the seat would pull) → release the seat.
+
+Impacts are the thesis's: infinite cam (seat) mass, perfectly plastic; the struck coordinate
+takes the obstacle's velocity and, through the consistent mass, the free coordinates change
+velocity by −M_ff⁻¹ M_fp Δv_p: the impulse m_eff·v_closing is applied at the instant of
+contact, so no force measures 1/Δt.
+
+The only step-size limit is event resolution: a monitor that rises and falls back within one
+step is not seen. ``dt`` is therefore refused above half the shortest natural period of any
+configuration the case can visit (``event_resolution_limit``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from campipe.engine.newmark import (
+    CAM_IMPACT,
+    CAM_SEPARATION,
+    EVENTS_TRUNCATED,
+    NONFINITE,
+    OK,
+    SEAT_IMPACT,
+    SEAT_SEPARATION,
+    TWO_PI,
+    _config,
+    _record,
+    locate,
+    piece_eval,
+)
+from campipe.engine.modal import NS
+
+CHATTER = 3  # status: events kept recurring without time advancing
+#: Steps are at most RESOLUTION·π/|λ| of the fastest mode still present: a quarter period, so
+#: no monitor can rise through zero and fall back unseen between two grid points.
+RESOLUTION = 0.5
+#: A mode is dropped once its share of every coordinate [m] and velocity [m/s] is below this
+#: (4e-12 in: far below any output's resolution) and its share of the contact forces is below
+#: the force level of the monitors.
+MODE_FLOOR = 1e-13
+MAX_STALLED_EVENTS = 64
+ROOT_ITERATIONS = 200
+
+
+@njit(cache=True, nogil=True)
+def _horner(coef, x, deg=7):
+    """Σ_{k ≤ deg} coef[k]·x^k."""
+    s = 0.0
+    for k in range(deg, -1, -1):
+        s = s * x + coef[k]
+    return s
+
+
+@njit(cache=True, nogil=True)
+def _held_inputs(poly, trig, c, p, w, seat_q, cam_held, seat_held, inp, inp_t):
+    """Held coordinates' (q, q̇, q̈) as polynomials in the piece's local angle x (inp, shape
+    (3, 2, 8)) and harmonic parts Re(inp_t·e^{iθ}) (inp_t (3, 2) complex)."""
+    for kind in range(3):
+        for hc in range(2):
+            inp_t[kind, hc] = 0.0
+            for k in range(8):
+                inp[kind, hc, k] = 0.0
+    if cam_held:
+        for k in range(8):
+            inp[0, 0, k] = -poly[c, p, k]
+            if k + 1 < 8:
+                inp[1, 0, k] = -w * (k + 1) * poly[c, p, k + 1]
+            if k + 2 < 8:
+                inp[2, 0, k] = -w * w * (k + 1) * (k + 2) * poly[c, p, k + 2]
+        # a·sin θ + b·cos θ = Re((b − i·a)·e^{iθ})
+        beta = trig[c, p, 1] - 1j * trig[c, p, 0]
+        inp_t[0, 0] = -beta
+        inp_t[1, 0] = -1j * w * beta
+        inp_t[2, 0] = w * w * beta
+    if seat_held:
+        inp[0, 1, 0] = seat_q
+
+
+
+@njit(cache=True, nogil=True)
+def _modal_sum(W, m, ev, ns):
+    """Re Σ_j W_mj·ev_j."""
+    acc = 0.0
+    for j in range(ns):
+        acc += W[m, j].real * ev[j].real - W[m, j].imag * ev[j].imag
+    return acc
+
+
+@njit(cache=True, nogil=True)
+def _monitor(W, G, GT, m, ev, ns, x, th):
+    """Monitor m at local angle x, cam angle θ, with ev_j = e^{λ_j τ}."""
+    g = _modal_sum(W, m, ev, ns) + _horner(G[m], x)
+    if GT[m] != 0.0:
+        g += GT[m].real * np.cos(th) - GT[m].imag * np.sin(th)
+    return g
+
+
+@njit(cache=True, nogil=True)
+def _exps(lam, c, ci, ns, tau, ev):
+    for j in range(ns):
+        ev[j] = np.exp(lam[c, ci, j] * tau)
+
+
+@njit(cache=True, nogil=True)
+def _eval(deriv, W, Wl, G, GT, lam, c, ci, m, ns, t_s, t, w, th0, ev):
+    """Monitor m (deriv False) or its time derivative (deriv True) at time t, exactly."""
+    _exps(lam, c, ci, ns, t - t_s, ev)
+    x = w * t - th0
+    th = w * t
+    if not deriv:
+        return _monitor(W, G, GT, m, ev, ns, x, th)
+    dg = _modal_sum(Wl, m, ev, ns)
+    for k in range(7, 0, -1):
+        dg += w * k * G[m, k] * x ** (k - 1)
+    if GT[m] != 0.0:
+        dg -= w * (GT[m].real * np.sin(th) + GT[m].imag * np.cos(th))
+    return dg
+
+
+@njit(cache=True, nogil=True)
+def _root(deriv, sgn, W, Wl, G, GT, lam, c, ci, m, ns, t_s, ta, tb, level, w, th0,
+          tolerance, ev):
+    """Time in [ta, tb] where sgn·(f − level) rises through zero, f the monitor m or (deriv)
+    its derivative, by the Illinois method. Returns the bracket's left end once the bracket
+    is narrower than ``tolerance``: the last time known to be before the crossing (no
+    penetration, no tension beyond ``level``).
+    """
+    fa = sgn * (_eval(deriv, W, Wl, G, GT, lam, c, ci, m, ns, t_s, ta, w, th0, ev) - level)
+    if fa > 0.0:
+        return ta
+    fb = sgn * (_eval(deriv, W, Wl, G, GT, lam, c, ci, m, ns, t_s, tb, w, th0, ev) - level)
+    side = 0
+    for _ in range(ROOT_ITERATIONS):
+        if tb - ta <= tolerance:
+            break
+        t = (ta * fb - tb * fa) / (fb - fa)
+        # Keep the trial point strictly inside; fall back to bisection if it is not.
+        if not (ta < t < tb):
+            t = 0.5 * (ta + tb)
+        f = sgn * (_eval(deriv, W, Wl, G, GT, lam, c, ci, m, ns, t_s, t, w, th0, ev) - level)
+        if f > 0.0:
+            tb = t
+            fb = f
+            if side == -1:
+                fa *= 0.5
+            side = -1
+        else:
+            ta = t
+            fa = f
+            if side == 1:
+                fb *= 0.5
+            side = 1
+    return ta
+
+
+@njit(cache=True, nogil=True)
+def _state(q, v, z, ya, vec, ev, y0, Z, ZT, free, c, ci, nf, ns, x, ct, st, rows, deg):
+    """Free coordinates at local angle x, cam angle θ (ct = cos θ, st = sin θ), with
+    ev_j = e^{λ_j τ}: the first ``rows`` entries of z (nf: positions only; ns: positions and
+    velocities), then q, v."""
+    for j in range(ns):
+        ya[j] = y0[j] * ev[j]
+    for s in range(rows):
+        acc = 0.0
+        for j in range(ns):
+            acc += vec[c, ci, s, j].real * ya[j].real - vec[c, ci, s, j].imag * ya[j].imag
+        z[s] = acc + _horner(Z[:, s], x, deg) + ZT[s].real * ct - ZT[s].imag * st
+    for k in range(nf):
+        q[free[c, ci, k]] = z[k]
+        if rows == ns:
+            v[free[c, ci, k]] = z[nf + k]
+
+
+@njit(cache=True, nogil=True)
+def _modal_sum_active(W, m, E, act, nact):
+    """Re Σ_j W_mj·E_j over the active modes."""
+    acc = 0.0
+    for jj in range(nact):
+        j = act[jj]
+        acc += W[m, j].real * E[j].real - W[m, j].imag * E[j].imag
+    return acc
+
+
+@njit(cache=True, nogil=True)
+def _state_active(q, z, vec, E, y0, Z, ZT, free, c, ci, nf, act, nact, x, ct, st, deg):
+    """Positions of the free coordinates from the active modes (an output sample)."""
+    for s in range(nf):
+        acc = 0.0
+        for jj in range(nact):
+            j = act[jj]
+            a = y0[j] * E[j]
+            acc += vec[c, ci, s, j].real * a.real - vec[c, ci, s, j].imag * a.imag
+        z[s] = acc + _horner(Z[:, s], x, deg) + ZT[s].real * ct - ZT[s].imag * st
+        q[free[c, ci, s]] = z[s]
+
+
+@njit(cache=True, nogil=True)
+def _write_sample(q_out, force_out, cam_out, cfg_out, c, k, q, gval, cam_held, seat_held, lift,
+                  cfg):
+    """Output sample k: coordinates (held ones on the cam and seat), forces, cam lift."""
+    for i in range(7):
+        q_out[c, k, i] = q[i]
+    if cam_held:
+        q_out[c, k, 0] = -lift
+    force_out[c, k, 0] = gval[0] if cam_held else 0.0
+    force_out[c, k, 1] = -gval[1] if seat_held else 0.0
+    cam_out[c, k] = lift
+    cfg_out[c, k] = cfg
+
+
+@njit(cache=True, nogil=True)
+def _separation(sep_rev, c, n_rev, w, ta, tb):
+    """Add the cam angle of [ta, tb] off the cam to each revolution it overlaps."""
+    a = w * ta
+    b = w * tb
+    r = int(a / TWO_PI)
+    while a < b and r < n_rev:
+        end = min(b, (r + 1) * TWO_PI)
+        sep_rev[c, r] += end - a
+        a = end
+        r += 1
+
+
+@njit(cache=True, nogil=True)
+def modal_exact_batch(
+    M, load, n_free, free, lam, vec, vec_inv, a_inv, b_in, b_load, rho, sigma, sigma0,
+    impulse, rho_vec, vnorm, zeta, meff, q0, v0, cfg0, seat_q, has_seat, form, omega,
+    t_sample_all, t_end_all, dt_cap, tolerance, steps_taken, breaks, poly, trig, n_pieces,
+    q_out, force_out, cam_out, cfg_out,
+    sep_rev, counts, vmax, fmax, events, n_events, status,
+):
+    """Advance every case of a batch exactly between events; fill the outputs in place.
+
+    Per case: ``t_sample_all`` the output spacing in time [s], ``t_end_all`` the run's end [s];
+    ``dt_cap`` the largest step [s] (0: none). Modal data per case and configuration as
+    ``ModalData`` (leading axes (n, 4)). Outputs as ``newmark.newmark_linear_batch``.
+    """
+    n_cases = q0.shape[0]
+    n_out = q_out.shape[1]
+    n_rev = sep_rev.shape[1]
+    q = np.zeros(7)
+    v = np.zeros(7)
+    z = np.zeros(NS)
+    zh = np.zeros(NS)
+    zb = np.zeros(NS)
+    Z = np.zeros((9, NS))
+    ZT = np.zeros(NS, np.complex128)
+    bpoly = np.zeros((8, NS))
+    y0 = np.zeros(NS, np.complex128)
+    E = np.zeros(NS, np.complex128)
+    D = np.zeros(NS, np.complex128)
+    ev = np.zeros(NS, np.complex128)
+    ya = np.zeros(NS, np.complex128)
+    W = np.zeros((2, NS), np.complex128)
+    Wl = np.zeros((2, NS), np.complex128)
+    dval = np.zeros(2)
+    dprev = np.zeros(2)
+    G = np.zeros((2, 8))
+    GT = np.zeros(2, np.complex128)
+    ready = np.zeros(2, np.bool_)  # monitor prepared (its value is computed)
+    watch = np.zeros(2, np.bool_)  # monitor can end the segment
+    level = np.zeros(2)
+    gval = np.zeros(2)
+    inp = np.zeros((3, 2, 8))
+    inp_t = np.zeros((3, 2), np.complex128)
+    act = np.zeros(NS, np.int64)
+    for c in range(n_cases):
+        w = omega[c]
+        t_sample = t_sample_all[c]
+        t_end = t_end_all[c]
+        qs = seat_q[c]
+        eps_force = 1e-9 * (abs(load[c, 3]) + 1.0)
+        for i in range(7):
+            q[i] = q0[c, i]
+            v[i] = v0[c, i]
+        cfg = cfg0[c]
+        rev, p = locate(breaks, n_pieces, c, 0.0)
+        t_s = 0.0
+        k_out = 0
+        stalled = 0
+        done = False
+        while not done:
+            # ---- begin a segment at t_s in configuration cfg on piece p ----
+            ci = cfg - 1
+            nf = n_free[c, ci]
+            ns = 2 * nf
+            cam_held = cfg == 1 or cfg == 3
+            seat_held = cfg == 3 or cfg == 4
+            for k in range(nf):
+                zh[k] = q[free[c, ci, k]]
+                zh[nf + k] = v[free[c, ci, k]]
+            _held_inputs(poly, trig, c, p, w, qs, cam_held, seat_held, inp, inp_t)
+            has_trig = cam_held and (trig[c, p, 0] != 0.0 or trig[c, p, 1] != 0.0)
+            for k in range(8):
+                for s in range(ns):
+                    acc = b_load[c, ci, s] if k == 0 else 0.0
+                    for kind in range(3):
+                        for hc in range(2):
+                            acc += b_in[c, ci, s, kind, hc] * inp[kind, hc, k]
+                    bpoly[k, s] = acc
+            # Particular solutions: Z_k = A⁻¹(ω(k+1) Z_{k+1} − b_k) from the piece's degree
+            # down; the harmonic one Z_T = β·ζ (campipe.engine.modal.harmonic_response).
+            deg = 0
+            for k in range(8):
+                for s in range(ns):
+                    if bpoly[k, s] != 0.0:
+                        deg = k
+            for k in range(deg + 1, 9):
+                for s in range(ns):
+                    Z[k, s] = 0.0
+            for k in range(deg, -1, -1):
+                for s in range(ns):
+                    zb[s] = w * (k + 1) * Z[k + 1, s] - bpoly[k, s]
+                for s in range(ns):
+                    acc = 0.0
+                    for j in range(ns):
+                        acc += a_inv[c, ci, s, j] * zb[j]
+                    Z[k, s] = acc
+            beta = trig[c, p, 1] - 1j * trig[c, p, 0]
+            for s in range(NS):
+                ZT[s] = beta * zeta[c, ci, s] if has_trig else 0.0
+            th_s = w * t_s
+            th0 = rev * TWO_PI + breaks[c, p]
+            x_s = th_s - th0
+            ct = np.cos(th_s)
+            st = np.sin(th_s)
+            for s in range(ns):
+                zh[s] -= _horner(Z[:, s], x_s, deg) + ZT[s].real * ct - ZT[s].imag * st
+            for j in range(ns):
+                acc_c = 0.0 + 0.0j
+                for s in range(ns):
+                    acc_c += vec_inv[c, ci, j, s] * zh[s]
+                y0[j] = acc_c
+            # Monitors: g_m(τ) = Re Σ_j W_mj e^{λ_j τ} + Σ_k G_mk x^k + Re(GT_m e^{iθ}).
+            ready[0] = True
+            watch[0] = not (cam_held and form[c])
+            ready[1] = has_seat[c] or seat_held
+            watch[1] = ready[1]
+            for m in range(2):
+                if not ready[m]:
+                    continue
+                held = cam_held if m == 0 else seat_held
+                sign = 1.0 if m == 0 else -1.0  # F1, q1 + lift; −F7, q7_seat − q7
+                for k in range(8):
+                    G[m, k] = 0.0
+                if held:
+                    level[m] = eps_force
+                    for j in range(ns):
+                        W[m, j] = sign * rho_vec[c, ci, m, j] * y0[j]
+                    for k in range(8):
+                        acc = 0.0
+                        for s in range(ns):
+                            acc += rho[c, ci, m, s] * Z[k, s]
+                        for kind in range(3):
+                            for hc in range(2):
+                                acc += sigma[c, ci, m, kind, hc] * inp[kind, hc, k]
+                        G[m, k] = sign * acc
+                    G[m, 0] += sign * sigma0[c, ci, m]
+                    acc_c = 0.0 + 0.0j
+                    for s in range(ns):
+                        acc_c += rho[c, ci, m, s] * ZT[s]
+                    for kind in range(3):
+                        acc_c += sigma[c, ci, m, kind, 0] * inp_t[kind, 0]
+                    GT[m] = sign * acc_c
+                else:
+                    level[m] = 1e-13  # [m] of penetration
+                    coord = 0 if m == 0 else 6
+                    row = 0
+                    for k in range(nf):
+                        if free[c, ci, k] == coord:
+                            row = k
+                    for j in range(ns):
+                        W[m, j] = sign * vec[c, ci, row, j] * y0[j]
+                    for k in range(8):
+                        G[m, k] = sign * Z[k, row]
+                    GT[m] = sign * ZT[row]
+                    if m == 0:
+                        for k in range(8):
+                            G[m, k] += poly[c, p, k]
+                        GT[m] += trig[c, p, 1] - 1j * trig[c, p, 0]
+                    else:
+                        G[m, 0] += qs
+            mon_trig = (ready[0] and GT[0] != 0.0) or (ready[1] and GT[1] != 0.0)
+            gdeg = 0
+            for m in range(2):
+                if ready[m]:
+                    for k in range(8):
+                        if G[m, k] != 0.0:
+                            gdeg = max(gdeg, k)
+                    for j in range(ns):
+                        Wl[m, j] = W[m, j] * lam[c, ci, j]
+                    dprev[m] = _eval(True, W, Wl, G, GT, lam, c, ci, m, ns, t_s, t_s, w, th0,
+                                     ev)
+            # The segment ends at the next break of the profile at the latest.
+            nb = p + 1
+            revb = rev
+            if nb == n_pieces[c]:
+                nb = 0
+                revb = rev + 1
+            t_break = (revb * TWO_PI + breaks[c, nb]) / w
+            for j in range(ns):
+                act[j] = j
+                E[j] = 1.0
+            nact = ns
+            if k_out < n_out and k_out * t_sample <= t_s * (1.0 + 1e-13):
+                # A sample due at the segment start (the initial state, or a break or event
+                # that falls on an output angle) is the state here.
+                for m in range(2):
+                    if ready[m]:
+                        gval[m] = _monitor(W, G, GT, m, E, ns, x_s, th_s)
+                _write_sample(q_out, force_out, cam_out, cfg_out, c, k_out, q, gval, cam_held,
+                              seat_held, _horner(poly[c, p], x_s) + trig[c, p, 0] * st
+                              + trig[c, p, 1] * ct, cfg)
+                k_out += 1
+            t_prev = t_s
+            replan = True
+            start_check = True
+            h = -1.0
+            since_refresh = 0
+            since_check = 0
+            # ---- walk: steps sized by the fastest mode still present ----
+            while True:
+                if replan:
+                    # Drop modes that have decayed below what any output can show.
+                    jj = 0 if since_check >= 32 else nact
+                    since_check = 0 if jj == 0 else since_check
+                    while jj < nact:
+                        j = act[jj]
+                        amp = abs(y0[j] * E[j])
+                        if (amp * vnorm[c, ci, j] < MODE_FLOOR
+                                and amp * (abs(rho_vec[c, ci, 0, j]) + abs(rho_vec[c, ci, 1, j]))
+                                < eps_force):
+                            nact -= 1
+                            act[jj] = act[nact]
+                        else:
+                            jj += 1
+                    fastest = 0.0
+                    for jj in range(nact):
+                        fastest = max(fastest, abs(lam[c, ci, act[jj]]))
+                    h_allow = RESOLUTION * np.pi / fastest if fastest > 0.0 else np.inf
+                    if dt_cap > 0.0:
+                        h_allow = min(h_allow, dt_cap)
+                    t_from = t_prev
+                    to_sample = k_out < n_out and k_out * t_sample < t_end * (1.0 + 1e-13)
+                    t_next = k_out * t_sample if to_sample else t_end
+                    n_steps = max(1, int(np.ceil((t_next - t_from) / h_allow - 1e-9)))
+                    h_new = (t_next - t_from) / n_steps
+                    i_step = 0
+                    since_refresh += n_steps
+                    since_check += n_steps
+                    if h_new != h or since_refresh > 256 or t_from == t_s:
+                        # New step, a fresh segment, or time to refresh: exact exponentials.
+                        h = h_new
+                        for jj in range(nact):
+                            j = act[jj]
+                            D[j] = np.exp(lam[c, ci, j] * h)
+                            E[j] = np.exp(lam[c, ci, j] * (t_from + h - t_s))
+                        cwh = np.cos(w * h)
+                        swh = np.sin(w * h)
+                        cth = np.cos(w * (t_from + h))
+                        sth = np.sin(w * (t_from + h))
+                        since_refresh = 0
+                    else:
+                        # Same step: E and (cos θ, sin θ) advance from the sample point.
+                        for jj in range(nact):
+                            j = act[jj]
+                            E[j] *= D[j]
+                        cth, sth = cth * cwh - sth * swh, sth * cwh + cth * swh
+                    replan = False
+                if start_check:
+                    # A monitor already above its level at the segment start (a contact that
+                    # pulls the instant after an impact) is an event there.
+                    start_check = False
+                    first = -1
+                    for m in range(2):
+                        if watch[m] and first < 0:
+                            if _eval(False, W, Wl, G, GT, lam, c, ci, m, ns, t_s, t_s, w, th0,
+                                     ev) > level[m]:
+                                first = m
+                    if first < 0:
+                        continue
+                    t_ev = t_s
+                    at_break = False
+                else:
+                    first = -1
+                if first < 0:
+                    i_step += 1
+                    steps_taken[c] += 1
+                t_n = t_next if i_step == n_steps else t_from + i_step * h
+                at_break = t_break <= t_n if first < 0 else False
+                if first >= 0:
+                    pass
+                elif at_break:
+                    t_eval = t_break
+                    for m in range(2):
+                        if ready[m]:
+                            gval[m] = _eval(False, W, Wl, G, GT, lam, c, ci, m, ns, t_s,
+                                            t_break, w, th0, ev)
+                            dval[m] = _eval(True, W, Wl, G, GT, lam, c, ci, m, ns, t_s,
+                                            t_break, w, th0, ev)
+                else:
+                    t_eval = t_n
+                    x_n = w * t_n - th0
+                    for m in range(2):
+                        if ready[m]:
+                            g = _modal_sum_active(W, m, E, act, nact) + _horner(G[m], x_n, gdeg)
+                            dg = _modal_sum_active(Wl, m, E, act, nact)
+                            for k in range(gdeg, 0, -1):
+                                dg += w * k * G[m, k] * x_n ** (k - 1)
+                            if mon_trig:
+                                g += GT[m].real * cth - GT[m].imag * sth
+                                dg -= w * (GT[m].real * sth + GT[m].imag * cth)
+                            gval[m] = g
+                            dval[m] = dg
+                # An event in (t_prev, t_eval]: the earliest monitor to rise through its level.
+                if first < 0:
+                    t_ev = t_eval
+                if first < 0 and t_eval > t_s:
+                    for m in range(2):
+                        if not watch[m]:
+                            continue
+                        t_hi = -1.0
+                        if gval[m] > level[m]:
+                            t_hi = t_eval
+                        elif dprev[m] > 0.0 and dval[m] < 0.0:
+                            # A maximum inside the step: does it rise above the level?
+                            t_max = _root(True, -1.0, W, Wl, G, GT, lam, c, ci, m, ns, t_s,
+                                          t_prev, t_eval, 0.0, w, th0, tolerance, ev)
+                            if _eval(False, W, Wl, G, GT, lam, c, ci, m, ns, t_s, t_max, w,
+                                     th0, ev) > level[m]:
+                                t_hi = t_max
+                        if t_hi > 0.0:
+                            te = _root(False, 1.0, W, Wl, G, GT, lam, c, ci, m, ns, t_s,
+                                       t_prev, t_hi, level[m], w, th0, tolerance, ev)
+                            if first < 0 or te < t_ev:
+                                t_ev = te
+                                first = m
+                if first >= 0:
+                    _exps(lam, c, ci, ns, t_ev - t_s, ev)
+                    _state(q, v, z, ya, vec, ev, y0, Z, ZT, free, c, ci, nf, ns,
+                           w * t_ev - th0, np.cos(w * t_ev), np.sin(w * t_ev), ns, deg)
+                    lift_e, dl_e, _ = piece_eval(breaks, poly, trig, c, p, rev, w * t_ev)
+                    vcam = -w * dl_e
+                    if cam_held:
+                        q[0] = -lift_e
+                        v[0] = vcam
+                    if seat_held:
+                        q[6] = qs
+                        v[6] = 0.0
+                    if not cam_held:
+                        _separation(sep_rev, c, n_rev, w, t_s, t_ev)
+                    if first == 0 and cam_held:
+                        new = _config(False, seat_held)
+                        _record(events, n_events, c, t_ev, CAM_SEPARATION, cfg, new, 0.0, 0.0)
+                    elif first == 0:
+                        new = _config(True, seat_held)
+                        closing = v[0] - vcam
+                        dv = vcam - v[0]
+                        for i in range(7):
+                            v[i] += impulse[c, new - 1, 0, i] * dv
+                        q[0] = -lift_e
+                        counts[c, 0] += 1
+                        vmax[c, 0] = max(vmax[c, 0], closing)
+                        mi = 1 if seat_held else 0
+                        _record(events, n_events, c, t_ev, CAM_IMPACT, cfg, new, closing,
+                                meff[c, mi] * closing)
+                    elif seat_held:
+                        new = _config(cam_held, False)
+                        _record(events, n_events, c, t_ev, SEAT_SEPARATION, cfg, new, 0.0,
+                                0.0)
+                    else:
+                        new = _config(cam_held, True)
+                        closing = -v[6]
+                        dv = -v[6]
+                        for i in range(7):
+                            v[i] += impulse[c, new - 1, 1, i] * dv
+                        q[6] = qs
+                        counts[c, 1] += 1
+                        vmax[c, 1] = max(vmax[c, 1], closing)
+                        mi = 3 if cam_held else 2
+                        _record(events, n_events, c, t_ev, SEAT_IMPACT, cfg, new, closing,
+                                meff[c, mi] * closing)
+                    cfg = new
+                    stalled = stalled + 1 if t_ev - t_s <= 1e-15 * (1.0 + t_s) else 0
+                    t_s = t_ev
+                    break
+                if at_break:
+                    _state(q, v, z, ya, vec, ev, y0, Z, ZT, free, c, ci, nf, ns,
+                           w * t_break - th0, np.cos(w * t_break), np.sin(w * t_break), ns,
+                           deg)
+                    if not cam_held:
+                        _separation(sep_rev, c, n_rev, w, t_s, t_break)
+                    l_left, dl_left, _ = piece_eval(breaks, poly, trig, c, p, rev,
+                                                    w * t_break)
+                    l_right, dl_right, _ = piece_eval(breaks, poly, trig, c, nb, revb,
+                                                      w * t_break)
+                    if seat_held:
+                        q[6] = qs
+                        v[6] = 0.0
+                    if cam_held:
+                        jump = w * (dl_right - dl_left)  # lift-rate jump [m/s]
+                        scale = 1e-9 * (abs(w * dl_left) + abs(w * dl_right) + 1e-12)
+                        drop = l_right < l_left - 1e-12
+                        q[0] = -l_left
+                        v[0] = -w * dl_left
+                        if (jump < -scale or drop) and not form[c]:
+                            new = _config(False, seat_held)
+                            _record(events, n_events, c, t_break, CAM_SEPARATION, cfg, new,
+                                    -jump, 0.0)
+                            cfg = new
+                        else:
+                            if abs(jump) > scale:
+                                dv = -jump
+                                for i in range(7):
+                                    v[i] += impulse[c, cfg - 1, 0, i] * dv
+                                counts[c, 0] += 1
+                                vmax[c, 0] = max(vmax[c, 0], abs(jump))
+                                mi = 1 if seat_held else 0
+                                _record(events, n_events, c, t_break, CAM_IMPACT, cfg, cfg,
+                                        abs(jump), meff[c, mi] * abs(jump))
+                            q[0] = -l_right
+                            v[0] = -w * dl_right
+                    p = nb
+                    rev = revb
+                    t_s = t_break
+                    stalled = 0
+                    break
+                # Accept the grid point: force maxima, output sample, end of run.
+                for m in range(2):
+                    dprev[m] = dval[m]
+                if cam_held:
+                    fmax[c, 0] = max(fmax[c, 0], -gval[0])
+                if seat_held:
+                    fmax[c, 1] = max(fmax[c, 1], -gval[1])
+                t_prev = t_n
+                if i_step == n_steps:
+                    if to_sample:
+                        x_n = w * t_n - th0
+                        _state_active(q, z, vec, E, y0, Z, ZT, free, c, ci, nf, act, nact,
+                                      x_n, cth, sth, deg)
+                        _write_sample(q_out, force_out, cam_out, cfg_out, c, k_out, q, gval,
+                                      cam_held, seat_held, _horner(poly[c, p], x_n)
+                                      + trig[c, p, 0] * sth + trig[c, p, 1] * cth, cfg)
+                        k_out += 1
+                    if t_n >= t_end:
+                        if not cam_held:
+                            _separation(sep_rev, c, n_rev, w, t_s, t_n)
+                        done = True
+                        break
+                    replan = True
+                else:
+                    for jj in range(nact):
+                        j = act[jj]
+                        E[j] *= D[j]
+                    cth, sth = cth * cwh - sth * swh, sth * cwh + cth * swh
+            if stalled > MAX_STALLED_EVENTS:
+                status[c] = CHATTER
+                break
+            finite = True
+            for i in range(7):
+                if not (np.isfinite(q[i]) and np.isfinite(v[i])):
+                    finite = False
+            if not finite:
+                status[c] = NONFINITE
+                break
+        if n_events[c] > events.shape[1] and status[c] == OK:
+            status[c] = EVENTS_TRUNCATED
