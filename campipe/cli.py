@@ -42,7 +42,8 @@ def parse_overrides(pairs: tuple[str, ...]) -> dict[str, object]:
         try:
             out[key] = yaml.safe_load(text)
         except yaml.YAMLError as exc:
-            raise click.BadParameter(f"{key}: cannot read {text!r} ({exc})", param_hint="--set")
+            raise click.BadParameter(f"{key}: cannot read {text!r} ({exc})",
+                                     param_hint="--set") from None
     return out
 
 
@@ -160,3 +161,192 @@ def model_text(train, sm, limits, preset, overrides) -> str:
     for name, dt in limits.items():
         lines.append(f"  {name:<4} {dt * 1e6:8.4f} µs")
     return "\n".join(lines)
+
+
+# -- studies ----------------------------------------------------------------------------------
+
+
+class SpecRefused(click.ClickException):
+    """A spec refused before anything runs (exit status 2, like a usage error)."""
+
+    exit_code = 2
+
+    def show(self, file=None) -> None:
+        click.echo(self.format_message(), err=True)
+
+
+def _load(spec_path, sets):
+    from campipe.io.spec_yaml import SpecFileError
+    from campipe.study import SpecError, load_study
+
+    overrides = parse_overrides(sets)
+    try:
+        return load_study(spec_path, overrides)
+    except (SpecFileError, SpecError) as exc:
+        raise SpecRefused(str(exc)) from None
+
+
+def _archive_path(study, spec_path, output):
+    from pathlib import Path
+
+    return Path(output) if output else Path(spec_path).parent / f"{study.name}.nc"
+
+
+_SET_HELP = ("Override a spec key before checking it, value as YAML: --set run.revolutions=1, "
+             "--set sweep.speed='[9000 rpm, 9524 rpm]'. Repeatable.")
+
+
+@main.command()
+@click.argument("spec", type=click.Path(exists=True, dir_okay=False))
+@click.option("-o", "--output", type=click.Path(dir_okay=False),
+              help="Archive to write (default: <name>.nc beside the spec).")
+@click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=_SET_HELP)
+@click.option("--scheduler", default="threads", show_default=True,
+              help="threads, synchronous, processes, or a dask.distributed scheduler address "
+                   "such as tcp://127.0.0.1:8786.")
+@click.option("--workers", type=click.IntRange(min=1),
+              help="Threads or processes of a local scheduler (default: the cores available).")
+@click.option("--batch-size", type=click.IntRange(min=1),
+              help="Cases per batch (default: about four batches per worker, 4 to 32 cases).")
+@click.option("--keep-parts", is_flag=True,
+              help="Keep the batch files (<archive>.parts/) after writing the archive.")
+@click.option("--progress/--no-progress", default=True, show_default=True,
+              help="Show a progress line on stderr.")
+def study(spec, output, sets, scheduler, workers, batch_size, keep_parts, progress) -> None:
+    """Run the study SPEC (YAML) into one netCDF archive.
+
+    Rerunning the same command after an interruption computes only the cases whose batches
+    were not stored; a finished archive that already holds the study is left as it is.
+    """
+    import sys
+
+    from campipe.engine import IntegrationError
+    from campipe.study.execute import run_study
+    from campipe.study.progress import Progress
+
+    loaded = _load(spec, sets)
+    archive = _archive_path(loaded, spec, output)
+    stderr = click.get_text_stream("stderr")
+
+    def bar(total, done):
+        return Progress(total, stderr.write, done=done, terminal=stderr.isatty())
+
+    if loaded.spec.replay:
+        logging.getLogger(__name__).warning(
+            "replay: the selection %r is checked and kept in the archive, but logging cases "
+            "to rerun is not part of this version (the hook is campipe.study.execute."
+            "BatchHook)", loaded.spec.replay)
+    command = "campipe " + " ".join(sys.argv[1:]) if sys.argv[1:] else f"campipe study {spec}"
+    try:
+        report = run_study(loaded, archive, scheduler=scheduler, workers=workers,
+                           batch_size=batch_size, progress=bar if progress else None,
+                           keep_parts=keep_parts, command=command)
+    except IntegrationError as exc:
+        raise click.ClickException(f"{exc}\nBatches finished before it are stored; fix the "
+                                   "spec and rerun the same command to resume.") from None
+    except ValueError as exc:
+        raise click.UsageError(str(exc)) from None
+    click.echo(f"campipe study: {report.summary()}", err=True)
+    click.echo(str(report.archive))
+
+
+@main.command()
+@click.argument("spec", type=click.Path(exists=True, dir_okay=False))
+@click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=_SET_HELP)
+@click.option("--workers", type=click.IntRange(min=1),
+              help="Workers to estimate the run time for (default: the cores available).")
+@click.option("--estimate/--no-estimate", default=True, show_default=True,
+              help="Time a short sample run to estimate the run time.")
+def validate(spec, sets, workers, estimate) -> None:
+    """Check the study SPEC and print its case count, axes and estimated cost."""
+    from campipe.study.estimate import archive_bytes
+    from campipe.study.estimate import estimate as cost
+    from campipe.study.execute import default_batch_size, default_workers, plan_batches
+    from campipe.study.progress import format_seconds
+
+    loaded = _load(spec, sets)
+    workers = workers or default_workers()
+    click.echo(validate_text(loaded, spec))
+    size = default_batch_size(len(loaded.cases), workers)
+    plans = plan_batches(loaded.cases, loaded.record, size)
+    click.echo(f"batches: {len(plans)} of up to {size} cases")
+    if estimate:
+        e = cost(loaded, workers)
+        click.echo(f"run time: about {format_seconds(e.seconds)} on {workers} "
+                   f"worker{'s' if workers != 1 else ''} ({e.simulated:.3g} s simulated; "
+                   "timed on a short run of one case per run-settings group)")
+    click.echo(f"archive: about {archive_bytes(loaded) / 1e6:.3g} MB before compression "
+               f"(events not counted)")
+
+
+def validate_text(loaded, spec_path) -> str:
+    """The checked study in words: cases, axes (values as the spec wrote them), run."""
+    from campipe.study.layout import coordinate_values
+    from campipe.study.variables import case_coordinates
+
+    s = loaded.spec
+    run = s.base["run"]
+    first = loaded.cases[0]
+    lines = [f"{spec_path}: valid; study {s.name!r}, {len(loaded.cases)} "
+             f"case{'s' if len(loaded.cases) != 1 else ''}"]
+    coords = case_coordinates(loaded.varied)
+    values = coordinate_values(loaded.cases, loaded)
+    lines.append("axes:" if loaded.axes else "axes: none (a single case)")
+    for a in loaded.axes:
+        listed = s.sweep.get(a.key) or s.zip.get(a.key)
+        if a.key in ("profile", "defects"):
+            shown = list(dict.fromkeys(values[a.key]))
+        elif listed is not None:
+            shown = [str(v) for v in listed]
+        elif a.kind == "sample":
+            lo, hi = s.sample.ranges[a.key]
+            shown = [f"{s.sample.method} over {lo:.6g} … {hi:.6g} (SI), seed {s.sample.seed}"]
+        else:
+            shown = [f"{len(s.cases)} entries"]
+        text = ", ".join(shown) if len(shown) <= 6 else f"{shown[0]} … {shown[-1]}"
+        name = coords[a.key][0] if a.key in coords else a.key
+        lines.append(f"  {name:<22} {a.kind:<7} {a.size:>4} values: {text}")
+    step = first.settings.step
+    dt = "chosen by the integrator" if step is None else f"{step * 1e6:.4g} µs"
+    lines.append(f"run: {run['revolutions']:g} revolutions, integrator "
+                 f"{first.settings.method}, dt {dt}, output every {run['output_every']}, "
+                 f"record: {', '.join(loaded.record) or '-'}")
+    if s.replay:
+        lines.append(f"replay: {s.replay!r} (checked; logging to rerun is not in this version)")
+    return "\n".join(lines)
+
+
+@main.command()
+@click.argument("archive", type=click.Path(exists=True, dir_okay=False))
+@click.option("--where", help="Keep cases where EXPR holds, e.g. \"speed_rpm > 9000 and seat "
+                              "> 0\" (comparisons, and, or, not, parentheses; never run as "
+                              "Python).")
+@click.option("--columns", help="Comma-separated columns (default: parameters and metrics).")
+@click.option("--sort", help="Sort by these comma-separated columns; -col for descending.")
+@click.option("--format", "fmt", type=click.Choice(["table", "csv", "json"]), default="table",
+              show_default=True, help="json: an array of row objects.")
+@click.option("--summary", is_flag=True,
+              help="Print the axes and, for a speed sweep, the separation onset speeds.")
+def query(archive, where, columns, sort, fmt, summary) -> None:
+    """Print an archive's cases, one row per case."""
+    import xarray as xr
+
+    from campipe.study.query import QueryError, case_table, format_rows, select
+    from campipe.study.query import summary as summary_text
+
+    try:
+        with xr.open_dataset(archive) as ds:
+            if summary:
+                click.echo(summary_text(ds))
+                return
+            table = case_table(ds)
+    except (OSError, ValueError) as exc:
+        if isinstance(exc, QueryError):
+            raise
+        raise click.ClickException(f"{archive}: cannot read as an archive ({exc})") from None
+    names = [c.strip() for c in columns.split(",") if c.strip()] if columns else table.default
+    try:
+        rows = select(table, where, sort)
+        click.echo(format_rows(table, rows, names, fmt))
+    except QueryError as exc:
+        raise click.UsageError(str(exc)) from None

@@ -83,3 +83,56 @@ def _example_unit(unit: pint.Unit) -> str:
 def convert(value: float, from_units: str, to_units: str) -> float:
     """Convert a float between two pint unit spellings."""
     return float(Q_(value, from_units).to(to_units).magnitude)
+
+
+def parse_angular(text: str | float | int, units: str, key: str, example_units: str) -> float:
+    """Parse an angle or an angular speed, whose units must name an angle.
+
+    pint treats the radian as dimensionless, so :func:`parse_quantity` alone would take a bare
+    ``268`` as radians and ``1 Hz`` as 1 rad/s. Here the quantity's base units must hold
+    exactly one radian: ``"268 deg"``, ``"9000 rpm"``, ``"2 rad/s"``.
+
+    Parameters
+    ----------
+    text : str, float or int
+        The quantity, such as ``"268 deg"``.
+    units : str
+        ``"rad"`` or an angle per something, such as ``"rad/s"``.
+    key : str
+        The key the value came from, named in any error.
+    example_units : str
+        Units to suggest in errors (``"deg"``, ``"rpm"``).
+
+    Raises
+    ------
+    QuantityError
+        With the key, what was found and what is expected.
+    """
+    if isinstance(text, bool) or not isinstance(text, str):
+        if isinstance(text, (int, float)):
+            raise QuantityError(
+                f"{key}: found the bare number {text!r}; write it with units, "
+                f"e.g. '{text} {example_units}'"
+            )
+        raise QuantityError(f"{key}: expected a quantity such as '1 {example_units}', "
+                            f"found {text!r}")
+    try:
+        q = ureg.Quantity(text.strip())
+    except Exception as exc:  # pint raises several unrelated types on bad text
+        raise QuantityError(
+            f"{key}: cannot read {text!r} as a quantity ({exc}); "
+            f"write a number and a unit, e.g. '1 {example_units}'"
+        ) from None
+    base = q.to_base_units() if isinstance(q, pint.Quantity) else None
+    if base is None or dict(base.unit_items()).get("radian") != 1:
+        raise QuantityError(
+            f"{key}: found {text!r}, expected a quantity whose units name an angle, "
+            f"such as '1 {example_units}'"
+        )
+    try:
+        return float(q.to(units).magnitude)
+    except pint.DimensionalityError:
+        raise QuantityError(
+            f"{key}: found {text!r}, expected a quantity convertible to {example_units}, "
+            f"such as '1 {example_units}'"
+        ) from None

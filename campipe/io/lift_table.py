@@ -1,0 +1,119 @@
+"""Reading a measured cam lift table from CSV.
+
+Format: comma-separated text; lines starting with ``#`` and blank lines are ignored. The first
+other line is a header naming two columns, ``angle`` and ``lift``, each with its units in
+square brackets (pint spelling); every following line holds one angle and one lift::
+
+    # lift table of cam 17, measured 2024-03-02
+    angle [deg],lift [in]
+    0,0.0
+    10,0.0021
+    ...
+
+Angles lie within one turn, [0, 360) deg, strictly increasing, at least four of them; the
+profile passes through every point (a periodic cubic spline, see
+:func:`campipe.profiles.table`).
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+
+from campipe.units import QuantityError, parse_angular, parse_quantity
+
+_HEADER = re.compile(r"^\s*(?P<name>[A-Za-z_]+)\s*\[(?P<units>[^\]]+)\]\s*$")
+#: Column name → (SI units the numerics take, units suggested in errors).
+COLUMNS = {"angle": ("rad", "deg"), "lift": ("m", "in")}
+
+
+class LiftTableError(ValueError):
+    """A lift table file that cannot be read, with the file and line."""
+
+
+def read_lift_table(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
+    """Read a lift table CSV (format above).
+
+    Parameters
+    ----------
+    path : str or Path
+        The CSV file.
+
+    Returns
+    -------
+    angles : np.ndarray
+        (m,) cam angles [rad].
+    lifts : np.ndarray
+        (m,) lifts [m].
+
+    Raises
+    ------
+    LiftTableError
+        Naming the file and line: unreadable file, missing or bad header, unknown units,
+        a non-numeric or non-finite value, a row without exactly two values.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise LiftTableError(f"{path}: cannot read the lift table ({exc.strerror})") from None
+    except UnicodeDecodeError:
+        raise LiftTableError(f"{path}: not UTF-8 text") from None
+    rows = [
+        (n, row)
+        for n, row in enumerate(csv.reader(text.splitlines()), 1)
+        if row and "".join(row).strip() and not row[0].lstrip().startswith("#")
+    ]
+    if not rows:
+        raise LiftTableError(f"{path}: empty; expected a header 'angle [deg],lift [in]' and rows")
+    line, header = rows[0]
+    scale = _read_header(path, line, header)
+    values = np.empty((len(rows) - 1, 2))
+    for k, (n, row) in enumerate(rows[1:]):
+        if len(row) != 2:
+            raise LiftTableError(f"{path}:{n}: expected 2 values (angle, lift), found {len(row)}")
+        for j, cell in enumerate(row):
+            try:
+                v = float(cell)
+            except ValueError:
+                v = math.nan
+            if not math.isfinite(v):
+                raise LiftTableError(
+                    f"{path}:{n}: found {cell.strip()!r} in column {j + 1}, expected a finite "
+                    "number"
+                )
+            values[k, j] = v * scale[j]
+    return values[:, 0].copy(), values[:, 1].copy()
+
+
+def _read_header(path: Path, line: int, header: list[str]) -> tuple[float, float]:
+    expected = "expected a header such as 'angle [deg],lift [in]'"
+    if len(header) != 2:
+        raise LiftTableError(f"{path}:{line}: found {','.join(header)!r}, {expected}")
+    scale = []
+    for cell, (name, (units, example)) in zip(header, COLUMNS.items(), strict=True):
+        m = _HEADER.match(cell)
+        if not m or m["name"].lower() != name:
+            raise LiftTableError(
+                f"{path}:{line}: found column {cell.strip()!r} where '{name} [units]' belongs; "
+                + expected
+            )
+        try:
+            parse = parse_angular if name == "angle" else parse_quantity
+            scale.append(parse(f"1 {m['units']}", units, f"{path}:{line}: {name}", example))
+        except QuantityError as exc:
+            raise LiftTableError(str(exc)) from None
+    return scale[0], scale[1]
+
+
+def table_digest(angles: np.ndarray, lifts: np.ndarray) -> str:
+    """SHA-256 of a table's values in SI: what a case id records instead of the file's path."""
+    h = hashlib.sha256()
+    h.update(np.ascontiguousarray(angles, dtype="<f8").tobytes())
+    h.update(np.ascontiguousarray(lifts, dtype="<f8").tobytes())
+    return h.hexdigest()

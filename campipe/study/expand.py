@@ -1,0 +1,477 @@
+"""From a checked spec to the study's cases: expansion, resolution to engine inputs, case ids.
+
+Expansion order: for each ``cases`` entry (or the base alone), the ``sweep`` grid (first key
+outermost), then the ``zip`` rows, then the ``sample`` points, last varying fastest. Each
+case is the base deep-merged with its entry (a ``profile`` of another ``kind`` replaces the
+base's profile whole), then each axis's value set at its key.
+
+Each case is resolved to SI and to the engine's :class:`~campipe.engine.Case` and
+:class:`~campipe.engine.RunSettings`; its id is the SHA-256 of its canonical parameters
+(every model parameter, the cam with its defects, speed, seat, closure and run settings, SI,
+as sorted JSON). A measured lift table enters the id by its values, not its path.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import hashlib
+import itertools
+import json
+import math
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from campipe.engine import Case, RunSettings, StabilityError, resolve_integrator
+from campipe.engine.batch import check_stability
+from campipe.model import PARAMETERS, ModelParameterError, ValveTrain, valve_train
+from campipe.profiles import Profile, bump, flat, harmonic, max_lift, min_lift, polydyne, table
+from campipe.study.fields import (
+    CASE_FIELDS,
+    DEFECT_FIELDS,
+    PROFILE_FIELDS,
+    SpecProblem,
+    varied_fields,
+)
+from campipe.study.spec import (
+    MAX_PROBLEMS,
+    Spec,
+    SpecError,
+    check_defects,
+    check_profile,
+)
+
+#: Lift below the base circle tolerated as round-off [m].
+LIFT_TOLERANCE = 1e-12
+#: Hex digits of a case id (64 bits).
+CASE_ID_LENGTH = 16
+
+
+@dataclass(frozen=True)
+class ResolvedCase:
+    """One case of a study, ready for the engine."""
+
+    index: int  # position in the study and the archive
+    case: Case  # engine input
+    settings: RunSettings  # how it is integrated (batches share these)
+    values: dict[str, object]  # dotted key → value: SI floats, words, labels ("profile")
+    case_id: str  # hash of the canonical parameters
+
+
+@dataclass(frozen=True)
+class Axis:
+    """One axis of the study, as the archive and ``campipe query --summary`` report it."""
+
+    key: str  # dotted key varied ("speed", "model.spring_preload"), or "cases"
+    kind: str  # "sweep", "zip", "sample" or "cases"
+    size: int  # number of values
+
+
+@dataclass
+class Study:
+    """A spec expanded into resolved cases."""
+
+    spec: Spec  # the checked spec
+    cases: list[ResolvedCase]  # in archive order
+    axes: list[Axis]  # what varies, in expansion order
+    varied: tuple[str, ...]  # extra dotted keys with a per-case coordinate in the archive
+    revolutions: float  # cam turns, shared [-]
+    output_every: float  # output spacing, shared [rad]
+    record: tuple[str, ...]  # optional histories stored
+
+    @property
+    def name(self) -> str:
+        return self.spec.name
+
+
+# -- expansion ------------------------------------------------------------------------------
+
+def deep_merge(base: Mapping, entry: Mapping) -> dict:
+    """``entry`` over ``base``: mappings merge key by key, anything else replaces.
+
+    A profile of another kind replaces the base's profile whole (its keys differ).
+    """
+    out = dict(base)
+    for k, v in entry.items():
+        old = out.get(k)
+        if k == "profile" and isinstance(v, Mapping) and isinstance(old, Mapping) and (
+            "kind" in v and v["kind"] != old.get("kind")
+        ):
+            out[k] = dict(v)
+        elif isinstance(v, Mapping) and isinstance(old, Mapping):
+            out[k] = deep_merge(old, v)
+        else:
+            out[k] = v
+    return out
+
+
+def set_key(case: dict, key: str, value: object) -> None:
+    """Set a dotted key in a case, copying only the mapping on its way."""
+    head, _, rest = key.partition(".")
+    if not rest:
+        case[head] = value
+        return
+    inner = dict(case.get(head) or {})
+    set_key(inner, rest, value)
+    case[head] = inner
+
+
+@dataclass(frozen=True)
+class _AxisRows:
+    keys: tuple[str, ...]  # dotted keys set together
+    rows: list[tuple]  # one tuple of values per position
+    paths: tuple[str, ...]  # spec path of each key's value list
+
+
+def sample_rows(spec: Spec) -> list[tuple]:
+    """The sampled design's points, values written in SI units (exact floats)."""
+    from scipy.stats import qmc
+
+    s = spec.sample
+    assert s is not None
+    keys = list(s.ranges)
+    unit = qmc.LatinHypercube(d=len(keys), rng=np.random.default_rng(s.seed)).random(s.n)
+    fields = varied_fields()
+    rows = []
+    for u in unit:
+        row = []
+        for k, x in zip(keys, u, strict=True):
+            lo, hi = s.ranges[k]
+            row.append(f"{lo + float(x) * (hi - lo)!r} {fields[k].units}".rstrip())
+        rows.append(tuple(row))
+    return rows
+
+
+def _axes(spec: Spec) -> list[_AxisRows]:
+    out = [_AxisRows((k,), [(v,) for v in vals], (f"sweep.{k}",)) for k, vals in spec.sweep.items()]
+    if spec.zip:
+        keys = tuple(spec.zip)
+        out.append(_AxisRows(keys, list(zip(*spec.zip.values(), strict=True)),
+                             tuple(f"zip.{k}" for k in keys)))
+    if spec.sample:
+        keys = tuple(spec.sample.ranges)
+        out.append(_AxisRows(keys, sample_rows(spec), tuple(f"sample.ranges.{k}" for k in keys)))
+    return out
+
+
+def raw_cases(spec: Spec) -> Iterator[tuple[dict, dict[str, str]]]:
+    """Every case as spec data, with where each of its varied values came from."""
+    axes = _axes(spec)
+    entries = spec.cases or [{}]
+    for ci, entry in enumerate(entries):
+        merged = deep_merge(spec.base, entry)
+        entry_origins = {k: f"cases[{ci}].{k}" for k in _leaves(entry)} if spec.cases else {}
+        for combo in itertools.product(*(range(len(a.rows)) for a in axes)):
+            case = dict(merged)
+            origins = dict(entry_origins)
+            for axis, j in zip(axes, combo, strict=True):
+                for key, value, path in zip(axis.keys, axis.rows[j], axis.paths, strict=True):
+                    set_key(case, key, value)
+                    origins[key] = f"{path}[{j}]" if not path.startswith("sample") \
+                        else f"sample point {j} ({path})"
+            yield case, origins
+
+
+def _leaves(entry: Mapping, prefix: str = "") -> list[str]:
+    out = []
+    for k, v in entry.items():
+        if isinstance(v, Mapping) and k in ("model", "profile", "run"):
+            out += _leaves(v, f"{prefix}{k}.")
+        else:
+            out.append(f"{prefix}{k}")
+    return out
+
+
+def count_cases(spec: Spec) -> int:
+    n = len(spec.cases) or 1
+    for a in _axes(spec):
+        n *= len(a.rows)
+    return n
+
+
+# -- resolution -----------------------------------------------------------------------------
+
+def _freeze(value: object) -> object:
+    if isinstance(value, Mapping):
+        return tuple(sorted((k, _freeze(v)) for k, v in value.items()))
+    if isinstance(value, list | tuple):
+        return tuple(_freeze(v) for v in value)
+    return value
+
+
+def _thaw(frozen: tuple) -> dict:
+    return {k: list(v) if isinstance(v, tuple) else v for k, v in frozen}
+
+
+@functools.lru_cache(maxsize=4096)
+def _parse(key: str, value: object, path: str) -> object:
+    """A case field's SI value (cached: a grid repeats its base values in every case)."""
+    return (CASE_FIELDS.get(key) or varied_fields()[key]).parse(
+        list(value) if isinstance(value, tuple) else value, path)
+
+
+@functools.lru_cache(maxsize=1024)
+def _train(preset: str, overrides: tuple) -> ValveTrain:
+    try:
+        return valve_train(preset, _thaw(overrides), key_prefix="model.")
+    except ModelParameterError as exc:
+        path, _, message = str(exc).partition(": ")
+        raise SpecProblem(path, message) from None
+
+
+@functools.lru_cache(maxsize=256)
+def _lift_table(path: Path, mtime_ns: int) -> tuple[np.ndarray, np.ndarray, str]:
+    from campipe.io.lift_table import LiftTableError, read_lift_table, table_digest
+
+    try:
+        angles, lifts = read_lift_table(path)
+    except LiftTableError as exc:
+        raise SpecProblem("profile.file", str(exc)) from None
+    return angles, lifts, table_digest(angles, lifts)
+
+
+@functools.lru_cache(maxsize=1024)
+def _profile(frozen: tuple, directory: Path) -> tuple[Profile, dict, dict[str, object]]:
+    """(profile, canonical form, archive values) of a checked profile mapping."""
+    spec = _thaw(frozen)
+    kind = spec["kind"]
+    values: dict[str, object] = {"profile.kind": kind}
+    si = {k: PROFILE_FIELDS[k].parse(v, f"profile.{k}") for k, v in spec.items() if k != "kind"}
+    try:
+        if kind == "harmonic":
+            profile = harmonic(si["lift"])
+        elif kind.startswith("polydyne-"):
+            profile = polydyne(kind.removeprefix("polydyne-"), si["lift"], si["rise"],
+                               si["dwell"], si["fall"])
+        else:
+            path = (directory / si["file"]).resolve()
+            try:
+                mtime = path.stat().st_mtime_ns
+            except OSError as exc:
+                raise SpecProblem("profile.file", f"found {spec['file']!r}, cannot read "
+                                  f"{path} ({exc.strerror}); the path is relative to the "
+                                  "spec") from None
+            angles, lifts, digest = _lift_table(path, mtime)
+            try:
+                profile = table(angles, lifts)
+            except ValueError as exc:
+                raise SpecProblem("profile.file", f"{path}: {exc}") from None
+            profile = dataclasses.replace(
+                profile, label=f"table {Path(si['file']).name} ({angles.size} points)")
+            canonical = {"kind": kind, "table_sha256": digest}
+            values.update({"profile.file": si["file"], "profile": profile.label})
+            return profile, canonical, values
+    except ValueError as exc:
+        raise SpecProblem("profile", str(exc)) from None
+    canonical = {"kind": kind, **{k: _clean(v) for k, v in si.items()}}
+    values.update({f"profile.{k}": v for k, v in si.items()})
+    values["profile"] = profile.label
+    return profile, canonical, values
+
+
+@functools.lru_cache(maxsize=1024)
+def _with_defects(frozen_profile: tuple, frozen_defects: tuple, directory: Path):
+    profile, canonical, values = _profile(frozen_profile, directory)
+    out = profile
+    defects = []
+    for i, d in enumerate(_thaw_list(frozen_defects)):
+        si = {k: DEFECT_FIELDS[k].parse(v, f"defects[{i}].{k}") for k, v in d.items()
+              if k != "kind"}
+        try:
+            if d["kind"] == "flat":
+                out = flat(out, si["from"], si["to"])
+            else:
+                out = bump(out, si["center"], si["height"], si["width"])
+        except ValueError as exc:
+            raise SpecProblem(f"defects[{i}]", str(exc)) from None
+        defects.append({"kind": d["kind"], **{k: _clean(v) for k, v in si.items()}})
+    label = out.label[len(profile.label):].removeprefix(" + ") if defects else "none"
+    low = min_lift(out)
+    if low < -LIFT_TOLERANCE:
+        where = "defects" if defects else ("profile.file" if "profile.file" in values
+                                          else "profile")
+        raise SpecProblem(where, f"the cam's lift falls to {low / 0.0254:.4g} in; expected a "
+                                 "lift never below the base circle (0)")
+    return out, canonical, defects, values, label, max_lift(out)
+
+
+def _thaw_list(frozen: tuple) -> list[dict]:
+    return [dict(d) for d in frozen]
+
+
+def _clean(v: object) -> object:
+    """Floats as JSON keeps them; −0.0 as 0.0 (the same case)."""
+    if isinstance(v, float):
+        return v + 0.0
+    if isinstance(v, tuple | list):
+        return [_clean(x) for x in v]
+    return v
+
+
+def case_id(canonical: Mapping) -> str:
+    """The first 16 hex digits of the SHA-256 of the canonical parameters as sorted JSON."""
+    text = json.dumps(canonical, sort_keys=True, separators=(",", ":"), allow_nan=False)
+    return hashlib.sha256(text.encode()).hexdigest()[:CASE_ID_LENGTH]
+
+
+def resolve(raw: Mapping, index: int, directory: Path) -> ResolvedCase:
+    """One case (spec data, defaults filled in) → engine inputs, archive values and id.
+
+    Raises
+    ------
+    SpecProblem
+        With the key path inside the case (``seat``, ``profile.lift``, ``run.dt``).
+    """
+    values: dict[str, object] = {}
+    model = dict(raw["model"])
+    preset = model.pop("preset")
+    train = _train(preset, _freeze(model))
+    values["model.preset"] = preset
+    for name in PARAMETERS:
+        values[f"model.{name}"] = getattr(train, name)
+
+    if "profile" not in raw:
+        raise SpecProblem("profile", "missing; give the cam in the base, an axis or a case, "
+                                     "e.g. profile: {kind: harmonic, lift: 1 in}")
+    prof = check_profile(raw["profile"], "profile", partial=False)
+    defects = check_defects(raw["defects"], "defects")
+    profile, canonical_profile, canonical_defects, pvalues, dlabel, full = _with_defects(
+        _freeze(prof), tuple(_freeze(d) for d in defects), directory)
+    values.update(pvalues)
+    values["defects"] = dlabel
+
+    if "speed" not in raw:
+        raise SpecProblem("speed", "missing; give the cam speed in the base, an axis or a "
+                                   "case, e.g. speed: 9000 rpm")
+    speed = _parse("speed", _freeze(raw["speed"]), "speed")
+    seat = _parse("seat", _freeze(raw["seat"]), "seat")
+    closure = _parse("closure", raw["closure"], "closure")
+    if seat is not None:
+        ratio = train.rocker_valve_arm_length / train.rocker_pushrod_arm_length
+        if seat >= full * ratio:
+            raise SpecProblem("seat", f"found {raw['seat']!r}, expected a valve lift below "
+                              f"the full valve lift {full * ratio / 0.0254:.4g} in (cam lift "
+                              f"{full / 0.0254:.4g} in × rocker ratio {ratio:.4g}): above it "
+                              "the valve never leaves its seat")
+    run = raw["run"]
+    rs = {k: _parse(f"run.{k}", _freeze(v), f"run.{k}") for k, v in run.items() if k != "record"}
+    settings = RunSettings(
+        revolutions=rs["revolutions"],
+        dt=rs["dt"],
+        output_every=rs["output_every"],
+        integrator=resolve_integrator(rs["integrator"]),
+        tolerance=rs["tolerance"],
+        max_events=rs["max_events"],
+    )
+    case = Case(train, profile, speed, math.nan if seat is None else seat, closure)
+    try:
+        check_stability([case], settings)
+    except StabilityError as exc:
+        message = str(exc).removeprefix("run.dt: ").replace(" for case 0", "")
+        raise SpecProblem("run.dt", message) from None
+    values.update({
+        "speed": speed,
+        "seat": math.nan if seat is None else seat,
+        "closure": closure,
+        "run.integrator": settings.method,
+        "run.dt": math.nan if settings.step is None else settings.step,
+        "run.tolerance": settings.tolerance,
+        "run.max_events": settings.max_events,
+    })
+    canonical = {
+        "model": {name: _clean(getattr(train, name)) for name in PARAMETERS},
+        "profile": canonical_profile,
+        "defects": canonical_defects,
+        "speed": _clean(speed),
+        "seat": None if seat is None else _clean(seat),
+        "closure": closure,
+        "run": {
+            "integrator": settings.method,
+            "dt": None if settings.step is None else _clean(settings.step),
+            "revolutions": _clean(float(settings.revolutions)),
+            "output_every": _clean(settings.output_every),
+            "tolerance": _clean(settings.tolerance),
+            "max_events": settings.max_events,
+        },
+    }
+    return ResolvedCase(index, case, settings, values, case_id(canonical))
+
+
+def _origin(path: str, origins: Mapping[str, str]) -> str:
+    """The spec path a case key's value came from: an axis, a case entry, or the base."""
+    best = ""
+    for key in origins:
+        if (path == key or path.startswith(key + ".") or path.startswith(key + "[")) and \
+                len(key) > len(best):
+            best = key
+    if not best:
+        return path
+    origin = origins[best]
+    rest = path[len(best):]
+    return origin + rest if "point" not in origin else origin
+
+
+def expand(spec: Spec, source: str = "spec") -> Study:
+    """Expand and resolve every case of a checked spec.
+
+    Raises
+    ------
+    SpecError
+        Problems found while resolving cases, each at the spec path its value came from,
+        a repeated problem reported once with the cases it affects.
+    """
+    cases: list[ResolvedCase] = []
+    found: dict[tuple[str, str], list[int]] = {}
+    for index, (raw, origins) in enumerate(raw_cases(spec)):
+        try:
+            cases.append(resolve(raw, index, spec.directory))
+        except SpecProblem as exc:
+            found.setdefault((_origin(exc.path, origins), exc.message), []).append(index)
+            if len(found) >= MAX_PROBLEMS:
+                break
+    if found:
+        problems = []
+        for (path, message), which in found.items():
+            shown = ", ".join(map(str, which[:5])) + (", ..." if len(which) > 5 else "")
+            tail = f" (case {shown})" if len(which) == 1 else f" ({len(which)} cases: {shown})"
+            problems.append(SpecProblem(path, message + tail))
+        raise SpecError(problems, source)
+    run = spec.base["run"]
+    axes = [Axis(k, "sweep", len(v)) for k, v in spec.sweep.items()]
+    axes += [Axis(k, "zip", len(v)) for k, v in spec.zip.items()]
+    if spec.sample:
+        axes += [Axis(k, "sample", spec.sample.n) for k in spec.sample.ranges]
+    if spec.cases:
+        axes.append(Axis("cases", "cases", len(spec.cases)))
+    return Study(
+        spec=spec,
+        cases=cases,
+        axes=axes,
+        varied=varied_keys(spec),
+        revolutions=float(run["revolutions"]),
+        output_every=float(_parse("run.output_every", run["output_every"], "run.output_every")),
+        record=tuple(run["record"]),
+    )
+
+
+#: Keys always stored per case (their archive names: see campipe.study.variables).
+STANDARD_KEYS = ("speed", "seat", "profile", "defects", "closure", "run.integrator", "run.dt")
+
+
+def varied_keys(spec: Spec) -> tuple[str, ...]:
+    """Keys beyond the standard ones that an axis or a case entry varies."""
+    keys = list(spec.sweep) + list(spec.zip)
+    if spec.sample:
+        keys += list(spec.sample.ranges)
+    for entry in spec.cases:
+        keys += [k for k in _leaves(entry) if k.startswith(("model.", "run."))]
+    fields = varied_fields()
+    out: list[str] = []
+    for k in keys:
+        if k in STANDARD_KEYS or k not in fields or k in out:
+            continue
+        out.append(k)
+    return tuple(out)

@@ -1,0 +1,300 @@
+"""The keys of a study spec, declared once.
+
+Validation (:mod:`campipe.study.spec`), the JSON Schema (:mod:`campipe.study.schema`) and the
+archive's per-case coordinates (:mod:`campipe.study.variables`) all read these tables; the
+model's parameters come from :data:`campipe.model.PARAMETERS` and the run defaults from
+:class:`campipe.engine.RunSettings`, so nothing here repeats them.
+
+A *case* is one run: a valve train (``model``), a cam (``profile`` plus ``defects``), how it is
+driven (``speed``, ``seat``, ``closure``) and how it is integrated (``run``). Keys inside a case
+are written as dotted paths: ``speed``, ``profile.lift``, ``model.spring_preload``, ``run.dt``.
+"""
+
+from __future__ import annotations
+
+import difflib
+import math
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+from campipe.engine import INTEGRATORS, MEMBER_LOADS, RunSettings
+from campipe.model import PARAMETERS, PRESETS, ModelParameterError, parse_parameter
+from campipe.units import QuantityError, parse_angular, parse_quantity
+
+
+class SpecProblem(ValueError):
+    """One problem in a spec: the key's path, what was found and what is expected."""
+
+    def __init__(self, path: str, message: str):
+        super().__init__(f"{path}: {message}" if path else message)
+        self.path = path
+        self.message = message
+
+
+@dataclass(frozen=True)
+class Field:
+    """One key of a case, its type and its meaning."""
+
+    key: str  # dotted path inside a case: "speed", "run.dt", "profile.lift"
+    kind: str  # "quantity", "number", "integer", "choice", "text", "record" or "parameter"
+    description: str  # what it means (JSON Schema description, error messages)
+    units: str = ""  # SI units the numerics take (pint spelling); quantities only
+    example: str = ""  # units suggested in messages and the schema ("rpm", "in", "deg")
+    minimum: float | None = None  # smallest allowed SI value
+    exclusive_minimum: bool = True  # minimum itself refused
+    choices: tuple[str, ...] = ()  # allowed words ("choice"), allowed items ("record")
+    allow_none: bool = False  # "none" (or null) accepted, meaning absent (seat)
+    allow_default: bool = False  # "default" accepted, meaning the engine's choice (run.dt)
+    archive_name: str | None = None  # name of its per-case coordinate in the archive
+    archive_units: str | None = None  # units of that coordinate (pint spelling)
+
+    @property
+    def angular(self) -> bool:
+        """An angle or angular speed: its units must name an angle (see parse_angular)."""
+        return "rad" in self.units
+
+    def parse(self, value: object, path: str) -> object:
+        """The value in SI (floats), a word, or None for "none"; raises SpecProblem."""
+        if self.allow_none and (value is None or value == "none"):
+            return None
+        if self.allow_default and value == "default":
+            return None
+        if self.kind == "quantity":
+            return self._quantity(value, path)
+        if self.kind in ("number", "integer"):
+            return self._number(value, path)
+        if self.kind == "choice":
+            return _choice(value, self.choices, path, self.description)
+        if self.kind == "text":
+            if not isinstance(value, str) or not value.strip():
+                raise SpecProblem(path, f"found {value!r}, expected a non-empty string")
+            return value
+        if self.kind == "parameter":
+            try:
+                return parse_parameter(self.key.removeprefix("model."), value, path)
+            except ModelParameterError as exc:
+                raise SpecProblem(path, str(exc).removeprefix(f"{path}: ")) from None
+        if self.kind == "record":
+            if not isinstance(value, list):
+                raise SpecProblem(
+                    path, f"found {value!r}, expected a list of: {', '.join(self.choices)}"
+                )
+            return tuple(
+                _choice(v, self.choices, f"{path}[{i}]", "what to record")
+                for i, v in enumerate(value)
+            )
+        raise AssertionError(self.kind)
+
+    def _quantity(self, value: object, path: str) -> float:
+        try:
+            if self.angular:
+                v = parse_angular(value, self.units, path, self.example)  # type: ignore[arg-type]
+            else:
+                v = parse_quantity(value, self.units, path, self.example)  # type: ignore[arg-type]
+        except QuantityError as exc:
+            raise SpecProblem(path, str(exc).removeprefix(f"{path}: ")) from None
+        self._check_range(v, value, path)
+        return v
+
+    def _number(self, value: object, path: str) -> float | int:
+        integer = self.kind == "integer"
+        ok = isinstance(value, int) if integer else isinstance(value, (int, float))
+        if isinstance(value, bool) or not ok:
+            what = "an integer" if integer else "a number"
+            raise SpecProblem(path, f"found {value!r}, expected {what}")
+        self._check_range(float(value), value, path)
+        return int(value) if integer else float(value)
+
+    def _check_range(self, v: float, raw: object, path: str) -> None:
+        if not math.isfinite(v):
+            raise SpecProblem(path, f"found {raw!r}, expected a finite value")
+        if self.minimum is None:
+            return
+        if v < self.minimum or (self.exclusive_minimum and v == self.minimum):
+            relation = "greater than" if self.exclusive_minimum else "at least"
+            unit = f" {self.example}" if self.example else ""
+            raise SpecProblem(path, f"found {raw!r}, expected a value {relation} "
+                                    f"{self.minimum:g}{unit}")
+
+
+def _choice(value: object, choices: Iterable[str], path: str, what: str) -> str:
+    choices = tuple(choices)
+    if isinstance(value, str) and value in choices:
+        return value
+    hint = did_you_mean(value, choices) if isinstance(value, str) else ""
+    raise SpecProblem(path, f"found {value!r}, expected one of: {', '.join(choices)}{hint}"
+                      + (f" ({what})" if what else ""))
+
+
+def did_you_mean(word: object, known: Iterable[str]) -> str:
+    """``"; did you mean 'speed'?"`` for a near miss, else ``""``."""
+    close = difflib.get_close_matches(str(word), list(known), n=1, cutoff=0.6)
+    return f"; did you mean {close[0]!r}?" if close else ""
+
+
+def _defaults() -> RunSettings:
+    return RunSettings()
+
+
+#: Keys of a case that are not model parameters, profile or defect fields.
+CASE_FIELDS: dict[str, Field] = {
+    f.key: f
+    for f in [
+        Field("speed", "quantity", "cam speed", units="rad/s", example="rpm", minimum=0.0,
+              archive_name="speed_rpm", archive_units="rpm"),
+        Field("seat", "quantity", "valve seat position, as a valve lift; none: no seat",
+              units="m", example="in", minimum=0.0, exclusive_minimum=False, allow_none=True,
+              archive_name="seat", archive_units="m"),
+        Field("closure", "choice",
+              "force: the spring holds the follower on the cam and it may separate; "
+              "form: a second cam holds it, it never separates",
+              choices=("force", "form"), archive_name="closure"),
+        Field("run.revolutions", "number", "cam turns to integrate, from θ = 0",
+              minimum=0.0),
+        Field("run.integrator", "choice",
+              "integrator name; default: the engine's default integrator",
+              choices=("default", *INTEGRATORS), archive_name="integrator"),
+        Field("run.dt", "quantity", "time step; default: the integrator's own step",
+              units="s", example="us", minimum=0.0, allow_default=True,
+              archive_name="dt", archive_units="s"),
+        Field("run.output_every", "quantity", "cam-angle spacing of the stored histories",
+              units="rad", example="deg", minimum=0.0),
+        Field("run.tolerance", "quantity",
+              "event-time tolerance of integrators that locate events", units="s",
+              example="s", minimum=0.0, archive_name="tolerance", archive_units="s"),
+        Field("run.max_events", "integer", "events kept per case", minimum=1.0,
+              exclusive_minimum=False, archive_name="max_events"),
+        Field("run.record", "record",
+              "optional histories to store: q (all seven coordinates), member_loads (all "
+              "member loads) or single member loads by name",
+              choices=("q", "member_loads", *MEMBER_LOADS)),
+    ]
+}
+
+#: Run keys whose value the whole study shares: they fix the archive's cam_angle axis and
+#: its variables, so a sweep, zip, sample or case may not vary them.
+STUDY_WIDE = ("run.revolutions", "run.output_every", "run.record")
+
+#: Defaults of the run keys, in spec spelling, from the engine's RunSettings.
+RUN_DEFAULTS: dict[str, object] = {
+    "revolutions": _defaults().revolutions,
+    "integrator": _defaults().integrator,
+    "dt": "default" if _defaults().dt is None else f"{_defaults().dt!r} s",
+    "output_every": f"{math.degrees(_defaults().output_every):g} deg",
+    "tolerance": f"{_defaults().tolerance!r} s",
+    "max_events": _defaults().max_events,
+    "record": [],
+}
+
+#: Profile kinds → their keys (all required).
+PROFILE_KINDS: dict[str, tuple[str, ...]] = {
+    "harmonic": ("lift",),
+    "polydyne-345": ("lift", "rise", "dwell", "fall"),
+    "polydyne-4567": ("lift", "rise", "dwell", "fall"),
+    "table": ("file",),
+}
+
+PROFILE_FIELDS: dict[str, Field] = {
+    f.key.removeprefix("profile."): f
+    for f in [
+        Field("profile.lift", "quantity", "full lift of the cam", units="m", example="in",
+              minimum=0.0, archive_name="profile_lift", archive_units="m"),
+        Field("profile.rise", "quantity", "angle of the rise", units="rad", example="deg",
+              minimum=0.0, archive_name="profile_rise", archive_units="deg"),
+        Field("profile.dwell", "quantity", "angle of the dwell at full lift", units="rad",
+              example="deg", minimum=0.0, exclusive_minimum=False,
+              archive_name="profile_dwell", archive_units="deg"),
+        Field("profile.fall", "quantity", "angle of the fall", units="rad", example="deg",
+              minimum=0.0, archive_name="profile_fall", archive_units="deg"),
+        Field("profile.file", "text",
+              "lift table CSV, relative to the spec (header 'angle [deg],lift [in]')",
+              archive_name="profile_file"),
+    ]
+}
+
+#: Defect kinds → their keys (all required). Defects apply in the order listed.
+DEFECT_KINDS: dict[str, tuple[str, ...]] = {
+    "flat": ("from", "to"),
+    "bump": ("center", "height", "width"),
+}
+
+DEFECT_FIELDS: dict[str, Field] = {
+    "from": Field("from", "quantity", "where the flat starts", units="rad", example="deg"),
+    "to": Field("to", "quantity", "where the flat ends", units="rad", example="deg"),
+    "center": Field("center", "quantity", "angle of the bump's peak", units="rad",
+                    example="deg"),
+    "height": Field("height", "quantity", "height of the bump; negative for a dent",
+                    units="m", example="in"),
+    "width": Field("width", "quantity", "full width of the bump", units="rad",
+                   example="deg", minimum=0.0),
+}
+
+#: The top-level keys of a spec and what they hold.
+TOP_LEVEL: dict[str, str] = {
+    "name": "study name; the archive defaults to <name>.nc beside the spec",
+    "description": "free text, kept in the archive",
+    "model": "preset plus parameter overrides (any model parameter by name)",
+    "profile": "the cam: {kind: harmonic | polydyne-345 | polydyne-4567 | table, ...}",
+    "defects": "defects applied to the cam, in order: flat {from, to}, bump {center, "
+               "height, width}",
+    "closure": CASE_FIELDS["closure"].description,
+    "seat": CASE_FIELDS["seat"].description,
+    "speed": CASE_FIELDS["speed"].description,
+    "run": "how cases are integrated and what is stored",
+    "sweep": "full grid: key → list of values or {from, to, num}",
+    "zip": "axes varied together: key → list of values or {from, to, num}, equal lengths",
+    "cases": "explicit cases, each deep-merged over the base",
+    "sample": "a sampled design: {method: latin-hypercube, n, seed, ranges: {key: {from, to}}}",
+    "replay": "cases to log to rerun while the study runs: {where: EXPR}",
+}
+
+#: Keys of a case (the base's top-level keys that describe one run).
+CASE_KEYS = ("model", "profile", "defects", "closure", "seat", "speed", "run")
+
+SAMPLE_METHODS = ("latin-hypercube",)
+
+
+def model_field(name: str) -> Field:
+    """A Field view of a model parameter (the archive names it as the parameter)."""
+    p = PARAMETERS[name]
+    return Field(f"model.{name}", "parameter", p.long_name, units=p.units,
+                 example=p.thesis_units, minimum=p.minimum,
+                 exclusive_minimum=p.exclusive_minimum, archive_name=name,
+                 archive_units=p.units)
+
+
+def varied_fields() -> dict[str, Field]:
+    """Every key a sweep, zip or case may vary (dotted path → Field); whole ``profile`` and
+    ``defects`` entries (mappings, lists) are variable too, see :data:`WHOLE_KEYS`."""
+    out: dict[str, Field] = {}
+    for key, f in CASE_FIELDS.items():
+        if key not in STUDY_WIDE:
+            out[key] = f
+    for name, f in PROFILE_FIELDS.items():
+        out[f"profile.{name}"] = f
+    out["profile.kind"] = Field("profile.kind", "choice", "profile kind",
+                                choices=tuple(PROFILE_KINDS), archive_name="profile_kind")
+    out["model.preset"] = Field("model.preset", "choice", "named parameter set",
+                                choices=tuple(PRESETS), archive_name="preset")
+    for name in PARAMETERS:
+        out[f"model.{name}"] = model_field(name)
+    return out
+
+
+#: Keys whose values are whole structures: a sweep over them lists whole profiles or whole
+#: defect lists; the archive labels them.
+WHOLE_KEYS = ("profile", "defects")
+
+
+def sweep_keys() -> tuple[str, ...]:
+    """Keys a sweep or zip may vary."""
+    return (*WHOLE_KEYS, *varied_fields())
+
+
+def sample_keys() -> tuple[str, ...]:
+    """Keys a sampled design may vary: the scalar quantities and numbers."""
+    return tuple(
+        k for k, f in varied_fields().items()
+        if f.kind in ("quantity", "number") or (f.kind == "parameter"
+                                               and not PARAMETERS[k[6:]].length)
+    )

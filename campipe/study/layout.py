@@ -1,0 +1,156 @@
+"""What goes into a batch file and into the archive: sizes, variables and attributes, all
+built from the declarations in :mod:`campipe.study.variables`."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from collections.abc import Iterable
+
+import numpy as np
+
+from campipe.io.archive import VariableSpec
+from campipe.study.expand import ResolvedCase, Study
+from campipe.study.results import BatchData
+from campipe.study.variables import (
+    DOF_NAMES,
+    DOF_UNITS,
+    VARIABLES,
+    Variable,
+    case_coordinates,
+    data_variables,
+)
+
+#: Version of the file layout: batch files and archives of another layout are not reused.
+LAYOUT_VERSION = "campipe-archive-1"
+
+
+def record_text(record: Iterable[str]) -> str:
+    return " ".join(record) or "-"
+
+
+def batch_key(case_ids: Iterable[str], record: Iterable[str]) -> str:
+    """A batch file's key: the cases it holds and what it records, in this layout."""
+    text = json.dumps([LAYOUT_VERSION, list(record), list(case_ids)])
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def _spec(name: str, var: Variable, coordinates: str | None = None) -> VariableSpec:
+    attrs = var.attrs()
+    if coordinates:
+        attrs["coordinates"] = coordinates
+    return VariableSpec(name, var.dims, var.dtype, attrs)
+
+
+def _axes(record: Iterable[str]) -> list[str]:
+    names = ["cam_angle", "revolution"]
+    if "q" in record:
+        names += ["dof", "dof_units"]
+    return names
+
+
+def axis_arrays(cam_angle: np.ndarray, n_revolutions: int) -> dict[str, np.ndarray]:
+    return {
+        "cam_angle": cam_angle,
+        "revolution": np.arange(1, n_revolutions + 1, dtype=np.int32),
+        "dof": np.array(DOF_NAMES, dtype=object),
+        "dof_units": np.array(DOF_UNITS, dtype=object),
+    }
+
+
+def data_specs(record: Iterable[str], case_coords: str) -> list[VariableSpec]:
+    out = []
+    for name, var in data_variables(record).items():
+        coords = case_coords if "case" in var.dims else (
+            "event_case" if name != "event_case" and "event" in var.dims else None)
+        out.append(_spec(name, var, coords))
+    return out
+
+
+def batch_layout(data: BatchData, record: tuple[str, ...]):
+    """(sizes, variables, arrays, attributes) of a batch file."""
+    sizes = {"case": data.n_cases, "cam_angle": data.cam_angle.size,
+             "revolution": data.n_revolutions, "event": data.n_events}
+    if "q" in record:
+        sizes["dof"] = len(DOF_NAMES)
+    specs = [_spec(n, VARIABLES[n]) for n in _axes(record)]
+    specs.append(_spec("case_id", VARIABLES["case_id"]))
+    specs += data_specs(record, "case_id")
+    arrays = {**axis_arrays(data.cam_angle, data.n_revolutions), "case_id": data.case_ids,
+              **data.arrays}
+    attrs = {"campipe_layout": LAYOUT_VERSION, "campipe_record": record_text(record),
+             "batch_key": data.key}
+    return sizes, specs, arrays, attrs
+
+
+def coordinate_values(cases: list[ResolvedCase], study: Study) -> dict[str, np.ndarray]:
+    """Per-case coordinate arrays in archive units, in study order."""
+    out: dict[str, np.ndarray] = {"case_id": np.array([c.case_id for c in cases], dtype=object)}
+    for key, (name, var, factor) in case_coordinates(study.varied).items():
+        raw = [c.values[key] for c in cases]
+        if var.dtype == "str":
+            out[name] = np.array([str(v) for v in raw], dtype=object)
+        elif var.dtype.startswith("i"):
+            out[name] = np.array(raw, dtype=var.dtype)
+        else:
+            values = np.array(raw, dtype=float) * factor
+            if key == "speed":
+                # rpm from rad/s: round away the conversion's last-digit noise (11000 rpm
+                # stays 11000, so `--where "speed_rpm == 11000"` finds it)
+                values = np.array([float(f"{v:.12g}") for v in values])
+            out[name] = values
+    return out
+
+
+def archive_layout(study: Study, n_events: int, cam_angle: np.ndarray, n_revolutions: int):
+    """(sizes, variables, static arrays) of the study's archive; the static arrays are the
+    axes and the per-case coordinates, the rest streams in from batch files."""
+    coords = case_coordinates(study.varied)
+    coord_names = ["case_id", *(name for name, _, _ in coords.values())]
+    sizes = {"case": len(study.cases), "cam_angle": cam_angle.size,
+             "revolution": n_revolutions, "event": n_events}
+    if "q" in study.record:
+        sizes["dof"] = len(DOF_NAMES)
+    specs = [_spec(n, VARIABLES[n]) for n in _axes(study.record)]
+    specs.append(_spec("case_id", VARIABLES["case_id"]))
+    for _key, (name, var, _) in coords.items():
+        if "mode" in var.dims:
+            sizes["mode"] = 7
+        specs.append(_spec(name, var))
+    specs += data_specs(study.record, " ".join(coord_names))
+    static = {**axis_arrays(cam_angle, n_revolutions), **coordinate_values(study.cases, study)}
+    static = {s.name: static[s.name] for s in specs if s.name in static}
+    return sizes, specs, static
+
+
+def study_attrs(study: Study) -> dict[str, str]:
+    """Global attributes describing the study (provenance comes from campipe.io.archive)."""
+    coords = case_coordinates(study.varied)
+    axes = [
+        {"key": a.key, "name": coords[a.key][0] if a.key in coords else a.key, "kind": a.kind,
+         "size": a.size}
+        for a in study.axes
+    ]
+    spec = study.spec
+    return {
+        "title": f"campipe study {spec.name}",
+        "study_name": spec.name,
+        "description": spec.description,
+        "spec": spec.text,
+        "spec_overrides": json.dumps(spec.overrides, default=str),
+        "study_axes": json.dumps(axes),
+        "record": record_text(study.record),
+        "revolutions": float(study.revolutions),
+        "output_every_deg": float(np.round(np.degrees(study.output_every), 9)),
+        "replay_where": spec.replay or "",
+        "campipe_layout": LAYOUT_VERSION,
+        "campipe_record": record_text(study.record),
+        "study_key": study_key(study),
+    }
+
+
+def study_key(study: Study) -> str:
+    """Equal for two runs that would write the same archive (provenance aside)."""
+    text = json.dumps([LAYOUT_VERSION, study.spec.text, study.spec.overrides,
+                       list(study.record), [c.case_id for c in study.cases]], default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]

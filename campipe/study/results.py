@@ -1,0 +1,147 @@
+"""One batch: run its cases through the engine and lay the results out as archive arrays.
+
+:func:`compute_batch` is what a dask task runs: pure computation, arrays in and out (no
+files); the caller stores the :class:`BatchData` (:mod:`campipe.io.archive`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from campipe.engine import MEMBER_LOADS, BatchResult, member_loads, run_batch
+from campipe.engine.newmark import (
+    EV_FROM,
+    EV_IMPULSE,
+    EV_KIND,
+    EV_TIME,
+    EV_TO,
+    EV_VELOCITY,
+)
+from campipe.study.expand import ResolvedCase
+from campipe.study.variables import data_variables
+
+
+@dataclass(frozen=True)
+class BatchPlan:
+    """The cases of one batch (sharing run settings) and what to record."""
+
+    key: str  # batch key: hash of its case ids and what is recorded
+    cases: tuple[ResolvedCase, ...]  # its cases, in study order
+    record: tuple[str, ...]  # run.record of the study
+
+    @property
+    def size(self) -> int:
+        return len(self.cases)
+
+
+@dataclass
+class BatchData:
+    """A batch's archive arrays: name → array with the case (or event) axis first."""
+
+    key: str  # the batch key
+    case_ids: np.ndarray  # (n,) str
+    arrays: dict[str, np.ndarray]  # data variables, see campipe.study.variables
+    cam_angle: np.ndarray  # (n_out,) [degree]
+    n_revolutions: int  # length of the revolution axis
+
+    @property
+    def n_cases(self) -> int:
+        return self.case_ids.size
+
+    @property
+    def n_events(self) -> int:
+        return int(self.arrays["event_case"].size)
+
+
+def cam_angle_degrees(cam_angle: np.ndarray) -> np.ndarray:
+    """Output angles [rad] → [degree], rounded to 1e-9 degree so 1° steps read as integers."""
+    return np.round(np.degrees(cam_angle), 9)
+
+
+def compute_batch(plan: BatchPlan) -> BatchData:
+    """Run a batch's cases in one engine call and lay out its archive arrays.
+
+    All cases of a plan share one :class:`~campipe.engine.RunSettings`.
+    """
+    settings = plan.cases[0].settings
+    result = run_batch([c.case for c in plan.cases], settings)
+    return batch_arrays(plan, result)
+
+
+def batch_arrays(plan: BatchPlan, result: BatchResult) -> BatchData:
+    """Archive arrays from an engine result (SI; angles in degrees)."""
+    wanted = data_variables(plan.record)
+    arrays: dict[str, np.ndarray] = {
+        "time": result.time,
+        "cam_lift": result.cam_lift,
+        "follower_lift": result.follower_lift,
+        "valve_lift": result.valve_lift,
+        "cam_force": result.cam_force,
+        "seat_force": result.seat_force,
+        "contact_state": result.contact_state.astype(np.int8),
+        "separation_deg": np.degrees(result.separation_per_rev),
+        "cam_impacts": np.asarray(result.cam_impacts, np.int32),
+        "seat_impacts": np.asarray(result.seat_impacts, np.int32),
+        "max_cam_impact_velocity": result.max_cam_impact_velocity,
+        "max_seating_velocity": result.max_seating_velocity,
+        "max_cam_force": result.max_cam_force,
+        "max_seat_force": result.max_seat_force,
+        "steps": np.asarray(result.steps, np.int64),
+    }
+    arrays["separation_deg_per_rev"] = arrays["separation_deg"][:, -1]
+    if "q" in wanted:
+        arrays["q"] = result.q
+    loads = set(MEMBER_LOADS) & set(wanted)
+    if loads:
+        per_case = [member_loads(c.case.train, result.q[i]) for i, c in enumerate(plan.cases)]
+        for name in loads:
+            arrays[name] = np.stack([p[name] for p in per_case])
+    arrays.update(event_arrays(result.events, [c.case.speed for c in plan.cases]))
+    missing = set(wanted) - set(arrays)
+    assert not missing, missing
+    arrays = {k: np.ascontiguousarray(v) for k, v in arrays.items() if k in wanted}
+    return BatchData(
+        key=plan.key,
+        case_ids=np.array([c.case_id for c in plan.cases], dtype=object),
+        arrays=arrays,
+        cam_angle=cam_angle_degrees(result.cam_angle),
+        n_revolutions=result.separation_per_rev.shape[1],
+    )
+
+
+def event_arrays(events: Sequence[np.ndarray], speeds: Sequence[float]) -> dict[str, np.ndarray]:
+    """Per-case event lists → the contiguous ragged event variables.
+
+    Parameters
+    ----------
+    events : sequence of (n_ev, 6) arrays
+        Columns as ``campipe.engine.newmark.EV_*``.
+    speeds : sequence of float
+        Each case's cam speed [rad/s], to give each event its cam angle.
+    """
+    counts = np.array([e.shape[0] for e in events], dtype=np.int32)
+    ev = np.concatenate([e for e in events]) if len(events) else np.zeros((0, 6))
+    if ev.size == 0:
+        ev = np.zeros((0, 6))
+    case = np.repeat(np.arange(len(events), dtype=np.int32), counts)
+    omega = np.asarray(speeds, dtype=float)[case] if case.size else np.zeros(0)
+    return {
+        "event_count": counts,
+        "event_case": case,
+        "event_time": ev[:, EV_TIME].copy(),
+        "event_cam_angle": np.degrees(ev[:, EV_TIME] * omega),
+        "event_kind": ev[:, EV_KIND].astype(np.int8),
+        "event_from": ev[:, EV_FROM].astype(np.int8),
+        "event_to": ev[:, EV_TO].astype(np.int8),
+        "event_velocity": ev[:, EV_VELOCITY].copy(),
+        "event_impulse": ev[:, EV_IMPULSE].copy(),
+    }
+
+
+def n_revolutions(revolutions: float) -> int:
+    """Length of the revolution axis for ``revolutions`` turns (a partial last turn counts)."""
+    return int(math.ceil(revolutions - 1e-12))

@@ -1,0 +1,232 @@
+"""JSON Schema of a study spec, generated from the key table (:mod:`campipe.study.fields`)
+and the model's own schema (:func:`campipe.model.schema.model_schema`).
+
+``schemas/study.schema.json`` is this module's output (a test keeps the two equal);
+regenerate it with ``python -m campipe.study.schema > schemas/study.schema.json``.
+
+The schema checks a spec's shape (keys, types, quantities written with units, enumerations);
+:func:`campipe.study.spec.check_spec` checks the rest (units of the right dimension, ranges,
+a seat below full lift, the step limit) and names the key path of every problem.
+"""
+
+from __future__ import annotations
+
+import json
+
+from campipe.model.schema import QUANTITY_PATTERN, model_schema
+from campipe.study.fields import (
+    CASE_FIELDS,
+    CASE_KEYS,
+    DEFECT_FIELDS,
+    DEFECT_KINDS,
+    PROFILE_FIELDS,
+    PROFILE_KINDS,
+    SAMPLE_METHODS,
+    STUDY_WIDE,
+    TOP_LEVEL,
+    WHOLE_KEYS,
+    Field,
+    sample_keys,
+    sweep_keys,
+    varied_fields,
+)
+from campipe.study.spec import NAME_PATTERN
+
+SCHEMA_ID = "https://campipe.example/schemas/study.schema.json"
+
+
+def field_schema(f: Field) -> dict[str, object]:
+    """The schema of one key's value."""
+    if f.kind == "parameter":
+        return model_schema()["properties"][f.key.removeprefix("model.")]
+    if f.kind == "quantity":
+        out: dict[str, object] = {
+            "type": "string", "pattern": QUANTITY_PATTERN,
+            "description": f"{f.description}, a quantity with units, e.g. '1 {f.example}'",
+        }
+        words = (["none"] if f.allow_none else []) + (["default"] if f.allow_default else [])
+        if words:
+            alternatives: list[object] = [{"enum": words}, out]
+            if f.allow_none:
+                alternatives.insert(1, {"type": "null"})
+            return {"anyOf": alternatives, "description": out.pop("description")}
+        return out
+    if f.kind in ("number", "integer"):
+        out = {"type": f.kind, "description": f.description}
+        if f.minimum is not None:
+            out["exclusiveMinimum" if f.exclusive_minimum else "minimum"] = f.minimum
+        return out
+    if f.kind == "choice":
+        return {"enum": list(f.choices), "description": f.description}
+    if f.kind == "text":
+        return {"type": "string", "minLength": 1, "description": f.description}
+    if f.kind == "record":
+        return {"type": "array", "items": {"enum": list(f.choices)}, "uniqueItems": True,
+                "description": f.description}
+    raise AssertionError(f.kind)
+
+
+def _profile(kind: str) -> dict[str, object]:
+    keys = PROFILE_KINDS[kind]
+    return {
+        "type": "object",
+        "properties": {"kind": {"const": kind},
+                       **{k: field_schema(PROFILE_FIELDS[k]) for k in keys}},
+        "required": ["kind", *keys],
+        "additionalProperties": False,
+    }
+
+
+def _defect(kind: str) -> dict[str, object]:
+    keys = DEFECT_KINDS[kind]
+    return {
+        "type": "object",
+        "properties": {"kind": {"const": kind},
+                       **{k: field_schema(DEFECT_FIELDS[k]) for k in keys}},
+        "required": ["kind", *keys],
+        "additionalProperties": False,
+    }
+
+
+def _run(study_wide: bool) -> dict[str, object]:
+    keys = [k for k in CASE_FIELDS if k.startswith("run.") and (study_wide or k not in STUDY_WIDE)]
+    return {
+        "type": "object",
+        "properties": {k.removeprefix("run."): field_schema(CASE_FIELDS[k]) for k in keys},
+        "additionalProperties": False,
+        "description": TOP_LEVEL["run"] if study_wide else
+        "run settings of this case (the study-wide revolutions, output_every and record "
+        "are set in the base)",
+    }
+
+
+def _case(patch: bool) -> dict[str, object]:
+    props: dict[str, object] = {
+        "model": {"$ref": "#/$defs/model"},
+        "profile": {"$ref": "#/$defs/profile_patch" if patch else "#/$defs/profile"},
+        "defects": {"$ref": "#/$defs/defects"},
+        "closure": {"$ref": "#/$defs/closure"},
+        "seat": {"$ref": "#/$defs/seat"},
+        "speed": {"$ref": "#/$defs/speed"},
+        "run": {"$ref": "#/$defs/case_run" if patch else "#/$defs/run"},
+    }
+    assert list(props) == list(CASE_KEYS)
+    return props
+
+
+def _value(key: str) -> dict[str, object]:
+    """A reference to the schema of a case key's value (each declared once in $defs)."""
+    if key in WHOLE_KEYS:
+        return {"$ref": f"#/$defs/{key}"}
+    head, _, rest = key.partition(".")
+    if head == "model":
+        return {"$ref": f"#/$defs/model/properties/{rest}"}
+    if head == "profile":
+        return {"$ref": f"#/$defs/profile_patch/properties/{rest}"}
+    if head == "run":
+        return {"$ref": f"#/$defs/run/properties/{rest}"}
+    return {"$ref": f"#/$defs/{key}"}
+
+
+def _range(key: str, with_num: bool) -> dict[str, object] | None:
+    """A {from, to[, num]} range of a scalar quantity, or None where none applies."""
+    f = varied_fields().get(key)
+    scalar = f is not None and (
+        f.kind == "quantity" or (f.kind == "parameter" and f.units and "rad" not in f.units
+                                 and not f.key.endswith("damping_ratios"))
+    )
+    if not scalar:
+        return None
+    props: dict[str, object] = {"from": {"$ref": "#/$defs/quantity"},
+                                "to": {"$ref": "#/$defs/quantity"}}
+    if with_num:
+        props["num"] = {"type": "integer", "minimum": 1}
+    return {"type": "object", "properties": props, "required": list(props),
+            "additionalProperties": False}
+
+
+def _axes(description: str) -> dict[str, object]:
+    props = {}
+    for key in sweep_keys():
+        listed = {"type": "array", "minItems": 1, "items": _value(key)}
+        rng = _range(key, True)
+        props[key] = {"oneOf": [listed, rng]} if rng else listed
+    return {"type": "object", "minProperties": 1, "properties": props,
+            "additionalProperties": False, "description": description}
+
+
+def study_schema() -> dict[str, object]:
+    """The JSON Schema of a study spec."""
+    model = {k: v for k, v in model_schema().items() if k not in ("$schema", "$id")}
+    return {
+        "$schema": "https://json-schema.org/draft/2020-12/schema",
+        "$id": SCHEMA_ID,
+        "title": "campipe study spec",
+        "type": "object",
+        "required": ["name"],
+        "properties": {
+            "name": {"type": "string", "pattern": NAME_PATTERN,
+                     "description": TOP_LEVEL["name"]},
+            "description": {"type": "string", "description": TOP_LEVEL["description"]},
+            **_case(patch=False),
+            "sweep": {"$ref": "#/$defs/axes", "description": TOP_LEVEL["sweep"]},
+            "zip": {"$ref": "#/$defs/axes", "description": TOP_LEVEL["zip"]},
+            "cases": {"type": "array", "minItems": 1, "items": {"$ref": "#/$defs/case"},
+                      "description": TOP_LEVEL["cases"]},
+            "sample": {
+                "type": "object",
+                "properties": {
+                    "method": {"enum": list(SAMPLE_METHODS)},
+                    "n": {"type": "integer", "minimum": 1},
+                    "seed": {"type": "integer", "minimum": 0},
+                    "ranges": {
+                        "type": "object", "minProperties": 1,
+                        "properties": {k: _range(k, False) for k in sample_keys()},
+                        "additionalProperties": False,
+                    },
+                },
+                "required": ["method", "n", "seed", "ranges"],
+                "additionalProperties": False,
+                "description": TOP_LEVEL["sample"],
+            },
+            "replay": {
+                "type": "object",
+                "properties": {"where": {"type": "string", "minLength": 1}},
+                "required": ["where"],
+                "additionalProperties": False,
+                "description": TOP_LEVEL["replay"],
+            },
+        },
+        "additionalProperties": False,
+        "$defs": {
+            "model": {**model, "description": TOP_LEVEL["model"]},
+            "profile": {"oneOf": [_profile(k) for k in PROFILE_KINDS],
+                        "description": TOP_LEVEL["profile"]},
+            "profile_patch": {
+                "type": "object",
+                "properties": {"kind": {"enum": list(PROFILE_KINDS)},
+                               **{k: field_schema(f) for k, f in PROFILE_FIELDS.items()}},
+                "additionalProperties": False,
+                "description": "profile keys merged over the base's (a new kind replaces it)",
+            },
+            "defects": {"type": "array", "items": {"oneOf": [_defect(k) for k in DEFECT_KINDS]},
+                        "description": TOP_LEVEL["defects"]},
+            **{k: field_schema(CASE_FIELDS[k]) for k in ("closure", "seat", "speed")},
+            "quantity": {"type": "string", "pattern": QUANTITY_PATTERN,
+                         "description": "a quantity with units, e.g. '9000 rpm'"},
+            "axes": _axes("key → list of values or {from, to, num}"),
+            "run": _run(study_wide=True),
+            "case_run": _run(study_wide=False),
+            "case": {"type": "object", "properties": _case(patch=True),
+                     "additionalProperties": False, "description": TOP_LEVEL["cases"]},
+        },
+    }
+
+
+def schema_text() -> str:
+    """The schema file's text."""
+    return json.dumps(study_schema(), indent=2, ensure_ascii=False) + "\n"
+
+
+if __name__ == "__main__":
+    print(schema_text(), end="")

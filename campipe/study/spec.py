@@ -1,0 +1,609 @@
+"""Checking a study spec's structure and values, every problem named by its key path.
+
+The spec arrives as plain data (parsed by :mod:`campipe.io.spec_yaml`); this module refuses
+anything it does not declare (:mod:`campipe.study.fields`) with the key's path, what was
+found and what is expected, and returns a :class:`Spec`: the base case with the run defaults
+filled in, and the axes (sweep, zip, cases, sample) with ranges expanded into value lists.
+Checks that need a whole case (a seat above full lift, a step beyond the stability limit)
+run when the cases are resolved (:mod:`campipe.study.expand`).
+
+Grammar (all keys optional except ``name``; each case must end up with a ``speed`` and a
+``profile`` from the base or an axis)::
+
+    name: separation-map
+    description: free text
+    model: {preset: thesis-1971, <parameter>: <quantity>, ...}
+    profile: {kind: harmonic, lift: 1 in}
+           | {kind: polydyne-345 | polydyne-4567, lift, rise, dwell, fall}
+           | {kind: table, file: lift.csv}
+    defects: [{kind: flat, from: 268 deg, to: 272 deg}, {kind: bump, center, height, width}]
+    closure: force | form
+    seat: none | <length>
+    speed: <angular speed>
+    run: {revolutions, integrator, dt, output_every, tolerance, max_events, record: [...]}
+    sweep: {<key>: [values] | {from, to, num}, ...}     # full grid
+    zip: {<key>: [values] | {from, to, num}, ...}       # varied together
+    cases: [{<case keys>}, ...]                          # deep-merged over the base
+    sample: {method: latin-hypercube, n, seed, ranges: {<key>: {from, to}}}
+    replay: {where: EXPR}
+"""
+
+from __future__ import annotations
+
+import copy
+import re
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from campipe.model import PARAMETERS
+from campipe.study.fields import (
+    CASE_FIELDS,
+    CASE_KEYS,
+    DEFECT_FIELDS,
+    DEFECT_KINDS,
+    PROFILE_FIELDS,
+    PROFILE_KINDS,
+    RUN_DEFAULTS,
+    SAMPLE_METHODS,
+    STUDY_WIDE,
+    TOP_LEVEL,
+    WHOLE_KEYS,
+    Field,
+    SpecProblem,
+    did_you_mean,
+    sample_keys,
+    sweep_keys,
+    varied_fields,
+)
+
+#: A study name: it names the archive file.
+NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]*$"
+#: Containers whose keys are dotted case keys (so ``--set`` takes the rest of a path whole).
+_KEYED_BY_CASE_KEY = ("sweep", "zip", "ranges")
+#: Problems reported at most, so a large bad grid stays readable.
+MAX_PROBLEMS = 20
+
+
+class SpecError(ValueError):
+    """A spec refused before anything runs: one or more problems, each with its key path."""
+
+    def __init__(self, problems: list[SpecProblem], source: str = "spec"):
+        self.problems = problems
+        self.source = source
+        head = f"{source}: {len(problems)} problem{'s' if len(problems) != 1 else ''}"
+        super().__init__("\n".join([head, *(f"  {p}" for p in problems)]))
+
+    @property
+    def paths(self) -> list[str]:
+        return [p.path for p in self.problems]
+
+
+@dataclass(frozen=True)
+class Sample:
+    """A sampled design over ranges of scalar keys."""
+
+    method: str  # one of SAMPLE_METHODS
+    n: int  # number of points
+    seed: int  # seed of the generator: the same seed gives the same points
+    ranges: dict[str, tuple[float, float]]  # key → (from, to) in SI
+
+
+@dataclass
+class Spec:
+    """A checked spec: the base case and its axes, values still in spec spelling."""
+
+    name: str  # study name
+    description: str  # free text
+    text: str  # the spec's text as read (kept in the archive)
+    directory: Path  # where relative paths (lift tables) are resolved
+    base: dict  # the base case: CASE_KEYS, run defaults filled in
+    sweep: dict[str, list]  # key → values; full grid, first key outermost
+    zip: dict[str, list]  # key → values, all the same length
+    cases: list[dict]  # case entries, deep-merged over the base
+    sample: Sample | None  # sampled design
+    replay: str | None  # replay selection expression
+    overrides: dict[str, object] = field(default_factory=dict)  # --set KEY=VALUE applied
+
+    @property
+    def record(self) -> tuple[str, ...]:
+        return tuple(self.base["run"]["record"])
+
+
+class _Problems:
+    """Collects problems; ``check`` runs one check and keeps its problem."""
+
+    def __init__(self) -> None:
+        self.items: list[SpecProblem] = []
+
+    def add(self, path: str, message: str) -> None:
+        self.items.append(SpecProblem(path, message))
+
+    def check(self, fn, *args):
+        try:
+            return fn(*args)
+        except SpecProblem as exc:
+            self.items.append(exc)
+            return None
+
+
+def join(path: str, key: str | int) -> str:
+    """``join("cases[1]", "seat") == "cases[1].seat"``; ints index lists."""
+    if isinstance(key, int):
+        return f"{path}[{key}]"
+    return f"{path}.{key}" if path else key
+
+
+def _mapping(value: object, path: str, what: str) -> Mapping:
+    if not isinstance(value, Mapping):
+        raise SpecProblem(path, f"found {_show(value)}, expected a mapping ({what})")
+    for k in value:
+        if not isinstance(k, str):
+            raise SpecProblem(path, f"found the key {k!r}, expected keys that are strings")
+    return value
+
+
+def _show(value: object) -> str:
+    text = repr(value)
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def _unknown(path: str, key: str, known) -> SpecProblem:
+    known = list(known)
+    listing = ", ".join(known) if len(known) <= 12 else ", ".join(known[:12]) + ", ..."
+    return SpecProblem(join(path, key),
+                       f"unknown key {key!r}{did_you_mean(key, known)} (expected one of: "
+                       f"{listing})")
+
+
+# -- blocks of a case ---------------------------------------------------------------------
+
+def check_profile(value: object, path: str, partial: bool) -> dict:
+    """A profile mapping; ``partial`` (a case entry merging over the base) needs no kind."""
+    value = _mapping(value, path, "a cam profile such as {kind: harmonic, lift: 1 in}")
+    known = ("kind", *PROFILE_FIELDS)
+    for k in value:
+        if k not in known:
+            raise _unknown(path, k, known)
+    kind = value.get("kind")
+    if kind is None and not partial:
+        raise SpecProblem(join(path, "kind"),
+                          "missing; expected one of: " + ", ".join(PROFILE_KINDS))
+    if kind is not None and kind not in PROFILE_KINDS:
+        raise SpecProblem(join(path, "kind"),
+                          f"found {kind!r}, expected one of: {', '.join(PROFILE_KINDS)}"
+                          + did_you_mean(kind, PROFILE_KINDS))
+    if kind is not None:
+        keys = PROFILE_KINDS[kind]
+        for k in value:
+            if k != "kind" and k not in keys:
+                raise SpecProblem(join(path, k),
+                                  f"not a key of a {kind} profile (its keys: {', '.join(keys)})")
+        if not partial:
+            for k in keys:
+                if k not in value:
+                    raise SpecProblem(join(path, k), f"missing; a {kind} profile needs "
+                                      + ", ".join(keys))
+    for k, v in value.items():
+        if k != "kind":
+            PROFILE_FIELDS[k].parse(v, join(path, k))
+    return dict(value)
+
+
+def check_defects(value: object, path: str) -> list:
+    if not isinstance(value, list):
+        raise SpecProblem(path, f"found {_show(value)}, expected a list of defects such as "
+                                "[{kind: flat, from: 268 deg, to: 272 deg}] (or [])")
+    for i, d in enumerate(value):
+        p = join(path, i)
+        d = _mapping(d, p, "a defect such as {kind: flat, from: 268 deg, to: 272 deg}")
+        kind = d.get("kind")
+        if kind not in DEFECT_KINDS:
+            found = "missing" if kind is None else f"found {kind!r}"
+            raise SpecProblem(join(p, "kind"), f"{found}, expected one of: "
+                              + ", ".join(DEFECT_KINDS) + did_you_mean(kind, DEFECT_KINDS))
+        keys = DEFECT_KINDS[kind]
+        for k in d:
+            if k != "kind" and k not in keys:
+                raise SpecProblem(join(p, k), f"not a key of a {kind} defect (its keys: "
+                                  f"{', '.join(keys)}){did_you_mean(k, keys)}")
+        for k in keys:
+            if k not in d:
+                raise SpecProblem(join(p, k), f"missing; a {kind} defect needs "
+                                  + ", ".join(keys))
+            DEFECT_FIELDS[k].parse(d[k], join(p, k))
+    return copy.deepcopy(value)
+
+
+def check_model(value: object, path: str) -> dict:
+    value = _mapping(value, path, "a preset plus parameter overrides")
+    fields = varied_fields()
+    for k, v in value.items():
+        key = f"model.{k}"
+        if key not in fields:
+            raise _unknown(path, k, ["preset", *PARAMETERS])
+        fields[key].parse(v, join(path, k))
+    return dict(value)
+
+
+def check_run(value: object, path: str, study_wide: bool, problems: _Problems) -> dict:
+    value = _mapping(value, path, "run settings")
+    known = [k.removeprefix("run.") for k in CASE_FIELDS if k.startswith("run.")]
+    for k, v in value.items():
+        if k not in known:
+            problems.items.append(_unknown(path, k, known))
+            continue
+        if not study_wide and f"run.{k}" in STUDY_WIDE:
+            problems.add(join(path, k), "the whole study shares it (it fixes the archive's "
+                                        "cam_angle axis and variables); set it in the base run")
+            continue
+        problems.check(CASE_FIELDS[f"run.{k}"].parse, v, join(path, k))
+    return dict(value)
+
+
+def check_case_block(value: Mapping, path: str, partial: bool, problems: _Problems) -> dict:
+    """The case keys of the base (``partial=False``) or of one case entry."""
+    out: dict = {}
+    for k, v in value.items():
+        p = join(path, k)
+        if k == "model":
+            out[k] = problems.check(check_model, v, p)
+        elif k == "profile":
+            out[k] = problems.check(check_profile, v, p, partial)
+        elif k == "defects":
+            out[k] = problems.check(check_defects, v, p)
+        elif k == "run":
+            out[k] = problems.check(check_run, v, p, not partial, problems)
+        elif k in CASE_FIELDS:
+            problems.check(CASE_FIELDS[k].parse, v, p)
+            out[k] = v
+    return out
+
+
+# -- axes ----------------------------------------------------------------------------------
+
+_NUMBER_UNIT = re.compile(r"^\s*(?P<number>[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?)\s*(?P<unit>.*)$")
+
+
+def expand_range(value: Mapping, key: str, path: str, with_num: bool) -> list:
+    """``{from: 1000 rpm, to: 20000 rpm, num: 39}`` → 39 values in the units of ``from``."""
+    need = ("from", "to", "num") if with_num else ("from", "to")
+    for k in value:
+        if k not in need:
+            raise _unknown(path, k, need)
+    for k in need:
+        if k not in value:
+            raise SpecProblem(join(path, k), f"missing; a range needs {', '.join(need)}")
+    field_ = range_field(key, path)
+    lo = field_.parse(value["from"], join(path, "from"))
+    hi = field_.parse(value["to"], join(path, "to"))
+    if lo is None or hi is None:
+        raise SpecProblem(path, "a range runs between two values; list 'none' separately")
+    if not with_num:
+        if not lo < hi:
+            raise SpecProblem(path, f"found from {value['from']!r} ≥ to {value['to']!r}, "
+                                    "expected from < to")
+        return [lo, hi]
+    num = value["num"]
+    if isinstance(num, bool) or not isinstance(num, int) or num < 1:
+        raise SpecProblem(join(path, "num"), f"found {num!r}, expected an integer ≥ 1")
+    if field_.kind in ("number", "integer"):
+        return [float(v) for v in np.linspace(float(value["from"]), float(value["to"]), num)]
+    # Space the values in the units the spec wrote, so 1000 … 20000 rpm step by whole rpm.
+    start = _NUMBER_UNIT.match(str(value["from"]))
+    end = _NUMBER_UNIT.match(str(value["to"]))
+    unit = start["unit"].strip() if start else ""
+    if not unit:
+        return [f"{float(v)!r} {field_.units}" for v in np.linspace(lo, hi, num)]
+    first = float(start["number"])
+    if end and end["unit"].strip() == unit:
+        last = float(end["number"])
+    else:
+        last = hi / field_.parse(f"1 {unit}", join(path, "from"))
+    return [f"{float(v)!r} {unit}" for v in np.linspace(first, last, num)]
+
+
+def range_field(key: str, path: str) -> Field:
+    f = varied_fields().get(key)
+    if f is None or f.kind not in ("quantity", "number", "parameter") or (
+        f.kind == "parameter" and PARAMETERS[key.removeprefix("model.")].length
+    ):
+        raise SpecProblem(path, f"{key} is not a scalar quantity; list its values instead "
+                                "of a range")
+    if f.kind == "parameter":
+        p = PARAMETERS[key.removeprefix("model.")]
+        return Field(key, "quantity", p.long_name, units=p.units, example=p.thesis_units,
+                     minimum=p.minimum, exclusive_minimum=p.exclusive_minimum)
+    return f
+
+
+def check_axis_value(key: str, value: object, path: str) -> object:
+    """One value of a swept key, checked like the key itself."""
+    if key == "profile":
+        return check_profile(value, path, partial=False)
+    if key == "defects":
+        return check_defects(value, path)
+    varied_fields()[key].parse(value, path)
+    return value
+
+
+def check_axes(value: object, path: str, zipped: bool, problems: _Problems) -> dict[str, list]:
+    """A ``sweep:`` or ``zip:`` mapping: key → values or range."""
+    value = problems.check(_mapping, value, path, "key → list of values or {from, to, num}")
+    if value is None:
+        return {}
+    if not value:
+        problems.add(path, "empty; expected at least one key to vary (or leave it out)")
+        return {}
+    keys = sweep_keys()
+    out: dict[str, list] = {}
+    for key, values in value.items():
+        p = f"{path}.{key}"
+        if key not in keys:
+            if key in STUDY_WIDE:
+                problems.add(p, "the whole study shares it (it fixes the archive's cam_angle "
+                                "axis and variables); it cannot vary")
+            else:
+                problems.items.append(_unknown(path, key, keys))
+            continue
+        if isinstance(values, Mapping) and key not in WHOLE_KEYS:
+            got = problems.check(expand_range, values, key, p, True)
+        elif isinstance(values, list):
+            if not values:
+                problems.add(p, "empty list; expected at least one value (an empty axis "
+                                "makes an empty grid)")
+                continue
+            before = len(problems.items)
+            for i, v in enumerate(values):
+                problems.check(check_axis_value, key, v, f"{p}[{i}]")
+            got = values if len(problems.items) == before else None
+        else:
+            problems.add(p, f"found {_show(values)}, expected a list of values"
+                            + ("" if key in WHOLE_KEYS else " or {from, to, num}"))
+            continue
+        if got is not None:
+            out[key] = list(got)
+    if zipped:
+        lengths = {k: len(v) for k, v in out.items()}
+        if len(set(lengths.values())) > 1:
+            problems.add(path, "zipped keys vary together and need equal lengths; found "
+                         + ", ".join(f"{k} {n}" for k, n in lengths.items()))
+    return out
+
+
+def check_cases(value: object, problems: _Problems) -> list[dict]:
+    if not isinstance(value, list):
+        problems.add("cases", f"found {_show(value)}, expected a list of case mappings")
+        return []
+    if not value:
+        problems.add("cases", "empty list; expected at least one case (or leave cases out)")
+        return []
+    out = []
+    for i, entry in enumerate(value):
+        p = join("cases", i)
+        entry = problems.check(_mapping, entry, p, "case keys merged over the base")
+        if entry is None:
+            continue
+        for k in entry:
+            if k not in CASE_KEYS:
+                problems.items.append(_unknown(p, k, CASE_KEYS))
+        out.append(check_case_block({k: v for k, v in entry.items() if k in CASE_KEYS}, p,
+                                    True, problems))
+    return out
+
+
+def check_sample(value: object, problems: _Problems) -> Sample | None:
+    value = problems.check(_mapping, value, "sample",
+                           "{method: latin-hypercube, n, seed, ranges: {key: {from, to}}}")
+    if value is None:
+        return None
+    before = len(problems.items)
+    need = ("method", "n", "seed", "ranges")
+    ok = True
+    for k in value:
+        if k not in need:
+            problems.items.append(_unknown("sample", k, need))
+            ok = False
+    for k in need:
+        if k not in value:
+            problems.add(f"sample.{k}", "missing; a sampled design needs " + ", ".join(need))
+            ok = False
+    if not ok:
+        return None
+    method = value["method"]
+    if method not in SAMPLE_METHODS:
+        problems.add("sample.method", f"found {method!r}, expected one of: "
+                     + ", ".join(SAMPLE_METHODS) + did_you_mean(method, SAMPLE_METHODS))
+    n, seed = value["n"], value["seed"]
+    if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+        problems.add("sample.n", f"found {n!r}, expected an integer ≥ 1 (points to sample)")
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        problems.add("sample.seed", f"found {seed!r}, expected an integer ≥ 0")
+    ranges = problems.check(_mapping, value["ranges"], "sample.ranges", "key → {from, to}")
+    out: dict[str, tuple[float, float]] = {}
+    if ranges is not None:
+        if not ranges:
+            problems.add("sample.ranges", "empty; expected at least one key → {from, to}")
+        keys = sample_keys()
+        for key, r in ranges.items():
+            p = f"sample.ranges.{key}"
+            if key not in keys:
+                problems.items.append(_unknown("sample.ranges", key, keys))
+                continue
+            r = problems.check(_mapping, r, p, "{from, to}")
+            if r is not None:
+                got = problems.check(expand_range, r, key, p, False)
+                if got is not None:
+                    out[key] = (got[0], got[1])
+    if len(problems.items) > before:
+        return None
+    return Sample(method, n, seed, out)
+
+
+def check_conflicts(spec: Spec, problems: _Problems) -> None:
+    """A key may be varied by one axis only, and not also set by a case entry."""
+    owners: dict[str, str] = {}
+    axes = [("sweep", k) for k in spec.sweep] + [("zip", k) for k in spec.zip]
+    if spec.sample:
+        axes += [("sample.ranges", k) for k in spec.sample.ranges]
+    for where, key in axes:
+        for other, owner in owners.items():
+            if key == other or key.startswith(other + ".") or other.startswith(key + "."):
+                problems.add(f"{where}.{key}", f"{other} is already varied by {owner}.{other}; "
+                                               "vary each key in one place")
+        owners[key] = where
+    for i, entry in enumerate(spec.cases):
+        for key in _leaf_keys(entry):
+            for other, owner in owners.items():
+                if key == other or key.startswith(other + "."):
+                    problems.add(f"cases[{i}].{key}",
+                                 f"also varied by {owner}.{other}; vary it in one place")
+
+
+def _leaf_keys(entry: Mapping, prefix: str = "") -> list[str]:
+    out = []
+    for k, v in entry.items():
+        key = f"{prefix}{k}"
+        if isinstance(v, Mapping) and k in ("model", "profile", "run"):
+            out += _leaf_keys(v, key + ".")
+        else:
+            out.append(key)
+    return out
+
+
+def check_replay(value: object, problems: _Problems) -> str | None:
+    from campipe.study.query import QueryError, parse_where
+
+    value = problems.check(_mapping, value, "replay", "{where: EXPR}")
+    if value is None:
+        return None
+    for k in value:
+        if k != "where":
+            problems.items.append(_unknown("replay", k, ["where"]))
+    where = value.get("where")
+    if not isinstance(where, str) or not where.strip():
+        problems.add("replay.where", f"found {_show(where)}, expected an expression such as "
+                                     "\"speed_rpm == 11000\"")
+        return None
+    try:
+        parse_where(where)
+    except QueryError as exc:
+        problems.add("replay.where", str(exc))
+        return None
+    return where
+
+
+# -- the spec -------------------------------------------------------------------------------
+
+def check_spec(raw: object, text: str = "", directory: str | Path = ".", source: str = "spec",
+               overrides: Mapping[str, object] | None = None) -> Spec:
+    """Check a parsed spec and return it with defaults filled in and ranges expanded.
+
+    Parameters
+    ----------
+    raw : object
+        The parsed YAML (see :func:`campipe.io.spec_yaml.read_spec`).
+    text : str
+        The spec's text, kept in the archive.
+    directory : str or Path
+        The spec's folder: lift-table files are relative to it.
+    source : str
+        The spec's name in error messages.
+    overrides : mapping, optional
+        ``{"run.revolutions": 1}``: applied over ``raw`` first (``campipe study --set``).
+
+    Raises
+    ------
+    SpecError
+        Listing every problem found, each with its key path.
+    """
+    problems = _Problems()
+    overrides = dict(overrides or {})
+    if overrides:
+        raw = copy.deepcopy(raw)
+        for key, value in overrides.items():
+            try:
+                raw = apply_override(raw, key, value)
+            except SpecProblem as exc:
+                problems.items.append(exc)
+    if not isinstance(raw, Mapping):
+        raise SpecError([SpecProblem("", f"found {_show(raw)}, expected a mapping of the keys: "
+                                     + ", ".join(TOP_LEVEL))], source)
+    for k in raw:
+        if k not in TOP_LEVEL:
+            problems.items.append(_unknown("", str(k), TOP_LEVEL))
+    name = raw.get("name")
+    if name is None:
+        problems.add("name", "missing; expected a study name such as 'separation-map' "
+                             "(it names the archive)")
+    elif not isinstance(name, str) or not re.match(NAME_PATTERN, name):
+        problems.add("name", f"found {_show(name)}, expected letters, digits, '-', '_' or '.', "
+                             "starting with a letter or digit (it names the archive file)")
+    description = raw.get("description", "")
+    if not isinstance(description, str):
+        problems.add("description", f"found {_show(description)}, expected text")
+    base = check_case_block({k: raw[k] for k in CASE_KEYS if k in raw}, "", False, problems)
+    base.setdefault("model", {})
+    base["model"] = {"preset": "thesis-1971", **(base["model"] or {})}
+    base.setdefault("defects", [])
+    base.setdefault("closure", "force")
+    base.setdefault("seat", "none")
+    base["run"] = {**RUN_DEFAULTS, **(base.get("run") or {})}
+    sweep = check_axes(raw["sweep"], "sweep", False, problems) if "sweep" in raw else {}
+    zipped = check_axes(raw["zip"], "zip", True, problems) if "zip" in raw else {}
+    cases = check_cases(raw["cases"], problems) if "cases" in raw else []
+    sample = check_sample(raw["sample"], problems) if "sample" in raw else None
+    replay = check_replay(raw["replay"], problems) if "replay" in raw else None
+    spec = Spec(name=name if isinstance(name, str) else "", description=str(description),
+                text=text, directory=Path(directory), base=base, sweep=sweep, zip=zipped,
+                cases=cases, sample=sample, replay=replay, overrides=overrides)
+    check_conflicts(spec, problems)
+    if problems.items:
+        raise SpecError(problems.items[:MAX_PROBLEMS], source)
+    return spec
+
+
+def apply_override(raw: object, key: str, value: object) -> object:
+    """Set ``key`` (a dotted path, list indices as numbers) in a copy of ``raw``.
+
+    Inside ``sweep``, ``zip`` and ``sample.ranges`` the rest of the path is one key:
+    ``sweep.model.spring_preload`` sets the sweep's ``model.spring_preload``.
+    """
+    if not isinstance(raw, dict):
+        raise SpecProblem(key, "the spec is not a mapping")
+    parts = key.split(".")
+    node: object = raw
+    i = 0
+    while i < len(parts) - 1:
+        part = parts[i]
+        if isinstance(node, list):
+            idx = _index(part, node, key)
+            node = node[idx]
+            i += 1
+            continue
+        if not isinstance(node, dict):
+            raise SpecProblem(key, f"{'.'.join(parts[:i])} is not a mapping")
+        if part in _KEYED_BY_CASE_KEY:
+            node = node.setdefault(part, {})
+            if not isinstance(node, dict):
+                raise SpecProblem(key, f"{'.'.join(parts[:i + 1])} is not a mapping")
+            node[".".join(parts[i + 1:])] = value
+            return raw
+        node = node.setdefault(part, {})
+        i += 1
+    last = parts[-1]
+    if isinstance(node, list):
+        node[_index(last, node, key)] = value
+    elif isinstance(node, dict):
+        node[last] = value
+    else:
+        raise SpecProblem(key, f"{'.'.join(parts[:-1])} is not a mapping")
+    return raw
+
+
+def _index(part: str, node: list, key: str) -> int:
+    if not part.isdigit() or int(part) >= len(node):
+        raise SpecProblem(key, f"found {part!r}, expected a list index below {len(node)}")
+    return int(part)
