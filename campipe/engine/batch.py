@@ -332,7 +332,7 @@ def _run_newmark(preps, which, settings, dt_run, meff, q0, v0, a0, cfg0, seat_q,
 def _run_modal_exact(trains, preps, which, settings, dt_run, meff, q0, v0, a0, cfg0, seat_q,
                      has_seat, form, omega, packed, out) -> np.ndarray:
     fields = ("n_free", "free", "lam", "vec", "vec_inv", "a_inv", "b_in", "b_load", "rho",
-              "sigma", "sigma0", "impulse", "rho_vec", "vnorm")
+              "sigma", "sigma0", "impulse", "rho_vec", "vnorm", "lam_abs")
     data = [_modal(t) for t in trains]
     stacked = {f: np.stack([getattr(d, f) for d in data])[which] for f in fields}
     a_mat = np.stack([d.a_mat for d in data])[which]

@@ -47,9 +47,10 @@ from campipe.engine.newmark import (
 from campipe.engine.modal import NS
 
 CHATTER = 3  # status: events kept recurring without time advancing
-#: Steps are at most RESOLUTION·π/|λ| of the fastest mode still present: a quarter period, so
-#: no monitor can rise through zero and fall back unseen between two grid points.
-RESOLUTION = 0.5
+#: Steps are at most RESOLUTION·π/|λ| of the fastest mode still present: under half its period,
+#: so that mode's part of a monitor's derivative changes sign at most once per step, and a
+#: maximum inside a step is seen as a + to − change of the derivative at the grid points.
+RESOLUTION = 0.9
 #: A mode is dropped once its share of every coordinate [m] and velocity [m/s] is below this
 #: (4e-12 in: far below any output's resolution) and its share of the contact forces is below
 #: the force level of the monitors.
@@ -120,40 +121,85 @@ def _exps(lam, c, ci, ns, tau, ev):
 @njit(cache=True, nogil=True)
 def _eval(deriv, W, Wl, G, GT, lam, c, ci, m, ns, t_s, t, w, th0, ev):
     """Monitor m (deriv False) or its time derivative (deriv True) at time t, exactly."""
+    g, dg, d2g = _eval3(W, Wl, G, GT, lam, c, ci, m, ns, t_s, t, w, th0, ev)
+    return dg if deriv else g
+
+
+@njit(cache=True, nogil=True)
+def _eval3(W, Wl, G, GT, lam, c, ci, m, ns, t_s, t, w, th0, ev):
+    """Monitor m and its first two time derivatives at time t, exactly (one set of
+    exponentials)."""
     _exps(lam, c, ci, ns, t - t_s, ev)
     x = w * t - th0
     th = w * t
-    if not deriv:
-        return _monitor(W, G, GT, m, ev, ns, x, th)
-    dg = _modal_sum(Wl, m, ev, ns)
-    for k in range(7, 0, -1):
-        dg += w * k * G[m, k] * x ** (k - 1)
+    g = 0.0
+    dg = 0.0
+    d2g = 0.0
+    for j in range(ns):
+        a = W[m, j] * ev[j]
+        b = Wl[m, j] * ev[j]
+        g += a.real
+        dg += b.real
+        d2g += (b * lam[c, ci, j]).real
+    p0 = 0.0
+    p1 = 0.0
+    p2 = 0.0
+    for k in range(7, -1, -1):
+        p2 = p2 * x + 2.0 * p1
+        p1 = p1 * x + p0
+        p0 = p0 * x + G[m, k]
+    g += p0
+    dg += w * p1
+    d2g += w * w * p2
     if GT[m] != 0.0:
-        dg -= w * (GT[m].real * np.sin(th) + GT[m].imag * np.cos(th))
-    return dg
+        ct = np.cos(th)
+        st = np.sin(th)
+        g += GT[m].real * ct - GT[m].imag * st
+        dg -= w * (GT[m].real * st + GT[m].imag * ct)
+        d2g -= w * w * (GT[m].real * ct - GT[m].imag * st)
+    return g, dg, d2g
 
 
 @njit(cache=True, nogil=True)
 def _root(deriv, sgn, W, Wl, G, GT, lam, c, ci, m, ns, t_s, ta, tb, level, w, th0,
           tolerance, ev):
-    """Time in [ta, tb] where sgn·(f − level) rises through zero, f the monitor m or (deriv)
-    its derivative, by the Illinois method. Returns the bracket's left end once the bracket
-    is narrower than ``tolerance``: the last time known to be before the crossing (no
-    penetration, no tension beyond ``level``).
+    """Time in [ta, tb] where f = sgn·(monitor − level) (or, with deriv, sgn·its derivative)
+    rises through zero: Newton steps from the latest point, kept inside the bracket, with
+    Illinois (regula falsi) and bisection as fall-backs. Returns the bracket's left end once
+    the bracket is narrower than ``tolerance``: the last time known to be before the crossing
+    (no penetration, no tension beyond ``level``).
     """
-    fa = sgn * (_eval(deriv, W, Wl, G, GT, lam, c, ci, m, ns, t_s, ta, w, th0, ev) - level)
+    g, dg, d2g = _eval3(W, Wl, G, GT, lam, c, ci, m, ns, t_s, ta, w, th0, ev)
+    fa = sgn * ((dg if deriv else g) - (0.0 if deriv else level))
     if fa > 0.0:
         return ta
-    fb = sgn * (_eval(deriv, W, Wl, G, GT, lam, c, ci, m, ns, t_s, tb, w, th0, ev) - level)
+    g, dg, d2g = _eval3(W, Wl, G, GT, lam, c, ci, m, ns, t_s, tb, w, th0, ev)
+    fb = sgn * ((dg if deriv else g) - (0.0 if deriv else level))
+    dfb = sgn * (d2g if deriv else dg)
+    t_last = tb
+    f_last = fb
+    df_last = dfb
     side = 0
+    converged = False
     for _ in range(ROOT_ITERATIONS):
         if tb - ta <= tolerance:
             break
-        t = (ta * fb - tb * fa) / (fb - fa)
-        # Keep the trial point strictly inside; fall back to bisection if it is not.
-        if not (ta < t < tb):
-            t = 0.5 * (ta + tb)
-        f = sgn * (_eval(deriv, W, Wl, G, GT, lam, c, ci, m, ns, t_s, t, w, th0, ev) - level)
+        if converged:
+            # Newton has the root to within the tolerance: close the bracket around it.
+            t = t_last - 0.5 * tolerance if side != 1 else t_last + 0.5 * tolerance
+            if not (ta < t < tb):
+                t = 0.5 * (ta + tb)
+        else:
+            t = t_last - f_last / df_last if df_last != 0.0 else -1.0
+            if ta < t < tb:
+                converged = abs(t - t_last) < 0.25 * tolerance
+            else:
+                t = (ta * fb - tb * fa) / (fb - fa)
+                if not (ta < t < tb):
+                    t = 0.5 * (ta + tb)
+        g, dg, d2g = _eval3(W, Wl, G, GT, lam, c, ci, m, ns, t_s, t, w, th0, ev)
+        f = sgn * ((dg if deriv else g) - (0.0 if deriv else level))
+        df = sgn * (d2g if deriv else dg)
         if f > 0.0:
             tb = t
             fb = f
@@ -166,6 +212,10 @@ def _root(deriv, sgn, W, Wl, G, GT, lam, c, ci, m, ns, t_s, ta, tb, level, w, th
             if side == 1:
                 fb *= 0.5
             side = 1
+        if not converged:
+            t_last = t
+            f_last = f
+            df_last = df
     return ta
 
 
@@ -211,6 +261,29 @@ def _state_active(q, z, vec, E, y0, Z, ZT, free, c, ci, nf, act, nact, x, ct, st
 
 
 @njit(cache=True, nogil=True)
+def _slope_bound(Wl, G, GT, m, Eabs, act, nact, gdeg, w, xa, xb):
+    """An upper bound on |dg/dt| of monitor m over a step from local angle xa to xb, with the
+    modal magnitudes Eabs at its start (they only decay): Σ|W_j λ_j||E_j| + max|P'| + ω|G_T|.
+    The polynomial part is bounded by its derivative's values at the ends plus its second
+    derivative's, which is ample for a step of at most one output interval."""
+    bound = 0.0
+    for jj in range(nact):
+        j = act[jj]
+        bound += abs(Wl[m, j]) * Eabs[j]
+    pa = 0.0
+    pb = 0.0
+    p2 = 0.0
+    for k in range(gdeg, 0, -1):
+        pa = pa * xa + k * G[m, k]
+        pb = pb * xb + k * G[m, k]
+    for k in range(gdeg, 1, -1):
+        p2 = max(p2, abs(k * (k - 1) * G[m, k]) * (abs(xa) + abs(xb) + 1.0) ** (k - 2))
+    bound += w * (max(abs(pa), abs(pb)) + p2 * abs(xb - xa))
+    bound += w * abs(GT[m])
+    return bound
+
+
+@njit(cache=True, nogil=True)
 def _write_sample(q_out, force_out, cam_out, cfg_out, c, k, q, gval, cam_held, seat_held, lift,
                   cfg):
     """Output sample k: coordinates (held ones on the cam and seat), forces, cam lift."""
@@ -240,7 +313,7 @@ def _separation(sep_rev, c, n_rev, w, ta, tb):
 @njit(cache=True, nogil=True)
 def modal_exact_batch(
     M, load, n_free, free, lam, vec, vec_inv, a_inv, b_in, b_load, rho, sigma, sigma0,
-    impulse, rho_vec, vnorm, zeta, meff, q0, v0, cfg0, seat_q, has_seat, form, omega,
+    impulse, rho_vec, vnorm, lam_abs, zeta, meff, q0, v0, cfg0, seat_q, has_seat, form, omega,
     t_sample_all, t_end_all, dt_cap, tolerance, steps_taken, breaks, poly, trig, n_pieces,
     q_out, force_out, cam_out, cfg_out,
     sep_rev, counts, vmax, fmax, events, n_events, status,
@@ -269,8 +342,12 @@ def modal_exact_batch(
     ya = np.zeros(NS, np.complex128)
     W = np.zeros((2, NS), np.complex128)
     Wl = np.zeros((2, NS), np.complex128)
+    Wabs = np.zeros((2, NS))
+    Eabs = np.zeros(NS)
+    Dabs = np.zeros(NS)
     dval = np.zeros(2)
     dprev = np.zeros(2)
+    gprev = np.zeros(2)
     G = np.zeros((2, 8))
     GT = np.zeros(2, np.complex128)
     ready = np.zeros(2, np.bool_)  # monitor prepared (its value is computed)
@@ -407,6 +484,9 @@ def modal_exact_batch(
                         Wl[m, j] = W[m, j] * lam[c, ci, j]
                     dprev[m] = _eval(True, W, Wl, G, GT, lam, c, ci, m, ns, t_s, t_s, w, th0,
                                      ev)
+                    gval[m] = _eval(False, W, Wl, G, GT, lam, c, ci, m, ns, t_s, t_s, w, th0,
+                                    ev)
+                    gprev[m] = gval[m]
             # The segment ends at the next break of the profile at the latest.
             nb = p + 1
             revb = rev
@@ -415,8 +495,16 @@ def modal_exact_batch(
                 revb = rev + 1
             t_break = (revb * TWO_PI + breaks[c, nb]) / w
             for j in range(ns):
-                act[j] = j
                 E[j] = 1.0
+                Eabs[j] = 1.0
+                for m in range(2):
+                    Wabs[m, j] = abs(W[m, j])
+                # Fastest mode first (insertion sort; ns ≤ 14).
+                k = j
+                while k > 0 and lam_abs[c, ci, act[k - 1]] < lam_abs[c, ci, j]:
+                    act[k] = act[k - 1]
+                    k -= 1
+                act[k] = j
             nact = ns
             if k_out < n_out and k_out * t_sample <= t_s * (1.0 + 1e-13):
                 # A sample due at the segment start (the initial state, or a break or event
@@ -442,17 +530,35 @@ def modal_exact_batch(
                     since_check = 0 if jj == 0 else since_check
                     while jj < nact:
                         j = act[jj]
-                        amp = abs(y0[j] * E[j])
+                        amp = abs(y0[j]) * Eabs[j]
                         if (amp * vnorm[c, ci, j] < MODE_FLOOR
                                 and amp * (abs(rho_vec[c, ci, 0, j]) + abs(rho_vec[c, ci, 1, j]))
                                 < eps_force):
                             nact -= 1
-                            act[jj] = act[nact]
+                            for kk in range(jj, nact):  # keep the fastest-first order
+                                act[kk] = act[kk + 1]
                         else:
                             jj += 1
-                    fastest = 0.0
-                    for jj in range(nact):
-                        fastest = max(fastest, abs(lam[c, ci, act[jj]]))
+                    # The step need only resolve modes that could bring a watched monitor to its
+                    # level: skip the fastest modes while their summed amplitudes (which only
+                    # decay) stay under half of every monitor's distance from its level.
+                    margin = np.inf
+                    for m in range(2):
+                        if watch[m]:
+                            margin = min(margin, level[m] - gval[m])
+                    k = 0
+                    spent = 0.0
+                    while k < nact:
+                        j = act[k]
+                        amp = 0.0
+                        for m in range(2):
+                            if watch[m]:
+                                amp = max(amp, Wabs[m, j] * Eabs[j])
+                        if spent + amp >= 0.5 * margin:
+                            break
+                        spent += amp
+                        k += 1
+                    fastest = lam_abs[c, ci, act[k]] if k < nact else 0.0
                     h_allow = RESOLUTION * np.pi / fastest if fastest > 0.0 else np.inf
                     if dt_cap > 0.0:
                         h_allow = min(h_allow, dt_cap)
@@ -464,13 +570,16 @@ def modal_exact_batch(
                     i_step = 0
                     since_refresh += n_steps
                     since_check += n_steps
-                    if h_new != h or since_refresh > 256 or t_from == t_s:
+                    # (A step within 1e-12 of the last one keeps D: the difference is rounding.)
+                    if abs(h_new - h) > 1e-12 * h or since_refresh > 256 or t_from == t_s:
                         # New step, a fresh segment, or time to refresh: exact exponentials.
                         h = h_new
                         for jj in range(nact):
                             j = act[jj]
                             D[j] = np.exp(lam[c, ci, j] * h)
                             E[j] = np.exp(lam[c, ci, j] * (t_from + h - t_s))
+                            Dabs[j] = abs(D[j])
+                            Eabs[j] = abs(E[j])
                         cwh = np.cos(w * h)
                         swh = np.sin(w * h)
                         cth = np.cos(w * (t_from + h))
@@ -481,6 +590,7 @@ def modal_exact_batch(
                         for jj in range(nact):
                             j = act[jj]
                             E[j] *= D[j]
+                            Eabs[j] *= Dabs[j]
                         cth, sth = cth * cwh - sth * swh, sth * cwh + cth * swh
                     replan = False
                 if start_check:
@@ -519,8 +629,14 @@ def modal_exact_batch(
                     x_n = w * t_n - th0
                     for m in range(2):
                         if ready[m]:
-                            g = _modal_sum_active(W, m, E, act, nact) + _horner(G[m], x_n, gdeg)
-                            dg = _modal_sum_active(Wl, m, E, act, nact)
+                            g = _horner(G[m], x_n, gdeg)
+                            dg = 0.0
+                            for jj in range(nact):
+                                j = act[jj]
+                                er = E[j].real
+                                ei = E[j].imag
+                                g += W[m, j].real * er - W[m, j].imag * ei
+                                dg += Wl[m, j].real * er - Wl[m, j].imag * ei
                             for k in range(gdeg, 0, -1):
                                 dg += w * k * G[m, k] * x_n ** (k - 1)
                             if mon_trig:
@@ -538,8 +654,13 @@ def modal_exact_batch(
                         t_hi = -1.0
                         if gval[m] > level[m]:
                             t_hi = t_eval
-                        elif dprev[m] > 0.0 and dval[m] < 0.0:
-                            # A maximum inside the step: does it rise above the level?
+                        elif dprev[m] > 0.0 and dval[m] < 0.0 and (
+                                max(gprev[m], gval[m]) + (t_eval - t_prev)
+                                * _slope_bound(Wl, G, GT, m, Eabs, act, nact, gdeg, w,
+                                               w * t_prev - th0, w * t_eval - th0)
+                                > level[m]):
+                            # A maximum inside the step that might rise above the level (the
+                            # bound on |g'| over the step cannot rule it out): find it.
                             t_max = _root(True, -1.0, W, Wl, G, GT, lam, c, ci, m, ns, t_s,
                                           t_prev, t_eval, 0.0, w, th0, tolerance, ev)
                             if _eval(False, W, Wl, G, GT, lam, c, ci, m, ns, t_s, t_max, w,
@@ -644,6 +765,7 @@ def modal_exact_batch(
                 # Accept the grid point: force maxima, output sample, end of run.
                 for m in range(2):
                     dprev[m] = dval[m]
+                    gprev[m] = gval[m]
                 if cam_held:
                     fmax[c, 0] = max(fmax[c, 0], -gval[0])
                 if seat_held:
@@ -668,6 +790,7 @@ def modal_exact_batch(
                     for jj in range(nact):
                         j = act[jj]
                         E[j] *= D[j]
+                        Eabs[j] *= Dabs[j]
                     cth, sth = cth * cwh - sth * swh, sth * cwh + cth * swh
             if stalled > MAX_STALLED_EVENTS:
                 status[c] = CHATTER

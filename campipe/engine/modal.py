@@ -57,6 +57,7 @@ class ModalData:
     impulse: np.ndarray  # (4, 2, 7) Δv of each coordinate per unit Δv of a held one
     rho_vec: np.ndarray  # (4, 2, NS) complex: the force rows in modal coordinates, ρ·V
     vnorm: np.ndarray  # (4, NS) largest |V_sj| of each mode j over the state
+    lam_abs: np.ndarray  # (4, NS) |λ_j| [1/s]
 
 
 def modal_data(sm: SystemMatrices, max_condition: float = 1e10) -> ModalData:
@@ -85,6 +86,7 @@ def modal_data(sm: SystemMatrices, max_condition: float = 1e10) -> ModalData:
         "impulse": np.zeros((4, 2, 7)),
         "rho_vec": np.zeros((4, 2, NS), complex),
         "vnorm": np.zeros((4, NS)),
+        "lam_abs": np.zeros((4, NS)),
     }
     for ci, cfg in enumerate((1, 2, 3, 4)):
         fr = np.array(CONFIGURATIONS[cfg])
@@ -122,6 +124,7 @@ def modal_data(sm: SystemMatrices, max_condition: float = 1e10) -> ModalData:
             out["sigma0"][ci, r] = mrf @ mff_inv @ f[fr] - f[row]
         out["rho_vec"][ci, :, :ns] = out["rho"][ci, :, :ns] @ V
         out["vnorm"][ci, :ns] = np.abs(V).max(axis=0)
+        out["lam_abs"][ci, :ns] = np.abs(lam)
         # A plastic impact that sets held coordinate p's velocity: M Δv = P e_p with the other
         # held coordinates fixed, so Δv_free = −M_ff⁻¹ M_fp Δv_p.
         for hc, p in enumerate(HELD_COORDS):
