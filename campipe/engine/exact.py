@@ -167,7 +167,8 @@ def _root(deriv, sgn, W, Wl, G, GT, lam, c, ci, m, ns, t_s, ta, tb, level, w, th
     rises through zero: Newton steps from the latest point, kept inside the bracket, with
     Illinois (regula falsi) and bisection as fall-backs. Returns the bracket's left end once
     the bracket is narrower than ``tolerance``: the last time known to be before the crossing
-    (no penetration, no tension beyond ``level``).
+    (no penetration, no tension beyond ``level``), or its right end if the left one is the
+    segment start.
     """
     g, dg, d2g = _eval3(W, Wl, G, GT, lam, c, ci, m, ns, t_s, ta, w, th0, ev)
     fa = sgn * ((dg if deriv else g) - (0.0 if deriv else level))
@@ -216,7 +217,8 @@ def _root(deriv, sgn, W, Wl, G, GT, lam, c, ci, m, ns, t_s, ta, tb, level, w, th
             t_last = t
             f_last = f
             df_last = df
-    return ta
+    # The left end, unless that is the segment start: a segment must advance.
+    return ta if ta > t_s else tb
 
 
 @njit(cache=True, nogil=True)
@@ -248,16 +250,18 @@ def _modal_sum_active(W, m, E, act, nact):
 
 
 @njit(cache=True, nogil=True)
-def _state_active(q, z, vec, E, y0, Z, ZT, free, c, ci, nf, act, nact, x, ct, st, deg):
-    """Positions of the free coordinates from the active modes (an output sample)."""
-    for s in range(nf):
+def _state_active(q, v, z, vec, E, y0, Z, ZT, free, c, ci, nf, ns, act, nact, x, ct, st, deg):
+    """Free coordinates and velocities from the active modes (an output sample)."""
+    for s in range(ns):
         acc = 0.0
         for jj in range(nact):
             j = act[jj]
             a = y0[j] * E[j]
             acc += vec[c, ci, s, j].real * a.real - vec[c, ci, s, j].imag * a.imag
         z[s] = acc + _horner(Z[:, s], x, deg) + ZT[s].real * ct - ZT[s].imag * st
-        q[free[c, ci, s]] = z[s]
+    for k in range(nf):
+        q[free[c, ci, k]] = z[k]
+        v[free[c, ci, k]] = z[nf + k]
 
 
 @njit(cache=True, nogil=True)
@@ -284,13 +288,23 @@ def _slope_bound(Wl, G, GT, m, Eabs, act, nact, gdeg, w, xa, xb):
 
 
 @njit(cache=True, nogil=True)
-def _write_sample(q_out, force_out, cam_out, cfg_out, c, k, q, gval, cam_held, seat_held, lift,
-                  cfg):
-    """Output sample k: coordinates (held ones on the cam and seat), forces, cam lift."""
+def _write_sample(q_out, v_out, force_out, cam_out, cfg_out, c, k, q, v, gval, cam_held,
+                  seat_held, poly, trig, p, x, ct, st, w, cfg):
+    """Output sample k: coordinates and velocities (held ones on the cam and seat), forces,
+    cam lift."""
+    lift = 0.0
+    dlift = 0.0
+    for kk in range(7, -1, -1):
+        dlift = dlift * x + lift
+        lift = lift * x + poly[c, p, kk]
+    lift += trig[c, p, 0] * st + trig[c, p, 1] * ct
+    dlift += trig[c, p, 0] * ct - trig[c, p, 1] * st
     for i in range(7):
         q_out[c, k, i] = q[i]
+        v_out[c, k, i] = v[i]
     if cam_held:
         q_out[c, k, 0] = -lift
+        v_out[c, k, 0] = -w * dlift
     force_out[c, k, 0] = gval[0] if cam_held else 0.0
     force_out[c, k, 1] = -gval[1] if seat_held else 0.0
     cam_out[c, k] = lift
@@ -315,7 +329,7 @@ def modal_exact_batch(
     M, load, n_free, free, lam, vec, vec_inv, a_inv, b_in, b_load, rho, sigma, sigma0,
     impulse, rho_vec, vnorm, lam_abs, zeta, meff, q0, v0, cfg0, seat_q, has_seat, form, omega,
     t_sample_all, t_end_all, dt_cap, tolerance, steps_taken, breaks, poly, trig, n_pieces,
-    q_out, force_out, cam_out, cfg_out,
+    q_out, v_out, force_out, cam_out, cfg_out,
     sep_rev, counts, vmax, fmax, events, n_events, status,
 ):
     """Advance every case of a batch exactly between events; fill the outputs in place.
@@ -512,9 +526,8 @@ def modal_exact_batch(
                 for m in range(2):
                     if ready[m]:
                         gval[m] = _monitor(W, G, GT, m, E, ns, x_s, th_s)
-                _write_sample(q_out, force_out, cam_out, cfg_out, c, k_out, q, gval, cam_held,
-                              seat_held, _horner(poly[c, p], x_s) + trig[c, p, 0] * st
-                              + trig[c, p, 1] * ct, cfg)
+                _write_sample(q_out, v_out, force_out, cam_out, cfg_out, c, k_out, q, v, gval,
+                              cam_held, seat_held, poly, trig, p, x_s, ct, st, w, cfg)
                 k_out += 1
             t_prev = t_s
             replan = True
@@ -774,11 +787,11 @@ def modal_exact_batch(
                 if i_step == n_steps:
                     if to_sample:
                         x_n = w * t_n - th0
-                        _state_active(q, z, vec, E, y0, Z, ZT, free, c, ci, nf, act, nact,
-                                      x_n, cth, sth, deg)
-                        _write_sample(q_out, force_out, cam_out, cfg_out, c, k_out, q, gval,
-                                      cam_held, seat_held, _horner(poly[c, p], x_n)
-                                      + trig[c, p, 0] * sth + trig[c, p, 1] * cth, cfg)
+                        _state_active(q, v, z, vec, E, y0, Z, ZT, free, c, ci, nf, ns, act,
+                                      nact, x_n, cth, sth, deg)
+                        _write_sample(q_out, v_out, force_out, cam_out, cfg_out, c, k_out, q, v,
+                                      gval, cam_held, seat_held, poly, trig, p, x_n, cth, sth, w,
+                                      cfg)
                         k_out += 1
                     if t_n >= t_end:
                         if not cam_held:
@@ -802,5 +815,6 @@ def modal_exact_batch(
             if not finite:
                 status[c] = NONFINITE
                 break
+        fmax[c, 2] = fmax[c, 0]  # no force here measures a step: impulses are instantaneous
         if n_events[c] > events.shape[1] and status[c] == OK:
             status[c] = EVENTS_TRUNCATED

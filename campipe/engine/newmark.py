@@ -123,17 +123,19 @@ def newmark_linear_batch(
     M, C, K, load, minv, meff, q0, v0, a0, cfg0,
     seat_q, has_seat, form, omega, dt, n_steps,
     breaks, poly, trig, n_pieces,
-    d_theta_out, q_out, force_out, cam_out, cfg_out,
+    d_theta_out, q_out, v_out, force_out, cam_out, cfg_out,
     sep_rev, counts, vmax, fmax, events, n_events, status,
 ):
     """Advance every case of a batch; fill the output arrays in place.
 
     Shapes: M, C, K (n, 7, 7); load, q0, v0, a0 (n, 7); minv (n, 4, 7, 7) from
     ``effective_mass_inverses``; meff (n, 4) from ``impact_masses``; per-case vectors (n,);
-    q_out (n, n_out, 7); force_out (n, n_out, 2) = (F1, F7), thesis signs; cam_out (n, n_out)
+    q_out, v_out (n, n_out, 7); force_out (n, n_out, 2) = (F1, F7), thesis signs; cam_out (n, n_out)
     cam lift; cfg_out (n, n_out) int8; sep_rev (n, n_rev) [rad]; counts (n, 2) cam and seat
     impacts; vmax (n, 2) largest cam and seat closing velocity; fmax (n, 2) largest
-    compressive cam and seat force between impacts; events (n, max_events, 6).
+    compressive cam and seat force between impacts, and the cam force including the steps an
+    impulse passes through (the thesis's "impact force", which measures 1/Δt); events
+    (n, max_events, 6).
     """
     n_cases = M.shape[0]
     n_out = q_out.shape[1]
@@ -302,6 +304,8 @@ def newmark_linear_batch(
                 quiet_cam -= 1
             elif cam_held:
                 fmax[c, 0] = max(fmax[c, 0], -f1)
+            if cam_held:
+                fmax[c, 2] = max(fmax[c, 2], -f1)
             if quiet_seat > 0:
                 quiet_seat -= 1
             elif seat_held:
@@ -328,6 +332,7 @@ def newmark_linear_batch(
                     at[6] = 0.0
                 for i in range(NP):
                     q_out[c, k_out, i] = qt[i]
+                    v_out[c, k_out, i] = vt[i]
                 # A contact that the step end releases may show a little tension inside the
                 # step; a force-closed contact cannot pull, so it reports zero there.
                 fs1 = _row_force(M, C, K, load, c, 0, at, vt, qt) if cam_held else 0.0

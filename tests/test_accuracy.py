@@ -1,0 +1,240 @@
+"""Accuracy of the integrators: convergence orders, analytic checks, impacts, cost settings.
+
+The reference for every comparison is modal-exact with a tight event tolerance and a small
+step cap: exact between events, so its only error is the event location (≤ 1e-15 s here).
+"""
+
+import math
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+
+from campipe.engine import Case, IntegrationError, RunSettings, run_batch, stability_limit
+from campipe.engine.batch import _matrices
+from campipe.engine.newmark import CAM_IMPACT, EV_IMPULSE, EV_KIND, EV_TIME, EV_VELOCITY
+from campipe.model import thesis_train
+from campipe.profiles import harmonic
+
+INCH = 0.0254
+TRAIN = thesis_train()
+CAM = harmonic(INCH)
+
+
+def rpm(r):
+    return r * math.pi / 30
+
+
+SEPARATING = Case(TRAIN, CAM, rpm(11000))
+SEAT_BOUNCE = Case(TRAIN, CAM, rpm(13205), seat=0.1 * INCH)
+
+
+def run(case, revolutions=2, **kw):
+    return run_batch([case], RunSettings(revolutions=revolutions, **kw))
+
+
+@pytest.fixture(scope="module")
+def references():
+    return {
+        id(case): run(case, integrator="modal-exact", dt=0.05e-6, tolerance=1e-15)
+        for case in (SEPARATING, SEAT_BOUNCE)
+    }
+
+
+def slope(x, y):
+    """Observed order: the least-squares slope of log y against log x."""
+    return np.polyfit(np.log(x), np.log(y), 1)[0]
+
+
+def valve_error(res, ref):
+    return np.abs(res.valve_lift - ref.valve_lift).max()
+
+
+def event_angle_error(res, ref, case, first=None):
+    a, b = res.events[0], ref.events[0]
+    n = first or len(b)
+    assert len(a) >= n and (first or len(a) == len(b)), (len(a), len(b))
+    assert np.array_equal(a[:n, EV_KIND], b[:n, EV_KIND])
+    return np.abs(a[:n, EV_TIME] - b[:n, EV_TIME]).max() * case.speed  # [rad]
+
+
+@pytest.mark.parametrize(
+    ("case", "tolerances", "first"),
+    [(SEPARATING, [1e-7, 1e-8, 1e-9, 1e-10], None), (SEAT_BOUNCE, [1e-8, 1e-9, 1e-10, 1e-11], 8)],
+    ids=["11000rpm", "seat-13205rpm"],
+)
+def test_modal_exact_error_is_first_order_in_the_event_tolerance(references, case, tolerances,
+                                                                 first):
+    ref = references[id(case)]
+    runs = [run(case, integrator="modal-exact", tolerance=t) for t in tolerances]
+    valve = np.array([valve_error(r, ref) for r in runs])
+    events = np.array([event_angle_error(r, ref, case, first) for r in runs])
+    assert 0.8 < slope(tolerances, valve) < 1.5, valve
+    assert slope(tolerances, events) > 0.8, events
+    # Bounds: the valve moves at most ~v_closing·tolerance off per event, which later events
+    # may amplify by a bounded factor; event angles within a hundred ω·tolerance.
+    v_max = max(ref.max_cam_impact_velocity[0], ref.max_seating_velocity[0])
+    assert np.all(valve <= 2 * v_max * np.array(tolerances)), valve
+    assert np.all(events <= 100 * case.speed * np.array(tolerances)), events
+
+
+@pytest.mark.parametrize("case", [SEPARATING, SEAT_BOUNCE], ids=["11000rpm", "seat-13205rpm"])
+def test_modal_exact_does_not_depend_on_its_step(references, case):
+    """Exact between events: capping the step changes nothing beyond rounding."""
+    ref = references[id(case)]
+    for cap in (2e-6, 1e-6, 0.25e-6, None):
+        res = run(case, integrator="modal-exact", dt=cap, tolerance=1e-14)
+        assert valve_error(res, ref) < 1e-12 * INCH * 100
+        assert len(res.events[0]) == len(ref.events[0])
+
+
+def test_newmark_linear_converges_to_the_same_history_at_first_order(references):
+    """Switching at step ends makes the thesis algorithm first order through contact events."""
+    ref = references[id(SEPARATING)]
+    steps = [2e-6, 1e-6, 0.5e-6, 0.25e-6]
+    runs = [run(SEPARATING, integrator="newmark-linear", dt=dt) for dt in steps]
+    valve = np.array([valve_error(r, ref) for r in runs])
+    events = np.array([event_angle_error(r, ref, SEPARATING) for r in runs])
+    assert 0.7 < slope(steps, valve) < 1.6, valve
+    assert 0.7 < slope(steps, events) < 1.6, events
+    assert valve[1] < 2e-4 * INCH  # 1 µs, the thesis's step
+    assert np.degrees(events[1]) < 1.0
+
+
+def test_newmark_linear_converges_on_the_seat_bounce(references):
+    ref = references[id(SEAT_BOUNCE)]
+    steps = [1e-6, 0.5e-6, 0.25e-6, 0.125e-6]
+    valve = np.array([valve_error(run(SEAT_BOUNCE, integrator="newmark-linear", dt=dt), ref)
+                      for dt in steps])
+    assert 0.6 < slope(steps, valve) < 1.8, valve
+    assert valve[-1] < 3e-4 * INCH
+
+
+def test_impulse_and_closing_velocity_converge_the_thesis_impact_force_does_not(references):
+    ref = references[id(SEPARATING)]
+    first_ref = ref.events[0][ref.events[0][:, EV_KIND] == CAM_IMPACT][0]
+    steps = [1e-6, 0.5e-6, 0.25e-6, 0.125e-6]
+    velocity, impulse, peak, between = [], [], [], []
+    for dt in steps:
+        res = run(SEPARATING, integrator="newmark-linear", dt=dt)
+        first = res.events[0][res.events[0][:, EV_KIND] == CAM_IMPACT][0]
+        velocity.append(first[EV_VELOCITY])
+        impulse.append(first[EV_IMPULSE])
+        peak.append(res.thesis_impact_force[0])
+        between.append(res.max_cam_force[0])
+    v_err = np.abs(np.array(velocity) - first_ref[EV_VELOCITY])
+    j_err = np.abs(np.array(impulse) - first_ref[EV_IMPULSE])
+    assert v_err[-1] < 0.003 * first_ref[EV_VELOCITY] and v_err[-1] < v_err[0]
+    assert j_err[-1] < 0.003 * first_ref[EV_IMPULSE] and j_err[-1] < j_err[0]
+    # The impulse is the effective mass times the closing velocity (perfectly plastic).
+    assert_allclose(first_ref[EV_IMPULSE] / first_ref[EV_VELOCITY],
+                    impulse[-1] / velocity[-1], rtol=1e-12)
+    # The thesis's peak "impact force" is Δv·m/Δt: it doubles each time the step halves.
+    ratios = np.array(peak[1:]) / np.array(peak[:-1])
+    assert np.all((ratios > 1.8) & (ratios < 2.2)), ratios
+    # The largest force between impacts converges, to modal-exact's.
+    assert_allclose(between[-1], ref.max_cam_force[0], rtol=2e-4)
+    assert abs(between[-1] - ref.max_cam_force[0]) < abs(between[0] - ref.max_cam_force[0])
+    # modal-exact applies impulses at an instant: nothing in it measures a step.
+    assert ref.thesis_impact_force[0] == ref.max_cam_force[0]
+
+
+def test_default_reaches_a_micro_inch_on_the_separation_case(references):
+    """The accuracy half of 'accuracy for cost' (the cost half is in `campipe bench`)."""
+    res = run(SEPARATING)  # integrator: default, its own steps
+    assert valve_error(res, references[id(SEPARATING)]) < 1e-6 * INCH
+
+
+def steady_state_cam_force(train, speed, lift, theta):
+    """Contact force of the harmonic cam in configuration I once transients have decayed: the
+    frequency response of the train with q1 prescribed, q1 = −h/2 + (h/2)·sin θ."""
+    sm = _matrices(train)
+    M, C, K, f = sm.mass, sm.damping, sm.stiffness, sm.preload
+    fr = np.arange(1, 7)
+    q1_mean, q1_amp = -lift / 2, -1j * lift / 2  # (h/2) sin θ = Re(−i·h/2·e^{iθ})
+    x0 = np.linalg.solve(K[np.ix_(fr, fr)], f[fr] - K[fr, 0] * q1_mean)
+    dyn = lambda rows, cols: K[np.ix_(rows, cols)] - speed**2 * M[np.ix_(rows, cols)] \
+        + 1j * speed * C[np.ix_(rows, cols)]  # noqa: E731
+    x1 = np.linalg.solve(dyn(fr, fr), -dyn(fr, [0])[:, 0] * q1_amp)
+    # F1 = row 1 of (K − ω²M + iωC) applied to the complex amplitude, plus the static part.
+    static = K[0, fr] @ x0 + K[0, 0] * q1_mean - f[0]
+    amp = dyn([0], fr)[0] @ x1 + dyn([0], [0])[0, 0] * q1_amp
+    return static + np.real(amp * np.exp(1j * theta))
+
+
+@pytest.mark.parametrize("method", ["modal-exact", "newmark-linear"])
+def test_steady_state_contact_force_matches_the_frequency_response(method):
+    speed = rpm(3000)
+    res = run(Case(TRAIN, CAM, speed), revolutions=6, integrator=method)
+    last = slice(-361, None)
+    expected = -steady_state_cam_force(TRAIN, speed, INCH, res.cam_angle[last])
+    tol = 1e-7 if method == "modal-exact" else 2e-3
+    assert_allclose(res.cam_force[0, last], expected, rtol=0, atol=tol * np.abs(expected).max())
+
+
+def free_flight(train, q0, v0, t):
+    """Configuration II from (q0, v0): classical modal damping, each mode a damped
+    oscillator about the static deflection under the preload (the full train's real modes)."""
+    sm = _matrices(train)
+    qs = np.linalg.solve(sm.stiffness, sm.preload)
+    phi, w = sm.modes, sm.frequencies
+    zeta = np.asarray(train.damping_ratios)
+    eta0 = phi.T @ sm.mass @ (q0 - qs)
+    deta0 = phi.T @ sm.mass @ v0
+    wd = w * np.sqrt(1 - zeta**2)
+    decay = np.exp(-zeta * w * t)
+    eta = decay * (eta0 * np.cos(wd * t) + (deta0 + zeta * w * eta0) / wd * np.sin(wd * t))
+    return qs + phi @ eta
+
+
+@pytest.mark.parametrize("method", ["modal-exact", "newmark-linear"])
+def test_free_decay_in_configuration_II_matches_the_modal_solution(method):
+    res = run(Case(TRAIN, CAM, rpm(20000)), revolutions=2, integrator=method)
+    # The longest stretch in flight.
+    free = np.flatnonzero(res.contact_state[0] == 2)
+    stretches = np.split(free, np.flatnonzero(np.diff(free) > 1) + 1)
+    longest = max(stretches, key=len)
+    start, stop = longest[0], longest[-1]
+    assert stop - start > 200  # degrees in flight
+    k0, k1 = start + 1, stop - 1
+    t = res.time[0, k1] - res.time[0, k0]
+    expected = free_flight(TRAIN, res.q[0, k0], res.v[0, k0], t)
+    translations = [0, 1, 3, 6]
+    err = np.abs(res.q[0, k1, translations] - expected[translations]).max()
+    # modal-exact: rounding and the modes dropped below 1e-13 m (MODE_FLOOR).
+    tol = 1e-9 if method == "modal-exact" else 1e-5
+    assert err < tol * np.abs(expected[translations]).max()
+
+
+def test_energy_balance_of_an_undamped_impact_free_run():
+    """Undamped and always on the cam: the train's energy changes by the cam's work,
+    E(t) − E(0) = ∫ F1·q̇1 dt, with E = ½ q̇ᵀMq̇ + ½ qᵀKq − fᵀq."""
+    undamped = TRAIN.replace(damping_ratios=(0.0,) * 7)
+    res = run(Case(undamped, CAM, rpm(3000)), revolutions=1, integrator="modal-exact",
+              output_every=math.radians(0.25))
+    sm = _matrices(undamped)
+    q, v = res.q[0], res.v[0]
+    energy = (0.5 * np.einsum("ki,ij,kj->k", v, sm.mass, v)
+              + 0.5 * np.einsum("ki,ij,kj->k", q, sm.stiffness, q) - q @ sm.preload)
+    power = -res.cam_force[0] * v[:, 0]  # F1 = −(compressive cam force) acts on q1
+    t = res.time[0]
+    # Simpson's rule on the uniform samples (an even number of intervals).
+    work = np.concatenate([[0.0], np.cumsum((t[2::2] - t[:-2:2]) / 6
+                                            * (power[:-2:2] + 4 * power[1::2] + power[2::2]))])
+    swing = np.ptp(energy)
+    assert swing > 1.0  # joules: the cam does real work on the spring
+    assert np.abs(energy[::2] - energy[0] - work).max() < 1e-6 * swing
+    assert res.cam_impacts[0] == 0 and np.all(res.contact_state[0] == 1)
+
+
+def test_newmark_stability_limit_reproduced_by_runs_just_under_and_over():
+    case = Case(TRAIN, CAM, rpm(11000))  # no seat: configurations I and II
+    limit = stability_limit(case)
+    under = run(case, revolutions=1, integrator="newmark-linear", dt=0.99 * limit)
+    assert np.isfinite(under.q).all() and np.abs(under.valve_lift).max() < 2 * INCH
+    # Just over, the highest mode grows ×1.1 a step in contact and ×1.15 in flight (spectral
+    # radius of the amplification matrix): overflow within a few thousand steps.
+    with pytest.raises(IntegrationError, match="non-finite"):
+        run_batch([case], RunSettings(revolutions=4, integrator="newmark-linear",
+                                      dt=1.02 * limit), check_stability_limit=False)
+    assert math.isinf(stability_limit(case, "modal-exact"))
