@@ -44,6 +44,12 @@ DEFAULT_INTEGRATOR = "modal-exact"
 #: caps them).
 DEFAULT_STEPS: dict[str, float | None] = {"newmark-linear": 1e-6, "modal-exact": None}
 CLOSURES = ("force", "form")
+#: Model fidelity of a run: "full" keeps all seven coordinates' modes in every configuration;
+#: "reduced" keeps the modes up to ``mode_cutoff`` in each configuration, and the rest only
+#: through their quasi-static response (static correction): it does not pay for the 1.07e6
+#: rad/s mode where a scene does not need it.
+FIDELITIES = ("full", "reduced")
+DEFAULT_MODE_CUTOFF = 2.0e5  # [rad/s]: the configurations' lower modes, about 32 kHz
 
 
 def resolve_integrator(name: str) -> str:
@@ -82,6 +88,27 @@ class RunSettings:
     integrator: str = "default"  # "default" or a name in INTEGRATORS
     tolerance: float = 1e-12  # event-time tolerance of integrators that locate events [s]
     max_events: int = 4096  # events kept per case
+    fidelity: str = "full"  # "full" or "reduced" (see FIDELITIES)
+    mode_cutoff: float | None = None  # reduced: highest mode kept [rad/s]; None: the default
+
+    @property
+    def cutoff(self) -> float:
+        """The highest mode frequency modal-exact keeps [rad/s]; 0 keeps every mode."""
+        if self.fidelity not in FIDELITIES:
+            raise ValueError(
+                f"run.fidelity: unknown fidelity {self.fidelity!r}; known: {', '.join(FIDELITIES)}"
+            )
+        if self.fidelity == "full":
+            return 0.0
+        if self.method != "modal-exact":
+            raise ValueError(
+                f"run.fidelity: {self.fidelity} needs integrator modal-exact (or default), "
+                f"found {self.method}"
+            )
+        cutoff = DEFAULT_MODE_CUTOFF if self.mode_cutoff is None else self.mode_cutoff
+        if not cutoff > 0:
+            raise ValueError(f"run.mode_cutoff: found {cutoff!r} rad/s, expected > 0")
+        return float(cutoff)
 
     @property
     def method(self) -> str:
@@ -350,7 +377,8 @@ def _run_modal_exact(trains, preps, which, settings, dt_run, meff, q0, v0, a0, c
     steps_taken = np.zeros(len(which), np.int64)
     exact.modal_exact_batch(
         M, load, *(stacked[f] for f in fields), zeta, meff, q0, v0, cfg0, seat_q, has_seat, form,
-        omega, t_sample, t_end, dt_run or 0.0, settings.tolerance, steps_taken,
+        omega, t_sample, t_end, dt_run or 0.0, settings.tolerance, settings.cutoff,
+        steps_taken,
         packed.breaks, packed.poly, packed.trig, packed.n_pieces, *out.tail(),
     )
     return steps_taken
@@ -379,6 +407,7 @@ def run_batch(
         If a case's state became non-finite.
     """
     dt_run = settings.step  # also refuses an unknown integrator
+    settings.cutoff  # refuses an unknown fidelity, or reduced with newmark-linear
     if dt_run is not None and not (dt_run > 0 and math.isfinite(dt_run)):
         raise ValueError(f"run.dt: found {dt_run!r} s, expected a positive step")
     for i, case in enumerate(cases):

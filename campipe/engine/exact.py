@@ -250,14 +250,14 @@ def _modal_sum_active(W, m, E, act, nact):
 
 
 @njit(cache=True, nogil=True)
-def _state_active(q, v, z, vec, E, y0, Z, ZT, free, c, ci, nf, ns, act, nact, x, ct, st, deg):
-    """Free coordinates and velocities from the active modes (an output sample)."""
+def _state_active(q, v, z, VY, E, Z, ZT, free, c, ci, nf, ns, act, nact, x, ct, st, deg):
+    """Free coordinates and velocities from the active modes (an output sample); VY holds
+    V_sj·y0_j, so each term is the real part of one complex product."""
     for s in range(ns):
         acc = 0.0
         for jj in range(nact):
             j = act[jj]
-            a = y0[j] * E[j]
-            acc += vec[c, ci, s, j].real * a.real - vec[c, ci, s, j].imag * a.imag
+            acc += VY[s, j].real * E[j].real - VY[s, j].imag * E[j].imag
         z[s] = acc + _horner(Z[:, s], x, deg) + ZT[s].real * ct - ZT[s].imag * st
     for k in range(nf):
         q[free[c, ci, k]] = z[k]
@@ -328,7 +328,7 @@ def _separation(sep_rev, c, n_rev, w, ta, tb):
 def modal_exact_batch(
     M, load, n_free, free, lam, vec, vec_inv, a_inv, b_in, b_load, rho, sigma, sigma0,
     impulse, rho_vec, vnorm, lam_abs, zeta, meff, q0, v0, cfg0, seat_q, has_seat, form, omega,
-    t_sample_all, t_end_all, dt_cap, tolerance, steps_taken, breaks, poly, trig, n_pieces,
+    t_sample_all, t_end_all, dt_cap, tolerance, mode_cutoff, steps_taken, breaks, poly, trig, n_pieces,
     q_out, v_out, force_out, cam_out, cfg_out,
     sep_rev, counts, vmax, fmax, events, n_events, status,
 ):
@@ -357,6 +357,7 @@ def modal_exact_batch(
     W = np.zeros((2, NS), np.complex128)
     Wl = np.zeros((2, NS), np.complex128)
     Wabs = np.zeros((2, NS))
+    VY = np.zeros((NS, NS), np.complex128)
     Eabs = np.zeros(NS)
     Dabs = np.zeros(NS)
     dval = np.zeros(2)
@@ -438,6 +439,9 @@ def modal_exact_batch(
                 for s in range(ns):
                     acc_c += vec_inv[c, ci, j, s] * zh[s]
                 y0[j] = acc_c
+            for s in range(ns):
+                for j in range(ns):
+                    VY[s, j] = vec[c, ci, s, j] * y0[j]
             # Monitors: g_m(τ) = Re Σ_j W_mj e^{λ_j τ} + Σ_k G_mk x^k + Re(GT_m e^{iθ}).
             ready[0] = True
             watch[0] = not (cam_held and form[c])
@@ -520,6 +524,13 @@ def modal_exact_batch(
                     k -= 1
                 act[k] = j
             nact = ns
+            if mode_cutoff > 0.0:
+                # Reduced fidelity: the modes above the cut-off keep only their quasi-static
+                # part (inside the particular solution); their free vibration is dropped.
+                while nact > 0 and lam_abs[c, ci, act[0]] > mode_cutoff:
+                    for kk in range(nact - 1):
+                        act[kk] = act[kk + 1]
+                    nact -= 1
             if k_out < n_out and k_out * t_sample <= t_s * (1.0 + 1e-13):
                 # A sample due at the segment start (the initial state, or a break or event
                 # that falls on an output angle) is the state here.
@@ -787,8 +798,8 @@ def modal_exact_batch(
                 if i_step == n_steps:
                     if to_sample:
                         x_n = w * t_n - th0
-                        _state_active(q, v, z, vec, E, y0, Z, ZT, free, c, ci, nf, ns, act,
-                                      nact, x_n, cth, sth, deg)
+                        _state_active(q, v, z, VY, E, Z, ZT, free, c, ci, nf, ns, act, nact,
+                                      x_n, cth, sth, deg)
                         _write_sample(q_out, v_out, force_out, cam_out, cfg_out, c, k_out, q, v,
                                       gval, cam_held, seat_held, poly, trig, p, x_n, cth, sth, w,
                                       cfg)
