@@ -174,7 +174,9 @@ def test_parameters_change_the_matrices_accordingly():
     assert_allclose(longer.stiffness[0, 0], sm.stiffness[0, 0] / 2, rtol=1e-12)
     assert_allclose(longer.mass[0, 0], 2 * sm.mass[0, 0], rtol=1e-12)
     # A rocker diameter scales its bending stiffness by D⁴.
-    thick = system_matrices(base.replace(rocker_valve_arm_diameter=2 * base.rocker_valve_arm_diameter))
+    thick = system_matrices(
+        base.replace(rocker_valve_arm_diameter=2 * base.rocker_valve_arm_diameter)
+    )
     assert_allclose(thick.stiffness[4, 4], 16 * sm.stiffness[4, 4], rtol=1e-12)
     # Damping ratios scale their mode's share of C.
     zeta = np.array(base.damping_ratios)

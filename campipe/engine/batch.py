@@ -20,13 +20,13 @@ from campipe.engine.contact import (
     HELD,
     SEAT,
     effective_mass_inverses,
-    impact_masses,
     held_inverses,
+    impact_masses,
     quasi_static_batch,
     quasi_static_state,
 )
-from campipe.model import ROMAN, ValveTrain, system_matrices
 from campipe.engine.modal import ModalData, harmonic_responses, modal_data
+from campipe.model import ROMAN, ValveTrain, system_matrices
 from campipe.model.assembly import (
     NEWMARK_LINEAR_OMEGA_DT,
     SystemMatrices,
@@ -341,8 +341,8 @@ class _Outputs:
         self.status = np.zeros(n, np.int64)
 
     def tail(self) -> tuple:
-        return (self.q, self.v, self.force, self.cam, self.cfg, self.sep_rev, self.counts, self.vmax,
-                self.fmax, self.events, self.n_events, self.status)
+        return (self.q, self.v, self.force, self.cam, self.cfg, self.sep_rev, self.counts,
+                self.vmax, self.fmax, self.events, self.n_events, self.status)
 
 
 def _run_newmark(preps, which, settings, dt_run, meff, q0, v0, a0, cfg0, seat_q, has_seat,
@@ -407,7 +407,7 @@ def run_batch(
         If a case's state became non-finite.
     """
     dt_run = settings.step  # also refuses an unknown integrator
-    settings.cutoff  # refuses an unknown fidelity, or reduced with newmark-linear
+    _ = settings.cutoff  # refuses an unknown fidelity, or reduced with newmark-linear
     if dt_run is not None and not (dt_run > 0 and math.isfinite(dt_run)):
         raise ValueError(f"run.dt: found {dt_run!r} s, expected a positive step")
     for i, case in enumerate(cases):

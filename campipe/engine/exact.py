@@ -30,6 +30,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from campipe.engine.modal import NS
 from campipe.engine.newmark import (
     CAM_IMPACT,
     CAM_SEPARATION,
@@ -44,7 +45,6 @@ from campipe.engine.newmark import (
     locate,
     piece_eval,
 )
-from campipe.engine.modal import NS
 
 CHATTER = 3  # status: events kept recurring without time advancing
 #: Steps are at most RESOLUTION·π/|λ| of the fastest mode still present: under half its period,
@@ -328,7 +328,8 @@ def _separation(sep_rev, c, n_rev, w, ta, tb):
 def modal_exact_batch(
     M, load, n_free, free, lam, vec, vec_inv, a_inv, b_in, b_load, rho, sigma, sigma0,
     impulse, rho_vec, vnorm, lam_abs, zeta, meff, q0, v0, cfg0, seat_q, has_seat, form, omega,
-    t_sample_all, t_end_all, dt_cap, tolerance, mode_cutoff, steps_taken, breaks, poly, trig, n_pieces,
+    t_sample_all, t_end_all, dt_cap, tolerance, mode_cutoff, steps_taken,
+    breaks, poly, trig, n_pieces,
     q_out, v_out, force_out, cam_out, cfg_out,
     sep_rev, counts, vmax, fmax, events, n_events, status,
 ):

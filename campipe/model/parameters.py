@@ -176,7 +176,8 @@ def parse_parameter(name: str, value: object, key: str | None = None) -> float |
                     f"found {value!r}"
                 )
             out = tuple(
-                parse_quantity(_number(v), p.units, f"{key}[{i}]", p.thesis_units) for i, v in enumerate(value)
+                parse_quantity(_number(v), p.units, f"{key}[{i}]", p.thesis_units)
+                for i, v in enumerate(value)
             )
             for i, (v, raw) in enumerate(zip(out, value, strict=True)):
                 _check_range(p, v, f"{key}[{i}]", raw)
