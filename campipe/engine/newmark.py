@@ -80,6 +80,15 @@ def piece_eval(breaks, poly, trig, c, piece, rev, theta):
 
 
 @njit(cache=True, nogil=True)
+def _degree(poly, c, piece):
+    """Highest power with a nonzero coefficient on a piece (Horner need go no higher)."""
+    for k in range(7, 0, -1):
+        if poly[c, piece, k] != 0.0:
+            return k
+    return 0
+
+
+@njit(cache=True, nogil=True)
 def cam_eval(breaks, poly, trig, n_pieces, c, theta):
     rev, piece = locate(breaks, n_pieces, c, theta)
     return piece_eval(breaks, poly, trig, c, piece, rev, theta)
@@ -172,6 +181,11 @@ def newmark_linear_batch(
         k_out = 0
         t_sample = 0.0
         rev, p = locate(breaks, n_pieces, c, 0.0)
+        pdeg = _degree(poly, c, p)
+        npc = n_pieces[c]
+        fmax_cam = 0.0
+        fmax_seat = 0.0
+        fmax_raw = 0.0
         sd = np.sin(w * h)
         cd = np.cos(w * h)
         sn = 0.0
@@ -193,7 +207,7 @@ def newmark_linear_batch(
             while True:
                 pn = p + 1
                 revn = rev
-                if pn == n_pieces[c]:
+                if pn == npc:
                     pn = 0
                     revn = rev + 1
                 thb = revn * TWO_PI + breaks[c, pn]
@@ -222,11 +236,12 @@ def newmark_linear_batch(
                                 abs(jump), meff[c, mi] * abs(jump))
                 p = pn
                 rev = revn
+                pdeg = _degree(poly, c, p)
             x = th1 - rev * TWO_PI - breaks[c, p]
             lift1 = 0.0
             dl1 = 0.0
             ddl1 = 0.0
-            for k in range(7, -1, -1):
+            for k in range(pdeg, -1, -1):
                 ddl1 = ddl1 * x + 2.0 * dl1
                 dl1 = dl1 * x + lift1
                 lift1 = lift1 * x + poly[c, p, k]
@@ -297,19 +312,20 @@ def newmark_linear_batch(
             impulse_cam = False
             impulse_seat = False
             # Metrics over this step.
-            rev_i = int(th0 / TWO_PI)
-            if not cam_held and rev_i < n_rev:
-                sep_rev[c, rev_i] += w * h
+            if not cam_held:
+                rev_i = int(th0 / TWO_PI)
+                if rev_i < n_rev:
+                    sep_rev[c, rev_i] += w * h
             if quiet_cam > 0:
                 quiet_cam -= 1
             elif cam_held:
-                fmax[c, 0] = max(fmax[c, 0], -f1)
+                fmax_cam = max(fmax_cam, -f1)
             if cam_held:
-                fmax[c, 2] = max(fmax[c, 2], -f1)
+                fmax_raw = max(fmax_raw, -f1)
             if quiet_seat > 0:
                 quiet_seat -= 1
             elif seat_held:
-                fmax[c, 1] = max(fmax[c, 1], f7)
+                fmax_seat = max(fmax_seat, f7)
             # Output samples inside (t0, t1], from the step's cubic (thesis Eqs. 55–57).
             while k_out < n_out and t_sample <= t1 * (1.0 + 1e-12):
                 tau = t_sample - t0
@@ -385,5 +401,8 @@ def newmark_linear_batch(
                 if not finite:
                     status[c] = NONFINITE
                     break
+        fmax[c, 0] = fmax_cam
+        fmax[c, 1] = fmax_seat
+        fmax[c, 2] = fmax_raw
         if n_events[c] > events.shape[1] and status[c] == OK:
             status[c] = EVENTS_TRUNCATED
