@@ -218,7 +218,7 @@ def study(spec, output, sets, scheduler, workers, batch_size, keep_parts, progre
     Rerunning the same command after an interruption computes only the cases whose batches
     were not stored; a finished archive that already holds the study is left as it is.
     """
-    import sys
+    import shlex
 
     from campipe.engine import IntegrationError
     from campipe.study.execute import run_study
@@ -236,7 +236,10 @@ def study(spec, output, sets, scheduler, workers, batch_size, keep_parts, progre
             "replay: the selection %r is checked and kept in the archive, but logging cases "
             "to rerun is not part of this version (the hook is campipe.study.execute."
             "BatchHook)", loaded.spec.replay)
-    command = "campipe " + " ".join(sys.argv[1:]) if sys.argv[1:] else f"campipe study {spec}"
+    words = ["campipe", "study", spec, *(["-o", output] if output else [])]
+    words += [w for pair in sets for w in ("--set", pair)]
+    words += ["--scheduler", scheduler] if scheduler != "threads" else []
+    command = shlex.join(words)
     try:
         report = run_study(loaded, archive, scheduler=scheduler, workers=workers,
                            batch_size=batch_size, progress=bar if progress else None,
@@ -272,7 +275,7 @@ def validate(spec, sets, workers, estimate) -> None:
     click.echo(f"batches: {len(plans)} of up to {size} cases")
     if estimate:
         e = cost(loaded, workers)
-        click.echo(f"run time: about {format_seconds(e.seconds)} on {workers} "
+        click.echo(f"run time: {format_seconds(e.seconds)} on {workers} "
                    f"worker{'s' if workers != 1 else ''} ({e.simulated:.3g} s simulated; "
                    "timed on a short run of one case per run-settings group)")
     click.echo(f"archive: about {archive_bytes(loaded) / 1e6:.3g} MB before compression "

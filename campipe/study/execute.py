@@ -308,7 +308,8 @@ def _run_distributed(plans: list[BatchPlan], address: str, store, stored) -> Non
             return client.submit(compute_batch, p, key=f"campipe-{p.key}-{token}", pure=False)
 
         # Keep at most two batches per worker thread in flight: memory stays bounded.
-        queue = as_completed([submit(p) for p in itertools.islice(pending, 2 * threads)])
+        queue = as_completed([submit(p) for p in itertools.islice(pending, 2 * threads)],
+                             loop=client.loop)
         for future in queue:
             data = future.result()
             future.release()

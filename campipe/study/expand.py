@@ -33,6 +33,7 @@ from campipe.study.fields import (
     CASE_FIELDS,
     DEFECT_FIELDS,
     PROFILE_FIELDS,
+    RUN_SETTINGS,
     SpecProblem,
     varied_fields,
 )
@@ -264,6 +265,8 @@ def _profile(frozen: tuple, directory: Path) -> tuple[Profile, dict, dict[str, o
             canonical = {"kind": kind, "table_sha256": digest}
             values.update({"profile.file": si["file"], "profile": profile.label})
             return profile, canonical, values
+    except SpecProblem:
+        raise
     except ValueError as exc:
         raise SpecProblem("profile", str(exc)) from None
     canonical = {"kind": kind, **{k: _clean(v) for k, v in si.items()}}
@@ -358,14 +361,9 @@ def resolve(raw: Mapping, index: int, directory: Path) -> ResolvedCase:
                               "the valve never leaves its seat")
     run = raw["run"]
     rs = {k: _parse(f"run.{k}", _freeze(v), f"run.{k}") for k, v in run.items() if k != "record"}
-    settings = RunSettings(
-        revolutions=rs["revolutions"],
-        dt=rs["dt"],
-        output_every=rs["output_every"],
-        integrator=resolve_integrator(rs["integrator"]),
-        tolerance=rs["tolerance"],
-        max_events=rs["max_events"],
-    )
+    rs["integrator"] = resolve_integrator(rs["integrator"])
+    settings = RunSettings(**{name: rs[name] for name in RUN_SETTINGS})
+    check_settings(settings)
     case = Case(train, profile, speed, math.nan if seat is None else seat, closure)
     try:
         check_stability([case], settings)
@@ -376,10 +374,9 @@ def resolve(raw: Mapping, index: int, directory: Path) -> ResolvedCase:
         "speed": speed,
         "seat": math.nan if seat is None else seat,
         "closure": closure,
+        **{f"run.{name}": _archive_value(getattr(settings, name)) for name in RUN_SETTINGS},
         "run.integrator": settings.method,
         "run.dt": math.nan if settings.step is None else settings.step,
-        "run.tolerance": settings.tolerance,
-        "run.max_events": settings.max_events,
     })
     canonical = {
         "model": {name: _clean(getattr(train, name)) for name in PARAMETERS},
@@ -388,16 +385,45 @@ def resolve(raw: Mapping, index: int, directory: Path) -> ResolvedCase:
         "speed": _clean(speed),
         "seat": None if seat is None else _clean(seat),
         "closure": closure,
-        "run": {
-            "integrator": settings.method,
-            "dt": None if settings.step is None else _clean(settings.step),
-            "revolutions": _clean(float(settings.revolutions)),
-            "output_every": _clean(settings.output_every),
-            "tolerance": _clean(settings.tolerance),
-            "max_events": settings.max_events,
-        },
+        "run": canonical_run(settings),
     }
     return ResolvedCase(index, case, settings, values, case_id(canonical))
+
+
+#: Run settings every case id records; other RunSettings fields enter an id only when they
+#: differ from their default, so a field the engine adds does not change existing ids.
+CANONICAL_RUN = ("integrator", "dt", "revolutions", "output_every", "tolerance", "max_events")
+
+
+def canonical_run(settings: RunSettings) -> dict[str, object]:
+    """The run settings in a case id."""
+    out: dict[str, object] = {
+        "integrator": settings.method,
+        "dt": None if settings.step is None else _clean(settings.step),
+        "revolutions": _clean(float(settings.revolutions)),
+        "output_every": _clean(settings.output_every),
+        "tolerance": _clean(settings.tolerance),
+        "max_events": settings.max_events,
+    }
+    for f in dataclasses.fields(RunSettings):
+        if f.name not in CANONICAL_RUN and getattr(settings, f.name) != f.default:
+            out[f.name] = _clean(getattr(settings, f.name))
+    return out
+
+
+def check_settings(settings: RunSettings) -> None:
+    """Run the settings' own checks (integrator, step, fidelity) before anything runs; their
+    messages start with the key ("run.fidelity: ...")."""
+    try:
+        for name in ("method", "step", "cutoff"):
+            getattr(settings, name, None)
+    except ValueError as exc:
+        path, _, message = str(exc).partition(": ")
+        raise SpecProblem(path if path.startswith("run.") else "run", message) from None
+
+
+def _archive_value(v: object) -> object:
+    return math.nan if v is None else v
 
 
 def _origin(path: str, origins: Mapping[str, str]) -> str:

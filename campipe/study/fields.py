@@ -12,12 +12,14 @@ are written as dotted paths: ``speed``, ``profile.lift``, ``model.spring_preload
 
 from __future__ import annotations
 
+import dataclasses
 import difflib
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass
 
 from campipe.engine import INTEGRATORS, MEMBER_LOADS, RunSettings
+from campipe.engine import batch as _engine_batch
 from campipe.model import PARAMETERS, PRESETS, ModelParameterError, parse_parameter
 from campipe.units import QuantityError, parse_angular, parse_quantity
 
@@ -132,8 +134,56 @@ def did_you_mean(word: object, known: Iterable[str]) -> str:
     return f"; did you mean {close[0]!r}?" if close else ""
 
 
-def _defaults() -> RunSettings:
-    return RunSettings()
+#: Spec metadata of the engine's RunSettings fields, by field name. A spec's ``run:`` block
+#: holds exactly the fields RunSettings has (plus ``record``); the defaults are RunSettings's.
+_RUN_METADATA: dict[str, Field] = {
+    f.key.removeprefix("run."): f
+    for f in [
+        Field("run.revolutions", "number", "cam turns to integrate, from θ = 0",
+              minimum=0.0),
+        Field("run.dt", "quantity", "time step (an integrator that sizes its own steps "
+              "takes it as its largest); default: the integrator's own",
+              units="s", example="us", minimum=0.0, allow_default=True,
+              archive_name="dt", archive_units="s"),
+        Field("run.output_every", "quantity", "cam-angle spacing of the stored histories",
+              units="rad", example="deg", minimum=0.0),
+        Field("run.integrator", "choice",
+              "integrator name; default: the engine's default integrator",
+              choices=("default", *INTEGRATORS), archive_name="integrator"),
+        Field("run.tolerance", "quantity",
+              "event-time tolerance of integrators that locate events", units="s",
+              example="s", minimum=0.0, archive_name="tolerance", archive_units="s"),
+        Field("run.max_events", "integer", "events kept per case", minimum=1.0,
+              exclusive_minimum=False, archive_name="max_events"),
+        Field("run.fidelity", "choice", "full: every mode; reduced: the modes up to "
+              "mode_cutoff (modal-exact only)",
+              choices=tuple(getattr(_engine_batch, "FIDELITIES", ("full",))),
+              archive_name="fidelity"),
+        Field("run.mode_cutoff", "quantity", "highest mode kept by the reduced fidelity; "
+              "default: the engine's", units="rad/s", example="rad/s", minimum=0.0,
+              allow_default=True, archive_name="mode_cutoff", archive_units="rad/s"),
+    ]
+}
+
+#: RunSettings fields in engine order (those the spec declares).
+RUN_SETTINGS = tuple(f.name for f in dataclasses.fields(RunSettings) if f.name in _RUN_METADATA)
+
+
+def undeclared_run_settings() -> list[str]:
+    """RunSettings fields without spec metadata (a test keeps this empty)."""
+    return [f.name for f in dataclasses.fields(RunSettings) if f.name not in _RUN_METADATA]
+
+
+def _spec_default(name: str, value: object) -> object:
+    """A RunSettings default in spec spelling."""
+    f = _RUN_METADATA[name]
+    if value is None:
+        return "default"
+    if f.kind == "quantity":
+        if f.angular and f.example == "deg":
+            return f"{math.degrees(value):g} deg"
+        return f"{value!r} {f.units}"
+    return value
 
 
 #: Keys of a case that are not model parameters, profile or defect fields.
@@ -149,21 +199,7 @@ CASE_FIELDS: dict[str, Field] = {
               "force: the spring holds the follower on the cam and it may separate; "
               "form: a second cam holds it, it never separates",
               choices=("force", "form"), archive_name="closure"),
-        Field("run.revolutions", "number", "cam turns to integrate, from θ = 0",
-              minimum=0.0),
-        Field("run.integrator", "choice",
-              "integrator name; default: the engine's default integrator",
-              choices=("default", *INTEGRATORS), archive_name="integrator"),
-        Field("run.dt", "quantity", "time step; default: the integrator's own step",
-              units="s", example="us", minimum=0.0, allow_default=True,
-              archive_name="dt", archive_units="s"),
-        Field("run.output_every", "quantity", "cam-angle spacing of the stored histories",
-              units="rad", example="deg", minimum=0.0),
-        Field("run.tolerance", "quantity",
-              "event-time tolerance of integrators that locate events", units="s",
-              example="s", minimum=0.0, archive_name="tolerance", archive_units="s"),
-        Field("run.max_events", "integer", "events kept per case", minimum=1.0,
-              exclusive_minimum=False, archive_name="max_events"),
+        *(_RUN_METADATA[name] for name in RUN_SETTINGS),
         Field("run.record", "record",
               "optional histories to store: q (all seven coordinates), member_loads (all "
               "member loads) or single member loads by name",
@@ -177,12 +213,8 @@ STUDY_WIDE = ("run.revolutions", "run.output_every", "run.record")
 
 #: Defaults of the run keys, in spec spelling, from the engine's RunSettings.
 RUN_DEFAULTS: dict[str, object] = {
-    "revolutions": _defaults().revolutions,
-    "integrator": _defaults().integrator,
-    "dt": "default" if _defaults().dt is None else f"{_defaults().dt!r} s",
-    "output_every": f"{math.degrees(_defaults().output_every):g} deg",
-    "tolerance": f"{_defaults().tolerance!r} s",
-    "max_events": _defaults().max_events,
+    **{f.name: _spec_default(f.name, f.default) for f in dataclasses.fields(RunSettings)
+       if f.name in _RUN_METADATA},
     "record": [],
 }
 

@@ -15,7 +15,7 @@ def format_seconds(seconds: float) -> str:
     if seconds != seconds or seconds == float("inf"):
         return "?"
     if seconds < 1:
-        return "< 1 s"
+        return "under a second"
     s = int(round(seconds))
     if s < 60:
         return f"{s} s"

@@ -250,7 +250,7 @@ def select(table: CaseTable, where: str | None = None, sort: str | None = None) 
     """Row indices matching ``where``, ordered by ``sort`` (``"col"``, ``"-col"`` descending;
     several keys separated by commas, first key first)."""
     rows = np.arange(table.n)
-    if where:
+    if where is not None:
         rows = rows[evaluate(parse_where(where), table.columns, table.n)]
     if sort:
         for key in reversed([k.strip() for k in sort.split(",") if k.strip()]):
@@ -411,3 +411,23 @@ def _key(x) -> object:
     if isinstance(x, float) and math.isnan(x):
         return "nan"
     return x.item() if isinstance(x, np.generic) else x
+
+
+# -- replay selection ---------------------------------------------------------------------------
+
+def replay_mask(study, plan, data) -> np.ndarray:
+    """(n,) bool: which cases of a computed batch the spec's ``replay.where`` selects.
+
+    The expression sees the cases' archive coordinates and per-case metrics, as
+    ``campipe query`` would; this is what a replay logger (the study's
+    :data:`~campipe.study.execute.BatchHook`) calls to pick the cases to log.
+    """
+    from campipe.study.layout import coordinate_values
+
+    n = plan.size
+    if not study.spec.replay:
+        return np.zeros(n, dtype=bool)
+    columns = dict(coordinate_values(list(plan.cases), study))
+    columns.update({k: v for k, v in data.arrays.items() if v.shape[:1] == (n,) and v.ndim == 1
+                    and k != "event_count"})
+    return evaluate(parse_where(study.spec.replay), columns, n)

@@ -152,7 +152,7 @@ def _show(value: object) -> str:
 
 def _unknown(path: str, key: str, known) -> SpecProblem:
     known = list(known)
-    listing = ", ".join(known) if len(known) <= 12 else ", ".join(known[:12]) + ", ..."
+    listing = ", ".join(known) if len(known) <= 16 else ", ".join(known[:16]) + ", ..."
     return SpecProblem(join(path, key),
                        f"unknown key {key!r}{did_you_mean(key, known)} (expected one of: "
                        f"{listing})")
@@ -296,13 +296,19 @@ def expand_range(value: Mapping, key: str, path: str, with_num: bool) -> list:
     end = _NUMBER_UNIT.match(str(value["to"]))
     unit = start["unit"].strip() if start else ""
     if not unit:
-        return [f"{float(v)!r} {field_.units}" for v in np.linspace(lo, hi, num)]
+        return [f"{_number(v)} {field_.units}" for v in np.linspace(lo, hi, num)]
     first = float(start["number"])
     if end and end["unit"].strip() == unit:
         last = float(end["number"])
     else:
         last = hi / field_.parse(f"1 {unit}", join(path, "from"))
-    return [f"{float(v)!r} {unit}" for v in np.linspace(first, last, num)]
+    return [f"{_number(v)} {unit}" for v in np.linspace(first, last, num)]
+
+
+def _number(v: float) -> str:
+    """Exact text of a float: ``6000`` for a whole number, else its shortest repr."""
+    v = float(v)
+    return str(int(v)) if v.is_integer() and abs(v) < 1e15 else repr(v)
 
 
 def range_field(key: str, path: str) -> Field:

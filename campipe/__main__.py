@@ -1,0 +1,5 @@
+"""``python -m campipe``: the command line."""
+
+from campipe.cli import main
+
+main()

@@ -1,0 +1,69 @@
+"""`campipe study`, `campipe validate` and `campipe query` from the command line."""
+
+import re
+
+import xarray as xr
+from click.testing import CliRunner
+from study_helpers import STUDIES, write_spec
+
+from campipe.cli import main
+
+
+def invoke(*args):
+    return CliRunner().invoke(main, list(args))
+
+
+def test_validate_prints_cases_axes_and_estimates():
+    out = invoke("validate", str(STUDIES / "separation-map.yaml"), "--workers", "2")
+    assert out.exit_code == 0, out.output
+    text = out.output
+    assert "valid; study 'separation-map', 297 cases" in text
+    assert re.search(r"speed_rpm\s+sweep\s+33 values: 6000 rpm … 14000 rpm", text)
+    assert re.search(r"seat\s+sweep\s+3 values: none, 0 in, 0.1 in", text)
+    assert re.search(r"spring_preload\s+sweep\s+3 values: 120 lbf, 151 lbf, 180 lbf", text)
+    assert "batches: 10 of up to 32 cases" in text
+    assert re.search(r"run time: .+ on 2 workers \([\d.]+ s simulated", text)
+    size = float(re.search(r"archive: about ([\d.]+) MB", text).group(1))
+    # 297 cases × 1441 angles × (6 float64 histories + the int8 contact state) ≈ 21 MB
+    assert 20.9 < size < 21.5
+    assert "replay: 'speed_rpm == 11000 and seat is nan'" in text
+
+
+def test_validate_refuses_a_bad_spec_with_its_key_paths(tmp_path):
+    path = write_spec(tmp_path, """
+    name: bad
+    profile: {kind: harmonic, lift: 1 in}
+    speed: 9000
+    sweep: {sped: [1 rpm]}
+    """)
+    out = invoke("validate", str(path))
+    assert out.exit_code == 2
+    assert "2 problems" in out.output
+    assert "speed: found the bare number 9000" in out.output
+    assert "sweep.sped: unknown key 'sped'; did you mean 'speed'?" in out.output
+
+
+def test_study_writes_the_archive_with_overrides_and_progress(tmp_path):
+    out = CliRunner().invoke(main, [
+        "study", str(STUDIES / "quickstart.yaml"), "-o", str(tmp_path / "q.nc"),
+        "--set", "run.revolutions=1", "--set", "sweep.speed=[9000 rpm, 9524 rpm]",
+        "--scheduler", "synchronous"])
+    assert out.exit_code == 0, out.output + out.stderr
+    assert out.stdout.strip() == str(tmp_path / "q.nc")
+    assert "4 cases (0 reused, 4 computed in 1 batches)" in out.stderr
+    assert re.search(r"\] 4/4 cases +[\d.]+ cases/s +done", out.stderr)
+    ds = xr.open_dataset(tmp_path / "q.nc")
+    assert ds.sizes["case"] == 4 and ds.sizes["cam_angle"] == 361
+    assert '"run.revolutions": 1' in ds.attrs["spec_overrides"]
+    assert "campipe study" in ds.attrs["history"]
+    again = CliRunner().invoke(main, [
+        "study", str(STUDIES / "quickstart.yaml"), "-o", str(tmp_path / "q.nc"),
+        "--set", "run.revolutions=1", "--set", "sweep.speed=[9000 rpm, 9524 rpm]"])
+    assert "up to date" in again.stderr
+
+
+def test_study_refuses_an_unknown_scheduler(tmp_path):
+    out = invoke("study", str(STUDIES / "quickstart.yaml"), "-o", str(tmp_path / "q.nc"),
+                 "--scheduler", "thread")
+    assert out.exit_code == 2 and "expected one of threads, synchronous, processes" in out.output
+    assert not (tmp_path / "q.nc").exists()

@@ -1,0 +1,205 @@
+"""`campipe query`: the --where language (parsed, never run), sorting, formats, the summary."""
+
+import csv
+import io
+import json
+
+import numpy as np
+import pytest
+import xarray as xr
+from click.testing import CliRunner
+from study_helpers import write_spec
+
+from campipe.cli import main
+from campipe.study import load_study
+from campipe.study.execute import run_study
+from campipe.study.query import (
+    CaseTable,
+    QueryError,
+    case_table,
+    evaluate,
+    format_rows,
+    parse_where,
+    select,
+    summary,
+)
+
+SPEC = """
+name: q
+profile: {kind: harmonic, lift: 1 in}
+run: {revolutions: 2}
+sweep:
+  speed: [6000 rpm, 9000 rpm, 9524 rpm, 11000 rpm]
+  seat: [none, 0 in]
+"""
+
+
+@pytest.fixture(scope="module")
+def archive(tmp_path_factory):
+    d = tmp_path_factory.mktemp("q")
+    run_study(load_study(write_spec(d, SPEC)), d / "q.nc", scheduler="synchronous")
+    return d / "q.nc"
+
+
+@pytest.fixture(scope="module")
+def table(archive):
+    with xr.open_dataset(archive) as ds:
+        return case_table(ds)
+
+
+def toy() -> CaseTable:
+    cols = {
+        "speed_rpm": np.array([6000.0, 9000.0, 9524.0, 11000.0]),
+        "seat": np.array([np.nan, 0.00254, np.nan, 0.0]),
+        "closure": np.array(["force", "form", "force", "form"], dtype=object),
+        "separation_deg_per_rev": np.array([0.0, 0.0, 52.8, 212.3]),
+        "cam_impacts": np.array([0, 3, 2, 6], dtype=np.int32),
+    }
+    units = {"speed_rpm": "rpm", "seat": "m", "closure": "", "separation_deg_per_rev": "degree",
+             "cam_impacts": ""}
+    return CaseTable(cols, units, list(cols), 4)
+
+
+@pytest.mark.parametrize(("where", "rows"), [
+    ("speed_rpm > 9000", [2, 3]),
+    ("speed_rpm > 9000 and seat > 0", []),
+    ("speed_rpm >= 9000 and seat >= 0", [1, 3]),
+    ("seat is nan", [0, 2]),
+    ("seat is none", [0, 2]),
+    ("seat is not nan", [1, 3]),
+    ("not (seat is nan) or cam_impacts == 2", [1, 2, 3]),
+    ("closure == 'form'", [1, 3]),
+    ('closure != "form"', [0, 2]),
+    ("9000 <= speed_rpm < 11000", [1, 2]),
+    ("speed_rpm in [6000, 11000]", [0, 3]),
+    ("closure not in ['form']", [0, 2]),
+    ("speed_rpm == 9524.000000001", [2]),  # numbers equal within a relative 1e-9
+    ("separation_deg_per_rev > 0 and cam_impacts < 4 or speed_rpm == 6000", [0, 2]),
+    ("-1 < separation_deg_per_rev", [0, 1, 2, 3]),
+    ("speed_rpm > inf", []),
+])
+def test_where_selects_the_rows(where, rows):
+    assert select(toy(), where).tolist() == rows
+
+
+@pytest.mark.parametrize("where", [
+    "__import__('os').system('touch {marker}')",
+    "open('{marker}', 'w')",
+    "speed_rpm.__class__.__bases__",
+    "speed_rpm.real > 0",
+    "(lambda: 1)() == 1",
+    "speed_rpm + 1 > 2",
+    "speed_rpm[0] > 1",
+    "[c for c in closure] == 1",
+    "(x := 1) == 1",
+    "speed_rpm if seat else 1",
+    "__builtins__ == 1",
+    "_x == 1",
+    "globals() == 1",
+    "speed_rpm is 1",
+    "speed_rpm in closure",
+    "f'{{speed_rpm}}' == 'a'",
+    "b'x' == closure",
+    "speed_rpm > 1; import os",
+    "x" * 3000,
+])
+def test_malicious_where_is_refused_and_nothing_runs(tmp_path, where):
+    marker = tmp_path / "pwned"
+    with pytest.raises(QueryError):
+        select(toy(), where.replace("{marker}", str(marker)))
+    assert not marker.exists()
+
+
+@pytest.mark.parametrize(("where", "words"), [
+    ("spede_rpm > 1", "unknown column 'spede_rpm'; did you mean 'speed_rpm'?"),
+    ("closure > 'a'", "text compares with == and != only"),
+    ("closure == 1", "closure is text"),
+    ("speed_rpm ==", "cannot parse"),
+    ("", "empty"),
+    ("open('x')", "a call is not allowed"),
+    ("speed_rpm.real > 0", "attribute access is not allowed"),
+])
+def test_refusals_say_why(where, words):
+    with pytest.raises(QueryError) as info:
+        select(toy(), where)
+    assert words in str(info.value)
+
+
+def test_sorting_is_stable_descending_with_minus_and_keeps_nan_last():
+    t = toy()
+    assert select(t, sort="-speed_rpm").tolist() == [3, 2, 1, 0]
+    assert select(t, sort="seat").tolist() == [3, 1, 0, 2]
+    assert select(t, sort="-seat").tolist() == [1, 3, 0, 2]
+    assert select(t, sort="closure,-speed_rpm").tolist() == [2, 0, 3, 1]
+    assert select(t, "seat is nan", sort="-speed_rpm").tolist() == [2, 0]
+    with pytest.raises(QueryError, match="unknown column 'sped'"):
+        select(t, sort="sped")
+
+
+def test_formats_table_csv_json():
+    t = toy()
+    rows = np.array([2, 1])
+    names = ["speed_rpm", "seat", "closure", "cam_impacts"]
+    text = format_rows(t, rows, names, "table").splitlines()
+    assert text[0].split() == names
+    assert text[1].split() == ["[rpm]", "[m]"]
+    assert text[2].split() == ["9524", "nan", "force", "2"]
+    assert text[3].split() == ["9000", "0.00254", "form", "3"]
+    assert text[-1] == "(2 of 4 cases)"
+    got = list(csv.reader(io.StringIO(format_rows(t, rows, names, "csv"))))
+    assert got == [names, ["9524.0", "nan", "force", "2"], ["9000.0", "0.00254", "form", "3"]]
+    assert json.loads(format_rows(t, rows, names, "json")) == [
+        {"speed_rpm": 9524.0, "seat": None, "closure": "force", "cam_impacts": 2},
+        {"speed_rpm": 9000.0, "seat": 0.00254, "closure": "form", "cam_impacts": 3},
+    ]
+    with pytest.raises(QueryError, match="unknown column 'sat'; did you mean 'seat'"):
+        format_rows(t, rows, ["sat"], "csv")
+
+
+def test_default_columns_are_parameters_and_metrics(table):
+    assert table.default[:3] == ["case_id", "speed_rpm", "seat"]
+    assert {"profile", "defects", "closure", "separation_deg_per_rev", "cam_impacts",
+            "max_cam_force"} <= set(table.default)
+    assert "steps" in table.columns and "steps" not in table.default
+    assert table.n == 8
+
+
+def test_the_summary_gives_the_separation_onset_per_seat(archive):
+    with xr.open_dataset(archive) as ds:
+        text = summary(ds)
+    lines = text.splitlines()
+    assert lines[0] == "q: 8 cases, 2.0 revolutions, record: -"
+    assert "speed_rpm                sweep   4 values: 6000, 9000, 9524, 11000 rpm" in text
+    onset = {line.split()[0]: " ".join(line.split()[1:]) for line in
+             lines[lines.index("separation onset (first speed with separation_deg_per_rev "
+                               "> 0):") + 2:]}
+    assert onset == {"nan": "9524", "0": "9000"}
+
+
+def test_campipe_query_on_an_archive(archive):
+    runner = CliRunner()
+    out = runner.invoke(main, ["query", str(archive), "--where",
+                               "speed_rpm > 9000 and seat is nan", "--columns",
+                               "speed_rpm,separation_deg_per_rev", "--sort", "-speed_rpm",
+                               "--format", "json"])
+    assert out.exit_code == 0, out.output
+    rows = json.loads(out.output)
+    assert [r["speed_rpm"] for r in rows] == [11000.0, 9524.0]
+    assert 45 <= rows[1]["separation_deg_per_rev"] <= 60
+    out = runner.invoke(main, ["query", str(archive), "--where", "__import__('os').system('ls')"])
+    assert out.exit_code == 2 and "a call is not allowed" in out.output
+    out = runner.invoke(main, ["query", str(archive), "--summary"])
+    assert out.exit_code == 0 and "separation onset" in out.output
+    out = runner.invoke(main, ["query", str(archive)])
+    assert out.exit_code == 0 and out.output.strip().endswith("(8 of 8 cases)")
+
+
+def test_where_is_vectorised_over_the_whole_column():
+    cols = {"x": np.arange(10_000.0)}
+    mask = evaluate(parse_where("x >= 9990 or x < 2"), cols, 10_000)
+    assert mask.sum() == 12 and mask.dtype == bool
+
+
+def test_parse_where_reports_the_columns_it_reads():
+    w = parse_where("speed_rpm > 1 and (seat is nan or closure == 'form') and not true")
+    assert w.names == {"speed_rpm", "seat", "closure"}

@@ -1,0 +1,284 @@
+"""Running studies: the archive against the engine, schedulers, resume after a kill, reuse."""
+
+import json
+import math
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+
+import netCDF4
+import numpy as np
+import pytest
+import xarray as xr
+from numpy.testing import assert_array_equal
+from study_helpers import INCH, load, write_spec
+
+from campipe.engine import MEMBER_LOADS, member_loads, run_batch
+from campipe.io.spec_yaml import parse_spec_text
+from campipe.study import check_spec, expand, load_study
+from campipe.study.execute import parts_directory, plan_batches, run_study
+from campipe.study.variables import VARIABLES
+
+SMALL = """
+name: small
+profile: {kind: harmonic, lift: 1 in}
+run: {revolutions: 2, record: [q, member_loads]}
+sweep:
+  speed: [6000 rpm, 9524 rpm, 11000 rpm]
+  seat: [none, 0.1 in]
+"""
+
+
+@pytest.fixture(scope="module")
+def small(tmp_path_factory):
+    """The small study and its archive, run on the synchronous scheduler."""
+    d = tmp_path_factory.mktemp("small")
+    path = write_spec(d, SMALL)
+    study = load_study(path)
+    report = run_study(study, d / "small.nc", scheduler="synchronous", batch_size=2)
+    return study, report, d / "small.nc", path
+
+
+def test_the_archive_holds_the_engine_results(small):
+    study, report, archive, _ = small
+    assert (report.cases, report.computed, report.batches) == (6, 6, 3)
+    ds = xr.load_dataset(archive)
+    ref = run_batch([c.case for c in study.cases], study.cases[0].settings)
+    assert_array_equal(ds.case_id.values, [c.case_id for c in study.cases])
+    assert_array_equal(ds.speed_rpm.values, [6000, 6000, 9524, 9524, 11000, 11000])
+    assert_array_equal(ds.seat.values, [np.nan, 0.1 * INCH] * 3)
+    assert set(ds.profile.values) == {"harmonic 1 in"} and set(ds.defects.values) == {"none"}
+    assert_array_equal(ds.cam_angle.values, np.arange(721.0))
+    assert_array_equal(ds.revolution.values, [1, 2])
+    for name, values in [("time", ref.time), ("cam_lift", ref.cam_lift),
+                         ("follower_lift", ref.follower_lift), ("valve_lift", ref.valve_lift),
+                         ("cam_force", ref.cam_force), ("seat_force", ref.seat_force),
+                         ("contact_state", ref.contact_state), ("q", ref.q),
+                         ("separation_deg", np.degrees(ref.separation_per_rev)),
+                         ("cam_impacts", ref.cam_impacts),
+                         ("max_seating_velocity", ref.max_seating_velocity)]:
+        assert_array_equal(ds[name].values, values, err_msg=name)
+    assert_array_equal(ds.separation_deg_per_rev, np.degrees(ref.separation_per_rev[:, -1]))
+    for i, c in enumerate(study.cases):
+        loads = member_loads(c.case.train, ref.q[i])
+        for name in MEMBER_LOADS:
+            assert_array_equal(ds[name].values[i], loads[name])
+        # events: CF contiguous ragged array, case by case
+        mine = ds.event_case.values == i
+        assert ds.event_count.values[i] == mine.sum() == ref.events[i].shape[0]
+        assert_array_equal(ds.event_time.values[mine], ref.events[i][:, 0])
+        assert_array_equal(ds.event_kind.values[mine], ref.events[i][:, 1])
+        assert_array_equal(ds.event_cam_angle.values[mine],
+                           np.degrees(ref.events[i][:, 0] * c.case.speed))
+    offsets = np.concatenate([[0], np.cumsum(ds.event_count.values)])
+    assert_array_equal(ds.event_case.values, np.repeat(np.arange(6), np.diff(offsets)))
+    assert ds.event_count.attrs["sample_dimension"] == "event"
+
+
+def test_the_archive_carries_cf_metadata_from_the_table(small):
+    _, _, archive, spec_path = small
+    ds = xr.open_dataset(archive)
+    for name, var in VARIABLES.items():
+        if name in ds.variables:
+            for key, value in var.attrs().items():
+                got = ds[name].attrs[key]
+                assert np.array_equal(got, value) if key == "flag_values" else got == value, name
+    assert ds.cam_force.attrs == {"long_name": VARIABLES["cam_force"].long_name, "units": "N"}
+    assert ds.speed_rpm.attrs["units"] == "rpm" and ds.seat.attrs["units"] == "m"
+    assert ds.stem_force.attrs["units"] == "N" and ds.rocker_moment.attrs["units"] == "N*m"
+    assert list(ds.dof.values) == [f"q{i}" for i in range(1, 8)]
+    assert list(ds.dof_units.values) == ["m", "m", "rad", "m", "rad", "rad", "m"]
+    assert {"speed_rpm", "seat", "profile", "defects", "closure", "case_id"} <= set(ds.coords)
+    a = ds.attrs
+    assert a["Conventions"] == "CF-1.10" and a["campipe_version"] == "0.1.0"
+    assert a["spec"] == spec_path.read_text()
+    assert "numpy==" in a["dependency_versions"] and "netcdf-c==" in a["dependency_versions"]
+    assert a["host"] and re.match(r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\dZ", a["date_created"])
+    assert json.loads(a["study_axes"]) == [
+        {"key": "speed", "name": "speed_rpm", "kind": "sweep", "size": 3},
+        {"key": "seat", "name": "seat", "kind": "sweep", "size": 2}]
+    # compressed, one case per chunk
+    enc = ds.valve_lift.encoding
+    assert enc["zlib"] and enc["chunksizes"] == (1, 721)
+    assert ds.q.encoding["chunksizes"] == (1, 721, 7)
+    with netCDF4.Dataset(archive) as nc:
+        assert nc["cam_force"].filters()["zlib"]
+    # smaller than its raw arrays (float histories barely compress; time and flags do)
+    raw = sum(ds[v].nbytes for v in ds.variables)
+    assert os.path.getsize(archive) < raw
+
+
+def _three_schedulers(tmp_path, spec_text):
+    from distributed import LocalCluster
+
+    path = write_spec(tmp_path, spec_text)
+    study = load_study(path)
+    out = {}
+    for name in ("synchronous", "threads"):
+        report = run_study(study, tmp_path / f"{name}.nc", scheduler=name, workers=2,
+                           batch_size=2)
+        assert report.computed == len(study.cases)
+        out[name] = load(tmp_path / f"{name}.nc")
+    # in this process, but over TCP on the loopback, as a remote cluster is reached
+    with LocalCluster(n_workers=1, threads_per_worker=2, processes=False, protocol="tcp://",
+                      host="127.0.0.1", dashboard_address=":0") as cluster:
+        assert cluster.scheduler_address.startswith("tcp://127.0.0.1:")
+        report = run_study(study, tmp_path / "distributed.nc",
+                           scheduler=cluster.scheduler_address, batch_size=2)
+        assert report.batches == 3
+    out["distributed"] = load(tmp_path / "distributed.nc")
+    return out
+
+
+def test_synchronous_threaded_and_distributed_archives_are_identical(tmp_path):
+    out = _three_schedulers(tmp_path, SMALL)
+    xr.testing.assert_identical(out["synchronous"], out["threads"])
+    xr.testing.assert_identical(out["synchronous"], out["distributed"])
+    assert out["synchronous"].sizes["case"] == 6
+
+
+def test_a_finished_study_is_not_run_again(small, tmp_path):
+    study, _, archive, _ = small
+    before = os.stat(archive).st_mtime_ns
+    report = run_study(study, archive, scheduler="synchronous")
+    assert report.up_to_date and report.computed == 0
+    assert os.stat(archive).st_mtime_ns == before
+
+
+def test_a_changed_spec_reuses_only_the_unchanged_cases(tmp_path):
+    two = SMALL.replace("[6000 rpm, 9524 rpm, 11000 rpm]", "[6000 rpm, 9524 rpm]")
+    archive = tmp_path / "small.nc"
+    first = run_study(load_study(write_spec(tmp_path, two)), archive, scheduler="synchronous")
+    assert (first.computed, first.reused) == (4, 0)
+    study = load_study(write_spec(tmp_path, SMALL))
+    grown = run_study(study, archive, scheduler="synchronous")
+    assert (grown.computed, grown.reused) == (2, 4)
+    fresh = run_study(study, tmp_path / "fresh.nc", scheduler="synchronous")
+    xr.testing.assert_identical(load(archive), load(tmp_path / "fresh.nc"))
+    assert fresh.computed == 6
+    # a changed model parameter changes every id: nothing stale is reused
+    stiffer = SMALL.replace("name: small", "name: small\nmodel: {spring_preload: 160 lbf}")
+    changed = run_study(load_study(write_spec(tmp_path, stiffer)), archive,
+                        scheduler="synchronous")
+    assert (changed.computed, changed.reused) == (6, 0)
+    ds = xr.load_dataset(archive)
+    assert not set(ds.case_id.values) & {c.case_id for c in study.cases}
+
+
+def test_batches_share_run_settings_and_are_cut_to_size():
+    spec = SMALL.replace("run: {revolutions: 2, record: [q, member_loads]}",
+                         "run: {revolutions: 2, integrator: newmark-linear}")
+    spec += "  run.dt: [1 us, 0.5 us]\n"
+    study = expand(check_spec(parse_spec_text(spec)))
+    plans = plan_batches(study.cases, (), 4)
+    assert [p.size for p in plans] == [4, 2, 4, 2]
+    for p in plans:
+        assert len({c.settings for c in p.cases}) == 1
+    assert sorted(c.index for p in plans for c in p.cases) == list(range(12))
+
+
+KILLED = """
+name: slow
+profile: {kind: harmonic, lift: 1 in}
+run: {revolutions: 4, integrator: newmark-linear, dt: 1 us}
+sweep:
+  speed: {from: 500 rpm, to: 730 rpm, num: 24}
+"""
+
+
+def test_a_killed_study_resumes_computing_only_the_missing_batches(tmp_path):
+    killed = tmp_path / "killed"
+    killed.mkdir()
+    spec = write_spec(killed, KILLED)
+    cmd = [sys.executable, "-m", "campipe", "study", str(spec), "--scheduler", "synchronous",
+           "--batch-size", "1", "--no-progress", "--keep-parts"]
+    parts = parts_directory(killed / "slow.nc")
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    try:
+        deadline = time.monotonic() + 120
+        while len(list(parts.glob("batch-*.nc"))) < 3:
+            assert proc.poll() is None, proc.communicate()
+            assert time.monotonic() < deadline
+            time.sleep(0.005)
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == -signal.SIGKILL
+    assert not (killed / "slow.nc").exists()  # never a half-written archive
+    done = {p: (p.stat().st_ino, p.stat().st_mtime_ns) for p in parts.glob("batch-*.nc")}
+    assert 3 <= len(done) < 24
+    rerun = subprocess.run(cmd, capture_output=True, text=True, check=True)
+    assert f"({len(done)} reused, {24 - len(done)} computed in {24 - len(done)} batches)" \
+        in rerun.stderr, rerun.stderr
+    for p, stamp in done.items():  # the stored batches were read, not redone
+        assert (p.stat().st_ino, p.stat().st_mtime_ns) == stamp
+    assert not list(parts.glob(".*.tmp"))  # the killed run's temporary file is gone
+    # the same as a study that was never interrupted
+    whole = tmp_path / "whole"
+    whole.mkdir()
+    report = run_study(load_study(write_spec(whole, KILLED)), whole / "slow.nc",
+                       scheduler="threads", batch_size=5)
+    assert report.computed == 24
+    xr.testing.assert_identical(load(killed / "slow.nc"), load(whole / "slow.nc"))
+
+
+def test_stale_and_temporary_files_are_ignored_and_cleaned(small, tmp_path):
+    study, _, archive, _ = small
+    target = tmp_path / "small.nc"
+    parts = parts_directory(target)
+    parts.mkdir()
+    # a batch file of another study (other ids) and a temporary file from a killed run
+    other = load_study(write_spec(
+        tmp_path, SMALL.replace("name: small", "name: small\nmodel: {spring_preload: 160 lbf}"),
+        "o.yaml"))
+    run_study(other, tmp_path / "other.nc", scheduler="synchronous", keep_parts=True)
+    for p in parts_directory(tmp_path / "other.nc").glob("batch-*.nc"):
+        p.rename(parts / p.name)
+    (parts / ".batch-x.nc.1-2-3.tmp").write_bytes(b"partial")
+    report = run_study(study, target, scheduler="synchronous")
+    assert (report.computed, report.reused) == (6, 0)
+    assert not parts.exists()
+    xr.testing.assert_identical(load(target), load(archive))
+
+
+def test_import_campipe_does_not_pull_in_distributed_or_rerun():
+    code = ("import sys, campipe, campipe.cli, campipe.study.execute, campipe.study.query; "
+            "bad = [m for m in sys.modules if m.split('.')[0] in ('distributed', 'rerun')]; "
+            "print(bad); sys.exit(bool(bad))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.returncode == 0, out.stdout + out.stderr
+
+
+def test_seat_is_nan_where_absent_and_speed_rounds_to_whole_rpm(small):
+    ds = xr.open_dataset(small[2])
+    assert np.isnan(ds.seat.values[::2]).all()
+    assert ds.seat.values[1] == pytest.approx(0.00254, rel=1e-15)
+    assert (ds.speed_rpm.values == np.round(ds.speed_rpm.values)).all()
+    assert math.isnan(ds.dt.values[0]) or ds.dt.values[0] > 0
+
+
+def test_the_batch_hook_sees_every_batch_and_the_replay_selection(tmp_path):
+    """The replay hook: called once per computed batch with its data; replay.where picks
+    cases by parameters and metrics (logging them to rerun is a later feature)."""
+    from campipe.study.query import replay_mask
+
+    spec = SMALL + 'replay: {where: "speed_rpm == 9524 and separation_deg_per_rev > 0"}\n'
+    study = load_study(write_spec(tmp_path, spec))
+    seen = {}
+
+    def hook(plan, data):
+        assert [c.case_id for c in plan.cases] == list(data.case_ids)
+        for c, keep in zip(plan.cases, replay_mask(study, plan, data), strict=True):
+            seen[c.index] = bool(keep)
+
+    run_study(study, tmp_path / "r.nc", scheduler="threads", batch_size=2, on_batch=hook)
+    assert sorted(seen) == list(range(6))
+    ds = xr.load_dataset(tmp_path / "r.nc")
+    expected = (ds.speed_rpm.values == 9524) & (ds.separation_deg_per_rev.values > 0)
+    assert [seen[i] for i in range(6)] == expected.tolist() and expected.sum() == 2
+    assert ds.attrs["replay_where"] == "speed_rpm == 9524 and separation_deg_per_rev > 0"
