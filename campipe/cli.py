@@ -303,7 +303,10 @@ def validate_text(loaded, spec_path) -> str:
             shown = [str(v) for v in listed]
         elif a.kind == "sample":
             lo, hi = s.sample.ranges[a.key]
-            shown = [f"{s.sample.method} over {lo:.6g} … {hi:.6g} (SI), seed {s.sample.seed}"]
+            units = coords[a.key][1].units if a.key in coords else ""
+            factor = coords[a.key][2] if a.key in coords else 1.0
+            shown = [f"{s.sample.method} over {lo * factor:.6g} … {hi * factor:.6g} {units}, "
+                     f"seed {s.sample.seed}"]
         else:
             shown = [f"{len(s.cases)} entries"]
         text = ", ".join(shown) if len(shown) <= 6 else f"{shown[0]} … {shown[-1]}"

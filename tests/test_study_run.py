@@ -111,13 +111,13 @@ def test_the_archive_carries_cf_metadata_from_the_table(small):
     assert os.path.getsize(archive) < raw
 
 
-def _three_schedulers(tmp_path, spec_text):
+def _schedulers(tmp_path, spec_text):
     from distributed import LocalCluster
 
     path = write_spec(tmp_path, spec_text)
     study = load_study(path)
     out = {}
-    for name in ("synchronous", "threads"):
+    for name in ("synchronous", "threads", "processes"):
         report = run_study(study, tmp_path / f"{name}.nc", scheduler=name, workers=2,
                            batch_size=2)
         assert report.computed == len(study.cases)
@@ -133,9 +133,10 @@ def _three_schedulers(tmp_path, spec_text):
     return out
 
 
-def test_synchronous_threaded_and_distributed_archives_are_identical(tmp_path):
-    out = _three_schedulers(tmp_path, SMALL)
+def test_synchronous_threaded_processes_and_distributed_archives_are_identical(tmp_path):
+    out = _schedulers(tmp_path, SMALL)
     xr.testing.assert_identical(out["synchronous"], out["threads"])
+    xr.testing.assert_identical(out["synchronous"], out["processes"])
     xr.testing.assert_identical(out["synchronous"], out["distributed"])
     assert out["synchronous"].sizes["case"] == 6
 

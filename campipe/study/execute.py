@@ -217,6 +217,7 @@ def run_study(
     """
     started = time.monotonic()
     archive = Path(archive)
+    archive.parent.mkdir(parents=True, exist_ok=True)
     _clean_temporaries(archive)
     total = len(study.cases)
     if archive.exists():

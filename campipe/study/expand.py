@@ -134,7 +134,12 @@ def sample_rows(spec: Spec) -> list[tuple]:
     s = spec.sample
     assert s is not None
     keys = list(s.ranges)
-    unit = qmc.LatinHypercube(d=len(keys), rng=np.random.default_rng(s.seed)).random(s.n)
+    generator = np.random.default_rng(s.seed)
+    try:
+        engine = qmc.LatinHypercube(d=len(keys), rng=generator)
+    except TypeError:  # scipy < 1.15 names it seed
+        engine = qmc.LatinHypercube(d=len(keys), seed=generator)
+    unit = engine.random(s.n)
     fields = varied_fields()
     rows = []
     for u in unit:

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import functools
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -56,7 +57,14 @@ class Field:
         return "rad" in self.units
 
     def parse(self, value: object, path: str) -> object:
-        """The value in SI (floats), a word, or None for "none"; raises SpecProblem."""
+        """The value in SI (floats), a word, or None for "none"; raises SpecProblem.
+
+        Scalar values are parsed once (a grid repeats its values in every case)."""
+        if isinstance(value, str | int | float | bool | None):
+            return _parse_scalar(self, value, path)
+        return self._parse(value, path)
+
+    def _parse(self, value: object, path: str) -> object:
         if self.allow_none and (value is None or value == "none"):
             return None
         if self.allow_default and value == "default":
@@ -117,6 +125,11 @@ class Field:
             unit = f" {self.example}" if self.example else ""
             raise SpecProblem(path, f"found {raw!r}, expected a value {relation} "
                                     f"{self.minimum:g}{unit}")
+
+
+@functools.lru_cache(maxsize=8192)
+def _parse_scalar(field: Field, value: object, path: str) -> object:
+    return field._parse(value, path)
 
 
 def _choice(value: object, choices: Iterable[str], path: str, what: str) -> str:
