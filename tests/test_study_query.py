@@ -203,3 +203,17 @@ def test_where_is_vectorised_over_the_whole_column():
 def test_parse_where_reports_the_columns_it_reads():
     w = parse_where("speed_rpm > 1 and (seat is nan or closure == 'form') and not true")
     assert w.names == {"speed_rpm", "seat", "closure"}
+
+
+def test_a_vector_coordinate_prints_in_every_format():
+    cols = {"damping_ratios": np.array([[0.5, 0.1], [0.0, 0.0]]),
+            "closure": np.array(["force", "form"], dtype=object)}
+    t = CaseTable(cols, {"damping_ratios": "1", "closure": ""}, list(cols), 2)
+    rows = np.arange(2)
+    assert format_rows(t, rows, ["damping_ratios"], "csv").splitlines() == [
+        "damping_ratios", '"[0.5, 0.1]"', '"[0.0, 0.0]"']
+    assert json.loads(format_rows(t, rows, list(cols), "json"))[0] == {
+        "damping_ratios": [0.5, 0.1], "closure": "force"}
+    assert "0.5, 0.1" in format_rows(t, rows, ["damping_ratios"], "table")
+    with pytest.raises(QueryError, match="2 values per case"):
+        select(t, "damping_ratios > 0")

@@ -272,10 +272,6 @@ def _store(parts: Path, record: tuple[str, ...], on_batch: BatchHook | None,
     return _Stored(data.key, data.n_cases)
 
 
-def _store_task(data: BatchData, plan: BatchPlan, store) -> _Stored:
-    return store(data, plan)
-
-
 def _run_local(plans: list[BatchPlan], scheduler: str, workers: int, store, stored) -> None:
     import dask
     from dask.callbacks import Callback
@@ -289,8 +285,8 @@ def _run_local(plans: list[BatchPlan], scheduler: str, workers: int, store, stor
     for p in plans:
         plan = dask.delayed(p, traverse=False)
         data = dask.delayed(compute_batch, pure=False)(plan, dask_key_name=f"compute-{p.key}")
-        tasks.append(dask.delayed(_store_task, pure=False)(
-            data, plan, store, dask_key_name=f"store-{p.key}"))
+        tasks.append(dask.delayed(store, pure=False)(data, plan,
+                                                     dask_key_name=f"store-{p.key}"))
     with _Done():
         dask.compute(*tasks, scheduler=scheduler, num_workers=workers)
 

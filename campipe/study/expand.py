@@ -43,6 +43,7 @@ from campipe.study.spec import (
     SpecError,
     check_defects,
     check_profile,
+    leaf_keys,
 )
 
 #: Lift below the base circle tolerated as round-off [m].
@@ -169,7 +170,7 @@ def raw_cases(spec: Spec) -> Iterator[tuple[dict, dict[str, str]]]:
     entries = spec.cases or [{}]
     for ci, entry in enumerate(entries):
         merged = deep_merge(spec.base, entry)
-        entry_origins = {k: f"cases[{ci}].{k}" for k in _leaves(entry)} if spec.cases else {}
+        entry_origins = {k: f"cases[{ci}].{k}" for k in leaf_keys(entry)} if spec.cases else {}
         for combo in itertools.product(*(range(len(a.rows)) for a in axes)):
             case = dict(merged)
             origins = dict(entry_origins)
@@ -179,16 +180,6 @@ def raw_cases(spec: Spec) -> Iterator[tuple[dict, dict[str, str]]]:
                     origins[key] = f"{path}[{j}]" if not path.startswith("sample") \
                         else f"sample point {j} ({path})"
             yield case, origins
-
-
-def _leaves(entry: Mapping, prefix: str = "") -> list[str]:
-    out = []
-    for k, v in entry.items():
-        if isinstance(v, Mapping) and k in ("model", "profile", "run"):
-            out += _leaves(v, f"{prefix}{k}.")
-        else:
-            out.append(f"{prefix}{k}")
-    return out
 
 
 def count_cases(spec: Spec) -> int:
@@ -498,7 +489,7 @@ def varied_keys(spec: Spec) -> tuple[str, ...]:
     if spec.sample:
         keys += list(spec.sample.ranges)
     for entry in spec.cases:
-        keys += [k for k in _leaves(entry) if k.startswith(("model.", "run."))]
+        keys += [k for k in leaf_keys(entry) if k.startswith(("model.", "run."))]
     fields = varied_fields()
     out: list[str] = []
     for k in keys:

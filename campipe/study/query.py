@@ -306,8 +306,9 @@ def format_rows(table: CaseTable, rows: np.ndarray, names: Sequence[str], fmt: s
         buf = io.StringIO()
         writer = csv.writer(buf, lineterminator="\n")
         writer.writerow(names)
-        writer.writerows([[json.dumps(c) if isinstance(c, list) else c for c in row]
-                          for row in cells])
+        for r, row in zip(rows, cells, strict=True):
+            writer.writerow([json.dumps(_cell(table.columns[n][r], "json")) if isinstance(c, list)
+                             else c for n, c in zip(names, row, strict=True)])
         return buf.getvalue().rstrip("\n")
     if fmt != "table":
         raise QueryError(f"--format: found {fmt!r}, expected table, csv or json")

@@ -461,19 +461,20 @@ def check_conflicts(spec: Spec, problems: _Problems) -> None:
                                                "vary each key in one place")
         owners[key] = where
     for i, entry in enumerate(spec.cases):
-        for key in _leaf_keys(entry):
+        for key in leaf_keys(entry):
             for other, owner in owners.items():
                 if key == other or key.startswith(other + "."):
                     problems.add(f"cases[{i}].{key}",
                                  f"also varied by {owner}.{other}; vary it in one place")
 
 
-def _leaf_keys(entry: Mapping, prefix: str = "") -> list[str]:
+def leaf_keys(entry: Mapping, prefix: str = "") -> list[str]:
+    """Dotted keys a case entry sets: ``{model: {spring_preload: ..}}`` → model.spring_preload."""
     out = []
     for k, v in entry.items():
         key = f"{prefix}{k}"
         if isinstance(v, Mapping) and k in ("model", "profile", "run"):
-            out += _leaf_keys(v, key + ".")
+            out += leaf_keys(v, key + ".")
         else:
             out.append(key)
     return out
