@@ -349,3 +349,10 @@ def test_the_readme_spec_example_is_valid():
     study = expand(check_spec(raw))
     assert len(study.cases) == 2 * 39 * 3 * 2 * 4
     assert len({c.case_id for c in study.cases}) == len(study.cases)
+
+
+def test_a_boolean_is_not_a_number_even_after_the_number_was_seen():
+    """Parsed values are cached; True == 1 in Python, but not in a spec."""
+    expand(check_spec(with_(run__revolutions=1)))
+    error = refused(with_(run__revolutions=True))
+    assert error.paths == ["run.revolutions"] and "expected a number" in str(error)

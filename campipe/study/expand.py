@@ -203,7 +203,7 @@ def _thaw(frozen: tuple) -> dict:
     return {k: list(v) if isinstance(v, tuple) else v for k, v in frozen}
 
 
-@functools.lru_cache(maxsize=4096)
+@functools.lru_cache(maxsize=4096, typed=True)  # typed: True is not 1
 def _parse(key: str, value: object, path: str) -> object:
     """A case field's SI value (cached: a grid repeats its base values in every case)."""
     return (CASE_FIELDS.get(key) or varied_fields()[key]).parse(

@@ -127,7 +127,7 @@ class Field:
                                     f"{self.minimum:g}{unit}")
 
 
-@functools.lru_cache(maxsize=8192)
+@functools.lru_cache(maxsize=8192, typed=True)  # typed: True is not 1
 def _parse_scalar(field: Field, value: object, path: str) -> object:
     return field._parse(value, path)
 
