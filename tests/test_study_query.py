@@ -8,6 +8,8 @@ import numpy as np
 import pytest
 import xarray as xr
 from click.testing import CliRunner
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from study_helpers import write_spec
 
 from campipe.cli import main
@@ -217,3 +219,19 @@ def test_a_vector_coordinate_prints_in_every_format():
     assert "0.5, 0.1" in format_rows(t, rows, ["damping_ratios"], "table")
     with pytest.raises(QueryError, match="2 values per case"):
         select(t, "damping_ratios > 0")
+
+
+TOKENS = ["speed_rpm", "seat", "closure", "cam_impacts", "and", "or", "not", "is", "in", "nan",
+          "(", ")", "[", "]", "==", "<", ">=", "!=", "-", "1", "2.5", "'form'", ",", "__import__",
+          ".", "lambda", ":", "if", "else", "*", "f'x'", ";", "import", "os"]
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.one_of(st.lists(st.sampled_from(TOKENS), max_size=12).map(" ".join),
+                 st.text(max_size=40)))
+def test_any_text_either_selects_rows_or_is_refused(text):
+    try:
+        rows = select(toy(), text)
+    except QueryError:
+        return
+    assert rows.dtype.kind == "i" and set(rows.tolist()) <= {0, 1, 2, 3}

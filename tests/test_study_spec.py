@@ -238,7 +238,7 @@ def bad_specs(draw):
     kind = draw(st.sampled_from(["unknown", "bare", "type", "empty", "lift", "seat", "dt"]))
     if kind == "unknown":
         where = draw(st.sampled_from(sorted(CONTAINERS)))
-        key = draw(st.from_regex(r"[a-z][a-z_]{0,14}", fullmatch=True)
+        key = draw(st.from_regex(r"[a-z]{1,8}(_[a-z]{1,8}){0,2}", fullmatch=True)
                    .filter(lambda k: k not in CONTAINERS[where]))
         return with_(**{f"{where}__{key}" if where else key: "1 in"}), \
             f"{where}.{key}" if where else key

@@ -23,6 +23,7 @@ import csv
 import io
 import json
 import math
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
@@ -75,8 +76,10 @@ def parse_where(text: str) -> Where:
         raise QueryError(f"--where: {len(text)} characters, expected at most "
                          f"{MAX_WHERE_LENGTH}")
     try:
-        tree = ast.parse(text.strip(), mode="eval")
-    except SyntaxError as exc:
+        with warnings.catch_warnings():  # e.g. "invalid decimal literal": refused below anyway
+            warnings.simplefilter("ignore", SyntaxWarning)
+            tree = ast.parse(text.strip(), mode="eval")
+    except (SyntaxError, ValueError) as exc:
         raise QueryError(f"--where: cannot parse {text!r} ({exc.msg}); expected comparisons "
                          "joined by and, or, not") from None
     names: set[str] = set()
