@@ -238,3 +238,13 @@ def test_newmark_stability_limit_reproduced_by_runs_just_under_and_over():
         run_batch([case], RunSettings(revolutions=4, integrator="newmark-linear",
                                       dt=1.02 * limit), check_stability_limit=False)
     assert math.isinf(stability_limit(case, "modal-exact"))
+
+
+def test_contact_states_only_gives_the_same_contacts():
+    """run.full_state False computes only q1, q7 (and velocities) at the samples."""
+    full = run(SEAT_BOUNCE, integrator="modal-exact")
+    lean = run(SEAT_BOUNCE, integrator="modal-exact", full_state=False)
+    assert np.array_equal(full.valve_lift, lean.valve_lift)
+    assert np.array_equal(full.follower_lift, lean.follower_lift)
+    assert np.array_equal(full.cam_force, lean.cam_force)
+    assert np.isnan(lean.q[0, :, 1:6]).any() and not np.isnan(lean.q[0, :, [0, 6]]).any()

@@ -90,6 +90,10 @@ class RunSettings:
     max_events: int = 4096  # events kept per case
     fidelity: str = "full"  # "full" or "reduced" (see FIDELITIES)
     mode_cutoff: float | None = None  # reduced: highest mode kept [rad/s]; None: the default
+    #: Histories of all seven coordinates (True), or only what the contacts need: q1, q7 and
+    #: their velocities (modal-exact leaves the others NaN: a scene that shows cam, follower
+    #: and valve lifts does not pay for the rest).
+    full_state: bool = True
 
     @property
     def cutoff(self) -> float:
@@ -378,7 +382,7 @@ def _run_modal_exact(trains, preps, which, settings, dt_run, meff, q0, v0, a0, c
     exact.modal_exact_batch(
         M, load, *(stacked[f] for f in fields), zeta, meff, q0, v0, cfg0, seat_q, has_seat, form,
         omega, t_sample, t_end, dt_run or 0.0, settings.tolerance, settings.cutoff,
-        steps_taken,
+        settings.full_state, steps_taken,
         packed.breaks, packed.poly, packed.trig, packed.n_pieces, *out.tail(),
     )
     return steps_taken

@@ -250,18 +250,26 @@ def _modal_sum_active(W, m, E, act, nact):
 
 
 @njit(cache=True, nogil=True)
-def _state_active(q, v, z, VY, E, Z, ZT, free, c, ci, nf, ns, act, nact, x, ct, st, deg):
+def _state_active(q, v, z, VY, E, Z, ZT, free, c, ci, nf, ns, act, nact, x, ct, st, deg,
+                  full_state):
     """Free coordinates and velocities from the active modes (an output sample); VY holds
-    V_sj·y0_j, so each term is the real part of one complex product."""
-    for s in range(ns):
-        acc = 0.0
-        for jj in range(nact):
-            j = act[jj]
-            acc += VY[s, j].real * E[j].real - VY[s, j].imag * E[j].imag
-        z[s] = acc + _horner(Z[:, s], x, deg) + ZT[s].real * ct - ZT[s].imag * st
+    V_sj·y0_j, so each term is the real part of one complex product. Without
+    ``full_state`` only the contact coordinates q1 and q7 (and their velocities) are
+    computed: the others are left NaN."""
     for k in range(nf):
-        q[free[c, ci, k]] = z[k]
-        v[free[c, ci, k]] = z[nf + k]
+        coord = free[c, ci, k]
+        if not full_state and coord != 0 and coord != 6:
+            q[coord] = np.nan
+            v[coord] = np.nan
+            continue
+        for s in (k, nf + k):
+            acc = 0.0
+            for jj in range(nact):
+                j = act[jj]
+                acc += VY[s, j].real * E[j].real - VY[s, j].imag * E[j].imag
+            z[s] = acc + _horner(Z[:, s], x, deg) + ZT[s].real * ct - ZT[s].imag * st
+        q[coord] = z[k]
+        v[coord] = z[nf + k]
 
 
 @njit(cache=True, nogil=True)
@@ -328,7 +336,7 @@ def _separation(sep_rev, c, n_rev, w, ta, tb):
 def modal_exact_batch(
     M, load, n_free, free, lam, vec, vec_inv, a_inv, b_in, b_load, rho, sigma, sigma0,
     impulse, rho_vec, vnorm, lam_abs, zeta, meff, q0, v0, cfg0, seat_q, has_seat, form, omega,
-    t_sample_all, t_end_all, dt_cap, tolerance, mode_cutoff, steps_taken,
+    t_sample_all, t_end_all, dt_cap, tolerance, mode_cutoff, full_state, steps_taken,
     breaks, poly, trig, n_pieces,
     q_out, v_out, force_out, cam_out, cfg_out,
     sep_rev, counts, vmax, fmax, events, n_events, status,
@@ -800,7 +808,7 @@ def modal_exact_batch(
                     if to_sample:
                         x_n = w * t_n - th0
                         _state_active(q, v, z, VY, E, Z, ZT, free, c, ci, nf, ns, act, nact,
-                                      x_n, cth, sth, deg)
+                                      x_n, cth, sth, deg, full_state)
                         _write_sample(q_out, v_out, force_out, cam_out, cfg_out, c, k_out, q, v,
                                       gval, cam_held, seat_held, poly, trig, p, x_n, cth, sth, w,
                                       cfg)
