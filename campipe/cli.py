@@ -260,13 +260,23 @@ def study(spec, output, sets, scheduler, workers, batch_size, keep_parts, progre
               help="Workers to estimate the run time for (default: the cores available).")
 @click.option("--estimate/--no-estimate", default=True, show_default=True,
               help="Time a short sample run to estimate the run time.")
-def validate(spec, sets, workers, estimate) -> None:
+@click.option("--tolerance", metavar="LENGTH",
+              help="Valve-lift tolerance such as '1e-4 in': probe the cases and print the "
+                   "fidelity level (run.fidelity, run.mode_cutoff) they need for it.")
+def validate(spec, sets, workers, estimate, tolerance) -> None:
     """Check the study SPEC and print its case count, axes and estimated cost."""
     from campipe.study.estimate import archive_bytes
     from campipe.study.estimate import estimate as cost
     from campipe.study.execute import default_batch_size, default_workers, plan_batches
     from campipe.study.progress import format_seconds
 
+    if tolerance is not None:
+        from campipe.units import QuantityError, parse_quantity
+
+        try:
+            tolerance = parse_quantity(tolerance, "m", "--tolerance", "in")
+        except QuantityError as exc:
+            raise click.BadParameter(str(exc), param_hint="--tolerance") from None
     loaded = _load(spec, sets)
     workers = workers or default_workers()
     click.echo(validate_text(loaded, spec))
@@ -280,6 +290,11 @@ def validate(spec, sets, workers, estimate) -> None:
                    "timed on a short run of one case per run-settings group)")
     click.echo(f"archive: about {archive_bytes(loaded) / 1e6:.3g} MB before compression "
                f"(events not counted)")
+    if tolerance is not None:
+        from campipe.bench.fidelity import study_needs
+
+        click.echo(study_needs([c.case for c in loaded.cases],
+                               [c.settings for c in loaded.cases], tolerance))
 
 
 def validate_text(loaded, spec_path) -> str:
@@ -356,3 +371,42 @@ def query(archive, where, columns, sort, fmt, summary) -> None:
         click.echo(format_rows(table, rows, names, fmt))
     except QueryError as exc:
         raise click.UsageError(str(exc)) from None
+
+
+# -- bench ------------------------------------------------------------------------------------
+
+
+@main.command()
+@click.option("--quick", is_flag=True,
+              help="Small ladders, one cam turn per scene, scaling up to 256 cases (< 1 min).")
+@click.option("-o", "--output", "output", default="bench-results", show_default=True,
+              type=click.Path(file_okay=False), help="Folder for bench.md/.csv/.json/.png.")
+@click.option("--scene", "scenes", multiple=True, metavar="NAME",
+              help="Run only this scene of the suite (repeatable).")
+@click.option("--scaling/--no-scaling", default=True, show_default=True,
+              help="Measure throughput, time against cases and workers, archive size.")
+@click.option("--plot/--no-plot", default=True, show_default=True,
+              help="Write bench.png (needs matplotlib: pip install 'campipe[plot]').")
+def bench(quick, output, scenes, scaling, plot) -> None:
+    """Speed against error: the suite of scenes, every integrator and fidelity, peers, scaling."""
+    from campipe.bench.report import write_report
+    from campipe.bench.run import run_bench
+
+    if plot:
+        try:
+            import matplotlib  # noqa: F401
+        except ImportError:
+            raise click.UsageError("--plot needs matplotlib: pip install 'campipe[plot]', or "
+                                   "pass --no-plot") from None
+    stderr = click.get_text_stream("stderr")
+    try:
+        result = run_bench(quick, scenes or None, with_scaling=scaling,
+                           progress=lambda text: stderr.write(f"campipe bench: {text}\n"))
+    except ValueError as exc:
+        raise click.UsageError(str(exc)) from None
+    paths = write_report(result, output, with_plot=plot)
+    for g_peer, g in result.goals.items():
+        click.echo(f"default vs {g_peer}: {g['min_ratio_at_peer_error']:.3g}x at the peer's "
+                   f"error (goal {g['goal']:g}x), smallest over the suite", err=True)
+    for path in paths.values():
+        click.echo(str(path))

@@ -1,0 +1,15 @@
+"""Speed against error: the bench suite, its converged references, the peers and the fidelity
+probe.
+
+- :mod:`~campipe.bench.suite`: the fixed cases and the ladders of steps and tolerances.
+- :mod:`~campipe.bench.ivp`: the SciPy ``solve_ivp`` peer, an independent event-driven
+  implementation of the same model.
+- :mod:`~campipe.bench.measure`: timing, errors against a reference, the references and their
+  check, time-to-error ratios.
+- :mod:`~campipe.bench.fidelity`: which fidelity level a case needs for a tolerance.
+- :mod:`~campipe.bench.scaling`: time against number of cases and workers, archive size.
+- :mod:`~campipe.bench.run`: the whole bench as one call; :mod:`~campipe.bench.report` writes
+  its table and plot (the only module here that writes files).
+
+Nothing here is imported by ``import campipe``.
+"""

@@ -1,0 +1,299 @@
+"""The bench's files: a markdown report, the rows as CSV, everything as JSON, a PNG plot of wall
+time against valve-lift error. The only module of ``campipe.bench`` that writes files;
+matplotlib (the ``plot`` extra) is imported only inside :func:`plot`.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from dataclasses import asdict
+from pathlib import Path
+
+from campipe.bench.run import FAMILIES, Bench
+from campipe.bench.suite import INCH
+
+#: File names written into the output folder.
+FILES = {"markdown": "bench.md", "csv": "bench.csv", "json": "bench.json", "plot": "bench.png"}
+#: Errors below this [in] are drawn at it (a log axis has no zero).
+PLOT_FLOOR = 1e-14
+#: How a time-to-error was found, in words.
+HOW = {"cheapest": "its cheapest point is already below", "interpolated": "interpolated",
+       "extrapolated": "not reached in its ladder; extrapolated",
+       "not reached": "not reached in its ladder"}
+#: Columns of the CSV and the markdown tables, with their units and conversion from SI.
+COLUMNS = (
+    ("scene", "", None),
+    ("family", "", None),
+    ("setting", "", None),
+    ("seconds", "ms/case", 1e3),
+    ("cost", "steps or f-evals", None),
+    ("valve_lift", "valve err [in]", 1 / INCH),
+    ("separation_angle", "sep. angle err [deg]", math.degrees(1.0)),
+    ("separation", "sep./turn err [deg]", math.degrees(1.0)),
+    ("seating_velocity", "seating vel. err [in/s]", 1 / INCH),
+    ("event_angle", "event angle err [deg]", math.degrees(1.0)),
+    ("impact_velocity", "cam impact vel. err [in/s]", 1 / INCH),
+    ("events_match", "events match", None),
+)
+
+
+def _num(x, scale: float | None = None, fmt: str = ".3g") -> str:
+    if x is None:
+        return "–"
+    if isinstance(x, bool):
+        return "yes" if x else "no"
+    if isinstance(x, (int, float)):
+        if isinstance(x, float) and math.isnan(x):
+            return "–"
+        if isinstance(x, float) and math.isinf(x):
+            return "∞"
+        return format(x * scale if scale else x, fmt)
+    return str(x)
+
+
+def _table(header: list[str], rows: list[list[str]]) -> list[str]:
+    lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
+    lines += ["| " + " | ".join(r) + " |" for r in rows]
+    return lines
+
+
+def _clean(obj):
+    """JSON-safe: NaN and inf become null."""
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if isinstance(obj, dict):
+        return {str(k): _clean(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_clean(v) for v in obj]
+    return obj
+
+
+def summary_rows(bench: Bench) -> list[list[str]]:
+    """Per scene: the default, the best reduced level, the thesis algorithm at 1 µs and the
+    solve_ivp peer's best point, with time and valve-lift error."""
+    out = []
+    for scene in dict.fromkeys(r["scene"] for r in bench.rows):
+        mine = [r for r in bench.rows if r["scene"] == scene]
+        picks = [next((r for r in mine if r.get("default")), None)]
+        reduced = [r for r in mine if r["family"] == "reduced"]
+        picks.append(min(reduced, key=lambda r: r["seconds"]) if reduced else None)
+        picks.append(next((r for r in mine if r.get("thesis")), None))
+        ivp = [r for r in mine if r["family"] == "solve_ivp"]
+        picks.append(min(ivp, key=lambda r: r["valve_lift"]) if ivp else None)
+        for r in picks:
+            if r is None:
+                continue
+            name = "default (modal-exact)" if r.get("default") else r["family"]
+            out.append([scene, name, r["setting"], _num(r["seconds"], 1e3),
+                        _num(r["valve_lift"], 1 / INCH, ".2e"),
+                        _num(r["separation_angle"], math.degrees(1.0), ".2e"),
+                        _num(r["seating_velocity"], 1 / INCH, ".2e")])
+    return out
+
+
+def markdown(bench: Bench, plot_name: str | None = FILES["plot"]) -> str:
+    """The report as markdown."""
+    m = bench.meta
+    lines = [f"# campipe bench{' --quick' if bench.quick else ''}", ""]
+    lines.append(f"{m['date']}; {m['machine']}; Python {m['python']}, numpy {m['numpy']}, "
+                 f"scipy {m['scipy']}, numba {m['numba']}; bench wall time "
+                 f"{bench.seconds:.0f} s; load average {m['load_average_at_start']:.2f} at "
+                 f"the start, {m.get('load_average_at_end', math.nan):.2f} at the end (other "
+                 "work on the machine slows the timings and the 2-worker runs).")
+    lines.append("")
+    lines.append(f"Errors are against a converged reference computed in the same run: "
+                 f"{m['reference']}; output every {m['output_every_deg']:g} deg. Timing: "
+                 f"{m['timing']}.")
+    lines.append("")
+    if plot_name:
+        lines += [f"![wall time against valve-lift error]({plot_name})", ""]
+    lines += ["## The reference, checked", ""]
+    lines.append(f"Second reference: {m['reference_check']}. Stated agreement: valve lift "
+                 f"{m['agreement']['valve_lift'] / INCH:g} in, event angles "
+                 f"{math.degrees(m['agreement']['event_angle']):g} deg, separation per turn "
+                 f"{math.degrees(m['agreement']['separation']):g} deg, seating and impact "
+                 f"velocities {m['agreement']['seating_velocity'] / INCH:g} in/s.")
+    lines.append("")
+    lines += _table(
+        ["scene", "agrees", "valve lift [in]", "event angles [deg]", "sep./turn [deg]",
+         "seating vel. [in/s]", "impact vel. [in/s]", "check time [s]"],
+        [[c["scene"], _num(c["agrees"]) if c["events_match"] else "no (events differ)",
+          _num(c["valve_lift"], 1 / INCH, ".2e"),
+          _num(c["event_angle"], math.degrees(1.0), ".2e"),
+          _num(c["separation"], math.degrees(1.0), ".2e"),
+          _num(c["seating_velocity"], 1 / INCH, ".2e"),
+          _num(c["impact_velocity"], 1 / INCH, ".2e"), _num(c["seconds"], fmt=".1f")]
+         for c in bench.checks])
+    lines += ["", "## Summary: default, best reduced level, thesis algorithm, solve_ivp", ""]
+    lines += _table(["scene", "method", "setting", "ms/case", "valve err [in]",
+                     "sep. angle err [deg]", "seating vel. err [in/s]"], summary_rows(bench))
+    lines += ["", "## Peers at equal valve-lift error", ""]
+    lines.append("Time ratio = peer time / campipe time for the same valve-lift error, "
+                 "interpolated on each method's time/error curve (log–log). *At the default's "
+                 "error*: the time the peer would need to reach the default's error "
+                 "(extrapolated along its last two points where its ladder does not reach it). "
+                 "*At the peer's point*: the thesis algorithm at 1 µs, or solve_ivp's most "
+                 "accurate point, against the time campipe's modal-exact needs for that "
+                 "error (its cheapest setting is an upper bound when it is already more "
+                 "accurate).")
+    lines.append("")
+    lines += _table(
+        ["scene", "peer", "default ms/case", "default err [in]", "peer time at default err",
+         "ratio", "peer point", "peer ms", "peer err [in]", "ratio at peer's error"],
+        [[r["scene"], r["peer"], _num(r["default_seconds"], 1e3),
+          _num(r["default_error"], 1 / INCH, ".2e"),
+          (_num(r["peer_seconds_at_default_error"], 1e3) + " ms (" + HOW[r["how"]] + ")"),
+          _num(r["ratio_at_default_error"], fmt=".3g"), r["peer_point"],
+          _num(r["peer_point_seconds"], 1e3), _num(r["peer_point_error"], 1 / INCH, ".2e"),
+          _num(r["ratio_at_peer_error"], fmt=".3g") + f" ({HOW[r['how_campipe']]})"]
+         for r in bench.ratios])
+    if bench.goals:
+        lines += ["", "Goals (issue 7), smallest ratio over the suite:", ""]
+        for peer, g in bench.goals.items():
+            lines.append(
+                f"- default ≥ {g['goal']:g}× faster than {peer}: at the peer's error "
+                f"{_num(g['min_ratio_at_peer_error'])}× "
+                f"({'reached' if g['reached_at_peer_error'] else 'not reached'}); at the "
+                f"default's error {_num(g['min_ratio_at_default_error'])}× "
+                f"({'reached' if g['reached_at_default_error'] else 'not reached'}).")
+    a = bench.accuracy_for_cost
+    if a:
+        lines += ["", "## Accuracy for cost on 11000 rpm (issue 4)", ""]
+        cheapest = a["newmark_cheapest_meeting"]
+        lines.append(
+            f"- default: valve-lift error {a['default_error'] / INCH:.2e} in "
+            f"({'below' if a['default_below_target'] else 'not below'} 1e-6 in) in "
+            f"{a['default_seconds'] * 1e3:.3g} ms/case ({a['default_steps']} grid steps).")
+        lines.append(
+            f"- newmark-linear for {a['newmark_target'] / INCH:g} in: "
+            f"{_num(a['newmark_seconds_at_target'], 1e3)} ms/case ({HOW[a['how']]})"
+            + (f"; cheapest ladder point meeting it: {cheapest['setting']}, "
+               f"{cheapest['seconds'] * 1e3:.3g} ms/case, error {cheapest['error'] / INCH:.2e}"
+               f" in, {cheapest['steps']} steps" if cheapest else "; no ladder point meets it")
+            + f". Ratio newmark/default: {_num(a['ratio'])}.")
+    if bench.throughput:
+        lines += ["", "## Throughput: a 256-case batch (issue 3)", ""]
+        lines += _table(
+            ["integrator", "cases", "workers", "turns/case", "case-steps", "seconds",
+             "case-steps/s"],
+            [[t["integrator"], str(t["n_cases"]), str(t["workers"]), _num(t["revolutions"]),
+              str(t["case_steps"]), _num(t["seconds"], fmt=".3f"), _num(t["rate"], fmt=".3g")]
+             for t in bench.throughput])
+        lines.append("")
+        lines.append("modal-exact counts its grid steps (output samples and event refinement), "
+                     "so its case-steps are not newmark-linear's; the goal (> 2e7 case-steps/s "
+                     "on 2 cores) is newmark-linear's.")
+    if bench.scaling:
+        lines += ["", "## Scaling", ""]
+        lines.append("Default integrator, 2 turns per case, harmonic cam 6000–14000 rpm, "
+                     "alternately without and with a seat. *engine*: batches of 32 as dask "
+                     "tasks on the threaded scheduler, nothing stored; *study*: "
+                     "`campipe.study.execute.run_study` from a spec, archive written.")
+        lines.append("")
+        lines += _table(
+            ["layer", "cases", "workers", "seconds", "ms/case", "archive [MB]",
+             "archive/case [kB]"],
+            [[p["layer"], str(p["n_cases"]), str(p["workers"]), _num(p["seconds"], fmt=".3g"),
+              _num(p["per_case"], 1e3), _num(p["archive_bytes"] / 1e6) if p["archive_bytes"]
+              else "–",
+              _num(p["archive_bytes"] / p["n_cases"] / 1e3) if p["archive_bytes"] else "–"]
+             for p in bench.scaling])
+    if bench.fidelity:
+        lines += ["", "## Fidelity the scenes need", ""]
+        lines.append("`campipe.bench.fidelity.recommend`: the cheapest level whose valve lift "
+                     "stays within the tolerance of the full model's (timed probe; a reduced "
+                     "level must save ≥ 5 %).")
+        lines.append("")
+        lines += _table(
+            ["scene", "tolerance [in]", "level", "cutoff [rad/s]", "its error [in]",
+             "ms/case", "full ms/case"],
+            [[f["scene"], _num(f["tolerance"], 1 / INCH, "g"), f["fidelity"],
+              _num(f["mode_cutoff"], fmt=".3g"), _num(f["error"], 1 / INCH, ".2e"),
+              _num(f["seconds"], 1e3), _num(f["full_seconds"], 1e3)]
+             for f in bench.fidelity])
+    lines += ["", "## Every run", ""]
+    lines += _table([c[1] or c[0] for c in COLUMNS],
+                    [[_num(r.get(k), s, ".3g" if k in ("seconds",) else ".2e")
+                      if s else _num(r.get(k)) for k, _, s in COLUMNS] for r in bench.rows])
+    return "\n".join(lines) + "\n"
+
+
+def write_csv(bench: Bench, path: Path) -> Path:
+    """The rows, one per scene × setting, in the report's units."""
+    with open(path, "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow([c[1] or c[0] for c in COLUMNS])
+        for r in bench.rows:
+            w.writerow([("" if r.get(k) is None or (isinstance(r.get(k), float)
+                                                     and math.isnan(r[k]))
+                         else r[k] * s if s else r[k]) for k, _, s in COLUMNS])
+    return path
+
+
+def plot(bench: Bench, path: Path) -> Path:
+    """Wall time per case against valve-lift error, one panel per scene."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    scenes = list(dict.fromkeys(r["scene"] for r in bench.rows))
+    ncol = min(3, len(scenes))
+    nrow = math.ceil(len(scenes) / ncol)
+    fig, axes = plt.subplots(nrow, ncol, figsize=(4.6 * ncol, 3.8 * nrow), squeeze=False)
+    styles = {"modal-exact": ("C0", "o-"), "modal-exact capped": ("C9", "s:"),
+              "reduced": ("C2", "^--"), "newmark-linear": ("C3", "D-"),
+              "solve_ivp": ("C1", "v-")}
+    for ax, scene in zip(axes.flat, scenes, strict=False):
+        mine = [r for r in bench.rows if r["scene"] == scene]
+        for fam in FAMILIES:
+            pts = [r for r in mine if r["family"] == fam]
+            if not pts:
+                continue
+            if fam == "reduced":
+                pts = sorted(pts, key=lambda r: r["valve_lift"])
+            color, style = styles[fam]
+            x = [max(r["valve_lift"] / INCH, PLOT_FLOOR) for r in pts]
+            y = [r["seconds"] * 1e3 for r in pts]
+            ax.plot(x, y, style, color=color, ms=4, lw=1, label=fam)
+        for r in mine:
+            x = max(r["valve_lift"] / INCH, PLOT_FLOOR)
+            if r.get("default"):
+                ax.plot(x, r["seconds"] * 1e3, "*", color="k", ms=12, label="default")
+            if r.get("thesis"):
+                ax.plot(x, r["seconds"] * 1e3, "s", mfc="none", color="k", ms=9,
+                        label="thesis (1 µs)")
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_title(scene, fontsize=10)
+        ax.set_xlabel("valve-lift max error [in]")
+        ax.set_ylabel("wall time per case [ms]")
+        ax.grid(True, which="major", alpha=0.3)
+    for ax in list(axes.flat)[len(scenes):]:
+        ax.axis("off")
+    handles, labels = axes.flat[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=8,
+               frameon=False)
+    fig.suptitle("campipe bench: wall time against valve-lift error"
+                 + (" (--quick)" if bench.quick else ""), fontsize=11)
+    fig.tight_layout(rect=(0, 0.05, 1, 0.97))
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def write_report(bench: Bench, directory: str | Path, with_plot: bool = True) -> dict[str, Path]:
+    """Write the report's files into ``directory`` (created if missing); returns their paths."""
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    paths = {k: directory / v for k, v in FILES.items()}
+    if with_plot:
+        plot(bench, paths["plot"])
+    else:
+        del paths["plot"]
+    paths["markdown"].write_text(markdown(bench, FILES["plot"] if with_plot else None))
+    write_csv(bench, paths["csv"])
+    paths["json"].write_text(json.dumps(_clean(asdict(bench)), indent=1))
+    return paths

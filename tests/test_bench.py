@@ -1,0 +1,177 @@
+"""The bench: its references, the solve_ivp peer, the fidelity probe, the report (no timing
+assertions: times are measured by ``campipe bench``, never asserted)."""
+
+import csv
+import json
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from numpy.testing import assert_allclose
+
+from campipe.bench import fidelity, measure, scaling
+from campipe.bench.ivp import solve_case
+from campipe.bench.suite import INCH, QUICK, rpm, suite
+from campipe.cli import main
+from campipe.engine import Case, RunSettings, run_batch
+from campipe.engine.newmark import EV_KIND, EV_TIME
+from campipe.model import thesis_train
+from campipe.profiles import harmonic
+
+SCENES = {s.name: s for s in suite()}
+SEPARATION = SCENES["separation-11000"]
+
+
+@pytest.fixture(scope="module")
+def separation_reference():
+    return measure.reference(SEPARATION)
+
+
+@pytest.mark.parametrize(("name", "revolutions"),
+                         [("separation-11000", 2), ("seat-13205", 1)])
+def test_the_two_references_agree_to_their_stated_tolerance(name, revolutions):
+    """modal-exact (tolerance 1e-14 s, 0.1 µs cap) against solve_ivp DOP853 at 1e-13."""
+    scene = replace(SCENES[name], revolutions=revolutions)
+    ref = measure.reference(scene)
+    check = measure.check_reference(scene, ref)
+    err = check.errors
+    assert check.agrees, err
+    assert err.events_match
+    assert err.valve_lift < measure.AGREEMENT["valve_lift"]  # 1e-9 in
+    assert err.event_angle < measure.AGREEMENT["event_angle"]
+    assert err.separation < measure.AGREEMENT["separation"]
+    if scene.case.has_seat:
+        assert err.seating_velocity < measure.AGREEMENT["seating_velocity"]
+        # seat chatter: every configuration visited, so the check covers all four
+        assert {int(c) for c in ref.events[:, 2:4].ravel()} == {1, 2, 3, 4}
+
+
+def test_solve_ivp_and_campipe_agree_on_the_separation_case(separation_reference):
+    """The 11000 rpm separation and re-bounce: valve-lift histories within 1e-5 in."""
+    ref = separation_reference
+    ivp = solve_case(SEPARATION.case, SEPARATION.revolutions, method="Radau", rtol=1e-7)
+    default = run_batch([SEPARATION.case], RunSettings(revolutions=SEPARATION.revolutions))
+    assert ivp.valve_lift.shape == default.valve_lift[0].shape
+    assert np.abs(ivp.valve_lift - default.valve_lift[0]).max() < 1e-5 * INCH
+    # Same events in the same order (separations, impacts, the re-bounce) at the same angles.
+    assert_allclose(ivp.events[:, EV_KIND], default.events[0][:, EV_KIND])
+    assert ivp.events.shape[0] >= 8
+    assert np.abs(ivp.events[:, EV_TIME] - ref.events[:, EV_TIME]).max() * SEPARATION.case.speed \
+        < math.radians(1e-3)
+    assert_allclose(ivp.separation_per_rev, ref.separation_per_rev, atol=math.radians(1e-3))
+    assert np.degrees(ivp.separation_per_rev[1]) > 150
+
+
+def test_errors_compare_events_by_kind_and_order(separation_reference):
+    ref = separation_reference
+    shifted = replace(ref, events=ref.events.copy(), valve_lift=ref.valve_lift + 2e-7)
+    shifted.events[:, EV_TIME] += 1e-6
+    err = measure.errors(shifted, ref)
+    assert err.events_match
+    assert_allclose(err.event_angle, 1e-6 * SEPARATION.case.speed, rtol=1e-6)
+    assert_allclose(err.separation_angle, 1e-6 * SEPARATION.case.speed, rtol=1e-6)
+    assert_allclose(err.valve_lift, 2e-7, rtol=1e-6)
+    assert math.isnan(err.seating_velocity)
+    missing = replace(ref, events=ref.events[1:])
+    err = measure.errors(missing, ref)
+    assert not err.events_match and math.isnan(err.event_angle)
+    assert not measure.agrees(err)
+
+
+def test_time_to_error_interpolates_and_extrapolates_in_log_log():
+    # A first-order method: error = 1e-3 / time.
+    times = np.array([1.0, 10.0, 100.0])
+    errs = 1e-3 / times
+    t, how = measure.time_to_error(times, errs, 1e-5)
+    assert how == "interpolated" and t == pytest.approx(100.0)
+    t, how = measure.time_to_error(times, errs, 3e-5)
+    assert how == "interpolated" and t == pytest.approx(1e-3 / 3e-5)
+    t, how = measure.time_to_error(times, errs, 1e-7)
+    assert how == "extrapolated" and t == pytest.approx(1e4)
+    assert measure.time_to_error(times, errs, 1e-2) == (1.0, "cheapest")
+    # A costlier point that is no more accurate is off the front.
+    t, how = measure.time_to_error([1.0, 2.0, 10.0], [1e-4, 1e-3, 1e-5], 1e-5)
+    assert how == "interpolated" and t == pytest.approx(10.0)
+    assert measure.time_to_error([1.0, 2.0], [1e-4, 1e-4], 1e-6) == (math.inf, "not reached")
+
+
+def test_the_reduced_model_on_a_slow_scene_is_within_its_stated_tolerance():
+    """At 3000 rpm (contact throughout) the default cut-off's valve lift is within 1e-7 in of
+    the full model's; the probe's pick for 1e-6 in is within 1e-6 in."""
+    case = Case(thesis_train(), harmonic(INCH), rpm(3000))
+    settings = RunSettings(revolutions=2)
+    full = run_batch([case], settings)
+    reduced = run_batch([case], replace(settings, fidelity="reduced"))
+    assert np.abs(reduced.valve_lift - full.valve_lift).max() < fidelity.SLOW_SCENE_ERROR
+    assert fidelity.SLOW_SCENE_ERROR == 1e-7 * INCH
+    tol = 1e-6 * INCH
+    p = fidelity.probe([case], tol, settings, repeats=1)
+    assert [lv.mode_cutoff for lv in p.levels] == [None, *fidelity.CANDIDATE_CUTOFFS]
+    chosen, cutoff = p.setting(0)
+    again = run_batch([case], replace(settings, fidelity=chosen, mode_cutoff=cutoff))
+    assert np.abs(again.valve_lift - full.valve_lift).max() <= tol
+    # The lowest cut-off is too coarse at 1e-6 in; the probe never picks it.
+    assert p.levels[1].errors[0] > tol and p.choice[0] != 1
+
+
+def test_scaling_runs_through_dask_and_the_study_layer(tmp_path):
+    points = scaling.engine_scaling([3], workers=(1, 2), repeats=1)
+    assert [(p.layer, p.n_cases, p.workers) for p in points] == [("engine", 3, 1),
+                                                                 ("engine", 3, 2)]
+    points = scaling.study_scaling([4], tmp_path, workers=(1,))
+    assert [(p.layer, p.n_cases, p.workers) for p in points] == [("study", 4, 1)]
+    # 4 cases × 721 samples × several float64 histories: tens of kB per case.
+    assert 5e3 < points[0].archive_bytes / 4 < 2e5
+    assert (tmp_path / "bench-scaling-4-w1.nc").exists()
+
+
+def test_quick_bench_writes_its_table_and_plot(tmp_path):
+    out = tmp_path / "bench"
+    result = CliRunner().invoke(main, ["bench", "--quick", "--scene", "separation-11000",
+                                       "--no-scaling", "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    for name in ("bench.md", "bench.csv", "bench.json", "bench.png"):
+        assert (out / name).is_file()
+    assert (out / "bench.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    with open(out / "bench.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    expected = ([("modal-exact", f"tol {t:g} s") for t in QUICK.modal_tolerances]
+                + [("reduced", f"cutoff {c:.3g} rad/s") for c in QUICK.reduced_cutoffs]
+                + [("newmark-linear", f"dt {dt * 1e6:g} µs") for dt in QUICK.newmark_steps]
+                + [("solve_ivp", f"Radau rtol {r:g}") for r in QUICK.ivp_rtols])
+    assert [(r["family"], r["setting"]) for r in rows] == expected
+    assert {r["scene"] for r in rows} == {"separation-11000"}
+    by_setting = {r["setting"]: r for r in rows}
+    # The default (tolerance 1e-12 s) is below 1e-6 in; the thesis step is above it.
+    assert float(by_setting["tol 1e-12 s"]["valve err [in]"]) < 1e-6
+    assert float(by_setting["dt 1 µs"]["valve err [in]"]) > 1e-6
+    report = json.loads((out / "bench.json").read_text())
+    assert report["quick"] and [c["agrees"] for c in report["checks"]] == [True]
+    assert {r["peer"] for r in report["ratios"]} == {"newmark-linear", "solve_ivp"}
+    md = (out / "bench.md").read_text()
+    assert "## Peers at equal valve-lift error" in md and "![wall time" in md
+    assert "| separation-11000 | default (modal-exact) | tol 1e-12 s |" in md
+
+
+def test_bench_refuses_an_unknown_scene(tmp_path):
+    result = CliRunner().invoke(main, ["bench", "--quick", "--scene", "nope", "--no-scaling",
+                                       "-o", str(tmp_path)])
+    assert result.exit_code == 2 and "known: smooth-9000" in result.output
+
+
+def test_validate_prints_the_fidelity_a_spec_needs(tmp_path):
+    spec = tmp_path / "slow.yaml"
+    spec.write_text(
+        "name: slow\nmodel: {preset: thesis-1971}\nprofile: {kind: harmonic, lift: 1 in}\n"
+        "closure: force\nseat: none\nrun: {revolutions: 1, output_every: 1 deg}\n"
+        "sweep:\n  speed: [3000 rpm, 4000 rpm]\n")
+    result = CliRunner().invoke(main, ["validate", str(spec), "--no-estimate",
+                                       "--tolerance", "1e-3 in"])
+    assert result.exit_code == 0, result.output
+    assert "fidelity for a valve-lift tolerance of 0.001 in (probe: 2 of 2 cases" in \
+        result.output
+    assert "the whole study: run.fidelity:" in result.output
+    bare = CliRunner().invoke(main, ["validate", str(spec), "--tolerance", "1e-3"])
+    assert bare.exit_code == 2 and "without units" in bare.output
