@@ -2,12 +2,16 @@
 
 from campipe.engine.batch import (
     DEFAULT_INTEGRATOR,
+    DEFAULT_MODE_CUTOFF,
+    DEFAULT_STEPS,
+    FIDELITIES,
     INTEGRATORS,
     BatchResult,
     Case,
     IntegrationError,
     RunSettings,
     StabilityError,
+    check_run,
     resolve_integrator,
     run_batch,
     stability_limit,
@@ -16,6 +20,9 @@ from campipe.engine.loads import MEMBER_LOADS, member_loads
 
 __all__ = [
     "DEFAULT_INTEGRATOR",
+    "DEFAULT_MODE_CUTOFF",
+    "DEFAULT_STEPS",
+    "FIDELITIES",
     "INTEGRATORS",
     "MEMBER_LOADS",
     "BatchResult",
@@ -23,6 +30,7 @@ __all__ = [
     "IntegrationError",
     "RunSettings",
     "StabilityError",
+    "check_run",
     "member_loads",
     "resolve_integrator",
     "run_batch",

@@ -327,6 +327,34 @@ def output_angles(settings: RunSettings) -> np.ndarray:
     return np.arange(n) * settings.output_every
 
 
+def check_run(
+    cases: Sequence[Case], settings: RunSettings, *, check_stability_limit: bool = True
+) -> None:
+    """Everything ``run_batch`` refuses, checked without running: an unknown integrator or
+    fidelity, a non-positive step or tolerance, an unknown closure, a non-positive speed, a
+    newmark-linear step beyond the stability limit.
+
+    Raises
+    ------
+    ValueError
+        (StabilityError for the step limit) with a message that starts with the spec key:
+        ``run.<key>: …``, ``closure: …`` or ``speed: …``.
+    """
+    dt_run = settings.step  # also refuses an unknown integrator
+    _ = settings.cutoff  # refuses an unknown fidelity, or reduced with newmark-linear
+    if dt_run is not None and not (dt_run > 0 and math.isfinite(dt_run)):
+        raise ValueError(f"run.dt: found {dt_run!r} s, expected a positive step")
+    if not (settings.tolerance > 0 and math.isfinite(settings.tolerance)):
+        raise ValueError(f"run.tolerance: found {settings.tolerance!r} s, expected > 0")
+    for i, case in enumerate(cases):
+        if case.closure not in CLOSURES:
+            raise ValueError(f"closure: case {i} has {case.closure!r}, expected force or form")
+        if not case.speed > 0:
+            raise ValueError(f"speed: case {i} has {case.speed!r} rad/s, expected > 0")
+    if check_stability_limit:
+        check_stability(cases, settings)
+
+
 class _Outputs:
     """The arrays a kernel fills in place."""
 
@@ -410,17 +438,8 @@ def run_batch(
     IntegrationError
         If a case's state became non-finite.
     """
-    dt_run = settings.step  # also refuses an unknown integrator
-    _ = settings.cutoff  # refuses an unknown fidelity, or reduced with newmark-linear
-    if dt_run is not None and not (dt_run > 0 and math.isfinite(dt_run)):
-        raise ValueError(f"run.dt: found {dt_run!r} s, expected a positive step")
-    for i, case in enumerate(cases):
-        if case.closure not in CLOSURES:
-            raise ValueError(f"closure: case {i} has {case.closure!r}, expected force or form")
-        if not case.speed > 0:
-            raise ValueError(f"speed: case {i} has {case.speed!r} rad/s, expected > 0")
-    if check_stability_limit:
-        check_stability(cases, settings)
+    check_run(cases, settings, check_stability_limit=check_stability_limit)
+    dt_run = settings.step
     n = len(cases)
     angles = output_angles(settings)
     n_out = angles.size
