@@ -83,7 +83,19 @@ def parse_where(text: str) -> Where:
         raise QueryError(f"--where: cannot parse {text!r} ({exc.msg}); expected comparisons "
                          "joined by and, or, not") from None
     names: set[str] = set()
+    # A list (or tuple) stands only on the right of 'in' / 'not in', holding plain values.
+    lists = {id(right) for node in ast.walk(tree) if isinstance(node, ast.Compare)
+             for op, right in zip(node.ops, node.comparators, strict=True)
+             if isinstance(op, ast.In | ast.NotIn) and isinstance(right, ast.List | ast.Tuple)}
     for node in ast.walk(tree):
+        if isinstance(node, ast.List | ast.Tuple):
+            if id(node) not in lists:
+                raise QueryError("--where: a list stands only after 'in', e.g. 'speed_rpm in "
+                                 "[9000, 9524]'; join conditions with and, or, not")
+            if not all(isinstance(e, ast.Constant) or (
+                    isinstance(e, ast.UnaryOp) and isinstance(e.operand, ast.Constant))
+                    for e in node.elts):
+                raise QueryError("--where: the list after 'in' holds numbers or strings only")
         if not isinstance(node, _ALLOWED):
             raise QueryError(f"--where: {_describe(node)} is not allowed; expected comparisons "
                              "of columns with numbers or strings, joined by and, or, not")
