@@ -90,10 +90,6 @@ class RunSettings:
     max_events: int = 4096  # events kept per case
     fidelity: str = "full"  # "full" or "reduced" (see FIDELITIES)
     mode_cutoff: float | None = None  # reduced: highest mode kept [rad/s]; None: the default
-    #: Histories of all seven coordinates (True), or only what the contacts need: q1, q7 and
-    #: their velocities (modal-exact leaves the others NaN: a scene that shows cam, follower
-    #: and valve lifts does not pay for the rest).
-    full_state: bool = True
 
     @property
     def cutoff(self) -> float:
@@ -394,8 +390,8 @@ def _run_newmark(preps, which, settings, dt_run, meff, q0, v0, a0, cfg0, seat_q,
     return n_steps
 
 
-def _run_modal_exact(trains, preps, which, settings, dt_run, meff, q0, v0, a0, cfg0, seat_q,
-                     has_seat, form, omega, packed, out) -> np.ndarray:
+def _run_modal_exact(trains, preps, which, settings, dt_run, full_state, meff, q0, v0, a0,
+                     cfg0, seat_q, has_seat, form, omega, packed, out) -> np.ndarray:
     fields = ("n_free", "free", "lam", "vec", "vec_inv", "a_inv", "b_in", "b_load", "rho",
               "sigma", "sigma0", "impulse", "rho_vec", "vnorm", "lam_abs")
     data = [_modal(t) for t in trains]
@@ -410,14 +406,18 @@ def _run_modal_exact(trains, preps, which, settings, dt_run, meff, q0, v0, a0, c
     exact.modal_exact_batch(
         M, load, *(stacked[f] for f in fields), zeta, meff, q0, v0, cfg0, seat_q, has_seat, form,
         omega, t_sample, t_end, dt_run or 0.0, settings.tolerance, settings.cutoff,
-        settings.full_state, steps_taken,
+        full_state, steps_taken,
         packed.breaks, packed.poly, packed.trig, packed.n_pieces, *out.tail(),
     )
     return steps_taken
 
 
 def run_batch(
-    cases: Sequence[Case], settings: RunSettings, *, check_stability_limit: bool = True
+    cases: Sequence[Case],
+    settings: RunSettings,
+    *,
+    full_state: bool = True,
+    check_stability_limit: bool = True,
 ) -> BatchResult:
     """Integrate every case of a batch in one compiled call.
 
@@ -427,6 +427,10 @@ def run_batch(
         Any mix of trains, profiles, speeds, seats and closures.
     settings : RunSettings
         Shared by the batch: revolutions, step, output spacing, integrator.
+    full_state : bool
+        Histories of all seven coordinates (default), or only what the contacts need: q1, q7
+        and their velocities (modal-exact then leaves the others NaN, so a scene that shows
+        cam, follower and valve lifts does not pay for the rest).
     check_stability_limit : bool
         Refuse a newmark-linear step beyond the stability limit (default). False only to
         demonstrate the limit: the run then diverges and raises IntegrationError.
@@ -460,7 +464,7 @@ def run_batch(
     if settings.method == "newmark-linear":
         n_steps = _run_newmark(preps, which, settings, dt_run, *common)
     else:
-        n_steps = _run_modal_exact(trains, preps, which, settings, dt_run, *common)
+        n_steps = _run_modal_exact(trains, preps, which, settings, dt_run, full_state, *common)
     status, n_events = out.status, out.n_events
     bad = np.flatnonzero(status == newmark.NONFINITE)
     if bad.size:

@@ -68,7 +68,9 @@ def compute_batch(plan: BatchPlan) -> BatchData:
     All cases of a plan share one :class:`~campipe.engine.RunSettings`.
     """
     settings = plan.cases[0].settings
-    result = run_batch([c.case for c in plan.cases], settings)
+    wanted = set(data_variables(plan.record))
+    full_state = "q" in wanted or bool(set(MEMBER_LOADS) & wanted)
+    result = run_batch([c.case for c in plan.cases], settings, full_state=full_state)
     return batch_arrays(plan, result)
 
 
