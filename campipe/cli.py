@@ -231,11 +231,11 @@ def study(spec, output, sets, scheduler, workers, batch_size, keep_parts, progre
     def bar(total, done):
         return Progress(total, stderr.write, done=done, terminal=stderr.isatty())
 
+    replay = None
     if loaded.spec.replay:
-        logging.getLogger(__name__).warning(
-            "replay: the selection %r is checked and kept in the archive, but logging cases "
-            "to rerun is not part of this version (the hook is campipe.study.execute."
-            "BatchHook)", loaded.spec.replay)
+        from campipe.replay.live import StudyReplay, recording_path
+
+        replay = StudyReplay(loaded, recording_path(archive))
     words = ["campipe", "study", spec, *(["-o", output] if output else [])]
     words += [w for pair in sets for w in ("--set", pair)]
     words += ["--scheduler", scheduler] if scheduler != "threads" else []
@@ -243,13 +243,17 @@ def study(spec, output, sets, scheduler, workers, batch_size, keep_parts, progre
     try:
         report = run_study(loaded, archive, scheduler=scheduler, workers=workers,
                            batch_size=batch_size, progress=bar if progress else None,
-                           keep_parts=keep_parts, command=command)
+                           keep_parts=keep_parts, command=command,
+                           on_batch=replay if scheduler != "processes" else None)
     except IntegrationError as exc:
         raise click.ClickException(f"{exc}\nBatches finished before it are stored; fix the "
                                    "spec and rerun the same command to resume.") from None
     except ValueError as exc:
         raise click.UsageError(str(exc)) from None
     click.echo(f"campipe study: {report.summary()}", err=True)
+    if replay is not None and (recorded := replay.finish(report.archive)):
+        click.echo(f"campipe study: replay {loaded.spec.replay!r} recorded in {recorded}",
+                   err=True)
     click.echo(str(report.archive))
 
 
@@ -333,7 +337,7 @@ def validate_text(loaded, spec_path) -> str:
                  f"{first.settings.method}, dt {dt}, output every {run['output_every']}, "
                  f"record: {', '.join(loaded.record) or '-'}")
     if s.replay:
-        lines.append(f"replay: {s.replay!r} (checked; logging to rerun is not in this version)")
+        lines.append(f"replay: {s.replay!r} (logged to <archive stem>.rrd as the study runs)")
     return "\n".join(lines)
 
 
@@ -371,6 +375,45 @@ def query(archive, where, columns, sort, fmt, summary) -> None:
         click.echo(format_rows(table, rows, names, fmt))
     except QueryError as exc:
         raise click.UsageError(str(exc)) from None
+
+
+# -- replay -----------------------------------------------------------------------------------
+
+
+@main.command()
+@click.argument("archive", type=click.Path(dir_okay=False))
+@click.option("--case", "case_ids", multiple=True, metavar="ID",
+              help="Replay the case with this case_id (repeatable).")
+@click.option("--where", help="Replay the cases where EXPR holds (the language of campipe "
+                              "query --where; never run as Python).")
+@click.option("-o", "--output", type=click.Path(dir_okay=False),
+              help="Recording to write (default: <archive stem>.replay.rrd beside it).")
+@click.option("--spawn", is_flag=True, help="Open the rerun viewer instead of writing a file.")
+@click.option("--magnify", type=click.FloatRange(min=1.0), default=10.0, show_default=True,
+              help="Factor on the sketch's deviations from the rigid-body motion.")
+def replay(archive, case_ids, where, output, spawn, magnify) -> None:
+    """Write a rerun recording of cases of ARCHIVE: lift, force and contact plots, events,
+    parameters and the moving mechanism, on the timelines cam_angle and time. All cases go
+    into one recording, each in its own cases/<case_id> subtree and blueprint tab."""
+    from campipe.io.rerun_replay import replay_archive
+    from campipe.replay.cases import ReplayError
+    from campipe.study.query import QueryError
+
+    if bool(case_ids) == (where is not None):
+        raise click.UsageError("give --case ID (repeatable) or --where EXPR, one of the two")
+    if spawn and output:
+        raise click.UsageError("-o and --spawn exclude each other")
+    try:
+        path, cases = replay_archive(archive, case_ids=case_ids, where=where, output=output,
+                                     spawn=spawn, magnification=magnify)
+    except QueryError as exc:
+        raise click.UsageError(str(exc)) from None
+    except ReplayError as exc:
+        raise click.ClickException(str(exc)) from None
+    click.echo(f"campipe replay: {len(cases)} case{'s' if len(cases) != 1 else ''} ("
+               + ", ".join(c.case_id for c in cases) + ")", err=True)
+    if path is not None:
+        click.echo(str(path))
 
 
 # -- bench ------------------------------------------------------------------------------------

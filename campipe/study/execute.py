@@ -66,8 +66,10 @@ MAX_BATCH_SIZE = 32
 COPY_ROWS = 64
 
 #: Called with each newly computed batch after it is stored (in the process that stores it:
-#: a worker thread for local schedulers, this process for distributed). The replay logger
-#: of a later version plugs in here; see :func:`campipe.study.query.replay_mask`.
+#: a worker thread for local schedulers, this process for distributed). The replay logger,
+#: :class:`campipe.replay.live.StudyReplay`, plugs in here (selecting with
+#: :func:`campipe.study.query.replay_mask`); ``campipe study`` leaves it out under the
+#: processes scheduler, whose workers cannot log into this process's recording.
 BatchHook = Callable[[BatchPlan, BatchData], None]
 
 

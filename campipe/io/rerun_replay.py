@@ -1,0 +1,433 @@
+"""rerun recordings of valve-train cases (``campipe replay``, a study's ``replay:``).
+
+One recording holds every selected case, each in its own entity subtree; a blueprint shows
+each case on its own tab, the mechanism sketch beside the plots::
+
+    cases/<case_id>/lift/{cam,follower,valve}   Scalars, lift [mm]
+    cases/<case_id>/force/{cam,seat}            Scalars, contact force [N]
+    cases/<case_id>/contact_state               Scalars, configuration 1–4 (thesis Table I)
+    cases/<case_id>/events                      TextLog: separations and impacts
+    cases/<case_id>/parameters                  TextDocument (markdown, static)
+    cases/<case_id>/sketch/...                  LineStrips2D / Points2D [mm], moving
+    cases/<case_id>/sketch/frame/...            LineStrips2D / Boxes2D [mm], static (ground)
+
+Timelines (no others: the wall-clock ``log_time`` and ``log_tick`` are switched off, and
+``send_columns`` adds none):
+
+- ``cam_angle``: a *duration* timeline on which one second stands for one degree of cam
+  angle (the viewer prints 270° as ``+270s``). rerun's sequence timelines take integers
+  only, which would either round the events' angles to whole degrees or count in some
+  fraction of a degree; a duration keeps nanosecond integers, so every archive angle (kept
+  to 1e-9°) is placed exactly and the axis reads in degrees.
+- ``time``: the time from the start of the run, a duration.
+
+Every history is sent whole with ``send_columns``. The values are the archive's, converted
+only in units: lifts m → mm (× 1000), forces in N as stored. A recording is deterministic for
+the same archive and selection: its recording id is a hash of the study and the cases, and
+nothing depends on the clock; only rerun's row and chunk ids (time-based) differ between two
+writes, so files are compared by :func:`read_recording`, not byte by byte. (The blueprint is
+rerun's own store beside the recording, with its own random ids and times.)
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import rerun as rr
+import rerun.blueprint as rrb
+
+from campipe.model import PARAMETERS, ROMAN
+from campipe.replay import sketch
+from campipe.replay.cases import ReplayCase
+
+APPLICATION_ID = "campipe"
+#: Timeline names.
+CAM_ANGLE, TIME = "cam_angle", "time"
+#: Nanoseconds per degree on the cam_angle timeline, per second on the time timeline.
+NANOS = 1_000_000_000
+#: Sketch and lift units: millimetres per metre.
+MM = 1000.0
+
+#: Series: archive name → (entity under the case, label with units, factor from archive units,
+#: colour).
+SERIES: dict[str, tuple[str, str, float, tuple[int, int, int]]] = {
+    "cam_lift": ("lift/cam", "cam lift [mm]", MM, (150, 150, 150)),
+    "follower_lift": ("lift/follower", "follower lift [mm]", MM, (50, 110, 200)),
+    "valve_lift": ("lift/valve", "valve lift [mm]", MM, (40, 160, 80)),
+    "cam_force": ("force/cam", "cam contact force [N]", 1.0, (50, 110, 200)),
+    "seat_force": ("force/seat", "seat contact force [N]", 1.0, (160, 90, 40)),
+    "contact_state": ("contact_state", "contact state [1 I cam, 2 II free, 3 III cam+seat, "
+                      "4 IV seat]", 1.0, (60, 60, 60)),
+}
+#: Event kinds (campipe.engine.newmark) → (name, text-log level).
+EVENT_KINDS = {1: ("cam separation", "INFO"), 2: ("cam impact", "WARN"),
+               3: ("seat separation", "INFO"), 4: ("seat impact", "WARN")}
+#: Sketch parts: name → colour.
+PART_COLOURS = {
+    "cam": (140, 140, 140), "pushrod": (50, 110, 200), "rocker": (230, 140, 30),
+    "stem": (40, 160, 80), "head": (40, 160, 80), "spring": (150, 80, 190),
+    "retainer": (90, 90, 90), "frame": (90, 90, 90), "seat": (120, 70, 40),
+}
+IN_CONTACT, OFF_CONTACT = (40, 180, 70), (220, 40, 40)
+
+
+def case_path(case_id: str) -> str:
+    """The entity subtree of a case."""
+    return f"cases/{case_id}"
+
+
+def nanos(values: np.ndarray) -> np.ndarray:
+    """Degrees (or seconds) → the timeline's integer nanoseconds, rounded to nearest."""
+    return np.round(np.asarray(values, dtype=float) * NANOS).astype(np.int64)
+
+
+def _indexes(cam_angle: np.ndarray, time: np.ndarray) -> list:
+    return [rr.TimeColumn(CAM_ANGLE, duration=nanos(cam_angle).astype("timedelta64[ns]")),
+            rr.TimeColumn(TIME, duration=nanos(time).astype("timedelta64[ns]"))]
+
+
+# -- the content of one case ---------------------------------------------------------------------
+
+def event_text(kind: int, angle: float, time: float, velocity: float, impulse: float,
+               before: int, after: int) -> str:
+    """One event as a text-log line."""
+    name = EVENT_KINDS.get(int(kind), (f"event {kind}", "INFO"))[0]
+    text = (f"{name} at {angle:.4f}° (t = {time * 1e3:.4f} ms): velocity {velocity:.4g} m/s, "
+            f"configuration {ROMAN.get(int(before), before)} → {ROMAN.get(int(after), after)}")
+    if int(kind) in (2, 4):
+        text += f", impulse {impulse:.4g} N·s"
+    return text
+
+
+def _value(value: object) -> str:
+    if isinstance(value, tuple):
+        return ", ".join(_value(v) for v in value)
+    if isinstance(value, float):
+        return "none" if math.isnan(value) else f"{value:.10g}"
+    return str(value)
+
+
+def parameters_document(case: ReplayCase, magnification: float) -> str:
+    """The case as a markdown document: its columns, its model, how to read the replay."""
+    lines = [f"# {case.label}", "", f"Study `{case.study}`, case `{case.case_id}`.", "",
+             "## Case (as the archive holds it)", "", "| column | value | units |",
+             "|---|---|---|"]
+    lines += [f"| {name} | {_value(value)} | {units} |"
+              for name, (value, units) in case.columns.items()]
+    lines += ["", "## Valve train", "", "| parameter | value | units |", "|---|---|---|"]
+    for name, p in PARAMETERS.items():
+        lines.append(f"| {name} | {_value(getattr(case.train, name))} | {p.units} |")
+    lines += [
+        "", "## Reading the replay", "",
+        "- Timeline `cam_angle`: one second of this duration timeline stands for one degree "
+        "(270° reads `+270s`). Timeline `time`: the time from the start of the run.",
+        "- Plots: lifts in mm (the archive's metres × 1000), contact forces in N, compressive "
+        "positive and zero out of contact; contact state 1 I cam contact, 2 II free, 3 III "
+        "cam and seat, 4 IV seat only (thesis Table I).",
+        f"- Sketch, in mm: the rigid train the cam (and the seat) would carry, at true scale, "
+        f"plus **×{magnification:g}** the computed deviation from it: the gap at the cam "
+        "while the follower is off it, the valve's bounce off its seat, and the elastic "
+        "deflection of pushrod, rocker and valve stem. A contact that holds is drawn at its "
+        f"true place. Cam base-circle radius {case_geometry(case).base_radius * MM:g} mm "
+        "(a drawing choice). The follower's dot is green on the cam, red off it; the valve's "
+        "green on its seat, red off it.",
+        "- Events: separations and impacts at their cam angles, with the closing velocity "
+        "(impacts) or velocity jump and the impulse delivered (impacts).",
+    ]
+    return "\n".join(lines)
+
+
+def case_geometry(case: ReplayCase) -> sketch.Geometry:
+    return sketch.Geometry.from_train(case.train)
+
+
+def turn_profile(case: ReplayCase) -> tuple[np.ndarray, np.ndarray]:
+    """The cam's lift over one turn from the archive's samples: (angles [rad], lift [m])."""
+    phi = np.mod(case.cam_angle, 360.0)
+    phi, first = np.unique(np.round(phi, 9), return_index=True)
+    return np.radians(phi), case.histories["cam_lift"][first]
+
+
+def log_case(rec: rr.RecordingStream, case: ReplayCase,
+             magnification: float = sketch.DEFAULT_MAGNIFICATION) -> None:
+    """Log one case into ``rec``: series, events, parameters and the moving sketch."""
+    if case.q is None:
+        raise ValueError(f"case {case.case_id}: no q to draw the mechanism from")
+    root = case_path(case.case_id)
+    h = case.histories
+    indexes = _indexes(case.cam_angle, h["time"])
+    for name, (path, label, factor, colour) in SERIES.items():
+        style = rr.SeriesLines(names=label, colors=[colour],
+                               interpolation_mode="StepAfter" if name == "contact_state"
+                               else None)
+        rec.log(f"{root}/{path}", style, static=True)
+        values = np.asarray(h[name], dtype=float) * factor
+        rec.send_columns(f"{root}/{path}", indexes=indexes,
+                         columns=rr.Scalars.columns(scalars=values))
+    ev = case.events
+    if ev["event_kind"].size:
+        texts = [event_text(*row) for row in zip(
+            ev["event_kind"], ev["event_cam_angle"], ev["event_time"], ev["event_velocity"],
+            ev["event_impulse"], ev["event_from"], ev["event_to"], strict=True)]
+        levels = [EVENT_KINDS.get(int(k), ("", "INFO"))[1] for k in ev["event_kind"]]
+        rec.send_columns(f"{root}/events",
+                         indexes=_indexes(ev["event_cam_angle"], ev["event_time"]),
+                         columns=rr.TextLog.columns(text=texts, level=levels))
+    rec.log(f"{root}/parameters",
+            rr.TextDocument(parameters_document(case, magnification),
+                            media_type=rr.MediaType.MARKDOWN), static=True)
+    log_sketch(rec, case, indexes, magnification)
+
+
+def log_sketch(rec: rr.RecordingStream, case: ReplayCase, indexes: list,
+               magnification: float) -> None:
+    """The mechanism, moving with q (deviations magnified) and the cam turning."""
+    root = f"{case_path(case.case_id)}/sketch"
+    geom = case_geometry(case)
+    h = case.histories
+    state = np.asarray(h["contact_state"])
+    qd = sketch.displayed_coordinates(case.q, h["cam_lift"], state, geom, magnification,
+                                      case.seat_q7)
+    radii = {"pushrod": geom.pushrod_radius, "rocker": geom.rocker_radius,
+             "stem": geom.stem_radius, "head": 0.0005, "spring": 0.0005, "retainer": 0.001}
+    n = qd.shape[0]
+    for name, strips in sketch.moving_parts(qd, geom).items():
+        rec.log(f"{root}/{name}", rr.LineStrips2D.from_fields(
+            colors=[PART_COLOURS[name]], radii=[radii[name] * MM]), static=True)
+        rec.send_columns(f"{root}/{name}", indexes=indexes, columns=rr.LineStrips2D.columns(
+            strips=list(strips * MM)).partition(np.ones(n, dtype=np.int32)))
+    angle = np.radians(case.cam_angle)
+    phi, lift = turn_profile(case)
+    outline = sketch.cam_outline(phi, lift, angle, geom) * MM
+    mark = sketch.cam_mark(angle, geom) * MM
+    strips = [s for pair in zip(outline, mark, strict=True) for s in pair]
+    rec.log(f"{root}/cam", rr.LineStrips2D.from_fields(
+        colors=[PART_COLOURS["cam"], PART_COLOURS["frame"]], radii=[0.6, 0.4]), static=True)
+    rec.send_columns(f"{root}/cam", indexes=indexes, columns=rr.LineStrips2D.columns(
+        strips=strips).partition(np.full(n, 2, dtype=np.int32)))
+    on_cam = np.isin(state, sketch.CAM_CONTACT)
+    rec.log(f"{root}/follower", rr.Points2D.from_fields(radii=[1.5]), static=True)
+    rec.send_columns(f"{root}/follower", indexes=indexes, columns=rr.Points2D.columns(
+        positions=sketch.follower_position(qd, geom) * MM,
+        colors=np.where(on_cam[:, None], IN_CONTACT, OFF_CONTACT).astype(np.uint8)))
+    frame = sketch.fixed_parts(geom, case.seat_q7)
+    if "seat" in frame:
+        seated = np.isin(state, sketch.SEAT_CONTACT)
+        rec.log(f"{root}/valve", rr.Points2D.from_fields(radii=[1.5]), static=True)
+        rec.send_columns(f"{root}/valve", indexes=indexes, columns=rr.Points2D.columns(
+            positions=(sketch.valve_position(qd, geom) * MM),
+            colors=np.where(seated[:, None], IN_CONTACT, OFF_CONTACT).astype(np.uint8)))
+        boxes = frame.pop("seat") * MM
+        rec.log(f"{root}/frame/seat", rr.Boxes2D(mins=boxes[:, 0], sizes=boxes[:, 1],
+                                                 colors=[PART_COLOURS["seat"]]), static=True)
+    for name, strip in frame.items():
+        rec.log(f"{root}/frame/{name}", rr.LineStrips2D([strip * MM], colors=[
+            PART_COLOURS["frame"]], radii=[0.5]), static=True)
+    rec.log(f"{root}/frame/note", rr.Points2D(
+        [[-geom.pushrod_arm * MM, geom.pushrod_arm * 0.6 * MM]], radii=[0.01],
+        labels=[f"deviation from rigid-body motion ×{magnification:g} [mm]"]), static=True)
+
+
+# -- recordings --------------------------------------------------------------------------------
+
+def case_view(case: ReplayCase, magnification: float) -> rrb.Container:
+    """The sketch beside the plots, events and parameters of one case."""
+    root = case_path(case.case_id)
+    return rrb.Horizontal(
+        rrb.Spatial2DView(origin=f"{root}/sketch",
+                          name=f"mechanism [mm], deviations ×{magnification:g}"),
+        rrb.Vertical(
+            rrb.TimeSeriesView(origin=f"{root}/lift", name="lift [mm]"),
+            rrb.TimeSeriesView(origin=f"{root}/force", name="contact force [N]"),
+            rrb.TimeSeriesView(origin=f"{root}/contact_state", name="contact state"),
+            rrb.Tabs(rrb.TextLogView(origin=f"{root}/events", name="events"),
+                     rrb.TextDocumentView(origin=f"{root}/parameters", name="parameters")),
+            row_shares=[3, 3, 1, 2],
+        ),
+        column_shares=[2, 3],
+        name=case.label,
+    )
+
+
+def blueprint(cases: Sequence[ReplayCase], magnification: float) -> rrb.Blueprint:
+    """One tab per case (the first active), the time panel on ``cam_angle``."""
+    views = [case_view(c, magnification) for c in cases]
+    layout = views[0] if len(views) == 1 else rrb.Tabs(*views, active_tab=0)
+    return rrb.Blueprint(layout, rrb.TimePanel(timeline=CAM_ANGLE), collapse_panels=False)
+
+
+def recording_id(key: str, case_ids: Sequence[str], magnification: float) -> str:
+    """A recording id fixed by the study, the cases and the magnification."""
+    text = "\n".join([key, f"{magnification!r}", *case_ids])
+    return "campipe-" + hashlib.sha256(text.encode()).hexdigest()[:24]
+
+
+def recording_stream(rid: str, name: str) -> rr.RecordingStream:
+    """A recording of its own (not rerun's global one) with no wall-clock timelines."""
+    rec = rr.RecordingStream(APPLICATION_ID, recording_id=rid, send_properties=False)
+    rec.set_log_time_enabled(False)
+    rec.set_log_tick_enabled(False)
+    rec.send_recording_name(name)
+    return rec
+
+
+def write_recording(cases: Sequence[ReplayCase], path: str | Path, *, key: str = "",
+                    magnification: float = sketch.DEFAULT_MAGNIFICATION) -> Path:
+    """Write ``cases`` to one ``.rrd`` file, atomically (a temporary file renamed into place).
+
+    Parameters
+    ----------
+    cases : sequence of ReplayCase
+        At least one; each gets its subtree ``cases/<case_id>``.
+    path : str or Path
+        The recording to write.
+    key : str
+        The study's key (the archive's ``study_key``), part of the recording id.
+    magnification : float
+        Factor on the sketch's deviations from the rigid-body motion [-].
+    """
+    if not cases:
+        raise ValueError("no cases to record")
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    rec = recording_stream(recording_id(key, [c.case_id for c in cases], magnification),
+                           f"{cases[0].study} replay")
+    try:
+        rec.save(tmp, default_blueprint=blueprint(cases, magnification))
+        for case in cases:
+            log_case(rec, case, magnification)
+        rec.flush()
+        rec.disconnect()
+        os.replace(tmp, path)
+    except BaseException:
+        rec.disconnect()
+        tmp.unlink(missing_ok=True)
+        raise
+    return path
+
+
+def spawn_viewer(cases: Sequence[ReplayCase], *, key: str = "",
+                 magnification: float = sketch.DEFAULT_MAGNIFICATION) -> None:
+    """Open the rerun viewer on ``cases``."""
+    rec = recording_stream(recording_id(key, [c.case_id for c in cases], magnification),
+                           f"{cases[0].study} replay")
+    rec.spawn(default_blueprint=blueprint(cases, magnification))
+    for case in cases:
+        log_case(rec, case, magnification)
+    rec.flush()
+
+
+def default_output(archive: str | Path) -> Path:
+    """``campipe replay``'s recording when ``-o`` is not given: ``<archive stem>.replay.rrd``
+    beside the archive (the study's own recording is ``<archive stem>.rrd``)."""
+    return Path(archive).with_suffix(".replay.rrd")
+
+
+def replay_archive(archive: str | Path, *, case_ids: Sequence[str] = (), where: str | None = None,
+                   output: str | Path | None = None, spawn: bool = False,
+                   magnification: float = sketch.DEFAULT_MAGNIFICATION,
+                   ) -> tuple[Path | None, list[ReplayCase]]:
+    """Replay an archive's cases chosen by id or by a ``--where`` expression.
+
+    Writes one recording (``output``, default :func:`default_output`) or, with ``spawn``,
+    opens the viewer instead. Nothing is written when the selection fails.
+
+    Returns
+    -------
+    (path or None, cases)
+        The recording written (None when spawned) and the cases it holds.
+
+    Raises
+    ------
+    ReplayError
+        For a missing or unreadable archive, an unknown case id, a selection of no case,
+        or q that can be neither read nor computed again.
+    campipe.study.query.QueryError
+        For a ``--where`` expression the query language refuses.
+    """
+    import xarray as xr
+
+    from campipe.replay.cases import ReplayError, archive_cases, select_rows
+
+    archive = Path(archive)
+    if not archive.is_file():
+        raise ReplayError(f"{archive}: no such archive")
+    try:
+        ds = xr.open_dataset(archive)
+    except (OSError, ValueError) as exc:
+        raise ReplayError(f"{archive}: cannot read as an archive ({exc})") from None
+    with ds:
+        try:
+            rows = select_rows(ds, case_ids, where)
+        except ReplayError as exc:
+            raise ReplayError(f"{archive}: {exc}") from None
+        cases = archive_cases(ds, rows, directories=[archive.parent, Path.cwd()])
+        key = str(ds.attrs.get("study_key", ""))
+    if spawn:
+        spawn_viewer(cases, key=key, magnification=magnification)
+        return None, cases
+    path = write_recording(cases, output or default_output(archive), key=key,
+                           magnification=magnification)
+    return path, cases
+
+
+# -- reading back --------------------------------------------------------------------------------
+
+@dataclass
+class RecordedEntity:
+    """One entity of a recording as read back: timelines and components, rows in logging
+    order (rerun's row ids left out)."""
+
+    static: dict[str, list] = field(default_factory=dict)  # component → its static value
+    times: dict[str, np.ndarray] = field(default_factory=dict)  # timeline → (rows,) [ns]
+    columns: dict[str, list] = field(default_factory=dict)  # component → one value per row
+
+    def scalars(self, component: str = "Scalars:scalars") -> np.ndarray:
+        """(rows,) the one value each row holds."""
+        return np.array([row[0] for row in self.columns[component]], dtype=float)
+
+
+def read_recording(path: str | Path) -> dict[str, RecordedEntity]:
+    """Entity path → its data, from the first recording store of an ``.rrd`` file
+    (``rerun.chunk.RrdReader``)."""
+    from rerun.chunk import RrdReader
+
+    parts: dict[str, list] = {}
+    for chunk in RrdReader(path).store().stream():
+        rb = chunk.to_record_batch()
+        entity = rb.schema.metadata[b"rerun:entity_path"].decode().lstrip("/")
+        parts.setdefault(entity, []).append(rb)
+    out: dict[str, RecordedEntity] = {}
+    for entity, batches in sorted(parts.items()):
+        e = RecordedEntity()
+        rows: dict[tuple, list] = {}
+        for rb in batches:
+            kinds = {f.name: (f.metadata or {}).get(b"rerun:kind", b"").decode()
+                     for f in rb.schema}
+            index = tuple(sorted(n for n, k in kinds.items() if k == "index"))
+            data = [n for n, k in kinds.items() if k == "data"]
+            if not index:
+                for name in data:
+                    e.static[name] = rb.column(name).to_pylist()[-1]
+                continue
+            ids = rb.column("rerun.controls.RowId").to_pylist()
+            times = {n: np.asarray(rb.column(n).cast("int64")) for n in index}
+            values = {n: rb.column(n).to_pylist() for n in data}
+            rows.setdefault(index, []).extend(
+                (rid, {n: int(t[i]) for n, t in times.items()},
+                 {n: v[i] for n, v in values.items()}) for i, rid in enumerate(ids))
+        for index, items in rows.items():
+            items.sort(key=lambda item: item[0])
+            for name in index:
+                e.times[name] = np.array([t[name] for _, t, _ in items], dtype=np.int64)
+            names = dict.fromkeys(n for _, _, d in items for n in d)
+            for name in names:
+                e.columns[name] = [d.get(name) for _, _, d in items]
+        out[entity] = e
+    return out

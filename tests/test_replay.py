@@ -1,0 +1,250 @@
+"""`campipe replay` and a study's `replay:`: rerun recordings read back with RrdReader."""
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import xarray as xr
+from click.testing import CliRunner
+from numpy.testing import assert_allclose, assert_array_equal
+from study_helpers import STUDIES
+
+from campipe.cli import main
+from campipe.io.rerun_replay import NANOS, SERIES, nanos, read_recording
+from campipe.model import thesis_train
+from campipe.replay import sketch
+
+#: Two cases at 11000 rpm, two turns: no seat, and the valve seat at 0.1 in (it bounces).
+STUDY = ["--set", "run.revolutions=2", "--set", "sweep.speed=[11000 rpm]",
+         "--scheduler", "synchronous", "--no-progress"]
+SKETCH = {"cam", "pushrod", "rocker", "stem", "head", "spring", "retainer", "follower"}
+
+
+def invoke(*args):
+    return CliRunner().invoke(main, [str(a) for a in args])
+
+
+@pytest.fixture(scope="module")
+def archives(tmp_path_factory):
+    """(with q and the spec's replay selection, without q): the same two cases."""
+    folder = tmp_path_factory.mktemp("replay")
+    with_q, without_q = folder / "with-q.nc", folder / "without-q.nc"
+    out = invoke("study", STUDIES / "quickstart.yaml", "-o", with_q, *STUDY,
+                 "--set", "run.record=[q]", "--set", 'replay={where: "seat > 0"}')
+    assert out.exit_code == 0, out.output
+    assert f"replay 'seat > 0' recorded in {folder / 'with-q.rrd'}" in out.stderr
+    out = invoke("study", STUDIES / "quickstart.yaml", "-o", without_q, *STUDY)
+    assert out.exit_code == 0, out.output
+    return with_q, without_q
+
+
+@pytest.fixture(scope="module")
+def seated(archives):
+    """The case with the seat: its archive row and its recording read back."""
+    ds = xr.load_dataset(archives[0])
+    row = int(np.flatnonzero(ds["seat"].values > 0)[0])
+    out = invoke("replay", archives[0], "--case", ds["case_id"].values[row], "-o",
+                 archives[0].with_name("seated.rrd"))
+    assert out.exit_code == 0, out.output
+    assert out.stdout.strip() == str(archives[0].with_name("seated.rrd"))
+    return ds, row, read_recording(archives[0].with_name("seated.rrd"))
+
+
+def test_replay_holds_every_series_exactly_at_every_cam_angle(seated):
+    ds, row, rec = seated
+    root = f"cases/{ds['case_id'].values[row]}"
+    angle = ds["cam_angle"].values
+    assert angle.size == 721
+    for name, (path, label, factor, _) in SERIES.items():
+        e = rec[f"{root}/{path}"]
+        assert e.static["SeriesLines:names"] == [label]
+        # cam_angle: one nanosecond of the timeline per 1e-9 degree, the archive's own values
+        assert_array_equal(e.times["cam_angle"], np.round(angle * 1e9).astype(np.int64))
+        assert_array_equal(e.times["time"], nanos(ds["time"].values[row]))
+        # exactly the archive's values, in the display units (mm = m × 1000, N, 1–4)
+        assert_array_equal(e.scalars(), ds[name].values[row].astype(float) * factor)
+    assert SERIES["valve_lift"][1] == "valve lift [mm]" and SERIES["valve_lift"][2] == 1000.0
+    # the only timelines in the recording are the replay's own: no wall clock, no log tick
+    assert {t for e in rec.values() for t in e.times} == {"cam_angle", "time"}
+
+
+def test_replay_holds_the_events_at_their_angles(seated):
+    ds, row, rec = seated
+    n = int(ds["event_count"].values[row])
+    start = int(ds["event_count"].values[:row].sum())
+    ev = ds.isel(event=slice(start, start + n))
+    assert int(ds["seat_impacts"].values[row]) >= 2  # it bounces on its seat
+    e = rec[f"cases/{ds['case_id'].values[row]}/events"]
+    assert_array_equal(e.times["cam_angle"], nanos(ev["event_cam_angle"].values))
+    assert_array_equal(e.times["time"], nanos(ev["event_time"].values))
+    names = {1: "cam separation", 2: "cam impact", 3: "seat separation", 4: "seat impact"}
+    texts = [t[0] for t in e.columns["TextLog:text"]]
+    for text, kind, angle, velocity, impulse in zip(
+            texts, ev["event_kind"].values, ev["event_cam_angle"].values,
+            ev["event_velocity"].values, ev["event_impulse"].values, strict=True):
+        assert text.startswith(f"{names[kind]} at {angle:.4f}°")
+        assert f"velocity {velocity:.4g} m/s" in text
+        assert (f"impulse {impulse:.4g} N·s" in text) == (kind in (2, 4))
+    levels = [t[0] for t in e.columns["TextLog:level"]]
+    assert levels == ["WARN" if k in (2, 4) else "INFO" for k in ev["event_kind"].values]
+
+
+def test_replay_draws_the_mechanism_from_q(seated):
+    ds, row, rec = seated
+    root = f"cases/{ds['case_id'].values[row]}/sketch"
+    assert {k.removeprefix(root + "/") for k in rec if k.startswith(root)} == (
+        SKETCH | {"valve", "frame/seat", "frame/pivot", "frame/ground", "frame/spring_plate",
+                  "frame/note"})
+    geom = sketch.Geometry.from_train(thesis_train())
+    q = ds["q"].values[row]
+    seat_q7 = float(np.median(q[:, 6] - ds["valve_lift"].values[row]) + ds["seat"].values[row])
+    qd = sketch.displayed_coordinates(q, ds["cam_lift"].values[row],
+                                      ds["contact_state"].values[row], geom, 10.0, seat_q7)
+    for name, strips in sketch.moving_parts(qd, geom).items():
+        e = rec[f"{root}/{name}"]
+        assert len(e.columns["LineStrips2D:strips"]) == 721
+        drawn = np.array([s[0] for s in e.columns["LineStrips2D:strips"]])
+        assert_allclose(drawn, strips * 1000, rtol=1e-6, atol=1e-4)  # float32 millimetres
+    # the follower's dot: red while off the cam, and off it while the state says II or IV
+    colours = np.array([c[0] for c in rec[f"{root}/follower"].columns["Points2D:colors"]])
+    off = np.isin(ds["contact_state"].values[row], [2, 4])
+    assert off.sum() > 100
+    assert_array_equal(colours == colours[off][0], off)
+    # the cam turns clockwise: its outline at 90° is the outline at 0° turned by −90°
+    cam = rec[f"{root}/cam"].columns["LineStrips2D:strips"]
+    c = geom.cam_centre * 1000
+    p0, p90 = np.asarray(cam[0][0]) - c, np.asarray(cam[90][0]) - c
+    assert_allclose(p90, p0 @ np.array([[0.0, 1.0], [-1.0, 0.0]]).T, atol=2e-4)
+    doc = rec[f"cases/{ds['case_id'].values[row]}/parameters"].static["TextDocument:text"][0]
+    assert "| speed_rpm | 11000 | rpm |" in doc and "×10" in doc
+
+
+def test_blueprint_places_the_sketch_beside_the_plots(archives):
+    from rerun.chunk import RrdReader
+
+    reader = RrdReader(archives[0].with_name("seated.rrd"))
+    parts = {}
+    for chunk in reader.store(store=reader.blueprints()[0]).stream():
+        rb = chunk.to_record_batch()
+        parts[rb.schema.metadata[b"rerun:entity_path"].decode().lstrip("/")] = {
+            n: rb.column(n).to_pylist()[-1] for n in rb.schema.names}
+    views = {k: v for k, v in parts.items() if "ViewBlueprint:class_identifier" in v}
+    kind = {k: v["ViewBlueprint:class_identifier"][0] for k, v in views.items()}
+    origin = {k: v["ViewBlueprint:space_origin"][0] for k, v in views.items()}
+    (sketch_view,) = [k for k in views if kind[k] == "2D"]
+    assert origin[sketch_view].endswith("/sketch")
+    (row,) = [v for v in parts.values() if v.get("ContainerBlueprint:contents", [""])[0]
+              == sketch_view]
+    assert row["ContainerBlueprint:container_kind"] == [2]  # horizontal: side by side
+    beside = parts[row["ContainerBlueprint:contents"][1]]["ContainerBlueprint:contents"]
+    assert [origin[v].rsplit("/", 1)[-1] for v in beside if v in origin] == [
+        "lift", "force", "contact_state"]
+    assert parts["time_panel"]["TimePanelBlueprint:timeline"] == ["cam_angle"]
+
+
+def test_a_study_records_its_replay_selection_as_it_runs(archives):
+    """The study's own recording holds the same content as `campipe replay --where`."""
+    live = read_recording(archives[0].with_name("with-q.rrd"))
+    out = invoke("replay", archives[0], "--where", "seat > 0", "-o",
+                 archives[0].with_name("where.rrd"))
+    assert out.exit_code == 0, out.output
+    again = read_recording(archives[0].with_name("where.rrd"))
+    assert len({k.split("/")[1] for k in live if k.startswith("cases/")}) == 1
+    assert_same(live, again)
+
+
+def test_a_study_with_nothing_to_compute_records_its_selection_from_the_archive(archives):
+    """A rerun finds the archive up to date (no batch computed, no hook called); the recording
+    is made again from the archive, with the same content."""
+    path = archives[0].with_name("with-q.rrd")
+    first = read_recording(path)
+    path.unlink()
+    out = invoke("study", STUDIES / "quickstart.yaml", "-o", archives[0], *STUDY,
+                 "--set", "run.record=[q]", "--set", 'replay={where: "seat > 0"}')
+    assert out.exit_code == 0, out.output
+    assert "up to date" in out.stderr
+    assert_same(read_recording(path), first)
+
+
+def test_an_archive_without_q_replays_by_running_its_cases_again(archives, seated):
+    ds, row, rec = seated
+    out = invoke("replay", archives[1], "--case", ds["case_id"].values[row], "-o",
+                 archives[1].with_name("rerun.rrd"))
+    assert out.exit_code == 0, out.output
+    assert_same(read_recording(archives[1].with_name("rerun.rrd")), rec)
+
+
+def test_two_replays_of_an_archive_are_identical(archives):
+    from rerun.chunk import RrdReader
+
+    paths = [archives[0].with_name(f"twice-{i}.rrd") for i in range(2)]
+    for path in paths:
+        out = invoke("replay", archives[0], "--where", "speed_rpm == 11000", "-o", path)
+        assert out.exit_code == 0, out.output
+    a, b = (read_recording(p) for p in paths)
+    assert len({k.split("/")[1] for k in a if k.startswith("cases/")}) == 2
+    assert_same(a, b)
+    ids = [RrdReader(p).recordings()[0].recording_id for p in paths]
+    assert ids[0] == ids[1] and ids[0].startswith("campipe-")
+
+
+def test_where_selecting_nothing_writes_nothing(archives):
+    path = archives[0].with_name("nothing.rrd")
+    out = invoke("replay", archives[0], "--where", "speed_rpm > 20000", "-o", path)
+    assert out.exit_code == 1
+    assert "--where 'speed_rpm > 20000' selects none of the archive's 2 cases; nothing " \
+           "written" in out.output
+    assert not path.exists()
+    assert not list(path.parent.glob(".nothing.rrd*"))
+
+
+def test_missing_archive_unknown_case_and_bad_options_are_clear_errors(archives, tmp_path):
+    out = invoke("replay", tmp_path / "none.nc", "--case", "abc", "-o", tmp_path / "x.rrd")
+    assert out.exit_code == 1 and f"{tmp_path / 'none.nc'}: no such archive" in out.output
+    out = invoke("replay", archives[0], "--case", "0123456789abcdef", "-o", tmp_path / "x.rrd")
+    assert out.exit_code == 1
+    assert "--case 0123456789abcdef: no such case among the archive's 2 cases" in out.output
+    out = invoke("replay", archives[0], "--where", "__import__('os')", "-o", tmp_path / "x.rrd")
+    assert out.exit_code == 2 and "is not allowed" in out.output
+    out = invoke("replay", archives[0], "-o", tmp_path / "x.rrd")
+    assert out.exit_code == 2 and "give --case ID (repeatable) or --where EXPR" in out.output
+    out = invoke("replay", archives[0], "--where", "seat > 0", "--spawn", "-o", "x.rrd")
+    assert out.exit_code == 2 and "-o and --spawn exclude each other" in out.output
+    assert not list(tmp_path.glob("*.rrd"))
+
+
+def test_import_campipe_replay_does_not_import_rerun():
+    code = ("import sys, campipe, campipe.cli, campipe.replay.sketch, campipe.replay.cases, "
+            "campipe.replay.live; print('rerun' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True)
+    assert out.stdout.strip() == "False"
+
+
+def assert_same(a, b):
+    """Two recordings read back hold the same entities, timelines and values."""
+    assert sorted(a) == sorted(b)
+    for name in a:
+        x, y = a[name], b[name]
+        assert x.static == y.static, name
+        assert list(x.times) == list(y.times), name
+        for t in x.times:
+            assert_array_equal(x.times[t], y.times[t])
+        assert x.columns == y.columns, name
+    assert NANOS == 10**9
+
+
+@pytest.mark.slow
+def test_processes_scheduler_records_the_selection_from_the_archive(tmp_path):
+    """Worker processes cannot log into this process's recording: the cases come from the
+    finished archive instead, q computed again."""
+    out = invoke("study", STUDIES / "quickstart.yaml", "-o", tmp_path / "p.nc", *STUDY[:4],
+                 "--set", 'replay={where: "seat > 0"}', "--scheduler", "processes",
+                 "--workers", "2", "--no-progress")
+    assert out.exit_code == 0, out.output
+    rec = read_recording(tmp_path / "p.rrd")
+    ds = xr.load_dataset(tmp_path / "p.nc")
+    row = int(np.flatnonzero(ds["seat"].values > 0)[0])
+    valve = rec[f"cases/{ds['case_id'].values[row]}/lift/valve"].scalars()
+    assert_array_equal(valve, ds["valve_lift"].values[row] * 1000.0)
