@@ -214,6 +214,24 @@ def test_missing_archive_unknown_case_and_bad_options_are_clear_errors(archives,
     assert not list(tmp_path.glob("*.rrd"))
 
 
+def test_spawn_opens_the_viewer_with_the_blueprint_and_writes_no_file(archives, monkeypatch):
+    import rerun as rr
+
+    opened = {}
+
+    def spawn(self, *, default_blueprint=None, **kwargs):
+        opened["blueprint"] = default_blueprint
+        self.memory_recording()  # instead of a viewer: keep the data in memory
+
+    monkeypatch.setattr(rr.RecordingStream, "spawn", spawn)
+    before = sorted(archives[0].parent.iterdir())
+    out = invoke("replay", archives[0], "--where", "seat > 0", "--spawn")
+    assert out.exit_code == 0, out.output
+    assert out.stdout == "" and "campipe replay: 1 case" in out.stderr
+    assert opened["blueprint"] is not None
+    assert sorted(archives[0].parent.iterdir()) == before
+
+
 def test_import_campipe_replay_does_not_import_rerun():
     code = ("import sys, campipe, campipe.cli, campipe.replay.sketch, campipe.replay.cases, "
             "campipe.replay.live; print('rerun' in sys.modules)")
