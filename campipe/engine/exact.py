@@ -42,6 +42,7 @@ from campipe.engine.newmark import (
     TWO_PI,
     _config,
     _record,
+    horner2,
     locate,
     piece_eval,
 )
@@ -141,13 +142,7 @@ def _eval3(W, Wl, G, GT, lam, c, ci, m, ns, t_s, t, w, th0, ev):
         g += a.real
         dg += b.real
         d2g += (b * lam[c, ci, j]).real
-    p0 = 0.0
-    p1 = 0.0
-    p2 = 0.0
-    for k in range(7, -1, -1):
-        p2 = p2 * x + 2.0 * p1
-        p1 = p1 * x + p0
-        p0 = p0 * x + G[m, k]
+    p0, p1, p2 = horner2(G[m], x)
     g += p0
     dg += w * p1
     d2g += w * w * p2
@@ -317,6 +312,16 @@ def _write_sample(q_out, v_out, force_out, cam_out, cfg_out, c, k, q, v, gval, c
     force_out[c, k, 1] = -gval[1] if seat_held else 0.0
     cam_out[c, k] = lift
     cfg_out[c, k] = cfg
+
+
+@njit(cache=True, nogil=True)
+def _advance(E, Eabs, D, Dabs, act, nact, cth, sth, cwh, swh):
+    """One grid step: e^{λτ} of the active modes and (cos θ, sin θ) by rotation."""
+    for jj in range(nact):
+        j = act[jj]
+        E[j] *= D[j]
+        Eabs[j] *= Dabs[j]
+    return cth * cwh - sth * swh, sth * cwh + cth * swh
 
 
 @njit(cache=True, nogil=True)
@@ -620,11 +625,7 @@ def modal_exact_batch(
                         since_refresh = 0
                     else:
                         # Same step: E and (cos θ, sin θ) advance from the sample point.
-                        for jj in range(nact):
-                            j = act[jj]
-                            E[j] *= D[j]
-                            Eabs[j] *= Dabs[j]
-                        cth, sth = cth * cwh - sth * swh, sth * cwh + cth * swh
+                        cth, sth = _advance(E, Eabs, D, Dabs, act, nact, cth, sth, cwh, swh)
                     replan = False
                 if start_check:
                     # A monitor already above its level at the segment start (a contact that
@@ -820,11 +821,7 @@ def modal_exact_batch(
                         break
                     replan = True
                 else:
-                    for jj in range(nact):
-                        j = act[jj]
-                        E[j] *= D[j]
-                        Eabs[j] *= Dabs[j]
-                    cth, sth = cth * cwh - sth * swh, sth * cwh + cth * swh
+                    cth, sth = _advance(E, Eabs, D, Dabs, act, nact, cth, sth, cwh, swh)
             if stalled > MAX_STALLED_EVENTS:
                 status[c] = CHATTER
                 break

@@ -62,16 +62,23 @@ def locate(breaks, n_pieces, c, theta):
 
 
 @njit(cache=True, nogil=True)
-def piece_eval(breaks, poly, trig, c, piece, rev, theta):
-    """Lift [m] and its first two θ-derivatives on one piece, by Horner's scheme."""
-    x = theta - rev * TWO_PI - breaks[c, piece]
+def horner2(coef, x, deg=7):
+    """Σ_{k ≤ deg} coef[k]·x^k and its first two derivatives in x, by Horner's scheme."""
     p0 = 0.0
     p1 = 0.0
     p2 = 0.0
-    for k in range(7, -1, -1):
+    for k in range(deg, -1, -1):
         p2 = p2 * x + 2.0 * p1
         p1 = p1 * x + p0
-        p0 = p0 * x + poly[c, piece, k]
+        p0 = p0 * x + coef[k]
+    return p0, p1, p2
+
+
+@njit(cache=True, nogil=True)
+def piece_eval(breaks, poly, trig, c, piece, rev, theta):
+    """Lift [m] and its first two θ-derivatives on one piece."""
+    x = theta - rev * TWO_PI - breaks[c, piece]
+    p0, p1, p2 = horner2(poly[c, piece], x)
     s = np.sin(theta)
     co = np.cos(theta)
     a = trig[c, piece, 0]
@@ -238,13 +245,7 @@ def newmark_linear_batch(
                 rev = revn
                 pdeg = _degree(poly, c, p)
             x = th1 - rev * TWO_PI - breaks[c, p]
-            lift1 = 0.0
-            dl1 = 0.0
-            ddl1 = 0.0
-            for k in range(pdeg, -1, -1):
-                ddl1 = ddl1 * x + 2.0 * dl1
-                dl1 = dl1 * x + lift1
-                lift1 = lift1 * x + poly[c, p, k]
+            lift1, dl1, ddl1 = horner2(poly[c, p], x, pdeg)
             ta = trig[c, p, 0]
             tb = trig[c, p, 1]
             if ta != 0.0 or tb != 0.0:
