@@ -139,6 +139,7 @@ def test_quick_bench_writes_its_table_and_plot(tmp_path):
         rows = list(csv.DictReader(fh))
     expected = ([("modal-exact", f"tol {t:g} s") for t in QUICK.modal_tolerances]
                 + [("reduced", f"cutoff {c:.3g} rad/s") for c in QUICK.reduced_cutoffs]
+                + [("contacts only", "full")]
                 + [("newmark-linear", f"dt {dt * 1e6:g} µs") for dt in QUICK.newmark_steps]
                 + [("solve_ivp", f"Radau rtol {r:g}") for r in QUICK.ivp_rtols])
     assert [(r["family"], r["setting"]) for r in rows] == expected

@@ -118,21 +118,23 @@ def warm_up() -> None:
 
 
 def time_engine(scene: Scene, settings: RunSettings, max_copies: int, repeats: int,
-                batch_seconds: float = BATCH_SECONDS) -> tuple[float, Outcome, int]:
+                batch_seconds: float = BATCH_SECONDS,
+                full_state: bool = True) -> tuple[float, Outcome, int]:
     """Per-case wall time [s] of one setting, its outcome and the grid steps per case.
 
     An untimed single-case run first (it fills the engine's caches), which also sizes the
     timed batch: enough copies to last ``batch_seconds``, at most ``max_copies``.
+    ``full_state`` as ``run_batch``'s (False: only the contact coordinates are sampled).
     """
     settings = replace(settings, revolutions=scene.revolutions)
     t0 = time.perf_counter()
-    first = run_batch([scene.case], settings)
+    first = run_batch([scene.case], settings, full_state=full_state)
     single = time.perf_counter() - t0
     copies = int(np.clip(round(batch_seconds / max(single, 1e-6)), 1, max_copies))
     best = math.inf
     for _ in range(repeats):
         t0 = time.perf_counter()
-        run_batch([scene.case] * copies, settings)
+        run_batch([scene.case] * copies, settings, full_state=full_state)
         best = min(best, (time.perf_counter() - t0) / copies)
     return best, outcome_of_batch(first, 0, scene.case), int(first.steps[0])
 

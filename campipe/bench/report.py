@@ -71,14 +71,17 @@ def _clean(obj):
 
 
 def summary_rows(bench: Bench) -> list[list[str]]:
-    """Per scene: the default, the best reduced level, the thesis algorithm at 1 µs and the
-    solve_ivp peer's best point, with time and valve-lift error."""
+    """Per scene: the default, the fastest reduced level, the default with only the contact
+    coordinates sampled, the thesis algorithm at 1 µs and the solve_ivp peer's most accurate
+    point, with time and errors."""
     out = []
     for scene in dict.fromkeys(r["scene"] for r in bench.rows):
         mine = [r for r in bench.rows if r["scene"] == scene]
         picks = [next((r for r in mine if r.get("default")), None)]
         reduced = [r for r in mine if r["family"] == "reduced"]
         picks.append(min(reduced, key=lambda r: r["seconds"]) if reduced else None)
+        picks.append(next((r for r in mine if r["family"] == "contacts only"
+                           and r["setting"] == "full"), None))
         picks.append(next((r for r in mine if r.get("thesis")), None))
         ivp = [r for r in mine if r["family"] == "solve_ivp"]
         picks.append(min(ivp, key=lambda r: r["valve_lift"]) if ivp else None)
@@ -126,14 +129,16 @@ def markdown(bench: Bench, plot_name: str | None = FILES["plot"]) -> str:
           _num(c["seating_velocity"], 1 / INCH, ".2e"),
           _num(c["impact_velocity"], 1 / INCH, ".2e"), _num(c["seconds"], fmt=".1f")]
          for c in bench.checks])
-    lines += ["", "## Summary: default, best reduced level, thesis algorithm, solve_ivp", ""]
+    lines += ["", "## Summary: default, fastest reduced level, contacts only, thesis algorithm, "
+              "solve_ivp", ""]
     lines += _table(["scene", "method", "setting", "ms/case", "valve err [in]",
                      "sep. angle err [deg]", "seating vel. err [in/s]"], summary_rows(bench))
     lines += ["", "## Peers at equal valve-lift error", ""]
     lines.append("Time ratio = peer time / campipe time for the same valve-lift error, "
                  "interpolated on each method's time/error curve (log–log). *At the default's "
                  "error*: the time the peer would need to reach the default's error "
-                 "(extrapolated along its last two points where its ladder does not reach it). "
+                 "(extrapolated along the slope of its last three points where its ladder "
+                 "does not reach it). "
                  "*At the peer's point*: the thesis algorithm at 1 µs, or solve_ivp's most "
                  "accurate point, against the time campipe's modal-exact needs for that "
                  "error (its cheapest setting is an upper bound when it is already more "
@@ -173,6 +178,12 @@ def markdown(bench: Bench, plot_name: str | None = FILES["plot"]) -> str:
                f"{cheapest['seconds'] * 1e3:.3g} ms/case, error {cheapest['error'] / INCH:.2e}"
                f" in, {cheapest['steps']} steps" if cheapest else "; no ladder point meets it")
             + f". Ratio newmark/default: {_num(a['ratio'])}.")
+        if a.get("contacts_only_seconds"):
+            lines.append(
+                f"- default sampling only the contact coordinates (what a study that records "
+                f"no q or member loads runs): error {a['contacts_only_error'] / INCH:.2e} in "
+                f"in {a['contacts_only_seconds'] * 1e3:.3g} ms/case. Ratio newmark/that: "
+                f"{_num(a['ratio_contacts_only'])}.")
     if bench.throughput:
         lines += ["", "## Throughput: a 256-case batch (issue 3)", ""]
         lines += _table(
@@ -244,7 +255,8 @@ def plot(bench: Bench, path: Path) -> Path:
     nrow = math.ceil(len(scenes) / ncol)
     fig, axes = plt.subplots(nrow, ncol, figsize=(4.6 * ncol, 3.8 * nrow), squeeze=False)
     styles = {"modal-exact": ("C0", "o-"), "modal-exact capped": ("C9", "s:"),
-              "reduced": ("C2", "^--"), "newmark-linear": ("C3", "D-"),
+              "reduced": ("C2", "^--"), "contacts only": ("C4", "P"),
+              "newmark-linear": ("C3", "D-"),
               "solve_ivp": ("C1", "v-")}
     for ax, scene in zip(axes.flat, scenes, strict=False):
         mine = [r for r in bench.rows if r["scene"] == scene]

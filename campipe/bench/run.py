@@ -19,6 +19,7 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 
 from campipe.bench import fidelity, measure, scaling
+from campipe.bench.ivp import ChatterError
 from campipe.bench.suite import FULL, INCH, QUICK, Ladder, Scene, suite
 from campipe.engine import RunSettings
 
@@ -42,7 +43,14 @@ QUICK_SCALING_COUNTS = (1, 16, 256)
 FIDELITY_TOLERANCES = (1e-3 * INCH, 1e-5 * INCH)
 
 #: Families of rows: how each is labelled in the table and the plot.
-FAMILIES = ("modal-exact", "modal-exact capped", "reduced", "newmark-linear", "solve_ivp")
+FAMILIES = ("modal-exact", "modal-exact capped", "reduced", "contacts only",
+            "newmark-linear", "solve_ivp")
+
+
+#: The error columns of a run that failed.
+FAILED = {"valve_lift": math.nan, "events_match": False, "event_angle": math.nan,
+          "separation_angle": math.nan, "separation": math.nan, "seating_velocity": math.nan,
+          "impact_velocity": math.nan}
 
 
 @dataclass
@@ -88,16 +96,22 @@ def _meta(quick: bool, ladder: Ladder, scenes: Sequence[Scene]) -> dict:
     }
 
 
-def _settings_rows(ladder: Ladder) -> list[tuple[str, str, RunSettings]]:
-    rows = [("modal-exact", f"tol {t:g} s", RunSettings(tolerance=t))
+def _settings_rows(ladder: Ladder) -> list[tuple[str, str, RunSettings, bool]]:
+    """(family, label, settings, full_state) of every engine run of a scene."""
+    rows = [("modal-exact", f"tol {t:g} s", RunSettings(tolerance=t), True)
             for t in ladder.modal_tolerances]
-    rows += [("modal-exact capped", f"cap {c * 1e6:g} µs", RunSettings(dt=c))
+    rows += [("modal-exact capped", f"cap {c * 1e6:g} µs", RunSettings(dt=c), True)
              for c in ladder.modal_caps]
-    rows += [("reduced", f"cutoff {c:.3g} rad/s", RunSettings(fidelity="reduced",
-                                                                mode_cutoff=c))
+    rows += [("reduced", f"cutoff {c:.3g} rad/s",
+              RunSettings(fidelity="reduced", mode_cutoff=c), True)
              for c in ladder.reduced_cutoffs]
+    rows += [("contacts only", "full" if c is None else f"cutoff {c:.3g} rad/s",
+              RunSettings() if c is None else RunSettings(fidelity="reduced", mode_cutoff=c),
+              False)
+             for c in ladder.contacts_only]
     rows += [("newmark-linear", f"dt {dt * 1e6:g} µs",
-              RunSettings(integrator="newmark-linear", dt=dt)) for dt in ladder.newmark_steps]
+              RunSettings(integrator="newmark-linear", dt=dt), True)
+             for dt in ladder.newmark_steps]
     return rows
 
 
@@ -154,6 +168,8 @@ def _accuracy_for_cost(rows: list[dict]) -> dict:
     if not mine:
         return {}
     default = next(r for r in mine if r.get("default"))
+    lean = next((r for r in mine if r["family"] == "contacts only" and r["setting"] == "full"),
+                None)
     nm = [r for r in mine if r["family"] == "newmark-linear"]
     t_nm, how = measure.time_to_error([r["seconds"] for r in nm], [r["valve_lift"] for r in nm],
                                       ISSUE4_NEWMARK_ERROR)
@@ -170,6 +186,9 @@ def _accuracy_for_cost(rows: list[dict]) -> dict:
             "setting": cheapest["setting"], "seconds": cheapest["seconds"],
             "error": cheapest["valve_lift"], "steps": cheapest["cost"]},
         "ratio": t_nm / default["seconds"],
+        "contacts_only_seconds": lean and lean["seconds"],
+        "contacts_only_error": lean and lean["valve_lift"],
+        "ratio_contacts_only": lean and t_nm / lean["seconds"],
     }
 
 
@@ -234,20 +253,28 @@ def run_bench(
         bench.checks.append({"scene": scene.name, "agrees": check.agrees,
                              "seconds": check.seconds, **check.errors.as_dict()})
         say(f"{scene.name}: campipe and newmark-linear ladders")
-        for family, label, settings in _settings_rows(ladder):
+        for family, label, settings, full_state in _settings_rows(ladder):
             seconds, out, steps = measure.time_engine(scene, settings, ladder.copies,
-                                                      ladder.repeats)
+                                                      ladder.repeats, full_state=full_state)
             bench.rows.append(_row(
                 scene, family, label, seconds, steps, measure.errors(out, ref),
                 integrator=settings.method, fidelity=settings.fidelity,
-                default=_is_default(settings),
+                full_state=full_state, default=_is_default(settings) and full_state,
                 thesis=settings.method == "newmark-linear" and settings.dt == THESIS_STEP))
         say(f"{scene.name}: solve_ivp {ladder.ivp_method}")
         for rtol in ladder.ivp_rtols:
-            seconds, out, nfev = measure.time_ivp(scene, rtol, ladder.ivp_method,
-                                                  ladder.ivp_repeats)
-            bench.rows.append(_row(scene, "solve_ivp", f"{ladder.ivp_method} rtol {rtol:g}",
-                                   seconds, nfev, measure.errors(out, ref),
+            label = f"{ladder.ivp_method} rtol {rtol:g}"
+            try:
+                seconds, out, nfev = measure.time_ivp(scene, rtol, ladder.ivp_method,
+                                                      ladder.ivp_repeats)
+            except (ChatterError, RuntimeError) as exc:
+                log.warning("%s: solve_ivp %s failed: %s", scene.name, label, exc)
+                bench.rows.append({"scene": scene.name, "family": "solve_ivp",
+                                   "setting": label, "seconds": math.nan, "cost": 0,
+                                   "failed": str(exc), **FAILED})
+                continue
+            bench.rows.append(_row(scene, "solve_ivp", label, seconds, nfev,
+                                   measure.errors(out, ref),
                                    integrator=f"solve_ivp {ladder.ivp_method}",
                                    fidelity="full", default=False, thesis=False))
         bench.ratios += _ratios(scene.name, bench.rows)
@@ -268,7 +295,7 @@ def run_bench(
         say("throughput: 256 cases, newmark-linear and modal-exact")
         for integrator, workers in (("newmark-linear", 1), ("newmark-linear", 2),
                                     ("modal-exact", 2)):
-            tp = scaling.throughput(256, workers, integrator, repeats=2 if quick else 3)
+            tp = scaling.throughput(256, workers, integrator, repeats=2 if quick else 5)
             bench.throughput.append({**asdict(tp), "rate": tp.rate})
         counts = QUICK_SCALING_COUNTS if quick else SCALING_COUNTS
         say(f"scaling: engine on dask threads, {counts[0]}–{counts[-1]} cases")
