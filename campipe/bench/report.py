@@ -140,9 +140,9 @@ def markdown(bench: Bench, plot_name: str | None = FILES["plot"]) -> str:
                  "(extrapolated along the slope of its last three points where its ladder "
                  "does not reach it). "
                  "*At the peer's point*: the thesis algorithm at 1 µs, or solve_ivp's most "
-                 "accurate point, against the time campipe's modal-exact needs for that "
-                 "error (its cheapest setting is an upper bound when it is already more "
-                 "accurate).")
+                 "accurate point, against the time campipe's default integrator (full "
+                 "fidelity, any tolerance or step cap of its ladder) needs for that error (its "
+                 "cheapest setting is an upper bound when it is already more accurate).")
     lines.append("")
     lines += _table(
         ["scene", "peer", "default ms/case", "default err [in]", "peer time at default err",
@@ -162,7 +162,10 @@ def markdown(bench: Bench, plot_name: str | None = FILES["plot"]) -> str:
                 f"{_num(g['min_ratio_at_peer_error'])}× "
                 f"({'reached' if g['reached_at_peer_error'] else 'not reached'}); at the "
                 f"default's error {_num(g['min_ratio_at_default_error'])}× "
-                f"({'reached' if g['reached_at_default_error'] else 'not reached'}).")
+                f"({'reached' if g['reached_at_default_error'] else 'not reached'})."
+                + (f" campipe's ladder does not reach the peer's error on: "
+                   f"{', '.join(g['campipe_not_reaching'])}." if g["campipe_not_reaching"]
+                   else ""))
     a = bench.accuracy_for_cost
     if a:
         lines += ["", "## Accuracy for cost on 11000 rpm (issue 4)", ""]
