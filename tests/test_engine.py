@@ -249,3 +249,11 @@ def test_member_loads_at_static_equilibrium():
     assert_allclose(loads["stem_force"], 0.0, atol=1e-9)
     assert_allclose(abs(loads["rocker_moment"]),
                     loads["spring_force"] * TRAIN.rocker_valve_arm_length, rtol=1e-6)
+
+
+@pytest.mark.parametrize("method", INTEGRATORS)
+def test_smooth_profile_breaks_are_not_impacts(method):
+    """A polydyne's breaks join lift, velocity and acceleration continuously: no event."""
+    prof = polydyne("4567", INCH, *np.radians([90, 90, 90]))
+    res = run([Case(TRAIN, prof, rpm(9000), closure="form")], revolutions=2, integrator=method)
+    assert res.cam_impacts[0] == 0 and len(res.events[0]) == 0

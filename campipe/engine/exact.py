@@ -35,6 +35,7 @@ from campipe.engine.newmark import (
     CAM_IMPACT,
     CAM_SEPARATION,
     EVENTS_TRUNCATED,
+    JUMP_FLOOR,
     NONFINITE,
     OK,
     SEAT_IMPACT,
@@ -770,7 +771,7 @@ def modal_exact_batch(
                         v[6] = 0.0
                     if cam_held:
                         jump = w * (dl_right - dl_left)  # lift-rate jump [m/s]
-                        scale = 1e-9 * (abs(w * dl_left) + abs(w * dl_right) + 1e-12)
+                        scale = 1e-9 * (abs(w * dl_left) + abs(w * dl_right)) + JUMP_FLOOR
                         drop = l_right < l_left - 1e-12
                         q[0] = -l_left
                         v[0] = -w * dl_left

@@ -43,6 +43,9 @@ TWO_PI = 2.0 * np.pi
 FAST = {"contract", "reassoc", "nsz", "arcp"}
 #: Number of coordinates.
 NP = 7
+#: A profile break whose lift rate jumps by less than this [m/s] (beyond 1e-9 relative) is
+#: smooth: rounding in re-expanded polynomial pieces, not a velocity jump.
+JUMP_FLOOR = 1e-9
 
 
 @njit(cache=True, nogil=True)
@@ -224,7 +227,7 @@ def newmark_linear_batch(
                     l_left, dl_left, _ = piece_eval(breaks, poly, trig, c, p, rev, thb)
                     l_right, dl_right, _ = piece_eval(breaks, poly, trig, c, pn, revn, thb)
                     jump = w * (dl_right - dl_left)  # lift-rate jump [m/s]
-                    scale = 1e-9 * (abs(w * dl_left) + abs(w * dl_right) + 1e-12)
+                    scale = 1e-9 * (abs(w * dl_left) + abs(w * dl_right)) + JUMP_FLOOR
                     drop = l_right < l_left - 1e-12  # a step down in lift (the engine refuses up)
                     if (jump < -scale or drop) and not form[c]:
                         # The surface falls away: the follower keeps its velocity.
