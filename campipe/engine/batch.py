@@ -32,7 +32,7 @@ from campipe.model.assembly import (
     SystemMatrices,
     configuration_frequencies,
 )
-from campipe.profiles import Profile, evaluate, evaluate_packed, pack
+from campipe.profiles import Profile, evaluate_packed, pack
 
 log = logging.getLogger(__name__)
 
@@ -210,15 +210,21 @@ def visited_configurations(case: Case) -> tuple[int, ...]:
     return (1, 2, 3, 4) if case.has_seat else (1, 2)
 
 
+def _newmark_limit(case: Case) -> tuple[float, int]:
+    """newmark-linear's stability limit √12/ω_max [s] over the configurations a case can
+    visit (thesis Appendix B), and the configuration that sets it."""
+    omega_max = prepare(case.train, 0.0).omega_max
+    worst = max(visited_configurations(case), key=lambda c: omega_max[c - 1])
+    return float(NEWMARK_LINEAR_OMEGA_DT / omega_max[worst - 1]), worst
+
+
 def stability_limit(case: Case, integrator: str = "newmark-linear") -> float:
     """Largest step [s] the integrator accepts for a case, over the configurations it can
     visit: newmark-linear's stability limit √12/ω_max (thesis Appendix B); modal-exact has
     none (inf): it is exact between events and sizes its own steps."""
     if resolve_integrator(integrator) != "newmark-linear":
         return math.inf
-    omega_max = prepare(case.train, 0.0).omega_max
-    return float(min(NEWMARK_LINEAR_OMEGA_DT / omega_max[c - 1]
-                     for c in visited_configurations(case)))
+    return _newmark_limit(case)[0]
 
 
 def check_stability(cases: Sequence[Case], settings: RunSettings) -> None:
@@ -228,9 +234,7 @@ def check_stability(cases: Sequence[Case], settings: RunSettings) -> None:
         return
     dt_run = settings.step
     for i, case in enumerate(cases):
-        omega_max = prepare(case.train, 0.0).omega_max
-        worst = max(visited_configurations(case), key=lambda c: omega_max[c - 1])
-        limit = NEWMARK_LINEAR_OMEGA_DT / omega_max[worst - 1]
+        limit, worst = _newmark_limit(case)
         if dt_run >= limit:
             raise StabilityError(
                 f"run.dt: {dt_run * 1e6:.4g} µs is beyond the stability limit of "
@@ -240,21 +244,12 @@ def check_stability(cases: Sequence[Case], settings: RunSettings) -> None:
 
 
 def initial_state(case: Case, sm: SystemMatrices, seat_q: float):
-    """Quasi-static start at θ = 0 in configuration I (III where the valve starts on its seat)."""
-    lift, dlift, ddlift = (float(x[0]) for x in evaluate(case.profile, np.array([0.0])))
-    w = case.speed
-    held_q = np.zeros(7)
-    held_v = np.zeros(7)
-    held_a = np.zeros(7)
-    held_q[CAM], held_v[CAM], held_a[CAM] = -lift, -w * dlift, -w * w * ddlift
-    q, v, a = quasi_static_state(sm.mass, sm.damping, sm.stiffness, sm.preload, HELD[0],
-                                 held_q, held_v, held_a)
-    if case.has_seat and q[SEAT] < seat_q:
-        held_q[SEAT] = seat_q
-        q, v, a = quasi_static_state(sm.mass, sm.damping, sm.stiffness, sm.preload, HELD[2],
-                                     held_q, held_v, held_a)
-        return q, v, a, 3
-    return q, v, a, 1
+    """Quasi-static start of one case at θ = 0: (q, v, a, configuration); see
+    ``initial_states``."""
+    q, v, a, cfg = initial_states([sm], np.zeros(1, np.int64), pack([case.profile]),
+                                  np.array([case.speed]), np.array([case.has_seat]),
+                                  np.array([seat_q]))
+    return q[0], v[0], a[0], int(cfg[0])
 
 
 def _unique_trains(cases: Sequence[Case]) -> tuple[list[ValveTrain], np.ndarray]:
@@ -275,9 +270,10 @@ def _cam_at(breaks, poly, trig, n_pieces, theta):
     return out
 
 
-def initial_states(preps, which, packed, omega, has_seat, seat_q):
-    """Quasi-static start of every case at θ = 0 (see ``initial_state``): configuration I, or
-    III where the valve starts on its seat."""
+def initial_states(mats, which, packed, omega, has_seat, seat_q):
+    """Quasi-static start of every case at θ = 0 (thesis Appendix B, step 1): configuration
+    I, or III where the valve starts on its seat. ``mats``: the distinct trains' matrices,
+    ``which`` each case's index into them."""
     n = which.size
     cam = _cam_at(packed.breaks, packed.poly, packed.trig, packed.n_pieces, 0.0)
     held_q = np.zeros((n, 7))
@@ -287,7 +283,6 @@ def initial_states(preps, which, packed, omega, has_seat, seat_q):
     held_v[:, CAM] = -omega * cam[:, 1]
     held_a[:, CAM] = -omega**2 * cam[:, 2]
     held_q[:, SEAT] = seat_q
-    mats = [p.matrices for p in preps]
     M = np.stack([m.mass for m in mats])[which]
     C = np.stack([m.damping for m in mats])[which]
     K = np.stack([m.stiffness for m in mats])[which]
@@ -458,7 +453,8 @@ def run_batch(
     omega = np.array([c.speed for c in cases], dtype=float)
     form = np.array([c.closure == "form" for c in cases], dtype=np.bool_)
     packed = pack([c.profile for c in cases])
-    q0, v0, a0, cfg0 = initial_states(preps, which, packed, omega, has_seat, seat_q)
+    q0, v0, a0, cfg0 = initial_states([p.matrices for p in preps], which, packed, omega,
+                                      has_seat, seat_q)
     out = _Outputs(n, n_out, n_rev, settings.max_events)
     common = (meff, q0, v0, a0, cfg0, seat_q, has_seat, form, omega, packed, out)
     if settings.method == "newmark-linear":

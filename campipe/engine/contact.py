@@ -19,11 +19,6 @@ HELD = np.array(
 )
 
 
-def configuration(cam: bool, seat: bool) -> int:
-    """The configuration number (1–4) for the contacts that hold."""
-    return {(True, False): 1, (False, False): 2, (True, True): 3, (False, True): 4}[(cam, seat)]
-
-
 def effective_mass_inverses(mass, damping, stiffness, dt: float) -> np.ndarray:
     """(4, 7, 7): inverse of M + Δt/2·C + Δt²/6·K over each configuration's free coordinates,
     zero in the held rows and columns (thesis Eq. 67, partitioned as in Appendix A)."""
@@ -65,7 +60,7 @@ def quasi_static_state(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The static solution for the held coordinates' position, moving with the velocity that
     solution has for their velocity; accelerations from the equation of motion (thesis
-    Appendix B, step 1).
+    Appendix B, step 1). One case of ``quasi_static_batch``.
 
     Parameters
     ----------
@@ -74,18 +69,12 @@ def quasi_static_state(
     held_q, held_v, held_a : (7,) float
         Their displacement [m], velocity [m/s] and acceleration [m/s²] (other entries ignored).
     """
-    free = np.flatnonzero(~held)
-    fixed = np.flatnonzero(held)
-    q = np.where(held, held_q, 0.0)
-    v = np.where(held, held_v, 0.0)
-    a = np.where(held, held_a, 0.0)
-    kff = stiffness[np.ix_(free, free)]
-    q[free] = np.linalg.solve(kff, load[free] - stiffness[np.ix_(free, fixed)] @ q[fixed])
-    v[free] = np.linalg.solve(kff, -stiffness[np.ix_(free, fixed)] @ v[fixed])
-    rhs = load - stiffness @ q - damping @ v - mass[:, fixed] @ a[fixed]
-    a[free] = np.linalg.solve(mass[np.ix_(free, free)], rhs[free])
-    return q, v, a
-
+    kinv, minv = held_inverses(mass, stiffness, held)
+    q, v, a = (np.empty((1, 7)) for _ in range(3))
+    quasi_static_batch(kinv[None], minv[None], mass[None], damping[None], stiffness[None],
+                       load[None], np.asarray(held)[None], np.asarray(held_q)[None],
+                       np.asarray(held_v)[None], np.asarray(held_a)[None], q, v, a)
+    return q[0], v[0], a[0]
 
 
 def held_inverses(mass, stiffness, held) -> tuple[np.ndarray, np.ndarray]:
