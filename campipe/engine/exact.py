@@ -97,24 +97,6 @@ def _held_inputs(poly, trig, c, p, w, seat_q, cam_held, seat_held, inp, inp_t):
 
 
 @njit(cache=True, nogil=True)
-def _modal_sum(W, m, ev, ns):
-    """Re Σ_j W_mj·ev_j."""
-    acc = 0.0
-    for j in range(ns):
-        acc += W[m, j].real * ev[j].real - W[m, j].imag * ev[j].imag
-    return acc
-
-
-@njit(cache=True, nogil=True)
-def _monitor(W, G, GT, m, ev, ns, x, th):
-    """Monitor m at local angle x, cam angle θ, with ev_j = e^{λ_j τ}."""
-    g = _modal_sum(W, m, ev, ns) + _horner(G[m], x)
-    if GT[m] != 0.0:
-        g += GT[m].real * np.cos(th) - GT[m].imag * np.sin(th)
-    return g
-
-
-@njit(cache=True, nogil=True)
 def _exps(lam, c, ci, ns, tau, ev):
     for j in range(ns):
         ev[j] = np.exp(lam[c, ci, j] * tau)
@@ -515,10 +497,8 @@ def modal_exact_batch(
                             gdeg = max(gdeg, k)
                     for j in range(ns):
                         Wl[m, j] = W[m, j] * lam[c, ci, j]
-                    dprev[m] = _eval(True, W, Wl, G, GT, lam, c, ci, m, ns, t_s, t_s, w, th0,
-                                     ev)
-                    gval[m] = _eval(False, W, Wl, G, GT, lam, c, ci, m, ns, t_s, t_s, w, th0,
-                                    ev)
+                    gval[m], dprev[m], _ = _eval3(W, Wl, G, GT, lam, c, ci, m, ns, t_s, t_s, w,
+                                                  th0, ev)
                     gprev[m] = gval[m]
             # The segment ends at the next break of the profile at the latest.
             nb = p + 1
@@ -548,10 +528,7 @@ def modal_exact_batch(
                     nact -= 1
             if k_out < n_out and k_out * t_sample <= t_s * (1.0 + 1e-13):
                 # A sample due at the segment start (the initial state, or a break or event
-                # that falls on an output angle) is the state here.
-                for m in range(2):
-                    if ready[m]:
-                        gval[m] = _monitor(W, G, GT, m, E, ns, x_s, th_s)
+                # that falls on an output angle) is the state here (gval holds its monitors).
                 _write_sample(q_out, v_out, force_out, cam_out, cfg_out, c, k_out, q, v, gval,
                               cam_held, seat_held, poly, trig, p, x_s, ct, st, w, cfg)
                 k_out += 1
