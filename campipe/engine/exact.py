@@ -611,10 +611,8 @@ def modal_exact_batch(
                     start_check = False
                     first = -1
                     for m in range(2):
-                        if watch[m] and first < 0:
-                            if _eval(False, W, Wl, G, GT, lam, c, ci, m, ns, t_s, t_s, w, th0,
-                                     ev) > level[m]:
-                                first = m
+                        if watch[m] and first < 0 and gval[m] > level[m]:
+                            first = m  # gval still holds the values at the segment start
                     if first < 0:
                         continue
                     t_ev = t_s
