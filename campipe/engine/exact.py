@@ -35,6 +35,7 @@ from campipe.engine.newmark import (
     CAM_IMPACT,
     CAM_SEPARATION,
     EVENTS_TRUNCATED,
+    FAST,
     JUMP_FLOOR,
     NONFINITE,
     OK,
@@ -96,35 +97,36 @@ def _held_inputs(poly, trig, c, p, w, seat_q, cam_held, seat_held, inp, inp_t):
 
 
 
+# Rows of the per-mode work array ``MC`` (one column per active mode pair, fastest first):
+# e^{λτ} at the current grid point (real, imaginary), the grid step's factor e^{λh}, their
+# magnitudes, and the pair's largest share of a coordinate or velocity and of the contact
+# forces at the segment start.
+ER, EI, DR, DI, EABS, DABS, AMP_Q, AMP_F = range(8)
+# Rows of the monitor coefficients ``WC`` (row, monitor, pair): W, W·λ, W·λ² as (real,
+# imaginary), then |W| and |W·λ|.
+W_R, W_I, WL_R, WL_I, WLL_R, WLL_I, W_ABS, WL_ABS = range(8)
+
+
 @njit(cache=True, nogil=True)
 def _exps(lam, c, ci, ns, tau, ev):
     for j in range(ns):
         ev[j] = np.exp(lam[c, ci, j] * tau)
 
 
-@njit(cache=True, nogil=True)
-def _eval(deriv, W, Wl, G, GT, lam, c, ci, m, ns, t_s, t, w, th0, ev):
-    """Monitor m (deriv False) or its time derivative (deriv True) at time t, exactly."""
-    g, dg, d2g = _eval3(W, Wl, G, GT, lam, c, ci, m, ns, t_s, t, w, th0, ev)
-    return dg if deriv else g
-
-
-@njit(cache=True, nogil=True)
-def _eval3(W, Wl, G, GT, lam, c, ci, m, ns, t_s, t, w, th0, ev):
-    """Monitor m and its first two time derivatives at time t, exactly (one set of
-    exponentials)."""
-    _exps(lam, c, ci, ns, t - t_s, ev)
-    x = w * t - th0
-    th = w * t
+@njit(cache=True, nogil=True, fastmath=FAST)
+def _eval3(WC, lamc, nact, G, GT, m, tau, w, x, th):
+    """Monitor m and its first two time derivatives τ after the segment start (local angle x,
+    cam angle θ), exactly: the active mode pairs, the polynomial and the harmonic part."""
     g = 0.0
     dg = 0.0
     d2g = 0.0
-    for j in range(ns):
-        a = W[m, j] * ev[j]
-        b = Wl[m, j] * ev[j]
-        g += a.real
-        dg += b.real
-        d2g += (b * lam[c, ci, j]).real
+    for jj in range(nact):
+        e = np.exp(lamc[jj] * tau)
+        er = e.real
+        ei = e.imag
+        g += WC[W_R, m, jj] * er - WC[W_I, m, jj] * ei
+        dg += WC[WL_R, m, jj] * er - WC[WL_I, m, jj] * ei
+        d2g += WC[WLL_R, m, jj] * er - WC[WLL_I, m, jj] * ei
     p0, p1, p2 = horner2(G[m], x)
     g += p0
     dg += w * p1
@@ -139,8 +141,15 @@ def _eval3(W, Wl, G, GT, lam, c, ci, m, ns, t_s, t, w, th0, ev):
 
 
 @njit(cache=True, nogil=True)
-def _root(deriv, sgn, W, Wl, G, GT, lam, c, ci, m, ns, t_s, ta, tb, level, w, th0,
-          tolerance, ev):
+def _at(deriv, WC, lamc, nact, G, GT, m, t_s, t, w, th0):
+    """Monitor m (deriv False) or its time derivative (deriv True) at time t, and the next
+    derivative."""
+    g, dg, d2g = _eval3(WC, lamc, nact, G, GT, m, t - t_s, w, w * t - th0, w * t)
+    return (dg, d2g) if deriv else (g, dg)
+
+
+@njit(cache=True, nogil=True)
+def _root(deriv, sgn, WC, lamc, nact, G, GT, m, t_s, ta, tb, level, w, th0, tolerance):
     """Time in [ta, tb] where f = sgn·(monitor − level) (or, with deriv, sgn·its derivative)
     rises through zero: Newton steps from the latest point, kept inside the bracket, with
     Illinois (regula falsi) and bisection as fall-backs. Returns the bracket's left end once
@@ -148,16 +157,16 @@ def _root(deriv, sgn, W, Wl, G, GT, lam, c, ci, m, ns, t_s, ta, tb, level, w, th
     (no penetration, no tension beyond ``level``), or its right end if the left one is the
     segment start.
     """
-    g, dg, d2g = _eval3(W, Wl, G, GT, lam, c, ci, m, ns, t_s, ta, w, th0, ev)
-    fa = sgn * ((dg if deriv else g) - (0.0 if deriv else level))
+    lev = 0.0 if deriv else level
+    f, _ = _at(deriv, WC, lamc, nact, G, GT, m, t_s, ta, w, th0)
+    fa = sgn * (f - lev)
     if fa > 0.0:
         return ta
-    g, dg, d2g = _eval3(W, Wl, G, GT, lam, c, ci, m, ns, t_s, tb, w, th0, ev)
-    fb = sgn * ((dg if deriv else g) - (0.0 if deriv else level))
-    dfb = sgn * (d2g if deriv else dg)
+    f, df = _at(deriv, WC, lamc, nact, G, GT, m, t_s, tb, w, th0)
+    fb = sgn * (f - lev)
     t_last = tb
     f_last = fb
-    df_last = dfb
+    df_last = sgn * df
     side = 0
     converged = False
     for _ in range(ROOT_ITERATIONS):
@@ -176,9 +185,9 @@ def _root(deriv, sgn, W, Wl, G, GT, lam, c, ci, m, ns, t_s, ta, tb, level, w, th
                 t = (ta * fb - tb * fa) / (fb - fa)
                 if not (ta < t < tb):
                     t = 0.5 * (ta + tb)
-        g, dg, d2g = _eval3(W, Wl, G, GT, lam, c, ci, m, ns, t_s, t, w, th0, ev)
-        f = sgn * ((dg if deriv else g) - (0.0 if deriv else level))
-        df = sgn * (d2g if deriv else dg)
+        f, df = _at(deriv, WC, lamc, nact, G, GT, m, t_s, t, w, th0)
+        f = sgn * (f - lev)
+        df = sgn * df
         if f > 0.0:
             tb = t
             fb = f
@@ -202,8 +211,8 @@ def _root(deriv, sgn, W, Wl, G, GT, lam, c, ci, m, ns, t_s, ta, tb, level, w, th
 @njit(cache=True, nogil=True)
 def _state(q, v, z, ya, vec, ev, y0, Z, ZT, free, c, ci, nf, ns, x, ct, st, rows, deg):
     """Free coordinates at local angle x, cam angle θ (ct = cos θ, st = sin θ), with
-    ev_j = e^{λ_j τ}: the first ``rows`` entries of z (nf: positions only; ns: positions and
-    velocities), then q, v."""
+    ev_j = e^{λ_j τ}, from every mode: the first ``rows`` entries of z (nf: positions only;
+    ns: positions and velocities), then q, v."""
     for j in range(ns):
         ya[j] = y0[j] * ev[j]
     for s in range(rows):
@@ -217,49 +226,40 @@ def _state(q, v, z, ya, vec, ev, y0, Z, ZT, free, c, ci, nf, ns, x, ct, st, rows
             v[free[c, ci, k]] = z[nf + k]
 
 
-@njit(cache=True, nogil=True)
-def _modal_sum_active(W, m, E, act, nact):
-    """Re Σ_j W_mj·E_j over the active modes."""
-    acc = 0.0
-    for jj in range(nact):
-        j = act[jj]
-        acc += W[m, j].real * E[j].real - W[m, j].imag * E[j].imag
-    return acc
-
-
-@njit(cache=True, nogil=True)
-def _state_active(q, v, z, VY, E, Z, ZT, free, c, ci, nf, ns, act, nact, x, ct, st, deg,
+@njit(cache=True, nogil=True, fastmath=FAST)
+def _state_active(q, v, VY, MC, Z, ZT, free, c, ci, nf, lo, nact, x, ct, st, deg,
                   full_state):
-    """Free coordinates and velocities from the active modes (an output sample); VY holds
-    V_sj·y0_j, so each term is the real part of one complex product. Without
-    ``full_state`` only the contact coordinates q1 and q7 (and their velocities) are
-    computed: the others are left NaN."""
+    """Free coordinates and velocities from the active mode pairs (an output sample); VY
+    holds (Re, Im) of V_sj·y0_j (doubled for a pair), so each term is the real part of one
+    complex product. Without ``full_state`` only the contact coordinates q1 and q7 (and
+    their velocities) are computed: the others are left NaN."""
     for k in range(nf):
         coord = free[c, ci, k]
         if not full_state and coord != 0 and coord != 6:
             q[coord] = np.nan
             v[coord] = np.nan
             continue
-        for s in (k, nf + k):
+        for r in range(2):
+            s = k + r * nf
             acc = 0.0
-            for jj in range(nact):
-                j = act[jj]
-                acc += VY[s, j].real * E[j].real - VY[s, j].imag * E[j].imag
-            z[s] = acc + _horner(Z[:, s], x, deg) + ZT[s].real * ct - ZT[s].imag * st
-        q[coord] = z[k]
-        v[coord] = z[nf + k]
+            for jj in range(lo, nact):
+                acc += VY[0, s, jj] * MC[ER, jj] - VY[1, s, jj] * MC[EI, jj]
+            val = acc + _horner(Z[:, s], x, deg) + ZT[s].real * ct - ZT[s].imag * st
+            if r == 0:
+                q[coord] = val
+            else:
+                v[coord] = val
 
 
-@njit(cache=True, nogil=True)
-def _slope_bound(Wl, G, GT, m, Eabs, act, nact, gdeg, w, xa, xb):
+@njit(cache=True, nogil=True, fastmath=FAST)
+def _slope_bound(WC, G, GT, m, MC, lo, nact, gdeg, w, xa, xb):
     """An upper bound on |dg/dt| of monitor m over a step from local angle xa to xb, with the
-    modal magnitudes Eabs at its start (they only decay): Σ|W_j λ_j||E_j| + max|P'| + ω|G_T|.
+    modal magnitudes at its start (they only decay): Σ|W_j λ_j||E_j| + max|P'| + ω|G_T|.
     The polynomial part is bounded by its derivative's values at the ends plus its second
     derivative's, which is ample for a step of at most one output interval."""
     bound = 0.0
-    for jj in range(nact):
-        j = act[jj]
-        bound += abs(Wl[m, j]) * Eabs[j]
+    for jj in range(lo, nact):
+        bound += WC[WL_ABS, m, jj] * MC[EABS, jj]
     pa = 0.0
     pb = 0.0
     p2 = 0.0
@@ -297,14 +297,53 @@ def _write_sample(q_out, v_out, force_out, cam_out, cfg_out, c, k, q, v, gval, c
     cfg_out[c, k] = cfg
 
 
-@njit(cache=True, nogil=True)
-def _advance(E, Eabs, D, Dabs, act, nact, cth, sth, cwh, swh):
-    """One grid step: e^{λτ} of the active modes and (cos θ, sin θ) by rotation."""
-    for jj in range(nact):
-        j = act[jj]
-        E[j] *= D[j]
-        Eabs[j] *= Dabs[j]
+@njit(cache=True, nogil=True, fastmath=FAST)
+def _advance(MC, lo, nact, cth, sth, cwh, swh):
+    """One grid step: e^{λτ} of the mode pairs lo … nact − 1 and (cos θ, sin θ) by
+    rotation."""
+    for jj in range(lo, nact):
+        er = MC[ER, jj]
+        ei = MC[EI, jj]
+        MC[ER, jj] = er * MC[DR, jj] - ei * MC[DI, jj]
+        MC[EI, jj] = er * MC[DI, jj] + ei * MC[DR, jj]
+        MC[EABS, jj] *= MC[DABS, jj]
     return cth * cwh - sth * swh, sth * cwh + cth * swh
+
+
+@njit(cache=True, nogil=True, fastmath=FAST)
+def _monitor_at_grid(WC, MC, lo, nact, G, GT, m, gdeg, w, x, cth, sth):
+    """Monitor m and its time derivative at the current grid point from the mode pairs
+    lo … nact − 1 and their advanced exponentials (no exp or sin/cos)."""
+    g = 0.0
+    dg = 0.0
+    for jj in range(lo, nact):
+        er = MC[ER, jj]
+        ei = MC[EI, jj]
+        g += WC[W_R, m, jj] * er - WC[W_I, m, jj] * ei
+        dg += WC[WL_R, m, jj] * er - WC[WL_I, m, jj] * ei
+    p0 = 0.0
+    p1 = 0.0
+    for k in range(gdeg, -1, -1):
+        p1 = p1 * x + p0
+        p0 = p0 * x + G[m, k]
+    g += p0 + GT[m].real * cth - GT[m].imag * sth
+    dg += w * (p1 - GT[m].real * sth - GT[m].imag * cth)
+    return g, dg
+
+
+@njit(cache=True, nogil=True)
+def _keep_column(MC, WC, VY, lamc, act, ns, src, dst):
+    """Move mode pair ``src``'s data to column ``dst`` (dropping the pairs between)."""
+    act[dst] = act[src]
+    lamc[dst] = lamc[src]
+    for r in range(MC.shape[0]):
+        MC[r, dst] = MC[r, src]
+    for r in range(WC.shape[0]):
+        for m in range(2):
+            WC[r, m, dst] = WC[r, m, src]
+    for s in range(ns):
+        VY[0, s, dst] = VY[0, s, src]
+        VY[1, s, dst] = VY[1, s, src]
 
 
 @njit(cache=True, nogil=True)
@@ -347,16 +386,17 @@ def modal_exact_batch(
     ZT = np.zeros(NS, np.complex128)
     bpoly = np.zeros((8, NS))
     y0 = np.zeros(NS, np.complex128)
-    E = np.zeros(NS, np.complex128)
-    D = np.zeros(NS, np.complex128)
     ev = np.zeros(NS, np.complex128)
     ya = np.zeros(NS, np.complex128)
     W = np.zeros((2, NS), np.complex128)
-    Wl = np.zeros((2, NS), np.complex128)
-    Wabs = np.zeros((2, NS))
-    VY = np.zeros((NS, NS), np.complex128)
-    Eabs = np.zeros(NS)
-    Dabs = np.zeros(NS)
+    order = np.zeros(NS, np.int64)  # the modes, fastest first
+    # The active mode pairs, fastest first (column jj): the mode index, λ, per-mode work
+    # (rows ER … AMP_F), monitor coefficients (rows W_R … WL_ABS), and (Re, Im) of V_sj·y0_j.
+    act = np.zeros(NS, np.int64)
+    lamc = np.zeros(NS, np.complex128)
+    MC = np.zeros((8, NS))
+    WC = np.zeros((8, 2, NS))
+    VY = np.zeros((2, NS, NS))
     dval = np.zeros(2)
     dprev = np.zeros(2)
     gprev = np.zeros(2)
@@ -368,7 +408,6 @@ def modal_exact_batch(
     gval = np.zeros(2)
     inp = np.zeros((3, 2, 8))
     inp_t = np.zeros((3, 2), np.complex128)
-    act = np.zeros(NS, np.int64)
     for c in range(n_cases):
         w = omega[c]
         t_sample = t_sample_all[c]
@@ -436,9 +475,6 @@ def modal_exact_batch(
                 for s in range(ns):
                     acc_c += vec_inv[c, ci, j, s] * zh[s]
                 y0[j] = acc_c
-            for s in range(ns):
-                for j in range(ns):
-                    VY[s, j] = vec[c, ci, s, j] * y0[j]
             # Monitors: g_m(τ) = Re Σ_j W_mj e^{λ_j τ} + Σ_k G_mk x^k + Re(GT_m e^{iθ}).
             ready[0] = True
             watch[0] = not (cam_held and form[c])
@@ -488,18 +524,12 @@ def modal_exact_batch(
                         GT[m] += trig[c, p, 1] - 1j * trig[c, p, 0]
                     else:
                         G[m, 0] += qs
-            mon_trig = (ready[0] and GT[0] != 0.0) or (ready[1] and GT[1] != 0.0)
             gdeg = 0
             for m in range(2):
                 if ready[m]:
                     for k in range(8):
                         if G[m, k] != 0.0:
                             gdeg = max(gdeg, k)
-                    for j in range(ns):
-                        Wl[m, j] = W[m, j] * lam[c, ci, j]
-                    gval[m], dprev[m], _ = _eval3(W, Wl, G, GT, lam, c, ci, m, ns, t_s, t_s, w,
-                                                  th0, ev)
-                    gprev[m] = gval[m]
             # The segment ends at the next break of the profile at the latest.
             nb = p + 1
             revb = rev
@@ -507,25 +537,58 @@ def modal_exact_batch(
                 nb = 0
                 revb = rev + 1
             t_break = (revb * TWO_PI + breaks[c, nb]) / w
+            # The modes, fastest first (insertion sort; ns ≤ 14).
             for j in range(ns):
-                E[j] = 1.0
-                Eabs[j] = 1.0
-                for m in range(2):
-                    Wabs[m, j] = abs(W[m, j])
-                # Fastest mode first (insertion sort; ns ≤ 14).
                 k = j
-                while k > 0 and lam_abs[c, ci, act[k - 1]] < lam_abs[c, ci, j]:
-                    act[k] = act[k - 1]
+                while k > 0 and lam_abs[c, ci, order[k - 1]] < lam_abs[c, ci, j]:
+                    order[k] = order[k - 1]
                     k -= 1
-                act[k] = j
-            nact = ns
-            if mode_cutoff > 0.0:
-                # Reduced fidelity: the modes above the cut-off keep only their quasi-static
-                # part (inside the particular solution); their free vibration is dropped.
-                while nact > 0 and lam_abs[c, ci, act[0]] > mode_cutoff:
-                    for kk in range(nact - 1):
-                        act[kk] = act[kk + 1]
-                    nact -= 1
+                order[k] = j
+            # The modes in conjugate pairs (a real state has conjugate modal coordinates):
+            # one column per pair, its coefficients doubled, so every sum is Re Σ over half
+            # the modes. Reduced fidelity leaves the pairs above the cut-off (the first
+            # ``lo`` columns) out of the grid, the samples and the step size: there they keep
+            # only their quasi-static part (inside the particular solution). Event location
+            # and the state at events use every pair.
+            nact = 0
+            lo = 0
+            for jj in range(ns):
+                j = order[jj]
+                lj = lam[c, ci, j]
+                if lj.imag < 0.0:
+                    continue
+                if mode_cutoff > 0.0 and lam_abs[c, ci, j] > mode_cutoff:
+                    lo += 1
+                f = 2.0 if lj.imag > 0.0 else 1.0
+                act[nact] = j
+                lamc[nact] = lj
+                ya_abs = f * abs(y0[j])
+                MC[ER, nact] = 1.0
+                MC[EI, nact] = 0.0
+                MC[EABS, nact] = 1.0
+                MC[AMP_Q, nact] = ya_abs * vnorm[c, ci, j]
+                MC[AMP_F, nact] = ya_abs * (abs(rho_vec[c, ci, 0, j]) + abs(rho_vec[c, ci, 1, j]))
+                for m in range(2):
+                    wv = f * W[m, j] if ready[m] else 0.0j
+                    wl = wv * lj
+                    wll = wl * lj
+                    WC[W_R, m, nact] = wv.real
+                    WC[W_I, m, nact] = wv.imag
+                    WC[WL_R, m, nact] = wl.real
+                    WC[WL_I, m, nact] = wl.imag
+                    WC[WLL_R, m, nact] = wll.real
+                    WC[WLL_I, m, nact] = wll.imag
+                    WC[W_ABS, m, nact] = abs(wv)
+                    WC[WL_ABS, m, nact] = abs(wl)
+                for s2 in range(ns):
+                    vy = f * vec[c, ci, s2, j] * y0[j]
+                    VY[0, s2, nact] = vy.real
+                    VY[1, s2, nact] = vy.imag
+                nact += 1
+            for m in range(2):
+                if ready[m]:
+                    gval[m], dprev[m], _ = _eval3(WC, lamc, nact, G, GT, m, 0.0, w, x_s, th_s)
+                    gprev[m] = gval[m]
             if k_out < n_out and k_out * t_sample <= t_s * (1.0 + 1e-13):
                 # A sample due at the segment start (the initial state, or a break or event
                 # that falls on an output angle) is the state here (gval holds its monitors).
@@ -541,20 +604,19 @@ def modal_exact_batch(
             # ---- walk: steps sized by the fastest mode still present ----
             while True:
                 if replan:
-                    # Drop modes that have decayed below what any output can show.
-                    jj = 0 if since_check >= 32 else nact
-                    since_check = 0 if jj == 0 else since_check
-                    while jj < nact:
-                        j = act[jj]
-                        amp = abs(y0[j]) * Eabs[j]
-                        if (amp * vnorm[c, ci, j] < MODE_FLOOR
-                                and amp * (abs(rho_vec[c, ci, 0, j]) + abs(rho_vec[c, ci, 1, j]))
-                                < eps_force):
-                            nact -= 1
-                            for kk in range(jj, nact):  # keep the fastest-first order
-                                act[kk] = act[kk + 1]
-                        else:
-                            jj += 1
+                    # Drop mode pairs that have decayed below what any output can show
+                    # (keeping the fastest-first order).
+                    if since_check >= 32:
+                        since_check = 0
+                        kept = lo
+                        for jj in range(lo, nact):
+                            if (MC[AMP_Q, jj] * MC[EABS, jj] < MODE_FLOOR
+                                    and MC[AMP_F, jj] * MC[EABS, jj] < eps_force):
+                                continue
+                            if kept != jj:
+                                _keep_column(MC, WC, VY, lamc, act, ns, jj, kept)
+                            kept += 1
+                        nact = kept
                     # The step need only resolve modes that could bring a watched monitor to its
                     # level: skip the fastest modes while their summed amplitudes (which only
                     # decay) stay under half of every monitor's distance from its level.
@@ -562,14 +624,13 @@ def modal_exact_batch(
                     for m in range(2):
                         if watch[m]:
                             margin = min(margin, level[m] - gval[m])
-                    k = 0
+                    k = lo
                     spent = 0.0
                     while k < nact:
-                        j = act[k]
                         amp = 0.0
                         for m in range(2):
                             if watch[m]:
-                                amp = max(amp, Wabs[m, j] * Eabs[j])
+                                amp = max(amp, WC[W_ABS, m, k] * MC[EABS, k])
                         if spent + amp >= 0.5 * margin:
                             break
                         spent += amp
@@ -590,12 +651,15 @@ def modal_exact_batch(
                     if abs(h_new - h) > 1e-12 * h or since_refresh > 256 or t_from == t_s:
                         # New step, a fresh segment, or time to refresh: exact exponentials.
                         h = h_new
-                        for jj in range(nact):
-                            j = act[jj]
-                            D[j] = np.exp(lam[c, ci, j] * h)
-                            E[j] = np.exp(lam[c, ci, j] * (t_from + h - t_s))
-                            Dabs[j] = abs(D[j])
-                            Eabs[j] = abs(E[j])
+                        for jj in range(lo, nact):
+                            d = np.exp(lamc[jj] * h)
+                            e = np.exp(lamc[jj] * (t_from + h - t_s))
+                            MC[DR, jj] = d.real
+                            MC[DI, jj] = d.imag
+                            MC[ER, jj] = e.real
+                            MC[EI, jj] = e.imag
+                            MC[DABS, jj] = np.exp(lamc[jj].real * h)
+                            MC[EABS, jj] = np.exp(lamc[jj].real * (t_from + h - t_s))
                         cwh = np.cos(w * h)
                         swh = np.sin(w * h)
                         cth = np.cos(w * (t_from + h))
@@ -603,7 +667,7 @@ def modal_exact_batch(
                         since_refresh = 0
                     else:
                         # Same step: E and (cos θ, sin θ) advance from the sample point.
-                        cth, sth = _advance(E, Eabs, D, Dabs, act, nact, cth, sth, cwh, swh)
+                        cth, sth = _advance(MC, lo, nact, cth, sth, cwh, swh)
                     replan = False
                 if start_check:
                     # A monitor already above its level at the segment start (a contact that
@@ -630,30 +694,15 @@ def modal_exact_batch(
                     t_eval = t_break
                     for m in range(2):
                         if ready[m]:
-                            gval[m] = _eval(False, W, Wl, G, GT, lam, c, ci, m, ns, t_s,
-                                            t_break, w, th0, ev)
-                            dval[m] = _eval(True, W, Wl, G, GT, lam, c, ci, m, ns, t_s,
-                                            t_break, w, th0, ev)
+                            gval[m], dval[m] = _at(False, WC, lamc, nact, G, GT, m, t_s,
+                                                   t_break, w, th0)
                 else:
                     t_eval = t_n
                     x_n = w * t_n - th0
                     for m in range(2):
                         if ready[m]:
-                            g = _horner(G[m], x_n, gdeg)
-                            dg = 0.0
-                            for jj in range(nact):
-                                j = act[jj]
-                                er = E[j].real
-                                ei = E[j].imag
-                                g += W[m, j].real * er - W[m, j].imag * ei
-                                dg += Wl[m, j].real * er - Wl[m, j].imag * ei
-                            for k in range(gdeg, 0, -1):
-                                dg += w * k * G[m, k] * x_n ** (k - 1)
-                            if mon_trig:
-                                g += GT[m].real * cth - GT[m].imag * sth
-                                dg -= w * (GT[m].real * sth + GT[m].imag * cth)
-                            gval[m] = g
-                            dval[m] = dg
+                            gval[m], dval[m] = _monitor_at_grid(WC, MC, lo, nact, G, GT, m, gdeg,
+                                                                w, x_n, cth, sth)
                 # An event in (t_prev, t_eval]: the earliest monitor to rise through its level.
                 if first < 0:
                     t_ev = t_eval
@@ -666,19 +715,19 @@ def modal_exact_batch(
                             t_hi = t_eval
                         elif dprev[m] > 0.0 and dval[m] < 0.0 and (
                                 max(gprev[m], gval[m]) + (t_eval - t_prev)
-                                * _slope_bound(Wl, G, GT, m, Eabs, act, nact, gdeg, w,
+                                * _slope_bound(WC, G, GT, m, MC, lo, nact, gdeg, w,
                                                w * t_prev - th0, w * t_eval - th0)
                                 > level[m]):
                             # A maximum inside the step that might rise above the level (the
                             # bound on |g'| over the step cannot rule it out): find it.
-                            t_max = _root(True, -1.0, W, Wl, G, GT, lam, c, ci, m, ns, t_s,
-                                          t_prev, t_eval, 0.0, w, th0, tolerance, ev)
-                            if _eval(False, W, Wl, G, GT, lam, c, ci, m, ns, t_s, t_max, w,
-                                     th0, ev) > level[m]:
+                            t_max = _root(True, -1.0, WC, lamc, nact, G, GT, m, t_s, t_prev,
+                                          t_eval, 0.0, w, th0, tolerance)
+                            if _at(False, WC, lamc, nact, G, GT, m, t_s, t_max, w,
+                                   th0)[0] > level[m]:
                                 t_hi = t_max
                         if t_hi > 0.0:
-                            te = _root(False, 1.0, W, Wl, G, GT, lam, c, ci, m, ns, t_s,
-                                       t_prev, t_hi, level[m], w, th0, tolerance, ev)
+                            te = _root(False, 1.0, WC, lamc, nact, G, GT, m, t_s, t_prev,
+                                       t_hi, level[m], w, th0, tolerance)
                             if first < 0 or te < t_ev:
                                 t_ev = te
                                 first = m
@@ -732,6 +781,7 @@ def modal_exact_batch(
                     t_s = t_ev
                     break
                 if at_break:
+                    _exps(lam, c, ci, ns, t_break - t_s, ev)
                     _state(q, v, z, ya, vec, ev, y0, Z, ZT, free, c, ci, nf, ns,
                            w * t_break - th0, np.cos(w * t_break), np.sin(w * t_break), ns,
                            deg)
@@ -784,8 +834,8 @@ def modal_exact_batch(
                 if i_step == n_steps:
                     if to_sample:
                         x_n = w * t_n - th0
-                        _state_active(q, v, z, VY, E, Z, ZT, free, c, ci, nf, ns, act, nact,
-                                      x_n, cth, sth, deg, full_state)
+                        _state_active(q, v, VY, MC, Z, ZT, free, c, ci, nf, lo, nact, x_n,
+                                      cth, sth, deg, full_state)
                         _write_sample(q_out, v_out, force_out, cam_out, cfg_out, c, k_out, q, v,
                                       gval, cam_held, seat_held, poly, trig, p, x_n, cth, sth, w,
                                       cfg)
@@ -797,7 +847,7 @@ def modal_exact_batch(
                         break
                     replan = True
                 else:
-                    cth, sth = _advance(E, Eabs, D, Dabs, act, nact, cth, sth, cwh, swh)
+                    cth, sth = _advance(MC, lo, nact, cth, sth, cwh, swh)
             if stalled > MAX_STALLED_EVENTS:
                 status[c] = CHATTER
                 break
