@@ -63,12 +63,12 @@ ROOT_ITERATIONS = 200
 
 
 @njit(cache=True, nogil=True)
-def _horner(coef, x, deg=7):
-    """Σ_{k ≤ deg} coef[k]·x^k."""
-    s = 0.0
+def _zpoly(Z, s, x, deg):
+    """Σ_{k ≤ deg} Z[k, s]·x^k: entry s of the particular solution's polynomial part."""
+    acc = 0.0
     for k in range(deg, -1, -1):
-        s = s * x + coef[k]
-    return s
+        acc = acc * x + Z[k, s]
+    return acc
 
 
 @njit(cache=True, nogil=True)
@@ -94,7 +94,6 @@ def _held_inputs(poly, trig, c, p, w, seat_q, cam_held, seat_held, inp, inp_t):
         inp_t[2, 0] = w * w * beta
     if seat_held:
         inp[0, 1, 0] = seat_q
-
 
 
 # Rows of the per-mode work array ``MC`` (one column per active mode pair, fastest first):
@@ -219,7 +218,7 @@ def _state(q, v, z, ya, vec, ev, y0, Z, ZT, free, c, ci, nf, ns, x, ct, st, rows
         acc = 0.0
         for j in range(ns):
             acc += vec[c, ci, s, j].real * ya[j].real - vec[c, ci, s, j].imag * ya[j].imag
-        z[s] = acc + _horner(Z[:, s], x, deg) + ZT[s].real * ct - ZT[s].imag * st
+        z[s] = acc + _zpoly(Z, s, x, deg) + ZT[s].real * ct - ZT[s].imag * st
     for k in range(nf):
         q[free[c, ci, k]] = z[k]
         if rows == ns:
@@ -227,28 +226,41 @@ def _state(q, v, z, ya, vec, ev, y0, Z, ZT, free, c, ci, nf, ns, x, ct, st, rows
 
 
 @njit(cache=True, nogil=True, fastmath=FAST)
-def _state_active(q, v, VY, MC, Z, ZT, free, c, ci, nf, lo, nact, x, ct, st, deg,
+def _state_active(q, v, z, VY, MC, Z, ZT, free, c, ci, nf, lo, nact, x, ct, st, deg,
                   full_state):
-    """Free coordinates and velocities from the active mode pairs (an output sample); VY
-    holds (Re, Im) of V_sj·y0_j (doubled for a pair), so each term is the real part of one
-    complex product. Without ``full_state`` only the contact coordinates q1 and q7 (and
-    their velocities) are computed: the others are left NaN."""
+    """Free coordinates and velocities from the mode pairs lo … nact − 1 (an output sample):
+    VY[:, jj, s] holds (Re, Im) of V_sj·y0_j (doubled for a pair), so each term is the real
+    part of one complex product; plus the particular solution. Without ``full_state`` only
+    the contact coordinates q1 and q7 (and their velocities) are computed: the others are
+    left NaN."""
+    ns = 2 * nf
+    if full_state:
+        for s in range(ns):
+            z[s] = ZT[s].real * ct - ZT[s].imag * st
+        for jj in range(lo, nact):
+            er = MC[ER, jj]
+            ei = MC[EI, jj]
+            for s in range(ns):
+                z[s] += VY[0, jj, s] * er - VY[1, jj, s] * ei
     for k in range(nf):
         coord = free[c, ci, k]
-        if not full_state and coord != 0 and coord != 6:
-            q[coord] = np.nan
-            v[coord] = np.nan
-            continue
-        for r in range(2):
-            s = k + r * nf
-            acc = 0.0
-            for jj in range(lo, nact):
-                acc += VY[0, s, jj] * MC[ER, jj] - VY[1, s, jj] * MC[EI, jj]
-            val = acc + _horner(Z[:, s], x, deg) + ZT[s].real * ct - ZT[s].imag * st
-            if r == 0:
-                q[coord] = val
-            else:
-                v[coord] = val
+        if not full_state:
+            if coord != 0 and coord != 6:
+                q[coord] = np.nan
+                v[coord] = np.nan
+                continue
+            for s in (k, k + nf):
+                acc = ZT[s].real * ct - ZT[s].imag * st
+                for jj in range(lo, nact):
+                    acc += VY[0, jj, s] * MC[ER, jj] - VY[1, jj, s] * MC[EI, jj]
+                z[s] = acc
+        pq = 0.0
+        pv = 0.0
+        for kz in range(deg, -1, -1):
+            pq = pq * x + Z[kz, k]
+            pv = pv * x + Z[kz, k + nf]
+        q[coord] = z[k] + pq
+        v[coord] = z[k + nf] + pv
 
 
 @njit(cache=True, nogil=True, fastmath=FAST)
@@ -342,8 +354,8 @@ def _keep_column(MC, WC, VY, lamc, act, ns, src, dst):
         for m in range(2):
             WC[r, m, dst] = WC[r, m, src]
     for s in range(ns):
-        VY[0, s, dst] = VY[0, s, src]
-        VY[1, s, dst] = VY[1, s, src]
+        VY[0, dst, s] = VY[0, src, s]
+        VY[1, dst, s] = VY[1, src, s]
 
 
 @njit(cache=True, nogil=True)
@@ -391,7 +403,8 @@ def modal_exact_batch(
     W = np.zeros((2, NS), np.complex128)
     order = np.zeros(NS, np.int64)  # the modes, fastest first
     # The active mode pairs, fastest first (column jj): the mode index, λ, per-mode work
-    # (rows ER … AMP_F), monitor coefficients (rows W_R … WL_ABS), and (Re, Im) of V_sj·y0_j.
+    # (rows ER … AMP_F), monitor coefficients (rows W_R … WL_ABS), and (Re, Im) of V_sj·y0_j
+    # (VY[:, jj, s]).
     act = np.zeros(NS, np.int64)
     lamc = np.zeros(NS, np.complex128)
     MC = np.zeros((8, NS))
@@ -469,7 +482,7 @@ def modal_exact_batch(
             ct = np.cos(th_s)
             st = np.sin(th_s)
             for s in range(ns):
-                zh[s] -= _horner(Z[:, s], x_s, deg) + ZT[s].real * ct - ZT[s].imag * st
+                zh[s] -= _zpoly(Z, s, x_s, deg) + ZT[s].real * ct - ZT[s].imag * st
             for j in range(ns):
                 acc_c = 0.0 + 0.0j
                 for s in range(ns):
@@ -582,8 +595,8 @@ def modal_exact_batch(
                     WC[WL_ABS, m, nact] = abs(wl)
                 for s2 in range(ns):
                     vy = f * vec[c, ci, s2, j] * y0[j]
-                    VY[0, s2, nact] = vy.real
-                    VY[1, s2, nact] = vy.imag
+                    VY[0, nact, s2] = vy.real
+                    VY[1, nact, s2] = vy.imag
                 nact += 1
             for m in range(2):
                 if ready[m]:
@@ -834,7 +847,7 @@ def modal_exact_batch(
                 if i_step == n_steps:
                     if to_sample:
                         x_n = w * t_n - th0
-                        _state_active(q, v, VY, MC, Z, ZT, free, c, ci, nf, lo, nact, x_n,
+                        _state_active(q, v, z, VY, MC, Z, ZT, free, c, ci, nf, lo, nact, x_n,
                                       cth, sth, deg, full_state)
                         _write_sample(q_out, v_out, force_out, cam_out, cfg_out, c, k_out, q, v,
                                       gval, cam_held, seat_held, poly, trig, p, x_n, cth, sth, w,
