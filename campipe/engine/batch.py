@@ -359,7 +359,7 @@ class _Outputs:
         self.counts = np.zeros((n, 2), np.int64)
         self.vmax = np.zeros((n, 2))
         self.fmax = np.zeros((n, 3))
-        self.events = np.zeros((n, max_events, newmark.N_EVENT_FIELDS))
+        self.events = np.empty((n, max_events, newmark.N_EVENT_FIELDS))  # rows < n_events
         self.n_events = np.zeros(n, np.int64)
         self.status = np.zeros(n, np.int64)
 
@@ -389,18 +389,18 @@ def _run_modal_exact(trains, preps, which, settings, dt_run, full_state, meff, q
                      cfg0, seat_q, has_seat, form, omega, packed, out) -> np.ndarray:
     fields = ("n_free", "free", "lam", "vec", "vec_inv", "a_inv", "b_in", "b_load", "rho",
               "sigma", "sigma0", "impulse", "rho_vec", "vnorm", "lam_abs")
+    # Per-train data, indexed in the kernel by each case's train.
     data = [_modal(t) for t in trains]
-    stacked = {f: np.stack([getattr(d, f) for d in data])[which] for f in fields}
-    a_mat = np.stack([d.a_mat for d in data])[which]
-    zeta = harmonic_responses(stacked["n_free"], a_mat, stacked["b_in"], omega)
-    load = np.stack([p.matrices.preload for p in preps])[which]
-    M = np.stack([p.matrices.mass for p in preps])[which]
+    stacked = {f: np.stack([getattr(d, f) for d in data]) for f in fields}
+    a_mat = np.stack([d.a_mat for d in data])
+    zeta = harmonic_responses(which, stacked["n_free"], a_mat, stacked["b_in"], omega)
+    load = np.stack([p.matrices.preload for p in preps])
     t_sample = settings.output_every / omega
     t_end = settings.revolutions * 2 * np.pi / omega
     steps_taken = np.zeros(len(which), np.int64)
     exact.modal_exact_batch(
-        M, load, *(stacked[f] for f in fields), zeta, meff, q0, v0, cfg0, seat_q, has_seat, form,
-        omega, t_sample, t_end, dt_run or 0.0, settings.tolerance, settings.cutoff,
+        which, load, *(stacked[f] for f in fields), zeta, meff, q0, v0, cfg0, seat_q, has_seat,
+        form, omega, t_sample, t_end, dt_run or 0.0, settings.tolerance, settings.cutoff,
         full_state, steps_taken,
         packed.breaks, packed.poly, packed.trig, packed.n_pieces, *out.tail(),
     )

@@ -373,7 +373,7 @@ def _separation(sep_rev, c, n_rev, w, ta, tb):
 
 @njit(cache=True, nogil=True)
 def modal_exact_batch(
-    M, load, n_free, free, lam, vec, vec_inv, a_inv, b_in, b_load, rho, sigma, sigma0,
+    train, load, n_free, free, lam, vec, vec_inv, a_inv, b_in, b_load, rho, sigma, sigma0,
     impulse, rho_vec, vnorm, lam_abs, zeta, meff, q0, v0, cfg0, seat_q, has_seat, form, omega,
     t_sample_all, t_end_all, dt_cap, tolerance, mode_cutoff, full_state, steps_taken,
     breaks, poly, trig, n_pieces,
@@ -382,9 +382,11 @@ def modal_exact_batch(
 ):
     """Advance every case of a batch exactly between events; fill the outputs in place.
 
-    Per case: ``t_sample_all`` the output spacing in time [s], ``t_end_all`` the run's end [s];
-    ``dt_cap`` the largest step [s] (0: none). Modal data per case and configuration as
-    ``ModalData`` (leading axes (n, 4)). Outputs as ``newmark.newmark_linear_batch``.
+    Per case: ``train`` the index of its train in the per-train arrays, ``t_sample_all`` the
+    output spacing in time [s], ``t_end_all`` the run's end [s]; ``dt_cap`` the largest step
+    [s] (0: none). Per train: ``load`` (n_trains, 7) and the modal data per configuration as
+    ``ModalData`` (leading axes (n_trains, 4)); ``zeta`` (n, 4, NS) per case (it depends on
+    the speed). Outputs as ``newmark.newmark_linear_batch``.
     """
     n_cases = q0.shape[0]
     n_out = q_out.shape[1]
@@ -422,11 +424,12 @@ def modal_exact_batch(
     inp = np.zeros((3, 2, 8))
     inp_t = np.zeros((3, 2), np.complex128)
     for c in range(n_cases):
+        tr = train[c]
         w = omega[c]
         t_sample = t_sample_all[c]
         t_end = t_end_all[c]
         qs = seat_q[c]
-        eps_force = 1e-9 * (abs(load[c, 3]) + 1.0)
+        eps_force = 1e-9 * (abs(load[tr, 3]) + 1.0)
         for i in range(7):
             q[i] = q0[c, i]
             v[i] = v0[c, i]
@@ -439,21 +442,21 @@ def modal_exact_batch(
         while not done:
             # ---- begin a segment at t_s in configuration cfg on piece p ----
             ci = cfg - 1
-            nf = n_free[c, ci]
+            nf = n_free[tr, ci]
             ns = 2 * nf
             cam_held = cfg == 1 or cfg == 3
             seat_held = cfg == 3 or cfg == 4
             for k in range(nf):
-                zh[k] = q[free[c, ci, k]]
-                zh[nf + k] = v[free[c, ci, k]]
+                zh[k] = q[free[tr, ci, k]]
+                zh[nf + k] = v[free[tr, ci, k]]
             _held_inputs(poly, trig, c, p, w, qs, cam_held, seat_held, inp, inp_t)
             has_trig = cam_held and (trig[c, p, 0] != 0.0 or trig[c, p, 1] != 0.0)
             for k in range(8):
                 for s in range(ns):
-                    acc = b_load[c, ci, s] if k == 0 else 0.0
+                    acc = b_load[tr, ci, s] if k == 0 else 0.0
                     for kind in range(3):
                         for hc in range(2):
-                            acc += b_in[c, ci, s, kind, hc] * inp[kind, hc, k]
+                            acc += b_in[tr, ci, s, kind, hc] * inp[kind, hc, k]
                     bpoly[k, s] = acc
             # Particular solutions: Z_k = A⁻¹(ω(k+1) Z_{k+1} − b_k) from the piece's degree
             # down; the harmonic one Z_T = β·ζ (campipe.engine.modal.harmonic_response).
@@ -471,7 +474,7 @@ def modal_exact_batch(
                 for s in range(ns):
                     acc = 0.0
                     for j in range(ns):
-                        acc += a_inv[c, ci, s, j] * zb[j]
+                        acc += a_inv[tr, ci, s, j] * zb[j]
                     Z[k, s] = acc
             beta = trig[c, p, 1] - 1j * trig[c, p, 0]
             for s in range(NS):
@@ -486,7 +489,7 @@ def modal_exact_batch(
             for j in range(ns):
                 acc_c = 0.0 + 0.0j
                 for s in range(ns):
-                    acc_c += vec_inv[c, ci, j, s] * zh[s]
+                    acc_c += vec_inv[tr, ci, j, s] * zh[s]
                 y0[j] = acc_c
             # Monitors: g_m(τ) = Re Σ_j W_mj e^{λ_j τ} + Σ_k G_mk x^k + Re(GT_m e^{iθ}).
             ready[0] = True
@@ -503,31 +506,31 @@ def modal_exact_batch(
                 if held:
                     level[m] = eps_force
                     for j in range(ns):
-                        W[m, j] = sign * rho_vec[c, ci, m, j] * y0[j]
+                        W[m, j] = sign * rho_vec[tr, ci, m, j] * y0[j]
                     for k in range(8):
                         acc = 0.0
                         for s in range(ns):
-                            acc += rho[c, ci, m, s] * Z[k, s]
+                            acc += rho[tr, ci, m, s] * Z[k, s]
                         for kind in range(3):
                             for hc in range(2):
-                                acc += sigma[c, ci, m, kind, hc] * inp[kind, hc, k]
+                                acc += sigma[tr, ci, m, kind, hc] * inp[kind, hc, k]
                         G[m, k] = sign * acc
-                    G[m, 0] += sign * sigma0[c, ci, m]
+                    G[m, 0] += sign * sigma0[tr, ci, m]
                     acc_c = 0.0 + 0.0j
                     for s in range(ns):
-                        acc_c += rho[c, ci, m, s] * ZT[s]
+                        acc_c += rho[tr, ci, m, s] * ZT[s]
                     for kind in range(3):
-                        acc_c += sigma[c, ci, m, kind, 0] * inp_t[kind, 0]
+                        acc_c += sigma[tr, ci, m, kind, 0] * inp_t[kind, 0]
                     GT[m] = sign * acc_c
                 else:
                     level[m] = 1e-13  # [m] of penetration
                     coord = 0 if m == 0 else 6
                     row = 0
                     for k in range(nf):
-                        if free[c, ci, k] == coord:
+                        if free[tr, ci, k] == coord:
                             row = k
                     for j in range(ns):
-                        W[m, j] = sign * vec[c, ci, row, j] * y0[j]
+                        W[m, j] = sign * vec[tr, ci, row, j] * y0[j]
                     for k in range(8):
                         G[m, k] = sign * Z[k, row]
                     GT[m] = sign * ZT[row]
@@ -553,7 +556,7 @@ def modal_exact_batch(
             # The modes, fastest first (insertion sort; ns ≤ 14).
             for j in range(ns):
                 k = j
-                while k > 0 and lam_abs[c, ci, order[k - 1]] < lam_abs[c, ci, j]:
+                while k > 0 and lam_abs[tr, ci, order[k - 1]] < lam_abs[tr, ci, j]:
                     order[k] = order[k - 1]
                     k -= 1
                 order[k] = j
@@ -567,10 +570,10 @@ def modal_exact_batch(
             lo = 0
             for jj in range(ns):
                 j = order[jj]
-                lj = lam[c, ci, j]
+                lj = lam[tr, ci, j]
                 if lj.imag < 0.0:
                     continue
-                if mode_cutoff > 0.0 and lam_abs[c, ci, j] > mode_cutoff:
+                if mode_cutoff > 0.0 and lam_abs[tr, ci, j] > mode_cutoff:
                     lo += 1
                 f = 2.0 if lj.imag > 0.0 else 1.0
                 act[nact] = j
@@ -579,8 +582,8 @@ def modal_exact_batch(
                 MC[ER, nact] = 1.0
                 MC[EI, nact] = 0.0
                 MC[EABS, nact] = 1.0
-                MC[AMP_Q, nact] = ya_abs * vnorm[c, ci, j]
-                MC[AMP_F, nact] = ya_abs * (abs(rho_vec[c, ci, 0, j]) + abs(rho_vec[c, ci, 1, j]))
+                MC[AMP_Q, nact] = ya_abs * vnorm[tr, ci, j]
+                MC[AMP_F, nact] = ya_abs * (abs(rho_vec[tr, ci, 0, j]) + abs(rho_vec[tr, ci, 1, j]))
                 for m in range(2):
                     wv = f * W[m, j] if ready[m] else 0.0j
                     wl = wv * lj
@@ -594,7 +597,7 @@ def modal_exact_batch(
                     WC[W_ABS, m, nact] = abs(wv)
                     WC[WL_ABS, m, nact] = abs(wl)
                 for s2 in range(ns):
-                    vy = f * vec[c, ci, s2, j] * y0[j]
+                    vy = f * vec[tr, ci, s2, j] * y0[j]
                     VY[0, nact, s2] = vy.real
                     VY[1, nact, s2] = vy.imag
                 nact += 1
@@ -648,7 +651,7 @@ def modal_exact_batch(
                             break
                         spent += amp
                         k += 1
-                    fastest = lam_abs[c, ci, act[k]] if k < nact else 0.0
+                    fastest = lam_abs[tr, ci, act[k]] if k < nact else 0.0
                     h_allow = RESOLUTION * np.pi / fastest if fastest > 0.0 else np.inf
                     if dt_cap > 0.0:
                         h_allow = min(h_allow, dt_cap)
@@ -745,8 +748,8 @@ def modal_exact_batch(
                                 t_ev = te
                                 first = m
                 if first >= 0:
-                    _exps(lam, c, ci, ns, t_ev - t_s, ev)
-                    _state(q, v, z, ya, vec, ev, y0, Z, ZT, free, c, ci, nf, ns,
+                    _exps(lam, tr, ci, ns, t_ev - t_s, ev)
+                    _state(q, v, z, ya, vec, ev, y0, Z, ZT, free, tr, ci, nf, ns,
                            w * t_ev - th0, np.cos(w * t_ev), np.sin(w * t_ev), ns, deg)
                     lift_e, dl_e, _ = piece_eval(breaks, poly, trig, c, p, rev, w * t_ev)
                     vcam = -w * dl_e
@@ -766,7 +769,7 @@ def modal_exact_batch(
                         closing = v[0] - vcam
                         dv = vcam - v[0]
                         for i in range(7):
-                            v[i] += impulse[c, new - 1, 0, i] * dv
+                            v[i] += impulse[tr, new - 1, 0, i] * dv
                         q[0] = -lift_e
                         counts[c, 0] += 1
                         vmax[c, 0] = max(vmax[c, 0], closing)
@@ -782,7 +785,7 @@ def modal_exact_batch(
                         closing = -v[6]
                         dv = -v[6]
                         for i in range(7):
-                            v[i] += impulse[c, new - 1, 1, i] * dv
+                            v[i] += impulse[tr, new - 1, 1, i] * dv
                         q[6] = qs
                         counts[c, 1] += 1
                         vmax[c, 1] = max(vmax[c, 1], closing)
@@ -794,8 +797,8 @@ def modal_exact_batch(
                     t_s = t_ev
                     break
                 if at_break:
-                    _exps(lam, c, ci, ns, t_break - t_s, ev)
-                    _state(q, v, z, ya, vec, ev, y0, Z, ZT, free, c, ci, nf, ns,
+                    _exps(lam, tr, ci, ns, t_break - t_s, ev)
+                    _state(q, v, z, ya, vec, ev, y0, Z, ZT, free, tr, ci, nf, ns,
                            w * t_break - th0, np.cos(w * t_break), np.sin(w * t_break), ns,
                            deg)
                     if not cam_held:
@@ -822,7 +825,7 @@ def modal_exact_batch(
                             if abs(jump) > scale:
                                 dv = -jump
                                 for i in range(7):
-                                    v[i] += impulse[c, cfg - 1, 0, i] * dv
+                                    v[i] += impulse[tr, cfg - 1, 0, i] * dv
                                 counts[c, 0] += 1
                                 vmax[c, 0] = max(vmax[c, 0], abs(jump))
                                 mi = 1 if seat_held else 0
@@ -847,7 +850,7 @@ def modal_exact_batch(
                 if i_step == n_steps:
                     if to_sample:
                         x_n = w * t_n - th0
-                        _state_active(q, v, z, VY, MC, Z, ZT, free, c, ci, nf, lo, nact, x_n,
+                        _state_active(q, v, z, VY, MC, Z, ZT, free, tr, ci, nf, lo, nact, x_n,
                                       cth, sth, deg, full_state)
                         _write_sample(q_out, v_out, force_out, cam_out, cfg_out, c, k_out, q, v,
                                       gval, cam_held, seat_held, poly, trig, p, x_n, cth, sth, w,

@@ -134,27 +134,29 @@ def modal_data(sm: SystemMatrices, max_condition: float = 1e10) -> ModalData:
 
 
 @njit(cache=True, nogil=True)
-def harmonic_responses(n_free, a_mat, b_in, omega):
+def harmonic_responses(train, n_free, a_mat, b_in, omega):
     """(n, 4, NS) complex ζ per case: the particular solution for a cam harmonic
     Re(β e^{iθ}) of the lift is Z_T = β·ζ, with θ = ωt (configurations I and III hold the cam).
 
     The cam coordinate is q1 = −lift, so (q1, q̇1, q̈1) = Re(β (−1, −iω, ω²) e^{iθ}) and
-    (iωI − A) ζ = −b_q − iω b_v + ω² b_a.  Arrays as ``ModalData`` with a leading case axis.
+    (iωI − A) ζ = −b_q − iω b_v + ω² b_a.  Arrays as ``ModalData`` with a leading train axis;
+    case c runs train ``train[c]`` at speed ``omega[c]``.
     """
     n = omega.shape[0]
     out = np.zeros((n, 4, NS), np.complex128)
     for c in range(n):
         w = omega[c]
+        t = train[c]
         for ci in (0, 2):
-            ns = 2 * n_free[c, ci]
+            ns = 2 * n_free[t, ci]
             mat = np.zeros((ns, ns), np.complex128)
             rhs = np.zeros(ns, np.complex128)
             for s in range(ns):
                 for j in range(ns):
-                    mat[s, j] = -a_mat[c, ci, s, j]
+                    mat[s, j] = -a_mat[t, ci, s, j]
                 mat[s, s] += 1j * w
-                rhs[s] = (-b_in[c, ci, s, 0, 0] - 1j * w * b_in[c, ci, s, 1, 0]
-                          + w * w * b_in[c, ci, s, 2, 0])
+                rhs[s] = (-b_in[t, ci, s, 0, 0] - 1j * w * b_in[t, ci, s, 1, 0]
+                          + w * w * b_in[t, ci, s, 2, 0])
             sol = np.linalg.solve(mat, rhs)
             for s in range(ns):
                 out[c, ci, s] = sol[s]
