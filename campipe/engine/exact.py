@@ -112,7 +112,7 @@ def _exps(lam, c, ci, ns, tau, ev):
         ev[j] = np.exp(lam[c, ci, j] * tau)
 
 
-@njit(cache=True, nogil=True, fastmath=FAST)
+@njit(inline='always', nogil=True, fastmath=FAST)
 def _eval3(WC, lamc, nact, G, GT, m, tau, w, x, th):
     """Monitor m and its first two time derivatives τ after the segment start (local angle x,
     cam angle θ), exactly: the active mode pairs, the polynomial and the harmonic part."""
@@ -139,7 +139,7 @@ def _eval3(WC, lamc, nact, G, GT, m, tau, w, x, th):
     return g, dg, d2g
 
 
-@njit(cache=True, nogil=True)
+@njit(inline='always', nogil=True)
 def _at(deriv, WC, lamc, nact, G, GT, m, t_s, t, w, th0):
     """Monitor m (deriv False) or its time derivative (deriv True) at time t, and the next
     derivative."""
@@ -225,7 +225,7 @@ def _state(q, v, z, ya, vec, ev, y0, Z, ZT, free, c, ci, nf, ns, x, ct, st, rows
             v[free[c, ci, k]] = z[nf + k]
 
 
-@njit(cache=True, nogil=True, fastmath=FAST)
+@njit(inline='always', nogil=True, fastmath=FAST)
 def _state_active(q, v, z, VY, MC, Z, ZT, free, c, ci, nf, lo, nact, x, ct, st, deg,
                   full_state):
     """Free coordinates and velocities from the mode pairs lo … nact − 1 (an output sample):
@@ -263,7 +263,7 @@ def _state_active(q, v, z, VY, MC, Z, ZT, free, c, ci, nf, lo, nact, x, ct, st, 
         v[coord] = z[k + nf] + pv
 
 
-@njit(cache=True, nogil=True, fastmath=FAST)
+@njit(inline='always', nogil=True, fastmath=FAST)
 def _slope_bound(WC, G, GT, m, MC, lo, nact, gdeg, w, xa, xb):
     """An upper bound on |dg/dt| of monitor m over a step from local angle xa to xb, with the
     modal magnitudes at its start (they only decay): Σ|W_j λ_j||E_j| + max|P'| + ω|G_T|.
@@ -285,7 +285,7 @@ def _slope_bound(WC, G, GT, m, MC, lo, nact, gdeg, w, xa, xb):
     return bound
 
 
-@njit(cache=True, nogil=True)
+@njit(inline='always', nogil=True)
 def _write_sample(q_out, v_out, force_out, cam_out, cfg_out, c, k, q, v, gval, cam_held,
                   seat_held, poly, trig, p, x, ct, st, w, cfg):
     """Output sample k: coordinates and velocities (held ones on the cam and seat), forces,
@@ -309,7 +309,7 @@ def _write_sample(q_out, v_out, force_out, cam_out, cfg_out, c, k, q, v, gval, c
     cfg_out[c, k] = cfg
 
 
-@njit(cache=True, nogil=True, fastmath=FAST)
+@njit(inline='always', nogil=True, fastmath=FAST)
 def _advance(MC, lo, nact, cth, sth, cwh, swh):
     """One grid step: e^{λτ} of the mode pairs lo … nact − 1 and (cos θ, sin θ) by
     rotation."""
@@ -322,7 +322,7 @@ def _advance(MC, lo, nact, cth, sth, cwh, swh):
     return cth * cwh - sth * swh, sth * cwh + cth * swh
 
 
-@njit(cache=True, nogil=True, fastmath=FAST)
+@njit(inline='always', nogil=True, fastmath=FAST)
 def _monitor_at_grid(WC, MC, lo, nact, G, GT, m, gdeg, w, x, cth, sth):
     """Monitor m and its time derivative at the current grid point from the mode pairs
     lo … nact − 1 and their advanced exponentials (no exp or sin/cos)."""
@@ -371,7 +371,7 @@ def _separation(sep_rev, c, n_rev, w, ta, tb):
         r += 1
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, fastmath=FAST)
 def modal_exact_batch(
     train, load, n_free, free, lam, vec, vec_inv, a_inv, b_in, b_load, rho, sigma, sigma0,
     impulse, rho_vec, vnorm, lam_abs, zeta, meff, q0, v0, cfg0, seat_q, has_seat, form, omega,
