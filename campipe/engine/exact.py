@@ -43,6 +43,7 @@ from campipe.engine.newmark import (
     SEAT_SEPARATION,
     TWO_PI,
     _config,
+    _degree,
     _record,
     horner2,
     locate,
@@ -451,20 +452,21 @@ def modal_exact_batch(
                 zh[nf + k] = v[free[tr, ci, k]]
             _held_inputs(poly, trig, c, p, w, qs, cam_held, seat_held, inp, inp_t)
             has_trig = cam_held and (trig[c, p, 0] != 0.0 or trig[c, p, 1] != 0.0)
-            for k in range(8):
+            # The held inputs are polynomials of the piece's degree at most (the seat's a
+            # constant), and so is the forcing.
+            kmax = _degree(poly, c, p) if cam_held else 0
+            deg = 0
+            for k in range(kmax + 1):
                 for s in range(ns):
                     acc = b_load[tr, ci, s] if k == 0 else 0.0
                     for kind in range(3):
                         for hc in range(2):
                             acc += b_in[tr, ci, s, kind, hc] * inp[kind, hc, k]
                     bpoly[k, s] = acc
-            # Particular solutions: Z_k = A⁻¹(ω(k+1) Z_{k+1} − b_k) from the piece's degree
-            # down; the harmonic one Z_T = β·ζ (campipe.engine.modal.harmonic_response).
-            deg = 0
-            for k in range(8):
-                for s in range(ns):
-                    if bpoly[k, s] != 0.0:
+                    if acc != 0.0:
                         deg = k
+            # Particular solutions: Z_k = A⁻¹(ω(k+1) Z_{k+1} − b_k) from the forcing's degree
+            # down; the harmonic one Z_T = β·ζ (campipe.engine.modal.harmonic_response).
             for k in range(deg + 1, 9):
                 for s in range(ns):
                     Z[k, s] = 0.0
@@ -507,7 +509,7 @@ def modal_exact_batch(
                     level[m] = eps_force
                     for j in range(ns):
                         W[m, j] = sign * rho_vec[tr, ci, m, j] * y0[j]
-                    for k in range(8):
+                    for k in range(kmax + 1):
                         acc = 0.0
                         for s in range(ns):
                             acc += rho[tr, ci, m, s] * Z[k, s]
