@@ -19,9 +19,9 @@ from campipe.engine.contact import (
     CAM,
     HELD,
     SEAT,
-    effective_mass_inverses,
     held_inverses,
     impact_masses,
+    newmark_step_maps,
     quasi_static_batch,
     quasi_static_state,
 )
@@ -177,7 +177,8 @@ class Prepared:
     """What a step size and a train fix for every case that shares them (cached)."""
 
     matrices: SystemMatrices  # M, C, K, modes, preload
-    minv: np.ndarray  # (4, 7, 7) effective-mass inverses per configuration
+    step_A: np.ndarray  # (4, 24, 8) newmark-linear's step per configuration: forces, and
+    step_G: np.ndarray  # (4, 8, 8) accelerations and contact forces (contact.newmark_step_maps)
     impact_masses: np.ndarray  # (4,) see contact.impact_masses [kg]
     valve_reference: float  # q7 at zero valve lift [m]
     omega_max: np.ndarray  # (4,) highest natural frequency per configuration [rad/s]
@@ -191,7 +192,7 @@ def prepare(train: ValveTrain, dt: float) -> Prepared:
     )
     return Prepared(
         sm,
-        effective_mass_inverses(sm.mass, sm.damping, sm.stiffness, dt),
+        *newmark_step_maps(sm.mass, sm.damping, sm.stiffness, dt),
         impact_masses(sm.mass),
         valve_reference(sm),
         omega_max,
@@ -374,11 +375,13 @@ def _run_newmark(preps, which, settings, dt_run, meff, q0, v0, a0, cfg0, seat_q,
     C = np.stack([p.matrices.damping for p in preps])[which]
     K = np.stack([p.matrices.stiffness for p in preps])[which]
     load = np.stack([p.matrices.preload for p in preps])[which]
-    minv = np.stack([p.minv for p in preps])[which]
+    step_A = np.stack([p.step_A for p in preps])[which]
+    step_G = np.stack([p.step_G for p in preps])[which]
     dt = np.full(len(which), dt_run)
     n_steps = np.ceil(settings.revolutions * 2 * np.pi / (omega * dt) - 1e-9).astype(np.int64)
     newmark.newmark_linear_batch(
-        M, C, K, load, minv, meff, q0, v0, a0, cfg0, seat_q, has_seat, form, omega, dt, n_steps,
+        M, C, K, load, step_A, step_G, meff, q0, v0, a0, cfg0, seat_q, has_seat, form, omega, dt,
+        n_steps,
         packed.breaks, packed.poly, packed.trig, packed.n_pieces, settings.output_every,
         *out.tail(),
     )

@@ -20,14 +20,25 @@ A velocity jump in the profile (a flat's edges) is a break of the piecewise prof
 one with the cam held, a surface that falls away releases the follower for that step (the cam
 never pulls it along); a surface that jumps into the follower is a cam impact.
 
+A step is two small matrix products fixed by the train, the step and the configuration
+(``contact.newmark_step_maps``): the force left after the predictors, then the step-end
+accelerations and contact forces from it, applied with the corrector in AVX2 registers
+(``_newmark_step``).
+
 State arrays have a leading case axis; each case runs to its own end inside one compiled call,
 which releases the GIL so dask threads run batches in parallel.
 """
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
-from numba import njit
+from llvmlite import ir
+from numba import njit, types
+from numba.core import cgutils
+from numba.core.errors import TypingError
+from numba.extending import intrinsic
 
 # Event kinds.
 CAM_SEPARATION, CAM_IMPACT, SEAT_SEPARATION, SEAT_IMPACT = 1, 2, 3, 4
@@ -43,9 +54,19 @@ TWO_PI = 2.0 * np.pi
 FAST = {"contract", "reassoc", "nsz", "arcp"}
 #: Number of coordinates.
 NP = 7
+#: The state x = (q, v, a) a step reads (``_newmark_step``, ``contact.newmark_step_maps``): each
+#: block padded to N_Z = 8 lanes (two AVX2 registers of LANES doubles) and starting at these
+#: offsets; N_X lanes in all. Padding lanes stay zero.
+X_Q, X_V, X_A = 0, 8, 16
+N_X, N_Z = 24, 8
+LANES = 4
+#: LLVM flags of ``_newmark_step``'s arithmetic: multiplies and adds fuse, nothing reassociates.
+FUSE = ("contract",)
 #: A profile break whose lift rate jumps by less than this [m/s] (beyond 1e-9 relative) is
 #: smooth: rounding in re-expanded polynomial pieces, not a velocity jump.
 JUMP_FLOOR = 1e-9
+#: Turns [-] by which an angle may fall short of a turn's start and still count to that turn.
+TURN_GUARD = 1e-9
 
 
 @njit(cache=True, nogil=True)
@@ -131,15 +152,160 @@ def _row_force(M, C, K, load, c, i, a, v, q):
 
 
 @njit(cache=True, nogil=True)
+def _revolution(theta):
+    """The cam turn holding angle ``theta`` [rad]. An angle on a turn's start to rounding
+    (a round speed and step) counts to that turn, however LLVM reassociates θ = ω·n·Δt."""
+    return int(theta / TWO_PI + TURN_GUARD)
+
+
+@njit(cache=True, nogil=True, fastmath=FAST)
+def _next_break(breaks, n_pieces, c, piece, rev):
+    """The piece after ``piece`` of turn ``rev``, its turn, and the cam angle [rad] where it
+    starts."""
+    pn = piece + 1
+    revn = rev
+    if pn == n_pieces:
+        pn = 0
+        revn = rev + 1
+    return pn, revn, revn * TWO_PI + breaks[c, pn]
+
+
+@njit(cache=True, nogil=True)
+def _add_turn(sep_rev, c, turn, angle):
+    """Add one turn's separation angle [rad] to case c's record, if that turn is recorded."""
+    if turn < sep_rev.shape[1]:
+        sep_rev[c, turn] += angle
+
+
+@njit(cache=True, nogil=True)
 def _config(cam, seat):
     if cam:
         return 3 if seat else 1
     return 4 if seat else 2
 
 
+@intrinsic
+def _newmark_step(typingctx, A, G, c, k, load, h, x, xn, z):
+    """One step of Newmark's linear-acceleration method for case c in configuration k + 1,
+    on all N_Z lanes of the state x = (q, v, a) (thesis Appendix B, steps 2–6):
+
+        r = load − A·x,   z = G·r,
+        xn = (q + Δt·v + Δt²/3·a + Δt²/6·z,  v + Δt/2·a + Δt/2·z,  z),
+
+    with A, G from ``contact.newmark_step_maps`` (z: the step-end accelerations, and in a held
+    coordinate's row its contact force), Δt = h and ``load`` the case's (N_Z,). The caller
+    puts the held coordinates' prescribed values back into xn.
+
+    Written out as vector instructions, LANES rows to a register: numba compiles with LLVM's
+    SLP vectoriser off and its loop vectoriser leaves loops this short alone, so as loops the
+    multiply-adds stay scalar and take most of a step. A (n, 4, N_X, N_Z) and G
+    (n, 4, N_Z, N_Z) are stored by columns; each column is scaled by its x[j] (r[j]) and added
+    into one of a few accumulators, summed at the end. Multiplies and adds fuse; nothing is
+    reassociated.
+    """
+    f8 = types.float64
+    vector = types.Array(f8, 1, "C")
+    if (A, G, load, h, x, xn, z) != (types.Array(f8, 4, "C"), types.Array(f8, 4, "C"), vector,
+                                     f8, vector, vector, vector):
+        raise TypingError("_newmark_step: expected C-contiguous float64 arrays A (n, 4, N_X, "
+                          "N_Z), G (n, 4, N_Z, N_Z), load, z (N_Z,), x, xn (N_X,) and a "
+                          "float64 step")
+
+    def codegen(context, builder, sig, args):
+        f64 = ir.DoubleType()
+        vec = ir.VectorType(f64, LANES)
+        intp = context.get_value_type(types.intp)
+        zero = ir.Constant(intp, 0)
+
+        def start(i, *index):  # pointer to element ``index`` of array argument i
+            array = context.make_array(sig.args[i])(context, builder, args[i])
+            return cgutils.get_item_pointer(context, builder, sig.args[i], array, index,
+                                            wraparound=False)
+
+        def element(ptr, offset):
+            return builder.gep(ptr, [ir.Constant(intp, offset)], source_etype=f64)
+
+        def load(ptr, offset):  # the LANES doubles from ptr[offset] on
+            return builder.load(builder.bitcast(element(ptr, offset), vec.as_pointer()),
+                                align=8, typ=vec)
+
+        def store(value, ptr, offset):
+            builder.store(value, builder.bitcast(element(ptr, offset), vec.as_pointer()),
+                          align=8)
+
+        def add(u, v):
+            return builder.fadd(u, v, flags=FUSE)
+
+        def mul(u, v):
+            return builder.fmul(u, v, flags=FUSE)
+
+        def lane(u, i):  # lane i of vector u in every lane
+            return builder.shuffle_vector(
+                u, u, ir.Constant(ir.VectorType(ir.IntType(32), LANES), [i] * LANES))
+
+        def splat(value):
+            return lane(builder.insert_element(ir.Constant(vec, None), value, zero), 0)
+
+        halves = range(0, N_Z, LANES)
+
+        def product(M, chains, scale):
+            """Σ_j M[:, j]·scale(j) over the columns j of ``chains`` (ranges, each summed in
+            its own registers, then added in order), as N_Z // LANES vectors."""
+            sums = []
+            for cols in chains:
+                acc = None
+                for j in cols:
+                    s = scale(j)
+                    terms = [mul(load(M, j * N_Z + i), s) for i in halves]
+                    acc = terms if acc is None else [
+                        add(u, t) for u, t in zip(acc, terms, strict=True)]
+                sums.append(acc)
+            return [functools.reduce(add, parts) for parts in zip(*sums, strict=True)]
+
+        case, cfg = (context.cast(builder, args[i], sig.args[i], types.intp) for i in (2, 3))
+        A_at = start(0, case, cfg, zero, zero)
+        G_at = start(1, case, cfg, zero, zero)
+        load_at, x_at, xn_at, z_at = (start(i, zero) for i in (4, 6, 7, 8))
+        # r = load − A·x, each block's columns in two chains; z = G·r; the corrector.
+        chains = [range(b + part, b + min(part + 4, NP)) for part in (0, 4)
+                  for b in (X_Q, X_V, X_A)]
+        ax = product(A_at, chains, lambda j: splat(builder.load(element(x_at, j), typ=f64)))
+        r = [builder.fsub(load(load_at, i), u, flags=FUSE)
+             for i, u in zip(halves, ax, strict=True)]
+        zs = product(G_at, (range(0, 4), range(4, NP)), lambda j: lane(r[j // LANES], j % LANES))
+        dt = splat(args[5])
+        dt2 = mul(dt, dt)
+        dt2_3 = builder.fdiv(dt2, ir.Constant(vec, [3.0] * LANES), flags=FUSE)
+        dt2_6 = builder.fdiv(dt2, ir.Constant(vec, [6.0] * LANES), flags=FUSE)
+        dt_2 = mul(ir.Constant(vec, [0.5] * LANES), dt)
+        for i, zi in zip(halves, zs, strict=True):
+            q, v, a = (load(x_at, b + i) for b in (X_Q, X_V, X_A))
+            store(zi, z_at, i)
+            store(add(add(add(q, mul(dt, v)), mul(dt2_3, a)), mul(dt2_6, zi)), xn_at, X_Q + i)
+            store(add(add(v, mul(dt_2, a)), mul(dt_2, zi)), xn_at, X_V + i)
+            store(zi, xn_at, X_A + i)
+        return context.get_dummy_value()
+
+    return types.void(A, G, c, k, load, h, x, xn, z), codegen
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _lift(poly, c, p, x, deg):
+    """``horner2`` on piece p of case c, indexing ``poly`` in place: a view per step would cost
+    two atomic reference-count updates."""
+    p0 = 0.0
+    p1 = 0.0
+    p2 = 0.0
+    for k in range(deg, -1, -1):
+        p2 = p2 * x + 2.0 * p1
+        p1 = p1 * x + p0
+        p0 = p0 * x + poly[c, p, k]
+    return p0, p1, p2
+
+
 @njit(cache=True, nogil=True, fastmath=FAST)
 def newmark_linear_batch(
-    M, C, K, load, minv, meff, q0, v0, a0, cfg0,
+    M, C, K, load, step_A, step_G, meff, q0, v0, a0, cfg0,
     seat_q, has_seat, form, omega, dt, n_steps,
     breaks, poly, trig, n_pieces,
     d_theta_out, q_out, v_out, force_out, cam_out, cfg_out,
@@ -147,42 +313,40 @@ def newmark_linear_batch(
 ):
     """Advance every case of a batch; fill the output arrays in place.
 
-    Shapes: M, C, K (n, 7, 7); load, q0, v0, a0 (n, 7); minv (n, 4, 7, 7) from
-    ``effective_mass_inverses``; meff (n, 4) from ``impact_masses``; per-case vectors (n,);
-    q_out, v_out (n, n_out, 7); force_out (n, n_out, 2) = (F1, F7), thesis signs; cam_out (n, n_out)
-    cam lift; cfg_out (n, n_out) int8; sep_rev (n, n_rev) [rad]; counts (n, 2) cam and seat
-    impacts; vmax (n, 2) largest cam and seat closing velocity; fmax (n, 2) largest
-    compressive cam and seat force between impacts, and the cam force including the steps an
-    impulse passes through (the thesis's "impact force", which measures 1/Δt); events
-    (n, max_events, 6).
+    Shapes: M, C, K (n, 7, 7); load, q0, v0, a0 (n, 7); step_A (n, 4, N_X, N_Z), step_G
+    (n, 4, N_Z, N_Z) from ``contact.newmark_step_maps`` at the case's step (C-contiguous);
+    meff (n, 4) from ``impact_masses``;
+    per-case vectors (n,); q_out, v_out (n, n_out, 7); force_out (n, n_out, 2) = (F1, F7),
+    thesis signs; cam_out (n, n_out) cam lift; cfg_out (n, n_out) int8; sep_rev (n, n_rev)
+    [rad]; counts (n, 2) cam and seat impacts; vmax (n, 2) largest cam and seat closing
+    velocity; fmax (n, 2) largest compressive cam and seat force between impacts, and the cam
+    force including the steps an impulse passes through (the thesis's "impact force", which
+    measures 1/Δt); events (n, max_events, 6).
     """
+    if step_A.shape[2:] != (N_X, N_Z) or step_G.shape[2:] != (N_Z, N_Z):
+        raise ValueError("step_A, step_G: expected (n, 4, N_X, N_Z) and (n, 4, N_Z, N_Z)")
     n_cases = M.shape[0]
     n_out = q_out.shape[1]
-    n_rev = sep_rev.shape[1]
-    q = np.zeros(NP)
-    v = np.zeros(NP)
-    a = np.zeros(NP)
-    qn = np.zeros(NP)
-    vn = np.zeros(NP)
-    an = np.zeros(NP)
+    # The state (q, v, a) at the step start and end, in the step's layout (X_Q, X_V, X_A).
+    x = np.zeros(N_X)
+    xn = np.zeros(N_X)
+    z = np.zeros(N_Z)
+    f = np.zeros(N_Z)
     qt = np.zeros(NP)
     vt = np.zeros(NP)
     at = np.zeros(NP)
-    al = np.zeros(NP)
-    ps = np.zeros(NP)
-    rhs = np.zeros(NP)
     for c in range(n_cases):
         h = dt[c]
         w = omega[c]
-        Kc = K[c]
-        Cc = C[c]
-        Mc = M[c]
-        fc = load[c]
         qs = seat_q[c]
+        for i in range(N_X):
+            x[i] = 0.0
+            xn[i] = 0.0
         for i in range(NP):
-            q[i] = q0[c, i]
-            v[i] = v0[c, i]
-            a[i] = a0[c, i]
+            f[i] = load[c, i]
+            x[X_Q + i] = q0[c, i]
+            x[X_V + i] = v0[c, i]
+            x[X_A + i] = a0[c, i]
         cfg = cfg0[c]
         impulse_cam = False
         impulse_seat = False
@@ -193,9 +357,12 @@ def newmark_linear_batch(
         rev, p = locate(breaks, n_pieces, c, 0.0)
         pdeg = _degree(poly, c, p)
         npc = n_pieces[c]
+        pn, revn, thb = _next_break(breaks, npc, c, p, rev)
         fmax_cam = 0.0
         fmax_seat = 0.0
         fmax_raw = 0.0
+        sep_turn = 0  # the turn whose separation [rad] ``sep`` sums
+        sep = 0.0
         sd = np.sin(w * h)
         cd = np.cos(w * h)
         sn = 0.0
@@ -203,7 +370,6 @@ def newmark_linear_batch(
         for n in range(n_steps[c]):
             t0 = n * h
             t1 = (n + 1) * h
-            th0 = w * t0
             th1 = w * t1
             cam_held = cfg == 1 or cfg == 3
             seat_held = cfg == 3 or cfg == 4
@@ -214,15 +380,7 @@ def newmark_linear_batch(
             else:
                 sn, cs = sn * cd + cs * sd, cs * cd - sn * sd
             # Move the piece cursor to θ1; a velocity jump of the profile is a break crossed.
-            while True:
-                pn = p + 1
-                revn = rev
-                if pn == npc:
-                    pn = 0
-                    revn = rev + 1
-                thb = revn * TWO_PI + breaks[c, pn]
-                if th1 < thb:
-                    break
+            while th1 >= thb:
                 if cam_held:
                     l_left, dl_left, _ = piece_eval(breaks, poly, trig, c, p, rev, thb)
                     l_right, dl_right, _ = piece_eval(breaks, poly, trig, c, pn, revn, thb)
@@ -247,8 +405,9 @@ def newmark_linear_batch(
                 p = pn
                 rev = revn
                 pdeg = _degree(poly, c, p)
-            x = th1 - rev * TWO_PI - breaks[c, p]
-            lift1, dl1, ddl1 = horner2(poly[c, p], x, pdeg)
+                pn, revn, thb = _next_break(breaks, npc, c, p, rev)
+            x1 = th1 - rev * TWO_PI - breaks[c, p]
+            lift1, dl1, ddl1 = _lift(poly, c, p, x1, pdeg)
             ta = trig[c, p, 0]
             tb = trig[c, p, 1]
             if ta != 0.0 or tb != 0.0:
@@ -258,57 +417,30 @@ def newmark_linear_batch(
             qc = -lift1
             vc = -w * dl1
             ac = -w * w * ddl1
-            # Thesis Appendix B, steps 2–6, over the free coordinates of this configuration.
-            for i in range(NP):
-                al[i] = v[i] + 0.5 * h * a[i]
-                ps[i] = q[i] + h * v[i] + h * h / 3.0 * a[i]
-                qt[i] = ps[i]
-                vt[i] = al[i]
-                at[i] = 0.0
+            # Thesis Appendix B, steps 2–6: the held coordinates take their step-end values
+            # (over an impulse's first step, its velocity change over Δt: Eq. 28); one step
+            # map advances the free coordinates and gives the contact forces at the step end.
             if cam_held:
-                qt[0] = qc
-                vt[0] = vc
-                at[0] = (vc - v[0]) / h if impulse_cam else ac
+                x[X_A] = (vc - x[X_V]) / h if impulse_cam else ac
+                x[X_Q] = qc
+                x[X_V] = vc
             if seat_held:
-                qt[6] = qs
-                vt[6] = 0.0
-                at[6] = (0.0 - v[6]) / h if impulse_seat else 0.0
-            # Column by column (the matrices are symmetric), so the seven row sums advance
-            # together instead of as seven serial chains. Only the contact coordinates can
-            # carry a prescribed acceleration.
-            a0h = at[0]
-            a6h = at[6]
-            for i in range(NP):
-                rhs[i] = fc[i] - Mc[0, i] * a0h - Mc[6, i] * a6h
-            for j in range(NP):
-                qj = qt[j]
-                vj = vt[j]
-                for i in range(NP):
-                    rhs[i] -= Kc[j, i] * qj + Cc[j, i] * vj
-            mi_c = minv[c, cfg - 1]
-            for i in range(NP):
-                an[i] = 0.0
-            for j in range(NP):
-                rj = rhs[j]
-                for i in range(NP):
-                    an[i] += mi_c[j, i] * rj
-            for i in range(NP):
-                vn[i] = al[i] + 0.5 * h * an[i]
-                qn[i] = ps[i] + h * h / 6.0 * an[i]
-            if cam_held:
-                qn[0] = qt[0]
-                vn[0] = vt[0]
-                an[0] = at[0]
-            if seat_held:
-                qn[6] = qt[6]
-                vn[6] = vt[6]
-                an[6] = at[6]
+                x[X_A + 6] = (0.0 - x[X_V + 6]) / h if impulse_seat else 0.0
+                x[X_Q + 6] = qs
+                x[X_V + 6] = 0.0
+            _newmark_step(step_A, step_G, c, cfg - 1, f, h, x, xn, z)
             f1 = 0.0
             f7 = 0.0
             if cam_held:
-                f1 = _row_force(M, C, K, load, c, 0, an, vn, qn)
+                xn[X_Q] = x[X_Q]
+                xn[X_V] = x[X_V]
+                xn[X_A] = x[X_A]
+                f1 = z[0]
             if seat_held:
-                f7 = _row_force(M, C, K, load, c, 6, an, vn, qn)
+                xn[X_Q + 6] = x[X_Q + 6]
+                xn[X_V + 6] = x[X_V + 6]
+                xn[X_A + 6] = x[X_A + 6]
+                f7 = z[6]
             if impulse_cam:
                 quiet_cam = 2
             if impulse_seat:
@@ -317,9 +449,12 @@ def newmark_linear_batch(
             impulse_seat = False
             # Metrics over this step.
             if not cam_held:
-                rev_i = int(th0 / TWO_PI)
-                if rev_i < n_rev:
-                    sep_rev[c, rev_i] += w * h
+                rev_i = _revolution(w * t0)
+                if rev_i != sep_turn:
+                    _add_turn(sep_rev, c, sep_turn, sep)
+                    sep_turn = rev_i
+                    sep = 0.0
+                sep += w * h
             if quiet_cam > 0:
                 quiet_cam -= 1
             elif cam_held:
@@ -330,17 +465,21 @@ def newmark_linear_batch(
                 quiet_seat -= 1
             elif seat_held:
                 fmax_seat = max(fmax_seat, f7)
-            # Output samples inside (t0, t1], from the step's cubic (thesis Eqs. 55–57).
+            # Output samples inside (t0, t1], from the step's cubic (thesis Eqs. 55–57); the
+            # held coordinates from the cam and the seat.
             while k_out < n_out and t_sample <= t1 * (1.0 + 1e-12):
                 tau = t_sample - t0
                 if k_out == 0:
                     tau = 0.0
                 r = tau / h
                 for i in range(NP):
-                    da = an[i] - a[i]
-                    qt[i] = q[i] + v[i] * tau + 0.5 * a[i] * tau * tau + da * tau * tau * r / 6.0
-                    vt[i] = v[i] + a[i] * tau + 0.5 * da * tau * r
-                    at[i] = a[i] + da * r
+                    q = x[X_Q + i]
+                    v = x[X_V + i]
+                    a = x[X_A + i]
+                    da = xn[X_A + i] - a
+                    qt[i] = q + v * tau + 0.5 * a * tau * tau + da * tau * tau * r / 6.0
+                    vt[i] = v + a * tau + 0.5 * da * tau * r
+                    at[i] = a + da * r
                 ls, dls, ddls = cam_eval(breaks, poly, trig, n_pieces, c, w * t_sample)
                 if cam_held:
                     qt[0] = -ls
@@ -374,8 +513,8 @@ def newmark_linear_batch(
                 seat_next = False
                 _record(events, n_events, c, t1, SEAT_SEPARATION, cfg,
                         _config(cam_next, False), 0.0, 0.0)
-            if not cam_held and qn[0] > qc:
-                closing = vn[0] - vc
+            if not cam_held and xn[X_Q] > qc:
+                closing = xn[X_V] - vc
                 cam_next = True
                 impulse_cam = True
                 counts[c, 0] += 1
@@ -383,8 +522,8 @@ def newmark_linear_batch(
                 mi = 1 if seat_next else 0
                 _record(events, n_events, c, t1, CAM_IMPACT, cfg, _config(True, seat_next),
                         closing, meff[c, mi] * closing)
-            if has_seat[c] and not seat_held and qn[6] < qs:
-                closing = -vn[6]
+            if has_seat[c] and not seat_held and xn[X_Q + 6] < qs:
+                closing = -xn[X_V + 6]
                 seat_next = True
                 impulse_seat = True
                 counts[c, 1] += 1
@@ -393,18 +532,16 @@ def newmark_linear_batch(
                 _record(events, n_events, c, t1, SEAT_IMPACT, cfg, _config(cam_next, True),
                         closing, meff[c, mi] * closing)
             cfg = _config(cam_next, seat_next)
-            for i in range(NP):
-                q[i] = qn[i]
-                v[i] = vn[i]
-                a[i] = an[i]
+            x, xn = xn, x
             if n % 1024 == 0 or n == n_steps[c] - 1:
                 finite = True
-                for i in range(NP):
-                    if not (np.isfinite(q[i]) and np.isfinite(v[i]) and np.isfinite(a[i])):
+                for i in range(N_X):
+                    if not np.isfinite(x[i]):
                         finite = False
                 if not finite:
                     status[c] = NONFINITE
                     break
+        _add_turn(sep_rev, c, sep_turn, sep)
         fmax[c, 0] = fmax_cam
         fmax[c, 1] = fmax_seat
         fmax[c, 2] = fmax_raw
