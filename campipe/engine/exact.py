@@ -149,24 +149,30 @@ def _at(deriv, WC, lamc, nact, G, GT, m, t_s, t, w, th0):
 
 
 @njit(cache=True, nogil=True)
-def _root(deriv, sgn, WC, lamc, nact, G, GT, m, t_s, ta, tb, level, w, th0, tolerance):
+def _root(deriv, sgn, WC, lamc, nact, G, GT, m, t_s, ta, tb, level, w, th0, tolerance,
+          known, fa, fb, dfb):
     """Time in [ta, tb] where f = sgn·(monitor − level) (or, with deriv, sgn·its derivative)
     rises through zero: Newton steps from the latest point, kept inside the bracket, with
     Illinois (regula falsi) and bisection as fall-backs. Returns the bracket's left end once
     the bracket is narrower than ``tolerance``: the last time known to be before the crossing
     (no penetration, no tension beyond ``level``), or its right end if the left one is the
-    segment start.
+    segment start. With ``known``, f(ta) = fa, f(tb) = fb and f'(tb) = dfb are given (the
+    grid has them) and not evaluated again.
     """
     lev = 0.0 if deriv else level
-    f, _ = _at(deriv, WC, lamc, nact, G, GT, m, t_s, ta, w, th0)
-    fa = sgn * (f - lev)
-    if fa > 0.0:
+    if not known:
+        f, _ = _at(deriv, WC, lamc, nact, G, GT, m, t_s, ta, w, th0)
+        fa = sgn * (f - lev)
+        if fa > 0.0:
+            return ta
+        f, df = _at(deriv, WC, lamc, nact, G, GT, m, t_s, tb, w, th0)
+        fb = sgn * (f - lev)
+        dfb = sgn * df
+    elif fa > 0.0:
         return ta
-    f, df = _at(deriv, WC, lamc, nact, G, GT, m, t_s, tb, w, th0)
-    fb = sgn * (f - lev)
     t_last = tb
     f_last = fb
-    df_last = sgn * df
+    df_last = dfb
     side = 0
     converged = False
     for _ in range(ROOT_ITERATIONS):
@@ -729,6 +735,8 @@ def modal_exact_batch(
                         if not watch[m]:
                             continue
                         t_hi = -1.0
+                        g_hi = gval[m]
+                        dg_hi = dval[m]
                         if gval[m] > level[m]:
                             t_hi = t_eval
                         elif dprev[m] > 0.0 and dval[m] < 0.0 and (
@@ -739,13 +747,18 @@ def modal_exact_batch(
                             # A maximum inside the step that might rise above the level (the
                             # bound on |g'| over the step cannot rule it out): find it.
                             t_max = _root(True, -1.0, WC, lamc, nact, G, GT, m, t_s, t_prev,
-                                          t_eval, 0.0, w, th0, tolerance)
-                            if _at(False, WC, lamc, nact, G, GT, m, t_s, t_max, w,
-                                   th0)[0] > level[m]:
+                                          t_eval, 0.0, w, th0, tolerance, False, 0.0, 0.0,
+                                          0.0)
+                            g_hi, dg_hi = _at(False, WC, lamc, nact, G, GT, m, t_s, t_max, w,
+                                              th0)
+                            if g_hi > level[m]:
                                 t_hi = t_max
                         if t_hi > 0.0:
+                            # The value root starts from what the grid (or the maximum's
+                            # search) has, unless reduced fidelity leaves pairs out of the grid.
                             te = _root(False, 1.0, WC, lamc, nact, G, GT, m, t_s, t_prev,
-                                       t_hi, level[m], w, th0, tolerance)
+                                       t_hi, level[m], w, th0, tolerance, lo == 0,
+                                       gprev[m] - level[m], g_hi - level[m], dg_hi)
                             if first < 0 or te < t_ev:
                                 t_ev = te
                                 first = m
