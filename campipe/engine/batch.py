@@ -182,6 +182,7 @@ class Prepared:
     impact_masses: np.ndarray  # (4,) see contact.impact_masses [kg]
     valve_reference: float  # q7 at zero valve lift [m]
     omega_max: np.ndarray  # (4,) highest natural frequency per configuration [rad/s]
+    start_inverses: np.ndarray  # (2, 2, 7, 7) see start_inverses
 
 
 @functools.lru_cache(maxsize=256)
@@ -196,7 +197,14 @@ def prepare(train: ValveTrain, dt: float) -> Prepared:
         impact_masses(sm.mass),
         valve_reference(sm),
         omega_max,
+        start_inverses(sm),
     )
+
+
+def start_inverses(sm: SystemMatrices) -> np.ndarray:
+    """(2, 2, 7, 7): K_ff⁻¹ and M_ff⁻¹ (``contact.held_inverses``) in configurations I and
+    III, the quasi-static start's."""
+    return np.array([held_inverses(sm.mass, sm.stiffness, HELD[cfg - 1]) for cfg in (1, 3)])
 
 
 @functools.lru_cache(maxsize=256)
@@ -271,10 +279,13 @@ def _cam_at(breaks, poly, trig, n_pieces, theta):
     return out
 
 
-def initial_states(mats, which, packed, omega, has_seat, seat_q):
+def initial_states(mats, which, packed, omega, has_seat, seat_q, inverses=None):
     """Quasi-static start of every case at θ = 0 (thesis Appendix B, step 1): configuration
     I, or III where the valve starts on its seat. ``mats``: the distinct trains' matrices,
-    ``which`` each case's index into them."""
+    ``which`` each case's index into them; ``inverses`` their ``start_inverses`` (computed
+    here if not given)."""
+    if inverses is None:
+        inverses = [start_inverses(m) for m in mats]
     n = which.size
     cam = _cam_at(packed.breaks, packed.poly, packed.trig, packed.n_pieces, 0.0)
     held_q = np.zeros((n, 7))
@@ -291,10 +302,9 @@ def initial_states(mats, which, packed, omega, has_seat, seat_q):
     q = np.empty((n, 7))
     v = np.empty((n, 7))
     a = np.empty((n, 7))
-    for cfg in (1, 3):
-        inv = [held_inverses(m.mass, m.stiffness, HELD[cfg - 1]) for m in mats]
-        kinv = np.stack([k for k, _ in inv])[which]
-        minv = np.stack([m for _, m in inv])[which]
+    for i_cfg, cfg in enumerate((1, 3)):
+        kinv = np.stack([inv[i_cfg, 0] for inv in inverses])[which]
+        minv = np.stack([inv[i_cfg, 1] for inv in inverses])[which]
         held = np.broadcast_to(HELD[cfg - 1], (n, 7))
         qc, vc, ac = np.empty((n, 7)), np.empty((n, 7)), np.empty((n, 7))
         quasi_static_batch(kinv, minv, M, C, K, load, held, held_q, held_v, held_a, qc, vc, ac)
@@ -457,7 +467,7 @@ def run_batch(
     form = np.array([c.closure == "form" for c in cases], dtype=np.bool_)
     packed = pack([c.profile for c in cases])
     q0, v0, a0, cfg0 = initial_states([p.matrices for p in preps], which, packed, omega,
-                                      has_seat, seat_q)
+                                      has_seat, seat_q, [p.start_inverses for p in preps])
     out = _Outputs(n, n_out, n_rev, settings.max_events)
     common = (meff, q0, v0, a0, cfg0, seat_q, has_seat, form, omega, packed, out)
     if settings.method == "newmark-linear":
