@@ -477,10 +477,11 @@ def run_batch(
     status, n_events = out.status, out.n_events
     bad = np.flatnonzero(status == newmark.NONFINITE)
     if bad.size:
-        raise IntegrationError(
-            f"cases {bad.tolist()} became non-finite; a step of {dt_run:g} s is inside the "
-            "stability limit, so this is a defect: please report it with the case"
-        )
+        how = f"{settings.method}, step {dt_run:g} s" if dt_run else settings.method
+        why = ("the step is beyond the stability limit (the run was asked not to check it)"
+               if not check_stability_limit else
+               "this is a defect: please report it with the case")
+        raise IntegrationError(f"cases {bad.tolist()} became non-finite ({how}); {why}")
     bad = np.flatnonzero(status == exact.CHATTER)
     if bad.size:
         raise IntegrationError(

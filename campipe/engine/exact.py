@@ -238,8 +238,8 @@ def _state_active(q, v, z, VY, MC, Z, ZT, free, c, ci, nf, lo, nact, x, ct, st, 
     """Free coordinates and velocities from the mode pairs lo … nact − 1 (an output sample):
     VY[:, jj, s] holds (Re, Im) of V_sj·y0_j (doubled for a pair), so each term is the real
     part of one complex product; plus the particular solution. Without ``full_state`` only
-    the contact coordinates q1 and q7 (and their velocities) are computed: the others are
-    left NaN."""
+    the contact coordinates q1 and q7 (and their velocities) are computed: the others keep
+    the values of the segment's start (``_write_sample`` shows them as NaN)."""
     ns = 2 * nf
     if full_state:
         for s in range(ns):
@@ -253,8 +253,6 @@ def _state_active(q, v, z, VY, MC, Z, ZT, free, c, ci, nf, lo, nact, x, ct, st, 
         coord = free[c, ci, k]
         if not full_state:
             if coord != 0 and coord != 6:
-                q[coord] = np.nan
-                v[coord] = np.nan
                 continue
             for s in (k, k + nf):
                 acc = ZT[s].real * ct - ZT[s].imag * st
@@ -294,9 +292,9 @@ def _slope_bound(WC, G, GT, m, MC, lo, nact, gdeg, w, xa, xb):
 
 @njit(inline='always', nogil=True)
 def _write_sample(q_out, v_out, force_out, cam_out, cfg_out, c, k, q, v, gval, cam_held,
-                  seat_held, poly, trig, p, x, ct, st, w, cfg):
-    """Output sample k: coordinates and velocities (held ones on the cam and seat), forces,
-    cam lift."""
+                  seat_held, poly, trig, p, x, ct, st, w, cfg, full_state):
+    """Output sample k: coordinates and velocities (held ones on the cam and seat; without
+    ``full_state`` only q1 and q7, the others NaN), forces, cam lift."""
     lift = 0.0
     dlift = 0.0
     for kk in range(7, -1, -1):
@@ -305,8 +303,9 @@ def _write_sample(q_out, v_out, force_out, cam_out, cfg_out, c, k, q, v, gval, c
     lift += trig[c, p, 0] * st + trig[c, p, 1] * ct
     dlift += trig[c, p, 0] * ct - trig[c, p, 1] * st
     for i in range(7):
-        q_out[c, k, i] = q[i]
-        v_out[c, k, i] = v[i]
+        shown = full_state or i == 0 or i == 6
+        q_out[c, k, i] = q[i] if shown else np.nan
+        v_out[c, k, i] = v[i] if shown else np.nan
     if cam_held:
         q_out[c, k, 0] = -lift
         v_out[c, k, 0] = -w * dlift
@@ -617,7 +616,7 @@ def modal_exact_batch(
                 # A sample due at the segment start (the initial state, or a break or event
                 # that falls on an output angle) is the state here (gval holds its monitors).
                 _write_sample(q_out, v_out, force_out, cam_out, cfg_out, c, k_out, q, v, gval,
-                              cam_held, seat_held, poly, trig, p, x_s, ct, st, w, cfg)
+                              cam_held, seat_held, poly, trig, p, x_s, ct, st, w, cfg, full_state)
                 k_out += 1
             t_prev = t_s
             replan = True
@@ -869,7 +868,7 @@ def modal_exact_batch(
                                       cth, sth, deg, full_state)
                         _write_sample(q_out, v_out, force_out, cam_out, cfg_out, c, k_out, q, v,
                                       gval, cam_held, seat_held, poly, trig, p, x_n, cth, sth, w,
-                                      cfg)
+                                      cfg, full_state)
                         k_out += 1
                     if t_n >= t_end:
                         if not cam_held:
