@@ -151,7 +151,18 @@ def test_quick_bench_writes_its_table_and_plot(tmp_path):
     report = json.loads((out / "bench.json").read_text())
     assert report["quick"] and [c["agrees"] for c in report["checks"]] == [True]
     assert {r["peer"] for r in report["ratios"]} == {"newmark-linear", "solve_ivp"}
+    # The thesis algorithm's ratio at every step of its ladder, coarsest error first.
+    ladder = next(r for r in report["ratios"] if r["peer"] == "newmark-linear")["ladder"]
+    assert sorted(p["setting"] for p in ladder) == sorted(
+        f"dt {dt * 1e6:g} µs" for dt in QUICK.newmark_steps)
+    errors = [p["error"] for p in ladder]
+    assert errors == sorted(errors, reverse=True)
+    for p in ladder:
+        assert p["ratio"] == pytest.approx(p["seconds"] / p["campipe_seconds"])
+        assert float(by_setting[p["setting"]]["valve err [in]"]) == pytest.approx(
+            p["error"] / 0.0254, rel=1e-2)
     md = (out / "bench.md").read_text()
+    assert "### The thesis algorithm at each step of its ladder" in md
     assert "## Peers at equal valve-lift error" in md and "![wall time" in md
     assert "| separation-11000 | default (modal-exact) | tol 1e-12 s |" in md
 

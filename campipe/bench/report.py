@@ -154,6 +154,18 @@ def markdown(bench: Bench, plot_name: str | None = FILES["plot"]) -> str:
           _num(r["peer_point_seconds"], 1e3), _num(r["peer_point_error"], 1 / INCH, ".2e"),
           _num(r["ratio_at_peer_error"], fmt=".3g") + f" ({HOW[r['how_campipe']]})"]
          for r in bench.ratios])
+    ladders = [r for r in bench.ratios if r["peer"] == "newmark-linear" and r.get("ladder")]
+    if ladders:
+        lines += ["", "### The thesis algorithm at each step of its ladder", ""]
+        lines.append("newmark-linear's time at each step against the time campipe's default "
+                     "integrator needs for the same valve-lift error (as above).")
+        lines.append("")
+        lines += _table(
+            ["scene", "newmark step", "err [in]", "newmark ms", "campipe ms", "ratio"],
+            [[r["scene"], p["setting"], _num(p["error"], 1 / INCH, ".2e"),
+              _num(p["seconds"], 1e3), _num(p["campipe_seconds"], 1e3)
+              + f" ({HOW[p['how_campipe']]})", _num(p["ratio"], fmt=".3g")]
+             for r in ladders for p in r["ladder"]])
     if bench.goals:
         lines += ["", "Goals (issue 7), smallest ratio over the suite:", ""]
         for peer, g in bench.goals.items():
@@ -166,6 +178,13 @@ def markdown(bench: Bench, plot_name: str | None = FILES["plot"]) -> str:
                 + (f" campipe's ladder does not reach the peer's error on: "
                    f"{', '.join(g['campipe_not_reaching'])}." if g["campipe_not_reaching"]
                    else ""))
+            below = g.get("goal_reached_below_error", {})
+            if below:
+                lines.append(
+                    f"  - ≥ {g['goal']:g}× at every point of the {peer} ladder with a valve-lift "
+                    "error up to: " + "; ".join(
+                        f"{scene} {_num(e, 1 / INCH, '.1e')} in" if e == e else
+                        f"{scene} none" for scene, e in below.items()) + ".")
     a = bench.accuracy_for_cost
     if a:
         lines += ["", "## Accuracy for cost on 11000 rpm (issue 4)", ""]

@@ -151,6 +151,15 @@ def _ratios(scene: str, rows: list[dict]) -> list[dict]:
         t_mine, how_mine = measure.time_to_error([r["seconds"] for r in modal],
                                                  [r["valve_lift"] for r in modal],
                                                  point["valve_lift"])
+        # The same at every point of the peer's ladder: where the ratio stands at each error.
+        ladder = []
+        for r in sorted(pts, key=lambda r: -r["valve_lift"]):
+            t_at, how_at = measure.time_to_error([m["seconds"] for m in modal],
+                                                 [m["valve_lift"] for m in modal],
+                                                 r["valve_lift"])
+            ladder.append({"setting": r["setting"], "seconds": r["seconds"],
+                           "error": r["valve_lift"], "campipe_seconds": t_at,
+                           "how_campipe": how_at, "ratio": r["seconds"] / t_at})
         out.append({
             "scene": scene, "peer": peer,
             "default_seconds": default["seconds"], "default_error": default["valve_lift"],
@@ -160,6 +169,7 @@ def _ratios(scene: str, rows: list[dict]) -> list[dict]:
             "peer_point_error": point["valve_lift"],
             "campipe_seconds_at_peer_error": t_mine, "how_campipe": how_mine,
             "ratio_at_peer_error": point["seconds"] / t_mine,
+            "ladder": ladder,
         })
     return out
 
@@ -204,7 +214,18 @@ def _goals(ratios: list[dict]) -> dict:
         at_peer = min((r["ratio_at_peer_error"] for r in mine if r["ratio_at_peer_error"] > 0),
                       default=math.nan)
         at_default = min(r["ratio_at_default_error"] for r in mine)
+        # Per scene, the largest error from which on (to the most accurate point) every
+        # point of the peer's ladder is at least ``goal`` times slower than campipe.
+        below = {}
+        for r in mine:
+            bound = math.nan
+            for point in sorted(r["ladder"], key=lambda p: p["error"]):
+                if not point["ratio"] >= goal:
+                    break
+                bound = point["error"]
+            below[r["scene"]] = bound
         out[peer] = {"goal": goal, "min_ratio_at_peer_error": at_peer,
+                     "goal_reached_below_error": below,
                      "min_ratio_at_default_error": at_default,
                      "reached_at_peer_error": at_peer >= goal,
                      "reached_at_default_error": at_default >= goal,
