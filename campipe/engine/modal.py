@@ -98,6 +98,10 @@ def modal_data(sm: SystemMatrices, max_condition: float = 1e10) -> ModalData:
         A[nf:, :nf] = -mff_inv @ K[np.ix_(fr, fr)]
         A[nf:, nf:] = -mff_inv @ C[np.ix_(fr, fr)]
         lam, V = np.linalg.eig(A)
+        # A real A's eigenvalues come in exact conjugate pairs (LAPACK's real eig), which
+        # modal-exact relies on: it sums one mode of each pair, doubled.
+        upper = np.sort_complex(lam[lam.imag > 0])
+        assert np.array_equal(upper, np.sort_complex(lam[lam.imag < 0].conj())), lam
         if np.linalg.cond(V) > max_condition:
             raise DefectiveModesError(
                 f"configuration {cfg}: the modes are nearly defective (critically damped?); "
