@@ -35,7 +35,6 @@ from campipe.engine.newmark import (
     CAM_IMPACT,
     CAM_SEPARATION,
     EVENTS_TRUNCATED,
-    FAST,
     JUMP_FLOOR,
     NONFINITE,
     OK,
@@ -113,7 +112,7 @@ def _exps(lam, c, ci, ns, tau, ev):
         ev[j] = np.exp(lam[c, ci, j] * tau)
 
 
-@njit(inline='always', nogil=True, fastmath=FAST)
+@njit(inline='always', nogil=True)
 def _eval3(WC, lamc, nact, G, GT, m, tau, w, x, th):
     """Monitor m and its first two time derivatives τ after the segment start (local angle x,
     cam angle θ), exactly: the active mode pairs, the polynomial and the harmonic part."""
@@ -232,7 +231,7 @@ def _state(q, v, z, ya, vec, ev, y0, Z, ZT, free, c, ci, nf, ns, x, ct, st, rows
             v[free[c, ci, k]] = z[nf + k]
 
 
-@njit(inline='always', nogil=True, fastmath=FAST)
+@njit(inline='always', nogil=True)
 def _state_active(q, v, z, VY, MC, Z, ZT, free, c, ci, nf, lo, nact, x, ct, st, deg,
                   full_state):
     """Free coordinates and velocities from the mode pairs lo … nact − 1 (an output sample):
@@ -268,7 +267,7 @@ def _state_active(q, v, z, VY, MC, Z, ZT, free, c, ci, nf, lo, nact, x, ct, st, 
         v[coord] = z[k + nf] + pv
 
 
-@njit(inline='always', nogil=True, fastmath=FAST)
+@njit(inline='always', nogil=True)
 def _slope_bound(WC, G, GT, m, MC, lo, nact, gdeg, w, xa, xb):
     """An upper bound on |dg/dt| of monitor m over a step from local angle xa to xb, with the
     modal magnitudes at its start (they only decay): Σ|W_j λ_j||E_j| + max|P'| + ω|G_T|.
@@ -315,7 +314,7 @@ def _write_sample(q_out, v_out, force_out, cam_out, cfg_out, c, k, q, v, gval, c
     cfg_out[c, k] = cfg
 
 
-@njit(inline='always', nogil=True, fastmath=FAST)
+@njit(inline='always', nogil=True)
 def _advance(MC, lo, nact, cth, sth, cwh, swh):
     """One grid step: e^{λτ} of the mode pairs lo … nact − 1 and (cos θ, sin θ) by
     rotation."""
@@ -328,7 +327,7 @@ def _advance(MC, lo, nact, cth, sth, cwh, swh):
     return cth * cwh - sth * swh, sth * cwh + cth * swh
 
 
-@njit(inline='always', nogil=True, fastmath=FAST)
+@njit(inline='always', nogil=True)
 def _monitor_at_grid(WC, MC, lo, nact, G, GT, m, gdeg, w, x, cth, sth):
     """Monitor m and its time derivative at the current grid point from the mode pairs
     lo … nact − 1 and their advanced exponentials (no exp or sin/cos)."""
@@ -377,7 +376,7 @@ def _separation(sep_rev, c, n_rev, w, ta, tb):
         r += 1
 
 
-@njit(cache=True, nogil=True, fastmath=FAST)
+@njit(cache=True, nogil=True)
 def modal_exact_batch(
     train, load, n_free, free, lam, vec, vec_inv, a_inv, b_in, b_load, rho, sigma, sigma0,
     impulse, rho_vec, vnorm, lam_abs, zeta, meff, q0, v0, cfg0, seat_q, has_seat, form, omega,
