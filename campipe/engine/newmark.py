@@ -85,9 +85,10 @@ def locate(breaks, n_pieces, c, theta):
     return int(rev), lo
 
 
-@njit(cache=True, nogil=True)
+@njit(cache=True, nogil=True, inline="always")
 def horner2(coef, x, deg=7):
-    """Σ_{k ≤ deg} coef[k]·x^k and its first two derivatives in x, by Horner's scheme."""
+    """Σ_{k ≤ deg} coef[k]·x^k and its first two derivatives in x, by Horner's scheme.
+    Inlined, so a caller's view ``poly[c, p]`` costs no reference counting per call."""
     p0 = 0.0
     p1 = 0.0
     p2 = 0.0
@@ -289,20 +290,6 @@ def _newmark_step(typingctx, A, G, c, k, load, h, x, xn, z):
     return types.void(A, G, c, k, load, h, x, xn, z), codegen
 
 
-@njit(cache=True, nogil=True, inline="always")
-def _lift(poly, c, p, x, deg):
-    """``horner2`` on piece p of case c, indexing ``poly`` in place: a view per step would cost
-    two atomic reference-count updates."""
-    p0 = 0.0
-    p1 = 0.0
-    p2 = 0.0
-    for k in range(deg, -1, -1):
-        p2 = p2 * x + 2.0 * p1
-        p1 = p1 * x + p0
-        p0 = p0 * x + poly[c, p, k]
-    return p0, p1, p2
-
-
 @njit(cache=True, nogil=True, fastmath=FAST)
 def newmark_linear_batch(
     M, C, K, load, step_A, step_G, meff, q0, v0, a0, cfg0,
@@ -407,7 +394,7 @@ def newmark_linear_batch(
                 pdeg = _degree(poly, c, p)
                 pn, revn, thb = _next_break(breaks, npc, c, p, rev)
             x1 = th1 - rev * TWO_PI - breaks[c, p]
-            lift1, dl1, ddl1 = _lift(poly, c, p, x1, pdeg)
+            lift1, dl1, ddl1 = horner2(poly[c, p], x1, pdeg)
             ta = trig[c, p, 0]
             tb = trig[c, p, 1]
             if ta != 0.0 or tb != 0.0:
