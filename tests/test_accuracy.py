@@ -262,3 +262,23 @@ def test_contact_states_only_to_the_end_of_any_run(speed, revolutions):
     lean = run_batch([case], settings, full_state=False)
     assert np.array_equal(full.valve_lift, lean.valve_lift)
     assert np.isnan(lean.q[0, :, 1:6]).all() and np.isfinite(lean.q[0, :, [0, 6]]).all()
+
+
+def test_overdamped_modes_against_an_independent_integrator():
+    """Modes with real eigenvalues (overdamped: summed once, where modal-exact sums one mode of
+    each conjugate pair doubled) give the same separation run as SciPy's DOP853 through the
+    same events (``campipe.bench.ivp``, written from the matrices, not the modal forms)."""
+    import dataclasses
+
+    from campipe.bench.ivp import solve_case
+    from campipe.engine.batch import _modal
+
+    train = dataclasses.replace(TRAIN, damping_ratios=(1.8, 0.1, 1.5, 0.1, 0.1, 0.1, 0.1))
+    data = _modal(train)
+    ns = 2 * data.n_free[1]
+    assert np.sum(data.lam[1, :ns].imag == 0.0) == 4  # configuration II: two overdamped modes
+    case = Case(train, CAM, rpm(11000))
+    ours = run_batch([case], RunSettings(revolutions=2))
+    peer = solve_case(case, 2, method="DOP853", rtol=1e-10)
+    assert ours.cam_impacts[0] >= 2 and len(ours.events[0]) == len(peer.events)
+    assert np.max(np.abs(ours.valve_lift[0] - peer.valve_lift)) < 1e-9 * INCH
