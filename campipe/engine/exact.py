@@ -32,17 +32,16 @@ from numba import njit
 
 from campipe.engine.modal import NS
 from campipe.engine.newmark import (
-    CAM_IMPACT,
     CAM_SEPARATION,
     EVENTS_TRUNCATED,
     JUMP_FLOOR,
     NONFINITE,
     OK,
-    SEAT_IMPACT,
     SEAT_SEPARATION,
     TWO_PI,
     _config,
     _degree,
+    _impact,
     _record,
     horner2,
     locate,
@@ -784,11 +783,8 @@ def modal_exact_batch(
                         for i in range(7):
                             v[i] += impulse[tr, new - 1, 0, i] * dv
                         q[0] = -lift_e
-                        counts[c, 0] += 1
-                        vmax[c, 0] = max(vmax[c, 0], closing)
-                        mi = 1 if seat_held else 0
-                        _record(events, n_events, c, t_ev, CAM_IMPACT, cfg, new, closing,
-                                meff[c, mi] * closing)
+                        _impact(events, n_events, counts, vmax, meff, c, t_ev, False,
+                                seat_held, cfg, new, closing)
                     elif seat_held:
                         new = _config(cam_held, False)
                         _record(events, n_events, c, t_ev, SEAT_SEPARATION, cfg, new, 0.0,
@@ -800,11 +796,8 @@ def modal_exact_batch(
                         for i in range(7):
                             v[i] += impulse[tr, new - 1, 1, i] * dv
                         q[6] = qs
-                        counts[c, 1] += 1
-                        vmax[c, 1] = max(vmax[c, 1], closing)
-                        mi = 3 if cam_held else 2
-                        _record(events, n_events, c, t_ev, SEAT_IMPACT, cfg, new, closing,
-                                meff[c, mi] * closing)
+                        _impact(events, n_events, counts, vmax, meff, c, t_ev, True,
+                                cam_held, cfg, new, closing)
                     cfg = new
                     stalled = stalled + 1 if t_ev - t_s <= 1e-15 * (1.0 + t_s) else 0
                     t_s = t_ev
@@ -839,11 +832,8 @@ def modal_exact_batch(
                                 dv = -jump
                                 for i in range(7):
                                     v[i] += impulse[tr, cfg - 1, 0, i] * dv
-                                counts[c, 0] += 1
-                                vmax[c, 0] = max(vmax[c, 0], abs(jump))
-                                mi = 1 if seat_held else 0
-                                _record(events, n_events, c, t_break, CAM_IMPACT, cfg, cfg,
-                                        abs(jump), meff[c, mi] * abs(jump))
+                                _impact(events, n_events, counts, vmax, meff, c, t_break,
+                                        False, seat_held, cfg, cfg, abs(jump))
                             q[0] = -l_right
                             v[0] = -w * dl_right
                     p = nb

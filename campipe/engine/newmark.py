@@ -139,6 +139,20 @@ def _record(events, n_events, c, t, kind, c_from, c_to, velocity, impulse):
     n_events[c] = k + 1
 
 
+@njit(cache=True, nogil=True)
+def _impact(events, n_events, counts, vmax, meff, c, t, seat, other_held, c_from, c_to,
+            closing):
+    """Count a plastic impact of case c on the cam (``seat`` False) or the seat, keep its
+    largest closing velocity [m/s] and record the event with its impulse m_eff·v_closing;
+    ``other_held``: the other contact is held (``contact.impact_masses`` order)."""
+    side = 1 if seat else 0
+    counts[c, side] += 1
+    vmax[c, side] = max(vmax[c, side], closing)
+    mass = meff[c, 2 * side + (1 if other_held else 0)]
+    _record(events, n_events, c, t, SEAT_IMPACT if seat else CAM_IMPACT, c_from, c_to,
+            closing, mass * closing)
+
+
 @njit(cache=True, nogil=True, fastmath=FAST)
 def _row_force(M, C, K, load, c, i, a, v, q):
     """Contact force at coordinate i: row i of M·a + C·v + K·q − load (thesis Eqs. 26, 27)."""
@@ -384,11 +398,8 @@ def newmark_linear_batch(
                     elif abs(jump) > scale:
                         # The surface jumps into the follower (or, form-closed, drags it).
                         impulse_cam = True
-                        counts[c, 0] += 1
-                        vmax[c, 0] = max(vmax[c, 0], abs(jump))
-                        mi = 1 if seat_held else 0
-                        _record(events, n_events, c, thb / w, CAM_IMPACT, cfg, cfg,
-                                abs(jump), meff[c, mi] * abs(jump))
+                        _impact(events, n_events, counts, vmax, meff, c, thb / w, False,
+                                seat_held, cfg, cfg, abs(jump))
                 p = pn
                 rev = revn
                 pdeg = _degree(poly, c, p)
@@ -504,20 +515,14 @@ def newmark_linear_batch(
                 closing = xn[X_V] - vc
                 cam_next = True
                 impulse_cam = True
-                counts[c, 0] += 1
-                vmax[c, 0] = max(vmax[c, 0], closing)
-                mi = 1 if seat_next else 0
-                _record(events, n_events, c, t1, CAM_IMPACT, cfg, _config(True, seat_next),
-                        closing, meff[c, mi] * closing)
+                _impact(events, n_events, counts, vmax, meff, c, t1, False, seat_next, cfg,
+                        _config(True, seat_next), closing)
             if has_seat[c] and not seat_held and xn[X_Q + 6] < qs:
                 closing = -xn[X_V + 6]
                 seat_next = True
                 impulse_seat = True
-                counts[c, 1] += 1
-                vmax[c, 1] = max(vmax[c, 1], closing)
-                mi = 3 if cam_next else 2
-                _record(events, n_events, c, t1, SEAT_IMPACT, cfg, _config(cam_next, True),
-                        closing, meff[c, mi] * closing)
+                _impact(events, n_events, counts, vmax, meff, c, t1, True, cam_next, cfg,
+                        _config(cam_next, True), closing)
             cfg = _config(cam_next, seat_next)
             x, xn = xn, x
             if n % 1024 == 0 or n == n_steps[c] - 1:
