@@ -53,13 +53,7 @@ def parse_quantity(
             f"{key}: found the bare number {text!r}; write it with units, "
             f"e.g. '{text} {example}'"
         )
-    try:
-        q = ureg.Quantity(text.strip())
-    except Exception as exc:  # pint raises several unrelated types on bad text
-        raise QuantityError(
-            f"{key}: cannot read {text!r} as a quantity ({exc}); "
-            f"write a number and a unit, e.g. '1 {example}'"
-        ) from None
+    q = _read(text, key, example)
     if not isinstance(q, pint.Quantity):
         q = Q_(float(q), "")
     if q.dimensionless and not dimensionless:
@@ -73,6 +67,18 @@ def parse_quantity(
         raise QuantityError(
             f"{key}: found {text!r} [{q.dimensionality}], expected a quantity convertible "
             f"to {example} [{target.dimensionality}]"
+        ) from None
+
+
+def _read(text: str, key: str, example: str):
+    """``text`` as pint reads it (a Quantity, or a plain number), or a QuantityError naming the
+    key and suggesting ``example`` units."""
+    try:
+        return ureg.Quantity(text.strip())
+    except Exception as exc:  # pint raises several unrelated types on bad text
+        raise QuantityError(
+            f"{key}: cannot read {text!r} as a quantity ({exc}); "
+            f"write a number and a unit, e.g. '1 {example}'"
         ) from None
 
 
@@ -116,13 +122,7 @@ def parse_angular(text: str | float | int, units: str, key: str, example_units: 
             )
         raise QuantityError(f"{key}: expected a quantity such as '1 {example_units}', "
                             f"found {text!r}")
-    try:
-        q = ureg.Quantity(text.strip())
-    except Exception as exc:  # pint raises several unrelated types on bad text
-        raise QuantityError(
-            f"{key}: cannot read {text!r} as a quantity ({exc}); "
-            f"write a number and a unit, e.g. '1 {example_units}'"
-        ) from None
+    q = _read(text, key, example_units)
     base = q.to_base_units() if isinstance(q, pint.Quantity) else None
     if base is None or dict(base.unit_items()).get("radian") != 1:
         raise QuantityError(
