@@ -3,3 +3,16 @@
 Nothing here computes; the numerics never import from here. Each module imports its file
 format's library itself, so ``import campipe.io`` stays light.
 """
+
+from pathlib import Path
+
+
+def read_text(path: Path, what: str, error: type[Exception]) -> str:
+    """The UTF-8 text of ``path``, or ``error`` naming the file and what it was to hold
+    (``what``: "the spec", "the lift table")."""
+    try:
+        return path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise error(f"{path}: cannot read {what} ({exc.strerror})") from None
+    except UnicodeDecodeError:
+        raise error(f"{path}: not UTF-8 text") from None

@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from campipe.io import read_text
 from campipe.units import QuantityError, parse_angular, parse_quantity
 
 _HEADER = re.compile(r"^\s*(?P<name>[A-Za-z_]+)\s*\[(?P<units>[^\]]+)\]\s*$")
@@ -58,12 +59,7 @@ def read_lift_table(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
         a non-numeric or non-finite value, a row without exactly two values.
     """
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise LiftTableError(f"{path}: cannot read the lift table ({exc.strerror})") from None
-    except UnicodeDecodeError:
-        raise LiftTableError(f"{path}: not UTF-8 text") from None
+    text = read_text(path, "the lift table", LiftTableError)
     rows = [
         (n, row)
         for n, row in enumerate(csv.reader(text.splitlines()), 1)

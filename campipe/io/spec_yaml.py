@@ -11,6 +11,8 @@ from pathlib import Path
 
 import yaml
 
+from campipe.io import read_text
+
 
 class SpecFileError(ValueError):
     """A spec file that cannot be read as YAML data."""
@@ -78,10 +80,5 @@ def read_spec(path: str | Path) -> tuple[object, str]:
         For a missing or unreadable file, or YAML that :func:`parse_spec_text` refuses.
     """
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except OSError as exc:
-        raise SpecFileError(f"{path}: cannot read the spec ({exc.strerror})") from None
-    except UnicodeDecodeError:
-        raise SpecFileError(f"{path}: not UTF-8 text") from None
+    text = read_text(path, "the spec", SpecFileError)
     return parse_spec_text(text, str(path)), text
