@@ -66,26 +66,15 @@ def field_schema(f: Field) -> dict[str, object]:
     raise AssertionError(f.kind)
 
 
-def _profile(kind: str) -> dict[str, object]:
-    keys = PROFILE_KINDS[kind]
-    return {
-        "type": "object",
-        "properties": {"kind": {"const": kind},
-                       **{k: field_schema(PROFILE_FIELDS[k]) for k in keys}},
-        "required": ["kind", *keys],
-        "additionalProperties": False,
-    }
-
-
-def _defect(kind: str) -> dict[str, object]:
-    keys = DEFECT_KINDS[kind]
-    return {
-        "type": "object",
-        "properties": {"kind": {"const": kind},
-                       **{k: field_schema(DEFECT_FIELDS[k]) for k in keys}},
-        "required": ["kind", *keys],
-        "additionalProperties": False,
-    }
+def _one_of_kinds(kinds: dict, fields: dict) -> list[dict[str, object]]:
+    """A profile or defect: one object per kind, with that kind's keys (``kinds[kind]``), all
+    required."""
+    return [{"type": "object",
+             "properties": {"kind": {"const": kind},
+                            **{k: field_schema(fields[k]) for k in keys}},
+             "required": ["kind", *keys],
+             "additionalProperties": False}
+            for kind, keys in kinds.items()]
 
 
 def _run(study_wide: bool) -> dict[str, object]:
@@ -200,7 +189,7 @@ def study_schema() -> dict[str, object]:
         "additionalProperties": False,
         "$defs": {
             "model": {**model, "description": TOP_LEVEL["model"]},
-            "profile": {"oneOf": [_profile(k) for k in PROFILE_KINDS],
+            "profile": {"oneOf": _one_of_kinds(PROFILE_KINDS, PROFILE_FIELDS),
                         "description": TOP_LEVEL["profile"]},
             "profile_patch": {
                 "type": "object",
@@ -209,7 +198,8 @@ def study_schema() -> dict[str, object]:
                 "additionalProperties": False,
                 "description": "profile keys merged over the base's (a new kind replaces it)",
             },
-            "defects": {"type": "array", "items": {"oneOf": [_defect(k) for k in DEFECT_KINDS]},
+            "defects": {"type": "array",
+                        "items": {"oneOf": _one_of_kinds(DEFECT_KINDS, DEFECT_FIELDS)},
                         "description": TOP_LEVEL["defects"]},
             **{k: field_schema(CASE_FIELDS[k]) for k in ("closure", "seat", "speed")},
             "quantity": {"type": "string", "pattern": QUANTITY_PATTERN,
