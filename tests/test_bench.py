@@ -11,7 +11,7 @@ import pytest
 from click.testing import CliRunner
 from numpy.testing import assert_allclose
 
-from campipe.bench import fidelity, measure, scaling
+from campipe.bench import fidelity, measure, run, scaling
 from campipe.bench.ivp import solve_case
 from campipe.bench.suite import INCH, QUICK, rpm, suite
 from campipe.cli import main
@@ -95,6 +95,57 @@ def test_time_to_error_interpolates_and_extrapolates_in_log_log():
     t, how = measure.time_to_error([1.0, 2.0, 10.0], [1e-4, 1e-3, 1e-5], 1e-5)
     assert how == "interpolated" and t == pytest.approx(10.0)
     assert measure.time_to_error([1.0, 2.0], [1e-4, 1e-4], 1e-6) == (math.inf, "not reached")
+
+
+def test_measured_time_to_error_is_a_lower_bound_beyond_the_ladder():
+    times = np.array([1.0, 10.0, 100.0])
+    errs = 1e-3 / times
+    assert measure.measured_time_to_error(times, errs, 3e-5) == (pytest.approx(1e-3 / 3e-5),
+                                                                   True)
+    # Beyond the ladder: its most accurate point's time, not the extrapolated 1e4.
+    assert measure.measured_time_to_error(times, errs, 1e-7) == (100.0, False)
+    assert measure.measured_time_to_error([], [], 1e-7) == (math.inf, False)
+
+
+def _rows(scene, default, peer):
+    """Bench rows of one scene: campipe's default (time, error) and a newmark ladder."""
+    rows = [{"scene": scene, "family": "modal-exact", "setting": "tol 1e-12 s",
+             "seconds": default[0], "valve_lift": default[1], "default": True}]
+    rows += [{"scene": scene, "family": "newmark-linear", "setting": f"dt {dt:g} µs",
+              "seconds": t, "valve_lift": e, "thesis": dt == 1.0} for dt, t, e in peer]
+    return rows
+
+
+def test_the_newmark_goal_is_judged_on_measured_ratios():
+    """The issue's ratio (the peer's time to the default's error) is judged on what the
+    ladder measured: a lower bound where the peer never reaches the default's error."""
+    # Scene a: newmark (error ∝ dt) never reaches 1e-12; its finest point costs 40× the
+    # default, extrapolated far more. Scene b: its finest point reaches the default's error.
+    a = _rows("a", (1.0, 1e-12), [(1.0, 2.0, 1e-4), (0.1, 20.0, 1e-5), (0.025, 80.0, 2.5e-6)])
+    b = _rows("b", (1.0, 1e-6), [(1.0, 2.0, 1e-4), (0.1, 20.0, 1e-5), (0.01, 200.0, 1e-6)])
+    ratios = run._ratios("a", a) + run._ratios("b", b)
+    ra, rb = ratios
+    assert not ra["peer_reaches_default_error"] and rb["peer_reaches_default_error"]
+    assert ra["measured_ratio_at_default_error"] == pytest.approx(80.0)
+    assert ra["ratio_at_default_error"] > 1e6  # the extrapolation, reported beside it
+    assert rb["measured_ratio_at_default_error"] == pytest.approx(200.0)
+    # At the thesis step campipe's cheapest point is already more accurate: 2×.
+    assert ra["ratio_at_peer_error"] == pytest.approx(2.0)
+    goal = run._goals(ratios)["newmark-linear"]
+    assert goal["min_ratio_at_default_error"] == pytest.approx(80.0)
+    assert goal["reached_at_default_error"] and not goal["reached_at_peer_error"]
+    assert goal["verdict_at_default_error"] == "reached"
+    assert goal["peer_not_reaching_default_error"] == ["a"]
+    # Were the finest step only 5× the default's time, the bound would not show the goal; were
+    # the step that reaches the default's error 8×, it would not be reached.
+    a[-1]["seconds"] = 5.0
+    b[-1]["seconds"] = 8.0
+    assert run._goals(run._ratios("b", b))["newmark-linear"]["verdict_at_default_error"] == (
+        "not reached")
+    goal = run._goals(run._ratios("a", a))["newmark-linear"]
+    assert goal["min_ratio_at_default_error"] == pytest.approx(5.0)
+    assert not goal["reached_at_default_error"]
+    assert goal["verdict_at_default_error"] == "not shown (a lower bound)"
 
 
 def test_the_reduced_model_on_a_slow_scene_is_within_its_stated_tolerance():

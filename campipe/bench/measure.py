@@ -233,3 +233,23 @@ def time_to_error(times, errs, target: float) -> tuple[float, str]:
         if s < 0:
             return float(t[-1] * (target / e[-1]) ** s), "extrapolated"
     return math.inf, "not reached"
+
+
+def measured_time_to_error(times, errs, target: float) -> tuple[float, bool]:
+    """What the ladder itself shows of the time to reach ``target``, without extrapolating.
+
+    Returns
+    -------
+    seconds : float
+        As :func:`time_to_error` where a point reaches the target; otherwise the time of the
+        ladder's most accurate point, which still does not: a finer setting is needed, so
+        reaching the target costs more than that (a lower bound). inf for an empty ladder.
+    reached : bool
+        True when a ladder point reaches the target (``seconds`` is then the estimate
+        itself), False when ``seconds`` is the lower bound.
+    """
+    seconds, how = time_to_error(times, errs, target)
+    if how in ("cheapest", "interpolated"):
+        return seconds, True
+    t, _ = pareto(np.asarray(times, float), np.asarray(errs, float))
+    return (float(t[-1]) if t.size else math.inf), False
