@@ -183,9 +183,10 @@ def test_quick_bench_writes_its_table_and_plot(tmp_path):
     result = CliRunner().invoke(main, ["bench", "--quick", "--scene", "separation-11000",
                                        "--no-scaling", "-o", str(out)])
     assert result.exit_code == 0, result.output
-    for name in ("bench.md", "bench.csv", "bench.json", "bench.png"):
+    for name in ("bench.md", "bench.csv", "bench.json", "bench.png", "bench-events.png"):
         assert (out / name).is_file()
-    assert (out / "bench.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    for name in ("bench.png", "bench-events.png"):
+        assert (out / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     with open(out / "bench.csv") as fh:
         rows = list(csv.DictReader(fh))
     expected = ([("modal-exact", f"tol {t:g} s") for t in QUICK.modal_tolerances]
@@ -214,7 +215,8 @@ def test_quick_bench_writes_its_table_and_plot(tmp_path):
             p["error"] / 0.0254, rel=1e-2)
     md = (out / "bench.md").read_text()
     assert "### The thesis algorithm at each step of its ladder" in md
-    assert "## Peers at equal valve-lift error" in md and "![wall time" in md
+    assert "## Peers at equal valve-lift error" in md and "](bench.png)" in md
+    assert "](bench-events.png)" in md
     assert "| separation-11000 | default (modal-exact) | tol 1e-12 s |" in md
 
 

@@ -1,6 +1,7 @@
-"""The bench's files: a markdown report, the rows as CSV, everything as JSON, a PNG plot of wall
-time against valve-lift error. The only module of ``campipe.bench`` that writes files;
-matplotlib (the ``plot`` extra) is imported only inside :func:`plot`.
+"""The bench's files: a markdown report, the rows as CSV, everything as JSON, and PNG plots of
+wall time against the valve-lift error and against the event errors (separation angle, seating
+velocity). The only module of ``campipe.bench`` that writes files; matplotlib (the ``plot``
+extra) is imported only inside :func:`plot`.
 """
 
 from __future__ import annotations
@@ -15,9 +16,13 @@ from campipe.bench.run import FAMILIES, Bench
 from campipe.bench.suite import INCH
 
 #: File names written into the output folder.
-FILES = {"markdown": "bench.md", "csv": "bench.csv", "json": "bench.json", "plot": "bench.png"}
-#: Errors below this [in] are drawn at it (a log axis has no zero).
-PLOT_FLOOR = 1e-14
+FILES = {"markdown": "bench.md", "csv": "bench.csv", "json": "bench.json", "plot": "bench.png",
+         "events_plot": "bench-events.png"}
+#: The errors each plot draws: (row key, axis label, factor from SI, floor in the axis's unit:
+#: smaller errors are drawn at it, as a log axis has no zero).
+VALVE_LIFT = ("valve_lift", "valve-lift max error [in]", 1 / INCH, 1e-14)
+EVENT_ERRORS = (("separation_angle", "separation-angle error [deg]", math.degrees(1.0), 1e-16),
+                ("seating_velocity", "seating-velocity error [in/s]", 1 / INCH, 1e-14))
 #: How a time-to-error was found, in words.
 HOW = {"cheapest": "its cheapest point is already below", "interpolated": "interpolated",
        "extrapolated": "not reached in its ladder; extrapolated",
@@ -96,7 +101,7 @@ def summary_rows(bench: Bench) -> list[list[str]]:
     return out
 
 
-def markdown(bench: Bench, plot_name: str | None = FILES["plot"]) -> str:
+def markdown(bench: Bench, with_plots: bool = True) -> str:
     """The report as markdown."""
     m = bench.meta
     lines = [f"# campipe bench{' --quick' if bench.quick else ''}", ""]
@@ -110,8 +115,10 @@ def markdown(bench: Bench, plot_name: str | None = FILES["plot"]) -> str:
                  f"{m['reference']}; output every {m['output_every_deg']:g} deg. Timing: "
                  f"{m['timing']}.")
     lines.append("")
-    if plot_name:
-        lines += [f"![wall time against valve-lift error]({plot_name})", ""]
+    if with_plots:
+        lines += [f"![wall time against valve-lift error]({FILES['plot']})", "",
+                  f"![wall time against separation-angle and seating-velocity error]"
+                  f"({FILES['events_plot']})", ""]
     lines += ["## The reference, checked", ""]
     lines.append(f"Second reference: {m['reference_check']}. Stated agreement: valve lift "
                  f"{m['agreement']['valve_lift'] / INCH:g} in, event angles "
@@ -283,57 +290,72 @@ def write_csv(bench: Bench, path: Path) -> Path:
     return path
 
 
-def plot(bench: Bench, path: Path) -> Path:
-    """Wall time per case against valve-lift error, one panel per scene."""
+def plot(bench: Bench, path: Path, errors: tuple[tuple, ...] = (VALVE_LIFT,)) -> Path:
+    """Wall time per case against each error of ``errors``: a panel per scene and error, for
+    the scenes that have that error (a separation, a seat)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    scenes = list(dict.fromkeys(r["scene"] for r in bench.rows))
-    ncol = min(3, len(scenes))
-    nrow = math.ceil(len(scenes) / ncol)
+    panels = [(scene, err) for err in errors
+              for scene in dict.fromkeys(r["scene"] for r in bench.rows)
+              if any(r["scene"] == scene and _finite(r.get(err[0])) for r in bench.rows)]
+    ncol = max(1, min(3, len(panels)))
+    nrow = max(1, math.ceil(len(panels) / ncol))
     fig, axes = plt.subplots(nrow, ncol, figsize=(4.6 * ncol, 3.8 * nrow), squeeze=False)
     styles = {"modal-exact": ("C0", "o-"), "modal-exact capped": ("C9", "s:"),
               "reduced": ("C2", "^--"), "contacts only": ("C4", "P"),
               "newmark-linear": ("C3", "D-"),
               "solve_ivp": ("C1", "v-")}
-    for ax, scene in zip(axes.flat, scenes, strict=False):
-        mine = [r for r in bench.rows if r["scene"] == scene]
+    for ax, (scene, (key, label, scale, floor)) in zip(axes.flat, panels, strict=False):
+        mine = [r for r in bench.rows if r["scene"] == scene and _finite(r.get(key))]
+
+        def x_of(r: dict, key=key, scale=scale, floor=floor) -> float:
+            return max(r[key] * scale, floor)
+
         for fam in FAMILIES:
             pts = [r for r in mine if r["family"] == fam]
             if not pts:
                 continue
             if fam == "reduced":
-                pts = sorted(pts, key=lambda r: r["valve_lift"])
+                pts = sorted(pts, key=lambda r, key=key: r[key])
             color, style = styles[fam]
-            x = [max(r["valve_lift"] / INCH, PLOT_FLOOR) for r in pts]
-            y = [r["seconds"] * 1e3 for r in pts]
-            ax.plot(x, y, style, color=color, ms=4, lw=1, label=fam)
+            ax.plot([x_of(r) for r in pts], [r["seconds"] * 1e3 for r in pts], style,
+                    color=color, ms=4, lw=1, label=fam)
         for r in mine:
-            x = max(r["valve_lift"] / INCH, PLOT_FLOOR)
             if r.get("default"):
-                ax.plot(x, r["seconds"] * 1e3, "*", color="k", ms=12, label="default")
+                ax.plot(x_of(r), r["seconds"] * 1e3, "*", color="k", ms=12, label="default")
             if r.get("thesis"):
-                ax.plot(x, r["seconds"] * 1e3, "s", mfc="none", color="k", ms=9,
+                ax.plot(x_of(r), r["seconds"] * 1e3, "s", mfc="none", color="k", ms=9,
                         label="thesis (1 µs)")
         ax.set_xscale("log")
         ax.set_yscale("log")
-        ax.set_title(scene, fontsize=10)
-        ax.set_xlabel("valve-lift max error [in]")
+        ax.set_title(scene if len(errors) == 1 else f"{scene}: {label.split(' error')[0]}",
+                     fontsize=10)
+        ax.set_xlabel(label)
         ax.set_ylabel("wall time per case [ms]")
         ax.grid(True, which="major", alpha=0.3)
-    for ax in list(axes.flat)[len(scenes):]:
+    for ax in list(axes.flat)[len(panels):]:
         ax.axis("off")
-    handles, labels = axes.flat[0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=8,
-               frameon=False)
-    fig.suptitle("campipe bench: wall time against valve-lift error"
+    # One legend entry per label, from every panel (a panel may lack a family).
+    entries = {}
+    for ax in axes.flat:
+        for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
+            entries.setdefault(lab, h)
+    fig.legend(list(entries.values()), list(entries), loc="lower center", ncol=len(entries),
+               fontsize=8, frameon=False)
+    what = " and ".join(label.split(" error")[0] for _, label, _, _ in errors)
+    fig.suptitle(f"campipe bench: wall time against {what} error"
                  + (" (--quick)" if bench.quick else ""), fontsize=11)
     fig.tight_layout(rect=(0, 0.05, 1, 0.97))
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
+
+
+def _finite(x) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
 
 
 def write_report(bench: Bench, directory: str | Path, with_plot: bool = True) -> dict[str, Path]:
@@ -343,9 +365,10 @@ def write_report(bench: Bench, directory: str | Path, with_plot: bool = True) ->
     paths = {k: directory / v for k, v in FILES.items()}
     if with_plot:
         plot(bench, paths["plot"])
+        plot(bench, paths["events_plot"], EVENT_ERRORS)
     else:
-        del paths["plot"]
-    paths["markdown"].write_text(markdown(bench, FILES["plot"] if with_plot else None))
+        del paths["plot"], paths["events_plot"]
+    paths["markdown"].write_text(markdown(bench, with_plot))
     write_csv(bench, paths["csv"])
     paths["json"].write_text(json.dumps(_clean(asdict(bench)), indent=1))
     return paths
