@@ -100,10 +100,10 @@ def test_the_archive_carries_cf_metadata_from_the_table(small):
     assert json.loads(a["study_axes"]) == [
         {"key": "speed", "name": "speed_rpm", "kind": "sweep", "size": 3},
         {"key": "seat", "name": "seat", "kind": "sweep", "size": 2}]
-    # compressed, one case per chunk
+    # compressed, up to eight cases per chunk (this study has six)
     enc = ds.valve_lift.encoding
-    assert enc["zlib"] and enc["chunksizes"] == (1, 721)
-    assert ds.q.encoding["chunksizes"] == (1, 721, 7)
+    assert enc["zlib"] and enc["chunksizes"] == (6, 721)
+    assert ds.q.encoding["chunksizes"] == (6, 721, 7)
     with netCDF4.Dataset(archive) as nc:
         assert nc["cam_force"].filters()["zlib"]
     # smaller than its raw arrays (float histories barely compress; time and flags do)
@@ -179,6 +179,36 @@ def test_batches_share_run_settings_and_are_cut_to_size():
     for p in plans:
         assert len({c.settings for c in p.cases}) == 1
     assert sorted(c.index for p in plans for c in p.cases) == list(range(12))
+
+
+def test_interleaved_batches_fill_shared_chunks_and_batch_files_are_uncompressed(tmp_path):
+    """Two run settings alternate along the study, so each batch writes every other row and
+    each archive chunk of eight cases is filled by several batches; the archive still holds
+    each case's own results. Batch files (kept here) are written uncompressed."""
+    spec = SMALL.replace("run: {revolutions: 2, record: [q, member_loads]}",
+                         "run: {revolutions: 1}")
+    spec = spec.replace("[6000 rpm, 9524 rpm, 11000 rpm]",
+                        "[6000 rpm, 8000 rpm, 9524 rpm, 11000 rpm, 12000 rpm]")
+    spec += "  run.tolerance: [1e-12 s, 1e-6 s]\n"
+    study = load_study(write_spec(tmp_path, spec))
+    assert len(study.cases) == 20
+    archive = tmp_path / "mixed.nc"
+    run_study(study, archive, scheduler="synchronous", batch_size=3, keep_parts=True)
+    ds = load(archive)
+    assert ds.valve_lift.encoding["chunksizes"] == (8, 361)  # one turn, every degree
+    by_settings = {}
+    for c in study.cases:
+        by_settings.setdefault(c.settings, []).append(c)
+    for settings, cases in by_settings.items():
+        assert [c.index for c in cases][1] - [c.index for c in cases][0] == 2
+        ref = run_batch([c.case for c in cases], settings, full_state=False)
+        rows = [c.index for c in cases]
+        assert_array_equal(ds.valve_lift.values[rows], ref.valve_lift)
+        assert_array_equal(ds.cam_impacts.values[rows], ref.cam_impacts)
+    parts = list(parts_directory(archive).glob("batch-*.nc"))
+    assert len(parts) == 8
+    with netCDF4.Dataset(parts[0]) as nc:
+        assert not nc["valve_lift"].filters()["zlib"]
 
 
 KILLED = """

@@ -134,7 +134,10 @@ def store_batch(data: BatchData, directory: Path, record: tuple[str, ...]) -> Pa
     """Write a batch file atomically; returns its path."""
     sizes, specs, arrays, attrs = batch_layout(data, record)
     directory.mkdir(parents=True, exist_ok=True)
-    return write_file(directory / f"batch-{data.key}.nc", sizes, specs, arrays, attrs)
+    # Uncompressed: a batch file lives only until the archive is assembled (compressing it
+    # would cost as much again as the archive's own compression).
+    return write_file(directory / f"batch-{data.key}.nc", sizes, specs, arrays, attrs,
+                      complevel=0)
 
 
 def _usable(attrs: dict, record: tuple[str, ...]) -> bool:
