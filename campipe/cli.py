@@ -221,6 +221,7 @@ def study(spec, output, sets, scheduler, workers, batch_size, keep_parts, progre
     import shlex
 
     from campipe.engine import IntegrationError
+    from campipe.io.archive import ArchiveBusyError
     from campipe.study.execute import run_study
     from campipe.study.progress import Progress
 
@@ -248,6 +249,8 @@ def study(spec, output, sets, scheduler, workers, batch_size, keep_parts, progre
     except IntegrationError as exc:
         raise click.ClickException(f"{exc}\nBatches finished before it are stored; fix the "
                                    "spec and rerun the same command to resume.") from None
+    except ArchiveBusyError as exc:
+        raise click.ClickException(str(exc)) from None
     except ValueError as exc:
         raise click.UsageError(str(exc)) from None
     click.echo(f"campipe study: {report.summary()}", err=True)

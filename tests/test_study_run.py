@@ -5,6 +5,7 @@ import math
 import os
 import re
 import signal
+import socket
 import subprocess
 import sys
 import time
@@ -13,10 +14,13 @@ import netCDF4
 import numpy as np
 import pytest
 import xarray as xr
+from click.testing import CliRunner
 from numpy.testing import assert_array_equal
 from study_helpers import INCH, load, write_spec
 
+from campipe.cli import main
 from campipe.engine import MEMBER_LOADS, member_loads, run_batch
+from campipe.io.archive import ArchiveBusyError, lock_path, writing
 from campipe.io.spec_yaml import parse_spec_text
 from campipe.study import check_spec, expand, load_study
 from campipe.study.execute import parts_directory, plan_batches, run_study
@@ -241,6 +245,8 @@ def test_a_killed_study_resumes_computing_only_the_missing_batches(tmp_path):
             proc.kill()
     assert proc.returncode == -signal.SIGKILL
     assert not (killed / "slow.nc").exists()  # never a half-written archive
+    # the killed run's lock names it; the rerun takes it over (its process is gone)
+    assert json.loads(lock_path(killed / "slow.nc").read_text())["pid"] == proc.pid
     done = {p: (p.stat().st_ino, p.stat().st_mtime_ns) for p in parts.glob("batch-*.nc")}
     assert 1 <= len(done) < 24
     rerun = subprocess.run(cmd, capture_output=True, text=True, check=True)
@@ -249,6 +255,7 @@ def test_a_killed_study_resumes_computing_only_the_missing_batches(tmp_path):
     for p, stamp in done.items():  # the stored batches were read, not redone
         assert (p.stat().st_ino, p.stat().st_mtime_ns) == stamp
     assert not list(parts.glob(".*.tmp"))  # the killed run's temporary file is gone
+    assert not lock_path(killed / "slow.nc").exists()
     # the same as a study that was never interrupted
     whole = tmp_path / "whole"
     whole.mkdir()
@@ -256,6 +263,54 @@ def test_a_killed_study_resumes_computing_only_the_missing_batches(tmp_path):
                        scheduler="threads", batch_size=5)
     assert report.computed == 24
     xr.testing.assert_identical(load(killed / "slow.nc"), load(whole / "slow.nc"))
+
+
+def test_a_second_run_on_a_busy_archive_stops_and_touches_nothing(small, tmp_path):
+    """While another live process holds the archive's lock, a run (API or CLI) stops with an
+    error naming the holder and the lock, and leaves the holder's files alone; once the
+    holder is gone its lock is taken over and released at the end."""
+    study, _, archive, spec = small
+    target = tmp_path / "small.nc"
+    lock = lock_path(target)
+    parts = parts_directory(target)
+    parts.mkdir()
+    in_progress = parts / ".batch-x.nc.1-2-3.tmp"  # the holder's batch being written
+    in_progress.write_bytes(b"partial")
+    holder = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(120)"])
+    try:
+        lock.write_text(json.dumps({"pid": holder.pid, "host": socket.gethostname(),
+                                    "started": "2026-11-22T08:00:00Z"}))
+        with pytest.raises(ArchiveBusyError, match=(
+                rf"small.nc is being written by process {holder.pid} on .* since "
+                rf"2026-11-22T08:00:00Z.* remove {re.escape(str(lock))}")):
+            run_study(study, target, scheduler="synchronous")
+        result = CliRunner().invoke(main, ["study", str(spec), "-o", str(target),
+                                           "--no-progress"])
+        assert result.exit_code == 1 and "is being written by process" in result.output
+        assert "Traceback" not in result.output
+        assert in_progress.exists() and lock.exists() and not target.exists()
+    finally:
+        holder.kill()
+        holder.wait()
+    report = run_study(study, target, scheduler="synchronous")
+    assert report.computed == 6 and not lock.exists() and not in_progress.exists()
+    xr.testing.assert_identical(load(target), load(archive))
+
+
+@pytest.mark.parametrize("content", [
+    {"pid": 2**22 + 12345, "host": "another-host", "started": "2026-11-22T08:00:00Z"},
+    None,  # empty: its writer has not filled it in yet
+])
+def test_a_lock_that_cannot_be_checked_is_left_alone(tmp_path, content):
+    """A lock from another host (its process cannot be checked) or one still empty is never
+    taken over."""
+    target = tmp_path / "a.nc"
+    lock = lock_path(target)
+    lock.write_text(json.dumps(content) if content else "")
+    with pytest.raises(ArchiveBusyError, match="another-host" if content else "another run"):
+        with writing(target):
+            pass
+    assert lock.read_text() == (json.dumps(content) if content else "")
 
 
 def test_stale_and_temporary_files_are_ignored_and_cleaned(small, tmp_path):

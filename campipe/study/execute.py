@@ -8,6 +8,9 @@
   only the cases none of them has: an interrupted study resumes where it stopped.
 - The archive is assembled by streaming the batch files' rows into one new file at a
   temporary path, renamed into place when complete; memory stays bounded by a batch.
+- A run holds ``<archive>.lock`` throughout (``campipe.io.archive.writing``): a second run on
+  the same archive stops with a clear error instead of removing the first one's files; the
+  lock of a run that died on this host is taken over.
 
 Schedulers: ``threads`` (dask's local threaded scheduler, one thread per core: the engine
 releases the GIL), ``synchronous``, ``processes``, or the address of a dask.distributed
@@ -40,6 +43,7 @@ from campipe.io.archive import (
     read_variable,
     runs,
     write_file,
+    writing,
 )
 from campipe.study.expand import ResolvedCase, Study
 from campipe.study.layout import (
@@ -219,54 +223,57 @@ def run_study(
     ------
     campipe.engine.IntegrationError
         If a case fails; batches finished before it stay stored for the rerun.
+    campipe.io.archive.ArchiveBusyError
+        If another run is writing the same archive (its lock, ``<archive>.lock``, is held).
     """
     started = time.monotonic()
     archive = Path(archive)
     archive.parent.mkdir(parents=True, exist_ok=True)
-    _clean_temporaries(archive)
-    total = len(study.cases)
-    if archive.exists():
-        try:
-            _, _, attrs = read_index(archive)
-            if attrs.get("study_key") == study_key(study):
-                log.info("%s already holds this study", archive)
-                return StudyReport(archive, total, total, 0, 0, True,
-                                   time.monotonic() - started)
-        except ArchiveFileError as exc:
-            log.warning("existing %s unreadable (%s): it will be replaced", archive, exc)
-    found = find_results(study, archive)
-    missing = [c for c in study.cases if c.case_id not in found]
-    local = "://" not in scheduler
-    if local and scheduler not in LOCAL_SCHEDULERS:
-        raise ValueError(f"--scheduler: found {scheduler!r}, expected one of "
-                         f"{', '.join(LOCAL_SCHEDULERS)} or an address such as "
-                         "tcp://127.0.0.1:8786")
-    workers = workers or (1 if scheduler == "synchronous" else default_workers())
-    size = batch_size or default_batch_size(len(missing), workers)
-    plans = plan_batches(missing, study.record, size)
-    log.info("%s: %d cases, %d reused from earlier runs; computing %d in %d batches of up "
-             "to %d on %s", study.name, total, total - len(missing), len(missing), len(plans),
-             size, scheduler)
-    bar = progress(total, total - len(missing)) if progress else None
-    parts = parts_directory(archive)
-    store = functools.partial(_store, parts, study.record, on_batch)
+    with writing(archive):
+        _clean_temporaries(archive)
+        total = len(study.cases)
+        if archive.exists():
+            try:
+                _, _, attrs = read_index(archive)
+                if attrs.get("study_key") == study_key(study):
+                    log.info("%s already holds this study", archive)
+                    return StudyReport(archive, total, total, 0, 0, True,
+                                       time.monotonic() - started)
+            except ArchiveFileError as exc:
+                log.warning("existing %s unreadable (%s): it will be replaced", archive, exc)
+        found = find_results(study, archive)
+        missing = [c for c in study.cases if c.case_id not in found]
+        local = "://" not in scheduler
+        if local and scheduler not in LOCAL_SCHEDULERS:
+            raise ValueError(f"--scheduler: found {scheduler!r}, expected one of "
+                             f"{', '.join(LOCAL_SCHEDULERS)} or an address such as "
+                             "tcp://127.0.0.1:8786")
+        workers = workers or (1 if scheduler == "synchronous" else default_workers())
+        size = batch_size or default_batch_size(len(missing), workers)
+        plans = plan_batches(missing, study.record, size)
+        log.info("%s: %d cases, %d reused from earlier runs; computing %d in %d batches of up "
+                 "to %d on %s", study.name, total, total - len(missing), len(missing),
+                 len(plans), size, scheduler)
+        bar = progress(total, total - len(missing)) if progress else None
+        parts = parts_directory(archive)
+        store = functools.partial(_store, parts, study.record, on_batch)
 
-    def stored(s: _Stored) -> None:
-        log.debug("batch %s stored (%d cases)", s.key, s.n_cases)
-        if bar:
-            bar.advance(s.n_cases)
+        def stored(s: _Stored) -> None:
+            log.debug("batch %s stored (%d cases)", s.key, s.n_cases)
+            if bar:
+                bar.advance(s.n_cases)
 
-    if plans:
-        if local:
-            _run_local(plans, scheduler, workers, store, stored)
-        else:
-            _run_distributed(plans, scheduler, store, stored)
-    found = find_results(study, archive)
-    assemble(study, archive, found, command)
-    if not keep_parts and parts.is_dir():
-        shutil.rmtree(parts)
-    return StudyReport(archive, total, total - len(missing), len(missing), len(plans), False,
-                       time.monotonic() - started)
+        if plans:
+            if local:
+                _run_local(plans, scheduler, workers, store, stored)
+            else:
+                _run_distributed(plans, scheduler, store, stored)
+        found = find_results(study, archive)
+        assemble(study, archive, found, command)
+        if not keep_parts and parts.is_dir():
+            shutil.rmtree(parts)
+        return StudyReport(archive, total, total - len(missing), len(missing), len(plans),
+                           False, time.monotonic() - started)
 
 
 def _store(parts: Path, record: tuple[str, ...], on_batch: BatchHook | None,
