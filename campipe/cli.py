@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import logging
+import sys
 
 import click
 import numpy as np
@@ -227,7 +228,7 @@ def study(spec, output, sets, scheduler, workers, batch_size, keep_parts, progre
 
     loaded = _load(spec, sets)
     archive = _archive_path(loaded, spec, output)
-    stderr = click.get_text_stream("stderr")
+    stderr = sys.stderr
 
     def bar(total, done):
         return Progress(total, stderr.write, done=done, terminal=stderr.isatty())
@@ -444,7 +445,7 @@ def bench(quick, output, scenes, scaling, plot) -> None:
         except ImportError:
             raise click.UsageError("--plot needs matplotlib: pip install 'campipe[plot]', or "
                                    "pass --no-plot") from None
-    stderr = click.get_text_stream("stderr")
+    stderr = sys.stderr
     try:
         result = run_bench(quick, scenes or None, with_scaling=scaling,
                            progress=lambda text: stderr.write(f"campipe bench: {text}\n"))
