@@ -204,9 +204,9 @@ def test_interleaved_batches_fill_shared_chunks_and_batch_files_are_uncompressed
     for c in study.cases:
         by_settings.setdefault(c.settings, []).append(c)
     for settings, cases in by_settings.items():
-        assert [c.index for c in cases][1] - [c.index for c in cases][0] == 2
-        ref = run_batch([c.case for c in cases], settings, full_state=False)
         rows = [c.index for c in cases]
+        assert set(np.diff(rows)) == {2}  # every other row of the archive
+        ref = run_batch([c.case for c in cases], settings, full_state=False)
         assert_array_equal(ds.valve_lift.values[rows], ref.valve_lift)
         assert_array_equal(ds.cam_impacts.values[rows], ref.cam_impacts)
     parts = list(parts_directory(archive).glob("batch-*.nc"))
