@@ -43,8 +43,9 @@ def parse_overrides(pairs: tuple[str, ...]) -> dict[str, object]:
         try:
             out[key] = yaml.safe_load(text)
         except yaml.YAMLError as exc:
-            raise click.BadParameter(f"{key}: cannot read {text!r} ({exc})",
-                                     param_hint="--set") from None
+            raise click.BadParameter(
+                f"{key}: cannot read {text!r} ({exc})", param_hint="--set"
+            ) from None
     return out
 
 
@@ -57,11 +58,21 @@ def main(verbose: int) -> None:
 
 
 @main.command()
-@click.option("--preset", default="thesis-1971", show_default=True,
-              type=click.Choice(sorted(PRESETS)), help="Named parameter set.")
-@click.option("--set", "sets", multiple=True, metavar="NAME=VALUE",
-              help="Override a model parameter, with units: --set spring_rate='260 lbf/in'. "
-                   "Repeatable. Names: " + ", ".join(PARAMETERS))
+@click.option(
+    "--preset",
+    default="thesis-1971",
+    show_default=True,
+    type=click.Choice(sorted(PRESETS)),
+    help="Named parameter set.",
+)
+@click.option(
+    "--set",
+    "sets",
+    multiple=True,
+    metavar="NAME=VALUE",
+    help="Override a model parameter, with units: --set spring_rate='260 lbf/in'. "
+    "Repeatable. Names: " + ", ".join(PARAMETERS),
+)
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object (SI units).")
 def model(preset: str, sets: tuple[str, ...], as_json: bool) -> None:
     """Print the model's matrices, natural frequencies, mode shapes and stability limits."""
@@ -89,8 +100,13 @@ def model_report(train, sm, limits, preset) -> dict[str, object]:
             for name, p in PARAMETERS.items()
         },
         "coordinates": [
-            {"symbol": c.symbol, "name": c.name, "kind": c.kind, "positive": c.positive,
-             "units": "m" if c.kind == "translation" else "rad"}
+            {
+                "symbol": c.symbol,
+                "name": c.name,
+                "kind": c.kind,
+                "positive": c.positive,
+                "units": "m" if c.kind == "translation" else "rad",
+            }
             for c in COORDINATES
         ],
         "natural_frequencies": sm.frequencies.tolist(),
@@ -121,14 +137,19 @@ def _matrix_text(a: np.ndarray, scale: float) -> list[str]:
 
 def model_text(train, sm, limits, preset, overrides) -> str:
     """The human form of ``campipe model``, in the thesis's units and layout."""
-    lines = [f"campipe model: preset {preset}"
-             + (f", overrides {', '.join(overrides)}" if overrides else "")]
+    lines = [
+        f"campipe model: preset {preset}"
+        + (f", overrides {', '.join(overrides)}" if overrides else "")
+    ]
     lines.append("")
     lines.append("Parameters (thesis units)")
     for name, p in PARAMETERS.items():
         v = getattr(train, name)
-        text = (", ".join(f"{x:g}" for x in v) if p.length
-                else f"{convert(v, p.units, p.thesis_units):g} {p.thesis_units}")
+        text = (
+            ", ".join(f"{x:g}" for x in v)
+            if p.length
+            else f"{convert(v, p.units, p.thesis_units):g} {p.thesis_units}"
+        )
         lines.append(f"  {name:<28} {text}")
     lines.append("")
     lines.append("Coordinates (thesis order and signs)")
@@ -150,8 +171,10 @@ def model_text(train, sm, limits, preset, overrides) -> str:
     for i, (w, z) in enumerate(zip(sm.frequencies, train.damping_ratios, strict=True), 1):
         lines.append(f"  {i:>4} {w:14.1f} {w * RAD_S_TO_RPM:14.1f} {z:6.3f}")
     lines.append("")
-    lines.append("Mode shapes (Figure 14), one column a mode, scaled to a largest translation of 1"
-                 " (rotations in rad/in)")
+    lines.append(
+        "Mode shapes (Figure 14), one column a mode, scaled to a largest translation of 1"
+        " (rotations in rad/in)"
+    )
     modes = sm.modes / np.where([c.kind == "translation" for c in COORDINATES], INCH, 1.0)[:, None]
     modes = modes / np.abs(modes[TRANSLATIONS]).max(axis=0)
     lines.append("      " + "".join(f"{'mode ' + str(j):>9}" for j in range(1, 8)))
@@ -193,26 +216,49 @@ def _archive_path(study, spec_path, output):
     return Path(output) if output else Path(spec_path).parent / f"{study.name}.nc"
 
 
-_SET_HELP = ("Override a spec key before checking it, value as YAML: --set run.revolutions=1, "
-             "--set sweep.speed='[9000 rpm, 9524 rpm]'. Repeatable.")
+_SET_HELP = (
+    "Override a spec key before checking it, value as YAML: --set run.revolutions=1, "
+    "--set sweep.speed='[9000 rpm, 9524 rpm]'. Repeatable."
+)
 
 
 @main.command()
 @click.argument("spec", type=click.Path(exists=True, dir_okay=False))
-@click.option("-o", "--output", type=click.Path(dir_okay=False),
-              help="Archive to write (default: <name>.nc beside the spec).")
+@click.option(
+    "-o",
+    "--output",
+    type=click.Path(dir_okay=False),
+    help="Archive to write (default: <name>.nc beside the spec).",
+)
 @click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=_SET_HELP)
-@click.option("--scheduler", default="threads", show_default=True,
-              help="threads, synchronous, processes, or a dask.distributed scheduler address "
-                   "such as tcp://127.0.0.1:8786.")
-@click.option("--workers", type=click.IntRange(min=1),
-              help="Threads or processes of a local scheduler (default: the cores available).")
-@click.option("--batch-size", type=click.IntRange(min=1),
-              help="Cases per batch (default: about four batches per worker, 4 to 32 cases).")
-@click.option("--keep-parts", is_flag=True,
-              help="Keep the batch files (<archive>.parts/) after writing the archive.")
-@click.option("--progress/--no-progress", default=True, show_default=True,
-              help="Show a progress line on stderr.")
+@click.option(
+    "--scheduler",
+    default="threads",
+    show_default=True,
+    help="threads, synchronous, processes, or a dask.distributed scheduler address "
+    "such as tcp://127.0.0.1:8786.",
+)
+@click.option(
+    "--workers",
+    type=click.IntRange(min=1),
+    help="Threads or processes of a local scheduler (default: the cores available).",
+)
+@click.option(
+    "--batch-size",
+    type=click.IntRange(min=1),
+    help="Cases per batch (default: about four batches per worker, 4 to 32 cases).",
+)
+@click.option(
+    "--keep-parts",
+    is_flag=True,
+    help="Keep the batch files (<archive>.parts/) after writing the archive.",
+)
+@click.option(
+    "--progress/--no-progress",
+    default=True,
+    show_default=True,
+    help="Show a progress line on stderr.",
+)
 def study(spec, output, sets, scheduler, workers, batch_size, keep_parts, progress) -> None:
     """Run the study SPEC (YAML) into one netCDF archive.
 
@@ -243,34 +289,52 @@ def study(spec, output, sets, scheduler, workers, batch_size, keep_parts, progre
     words += ["--scheduler", scheduler] if scheduler != "threads" else []
     command = shlex.join(words)
     try:
-        report = run_study(loaded, archive, scheduler=scheduler, workers=workers,
-                           batch_size=batch_size, progress=bar if progress else None,
-                           keep_parts=keep_parts, command=command,
-                           on_batch=replay if scheduler != "processes" else None)
+        report = run_study(
+            loaded,
+            archive,
+            scheduler=scheduler,
+            workers=workers,
+            batch_size=batch_size,
+            progress=bar if progress else None,
+            keep_parts=keep_parts,
+            command=command,
+            on_batch=replay if scheduler != "processes" else None,
+        )
     except IntegrationError as exc:
-        raise click.ClickException(f"{exc}\nBatches finished before it are stored; fix the "
-                                   "spec and rerun the same command to resume.") from None
+        raise click.ClickException(
+            f"{exc}\nBatches finished before it are stored; fix the "
+            "spec and rerun the same command to resume."
+        ) from None
     except ArchiveBusyError as exc:
         raise click.ClickException(str(exc)) from None
     except ValueError as exc:
         raise click.UsageError(str(exc)) from None
     click.echo(f"campipe study: {report.summary()}", err=True)
     if replay is not None and (recorded := replay.finish(report.archive)):
-        click.echo(f"campipe study: replay {loaded.spec.replay!r} recorded in {recorded}",
-                   err=True)
+        click.echo(f"campipe study: replay {loaded.spec.replay!r} recorded in {recorded}", err=True)
     click.echo(str(report.archive))
 
 
 @main.command()
 @click.argument("spec", type=click.Path(exists=True, dir_okay=False))
 @click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=_SET_HELP)
-@click.option("--workers", type=click.IntRange(min=1),
-              help="Workers to estimate the run time for (default: the cores available).")
-@click.option("--estimate/--no-estimate", default=True, show_default=True,
-              help="Time a short sample run to estimate the run time.")
-@click.option("--tolerance", metavar="LENGTH",
-              help="Valve-lift tolerance such as '1e-4 in': probe the cases and print the "
-                   "fidelity level (run.fidelity, run.mode_cutoff) they need for it.")
+@click.option(
+    "--workers",
+    type=click.IntRange(min=1),
+    help="Workers to estimate the run time for (default: the cores available).",
+)
+@click.option(
+    "--estimate/--no-estimate",
+    default=True,
+    show_default=True,
+    help="Time a short sample run to estimate the run time.",
+)
+@click.option(
+    "--tolerance",
+    metavar="LENGTH",
+    help="Valve-lift tolerance such as '1e-4 in': probe the cases and print the "
+    "fidelity level (run.fidelity, run.mode_cutoff) they need for it.",
+)
 def validate(spec, sets, workers, estimate, tolerance) -> None:
     """Check the study SPEC and print its case count, axes and estimated cost."""
     from campipe.study.estimate import archive_bytes
@@ -293,16 +357,23 @@ def validate(spec, sets, workers, estimate, tolerance) -> None:
     click.echo(f"batches: {len(plans)} of up to {size} cases")
     if estimate:
         e = cost(loaded, workers)
-        click.echo(f"run time: {format_seconds(e.seconds)} on {workers} "
-                   f"worker{'s' if workers != 1 else ''} ({e.simulated:.3g} s simulated; "
-                   "timed on a short run of one case per run-settings group)")
-    click.echo(f"archive: about {archive_bytes(loaded) / 1e6:.3g} MB before compression "
-               f"(events not counted)")
+        click.echo(
+            f"run time: {format_seconds(e.seconds)} on {workers} "
+            f"worker{'s' if workers != 1 else ''} ({e.simulated:.3g} s simulated; "
+            "timed on a short run of one case per run-settings group)"
+        )
+    click.echo(
+        f"archive: about {archive_bytes(loaded) / 1e6:.3g} MB before compression "
+        f"(events not counted)"
+    )
     if tolerance is not None:
         from campipe.bench.fidelity import study_needs
 
-        click.echo(study_needs([c.case for c in loaded.cases],
-                               [c.settings for c in loaded.cases], tolerance))
+        click.echo(
+            study_needs(
+                [c.case for c in loaded.cases], [c.settings for c in loaded.cases], tolerance
+            )
+        )
 
 
 def validate_text(loaded, spec_path) -> str:
@@ -313,8 +384,10 @@ def validate_text(loaded, spec_path) -> str:
     s = loaded.spec
     run = s.base["run"]
     first = loaded.cases[0]
-    lines = [f"{spec_path}: valid; study {s.name!r}, {len(loaded.cases)} "
-             f"case{'s' if len(loaded.cases) != 1 else ''}"]
+    lines = [
+        f"{spec_path}: valid; study {s.name!r}, {len(loaded.cases)} "
+        f"case{'s' if len(loaded.cases) != 1 else ''}"
+    ]
     coords = case_coordinates(loaded.varied)
     values = coordinate_values(loaded.cases, loaded)
     lines.append("axes:" if loaded.axes else "axes: none (a single case)")
@@ -328,8 +401,10 @@ def validate_text(loaded, spec_path) -> str:
             lo, hi = s.sample.ranges[a.key]
             units = coords[a.key][1].units if a.key in coords else ""
             factor = coords[a.key][2] if a.key in coords else 1.0
-            shown = [f"{s.sample.method} over {lo * factor:.6g} … {hi * factor:.6g} {units}, "
-                     f"seed {s.sample.seed}"]
+            shown = [
+                f"{s.sample.method} over {lo * factor:.6g} … {hi * factor:.6g} {units}, "
+                f"seed {s.sample.seed}"
+            ]
         else:
             shown = [f"{len(s.cases)} entries"]
         text = ", ".join(shown) if len(shown) <= 6 else f"{shown[0]} … {shown[-1]}"
@@ -337,9 +412,11 @@ def validate_text(loaded, spec_path) -> str:
         lines.append(f"  {name:<22} {a.kind:<7} {a.size:>4} values: {text}")
     step = first.settings.step
     dt = "chosen by the integrator" if step is None else f"{step * 1e6:.4g} µs"
-    lines.append(f"run: {run['revolutions']:g} revolutions, integrator "
-                 f"{first.settings.method}, dt {dt}, output every {run['output_every']}, "
-                 f"record: {', '.join(loaded.record) or '-'}")
+    lines.append(
+        f"run: {run['revolutions']:g} revolutions, integrator "
+        f"{first.settings.method}, dt {dt}, output every {run['output_every']}, "
+        f"record: {', '.join(loaded.record) or '-'}"
+    )
     if s.replay:
         lines.append(f"replay: {s.replay!r} (logged to <archive stem>.rrd as the study runs)")
     return "\n".join(lines)
@@ -347,15 +424,27 @@ def validate_text(loaded, spec_path) -> str:
 
 @main.command()
 @click.argument("archive", type=click.Path(exists=True, dir_okay=False))
-@click.option("--where", help="Keep cases where EXPR holds, e.g. \"speed_rpm > 9000 and seat "
-                              "> 0\" (comparisons, and, or, not, parentheses; never run as "
-                              "Python).")
+@click.option(
+    "--where",
+    help='Keep cases where EXPR holds, e.g. "speed_rpm > 9000 and seat '
+    '> 0" (comparisons, and, or, not, parentheses; never run as '
+    "Python).",
+)
 @click.option("--columns", help="Comma-separated columns (default: parameters and metrics).")
 @click.option("--sort", help="Sort by these comma-separated columns; -col for descending.")
-@click.option("--format", "fmt", type=click.Choice(["table", "csv", "json"]), default="table",
-              show_default=True, help="json: an array of row objects.")
-@click.option("--summary", is_flag=True,
-              help="Print the axes and, for a speed sweep, the separation onset speeds.")
+@click.option(
+    "--format",
+    "fmt",
+    type=click.Choice(["table", "csv", "json"]),
+    default="table",
+    show_default=True,
+    help="json: an array of row objects.",
+)
+@click.option(
+    "--summary",
+    is_flag=True,
+    help="Print the axes and, for a speed sweep, the separation onset speeds.",
+)
 def query(archive, where, columns, sort, fmt, summary) -> None:
     """Print an archive's cases, one row per case."""
     import xarray as xr
@@ -386,15 +475,32 @@ def query(archive, where, columns, sort, fmt, summary) -> None:
 
 @main.command()
 @click.argument("archive", type=click.Path(dir_okay=False))
-@click.option("--case", "case_ids", multiple=True, metavar="ID",
-              help="Replay the case with this case_id (repeatable).")
-@click.option("--where", help="Replay the cases where EXPR holds (the language of campipe "
-                              "query --where; never run as Python).")
-@click.option("-o", "--output", type=click.Path(dir_okay=False),
-              help="Recording to write (default: <archive stem>.replay.rrd beside it).")
+@click.option(
+    "--case",
+    "case_ids",
+    multiple=True,
+    metavar="ID",
+    help="Replay the case with this case_id (repeatable).",
+)
+@click.option(
+    "--where",
+    help="Replay the cases where EXPR holds (the language of campipe "
+    "query --where; never run as Python).",
+)
+@click.option(
+    "-o",
+    "--output",
+    type=click.Path(dir_okay=False),
+    help="Recording to write (default: <archive stem>.replay.rrd beside it).",
+)
 @click.option("--spawn", is_flag=True, help="Open the rerun viewer instead of writing a file.")
-@click.option("--magnify", type=click.FloatRange(min=1.0), default=10.0, show_default=True,
-              help="Factor on the sketch's deviations from the rigid-body motion.")
+@click.option(
+    "--magnify",
+    type=click.FloatRange(min=1.0),
+    default=10.0,
+    show_default=True,
+    help="Factor on the sketch's deviations from the rigid-body motion.",
+)
 def replay(archive, case_ids, where, output, spawn, magnify) -> None:
     """Write a rerun recording of cases of ARCHIVE: lift, force and contact plots, events,
     parameters and the moving mechanism, on the timelines cam_angle and time. All cases go
@@ -408,14 +514,24 @@ def replay(archive, case_ids, where, output, spawn, magnify) -> None:
     if spawn and output:
         raise click.UsageError("-o and --spawn exclude each other")
     try:
-        path, cases = replay_archive(archive, case_ids=case_ids, where=where, output=output,
-                                     spawn=spawn, magnification=magnify)
+        path, cases = replay_archive(
+            archive,
+            case_ids=case_ids,
+            where=where,
+            output=output,
+            spawn=spawn,
+            magnification=magnify,
+        )
     except QueryError as exc:
         raise click.UsageError(str(exc)) from None
     except ReplayError as exc:
         raise click.ClickException(str(exc)) from None
-    click.echo(f"campipe replay: {len(cases)} case{'s' if len(cases) != 1 else ''} ("
-               + ", ".join(c.case_id for c in cases) + ")", err=True)
+    click.echo(
+        f"campipe replay: {len(cases)} case{'s' if len(cases) != 1 else ''} ("
+        + ", ".join(c.case_id for c in cases)
+        + ")",
+        err=True,
+    )
     if path is not None:
         click.echo(str(path))
 
@@ -424,16 +540,39 @@ def replay(archive, case_ids, where, output, spawn, magnify) -> None:
 
 
 @main.command()
-@click.option("--quick", is_flag=True,
-              help="Small ladders, one cam turn per scene, scaling up to 256 cases (< 1 min).")
-@click.option("-o", "--output", "output", default="bench-results", show_default=True,
-              type=click.Path(file_okay=False), help="Folder for bench.md/.csv/.json/.png.")
-@click.option("--scene", "scenes", multiple=True, metavar="NAME",
-              help="Run only this scene of the suite (repeatable).")
-@click.option("--scaling/--no-scaling", default=True, show_default=True,
-              help="Measure throughput, time against cases and workers, archive size.")
-@click.option("--plot/--no-plot", default=True, show_default=True,
-              help="Write bench.png (needs matplotlib: pip install 'campipe[plot]').")
+@click.option(
+    "--quick",
+    is_flag=True,
+    help="Small ladders, one cam turn per scene, scaling up to 256 cases (< 1 min).",
+)
+@click.option(
+    "-o",
+    "--output",
+    "output",
+    default="bench-results",
+    show_default=True,
+    type=click.Path(file_okay=False),
+    help="Folder for bench.md/.csv/.json/.png.",
+)
+@click.option(
+    "--scene",
+    "scenes",
+    multiple=True,
+    metavar="NAME",
+    help="Run only this scene of the suite (repeatable).",
+)
+@click.option(
+    "--scaling/--no-scaling",
+    default=True,
+    show_default=True,
+    help="Measure throughput, time against cases and workers, archive size.",
+)
+@click.option(
+    "--plot/--no-plot",
+    default=True,
+    show_default=True,
+    help="Write bench.png (needs matplotlib: pip install 'campipe[plot]').",
+)
 def bench(quick, output, scenes, scaling, plot) -> None:
     """Speed against error: the suite of scenes, every integrator and fidelity, peers, scaling."""
     from campipe.bench.report import write_report
@@ -443,19 +582,27 @@ def bench(quick, output, scenes, scaling, plot) -> None:
         try:
             import matplotlib  # noqa: F401
         except ImportError:
-            raise click.UsageError("--plot needs matplotlib: pip install 'campipe[plot]', or "
-                                   "pass --no-plot") from None
+            raise click.UsageError(
+                "--plot needs matplotlib: pip install 'campipe[plot]', or pass --no-plot"
+            ) from None
     stderr = sys.stderr
     try:
-        result = run_bench(quick, scenes or None, with_scaling=scaling,
-                           progress=lambda text: stderr.write(f"campipe bench: {text}\n"))
+        result = run_bench(
+            quick,
+            scenes or None,
+            with_scaling=scaling,
+            progress=lambda text: stderr.write(f"campipe bench: {text}\n"),
+        )
     except ValueError as exc:
         raise click.UsageError(str(exc)) from None
     paths = write_report(result, output, with_plot=plot)
     for g_peer, g in result.goals.items():
         bound = "≥ " if g["peer_not_reaching_default_error"] else ""
-        click.echo(f"default vs {g_peer} (goal {g['goal']:g}x), smallest over the suite: "
-                   f"{bound}{g['min_ratio_at_default_error']:.3g}x at the default's error, "
-                   f"{g['min_ratio_at_peer_error']:.3g}x at the peer's own point", err=True)
+        click.echo(
+            f"default vs {g_peer} (goal {g['goal']:g}x), smallest over the suite: "
+            f"{bound}{g['min_ratio_at_default_error']:.3g}x at the default's error, "
+            f"{g['min_ratio_at_peer_error']:.3g}x at the peer's own point",
+            err=True,
+        )
     for path in paths.values():
         click.echo(str(path))

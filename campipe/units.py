@@ -43,15 +43,12 @@ def parse_quantity(
     dimensionless = target.dimensionless
     example = example_units or _example_unit(target)
     if isinstance(text, bool) or not isinstance(text, (str, int, float)):
-        raise QuantityError(
-            f"{key}: expected a quantity such as '1 {example}', found {text!r}"
-        )
+        raise QuantityError(f"{key}: expected a quantity such as '1 {example}', found {text!r}")
     if isinstance(text, (int, float)):
         if dimensionless:
             return float(text)
         raise QuantityError(
-            f"{key}: found the bare number {text!r}; write it with units, "
-            f"e.g. '{text} {example}'"
+            f"{key}: found the bare number {text!r}; write it with units, e.g. '{text} {example}'"
         )
     q = _read(text, key, example)
     if not isinstance(q, pint.Quantity):
@@ -120,8 +117,9 @@ def parse_angular(text: str | float | int, units: str, key: str, example_units: 
                 f"{key}: found the bare number {text!r}; write it with units, "
                 f"e.g. '{text} {example_units}'"
             )
-        raise QuantityError(f"{key}: expected a quantity such as '1 {example_units}', "
-                            f"found {text!r}")
+        raise QuantityError(
+            f"{key}: expected a quantity such as '1 {example_units}', found {text!r}"
+        )
     q = _read(text, key, example_units)
     base = q.to_base_units() if isinstance(q, pint.Quantity) else None
     if base is None or dict(base.unit_items()).get("radian") != 1:

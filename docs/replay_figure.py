@@ -25,8 +25,9 @@ def _rgb(packed: int) -> tuple[float, float, float]:
     return tuple(((packed >> s) & 0xFF) / 255 for s in (24, 16, 8))
 
 
-def draw(path: str, output: str, case: str | None = None,
-         angles: list[float] | None = None) -> None:
+def draw(
+    path: str, output: str, case: str | None = None, angles: list[float] | None = None
+) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -48,8 +49,9 @@ def draw(path: str, output: str, case: str | None = None,
     grid = fig.add_gridspec(3, 2 + len(angles), width_ratios=[1] * len(angles) + [2.2, 2.2])
     rows = [int(np.argmin(np.abs(angle - a))) for a in angles]
     strips = {part: rec[f"{root}/sketch/{part}"].columns["LineStrips2D:strips"] for part in PARTS}
-    drawn = np.concatenate([np.asarray(s).reshape(-1, 2) for part in PARTS for i in rows
-                            for s in strips[part][i]])
+    drawn = np.concatenate(
+        [np.asarray(s).reshape(-1, 2) for part in PARTS for i in rows for s in strips[part][i]]
+    )
     low, high = drawn.min(axis=0) - 10.0, drawn.max(axis=0) + 10.0
     for k, i in enumerate(rows):
         ax = fig.add_subplot(grid[:, k])
@@ -59,18 +61,29 @@ def draw(path: str, output: str, case: str | None = None,
             widths = e.static.get("LineStrips2D:radii", [0.5])
             for j, strip in enumerate(e.columns["LineStrips2D:strips"][i]):
                 xy = np.asarray(strip)
-                ax.plot(xy[:, 0], xy[:, 1], color=_rgb(colours[min(j, len(colours) - 1)]),
-                        lw=max(1.0, 1.2 * widths[min(j, len(widths) - 1)]),
-                        solid_capstyle="butt")
+                ax.plot(
+                    xy[:, 0],
+                    xy[:, 1],
+                    color=_rgb(colours[min(j, len(colours) - 1)]),
+                    lw=max(1.0, 1.2 * widths[min(j, len(widths) - 1)]),
+                    solid_capstyle="butt",
+                )
         for name in ("pivot", "ground", "spring_plate"):
             xy = np.asarray(rec[f"{root}/sketch/frame/{name}"].static["LineStrips2D:strips"][0])
             ax.plot(xy[:, 0], xy[:, 1], color="0.35", lw=1.2)
         seat = rec.get(f"{root}/sketch/frame/seat")
         if seat is not None:
-            for c, h in zip(seat.static["Boxes2D:centers"], seat.static["Boxes2D:half_sizes"],
-                            strict=True):
-                ax.add_patch(plt.Rectangle((c[0] - h[0], c[1] - h[1]), 2 * h[0], 2 * h[1],
-                                           color=_rgb(seat.static["Boxes2D:colors"][0])))
+            for c, h in zip(
+                seat.static["Boxes2D:centers"], seat.static["Boxes2D:half_sizes"], strict=True
+            ):
+                ax.add_patch(
+                    plt.Rectangle(
+                        (c[0] - h[0], c[1] - h[1]),
+                        2 * h[0],
+                        2 * h[1],
+                        color=_rgb(seat.static["Boxes2D:colors"][0]),
+                    )
+                )
         for marker in ("follower", "valve"):
             e = rec.get(f"{root}/sketch/{marker}")
             if e is not None:
@@ -85,10 +98,15 @@ def draw(path: str, output: str, case: str | None = None,
             ax.set_ylabel("mm")
     label = rec[f"{root}/sketch/frame/note"].static["Points2D:labels"][0]
     fig.text(0.01, 0.005, f"sketch: {label}; dots green in contact, red off it", fontsize=9)
-    axes = [fig.add_subplot(grid[r, len(angles):]) for r in range(3)]
+    axes = [fig.add_subplot(grid[r, len(angles) :]) for r in range(3)]
     for n, colour in (("cam", "0.6"), ("follower", "C0"), ("valve", "C2")):
-        axes[0].plot(angle, lift[n], color=colour, lw=1.2,
-                     label=rec[f"{root}/lift/{n}"].static["SeriesLines:names"][0])
+        axes[0].plot(
+            angle,
+            lift[n],
+            color=colour,
+            lw=1.2,
+            label=rec[f"{root}/lift/{n}"].static["SeriesLines:names"][0],
+        )
     for n in ("cam", "seat"):
         e = rec[f"{root}/force/{n}"]
         axes[1].plot(angle, e.scalars(), lw=1.0, label=e.static["SeriesLines:names"][0])
@@ -121,8 +139,9 @@ def main() -> None:
     parser.add_argument("recording")
     parser.add_argument("-o", "--output", default="replay.png")
     parser.add_argument("--case", help="case id (default: the recording's first)")
-    parser.add_argument("--angle", type=float, action="append",
-                        help="cam angle of a sketch [degree] (repeatable)")
+    parser.add_argument(
+        "--angle", type=float, action="append", help="cam angle of a sketch [degree] (repeatable)"
+    )
     args = parser.parse_args()
     draw(args.recording, args.output, args.case, args.angle)
 

@@ -63,8 +63,9 @@ def event_angle_error(res, ref, case, first=None):
     [(SEPARATING, [1e-7, 1e-8, 1e-9, 1e-10], None), (SEAT_BOUNCE, [1e-8, 1e-9, 1e-10, 1e-11], 8)],
     ids=["11000rpm", "seat-13205rpm"],
 )
-def test_modal_exact_error_is_first_order_in_the_event_tolerance(references, case, tolerances,
-                                                                 first):
+def test_modal_exact_error_is_first_order_in_the_event_tolerance(
+    references, case, tolerances, first
+):
     ref = references[id(case)]
     runs = [run(case, integrator="modal-exact", tolerance=t) for t in tolerances]
     valve = np.array([valve_error(r, ref) for r in runs])
@@ -104,8 +105,9 @@ def test_newmark_linear_converges_to_the_same_history_at_first_order(references)
 def test_newmark_linear_converges_on_the_seat_bounce(references):
     ref = references[id(SEAT_BOUNCE)]
     steps = [1e-6, 0.5e-6, 0.25e-6, 0.125e-6]
-    valve = np.array([valve_error(run(SEAT_BOUNCE, integrator="newmark-linear", dt=dt), ref)
-                      for dt in steps])
+    valve = np.array(
+        [valve_error(run(SEAT_BOUNCE, integrator="newmark-linear", dt=dt), ref) for dt in steps]
+    )
     assert 0.6 < slope(steps, valve) < 1.8, valve
     assert valve[-1] < 3e-4 * INCH
 
@@ -127,8 +129,9 @@ def test_impulse_and_closing_velocity_converge_the_thesis_impact_force_does_not(
     assert v_err[-1] < 0.003 * first_ref[EV_VELOCITY] and v_err[-1] < v_err[0]
     assert j_err[-1] < 0.003 * first_ref[EV_IMPULSE] and j_err[-1] < j_err[0]
     # The impulse is the effective mass times the closing velocity (perfectly plastic).
-    assert_allclose(first_ref[EV_IMPULSE] / first_ref[EV_VELOCITY],
-                    impulse[-1] / velocity[-1], rtol=1e-12)
+    assert_allclose(
+        first_ref[EV_IMPULSE] / first_ref[EV_VELOCITY], impulse[-1] / velocity[-1], rtol=1e-12
+    )
     # The thesis's peak "impact force" is Δv·m/Δt: it doubles each time the step halves.
     ratios = np.array(peak[1:]) / np.array(peak[:-1])
     assert np.all((ratios > 1.8) & (ratios < 2.2)), ratios
@@ -153,8 +156,14 @@ def steady_state_cam_force(train, speed, lift, theta):
     fr = np.arange(1, 7)
     q1_mean, q1_amp = -lift / 2, -1j * lift / 2  # (h/2) sin θ = Re(−i·h/2·e^{iθ})
     x0 = np.linalg.solve(K[np.ix_(fr, fr)], f[fr] - K[fr, 0] * q1_mean)
-    dyn = lambda rows, cols: K[np.ix_(rows, cols)] - speed**2 * M[np.ix_(rows, cols)] \
-        + 1j * speed * C[np.ix_(rows, cols)]  # noqa: E731
+
+    def dyn(rows, cols):
+        return (
+            K[np.ix_(rows, cols)]
+            - speed**2 * M[np.ix_(rows, cols)]
+            + 1j * speed * C[np.ix_(rows, cols)]
+        )
+
     x1 = np.linalg.solve(dyn(fr, fr), -dyn(fr, [0])[:, 0] * q1_amp)
     # F1 = row 1 of (K − ω²M + iωC) applied to the complex amplitude, plus the static part.
     static = K[0, fr] @ x0 + K[0, 0] * q1_mean - f[0]
@@ -210,17 +219,28 @@ def test_energy_balance_of_an_undamped_impact_free_run():
     """Undamped and always on the cam: the train's energy changes by the cam's work,
     E(t) − E(0) = ∫ F1·q̇1 dt, with E = ½ q̇ᵀMq̇ + ½ qᵀKq − fᵀq."""
     undamped = TRAIN.replace(damping_ratios=(0.0,) * 7)
-    res = run(Case(undamped, CAM, rpm(3000)), revolutions=1, integrator="modal-exact",
-              output_every=math.radians(0.25))
+    res = run(
+        Case(undamped, CAM, rpm(3000)),
+        revolutions=1,
+        integrator="modal-exact",
+        output_every=math.radians(0.25),
+    )
     sm = _matrices(undamped)
     q, v = res.q[0], res.v[0]
-    energy = (0.5 * np.einsum("ki,ij,kj->k", v, sm.mass, v)
-              + 0.5 * np.einsum("ki,ij,kj->k", q, sm.stiffness, q) - q @ sm.preload)
+    energy = (
+        0.5 * np.einsum("ki,ij,kj->k", v, sm.mass, v)
+        + 0.5 * np.einsum("ki,ij,kj->k", q, sm.stiffness, q)
+        - q @ sm.preload
+    )
     power = -res.cam_force[0] * v[:, 0]  # F1 = −(compressive cam force) acts on q1
     t = res.time[0]
     # Simpson's rule on the uniform samples (an even number of intervals).
-    work = np.concatenate([[0.0], np.cumsum((t[2::2] - t[:-2:2]) / 6
-                                            * (power[:-2:2] + 4 * power[1::2] + power[2::2]))])
+    work = np.concatenate(
+        [
+            [0.0],
+            np.cumsum((t[2::2] - t[:-2:2]) / 6 * (power[:-2:2] + 4 * power[1::2] + power[2::2])),
+        ]
+    )
     swing = np.ptp(energy)
     assert swing > 1.0  # joules: the cam does real work on the spring
     assert np.abs(energy[::2] - energy[0] - work).max() < 1e-6 * swing
@@ -235,16 +255,20 @@ def test_newmark_stability_limit_reproduced_by_runs_just_under_and_over():
     # Just over, the highest mode grows ×1.1 a step in contact and ×1.15 in flight (spectral
     # radius of the amplification matrix): overflow within a few thousand steps.
     with pytest.raises(IntegrationError, match="non-finite"):
-        run_batch([case], RunSettings(revolutions=4, integrator="newmark-linear",
-                                      dt=1.02 * limit), check_stability_limit=False)
+        run_batch(
+            [case],
+            RunSettings(revolutions=4, integrator="newmark-linear", dt=1.02 * limit),
+            check_stability_limit=False,
+        )
     assert math.isinf(stability_limit(case, "modal-exact"))
 
 
 def test_contact_states_only_gives_the_same_contacts():
     """full_state=False computes only q1, q7 (and velocities) at the samples."""
     full = run(SEAT_BOUNCE, integrator="modal-exact")
-    lean = run_batch([SEAT_BOUNCE], RunSettings(revolutions=2, integrator="modal-exact"),
-                     full_state=False)
+    lean = run_batch(
+        [SEAT_BOUNCE], RunSettings(revolutions=2, integrator="modal-exact"), full_state=False
+    )
     assert np.array_equal(full.valve_lift, lean.valve_lift)
     assert np.array_equal(full.follower_lift, lean.follower_lift)
     assert np.array_equal(full.cam_force, lean.cam_force)

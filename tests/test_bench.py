@@ -29,8 +29,7 @@ def separation_reference():
     return measure.reference(SEPARATION)
 
 
-@pytest.mark.parametrize(("name", "revolutions"),
-                         [("separation-11000", 2), ("seat-13205", 1)])
+@pytest.mark.parametrize(("name", "revolutions"), [("separation-11000", 2), ("seat-13205", 1)])
 def test_the_two_references_agree_to_their_stated_tolerance(name, revolutions):
     """modal-exact (tolerance 1e-14 s, 0.1 µs cap) against solve_ivp DOP853 at 1e-13."""
     scene = replace(SCENES[name], revolutions=revolutions)
@@ -58,8 +57,9 @@ def test_solve_ivp_and_campipe_agree_on_the_separation_case(separation_reference
     # Same events in the same order (separations, impacts, the re-bounce) at the same angles.
     assert_allclose(ivp.events[:, EV_KIND], default.events[0][:, EV_KIND])
     assert ivp.events.shape[0] >= 8
-    assert np.abs(ivp.events[:, EV_TIME] - ref.events[:, EV_TIME]).max() * SEPARATION.case.speed \
-        < math.radians(1e-3)
+    assert np.abs(
+        ivp.events[:, EV_TIME] - ref.events[:, EV_TIME]
+    ).max() * SEPARATION.case.speed < math.radians(1e-3)
     assert_allclose(ivp.separation_per_rev, ref.separation_per_rev, atol=math.radians(1e-3))
     assert np.degrees(ivp.separation_per_rev[1]) > 150
 
@@ -100,8 +100,7 @@ def test_time_to_error_interpolates_and_extrapolates_in_log_log():
 def test_measured_time_to_error_is_a_lower_bound_beyond_the_ladder():
     times = np.array([1.0, 10.0, 100.0])
     errs = 1e-3 / times
-    assert measure.measured_time_to_error(times, errs, 3e-5) == (pytest.approx(1e-3 / 3e-5),
-                                                                   True)
+    assert measure.measured_time_to_error(times, errs, 3e-5) == (pytest.approx(1e-3 / 3e-5), True)
     # Beyond the ladder: its most accurate point's time, not the extrapolated 1e4.
     assert measure.measured_time_to_error(times, errs, 1e-7) == (100.0, False)
     assert measure.measured_time_to_error([], [], 1e-7) == (math.inf, False)
@@ -109,10 +108,27 @@ def test_measured_time_to_error_is_a_lower_bound_beyond_the_ladder():
 
 def _rows(scene, default, peer):
     """Bench rows of one scene: campipe's default (time, error) and a newmark ladder."""
-    rows = [{"scene": scene, "family": "modal-exact", "setting": "tol 1e-12 s",
-             "seconds": default[0], "valve_lift": default[1], "default": True}]
-    rows += [{"scene": scene, "family": "newmark-linear", "setting": f"dt {dt:g} µs",
-              "seconds": t, "valve_lift": e, "thesis": dt == 1.0} for dt, t, e in peer]
+    rows = [
+        {
+            "scene": scene,
+            "family": "modal-exact",
+            "setting": "tol 1e-12 s",
+            "seconds": default[0],
+            "valve_lift": default[1],
+            "default": True,
+        }
+    ]
+    rows += [
+        {
+            "scene": scene,
+            "family": "newmark-linear",
+            "setting": f"dt {dt:g} µs",
+            "seconds": t,
+            "valve_lift": e,
+            "thesis": dt == 1.0,
+        }
+        for dt, t, e in peer
+    ]
     return rows
 
 
@@ -141,7 +157,8 @@ def test_the_newmark_goal_is_judged_on_measured_ratios():
     a[-1]["seconds"] = 5.0
     b[-1]["seconds"] = 8.0
     assert run._goals(run._ratios("b", b))["newmark-linear"]["verdict_at_default_error"] == (
-        "not reached")
+        "not reached"
+    )
     goal = run._goals(run._ratios("a", a))["newmark-linear"]
     assert goal["min_ratio_at_default_error"] == pytest.approx(5.0)
     assert not goal["reached_at_default_error"]
@@ -169,8 +186,7 @@ def test_the_reduced_model_on_a_slow_scene_is_within_its_stated_tolerance():
 
 def test_scaling_runs_through_dask_and_the_study_layer(tmp_path):
     points = scaling.engine_scaling([3], workers=(1, 2), repeats=1)
-    assert [(p.layer, p.n_cases, p.workers) for p in points] == [("engine", 3, 1),
-                                                                 ("engine", 3, 2)]
+    assert [(p.layer, p.n_cases, p.workers) for p in points] == [("engine", 3, 1), ("engine", 3, 2)]
     points = scaling.study_scaling([4], tmp_path, workers=(1,))
     assert [(p.layer, p.n_cases, p.workers) for p in points] == [("study", 4, 1)]
     # 4 cases × 721 samples × several float64 histories: tens of kB per case.
@@ -180,8 +196,9 @@ def test_scaling_runs_through_dask_and_the_study_layer(tmp_path):
 
 def test_quick_bench_writes_its_table_and_plot(tmp_path):
     out = tmp_path / "bench"
-    result = CliRunner().invoke(main, ["bench", "--quick", "--scene", "separation-11000",
-                                       "--no-scaling", "-o", str(out)])
+    result = CliRunner().invoke(
+        main, ["bench", "--quick", "--scene", "separation-11000", "--no-scaling", "-o", str(out)]
+    )
     assert result.exit_code == 0, result.output
     for name in ("bench.md", "bench.csv", "bench.json", "bench.png", "bench-events.png"):
         assert (out / name).is_file()
@@ -189,11 +206,13 @@ def test_quick_bench_writes_its_table_and_plot(tmp_path):
         assert (out / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     with open(out / "bench.csv") as fh:
         rows = list(csv.DictReader(fh))
-    expected = ([("modal-exact", f"tol {t:g} s") for t in QUICK.modal_tolerances]
-                + [("reduced", f"cutoff {c:.3g} rad/s") for c in QUICK.reduced_cutoffs]
-                + [("contacts only", "full")]
-                + [("newmark-linear", f"dt {dt * 1e6:g} µs") for dt in QUICK.newmark_steps]
-                + [("solve_ivp", f"Radau rtol {r:g}") for r in QUICK.ivp_rtols])
+    expected = (
+        [("modal-exact", f"tol {t:g} s") for t in QUICK.modal_tolerances]
+        + [("reduced", f"cutoff {c:.3g} rad/s") for c in QUICK.reduced_cutoffs]
+        + [("contacts only", "full")]
+        + [("newmark-linear", f"dt {dt * 1e6:g} µs") for dt in QUICK.newmark_steps]
+        + [("solve_ivp", f"Radau rtol {r:g}") for r in QUICK.ivp_rtols]
+    )
     assert [(r["family"], r["setting"]) for r in rows] == expected
     assert {r["scene"] for r in rows} == {"separation-11000"}
     by_setting = {r["setting"]: r for r in rows}
@@ -206,13 +225,15 @@ def test_quick_bench_writes_its_table_and_plot(tmp_path):
     # The thesis algorithm's ratio at every step of its ladder, coarsest error first.
     ladder = next(r for r in report["ratios"] if r["peer"] == "newmark-linear")["ladder"]
     assert sorted(p["setting"] for p in ladder) == sorted(
-        f"dt {dt * 1e6:g} µs" for dt in QUICK.newmark_steps)
+        f"dt {dt * 1e6:g} µs" for dt in QUICK.newmark_steps
+    )
     errors = [p["error"] for p in ladder]
     assert errors == sorted(errors, reverse=True)
     for p in ladder:
         assert p["ratio"] == pytest.approx(p["seconds"] / p["campipe_seconds"])
         assert float(by_setting[p["setting"]]["valve err [in]"]) == pytest.approx(
-            p["error"] / 0.0254, rel=1e-2)
+            p["error"] / 0.0254, rel=1e-2
+        )
     md = (out / "bench.md").read_text()
     assert "### The thesis algorithm at each step of its ladder" in md
     assert "## Peers at equal valve-lift error" in md and "](bench.png)" in md
@@ -221,8 +242,9 @@ def test_quick_bench_writes_its_table_and_plot(tmp_path):
 
 
 def test_bench_refuses_an_unknown_scene(tmp_path):
-    result = CliRunner().invoke(main, ["bench", "--quick", "--scene", "nope", "--no-scaling",
-                                       "-o", str(tmp_path)])
+    result = CliRunner().invoke(
+        main, ["bench", "--quick", "--scene", "nope", "--no-scaling", "-o", str(tmp_path)]
+    )
     assert result.exit_code == 2 and "known: smooth-9000" in result.output
 
 
@@ -231,12 +253,13 @@ def test_validate_prints_the_fidelity_a_spec_needs(tmp_path):
     spec.write_text(
         "name: slow\nmodel: {preset: thesis-1971}\nprofile: {kind: harmonic, lift: 1 in}\n"
         "closure: force\nseat: none\nrun: {revolutions: 1, output_every: 1 deg}\n"
-        "sweep:\n  speed: [3000 rpm, 4000 rpm]\n")
-    result = CliRunner().invoke(main, ["validate", str(spec), "--no-estimate",
-                                       "--tolerance", "1e-3 in"])
+        "sweep:\n  speed: [3000 rpm, 4000 rpm]\n"
+    )
+    result = CliRunner().invoke(
+        main, ["validate", str(spec), "--no-estimate", "--tolerance", "1e-3 in"]
+    )
     assert result.exit_code == 0, result.output
-    assert "fidelity for a valve-lift tolerance of 0.001 in (probe: 2 of 2 cases" in \
-        result.output
+    assert "fidelity for a valve-lift tolerance of 0.001 in (probe: 2 of 2 cases" in result.output
     assert "the whole study: run.fidelity:" in result.output
     bare = CliRunner().invoke(main, ["validate", str(spec), "--tolerance", "1e-3"])
     assert bare.exit_code == 2 and "without units" in bare.output

@@ -57,6 +57,5 @@ def test_bad_override_is_a_usage_error_naming_the_key():
 
 
 def test_console_script_runs():
-    out = subprocess.run(["campipe", "model", "--json"], capture_output=True, text=True,
-                         check=True)
+    out = subprocess.run(["campipe", "model", "--json"], capture_output=True, text=True, check=True)
     assert_allclose(json.loads(out.stdout)["natural_frequencies"][0], 679.1, rtol=1e-3)

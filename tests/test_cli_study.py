@@ -30,12 +30,15 @@ def test_validate_prints_cases_axes_and_estimates():
 
 
 def test_validate_refuses_a_bad_spec_with_its_key_paths(tmp_path):
-    path = write_spec(tmp_path, """
+    path = write_spec(
+        tmp_path,
+        """
     name: bad
     profile: {kind: harmonic, lift: 1 in}
     speed: 9000
     sweep: {sped: [1 rpm]}
-    """)
+    """,
+    )
     out = invoke("validate", str(path))
     assert out.exit_code == 2
     assert "2 problems" in out.output
@@ -44,10 +47,21 @@ def test_validate_refuses_a_bad_spec_with_its_key_paths(tmp_path):
 
 
 def test_study_writes_the_archive_with_overrides_and_progress(tmp_path):
-    out = CliRunner().invoke(main, [
-        "study", str(STUDIES / "quickstart.yaml"), "-o", str(tmp_path / "q.nc"),
-        "--set", "run.revolutions=1", "--set", "sweep.speed=[9000 rpm, 9524 rpm]",
-        "--scheduler", "synchronous"])
+    out = CliRunner().invoke(
+        main,
+        [
+            "study",
+            str(STUDIES / "quickstart.yaml"),
+            "-o",
+            str(tmp_path / "q.nc"),
+            "--set",
+            "run.revolutions=1",
+            "--set",
+            "sweep.speed=[9000 rpm, 9524 rpm]",
+            "--scheduler",
+            "synchronous",
+        ],
+    )
     assert out.exit_code == 0, out.output + out.stderr
     assert out.stdout.strip() == str(tmp_path / "q.nc")
     assert "4 cases (0 reused, 4 computed in 1 batches)" in out.stderr
@@ -56,14 +70,30 @@ def test_study_writes_the_archive_with_overrides_and_progress(tmp_path):
     assert ds.sizes["case"] == 4 and ds.sizes["cam_angle"] == 361
     assert '"run.revolutions": 1' in ds.attrs["spec_overrides"]
     assert "campipe study" in ds.attrs["history"]
-    again = CliRunner().invoke(main, [
-        "study", str(STUDIES / "quickstart.yaml"), "-o", str(tmp_path / "q.nc"),
-        "--set", "run.revolutions=1", "--set", "sweep.speed=[9000 rpm, 9524 rpm]"])
+    again = CliRunner().invoke(
+        main,
+        [
+            "study",
+            str(STUDIES / "quickstart.yaml"),
+            "-o",
+            str(tmp_path / "q.nc"),
+            "--set",
+            "run.revolutions=1",
+            "--set",
+            "sweep.speed=[9000 rpm, 9524 rpm]",
+        ],
+    )
     assert "up to date" in again.stderr
 
 
 def test_study_refuses_an_unknown_scheduler(tmp_path):
-    out = invoke("study", str(STUDIES / "quickstart.yaml"), "-o", str(tmp_path / "q.nc"),
-                 "--scheduler", "thread")
+    out = invoke(
+        "study",
+        str(STUDIES / "quickstart.yaml"),
+        "-o",
+        str(tmp_path / "q.nc"),
+        "--scheduler",
+        "thread",
+    )
     assert out.exit_code == 2 and "expected one of threads, synchronous, processes" in out.output
     assert not (tmp_path / "q.nc").exists()

@@ -110,8 +110,11 @@ def test_never_settles_at_20000_rpm(no_seat):
 
 def test_seat_bounce_visits_all_configurations(integrator):
     seat = 0.1 * INCH
-    res = run([Case(TRAIN, CAM, rpm(r), seat=seat) for r in (1000, 5000, 13205)], revolutions=2,
-              integrator=integrator)
+    res = run(
+        [Case(TRAIN, CAM, rpm(r), seat=seat) for r in (1000, 5000, 13205)],
+        revolutions=2,
+        integrator=integrator,
+    )
     for i in range(3):
         assert res.seat_impacts[i] >= 1
         assert res.cam_impacts[i] >= 1
@@ -129,8 +132,11 @@ def test_undamped_at_the_fundamental_the_contact_force_barely_swings(integrator)
     stays near its mean; off resonance it swings with the spring's full stroke."""
     undamped = TRAIN.replace(damping_ratios=(0.0,) * 7)
     omega1 = _matrices(undamped).frequencies[0]
-    res = run([Case(undamped, CAM, omega1), Case(undamped, CAM, rpm(3000))], revolutions=3,
-              integrator=integrator)
+    res = run(
+        [Case(undamped, CAM, omega1), Case(undamped, CAM, rpm(3000))],
+        revolutions=3,
+        integrator=integrator,
+    )
     swing = [np.ptp(res.cam_force[i, 720:]) / 2 / LBF for i in range(2)]
     assert swing[0] < 15.0  # the thesis: "about 10 pounds"
     assert swing[1] > 150.0
@@ -176,8 +182,7 @@ def test_a_mixed_batch_equals_each_case_alone(method):
     cases = [
         Case(TRAIN, CAM, rpm(9524)),
         Case(TRAIN.replace(spring_preload=120 * LBF), CAM, rpm(11000), seat=0.05 * INCH),
-        Case(TRAIN, polydyne("4567", INCH, *np.radians([90, 90, 90])), rpm(9000),
-             closure="form"),
+        Case(TRAIN, polydyne("4567", INCH, *np.radians([90, 90, 90])), rpm(9000), closure="form"),
         Case(TRAIN, flat(CAM, math.radians(268), math.radians(272)), rpm(15000)),
     ]
     together = run(cases, revolutions=2, integrator=method)
@@ -191,8 +196,7 @@ def test_a_mixed_batch_equals_each_case_alone(method):
 
 def test_form_closure_never_leaves_the_cam(integrator):
     prof = polydyne("4567", INCH, *np.radians([90, 90, 90]))
-    res = run([Case(TRAIN, prof, rpm(20000), closure="form")], revolutions=2,
-              integrator=integrator)
+    res = run([Case(TRAIN, prof, rpm(20000), closure="form")], revolutions=2, integrator=integrator)
     assert np.all(res.contact_state == 1)
     assert_allclose(res.follower_lift, res.cam_lift, atol=1e-15)
     assert res.separation_per_rev.max() == 0.0
@@ -247,8 +251,11 @@ def test_member_loads_at_static_equilibrium():
     assert_allclose(loads["spring_force"], spring, rtol=0.01)
     assert_allclose(loads["pushrod_force"], ratio * loads["spring_force"], rtol=1e-6)
     assert_allclose(loads["stem_force"], 0.0, atol=1e-9)
-    assert_allclose(abs(loads["rocker_moment"]),
-                    loads["spring_force"] * TRAIN.rocker_valve_arm_length, rtol=1e-6)
+    assert_allclose(
+        abs(loads["rocker_moment"]),
+        loads["spring_force"] * TRAIN.rocker_valve_arm_length,
+        rtol=1e-6,
+    )
 
 
 @pytest.mark.parametrize("method", INTEGRATORS)

@@ -24,17 +24,20 @@ def test_units_come_from_the_header(tmp_path):
     assert_allclose(lifts, [1e-3, 2e-3], rtol=1e-15)
 
 
-@pytest.mark.parametrize(("text", "words"), [
-    ("", "empty"),
-    ("angle,lift\n0,0\n", "where 'angle [units]' belongs"),
-    ("lift [in],angle [deg]\n0,0\n", "where 'angle [units]' belongs"),
-    ("angle [m],lift [in]\n0,0\n", "angle"),
-    ("angle [deg],lift [deg]\n0,0\n", "lift"),
-    ("angle [deg],lift [in],x [in]\n0,0,0\n", "expected a header"),
-    ("angle [deg],lift [in]\n0,0\n10,zero\n", "cam.csv:3: found 'zero' in column 2"),
-    ("angle [deg],lift [in]\n0,0\n10,nan\n", "cam.csv:3: found 'nan'"),
-    ("angle [deg],lift [in]\n0,0\n10\n", "cam.csv:3: expected 2 values"),
-])
+@pytest.mark.parametrize(
+    ("text", "words"),
+    [
+        ("", "empty"),
+        ("angle,lift\n0,0\n", "where 'angle [units]' belongs"),
+        ("lift [in],angle [deg]\n0,0\n", "where 'angle [units]' belongs"),
+        ("angle [m],lift [in]\n0,0\n", "angle"),
+        ("angle [deg],lift [deg]\n0,0\n", "lift"),
+        ("angle [deg],lift [in],x [in]\n0,0,0\n", "expected a header"),
+        ("angle [deg],lift [in]\n0,0\n10,zero\n", "cam.csv:3: found 'zero' in column 2"),
+        ("angle [deg],lift [in]\n0,0\n10,nan\n", "cam.csv:3: found 'nan'"),
+        ("angle [deg],lift [in]\n0,0\n10\n", "cam.csv:3: expected 2 values"),
+    ],
+)
 def test_bad_files_are_refused_with_file_and_line(tmp_path, text, words):
     with pytest.raises(LiftTableError, match="cam.csv") as info:
         read_lift_table(write(tmp_path, text))

@@ -109,8 +109,9 @@ def test_modes_are_mass_normalised_and_diagonalise_damping(thesis):
 
 
 def test_stability_limits_of_newmark_linear(thesis):
-    limits = {c: newmark_linear_stability_limit(thesis.mass, thesis.stiffness, c)
-              for c in CONFIGURATIONS}
+    limits = {
+        c: newmark_linear_stability_limit(thesis.mass, thesis.stiffness, c) for c in CONFIGURATIONS
+    }
     # NOTES.md: ≈ 3.24 µs in configuration II, 3.26 µs in configuration I.
     assert_allclose(limits[2], 3.24e-6, rtol=2e-3)
     assert_allclose(limits[1], 3.26e-6, rtol=2e-3)
@@ -206,8 +207,7 @@ def test_matrices_are_symmetric_and_definite_for_any_positive_geometry(
     for name, fl, fd in zip(names, lengths, diameters, strict=True):
         changes[f"{name}_length"] = getattr(base, f"{name}_length") * fl
         changes[f"{name}_diameter"] = getattr(base, f"{name}_diameter") * fd
-    train = base.replace(**changes, spring_rate=base.spring_rate * rate,
-                         damping_ratios=tuple(zeta))
+    train = base.replace(**changes, spring_rate=base.spring_rate * rate, damping_ratios=tuple(zeta))
     sm = system_matrices(train)
     for a in (sm.mass, sm.stiffness, sm.damping):
         assert_allclose(a, a.T, rtol=0, atol=1e-12 * np.abs(a).max())
@@ -218,8 +218,11 @@ def test_matrices_are_symmetric_and_definite_for_any_positive_geometry(
     modal_c = sm.modes.T @ sm.damping @ sm.modes
     off = modal_c - np.diag(np.diag(modal_c))
     assert np.abs(off).max() <= 1e-7 * max(np.abs(np.diag(modal_c)).max(), 1e-300)
-    assert_allclose(np.diag(modal_c), 2 * np.array(zeta) * sm.frequencies,
-                    atol=1e-7 * np.abs(np.diag(modal_c)).max())
+    assert_allclose(
+        np.diag(modal_c),
+        2 * np.array(zeta) * sm.frequencies,
+        atol=1e-7 * np.abs(np.diag(modal_c)).max(),
+    )
 
 
 def test_preset_values_parse_from_thesis_units():

@@ -67,8 +67,9 @@ def test_compiled_step_is_appendix_b_to_rounding(configuration):
         got_q, got_v, got_a = (xn[b : b + NP] for b in (X_Q, X_V, X_A))
         assert np.all(np.abs(got_a - an)[free] <= 1e-14 * a_size[free])
         assert np.all(np.abs(got_v - vn)[free] <= 1e-14 * (np.abs(v) + DT * a_size)[free])
-        assert np.all(np.abs(got_q - qn)[free] <= 1e-15 * np.abs(q)[free] + 1e-14 * DT * DT
-                      * a_size[free])
+        assert np.all(
+            np.abs(got_q - qn)[free] <= 1e-15 * np.abs(q)[free] + 1e-14 * DT * DT * a_size[free]
+        )
         assert np.all(np.abs(z[:NP] - force)[held] <= 1e-14 * f_size[held])
         assert_array_equal(xn[[X_Q + NP, X_V + NP, X_A + NP]], 0.0)  # padding stays zero
 

@@ -16,8 +16,15 @@ from campipe.model import thesis_train
 from campipe.replay import sketch
 
 #: Two cases at 11000 rpm, two turns: no seat, and the valve seat at 0.1 in (it bounces).
-STUDY = ["--set", "run.revolutions=2", "--set", "sweep.speed=[11000 rpm]",
-         "--scheduler", "synchronous", "--no-progress"]
+STUDY = [
+    "--set",
+    "run.revolutions=2",
+    "--set",
+    "sweep.speed=[11000 rpm]",
+    "--scheduler",
+    "synchronous",
+    "--no-progress",
+]
 SKETCH = {"cam", "pushrod", "rocker", "stem", "head", "spring", "retainer", "follower"}
 
 
@@ -30,8 +37,17 @@ def archives(tmp_path_factory):
     """(with q and the spec's replay selection, without q): the same two cases."""
     folder = tmp_path_factory.mktemp("replay")
     with_q, without_q = folder / "with-q.nc", folder / "without-q.nc"
-    out = invoke("study", STUDIES / "quickstart.yaml", "-o", with_q, *STUDY,
-                 "--set", "run.record=[q]", "--set", 'replay={where: "seat > 0"}')
+    out = invoke(
+        "study",
+        STUDIES / "quickstart.yaml",
+        "-o",
+        with_q,
+        *STUDY,
+        "--set",
+        "run.record=[q]",
+        "--set",
+        'replay={where: "seat > 0"}',
+    )
     assert out.exit_code == 0, out.output
     assert f"replay 'seat > 0' recorded in {folder / 'with-q.rrd'}" in out.stderr
     out = invoke("study", STUDIES / "quickstart.yaml", "-o", without_q, *STUDY)
@@ -44,8 +60,14 @@ def seated(archives):
     """The case with the seat: its archive row and its recording read back."""
     ds = xr.load_dataset(archives[0])
     row = int(np.flatnonzero(ds["seat"].values > 0)[0])
-    out = invoke("replay", archives[0], "--case", ds["case_id"].values[row], "-o",
-                 archives[0].with_name("seated.rrd"))
+    out = invoke(
+        "replay",
+        archives[0],
+        "--case",
+        ds["case_id"].values[row],
+        "-o",
+        archives[0].with_name("seated.rrd"),
+    )
     assert out.exit_code == 0, out.output
     assert out.stdout.strip() == str(archives[0].with_name("seated.rrd"))
     return ds, row, read_recording(archives[0].with_name("seated.rrd"))
@@ -81,8 +103,13 @@ def test_replay_holds_the_events_at_their_angles(seated):
     names = {1: "cam separation", 2: "cam impact", 3: "seat separation", 4: "seat impact"}
     texts = [t[0] for t in e.columns["TextLog:text"]]
     for text, kind, angle, velocity, impulse in zip(
-            texts, ev["event_kind"].values, ev["event_cam_angle"].values,
-            ev["event_velocity"].values, ev["event_impulse"].values, strict=True):
+        texts,
+        ev["event_kind"].values,
+        ev["event_cam_angle"].values,
+        ev["event_velocity"].values,
+        ev["event_impulse"].values,
+        strict=True,
+    ):
         assert text.startswith(f"{names[kind]} at {angle:.4f}°")
         assert f"velocity {velocity:.4g} m/s" in text
         assert (f"impulse {impulse:.4g} N·s" in text) == (kind in (2, 4))
@@ -94,13 +121,15 @@ def test_replay_draws_the_mechanism_from_q(seated):
     ds, row, rec = seated
     root = f"cases/{ds['case_id'].values[row]}/sketch"
     assert {k.removeprefix(root + "/") for k in rec if k.startswith(root)} == (
-        SKETCH | {"valve", "frame/seat", "frame/pivot", "frame/ground", "frame/spring_plate",
-                  "frame/note"})
+        SKETCH
+        | {"valve", "frame/seat", "frame/pivot", "frame/ground", "frame/spring_plate", "frame/note"}
+    )
     geom = sketch.Geometry.from_train(thesis_train())
     q = ds["q"].values[row]
     seat_q7 = float(np.median(q[:, 6] - ds["valve_lift"].values[row]) + ds["seat"].values[row])
-    qd = sketch.displayed_coordinates(q, ds["cam_lift"].values[row],
-                                      ds["contact_state"].values[row], geom, 10.0, seat_q7)
+    qd = sketch.displayed_coordinates(
+        q, ds["cam_lift"].values[row], ds["contact_state"].values[row], geom, 10.0, seat_q7
+    )
     for name, strips in sketch.moving_parts(qd, geom).items():
         e = rec[f"{root}/{name}"]
         assert len(e.columns["LineStrips2D:strips"]) == 721
@@ -128,26 +157,32 @@ def test_blueprint_places_the_sketch_beside_the_plots(archives):
     for chunk in reader.store(store=reader.blueprints()[0]).stream():
         rb = chunk.to_record_batch()
         parts[rb.schema.metadata[b"rerun:entity_path"].decode().lstrip("/")] = {
-            n: rb.column(n).to_pylist()[-1] for n in rb.schema.names}
+            n: rb.column(n).to_pylist()[-1] for n in rb.schema.names
+        }
     views = {k: v for k, v in parts.items() if "ViewBlueprint:class_identifier" in v}
     kind = {k: v["ViewBlueprint:class_identifier"][0] for k, v in views.items()}
     origin = {k: v["ViewBlueprint:space_origin"][0] for k, v in views.items()}
     (sketch_view,) = [k for k in views if kind[k] == "2D"]
     assert origin[sketch_view].endswith("/sketch")
-    (row,) = [v for v in parts.values() if v.get("ContainerBlueprint:contents", [""])[0]
-              == sketch_view]
+    (row,) = [
+        v for v in parts.values() if v.get("ContainerBlueprint:contents", [""])[0] == sketch_view
+    ]
     assert row["ContainerBlueprint:container_kind"] == [2]  # horizontal: side by side
     beside = parts[row["ContainerBlueprint:contents"][1]]["ContainerBlueprint:contents"]
     assert [origin[v].rsplit("/", 1)[-1] for v in beside if v in origin] == [
-        "lift", "force", "contact_state"]
+        "lift",
+        "force",
+        "contact_state",
+    ]
     assert parts["time_panel"]["TimePanelBlueprint:timeline"] == ["cam_angle"]
 
 
 def test_a_study_records_its_replay_selection_as_it_runs(archives):
     """The study's own recording holds the same content as `campipe replay --where`."""
     live = read_recording(archives[0].with_name("with-q.rrd"))
-    out = invoke("replay", archives[0], "--where", "seat > 0", "-o",
-                 archives[0].with_name("where.rrd"))
+    out = invoke(
+        "replay", archives[0], "--where", "seat > 0", "-o", archives[0].with_name("where.rrd")
+    )
     assert out.exit_code == 0, out.output
     again = read_recording(archives[0].with_name("where.rrd"))
     assert len({k.split("/")[1] for k in live if k.startswith("cases/")}) == 1
@@ -160,8 +195,17 @@ def test_a_study_with_nothing_to_compute_records_its_selection_from_the_archive(
     path = archives[0].with_name("with-q.rrd")
     first = read_recording(path)
     path.unlink()
-    out = invoke("study", STUDIES / "quickstart.yaml", "-o", archives[0], *STUDY,
-                 "--set", "run.record=[q]", "--set", 'replay={where: "seat > 0"}')
+    out = invoke(
+        "study",
+        STUDIES / "quickstart.yaml",
+        "-o",
+        archives[0],
+        *STUDY,
+        "--set",
+        "run.record=[q]",
+        "--set",
+        'replay={where: "seat > 0"}',
+    )
     assert out.exit_code == 0, out.output
     assert "up to date" in out.stderr
     assert_same(read_recording(path), first)
@@ -169,8 +213,14 @@ def test_a_study_with_nothing_to_compute_records_its_selection_from_the_archive(
 
 def test_an_archive_without_q_replays_by_running_its_cases_again(archives, seated):
     ds, row, rec = seated
-    out = invoke("replay", archives[1], "--case", ds["case_id"].values[row], "-o",
-                 archives[1].with_name("rerun.rrd"))
+    out = invoke(
+        "replay",
+        archives[1],
+        "--case",
+        ds["case_id"].values[row],
+        "-o",
+        archives[1].with_name("rerun.rrd"),
+    )
     assert out.exit_code == 0, out.output
     assert_same(read_recording(archives[1].with_name("rerun.rrd")), rec)
 
@@ -193,8 +243,10 @@ def test_where_selecting_nothing_writes_nothing(archives):
     path = archives[0].with_name("nothing.rrd")
     out = invoke("replay", archives[0], "--where", "speed_rpm > 20000", "-o", path)
     assert out.exit_code == 1
-    assert "--where 'speed_rpm > 20000' selects none of the archive's 2 cases; nothing " \
-           "written" in out.output
+    assert (
+        "--where 'speed_rpm > 20000' selects none of the archive's 2 cases; nothing "
+        "written" in out.output
+    )
     assert not path.exists()
     assert not list(path.parent.glob(".nothing.rrd*"))
 
@@ -233,10 +285,11 @@ def test_spawn_opens_the_viewer_with_the_blueprint_and_writes_no_file(archives, 
 
 
 def test_import_campipe_replay_does_not_import_rerun():
-    code = ("import sys, campipe, campipe.cli, campipe.replay.sketch, campipe.replay.cases, "
-            "campipe.replay.live; print('rerun' in sys.modules)")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         check=True)
+    code = (
+        "import sys, campipe, campipe.cli, campipe.replay.sketch, campipe.replay.cases, "
+        "campipe.replay.live; print('rerun' in sys.modules)"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
 
 
@@ -257,9 +310,20 @@ def assert_same(a, b):
 def test_processes_scheduler_records_the_selection_from_the_archive(tmp_path):
     """Worker processes cannot log into this process's recording: the cases come from the
     finished archive instead, q computed again."""
-    out = invoke("study", STUDIES / "quickstart.yaml", "-o", tmp_path / "p.nc", *STUDY[:4],
-                 "--set", 'replay={where: "seat > 0"}', "--scheduler", "processes",
-                 "--workers", "2", "--no-progress")
+    out = invoke(
+        "study",
+        STUDIES / "quickstart.yaml",
+        "-o",
+        tmp_path / "p.nc",
+        *STUDY[:4],
+        "--set",
+        'replay={where: "seat > 0"}',
+        "--scheduler",
+        "processes",
+        "--workers",
+        "2",
+        "--no-progress",
+    )
     assert out.exit_code == 0, out.output
     rec = read_recording(tmp_path / "p.rrd")
     ds = xr.load_dataset(tmp_path / "p.nc")

@@ -101,7 +101,6 @@ def test_the_cam_turns_clockwise_with_the_lift_under_the_follower():
     c = GEOM.cam_centre
     # the body angle θ sits straight above the centre at cam angle θ
     for k, deg in enumerate([0, 90, 180]):
-        assert_allclose(outline[k, deg], [c[0], c[1] + GEOM.base_radius + lift[deg]],
-                        atol=1e-15)
+        assert_allclose(outline[k, deg], [c[0], c[1] + GEOM.base_radius + lift[deg]], atol=1e-15)
     # clockwise: at 90°, body angle 0 has turned to the right of the centre
     assert_allclose(outline[1, 0], [c[0] + GEOM.base_radius, c[1]], atol=1e-15)

@@ -29,9 +29,12 @@ def by_speed(ds):
 def test_quickstart(tmp_path):
     ds = run(tmp_path, "quickstart")
     assert ds.sizes["case"] == 8
-    sep = {(int(s), bool(np.isnan(z))): v for s, z, v in
-           zip(ds.speed_rpm.values, ds.seat.values, ds.separation_deg_per_rev.values,
-               strict=True)}
+    sep = {
+        (int(s), bool(np.isnan(z))): v
+        for s, z, v in zip(
+            ds.speed_rpm.values, ds.seat.values, ds.separation_deg_per_rev.values, strict=True
+        )
+    }
     assert sep[9000, True] == 0.0 and 45 <= sep[9524, True] <= 60
     onset = onset_table(case_table(ds))
     assert onset[1].split() == ["nan", "9524"]
@@ -73,8 +76,10 @@ def test_thesis_machining_error(tmp_path):
     """Figure 33: the perfect cam holds the follower; the flat from 268° to 272° throws it
     off at both edges, every turn, for a fraction of a degree (thesis: about 0.75°)."""
     ds = run(tmp_path, "thesis-machining-error", **{"run.revolutions": 2})
-    perfect, flawed = list(ds.defects.values).index("none"), \
-        list(ds.defects.values).index("flat 268–272 deg")
+    perfect, flawed = (
+        list(ds.defects.values).index("none"),
+        list(ds.defects.values).index("flat 268–272 deg"),
+    )
     assert ds.cam_impacts.values[perfect] == 0
     assert ds.cam_impacts.values[flawed] == 4  # two edges × two turns
     mine = ds.event_case.values == flawed
@@ -127,11 +132,15 @@ def test_thesis_member_loads(tmp_path):
 def test_separation_map(tmp_path):
     """The onset speed rises with the spring preload; at the thesis's 151 lbf it lies between
     9000 and 9524 rpm (the preset's calibration)."""
-    ds = run(tmp_path, "separation-map", **{
-        "run.revolutions": 2,
-        "sweep.speed": {"from": "8500 rpm", "to": "10500 rpm", "num": 9},
-        "sweep.seat": ["none"],
-    })
+    ds = run(
+        tmp_path,
+        "separation-map",
+        **{
+            "run.revolutions": 2,
+            "sweep.speed": {"from": "8500 rpm", "to": "10500 rpm", "num": 9},
+            "sweep.seat": ["none"],
+        },
+    )
     assert ds.sizes["case"] == 27
     lines = onset_table(case_table(ds))
     assert lines[0].split() == ["spring_preload", "onset_rpm"]

@@ -29,16 +29,20 @@ def rpm(case):
 
 
 def test_a_grid_is_the_product_of_its_axes_first_key_outermost():
-    s = study(sweep={"speed": ["6000 rpm", "9000 rpm", "9524 rpm"],
-                     "seat": ["none", "0.05 in"]})
+    s = study(sweep={"speed": ["6000 rpm", "9000 rpm", "9524 rpm"], "seat": ["none", "0.05 in"]})
     assert [(rpm(c), c.values["seat"]) for c in s.cases] == [
-        (6000, pytest.approx(math.nan, nan_ok=True)), (6000, pytest.approx(0.05 * INCH)),
-        (9000, pytest.approx(math.nan, nan_ok=True)), (9000, pytest.approx(0.05 * INCH)),
-        (9524, pytest.approx(math.nan, nan_ok=True)), (9524, pytest.approx(0.05 * INCH)),
+        (6000, pytest.approx(math.nan, nan_ok=True)),
+        (6000, pytest.approx(0.05 * INCH)),
+        (9000, pytest.approx(math.nan, nan_ok=True)),
+        (9000, pytest.approx(0.05 * INCH)),
+        (9524, pytest.approx(math.nan, nan_ok=True)),
+        (9524, pytest.approx(0.05 * INCH)),
     ]
     assert [c.index for c in s.cases] == list(range(6))
-    assert [(a.key, a.kind, a.size) for a in s.axes] == [("speed", "sweep", 3),
-                                                        ("seat", "sweep", 2)]
+    assert [(a.key, a.kind, a.size) for a in s.axes] == [
+        ("speed", "sweep", 3),
+        ("seat", "sweep", 2),
+    ]
     assert len({c.case_id for c in s.cases}) == 6
 
 
@@ -46,30 +50,50 @@ def test_a_range_steps_in_the_units_written():
     s = study(sweep={"speed": {"from": "1000 rpm", "to": "20000 rpm", "num": 39}})
     assert [rpm(c) for c in s.cases] == [1000 + 500 * i for i in range(39)]
     s = study(sweep={"model.spring_preload": {"from": "120 lbf", "to": "180 lbf", "num": 3}})
-    assert_allclose([c.case.train.spring_preload for c in s.cases],
-                    np.array([120, 150, 180]) * LBF, rtol=1e-12)
+    assert_allclose(
+        [c.case.train.spring_preload for c in s.cases], np.array([120, 150, 180]) * LBF, rtol=1e-12
+    )
 
 
 def test_zip_varies_its_keys_together():
-    s = study(zip={"speed": ["6000 rpm", "9000 rpm", "9524 rpm"],
-                   "model.spring_preload": ["120 lbf", "151 lbf", "180 lbf"]},
-              sweep={"closure": ["force", "form"]})
-    pairs = [(c.case.closure, rpm(c), round(c.case.train.spring_preload / LBF, 9))
-             for c in s.cases]
-    assert pairs == [("force", 6000, 120), ("force", 9000, 151), ("force", 9524, 180),
-                     ("form", 6000, 120), ("form", 9000, 151), ("form", 9524, 180)]
+    s = study(
+        zip={
+            "speed": ["6000 rpm", "9000 rpm", "9524 rpm"],
+            "model.spring_preload": ["120 lbf", "151 lbf", "180 lbf"],
+        },
+        sweep={"closure": ["force", "form"]},
+    )
+    pairs = [(c.case.closure, rpm(c), round(c.case.train.spring_preload / LBF, 9)) for c in s.cases]
+    assert pairs == [
+        ("force", 6000, 120),
+        ("force", 9000, 151),
+        ("force", 9524, 180),
+        ("form", 6000, 120),
+        ("form", 9000, 151),
+        ("form", 9524, 180),
+    ]
     assert s.varied == ("model.spring_preload",)
 
 
 def test_cases_deep_merge_over_the_base_and_multiply_the_grid():
-    s = study(model={"preset": "thesis-1971", "spring_rate": "260 lbf/in"},
-              sweep={"speed": ["6000 rpm", "9000 rpm"]},
-              cases=[
-                  {"model": {"spring_preload": "120 lbf"}},
-                  {"profile": {"kind": "polydyne-4567", "lift": "1 in", "rise": "90 deg",
-                               "dwell": "90 deg", "fall": "90 deg"}, "closure": "form"},
-                  {"profile": {"lift": "0.5 in"}, "run": {"dt": "0.5 us"}},
-              ])
+    s = study(
+        model={"preset": "thesis-1971", "spring_rate": "260 lbf/in"},
+        sweep={"speed": ["6000 rpm", "9000 rpm"]},
+        cases=[
+            {"model": {"spring_preload": "120 lbf"}},
+            {
+                "profile": {
+                    "kind": "polydyne-4567",
+                    "lift": "1 in",
+                    "rise": "90 deg",
+                    "dwell": "90 deg",
+                    "fall": "90 deg",
+                },
+                "closure": "form",
+            },
+            {"profile": {"lift": "0.5 in"}, "run": {"dt": "0.5 us"}},
+        ],
+    )
     assert len(s.cases) == 6
     a, b, c = s.cases[0], s.cases[2], s.cases[4]
     thesis = thesis_train()
@@ -99,9 +123,15 @@ def test_deep_merge_keeps_the_base_untouched():
 
 
 def test_a_latin_hypercube_puts_one_point_in_each_stratum_and_is_seeded():
-    sample = {"method": "latin-hypercube", "n": 8, "seed": 1,
-              "ranges": {"speed": {"from": "1000 rpm", "to": "2000 rpm"},
-                         "model.spring_preload": {"from": "100 lbf", "to": "200 lbf"}}}
+    sample = {
+        "method": "latin-hypercube",
+        "n": 8,
+        "seed": 1,
+        "ranges": {
+            "speed": {"from": "1000 rpm", "to": "2000 rpm"},
+            "model.spring_preload": {"from": "100 lbf", "to": "200 lbf"},
+        },
+    }
     s = study(sample=sample)
     speeds = np.array([rpm(c) for c in s.cases])
     preloads = np.array([c.case.train.spring_preload / LBF for c in s.cases])
@@ -113,14 +143,21 @@ def test_a_latin_hypercube_puts_one_point_in_each_stratum_and_is_seeded():
     assert [c.case_id for c in again.cases] == [c.case_id for c in s.cases]
     other = study(sample={**sample, "seed": 2})
     assert not {c.case_id for c in other.cases} & {c.case_id for c in s.cases}
-    assert [(a.key, a.kind, a.size) for a in s.axes] == [("speed", "sample", 8),
-                                                        ("model.spring_preload", "sample", 8)]
+    assert [(a.key, a.kind, a.size) for a in s.axes] == [
+        ("speed", "sample", 8),
+        ("model.spring_preload", "sample", 8),
+    ]
 
 
 def test_count_matches_the_expansion():
-    spec = check_spec({**BASE, "sweep": {"speed": ["1 rpm", "2 rpm"], "seat": ["none"]},
-                       "zip": {"closure": ["force", "form"], "profile.lift": ["1 in", "2 in"]},
-                       "cases": [{}, {"model": {"spring_preload": "100 lbf"}}]})
+    spec = check_spec(
+        {
+            **BASE,
+            "sweep": {"speed": ["1 rpm", "2 rpm"], "seat": ["none"]},
+            "zip": {"closure": ["force", "form"], "profile.lift": ["1 in", "2 in"]},
+            "cases": [{}, {"model": {"spring_preload": "100 lbf"}}],
+        }
+    )
     assert count_cases(spec) == 2 * 1 * 2 * 2 == len(list(raw_cases(spec)))
 
 
@@ -133,15 +170,18 @@ def test_case_ids_are_stable_and_follow_the_parameters_not_their_spelling():
     assert base == study().cases[0].case_id
     assert len(base) == 16 and int(base, 16) >= 0
     # the preset's own value, written out, is the same case
-    assert study(model={"preset": "thesis-1971", "spring_preload": "151 lbf"}) \
-        .cases[0].case_id == base
+    assert (
+        study(model={"preset": "thesis-1971", "spring_preload": "151 lbf"}).cases[0].case_id == base
+    )
     # seat "none" and null are the same case
     assert study(seat=None).cases[0].case_id == base
     # any change of a parameter is another case
     changed = [
-        study(speed="9001 rpm"), study(seat="0.1 in"), study(closure="form"),
-        study(model={"spring_preload": "150 lbf"}), study(profile={"kind": "harmonic",
-                                                                   "lift": "0.9 in"}),
+        study(speed="9001 rpm"),
+        study(seat="0.1 in"),
+        study(closure="form"),
+        study(model={"spring_preload": "150 lbf"}),
+        study(profile={"kind": "harmonic", "lift": "0.9 in"}),
         study(defects=[{"kind": "flat", "from": "268 deg", "to": "272 deg"}]),
         study(run={"revolutions": 2, "integrator": "newmark-linear", "dt": "1 us"}),
         study(run={"revolutions": 1, "integrator": "newmark-linear", "dt": "0.5 us"}),
@@ -158,15 +198,18 @@ def test_a_lift_table_enters_the_id_by_its_values_not_its_path(tmp_path):
     rows = "\n".join(f"{a},{0.5 * (1 - math.cos(math.radians(a)))}" for a in range(0, 360, 10))
     (tmp_path / "cam.csv").write_text(f"angle [deg],lift [in]\n{rows}\n")
     (tmp_path / "copy.csv").write_text(f"# the same cam\nangle [deg],lift [in]\n{rows}\n")
-    (tmp_path / "other.csv").write_text(f"angle [deg],lift [in]\n{rows}\n".replace(",0.5", ",0.6",
-                                                                                   1))
+    (tmp_path / "other.csv").write_text(
+        f"angle [deg],lift [in]\n{rows}\n".replace(",0.5", ",0.6", 1)
+    )
     spec = """
     name: t
     profile: {{kind: table, file: {file}}}
     speed: 6000 rpm
     """
-    ids = {f: load_study(write_spec(tmp_path, spec.format(file=f), f"{f}.yaml")).cases[0]
-           for f in ("cam.csv", "copy.csv", "other.csv")}
+    ids = {
+        f: load_study(write_spec(tmp_path, spec.format(file=f), f"{f}.yaml")).cases[0]
+        for f in ("cam.csv", "copy.csv", "other.csv")
+    }
     assert ids["cam.csv"].case_id == ids["copy.csv"].case_id
     assert ids["other.csv"].case_id != ids["cam.csv"].case_id
     assert ids["cam.csv"].values["profile"] == "table cam.csv (36 points)"

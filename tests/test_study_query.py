@@ -57,54 +57,65 @@ def toy() -> CaseTable:
         "separation_deg_per_rev": np.array([0.0, 0.0, 52.8, 212.3]),
         "cam_impacts": np.array([0, 3, 2, 6], dtype=np.int32),
     }
-    units = {"speed_rpm": "rpm", "seat": "m", "closure": "", "separation_deg_per_rev": "degree",
-             "cam_impacts": ""}
+    units = {
+        "speed_rpm": "rpm",
+        "seat": "m",
+        "closure": "",
+        "separation_deg_per_rev": "degree",
+        "cam_impacts": "",
+    }
     return CaseTable(cols, units, list(cols), 4)
 
 
-@pytest.mark.parametrize(("where", "rows"), [
-    ("speed_rpm > 9000", [2, 3]),
-    ("speed_rpm > 9000 and seat > 0", []),
-    ("speed_rpm >= 9000 and seat >= 0", [1, 3]),
-    ("seat is nan", [0, 2]),
-    ("seat is none", [0, 2]),
-    ("seat is not nan", [1, 3]),
-    ("not (seat is nan) or cam_impacts == 2", [1, 2, 3]),
-    ("closure == 'form'", [1, 3]),
-    ('closure != "form"', [0, 2]),
-    ("9000 <= speed_rpm < 11000", [1, 2]),
-    ("speed_rpm in [6000, 11000]", [0, 3]),
-    ("closure not in ['form']", [0, 2]),
-    ("speed_rpm == 9524.000000001", [2]),  # numbers equal within a relative 1e-9
-    ("separation_deg_per_rev > 0 and cam_impacts < 4 or speed_rpm == 6000", [0, 2]),
-    ("-1 < separation_deg_per_rev", [0, 1, 2, 3]),
-    ("speed_rpm > inf", []),
-])
+@pytest.mark.parametrize(
+    ("where", "rows"),
+    [
+        ("speed_rpm > 9000", [2, 3]),
+        ("speed_rpm > 9000 and seat > 0", []),
+        ("speed_rpm >= 9000 and seat >= 0", [1, 3]),
+        ("seat is nan", [0, 2]),
+        ("seat is none", [0, 2]),
+        ("seat is not nan", [1, 3]),
+        ("not (seat is nan) or cam_impacts == 2", [1, 2, 3]),
+        ("closure == 'form'", [1, 3]),
+        ('closure != "form"', [0, 2]),
+        ("9000 <= speed_rpm < 11000", [1, 2]),
+        ("speed_rpm in [6000, 11000]", [0, 3]),
+        ("closure not in ['form']", [0, 2]),
+        ("speed_rpm == 9524.000000001", [2]),  # numbers equal within a relative 1e-9
+        ("separation_deg_per_rev > 0 and cam_impacts < 4 or speed_rpm == 6000", [0, 2]),
+        ("-1 < separation_deg_per_rev", [0, 1, 2, 3]),
+        ("speed_rpm > inf", []),
+    ],
+)
 def test_where_selects_the_rows(where, rows):
     assert select(toy(), where).tolist() == rows
 
 
-@pytest.mark.parametrize("where", [
-    "__import__('os').system('touch {marker}')",
-    "open('{marker}', 'w')",
-    "speed_rpm.__class__.__bases__",
-    "speed_rpm.real > 0",
-    "(lambda: 1)() == 1",
-    "speed_rpm + 1 > 2",
-    "speed_rpm[0] > 1",
-    "[c for c in closure] == 1",
-    "(x := 1) == 1",
-    "speed_rpm if seat else 1",
-    "__builtins__ == 1",
-    "_x == 1",
-    "globals() == 1",
-    "speed_rpm is 1",
-    "speed_rpm in closure",
-    "f'{{speed_rpm}}' == 'a'",
-    "b'x' == closure",
-    "speed_rpm > 1; import os",
-    "x" * 3000,
-])
+@pytest.mark.parametrize(
+    "where",
+    [
+        "__import__('os').system('touch {marker}')",
+        "open('{marker}', 'w')",
+        "speed_rpm.__class__.__bases__",
+        "speed_rpm.real > 0",
+        "(lambda: 1)() == 1",
+        "speed_rpm + 1 > 2",
+        "speed_rpm[0] > 1",
+        "[c for c in closure] == 1",
+        "(x := 1) == 1",
+        "speed_rpm if seat else 1",
+        "__builtins__ == 1",
+        "_x == 1",
+        "globals() == 1",
+        "speed_rpm is 1",
+        "speed_rpm in closure",
+        "f'{{speed_rpm}}' == 'a'",
+        "b'x' == closure",
+        "speed_rpm > 1; import os",
+        "x" * 3000,
+    ],
+)
 def test_malicious_where_is_refused_and_nothing_runs(tmp_path, where):
     marker = tmp_path / "pwned"
     with pytest.raises(QueryError):
@@ -112,15 +123,18 @@ def test_malicious_where_is_refused_and_nothing_runs(tmp_path, where):
     assert not marker.exists()
 
 
-@pytest.mark.parametrize(("where", "words"), [
-    ("spede_rpm > 1", "unknown column 'spede_rpm'; did you mean 'speed_rpm'?"),
-    ("closure > 'a'", "text compares with == and != only"),
-    ("closure == 1", "closure is text"),
-    ("speed_rpm ==", "cannot parse"),
-    ("", "empty"),
-    ("open('x')", "a call is not allowed"),
-    ("speed_rpm.real > 0", "attribute access is not allowed"),
-])
+@pytest.mark.parametrize(
+    ("where", "words"),
+    [
+        ("spede_rpm > 1", "unknown column 'spede_rpm'; did you mean 'speed_rpm'?"),
+        ("closure > 'a'", "text compares with == and != only"),
+        ("closure == 1", "closure is text"),
+        ("speed_rpm ==", "cannot parse"),
+        ("", "empty"),
+        ("open('x')", "a call is not allowed"),
+        ("speed_rpm.real > 0", "attribute access is not allowed"),
+    ],
+)
 def test_refusals_say_why(where, words):
     with pytest.raises(QueryError) as info:
         select(toy(), where)
@@ -160,8 +174,14 @@ def test_formats_table_csv_json():
 
 def test_default_columns_are_parameters_and_metrics(table):
     assert table.default[:3] == ["case_id", "speed_rpm", "seat"]
-    assert {"profile", "defects", "closure", "separation_deg_per_rev", "cam_impacts",
-            "max_cam_force"} <= set(table.default)
+    assert {
+        "profile",
+        "defects",
+        "closure",
+        "separation_deg_per_rev",
+        "cam_impacts",
+        "max_cam_force",
+    } <= set(table.default)
     assert "steps" in table.columns and "steps" not in table.default
     assert table.n == 8
 
@@ -172,18 +192,32 @@ def test_the_summary_gives_the_separation_onset_per_seat(archive):
     lines = text.splitlines()
     assert lines[0] == "q: 8 cases, 2.0 revolutions, record: -"
     assert "speed_rpm                sweep   4 values: 6000, 9000, 9524, 11000 rpm" in text
-    onset = {line.split()[0]: " ".join(line.split()[1:]) for line in
-             lines[lines.index("separation onset (first speed with separation_deg_per_rev "
-                               "> 0):") + 2:]}
+    onset = {
+        line.split()[0]: " ".join(line.split()[1:])
+        for line in lines[
+            lines.index("separation onset (first speed with separation_deg_per_rev > 0):") + 2 :
+        ]
+    }
     assert onset == {"nan": "9524", "0": "9000"}
 
 
 def test_campipe_query_on_an_archive(archive):
     runner = CliRunner()
-    out = runner.invoke(main, ["query", str(archive), "--where",
-                               "speed_rpm > 9000 and seat is nan", "--columns",
-                               "speed_rpm,separation_deg_per_rev", "--sort", "-speed_rpm",
-                               "--format", "json"])
+    out = runner.invoke(
+        main,
+        [
+            "query",
+            str(archive),
+            "--where",
+            "speed_rpm > 9000 and seat is nan",
+            "--columns",
+            "speed_rpm,separation_deg_per_rev",
+            "--sort",
+            "-speed_rpm",
+            "--format",
+            "json",
+        ],
+    )
     assert out.exit_code == 0, out.output
     rows = json.loads(out.output)
     assert [r["speed_rpm"] for r in rows] == [11000.0, 9524.0]
@@ -208,27 +242,68 @@ def test_parse_where_reports_the_columns_it_reads():
 
 
 def test_a_vector_coordinate_prints_in_every_format():
-    cols = {"damping_ratios": np.array([[0.5, 0.1], [0.0, 0.0]]),
-            "closure": np.array(["force", "form"], dtype=object)}
+    cols = {
+        "damping_ratios": np.array([[0.5, 0.1], [0.0, 0.0]]),
+        "closure": np.array(["force", "form"], dtype=object),
+    }
     t = CaseTable(cols, {"damping_ratios": "1", "closure": ""}, list(cols), 2)
     rows = np.arange(2)
     assert format_rows(t, rows, ["damping_ratios"], "csv").splitlines() == [
-        "damping_ratios", '"[0.5, 0.1]"', '"[0.0, 0.0]"']
+        "damping_ratios",
+        '"[0.5, 0.1]"',
+        '"[0.0, 0.0]"',
+    ]
     assert json.loads(format_rows(t, rows, list(cols), "json"))[0] == {
-        "damping_ratios": [0.5, 0.1], "closure": "force"}
+        "damping_ratios": [0.5, 0.1],
+        "closure": "force",
+    }
     assert "0.5, 0.1" in format_rows(t, rows, ["damping_ratios"], "table")
     with pytest.raises(QueryError, match="2 values per case"):
         select(t, "damping_ratios > 0")
 
 
-TOKENS = ["speed_rpm", "seat", "closure", "cam_impacts", "and", "or", "not", "is", "in", "nan",
-          "(", ")", "[", "]", "==", "<", ">=", "!=", "-", "1", "2.5", "'form'", ",", "__import__",
-          ".", "lambda", ":", "if", "else", "*", "f'x'", ";", "import", "os"]
+TOKENS = [
+    "speed_rpm",
+    "seat",
+    "closure",
+    "cam_impacts",
+    "and",
+    "or",
+    "not",
+    "is",
+    "in",
+    "nan",
+    "(",
+    ")",
+    "[",
+    "]",
+    "==",
+    "<",
+    ">=",
+    "!=",
+    "-",
+    "1",
+    "2.5",
+    "'form'",
+    ",",
+    "__import__",
+    ".",
+    "lambda",
+    ":",
+    "if",
+    "else",
+    "*",
+    "f'x'",
+    ";",
+    "import",
+    "os",
+]
 
 
 @settings(max_examples=300, deadline=None)
-@given(st.one_of(st.lists(st.sampled_from(TOKENS), max_size=12).map(" ".join),
-                 st.text(max_size=40)))
+@given(
+    st.one_of(st.lists(st.sampled_from(TOKENS), max_size=12).map(" ".join), st.text(max_size=40))
+)
 def test_any_text_either_selects_rows_or_is_refused(text):
     try:
         rows = select(toy(), text)

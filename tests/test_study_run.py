@@ -57,13 +57,19 @@ def test_the_archive_holds_the_engine_results(small):
     assert set(ds.profile.values) == {"harmonic 1 in"} and set(ds.defects.values) == {"none"}
     assert_array_equal(ds.cam_angle.values, np.arange(721.0))
     assert_array_equal(ds.revolution.values, [1, 2])
-    for name, values in [("time", ref.time), ("cam_lift", ref.cam_lift),
-                         ("follower_lift", ref.follower_lift), ("valve_lift", ref.valve_lift),
-                         ("cam_force", ref.cam_force), ("seat_force", ref.seat_force),
-                         ("contact_state", ref.contact_state), ("q", ref.q),
-                         ("separation_deg", np.degrees(ref.separation_per_rev)),
-                         ("cam_impacts", ref.cam_impacts),
-                         ("max_seating_velocity", ref.max_seating_velocity)]:
+    for name, values in [
+        ("time", ref.time),
+        ("cam_lift", ref.cam_lift),
+        ("follower_lift", ref.follower_lift),
+        ("valve_lift", ref.valve_lift),
+        ("cam_force", ref.cam_force),
+        ("seat_force", ref.seat_force),
+        ("contact_state", ref.contact_state),
+        ("q", ref.q),
+        ("separation_deg", np.degrees(ref.separation_per_rev)),
+        ("cam_impacts", ref.cam_impacts),
+        ("max_seating_velocity", ref.max_seating_velocity),
+    ]:
         assert_array_equal(ds[name].values, values, err_msg=name)
     assert_array_equal(ds.separation_deg_per_rev, np.degrees(ref.separation_per_rev[:, -1]))
     for i, c in enumerate(study.cases):
@@ -75,8 +81,9 @@ def test_the_archive_holds_the_engine_results(small):
         assert ds.event_count.values[i] == mine.sum() == ref.events[i].shape[0]
         assert_array_equal(ds.event_time.values[mine], ref.events[i][:, 0])
         assert_array_equal(ds.event_kind.values[mine], ref.events[i][:, 1])
-        assert_array_equal(ds.event_cam_angle.values[mine],
-                           np.degrees(ref.events[i][:, 0] * c.case.speed))
+        assert_array_equal(
+            ds.event_cam_angle.values[mine], np.degrees(ref.events[i][:, 0] * c.case.speed)
+        )
     offsets = np.concatenate([[0], np.cumsum(ds.event_count.values)])
     assert_array_equal(ds.event_case.values, np.repeat(np.arange(6), np.diff(offsets)))
     assert ds.event_count.attrs["sample_dimension"] == "event"
@@ -103,7 +110,8 @@ def test_the_archive_carries_cf_metadata_from_the_table(small):
     assert a["host"] and re.match(r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\dZ", a["date_created"])
     assert json.loads(a["study_axes"]) == [
         {"key": "speed", "name": "speed_rpm", "kind": "sweep", "size": 3},
-        {"key": "seat", "name": "seat", "kind": "sweep", "size": 2}]
+        {"key": "seat", "name": "seat", "kind": "sweep", "size": 2},
+    ]
     # compressed, up to eight cases per chunk (this study has six)
     enc = ds.valve_lift.encoding
     assert enc["zlib"] and enc["chunksizes"] == (6, 721)
@@ -122,16 +130,22 @@ def _schedulers(tmp_path, spec_text):
     study = load_study(path)
     out = {}
     for name in ("synchronous", "threads", "processes"):
-        report = run_study(study, tmp_path / f"{name}.nc", scheduler=name, workers=2,
-                           batch_size=2)
+        report = run_study(study, tmp_path / f"{name}.nc", scheduler=name, workers=2, batch_size=2)
         assert report.computed == len(study.cases)
         out[name] = load(tmp_path / f"{name}.nc")
     # in this process, but over TCP on the loopback, as a remote cluster is reached
-    with LocalCluster(n_workers=1, threads_per_worker=2, processes=False, protocol="tcp://",
-                      host="127.0.0.1", dashboard_address=":0") as cluster:
+    with LocalCluster(
+        n_workers=1,
+        threads_per_worker=2,
+        processes=False,
+        protocol="tcp://",
+        host="127.0.0.1",
+        dashboard_address=":0",
+    ) as cluster:
         assert cluster.scheduler_address.startswith("tcp://127.0.0.1:")
-        report = run_study(study, tmp_path / "distributed.nc",
-                           scheduler=cluster.scheduler_address, batch_size=2)
+        report = run_study(
+            study, tmp_path / "distributed.nc", scheduler=cluster.scheduler_address, batch_size=2
+        )
         assert report.batches == 3
     out["distributed"] = load(tmp_path / "distributed.nc")
     return out
@@ -166,16 +180,17 @@ def test_a_changed_spec_reuses_only_the_unchanged_cases(tmp_path):
     assert fresh.computed == 6
     # a changed model parameter changes every id: nothing stale is reused
     stiffer = SMALL.replace("name: small", "name: small\nmodel: {spring_preload: 160 lbf}")
-    changed = run_study(load_study(write_spec(tmp_path, stiffer)), archive,
-                        scheduler="synchronous")
+    changed = run_study(load_study(write_spec(tmp_path, stiffer)), archive, scheduler="synchronous")
     assert (changed.computed, changed.reused) == (6, 0)
     ds = xr.load_dataset(archive)
     assert not set(ds.case_id.values) & {c.case_id for c in study.cases}
 
 
 def test_batches_share_run_settings_and_are_cut_to_size():
-    spec = SMALL.replace("run: {revolutions: 2, record: [q, member_loads]}",
-                         "run: {revolutions: 2, integrator: newmark-linear}")
+    spec = SMALL.replace(
+        "run: {revolutions: 2, record: [q, member_loads]}",
+        "run: {revolutions: 2, integrator: newmark-linear}",
+    )
     spec += "  run.dt: [1 us, 0.5 us]\n"
     study = expand(check_spec(parse_spec_text(spec)))
     plans = plan_batches(study.cases, (), 4)
@@ -189,10 +204,12 @@ def test_interleaved_batches_fill_shared_chunks_and_batch_files_are_uncompressed
     """Two run settings alternate along the study, so each batch writes every other row and
     each archive chunk of eight cases is filled by several batches; the archive still holds
     each case's own results. Batch files (kept here) are written uncompressed."""
-    spec = SMALL.replace("run: {revolutions: 2, record: [q, member_loads]}",
-                         "run: {revolutions: 1}")
-    spec = spec.replace("[6000 rpm, 9524 rpm, 11000 rpm]",
-                        "[6000 rpm, 8000 rpm, 9524 rpm, 11000 rpm, 12000 rpm]")
+    spec = SMALL.replace(
+        "run: {revolutions: 2, record: [q, member_loads]}", "run: {revolutions: 1}"
+    )
+    spec = spec.replace(
+        "[6000 rpm, 9524 rpm, 11000 rpm]", "[6000 rpm, 8000 rpm, 9524 rpm, 11000 rpm, 12000 rpm]"
+    )
     spec += "  run.tolerance: [1e-12 s, 1e-6 s]\n"
     study = load_study(write_spec(tmp_path, spec))
     assert len(study.cases) == 20
@@ -228,8 +245,19 @@ def test_a_killed_study_resumes_computing_only_the_missing_batches(tmp_path):
     killed = tmp_path / "killed"
     killed.mkdir()
     spec = write_spec(killed, KILLED)
-    cmd = [sys.executable, "-m", "campipe", "study", str(spec), "--scheduler", "synchronous",
-           "--batch-size", "1", "--no-progress", "--keep-parts"]
+    cmd = [
+        sys.executable,
+        "-m",
+        "campipe",
+        "study",
+        str(spec),
+        "--scheduler",
+        "synchronous",
+        "--batch-size",
+        "1",
+        "--no-progress",
+        "--keep-parts",
+    ]
     parts = parts_directory(killed / "slow.nc")
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     try:
@@ -250,8 +278,10 @@ def test_a_killed_study_resumes_computing_only_the_missing_batches(tmp_path):
     done = {p: (p.stat().st_ino, p.stat().st_mtime_ns) for p in parts.glob("batch-*.nc")}
     assert 1 <= len(done) < 24
     rerun = subprocess.run(cmd, capture_output=True, text=True, check=True)
-    assert f"({len(done)} reused, {24 - len(done)} computed in {24 - len(done)} batches)" \
-        in rerun.stderr, rerun.stderr
+    assert (
+        f"({len(done)} reused, {24 - len(done)} computed in {24 - len(done)} batches)"
+        in rerun.stderr
+    ), rerun.stderr
     for p, stamp in done.items():  # the stored batches were read, not redone
         assert (p.stat().st_ino, p.stat().st_mtime_ns) == stamp
     assert not list(parts.glob(".*.tmp"))  # the killed run's temporary file is gone
@@ -259,8 +289,9 @@ def test_a_killed_study_resumes_computing_only_the_missing_batches(tmp_path):
     # the same as a study that was never interrupted
     whole = tmp_path / "whole"
     whole.mkdir()
-    report = run_study(load_study(write_spec(whole, KILLED)), whole / "slow.nc",
-                       scheduler="threads", batch_size=5)
+    report = run_study(
+        load_study(write_spec(whole, KILLED)), whole / "slow.nc", scheduler="threads", batch_size=5
+    )
     assert report.computed == 24
     xr.testing.assert_identical(load(killed / "slow.nc"), load(whole / "slow.nc"))
 
@@ -278,14 +309,20 @@ def test_a_second_run_on_a_busy_archive_stops_and_touches_nothing(small, tmp_pat
     in_progress.write_bytes(b"partial")
     holder = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(120)"])
     try:
-        lock.write_text(json.dumps({"pid": holder.pid, "host": socket.gethostname(),
-                                    "started": "2026-11-22T08:00:00Z"}))
-        with pytest.raises(ArchiveBusyError, match=(
+        lock.write_text(
+            json.dumps(
+                {"pid": holder.pid, "host": socket.gethostname(), "started": "2026-11-22T08:00:00Z"}
+            )
+        )
+        with pytest.raises(
+            ArchiveBusyError,
+            match=(
                 rf"small.nc is being written by process {holder.pid} on .* since "
-                rf"2026-11-22T08:00:00Z.* remove {re.escape(str(lock))}")):
+                rf"2026-11-22T08:00:00Z.* remove {re.escape(str(lock))}"
+            ),
+        ):
             run_study(study, target, scheduler="synchronous")
-        result = CliRunner().invoke(main, ["study", str(spec), "-o", str(target),
-                                           "--no-progress"])
+        result = CliRunner().invoke(main, ["study", str(spec), "-o", str(target), "--no-progress"])
         assert result.exit_code == 1 and "is being written by process" in result.output
         assert "Traceback" not in result.output
         assert in_progress.exists() and lock.exists() and not target.exists()
@@ -297,10 +334,13 @@ def test_a_second_run_on_a_busy_archive_stops_and_touches_nothing(small, tmp_pat
     xr.testing.assert_identical(load(target), load(archive))
 
 
-@pytest.mark.parametrize("content", [
-    {"pid": 2**22 + 12345, "host": "another-host", "started": "2026-11-22T08:00:00Z"},
-    None,  # empty: its writer has not filled it in yet
-])
+@pytest.mark.parametrize(
+    "content",
+    [
+        {"pid": 2**22 + 12345, "host": "another-host", "started": "2026-11-22T08:00:00Z"},
+        None,  # empty: its writer has not filled it in yet
+    ],
+)
 def test_a_lock_that_cannot_be_checked_is_left_alone(tmp_path, content):
     """A lock from another host (its process cannot be checked) or one still empty is never
     taken over."""
@@ -319,9 +359,13 @@ def test_stale_and_temporary_files_are_ignored_and_cleaned(small, tmp_path):
     parts = parts_directory(target)
     parts.mkdir()
     # a batch file of another study (other ids) and a temporary file from a killed run
-    other = load_study(write_spec(
-        tmp_path, SMALL.replace("name: small", "name: small\nmodel: {spring_preload: 160 lbf}"),
-        "o.yaml"))
+    other = load_study(
+        write_spec(
+            tmp_path,
+            SMALL.replace("name: small", "name: small\nmodel: {spring_preload: 160 lbf}"),
+            "o.yaml",
+        )
+    )
     run_study(other, tmp_path / "other.nc", scheduler="synchronous", keep_parts=True)
     for p in parts_directory(tmp_path / "other.nc").glob("batch-*.nc"):
         p.rename(parts / p.name)
@@ -333,9 +377,11 @@ def test_stale_and_temporary_files_are_ignored_and_cleaned(small, tmp_path):
 
 
 def test_import_campipe_does_not_pull_in_distributed_or_rerun():
-    code = ("import sys, campipe, campipe.cli, campipe.study.execute, campipe.study.query; "
-            "bad = [m for m in sys.modules if m.split('.')[0] in ('distributed', 'rerun')]; "
-            "print(bad); sys.exit(bool(bad))")
+    code = (
+        "import sys, campipe, campipe.cli, campipe.study.execute, campipe.study.query; "
+        "bad = [m for m in sys.modules if m.split('.')[0] in ('distributed', 'rerun')]; "
+        "print(bad); sys.exit(bool(bad))"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert out.returncode == 0, out.stdout + out.stderr
 
@@ -377,8 +423,9 @@ def test_memory_is_bounded_by_the_batch_not_the_study(tmp_path, monkeypatch):
 
     import campipe.study.execute as execute
 
-    spec = SMALL.replace("[6000 rpm, 9524 rpm, 11000 rpm]",
-                         "{from: 3000 rpm, to: 12000 rpm, num: 20}")
+    spec = SMALL.replace(
+        "[6000 rpm, 9524 rpm, 11000 rpm]", "{from: 3000 rpm, to: 12000 rpm, num: 20}"
+    )
     lock = threading.Lock()
     live = {"now": 0, "max": 0, "rows": 0}
     compute, store, read = execute.compute_batch, execute._store, execute.read_rows

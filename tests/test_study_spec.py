@@ -110,12 +110,15 @@ def test_the_issue_example_works_exactly(tmp_path):
     assert len({c.case_id for c in study.cases}) == 117
 
 
-@pytest.mark.parametrize("text", [
-    "!!python/object/apply:os.system ['touch {marker}']",
-    "name: !!python/object/apply:os.system ['touch {marker}']",
-    "name: !!python/name:os.system",
-    "name: !!python/object:collections.OrderedDict {}",
-])
+@pytest.mark.parametrize(
+    "text",
+    [
+        "!!python/object/apply:os.system ['touch {marker}']",
+        "name: !!python/object/apply:os.system ['touch {marker}']",
+        "name: !!python/name:os.system",
+        "name: !!python/object:collections.OrderedDict {}",
+    ],
+)
 def test_the_loader_uses_safe_yaml(tmp_path, text):
     marker = tmp_path / "pwned"
     with pytest.raises(SpecFileError, match="plain data"):
@@ -153,13 +156,19 @@ BAD = [
     (with_(seat=0.1), "seat", "bare number"),
     (with_(run__dt=1e-6), "run.dt", "bare number"),
     (with_(speed="9000 in"), "speed", "angle"),
-    (with_(defects=[{"kind": "flat", "from": 268, "to": "272 deg"}]), "defects[0].from",
-     "bare number"),
+    (
+        with_(defects=[{"kind": "flat", "from": 268, "to": "272 deg"}]),
+        "defects[0].from",
+        "bare number",
+    ),
     (with_(model__spring_rate="245"), "model.spring_rate", "without units"),
     # empty grids
     (with_(sweep={"speed": []}), "sweep.speed", "empty list"),
-    (with_(sweep={"speed": {"from": "1 rpm", "to": "2 rpm", "num": 0}}), "sweep.speed.num",
-     "integer ≥ 1"),
+    (
+        with_(sweep={"speed": {"from": "1 rpm", "to": "2 rpm", "num": 0}}),
+        "sweep.speed.num",
+        "integer ≥ 1",
+    ),
     (with_(cases=[]), "cases", "empty list"),
     (with_(sweep={}), "sweep", "empty"),
     # impossible values
@@ -167,33 +176,83 @@ BAD = [
     (with_(seat="2 in"), "seat", "below the full valve lift 1.5 in"),
     (with_(sweep={"seat": ["none", "2 in"]}), "sweep.seat[1]", "full valve lift"),
     (with_(run__integrator="newmark-linear", run__dt="5 us"), "run.dt", "stability limit"),
-    (with_(defects=[{"kind": "bump", "center": "90 deg", "height": "-0.1 in",
-                     "width": "20 deg"}]), "defects", "below the base circle"),
-    (with_(profile={"kind": "polydyne-345", "lift": "1 in", "rise": "180 deg",
-                    "dwell": "180 deg", "fall": "90 deg"}), "profile", "one turn"),
+    (
+        with_(
+            defects=[{"kind": "bump", "center": "90 deg", "height": "-0.1 in", "width": "20 deg"}]
+        ),
+        "defects",
+        "below the base circle",
+    ),
+    (
+        with_(
+            profile={
+                "kind": "polydyne-345",
+                "lift": "1 in",
+                "rise": "180 deg",
+                "dwell": "180 deg",
+                "fall": "90 deg",
+            }
+        ),
+        "profile",
+        "one turn",
+    ),
     (with_(speed="-9000 rpm"), "speed", "greater than 0"),
     # structure of axes, cases and samples
     (with_(zip={"speed": ["1 rpm", "2 rpm"], "seat": ["none"]}), "zip", "equal lengths"),
     (with_(sweep={"run.revolutions": [1, 2]}), "sweep.run.revolutions", "whole study"),
     (with_(cases=[{"run": {"revolutions": 2}}]), "cases[0].run.revolutions", "whole study"),
-    (with_(sweep={"speed": ["1000 rpm"]}, cases=[{"speed": "2000 rpm"}]), "cases[0].speed",
-     "also varied by sweep.speed"),
+    (
+        with_(sweep={"speed": ["1000 rpm"]}, cases=[{"speed": "2000 rpm"}]),
+        "cases[0].speed",
+        "also varied by sweep.speed",
+    ),
     (with_(sweep={"speed": ["9000 rpm", 9000]}), "sweep.speed[1]", "bare number"),
-    (with_(sample={"method": "latin-hypercube", "n": 0, "seed": 1,
-                   "ranges": {"speed": {"from": "1 rpm", "to": "2 rpm"}}}), "sample.n", "≥ 1"),
-    (with_(sample={"method": "latin-hypercub", "n": 2, "seed": 1,
-                   "ranges": {"speed": {"from": "1 rpm", "to": "2 rpm"}}}), "sample.method",
-     "did you mean 'latin-hypercube'"),
-    (with_(sample={"method": "latin-hypercube", "n": 2, "seed": 1,
-                   "ranges": {"closure": {"from": "a", "to": "b"}}}), "sample.ranges.closure",
-     "unknown key"),
+    (
+        with_(
+            sample={
+                "method": "latin-hypercube",
+                "n": 0,
+                "seed": 1,
+                "ranges": {"speed": {"from": "1 rpm", "to": "2 rpm"}},
+            }
+        ),
+        "sample.n",
+        "≥ 1",
+    ),
+    (
+        with_(
+            sample={
+                "method": "latin-hypercub",
+                "n": 2,
+                "seed": 1,
+                "ranges": {"speed": {"from": "1 rpm", "to": "2 rpm"}},
+            }
+        ),
+        "sample.method",
+        "did you mean 'latin-hypercube'",
+    ),
+    (
+        with_(
+            sample={
+                "method": "latin-hypercube",
+                "n": 2,
+                "seed": 1,
+                "ranges": {"closure": {"from": "a", "to": "b"}},
+            }
+        ),
+        "sample.ranges.closure",
+        "unknown key",
+    ),
     (with_(replay={"where": "__import__('os')"}), "replay.where", "a call is not allowed"),
     # missing pieces
     ({k: v for k, v in BASE.items() if k != "speed"}, "speed", "missing"),
     ({k: v for k, v in BASE.items() if k != "name"}, "name", "missing"),
     (with_(profile={"kind": "polydyne-345", "lift": "1 in"}), "profile.rise", "missing"),
-    (with_(profile={"kind": "table", "file": "nowhere.csv"}), "profile.file",
-     "relative to the spec"),
+    (
+        with_(profile={"kind": "table", "file": "nowhere.csv"}),
+        "profile.file",
+        "relative to the spec",
+    ),
 ]
 
 
@@ -219,8 +278,16 @@ def test_a_problem_in_many_cases_is_reported_once_with_the_cases():
 
 # -- property tests: generated bad specs ------------------------------------------------------
 
-DIMENSIONAL = ["speed", "seat", "profile__lift", "run__dt", "run__output_every",
-               "model__spring_rate", "model__pushrod_length", "model__spring_preload"]
+DIMENSIONAL = [
+    "speed",
+    "seat",
+    "profile__lift",
+    "run__dt",
+    "run__output_every",
+    "model__spring_rate",
+    "model__pushrod_length",
+    "model__spring_preload",
+]
 CONTAINERS = {
     "": list(TOP_LEVEL),
     "model": ["preset", *PARAMETERS],
@@ -228,8 +295,11 @@ CONTAINERS = {
     "profile": ["kind", *PROFILE_FIELDS],
 }
 NUMBERS = st.one_of(st.integers(1, 10**6), st.floats(1e-3, 1e6, allow_nan=False))
-WRONG_TYPES = st.one_of(st.lists(st.integers(), max_size=2), st.booleans(),
-                        st.dictionaries(st.sampled_from("abc"), st.integers(), max_size=2))
+WRONG_TYPES = st.one_of(
+    st.lists(st.integers(), max_size=2),
+    st.booleans(),
+    st.dictionaries(st.sampled_from("abc"), st.integers(), max_size=2),
+)
 
 
 @st.composite
@@ -238,10 +308,14 @@ def bad_specs(draw):
     kind = draw(st.sampled_from(["unknown", "bare", "type", "empty", "lift", "seat", "dt"]))
     if kind == "unknown":
         where = draw(st.sampled_from(sorted(CONTAINERS)))
-        key = draw(st.from_regex(r"[a-z]{1,8}(_[a-z]{1,8}){0,2}", fullmatch=True)
-                   .filter(lambda k: k not in CONTAINERS[where]))
-        return with_(**{f"{where}__{key}" if where else key: "1 in"}), \
-            f"{where}.{key}" if where else key
+        key = draw(
+            st.from_regex(r"[a-z]{1,8}(_[a-z]{1,8}){0,2}", fullmatch=True).filter(
+                lambda k: k not in CONTAINERS[where]
+            )
+        )
+        return with_(
+            **{f"{where}__{key}" if where else key: "1 in"}
+        ), f"{where}.{key}" if where else key
     if kind == "bare":
         key = draw(st.sampled_from(DIMENSIONAL))
         return with_(**{key: draw(NUMBERS)}), key.replace("__", ".")
@@ -270,11 +344,15 @@ def test_generated_bad_specs_are_refused_with_their_key_path(case):
 
 
 @settings(max_examples=40, deadline=None)
-@given(speed=st.floats(100, 20000), seat=st.one_of(st.none(), st.floats(0, 1.45)),
-       closure=st.sampled_from(["force", "form"]))
+@given(
+    speed=st.floats(100, 20000),
+    seat=st.one_of(st.none(), st.floats(0, 1.45)),
+    closure=st.sampled_from(["force", "form"]),
+)
 def test_generated_good_specs_are_accepted_by_checker_and_schema(speed, seat, closure):
-    raw = with_(speed=f"{speed} rpm", seat="none" if seat is None else f"{seat} in",
-                closure=closure)
+    raw = with_(
+        speed=f"{speed} rpm", seat="none" if seat is None else f"{seat} in", closure=closure
+    )
     assert not list(jsonschema.Draft202012Validator(study_schema()).iter_errors(raw))
     study = expand(check_spec(raw))
     assert len(study.cases) == 1
@@ -283,18 +361,26 @@ def test_generated_good_specs_are_accepted_by_checker_and_schema(speed, seat, cl
 
 def test_schema_refuses_the_shape_level_mistakes():
     validator = jsonschema.Draft202012Validator(study_schema())
-    for raw, path in [(with_(speed=9000), ["speed"]), (with_(sped="1 rpm"), []),
-                      (with_(sweep={"speed": []}), ["sweep", "speed"]),
-                      (with_(run__record=["x"]), ["run", "record", 0])]:
+    for raw, path in [
+        (with_(speed=9000), ["speed"]),
+        (with_(sped="1 rpm"), []),
+        (with_(sweep={"speed": []}), ["sweep", "speed"]),
+        (with_(run__record=["x"]), ["run", "record", 0]),
+    ]:
         errors = list(validator.iter_errors(raw))
         assert errors, raw
         assert any(list(e.absolute_path) == path for e in errors), [e.message for e in errors]
 
 
 def test_overrides_apply_before_checking():
-    spec = check_spec(with_(sweep={"speed": ["1000 rpm", "2000 rpm"]}),
-                      overrides={"run.revolutions": 2, "sweep.speed": ["3000 rpm"],
-                                 "model.spring_preload": "140 lbf"})
+    spec = check_spec(
+        with_(sweep={"speed": ["1000 rpm", "2000 rpm"]}),
+        overrides={
+            "run.revolutions": 2,
+            "sweep.speed": ["3000 rpm"],
+            "model.spring_preload": "140 lbf",
+        },
+    )
     assert spec.base["run"]["revolutions"] == 2
     assert spec.sweep == {"speed": ["3000 rpm"]}
     assert spec.base["model"]["spring_preload"] == "140 lbf"
@@ -303,10 +389,14 @@ def test_overrides_apply_before_checking():
 
 
 def test_yaml_key_order_and_comments_do_not_matter(tmp_path):
-    a = write_spec(tmp_path, "name: t\nspeed: 9000 rpm\nprofile: {kind: harmonic, lift: 1 in}\n",
-                   "a.yaml")
-    b = write_spec(tmp_path, "# c\nprofile: {lift: 1 in, kind: harmonic}\nname: t\n"
-                   "speed: 9000 rpm  # c\n", "b.yaml")
+    a = write_spec(
+        tmp_path, "name: t\nspeed: 9000 rpm\nprofile: {kind: harmonic, lift: 1 in}\n", "a.yaml"
+    )
+    b = write_spec(
+        tmp_path,
+        "# c\nprofile: {lift: 1 in, kind: harmonic}\nname: t\nspeed: 9000 rpm  # c\n",
+        "b.yaml",
+    )
     assert load_study(a).cases[0].case_id == load_study(b).cases[0].case_id
 
 

@@ -103,23 +103,24 @@ def probe(
         raise ValueError(f"tolerance: found {tolerance!r} m, expected > 0")
     cases = list(cases)
     base = settings or RunSettings()
-    base = replace(base, revolutions=min(base.revolutions, revolutions), fidelity="full",
-                   mode_cutoff=None)
+    base = replace(
+        base, revolutions=min(base.revolutions, revolutions), fidelity="full", mode_cutoff=None
+    )
     if base.method != "modal-exact":
         base = replace(base, integrator="modal-exact", dt=None)
     full, full_seconds = _timed(cases, base, repeats)
     levels = [Level("full", None, full_seconds, np.zeros(len(cases)))]
     for cutoff in sorted(cutoffs):
-        res, seconds = _timed(cases, replace(base, fidelity="reduced", mode_cutoff=cutoff),
-                              repeats)
+        res, seconds = _timed(cases, replace(base, fidelity="reduced", mode_cutoff=cutoff), repeats)
         err = np.abs(res.valve_lift - full.valve_lift).max(axis=1)
         levels.append(Level("reduced", float(cutoff), seconds, err))
 
     def cheapest(ok: np.ndarray) -> int:
         best = 0
         for k in range(1, len(levels)):
-            if ok[k] and levels[k].seconds < min(levels[best].seconds,
-                                                 (1 - MIN_SAVING) * full_seconds):
+            if ok[k] and levels[k].seconds < min(
+                levels[best].seconds, (1 - MIN_SAVING) * full_seconds
+            ):
                 best = k
         return best
 
@@ -128,8 +129,9 @@ def probe(
     return Probe(tolerance, tuple(levels), choice, cheapest(within.all(axis=1)))
 
 
-def recommend(case: Case, tolerance: float, settings: RunSettings | None = None,
-              **kw) -> tuple[str, float | None]:
+def recommend(
+    case: Case, tolerance: float, settings: RunSettings | None = None, **kw
+) -> tuple[str, float | None]:
     """The cheapest fidelity level whose valve lift stays within ``tolerance`` [m] of the full
     model's on ``case``: ``("full", None)`` or ``("reduced", mode_cutoff [rad/s])``.
 
@@ -143,8 +145,12 @@ def recommend(case: Case, tolerance: float, settings: RunSettings | None = None,
 MAX_PROBE_CASES = 256
 
 
-def study_needs(cases: Sequence[Case], settings: Sequence[RunSettings], tolerance: float,
-                unit: tuple[str, float] = ("in", 0.0254)) -> str:
+def study_needs(
+    cases: Sequence[Case],
+    settings: Sequence[RunSettings],
+    tolerance: float,
+    unit: tuple[str, float] = ("in", 0.0254),
+) -> str:
     """What ``campipe validate --tolerance`` prints: the fidelity level a study's cases need.
 
     Parameters
@@ -163,9 +169,11 @@ def study_needs(cases: Sequence[Case], settings: Sequence[RunSettings], toleranc
     groups: dict[RunSettings, list[int]] = {}
     for i in index:
         groups.setdefault(settings[i], []).append(int(i))
-    lines = [f"fidelity for a valve-lift tolerance of {tolerance / metres:g} {name} "
-             f"(probe: {index.size} of {len(cases)} cases, up to {PROBE_REVOLUTIONS:g} turns, "
-             "modal-exact, valve lift against the full model):"]
+    lines = [
+        f"fidelity for a valve-lift tolerance of {tolerance / metres:g} {name} "
+        f"(probe: {index.size} of {len(cases)} cases, up to {PROBE_REVOLUTIONS:g} turns, "
+        "modal-exact, valve lift against the full model):"
+    ]
     for group_settings, members in groups.items():
         p = probe([cases[i] for i in members], tolerance, group_settings)
         counts: dict[int, int] = {}
@@ -174,20 +182,31 @@ def study_needs(cases: Sequence[Case], settings: Sequence[RunSettings], toleranc
         chosen = np.array(p.choice)
         for k in sorted(counts):
             lv = p.levels[k]
-            what = ("full" if lv.mode_cutoff is None
-                    else f"reduced, mode_cutoff {lv.mode_cutoff:g} rad/s")
+            what = (
+                "full"
+                if lv.mode_cutoff is None
+                else f"reduced, mode_cutoff {lv.mode_cutoff:g} rad/s"
+            )
             worst = float(lv.errors[chosen == k].max()) / metres
-            lines.append(f"  {what}: {counts[k]} case{'s' if counts[k] != 1 else ''}"
-                         + (f" (largest error {worst:.2g} {name})" if k else ""))
+            lines.append(
+                f"  {what}: {counts[k]} case{'s' if counts[k] != 1 else ''}"
+                + (f" (largest error {worst:.2g} {name})" if k else "")
+            )
         lv = p.levels[p.common]
         if lv.mode_cutoff is None:
-            lines.append("  the whole study: run.fidelity: full (no reduced level is both within "
-                         "the tolerance for every case and cheaper)")
+            lines.append(
+                "  the whole study: run.fidelity: full (no reduced level is both within "
+                "the tolerance for every case and cheaper)"
+            )
         else:
             saving = 1 - lv.seconds / p.levels[0].seconds
-            lines.append(f"  the whole study: run.fidelity: reduced, run.mode_cutoff: "
-                         f"{lv.mode_cutoff:g} rad/s (about {saving:.0%} less time than full)")
+            lines.append(
+                f"  the whole study: run.fidelity: reduced, run.mode_cutoff: "
+                f"{lv.mode_cutoff:g} rad/s (about {saving:.0%} less time than full)"
+            )
         if group_settings.method != "modal-exact":
-            lines.append(f"  (these cases run {group_settings.method}; the reduced fidelity "
-                         "needs integrator modal-exact)")
+            lines.append(
+                f"  (these cases run {group_settings.method}; the reduced fidelity "
+                "needs integrator modal-exact)"
+            )
     return "\n".join(lines)

@@ -149,8 +149,7 @@ class _Cam:
         s, co = math.sin(theta), math.cos(theta)
         ta, tb = pr.trig[piece]
         w = self.w
-        return (p0 + ta * s + tb * co, w * (p1 + ta * co - tb * s),
-                w * w * (p2 - ta * s - tb * co))
+        return (p0 + ta * s + tb * co, w * (p1 + ta * co - tb * s), w * w * (p2 - ta * s - tb * co))
 
 
 def solve_case(
@@ -255,8 +254,7 @@ def solve_case(
         t_stop = min(t_break, t_end)
         pc, rc = piece, rev  # bind the piece for the closures below
 
-        def held_state(tt, x, xd, pc=pc, rc=rc, cam_held=cam_held, seat_held=seat_held,
-                       fr=fr):
+        def held_state(tt, x, xd, pc=pc, rc=rc, cam_held=cam_held, seat_held=seat_held, fr=fr):
             qq = np.empty(7)
             vv = np.empty(7)
             qq[fr] = x
@@ -276,8 +274,7 @@ def solve_case(
                 out[nf:] += conf.cam_terms.T @ (-lift, -dlift, -ddlift)
             return out
 
-        def force(tt, z, row, conf=conf, nf=nf, cam_held=cam_held, rhs=rhs,
-                  held_state=held_state):
+        def force(tt, z, row, conf=conf, nf=nf, cam_held=cam_held, rhs=rhs, held_state=held_state):
             """Contact force at coordinate ``row``: row of M·q̈ + C·q̇ + K·q − f."""
             qq, vv, acam, _ = held_state(tt, z[:nf], z[nf:])
             acc = np.zeros(7)
@@ -294,8 +291,9 @@ def solve_case(
                 kinds.append(CAM_SEPARATION)
             else:
                 i1 = int(np.flatnonzero(fr == CAM)[0])
-                monitors.append(lambda tt, z, i1=i1, pc=pc, rc=rc:
-                                z[i1] + cam.at(pc, rc, tt)[0] - GAP_LEVEL)
+                monitors.append(
+                    lambda tt, z, i1=i1, pc=pc, rc=rc: z[i1] + cam.at(pc, rc, tt)[0] - GAP_LEVEL
+                )
                 kinds.append(CAM_IMPACT)
         if seat_held:
             monitors.append(lambda tt, z: -force(tt, z, SEAT) - eps_force)
@@ -321,8 +319,17 @@ def solve_case(
         elif t_stop - t > 1e-15 * (1.0 + t):
             tol = atol_frac * np.concatenate([scale[fr], w * scale[fr]])
             kw = {"jac": lambda tt, z, a=conf.a: a} if method in IMPLICIT else {}
-            sol = solve_ivp(rhs, (t, t_stop), z0, method=method, rtol=rtol, atol=tol,
-                            events=monitors, dense_output=True, **kw)
+            sol = solve_ivp(
+                rhs,
+                (t, t_stop),
+                z0,
+                method=method,
+                rtol=rtol,
+                atol=tol,
+                events=monitors,
+                dense_output=True,
+                **kw,
+            )
             segments += 1
             nfev += sol.nfev
             t_seg = sol.t[-1]
@@ -340,9 +347,11 @@ def solve_case(
                 z_end = sol.y_events[k][0]
                 stalled = stalled + 1 if t_ev - t < STALL_WINDOW else 0
                 if stalled > MAX_STALLED:
-                    raise ChatterError(f"contact events kept recurring within "
-                                       f"{STALL_WINDOW:g} s of each other at t = {t:.9g} s "
-                                       f"(method {method}, rtol {rtol:g})")
+                    raise ChatterError(
+                        f"contact events kept recurring within "
+                        f"{STALL_WINDOW:g} s of each other at t = {t:.9g} s "
+                        f"(method {method}, rtol {rtol:g})"
+                    )
             else:
                 z_end = sol.y[:, -1]
             while k_out < n_out and t_out[k_out] <= t_seg * (1.0 + 1e-14):
@@ -369,16 +378,18 @@ def solve_case(
                 v = v + configs[new].kick[0] * (-dlift - v[CAM])
                 q[CAM] = -lift
                 v_cam_max = max(v_cam_max, closing)
-                events.append((t_ev, kind, cfg, new, closing,
-                               configs[new].impact_mass[0] * closing))
+                events.append(
+                    (t_ev, kind, cfg, new, closing, configs[new].impact_mass[0] * closing)
+                )
             else:
                 new = _config_number(cam_held, True)
                 closing = -v[SEAT]
                 v = v + configs[new].kick[1] * closing
                 q[SEAT] = seat_q
                 v_seat_max = max(v_seat_max, closing)
-                events.append((t_ev, kind, cfg, new, closing,
-                               configs[new].impact_mass[1] * closing))
+                events.append(
+                    (t_ev, kind, cfg, new, closing, configs[new].impact_mass[1] * closing)
+                )
             cfg = new
             continue
         if t >= t_end:
@@ -396,8 +407,9 @@ def solve_case(
             elif abs(jump) > small:
                 v = v + configs[cfg].kick[0] * (-jump)
                 v_cam_max = max(v_cam_max, abs(jump))
-                events.append((t, CAM_IMPACT, cfg, cfg, abs(jump),
-                               configs[cfg].impact_mass[0] * abs(jump)))
+                events.append(
+                    (t, CAM_IMPACT, cfg, cfg, abs(jump), configs[cfg].impact_mass[0] * abs(jump))
+                )
                 q[CAM], v[CAM] = -l_right, -dl_right
         piece, rev = nxt, rev_next
     if len(events) > max_events:

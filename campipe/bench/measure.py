@@ -22,8 +22,9 @@ from campipe.engine.newmark import CAM_SEPARATION, EV_KIND, EV_TIME
 
 #: The converged reference: modal-exact (exact between events) with events located to 1e-14 s
 #: and steps capped at 0.1 µs, so that no monitor excursion between grid points can hide.
-REFERENCE = RunSettings(integrator="modal-exact", tolerance=1e-14, dt=0.1e-6,
-                        output_every=OUTPUT_EVERY)
+REFERENCE = RunSettings(
+    integrator="modal-exact", tolerance=1e-14, dt=0.1e-6, output_every=OUTPUT_EVERY
+)
 #: The reference's check, a different method: solve_ivp's DOP853 (explicit Runge–Kutta of
 #: order 8, dense output of order 7, events by Brent's method on the dense output) at
 #: rtol = atol = 1e-13 (``campipe.bench.ivp``).
@@ -57,16 +58,28 @@ class Outcome:
 
 def outcome_of_batch(result: BatchResult, i: int, case: Case) -> Outcome:
     """Case ``i`` of an engine batch."""
-    return Outcome(result.valve_lift[i].copy(), result.events[i].copy(),
-                   result.separation_per_rev[i].copy(), float(result.max_seating_velocity[i]),
-                   float(result.max_cam_impact_velocity[i]), case.speed, case.has_seat)
+    return Outcome(
+        result.valve_lift[i].copy(),
+        result.events[i].copy(),
+        result.separation_per_rev[i].copy(),
+        float(result.max_seating_velocity[i]),
+        float(result.max_cam_impact_velocity[i]),
+        case.speed,
+        case.has_seat,
+    )
 
 
 def outcome_of_ivp(result: IvpResult, case: Case) -> Outcome:
     """A ``solve_ivp`` run."""
-    return Outcome(result.valve_lift.copy(), result.events.copy(),
-                   result.separation_per_rev.copy(), result.max_seating_velocity,
-                   result.max_cam_impact_velocity, case.speed, case.has_seat)
+    return Outcome(
+        result.valve_lift.copy(),
+        result.events.copy(),
+        result.separation_per_rev.copy(),
+        result.max_seating_velocity,
+        result.max_cam_impact_velocity,
+        case.speed,
+        case.has_seat,
+    )
 
 
 @dataclass(frozen=True)
@@ -101,8 +114,11 @@ def errors(run: Outcome, reference: Outcome) -> Errors:
         event_angle=event_angle,
         separation_angle=separation_angle,
         separation=float(np.abs(run.separation_per_rev - reference.separation_per_rev).max()),
-        seating_velocity=(abs(run.max_seating_velocity - reference.max_seating_velocity)
-                          if reference.has_seat else math.nan),
+        seating_velocity=(
+            abs(run.max_seating_velocity - reference.max_seating_velocity)
+            if reference.has_seat
+            else math.nan
+        ),
         impact_velocity=abs(run.max_cam_impact_velocity - reference.max_cam_impact_velocity),
     )
 
@@ -111,15 +127,22 @@ def warm_up() -> None:
     """Load (or compile) every kernel the bench times, on a scene that visits all four
     configurations, so that no timing includes compilation."""
     seat = suite()[2]
-    for settings in (RunSettings(revolutions=0.3, integrator="newmark-linear"),
-                     RunSettings(revolutions=0.3, integrator="modal-exact"),
-                     RunSettings(revolutions=0.3, fidelity="reduced")):
+    for settings in (
+        RunSettings(revolutions=0.3, integrator="newmark-linear"),
+        RunSettings(revolutions=0.3, integrator="modal-exact"),
+        RunSettings(revolutions=0.3, fidelity="reduced"),
+    ):
         run_batch([seat.case, seat.case], settings)
 
 
-def time_engine(scene: Scene, settings: RunSettings, max_copies: int, repeats: int,
-                batch_seconds: float = BATCH_SECONDS,
-                full_state: bool = True) -> tuple[float, Outcome, int]:
+def time_engine(
+    scene: Scene,
+    settings: RunSettings,
+    max_copies: int,
+    repeats: int,
+    batch_seconds: float = BATCH_SECONDS,
+    full_state: bool = True,
+) -> tuple[float, Outcome, int]:
     """Per-case wall time [s] of one setting, its outcome and the grid steps per case.
 
     An untimed single-case run first (it fills the engine's caches), which also sizes the
@@ -139,16 +162,14 @@ def time_engine(scene: Scene, settings: RunSettings, max_copies: int, repeats: i
     return best, outcome_of_batch(first, 0, scene.case), int(first.steps[0])
 
 
-def time_ivp(scene: Scene, rtol: float, method: str, repeats: int) -> tuple[float, Outcome,
-                                                                             int]:
+def time_ivp(scene: Scene, rtol: float, method: str, repeats: int) -> tuple[float, Outcome, int]:
     """Wall time [s] of the ``solve_ivp`` peer on one case, its outcome and its number of
     right-hand-side evaluations."""
     best = math.inf
     result = None
     for _ in range(max(repeats, 1)):
         t0 = time.perf_counter()
-        result = solve_case(scene.case, scene.revolutions, OUTPUT_EVERY, method=method,
-                            rtol=rtol)
+        result = solve_case(scene.case, scene.revolutions, OUTPUT_EVERY, method=method, rtol=rtol)
         best = min(best, time.perf_counter() - t0)
     return best, outcome_of_ivp(result, scene.case), result.nfev
 
@@ -172,8 +193,9 @@ class ReferenceCheck:
 def check_reference(scene: Scene, ref: Outcome) -> ReferenceCheck:
     """Run the second reference (``CHECK_METHOD`` at ``CHECK_RTOL``) and compare."""
     t0 = time.perf_counter()
-    res = solve_case(scene.case, scene.revolutions, OUTPUT_EVERY, method=CHECK_METHOD,
-                     rtol=CHECK_RTOL)
+    res = solve_case(
+        scene.case, scene.revolutions, OUTPUT_EVERY, method=CHECK_METHOD, rtol=CHECK_RTOL
+    )
     seconds = time.perf_counter() - t0
     err = errors(outcome_of_ivp(res, scene.case), ref)
     return ReferenceCheck(scene.name, err, seconds, agrees(err))

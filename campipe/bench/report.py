@@ -16,17 +16,27 @@ from campipe.bench.run import FAMILIES, Bench
 from campipe.bench.suite import INCH
 
 #: File names written into the output folder.
-FILES = {"markdown": "bench.md", "csv": "bench.csv", "json": "bench.json", "plot": "bench.png",
-         "events_plot": "bench-events.png"}
+FILES = {
+    "markdown": "bench.md",
+    "csv": "bench.csv",
+    "json": "bench.json",
+    "plot": "bench.png",
+    "events_plot": "bench-events.png",
+}
 #: The errors each plot draws: (row key, axis label, factor from SI, floor in the axis's unit:
 #: smaller errors are drawn at it, as a log axis has no zero).
 VALVE_LIFT = ("valve_lift", "valve-lift max error [in]", 1 / INCH, 1e-14)
-EVENT_ERRORS = (("separation_angle", "separation-angle error [deg]", math.degrees(1.0), 1e-16),
-                ("seating_velocity", "seating-velocity error [in/s]", 1 / INCH, 1e-14))
+EVENT_ERRORS = (
+    ("separation_angle", "separation-angle error [deg]", math.degrees(1.0), 1e-16),
+    ("seating_velocity", "seating-velocity error [in/s]", 1 / INCH, 1e-14),
+)
 #: How a time-to-error was found, in words.
-HOW = {"cheapest": "its cheapest point is already below", "interpolated": "interpolated",
-       "extrapolated": "not reached in its ladder; extrapolated",
-       "not reached": "not reached in its ladder"}
+HOW = {
+    "cheapest": "its cheapest point is already below",
+    "interpolated": "interpolated",
+    "extrapolated": "not reached in its ladder; extrapolated",
+    "not reached": "not reached in its ladder",
+}
 #: Columns of the CSV and the markdown tables, with their units and conversion from SI.
 COLUMNS = (
     ("scene", "", None),
@@ -85,8 +95,11 @@ def summary_rows(bench: Bench) -> list[list[str]]:
         picks = [next((r for r in mine if r.get("default")), None)]
         reduced = [r for r in mine if r["family"] == "reduced"]
         picks.append(min(reduced, key=lambda r: r["seconds"]) if reduced else None)
-        picks.append(next((r for r in mine if r["family"] == "contacts only"
-                           and r["setting"] == "full"), None))
+        picks.append(
+            next(
+                (r for r in mine if r["family"] == "contacts only" and r["setting"] == "full"), None
+            )
+        )
         picks.append(next((r for r in mine if r.get("thesis")), None))
         ivp = [r for r in mine if r["family"] == "solve_ivp"]
         picks.append(min(ivp, key=lambda r: r["valve_lift"]) if ivp else None)
@@ -94,10 +107,17 @@ def summary_rows(bench: Bench) -> list[list[str]]:
             if r is None:
                 continue
             name = "default (modal-exact)" if r.get("default") else r["family"]
-            out.append([scene, name, r["setting"], _num(r["seconds"], 1e3),
-                        _num(r["valve_lift"], 1 / INCH, ".2e"),
-                        _num(r["separation_angle"], math.degrees(1.0), ".2e"),
-                        _num(r["seating_velocity"], 1 / INCH, ".2e")])
+            out.append(
+                [
+                    scene,
+                    name,
+                    r["setting"],
+                    _num(r["seconds"], 1e3),
+                    _num(r["valve_lift"], 1 / INCH, ".2e"),
+                    _num(r["separation_angle"], math.degrees(1.0), ".2e"),
+                    _num(r["seating_velocity"], 1 / INCH, ".2e"),
+                ]
+            )
     return out
 
 
@@ -105,84 +125,157 @@ def markdown(bench: Bench, with_plots: bool = True) -> str:
     """The report as markdown."""
     m = bench.meta
     lines = [f"# campipe bench{' --quick' if bench.quick else ''}", ""]
-    lines.append(f"{m['date']}; {m['machine']}; Python {m['python']}, numpy {m['numpy']}, "
-                 f"scipy {m['scipy']}, numba {m['numba']}; bench wall time "
-                 f"{bench.seconds:.0f} s; load average {m['load_average_at_start']:.2f} at "
-                 f"the start, {m.get('load_average_at_end', math.nan):.2f} at the end (other "
-                 "work on the machine slows the timings and the 2-worker runs).")
+    lines.append(
+        f"{m['date']}; {m['machine']}; Python {m['python']}, numpy {m['numpy']}, "
+        f"scipy {m['scipy']}, numba {m['numba']}; bench wall time "
+        f"{bench.seconds:.0f} s; load average {m['load_average_at_start']:.2f} at "
+        f"the start, {m.get('load_average_at_end', math.nan):.2f} at the end (other "
+        "work on the machine slows the timings and the 2-worker runs)."
+    )
     lines.append("")
-    lines.append(f"Errors are against a converged reference computed in the same run: "
-                 f"{m['reference']}; output every {m['output_every_deg']:g} deg. Timing: "
-                 f"{m['timing']}.")
+    lines.append(
+        f"Errors are against a converged reference computed in the same run: "
+        f"{m['reference']}; output every {m['output_every_deg']:g} deg. Timing: "
+        f"{m['timing']}."
+    )
     lines.append("")
     if with_plots:
-        lines += [f"![wall time against valve-lift error]({FILES['plot']})", "",
-                  f"![wall time against separation-angle and seating-velocity error]"
-                  f"({FILES['events_plot']})", ""]
+        lines += [
+            f"![wall time against valve-lift error]({FILES['plot']})",
+            "",
+            f"![wall time against separation-angle and seating-velocity error]"
+            f"({FILES['events_plot']})",
+            "",
+        ]
     lines += ["## The reference, checked", ""]
-    lines.append(f"Second reference: {m['reference_check']}. Stated agreement: valve lift "
-                 f"{m['agreement']['valve_lift'] / INCH:g} in, event angles "
-                 f"{math.degrees(m['agreement']['event_angle']):g} deg, separation per turn "
-                 f"{math.degrees(m['agreement']['separation']):g} deg, seating and impact "
-                 f"velocities {m['agreement']['seating_velocity'] / INCH:g} in/s.")
+    lines.append(
+        f"Second reference: {m['reference_check']}. Stated agreement: valve lift "
+        f"{m['agreement']['valve_lift'] / INCH:g} in, event angles "
+        f"{math.degrees(m['agreement']['event_angle']):g} deg, separation per turn "
+        f"{math.degrees(m['agreement']['separation']):g} deg, seating and impact "
+        f"velocities {m['agreement']['seating_velocity'] / INCH:g} in/s."
+    )
     lines.append("")
     lines += _table(
-        ["scene", "agrees", "valve lift [in]", "event angles [deg]", "sep./turn [deg]",
-         "seating vel. [in/s]", "impact vel. [in/s]", "check time [s]"],
-        [[c["scene"], _num(c["agrees"]) if c["events_match"] else "no (events differ)",
-          _num(c["valve_lift"], 1 / INCH, ".2e"),
-          _num(c["event_angle"], math.degrees(1.0), ".2e"),
-          _num(c["separation"], math.degrees(1.0), ".2e"),
-          _num(c["seating_velocity"], 1 / INCH, ".2e"),
-          _num(c["impact_velocity"], 1 / INCH, ".2e"), _num(c["seconds"], fmt=".1f")]
-         for c in bench.checks])
-    lines += ["", "## Summary: default, fastest reduced level, contacts only, thesis algorithm, "
-              "solve_ivp", ""]
-    lines += _table(["scene", "method", "setting", "ms/case", "valve err [in]",
-                     "sep. angle err [deg]", "seating vel. err [in/s]"], summary_rows(bench))
+        [
+            "scene",
+            "agrees",
+            "valve lift [in]",
+            "event angles [deg]",
+            "sep./turn [deg]",
+            "seating vel. [in/s]",
+            "impact vel. [in/s]",
+            "check time [s]",
+        ],
+        [
+            [
+                c["scene"],
+                _num(c["agrees"]) if c["events_match"] else "no (events differ)",
+                _num(c["valve_lift"], 1 / INCH, ".2e"),
+                _num(c["event_angle"], math.degrees(1.0), ".2e"),
+                _num(c["separation"], math.degrees(1.0), ".2e"),
+                _num(c["seating_velocity"], 1 / INCH, ".2e"),
+                _num(c["impact_velocity"], 1 / INCH, ".2e"),
+                _num(c["seconds"], fmt=".1f"),
+            ]
+            for c in bench.checks
+        ],
+    )
+    lines += [
+        "",
+        "## Summary: default, fastest reduced level, contacts only, thesis algorithm, solve_ivp",
+        "",
+    ]
+    lines += _table(
+        [
+            "scene",
+            "method",
+            "setting",
+            "ms/case",
+            "valve err [in]",
+            "sep. angle err [deg]",
+            "seating vel. err [in/s]",
+        ],
+        summary_rows(bench),
+    )
     lines += ["", "## Peers at equal valve-lift error", ""]
-    lines.append("Time ratio = peer time / campipe time for the same valve-lift error, "
-                 "interpolated on each method's time/error curve (log–log). *At the default's "
-                 "error* (the issue's ratio): the time the peer needs to reach the default's "
-                 "error. Where no point of its ladder reaches it, the measured figure is a "
-                 "lower bound, the time of its most accurate point (a finer setting is "
-                 "needed), and the estimate extrapolated along the slope of its last three "
-                 "points is given beside it. "
-                 "*At the peer's point*: the thesis algorithm at 1 µs, or solve_ivp's most "
-                 "accurate point, against the time campipe's default integrator (full "
-                 "fidelity, any tolerance or step cap of its ladder) needs for that error (its "
-                 "cheapest setting is an upper bound when it is already more accurate).")
+    lines.append(
+        "Time ratio = peer time / campipe time for the same valve-lift error, "
+        "interpolated on each method's time/error curve (log–log). *At the default's "
+        "error* (the issue's ratio): the time the peer needs to reach the default's "
+        "error. Where no point of its ladder reaches it, the measured figure is a "
+        "lower bound, the time of its most accurate point (a finer setting is "
+        "needed), and the estimate extrapolated along the slope of its last three "
+        "points is given beside it. "
+        "*At the peer's point*: the thesis algorithm at 1 µs, or solve_ivp's most "
+        "accurate point, against the time campipe's default integrator (full "
+        "fidelity, any tolerance or step cap of its ladder) needs for that error (its "
+        "cheapest setting is an upper bound when it is already more accurate)."
+    )
     lines.append("")
 
     def at_default(r: dict) -> list[str]:
         """Peer time, measured ratio and extrapolated ratio at the default's error."""
         bound = "" if r["peer_reaches_default_error"] else "> "
         how = "measured" if not bound else "not reached; its most accurate point"
-        return [f"{bound}{_num(r['peer_seconds_at_default_error_measured'], 1e3)} ms ({how})",
-                bound + _num(r["measured_ratio_at_default_error"], fmt=".3g"),
-                "–" if not bound else _num(r["ratio_at_default_error"], fmt=".3g")]
+        return [
+            f"{bound}{_num(r['peer_seconds_at_default_error_measured'], 1e3)} ms ({how})",
+            bound + _num(r["measured_ratio_at_default_error"], fmt=".3g"),
+            "–" if not bound else _num(r["ratio_at_default_error"], fmt=".3g"),
+        ]
 
     lines += _table(
-        ["scene", "peer", "default ms/case", "default err [in]", "peer time at default err",
-         "ratio", "ratio extrapolated", "peer point", "peer ms", "peer err [in]",
-         "ratio at peer's error"],
-        [[r["scene"], r["peer"], _num(r["default_seconds"], 1e3),
-          _num(r["default_error"], 1 / INCH, ".2e"), *at_default(r), r["peer_point"],
-          _num(r["peer_point_seconds"], 1e3), _num(r["peer_point_error"], 1 / INCH, ".2e"),
-          _num(r["ratio_at_peer_error"], fmt=".3g") + f" ({HOW[r['how_campipe']]})"]
-         for r in bench.ratios])
+        [
+            "scene",
+            "peer",
+            "default ms/case",
+            "default err [in]",
+            "peer time at default err",
+            "ratio",
+            "ratio extrapolated",
+            "peer point",
+            "peer ms",
+            "peer err [in]",
+            "ratio at peer's error",
+        ],
+        [
+            [
+                r["scene"],
+                r["peer"],
+                _num(r["default_seconds"], 1e3),
+                _num(r["default_error"], 1 / INCH, ".2e"),
+                *at_default(r),
+                r["peer_point"],
+                _num(r["peer_point_seconds"], 1e3),
+                _num(r["peer_point_error"], 1 / INCH, ".2e"),
+                _num(r["ratio_at_peer_error"], fmt=".3g") + f" ({HOW[r['how_campipe']]})",
+            ]
+            for r in bench.ratios
+        ],
+    )
     ladders = [r for r in bench.ratios if r["peer"] == "newmark-linear" and r.get("ladder")]
     if ladders:
         lines += ["", "### The thesis algorithm at each step of its ladder", ""]
-        lines.append("newmark-linear's time at each step against the time campipe's default "
-                     "integrator needs for the same valve-lift error (as above).")
+        lines.append(
+            "newmark-linear's time at each step against the time campipe's default "
+            "integrator needs for the same valve-lift error (as above)."
+        )
         lines.append("")
         lines += _table(
             ["scene", "newmark step", "err [in]", "newmark ms", "campipe ms", "ratio"],
-            [[r["scene"], p["setting"], _num(p["error"], 1 / INCH, ".2e"),
-              _num(p["seconds"], 1e3), _num(p["campipe_seconds"], 1e3)
-              + f" ({HOW[p['how_campipe']]})", _num(p["ratio"], fmt=".3g")]
-             for r in ladders for p in r["ladder"]])
+            [
+                [
+                    r["scene"],
+                    p["setting"],
+                    _num(p["error"], 1 / INCH, ".2e"),
+                    _num(p["seconds"], 1e3),
+                    _num(p["campipe_seconds"], 1e3) + f" ({HOW[p['how_campipe']]})",
+                    _num(p["ratio"], fmt=".3g"),
+                ]
+                for r in ladders
+                for p in r["ladder"]
+            ],
+        )
     if bench.goals:
         lines += ["", "Goals (issue 7), smallest ratio over the suite:", ""]
         for peer, g in bench.goals.items():
@@ -192,24 +285,37 @@ def markdown(bench: Bench, with_plots: bool = True) -> str:
                 f"the peer's time to reach the default's error (the issue's ratio): "
                 f"{'≥ ' if short else ''}{_num(g['min_ratio_at_default_error'])}× measured "
                 f"({g['verdict_at_default_error']})"
-                + (f"; a lower bound where the peer's ladder does not reach the default's "
-                   f"error ({', '.join(short)}); extrapolated "
-                   f"{_num(g['min_ratio_at_default_error_extrapolated'])}×" if short else "")
-                + ".")
+                + (
+                    f"; a lower bound where the peer's ladder does not reach the default's "
+                    f"error ({', '.join(short)}); extrapolated "
+                    f"{_num(g['min_ratio_at_default_error_extrapolated'])}×"
+                    if short
+                    else ""
+                )
+                + "."
+            )
             lines.append(
                 f"  - At the peer's own point, the time campipe needs for the peer's error: "
                 f"{_num(g['min_ratio_at_peer_error'])}× "
                 f"({'≥' if g['reached_at_peer_error'] else 'below'} {g['goal']:g}×)."
-                + (f" campipe's ladder does not reach the peer's error on: "
-                   f"{', '.join(g['campipe_not_reaching'])}." if g["campipe_not_reaching"]
-                   else ""))
+                + (
+                    f" campipe's ladder does not reach the peer's error on: "
+                    f"{', '.join(g['campipe_not_reaching'])}."
+                    if g["campipe_not_reaching"]
+                    else ""
+                )
+            )
             below = g.get("goal_reached_below_error", {})
             if below:
                 lines.append(
                     f"  - ≥ {g['goal']:g}× at every point of the {peer} ladder with a valve-lift "
-                    "error up to: " + "; ".join(
-                        f"{scene} {_num(e, 1 / INCH, '.1e')} in" if e == e else
-                        f"{scene} none" for scene, e in below.items()) + ".")
+                    "error up to: "
+                    + "; ".join(
+                        f"{scene} {_num(e, 1 / INCH, '.1e')} in" if e == e else f"{scene} none"
+                        for scene, e in below.items()
+                    )
+                    + "."
+                )
     a = bench.accuracy_for_cost
     if a:
         lines += ["", "## Accuracy for cost on 11000 rpm (issue 4)", ""]
@@ -217,64 +323,132 @@ def markdown(bench: Bench, with_plots: bool = True) -> str:
         lines.append(
             f"- default: valve-lift error {a['default_error'] / INCH:.2e} in "
             f"({'below' if a['default_below_target'] else 'not below'} 1e-6 in) in "
-            f"{a['default_seconds'] * 1e3:.3g} ms/case ({a['default_steps']} grid steps).")
+            f"{a['default_seconds'] * 1e3:.3g} ms/case ({a['default_steps']} grid steps)."
+        )
         lines.append(
             f"- newmark-linear for {a['newmark_target'] / INCH:g} in: "
             f"{_num(a['newmark_seconds_at_target'], 1e3)} ms/case ({HOW[a['how']]})"
-            + (f"; cheapest ladder point meeting it: {cheapest['setting']}, "
-               f"{cheapest['seconds'] * 1e3:.3g} ms/case, error {cheapest['error'] / INCH:.2e}"
-               f" in, {cheapest['steps']} steps" if cheapest else "; no ladder point meets it")
-            + f". Ratio newmark/default: {_num(a['ratio'])}.")
+            + (
+                f"; cheapest ladder point meeting it: {cheapest['setting']}, "
+                f"{cheapest['seconds'] * 1e3:.3g} ms/case, error {cheapest['error'] / INCH:.2e}"
+                f" in, {cheapest['steps']} steps"
+                if cheapest
+                else "; no ladder point meets it"
+            )
+            + f". Ratio newmark/default: {_num(a['ratio'])}."
+        )
         if a.get("contacts_only_seconds"):
             lines.append(
                 f"- default sampling only the contact coordinates (what a study that records "
                 f"no q or member loads runs): error {a['contacts_only_error'] / INCH:.2e} in "
                 f"in {a['contacts_only_seconds'] * 1e3:.3g} ms/case. Ratio newmark/that: "
-                f"{_num(a['ratio_contacts_only'])}.")
+                f"{_num(a['ratio_contacts_only'])}."
+            )
     if bench.throughput:
         lines += ["", "## Throughput: a 256-case batch (issue 3)", ""]
         lines += _table(
-            ["integrator", "cases", "workers", "turns/case", "case-steps", "seconds",
-             "case-steps/s"],
-            [[t["integrator"], str(t["n_cases"]), str(t["workers"]), _num(t["revolutions"]),
-              str(t["case_steps"]), _num(t["seconds"], fmt=".3f"), _num(t["rate"], fmt=".3g")]
-             for t in bench.throughput])
+            [
+                "integrator",
+                "cases",
+                "workers",
+                "turns/case",
+                "case-steps",
+                "seconds",
+                "case-steps/s",
+            ],
+            [
+                [
+                    t["integrator"],
+                    str(t["n_cases"]),
+                    str(t["workers"]),
+                    _num(t["revolutions"]),
+                    str(t["case_steps"]),
+                    _num(t["seconds"], fmt=".3f"),
+                    _num(t["rate"], fmt=".3g"),
+                ]
+                for t in bench.throughput
+            ],
+        )
         lines.append("")
-        lines.append("modal-exact counts its grid steps (output samples and event refinement), "
-                     "so its case-steps are not newmark-linear's; the goal (> 2e7 case-steps/s "
-                     "on 2 cores) is newmark-linear's.")
+        lines.append(
+            "modal-exact counts its grid steps (output samples and event refinement), "
+            "so its case-steps are not newmark-linear's; the goal (> 2e7 case-steps/s "
+            "on 2 cores) is newmark-linear's."
+        )
     if bench.scaling:
         lines += ["", "## Scaling", ""]
-        lines.append("Default integrator, 2 turns per case, harmonic cam 6000–14000 rpm, "
-                     "alternately without and with a seat. *engine*: batches of 32 as dask "
-                     "tasks on the threaded scheduler, nothing stored; *study*: "
-                     "`campipe.study.execute.run_study` from a spec, archive written.")
+        lines.append(
+            "Default integrator, 2 turns per case, harmonic cam 6000–14000 rpm, "
+            "alternately without and with a seat. *engine*: batches of 32 as dask "
+            "tasks on the threaded scheduler, nothing stored; *study*: "
+            "`campipe.study.execute.run_study` from a spec, archive written."
+        )
         lines.append("")
         lines += _table(
-            ["layer", "cases", "workers", "seconds", "ms/case", "archive [MB]",
-             "archive/case [kB]"],
-            [[p["layer"], str(p["n_cases"]), str(p["workers"]), _num(p["seconds"], fmt=".3g"),
-              _num(p["per_case"], 1e3), _num(p["archive_bytes"] / 1e6) if p["archive_bytes"]
-              else "–",
-              _num(p["archive_bytes"] / p["n_cases"] / 1e3) if p["archive_bytes"] else "–"]
-             for p in bench.scaling])
+            [
+                "layer",
+                "cases",
+                "workers",
+                "seconds",
+                "ms/case",
+                "archive [MB]",
+                "archive/case [kB]",
+            ],
+            [
+                [
+                    p["layer"],
+                    str(p["n_cases"]),
+                    str(p["workers"]),
+                    _num(p["seconds"], fmt=".3g"),
+                    _num(p["per_case"], 1e3),
+                    _num(p["archive_bytes"] / 1e6) if p["archive_bytes"] else "–",
+                    _num(p["archive_bytes"] / p["n_cases"] / 1e3) if p["archive_bytes"] else "–",
+                ]
+                for p in bench.scaling
+            ],
+        )
     if bench.fidelity:
         lines += ["", "## Fidelity the scenes need", ""]
-        lines.append("`campipe.bench.fidelity.recommend`: the cheapest level whose valve lift "
-                     "stays within the tolerance of the full model's (timed probe; a reduced "
-                     "level must save ≥ 5 %).")
+        lines.append(
+            "`campipe.bench.fidelity.recommend`: the cheapest level whose valve lift "
+            "stays within the tolerance of the full model's (timed probe; a reduced "
+            "level must save ≥ 5 %)."
+        )
         lines.append("")
         lines += _table(
-            ["scene", "tolerance [in]", "level", "cutoff [rad/s]", "its error [in]",
-             "ms/case", "full ms/case"],
-            [[f["scene"], _num(f["tolerance"], 1 / INCH, "g"), f["fidelity"],
-              _num(f["mode_cutoff"], fmt=".3g"), _num(f["error"], 1 / INCH, ".2e"),
-              _num(f["seconds"], 1e3), _num(f["full_seconds"], 1e3)]
-             for f in bench.fidelity])
+            [
+                "scene",
+                "tolerance [in]",
+                "level",
+                "cutoff [rad/s]",
+                "its error [in]",
+                "ms/case",
+                "full ms/case",
+            ],
+            [
+                [
+                    f["scene"],
+                    _num(f["tolerance"], 1 / INCH, "g"),
+                    f["fidelity"],
+                    _num(f["mode_cutoff"], fmt=".3g"),
+                    _num(f["error"], 1 / INCH, ".2e"),
+                    _num(f["seconds"], 1e3),
+                    _num(f["full_seconds"], 1e3),
+                ]
+                for f in bench.fidelity
+            ],
+        )
     lines += ["", "## Every run", ""]
-    lines += _table([c[1] or c[0] for c in COLUMNS],
-                    [[_num(r.get(k), s, ".3g" if k in ("seconds",) else ".2e")
-                      if s else _num(r.get(k)) for k, _, s in COLUMNS] for r in bench.rows])
+    lines += _table(
+        [c[1] or c[0] for c in COLUMNS],
+        [
+            [
+                _num(r.get(k), s, ".3g" if k in ("seconds",) else ".2e") if s else _num(r.get(k))
+                for k, _, s in COLUMNS
+            ]
+            for r in bench.rows
+        ],
+    )
     return "\n".join(lines) + "\n"
 
 
@@ -284,9 +458,18 @@ def write_csv(bench: Bench, path: Path) -> Path:
         w = csv.writer(fh)
         w.writerow([c[1] or c[0] for c in COLUMNS])
         for r in bench.rows:
-            w.writerow([("" if r.get(k) is None or (isinstance(r.get(k), float)
-                                                     and math.isnan(r[k]))
-                         else r[k] * s if s else r[k]) for k, _, s in COLUMNS])
+            w.writerow(
+                [
+                    (
+                        ""
+                        if r.get(k) is None or (isinstance(r.get(k), float) and math.isnan(r[k]))
+                        else r[k] * s
+                        if s
+                        else r[k]
+                    )
+                    for k, _, s in COLUMNS
+                ]
+            )
     return path
 
 
@@ -298,16 +481,23 @@ def plot(bench: Bench, path: Path, errors: tuple[tuple, ...] = (VALVE_LIFT,)) ->
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    panels = [(scene, err) for err in errors
-              for scene in dict.fromkeys(r["scene"] for r in bench.rows)
-              if any(r["scene"] == scene and _finite(r.get(err[0])) for r in bench.rows)]
+    panels = [
+        (scene, err)
+        for err in errors
+        for scene in dict.fromkeys(r["scene"] for r in bench.rows)
+        if any(r["scene"] == scene and _finite(r.get(err[0])) for r in bench.rows)
+    ]
     ncol = max(1, min(3, len(panels)))
     nrow = max(1, math.ceil(len(panels) / ncol))
     fig, axes = plt.subplots(nrow, ncol, figsize=(4.6 * ncol, 3.8 * nrow), squeeze=False)
-    styles = {"modal-exact": ("C0", "o-"), "modal-exact capped": ("C9", "s:"),
-              "reduced": ("C2", "^--"), "contacts only": ("C4", "P"),
-              "newmark-linear": ("C3", "D-"),
-              "solve_ivp": ("C1", "v-")}
+    styles = {
+        "modal-exact": ("C0", "o-"),
+        "modal-exact capped": ("C9", "s:"),
+        "reduced": ("C2", "^--"),
+        "contacts only": ("C4", "P"),
+        "newmark-linear": ("C3", "D-"),
+        "solve_ivp": ("C1", "v-"),
+    }
     for ax, (scene, (key, label, scale, floor)) in zip(axes.flat, panels, strict=False):
         mine = [r for r in bench.rows if r["scene"] == scene and _finite(r.get(key))]
 
@@ -321,33 +511,56 @@ def plot(bench: Bench, path: Path, errors: tuple[tuple, ...] = (VALVE_LIFT,)) ->
             if fam == "reduced":
                 pts = sorted(pts, key=lambda r, key=key: r[key])
             color, style = styles[fam]
-            ax.plot([x_of(r) for r in pts], [r["seconds"] * 1e3 for r in pts], style,
-                    color=color, ms=4, lw=1, label=fam)
+            ax.plot(
+                [x_of(r) for r in pts],
+                [r["seconds"] * 1e3 for r in pts],
+                style,
+                color=color,
+                ms=4,
+                lw=1,
+                label=fam,
+            )
         for r in mine:
             if r.get("default"):
                 ax.plot(x_of(r), r["seconds"] * 1e3, "*", color="k", ms=12, label="default")
             if r.get("thesis"):
-                ax.plot(x_of(r), r["seconds"] * 1e3, "s", mfc="none", color="k", ms=9,
-                        label="thesis (1 µs)")
+                ax.plot(
+                    x_of(r),
+                    r["seconds"] * 1e3,
+                    "s",
+                    mfc="none",
+                    color="k",
+                    ms=9,
+                    label="thesis (1 µs)",
+                )
         ax.set_xscale("log")
         ax.set_yscale("log")
-        ax.set_title(scene if len(errors) == 1 else f"{scene}: {label.split(' error')[0]}",
-                     fontsize=10)
+        ax.set_title(
+            scene if len(errors) == 1 else f"{scene}: {label.split(' error')[0]}", fontsize=10
+        )
         ax.set_xlabel(label)
         ax.set_ylabel("wall time per case [ms]")
         ax.grid(True, which="major", alpha=0.3)
-    for ax in list(axes.flat)[len(panels):]:
+    for ax in list(axes.flat)[len(panels) :]:
         ax.axis("off")
     # One legend entry per label, from every panel (a panel may lack a family).
     entries = {}
     for ax in axes.flat:
         for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
             entries.setdefault(lab, h)
-    fig.legend(list(entries.values()), list(entries), loc="lower center", ncol=len(entries),
-               fontsize=8, frameon=False)
+    fig.legend(
+        list(entries.values()),
+        list(entries),
+        loc="lower center",
+        ncol=len(entries),
+        fontsize=8,
+        frameon=False,
+    )
     what = " and ".join(label.split(" error")[0] for _, label, _, _ in errors)
-    fig.suptitle(f"campipe bench: wall time against {what} error"
-                 + (" (--quick)" if bench.quick else ""), fontsize=11)
+    fig.suptitle(
+        f"campipe bench: wall time against {what} error" + (" (--quick)" if bench.quick else ""),
+        fontsize=11,
+    )
     fig.tight_layout(rect=(0, 0.05, 1, 0.97))
     fig.savefig(path, dpi=110)
     plt.close(fig)

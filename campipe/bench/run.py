@@ -43,14 +43,26 @@ QUICK_SCALING_COUNTS = (1, 16, 256)
 FIDELITY_TOLERANCES = (1e-3 * INCH, 1e-5 * INCH)
 
 #: Families of rows: how each is labelled in the table and the plot.
-FAMILIES = ("modal-exact", "modal-exact capped", "reduced", "contacts only",
-            "newmark-linear", "solve_ivp")
+FAMILIES = (
+    "modal-exact",
+    "modal-exact capped",
+    "reduced",
+    "contacts only",
+    "newmark-linear",
+    "solve_ivp",
+)
 
 
 #: The error columns of a run that failed.
-FAILED = {"valve_lift": math.nan, "events_match": False, "event_angle": math.nan,
-          "separation_angle": math.nan, "separation": math.nan, "seating_velocity": math.nan,
-          "impact_velocity": math.nan}
+FAILED = {
+    "valve_lift": math.nan,
+    "events_match": False,
+    "event_angle": math.nan,
+    "separation_angle": math.nan,
+    "separation": math.nan,
+    "seating_velocity": math.nan,
+    "impact_velocity": math.nan,
+}
 
 
 @dataclass
@@ -77,56 +89,91 @@ def _meta(quick: bool, ladder: Ladder, scenes: Sequence[Scene]) -> dict:
     return {
         "machine": f"{platform.machine()}, {os.cpu_count()} cores, {platform.system()}",
         "python": platform.python_version(),
-        "numpy": np.__version__, "scipy": scipy.__version__, "numba": numba.__version__,
+        "numpy": np.__version__,
+        "scipy": scipy.__version__,
+        "numba": numba.__version__,
         "date": time.strftime("%Y-%m-%d %H:%M:%S %Z"),
         "load_average_at_start": os.getloadavg()[0],
-        "scenes": {s.name: {"description": s.description, "revolutions": s.revolutions}
-                   for s in scenes},
+        "scenes": {
+            s.name: {"description": s.description, "revolutions": s.revolutions} for s in scenes
+        },
         "output_every_deg": math.degrees(measure.OUTPUT_EVERY),
-        "reference": (f"modal-exact, tolerance {measure.REFERENCE.tolerance:g} s, step cap "
-                      f"{measure.REFERENCE.dt * 1e6:g} µs"),
-        "reference_check": (f"solve_ivp {measure.CHECK_METHOD}, rtol = atol = "
-                            f"{measure.CHECK_RTOL:g} (campipe.bench.ivp)"),
+        "reference": (
+            f"modal-exact, tolerance {measure.REFERENCE.tolerance:g} s, step cap "
+            f"{measure.REFERENCE.dt * 1e6:g} µs"
+        ),
+        "reference_check": (
+            f"solve_ivp {measure.CHECK_METHOD}, rtol = atol = "
+            f"{measure.CHECK_RTOL:g} (campipe.bench.ivp)"
+        ),
         "agreement": {k: v for k, v in measure.AGREEMENT.items()},
         "default": "modal-exact, tolerance 1e-12 s, steps chosen by the integrator, full",
         "ladder": asdict(ladder),
-        "timing": (f"engine: per-case time of a batch of up to {ladder.copies} copies "
-                   f"(about {measure.BATCH_SECONDS:g} s), best of {ladder.repeats}, kernels "
-                   f"loaded first; solve_ivp: one run, best of {ladder.ivp_repeats}"),
+        "timing": (
+            f"engine: per-case time of a batch of up to {ladder.copies} copies "
+            f"(about {measure.BATCH_SECONDS:g} s), best of {ladder.repeats}, kernels "
+            f"loaded first; solve_ivp: one run, best of {ladder.ivp_repeats}"
+        ),
     }
 
 
 def _settings_rows(ladder: Ladder) -> list[tuple[str, str, RunSettings, bool]]:
     """(family, label, settings, full_state) of every engine run of a scene."""
-    rows = [("modal-exact", f"tol {t:g} s", RunSettings(tolerance=t), True)
-            for t in ladder.modal_tolerances]
-    rows += [("modal-exact capped", f"cap {c * 1e6:g} µs", RunSettings(dt=c), True)
-             for c in ladder.modal_caps]
-    rows += [("reduced", f"cutoff {c:.3g} rad/s",
-              RunSettings(fidelity="reduced", mode_cutoff=c), True)
-             for c in ladder.reduced_cutoffs]
-    rows += [("contacts only", "full" if c is None else f"cutoff {c:.3g} rad/s",
-              RunSettings() if c is None else RunSettings(fidelity="reduced", mode_cutoff=c),
-              False)
-             for c in ladder.contacts_only]
-    rows += [("newmark-linear", f"dt {dt * 1e6:g} µs",
-              RunSettings(integrator="newmark-linear", dt=dt), True)
-             for dt in ladder.newmark_steps]
+    rows = [
+        ("modal-exact", f"tol {t:g} s", RunSettings(tolerance=t), True)
+        for t in ladder.modal_tolerances
+    ]
+    rows += [
+        ("modal-exact capped", f"cap {c * 1e6:g} µs", RunSettings(dt=c), True)
+        for c in ladder.modal_caps
+    ]
+    rows += [
+        ("reduced", f"cutoff {c:.3g} rad/s", RunSettings(fidelity="reduced", mode_cutoff=c), True)
+        for c in ladder.reduced_cutoffs
+    ]
+    rows += [
+        (
+            "contacts only",
+            "full" if c is None else f"cutoff {c:.3g} rad/s",
+            RunSettings() if c is None else RunSettings(fidelity="reduced", mode_cutoff=c),
+            False,
+        )
+        for c in ladder.contacts_only
+    ]
+    rows += [
+        (
+            "newmark-linear",
+            f"dt {dt * 1e6:g} µs",
+            RunSettings(integrator="newmark-linear", dt=dt),
+            True,
+        )
+        for dt in ladder.newmark_steps
+    ]
     return rows
 
 
-def _row(scene: Scene, family: str, label: str, seconds: float, cost: int,
-         err: measure.Errors, **extra) -> dict:
-    row = {"scene": scene.name, "family": family, "setting": label, "seconds": seconds,
-           "cost": cost}
+def _row(
+    scene: Scene, family: str, label: str, seconds: float, cost: int, err: measure.Errors, **extra
+) -> dict:
+    row = {
+        "scene": scene.name,
+        "family": family,
+        "setting": label,
+        "seconds": seconds,
+        "cost": cost,
+    }
     row.update(extra)
     row.update(err.as_dict())
     return row
 
 
 def _is_default(s: RunSettings) -> bool:
-    return (s.method == DEFAULT.method and s.tolerance == DEFAULT.tolerance and s.dt is None
-            and s.fidelity == "full")
+    return (
+        s.method == DEFAULT.method
+        and s.tolerance == DEFAULT.tolerance
+        and s.dt is None
+        and s.fidelity == "full"
+    )
 
 
 def _ratios(scene: str, rows: list[dict]) -> list[dict]:
@@ -149,34 +196,48 @@ def _ratios(scene: str, rows: list[dict]) -> list[dict]:
             point = next((r for r in pts if r.get("thesis")), pts[0])
         else:
             point = min(pts, key=lambda r: r["valve_lift"])
-        t_mine, how_mine = measure.time_to_error([r["seconds"] for r in modal],
-                                                 [r["valve_lift"] for r in modal],
-                                                 point["valve_lift"])
+        t_mine, how_mine = measure.time_to_error(
+            [r["seconds"] for r in modal], [r["valve_lift"] for r in modal], point["valve_lift"]
+        )
         # The same at every point of the peer's ladder: where the ratio stands at each error.
         ladder = []
         for r in sorted(pts, key=lambda r: -r["valve_lift"]):
-            t_at, how_at = measure.time_to_error([m["seconds"] for m in modal],
-                                                 [m["valve_lift"] for m in modal],
-                                                 r["valve_lift"])
-            ladder.append({"setting": r["setting"], "seconds": r["seconds"],
-                           "error": r["valve_lift"], "campipe_seconds": t_at,
-                           "how_campipe": how_at, "ratio": r["seconds"] / t_at})
-        out.append({
-            "scene": scene, "peer": peer,
-            "default_seconds": default["seconds"], "default_error": default["valve_lift"],
-            "peer_seconds_at_default_error": t_peer, "how": how,
-            "ratio_at_default_error": t_peer / default["seconds"],
-            # Measured only: the estimate where the ladder reaches the default's error, else
-            # the lower bound its most accurate point gives.
-            "peer_seconds_at_default_error_measured": t_bound,
-            "peer_reaches_default_error": reached,
-            "measured_ratio_at_default_error": t_bound / default["seconds"],
-            "peer_point": point["setting"], "peer_point_seconds": point["seconds"],
-            "peer_point_error": point["valve_lift"],
-            "campipe_seconds_at_peer_error": t_mine, "how_campipe": how_mine,
-            "ratio_at_peer_error": point["seconds"] / t_mine,
-            "ladder": ladder,
-        })
+            t_at, how_at = measure.time_to_error(
+                [m["seconds"] for m in modal], [m["valve_lift"] for m in modal], r["valve_lift"]
+            )
+            ladder.append(
+                {
+                    "setting": r["setting"],
+                    "seconds": r["seconds"],
+                    "error": r["valve_lift"],
+                    "campipe_seconds": t_at,
+                    "how_campipe": how_at,
+                    "ratio": r["seconds"] / t_at,
+                }
+            )
+        out.append(
+            {
+                "scene": scene,
+                "peer": peer,
+                "default_seconds": default["seconds"],
+                "default_error": default["valve_lift"],
+                "peer_seconds_at_default_error": t_peer,
+                "how": how,
+                "ratio_at_default_error": t_peer / default["seconds"],
+                # Measured only: the estimate where the ladder reaches the default's error, else
+                # the lower bound its most accurate point gives.
+                "peer_seconds_at_default_error_measured": t_bound,
+                "peer_reaches_default_error": reached,
+                "measured_ratio_at_default_error": t_bound / default["seconds"],
+                "peer_point": point["setting"],
+                "peer_point_seconds": point["seconds"],
+                "peer_point_error": point["valve_lift"],
+                "campipe_seconds_at_peer_error": t_mine,
+                "how_campipe": how_mine,
+                "ratio_at_peer_error": point["seconds"] / t_mine,
+                "ladder": ladder,
+            }
+        )
     return out
 
 
@@ -185,23 +246,31 @@ def _accuracy_for_cost(rows: list[dict]) -> dict:
     if not mine:
         return {}
     default = next(r for r in mine if r.get("default"))
-    lean = next((r for r in mine if r["family"] == "contacts only" and r["setting"] == "full"),
-                None)
+    lean = next(
+        (r for r in mine if r["family"] == "contacts only" and r["setting"] == "full"), None
+    )
     nm = [r for r in mine if r["family"] == "newmark-linear"]
-    t_nm, how = measure.time_to_error([r["seconds"] for r in nm], [r["valve_lift"] for r in nm],
-                                      ISSUE4_NEWMARK_ERROR)
+    t_nm, how = measure.time_to_error(
+        [r["seconds"] for r in nm], [r["valve_lift"] for r in nm], ISSUE4_NEWMARK_ERROR
+    )
     meeting = [r for r in nm if r["valve_lift"] <= ISSUE4_NEWMARK_ERROR]
     cheapest = min(meeting, key=lambda r: r["seconds"]) if meeting else None
     return {
         "scene": ISSUE4_SCENE,
-        "default_error": default["valve_lift"], "default_seconds": default["seconds"],
+        "default_error": default["valve_lift"],
+        "default_seconds": default["seconds"],
         "default_steps": default["cost"],
         "default_below_target": default["valve_lift"] < ISSUE4_DEFAULT_ERROR,
         "newmark_target": ISSUE4_NEWMARK_ERROR,
-        "newmark_seconds_at_target": t_nm, "how": how,
-        "newmark_cheapest_meeting": cheapest and {
-            "setting": cheapest["setting"], "seconds": cheapest["seconds"],
-            "error": cheapest["valve_lift"], "steps": cheapest["cost"]},
+        "newmark_seconds_at_target": t_nm,
+        "how": how,
+        "newmark_cheapest_meeting": cheapest
+        and {
+            "setting": cheapest["setting"],
+            "seconds": cheapest["seconds"],
+            "error": cheapest["valve_lift"],
+            "steps": cheapest["cost"],
+        },
         "ratio": t_nm / default["seconds"],
         "contacts_only_seconds": lean and lean["seconds"],
         "contacts_only_error": lean and lean["valve_lift"],
@@ -217,17 +286,23 @@ def _goals(ratios: list[dict]) -> dict:
             continue
         # A ratio of 0 means campipe's ladder did not reach the peer's error: not comparable
         # there, and named rather than averaged in.
-        at_peer = min((r["ratio_at_peer_error"] for r in mine if r["ratio_at_peer_error"] > 0),
-                      default=math.nan)
+        at_peer = min(
+            (r["ratio_at_peer_error"] for r in mine if r["ratio_at_peer_error"] > 0),
+            default=math.nan,
+        )
         # The issue's ratio: the peer's time to reach the default's error. Judged on what the
         # ladders measured (a lower bound where the peer's ladder does not reach it); the
         # extrapolated estimate is reported beside it.
         least = min(mine, key=lambda r: r["measured_ratio_at_default_error"])
         at_default = least["measured_ratio_at_default_error"]
         # Below the goal on a lower bound: the ladder is too short to tell.
-        verdict = ("reached" if at_default >= goal else
-                   "not shown (a lower bound)" if not least["peer_reaches_default_error"]
-                   else "not reached")
+        verdict = (
+            "reached"
+            if at_default >= goal
+            else "not shown (a lower bound)"
+            if not least["peer_reaches_default_error"]
+            else "not reached"
+        )
         at_default_extrapolated = min(r["ratio_at_default_error"] for r in mine)
         # Per scene, the largest error from which on (to the most accurate point) every
         # point of the peer's ladder is at least ``goal`` times slower than campipe.
@@ -239,17 +314,20 @@ def _goals(ratios: list[dict]) -> dict:
                     break
                 bound = point["error"]
             below[r["scene"]] = bound
-        out[peer] = {"goal": goal, "min_ratio_at_peer_error": at_peer,
-                     "goal_reached_below_error": below,
-                     "min_ratio_at_default_error": at_default,
-                     "min_ratio_at_default_error_extrapolated": at_default_extrapolated,
-                     "peer_not_reaching_default_error": [
-                         r["scene"] for r in mine if not r["peer_reaches_default_error"]],
-                     "reached_at_peer_error": at_peer >= goal,
-                     "reached_at_default_error": at_default >= goal,
-                     "verdict_at_default_error": verdict,
-                     "campipe_not_reaching": [r["scene"] for r in mine
-                                              if not r["ratio_at_peer_error"] > 0]}
+        out[peer] = {
+            "goal": goal,
+            "min_ratio_at_peer_error": at_peer,
+            "goal_reached_below_error": below,
+            "min_ratio_at_default_error": at_default,
+            "min_ratio_at_default_error_extrapolated": at_default_extrapolated,
+            "peer_not_reaching_default_error": [
+                r["scene"] for r in mine if not r["peer_reaches_default_error"]
+            ],
+            "reached_at_peer_error": at_peer >= goal,
+            "reached_at_default_error": at_default >= goal,
+            "verdict_at_default_error": verdict,
+            "campipe_not_reaching": [r["scene"] for r in mine if not r["ratio_at_peer_error"] > 0],
+        }
     return out
 
 
@@ -284,8 +362,9 @@ def run_bench(
     if scenes:
         unknown = set(scenes) - {s.name for s in chosen}
         if unknown:
-            raise ValueError(f"unknown scenes {sorted(unknown)}; known: "
-                             + ", ".join(s.name for s in chosen))
+            raise ValueError(
+                f"unknown scenes {sorted(unknown)}; known: " + ", ".join(s.name for s in chosen)
+            )
         chosen = tuple(s for s in chosen if s.name in scenes)
     if quick:
         chosen = tuple(Scene(s.name, s.description, s.case, 1.0) for s in chosen)
@@ -296,51 +375,101 @@ def run_bench(
         say(f"{scene.name}: reference and its check")
         ref = measure.reference(scene)
         check = measure.check_reference(scene, ref)
-        bench.checks.append({"scene": scene.name, "agrees": check.agrees,
-                             "seconds": check.seconds, **check.errors.as_dict()})
+        bench.checks.append(
+            {
+                "scene": scene.name,
+                "agrees": check.agrees,
+                "seconds": check.seconds,
+                **check.errors.as_dict(),
+            }
+        )
         say(f"{scene.name}: campipe and newmark-linear ladders")
         for family, label, settings, full_state in _settings_rows(ladder):
-            seconds, out, steps = measure.time_engine(scene, settings, ladder.copies,
-                                                      ladder.repeats, full_state=full_state)
-            bench.rows.append(_row(
-                scene, family, label, seconds, steps, measure.errors(out, ref),
-                integrator=settings.method, fidelity=settings.fidelity,
-                full_state=full_state, default=_is_default(settings) and full_state,
-                thesis=settings.method == "newmark-linear" and settings.dt == THESIS_STEP))
+            seconds, out, steps = measure.time_engine(
+                scene, settings, ladder.copies, ladder.repeats, full_state=full_state
+            )
+            bench.rows.append(
+                _row(
+                    scene,
+                    family,
+                    label,
+                    seconds,
+                    steps,
+                    measure.errors(out, ref),
+                    integrator=settings.method,
+                    fidelity=settings.fidelity,
+                    full_state=full_state,
+                    default=_is_default(settings) and full_state,
+                    thesis=settings.method == "newmark-linear" and settings.dt == THESIS_STEP,
+                )
+            )
         say(f"{scene.name}: solve_ivp {ladder.ivp_method}")
         for rtol in ladder.ivp_rtols:
             label = f"{ladder.ivp_method} rtol {rtol:g}"
             try:
-                seconds, out, nfev = measure.time_ivp(scene, rtol, ladder.ivp_method,
-                                                      ladder.ivp_repeats)
+                seconds, out, nfev = measure.time_ivp(
+                    scene, rtol, ladder.ivp_method, ladder.ivp_repeats
+                )
             except (ChatterError, RuntimeError) as exc:
                 log.warning("%s: solve_ivp %s failed: %s", scene.name, label, exc)
-                bench.rows.append({"scene": scene.name, "family": "solve_ivp",
-                                   "setting": label, "seconds": math.nan, "cost": 0,
-                                   "failed": str(exc), **FAILED})
+                bench.rows.append(
+                    {
+                        "scene": scene.name,
+                        "family": "solve_ivp",
+                        "setting": label,
+                        "seconds": math.nan,
+                        "cost": 0,
+                        "failed": str(exc),
+                        **FAILED,
+                    }
+                )
                 continue
-            bench.rows.append(_row(scene, "solve_ivp", label, seconds, nfev,
-                                   measure.errors(out, ref),
-                                   integrator=f"solve_ivp {ladder.ivp_method}",
-                                   fidelity="full", default=False, thesis=False))
+            bench.rows.append(
+                _row(
+                    scene,
+                    "solve_ivp",
+                    label,
+                    seconds,
+                    nfev,
+                    measure.errors(out, ref),
+                    integrator=f"solve_ivp {ladder.ivp_method}",
+                    fidelity="full",
+                    default=False,
+                    thesis=False,
+                )
+            )
         bench.ratios += _ratios(scene.name, bench.rows)
         say(f"{scene.name}: fidelity probe")
         for tol in FIDELITY_TOLERANCES:
-            p = fidelity.probe([scene.case], tol, RunSettings(revolutions=scene.revolutions),
-                               repeats=2 if quick else 3)
+            p = fidelity.probe(
+                [scene.case],
+                tol,
+                RunSettings(revolutions=scene.revolutions),
+                repeats=2 if quick else 3,
+            )
             fid, cutoff = p.setting(0)
             full_seconds = p.levels[0].seconds
             pick = p.levels[p.choice[0]]
-            bench.fidelity.append({"scene": scene.name, "tolerance": tol, "fidelity": fid,
-                                   "mode_cutoff": cutoff, "seconds": pick.seconds,
-                                   "full_seconds": full_seconds,
-                                   "error": float(pick.errors[0])})
+            bench.fidelity.append(
+                {
+                    "scene": scene.name,
+                    "tolerance": tol,
+                    "fidelity": fid,
+                    "mode_cutoff": cutoff,
+                    "seconds": pick.seconds,
+                    "full_seconds": full_seconds,
+                    "error": float(pick.errors[0]),
+                }
+            )
     bench.goals = _goals(bench.ratios)
     bench.accuracy_for_cost = _accuracy_for_cost(bench.rows)
     if with_scaling:
         say("throughput: 256 cases, newmark-linear and modal-exact")
-        for integrator, workers in (("newmark-linear", 1), ("newmark-linear", 2),
-                                    ("modal-exact", 2)):
+        for integrator, workers in (
+            ("newmark-linear", 1),
+            ("newmark-linear", 2),
+            ("modal-exact", 2),
+        ):
             tp = scaling.throughput(256, workers, integrator, repeats=2 if quick else 5)
             bench.throughput.append({**asdict(tp), "rate": tp.rate})
         counts = QUICK_SCALING_COUNTS if quick else SCALING_COUNTS

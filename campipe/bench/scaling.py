@@ -38,8 +38,10 @@ def scaling_cases(n: int) -> list[Case]:
     train = thesis_train()
     cam = harmonic(INCH)
     speeds = np.linspace(*SPEED_RANGE, n) if n > 1 else np.array([9000.0])
-    return [Case(train, cam, rpm(s), seat=math.nan if i % 2 == 0 else 0.1 * INCH)
-            for i, s in enumerate(speeds)]
+    return [
+        Case(train, cam, rpm(s), seat=math.nan if i % 2 == 0 else 0.1 * INCH)
+        for i, s in enumerate(speeds)
+    ]
 
 
 @dataclass(frozen=True)
@@ -58,22 +60,27 @@ class ScalingPoint:
         return self.seconds / self.n_cases
 
 
-def _run_threads(cases: list[Case], settings: RunSettings, workers: int,
-                 batch_size: int = BATCH_SIZE) -> list:
+def _run_threads(
+    cases: list[Case], settings: RunSettings, workers: int, batch_size: int = BATCH_SIZE
+) -> list:
     import dask
 
-    tasks = [dask.delayed(run_batch, pure=False)(cases[i:i + batch_size], settings)
-             for i in range(0, len(cases), batch_size)]
+    tasks = [
+        dask.delayed(run_batch, pure=False)(cases[i : i + batch_size], settings)
+        for i in range(0, len(cases), batch_size)
+    ]
     return list(dask.compute(*tasks, scheduler="threads", num_workers=workers))
 
 
-def engine_scaling(counts: Sequence[int], workers: Sequence[int] = (1, 2),
-                   settings: RunSettings | None = None,
-                   repeats: int = 2) -> list[ScalingPoint]:
+def engine_scaling(
+    counts: Sequence[int],
+    workers: Sequence[int] = (1, 2),
+    settings: RunSettings | None = None,
+    repeats: int = 2,
+) -> list[ScalingPoint]:
     """Wall time of the engine alone on n cases, batches of ``BATCH_SIZE`` as dask tasks on
     the threaded scheduler; best of ``repeats`` (one repeat above 1000 cases)."""
-    settings = settings or RunSettings(revolutions=SCALING_REVOLUTIONS,
-                                       output_every=OUTPUT_EVERY)
+    settings = settings or RunSettings(revolutions=SCALING_REVOLUTIONS, output_every=OUTPUT_EVERY)
     _run_threads(scaling_cases(4), settings, 2)  # kernels and caches loaded
     out = []
     for n in counts:
@@ -102,16 +109,30 @@ def scaling_spec(n: int) -> dict:
     }
     if n > 1:
         half = n // 2
-        spec["sweep"] = {"speed": {"from": f"{SPEED_RANGE[0]:g} rpm",
-                                   "to": f"{SPEED_RANGE[1]:g} rpm", "num": max(half, 1)},
-                         "seat": ["none", "0.1 in"]} if n % 2 == 0 else {
-            "speed": {"from": f"{SPEED_RANGE[0]:g} rpm", "to": f"{SPEED_RANGE[1]:g} rpm",
-                      "num": n}}
+        spec["sweep"] = (
+            {
+                "speed": {
+                    "from": f"{SPEED_RANGE[0]:g} rpm",
+                    "to": f"{SPEED_RANGE[1]:g} rpm",
+                    "num": max(half, 1),
+                },
+                "seat": ["none", "0.1 in"],
+            }
+            if n % 2 == 0
+            else {
+                "speed": {
+                    "from": f"{SPEED_RANGE[0]:g} rpm",
+                    "to": f"{SPEED_RANGE[1]:g} rpm",
+                    "num": n,
+                }
+            }
+        )
     return spec
 
 
-def study_scaling(counts: Sequence[int], directory: str | Path,
-                  workers: Sequence[int] = (1, 2)) -> list[ScalingPoint]:
+def study_scaling(
+    counts: Sequence[int], directory: str | Path, workers: Sequence[int] = (1, 2)
+) -> list[ScalingPoint]:
     """Wall time of ``campipe study`` on n cases (spec check, batches, archive) and the
     archive's size; spec and archives are written under ``directory``."""
     import yaml
@@ -132,8 +153,7 @@ def study_scaling(counts: Sequence[int], directory: str | Path,
             study = load_study(path)
             run_study(study, archive, scheduler="threads", workers=w)
             seconds = time.perf_counter() - t0
-            out.append(ScalingPoint("study", len(study.cases), w, seconds,
-                                    archive.stat().st_size))
+            out.append(ScalingPoint("study", len(study.cases), w, seconds, archive.stat().st_size))
     return out
 
 
@@ -154,8 +174,13 @@ class Throughput:
         return self.case_steps / self.seconds
 
 
-def throughput(n_cases: int = 256, workers: int = 2, integrator: str = "newmark-linear",
-               revolutions: float = 4.0, repeats: int = 3) -> Throughput:
+def throughput(
+    n_cases: int = 256,
+    workers: int = 2,
+    integrator: str = "newmark-linear",
+    revolutions: float = 4.0,
+    repeats: int = 3,
+) -> Throughput:
     """Case-steps per second of a batch of ``n_cases``: the harmonic cam over 6000–20000 rpm,
     without a seat and with one at 0.1 in by turns, split over ``workers`` threads (worker k
     takes cases k, k + workers, …, so each gets the same mix of speeds), best of
@@ -163,10 +188,13 @@ def throughput(n_cases: int = 256, workers: int = 2, integrator: str = "newmark-
     train = thesis_train()
     cam = harmonic(INCH)
     speeds = np.linspace(6000.0, 20000.0, n_cases)
-    cases = [Case(train, cam, rpm(s), seat=math.nan if (i // 2) % 2 == 0 else 0.1 * INCH)
-             for i, s in enumerate(speeds)]
-    settings = RunSettings(revolutions=revolutions, integrator=integrator,
-                           output_every=OUTPUT_EVERY)
+    cases = [
+        Case(train, cam, rpm(s), seat=math.nan if (i // 2) % 2 == 0 else 0.1 * INCH)
+        for i, s in enumerate(speeds)
+    ]
+    settings = RunSettings(
+        revolutions=revolutions, integrator=integrator, output_every=OUTPUT_EVERY
+    )
     run_batch(cases[:2], replace(settings, revolutions=0.1))
     size = -(-n_cases // workers)
     interleaved = [c for k in range(workers) for c in cases[k::workers]]

@@ -47,17 +47,33 @@ def suite(train: ValveTrain | None = None) -> tuple[Scene, ...]:
     cam = harmonic(1.0 * INCH)
     return (
         Scene("smooth-9000", "smooth contact, 9000 rpm, no seat", Case(t, cam, rpm(9000)), 2),
-        Scene("separation-11000", "separation and re-bounce, 11000 rpm, no seat",
-              Case(t, cam, rpm(11000)), 2),
-        Scene("seat-13205", "seat chatter, 13205 rpm, seat at 0.1 in",
-              Case(t, cam, rpm(13205), seat=0.1 * INCH), 2),
-        Scene("bouncing-20000", "continuous bouncing, 20000 rpm, no seat",
-              Case(t, cam, rpm(20000)), 2),
-        Scene("flat-15000", "flat defect 268–272 deg, 15000 rpm, no seat",
-              Case(t, flat(cam, math.radians(268), math.radians(272)), rpm(15000)), 2),
-        Scene("polydyne-9000", "polydyne-4567 90/90/90 deg, form closure, 9000 rpm",
-              Case(t, polydyne("4567", INCH, *np.radians([90, 90, 90])), rpm(9000),
-                   closure="form"), 2),
+        Scene(
+            "separation-11000",
+            "separation and re-bounce, 11000 rpm, no seat",
+            Case(t, cam, rpm(11000)),
+            2,
+        ),
+        Scene(
+            "seat-13205",
+            "seat chatter, 13205 rpm, seat at 0.1 in",
+            Case(t, cam, rpm(13205), seat=0.1 * INCH),
+            2,
+        ),
+        Scene(
+            "bouncing-20000", "continuous bouncing, 20000 rpm, no seat", Case(t, cam, rpm(20000)), 2
+        ),
+        Scene(
+            "flat-15000",
+            "flat defect 268–272 deg, 15000 rpm, no seat",
+            Case(t, flat(cam, math.radians(268), math.radians(272)), rpm(15000)),
+            2,
+        ),
+        Scene(
+            "polydyne-9000",
+            "polydyne-4567 90/90/90 deg, form closure, 9000 rpm",
+            Case(t, polydyne("4567", INCH, *np.radians([90, 90, 90])), rpm(9000), closure="form"),
+            2,
+        ),
     )
 
 

@@ -255,9 +255,14 @@ def check_stability(cases: Sequence[Case], settings: RunSettings) -> None:
 def initial_state(case: Case, sm: SystemMatrices, seat_q: float):
     """Quasi-static start of one case at θ = 0: (q, v, a, configuration); see
     ``initial_states``."""
-    q, v, a, cfg = initial_states([sm], np.zeros(1, np.int64), pack([case.profile]),
-                                  np.array([case.speed]), np.array([case.has_seat]),
-                                  np.array([seat_q]))
+    q, v, a, cfg = initial_states(
+        [sm],
+        np.zeros(1, np.int64),
+        pack([case.profile]),
+        np.array([case.speed]),
+        np.array([case.has_seat]),
+        np.array([seat_q]),
+    )
     return q[0], v[0], a[0], int(cfg[0])
 
 
@@ -293,7 +298,7 @@ def initial_states(mats, which, packed, omega, has_seat, seat_q, inverses=None):
     held_a = np.zeros((n, 7))
     held_q[:, CAM] = -cam[:, 0]
     held_v[:, CAM] = -omega * cam[:, 1]
-    held_a[:, CAM] = -omega**2 * cam[:, 2]
+    held_a[:, CAM] = -(omega**2) * cam[:, 2]
     held_q[:, SEAT] = seat_q
     M = np.stack([m.mass for m in mats])[which]
     C = np.stack([m.damping for m in mats])[which]
@@ -318,8 +323,16 @@ def initial_states(mats, which, packed, omega, has_seat, seat_q, inverses=None):
 
 def valve_reference(sm: SystemMatrices) -> float:
     """q7 with the cam on its base circle, no seat, in static equilibrium [m]."""
-    q, _, _ = quasi_static_state(sm.mass, sm.damping, sm.stiffness, sm.preload, HELD[0],
-                                 np.zeros(7), np.zeros(7), np.zeros(7))
+    q, _, _ = quasi_static_state(
+        sm.mass,
+        sm.damping,
+        sm.stiffness,
+        sm.preload,
+        HELD[0],
+        np.zeros(7),
+        np.zeros(7),
+        np.zeros(7),
+    )
     return float(q[SEAT])
 
 
@@ -375,12 +388,39 @@ class _Outputs:
         self.status = np.zeros(n, np.int64)
 
     def tail(self) -> tuple:
-        return (self.q, self.v, self.force, self.cam, self.cfg, self.sep_rev, self.counts,
-                self.vmax, self.fmax, self.events, self.n_events, self.status)
+        return (
+            self.q,
+            self.v,
+            self.force,
+            self.cam,
+            self.cfg,
+            self.sep_rev,
+            self.counts,
+            self.vmax,
+            self.fmax,
+            self.events,
+            self.n_events,
+            self.status,
+        )
 
 
-def _run_newmark(preps, which, settings, dt_run, meff, q0, v0, a0, cfg0, seat_q, has_seat,
-                 form, omega, packed, out) -> np.ndarray:
+def _run_newmark(
+    preps,
+    which,
+    settings,
+    dt_run,
+    meff,
+    q0,
+    v0,
+    a0,
+    cfg0,
+    seat_q,
+    has_seat,
+    form,
+    omega,
+    packed,
+    out,
+) -> np.ndarray:
     M = np.stack([p.matrices.mass for p in preps])[which]
     C = np.stack([p.matrices.damping for p in preps])[which]
     K = np.stack([p.matrices.stiffness for p in preps])[which]
@@ -390,18 +430,69 @@ def _run_newmark(preps, which, settings, dt_run, meff, q0, v0, a0, cfg0, seat_q,
     dt = np.full(len(which), dt_run)
     n_steps = np.ceil(settings.revolutions * 2 * np.pi / (omega * dt) - 1e-9).astype(np.int64)
     newmark.newmark_linear_batch(
-        M, C, K, load, step_A, step_G, meff, q0, v0, a0, cfg0, seat_q, has_seat, form, omega, dt,
+        M,
+        C,
+        K,
+        load,
+        step_A,
+        step_G,
+        meff,
+        q0,
+        v0,
+        a0,
+        cfg0,
+        seat_q,
+        has_seat,
+        form,
+        omega,
+        dt,
         n_steps,
-        packed.breaks, packed.poly, packed.trig, packed.n_pieces, settings.output_every,
+        packed.breaks,
+        packed.poly,
+        packed.trig,
+        packed.n_pieces,
+        settings.output_every,
         *out.tail(),
     )
     return n_steps
 
 
-def _run_modal_exact(trains, preps, which, settings, dt_run, full_state, meff, q0, v0, a0,
-                     cfg0, seat_q, has_seat, form, omega, packed, out) -> np.ndarray:
-    fields = ("n_free", "free", "lam", "vec", "vec_inv", "a_inv", "b_in", "b_load", "rho",
-              "sigma", "sigma0", "impulse", "rho_vec", "vnorm", "lam_abs")
+def _run_modal_exact(
+    trains,
+    preps,
+    which,
+    settings,
+    dt_run,
+    full_state,
+    meff,
+    q0,
+    v0,
+    a0,
+    cfg0,
+    seat_q,
+    has_seat,
+    form,
+    omega,
+    packed,
+    out,
+) -> np.ndarray:
+    fields = (
+        "n_free",
+        "free",
+        "lam",
+        "vec",
+        "vec_inv",
+        "a_inv",
+        "b_in",
+        "b_load",
+        "rho",
+        "sigma",
+        "sigma0",
+        "impulse",
+        "rho_vec",
+        "vnorm",
+        "lam_abs",
+    )
     # Per-train data, indexed in the kernel by each case's train.
     data = [_modal(t) for t in trains]
     stacked = {f: np.stack([getattr(d, f) for d in data]) for f in fields}
@@ -412,10 +503,30 @@ def _run_modal_exact(trains, preps, which, settings, dt_run, full_state, meff, q
     t_end = settings.revolutions * 2 * np.pi / omega
     steps_taken = np.zeros(len(which), np.int64)
     exact.modal_exact_batch(
-        which, load, *(stacked[f] for f in fields), zeta, meff, q0, v0, cfg0, seat_q, has_seat,
-        form, omega, t_sample, t_end, dt_run or 0.0, settings.tolerance, settings.cutoff,
-        full_state, steps_taken,
-        packed.breaks, packed.poly, packed.trig, packed.n_pieces, *out.tail(),
+        which,
+        load,
+        *(stacked[f] for f in fields),
+        zeta,
+        meff,
+        q0,
+        v0,
+        cfg0,
+        seat_q,
+        has_seat,
+        form,
+        omega,
+        t_sample,
+        t_end,
+        dt_run or 0.0,
+        settings.tolerance,
+        settings.cutoff,
+        full_state,
+        steps_taken,
+        packed.breaks,
+        packed.poly,
+        packed.trig,
+        packed.n_pieces,
+        *out.tail(),
     )
     return steps_taken
 
@@ -466,8 +577,15 @@ def run_batch(
     omega = np.array([c.speed for c in cases], dtype=float)
     form = np.array([c.closure == "form" for c in cases], dtype=np.bool_)
     packed = pack([c.profile for c in cases])
-    q0, v0, a0, cfg0 = initial_states([p.matrices for p in preps], which, packed, omega,
-                                      has_seat, seat_q, [p.start_inverses for p in preps])
+    q0, v0, a0, cfg0 = initial_states(
+        [p.matrices for p in preps],
+        which,
+        packed,
+        omega,
+        has_seat,
+        seat_q,
+        [p.start_inverses for p in preps],
+    )
     out = _Outputs(n, n_out, n_rev, settings.max_events)
     common = (meff, q0, v0, a0, cfg0, seat_q, has_seat, form, omega, packed, out)
     if settings.method == "newmark-linear":
@@ -478,9 +596,11 @@ def run_batch(
     bad = np.flatnonzero(status == newmark.NONFINITE)
     if bad.size:
         how = f"{settings.method}, step {dt_run:g} s" if dt_run else settings.method
-        why = ("the step is beyond the stability limit (the run was asked not to check it)"
-               if not check_stability_limit else
-               "this is a defect: please report it with the case")
+        why = (
+            "the step is beyond the stability limit (the run was asked not to check it)"
+            if not check_stability_limit
+            else "this is a defect: please report it with the case"
+        )
         raise IntegrationError(f"cases {bad.tolist()} became non-finite ({how}); {why}")
     bad = np.flatnonzero(status == exact.CHATTER)
     if bad.size:
@@ -489,8 +609,12 @@ def run_batch(
             "integrate them with newmark-linear"
         )
     for i in np.flatnonzero(status == newmark.EVENTS_TRUNCATED):
-        log.warning("case %d: %d events, only the first %d kept (raise run.max_events)",
-                    i, n_events[i], settings.max_events)
+        log.warning(
+            "case %d: %d events, only the first %d kept (raise run.max_events)",
+            i,
+            n_events[i],
+            settings.max_events,
+        )
     kept = np.minimum(n_events, settings.max_events)
     q_out, v_out, force_out, cam_out, cfg_out = out.q, out.v, out.force, out.cam, out.cfg
     sep_rev, counts, vmax, fmax, events = out.sep_rev, out.counts, out.vmax, out.fmax, out.events

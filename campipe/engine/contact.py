@@ -31,9 +31,7 @@ def effective_mass_inverses(mass, damping, stiffness, dt: float) -> np.ndarray:
     return out
 
 
-def newmark_step_maps(
-    mass, damping, stiffness, dt: float
-) -> tuple[np.ndarray, np.ndarray]:
+def newmark_step_maps(mass, damping, stiffness, dt: float) -> tuple[np.ndarray, np.ndarray]:
     """newmark-linear's step (β = 1/6, γ = 1/2) in each configuration as two matrix products
     (thesis Appendix B, steps 2–6; applied by ``newmark._newmark_step``):
 
@@ -125,9 +123,21 @@ def quasi_static_state(
     """
     kinv, minv = held_inverses(mass, stiffness, held)
     q, v, a = (np.empty((1, 7)) for _ in range(3))
-    quasi_static_batch(kinv[None], minv[None], mass[None], damping[None], stiffness[None],
-                       load[None], np.asarray(held)[None], np.asarray(held_q)[None],
-                       np.asarray(held_v)[None], np.asarray(held_a)[None], q, v, a)
+    quasi_static_batch(
+        kinv[None],
+        minv[None],
+        mass[None],
+        damping[None],
+        stiffness[None],
+        load[None],
+        np.asarray(held)[None],
+        np.asarray(held_q)[None],
+        np.asarray(held_v)[None],
+        np.asarray(held_a)[None],
+        q,
+        v,
+        a,
+    )
     return q[0], v[0], a[0]
 
 

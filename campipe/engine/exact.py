@@ -111,7 +111,7 @@ def _exps(lam, c, ci, ns, tau, ev):
         ev[j] = np.exp(lam[c, ci, j] * tau)
 
 
-@njit(inline='always', nogil=True)
+@njit(inline="always", nogil=True)
 def _eval3(WC, lamc, nact, G, GT, m, tau, w, x, th):
     """Monitor m and its first two time derivatives τ after the segment start (local angle x,
     cam angle θ), exactly: the active mode pairs, the polynomial and the harmonic part."""
@@ -138,7 +138,7 @@ def _eval3(WC, lamc, nact, G, GT, m, tau, w, x, th):
     return g, dg, d2g
 
 
-@njit(inline='always', nogil=True)
+@njit(inline="always", nogil=True)
 def _at(deriv, WC, lamc, nact, G, GT, m, t_s, t, w, th0):
     """Monitor m (deriv False) or its time derivative (deriv True) at time t, and the next
     derivative."""
@@ -147,8 +147,9 @@ def _at(deriv, WC, lamc, nact, G, GT, m, t_s, t, w, th0):
 
 
 @njit(cache=True, nogil=True)
-def _root(deriv, sgn, WC, lamc, nact, G, GT, m, t_s, ta, tb, level, w, th0, tolerance,
-          known, fa, fb, dfb):
+def _root(
+    deriv, sgn, WC, lamc, nact, G, GT, m, t_s, ta, tb, level, w, th0, tolerance, known, fa, fb, dfb
+):
     """Time in [ta, tb] where f = sgn·(monitor − level) (or, with deriv, sgn·its derivative)
     rises through zero: Newton steps from the latest point, kept inside the bracket, with
     Illinois (regula falsi) and bisection as fall-backs. Returns the bracket's left end once
@@ -230,9 +231,8 @@ def _state(q, v, z, ya, vec, ev, y0, Z, ZT, free, c, ci, nf, ns, x, ct, st, rows
             v[free[c, ci, k]] = z[nf + k]
 
 
-@njit(inline='always', nogil=True)
-def _state_active(q, v, z, VY, MC, Z, ZT, free, c, ci, nf, lo, nact, x, ct, st, deg,
-                  full_state):
+@njit(inline="always", nogil=True)
+def _state_active(q, v, z, VY, MC, Z, ZT, free, c, ci, nf, lo, nact, x, ct, st, deg, full_state):
     """Free coordinates and velocities from the mode pairs lo … nact − 1 (an output sample):
     VY[:, jj, s] holds (Re, Im) of V_sj·y0_j (doubled for a pair), so each term is the real
     part of one complex product; plus the particular solution. Without ``full_state`` only
@@ -266,7 +266,7 @@ def _state_active(q, v, z, VY, MC, Z, ZT, free, c, ci, nf, lo, nact, x, ct, st, 
         v[coord] = z[k + nf] + pv
 
 
-@njit(inline='always', nogil=True)
+@njit(inline="always", nogil=True)
 def _slope_bound(WC, G, GT, m, MC, lo, nact, gdeg, w, xa, xb):
     """An upper bound on |dg/dt| of monitor m over a step from local angle xa to xb, with the
     modal magnitudes at its start (they only decay): Σ|W_j λ_j||E_j| + max|P'| + ω|G_T|.
@@ -288,9 +288,30 @@ def _slope_bound(WC, G, GT, m, MC, lo, nact, gdeg, w, xa, xb):
     return bound
 
 
-@njit(inline='always', nogil=True)
-def _write_sample(q_out, v_out, force_out, cam_out, cfg_out, c, k, q, v, gval, cam_held,
-                  seat_held, poly, trig, p, x, ct, st, w, cfg, full_state):
+@njit(inline="always", nogil=True)
+def _write_sample(
+    q_out,
+    v_out,
+    force_out,
+    cam_out,
+    cfg_out,
+    c,
+    k,
+    q,
+    v,
+    gval,
+    cam_held,
+    seat_held,
+    poly,
+    trig,
+    p,
+    x,
+    ct,
+    st,
+    w,
+    cfg,
+    full_state,
+):
     """Output sample k: coordinates and velocities (held ones on the cam and seat; without
     ``full_state`` only q1 and q7, the others NaN), forces, cam lift."""
     lift = 0.0
@@ -313,7 +334,7 @@ def _write_sample(q_out, v_out, force_out, cam_out, cfg_out, c, k, q, v, gval, c
     cfg_out[c, k] = cfg
 
 
-@njit(inline='always', nogil=True)
+@njit(inline="always", nogil=True)
 def _advance(MC, lo, nact, cth, sth, cwh, swh):
     """One grid step: e^{λτ} of the mode pairs lo … nact − 1 and (cos θ, sin θ) by
     rotation."""
@@ -326,7 +347,7 @@ def _advance(MC, lo, nact, cth, sth, cwh, swh):
     return cth * cwh - sth * swh, sth * cwh + cth * swh
 
 
-@njit(inline='always', nogil=True)
+@njit(inline="always", nogil=True)
 def _monitor_at_grid(WC, MC, lo, nact, G, GT, m, gdeg, w, x, cth, sth):
     """Monitor m and its time derivative at the current grid point from the mode pairs
     lo … nact − 1 and their advanced exponentials (no exp or sin/cos)."""
@@ -377,12 +398,55 @@ def _separation(sep_rev, c, n_rev, w, ta, tb):
 
 @njit(cache=True, nogil=True)
 def modal_exact_batch(
-    train, load, n_free, free, lam, vec, vec_inv, a_inv, b_in, b_load, rho, sigma, sigma0,
-    impulse, rho_vec, vnorm, lam_abs, zeta, meff, q0, v0, cfg0, seat_q, has_seat, form, omega,
-    t_sample_all, t_end_all, dt_cap, tolerance, mode_cutoff, full_state, steps_taken,
-    breaks, poly, trig, n_pieces,
-    q_out, v_out, force_out, cam_out, cfg_out,
-    sep_rev, counts, vmax, fmax, events, n_events, status,
+    train,
+    load,
+    n_free,
+    free,
+    lam,
+    vec,
+    vec_inv,
+    a_inv,
+    b_in,
+    b_load,
+    rho,
+    sigma,
+    sigma0,
+    impulse,
+    rho_vec,
+    vnorm,
+    lam_abs,
+    zeta,
+    meff,
+    q0,
+    v0,
+    cfg0,
+    seat_q,
+    has_seat,
+    form,
+    omega,
+    t_sample_all,
+    t_end_all,
+    dt_cap,
+    tolerance,
+    mode_cutoff,
+    full_state,
+    steps_taken,
+    breaks,
+    poly,
+    trig,
+    n_pieces,
+    q_out,
+    v_out,
+    force_out,
+    cam_out,
+    cfg_out,
+    sep_rev,
+    counts,
+    vmax,
+    fmax,
+    events,
+    n_events,
+    status,
 ):
     """Advance every case of a batch exactly between events; fill the outputs in place.
 
@@ -613,8 +677,29 @@ def modal_exact_batch(
             if k_out < n_out and k_out * t_sample <= t_s * (1.0 + 1e-13):
                 # A sample due at the segment start (the initial state, or a break or event
                 # that falls on an output angle) is the state here (gval holds its monitors).
-                _write_sample(q_out, v_out, force_out, cam_out, cfg_out, c, k_out, q, v, gval,
-                              cam_held, seat_held, poly, trig, p, x_s, ct, st, w, cfg, full_state)
+                _write_sample(
+                    q_out,
+                    v_out,
+                    force_out,
+                    cam_out,
+                    cfg_out,
+                    c,
+                    k_out,
+                    q,
+                    v,
+                    gval,
+                    cam_held,
+                    seat_held,
+                    poly,
+                    trig,
+                    p,
+                    x_s,
+                    ct,
+                    st,
+                    w,
+                    cfg,
+                    full_state,
+                )
                 k_out += 1
             t_prev = t_s
             replan = True
@@ -631,8 +716,10 @@ def modal_exact_batch(
                         since_check = 0
                         kept = lo
                         for jj in range(lo, nact):
-                            if (MC[AMP_Q, jj] * MC[EABS, jj] < MODE_FLOOR
-                                    and MC[AMP_F, jj] * MC[EABS, jj] < eps_force):
+                            if (
+                                MC[AMP_Q, jj] * MC[EABS, jj] < MODE_FLOOR
+                                and MC[AMP_F, jj] * MC[EABS, jj] < eps_force
+                            ):
                                 continue
                             if kept != jj:
                                 _keep_column(MC, WC, VY, lamc, act, ns, jj, kept)
@@ -715,15 +802,17 @@ def modal_exact_batch(
                     t_eval = t_break
                     for m in range(2):
                         if ready[m]:
-                            gval[m], dval[m] = _at(False, WC, lamc, nact, G, GT, m, t_s,
-                                                   t_break, w, th0)
+                            gval[m], dval[m] = _at(
+                                False, WC, lamc, nact, G, GT, m, t_s, t_break, w, th0
+                            )
                 else:
                     t_eval = t_n
                     x_n = w * t_n - th0
                     for m in range(2):
                         if ready[m]:
-                            gval[m], dval[m] = _monitor_at_grid(WC, MC, lo, nact, G, GT, m, gdeg,
-                                                                w, x_n, cth, sth)
+                            gval[m], dval[m] = _monitor_at_grid(
+                                WC, MC, lo, nact, G, GT, m, gdeg, w, x_n, cth, sth
+                            )
                 # An event in (t_prev, t_eval]: the earliest monitor to rise through its level.
                 if first < 0:
                     t_ev = t_eval
@@ -736,33 +825,104 @@ def modal_exact_batch(
                         dg_hi = dval[m]
                         if gval[m] > level[m]:
                             t_hi = t_eval
-                        elif dprev[m] > 0.0 and dval[m] < 0.0 and (
-                                max(gprev[m], gval[m]) + (t_eval - t_prev)
-                                * _slope_bound(WC, G, GT, m, MC, lo, nact, gdeg, w,
-                                               w * t_prev - th0, w * t_eval - th0)
-                                > level[m]):
+                        elif (
+                            dprev[m] > 0.0
+                            and dval[m] < 0.0
+                            and (
+                                max(gprev[m], gval[m])
+                                + (t_eval - t_prev)
+                                * _slope_bound(
+                                    WC,
+                                    G,
+                                    GT,
+                                    m,
+                                    MC,
+                                    lo,
+                                    nact,
+                                    gdeg,
+                                    w,
+                                    w * t_prev - th0,
+                                    w * t_eval - th0,
+                                )
+                                > level[m]
+                            )
+                        ):
                             # A maximum inside the step that might rise above the level (the
                             # bound on |g'| over the step cannot rule it out): find it.
-                            t_max = _root(True, -1.0, WC, lamc, nact, G, GT, m, t_s, t_prev,
-                                          t_eval, 0.0, w, th0, tolerance, False, 0.0, 0.0,
-                                          0.0)
-                            g_hi, dg_hi = _at(False, WC, lamc, nact, G, GT, m, t_s, t_max, w,
-                                              th0)
+                            t_max = _root(
+                                True,
+                                -1.0,
+                                WC,
+                                lamc,
+                                nact,
+                                G,
+                                GT,
+                                m,
+                                t_s,
+                                t_prev,
+                                t_eval,
+                                0.0,
+                                w,
+                                th0,
+                                tolerance,
+                                False,
+                                0.0,
+                                0.0,
+                                0.0,
+                            )
+                            g_hi, dg_hi = _at(False, WC, lamc, nact, G, GT, m, t_s, t_max, w, th0)
                             if g_hi > level[m]:
                                 t_hi = t_max
                         if t_hi > 0.0:
                             # The value root starts from what the grid (or the maximum's
                             # search) has, unless reduced fidelity leaves pairs out of the grid.
-                            te = _root(False, 1.0, WC, lamc, nact, G, GT, m, t_s, t_prev,
-                                       t_hi, level[m], w, th0, tolerance, lo == 0,
-                                       gprev[m] - level[m], g_hi - level[m], dg_hi)
+                            te = _root(
+                                False,
+                                1.0,
+                                WC,
+                                lamc,
+                                nact,
+                                G,
+                                GT,
+                                m,
+                                t_s,
+                                t_prev,
+                                t_hi,
+                                level[m],
+                                w,
+                                th0,
+                                tolerance,
+                                lo == 0,
+                                gprev[m] - level[m],
+                                g_hi - level[m],
+                                dg_hi,
+                            )
                             if first < 0 or te < t_ev:
                                 t_ev = te
                                 first = m
                 if first >= 0:
                     _exps(lam, tr, ci, ns, t_ev - t_s, ev)
-                    _state(q, v, z, ya, vec, ev, y0, Z, ZT, free, tr, ci, nf, ns,
-                           w * t_ev - th0, np.cos(w * t_ev), np.sin(w * t_ev), ns, deg)
+                    _state(
+                        q,
+                        v,
+                        z,
+                        ya,
+                        vec,
+                        ev,
+                        y0,
+                        Z,
+                        ZT,
+                        free,
+                        tr,
+                        ci,
+                        nf,
+                        ns,
+                        w * t_ev - th0,
+                        np.cos(w * t_ev),
+                        np.sin(w * t_ev),
+                        ns,
+                        deg,
+                    )
                     lift_e, dl_e, _ = piece_eval(breaks, poly, trig, c, p, rev, w * t_ev)
                     vcam = -w * dl_e
                     if cam_held:
@@ -783,12 +943,23 @@ def modal_exact_batch(
                         for i in range(7):
                             v[i] += impulse[tr, new - 1, 0, i] * dv
                         q[0] = -lift_e
-                        _impact(events, n_events, counts, vmax, meff, c, t_ev, False,
-                                seat_held, cfg, new, closing)
+                        _impact(
+                            events,
+                            n_events,
+                            counts,
+                            vmax,
+                            meff,
+                            c,
+                            t_ev,
+                            False,
+                            seat_held,
+                            cfg,
+                            new,
+                            closing,
+                        )
                     elif seat_held:
                         new = _config(cam_held, False)
-                        _record(events, n_events, c, t_ev, SEAT_SEPARATION, cfg, new, 0.0,
-                                0.0)
+                        _record(events, n_events, c, t_ev, SEAT_SEPARATION, cfg, new, 0.0, 0.0)
                     else:
                         new = _config(cam_held, True)
                         closing = -v[6]
@@ -796,23 +967,51 @@ def modal_exact_batch(
                         for i in range(7):
                             v[i] += impulse[tr, new - 1, 1, i] * dv
                         q[6] = qs
-                        _impact(events, n_events, counts, vmax, meff, c, t_ev, True,
-                                cam_held, cfg, new, closing)
+                        _impact(
+                            events,
+                            n_events,
+                            counts,
+                            vmax,
+                            meff,
+                            c,
+                            t_ev,
+                            True,
+                            cam_held,
+                            cfg,
+                            new,
+                            closing,
+                        )
                     cfg = new
                     stalled = stalled + 1 if t_ev - t_s <= 1e-15 * (1.0 + t_s) else 0
                     t_s = t_ev
                     break
                 if at_break:
                     _exps(lam, tr, ci, ns, t_break - t_s, ev)
-                    _state(q, v, z, ya, vec, ev, y0, Z, ZT, free, tr, ci, nf, ns,
-                           w * t_break - th0, np.cos(w * t_break), np.sin(w * t_break), ns,
-                           deg)
+                    _state(
+                        q,
+                        v,
+                        z,
+                        ya,
+                        vec,
+                        ev,
+                        y0,
+                        Z,
+                        ZT,
+                        free,
+                        tr,
+                        ci,
+                        nf,
+                        ns,
+                        w * t_break - th0,
+                        np.cos(w * t_break),
+                        np.sin(w * t_break),
+                        ns,
+                        deg,
+                    )
                     if not cam_held:
                         _separation(sep_rev, c, n_rev, w, t_s, t_break)
-                    l_left, dl_left, _ = piece_eval(breaks, poly, trig, c, p, rev,
-                                                    w * t_break)
-                    l_right, dl_right, _ = piece_eval(breaks, poly, trig, c, nb, revb,
-                                                      w * t_break)
+                    l_left, dl_left, _ = piece_eval(breaks, poly, trig, c, p, rev, w * t_break)
+                    l_right, dl_right, _ = piece_eval(breaks, poly, trig, c, nb, revb, w * t_break)
                     if seat_held:
                         q[6] = qs
                         v[6] = 0.0
@@ -824,16 +1023,29 @@ def modal_exact_batch(
                         v[0] = -w * dl_left
                         if (jump < -scale or drop) and not form[c]:
                             new = _config(False, seat_held)
-                            _record(events, n_events, c, t_break, CAM_SEPARATION, cfg, new,
-                                    -jump, 0.0)
+                            _record(
+                                events, n_events, c, t_break, CAM_SEPARATION, cfg, new, -jump, 0.0
+                            )
                             cfg = new
                         else:
                             if abs(jump) > scale:
                                 dv = -jump
                                 for i in range(7):
                                     v[i] += impulse[tr, cfg - 1, 0, i] * dv
-                                _impact(events, n_events, counts, vmax, meff, c, t_break,
-                                        False, seat_held, cfg, cfg, abs(jump))
+                                _impact(
+                                    events,
+                                    n_events,
+                                    counts,
+                                    vmax,
+                                    meff,
+                                    c,
+                                    t_break,
+                                    False,
+                                    seat_held,
+                                    cfg,
+                                    cfg,
+                                    abs(jump),
+                                )
                             q[0] = -l_right
                             v[0] = -w * dl_right
                     p = nb
@@ -853,11 +1065,49 @@ def modal_exact_batch(
                 if i_step == n_steps:
                     if to_sample:
                         x_n = w * t_n - th0
-                        _state_active(q, v, z, VY, MC, Z, ZT, free, tr, ci, nf, lo, nact, x_n,
-                                      cth, sth, deg, full_state)
-                        _write_sample(q_out, v_out, force_out, cam_out, cfg_out, c, k_out, q, v,
-                                      gval, cam_held, seat_held, poly, trig, p, x_n, cth, sth, w,
-                                      cfg, full_state)
+                        _state_active(
+                            q,
+                            v,
+                            z,
+                            VY,
+                            MC,
+                            Z,
+                            ZT,
+                            free,
+                            tr,
+                            ci,
+                            nf,
+                            lo,
+                            nact,
+                            x_n,
+                            cth,
+                            sth,
+                            deg,
+                            full_state,
+                        )
+                        _write_sample(
+                            q_out,
+                            v_out,
+                            force_out,
+                            cam_out,
+                            cfg_out,
+                            c,
+                            k_out,
+                            q,
+                            v,
+                            gval,
+                            cam_held,
+                            seat_held,
+                            poly,
+                            trig,
+                            p,
+                            x_n,
+                            cth,
+                            sth,
+                            w,
+                            cfg,
+                            full_state,
+                        )
                         k_out += 1
                     if t_n >= t_end:
                         if not cam_held:

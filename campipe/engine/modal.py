@@ -159,8 +159,11 @@ def harmonic_responses(train, n_free, a_mat, b_in, omega):
                 for j in range(ns):
                     mat[s, j] = -a_mat[t, ci, s, j]
                 mat[s, s] += 1j * w
-                rhs[s] = (-b_in[t, ci, s, 0, 0] - 1j * w * b_in[t, ci, s, 1, 0]
-                          + w * w * b_in[t, ci, s, 2, 0])
+                rhs[s] = (
+                    -b_in[t, ci, s, 0, 0]
+                    - 1j * w * b_in[t, ci, s, 1, 0]
+                    + w * w * b_in[t, ci, s, 2, 0]
+                )
             sol = np.linalg.solve(mat, rhs)
             for s in range(ns):
                 out[c, ci, s] = sol[s]

@@ -140,8 +140,7 @@ def _record(events, n_events, c, t, kind, c_from, c_to, velocity, impulse):
 
 
 @njit(cache=True, nogil=True)
-def _impact(events, n_events, counts, vmax, meff, c, t, seat, other_held, c_from, c_to,
-            closing):
+def _impact(events, n_events, counts, vmax, meff, c, t, seat, other_held, c_from, c_to, closing):
     """Count a plastic impact of case c on the cam (``seat`` False) or the seat, keep its
     largest closing velocity [m/s] and record the event with its impulse m_eff·v_closing;
     ``other_held``: the other contact is held (``contact.impact_masses`` order)."""
@@ -149,8 +148,17 @@ def _impact(events, n_events, counts, vmax, meff, c, t, seat, other_held, c_from
     counts[c, side] += 1
     vmax[c, side] = max(vmax[c, side], closing)
     mass = meff[c, 2 * side + (1 if other_held else 0)]
-    _record(events, n_events, c, t, SEAT_IMPACT if seat else CAM_IMPACT, c_from, c_to,
-            closing, mass * closing)
+    _record(
+        events,
+        n_events,
+        c,
+        t,
+        SEAT_IMPACT if seat else CAM_IMPACT,
+        c_from,
+        c_to,
+        closing,
+        mass * closing,
+    )
 
 
 @njit(cache=True, nogil=True, fastmath=FAST)
@@ -220,11 +228,20 @@ def _newmark_step(typingctx, A, G, c, k, load, h, x, xn, z):
     """
     f8 = types.float64
     vector = types.Array(f8, 1, "C")
-    if (A, G, load, h, x, xn, z) != (types.Array(f8, 4, "C"), types.Array(f8, 4, "C"), vector,
-                                     f8, vector, vector, vector):
-        raise TypingError("_newmark_step: expected C-contiguous float64 arrays A (n, 4, N_X, "
-                          "N_Z), G (n, 4, N_Z, N_Z), load, z (N_Z,), x, xn (N_X,) and a "
-                          "float64 step")
+    if (A, G, load, h, x, xn, z) != (
+        types.Array(f8, 4, "C"),
+        types.Array(f8, 4, "C"),
+        vector,
+        f8,
+        vector,
+        vector,
+        vector,
+    ):
+        raise TypingError(
+            "_newmark_step: expected C-contiguous float64 arrays A (n, 4, N_X, "
+            "N_Z), G (n, 4, N_Z, N_Z), load, z (N_Z,), x, xn (N_X,) and a "
+            "float64 step"
+        )
 
     def codegen(context, builder, sig, args):
         f64 = ir.DoubleType()
@@ -234,19 +251,20 @@ def _newmark_step(typingctx, A, G, c, k, load, h, x, xn, z):
 
         def start(i, *index):  # pointer to element ``index`` of array argument i
             array = context.make_array(sig.args[i])(context, builder, args[i])
-            return cgutils.get_item_pointer(context, builder, sig.args[i], array, index,
-                                            wraparound=False)
+            return cgutils.get_item_pointer(
+                context, builder, sig.args[i], array, index, wraparound=False
+            )
 
         def element(ptr, offset):
             return builder.gep(ptr, [ir.Constant(intp, offset)], source_etype=f64)
 
         def load(ptr, offset):  # the LANES doubles from ptr[offset] on
-            return builder.load(builder.bitcast(element(ptr, offset), vec.as_pointer()),
-                                align=8, typ=vec)
+            return builder.load(
+                builder.bitcast(element(ptr, offset), vec.as_pointer()), align=8, typ=vec
+            )
 
         def store(value, ptr, offset):
-            builder.store(value, builder.bitcast(element(ptr, offset), vec.as_pointer()),
-                          align=8)
+            builder.store(value, builder.bitcast(element(ptr, offset), vec.as_pointer()), align=8)
 
         def add(u, v):
             return builder.fadd(u, v, flags=FUSE)
@@ -256,7 +274,8 @@ def _newmark_step(typingctx, A, G, c, k, load, h, x, xn, z):
 
         def lane(u, i):  # lane i of vector u in every lane
             return builder.shuffle_vector(
-                u, u, ir.Constant(ir.VectorType(ir.IntType(32), LANES), [i] * LANES))
+                u, u, ir.Constant(ir.VectorType(ir.IntType(32), LANES), [i] * LANES)
+            )
 
         def splat(value):
             return lane(builder.insert_element(ir.Constant(vec, None), value, zero), 0)
@@ -272,8 +291,11 @@ def _newmark_step(typingctx, A, G, c, k, load, h, x, xn, z):
                 for j in cols:
                     s = scale(j)
                     terms = [mul(load(M, j * N_Z + i), s) for i in halves]
-                    acc = terms if acc is None else [
-                        add(u, t) for u, t in zip(acc, terms, strict=True)]
+                    acc = (
+                        terms
+                        if acc is None
+                        else [add(u, t) for u, t in zip(acc, terms, strict=True)]
+                    )
                 sums.append(acc)
             return [functools.reduce(add, parts) for parts in zip(*sums, strict=True)]
 
@@ -282,11 +304,11 @@ def _newmark_step(typingctx, A, G, c, k, load, h, x, xn, z):
         G_at = start(1, case, cfg, zero, zero)
         load_at, x_at, xn_at, z_at = (start(i, zero) for i in (4, 6, 7, 8))
         # r = load − A·x, each block's columns in two chains; z = G·r; the corrector.
-        chains = [range(b + part, b + min(part + 4, NP)) for part in (0, 4)
-                  for b in (X_Q, X_V, X_A)]
+        chains = [
+            range(b + part, b + min(part + 4, NP)) for part in (0, 4) for b in (X_Q, X_V, X_A)
+        ]
         ax = product(A_at, chains, lambda j: splat(builder.load(element(x_at, j), typ=f64)))
-        r = [builder.fsub(load(load_at, i), u, flags=FUSE)
-             for i, u in zip(halves, ax, strict=True)]
+        r = [builder.fsub(load(load_at, i), u, flags=FUSE) for i, u in zip(halves, ax, strict=True)]
         zs = product(G_at, (range(0, 4), range(4, NP)), lambda j: lane(r[j // LANES], j % LANES))
         dt = splat(args[5])
         dt2 = mul(dt, dt)
@@ -306,11 +328,40 @@ def _newmark_step(typingctx, A, G, c, k, load, h, x, xn, z):
 
 @njit(cache=True, nogil=True, fastmath=FAST)
 def newmark_linear_batch(
-    M, C, K, load, step_A, step_G, meff, q0, v0, a0, cfg0,
-    seat_q, has_seat, form, omega, dt, n_steps,
-    breaks, poly, trig, n_pieces,
-    d_theta_out, q_out, v_out, force_out, cam_out, cfg_out,
-    sep_rev, counts, vmax, fmax, events, n_events, status,
+    M,
+    C,
+    K,
+    load,
+    step_A,
+    step_G,
+    meff,
+    q0,
+    v0,
+    a0,
+    cfg0,
+    seat_q,
+    has_seat,
+    form,
+    omega,
+    dt,
+    n_steps,
+    breaks,
+    poly,
+    trig,
+    n_pieces,
+    d_theta_out,
+    q_out,
+    v_out,
+    force_out,
+    cam_out,
+    cfg_out,
+    sep_rev,
+    counts,
+    vmax,
+    fmax,
+    events,
+    n_events,
+    status,
 ):
     """Advance every case of a batch; fill the output arrays in place.
 
@@ -391,15 +442,26 @@ def newmark_linear_batch(
                     if (jump < -scale or drop) and not form[c]:
                         # The surface falls away: the follower keeps its velocity.
                         new = _config(False, seat_held)
-                        _record(events, n_events, c, thb / w, CAM_SEPARATION, cfg, new,
-                                -jump, 0.0)
+                        _record(events, n_events, c, thb / w, CAM_SEPARATION, cfg, new, -jump, 0.0)
                         cfg = new
                         cam_held = False
                     elif abs(jump) > scale:
                         # The surface jumps into the follower (or, form-closed, drags it).
                         impulse_cam = True
-                        _impact(events, n_events, counts, vmax, meff, c, thb / w, False,
-                                seat_held, cfg, cfg, abs(jump))
+                        _impact(
+                            events,
+                            n_events,
+                            counts,
+                            vmax,
+                            meff,
+                            c,
+                            thb / w,
+                            False,
+                            seat_held,
+                            cfg,
+                            cfg,
+                            abs(jump),
+                        )
                 p = pn
                 rev = revn
                 pdeg = _degree(poly, c, p)
@@ -505,24 +567,66 @@ def newmark_linear_batch(
             seat_next = seat_held
             if cam_held and not form[c] and f1 > 0.0:
                 cam_next = False
-                _record(events, n_events, c, t1, CAM_SEPARATION, cfg,
-                        _config(False, seat_held and not f7 < 0.0), 0.0, 0.0)
+                _record(
+                    events,
+                    n_events,
+                    c,
+                    t1,
+                    CAM_SEPARATION,
+                    cfg,
+                    _config(False, seat_held and not f7 < 0.0),
+                    0.0,
+                    0.0,
+                )
             if seat_held and f7 < 0.0:
                 seat_next = False
-                _record(events, n_events, c, t1, SEAT_SEPARATION, cfg,
-                        _config(cam_next, False), 0.0, 0.0)
+                _record(
+                    events,
+                    n_events,
+                    c,
+                    t1,
+                    SEAT_SEPARATION,
+                    cfg,
+                    _config(cam_next, False),
+                    0.0,
+                    0.0,
+                )
             if not cam_held and xn[X_Q] > qc:
                 closing = xn[X_V] - vc
                 cam_next = True
                 impulse_cam = True
-                _impact(events, n_events, counts, vmax, meff, c, t1, False, seat_next, cfg,
-                        _config(True, seat_next), closing)
+                _impact(
+                    events,
+                    n_events,
+                    counts,
+                    vmax,
+                    meff,
+                    c,
+                    t1,
+                    False,
+                    seat_next,
+                    cfg,
+                    _config(True, seat_next),
+                    closing,
+                )
             if has_seat[c] and not seat_held and xn[X_Q + 6] < qs:
                 closing = -xn[X_V + 6]
                 seat_next = True
                 impulse_seat = True
-                _impact(events, n_events, counts, vmax, meff, c, t1, True, cam_next, cfg,
-                        _config(cam_next, True), closing)
+                _impact(
+                    events,
+                    n_events,
+                    counts,
+                    vmax,
+                    meff,
+                    c,
+                    t1,
+                    True,
+                    cam_next,
+                    cfg,
+                    _config(cam_next, True),
+                    closing,
+                )
             cfg = _config(cam_next, seat_next)
             x, xn = xn, x
             if n % 1024 == 0 or n == n_steps[c] - 1:

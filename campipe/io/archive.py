@@ -87,23 +87,31 @@ def writing(archive: str | Path) -> Iterator[Path]:
         If a live process (or one on another host, which cannot be checked) holds the lock.
     """
     lock = lock_path(Path(archive))
-    me = {"pid": os.getpid(), "host": socket.gethostname(),
-          "started": datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ")}
+    me = {
+        "pid": os.getpid(),
+        "host": socket.gethostname(),
+        "started": datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
+    }
     for attempt in range(2):
         try:
             fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
         except FileExistsError:
             holder = _lock_holder(lock)
             if attempt == 0 and holder is not None and _is_dead(holder):
-                log.warning("%s: taking over the lock of process %s, which is gone", archive,
-                            holder["pid"])
+                log.warning(
+                    "%s: taking over the lock of process %s, which is gone", archive, holder["pid"]
+                )
                 lock.unlink(missing_ok=True)
                 continue
-            who = (f"process {holder['pid']} on {holder['host']} since {holder['started']}"
-                   if holder else "another run")
+            who = (
+                f"process {holder['pid']} on {holder['host']} since {holder['started']}"
+                if holder
+                else "another run"
+            )
             raise ArchiveBusyError(
                 f"{archive} is being written by {who}: wait for that run to finish, or "
-                f"write to another archive (-o); if that run is gone, remove {lock}") from None
+                f"write to another archive (-o); if that run is gone, remove {lock}"
+            ) from None
         with os.fdopen(fd, "w") as f:
             json.dump(me, f)
         break
@@ -153,9 +161,14 @@ class NetCDFWriter:
     Use as a context manager: leaving the block by an exception removes the temporary file.
     """
 
-    def __init__(self, path: str | Path, sizes: Mapping[str, int],
-                 variables: Iterable[VariableSpec], attrs: Mapping[str, object],
-                 complevel: int = COMPLEVEL):
+    def __init__(
+        self,
+        path: str | Path,
+        sizes: Mapping[str, int],
+        variables: Iterable[VariableSpec],
+        attrs: Mapping[str, object],
+        complevel: int = COMPLEVEL,
+    ):
         import netCDF4
 
         self.path = Path(path)
@@ -178,8 +191,10 @@ class NetCDFWriter:
         shape = [sizes[d] for d in v.dims]
         kwargs: dict[str, object] = {"fill_value": False}
         if v.dtype != "str" and all(shape):
-            chunks = [min(CASE_CHUNK, n) if d == "case" and len(v.dims) > 1 else n
-                      for d, n in zip(v.dims, shape, strict=True)]
+            chunks = [
+                min(CASE_CHUNK, n) if d == "case" and len(v.dims) > 1 else n
+                for d, n in zip(v.dims, shape, strict=True)
+            ]
             if len(v.dims) == 1:
                 chunks = [min(shape[0], ROW_CHUNK)]
             kwargs["chunksizes"] = chunks
@@ -217,7 +232,7 @@ class NetCDFWriter:
                 block = values[start:stop]
                 if string:
                     block = np.array([str(v) for v in block], dtype=object)
-                var[p0:p0 + (stop - start)] = block
+                var[p0 : p0 + (stop - start)] = block
 
     def commit(self) -> Path:
         """Close, flush to disk and rename into place; returns the final path."""
@@ -263,9 +278,14 @@ def _attr(value: object) -> object:
     return value
 
 
-def write_file(path: str | Path, sizes: Mapping[str, int], variables: Iterable[VariableSpec],
-               arrays: Mapping[str, np.ndarray], attrs: Mapping[str, object],
-               complevel: int = COMPLEVEL) -> Path:
+def write_file(
+    path: str | Path,
+    sizes: Mapping[str, int],
+    variables: Iterable[VariableSpec],
+    arrays: Mapping[str, np.ndarray],
+    attrs: Mapping[str, object],
+    complevel: int = COMPLEVEL,
+) -> Path:
     """Write a whole small file (a batch) atomically: every variable from ``arrays``."""
     variables = list(variables)
     with NetCDFWriter(path, sizes, variables, attrs, complevel) as w:
@@ -313,8 +333,9 @@ def read_variable(path: str | Path, name: str) -> np.ndarray:
         return np.asarray(ds.variables[name][:])
 
 
-def read_rows(path: str | Path, rows: np.ndarray, case_names: Iterable[str],
-              event_names: Iterable[str]) -> dict[str, np.ndarray]:
+def read_rows(
+    path: str | Path, rows: np.ndarray, case_names: Iterable[str], event_names: Iterable[str]
+) -> dict[str, np.ndarray]:
     """Some cases' rows of an archive or batch file, with their events.
 
     Parameters
@@ -343,9 +364,12 @@ def read_rows(path: str | Path, rows: np.ndarray, case_names: Iterable[str],
         counts = np.asarray(ds.variables["event_count"][:], dtype=np.int64)
         starts = np.concatenate([[0], np.cumsum(counts)])
         span = slice(int(starts[lo]), int(starts[hi]))
-        pick = np.concatenate(
-            [np.arange(starts[r], starts[r + 1]) for r in rows] or [np.zeros(0, np.int64)]
-        ).astype(np.int64) - span.start
+        pick = (
+            np.concatenate(
+                [np.arange(starts[r], starts[r + 1]) for r in rows] or [np.zeros(0, np.int64)]
+            ).astype(np.int64)
+            - span.start
+        )
         for name in event_names:
             out[name] = np.asarray(ds.variables[name][span])[pick]
         out["event_count"] = counts[rows].astype(np.int32)

@@ -62,17 +62,31 @@ SERIES: dict[str, tuple[str, str, float, tuple[int, int, int]]] = {
     "valve_lift": ("lift/valve", "valve lift [mm]", MM, (40, 160, 80)),
     "cam_force": ("force/cam", "cam contact force [N]", 1.0, (50, 110, 200)),
     "seat_force": ("force/seat", "seat contact force [N]", 1.0, (160, 90, 40)),
-    "contact_state": ("contact_state", "contact state [1 I cam, 2 II free, 3 III cam+seat, "
-                      "4 IV seat]", 1.0, (60, 60, 60)),
+    "contact_state": (
+        "contact_state",
+        "contact state [1 I cam, 2 II free, 3 III cam+seat, 4 IV seat]",
+        1.0,
+        (60, 60, 60),
+    ),
 }
 #: Event kinds (campipe.engine.newmark) → (name, text-log level).
-EVENT_KINDS = {1: ("cam separation", "INFO"), 2: ("cam impact", "WARN"),
-               3: ("seat separation", "INFO"), 4: ("seat impact", "WARN")}
+EVENT_KINDS = {
+    1: ("cam separation", "INFO"),
+    2: ("cam impact", "WARN"),
+    3: ("seat separation", "INFO"),
+    4: ("seat impact", "WARN"),
+}
 #: Sketch parts: name → colour.
 PART_COLOURS = {
-    "cam": (140, 140, 140), "pushrod": (50, 110, 200), "rocker": (230, 140, 30),
-    "stem": (40, 160, 80), "head": (40, 160, 80), "spring": (150, 80, 190),
-    "retainer": (90, 90, 90), "frame": (90, 90, 90), "seat": (120, 70, 40),
+    "cam": (140, 140, 140),
+    "pushrod": (50, 110, 200),
+    "rocker": (230, 140, 30),
+    "stem": (40, 160, 80),
+    "head": (40, 160, 80),
+    "spring": (150, 80, 190),
+    "retainer": (90, 90, 90),
+    "frame": (90, 90, 90),
+    "seat": (120, 70, 40),
 }
 IN_CONTACT, OFF_CONTACT = (40, 180, 70), (220, 40, 40)
 
@@ -88,18 +102,24 @@ def nanos(values: np.ndarray) -> np.ndarray:
 
 
 def _indexes(cam_angle: np.ndarray, time: np.ndarray) -> list:
-    return [rr.TimeColumn(CAM_ANGLE, duration=nanos(cam_angle).astype("timedelta64[ns]")),
-            rr.TimeColumn(TIME, duration=nanos(time).astype("timedelta64[ns]"))]
+    return [
+        rr.TimeColumn(CAM_ANGLE, duration=nanos(cam_angle).astype("timedelta64[ns]")),
+        rr.TimeColumn(TIME, duration=nanos(time).astype("timedelta64[ns]")),
+    ]
 
 
 # -- the content of one case ---------------------------------------------------------------------
 
-def event_text(kind: int, angle: float, time: float, velocity: float, impulse: float,
-               before: int, after: int) -> str:
+
+def event_text(
+    kind: int, angle: float, time: float, velocity: float, impulse: float, before: int, after: int
+) -> str:
     """One event as a text-log line."""
     name = EVENT_KINDS.get(int(kind), (f"event {kind}", "INFO"))[0]
-    text = (f"{name} at {angle:.4f}° (t = {time * 1e3:.4f} ms): velocity {velocity:.4g} m/s, "
-            f"configuration {ROMAN.get(int(before), before)} → {ROMAN.get(int(after), after)}")
+    text = (
+        f"{name} at {angle:.4f}° (t = {time * 1e3:.4f} ms): velocity {velocity:.4g} m/s, "
+        f"configuration {ROMAN.get(int(before), before)} → {ROMAN.get(int(after), after)}"
+    )
     if int(kind) in (2, 4):
         text += f", impulse {impulse:.4g} N·s"
     return text
@@ -115,16 +135,26 @@ def _value(value: object) -> str:
 
 def parameters_document(case: ReplayCase, magnification: float) -> str:
     """The case as a markdown document: its columns, its model, how to read the replay."""
-    lines = [f"# {case.label}", "", f"Study `{case.study}`, case `{case.case_id}`.", "",
-             "## Case (as the archive holds it)", "", "| column | value | units |",
-             "|---|---|---|"]
-    lines += [f"| {name} | {_value(value)} | {units} |"
-              for name, (value, units) in case.columns.items()]
+    lines = [
+        f"# {case.label}",
+        "",
+        f"Study `{case.study}`, case `{case.case_id}`.",
+        "",
+        "## Case (as the archive holds it)",
+        "",
+        "| column | value | units |",
+        "|---|---|---|",
+    ]
+    lines += [
+        f"| {name} | {_value(value)} | {units} |" for name, (value, units) in case.columns.items()
+    ]
     lines += ["", "## Valve train", "", "| parameter | value | units |", "|---|---|---|"]
     for name, p in PARAMETERS.items():
         lines.append(f"| {name} | {_value(getattr(case.train, name))} | {p.units} |")
     lines += [
-        "", "## Reading the replay", "",
+        "",
+        "## Reading the replay",
+        "",
         "- Timeline `cam_angle`: one second of this duration timeline stands for one degree "
         "(270° reads `+270s`). Timeline `time`: the time from the start of the run.",
         "- Plots: lifts in mm (the archive's metres × 1000), contact forces in N, compressive "
@@ -154,8 +184,9 @@ def turn_profile(case: ReplayCase) -> tuple[np.ndarray, np.ndarray]:
     return np.radians(phi), case.histories["cam_lift"][first]
 
 
-def log_case(rec: rr.RecordingStream, case: ReplayCase,
-             magnification: float = sketch.DEFAULT_MAGNIFICATION) -> None:
+def log_case(
+    rec: rr.RecordingStream, case: ReplayCase, magnification: float = sketch.DEFAULT_MAGNIFICATION
+) -> None:
     """Log one case into ``rec``: series, events, parameters and the moving sketch."""
     if case.q is None:
         raise ValueError(f"case {case.case_id}: no q to draw the mechanism from")
@@ -163,91 +194,158 @@ def log_case(rec: rr.RecordingStream, case: ReplayCase,
     h = case.histories
     indexes = _indexes(case.cam_angle, h["time"])
     for name, (path, label, factor, colour) in SERIES.items():
-        style = rr.SeriesLines(names=label, colors=[colour],
-                               interpolation_mode="StepAfter" if name == "contact_state"
-                               else None)
+        style = rr.SeriesLines(
+            names=label,
+            colors=[colour],
+            interpolation_mode="StepAfter" if name == "contact_state" else None,
+        )
         rec.log(f"{root}/{path}", style, static=True)
         values = np.asarray(h[name], dtype=float) * factor
-        rec.send_columns(f"{root}/{path}", indexes=indexes,
-                         columns=rr.Scalars.columns(scalars=values))
+        rec.send_columns(
+            f"{root}/{path}", indexes=indexes, columns=rr.Scalars.columns(scalars=values)
+        )
     ev = case.events
     if ev["event_kind"].size:
-        texts = [event_text(*row) for row in zip(
-            ev["event_kind"], ev["event_cam_angle"], ev["event_time"], ev["event_velocity"],
-            ev["event_impulse"], ev["event_from"], ev["event_to"], strict=True)]
+        texts = [
+            event_text(*row)
+            for row in zip(
+                ev["event_kind"],
+                ev["event_cam_angle"],
+                ev["event_time"],
+                ev["event_velocity"],
+                ev["event_impulse"],
+                ev["event_from"],
+                ev["event_to"],
+                strict=True,
+            )
+        ]
         levels = [EVENT_KINDS.get(int(k), ("", "INFO"))[1] for k in ev["event_kind"]]
-        rec.send_columns(f"{root}/events",
-                         indexes=_indexes(ev["event_cam_angle"], ev["event_time"]),
-                         columns=rr.TextLog.columns(text=texts, level=levels))
-    rec.log(f"{root}/parameters",
-            rr.TextDocument(parameters_document(case, magnification),
-                            media_type=rr.MediaType.MARKDOWN), static=True)
+        rec.send_columns(
+            f"{root}/events",
+            indexes=_indexes(ev["event_cam_angle"], ev["event_time"]),
+            columns=rr.TextLog.columns(text=texts, level=levels),
+        )
+    rec.log(
+        f"{root}/parameters",
+        rr.TextDocument(parameters_document(case, magnification), media_type=rr.MediaType.MARKDOWN),
+        static=True,
+    )
     log_sketch(rec, case, indexes, magnification)
 
 
-def log_sketch(rec: rr.RecordingStream, case: ReplayCase, indexes: list,
-               magnification: float) -> None:
+def log_sketch(
+    rec: rr.RecordingStream, case: ReplayCase, indexes: list, magnification: float
+) -> None:
     """The mechanism, moving with q (deviations magnified) and the cam turning."""
     root = f"{case_path(case.case_id)}/sketch"
     geom = case_geometry(case)
     h = case.histories
     state = np.asarray(h["contact_state"])
-    qd = sketch.displayed_coordinates(case.q, h["cam_lift"], state, geom, magnification,
-                                      case.seat_q7)
-    radii = {"pushrod": geom.pushrod_radius, "rocker": geom.rocker_radius,
-             "stem": geom.stem_radius, "head": 0.0005, "spring": 0.0005, "retainer": 0.001}
+    qd = sketch.displayed_coordinates(
+        case.q, h["cam_lift"], state, geom, magnification, case.seat_q7
+    )
+    radii = {
+        "pushrod": geom.pushrod_radius,
+        "rocker": geom.rocker_radius,
+        "stem": geom.stem_radius,
+        "head": 0.0005,
+        "spring": 0.0005,
+        "retainer": 0.001,
+    }
     n = qd.shape[0]
     for name, strips in sketch.moving_parts(qd, geom).items():
-        rec.log(f"{root}/{name}", rr.LineStrips2D.from_fields(
-            colors=[PART_COLOURS[name]], radii=[radii[name] * MM]), static=True)
-        rec.send_columns(f"{root}/{name}", indexes=indexes, columns=rr.LineStrips2D.columns(
-            strips=list(strips * MM)).partition(np.ones(n, dtype=np.int32)))
+        rec.log(
+            f"{root}/{name}",
+            rr.LineStrips2D.from_fields(colors=[PART_COLOURS[name]], radii=[radii[name] * MM]),
+            static=True,
+        )
+        rec.send_columns(
+            f"{root}/{name}",
+            indexes=indexes,
+            columns=rr.LineStrips2D.columns(strips=list(strips * MM)).partition(
+                np.ones(n, dtype=np.int32)
+            ),
+        )
     angle = np.radians(case.cam_angle)
     phi, lift = turn_profile(case)
     outline = sketch.cam_outline(phi, lift, angle, geom) * MM
     mark = sketch.cam_mark(angle, geom) * MM
     strips = [s for pair in zip(outline, mark, strict=True) for s in pair]
-    rec.log(f"{root}/cam", rr.LineStrips2D.from_fields(
-        colors=[PART_COLOURS["cam"], PART_COLOURS["frame"]], radii=[0.6, 0.4]), static=True)
-    rec.send_columns(f"{root}/cam", indexes=indexes, columns=rr.LineStrips2D.columns(
-        strips=strips).partition(np.full(n, 2, dtype=np.int32)))
+    rec.log(
+        f"{root}/cam",
+        rr.LineStrips2D.from_fields(
+            colors=[PART_COLOURS["cam"], PART_COLOURS["frame"]], radii=[0.6, 0.4]
+        ),
+        static=True,
+    )
+    rec.send_columns(
+        f"{root}/cam",
+        indexes=indexes,
+        columns=rr.LineStrips2D.columns(strips=strips).partition(np.full(n, 2, dtype=np.int32)),
+    )
     on_cam = np.isin(state, sketch.CAM_CONTACT)
     rec.log(f"{root}/follower", rr.Points2D.from_fields(radii=[1.5]), static=True)
-    rec.send_columns(f"{root}/follower", indexes=indexes, columns=rr.Points2D.columns(
-        positions=sketch.follower_position(qd, geom) * MM,
-        colors=np.where(on_cam[:, None], IN_CONTACT, OFF_CONTACT).astype(np.uint8)))
+    rec.send_columns(
+        f"{root}/follower",
+        indexes=indexes,
+        columns=rr.Points2D.columns(
+            positions=sketch.follower_position(qd, geom) * MM,
+            colors=np.where(on_cam[:, None], IN_CONTACT, OFF_CONTACT).astype(np.uint8),
+        ),
+    )
     frame = sketch.fixed_parts(geom, case.seat_q7)
     if "seat" in frame:
         seated = np.isin(state, sketch.SEAT_CONTACT)
         rec.log(f"{root}/valve", rr.Points2D.from_fields(radii=[1.5]), static=True)
-        rec.send_columns(f"{root}/valve", indexes=indexes, columns=rr.Points2D.columns(
-            positions=(sketch.valve_position(qd, geom) * MM),
-            colors=np.where(seated[:, None], IN_CONTACT, OFF_CONTACT).astype(np.uint8)))
+        rec.send_columns(
+            f"{root}/valve",
+            indexes=indexes,
+            columns=rr.Points2D.columns(
+                positions=(sketch.valve_position(qd, geom) * MM),
+                colors=np.where(seated[:, None], IN_CONTACT, OFF_CONTACT).astype(np.uint8),
+            ),
+        )
         boxes = frame.pop("seat") * MM
-        rec.log(f"{root}/frame/seat", rr.Boxes2D(mins=boxes[:, 0], sizes=boxes[:, 1],
-                                                 colors=[PART_COLOURS["seat"]]), static=True)
+        rec.log(
+            f"{root}/frame/seat",
+            rr.Boxes2D(mins=boxes[:, 0], sizes=boxes[:, 1], colors=[PART_COLOURS["seat"]]),
+            static=True,
+        )
     for name, strip in frame.items():
-        rec.log(f"{root}/frame/{name}", rr.LineStrips2D([strip * MM], colors=[
-            PART_COLOURS["frame"]], radii=[0.5]), static=True)
-    rec.log(f"{root}/frame/note", rr.Points2D(
-        [[-geom.pushrod_arm * MM, geom.pushrod_arm * 0.6 * MM]], radii=[0.01],
-        labels=[f"deviation from rigid-body motion ×{magnification:g} [mm]"]), static=True)
+        rec.log(
+            f"{root}/frame/{name}",
+            rr.LineStrips2D([strip * MM], colors=[PART_COLOURS["frame"]], radii=[0.5]),
+            static=True,
+        )
+    rec.log(
+        f"{root}/frame/note",
+        rr.Points2D(
+            [[-geom.pushrod_arm * MM, geom.pushrod_arm * 0.6 * MM]],
+            radii=[0.01],
+            labels=[f"deviation from rigid-body motion ×{magnification:g} [mm]"],
+        ),
+        static=True,
+    )
 
 
 # -- recordings --------------------------------------------------------------------------------
+
 
 def case_view(case: ReplayCase, magnification: float) -> rrb.Container:
     """The sketch beside the plots, events and parameters of one case."""
     root = case_path(case.case_id)
     return rrb.Horizontal(
-        rrb.Spatial2DView(origin=f"{root}/sketch",
-                          name=f"mechanism [mm], deviations ×{magnification:g}"),
+        rrb.Spatial2DView(
+            origin=f"{root}/sketch", name=f"mechanism [mm], deviations ×{magnification:g}"
+        ),
         rrb.Vertical(
             rrb.TimeSeriesView(origin=f"{root}/lift", name="lift [mm]"),
             rrb.TimeSeriesView(origin=f"{root}/force", name="contact force [N]"),
             rrb.TimeSeriesView(origin=f"{root}/contact_state", name="contact state"),
-            rrb.Tabs(rrb.TextLogView(origin=f"{root}/events", name="events"),
-                     rrb.TextDocumentView(origin=f"{root}/parameters", name="parameters")),
+            rrb.Tabs(
+                rrb.TextLogView(origin=f"{root}/events", name="events"),
+                rrb.TextDocumentView(origin=f"{root}/parameters", name="parameters"),
+            ),
             row_shares=[3, 3, 1, 2],
         ),
         column_shares=[2, 3],
@@ -277,8 +375,13 @@ def recording_stream(rid: str, name: str) -> rr.RecordingStream:
     return rec
 
 
-def write_recording(cases: Sequence[ReplayCase], path: str | Path, *, key: str = "",
-                    magnification: float = sketch.DEFAULT_MAGNIFICATION) -> Path:
+def write_recording(
+    cases: Sequence[ReplayCase],
+    path: str | Path,
+    *,
+    key: str = "",
+    magnification: float = sketch.DEFAULT_MAGNIFICATION,
+) -> Path:
     """Write ``cases`` to one ``.rrd`` file, atomically (a temporary file renamed into place).
 
     Parameters
@@ -296,8 +399,9 @@ def write_recording(cases: Sequence[ReplayCase], path: str | Path, *, key: str =
         raise ValueError("no cases to record")
     path = Path(path)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    rec = recording_stream(recording_id(key, [c.case_id for c in cases], magnification),
-                           f"{cases[0].study} replay")
+    rec = recording_stream(
+        recording_id(key, [c.case_id for c in cases], magnification), f"{cases[0].study} replay"
+    )
     try:
         rec.save(tmp, default_blueprint=blueprint(cases, magnification))
         for case in cases:
@@ -312,11 +416,16 @@ def write_recording(cases: Sequence[ReplayCase], path: str | Path, *, key: str =
     return path
 
 
-def spawn_viewer(cases: Sequence[ReplayCase], *, key: str = "",
-                 magnification: float = sketch.DEFAULT_MAGNIFICATION) -> None:
+def spawn_viewer(
+    cases: Sequence[ReplayCase],
+    *,
+    key: str = "",
+    magnification: float = sketch.DEFAULT_MAGNIFICATION,
+) -> None:
     """Open the rerun viewer on ``cases``."""
-    rec = recording_stream(recording_id(key, [c.case_id for c in cases], magnification),
-                           f"{cases[0].study} replay")
+    rec = recording_stream(
+        recording_id(key, [c.case_id for c in cases], magnification), f"{cases[0].study} replay"
+    )
     rec.spawn(default_blueprint=blueprint(cases, magnification))
     for case in cases:
         log_case(rec, case, magnification)
@@ -329,10 +438,15 @@ def default_output(archive: str | Path) -> Path:
     return Path(archive).with_suffix(".replay.rrd")
 
 
-def replay_archive(archive: str | Path, *, case_ids: Sequence[str] = (), where: str | None = None,
-                   output: str | Path | None = None, spawn: bool = False,
-                   magnification: float = sketch.DEFAULT_MAGNIFICATION,
-                   ) -> tuple[Path | None, list[ReplayCase]]:
+def replay_archive(
+    archive: str | Path,
+    *,
+    case_ids: Sequence[str] = (),
+    where: str | None = None,
+    output: str | Path | None = None,
+    spawn: bool = False,
+    magnification: float = sketch.DEFAULT_MAGNIFICATION,
+) -> tuple[Path | None, list[ReplayCase]]:
     """Replay an archive's cases chosen by id or by a ``--where`` expression.
 
     Writes one recording (``output``, default :func:`default_output`) or, with ``spawn``,
@@ -372,12 +486,14 @@ def replay_archive(archive: str | Path, *, case_ids: Sequence[str] = (), where: 
     if spawn:
         spawn_viewer(cases, key=key, magnification=magnification)
         return None, cases
-    path = write_recording(cases, output or default_output(archive), key=key,
-                           magnification=magnification)
+    path = write_recording(
+        cases, output or default_output(archive), key=key, magnification=magnification
+    )
     return path, cases
 
 
 # -- reading back --------------------------------------------------------------------------------
+
 
 @dataclass
 class RecordedEntity:
@@ -408,8 +524,7 @@ def read_recording(path: str | Path) -> dict[str, RecordedEntity]:
         e = RecordedEntity()
         rows: dict[tuple, list] = {}
         for rb in batches:
-            kinds = {f.name: (f.metadata or {}).get(b"rerun:kind", b"").decode()
-                     for f in rb.schema}
+            kinds = {f.name: (f.metadata or {}).get(b"rerun:kind", b"").decode() for f in rb.schema}
             index = tuple(sorted(n for n, k in kinds.items() if k == "index"))
             data = [n for n, k in kinds.items() if k == "data"]
             if not index:
@@ -420,8 +535,13 @@ def read_recording(path: str | Path) -> dict[str, RecordedEntity]:
             times = {n: np.asarray(rb.column(n).cast("int64")) for n in index}
             values = {n: rb.column(n).to_pylist() for n in data}
             rows.setdefault(index, []).extend(
-                (rid, {n: int(t[i]) for n, t in times.items()},
-                 {n: v[i] for n, v in values.items()}) for i, rid in enumerate(ids))
+                (
+                    rid,
+                    {n: int(t[i]) for n, t in times.items()},
+                    {n: v[i] for n, v in values.items()},
+                )
+                for i, rid in enumerate(ids)
+            )
         for index, items in rows.items():
             items.sort(key=lambda item: item[0])
             for name in index:

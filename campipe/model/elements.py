@@ -28,26 +28,34 @@ def bar_mass(m: float) -> np.ndarray:
 def beam_stiffness(ei: float, length: float) -> np.ndarray:
     """Euler–Bernoulli beam stiffness, thesis Eq. 8, in the order (v1, v2, θ1, θ2)."""
     L = length
-    return ei / L**3 * np.array(
-        [
-            [12.0, -12.0, 6 * L, 6 * L],
-            [-12.0, 12.0, -6 * L, -6 * L],
-            [6 * L, -6 * L, 4 * L**2, 2 * L**2],
-            [6 * L, -6 * L, 2 * L**2, 4 * L**2],
-        ]
+    return (
+        ei
+        / L**3
+        * np.array(
+            [
+                [12.0, -12.0, 6 * L, 6 * L],
+                [-12.0, 12.0, -6 * L, -6 * L],
+                [6 * L, -6 * L, 4 * L**2, 2 * L**2],
+                [6 * L, -6 * L, 2 * L**2, 4 * L**2],
+            ]
+        )
     )
 
 
 def beam_mass(m: float, length: float) -> np.ndarray:
     """Consistent beam mass, thesis Eq. 10, in the order (v1, v2, θ1, θ2)."""
     L = length
-    return m / 420.0 * np.array(
-        [
-            [156.0, 54.0, 22 * L, -13 * L],
-            [54.0, 156.0, 13 * L, -22 * L],
-            [22 * L, 13 * L, 4 * L**2, -3 * L**2],
-            [-13 * L, -22 * L, -3 * L**2, 4 * L**2],
-        ]
+    return (
+        m
+        / 420.0
+        * np.array(
+            [
+                [156.0, 54.0, 22 * L, -13 * L],
+                [54.0, 156.0, 13 * L, -22 * L],
+                [22 * L, 13 * L, 4 * L**2, -3 * L**2],
+                [-13 * L, -22 * L, -3 * L**2, 4 * L**2],
+            ]
+        )
     )
 
 

@@ -208,8 +208,9 @@ def _check_range(p: Parameter, v: float, key: str, raw: object) -> None:
         )
 
 
-def valve_train(preset: str = "thesis-1971", overrides: Mapping[str, object] | None = None,
-                key_prefix: str = "") -> ValveTrain:
+def valve_train(
+    preset: str = "thesis-1971", overrides: Mapping[str, object] | None = None, key_prefix: str = ""
+) -> ValveTrain:
     """Resolve a preset plus overrides into a :class:`ValveTrain` in SI.
 
     Parameters

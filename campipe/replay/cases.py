@@ -35,11 +35,25 @@ from campipe.model import PARAMETERS, ModelParameterError, ValveTrain, valve_tra
 log = logging.getLogger(__name__)
 
 #: Histories along cam_angle a replay shows (archive names).
-HISTORIES = ("time", "cam_lift", "follower_lift", "valve_lift", "cam_force", "seat_force",
-             "contact_state")
+HISTORIES = (
+    "time",
+    "cam_lift",
+    "follower_lift",
+    "valve_lift",
+    "cam_force",
+    "seat_force",
+    "contact_state",
+)
 #: Event variables a replay shows (archive names).
-EVENT_FIELDS = ("event_time", "event_cam_angle", "event_kind", "event_from", "event_to",
-                "event_velocity", "event_impulse")
+EVENT_FIELDS = (
+    "event_time",
+    "event_cam_angle",
+    "event_kind",
+    "event_from",
+    "event_to",
+    "event_velocity",
+    "event_impulse",
+)
 #: Largest difference [m] between a rerun's valve lift and the archive's still called equal.
 RERUN_TOLERANCE = 1e-12
 
@@ -90,6 +104,7 @@ class ReplayCase:
 
 # -- selection ---------------------------------------------------------------------------------
 
+
 def select_rows(ds, case_ids: Sequence[str] = (), where: str | None = None) -> np.ndarray:
     """Rows of an archive (an ``xarray.Dataset``) by case id, or where an expression holds.
 
@@ -120,15 +135,18 @@ def select_rows(ds, case_ids: Sequence[str] = (), where: str | None = None) -> n
         rows = []
         for cid in case_ids:
             if cid not in ids:
-                raise ReplayError(f"--case {cid}: no such case among the archive's {len(ids)} "
-                                  f"cases{did_you_mean(cid, ids)} (campipe query ARCHIVE "
-                                  "--columns case_id lists them)")
+                raise ReplayError(
+                    f"--case {cid}: no such case among the archive's {len(ids)} "
+                    f"cases{did_you_mean(cid, ids)} (campipe query ARCHIVE "
+                    "--columns case_id lists them)"
+                )
             rows.append(ids.index(cid))
         return np.array(list(dict.fromkeys(rows)), dtype=np.int64)
     rows = select(table, where)
     if rows.size == 0:
-        raise ReplayError(f"--where {where!r} selects none of the archive's {len(ids)} cases; "
-                          "nothing written")
+        raise ReplayError(
+            f"--where {where!r} selects none of the archive's {len(ids)} cases; nothing written"
+        )
     return rows
 
 
@@ -142,8 +160,14 @@ def _cell(value: object) -> object:
 
 # -- from an archive ---------------------------------------------------------------------------
 
-def archive_cases(ds, rows: Iterable[int], *, resolved: Mapping[str, object] | None = None,
-                  directories: Sequence[Path] = ()) -> list[ReplayCase]:
+
+def archive_cases(
+    ds,
+    rows: Iterable[int],
+    *,
+    resolved: Mapping[str, object] | None = None,
+    directories: Sequence[Path] = (),
+) -> list[ReplayCase]:
     """The archive's rows as replay cases.
 
     Parameters
@@ -177,30 +201,46 @@ def archive_cases(ds, rows: Iterable[int], *, resolved: Mapping[str, object] | N
             resolved = rebuild_cases(ds.attrs, directories)
         except ReplayError as exc:
             if not has_q:
-                raise ReplayError(f"{exc}; the archive holds no q (run.record: [q]) to draw "
-                                  "the mechanism from, so its cases must be rebuilt: keep the "
-                                  "files the spec names beside the archive, or add run.record:"
-                                  " [q] to the spec and run the study again") from None
-            log.warning("%s; the sketch takes the train from the spec's model and the "
-                        "case's columns", exc)
+                raise ReplayError(
+                    f"{exc}; the archive holds no q (run.record: [q]) to draw "
+                    "the mechanism from, so its cases must be rebuilt: keep the "
+                    "files the spec names beside the archive, or add run.record:"
+                    " [q] to the spec and run the study again"
+                ) from None
+            log.warning(
+                "%s; the sketch takes the train from the spec's model and the case's columns", exc
+            )
             resolved = {}
     missing = [cid for cid in ids if cid not in resolved]
     if missing and not has_q:
-        raise ReplayError(f"cases {', '.join(missing[:3])} are not among the cases the "
-                          "archive's spec expands to (was it written by another campipe "
-                          "version?); add run.record: [q] to the spec and run the study again")
+        raise ReplayError(
+            f"cases {', '.join(missing[:3])} are not among the cases the "
+            "archive's spec expands to (was it written by another campipe "
+            "version?); add run.record: [q] to the spec and run the study again"
+        )
     out = []
     for r, cid in zip(rows, ids, strict=True):
-        columns = {name: (_cell(table.columns[name][r]), table.units[name])
-                   for name in table.columns}
+        columns = {
+            name: (_cell(table.columns[name][r]), table.units[name]) for name in table.columns
+        }
         histories = {name: np.asarray(ds[name][r].values) for name in HISTORIES}
         span = slice(int(starts[r]), int(starts[r + 1]))
         events = {name: np.asarray(ds[name][span].values) for name in EVENT_FIELDS}
         rc = resolved.get(cid)
         train = rc.case.train if rc is not None else _train_from_columns(ds.attrs, columns)
         q = np.asarray(ds["q"][r].values, dtype=float) if has_q else None
-        out.append(ReplayCase(cid, str(ds.attrs.get("study_name", "")), cam_angle, histories,
-                              q, events, columns, train))
+        out.append(
+            ReplayCase(
+                cid,
+                str(ds.attrs.get("study_name", "")),
+                cam_angle,
+                histories,
+                q,
+                events,
+                columns,
+                train,
+            )
+        )
     if not has_q:
         fill_q(out, [resolved[c.case_id] for c in out])
     return out
@@ -252,8 +292,9 @@ def _history_directories(attrs: Mapping[str, object]) -> list[Path]:
     return []
 
 
-def _train_from_columns(attrs: Mapping[str, object],
-                        columns: Mapping[str, tuple[object, str]]) -> ValveTrain:
+def _train_from_columns(
+    attrs: Mapping[str, object], columns: Mapping[str, tuple[object, str]]
+) -> ValveTrain:
     """The valve train from the spec's ``model`` and the case's model-parameter columns:
     the sketch's lengths when the cases cannot be rebuilt (q was recorded)."""
     from campipe.io.spec_yaml import SpecFileError, parse_spec_text
@@ -297,13 +338,18 @@ def fill_q(cases: Sequence[ReplayCase], resolved: Sequence) -> None:
     for case, (q, valve_lift) in zip(cases, regain_q(resolved), strict=True):
         diff = float(np.max(np.abs(valve_lift - case.histories["valve_lift"]), initial=0.0))
         if diff > RERUN_TOLERANCE:
-            log.warning("case %s: the engine's rerun differs from the archive by up to %.3g m "
-                        "of valve lift (another campipe version?); the sketch follows the "
-                        "rerun, the plots the archive", case.case_id, diff)
+            log.warning(
+                "case %s: the engine's rerun differs from the archive by up to %.3g m "
+                "of valve lift (another campipe version?); the sketch follows the "
+                "rerun, the plots the archive",
+                case.case_id,
+                diff,
+            )
         case.q = q
 
 
 # -- from a running study ----------------------------------------------------------------------
+
 
 def batch_columns(study, plan, data) -> tuple[dict[str, np.ndarray], dict[str, str]]:
     """A batch's per-case columns and their units, as the archive will hold them."""
@@ -345,16 +391,18 @@ def batch_cases(study, plan, data) -> list[ReplayCase]:
     out = []
     for r in rows:
         span = slice(int(starts[r]), int(starts[r + 1]))
-        out.append(ReplayCase(
-            case_id=str(data.case_ids[r]),
-            study=study.name,
-            cam_angle=np.asarray(data.cam_angle, dtype=float),
-            histories={name: np.asarray(arrays[name][r]) for name in HISTORIES},
-            q=np.asarray(arrays["q"][r], dtype=float) if "q" in arrays else None,
-            events={name: np.asarray(arrays[name][span]) for name in EVENT_FIELDS},
-            columns={name: (_cell(columns[name][r]), units[name]) for name in columns},
-            train=plan.cases[r].case.train,
-        ))
+        out.append(
+            ReplayCase(
+                case_id=str(data.case_ids[r]),
+                study=study.name,
+                cam_angle=np.asarray(data.cam_angle, dtype=float),
+                histories={name: np.asarray(arrays[name][r]) for name in HISTORIES},
+                q=np.asarray(arrays["q"][r], dtype=float) if "q" in arrays else None,
+                events={name: np.asarray(arrays[name][span]) for name in EVENT_FIELDS},
+                columns={name: (_cell(columns[name][r]), units[name]) for name in columns},
+                train=plan.cases[r].case.train,
+            )
+        )
     if "q" not in arrays:
         fill_q(out, [plan.cases[r] for r in rows])
     return out

@@ -37,8 +37,9 @@ class StudyReplay:
         Factor on the sketch's deviations from the rigid-body motion [-].
     """
 
-    def __init__(self, study, path: str | Path,
-                 magnification: float = DEFAULT_MAGNIFICATION) -> None:
+    def __init__(
+        self, study, path: str | Path, magnification: float = DEFAULT_MAGNIFICATION
+    ) -> None:
         from campipe.io import rerun_replay as rrio
         from campipe.study.layout import study_key
 
@@ -58,7 +59,8 @@ class StudyReplay:
             if self._rec is None:
                 self._rec = self._io.recording_stream(
                     self._io.recording_id(self.key, ["study"], self.magnification),
-                    f"{self.study.name} replay")
+                    f"{self.study.name} replay",
+                )
                 self.path.parent.mkdir(parents=True, exist_ok=True)
                 self._rec.save(self.path)
             for case in cases:
@@ -77,8 +79,7 @@ class StudyReplay:
             return
         if cases:
             self._log(cases)
-            log.info("replay: logged %d case(s) of batch %s to %s", len(cases), plan.key,
-                     self.path)
+            log.info("replay: logged %d case(s) of batch %s to %s", len(cases), plan.key, self.path)
 
     def finish(self, archive: str | Path) -> Path | None:
         """Log the selected cases not computed by this run from the finished archive, send

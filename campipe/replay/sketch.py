@@ -69,8 +69,8 @@ class Geometry:
             pushrod_length=train.pushrod_length,
             valve_stem_length=train.valve_stem_length,
             pushrod_radius=train.pushrod_diameter / 2,
-            rocker_radius=max(train.rocker_pushrod_arm_diameter,
-                              train.rocker_valve_arm_diameter) / 2,
+            rocker_radius=max(train.rocker_pushrod_arm_diameter, train.rocker_valve_arm_diameter)
+            / 2,
             stem_radius=train.valve_stem_diameter / 2,
             base_radius=base_radius,
         )
@@ -106,8 +106,9 @@ def rigid_coordinates(follower_lift: np.ndarray, geometry: Geometry) -> np.ndarr
     return np.stack([-p, p, slope, b * slope, slope, slope, -b * slope], axis=-1)
 
 
-def rigid_follower_lift(cam_lift: np.ndarray, geometry: Geometry,
-                        seat_q7: float = np.nan) -> np.ndarray:
+def rigid_follower_lift(
+    cam_lift: np.ndarray, geometry: Geometry, seat_q7: float = np.nan
+) -> np.ndarray:
     """Follower lift [m] of the rigid train on the cam, resting on the seat where the cam
     falls below it (``seat_q7``: q7 of the valve on its seat [m]; NaN: no seat)."""
     cam_lift = np.asarray(cam_lift, dtype=float)
@@ -116,9 +117,14 @@ def rigid_follower_lift(cam_lift: np.ndarray, geometry: Geometry,
     return np.maximum(cam_lift, seat_q7 / geometry.ratio)
 
 
-def displayed_coordinates(q: np.ndarray, cam_lift: np.ndarray, contact_state: np.ndarray,
-                          geometry: Geometry, magnification: float = DEFAULT_MAGNIFICATION,
-                          seat_q7: float = np.nan) -> np.ndarray:
+def displayed_coordinates(
+    q: np.ndarray,
+    cam_lift: np.ndarray,
+    contact_state: np.ndarray,
+    geometry: Geometry,
+    magnification: float = DEFAULT_MAGNIFICATION,
+    seat_q7: float = np.nan,
+) -> np.ndarray:
     """The coordinates the sketch draws: rigid-body motion + magnification × deviation.
 
     Parameters
@@ -187,8 +193,9 @@ def pushrod(qd: np.ndarray, geometry: Geometry) -> np.ndarray:
 
 def valve_position(qd: np.ndarray, geometry: Geometry) -> np.ndarray:
     """(n, 2): the valve (stem foot, top face of the head)."""
-    return np.stack([np.full(qd.shape[0], geometry.valve_arm),
-                     -geometry.valve_stem_length - qd[:, 6]], axis=-1)
+    return np.stack(
+        [np.full(qd.shape[0], geometry.valve_arm), -geometry.valve_stem_length - qd[:, 6]], axis=-1
+    )
 
 
 def stem(qd: np.ndarray, geometry: Geometry) -> np.ndarray:
@@ -224,12 +231,15 @@ def retainer(qd: np.ndarray, geometry: Geometry) -> np.ndarray:
     w = 0.8 * geometry.head_half_width
     y = qd[:, 3] - 0.05 * geometry.valve_stem_length
     b = geometry.valve_arm
-    return np.stack([np.stack([np.full_like(y, b - w), y], -1),
-                     np.stack([np.full_like(y, b + w), y], -1)], axis=1)
+    return np.stack(
+        [np.stack([np.full_like(y, b - w), y], -1), np.stack([np.full_like(y, b + w), y], -1)],
+        axis=1,
+    )
 
 
-def cam_outline(turn_angle: np.ndarray, turn_lift: np.ndarray, cam_angle: np.ndarray,
-                geometry: Geometry) -> np.ndarray:
+def cam_outline(
+    turn_angle: np.ndarray, turn_lift: np.ndarray, cam_angle: np.ndarray, geometry: Geometry
+) -> np.ndarray:
     """The cam's polar outline turned by each cam angle.
 
     Parameters
@@ -294,12 +304,16 @@ def fixed_parts(geometry: Geometry, seat_q7: float = np.nan) -> dict[str, np.nda
     out = {
         "pivot": np.array([[0.0, 0.0], [-0.5 * h, h], [0.5 * h, h], [0.0, 0.0]]),
         "ground": np.array([[-h, h], [h, h]]),
-        "spring_plate": np.array([[b - 1.3 * w, geometry.spring_plate],
-                                  [b - 0.2 * w, geometry.spring_plate],
-                                  [b - 0.2 * w, geometry.spring_plate - 0.05 * w],
-                                  [b + 0.2 * w, geometry.spring_plate - 0.05 * w],
-                                  [b + 0.2 * w, geometry.spring_plate],
-                                  [b + 1.3 * w, geometry.spring_plate]]),
+        "spring_plate": np.array(
+            [
+                [b - 1.3 * w, geometry.spring_plate],
+                [b - 0.2 * w, geometry.spring_plate],
+                [b - 0.2 * w, geometry.spring_plate - 0.05 * w],
+                [b + 0.2 * w, geometry.spring_plate - 0.05 * w],
+                [b + 0.2 * w, geometry.spring_plate],
+                [b + 1.3 * w, geometry.spring_plate],
+            ]
+        ),
     }
     if not np.isnan(seat_q7):
         y = -geometry.valve_stem_length - seat_q7

@@ -74,8 +74,9 @@ def archive_bytes(study: Study) -> int:
     return len(study.cases) * per_case + n_out * 8
 
 
-def estimate(study: Study, workers: int,
-             speeds: dict[RunSettings, float] | None = None) -> Estimate:
+def estimate(
+    study: Study, workers: int, speeds: dict[RunSettings, float] | None = None
+) -> Estimate:
     """Estimate a study's cost; ``speeds`` (see :func:`measure_speeds`) skips the timing."""
     speeds = speeds or measure_speeds(study)
     simulated = simulated_seconds(study)

@@ -92,8 +92,10 @@ class StudyReport:
     def summary(self) -> str:
         if self.up_to_date:
             return f"{self.archive}: up to date ({self.cases} cases); nothing to do"
-        return (f"{self.archive}: {self.cases} cases ({self.reused} reused, {self.computed} "
-                f"computed in {self.batches} batches) in {self.seconds:.1f} s")
+        return (
+            f"{self.archive}: {self.cases} cases ({self.reused} reused, {self.computed} "
+            f"computed in {self.batches} batches) in {self.seconds:.1f} s"
+        )
 
 
 @dataclass(frozen=True)
@@ -120,8 +122,9 @@ def default_batch_size(n_cases: int, workers: int) -> int:
     return int(np.clip(-(-n_cases // (4 * max(workers, 1))), MIN_BATCH_SIZE, MAX_BATCH_SIZE))
 
 
-def plan_batches(cases: Sequence[ResolvedCase], record: tuple[str, ...],
-                 batch_size: int) -> list[BatchPlan]:
+def plan_batches(
+    cases: Sequence[ResolvedCase], record: tuple[str, ...], batch_size: int
+) -> list[BatchPlan]:
     """Group cases by run settings (study order kept inside a group), then cut into batches."""
     groups: dict[object, list[ResolvedCase]] = {}
     for c in cases:
@@ -129,7 +132,7 @@ def plan_batches(cases: Sequence[ResolvedCase], record: tuple[str, ...],
     plans = []
     for group in groups.values():
         for i in range(0, len(group), batch_size):
-            chunk = tuple(group[i:i + batch_size])
+            chunk = tuple(group[i : i + batch_size])
             plans.append(BatchPlan(batch_key([c.case_id for c in chunk], record), chunk, record))
     return plans
 
@@ -140,13 +143,13 @@ def store_batch(data: BatchData, directory: Path, record: tuple[str, ...]) -> Pa
     directory.mkdir(parents=True, exist_ok=True)
     # Uncompressed: a batch file lives only until the archive is assembled (compressing it
     # would cost as much again as the archive's own compression).
-    return write_file(directory / f"batch-{data.key}.nc", sizes, specs, arrays, attrs,
-                      complevel=0)
+    return write_file(directory / f"batch-{data.key}.nc", sizes, specs, arrays, attrs, complevel=0)
 
 
 def _usable(attrs: dict, record: tuple[str, ...]) -> bool:
-    return (attrs.get("campipe_layout") == LAYOUT_VERSION
-            and attrs.get("campipe_record") == record_text(record))
+    return attrs.get("campipe_layout") == LAYOUT_VERSION and attrs.get(
+        "campipe_record"
+    ) == record_text(record)
 
 
 def find_results(study: Study, archive: Path) -> dict[str, tuple[Path, int, int]]:
@@ -237,23 +240,34 @@ def run_study(
                 _, _, attrs = read_index(archive)
                 if attrs.get("study_key") == study_key(study):
                     log.info("%s already holds this study", archive)
-                    return StudyReport(archive, total, total, 0, 0, True,
-                                       time.monotonic() - started)
+                    return StudyReport(
+                        archive, total, total, 0, 0, True, time.monotonic() - started
+                    )
             except ArchiveFileError as exc:
                 log.warning("existing %s unreadable (%s): it will be replaced", archive, exc)
         found = find_results(study, archive)
         missing = [c for c in study.cases if c.case_id not in found]
         local = "://" not in scheduler
         if local and scheduler not in LOCAL_SCHEDULERS:
-            raise ValueError(f"--scheduler: found {scheduler!r}, expected one of "
-                             f"{', '.join(LOCAL_SCHEDULERS)} or an address such as "
-                             "tcp://127.0.0.1:8786")
+            raise ValueError(
+                f"--scheduler: found {scheduler!r}, expected one of "
+                f"{', '.join(LOCAL_SCHEDULERS)} or an address such as "
+                "tcp://127.0.0.1:8786"
+            )
         workers = workers or (1 if scheduler == "synchronous" else default_workers())
         size = batch_size or default_batch_size(len(missing), workers)
         plans = plan_batches(missing, study.record, size)
-        log.info("%s: %d cases, %d reused from earlier runs; computing %d in %d batches of up "
-                 "to %d on %s", study.name, total, total - len(missing), len(missing),
-                 len(plans), size, scheduler)
+        log.info(
+            "%s: %d cases, %d reused from earlier runs; computing %d in %d batches of up "
+            "to %d on %s",
+            study.name,
+            total,
+            total - len(missing),
+            len(missing),
+            len(plans),
+            size,
+            scheduler,
+        )
         bar = progress(total, total - len(missing)) if progress else None
         parts = parts_directory(archive)
         store = functools.partial(_store, parts, study.record, on_batch)
@@ -272,12 +286,24 @@ def run_study(
         assemble(study, archive, found, command)
         if not keep_parts and parts.is_dir():
             shutil.rmtree(parts)
-        return StudyReport(archive, total, total - len(missing), len(missing), len(plans),
-                           False, time.monotonic() - started)
+        return StudyReport(
+            archive,
+            total,
+            total - len(missing),
+            len(missing),
+            len(plans),
+            False,
+            time.monotonic() - started,
+        )
 
 
-def _store(parts: Path, record: tuple[str, ...], on_batch: BatchHook | None,
-           data: BatchData, plan: BatchPlan) -> _Stored:
+def _store(
+    parts: Path,
+    record: tuple[str, ...],
+    on_batch: BatchHook | None,
+    data: BatchData,
+    plan: BatchPlan,
+) -> _Stored:
     store_batch(data, parts, record)
     if on_batch is not None:
         on_batch(plan, data)
@@ -297,8 +323,7 @@ def _run_local(plans: list[BatchPlan], scheduler: str, workers: int, store, stor
     for p in plans:
         plan = dask.delayed(p, traverse=False)
         data = dask.delayed(compute_batch, pure=False)(plan, dask_key_name=f"compute-{p.key}")
-        tasks.append(dask.delayed(store, pure=False)(data, plan,
-                                                     dask_key_name=f"store-{p.key}"))
+        tasks.append(dask.delayed(store, pure=False)(data, plan, dask_key_name=f"store-{p.key}"))
     with _Done():
         dask.compute(*tasks, scheduler=scheduler, num_workers=workers)
 
@@ -317,8 +342,9 @@ def _run_distributed(plans: list[BatchPlan], address: str, store, stored) -> Non
             return client.submit(compute_batch, p, key=f"campipe-{p.key}-{token}", pure=False)
 
         # Keep at most two batches per worker thread in flight: memory stays bounded.
-        queue = as_completed([submit(p) for p in itertools.islice(pending, 2 * threads)],
-                             loop=client.loop)
+        queue = as_completed(
+            [submit(p) for p in itertools.islice(pending, 2 * threads)], loop=client.loop
+        )
         for future in queue:
             data = future.result()
             future.release()
@@ -328,8 +354,9 @@ def _run_distributed(plans: list[BatchPlan], address: str, store, stored) -> Non
                 queue.add(submit(nxt))
 
 
-def assemble(study: Study, archive: Path, found: dict[str, tuple[Path, int, int]],
-             command: str) -> Path:
+def assemble(
+    study: Study, archive: Path, found: dict[str, tuple[Path, int, int]], command: str
+) -> Path:
     """Stream every case's rows from the files that hold them into a new archive."""
     missing = [c.case_id for c in study.cases if c.case_id not in found]
     if missing:
@@ -338,8 +365,9 @@ def assemble(study: Study, archive: Path, found: dict[str, tuple[Path, int, int]
     offsets = np.concatenate([[0], np.cumsum(counts)])
     first = found[study.cases[0].case_id][0]
     cam_angle = read_variable(first, "cam_angle")
-    sizes, specs, static = archive_layout(study, int(offsets[-1]), cam_angle,
-                                          n_revolutions(study.revolutions))
+    sizes, specs, static = archive_layout(
+        study, int(offsets[-1]), cam_angle, n_revolutions(study.revolutions)
+    )
     attrs = {**study_attrs(study), **provenance(command)}
     case_names = [s.name for s in specs if s.dims[:1] == ("case",) and s.name not in static]
     event_names = [s.name for s in specs if s.dims == ("event",) and s.name != "event_case"]
@@ -353,7 +381,7 @@ def assemble(study: Study, archive: Path, found: dict[str, tuple[Path, int, int]
         for path, pairs in by_file.items():
             pairs.sort()
             for i in range(0, len(pairs), COPY_ROWS):
-                chunk = pairs[i:i + COPY_ROWS]
+                chunk = pairs[i : i + COPY_ROWS]
                 rows = np.array([r for r, _ in chunk])
                 positions = np.array([p for _, p in chunk])
                 data = read_rows(path, rows, case_names, event_names)
@@ -365,8 +393,9 @@ def assemble(study: Study, archive: Path, found: dict[str, tuple[Path, int, int]
     return archive
 
 
-def _copy_events(w: NetCDFWriter, data: dict, positions: np.ndarray, offsets: np.ndarray,
-                 names: list[str]) -> None:
+def _copy_events(
+    w: NetCDFWriter, data: dict, positions: np.ndarray, offsets: np.ndarray, names: list[str]
+) -> None:
     """Events of the rows read, case by case, to their place in the archive."""
     starts = np.concatenate([[0], np.cumsum(data["event_count"])])
     for a, b in runs(positions):
@@ -376,5 +405,8 @@ def _copy_events(w: NetCDFWriter, data: dict, positions: np.ndarray, offsets: np
         target = slice(int(offsets[positions[a]]), int(offsets[positions[a]]) + hi - lo)
         for name in names:
             w.write(name, data[name][lo:hi], target)
-        w.write("event_case", np.repeat(positions[a:b], data["event_count"][a:b])
-                .astype(np.int32), target)
+        w.write(
+            "event_case",
+            np.repeat(positions[a:b], data["event_count"][a:b]).astype(np.int32),
+            target,
+        )

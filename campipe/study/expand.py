@@ -91,6 +91,7 @@ class Study:
 
 # -- expansion ------------------------------------------------------------------------------
 
+
 def deep_merge(base: Mapping, entry: Mapping) -> dict:
     """``entry`` over ``base``: mappings merge key by key, anything else replaces.
 
@@ -99,8 +100,11 @@ def deep_merge(base: Mapping, entry: Mapping) -> dict:
     out = dict(base)
     for k, v in entry.items():
         old = out.get(k)
-        if k == "profile" and isinstance(v, Mapping) and isinstance(old, Mapping) and (
-            "kind" in v and v["kind"] != old.get("kind")
+        if (
+            k == "profile"
+            and isinstance(v, Mapping)
+            and isinstance(old, Mapping)
+            and ("kind" in v and v["kind"] != old.get("kind"))
         ):
             out[k] = dict(v)
         elif isinstance(v, Mapping) and isinstance(old, Mapping):
@@ -156,8 +160,11 @@ def _axes(spec: Spec) -> list[_AxisRows]:
     out = [_AxisRows((k,), [(v,) for v in vals], (f"sweep.{k}",)) for k, vals in spec.sweep.items()]
     if spec.zip:
         keys = tuple(spec.zip)
-        out.append(_AxisRows(keys, list(zip(*spec.zip.values(), strict=True)),
-                             tuple(f"zip.{k}" for k in keys)))
+        out.append(
+            _AxisRows(
+                keys, list(zip(*spec.zip.values(), strict=True)), tuple(f"zip.{k}" for k in keys)
+            )
+        )
     if spec.sample:
         keys = tuple(spec.sample.ranges)
         out.append(_AxisRows(keys, sample_rows(spec), tuple(f"sample.ranges.{k}" for k in keys)))
@@ -177,8 +184,11 @@ def raw_cases(spec: Spec) -> Iterator[tuple[dict, dict[str, str]]]:
             for axis, j in zip(axes, combo, strict=True):
                 for key, value, path in zip(axis.keys, axis.rows[j], axis.paths, strict=True):
                     set_key(case, key, value)
-                    origins[key] = f"{path}[{j}]" if not path.startswith("sample") \
+                    origins[key] = (
+                        f"{path}[{j}]"
+                        if not path.startswith("sample")
                         else f"sample point {j} ({path})"
+                    )
             yield case, origins
 
 
@@ -190,6 +200,7 @@ def count_cases(spec: Spec) -> int:
 
 
 # -- resolution -----------------------------------------------------------------------------
+
 
 def _freeze(value: object) -> object:
     if isinstance(value, Mapping):
@@ -207,7 +218,8 @@ def _thaw(frozen: tuple) -> dict:
 def _parse(key: str, value: object, path: str) -> object:
     """A case field's SI value (cached: a grid repeats its base values in every case)."""
     return (CASE_FIELDS.get(key) or varied_fields()[key]).parse(
-        list(value) if isinstance(value, tuple) else value, path)
+        list(value) if isinstance(value, tuple) else value, path
+    )
 
 
 @functools.lru_cache(maxsize=1024)
@@ -241,23 +253,28 @@ def _profile(frozen: tuple, directory: Path) -> tuple[Profile, dict, dict[str, o
         if kind == "harmonic":
             profile = harmonic(si["lift"])
         elif kind.startswith("polydyne-"):
-            profile = polydyne(kind.removeprefix("polydyne-"), si["lift"], si["rise"],
-                               si["dwell"], si["fall"])
+            profile = polydyne(
+                kind.removeprefix("polydyne-"), si["lift"], si["rise"], si["dwell"], si["fall"]
+            )
         else:
             path = (directory / si["file"]).resolve()
             try:
                 mtime = path.stat().st_mtime_ns
             except OSError as exc:
-                raise SpecProblem("profile.file", f"found {spec['file']!r}, cannot read "
-                                  f"{path} ({exc.strerror}); the path is relative to the "
-                                  "spec") from None
+                raise SpecProblem(
+                    "profile.file",
+                    f"found {spec['file']!r}, cannot read "
+                    f"{path} ({exc.strerror}); the path is relative to the "
+                    "spec",
+                ) from None
             angles, lifts, digest = _lift_table(path, mtime)
             try:
                 profile = table(angles, lifts)
             except ValueError as exc:
                 raise SpecProblem("profile.file", f"{path}: {exc}") from None
             profile = dataclasses.replace(
-                profile, label=f"table {Path(si['file']).name} ({angles.size} points)")
+                profile, label=f"table {Path(si['file']).name} ({angles.size} points)"
+            )
             canonical = {"kind": kind, "table_sha256": digest}
             values.update({"profile.file": si["file"], "profile": profile.label})
             return profile, canonical, values
@@ -277,8 +294,9 @@ def _with_defects(frozen_profile: tuple, frozen_defects: tuple, directory: Path)
     out = profile
     defects = []
     for i, d in enumerate(_thaw_list(frozen_defects)):
-        si = {k: DEFECT_FIELDS[k].parse(v, f"defects[{i}].{k}") for k, v in d.items()
-              if k != "kind"}
+        si = {
+            k: DEFECT_FIELDS[k].parse(v, f"defects[{i}].{k}") for k, v in d.items() if k != "kind"
+        }
         try:
             if d["kind"] == "flat":
                 out = flat(out, si["from"], si["to"])
@@ -287,13 +305,17 @@ def _with_defects(frozen_profile: tuple, frozen_defects: tuple, directory: Path)
         except ValueError as exc:
             raise SpecProblem(f"defects[{i}]", str(exc)) from None
         defects.append({"kind": d["kind"], **{k: _clean(v) for k, v in si.items()}})
-    label = out.label[len(profile.label):].removeprefix(" + ") if defects else "none"
+    label = out.label[len(profile.label) :].removeprefix(" + ") if defects else "none"
     low = min_lift(out)
     if low < -LIFT_TOLERANCE:
-        where = "defects" if defects else ("profile.file" if "profile.file" in values
-                                          else "profile")
-        raise SpecProblem(where, f"the cam's lift falls to {low / 0.0254:.4g} in; expected a "
-                                 "lift never below the base circle (0)")
+        where = (
+            "defects" if defects else ("profile.file" if "profile.file" in values else "profile")
+        )
+        raise SpecProblem(
+            where,
+            f"the cam's lift falls to {low / 0.0254:.4g} in; expected a "
+            "lift never below the base circle (0)",
+        )
     return out, canonical, defects, values, label, max_lift(out)
 
 
@@ -333,28 +355,37 @@ def resolve(raw: Mapping, index: int, directory: Path) -> ResolvedCase:
         values[f"model.{name}"] = getattr(train, name)
 
     if "profile" not in raw:
-        raise SpecProblem("profile", "missing; give the cam in the base, an axis or a case, "
-                                     "e.g. profile: {kind: harmonic, lift: 1 in}")
+        raise SpecProblem(
+            "profile",
+            "missing; give the cam in the base, an axis or a case, "
+            "e.g. profile: {kind: harmonic, lift: 1 in}",
+        )
     prof = check_profile(raw["profile"], "profile", partial=False)
     defects = check_defects(raw["defects"], "defects")
     profile, canonical_profile, canonical_defects, pvalues, dlabel, full = _with_defects(
-        _freeze(prof), tuple(_freeze(d) for d in defects), directory)
+        _freeze(prof), tuple(_freeze(d) for d in defects), directory
+    )
     values.update(pvalues)
     values["defects"] = dlabel
 
     if "speed" not in raw:
-        raise SpecProblem("speed", "missing; give the cam speed in the base, an axis or a "
-                                   "case, e.g. speed: 9000 rpm")
+        raise SpecProblem(
+            "speed",
+            "missing; give the cam speed in the base, an axis or a case, e.g. speed: 9000 rpm",
+        )
     speed = _parse("speed", _freeze(raw["speed"]), "speed")
     seat = _parse("seat", _freeze(raw["seat"]), "seat")
     closure = _parse("closure", raw["closure"], "closure")
     if seat is not None:
         ratio = train.rocker_valve_arm_length / train.rocker_pushrod_arm_length
         if seat >= full * ratio:
-            raise SpecProblem("seat", f"found {raw['seat']!r}, expected a valve lift below "
-                              f"the full valve lift {full * ratio / 0.0254:.4g} in (cam lift "
-                              f"{full / 0.0254:.4g} in × rocker ratio {ratio:.4g}): above it "
-                              "the valve never leaves its seat")
+            raise SpecProblem(
+                "seat",
+                f"found {raw['seat']!r}, expected a valve lift below "
+                f"the full valve lift {full * ratio / 0.0254:.4g} in (cam lift "
+                f"{full / 0.0254:.4g} in × rocker ratio {ratio:.4g}): above it "
+                "the valve never leaves its seat",
+            )
     run = raw["run"]
     rs = {k: _parse(f"run.{k}", _freeze(v), f"run.{k}") for k, v in run.items() if k != "record"}
     rs["integrator"] = resolve_integrator(rs["integrator"])
@@ -366,14 +397,16 @@ def resolve(raw: Mapping, index: int, directory: Path) -> ResolvedCase:
     except StabilityError as exc:
         message = str(exc).removeprefix("run.dt: ").replace(" for case 0", "")
         raise SpecProblem("run.dt", message) from None
-    values.update({
-        "speed": speed,
-        "seat": math.nan if seat is None else seat,
-        "closure": closure,
-        **{f"run.{name}": _archive_value(getattr(settings, name)) for name in RUN_SETTINGS},
-        "run.integrator": settings.method,
-        "run.dt": math.nan if settings.step is None else settings.step,
-    })
+    values.update(
+        {
+            "speed": speed,
+            "seat": math.nan if seat is None else seat,
+            "closure": closure,
+            **{f"run.{name}": _archive_value(getattr(settings, name)) for name in RUN_SETTINGS},
+            "run.integrator": settings.method,
+            "run.dt": math.nan if settings.step is None else settings.step,
+        }
+    )
     canonical = {
         "model": {name: _clean(getattr(train, name)) for name in PARAMETERS},
         "profile": canonical_profile,
@@ -426,13 +459,14 @@ def _origin(path: str, origins: Mapping[str, str]) -> str:
     """The spec path a case key's value came from: an axis, a case entry, or the base."""
     best = ""
     for key in origins:
-        if (path == key or path.startswith(key + ".") or path.startswith(key + "[")) and \
-                len(key) > len(best):
+        if (path == key or path.startswith(key + ".") or path.startswith(key + "[")) and len(
+            key
+        ) > len(best):
             best = key
     if not best:
         return path
     origin = origins[best]
-    rest = path[len(best):]
+    rest = path[len(best) :]
     return origin + rest if "point" not in origin else origin
 
 

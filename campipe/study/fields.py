@@ -123,8 +123,9 @@ class Field:
         if v < self.minimum or (self.exclusive_minimum and v == self.minimum):
             relation = "greater than" if self.exclusive_minimum else "at least"
             unit = f" {self.example}" if self.example else ""
-            raise SpecProblem(path, f"found {raw!r}, expected a value {relation} "
-                                    f"{self.minimum:g}{unit}")
+            raise SpecProblem(
+                path, f"found {raw!r}, expected a value {relation} {self.minimum:g}{unit}"
+            )
 
 
 @functools.lru_cache(maxsize=8192, typed=True)  # typed: True is not 1
@@ -137,8 +138,11 @@ def _choice(value: object, choices: Iterable[str], path: str, what: str) -> str:
     if isinstance(value, str) and value in choices:
         return value
     hint = did_you_mean(value, choices) if isinstance(value, str) else ""
-    raise SpecProblem(path, f"found {value!r}, expected one of: {', '.join(choices)}{hint}"
-                      + (f" ({what})" if what else ""))
+    raise SpecProblem(
+        path,
+        f"found {value!r}, expected one of: {', '.join(choices)}{hint}"
+        + (f" ({what})" if what else ""),
+    )
 
 
 def did_you_mean(word: object, known: Iterable[str]) -> str:
@@ -152,29 +156,70 @@ def did_you_mean(word: object, known: Iterable[str]) -> str:
 _RUN_METADATA: dict[str, Field] = {
     f.key.removeprefix("run."): f
     for f in [
-        Field("run.revolutions", "number", "cam turns to integrate, from θ = 0",
-              minimum=0.0),
-        Field("run.dt", "quantity", "time step (an integrator that sizes its own steps "
-              "takes it as its largest); default: the integrator's own",
-              units="s", example="us", minimum=0.0, allow_default=True,
-              archive_name="dt", archive_units="s"),
-        Field("run.output_every", "quantity", "cam-angle spacing of the stored histories",
-              units="rad", example="deg", minimum=0.0),
-        Field("run.integrator", "choice",
-              "integrator name; default: the engine's default integrator",
-              choices=("default", *INTEGRATORS), archive_name="integrator"),
-        Field("run.tolerance", "quantity",
-              "event-time tolerance of integrators that locate events", units="s",
-              example="s", minimum=0.0, archive_name="tolerance", archive_units="s"),
-        Field("run.max_events", "integer", "events kept per case", minimum=1.0,
-              exclusive_minimum=False, archive_name="max_events"),
-        Field("run.fidelity", "choice", "full: every mode; reduced: the modes up to "
-              "mode_cutoff (modal-exact only)",
-              choices=tuple(getattr(_engine_batch, "FIDELITIES", ("full",))),
-              archive_name="fidelity"),
-        Field("run.mode_cutoff", "quantity", "highest mode kept by the reduced fidelity; "
-              "default: the engine's", units="rad/s", example="rad/s", minimum=0.0,
-              allow_default=True, archive_name="mode_cutoff", archive_units="rad/s"),
+        Field("run.revolutions", "number", "cam turns to integrate, from θ = 0", minimum=0.0),
+        Field(
+            "run.dt",
+            "quantity",
+            "time step (an integrator that sizes its own steps "
+            "takes it as its largest); default: the integrator's own",
+            units="s",
+            example="us",
+            minimum=0.0,
+            allow_default=True,
+            archive_name="dt",
+            archive_units="s",
+        ),
+        Field(
+            "run.output_every",
+            "quantity",
+            "cam-angle spacing of the stored histories",
+            units="rad",
+            example="deg",
+            minimum=0.0,
+        ),
+        Field(
+            "run.integrator",
+            "choice",
+            "integrator name; default: the engine's default integrator",
+            choices=("default", *INTEGRATORS),
+            archive_name="integrator",
+        ),
+        Field(
+            "run.tolerance",
+            "quantity",
+            "event-time tolerance of integrators that locate events",
+            units="s",
+            example="s",
+            minimum=0.0,
+            archive_name="tolerance",
+            archive_units="s",
+        ),
+        Field(
+            "run.max_events",
+            "integer",
+            "events kept per case",
+            minimum=1.0,
+            exclusive_minimum=False,
+            archive_name="max_events",
+        ),
+        Field(
+            "run.fidelity",
+            "choice",
+            "full: every mode; reduced: the modes up to mode_cutoff (modal-exact only)",
+            choices=tuple(getattr(_engine_batch, "FIDELITIES", ("full",))),
+            archive_name="fidelity",
+        ),
+        Field(
+            "run.mode_cutoff",
+            "quantity",
+            "highest mode kept by the reduced fidelity; default: the engine's",
+            units="rad/s",
+            example="rad/s",
+            minimum=0.0,
+            allow_default=True,
+            archive_name="mode_cutoff",
+            archive_units="rad/s",
+        ),
     ]
 }
 
@@ -203,20 +248,44 @@ def _spec_default(name: str, value: object) -> object:
 CASE_FIELDS: dict[str, Field] = {
     f.key: f
     for f in [
-        Field("speed", "quantity", "cam speed", units="rad/s", example="rpm", minimum=0.0,
-              archive_name="speed_rpm", archive_units="rpm"),
-        Field("seat", "quantity", "valve seat position, as a valve lift; none: no seat",
-              units="m", example="in", minimum=0.0, exclusive_minimum=False, allow_none=True,
-              archive_name="seat", archive_units="m"),
-        Field("closure", "choice",
-              "force: the spring holds the follower on the cam and it may separate; "
-              "form: a second cam holds it, it never separates",
-              choices=("force", "form"), archive_name="closure"),
+        Field(
+            "speed",
+            "quantity",
+            "cam speed",
+            units="rad/s",
+            example="rpm",
+            minimum=0.0,
+            archive_name="speed_rpm",
+            archive_units="rpm",
+        ),
+        Field(
+            "seat",
+            "quantity",
+            "valve seat position, as a valve lift; none: no seat",
+            units="m",
+            example="in",
+            minimum=0.0,
+            exclusive_minimum=False,
+            allow_none=True,
+            archive_name="seat",
+            archive_units="m",
+        ),
+        Field(
+            "closure",
+            "choice",
+            "force: the spring holds the follower on the cam and it may separate; "
+            "form: a second cam holds it, it never separates",
+            choices=("force", "form"),
+            archive_name="closure",
+        ),
         *(_RUN_METADATA[name] for name in RUN_SETTINGS),
-        Field("run.record", "record",
-              "optional histories to store: q (all seven coordinates), member_loads (all "
-              "member loads) or single member loads by name",
-              choices=("q", "member_loads", *MEMBER_LOADS)),
+        Field(
+            "run.record",
+            "record",
+            "optional histories to store: q (all seven coordinates), member_loads (all "
+            "member loads) or single member loads by name",
+            choices=("q", "member_loads", *MEMBER_LOADS),
+        ),
     ]
 }
 
@@ -226,8 +295,11 @@ STUDY_WIDE = ("run.revolutions", "run.output_every", "run.record")
 
 #: Defaults of the run keys, in spec spelling, from the engine's RunSettings.
 RUN_DEFAULTS: dict[str, object] = {
-    **{f.name: _spec_default(f.name, f.default) for f in dataclasses.fields(RunSettings)
-       if f.name in _RUN_METADATA},
+    **{
+        f.name: _spec_default(f.name, f.default)
+        for f in dataclasses.fields(RunSettings)
+        if f.name in _RUN_METADATA
+    },
     "record": [],
 }
 
@@ -242,18 +314,53 @@ PROFILE_KINDS: dict[str, tuple[str, ...]] = {
 PROFILE_FIELDS: dict[str, Field] = {
     f.key.removeprefix("profile."): f
     for f in [
-        Field("profile.lift", "quantity", "full lift of the cam", units="m", example="in",
-              minimum=0.0, archive_name="profile_lift", archive_units="m"),
-        Field("profile.rise", "quantity", "angle of the rise", units="rad", example="deg",
-              minimum=0.0, archive_name="profile_rise", archive_units="deg"),
-        Field("profile.dwell", "quantity", "angle of the dwell at full lift", units="rad",
-              example="deg", minimum=0.0, exclusive_minimum=False,
-              archive_name="profile_dwell", archive_units="deg"),
-        Field("profile.fall", "quantity", "angle of the fall", units="rad", example="deg",
-              minimum=0.0, archive_name="profile_fall", archive_units="deg"),
-        Field("profile.file", "text",
-              "lift table CSV, relative to the spec (header 'angle [deg],lift [in]')",
-              archive_name="profile_file"),
+        Field(
+            "profile.lift",
+            "quantity",
+            "full lift of the cam",
+            units="m",
+            example="in",
+            minimum=0.0,
+            archive_name="profile_lift",
+            archive_units="m",
+        ),
+        Field(
+            "profile.rise",
+            "quantity",
+            "angle of the rise",
+            units="rad",
+            example="deg",
+            minimum=0.0,
+            archive_name="profile_rise",
+            archive_units="deg",
+        ),
+        Field(
+            "profile.dwell",
+            "quantity",
+            "angle of the dwell at full lift",
+            units="rad",
+            example="deg",
+            minimum=0.0,
+            exclusive_minimum=False,
+            archive_name="profile_dwell",
+            archive_units="deg",
+        ),
+        Field(
+            "profile.fall",
+            "quantity",
+            "angle of the fall",
+            units="rad",
+            example="deg",
+            minimum=0.0,
+            archive_name="profile_fall",
+            archive_units="deg",
+        ),
+        Field(
+            "profile.file",
+            "text",
+            "lift table CSV, relative to the spec (header 'angle [deg],lift [in]')",
+            archive_name="profile_file",
+        ),
     ]
 }
 
@@ -266,12 +373,13 @@ DEFECT_KINDS: dict[str, tuple[str, ...]] = {
 DEFECT_FIELDS: dict[str, Field] = {
     "from": Field("from", "quantity", "where the flat starts", units="rad", example="deg"),
     "to": Field("to", "quantity", "where the flat ends", units="rad", example="deg"),
-    "center": Field("center", "quantity", "angle of the bump's peak", units="rad",
-                    example="deg"),
-    "height": Field("height", "quantity", "height of the bump; negative for a dent",
-                    units="m", example="in"),
-    "width": Field("width", "quantity", "full width of the bump", units="rad",
-                   example="deg", minimum=0.0),
+    "center": Field("center", "quantity", "angle of the bump's peak", units="rad", example="deg"),
+    "height": Field(
+        "height", "quantity", "height of the bump; negative for a dent", units="m", example="in"
+    ),
+    "width": Field(
+        "width", "quantity", "full width of the bump", units="rad", example="deg", minimum=0.0
+    ),
 }
 
 #: The top-level keys of a spec and what they hold.
@@ -281,7 +389,7 @@ TOP_LEVEL: dict[str, str] = {
     "model": "preset plus parameter overrides (any model parameter by name)",
     "profile": "the cam: {kind: harmonic | polydyne-345 | polydyne-4567 | table, ...}",
     "defects": "defects applied to the cam, in order: flat {from, to}, bump {center, "
-               "height, width}",
+    "height, width}",
     "closure": CASE_FIELDS["closure"].description,
     "seat": CASE_FIELDS["seat"].description,
     "speed": CASE_FIELDS["speed"].description,
@@ -302,10 +410,17 @@ SAMPLE_METHODS = ("latin-hypercube",)
 def model_field(name: str) -> Field:
     """A Field view of a model parameter (the archive names it as the parameter)."""
     p = PARAMETERS[name]
-    return Field(f"model.{name}", "parameter", p.long_name, units=p.units,
-                 example=p.thesis_units, minimum=p.minimum,
-                 exclusive_minimum=p.exclusive_minimum, archive_name=name,
-                 archive_units=p.units)
+    return Field(
+        f"model.{name}",
+        "parameter",
+        p.long_name,
+        units=p.units,
+        example=p.thesis_units,
+        minimum=p.minimum,
+        exclusive_minimum=p.exclusive_minimum,
+        archive_name=name,
+        archive_units=p.units,
+    )
 
 
 def varied_fields() -> dict[str, Field]:
@@ -317,10 +432,20 @@ def varied_fields() -> dict[str, Field]:
             out[key] = f
     for name, f in PROFILE_FIELDS.items():
         out[f"profile.{name}"] = f
-    out["profile.kind"] = Field("profile.kind", "choice", "profile kind",
-                                choices=tuple(PROFILE_KINDS), archive_name="profile_kind")
-    out["model.preset"] = Field("model.preset", "choice", "named parameter set",
-                                choices=tuple(PRESETS), archive_name="preset")
+    out["profile.kind"] = Field(
+        "profile.kind",
+        "choice",
+        "profile kind",
+        choices=tuple(PROFILE_KINDS),
+        archive_name="profile_kind",
+    )
+    out["model.preset"] = Field(
+        "model.preset",
+        "choice",
+        "named parameter set",
+        choices=tuple(PRESETS),
+        archive_name="preset",
+    )
     for name in PARAMETERS:
         out[f"model.{name}"] = model_field(name)
     return out
@@ -339,7 +464,8 @@ def sweep_keys() -> tuple[str, ...]:
 def sample_keys() -> tuple[str, ...]:
     """Keys a sampled design may vary: the scalar quantities and numbers."""
     return tuple(
-        k for k, f in varied_fields().items()
-        if f.kind in ("quantity", "number") or (f.kind == "parameter"
-                                               and not PARAMETERS[k[6:]].length)
+        k
+        for k, f in varied_fields().items()
+        if f.kind in ("quantity", "number")
+        or (f.kind == "parameter" and not PARAMETERS[k[6:]].length)
     )

@@ -61,25 +61,38 @@ def axis_arrays(cam_angle: np.ndarray, n_revolutions: int) -> dict[str, np.ndarr
 def data_specs(record: Iterable[str], case_coords: str) -> list[VariableSpec]:
     out = []
     for name, var in data_variables(record).items():
-        coords = case_coords if "case" in var.dims else (
-            "event_case" if name != "event_case" and "event" in var.dims else None)
+        coords = (
+            case_coords
+            if "case" in var.dims
+            else ("event_case" if name != "event_case" and "event" in var.dims else None)
+        )
         out.append(_spec(name, var, coords))
     return out
 
 
 def batch_layout(data: BatchData, record: tuple[str, ...]):
     """(sizes, variables, arrays, attributes) of a batch file."""
-    sizes = {"case": data.n_cases, "cam_angle": data.cam_angle.size,
-             "revolution": data.n_revolutions, "event": data.n_events}
+    sizes = {
+        "case": data.n_cases,
+        "cam_angle": data.cam_angle.size,
+        "revolution": data.n_revolutions,
+        "event": data.n_events,
+    }
     if "q" in record:
         sizes["dof"] = len(DOF_NAMES)
     specs = [_spec(n, VARIABLES[n]) for n in _axes(record)]
     specs.append(_spec("case_id", VARIABLES["case_id"]))
     specs += data_specs(record, "case_id")
-    arrays = {**axis_arrays(data.cam_angle, data.n_revolutions), "case_id": data.case_ids,
-              **data.arrays}
-    attrs = {"campipe_layout": LAYOUT_VERSION, "campipe_record": record_text(record),
-             "batch_key": data.key}
+    arrays = {
+        **axis_arrays(data.cam_angle, data.n_revolutions),
+        "case_id": data.case_ids,
+        **data.arrays,
+    }
+    attrs = {
+        "campipe_layout": LAYOUT_VERSION,
+        "campipe_record": record_text(record),
+        "batch_key": data.key,
+    }
     return sizes, specs, arrays, attrs
 
 
@@ -107,8 +120,12 @@ def archive_layout(study: Study, n_events: int, cam_angle: np.ndarray, n_revolut
     axes and the per-case coordinates, the rest streams in from batch files."""
     coords = case_coordinates(study.varied)
     coord_names = ["case_id", *(name for name, _, _ in coords.values())]
-    sizes = {"case": len(study.cases), "cam_angle": cam_angle.size,
-             "revolution": n_revolutions, "event": n_events}
+    sizes = {
+        "case": len(study.cases),
+        "cam_angle": cam_angle.size,
+        "revolution": n_revolutions,
+        "event": n_events,
+    }
     if "q" in study.record:
         sizes["dof"] = len(DOF_NAMES)
     specs = [_spec(n, VARIABLES[n]) for n in _axes(study.record)]
@@ -127,8 +144,12 @@ def study_attrs(study: Study) -> dict[str, str]:
     """Global attributes describing the study (provenance comes from campipe.io.archive)."""
     coords = case_coordinates(study.varied)
     axes = [
-        {"key": a.key, "name": coords[a.key][0] if a.key in coords else a.key, "kind": a.kind,
-         "size": a.size}
+        {
+            "key": a.key,
+            "name": coords[a.key][0] if a.key in coords else a.key,
+            "kind": a.kind,
+            "size": a.size,
+        }
         for a in study.axes
     ]
     spec = study.spec
@@ -151,6 +172,14 @@ def study_attrs(study: Study) -> dict[str, str]:
 
 def study_key(study: Study) -> str:
     """Equal for two runs that would write the same archive (provenance aside)."""
-    text = json.dumps([LAYOUT_VERSION, study.spec.text, study.spec.overrides,
-                       list(study.record), [c.case_id for c in study.cases]], default=str)
+    text = json.dumps(
+        [
+            LAYOUT_VERSION,
+            study.spec.text,
+            study.spec.overrides,
+            list(study.record),
+            [c.case_id for c in study.cases],
+        ],
+        default=str,
+    )
     return hashlib.sha256(text.encode()).hexdigest()[:16]

@@ -27,9 +27,17 @@ def format_seconds(seconds: float) -> str:
 class Progress:
     """Counts finished cases and draws ``[####....] 37/117 cases  12.3 cases/s  6 s left``."""
 
-    def __init__(self, total: int, write: Callable[[str], object], *, done: int = 0,
-                 terminal: bool = False, interval: float = 2.0, width: int = 24,
-                 clock: Callable[[], float] = time.monotonic):
+    def __init__(
+        self,
+        total: int,
+        write: Callable[[str], object],
+        *,
+        done: int = 0,
+        terminal: bool = False,
+        interval: float = 2.0,
+        width: int = 24,
+        clock: Callable[[], float] = time.monotonic,
+    ):
         self.total = total  # cases in the study
         self.done = done  # cases finished (reused ones included)
         self.start_done = done  # cases finished before this run
@@ -48,9 +56,11 @@ class Progress:
         left = (self.total - self.done) / rate if rate > 0 else float("nan")
         frac = self.done / self.total if self.total else 1.0
         bar = "#" * int(round(frac * self.width))
-        return (f"[{bar:<{self.width}}] {self.done}/{self.total} cases  {rate:.3g} cases/s  "
-                f"{format_seconds(left) if self.done < self.total else 'done'}"
-                + (" left" if self.done < self.total else ""))
+        return (
+            f"[{bar:<{self.width}}] {self.done}/{self.total} cases  {rate:.3g} cases/s  "
+            f"{format_seconds(left) if self.done < self.total else 'done'}"
+            + (" left" if self.done < self.total else "")
+        )
 
     def advance(self, cases: int) -> None:
         self.done += cases

@@ -39,12 +39,33 @@ EQUAL_RTOL = 1e-9
 WORDS = {"nan": math.nan, "none": math.nan, "inf": math.inf, "true": True, "false": False}
 
 _COMPARE = {
-    ast.Eq: "==", ast.NotEq: "!=", ast.Lt: "<", ast.LtE: "<=", ast.Gt: ">", ast.GtE: ">=",
-    ast.In: "in", ast.NotIn: "not in", ast.Is: "is", ast.IsNot: "is not",
+    ast.Eq: "==",
+    ast.NotEq: "!=",
+    ast.Lt: "<",
+    ast.LtE: "<=",
+    ast.Gt: ">",
+    ast.GtE: ">=",
+    ast.In: "in",
+    ast.NotIn: "not in",
+    ast.Is: "is",
+    ast.IsNot: "is not",
 }
 _ALLOWED = (
-    ast.Expression, ast.BoolOp, ast.And, ast.Or, ast.UnaryOp, ast.Not, ast.USub, ast.UAdd,
-    ast.Compare, ast.Name, ast.Load, ast.Constant, ast.List, ast.Tuple, *_COMPARE,
+    ast.Expression,
+    ast.BoolOp,
+    ast.And,
+    ast.Or,
+    ast.UnaryOp,
+    ast.Not,
+    ast.USub,
+    ast.UAdd,
+    ast.Compare,
+    ast.Name,
+    ast.Load,
+    ast.Constant,
+    ast.List,
+    ast.Tuple,
+    *_COMPARE,
 )
 
 
@@ -73,32 +94,43 @@ def parse_where(text: str) -> Where:
     if not isinstance(text, str) or not text.strip():
         raise QueryError("--where: empty; expected a condition such as 'speed_rpm > 9000'")
     if len(text) > MAX_WHERE_LENGTH:
-        raise QueryError(f"--where: {len(text)} characters, expected at most "
-                         f"{MAX_WHERE_LENGTH}")
+        raise QueryError(f"--where: {len(text)} characters, expected at most {MAX_WHERE_LENGTH}")
     try:
         with warnings.catch_warnings():  # e.g. "invalid decimal literal": refused below anyway
             warnings.simplefilter("ignore", SyntaxWarning)
             tree = ast.parse(text.strip(), mode="eval")
     except (SyntaxError, ValueError) as exc:
-        raise QueryError(f"--where: cannot parse {text!r} ({exc.msg}); expected comparisons "
-                         "joined by and, or, not") from None
+        raise QueryError(
+            f"--where: cannot parse {text!r} ({exc.msg}); expected comparisons "
+            "joined by and, or, not"
+        ) from None
     names: set[str] = set()
     # A list (or tuple) stands only on the right of 'in' / 'not in', holding plain values.
-    lists = {id(right) for node in ast.walk(tree) if isinstance(node, ast.Compare)
-             for op, right in zip(node.ops, node.comparators, strict=True)
-             if isinstance(op, ast.In | ast.NotIn) and isinstance(right, ast.List | ast.Tuple)}
+    lists = {
+        id(right)
+        for node in ast.walk(tree)
+        if isinstance(node, ast.Compare)
+        for op, right in zip(node.ops, node.comparators, strict=True)
+        if isinstance(op, ast.In | ast.NotIn) and isinstance(right, ast.List | ast.Tuple)
+    }
     for node in ast.walk(tree):
         if isinstance(node, ast.List | ast.Tuple):
             if id(node) not in lists:
-                raise QueryError("--where: a list stands only after 'in', e.g. 'speed_rpm in "
-                                 "[9000, 9524]'; join conditions with and, or, not")
-            if not all(isinstance(e, ast.Constant) or (
-                    isinstance(e, ast.UnaryOp) and isinstance(e.operand, ast.Constant))
-                    for e in node.elts):
+                raise QueryError(
+                    "--where: a list stands only after 'in', e.g. 'speed_rpm in "
+                    "[9000, 9524]'; join conditions with and, or, not"
+                )
+            if not all(
+                isinstance(e, ast.Constant)
+                or (isinstance(e, ast.UnaryOp) and isinstance(e.operand, ast.Constant))
+                for e in node.elts
+            ):
                 raise QueryError("--where: the list after 'in' holds numbers or strings only")
         if not isinstance(node, _ALLOWED):
-            raise QueryError(f"--where: {_describe(node)} is not allowed; expected comparisons "
-                             "of columns with numbers or strings, joined by and, or, not")
+            raise QueryError(
+                f"--where: {_describe(node)} is not allowed; expected comparisons "
+                "of columns with numbers or strings, joined by and, or, not"
+            )
         if isinstance(node, ast.Name):
             if node.id.startswith("_"):
                 raise QueryError(f"--where: the name {node.id!r} is not allowed")
@@ -106,27 +138,39 @@ def parse_where(text: str) -> Where:
                 names.add(node.id)
         if isinstance(node, ast.Constant) and not isinstance(node.value, int | float | str):
             raise QueryError(f"--where: the constant {node.value!r} is not allowed")
-        if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.USub | ast.UAdd) and \
-                not isinstance(node.operand, ast.Constant | ast.Name):
+        if (
+            isinstance(node, ast.UnaryOp)
+            and isinstance(node.op, ast.USub | ast.UAdd)
+            and not isinstance(node.operand, ast.Constant | ast.Name)
+        ):
             raise QueryError("--where: a sign applies to a number only")
         if isinstance(node, ast.Compare):
             for op, right in zip(node.ops, node.comparators, strict=True):
                 if isinstance(op, ast.Is | ast.IsNot) and not (
                     isinstance(right, ast.Name) and right.id.lower() in ("nan", "none")
                 ):
-                    raise QueryError("--where: 'is' and 'is not' compare with nan (or none) "
-                                     "only, e.g. 'seat is nan'")
-                if isinstance(op, ast.In | ast.NotIn) and not isinstance(right, ast.List |
-                                                                         ast.Tuple):
-                    raise QueryError("--where: 'in' takes a list, e.g. 'speed_rpm in [9000, "
-                                     "9524]'")
+                    raise QueryError(
+                        "--where: 'is' and 'is not' compare with nan (or none) "
+                        "only, e.g. 'seat is nan'"
+                    )
+                if isinstance(op, ast.In | ast.NotIn) and not isinstance(
+                    right, ast.List | ast.Tuple
+                ):
+                    raise QueryError("--where: 'in' takes a list, e.g. 'speed_rpm in [9000, 9524]'")
     return Where(text, tree, frozenset(names))
 
 
 def _describe(node: ast.AST) -> str:
-    kinds = {ast.Call: "a call", ast.Attribute: "attribute access", ast.Subscript: "a subscript",
-             ast.BinOp: "arithmetic", ast.Lambda: "a lambda", ast.IfExp: "an if-expression",
-             ast.NamedExpr: "an assignment", ast.Starred: "unpacking"}
+    kinds = {
+        ast.Call: "a call",
+        ast.Attribute: "attribute access",
+        ast.Subscript: "a subscript",
+        ast.BinOp: "arithmetic",
+        ast.Lambda: "a lambda",
+        ast.IfExp: "an if-expression",
+        ast.NamedExpr: "an assignment",
+        ast.Starred: "unpacking",
+    }
     for kind, text in kinds.items():
         if isinstance(node, kind):
             return text
@@ -137,8 +181,10 @@ def check_names(where: Where, columns: Sequence[str]) -> None:
     """Refuse a name that is not a column, suggesting the nearest."""
     for name in sorted(where.names):
         if name not in columns:
-            raise QueryError(f"--where: unknown column {name!r}{did_you_mean(name, columns)} "
-                             f"(columns: {', '.join(columns)})")
+            raise QueryError(
+                f"--where: unknown column {name!r}{did_you_mean(name, columns)} "
+                f"(columns: {', '.join(columns)})"
+            )
 
 
 def evaluate(where: Where, columns: Mapping[str, np.ndarray], n: int) -> np.ndarray:
@@ -174,8 +220,9 @@ def _eval(node: ast.AST, cols: Mapping[str, np.ndarray]):
             return WORDS[node.id.lower()]
         col = cols[node.id]
         if col.ndim != 1:
-            raise QueryError(f"--where: {node.id} holds {col.shape[1]} values per case and "
-                             "cannot be compared")
+            raise QueryError(
+                f"--where: {node.id} holds {col.shape[1]} values per case and cannot be compared"
+            )
         return col
     if isinstance(node, ast.Constant):
         return node.value
@@ -190,7 +237,8 @@ def _is_text(v) -> bool:
 
 def _is_number(v) -> bool:
     return (isinstance(v, int | float) and not isinstance(v, bool)) or (
-        isinstance(v, np.ndarray) and v.dtype.kind in "iuf")
+        isinstance(v, np.ndarray) and v.dtype.kind in "iuf"
+    )
 
 
 def _name(node: ast.AST) -> str:
@@ -211,12 +259,16 @@ def _compare(op: str, a, b, a_node, b_node) -> np.ndarray:
         return hit if op == "in" else ~hit
     if _is_text(a) != _is_text(b) or isinstance(a, bool) or isinstance(b, bool):
         text, other = (a_node, b_node) if _is_text(a) else (b_node, a_node)
-        raise QueryError(f"--where: {_name(text)} is text and {_name(other)} is not; "
-                         "compare text with a quoted string, e.g. closure == \"form\"")
+        raise QueryError(
+            f"--where: {_name(text)} is text and {_name(other)} is not; "
+            'compare text with a quoted string, e.g. closure == "form"'
+        )
     if _is_text(a):
         if op not in ("==", "!="):
-            raise QueryError(f"--where: text compares with == and != only (found {op} "
-                             f"between {_name(a_node)} and {_name(b_node)})")
+            raise QueryError(
+                f"--where: text compares with == and != only (found {op} "
+                f"between {_name(a_node)} and {_name(b_node)})"
+            )
         eq = np.asarray(a, dtype=object) == np.asarray(b, dtype=object)
         return eq if op == "==" else ~eq
     a = np.asarray(a, dtype=float)
@@ -225,11 +277,13 @@ def _compare(op: str, a, b, a_node, b_node) -> np.ndarray:
         eq = np.isclose(a, b, rtol=EQUAL_RTOL, atol=0.0)
         return eq if op == "==" else ~eq
     with np.errstate(invalid="ignore"):
-        return {"<": np.less, "<=": np.less_equal, ">": np.greater,
-                ">=": np.greater_equal}[op](a, b)
+        return {"<": np.less, "<=": np.less_equal, ">": np.greater, ">=": np.greater_equal}[op](
+            a, b
+        )
 
 
 # -- the case table --------------------------------------------------------------------------
+
 
 @dataclass
 class CaseTable:
@@ -272,8 +326,9 @@ def select(table: CaseTable, where: str | None = None, sort: str | None = None) 
             descending = key.startswith("-")
             name = key.lstrip("-+")
             if name not in table.columns:
-                raise QueryError(f"--sort: unknown column {name!r}"
-                                 f"{did_you_mean(name, table.columns)}")
+                raise QueryError(
+                    f"--sort: unknown column {name!r}{did_you_mean(name, table.columns)}"
+                )
             values = table.columns[name][rows]
             if values.ndim != 1:
                 raise QueryError(f"--sort: {name} holds several values per case")
@@ -311,9 +366,11 @@ def format_rows(table: CaseTable, rows: np.ndarray, names: Sequence[str], fmt: s
     array of row objects)."""
     for name in names:
         if name not in table.columns:
-            raise QueryError(f"--columns: unknown column {name!r}"
-                             f"{did_you_mean(name, table.columns)} (columns: "
-                             f"{', '.join(table.columns)})")
+            raise QueryError(
+                f"--columns: unknown column {name!r}"
+                f"{did_you_mean(name, table.columns)} (columns: "
+                f"{', '.join(table.columns)})"
+            )
     cells = [[_cell(table.columns[n][r], fmt) for n in names] for r in rows]
     if fmt == "json":
         return json.dumps([dict(zip(names, row, strict=True)) for row in cells], indent=1)
@@ -322,35 +379,45 @@ def format_rows(table: CaseTable, rows: np.ndarray, names: Sequence[str], fmt: s
         writer = csv.writer(buf, lineterminator="\n")
         writer.writerow(names)
         for r, row in zip(rows, cells, strict=True):
-            writer.writerow([json.dumps(_cell(table.columns[n][r], "json")) if isinstance(c, list)
-                             else c for n, c in zip(names, row, strict=True)])
+            writer.writerow(
+                [
+                    json.dumps(_cell(table.columns[n][r], "json")) if isinstance(c, list) else c
+                    for n, c in zip(names, row, strict=True)
+                ]
+            )
         return buf.getvalue().rstrip("\n")
     if fmt != "table":
         raise QueryError(f"--format: found {fmt!r}, expected table, csv or json")
-    text = [[", ".join(map(str, c)) if isinstance(c, list) else str(c) for c in row]
-            for row in cells]
+    text = [
+        [", ".join(map(str, c)) if isinstance(c, list) else str(c) for c in row] for row in cells
+    ]
     head = [list(names), [f"[{table.units[n]}]" if table.units[n] else "" for n in names]]
     numeric = [table.columns[n].dtype.kind in "iuf" for n in names]
     widths = [max(len(r[j]) for r in head + text) for j in range(len(names))]
     lines = []
     for row in head + text:
-        lines.append("  ".join(
-            (c.rjust(w) if num else c.ljust(w)) for c, w, num in zip(row, widths, numeric,
-                                                                       strict=True)
-        ).rstrip())
+        lines.append(
+            "  ".join(
+                (c.rjust(w) if num else c.ljust(w))
+                for c, w, num in zip(row, widths, numeric, strict=True)
+            ).rstrip()
+        )
     lines.append(f"({len(rows)} of {table.n} cases)")
     return "\n".join(lines)
 
 
 # -- the summary -------------------------------------------------------------------------------
 
+
 def summary(ds) -> str:
     """The study's axes and, for a speed sweep, the separation onset speed (first speed with
     ``separation_deg_per_rev > 0``) for each combination of the other varying parameters."""
     table = case_table(ds)
     name = ds.attrs.get("study_name", "study")
-    lines = [f"{name}: {table.n} cases, {ds.attrs.get('revolutions', '?')} revolutions, "
-             f"record: {ds.attrs.get('record', '-')}"]
+    lines = [
+        f"{name}: {table.n} cases, {ds.attrs.get('revolutions', '?')} revolutions, "
+        f"record: {ds.attrs.get('record', '-')}"
+    ]
     try:
         axes = json.loads(ds.attrs.get("study_axes", "[]"))
     except json.JSONDecodeError:
@@ -358,9 +425,10 @@ def summary(ds) -> str:
     lines.append("axes:" if axes else "axes: none (a single case)")
     for a in axes:
         col = table.columns.get(a["name"])
-        lines.append(f"  {a['name']:<24} {a['kind']:<7} {a['size']} values"
-                     + (f": {_values_text(col, table.units.get(a['name'], ''))}"
-                        if col is not None else ""))
+        lines.append(
+            f"  {a['name']:<24} {a['kind']:<7} {a['size']} values"
+            + (f": {_values_text(col, table.units.get(a['name'], ''))}" if col is not None else "")
+        )
     onset = onset_table(table)
     if onset:
         lines.append("")
@@ -389,9 +457,14 @@ def onset_table(table: CaseTable) -> list[str]:
     speed = cols["speed_rpm"].astype(float)
     if np.unique(speed).size < 2:
         return []
-    others = [n for n, v in cols.items() if n not in ("speed_rpm", "case_id") and
-              n in table.default and n not in _metric_names(table) and
-              len({_key(x) for x in v}) > 1]
+    others = [
+        n
+        for n, v in cols.items()
+        if n not in ("speed_rpm", "case_id")
+        and n in table.default
+        and n not in _metric_names(table)
+        and len({_key(x) for x in v}) > 1
+    ]
     groups: dict[tuple, list[int]] = {}
     for i in range(table.n):
         groups.setdefault(tuple(_key(cols[n][i]) for n in others), []).append(i)
@@ -411,8 +484,10 @@ def onset_table(table: CaseTable) -> list[str]:
         rows.append([_cell(cols[n][idx[0]], "table") for n in others] + [text])
     text = [[", ".join(map(str, c)) if isinstance(c, list) else str(c) for c in r] for r in rows]
     widths = [max(len(r[j]) for r in [head, *text]) for j in range(len(head))]
-    return ["  " + "  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip()
-            for r in [head, *text]]
+    return [
+        "  " + "  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip()
+        for r in [head, *text]
+    ]
 
 
 def _metric_names(table: CaseTable) -> set[str]:
@@ -431,6 +506,7 @@ def _key(x) -> object:
 
 # -- replay selection ---------------------------------------------------------------------------
 
+
 def replay_mask(study, plan, data) -> np.ndarray:
     """(n,) bool: which cases of a computed batch the spec's ``replay.where`` selects.
 
@@ -444,6 +520,11 @@ def replay_mask(study, plan, data) -> np.ndarray:
     if not study.spec.replay:
         return np.zeros(n, dtype=bool)
     columns = dict(coordinate_values(list(plan.cases), study))
-    columns.update({k: v for k, v in data.arrays.items() if v.shape[:1] == (n,) and v.ndim == 1
-                    and k != "event_count"})
+    columns.update(
+        {
+            k: v
+            for k, v in data.arrays.items()
+            if v.shape[:1] == (n,) and v.ndim == 1 and k != "event_count"
+        }
+    )
     return evaluate(parse_where(study.spec.replay), columns, n)

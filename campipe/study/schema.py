@@ -41,7 +41,8 @@ def field_schema(f: Field) -> dict[str, object]:
         return model_schema()["properties"][f.key.removeprefix("model.")]
     if f.kind == "quantity":
         out: dict[str, object] = {
-            "type": "string", "pattern": QUANTITY_PATTERN,
+            "type": "string",
+            "pattern": QUANTITY_PATTERN,
             "description": f"{f.description}, a quantity with units, e.g. '1 {f.example}'",
         }
         words = (["none"] if f.allow_none else []) + (["default"] if f.allow_default else [])
@@ -61,20 +62,27 @@ def field_schema(f: Field) -> dict[str, object]:
     if f.kind == "text":
         return {"type": "string", "minLength": 1, "description": f.description}
     if f.kind == "record":
-        return {"type": "array", "items": {"enum": list(f.choices)}, "uniqueItems": True,
-                "description": f.description}
+        return {
+            "type": "array",
+            "items": {"enum": list(f.choices)},
+            "uniqueItems": True,
+            "description": f.description,
+        }
     raise AssertionError(f.kind)
 
 
 def _one_of_kinds(kinds: dict, fields: dict) -> list[dict[str, object]]:
     """A profile or defect: one object per kind, with that kind's keys (``kinds[kind]``), all
     required."""
-    return [{"type": "object",
-             "properties": {"kind": {"const": kind},
-                            **{k: field_schema(fields[k]) for k in keys}},
-             "required": ["kind", *keys],
-             "additionalProperties": False}
-            for kind, keys in kinds.items()]
+    return [
+        {
+            "type": "object",
+            "properties": {"kind": {"const": kind}, **{k: field_schema(fields[k]) for k in keys}},
+            "required": ["kind", *keys],
+            "additionalProperties": False,
+        }
+        for kind, keys in kinds.items()
+    ]
 
 
 def _run(study_wide: bool) -> dict[str, object]:
@@ -83,8 +91,9 @@ def _run(study_wide: bool) -> dict[str, object]:
         "type": "object",
         "properties": {k.removeprefix("run."): field_schema(CASE_FIELDS[k]) for k in keys},
         "additionalProperties": False,
-        "description": TOP_LEVEL["run"] if study_wide else
-        "run settings of this case (the study-wide revolutions, output_every and record "
+        "description": TOP_LEVEL["run"]
+        if study_wide
+        else "run settings of this case (the study-wide revolutions, output_every and record "
         "are set in the base)",
     }
 
@@ -121,17 +130,28 @@ def _range(key: str, with_num: bool) -> dict[str, object] | None:
     """A {from, to[, num]} range of a scalar quantity, or None where none applies."""
     f = varied_fields().get(key)
     scalar = f is not None and (
-        f.kind == "quantity" or (f.kind == "parameter" and f.units and "rad" not in f.units
-                                 and not f.key.endswith("damping_ratios"))
+        f.kind == "quantity"
+        or (
+            f.kind == "parameter"
+            and f.units
+            and "rad" not in f.units
+            and not f.key.endswith("damping_ratios")
+        )
     )
     if not scalar:
         return None
-    props: dict[str, object] = {"from": {"$ref": "#/$defs/quantity"},
-                                "to": {"$ref": "#/$defs/quantity"}}
+    props: dict[str, object] = {
+        "from": {"$ref": "#/$defs/quantity"},
+        "to": {"$ref": "#/$defs/quantity"},
+    }
     if with_num:
         props["num"] = {"type": "integer", "minimum": 1}
-    return {"type": "object", "properties": props, "required": list(props),
-            "additionalProperties": False}
+    return {
+        "type": "object",
+        "properties": props,
+        "required": list(props),
+        "additionalProperties": False,
+    }
 
 
 def _axes(description: str) -> dict[str, object]:
@@ -140,8 +160,13 @@ def _axes(description: str) -> dict[str, object]:
         listed = {"type": "array", "minItems": 1, "items": _value(key)}
         rng = _range(key, True)
         props[key] = {"oneOf": [listed, rng]} if rng else listed
-    return {"type": "object", "minProperties": 1, "properties": props,
-            "additionalProperties": False, "description": description}
+    return {
+        "type": "object",
+        "minProperties": 1,
+        "properties": props,
+        "additionalProperties": False,
+        "description": description,
+    }
 
 
 def study_schema() -> dict[str, object]:
@@ -154,14 +179,17 @@ def study_schema() -> dict[str, object]:
         "type": "object",
         "required": ["name"],
         "properties": {
-            "name": {"type": "string", "pattern": NAME_PATTERN,
-                     "description": TOP_LEVEL["name"]},
+            "name": {"type": "string", "pattern": NAME_PATTERN, "description": TOP_LEVEL["name"]},
             "description": {"type": "string", "description": TOP_LEVEL["description"]},
             **_case(patch=False),
             "sweep": {"$ref": "#/$defs/axes", "description": TOP_LEVEL["sweep"]},
             "zip": {"$ref": "#/$defs/axes", "description": TOP_LEVEL["zip"]},
-            "cases": {"type": "array", "minItems": 1, "items": {"$ref": "#/$defs/case"},
-                      "description": TOP_LEVEL["cases"]},
+            "cases": {
+                "type": "array",
+                "minItems": 1,
+                "items": {"$ref": "#/$defs/case"},
+                "description": TOP_LEVEL["cases"],
+            },
             "sample": {
                 "type": "object",
                 "properties": {
@@ -169,7 +197,8 @@ def study_schema() -> dict[str, object]:
                     "n": {"type": "integer", "minimum": 1},
                     "seed": {"type": "integer", "minimum": 0},
                     "ranges": {
-                        "type": "object", "minProperties": 1,
+                        "type": "object",
+                        "minProperties": 1,
                         "properties": {k: _range(k, False) for k in sample_keys()},
                         "additionalProperties": False,
                     },
@@ -189,26 +218,39 @@ def study_schema() -> dict[str, object]:
         "additionalProperties": False,
         "$defs": {
             "model": {**model, "description": TOP_LEVEL["model"]},
-            "profile": {"oneOf": _one_of_kinds(PROFILE_KINDS, PROFILE_FIELDS),
-                        "description": TOP_LEVEL["profile"]},
+            "profile": {
+                "oneOf": _one_of_kinds(PROFILE_KINDS, PROFILE_FIELDS),
+                "description": TOP_LEVEL["profile"],
+            },
             "profile_patch": {
                 "type": "object",
-                "properties": {"kind": {"enum": list(PROFILE_KINDS)},
-                               **{k: field_schema(f) for k, f in PROFILE_FIELDS.items()}},
+                "properties": {
+                    "kind": {"enum": list(PROFILE_KINDS)},
+                    **{k: field_schema(f) for k, f in PROFILE_FIELDS.items()},
+                },
                 "additionalProperties": False,
                 "description": "profile keys merged over the base's (a new kind replaces it)",
             },
-            "defects": {"type": "array",
-                        "items": {"oneOf": _one_of_kinds(DEFECT_KINDS, DEFECT_FIELDS)},
-                        "description": TOP_LEVEL["defects"]},
+            "defects": {
+                "type": "array",
+                "items": {"oneOf": _one_of_kinds(DEFECT_KINDS, DEFECT_FIELDS)},
+                "description": TOP_LEVEL["defects"],
+            },
             **{k: field_schema(CASE_FIELDS[k]) for k in ("closure", "seat", "speed")},
-            "quantity": {"type": "string", "pattern": QUANTITY_PATTERN,
-                         "description": "a quantity with units, e.g. '9000 rpm'"},
+            "quantity": {
+                "type": "string",
+                "pattern": QUANTITY_PATTERN,
+                "description": "a quantity with units, e.g. '9000 rpm'",
+            },
             "axes": _axes("key → list of values or {from, to, num}"),
             "run": _run(study_wide=True),
             "case_run": _run(study_wide=False),
-            "case": {"type": "object", "properties": _case(patch=True),
-                     "additionalProperties": False, "description": TOP_LEVEL["cases"]},
+            "case": {
+                "type": "object",
+                "properties": _case(patch=True),
+                "additionalProperties": False,
+                "description": TOP_LEVEL["cases"],
+            },
         },
     }
 

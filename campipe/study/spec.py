@@ -153,12 +153,14 @@ def _show(value: object) -> str:
 def _unknown(path: str, key: str, known) -> SpecProblem:
     known = list(known)
     listing = ", ".join(known) if len(known) <= 16 else ", ".join(known[:16]) + ", ..."
-    return SpecProblem(join(path, key),
-                       f"unknown key {key!r}{did_you_mean(key, known)} (expected one of: "
-                       f"{listing})")
+    return SpecProblem(
+        join(path, key),
+        f"unknown key {key!r}{did_you_mean(key, known)} (expected one of: {listing})",
+    )
 
 
 # -- blocks of a case ---------------------------------------------------------------------
+
 
 def check_profile(value: object, path: str, partial: bool) -> dict:
     """A profile mapping; ``partial`` (a case entry merging over the base) needs no kind."""
@@ -169,23 +171,28 @@ def check_profile(value: object, path: str, partial: bool) -> dict:
             raise _unknown(path, k, known)
     kind = value.get("kind")
     if kind is None and not partial:
-        raise SpecProblem(join(path, "kind"),
-                          "missing; expected one of: " + ", ".join(PROFILE_KINDS))
+        raise SpecProblem(
+            join(path, "kind"), "missing; expected one of: " + ", ".join(PROFILE_KINDS)
+        )
     if kind is not None and kind not in PROFILE_KINDS:
-        raise SpecProblem(join(path, "kind"),
-                          f"found {kind!r}, expected one of: {', '.join(PROFILE_KINDS)}"
-                          + did_you_mean(kind, PROFILE_KINDS))
+        raise SpecProblem(
+            join(path, "kind"),
+            f"found {kind!r}, expected one of: {', '.join(PROFILE_KINDS)}"
+            + did_you_mean(kind, PROFILE_KINDS),
+        )
     if kind is not None:
         keys = PROFILE_KINDS[kind]
         for k in value:
             if k != "kind" and k not in keys:
-                raise SpecProblem(join(path, k),
-                                  f"not a key of a {kind} profile (its keys: {', '.join(keys)})")
+                raise SpecProblem(
+                    join(path, k), f"not a key of a {kind} profile (its keys: {', '.join(keys)})"
+                )
         if not partial:
             for k in keys:
                 if k not in value:
-                    raise SpecProblem(join(path, k), f"missing; a {kind} profile needs "
-                                      + ", ".join(keys))
+                    raise SpecProblem(
+                        join(path, k), f"missing; a {kind} profile needs " + ", ".join(keys)
+                    )
     for k, v in value.items():
         if k != "kind":
             PROFILE_FIELDS[k].parse(v, join(path, k))
@@ -194,25 +201,34 @@ def check_profile(value: object, path: str, partial: bool) -> dict:
 
 def check_defects(value: object, path: str) -> list:
     if not isinstance(value, list):
-        raise SpecProblem(path, f"found {_show(value)}, expected a list of defects such as "
-                                "[{kind: flat, from: 268 deg, to: 272 deg}] (or [])")
+        raise SpecProblem(
+            path,
+            f"found {_show(value)}, expected a list of defects such as "
+            "[{kind: flat, from: 268 deg, to: 272 deg}] (or [])",
+        )
     for i, d in enumerate(value):
         p = join(path, i)
         d = _mapping(d, p, "a defect such as {kind: flat, from: 268 deg, to: 272 deg}")
         kind = d.get("kind")
         if kind not in DEFECT_KINDS:
             found = "missing" if kind is None else f"found {kind!r}"
-            raise SpecProblem(join(p, "kind"), f"{found}, expected one of: "
-                              + ", ".join(DEFECT_KINDS) + did_you_mean(kind, DEFECT_KINDS))
+            raise SpecProblem(
+                join(p, "kind"),
+                f"{found}, expected one of: "
+                + ", ".join(DEFECT_KINDS)
+                + did_you_mean(kind, DEFECT_KINDS),
+            )
         keys = DEFECT_KINDS[kind]
         for k in d:
             if k != "kind" and k not in keys:
-                raise SpecProblem(join(p, k), f"not a key of a {kind} defect (its keys: "
-                                  f"{', '.join(keys)}){did_you_mean(k, keys)}")
+                raise SpecProblem(
+                    join(p, k),
+                    f"not a key of a {kind} defect (its keys: "
+                    f"{', '.join(keys)}){did_you_mean(k, keys)}",
+                )
         for k in keys:
             if k not in d:
-                raise SpecProblem(join(p, k), f"missing; a {kind} defect needs "
-                                  + ", ".join(keys))
+                raise SpecProblem(join(p, k), f"missing; a {kind} defect needs " + ", ".join(keys))
             DEFECT_FIELDS[k].parse(d[k], join(p, k))
     return copy.deepcopy(value)
 
@@ -236,8 +252,11 @@ def check_run(value: object, path: str, study_wide: bool, problems: _Problems) -
             problems.items.append(_unknown(path, k, known))
             continue
         if not study_wide and f"run.{k}" in STUDY_WIDE:
-            problems.add(join(path, k), "the whole study shares it (it fixes the archive's "
-                                        "cam_angle axis and variables); set it in the base run")
+            problems.add(
+                join(path, k),
+                "the whole study shares it (it fixes the archive's "
+                "cam_angle axis and variables); set it in the base run",
+            )
             continue
         problems.check(CASE_FIELDS[f"run.{k}"].parse, v, join(path, k))
     return dict(value)
@@ -283,8 +302,9 @@ def expand_range(value: Mapping, key: str, path: str, with_num: bool) -> list:
         raise SpecProblem(path, "a range runs between two values; list 'none' separately")
     if not with_num:
         if not lo < hi:
-            raise SpecProblem(path, f"found from {value['from']!r} ≥ to {value['to']!r}, "
-                                    "expected from < to")
+            raise SpecProblem(
+                path, f"found from {value['from']!r} ≥ to {value['to']!r}, expected from < to"
+            )
         return [lo, hi]
     num = value["num"]
     if isinstance(num, bool) or not isinstance(num, int) or num < 1:
@@ -313,15 +333,25 @@ def _number(v: float) -> str:
 
 def range_field(key: str, path: str) -> Field:
     f = varied_fields().get(key)
-    if f is None or f.kind not in ("quantity", "number", "parameter") or (
-        f.kind == "parameter" and PARAMETERS[key.removeprefix("model.")].length
+    if (
+        f is None
+        or f.kind not in ("quantity", "number", "parameter")
+        or (f.kind == "parameter" and PARAMETERS[key.removeprefix("model.")].length)
     ):
-        raise SpecProblem(path, f"{key} is not a scalar quantity; list its values instead "
-                                "of a range")
+        raise SpecProblem(
+            path, f"{key} is not a scalar quantity; list its values instead of a range"
+        )
     if f.kind == "parameter":
         p = PARAMETERS[key.removeprefix("model.")]
-        return Field(key, "quantity", p.long_name, units=p.units, example=p.thesis_units,
-                     minimum=p.minimum, exclusive_minimum=p.exclusive_minimum)
+        return Field(
+            key,
+            "quantity",
+            p.long_name,
+            units=p.units,
+            example=p.thesis_units,
+            minimum=p.minimum,
+            exclusive_minimum=p.exclusive_minimum,
+        )
     return f
 
 
@@ -349,8 +379,11 @@ def check_axes(value: object, path: str, zipped: bool, problems: _Problems) -> d
         p = f"{path}.{key}"
         if key not in keys:
             if key in STUDY_WIDE:
-                problems.add(p, "the whole study shares it (it fixes the archive's cam_angle "
-                                "axis and variables); it cannot vary")
+                problems.add(
+                    p,
+                    "the whole study shares it (it fixes the archive's cam_angle "
+                    "axis and variables); it cannot vary",
+                )
             else:
                 problems.items.append(_unknown(path, key, keys))
             continue
@@ -358,24 +391,31 @@ def check_axes(value: object, path: str, zipped: bool, problems: _Problems) -> d
             got = problems.check(expand_range, values, key, p, True)
         elif isinstance(values, list):
             if not values:
-                problems.add(p, "empty list; expected at least one value (an empty axis "
-                                "makes an empty grid)")
+                problems.add(
+                    p, "empty list; expected at least one value (an empty axis makes an empty grid)"
+                )
                 continue
             before = len(problems.items)
             for i, v in enumerate(values):
                 problems.check(check_axis_value, key, v, f"{p}[{i}]")
             got = values if len(problems.items) == before else None
         else:
-            problems.add(p, f"found {_show(values)}, expected a list of values"
-                            + ("" if key in WHOLE_KEYS else " or {from, to, num}"))
+            problems.add(
+                p,
+                f"found {_show(values)}, expected a list of values"
+                + ("" if key in WHOLE_KEYS else " or {from, to, num}"),
+            )
             continue
         if got is not None:
             out[key] = list(got)
     if zipped:
         lengths = {k: len(v) for k, v in out.items()}
         if len(set(lengths.values())) > 1:
-            problems.add(path, "zipped keys vary together and need equal lengths; found "
-                         + ", ".join(f"{k} {n}" for k, n in lengths.items()))
+            problems.add(
+                path,
+                "zipped keys vary together and need equal lengths; found "
+                + ", ".join(f"{k} {n}" for k, n in lengths.items()),
+            )
     return out
 
 
@@ -395,14 +435,16 @@ def check_cases(value: object, problems: _Problems) -> list[dict]:
         for k in entry:
             if k not in CASE_KEYS:
                 problems.items.append(_unknown(p, k, CASE_KEYS))
-        out.append(check_case_block({k: v for k, v in entry.items() if k in CASE_KEYS}, p,
-                                    True, problems))
+        out.append(
+            check_case_block({k: v for k, v in entry.items() if k in CASE_KEYS}, p, True, problems)
+        )
     return out
 
 
 def check_sample(value: object, problems: _Problems) -> Sample | None:
-    value = problems.check(_mapping, value, "sample",
-                           "{method: latin-hypercube, n, seed, ranges: {key: {from, to}}}")
+    value = problems.check(
+        _mapping, value, "sample", "{method: latin-hypercube, n, seed, ranges: {key: {from, to}}}"
+    )
     if value is None:
         return None
     before = len(problems.items)
@@ -420,8 +462,12 @@ def check_sample(value: object, problems: _Problems) -> Sample | None:
         return None
     method = value["method"]
     if method not in SAMPLE_METHODS:
-        problems.add("sample.method", f"found {method!r}, expected one of: "
-                     + ", ".join(SAMPLE_METHODS) + did_you_mean(method, SAMPLE_METHODS))
+        problems.add(
+            "sample.method",
+            f"found {method!r}, expected one of: "
+            + ", ".join(SAMPLE_METHODS)
+            + did_you_mean(method, SAMPLE_METHODS),
+        )
     n, seed = value["n"], value["seed"]
     if isinstance(n, bool) or not isinstance(n, int) or n < 1:
         problems.add("sample.n", f"found {n!r}, expected an integer ≥ 1 (points to sample)")
@@ -457,15 +503,18 @@ def check_conflicts(spec: Spec, problems: _Problems) -> None:
     for where, key in axes:
         for other, owner in owners.items():
             if key == other or key.startswith(other + ".") or other.startswith(key + "."):
-                problems.add(f"{where}.{key}", f"{other} is already varied by {owner}.{other}; "
-                                               "vary each key in one place")
+                problems.add(
+                    f"{where}.{key}",
+                    f"{other} is already varied by {owner}.{other}; vary each key in one place",
+                )
         owners[key] = where
     for i, entry in enumerate(spec.cases):
         for key in leaf_keys(entry):
             for other, owner in owners.items():
                 if key == other or key.startswith(other + "."):
-                    problems.add(f"cases[{i}].{key}",
-                                 f"also varied by {owner}.{other}; vary it in one place")
+                    problems.add(
+                        f"cases[{i}].{key}", f"also varied by {owner}.{other}; vary it in one place"
+                    )
 
 
 def leaf_keys(entry: Mapping, prefix: str = "") -> list[str]:
@@ -491,8 +540,10 @@ def check_replay(value: object, problems: _Problems) -> str | None:
             problems.items.append(_unknown("replay", k, ["where"]))
     where = value.get("where")
     if not isinstance(where, str) or not where.strip():
-        problems.add("replay.where", f"found {_show(where)}, expected an expression such as "
-                                     "\"speed_rpm == 11000\"")
+        problems.add(
+            "replay.where",
+            f'found {_show(where)}, expected an expression such as "speed_rpm == 11000"',
+        )
         return None
     try:
         parse_where(where)
@@ -504,8 +555,14 @@ def check_replay(value: object, problems: _Problems) -> str | None:
 
 # -- the spec -------------------------------------------------------------------------------
 
-def check_spec(raw: object, text: str = "", directory: str | Path = ".", source: str = "spec",
-               overrides: Mapping[str, object] | None = None) -> Spec:
+
+def check_spec(
+    raw: object,
+    text: str = "",
+    directory: str | Path = ".",
+    source: str = "spec",
+    overrides: Mapping[str, object] | None = None,
+) -> Spec:
     """Check a parsed spec and return it with defaults filled in and ranges expanded.
 
     Parameters
@@ -536,18 +593,29 @@ def check_spec(raw: object, text: str = "", directory: str | Path = ".", source:
             except SpecProblem as exc:
                 problems.items.append(exc)
     if not isinstance(raw, Mapping):
-        raise SpecError([SpecProblem("", f"found {_show(raw)}, expected a mapping of the keys: "
-                                     + ", ".join(TOP_LEVEL))], source)
+        raise SpecError(
+            [
+                SpecProblem(
+                    "",
+                    f"found {_show(raw)}, expected a mapping of the keys: " + ", ".join(TOP_LEVEL),
+                )
+            ],
+            source,
+        )
     for k in raw:
         if k not in TOP_LEVEL:
             problems.items.append(_unknown("", str(k), TOP_LEVEL))
     name = raw.get("name")
     if name is None:
-        problems.add("name", "missing; expected a study name such as 'separation-map' "
-                             "(it names the archive)")
+        problems.add(
+            "name", "missing; expected a study name such as 'separation-map' (it names the archive)"
+        )
     elif not isinstance(name, str) or not re.match(NAME_PATTERN, name):
-        problems.add("name", f"found {_show(name)}, expected letters, digits, '-', '_' or '.', "
-                             "starting with a letter or digit (it names the archive file)")
+        problems.add(
+            "name",
+            f"found {_show(name)}, expected letters, digits, '-', '_' or '.', "
+            "starting with a letter or digit (it names the archive file)",
+        )
     description = raw.get("description", "")
     if not isinstance(description, str):
         problems.add("description", f"found {_show(description)}, expected text")
@@ -563,9 +631,19 @@ def check_spec(raw: object, text: str = "", directory: str | Path = ".", source:
     cases = check_cases(raw["cases"], problems) if "cases" in raw else []
     sample = check_sample(raw["sample"], problems) if "sample" in raw else None
     replay = check_replay(raw["replay"], problems) if "replay" in raw else None
-    spec = Spec(name=name if isinstance(name, str) else "", description=str(description),
-                text=text, directory=Path(directory), base=base, sweep=sweep, zip=zipped,
-                cases=cases, sample=sample, replay=replay, overrides=overrides)
+    spec = Spec(
+        name=name if isinstance(name, str) else "",
+        description=str(description),
+        text=text,
+        directory=Path(directory),
+        base=base,
+        sweep=sweep,
+        zip=zipped,
+        cases=cases,
+        sample=sample,
+        replay=replay,
+        overrides=overrides,
+    )
     check_conflicts(spec, problems)
     if problems.items:
         raise SpecError(problems.items[:MAX_PROBLEMS], source)
@@ -595,8 +673,8 @@ def apply_override(raw: object, key: str, value: object) -> object:
         if part in _KEYED_BY_CASE_KEY:
             node = node.setdefault(part, {})
             if not isinstance(node, dict):
-                raise SpecProblem(key, f"{'.'.join(parts[:i + 1])} is not a mapping")
-            node[".".join(parts[i + 1:])] = value
+                raise SpecProblem(key, f"{'.'.join(parts[: i + 1])} is not a mapping")
+            node[".".join(parts[i + 1 :])] = value
             return raw
         node = node.setdefault(part, {})
         i += 1

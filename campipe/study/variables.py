@@ -42,73 +42,118 @@ class Variable:
         return out
 
 
-CONTACT_FLAGS = (("flag_values", [1, 2, 3, 4]),
-                 ("flag_meanings", "I_cam_contact II_free III_cam_and_seat IV_seat_only"))
-EVENT_FLAGS = (("flag_values", [1, 2, 3, 4]),
-               ("flag_meanings", "cam_separation cam_impact seat_separation seat_impact"))
+CONTACT_FLAGS = (
+    ("flag_values", [1, 2, 3, 4]),
+    ("flag_meanings", "I_cam_contact II_free III_cam_and_seat IV_seat_only"),
+)
+EVENT_FLAGS = (
+    ("flag_values", [1, 2, 3, 4]),
+    ("flag_meanings", "cam_separation cam_impact seat_separation seat_impact"),
+)
 CASE = ("case",)
 HISTORY = ("case", "cam_angle")
 
 #: Variables every archive holds (member loads and q only when run.record asks).
 VARIABLES: dict[str, Variable] = {
-    "cam_angle": Variable(("cam_angle",), "f8", "cam angle from the start of the run",
-                          "degree", role="axis"),
-    "revolution": Variable(("revolution",), "i4", "cam revolution, counted from 1",
-                           role="axis"),
-    "dof": Variable(("dof",), "str", "generalised coordinate (thesis q1-q7)", role="axis",
-                    record="q"),
-    "dof_units": Variable(("dof",), "str", "units of each generalised coordinate",
-                          role="axis", record="q"),
-    "case_id": Variable(CASE, "str", "case id: SHA-256 of the case's canonical parameters",
-                        role="parameter"),
+    "cam_angle": Variable(
+        ("cam_angle",), "f8", "cam angle from the start of the run", "degree", role="axis"
+    ),
+    "revolution": Variable(("revolution",), "i4", "cam revolution, counted from 1", role="axis"),
+    "dof": Variable(
+        ("dof",), "str", "generalised coordinate (thesis q1-q7)", role="axis", record="q"
+    ),
+    "dof_units": Variable(
+        ("dof",), "str", "units of each generalised coordinate", role="axis", record="q"
+    ),
+    "case_id": Variable(
+        CASE, "str", "case id: SHA-256 of the case's canonical parameters", role="parameter"
+    ),
     "time": Variable(HISTORY, "f8", "time from the start of the run", "s"),
     "cam_lift": Variable(HISTORY, "f8", "cam lift", "m"),
-    "follower_lift": Variable(HISTORY, "f8", "pushrod foot height in the cam's lift "
-                              "coordinate", "m"),
-    "valve_lift": Variable(HISTORY, "f8", "valve opening from its base-circle static "
-                           "position", "m"),
-    "cam_force": Variable(HISTORY, "f8", "cam contact force, compressive positive, zero out "
-                          "of contact", "N"),
-    "seat_force": Variable(HISTORY, "f8", "valve seat contact force, compressive positive, "
-                           "zero out of contact", "N"),
-    "contact_state": Variable(HISTORY, "i1", "contact configuration (thesis Table I)",
-                              extra=CONTACT_FLAGS),
-    "q": Variable(("case", "cam_angle", "dof"), "f8",
-                  "generalised coordinates q1-q7 (thesis order and signs)", record="q",
-                  extra=(("comment", "q1, q2, q4, q7 are translations [m]; q3, q5, q6 are "
-                                     "rotations [rad]; see dof_units"),)),
-    "separation_deg_per_rev": Variable(CASE, "f8", "cam angle with the follower off the "
-                                       "cam in the last revolution", "degree", role="metric"),
-    "separation_deg": Variable(("case", "revolution"), "f8", "cam angle with the follower "
-                               "off the cam, per revolution", "degree", role="per_revolution"),
+    "follower_lift": Variable(
+        HISTORY, "f8", "pushrod foot height in the cam's lift coordinate", "m"
+    ),
+    "valve_lift": Variable(
+        HISTORY, "f8", "valve opening from its base-circle static position", "m"
+    ),
+    "cam_force": Variable(
+        HISTORY, "f8", "cam contact force, compressive positive, zero out of contact", "N"
+    ),
+    "seat_force": Variable(
+        HISTORY, "f8", "valve seat contact force, compressive positive, zero out of contact", "N"
+    ),
+    "contact_state": Variable(
+        HISTORY, "i1", "contact configuration (thesis Table I)", extra=CONTACT_FLAGS
+    ),
+    "q": Variable(
+        ("case", "cam_angle", "dof"),
+        "f8",
+        "generalised coordinates q1-q7 (thesis order and signs)",
+        record="q",
+        extra=(
+            (
+                "comment",
+                "q1, q2, q4, q7 are translations [m]; q3, q5, q6 are "
+                "rotations [rad]; see dof_units",
+            ),
+        ),
+    ),
+    "separation_deg_per_rev": Variable(
+        CASE,
+        "f8",
+        "cam angle with the follower off the cam in the last revolution",
+        "degree",
+        role="metric",
+    ),
+    "separation_deg": Variable(
+        ("case", "revolution"),
+        "f8",
+        "cam angle with the follower off the cam, per revolution",
+        "degree",
+        role="per_revolution",
+    ),
     "cam_impacts": Variable(CASE, "i4", "number of cam impacts", role="metric"),
     "seat_impacts": Variable(CASE, "i4", "number of valve seat impacts", role="metric"),
-    "max_cam_impact_velocity": Variable(CASE, "f8", "largest closing velocity at a cam "
-                                        "impact", "m/s", role="metric"),
-    "max_seating_velocity": Variable(CASE, "f8", "largest closing velocity at a seat impact",
-                                     "m/s", role="metric"),
-    "max_cam_force": Variable(CASE, "f8", "largest compressive cam force between impacts",
-                              "N", role="metric"),
-    "max_seat_force": Variable(CASE, "f8", "largest compressive seat force between impacts",
-                               "N", role="metric"),
+    "max_cam_impact_velocity": Variable(
+        CASE, "f8", "largest closing velocity at a cam impact", "m/s", role="metric"
+    ),
+    "max_seating_velocity": Variable(
+        CASE, "f8", "largest closing velocity at a seat impact", "m/s", role="metric"
+    ),
+    "max_cam_force": Variable(
+        CASE, "f8", "largest compressive cam force between impacts", "N", role="metric"
+    ),
+    "max_seat_force": Variable(
+        CASE, "f8", "largest compressive seat force between impacts", "N", role="metric"
+    ),
     "steps": Variable(CASE, "i8", "integration steps taken", role="count"),
-    "event_count": Variable(CASE, "i4", "number of events of each case", role="count",
-                            extra=(("sample_dimension", "event"),)),
-    "event_case": Variable(("event",), "i4", "index of the event's case along case",
-                           role="event"),
+    "event_count": Variable(
+        CASE,
+        "i4",
+        "number of events of each case",
+        role="count",
+        extra=(("sample_dimension", "event"),),
+    ),
+    "event_case": Variable(("event",), "i4", "index of the event's case along case", role="event"),
     "event_time": Variable(("event",), "f8", "time of the event", "s", role="event"),
-    "event_cam_angle": Variable(("event",), "f8", "cam angle at the event", "degree",
-                                role="event"),
-    "event_kind": Variable(("event",), "i1", "kind of event", role="event",
-                           extra=EVENT_FLAGS),
-    "event_from": Variable(("event",), "i1", "contact configuration before the event",
-                           role="event", extra=CONTACT_FLAGS),
-    "event_to": Variable(("event",), "i1", "contact configuration after the event",
-                         role="event", extra=CONTACT_FLAGS),
-    "event_velocity": Variable(("event",), "f8", "velocity jump or closing velocity at the "
-                               "event", "m/s", role="event"),
-    "event_impulse": Variable(("event",), "f8", "impulse delivered at an impact", "N*s",
-                              role="event"),
+    "event_cam_angle": Variable(("event",), "f8", "cam angle at the event", "degree", role="event"),
+    "event_kind": Variable(("event",), "i1", "kind of event", role="event", extra=EVENT_FLAGS),
+    "event_from": Variable(
+        ("event",),
+        "i1",
+        "contact configuration before the event",
+        role="event",
+        extra=CONTACT_FLAGS,
+    ),
+    "event_to": Variable(
+        ("event",), "i1", "contact configuration after the event", role="event", extra=CONTACT_FLAGS
+    ),
+    "event_velocity": Variable(
+        ("event",), "f8", "velocity jump or closing velocity at the event", "m/s", role="event"
+    ),
+    "event_impulse": Variable(
+        ("event",), "f8", "impulse delivered at an impact", "N*s", role="event"
+    ),
     **{
         name: Variable(HISTORY, "f8", long_name, units.replace(" ", "*"), record=name)
         for name, (long_name, units) in MEMBER_LOADS.items()
@@ -136,7 +181,8 @@ def data_variables(record: Iterable[str]) -> dict[str, Variable]:
     """The variables a batch computes: all but the axes and per-case coordinates."""
     wanted = recorded(record)
     return {
-        name: v for name, v in VARIABLES.items()
+        name: v
+        for name, v in VARIABLES.items()
         if v.role not in ("axis", "parameter") and (v.record is None or v.record in wanted)
     }
 
@@ -149,17 +195,30 @@ def coordinate_field(key: str) -> Field:
 #: Standard per-case coordinates: spec key → archive variable.
 STANDARD_COORDINATES: dict[str, tuple[str, Variable]] = {
     "speed": ("speed_rpm", Variable(CASE, "f8", "cam speed", "rpm", role="parameter")),
-    "seat": ("seat", Variable(CASE, "f8", "valve seat position as a valve lift; NaN: no "
-                              "seat", "m", role="parameter")),
+    "seat": (
+        "seat",
+        Variable(
+            CASE, "f8", "valve seat position as a valve lift; NaN: no seat", "m", role="parameter"
+        ),
+    ),
     "profile": ("profile", Variable(CASE, "str", "cam profile", role="parameter")),
-    "defects": ("defects", Variable(CASE, "str", "defects applied to the cam",
-                                    role="parameter")),
-    "closure": ("closure", Variable(CASE, "str", "closure: force (spring) or form (second "
-                                    "cam)", role="parameter")),
+    "defects": ("defects", Variable(CASE, "str", "defects applied to the cam", role="parameter")),
+    "closure": (
+        "closure",
+        Variable(CASE, "str", "closure: force (spring) or form (second cam)", role="parameter"),
+    ),
     "run.integrator": ("integrator", Variable(CASE, "str", "integrator", role="parameter")),
-    "run.dt": ("dt", Variable(CASE, "f8", "time step (largest step of an integrator that "
-                              "sizes its own; NaN: the integrator's choice)", "s",
-                              role="parameter")),
+    "run.dt": (
+        "dt",
+        Variable(
+            CASE,
+            "f8",
+            "time step (largest step of an integrator that "
+            "sizes its own; NaN: the integrator's choice)",
+            "s",
+            role="parameter",
+        ),
+    ),
 }
 
 
