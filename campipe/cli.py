@@ -11,11 +11,9 @@ import numpy as np
 import yaml
 
 from campipe.model import (
-    CONFIGURATIONS,
     COORDINATES,
     PARAMETERS,
     PRESETS,
-    ROMAN,
     ModelParameterError,
     newmark_linear_stability_limit,
     system_matrices,
@@ -23,6 +21,7 @@ from campipe.model import (
 )
 from campipe.model.assembly import TRANSLATIONS, to_display_units
 from campipe.units import convert
+from campipe.vocabulary import CONFIGURATIONS, ROMAN
 
 #: The thesis's display units: lengths in inches, energies in lbf·in.
 INCH = 0.0254

@@ -36,9 +36,9 @@ from scipy.integrate import solve_ivp
 
 from campipe.engine.batch import Case
 from campipe.engine.newmark import CAM_IMPACT, CAM_SEPARATION, SEAT_IMPACT, SEAT_SEPARATION
-from campipe.model import CONFIGURATIONS, system_matrices
+from campipe.model import system_matrices
+from campipe.vocabulary import CAM, CONFIGURATIONS, SEAT, configuration
 
-CAM, SEAT = 0, 6  # the contact coordinates q1, q7 (0-based)
 TWO_PI = 2.0 * math.pi
 #: Monitor levels, as a contact switch is decided: penetration [m] and tension [N per N of
 #: spring preload] a monitor must exceed, so that a contact just made or just left is not
@@ -92,7 +92,7 @@ class IvpResult:
 
 
 def _configuration(M, C, K, f, cfg: int, seat_q: float) -> _Configuration:
-    free = np.array(CONFIGURATIONS[cfg])
+    free = np.array(CONFIGURATIONS[cfg].free)
     nf = free.size
     minv = np.linalg.inv(M[np.ix_(free, free)])
     a = np.zeros((2 * nf, 2 * nf))
@@ -112,10 +112,6 @@ def _configuration(M, C, K, f, cfg: int, seat_q: float) -> _Configuration:
         kick[row, p] = 1.0
         impact_mass[row] = M[p, p] - M[p, free] @ minv @ M[free, p]
     return _Configuration(free, a, cam_terms, minv @ load, kick, impact_mass)
-
-
-def _config_number(cam: bool, seat: bool) -> int:
-    return {(True, False): 1, (False, False): 2, (True, True): 3, (False, True): 4}[(cam, seat)]
 
 
 def _static(K, f, held_q: dict[int, float]) -> np.ndarray:
@@ -367,13 +363,13 @@ def solve_case(
         if kind is not None:
             lift, dlift, _ = cam.at(piece, rev, t_ev)
             if kind == CAM_SEPARATION:
-                new = _config_number(False, seat_held)
+                new = configuration(False, seat_held)
                 events.append((t_ev, kind, cfg, new, 0.0, 0.0))
             elif kind == SEAT_SEPARATION:
-                new = _config_number(cam_held, False)
+                new = configuration(cam_held, False)
                 events.append((t_ev, kind, cfg, new, 0.0, 0.0))
             elif kind == CAM_IMPACT:
-                new = _config_number(True, seat_held)
+                new = configuration(True, seat_held)
                 closing = v[CAM] + dlift
                 v = v + configs[new].kick[0] * (-dlift - v[CAM])
                 q[CAM] = -lift
@@ -382,7 +378,7 @@ def solve_case(
                     (t_ev, kind, cfg, new, closing, configs[new].impact_mass[0] * closing)
                 )
             else:
-                new = _config_number(cam_held, True)
+                new = configuration(cam_held, True)
                 closing = -v[SEAT]
                 v = v + configs[new].kick[1] * closing
                 q[SEAT] = seat_q
@@ -401,7 +397,7 @@ def solve_case(
             jump = dl_right - dl_left  # lift-rate jump [m/s]
             small = 1e-9 * (abs(dl_left) + abs(dl_right) + 1e-12)
             if (jump < -small or l_right < l_left - 1e-12) and not form:
-                new = _config_number(False, seat_held)
+                new = configuration(False, seat_held)
                 events.append((t, CAM_SEPARATION, cfg, new, -jump, 0.0))
                 cfg = new
             elif abs(jump) > small:

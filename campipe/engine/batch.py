@@ -16,9 +16,7 @@ from numba import njit
 
 from campipe.engine import exact, newmark
 from campipe.engine.contact import (
-    CAM,
     HELD,
-    SEAT,
     held_inverses,
     impact_masses,
     newmark_step_maps,
@@ -26,13 +24,14 @@ from campipe.engine.contact import (
     quasi_static_state,
 )
 from campipe.engine.modal import ModalData, harmonic_responses, modal_data
-from campipe.model import ROMAN, ValveTrain, system_matrices
+from campipe.model import ValveTrain, system_matrices
 from campipe.model.assembly import (
     NEWMARK_LINEAR_OMEGA_DT,
     SystemMatrices,
     configuration_frequencies,
 )
 from campipe.profiles import Profile, evaluate_packed, pack
+from campipe.vocabulary import CAM, ROMAN, SEAT
 
 log = logging.getLogger(__name__)
 

@@ -10,13 +10,11 @@ import numpy as np
 from numba import njit
 
 from campipe.engine.newmark import N_X, N_Z, X_A, X_Q, X_V
-from campipe.model.assembly import CONFIGURATIONS
-
-CAM, SEAT = 0, 6  # the two contact coordinates (q1, q7), 0-based
+from campipe.vocabulary import CAM, CONFIGURATIONS, SEAT
 
 #: HELD[c - 1, i]: coordinate i is prescribed in configuration c.
 HELD = np.array(
-    [[i not in CONFIGURATIONS[c] for i in range(7)] for c in (1, 2, 3, 4)], dtype=np.bool_
+    [[i in CONFIGURATIONS[c].held for i in range(7)] for c in (1, 2, 3, 4)], dtype=np.bool_
 )
 
 
@@ -26,7 +24,7 @@ def effective_mass_inverses(mass, damping, stiffness, dt: float) -> np.ndarray:
     meff = mass + 0.5 * dt * damping + dt * dt / 6.0 * stiffness
     out = np.zeros((4, 7, 7))
     for c in (1, 2, 3, 4):
-        free = list(CONFIGURATIONS[c])
+        free = list(CONFIGURATIONS[c].free)
         out[c - 1][np.ix_(free, free)] = np.linalg.inv(meff[np.ix_(free, free)])
     return out
 
@@ -89,7 +87,7 @@ def impact_mass(mass: np.ndarray, struck: int, configuration_after: int) -> floa
     A perfectly plastic impact against an infinite mass that changes the struck coordinate's
     velocity by Δv delivers the impulse m·Δv.
     """
-    free = list(CONFIGURATIONS[configuration_after])
+    free = list(CONFIGURATIONS[configuration_after].free)
     mpf = mass[struck, free]
     return float(mass[struck, struck] - mpf @ np.linalg.solve(mass[np.ix_(free, free)], mpf))
 

@@ -24,11 +24,11 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from campipe.model.assembly import CONFIGURATIONS, SystemMatrices
+from campipe.model.assembly import SystemMatrices
+from campipe.vocabulary import CONFIGURATIONS, CONTACTS
 
 NS = 14  # padded state size: 2 × 7 free coordinates (configuration II)
-CAM, SEAT = 0, 6
-HELD_COORDS = (CAM, SEAT)  # index hc of the held-coordinate axes below
+# Index hc of the held-coordinate axes below follows vocabulary.CONTACTS: 0 the cam, 1 the seat.
 
 
 class DefectiveModesError(ValueError):
@@ -89,7 +89,7 @@ def modal_data(sm: SystemMatrices, max_condition: float = 1e10) -> ModalData:
         "lam_abs": np.zeros((4, NS)),
     }
     for ci, cfg in enumerate((1, 2, 3, 4)):
-        fr = np.array(CONFIGURATIONS[cfg])
+        fr = np.array(CONFIGURATIONS[cfg].free)
         nf = fr.size
         ns = 2 * nf
         mff_inv = np.linalg.inv(M[np.ix_(fr, fr)])
@@ -115,14 +115,14 @@ def modal_data(sm: SystemMatrices, max_condition: float = 1e10) -> ModalData:
         out["a_mat"][ci, :ns, :ns] = A
         out["a_inv"][ci, :ns, :ns] = np.linalg.inv(A)
         out["b_load"][ci, nf:ns] = mff_inv @ f[fr]
-        for hc, p in enumerate(HELD_COORDS):
+        for hc, p in enumerate(CONTACTS):
             for kind, mat in enumerate((K, C, M)):  # q, q̇, q̈ of the held coordinate
                 out["b_in"][ci, nf:ns, kind, hc] = -mff_inv @ mat[fr, p]
-        for r, row in enumerate(HELD_COORDS):
+        for r, row in enumerate(CONTACTS):
             mrf = M[row, fr]
             out["rho"][ci, r, :nf] = K[row, fr] + mrf @ A[nf:, :nf]
             out["rho"][ci, r, nf:ns] = C[row, fr] + mrf @ A[nf:, nf:]
-            for hc, p in enumerate(HELD_COORDS):
+            for hc, p in enumerate(CONTACTS):
                 for kind, mat in enumerate((K, C, M)):
                     out["sigma"][ci, r, kind, hc] = mat[row, p] - mrf @ mff_inv @ mat[fr, p]
             out["sigma0"][ci, r] = mrf @ mff_inv @ f[fr] - f[row]
@@ -131,7 +131,7 @@ def modal_data(sm: SystemMatrices, max_condition: float = 1e10) -> ModalData:
         out["lam_abs"][ci, :ns] = np.abs(lam)
         # A plastic impact that sets held coordinate p's velocity: M Δv = P e_p with the other
         # held coordinates fixed, so Δv_free = −M_ff⁻¹ M_fp Δv_p.
-        for hc, p in enumerate(HELD_COORDS):
+        for hc, p in enumerate(CONTACTS):
             out["impulse"][ci, hc, fr] = -mff_inv @ M[fr, p]
             out["impulse"][ci, hc, p] = 1.0
     return ModalData(**out)

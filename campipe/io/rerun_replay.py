@@ -42,9 +42,10 @@ import numpy as np
 import rerun as rr
 import rerun.blueprint as rrb
 
-from campipe.model import PARAMETERS, ROMAN
+from campipe.model import PARAMETERS
 from campipe.replay import sketch
 from campipe.replay.cases import ReplayCase
+from campipe.vocabulary import CAM_IMPACT, CAM_SEPARATION, ROMAN, SEAT_IMPACT, SEAT_SEPARATION
 
 APPLICATION_ID = "campipe"
 #: Timeline names.
@@ -69,12 +70,12 @@ SERIES: dict[str, tuple[str, str, float, tuple[int, int, int]]] = {
         (60, 60, 60),
     ),
 }
-#: Event kinds (campipe.engine.newmark) → (name, text-log level).
+#: Event kinds (campipe.vocabulary) → (name, text-log level).
 EVENT_KINDS = {
-    1: ("cam separation", "INFO"),
-    2: ("cam impact", "WARN"),
-    3: ("seat separation", "INFO"),
-    4: ("seat impact", "WARN"),
+    CAM_SEPARATION: ("cam separation", "INFO"),
+    CAM_IMPACT: ("cam impact", "WARN"),
+    SEAT_SEPARATION: ("seat separation", "INFO"),
+    SEAT_IMPACT: ("seat impact", "WARN"),
 }
 #: Sketch parts: name → colour.
 PART_COLOURS = {

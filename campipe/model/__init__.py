@@ -1,9 +1,7 @@
 """The valve-train model: parameters, presets, element and system matrices (thesis Ch. II)."""
 
 from campipe.model.assembly import (
-    CONFIGURATIONS,
     COORDINATES,
-    ROMAN,
     SystemMatrices,
     assemble,
     configuration_frequencies,
@@ -25,12 +23,10 @@ from campipe.model.parameters import (
 )
 
 __all__ = [
-    "CONFIGURATIONS",
     "COORDINATES",
     "ELEMENTS",
     "PARAMETERS",
     "PRESETS",
-    "ROMAN",
     "ModelParameterError",
     "SystemMatrices",
     "ValveTrain",

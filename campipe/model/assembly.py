@@ -14,16 +14,7 @@ import scipy.linalg
 
 from campipe.model.elements import elements
 from campipe.model.parameters import N_DOF, ValveTrain
-
-#: Free coordinates (0-based) in each contact configuration (thesis Table I): I cam contact
-#: (q1 prescribed), II free, III cam and seat (q1 and q7 prescribed), IV seat (q7 prescribed).
-CONFIGURATIONS: dict[int, tuple[int, ...]] = {
-    1: (1, 2, 3, 4, 5, 6),
-    2: (0, 1, 2, 3, 4, 5, 6),
-    3: (1, 2, 3, 4, 5),
-    4: (0, 1, 2, 3, 4, 5),
-}
-ROMAN = {1: "I", 2: "II", 3: "III", 4: "IV"}
+from campipe.vocabulary import CONFIGURATIONS
 
 #: Newmark linear acceleration (β = 1/6, γ = 1/2) is stable for ω·Δt < √12 (= (√3/π)·T),
 #: whatever the damping (the γ = 1/2 family's limit does not depend on ζ).
@@ -119,7 +110,7 @@ def configuration_frequencies(
     mass: np.ndarray, stiffness: np.ndarray, configuration: int
 ) -> np.ndarray:
     """Natural frequencies [rad/s] of the train with the configuration's contacts held."""
-    free = list(CONFIGURATIONS[configuration])
+    free = list(CONFIGURATIONS[configuration].free)
     omega, _ = normal_modes(mass[np.ix_(free, free)], stiffness[np.ix_(free, free)])
     return omega
 

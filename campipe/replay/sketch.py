@@ -34,6 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from campipe.model import ValveTrain
+from campipe.vocabulary import CONFIGURATIONS
 
 #: Base-circle radius of the drawn cam [m]: the thesis's model needs none.
 BASE_RADIUS = 0.02
@@ -44,8 +45,8 @@ ARM_POINTS = 17
 #: Zig-zag corners of the spring.
 SPRING_CORNERS = 14
 #: Contact configurations (thesis Table I) with the follower on the cam / the valve seated.
-CAM_CONTACT = (1, 3)
-SEAT_CONTACT = (3, 4)
+CAM_CONTACT = tuple(n for n, c in CONFIGURATIONS.items() if c.cam)
+SEAT_CONTACT = tuple(n for n, c in CONFIGURATIONS.items() if c.seat)
 
 
 @dataclass(frozen=True)

@@ -20,6 +20,7 @@ from campipe.engine import MEMBER_LOADS
 from campipe.model import COORDINATES, PARAMETERS
 from campipe.study.fields import CASE_FIELDS, Field, varied_fields
 from campipe.units import convert
+from campipe.vocabulary import CONTACT_FLAGS, EVENT_FLAGS
 
 
 @dataclass(frozen=True)
@@ -42,14 +43,6 @@ class Variable:
         return out
 
 
-CONTACT_FLAGS = (
-    ("flag_values", [1, 2, 3, 4]),
-    ("flag_meanings", "I_cam_contact II_free III_cam_and_seat IV_seat_only"),
-)
-EVENT_FLAGS = (
-    ("flag_values", [1, 2, 3, 4]),
-    ("flag_meanings", "cam_separation cam_impact seat_separation seat_impact"),
-)
 CASE = ("case",)
 HISTORY = ("case", "cam_angle")
 
