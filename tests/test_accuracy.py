@@ -12,9 +12,9 @@ from numpy.testing import assert_allclose
 
 from campipe.engine import Case, IntegrationError, RunSettings, run_batch, stability_limit
 from campipe.engine.batch import _matrices
-from campipe.engine.newmark import CAM_IMPACT, EV_IMPULSE, EV_KIND, EV_TIME, EV_VELOCITY
 from campipe.model import thesis_train
 from campipe.profiles import harmonic
+from campipe.vocabulary import CAM_IMPACT, EV_IMPULSE, EV_KIND, EV_TIME, EV_VELOCITY
 
 INCH = 0.0254
 TRAIN = thesis_train()

@@ -16,9 +16,9 @@ from campipe.bench.ivp import solve_case
 from campipe.bench.suite import INCH, QUICK, rpm, suite
 from campipe.cli import main
 from campipe.engine import Case, RunSettings, run_batch
-from campipe.engine.newmark import EV_KIND, EV_TIME
 from campipe.model import thesis_train
 from campipe.profiles import harmonic
+from campipe.vocabulary import EV_KIND, EV_TIME
 
 SCENES = {s.name: s for s in suite()}
 SEPARATION = SCENES["separation-11000"]

@@ -17,10 +17,10 @@ from campipe.engine import (
 )
 from campipe.engine.batch import _matrices, initial_state, valve_reference
 from campipe.engine.contact import impact_masses
-from campipe.engine.newmark import CAM_IMPACT, CAM_SEPARATION, EV_KIND, EV_TIME
 from campipe.model import thesis_train
 from campipe.profiles import flat, harmonic, polydyne
 from campipe.units import convert
+from campipe.vocabulary import CAM_IMPACT, CAM_SEPARATION, EV_KIND, EV_TIME
 
 INCH = 0.0254
 LBF = convert(1.0, "lbf", "N")

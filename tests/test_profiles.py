@@ -494,10 +494,5 @@ def test_pack_and_evaluate_packed_match_evaluate():
     for c, p in enumerate(profiles):
         theta = np.concatenate([rng.uniform(-15.0, 20.0, 300), p.breaks, [-1e-300, -TWO_PI]])
         want = np.array(evaluate(p, theta))
-        got = np.array(
-            [
-                evaluate_packed(packed.breaks, packed.poly, packed.trig, packed.n_pieces, c, t)
-                for t in theta
-            ]
-        ).T
+        got = np.array([evaluate_packed(packed, c, t) for t in theta]).T
         assert_allclose(got, want, rtol=1e-14, atol=1e-15 * H)

@@ -9,11 +9,11 @@ from numpy.testing import assert_allclose
 from study_helpers import LBF, STUDIES
 
 from campipe.engine import MEMBER_LOADS, member_loads
-from campipe.engine.newmark import CAM_IMPACT, CAM_SEPARATION
 from campipe.model import thesis_train
 from campipe.study import load_study
 from campipe.study.execute import run_study
 from campipe.study.query import case_table, onset_table
+from campipe.vocabulary import CAM_IMPACT, CAM_SEPARATION
 
 
 def run(tmp_path, name, **overrides) -> xr.Dataset:

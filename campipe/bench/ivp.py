@@ -35,9 +35,17 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from campipe.engine.batch import Case
-from campipe.engine.newmark import CAM_IMPACT, CAM_SEPARATION, SEAT_IMPACT, SEAT_SEPARATION
 from campipe.model import system_matrices
-from campipe.vocabulary import CAM, CONFIGURATIONS, SEAT, configuration
+from campipe.vocabulary import (
+    CAM,
+    CAM_IMPACT,
+    CAM_SEPARATION,
+    CONFIGURATIONS,
+    SEAT,
+    SEAT_IMPACT,
+    SEAT_SEPARATION,
+    configuration,
+)
 
 TWO_PI = 2.0 * math.pi
 #: Monitor levels, as a contact switch is decided: penetration [m] and tension [N per N of

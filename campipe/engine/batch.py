@@ -15,6 +15,7 @@ import numpy as np
 from numba import njit
 
 from campipe.engine import exact, newmark
+from campipe.engine.common import Cases, make_outputs
 from campipe.engine.contact import (
     HELD,
     held_inverses,
@@ -31,7 +32,7 @@ from campipe.model.assembly import (
     configuration_frequencies,
 )
 from campipe.profiles import Profile, evaluate_packed, pack
-from campipe.vocabulary import CAM, ROMAN, SEAT
+from campipe.vocabulary import CAM, CHATTER, EVENTS_TRUNCATED, NONFINITE, ROMAN, SEAT
 
 log = logging.getLogger(__name__)
 
@@ -152,7 +153,8 @@ class BatchResult:
     #: the thesis's peak "impact force" [N]. For newmark-linear it measures 1/Δt and does not
     #: converge; modal-exact applies impulses instantly, so it equals max_cam_force.
     thesis_impact_force: np.ndarray
-    events: list[np.ndarray] = field(default_factory=list)  # per case (n_ev, 6), see newmark.EV_*
+    #: per case (n_ev, 6): columns vocabulary.EV_*
+    events: list[np.ndarray] = field(default_factory=list)
     steps: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # (n_cases,)
 
     @property
@@ -275,11 +277,12 @@ def _unique_trains(cases: Sequence[Case]) -> tuple[list[ValveTrain], np.ndarray]
 
 
 @njit(cache=True, nogil=True)
-def _cam_at(breaks, poly, trig, n_pieces, theta):
+def _cam_at(profiles, theta):
     """(n, 3): lift [m] and its θ-derivatives of every packed profile at one angle."""
-    out = np.empty((n_pieces.shape[0], 3))
-    for c in range(n_pieces.shape[0]):
-        out[c, 0], out[c, 1], out[c, 2] = evaluate_packed(breaks, poly, trig, n_pieces, c, theta)
+    n = profiles.n_pieces.shape[0]
+    out = np.empty((n, 3))
+    for c in range(n):
+        out[c, 0], out[c, 1], out[c, 2] = evaluate_packed(profiles, c, theta)
     return out
 
 
@@ -291,7 +294,7 @@ def initial_states(mats, which, packed, omega, has_seat, seat_q, inverses=None):
     if inverses is None:
         inverses = [start_inverses(m) for m in mats]
     n = which.size
-    cam = _cam_at(packed.breaks, packed.poly, packed.trig, packed.n_pieces, 0.0)
+    cam = _cam_at(packed, 0.0)
     held_q = np.zeros((n, 7))
     held_v = np.zeros((n, 7))
     held_a = np.zeros((n, 7))
@@ -369,165 +372,46 @@ def check_run(
         check_stability(cases, settings)
 
 
-class _Outputs:
-    """The arrays a kernel fills in place."""
-
-    def __init__(self, n: int, n_out: int, n_rev: int, max_events: int) -> None:
-        self.q = np.zeros((n, n_out, 7))
-        self.v = np.zeros((n, n_out, 7))
-        self.force = np.zeros((n, n_out, 2))
-        self.cam = np.zeros((n, n_out))
-        self.cfg = np.zeros((n, n_out), np.int8)
-        self.sep_rev = np.zeros((n, n_rev))
-        self.counts = np.zeros((n, 2), np.int64)
-        self.vmax = np.zeros((n, 2))
-        self.fmax = np.zeros((n, 3))
-        self.events = np.empty((n, max_events, newmark.N_EVENT_FIELDS))  # rows < n_events
-        self.n_events = np.zeros(n, np.int64)
-        self.status = np.zeros(n, np.int64)
-
-    def tail(self) -> tuple:
-        return (
-            self.q,
-            self.v,
-            self.force,
-            self.cam,
-            self.cfg,
-            self.sep_rev,
-            self.counts,
-            self.vmax,
-            self.fmax,
-            self.events,
-            self.n_events,
-            self.status,
-        )
-
-
-def _run_newmark(
-    preps,
-    which,
-    settings,
-    dt_run,
-    meff,
-    q0,
-    v0,
-    a0,
-    cfg0,
-    seat_q,
-    has_seat,
-    form,
-    omega,
-    packed,
-    out,
-) -> np.ndarray:
-    M = np.stack([p.matrices.mass for p in preps])[which]
-    C = np.stack([p.matrices.damping for p in preps])[which]
-    K = np.stack([p.matrices.stiffness for p in preps])[which]
-    load = np.stack([p.matrices.preload for p in preps])[which]
-    step_A = np.stack([p.step_A for p in preps])[which]
-    step_G = np.stack([p.step_G for p in preps])[which]
+def _run_newmark(preps, which, settings, dt_run, cases, packed, out) -> None:
+    trains = newmark.NewmarkTrains(
+        M=np.stack([p.matrices.mass for p in preps])[which],
+        C=np.stack([p.matrices.damping for p in preps])[which],
+        K=np.stack([p.matrices.stiffness for p in preps])[which],
+        load=np.stack([p.matrices.preload for p in preps])[which],
+        step_A=np.stack([p.step_A for p in preps])[which],
+        step_G=np.stack([p.step_G for p in preps])[which],
+    )
     dt = np.full(len(which), dt_run)
-    n_steps = np.ceil(settings.revolutions * 2 * np.pi / (omega * dt) - 1e-9).astype(np.int64)
-    newmark.newmark_linear_batch(
-        M,
-        C,
-        K,
-        load,
-        step_A,
-        step_G,
-        meff,
-        q0,
-        v0,
-        a0,
-        cfg0,
-        seat_q,
-        has_seat,
-        form,
-        omega,
-        dt,
-        n_steps,
-        packed.breaks,
-        packed.poly,
-        packed.trig,
-        packed.n_pieces,
-        settings.output_every,
-        *out.tail(),
-    )
-    return n_steps
+    n_steps = np.ceil(settings.revolutions * 2 * np.pi / (cases.omega * dt) - 1e-9)
+    runs = newmark.NewmarkRuns(dt, n_steps.astype(np.int64), float(settings.output_every))
+    newmark.newmark_linear_batch(cases, trains, packed, runs, out, newmark.make_work())
 
 
-def _run_modal_exact(
-    trains,
-    preps,
-    which,
-    settings,
-    dt_run,
-    full_state,
-    meff,
-    q0,
-    v0,
-    a0,
-    cfg0,
-    seat_q,
-    has_seat,
-    form,
-    omega,
-    packed,
-    out,
-) -> np.ndarray:
-    fields = (
-        "n_free",
-        "free",
-        "lam",
-        "vec",
-        "vec_inv",
-        "a_inv",
-        "b_in",
-        "b_load",
-        "rho",
-        "sigma",
-        "sigma0",
-        "impulse",
-        "rho_vec",
-        "vnorm",
-        "lam_abs",
-    )
+def _run_modal_exact(trains, preps, which, settings, dt_run, full_state, cases, packed, out):
     # Per-train data, indexed in the kernel by each case's train.
     data = [_modal(t) for t in trains]
-    stacked = {f: np.stack([getattr(d, f) for d in data]) for f in fields}
-    a_mat = np.stack([d.a_mat for d in data])
-    zeta = harmonic_responses(which, stacked["n_free"], a_mat, stacked["b_in"], omega)
-    load = np.stack([p.matrices.preload for p in preps])
-    t_sample = settings.output_every / omega
-    t_end = settings.revolutions * 2 * np.pi / omega
-    steps_taken = np.zeros(len(which), np.int64)
-    exact.modal_exact_batch(
-        which,
-        load,
-        *(stacked[f] for f in fields),
-        zeta,
-        meff,
-        q0,
-        v0,
-        cfg0,
-        seat_q,
-        has_seat,
-        form,
-        omega,
-        t_sample,
-        t_end,
-        dt_run or 0.0,
-        settings.tolerance,
-        settings.cutoff,
-        full_state,
-        steps_taken,
-        packed.breaks,
-        packed.poly,
-        packed.trig,
-        packed.n_pieces,
-        *out.tail(),
+    modal_trains = exact.ModalTrains(
+        load=np.stack([p.matrices.preload for p in preps]),
+        **{
+            f: np.stack([getattr(d, f) for d in data])
+            for f in exact.ModalTrains._fields
+            if f != "load"
+        },
     )
-    return steps_taken
+    a_mat = np.stack([d.a_mat for d in data])
+    omega = cases.omega
+    runs = exact.ExactRuns(
+        train=which,
+        t_sample=settings.output_every / omega,
+        t_end=settings.revolutions * 2 * np.pi / omega,
+        zeta=harmonic_responses(which, modal_trains.n_free, a_mat, modal_trains.b_in, omega),
+        dt_cap=float(dt_run or 0.0),
+        tolerance=float(settings.tolerance),
+        mode_cutoff=float(settings.cutoff),
+        full_state=bool(full_state),
+    )
+    state = np.zeros(1, exact.STATE)
+    exact.modal_exact_batch(cases, modal_trains, packed, runs, out, exact.make_workspace(), state)
 
 
 def run_batch(
@@ -585,14 +469,14 @@ def run_batch(
         seat_q,
         [p.start_inverses for p in preps],
     )
-    out = _Outputs(n, n_out, n_rev, settings.max_events)
-    common = (meff, q0, v0, a0, cfg0, seat_q, has_seat, form, omega, packed, out)
+    out = make_outputs(n, n_out, n_rev, settings.max_events)
+    cases_in = Cases(omega, seat_q, has_seat, form, q0, v0, a0, cfg0, meff)
     if settings.method == "newmark-linear":
-        n_steps = _run_newmark(preps, which, settings, dt_run, *common)
+        _run_newmark(preps, which, settings, dt_run, cases_in, packed, out)
     else:
-        n_steps = _run_modal_exact(trains, preps, which, settings, dt_run, full_state, *common)
+        _run_modal_exact(trains, preps, which, settings, dt_run, full_state, cases_in, packed, out)
     status, n_events = out.status, out.n_events
-    bad = np.flatnonzero(status == newmark.NONFINITE)
+    bad = np.flatnonzero(status == NONFINITE)
     if bad.size:
         how = f"{settings.method}, step {dt_run:g} s" if dt_run else settings.method
         why = (
@@ -601,13 +485,13 @@ def run_batch(
             else "this is a defect: please report it with the case"
         )
         raise IntegrationError(f"cases {bad.tolist()} became non-finite ({how}); {why}")
-    bad = np.flatnonzero(status == exact.CHATTER)
+    bad = np.flatnonzero(status == CHATTER)
     if bad.size:
         raise IntegrationError(
             f"cases {bad.tolist()}: contact events kept recurring at one instant (chatter); "
             "integrate them with newmark-linear"
         )
-    for i in np.flatnonzero(status == newmark.EVENTS_TRUNCATED):
+    for i in np.flatnonzero(status == EVENTS_TRUNCATED):
         log.warning(
             "case %d: %d events, only the first %d kept (raise run.max_events)",
             i,
@@ -636,5 +520,5 @@ def run_batch(
         max_seat_force=fmax[:, 1],
         thesis_impact_force=fmax[:, 2],
         events=[events[i, : kept[i]].copy() for i in range(n)],
-        steps=n_steps,
+        steps=out.steps,
     )

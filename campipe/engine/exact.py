@@ -2,13 +2,13 @@
 
 Between events the solution is exact (``campipe.engine.modal``): the state at any time is
 V·(y₀ ∘ e^{λτ}) plus the exact particular solution of the piece's polynomial and harmonic
-forcing. The integrator walks a grid of ``h`` (``dt`` rounded down so that the output angles
-fall on the grid), watches each configuration's monitors (thesis Table I) at the grid points,
-and on a sign change locates the event by a bracketed root search (Illinois) on the closed
-form, to ``tolerance`` in time. A segment ends at an event or at a break of the cam profile;
-the next starts from the exact state there.
+forcing. The integrator walks a grid (steps sized by the modes that can still matter, so that
+the output angles fall on it), watches each configuration's monitors (thesis Table I) at the
+grid points, and on a sign change locates the event by a bracketed root search (Newton with
+Illinois) on the closed form, to ``tolerance`` in time. A segment ends at an event or at a
+break of the cam profile; the next starts from the exact state there.
 
-Monitors, each an event when it rises through zero (direction: upward only):
+Monitors, each an event when it rises through its level (direction: upward only):
 
 - cam held (I, III), force closure: F1 (the cam would pull) → release the cam;
 - cam free (II, IV): q1 + lift(θ) (the follower reaches the cam surface) → cam impact;
@@ -20,35 +20,69 @@ takes the obstacle's velocity and, through the consistent mass, the free coordin
 velocity by −M_ff⁻¹ M_fp Δv_p: the impulse m_eff·v_closing is applied at the instant of
 contact, so no force measures 1/Δt.
 
-The only step-size limit is event resolution: a monitor that rises and falls back within one
-step is not seen. ``dt`` is therefore refused above half the shortest natural period of any
-configuration the case can visit (``event_resolution_limit``).
+There is no step-size limit to trip: a step is at most ``RESOLUTION``·π/|λ| of the fastest
+mode that could bring a monitor to its level, so a monitor's maximum inside a step shows as a
+sign change of its derivative; ``run.dt`` only caps the step.
+
+Notation (``campipe.engine.modal`` for the equations)
+-----------------------------------------------------
+==============  ===========================================================================
+z = [x; ẋ]      state of the free coordinates (2·n_f entries, ``ns``); ż = A z + forcing
+λ_j, V          eigenvalues and right eigenvectors of A (A = V Λ V⁻¹), mode j
+t_s, τ          the segment's start [s]; τ = t − t_s
+θ, x            cam angle ωt [rad]; x = θ − θ0, the angle from the piece's start θ0
+z_p             particular solution Σ_k Z_k x^k + Re(Z_T e^{iθ}) (``Z``, ``ZT``)
+y0              modal coordinates at t_s: V⁻¹ (z(t_s) − z_p(t_s))
+z(t)            V (y0 ∘ e^{λτ}) + z_p(t)
+g_m             monitor m (0: cam, 1: seat) = Re Σ_j W_mj e^{λ_j τ} + Σ_k G_mk x^k
+                + Re(GT_m e^{iθ}); an event where g_m rises through ``level[m]``
+h, E_j, D_j     grid step [s]; E_j = e^{λ_j τ} at the grid point, D_j = e^{λ_j h}
+pair (column)   modes in conjugate pairs, one column each, fastest first, coefficients
+                doubled: every sum is Re Σ over half the modes
+==============  ===========================================================================
+
+The per-pair work arrays: ``MC`` rows ER … AMP_F (E, D, |E|, |D| and the pair's largest share
+of a coordinate and of the contact forces), ``WC`` rows W_R … WL_ABS (W, Wλ, Wλ² and |W|,
+|Wλ|), ``VY[:, jj, s]`` (Re, Im) of V_sj·y0_j.
+
+The kernel's steps, each a function below: begin a segment (``_begin_segment``: forcing,
+particular solution, modal start, monitors, mode pairs), walk the grid (``_walk``: plan the
+steps, advance, watch the monitors), locate an event (``_earliest_crossing``, ``_root``), apply
+it (``_apply_event``), cross a profile break (``_cross_break``).
 """
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 from numba import njit
 
+from campipe.constants import TWO_PI
+from campipe.engine.common import (
+    KERNEL,
+    RELEASE,
+    SMOOTH,
+    classify_break,
+    configuration,
+    holds_cam,
+    holds_seat,
+    record_event,
+    record_impact,
+)
 from campipe.engine.modal import NS
-from campipe.engine.newmark import (
+from campipe.profiles.packed import degree, horner, locate, next_break, piece_eval
+from campipe.vocabulary import (
+    CAM,
     CAM_SEPARATION,
+    CHATTER,
     EVENTS_TRUNCATED,
-    JUMP_FLOOR,
     NONFINITE,
     OK,
+    SEAT,
     SEAT_SEPARATION,
-    TWO_PI,
-    _config,
-    _degree,
-    _impact,
-    _record,
-    horner2,
-    locate,
-    piece_eval,
 )
 
-CHATTER = 3  # status: events kept recurring without time advancing
 #: Steps are at most RESOLUTION·π/|λ| of the fastest mode still present: under half its period,
 #: so that mode's part of a monitor's derivative changes sign at most once per step, and a
 #: maximum inside a step is seen as a + to − change of the derivative at the grid points.
@@ -57,23 +91,166 @@ RESOLUTION = 0.9
 #: (4e-12 in: far below any output's resolution) and its share of the contact forces is below
 #: the force level of the monitors.
 MODE_FLOOR = 1e-13
+#: A gap monitor's level [m]: the penetration at which a contact is an impact.
+GAP_LEVEL = 1e-13
 MAX_STALLED_EVENTS = 64
 ROOT_ITERATIONS = 200
 
+# Rows of the per-pair work array ``MC`` (one column per active mode pair, fastest first):
+# e^{λτ} at the current grid point (real, imaginary), the grid step's factor e^{λh}, their
+# magnitudes, and the pair's largest share of a coordinate or velocity and of the contact
+# forces at the segment start.
+ER, EI, DR, DI, EABS, DABS, AMP_Q, AMP_F = range(8)
+# Rows of the monitor coefficients ``WC`` (row, monitor, pair): W, W·λ, W·λ² as (real,
+# imaginary), then |W| and |W·λ|.
+W_R, W_I, WL_R, WL_I, WLL_R, WLL_I, W_ABS, WL_ABS = range(8)
 
-@njit(cache=True, nogil=True)
-def _zpoly(Z, s, x, deg):
-    """Σ_{k ≤ deg} Z[k, s]·x^k: entry s of the particular solution's polynomial part."""
-    acc = 0.0
-    for k in range(deg, -1, -1):
-        acc = acc * x + Z[k, s]
-    return acc
+
+class ModalTrains(NamedTuple):
+    """The distinct trains of a batch: preload and ``modal.ModalData`` per configuration
+    (leading axes (n_trains, 4); see ``modal.ModalData`` for each field)."""
+
+    load: np.ndarray  # (n_trains, 7) preload [N]
+    n_free: np.ndarray
+    free: np.ndarray
+    lam: np.ndarray
+    vec: np.ndarray
+    vec_inv: np.ndarray
+    a_inv: np.ndarray
+    b_in: np.ndarray
+    b_load: np.ndarray
+    rho: np.ndarray
+    sigma: np.ndarray
+    sigma0: np.ndarray
+    impulse: np.ndarray
+    rho_vec: np.ndarray
+    vnorm: np.ndarray
+    lam_abs: np.ndarray
 
 
-@njit(cache=True, nogil=True)
-def _held_inputs(poly, trig, c, p, w, seat_q, cam_held, seat_held, inp, inp_t):
+class ExactRuns(NamedTuple):
+    """How each case is run: its train, sampling, end, harmonic responses, and the settings
+    shared by the batch."""
+
+    train: np.ndarray  # (n,) int64 index into ModalTrains
+    t_sample: np.ndarray  # (n,) output spacing in time [s]
+    t_end: np.ndarray  # (n,) the run's end [s]
+    zeta: np.ndarray  # (n, 4, NS) complex ``modal.harmonic_responses`` at the case's speed
+    dt_cap: float  # largest step [s]; 0: none
+    tolerance: float  # event-time tolerance [s]
+    mode_cutoff: float  # reduced fidelity: highest mode kept on the grid [rad/s]; 0: all
+    full_state: bool  # sample all seven coordinates (else q1 and q7 only)
+
+
+class Workspace(NamedTuple):
+    """Work arrays of one case's segment, allocated once per batch (``make_workspace``)."""
+
+    q: np.ndarray  # (7,) coordinates at the segment start / an event [m, rad]
+    v: np.ndarray  # (7,) velocities
+    z: np.ndarray  # (NS,) a state z
+    zh: np.ndarray  # (NS,) the homogeneous part at the segment start
+    zb: np.ndarray  # (NS,) scratch
+    Z: np.ndarray  # (9, NS) polynomial particular solution Z_k (row k)
+    ZT: np.ndarray  # (NS,) complex harmonic particular solution Z_T
+    bpoly: np.ndarray  # (8, NS) the forcing's polynomial coefficients b_k
+    y0: np.ndarray  # (NS,) complex modal coordinates at t_s
+    ev: np.ndarray  # (NS,) complex e^{λτ} at an event
+    ya: np.ndarray  # (NS,) complex y0 ∘ e^{λτ}
+    W: np.ndarray  # (2, NS) complex monitor modal coefficients, per mode
+    order: np.ndarray  # (NS,) int64 the modes, fastest first
+    act: np.ndarray  # (NS,) int64 the mode of each active pair column
+    lamc: np.ndarray  # (NS,) complex λ of each pair column
+    MC: np.ndarray  # (8, NS) per-pair work, rows ER … AMP_F
+    WC: np.ndarray  # (8, 2, NS) monitor coefficients per pair, rows W_R … WL_ABS
+    VY: np.ndarray  # (2, NS, NS) (Re, Im) of V_sj·y0_j per pair column jj
+    gval: np.ndarray  # (2,) monitors at the latest point
+    dval: np.ndarray  # (2,) their time derivatives
+    gprev: np.ndarray  # (2,) monitors at the previous grid point
+    dprev: np.ndarray  # (2,) their time derivatives
+    G: np.ndarray  # (2, 8) monitors' polynomial part G_mk
+    GT: np.ndarray  # (2,) complex monitors' harmonic part
+    ready: np.ndarray  # (2,) bool: monitor prepared (its value is computed)
+    watch: np.ndarray  # (2,) bool: monitor can end the segment
+    level: np.ndarray  # (2,) the level each monitor rises through at an event
+    inp: np.ndarray  # (3, 2, 8) held coordinates' (q, q̇, q̈) polynomials in x
+    inp_t: np.ndarray  # (3, 2) complex held coordinates' harmonic parts
+
+
+def make_workspace() -> Workspace:
+    """A zeroed workspace."""
+    return Workspace(
+        q=np.zeros(7),
+        v=np.zeros(7),
+        z=np.zeros(NS),
+        zh=np.zeros(NS),
+        zb=np.zeros(NS),
+        Z=np.zeros((9, NS)),
+        ZT=np.zeros(NS, np.complex128),
+        bpoly=np.zeros((8, NS)),
+        y0=np.zeros(NS, np.complex128),
+        ev=np.zeros(NS, np.complex128),
+        ya=np.zeros(NS, np.complex128),
+        W=np.zeros((2, NS), np.complex128),
+        order=np.zeros(NS, np.int64),
+        act=np.zeros(NS, np.int64),
+        lamc=np.zeros(NS, np.complex128),
+        MC=np.zeros((8, NS)),
+        WC=np.zeros((8, 2, NS)),
+        VY=np.zeros((2, NS, NS)),
+        gval=np.zeros(2),
+        dval=np.zeros(2),
+        gprev=np.zeros(2),
+        dprev=np.zeros(2),
+        G=np.zeros((2, 8)),
+        GT=np.zeros(2, np.complex128),
+        ready=np.zeros(2, np.bool_),
+        watch=np.zeros(2, np.bool_),
+        level=np.zeros(2),
+        inp=np.zeros((3, 2, 8)),
+        inp_t=np.zeros((3, 2), np.complex128),
+    )
+
+
+#: The scalars of one case's run and of its current segment (a record, so the steps below
+#: share them by name).
+STATE = np.dtype(
+    [
+        ("c", "i8"),  # the case
+        ("tr", "i8"),  # its train
+        ("w", "f8"),  # its speed ω [rad/s]
+        ("eps_force", "f8"),  # force monitors' level [N]
+        ("cfg", "i8"),  # configuration
+        ("p", "i8"),  # piece of the profile, of turn ``rev``
+        ("rev", "i8"),
+        ("t_s", "f8"),  # segment start [s]
+        ("th0", "f8"),  # cam angle where the piece starts [rad]
+        ("nb", "i8"),  # the next piece, of turn ``revb``, starting at ``t_break`` [s]
+        ("revb", "i8"),
+        ("t_break", "f8"),
+        ("nf", "i8"),  # free coordinates; the state has ns = 2·nf entries
+        ("ns", "i8"),
+        ("kmax", "i8"),  # degree of the held inputs' polynomials
+        ("deg", "i8"),  # degree of the particular solution's polynomial
+        ("gdeg", "i8"),  # degree of the monitors' polynomials
+        ("nact", "i8"),  # active mode pair columns; the first ``lo`` are left off the grid
+        ("lo", "i8"),
+        ("k_out", "i8"),  # the next output sample
+        ("stalled", "i8"),  # events in a row without time advancing
+        ("done", "?"),  # the run reached its end
+    ],
+    align=True,
+)
+
+
+# --------------------------------------------------------------------------- closed forms
+
+
+@njit(**KERNEL)
+def _held_inputs(profiles, c, p, w, seat_q, cam_held, seat_held, inp, inp_t):
     """Held coordinates' (q, q̇, q̈) as polynomials in the piece's local angle x (inp, shape
     (3, 2, 8)) and harmonic parts Re(inp_t·e^{iθ}) (inp_t (3, 2) complex)."""
+    poly = profiles.poly
+    trig = profiles.trig
     for kind in range(3):
         for hc in range(2):
             inp_t[kind, hc] = 0.0
@@ -95,17 +272,7 @@ def _held_inputs(poly, trig, c, p, w, seat_q, cam_held, seat_held, inp, inp_t):
         inp[0, 1, 0] = seat_q
 
 
-# Rows of the per-mode work array ``MC`` (one column per active mode pair, fastest first):
-# e^{λτ} at the current grid point (real, imaginary), the grid step's factor e^{λh}, their
-# magnitudes, and the pair's largest share of a coordinate or velocity and of the contact
-# forces at the segment start.
-ER, EI, DR, DI, EABS, DABS, AMP_Q, AMP_F = range(8)
-# Rows of the monitor coefficients ``WC`` (row, monitor, pair): W, W·λ, W·λ² as (real,
-# imaginary), then |W| and |W·λ|.
-W_R, W_I, WL_R, WL_I, WLL_R, WLL_I, W_ABS, WL_ABS = range(8)
-
-
-@njit(cache=True, nogil=True)
+@njit(**KERNEL)
 def _exps(lam, c, ci, ns, tau, ev):
     for j in range(ns):
         ev[j] = np.exp(lam[c, ci, j] * tau)
@@ -125,16 +292,16 @@ def _eval3(WC, lamc, nact, G, GT, m, tau, w, x, th):
         g += WC[W_R, m, jj] * er - WC[W_I, m, jj] * ei
         dg += WC[WL_R, m, jj] * er - WC[WL_I, m, jj] * ei
         d2g += WC[WLL_R, m, jj] * er - WC[WLL_I, m, jj] * ei
-    p0, p1, p2 = horner2(G[m], x)
+    p0, p1, p2 = horner(G[m], x)
     g += p0
     dg += w * p1
     d2g += w * w * p2
     if GT[m] != 0.0:
         ct = np.cos(th)
-        st = np.sin(th)
-        g += GT[m].real * ct - GT[m].imag * st
-        dg -= w * (GT[m].real * st + GT[m].imag * ct)
-        d2g -= w * w * (GT[m].real * ct - GT[m].imag * st)
+        sn = np.sin(th)
+        g += GT[m].real * ct - GT[m].imag * sn
+        dg -= w * (GT[m].real * sn + GT[m].imag * ct)
+        d2g -= w * w * (GT[m].real * ct - GT[m].imag * sn)
     return g, dg, d2g
 
 
@@ -146,10 +313,11 @@ def _at(deriv, WC, lamc, nact, G, GT, m, t_s, t, w, th0):
     return (dg, d2g) if deriv else (g, dg)
 
 
-@njit(cache=True, nogil=True)
+@njit(**KERNEL)
 def _root(
-    deriv, sgn, WC, lamc, nact, G, GT, m, t_s, ta, tb, level, w, th0, tolerance, known, fa, fb, dfb
-):
+    deriv, sgn, WC, lamc, nact, G, GT, m, t_s, ta, tb, level, w, th0, tolerance, known, fa, fb,
+    dfb,
+):  # fmt: skip
     """Time in [ta, tb] where f = sgn·(monitor − level) (or, with deriv, sgn·its derivative)
     rises through zero: Newton steps from the latest point, kept inside the bracket, with
     Illinois (regula falsi) and bisection as fall-backs. Returns the bracket's left end once
@@ -213,26 +381,33 @@ def _root(
     return ta if ta > t_s else tb
 
 
-@njit(cache=True, nogil=True)
-def _state(q, v, z, ya, vec, ev, y0, Z, ZT, free, c, ci, nf, ns, x, ct, st, rows, deg):
-    """Free coordinates at local angle x, cam angle θ (ct = cos θ, st = sin θ), with
-    ev_j = e^{λ_j τ}, from every mode: the first ``rows`` entries of z (nf: positions only;
-    ns: positions and velocities), then q, v."""
+@njit(**KERNEL)
+def _state_at(trains, ws, st, t):
+    """The free coordinates and velocities at time t [s] of the segment, from every mode,
+    into ws.q, ws.v (the held ones are left as they are)."""
+    tr = st.tr
+    ci = st.cfg - 1
+    ns = st.ns
+    nf = st.nf
+    _exps(trains.lam, tr, ci, ns, t - st.t_s, ws.ev)
+    x = st.w * t - st.th0
+    ct = np.cos(st.w * t)
+    sn = np.sin(st.w * t)
     for j in range(ns):
-        ya[j] = y0[j] * ev[j]
-    for s in range(rows):
+        ws.ya[j] = ws.y0[j] * ws.ev[j]
+    for s in range(ns):
         acc = 0.0
         for j in range(ns):
-            acc += vec[c, ci, s, j].real * ya[j].real - vec[c, ci, s, j].imag * ya[j].imag
-        z[s] = acc + _zpoly(Z, s, x, deg) + ZT[s].real * ct - ZT[s].imag * st
+            vsj = trains.vec[tr, ci, s, j]
+            acc += vsj.real * ws.ya[j].real - vsj.imag * ws.ya[j].imag
+        ws.z[s] = acc + horner(ws.Z[:, s], x, st.deg)[0] + ws.ZT[s].real * ct - ws.ZT[s].imag * sn
     for k in range(nf):
-        q[free[c, ci, k]] = z[k]
-        if rows == ns:
-            v[free[c, ci, k]] = z[nf + k]
+        ws.q[trains.free[tr, ci, k]] = ws.z[k]
+        ws.v[trains.free[tr, ci, k]] = ws.z[nf + k]
 
 
 @njit(inline="always", nogil=True)
-def _state_active(q, v, z, VY, MC, Z, ZT, free, c, ci, nf, lo, nact, x, ct, st, deg, full_state):
+def _state_active(q, v, z, VY, MC, Z, ZT, free, c, ci, nf, lo, nact, x, ct, sn, deg, full_state):
     """Free coordinates and velocities from the mode pairs lo … nact − 1 (an output sample):
     VY[:, jj, s] holds (Re, Im) of V_sj·y0_j (doubled for a pair), so each term is the real
     part of one complex product; plus the particular solution. Without ``full_state`` only
@@ -241,7 +416,7 @@ def _state_active(q, v, z, VY, MC, Z, ZT, free, c, ci, nf, lo, nact, x, ct, st, 
     ns = 2 * nf
     if full_state:
         for s in range(ns):
-            z[s] = ZT[s].real * ct - ZT[s].imag * st
+            z[s] = ZT[s].real * ct - ZT[s].imag * sn
         for jj in range(lo, nact):
             er = MC[ER, jj]
             ei = MC[EI, jj]
@@ -250,20 +425,15 @@ def _state_active(q, v, z, VY, MC, Z, ZT, free, c, ci, nf, lo, nact, x, ct, st, 
     for k in range(nf):
         coord = free[c, ci, k]
         if not full_state:
-            if coord != 0 and coord != 6:
+            if coord != CAM and coord != SEAT:
                 continue
             for s in (k, k + nf):
-                acc = ZT[s].real * ct - ZT[s].imag * st
+                acc = ZT[s].real * ct - ZT[s].imag * sn
                 for jj in range(lo, nact):
                     acc += VY[0, jj, s] * MC[ER, jj] - VY[1, jj, s] * MC[EI, jj]
                 z[s] = acc
-        pq = 0.0
-        pv = 0.0
-        for kz in range(deg, -1, -1):
-            pq = pq * x + Z[kz, k]
-            pv = pv * x + Z[kz, k + nf]
-        q[coord] = z[k] + pq
-        v[coord] = z[k + nf] + pv
+        q[coord] = z[k] + horner(Z[:, k], x, deg)[0]
+        v[coord] = z[k + nf] + horner(Z[:, k + nf], x, deg)[0]
 
 
 @njit(inline="always", nogil=True)
@@ -290,46 +460,26 @@ def _slope_bound(WC, G, GT, m, MC, lo, nact, gdeg, w, xa, xb):
 
 @njit(inline="always", nogil=True)
 def _write_sample(
-    q_out,
-    v_out,
-    force_out,
-    cam_out,
-    cfg_out,
-    c,
-    k,
-    q,
-    v,
-    gval,
-    cam_held,
-    seat_held,
-    poly,
-    trig,
-    p,
-    x,
-    ct,
-    st,
-    w,
-    cfg,
-    full_state,
-):
-    """Output sample k: coordinates and velocities (held ones on the cam and seat; without
-    ``full_state`` only q1 and q7, the others NaN), forces, cam lift."""
-    lift = 0.0
-    dlift = 0.0
-    for kk in range(7, -1, -1):
-        dlift = dlift * x + lift
-        lift = lift * x + poly[c, p, kk]
-    lift += trig[c, p, 0] * st + trig[c, p, 1] * ct
-    dlift += trig[c, p, 0] * ct - trig[c, p, 1] * st
+    q_out, v_out, force_out, cam_out, cfg_out, c, k, q, v, gval, poly, trig, cfg, p, x, ct, sn,
+    w, full_state,
+):  # fmt: skip
+    """Output sample k of case c (``common.Outputs``' arrays): coordinates and velocities q, v
+    (held ones on the cam and seat; without ``full_state`` only q1 and q7, the others NaN),
+    forces from the monitors gval, and the cam lift on piece p at local angle x, cam angle
+    with cosine ct and sine sn. Takes arrays, not named tuples: it runs at every sample."""
+    lift, dlift, _ = horner(poly[c, p], x)
+    lift += trig[c, p, 0] * sn + trig[c, p, 1] * ct
+    dlift += trig[c, p, 0] * ct - trig[c, p, 1] * sn
     for i in range(7):
-        shown = full_state or i == 0 or i == 6
+        shown = full_state or i == CAM or i == SEAT
         q_out[c, k, i] = q[i] if shown else np.nan
         v_out[c, k, i] = v[i] if shown else np.nan
+    cam_held = holds_cam(cfg)
     if cam_held:
-        q_out[c, k, 0] = -lift
-        v_out[c, k, 0] = -w * dlift
+        q_out[c, k, CAM] = -lift
+        v_out[c, k, CAM] = -w * dlift
     force_out[c, k, 0] = gval[0] if cam_held else 0.0
-    force_out[c, k, 1] = -gval[1] if seat_held else 0.0
+    force_out[c, k, 1] = -gval[1] if holds_seat(cfg) else 0.0
     cam_out[c, k] = lift
     cfg_out[c, k] = cfg
 
@@ -358,17 +508,13 @@ def _monitor_at_grid(WC, MC, lo, nact, G, GT, m, gdeg, w, x, cth, sth):
         ei = MC[EI, jj]
         g += WC[W_R, m, jj] * er - WC[W_I, m, jj] * ei
         dg += WC[WL_R, m, jj] * er - WC[WL_I, m, jj] * ei
-    p0 = 0.0
-    p1 = 0.0
-    for k in range(gdeg, -1, -1):
-        p1 = p1 * x + p0
-        p0 = p0 * x + G[m, k]
+    p0, p1, _ = horner(G[m], x, gdeg)
     g += p0 + GT[m].real * cth - GT[m].imag * sth
     dg += w * (p1 - GT[m].real * sth - GT[m].imag * cth)
     return g, dg
 
 
-@njit(cache=True, nogil=True)
+@njit(**KERNEL)
 def _keep_column(MC, WC, VY, lamc, act, ns, src, dst):
     """Move mode pair ``src``'s data to column ``dst`` (dropping the pairs between)."""
     act[dst] = act[src]
@@ -383,9 +529,10 @@ def _keep_column(MC, WC, VY, lamc, act, ns, src, dst):
         VY[1, dst, s] = VY[1, src, s]
 
 
-@njit(cache=True, nogil=True)
-def _separation(sep_rev, c, n_rev, w, ta, tb):
+@njit(**KERNEL)
+def _separation(sep_rev, c, w, ta, tb):
     """Add the cam angle of [ta, tb] off the cam to each revolution it overlaps."""
+    n_rev = sep_rev.shape[1]
     a = w * ta
     b = w * tb
     r = int(a / TWO_PI)
@@ -396,737 +543,697 @@ def _separation(sep_rev, c, n_rev, w, ta, tb):
         r += 1
 
 
-@njit(cache=True, nogil=True)
-def modal_exact_batch(
-    train,
-    load,
-    n_free,
-    free,
-    lam,
-    vec,
-    vec_inv,
-    a_inv,
-    b_in,
-    b_load,
-    rho,
-    sigma,
-    sigma0,
-    impulse,
-    rho_vec,
-    vnorm,
-    lam_abs,
-    zeta,
-    meff,
-    q0,
-    v0,
-    cfg0,
-    seat_q,
-    has_seat,
-    form,
-    omega,
-    t_sample_all,
-    t_end_all,
-    dt_cap,
-    tolerance,
-    mode_cutoff,
-    full_state,
-    steps_taken,
-    breaks,
-    poly,
-    trig,
-    n_pieces,
-    q_out,
-    v_out,
-    force_out,
-    cam_out,
-    cfg_out,
-    sep_rev,
-    counts,
-    vmax,
-    fmax,
-    events,
-    n_events,
-    status,
-):
-    """Advance every case of a batch exactly between events; fill the outputs in place.
+# --------------------------------------------------------------------------- begin a segment
 
-    Per case: ``train`` the index of its train in the per-train arrays, ``t_sample_all`` the
-    output spacing in time [s], ``t_end_all`` the run's end [s]; ``dt_cap`` the largest step
-    [s] (0: none). Per train: ``load`` (n_trains, 7) and the modal data per configuration as
-    ``ModalData`` (leading axes (n_trains, 4)); ``zeta`` (n, 4, NS) per case (it depends on
-    the speed). Outputs as ``newmark.newmark_linear_batch``.
+
+@njit(inline="always", nogil=True)
+def _forcing(cases, trains, profiles, ws, st):
+    """The state's homogeneous start zh (the free coordinates' q, v for now), the held
+    inputs on the piece, and the forcing's polynomial coefficients b_k (ws.bpoly); sets
+    st.kmax and st.deg."""
+    c, tr, ci, nf, ns = st.c, st.tr, st.cfg - 1, st.nf, st.ns
+    cam_held = holds_cam(st.cfg)
+    for k in range(nf):
+        ws.zh[k] = ws.q[trains.free[tr, ci, k]]
+        ws.zh[nf + k] = ws.v[trains.free[tr, ci, k]]
+    _held_inputs(
+        profiles, c, st.p, st.w, cases.seat_q[c], cam_held, holds_seat(st.cfg), ws.inp,
+        ws.inp_t,
+    )  # fmt: skip
+    # The held inputs are polynomials of the piece's degree at most (the seat's a constant),
+    # and so is the forcing.
+    kmax = degree(profiles, c, st.p) if cam_held else 0
+    deg = 0
+    for k in range(kmax + 1):
+        for s in range(ns):
+            acc = trains.b_load[tr, ci, s] if k == 0 else 0.0
+            for kind in range(3):
+                for hc in range(2):
+                    acc += trains.b_in[tr, ci, s, kind, hc] * ws.inp[kind, hc, k]
+            ws.bpoly[k, s] = acc
+            if acc != 0.0:
+                deg = k
+    st.kmax = kmax
+    st.deg = deg
+
+
+@njit(inline="always", nogil=True)
+def _particular(trains, profiles, runs, ws, st):
+    """Particular solutions: Z_k = A⁻¹(ω(k+1) Z_{k+1} − b_k) from the forcing's degree down;
+    the harmonic one Z_T = β·ζ (``modal.harmonic_responses``)."""
+    tr, ci, ns, deg, w = st.tr, st.cfg - 1, st.ns, st.deg, st.w
+    Z = ws.Z
+    for k in range(deg + 1, 9):
+        for s in range(ns):
+            Z[k, s] = 0.0
+    for k in range(deg, -1, -1):
+        for s in range(ns):
+            ws.zb[s] = w * (k + 1) * Z[k + 1, s] - ws.bpoly[k, s]
+        for s in range(ns):
+            acc = 0.0
+            for j in range(ns):
+                acc += trains.a_inv[tr, ci, s, j] * ws.zb[j]
+            Z[k, s] = acc
+    c, p = st.c, st.p
+    trig = profiles.trig
+    has_trig = holds_cam(st.cfg) and (trig[c, p, 0] != 0.0 or trig[c, p, 1] != 0.0)
+    beta = trig[c, p, 1] - 1j * trig[c, p, 0]
+    for s in range(NS):
+        ws.ZT[s] = beta * runs.zeta[c, ci, s] if has_trig else 0.0
+
+
+@njit(inline="always", nogil=True)
+def _modal_start(trains, ws, st, x_s, ct, sn):
+    """y0 = V⁻¹ (z(t_s) − z_p(t_s)): the modal coordinates at the segment start."""
+    tr, ci, ns = st.tr, st.cfg - 1, st.ns
+    for s in range(ns):
+        ws.zh[s] -= horner(ws.Z[:, s], x_s, st.deg)[0] + ws.ZT[s].real * ct - ws.ZT[s].imag * sn
+    for j in range(ns):
+        acc_c = 0.0 + 0.0j
+        for s in range(ns):
+            acc_c += trains.vec_inv[tr, ci, j, s] * ws.zh[s]
+        ws.y0[j] = acc_c
+
+
+@njit(inline="always", nogil=True)
+def _force_monitor(trains, ws, st, m, sign):
+    """Monitor m as a held contact's force (sign·F: F1 for the cam, −F7 for the seat):
+    thesis Eqs. 26, 27 through ``modal.ModalData``'s ρ, σ."""
+    tr, ci, ns = st.tr, st.cfg - 1, st.ns
+    ws.level[m] = st.eps_force
+    for j in range(ns):
+        ws.W[m, j] = sign * trains.rho_vec[tr, ci, m, j] * ws.y0[j]
+    for k in range(st.kmax + 1):
+        acc = 0.0
+        for s in range(ns):
+            acc += trains.rho[tr, ci, m, s] * ws.Z[k, s]
+        for kind in range(3):
+            for hc in range(2):
+                acc += trains.sigma[tr, ci, m, kind, hc] * ws.inp[kind, hc, k]
+        ws.G[m, k] = sign * acc
+    ws.G[m, 0] += sign * trains.sigma0[tr, ci, m]
+    acc_c = 0.0 + 0.0j
+    for s in range(ns):
+        acc_c += trains.rho[tr, ci, m, s] * ws.ZT[s]
+    for kind in range(3):
+        acc_c += trains.sigma[tr, ci, m, kind, 0] * ws.inp_t[kind, 0]
+    ws.GT[m] = sign * acc_c
+
+
+@njit(inline="always", nogil=True)
+def _gap_monitor(cases, trains, profiles, ws, st, m, sign):
+    """Monitor m as a free contact's gap: q1 + lift (the cam) or q7_seat − q7 (the seat)."""
+    tr, ci, nf, ns, c, p = st.tr, st.cfg - 1, st.nf, st.ns, st.c, st.p
+    ws.level[m] = GAP_LEVEL
+    coord = CAM if m == 0 else SEAT
+    row = 0
+    for k in range(nf):
+        if trains.free[tr, ci, k] == coord:
+            row = k
+    for j in range(ns):
+        ws.W[m, j] = sign * trains.vec[tr, ci, row, j] * ws.y0[j]
+    for k in range(8):
+        ws.G[m, k] = sign * ws.Z[k, row]
+    ws.GT[m] = sign * ws.ZT[row]
+    if m == 0:
+        for k in range(8):
+            ws.G[m, k] += profiles.poly[c, p, k]
+        ws.GT[m] += profiles.trig[c, p, 1] - 1j * profiles.trig[c, p, 0]
+    else:
+        ws.G[m, 0] += cases.seat_q[c]
+
+
+@njit(inline="always", nogil=True)
+def _monitors(cases, trains, profiles, ws, st):
+    """The monitors' coefficients g_m(τ) = Re Σ_j W_mj e^{λ_j τ} + Σ_k G_mk x^k
+    + Re(GT_m e^{iθ}), which of them can end the segment, and st.gdeg."""
+    c = st.c
+    cam_held = holds_cam(st.cfg)
+    seat_held = holds_seat(st.cfg)
+    ws.ready[0] = True
+    ws.watch[0] = not (cam_held and cases.form[c])
+    ws.ready[1] = cases.has_seat[c] or seat_held
+    ws.watch[1] = ws.ready[1]
+    for m in range(2):
+        if not ws.ready[m]:
+            continue
+        held = cam_held if m == 0 else seat_held
+        sign = 1.0 if m == 0 else -1.0  # F1, q1 + lift; −F7, q7_seat − q7
+        for k in range(8):
+            ws.G[m, k] = 0.0
+        if held:
+            _force_monitor(trains, ws, st, m, sign)
+        else:
+            _gap_monitor(cases, trains, profiles, ws, st, m, sign)
+    gdeg = 0
+    for m in range(2):
+        if ws.ready[m]:
+            for k in range(8):
+                if ws.G[m, k] != 0.0:
+                    gdeg = max(gdeg, k)
+    st.gdeg = gdeg
+
+
+@njit(inline="always", nogil=True)
+def _pair_columns(trains, runs, ws, st):
+    """The modes in conjugate pairs (a real state has conjugate modal coordinates), fastest
+    first: one column per pair, its coefficients doubled, so every sum is Re Σ over half the
+    modes; sets st.nact and st.lo.
+
+    Reduced fidelity leaves the pairs above the cut-off (the first ``lo`` columns) out of the
+    grid, the samples and the step size: there they keep only their quasi-static part (inside
+    the particular solution). Event location and the state at events use every pair.
     """
-    n_cases = q0.shape[0]
-    n_out = q_out.shape[1]
-    n_rev = sep_rev.shape[1]
-    q = np.zeros(7)
-    v = np.zeros(7)
-    z = np.zeros(NS)
-    zh = np.zeros(NS)
-    zb = np.zeros(NS)
-    Z = np.zeros((9, NS))
-    ZT = np.zeros(NS, np.complex128)
-    bpoly = np.zeros((8, NS))
-    y0 = np.zeros(NS, np.complex128)
-    ev = np.zeros(NS, np.complex128)
-    ya = np.zeros(NS, np.complex128)
-    W = np.zeros((2, NS), np.complex128)
-    order = np.zeros(NS, np.int64)  # the modes, fastest first
-    # The active mode pairs, fastest first (column jj): the mode index, λ, per-mode work
-    # (rows ER … AMP_F), monitor coefficients (rows W_R … WL_ABS), and (Re, Im) of V_sj·y0_j
-    # (VY[:, jj, s]).
-    act = np.zeros(NS, np.int64)
-    lamc = np.zeros(NS, np.complex128)
-    MC = np.zeros((8, NS))
-    WC = np.zeros((8, 2, NS))
-    VY = np.zeros((2, NS, NS))
-    dval = np.zeros(2)
-    dprev = np.zeros(2)
-    gprev = np.zeros(2)
-    G = np.zeros((2, 8))
-    GT = np.zeros(2, np.complex128)
-    ready = np.zeros(2, np.bool_)  # monitor prepared (its value is computed)
-    watch = np.zeros(2, np.bool_)  # monitor can end the segment
-    level = np.zeros(2)
-    gval = np.zeros(2)
-    inp = np.zeros((3, 2, 8))
-    inp_t = np.zeros((3, 2), np.complex128)
-    for c in range(n_cases):
-        tr = train[c]
-        w = omega[c]
-        t_sample = t_sample_all[c]
-        t_end = t_end_all[c]
-        qs = seat_q[c]
-        eps_force = 1e-9 * (abs(load[tr, 3]) + 1.0)
+    tr, ci, ns = st.tr, st.cfg - 1, st.ns
+    lam_abs = trains.lam_abs
+    order = ws.order
+    MC = ws.MC
+    WC = ws.WC
+    # The modes, fastest first (insertion sort; ns ≤ 14).
+    for j in range(ns):
+        k = j
+        while k > 0 and lam_abs[tr, ci, order[k - 1]] < lam_abs[tr, ci, j]:
+            order[k] = order[k - 1]
+            k -= 1
+        order[k] = j
+    nact = 0
+    lo = 0
+    for jj in range(ns):
+        j = order[jj]
+        lj = trains.lam[tr, ci, j]
+        if lj.imag < 0.0:
+            continue
+        if runs.mode_cutoff > 0.0 and lam_abs[tr, ci, j] > runs.mode_cutoff:
+            lo += 1
+        f = 2.0 if lj.imag > 0.0 else 1.0
+        ws.act[nact] = j
+        ws.lamc[nact] = lj
+        ya_abs = f * abs(ws.y0[j])
+        MC[ER, nact] = 1.0
+        MC[EI, nact] = 0.0
+        MC[EABS, nact] = 1.0
+        MC[AMP_Q, nact] = ya_abs * trains.vnorm[tr, ci, j]
+        MC[AMP_F, nact] = ya_abs * (
+            abs(trains.rho_vec[tr, ci, 0, j]) + abs(trains.rho_vec[tr, ci, 1, j])
+        )
+        for m in range(2):
+            wv = f * ws.W[m, j] if ws.ready[m] else 0.0j
+            wl = wv * lj
+            wll = wl * lj
+            WC[W_R, m, nact] = wv.real
+            WC[W_I, m, nact] = wv.imag
+            WC[WL_R, m, nact] = wl.real
+            WC[WL_I, m, nact] = wl.imag
+            WC[WLL_R, m, nact] = wll.real
+            WC[WLL_I, m, nact] = wll.imag
+            WC[W_ABS, m, nact] = abs(wv)
+            WC[WL_ABS, m, nact] = abs(wl)
+        for s2 in range(ns):
+            vy = f * trains.vec[tr, ci, s2, j] * ws.y0[j]
+            ws.VY[0, nact, s2] = vy.real
+            ws.VY[1, nact, s2] = vy.imag
+        nact += 1
+    st.nact = nact
+    st.lo = lo
+
+
+@njit(inline="always", nogil=True)
+def _begin_segment(cases, trains, profiles, runs, out, ws, st):
+    """Begin a segment at st.t_s in configuration st.cfg on piece st.p, from the state in
+    ws.q, ws.v: forcing, particular solution, modal start, monitors, the break ahead, the mode
+    pairs; the monitors' values there, and the sample due there, if any."""
+    ci = st.cfg - 1
+    st.nf = trains.n_free[st.tr, ci]
+    st.ns = 2 * st.nf
+    _forcing(cases, trains, profiles, ws, st)
+    _particular(trains, profiles, runs, ws, st)
+    th_s = st.w * st.t_s
+    st.th0 = st.rev * TWO_PI + profiles.breaks[st.c, st.p]
+    x_s = th_s - st.th0
+    ct = np.cos(th_s)
+    sn = np.sin(th_s)
+    _modal_start(trains, ws, st, x_s, ct, sn)
+    _monitors(cases, trains, profiles, ws, st)
+    # The segment ends at the next break of the profile at the latest.
+    nb, revb, th_b = next_break(profiles, st.c, st.p, st.rev)
+    st.nb = nb
+    st.revb = revb
+    st.t_break = th_b / st.w
+    _pair_columns(trains, runs, ws, st)
+    for m in range(2):
+        if ws.ready[m]:
+            ws.gval[m], ws.dprev[m], _ = _eval3(
+                ws.WC, ws.lamc, st.nact, ws.G, ws.GT, m, 0.0, st.w, x_s, th_s
+            )
+            ws.gprev[m] = ws.gval[m]
+    k_out = st.k_out
+    if k_out < out.q.shape[1] and k_out * runs.t_sample[st.c] <= st.t_s * (1.0 + 1e-13):
+        # A sample due at the segment start (the initial state, or a break or event that
+        # falls on an output angle) is the state here (gval holds its monitors).
+        _write_sample(
+            out.q, out.v, out.force, out.cam, out.cfg, st.c, k_out, ws.q, ws.v, ws.gval,
+            profiles.poly, profiles.trig, st.cfg, st.p, x_s, ct, sn, st.w, runs.full_state,
+        )  # fmt: skip
+        st.k_out = k_out + 1
+
+
+# --------------------------------------------------------------------------- walk the grid
+
+
+@njit(inline="always", nogil=True)
+def _drop_decayed(MC, WC, VY, lamc, act, lo, nact, ns, eps_force):
+    """Drop the mode pairs that have decayed below what any output can show, keeping the
+    fastest-first order; returns the new count."""
+    kept = lo
+    for jj in range(lo, nact):
+        if MC[AMP_Q, jj] * MC[EABS, jj] < MODE_FLOOR and MC[AMP_F, jj] * MC[EABS, jj] < eps_force:
+            continue
+        if kept != jj:
+            _keep_column(MC, WC, VY, lamc, act, ns, jj, kept)
+        kept += 1
+    return kept
+
+
+@njit(inline="always", nogil=True)
+def _fastest_needed(WC, MC, watch, level, gval, lo, nact):
+    """The first pair column whose mode could bring a watched monitor to its level (nact if
+    none): the fastest modes are skipped while their summed amplitudes (which only decay)
+    stay under half of every monitor's distance from its level."""
+    margin = np.inf
+    for m in range(2):
+        if watch[m]:
+            margin = min(margin, level[m] - gval[m])
+    k = lo
+    spent = 0.0
+    while k < nact:
+        amp = 0.0
+        for m in range(2):
+            if watch[m]:
+                amp = max(amp, WC[W_ABS, m, k] * MC[EABS, k])
+        if spent + amp >= 0.5 * margin:
+            break
+        spent += amp
+        k += 1
+    return k
+
+
+@njit(inline="always", nogil=True)
+def _refresh(MC, lamc, lo, nact, h, tau):
+    """Exact e^{λh} and e^{λτ} (τ from the segment start to the next grid point) of the mode
+    pairs lo … nact − 1."""
+    for jj in range(lo, nact):
+        d = np.exp(lamc[jj] * h)
+        e = np.exp(lamc[jj] * tau)
+        MC[DR, jj] = d.real
+        MC[DI, jj] = d.imag
+        MC[ER, jj] = e.real
+        MC[EI, jj] = e.imag
+        MC[DABS, jj] = np.exp(lamc[jj].real * h)
+        MC[EABS, jj] = np.exp(lamc[jj].real * tau)
+
+
+@njit(inline="always", nogil=True)
+def _suspect(watch, level, gval, dval, dprev):
+    """A watched monitor above its level at the grid point, or past a maximum inside the
+    step (its derivative turned from + to −): ``_earliest_crossing`` must look."""
+    for m in range(2):
+        if watch[m] and (gval[m] > level[m] or (dprev[m] > 0.0 and dval[m] < 0.0)):
+            return True
+    return False
+
+
+@njit(**KERNEL)
+def _earliest_crossing(ws, st, nact, tolerance, t_prev, t_eval):
+    """The earliest monitor to rise through its level in (t_prev, t_eval] [s] and when,
+    from its values at both ends, or from a maximum inside the step that the bound on its
+    slope cannot rule out (found by a root of its derivative). Returns (monitor or −1, time).
+    """
+    w, t_s, th0, gdeg, lo = st.w, st.t_s, st.th0, st.gdeg, st.lo
+    WC, G, GT, lamc = ws.WC, ws.G, ws.GT, ws.lamc
+    first = -1
+    t_ev = t_eval
+    for m in range(2):
+        if not ws.watch[m]:
+            continue
+        level = ws.level[m]
+        t_hi = -1.0
+        g_hi = ws.gval[m]
+        dg_hi = ws.dval[m]
+        if ws.gval[m] > level:
+            t_hi = t_eval
+        elif (
+            ws.dprev[m] > 0.0
+            and ws.dval[m] < 0.0
+            and max(ws.gprev[m], ws.gval[m])
+            + (t_eval - t_prev)
+            * _slope_bound(
+                WC, G, GT, m, ws.MC, lo, nact, gdeg, w, w * t_prev - th0, w * t_eval - th0
+            )
+            > level
+        ):
+            t_max = _root(
+                True, -1.0, WC, lamc, nact, G, GT, m, t_s, t_prev, t_eval, 0.0, w, th0,
+                tolerance, False, 0.0, 0.0, 0.0,
+            )  # fmt: skip
+            g_hi, dg_hi = _at(False, WC, lamc, nact, G, GT, m, t_s, t_max, w, th0)
+            if g_hi > level:
+                t_hi = t_max
+        if t_hi > 0.0:
+            # The value root starts from what the grid (or the maximum's search) has, unless
+            # reduced fidelity leaves pairs out of the grid.
+            te = _root(
+                False, 1.0, WC, lamc, nact, G, GT, m, t_s, t_prev, t_hi, level, w, th0,
+                tolerance, lo == 0, ws.gprev[m] - level, g_hi - level, dg_hi,
+            )  # fmt: skip
+            if first < 0 or te < t_ev:
+                t_ev = te
+                first = m
+    return first, t_ev
+
+
+@njit(inline="always", nogil=True)
+def _walk(cases, trains, profiles, runs, out, ws, st):
+    """Walk the segment's grid from st.t_s until an event, a profile break or the run's end,
+    and handle what ended it (``_apply_event``, ``_cross_break``, or st.done).
+
+    The grid step's work is inlined and makes no calls, on arrays and scalars held in locals:
+    numba reference-counts a named tuple's arrays (or an array handed to an inlined helper)
+    on every pass otherwise. Anything rarer (replanning with dropped pairs, a suspected
+    crossing, a sample, an event, a break) is a compiled function of its own.
+    """
+    c, w, t_s, th0, t_break = st.c, st.w, st.t_s, st.th0, st.t_break
+    lo, nact, ns, gdeg, eps_force = st.lo, st.nact, st.ns, st.gdeg, st.eps_force
+    lam_abs_row = trains.lam_abs[st.tr, st.cfg - 1]
+    cam_held = holds_cam(st.cfg)
+    seat_held = holds_seat(st.cfg)
+    n_out = out.q.shape[1]
+    t_sample = runs.t_sample[c]
+    t_end = runs.t_end[c]
+    dt_cap = runs.dt_cap
+    steps = out.steps
+    fmax = out.fmax
+    MC, WC, G, GT, lamc, act = ws.MC, ws.WC, ws.G, ws.GT, ws.lamc, ws.act
+    gval, dval, gprev, dprev = ws.gval, ws.dval, ws.gprev, ws.dprev
+    watch, ready, level = ws.watch, ws.ready, ws.level
+    # What a sample reads and writes.
+    q, v, z, VY, Z, ZT = ws.q, ws.v, ws.z, ws.VY, ws.Z, ws.ZT
+    free, poly, trig = trains.free, profiles.poly, profiles.trig
+    q_out, v_out, force_out, cam_out, cfg_out = out.q, out.v, out.force, out.cam, out.cfg
+    tr, cfg, ci, nf, p, deg = st.tr, st.cfg, st.cfg - 1, st.nf, st.p, st.deg
+    full_state = runs.full_state
+    # A monitor already above its level at the segment start (a contact that pulls the
+    # instant after an impact) is an event there.
+    for m in range(2):
+        if watch[m] and gval[m] > level[m]:
+            _apply_event(cases, trains, profiles, out, ws, st, m, t_s)
+            return
+    t_prev = t_s
+    h = -1.0
+    since_refresh = 0
+    since_check = 0
+    replan = True
+    i_step = n_steps = 0
+    t_from = t_next = cth = sth = cwh = swh = 0.0
+    to_sample = False
+    while True:
+        if replan:
+            if since_check >= 32:
+                since_check = 0
+                nact = _drop_decayed(MC, WC, VY, lamc, act, lo, nact, ns, eps_force)
+            # The step need only resolve the modes that could bring a watched monitor to its
+            # level.
+            k = _fastest_needed(WC, MC, watch, level, gval, lo, nact)
+            fastest = lam_abs_row[act[k]] if k < nact else 0.0
+            h_allow = RESOLUTION * np.pi / fastest if fastest > 0.0 else np.inf
+            if dt_cap > 0.0:
+                h_allow = min(h_allow, dt_cap)
+            t_from = t_prev
+            k_out = st.k_out
+            to_sample = k_out < n_out and k_out * t_sample < t_end * (1.0 + 1e-13)
+            t_next = k_out * t_sample if to_sample else t_end
+            n_steps = max(1, int(np.ceil((t_next - t_from) / h_allow - 1e-9)))
+            h_new = (t_next - t_from) / n_steps
+            i_step = 0
+            since_refresh += n_steps
+            since_check += n_steps
+            # (A step within 1e-12 of the last one keeps D: the difference is rounding.)
+            if abs(h_new - h) > 1e-12 * h or since_refresh > 256 or t_from == t_s:
+                # New step, a fresh segment, or time to refresh: exact exponentials.
+                h = h_new
+                _refresh(MC, lamc, lo, nact, h, t_from + h - t_s)
+                cwh = np.cos(w * h)
+                swh = np.sin(w * h)
+                cth = np.cos(w * (t_from + h))
+                sth = np.sin(w * (t_from + h))
+                since_refresh = 0
+            else:
+                # Same step: E and (cos θ, sin θ) advance from the sample point.
+                cth, sth = _advance(MC, lo, nact, cth, sth, cwh, swh)
+            replan = False
+        i_step += 1
+        steps[c] += 1
+        t_n = t_next if i_step == n_steps else t_from + i_step * h
+        at_break = t_break <= t_n
+        if at_break:
+            t_eval = t_break
+            for m in range(2):
+                if ready[m]:
+                    gval[m], dval[m] = _at(False, WC, lamc, nact, G, GT, m, t_s, t_break, w, th0)
+        else:
+            t_eval = t_n
+            x_n = w * t_n - th0
+            for m in range(2):
+                if ready[m]:
+                    gval[m], dval[m] = _monitor_at_grid(
+                        WC, MC, lo, nact, G, GT, m, gdeg, w, x_n, cth, sth
+                    )
+        if t_eval > t_s and _suspect(watch, level, gval, dval, dprev):
+            first, t_ev = _earliest_crossing(ws, st, nact, runs.tolerance, t_prev, t_eval)
+            if first >= 0:
+                st.nact = nact
+                _apply_event(cases, trains, profiles, out, ws, st, first, t_ev)
+                return
+        if at_break:
+            st.nact = nact
+            _cross_break(cases, trains, profiles, out, ws, st)
+            return
+        # Accept the grid point: force maxima, output sample, end of run.
+        for m in range(2):
+            dprev[m] = dval[m]
+            gprev[m] = gval[m]
+        if cam_held:
+            fmax[c, 0] = max(fmax[c, 0], -gval[0])
+        if seat_held:
+            fmax[c, 1] = max(fmax[c, 1], -gval[1])
+        t_prev = t_n
+        if i_step < n_steps:
+            cth, sth = _advance(MC, lo, nact, cth, sth, cwh, swh)
+            continue
+        if to_sample:
+            x_n = w * t_n - th0
+            _state_active(
+                q, v, z, VY, MC, Z, ZT, free, tr, ci, nf, lo, nact, x_n, cth, sth, deg,
+                full_state,
+            )  # fmt: skip
+            _write_sample(
+                q_out, v_out, force_out, cam_out, cfg_out, c, st.k_out, q, v, gval, poly,
+                trig, cfg, p, x_n, cth, sth, w, full_state,
+            )  # fmt: skip
+            st.k_out += 1
+        if t_n >= t_end:
+            if not cam_held:
+                _separation(out.sep_rev, c, w, t_s, t_n)
+            st.nact = nact
+            st.done = True
+            return
+        replan = True
+
+
+# --------------------------------------------------------------------------- events, breaks
+
+
+@njit(**KERNEL)
+def _apply_event(cases, trains, profiles, out, ws, st, first, t_ev):
+    """Monitor ``first`` rose through its level at t_ev [s]: take the exact state there, and
+    release the contact (a force monitor) or apply the plastic impact (a gap monitor: the
+    struck coordinate takes the obstacle's velocity, the free ones change by the impulse's
+    share ``modal.ModalData.impulse``). Starts the next segment there."""
+    c, tr, w, cfg = st.c, st.tr, st.w, st.cfg
+    cam_held = holds_cam(cfg)
+    seat_held = holds_seat(cfg)
+    q, v = ws.q, ws.v
+    _state_at(trains, ws, st, t_ev)
+    lift_e, dl_e, _ = piece_eval(profiles, c, st.p, st.rev, w * t_ev)
+    vcam = -w * dl_e
+    if cam_held:
+        q[CAM] = -lift_e
+        v[CAM] = vcam
+    if seat_held:
+        q[SEAT] = cases.seat_q[c]
+        v[SEAT] = 0.0
+    if not cam_held:
+        _separation(out.sep_rev, c, w, st.t_s, t_ev)
+    if first == 0 and cam_held:
+        new = configuration(False, seat_held)
+        record_event(out.events, out.n_events, c, t_ev, CAM_SEPARATION, cfg, new, 0.0, 0.0)
+    elif first == 0:
+        new = configuration(True, seat_held)
+        closing = v[CAM] - vcam
+        dv = vcam - v[CAM]
         for i in range(7):
-            q[i] = q0[c, i]
-            v[i] = v0[c, i]
-        cfg = cfg0[c]
-        rev, p = locate(breaks, n_pieces, c, 0.0)
-        t_s = 0.0
-        k_out = 0
-        stalled = 0
-        done = False
-        while not done:
-            # ---- begin a segment at t_s in configuration cfg on piece p ----
-            ci = cfg - 1
-            nf = n_free[tr, ci]
-            ns = 2 * nf
-            cam_held = cfg == 1 or cfg == 3
-            seat_held = cfg == 3 or cfg == 4
-            for k in range(nf):
-                zh[k] = q[free[tr, ci, k]]
-                zh[nf + k] = v[free[tr, ci, k]]
-            _held_inputs(poly, trig, c, p, w, qs, cam_held, seat_held, inp, inp_t)
-            has_trig = cam_held and (trig[c, p, 0] != 0.0 or trig[c, p, 1] != 0.0)
-            # The held inputs are polynomials of the piece's degree at most (the seat's a
-            # constant), and so is the forcing.
-            kmax = _degree(poly, c, p) if cam_held else 0
-            deg = 0
-            for k in range(kmax + 1):
-                for s in range(ns):
-                    acc = b_load[tr, ci, s] if k == 0 else 0.0
-                    for kind in range(3):
-                        for hc in range(2):
-                            acc += b_in[tr, ci, s, kind, hc] * inp[kind, hc, k]
-                    bpoly[k, s] = acc
-                    if acc != 0.0:
-                        deg = k
-            # Particular solutions: Z_k = A⁻¹(ω(k+1) Z_{k+1} − b_k) from the forcing's degree
-            # down; the harmonic one Z_T = β·ζ (campipe.engine.modal.harmonic_response).
-            for k in range(deg + 1, 9):
-                for s in range(ns):
-                    Z[k, s] = 0.0
-            for k in range(deg, -1, -1):
-                for s in range(ns):
-                    zb[s] = w * (k + 1) * Z[k + 1, s] - bpoly[k, s]
-                for s in range(ns):
-                    acc = 0.0
-                    for j in range(ns):
-                        acc += a_inv[tr, ci, s, j] * zb[j]
-                    Z[k, s] = acc
-            beta = trig[c, p, 1] - 1j * trig[c, p, 0]
-            for s in range(NS):
-                ZT[s] = beta * zeta[c, ci, s] if has_trig else 0.0
-            th_s = w * t_s
-            th0 = rev * TWO_PI + breaks[c, p]
-            x_s = th_s - th0
-            ct = np.cos(th_s)
-            st = np.sin(th_s)
-            for s in range(ns):
-                zh[s] -= _zpoly(Z, s, x_s, deg) + ZT[s].real * ct - ZT[s].imag * st
-            for j in range(ns):
-                acc_c = 0.0 + 0.0j
-                for s in range(ns):
-                    acc_c += vec_inv[tr, ci, j, s] * zh[s]
-                y0[j] = acc_c
-            # Monitors: g_m(τ) = Re Σ_j W_mj e^{λ_j τ} + Σ_k G_mk x^k + Re(GT_m e^{iθ}).
-            ready[0] = True
-            watch[0] = not (cam_held and form[c])
-            ready[1] = has_seat[c] or seat_held
-            watch[1] = ready[1]
-            for m in range(2):
-                if not ready[m]:
-                    continue
-                held = cam_held if m == 0 else seat_held
-                sign = 1.0 if m == 0 else -1.0  # F1, q1 + lift; −F7, q7_seat − q7
-                for k in range(8):
-                    G[m, k] = 0.0
-                if held:
-                    level[m] = eps_force
-                    for j in range(ns):
-                        W[m, j] = sign * rho_vec[tr, ci, m, j] * y0[j]
-                    for k in range(kmax + 1):
-                        acc = 0.0
-                        for s in range(ns):
-                            acc += rho[tr, ci, m, s] * Z[k, s]
-                        for kind in range(3):
-                            for hc in range(2):
-                                acc += sigma[tr, ci, m, kind, hc] * inp[kind, hc, k]
-                        G[m, k] = sign * acc
-                    G[m, 0] += sign * sigma0[tr, ci, m]
-                    acc_c = 0.0 + 0.0j
-                    for s in range(ns):
-                        acc_c += rho[tr, ci, m, s] * ZT[s]
-                    for kind in range(3):
-                        acc_c += sigma[tr, ci, m, kind, 0] * inp_t[kind, 0]
-                    GT[m] = sign * acc_c
-                else:
-                    level[m] = 1e-13  # [m] of penetration
-                    coord = 0 if m == 0 else 6
-                    row = 0
-                    for k in range(nf):
-                        if free[tr, ci, k] == coord:
-                            row = k
-                    for j in range(ns):
-                        W[m, j] = sign * vec[tr, ci, row, j] * y0[j]
-                    for k in range(8):
-                        G[m, k] = sign * Z[k, row]
-                    GT[m] = sign * ZT[row]
-                    if m == 0:
-                        for k in range(8):
-                            G[m, k] += poly[c, p, k]
-                        GT[m] += trig[c, p, 1] - 1j * trig[c, p, 0]
-                    else:
-                        G[m, 0] += qs
-            gdeg = 0
-            for m in range(2):
-                if ready[m]:
-                    for k in range(8):
-                        if G[m, k] != 0.0:
-                            gdeg = max(gdeg, k)
-            # The segment ends at the next break of the profile at the latest.
-            nb = p + 1
-            revb = rev
-            if nb == n_pieces[c]:
-                nb = 0
-                revb = rev + 1
-            t_break = (revb * TWO_PI + breaks[c, nb]) / w
-            # The modes, fastest first (insertion sort; ns ≤ 14).
-            for j in range(ns):
-                k = j
-                while k > 0 and lam_abs[tr, ci, order[k - 1]] < lam_abs[tr, ci, j]:
-                    order[k] = order[k - 1]
-                    k -= 1
-                order[k] = j
-            # The modes in conjugate pairs (a real state has conjugate modal coordinates):
-            # one column per pair, its coefficients doubled, so every sum is Re Σ over half
-            # the modes. Reduced fidelity leaves the pairs above the cut-off (the first
-            # ``lo`` columns) out of the grid, the samples and the step size: there they keep
-            # only their quasi-static part (inside the particular solution). Event location
-            # and the state at events use every pair.
-            nact = 0
-            lo = 0
-            for jj in range(ns):
-                j = order[jj]
-                lj = lam[tr, ci, j]
-                if lj.imag < 0.0:
-                    continue
-                if mode_cutoff > 0.0 and lam_abs[tr, ci, j] > mode_cutoff:
-                    lo += 1
-                f = 2.0 if lj.imag > 0.0 else 1.0
-                act[nact] = j
-                lamc[nact] = lj
-                ya_abs = f * abs(y0[j])
-                MC[ER, nact] = 1.0
-                MC[EI, nact] = 0.0
-                MC[EABS, nact] = 1.0
-                MC[AMP_Q, nact] = ya_abs * vnorm[tr, ci, j]
-                MC[AMP_F, nact] = ya_abs * (abs(rho_vec[tr, ci, 0, j]) + abs(rho_vec[tr, ci, 1, j]))
-                for m in range(2):
-                    wv = f * W[m, j] if ready[m] else 0.0j
-                    wl = wv * lj
-                    wll = wl * lj
-                    WC[W_R, m, nact] = wv.real
-                    WC[W_I, m, nact] = wv.imag
-                    WC[WL_R, m, nact] = wl.real
-                    WC[WL_I, m, nact] = wl.imag
-                    WC[WLL_R, m, nact] = wll.real
-                    WC[WLL_I, m, nact] = wll.imag
-                    WC[W_ABS, m, nact] = abs(wv)
-                    WC[WL_ABS, m, nact] = abs(wl)
-                for s2 in range(ns):
-                    vy = f * vec[tr, ci, s2, j] * y0[j]
-                    VY[0, nact, s2] = vy.real
-                    VY[1, nact, s2] = vy.imag
-                nact += 1
-            for m in range(2):
-                if ready[m]:
-                    gval[m], dprev[m], _ = _eval3(WC, lamc, nact, G, GT, m, 0.0, w, x_s, th_s)
-                    gprev[m] = gval[m]
-            if k_out < n_out and k_out * t_sample <= t_s * (1.0 + 1e-13):
-                # A sample due at the segment start (the initial state, or a break or event
-                # that falls on an output angle) is the state here (gval holds its monitors).
-                _write_sample(
-                    q_out,
-                    v_out,
-                    force_out,
-                    cam_out,
-                    cfg_out,
+            v[i] += trains.impulse[tr, new - 1, 0, i] * dv
+        q[CAM] = -lift_e
+        record_impact(
+            out.events,
+            out.n_events,
+            out.counts,
+            out.vmax,
+            cases.meff,
+            c,
+            t_ev,
+            False,
+            seat_held,
+            cfg,
+            new,
+            closing,
+        )
+    elif seat_held:
+        new = configuration(cam_held, False)
+        record_event(out.events, out.n_events, c, t_ev, SEAT_SEPARATION, cfg, new, 0.0, 0.0)
+    else:
+        new = configuration(cam_held, True)
+        closing = -v[SEAT]
+        dv = -v[SEAT]
+        for i in range(7):
+            v[i] += trains.impulse[tr, new - 1, 1, i] * dv
+        q[SEAT] = cases.seat_q[c]
+        record_impact(
+            out.events,
+            out.n_events,
+            out.counts,
+            out.vmax,
+            cases.meff,
+            c,
+            t_ev,
+            True,
+            cam_held,
+            cfg,
+            new,
+            closing,
+        )
+    st.cfg = new
+    st.stalled = st.stalled + 1 if t_ev - st.t_s <= 1e-15 * (1.0 + st.t_s) else 0
+    st.t_s = t_ev
+
+
+@njit(**KERNEL)
+def _cross_break(cases, trains, profiles, out, ws, st):
+    """The segment reached the next break of the profile: take the exact state there, and
+    with the cam held apply what the break does (``common.classify_break``): release, an
+    impact of the cam's rate jump, or nothing. Starts the next segment on the next piece."""
+    c, tr, w, cfg, t_break = st.c, st.tr, st.w, st.cfg, st.t_break
+    cam_held = holds_cam(cfg)
+    seat_held = holds_seat(cfg)
+    q, v = ws.q, ws.v
+    _state_at(trains, ws, st, t_break)
+    if not cam_held:
+        _separation(out.sep_rev, c, w, st.t_s, t_break)
+    l_left, dl_left, _ = piece_eval(profiles, c, st.p, st.rev, w * t_break)
+    l_right, dl_right, _ = piece_eval(profiles, c, st.nb, st.revb, w * t_break)
+    if seat_held:
+        q[SEAT] = cases.seat_q[c]
+        v[SEAT] = 0.0
+    if cam_held:
+        kind, jump = classify_break(l_left, dl_left, l_right, dl_right, w, cases.form[c])
+        q[CAM] = -l_left
+        v[CAM] = -w * dl_left
+        if kind == RELEASE:
+            new = configuration(False, seat_held)
+            record_event(out.events, out.n_events, c, t_break, CAM_SEPARATION, cfg, new, -jump, 0.0)
+            st.cfg = new
+        else:
+            if kind != SMOOTH:
+                dv = -jump
+                for i in range(7):
+                    v[i] += trains.impulse[tr, cfg - 1, 0, i] * dv
+                record_impact(
+                    out.events,
+                    out.n_events,
+                    out.counts,
+                    out.vmax,
+                    cases.meff,
                     c,
-                    k_out,
-                    q,
-                    v,
-                    gval,
-                    cam_held,
+                    t_break,
+                    False,
                     seat_held,
-                    poly,
-                    trig,
-                    p,
-                    x_s,
-                    ct,
-                    st,
-                    w,
                     cfg,
-                    full_state,
+                    cfg,
+                    abs(jump),
                 )
-                k_out += 1
-            t_prev = t_s
-            replan = True
-            start_check = True
-            h = -1.0
-            since_refresh = 0
-            since_check = 0
-            # ---- walk: steps sized by the fastest mode still present ----
-            while True:
-                if replan:
-                    # Drop mode pairs that have decayed below what any output can show
-                    # (keeping the fastest-first order).
-                    if since_check >= 32:
-                        since_check = 0
-                        kept = lo
-                        for jj in range(lo, nact):
-                            if (
-                                MC[AMP_Q, jj] * MC[EABS, jj] < MODE_FLOOR
-                                and MC[AMP_F, jj] * MC[EABS, jj] < eps_force
-                            ):
-                                continue
-                            if kept != jj:
-                                _keep_column(MC, WC, VY, lamc, act, ns, jj, kept)
-                            kept += 1
-                        nact = kept
-                    # The step need only resolve modes that could bring a watched monitor to its
-                    # level: skip the fastest modes while their summed amplitudes (which only
-                    # decay) stay under half of every monitor's distance from its level.
-                    margin = np.inf
-                    for m in range(2):
-                        if watch[m]:
-                            margin = min(margin, level[m] - gval[m])
-                    k = lo
-                    spent = 0.0
-                    while k < nact:
-                        amp = 0.0
-                        for m in range(2):
-                            if watch[m]:
-                                amp = max(amp, WC[W_ABS, m, k] * MC[EABS, k])
-                        if spent + amp >= 0.5 * margin:
-                            break
-                        spent += amp
-                        k += 1
-                    fastest = lam_abs[tr, ci, act[k]] if k < nact else 0.0
-                    h_allow = RESOLUTION * np.pi / fastest if fastest > 0.0 else np.inf
-                    if dt_cap > 0.0:
-                        h_allow = min(h_allow, dt_cap)
-                    t_from = t_prev
-                    to_sample = k_out < n_out and k_out * t_sample < t_end * (1.0 + 1e-13)
-                    t_next = k_out * t_sample if to_sample else t_end
-                    n_steps = max(1, int(np.ceil((t_next - t_from) / h_allow - 1e-9)))
-                    h_new = (t_next - t_from) / n_steps
-                    i_step = 0
-                    since_refresh += n_steps
-                    since_check += n_steps
-                    # (A step within 1e-12 of the last one keeps D: the difference is rounding.)
-                    if abs(h_new - h) > 1e-12 * h or since_refresh > 256 or t_from == t_s:
-                        # New step, a fresh segment, or time to refresh: exact exponentials.
-                        h = h_new
-                        for jj in range(lo, nact):
-                            d = np.exp(lamc[jj] * h)
-                            e = np.exp(lamc[jj] * (t_from + h - t_s))
-                            MC[DR, jj] = d.real
-                            MC[DI, jj] = d.imag
-                            MC[ER, jj] = e.real
-                            MC[EI, jj] = e.imag
-                            MC[DABS, jj] = np.exp(lamc[jj].real * h)
-                            MC[EABS, jj] = np.exp(lamc[jj].real * (t_from + h - t_s))
-                        cwh = np.cos(w * h)
-                        swh = np.sin(w * h)
-                        cth = np.cos(w * (t_from + h))
-                        sth = np.sin(w * (t_from + h))
-                        since_refresh = 0
-                    else:
-                        # Same step: E and (cos θ, sin θ) advance from the sample point.
-                        cth, sth = _advance(MC, lo, nact, cth, sth, cwh, swh)
-                    replan = False
-                if start_check:
-                    # A monitor already above its level at the segment start (a contact that
-                    # pulls the instant after an impact) is an event there.
-                    start_check = False
-                    first = -1
-                    for m in range(2):
-                        if watch[m] and first < 0 and gval[m] > level[m]:
-                            first = m  # gval still holds the values at the segment start
-                    if first < 0:
-                        continue
-                    t_ev = t_s
-                    at_break = False
-                else:
-                    first = -1
-                if first < 0:
-                    i_step += 1
-                    steps_taken[c] += 1
-                t_n = t_next if i_step == n_steps else t_from + i_step * h
-                at_break = t_break <= t_n if first < 0 else False
-                if first >= 0:
-                    pass
-                elif at_break:
-                    t_eval = t_break
-                    for m in range(2):
-                        if ready[m]:
-                            gval[m], dval[m] = _at(
-                                False, WC, lamc, nact, G, GT, m, t_s, t_break, w, th0
-                            )
-                else:
-                    t_eval = t_n
-                    x_n = w * t_n - th0
-                    for m in range(2):
-                        if ready[m]:
-                            gval[m], dval[m] = _monitor_at_grid(
-                                WC, MC, lo, nact, G, GT, m, gdeg, w, x_n, cth, sth
-                            )
-                # An event in (t_prev, t_eval]: the earliest monitor to rise through its level.
-                if first < 0:
-                    t_ev = t_eval
-                if first < 0 and t_eval > t_s:
-                    for m in range(2):
-                        if not watch[m]:
-                            continue
-                        t_hi = -1.0
-                        g_hi = gval[m]
-                        dg_hi = dval[m]
-                        if gval[m] > level[m]:
-                            t_hi = t_eval
-                        elif (
-                            dprev[m] > 0.0
-                            and dval[m] < 0.0
-                            and (
-                                max(gprev[m], gval[m])
-                                + (t_eval - t_prev)
-                                * _slope_bound(
-                                    WC,
-                                    G,
-                                    GT,
-                                    m,
-                                    MC,
-                                    lo,
-                                    nact,
-                                    gdeg,
-                                    w,
-                                    w * t_prev - th0,
-                                    w * t_eval - th0,
-                                )
-                                > level[m]
-                            )
-                        ):
-                            # A maximum inside the step that might rise above the level (the
-                            # bound on |g'| over the step cannot rule it out): find it.
-                            t_max = _root(
-                                True,
-                                -1.0,
-                                WC,
-                                lamc,
-                                nact,
-                                G,
-                                GT,
-                                m,
-                                t_s,
-                                t_prev,
-                                t_eval,
-                                0.0,
-                                w,
-                                th0,
-                                tolerance,
-                                False,
-                                0.0,
-                                0.0,
-                                0.0,
-                            )
-                            g_hi, dg_hi = _at(False, WC, lamc, nact, G, GT, m, t_s, t_max, w, th0)
-                            if g_hi > level[m]:
-                                t_hi = t_max
-                        if t_hi > 0.0:
-                            # The value root starts from what the grid (or the maximum's
-                            # search) has, unless reduced fidelity leaves pairs out of the grid.
-                            te = _root(
-                                False,
-                                1.0,
-                                WC,
-                                lamc,
-                                nact,
-                                G,
-                                GT,
-                                m,
-                                t_s,
-                                t_prev,
-                                t_hi,
-                                level[m],
-                                w,
-                                th0,
-                                tolerance,
-                                lo == 0,
-                                gprev[m] - level[m],
-                                g_hi - level[m],
-                                dg_hi,
-                            )
-                            if first < 0 or te < t_ev:
-                                t_ev = te
-                                first = m
-                if first >= 0:
-                    _exps(lam, tr, ci, ns, t_ev - t_s, ev)
-                    _state(
-                        q,
-                        v,
-                        z,
-                        ya,
-                        vec,
-                        ev,
-                        y0,
-                        Z,
-                        ZT,
-                        free,
-                        tr,
-                        ci,
-                        nf,
-                        ns,
-                        w * t_ev - th0,
-                        np.cos(w * t_ev),
-                        np.sin(w * t_ev),
-                        ns,
-                        deg,
-                    )
-                    lift_e, dl_e, _ = piece_eval(breaks, poly, trig, c, p, rev, w * t_ev)
-                    vcam = -w * dl_e
-                    if cam_held:
-                        q[0] = -lift_e
-                        v[0] = vcam
-                    if seat_held:
-                        q[6] = qs
-                        v[6] = 0.0
-                    if not cam_held:
-                        _separation(sep_rev, c, n_rev, w, t_s, t_ev)
-                    if first == 0 and cam_held:
-                        new = _config(False, seat_held)
-                        _record(events, n_events, c, t_ev, CAM_SEPARATION, cfg, new, 0.0, 0.0)
-                    elif first == 0:
-                        new = _config(True, seat_held)
-                        closing = v[0] - vcam
-                        dv = vcam - v[0]
-                        for i in range(7):
-                            v[i] += impulse[tr, new - 1, 0, i] * dv
-                        q[0] = -lift_e
-                        _impact(
-                            events,
-                            n_events,
-                            counts,
-                            vmax,
-                            meff,
-                            c,
-                            t_ev,
-                            False,
-                            seat_held,
-                            cfg,
-                            new,
-                            closing,
-                        )
-                    elif seat_held:
-                        new = _config(cam_held, False)
-                        _record(events, n_events, c, t_ev, SEAT_SEPARATION, cfg, new, 0.0, 0.0)
-                    else:
-                        new = _config(cam_held, True)
-                        closing = -v[6]
-                        dv = -v[6]
-                        for i in range(7):
-                            v[i] += impulse[tr, new - 1, 1, i] * dv
-                        q[6] = qs
-                        _impact(
-                            events,
-                            n_events,
-                            counts,
-                            vmax,
-                            meff,
-                            c,
-                            t_ev,
-                            True,
-                            cam_held,
-                            cfg,
-                            new,
-                            closing,
-                        )
-                    cfg = new
-                    stalled = stalled + 1 if t_ev - t_s <= 1e-15 * (1.0 + t_s) else 0
-                    t_s = t_ev
-                    break
-                if at_break:
-                    _exps(lam, tr, ci, ns, t_break - t_s, ev)
-                    _state(
-                        q,
-                        v,
-                        z,
-                        ya,
-                        vec,
-                        ev,
-                        y0,
-                        Z,
-                        ZT,
-                        free,
-                        tr,
-                        ci,
-                        nf,
-                        ns,
-                        w * t_break - th0,
-                        np.cos(w * t_break),
-                        np.sin(w * t_break),
-                        ns,
-                        deg,
-                    )
-                    if not cam_held:
-                        _separation(sep_rev, c, n_rev, w, t_s, t_break)
-                    l_left, dl_left, _ = piece_eval(breaks, poly, trig, c, p, rev, w * t_break)
-                    l_right, dl_right, _ = piece_eval(breaks, poly, trig, c, nb, revb, w * t_break)
-                    if seat_held:
-                        q[6] = qs
-                        v[6] = 0.0
-                    if cam_held:
-                        jump = w * (dl_right - dl_left)  # lift-rate jump [m/s]
-                        scale = 1e-9 * (abs(w * dl_left) + abs(w * dl_right)) + JUMP_FLOOR
-                        drop = l_right < l_left - 1e-12
-                        q[0] = -l_left
-                        v[0] = -w * dl_left
-                        if (jump < -scale or drop) and not form[c]:
-                            new = _config(False, seat_held)
-                            _record(
-                                events, n_events, c, t_break, CAM_SEPARATION, cfg, new, -jump, 0.0
-                            )
-                            cfg = new
-                        else:
-                            if abs(jump) > scale:
-                                dv = -jump
-                                for i in range(7):
-                                    v[i] += impulse[tr, cfg - 1, 0, i] * dv
-                                _impact(
-                                    events,
-                                    n_events,
-                                    counts,
-                                    vmax,
-                                    meff,
-                                    c,
-                                    t_break,
-                                    False,
-                                    seat_held,
-                                    cfg,
-                                    cfg,
-                                    abs(jump),
-                                )
-                            q[0] = -l_right
-                            v[0] = -w * dl_right
-                    p = nb
-                    rev = revb
-                    t_s = t_break
-                    stalled = 0
-                    break
-                # Accept the grid point: force maxima, output sample, end of run.
-                for m in range(2):
-                    dprev[m] = dval[m]
-                    gprev[m] = gval[m]
-                if cam_held:
-                    fmax[c, 0] = max(fmax[c, 0], -gval[0])
-                if seat_held:
-                    fmax[c, 1] = max(fmax[c, 1], -gval[1])
-                t_prev = t_n
-                if i_step == n_steps:
-                    if to_sample:
-                        x_n = w * t_n - th0
-                        _state_active(
-                            q,
-                            v,
-                            z,
-                            VY,
-                            MC,
-                            Z,
-                            ZT,
-                            free,
-                            tr,
-                            ci,
-                            nf,
-                            lo,
-                            nact,
-                            x_n,
-                            cth,
-                            sth,
-                            deg,
-                            full_state,
-                        )
-                        _write_sample(
-                            q_out,
-                            v_out,
-                            force_out,
-                            cam_out,
-                            cfg_out,
-                            c,
-                            k_out,
-                            q,
-                            v,
-                            gval,
-                            cam_held,
-                            seat_held,
-                            poly,
-                            trig,
-                            p,
-                            x_n,
-                            cth,
-                            sth,
-                            w,
-                            cfg,
-                            full_state,
-                        )
-                        k_out += 1
-                    if t_n >= t_end:
-                        if not cam_held:
-                            _separation(sep_rev, c, n_rev, w, t_s, t_n)
-                        done = True
-                        break
-                    replan = True
-                else:
-                    cth, sth = _advance(MC, lo, nact, cth, sth, cwh, swh)
-            if stalled > MAX_STALLED_EVENTS:
-                status[c] = CHATTER
+            q[CAM] = -l_right
+            v[CAM] = -w * dl_right
+    st.p = st.nb
+    st.rev = st.revb
+    st.t_s = t_break
+    st.stalled = 0
+
+
+# --------------------------------------------------------------------------- the kernel
+
+
+@njit(inline="always", nogil=True)
+def _start_case(cases, trains, profiles, ws, st, c, tr):
+    """Case c's run from its start state at θ = 0."""
+    st.c = c
+    st.tr = tr
+    st.w = cases.omega[c]
+    st.eps_force = 1e-9 * (abs(trains.load[tr, 3]) + 1.0)
+    for i in range(7):
+        ws.q[i] = cases.q0[c, i]
+        ws.v[i] = cases.v0[c, i]
+    st.cfg = cases.cfg0[c]
+    rev, p = locate(profiles, c, 0.0)
+    st.rev = rev
+    st.p = p
+    st.t_s = 0.0
+    st.k_out = 0
+    st.stalled = 0
+    st.done = False
+
+
+@njit(**KERNEL)
+def modal_exact_batch(cases, trains, profiles, runs, out, ws, state):
+    """Advance every case of a batch exactly between events; fill ``out`` in place.
+
+    Parameters
+    ----------
+    cases : common.Cases
+    trains : ModalTrains
+        The distinct trains; case c runs train ``runs.train[c]``.
+    profiles : campipe.profiles.PackedProfiles
+    runs : ExactRuns
+    out : common.Outputs
+    ws : Workspace
+        Work arrays (``make_workspace``).
+    state : (1,) array of STATE
+        The run's scalars.
+    """
+    st = state[0]
+    for c in range(cases.omega.shape[0]):
+        _start_case(cases, trains, profiles, ws, st, c, runs.train[c])
+        while not st.done:
+            _begin_segment(cases, trains, profiles, runs, out, ws, st)
+            _walk(cases, trains, profiles, runs, out, ws, st)
+            if st.stalled > MAX_STALLED_EVENTS:
+                out.status[c] = CHATTER
                 break
             finite = True
             for i in range(7):
-                if not (np.isfinite(q[i]) and np.isfinite(v[i])):
+                if not (np.isfinite(ws.q[i]) and np.isfinite(ws.v[i])):
                     finite = False
             if not finite:
-                status[c] = NONFINITE
+                out.status[c] = NONFINITE
                 break
-        fmax[c, 2] = fmax[c, 0]  # no force here measures a step: impulses are instantaneous
-        if n_events[c] > events.shape[1] and status[c] == OK:
-            status[c] = EVENTS_TRUNCATED
+        out.fmax[c, 2] = out.fmax[c, 0]  # no force here measures a step: impulses are instant
+        if out.n_events[c] > out.events.shape[1] and out.status[c] == OK:
+            out.status[c] = EVENTS_TRUNCATED

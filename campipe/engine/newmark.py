@@ -16,22 +16,29 @@ its acceleration is the velocity change divided by Δt (thesis Eq. 28), which ca
 impulse into the free coordinates. The contact force in that step measures 1/Δt and is left
 out of the force maxima; the impulse reported is the converged one, m_eff·v_closing.
 
-A velocity jump in the profile (a flat's edges) is a break of the piecewise profile. Crossing
-one with the cam held, a surface that falls away releases the follower for that step (the cam
-never pulls it along); a surface that jumps into the follower is a cam impact.
+A velocity jump in the profile (a flat's edges) is a break of the piecewise profile, classified
+by ``common.classify_break``: crossing one with the cam held, a surface that falls away releases
+the follower for that step (the cam never pulls it along); a surface that jumps into the
+follower is a cam impact.
 
 A step is two small matrix products fixed by the train, the step and the configuration
 (``contact.newmark_step_maps``): the force left after the predictors, then the step-end
 accelerations and contact forces from it, applied with the corrector in AVX2 registers
 (``_newmark_step``).
 
-State arrays have a leading case axis; each case runs to its own end inside one compiled call,
-which releases the GIL so dask threads run batches in parallel.
+Notation (thesis Appendix B): x = (q, q̇, q̈) the state at a step's start, xn at its end, in the
+lane layout X_Q, X_V, X_A; z the step-end accelerations, and in a held coordinate's row its
+contact force (F1 at q1, F7 at q7); h = Δt; θ1 = ω·t1 the cam angle at the step end; qc, vc,
+ac the cam's prescribed q1, q̇1, q̈1 there (q1 = −lift).
+
+Each case runs to its own end inside one compiled call, which releases the GIL so dask threads
+run batches in parallel.
 """
 
 from __future__ import annotations
 
 import functools
+from typing import NamedTuple
 
 import numpy as np
 from llvmlite import ir
@@ -40,20 +47,33 @@ from numba.core import cgutils
 from numba.core.errors import TypingError
 from numba.extending import intrinsic
 
-# Event kinds.
-CAM_SEPARATION, CAM_IMPACT, SEAT_SEPARATION, SEAT_IMPACT = 1, 2, 3, 4
-# Columns of the event array.
-EV_TIME, EV_KIND, EV_FROM, EV_TO, EV_VELOCITY, EV_IMPULSE = range(6)
-N_EVENT_FIELDS = 6
-# Status codes.
-OK, NONFINITE, EVENTS_TRUNCATED = 0, 1, 2
+from campipe.constants import TWO_PI
+from campipe.engine.common import (
+    JUMP,
+    KERNEL,
+    RELEASE,
+    classify_break,
+    configuration,
+    holds_cam,
+    holds_seat,
+    record_event,
+    record_impact,
+)
+from campipe.profiles.packed import degree, evaluate_packed, horner, locate, next_break, piece_eval
+from campipe.vocabulary import (
+    CAM_SEPARATION,
+    EVENTS_TRUNCATED,
+    N_COORDINATES,
+    NONFINITE,
+    OK,
+    SEAT,
+    SEAT_SEPARATION,
+)
 
-TWO_PI = 2.0 * np.pi
 #: Let LLVM reassociate and fuse floating-point operations, but keep NaN and inf semantics:
 #: the kernel's finiteness check must keep working.
 FAST = {"contract", "reassoc", "nsz", "arcp"}
-#: Number of coordinates.
-NP = 7
+NP = N_COORDINATES
 #: The state x = (q, v, a) a step reads (``_newmark_step``, ``contact.newmark_step_maps``): each
 #: block padded to N_Z = 8 lanes (two AVX2 registers of LANES doubles) and starting at these
 #: offsets; N_X lanes in all. Padding lanes stay zero.
@@ -62,106 +82,52 @@ N_X, N_Z = 24, 8
 LANES = 4
 #: LLVM flags of ``_newmark_step``'s arithmetic: multiplies and adds fuse, nothing reassociates.
 FUSE = ("contract",)
-#: A profile break whose lift rate jumps by less than this [m/s] (beyond 1e-9 relative) is
-#: smooth: rounding in re-expanded polynomial pieces, not a velocity jump.
-JUMP_FLOOR = 1e-9
 #: Turns [-] by which an angle may fall short of a turn's start and still count to that turn.
 TURN_GUARD = 1e-9
 
 
-@njit(cache=True, nogil=True)
-def locate(breaks, n_pieces, c, theta):
-    """(revolution, piece) holding cam angle ``theta`` [rad] for case ``c``."""
-    rev = np.floor(theta / TWO_PI)
-    phi = theta - rev * TWO_PI
-    lo = 0
-    hi = n_pieces[c] - 1
-    while lo < hi:
-        mid = (lo + hi + 1) // 2
-        if breaks[c, mid] <= phi:
-            lo = mid
-        else:
-            hi = mid - 1
-    return int(rev), lo
+class NewmarkTrains(NamedTuple):
+    """Each case's train at its step (leading axis: case; C-contiguous)."""
+
+    M: np.ndarray  # (n, 7, 7) mass [kg, kg·m, kg·m²]
+    C: np.ndarray  # (n, 7, 7) damping
+    K: np.ndarray  # (n, 7, 7) stiffness
+    load: np.ndarray  # (n, 7) preload [N]
+    step_A: np.ndarray  # (n, 4, N_X, N_Z) ``contact.newmark_step_maps``: forces
+    step_G: np.ndarray  # (n, 4, N_Z, N_Z) and step-end accelerations and contact forces
 
 
-@njit(cache=True, nogil=True, inline="always")
-def horner2(coef, x, deg=7):
-    """Σ_{k ≤ deg} coef[k]·x^k and its first two derivatives in x, by Horner's scheme.
-    Inlined, so a caller's view ``poly[c, p]`` costs no reference counting per call."""
-    p0 = 0.0
-    p1 = 0.0
-    p2 = 0.0
-    for k in range(deg, -1, -1):
-        p2 = p2 * x + 2.0 * p1
-        p1 = p1 * x + p0
-        p0 = p0 * x + coef[k]
-    return p0, p1, p2
+class NewmarkWork(NamedTuple):
+    """Work arrays of one case's step (``make_work``): the state (q, v, a) at the step start
+    and end in the step's layout (X_Q, X_V, X_A), the step map's output, the load, and a
+    sample's state."""
+
+    x: np.ndarray  # (N_X,)
+    xn: np.ndarray  # (N_X,)
+    z: np.ndarray  # (N_Z,)
+    f: np.ndarray  # (N_Z,)
+    qt: np.ndarray  # (7,)
+    vt: np.ndarray  # (7,)
+    at: np.ndarray  # (7,)
 
 
-@njit(cache=True, nogil=True)
-def piece_eval(breaks, poly, trig, c, piece, rev, theta):
-    """Lift [m] and its first two θ-derivatives on one piece."""
-    x = theta - rev * TWO_PI - breaks[c, piece]
-    p0, p1, p2 = horner2(poly[c, piece], x)
-    s = np.sin(theta)
-    co = np.cos(theta)
-    a = trig[c, piece, 0]
-    b = trig[c, piece, 1]
-    return p0 + a * s + b * co, p1 + a * co - b * s, p2 - a * s - b * co
+def make_work() -> NewmarkWork:
+    """Zeroed work arrays."""
+    return NewmarkWork(
+        np.zeros(N_X), np.zeros(N_X), np.zeros(N_Z), np.zeros(N_Z), np.zeros(NP), np.zeros(NP),
+        np.zeros(NP),
+    )  # fmt: skip
 
 
-@njit(cache=True, nogil=True)
-def _degree(poly, c, piece):
-    """Highest power with a nonzero coefficient on a piece (Horner need go no higher)."""
-    for k in range(7, 0, -1):
-        if poly[c, piece, k] != 0.0:
-            return k
-    return 0
+class NewmarkRuns(NamedTuple):
+    """How each case is stepped and sampled."""
+
+    dt: np.ndarray  # (n,) step [s]
+    n_steps: np.ndarray  # (n,) int64 steps to take
+    d_theta_out: float  # output spacing in cam angle [rad]
 
 
-@njit(cache=True, nogil=True)
-def cam_eval(breaks, poly, trig, n_pieces, c, theta):
-    rev, piece = locate(breaks, n_pieces, c, theta)
-    return piece_eval(breaks, poly, trig, c, piece, rev, theta)
-
-
-@njit(cache=True, nogil=True)
-def _record(events, n_events, c, t, kind, c_from, c_to, velocity, impulse):
-    k = n_events[c]
-    if k < events.shape[1]:
-        events[c, k, EV_TIME] = t
-        events[c, k, EV_KIND] = kind
-        events[c, k, EV_FROM] = c_from
-        events[c, k, EV_TO] = c_to
-        events[c, k, EV_VELOCITY] = velocity
-        events[c, k, EV_IMPULSE] = impulse
-    n_events[c] = k + 1
-
-
-@njit(cache=True, nogil=True)
-def _impact(events, n_events, counts, vmax, meff, c, t, seat, other_held, c_from, c_to, closing):
-    """Count a plastic impact of case c on the cam (``seat`` False) or the seat, keep its
-    largest closing velocity [m/s] and record the event with its impulse m_eff·v_closing;
-    ``other_held``: the other contact is held (``contact.impact_masses`` order)."""
-    side = 1 if seat else 0
-    counts[c, side] += 1
-    vmax[c, side] = max(vmax[c, side], closing)
-    mass = meff[c, 2 * side + (1 if other_held else 0)]
-    _record(
-        events,
-        n_events,
-        c,
-        t,
-        SEAT_IMPACT if seat else CAM_IMPACT,
-        c_from,
-        c_to,
-        closing,
-        mass * closing,
-    )
-
-
-@njit(cache=True, nogil=True, fastmath=FAST)
+@njit(**KERNEL, fastmath=FAST)
 def _row_force(M, C, K, load, c, i, a, v, q):
     """Contact force at coordinate i: row i of M·a + C·v + K·q − load (thesis Eqs. 26, 27)."""
     fm = 0.0
@@ -174,37 +140,18 @@ def _row_force(M, C, K, load, c, i, a, v, q):
     return fm + fc + fk - load[c, i]
 
 
-@njit(cache=True, nogil=True)
+@njit(**KERNEL)
 def _revolution(theta):
     """The cam turn holding angle ``theta`` [rad]. An angle on a turn's start to rounding
     (a round speed and step) counts to that turn, however LLVM reassociates θ = ω·n·Δt."""
     return int(theta / TWO_PI + TURN_GUARD)
 
 
-@njit(cache=True, nogil=True, fastmath=FAST)
-def _next_break(breaks, n_pieces, c, piece, rev):
-    """The piece after ``piece`` of turn ``rev``, its turn, and the cam angle [rad] where it
-    starts."""
-    pn = piece + 1
-    revn = rev
-    if pn == n_pieces:
-        pn = 0
-        revn = rev + 1
-    return pn, revn, revn * TWO_PI + breaks[c, pn]
-
-
-@njit(cache=True, nogil=True)
+@njit(**KERNEL)
 def _add_turn(sep_rev, c, turn, angle):
     """Add one turn's separation angle [rad] to case c's record, if that turn is recorded."""
     if turn < sep_rev.shape[1]:
         sep_rev[c, turn] += angle
-
-
-@njit(cache=True, nogil=True)
-def _config(cam, seat):
-    if cam:
-        return 3 if seat else 1
-    return 4 if seat else 2
 
 
 @intrinsic
@@ -326,90 +273,184 @@ def _newmark_step(typingctx, A, G, c, k, load, h, x, xn, z):
     return types.void(A, G, c, k, load, h, x, xn, z), codegen
 
 
-@njit(cache=True, nogil=True, fastmath=FAST)
-def newmark_linear_batch(
-    M,
-    C,
-    K,
-    load,
-    step_A,
-    step_G,
-    meff,
-    q0,
-    v0,
-    a0,
-    cfg0,
-    seat_q,
-    has_seat,
-    form,
-    omega,
-    dt,
-    n_steps,
-    breaks,
-    poly,
-    trig,
-    n_pieces,
-    d_theta_out,
-    q_out,
-    v_out,
-    force_out,
-    cam_out,
-    cfg_out,
-    sep_rev,
-    counts,
-    vmax,
-    fmax,
-    events,
-    n_events,
-    status,
-):
-    """Advance every case of a batch; fill the output arrays in place.
+@njit(**KERNEL, fastmath=FAST)
+def _cross_breaks(profiles, cases, out, c, w, th1, cfg, p, rev, pn, revn, thb):
+    """Move case c's piece cursor (piece p of turn rev; the next break thb [rad] starts piece
+    pn of turn revn) up to the step end θ1 [rad], classifying each break crossed with the cam
+    held (``common.classify_break``): a surface falling away releases the follower, one
+    jumping into it is a cam impact. Returns the configuration, whether that impact's
+    impulse starts now, and the cursor."""
+    impulse_cam = False
+    while th1 >= thb:
+        if holds_cam(cfg):
+            l_left, dl_left, _ = piece_eval(profiles, c, p, rev, thb)
+            l_right, dl_right, _ = piece_eval(profiles, c, pn, revn, thb)
+            kind, jump = classify_break(l_left, dl_left, l_right, dl_right, w, cases.form[c])
+            seat_held = holds_seat(cfg)
+            if kind == RELEASE:
+                # The surface falls away: the follower keeps its velocity.
+                new = configuration(False, seat_held)
+                record_event(out.events, out.n_events, c, thb / w, CAM_SEPARATION, cfg, new,
+                             -jump, 0.0)  # fmt: skip
+                cfg = new
+            elif kind == JUMP:
+                # The surface jumps into the follower (or, form-closed, drags it).
+                impulse_cam = True
+                record_impact(out.events, out.n_events, out.counts, out.vmax, cases.meff, c,
+                              thb / w, False, seat_held, cfg, cfg, abs(jump))  # fmt: skip
+        p = pn
+        rev = revn
+        pn, revn, thb = next_break(profiles, c, p, rev)
+    return cfg, impulse_cam, p, rev, pn, revn, thb
 
-    Shapes: M, C, K (n, 7, 7); load, q0, v0, a0 (n, 7); step_A (n, 4, N_X, N_Z), step_G
-    (n, 4, N_Z, N_Z) from ``contact.newmark_step_maps`` at the case's step (C-contiguous);
-    meff (n, 4) from ``impact_masses``;
-    per-case vectors (n,); q_out, v_out (n, n_out, 7); force_out (n, n_out, 2) = (F1, F7),
-    thesis signs; cam_out (n, n_out) cam lift; cfg_out (n, n_out) int8; sep_rev (n, n_rev)
-    [rad]; counts (n, 2) cam and seat impacts; vmax (n, 2) largest cam and seat closing
-    velocity; fmax (n, 2) largest compressive cam and seat force between impacts, and the cam
-    force including the steps an impulse passes through (the thesis's "impact force", which
-    measures 1/Δt); events (n, max_events, 6).
+
+@njit(**KERNEL, fastmath=FAST)
+def _write_samples(
+    trains, cases, profiles, runs, out, c, k_out, t_sample, t0, t1, h, x, xn, qt, vt, at, cfg
+):
+    """Output samples of case c inside the step (t0, t1] [s], from the step's cubic (thesis
+    Eqs. 55–57); the held coordinates from the cam and the seat. Returns the next sample's
+    index and time."""
+    w = cases.omega[c]
+    n_out = out.q.shape[1]
+    cam_held = holds_cam(cfg)
+    seat_held = holds_seat(cfg)
+    while k_out < n_out and t_sample <= t1 * (1.0 + 1e-12):
+        tau = t_sample - t0
+        if k_out == 0:
+            tau = 0.0
+        r = tau / h
+        for i in range(NP):
+            q = x[X_Q + i]
+            v = x[X_V + i]
+            a = x[X_A + i]
+            da = xn[X_A + i] - a
+            qt[i] = q + v * tau + 0.5 * a * tau * tau + da * tau * tau * r / 6.0
+            vt[i] = v + a * tau + 0.5 * da * tau * r
+            at[i] = a + da * r
+        ls, dls, ddls = evaluate_packed(profiles, c, w * t_sample)
+        if cam_held:
+            qt[0] = -ls
+            vt[0] = -w * dls
+            at[0] = -w * w * ddls
+        if seat_held:
+            qt[SEAT] = cases.seat_q[c]
+            vt[SEAT] = 0.0
+            at[SEAT] = 0.0
+        for i in range(NP):
+            out.q[c, k_out, i] = qt[i]
+            out.v[c, k_out, i] = vt[i]
+        # A contact that the step end releases may show a little tension inside the step; a
+        # force-closed contact cannot pull, so it reports zero there.
+        M, C, K, load = trains.M, trains.C, trains.K, trains.load
+        fs1 = _row_force(M, C, K, load, c, 0, at, vt, qt) if cam_held else 0.0
+        fs7 = _row_force(M, C, K, load, c, SEAT, at, vt, qt) if seat_held else 0.0
+        out.force[c, k_out, 0] = fs1 if cases.form[c] else min(fs1, 0.0)
+        out.force[c, k_out, 1] = max(fs7, 0.0)
+        out.cam[c, k_out] = ls
+        out.cfg[c, k_out] = cfg
+        k_out += 1
+        t_sample = k_out * runs.d_theta_out / w
+    return k_out, t_sample
+
+
+@njit(inline="always")
+def _tripped(cfg, form, has_seat, f1, f7, q1, q7, qc, qs):
+    """The monitors of thesis Table I at a step end (F1, F7 the contact forces, q1, q7 the
+    contact coordinates, qc the cam's q1, qs the seat's q7): the cam or the seat would pull,
+    the follower passed the cam surface, the valve passed its seat.
+
+    Inlined and taking scalars only: it runs every step, and numba reference-counts an array
+    handed to an inlined function on every call.
     """
-    if step_A.shape[2:] != (N_X, N_Z) or step_G.shape[2:] != (N_Z, N_Z):
+    cam_held = holds_cam(cfg)
+    seat_held = holds_seat(cfg)
+    release_cam = cam_held and not form and f1 > 0.0
+    release_seat = seat_held and f7 < 0.0
+    hit_cam = not cam_held and q1 > qc
+    hit_seat = has_seat and not seat_held and q7 < qs
+    return release_cam, release_seat, hit_cam, hit_seat
+
+
+@njit(**KERNEL, fastmath=FAST)
+def _switch(cases, out, c, t1, cfg, f7, xn, vc, release_cam, release_seat, hit_cam, hit_seat):
+    """Apply what the monitors tripped at the step end t1 [s] (``_tripped``): record the
+    releases and impacts, and return the next configuration and whether a cam or seat
+    impulse starts."""
+    events, n_events, counts, vmax = out.events, out.n_events, out.counts, out.vmax
+    meff = cases.meff
+    seat_held = holds_seat(cfg)
+    cam_next = holds_cam(cfg)
+    seat_next = seat_held
+    if release_cam:
+        cam_next = False
+        new = configuration(False, seat_held and not f7 < 0.0)
+        record_event(events, n_events, c, t1, CAM_SEPARATION, cfg, new, 0.0, 0.0)
+    if release_seat:
+        seat_next = False
+        new = configuration(cam_next, False)
+        record_event(events, n_events, c, t1, SEAT_SEPARATION, cfg, new, 0.0, 0.0)
+    if hit_cam:
+        closing = xn[X_V] - vc
+        cam_next = True
+        new = configuration(True, seat_next)
+        record_impact(events, n_events, counts, vmax, meff, c, t1, False, seat_next, cfg, new,
+                      closing)  # fmt: skip
+    if hit_seat:
+        closing = -xn[X_V + SEAT]
+        seat_next = True
+        new = configuration(cam_next, True)
+        record_impact(events, n_events, counts, vmax, meff, c, t1, True, cam_next, cfg, new,
+                      closing)  # fmt: skip
+    return configuration(cam_next, seat_next), hit_cam, hit_seat
+
+
+@njit(**KERNEL, fastmath=FAST)
+def newmark_linear_batch(cases, trains, profiles, runs, out, work):
+    """Advance every case of a batch; fill ``out`` (``common.Outputs``) in place.
+
+    Parameters
+    ----------
+    cases : common.Cases
+    trains : NewmarkTrains
+    profiles : campipe.profiles.PackedProfiles
+    runs : NewmarkRuns
+    out : common.Outputs
+        ``fmax[:, 2]`` is the cam force including the steps an impulse passes through (the
+        thesis's "impact force", which measures 1/Δt).
+    work : NewmarkWork
+    """
+    if trains.step_A.shape[2:] != (N_X, N_Z) or trains.step_G.shape[2:] != (N_Z, N_Z):
         raise ValueError("step_A, step_G: expected (n, 4, N_X, N_Z) and (n, 4, N_Z, N_Z)")
-    n_cases = M.shape[0]
-    n_out = q_out.shape[1]
-    # The state (q, v, a) at the step start and end, in the step's layout (X_Q, X_V, X_A).
-    x = np.zeros(N_X)
-    xn = np.zeros(N_X)
-    z = np.zeros(N_Z)
-    f = np.zeros(N_Z)
-    qt = np.zeros(NP)
-    vt = np.zeros(NP)
-    at = np.zeros(NP)
+    n_cases = cases.omega.shape[0]
+    n_out = out.q.shape[1]
+    x, xn, z, f, qt, vt, at = work
     for c in range(n_cases):
-        h = dt[c]
-        w = omega[c]
-        qs = seat_q[c]
+        h = runs.dt[c]
+        w = cases.omega[c]
+        qs = cases.seat_q[c]
+        form_c = cases.form[c]
+        has_seat_c = cases.has_seat[c]
+        n_steps = runs.n_steps[c]
+        out.steps[c] = n_steps
         for i in range(N_X):
             x[i] = 0.0
             xn[i] = 0.0
         for i in range(NP):
-            f[i] = load[c, i]
-            x[X_Q + i] = q0[c, i]
-            x[X_V + i] = v0[c, i]
-            x[X_A + i] = a0[c, i]
-        cfg = cfg0[c]
+            f[i] = trains.load[c, i]
+            x[X_Q + i] = cases.q0[c, i]
+            x[X_V + i] = cases.v0[c, i]
+            x[X_A + i] = cases.a0[c, i]
+        cfg = cases.cfg0[c]
         impulse_cam = False
         impulse_seat = False
         quiet_cam = 0  # steps left whose cam force measures an impulse, not the train
         quiet_seat = 0
         k_out = 0
         t_sample = 0.0
-        rev, p = locate(breaks, n_pieces, c, 0.0)
-        pdeg = _degree(poly, c, p)
-        npc = n_pieces[c]
-        pn, revn, thb = _next_break(breaks, npc, c, p, rev)
+        rev, p = locate(profiles, c, 0.0)
+        pdeg = degree(profiles, c, p)
+        pn, revn, thb = next_break(profiles, c, p, rev)
         fmax_cam = 0.0
         fmax_seat = 0.0
         fmax_raw = 0.0
@@ -419,57 +460,30 @@ def newmark_linear_batch(
         cd = np.cos(w * h)
         sn = 0.0
         cs = 1.0
-        for n in range(n_steps[c]):
+        for n in range(n_steps):
             t0 = n * h
             t1 = (n + 1) * h
             th1 = w * t1
-            cam_held = cfg == 1 or cfg == 3
-            seat_held = cfg == 3 or cfg == 4
             # sin θ1, cos θ1 by rotation, refreshed exactly every 256 steps.
             if n % 256 == 0:
                 sn = np.sin(th1)
                 cs = np.cos(th1)
             else:
                 sn, cs = sn * cd + cs * sd, cs * cd - sn * sd
-            # Move the piece cursor to θ1; a velocity jump of the profile is a break crossed.
-            while th1 >= thb:
-                if cam_held:
-                    l_left, dl_left, _ = piece_eval(breaks, poly, trig, c, p, rev, thb)
-                    l_right, dl_right, _ = piece_eval(breaks, poly, trig, c, pn, revn, thb)
-                    jump = w * (dl_right - dl_left)  # lift-rate jump [m/s]
-                    scale = 1e-9 * (abs(w * dl_left) + abs(w * dl_right)) + JUMP_FLOOR
-                    drop = l_right < l_left - 1e-12  # a step down in lift (the engine refuses up)
-                    if (jump < -scale or drop) and not form[c]:
-                        # The surface falls away: the follower keeps its velocity.
-                        new = _config(False, seat_held)
-                        _record(events, n_events, c, thb / w, CAM_SEPARATION, cfg, new, -jump, 0.0)
-                        cfg = new
-                        cam_held = False
-                    elif abs(jump) > scale:
-                        # The surface jumps into the follower (or, form-closed, drags it).
-                        impulse_cam = True
-                        _impact(
-                            events,
-                            n_events,
-                            counts,
-                            vmax,
-                            meff,
-                            c,
-                            thb / w,
-                            False,
-                            seat_held,
-                            cfg,
-                            cfg,
-                            abs(jump),
-                        )
-                p = pn
-                rev = revn
-                pdeg = _degree(poly, c, p)
-                pn, revn, thb = _next_break(breaks, npc, c, p, rev)
-            x1 = th1 - rev * TWO_PI - breaks[c, p]
-            lift1, dl1, ddl1 = horner2(poly[c, p], x1, pdeg)
-            ta = trig[c, p, 0]
-            tb = trig[c, p, 1]
+            if th1 >= thb:
+                p_was = p
+                cfg, jumped, p, rev, pn, revn, thb = _cross_breaks(
+                    profiles, cases, out, c, w, th1, cfg, p, rev, pn, revn, thb
+                )
+                impulse_cam = impulse_cam or jumped
+                if p != p_was:
+                    pdeg = degree(profiles, c, p)
+            cam_held = holds_cam(cfg)
+            seat_held = holds_seat(cfg)
+            x1 = th1 - rev * TWO_PI - profiles.breaks[c, p]
+            lift1, dl1, ddl1 = horner(profiles.poly[c, p], x1, pdeg)
+            ta = profiles.trig[c, p, 0]
+            tb = profiles.trig[c, p, 1]
             if ta != 0.0 or tb != 0.0:
                 lift1 += ta * sn + tb * cs
                 dl1 += ta * cs - tb * sn
@@ -485,10 +499,10 @@ def newmark_linear_batch(
                 x[X_Q] = qc
                 x[X_V] = vc
             if seat_held:
-                x[X_A + 6] = (0.0 - x[X_V + 6]) / h if impulse_seat else 0.0
-                x[X_Q + 6] = qs
-                x[X_V + 6] = 0.0
-            _newmark_step(step_A, step_G, c, cfg - 1, f, h, x, xn, z)
+                x[X_A + SEAT] = (0.0 - x[X_V + SEAT]) / h if impulse_seat else 0.0
+                x[X_Q + SEAT] = qs
+                x[X_V + SEAT] = 0.0
+            _newmark_step(trains.step_A, trains.step_G, c, cfg - 1, f, h, x, xn, z)
             f1 = 0.0
             f7 = 0.0
             if cam_held:
@@ -497,21 +511,19 @@ def newmark_linear_batch(
                 xn[X_A] = x[X_A]
                 f1 = z[0]
             if seat_held:
-                xn[X_Q + 6] = x[X_Q + 6]
-                xn[X_V + 6] = x[X_V + 6]
-                xn[X_A + 6] = x[X_A + 6]
-                f7 = z[6]
+                xn[X_Q + SEAT] = x[X_Q + SEAT]
+                xn[X_V + SEAT] = x[X_V + SEAT]
+                xn[X_A + SEAT] = x[X_A + SEAT]
+                f7 = z[SEAT]
             if impulse_cam:
                 quiet_cam = 2
             if impulse_seat:
                 quiet_seat = 2
-            impulse_cam = False
-            impulse_seat = False
             # Metrics over this step.
             if not cam_held:
                 rev_i = _revolution(w * t0)
                 if rev_i != sep_turn:
-                    _add_turn(sep_rev, c, sep_turn, sep)
+                    _add_turn(out.sep_rev, c, sep_turn, sep)
                     sep_turn = rev_i
                     sep = 0.0
                 sep += w * h
@@ -525,121 +537,31 @@ def newmark_linear_batch(
                 quiet_seat -= 1
             elif seat_held:
                 fmax_seat = max(fmax_seat, f7)
-            # Output samples inside (t0, t1], from the step's cubic (thesis Eqs. 55–57); the
-            # held coordinates from the cam and the seat.
-            while k_out < n_out and t_sample <= t1 * (1.0 + 1e-12):
-                tau = t_sample - t0
-                if k_out == 0:
-                    tau = 0.0
-                r = tau / h
-                for i in range(NP):
-                    q = x[X_Q + i]
-                    v = x[X_V + i]
-                    a = x[X_A + i]
-                    da = xn[X_A + i] - a
-                    qt[i] = q + v * tau + 0.5 * a * tau * tau + da * tau * tau * r / 6.0
-                    vt[i] = v + a * tau + 0.5 * da * tau * r
-                    at[i] = a + da * r
-                ls, dls, ddls = cam_eval(breaks, poly, trig, n_pieces, c, w * t_sample)
-                if cam_held:
-                    qt[0] = -ls
-                    vt[0] = -w * dls
-                    at[0] = -w * w * ddls
-                if seat_held:
-                    qt[6] = qs
-                    vt[6] = 0.0
-                    at[6] = 0.0
-                for i in range(NP):
-                    q_out[c, k_out, i] = qt[i]
-                    v_out[c, k_out, i] = vt[i]
-                # A contact that the step end releases may show a little tension inside the
-                # step; a force-closed contact cannot pull, so it reports zero there.
-                fs1 = _row_force(M, C, K, load, c, 0, at, vt, qt) if cam_held else 0.0
-                fs7 = _row_force(M, C, K, load, c, 6, at, vt, qt) if seat_held else 0.0
-                force_out[c, k_out, 0] = fs1 if form[c] else min(fs1, 0.0)
-                force_out[c, k_out, 1] = max(fs7, 0.0)
-                cam_out[c, k_out] = ls
-                cfg_out[c, k_out] = cfg
-                k_out += 1
-                t_sample = k_out * d_theta_out / w
-            # Monitors at the step end (thesis Table I, Figure 4).
-            cam_next = cam_held
-            seat_next = seat_held
-            if cam_held and not form[c] and f1 > 0.0:
-                cam_next = False
-                _record(
-                    events,
-                    n_events,
-                    c,
-                    t1,
-                    CAM_SEPARATION,
-                    cfg,
-                    _config(False, seat_held and not f7 < 0.0),
-                    0.0,
-                    0.0,
+            if k_out < n_out and t_sample <= t1 * (1.0 + 1e-12):
+                k_out, t_sample = _write_samples(
+                    trains, cases, profiles, runs, out, c, k_out, t_sample, t0, t1, h, x, xn,
+                    qt, vt, at, cfg,
+                )  # fmt: skip
+            tripped = _tripped(cfg, form_c, has_seat_c, f1, f7, xn[X_Q], xn[X_Q + SEAT], qc, qs)
+            if tripped[0] or tripped[1] or tripped[2] or tripped[3]:
+                cfg, impulse_cam, impulse_seat = _switch(
+                    cases, out, c, t1, cfg, f7, xn, vc, *tripped
                 )
-            if seat_held and f7 < 0.0:
-                seat_next = False
-                _record(
-                    events,
-                    n_events,
-                    c,
-                    t1,
-                    SEAT_SEPARATION,
-                    cfg,
-                    _config(cam_next, False),
-                    0.0,
-                    0.0,
-                )
-            if not cam_held and xn[X_Q] > qc:
-                closing = xn[X_V] - vc
-                cam_next = True
-                impulse_cam = True
-                _impact(
-                    events,
-                    n_events,
-                    counts,
-                    vmax,
-                    meff,
-                    c,
-                    t1,
-                    False,
-                    seat_next,
-                    cfg,
-                    _config(True, seat_next),
-                    closing,
-                )
-            if has_seat[c] and not seat_held and xn[X_Q + 6] < qs:
-                closing = -xn[X_V + 6]
-                seat_next = True
-                impulse_seat = True
-                _impact(
-                    events,
-                    n_events,
-                    counts,
-                    vmax,
-                    meff,
-                    c,
-                    t1,
-                    True,
-                    cam_next,
-                    cfg,
-                    _config(cam_next, True),
-                    closing,
-                )
-            cfg = _config(cam_next, seat_next)
+            else:
+                impulse_cam = False
+                impulse_seat = False
             x, xn = xn, x
-            if n % 1024 == 0 or n == n_steps[c] - 1:
+            if n % 1024 == 0 or n == n_steps - 1:
                 finite = True
                 for i in range(N_X):
                     if not np.isfinite(x[i]):
                         finite = False
                 if not finite:
-                    status[c] = NONFINITE
+                    out.status[c] = NONFINITE
                     break
-        _add_turn(sep_rev, c, sep_turn, sep)
-        fmax[c, 0] = fmax_cam
-        fmax[c, 1] = fmax_seat
-        fmax[c, 2] = fmax_raw
-        if n_events[c] > events.shape[1] and status[c] == OK:
-            status[c] = EVENTS_TRUNCATED
+        _add_turn(out.sep_rev, c, sep_turn, sep)
+        out.fmax[c, 0] = fmax_cam
+        out.fmax[c, 1] = fmax_seat
+        out.fmax[c, 2] = fmax_raw
+        if out.n_events[c] > out.events.shape[1] and out.status[c] == OK:
+            out.status[c] = EVENTS_TRUNCATED

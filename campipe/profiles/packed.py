@@ -1,26 +1,31 @@
-"""Profiles packed into padded arrays, and their evaluation inside compiled (numba) kernels.
+"""Profiles packed into padded arrays, and the one compiled evaluator every kernel uses.
 
 A batch of cases steps together; each case has its own profile, with its own piece count.
 The arrays are padded to the largest piece count P: breaks with +inf (never found by the
 search, which only looks at a case's real breaks anyway), coefficients with zeros.
+
+On piece i of case c the lift is Σₖ poly[c, i, k]·xᵏ + trig[c, i, 0]·sin θ + trig[c, i, 1]·cos θ
+with x = θ − 2π·rev − breaks[c, i] the angle from the piece's start in turn ``rev``
+(``campipe.profiles.pieces``). The kernels walk the pieces turn by turn, so they carry
+(rev, piece) and evaluate a known piece (:func:`piece_eval`); :func:`evaluate_packed` finds the
+piece first.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numba
 import numpy as np
 
-from campipe.profiles.pieces import N_COEFFS, TWO_PI, Profile
+from campipe.constants import TWO_PI
+from campipe.profiles.pieces import N_COEFFS, Profile
 
 
-# eq=False: the fields are arrays, so the generated __eq__ would raise on comparison.
-@dataclass(frozen=True, eq=False)
-class PackedProfiles:
-    """The profiles of a batch of cases as padded, C-contiguous float64 arrays."""
+class PackedProfiles(NamedTuple):
+    """The profiles of a batch of cases as padded, C-contiguous float64 arrays (a named tuple,
+    so the compiled kernels take it as one argument)."""
 
     breaks: np.ndarray  # (n_cases, P+1) piece boundaries [rad], +inf past breaks[c, n_pieces[c]]
     poly: np.ndarray  # (n_cases, P, 8) polynomial coefficients, zero-padded [m/rad**k]
@@ -29,7 +34,7 @@ class PackedProfiles:
 
 
 def pack(profiles: Sequence[Profile]) -> PackedProfiles:
-    """Pack a list of profiles, one per case, for :func:`evaluate_packed`."""
+    """Pack a list of profiles, one per case, for the compiled evaluators below."""
     if len(profiles) == 0:
         raise ValueError("pack needs at least one profile")
     n_pieces = np.array([p.n_pieces for p in profiles], dtype=np.int64)
@@ -45,42 +50,79 @@ def pack(profiles: Sequence[Profile]) -> PackedProfiles:
     return PackedProfiles(breaks, poly, trig, n_pieces)
 
 
-@numba.njit(cache=True, nogil=True)
-def evaluate_packed(
-    breaks: np.ndarray,
-    poly: np.ndarray,
-    trig: np.ndarray,
-    n_pieces: np.ndarray,
-    case: int,
-    theta: float,
-) -> tuple[float, float, float]:
-    """Lift [m], dlift/dθ [m/rad] and d²lift/dθ² [m/rad²] of one case at one angle.
+@numba.njit(cache=True, nogil=True, inline="always")
+def horner(coef, x, deg=N_COEFFS - 1):
+    """Σ_{k ≤ deg} coef[k]·x^k and its first two derivatives in x, by Horner's scheme.
 
-    Same result as :func:`campipe.profiles.evaluate` (at a break, the piece to the right),
-    without allocating: θ [rad] wraps modulo 2π, the piece is found by binary search on the
-    case's real breaks, the polynomial is evaluated by Horner's scheme.
+    The one polynomial evaluator of the kernels (profile pieces, particular solutions,
+    monitors). Inlined, so a caller's view ``poly[c, p]`` costs no reference counting per call,
+    and compiled with the caller's floating-point flags.
     """
-    t = theta % TWO_PI
-    if t >= TWO_PI:  # a tiny negative θ rounds up to 2π, which is 0 on the next turn
-        t = 0.0
+    p0 = 0.0
+    p1 = 0.0
+    p2 = 0.0
+    for k in range(deg, -1, -1):
+        p2 = p2 * x + 2.0 * p1
+        p1 = p1 * x + p0
+        p0 = p0 * x + coef[k]
+    return p0, p1, p2
+
+
+@numba.njit(cache=True, nogil=True)
+def locate(profiles, c, theta):
+    """(turn, piece) holding cam angle ``theta`` [rad] for case ``c``."""
+    rev = np.floor(theta / TWO_PI)
+    phi = theta - rev * TWO_PI
     lo = 0
-    hi = n_pieces[case]
-    while hi - lo > 1:
-        mid = (lo + hi) // 2
-        if breaks[case, mid] <= t:
+    hi = profiles.n_pieces[c] - 1
+    while lo < hi:
+        mid = (lo + hi + 1) // 2
+        if profiles.breaks[c, mid] <= phi:
             lo = mid
         else:
-            hi = mid
-    x = t - breaks[case, lo]
-    p = poly[case, lo, N_COEFFS - 1]
-    dp = 0.0
-    ddp = 0.0
-    for k in range(N_COEFFS - 2, -1, -1):
-        ddp = ddp * x + 2.0 * dp
-        dp = dp * x + p
-        p = p * x + poly[case, lo, k]
-    a = trig[case, lo, 0]
-    b = trig[case, lo, 1]
-    s = math.sin(t)
-    co = math.cos(t)
-    return p + a * s + b * co, dp + a * co - b * s, ddp - a * s - b * co
+            hi = mid - 1
+    return int(rev), lo
+
+
+@numba.njit(cache=True, nogil=True)
+def piece_eval(profiles, c, piece, rev, theta):
+    """Lift [m] and its first two θ-derivatives [m/rad, m/rad²] of case c at cam angle
+    ``theta`` [rad], on ``piece`` of turn ``rev`` (evaluated as is, also outside the piece:
+    one-sided limits at a break)."""
+    x = theta - rev * TWO_PI - profiles.breaks[c, piece]
+    p0, p1, p2 = horner(profiles.poly[c, piece], x)
+    s = np.sin(theta)
+    co = np.cos(theta)
+    a = profiles.trig[c, piece, 0]
+    b = profiles.trig[c, piece, 1]
+    return p0 + a * s + b * co, p1 + a * co - b * s, p2 - a * s - b * co
+
+
+@numba.njit(cache=True, nogil=True)
+def evaluate_packed(profiles, c, theta):
+    """Lift [m], dlift/dθ [m/rad] and d²lift/dθ² [m/rad²] of case c at any cam angle
+    ``theta`` [rad] (at a break, the piece to the right); the compiled twin of
+    :func:`campipe.profiles.evaluate`."""
+    rev, piece = locate(profiles, c, theta)
+    return piece_eval(profiles, c, piece, rev, theta)
+
+
+@numba.njit(cache=True, nogil=True)
+def degree(profiles, c, piece):
+    """Highest power with a nonzero coefficient on a piece (Horner need go no higher)."""
+    for k in range(N_COEFFS - 1, 0, -1):
+        if profiles.poly[c, piece, k] != 0.0:
+            return k
+    return 0
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def next_break(profiles, c, piece, rev):
+    """The piece after ``piece`` of turn ``rev``, its turn, and the cam angle [rad] where it
+    starts (inlined: computed with the caller's floating-point flags)."""
+    pn = piece + 1
+    revn = rev
+    if pn == profiles.n_pieces[c]:
+        pn = 0
+        revn = rev + 1
+    return pn, revn, revn * TWO_PI + profiles.breaks[c, pn]
