@@ -10,6 +10,7 @@ import click
 import numpy as np
 import yaml
 
+from campipe.errors import CampipeError
 from campipe.model import (
     COORDINATES,
     PARAMETERS,
@@ -189,7 +190,7 @@ def model_text(train, sm, limits, preset, overrides) -> str:
 # -- studies ----------------------------------------------------------------------------------
 
 
-class SpecRefused(click.ClickException):
+class SpecRefused(CampipeError, click.ClickException):
     """A spec refused before anything runs (exit status 2, like a usage error)."""
 
     exit_code = 2

@@ -36,6 +36,7 @@ from scipy.integrate import solve_ivp
 
 from campipe.engine.batch import Case
 from campipe.engine.newmark import CAM_IMPACT, CAM_SEPARATION, SEAT_IMPACT, SEAT_SEPARATION
+from campipe.errors import CampipeError
 from campipe.model import system_matrices
 from campipe.vocabulary import CAM, CONFIGURATIONS, SEAT, configuration
 
@@ -54,7 +55,7 @@ MAX_STALLED = 64
 STALL_WINDOW = 1e-9
 
 
-class ChatterError(RuntimeError):
+class ChatterError(CampipeError, RuntimeError):
     """Contact events kept recurring at one instant."""
 
 

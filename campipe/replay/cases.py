@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from campipe.errors import CampipeError, did_you_mean
 from campipe.model import PARAMETERS, ModelParameterError, ValveTrain, valve_train
 
 log = logging.getLogger(__name__)
@@ -58,8 +59,9 @@ EVENT_FIELDS = (
 RERUN_TOLERANCE = 1e-12
 
 
-class ReplayError(ValueError):
-    """A replay that cannot be made: no such case, an empty selection, no way to get q."""
+class ReplayError(CampipeError, ValueError):
+    """A replay that cannot be made: no such case, an empty selection (``key`` the option,
+    ``--case`` or ``--where``), no way to get q."""
 
 
 @dataclass
@@ -124,7 +126,6 @@ def select_rows(ds, case_ids: Sequence[str] = (), where: str | None = None) -> n
     campipe.study.query.QueryError
         For an expression the query language refuses.
     """
-    from campipe.study.fields import did_you_mean
     from campipe.study.query import case_table, select
 
     if "case_id" not in ds.variables:
@@ -138,14 +139,19 @@ def select_rows(ds, case_ids: Sequence[str] = (), where: str | None = None) -> n
                 raise ReplayError(
                     f"--case {cid}: no such case among the archive's {len(ids)} "
                     f"cases{did_you_mean(cid, ids)} (campipe query ARCHIVE "
-                    "--columns case_id lists them)"
+                    "--columns case_id lists them)",
+                    key="--case",
+                    found=cid,
+                    expected="a case id of the archive",
                 )
             rows.append(ids.index(cid))
         return np.array(list(dict.fromkeys(rows)), dtype=np.int64)
     rows = select(table, where)
     if rows.size == 0:
         raise ReplayError(
-            f"--where {where!r} selects none of the archive's {len(ids)} cases; nothing written"
+            f"--where {where!r} selects none of the archive's {len(ids)} cases; nothing written",
+            key="--where",
+            found=where,
         )
     return rows
 

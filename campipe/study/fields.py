@@ -13,7 +13,6 @@ are written as dotted paths: ``speed``, ``profile.lift``, ``model.spring_preload
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import functools
 import math
 from collections.abc import Iterable
@@ -21,17 +20,36 @@ from dataclasses import dataclass
 
 from campipe.engine import INTEGRATORS, MEMBER_LOADS, RunSettings
 from campipe.engine import batch as _engine_batch
+from campipe.errors import CampipeError, did_you_mean
 from campipe.model import PARAMETERS, PRESETS, ModelParameterError, parse_parameter
 from campipe.units import QuantityError, parse_angular, parse_quantity
 
 
-class SpecProblem(ValueError):
-    """One problem in a spec: the key's path, what was found and what is expected."""
+class SpecProblem(CampipeError, ValueError):
+    """One problem in a spec: the key's path (``key``, also ``path``) and the message
+    (``reason``, also ``message``); ``found`` and ``expected`` where the problem came from an
+    error that had them."""
 
-    def __init__(self, path: str, message: str):
-        super().__init__(f"{path}: {message}" if path else message)
+    def __init__(
+        self, path: str, message: str, *, found: object = None, expected: str | None = None
+    ) -> None:
+        super().__init__(
+            f"{path}: {message}" if path else message,
+            key=path,
+            found=found,
+            expected=expected,
+            reason=message,
+        )
         self.path = path
         self.message = message
+
+    @classmethod
+    def from_error(cls, error: CampipeError, path: str | None = None) -> SpecProblem:
+        """The problem ``error`` names: at its key (or at ``path``, where the caller knows the
+        spec path better), with its reason, found and expected."""
+        return cls(
+            path or error.key or "", error.reason, found=error.found, expected=error.expected
+        )
 
 
 @dataclass(frozen=True)
@@ -83,7 +101,7 @@ class Field:
             try:
                 return parse_parameter(self.key.removeprefix("model."), value, path)
             except ModelParameterError as exc:
-                raise SpecProblem(path, str(exc).removeprefix(f"{path}: ")) from None
+                raise SpecProblem.from_error(exc) from None
         if self.kind == "record":
             if not isinstance(value, list):
                 raise SpecProblem(
@@ -102,7 +120,7 @@ class Field:
             else:
                 v = parse_quantity(value, self.units, path, self.example)  # type: ignore[arg-type]
         except QuantityError as exc:
-            raise SpecProblem(path, str(exc).removeprefix(f"{path}: ")) from None
+            raise SpecProblem.from_error(exc) from None
         self._check_range(v, value, path)
         return v
 
@@ -143,12 +161,6 @@ def _choice(value: object, choices: Iterable[str], path: str, what: str) -> str:
         f"found {value!r}, expected one of: {', '.join(choices)}{hint}"
         + (f" ({what})" if what else ""),
     )
-
-
-def did_you_mean(word: object, known: Iterable[str]) -> str:
-    """``"; did you mean 'speed'?"`` for a near miss, else ``""``."""
-    close = difflib.get_close_matches(str(word), list(known), n=1, cutoff=0.6)
-    return f"; did you mean {close[0]!r}?" if close else ""
 
 
 #: Spec metadata of the engine's RunSettings fields, by field name. A spec's ``run:`` block

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from campipe.study.fields import did_you_mean
+from campipe.errors import CampipeError, did_you_mean
 
 #: Longest ``--where`` accepted [characters]; keeps the parser's recursion shallow.
 MAX_WHERE_LENGTH = 2000
@@ -69,8 +69,9 @@ _ALLOWED = (
 )
 
 
-class QueryError(ValueError):
-    """A ``--where`` expression, column or sort key that is refused."""
+class QueryError(CampipeError, ValueError):
+    """A ``--where`` expression, column or sort key that is refused; ``key`` is the option
+    (``--where``, ``--columns``, ``--sort``, ``--format``)."""
 
 
 @dataclass(frozen=True)
@@ -92,17 +93,19 @@ def parse_where(text: str) -> Where:
         a subscript, arithmetic, a name starting with an underscore), naming what was found.
     """
     if not isinstance(text, str) or not text.strip():
-        raise QueryError("--where: empty; expected a condition such as 'speed_rpm > 9000'")
+        raise QueryError.at("--where", "empty; expected a condition such as 'speed_rpm > 9000'")
     if len(text) > MAX_WHERE_LENGTH:
-        raise QueryError(f"--where: {len(text)} characters, expected at most {MAX_WHERE_LENGTH}")
+        raise QueryError.at(
+            "--where", f"{len(text)} characters, expected at most {MAX_WHERE_LENGTH}"
+        )
     try:
         with warnings.catch_warnings():  # e.g. "invalid decimal literal": refused below anyway
             warnings.simplefilter("ignore", SyntaxWarning)
             tree = ast.parse(text.strip(), mode="eval")
     except (SyntaxError, ValueError) as exc:
-        raise QueryError(
-            f"--where: cannot parse {text!r} ({exc.msg}); expected comparisons "
-            "joined by and, or, not"
+        raise QueryError.at(
+            "--where",
+            f"cannot parse {text!r} ({exc.msg}); expected comparisons joined by and, or, not",
         ) from None
     names: set[str] = set()
     # A list (or tuple) stands only on the right of 'in' / 'not in', holding plain values.
@@ -116,47 +119,51 @@ def parse_where(text: str) -> Where:
     for node in ast.walk(tree):
         if isinstance(node, ast.List | ast.Tuple):
             if id(node) not in lists:
-                raise QueryError(
-                    "--where: a list stands only after 'in', e.g. 'speed_rpm in "
-                    "[9000, 9524]'; join conditions with and, or, not"
+                raise QueryError.at(
+                    "--where",
+                    "a list stands only after 'in', e.g. 'speed_rpm in "
+                    "[9000, 9524]'; join conditions with and, or, not",
                 )
             if not all(
                 isinstance(e, ast.Constant)
                 or (isinstance(e, ast.UnaryOp) and isinstance(e.operand, ast.Constant))
                 for e in node.elts
             ):
-                raise QueryError("--where: the list after 'in' holds numbers or strings only")
+                raise QueryError.at("--where", "the list after 'in' holds numbers or strings only")
         if not isinstance(node, _ALLOWED):
-            raise QueryError(
-                f"--where: {_describe(node)} is not allowed; expected comparisons "
-                "of columns with numbers or strings, joined by and, or, not"
+            raise QueryError.at(
+                "--where",
+                f"{_describe(node)} is not allowed; expected comparisons "
+                "of columns with numbers or strings, joined by and, or, not",
             )
         if isinstance(node, ast.Name):
             if node.id.startswith("_"):
-                raise QueryError(f"--where: the name {node.id!r} is not allowed")
+                raise QueryError.at("--where", f"the name {node.id!r} is not allowed")
             if node.id.lower() not in WORDS:
                 names.add(node.id)
         if isinstance(node, ast.Constant) and not isinstance(node.value, int | float | str):
-            raise QueryError(f"--where: the constant {node.value!r} is not allowed")
+            raise QueryError.at("--where", f"the constant {node.value!r} is not allowed")
         if (
             isinstance(node, ast.UnaryOp)
             and isinstance(node.op, ast.USub | ast.UAdd)
             and not isinstance(node.operand, ast.Constant | ast.Name)
         ):
-            raise QueryError("--where: a sign applies to a number only")
+            raise QueryError.at("--where", "a sign applies to a number only")
         if isinstance(node, ast.Compare):
             for op, right in zip(node.ops, node.comparators, strict=True):
                 if isinstance(op, ast.Is | ast.IsNot) and not (
                     isinstance(right, ast.Name) and right.id.lower() in ("nan", "none")
                 ):
-                    raise QueryError(
-                        "--where: 'is' and 'is not' compare with nan (or none) "
-                        "only, e.g. 'seat is nan'"
+                    raise QueryError.at(
+                        "--where",
+                        "'is' and 'is not' compare with nan (or none) only, e.g. 'seat is nan'",
                     )
                 if isinstance(op, ast.In | ast.NotIn) and not isinstance(
                     right, ast.List | ast.Tuple
                 ):
-                    raise QueryError("--where: 'in' takes a list, e.g. 'speed_rpm in [9000, 9524]'")
+                    raise QueryError.at(
+                        "--where", "'in' takes a list, e.g. 'speed_rpm in [9000, 9524]'"
+                    )
     return Where(text, tree, frozenset(names))
 
 
@@ -181,9 +188,10 @@ def check_names(where: Where, columns: Sequence[str]) -> None:
     """Refuse a name that is not a column, suggesting the nearest."""
     for name in sorted(where.names):
         if name not in columns:
-            raise QueryError(
-                f"--where: unknown column {name!r}{did_you_mean(name, columns)} "
-                f"(columns: {', '.join(columns)})"
+            raise QueryError.at(
+                "--where",
+                f"unknown column {name!r}{did_you_mean(name, columns)} "
+                f"(columns: {', '.join(columns)})",
             )
 
 
@@ -204,7 +212,7 @@ def _eval(node: ast.AST, cols: Mapping[str, np.ndarray]):
         if isinstance(node.op, ast.Not):
             return ~np.asarray(value, dtype=bool)
         if not _is_number(value):
-            raise QueryError("--where: a sign applies to a number only")
+            raise QueryError.at("--where", "a sign applies to a number only")
         return -value if isinstance(node.op, ast.USub) else value
     if isinstance(node, ast.Compare):
         result = None
@@ -220,15 +228,15 @@ def _eval(node: ast.AST, cols: Mapping[str, np.ndarray]):
             return WORDS[node.id.lower()]
         col = cols[node.id]
         if col.ndim != 1:
-            raise QueryError(
-                f"--where: {node.id} holds {col.shape[1]} values per case and cannot be compared"
+            raise QueryError.at(
+                "--where", f"{node.id} holds {col.shape[1]} values per case and cannot be compared"
             )
         return col
     if isinstance(node, ast.Constant):
         return node.value
     if isinstance(node, ast.List | ast.Tuple):
         return [_eval(e, cols) for e in node.elts]
-    raise QueryError(f"--where: {_describe(node)} is not allowed")
+    raise QueryError.at("--where", f"{_describe(node)} is not allowed")
 
 
 def _is_text(v) -> bool:
@@ -259,15 +267,17 @@ def _compare(op: str, a, b, a_node, b_node) -> np.ndarray:
         return hit if op == "in" else ~hit
     if _is_text(a) != _is_text(b) or isinstance(a, bool) or isinstance(b, bool):
         text, other = (a_node, b_node) if _is_text(a) else (b_node, a_node)
-        raise QueryError(
-            f"--where: {_name(text)} is text and {_name(other)} is not; "
-            'compare text with a quoted string, e.g. closure == "form"'
+        raise QueryError.at(
+            "--where",
+            f"{_name(text)} is text and {_name(other)} is not; "
+            'compare text with a quoted string, e.g. closure == "form"',
         )
     if _is_text(a):
         if op not in ("==", "!="):
-            raise QueryError(
-                f"--where: text compares with == and != only (found {op} "
-                f"between {_name(a_node)} and {_name(b_node)})"
+            raise QueryError.at(
+                "--where",
+                f"text compares with == and != only (found {op} "
+                f"between {_name(a_node)} and {_name(b_node)})",
             )
         eq = np.asarray(a, dtype=object) == np.asarray(b, dtype=object)
         return eq if op == "==" else ~eq
@@ -326,12 +336,12 @@ def select(table: CaseTable, where: str | None = None, sort: str | None = None) 
             descending = key.startswith("-")
             name = key.lstrip("-+")
             if name not in table.columns:
-                raise QueryError(
-                    f"--sort: unknown column {name!r}{did_you_mean(name, table.columns)}"
+                raise QueryError.at(
+                    "--sort", f"unknown column {name!r}{did_you_mean(name, table.columns)}"
                 )
             values = table.columns[name][rows]
             if values.ndim != 1:
-                raise QueryError(f"--sort: {name} holds several values per case")
+                raise QueryError.at("--sort", f"{name} holds several values per case")
             rows = rows[_order(values, descending)]
     return rows
 
@@ -366,10 +376,11 @@ def format_rows(table: CaseTable, rows: np.ndarray, names: Sequence[str], fmt: s
     array of row objects)."""
     for name in names:
         if name not in table.columns:
-            raise QueryError(
-                f"--columns: unknown column {name!r}"
+            raise QueryError.at(
+                "--columns",
+                f"unknown column {name!r}"
                 f"{did_you_mean(name, table.columns)} (columns: "
-                f"{', '.join(table.columns)})"
+                f"{', '.join(table.columns)})",
             )
     cells = [[_cell(table.columns[n][r], fmt) for n in names] for r in rows]
     if fmt == "json":
@@ -387,7 +398,7 @@ def format_rows(table: CaseTable, rows: np.ndarray, names: Sequence[str], fmt: s
             )
         return buf.getvalue().rstrip("\n")
     if fmt != "table":
-        raise QueryError(f"--format: found {fmt!r}, expected table, csv or json")
+        raise QueryError.at("--format", f"found {fmt!r}, expected table, csv or json")
     text = [
         [", ".join(map(str, c)) if isinstance(c, list) else str(c) for c in row] for row in cells
     ]

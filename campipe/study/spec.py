@@ -38,6 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
+from campipe.errors import CampipeError, did_you_mean
 from campipe.model import PARAMETERS
 from campipe.study.fields import (
     CASE_FIELDS,
@@ -53,7 +54,6 @@ from campipe.study.fields import (
     WHOLE_KEYS,
     Field,
     SpecProblem,
-    did_you_mean,
     sample_keys,
     sweep_keys,
     varied_fields,
@@ -67,8 +67,9 @@ _KEYED_BY_CASE_KEY = ("sweep", "zip", "ranges")
 MAX_PROBLEMS = 20
 
 
-class SpecError(ValueError):
-    """A spec refused before anything runs: one or more problems, each with its key path."""
+class SpecError(CampipeError, ValueError):
+    """A spec refused before anything runs: one or more problems (``problems``), each with
+    its key path."""
 
     def __init__(self, problems: list[SpecProblem], source: str = "spec"):
         self.problems = problems
