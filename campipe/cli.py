@@ -505,9 +505,9 @@ def replay(archive, case_ids, where, output, spawn, magnify) -> None:
     """Write a rerun recording of cases of ARCHIVE: lift, force and contact plots, events,
     parameters and the moving mechanism, on the timelines cam_angle and time. All cases go
     into one recording, each in its own cases/<case_id> subtree and blueprint tab."""
-    from campipe.io.rerun_replay import replay_archive
     from campipe.replay.cases import ReplayError
-    from campipe.study.query import QueryError
+    from campipe.replay.record import replay_archive
+    from campipe.study.where import QueryError
 
     if bool(case_ids) == (where is not None):
         raise click.UsageError("give --case ID (repeatable) or --where EXPR, one of the two")

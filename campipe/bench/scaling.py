@@ -19,11 +19,14 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
+import yaml
 
 from campipe.bench.suite import INCH, OUTPUT_EVERY, rpm
 from campipe.engine import Case, RunSettings, run_batch
 from campipe.model import thesis_train
 from campipe.profiles import harmonic
+from campipe.study import load_study
+from campipe.study.execute import run_study
 
 #: The population the scaling runs sweep: the harmonic cam over this speed range [rpm],
 #: alternately without a seat and with one at 0.1 in.
@@ -135,11 +138,6 @@ def study_scaling(
 ) -> list[ScalingPoint]:
     """Wall time of ``campipe study`` on n cases (spec check, batches, archive) and the
     archive's size; spec and archives are written under ``directory``."""
-    import yaml
-
-    from campipe.study import load_study
-    from campipe.study.execute import run_study
-
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
     out = []

@@ -30,8 +30,16 @@ from pathlib import Path
 
 import numpy as np
 
+from campipe.engine import run_batch
 from campipe.errors import CampipeError, did_you_mean
+from campipe.io.spec_yaml import SpecFileError, parse_spec_text
 from campipe.model import PARAMETERS, ModelParameterError, ValveTrain, valve_train
+from campipe.study.expand import ResolvedCase, Study, expand
+from campipe.study.layout import coordinate_values
+from campipe.study.query import case_table, replay_mask, select
+from campipe.study.results import BatchData, BatchPlan
+from campipe.study.spec import SpecError, check_spec
+from campipe.study.variables import VARIABLES, case_coordinates, data_variables
 
 log = logging.getLogger(__name__)
 
@@ -117,17 +125,15 @@ def select_rows(ds, case_ids: Sequence[str] = (), where: str | None = None) -> n
     case_ids : sequence of str
         Case ids, in the order to show them.
     where : str, optional
-        A ``--where`` expression (:mod:`campipe.study.query`; never evaluated as Python).
+        A ``--where`` expression (:mod:`campipe.study.where`; never evaluated as Python).
 
     Raises
     ------
     ReplayError
         For an unknown case id, or an expression that selects no case.
-    campipe.study.query.QueryError
+    campipe.study.where.QueryError
         For an expression the query language refuses.
     """
-    from campipe.study.query import case_table, select
-
     if "case_id" not in ds.variables:
         raise ReplayError("not a campipe archive (no case_id variable)")
     table = case_table(ds)
@@ -171,7 +177,7 @@ def archive_cases(
     ds,
     rows: Iterable[int],
     *,
-    resolved: Mapping[str, object] | None = None,
+    resolved: Mapping[str, ResolvedCase] | None = None,
     directories: Sequence[Path] = (),
 ) -> list[ReplayCase]:
     """The archive's rows as replay cases.
@@ -193,8 +199,6 @@ def archive_cases(
     ReplayError
         If the archive lacks ``q`` and its cases cannot be rebuilt to compute it again.
     """
-    from campipe.study.query import case_table
-
     rows = [int(r) for r in rows]
     table = case_table(ds)
     ids = [str(table.columns["case_id"][r]) for r in rows]
@@ -252,7 +256,9 @@ def archive_cases(
     return out
 
 
-def rebuild_cases(attrs: Mapping[str, object], directories: Sequence[Path] = ()) -> dict:
+def rebuild_cases(
+    attrs: Mapping[str, object], directories: Sequence[Path] = ()
+) -> dict[str, ResolvedCase]:
     """Case id → :class:`~campipe.study.ResolvedCase`: the archive's spec (``spec``,
     ``spec_overrides``) expanded again.
 
@@ -264,10 +270,6 @@ def rebuild_cases(attrs: Mapping[str, object], directories: Sequence[Path] = ())
     ReplayError
         If the spec is missing or does not expand.
     """
-    from campipe.io.spec_yaml import SpecFileError, parse_spec_text
-    from campipe.study.expand import expand
-    from campipe.study.spec import SpecError, check_spec
-
     text = attrs.get("spec")
     if not isinstance(text, str) or not text:
         raise ReplayError("the archive keeps no spec to rebuild its cases from")
@@ -303,8 +305,6 @@ def _train_from_columns(
 ) -> ValveTrain:
     """The valve train from the spec's ``model`` and the case's model-parameter columns:
     the sketch's lengths when the cases cannot be rebuilt (q was recorded)."""
-    from campipe.io.spec_yaml import SpecFileError, parse_spec_text
-
     try:
         raw = parse_spec_text(str(attrs.get("spec", "")), "the archive's spec")
     except SpecFileError:
@@ -321,11 +321,9 @@ def _train_from_columns(
         raise ReplayError(f"cannot build the case's valve train ({exc})") from None
 
 
-def regain_q(resolved: Sequence) -> list[tuple[np.ndarray, np.ndarray]]:
+def regain_q(resolved: Sequence[ResolvedCase]) -> list[tuple[np.ndarray, np.ndarray]]:
     """Run resolved cases through the engine again (one batch per run-settings group):
     each case's (q [m, rad], valve lift [m]) at the output angles."""
-    from campipe.engine import run_batch
-
     groups: dict[object, list[int]] = {}
     for i, rc in enumerate(resolved):
         groups.setdefault(rc.settings, []).append(i)
@@ -337,7 +335,7 @@ def regain_q(resolved: Sequence) -> list[tuple[np.ndarray, np.ndarray]]:
     return out
 
 
-def fill_q(cases: Sequence[ReplayCase], resolved: Sequence) -> None:
+def fill_q(cases: Sequence[ReplayCase], resolved: Sequence[ResolvedCase]) -> None:
     """Give cases without q the q of an engine rerun; warn where the rerun's valve lift
     differs from the case's."""
     log.info("q not recorded: running %d case(s) through the engine again", len(cases))
@@ -357,11 +355,10 @@ def fill_q(cases: Sequence[ReplayCase], resolved: Sequence) -> None:
 # -- from a running study ----------------------------------------------------------------------
 
 
-def batch_columns(study, plan, data) -> tuple[dict[str, np.ndarray], dict[str, str]]:
+def batch_columns(
+    study: Study, plan: BatchPlan, data: BatchData
+) -> tuple[dict[str, np.ndarray], dict[str, str]]:
     """A batch's per-case columns and their units, as the archive will hold them."""
-    from campipe.study.layout import coordinate_values
-    from campipe.study.variables import VARIABLES, case_coordinates, data_variables
-
     columns = coordinate_values(list(plan.cases), study)
     units = {"case_id": ""}
     for name, var, _ in case_coordinates(study.varied).values():
@@ -373,7 +370,7 @@ def batch_columns(study, plan, data) -> tuple[dict[str, np.ndarray], dict[str, s
     return columns, units
 
 
-def batch_cases(study, plan, data) -> list[ReplayCase]:
+def batch_cases(study: Study, plan: BatchPlan, data: BatchData) -> list[ReplayCase]:
     """The cases of a computed batch that the spec's ``replay: {where: ...}`` selects
     (:func:`campipe.study.query.replay_mask`), as replay cases (q computed again for a study
     that does not record it).
@@ -385,8 +382,6 @@ def batch_cases(study, plan, data) -> list[ReplayCase]:
     data : campipe.study.results.BatchData
         The batch's archive arrays, as stored.
     """
-    from campipe.study.query import replay_mask
-
     rows = np.flatnonzero(replay_mask(study, plan, data))
     if rows.size == 0:
         return []

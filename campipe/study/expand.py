@@ -27,6 +27,7 @@ import numpy as np
 
 from campipe.engine import Case, RunSettings, RunSettingsError, resolve_integrator
 from campipe.engine.batch import check_stability
+from campipe.io.lift_table import LiftTableError, read_lift_table, table_digest
 from campipe.model import PARAMETERS, ModelParameterError, ValveTrain, valve_train
 from campipe.profiles import Profile, bump, flat, harmonic, max_lift, min_lift, polydyne, table
 from campipe.study.fields import (
@@ -232,8 +233,6 @@ def _train(preset: str, overrides: tuple) -> ValveTrain:
 
 @functools.lru_cache(maxsize=256)
 def _lift_table(path: Path, mtime_ns: int) -> tuple[np.ndarray, np.ndarray, str]:
-    from campipe.io.lift_table import LiftTableError, read_lift_table, table_digest
-
     try:
         angles, lifts = read_lift_table(path)
     except LiftTableError as exc:

@@ -58,6 +58,7 @@ from campipe.study.fields import (
     sweep_keys,
     varied_fields,
 )
+from campipe.study.where import QueryError, parse_where
 
 #: A study name: it names the archive file.
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]*$"
@@ -531,8 +532,6 @@ def leaf_keys(entry: Mapping, prefix: str = "") -> list[str]:
 
 
 def check_replay(value: object, problems: _Problems) -> str | None:
-    from campipe.study.query import QueryError, parse_where
-
     value = problems.check(_mapping, value, "replay", "{where: EXPR}")
     if value is None:
         return None
