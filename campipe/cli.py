@@ -10,6 +10,7 @@ import click
 import numpy as np
 import yaml
 
+from campipe.constants import INCH, LBF_IN, RPM
 from campipe.errors import CampipeError
 from campipe.model import (
     COORDINATES,
@@ -23,11 +24,6 @@ from campipe.model import (
 from campipe.model.assembly import TRANSLATIONS, to_display_units
 from campipe.units import convert
 from campipe.vocabulary import CONFIGURATIONS, ROMAN
-
-#: The thesis's display units: lengths in inches, energies in lbf·in.
-INCH = 0.0254
-LBF_IN = convert(1.0, "lbf*in", "J")
-RAD_S_TO_RPM = 60.0 / (2.0 * np.pi)
 
 
 def parse_overrides(pairs: tuple[str, ...]) -> dict[str, object]:
@@ -110,7 +106,7 @@ def model_report(train, sm, limits, preset) -> dict[str, object]:
             for c in COORDINATES
         ],
         "natural_frequencies": sm.frequencies.tolist(),
-        "natural_frequencies_rpm": (sm.frequencies * RAD_S_TO_RPM).tolist(),
+        "natural_frequencies_rpm": (sm.frequencies / RPM).tolist(),
         "mass_matrix": sm.mass.tolist(),
         "stiffness_matrix": sm.stiffness.tolist(),
         "damping_matrix": sm.damping.tolist(),
@@ -169,7 +165,7 @@ def model_text(train, sm, limits, preset, overrides) -> str:
     lines.append("Natural frequencies (Figure 14)")
     lines.append(f"  {'mode':>4} {'rad/s':>14} {'rpm':>14} {'ζ':>6}")
     for i, (w, z) in enumerate(zip(sm.frequencies, train.damping_ratios, strict=True), 1):
-        lines.append(f"  {i:>4} {w:14.1f} {w * RAD_S_TO_RPM:14.1f} {z:6.3f}")
+        lines.append(f"  {i:>4} {w:14.1f} {w / RPM:14.1f} {z:6.3f}")
     lines.append("")
     lines.append(
         "Mode shapes (Figure 14), one column a mode, scaled to a largest translation of 1"

@@ -20,6 +20,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from campipe.constants import INCH
 from campipe.engine import Case, RunSettings, run_batch
 
 #: Reduced-fidelity cut-offs tried [rad/s]: between the configurations' natural frequencies
@@ -32,7 +33,7 @@ MIN_SAVING = 0.05
 #: The reduced model's stated error on a slow scene: at 3000 rpm (the cam always in contact)
 #: the default cut-off (``campipe.engine.batch.DEFAULT_MODE_CUTOFF``) keeps the valve lift
 #: within this of the full model's [m] (tests/test_bench.py).
-SLOW_SCENE_ERROR = 1e-7 * 0.0254
+SLOW_SCENE_ERROR = 1e-7 * INCH
 #: Cases a probe batch holds at least (cases are repeated to fill it) so its time is stable.
 MIN_BATCH = 16
 
@@ -149,7 +150,7 @@ def study_needs(
     cases: Sequence[Case],
     settings: Sequence[RunSettings],
     tolerance: float,
-    unit: tuple[str, float] = ("in", 0.0254),
+    unit: tuple[str, float] = ("in", INCH),
 ) -> str:
     """What ``campipe validate --tolerance`` prints: the fidelity level a study's cases need.
 

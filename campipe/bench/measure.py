@@ -16,7 +16,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from campipe.bench.ivp import IvpResult, solve_case
-from campipe.bench.suite import INCH, OUTPUT_EVERY, Scene, suite
+from campipe.bench.suite import OUTPUT_EVERY, Scene, suite
+from campipe.constants import INCH
 from campipe.engine import BatchResult, Case, RunSettings, run_batch
 from campipe.engine.newmark import CAM_SEPARATION, EV_KIND, EV_TIME
 

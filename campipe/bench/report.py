@@ -13,7 +13,7 @@ from dataclasses import asdict
 from pathlib import Path
 
 from campipe.bench.run import FAMILIES, Bench
-from campipe.bench.suite import INCH
+from campipe.constants import INCH
 
 #: File names written into the output folder.
 FILES = {

@@ -20,7 +20,8 @@ import numpy as np
 
 from campipe.bench import fidelity, measure, scaling
 from campipe.bench.ivp import ChatterError
-from campipe.bench.suite import FULL, INCH, QUICK, Ladder, Scene, suite
+from campipe.bench.suite import FULL, QUICK, Ladder, Scene, suite
+from campipe.constants import INCH
 from campipe.engine import RunSettings
 
 log = logging.getLogger(__name__)

@@ -21,7 +21,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from campipe.bench.suite import INCH, OUTPUT_EVERY, rpm
+from campipe.bench.suite import OUTPUT_EVERY, rpm
+from campipe.constants import INCH
 from campipe.engine import Case, RunSettings, run_batch
 from campipe.model import thesis_train
 from campipe.profiles import harmonic

@@ -12,7 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from campipe.model.parameters import N_DOF, STANDARD_GRAVITY, ValveTrain
+from campipe.constants import STANDARD_GRAVITY
+from campipe.model.parameters import N_DOF, ValveTrain
 
 
 def bar_stiffness(k: float) -> np.ndarray:

@@ -28,9 +28,6 @@ from dataclasses import dataclass
 from campipe.errors import CampipeError
 from campipe.units import QuantityError, parse_quantity
 
-#: Standard gravity [m/s²], turning the thesis's specific weight into density (386.088 in/s²).
-STANDARD_GRAVITY = 9.80665
-
 ELEMENTS = ("pushrod", "rocker_pushrod_arm", "rocker_valve_arm", "spring", "valve_stem")
 N_DOF = 7
 

@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from campipe.constants import INCH
 from campipe.engine import Case, RunSettings, RunSettingsError, resolve_integrator
 from campipe.engine.batch import check_stability
 from campipe.io.lift_table import LiftTableError, read_lift_table, table_digest
@@ -311,7 +312,7 @@ def _with_defects(frozen_profile: tuple, frozen_defects: tuple, directory: Path)
         )
         raise SpecProblem(
             where,
-            f"the cam's lift falls to {low / 0.0254:.4g} in; expected a "
+            f"the cam's lift falls to {low / INCH:.4g} in; expected a "
             "lift never below the base circle (0)",
         )
     return out, canonical, defects, values, label, max_lift(out)
@@ -380,8 +381,8 @@ def resolve(raw: Mapping, index: int, directory: Path) -> ResolvedCase:
             raise SpecProblem(
                 "seat",
                 f"found {raw['seat']!r}, expected a valve lift below "
-                f"the full valve lift {full * ratio / 0.0254:.4g} in (cam lift "
-                f"{full / 0.0254:.4g} in × rocker ratio {ratio:.4g}): above it "
+                f"the full valve lift {full * ratio / INCH:.4g} in (cam lift "
+                f"{full / INCH:.4g} in × rocker ratio {ratio:.4g}): above it "
                 "the valve never leaves its seat",
             )
     run = raw["run"]
