@@ -36,10 +36,18 @@ from scipy.integrate import solve_ivp
 
 from campipe.constants import TWO_PI
 from campipe.engine.batch import Case
-from campipe.engine.newmark import CAM_IMPACT, CAM_SEPARATION, SEAT_IMPACT, SEAT_SEPARATION
 from campipe.errors import CampipeError
 from campipe.model import system_matrices
-from campipe.vocabulary import CAM, CONFIGURATIONS, SEAT, configuration
+from campipe.vocabulary import (
+    CAM,
+    CAM_IMPACT,
+    CAM_SEPARATION,
+    CONFIGURATIONS,
+    SEAT,
+    SEAT_IMPACT,
+    SEAT_SEPARATION,
+    configuration,
+)
 
 #: Monitor levels, as a contact switch is decided: penetration [m] and tension [N per N of
 #: spring preload] a monitor must exceed, so that a contact just made or just left is not

@@ -19,7 +19,7 @@ from campipe.bench.ivp import IvpResult, solve_case
 from campipe.bench.suite import OUTPUT_EVERY, Scene, suite
 from campipe.constants import INCH
 from campipe.engine import BatchResult, Case, RunSettings, run_batch
-from campipe.engine.newmark import CAM_SEPARATION, EV_KIND, EV_TIME
+from campipe.vocabulary import CAM_SEPARATION, EV_KIND, EV_TIME
 
 #: The converged reference: modal-exact (exact between events) with events located to 1e-14 s
 #: and steps capped at 0.1 µs, so that no monitor excursion between grid points can hide.

@@ -13,16 +13,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from campipe.engine import MEMBER_LOADS, BatchResult, member_loads, run_batch
-from campipe.engine.newmark import (
-    EV_FROM,
-    EV_IMPULSE,
-    EV_KIND,
-    EV_TIME,
-    EV_TO,
-    EV_VELOCITY,
-)
 from campipe.study.expand import ResolvedCase
 from campipe.study.variables import data_variables
+from campipe.vocabulary import EV_FROM, EV_IMPULSE, EV_KIND, EV_TIME, EV_TO, EV_VELOCITY
 
 
 @dataclass(frozen=True)
@@ -121,7 +114,7 @@ def event_arrays(events: Sequence[np.ndarray], speeds: Sequence[float]) -> dict[
     Parameters
     ----------
     events : sequence of (n_ev, 6) arrays
-        Columns as ``campipe.engine.newmark.EV_*``.
+        Columns as ``campipe.vocabulary.EV_*``.
     speeds : sequence of float
         Each case's cam speed [rad/s], to give each event its cam angle.
     """
