@@ -4,7 +4,7 @@
   kernels release the GIL), 1 and 2 workers.
 - :func:`study_scaling`: the same cases as a study through the study layer's executor
   (:func:`campipe.study.execute.run_study`), archive included; the archive's size per case.
-- :func:`throughput`: case-steps per second of newmark-linear on a 256-case batch (issue 3).
+- :func:`throughput`: case-steps per second of newmark-linear on a 256-case batch.
 
 These functions time runs; :func:`study_scaling` writes its spec and archives under the
 directory it is given (and nowhere else).
@@ -158,7 +158,7 @@ def study_scaling(
 
 @dataclass(frozen=True)
 class Throughput:
-    """Case-steps per second of one batch (issue 3's benchmark)."""
+    """Case-steps per second of one batch (the throughput benchmark)."""
 
     integrator: str  # integrator name
     n_cases: int  # cases in the batch
