@@ -11,7 +11,7 @@ import pint
 
 from campipe.errors import CampipeError
 
-ureg = pint.UnitRegistry()
+ureg: pint.UnitRegistry = pint.UnitRegistry()
 Q_ = ureg.Quantity
 
 
@@ -21,16 +21,14 @@ class QuantityError(CampipeError, ValueError):
     units it must convert to."""
 
 
-def parse_quantity(
-    text: str | float | int, units: str, key: str, example_units: str | None = None
-) -> float:
+def parse_quantity(text: object, units: str, key: str, example_units: str | None = None) -> float:
     """Parse ``text`` as a quantity and return its magnitude in ``units``.
 
     Parameters
     ----------
-    text : str, float or int
+    text : object
         A quantity with units, such as ``"9 in"``. A bare number is accepted only where
-        ``units`` is dimensionless.
+        ``units`` is dimensionless; anything else is refused with a QuantityError.
     units : str
         The units to convert to (pint spelling), ``""`` for dimensionless.
     key : str
@@ -109,7 +107,7 @@ def convert(value: float, from_units: str, to_units: str) -> float:
     return float(Q_(value, from_units).to(to_units).magnitude)
 
 
-def parse_angular(text: str | float | int, units: str, key: str, example_units: str) -> float:
+def parse_angular(text: object, units: str, key: str, example_units: str) -> float:
     """Parse an angle or an angular speed, whose units must name an angle.
 
     pint treats the radian as dimensionless, so :func:`parse_quantity` alone would take a bare

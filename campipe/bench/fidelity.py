@@ -127,7 +127,7 @@ def probe(
 
     within = np.array([lv.errors <= tolerance for lv in levels])  # (n_levels, n_cases)
     choice = tuple(cheapest(within[:, i]) for i in range(len(cases)))
-    return Probe(tolerance, tuple(levels), choice, cheapest(within.all(axis=1)))
+    return Probe(tolerance, tuple(levels), choice, cheapest(np.asarray(within.all(axis=1))))
 
 
 def recommend(
@@ -168,8 +168,8 @@ def study_needs(
     if len(cases) > MAX_PROBE_CASES:
         index = np.unique(np.linspace(0, len(cases) - 1, MAX_PROBE_CASES).round().astype(int))
     groups: dict[RunSettings, list[int]] = {}
-    for i in index:
-        groups.setdefault(settings[i], []).append(int(i))
+    for i in index.tolist():
+        groups.setdefault(settings[i], []).append(i)
     lines = [
         f"fidelity for a valve-lift tolerance of {tolerance / metres:g} {name} "
         f"(probe: {index.size} of {len(cases)} cases, up to {PROBE_REVOLUTIONS:g} turns, "

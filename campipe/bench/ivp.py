@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy.integrate import solve_ivp
@@ -288,7 +289,7 @@ def solve_case(
                 acc[CAM] = acam
             return M[row] @ acc + C[row] @ vv + K[row] @ qq - f[row]
 
-        monitors = []
+        monitors: list[Any] = []  # solve_ivp's events: callables with terminal, direction
         kinds = []
         if not (cam_held and form):
             if cam_held:

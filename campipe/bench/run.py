@@ -103,7 +103,7 @@ def _meta(quick: bool, ladder: Ladder, scenes: Sequence[Scene]) -> dict:
         "output_every_deg": math.degrees(measure.OUTPUT_EVERY),
         "reference": (
             f"modal-exact, tolerance {measure.REFERENCE.tolerance:g} s, step cap "
-            f"{measure.REFERENCE.dt * 1e6:g} µs"
+            f"{measure.REFERENCE_STEP_CAP * 1e6:g} µs"
         ),
         "reference_check": (
             f"solve_ivp {measure.CHECK_METHOD}, rtol = atol = "

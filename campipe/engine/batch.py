@@ -265,6 +265,7 @@ def check_stability(cases: Sequence[Case], settings: RunSettings) -> None:
     if settings.method != "newmark-linear":
         return
     dt_run = settings.step
+    assert dt_run is not None  # newmark-linear always has a step
     for i, case in enumerate(cases):
         limit, worst = _newmark_limit(case)
         if dt_run >= limit:

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 from datetime import UTC, datetime
 from importlib import metadata
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -195,7 +196,7 @@ class NetCDFWriter:
 
     def _create(self, v: VariableSpec, sizes: Mapping[str, int]) -> None:
         shape = [sizes[d] for d in v.dims]
-        kwargs: dict[str, object] = {"fill_value": False}
+        kwargs: dict[str, Any] = {"fill_value": False}
         if v.dtype != "str" and all(shape):
             chunks = [
                 min(CASE_CHUNK, n) if d == "case" and len(v.dims) > 1 else n

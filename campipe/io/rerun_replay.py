@@ -268,7 +268,7 @@ def log_sketch(
             ),
         )
     outline, mark = sketch.cam_outline * MM, sketch.cam_mark * MM
-    strips = [s for pair in zip(outline, mark, strict=True) for s in pair]
+    cam = [s for pair in zip(outline, mark, strict=True) for s in pair]
     rec.log(
         f"{root}/cam",
         rr.LineStrips2D.from_fields(
@@ -279,7 +279,7 @@ def log_sketch(
     rec.send_columns(
         f"{root}/cam",
         indexes=indexes,
-        columns=rr.LineStrips2D.columns(strips=strips).partition(np.full(n, 2, dtype=np.int32)),
+        columns=rr.LineStrips2D.columns(strips=cam).partition(np.full(n, 2, dtype=np.int32)),
     )
     _points(rec, f"{root}/follower", indexes, sketch.follower, sketch.on_cam)
     if sketch.seat is not None and sketch.valve is not None and sketch.seated is not None:

@@ -24,6 +24,7 @@ import difflib
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 from campipe.errors import CampipeError
 from campipe.units import QuantityError, parse_quantity
@@ -133,7 +134,7 @@ class ValveTrain:
     spring_preload: float  # [N] installed force, cam on the base circle
     damping_ratios: tuple[float, ...]  # [-] seven, lowest mode first
 
-    def replace(self, **changes: object) -> ValveTrain:
+    def replace(self, **changes: Any) -> ValveTrain:
         """A copy with some values (SI) changed."""
         return dataclasses.replace(self, **changes)
 
@@ -187,7 +188,7 @@ def parse_parameter(name: str, value: object, key: str | None = None) -> float |
             for i, (v, raw) in enumerate(zip(out, value, strict=True)):
                 _check_range(p, v, f"{key}[{i}]", raw)
             return out
-        v = parse_quantity(value, p.units, key, p.thesis_units)  # type: ignore[arg-type]
+        v = parse_quantity(value, p.units, key, p.thesis_units)
     except QuantityError as exc:
         raise ModelParameterError(
             str(exc), key=exc.key, found=exc.found, expected=exc.expected, reason=exc.reason

@@ -27,10 +27,11 @@ import shlex
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from campipe.engine import run_batch
+from campipe.engine import RunSettings, run_batch
 from campipe.errors import CampipeError, did_you_mean
 from campipe.io.spec_yaml import SpecFileError, parse_spec_text
 from campipe.model import PARAMETERS, ModelParameterError, ValveTrain, valve_train
@@ -82,7 +83,7 @@ class ReplayCase:
     histories: dict[str, np.ndarray]  # HISTORIES → (n,) archive values (time [s], lifts [m], ...)
     q: np.ndarray | None  # (n, 7) coordinates [m, rad]; None until computed again
     events: dict[str, np.ndarray]  # EVENT_FIELDS → (n_events,) archive values
-    columns: dict[str, tuple[object, str]]  # per-case column → (value, units) as in the archive
+    columns: dict[str, tuple[Any, str]]  # per-case column → (value, units) as in the archive
     train: ValveTrain  # the case's valve train [SI]
 
     @property
@@ -94,6 +95,8 @@ class ReplayCase:
     @property
     def valve_reference(self) -> float:
         """q7 of the valve at zero valve lift (cam on its base circle, no seat) [m]."""
+        if self.q is None:
+            raise ReplayError(f"case {self.case_id}: no q, so no valve reference")
         return float(np.median(self.q[:, 6] - self.histories["valve_lift"]))
 
     @property
@@ -139,7 +142,7 @@ def select_rows(ds, case_ids: Sequence[str] = (), where: str | None = None) -> n
     table = case_table(ds)
     ids = [str(i) for i in table.columns["case_id"]]
     if case_ids:
-        rows = []
+        picked = []
         for cid in case_ids:
             if cid not in ids:
                 raise ReplayError(
@@ -150,8 +153,8 @@ def select_rows(ds, case_ids: Sequence[str] = (), where: str | None = None) -> n
                     found=cid,
                     expected="a case id of the archive",
                 )
-            rows.append(ids.index(cid))
-        return np.array(list(dict.fromkeys(rows)), dtype=np.int64)
+            picked.append(ids.index(cid))
+        return np.array(list(dict.fromkeys(picked)), dtype=np.int64)
     rows = select(table, where)
     if rows.size == 0:
         raise ReplayError(
@@ -290,9 +293,9 @@ def rebuild_cases(
 
 def _history_directories(attrs: Mapping[str, object]) -> list[Path]:
     """The spec's folder as the ``history`` command line named it (``campipe study SPEC``)."""
-    words = str(attrs.get("history", "")).split(" ", 1)[-1]
+    command = str(attrs.get("history", "")).split(" ", 1)[-1]
     try:
-        words = shlex.split(words)
+        words = shlex.split(command)
     except ValueError:
         return []
     if len(words) >= 3 and words[:2] == ["campipe", "study"]:
@@ -301,7 +304,7 @@ def _history_directories(attrs: Mapping[str, object]) -> list[Path]:
 
 
 def _train_from_columns(
-    attrs: Mapping[str, object], columns: Mapping[str, tuple[object, str]]
+    attrs: Mapping[str, object], columns: Mapping[str, tuple[Any, str]]
 ) -> ValveTrain:
     """The valve train from the spec's ``model`` and the case's model-parameter columns:
     the sketch's lengths when the cases cannot be rebuilt (q was recorded)."""
@@ -324,7 +327,7 @@ def _train_from_columns(
 def regain_q(resolved: Sequence[ResolvedCase]) -> list[tuple[np.ndarray, np.ndarray]]:
     """Run resolved cases through the engine again (one batch per run-settings group):
     each case's (q [m, rad], valve lift [m]) at the output angles."""
-    groups: dict[object, list[int]] = {}
+    groups: dict[RunSettings, list[int]] = {}
     for i, rc in enumerate(resolved):
         groups.setdefault(rc.settings, []).append(i)
     out: list = [None] * len(resolved)

@@ -17,7 +17,7 @@ import numpy as np
 
 from campipe.constants import TWO_PI
 from campipe.engine import RunSettings, run_batch
-from campipe.study.expand import Study
+from campipe.study.expand import ResolvedCase, Study
 from campipe.study.results import n_revolutions
 from campipe.study.variables import DOF_NAMES, data_variables
 
@@ -43,7 +43,7 @@ def simulated_seconds(study: Study) -> np.ndarray:
 def measure_speeds(study: Study) -> dict[RunSettings, float]:
     """Simulated seconds per wall-clock second of one worker, per run-settings group, timed
     on the group's first case."""
-    firsts = {}
+    firsts: dict[RunSettings, ResolvedCase] = {}
     for c in study.cases:
         firsts.setdefault(c.settings, c)
     speeds = {}

@@ -22,6 +22,7 @@ import math
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -217,8 +218,9 @@ def _thaw(frozen: tuple) -> dict:
 
 
 @functools.lru_cache(maxsize=4096, typed=True)  # typed: True is not 1
-def _parse(key: str, value: object, path: str) -> object:
-    """A case field's SI value (cached: a grid repeats its base values in every case)."""
+def _parse(key: str, value: object, path: str) -> Any:
+    """A case field's SI value, typed as the field's kind makes it (cached: a grid repeats its
+    base values in every case)."""
     return (CASE_FIELDS.get(key) or varied_fields()[key]).parse(
         list(value) if isinstance(value, tuple) else value, path
     )

@@ -17,6 +17,7 @@ import functools
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import Any
 
 from campipe.engine import INTEGRATORS, MEMBER_LOADS, RunSettings
 from campipe.engine import batch as _engine_batch
@@ -74,15 +75,17 @@ class Field:
         """An angle or angular speed: its units must name an angle (see parse_angular)."""
         return "rad" in self.units
 
-    def parse(self, value: object, path: str) -> object:
+    def parse(self, value: object, path: str) -> Any:
         """The value in SI (floats), a word, or None for "none"; raises SpecProblem.
 
+        Its type follows the field's kind (a float for a quantity or number, an int for an
+        integer, a str for a choice or text, a tuple for a record or a list parameter).
         Scalar values are parsed once (a grid repeats its values in every case)."""
         if isinstance(value, str | int | float | bool | None):
             return _parse_scalar(self, value, path)
         return self._parse(value, path)
 
-    def _parse(self, value: object, path: str) -> object:
+    def _parse(self, value: object, path: str) -> Any:
         if self.allow_none and (value is None or value == "none"):
             return None
         if self.allow_default and value == "default":
@@ -116,9 +119,9 @@ class Field:
     def _quantity(self, value: object, path: str) -> float:
         try:
             if self.angular:
-                v = parse_angular(value, self.units, path, self.example)  # type: ignore[arg-type]
+                v = parse_angular(value, self.units, path, self.example)
             else:
-                v = parse_quantity(value, self.units, path, self.example)  # type: ignore[arg-type]
+                v = parse_quantity(value, self.units, path, self.example)
         except QuantityError as exc:
             raise SpecProblem.from_error(exc) from None
         self._check_range(v, value, path)
@@ -126,12 +129,12 @@ class Field:
 
     def _number(self, value: object, path: str) -> float | int:
         integer = self.kind == "integer"
-        ok = isinstance(value, int) if integer else isinstance(value, (int, float))
-        if isinstance(value, bool) or not ok:
+        number = value if isinstance(value, int | float) and not isinstance(value, bool) else None
+        if number is None or (integer and not isinstance(number, int)):
             what = "an integer" if integer else "a number"
             raise SpecProblem(path, f"found {value!r}, expected {what}")
-        self._check_range(float(value), value, path)
-        return int(value) if integer else float(value)
+        self._check_range(float(number), value, path)
+        return int(number) if integer else float(number)
 
     def _check_range(self, v: float, raw: object, path: str) -> None:
         if not math.isfinite(v):
@@ -147,7 +150,7 @@ class Field:
 
 
 @functools.lru_cache(maxsize=8192, typed=True)  # typed: True is not 1
-def _parse_scalar(field: Field, value: object, path: str) -> object:
+def _parse_scalar(field: Field, value: object, path: str) -> Any:
     return field._parse(value, path)
 
 
@@ -244,7 +247,7 @@ def undeclared_run_settings() -> list[str]:
     return [f.name for f in dataclasses.fields(RunSettings) if f.name not in _RUN_METADATA]
 
 
-def _spec_default(name: str, value: object) -> object:
+def _spec_default(name: str, value: Any) -> object:
     """A RunSettings default in spec spelling."""
     f = _RUN_METADATA[name]
     if value is None:

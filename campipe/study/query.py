@@ -146,11 +146,11 @@ def format_rows(table: CaseTable, rows: np.ndarray, names: Sequence[str], fmt: s
     numeric = [table.columns[n].dtype.kind in "iuf" for n in names]
     widths = [max(len(r[j]) for r in head + text) for j in range(len(names))]
     lines = []
-    for row in head + text:
+    for line in head + text:
         lines.append(
             "  ".join(
                 (c.rjust(w) if num else c.ljust(w))
-                for c, w, num in zip(row, widths, numeric, strict=True)
+                for c, w, num in zip(line, widths, numeric, strict=True)
             ).rstrip()
         )
     lines.append(f"({len(rows)} of {table.n} cases)")
@@ -221,18 +221,18 @@ def onset_table(table: CaseTable) -> list[str]:
         groups.setdefault(tuple(_key(cols[n][i]) for n in others), []).append(i)
     head = [*others, "onset_rpm"]
     rows = []
-    for idx in groups.values():
-        idx = np.array(idx)
+    for members in groups.values():
+        idx = np.array(members)
         order = idx[np.argsort(speed[idx], kind="stable")]
         sep = cols["separation_deg_per_rev"][order]
         hit = np.flatnonzero(sep > 0)
         if hit.size == 0:
-            text = f"none up to {speed[order[-1]]:.6g}"
+            onset = f"none up to {speed[order[-1]]:.6g}"
         elif hit[0] == 0:
-            text = f"at or below {speed[order[0]]:.6g}"
+            onset = f"at or below {speed[order[0]]:.6g}"
         else:
-            text = f"{speed[order[hit[0]]]:.6g}"
-        rows.append([_cell(cols[n][idx[0]], "table") for n in others] + [text])
+            onset = f"{speed[order[hit[0]]]:.6g}"
+        rows.append([_cell(cols[n][idx[0]], "table") for n in others] + [onset])
     text = [[", ".join(map(str, c)) if isinstance(c, list) else str(c) for c in r] for r in rows]
     widths = [max(len(r[j]) for r in [head, *text]) for j in range(len(head))]
     return [

@@ -98,10 +98,11 @@ def parse_where(text: str) -> Where:
         with warnings.catch_warnings():  # e.g. "invalid decimal literal": refused below anyway
             warnings.simplefilter("ignore", SyntaxWarning)
             tree = ast.parse(text.strip(), mode="eval")
-    except (SyntaxError, ValueError) as exc:
+    except (SyntaxError, ValueError) as exc:  # ValueError: a null byte, before Python 3.12
+        reason = exc.msg if isinstance(exc, SyntaxError) else str(exc)
         raise QueryError.at(
             "--where",
-            f"cannot parse {text!r} ({exc.msg}); expected comparisons joined by and, or, not",
+            f"cannot parse {text!r} ({reason}); expected comparisons joined by and, or, not",
         ) from None
     names: set[str] = set()
     # A list (or tuple) stands only on the right of 'in' / 'not in', holding plain values.
