@@ -10,6 +10,7 @@ import click
 import numpy as np
 import yaml
 
+from campipe import __version__
 from campipe.constants import INCH, LBF_IN, RPM
 from campipe.errors import CampipeError
 from campipe.model import (
@@ -46,7 +47,7 @@ def parse_overrides(pairs: tuple[str, ...]) -> dict[str, object]:
 
 
 @click.group()
-@click.version_option(package_name="campipe")
+@click.version_option(version=__version__, package_name="campipe")
 @click.option("-v", "--verbose", count=True, help="More log output (-v info, -vv debug).")
 def main(verbose: int) -> None:
     """campipe: parametric studies of cam-driven valve-train dynamics."""
@@ -582,13 +583,12 @@ def bench(quick, output, scenes, scaling, plot) -> None:
                 "--plot needs matplotlib: pip install 'campipe[plot]', or pass --no-plot"
             ) from None
     stderr = sys.stderr
+
+    def say(text: str) -> None:
+        stderr.write(f"campipe bench: {text}\n")
+
     try:
-        result = run_bench(
-            quick,
-            scenes or None,
-            with_scaling=scaling,
-            progress=lambda text: stderr.write(f"campipe bench: {text}\n"),
-        )
+        result = run_bench(quick, scenes or None, with_scaling=scaling, progress=say)
     except ValueError as exc:
         raise click.UsageError(str(exc)) from None
     paths = write_report(result, output, with_plot=plot)
