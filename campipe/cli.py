@@ -10,6 +10,9 @@ import click
 import numpy as np
 import yaml
 
+from campipe import __version__
+from campipe.constants import INCH, LBF_IN, RPM
+from campipe.errors import CampipeError
 from campipe.model import (
     COORDINATES,
     PARAMETERS,
@@ -22,11 +25,6 @@ from campipe.model import (
 from campipe.model.assembly import TRANSLATIONS, to_display_units
 from campipe.units import convert
 from campipe.vocabulary import CONFIGURATIONS, ROMAN
-
-#: The thesis's display units: lengths in inches, energies in lbf·in.
-INCH = 0.0254
-LBF_IN = convert(1.0, "lbf*in", "J")
-RAD_S_TO_RPM = 60.0 / (2.0 * np.pi)
 
 
 def parse_overrides(pairs: tuple[str, ...]) -> dict[str, object]:
@@ -49,7 +47,7 @@ def parse_overrides(pairs: tuple[str, ...]) -> dict[str, object]:
 
 
 @click.group()
-@click.version_option(package_name="campipe")
+@click.version_option(version=__version__, package_name="campipe")
 @click.option("-v", "--verbose", count=True, help="More log output (-v info, -vv debug).")
 def main(verbose: int) -> None:
     """campipe: parametric studies of cam-driven valve-train dynamics."""
@@ -109,7 +107,7 @@ def model_report(train, sm, limits, preset) -> dict[str, object]:
             for c in COORDINATES
         ],
         "natural_frequencies": sm.frequencies.tolist(),
-        "natural_frequencies_rpm": (sm.frequencies * RAD_S_TO_RPM).tolist(),
+        "natural_frequencies_rpm": (sm.frequencies / RPM).tolist(),
         "mass_matrix": sm.mass.tolist(),
         "stiffness_matrix": sm.stiffness.tolist(),
         "damping_matrix": sm.damping.tolist(),
@@ -168,7 +166,7 @@ def model_text(train, sm, limits, preset, overrides) -> str:
     lines.append("Natural frequencies (Figure 14)")
     lines.append(f"  {'mode':>4} {'rad/s':>14} {'rpm':>14} {'ζ':>6}")
     for i, (w, z) in enumerate(zip(sm.frequencies, train.damping_ratios, strict=True), 1):
-        lines.append(f"  {i:>4} {w:14.1f} {w * RAD_S_TO_RPM:14.1f} {z:6.3f}")
+        lines.append(f"  {i:>4} {w:14.1f} {w / RPM:14.1f} {z:6.3f}")
     lines.append("")
     lines.append(
         "Mode shapes (Figure 14), one column a mode, scaled to a largest translation of 1"
@@ -189,7 +187,7 @@ def model_text(train, sm, limits, preset, overrides) -> str:
 # -- studies ----------------------------------------------------------------------------------
 
 
-class SpecRefused(click.ClickException):
+class SpecRefused(CampipeError, click.ClickException):
     """A spec refused before anything runs (exit status 2, like a usage error)."""
 
     exit_code = 2
@@ -504,9 +502,9 @@ def replay(archive, case_ids, where, output, spawn, magnify) -> None:
     """Write a rerun recording of cases of ARCHIVE: lift, force and contact plots, events,
     parameters and the moving mechanism, on the timelines cam_angle and time. All cases go
     into one recording, each in its own cases/<case_id> subtree and blueprint tab."""
-    from campipe.io.rerun_replay import replay_archive
     from campipe.replay.cases import ReplayError
-    from campipe.study.query import QueryError
+    from campipe.replay.record import replay_archive
+    from campipe.study.where import QueryError
 
     if bool(case_ids) == (where is not None):
         raise click.UsageError("give --case ID (repeatable) or --where EXPR, one of the two")
@@ -585,13 +583,12 @@ def bench(quick, output, scenes, scaling, plot) -> None:
                 "--plot needs matplotlib: pip install 'campipe[plot]', or pass --no-plot"
             ) from None
     stderr = sys.stderr
+
+    def say(text: str) -> None:
+        stderr.write(f"campipe bench: {text}\n")
+
     try:
-        result = run_bench(
-            quick,
-            scenes or None,
-            with_scaling=scaling,
-            progress=lambda text: stderr.write(f"campipe bench: {text}\n"),
-        )
+        result = run_bench(quick, scenes or None, with_scaling=scaling, progress=say)
     except ValueError as exc:
         raise click.UsageError(str(exc)) from None
     paths = write_report(result, output, with_plot=plot)

@@ -9,24 +9,26 @@ from __future__ import annotations
 
 import pint
 
-ureg = pint.UnitRegistry()
+from campipe.errors import CampipeError
+
+ureg: pint.UnitRegistry = pint.UnitRegistry()
 Q_ = ureg.Quantity
 
 
-class QuantityError(ValueError):
-    """A quantity that is missing its units, has the wrong dimension, or does not parse."""
+class QuantityError(CampipeError, ValueError):
+    """A quantity that is missing its units, has the wrong dimension, or does not parse; its
+    ``key`` is the key the value came from, ``found`` the value as given, ``expected`` the
+    units it must convert to."""
 
 
-def parse_quantity(
-    text: str | float | int, units: str, key: str, example_units: str | None = None
-) -> float:
+def parse_quantity(text: object, units: str, key: str, example_units: str | None = None) -> float:
     """Parse ``text`` as a quantity and return its magnitude in ``units``.
 
     Parameters
     ----------
-    text : str, float or int
+    text : object
         A quantity with units, such as ``"9 in"``. A bare number is accepted only where
-        ``units`` is dimensionless.
+        ``units`` is dimensionless; anything else is refused with a QuantityError.
     units : str
         The units to convert to (pint spelling), ``""`` for dimensionless.
     key : str
@@ -42,40 +44,57 @@ def parse_quantity(
     target = ureg.Unit(units) if units else ureg.dimensionless
     dimensionless = target.dimensionless
     example = example_units or _example_unit(target)
+    expected = f"a quantity in {example}" if example else "a number"
     if isinstance(text, bool) or not isinstance(text, (str, int, float)):
-        raise QuantityError(f"{key}: expected a quantity such as '1 {example}', found {text!r}")
+        raise QuantityError.at(
+            key,
+            f"expected a quantity such as '1 {example}', found {text!r}",
+            found=text,
+            expected=expected,
+        )
     if isinstance(text, (int, float)):
         if dimensionless:
             return float(text)
-        raise QuantityError(
-            f"{key}: found the bare number {text!r}; write it with units, e.g. '{text} {example}'"
+        raise QuantityError.at(
+            key,
+            f"found the bare number {text!r}; write it with units, e.g. '{text} {example}'",
+            found=text,
+            expected=expected,
         )
     q = _read(text, key, example)
     if not isinstance(q, pint.Quantity):
         q = Q_(float(q), "")
     if q.dimensionless and not dimensionless:
-        raise QuantityError(
-            f"{key}: found {text!r} without units; write it with units, "
-            f"e.g. '{text.strip()} {example}'"
+        raise QuantityError.at(
+            key,
+            f"found {text!r} without units; write it with units, e.g. '{text.strip()} {example}'",
+            found=text,
+            expected=expected,
         )
     try:
         return float(q.to(target).magnitude)
     except pint.DimensionalityError:
-        raise QuantityError(
-            f"{key}: found {text!r} [{q.dimensionality}], expected a quantity convertible "
-            f"to {example} [{target.dimensionality}]"
+        raise QuantityError.at(
+            key,
+            f"found {text!r} [{q.dimensionality}], expected a quantity convertible "
+            f"to {example} [{target.dimensionality}]",
+            found=text,
+            expected=expected,
         ) from None
 
 
-def _read(text: str, key: str, example: str):
+def _read(text: str, key: str, example: str) -> pint.Quantity | float:
     """``text`` as pint reads it (a Quantity, or a plain number), or a QuantityError naming the
     key and suggesting ``example`` units."""
     try:
         return ureg.Quantity(text.strip())
     except Exception as exc:  # pint raises several unrelated types on bad text
-        raise QuantityError(
-            f"{key}: cannot read {text!r} as a quantity ({exc}); "
-            f"write a number and a unit, e.g. '1 {example}'"
+        raise QuantityError.at(
+            key,
+            f"cannot read {text!r} as a quantity ({exc}); "
+            f"write a number and a unit, e.g. '1 {example}'",
+            found=text,
+            expected=f"a quantity in {example}",
         ) from None
 
 
@@ -88,7 +107,7 @@ def convert(value: float, from_units: str, to_units: str) -> float:
     return float(Q_(value, from_units).to(to_units).magnitude)
 
 
-def parse_angular(text: str | float | int, units: str, key: str, example_units: str) -> float:
+def parse_angular(text: object, units: str, key: str, example_units: str) -> float:
     """Parse an angle or an angular speed, whose units must name an angle.
 
     pint treats the radian as dimensionless, so :func:`parse_quantity` alone would take a bare
@@ -111,26 +130,38 @@ def parse_angular(text: str | float | int, units: str, key: str, example_units: 
     QuantityError
         With the key, what was found and what is expected.
     """
+    expected = f"a quantity in {example_units}"
     if isinstance(text, bool) or not isinstance(text, str):
         if isinstance(text, (int, float)):
-            raise QuantityError(
-                f"{key}: found the bare number {text!r}; write it with units, "
-                f"e.g. '{text} {example_units}'"
+            raise QuantityError.at(
+                key,
+                f"found the bare number {text!r}; write it with units, "
+                f"e.g. '{text} {example_units}'",
+                found=text,
+                expected=expected,
             )
-        raise QuantityError(
-            f"{key}: expected a quantity such as '1 {example_units}', found {text!r}"
+        raise QuantityError.at(
+            key,
+            f"expected a quantity such as '1 {example_units}', found {text!r}",
+            found=text,
+            expected=expected,
         )
     q = _read(text, key, example_units)
-    base = q.to_base_units() if isinstance(q, pint.Quantity) else None
-    if base is None or dict(base.unit_items()).get("radian") != 1:
-        raise QuantityError(
-            f"{key}: found {text!r}, expected a quantity whose units name an angle, "
-            f"such as '1 {example_units}'"
+    if not isinstance(q, pint.Quantity) or dict(q.to_base_units().unit_items()).get("radian") != 1:
+        raise QuantityError.at(
+            key,
+            f"found {text!r}, expected a quantity whose units name an angle, "
+            f"such as '1 {example_units}'",
+            found=text,
+            expected=expected,
         )
     try:
         return float(q.to(units).magnitude)
     except pint.DimensionalityError:
-        raise QuantityError(
-            f"{key}: found {text!r}, expected a quantity convertible to {example_units}, "
-            f"such as '1 {example_units}'"
+        raise QuantityError.at(
+            key,
+            f"found {text!r}, expected a quantity convertible to {example_units}, "
+            f"such as '1 {example_units}'",
+            found=text,
+            expected=expected,
         ) from None

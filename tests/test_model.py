@@ -113,7 +113,7 @@ def test_stability_limits_of_newmark_linear(thesis):
     limits = {
         c: newmark_linear_stability_limit(thesis.mass, thesis.stiffness, c) for c in CONFIGURATIONS
     }
-    # NOTES.md: ≈ 3.24 µs in configuration II, 3.26 µs in configuration I.
+    # √12/ω_max: ≈ 3.24 µs in configuration II, 3.26 µs in configuration I.
     assert_allclose(limits[2], 3.24e-6, rtol=2e-3)
     assert_allclose(limits[1], 3.26e-6, rtol=2e-3)
     assert min(limits.values()) == limits[2]

@@ -20,6 +20,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from campipe.constants import INCH
 from campipe.engine import Case, RunSettings, run_batch
 
 #: Reduced-fidelity cut-offs tried [rad/s]: between the configurations' natural frequencies
@@ -32,7 +33,7 @@ MIN_SAVING = 0.05
 #: The reduced model's stated error on a slow scene: at 3000 rpm (the cam always in contact)
 #: the default cut-off (``campipe.engine.batch.DEFAULT_MODE_CUTOFF``) keeps the valve lift
 #: within this of the full model's [m] (tests/test_bench.py).
-SLOW_SCENE_ERROR = 1e-7 * 0.0254
+SLOW_SCENE_ERROR = 1e-7 * INCH
 #: Cases a probe batch holds at least (cases are repeated to fill it) so its time is stable.
 MIN_BATCH = 16
 
@@ -126,7 +127,7 @@ def probe(
 
     within = np.array([lv.errors <= tolerance for lv in levels])  # (n_levels, n_cases)
     choice = tuple(cheapest(within[:, i]) for i in range(len(cases)))
-    return Probe(tolerance, tuple(levels), choice, cheapest(within.all(axis=1)))
+    return Probe(tolerance, tuple(levels), choice, cheapest(np.asarray(within.all(axis=1))))
 
 
 def recommend(
@@ -149,7 +150,7 @@ def study_needs(
     cases: Sequence[Case],
     settings: Sequence[RunSettings],
     tolerance: float,
-    unit: tuple[str, float] = ("in", 0.0254),
+    unit: tuple[str, float] = ("in", INCH),
 ) -> str:
     """What ``campipe validate --tolerance`` prints: the fidelity level a study's cases need.
 
@@ -167,8 +168,8 @@ def study_needs(
     if len(cases) > MAX_PROBE_CASES:
         index = np.unique(np.linspace(0, len(cases) - 1, MAX_PROBE_CASES).round().astype(int))
     groups: dict[RunSettings, list[int]] = {}
-    for i in index:
-        groups.setdefault(settings[i], []).append(int(i))
+    for i in index.tolist():
+        groups.setdefault(settings[i], []).append(i)
     lines = [
         f"fidelity for a valve-lift tolerance of {tolerance / metres:g} {name} "
         f"(probe: {index.size} of {len(cases)} cases, up to {PROBE_REVOLUTIONS:g} turns, "

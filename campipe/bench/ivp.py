@@ -30,11 +30,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from scipy.integrate import solve_ivp
 
+from campipe.constants import TWO_PI
 from campipe.engine.batch import Case
+from campipe.errors import CampipeError
 from campipe.model import system_matrices
 from campipe.vocabulary import (
     CAM,
@@ -47,7 +50,6 @@ from campipe.vocabulary import (
     configuration,
 )
 
-TWO_PI = 2.0 * math.pi
 #: Monitor levels, as a contact switch is decided: penetration [m] and tension [N per N of
 #: spring preload] a monitor must exceed, so that a contact just made or just left is not
 #: switched again by rounding at the segment's first point.
@@ -62,7 +64,7 @@ MAX_STALLED = 64
 STALL_WINDOW = 1e-9
 
 
-class ChatterError(RuntimeError):
+class ChatterError(CampipeError, RuntimeError):
     """Contact events kept recurring at one instant."""
 
 
@@ -287,7 +289,7 @@ def solve_case(
                 acc[CAM] = acam
             return M[row] @ acc + C[row] @ vv + K[row] @ qq - f[row]
 
-        monitors = []
+        monitors: list[Any] = []  # solve_ivp's events: callables with terminal, direction
         kinds = []
         if not (cam_held and form):
             if cam_held:

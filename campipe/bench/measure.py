@@ -16,14 +16,16 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from campipe.bench.ivp import IvpResult, solve_case
-from campipe.bench.suite import INCH, OUTPUT_EVERY, Scene, suite
+from campipe.bench.suite import OUTPUT_EVERY, Scene, suite
+from campipe.constants import INCH
 from campipe.engine import BatchResult, Case, RunSettings, run_batch
 from campipe.vocabulary import CAM_SEPARATION, EV_KIND, EV_TIME
 
 #: The converged reference: modal-exact (exact between events) with events located to 1e-14 s
 #: and steps capped at 0.1 µs, so that no monitor excursion between grid points can hide.
+REFERENCE_STEP_CAP = 0.1e-6  # [s]
 REFERENCE = RunSettings(
-    integrator="modal-exact", tolerance=1e-14, dt=0.1e-6, output_every=OUTPUT_EVERY
+    integrator="modal-exact", tolerance=1e-14, dt=REFERENCE_STEP_CAP, output_every=OUTPUT_EVERY
 )
 #: The reference's check, a different method: solve_ivp's DOP853 (explicit Runge–Kutta of
 #: order 8, dense output of order 7, events by Brent's method on the dense output) at
@@ -171,6 +173,7 @@ def time_ivp(scene: Scene, rtol: float, method: str, repeats: int) -> tuple[floa
         t0 = time.perf_counter()
         result = solve_case(scene.case, scene.revolutions, OUTPUT_EVERY, method=method, rtol=rtol)
         best = min(best, time.perf_counter() - t0)
+    assert result is not None  # the loop runs at least once
     return best, outcome_of_ivp(result, scene.case), result.nfev
 
 
@@ -216,7 +219,8 @@ def pareto(times: np.ndarray, errs: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     """The points no cheaper point beats: sorted by time, each with a smaller error than
     every cheaper one."""
     order = np.argsort(times, kind="stable")
-    t_out, e_out = [], []
+    t_out: list[float] = []
+    e_out: list[float] = []
     for i in order:
         if errs[i] > 0 and np.isfinite(errs[i]) and (not e_out or errs[i] < e_out[-1]):
             t_out.append(times[i])

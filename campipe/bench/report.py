@@ -9,11 +9,13 @@ from __future__ import annotations
 import csv
 import json
 import math
+import operator
 from dataclasses import asdict
 from pathlib import Path
+from typing import Any
 
 from campipe.bench.run import FAMILIES, Bench
-from campipe.bench.suite import INCH
+from campipe.constants import INCH
 
 #: File names written into the output folder.
 FILES = {
@@ -509,7 +511,7 @@ def plot(bench: Bench, path: Path, errors: tuple[tuple, ...] = (VALVE_LIFT,)) ->
             if not pts:
                 continue
             if fam == "reduced":
-                pts = sorted(pts, key=lambda r, key=key: r[key])
+                pts = sorted(pts, key=operator.itemgetter(key))
             color, style = styles[fam]
             ax.plot(
                 [x_of(r) for r in pts],
@@ -544,7 +546,7 @@ def plot(bench: Bench, path: Path, errors: tuple[tuple, ...] = (VALVE_LIFT,)) ->
     for ax in list(axes.flat)[len(panels) :]:
         ax.axis("off")
     # One legend entry per label, from every panel (a panel may lack a family).
-    entries = {}
+    entries: dict[str, Any] = {}
     for ax in axes.flat:
         for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
             entries.setdefault(lab, h)

@@ -4,7 +4,7 @@
   kernels release the GIL), 1 and 2 workers.
 - :func:`study_scaling`: the same cases as a study through the study layer's executor
   (:func:`campipe.study.execute.run_study`), archive included; the archive's size per case.
-- :func:`throughput`: case-steps per second of newmark-linear on a 256-case batch (issue 3).
+- :func:`throughput`: case-steps per second of newmark-linear on a 256-case batch.
 
 These functions time runs; :func:`study_scaling` writes its spec and archives under the
 directory it is given (and nowhere else).
@@ -19,11 +19,15 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
+import yaml
 
-from campipe.bench.suite import INCH, OUTPUT_EVERY, rpm
+from campipe.bench.suite import OUTPUT_EVERY, rpm
+from campipe.constants import INCH
 from campipe.engine import Case, RunSettings, run_batch
 from campipe.model import thesis_train
 from campipe.profiles import harmonic
+from campipe.study import load_study
+from campipe.study.execute import run_study
 
 #: The population the scaling runs sweep: the harmonic cam over this speed range [rpm],
 #: alternately without a seat and with one at 0.1 in.
@@ -135,11 +139,6 @@ def study_scaling(
 ) -> list[ScalingPoint]:
     """Wall time of ``campipe study`` on n cases (spec check, batches, archive) and the
     archive's size; spec and archives are written under ``directory``."""
-    import yaml
-
-    from campipe.study import load_study
-    from campipe.study.execute import run_study
-
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
     out = []
@@ -159,7 +158,7 @@ def study_scaling(
 
 @dataclass(frozen=True)
 class Throughput:
-    """Case-steps per second of one batch (issue 3's benchmark)."""
+    """Case-steps per second of one batch (the throughput benchmark)."""
 
     integrator: str  # integrator name
     n_cases: int  # cases in the batch

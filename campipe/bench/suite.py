@@ -11,18 +11,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from campipe.constants import INCH, RPM
 from campipe.engine import Case
 from campipe.model import ValveTrain, thesis_train
 from campipe.profiles import flat, harmonic, polydyne
 
-INCH = 0.0254  # [m]
 #: Output spacing of every run the bench compares [rad]: the study default.
 OUTPUT_EVERY = math.radians(1.0)
 
 
 def rpm(speed: float) -> float:
     """Cam speed [rpm] → [rad/s]."""
-    return speed * math.pi / 30.0
+    return speed * RPM
 
 
 @dataclass(frozen=True)

@@ -25,6 +25,7 @@ from campipe.engine.contact import (
     quasi_static_state,
 )
 from campipe.engine.modal import ModalData, harmonic_responses, modal_data
+from campipe.errors import CampipeError
 from campipe.model import ValveTrain, system_matrices
 from campipe.model.assembly import (
     NEWMARK_LINEAR_OMEGA_DT,
@@ -52,13 +53,34 @@ FIDELITIES = ("full", "reduced")
 DEFAULT_MODE_CUTOFF = 2.0e5  # [rad/s]: the configurations' lower modes, about 32 kHz
 
 
+class RunSettingsError(CampipeError, ValueError):
+    """Run settings the engine refuses; ``key`` is the spec key (``run.integrator``,
+    ``run.fidelity``, ``run.mode_cutoff``, ``run.dt``, ``run.tolerance``)."""
+
+
+class StabilityError(RunSettingsError):
+    """A step beyond the integrator's stability limit (``key`` ``run.dt``, ``found`` the
+    step [s]); its ``reason`` leaves out which case of the batch set the limit."""
+
+
+class CaseError(CampipeError, ValueError):
+    """A case the engine refuses; ``key`` is ``closure`` or ``speed``."""
+
+
+class IntegrationError(CampipeError, RuntimeError):
+    """A run that produced a non-finite state, or chattered; ``found`` lists the cases."""
+
+
 def resolve_integrator(name: str) -> str:
     """``default`` → the default integrator's name; refuse an unknown name."""
     resolved = DEFAULT_INTEGRATOR if name == "default" else name
     if resolved not in INTEGRATORS:
-        raise ValueError(
-            f"run.integrator: unknown integrator {name!r}; known: default, "
-            + ", ".join(INTEGRATORS)
+        known = ", ".join(("default", *INTEGRATORS))
+        raise RunSettingsError.at(
+            "run.integrator",
+            f"unknown integrator {name!r}; known: {known}",
+            found=name,
+            expected=f"one of: {known}",
         )
     return resolved
 
@@ -95,19 +117,29 @@ class RunSettings:
     def cutoff(self) -> float:
         """The highest mode frequency modal-exact keeps [rad/s]; 0 keeps every mode."""
         if self.fidelity not in FIDELITIES:
-            raise ValueError(
-                f"run.fidelity: unknown fidelity {self.fidelity!r}; known: {', '.join(FIDELITIES)}"
+            raise RunSettingsError.at(
+                "run.fidelity",
+                f"unknown fidelity {self.fidelity!r}; known: {', '.join(FIDELITIES)}",
+                found=self.fidelity,
+                expected=f"one of: {', '.join(FIDELITIES)}",
             )
         if self.fidelity == "full":
             return 0.0
         if self.method != "modal-exact":
-            raise ValueError(
-                f"run.fidelity: {self.fidelity} needs integrator modal-exact (or default), "
-                f"found {self.method}"
+            raise RunSettingsError.at(
+                "run.fidelity",
+                f"{self.fidelity} needs integrator modal-exact (or default), found {self.method}",
+                found=self.fidelity,
+                expected="full, or integrator modal-exact",
             )
         cutoff = DEFAULT_MODE_CUTOFF if self.mode_cutoff is None else self.mode_cutoff
         if not cutoff > 0:
-            raise ValueError(f"run.mode_cutoff: found {cutoff!r} rad/s, expected > 0")
+            raise RunSettingsError.at(
+                "run.mode_cutoff",
+                f"found {cutoff!r} rad/s, expected > 0",
+                found=cutoff,
+                expected="> 0 rad/s",
+            )
         return float(cutoff)
 
     @property
@@ -119,14 +151,6 @@ class RunSettings:
     def step(self) -> float | None:
         """The time step [s] (modal-exact: the cap on its steps, None for none)."""
         return DEFAULT_STEPS[self.method] if self.dt is None else self.dt
-
-
-class StabilityError(ValueError):
-    """A step beyond the integrator's stability limit."""
-
-
-class IntegrationError(RuntimeError):
-    """A run that produced a non-finite state."""
 
 
 @dataclass
@@ -243,13 +267,21 @@ def check_stability(cases: Sequence[Case], settings: RunSettings) -> None:
     if settings.method != "newmark-linear":
         return
     dt_run = settings.step
+    assert dt_run is not None  # newmark-linear always has a step
     for i, case in enumerate(cases):
         limit, worst = _newmark_limit(case)
         if dt_run >= limit:
+            beyond = f"{dt_run * 1e6:.4g} µs is beyond the stability limit of newmark-linear"
+            bound = (
+                f"({limit * 1e6:.4g} µs, configuration {ROMAN[worst]}); "
+                f"use a step below {limit * 1e6:.4g} µs"
+            )
             raise StabilityError(
-                f"run.dt: {dt_run * 1e6:.4g} µs is beyond the stability limit of "
-                f"newmark-linear for case {i} ({limit * 1e6:.4g} µs, configuration "
-                f"{ROMAN[worst]}); use a step below {limit * 1e6:.4g} µs"
+                f"run.dt: {beyond} for case {i} {bound}",
+                key="run.dt",
+                found=dt_run,
+                expected=f"a step below {limit * 1e6:.4g} µs",
+                reason=f"{beyond} {bound}",
             )
 
 
@@ -353,21 +385,42 @@ def check_run(
 
     Raises
     ------
-    ValueError
-        (StabilityError for the step limit) with a message that starts with the spec key:
-        ``run.<key>: …``, ``closure: …`` or ``speed: …``.
+    RunSettingsError
+        (StabilityError for the step limit) for a run setting, its ``key`` ``run.<name>``.
+    CaseError
+        For a case's closure or speed, its ``key`` ``closure`` or ``speed``.
     """
     dt_run = settings.step  # also refuses an unknown integrator
     _ = settings.cutoff  # refuses an unknown fidelity, or reduced with newmark-linear
     if dt_run is not None and not (dt_run > 0 and math.isfinite(dt_run)):
-        raise ValueError(f"run.dt: found {dt_run!r} s, expected a positive step")
+        raise RunSettingsError.at(
+            "run.dt",
+            f"found {dt_run!r} s, expected a positive step",
+            found=dt_run,
+            expected="> 0 s",
+        )
     if not (settings.tolerance > 0 and math.isfinite(settings.tolerance)):
-        raise ValueError(f"run.tolerance: found {settings.tolerance!r} s, expected > 0")
+        raise RunSettingsError.at(
+            "run.tolerance",
+            f"found {settings.tolerance!r} s, expected > 0",
+            found=settings.tolerance,
+            expected="> 0 s",
+        )
     for i, case in enumerate(cases):
         if case.closure not in CLOSURES:
-            raise ValueError(f"closure: case {i} has {case.closure!r}, expected force or form")
+            raise CaseError.at(
+                "closure",
+                f"case {i} has {case.closure!r}, expected force or form",
+                found=case.closure,
+                expected="force or form",
+            )
         if not case.speed > 0:
-            raise ValueError(f"speed: case {i} has {case.speed!r} rad/s, expected > 0")
+            raise CaseError.at(
+                "speed",
+                f"case {i} has {case.speed!r} rad/s, expected > 0",
+                found=case.speed,
+                expected="> 0 rad/s",
+            )
     if check_stability_limit:
         check_stability(cases, settings)
 
@@ -484,12 +537,15 @@ def run_batch(
             if not check_stability_limit
             else "this is a defect: please report it with the case"
         )
-        raise IntegrationError(f"cases {bad.tolist()} became non-finite ({how}); {why}")
+        raise IntegrationError(
+            f"cases {bad.tolist()} became non-finite ({how}); {why}", found=bad.tolist()
+        )
     bad = np.flatnonzero(status == CHATTER)
     if bad.size:
         raise IntegrationError(
             f"cases {bad.tolist()}: contact events kept recurring at one instant (chatter); "
-            "integrate them with newmark-linear"
+            "integrate them with newmark-linear",
+            found=bad.tolist(),
         )
     for i in np.flatnonzero(status == EVENTS_TRUNCATED):
         log.warning(

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
+from campipe.errors import CampipeError
 from campipe.model.assembly import SystemMatrices
 from campipe.vocabulary import CONFIGURATIONS, CONTACTS
 
@@ -31,7 +32,7 @@ NS = 14  # padded state size: 2 × 7 free coordinates (configuration II)
 # Index hc of the held-coordinate axes below follows vocabulary.CONTACTS: 0 the cam, 1 the seat.
 
 
-class DefectiveModesError(ValueError):
+class DefectiveModesError(CampipeError, ValueError):
     """A configuration whose state matrix has no complete set of eigenvectors."""
 
 

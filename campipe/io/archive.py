@@ -27,8 +27,12 @@ from dataclasses import dataclass
 from datetime import UTC, datetime
 from importlib import metadata
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+
+from campipe import __version__
+from campipe.errors import CampipeError
 
 log = logging.getLogger(__name__)
 
@@ -59,12 +63,13 @@ class VariableSpec:
     attrs: Mapping[str, object]  # netCDF attributes
 
 
-class ArchiveFileError(RuntimeError):
-    """A file that is not a campipe archive or batch file."""
+class ArchiveFileError(CampipeError, RuntimeError):
+    """A file that is not a campipe archive or batch file (``key`` the file)."""
 
 
-class ArchiveBusyError(RuntimeError):
-    """Another run is writing the same archive."""
+class ArchiveBusyError(CampipeError, RuntimeError):
+    """Another run is writing the same archive (``key`` the archive, ``found`` its lock's
+    holder: pid, host and start, or None if the lock cannot be read)."""
 
 
 def lock_path(archive: Path) -> Path:
@@ -110,7 +115,9 @@ def writing(archive: str | Path) -> Iterator[Path]:
             )
             raise ArchiveBusyError(
                 f"{archive} is being written by {who}: wait for that run to finish, or "
-                f"write to another archive (-o); if that run is gone, remove {lock}"
+                f"write to another archive (-o); if that run is gone, remove {lock}",
+                key=str(archive),
+                found=holder,
             ) from None
         with os.fdopen(fd, "w") as f:
             json.dump(me, f)
@@ -189,7 +196,7 @@ class NetCDFWriter:
 
     def _create(self, v: VariableSpec, sizes: Mapping[str, int]) -> None:
         shape = [sizes[d] for d in v.dims]
-        kwargs: dict[str, object] = {"fill_value": False}
+        kwargs: dict[str, Any] = {"fill_value": False}
         if v.dtype != "str" and all(shape):
             chunks = [
                 min(CASE_CHUNK, n) if d == "case" and len(v.dims) > 1 else n
@@ -316,12 +323,12 @@ def read_index(path: str | Path) -> tuple[np.ndarray, np.ndarray, dict[str, obje
         with LOCK, netCDF4.Dataset(path, "r") as ds:
             for name in ("case_id", "event_count"):
                 if name not in ds.variables:
-                    raise ArchiveFileError(f"{path}: no {name} variable")
+                    raise ArchiveFileError(f"{path}: no {name} variable", key=str(path))
             ids = np.asarray(ds.variables["case_id"][:], dtype=object)
             counts = np.asarray(ds.variables["event_count"][:], dtype=np.int64)
             return ids, counts, {k: ds.getncattr(k) for k in ds.ncattrs()}
     except OSError as exc:
-        raise ArchiveFileError(f"{path}: cannot read ({exc})") from None
+        raise ArchiveFileError(f"{path}: cannot read ({exc})", key=str(path)) from None
 
 
 def read_variable(path: str | Path, name: str) -> np.ndarray:
@@ -379,8 +386,6 @@ def read_rows(
 def provenance(command: str) -> dict[str, str]:
     """Global attributes naming who wrote an archive, when and with what."""
     import netCDF4
-
-    from campipe import __version__
 
     now = datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
     versions = []

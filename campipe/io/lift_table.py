@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
+from campipe.errors import CampipeError
 from campipe.io import read_text
 from campipe.units import QuantityError, parse_angular, parse_quantity
 
@@ -33,8 +34,9 @@ _HEADER = re.compile(r"^\s*(?P<name>[A-Za-z_]+)\s*\[(?P<units>[^\]]+)\]\s*$")
 COLUMNS = {"angle": ("rad", "deg"), "lift": ("m", "in")}
 
 
-class LiftTableError(ValueError):
-    """A lift table file that cannot be read, with the file and line."""
+class LiftTableError(CampipeError, ValueError):
+    """A lift table file that cannot be read, with the file and line (``key``:
+    ``<file>:<line>``, or the file alone)."""
 
 
 def read_lift_table(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
@@ -66,22 +68,33 @@ def read_lift_table(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
         if row and "".join(row).strip() and not row[0].lstrip().startswith("#")
     ]
     if not rows:
-        raise LiftTableError(f"{path}: empty; expected a header 'angle [deg],lift [in]' and rows")
+        raise LiftTableError.at(
+            str(path),
+            "empty; expected a header 'angle [deg],lift [in]' and rows",
+            expected="a header 'angle [deg],lift [in]' and rows",
+        )
     line, header = rows[0]
     scale = _read_header(path, line, header)
     values = np.empty((len(rows) - 1, 2))
     for k, (n, row) in enumerate(rows[1:]):
         if len(row) != 2:
-            raise LiftTableError(f"{path}:{n}: expected 2 values (angle, lift), found {len(row)}")
+            raise LiftTableError.at(
+                f"{path}:{n}",
+                f"expected 2 values (angle, lift), found {len(row)}",
+                found=row,
+                expected="2 values (angle, lift)",
+            )
         for j, cell in enumerate(row):
             try:
                 v = float(cell)
             except ValueError:
                 v = math.nan
             if not math.isfinite(v):
-                raise LiftTableError(
-                    f"{path}:{n}: found {cell.strip()!r} in column {j + 1}, expected a finite "
-                    "number"
+                raise LiftTableError.at(
+                    f"{path}:{n}",
+                    f"found {cell.strip()!r} in column {j + 1}, expected a finite number",
+                    found=cell.strip(),
+                    expected="a finite number",
                 )
             values[k, j] = v * scale[j]
     return values[:, 0].copy(), values[:, 1].copy()
@@ -90,20 +103,25 @@ def read_lift_table(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
 def _read_header(path: Path, line: int, header: list[str]) -> tuple[float, float]:
     expected = "expected a header such as 'angle [deg],lift [in]'"
     if len(header) != 2:
-        raise LiftTableError(f"{path}:{line}: found {','.join(header)!r}, {expected}")
+        raise LiftTableError.at(
+            f"{path}:{line}", f"found {','.join(header)!r}, {expected}", found=header
+        )
     scale = []
     for cell, (name, (units, example)) in zip(header, COLUMNS.items(), strict=True):
         m = _HEADER.match(cell)
         if not m or m["name"].lower() != name:
-            raise LiftTableError(
-                f"{path}:{line}: found column {cell.strip()!r} where '{name} [units]' belongs; "
-                + expected
+            raise LiftTableError.at(
+                f"{path}:{line}",
+                f"found column {cell.strip()!r} where '{name} [units]' belongs; " + expected,
+                found=cell.strip(),
             )
         try:
             parse = parse_angular if name == "angle" else parse_quantity
             scale.append(parse(f"1 {m['units']}", units, f"{path}:{line}: {name}", example))
         except QuantityError as exc:
-            raise LiftTableError(str(exc)) from None
+            raise LiftTableError(
+                str(exc), key=exc.key, found=exc.found, expected=exc.expected, reason=exc.reason
+            ) from None
     return scale[0], scale[1]
 
 

@@ -1,4 +1,10 @@
-"""rerun recordings of valve-train cases (``campipe replay``, a study's ``replay:``).
+"""rerun recordings of valve-train cases: the file format of ``campipe replay`` and a study's
+``replay:``.
+
+This module writes what it is given: each case as plain arrays and text
+(:class:`CaseRecording`, built by :mod:`campipe.replay.record` from an archive's or a batch's
+case). It selects nothing and computes nothing; rerun itself is imported where it is used,
+so importing this module stays light.
 
 One recording holds every selected case, each in its own entity subtree; a blueprint shows
 each case on its own tab, the mechanism sketch beside the plots::
@@ -32,20 +38,19 @@ rerun's own store beside the recording, with its own random ids and times.)
 from __future__ import annotations
 
 import hashlib
-import math
 import os
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
-import rerun as rr
-import rerun.blueprint as rrb
 
-from campipe.model import PARAMETERS
-from campipe.replay import sketch
-from campipe.replay.cases import ReplayCase
 from campipe.vocabulary import CAM_IMPACT, CAM_SEPARATION, ROMAN, SEAT_IMPACT, SEAT_SEPARATION
+
+if TYPE_CHECKING:
+    import rerun as rr
+    import rerun.blueprint as rrb
 
 APPLICATION_ID = "campipe"
 #: Timeline names.
@@ -92,6 +97,47 @@ PART_COLOURS = {
 IN_CONTACT, OFF_CONTACT = (40, 180, 70), (220, 40, 40)
 
 
+class Labelled(Protocol):
+    """What a blueprint needs of a case: its id and a short name."""
+
+    @property
+    def case_id(self) -> str: ...
+
+    @property
+    def label(self) -> str: ...
+
+
+@dataclass(frozen=True)
+class SketchFrames:
+    """The mechanism of one case as drawn at every sample, positions in metres."""
+
+    moving: Mapping[str, np.ndarray]  # part → (n, k, 2) its line strip per sample [m]
+    radii: Mapping[str, float]  # moving part → line radius [m]
+    cam_outline: np.ndarray  # (n, k, 2) the turning cam's outline per sample [m]
+    cam_mark: np.ndarray  # (n, 2, 2) a radius marking the cam's angle per sample [m]
+    follower: np.ndarray  # (n, 2) the follower's contact point [m]
+    on_cam: np.ndarray  # (n,) bool: the follower is on the cam
+    frame: Mapping[str, np.ndarray]  # fixed part → (k, 2) line strip [m]
+    note_at: tuple[float, float]  # where the magnification note stands [m]
+    valve: np.ndarray | None = None  # (n, 2) the valve's seat point [m]; None: no seat
+    seated: np.ndarray | None = None  # (n,) bool: the valve is on its seat
+    seat: np.ndarray | None = None  # (blocks, 2, 2) the seat's boxes: min corner, size [m]
+
+
+@dataclass(frozen=True)
+class CaseRecording:
+    """One case as a recording shows it: the archive's values (SI, angles in degrees), its
+    parameters as a markdown document and the mechanism's sketch."""
+
+    case_id: str  # the case's id: its entity subtree is cases/<case_id>
+    label: str  # a short name, the blueprint tab's
+    cam_angle: np.ndarray  # (n,) sample angles [degree]
+    histories: Mapping[str, np.ndarray]  # "time" [s] and every SERIES name → (n,) values
+    events: Mapping[str, np.ndarray]  # event variables as the archive holds them
+    parameters: str  # markdown document
+    sketch: SketchFrames
+
+
 def case_path(case_id: str) -> str:
     """The entity subtree of a case."""
     return f"cases/{case_id}"
@@ -103,6 +149,8 @@ def nanos(values: np.ndarray) -> np.ndarray:
 
 
 def _indexes(cam_angle: np.ndarray, time: np.ndarray) -> list:
+    import rerun as rr
+
     return [
         rr.TimeColumn(CAM_ANGLE, duration=nanos(cam_angle).astype("timedelta64[ns]")),
         rr.TimeColumn(TIME, duration=nanos(time).astype("timedelta64[ns]")),
@@ -121,76 +169,15 @@ def event_text(
         f"{name} at {angle:.4f}° (t = {time * 1e3:.4f} ms): velocity {velocity:.4g} m/s, "
         f"configuration {ROMAN.get(int(before), before)} → {ROMAN.get(int(after), after)}"
     )
-    if int(kind) in (2, 4):
+    if int(kind) in (CAM_IMPACT, SEAT_IMPACT):
         text += f", impulse {impulse:.4g} N·s"
     return text
 
 
-def _value(value: object) -> str:
-    if isinstance(value, tuple):
-        return ", ".join(_value(v) for v in value)
-    if isinstance(value, float):
-        return "none" if math.isnan(value) else f"{value:.10g}"
-    return str(value)
-
-
-def parameters_document(case: ReplayCase, magnification: float) -> str:
-    """The case as a markdown document: its columns, its model, how to read the replay."""
-    lines = [
-        f"# {case.label}",
-        "",
-        f"Study `{case.study}`, case `{case.case_id}`.",
-        "",
-        "## Case (as the archive holds it)",
-        "",
-        "| column | value | units |",
-        "|---|---|---|",
-    ]
-    lines += [
-        f"| {name} | {_value(value)} | {units} |" for name, (value, units) in case.columns.items()
-    ]
-    lines += ["", "## Valve train", "", "| parameter | value | units |", "|---|---|---|"]
-    for name, p in PARAMETERS.items():
-        lines.append(f"| {name} | {_value(getattr(case.train, name))} | {p.units} |")
-    lines += [
-        "",
-        "## Reading the replay",
-        "",
-        "- Timeline `cam_angle`: one second of this duration timeline stands for one degree "
-        "(270° reads `+270s`). Timeline `time`: the time from the start of the run.",
-        "- Plots: lifts in mm (the archive's metres × 1000), contact forces in N, compressive "
-        "positive and zero out of contact; contact state 1 I cam contact, 2 II free, 3 III "
-        "cam and seat, 4 IV seat only (thesis Table I).",
-        f"- Sketch, in mm: the rigid train the cam (and the seat) would carry, at true scale, "
-        f"plus **×{magnification:g}** the computed deviation from it: the gap at the cam "
-        "while the follower is off it, the valve's bounce off its seat, and the elastic "
-        "deflection of pushrod, rocker and valve stem. A contact that holds is drawn at its "
-        f"true place. Cam base-circle radius {case_geometry(case).base_radius * MM:g} mm "
-        "(a drawing choice). The follower's dot is green on the cam, red off it; the valve's "
-        "green on its seat, red off it.",
-        "- Events: separations and impacts at their cam angles, with the closing velocity "
-        "(impacts) or velocity jump and the impulse delivered (impacts).",
-    ]
-    return "\n".join(lines)
-
-
-def case_geometry(case: ReplayCase) -> sketch.Geometry:
-    return sketch.Geometry.from_train(case.train)
-
-
-def turn_profile(case: ReplayCase) -> tuple[np.ndarray, np.ndarray]:
-    """The cam's lift over one turn from the archive's samples: (angles [rad], lift [m])."""
-    phi = np.mod(case.cam_angle, 360.0)
-    phi, first = np.unique(np.round(phi, 9), return_index=True)
-    return np.radians(phi), case.histories["cam_lift"][first]
-
-
-def log_case(
-    rec: rr.RecordingStream, case: ReplayCase, magnification: float = sketch.DEFAULT_MAGNIFICATION
-) -> None:
+def log_case(rec: rr.RecordingStream, case: CaseRecording, magnification: float) -> None:
     """Log one case into ``rec``: series, events, parameters and the moving sketch."""
-    if case.q is None:
-        raise ValueError(f"case {case.case_id}: no q to draw the mechanism from")
+    import rerun as rr
+
     root = case_path(case.case_id)
     h = case.histories
     indexes = _indexes(case.cam_angle, h["time"])
@@ -205,59 +192,72 @@ def log_case(
         rec.send_columns(
             f"{root}/{path}", indexes=indexes, columns=rr.Scalars.columns(scalars=values)
         )
-    ev = case.events
-    if ev["event_kind"].size:
-        texts = [
-            event_text(*row)
-            for row in zip(
-                ev["event_kind"],
-                ev["event_cam_angle"],
-                ev["event_time"],
-                ev["event_velocity"],
-                ev["event_impulse"],
-                ev["event_from"],
-                ev["event_to"],
-                strict=True,
-            )
-        ]
-        levels = [EVENT_KINDS.get(int(k), ("", "INFO"))[1] for k in ev["event_kind"]]
-        rec.send_columns(
-            f"{root}/events",
-            indexes=_indexes(ev["event_cam_angle"], ev["event_time"]),
-            columns=rr.TextLog.columns(text=texts, level=levels),
-        )
+    log_events(rec, root, case.events)
     rec.log(
         f"{root}/parameters",
-        rr.TextDocument(parameters_document(case, magnification), media_type=rr.MediaType.MARKDOWN),
+        rr.TextDocument(case.parameters, media_type=rr.MediaType.MARKDOWN),
         static=True,
     )
-    log_sketch(rec, case, indexes, magnification)
+    log_sketch(rec, f"{root}/sketch", case.sketch, indexes, magnification)
+
+
+def log_events(rec: rr.RecordingStream, root: str, ev: Mapping[str, np.ndarray]) -> None:
+    """A case's events as a text log at their cam angles and times."""
+    import rerun as rr
+
+    if not ev["event_kind"].size:
+        return
+    texts = [
+        event_text(*row)
+        for row in zip(
+            ev["event_kind"],
+            ev["event_cam_angle"],
+            ev["event_time"],
+            ev["event_velocity"],
+            ev["event_impulse"],
+            ev["event_from"],
+            ev["event_to"],
+            strict=True,
+        )
+    ]
+    levels = [EVENT_KINDS.get(int(k), ("", "INFO"))[1] for k in ev["event_kind"]]
+    rec.send_columns(
+        f"{root}/events",
+        indexes=_indexes(ev["event_cam_angle"], ev["event_time"]),
+        columns=rr.TextLog.columns(text=texts, level=levels),
+    )
+
+
+def _points(
+    rec: rr.RecordingStream, path: str, indexes: list, where: np.ndarray, held: np.ndarray
+) -> None:
+    """A dot per sample [m], green while its contact holds, red while it does not."""
+    import rerun as rr
+
+    rec.log(path, rr.Points2D.from_fields(radii=[1.5]), static=True)
+    rec.send_columns(
+        path,
+        indexes=indexes,
+        columns=rr.Points2D.columns(
+            positions=where * MM,
+            colors=np.where(held[:, None], IN_CONTACT, OFF_CONTACT).astype(np.uint8),
+        ),
+    )
 
 
 def log_sketch(
-    rec: rr.RecordingStream, case: ReplayCase, indexes: list, magnification: float
+    rec: rr.RecordingStream, root: str, sketch: SketchFrames, indexes: list, magnification: float
 ) -> None:
-    """The mechanism, moving with q (deviations magnified) and the cam turning."""
-    root = f"{case_path(case.case_id)}/sketch"
-    geom = case_geometry(case)
-    h = case.histories
-    state = np.asarray(h["contact_state"])
-    qd = sketch.displayed_coordinates(
-        case.q, h["cam_lift"], state, geom, magnification, case.seat_q7
-    )
-    radii = {
-        "pushrod": geom.pushrod_radius,
-        "rocker": geom.rocker_radius,
-        "stem": geom.stem_radius,
-        "head": 0.0005,
-        "spring": 0.0005,
-        "retainer": 0.001,
-    }
-    n = qd.shape[0]
-    for name, strips in sketch.moving_parts(qd, geom).items():
+    """The mechanism, moving with the samples, and its fixed frame."""
+    import rerun as rr
+
+    n = sketch.follower.shape[0]
+    for name, strips in sketch.moving.items():
         rec.log(
             f"{root}/{name}",
-            rr.LineStrips2D.from_fields(colors=[PART_COLOURS[name]], radii=[radii[name] * MM]),
+            rr.LineStrips2D.from_fields(
+                colors=[PART_COLOURS[name]], radii=[sketch.radii[name] * MM]
+            ),
             static=True,
         )
         rec.send_columns(
@@ -267,11 +267,8 @@ def log_sketch(
                 np.ones(n, dtype=np.int32)
             ),
         )
-    angle = np.radians(case.cam_angle)
-    phi, lift = turn_profile(case)
-    outline = sketch.cam_outline(phi, lift, angle, geom) * MM
-    mark = sketch.cam_mark(angle, geom) * MM
-    strips = [s for pair in zip(outline, mark, strict=True) for s in pair]
+    outline, mark = sketch.cam_outline * MM, sketch.cam_mark * MM
+    cam = [s for pair in zip(outline, mark, strict=True) for s in pair]
     rec.log(
         f"{root}/cam",
         rr.LineStrips2D.from_fields(
@@ -282,46 +279,28 @@ def log_sketch(
     rec.send_columns(
         f"{root}/cam",
         indexes=indexes,
-        columns=rr.LineStrips2D.columns(strips=strips).partition(np.full(n, 2, dtype=np.int32)),
+        columns=rr.LineStrips2D.columns(strips=cam).partition(np.full(n, 2, dtype=np.int32)),
     )
-    on_cam = np.isin(state, sketch.CAM_CONTACT)
-    rec.log(f"{root}/follower", rr.Points2D.from_fields(radii=[1.5]), static=True)
-    rec.send_columns(
-        f"{root}/follower",
-        indexes=indexes,
-        columns=rr.Points2D.columns(
-            positions=sketch.follower_position(qd, geom) * MM,
-            colors=np.where(on_cam[:, None], IN_CONTACT, OFF_CONTACT).astype(np.uint8),
-        ),
-    )
-    frame = sketch.fixed_parts(geom, case.seat_q7)
-    if "seat" in frame:
-        seated = np.isin(state, sketch.SEAT_CONTACT)
-        rec.log(f"{root}/valve", rr.Points2D.from_fields(radii=[1.5]), static=True)
-        rec.send_columns(
-            f"{root}/valve",
-            indexes=indexes,
-            columns=rr.Points2D.columns(
-                positions=(sketch.valve_position(qd, geom) * MM),
-                colors=np.where(seated[:, None], IN_CONTACT, OFF_CONTACT).astype(np.uint8),
-            ),
-        )
-        boxes = frame.pop("seat") * MM
+    _points(rec, f"{root}/follower", indexes, sketch.follower, sketch.on_cam)
+    if sketch.seat is not None and sketch.valve is not None and sketch.seated is not None:
+        _points(rec, f"{root}/valve", indexes, sketch.valve, sketch.seated)
+        boxes = sketch.seat * MM
         rec.log(
             f"{root}/frame/seat",
             rr.Boxes2D(mins=boxes[:, 0], sizes=boxes[:, 1], colors=[PART_COLOURS["seat"]]),
             static=True,
         )
-    for name, strip in frame.items():
+    for name, strip in sketch.frame.items():
         rec.log(
             f"{root}/frame/{name}",
             rr.LineStrips2D([strip * MM], colors=[PART_COLOURS["frame"]], radii=[0.5]),
             static=True,
         )
+    x, y = sketch.note_at
     rec.log(
         f"{root}/frame/note",
         rr.Points2D(
-            [[-geom.pushrod_arm * MM, geom.pushrod_arm * 0.6 * MM]],
+            [[x * MM, y * MM]],
             radii=[0.01],
             labels=[f"deviation from rigid-body motion ×{magnification:g} [mm]"],
         ),
@@ -332,8 +311,10 @@ def log_sketch(
 # -- recordings --------------------------------------------------------------------------------
 
 
-def case_view(case: ReplayCase, magnification: float) -> rrb.Container:
+def case_view(case: Labelled, magnification: float) -> rrb.Container:
     """The sketch beside the plots, events and parameters of one case."""
+    import rerun.blueprint as rrb
+
     root = case_path(case.case_id)
     return rrb.Horizontal(
         rrb.Spatial2DView(
@@ -354,8 +335,10 @@ def case_view(case: ReplayCase, magnification: float) -> rrb.Container:
     )
 
 
-def blueprint(cases: Sequence[ReplayCase], magnification: float) -> rrb.Blueprint:
+def blueprint(cases: Sequence[Labelled], magnification: float) -> rrb.Blueprint:
     """One tab per case (the first active), the time panel on ``cam_angle``."""
+    import rerun.blueprint as rrb
+
     views = [case_view(c, magnification) for c in cases]
     layout = views[0] if len(views) == 1 else rrb.Tabs(*views, active_tab=0)
     return rrb.Blueprint(layout, rrb.TimePanel(timeline=CAM_ANGLE), collapse_panels=False)
@@ -369,6 +352,8 @@ def recording_id(key: str, case_ids: Sequence[str], magnification: float) -> str
 
 def recording_stream(rid: str, name: str) -> rr.RecordingStream:
     """A recording of its own (not rerun's global one) with no wall-clock timelines."""
+    import rerun as rr
+
     rec = rr.RecordingStream(APPLICATION_ID, recording_id=rid, send_properties=False)
     rec.set_log_time_enabled(False)
     rec.set_log_tick_enabled(False)
@@ -377,31 +362,34 @@ def recording_stream(rid: str, name: str) -> rr.RecordingStream:
 
 
 def write_recording(
-    cases: Sequence[ReplayCase],
+    cases: Sequence[CaseRecording],
     path: str | Path,
     *,
-    key: str = "",
-    magnification: float = sketch.DEFAULT_MAGNIFICATION,
+    study: str,
+    key: str,
+    magnification: float,
 ) -> Path:
     """Write ``cases`` to one ``.rrd`` file, atomically (a temporary file renamed into place).
 
     Parameters
     ----------
-    cases : sequence of ReplayCase
+    cases : sequence of CaseRecording
         At least one; each gets its subtree ``cases/<case_id>``.
     path : str or Path
         The recording to write.
+    study : str
+        The study's name, in the recording's name.
     key : str
         The study's key (the archive's ``study_key``), part of the recording id.
     magnification : float
-        Factor on the sketch's deviations from the rigid-body motion [-].
+        Factor on the sketch's deviations from the rigid-body motion [-], as drawn.
     """
     if not cases:
         raise ValueError("no cases to record")
     path = Path(path)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     rec = recording_stream(
-        recording_id(key, [c.case_id for c in cases], magnification), f"{cases[0].study} replay"
+        recording_id(key, [c.case_id for c in cases], magnification), f"{study} replay"
     )
     try:
         rec.save(tmp, default_blueprint=blueprint(cases, magnification))
@@ -418,79 +406,16 @@ def write_recording(
 
 
 def spawn_viewer(
-    cases: Sequence[ReplayCase],
-    *,
-    key: str = "",
-    magnification: float = sketch.DEFAULT_MAGNIFICATION,
+    cases: Sequence[CaseRecording], *, study: str, key: str, magnification: float
 ) -> None:
     """Open the rerun viewer on ``cases``."""
     rec = recording_stream(
-        recording_id(key, [c.case_id for c in cases], magnification), f"{cases[0].study} replay"
+        recording_id(key, [c.case_id for c in cases], magnification), f"{study} replay"
     )
     rec.spawn(default_blueprint=blueprint(cases, magnification))
     for case in cases:
         log_case(rec, case, magnification)
     rec.flush()
-
-
-def default_output(archive: str | Path) -> Path:
-    """``campipe replay``'s recording when ``-o`` is not given: ``<archive stem>.replay.rrd``
-    beside the archive (the study's own recording is ``<archive stem>.rrd``)."""
-    return Path(archive).with_suffix(".replay.rrd")
-
-
-def replay_archive(
-    archive: str | Path,
-    *,
-    case_ids: Sequence[str] = (),
-    where: str | None = None,
-    output: str | Path | None = None,
-    spawn: bool = False,
-    magnification: float = sketch.DEFAULT_MAGNIFICATION,
-) -> tuple[Path | None, list[ReplayCase]]:
-    """Replay an archive's cases chosen by id or by a ``--where`` expression.
-
-    Writes one recording (``output``, default :func:`default_output`) or, with ``spawn``,
-    opens the viewer instead. Nothing is written when the selection fails.
-
-    Returns
-    -------
-    (path or None, cases)
-        The recording written (None when spawned) and the cases it holds.
-
-    Raises
-    ------
-    ReplayError
-        For a missing or unreadable archive, an unknown case id, a selection of no case,
-        or q that can be neither read nor computed again.
-    campipe.study.query.QueryError
-        For a ``--where`` expression the query language refuses.
-    """
-    import xarray as xr
-
-    from campipe.replay.cases import ReplayError, archive_cases, select_rows
-
-    archive = Path(archive)
-    if not archive.is_file():
-        raise ReplayError(f"{archive}: no such archive")
-    try:
-        ds = xr.open_dataset(archive)
-    except (OSError, ValueError) as exc:
-        raise ReplayError(f"{archive}: cannot read as an archive ({exc})") from None
-    with ds:
-        try:
-            rows = select_rows(ds, case_ids, where)
-        except ReplayError as exc:
-            raise ReplayError(f"{archive}: {exc}") from None
-        cases = archive_cases(ds, rows, directories=[archive.parent, Path.cwd()])
-        key = str(ds.attrs.get("study_key", ""))
-    if spawn:
-        spawn_viewer(cases, key=key, magnification=magnification)
-        return None, cases
-    path = write_recording(
-        cases, output or default_output(archive), key=key, magnification=magnification
-    )
-    return path, cases
 
 
 # -- reading back --------------------------------------------------------------------------------

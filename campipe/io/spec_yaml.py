@@ -11,10 +11,11 @@ from pathlib import Path
 
 import yaml
 
+from campipe.errors import CampipeError
 from campipe.io import read_text
 
 
-class SpecFileError(ValueError):
+class SpecFileError(CampipeError, ValueError):
     """A spec file that cannot be read as YAML data."""
 
 

@@ -23,7 +23,8 @@ NEWMARK_LINEAR_OMEGA_DT = math.sqrt(12.0)
 
 @dataclass(frozen=True)
 class Coordinate:
-    """One system coordinate (thesis Figure 2, as reconstructed in NOTES.md)."""
+    """One system coordinate (thesis Figure 2, lost from the thesis's copy: this order and
+    these signs are the ones that reproduce its Figures 11–14)."""
 
     symbol: str  # q1 … q7
     name: str  # readable name

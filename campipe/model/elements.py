@@ -1,8 +1,9 @@
 """Element matrices and compatibility matrices of the valve train (thesis Ch. II, Eqs. 2–10).
 
 Pure functions on floats and arrays; any consistent unit system works (campipe uses SI).
-The OCR copy of the thesis lost signs in Eqs. 7 and 9; the forms here are the standard ones
-that reproduce its Figures 11–14 (shared/thesis/NOTES.md).
+The OCR copy of the thesis lost signs in Eqs. 7 and 9; the forms here are the standard ones,
+k·[[1, −1], [−1, 1]] and the consistent bar mass (M/6)·[[2, 1], [1, 2]], and with them the
+assembled matrices reproduce its Figures 11–14.
 """
 
 from __future__ import annotations
@@ -12,7 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from campipe.model.parameters import N_DOF, STANDARD_GRAVITY, ValveTrain
+from campipe.constants import STANDARD_GRAVITY
+from campipe.model.parameters import N_DOF, ValveTrain
 
 
 def bar_stiffness(k: float) -> np.ndarray:

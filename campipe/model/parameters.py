@@ -24,11 +24,10 @@ import difflib
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
+from campipe.errors import CampipeError
 from campipe.units import QuantityError, parse_quantity
-
-#: Standard gravity [m/s²], turning the thesis's specific weight into density (386.088 in/s²).
-STANDARD_GRAVITY = 9.80665
 
 ELEMENTS = ("pushrod", "rocker_pushrod_arm", "rocker_valve_arm", "spring", "valve_stem")
 N_DOF = 7
@@ -90,8 +89,10 @@ PARAMETERS: dict[str, Parameter] = {
 }
 
 #: The thesis's values (Table II and Ch. II), in its inch–pound–second units. The thesis never
-#: states the spring preload; 151 lbf is calibrated so that separation begins between 9000 and
-#: 9524 rpm with the harmonic cam, as its Figures 15–22 show (see shared/thesis/NOTES.md).
+#: states the spring preload, yet without one the follower cannot stay on the cam at 9000 rpm;
+#: 151 lbf is calibrated so that separation begins between 9000 and 9524 rpm with the harmonic
+#: cam, as its Figures 15–22 show (then about 53° of each turn off the cam at 9524 rpm, the
+#: thesis ≈ 50°, and 220° at 11000 rpm, the thesis ≈ 180°).
 THESIS_1971: dict[str, object] = {
     "pushrod_length": "9.0 in",
     "pushrod_diameter": "0.3 in",
@@ -133,7 +134,7 @@ class ValveTrain:
     spring_preload: float  # [N] installed force, cam on the base circle
     damping_ratios: tuple[float, ...]  # [-] seven, lowest mode first
 
-    def replace(self, **changes: object) -> ValveTrain:
+    def replace(self, **changes: Any) -> ValveTrain:
         """A copy with some values (SI) changed."""
         return dataclasses.replace(self, **changes)
 
@@ -141,8 +142,9 @@ class ValveTrain:
         return dataclasses.asdict(self)
 
 
-class ModelParameterError(ValueError):
-    """A model parameter that is unknown, badly typed or out of range."""
+class ModelParameterError(CampipeError, ValueError):
+    """A model parameter that is unknown, badly typed or out of range; ``key`` is the key path
+    named in the message (``model.spring_rate``, ``damping_ratios[1]``)."""
 
 
 def parse_parameter(name: str, value: object, key: str | None = None) -> float | tuple[float, ...]:
@@ -161,9 +163,11 @@ def parse_parameter(name: str, value: object, key: str | None = None) -> float |
     if name not in PARAMETERS:
         close = difflib.get_close_matches(name, PARAMETERS, n=1)
         hint = f"did you mean {close[0]!r}? " if close else ""
-        raise ModelParameterError(
-            f"{key}: unknown model parameter {name!r}; {hint}known parameters: "
-            + ", ".join(PARAMETERS)
+        raise ModelParameterError.at(
+            key,
+            f"unknown model parameter {name!r}; {hint}known parameters: " + ", ".join(PARAMETERS),
+            found=name,
+            expected="a model parameter",
         )
     p = PARAMETERS[name]
     try:
@@ -171,9 +175,11 @@ def parse_parameter(name: str, value: object, key: str | None = None) -> float |
             if isinstance(value, str):
                 value = [v for v in value.strip("[]() ").replace(",", " ").split()]
             if not isinstance(value, (list, tuple)) or len(value) != p.length:
-                raise ModelParameterError(
-                    f"{key}: expected a list of {p.length} numbers, lowest mode first, "
-                    f"found {value!r}"
+                raise ModelParameterError.at(
+                    key,
+                    f"expected a list of {p.length} numbers, lowest mode first, found {value!r}",
+                    found=value,
+                    expected=f"a list of {p.length} numbers",
                 )
             out = tuple(
                 parse_quantity(_number(v), p.units, f"{key}[{i}]", p.thesis_units)
@@ -182,9 +188,11 @@ def parse_parameter(name: str, value: object, key: str | None = None) -> float |
             for i, (v, raw) in enumerate(zip(out, value, strict=True)):
                 _check_range(p, v, f"{key}[{i}]", raw)
             return out
-        v = parse_quantity(value, p.units, key, p.thesis_units)  # type: ignore[arg-type]
+        v = parse_quantity(value, p.units, key, p.thesis_units)
     except QuantityError as exc:
-        raise ModelParameterError(str(exc)) from None
+        raise ModelParameterError(
+            str(exc), key=exc.key, found=exc.found, expected=exc.expected, reason=exc.reason
+        ) from None
     _check_range(p, v, key, value)
     return v
 
@@ -202,9 +210,11 @@ def _check_range(p: Parameter, v: float, key: str, raw: object) -> None:
     bad = v <= p.minimum if p.exclusive_minimum else v < p.minimum
     if bad or not math.isfinite(v):
         relation = "greater than" if p.exclusive_minimum else "at least"
-        raise ModelParameterError(
-            f"{key}: found {raw!r}, expected a finite value {relation} {p.minimum:g}"
-            + (f" {p.thesis_units}" if p.thesis_units else "")
+        expected = f"a finite value {relation} {p.minimum:g}" + (
+            f" {p.thesis_units}" if p.thesis_units else ""
+        )
+        raise ModelParameterError.at(
+            key, f"found {raw!r}, expected {expected}", found=raw, expected=expected
         )
 
 
@@ -223,8 +233,11 @@ def valve_train(
         Prefix for key paths in error messages (``"model."`` for specs).
     """
     if preset not in PRESETS:
-        raise ModelParameterError(
-            f"{key_prefix}preset: unknown preset {preset!r}; known presets: " + ", ".join(PRESETS)
+        raise ModelParameterError.at(
+            f"{key_prefix}preset",
+            f"unknown preset {preset!r}; known presets: " + ", ".join(PRESETS),
+            found=preset,
+            expected="one of: " + ", ".join(PRESETS),
         )
     values = {**PRESETS[preset], **(overrides or {})}
     resolved = {name: parse_parameter(name, v, key_prefix + name) for name, v in values.items()}

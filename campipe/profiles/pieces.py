@@ -18,17 +18,15 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-#: One turn of the cam [rad]; every profile is periodic with this period.
-TWO_PI = 2.0 * math.pi
+# TWO_PI: one turn of the cam [rad], every profile's period; INCH: labels give lengths in the
+# thesis's inches [m/in].
+from campipe.constants import INCH, TWO_PI
 
 #: Polynomial coefficients per piece (degree ≤ 7).
 N_COEFFS = 8
 
 #: Two angles closer than this [rad] are the same break: no piece is ever shorter.
 BREAK_TOL = 1e-12
-
-#: Labels give lengths in the thesis's inches [m/in].
-INCH = 0.0254
 
 #: Angles [rad], any shape; any real value (the profile wraps modulo 2π).
 Angles = npt.ArrayLike

@@ -27,10 +27,20 @@ import shlex
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
+from campipe.engine import RunSettings, run_batch
+from campipe.errors import CampipeError, did_you_mean
+from campipe.io.spec_yaml import SpecFileError, parse_spec_text
 from campipe.model import PARAMETERS, ModelParameterError, ValveTrain, valve_train
+from campipe.study.expand import ResolvedCase, Study, expand
+from campipe.study.layout import coordinate_values
+from campipe.study.query import case_table, replay_mask, select
+from campipe.study.results import BatchData, BatchPlan
+from campipe.study.spec import SpecError, check_spec
+from campipe.study.variables import VARIABLES, case_coordinates, data_variables
 
 log = logging.getLogger(__name__)
 
@@ -58,8 +68,9 @@ EVENT_FIELDS = (
 RERUN_TOLERANCE = 1e-12
 
 
-class ReplayError(ValueError):
-    """A replay that cannot be made: no such case, an empty selection, no way to get q."""
+class ReplayError(CampipeError, ValueError):
+    """A replay that cannot be made: no such case, an empty selection (``key`` the option,
+    ``--case`` or ``--where``), no way to get q."""
 
 
 @dataclass
@@ -72,7 +83,7 @@ class ReplayCase:
     histories: dict[str, np.ndarray]  # HISTORIES → (n,) archive values (time [s], lifts [m], ...)
     q: np.ndarray | None  # (n, 7) coordinates [m, rad]; None until computed again
     events: dict[str, np.ndarray]  # EVENT_FIELDS → (n_events,) archive values
-    columns: dict[str, tuple[object, str]]  # per-case column → (value, units) as in the archive
+    columns: dict[str, tuple[Any, str]]  # per-case column → (value, units) as in the archive
     train: ValveTrain  # the case's valve train [SI]
 
     @property
@@ -84,6 +95,8 @@ class ReplayCase:
     @property
     def valve_reference(self) -> float:
         """q7 of the valve at zero valve lift (cam on its base circle, no seat) [m]."""
+        if self.q is None:
+            raise ReplayError(f"case {self.case_id}: no q, so no valve reference")
         return float(np.median(self.q[:, 6] - self.histories["valve_lift"]))
 
     @property
@@ -115,37 +128,39 @@ def select_rows(ds, case_ids: Sequence[str] = (), where: str | None = None) -> n
     case_ids : sequence of str
         Case ids, in the order to show them.
     where : str, optional
-        A ``--where`` expression (:mod:`campipe.study.query`; never evaluated as Python).
+        A ``--where`` expression (:mod:`campipe.study.where`; never evaluated as Python).
 
     Raises
     ------
     ReplayError
         For an unknown case id, or an expression that selects no case.
-    campipe.study.query.QueryError
+    campipe.study.where.QueryError
         For an expression the query language refuses.
     """
-    from campipe.study.fields import did_you_mean
-    from campipe.study.query import case_table, select
-
     if "case_id" not in ds.variables:
         raise ReplayError("not a campipe archive (no case_id variable)")
     table = case_table(ds)
     ids = [str(i) for i in table.columns["case_id"]]
     if case_ids:
-        rows = []
+        picked = []
         for cid in case_ids:
             if cid not in ids:
                 raise ReplayError(
                     f"--case {cid}: no such case among the archive's {len(ids)} "
                     f"cases{did_you_mean(cid, ids)} (campipe query ARCHIVE "
-                    "--columns case_id lists them)"
+                    "--columns case_id lists them)",
+                    key="--case",
+                    found=cid,
+                    expected="a case id of the archive",
                 )
-            rows.append(ids.index(cid))
-        return np.array(list(dict.fromkeys(rows)), dtype=np.int64)
+            picked.append(ids.index(cid))
+        return np.array(list(dict.fromkeys(picked)), dtype=np.int64)
     rows = select(table, where)
     if rows.size == 0:
         raise ReplayError(
-            f"--where {where!r} selects none of the archive's {len(ids)} cases; nothing written"
+            f"--where {where!r} selects none of the archive's {len(ids)} cases; nothing written",
+            key="--where",
+            found=where,
         )
     return rows
 
@@ -165,7 +180,7 @@ def archive_cases(
     ds,
     rows: Iterable[int],
     *,
-    resolved: Mapping[str, object] | None = None,
+    resolved: Mapping[str, ResolvedCase] | None = None,
     directories: Sequence[Path] = (),
 ) -> list[ReplayCase]:
     """The archive's rows as replay cases.
@@ -187,8 +202,6 @@ def archive_cases(
     ReplayError
         If the archive lacks ``q`` and its cases cannot be rebuilt to compute it again.
     """
-    from campipe.study.query import case_table
-
     rows = [int(r) for r in rows]
     table = case_table(ds)
     ids = [str(table.columns["case_id"][r]) for r in rows]
@@ -246,7 +259,9 @@ def archive_cases(
     return out
 
 
-def rebuild_cases(attrs: Mapping[str, object], directories: Sequence[Path] = ()) -> dict:
+def rebuild_cases(
+    attrs: Mapping[str, object], directories: Sequence[Path] = ()
+) -> dict[str, ResolvedCase]:
     """Case id → :class:`~campipe.study.ResolvedCase`: the archive's spec (``spec``,
     ``spec_overrides``) expanded again.
 
@@ -258,10 +273,6 @@ def rebuild_cases(attrs: Mapping[str, object], directories: Sequence[Path] = ())
     ReplayError
         If the spec is missing or does not expand.
     """
-    from campipe.io.spec_yaml import SpecFileError, parse_spec_text
-    from campipe.study.expand import expand
-    from campipe.study.spec import SpecError, check_spec
-
     text = attrs.get("spec")
     if not isinstance(text, str) or not text:
         raise ReplayError("the archive keeps no spec to rebuild its cases from")
@@ -282,9 +293,9 @@ def rebuild_cases(attrs: Mapping[str, object], directories: Sequence[Path] = ())
 
 def _history_directories(attrs: Mapping[str, object]) -> list[Path]:
     """The spec's folder as the ``history`` command line named it (``campipe study SPEC``)."""
-    words = str(attrs.get("history", "")).split(" ", 1)[-1]
+    command = str(attrs.get("history", "")).split(" ", 1)[-1]
     try:
-        words = shlex.split(words)
+        words = shlex.split(command)
     except ValueError:
         return []
     if len(words) >= 3 and words[:2] == ["campipe", "study"]:
@@ -293,12 +304,10 @@ def _history_directories(attrs: Mapping[str, object]) -> list[Path]:
 
 
 def _train_from_columns(
-    attrs: Mapping[str, object], columns: Mapping[str, tuple[object, str]]
+    attrs: Mapping[str, object], columns: Mapping[str, tuple[Any, str]]
 ) -> ValveTrain:
     """The valve train from the spec's ``model`` and the case's model-parameter columns:
     the sketch's lengths when the cases cannot be rebuilt (q was recorded)."""
-    from campipe.io.spec_yaml import SpecFileError, parse_spec_text
-
     try:
         raw = parse_spec_text(str(attrs.get("spec", "")), "the archive's spec")
     except SpecFileError:
@@ -315,12 +324,10 @@ def _train_from_columns(
         raise ReplayError(f"cannot build the case's valve train ({exc})") from None
 
 
-def regain_q(resolved: Sequence) -> list[tuple[np.ndarray, np.ndarray]]:
+def regain_q(resolved: Sequence[ResolvedCase]) -> list[tuple[np.ndarray, np.ndarray]]:
     """Run resolved cases through the engine again (one batch per run-settings group):
     each case's (q [m, rad], valve lift [m]) at the output angles."""
-    from campipe.engine import run_batch
-
-    groups: dict[object, list[int]] = {}
+    groups: dict[RunSettings, list[int]] = {}
     for i, rc in enumerate(resolved):
         groups.setdefault(rc.settings, []).append(i)
     out: list = [None] * len(resolved)
@@ -331,7 +338,7 @@ def regain_q(resolved: Sequence) -> list[tuple[np.ndarray, np.ndarray]]:
     return out
 
 
-def fill_q(cases: Sequence[ReplayCase], resolved: Sequence) -> None:
+def fill_q(cases: Sequence[ReplayCase], resolved: Sequence[ResolvedCase]) -> None:
     """Give cases without q the q of an engine rerun; warn where the rerun's valve lift
     differs from the case's."""
     log.info("q not recorded: running %d case(s) through the engine again", len(cases))
@@ -351,11 +358,10 @@ def fill_q(cases: Sequence[ReplayCase], resolved: Sequence) -> None:
 # -- from a running study ----------------------------------------------------------------------
 
 
-def batch_columns(study, plan, data) -> tuple[dict[str, np.ndarray], dict[str, str]]:
+def batch_columns(
+    study: Study, plan: BatchPlan, data: BatchData
+) -> tuple[dict[str, np.ndarray], dict[str, str]]:
     """A batch's per-case columns and their units, as the archive will hold them."""
-    from campipe.study.layout import coordinate_values
-    from campipe.study.variables import VARIABLES, case_coordinates, data_variables
-
     columns = coordinate_values(list(plan.cases), study)
     units = {"case_id": ""}
     for name, var, _ in case_coordinates(study.varied).values():
@@ -367,7 +373,7 @@ def batch_columns(study, plan, data) -> tuple[dict[str, np.ndarray], dict[str, s
     return columns, units
 
 
-def batch_cases(study, plan, data) -> list[ReplayCase]:
+def batch_cases(study: Study, plan: BatchPlan, data: BatchData) -> list[ReplayCase]:
     """The cases of a computed batch that the spec's ``replay: {where: ...}`` selects
     (:func:`campipe.study.query.replay_mask`), as replay cases (q computed again for a study
     that does not record it).
@@ -379,8 +385,6 @@ def batch_cases(study, plan, data) -> list[ReplayCase]:
     data : campipe.study.results.BatchData
         The batch's archive arrays, as stored.
     """
-    from campipe.study.query import replay_mask
-
     rows = np.flatnonzero(replay_mask(study, plan, data))
     if rows.size == 0:
         return []

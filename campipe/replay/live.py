@@ -12,9 +12,22 @@ from __future__ import annotations
 
 import logging
 import threading
+from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
+import numpy as np
+
+from campipe.io import rerun_replay as rrio
+from campipe.replay.cases import ReplayCase, ReplayError, archive_cases, batch_cases, select_rows
+from campipe.replay.record import recording_case
 from campipe.replay.sketch import DEFAULT_MAGNIFICATION
+from campipe.study.expand import Study
+from campipe.study.layout import study_key
+from campipe.study.results import BatchData, BatchPlan
+
+if TYPE_CHECKING:
+    import rerun as rr
 
 log = logging.getLogger(__name__)
 
@@ -38,40 +51,36 @@ class StudyReplay:
     """
 
     def __init__(
-        self, study, path: str | Path, magnification: float = DEFAULT_MAGNIFICATION
+        self, study: Study, path: str | Path, magnification: float = DEFAULT_MAGNIFICATION
     ) -> None:
-        from campipe.io import rerun_replay as rrio
-        from campipe.study.layout import study_key
-
         self.study = study
         self.where = study.spec.replay
         self.path = Path(path)
         self.magnification = magnification
         self.key = study_key(study)
-        self._io = rrio
         self._lock = threading.Lock()
-        self._logged: dict[str, object] = {}
-        self._rec = None
+        self._logged: dict[str, ReplayCase] = {}
+        self._rec: rr.RecordingStream | None = None
 
-    def _log(self, cases) -> None:
+    def _log(self, cases: Sequence[ReplayCase]) -> None:
         """Log cases, opening the recording (its file) with the first."""
         with self._lock:
             if self._rec is None:
-                self._rec = self._io.recording_stream(
-                    self._io.recording_id(self.key, ["study"], self.magnification),
+                self._rec = rrio.recording_stream(
+                    rrio.recording_id(self.key, ["study"], self.magnification),
                     f"{self.study.name} replay",
                 )
                 self.path.parent.mkdir(parents=True, exist_ok=True)
                 self._rec.save(self.path)
             for case in cases:
-                self._io.log_case(self._rec, case, self.magnification)
+                rrio.log_case(
+                    self._rec, recording_case(case, self.magnification), self.magnification
+                )
                 self._logged[case.case_id] = case
 
-    def __call__(self, plan, data) -> None:
+    def __call__(self, plan: BatchPlan, data: BatchData) -> None:
         """The batch hook: log the batch's selected cases. A failure here is logged, never
         raised: the study goes on, and :meth:`finish` retries the cases from the archive."""
-        from campipe.replay.cases import batch_cases
-
         try:
             cases = batch_cases(self.study, plan, data)
         except Exception as exc:  # noqa: BLE001 - the replay must not stop the study
@@ -87,14 +96,12 @@ class StudyReplay:
         nothing) when the selection holds no case."""
         import xarray as xr
 
-        from campipe.replay.cases import ReplayError, archive_cases, select_rows
-
         resolved = {c.case_id: c for c in self.study.cases}
         with xr.open_dataset(archive) as ds:
             try:
                 rows = select_rows(ds, where=self.where)
             except ReplayError:
-                rows = []
+                rows = np.zeros(0, np.int64)
             ids = [str(ds["case_id"].values[r]) for r in rows]
             rest = [r for r, cid in zip(rows, ids, strict=True) if cid not in self._logged]
             if rest:
@@ -103,7 +110,8 @@ class StudyReplay:
             log.warning("replay: %r selects no case; no recording written", self.where)
             return None
         cases = [self._logged[cid] for cid in ids]
-        self._rec.send_blueprint(self._io.blueprint(cases, self.magnification))
+        assert self._rec is not None  # opened by _log with the first case
+        self._rec.send_blueprint(rrio.blueprint(cases, self.magnification))
         self._rec.flush()
         self._rec.disconnect()
         return self.path

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from campipe.constants import TWO_PI
 from campipe.model import ValveTrain
 from campipe.vocabulary import CONFIGURATIONS
 
@@ -264,7 +265,7 @@ def cam_outline(
     c = geometry.cam_centre
     out = np.stack([c[0] + r * np.cos(alpha), c[1] + r * np.sin(alpha)], axis=-1)
     # a whole turn (no gap wider than twice the spacing) is closed on its first point
-    if phi.size > 1 and phi[0] - phi[-1] + 2 * np.pi <= 2 * np.max(np.diff(phi)) + 1e-12:
+    if phi.size > 1 and phi[0] - phi[-1] + TWO_PI <= 2 * np.max(np.diff(phi)) + 1e-12:
         out = np.concatenate([out, out[:, :1]], axis=1)
     return out
 

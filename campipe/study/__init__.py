@@ -9,7 +9,8 @@ Layers, in the order a study passes through them:
 - :mod:`~campipe.study.results`: one batch through the engine, as archive arrays.
 - :mod:`~campipe.study.variables`, :mod:`~campipe.study.layout`: the archive's variables.
 - :mod:`~campipe.study.execute`: batches on dask, resume, the archive.
-- :mod:`~campipe.study.query`: ``--where``, tables and the summary.
+- :mod:`~campipe.study.where`: the ``--where`` language.
+- :mod:`~campipe.study.query`: tables, the summary and the replay selection.
 - :mod:`~campipe.study.schema`: the JSON Schema of a spec.
 
 File formats live in :mod:`campipe.io`.
@@ -20,6 +21,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from pathlib import Path
 
+from campipe.io.spec_yaml import read_spec
 from campipe.study.expand import ResolvedCase, Study, expand
 from campipe.study.spec import Spec, SpecError, check_spec
 
@@ -43,8 +45,6 @@ def load_study(path: str | Path, overrides: Mapping[str, object] | None = None) 
     SpecError
         For any problem in the spec, each with its key path.
     """
-    from campipe.io.spec_yaml import read_spec
-
     path = Path(path)
     raw, text = read_spec(path)
     spec = check_spec(raw, text, path.parent, str(path), overrides)

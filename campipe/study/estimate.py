@@ -15,8 +15,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from campipe.constants import TWO_PI
 from campipe.engine import RunSettings, run_batch
-from campipe.study.expand import Study
+from campipe.study.expand import ResolvedCase, Study
 from campipe.study.results import n_revolutions
 from campipe.study.variables import DOF_NAMES, data_variables
 
@@ -36,13 +37,13 @@ class Estimate:
 
 def simulated_seconds(study: Study) -> np.ndarray:
     """(n_cases,) simulated time of each case [s]."""
-    return np.array([c.settings.revolutions * 2 * math.pi / c.case.speed for c in study.cases])
+    return np.array([c.settings.revolutions * TWO_PI / c.case.speed for c in study.cases])
 
 
 def measure_speeds(study: Study) -> dict[RunSettings, float]:
     """Simulated seconds per wall-clock second of one worker, per run-settings group, timed
     on the group's first case."""
-    firsts = {}
+    firsts: dict[RunSettings, ResolvedCase] = {}
     for c in study.cases:
         firsts.setdefault(c.settings, c)
     speeds = {}
@@ -53,7 +54,7 @@ def measure_speeds(study: Study) -> dict[RunSettings, float]:
         t = time.perf_counter()
         run_batch([c.case], sample)
         elapsed = max(time.perf_counter() - t, 1e-6)
-        speeds[settings] = sample.revolutions * 2 * math.pi / c.case.speed / elapsed
+        speeds[settings] = sample.revolutions * TWO_PI / c.case.speed / elapsed
     return speeds
 
 

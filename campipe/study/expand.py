@@ -22,11 +22,14 @@ import math
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from campipe.engine import Case, RunSettings, StabilityError, resolve_integrator
+from campipe.constants import INCH
+from campipe.engine import Case, RunSettings, RunSettingsError, resolve_integrator
 from campipe.engine.batch import check_stability
+from campipe.io.lift_table import LiftTableError, read_lift_table, table_digest
 from campipe.model import PARAMETERS, ModelParameterError, ValveTrain, valve_train
 from campipe.profiles import Profile, bump, flat, harmonic, max_lift, min_lift, polydyne, table
 from campipe.study.fields import (
@@ -215,8 +218,9 @@ def _thaw(frozen: tuple) -> dict:
 
 
 @functools.lru_cache(maxsize=4096, typed=True)  # typed: True is not 1
-def _parse(key: str, value: object, path: str) -> object:
-    """A case field's SI value (cached: a grid repeats its base values in every case)."""
+def _parse(key: str, value: object, path: str) -> Any:
+    """A case field's SI value, typed as the field's kind makes it (cached: a grid repeats its
+    base values in every case)."""
     return (CASE_FIELDS.get(key) or varied_fields()[key]).parse(
         list(value) if isinstance(value, tuple) else value, path
     )
@@ -227,14 +231,11 @@ def _train(preset: str, overrides: tuple) -> ValveTrain:
     try:
         return valve_train(preset, _thaw(overrides), key_prefix="model.")
     except ModelParameterError as exc:
-        path, _, message = str(exc).partition(": ")
-        raise SpecProblem(path, message) from None
+        raise SpecProblem.from_error(exc) from None
 
 
 @functools.lru_cache(maxsize=256)
 def _lift_table(path: Path, mtime_ns: int) -> tuple[np.ndarray, np.ndarray, str]:
-    from campipe.io.lift_table import LiftTableError, read_lift_table, table_digest
-
     try:
         angles, lifts = read_lift_table(path)
     except LiftTableError as exc:
@@ -313,7 +314,7 @@ def _with_defects(frozen_profile: tuple, frozen_defects: tuple, directory: Path)
         )
         raise SpecProblem(
             where,
-            f"the cam's lift falls to {low / 0.0254:.4g} in; expected a "
+            f"the cam's lift falls to {low / INCH:.4g} in; expected a "
             "lift never below the base circle (0)",
         )
     return out, canonical, defects, values, label, max_lift(out)
@@ -382,8 +383,8 @@ def resolve(raw: Mapping, index: int, directory: Path) -> ResolvedCase:
             raise SpecProblem(
                 "seat",
                 f"found {raw['seat']!r}, expected a valve lift below "
-                f"the full valve lift {full * ratio / 0.0254:.4g} in (cam lift "
-                f"{full / 0.0254:.4g} in × rocker ratio {ratio:.4g}): above it "
+                f"the full valve lift {full * ratio / INCH:.4g} in (cam lift "
+                f"{full / INCH:.4g} in × rocker ratio {ratio:.4g}): above it "
                 "the valve never leaves its seat",
             )
     run = raw["run"]
@@ -394,9 +395,8 @@ def resolve(raw: Mapping, index: int, directory: Path) -> ResolvedCase:
     case = Case(train, profile, speed, math.nan if seat is None else seat, closure)
     try:
         check_stability([case], settings)
-    except StabilityError as exc:
-        message = str(exc).removeprefix("run.dt: ").replace(" for case 0", "")
-        raise SpecProblem("run.dt", message) from None
+    except RunSettingsError as exc:
+        raise SpecProblem.from_error(exc) from None
     values.update(
         {
             "speed": speed,
@@ -441,14 +441,13 @@ def canonical_run(settings: RunSettings) -> dict[str, object]:
 
 
 def check_settings(settings: RunSettings) -> None:
-    """Run the settings' own checks (integrator, step, fidelity) before anything runs; their
-    messages start with the key ("run.fidelity: ...")."""
+    """Run the settings' own checks (integrator, step, fidelity) before anything runs, each
+    refusal a problem at its key (``run.fidelity``)."""
     try:
         for name in ("method", "step", "cutoff"):
             getattr(settings, name, None)
-    except ValueError as exc:
-        path, _, message = str(exc).partition(": ")
-        raise SpecProblem(path if path.startswith("run.") else "run", message) from None
+    except RunSettingsError as exc:
+        raise SpecProblem.from_error(exc) from None
 
 
 def _archive_value(v: object) -> object:
@@ -480,20 +479,24 @@ def expand(spec: Spec, source: str = "spec") -> Study:
         a repeated problem reported once with the cases it affects.
     """
     cases: list[ResolvedCase] = []
-    found: dict[tuple[str, str], list[int]] = {}
+    # (spec path, message) → the first case's problem and every case it affects
+    found: dict[tuple[str, str], tuple[SpecProblem, list[int]]] = {}
     for index, (raw, origins) in enumerate(raw_cases(spec)):
         try:
             cases.append(resolve(raw, index, spec.directory))
         except SpecProblem as exc:
-            found.setdefault((_origin(exc.path, origins), exc.message), []).append(index)
+            key = (_origin(exc.path, origins), exc.message)
+            found.setdefault(key, (exc, []))[1].append(index)
             if len(found) >= MAX_PROBLEMS:
                 break
     if found:
         problems = []
-        for (path, message), which in found.items():
+        for (path, message), (first, which) in found.items():
             shown = ", ".join(map(str, which[:5])) + (", ..." if len(which) > 5 else "")
             tail = f" (case {shown})" if len(which) == 1 else f" ({len(which)} cases: {shown})"
-            problems.append(SpecProblem(path, message + tail))
+            problems.append(
+                SpecProblem(path, message + tail, found=first.found, expected=first.expected)
+            )
         raise SpecError(problems, source)
     run = spec.base["run"]
     axes = [Axis(k, "sweep", len(v)) for k, v in spec.sweep.items()]

@@ -13,25 +13,44 @@ are written as dotted paths: ``speed``, ``profile.lift``, ``model.spring_preload
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import functools
 import math
 from collections.abc import Iterable
 from dataclasses import dataclass
+from typing import Any
 
 from campipe.engine import INTEGRATORS, MEMBER_LOADS, RunSettings
 from campipe.engine import batch as _engine_batch
+from campipe.errors import CampipeError, did_you_mean
 from campipe.model import PARAMETERS, PRESETS, ModelParameterError, parse_parameter
 from campipe.units import QuantityError, parse_angular, parse_quantity
 
 
-class SpecProblem(ValueError):
-    """One problem in a spec: the key's path, what was found and what is expected."""
+class SpecProblem(CampipeError, ValueError):
+    """One problem in a spec: the key's path (``key``, also ``path``) and the message
+    (``reason``, also ``message``); ``found`` and ``expected`` where the problem came from an
+    error that had them."""
 
-    def __init__(self, path: str, message: str):
-        super().__init__(f"{path}: {message}" if path else message)
+    def __init__(
+        self, path: str, message: str, *, found: object = None, expected: str | None = None
+    ) -> None:
+        super().__init__(
+            f"{path}: {message}" if path else message,
+            key=path,
+            found=found,
+            expected=expected,
+            reason=message,
+        )
         self.path = path
         self.message = message
+
+    @classmethod
+    def from_error(cls, error: CampipeError, path: str | None = None) -> SpecProblem:
+        """The problem ``error`` names: at its key (or at ``path``, where the caller knows the
+        spec path better), with its reason, found and expected."""
+        return cls(
+            path or error.key or "", error.reason, found=error.found, expected=error.expected
+        )
 
 
 @dataclass(frozen=True)
@@ -56,15 +75,17 @@ class Field:
         """An angle or angular speed: its units must name an angle (see parse_angular)."""
         return "rad" in self.units
 
-    def parse(self, value: object, path: str) -> object:
+    def parse(self, value: object, path: str) -> Any:
         """The value in SI (floats), a word, or None for "none"; raises SpecProblem.
 
+        Its type follows the field's kind (a float for a quantity or number, an int for an
+        integer, a str for a choice or text, a tuple for a record or a list parameter).
         Scalar values are parsed once (a grid repeats its values in every case)."""
         if isinstance(value, str | int | float | bool | None):
             return _parse_scalar(self, value, path)
         return self._parse(value, path)
 
-    def _parse(self, value: object, path: str) -> object:
+    def _parse(self, value: object, path: str) -> Any:
         if self.allow_none and (value is None or value == "none"):
             return None
         if self.allow_default and value == "default":
@@ -83,7 +104,7 @@ class Field:
             try:
                 return parse_parameter(self.key.removeprefix("model."), value, path)
             except ModelParameterError as exc:
-                raise SpecProblem(path, str(exc).removeprefix(f"{path}: ")) from None
+                raise SpecProblem.from_error(exc) from None
         if self.kind == "record":
             if not isinstance(value, list):
                 raise SpecProblem(
@@ -98,22 +119,22 @@ class Field:
     def _quantity(self, value: object, path: str) -> float:
         try:
             if self.angular:
-                v = parse_angular(value, self.units, path, self.example)  # type: ignore[arg-type]
+                v = parse_angular(value, self.units, path, self.example)
             else:
-                v = parse_quantity(value, self.units, path, self.example)  # type: ignore[arg-type]
+                v = parse_quantity(value, self.units, path, self.example)
         except QuantityError as exc:
-            raise SpecProblem(path, str(exc).removeprefix(f"{path}: ")) from None
+            raise SpecProblem.from_error(exc) from None
         self._check_range(v, value, path)
         return v
 
     def _number(self, value: object, path: str) -> float | int:
         integer = self.kind == "integer"
-        ok = isinstance(value, int) if integer else isinstance(value, (int, float))
-        if isinstance(value, bool) or not ok:
+        number = value if isinstance(value, int | float) and not isinstance(value, bool) else None
+        if number is None or (integer and not isinstance(number, int)):
             what = "an integer" if integer else "a number"
             raise SpecProblem(path, f"found {value!r}, expected {what}")
-        self._check_range(float(value), value, path)
-        return int(value) if integer else float(value)
+        self._check_range(float(number), value, path)
+        return int(number) if integer else float(number)
 
     def _check_range(self, v: float, raw: object, path: str) -> None:
         if not math.isfinite(v):
@@ -129,7 +150,7 @@ class Field:
 
 
 @functools.lru_cache(maxsize=8192, typed=True)  # typed: True is not 1
-def _parse_scalar(field: Field, value: object, path: str) -> object:
+def _parse_scalar(field: Field, value: object, path: str) -> Any:
     return field._parse(value, path)
 
 
@@ -143,12 +164,6 @@ def _choice(value: object, choices: Iterable[str], path: str, what: str) -> str:
         f"found {value!r}, expected one of: {', '.join(choices)}{hint}"
         + (f" ({what})" if what else ""),
     )
-
-
-def did_you_mean(word: object, known: Iterable[str]) -> str:
-    """``"; did you mean 'speed'?"`` for a near miss, else ``""``."""
-    close = difflib.get_close_matches(str(word), list(known), n=1, cutoff=0.6)
-    return f"; did you mean {close[0]!r}?" if close else ""
 
 
 #: Spec metadata of the engine's RunSettings fields, by field name. A spec's ``run:`` block
@@ -232,7 +247,7 @@ def undeclared_run_settings() -> list[str]:
     return [f.name for f in dataclasses.fields(RunSettings) if f.name not in _RUN_METADATA]
 
 
-def _spec_default(name: str, value: object) -> object:
+def _spec_default(name: str, value: Any) -> object:
     """A RunSettings default in spec spelling."""
     f = _RUN_METADATA[name]
     if value is None:

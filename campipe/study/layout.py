@@ -140,7 +140,7 @@ def archive_layout(study: Study, n_events: int, cam_angle: np.ndarray, n_revolut
     return sizes, specs, static
 
 
-def study_attrs(study: Study) -> dict[str, str]:
+def study_attrs(study: Study) -> dict[str, object]:
     """Global attributes describing the study (provenance comes from campipe.io.archive)."""
     coords = case_coordinates(study.varied)
     axes = [

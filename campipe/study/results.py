@@ -15,14 +15,7 @@ import numpy as np
 from campipe.engine import MEMBER_LOADS, BatchResult, member_loads, run_batch
 from campipe.study.expand import ResolvedCase
 from campipe.study.variables import data_variables
-from campipe.vocabulary import (
-    EV_FROM,
-    EV_IMPULSE,
-    EV_KIND,
-    EV_TIME,
-    EV_TO,
-    EV_VELOCITY,
-)
+from campipe.vocabulary import EV_FROM, EV_IMPULSE, EV_KIND, EV_TIME, EV_TO, EV_VELOCITY
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import json
 
-from campipe.model.schema import QUANTITY_PATTERN, model_schema
+from campipe.model.schema import QUANTITY_PATTERN, model_schema, parameter_schema
 from campipe.study.fields import (
     CASE_FIELDS,
     CASE_KEYS,
@@ -38,7 +38,7 @@ SCHEMA_ID = "https://campipe.example/schemas/study.schema.json"
 def field_schema(f: Field) -> dict[str, object]:
     """The schema of one key's value."""
     if f.kind == "parameter":
-        return model_schema()["properties"][f.key.removeprefix("model.")]
+        return parameter_schema(f.key.removeprefix("model."))
     if f.kind == "quantity":
         out: dict[str, object] = {
             "type": "string",

@@ -32,12 +32,14 @@ from __future__ import annotations
 
 import copy
 import re
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
 
+from campipe.errors import CampipeError, did_you_mean
 from campipe.model import PARAMETERS
 from campipe.study.fields import (
     CASE_FIELDS,
@@ -53,11 +55,11 @@ from campipe.study.fields import (
     WHOLE_KEYS,
     Field,
     SpecProblem,
-    did_you_mean,
     sample_keys,
     sweep_keys,
     varied_fields,
 )
+from campipe.study.where import QueryError, parse_where
 
 #: A study name: it names the archive file.
 NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]*$"
@@ -66,9 +68,12 @@ _KEYED_BY_CASE_KEY = ("sweep", "zip", "ranges")
 #: Problems reported at most, so a large bad grid stays readable.
 MAX_PROBLEMS = 20
 
+T = TypeVar("T")
 
-class SpecError(ValueError):
-    """A spec refused before anything runs: one or more problems, each with its key path."""
+
+class SpecError(CampipeError, ValueError):
+    """A spec refused before anything runs: one or more problems (``problems``), each with
+    its key path."""
 
     def __init__(self, problems: list[SpecProblem], source: str = "spec"):
         self.problems = problems
@@ -121,7 +126,7 @@ class _Problems:
     def add(self, path: str, message: str) -> None:
         self.items.append(SpecProblem(path, message))
 
-    def check(self, fn, *args):
+    def check(self, fn: Callable[..., T], *args: object) -> T | None:
         try:
             return fn(*args)
         except SpecProblem as exc:
@@ -315,7 +320,7 @@ def expand_range(value: Mapping, key: str, path: str, with_num: bool) -> list:
     start = _NUMBER_UNIT.match(str(value["from"]))
     end = _NUMBER_UNIT.match(str(value["to"]))
     unit = start["unit"].strip() if start else ""
-    if not unit:
+    if start is None or not unit:
         return [f"{_number(v)} {field_.units}" for v in np.linspace(lo, hi, num)]
     first = float(start["number"])
     if end and end["unit"].strip() == unit:
@@ -367,15 +372,15 @@ def check_axis_value(key: str, value: object, path: str) -> object:
 
 def check_axes(value: object, path: str, zipped: bool, problems: _Problems) -> dict[str, list]:
     """A ``sweep:`` or ``zip:`` mapping: key → values or range."""
-    value = problems.check(_mapping, value, path, "key → list of values or {from, to, num}")
-    if value is None:
+    block = problems.check(_mapping, value, path, "key → list of values or {from, to, num}")
+    if block is None:
         return {}
-    if not value:
+    if not block:
         problems.add(path, "empty; expected at least one key to vary (or leave it out)")
         return {}
     keys = sweep_keys()
     out: dict[str, list] = {}
-    for key, values in value.items():
+    for key, values in block.items():
         p = f"{path}.{key}"
         if key not in keys:
             if key in STUDY_WIDE:
@@ -442,25 +447,25 @@ def check_cases(value: object, problems: _Problems) -> list[dict]:
 
 
 def check_sample(value: object, problems: _Problems) -> Sample | None:
-    value = problems.check(
+    block = problems.check(
         _mapping, value, "sample", "{method: latin-hypercube, n, seed, ranges: {key: {from, to}}}"
     )
-    if value is None:
+    if block is None:
         return None
     before = len(problems.items)
     need = ("method", "n", "seed", "ranges")
     ok = True
-    for k in value:
+    for k in block:
         if k not in need:
             problems.items.append(_unknown("sample", k, need))
             ok = False
     for k in need:
-        if k not in value:
+        if k not in block:
             problems.add(f"sample.{k}", "missing; a sampled design needs " + ", ".join(need))
             ok = False
     if not ok:
         return None
-    method = value["method"]
+    method = block["method"]
     if method not in SAMPLE_METHODS:
         problems.add(
             "sample.method",
@@ -468,12 +473,12 @@ def check_sample(value: object, problems: _Problems) -> Sample | None:
             + ", ".join(SAMPLE_METHODS)
             + did_you_mean(method, SAMPLE_METHODS),
         )
-    n, seed = value["n"], value["seed"]
+    n, seed = block["n"], block["seed"]
     if isinstance(n, bool) or not isinstance(n, int) or n < 1:
         problems.add("sample.n", f"found {n!r}, expected an integer ≥ 1 (points to sample)")
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         problems.add("sample.seed", f"found {seed!r}, expected an integer ≥ 0")
-    ranges = problems.check(_mapping, value["ranges"], "sample.ranges", "key → {from, to}")
+    ranges = problems.check(_mapping, block["ranges"], "sample.ranges", "key → {from, to}")
     out: dict[str, tuple[float, float]] = {}
     if ranges is not None:
         if not ranges:
@@ -530,15 +535,13 @@ def leaf_keys(entry: Mapping, prefix: str = "") -> list[str]:
 
 
 def check_replay(value: object, problems: _Problems) -> str | None:
-    from campipe.study.query import QueryError, parse_where
-
-    value = problems.check(_mapping, value, "replay", "{where: EXPR}")
-    if value is None:
+    block = problems.check(_mapping, value, "replay", "{where: EXPR}")
+    if block is None:
         return None
-    for k in value:
+    for k in block:
         if k != "where":
             problems.items.append(_unknown("replay", k, ["where"]))
-    where = value.get("where")
+    where = block.get("where")
     if not isinstance(where, str) or not where.strip():
         problems.add(
             "replay.where",

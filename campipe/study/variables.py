@@ -241,7 +241,7 @@ def case_coordinates(varied: Iterable[str]) -> dict[str, tuple[str, Variable, fl
             out[key] = (name, Variable(CASE, "i8", f.description, role="parameter"), 1.0)
             continue
         units = f.archive_units if f.archive_units is not None else f.units
-        dims = CASE
+        dims: tuple[str, ...] = CASE
         if key.startswith("model.") and PARAMETERS[key[6:]].length:
             dims = ("case", "mode")
         var = Variable(dims, "f8", f.description, units or "1", role="parameter")

@@ -1,0 +1,206 @@
+"""From replay cases to rerun recordings: what each case shows, and ``campipe replay``.
+
+:func:`recording_case` turns a :class:`~campipe.replay.cases.ReplayCase` into the plain
+arrays and text a recording holds (:class:`campipe.io.rerun_replay.CaseRecording`): the
+parameters document and the mechanism's sketch at every sample. :func:`replay_archive` is
+``campipe replay``: it opens an archive, selects its cases and writes them (or opens the
+viewer). The file format itself is :mod:`campipe.io.rerun_replay`'s.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from campipe.io.rerun_replay import (
+    MM,
+    CaseRecording,
+    SketchFrames,
+    spawn_viewer,
+    write_recording,
+)
+from campipe.model import PARAMETERS
+from campipe.replay import sketch
+from campipe.replay.cases import ReplayCase, ReplayError, archive_cases, select_rows
+
+#: Line radii of the sketch's parts drawn with no width of their own [m].
+HEAD_RADIUS = SPRING_RADIUS = 0.0005
+RETAINER_RADIUS = 0.001
+
+
+def _value(value: object) -> str:
+    if isinstance(value, tuple):
+        return ", ".join(_value(v) for v in value)
+    if isinstance(value, float):
+        return "none" if math.isnan(value) else f"{value:.10g}"
+    return str(value)
+
+
+def case_geometry(case: ReplayCase) -> sketch.Geometry:
+    return sketch.Geometry.from_train(case.train)
+
+
+def parameters_document(case: ReplayCase, magnification: float) -> str:
+    """The case as a markdown document: its columns, its model, how to read the replay."""
+    lines = [
+        f"# {case.label}",
+        "",
+        f"Study `{case.study}`, case `{case.case_id}`.",
+        "",
+        "## Case (as the archive holds it)",
+        "",
+        "| column | value | units |",
+        "|---|---|---|",
+    ]
+    lines += [
+        f"| {name} | {_value(value)} | {units} |" for name, (value, units) in case.columns.items()
+    ]
+    lines += ["", "## Valve train", "", "| parameter | value | units |", "|---|---|---|"]
+    for name, p in PARAMETERS.items():
+        lines.append(f"| {name} | {_value(getattr(case.train, name))} | {p.units} |")
+    lines += [
+        "",
+        "## Reading the replay",
+        "",
+        "- Timeline `cam_angle`: one second of this duration timeline stands for one degree "
+        "(270° reads `+270s`). Timeline `time`: the time from the start of the run.",
+        "- Plots: lifts in mm (the archive's metres × 1000), contact forces in N, compressive "
+        "positive and zero out of contact; contact state 1 I cam contact, 2 II free, 3 III "
+        "cam and seat, 4 IV seat only (thesis Table I).",
+        f"- Sketch, in mm: the rigid train the cam (and the seat) would carry, at true scale, "
+        f"plus **×{magnification:g}** the computed deviation from it: the gap at the cam "
+        "while the follower is off it, the valve's bounce off its seat, and the elastic "
+        "deflection of pushrod, rocker and valve stem. A contact that holds is drawn at its "
+        f"true place. Cam base-circle radius {case_geometry(case).base_radius * MM:g} mm "
+        "(a drawing choice). The follower's dot is green on the cam, red off it; the valve's "
+        "green on its seat, red off it.",
+        "- Events: separations and impacts at their cam angles, with the closing velocity "
+        "(impacts) or velocity jump and the impulse delivered (impacts).",
+    ]
+    return "\n".join(lines)
+
+
+def turn_profile(case: ReplayCase) -> tuple[np.ndarray, np.ndarray]:
+    """The cam's lift over one turn from the archive's samples: (angles [rad], lift [m])."""
+    phi = np.mod(case.cam_angle, 360.0)
+    phi, first = np.unique(np.round(phi, 9), return_index=True)
+    return np.radians(phi), case.histories["cam_lift"][first]
+
+
+def sketch_frames(case: ReplayCase, magnification: float) -> SketchFrames:
+    """The mechanism at every sample, moving with q (deviations magnified), the cam turning."""
+    if case.q is None:
+        raise ReplayError(f"case {case.case_id}: no q to draw the mechanism from")
+    geom = case_geometry(case)
+    state = np.asarray(case.histories["contact_state"])
+    qd = sketch.displayed_coordinates(
+        case.q, case.histories["cam_lift"], state, geom, magnification, case.seat_q7
+    )
+    angle = np.radians(case.cam_angle)
+    phi, lift = turn_profile(case)
+    frame = sketch.fixed_parts(geom, case.seat_q7)
+    seat = frame.pop("seat", None)
+    return SketchFrames(
+        moving=sketch.moving_parts(qd, geom),
+        radii={
+            "pushrod": geom.pushrod_radius,
+            "rocker": geom.rocker_radius,
+            "stem": geom.stem_radius,
+            "head": HEAD_RADIUS,
+            "spring": SPRING_RADIUS,
+            "retainer": RETAINER_RADIUS,
+        },
+        cam_outline=sketch.cam_outline(phi, lift, angle, geom),
+        cam_mark=sketch.cam_mark(angle, geom),
+        follower=sketch.follower_position(qd, geom),
+        on_cam=np.isin(state, sketch.CAM_CONTACT),
+        frame=frame,
+        note_at=(-geom.pushrod_arm, geom.pushrod_arm * 0.6),
+        valve=None if seat is None else sketch.valve_position(qd, geom),
+        seated=None if seat is None else np.isin(state, sketch.SEAT_CONTACT),
+        seat=seat,
+    )
+
+
+def recording_case(
+    case: ReplayCase, magnification: float = sketch.DEFAULT_MAGNIFICATION
+) -> CaseRecording:
+    """What a recording shows of ``case``: its archive values, parameters and sketch."""
+    return CaseRecording(
+        case_id=case.case_id,
+        label=case.label,
+        cam_angle=case.cam_angle,
+        histories=case.histories,
+        events=case.events,
+        parameters=parameters_document(case, magnification),
+        sketch=sketch_frames(case, magnification),
+    )
+
+
+def default_output(archive: str | Path) -> Path:
+    """``campipe replay``'s recording when ``-o`` is not given: ``<archive stem>.replay.rrd``
+    beside the archive (the study's own recording is ``<archive stem>.rrd``)."""
+    return Path(archive).with_suffix(".replay.rrd")
+
+
+def replay_archive(
+    archive: str | Path,
+    *,
+    case_ids: Sequence[str] = (),
+    where: str | None = None,
+    output: str | Path | None = None,
+    spawn: bool = False,
+    magnification: float = sketch.DEFAULT_MAGNIFICATION,
+) -> tuple[Path | None, list[ReplayCase]]:
+    """Replay an archive's cases chosen by id or by a ``--where`` expression.
+
+    Writes one recording (``output``, default :func:`default_output`) or, with ``spawn``,
+    opens the viewer instead. Nothing is written when the selection fails.
+
+    Returns
+    -------
+    (path or None, cases)
+        The recording written (None when spawned) and the cases it holds.
+
+    Raises
+    ------
+    ReplayError
+        For a missing or unreadable archive, an unknown case id, a selection of no case,
+        or q that can be neither read nor computed again.
+    campipe.study.where.QueryError
+        For a ``--where`` expression the query language refuses.
+    """
+    import xarray as xr
+
+    archive = Path(archive)
+    if not archive.is_file():
+        raise ReplayError(f"{archive}: no such archive", key=str(archive))
+    try:
+        ds = xr.open_dataset(archive)
+    except (OSError, ValueError) as exc:
+        raise ReplayError(
+            f"{archive}: cannot read as an archive ({exc})", key=str(archive)
+        ) from None
+    with ds:
+        try:
+            rows = select_rows(ds, case_ids, where)
+        except ReplayError as exc:
+            raise ReplayError(f"{archive}: {exc}", key=exc.key, found=exc.found) from None
+        cases = archive_cases(ds, rows, directories=[archive.parent, Path.cwd()])
+        key = str(ds.attrs.get("study_key", ""))
+    contents = [recording_case(c, magnification) for c in cases]
+    study = cases[0].study if cases else ""
+    if spawn:
+        spawn_viewer(contents, study=study, key=key, magnification=magnification)
+        return None, cases
+    path = write_recording(
+        contents,
+        output or default_output(archive),
+        study=study,
+        key=key,
+        magnification=magnification,
+    )
+    return path, cases
