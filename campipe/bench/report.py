@@ -12,6 +12,7 @@ import math
 from dataclasses import asdict
 from pathlib import Path
 
+from campipe.bench import verdict
 from campipe.bench.run import FAMILIES, Bench
 from campipe.bench.suite import INCH
 
@@ -54,7 +55,9 @@ COLUMNS = (
 )
 
 
-def _num(x, scale: float | None = None, fmt: str = ".3g") -> str:
+def format_number(x, scale: float | None = None, fmt: str = ".3g") -> str:
+    """A figure of a report: ``x`` × ``scale`` in ``fmt``; "–" for a missing one (None, as
+    the JSON holds NaN, or NaN), "yes"/"no" for a flag."""
     if x is None:
         return "–"
     if isinstance(x, bool):
@@ -112,10 +115,10 @@ def summary_rows(bench: Bench) -> list[list[str]]:
                     scene,
                     name,
                     r["setting"],
-                    _num(r["seconds"], 1e3),
-                    _num(r["valve_lift"], 1 / INCH, ".2e"),
-                    _num(r["separation_angle"], math.degrees(1.0), ".2e"),
-                    _num(r["seating_velocity"], 1 / INCH, ".2e"),
+                    format_number(r["seconds"], 1e3),
+                    format_number(r["valve_lift"], 1 / INCH, ".2e"),
+                    format_number(r["separation_angle"], math.degrees(1.0), ".2e"),
+                    format_number(r["seating_velocity"], 1 / INCH, ".2e"),
                 ]
             )
     return out
@@ -147,7 +150,7 @@ def markdown(bench: Bench, with_plots: bool = True) -> str:
             f"({FILES['events_plot']})",
             "",
         ]
-    lines += ["## The reference, checked", ""]
+    lines += ["## Verdict", "", verdict.markdown(bench), "", "## The reference, checked", ""]
     lines.append(
         f"Second reference: {m['reference_check']}. Stated agreement: valve lift "
         f"{m['agreement']['valve_lift'] / INCH:g} in, event angles "
@@ -170,13 +173,13 @@ def markdown(bench: Bench, with_plots: bool = True) -> str:
         [
             [
                 c["scene"],
-                _num(c["agrees"]) if c["events_match"] else "no (events differ)",
-                _num(c["valve_lift"], 1 / INCH, ".2e"),
-                _num(c["event_angle"], math.degrees(1.0), ".2e"),
-                _num(c["separation"], math.degrees(1.0), ".2e"),
-                _num(c["seating_velocity"], 1 / INCH, ".2e"),
-                _num(c["impact_velocity"], 1 / INCH, ".2e"),
-                _num(c["seconds"], fmt=".1f"),
+                format_number(c["agrees"]) if c["events_match"] else "no (events differ)",
+                format_number(c["valve_lift"], 1 / INCH, ".2e"),
+                format_number(c["event_angle"], math.degrees(1.0), ".2e"),
+                format_number(c["separation"], math.degrees(1.0), ".2e"),
+                format_number(c["seating_velocity"], 1 / INCH, ".2e"),
+                format_number(c["impact_velocity"], 1 / INCH, ".2e"),
+                format_number(c["seconds"], fmt=".1f"),
             ]
             for c in bench.checks
         ],
@@ -219,9 +222,9 @@ def markdown(bench: Bench, with_plots: bool = True) -> str:
         bound = "" if r["peer_reaches_default_error"] else "> "
         how = "measured" if not bound else "not reached; its most accurate point"
         return [
-            f"{bound}{_num(r['peer_seconds_at_default_error_measured'], 1e3)} ms ({how})",
-            bound + _num(r["measured_ratio_at_default_error"], fmt=".3g"),
-            "–" if not bound else _num(r["ratio_at_default_error"], fmt=".3g"),
+            f"{bound}{format_number(r['peer_seconds_at_default_error_measured'], 1e3)} ms ({how})",
+            bound + format_number(r["measured_ratio_at_default_error"], fmt=".3g"),
+            "–" if not bound else format_number(r["ratio_at_default_error"], fmt=".3g"),
         ]
 
     lines += _table(
@@ -242,13 +245,13 @@ def markdown(bench: Bench, with_plots: bool = True) -> str:
             [
                 r["scene"],
                 r["peer"],
-                _num(r["default_seconds"], 1e3),
-                _num(r["default_error"], 1 / INCH, ".2e"),
+                format_number(r["default_seconds"], 1e3),
+                format_number(r["default_error"], 1 / INCH, ".2e"),
                 *at_default(r),
                 r["peer_point"],
-                _num(r["peer_point_seconds"], 1e3),
-                _num(r["peer_point_error"], 1 / INCH, ".2e"),
-                _num(r["ratio_at_peer_error"], fmt=".3g") + f" ({HOW[r['how_campipe']]})",
+                format_number(r["peer_point_seconds"], 1e3),
+                format_number(r["peer_point_error"], 1 / INCH, ".2e"),
+                format_number(r["ratio_at_peer_error"], fmt=".3g") + f" ({HOW[r['how_campipe']]})",
             ]
             for r in bench.ratios
         ],
@@ -267,55 +270,30 @@ def markdown(bench: Bench, with_plots: bool = True) -> str:
                 [
                     r["scene"],
                     p["setting"],
-                    _num(p["error"], 1 / INCH, ".2e"),
-                    _num(p["seconds"], 1e3),
-                    _num(p["campipe_seconds"], 1e3) + f" ({HOW[p['how_campipe']]})",
-                    _num(p["ratio"], fmt=".3g"),
+                    format_number(p["error"], 1 / INCH, ".2e"),
+                    format_number(p["seconds"], 1e3),
+                    format_number(p["campipe_seconds"], 1e3) + f" ({HOW[p['how_campipe']]})",
+                    format_number(p["ratio"], fmt=".3g"),
                 ]
                 for r in ladders
                 for p in r["ladder"]
             ],
         )
-    if bench.goals:
-        lines += ["", "Goals (issue 7), smallest ratio over the suite:", ""]
-        for peer, g in bench.goals.items():
-            short = g["peer_not_reaching_default_error"]
+    for peer, g in bench.goals.items():
+        below = g.get("goal_reached_below_error", {})
+        if below:
+            lines.append("")
             lines.append(
-                f"- default ≥ {g['goal']:g}× faster than {peer} at equal valve-lift error, "
-                f"the peer's time to reach the default's error (the issue's ratio): "
-                f"{'≥ ' if short else ''}{_num(g['min_ratio_at_default_error'])}× measured "
-                f"({g['verdict_at_default_error']})"
-                + (
-                    f"; a lower bound where the peer's ladder does not reach the default's "
-                    f"error ({', '.join(short)}); extrapolated "
-                    f"{_num(g['min_ratio_at_default_error_extrapolated'])}×"
-                    if short
-                    else ""
+                f"≥ {g['goal']:g}× faster than {peer} at every point of its ladder with a "
+                "valve-lift error up to: "
+                + "; ".join(
+                    f"{scene} {format_number(e, 1 / INCH, '.1e')} in"
+                    if _finite(e)
+                    else f"{scene} none"
+                    for scene, e in below.items()
                 )
                 + "."
             )
-            lines.append(
-                f"  - At the peer's own point, the time campipe needs for the peer's error: "
-                f"{_num(g['min_ratio_at_peer_error'])}× "
-                f"({'≥' if g['reached_at_peer_error'] else 'below'} {g['goal']:g}×)."
-                + (
-                    f" campipe's ladder does not reach the peer's error on: "
-                    f"{', '.join(g['campipe_not_reaching'])}."
-                    if g["campipe_not_reaching"]
-                    else ""
-                )
-            )
-            below = g.get("goal_reached_below_error", {})
-            if below:
-                lines.append(
-                    f"  - ≥ {g['goal']:g}× at every point of the {peer} ladder with a valve-lift "
-                    "error up to: "
-                    + "; ".join(
-                        f"{scene} {_num(e, 1 / INCH, '.1e')} in" if e == e else f"{scene} none"
-                        for scene, e in below.items()
-                    )
-                    + "."
-                )
     a = bench.accuracy_for_cost
     if a:
         lines += ["", "## Accuracy for cost on 11000 rpm (issue 4)", ""]
@@ -327,7 +305,7 @@ def markdown(bench: Bench, with_plots: bool = True) -> str:
         )
         lines.append(
             f"- newmark-linear for {a['newmark_target'] / INCH:g} in: "
-            f"{_num(a['newmark_seconds_at_target'], 1e3)} ms/case ({HOW[a['how']]})"
+            f"{format_number(a['newmark_seconds_at_target'], 1e3)} ms/case ({HOW[a['how']]})"
             + (
                 f"; cheapest ladder point meeting it: {cheapest['setting']}, "
                 f"{cheapest['seconds'] * 1e3:.3g} ms/case, error {cheapest['error'] / INCH:.2e}"
@@ -335,14 +313,14 @@ def markdown(bench: Bench, with_plots: bool = True) -> str:
                 if cheapest
                 else "; no ladder point meets it"
             )
-            + f". Ratio newmark/default: {_num(a['ratio'])}."
+            + f". Ratio newmark/default: {format_number(a['ratio'])}."
         )
         if a.get("contacts_only_seconds"):
             lines.append(
                 f"- default sampling only the contact coordinates (what a study that records "
                 f"no q or member loads runs): error {a['contacts_only_error'] / INCH:.2e} in "
                 f"in {a['contacts_only_seconds'] * 1e3:.3g} ms/case. Ratio newmark/that: "
-                f"{_num(a['ratio_contacts_only'])}."
+                f"{format_number(a['ratio_contacts_only'])}."
             )
     if bench.throughput:
         lines += ["", "## Throughput: a 256-case batch (issue 3)", ""]
@@ -361,10 +339,10 @@ def markdown(bench: Bench, with_plots: bool = True) -> str:
                     t["integrator"],
                     str(t["n_cases"]),
                     str(t["workers"]),
-                    _num(t["revolutions"]),
+                    format_number(t["revolutions"]),
                     str(t["case_steps"]),
-                    _num(t["seconds"], fmt=".3f"),
-                    _num(t["rate"], fmt=".3g"),
+                    format_number(t["seconds"], fmt=".3f"),
+                    format_number(t["rate"], fmt=".3g"),
                 ]
                 for t in bench.throughput
             ],
@@ -399,10 +377,12 @@ def markdown(bench: Bench, with_plots: bool = True) -> str:
                     p["layer"],
                     str(p["n_cases"]),
                     str(p["workers"]),
-                    _num(p["seconds"], fmt=".3g"),
-                    _num(p["per_case"], 1e3),
-                    _num(p["archive_bytes"] / 1e6) if p["archive_bytes"] else "–",
-                    _num(p["archive_bytes"] / p["n_cases"] / 1e3) if p["archive_bytes"] else "–",
+                    format_number(p["seconds"], fmt=".3g"),
+                    format_number(p["per_case"], 1e3),
+                    format_number(p["archive_bytes"] / 1e6) if p["archive_bytes"] else "–",
+                    format_number(p["archive_bytes"] / p["n_cases"] / 1e3)
+                    if p["archive_bytes"]
+                    else "–",
                 ]
                 for p in bench.scaling
             ],
@@ -428,12 +408,12 @@ def markdown(bench: Bench, with_plots: bool = True) -> str:
             [
                 [
                     f["scene"],
-                    _num(f["tolerance"], 1 / INCH, "g"),
+                    format_number(f["tolerance"], 1 / INCH, "g"),
                     f["fidelity"],
-                    _num(f["mode_cutoff"], fmt=".3g"),
-                    _num(f["error"], 1 / INCH, ".2e"),
-                    _num(f["seconds"], 1e3),
-                    _num(f["full_seconds"], 1e3),
+                    format_number(f["mode_cutoff"], fmt=".3g"),
+                    format_number(f["error"], 1 / INCH, ".2e"),
+                    format_number(f["seconds"], 1e3),
+                    format_number(f["full_seconds"], 1e3),
                 ]
                 for f in bench.fidelity
             ],
@@ -443,7 +423,9 @@ def markdown(bench: Bench, with_plots: bool = True) -> str:
         [c[1] or c[0] for c in COLUMNS],
         [
             [
-                _num(r.get(k), s, ".3g" if k in ("seconds",) else ".2e") if s else _num(r.get(k))
+                format_number(r.get(k), s, ".3g" if k in ("seconds",) else ".2e")
+                if s
+                else format_number(r.get(k))
                 for k, _, s in COLUMNS
             ]
             for r in bench.rows
@@ -569,6 +551,12 @@ def plot(bench: Bench, path: Path, errors: tuple[tuple, ...] = (VALVE_LIFT,)) ->
 
 def _finite(x) -> bool:
     return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
+
+def read_json(path: str | Path) -> Bench:
+    """The :class:`Bench` a ``bench.json`` holds (as :func:`write_report` wrote it: NaN and inf
+    are null, so a missing figure reads as None)."""
+    return Bench(**json.loads(Path(path).read_text()))
 
 
 def write_report(bench: Bench, directory: str | Path, with_plot: bool = True) -> dict[str, Path]:
