@@ -1,12 +1,14 @@
 """The bench's files: a markdown report, the rows as CSV, everything as JSON, and PNG plots of
 wall time against the valve-lift error and against the event errors (separation angle, seating
-velocity). The only module of ``campipe.bench`` that writes files; matplotlib (the ``plot``
-extra) is imported only inside :func:`plot`.
+velocity); :func:`read_json` reads a run back. With ``campipe.bench.pages`` the only module of
+``campipe.bench`` that writes files; matplotlib (the ``plot`` extra) is imported only inside
+:func:`plot`.
 """
 
 from __future__ import annotations
 
 import csv
+import io
 import json
 import math
 from dataclasses import asdict
@@ -15,6 +17,7 @@ from pathlib import Path
 from campipe.bench import verdict
 from campipe.bench.run import FAMILIES, Bench
 from campipe.bench.suite import INCH
+from campipe.bench.verdict import finite
 
 #: File names written into the output folder.
 FILES = {
@@ -288,7 +291,7 @@ def markdown(bench: Bench, with_plots: bool = True) -> str:
                 "valve-lift error up to: "
                 + "; ".join(
                     f"{scene} {format_number(e, 1 / INCH, '.1e')} in"
-                    if _finite(e)
+                    if finite(e)
                     else f"{scene} none"
                     for scene, e in below.items()
                 )
@@ -434,24 +437,31 @@ def markdown(bench: Bench, with_plots: bool = True) -> str:
     return "\n".join(lines) + "\n"
 
 
+def csv_text(bench: Bench) -> str:
+    """The rows, one per scene × setting, in the report's units, as CSV."""
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    w.writerow([c[1] or c[0] for c in COLUMNS])
+    for r in bench.rows:
+        w.writerow(
+            [
+                (
+                    ""
+                    if r.get(k) is None or (isinstance(r.get(k), float) and math.isnan(r[k]))
+                    else r[k] * s
+                    if s
+                    else r[k]
+                )
+                for k, _, s in COLUMNS
+            ]
+        )
+    return buf.getvalue()
+
+
 def write_csv(bench: Bench, path: Path) -> Path:
-    """The rows, one per scene × setting, in the report's units."""
+    """:func:`csv_text` into ``path``."""
     with open(path, "w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow([c[1] or c[0] for c in COLUMNS])
-        for r in bench.rows:
-            w.writerow(
-                [
-                    (
-                        ""
-                        if r.get(k) is None or (isinstance(r.get(k), float) and math.isnan(r[k]))
-                        else r[k] * s
-                        if s
-                        else r[k]
-                    )
-                    for k, _, s in COLUMNS
-                ]
-            )
+        fh.write(csv_text(bench))
     return path
 
 
@@ -467,7 +477,7 @@ def plot(bench: Bench, path: Path, errors: tuple[tuple, ...] = (VALVE_LIFT,)) ->
         (scene, err)
         for err in errors
         for scene in dict.fromkeys(r["scene"] for r in bench.rows)
-        if any(r["scene"] == scene and _finite(r.get(err[0])) for r in bench.rows)
+        if any(r["scene"] == scene and finite(r.get(err[0])) for r in bench.rows)
     ]
     ncol = max(1, min(3, len(panels)))
     nrow = max(1, math.ceil(len(panels) / ncol))
@@ -481,7 +491,7 @@ def plot(bench: Bench, path: Path, errors: tuple[tuple, ...] = (VALVE_LIFT,)) ->
         "solve_ivp": ("C1", "v-"),
     }
     for ax, (scene, (key, label, scale, floor)) in zip(axes.flat, panels, strict=False):
-        mine = [r for r in bench.rows if r["scene"] == scene and _finite(r.get(key))]
+        mine = [r for r in bench.rows if r["scene"] == scene and finite(r.get(key))]
 
         def x_of(r: dict, key=key, scale=scale, floor=floor) -> float:
             return max(r[key] * scale, floor)
@@ -547,10 +557,6 @@ def plot(bench: Bench, path: Path, errors: tuple[tuple, ...] = (VALVE_LIFT,)) ->
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return path
-
-
-def _finite(x) -> bool:
-    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
 
 
 def read_json(path: str | Path) -> Bench:

@@ -58,18 +58,28 @@ class Check:
 
 
 def format_short(x: float, digits: int = 3) -> str:
-    """``x`` to ``digits`` significant digits, an exponent written short (1.5e4, 2.1e-8)."""
-    text = format(x, f".{digits}g")
-    mantissa, e, exponent = text.partition("e")
-    return f"{mantissa}e{int(exponent)}" if e else text
+    """``x`` to ``digits`` significant digits: plain from 1e-3 to 1e5 (0.0963, 15000), else
+    with a short exponent (2.1e-8, 2.68e7); trailing zeros dropped."""
+    if x == 0 or not math.isfinite(x):
+        return format(x, "g")
+    if 1e-3 <= abs(x) < 1e5:
+        rounded = float(format(x, f".{digits}g"))
+        decimals = max(digits - 1 - math.floor(math.log10(abs(rounded))), 0)
+        text = format(rounded, f".{decimals}f")
+        return text.rstrip("0").rstrip(".") if "." in text else text
+    mantissa, _, exponent = format(x, f".{digits - 1}e").partition("e")
+    if "." in mantissa:
+        mantissa = mantissa.rstrip("0").rstrip(".")
+    return f"{mantissa}e{int(exponent)}"
 
 
-def _finite(x) -> bool:
+def finite(x) -> bool:
+    """``x`` is a finite number (not None, as bench.json holds NaN, nor a flag)."""
     return isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)
 
 
 def _or_inf(x) -> float:
-    return x if _finite(x) else math.inf
+    return x if finite(x) else math.inf
 
 
 def _issue7(bench: Bench, peer: str, goal: float) -> list[Goal]:
@@ -112,7 +122,7 @@ def _issue7(bench: Bench, peer: str, goal: float) -> list[Goal]:
     ]
 
     # A ratio of 0: campipe's ladder does not reach the peer's error there (run._goals).
-    compared = [r for r in mine if _finite(r["ratio_at_peer_error"]) and r["ratio_at_peer_error"]]
+    compared = [r for r in mine if finite(r["ratio_at_peer_error"]) and r["ratio_at_peer_error"]]
     if not compared:
         goals.append(
             Goal(
@@ -163,7 +173,7 @@ def _issue4(bench: Bench) -> list[Goal]:
         )
     ]
     ratio = a["ratio"]
-    if a["how"] not in ("cheapest", "interpolated") or not _finite(ratio):
+    if a["how"] not in ("cheapest", "interpolated") or not finite(ratio):
         goals.append(
             Goal(4, cost, "–", NOT_SHOWN, f"newmark-linear's ladder does not reach it ({a['how']})")
         )
@@ -175,7 +185,7 @@ def _issue4(bench: Bench) -> list[Goal]:
             f"newmark-linear's time / the default's; its cheapest ladder point "
             f"({cheapest['setting']}) already reaches the target"
         )
-    if _finite(a.get("ratio_contacts_only")):
+    if finite(a.get("ratio_contacts_only")):
         note += f"; {format_short(a['ratio_contacts_only'])}× sampling only the contact coordinates"
     goals.append(
         Goal(4, cost, f"{format_short(ratio)}×", REACHED if ratio > 1 else NOT_REACHED, note)
@@ -235,7 +245,7 @@ def checks(bench: Bench) -> list[Check]:
         within, beyond = [], []
         for key, words, scale, unit in CHECKED:
             value = c.get(key)
-            if not _finite(value):
+            if not finite(value):
                 continue
             text = f"{words} {format_short(value * scale, 2)} {unit}"
             if value > limits[key]:
