@@ -1,12 +1,20 @@
 """The documentation tells the truth: its bench figures are those the committed bench.json
-holds."""
+holds, and the README's commands and analysis print what it shows."""
 
+import contextlib
+import io
 import re
 
+import numpy as np
 import pytest
-from study_helpers import ROOT
+from click.testing import CliRunner
+from numpy.testing import assert_allclose
+from study_helpers import ROOT, STUDIES
 
 from campipe.bench import pages, report
+from campipe.cli import main
+from campipe.study import load_study
+from campipe.study.execute import run_study
 
 BENCH_JSON = ROOT / pages.BENCH_JSON
 README = ROOT / "README.md"
@@ -88,3 +96,82 @@ def test_the_bench_prose_carries_no_figure():
         assert not figures, f"{name}: figures outside the generated blocks: {figures}"
     assert _prose("a 1.17× margin (issue 4) <!-- generated: x -->\n2e7\n<!-- end generated -->")
     assert re.findall(r"\S*\d\S*", _prose("a 1.17× margin")) == ["1.17×"]
+
+
+def _slug(heading: str) -> str:
+    """GitHub's anchor of a markdown heading."""
+    return re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
+
+
+@pytest.mark.parametrize("page", DOCS, ids=lambda p: str(p.relative_to(ROOT)))
+def test_every_relative_link_of_the_docs_resolves(page):
+    text = re.sub(r"```.*?```", "", page.read_text(), flags=re.DOTALL)
+    links = re.findall(r"\]\(([^)\s]+)\)", text)
+    assert links
+    for link in links:
+        if re.match(r"[a-z]+://", link):
+            continue
+        target, _, anchor = link.partition("#")
+        path = (page.parent / target).resolve() if target else page
+        assert path.exists(), f"{page.name}: {link}"
+        if anchor:
+            headings = re.findall(r"^#+ (.*)$", path.read_text(), flags=re.MULTILINE)
+            assert anchor in {_slug(h) for h in headings}, f"{page.name}: {link}"
+
+
+def test_the_readme_keeps_its_two_set_up_commands_and_its_length():
+    """Tools find the set-up commands by these patterns; the README stays a first page."""
+    lines = README.read_text().splitlines()
+    run = [line for line in lines if re.match(r"^\s*python -m pip install [^[]*&& campipe ", line)]
+    assert run[0] == "python -m pip install . && campipe study studies/quickstart.yaml"
+    tests = [line for line in lines if re.search(r"pip install .*\[test\].*pytest", line)]
+    assert tests[0] == 'python -m pip install ".[test]" && python -m pytest'
+    assert next(line for line in lines if re.match(r"^\s*(\$ )?[^#]*pytest", line)) == tests[0]
+    assert len(lines) <= 200
+
+
+@pytest.fixture(scope="module")
+def quickstart(tmp_path_factory):
+    """A folder holding studies/quickstart.nc as the README's first command writes it."""
+    root = tmp_path_factory.mktemp("readme")
+    archive = root / "studies" / "quickstart.nc"
+    archive.parent.mkdir()
+    run_study(load_study(STUDIES / "quickstart.yaml"), archive, scheduler="threads")
+    return root
+
+
+def _fenced_after(text: str, marker: str) -> str:
+    """The body of the first fenced block after ``<!-- marker -->``."""
+    after = text.split(f"<!-- {marker} -->\n", 1)[1]
+    return after.split("```", 2)[1].split("\n", 1)[1]
+
+
+NUMBER = re.compile(r"^[-+]?(\d+\.?\d*(e[-+]?\d+)?|nan)$", re.IGNORECASE)
+
+
+def test_the_readme_analysis_prints_what_the_readme_shows(quickstart, monkeypatch):
+    text = README.read_text()
+    code = _fenced_after(text, "readme-analysis")
+    shown = _fenced_after(text, "readme-analysis-output").split()
+    assert len(code.strip().splitlines()) == 5
+    monkeypatch.chdir(quickstart)
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        exec(compile(code, "README.md", "exec"), {})
+    printed = out.getvalue().split()
+    assert [t for t in printed if not NUMBER.match(t)] == [t for t in shown if not NUMBER.match(t)]
+    values = [float(t) for t in printed if NUMBER.match(t)]
+    assert_allclose(values, [float(t) for t in shown if NUMBER.match(t)], rtol=1e-6)
+    # the table: 4 speeds × (no seat, 0.1 in): no separation at 9000 rpm without a seat
+    table = np.array(values[2:]).reshape(4, 3)
+    assert table[:, 0].tolist() == [6000, 9000, 9524, 11000]
+    assert table[1, 1] == 0 and 45 <= table[2, 1] <= 60 and np.all(table[:, 2] > 0)
+
+
+def test_the_readme_summary_is_what_campipe_query_prints(quickstart):
+    text = README.read_text()
+    shown = text.split("$ campipe query studies/quickstart.nc --summary\n")[1].split("```")[0]
+    archive = quickstart / "studies" / "quickstart.nc"
+    result = CliRunner().invoke(main, ["query", str(archive), "--summary"])
+    assert result.exit_code == 0, result.output
+    assert result.output == shown
