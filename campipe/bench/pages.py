@@ -126,7 +126,7 @@ def setup_block(bench: Bench) -> str:
         + "; ".join(f"`{name}`, {s['description']}" for name, s in scenes.items())
         + ".",
         "- **Ladders**: modal-exact at event tolerances "
-        + ", ".join(f"{t:g}" for t in lad["modal_tolerances"])
+        + ", ".join(format_short(t) for t in lad["modal_tolerances"])
         + " s"
         + (
             " and step caps " + ", ".join(f"{c * 1e6:g}" for c in lad["modal_caps"]) + " µs"
@@ -143,7 +143,7 @@ def setup_block(bench: Bench) -> str:
         + "; newmark-linear at steps "
         + ", ".join(f"{dt * 1e6:g}" for dt in lad["newmark_steps"])
         + f" µs; solve_ivp {lad['ivp_method']} at rtol "
-        + ", ".join(f"{r:g}" for r in lad["ivp_rtols"])
+        + ", ".join(format_short(r) for r in lad["ivp_rtols"])
         + ".",
         f"- **Timing**: {m['timing']}.",
         f"- **Reference**: {m['reference']}. **Its check**: {m['reference_check']}, stated "

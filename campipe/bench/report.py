@@ -58,9 +58,7 @@ COLUMNS = (
 )
 
 
-def format_number(x, scale: float | None = None, fmt: str = ".3g") -> str:
-    """A figure of a report: ``x`` × ``scale`` in ``fmt``; "–" for a missing one (None, as
-    the JSON holds NaN, or NaN), "yes"/"no" for a flag."""
+def _num(x, scale: float | None = None, fmt: str = ".3g") -> str:
     if x is None:
         return "–"
     if isinstance(x, bool):
@@ -118,10 +116,10 @@ def summary_rows(bench: Bench) -> list[list[str]]:
                     scene,
                     name,
                     r["setting"],
-                    format_number(r["seconds"], 1e3),
-                    format_number(r["valve_lift"], 1 / INCH, ".2e"),
-                    format_number(r["separation_angle"], math.degrees(1.0), ".2e"),
-                    format_number(r["seating_velocity"], 1 / INCH, ".2e"),
+                    _num(r["seconds"], 1e3),
+                    _num(r["valve_lift"], 1 / INCH, ".2e"),
+                    _num(r["separation_angle"], math.degrees(1.0), ".2e"),
+                    _num(r["seating_velocity"], 1 / INCH, ".2e"),
                 ]
             )
     return out
@@ -176,13 +174,13 @@ def markdown(bench: Bench, with_plots: bool = True) -> str:
         [
             [
                 c["scene"],
-                format_number(c["agrees"]) if c["events_match"] else "no (events differ)",
-                format_number(c["valve_lift"], 1 / INCH, ".2e"),
-                format_number(c["event_angle"], math.degrees(1.0), ".2e"),
-                format_number(c["separation"], math.degrees(1.0), ".2e"),
-                format_number(c["seating_velocity"], 1 / INCH, ".2e"),
-                format_number(c["impact_velocity"], 1 / INCH, ".2e"),
-                format_number(c["seconds"], fmt=".1f"),
+                _num(c["agrees"]) if c["events_match"] else "no (events differ)",
+                _num(c["valve_lift"], 1 / INCH, ".2e"),
+                _num(c["event_angle"], math.degrees(1.0), ".2e"),
+                _num(c["separation"], math.degrees(1.0), ".2e"),
+                _num(c["seating_velocity"], 1 / INCH, ".2e"),
+                _num(c["impact_velocity"], 1 / INCH, ".2e"),
+                _num(c["seconds"], fmt=".1f"),
             ]
             for c in bench.checks
         ],
@@ -225,9 +223,9 @@ def markdown(bench: Bench, with_plots: bool = True) -> str:
         bound = "" if r["peer_reaches_default_error"] else "> "
         how = "measured" if not bound else "not reached; its most accurate point"
         return [
-            f"{bound}{format_number(r['peer_seconds_at_default_error_measured'], 1e3)} ms ({how})",
-            bound + format_number(r["measured_ratio_at_default_error"], fmt=".3g"),
-            "–" if not bound else format_number(r["ratio_at_default_error"], fmt=".3g"),
+            f"{bound}{_num(r['peer_seconds_at_default_error_measured'], 1e3)} ms ({how})",
+            bound + _num(r["measured_ratio_at_default_error"], fmt=".3g"),
+            "–" if not bound else _num(r["ratio_at_default_error"], fmt=".3g"),
         ]
 
     lines += _table(
@@ -248,13 +246,13 @@ def markdown(bench: Bench, with_plots: bool = True) -> str:
             [
                 r["scene"],
                 r["peer"],
-                format_number(r["default_seconds"], 1e3),
-                format_number(r["default_error"], 1 / INCH, ".2e"),
+                _num(r["default_seconds"], 1e3),
+                _num(r["default_error"], 1 / INCH, ".2e"),
                 *at_default(r),
                 r["peer_point"],
-                format_number(r["peer_point_seconds"], 1e3),
-                format_number(r["peer_point_error"], 1 / INCH, ".2e"),
-                format_number(r["ratio_at_peer_error"], fmt=".3g") + f" ({HOW[r['how_campipe']]})",
+                _num(r["peer_point_seconds"], 1e3),
+                _num(r["peer_point_error"], 1 / INCH, ".2e"),
+                _num(r["ratio_at_peer_error"], fmt=".3g") + f" ({HOW[r['how_campipe']]})",
             ]
             for r in bench.ratios
         ],
@@ -273,10 +271,10 @@ def markdown(bench: Bench, with_plots: bool = True) -> str:
                 [
                     r["scene"],
                     p["setting"],
-                    format_number(p["error"], 1 / INCH, ".2e"),
-                    format_number(p["seconds"], 1e3),
-                    format_number(p["campipe_seconds"], 1e3) + f" ({HOW[p['how_campipe']]})",
-                    format_number(p["ratio"], fmt=".3g"),
+                    _num(p["error"], 1 / INCH, ".2e"),
+                    _num(p["seconds"], 1e3),
+                    _num(p["campipe_seconds"], 1e3) + f" ({HOW[p['how_campipe']]})",
+                    _num(p["ratio"], fmt=".3g"),
                 ]
                 for r in ladders
                 for p in r["ladder"]
@@ -290,9 +288,7 @@ def markdown(bench: Bench, with_plots: bool = True) -> str:
                 f"≥ {g['goal']:g}× faster than {peer} at every point of its ladder with a "
                 "valve-lift error up to: "
                 + "; ".join(
-                    f"{scene} {format_number(e, 1 / INCH, '.1e')} in"
-                    if finite(e)
-                    else f"{scene} none"
+                    f"{scene} {_num(e, 1 / INCH, '.1e')} in" if finite(e) else f"{scene} none"
                     for scene, e in below.items()
                 )
                 + "."
@@ -308,7 +304,7 @@ def markdown(bench: Bench, with_plots: bool = True) -> str:
         )
         lines.append(
             f"- newmark-linear for {a['newmark_target'] / INCH:g} in: "
-            f"{format_number(a['newmark_seconds_at_target'], 1e3)} ms/case ({HOW[a['how']]})"
+            f"{_num(a['newmark_seconds_at_target'], 1e3)} ms/case ({HOW[a['how']]})"
             + (
                 f"; cheapest ladder point meeting it: {cheapest['setting']}, "
                 f"{cheapest['seconds'] * 1e3:.3g} ms/case, error {cheapest['error'] / INCH:.2e}"
@@ -316,14 +312,14 @@ def markdown(bench: Bench, with_plots: bool = True) -> str:
                 if cheapest
                 else "; no ladder point meets it"
             )
-            + f". Ratio newmark/default: {format_number(a['ratio'])}."
+            + f". Ratio newmark/default: {_num(a['ratio'])}."
         )
         if a.get("contacts_only_seconds"):
             lines.append(
                 f"- default sampling only the contact coordinates (what a study that records "
                 f"no q or member loads runs): error {a['contacts_only_error'] / INCH:.2e} in "
                 f"in {a['contacts_only_seconds'] * 1e3:.3g} ms/case. Ratio newmark/that: "
-                f"{format_number(a['ratio_contacts_only'])}."
+                f"{_num(a['ratio_contacts_only'])}."
             )
     if bench.throughput:
         lines += ["", "## Throughput: a 256-case batch (issue 3)", ""]
@@ -342,10 +338,10 @@ def markdown(bench: Bench, with_plots: bool = True) -> str:
                     t["integrator"],
                     str(t["n_cases"]),
                     str(t["workers"]),
-                    format_number(t["revolutions"]),
+                    _num(t["revolutions"]),
                     str(t["case_steps"]),
-                    format_number(t["seconds"], fmt=".3f"),
-                    format_number(t["rate"], fmt=".3g"),
+                    _num(t["seconds"], fmt=".3f"),
+                    _num(t["rate"], fmt=".3g"),
                 ]
                 for t in bench.throughput
             ],
@@ -380,12 +376,10 @@ def markdown(bench: Bench, with_plots: bool = True) -> str:
                     p["layer"],
                     str(p["n_cases"]),
                     str(p["workers"]),
-                    format_number(p["seconds"], fmt=".3g"),
-                    format_number(p["per_case"], 1e3),
-                    format_number(p["archive_bytes"] / 1e6) if p["archive_bytes"] else "–",
-                    format_number(p["archive_bytes"] / p["n_cases"] / 1e3)
-                    if p["archive_bytes"]
-                    else "–",
+                    _num(p["seconds"], fmt=".3g"),
+                    _num(p["per_case"], 1e3),
+                    _num(p["archive_bytes"] / 1e6) if p["archive_bytes"] else "–",
+                    _num(p["archive_bytes"] / p["n_cases"] / 1e3) if p["archive_bytes"] else "–",
                 ]
                 for p in bench.scaling
             ],
@@ -411,12 +405,12 @@ def markdown(bench: Bench, with_plots: bool = True) -> str:
             [
                 [
                     f["scene"],
-                    format_number(f["tolerance"], 1 / INCH, "g"),
+                    _num(f["tolerance"], 1 / INCH, "g"),
                     f["fidelity"],
-                    format_number(f["mode_cutoff"], fmt=".3g"),
-                    format_number(f["error"], 1 / INCH, ".2e"),
-                    format_number(f["seconds"], 1e3),
-                    format_number(f["full_seconds"], 1e3),
+                    _num(f["mode_cutoff"], fmt=".3g"),
+                    _num(f["error"], 1 / INCH, ".2e"),
+                    _num(f["seconds"], 1e3),
+                    _num(f["full_seconds"], 1e3),
                 ]
                 for f in bench.fidelity
             ],
@@ -426,9 +420,7 @@ def markdown(bench: Bench, with_plots: bool = True) -> str:
         [c[1] or c[0] for c in COLUMNS],
         [
             [
-                format_number(r.get(k), s, ".3g" if k in ("seconds",) else ".2e")
-                if s
-                else format_number(r.get(k))
+                _num(r.get(k), s, ".3g" if k in ("seconds",) else ".2e") if s else _num(r.get(k))
                 for k, _, s in COLUMNS
             ]
             for r in bench.rows

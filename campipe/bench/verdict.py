@@ -179,10 +179,10 @@ def _issue4(bench: Bench) -> list[Goal]:
         )
         return goals
     cheapest = a["newmark_cheapest_meeting"]
-    note = "newmark-linear's time / the default's; newmark-linear's interpolated on its ladder"
+    note = "newmark-linear's time, interpolated on its ladder, over the default's"
     if a["how"] == "cheapest":
         note = (
-            f"newmark-linear's time / the default's; its cheapest ladder point "
+            f"newmark-linear's time over the default's; its cheapest ladder point "
             f"({cheapest['setting']}) already reaches the target"
         )
     if finite(a.get("ratio_contacts_only")):
@@ -233,7 +233,7 @@ def _events_text(counts: dict | None) -> str:
     present = {k: n for k, n in counts.items() if n}
     if not present:
         return " (the reference has none)"
-    listed = ", ".join(f"{n} {k.replace('_', ' ')}" for k, n in present.items())
+    listed = ", ".join(f"{n} × {k.replace('_', ' ')}" for k, n in present.items())
     return f" (the reference's: {listed})"
 
 
