@@ -571,7 +571,13 @@ def replay(archive, case_ids, where, output, spawn, magnify) -> None:
     help="Write bench.png (needs matplotlib: pip install 'campipe[plot]').",
 )
 def bench(quick, output, scenes, scaling, plot) -> None:
-    """Speed against error: the suite of scenes, every integrator and fidelity, peers, scaling."""
+    """Speed against error: the suite of scenes, every integrator and fidelity, peers, scaling.
+
+    Ends with the verdict: each goal with its measured figure (reached, not reached or not
+    shown), each reference cross-check (agree or disagree, and why). Exit status 1 when a
+    cross-check disagrees.
+    """
+    from campipe.bench import verdict
     from campipe.bench.report import write_report
     from campipe.bench.run import run_bench
 
@@ -592,13 +598,8 @@ def bench(quick, output, scenes, scaling, plot) -> None:
     except ValueError as exc:
         raise click.UsageError(str(exc)) from None
     paths = write_report(result, output, with_plot=plot)
-    for g_peer, g in result.goals.items():
-        bound = "≥ " if g["peer_not_reaching_default_error"] else ""
-        click.echo(
-            f"default vs {g_peer} (goal {g['goal']:g}x), smallest over the suite: "
-            f"{bound}{g['min_ratio_at_default_error']:.3g}x at the default's error, "
-            f"{g['min_ratio_at_peer_error']:.3g}x at the peer's own point",
-            err=True,
-        )
     for path in paths.values():
         click.echo(str(path))
+    click.echo(verdict.text(result))
+    if not verdict.all_agree(result):
+        sys.exit(1)

@@ -1,6 +1,7 @@
-"""Draw a PNG of a replay from its recording: the README's picture of a bouncing case.
+"""Draw a PNG of a replay from its recording: the picture of a bouncing case in the README and
+docs/replay.md.
 
-The viewer needs a GPU, so the README shows this instead: the same recorded data read back
+The viewer needs a GPU, so the docs show this instead: the same recorded data read back
 with ``rerun.chunk.RrdReader`` (:func:`campipe.io.rerun_replay.read_recording`) and drawn with
 matplotlib (``pip install 'campipe[plot]'``): the mechanism sketch at a few cam angles beside
 the lift, force and contact-state plots, with the events marked.

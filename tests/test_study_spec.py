@@ -431,9 +431,9 @@ def test_settings_the_engine_refuses_are_refused_before_running():
     assert error.paths == ["run.fidelity"] and "modal-exact" in str(error)
 
 
-def test_the_readme_spec_example_is_valid():
-    text = (ROOT / "README.md").read_text()
-    block = text.split("### The spec")[1].split("```yaml")[1].split("```")[0]
+def test_the_docs_spec_example_is_valid():
+    text = (ROOT / "docs" / "studies.md").read_text()
+    block = text.split("## The spec")[1].split("```yaml")[1].split("```")[0]
     raw = yaml.safe_load(block)
     assert not list(jsonschema.Draft202012Validator(study_schema()).iter_errors(raw))
     study = expand(check_spec(raw))

@@ -9,7 +9,12 @@ probe.
 - :mod:`~campipe.bench.fidelity`: which fidelity level a case needs for a tolerance.
 - :mod:`~campipe.bench.scaling`: time against number of cases and workers, archive size.
 - :mod:`~campipe.bench.run`: the whole bench as one call; :mod:`~campipe.bench.report` writes
-  its table and plot (the only module here that writes files).
+  its table and plot and reads its json back (the only module here that writes files, with
+  :mod:`~campipe.bench.pages`).
+- :mod:`~campipe.bench.verdict`: each goal reached or not, each reference cross-check agreeing
+  or not, and why.
+- :mod:`~campipe.bench.pages`: the documentation's bench figures, generated from a
+  ``bench.json`` (``python -m campipe.bench.pages``).
 
 Nothing here is imported by ``import campipe``.
 """

@@ -1,12 +1,14 @@
 """The bench's files: a markdown report, the rows as CSV, everything as JSON, and PNG plots of
 wall time against the valve-lift error and against the event errors (separation angle, seating
-velocity). The only module of ``campipe.bench`` that writes files; matplotlib (the ``plot``
-extra) is imported only inside :func:`plot`.
+velocity); :func:`read_json` reads a run back. With ``campipe.bench.pages`` the only module of
+``campipe.bench`` that writes files; matplotlib (the ``plot`` extra) is imported only inside
+:func:`plot`.
 """
 
 from __future__ import annotations
 
 import csv
+import io
 import json
 import math
 import operator
@@ -14,7 +16,9 @@ from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
+from campipe.bench import verdict
 from campipe.bench.run import FAMILIES, Bench
+from campipe.bench.verdict import finite
 from campipe.constants import INCH
 
 #: File names written into the output folder.
@@ -149,7 +153,7 @@ def markdown(bench: Bench, with_plots: bool = True) -> str:
             f"({FILES['events_plot']})",
             "",
         ]
-    lines += ["## The reference, checked", ""]
+    lines += ["## Verdict", "", verdict.markdown(bench), "", "## The reference, checked", ""]
     lines.append(
         f"Second reference: {m['reference_check']}. Stated agreement: valve lift "
         f"{m['agreement']['valve_lift'] / INCH:g} in, event angles "
@@ -278,46 +282,19 @@ def markdown(bench: Bench, with_plots: bool = True) -> str:
                 for p in r["ladder"]
             ],
         )
-    if bench.goals:
-        lines += ["", "Goals (issue 7), smallest ratio over the suite:", ""]
-        for peer, g in bench.goals.items():
-            short = g["peer_not_reaching_default_error"]
+    for peer, g in bench.goals.items():
+        below = g.get("goal_reached_below_error", {})
+        if below:
+            lines.append("")
             lines.append(
-                f"- default ≥ {g['goal']:g}× faster than {peer} at equal valve-lift error, "
-                f"the peer's time to reach the default's error (the issue's ratio): "
-                f"{'≥ ' if short else ''}{_num(g['min_ratio_at_default_error'])}× measured "
-                f"({g['verdict_at_default_error']})"
-                + (
-                    f"; a lower bound where the peer's ladder does not reach the default's "
-                    f"error ({', '.join(short)}); extrapolated "
-                    f"{_num(g['min_ratio_at_default_error_extrapolated'])}×"
-                    if short
-                    else ""
+                f"≥ {g['goal']:g}× faster than {peer} at every point of its ladder with a "
+                "valve-lift error up to: "
+                + "; ".join(
+                    f"{scene} {_num(e, 1 / INCH, '.1e')} in" if finite(e) else f"{scene} none"
+                    for scene, e in below.items()
                 )
                 + "."
             )
-            lines.append(
-                f"  - At the peer's own point, the time campipe needs for the peer's error: "
-                f"{_num(g['min_ratio_at_peer_error'])}× "
-                f"({'≥' if g['reached_at_peer_error'] else 'below'} {g['goal']:g}×)."
-                + (
-                    f" campipe's ladder does not reach the peer's error on: "
-                    f"{', '.join(g['campipe_not_reaching'])}."
-                    if g["campipe_not_reaching"]
-                    else ""
-                )
-            )
-            below = g.get("goal_reached_below_error", {})
-            if below:
-                lines.append(
-                    f"  - ≥ {g['goal']:g}× at every point of the {peer} ladder with a valve-lift "
-                    "error up to: "
-                    + "; ".join(
-                        f"{scene} {_num(e, 1 / INCH, '.1e')} in" if e == e else f"{scene} none"
-                        for scene, e in below.items()
-                    )
-                    + "."
-                )
     a = bench.accuracy_for_cost
     if a:
         lines += ["", "## Accuracy for cost on 11000 rpm (issue 4)", ""]
@@ -454,24 +431,31 @@ def markdown(bench: Bench, with_plots: bool = True) -> str:
     return "\n".join(lines) + "\n"
 
 
+def csv_text(bench: Bench) -> str:
+    """The rows, one per scene × setting, in the report's units, as CSV."""
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    w.writerow([c[1] or c[0] for c in COLUMNS])
+    for r in bench.rows:
+        w.writerow(
+            [
+                (
+                    ""
+                    if r.get(k) is None or (isinstance(r.get(k), float) and math.isnan(r[k]))
+                    else r[k] * s
+                    if s
+                    else r[k]
+                )
+                for k, _, s in COLUMNS
+            ]
+        )
+    return buf.getvalue()
+
+
 def write_csv(bench: Bench, path: Path) -> Path:
-    """The rows, one per scene × setting, in the report's units."""
+    """:func:`csv_text` into ``path``."""
     with open(path, "w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow([c[1] or c[0] for c in COLUMNS])
-        for r in bench.rows:
-            w.writerow(
-                [
-                    (
-                        ""
-                        if r.get(k) is None or (isinstance(r.get(k), float) and math.isnan(r[k]))
-                        else r[k] * s
-                        if s
-                        else r[k]
-                    )
-                    for k, _, s in COLUMNS
-                ]
-            )
+        fh.write(csv_text(bench))
     return path
 
 
@@ -487,7 +471,7 @@ def plot(bench: Bench, path: Path, errors: tuple[tuple, ...] = (VALVE_LIFT,)) ->
         (scene, err)
         for err in errors
         for scene in dict.fromkeys(r["scene"] for r in bench.rows)
-        if any(r["scene"] == scene and _finite(r.get(err[0])) for r in bench.rows)
+        if any(r["scene"] == scene and finite(r.get(err[0])) for r in bench.rows)
     ]
     ncol = max(1, min(3, len(panels)))
     nrow = max(1, math.ceil(len(panels) / ncol))
@@ -501,7 +485,7 @@ def plot(bench: Bench, path: Path, errors: tuple[tuple, ...] = (VALVE_LIFT,)) ->
         "solve_ivp": ("C1", "v-"),
     }
     for ax, (scene, (key, label, scale, floor)) in zip(axes.flat, panels, strict=False):
-        mine = [r for r in bench.rows if r["scene"] == scene and _finite(r.get(key))]
+        mine = [r for r in bench.rows if r["scene"] == scene and finite(r.get(key))]
 
         def x_of(r: dict, key=key, scale=scale, floor=floor) -> float:
             return max(r[key] * scale, floor)
@@ -569,8 +553,10 @@ def plot(bench: Bench, path: Path, errors: tuple[tuple, ...] = (VALVE_LIFT,)) ->
     return path
 
 
-def _finite(x) -> bool:
-    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+def read_json(path: str | Path) -> Bench:
+    """The :class:`Bench` a ``bench.json`` holds (as :func:`write_report` wrote it: NaN and inf
+    are null, so a missing figure reads as None)."""
+    return Bench(**json.loads(Path(path).read_text()))
 
 
 def write_report(bench: Bench, directory: str | Path, with_plot: bool = True) -> dict[str, Path]:

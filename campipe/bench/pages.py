@@ -1,0 +1,575 @@
+"""The documentation's bench figures, generated from a ``bench.json``: one source of truth.
+
+A page holds generated blocks between two markers::
+
+    <!-- generated: bench-verdict -->
+    ... written by this module, never by hand ...
+    <!-- end generated -->
+
+:func:`blocks` turns a :class:`~campipe.bench.run.Bench` into the text of every block,
+:func:`render` puts them into a page; the prose around them is written by hand and carries no
+figure. The bench's own report files (``bench.md``, ``bench.csv`` beside the json) are
+rendered from the same json by ``campipe.bench.report``.
+
+From the repository's root::
+
+    python -m campipe.bench.pages           # README.md, docs/bench.md, docs/bench/bench.{md,csv}
+    python -m campipe.bench.pages --check   # exit 1 if a committed file differs (a test runs it)
+    python -m campipe.bench.pages --plots   # also re-draw docs/bench/*.png (needs matplotlib)
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import re
+import sys
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+from campipe.bench import report, verdict
+from campipe.bench.run import (
+    ACCURACY_DEFAULT_ERROR,
+    ACCURACY_SCENE,
+    THESIS_STEP,
+    Bench,
+)
+from campipe.bench.verdict import finite, format_short
+from campipe.constants import INCH
+
+#: The committed latest full run, and the pages generated from it (relative to the root).
+BENCH_JSON = Path("docs/bench/bench.json")
+PAGES = (Path("README.md"), Path("docs/bench.md"))
+#: A generated block: its opening marker (with the block's name), its body, its end marker.
+BLOCK = re.compile(
+    r"(?P<open><!-- generated: (?P<name>[a-z0-9-]+) -->\n)(?P<body>.*?)"
+    r"(?P<close><!-- end generated -->)",
+    re.DOTALL,
+)
+
+
+def _ms(seconds: float | None, digits: int = 3) -> str:
+    return format_short(seconds * 1e3, digits) if finite(seconds) else "–"
+
+
+def _inch(metres: float | None, digits: int = 1) -> str:
+    return format_short(metres / INCH, digits) if finite(metres) else "–"
+
+
+def _duration(seconds: float) -> str:
+    return (
+        f"{format_short(seconds * 1e3, 2)} ms" if seconds < 0.1 else f"{format_short(seconds, 2)} s"
+    )
+
+
+def _span(values: Sequence[float], digits: int = 2, unit: str = "") -> str:
+    """The range of the finite values, "a–b unit" ("a unit" when they round alike)."""
+    kept = [v for v in values if finite(v)]
+    if not kept:
+        return "–"
+    low, high = format_short(min(kept), digits), format_short(max(kept), digits)
+    return (low if low == high else f"{low}–{high}") + (f" {unit}" if unit else "")
+
+
+def _table(header: list[str], rows: list[list[str]]) -> list[str]:
+    lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
+    return lines + ["| " + " | ".join(r) + " |" for r in rows]
+
+
+def _scenes(bench: Bench) -> list[str]:
+    return list(dict.fromkeys(r["scene"] for r in bench.rows))
+
+
+def _rows(bench: Bench, scene: str, family: str | None = None) -> list[dict]:
+    return [
+        r for r in bench.rows if r["scene"] == scene and (family is None or r["family"] == family)
+    ]
+
+
+def _pick(rows: list[dict], test: Callable[[dict], object]) -> dict | None:
+    return next((r for r in rows if test(r)), None)
+
+
+def _ratio(bench: Bench, scene: str, peer: str) -> dict | None:
+    return _pick(bench.ratios, lambda r: r["scene"] == scene and r["peer"] == peer)
+
+
+# -- the blocks ---------------------------------------------------------------------------------
+
+
+def run_block(bench: Bench) -> str:
+    """Which run the figures come from."""
+    m = bench.meta
+    return (
+        f"The {'`--quick`' if bench.quick else 'full'} run of {m['date']} on {m['machine']} "
+        f"(Python {m['python']}, numpy {m['numpy']}, scipy {m['scipy']}, numba {m['numba']}): "
+        f"{bench.seconds:.0f} s of wall time, load average "
+        f"{format_short(m['load_average_at_start'], 2)} at the start and "
+        f"{format_short(m.get('load_average_at_end', math.nan), 2)} at the end."
+    )
+
+
+def verdict_block(bench: Bench) -> str:
+    """The verdict, as ``campipe bench`` ends with it, after the line naming the run."""
+    return run_block(bench) + "\n\n" + verdict.markdown(bench)
+
+
+def setup_block(bench: Bench) -> str:
+    """What the bench runs: the scenes, the ladders, the timing, the references."""
+    m = bench.meta
+    lad = m["ladder"]
+    scenes = m["scenes"]
+    turns = {format_short(s["revolutions"]) for s in scenes.values()}
+    lines = [
+        f"- **{len(scenes)} scenes**, each {' or '.join(sorted(turns))} cam turns sampled every "
+        f"{format_short(m['output_every_deg'])} deg: "
+        + "; ".join(f"`{name}`, {s['description']}" for name, s in scenes.items())
+        + ".",
+        "- **Ladders**: modal-exact at event tolerances "
+        + ", ".join(format_short(t) for t in lad["modal_tolerances"])
+        + " s"
+        + (
+            " and step caps " + ", ".join(f"{c * 1e6:g}" for c in lad["modal_caps"]) + " µs"
+            if lad["modal_caps"]
+            else ""
+        )
+        + "; reduced fidelity at cut-offs "
+        + ", ".join(format_short(c) for c in lad["reduced_cutoffs"])
+        + " rad/s; contacts only at "
+        + ", ".join(
+            "full fidelity" if c is None else f"cut-off {format_short(c)} rad/s"
+            for c in lad["contacts_only"]
+        )
+        + "; newmark-linear at steps "
+        + ", ".join(f"{dt * 1e6:g}" for dt in lad["newmark_steps"])
+        + f" µs; solve_ivp {lad['ivp_method']} at rtol "
+        + ", ".join(format_short(r) for r in lad["ivp_rtols"])
+        + ".",
+        f"- **Timing**: {m['timing']}.",
+        f"- **Reference**: {m['reference']}. **Its check**: {m['reference_check']}, stated "
+        f"agreement {format_short(m['agreement']['valve_lift'] / INCH)} in of valve lift, "
+        f"{format_short(math.degrees(m['agreement']['event_angle']))} deg in every event angle "
+        f"and {format_short(math.degrees(m['agreement']['separation']))} deg in the separation "
+        f"per turn, {format_short(m['agreement']['seating_velocity'] / INCH)} in/s in the "
+        "seating and cam-impact velocities.",
+        "- " + run_block(bench),
+    ]
+    return "\n".join(lines)
+
+
+def _point(r: dict | None) -> str:
+    """A run's time and valve-lift error."""
+    return f"{_ms(r['seconds'])} ({_inch(r['valve_lift'])})" if r else "–"
+
+
+def _at_default(r: dict | None) -> str:
+    """A peer's measured time ratio at the default's error; "> " marks a lower bound."""
+    if r is None:
+        return "–"
+    bound = "" if r["peer_reaches_default_error"] else "> "
+    return f"{bound}{format_short(r['measured_ratio_at_default_error'], 2)}×"
+
+
+def scenes_block(bench: Bench) -> str:
+    """Per scene: the default, contacts only, the thesis algorithm at its step, solve_ivp at its
+    most accurate point, and the time ratios."""
+    out = []
+    for scene in _scenes(bench):
+        mine = _rows(bench, scene)
+        default = _pick(mine, lambda r: r.get("default"))
+        lean = _pick(mine, lambda r: r["family"] == "contacts only" and r["setting"] == "full")
+        thesis = _pick(mine, lambda r: r.get("thesis"))
+        ivp = [r for r in mine if r["family"] == "solve_ivp" and finite(r["valve_lift"])]
+        best = min(ivp, key=lambda r: r["valve_lift"]) if ivp else None
+        nm = _ratio(bench, scene, "newmark-linear")
+        out.append(
+            [
+                scene,
+                _point(default),
+                _ms(lean["seconds"]) if lean else "–",
+                _point(thesis),
+                f"{_point(best)}, {best['setting'].split(' ', 1)[1]}" if best else "–",
+                _at_default(nm),
+                _at_default(_ratio(bench, scene, "solve_ivp")),
+                f"{format_short(nm['ratio_at_peer_error'], 2)}×" if nm else "–",
+            ]
+        )
+    header = [
+        "scene",
+        "default: ms/case (valve err, in)",
+        "contacts only: ms",
+        f"newmark-linear {THESIS_STEP * 1e6:g} µs: ms (err, in)",
+        "solve_ivp, most accurate: ms (err, in), setting",
+        "vs newmark-linear at the default's error",
+        "vs solve_ivp at the default's error",
+        f"vs newmark-linear {THESIS_STEP * 1e6:g} µs at its error",
+    ]
+    return "\n".join(_table(header, out))
+
+
+def ratios_block(bench: Bench) -> str:
+    """How far the peers' ladders fall short of the default's error, and the ratio along
+    newmark-linear's ladder."""
+    lines = []
+    steps = bench.meta["ladder"]["newmark_steps"]
+    for peer in ("newmark-linear", "solve_ivp"):
+        short = [
+            r for r in bench.ratios if r["peer"] == peer and not r["peer_reaches_default_error"]
+        ]
+        if not short:
+            continue
+        factors = []
+        for r in short:
+            pts = [p for p in _rows(bench, r["scene"], peer) if finite(p["valve_lift"])]
+            factors.append(min(p["valve_lift"] for p in pts) / r["default_error"])
+        finest = (
+            f"at {min(steps) * 1e6:g} µs, {format_short(THESIS_STEP / min(steps))} times the "
+            "thesis's steps"
+            if peer == "newmark-linear"
+            else f"at rtol {min(bench.meta['ladder']['ivp_rtols']):g}"
+        )
+        extrapolated = [r["ratio_at_default_error"] for r in short if r["how"] == "extrapolated"]
+        lines.append(
+            f"- {peer}'s most accurate point ({finest}) is still {_span(factors, 1)} times less "
+            f"accurate than the default on {len(short)} of {len(_scenes(bench))} scenes "
+            f"({', '.join(r['scene'] for r in short)}); extrapolating along its time/error "
+            f"curve puts the ratio at the default's error at {_span(extrapolated, 2)}×."
+        )
+    nm = [r for r in bench.ratios if r["peer"] == "newmark-linear"]
+    if nm:
+        accuracy = [r["peer_point_error"] / r["default_error"] for r in nm]
+        lines.append(
+            f"- At newmark-linear's {THESIS_STEP * 1e6:g} µs step the default is "
+            f"{_span([r['ratio_at_peer_error'] for r in nm], 2)}× faster for the step's error, "
+            f"while it is {_span(accuracy, 1)} times more accurate itself."
+        )
+    goal = bench.goals.get("newmark-linear")
+    if goal and goal.get("goal_reached_below_error"):
+        lines.append(
+            f"- The ratio is at least {goal['goal']:g}× at every point of newmark-linear's ladder "
+            "with a valve-lift error up to "
+            + "; ".join(
+                f"{_inch(e)} in ({scene})" if finite(e) else f"no point ({scene})"
+                for scene, e in goal["goal_reached_below_error"].items()
+            )
+            + "."
+        )
+    if nm:
+        lines += [
+            "",
+            "The ratio at each step of newmark-linear's ladder (its time over the "
+            "time the default integrator needs for that step's error):",
+            "",
+        ]
+        scenes = [r["scene"] for r in nm]
+        settings = list(dict.fromkeys(p["setting"] for r in nm for p in r["ladder"]))
+        by = {(r["scene"], p["setting"]): p for r in nm for p in r["ladder"]}
+        lines += _table(
+            ["newmark-linear step", *scenes],
+            [
+                [
+                    s,
+                    *(
+                        f"{format_short(by[sc, s]['ratio'], 2)}× ({_inch(by[sc, s]['error'])} in)"
+                        if (sc, s) in by
+                        else "–"
+                        for sc in scenes
+                    ),
+                ]
+                for s in settings
+            ],
+        )
+    return "\n".join(lines)
+
+
+def issue4_block(bench: Bench) -> str:
+    """Accuracy for cost on the separation scene."""
+    a = bench.accuracy_for_cost
+    if not a:
+        return f"{ACCURACY_SCENE} was not run."
+    turns = bench.meta["scenes"][ACCURACY_SCENE]["revolutions"]
+    text = (
+        f"On {ACCURACY_SCENE} the default reaches a valve-lift error of "
+        f"{_inch(a['default_error'], 2)} in (goal: below {_inch(ACCURACY_DEFAULT_ERROR)} in) in "
+        f"{_ms(a['default_seconds'])} ms per case ({a['default_steps']} grid steps, "
+        f"{format_short(turns)} turns)."
+    )
+    cheapest = a["newmark_cheapest_meeting"]
+    if cheapest:
+        text += (
+            f" newmark-linear's cheapest ladder point meeting {_inch(a['newmark_target'])} in "
+            f"is {cheapest['setting']} ({_inch(cheapest['error'], 2)} in, {cheapest['steps']} "
+            f"steps) at {_ms(cheapest['seconds'])} ms"
+        )
+        text += ", the ladder's coarsest step" if a["how"] == "cheapest" else ""
+        text += "."
+    text += (
+        f" newmark-linear's time for {_inch(a['newmark_target'])} in over the default's: "
+        f"**{format_short(a['ratio'])}×**"
+    )
+    if finite(a.get("ratio_contacts_only")):
+        text += (
+            f"; sampling only the contact coordinates the default takes "
+            f"{_ms(a['contacts_only_seconds'])} ms, **{format_short(a['ratio_contacts_only'])}×**"
+        )
+    return text + "."
+
+
+def throughput_block(bench: Bench) -> str:
+    """The 256-case batch: case-steps per second on one and two workers."""
+    if not bench.throughput:
+        return "Not measured in this run (`--no-scaling`)."
+    lines = _table(
+        [
+            "integrator",
+            "cases",
+            "workers",
+            "turns per case",
+            "case-steps",
+            "seconds",
+            "case-steps/s",
+        ],
+        [
+            [
+                t["integrator"],
+                str(t["n_cases"]),
+                str(t["workers"]),
+                format_short(t["revolutions"]),
+                format_short(t["case_steps"]),
+                format_short(t["seconds"]),
+                format_short(t["rate"]),
+            ]
+            for t in bench.throughput
+        ],
+    )
+    one = _pick(
+        bench.throughput, lambda t: t["integrator"] == "newmark-linear" and t["workers"] == 1
+    )
+    if one:
+        lines += [
+            "",
+            f"One worker: {format_short(1e9 / one['rate'], 2)} ns per newmark-linear case-step.",
+        ]
+    return "\n".join(lines)
+
+
+def _change(r: dict | None, default: dict) -> str:
+    """A run's time against the default's, in per cent."""
+    if r is None:
+        return "–"
+    return f"{round((r['seconds'] / default['seconds'] - 1) * 100):+d} %"
+
+
+def fidelity_block(bench: Bench) -> str:
+    """Contacts only and the reduced fidelity against the default, per scene; the probe's
+    recommendation."""
+    cutoffs = bench.meta["ladder"]["reduced_cutoffs"]
+    rows = []
+    for scene in _scenes(bench):
+        mine = _rows(bench, scene)
+        default = _pick(mine, lambda r: r.get("default"))
+        if default is None:
+            continue
+        lean = _pick(mine, lambda r: r["family"] == "contacts only" and r["setting"] == "full")
+
+        reduced = {r["setting"]: r for r in _rows(bench, scene, "reduced")}
+        row = [scene, _ms(default["seconds"]), _change(lean, default)]
+        for c in cutoffs:
+            r = reduced.get(f"cutoff {c:.3g} rad/s")
+            row.append(f"{_change(r, default)} ({_inch(r['valve_lift'])} in)" if r else "–")
+        rows.append(row)
+    lines = _table(
+        [
+            "scene",
+            "default ms/case",
+            "contacts only: time",
+            *(f"reduced {format_short(c)} rad/s: time (err)" for c in cutoffs),
+        ],
+        rows,
+    )
+    if bench.fidelity:
+        lines += [
+            "",
+            "The level `campipe.bench.fidelity.recommend` picks for each scene and tolerance "
+            "(the valve-lift error against the full model's; a timed probe):",
+            "",
+        ]
+        lines += _table(
+            [
+                "scene",
+                "tolerance [in]",
+                "level",
+                "cut-off [rad/s]",
+                "its error [in]",
+                "ms/case",
+                "full ms/case",
+            ],
+            [
+                [
+                    f["scene"],
+                    _inch(f["tolerance"]),
+                    f["fidelity"],
+                    format_short(f["mode_cutoff"]) if finite(f["mode_cutoff"]) else "–",
+                    _inch(f["error"], 2),
+                    _ms(f["seconds"]),
+                    _ms(f["full_seconds"]),
+                ]
+                for f in bench.fidelity
+            ],
+        )
+        for tol in dict.fromkeys(f["tolerance"] for f in bench.fidelity):
+            mine = [f for f in bench.fidelity if f["tolerance"] == tol]
+            full = [f["scene"] for f in mine if f["fidelity"] == "full"]
+            nr = len(mine) - len(full)
+            lines += [
+                "",
+                f"At {_inch(tol)} in: "
+                + (
+                    f"the full model on {', '.join(full)}, a reduced level on the other {nr}."
+                    if full
+                    else f"a reduced level on all {nr} scenes."
+                ),
+            ]
+    return "\n".join(lines)
+
+
+def scaling_block(bench: Bench) -> str:
+    """Time against cases and workers, engine and study layer, and the archive's size."""
+    if not bench.scaling:
+        return "Not measured in this run (`--no-scaling`)."
+    at = {(p["layer"], p["n_cases"], p["workers"]): p for p in bench.scaling}
+    counts = sorted({p["n_cases"] for p in bench.scaling})
+    workers = sorted({p["workers"] for p in bench.scaling})
+    layers = ("engine", "study")
+    rows = []
+    for n in counts:
+        row = [str(n)]
+        for layer in layers:
+            for w in workers:
+                p = at.get((layer, n, w))
+                row.append(_duration(p["seconds"]) if p else "–")
+        study = next((at[k] for k in at if k[0] == "study" and k[1] == n), None)
+        row.append(
+            f"{format_short(study['archive_bytes'] / n / 1e3)} kB"
+            if study and study["archive_bytes"]
+            else "–"
+        )
+        rows.append(row)
+    lines = _table(
+        [
+            "cases",
+            *(f"{layer}, {w} worker{'s' if w > 1 else ''}" for layer in layers for w in workers),
+            "archive per case",
+        ],
+        rows,
+    )
+    large = counts[-2:]
+    if len(counts) > 2:
+        parts = []
+        for layer in layers:
+            for w in workers:
+                per = [at[layer, n, w]["per_case"] for n in large if (layer, n, w) in at]
+                if per:
+                    span = _span([p * 1e3 for p in per], 2, "ms")
+                    parts.append(f"{layer} on {w} worker{'s' if w > 1 else ''} {span}")
+        top, one, most = max(counts), workers[0], workers[-1]
+        gains = [
+            f"{layer} {format_short(at[k1]['seconds'] / at[k2]['seconds'], 2)}×"
+            for layer in layers
+            if (k1 := (layer, top, one)) in at and (k2 := (layer, top, most)) in at
+        ]
+        lines += [
+            "",
+            f"Per case at {' and '.join(map(str, large))} cases: "
+            + "; ".join(parts)
+            + "."
+            + (
+                f" At {top} cases the second worker gives " + ", ".join(gains) + "."
+                if len(workers) > 1 and gains
+                else ""
+            ),
+        ]
+    return "\n".join(lines)
+
+
+#: Every block a page may hold, by name.
+BLOCKS: dict[str, Callable[[Bench], str]] = {
+    "bench-verdict": verdict_block,
+    "bench-setup": setup_block,
+    "bench-scenes": scenes_block,
+    "bench-ratios": ratios_block,
+    "bench-issue4": issue4_block,
+    "bench-throughput": throughput_block,
+    "bench-fidelity": fidelity_block,
+    "bench-scaling": scaling_block,
+}
+
+
+def blocks(bench: Bench) -> dict[str, str]:
+    """The text of every block, from ``bench``."""
+    return {name: make(bench) for name, make in BLOCKS.items()}
+
+
+def block_names(text: str) -> list[str]:
+    """The names of the generated blocks in ``text``, in order."""
+    return [m["name"] for m in BLOCK.finditer(text)]
+
+
+def render(text: str, generated: dict[str, str]) -> str:
+    """``text`` with each generated block's body replaced by ``generated[name]``."""
+
+    def fill(m: re.Match) -> str:
+        name = m["name"]
+        if name not in generated:
+            raise KeyError(f"unknown generated block {name!r}; known: {', '.join(generated)}")
+        return f"{m['open']}{generated[name].rstrip()}\n{m['close']}"
+
+    return BLOCK.sub(fill, text)
+
+
+def rendered(bench: Bench, bench_json: Path, pages: Sequence[Path]) -> dict[Path, str]:
+    """What every generated file should hold: each page with its blocks filled, and the
+    bench's report files beside ``bench_json``."""
+    generated = blocks(bench)
+    out = {page: render(page.read_text(encoding="utf-8"), generated) for page in pages}
+    folder = bench_json.parent
+    with_plots = (folder / report.FILES["plot"]).exists()
+    out[folder / report.FILES["markdown"]] = report.markdown(bench, with_plots)
+    out[folder / report.FILES["csv"]] = report.csv_text(bench)
+    return out
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="python -m campipe.bench.pages",
+        description="Regenerate the documentation's bench figures from a bench.json.",
+    )
+    parser.add_argument("--json", type=Path, default=BENCH_JSON, help=f"default: {BENCH_JSON}")
+    parser.add_argument(
+        "pages", nargs="*", type=Path, default=list(PAGES), help="default: README.md docs/bench.md"
+    )
+    parser.add_argument(
+        "--check", action="store_true", help="change nothing; exit 1 if a file differs"
+    )
+    parser.add_argument("--plots", action="store_true", help="also re-draw the bench's PNG plots")
+    args = parser.parse_args(argv)
+    bench = report.read_json(args.json)
+    stale = []
+    for path, text in rendered(bench, args.json, args.pages).items():
+        # Bytes: the CSV's lines end in \r\n, which reading as text would hide.
+        if not path.exists() or path.read_bytes() != text.encode():
+            stale.append(path)
+            if not args.check:
+                path.write_bytes(text.encode())
+    if args.plots and not args.check:
+        folder = args.json.parent
+        report.plot(bench, folder / report.FILES["plot"])
+        report.plot(bench, folder / report.FILES["events_plot"], report.EVENT_ERRORS)
+    verb = "differs from" if args.check else "rewritten from"
+    for path in stale:
+        print(f"{path}: {verb} {args.json}")
+    return 1 if args.check and stale else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,188 @@
+"""The documentation tells the truth: its bench figures are those the committed bench.json
+holds, and the README's commands and analysis print what it shows."""
+
+import contextlib
+import io
+import re
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from numpy.testing import assert_allclose
+from study_helpers import ROOT, STUDIES
+
+from campipe.bench import pages, report
+from campipe.cli import main
+from campipe.study import load_study
+from campipe.study.execute import run_study
+
+BENCH_JSON = ROOT / pages.BENCH_JSON
+README = ROOT / "README.md"
+BENCH_PAGE = ROOT / "docs" / "bench.md"
+DOCS = [README, *sorted((ROOT / "docs").glob("*.md")), ROOT / "examples" / "README.md"]
+
+
+def test_the_committed_pages_are_generated_from_the_committed_bench_json():
+    bench = report.read_json(BENCH_JSON)
+    expected = pages.rendered(bench, BENCH_JSON, [README, BENCH_PAGE])
+    folder = BENCH_JSON.parent
+    assert set(expected) == {README, BENCH_PAGE, folder / "bench.md", folder / "bench.csv"}
+    for path, text in expected.items():
+        assert path.read_bytes() == text.encode(), (
+            f"{path.relative_to(ROOT)} differs from what {pages.BENCH_JSON} gives: "
+            "run python -m campipe.bench.pages"
+        )
+    assert pages.block_names(README.read_text()) == ["bench-verdict"]
+    assert sorted(pages.block_names(BENCH_PAGE.read_text())) == sorted(pages.BLOCKS)
+
+
+def test_a_figure_that_changes_in_the_json_changes_the_pages():
+    bench = report.read_json(BENCH_JSON)
+    text = README.read_text()
+    row = next(
+        t for t in bench.throughput if t["integrator"] == "newmark-linear" and t["workers"] == 2
+    )
+    row["rate"] = 1.23e7
+    bench.checks[0]["agrees"] = False
+    changed = pages.render(text, pages.blocks(bench))
+    assert changed != text
+    lines = changed.splitlines()
+    issue3 = next(line for line in lines if "case-steps/s on 2 workers" in line)
+    assert issue3.startswith("- **not reached** (issue 3)") and "**1.23e7 case-steps/s**" in issue3
+    first = bench.checks[0]["scene"]
+    assert f"- cross-check on {first}: **disagrees**" in changed
+
+
+def test_the_pages_command_checks_and_rewrites(tmp_path, capsys):
+    folder = tmp_path / "bench"
+    folder.mkdir()
+    json_path = folder / "bench.json"
+    json_path.write_bytes(BENCH_JSON.read_bytes())
+    page = tmp_path / "page.md"
+    stale = "Intro.\n\n<!-- generated: bench-issue4 -->\n1.17×\n<!-- end generated -->\nEnd.\n"
+    page.write_text(stale)
+    args = ["--json", str(json_path), str(page)]
+    assert pages.main(["--check", *args]) == 1
+    assert page.read_text() == stale and not (folder / "bench.csv").exists()
+    assert f"{page}: differs from {json_path}" in capsys.readouterr().out
+    assert pages.main(args) == 0
+    assert pages.main(["--check", *args]) == 0
+    head, body, tail = page.read_text().split("generated")
+    assert head == "Intro.\n\n<!-- " and tail == " -->\nEnd.\n"
+    assert body.startswith(": bench-issue4 -->\nOn separation-11000 the default reaches")
+    assert "**1.17×**" in body  # the committed run's figure, now from the json
+    assert (folder / "bench.csv").read_bytes() == (BENCH_JSON.parent / "bench.csv").read_bytes()
+    page.write_text("<!-- generated: no-such-block -->\n<!-- end generated -->\n")
+    with pytest.raises(KeyError, match="unknown generated block 'no-such-block'"):
+        pages.main(args)
+
+
+def _prose(text: str) -> str:
+    """``text`` without its generated blocks, code, link targets and comments."""
+    text = pages.BLOCK.sub("", text)
+    text = re.sub(r"```.*?```", "", text, flags=re.DOTALL)
+    text = re.sub(r"`[^`]*`", "", text)
+    text = re.sub(r"\]\([^)]*\)", "]", text)
+    text = re.sub(r"<!--.*?-->", "", text, flags=re.DOTALL)
+    return re.sub(r"\bissue \d+\b", "issue", text)
+
+
+def test_the_bench_prose_carries_no_figure():
+    """Figures of the bench come only from its json: none in the hand-written text around the
+    generated blocks (the issue numbers aside)."""
+    readme = README.read_text().split("\n## Speed against error\n")[1].split("\n## ")[0]
+    for name, text in (("docs/bench.md", BENCH_PAGE.read_text()), ("README.md", readme)):
+        figures = re.findall(r"\S*\d\S*", _prose(text))
+        assert not figures, f"{name}: figures outside the generated blocks: {figures}"
+    assert _prose("a 1.17× margin (issue 4) <!-- generated: x -->\n2e7\n<!-- end generated -->")
+    assert re.findall(r"\S*\d\S*", _prose("a 1.17× margin")) == ["1.17×"]
+
+
+def _slug(heading: str) -> str:
+    """GitHub's anchor of a markdown heading."""
+    return re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
+
+
+@pytest.mark.parametrize("page", DOCS, ids=lambda p: str(p.relative_to(ROOT)))
+def test_every_relative_link_of_the_docs_resolves(page):
+    text = re.sub(r"```.*?```", "", page.read_text(), flags=re.DOTALL)
+    links = re.findall(r"\]\(([^)\s]+)\)", text)
+    assert links
+    for link in links:
+        if re.match(r"[a-z]+://", link):
+            continue
+        target, _, anchor = link.partition("#")
+        path = (page.parent / target).resolve() if target else page
+        assert path.exists(), f"{page.name}: {link}"
+        if anchor:
+            headings = re.findall(r"^#+ (.*)$", path.read_text(), flags=re.MULTILINE)
+            assert anchor in {_slug(h) for h in headings}, f"{page.name}: {link}"
+
+
+def test_the_readme_keeps_its_two_set_up_commands_and_its_length():
+    """Tools find the set-up commands by these patterns; the README stays a first page."""
+    lines = README.read_text().splitlines()
+    run = [line for line in lines if re.match(r"^\s*python -m pip install [^[]*&& campipe ", line)]
+    assert run[0] == "python -m pip install . && campipe study studies/quickstart.yaml"
+    tests = [line for line in lines if re.search(r"pip install .*\[test\].*pytest", line)]
+    assert tests[0] == 'python -m pip install ".[test]" && python -m pytest'
+    assert next(line for line in lines if re.match(r"^\s*(\$ )?[^#]*pytest", line)) == tests[0]
+    assert len(lines) <= 200
+
+
+@pytest.fixture(scope="module")
+def quickstart(tmp_path_factory):
+    """A folder holding studies/quickstart.nc as the README's first command writes it."""
+    root = tmp_path_factory.mktemp("readme")
+    archive = root / "studies" / "quickstart.nc"
+    archive.parent.mkdir()
+    run_study(load_study(STUDIES / "quickstart.yaml"), archive, scheduler="threads")
+    return root
+
+
+def _fenced_after(text: str, marker: str) -> str:
+    """The body of the first fenced block after ``<!-- marker -->``."""
+    after = text.split(f"<!-- {marker} -->\n", 1)[1]
+    return after.split("```", 2)[1].split("\n", 1)[1]
+
+
+NUMBER = re.compile(r"^[-+]?(\d+\.?\d*(e[-+]?\d+)?|nan)$", re.IGNORECASE)
+
+
+def test_the_readme_analysis_prints_what_the_readme_shows(quickstart, monkeypatch):
+    text = README.read_text()
+    code = _fenced_after(text, "readme-analysis")
+    shown = _fenced_after(text, "readme-analysis-output").split()
+    assert len(code.strip().splitlines()) == 5
+    monkeypatch.chdir(quickstart)
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        exec(compile(code, "README.md", "exec"), {})
+    printed = out.getvalue().split()
+    assert [t for t in printed if not NUMBER.match(t)] == [t for t in shown if not NUMBER.match(t)]
+    values = [float(t) for t in printed if NUMBER.match(t)]
+    assert_allclose(values, [float(t) for t in shown if NUMBER.match(t)], rtol=1e-6)
+    # the table: 4 speeds × (no seat, 0.1 in): no separation at 9000 rpm without a seat
+    table = np.array(values[2:]).reshape(4, 3)
+    assert table[:, 0].tolist() == [6000, 9000, 9524, 11000]
+    assert table[1, 1] == 0 and 45 <= table[2, 1] <= 60 and np.all(table[:, 2] > 0)
+
+
+def test_the_readme_summary_is_what_campipe_query_prints(quickstart):
+    text = README.read_text()
+    shown = text.split("$ campipe query studies/quickstart.nc --summary\n")[1].split("```")[0]
+    archive = quickstart / "studies" / "quickstart.nc"
+    result = CliRunner().invoke(main, ["query", str(archive), "--summary"])
+    assert result.exit_code == 0, result.output
+    assert result.output == shown
+
+
+def test_the_known_disagreement_is_explained_while_the_json_shows_it():
+    """docs/bench.md explains why polydyne-9000's cross-check disagrees; once a run agrees, the
+    paragraph must go with it."""
+    bench = report.read_json(BENCH_JSON)
+    disagrees = {c["scene"] for c in bench.checks if not c["agrees"]}
+    explained = (
+        "**A known disagreement.** On the form-closed polydyne scene" in BENCH_PAGE.read_text()
+    )
+    assert explained == ("polydyne-9000" in disagrees)
