@@ -97,6 +97,14 @@ N_EVENT_FIELDS = 6
 #: Status of a run: finished; its state became non-finite; more events than kept; events
 #: recurring without time advancing (chatter).
 OK, NONFINITE, EVENTS_TRUNCATED, CHATTER = 0, 1, 2, 3
+STATUS = {
+    OK: "ok",
+    NONFINITE: "nonfinite",
+    EVENTS_TRUNCATED: "events_truncated",
+    CHATTER: "chatter",
+}
+#: The statuses of a case whose results cannot be used.
+FAILURES = (NONFINITE, CHATTER)
 
 
 def flag_attributes(names: dict[int, str]) -> tuple[tuple[str, object], ...]:
@@ -106,3 +114,4 @@ def flag_attributes(names: dict[int, str]) -> tuple[tuple[str, object], ...]:
 
 CONTACT_FLAGS = flag_attributes({n: c.meaning for n, c in CONFIGURATIONS.items()})
 EVENT_FLAGS = flag_attributes(EVENT_KINDS)
+STATUS_FLAGS = flag_attributes(STATUS)

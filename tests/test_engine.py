@@ -9,6 +9,7 @@ from numpy.testing import assert_allclose, assert_array_equal
 from campipe.engine import (
     INTEGRATORS,
     Case,
+    IntegrationError,
     RunSettings,
     StabilityError,
     member_loads,
@@ -264,3 +265,23 @@ def test_smooth_profile_breaks_are_not_impacts(method):
     prof = polydyne("4567", INCH, *np.radians([90, 90, 90]))
     res = run([Case(TRAIN, prof, rpm(9000), closure="form")], revolutions=2, integrator=method)
     assert res.cam_impacts[0] == 0 and len(res.events[0]) == 0
+
+
+def test_a_failing_case_is_recorded_beside_the_others_when_asked():
+    """on_failure="record": a diverging case (newmark-linear just beyond its limit) is marked
+    NONFINITE with NaN results; a train half as stiff, whose limit is √2 larger, runs in the
+    same batch and gives what it gives alone."""
+    from campipe.vocabulary import NONFINITE, OK
+
+    bad = Case(TRAIN, CAM, rpm(11000))  # no seat: configurations I and II
+    good = Case(TRAIN.replace(elastic_modulus=TRAIN.elastic_modulus / 2), CAM, rpm(11000))
+    settings = RunSettings(
+        revolutions=4, integrator="newmark-linear", dt=1.02 * stability_limit(bad)
+    )
+    res = run_batch([bad, good], settings, check_stability_limit=False, on_failure="record")
+    alone = run_batch([good], settings)
+    assert res.status.tolist() == [NONFINITE, OK] and alone.status.tolist() == [OK]
+    assert np.isnan(res.valve_lift[0]).all() and np.isnan(res.max_cam_force[0])
+    assert_array_equal(res.valve_lift[1], alone.valve_lift[0])
+    with pytest.raises(IntegrationError, match="non-finite"):
+        run_batch([bad, good], settings, check_stability_limit=False)

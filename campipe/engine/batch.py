@@ -33,7 +33,7 @@ from campipe.model.assembly import (
     configuration_frequencies,
 )
 from campipe.profiles import Profile, evaluate_packed, pack
-from campipe.vocabulary import CAM, CHATTER, EVENTS_TRUNCATED, NONFINITE, ROMAN, SEAT
+from campipe.vocabulary import CAM, CHATTER, EVENTS_TRUNCATED, FAILURES, NONFINITE, ROMAN, SEAT
 
 log = logging.getLogger(__name__)
 
@@ -180,6 +180,9 @@ class BatchResult:
     #: per case (n_ev, 6): columns vocabulary.EV_*
     events: list[np.ndarray] = field(default_factory=list)
     steps: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # (n_cases,)
+    #: (n_cases,) int64 vocabulary status: OK, EVENTS_TRUNCATED, or (``on_failure="record"``)
+    #: a failure (NONFINITE, CHATTER) whose histories and metrics are NaN
+    status: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
 
     @property
     def follower_lift(self) -> np.ndarray:
@@ -473,6 +476,7 @@ def run_batch(
     *,
     full_state: bool = True,
     check_stability_limit: bool = True,
+    on_failure: str = "raise",
 ) -> BatchResult:
     """Integrate every case of a batch in one compiled call.
 
@@ -489,14 +493,21 @@ def run_batch(
     check_stability_limit : bool
         Refuse a newmark-linear step beyond the stability limit (default). False only to
         demonstrate the limit: the run then diverges and raises IntegrationError.
+    on_failure : {"raise", "record"}
+        A case that fails (``vocabulary.NONFINITE``, ``CHATTER``): raise IntegrationError
+        naming them (default), or record it in ``BatchResult.status`` and return the others'
+        results; a failed case's histories and metrics are then NaN (its events are those
+        before the failure).
 
     Raises
     ------
     StabilityError
         For a step beyond the stability limit, before anything runs.
     IntegrationError
-        If a case's state became non-finite.
+        If a case failed and ``on_failure`` is "raise".
     """
+    if on_failure not in ("raise", "record"):
+        raise ValueError(f"on_failure: found {on_failure!r}, expected 'raise' or 'record'")
     check_run(cases, settings, check_stability_limit=check_stability_limit)
     dt_run = settings.step
     n = len(cases)
@@ -530,7 +541,7 @@ def run_batch(
         _run_modal_exact(trains, preps, which, settings, dt_run, full_state, cases_in, packed, out)
     status, n_events = out.status, out.n_events
     bad = np.flatnonzero(status == NONFINITE)
-    if bad.size:
+    if bad.size and on_failure == "raise":
         how = f"{settings.method}, step {dt_run:g} s" if dt_run else settings.method
         why = (
             "the step is beyond the stability limit (the run was asked not to check it)"
@@ -541,7 +552,7 @@ def run_batch(
             f"cases {bad.tolist()} became non-finite ({how}); {why}", found=bad.tolist()
         )
     bad = np.flatnonzero(status == CHATTER)
-    if bad.size:
+    if bad.size and on_failure == "raise":
         raise IntegrationError(
             f"cases {bad.tolist()}: contact events kept recurring at one instant (chatter); "
             "integrate them with newmark-linear",
@@ -554,6 +565,9 @@ def run_batch(
             n_events[i],
             settings.max_events,
         )
+    failed = np.flatnonzero(np.isin(status, FAILURES))
+    for array in (out.q, out.v, out.force, out.cam, out.sep_rev, out.vmax, out.fmax):
+        array[failed] = np.nan
     kept = np.minimum(n_events, settings.max_events)
     q_out, v_out, force_out, cam_out, cfg_out = out.q, out.v, out.force, out.cam, out.cfg
     sep_rev, counts, vmax, fmax, events = out.sep_rev, out.counts, out.vmax, out.fmax, out.events
@@ -577,4 +591,5 @@ def run_batch(
         thesis_impact_force=fmax[:, 2],
         events=[events[i, : kept[i]].copy() for i in range(n)],
         steps=out.steps,
+        status=status,
     )
