@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 import pytest
-from numpy.testing import assert_allclose
+from numpy.testing import assert_allclose, assert_array_equal
 
 from campipe.engine import Case, IntegrationError, RunSettings, run_batch, stability_limit
 from campipe.engine.batch import _matrices
@@ -300,9 +300,45 @@ def test_overdamped_modes_against_an_independent_integrator():
     train = dataclasses.replace(TRAIN, damping_ratios=(1.8, 0.1, 1.5, 0.1, 0.1, 0.1, 0.1))
     data = _modal(train)
     ns = 2 * data.n_free[1]
-    assert np.sum(data.lam[1, :ns].imag == 0.0) == 4  # configuration II: two overdamped modes
+    # configuration II: two overdamped modes
+    assert np.sum(data.eigenvalues[1, :ns].imag == 0.0) == 4
     case = Case(train, CAM, rpm(11000))
     ours = run_batch([case], RunSettings(revolutions=2))
     peer = solve_case(case, 2, method="DOP853", rtol=1e-10)
     assert ours.cam_impacts[0] >= 2 and len(ours.events[0]) == len(peer.events)
     assert np.max(np.abs(ours.valve_lift[0] - peer.valve_lift)) < 1e-9 * INCH
+
+
+def _event_angles(case, revolutions=4):
+    res = run(case, revolutions=revolutions)
+    ev = res.events[0]
+    return ev[:, EV_KIND], np.degrees(ev[:, EV_TIME] * case.speed)
+
+
+@pytest.mark.parametrize("seat", [None, 0.1 * INCH])
+def test_critical_damping_is_propagated_exactly(seat):
+    """ζ1 = 1 makes configuration II's first mode a defective pair (one eigenvector: a modal
+    basis is singular there); the block form propagates it exactly. ζ1 = 1 and 1 ± 1e-9 give
+    the same events to 1e-6°; 1 − 1e-6 and 1 − 1e-5 move them by amounts in the ratio 1 : 10
+    (to 2 %): the response is smooth and linear in ζ1 through critical damping, as the exact
+    solution is. Broken copy: with the eigenvector basis the preset with ζ1 = 1 logged 133
+    zero-time impacts, and 1 − 1e-9 stopped with a chatter error."""
+
+    def angles(zeta):
+        train = TRAIN.replace(damping_ratios=(zeta,) + TRAIN.damping_ratios[1:])
+        kw = {} if seat is None else {"seat": seat}
+        return _event_angles(Case(train, CAM, rpm(13205 if seat else 11000), **kw))
+
+    kinds, at_one = angles(1.0)
+    assert at_one.size >= 20
+    for zeta in (1.0 - 1e-9, 1.0 + 1e-9):
+        k, a = angles(zeta)
+        assert_array_equal(k, kinds)
+        assert_allclose(a, at_one, rtol=0, atol=1e-6)
+    k6, a6 = angles(1.0 - 1e-6)
+    k5, a5 = angles(1.0 - 1e-5)
+    assert_array_equal(k6, kinds) and assert_array_equal(k5, kinds)
+    d6, d5 = a6 - at_one, a5 - at_one
+    big = np.abs(d5) > 1e-5  # events that move measurably
+    assert big.sum() >= 10
+    assert_allclose(d6[big] / d5[big], 0.1, atol=0.002)

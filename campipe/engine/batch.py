@@ -454,7 +454,7 @@ def _run_modal_exact(trains, preps, which, settings, dt_run, full_state, cases, 
             if f != "load"
         },
     )
-    a_mat = np.stack([d.a_mat for d in data])
+    a_mat = np.stack([d.a_mat for d in data])  # for the harmonic responses only
     omega = cases.omega
     runs = exact.ExactRuns(
         train=which,

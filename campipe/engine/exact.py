@@ -28,22 +28,24 @@ Notation (``campipe.engine.modal`` for the equations)
 -----------------------------------------------------
 ==============  ===========================================================================
 z = [x; ẋ]      state of the free coordinates (2·n_f entries, ``ns``); ż = A z + forcing
-λ_j, V          eigenvalues and right eigenvectors of A (A = V Λ V⁻¹), mode j
+X, B_b          A = X·blockdiag(B_b)·X⁻¹: block b (1×1 or 2×2) and its basis X_b
+λ̄, δ², N_b      tr B_b / 2, (tr B_b / 2)² − det B_b, B_b − λ̄I
+f1, f2          the block's basis functions e^{λ̄τ}C(τ), e^{λ̄τ}S(τ): e^{B_b τ} = f1 I + f2 N_b
 t_s, τ          the segment's start [s]; τ = t − t_s
 θ, x            cam angle ωt [rad]; x = θ − θ0, the angle from the piece's start θ0
 z_p             particular solution Σ_k Z_k x^k + Re(Z_T e^{iθ}) (``Z``, ``ZT``)
-y0              modal coordinates at t_s: V⁻¹ (z(t_s) − z_p(t_s))
-z(t)            V (y0 ∘ e^{λτ}) + z_p(t)
-g_m             monitor m (0: cam, 1: seat) = Re Σ_j W_mj e^{λ_j τ} + Σ_k G_mk x^k
+u               X⁻¹ (z(t_s) − z_p(t_s)), the homogeneous part in the blocks' basis
+z(t)            Σ_b (f1 X_b u_b + f2 X_b N_b u_b) + z_p(t)
+g_m             monitor m (0: cam, 1: seat) = Σ_b (W1_mb f1 + W2_mb f2) + Σ_k G_mk x^k
                 + Re(GT_m e^{iθ}); an event where g_m rises through ``level[m]``
-h, E_j, D_j     grid step [s]; E_j = e^{λ_j τ} at the grid point, D_j = e^{λ_j h}
-pair (column)   modes in conjugate pairs, one column each, fastest first, coefficients
-                doubled: every sum is Re Σ over half the modes
+h, D1, D2       grid step [s] and the blocks' f1(h), f2(h), which advance f1, f2 a step
+column          one block each, fastest first
 ==============  ===========================================================================
 
-The per-pair work arrays: ``MC`` rows ER … AMP_F (E, D, |E|, |D| and the pair's largest share
-of a coordinate and of the contact forces), ``WC`` rows W_R … WL_ABS (W, Wλ, Wλ² and |W|,
-|Wλ|), ``VY[:, jj, s]`` (Re, Im) of V_sj·y0_j.
+The per-block work arrays: ``MC`` rows F1 … RATE (f1, f2, their step factors, the envelope,
+the block's shares of coordinates and forces, its constants), ``WC`` rows W1 … WL2_ABS (the
+coefficients of f1, f2 in a monitor and its derivatives, and their magnitudes),
+``VY[:, jj, s]`` the state's coefficients of f1, f2.
 
 The kernel's steps, each a function below: begin a segment (``_begin_segment``: forcing,
 particular solution, modal start, monitors, mode pairs), walk the grid (``_walk``: plan the
@@ -96,14 +98,18 @@ GAP_LEVEL = 1e-13
 MAX_STALLED_EVENTS = 64
 ROOT_ITERATIONS = 200
 
-# Rows of the per-pair work array ``MC`` (one column per active mode pair, fastest first):
-# e^{λτ} at the current grid point (real, imaginary), the grid step's factor e^{λh}, their
-# magnitudes, and the pair's largest share of a coordinate or velocity and of the contact
-# forces at the segment start.
-ER, EI, DR, DI, EABS, DABS, AMP_Q, AMP_F = range(8)
-# Rows of the monitor coefficients ``WC`` (row, monitor, pair): W, W·λ, W·λ² as (real,
-# imaginary), then |W| and |W·λ|.
-W_R, W_I, WL_R, WL_I, WLL_R, WLL_I, W_ABS, WL_ABS = range(8)
+# Rows of the per-block work array ``MC`` (one column per active block, fastest first): the
+# basis functions (f1, f2) at the current grid point, their values at the grid step h (the
+# step's factors), the envelope e^{rate·τ} and its step factor, the block's largest share of a
+# coordinate or velocity (with f1, with f2) and of the contact forces (likewise) at the segment
+# start, and the block's constants λ̄, δ², 1/|δ| (inf at δ = 0) and slowest rate.
+F1, F2, D1, D2, EABS, DABS, AMP_QA, AMP_QB, AMP_FA, AMP_FB, LBAR, DSQ, INVD, RATE = range(14)
+N_MC = 14
+# Rows of the monitor coefficients ``WC`` (row, monitor, block): the coefficients of f1 and f2
+# in the monitor, in its time derivative and in its second derivative, then |W1|, |W2|,
+# |WL1|, |WL2|.
+W1, W2, WL1, WL2, WLL1, WLL2, W1_ABS, W2_ABS, WL1_ABS, WL2_ABS = range(10)
+N_WC = 10
 
 
 class ModalTrains(NamedTuple):
@@ -113,9 +119,6 @@ class ModalTrains(NamedTuple):
     load: np.ndarray  # (n_trains, 7) preload [N]
     n_free: np.ndarray
     free: np.ndarray
-    lam: np.ndarray
-    vec: np.ndarray
-    vec_inv: np.ndarray
     a_inv: np.ndarray
     b_in: np.ndarray
     b_load: np.ndarray
@@ -123,9 +126,18 @@ class ModalTrains(NamedTuple):
     sigma: np.ndarray
     sigma0: np.ndarray
     impulse: np.ndarray
-    rho_vec: np.ndarray
-    vnorm: np.ndarray
-    lam_abs: np.ndarray
+    n_blocks: np.ndarray
+    bstart: np.ndarray
+    bdim: np.ndarray
+    lam_bar: np.ndarray
+    delta2: np.ndarray
+    rate: np.ndarray
+    speed: np.ndarray
+    basis: np.ndarray
+    basis_inv: np.ndarray
+    basis_n: np.ndarray
+    rho_x: np.ndarray
+    rho_xn: np.ndarray
 
 
 class ExactRuns(NamedTuple):
@@ -153,16 +165,11 @@ class Workspace(NamedTuple):
     Z: np.ndarray  # (9, NS) polynomial particular solution Z_k (row k)
     ZT: np.ndarray  # (NS,) complex harmonic particular solution Z_T
     bpoly: np.ndarray  # (8, NS) the forcing's polynomial coefficients b_k
-    y0: np.ndarray  # (NS,) complex modal coordinates at t_s
-    ev: np.ndarray  # (NS,) complex e^{λτ} at an event
-    ya: np.ndarray  # (NS,) complex y0 ∘ e^{λτ}
-    W: np.ndarray  # (2, NS) complex monitor modal coefficients, per mode
-    order: np.ndarray  # (NS,) int64 the modes, fastest first
-    act: np.ndarray  # (NS,) int64 the mode of each active pair column
-    lamc: np.ndarray  # (NS,) complex λ of each pair column
-    MC: np.ndarray  # (8, NS) per-pair work, rows ER … AMP_F
-    WC: np.ndarray  # (8, 2, NS) monitor coefficients per pair, rows W_R … WL_ABS
-    VY: np.ndarray  # (2, NS, NS) (Re, Im) of V_sj·y0_j per pair column jj
+    u: np.ndarray  # (NS,) the state's homogeneous part in the blocks' basis at t_s: X⁻¹ zh
+    act: np.ndarray  # (NS,) int64 the block of each active column
+    MC: np.ndarray  # (N_MC, NS) per-block work, rows F1 … RATE
+    WC: np.ndarray  # (N_WC, 2, NS) monitor coefficients per block, rows W1 … WL2_ABS
+    VY: np.ndarray  # (2, NS, NS) the state's coefficients of f1 and f2: X_b u_b, X_b N_b u_b
     gval: np.ndarray  # (2,) monitors at the latest point
     dval: np.ndarray  # (2,) their time derivatives
     gprev: np.ndarray  # (2,) monitors at the previous grid point
@@ -187,15 +194,10 @@ def make_workspace() -> Workspace:
         Z=np.zeros((9, NS)),
         ZT=np.zeros(NS, np.complex128),
         bpoly=np.zeros((8, NS)),
-        y0=np.zeros(NS, np.complex128),
-        ev=np.zeros(NS, np.complex128),
-        ya=np.zeros(NS, np.complex128),
-        W=np.zeros((2, NS), np.complex128),
-        order=np.zeros(NS, np.int64),
+        u=np.zeros(NS),
         act=np.zeros(NS, np.int64),
-        lamc=np.zeros(NS, np.complex128),
-        MC=np.zeros((8, NS)),
-        WC=np.zeros((8, 2, NS)),
+        MC=np.zeros((N_MC, NS)),
+        WC=np.zeros((N_WC, 2, NS)),
         VY=np.zeros((2, NS, NS)),
         gval=np.zeros(2),
         dval=np.zeros(2),
@@ -232,7 +234,7 @@ STATE = np.dtype(
         ("kmax", "i8"),  # degree of the held inputs' polynomials
         ("deg", "i8"),  # degree of the particular solution's polynomial
         ("gdeg", "i8"),  # degree of the monitors' polynomials
-        ("nact", "i8"),  # active mode pair columns; the first ``lo`` are left off the grid
+        ("nact", "i8"),  # active block columns; the first ``lo`` are left off the grid
         ("lo", "i8"),
         ("k_out", "i8"),  # the next output sample
         ("stalled", "i8"),  # events in a row without time advancing
@@ -272,26 +274,43 @@ def _held_inputs(profiles, c, p, w, seat_q, cam_held, seat_held, inp, inp_t):
         inp[0, 1, 0] = seat_q
 
 
-@njit(**KERNEL)
-def _exps(lam, c, ci, ns, tau, ev):
-    for j in range(ns):
-        ev[j] = np.exp(lam[c, ci, j] * tau)
+@njit(inline="always", nogil=True)
+def _basis(lbar, d2, tau):
+    """The block's basis functions f1 = e^{λ̄τ}·C(τ) and f2 = e^{λ̄τ}·S(τ) (``modal``): C, S
+    from cos, sin (δ² < 0), cosh, sinh (δ² > 0, as two exponentials, which cannot overflow on a
+    decaying block) or the Jordan limit 1, τ, by series where δτ is small."""
+    e = np.exp(lbar * tau)
+    if d2 < 0.0:
+        nu = np.sqrt(-d2)
+        x = nu * tau
+        if x > 1e-3:
+            return e * np.cos(x), e * np.sin(x) / nu
+        x2 = x * x
+        return e * (1.0 - x2 / 2.0 + x2 * x2 / 24.0), e * tau * (1.0 - x2 / 6.0 + x2 * x2 / 120.0)
+    if d2 > 0.0:
+        d = np.sqrt(d2)
+        x = d * tau
+        if x > 1e-3:
+            ep = np.exp((lbar + d) * tau)
+            em = np.exp((lbar - d) * tau)
+            return 0.5 * (ep + em), 0.5 * (ep - em) / d
+        x2 = x * x
+        return e * (1.0 + x2 / 2.0 + x2 * x2 / 24.0), e * tau * (1.0 + x2 / 6.0 + x2 * x2 / 120.0)
+    return e, e * tau
 
 
 @njit(inline="always", nogil=True)
-def _eval3(WC, lamc, nact, G, GT, m, tau, w, x, th):
+def _eval3(WC, MC, nact, G, GT, m, tau, w, x, th):
     """Monitor m and its first two time derivatives τ after the segment start (local angle x,
-    cam angle θ), exactly: the active mode pairs, the polynomial and the harmonic part."""
+    cam angle θ), exactly: the active blocks, the polynomial and the harmonic part."""
     g = 0.0
     dg = 0.0
     d2g = 0.0
     for jj in range(nact):
-        e = np.exp(lamc[jj] * tau)
-        er = e.real
-        ei = e.imag
-        g += WC[W_R, m, jj] * er - WC[W_I, m, jj] * ei
-        dg += WC[WL_R, m, jj] * er - WC[WL_I, m, jj] * ei
-        d2g += WC[WLL_R, m, jj] * er - WC[WLL_I, m, jj] * ei
+        f1, f2 = _basis(MC[LBAR, jj], MC[DSQ, jj], tau)
+        g += WC[W1, m, jj] * f1 + WC[W2, m, jj] * f2
+        dg += WC[WL1, m, jj] * f1 + WC[WL2, m, jj] * f2
+        d2g += WC[WLL1, m, jj] * f1 + WC[WLL2, m, jj] * f2
     p0, p1, p2 = horner(G[m], x)
     g += p0
     dg += w * p1
@@ -306,16 +325,16 @@ def _eval3(WC, lamc, nact, G, GT, m, tau, w, x, th):
 
 
 @njit(inline="always", nogil=True)
-def _at(deriv, WC, lamc, nact, G, GT, m, t_s, t, w, th0):
+def _at(deriv, WC, MC, nact, G, GT, m, t_s, t, w, th0):
     """Monitor m (deriv False) or its time derivative (deriv True) at time t, and the next
     derivative."""
-    g, dg, d2g = _eval3(WC, lamc, nact, G, GT, m, t - t_s, w, w * t - th0, w * t)
+    g, dg, d2g = _eval3(WC, MC, nact, G, GT, m, t - t_s, w, w * t - th0, w * t)
     return (dg, d2g) if deriv else (g, dg)
 
 
 @njit(**KERNEL)
 def _root(
-    deriv, sgn, WC, lamc, nact, G, GT, m, t_s, ta, tb, level, w, th0, tolerance, known, fa, fb,
+    deriv, sgn, WC, MC, nact, G, GT, m, t_s, ta, tb, level, w, th0, tolerance, known, fa, fb,
     dfb,
 ):  # fmt: skip
     """Time in [ta, tb] where f = sgn·(monitor − level) (or, with deriv, sgn·its derivative)
@@ -328,11 +347,11 @@ def _root(
     """
     lev = 0.0 if deriv else level
     if not known:
-        f, _ = _at(deriv, WC, lamc, nact, G, GT, m, t_s, ta, w, th0)
+        f, _ = _at(deriv, WC, MC, nact, G, GT, m, t_s, ta, w, th0)
         fa = sgn * (f - lev)
         if fa > 0.0:
             return ta
-        f, df = _at(deriv, WC, lamc, nact, G, GT, m, t_s, tb, w, th0)
+        f, df = _at(deriv, WC, MC, nact, G, GT, m, t_s, tb, w, th0)
         fb = sgn * (f - lev)
         dfb = sgn * df
     elif fa > 0.0:
@@ -358,7 +377,7 @@ def _root(
                 t = (ta * fb - tb * fa) / (fb - fa)
                 if not (ta < t < tb):
                     t = 0.5 * (ta + tb)
-        f, df = _at(deriv, WC, lamc, nact, G, GT, m, t_s, t, w, th0)
+        f, df = _at(deriv, WC, MC, nact, G, GT, m, t_s, t, w, th0)
         f = sgn * (f - lev)
         df = sgn * df
         if f > 0.0:
@@ -383,24 +402,26 @@ def _root(
 
 @njit(**KERNEL)
 def _state_at(trains, ws, st, t):
-    """The free coordinates and velocities at time t [s] of the segment, from every mode,
+    """The free coordinates and velocities at time t [s] of the segment, from every block,
     into ws.q, ws.v (the held ones are left as they are)."""
     tr = st.tr
     ci = st.cfg - 1
     ns = st.ns
     nf = st.nf
-    _exps(trains.lam, tr, ci, ns, t - st.t_s, ws.ev)
+    tau = t - st.t_s
     x = st.w * t - st.th0
     ct = np.cos(st.w * t)
     sn = np.sin(st.w * t)
-    for j in range(ns):
-        ws.ya[j] = ws.y0[j] * ws.ev[j]
     for s in range(ns):
-        acc = 0.0
-        for j in range(ns):
-            vsj = trains.vec[tr, ci, s, j]
-            acc += vsj.real * ws.ya[j].real - vsj.imag * ws.ya[j].imag
-        ws.z[s] = acc + horner(ws.Z[:, s], x, st.deg)[0] + ws.ZT[s].real * ct - ws.ZT[s].imag * sn
+        ws.z[s] = horner(ws.Z[:, s], x, st.deg)[0] + ws.ZT[s].real * ct - ws.ZT[s].imag * sn
+    for b in range(trains.n_blocks[tr, ci]):
+        f1, f2 = _basis(trains.lam_bar[tr, ci, b], trains.delta2[tr, ci, b], tau)
+        i0 = trains.bstart[tr, ci, b]
+        for i in range(i0, i0 + trains.bdim[tr, ci, b]):
+            a = f1 * ws.u[i]
+            bn = f2 * ws.u[i]
+            for s in range(ns):
+                ws.z[s] += trains.basis[tr, ci, s, i] * a + trains.basis_n[tr, ci, s, i] * bn
     for k in range(nf):
         ws.q[trains.free[tr, ci, k]] = ws.z[k]
         ws.v[trains.free[tr, ci, k]] = ws.z[nf + k]
@@ -408,9 +429,9 @@ def _state_at(trains, ws, st, t):
 
 @njit(inline="always", nogil=True)
 def _state_active(q, v, z, VY, MC, Z, ZT, free, c, ci, nf, lo, nact, x, ct, sn, deg, full_state):
-    """Free coordinates and velocities from the mode pairs lo … nact − 1 (an output sample):
-    VY[:, jj, s] holds (Re, Im) of V_sj·y0_j (doubled for a pair), so each term is the real
-    part of one complex product; plus the particular solution. Without ``full_state`` only
+    """Free coordinates and velocities from the blocks lo … nact − 1 (an output sample):
+    VY[:, jj, s] holds the state's coefficients of f1 and f2 in block column jj; plus the
+    particular solution. Without ``full_state`` only
     the contact coordinates q1 and q7 (and their velocities) are computed: the others keep
     the values of the segment's start (``_write_sample`` shows them as NaN)."""
     ns = 2 * nf
@@ -418,10 +439,10 @@ def _state_active(q, v, z, VY, MC, Z, ZT, free, c, ci, nf, lo, nact, x, ct, sn, 
         for s in range(ns):
             z[s] = ZT[s].real * ct - ZT[s].imag * sn
         for jj in range(lo, nact):
-            er = MC[ER, jj]
-            ei = MC[EI, jj]
+            f1 = MC[F1, jj]
+            f2 = MC[F2, jj]
             for s in range(ns):
-                z[s] += VY[0, jj, s] * er - VY[1, jj, s] * ei
+                z[s] += VY[0, jj, s] * f1 + VY[1, jj, s] * f2
     for k in range(nf):
         coord = free[c, ci, k]
         if not full_state:
@@ -430,21 +451,23 @@ def _state_active(q, v, z, VY, MC, Z, ZT, free, c, ci, nf, lo, nact, x, ct, sn, 
             for s in (k, k + nf):
                 acc = ZT[s].real * ct - ZT[s].imag * sn
                 for jj in range(lo, nact):
-                    acc += VY[0, jj, s] * MC[ER, jj] - VY[1, jj, s] * MC[EI, jj]
+                    acc += VY[0, jj, s] * MC[F1, jj] + VY[1, jj, s] * MC[F2, jj]
                 z[s] = acc
         q[coord] = z[k] + horner(Z[:, k], x, deg)[0]
         v[coord] = z[k + nf] + horner(Z[:, k + nf], x, deg)[0]
 
 
 @njit(inline="always", nogil=True)
-def _slope_bound(WC, G, GT, m, MC, lo, nact, gdeg, w, xa, xb):
-    """An upper bound on |dg/dt| of monitor m over a step from local angle xa to xb, with the
-    modal magnitudes at its start (they only decay): Σ|W_j λ_j||E_j| + max|P'| + ω|G_T|.
-    The polynomial part is bounded by its derivative's values at the ends plus its second
-    derivative's, which is ample for a step of at most one output interval."""
+def _slope_bound(WC, G, GT, m, MC, lo, nact, gdeg, w, xa, xb, tau_b):
+    """An upper bound on |dg/dt| of monitor m over a step from local angle xa to xb (τ_b after
+    the segment start at its end), with the block envelopes at its start (they only decay):
+    Σ(|WL1| + |WL2|·min(τ_b, 1/|δ|))·e^{rate·τ} + max|P'| + ω|G_T|. The polynomial part is
+    bounded by its derivative's values at the ends plus its second derivative's, which is ample
+    for a step of at most one output interval."""
     bound = 0.0
     for jj in range(lo, nact):
-        bound += WC[WL_ABS, m, jj] * MC[EABS, jj]
+        s2 = min(tau_b, MC[INVD, jj])
+        bound += (WC[WL1_ABS, m, jj] + WC[WL2_ABS, m, jj] * s2) * MC[EABS, jj]
     pa = 0.0
     pb = 0.0
     p2 = 0.0
@@ -486,28 +509,28 @@ def _write_sample(
 
 @njit(inline="always", nogil=True)
 def _advance(MC, lo, nact, cth, sth, cwh, swh):
-    """One grid step: e^{λτ} of the mode pairs lo … nact − 1 and (cos θ, sin θ) by
-    rotation."""
+    """One grid step: the basis functions of the blocks lo … nact − 1 by their addition
+    theorems (f1 ← f1·D1 + δ²·f2·D2, f2 ← f2·D1 + f1·D2) and (cos θ, sin θ) by rotation."""
     for jj in range(lo, nact):
-        er = MC[ER, jj]
-        ei = MC[EI, jj]
-        MC[ER, jj] = er * MC[DR, jj] - ei * MC[DI, jj]
-        MC[EI, jj] = er * MC[DI, jj] + ei * MC[DR, jj]
+        f1 = MC[F1, jj]
+        f2 = MC[F2, jj]
+        MC[F1, jj] = f1 * MC[D1, jj] + MC[DSQ, jj] * f2 * MC[D2, jj]
+        MC[F2, jj] = f2 * MC[D1, jj] + f1 * MC[D2, jj]
         MC[EABS, jj] *= MC[DABS, jj]
     return cth * cwh - sth * swh, sth * cwh + cth * swh
 
 
 @njit(inline="always", nogil=True)
 def _monitor_at_grid(WC, MC, lo, nact, G, GT, m, gdeg, w, x, cth, sth):
-    """Monitor m and its time derivative at the current grid point from the mode pairs
-    lo … nact − 1 and their advanced exponentials (no exp or sin/cos)."""
+    """Monitor m and its time derivative at the current grid point from the blocks
+    lo … nact − 1 and their advanced basis functions (no exp or sin/cos)."""
     g = 0.0
     dg = 0.0
     for jj in range(lo, nact):
-        er = MC[ER, jj]
-        ei = MC[EI, jj]
-        g += WC[W_R, m, jj] * er - WC[W_I, m, jj] * ei
-        dg += WC[WL_R, m, jj] * er - WC[WL_I, m, jj] * ei
+        f1 = MC[F1, jj]
+        f2 = MC[F2, jj]
+        g += WC[W1, m, jj] * f1 + WC[W2, m, jj] * f2
+        dg += WC[WL1, m, jj] * f1 + WC[WL2, m, jj] * f2
     p0, p1, _ = horner(G[m], x, gdeg)
     g += p0 + GT[m].real * cth - GT[m].imag * sth
     dg += w * (p1 - GT[m].real * sth - GT[m].imag * cth)
@@ -515,10 +538,9 @@ def _monitor_at_grid(WC, MC, lo, nact, G, GT, m, gdeg, w, x, cth, sth):
 
 
 @njit(**KERNEL)
-def _keep_column(MC, WC, VY, lamc, act, ns, src, dst):
-    """Move mode pair ``src``'s data to column ``dst`` (dropping the pairs between)."""
+def _keep_column(MC, WC, VY, act, ns, src, dst):
+    """Move block column ``src``'s data to column ``dst`` (dropping the columns between)."""
     act[dst] = act[src]
-    lamc[dst] = lamc[src]
     for r in range(MC.shape[0]):
         MC[r, dst] = MC[r, src]
     for r in range(WC.shape[0]):
@@ -604,25 +626,25 @@ def _particular(trains, profiles, runs, ws, st):
 
 @njit(inline="always", nogil=True)
 def _modal_start(trains, ws, st, x_s, ct, sn):
-    """y0 = V⁻¹ (z(t_s) − z_p(t_s)): the modal coordinates at the segment start."""
+    """u = X⁻¹ (z(t_s) − z_p(t_s)): the homogeneous part in the blocks' basis at the segment
+    start."""
     tr, ci, ns = st.tr, st.cfg - 1, st.ns
     for s in range(ns):
         ws.zh[s] -= horner(ws.Z[:, s], x_s, st.deg)[0] + ws.ZT[s].real * ct - ws.ZT[s].imag * sn
     for j in range(ns):
-        acc_c = 0.0 + 0.0j
+        acc = 0.0
         for s in range(ns):
-            acc_c += trains.vec_inv[tr, ci, j, s] * ws.zh[s]
-        ws.y0[j] = acc_c
+            acc += trains.basis_inv[tr, ci, j, s] * ws.zh[s]
+        ws.u[j] = acc
 
 
 @njit(inline="always", nogil=True)
 def _force_monitor(trains, ws, st, m, sign):
     """Monitor m as a held contact's force (sign·F: F1 for the cam, −F7 for the seat):
-    thesis Eqs. 26, 27 through ``modal.ModalData``'s ρ, σ."""
+    thesis Eqs. 26, 27 through ``modal.ModalData``'s ρ, σ; its forced part (the blocks' part
+    is ``_block_columns``')."""
     tr, ci, ns = st.tr, st.cfg - 1, st.ns
     ws.level[m] = st.eps_force
-    for j in range(ns):
-        ws.W[m, j] = sign * trains.rho_vec[tr, ci, m, j] * ws.y0[j]
     for k in range(st.kmax + 1):
         acc = 0.0
         for s in range(ns):
@@ -641,17 +663,22 @@ def _force_monitor(trains, ws, st, m, sign):
 
 
 @njit(inline="always", nogil=True)
-def _gap_monitor(cases, trains, profiles, ws, st, m, sign):
-    """Monitor m as a free contact's gap: q1 + lift (the cam) or q7_seat − q7 (the seat)."""
-    tr, ci, nf, ns, c, p = st.tr, st.cfg - 1, st.nf, st.ns, st.c, st.p
-    ws.level[m] = GAP_LEVEL
-    coord = CAM if m == 0 else SEAT
+def _row_of(trains, st, coord):
+    """The state row of free coordinate ``coord`` in the segment's configuration."""
     row = 0
-    for k in range(nf):
-        if trains.free[tr, ci, k] == coord:
+    for k in range(st.nf):
+        if trains.free[st.tr, st.cfg - 1, k] == coord:
             row = k
-    for j in range(ns):
-        ws.W[m, j] = sign * trains.vec[tr, ci, row, j] * ws.y0[j]
+    return row
+
+
+@njit(inline="always", nogil=True)
+def _gap_monitor(cases, trains, profiles, ws, st, m, sign):
+    """Monitor m as a free contact's gap: q1 + lift (the cam) or q7_seat − q7 (the seat); its
+    forced part (the blocks' part is ``_block_columns``')."""
+    c, p = st.c, st.p
+    ws.level[m] = GAP_LEVEL
+    row = _row_of(trains, st, CAM if m == 0 else SEAT)
     for k in range(8):
         ws.G[m, k] = sign * ws.Z[k, row]
     ws.GT[m] = sign * ws.ZT[row]
@@ -695,65 +722,96 @@ def _monitors(cases, trains, profiles, ws, st):
 
 
 @njit(inline="always", nogil=True)
-def _pair_columns(trains, runs, ws, st):
-    """The modes in conjugate pairs (a real state has conjugate modal coordinates), fastest
-    first: one column per pair, its coefficients doubled, so every sum is Re Σ over half the
-    modes; sets st.nact and st.lo.
+def _derivative(w1, w2, lbar, d2):
+    """The coefficients of f1 and f2 in d/dτ (w1·f1 + w2·f2): f1' = λ̄f1 + δ²f2, f2' = λ̄f2 + f1."""
+    return lbar * w1 + w2, d2 * w1 + lbar * w2
 
-    Reduced fidelity leaves the pairs above the cut-off (the first ``lo`` columns) out of the
+
+@njit(inline="always", nogil=True)
+def _block_columns(cases, trains, runs, ws, st):
+    """One column per block, fastest first: the state's coefficients of f1 and f2 (VY), the
+    monitors' (WC) and their derivatives', the block's shares of coordinates and forces (MC);
+    sets st.nact and st.lo.
+
+    Reduced fidelity leaves the blocks above the cut-off (the first ``lo`` columns) out of the
     grid, the samples and the step size: there they keep only their quasi-static part (inside
-    the particular solution). Event location and the state at events use every pair.
+    the particular solution). Event location and the state at events use every block.
     """
     tr, ci, ns = st.tr, st.cfg - 1, st.ns
-    lam_abs = trains.lam_abs
-    order = ws.order
-    MC = ws.MC
-    WC = ws.WC
-    # The modes, fastest first (insertion sort; ns ≤ 14).
-    for j in range(ns):
-        k = j
-        while k > 0 and lam_abs[tr, ci, order[k - 1]] < lam_abs[tr, ci, j]:
-            order[k] = order[k - 1]
-            k -= 1
-        order[k] = j
-    nact = 0
+    cam_held = holds_cam(st.cfg)
+    seat_held = holds_seat(st.cfg)
+    rows = (_row_of(trains, st, CAM), _row_of(trains, st, SEAT))
+    MC, WC, VY, u = ws.MC, ws.WC, ws.VY, ws.u
+    nb = trains.n_blocks[tr, ci]
     lo = 0
-    for jj in range(ns):
-        j = order[jj]
-        lj = trains.lam[tr, ci, j]
-        if lj.imag < 0.0:
-            continue
-        if runs.mode_cutoff > 0.0 and lam_abs[tr, ci, j] > runs.mode_cutoff:
+    for jj in range(nb):
+        if runs.mode_cutoff > 0.0 and trains.speed[tr, ci, jj] > runs.mode_cutoff:
             lo += 1
-        f = 2.0 if lj.imag > 0.0 else 1.0
-        ws.act[nact] = j
-        ws.lamc[nact] = lj
-        ya_abs = f * abs(ws.y0[j])
-        MC[ER, nact] = 1.0
-        MC[EI, nact] = 0.0
-        MC[EABS, nact] = 1.0
-        MC[AMP_Q, nact] = ya_abs * trains.vnorm[tr, ci, j]
-        MC[AMP_F, nact] = ya_abs * (
-            abs(trains.rho_vec[tr, ci, 0, j]) + abs(trains.rho_vec[tr, ci, 1, j])
-        )
+        i0 = trains.bstart[tr, ci, jj]
+        i1 = i0 + trains.bdim[tr, ci, jj]
+        lbar = trains.lam_bar[tr, ci, jj]
+        d2 = trains.delta2[tr, ci, jj]
+        ws.act[jj] = jj
+        amp_a = 0.0
+        amp_b = 0.0
+        for s in range(ns):
+            a = 0.0
+            b = 0.0
+            for i in range(i0, i1):
+                a += trains.basis[tr, ci, s, i] * u[i]
+                b += trains.basis_n[tr, ci, s, i] * u[i]
+            VY[0, jj, s] = a
+            VY[1, jj, s] = b
+            amp_a = max(amp_a, abs(a))
+            amp_b = max(amp_b, abs(b))
+        # (ρX u, ρXN u) of the cam's force and of the seat's
+        fa0 = 0.0
+        fb0 = 0.0
+        fa1 = 0.0
+        fb1 = 0.0
+        for i in range(i0, i1):
+            fa0 += trains.rho_x[tr, ci, 0, i] * u[i]
+            fb0 += trains.rho_xn[tr, ci, 0, i] * u[i]
+            fa1 += trains.rho_x[tr, ci, 1, i] * u[i]
+            fb1 += trains.rho_xn[tr, ci, 1, i] * u[i]
+        MC[F1, jj] = 1.0
+        MC[F2, jj] = 0.0
+        MC[EABS, jj] = 1.0
+        MC[AMP_QA, jj] = amp_a
+        MC[AMP_QB, jj] = amp_b
+        MC[AMP_FA, jj] = abs(fa0) + abs(fa1)
+        MC[AMP_FB, jj] = abs(fb0) + abs(fb1)
+        MC[LBAR, jj] = lbar
+        MC[DSQ, jj] = d2
+        MC[INVD, jj] = 1.0 / np.sqrt(abs(d2)) if d2 != 0.0 else np.inf
+        MC[RATE, jj] = trains.rate[tr, ci, jj]
         for m in range(2):
-            wv = f * ws.W[m, j] if ws.ready[m] else 0.0j
-            wl = wv * lj
-            wll = wl * lj
-            WC[W_R, m, nact] = wv.real
-            WC[W_I, m, nact] = wv.imag
-            WC[WL_R, m, nact] = wl.real
-            WC[WL_I, m, nact] = wl.imag
-            WC[WLL_R, m, nact] = wll.real
-            WC[WLL_I, m, nact] = wll.imag
-            WC[W_ABS, m, nact] = abs(wv)
-            WC[WL_ABS, m, nact] = abs(wl)
-        for s2 in range(ns):
-            vy = f * trains.vec[tr, ci, s2, j] * ws.y0[j]
-            ws.VY[0, nact, s2] = vy.real
-            ws.VY[1, nact, s2] = vy.imag
-        nact += 1
-    st.nact = nact
+            w1 = 0.0
+            w2 = 0.0
+            if ws.ready[m]:
+                sign = 1.0 if m == 0 else -1.0  # F1, q1 + lift; −F7, q7_seat − q7
+                if m == 0 and cam_held:
+                    w1 = fa0
+                    w2 = fb0
+                elif m == 1 and seat_held:
+                    w1 = -fa1
+                    w2 = -fb1
+                else:
+                    w1 = sign * VY[0, jj, rows[m]]
+                    w2 = sign * VY[1, jj, rows[m]]
+            wl1, wl2 = _derivative(w1, w2, lbar, d2)
+            wll1, wll2 = _derivative(wl1, wl2, lbar, d2)
+            WC[W1, m, jj] = w1
+            WC[W2, m, jj] = w2
+            WC[WL1, m, jj] = wl1
+            WC[WL2, m, jj] = wl2
+            WC[WLL1, m, jj] = wll1
+            WC[WLL2, m, jj] = wll2
+            WC[W1_ABS, m, jj] = abs(w1)
+            WC[W2_ABS, m, jj] = abs(w2)
+            WC[WL1_ABS, m, jj] = abs(wl1)
+            WC[WL2_ABS, m, jj] = abs(wl2)
+    st.nact = nb
     st.lo = lo
 
 
@@ -779,11 +837,11 @@ def _begin_segment(cases, trains, profiles, runs, out, ws, st):
     st.nb = nb
     st.revb = revb
     st.t_break = th_b / st.w
-    _pair_columns(trains, runs, ws, st)
+    _block_columns(cases, trains, runs, ws, st)
     for m in range(2):
         if ws.ready[m]:
             ws.gval[m], ws.dprev[m], _ = _eval3(
-                ws.WC, ws.lamc, st.nact, ws.G, ws.GT, m, 0.0, st.w, x_s, th_s
+                ws.WC, ws.MC, st.nact, ws.G, ws.GT, m, 0.0, st.w, x_s, th_s
             )
             ws.gprev[m] = ws.gval[m]
     k_out = st.k_out
@@ -801,24 +859,28 @@ def _begin_segment(cases, trains, profiles, runs, out, ws, st):
 
 
 @njit(inline="always", nogil=True)
-def _drop_decayed(MC, WC, VY, lamc, act, lo, nact, ns, eps_force):
-    """Drop the mode pairs that have decayed below what any output can show, keeping the
-    fastest-first order; returns the new count."""
+def _drop_decayed(MC, WC, VY, act, lo, nact, ns, eps_force, tau):
+    """Drop the blocks that have decayed below what any output can show (τ after the segment
+    start), keeping the fastest-first order; returns the new count."""
     kept = lo
     for jj in range(lo, nact):
-        if MC[AMP_Q, jj] * MC[EABS, jj] < MODE_FLOOR and MC[AMP_F, jj] * MC[EABS, jj] < eps_force:
+        s2 = min(tau, MC[INVD, jj])
+        env = MC[EABS, jj]
+        if (MC[AMP_QA, jj] + MC[AMP_QB, jj] * s2) * env < MODE_FLOOR and (
+            MC[AMP_FA, jj] + MC[AMP_FB, jj] * s2
+        ) * env < eps_force:
             continue
         if kept != jj:
-            _keep_column(MC, WC, VY, lamc, act, ns, jj, kept)
+            _keep_column(MC, WC, VY, act, ns, jj, kept)
         kept += 1
     return kept
 
 
 @njit(inline="always", nogil=True)
-def _fastest_needed(WC, MC, watch, level, gval, lo, nact):
-    """The first pair column whose mode could bring a watched monitor to its level (nact if
-    none): the fastest modes are skipped while their summed amplitudes (which only decay)
-    stay under half of every monitor's distance from its level."""
+def _fastest_needed(WC, MC, watch, level, gval, lo, nact, tau):
+    """The first column whose block could bring a watched monitor to its level (nact if
+    none) up to τ after the segment start: the fastest blocks are skipped while their summed
+    amplitudes (which only decay) stay under half of every monitor's distance from its level."""
     margin = np.inf
     for m in range(2):
         if watch[m]:
@@ -826,10 +888,11 @@ def _fastest_needed(WC, MC, watch, level, gval, lo, nact):
     k = lo
     spent = 0.0
     while k < nact:
+        s2 = min(tau, MC[INVD, k])
         amp = 0.0
         for m in range(2):
             if watch[m]:
-                amp = max(amp, WC[W_ABS, m, k] * MC[EABS, k])
+                amp = max(amp, (WC[W1_ABS, m, k] + WC[W2_ABS, m, k] * s2) * MC[EABS, k])
         if spent + amp >= 0.5 * margin:
             break
         spent += amp
@@ -838,18 +901,14 @@ def _fastest_needed(WC, MC, watch, level, gval, lo, nact):
 
 
 @njit(inline="always", nogil=True)
-def _refresh(MC, lamc, lo, nact, h, tau):
-    """Exact e^{λh} and e^{λτ} (τ from the segment start to the next grid point) of the mode
-    pairs lo … nact − 1."""
+def _refresh(MC, lo, nact, h, tau):
+    """Exact basis functions at the grid step h and at τ (from the segment start to the next
+    grid point) of the blocks lo … nact − 1, and their envelopes."""
     for jj in range(lo, nact):
-        d = np.exp(lamc[jj] * h)
-        e = np.exp(lamc[jj] * tau)
-        MC[DR, jj] = d.real
-        MC[DI, jj] = d.imag
-        MC[ER, jj] = e.real
-        MC[EI, jj] = e.imag
-        MC[DABS, jj] = np.exp(lamc[jj].real * h)
-        MC[EABS, jj] = np.exp(lamc[jj].real * tau)
+        MC[D1, jj], MC[D2, jj] = _basis(MC[LBAR, jj], MC[DSQ, jj], h)
+        MC[F1, jj], MC[F2, jj] = _basis(MC[LBAR, jj], MC[DSQ, jj], tau)
+        MC[DABS, jj] = np.exp(MC[RATE, jj] * h)
+        MC[EABS, jj] = np.exp(MC[RATE, jj] * tau)
 
 
 @njit(inline="always", nogil=True)
@@ -869,7 +928,7 @@ def _earliest_crossing(ws, st, nact, tolerance, t_prev, t_eval):
     slope cannot rule out (found by a root of its derivative). Returns (monitor or −1, time).
     """
     w, t_s, th0, gdeg, lo = st.w, st.t_s, st.th0, st.gdeg, st.lo
-    WC, G, GT, lamc = ws.WC, ws.G, ws.GT, ws.lamc
+    WC, G, GT, MC = ws.WC, ws.G, ws.GT, ws.MC
     first = -1
     t_ev = t_eval
     for m in range(2):
@@ -887,22 +946,33 @@ def _earliest_crossing(ws, st, nact, tolerance, t_prev, t_eval):
             and max(ws.gprev[m], ws.gval[m])
             + (t_eval - t_prev)
             * _slope_bound(
-                WC, G, GT, m, ws.MC, lo, nact, gdeg, w, w * t_prev - th0, w * t_eval - th0
+                WC,
+                G,
+                GT,
+                m,
+                MC,
+                lo,
+                nact,
+                gdeg,
+                w,
+                w * t_prev - th0,
+                w * t_eval - th0,
+                t_eval - t_s,
             )
             > level
         ):
             t_max = _root(
-                True, -1.0, WC, lamc, nact, G, GT, m, t_s, t_prev, t_eval, 0.0, w, th0,
+                True, -1.0, WC, MC, nact, G, GT, m, t_s, t_prev, t_eval, 0.0, w, th0,
                 tolerance, False, 0.0, 0.0, 0.0,
             )  # fmt: skip
-            g_hi, dg_hi = _at(False, WC, lamc, nact, G, GT, m, t_s, t_max, w, th0)
+            g_hi, dg_hi = _at(False, WC, MC, nact, G, GT, m, t_s, t_max, w, th0)
             if g_hi > level:
                 t_hi = t_max
         if t_hi > 0.0:
             # The value root starts from what the grid (or the maximum's search) has, unless
             # reduced fidelity leaves pairs out of the grid.
             te = _root(
-                False, 1.0, WC, lamc, nact, G, GT, m, t_s, t_prev, t_hi, level, w, th0,
+                False, 1.0, WC, MC, nact, G, GT, m, t_s, t_prev, t_hi, level, w, th0,
                 tolerance, lo == 0, ws.gprev[m] - level, g_hi - level, dg_hi,
             )  # fmt: skip
             if first < 0 or te < t_ev:
@@ -923,7 +993,7 @@ def _walk(cases, trains, profiles, runs, out, ws, st):
     """
     c, w, t_s, th0, t_break = st.c, st.w, st.t_s, st.th0, st.t_break
     lo, nact, ns, gdeg, eps_force = st.lo, st.nact, st.ns, st.gdeg, st.eps_force
-    lam_abs_row = trains.lam_abs[st.tr, st.cfg - 1]
+    speed_row = trains.speed[st.tr, st.cfg - 1]
     cam_held = holds_cam(st.cfg)
     seat_held = holds_seat(st.cfg)
     n_out = out.q.shape[1]
@@ -932,7 +1002,7 @@ def _walk(cases, trains, profiles, runs, out, ws, st):
     dt_cap = runs.dt_cap
     steps = out.steps
     fmax = out.fmax
-    MC, WC, G, GT, lamc, act = ws.MC, ws.WC, ws.G, ws.GT, ws.lamc, ws.act
+    MC, WC, G, GT, act = ws.MC, ws.WC, ws.G, ws.GT, ws.act
     gval, dval, gprev, dprev = ws.gval, ws.dval, ws.gprev, ws.dprev
     watch, ready, level = ws.watch, ws.ready, ws.level
     # What a sample reads and writes.
@@ -959,18 +1029,18 @@ def _walk(cases, trains, profiles, runs, out, ws, st):
         if replan:
             if since_check >= 32:
                 since_check = 0
-                nact = _drop_decayed(MC, WC, VY, lamc, act, lo, nact, ns, eps_force)
+                nact = _drop_decayed(MC, WC, VY, act, lo, nact, ns, eps_force, t_prev - t_s)
             # The step need only resolve the modes that could bring a watched monitor to its
             # level.
-            k = _fastest_needed(WC, MC, watch, level, gval, lo, nact)
-            fastest = lam_abs_row[act[k]] if k < nact else 0.0
-            h_allow = RESOLUTION * np.pi / fastest if fastest > 0.0 else np.inf
-            if dt_cap > 0.0:
-                h_allow = min(h_allow, dt_cap)
             t_from = t_prev
             k_out = st.k_out
             to_sample = k_out < n_out and k_out * t_sample < t_end * (1.0 + 1e-13)
             t_next = k_out * t_sample if to_sample else t_end
+            k = _fastest_needed(WC, MC, watch, level, gval, lo, nact, t_next - t_s)
+            fastest = speed_row[act[k]] if k < nact else 0.0
+            h_allow = RESOLUTION * np.pi / fastest if fastest > 0.0 else np.inf
+            if dt_cap > 0.0:
+                h_allow = min(h_allow, dt_cap)
             n_steps = max(1, int(np.ceil((t_next - t_from) / h_allow - 1e-9)))
             h_new = (t_next - t_from) / n_steps
             i_step = 0
@@ -980,7 +1050,7 @@ def _walk(cases, trains, profiles, runs, out, ws, st):
             if abs(h_new - h) > 1e-12 * h or since_refresh > 256 or t_from == t_s:
                 # New step, a fresh segment, or time to refresh: exact exponentials.
                 h = h_new
-                _refresh(MC, lamc, lo, nact, h, t_from + h - t_s)
+                _refresh(MC, lo, nact, h, t_from + h - t_s)
                 cwh = np.cos(w * h)
                 swh = np.sin(w * h)
                 cth = np.cos(w * (t_from + h))
@@ -998,7 +1068,7 @@ def _walk(cases, trains, profiles, runs, out, ws, st):
             t_eval = t_break
             for m in range(2):
                 if ready[m]:
-                    gval[m], dval[m] = _at(False, WC, lamc, nact, G, GT, m, t_s, t_break, w, th0)
+                    gval[m], dval[m] = _at(False, WC, MC, nact, G, GT, m, t_s, t_break, w, th0)
         else:
             t_eval = t_n
             x_n = w * t_n - th0

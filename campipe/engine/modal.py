@@ -7,11 +7,24 @@ state as z = [x; ẋ] (2·n_free entries):
 
     ż = A z + B_q q_p(t) + B_v q̇_p(t) + B_a q̈_p(t) + b_f
 
-where p are the held coordinates (q1 on the cam, q7 on the seat). With A = V Λ V⁻¹, the
-solution is z(t) = V e^{Λτ} y₀ + z_p(t), where z_p is the particular solution for the
+where p are the held coordinates (q1 on the cam, q7 on the seat). The solution is
+z(t) = e^{Aτ} (z(t_s) − z_p(t_s)) + z_p(t), where z_p is the particular solution for the
 piece's polynomial and harmonic forcing, found exactly (``Z_k = A⁻¹(ω(k+1) Z_{k+1} − b_k)``
 and ``(iωI − A) Z_T = b_T``). Nothing here depends on a step size: the integrator is exact
 between events up to rounding.
+
+The homogeneous part is propagated in a real block-diagonal form A = X B X⁻¹: each block
+B_b is 1×1 (a real eigenvalue) or 2×2 (a conjugate pair, or two real eigenvalues closer
+than ``NEAR``: a critically damped mode), with an orthonormal basis of its invariant
+subspace from the balanced real Schur form (LAPACK ``dtrsen``). With λ̄ = tr B_b / 2,
+δ² = (tr B_b / 2)² − det B_b and N_b = B_b − λ̄ I,
+
+    e^{B_b τ} = f1(τ)·I + f2(τ)·N_b,   f1 = e^{λ̄τ}·C(τ),   f2 = e^{λ̄τ}·S(τ),
+
+C = cos ντ, S = sin(ντ)/ν for a pair with δ² = −ν² < 0, C = cosh δτ, S = sinh(δτ)/δ for
+δ² > 0, and C = 1, S = τ at δ = 0 (the Jordan form of a critically damped mode): one formula,
+uniformly accurate as a mode passes through critical damping, where an eigenvector basis
+becomes singular.
 
 The contact forces are F_r = ρ_r·z + σ_r·(q_p, q̇_p, q̈_p) + σ0_r for r = q1, q7 (thesis
 Eqs. 26, 27 with ẍ eliminated through the equation of motion).
@@ -22,32 +35,38 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.linalg
 from numba import njit
+from scipy.linalg import lapack
 
 from campipe.errors import CampipeError
 from campipe.model.assembly import SystemMatrices
-from campipe.vocabulary import CONFIGURATIONS, CONTACTS
+from campipe.vocabulary import CAM_AND_SEAT, CONFIGURATIONS, CONTACTS
 
 NS = 14  # padded state size: 2 × 7 free coordinates (configuration II)
 # Index hc of the held-coordinate axes below follows vocabulary.CONTACTS: 0 the cam, 1 the seat.
+#: Two real eigenvalues closer than this (relative) share a 2×2 block: their eigenvectors
+#: are nearly parallel (a mode near critical damping), the block's basis is not.
+NEAR = 1e-3
+#: A configuration whose scaled block basis is conditioned worse than this (three or more
+#: coinciding eigenvalues) is refused.
+MAX_CONDITION = 1e12
 
 
 class DefectiveModesError(CampipeError, ValueError):
-    """A configuration whose state matrix has no complete set of eigenvectors."""
+    """A configuration whose state matrix has no well-conditioned block-diagonal form."""
 
 
 @dataclass(frozen=True)
 class ModalData:
     """Per-configuration closed-form data of one train, padded to NS states.
 
-    Index 0–3 of the leading axis is configuration I–IV.
+    Index 0–3 of the leading axis is configuration I–IV; blocks are ordered fastest first.
     """
 
     n_free: np.ndarray  # (4,) int: free coordinates; the state has 2·n_free entries
     free: np.ndarray  # (4, 7) int: the free coordinates in order, −1 padded
-    lam: np.ndarray  # (4, NS) complex eigenvalues of A [1/s]
-    vec: np.ndarray  # (4, NS, NS) complex right eigenvectors V (columns)
-    vec_inv: np.ndarray  # (4, NS, NS) complex V⁻¹
+    eigenvalues: np.ndarray  # (4, NS) complex eigenvalues of A [1/s] (for reports)
     a_mat: np.ndarray  # (4, NS, NS) real state matrix A [1/s]
     a_inv: np.ndarray  # (4, NS, NS) real A⁻¹ [s]
     b_in: np.ndarray  # (4, NS, 3, 2) B for (q, q̇, q̈) of the held (cam, seat) coordinates
@@ -56,27 +75,130 @@ class ModalData:
     sigma: np.ndarray  # (4, 2, 3, 2) contact-force coefficients on the held inputs
     sigma0: np.ndarray  # (4, 2) constant part of the contact forces [N]
     impulse: np.ndarray  # (4, 2, 7) Δv of each coordinate per unit Δv of a held one
-    rho_vec: np.ndarray  # (4, 2, NS) complex: the force rows in modal coordinates, ρ·V
-    vnorm: np.ndarray  # (4, NS) largest |V_sj| of each mode j over the state
-    lam_abs: np.ndarray  # (4, NS) |λ_j| [1/s]
+    n_blocks: np.ndarray  # (4,) int: blocks of the real block-diagonal form
+    bstart: np.ndarray  # (4, NS) int: first basis column of block b
+    bdim: np.ndarray  # (4, NS) int: 1 or 2
+    lam_bar: np.ndarray  # (4, NS) λ̄ of block b [1/s]
+    delta2: np.ndarray  # (4, NS) δ² of block b [1/s²]
+    rate: np.ndarray  # (4, NS) slowest decay rate of block b, its envelope e^{rate·τ} [1/s]
+    speed: np.ndarray  # (4, NS) largest |λ| of block b [1/s]
+    basis: np.ndarray  # (4, NS, NS) X, the blocks' bases in columns
+    basis_inv: np.ndarray  # (4, NS, NS) X⁻¹
+    basis_n: np.ndarray  # (4, NS, NS) X·N (N block-diagonal, the N_b)
+    rho_x: np.ndarray  # (4, 2, NS) ρ·X
+    rho_xn: np.ndarray  # (4, 2, NS) ρ·X·N
+    #: (4, 2) bound on the force at held contact hc (its free vibration) per unit closing
+    #: velocity of a plastic impact there that brings the train into the configuration [N·s/m]
+    hold: np.ndarray
+    #: (2,) the other contact's reaction impulse in configuration III per unit velocity change
+    #: of the struck one (struck: cam, seat) [N·s/(m/s)]; thesis signs (the seat's compressive
+    #: when positive, the cam's when negative)
+    reaction: np.ndarray
 
 
-def modal_data(sm: SystemMatrices, max_condition: float = 1e10) -> ModalData:
+def state_matrix(M: np.ndarray, C: np.ndarray, K: np.ndarray, free) -> np.ndarray:
+    """A of ż = A z + … for the free coordinates ``free`` (z = [x; ẋ])."""
+    fr = np.asarray(free)
+    nf = fr.size
+    mff_inv = np.linalg.inv(M[np.ix_(fr, fr)])
+    A = np.zeros((2 * nf, 2 * nf))
+    A[:nf, nf:] = np.eye(nf)
+    A[nf:, :nf] = -mff_inv @ K[np.ix_(fr, fr)]
+    A[nf:, nf:] = -mff_inv @ C[np.ix_(fr, fr)]
+    return A
+
+
+def _schur_groups(T: np.ndarray) -> list[list[int]]:
+    """The diagonal positions of a real Schur form grouped into blocks: its 2×2 blocks (a
+    conjugate pair), and its real eigenvalues singly or in pairs closer than NEAR."""
+    ns = T.shape[0]
+    groups, singles, i = [], [], 0
+    while i < ns:
+        if i + 1 < ns and T[i + 1, i] != 0.0:
+            groups.append([i, i + 1])
+            i += 2
+        else:
+            singles.append(i)
+            i += 1
+    singles.sort(key=lambda k: T[k, k])
+    j = 0
+    while j < len(singles):
+        a = singles[j]
+        if j + 1 < len(singles):
+            b = singles[j + 1]
+            if abs(T[b, b] - T[a, a]) <= NEAR * max(abs(T[a, a]), abs(T[b, b])):
+                groups.append([a, b])
+                j += 2
+                continue
+        groups.append([a])
+        j += 1
+    return groups
+
+
+def block_form(A: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
+    """A = X·blockdiag(B_b)·X⁻¹: the blocks' bases X (ns × ns, block b in its columns) and the
+    blocks B_b, fastest first. Each basis is orthonormal in the balanced coordinates, from the
+    real Schur form reordered to put the block first (LAPACK dtrsen)."""
+    ns = A.shape[0]
+    balanced, (scale, _) = scipy.linalg.matrix_balance(A, permute=False, separate=True)
+    T, Q = scipy.linalg.schur(balanced, output="real")
+    cols, blocks = [], []
+    for group in _schur_groups(T):
+        select = np.zeros(ns, np.int32)
+        select[group] = 1
+        ts, qs, *_, m, _s, _sep, info = lapack.dtrsen(select, T, Q, job="N")
+        if info != 0 or m != len(group):
+            raise DefectiveModesError(f"the block-diagonal form failed (dtrsen info {info})")
+        cols.append(scale[:, None] * qs[:, :m])
+        blocks.append(ts[:m, :m])
+    speed = [_block_speed(b) for b in blocks]
+    order = np.argsort(speed, kind="stable")[::-1]
+    return np.hstack([cols[k] for k in order]), [blocks[k] for k in order]
+
+
+def _block_numbers(B: np.ndarray) -> tuple[float, float]:
+    """λ̄ and δ² of a block."""
+    if B.shape[0] == 1:
+        return float(B[0, 0]), 0.0
+    half = 0.5 * (B[0, 0] - B[1, 1])
+    return 0.5 * float(B[0, 0] + B[1, 1]), float(half * half + B[0, 1] * B[1, 0])
+
+
+def _block_speed(B: np.ndarray) -> float:
+    lbar, d2 = _block_numbers(B)
+    return float(np.sqrt(lbar * lbar - d2)) if d2 < 0.0 else abs(lbar) + float(np.sqrt(d2))
+
+
+def _free_response_bound(A, X, Xinv, rho_row, blocks_n, dz) -> float:
+    """Σ_b (|ρX_b u_b| + |ρX_bN_b u_b|·s_max) for the free response to a state jump dz,
+    u = X⁻¹ dz: a bound on the response's force (s_max bounds S(τ)·e^{λ̄τ} by 1/|λ̄|)."""
+    u = Xinv @ dz
+    total = 0.0
+    col = 0
+    for B, N in blocks_n:
+        k = B.shape[0]
+        lbar, _ = _block_numbers(B)
+        a = rho_row @ X[:, col : col + k] @ u[col : col + k]
+        b = rho_row @ X[:, col : col + k] @ N @ u[col : col + k]
+        total += abs(a) + abs(b) / max(abs(lbar), 1e-300)
+        col += k
+    return float(total)
+
+
+def modal_data(sm: SystemMatrices) -> ModalData:
     """Closed-form data of every configuration for one train.
 
     Raises
     ------
     DefectiveModesError
-        If a configuration's eigenvector matrix is ill-conditioned beyond ``max_condition``
-        (critically damped modes), where the modal closed form would lose accuracy.
+        If a configuration's block basis, scaled (positions by 1, velocities by 1/|λ|max), is
+        conditioned worse than MAX_CONDITION.
     """
     M, C, K, f = sm.mass, sm.damping, sm.stiffness, sm.preload
     out = {
         "n_free": np.zeros(4, np.int64),
         "free": np.full((4, 7), -1, np.int64),
-        "lam": np.zeros((4, NS), complex),
-        "vec": np.zeros((4, NS, NS), complex),
-        "vec_inv": np.zeros((4, NS, NS), complex),
+        "eigenvalues": np.zeros((4, NS), complex),
         "a_mat": np.zeros((4, NS, NS)),
         "a_inv": np.zeros((4, NS, NS)),
         "b_in": np.zeros((4, NS, 3, 2)),
@@ -85,34 +207,40 @@ def modal_data(sm: SystemMatrices, max_condition: float = 1e10) -> ModalData:
         "sigma": np.zeros((4, 2, 3, 2)),
         "sigma0": np.zeros((4, 2)),
         "impulse": np.zeros((4, 2, 7)),
-        "rho_vec": np.zeros((4, 2, NS), complex),
-        "vnorm": np.zeros((4, NS)),
-        "lam_abs": np.zeros((4, NS)),
+        "n_blocks": np.zeros(4, np.int64),
+        "bstart": np.zeros((4, NS), np.int64),
+        "bdim": np.zeros((4, NS), np.int64),
+        "lam_bar": np.zeros((4, NS)),
+        "delta2": np.zeros((4, NS)),
+        "rate": np.zeros((4, NS)),
+        "speed": np.zeros((4, NS)),
+        "basis": np.zeros((4, NS, NS)),
+        "basis_inv": np.zeros((4, NS, NS)),
+        "basis_n": np.zeros((4, NS, NS)),
+        "rho_x": np.zeros((4, 2, NS)),
+        "rho_xn": np.zeros((4, 2, NS)),
+        "hold": np.zeros((4, 2)),
+        "reaction": np.zeros(2),
     }
     for ci, cfg in enumerate((1, 2, 3, 4)):
         fr = np.array(CONFIGURATIONS[cfg].free)
         nf = fr.size
         ns = 2 * nf
         mff_inv = np.linalg.inv(M[np.ix_(fr, fr)])
-        A = np.zeros((ns, ns))
-        A[:nf, nf:] = np.eye(nf)
-        A[nf:, :nf] = -mff_inv @ K[np.ix_(fr, fr)]
-        A[nf:, nf:] = -mff_inv @ C[np.ix_(fr, fr)]
-        lam, V = np.linalg.eig(A)
-        # A real A's eigenvalues come in exact conjugate pairs (LAPACK's real eig), which
-        # modal-exact relies on: it sums one mode of each pair, doubled.
-        upper = np.sort_complex(lam[lam.imag > 0])
-        assert np.array_equal(upper, np.sort_complex(lam[lam.imag < 0].conj())), lam
-        if np.linalg.cond(V) > max_condition:
+        A = state_matrix(M, C, K, fr)
+        X, blocks = block_form(A)
+        Xinv = np.linalg.inv(X)
+        eig = np.linalg.eigvals(A)
+        scaled = X / np.r_[np.ones(nf), np.full(nf, np.abs(eig).max())][:, None]
+        condition = np.linalg.cond(scaled / np.linalg.norm(scaled, axis=0))
+        if condition > MAX_CONDITION:
             raise DefectiveModesError(
-                f"configuration {cfg}: the modes are nearly defective (critically damped?); "
-                "use integrator newmark-linear or change damping_ratios"
+                f"configuration {CONFIGURATIONS[cfg].roman}: its modes have no well-conditioned "
+                f"block form (condition {condition:.2g}); change damping_ratios"
             )
         out["n_free"][ci] = nf
         out["free"][ci, :nf] = fr
-        out["lam"][ci, :ns] = lam
-        out["vec"][ci, :ns, :ns] = V
-        out["vec_inv"][ci, :ns, :ns] = np.linalg.inv(V)
+        out["eigenvalues"][ci, :ns] = eig
         out["a_mat"][ci, :ns, :ns] = A
         out["a_inv"][ci, :ns, :ns] = np.linalg.inv(A)
         out["b_load"][ci, nf:ns] = mff_inv @ f[fr]
@@ -127,14 +255,43 @@ def modal_data(sm: SystemMatrices, max_condition: float = 1e10) -> ModalData:
                 for kind, mat in enumerate((K, C, M)):
                     out["sigma"][ci, r, kind, hc] = mat[row, p] - mrf @ mff_inv @ mat[fr, p]
             out["sigma0"][ci, r] = mrf @ mff_inv @ f[fr] - f[row]
-        out["rho_vec"][ci, :, :ns] = out["rho"][ci, :, :ns] @ V
-        out["vnorm"][ci, :ns] = np.abs(V).max(axis=0)
-        out["lam_abs"][ci, :ns] = np.abs(lam)
+        # The blocks.
+        XN = np.zeros((ns, ns))
+        col = 0
+        blocks_n = []
+        out["n_blocks"][ci] = len(blocks)
+        for b, B in enumerate(blocks):
+            k = B.shape[0]
+            lbar, d2 = _block_numbers(B)
+            N = B - lbar * np.eye(k)
+            XN[:, col : col + k] = X[:, col : col + k] @ N
+            out["bstart"][ci, b] = col
+            out["bdim"][ci, b] = k
+            out["lam_bar"][ci, b] = lbar
+            out["delta2"][ci, b] = d2
+            out["rate"][ci, b] = lbar + np.sqrt(d2) if d2 > 0.0 else lbar
+            out["speed"][ci, b] = _block_speed(B)
+            blocks_n.append((B, N))
+            col += k
+        out["basis"][ci, :ns, :ns] = X
+        out["basis_inv"][ci, :ns, :ns] = Xinv
+        out["basis_n"][ci, :ns, :ns] = XN
+        out["rho_x"][ci, :, :ns] = out["rho"][ci, :, :ns] @ X
+        out["rho_xn"][ci, :, :ns] = out["rho"][ci, :, :ns] @ XN
         # A plastic impact that sets held coordinate p's velocity: M Δv = P e_p with the other
         # held coordinates fixed, so Δv_free = −M_ff⁻¹ M_fp Δv_p.
         for hc, p in enumerate(CONTACTS):
             out["impulse"][ci, hc, fr] = -mff_inv @ M[fr, p]
             out["impulse"][ci, hc, p] = 1.0
+            if p not in fr:  # held here: the force's free response to a unit impact
+                dz = np.r_[np.zeros(nf), out["impulse"][ci, hc, fr]]
+                out["hold"][ci, hc] = _free_response_bound(
+                    A, X, Xinv, out["rho"][ci, hc, :ns], blocks_n, dz
+                )
+    # Configuration III: the other contact's reaction to a unit velocity change of one.
+    for hc in range(2):
+        other = CONTACTS[1 - hc]
+        out["reaction"][hc] = M[other] @ out["impulse"][CAM_AND_SEAT - 1, hc]
     return ModalData(**out)
 
 
