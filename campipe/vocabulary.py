@@ -95,16 +95,18 @@ EV_TIME, EV_KIND, EV_FROM, EV_TO, EV_VELOCITY, EV_IMPULSE = range(6)
 N_EVENT_FIELDS = 6
 
 #: Status of a run: finished; its state became non-finite; more events than kept; events
-#: recurring without time advancing (chatter).
-OK, NONFINITE, EVENTS_TRUNCATED, CHATTER = 0, 1, 2, 3
+#: recurring without time advancing (chatter); its motion left physical bounds (a valve lift
+#: or a closing speed far beyond what the cam drives: a step too large for the integrator).
+OK, NONFINITE, EVENTS_TRUNCATED, CHATTER, UNBOUNDED = 0, 1, 2, 3, 4
 STATUS = {
     OK: "ok",
     NONFINITE: "nonfinite",
     EVENTS_TRUNCATED: "events_truncated",
     CHATTER: "chatter",
+    UNBOUNDED: "unbounded",
 }
 #: The statuses of a case whose results cannot be used.
-FAILURES = (NONFINITE, CHATTER)
+FAILURES = (NONFINITE, CHATTER, UNBOUNDED)
 
 
 def flag_attributes(names: dict[int, str]) -> tuple[tuple[str, object], ...]:

@@ -14,7 +14,9 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 
-from campipe.engine import exact, newmark
+from campipe.constants import TWO_PI
+from campipe.engine import exact, newmark, steady
+from campipe.engine.closed_form import STATE, ExactRuns, ModalTrains, make_workspace
 from campipe.engine.common import Cases, make_outputs
 from campipe.engine.contact import (
     HELD,
@@ -24,7 +26,7 @@ from campipe.engine.contact import (
     quasi_static_batch,
     quasi_static_state,
 )
-from campipe.engine.modal import ModalData, harmonic_responses, modal_data
+from campipe.engine.modal import NS, ModalData, harmonic_responses, modal_data
 from campipe.errors import CampipeError
 from campipe.model import ValveTrain, system_matrices
 from campipe.model.assembly import (
@@ -32,8 +34,19 @@ from campipe.model.assembly import (
     SystemMatrices,
     configuration_frequencies,
 )
-from campipe.profiles import Profile, evaluate_packed, pack
-from campipe.vocabulary import CAM, CHATTER, EVENTS_TRUNCATED, FAILURES, NONFINITE, ROMAN, SEAT
+from campipe.profiles import Profile, evaluate, evaluate_packed, pack
+from campipe.vocabulary import (
+    CAM,
+    CAM_CONTACT,
+    CHATTER,
+    CONFIGURATIONS,
+    EVENTS_TRUNCATED,
+    FAILURES,
+    NONFINITE,
+    ROMAN,
+    SEAT,
+    UNBOUNDED,
+)
 
 log = logging.getLogger(__name__)
 
@@ -51,6 +64,20 @@ CLOSURES = ("force", "form")
 #: rad/s mode where a scene does not need it.
 FIDELITIES = ("full", "reduced")
 DEFAULT_MODE_CUTOFF = 2.0e5  # [rad/s]: the configurations' lower modes, about 32 kHz
+#: How a run starts: on the periodic steady state of configuration I (``engine.steady``), or
+#: the thesis's quasi-static state at θ = 0 (Appendix B, step 1), a transient.
+STARTS = ("periodic", "quasi-static")
+#: Turns integrated but left out of the metrics when a run names none, per start.
+DEFAULT_WARMUP = {"periodic": 0, "quasi-static": 1}
+#: An impact closing slower than this [m/s] leaves its contact resting (``common.captured``):
+#: 1 mm/s, two to three orders below the seating velocities a designer reads (0.1–1 m/s) and
+#: far above what the event location resolves (about 1e-8 m/s at 1e-12 s).
+DEFAULT_CAPTURE_VELOCITY = 1e-3
+#: Motion out of physical bounds ends a run (status UNBOUNDED): a valve lift beyond this many
+#: times the full valve lift (plus the seat's offset), a closing or valve speed beyond this
+#: many times the fastest the cam's surface moves (times the rocker ratio).
+LIFT_BOUND = 3.0
+SPEED_BOUND = 10.0
 
 
 class RunSettingsError(CampipeError, ValueError):
@@ -112,6 +139,30 @@ class RunSettings:
     max_events: int = 4096  # events kept per case
     fidelity: str = "full"  # "full" or "reduced" (see FIDELITIES)
     mode_cutoff: float | None = None  # reduced: highest mode kept [rad/s]; None: the default
+    start: str = "periodic"  # "periodic" or "quasi-static" (see STARTS)
+    warmup: int | None = None  # turns left out of the metrics; None: DEFAULT_WARMUP[start]
+    capture_velocity: float = DEFAULT_CAPTURE_VELOCITY  # resting contact below this [m/s]
+
+    @property
+    def warmup_turns(self) -> int:
+        """The turns integrated but left out of every metric."""
+        if self.start not in STARTS:
+            raise RunSettingsError.at(
+                "run.start",
+                f"unknown start {self.start!r}; known: {', '.join(STARTS)}",
+                found=self.start,
+                expected=f"one of: {', '.join(STARTS)}",
+            )
+        turns = DEFAULT_WARMUP[self.start] if self.warmup is None else self.warmup
+        if not (0 <= turns < math.ceil(self.revolutions - 1e-12)):
+            raise RunSettingsError.at(
+                "run.warmup",
+                f"found {turns!r} turns; a run of {self.revolutions:g} needs at least one "
+                "measured turn after its warm-up",
+                found=turns,
+                expected=f"0 … {math.ceil(self.revolutions - 1e-12) - 1} turns",
+            )
+        return int(turns)
 
     @property
     def cutoff(self) -> float:
@@ -155,34 +206,98 @@ class RunSettings:
 
 @dataclass
 class BatchResult:
-    """Histories at the output angles and metrics at full internal resolution, SI."""
+    """Histories at the output angles and metrics at full internal resolution, SI.
+
+    Every metric comes per turn (``*_per_rev``, (n_cases, n_rev)) and as a summary over the
+    measured turns (those after ``warmup``): the largest of a maximum, the mean per turn of a
+    count or an angle.
+    """
 
     cam_angle: np.ndarray  # (n_out,) cam angle of each sample [rad]
     time: np.ndarray  # (n_cases, n_out) [s]
     q: np.ndarray  # (n_cases, n_out, 7) coordinates [m, rad]
     v: np.ndarray  # (n_cases, n_out, 7) velocities [m/s, rad/s]
+    acc: np.ndarray  # (n_cases, n_out, 2) accelerations of q1 and q7 [m/s²]
     cam_lift: np.ndarray  # (n_cases, n_out) [m]
     cam_force: np.ndarray  # (n_cases, n_out) cam contact force, compressive positive [N]
     seat_force: np.ndarray  # (n_cases, n_out) seat contact force, compressive positive [N]
     contact_state: np.ndarray  # (n_cases, n_out) int8, 1–4 = configurations I–IV
     valve_reference: np.ndarray  # (n_cases,) q7 at zero valve lift [m]
-    separation_per_rev: np.ndarray  # (n_cases, n_rev) cam angle off the cam per turn [rad]
-    cam_impacts: np.ndarray  # (n_cases,) int
-    seat_impacts: np.ndarray  # (n_cases,) int
-    max_cam_impact_velocity: np.ndarray  # (n_cases,) [m/s]
-    max_seating_velocity: np.ndarray  # (n_cases,) [m/s]
-    max_cam_force: np.ndarray  # (n_cases,) largest compressive cam force between impacts [N]
-    max_seat_force: np.ndarray  # (n_cases,) likewise at the seat [N]
-    #: (n_cases,) largest cam force including the steps an impact's impulse passes through:
-    #: the thesis's peak "impact force" [N]. For newmark-linear it measures 1/Δt and does not
-    #: converge; modal-exact applies impulses instantly, so it equals max_cam_force.
-    thesis_impact_force: np.ndarray
+    measured: np.ndarray  # (n_rev,) bool: the turn counts in the summaries (after warm-up)
+    #: (n_cases, n_rev) per turn: cam angle in configuration II, the follower off the cam with
+    #: the valve off its seat (no-follow) [rad]
+    separation_per_rev: np.ndarray
+    #: (n_cases, n_rev) per turn: cam angle in configuration IV, the valve seated and the
+    #: follower off the cam (the lash of a seated train) [rad]
+    seated_off_cam_per_rev: np.ndarray
+    cam_impacts_per_rev: np.ndarray  # (n_cases, n_rev) int
+    seat_impacts_per_rev: np.ndarray  # (n_cases, n_rev) int
+    max_cam_impact_velocity_per_rev: np.ndarray  # (n_cases, n_rev) [m/s]
+    max_seating_velocity_per_rev: np.ndarray  # (n_cases, n_rev) [m/s]
+    max_cam_force_per_rev: np.ndarray  # (n_cases, n_rev) [N]
+    max_seat_force_per_rev: np.ndarray  # (n_cases, n_rev) [N]
+    thesis_impact_force_per_rev: np.ndarray  # (n_cases, n_rev) [N]
     #: per case (n_ev, 6): columns vocabulary.EV_*
     events: list[np.ndarray] = field(default_factory=list)
     steps: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # (n_cases,)
     #: (n_cases,) int64 vocabulary status: OK, EVENTS_TRUNCATED, or (``on_failure="record"``)
-    #: a failure (NONFINITE, CHATTER) whose histories and metrics are NaN
+    #: a failure (``vocabulary.FAILURES``) whose histories and metrics are NaN
     status: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    start_time: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (n_cases,) t0 ≤ 0 [s]
+
+    def _mean(self, per_rev: np.ndarray) -> np.ndarray:
+        return per_rev[:, self.measured].mean(axis=1)
+
+    def _max(self, per_rev: np.ndarray) -> np.ndarray:
+        return per_rev[:, self.measured].max(axis=1)
+
+    @property
+    def separation(self) -> np.ndarray:
+        """(n_cases,) no-follow per turn, mean over the measured turns [rad]."""
+        return self._mean(self.separation_per_rev)
+
+    @property
+    def seated_off_cam(self) -> np.ndarray:
+        """(n_cases,) configuration IV per turn, mean over the measured turns [rad]."""
+        return self._mean(self.seated_off_cam_per_rev)
+
+    @property
+    def cam_impacts(self) -> np.ndarray:
+        """(n_cases,) cam impacts per turn, mean over the measured turns."""
+        return self._mean(self.cam_impacts_per_rev)
+
+    @property
+    def seat_impacts(self) -> np.ndarray:
+        """(n_cases,) seat impacts per turn, mean over the measured turns."""
+        return self._mean(self.seat_impacts_per_rev)
+
+    @property
+    def max_cam_impact_velocity(self) -> np.ndarray:
+        """(n_cases,) largest closing velocity of a cam impact in the measured turns [m/s]."""
+        return self._max(self.max_cam_impact_velocity_per_rev)
+
+    @property
+    def max_seating_velocity(self) -> np.ndarray:
+        """(n_cases,) largest closing velocity of a seat impact in the measured turns [m/s]."""
+        return self._max(self.max_seating_velocity_per_rev)
+
+    @property
+    def max_cam_force(self) -> np.ndarray:
+        """(n_cases,) largest compressive cam force between impacts, measured turns [N]."""
+        return self._max(self.max_cam_force_per_rev)
+
+    @property
+    def max_seat_force(self) -> np.ndarray:
+        """(n_cases,) largest compressive seat force between impacts, measured turns [N]."""
+        return self._max(self.max_seat_force_per_rev)
+
+    @property
+    def thesis_impact_force(self) -> np.ndarray:
+        """(n_cases,) largest cam force including the steps an impact's impulse passes
+        through: the thesis's peak "impact force" [N]. For newmark-linear it measures 1/Δt and
+        does not converge; modal-exact applies impulses instantly, so it equals
+        max_cam_force."""
+        return self._max(self.thesis_impact_force_per_rev)
 
     @property
     def follower_lift(self) -> np.ndarray:
@@ -193,6 +308,21 @@ class BatchResult:
     def valve_lift(self) -> np.ndarray:
         """(n_cases, n_out) valve opening from its base-circle static position [m]."""
         return self.q[:, :, SEAT] - self.valve_reference[:, None]
+
+    @property
+    def valve_velocity(self) -> np.ndarray:
+        """(n_cases, n_out) valve opening velocity [m/s]."""
+        return self.v[:, :, SEAT]
+
+    @property
+    def valve_acceleration(self) -> np.ndarray:
+        """(n_cases, n_out) valve opening acceleration [m/s²]."""
+        return self.acc[:, :, 1]
+
+    @property
+    def follower_acceleration(self) -> np.ndarray:
+        """(n_cases, n_out) pushrod foot acceleration in the cam's lift coordinate [m/s²]."""
+        return -self.acc[:, :, 0]
 
 
 @functools.lru_cache(maxsize=256)
@@ -211,6 +341,7 @@ class Prepared:
     valve_reference: float  # q7 at zero valve lift [m]
     omega_max: np.ndarray  # (4,) highest natural frequency per configuration [rad/s]
     start_inverses: np.ndarray  # (2, 2, 7, 7) see start_inverses
+    valve_ratio: float  # static valve lift per unit cam lift (the rocker ratio) [-]
 
 
 @functools.lru_cache(maxsize=256)
@@ -226,7 +357,18 @@ def prepare(train: ValveTrain, dt: float) -> Prepared:
         valve_reference(sm),
         omega_max,
         start_inverses(sm),
+        valve_ratio(sm),
     )
+
+
+def valve_ratio(sm: SystemMatrices) -> float:
+    """The static valve lift per unit cam lift: the rocker ratio with the members' give."""
+    lifted = np.zeros(7)
+    lifted[CAM] = -1.0  # one metre of cam lift
+    q, _, _ = quasi_static_state(
+        sm.mass, sm.damping, sm.stiffness, sm.preload, HELD[0], lifted, np.zeros(7), np.zeros(7)
+    )
+    return float(q[SEAT] - valve_reference(sm))
 
 
 def start_inverses(sm: SystemMatrices) -> np.ndarray:
@@ -438,36 +580,89 @@ def _run_newmark(preps, which, settings, dt_run, cases, packed, out) -> None:
         step_G=np.stack([p.step_G for p in preps])[which],
     )
     dt = np.full(len(which), dt_run)
-    n_steps = np.ceil(settings.revolutions * 2 * np.pi / (cases.omega * dt) - 1e-9)
+    n_steps = np.ceil(settings.revolutions * TWO_PI / (cases.omega * dt) - 1e-9)
     runs = newmark.NewmarkRuns(dt, n_steps.astype(np.int64), float(settings.output_every))
-    newmark.newmark_linear_batch(cases, trains, packed, runs, out, newmark.make_work())
+    contact = np.zeros(1, newmark.CONTACT_STATE)
+    newmark.newmark_linear_batch(cases, trains, packed, runs, out, newmark.make_work(), contact)
 
 
-def _run_modal_exact(trains, preps, which, settings, dt_run, full_state, cases, packed, out):
-    # Per-train data, indexed in the kernel by each case's train.
+def _modal_trains(trains, preps) -> tuple[ModalTrains, np.ndarray]:
+    """The distinct trains' closed-form data, indexed in the kernels by each case's train, and
+    their state matrices (for the harmonic responses)."""
     data = [_modal(t) for t in trains]
-    modal_trains = exact.ModalTrains(
+    modal_trains = ModalTrains(
         load=np.stack([p.matrices.preload for p in preps]),
-        **{
-            f: np.stack([getattr(d, f) for d in data])
-            for f in exact.ModalTrains._fields
-            if f != "load"
-        },
+        **{f: np.stack([getattr(d, f) for d in data]) for f in ModalTrains._fields if f != "load"},
     )
-    a_mat = np.stack([d.a_mat for d in data])  # for the harmonic responses only
-    omega = cases.omega
-    runs = exact.ExactRuns(
+    return modal_trains, np.stack([d.a_mat for d in data])
+
+
+def _exact_runs(settings, dt_run, full_state, which, modal_trains, a_mat, omega) -> ExactRuns:
+    return ExactRuns(
         train=which,
         t_sample=settings.output_every / omega,
-        t_end=settings.revolutions * 2 * np.pi / omega,
+        t_end=settings.revolutions * TWO_PI / omega,
         zeta=harmonic_responses(which, modal_trains.n_free, a_mat, modal_trains.b_in, omega),
         dt_cap=float(dt_run or 0.0),
         tolerance=float(settings.tolerance),
         mode_cutoff=float(settings.cutoff),
         full_state=bool(full_state),
     )
-    state = np.zeros(1, exact.STATE)
-    exact.modal_exact_batch(cases, modal_trains, packed, runs, out, exact.make_workspace(), state)
+
+
+def _periodic_starts(case_list, cases, modal_trains, runs, packed, snap, preps, which):
+    """Each case's start on the periodic steady state of configuration I
+    (``steady.periodic_starts``): (t0, q0, v0, a0); refuses a case where configuration I holds
+    nowhere on the turn."""
+    n = cases.omega.size
+    t0 = np.empty(n)
+    q0 = np.empty((n, 7))
+    v0 = np.empty((n, 7))
+    z_turn = np.zeros((n, packed.n_pieces.max() + 1, NS))
+    state = np.zeros(1, STATE)
+    steady.periodic_starts(
+        cases, modal_trains, packed, runs, make_workspace(), state, snap, z_turn, t0, q0, v0
+    )
+    bad = np.flatnonzero(np.isnan(t0))
+    if bad.size:
+        raise CaseError.at(
+            "seat",
+            f"cases {bad.tolist()}: the cam never drives the valve off its seat with the cam "
+            "pushing (configuration I holds nowhere on the turn): the seat is above the "
+            "valve's lift, or the speed pulls the follower off wherever the valve is open",
+            found=bad.tolist(),
+            expected="a seat below the valve's full lift",
+        )
+    # Accelerations from the equation of motion with the cam held (newmark-linear's start).
+    a0 = np.zeros((n, 7))
+    theta = cases.omega * t0
+    for c in range(n):
+        sm = preps[which[c]].matrices
+        _, _, ddlift = evaluate(case_list[c].profile, theta[c])
+        a0[c, CAM] = -(cases.omega[c] ** 2) * float(ddlift)
+        free = np.array(CONFIGURATIONS[CAM_CONTACT].free)
+        force = sm.preload - sm.stiffness @ q0[c] - sm.damping @ v0[c] - sm.mass @ a0[c]
+        a0[c, free] = np.linalg.solve(sm.mass[np.ix_(free, free)], force[free])
+    return t0, q0, v0, a0
+
+
+def _bounds(cases: Sequence[Case], preps, which, qref) -> tuple[np.ndarray, np.ndarray]:
+    """Each case's bounds on valve lift [m] and on closing and valve speeds [m/s]."""
+    lift = np.empty(len(cases))
+    speed = np.empty(len(cases))
+    grid = np.linspace(0.0, TWO_PI, 2049)
+    slopes: dict[int, tuple[float, float]] = {}
+    for i, case in enumerate(cases):
+        key = id(case.profile)
+        if key not in slopes:
+            lifts, rates, _ = evaluate(case.profile, grid)
+            slopes[key] = (float(np.max(np.abs(lifts))), float(np.max(np.abs(rates))))
+        max_lift, max_rate = slopes[key]
+        ratio = abs(preps[which[i]].valve_ratio)
+        seat = abs(case.seat) if case.has_seat else 0.0
+        lift[i] = LIFT_BOUND * max_lift * ratio + seat
+        speed[i] = SPEED_BOUND * case.speed * max_rate * max(ratio, 1.0)
+    return lift, speed
 
 
 def run_batch(
@@ -514,9 +709,11 @@ def run_batch(
     angles = output_angles(settings)
     n_out = angles.size
     n_rev = int(math.ceil(settings.revolutions - 1e-12))
+    warmup = settings.warmup_turns
 
     trains, which = _unique_trains(cases)
     preps = [prepare(t, dt_run or 0.0) for t in trains]
+    modal = [_modal(t) for t in trains]
     meff = np.stack([p.impact_masses for p in preps])[which]
     qref = np.array([p.valve_reference for p in preps])[which]
     has_seat = np.array([c.has_seat for c in cases], dtype=np.bool_)
@@ -524,21 +721,50 @@ def run_batch(
     omega = np.array([c.speed for c in cases], dtype=float)
     form = np.array([c.closure == "form" for c in cases], dtype=np.bool_)
     packed = pack([c.profile for c in cases])
-    q0, v0, a0, cfg0 = initial_states(
-        [p.matrices for p in preps],
-        which,
-        packed,
-        omega,
-        has_seat,
-        seat_q,
-        [p.start_inverses for p in preps],
+    modal_trains, a_mat = _modal_trains(trains, preps)
+    runs = _exact_runs(settings, dt_run, full_state, which, modal_trains, a_mat, omega)
+    lift_bound, speed_bound = _bounds(cases, preps, which, qref)
+    cases_in = Cases(
+        omega=omega,
+        seat_q=seat_q,
+        has_seat=has_seat,
+        form=form,
+        t0=np.zeros(n),
+        q0=np.zeros((n, 7)),
+        v0=np.zeros((n, 7)),
+        a0=np.zeros((n, 7)),
+        cfg0=np.full(n, CAM_CONTACT, np.int64),
+        meff=meff,
+        separation=np.stack([d.separation for d in modal])[which],
+        hold=np.stack([d.hold for d in modal])[which],
+        capture=np.full(n, float(settings.capture_velocity)),
+        valve_ref=qref,
+        lift_bound=lift_bound,
+        speed_bound=speed_bound,
     )
+    if settings.start == "quasi-static":
+        q0, v0, a0, cfg0 = initial_states(
+            [p.matrices for p in preps],
+            which,
+            packed,
+            omega,
+            has_seat,
+            seat_q,
+            [p.start_inverses for p in preps],
+        )
+        cases_in = cases_in._replace(q0=q0, v0=v0, a0=a0, cfg0=cfg0)
+    else:
+        snap = np.full(n, dt_run if settings.method == "newmark-linear" else 0.0)
+        t0, q0, v0, a0 = _periodic_starts(
+            cases, cases_in, modal_trains, runs, packed, snap, preps, which
+        )
+        cases_in = cases_in._replace(t0=t0, q0=q0, v0=v0, a0=a0)
     out = make_outputs(n, n_out, n_rev, settings.max_events)
-    cases_in = Cases(omega, seat_q, has_seat, form, q0, v0, a0, cfg0, meff)
     if settings.method == "newmark-linear":
         _run_newmark(preps, which, settings, dt_run, cases_in, packed, out)
     else:
-        _run_modal_exact(trains, preps, which, settings, dt_run, full_state, cases_in, packed, out)
+        state = np.zeros(1, STATE)
+        exact.modal_exact_batch(cases_in, modal_trains, packed, runs, out, make_workspace(), state)
     status, n_events = out.status, out.n_events
     bad = np.flatnonzero(status == NONFINITE)
     if bad.size and on_failure == "raise":
@@ -558,6 +784,15 @@ def run_batch(
             "integrate them with newmark-linear",
             found=bad.tolist(),
         )
+    bad = np.flatnonzero(status == UNBOUNDED)
+    if bad.size and on_failure == "raise":
+        how = f"{settings.method}, step {dt_run:g} s" if dt_run else settings.method
+        raise IntegrationError(
+            f"cases {bad.tolist()}: the motion left its physical bounds ({how}): a valve lift "
+            f"beyond {LIFT_BOUND:g}× the full lift or a speed beyond {SPEED_BOUND:g}× the cam's; "
+            "the step is too large for this case (use a smaller run.dt or modal-exact)",
+            found=bad.tolist(),
+        )
     for i in np.flatnonzero(status == EVENTS_TRUNCATED):
         log.warning(
             "case %d: %d events, only the first %d kept (raise run.max_events)",
@@ -566,30 +801,37 @@ def run_batch(
             settings.max_events,
         )
     failed = np.flatnonzero(np.isin(status, FAILURES))
-    for array in (out.q, out.v, out.force, out.cam, out.sep_rev, out.vmax, out.fmax):
+    for array in (out.q, out.v, out.acc, out.force, out.cam, out.sep_rev, out.seated_rev,
+                  out.vmax, out.fmax):  # fmt: skip
         array[failed] = np.nan
+    counts = out.counts.astype(float)
+    counts[failed] = np.nan
+    out = out._replace(counts=counts)
     kept = np.minimum(n_events, settings.max_events)
-    q_out, v_out, force_out, cam_out, cfg_out = out.q, out.v, out.force, out.cam, out.cfg
-    sep_rev, counts, vmax, fmax, events = out.sep_rev, out.counts, out.vmax, out.fmax, out.events
+    measured = np.arange(n_rev) >= warmup
     return BatchResult(
         cam_angle=angles,
         time=angles[None, :] / omega[:, None],
-        q=q_out,
-        v=v_out,
-        cam_lift=cam_out,
-        cam_force=-force_out[:, :, 0],
-        seat_force=force_out[:, :, 1],
-        contact_state=cfg_out,
+        q=out.q,
+        v=out.v,
+        acc=out.acc,
+        cam_lift=out.cam,
+        cam_force=-out.force[:, :, 0],
+        seat_force=out.force[:, :, 1],
+        contact_state=out.cfg,
         valve_reference=qref,
-        separation_per_rev=sep_rev,
-        cam_impacts=counts[:, 0],
-        seat_impacts=counts[:, 1],
-        max_cam_impact_velocity=vmax[:, 0],
-        max_seating_velocity=vmax[:, 1],
-        max_cam_force=fmax[:, 0],
-        max_seat_force=fmax[:, 1],
-        thesis_impact_force=fmax[:, 2],
-        events=[events[i, : kept[i]].copy() for i in range(n)],
+        measured=measured,
+        separation_per_rev=out.sep_rev,
+        seated_off_cam_per_rev=out.seated_rev,
+        cam_impacts_per_rev=out.counts[:, :, 0],
+        seat_impacts_per_rev=out.counts[:, :, 1],
+        max_cam_impact_velocity_per_rev=out.vmax[:, :, 0],
+        max_seating_velocity_per_rev=out.vmax[:, :, 1],
+        max_cam_force_per_rev=out.fmax[:, :, 0],
+        max_seat_force_per_rev=out.fmax[:, :, 1],
+        thesis_impact_force_per_rev=out.fmax[:, :, 2],
+        events=[out.events[i, : kept[i]].copy() for i in range(n)],
         steps=out.steps,
         status=status,
+        start_time=cases_in.t0,
     )

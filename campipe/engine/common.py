@@ -14,8 +14,10 @@ import numpy as np
 from numba import njit
 
 from campipe import vocabulary
+from campipe.constants import TWO_PI
 from campipe.vocabulary import (
     CAM_IMPACT,
+    CAM_SEPARATION,
     EV_FROM,
     EV_IMPULSE,
     EV_KIND,
@@ -25,6 +27,7 @@ from campipe.vocabulary import (
     N_COORDINATES,
     N_EVENT_FIELDS,
     SEAT_IMPACT,
+    SEAT_SEPARATION,
 )
 
 #: How the kernels and their steps compile: cached, releasing the GIL, and without numba's
@@ -45,22 +48,38 @@ holds_seat = njit(inline="always")(vocabulary.holds_seat)
 JUMP_FLOOR = 1e-9
 #: A step down in lift larger than this [m] at a break is a drop (the engine refuses steps up).
 DROP_FLOOR = 1e-12
+#: A gap's level [m]: the penetration at which a contact closes (an impact), in both
+#: integrators, far below any output's resolution and above rounding of the coordinates.
+GAP_LEVEL = 1e-13
 #: What a break does to a follower held on the cam (:func:`classify_break`).
 SMOOTH, RELEASE, JUMP = 0, 1, 2
 
 
 class Cases(NamedTuple):
-    """Per case of a batch: how it is driven and where it starts (leading axis: case)."""
+    """Per case of a batch: how it is driven, where it starts, and its contact laws (leading
+    axis: case)."""
 
     omega: np.ndarray  # (n,) cam speed [rad/s]
     seat_q: np.ndarray  # (n,) q7 on the seat [m] (the valve reference where there is none)
     has_seat: np.ndarray  # (n,) bool: the valve has a seat
     form: np.ndarray  # (n,) bool: form closure (the cam never releases the follower)
+    t0: np.ndarray  # (n,) start time [s], ≤ 0: integrated, not recorded, up to t = 0
     q0: np.ndarray  # (n, 7) start coordinates [m, rad]
     v0: np.ndarray  # (n, 7) start velocities [m/s, rad/s]
     a0: np.ndarray  # (n, 7) start accelerations [m/s², rad/s²]
     cfg0: np.ndarray  # (n,) int64 start configuration
     meff: np.ndarray  # (n, 4) impact masses [kg] (``contact.impact_masses`` order)
+    #: (n, 2) the other contact's separation velocity per unit velocity change of the struck
+    #: one (struck: cam, seat) [-] (``modal.ModalData.separation``)
+    separation: np.ndarray
+    #: (n, 4, 2) per configuration and contact: the bound on the force of the free vibration a
+    #: unit-velocity impact there leaves [N·s/m] (``modal.ModalData.hold``); a resting contact
+    #: must pull beyond it times its capturing impact's closing velocity to release
+    hold: np.ndarray
+    capture: np.ndarray  # (n,) capture velocity [m/s]: slower impacts leave the contact resting
+    valve_ref: np.ndarray  # (n,) q7 at zero valve lift [m]
+    lift_bound: np.ndarray  # (n,) |valve lift| beyond this [m] is motion out of bounds
+    speed_bound: np.ndarray  # (n,) a closing or valve speed beyond this [m/s] is out of bounds
 
 
 class Outputs(NamedTuple):
@@ -71,11 +90,14 @@ class Outputs(NamedTuple):
     force: np.ndarray  # (n, n_out, 2) (F1, F7), thesis signs [N]
     cam: np.ndarray  # (n, n_out) cam lift [m]
     cfg: np.ndarray  # (n, n_out) int8 configuration
-    sep_rev: np.ndarray  # (n, n_rev) cam angle off the cam per turn [rad]
-    counts: np.ndarray  # (n, 2) int64 cam and seat impacts
-    vmax: np.ndarray  # (n, 2) largest cam and seat closing velocity [m/s]
-    #: (n, 3) largest compressive cam and seat force between impacts, and the cam force
-    #: including the steps an impulse passes through (the thesis's "impact force") [N]
+    acc: np.ndarray  # (n, n_out, 2) accelerations of q1 and q7 [m/s²]
+    sep_rev: np.ndarray  # (n, n_rev) per turn: cam angle in configuration II (no-follow) [rad]
+    seated_rev: np.ndarray  # (n, n_rev) per turn: cam angle in configuration IV [rad]
+    counts: np.ndarray  # (n, n_rev, 2) int64 per turn: cam and seat impacts
+    vmax: np.ndarray  # (n, n_rev, 2) per turn: largest cam and seat closing velocity [m/s]
+    #: (n, n_rev, 3) per turn: largest compressive cam and seat force between impacts, and
+    #: the cam force including the steps an impulse passes through (the thesis's "impact
+    #: force") [N]
     fmax: np.ndarray
     events: np.ndarray  # (n, max_events, N_EVENT_FIELDS), rows below n_events
     n_events: np.ndarray  # (n,) int64 events of each case (may exceed max_events)
@@ -91,10 +113,12 @@ def make_outputs(n: int, n_out: int, n_rev: int, max_events: int) -> Outputs:
         force=np.zeros((n, n_out, 2)),
         cam=np.zeros((n, n_out)),
         cfg=np.zeros((n, n_out), np.int8),
+        acc=np.zeros((n, n_out, 2)),
         sep_rev=np.zeros((n, n_rev)),
-        counts=np.zeros((n, 2), np.int64),
-        vmax=np.zeros((n, 2)),
-        fmax=np.zeros((n, 3)),
+        seated_rev=np.zeros((n, n_rev)),
+        counts=np.zeros((n, n_rev, 2), np.int64),
+        vmax=np.zeros((n, n_rev, 2)),
+        fmax=np.zeros((n, n_rev, 3)),
         events=np.empty((n, max_events, N_EVENT_FIELDS)),
         n_events=np.zeros(n, np.int64),
         status=np.zeros(n, np.int64),
@@ -102,9 +126,23 @@ def make_outputs(n: int, n_out: int, n_rev: int, max_events: int) -> Outputs:
     )
 
 
+#: Turns [-] by which an angle may fall short of a turn's start and still count to that turn.
+TURN_GUARD = 1e-9
+
+
+@njit(inline="always")
+def turn_of(w, t):
+    """The cam turn holding time t [s] at speed w (turn 0 from t = 0; negative before). An
+    angle on a turn's start to rounding (a round speed and step) counts to that turn."""
+    return int(np.floor(w * t / TWO_PI + TURN_GUARD))
+
+
 @njit(**KERNEL)
 def record_event(events, n_events, c, t, kind, c_from, c_to, velocity, impulse):
-    """Append an event to case c's record (counted beyond the kept rows)."""
+    """Append an event to case c's record (counted beyond the kept rows); nothing before
+    t = 0 (the start's run-up) is recorded."""
+    if t < 0.0:
+        return
     k = n_events[c]
     if k < events.shape[1]:
         events[c, k, EV_TIME] = t
@@ -117,15 +155,34 @@ def record_event(events, n_events, c, t, kind, c_from, c_to, velocity, impulse):
 
 
 @njit(**KERNEL)
-def record_impact(events, n_events, counts, vmax, meff, c, t, seat, other_held, c_from, c_to,
-                  closing):  # fmt: skip
-    """Count a plastic impact of case c on the cam (``seat`` False) or the seat, keep its
-    largest closing velocity [m/s] in ``vmax`` and record the event with its impulse
-    m_eff·v_closing; ``other_held``: the other contact is held (``contact.impact_masses``
-    order)."""
+def record_impact(events, n_events, counts, vmax, meff, c, w, t, seat, other_held, c_from, c_to,
+                  closing, capture):  # fmt: skip
+    """Count a plastic impact of case c at time t [s] (speed w) on the cam (``seat`` False)
+    or the seat in its turn, keep the turn's largest closing velocity [m/s] in ``vmax`` and
+    record the event with its impulse m_eff·v_closing; ``other_held``: the other contact is
+    held (``contact.impact_masses`` order). Nothing before t = 0 is recorded.
+
+    A contact that closes slower than the capture velocity ``capture`` [m/s] right after it
+    released (its release the last event) never really left: its flight is far below any
+    length a contact resolves (0.1 nm at 1e-4 m/s over a microsecond). The release is taken
+    back and the closing is no impact."""
+    if t < 0.0:
+        return
     side = 1 if seat else 0
-    counts[c, side] += 1
-    vmax[c, side] = max(vmax[c, side], closing)
+    k = n_events[c] - 1
+    release = SEAT_SEPARATION if seat else CAM_SEPARATION
+    if (
+        closing < capture
+        and 0 <= k < events.shape[1]
+        and events[c, k, EV_KIND] == release
+        and events[c, k, EV_TO] == c_from
+    ):
+        n_events[c] = k
+        return
+    turn = turn_of(w, t)
+    if turn < counts.shape[1]:
+        counts[c, turn, side] += 1
+        vmax[c, turn, side] = max(vmax[c, turn, side], closing)
     mass = meff[c, 2 * side + (1 if other_held else 0)]
     kind = SEAT_IMPACT if seat else CAM_IMPACT
     record_event(events, n_events, c, t, kind, c_from, c_to, closing, mass * closing)
@@ -152,3 +209,23 @@ def classify_break(l_left, dl_left, l_right, dl_right, w, form):
     if abs(jump) > scale:
         return JUMP, jump
     return SMOOTH, jump
+
+
+@njit(inline="always")
+def other_releases(separation, capture, c, seat, dv):
+    """An impact at the cam (``seat`` False) or the seat that changes its velocity by dv [m/s]
+    with the other contact held: does the other release? The impulsive complementarity of two
+    contacts: it keeps its hold only if its reaction impulse is compressive, which is where
+    releasing it would not separate it; a separation slower than the capture velocity
+    ``capture`` [m/s] is not resolved (the contact would close again at once), so the contact
+    stays (``modal.ModalData.separation``)."""
+    return separation[c, 1 if seat else 0] * dv > capture
+
+
+@njit(inline="always")
+def captured(closing, capture):
+    """An impact closing slower than the capture velocity [m/s] leaves its contact resting: it
+    stays held until its force pulls beyond what that impact's own vibration can (the hold,
+    ``modal.ModalData.hold`` × the closing velocity), so the micro-bounces of a valve resting
+    on its seat with no force to spare do not chatter."""
+    return closing < capture

@@ -55,25 +55,56 @@ it (``_apply_event``), cross a profile break (``_cross_break``).
 
 from __future__ import annotations
 
-from typing import NamedTuple
-
 import numpy as np
 from numba import njit
 
 from campipe.constants import TWO_PI
+from campipe.engine.closed_form import (
+    AMP_FA,
+    AMP_FB,
+    AMP_QA,
+    AMP_QB,
+    D1,
+    D2,
+    DABS,
+    DSQ,
+    EABS,
+    F1,
+    F2,
+    INVD,
+    LBAR,
+    RATE,
+    W1,
+    W1_ABS,
+    W2,
+    W2_ABS,
+    WL1,
+    WL1_ABS,
+    WL2,
+    WL2_ABS,
+    WLL1,
+    WLL2,
+    block_basis,
+    block_derivative,
+    forcing,
+    particular,
+)
 from campipe.engine.common import (
+    GAP_LEVEL,
     KERNEL,
     RELEASE,
     SMOOTH,
+    captured,
     classify_break,
     configuration,
     holds_cam,
     holds_seat,
+    other_releases,
     record_event,
     record_impact,
+    turn_of,
 )
-from campipe.engine.modal import NS
-from campipe.profiles.packed import degree, horner, locate, next_break, piece_eval
+from campipe.profiles.packed import horner, locate, next_break, piece_eval
 from campipe.vocabulary import (
     CAM,
     CAM_SEPARATION,
@@ -83,6 +114,7 @@ from campipe.vocabulary import (
     OK,
     SEAT,
     SEAT_SEPARATION,
+    UNBOUNDED,
 )
 
 #: Steps are at most RESOLUTION·π/|λ| of the fastest mode still present: under half its period,
@@ -93,210 +125,11 @@ RESOLUTION = 0.9
 #: (4e-12 in: far below any output's resolution) and its share of the contact forces is below
 #: the force level of the monitors.
 MODE_FLOOR = 1e-13
-#: A gap monitor's level [m]: the penetration at which a contact is an impact.
-GAP_LEVEL = 1e-13
 MAX_STALLED_EVENTS = 64
 ROOT_ITERATIONS = 200
 
-# Rows of the per-block work array ``MC`` (one column per active block, fastest first): the
-# basis functions (f1, f2) at the current grid point, their values at the grid step h (the
-# step's factors), the envelope e^{rate·τ} and its step factor, the block's largest share of a
-# coordinate or velocity (with f1, with f2) and of the contact forces (likewise) at the segment
-# start, and the block's constants λ̄, δ², 1/|δ| (inf at δ = 0) and slowest rate.
-F1, F2, D1, D2, EABS, DABS, AMP_QA, AMP_QB, AMP_FA, AMP_FB, LBAR, DSQ, INVD, RATE = range(14)
-N_MC = 14
-# Rows of the monitor coefficients ``WC`` (row, monitor, block): the coefficients of f1 and f2
-# in the monitor, in its time derivative and in its second derivative, then |W1|, |W2|,
-# |WL1|, |WL2|.
-W1, W2, WL1, WL2, WLL1, WLL2, W1_ABS, W2_ABS, WL1_ABS, WL2_ABS = range(10)
-N_WC = 10
-
-
-class ModalTrains(NamedTuple):
-    """The distinct trains of a batch: preload and ``modal.ModalData`` per configuration
-    (leading axes (n_trains, 4); see ``modal.ModalData`` for each field)."""
-
-    load: np.ndarray  # (n_trains, 7) preload [N]
-    n_free: np.ndarray
-    free: np.ndarray
-    a_inv: np.ndarray
-    b_in: np.ndarray
-    b_load: np.ndarray
-    rho: np.ndarray
-    sigma: np.ndarray
-    sigma0: np.ndarray
-    impulse: np.ndarray
-    n_blocks: np.ndarray
-    bstart: np.ndarray
-    bdim: np.ndarray
-    lam_bar: np.ndarray
-    delta2: np.ndarray
-    rate: np.ndarray
-    speed: np.ndarray
-    basis: np.ndarray
-    basis_inv: np.ndarray
-    basis_n: np.ndarray
-    rho_x: np.ndarray
-    rho_xn: np.ndarray
-
-
-class ExactRuns(NamedTuple):
-    """How each case is run: its train, sampling, end, harmonic responses, and the settings
-    shared by the batch."""
-
-    train: np.ndarray  # (n,) int64 index into ModalTrains
-    t_sample: np.ndarray  # (n,) output spacing in time [s]
-    t_end: np.ndarray  # (n,) the run's end [s]
-    zeta: np.ndarray  # (n, 4, NS) complex ``modal.harmonic_responses`` at the case's speed
-    dt_cap: float  # largest step [s]; 0: none
-    tolerance: float  # event-time tolerance [s]
-    mode_cutoff: float  # reduced fidelity: highest mode kept on the grid [rad/s]; 0: all
-    full_state: bool  # sample all seven coordinates (else q1 and q7 only)
-
-
-class Workspace(NamedTuple):
-    """Work arrays of one case's segment, allocated once per batch (``make_workspace``)."""
-
-    q: np.ndarray  # (7,) coordinates at the segment start / an event [m, rad]
-    v: np.ndarray  # (7,) velocities
-    z: np.ndarray  # (NS,) a state z
-    zh: np.ndarray  # (NS,) the homogeneous part at the segment start
-    zb: np.ndarray  # (NS,) scratch
-    Z: np.ndarray  # (9, NS) polynomial particular solution Z_k (row k)
-    ZT: np.ndarray  # (NS,) complex harmonic particular solution Z_T
-    bpoly: np.ndarray  # (8, NS) the forcing's polynomial coefficients b_k
-    u: np.ndarray  # (NS,) the state's homogeneous part in the blocks' basis at t_s: X⁻¹ zh
-    act: np.ndarray  # (NS,) int64 the block of each active column
-    MC: np.ndarray  # (N_MC, NS) per-block work, rows F1 … RATE
-    WC: np.ndarray  # (N_WC, 2, NS) monitor coefficients per block, rows W1 … WL2_ABS
-    VY: np.ndarray  # (2, NS, NS) the state's coefficients of f1 and f2: X_b u_b, X_b N_b u_b
-    gval: np.ndarray  # (2,) monitors at the latest point
-    dval: np.ndarray  # (2,) their time derivatives
-    gprev: np.ndarray  # (2,) monitors at the previous grid point
-    dprev: np.ndarray  # (2,) their time derivatives
-    G: np.ndarray  # (2, 8) monitors' polynomial part G_mk
-    GT: np.ndarray  # (2,) complex monitors' harmonic part
-    ready: np.ndarray  # (2,) bool: monitor prepared (its value is computed)
-    watch: np.ndarray  # (2,) bool: monitor can end the segment
-    level: np.ndarray  # (2,) the level each monitor rises through at an event
-    inp: np.ndarray  # (3, 2, 8) held coordinates' (q, q̇, q̈) polynomials in x
-    inp_t: np.ndarray  # (3, 2) complex held coordinates' harmonic parts
-
-
-def make_workspace() -> Workspace:
-    """A zeroed workspace."""
-    return Workspace(
-        q=np.zeros(7),
-        v=np.zeros(7),
-        z=np.zeros(NS),
-        zh=np.zeros(NS),
-        zb=np.zeros(NS),
-        Z=np.zeros((9, NS)),
-        ZT=np.zeros(NS, np.complex128),
-        bpoly=np.zeros((8, NS)),
-        u=np.zeros(NS),
-        act=np.zeros(NS, np.int64),
-        MC=np.zeros((N_MC, NS)),
-        WC=np.zeros((N_WC, 2, NS)),
-        VY=np.zeros((2, NS, NS)),
-        gval=np.zeros(2),
-        dval=np.zeros(2),
-        gprev=np.zeros(2),
-        dprev=np.zeros(2),
-        G=np.zeros((2, 8)),
-        GT=np.zeros(2, np.complex128),
-        ready=np.zeros(2, np.bool_),
-        watch=np.zeros(2, np.bool_),
-        level=np.zeros(2),
-        inp=np.zeros((3, 2, 8)),
-        inp_t=np.zeros((3, 2), np.complex128),
-    )
-
-
-#: The scalars of one case's run and of its current segment (a record, so the steps below
-#: share them by name).
-STATE = np.dtype(
-    [
-        ("c", "i8"),  # the case
-        ("tr", "i8"),  # its train
-        ("w", "f8"),  # its speed ω [rad/s]
-        ("eps_force", "f8"),  # force monitors' level [N]
-        ("cfg", "i8"),  # configuration
-        ("p", "i8"),  # piece of the profile, of turn ``rev``
-        ("rev", "i8"),
-        ("t_s", "f8"),  # segment start [s]
-        ("th0", "f8"),  # cam angle where the piece starts [rad]
-        ("nb", "i8"),  # the next piece, of turn ``revb``, starting at ``t_break`` [s]
-        ("revb", "i8"),
-        ("t_break", "f8"),
-        ("nf", "i8"),  # free coordinates; the state has ns = 2·nf entries
-        ("ns", "i8"),
-        ("kmax", "i8"),  # degree of the held inputs' polynomials
-        ("deg", "i8"),  # degree of the particular solution's polynomial
-        ("gdeg", "i8"),  # degree of the monitors' polynomials
-        ("nact", "i8"),  # active block columns; the first ``lo`` are left off the grid
-        ("lo", "i8"),
-        ("k_out", "i8"),  # the next output sample
-        ("stalled", "i8"),  # events in a row without time advancing
-        ("done", "?"),  # the run reached its end
-    ],
-    align=True,
-)
-
 
 # --------------------------------------------------------------------------- closed forms
-
-
-@njit(**KERNEL)
-def _held_inputs(profiles, c, p, w, seat_q, cam_held, seat_held, inp, inp_t):
-    """Held coordinates' (q, q̇, q̈) as polynomials in the piece's local angle x (inp, shape
-    (3, 2, 8)) and harmonic parts Re(inp_t·e^{iθ}) (inp_t (3, 2) complex)."""
-    poly = profiles.poly
-    trig = profiles.trig
-    for kind in range(3):
-        for hc in range(2):
-            inp_t[kind, hc] = 0.0
-            for k in range(8):
-                inp[kind, hc, k] = 0.0
-    if cam_held:
-        for k in range(8):
-            inp[0, 0, k] = -poly[c, p, k]
-            if k + 1 < 8:
-                inp[1, 0, k] = -w * (k + 1) * poly[c, p, k + 1]
-            if k + 2 < 8:
-                inp[2, 0, k] = -w * w * (k + 1) * (k + 2) * poly[c, p, k + 2]
-        # a·sin θ + b·cos θ = Re((b − i·a)·e^{iθ})
-        beta = trig[c, p, 1] - 1j * trig[c, p, 0]
-        inp_t[0, 0] = -beta
-        inp_t[1, 0] = -1j * w * beta
-        inp_t[2, 0] = w * w * beta
-    if seat_held:
-        inp[0, 1, 0] = seat_q
-
-
-@njit(inline="always", nogil=True)
-def _basis(lbar, d2, tau):
-    """The block's basis functions f1 = e^{λ̄τ}·C(τ) and f2 = e^{λ̄τ}·S(τ) (``modal``): C, S
-    from cos, sin (δ² < 0), cosh, sinh (δ² > 0, as two exponentials, which cannot overflow on a
-    decaying block) or the Jordan limit 1, τ, by series where δτ is small."""
-    e = np.exp(lbar * tau)
-    if d2 < 0.0:
-        nu = np.sqrt(-d2)
-        x = nu * tau
-        if x > 1e-3:
-            return e * np.cos(x), e * np.sin(x) / nu
-        x2 = x * x
-        return e * (1.0 - x2 / 2.0 + x2 * x2 / 24.0), e * tau * (1.0 - x2 / 6.0 + x2 * x2 / 120.0)
-    if d2 > 0.0:
-        d = np.sqrt(d2)
-        x = d * tau
-        if x > 1e-3:
-            ep = np.exp((lbar + d) * tau)
-            em = np.exp((lbar - d) * tau)
-            return 0.5 * (ep + em), 0.5 * (ep - em) / d
-        x2 = x * x
-        return e * (1.0 + x2 / 2.0 + x2 * x2 / 24.0), e * tau * (1.0 + x2 / 6.0 + x2 * x2 / 120.0)
-    return e, e * tau
 
 
 @njit(inline="always", nogil=True)
@@ -307,7 +140,7 @@ def _eval3(WC, MC, nact, G, GT, m, tau, w, x, th):
     dg = 0.0
     d2g = 0.0
     for jj in range(nact):
-        f1, f2 = _basis(MC[LBAR, jj], MC[DSQ, jj], tau)
+        f1, f2 = block_basis(MC[LBAR, jj], MC[DSQ, jj], tau)
         g += WC[W1, m, jj] * f1 + WC[W2, m, jj] * f2
         dg += WC[WL1, m, jj] * f1 + WC[WL2, m, jj] * f2
         d2g += WC[WLL1, m, jj] * f1 + WC[WLL2, m, jj] * f2
@@ -370,7 +203,7 @@ def _root(
             if not (ta < t < tb):
                 t = 0.5 * (ta + tb)
         else:
-            t = t_last - f_last / df_last if df_last != 0.0 else -1.0
+            t = t_last - f_last / df_last if df_last != 0.0 else np.nan  # nan: not in (ta, tb)
             if ta < t < tb:
                 converged = abs(t - t_last) < 0.25 * tolerance
             else:
@@ -415,7 +248,7 @@ def _state_at(trains, ws, st, t):
     for s in range(ns):
         ws.z[s] = horner(ws.Z[:, s], x, st.deg)[0] + ws.ZT[s].real * ct - ws.ZT[s].imag * sn
     for b in range(trains.n_blocks[tr, ci]):
-        f1, f2 = _basis(trains.lam_bar[tr, ci, b], trains.delta2[tr, ci, b], tau)
+        f1, f2 = block_basis(trains.lam_bar[tr, ci, b], trains.delta2[tr, ci, b], tau)
         i0 = trains.bstart[tr, ci, b]
         for i in range(i0, i0 + trains.bdim[tr, ci, b]):
             a = f1 * ws.u[i]
@@ -482,29 +315,87 @@ def _slope_bound(WC, G, GT, m, MC, lo, nact, gdeg, w, xa, xb, tau_b):
 
 
 @njit(inline="always", nogil=True)
+def _free_acceleration(VY, MC, Z, ZT, s, lo, nact, x, cth, sth, w, deg):
+    """The time derivative of state row s (a velocity row: an acceleration) at the grid point,
+    from the blocks lo … nact − 1 and the particular solution."""
+    acc = 0.0
+    for jj in range(lo, nact):
+        a = VY[0, jj, s]
+        b = VY[1, jj, s]
+        lbar = MC[LBAR, jj]
+        acc += (lbar * a + b) * MC[F1, jj] + (MC[DSQ, jj] * a + lbar * b) * MC[F2, jj]
+    acc += w * horner(Z[:, s], x, deg)[1]
+    return acc - w * (ZT[s].real * sth + ZT[s].imag * cth)
+
+
+@njit(inline="always", nogil=True)
 def _write_sample(
-    q_out, v_out, force_out, cam_out, cfg_out, c, k, q, v, gval, poly, trig, cfg, p, x, ct, sn,
-    w, full_state,
+    out, c, k, q, v, gval, poly, trig, cfg, p, x, ct, sn, w, full_state, acc1, acc7,
 ):  # fmt: skip
-    """Output sample k of case c (``common.Outputs``' arrays): coordinates and velocities q, v
-    (held ones on the cam and seat; without ``full_state`` only q1 and q7, the others NaN),
-    forces from the monitors gval, and the cam lift on piece p at local angle x, cam angle
-    with cosine ct and sine sn. Takes arrays, not named tuples: it runs at every sample."""
-    lift, dlift, _ = horner(poly[c, p], x)
+    """Output sample k of case c: coordinates and velocities q, v (held ones on the cam and
+    seat; without ``full_state`` only q1 and q7, the others NaN), forces from the monitors
+    gval, the contact coordinates' accelerations (a free one's acc1, acc7; a held one's from
+    the cam or the seat), and the cam lift on piece p at local angle x, cam angle with cosine
+    ct and sine sn."""
+    lift, dlift, ddlift = horner(poly[c, p], x)
     lift += trig[c, p, 0] * sn + trig[c, p, 1] * ct
     dlift += trig[c, p, 0] * ct - trig[c, p, 1] * sn
+    ddlift -= trig[c, p, 0] * sn + trig[c, p, 1] * ct
     for i in range(7):
         shown = full_state or i == CAM or i == SEAT
-        q_out[c, k, i] = q[i] if shown else np.nan
-        v_out[c, k, i] = v[i] if shown else np.nan
+        out.q[c, k, i] = q[i] if shown else np.nan
+        out.v[c, k, i] = v[i] if shown else np.nan
     cam_held = holds_cam(cfg)
+    seat_held = holds_seat(cfg)
     if cam_held:
-        q_out[c, k, CAM] = -lift
-        v_out[c, k, CAM] = -w * dlift
-    force_out[c, k, 0] = gval[0] if cam_held else 0.0
-    force_out[c, k, 1] = -gval[1] if holds_seat(cfg) else 0.0
-    cam_out[c, k] = lift
-    cfg_out[c, k] = cfg
+        out.q[c, k, CAM] = -lift
+        out.v[c, k, CAM] = -w * dlift
+    out.acc[c, k, 0] = -w * w * ddlift if cam_held else acc1
+    out.acc[c, k, 1] = 0.0 if seat_held else acc7
+    out.force[c, k, 0] = gval[0] if cam_held else 0.0
+    out.force[c, k, 1] = -gval[1] if seat_held else 0.0
+    out.cam[c, k] = lift
+    out.cfg[c, k] = cfg
+
+
+@njit(inline="always", nogil=True)
+def _out_of_bounds(cases, c, q, v):
+    """The valve's lift or speed beyond its physical bounds (``common.Cases``)."""
+    return (
+        abs(q[SEAT] - cases.valve_ref[c]) > cases.lift_bound[c]
+        or abs(v[SEAT]) > cases.speed_bound[c]
+    )
+
+
+@njit(**KERNEL)
+def _sample(cases, trains, profiles, runs, out, ws, st, lo, nact, x, cth, sth):
+    """The output sample at the grid point (local angle x, cam angle with cosine cth and sine
+    sth) from the blocks lo … nact − 1; a motion out of bounds ends the case (UNBOUNDED)."""
+    tr, ci, nf, c, w, deg = st.tr, st.cfg - 1, st.nf, st.c, st.w, st.deg
+    q, v = ws.q, ws.v
+    _state_active(
+        q, v, ws.z, ws.VY, ws.MC, ws.Z, ws.ZT, trains.free, tr, ci, nf, lo, nact, x, cth, sth,
+        deg, runs.full_state,
+    )  # fmt: skip
+    acc1 = 0.0  # q̈1, q̈7 where free (the held ones come from the cam and the seat)
+    acc7 = 0.0
+    for k in range(nf):
+        coord = trains.free[tr, ci, k]
+        if coord == CAM:
+            acc1 = _free_acceleration(
+                ws.VY, ws.MC, ws.Z, ws.ZT, nf + k, lo, nact, x, cth, sth, w, deg
+            )
+        elif coord == SEAT:
+            acc7 = _free_acceleration(
+                ws.VY, ws.MC, ws.Z, ws.ZT, nf + k, lo, nact, x, cth, sth, w, deg
+            )
+    _write_sample(
+        out, c, st.k_out, q, v, ws.gval, profiles.poly, profiles.trig, st.cfg, st.p, x, cth,
+        sth, w, runs.full_state, acc1, acc7,
+    )  # fmt: skip
+    st.k_out += 1
+    if _out_of_bounds(cases, c, q, v):
+        out.status[c] = UNBOUNDED
 
 
 @njit(inline="always", nogil=True)
@@ -551,11 +442,18 @@ def _keep_column(MC, WC, VY, act, ns, src, dst):
         VY[1, dst, s] = VY[1, src, s]
 
 
+@njit(inline="always", nogil=True)
+def _off_cam(out, cfg, c, w, ta, tb):
+    """Count [ta, tb] in configuration ``cfg``: no-follow (II) or seated off the cam (IV)."""
+    if not holds_cam(cfg):
+        _separation(out.seated_rev if holds_seat(cfg) else out.sep_rev, c, w, ta, tb)
+
+
 @njit(**KERNEL)
 def _separation(sep_rev, c, w, ta, tb):
-    """Add the cam angle of [ta, tb] off the cam to each revolution it overlaps."""
+    """Add the cam angle of [ta, tb] ∩ [0, ∞) off the cam to each revolution it overlaps."""
     n_rev = sep_rev.shape[1]
-    a = w * ta
+    a = max(w * ta, 0.0)
     b = w * tb
     r = int(a / TWO_PI)
     while a < b and r < n_rev:
@@ -573,55 +471,11 @@ def _forcing(cases, trains, profiles, ws, st):
     """The state's homogeneous start zh (the free coordinates' q, v for now), the held
     inputs on the piece, and the forcing's polynomial coefficients b_k (ws.bpoly); sets
     st.kmax and st.deg."""
-    c, tr, ci, nf, ns = st.c, st.tr, st.cfg - 1, st.nf, st.ns
-    cam_held = holds_cam(st.cfg)
+    tr, ci, nf = st.tr, st.cfg - 1, st.nf
     for k in range(nf):
         ws.zh[k] = ws.q[trains.free[tr, ci, k]]
         ws.zh[nf + k] = ws.v[trains.free[tr, ci, k]]
-    _held_inputs(
-        profiles, c, st.p, st.w, cases.seat_q[c], cam_held, holds_seat(st.cfg), ws.inp,
-        ws.inp_t,
-    )  # fmt: skip
-    # The held inputs are polynomials of the piece's degree at most (the seat's a constant),
-    # and so is the forcing.
-    kmax = degree(profiles, c, st.p) if cam_held else 0
-    deg = 0
-    for k in range(kmax + 1):
-        for s in range(ns):
-            acc = trains.b_load[tr, ci, s] if k == 0 else 0.0
-            for kind in range(3):
-                for hc in range(2):
-                    acc += trains.b_in[tr, ci, s, kind, hc] * ws.inp[kind, hc, k]
-            ws.bpoly[k, s] = acc
-            if acc != 0.0:
-                deg = k
-    st.kmax = kmax
-    st.deg = deg
-
-
-@njit(inline="always", nogil=True)
-def _particular(trains, profiles, runs, ws, st):
-    """Particular solutions: Z_k = A⁻¹(ω(k+1) Z_{k+1} − b_k) from the forcing's degree down;
-    the harmonic one Z_T = β·ζ (``modal.harmonic_responses``)."""
-    tr, ci, ns, deg, w = st.tr, st.cfg - 1, st.ns, st.deg, st.w
-    Z = ws.Z
-    for k in range(deg + 1, 9):
-        for s in range(ns):
-            Z[k, s] = 0.0
-    for k in range(deg, -1, -1):
-        for s in range(ns):
-            ws.zb[s] = w * (k + 1) * Z[k + 1, s] - ws.bpoly[k, s]
-        for s in range(ns):
-            acc = 0.0
-            for j in range(ns):
-                acc += trains.a_inv[tr, ci, s, j] * ws.zb[j]
-            Z[k, s] = acc
-    c, p = st.c, st.p
-    trig = profiles.trig
-    has_trig = holds_cam(st.cfg) and (trig[c, p, 0] != 0.0 or trig[c, p, 1] != 0.0)
-    beta = trig[c, p, 1] - 1j * trig[c, p, 0]
-    for s in range(NS):
-        ws.ZT[s] = beta * runs.zeta[c, ci, s] if has_trig else 0.0
+    forcing(cases, trains, profiles, ws, st)
 
 
 @njit(inline="always", nogil=True)
@@ -639,12 +493,12 @@ def _modal_start(trains, ws, st, x_s, ct, sn):
 
 
 @njit(inline="always", nogil=True)
-def _force_monitor(trains, ws, st, m, sign):
+def _force_monitor(trains, ws, st, m, sign, level):
     """Monitor m as a held contact's force (sign·F: F1 for the cam, −F7 for the seat):
     thesis Eqs. 26, 27 through ``modal.ModalData``'s ρ, σ; its forced part (the blocks' part
     is ``_block_columns``')."""
     tr, ci, ns = st.tr, st.cfg - 1, st.ns
-    ws.level[m] = st.eps_force
+    ws.level[m] = level
     for k in range(st.kmax + 1):
         acc = 0.0
         for s in range(ns):
@@ -709,7 +563,11 @@ def _monitors(cases, trains, profiles, ws, st):
         for k in range(8):
             ws.G[m, k] = 0.0
         if held:
-            _force_monitor(trains, ws, st, m, sign)
+            # A resting contact releases only when it pulls beyond its hold.
+            rest = st.rest_cam if m == 0 else st.rest_seat
+            hold = st.hold_cam if m == 0 else st.hold_seat
+            level = max(st.eps_force, hold) if rest else st.eps_force
+            _force_monitor(trains, ws, st, m, sign, level)
         else:
             _gap_monitor(cases, trains, profiles, ws, st, m, sign)
     gdeg = 0
@@ -719,12 +577,6 @@ def _monitors(cases, trains, profiles, ws, st):
                 if ws.G[m, k] != 0.0:
                     gdeg = max(gdeg, k)
     st.gdeg = gdeg
-
-
-@njit(inline="always", nogil=True)
-def _derivative(w1, w2, lbar, d2):
-    """The coefficients of f1 and f2 in d/dτ (w1·f1 + w2·f2): f1' = λ̄f1 + δ²f2, f2' = λ̄f2 + f1."""
-    return lbar * w1 + w2, d2 * w1 + lbar * w2
 
 
 @njit(inline="always", nogil=True)
@@ -799,8 +651,8 @@ def _block_columns(cases, trains, runs, ws, st):
                 else:
                     w1 = sign * VY[0, jj, rows[m]]
                     w2 = sign * VY[1, jj, rows[m]]
-            wl1, wl2 = _derivative(w1, w2, lbar, d2)
-            wll1, wll2 = _derivative(wl1, wl2, lbar, d2)
+            wl1, wl2 = block_derivative(w1, w2, lbar, d2)
+            wll1, wll2 = block_derivative(wl1, wl2, lbar, d2)
             WC[W1, m, jj] = w1
             WC[W2, m, jj] = w2
             WC[WL1, m, jj] = wl1
@@ -824,7 +676,7 @@ def _begin_segment(cases, trains, profiles, runs, out, ws, st):
     st.nf = trains.n_free[st.tr, ci]
     st.ns = 2 * st.nf
     _forcing(cases, trains, profiles, ws, st)
-    _particular(trains, profiles, runs, ws, st)
+    particular(trains, profiles, runs, ws, st)
     th_s = st.w * st.t_s
     st.th0 = st.rev * TWO_PI + profiles.breaks[st.c, st.p]
     x_s = th_s - st.th0
@@ -848,11 +700,8 @@ def _begin_segment(cases, trains, profiles, runs, out, ws, st):
     if k_out < out.q.shape[1] and k_out * runs.t_sample[st.c] <= st.t_s * (1.0 + 1e-13):
         # A sample due at the segment start (the initial state, or a break or event that
         # falls on an output angle) is the state here (gval holds its monitors).
-        _write_sample(
-            out.q, out.v, out.force, out.cam, out.cfg, st.c, k_out, ws.q, ws.v, ws.gval,
-            profiles.poly, profiles.trig, st.cfg, st.p, x_s, ct, sn, st.w, runs.full_state,
-        )  # fmt: skip
-        st.k_out = k_out + 1
+        # (The blocks' basis functions are at τ = 0: f1 = 1, f2 = 0; every block counts.)
+        _sample(cases, trains, profiles, runs, out, ws, st, 0, st.nact, x_s, ct, sn)
 
 
 # --------------------------------------------------------------------------- walk the grid
@@ -905,8 +754,8 @@ def _refresh(MC, lo, nact, h, tau):
     """Exact basis functions at the grid step h and at τ (from the segment start to the next
     grid point) of the blocks lo … nact − 1, and their envelopes."""
     for jj in range(lo, nact):
-        MC[D1, jj], MC[D2, jj] = _basis(MC[LBAR, jj], MC[DSQ, jj], h)
-        MC[F1, jj], MC[F2, jj] = _basis(MC[LBAR, jj], MC[DSQ, jj], tau)
+        MC[D1, jj], MC[D2, jj] = block_basis(MC[LBAR, jj], MC[DSQ, jj], h)
+        MC[F1, jj], MC[F2, jj] = block_basis(MC[LBAR, jj], MC[DSQ, jj], tau)
         MC[DABS, jj] = np.exp(MC[RATE, jj] * h)
         MC[EABS, jj] = np.exp(MC[RATE, jj] * tau)
 
@@ -935,7 +784,7 @@ def _earliest_crossing(ws, st, nact, tolerance, t_prev, t_eval):
         if not ws.watch[m]:
             continue
         level = ws.level[m]
-        t_hi = -1.0
+        t_hi = np.nan  # where the monitor is known above its level (times may be < 0)
         g_hi = ws.gval[m]
         dg_hi = ws.dval[m]
         if ws.gval[m] > level:
@@ -968,7 +817,7 @@ def _earliest_crossing(ws, st, nact, tolerance, t_prev, t_eval):
             g_hi, dg_hi = _at(False, WC, MC, nact, G, GT, m, t_s, t_max, w, th0)
             if g_hi > level:
                 t_hi = t_max
-        if t_hi > 0.0:
+        if not np.isnan(t_hi):
             # The value root starts from what the grid (or the maximum's search) has, unless
             # reduced fidelity leaves pairs out of the grid.
             te = _root(
@@ -1002,19 +851,15 @@ def _walk(cases, trains, profiles, runs, out, ws, st):
     dt_cap = runs.dt_cap
     steps = out.steps
     fmax = out.fmax
+    n_rev = fmax.shape[1]
     MC, WC, G, GT, act = ws.MC, ws.WC, ws.G, ws.GT, ws.act
     gval, dval, gprev, dprev = ws.gval, ws.dval, ws.gprev, ws.dprev
     watch, ready, level = ws.watch, ws.ready, ws.level
-    # What a sample reads and writes.
-    q, v, z, VY, Z, ZT = ws.q, ws.v, ws.z, ws.VY, ws.Z, ws.ZT
-    free, poly, trig = trains.free, profiles.poly, profiles.trig
-    q_out, v_out, force_out, cam_out, cfg_out = out.q, out.v, out.force, out.cam, out.cfg
-    tr, cfg, ci, nf, p, deg = st.tr, st.cfg, st.cfg - 1, st.nf, st.p, st.deg
-    full_state = runs.full_state
     # A monitor already above its level at the segment start (a contact that pulls the
-    # instant after an impact) is an event there.
+    # instant after an impact; a gap that closes) is an event there.
     for m in range(2):
-        if watch[m] and gval[m] > level[m]:
+        held = cam_held if m == 0 else seat_held
+        if watch[m] and gval[m] > level[m] and (held or dprev[m] > 0.0):
             _apply_event(cases, trains, profiles, out, ws, st, m, t_s)
             return
     t_prev = t_s
@@ -1029,7 +874,7 @@ def _walk(cases, trains, profiles, runs, out, ws, st):
         if replan:
             if since_check >= 32:
                 since_check = 0
-                nact = _drop_decayed(MC, WC, VY, act, lo, nact, ns, eps_force, t_prev - t_s)
+                nact = _drop_decayed(MC, WC, ws.VY, act, lo, nact, ns, eps_force, t_prev - t_s)
             # The step need only resolve the modes that could bring a watched monitor to its
             # level.
             t_from = t_prev
@@ -1091,28 +936,23 @@ def _walk(cases, trains, profiles, runs, out, ws, st):
         for m in range(2):
             dprev[m] = dval[m]
             gprev[m] = gval[m]
-        if cam_held:
-            fmax[c, 0] = max(fmax[c, 0], -gval[0])
-        if seat_held:
-            fmax[c, 1] = max(fmax[c, 1], -gval[1])
+        turn = turn_of(w, t_n)
+        if 0 <= turn < n_rev:
+            if cam_held:
+                fmax[c, turn, 0] = max(fmax[c, turn, 0], -gval[0])
+            if seat_held:
+                fmax[c, turn, 1] = max(fmax[c, turn, 1], -gval[1])
         t_prev = t_n
         if i_step < n_steps:
             cth, sth = _advance(MC, lo, nact, cth, sth, cwh, swh)
             continue
         if to_sample:
-            x_n = w * t_n - th0
-            _state_active(
-                q, v, z, VY, MC, Z, ZT, free, tr, ci, nf, lo, nact, x_n, cth, sth, deg,
-                full_state,
-            )  # fmt: skip
-            _write_sample(
-                q_out, v_out, force_out, cam_out, cfg_out, c, st.k_out, q, v, gval, poly,
-                trig, cfg, p, x_n, cth, sth, w, full_state,
-            )  # fmt: skip
-            st.k_out += 1
+            _sample(cases, trains, profiles, runs, out, ws, st, lo, nact, w * t_n - th0, cth, sth)
+            if out.status[c] != 0:
+                st.done = True
+                return
         if t_n >= t_end:
-            if not cam_held:
-                _separation(out.sep_rev, c, w, t_s, t_n)
+            _off_cam(out, st.cfg, c, w, t_s, t_n)
             st.nact = nact
             st.done = True
             return
@@ -1122,13 +962,60 @@ def _walk(cases, trains, profiles, runs, out, ws, st):
 # --------------------------------------------------------------------------- events, breaks
 
 
+@njit(inline="always", nogil=True)
+def _impact(cases, trains, out, ws, st, seat, closing, t, vcam, lift):
+    """The plastic impact of a closing contact (the cam, or with ``seat`` the seat) at time t
+    [s], closing at ``closing`` > 0 [m/s]: the struck coordinate takes the obstacle's velocity
+    and the free ones change by the impulse's share (``modal.ModalData.impulse``). The other
+    contact, if held, stays held unless releasing it would separate it
+    (``common.other_releases``). A slow impact leaves the contact resting
+    (``common.captured``). Returns the configuration after it."""
+    c, tr, w, cfg = st.c, st.tr, st.w, st.cfg
+    q, v = ws.q, ws.v
+    side = 1 if seat else 0
+    other_held = holds_cam(cfg) if seat else holds_seat(cfg)
+    # The struck coordinate's velocity change, thesis signs: q1 (down) approaches the cam
+    # moving down, q7 (down, opening) approaches the seat moving up.
+    dv = closing if seat else -closing
+    capture = cases.capture[c]
+    if other_held and other_releases(cases.separation, capture, c, seat, dv):
+        other_held = False
+        if seat:
+            st.rest_cam = False
+        else:
+            st.rest_seat = False
+    new = configuration(True, other_held) if not seat else configuration(other_held, True)
+    for i in range(7):
+        v[i] += trains.impulse[tr, new - 1, side, i] * dv
+    if seat:
+        q[SEAT] = cases.seat_q[c]
+    else:
+        q[CAM] = -lift
+        v[CAM] = vcam
+    if captured(closing, capture):
+        hold = cases.hold[c, new - 1, side] * closing
+        if seat:
+            st.rest_seat = True
+            st.hold_seat = hold
+        else:
+            st.rest_cam = True
+            st.hold_cam = hold
+    if closing > cases.speed_bound[c]:
+        out.status[c] = UNBOUNDED
+    record_impact(
+        out.events, out.n_events, out.counts, out.vmax, cases.meff, c, w, t, seat, other_held,
+        cfg, new, closing, capture,
+    )  # fmt: skip
+    return new
+
+
 @njit(**KERNEL)
 def _apply_event(cases, trains, profiles, out, ws, st, first, t_ev):
     """Monitor ``first`` rose through its level at t_ev [s]: take the exact state there, and
-    release the contact (a force monitor) or apply the plastic impact (a gap monitor: the
-    struck coordinate takes the obstacle's velocity, the free ones change by the impulse's
-    share ``modal.ModalData.impulse``). Starts the next segment there."""
-    c, tr, w, cfg = st.c, st.tr, st.w, st.cfg
+    release the contact (a force monitor) or, if the contact closes, apply the plastic impact
+    (a gap monitor; ``_impact``): a touch that does not close is no event. Starts the next
+    segment there."""
+    c, w, cfg = st.c, st.w, st.cfg
     cam_held = holds_cam(cfg)
     seat_held = holds_seat(cfg)
     q, v = ws.q, ws.v
@@ -1141,58 +1028,23 @@ def _apply_event(cases, trains, profiles, out, ws, st, first, t_ev):
     if seat_held:
         q[SEAT] = cases.seat_q[c]
         v[SEAT] = 0.0
-    if not cam_held:
-        _separation(out.sep_rev, c, w, st.t_s, t_ev)
+    _off_cam(out, cfg, c, w, st.t_s, t_ev)
+    new = cfg
     if first == 0 and cam_held:
         new = configuration(False, seat_held)
+        st.rest_cam = False
         record_event(out.events, out.n_events, c, t_ev, CAM_SEPARATION, cfg, new, 0.0, 0.0)
-    elif first == 0:
-        new = configuration(True, seat_held)
-        closing = v[CAM] - vcam
-        dv = vcam - v[CAM]
-        for i in range(7):
-            v[i] += trains.impulse[tr, new - 1, 0, i] * dv
-        q[CAM] = -lift_e
-        record_impact(
-            out.events,
-            out.n_events,
-            out.counts,
-            out.vmax,
-            cases.meff,
-            c,
-            t_ev,
-            False,
-            seat_held,
-            cfg,
-            new,
-            closing,
-        )
-    elif seat_held:
+    elif first == 1 and seat_held:
         new = configuration(cam_held, False)
+        st.rest_seat = False
         record_event(out.events, out.n_events, c, t_ev, SEAT_SEPARATION, cfg, new, 0.0, 0.0)
     else:
-        new = configuration(cam_held, True)
-        closing = -v[SEAT]
-        dv = -v[SEAT]
-        for i in range(7):
-            v[i] += trains.impulse[tr, new - 1, 1, i] * dv
-        q[SEAT] = cases.seat_q[c]
-        record_impact(
-            out.events,
-            out.n_events,
-            out.counts,
-            out.vmax,
-            cases.meff,
-            c,
-            t_ev,
-            True,
-            cam_held,
-            cfg,
-            new,
-            closing,
-        )
+        seat = first == 1
+        closing = -v[SEAT] if seat else v[CAM] - vcam
+        if closing > 0.0:
+            new = _impact(cases, trains, out, ws, st, seat, closing, t_ev, vcam, lift_e)
     st.cfg = new
-    st.stalled = st.stalled + 1 if t_ev - st.t_s <= 1e-15 * (1.0 + st.t_s) else 0
+    st.stalled = st.stalled + 1 if t_ev - st.t_s <= 1e-15 * (1.0 + abs(st.t_s)) else 0
     st.t_s = t_ev
 
 
@@ -1200,14 +1052,14 @@ def _apply_event(cases, trains, profiles, out, ws, st, first, t_ev):
 def _cross_break(cases, trains, profiles, out, ws, st):
     """The segment reached the next break of the profile: take the exact state there, and
     with the cam held apply what the break does (``common.classify_break``): release, an
-    impact of the cam's rate jump, or nothing. Starts the next segment on the next piece."""
+    impact of the cam's rate jump (the seat, if held, releasing where it would separate),
+    or nothing. Starts the next segment on the next piece."""
     c, tr, w, cfg, t_break = st.c, st.tr, st.w, st.cfg, st.t_break
     cam_held = holds_cam(cfg)
     seat_held = holds_seat(cfg)
     q, v = ws.q, ws.v
     _state_at(trains, ws, st, t_break)
-    if not cam_held:
-        _separation(out.sep_rev, c, w, st.t_s, t_break)
+    _off_cam(out, cfg, c, w, st.t_s, t_break)
     l_left, dl_left, _ = piece_eval(profiles, c, st.p, st.rev, w * t_break)
     l_right, dl_right, _ = piece_eval(profiles, c, st.nb, st.revb, w * t_break)
     if seat_held:
@@ -1219,27 +1071,26 @@ def _cross_break(cases, trains, profiles, out, ws, st):
         v[CAM] = -w * dl_left
         if kind == RELEASE:
             new = configuration(False, seat_held)
-            record_event(out.events, out.n_events, c, t_break, CAM_SEPARATION, cfg, new, -jump, 0.0)
+            st.rest_cam = False
+            record_event(out.events, out.n_events, c, t_break, CAM_SEPARATION, cfg, new,
+                         -jump, 0.0)  # fmt: skip
             st.cfg = new
         else:
             if kind != SMOOTH:
                 dv = -jump
+                if seat_held and other_releases(cases.separation, cases.capture[c], c, False, dv):
+                    seat_held = False
+                    st.rest_seat = False
+                new = configuration(True, seat_held)
                 for i in range(7):
-                    v[i] += trains.impulse[tr, cfg - 1, 0, i] * dv
+                    v[i] += trains.impulse[tr, new - 1, 0, i] * dv
+                if abs(jump) > cases.speed_bound[c]:
+                    out.status[c] = UNBOUNDED
                 record_impact(
-                    out.events,
-                    out.n_events,
-                    out.counts,
-                    out.vmax,
-                    cases.meff,
-                    c,
-                    t_break,
-                    False,
-                    seat_held,
-                    cfg,
-                    cfg,
-                    abs(jump),
-                )
+                    out.events, out.n_events, out.counts, out.vmax, cases.meff, c, w, t_break,
+                    False, seat_held, cfg, new, abs(jump), 0.0,
+                )  # fmt: skip
+                st.cfg = new
             q[CAM] = -l_right
             v[CAM] = -w * dl_right
     st.p = st.nb
@@ -1248,12 +1099,9 @@ def _cross_break(cases, trains, profiles, out, ws, st):
     st.stalled = 0
 
 
-# --------------------------------------------------------------------------- the kernel
-
-
 @njit(inline="always", nogil=True)
 def _start_case(cases, trains, profiles, ws, st, c, tr):
-    """Case c's run from its start state at θ = 0."""
+    """Case c's run from its start state at t0 ≤ 0."""
     st.c = c
     st.tr = tr
     st.w = cases.omega[c]
@@ -1262,13 +1110,17 @@ def _start_case(cases, trains, profiles, ws, st, c, tr):
         ws.q[i] = cases.q0[c, i]
         ws.v[i] = cases.v0[c, i]
     st.cfg = cases.cfg0[c]
-    rev, p = locate(profiles, c, 0.0)
+    st.t_s = cases.t0[c]
+    rev, p = locate(profiles, c, st.w * st.t_s)
     st.rev = rev
     st.p = p
-    st.t_s = 0.0
     st.k_out = 0
     st.stalled = 0
     st.done = False
+    st.rest_cam = False
+    st.rest_seat = False
+    st.hold_cam = 0.0
+    st.hold_seat = 0.0
 
 
 @njit(**KERNEL)
@@ -1294,6 +1146,8 @@ def modal_exact_batch(cases, trains, profiles, runs, out, ws, state):
         while not st.done:
             _begin_segment(cases, trains, profiles, runs, out, ws, st)
             _walk(cases, trains, profiles, runs, out, ws, st)
+            if out.status[c] != OK:
+                break
             if st.stalled > MAX_STALLED_EVENTS:
                 out.status[c] = CHATTER
                 break
@@ -1304,6 +1158,7 @@ def modal_exact_batch(cases, trains, profiles, runs, out, ws, state):
             if not finite:
                 out.status[c] = NONFINITE
                 break
-        out.fmax[c, 2] = out.fmax[c, 0]  # no force here measures a step: impulses are instant
+        for turn in range(out.fmax.shape[1]):  # no force measures a step: impulses are instant
+            out.fmax[c, turn, 2] = out.fmax[c, turn, 0]
         if out.n_events[c] > out.events.shape[1] and out.status[c] == OK:
             out.status[c] = EVENTS_TRUNCATED

@@ -41,7 +41,7 @@ from scipy.linalg import lapack
 
 from campipe.errors import CampipeError
 from campipe.model.assembly import SystemMatrices
-from campipe.vocabulary import CAM_AND_SEAT, CONFIGURATIONS, CONTACTS
+from campipe.vocabulary import CAM, CAM_CONTACT, CONFIGURATIONS, CONTACTS, SEAT, SEATED
 
 NS = 14  # padded state size: 2 × 7 free coordinates (configuration II)
 # Index hc of the held-coordinate axes below follows vocabulary.CONTACTS: 0 the cam, 1 the seat.
@@ -85,15 +85,17 @@ class ModalData:
     basis: np.ndarray  # (4, NS, NS) X, the blocks' bases in columns
     basis_inv: np.ndarray  # (4, NS, NS) X⁻¹
     basis_n: np.ndarray  # (4, NS, NS) X·N (N block-diagonal, the N_b)
+    block_n: np.ndarray  # (4, NS, NS) N, block-diagonal: the N_b
     rho_x: np.ndarray  # (4, 2, NS) ρ·X
     rho_xn: np.ndarray  # (4, 2, NS) ρ·X·N
     #: (4, 2) bound on the force at held contact hc (its free vibration) per unit closing
     #: velocity of a plastic impact there that brings the train into the configuration [N·s/m]
     hold: np.ndarray
-    #: (2,) the other contact's reaction impulse in configuration III per unit velocity change
-    #: of the struck one (struck: cam, seat) [N·s/(m/s)]; thesis signs (the seat's compressive
-    #: when positive, the cam's when negative)
-    reaction: np.ndarray
+    #: (2,) an impact at one contact (cam, seat) with the other held: the velocity at which the
+    #: other would separate, per unit velocity change of the struck one, if it were released
+    #: (the impact taken in the single-contact configuration, I or IV) [-]; positive where it
+    #: separates, which is where its reaction impulse in configuration III would pull
+    separation: np.ndarray
 
 
 def state_matrix(M: np.ndarray, C: np.ndarray, K: np.ndarray, free) -> np.ndarray:
@@ -217,10 +219,11 @@ def modal_data(sm: SystemMatrices) -> ModalData:
         "basis": np.zeros((4, NS, NS)),
         "basis_inv": np.zeros((4, NS, NS)),
         "basis_n": np.zeros((4, NS, NS)),
+        "block_n": np.zeros((4, NS, NS)),
         "rho_x": np.zeros((4, 2, NS)),
         "rho_xn": np.zeros((4, 2, NS)),
         "hold": np.zeros((4, 2)),
-        "reaction": np.zeros(2),
+        "separation": np.zeros(2),
     }
     for ci, cfg in enumerate((1, 2, 3, 4)):
         fr = np.array(CONFIGURATIONS[cfg].free)
@@ -265,6 +268,7 @@ def modal_data(sm: SystemMatrices) -> ModalData:
             lbar, d2 = _block_numbers(B)
             N = B - lbar * np.eye(k)
             XN[:, col : col + k] = X[:, col : col + k] @ N
+            out["block_n"][ci, col : col + k, col : col + k] = N
             out["bstart"][ci, b] = col
             out["bdim"][ci, b] = k
             out["lam_bar"][ci, b] = lbar
@@ -288,10 +292,10 @@ def modal_data(sm: SystemMatrices) -> ModalData:
                 out["hold"][ci, hc] = _free_response_bound(
                     A, X, Xinv, out["rho"][ci, hc, :ns], blocks_n, dz
                 )
-    # Configuration III: the other contact's reaction to a unit velocity change of one.
-    for hc in range(2):
-        other = CONTACTS[1 - hc]
-        out["reaction"][hc] = M[other] @ out["impulse"][CAM_AND_SEAT - 1, hc]
+    # The other contact's separation velocity if released: q7 opening (+) leaves the seat, q1
+    # moving up (−) leaves the cam.
+    out["separation"][0] = out["impulse"][CAM_CONTACT - 1, 0, SEAT]
+    out["separation"][1] = -out["impulse"][SEATED - 1, 1, CAM]
     return ModalData(**out)
 
 

@@ -49,13 +49,17 @@ from numba.extending import intrinsic
 
 from campipe.constants import TWO_PI
 from campipe.engine.common import (
+    GAP_LEVEL,
     JUMP,
     KERNEL,
     RELEASE,
+    TURN_GUARD,
+    captured,
     classify_break,
     configuration,
     holds_cam,
     holds_seat,
+    other_releases,
     record_event,
     record_impact,
 )
@@ -68,6 +72,7 @@ from campipe.vocabulary import (
     OK,
     SEAT,
     SEAT_SEPARATION,
+    UNBOUNDED,
 )
 
 #: Let LLVM reassociate and fuse floating-point operations, but keep NaN and inf semantics:
@@ -82,8 +87,6 @@ N_X, N_Z = 24, 8
 LANES = 4
 #: LLVM flags of ``_newmark_step``'s arithmetic: multiplies and adds fuse, nothing reassociates.
 FUSE = ("contract",)
-#: Turns [-] by which an angle may fall short of a turn's start and still count to that turn.
-TURN_GUARD = 1e-9
 
 
 class NewmarkTrains(NamedTuple):
@@ -138,20 +141,6 @@ def _row_force(M, C, K, load, c, i, a, v, q):
         fc += C[c, i, j] * v[j]
         fk += K[c, i, j] * q[j]
     return fm + fc + fk - load[c, i]
-
-
-@njit(**KERNEL)
-def _revolution(theta):
-    """The cam turn holding angle ``theta`` [rad]. An angle on a turn's start to rounding
-    (a round speed and step) counts to that turn, however LLVM reassociates θ = ω·n·Δt."""
-    return int(theta / TWO_PI + TURN_GUARD)
-
-
-@njit(**KERNEL)
-def _add_turn(sep_rev, c, turn, angle):
-    """Add one turn's separation angle [rad] to case c's record, if that turn is recorded."""
-    if turn < sep_rev.shape[1]:
-        sep_rev[c, turn] += angle
 
 
 @intrinsic
@@ -273,13 +262,26 @@ def _newmark_step(typingctx, A, G, c, k, load, h, x, xn, z):
     return types.void(A, G, c, k, load, h, x, xn, z), codegen
 
 
+#: A case's contact state between steps (a record): resting contacts (``common.captured``)
+#: and the force [N] they must pull beyond to release.
+CONTACT_STATE = np.dtype(
+    [
+        ("rest_cam", "?"),
+        ("rest_seat", "?"),
+        ("hold_cam", "f8"),
+        ("hold_seat", "f8"),
+    ],
+    align=True,
+)
+
+
 @njit(**KERNEL, fastmath=FAST)
 def _cross_breaks(profiles, cases, out, c, w, th1, cfg, p, rev, pn, revn, thb):
     """Move case c's piece cursor (piece p of turn rev; the next break thb [rad] starts piece
     pn of turn revn) up to the step end θ1 [rad], classifying each break crossed with the cam
     held (``common.classify_break``): a surface falling away releases the follower, one
-    jumping into it is a cam impact. Returns the configuration, whether that impact's
-    impulse starts now, and the cursor."""
+    jumping into it is a cam impact (the seat, if held, releasing where it would separate).
+    Returns the configuration, whether that impact's impulse starts now, and the cursor."""
     impulse_cam = False
     while th1 >= thb:
         if holds_cam(cfg):
@@ -296,8 +298,16 @@ def _cross_breaks(profiles, cases, out, c, w, th1, cfg, p, rev, pn, revn, thb):
             elif kind == JUMP:
                 # The surface jumps into the follower (or, form-closed, drags it).
                 impulse_cam = True
+                if seat_held and other_releases(
+                    cases.separation, cases.capture[c], c, False, -jump
+                ):
+                    seat_held = False
+                new = configuration(True, seat_held)
+                if abs(jump) > cases.speed_bound[c]:
+                    out.status[c] = UNBOUNDED
                 record_impact(out.events, out.n_events, out.counts, out.vmax, cases.meff, c,
-                              thb / w, False, seat_held, cfg, cfg, abs(jump))  # fmt: skip
+                              w, thb / w, False, seat_held, cfg, new, abs(jump), 0.0)  # fmt: skip
+                cfg = new
         p = pn
         rev = revn
         pn, revn, thb = next_break(profiles, c, p, rev)
@@ -309,15 +319,15 @@ def _write_samples(
     trains, cases, profiles, runs, out, c, k_out, t_sample, t0, t1, h, x, xn, qt, vt, at, cfg
 ):
     """Output samples of case c inside the step (t0, t1] [s], from the step's cubic (thesis
-    Eqs. 55–57); the held coordinates from the cam and the seat. Returns the next sample's
-    index and time."""
+    Eqs. 55–57); the held coordinates from the cam and the seat. A valve out of its bounds ends
+    the case (UNBOUNDED). Returns the next sample's index and time."""
     w = cases.omega[c]
     n_out = out.q.shape[1]
     cam_held = holds_cam(cfg)
     seat_held = holds_seat(cfg)
     while k_out < n_out and t_sample <= t1 * (1.0 + 1e-12):
         tau = t_sample - t0
-        if k_out == 0:
+        if k_out == 0 and t0 == 0.0:
             tau = 0.0
         r = tau / h
         for i in range(NP):
@@ -340,6 +350,8 @@ def _write_samples(
         for i in range(NP):
             out.q[c, k_out, i] = qt[i]
             out.v[c, k_out, i] = vt[i]
+        out.acc[c, k_out, 0] = at[0]
+        out.acc[c, k_out, 1] = at[SEAT]
         # A contact that the step end releases may show a little tension inside the step; a
         # force-closed contact cannot pull, so it reports zero there.
         M, C, K, load = trains.M, trains.C, trains.K, trains.load
@@ -351,80 +363,119 @@ def _write_samples(
         out.cfg[c, k_out] = cfg
         k_out += 1
         t_sample = k_out * runs.d_theta_out / w
+        if (
+            abs(qt[SEAT] - cases.valve_ref[c]) > cases.lift_bound[c]
+            or abs(vt[SEAT]) > cases.speed_bound[c]
+        ):
+            out.status[c] = UNBOUNDED
     return k_out, t_sample
 
 
 @njit(inline="always")
-def _tripped(cfg, form, has_seat, f1, f7, q1, q7, qc, qs):
-    """The monitors of thesis Table I at a step end (F1, F7 the contact forces, q1, q7 the
-    contact coordinates, qc the cam's q1, qs the seat's q7): the cam or the seat would pull,
-    the follower passed the cam surface, the valve passed its seat.
+def _tripped(cfg, form, has_seat, impulsive, f1, f7, hold1, hold7, q1, q7, v1, v7, qc, vc, qs):
+    """The monitors of thesis Table I at a step end (F1, F7 the contact forces, hold1, hold7
+    what a resting contact must pull beyond, q1, q7 and v1, v7 the contact coordinates and
+    velocities, qc, vc the cam's q1 and q̇1, qs the seat's q7): the cam or the seat would pull,
+    the follower passed the cam surface closing on it, the valve passed its seat closing on
+    it (an impact needs a positive closing velocity).
+
+    Not in a step an impulse passes through (``impulsive``): its contact forces measure the
+    impulse over Δt, and which contacts hold after an impact was decided at the impact, on
+    the impulses themselves (``common.other_releases``).
 
     Inlined and taking scalars only: it runs every step, and numba reference-counts an array
     handed to an inlined function on every call.
     """
     cam_held = holds_cam(cfg)
     seat_held = holds_seat(cfg)
-    release_cam = cam_held and not form and f1 > 0.0
-    release_seat = seat_held and f7 < 0.0
-    hit_cam = not cam_held and q1 > qc
-    hit_seat = has_seat and not seat_held and q7 < qs
+    release_cam = cam_held and not form and not impulsive and f1 > hold1
+    release_seat = seat_held and not impulsive and f7 < -hold7
+    hit_cam = not cam_held and q1 > qc + GAP_LEVEL and v1 - vc > 0.0
+    hit_seat = has_seat and not seat_held and q7 < qs - GAP_LEVEL and v7 < 0.0
     return release_cam, release_seat, hit_cam, hit_seat
 
 
 @njit(**KERNEL, fastmath=FAST)
-def _switch(cases, out, c, t1, cfg, f7, xn, vc, release_cam, release_seat, hit_cam, hit_seat):
+def _switch(
+    cases, out, ct, c, t1, cfg, f7, xn, vc, release_cam, release_seat, hit_cam, hit_seat
+):  # fmt: skip
     """Apply what the monitors tripped at the step end t1 [s] (``_tripped``): record the
-    releases and impacts, and return the next configuration and whether a cam or seat
-    impulse starts."""
+    releases and impacts, and return the next configuration and whether a cam or seat impulse
+    starts. The other contact, if held, releases where the impact would separate it
+    (``common.other_releases``); a slow impact leaves its contact resting (in the contact
+    state ``ct``)."""
     events, n_events, counts, vmax = out.events, out.n_events, out.counts, out.vmax
     meff = cases.meff
+    w = cases.omega[c]
     seat_held = holds_seat(cfg)
     cam_next = holds_cam(cfg)
     seat_next = seat_held
     if release_cam:
         cam_next = False
+        ct.rest_cam = False
         new = configuration(False, seat_held and not f7 < 0.0)
         record_event(events, n_events, c, t1, CAM_SEPARATION, cfg, new, 0.0, 0.0)
     if release_seat:
         seat_next = False
+        ct.rest_seat = False
         new = configuration(cam_next, False)
         record_event(events, n_events, c, t1, SEAT_SEPARATION, cfg, new, 0.0, 0.0)
     if hit_cam:
         closing = xn[X_V] - vc
         cam_next = True
+        if seat_next and other_releases(cases.separation, cases.capture[c], c, False, -closing):
+            seat_next = False
+            ct.rest_seat = False
         new = configuration(True, seat_next)
-        record_impact(events, n_events, counts, vmax, meff, c, t1, False, seat_next, cfg, new,
-                      closing)  # fmt: skip
+        if captured(closing, cases.capture[c]):
+            ct.rest_cam = True
+            ct.hold_cam = cases.hold[c, new - 1, 0] * closing
+        if closing > cases.speed_bound[c]:
+            out.status[c] = UNBOUNDED
+        record_impact(events, n_events, counts, vmax, meff, c, w, t1, False, seat_next, cfg,
+                      new, closing, cases.capture[c])  # fmt: skip
     if hit_seat:
         closing = -xn[X_V + SEAT]
         seat_next = True
+        if cam_next and other_releases(cases.separation, cases.capture[c], c, True, closing):
+            cam_next = False
+            ct.rest_cam = False
         new = configuration(cam_next, True)
-        record_impact(events, n_events, counts, vmax, meff, c, t1, True, cam_next, cfg, new,
-                      closing)  # fmt: skip
+        if captured(closing, cases.capture[c]):
+            ct.rest_seat = True
+            ct.hold_seat = cases.hold[c, new - 1, 1] * closing
+        if closing > cases.speed_bound[c]:
+            out.status[c] = UNBOUNDED
+        record_impact(events, n_events, counts, vmax, meff, c, w, t1, True, cam_next, cfg,
+                      new, closing, cases.capture[c])  # fmt: skip
     return configuration(cam_next, seat_next), hit_cam, hit_seat
 
 
 @njit(**KERNEL, fastmath=FAST)
-def newmark_linear_batch(cases, trains, profiles, runs, out, work):
+def newmark_linear_batch(cases, trains, profiles, runs, out, work, contact):
     """Advance every case of a batch; fill ``out`` (``common.Outputs``) in place.
 
     Parameters
     ----------
     cases : common.Cases
+        A case starts at its ``t0`` (a whole number of steps before t = 0); nothing before
+        t = 0 is recorded.
     trains : NewmarkTrains
     profiles : campipe.profiles.PackedProfiles
     runs : NewmarkRuns
     out : common.Outputs
-        ``fmax[:, 2]`` is the cam force including the steps an impulse passes through (the
+        ``fmax[..., 2]`` is the cam force including the steps an impulse passes through (the
         thesis's "impact force", which measures 1/Δt).
     work : NewmarkWork
+    contact : (1,) array of CONTACT_STATE
     """
     if trains.step_A.shape[2:] != (N_X, N_Z) or trains.step_G.shape[2:] != (N_Z, N_Z):
         raise ValueError("step_A, step_G: expected (n, 4, N_X, N_Z) and (n, 4, N_Z, N_Z)")
     n_cases = cases.omega.shape[0]
     n_out = out.q.shape[1]
+    n_rev = out.sep_rev.shape[1]
     x, xn, z, f, qt, vt, at = work
+    ct = contact[0]
     for c in range(n_cases):
         h = runs.dt[c]
         w = cases.omega[c]
@@ -432,7 +483,8 @@ def newmark_linear_batch(cases, trains, profiles, runs, out, work):
         form_c = cases.form[c]
         has_seat_c = cases.has_seat[c]
         n_steps = runs.n_steps[c]
-        out.steps[c] = n_steps
+        n0 = int(np.round(cases.t0[c] / h))  # the start, a whole number of steps before 0
+        out.steps[c] = n_steps - n0
         for i in range(N_X):
             x[i] = 0.0
             xn[i] = 0.0
@@ -442,30 +494,29 @@ def newmark_linear_batch(cases, trains, profiles, runs, out, work):
             x[X_V + i] = cases.v0[c, i]
             x[X_A + i] = cases.a0[c, i]
         cfg = cases.cfg0[c]
+        ct.rest_cam = False
+        ct.rest_seat = False
         impulse_cam = False
         impulse_seat = False
         quiet_cam = 0  # steps left whose cam force measures an impulse, not the train
         quiet_seat = 0
         k_out = 0
         t_sample = 0.0
-        rev, p = locate(profiles, c, 0.0)
+        rev, p = locate(profiles, c, w * n0 * h)
         pdeg = degree(profiles, c, p)
         pn, revn, thb = next_break(profiles, c, p, rev)
-        fmax_cam = 0.0
-        fmax_seat = 0.0
-        fmax_raw = 0.0
-        sep_turn = 0  # the turn whose separation [rad] ``sep`` sums
-        sep = 0.0
+        turn = 0  # the turn of the current step, and where the next begins [s]
+        t_turn = TWO_PI / w
         sd = np.sin(w * h)
         cd = np.cos(w * h)
         sn = 0.0
         cs = 1.0
-        for n in range(n_steps):
+        for n in range(n0, n_steps):
             t0 = n * h
             t1 = (n + 1) * h
             th1 = w * t1
             # sin θ1, cos θ1 by rotation, refreshed exactly every 256 steps.
-            if n % 256 == 0:
+            if (n - n0) % 256 == 0:
                 sn = np.sin(th1)
                 cs = np.cos(th1)
             else:
@@ -519,49 +570,54 @@ def newmark_linear_batch(cases, trains, profiles, runs, out, work):
                 quiet_cam = 2
             if impulse_seat:
                 quiet_seat = 2
-            # Metrics over this step.
-            if not cam_held:
-                rev_i = _revolution(w * t0)
-                if rev_i != sep_turn:
-                    _add_turn(out.sep_rev, c, sep_turn, sep)
-                    sep_turn = rev_i
-                    sep = 0.0
-                sep += w * h
+            # Metrics over this step, from t = 0 on, in its turn.
+            if n >= 0:
+                while t0 >= t_turn * (1.0 - TURN_GUARD):
+                    turn += 1
+                    t_turn = (turn + 1) * TWO_PI / w
+                if turn < n_rev:
+                    if not cam_held:
+                        if seat_held:
+                            out.seated_rev[c, turn] += w * h
+                        else:
+                            out.sep_rev[c, turn] += w * h
+                    if quiet_cam == 0 and cam_held:
+                        out.fmax[c, turn, 0] = max(out.fmax[c, turn, 0], -f1)
+                    if cam_held:
+                        out.fmax[c, turn, 2] = max(out.fmax[c, turn, 2], -f1)
+                    if quiet_seat == 0 and seat_held:
+                        out.fmax[c, turn, 1] = max(out.fmax[c, turn, 1], f7)
             if quiet_cam > 0:
                 quiet_cam -= 1
-            elif cam_held:
-                fmax_cam = max(fmax_cam, -f1)
-            if cam_held:
-                fmax_raw = max(fmax_raw, -f1)
             if quiet_seat > 0:
                 quiet_seat -= 1
-            elif seat_held:
-                fmax_seat = max(fmax_seat, f7)
             if k_out < n_out and t_sample <= t1 * (1.0 + 1e-12):
                 k_out, t_sample = _write_samples(
                     trains, cases, profiles, runs, out, c, k_out, t_sample, t0, t1, h, x, xn,
                     qt, vt, at, cfg,
                 )  # fmt: skip
-            tripped = _tripped(cfg, form_c, has_seat_c, f1, f7, xn[X_Q], xn[X_Q + SEAT], qc, qs)
+            hold1 = ct.hold_cam if ct.rest_cam else 0.0
+            hold7 = ct.hold_seat if ct.rest_seat else 0.0
+            tripped = _tripped(
+                cfg, form_c, has_seat_c, quiet_cam == 1 or quiet_seat == 1, f1, f7, hold1,
+                hold7, xn[X_Q], xn[X_Q + SEAT], xn[X_V], xn[X_V + SEAT], qc, vc, qs,
+            )  # fmt: skip
             if tripped[0] or tripped[1] or tripped[2] or tripped[3]:
                 cfg, impulse_cam, impulse_seat = _switch(
-                    cases, out, c, t1, cfg, f7, xn, vc, *tripped
+                    cases, out, ct, c, t1, cfg, f7, xn, vc, *tripped
                 )
             else:
                 impulse_cam = False
                 impulse_seat = False
             x, xn = xn, x
-            if n % 1024 == 0 or n == n_steps - 1:
+            if (n - n0) % 1024 == 0 or n == n_steps - 1:
                 finite = True
                 for i in range(N_X):
                     if not np.isfinite(x[i]):
                         finite = False
                 if not finite:
                     out.status[c] = NONFINITE
-                    break
-        _add_turn(out.sep_rev, c, sep_turn, sep)
-        out.fmax[c, 0] = fmax_cam
-        out.fmax[c, 1] = fmax_seat
-        out.fmax[c, 2] = fmax_raw
+            if out.status[c] != OK:
+                break
         if out.n_events[c] > out.events.shape[1] and out.status[c] == OK:
             out.status[c] = EVENTS_TRUNCATED

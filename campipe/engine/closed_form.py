@@ -1,0 +1,278 @@
+"""The closed forms modal-exact and the periodic steady state share: the data they take, the
+forcing and particular solution on a piece of the profile, and the blocks' basis functions.
+
+See ``campipe.engine.modal`` for the equations and ``campipe.engine.exact`` for the notation.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+from numba import njit
+
+from campipe.engine.common import KERNEL, holds_cam, holds_seat
+from campipe.engine.modal import NS
+from campipe.profiles.packed import degree
+
+# Rows of the per-block work array ``MC`` (one column per active block, fastest first): the
+# basis functions (f1, f2) at the current grid point, their values at the grid step h (the
+# step's factors), the envelope e^{rate·τ} and its step factor, the block's largest share of a
+# coordinate or velocity (with f1, with f2) and of the contact forces (likewise) at the segment
+# start, and the block's constants λ̄, δ², 1/|δ| (inf at δ = 0) and slowest rate.
+F1, F2, D1, D2, EABS, DABS, AMP_QA, AMP_QB, AMP_FA, AMP_FB, LBAR, DSQ, INVD, RATE = range(14)
+N_MC = 14
+# Rows of the monitor coefficients ``WC`` (row, monitor, block): the coefficients of f1 and f2
+# in the monitor, in its time derivative and in its second derivative, then |W1|, |W2|,
+# |WL1|, |WL2|.
+W1, W2, WL1, WL2, WLL1, WLL2, W1_ABS, W2_ABS, WL1_ABS, WL2_ABS = range(10)
+N_WC = 10
+
+
+class ModalTrains(NamedTuple):
+    """The distinct trains of a batch: preload and ``modal.ModalData`` per configuration
+    (leading axes (n_trains, 4); see ``modal.ModalData`` for each field)."""
+
+    load: np.ndarray  # (n_trains, 7) preload [N]
+    n_free: np.ndarray
+    free: np.ndarray
+    a_inv: np.ndarray
+    b_in: np.ndarray
+    b_load: np.ndarray
+    rho: np.ndarray
+    sigma: np.ndarray
+    sigma0: np.ndarray
+    impulse: np.ndarray
+    n_blocks: np.ndarray
+    bstart: np.ndarray
+    bdim: np.ndarray
+    lam_bar: np.ndarray
+    delta2: np.ndarray
+    rate: np.ndarray
+    speed: np.ndarray
+    basis: np.ndarray
+    basis_inv: np.ndarray
+    basis_n: np.ndarray
+    block_n: np.ndarray
+    rho_x: np.ndarray
+    rho_xn: np.ndarray
+
+
+class ExactRuns(NamedTuple):
+    """How each case is run: its train, sampling, end, harmonic responses, and the settings
+    shared by the batch."""
+
+    train: np.ndarray  # (n,) int64 index into ModalTrains
+    t_sample: np.ndarray  # (n,) output spacing in time [s]
+    t_end: np.ndarray  # (n,) the run's end [s]
+    zeta: np.ndarray  # (n, 4, NS) complex ``modal.harmonic_responses`` at the case's speed
+    dt_cap: float  # largest step [s]; 0: none
+    tolerance: float  # event-time tolerance [s]
+    mode_cutoff: float  # reduced fidelity: highest mode kept on the grid [rad/s]; 0: all
+    full_state: bool  # sample all seven coordinates (else q1 and q7 only)
+
+
+class Workspace(NamedTuple):
+    """Work arrays of one case's segment, allocated once per batch (``make_workspace``)."""
+
+    q: np.ndarray  # (7,) coordinates at the segment start / an event [m, rad]
+    v: np.ndarray  # (7,) velocities
+    z: np.ndarray  # (NS,) a state z
+    zh: np.ndarray  # (NS,) the homogeneous part at the segment start
+    zb: np.ndarray  # (NS,) scratch
+    Z: np.ndarray  # (9, NS) polynomial particular solution Z_k (row k)
+    ZT: np.ndarray  # (NS,) complex harmonic particular solution Z_T
+    bpoly: np.ndarray  # (8, NS) the forcing's polynomial coefficients b_k
+    u: np.ndarray  # (NS,) the state's homogeneous part in the blocks' basis at t_s: X⁻¹ zh
+    act: np.ndarray  # (NS,) int64 the block of each active column
+    MC: np.ndarray  # (N_MC, NS) per-block work, rows F1 … RATE
+    WC: np.ndarray  # (N_WC, 2, NS) monitor coefficients per block, rows W1 … WL2_ABS
+    VY: np.ndarray  # (2, NS, NS) the state's coefficients of f1 and f2: X_b u_b, X_b N_b u_b
+    gval: np.ndarray  # (2,) monitors at the latest point
+    dval: np.ndarray  # (2,) their time derivatives
+    gprev: np.ndarray  # (2,) monitors at the previous grid point
+    dprev: np.ndarray  # (2,) their time derivatives
+    G: np.ndarray  # (2, 8) monitors' polynomial part G_mk
+    GT: np.ndarray  # (2,) complex monitors' harmonic part
+    ready: np.ndarray  # (2,) bool: monitor prepared (its value is computed)
+    watch: np.ndarray  # (2,) bool: monitor can end the segment
+    level: np.ndarray  # (2,) the level each monitor rises through at an event
+    inp: np.ndarray  # (3, 2, 8) held coordinates' (q, q̇, q̈) polynomials in x
+    inp_t: np.ndarray  # (3, 2) complex held coordinates' harmonic parts
+
+
+def make_workspace() -> Workspace:
+    """A zeroed workspace."""
+    return Workspace(
+        q=np.zeros(7),
+        v=np.zeros(7),
+        z=np.zeros(NS),
+        zh=np.zeros(NS),
+        zb=np.zeros(NS),
+        Z=np.zeros((9, NS)),
+        ZT=np.zeros(NS, np.complex128),
+        bpoly=np.zeros((8, NS)),
+        u=np.zeros(NS),
+        act=np.zeros(NS, np.int64),
+        MC=np.zeros((N_MC, NS)),
+        WC=np.zeros((N_WC, 2, NS)),
+        VY=np.zeros((2, NS, NS)),
+        gval=np.zeros(2),
+        dval=np.zeros(2),
+        gprev=np.zeros(2),
+        dprev=np.zeros(2),
+        G=np.zeros((2, 8)),
+        GT=np.zeros(2, np.complex128),
+        ready=np.zeros(2, np.bool_),
+        watch=np.zeros(2, np.bool_),
+        level=np.zeros(2),
+        inp=np.zeros((3, 2, 8)),
+        inp_t=np.zeros((3, 2), np.complex128),
+    )
+
+
+#: The scalars of one case's run and of its current segment (a record, so the steps below
+#: share them by name).
+STATE = np.dtype(
+    [
+        ("c", "i8"),  # the case
+        ("tr", "i8"),  # its train
+        ("w", "f8"),  # its speed ω [rad/s]
+        ("eps_force", "f8"),  # force monitors' level [N]
+        ("cfg", "i8"),  # configuration
+        ("p", "i8"),  # piece of the profile, of turn ``rev``
+        ("rev", "i8"),
+        ("t_s", "f8"),  # segment start [s]
+        ("th0", "f8"),  # cam angle where the piece starts [rad]
+        ("nb", "i8"),  # the next piece, of turn ``revb``, starting at ``t_break`` [s]
+        ("revb", "i8"),
+        ("t_break", "f8"),
+        ("nf", "i8"),  # free coordinates; the state has ns = 2·nf entries
+        ("ns", "i8"),
+        ("kmax", "i8"),  # degree of the held inputs' polynomials
+        ("deg", "i8"),  # degree of the particular solution's polynomial
+        ("gdeg", "i8"),  # degree of the monitors' polynomials
+        ("nact", "i8"),  # active block columns; the first ``lo`` are left off the grid
+        ("lo", "i8"),
+        ("k_out", "i8"),  # the next output sample
+        ("stalled", "i8"),  # events in a row without time advancing
+        ("done", "?"),  # the run reached its end
+        # Resting contact: a contact captured by a slow impact (``common.captured``) releases
+        # only when its force pulls beyond ``hold`` [N].
+        ("rest_cam", "?"),
+        ("rest_seat", "?"),
+        ("hold_cam", "f8"),
+        ("hold_seat", "f8"),
+    ],
+    align=True,
+)
+
+
+@njit(**KERNEL)
+def held_inputs(profiles, c, p, w, seat_q, cam_held, seat_held, inp, inp_t):
+    """Held coordinates' (q, q̇, q̈) as polynomials in the piece's local angle x (inp, shape
+    (3, 2, 8)) and harmonic parts Re(inp_t·e^{iθ}) (inp_t (3, 2) complex)."""
+    poly = profiles.poly
+    trig = profiles.trig
+    for kind in range(3):
+        for hc in range(2):
+            inp_t[kind, hc] = 0.0
+            for k in range(8):
+                inp[kind, hc, k] = 0.0
+    if cam_held:
+        for k in range(8):
+            inp[0, 0, k] = -poly[c, p, k]
+            if k + 1 < 8:
+                inp[1, 0, k] = -w * (k + 1) * poly[c, p, k + 1]
+            if k + 2 < 8:
+                inp[2, 0, k] = -w * w * (k + 1) * (k + 2) * poly[c, p, k + 2]
+        # a·sin θ + b·cos θ = Re((b − i·a)·e^{iθ})
+        beta = trig[c, p, 1] - 1j * trig[c, p, 0]
+        inp_t[0, 0] = -beta
+        inp_t[1, 0] = -1j * w * beta
+        inp_t[2, 0] = w * w * beta
+    if seat_held:
+        inp[0, 1, 0] = seat_q
+
+
+@njit(inline="always", nogil=True)
+def block_basis(lbar, d2, tau):
+    """The block's basis functions f1 = e^{λ̄τ}·C(τ) and f2 = e^{λ̄τ}·S(τ) (``modal``): C, S
+    from cos, sin (δ² < 0), cosh, sinh (δ² > 0, as two exponentials, which cannot overflow on a
+    decaying block) or the Jordan limit 1, τ, by series where δτ is small."""
+    e = np.exp(lbar * tau)
+    if d2 < 0.0:
+        nu = np.sqrt(-d2)
+        x = nu * tau
+        if x > 1e-3:
+            return e * np.cos(x), e * np.sin(x) / nu
+        x2 = x * x
+        return e * (1.0 - x2 / 2.0 + x2 * x2 / 24.0), e * tau * (1.0 - x2 / 6.0 + x2 * x2 / 120.0)
+    if d2 > 0.0:
+        d = np.sqrt(d2)
+        x = d * tau
+        if x > 1e-3:
+            ep = np.exp((lbar + d) * tau)
+            em = np.exp((lbar - d) * tau)
+            return 0.5 * (ep + em), 0.5 * (ep - em) / d
+        x2 = x * x
+        return e * (1.0 + x2 / 2.0 + x2 * x2 / 24.0), e * tau * (1.0 + x2 / 6.0 + x2 * x2 / 120.0)
+    return e, e * tau
+
+
+@njit(inline="always", nogil=True)
+def forcing(cases, trains, profiles, ws, st):
+    """The held inputs on the segment's piece (ws.inp, ws.inp_t) and the forcing's polynomial
+    coefficients b_k (ws.bpoly) in the segment's configuration; sets st.kmax and st.deg."""
+    c, tr, ci, ns = st.c, st.tr, st.cfg - 1, st.ns
+    cam_held = holds_cam(st.cfg)
+    held_inputs(
+        profiles, c, st.p, st.w, cases.seat_q[c], cam_held, holds_seat(st.cfg), ws.inp,
+        ws.inp_t,
+    )  # fmt: skip
+    # The held inputs are polynomials of the piece's degree at most (the seat's a constant),
+    # and so is the forcing.
+    kmax = degree(profiles, c, st.p) if cam_held else 0
+    deg = 0
+    for k in range(kmax + 1):
+        for s in range(ns):
+            acc = trains.b_load[tr, ci, s] if k == 0 else 0.0
+            for kind in range(3):
+                for hc in range(2):
+                    acc += trains.b_in[tr, ci, s, kind, hc] * ws.inp[kind, hc, k]
+            ws.bpoly[k, s] = acc
+            if acc != 0.0:
+                deg = k
+    st.kmax = kmax
+    st.deg = deg
+
+
+@njit(inline="always", nogil=True)
+def particular(trains, profiles, runs, ws, st):
+    """Particular solutions: Z_k = A⁻¹(ω(k+1) Z_{k+1} − b_k) from the forcing's degree down;
+    the harmonic one Z_T = β·ζ (``modal.harmonic_responses``)."""
+    tr, ci, ns, deg, w = st.tr, st.cfg - 1, st.ns, st.deg, st.w
+    Z = ws.Z
+    for k in range(deg + 1, 9):
+        for s in range(ns):
+            Z[k, s] = 0.0
+    for k in range(deg, -1, -1):
+        for s in range(ns):
+            ws.zb[s] = w * (k + 1) * Z[k + 1, s] - ws.bpoly[k, s]
+        for s in range(ns):
+            acc = 0.0
+            for j in range(ns):
+                acc += trains.a_inv[tr, ci, s, j] * ws.zb[j]
+            Z[k, s] = acc
+    c, p = st.c, st.p
+    trig = profiles.trig
+    has_trig = holds_cam(st.cfg) and (trig[c, p, 0] != 0.0 or trig[c, p, 1] != 0.0)
+    beta = trig[c, p, 1] - 1j * trig[c, p, 0]
+    for s in range(NS):
+        ws.ZT[s] = beta * runs.zeta[c, ci, s] if has_trig else 0.0
+
+
+@njit(inline="always", nogil=True)
+def block_derivative(w1, w2, lbar, d2):
+    """The coefficients of f1 and f2 in d/dτ (w1·f1 + w2·f2): f1' = λ̄f1 + δ²f2, f2' = λ̄f2 + f1."""
+    return lbar * w1 + w2, d2 * w1 + lbar * w2
