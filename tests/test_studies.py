@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 import xarray as xr
-from numpy.testing import assert_allclose
+from numpy.testing import assert_allclose, assert_array_equal
 from study_helpers import LBF, STUDIES
 
 from campipe.engine import MEMBER_LOADS, member_loads
@@ -59,16 +59,22 @@ def test_thesis_no_seat(tmp_path):
 
 def test_thesis_seat(tmp_path):
     """Figures 23-32: with the seat at 0.1 in valve lift, at 1000 rpm the follower leaves the
-    cam while the valve sits on its seat: the cam's lift is below 0.1 in / 1.5 (the rocker
-    ratio) over 2·acos(1 − 2·0.0667) ≈ 59.9° of the turn, less the elastic compression."""
+    cam while the valve sits on its seat (configuration IV, the lash of a seated train, not
+    a loss of control): the cam's lift is below 0.1 in / 1.5 (the rocker ratio) over
+    2·acos(1 − 2·0.0667) ≈ 59.9° of the turn, less the elastic compression. No-follow
+    (configuration II) is a small fraction of a degree there."""
     ds = run(tmp_path, "thesis-seat", **{"run.revolutions": 2})
     i = by_speed(ds)
     quasi_static = 2 * math.degrees(math.acos(1 - 2 * 0.1 / 1.5))
     assert_allclose(quasi_static, 59.86, atol=0.01)
-    assert quasi_static - 2 < ds.separation_deg_per_rev.values[i[1000]] < quasi_static
-    seating = ds.max_seating_velocity.values[[i[s] for s in (1000, 5000, 9000, 13205, 20000)]]
+    assert quasi_static - 2 < ds.seated_off_cam_deg_per_rev.values[i[1000]] < quasi_static
+    assert ds.separation_deg_per_rev.values[i[1000]] < 1.0
+    seating = ds.max_seating_velocity.values[[i[s] for s in (1000, 5000, 9000, 13205)]]
     assert np.all(np.diff(seating) > 0), seating  # seating gets harder with speed
-    assert np.all(ds.seat_impacts.values >= 1)
+    assert np.all(ds.seat_impacts.values[[i[s] for s in (1000, 5000, 9000, 13205)]] >= 1)
+    # Thesis Ch. V (on Figure 41): at 20000 rpm "the valve never comes back in contact with
+    # the valve seat". From the periodic start it does not, in either turn.
+    assert ds.seat_impacts.values[i[20000]] == 0
     assert np.all(ds.seat_force.values >= 0)
 
 
@@ -81,7 +87,8 @@ def test_thesis_machining_error(tmp_path):
         list(ds.defects.values).index("flat 268–272 deg"),
     )
     assert ds.cam_impacts.values[perfect] == 0
-    assert ds.cam_impacts.values[flawed] == 4  # two edges × two turns
+    assert ds.cam_impacts.values[flawed] == 2  # per turn: the two edges
+    assert_array_equal(ds.cam_impacts_by_rev.values[flawed], [2, 2])
     mine = ds.event_case.values == flawed
     kinds, angles = ds.event_kind.values[mine], ds.event_cam_angle.values[mine]
     assert_allclose(angles[kinds == CAM_SEPARATION] % 360, [268, 272, 268, 272], atol=1e-6)

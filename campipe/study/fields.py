@@ -235,6 +235,37 @@ _RUN_METADATA: dict[str, Field] = {
             archive_name="mode_cutoff",
             archive_units="rad/s",
         ),
+        Field(
+            "run.start",
+            "choice",
+            "periodic: on the periodic steady state of configuration I (where it does not "
+            "hold at θ = 0, from the latest angle where it does, unrecorded up to θ = 0); "
+            "quasi-static: the thesis's start at θ = 0 (Appendix B, step 1), a transient",
+            choices=tuple(getattr(_engine_batch, "STARTS", ("periodic",))),
+            archive_name="start",
+        ),
+        Field(
+            "run.warmup",
+            "integer",
+            "turns integrated but left out of every metric; default: 0 with the periodic "
+            "start, 1 with the quasi-static",
+            minimum=0.0,
+            exclusive_minimum=False,
+            allow_default=True,
+            archive_name="warmup",
+        ),
+        Field(
+            "run.capture_velocity",
+            "quantity",
+            "an impact closing slower than this leaves its contact resting (held until it "
+            "pulls beyond the impact's own vibration); 0: never",
+            units="m/s",
+            example="mm/s",
+            minimum=0.0,
+            exclusive_minimum=False,
+            archive_name="capture_velocity",
+            archive_units="m/s",
+        ),
     ]
 }
 
@@ -306,7 +337,7 @@ CASE_FIELDS: dict[str, Field] = {
 
 #: Run keys whose value the whole study shares: they fix the archive's cam_angle axis and
 #: its variables, so a sweep, zip, sample or case may not vary them.
-STUDY_WIDE = ("run.revolutions", "run.output_every", "run.record")
+STUDY_WIDE = ("run.revolutions", "run.output_every", "run.record", "run.start", "run.warmup")
 
 #: Defaults of the run keys, in spec spelling, from the engine's RunSettings.
 RUN_DEFAULTS: dict[str, object] = {

@@ -14,7 +14,7 @@ import numpy as np
 
 from campipe.engine import MEMBER_LOADS, BatchResult, member_loads, run_batch
 from campipe.study.expand import ResolvedCase
-from campipe.study.variables import data_variables
+from campipe.study.variables import PER_REVOLUTION_METRICS, data_variables
 from campipe.vocabulary import EV_FROM, EV_IMPULSE, EV_KIND, EV_TIME, EV_TO, EV_VELOCITY
 
 
@@ -78,16 +78,31 @@ def batch_arrays(plan: BatchPlan, result: BatchResult) -> BatchData:
         "cam_force": result.cam_force,
         "seat_force": result.seat_force,
         "contact_state": result.contact_state.astype(np.int8),
-        "separation_deg": np.degrees(result.separation_per_rev),
-        "cam_impacts": np.asarray(result.cam_impacts, np.int32),
-        "seat_impacts": np.asarray(result.seat_impacts, np.int32),
-        "max_cam_impact_velocity": result.max_cam_impact_velocity,
-        "max_seating_velocity": result.max_seating_velocity,
-        "max_cam_force": result.max_cam_force,
-        "max_seat_force": result.max_seat_force,
+        "valve_velocity": result.valve_velocity,
+        "valve_acceleration": result.valve_acceleration,
         "steps": np.asarray(result.steps, np.int64),
+        "measured": np.broadcast_to(
+            result.measured.astype(np.int8), result.cam_impacts_per_rev.shape
+        ),
     }
-    arrays["separation_deg_per_rev"] = arrays["separation_deg"][:, -1]
+    per_rev = {
+        "separation_deg": np.degrees(result.separation_per_rev),
+        "seated_off_cam_deg": np.degrees(result.seated_off_cam_per_rev),
+        "cam_impacts_by_rev": result.cam_impacts_per_rev,
+        "seat_impacts_by_rev": result.seat_impacts_per_rev,
+        "max_cam_impact_velocity_by_rev": result.max_cam_impact_velocity_per_rev,
+        "max_seating_velocity_by_rev": result.max_seating_velocity_per_rev,
+        "max_cam_force_by_rev": result.max_cam_force_per_rev,
+        "max_seat_force_by_rev": result.max_seat_force_per_rev,
+    }
+    for summary, name, dtype, _, _, how in PER_REVOLUTION_METRICS:
+        values = per_rev[name]
+        measured = values[:, result.measured]
+        arrays[summary] = measured.mean(axis=1) if how == "mean" else measured.max(axis=1)
+        # A failed case's counts are NaN: its per-revolution integers are written as -1.
+        arrays[name] = (
+            np.where(np.isnan(values), -1, values).astype(dtype) if dtype == "i4" else values
+        )
     if "q" in wanted:
         arrays["q"] = result.q
     loads = set(MEMBER_LOADS) & set(wanted)

@@ -45,6 +45,76 @@ class Variable:
 
 CASE = ("case",)
 HISTORY = ("case", "cam_angle")
+PER_REV = ("case", "revolution")
+
+#: The metrics: (summary name, per-revolution name, dtype per revolution, long name, units,
+#: how the summary reads the measured revolutions: "mean" per revolution or "max").
+PER_REVOLUTION_METRICS = (
+    (
+        "separation_deg_per_rev",
+        "separation_deg",
+        "f8",
+        "no-follow: cam angle in configuration II (follower off the cam, valve off its seat)",
+        "degree",
+        "mean",
+    ),
+    (
+        "seated_off_cam_deg_per_rev",
+        "seated_off_cam_deg",
+        "f8",
+        "cam angle in configuration IV (valve seated, follower off the cam: the lash)",
+        "degree",
+        "mean",
+    ),
+    ("cam_impacts", "cam_impacts_by_rev", "i4", "cam impacts", None, "mean"),
+    ("seat_impacts", "seat_impacts_by_rev", "i4", "valve seat impacts", None, "mean"),
+    (
+        "max_cam_impact_velocity",
+        "max_cam_impact_velocity_by_rev",
+        "f8",
+        "largest closing velocity at a cam impact",
+        "m/s",
+        "max",
+    ),
+    (
+        "max_seating_velocity",
+        "max_seating_velocity_by_rev",
+        "f8",
+        "largest closing velocity at a seat impact",
+        "m/s",
+        "max",
+    ),
+    (
+        "max_cam_force",
+        "max_cam_force_by_rev",
+        "f8",
+        "largest compressive cam force between impacts",
+        "N",
+        "max",
+    ),
+    (
+        "max_seat_force",
+        "max_seat_force_by_rev",
+        "f8",
+        "largest compressive seat force between impacts",
+        "N",
+        "max",
+    ),
+)
+
+
+def _metric_variables(summary, per_rev, dtype, long_name, units, how) -> dict[str, Variable]:
+    """A metric's two variables: per revolution, and its summary over the measured ones."""
+    reads = "per revolution, mean over" if how == "mean" else "largest in"
+    return {
+        summary: Variable(
+            CASE, "f8", f"{long_name}, {reads} the measured revolutions", units, role="metric"
+        ),
+        per_rev: Variable(
+            PER_REV, dtype, f"{long_name}, per revolution", units, role="per_revolution"
+        ),
+    }
+
 
 #: Variables every archive holds (member loads and q only when run.record asks).
 VARIABLES: dict[str, Variable] = {
@@ -91,34 +161,20 @@ VARIABLES: dict[str, Variable] = {
             ),
         ),
     ),
-    "separation_deg_per_rev": Variable(
-        CASE,
-        "f8",
-        "cam angle with the follower off the cam in the last revolution",
-        "degree",
-        role="metric",
-    ),
-    "separation_deg": Variable(
-        ("case", "revolution"),
-        "f8",
-        "cam angle with the follower off the cam, per revolution",
-        "degree",
+    "valve_velocity": Variable(HISTORY, "f8", "valve opening velocity", "m/s"),
+    "valve_acceleration": Variable(HISTORY, "f8", "valve opening acceleration", "m/s^2"),
+    "measured": Variable(
+        PER_REV,
+        "i1",
+        "revolution counted in the summary metrics (1), or a warm-up revolution (0)",
         role="per_revolution",
+        extra=(("flag_values", [0, 1]), ("flag_meanings", "warm_up measured")),
     ),
-    "cam_impacts": Variable(CASE, "i4", "number of cam impacts", role="metric"),
-    "seat_impacts": Variable(CASE, "i4", "number of valve seat impacts", role="metric"),
-    "max_cam_impact_velocity": Variable(
-        CASE, "f8", "largest closing velocity at a cam impact", "m/s", role="metric"
-    ),
-    "max_seating_velocity": Variable(
-        CASE, "f8", "largest closing velocity at a seat impact", "m/s", role="metric"
-    ),
-    "max_cam_force": Variable(
-        CASE, "f8", "largest compressive cam force between impacts", "N", role="metric"
-    ),
-    "max_seat_force": Variable(
-        CASE, "f8", "largest compressive seat force between impacts", "N", role="metric"
-    ),
+    **{
+        name: var
+        for metric in PER_REVOLUTION_METRICS
+        for name, var in _metric_variables(*metric).items()
+    },
     "steps": Variable(CASE, "i8", "integration steps taken", role="count"),
     "event_count": Variable(
         CASE,

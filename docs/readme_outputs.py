@@ -1,0 +1,72 @@
+"""Rewrite the outputs the README shows (its five-line analysis and the quickstart's query
+summary) from a fresh run of ``studies/quickstart.yaml``, so they are never typed by hand.
+
+    python docs/readme_outputs.py          # rewrite README.md
+    python docs/readme_outputs.py --check  # exit 1 if README.md differs
+
+``tests/test_docs.py`` runs the same commands and compares them with the README.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import os
+import sys
+import tempfile
+from pathlib import Path
+
+from click.testing import CliRunner
+
+from campipe.cli import main
+from campipe.study import load_study
+from campipe.study.execute import run_study
+
+ROOT = Path(__file__).resolve().parents[1]
+README = ROOT / "README.md"
+SUMMARY = "$ campipe query studies/quickstart.nc --summary\n"
+
+
+def _fenced_after(text: str, marker: str) -> tuple[int, int]:
+    """The span of the body of the first fenced block after ``<!-- marker -->``."""
+    start = text.index(f"<!-- {marker} -->\n")
+    open_ = text.index("```", start)
+    body = text.index("\n", open_) + 1
+    return body, text.index("```", body)
+
+
+def outputs() -> tuple[str, str]:
+    """(the analysis's printout, the summary's) from a fresh quickstart run."""
+    text = README.read_text()
+    a, b = _fenced_after(text, "readme-analysis")
+    code = text[a:b]
+    with tempfile.TemporaryDirectory() as tmp:
+        archive = Path(tmp) / "studies" / "quickstart.nc"
+        archive.parent.mkdir()
+        run_study(load_study(ROOT / "studies" / "quickstart.yaml"), archive, scheduler="threads")
+        here = os.getcwd()
+        os.chdir(tmp)
+        try:
+            out = io.StringIO()
+            with contextlib.redirect_stdout(out):
+                exec(compile(code, "README.md", "exec"), {})
+        finally:
+            os.chdir(here)
+        summary = CliRunner().invoke(main, ["query", str(archive), "--summary"]).output
+    return out.getvalue(), summary
+
+
+def rewritten() -> str:
+    text = README.read_text()
+    analysis, summary = outputs()
+    a, b = _fenced_after(text, "readme-analysis-output")
+    text = text[:a] + analysis + text[b:]
+    head, rest = text.split(SUMMARY, 1)
+    return head + SUMMARY + summary + rest[rest.index("```") :]
+
+
+if __name__ == "__main__":
+    new = rewritten()
+    if "--check" in sys.argv[1:]:
+        sys.exit(0 if new == README.read_text() else 1)
+    README.write_text(new)
