@@ -15,14 +15,12 @@ netCDF-C and HDF5 are not thread-safe: every call into netCDF4 here holds :data:
 from __future__ import annotations
 
 import itertools
-import json
 import logging
 import os
 import platform
 import socket
 import threading
-from collections.abc import Iterable, Iterator, Mapping
-from contextlib import contextmanager
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from importlib import metadata
@@ -33,6 +31,16 @@ import numpy as np
 
 from campipe import __version__
 from campipe.errors import CampipeError
+from campipe.io.lock import ArchiveBusyError, lock_path, writing
+
+__all__ = [
+    "ArchiveBusyError",
+    "ArchiveFileError",
+    "NetCDFWriter",
+    "VariableSpec",
+    "lock_path",
+    "writing",
+]
 
 log = logging.getLogger(__name__)
 
@@ -65,91 +73,6 @@ class VariableSpec:
 
 class ArchiveFileError(CampipeError, RuntimeError):
     """A file that is not a campipe archive or batch file (``key`` the file)."""
-
-
-class ArchiveBusyError(CampipeError, RuntimeError):
-    """Another run is writing the same archive (``key`` the archive, ``found`` its lock's
-    holder: pid, host and start, or None if the lock cannot be read)."""
-
-
-def lock_path(archive: Path) -> Path:
-    """The lock a run holds while it writes ``archive``: ``<archive>.lock`` beside it."""
-    return archive.with_name(archive.name + ".lock")
-
-
-@contextmanager
-def writing(archive: str | Path) -> Iterator[Path]:
-    """Hold the archive's lock while a run writes it and its batch files.
-
-    The lock is a file created exclusively, naming the process, host and start time. A second
-    run on the same archive stops with :class:`ArchiveBusyError` before touching any file, so
-    it never removes the first run's temporary files or batch files. A lock left by a run that
-    died on this host (its process is gone) is taken over, so a rerun after a kill resumes.
-
-    Raises
-    ------
-    ArchiveBusyError
-        If a live process (or one on another host, which cannot be checked) holds the lock.
-    """
-    lock = lock_path(Path(archive))
-    me = {
-        "pid": os.getpid(),
-        "host": socket.gethostname(),
-        "started": datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
-    }
-    for attempt in range(2):
-        try:
-            fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
-        except FileExistsError:
-            holder = _lock_holder(lock)
-            if attempt == 0 and holder is not None and _is_dead(holder):
-                log.warning(
-                    "%s: taking over the lock of process %s, which is gone", archive, holder["pid"]
-                )
-                lock.unlink(missing_ok=True)
-                continue
-            who = (
-                f"process {holder['pid']} on {holder['host']} since {holder['started']}"
-                if holder
-                else "another run"
-            )
-            raise ArchiveBusyError(
-                f"{archive} is being written by {who}: wait for that run to finish, or "
-                f"write to another archive (-o); if that run is gone, remove {lock}",
-                key=str(archive),
-                found=holder,
-            ) from None
-        with os.fdopen(fd, "w") as f:
-            json.dump(me, f)
-        break
-    try:
-        yield lock
-    finally:
-        lock.unlink(missing_ok=True)
-
-
-def _lock_holder(lock: Path) -> dict | None:
-    """The lock's content, or None if it cannot be read (being written, or not ours)."""
-    try:
-        holder = json.loads(lock.read_text(encoding="utf-8"))
-        return holder if {"pid", "host", "started"} <= set(holder) else None
-    except (OSError, ValueError, TypeError):
-        return None
-
-
-def _is_dead(holder: dict) -> bool:
-    """The lock's process is known to be gone: on this host, and no such process."""
-    if holder["host"] != socket.gethostname() or not isinstance(holder["pid"], int):
-        return False
-    if holder["pid"] == os.getpid():
-        return False  # this process: another thread of it is writing the archive
-    try:
-        os.kill(holder["pid"], 0)
-    except ProcessLookupError:
-        return True
-    except PermissionError:
-        return False  # alive, another user's
-    return False
 
 
 def temporary_path(path: Path) -> Path:
