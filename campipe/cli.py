@@ -46,7 +46,69 @@ def parse_overrides(pairs: tuple[str, ...]) -> dict[str, object]:
     return out
 
 
-@click.group()
+#: Longest line of an error message shown: a message quoting a huge value stays readable.
+MAX_MESSAGE_LINE = 1000
+
+
+class Failure(CampipeError, click.ClickException):
+    """A CampipeError or a system error as the command's message: one line or a few naming
+    the cause and what to do. Exit status 2 for the user's input (the error is a
+    ValueError: a spec, an option, a path), 1 for the environment (a RuntimeError or
+    OSError: a full or read-only disk, a busy archive, a scheduler or worker gone)."""
+
+    exit_code = 1
+
+    def __init__(self, message: str) -> None:
+        lines = [
+            line if len(line) <= MAX_MESSAGE_LINE else line[: MAX_MESSAGE_LINE - 3] + "..."
+            for line in message.splitlines()[:60]
+        ]
+        super().__init__("\n".join(lines))
+
+    def show(self, file=None) -> None:
+        click.echo(f"Error: {self.format_message()}", err=True)
+
+    @staticmethod
+    def of(message: str, user_input: bool) -> Failure:
+        """An InputFailure (exit status 2) or an environment Failure (1)."""
+        return InputFailure(message) if user_input else Failure(message)
+
+
+class InputFailure(Failure):
+    """A Failure caused by the user's input: exit status 2."""
+
+    exit_code = 2
+
+
+def failure(exc: BaseException) -> Failure | None:
+    """The Failure for an exception a user can act on, or None for a defect (left to raise
+    with its traceback)."""
+    if isinstance(exc, CampipeError):
+        return Failure.of(str(exc), isinstance(exc, ValueError))
+    if isinstance(exc, OSError):
+        where = f"{exc.filename}: " if exc.filename else ""
+        return Failure(f"{where}{exc.strerror or exc}")
+    if isinstance(exc, MemoryError):
+        return Failure("out of memory; run a smaller study, or on a larger machine")
+    return None
+
+
+class CampipeGroup(click.Group):
+    """The ``campipe`` group: maps errors to messages and exit statuses (:func:`failure`)."""
+
+    def invoke(self, ctx: click.Context):
+        try:
+            return super().invoke(ctx)
+        except (click.ClickException, click.exceptions.Exit, click.Abort):
+            raise
+        except Exception as exc:
+            mapped = failure(exc)
+            if mapped is None:
+                raise
+            raise mapped from None
+
+
+@click.group(cls=CampipeGroup)
 @click.version_option(version=__version__, package_name="campipe")
 @click.option("-v", "--verbose", count=True, help="More log output (-v info, -vv debug).")
 def main(verbose: int) -> None:
@@ -256,16 +318,23 @@ _SET_HELP = (
     show_default=True,
     help="Show a progress line on stderr.",
 )
-def study(spec, output, sets, scheduler, workers, batch_size, keep_parts, progress) -> None:
+@click.option(
+    "--overwrite",
+    is_flag=True,
+    help="Replace a file at the archive path that is not this study's archive (another "
+    "study's archive, any other file); cases it shares by id are reused.",
+)
+def study(
+    spec, output, sets, scheduler, workers, batch_size, keep_parts, progress, overwrite
+) -> None:
     """Run the study SPEC (YAML) into one netCDF archive.
 
     Rerunning the same command after an interruption computes only the cases whose batches
-    were not stored; a finished archive that already holds the study is left as it is.
+    were not stored; a finished archive that already holds the study (its checksums
+    verified) is left as it is.
     """
     import shlex
 
-    from campipe.engine import IntegrationError
-    from campipe.io.archive import ArchiveBusyError
     from campipe.study.execute import run_study
     from campipe.study.progress import Progress
 
@@ -285,31 +354,62 @@ def study(spec, output, sets, scheduler, workers, batch_size, keep_parts, progre
     words += [w for pair in sets for w in ("--set", pair)]
     words += ["--scheduler", scheduler] if scheduler != "threads" else []
     command = shlex.join(words)
-    try:
-        report = run_study(
-            loaded,
-            archive,
-            scheduler=scheduler,
-            workers=workers,
-            batch_size=batch_size,
-            progress=bar if progress else None,
-            keep_parts=keep_parts,
-            command=command,
-            on_batch=replay if scheduler != "processes" else None,
-        )
-    except IntegrationError as exc:
-        raise click.ClickException(
-            f"{exc}\nBatches finished before it are stored; fix the "
-            "spec and rerun the same command to resume."
-        ) from None
-    except ArchiveBusyError as exc:
-        raise click.ClickException(str(exc)) from None
-    except ValueError as exc:
-        raise click.UsageError(str(exc)) from None
+    report = run_study(
+        loaded,
+        archive,
+        scheduler=scheduler,
+        workers=workers,
+        batch_size=batch_size,
+        progress=bar if progress else None,
+        keep_parts=keep_parts,
+        command=command,
+        on_batch=replay if scheduler != "processes" else None,
+        overwrite=overwrite,
+    )
+    for note in report.notes:
+        click.echo(f"campipe study: {note}", err=True)
     click.echo(f"campipe study: {report.summary()}", err=True)
-    if replay is not None and (recorded := replay.finish(report.archive)):
-        click.echo(f"campipe study: replay {loaded.spec.replay!r} recorded in {recorded}", err=True)
+    _report_statuses(report)
+    if replay is not None:
+        try:
+            recorded = replay.finish(report.archive)
+        except Exception as exc:  # the archive is complete: the recording is an extra
+            raise Failure.of(
+                f"the archive {report.archive} is complete, but the replay recording "
+                f"{replay.path} failed ({type(exc).__name__}: {str(exc)[:300]}); "
+                f"write it with campipe replay {report.archive} --where EXPR",
+                isinstance(exc, ValueError),
+            ) from None
+        if recorded:
+            click.echo(
+                f"campipe study: replay {loaded.spec.replay!r} recorded in {recorded}", err=True
+            )
     click.echo(str(report.archive))
+
+
+def _report_statuses(report) -> None:
+    """Name the cases that failed or kept only part of their events, by case id."""
+    failed = report.failures()
+    if failed:
+        shown = ", ".join(f"{cid} ({status})" for cid, status in list(failed.items())[:10])
+        more = f" and {len(failed) - 10} more" if len(failed) > 10 else ""
+        click.echo(
+            f"campipe study: {len(failed)} case{'s' if len(failed) != 1 else ''} failed: "
+            f"{shown}{more}; their histories and metrics are NaN (status in the archive; "
+            "campipe query ARCHIVE --summary lists them)",
+            err=True,
+        )
+    truncated = report.truncated()
+    if truncated:
+        shown = ", ".join(truncated[:10]) + (
+            f" and {len(truncated) - 10} more" if len(truncated) > 10 else ""
+        )
+        click.echo(
+            f"campipe study: {len(truncated)} case{'s' if len(truncated) != 1 else ''} kept "
+            f"only run.max_events events: {shown} (status events_truncated); raise "
+            "run.max_events to keep them all",
+            err=True,
+        )
 
 
 @main.command()
@@ -440,31 +540,30 @@ def validate_text(loaded, spec_path) -> str:
 @click.option(
     "--summary",
     is_flag=True,
-    help="Print the axes and, for a speed sweep, the separation onset speeds.",
+    help="Print the axes, the failed cases and, for a speed sweep, the separation onset "
+    "speeds (of the cases --where selects).",
 )
 def query(archive, where, columns, sort, fmt, summary) -> None:
     """Print an archive's cases, one row per case."""
     import xarray as xr
 
-    from campipe.study.query import QueryError, case_table, format_rows, select
+    from campipe.study.query import case_table, format_rows, select
     from campipe.study.query import summary as summary_text
 
     try:
-        with xr.open_dataset(archive) as ds:
-            if summary:
-                click.echo(summary_text(ds))
-                return
-            table = case_table(ds)
-    except (OSError, ValueError) as exc:
-        if isinstance(exc, QueryError):
-            raise
-        raise click.ClickException(f"{archive}: cannot read as an archive ({exc})") from None
+        ds = xr.open_dataset(archive)
+    except Exception as exc:  # not netCDF, or damaged: each reader fails its own way
+        raise Failure(
+            f"{archive}: cannot read as an archive ({type(exc).__name__}: {str(exc)[:200]})"
+        ) from None
+    with ds:
+        if summary:
+            click.echo(summary_text(ds, where))
+            return
+        table = case_table(ds)
     names = [c.strip() for c in columns.split(",") if c.strip()] if columns else table.default
-    try:
-        rows = select(table, where, sort)
-        click.echo(format_rows(table, rows, names, fmt))
-    except QueryError as exc:
-        raise click.UsageError(str(exc)) from None
+    rows = select(table, where, sort)
+    click.echo(format_rows(table, rows, names, fmt))
 
 
 # -- replay -----------------------------------------------------------------------------------

@@ -14,13 +14,18 @@ netCDF-C and HDF5 are not thread-safe: every call into netCDF4 here holds :data:
 
 from __future__ import annotations
 
+import errno
+import hashlib
 import itertools
+import json
 import logging
 import os
 import platform
+import shutil
 import socket
 import threading
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Iterator, Mapping
+from contextlib import contextmanager
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from importlib import metadata
@@ -75,6 +80,58 @@ class ArchiveFileError(CampipeError, RuntimeError):
     """A file that is not a campipe archive or batch file (``key`` the file)."""
 
 
+class ArchiveWriteError(CampipeError, RuntimeError):
+    """A file that cannot be written: a full disk, a read-only folder (``key`` the file,
+    ``found`` the errno where the system gave one)."""
+
+
+#: Global attribute holding the checksums of a file's variables and attributes (JSON).
+CHECKSUM_ATTR = "campipe_checksums"
+#: The checksum entry of the global attributes (no variable has this name).
+ATTRIBUTES_ENTRY = "/attributes"
+#: Bytes read at a time when a variable is checksummed.
+CHECKSUM_BLOCK = 8 * 2**20
+
+
+@contextmanager
+def _writes(path: Path) -> Iterator[None]:
+    """netCDF-C's and the system's write failures as ArchiveWriteError naming the file, the
+    cause where known, and the free space of its folder (netCDF-C says only 'HDF error')."""
+    try:
+        yield
+    except ArchiveWriteError:
+        raise
+    except (OSError, RuntimeError) as exc:
+        raise write_error(path, exc) from None
+
+
+def write_error(path: Path, exc: BaseException) -> ArchiveWriteError:
+    """An ArchiveWriteError for ``exc`` raised while writing ``path``."""
+    code = getattr(exc, "errno", None)
+    why = getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
+    try:
+        free = shutil.disk_usage(path.parent).free
+        space = f"; {free / 1e6:.3g} MB free in {path.parent}"
+        full = free < 64 * 2**20
+    except OSError:
+        space, full = "", False
+    if code in (errno.ENOSPC, errno.EDQUOT) or (code is None and full):
+        hint = "the disk is full: free some space"
+    elif code in (errno.EACCES, errno.EPERM, errno.EROFS):
+        hint = "the folder is not writable: choose another archive path (-o)"
+    elif code == errno.ENAMETOOLONG:
+        hint = "the file name is too long: choose a shorter archive path (-o)"
+    elif code == errno.EFBIG:
+        hint = "the file is larger than this system allows"
+    else:
+        hint = "check the disk"
+    return ArchiveWriteError.at(
+        str(path),
+        f"cannot write ({why}){space}; {hint}, then rerun the same command to resume",
+        found=code,
+    )
+
+
 def temporary_path(path: Path) -> Path:
     """A unique hidden name beside ``path`` (same file system, so the rename is atomic)."""
     tag = f"{os.getpid()}-{threading.get_ident()}-{next(_counter)}"
@@ -105,7 +162,7 @@ class NetCDFWriter:
         self.complevel = complevel
         self.tmp = temporary_path(self.path)
         self.variables = {v.name: v for v in variables}
-        with LOCK:
+        with LOCK, _writes(self.path):
             self._ds = netCDF4.Dataset(self.tmp, "w", format="NETCDF4")
             try:
                 for dim, size in sizes.items():
@@ -141,7 +198,7 @@ class NetCDFWriter:
 
     def write(self, name: str, values: np.ndarray, index: object = slice(None)) -> None:
         """Write ``values`` at ``index`` (a slice, an int, or a tuple of them)."""
-        with LOCK:
+        with LOCK, _writes(self.path):
             var = self._ds.variables[name]
             if self.variables[name].dtype == "str":
                 values = np.asarray(values, dtype=object)
@@ -155,7 +212,7 @@ class NetCDFWriter:
         consecutive positions are written in one call."""
         positions = np.asarray(positions, dtype=np.int64)
         string = self.variables[name].dtype == "str"
-        with LOCK:
+        with LOCK, _writes(self.path):
             var = self._ds.variables[name]
             for start, stop in runs(positions):
                 p0 = int(positions[start])
@@ -165,12 +222,15 @@ class NetCDFWriter:
                 var[p0 : p0 + (stop - start)] = block
 
     def commit(self) -> Path:
-        """Close, flush to disk and rename into place; returns the final path."""
-        with LOCK:
+        """Checksum every variable and the attributes (:data:`CHECKSUM_ATTR`), close, flush
+        to disk and rename into place; returns the final path."""
+        with LOCK, _writes(self.path):
+            self._ds.set_auto_mask(False)
+            self._ds.setncattr(CHECKSUM_ATTR, json.dumps(checksums(self._ds), sort_keys=True))
             self._ds.close()
-        with open(self.tmp, "rb") as f:
-            os.fsync(f.fileno())
-        os.replace(self.tmp, self.path)
+            with open(self.tmp, "rb") as f:
+                os.fsync(f.fileno())
+            os.replace(self.tmp, self.path)
         return self.path
 
     def abort(self) -> None:
@@ -224,10 +284,133 @@ def write_file(
         return w.commit()
 
 
-def read_attrs(path: str | Path) -> dict[str, object]:
+# -- reading ---------------------------------------------------------------------------------
+
+#: Largest file read into memory when it is already open elsewhere in this process [bytes].
+MAX_IN_MEMORY = 2**30
+
+
+def open_elsewhere(path: str | Path) -> bool:
+    """``path`` is open through another file descriptor of this process (an xarray Dataset
+    left open, say); False where that cannot be told (not Linux)."""
+    target = os.path.realpath(path)
+    try:
+        fds = os.listdir("/proc/self/fd")
+    except OSError:
+        return False
+    for fd in fds:
+        try:
+            if os.readlink(f"/proc/self/fd/{fd}") == target:
+                return True
+        except OSError:
+            continue
+    return False
+
+
+def open_dataset(path: str | Path):
+    """A netCDF4 Dataset of ``path`` for reading.
+
+    A file already open elsewhere in this process is read from an in-memory copy: netCDF-C
+    4.10 with HDF5 2.2 crashes (a segmentation fault) when a file held open is opened, read
+    (variable-length strings) and closed a few more times. A larger file than
+    :data:`MAX_IN_MEMORY` is then refused with ArchiveFileError.
+    """
     import netCDF4
 
-    with LOCK, netCDF4.Dataset(path, "r") as ds:
+    if not open_elsewhere(path):
+        return netCDF4.Dataset(path, "r")
+    size = os.path.getsize(path)
+    if size > MAX_IN_MEMORY:
+        raise ArchiveFileError.at(
+            str(path),
+            f"is open elsewhere in this process and too large ({size / 1e9:.3g} GB) to read "
+            "from a copy; close it (xarray: ds.close()) and try again",
+        )
+    with open(path, "rb") as f:
+        return netCDF4.Dataset(str(path), "r", memory=f.read())
+
+
+# -- checksums -------------------------------------------------------------------------------
+
+
+def _attribute_bytes(value: object) -> bytes:
+    """An attribute's value as bytes that do not depend on numpy's repr."""
+    if isinstance(value, str):
+        return b"s" + value.encode("utf-8", "surrogatepass")
+    a = np.asarray(value)
+    return b"a" + f"{a.dtype.str}{a.shape}".encode() + a.tobytes()
+
+
+def _attributes_digest(owner, h) -> None:
+    for key in sorted(owner.ncattrs()):
+        if key == CHECKSUM_ATTR:
+            continue
+        h.update(key.encode() + b"=")
+        h.update(_attribute_bytes(owner.getncattr(key)))
+        h.update(b";")
+
+
+def _values_bytes(values: np.ndarray) -> bytes:
+    if values.dtype == object or values.dtype.kind in "US":
+        parts = [str(v).encode("utf-8", "surrogatepass") for v in values.ravel()]
+        return b"".join(len(p).to_bytes(8, "little") + p for p in parts)
+    return np.ascontiguousarray(values).tobytes()
+
+
+def variable_digest(var) -> str:
+    """SHA-256 of a netCDF4 variable: name, dimensions, type, attributes and values (read a
+    block of rows at a time, so memory stays bounded)."""
+    h = hashlib.sha256()
+    h.update(f"{var.name}|{var.dimensions}|{var.dtype}|".encode())
+    _attributes_digest(var, h)
+    shape = var.shape
+    if not shape or shape[0] == 0:
+        h.update(_values_bytes(np.asarray(var[...])))
+        return h.hexdigest()
+    itemsize = 64 if var.dtype is str else np.dtype(var.dtype).itemsize
+    row = itemsize * int(np.prod(shape[1:], dtype=np.int64))
+    step = max(1, CHECKSUM_BLOCK // max(row, 1))
+    for start in range(0, shape[0], step):
+        h.update(_values_bytes(np.asarray(var[start : start + step])))
+    return h.hexdigest()
+
+
+def checksums(ds) -> dict[str, str]:
+    """Variable name → SHA-256 (:func:`variable_digest`) for an open netCDF4 Dataset, and the
+    digest of its global attributes under :data:`ATTRIBUTES_ENTRY`."""
+    out = {name: variable_digest(var) for name, var in ds.variables.items()}
+    h = hashlib.sha256()
+    _attributes_digest(ds, h)
+    out[ATTRIBUTES_ENTRY] = h.hexdigest()
+    return out
+
+
+def verify(path: str | Path) -> list[str]:
+    """Check a file against its stored checksums: ``[]`` if every variable and attribute is as
+    written, else what differs (or why the file cannot be read). Reads the whole file."""
+
+    try:
+        with LOCK, open_dataset(path) as ds:
+            ds.set_auto_mask(False)
+            if CHECKSUM_ATTR not in ds.ncattrs():
+                return ["it holds no checksums (written by an older campipe)"]
+            stored = json.loads(ds.getncattr(CHECKSUM_ATTR))
+            if not isinstance(stored, dict):
+                return ["its checksums cannot be read"]
+            found = checksums(ds)
+    except Exception as exc:  # a damaged HDF5 file fails in many ways; each means the same
+        return [f"it cannot be read ({type(exc).__name__}: {str(exc)[:200]})"]
+    bad = sorted(k for k in set(stored) | set(found) if stored.get(k) != found.get(k))
+    if not bad:
+        return []
+    names = ", ".join(("attributes" if k == ATTRIBUTES_ENTRY else k) for k in bad[:5])
+    more = f" and {len(bad) - 5} more" if len(bad) > 5 else ""
+    return [f"its checksums differ ({names}{more})"]
+
+
+def read_attrs(path: str | Path) -> dict[str, object]:
+
+    with LOCK, open_dataset(path) as ds:
         return {k: ds.getncattr(k) for k in ds.ncattrs()}
 
 
@@ -240,10 +423,9 @@ def read_index(path: str | Path) -> tuple[np.ndarray, np.ndarray, dict[str, obje
     ArchiveFileError
         If the file cannot be read or lacks those variables.
     """
-    import netCDF4
 
     try:
-        with LOCK, netCDF4.Dataset(path, "r") as ds:
+        with LOCK, open_dataset(path) as ds:
             for name in ("case_id", "event_count"):
                 if name not in ds.variables:
                     raise ArchiveFileError(f"{path}: no {name} variable", key=str(path))
@@ -256,9 +438,8 @@ def read_index(path: str | Path) -> tuple[np.ndarray, np.ndarray, dict[str, obje
 
 def read_variable(path: str | Path, name: str) -> np.ndarray:
     """One whole variable (an axis such as ``cam_angle``)."""
-    import netCDF4
 
-    with LOCK, netCDF4.Dataset(path, "r") as ds:
+    with LOCK, open_dataset(path) as ds:
         ds.set_auto_mask(False)
         return np.asarray(ds.variables[name][:])
 
@@ -281,11 +462,10 @@ def read_rows(
         name → array, rows in the order given; event variables hold the given cases' events
         case by case, ``event_count`` their counts.
     """
-    import netCDF4
 
     rows = np.asarray(rows, dtype=np.int64)
     out: dict[str, np.ndarray] = {}
-    with LOCK, netCDF4.Dataset(path, "r") as ds:
+    with LOCK, open_dataset(path) as ds:
         ds.set_auto_mask(False)
         lo, hi = int(rows.min()), int(rows.max()) + 1
         local = rows - lo

@@ -48,4 +48,5 @@ def load_study(path: str | Path, overrides: Mapping[str, object] | None = None) 
     path = Path(path)
     raw, text = read_spec(path)
     spec = check_spec(raw, text, path.parent, str(path), overrides)
+    spec.path = path
     return expand(spec, str(path))

@@ -111,6 +111,7 @@ class Spec:
     sample: Sample | None  # sampled design
     replay: str | None  # replay selection expression
     overrides: dict[str, object] = field(default_factory=dict)  # --set KEY=VALUE applied
+    path: Path | None = None  # the spec file, when read from one
 
     @property
     def record(self) -> tuple[str, ...]:
