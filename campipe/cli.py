@@ -8,11 +8,11 @@ import sys
 
 import click
 import numpy as np
-import yaml
 
 from campipe import __version__
 from campipe.constants import INCH, LBF_IN, RPM
 from campipe.errors import CampipeError
+from campipe.io.spec_yaml import SpecFileError, parse_value
 from campipe.model import (
     COORDINATES,
     PARAMETERS,
@@ -38,11 +38,9 @@ def parse_overrides(pairs: tuple[str, ...]) -> dict[str, object]:
                 f"{pair!r}: write NAME=VALUE, e.g. spring_rate='260 lbf/in'", param_hint="--set"
             )
         try:
-            out[key] = yaml.safe_load(text)
-        except yaml.YAMLError as exc:
-            raise click.BadParameter(
-                f"{key}: cannot read {text!r} ({exc})", param_hint="--set"
-            ) from None
+            out[key] = parse_value(text, key)
+        except SpecFileError as exc:
+            raise click.BadParameter(str(exc), param_hint="--set") from None
     return out
 
 
@@ -258,15 +256,76 @@ class SpecRefused(CampipeError, click.ClickException):
         click.echo(self.format_message(), err=True)
 
 
-def _load(spec_path, sets):
-    from campipe.io.spec_yaml import SpecFileError
+def _load(spec_path, sets, limits=None):
     from campipe.study import SpecError, load_study
 
     overrides = parse_overrides(sets)
     try:
-        return load_study(spec_path, overrides)
+        return load_study(spec_path, overrides, limits)
     except (SpecFileError, SpecError) as exc:
         raise SpecRefused(str(exc)) from None
+
+
+#: The defaults of campipe.study.limits.Limits, repeated here so --help needs no import of
+#: the engine (tests/test_fuzz.py checks they agree).
+DEFAULT_LIMITS = {
+    "cases": 100_000,
+    "steps": 1e9,
+    "samples": 100_000,
+    "events": 100_000,
+    "archive_gb": 20.0,
+}
+
+
+def limit_options(command):
+    """``--max-cases`` … ``--max-archive-gb``: the limits a spec is checked against."""
+    d = DEFAULT_LIMITS
+    options = [
+        click.option(
+            "--max-archive-gb",
+            type=click.FloatRange(min=0, min_open=True),
+            default=d["archive_gb"],
+            show_default=True,
+            help="Largest archive before compression [GB].",
+        ),
+        click.option(
+            "--max-events",
+            type=click.IntRange(min=1),
+            default=d["events"],
+            show_default=True,
+            help="Largest run.max_events (events kept per case).",
+        ),
+        click.option(
+            "--max-samples",
+            type=click.IntRange(min=2),
+            default=d["samples"],
+            show_default=True,
+            help="Most stored samples per case (revolutions × 360° / output_every).",
+        ),
+        click.option(
+            "--max-steps",
+            type=click.FloatRange(min=1),
+            default=d["steps"],
+            show_default=True,
+            help="Most integration steps per case (the slowest speed with the smallest step).",
+        ),
+        click.option(
+            "--max-cases",
+            type=click.IntRange(min=1),
+            default=d["cases"],
+            show_default=True,
+            help="Most cases in the study (counted from the axes' lengths).",
+        ),
+    ]
+    for option in options:
+        command = option(command)
+    return command
+
+
+def _limits(max_cases, max_steps, max_samples, max_events, max_archive_gb):
+    from campipe.study.limits import Limits
+
+    return Limits(max_cases, max_steps, max_samples, max_events, max_archive_gb * 1e9)
 
 
 def _archive_path(study, spec_path, output):
@@ -324,8 +383,22 @@ _SET_HELP = (
     help="Replace a file at the archive path that is not this study's archive (another "
     "study's archive, any other file); cases it shares by id are reused.",
 )
+@limit_options
 def study(
-    spec, output, sets, scheduler, workers, batch_size, keep_parts, progress, overwrite
+    spec,
+    output,
+    sets,
+    scheduler,
+    workers,
+    batch_size,
+    keep_parts,
+    progress,
+    overwrite,
+    max_cases,
+    max_steps,
+    max_samples,
+    max_events,
+    max_archive_gb,
 ) -> None:
     """Run the study SPEC (YAML) into one netCDF archive.
 
@@ -338,7 +411,8 @@ def study(
     from campipe.study.execute import run_study
     from campipe.study.progress import Progress
 
-    loaded = _load(spec, sets)
+    limits = _limits(max_cases, max_steps, max_samples, max_events, max_archive_gb)
+    loaded = _load(spec, sets, limits)
     archive = _archive_path(loaded, spec, output)
     stderr = sys.stderr
 
@@ -432,7 +506,19 @@ def _report_statuses(report) -> None:
     help="Valve-lift tolerance such as '1e-4 in': probe the cases and print the "
     "fidelity level (run.fidelity, run.mode_cutoff) they need for it.",
 )
-def validate(spec, sets, workers, estimate, tolerance) -> None:
+@limit_options
+def validate(
+    spec,
+    sets,
+    workers,
+    estimate,
+    tolerance,
+    max_cases,
+    max_steps,
+    max_samples,
+    max_events,
+    max_archive_gb,
+) -> None:
     """Check the study SPEC and print its case count, axes and estimated cost."""
     from campipe.study.estimate import archive_bytes
     from campipe.study.estimate import estimate as cost
@@ -446,7 +532,9 @@ def validate(spec, sets, workers, estimate, tolerance) -> None:
             tolerance = parse_quantity(tolerance, "m", "--tolerance", "in")
         except QuantityError as exc:
             raise click.BadParameter(str(exc), param_hint="--tolerance") from None
-    loaded = _load(spec, sets)
+    loaded = _load(
+        spec, sets, _limits(max_cases, max_steps, max_samples, max_events, max_archive_gb)
+    )
     workers = workers or default_workers()
     click.echo(validate_text(loaded, spec))
     size = default_batch_size(len(loaded.cases), workers)

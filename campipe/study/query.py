@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from campipe.errors import did_you_mean
+from campipe.errors import did_you_mean, excerpt
 from campipe.study.layout import coordinate_values
 from campipe.study.variables import VARIABLES
 from campipe.study.where import QueryError, Where, evaluate, parse_where
@@ -78,7 +78,7 @@ def select(table: CaseTable, where: str | None = None, sort: str | None = None) 
             name = key.lstrip("-+")
             if name not in table.columns:
                 raise QueryError.at(
-                    "--sort", f"unknown column {name!r}{did_you_mean(name, table.columns)}"
+                    "--sort", f"unknown column {excerpt(name)}{did_you_mean(name, table.columns)}"
                 )
             values = table.columns[name][rows]
             if values.ndim != 1:
@@ -119,7 +119,7 @@ def format_rows(table: CaseTable, rows: np.ndarray, names: Sequence[str], fmt: s
         if name not in table.columns:
             raise QueryError.at(
                 "--columns",
-                f"unknown column {name!r}"
+                f"unknown column {excerpt(name)}"
                 f"{did_you_mean(name, table.columns)} (columns: "
                 f"{', '.join(table.columns)})",
             )
@@ -139,7 +139,7 @@ def format_rows(table: CaseTable, rows: np.ndarray, names: Sequence[str], fmt: s
             )
         return buf.getvalue().rstrip("\n")
     if fmt != "table":
-        raise QueryError.at("--format", f"found {fmt!r}, expected table, csv or json")
+        raise QueryError.at("--format", f"found {excerpt(fmt)}, expected table, csv or json")
     text = [
         [", ".join(map(str, c)) if isinstance(c, list) else str(c) for c in row] for row in cells
     ]
