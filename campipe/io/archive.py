@@ -111,7 +111,8 @@ def write_error(path: Path, exc: BaseException) -> ArchiveWriteError:
     why = getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
     try:
         free = shutil.disk_usage(path.parent).free
-        space = f"; {free / 1e6:.3g} MB free in {path.parent}"
+        shown = f"{free / 1e9:.3g} GB" if free >= 1e9 else f"{free / 1e6:.3g} MB"
+        space = f"; {shown} free in {path.parent}"
         full = free < 64 * 2**20
     except OSError:
         space, full = "", False

@@ -20,6 +20,7 @@ workers compute and this process stores, so workers need no access to the study'
 
 from __future__ import annotations
 
+import errno
 import functools
 import itertools
 import logging
@@ -309,6 +310,13 @@ def inspect_archive(study: Study, archive: Path) -> ArchiveState:
     except FileNotFoundError:
         return ArchiveState(False, True, "", False)
     except OSError as exc:
+        if exc.errno == errno.ENAMETOOLONG:
+            raise OptionError.at(
+                str(archive),
+                "the file name is too long for this file system; choose a shorter archive "
+                "path (-o)",
+                found=str(archive),
+            ) from None
         return ArchiveState(True, False, f"a path that cannot be read ({exc.strerror})", False)
     if stat.S_ISDIR(info.st_mode):
         return ArchiveState(True, False, "a folder", False)
