@@ -166,6 +166,11 @@ def test_a_failing_case_is_recorded_by_case_id_and_the_others_finish(tmp_path, m
     assert ds.status.attrs["flag_meanings"] == dict(STATUS_FLAGS)["flag_meanings"]
     summary = CliRunner().invoke(main, ["query", str(tmp_path / "small.nc"), "--summary"])
     assert f"failed: {failed[0]} (chatter), {failed[1]} (chatter)" in summary.output
+    others = CliRunner().invoke(
+        main, ["query", str(tmp_path / "small.nc"), "--summary", "--where", "speed_rpm != 9524"]
+    )
+    assert "small: 4 cases (of 6, where speed_rpm != 9524)" in others.output
+    assert "failed" not in others.output
 
 
 def test_events_beyond_max_events_are_a_visible_status(tmp_path):
