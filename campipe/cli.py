@@ -537,7 +537,10 @@ def validate(
     )
     workers = workers or default_workers()
     click.echo(validate_text(loaded, spec))
-    size = default_batch_size(len(loaded.cases), workers)
+    from campipe.study.limits import samples_per_case
+
+    samples = samples_per_case(loaded.revolutions, loaded.output_every)
+    size = default_batch_size(len(loaded.cases), workers, samples)
     plans = plan_batches(loaded.cases, loaded.record, size)
     click.echo(f"batches: {len(plans)} of up to {size} cases")
     if estimate:

@@ -232,3 +232,12 @@ def test_where_takes_conditions_only():
         parse_where("speed_rpm > " + "9" * 400)
     with pytest.raises(QueryError, match="cannot parse"):
         parse_where("speed_rpm == '\udcff'")
+
+
+def test_long_histories_make_smaller_default_batches():
+    from campipe.study.execute import default_batch_size
+
+    assert default_batch_size(1000, 2) == 32
+    assert default_batch_size(1000, 2, samples=1441) == 32  # 4 turns at 1 deg
+    assert default_batch_size(1000, 2, samples=100_000) == 16  # 512 MiB / (1e5 × 320 B)
+    assert default_batch_size(1000, 2, samples=10_000_000) == 1

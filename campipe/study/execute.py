@@ -63,6 +63,7 @@ from campipe.study.layout import (
     study_attrs,
     study_key,
 )
+from campipe.study.limits import samples_per_case
 from campipe.study.progress import Progress
 from campipe.study.results import (
     BatchData,
@@ -183,9 +184,21 @@ def default_workers() -> int:
         return os.cpu_count() or 1
 
 
-def default_batch_size(n_cases: int, workers: int) -> int:
-    """About four batches per worker, within MIN_BATCH_SIZE … MAX_BATCH_SIZE cases."""
-    return int(np.clip(-(-n_cases // (4 * max(workers, 1))), MIN_BATCH_SIZE, MAX_BATCH_SIZE))
+#: Memory a batch's histories may take in the engine [bytes]; a batch of long histories
+#: (many samples per case) is cut smaller to stay within it.
+BATCH_MEMORY = 512 * 2**20
+#: The engine's bytes per case and stored sample (q and v of seven coordinates, forces,
+#: lifts, state, and the archive arrays made from them), roughly.
+BYTES_PER_SAMPLE = 320
+
+
+def default_batch_size(n_cases: int, workers: int, samples: int = 0) -> int:
+    """About four batches per worker, within MIN_BATCH_SIZE … MAX_BATCH_SIZE cases, and
+    fewer (down to one) when ``samples`` per case would take more than BATCH_MEMORY."""
+    size = int(np.clip(-(-n_cases // (4 * max(workers, 1))), MIN_BATCH_SIZE, MAX_BATCH_SIZE))
+    if samples:
+        size = min(size, max(1, BATCH_MEMORY // (samples * BYTES_PER_SAMPLE)))
+    return size
 
 
 def plan_batches(
@@ -515,7 +528,8 @@ def run_study(
         notes += more
         missing = [c for c in study.cases if c.case_id not in found]
         workers = workers or (1 if scheduler == "synchronous" else default_workers())
-        size = batch_size or default_batch_size(len(missing), workers)
+        samples = samples_per_case(study.revolutions, study.output_every)
+        size = batch_size or default_batch_size(len(missing), workers, samples)
         plans = plan_batches(missing, study.record, size)
         log.info(
             "%s: %d cases, %d reused from earlier runs; computing %d in %d batches of up "
