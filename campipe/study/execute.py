@@ -339,6 +339,8 @@ def inspect_archive(study: Study, archive: Path) -> ArchiveState:
         return ArchiveState(True, False, "the spec itself", False)
     try:
         attrs = read_attrs(archive)
+    except ArchiveFileError:
+        raise  # open elsewhere in this process and too large to copy
     except Exception:  # not netCDF, or damaged beyond reading its attributes
         if carries_key(archive, study_key(study)):
             return ArchiveState(True, True, "", False, ("its attributes cannot be read",))
