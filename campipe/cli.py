@@ -8,11 +8,11 @@ import sys
 
 import click
 import numpy as np
-import yaml
 
 from campipe import __version__
 from campipe.constants import INCH, LBF_IN, RPM
 from campipe.errors import CampipeError
+from campipe.io.spec_yaml import SpecFileError, parse_value
 from campipe.model import (
     COORDINATES,
     PARAMETERS,
@@ -38,15 +38,75 @@ def parse_overrides(pairs: tuple[str, ...]) -> dict[str, object]:
                 f"{pair!r}: write NAME=VALUE, e.g. spring_rate='260 lbf/in'", param_hint="--set"
             )
         try:
-            out[key] = yaml.safe_load(text)
-        except yaml.YAMLError as exc:
-            raise click.BadParameter(
-                f"{key}: cannot read {text!r} ({exc})", param_hint="--set"
-            ) from None
+            out[key] = parse_value(text, key)
+        except SpecFileError as exc:
+            raise click.BadParameter(str(exc), param_hint="--set") from None
     return out
 
 
-@click.group()
+#: Longest line of an error message shown: a message quoting a huge value stays readable.
+MAX_MESSAGE_LINE = 1000
+
+
+class Failure(CampipeError, click.ClickException):
+    """A CampipeError or a system error as the command's message: one line or a few naming
+    the cause and what to do. Exit status 2 for the user's input (the error is a
+    ValueError: a spec, an option, a path), 1 for the environment (a RuntimeError or
+    OSError: a full or read-only disk, a busy archive, a scheduler or worker gone)."""
+
+    exit_code = 1
+
+    def __init__(self, message: str) -> None:
+        lines = [
+            line if len(line) <= MAX_MESSAGE_LINE else line[: MAX_MESSAGE_LINE - 3] + "..."
+            for line in message.splitlines()[:60]
+        ]
+        super().__init__("\n".join(lines))
+
+    def show(self, file=None) -> None:
+        click.echo(f"Error: {self.format_message()}", err=True)
+
+    @staticmethod
+    def of(message: str, user_input: bool) -> Failure:
+        """An InputFailure (exit status 2) or an environment Failure (1)."""
+        return InputFailure(message) if user_input else Failure(message)
+
+
+class InputFailure(Failure):
+    """A Failure caused by the user's input: exit status 2."""
+
+    exit_code = 2
+
+
+def failure(exc: BaseException) -> Failure | None:
+    """The Failure for an exception a user can act on, or None for a defect (left to raise
+    with its traceback)."""
+    if isinstance(exc, CampipeError):
+        return Failure.of(str(exc), isinstance(exc, ValueError))
+    if isinstance(exc, OSError):
+        where = f"{exc.filename}: " if exc.filename else ""
+        return Failure(f"{where}{exc.strerror or exc}")
+    if isinstance(exc, MemoryError):
+        return Failure("out of memory; run a smaller study, or on a larger machine")
+    return None
+
+
+class CampipeGroup(click.Group):
+    """The ``campipe`` group: maps errors to messages and exit statuses (:func:`failure`)."""
+
+    def invoke(self, ctx: click.Context):
+        try:
+            return super().invoke(ctx)
+        except (click.ClickException, click.exceptions.Exit, click.Abort):
+            raise
+        except Exception as exc:
+            mapped = failure(exc)
+            if mapped is None:
+                raise
+            raise mapped from None
+
+
+@click.group(cls=CampipeGroup)
 @click.version_option(version=__version__, package_name="campipe")
 @click.option("-v", "--verbose", count=True, help="More log output (-v info, -vv debug).")
 def main(verbose: int) -> None:
@@ -196,15 +256,76 @@ class SpecRefused(CampipeError, click.ClickException):
         click.echo(self.format_message(), err=True)
 
 
-def _load(spec_path, sets):
-    from campipe.io.spec_yaml import SpecFileError
+def _load(spec_path, sets, limits=None):
     from campipe.study import SpecError, load_study
 
     overrides = parse_overrides(sets)
     try:
-        return load_study(spec_path, overrides)
+        return load_study(spec_path, overrides, limits)
     except (SpecFileError, SpecError) as exc:
         raise SpecRefused(str(exc)) from None
+
+
+#: The defaults of campipe.study.limits.Limits, repeated here so --help needs no import of
+#: the engine (tests/test_fuzz.py checks they agree).
+DEFAULT_LIMITS = {
+    "cases": 100_000,
+    "steps": 1e9,
+    "samples": 100_000,
+    "events": 100_000,
+    "archive_gb": 20.0,
+}
+
+
+def limit_options(command):
+    """``--max-cases`` … ``--max-archive-gb``: the limits a spec is checked against."""
+    d = DEFAULT_LIMITS
+    options = [
+        click.option(
+            "--max-archive-gb",
+            type=click.FloatRange(min=0, min_open=True),
+            default=d["archive_gb"],
+            show_default=True,
+            help="Largest archive before compression [GB].",
+        ),
+        click.option(
+            "--max-events",
+            type=click.IntRange(min=1),
+            default=d["events"],
+            show_default=True,
+            help="Largest run.max_events (events kept per case).",
+        ),
+        click.option(
+            "--max-samples",
+            type=click.IntRange(min=2),
+            default=d["samples"],
+            show_default=True,
+            help="Most stored samples per case (revolutions × 360° / output_every).",
+        ),
+        click.option(
+            "--max-steps",
+            type=click.FloatRange(min=1),
+            default=d["steps"],
+            show_default=True,
+            help="Most integration steps per case (the slowest speed with the smallest step).",
+        ),
+        click.option(
+            "--max-cases",
+            type=click.IntRange(min=1),
+            default=d["cases"],
+            show_default=True,
+            help="Most cases in the study (counted from the axes' lengths).",
+        ),
+    ]
+    for option in options:
+        command = option(command)
+    return command
+
+
+def _limits(max_cases, max_steps, max_samples, max_events, max_archive_gb):
+    from campipe.study.limits import Limits
+
+    return Limits(max_cases, max_steps, max_samples, max_events, max_archive_gb * 1e9)
 
 
 def _archive_path(study, spec_path, output):
@@ -256,20 +377,42 @@ _SET_HELP = (
     show_default=True,
     help="Show a progress line on stderr.",
 )
-def study(spec, output, sets, scheduler, workers, batch_size, keep_parts, progress) -> None:
+@click.option(
+    "--overwrite",
+    is_flag=True,
+    help="Replace a file at the archive path that is not this study's archive (another "
+    "study's archive, any other file); cases it shares by id are reused.",
+)
+@limit_options
+def study(
+    spec,
+    output,
+    sets,
+    scheduler,
+    workers,
+    batch_size,
+    keep_parts,
+    progress,
+    overwrite,
+    max_cases,
+    max_steps,
+    max_samples,
+    max_events,
+    max_archive_gb,
+) -> None:
     """Run the study SPEC (YAML) into one netCDF archive.
 
     Rerunning the same command after an interruption computes only the cases whose batches
-    were not stored; a finished archive that already holds the study is left as it is.
+    were not stored; a finished archive that already holds the study (its checksums
+    verified) is left as it is.
     """
     import shlex
 
-    from campipe.engine import IntegrationError
-    from campipe.io.archive import ArchiveBusyError
     from campipe.study.execute import run_study
     from campipe.study.progress import Progress
 
-    loaded = _load(spec, sets)
+    limits = _limits(max_cases, max_steps, max_samples, max_events, max_archive_gb)
+    loaded = _load(spec, sets, limits)
     archive = _archive_path(loaded, spec, output)
     stderr = sys.stderr
 
@@ -285,31 +428,62 @@ def study(spec, output, sets, scheduler, workers, batch_size, keep_parts, progre
     words += [w for pair in sets for w in ("--set", pair)]
     words += ["--scheduler", scheduler] if scheduler != "threads" else []
     command = shlex.join(words)
-    try:
-        report = run_study(
-            loaded,
-            archive,
-            scheduler=scheduler,
-            workers=workers,
-            batch_size=batch_size,
-            progress=bar if progress else None,
-            keep_parts=keep_parts,
-            command=command,
-            on_batch=replay if scheduler != "processes" else None,
-        )
-    except IntegrationError as exc:
-        raise click.ClickException(
-            f"{exc}\nBatches finished before it are stored; fix the "
-            "spec and rerun the same command to resume."
-        ) from None
-    except ArchiveBusyError as exc:
-        raise click.ClickException(str(exc)) from None
-    except ValueError as exc:
-        raise click.UsageError(str(exc)) from None
+    report = run_study(
+        loaded,
+        archive,
+        scheduler=scheduler,
+        workers=workers,
+        batch_size=batch_size,
+        progress=bar if progress else None,
+        keep_parts=keep_parts,
+        command=command,
+        on_batch=replay if scheduler != "processes" else None,
+        overwrite=overwrite,
+    )
+    for note in report.notes:
+        click.echo(f"campipe study: {note}", err=True)
     click.echo(f"campipe study: {report.summary()}", err=True)
-    if replay is not None and (recorded := replay.finish(report.archive)):
-        click.echo(f"campipe study: replay {loaded.spec.replay!r} recorded in {recorded}", err=True)
+    _report_statuses(report)
+    if replay is not None:
+        try:
+            recorded = replay.finish(report.archive)
+        except Exception as exc:  # the archive is complete: the recording is an extra
+            raise Failure.of(
+                f"the archive {report.archive} is complete, but the replay recording "
+                f"{replay.path} failed ({type(exc).__name__}: {str(exc)[:300]}); "
+                f"write it with campipe replay {report.archive} --where EXPR",
+                isinstance(exc, ValueError),
+            ) from None
+        if recorded:
+            click.echo(
+                f"campipe study: replay {loaded.spec.replay!r} recorded in {recorded}", err=True
+            )
     click.echo(str(report.archive))
+
+
+def _report_statuses(report) -> None:
+    """Name the cases that failed or kept only part of their events, by case id."""
+    failed = report.failures()
+    if failed:
+        shown = ", ".join(f"{cid} ({status})" for cid, status in list(failed.items())[:10])
+        more = f" and {len(failed) - 10} more" if len(failed) > 10 else ""
+        click.echo(
+            f"campipe study: {len(failed)} case{'s' if len(failed) != 1 else ''} failed: "
+            f"{shown}{more}; their histories and metrics are NaN (status in the archive; "
+            "campipe query ARCHIVE --summary lists them)",
+            err=True,
+        )
+    truncated = report.truncated()
+    if truncated:
+        shown = ", ".join(truncated[:10]) + (
+            f" and {len(truncated) - 10} more" if len(truncated) > 10 else ""
+        )
+        click.echo(
+            f"campipe study: {len(truncated)} case{'s' if len(truncated) != 1 else ''} kept "
+            f"only run.max_events events: {shown} (status events_truncated); raise "
+            "run.max_events to keep them all",
+            err=True,
+        )
 
 
 @main.command()
@@ -332,7 +506,19 @@ def study(spec, output, sets, scheduler, workers, batch_size, keep_parts, progre
     help="Valve-lift tolerance such as '1e-4 in': probe the cases and print the "
     "fidelity level (run.fidelity, run.mode_cutoff) they need for it.",
 )
-def validate(spec, sets, workers, estimate, tolerance) -> None:
+@limit_options
+def validate(
+    spec,
+    sets,
+    workers,
+    estimate,
+    tolerance,
+    max_cases,
+    max_steps,
+    max_samples,
+    max_events,
+    max_archive_gb,
+) -> None:
     """Check the study SPEC and print its case count, axes and estimated cost."""
     from campipe.study.estimate import archive_bytes
     from campipe.study.estimate import estimate as cost
@@ -346,10 +532,15 @@ def validate(spec, sets, workers, estimate, tolerance) -> None:
             tolerance = parse_quantity(tolerance, "m", "--tolerance", "in")
         except QuantityError as exc:
             raise click.BadParameter(str(exc), param_hint="--tolerance") from None
-    loaded = _load(spec, sets)
+    loaded = _load(
+        spec, sets, _limits(max_cases, max_steps, max_samples, max_events, max_archive_gb)
+    )
     workers = workers or default_workers()
     click.echo(validate_text(loaded, spec))
-    size = default_batch_size(len(loaded.cases), workers)
+    from campipe.study.limits import samples_per_case
+
+    samples = samples_per_case(loaded.revolutions, loaded.output_every)
+    size = default_batch_size(len(loaded.cases), workers, samples)
     plans = plan_batches(loaded.cases, loaded.record, size)
     click.echo(f"batches: {len(plans)} of up to {size} cases")
     if estimate:
@@ -440,31 +631,30 @@ def validate_text(loaded, spec_path) -> str:
 @click.option(
     "--summary",
     is_flag=True,
-    help="Print the axes and, for a speed sweep, the separation onset speeds.",
+    help="Print the axes, the failed cases and, for a speed sweep, the separation onset "
+    "speeds (of the cases --where selects).",
 )
 def query(archive, where, columns, sort, fmt, summary) -> None:
     """Print an archive's cases, one row per case."""
     import xarray as xr
 
-    from campipe.study.query import QueryError, case_table, format_rows, select
+    from campipe.study.query import case_table, format_rows, select
     from campipe.study.query import summary as summary_text
 
     try:
-        with xr.open_dataset(archive) as ds:
-            if summary:
-                click.echo(summary_text(ds))
-                return
-            table = case_table(ds)
-    except (OSError, ValueError) as exc:
-        if isinstance(exc, QueryError):
-            raise
-        raise click.ClickException(f"{archive}: cannot read as an archive ({exc})") from None
+        ds = xr.open_dataset(archive)
+    except Exception as exc:  # not netCDF, or damaged: each reader fails its own way
+        raise Failure(
+            f"{archive}: cannot read as an archive ({type(exc).__name__}: {str(exc)[:200]})"
+        ) from None
+    with ds:
+        if summary:
+            click.echo(summary_text(ds, where))
+            return
+        table = case_table(ds)
     names = [c.strip() for c in columns.split(",") if c.strip()] if columns else table.default
-    try:
-        rows = select(table, where, sort)
-        click.echo(format_rows(table, rows, names, fmt))
-    except QueryError as exc:
-        raise click.UsageError(str(exc)) from None
+    rows = select(table, where, sort)
+    click.echo(format_rows(table, rows, names, fmt))
 
 
 # -- replay -----------------------------------------------------------------------------------

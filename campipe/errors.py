@@ -10,8 +10,30 @@ its own.
 from __future__ import annotations
 
 import difflib
+import reprlib
 from collections.abc import Iterable
 from typing import Self
+
+#: Characters of a value an error message shows at most.
+EXCERPT = 60
+
+_repr = reprlib.Repr()
+_repr.maxlevel = 3
+_repr.maxstring = EXCERPT
+_repr.maxother = EXCERPT
+_repr.maxlong = 40
+for _name in ("maxlist", "maxtuple", "maxdict", "maxset", "maxfrozenset", "maxdeque", "maxarray"):
+    setattr(_repr, _name, 4)
+
+
+def excerpt(value: object, limit: int = EXCERPT) -> str:
+    """A short ``repr`` of ``value`` for a message: nested or long values are cut (``...``)
+    without building their whole repr, so a huge or self-repeating value costs nothing."""
+    try:
+        text = _repr.repr(value)
+    except (ValueError, RecursionError):  # an int beyond Python's digit limit, say
+        text = f"<{type(value).__name__}>"
+    return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
 class CampipeError(Exception):
@@ -57,5 +79,7 @@ class CampipeError(Exception):
 
 def did_you_mean(word: object, known: Iterable[str]) -> str:
     """``"; did you mean 'speed'?"`` for a near miss, else ``""``."""
-    close = difflib.get_close_matches(str(word), list(known), n=1, cutoff=0.6)
+    if not isinstance(word, str) or len(word) > 100:
+        return ""
+    close = difflib.get_close_matches(word, list(known), n=1, cutoff=0.6)
     return f"; did you mean {close[0]!r}?" if close else ""

@@ -1,15 +1,20 @@
 """One pint registry for the whole package, and the parsing of quantities with units.
 
 Specs and ``--set`` write quantities as strings with units (``"9 in"``, ``"245 lbf/in"``,
-``"9524 rpm"``); the numerics work in SI floats. Parsing goes through pint's own parser, which
-never evaluates Python code.
+``"9524 rpm"``); the numerics work in SI floats. A quantity is a decimal number followed by
+units (names joined by ``*``, ``/``, small integer powers ``**2`` and parentheses): the text
+is checked against that grammar before pint reads the units, so no arithmetic is evaluated
+(``9**9**9 rpm`` is refused at once instead of computing a number with 369 million digits).
 """
 
 from __future__ import annotations
 
+import math
+import re
+
 import pint
 
-from campipe.errors import CampipeError
+from campipe.errors import CampipeError, excerpt
 
 ureg: pint.UnitRegistry = pint.UnitRegistry()
 Q_ = ureg.Quantity
@@ -48,16 +53,17 @@ def parse_quantity(text: object, units: str, key: str, example_units: str | None
     if isinstance(text, bool) or not isinstance(text, (str, int, float)):
         raise QuantityError.at(
             key,
-            f"expected a quantity such as '1 {example}', found {text!r}",
+            f"expected a quantity such as '1 {example}', found {excerpt(text)}",
             found=text,
             expected=expected,
         )
     if isinstance(text, (int, float)):
         if dimensionless:
-            return float(text)
+            return _finite(float(text), text, key, expected)
         raise QuantityError.at(
             key,
-            f"found the bare number {text!r}; write it with units, e.g. '{text} {example}'",
+            f"found the bare number {excerpt(text)}; write it with units, "
+            f"e.g. '{excerpt(text, 30)} {example}'",
             found=text,
             expected=expected,
         )
@@ -67,35 +73,85 @@ def parse_quantity(text: object, units: str, key: str, example_units: str | None
     if q.dimensionless and not dimensionless:
         raise QuantityError.at(
             key,
-            f"found {text!r} without units; write it with units, e.g. '{text.strip()} {example}'",
+            f"found {excerpt(text)} without units; write it with units, "
+            f"e.g. '{text.strip()} {example}'",
             found=text,
             expected=expected,
         )
     try:
-        return float(q.to(target).magnitude)
+        value = float(q.to(target).magnitude)
     except pint.DimensionalityError:
         raise QuantityError.at(
             key,
-            f"found {text!r} [{q.dimensionality}], expected a quantity convertible "
+            f"found {excerpt(text)} [{q.dimensionality}], expected a quantity convertible "
             f"to {example} [{target.dimensionality}]",
             found=text,
             expected=expected,
         ) from None
+    return _finite(value, text, key, expected)
+
+
+def _finite(value: float, text: object, key: str, expected: str) -> float:
+    if not math.isfinite(value):
+        raise QuantityError.at(
+            key,
+            f"found {excerpt(text)}, beyond the range of a float in SI units",
+            found=text,
+            expected=expected,
+        )
+    return value
+
+
+#: Longest quantity text read [characters].
+MAX_QUANTITY_LENGTH = 100
+_NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d{1,4})?"
+_QUANTITY = re.compile(rf"^\s*(?P<number>{_NUMBER})?\s*(?P<units>.*?)\s*$", re.DOTALL)
+#: Units: names, * and /, powers of at most two digits, parentheses, spaces.
+_UNIT_TOKENS = re.compile(
+    r"\s+|[A-Za-z_\u00b0\u00b5\u03bc\u03a9][A-Za-z0-9_\u00b0\u00b5\u03bc\u03a9]*"
+    r"|(?:\*\*|\^)\s*[-+]?\d{1,2}(?:\.\d{1,3})?|[*/()]"
+)
 
 
 def _read(text: str, key: str, example: str) -> pint.Quantity | float:
-    """``text`` as pint reads it (a Quantity, or a plain number), or a QuantityError naming the
-    key and suggesting ``example`` units."""
-    try:
-        return ureg.Quantity(text.strip())
-    except Exception as exc:  # pint raises several unrelated types on bad text
-        raise QuantityError.at(
+    """``text`` as a Quantity (or a plain number), or a QuantityError naming the key and
+    suggesting ``example`` units. Only ``<number> <units>`` is read (see the module)."""
+
+    def refuse(why: str) -> QuantityError:
+        return QuantityError.at(
             key,
-            f"cannot read {text!r} as a quantity ({exc}); "
+            f"cannot read {excerpt(text)} as a quantity ({why}); "
             f"write a number and a unit, e.g. '1 {example}'",
             found=text,
             expected=f"a quantity in {example}",
-        ) from None
+        )
+
+    if len(text) > MAX_QUANTITY_LENGTH:
+        raise refuse(f"{len(text)} characters, expected at most {MAX_QUANTITY_LENGTH}")
+    m = _QUANTITY.match(text)
+    if m is None or m["number"] is None:
+        raise refuse("it does not start with a number")
+    number = float(m["number"])
+    if not math.isfinite(number):
+        raise refuse("the number is beyond the range of a float")
+    units = m["units"]
+    if not units:
+        return number
+    tokens = [t for t in _UNIT_TOKENS.findall(units) if not t.isspace()]
+    powers = [t[0] in "*^" and len(t) > 1 and t != "*" for t in tokens]
+    if (
+        "".join(_UNIT_TOKENS.findall(units)) != units
+        or any(a and b for a, b in zip(powers, powers[1:], strict=False))
+        or units.count("(") > 2
+    ):
+        raise refuse("units are names joined by *, / and small powers such as **2")
+    try:
+        unit = ureg.parse_units(units)
+        q = Q_(number, unit)
+        q.to_base_units()  # a unit whose size overflows is refused here, once
+    except Exception as exc:  # pint raises several unrelated types on bad text
+        raise refuse(excerpt(str(exc), 120)) from None
+    return q
 
 
 def _example_unit(unit: pint.Unit) -> str:
@@ -135,14 +191,14 @@ def parse_angular(text: object, units: str, key: str, example_units: str) -> flo
         if isinstance(text, (int, float)):
             raise QuantityError.at(
                 key,
-                f"found the bare number {text!r}; write it with units, "
-                f"e.g. '{text} {example_units}'",
+                f"found the bare number {excerpt(text)}; write it with units, "
+                f"e.g. '{excerpt(text, 30)} {example_units}'",
                 found=text,
                 expected=expected,
             )
         raise QuantityError.at(
             key,
-            f"expected a quantity such as '1 {example_units}', found {text!r}",
+            f"expected a quantity such as '1 {example_units}', found {excerpt(text)}",
             found=text,
             expected=expected,
         )
@@ -150,18 +206,19 @@ def parse_angular(text: object, units: str, key: str, example_units: str) -> flo
     if not isinstance(q, pint.Quantity) or dict(q.to_base_units().unit_items()).get("radian") != 1:
         raise QuantityError.at(
             key,
-            f"found {text!r}, expected a quantity whose units name an angle, "
+            f"found {excerpt(text)}, expected a quantity whose units name an angle, "
             f"such as '1 {example_units}'",
             found=text,
             expected=expected,
         )
     try:
-        return float(q.to(units).magnitude)
+        value = float(q.to(units).magnitude)
     except pint.DimensionalityError:
         raise QuantityError.at(
             key,
-            f"found {text!r}, expected a quantity convertible to {example_units}, "
+            f"found {excerpt(text)}, expected a quantity convertible to {example_units}, "
             f"such as '1 {example_units}'",
             found=text,
             expected=expected,
         ) from None
+    return _finite(value, text, key, expected)

@@ -28,3 +28,10 @@ def load(path: Path) -> xr.Dataset:
     for name in VOLATILE_ATTRS:
         ds.attrs.pop(name, None)
     return ds
+
+
+def die(plan):
+    """A batch whose worker process dies (tests of a killed worker)."""
+    import os
+
+    os._exit(9)

@@ -4,17 +4,42 @@ Nothing here computes; the numerics never import from here. Each module imports 
 format's library itself, so ``import campipe.io`` stays light.
 """
 
+import os
+import stat
 from pathlib import Path
 
 from campipe.errors import CampipeError
 
 
-def read_text(path: Path, what: str, error: type[CampipeError]) -> str:
+def read_text(path: Path, what: str, error: type[CampipeError], limit: int) -> str:
     """The UTF-8 text of ``path``, or ``error`` naming the file (its ``key``) and what it was
-    to hold (``what``: "the spec", "the lift table")."""
+    to hold (``what``: "the spec", "the lift table").
+
+    Only a regular file is read (a device such as /dev/zero, a pipe or a folder is refused
+    before opening it), and only up to ``limit`` bytes: a larger file is refused.
+    """
     try:
-        return path.read_text(encoding="utf-8")
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
     except OSError as exc:
         raise error.at(str(path), f"cannot read {what} ({exc.strerror})") from None
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise error.at(
+                str(path), f"not a regular file; {what} is a text file", expected="a text file"
+            )
+        with os.fdopen(fd, "rb", closefd=False) as f:
+            data = f.read(limit + 1)
+    except OSError as exc:
+        raise error.at(str(path), f"cannot read {what} ({exc.strerror})") from None
+    finally:
+        os.close(fd)
+    if len(data) > limit:
+        raise error.at(
+            str(path),
+            f"larger than {limit / 2**20:g} MiB; {what} is expected to be smaller",
+            expected=f"at most {limit} bytes",
+        )
+    try:
+        return data.decode("utf-8")
     except UnicodeDecodeError:
         raise error.at(str(path), "not UTF-8 text", expected="UTF-8 text") from None

@@ -14,11 +14,14 @@ netCDF-C and HDF5 are not thread-safe: every call into netCDF4 here holds :data:
 
 from __future__ import annotations
 
+import errno
+import hashlib
 import itertools
 import json
 import logging
 import os
 import platform
+import shutil
 import socket
 import threading
 from collections.abc import Iterable, Iterator, Mapping
@@ -33,6 +36,16 @@ import numpy as np
 
 from campipe import __version__
 from campipe.errors import CampipeError
+from campipe.io.lock import ArchiveBusyError, lock_path, writing
+
+__all__ = [
+    "ArchiveBusyError",
+    "ArchiveFileError",
+    "NetCDFWriter",
+    "VariableSpec",
+    "lock_path",
+    "writing",
+]
 
 log = logging.getLogger(__name__)
 
@@ -67,89 +80,57 @@ class ArchiveFileError(CampipeError, RuntimeError):
     """A file that is not a campipe archive or batch file (``key`` the file)."""
 
 
-class ArchiveBusyError(CampipeError, RuntimeError):
-    """Another run is writing the same archive (``key`` the archive, ``found`` its lock's
-    holder: pid, host and start, or None if the lock cannot be read)."""
+class ArchiveWriteError(CampipeError, RuntimeError):
+    """A file that cannot be written: a full disk, a read-only folder (``key`` the file,
+    ``found`` the errno where the system gave one)."""
 
 
-def lock_path(archive: Path) -> Path:
-    """The lock a run holds while it writes ``archive``: ``<archive>.lock`` beside it."""
-    return archive.with_name(archive.name + ".lock")
+#: Global attribute holding the checksums of a file's variables and attributes (JSON).
+CHECKSUM_ATTR = "campipe_checksums"
+#: The checksum entry of the global attributes (no variable has this name).
+ATTRIBUTES_ENTRY = "/attributes"
+#: Bytes read at a time when a variable is checksummed.
+CHECKSUM_BLOCK = 8 * 2**20
 
 
 @contextmanager
-def writing(archive: str | Path) -> Iterator[Path]:
-    """Hold the archive's lock while a run writes it and its batch files.
-
-    The lock is a file created exclusively, naming the process, host and start time. A second
-    run on the same archive stops with :class:`ArchiveBusyError` before touching any file, so
-    it never removes the first run's temporary files or batch files. A lock left by a run that
-    died on this host (its process is gone) is taken over, so a rerun after a kill resumes.
-
-    Raises
-    ------
-    ArchiveBusyError
-        If a live process (or one on another host, which cannot be checked) holds the lock.
-    """
-    lock = lock_path(Path(archive))
-    me = {
-        "pid": os.getpid(),
-        "host": socket.gethostname(),
-        "started": datetime.now(UTC).strftime("%Y-%m-%dT%H:%M:%SZ"),
-    }
-    for attempt in range(2):
-        try:
-            fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
-        except FileExistsError:
-            holder = _lock_holder(lock)
-            if attempt == 0 and holder is not None and _is_dead(holder):
-                log.warning(
-                    "%s: taking over the lock of process %s, which is gone", archive, holder["pid"]
-                )
-                lock.unlink(missing_ok=True)
-                continue
-            who = (
-                f"process {holder['pid']} on {holder['host']} since {holder['started']}"
-                if holder
-                else "another run"
-            )
-            raise ArchiveBusyError(
-                f"{archive} is being written by {who}: wait for that run to finish, or "
-                f"write to another archive (-o); if that run is gone, remove {lock}",
-                key=str(archive),
-                found=holder,
-            ) from None
-        with os.fdopen(fd, "w") as f:
-            json.dump(me, f)
-        break
+def _writes(path: Path) -> Iterator[None]:
+    """netCDF-C's and the system's write failures as ArchiveWriteError naming the file, the
+    cause where known, and the free space of its folder (netCDF-C says only 'HDF error')."""
     try:
-        yield lock
-    finally:
-        lock.unlink(missing_ok=True)
+        yield
+    except ArchiveWriteError:
+        raise
+    except (OSError, RuntimeError) as exc:
+        raise write_error(path, exc) from None
 
 
-def _lock_holder(lock: Path) -> dict | None:
-    """The lock's content, or None if it cannot be read (being written, or not ours)."""
+def write_error(path: Path, exc: BaseException) -> ArchiveWriteError:
+    """An ArchiveWriteError for ``exc`` raised while writing ``path``."""
+    code = getattr(exc, "errno", None)
+    why = getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
     try:
-        holder = json.loads(lock.read_text(encoding="utf-8"))
-        return holder if {"pid", "host", "started"} <= set(holder) else None
-    except (OSError, ValueError, TypeError):
-        return None
-
-
-def _is_dead(holder: dict) -> bool:
-    """The lock's process is known to be gone: on this host, and no such process."""
-    if holder["host"] != socket.gethostname() or not isinstance(holder["pid"], int):
-        return False
-    if holder["pid"] == os.getpid():
-        return False  # this process: another thread of it is writing the archive
-    try:
-        os.kill(holder["pid"], 0)
-    except ProcessLookupError:
-        return True
-    except PermissionError:
-        return False  # alive, another user's
-    return False
+        free = shutil.disk_usage(path.parent).free
+        shown = f"{free / 1e9:.3g} GB" if free >= 1e9 else f"{free / 1e6:.3g} MB"
+        space = f"; {shown} free in {path.parent}"
+        full = free < 64 * 2**20
+    except OSError:
+        space, full = "", False
+    if code in (errno.ENOSPC, errno.EDQUOT) or (code is None and full):
+        hint = "the disk is full: free some space"
+    elif code in (errno.EACCES, errno.EPERM, errno.EROFS):
+        hint = "the folder is not writable: choose another archive path (-o)"
+    elif code == errno.ENAMETOOLONG:
+        hint = "the file name is too long: choose a shorter archive path (-o)"
+    elif code == errno.EFBIG:
+        hint = "the file is larger than this system allows"
+    else:
+        hint = "check the disk"
+    return ArchiveWriteError.at(
+        str(path),
+        f"cannot write ({why}){space}; {hint}, then rerun the same command to resume",
+        found=code,
+    )
 
 
 def temporary_path(path: Path) -> Path:
@@ -182,7 +163,7 @@ class NetCDFWriter:
         self.complevel = complevel
         self.tmp = temporary_path(self.path)
         self.variables = {v.name: v for v in variables}
-        with LOCK:
+        with LOCK, _writes(self.path):
             self._ds = netCDF4.Dataset(self.tmp, "w", format="NETCDF4")
             try:
                 for dim, size in sizes.items():
@@ -218,7 +199,7 @@ class NetCDFWriter:
 
     def write(self, name: str, values: np.ndarray, index: object = slice(None)) -> None:
         """Write ``values`` at ``index`` (a slice, an int, or a tuple of them)."""
-        with LOCK:
+        with LOCK, _writes(self.path):
             var = self._ds.variables[name]
             if self.variables[name].dtype == "str":
                 values = np.asarray(values, dtype=object)
@@ -232,7 +213,7 @@ class NetCDFWriter:
         consecutive positions are written in one call."""
         positions = np.asarray(positions, dtype=np.int64)
         string = self.variables[name].dtype == "str"
-        with LOCK:
+        with LOCK, _writes(self.path):
             var = self._ds.variables[name]
             for start, stop in runs(positions):
                 p0 = int(positions[start])
@@ -242,12 +223,15 @@ class NetCDFWriter:
                 var[p0 : p0 + (stop - start)] = block
 
     def commit(self) -> Path:
-        """Close, flush to disk and rename into place; returns the final path."""
-        with LOCK:
+        """Checksum every variable and the attributes (:data:`CHECKSUM_ATTR`), close, flush
+        to disk and rename into place; returns the final path."""
+        with LOCK, _writes(self.path):
+            self._ds.set_auto_mask(False)
+            self._ds.setncattr(CHECKSUM_ATTR, json.dumps(checksums(self._ds), sort_keys=True))
             self._ds.close()
-        with open(self.tmp, "rb") as f:
-            os.fsync(f.fileno())
-        os.replace(self.tmp, self.path)
+            with open(self.tmp, "rb") as f:
+                os.fsync(f.fileno())
+            os.replace(self.tmp, self.path)
         return self.path
 
     def abort(self) -> None:
@@ -301,10 +285,135 @@ def write_file(
         return w.commit()
 
 
-def read_attrs(path: str | Path) -> dict[str, object]:
+# -- reading ---------------------------------------------------------------------------------
+
+#: Largest file read into memory when it is already open elsewhere in this process [bytes].
+MAX_IN_MEMORY = 2**30
+
+
+def open_elsewhere(path: str | Path) -> bool:
+    """``path`` is open through another file descriptor of this process (an xarray Dataset
+    left open, say); False where that cannot be told (not Linux)."""
+    target = os.path.realpath(path)
+    try:
+        fds = os.listdir("/proc/self/fd")
+    except OSError:
+        return False
+    for fd in fds:
+        try:
+            if os.readlink(f"/proc/self/fd/{fd}") == target:
+                return True
+        except OSError:
+            continue
+    return False
+
+
+def open_dataset(path: str | Path):
+    """A netCDF4 Dataset of ``path`` for reading.
+
+    A file already open elsewhere in this process is read from an in-memory copy: netCDF-C
+    4.10 with HDF5 2.2 crashes (a segmentation fault) when a file held open is opened, read
+    (variable-length strings) and closed a few more times. A larger file than
+    :data:`MAX_IN_MEMORY` is then refused with ArchiveFileError.
+    """
     import netCDF4
 
-    with LOCK, netCDF4.Dataset(path, "r") as ds:
+    if not open_elsewhere(path):
+        return netCDF4.Dataset(path, "r")
+    size = os.path.getsize(path)
+    if size > MAX_IN_MEMORY:
+        raise ArchiveFileError.at(
+            str(path),
+            f"is open elsewhere in this process and too large ({size / 1e9:.3g} GB) to read "
+            "from a copy; close it (xarray: ds.close()) and try again",
+        )
+    with open(path, "rb") as f:
+        return netCDF4.Dataset(str(path), "r", memory=f.read())
+
+
+# -- checksums -------------------------------------------------------------------------------
+
+
+def _attribute_bytes(value: object) -> bytes:
+    """An attribute's value as bytes that do not depend on numpy's repr."""
+    if isinstance(value, str):
+        return b"s" + value.encode("utf-8", "surrogatepass")
+    a = np.asarray(value)
+    return b"a" + f"{a.dtype.str}{a.shape}".encode() + a.tobytes()
+
+
+def _attributes_digest(owner, h) -> None:
+    for key in sorted(owner.ncattrs()):
+        if key == CHECKSUM_ATTR:
+            continue
+        h.update(key.encode() + b"=")
+        h.update(_attribute_bytes(owner.getncattr(key)))
+        h.update(b";")
+
+
+def _values_bytes(values: np.ndarray) -> bytes:
+    if values.dtype == object or values.dtype.kind in "US":
+        parts = [str(v).encode("utf-8", "surrogatepass") for v in values.ravel()]
+        return b"".join(len(p).to_bytes(8, "little") + p for p in parts)
+    return np.ascontiguousarray(values).tobytes()
+
+
+def variable_digest(var) -> str:
+    """SHA-256 of a netCDF4 variable: name, dimensions, type, attributes and values (read a
+    block of rows at a time, so memory stays bounded)."""
+    h = hashlib.sha256()
+    h.update(f"{var.name}|{var.dimensions}|{var.dtype}|".encode())
+    _attributes_digest(var, h)
+    shape = var.shape
+    if not shape or shape[0] == 0:
+        h.update(_values_bytes(np.asarray(var[...])))
+        return h.hexdigest()
+    itemsize = 64 if var.dtype is str else np.dtype(var.dtype).itemsize
+    row = itemsize * int(np.prod(shape[1:], dtype=np.int64))
+    step = max(1, CHECKSUM_BLOCK // max(row, 1))
+    for start in range(0, shape[0], step):
+        h.update(_values_bytes(np.asarray(var[start : start + step])))
+    return h.hexdigest()
+
+
+def checksums(ds) -> dict[str, str]:
+    """Variable name → SHA-256 (:func:`variable_digest`) for an open netCDF4 Dataset, and the
+    digest of its global attributes under :data:`ATTRIBUTES_ENTRY`."""
+    out = {name: variable_digest(var) for name, var in ds.variables.items()}
+    h = hashlib.sha256()
+    _attributes_digest(ds, h)
+    out[ATTRIBUTES_ENTRY] = h.hexdigest()
+    return out
+
+
+def verify(path: str | Path) -> list[str]:
+    """Check a file against its stored checksums: ``[]`` if every variable and attribute is as
+    written, else what differs (or why the file cannot be read). Reads the whole file."""
+
+    try:
+        with LOCK, open_dataset(path) as ds:
+            ds.set_auto_mask(False)
+            if CHECKSUM_ATTR not in ds.ncattrs():
+                return ["it holds no checksums (written by an older campipe)"]
+            stored = json.loads(ds.getncattr(CHECKSUM_ATTR))
+            if not isinstance(stored, dict):
+                return ["its checksums cannot be read"]
+            found = checksums(ds)
+    except ArchiveFileError:
+        raise  # open elsewhere in this process and too large to copy: not damage
+    except Exception as exc:  # a damaged HDF5 file fails in many ways; each means the same
+        return [f"it cannot be read ({type(exc).__name__}: {str(exc)[:200]})"]
+    bad = sorted(k for k in set(stored) | set(found) if stored.get(k) != found.get(k))
+    if not bad:
+        return []
+    names = ", ".join(("attributes" if k == ATTRIBUTES_ENTRY else k) for k in bad[:5])
+    more = f" and {len(bad) - 5} more" if len(bad) > 5 else ""
+    return [f"its checksums differ ({names}{more})"]
+
+
+def read_attrs(path: str | Path) -> dict[str, object]:
+
+    with LOCK, open_dataset(path) as ds:
         return {k: ds.getncattr(k) for k in ds.ncattrs()}
 
 
@@ -317,10 +426,9 @@ def read_index(path: str | Path) -> tuple[np.ndarray, np.ndarray, dict[str, obje
     ArchiveFileError
         If the file cannot be read or lacks those variables.
     """
-    import netCDF4
 
     try:
-        with LOCK, netCDF4.Dataset(path, "r") as ds:
+        with LOCK, open_dataset(path) as ds:
             for name in ("case_id", "event_count"):
                 if name not in ds.variables:
                     raise ArchiveFileError(f"{path}: no {name} variable", key=str(path))
@@ -333,9 +441,8 @@ def read_index(path: str | Path) -> tuple[np.ndarray, np.ndarray, dict[str, obje
 
 def read_variable(path: str | Path, name: str) -> np.ndarray:
     """One whole variable (an axis such as ``cam_angle``)."""
-    import netCDF4
 
-    with LOCK, netCDF4.Dataset(path, "r") as ds:
+    with LOCK, open_dataset(path) as ds:
         ds.set_auto_mask(False)
         return np.asarray(ds.variables[name][:])
 
@@ -358,11 +465,10 @@ def read_rows(
         name → array, rows in the order given; event variables hold the given cases' events
         case by case, ``event_count`` their counts.
     """
-    import netCDF4
 
     rows = np.asarray(rows, dtype=np.int64)
     out: dict[str, np.ndarray] = {}
-    with LOCK, netCDF4.Dataset(path, "r") as ds:
+    with LOCK, open_dataset(path) as ds:
         ds.set_auto_mask(False)
         lo, hi = int(rows.min()), int(rows.max()) + 1
         local = rows - lo

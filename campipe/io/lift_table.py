@@ -25,13 +25,19 @@ from pathlib import Path
 
 import numpy as np
 
-from campipe.errors import CampipeError
+from campipe.errors import CampipeError, excerpt
 from campipe.io import read_text
 from campipe.units import QuantityError, parse_angular, parse_quantity
 
 _HEADER = re.compile(r"^\s*(?P<name>[A-Za-z_]+)\s*\[(?P<units>[^\]]+)\]\s*$")
 #: Column name → (SI units the numerics take, units suggested in errors).
 COLUMNS = {"angle": ("rad", "deg"), "lift": ("m", "in")}
+
+
+#: Largest lift table read [bytes]: a measured table of a few thousand lines is ~100 kB.
+MAX_TABLE_BYTES = 16 * 2**20
+#: Most rows of a lift table.
+MAX_TABLE_ROWS = 100_000
 
 
 class LiftTableError(CampipeError, ValueError):
@@ -61,7 +67,7 @@ def read_lift_table(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
         a non-numeric or non-finite value, a row without exactly two values.
     """
     path = Path(path)
-    text = read_text(path, "the lift table", LiftTableError)
+    text = read_text(path, "the lift table", LiftTableError, MAX_TABLE_BYTES)
     rows = [
         (n, row)
         for n, row in enumerate(csv.reader(text.splitlines()), 1)
@@ -74,6 +80,12 @@ def read_lift_table(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
             expected="a header 'angle [deg],lift [in]' and rows",
         )
     line, header = rows[0]
+    if len(rows) - 1 > MAX_TABLE_ROWS:
+        raise LiftTableError.at(
+            str(path),
+            f"{len(rows) - 1} rows, expected at most {MAX_TABLE_ROWS}",
+            expected=f"at most {MAX_TABLE_ROWS} rows",
+        )
     scale = _read_header(path, line, header)
     values = np.empty((len(rows) - 1, 2))
     for k, (n, row) in enumerate(rows[1:]):
@@ -92,7 +104,7 @@ def read_lift_table(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
             if not math.isfinite(v):
                 raise LiftTableError.at(
                     f"{path}:{n}",
-                    f"found {cell.strip()!r} in column {j + 1}, expected a finite number",
+                    f"found {excerpt(cell.strip())} in column {j + 1}, expected a finite number",
                     found=cell.strip(),
                     expected="a finite number",
                 )
@@ -104,7 +116,7 @@ def _read_header(path: Path, line: int, header: list[str]) -> tuple[float, float
     expected = "expected a header such as 'angle [deg],lift [in]'"
     if len(header) != 2:
         raise LiftTableError.at(
-            f"{path}:{line}", f"found {','.join(header)!r}, {expected}", found=header
+            f"{path}:{line}", f"found {excerpt(','.join(header))}, {expected}", found=header
         )
     scale = []
     for cell, (name, (units, example)) in zip(header, COLUMNS.items(), strict=True):
@@ -112,7 +124,7 @@ def _read_header(path: Path, line: int, header: list[str]) -> tuple[float, float
         if not m or m["name"].lower() != name:
             raise LiftTableError.at(
                 f"{path}:{line}",
-                f"found column {cell.strip()!r} where '{name} [units]' belongs; " + expected,
+                f"found column {excerpt(cell.strip())} where '{name} [units]' belongs; " + expected,
                 found=cell.strip(),
             )
         try:

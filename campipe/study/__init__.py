@@ -23,12 +23,26 @@ from pathlib import Path
 
 from campipe.io.spec_yaml import read_spec
 from campipe.study.expand import ResolvedCase, Study, expand
+from campipe.study.limits import Limits
 from campipe.study.spec import Spec, SpecError, check_spec
 
-__all__ = ["ResolvedCase", "Spec", "SpecError", "Study", "check_spec", "expand", "load_study"]
+__all__ = [
+    "Limits",
+    "ResolvedCase",
+    "Spec",
+    "SpecError",
+    "Study",
+    "check_spec",
+    "expand",
+    "load_study",
+]
 
 
-def load_study(path: str | Path, overrides: Mapping[str, object] | None = None) -> Study:
+def load_study(
+    path: str | Path,
+    overrides: Mapping[str, object] | None = None,
+    limits: Limits | None = None,
+) -> Study:
     """Read, check and expand a spec file.
 
     Parameters
@@ -37,6 +51,9 @@ def load_study(path: str | Path, overrides: Mapping[str, object] | None = None) 
         The spec (YAML).
     overrides : mapping, optional
         Dotted key → value applied over the spec first, e.g. ``{"run.revolutions": 1}``.
+    limits : Limits, optional
+        Bounds on cases, steps, samples, events and archive size (default: ``Limits()``),
+        checked from the spec before any case is built.
 
     Raises
     ------
@@ -47,5 +64,7 @@ def load_study(path: str | Path, overrides: Mapping[str, object] | None = None) 
     """
     path = Path(path)
     raw, text = read_spec(path)
-    spec = check_spec(raw, text, path.parent, str(path), overrides)
-    return expand(spec, str(path))
+    limits = limits or Limits()
+    spec = check_spec(raw, text, path.parent, str(path), overrides, max_axis=limits.cases)
+    spec.path = path
+    return expand(spec, str(path), limits)

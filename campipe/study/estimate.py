@@ -49,10 +49,14 @@ def measure_speeds(study: Study) -> dict[RunSettings, float]:
     speeds = {}
     for settings, c in firsts.items():
         # a warm-up run loads the compiled kernel, then the timed run
-        run_batch([c.case], replace(settings, revolutions=min(settings.revolutions, 0.01)))
+        run_batch(
+            [c.case],
+            replace(settings, revolutions=min(settings.revolutions, 0.01)),
+            on_failure="record",
+        )
         sample = replace(settings, revolutions=min(settings.revolutions, SAMPLE_REVOLUTIONS))
         t = time.perf_counter()
-        run_batch([c.case], sample)
+        run_batch([c.case], sample, on_failure="record")
         elapsed = max(time.perf_counter() - t, 1e-6)
         speeds[settings] = sample.revolutions * TWO_PI / c.case.speed / elapsed
     return speeds

@@ -29,8 +29,15 @@ import numpy as np
 from campipe.constants import INCH
 from campipe.engine import Case, RunSettings, RunSettingsError, resolve_integrator
 from campipe.engine.batch import check_stability
+from campipe.errors import excerpt
 from campipe.io.lift_table import LiftTableError, read_lift_table, table_digest
-from campipe.model import PARAMETERS, ModelParameterError, ValveTrain, valve_train
+from campipe.model import (
+    PARAMETERS,
+    ModelParameterError,
+    ValveTrain,
+    system_matrices,
+    valve_train,
+)
 from campipe.profiles import Profile, bump, flat, harmonic, max_lift, min_lift, polydyne, table
 from campipe.study.fields import (
     CASE_FIELDS,
@@ -40,6 +47,7 @@ from campipe.study.fields import (
     SpecProblem,
     varied_fields,
 )
+from campipe.study.limits import Limits, check_limits
 from campipe.study.spec import (
     MAX_PROBLEMS,
     Spec,
@@ -48,6 +56,8 @@ from campipe.study.spec import (
     check_profile,
     leaf_keys,
 )
+from campipe.study.variables import case_coordinates, data_variables
+from campipe.study.where import QueryError, evaluate, parse_where
 
 #: Lift below the base circle tolerated as round-off [m].
 LIFT_TOLERANCE = 1e-12
@@ -229,9 +239,29 @@ def _parse(key: str, value: object, path: str) -> Any:
 @functools.lru_cache(maxsize=1024)
 def _train(preset: str, overrides: tuple) -> ValveTrain:
     try:
-        return valve_train(preset, _thaw(overrides), key_prefix="model.")
+        train = valve_train(preset, _thaw(overrides), key_prefix="model.")
     except ModelParameterError as exc:
         raise SpecProblem.from_error(exc) from None
+    check_train(train)
+    return train
+
+
+def check_train(train: ValveTrain) -> None:
+    """The train's matrices and natural frequencies are finite and positive: parameters
+    far out of range (a spring rate of 1e300 lbf/in) are refused here, not by the engine."""
+    try:
+        sm = system_matrices(train)
+        ok = all(
+            np.isfinite(a).all() for a in (sm.mass, sm.stiffness, sm.damping, sm.frequencies)
+        ) and bool((sm.frequencies > 0).all())
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError):
+        ok = False
+    if not ok:
+        raise SpecProblem(
+            "model",
+            "the parameters give a model whose matrices or natural frequencies are not "
+            "finite and positive; check the parameters' values and units",
+        )
 
 
 @functools.lru_cache(maxsize=256)
@@ -264,7 +294,7 @@ def _profile(frozen: tuple, directory: Path) -> tuple[Profile, dict, dict[str, o
             except OSError as exc:
                 raise SpecProblem(
                     "profile.file",
-                    f"found {spec['file']!r}, cannot read "
+                    f"found {excerpt(spec['file'])}, cannot read "
                     f"{path} ({exc.strerror}); the path is relative to the "
                     "spec",
                 ) from None
@@ -317,7 +347,15 @@ def _with_defects(frozen_profile: tuple, frozen_defects: tuple, directory: Path)
             f"the cam's lift falls to {low / INCH:.4g} in; expected a "
             "lift never below the base circle (0)",
         )
-    return out, canonical, defects, values, label, max_lift(out)
+    high = max_lift(out)
+    if not high > LIFT_TOLERANCE:
+        where = "profile.file" if "profile.file" in values else "profile"
+        raise SpecProblem(
+            where,
+            f"the cam's lift never rises above {high / INCH:.4g} in; expected a cam that "
+            "lifts the follower",
+        )
+    return out, canonical, defects, values, label, high
 
 
 def _thaw_list(frozen: tuple) -> list[dict]:
@@ -382,7 +420,7 @@ def resolve(raw: Mapping, index: int, directory: Path) -> ResolvedCase:
         if seat >= full * ratio:
             raise SpecProblem(
                 "seat",
-                f"found {raw['seat']!r}, expected a valve lift below "
+                f"found {excerpt(raw['seat'])}, expected a valve lift below "
                 f"the full valve lift {full * ratio / INCH:.4g} in (cam lift "
                 f"{full / INCH:.4g} in × rocker ratio {ratio:.4g}): above it "
                 "the valve never leaves its seat",
@@ -469,15 +507,19 @@ def _origin(path: str, origins: Mapping[str, str]) -> str:
     return origin + rest if "point" not in origin else origin
 
 
-def expand(spec: Spec, source: str = "spec") -> Study:
-    """Expand and resolve every case of a checked spec.
+def expand(spec: Spec, source: str = "spec", limits: Limits | None = None) -> Study:
+    """Expand and resolve every case of a checked spec, once it is known to stay within
+    ``limits`` (default ``Limits()``; checked from the spec alone, before any case is built).
 
     Raises
     ------
     SpecError
-        Problems found while resolving cases, each at the spec path its value came from,
-        a repeated problem reported once with the cases it affects.
+        A limit exceeded; or problems found while resolving cases, each at the spec path its
+        value came from, a repeated problem reported once with the cases it affects.
     """
+    over = check_limits(spec, limits or Limits())
+    if over:
+        raise SpecError(over, source)
     cases: list[ResolvedCase] = []
     # (spec path, message) → the first case's problem and every case it affects
     found: dict[tuple[str, str], tuple[SpecProblem, list[int]]] = {}
@@ -498,7 +540,10 @@ def expand(spec: Spec, source: str = "spec") -> Study:
                 SpecProblem(path, message + tail, found=first.found, expected=first.expected)
             )
         raise SpecError(problems, source)
+    check_unique(cases, spec, source)
     run = spec.base["run"]
+    if spec.replay:
+        check_replay_columns(spec.replay, varied_keys(spec), tuple(run["record"]), source)
     axes = [Axis(k, "sweep", len(v)) for k, v in spec.sweep.items()]
     axes += [Axis(k, "zip", len(v)) for k, v in spec.zip.items()]
     if spec.sample:
@@ -514,6 +559,48 @@ def expand(spec: Spec, source: str = "spec") -> Study:
         output_every=float(_parse("run.output_every", run["output_every"], "run.output_every")),
         record=tuple(run["record"]),
     )
+
+
+def check_replay_columns(
+    where: str, varied: tuple[str, ...], record: tuple[str, ...], source: str
+) -> None:
+    """``replay.where`` against the columns the archive will have, with their types: an
+    unknown column or text compared with a number is refused now, not after the study."""
+    columns: dict[str, np.ndarray] = {}
+    for name, var, _ in case_coordinates(varied).values():
+        shape = (1, 7) if "mode" in var.dims else (1,)
+        columns[name] = (
+            np.array(["x"], dtype=object) if var.dtype == "str" else np.full(shape, np.nan)
+        )
+    for name, var in data_variables(record).items():
+        if var.dims == ("case",):
+            columns[name] = np.full(1, np.nan)
+    columns["case_id"] = np.array(["x"], dtype=object)
+    try:
+        evaluate(parse_where(where), columns, 1)
+    except QueryError as exc:
+        raise SpecError([SpecProblem("replay.where", exc.reason)], source) from None
+
+
+def check_unique(cases: list[ResolvedCase], spec: Spec, source: str) -> None:
+    """Refuse two cases with one id (the same parameters reached twice, e.g. two equal
+    case entries): the archive would hold two rows of one case."""
+    seen: dict[str, int] = {}
+    for c in cases:
+        if c.case_id in seen:
+            where = "cases" if spec.cases else "sweep"
+            raise SpecError(
+                [
+                    SpecProblem(
+                        where,
+                        f"cases {seen[c.case_id]} and {c.index} are the same case (case id "
+                        f"{c.case_id}): the spec reaches the same parameters twice; vary "
+                        "each value once",
+                    )
+                ],
+                source,
+            )
+        seen[c.case_id] = c.index
 
 
 #: Keys always stored per case (their archive names: see campipe.study.variables).

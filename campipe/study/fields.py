@@ -21,9 +21,15 @@ from typing import Any
 
 from campipe.engine import INTEGRATORS, MEMBER_LOADS, RunSettings
 from campipe.engine import batch as _engine_batch
-from campipe.errors import CampipeError, did_you_mean
+from campipe.errors import CampipeError, did_you_mean, excerpt
 from campipe.model import PARAMETERS, PRESETS, ModelParameterError, parse_parameter
-from campipe.units import QuantityError, parse_angular, parse_quantity
+from campipe.units import QuantityError, convert, parse_angular, parse_quantity
+
+#: Bounds of sense on a spec's quantities [SI]: beyond them the numbers overflow or the
+#: geometry stops meaning anything (a lift of a kilometre, a cam at a million rpm).
+MAX_SPEED = 1e6 * math.pi / 30  # [rad/s]: 1e6 rpm
+MAX_LENGTH = 1.0  # [m]: lifts, seat positions, bump heights
+MAX_ANGLE = 4 * math.pi  # [rad]: defect angles, up to 720 deg (a flat may wrap past 360)
 
 
 class SpecProblem(CampipeError, ValueError):
@@ -64,6 +70,7 @@ class Field:
     example: str = ""  # units suggested in messages and the schema ("rpm", "in", "deg")
     minimum: float | None = None  # smallest allowed SI value
     exclusive_minimum: bool = True  # minimum itself refused
+    maximum: float | None = None  # largest allowed SI value (a bound on sense, not on taste)
     choices: tuple[str, ...] = ()  # allowed words ("choice"), allowed items ("record")
     allow_none: bool = False  # "none" (or null) accepted, meaning absent (seat)
     allow_default: bool = False  # "default" accepted, meaning the engine's choice (run.dt)
@@ -98,9 +105,10 @@ class Field:
             return _choice(value, self.choices, path, self.description)
         if self.kind == "text":
             if not isinstance(value, str) or not value.strip():
-                raise SpecProblem(path, f"found {value!r}, expected a non-empty string")
+                raise SpecProblem(path, f"found {excerpt(value)}, expected a non-empty string")
             return value
         if self.kind == "parameter":
+            _plain(value, path)
             try:
                 return parse_parameter(self.key.removeprefix("model."), value, path)
             except ModelParameterError as exc:
@@ -108,7 +116,7 @@ class Field:
         if self.kind == "record":
             if not isinstance(value, list):
                 raise SpecProblem(
-                    path, f"found {value!r}, expected a list of: {', '.join(self.choices)}"
+                    path, f"found {excerpt(value)}, expected a list of: {', '.join(self.choices)}"
                 )
             return tuple(
                 _choice(v, self.choices, f"{path}[{i}]", "what to record")
@@ -132,21 +140,52 @@ class Field:
         number = value if isinstance(value, int | float) and not isinstance(value, bool) else None
         if number is None or (integer and not isinstance(number, int)):
             what = "an integer" if integer else "a number"
-            raise SpecProblem(path, f"found {value!r}, expected {what}")
+            raise SpecProblem(path, f"found {excerpt(value)}, expected {what}")
         self._check_range(float(number), value, path)
         return int(number) if integer else float(number)
 
     def _check_range(self, v: float, raw: object, path: str) -> None:
         if not math.isfinite(v):
-            raise SpecProblem(path, f"found {raw!r}, expected a finite value")
+            raise SpecProblem(path, f"found {excerpt(raw)}, expected a finite value")
+        if self.maximum is not None and v > self.maximum:
+            shown = convert(self.maximum, self.units, self.example) if self.example else v
+            unit = f" {self.example}" if self.example else ""
+            raise SpecProblem(
+                path,
+                f"found {excerpt(raw)}, expected a value at most {shown:g}{unit}",
+                found=raw,
+                expected=f"at most {shown:g}{unit}",
+            )
         if self.minimum is None:
             return
         if v < self.minimum or (self.exclusive_minimum and v == self.minimum):
             relation = "greater than" if self.exclusive_minimum else "at least"
             unit = f" {self.example}" if self.example else ""
             raise SpecProblem(
-                path, f"found {raw!r}, expected a value {relation} {self.minimum:g}{unit}"
+                path, f"found {excerpt(raw)}, expected a value {relation} {self.minimum:g}{unit}"
             )
+
+
+#: Longest list a model parameter takes (damping_ratios: one per mode).
+MAX_PARAMETER_LENGTH = 16
+
+
+def _plain(value: object, path: str) -> None:
+    """A model parameter's value is a scalar or a short list of scalars: refused otherwise
+    before the model's parser sees (and quotes) it."""
+    if isinstance(value, list | tuple):
+        if len(value) > MAX_PARAMETER_LENGTH or not all(
+            isinstance(v, str | int | float) and not isinstance(v, bool) for v in value
+        ):
+            raise SpecProblem(
+                path,
+                f"found {excerpt(value)}, expected a number or quantity, or a short list of "
+                "numbers (damping_ratios)",
+            )
+    elif not isinstance(value, str | int | float | None) or (
+        isinstance(value, str) and len(value) > 200
+    ):
+        raise SpecProblem(path, f"found {excerpt(value)}, expected a number or quantity")
 
 
 @functools.lru_cache(maxsize=8192, typed=True)  # typed: True is not 1
@@ -161,7 +200,7 @@ def _choice(value: object, choices: Iterable[str], path: str, what: str) -> str:
     hint = did_you_mean(value, choices) if isinstance(value, str) else ""
     raise SpecProblem(
         path,
-        f"found {value!r}, expected one of: {', '.join(choices)}{hint}"
+        f"found {excerpt(value)}, expected one of: {', '.join(choices)}{hint}"
         + (f" ({what})" if what else ""),
     )
 
@@ -301,6 +340,7 @@ CASE_FIELDS: dict[str, Field] = {
             units="rad/s",
             example="rpm",
             minimum=0.0,
+            maximum=MAX_SPEED,
             archive_name="speed_rpm",
             archive_units="rpm",
         ),
@@ -312,6 +352,7 @@ CASE_FIELDS: dict[str, Field] = {
             example="in",
             minimum=0.0,
             exclusive_minimum=False,
+            maximum=MAX_LENGTH,
             allow_none=True,
             archive_name="seat",
             archive_units="m",
@@ -367,6 +408,7 @@ PROFILE_FIELDS: dict[str, Field] = {
             units="m",
             example="in",
             minimum=0.0,
+            maximum=MAX_LENGTH,
             archive_name="profile_lift",
             archive_units="m",
         ),
@@ -377,6 +419,7 @@ PROFILE_FIELDS: dict[str, Field] = {
             units="rad",
             example="deg",
             minimum=0.0,
+            maximum=2 * math.pi,
             archive_name="profile_rise",
             archive_units="deg",
         ),
@@ -388,6 +431,7 @@ PROFILE_FIELDS: dict[str, Field] = {
             example="deg",
             minimum=0.0,
             exclusive_minimum=False,
+            maximum=2 * math.pi,
             archive_name="profile_dwell",
             archive_units="deg",
         ),
@@ -398,6 +442,7 @@ PROFILE_FIELDS: dict[str, Field] = {
             units="rad",
             example="deg",
             minimum=0.0,
+            maximum=2 * math.pi,
             archive_name="profile_fall",
             archive_units="deg",
         ),
@@ -417,14 +462,55 @@ DEFECT_KINDS: dict[str, tuple[str, ...]] = {
 }
 
 DEFECT_FIELDS: dict[str, Field] = {
-    "from": Field("from", "quantity", "where the flat starts", units="rad", example="deg"),
-    "to": Field("to", "quantity", "where the flat ends", units="rad", example="deg"),
-    "center": Field("center", "quantity", "angle of the bump's peak", units="rad", example="deg"),
+    "from": Field(
+        "from",
+        "quantity",
+        "where the flat starts",
+        units="rad",
+        example="deg",
+        minimum=-MAX_ANGLE,
+        exclusive_minimum=False,
+        maximum=MAX_ANGLE,
+    ),
+    "to": Field(
+        "to",
+        "quantity",
+        "where the flat ends, after from and less than a turn later (past 360 deg for a flat "
+        "through 0, e.g. from 350 deg to 370 deg)",
+        units="rad",
+        example="deg",
+        minimum=-MAX_ANGLE,
+        exclusive_minimum=False,
+        maximum=MAX_ANGLE,
+    ),
+    "center": Field(
+        "center",
+        "quantity",
+        "angle of the bump's peak",
+        units="rad",
+        example="deg",
+        minimum=-MAX_ANGLE,
+        exclusive_minimum=False,
+        maximum=MAX_ANGLE,
+    ),
     "height": Field(
-        "height", "quantity", "height of the bump; negative for a dent", units="m", example="in"
+        "height",
+        "quantity",
+        "height of the bump; negative for a dent",
+        units="m",
+        example="in",
+        minimum=-MAX_LENGTH,
+        exclusive_minimum=False,
+        maximum=MAX_LENGTH,
     ),
     "width": Field(
-        "width", "quantity", "full width of the bump", units="rad", example="deg", minimum=0.0
+        "width",
+        "quantity",
+        "full width of the bump",
+        units="rad",
+        example="deg",
+        minimum=0.0,
+        maximum=2 * math.pi,
     ),
 }
 

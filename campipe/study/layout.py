@@ -11,7 +11,7 @@ import numpy as np
 
 from campipe.io.archive import VariableSpec
 from campipe.study.expand import ResolvedCase, Study
-from campipe.study.results import BatchData
+from campipe.study.results import BatchData, numerics_fingerprint
 from campipe.study.variables import (
     DOF_NAMES,
     DOF_UNITS,
@@ -22,7 +22,9 @@ from campipe.study.variables import (
 )
 
 #: Version of the file layout: batch files and archives of another layout are not reused.
-LAYOUT_VERSION = "campipe-archive-1"
+#: 2: per-case ``status``; checksums of every variable (``campipe_checksums``); the engine's
+#: fingerprint (``campipe_numerics``); the spec's file (``spec_file``).
+LAYOUT_VERSION = "campipe-archive-2"
 
 
 def record_text(record: Iterable[str]) -> str:
@@ -30,8 +32,9 @@ def record_text(record: Iterable[str]) -> str:
 
 
 def batch_key(case_ids: Iterable[str], record: Iterable[str]) -> str:
-    """A batch file's key: the cases it holds and what it records, in this layout."""
-    text = json.dumps([LAYOUT_VERSION, list(record), list(case_ids)])
+    """A batch file's key: the cases it holds and what it records, in this layout, by this
+    engine."""
+    text = json.dumps([LAYOUT_VERSION, numerics_fingerprint(), list(record), list(case_ids)])
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
@@ -91,6 +94,7 @@ def batch_layout(data: BatchData, record: tuple[str, ...]):
     attrs = {
         "campipe_layout": LAYOUT_VERSION,
         "campipe_record": record_text(record),
+        "campipe_numerics": data.numerics,
         "batch_key": data.key,
     }
     return sizes, specs, arrays, attrs
@@ -166,6 +170,7 @@ def study_attrs(study: Study) -> dict[str, object]:
         "replay_where": spec.replay or "",
         "campipe_layout": LAYOUT_VERSION,
         "campipe_record": record_text(study.record),
+        "campipe_numerics": numerics_fingerprint(),
         "study_key": study_key(study),
     }
 
@@ -175,6 +180,7 @@ def study_key(study: Study) -> str:
     text = json.dumps(
         [
             LAYOUT_VERSION,
+            numerics_fingerprint(),
             study.spec.text,
             study.spec.overrides,
             list(study.record),

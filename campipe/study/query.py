@@ -15,10 +15,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from campipe.errors import did_you_mean
+from campipe.errors import did_you_mean, excerpt
 from campipe.study.layout import coordinate_values
 from campipe.study.variables import VARIABLES
 from campipe.study.where import QueryError, Where, evaluate, parse_where
+from campipe.vocabulary import EVENTS_TRUNCATED, FAILURES, STATUS
 
 __all__ = [
     "CaseTable",
@@ -77,7 +78,7 @@ def select(table: CaseTable, where: str | None = None, sort: str | None = None) 
             name = key.lstrip("-+")
             if name not in table.columns:
                 raise QueryError.at(
-                    "--sort", f"unknown column {name!r}{did_you_mean(name, table.columns)}"
+                    "--sort", f"unknown column {excerpt(name)}{did_you_mean(name, table.columns)}"
                 )
             values = table.columns[name][rows]
             if values.ndim != 1:
@@ -118,7 +119,7 @@ def format_rows(table: CaseTable, rows: np.ndarray, names: Sequence[str], fmt: s
         if name not in table.columns:
             raise QueryError.at(
                 "--columns",
-                f"unknown column {name!r}"
+                f"unknown column {excerpt(name)}"
                 f"{did_you_mean(name, table.columns)} (columns: "
                 f"{', '.join(table.columns)})",
             )
@@ -138,7 +139,7 @@ def format_rows(table: CaseTable, rows: np.ndarray, names: Sequence[str], fmt: s
             )
         return buf.getvalue().rstrip("\n")
     if fmt != "table":
-        raise QueryError.at("--format", f"found {fmt!r}, expected table, csv or json")
+        raise QueryError.at("--format", f"found {excerpt(fmt)}, expected table, csv or json")
     text = [
         [", ".join(map(str, c)) if isinstance(c, list) else str(c) for c in row] for row in cells
     ]
@@ -160,13 +161,22 @@ def format_rows(table: CaseTable, rows: np.ndarray, names: Sequence[str], fmt: s
 # -- the summary -------------------------------------------------------------------------------
 
 
-def summary(ds) -> str:
-    """The study's axes and, for a speed sweep, the separation onset speed (first speed with
-    ``separation_deg_per_rev > 0``) for each combination of the other varying parameters."""
+def summary(ds, where: str | None = None) -> str:
+    """The study's axes, the cases that failed or kept only part of their events (by case
+    id) and, for a speed sweep, the separation onset speed (first speed with
+    ``separation_deg_per_rev > 0``) for each combination of the other varying parameters.
+
+    With ``where``, only the cases it selects are summarised (the axes' values among them,
+    their failures, their onsets)."""
     table = case_table(ds)
     name = ds.attrs.get("study_name", "study")
+    selected = ""
+    if where is not None:
+        total = table.n
+        table = subset(table, select(table, where))
+        selected = f" (of {total}, where {where})"
     lines = [
-        f"{name}: {table.n} cases, {ds.attrs.get('revolutions', '?')} revolutions, "
+        f"{name}: {table.n} cases{selected}, {ds.attrs.get('revolutions', '?')} revolutions, "
         f"record: {ds.attrs.get('record', '-')}"
     ]
     try:
@@ -180,12 +190,46 @@ def summary(ds) -> str:
             f"  {a['name']:<24} {a['kind']:<7} {a['size']} values"
             + (f": {_values_text(col, table.units.get(a['name'], ''))}" if col is not None else "")
         )
+    lines += status_lines(table)
     onset = onset_table(table)
     if onset:
         lines.append("")
         lines.append("separation onset (first speed with separation_deg_per_rev > 0):")
         lines += onset
     return "\n".join(lines)
+
+
+def subset(table: CaseTable, rows: np.ndarray) -> CaseTable:
+    """The table's rows ``rows``, in that order."""
+    return CaseTable(
+        {k: v[rows] for k, v in table.columns.items()}, table.units, table.default, rows.size
+    )
+
+
+#: Case ids listed at most per status in the summary.
+MAX_LISTED = 20
+
+
+def status_lines(table: CaseTable) -> list[str]:
+    """``failed: <id> (chatter), ...`` and ``events truncated: ...`` lines, by case id."""
+    status = table.columns.get("status")
+    if status is None:
+        return []
+    ids = table.columns["case_id"]
+    out = []
+    failed = np.flatnonzero(np.isin(status, FAILURES))
+    if failed.size:
+        shown = ", ".join(
+            f"{ids[i]} ({STATUS.get(int(status[i]), status[i])})" for i in failed[:MAX_LISTED]
+        )
+        more = f" and {failed.size - MAX_LISTED} more" if failed.size > MAX_LISTED else ""
+        out.append(f"failed: {shown}{more} (histories and metrics NaN)")
+    truncated = np.flatnonzero(status == EVENTS_TRUNCATED)
+    if truncated.size:
+        shown = ", ".join(str(ids[i]) for i in truncated[:MAX_LISTED])
+        more = f" and {truncated.size - MAX_LISTED} more" if truncated.size > MAX_LISTED else ""
+        out.append(f"events truncated (run.max_events reached): {shown}{more}")
+    return out
 
 
 def _values_text(col: np.ndarray, units: str) -> str:
@@ -217,7 +261,10 @@ def onset_table(table: CaseTable) -> list[str]:
         and len({_key(x) for x in v}) > 1
     ]
     groups: dict[tuple, list[int]] = {}
-    for i in range(table.n):
+    usable = (
+        ~np.isin(cols["status"], FAILURES) if "status" in cols else np.ones(table.n, dtype=bool)
+    )
+    for i in np.flatnonzero(usable).tolist():
         groups.setdefault(tuple(_key(cols[n][i]) for n in others), []).append(i)
     head = [*others, "onset_rpm"]
     rows = []

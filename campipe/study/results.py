@@ -6,16 +6,61 @@ files); the caller stores the :class:`BatchData` (:mod:`campipe.io.archive`).
 
 from __future__ import annotations
 
+import functools
+import hashlib
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from importlib import metadata
+from pathlib import Path
 
 import numpy as np
 
+import campipe
 from campipe.engine import MEMBER_LOADS, BatchResult, member_loads, run_batch
 from campipe.study.expand import ResolvedCase
 from campipe.study.variables import PER_REVOLUTION_METRICS, data_variables
 from campipe.vocabulary import EV_FROM, EV_IMPULSE, EV_KIND, EV_TIME, EV_TO, EV_VELOCITY
+
+#: Where the numbers come from: the source of these packages and modules enters
+#: :func:`numerics_fingerprint`.
+NUMERICS_SOURCES = (
+    "engine",
+    "profiles",
+    "model",
+    "vocabulary.py",
+    "constants.py",
+    "study/results.py",  # this module: the engine's results as archive arrays
+)
+#: Libraries whose versions enter :func:`numerics_fingerprint`: they compute the numbers too.
+NUMERICS_LIBRARIES = ("numpy", "scipy", "numba")
+
+
+@functools.cache
+def numerics_fingerprint() -> str:
+    """What computes a case's numbers: campipe's version, a SHA-256 of the source of the
+    engine, the profiles, the model and this module, and the versions of numpy, scipy and
+    numba, as one short text.
+
+    Batch files and archives record it (``campipe_numerics``); results of another fingerprint
+    are never reused, so an upgraded (or edited) engine never mixes its numbers with an older
+    one's. A case id says *what* was run; this says *by what*.
+    """
+    root = Path(campipe.__file__).parent
+    h = hashlib.sha256()
+    for name in NUMERICS_SOURCES:
+        top = root / name
+        files = sorted(top.rglob("*.py")) if top.is_dir() else [top]
+        for path in files:
+            h.update(str(path.relative_to(root)).encode())
+            h.update(path.read_bytes())
+    versions = []
+    for lib in NUMERICS_LIBRARIES:
+        try:
+            versions.append(f"{lib}=={metadata.version(lib)}")
+        except metadata.PackageNotFoundError:
+            versions.append(f"{lib}==?")
+    return f"campipe {campipe.__version__}; source {h.hexdigest()[:16]}; " + ", ".join(versions)
 
 
 @dataclass(frozen=True)
@@ -40,6 +85,7 @@ class BatchData:
     arrays: dict[str, np.ndarray]  # data variables, see campipe.study.variables
     cam_angle: np.ndarray  # (n_out,) [degree]
     n_revolutions: int  # length of the revolution axis
+    numerics: str = ""  # numerics_fingerprint() of the process that computed it
 
     @property
     def n_cases(self) -> int:
@@ -58,12 +104,16 @@ def cam_angle_degrees(cam_angle: np.ndarray) -> np.ndarray:
 def compute_batch(plan: BatchPlan) -> BatchData:
     """Run a batch's cases in one engine call and lay out its archive arrays.
 
-    All cases of a plan share one :class:`~campipe.engine.RunSettings`.
+    All cases of a plan share one :class:`~campipe.engine.RunSettings`. A case that fails
+    (non-finite, chatter) does not stop the others: its ``status`` says so and its histories
+    and metrics are NaN.
     """
     settings = plan.cases[0].settings
     wanted = set(data_variables(plan.record))
     full_state = "q" in wanted or bool(set(MEMBER_LOADS) & wanted)
-    result = run_batch([c.case for c in plan.cases], settings, full_state=full_state)
+    result = run_batch(
+        [c.case for c in plan.cases], settings, full_state=full_state, on_failure="record"
+    )
     return batch_arrays(plan, result)
 
 
@@ -84,6 +134,7 @@ def batch_arrays(plan: BatchPlan, result: BatchResult) -> BatchData:
         "measured": np.broadcast_to(
             result.measured.astype(np.int8), result.cam_impacts_per_rev.shape
         ),
+        "status": np.asarray(result.status, np.int8),
     }
     per_rev = {
         "separation_deg": np.degrees(result.separation_per_rev),
@@ -120,6 +171,7 @@ def batch_arrays(plan: BatchPlan, result: BatchResult) -> BatchData:
         arrays=arrays,
         cam_angle=cam_angle_degrees(result.cam_angle),
         n_revolutions=result.separation_per_rev.shape[1],
+        numerics=numerics_fingerprint(),
     )
 
 

@@ -31,6 +31,7 @@ Grammar (all keys optional except ``name``; each case must end up with a ``speed
 from __future__ import annotations
 
 import copy
+import math
 import re
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -39,7 +40,7 @@ from typing import TypeVar
 
 import numpy as np
 
-from campipe.errors import CampipeError, did_you_mean
+from campipe.errors import CampipeError, did_you_mean, excerpt
 from campipe.model import PARAMETERS
 from campipe.study.fields import (
     CASE_FIELDS,
@@ -67,6 +68,9 @@ NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]*$"
 _KEYED_BY_CASE_KEY = ("sweep", "zip", "ranges")
 #: Problems reported at most, so a large bad grid stays readable.
 MAX_PROBLEMS = 20
+#: Longest axis (a range's num, a sample's n) by default: also the default limit on cases
+#: (campipe.study.limits), so one axis alone never exceeds it.
+MAX_AXIS_LENGTH = 100_000
 
 T = TypeVar("T")
 
@@ -111,6 +115,7 @@ class Spec:
     sample: Sample | None  # sampled design
     replay: str | None  # replay selection expression
     overrides: dict[str, object] = field(default_factory=dict)  # --set KEY=VALUE applied
+    path: Path | None = None  # the spec file, when read from one
 
     @property
     def record(self) -> tuple[str, ...]:
@@ -146,13 +151,12 @@ def _mapping(value: object, path: str, what: str) -> Mapping:
         raise SpecProblem(path, f"found {_show(value)}, expected a mapping ({what})")
     for k in value:
         if not isinstance(k, str):
-            raise SpecProblem(path, f"found the key {k!r}, expected keys that are strings")
+            raise SpecProblem(path, f"found the key {excerpt(k)}, expected keys that are strings")
     return value
 
 
 def _show(value: object) -> str:
-    text = repr(value)
-    return text if len(text) <= 60 else text[:57] + "..."
+    return excerpt(value)
 
 
 def _unknown(path: str, key: str, known) -> SpecProblem:
@@ -160,7 +164,7 @@ def _unknown(path: str, key: str, known) -> SpecProblem:
     listing = ", ".join(known) if len(known) <= 16 else ", ".join(known[:16]) + ", ..."
     return SpecProblem(
         join(path, key),
-        f"unknown key {key!r}{did_you_mean(key, known)} (expected one of: {listing})",
+        f"unknown key {excerpt(key)}{did_you_mean(key, known)} (expected one of: {listing})",
     )
 
 
@@ -179,10 +183,10 @@ def check_profile(value: object, path: str, partial: bool) -> dict:
         raise SpecProblem(
             join(path, "kind"), "missing; expected one of: " + ", ".join(PROFILE_KINDS)
         )
-    if kind is not None and kind not in PROFILE_KINDS:
+    if kind is not None and (not isinstance(kind, str) or kind not in PROFILE_KINDS):
         raise SpecProblem(
             join(path, "kind"),
-            f"found {kind!r}, expected one of: {', '.join(PROFILE_KINDS)}"
+            f"found {excerpt(kind)}, expected one of: {', '.join(PROFILE_KINDS)}"
             + did_you_mean(kind, PROFILE_KINDS),
         )
     if kind is not None:
@@ -215,8 +219,8 @@ def check_defects(value: object, path: str) -> list:
         p = join(path, i)
         d = _mapping(d, p, "a defect such as {kind: flat, from: 268 deg, to: 272 deg}")
         kind = d.get("kind")
-        if kind not in DEFECT_KINDS:
-            found = "missing" if kind is None else f"found {kind!r}"
+        if not isinstance(kind, str) or kind not in DEFECT_KINDS:
+            found = "missing" if kind is None else f"found {excerpt(kind)}"
             raise SpecProblem(
                 join(p, "kind"),
                 f"{found}, expected one of: "
@@ -231,11 +235,36 @@ def check_defects(value: object, path: str) -> list:
                     f"not a key of a {kind} defect (its keys: "
                     f"{', '.join(keys)}){did_you_mean(k, keys)}",
                 )
+        si = {}
         for k in keys:
             if k not in d:
                 raise SpecProblem(join(p, k), f"missing; a {kind} defect needs " + ", ".join(keys))
-            DEFECT_FIELDS[k].parse(d[k], join(p, k))
+            si[k] = DEFECT_FIELDS[k].parse(d[k], join(p, k))
+        if kind == "flat":
+            check_flat(si["from"], si["to"], d, p)
     return copy.deepcopy(value)
+
+
+def check_flat(start: float, end: float, d: Mapping, path: str) -> None:
+    """A flat runs forward from ``from`` to ``to``, less than a turn: one through 0 deg is
+    written past 360 deg (from: 350 deg, to: 370 deg), never as an end before its start."""
+    if end <= start:
+        raise SpecProblem(
+            join(path, "to"),
+            f"found to {excerpt(d['to'])} at or before from {excerpt(d['from'])}; a flat runs "
+            "forward from 'from' to 'to' (for one through 0 deg write 'to' past 360 deg, e.g. "
+            "from: 350 deg, to: 370 deg)",
+            found=d["to"],
+            expected="an angle after 'from'",
+        )
+    if end - start >= 2 * math.pi:
+        raise SpecProblem(
+            join(path, "to"),
+            f"found from {excerpt(d['from'])} to {excerpt(d['to'])}, a turn or more; a flat "
+            "is shorter than one turn",
+            found=d["to"],
+            expected="less than 360 deg after 'from'",
+        )
 
 
 def check_model(value: object, path: str) -> dict:
@@ -291,8 +320,11 @@ def check_case_block(value: Mapping, path: str, partial: bool, problems: _Proble
 _NUMBER_UNIT = re.compile(r"^\s*(?P<number>[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?)\s*(?P<unit>.*)$")
 
 
-def expand_range(value: Mapping, key: str, path: str, with_num: bool) -> list:
-    """``{from: 1000 rpm, to: 20000 rpm, num: 39}`` → 39 values in the units of ``from``."""
+def expand_range(
+    value: Mapping, key: str, path: str, with_num: bool, max_len: int = MAX_AXIS_LENGTH
+) -> list:
+    """``{from: 1000 rpm, to: 20000 rpm, num: 39}`` → 39 values in the units of ``from``;
+    a ``num`` beyond ``max_len`` is refused before any value is made."""
     need = ("from", "to", "num") if with_num else ("from", "to")
     for k in value:
         if k not in need:
@@ -308,12 +340,21 @@ def expand_range(value: Mapping, key: str, path: str, with_num: bool) -> list:
     if not with_num:
         if not lo < hi:
             raise SpecProblem(
-                path, f"found from {value['from']!r} ≥ to {value['to']!r}, expected from < to"
+                path,
+                f"found from {excerpt(value['from'])} ≥ to {excerpt(value['to'])}, "
+                "expected from < to",
             )
         return [lo, hi]
     num = value["num"]
     if isinstance(num, bool) or not isinstance(num, int) or num < 1:
-        raise SpecProblem(join(path, "num"), f"found {num!r}, expected an integer ≥ 1")
+        raise SpecProblem(join(path, "num"), f"found {excerpt(num)}, expected an integer ≥ 1")
+    if num > max_len:
+        raise SpecProblem(
+            join(path, "num"),
+            f"found {num}, beyond the limit of {max_len} values (--max-cases raises it)",
+            found=num,
+            expected=f"at most {max_len}",
+        )
     if field_.kind in ("number", "integer"):
         return [float(v) for v in np.linspace(float(value["from"]), float(value["to"]), num)]
     # Space the values in the units the spec wrote, so 1000 … 20000 rpm step by whole rpm.
@@ -370,8 +411,10 @@ def check_axis_value(key: str, value: object, path: str) -> object:
     return value
 
 
-def check_axes(value: object, path: str, zipped: bool, problems: _Problems) -> dict[str, list]:
-    """A ``sweep:`` or ``zip:`` mapping: key → values or range."""
+def check_axes(
+    value: object, path: str, zipped: bool, problems: _Problems, max_len: int = MAX_AXIS_LENGTH
+) -> dict[str, list]:
+    """A ``sweep:`` or ``zip:`` mapping: key → values or range (at most ``max_len`` each)."""
     block = problems.check(_mapping, value, path, "key → list of values or {from, to, num}")
     if block is None:
         return {}
@@ -393,7 +436,7 @@ def check_axes(value: object, path: str, zipped: bool, problems: _Problems) -> d
                 problems.items.append(_unknown(path, key, keys))
             continue
         if isinstance(values, Mapping) and key not in WHOLE_KEYS:
-            got = problems.check(expand_range, values, key, p, True)
+            got = problems.check(expand_range, values, key, p, True, max_len)
         elif isinstance(values, list):
             if not values:
                 problems.add(
@@ -413,6 +456,8 @@ def check_axes(value: object, path: str, zipped: bool, problems: _Problems) -> d
             continue
         if got is not None:
             out[key] = list(got)
+            if not zipped:
+                _check_repeats(problems, p, [canonical_value(key, v) for v in got])
     if zipped:
         lengths = {k: len(v) for k, v in out.items()}
         if len(set(lengths.values())) > 1:
@@ -421,7 +466,46 @@ def check_axes(value: object, path: str, zipped: bool, problems: _Problems) -> d
                 "zipped keys vary together and need equal lengths; found "
                 + ", ".join(f"{k} {n}" for k, n in lengths.items()),
             )
+        elif out:
+            rows = zip(*([canonical_value(k, v) for v in vs] for k, vs in out.items()), strict=True)
+            _check_repeats(problems, path, list(rows), "row")
     return out
+
+
+def canonical_value(key: str, value: object) -> object:
+    """An axis value as the case sees it (SI, parsed), hashable: two spellings of one value
+    are equal (``9000 rpm`` and ``9000.0 rpm``)."""
+    if key == "profile" and isinstance(value, Mapping):
+        return _freeze_parsed(value, PROFILE_FIELDS)
+    if key == "defects" and isinstance(value, list):
+        return tuple(_freeze_parsed(d, DEFECT_FIELDS) for d in value)
+    parsed = varied_fields()[key].parse(value, key)
+    return tuple(parsed) if isinstance(parsed, list) else parsed
+
+
+def _freeze_parsed(value: Mapping, fields: Mapping[str, Field]) -> tuple:
+    return tuple(
+        sorted(
+            (k, fields[k].parse(v, k) if k in fields and k != "file" else v)
+            for k, v in value.items()
+        )
+    )
+
+
+def _check_repeats(problems: _Problems, path: str, values: list, what: str = "value") -> None:
+    """Refuse an axis that lists one value twice: it would run one case twice (two rows with
+    one case id)."""
+    first: dict[object, int] = {}
+    for i, v in enumerate(values):
+        if v in first:
+            where = f"{path}[{i}]" if what == "value" else f"{path} (row {i})"
+            problems.add(
+                where,
+                f"the same {what} as {path}[{first[v]}]; each {what} of an axis appears once "
+                "(it would run the same case twice)",
+            )
+            return
+        first[v] = i
 
 
 def check_cases(value: object, problems: _Problems) -> list[dict]:
@@ -446,7 +530,9 @@ def check_cases(value: object, problems: _Problems) -> list[dict]:
     return out
 
 
-def check_sample(value: object, problems: _Problems) -> Sample | None:
+def check_sample(
+    value: object, problems: _Problems, max_len: int = MAX_AXIS_LENGTH
+) -> Sample | None:
     block = problems.check(
         _mapping, value, "sample", "{method: latin-hypercube, n, seed, ranges: {key: {from, to}}}"
     )
@@ -469,15 +555,19 @@ def check_sample(value: object, problems: _Problems) -> Sample | None:
     if method not in SAMPLE_METHODS:
         problems.add(
             "sample.method",
-            f"found {method!r}, expected one of: "
+            f"found {excerpt(method)}, expected one of: "
             + ", ".join(SAMPLE_METHODS)
             + did_you_mean(method, SAMPLE_METHODS),
         )
     n, seed = block["n"], block["seed"]
     if isinstance(n, bool) or not isinstance(n, int) or n < 1:
-        problems.add("sample.n", f"found {n!r}, expected an integer ≥ 1 (points to sample)")
+        problems.add("sample.n", f"found {excerpt(n)}, expected an integer ≥ 1 (points to sample)")
+    elif n > max_len:
+        problems.add(
+            "sample.n", f"found {n}, beyond the limit of {max_len} points (--max-cases raises it)"
+        )
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        problems.add("sample.seed", f"found {seed!r}, expected an integer ≥ 0")
+        problems.add("sample.seed", f"found {excerpt(seed)}, expected an integer ≥ 0")
     ranges = problems.check(_mapping, block["ranges"], "sample.ranges", "key → {from, to}")
     out: dict[str, tuple[float, float]] = {}
     if ranges is not None:
@@ -565,6 +655,7 @@ def check_spec(
     directory: str | Path = ".",
     source: str = "spec",
     overrides: Mapping[str, object] | None = None,
+    max_axis: int = MAX_AXIS_LENGTH,
 ) -> Spec:
     """Check a parsed spec and return it with defaults filled in and ranges expanded.
 
@@ -580,6 +671,9 @@ def check_spec(
         The spec's name in error messages.
     overrides : mapping, optional
         ``{"run.revolutions": 1}``: applied over ``raw`` first (``campipe study --set``).
+    max_axis : int
+        Longest axis (a range's num, a sample's n): refused beyond it, before any value is
+        made (the case count is checked by :func:`campipe.study.limits.check_limits`).
 
     Raises
     ------
@@ -629,10 +723,11 @@ def check_spec(
     base.setdefault("closure", "force")
     base.setdefault("seat", "none")
     base["run"] = {**RUN_DEFAULTS, **(base.get("run") or {})}
-    sweep = check_axes(raw["sweep"], "sweep", False, problems) if "sweep" in raw else {}
-    zipped = check_axes(raw["zip"], "zip", True, problems) if "zip" in raw else {}
+    problems.check(check_output_every, base["run"])
+    sweep = check_axes(raw["sweep"], "sweep", False, problems, max_axis) if "sweep" in raw else {}
+    zipped = check_axes(raw["zip"], "zip", True, problems, max_axis) if "zip" in raw else {}
     cases = check_cases(raw["cases"], problems) if "cases" in raw else []
-    sample = check_sample(raw["sample"], problems) if "sample" in raw else None
+    sample = check_sample(raw["sample"], problems, max_axis) if "sample" in raw else None
     replay = check_replay(raw["replay"], problems) if "replay" in raw else None
     spec = Spec(
         name=name if isinstance(name, str) else "",
@@ -651,6 +746,24 @@ def check_spec(
     if problems.items:
         raise SpecError(problems.items[:MAX_PROBLEMS], source)
     return spec
+
+
+def check_output_every(run: Mapping) -> None:
+    """The stored histories need at least two samples: ``output_every`` within the run."""
+    try:
+        revolutions = CASE_FIELDS["run.revolutions"].parse(run["revolutions"], "run.revolutions")
+        every = CASE_FIELDS["run.output_every"].parse(run["output_every"], "run.output_every")
+    except SpecProblem:
+        return  # refused where the run block is checked
+    if every > revolutions * 2 * math.pi:
+        raise SpecProblem(
+            "run.output_every",
+            f"found {excerpt(run['output_every'])}, longer than the run "
+            f"({revolutions:g} revolutions = {revolutions * 360:g} deg): the histories would "
+            "hold the start alone",
+            found=run["output_every"],
+            expected=f"at most {revolutions * 360:g} deg",
+        )
 
 
 def apply_override(raw: object, key: str, value: object) -> object:
@@ -693,5 +806,5 @@ def apply_override(raw: object, key: str, value: object) -> object:
 
 def _index(part: str, node: list, key: str) -> int:
     if not part.isdigit() or int(part) >= len(node):
-        raise SpecProblem(key, f"found {part!r}, expected a list index below {len(node)}")
+        raise SpecProblem(key, f"found {excerpt(part)}, expected a list index below {len(node)}")
     return int(part)

@@ -20,7 +20,7 @@ from campipe.engine import MEMBER_LOADS
 from campipe.model import COORDINATES, PARAMETERS
 from campipe.study.fields import CASE_FIELDS, Field, varied_fields
 from campipe.units import convert
-from campipe.vocabulary import CONTACT_FLAGS, EVENT_FLAGS
+from campipe.vocabulary import CONTACT_FLAGS, EVENT_FLAGS, STATUS_FLAGS
 
 
 @dataclass(frozen=True)
@@ -31,7 +31,8 @@ class Variable:
     dtype: str  # numpy dtype ("f8", "i1", "i4", "i8") or "str"
     long_name: str  # CF long_name
     units: str | None = None  # CF units (pint spelling); None for words, flags and counts
-    role: str = "history"  # "axis", "parameter", "history", "metric", "count", "event"
+    role: str = "history"  # "axis", "parameter", "history", "metric", "count", "status",
+    #                        "event"
     record: str | None = None  # the run.record item that stores it (None: always stored)
     extra: tuple[tuple[str, object], ...] = ()  # further CF attributes
 
@@ -176,6 +177,14 @@ VARIABLES: dict[str, Variable] = {
         for name, var in _metric_variables(*metric).items()
     },
     "steps": Variable(CASE, "i8", "integration steps taken", role="count"),
+    "status": Variable(
+        CASE,
+        "i1",
+        "status of the case's run: ok; nonfinite and chatter failed (histories and metrics "
+        "NaN); events_truncated kept only run.max_events events",
+        role="status",
+        extra=STATUS_FLAGS,
+    ),
     "event_count": Variable(
         CASE,
         "i4",
@@ -214,8 +223,10 @@ RECORD_GROUPS = {"member_loads": tuple(MEMBER_LOADS)}
 #: dof coordinate values and units.
 DOF_NAMES = tuple(c.symbol for c in COORDINATES)
 DOF_UNITS = tuple("m" if c.kind == "translation" else "rad" for c in COORDINATES)
-#: Provenance attributes that legitimately differ between two runs of the same study.
-VOLATILE_ATTRS = ("date_created", "host", "history")
+#: Provenance attributes that legitimately differ between two runs of the same study (the
+#: spec's path is relative to the archive's folder; the checksums cover all the others, so
+#: they differ too).
+VOLATILE_ATTRS = ("date_created", "host", "history", "spec_file", "campipe_checksums")
 
 
 def recorded(record: Iterable[str]) -> set[str]:

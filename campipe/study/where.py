@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from campipe.errors import CampipeError, did_you_mean
+from campipe.errors import CampipeError, did_you_mean, excerpt
 
 MAX_WHERE_LENGTH = 2000
 #: Relative tolerance of ``==`` between numbers.
@@ -98,11 +98,14 @@ def parse_where(text: str) -> Where:
         with warnings.catch_warnings():  # e.g. "invalid decimal literal": refused below anyway
             warnings.simplefilter("ignore", SyntaxWarning)
             tree = ast.parse(text.strip(), mode="eval")
-    except (SyntaxError, ValueError) as exc:  # ValueError: a null byte, before Python 3.12
-        reason = exc.msg if isinstance(exc, SyntaxError) else str(exc)
+    except (SyntaxError, ValueError, RecursionError, MemoryError) as exc:
+        # ValueError: a null byte (before Python 3.12), text that is not UTF-8, an integer of
+        # thousands of digits; RecursionError, MemoryError: nesting too deep for the parser
+        reason = exc.msg if isinstance(exc, SyntaxError) else type(exc).__name__
         raise QueryError.at(
             "--where",
-            f"cannot parse {text!r} ({reason}); expected comparisons joined by and, or, not",
+            f"cannot parse {excerpt(text)} ({excerpt(reason, 80)}); expected comparisons "
+            "joined by and, or, not",
         ) from None
     names: set[str] = set()
     # A list (or tuple) stands only on the right of 'in' / 'not in', holding plain values.
@@ -135,11 +138,18 @@ def parse_where(text: str) -> Where:
             )
         if isinstance(node, ast.Name):
             if node.id.startswith("_"):
-                raise QueryError.at("--where", f"the name {node.id!r} is not allowed")
+                raise QueryError.at("--where", f"the name {excerpt(node.id)} is not allowed")
             if node.id.lower() not in WORDS:
                 names.add(node.id)
         if isinstance(node, ast.Constant) and not isinstance(node.value, int | float | str):
-            raise QueryError.at("--where", f"the constant {node.value!r} is not allowed")
+            raise QueryError.at("--where", f"the constant {excerpt(node.value)} is not allowed")
+        if isinstance(node, ast.Constant) and isinstance(node.value, int):
+            try:
+                float(node.value)
+            except OverflowError:
+                raise QueryError.at(
+                    "--where", f"the number {excerpt(node.value)} is too large to compare"
+                ) from None
         if (
             isinstance(node, ast.UnaryOp)
             and isinstance(node.op, ast.USub | ast.UAdd)
@@ -161,7 +171,37 @@ def parse_where(text: str) -> Where:
                     raise QueryError.at(
                         "--where", "'in' takes a list, e.g. 'speed_rpm in [9000, 9524]'"
                     )
+    _check_condition(tree.body)
     return Where(text, tree, frozenset(names))
+
+
+def _check_condition(node: ast.AST) -> None:
+    """The expression and each operand of and, or, not is a condition (a comparison, or
+    conditions joined), never a bare column, number or word: ``--where "1"`` would select
+    every case (the words true and false are conditions)."""
+    if isinstance(node, ast.BoolOp):
+        for value in node.values:
+            _check_condition(value)
+        return
+    if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.Not):
+        _check_condition(node.operand)
+        return
+    if isinstance(node, ast.Name) and node.id.lower() in ("true", "false"):
+        return
+    if not isinstance(node, ast.Compare):
+        raise QueryError.at(
+            "--where",
+            f"found {_source(node)} where a condition belongs; expected a "
+            "comparison such as 'speed_rpm > 9000' (conditions join with and, or, not)",
+        )
+
+
+def _source(node: ast.AST) -> str:
+    """A short excerpt of a node's text."""
+    try:
+        return excerpt(ast.unparse(node))
+    except RecursionError:
+        return f"a {type(node).__name__}"
 
 
 def _describe(node: ast.AST) -> str:
@@ -187,7 +227,7 @@ def check_names(where: Where, columns: Sequence[str]) -> None:
         if name not in columns:
             raise QueryError.at(
                 "--where",
-                f"unknown column {name!r}{did_you_mean(name, columns)} "
+                f"unknown column {excerpt(name)}{did_you_mean(name, columns)} "
                 f"(columns: {', '.join(columns)})",
             )
 
@@ -201,7 +241,7 @@ def evaluate(where: Where, columns: Mapping[str, np.ndarray], n: int) -> np.ndar
 
 def _eval(node: ast.AST, cols: Mapping[str, np.ndarray]):
     if isinstance(node, ast.BoolOp):
-        values = [np.asarray(_eval(v, cols), dtype=bool) for v in node.values]
+        values = np.broadcast_arrays(*(np.asarray(_eval(v, cols), dtype=bool) for v in node.values))
         reduce = np.logical_and.reduce if isinstance(node.op, ast.And) else np.logical_or.reduce
         return reduce(values)
     if isinstance(node, ast.UnaryOp):
@@ -247,7 +287,7 @@ def _is_number(v) -> bool:
 
 
 def _name(node: ast.AST) -> str:
-    return node.id if isinstance(node, ast.Name) else ast.unparse(node)
+    return node.id if isinstance(node, ast.Name) else _source(node)
 
 
 def _compare(op: str, a, b, a_node, b_node) -> np.ndarray:

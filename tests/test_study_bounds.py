@@ -1,0 +1,243 @@
+"""Specs that are impossible or too large, refused with their key path before anything is
+built; specs at the edge of the limits accepted."""
+
+import json
+import math
+import sys
+
+import numpy as np
+import pytest
+from study_helpers import write_spec
+
+from campipe.io.spec_yaml import MAX_DEPTH, SpecFileError, parse_spec_text
+from campipe.profiles import flat, harmonic
+from campipe.study import Limits, SpecError, check_spec, expand, load_study
+from campipe.study.limits import case_count
+from campipe.study.where import QueryError, evaluate, parse_where
+from campipe.units import QuantityError, parse_angular
+
+BASE = {
+    "name": "t",
+    "profile": {"kind": "harmonic", "lift": "1 in"},
+    "speed": "9000 rpm",
+    "run": {"revolutions": 1},
+}
+
+
+def spec(**changes):
+    raw = json.loads(json.dumps(BASE))
+    for key, value in changes.items():
+        node = raw
+        *parents, last = key.split("__")
+        for p in parents:
+            node = node.setdefault(p, {})
+        node[last] = value
+    return raw
+
+
+def refused(raw, limits=None) -> list[tuple[str, str]]:
+    with pytest.raises(SpecError) as info:
+        expand(check_spec(raw), limits=limits)
+    return [(p.path, p.message) for p in info.value.problems]
+
+
+@pytest.mark.parametrize(
+    ("raw", "path", "words"),
+    [
+        (
+            spec(defects=[{"kind": "flat", "from": "272 deg", "to": "268 deg"}]),
+            "defects[0].to",
+            "at or before from '272 deg'",
+        ),
+        (
+            spec(defects=[{"kind": "flat", "from": "10 deg", "to": "380 deg"}]),
+            "defects[0].to",
+            "a turn or more",
+        ),
+        (
+            spec(sweep={"speed": ["9000 rpm", "9000.0 rpm"]}),
+            "sweep.speed[1]",
+            "the same value as sweep.speed[0]",
+        ),
+        (
+            spec(sweep={"speed": {"from": "1 rpm", "to": "1 rpm", "num": 2}}),
+            "sweep.speed[1]",
+            "the same value",
+        ),
+        (
+            spec(zip={"speed": ["1 rpm", "1 rpm"], "seat": ["0.1 in", "0.1 in"]}),
+            "zip (row 1)",
+            "the same row",
+        ),
+        (
+            spec(cases=[{"seat": "0.1 in"}, {"seat": "0.1 in"}]),
+            "cases",
+            "cases 0 and 1 are the same case",
+        ),
+        (
+            spec(run={"revolutions": 1, "output_every": "361 deg"}),
+            "run.output_every",
+            "longer than the run",
+        ),
+        (spec(speed="1e308 rpm"), "speed", "at most 1e+06 rpm"),
+        (spec(profile={"kind": "harmonic", "lift": "1e300 in"}), "profile.lift", "at most 39.37"),
+        (spec(model={"spring_rate": "1e300 lbf/in"}), "model", "not finite and positive"),
+        (
+            spec(model={"damping_ratios": list(range(100))}),
+            "model.damping_ratios",
+            "[0, 1, 2, 3, ...]",
+        ),
+        (spec(speed="9**9**9 rpm"), "speed", "units are names joined by"),
+        (spec(replay={"where": "profile > 3"}), "replay.where", "profile is text"),
+        (spec(replay={"where": "1"}), "replay.where", "where a condition belongs"),
+    ],
+)
+def test_impossible_settings_are_refused_at_their_key(raw, path, words):
+    problems = refused(raw)
+    assert any(p == path and words in m for p, m in problems), problems
+
+
+def test_an_all_zero_lift_table_is_refused(tmp_path):
+    (tmp_path / "flat.csv").write_text("angle [deg],lift [in]\n0,0\n90,0\n180,0\n270,0\n")
+    raw = spec(profile={"kind": "table", "file": "flat.csv"})
+    with pytest.raises(SpecError) as info:
+        expand(check_spec(raw, directory=tmp_path))
+    assert info.value.problems[0].path == "profile.file"
+    assert "never rises above 0 in" in info.value.problems[0].message
+
+
+def test_a_flat_through_zero_is_written_past_360_degrees():
+    study = expand(check_spec(spec(defects=[{"kind": "flat", "from": "350 deg", "to": "370 deg"}])))
+    wrapped = flat(harmonic(0.0254), math.radians(350), math.radians(10))
+    profile = study.cases[0].case.profile
+    np.testing.assert_allclose(profile.breaks, wrapped.breaks, rtol=1e-14, atol=1e-14)
+    np.testing.assert_allclose(profile.poly, wrapped.poly, rtol=1e-12, atol=1e-18)
+    assert study.cases[0].values["defects"] == "flat 350–10 deg"
+
+
+@pytest.mark.parametrize(
+    ("raw", "limits", "path", "words"),
+    [
+        (
+            spec(
+                sweep={
+                    "speed": {"from": "1000 rpm", "to": "9000 rpm", "num": 300},
+                    "seat": {"from": "0 in", "to": "0.1 in", "num": 300},
+                }
+            ),
+            Limits(cases=50_000),
+            "sweep.speed",
+            "cases (sweep.speed 300 × sweep.seat 300): 9e+04",
+        ),
+        (spec(run={"revolutions": 1, "dt": "1e-15 s"}), Limits(), "run.dt", "steps per case"),
+        (
+            spec(speed="0.001 rpm", run={"revolutions": 1, "integrator": "newmark-linear"}),
+            Limits(),
+            "run.dt",
+            "6e+10",
+        ),
+        (
+            spec(run={"revolutions": 1, "output_every": "1e-9 deg"}),
+            Limits(),
+            "run.output_every",
+            "samples per case",
+        ),
+        (
+            spec(run={"revolutions": 1, "max_events": 10**12}),
+            Limits(),
+            "run.max_events",
+            "--max-events",
+        ),
+        (
+            spec(
+                run={"revolutions": 100, "output_every": "0.01 deg", "record": ["q"]},
+                sweep={"speed": {"from": "1000 rpm", "to": "9000 rpm", "num": 100}},
+            ),
+            Limits(samples=10**7),
+            "run",
+            "archive size",
+        ),
+    ],
+)
+def test_a_spec_beyond_a_limit_is_refused_before_any_case_is_built(
+    raw, limits, path, words, monkeypatch
+):
+    expand_module = sys.modules["campipe.study.expand"]
+
+    def no_cases(spec):
+        raise AssertionError("a case was built")
+
+    monkeypatch.setattr(expand_module, "raw_cases", no_cases)
+    problems = refused(raw, limits)
+    assert any(p == path and words in m for p, m in problems), problems
+
+
+def test_the_case_count_comes_from_the_axes_lengths():
+    raw = spec(
+        sweep={"speed": {"from": "1000 rpm", "to": "9000 rpm", "num": 10}},
+        zip={"seat": ["0 in", "0.05 in", "0.1 in"], "closure": ["force", "form", "force"]},
+        cases=[{"model": {"spring_rate": "245 lbf/in"}}, {"model": {"spring_rate": "260 lbf/in"}}],
+        sample={
+            "method": "latin-hypercube",
+            "n": 4,
+            "seed": 1,
+            "ranges": {"model.spring_preload": {"from": "140 lbf", "to": "160 lbf"}},
+        },
+    )
+    assert case_count(check_spec(raw)) == 10 * 3 * 2 * 4
+
+
+def test_raised_limits_accept_what_the_defaults_refuse(tmp_path):
+    path = write_spec(tmp_path, json.dumps(spec(run={"revolutions": 1, "max_events": 200_000})))
+    with pytest.raises(SpecError):
+        load_study(path)
+    assert load_study(path, limits=Limits(events=200_000)).cases[0].settings.max_events == 200_000
+
+
+@pytest.mark.parametrize(
+    "text",
+    [
+        "a: " + "[" * (MAX_DEPTH + 1) + "]" * (MAX_DEPTH + 1),
+        "a: &a [1, 2, 3, 4, 5, 6, 7, 8]\n"
+        + "".join(
+            f"{chr(98 + i)}: &{chr(98 + i)} [{', '.join([f'*{chr(97 + i)}'] * 8)}]\n"
+            for i in range(7)
+        ),
+        "a: &a [*a]",
+    ],
+)
+def test_yaml_that_would_exhaust_memory_or_the_stack_is_refused(text):
+    with pytest.raises(SpecFileError):
+        parse_spec_text(text)
+
+
+def test_aliases_within_the_bound_are_plain_yaml():
+    raw = parse_spec_text("cam: &cam {kind: harmonic, lift: 1 in}\nprofile: *cam\n")
+    assert raw["profile"] == {"kind": "harmonic", "lift": "1 in"}
+
+
+@pytest.mark.parametrize("text", ["9**9**9 rpm", "9 rpm**9**9", "9 ((rpm**99)**99)**99"])
+def test_quantities_evaluate_no_arithmetic(text):
+    with pytest.raises(QuantityError):
+        parse_angular(text, "rad/s", "speed", "rpm")
+
+
+def test_where_takes_conditions_only():
+    cols = {"speed_rpm": np.array([6000.0, 9000.0])}
+    for text in ["1", "speed_rpm", "'form'", "speed_rpm > 1 and 2"]:
+        with pytest.raises(QueryError, match="where a condition belongs"):
+            parse_where(text)
+    assert evaluate(parse_where("speed_rpm > 7000 and true"), cols, 2).tolist() == [False, True]
+    with pytest.raises(QueryError, match="too large to compare"):
+        parse_where("speed_rpm > " + "9" * 400)
+    with pytest.raises(QueryError, match="cannot parse"):
+        parse_where("speed_rpm == '\udcff'")
+
+
+def test_long_histories_make_smaller_default_batches():
+    from campipe.study.execute import default_batch_size
+
+    assert default_batch_size(1000, 2) == 32
+    assert default_batch_size(1000, 2, samples=1441) == 32  # 4 turns at 1 deg
+    assert default_batch_size(1000, 2, samples=100_000) == 16  # 512 MiB / (1e5 × 320 B)
+    assert default_batch_size(1000, 2, samples=10_000_000) == 1

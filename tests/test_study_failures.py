@@ -1,0 +1,185 @@
+"""Failures of the environment end in a message naming the cause and what to do, exit status
+1, and leave state a rerun resumes from: a scheduler that cannot be reached or goes away, a
+worker process that dies, a folder that cannot be written, a full disk, a replay that fails
+after the archive is written. Input problems exit with status 2."""
+
+import errno
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+
+import pytest
+import xarray as xr
+from click.testing import CliRunner
+from study_helpers import ROOT, load, write_spec
+
+import campipe.study.execute as execute
+from campipe.cli import main
+from campipe.study import load_study
+from campipe.study.execute import parts_directory, run_study
+
+SPEC = """
+name: small
+profile: {kind: harmonic, lift: 1 in}
+run: {revolutions: 1}
+sweep:
+  speed: [6000 rpm, 9524 rpm, 11000 rpm]
+"""
+
+
+def study(spec, *args):
+    return CliRunner().invoke(main, ["study", str(spec), "--no-progress", *args])
+
+
+def assert_message(result, status, *phrases):
+    assert result.exit_code == status, result.output
+    assert "Traceback" not in result.output
+    assert result.exception is None or isinstance(result.exception, SystemExit)
+    for phrase in phrases:
+        assert phrase in result.stderr, result.stderr
+
+
+def test_an_unreachable_scheduler(tmp_path, monkeypatch):
+    monkeypatch.setattr(execute, "CONNECT_TIMEOUT", 1)
+    spec = write_spec(tmp_path, SPEC)
+    result = study(spec, "--scheduler", "tcp://127.0.0.1:9")
+    assert_message(
+        result, 1, "cannot reach a dask scheduler at tcp://127.0.0.1:9", "--scheduler threads"
+    )
+    assert len(result.stderr.strip().splitlines()) <= 2
+    assert not (tmp_path / "small.nc.lock").exists()
+
+
+def test_a_scheduler_that_goes_away_mid_study_leaves_what_was_stored(tmp_path):
+    from distributed import LocalCluster
+
+    spec = write_spec(tmp_path, SPEC)
+    cluster = LocalCluster(
+        n_workers=1, threads_per_worker=1, processes=False, dashboard_address=":0"
+    )
+    address = cluster.scheduler_address
+
+    def close_after_the_first(plan, data):
+        cluster.close()
+
+    with pytest.raises(execute.SchedulerError, match=f"the dask cluster at {address} failed"):
+        run_study(
+            load_study(spec),
+            tmp_path / "small.nc",
+            scheduler=address,
+            batch_size=1,
+            on_batch=close_after_the_first,
+        )
+    assert len(list(parts_directory(tmp_path / "small.nc").glob("batch-*.nc"))) >= 1
+    report = run_study(load_study(spec), tmp_path / "small.nc", scheduler="synchronous")
+    assert report.reused >= 1 and report.reused + report.computed == 3
+
+
+def test_a_worker_process_that_dies(tmp_path, monkeypatch):
+    from study_helpers import die
+
+    monkeypatch.setattr(execute, "compute_batch", die)
+    spec = write_spec(tmp_path, SPEC)
+    result = study(spec, "--scheduler", "processes", "--workers", "1")
+    assert_message(result, 1, "a worker process of the processes scheduler died", "rerun")
+    assert not (tmp_path / "small.nc.lock").exists()
+
+
+def test_a_folder_that_cannot_be_written_and_a_finished_study_in_one(tmp_path, monkeypatch):
+    """(Run as root, chmod does not stop writes: the lock's creation is refused instead, as
+    a read-only folder refuses it.)"""
+    spec = write_spec(tmp_path, SPEC)
+    assert study(spec, "--scheduler", "synchronous").exit_code == 0
+    real_open = os.open
+
+    def read_only(path, flags, *args, **kwargs):
+        if flags & (os.O_CREAT | os.O_WRONLY | os.O_RDWR):
+            raise PermissionError(errno.EROFS, os.strerror(errno.EROFS), str(path))
+        return real_open(path, flags, *args, **kwargs)
+
+    monkeypatch.setattr(os, "open", read_only)
+    up_to_date = study(spec)
+    assert_message(up_to_date, 0, "up to date (3 cases, checksums verified)")
+    refused = study(spec, "-o", str(tmp_path / "other.nc"))
+    assert_message(refused, 1, "other.nc.lock: cannot create or open the lock", "-o")
+
+
+def test_a_full_disk_names_the_file_and_a_rerun_resumes(tmp_path):
+    """The file size limit (RLIMIT_FSIZE) stands in for a full disk: every write beyond it
+    fails as a full disk's does."""
+    spec = write_spec(tmp_path, SPEC)
+    code = textwrap.dedent(
+        """
+        import resource, signal, sys
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+        resource.setrlimit(resource.RLIMIT_FSIZE, (12000, 12000))
+        from campipe.cli import main
+        main(sys.argv[1:])
+        """
+    )
+    args = [str(spec), "--scheduler", "synchronous", "--batch-size", "1", "--no-progress"]
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    full = subprocess.run(
+        [sys.executable, "-c", code, "study", *args], capture_output=True, text=True, env=env
+    )
+    assert full.returncode == 1, full.stderr
+    assert "Traceback" not in full.stderr
+    assert "cannot write" in full.stderr and "rerun the same command to resume" in full.stderr
+    assert " free in " in full.stderr
+    assert not (tmp_path / "small.nc").exists() and not (tmp_path / "small.nc.lock").exists()
+    rerun = study(spec, "--scheduler", "synchronous")
+    assert rerun.exit_code == 0, rerun.output
+    fresh = tmp_path / "fresh"
+    fresh.mkdir()
+    run_study(load_study(write_spec(fresh, SPEC)), fresh / "small.nc", scheduler="threads")
+    xr.testing.assert_identical(load(tmp_path / "small.nc"), load(fresh / "small.nc"))
+
+
+def test_a_replay_that_fails_after_the_archive_is_written(tmp_path, monkeypatch):
+    from campipe.replay.live import StudyReplay
+
+    def broken(self, archive):
+        raise RuntimeError("the recording stream closed")
+
+    monkeypatch.setattr(StudyReplay, "finish", broken)
+    spec = write_spec(tmp_path, SPEC + 'replay: {where: "speed_rpm == 9524"}\n')
+    result = study(spec, "--scheduler", "synchronous")
+    assert_message(result, 1, "is complete, but the replay recording", "campipe replay")
+    assert xr.load_dataset(tmp_path / "small.nc").sizes["case"] == 3
+
+
+def test_input_problems_exit_with_status_2(tmp_path):
+    spec = write_spec(tmp_path, SPEC)
+    long = study(spec, "-o", str(tmp_path / ("x" * 300 + ".nc")))
+    assert_message(long, 2, "the file name is too long")
+    bad = study(spec, "--scheduler", "thread")
+    assert_message(bad, 2, "expected one of threads, synchronous, processes")
+
+
+def test_sigterm_leaves_a_state_the_rerun_resumes(tmp_path):
+    slow = SPEC.replace(
+        "run: {revolutions: 1}", "run: {revolutions: 4, integrator: newmark-linear}"
+    ).replace("[6000 rpm, 9524 rpm, 11000 rpm]", "{from: 500 rpm, to: 600 rpm, num: 12}")
+    spec = write_spec(tmp_path, slow)
+    cmd = [sys.executable, "-m", "campipe", "study", str(spec), "--scheduler", "synchronous"]
+    cmd += ["--batch-size", "1", "--no-progress"]
+    proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True, cwd=ROOT)
+    parts = parts_directory(tmp_path / "small.nc")
+    try:
+        for _ in range(2400):
+            if list(parts.glob("batch-*.nc")):
+                break
+            if proc.poll() is not None:
+                break
+            time.sleep(0.05)
+        proc.send_signal(signal.SIGTERM)
+        proc.wait(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    rerun = study(spec, "--scheduler", "synchronous")
+    assert rerun.exit_code == 0, rerun.output
+    assert "reused" in rerun.stderr

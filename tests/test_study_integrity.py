@@ -1,0 +1,243 @@
+"""Nothing lost, nothing wrong: checksums on reuse and "up to date", the engine's fingerprint,
+per-case status, and no file replaced without asking."""
+
+import shutil
+
+import netCDF4
+import numpy as np
+import pytest
+import xarray as xr
+from click.testing import CliRunner
+from study_helpers import load, write_spec
+
+import campipe.study.results as results
+from campipe.cli import main
+from campipe.io.archive import CHECKSUM_ATTR, read_attrs, verify
+from campipe.study import load_study
+from campipe.study.execute import parts_directory, run_study
+from campipe.vocabulary import CHATTER, EVENTS_TRUNCATED, OK, STATUS, STATUS_FLAGS
+
+SPEC = """
+name: small
+profile: {kind: harmonic, lift: 1 in}
+run: {revolutions: 1}
+sweep:
+  speed: [6000 rpm, 9524 rpm, 11000 rpm]
+  seat: [none, 0.1 in]
+"""
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    """The study run once, untouched: its archive and its batch files."""
+    d = tmp_path_factory.mktemp("ref")
+    spec = write_spec(d, SPEC)
+    run_study(
+        load_study(spec), d / "small.nc", scheduler="synchronous", batch_size=2, keep_parts=True
+    )
+    return d
+
+
+def _copy(reference, tmp_path):
+    shutil.copy(reference / "spec.yaml", tmp_path / "spec.yaml")
+    shutil.copy(reference / "small.nc", tmp_path / "small.nc")
+    shutil.copytree(parts_directory(reference / "small.nc"), parts_directory(tmp_path / "small.nc"))
+    return load_study(tmp_path / "spec.yaml")
+
+
+def _flip(path, offset):
+    data = bytearray(path.read_bytes())
+    data[offset] ^= 0x40
+    path.write_bytes(bytes(data))
+
+
+def test_every_file_carries_checksums_that_verify(reference):
+    archive = reference / "small.nc"
+    assert verify(archive) == []
+    attrs = read_attrs(archive)
+    assert attrs["campipe_layout"] == "campipe-archive-2"
+    assert attrs["campipe_numerics"].startswith("campipe 0.1.0; source ")
+    assert attrs["spec_file"] == "spec.yaml"
+    for path in [archive, *parts_directory(archive).glob("batch-*.nc")]:
+        with netCDF4.Dataset(path) as ds:
+            sums = __import__("json").loads(ds.getncattr(CHECKSUM_ATTR))
+            assert set(sums) == {*ds.variables, "/attributes"}
+        assert verify(path) == []
+
+
+def test_a_flipped_byte_in_a_batch_files_data_is_detected_and_recomputed(reference, tmp_path):
+    study = _copy(reference, tmp_path)
+    (tmp_path / "small.nc").unlink()  # the batch files alone must supply the cases
+    batch = sorted(parts_directory(tmp_path / "small.nc").glob("batch-*.nc"))[1]
+    with netCDF4.Dataset(batch) as ds:
+        lift = np.asarray(ds["valve_lift"][0, 100:104])
+    offset = batch.read_bytes().find(lift.tobytes())
+    assert offset > 0  # batch files are uncompressed: the values are there as written
+    _flip(batch, offset + 3)
+    report = run_study(study, tmp_path / "small.nc", scheduler="synchronous", batch_size=2)
+    assert (report.computed, report.reused) == (2, 4)
+    assert any(str(batch) in n and "failed its checks" in n for n in report.notes)
+    xr.testing.assert_identical(load(tmp_path / "small.nc"), load(reference / "small.nc"))
+
+
+@pytest.mark.parametrize("fraction", [0.3, 0.45, 0.6, 0.75, 0.9])
+def test_a_flipped_byte_anywhere_in_a_batch_file_never_reaches_the_archive(
+    reference, tmp_path, fraction
+):
+    study = _copy(reference, tmp_path)
+    (tmp_path / "small.nc").unlink()
+    batch = sorted(parts_directory(tmp_path / "small.nc").glob("batch-*.nc"))[0]
+    _flip(batch, int(fraction * batch.stat().st_size))
+    run_study(study, tmp_path / "small.nc", scheduler="synchronous", batch_size=2)
+    xr.testing.assert_identical(load(tmp_path / "small.nc"), load(reference / "small.nc"))
+
+
+def test_a_flipped_byte_in_the_archive_is_not_up_to_date_and_is_recomputed(reference, tmp_path):
+    """The archive is compressed: bytes at several places of it are flipped in turn. Each
+    damage that changes a value or attribute is detected before "up to date", and the
+    rerun's archive always equals the untouched one."""
+    pristine = (reference / "small.nc").read_bytes()
+    size = len(pristine)
+    detected = 0
+    for fraction in np.linspace(0.1, 0.95, 8):
+        d = tmp_path / f"f{fraction:.2f}"
+        d.mkdir()
+        shutil.copy(reference / "spec.yaml", d / "spec.yaml")
+        (d / "small.nc").write_bytes(pristine)
+        _flip(d / "small.nc", int(fraction * size))
+        damaged = bool(verify(d / "small.nc"))
+        report = run_study(load_study(d / "spec.yaml"), d / "small.nc", scheduler="synchronous")
+        assert report.up_to_date == (not damaged)
+        if damaged:
+            detected += 1
+            assert report.computed == 6 and "failed its checks" in report.notes[0]
+        xr.testing.assert_identical(load(d / "small.nc"), load(reference / "small.nc"))
+    assert detected >= 3  # the others hit bytes no value or attribute is read from
+
+
+def test_results_of_another_engine_are_never_reused(reference, tmp_path, monkeypatch):
+    study = _copy(reference, tmp_path)
+    monkeypatch.setattr(
+        "campipe.study.execute.numerics_fingerprint", lambda: "campipe 9; source x; numpy==9"
+    )
+    monkeypatch.setattr(
+        "campipe.study.layout.numerics_fingerprint", lambda: "campipe 9; source x; numpy==9"
+    )
+    monkeypatch.setattr(results, "numerics_fingerprint", lambda: "campipe 9; source x; numpy==9")
+    report = run_study(study, tmp_path / "small.nc", scheduler="synchronous", batch_size=2)
+    assert not report.up_to_date and (report.computed, report.reused) == (6, 0)
+    assert any("computed by another campipe (campipe 0.1.0" in n for n in report.notes)
+    assert read_attrs(tmp_path / "small.nc")["campipe_numerics"] == "campipe 9; source x; numpy==9"
+
+
+# -- per-case status ------------------------------------------------------------------------
+
+
+def test_a_failing_case_is_recorded_by_case_id_and_the_others_finish(tmp_path, monkeypatch):
+    """A chattering case (simulated here) is the engine's to avoid; the study's part is to
+    record it, name it by case id and finish every other case."""
+    real = results.run_batch
+
+    def chatter_on_9524(cases, settings, **kwargs):
+        assert kwargs["on_failure"] == "record"
+        out = real(cases, settings, **kwargs)
+        for i, c in enumerate(cases):
+            if abs(c.speed - 9524 * np.pi / 30) < 1e-6:
+                out.status[i] = CHATTER
+                out.valve_lift  # noqa: B018 - a property; the arrays below are the engine's
+                out.q[i] = np.nan
+                out.separation_per_rev[i] = np.nan
+        return out
+
+    monkeypatch.setattr(results, "run_batch", chatter_on_9524)
+    spec = write_spec(tmp_path, SPEC)
+    result = CliRunner().invoke(
+        main,
+        ["study", str(spec), "--scheduler", "synchronous", "--batch-size", "4", "--no-progress"],
+    )
+    assert result.exit_code == 0, result.output
+    ds = xr.load_dataset(tmp_path / "small.nc")
+    failed = ds.case_id.values[ds.status.values == CHATTER]
+    assert len(failed) == 2 and (ds.speed_rpm.values[ds.status.values == CHATTER] == 9524).all()
+    assert (ds.status.values[ds.speed_rpm.values != 9524] == OK).all()
+    assert np.isfinite(ds.valve_lift.values[ds.status.values == OK]).all()
+    assert np.isnan(ds.separation_deg_per_rev.values[ds.status.values == CHATTER]).all()
+    assert f"2 cases failed: {failed[0]} (chatter), {failed[1]} (chatter)" in result.stderr
+    assert ds.status.attrs["flag_meanings"] == dict(STATUS_FLAGS)["flag_meanings"]
+    summary = CliRunner().invoke(main, ["query", str(tmp_path / "small.nc"), "--summary"])
+    assert f"failed: {failed[0]} (chatter), {failed[1]} (chatter)" in summary.output
+    others = CliRunner().invoke(
+        main, ["query", str(tmp_path / "small.nc"), "--summary", "--where", "speed_rpm != 9524"]
+    )
+    assert "small: 4 cases (of 6, where speed_rpm != 9524)" in others.output
+    assert "failed" not in others.output
+
+
+def test_events_beyond_max_events_are_a_visible_status(tmp_path):
+    spec = write_spec(
+        tmp_path, SPEC.replace("run: {revolutions: 1}", "run: {revolutions: 1, max_events: 2}")
+    )
+    result = CliRunner().invoke(main, ["study", str(spec), "--scheduler", "synchronous"])
+    assert result.exit_code == 0, result.output
+    ds = xr.load_dataset(tmp_path / "small.nc")
+    truncated = ds.status.values == EVENTS_TRUNCATED
+    assert truncated.any() and (ds.event_count.values[truncated] == 2).all()
+    assert "kept only run.max_events events" in result.stderr
+    assert STATUS[EVENTS_TRUNCATED] in result.stderr
+
+
+# -- nothing replaced without asking -------------------------------------------------------
+
+
+def _study(tmp_path, output=None, *extra):
+    spec = tmp_path / "spec.yaml"
+    args = ["study", str(spec), "--scheduler", "synchronous", "--no-progress", *extra]
+    return CliRunner().invoke(main, args + (["-o", str(output)] if output else []))
+
+
+@pytest.mark.parametrize("target", ["spec", "text", "other-spec"])
+def test_a_file_that_is_not_this_studys_archive_is_refused(reference, tmp_path, target):
+    shutil.copy(reference / "spec.yaml", tmp_path / "spec.yaml")
+    if target == "spec":
+        victim = tmp_path / "spec.yaml"
+    elif target == "text":
+        victim = tmp_path / "notes.txt"
+        victim.write_text("my notes\n")
+    else:  # a second spec with the same name, in the same folder: the same default archive
+        shutil.copy(reference / "spec.yaml", tmp_path / "first.yaml")
+        first = CliRunner().invoke(
+            main, ["study", str(tmp_path / "first.yaml"), "--scheduler", "synchronous"]
+        )
+        assert first.exit_code == 0, first.output
+        victim = tmp_path / "small.nc"
+    before = victim.read_bytes()
+    result = _study(tmp_path, None if target == "other-spec" else victim)
+    assert result.exit_code == 2, result.output
+    assert f"{victim}: exists and is" in result.stderr and "--overwrite" in result.stderr
+    assert "Traceback" not in result.output
+    assert victim.read_bytes() == before
+    assert not list(tmp_path.glob("*.lock")) and not list(tmp_path.glob("*.parts"))
+
+
+def test_overwrite_replaces_another_studys_archive_reusing_the_cases_it_shares(reference, tmp_path):
+    other = tmp_path / "other.yaml"
+    other.write_text(SPEC.replace("name: small", "name: other").replace(", 11000 rpm", ""))
+    shutil.copy(reference / "spec.yaml", tmp_path / "spec.yaml")
+    assert (
+        CliRunner().invoke(main, ["study", str(other), "-o", str(tmp_path / "small.nc")]).exit_code
+        == 0
+    )
+    assert _study(tmp_path).exit_code == 2
+    result = _study(tmp_path, None, "--overwrite")
+    assert result.exit_code == 0, result.output
+    assert "(4 reused, 2 computed in 1 batches)" in result.stderr
+    xr.testing.assert_identical(load(tmp_path / "small.nc"), load(reference / "small.nc"))
+
+
+def test_an_edited_spec_may_replace_its_own_archive(reference, tmp_path):
+    shutil.copy(reference / "spec.yaml", tmp_path / "spec.yaml")
+    assert _study(tmp_path).exit_code == 0
+    (tmp_path / "spec.yaml").write_text(SPEC.replace(", 11000 rpm", ""))
+    result = _study(tmp_path)
+    assert result.exit_code == 0, result.output
+    assert xr.load_dataset(tmp_path / "small.nc").sizes["case"] == 4
