@@ -21,7 +21,12 @@ Impacts are the thesis's (Ch. IV): infinite cam (seat) mass, perfectly plastic; 
 coordinate takes the obstacle's velocity and the free velocities jump by −M_ff⁻¹ M_fp Δv_p
 (the consistent mass carries the impulse). A velocity jump of the profile at a break (a flat's
 edges) releases the follower where the surface falls away, and is an impact where it rises
-into it. The run starts at θ = 0 on the cam in quasi-static equilibrium, as the engine's.
+into it. The contact rules are the engine's, written again here: an impact needs a positive
+closing velocity; with the other contact held, it releases where the impact would separate it
+faster than the capture velocity; an impact slower than that leaves its contact resting (held
+until it pulls beyond the hold ``modal.ModalData.hold`` × the closing velocity), and a
+release it closes again at once is taken back. The run starts where the engine's does
+(``campipe.engine.start_states``): the scenario is the same, the integration independent.
 
 Pure numerics: arrays in, arrays out.
 """
@@ -36,7 +41,8 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from campipe.constants import TWO_PI
-from campipe.engine.batch import Case
+from campipe.engine.batch import DEFAULT_CAPTURE_VELOCITY, Case, RunSettings, start_states
+from campipe.engine.modal import modal_data
 from campipe.errors import CampipeError
 from campipe.model import system_matrices
 from campipe.vocabulary import (
@@ -88,7 +94,8 @@ class IvpResult:
     q: np.ndarray  # (n_out, 7) [m, rad]
     v: np.ndarray  # (n_out, 7) [m/s, rad/s]
     valve_reference: float  # q7 at zero valve lift [m]
-    separation_per_rev: np.ndarray  # (n_rev,) cam angle off the cam per turn [rad]
+    separation_per_rev: np.ndarray  # (n_rev,) cam angle in configuration II per turn [rad]
+    seated_off_cam_per_rev: np.ndarray  # (n_rev,) cam angle in configuration IV per turn [rad]
     max_cam_impact_velocity: float  # [m/s]
     max_seating_velocity: float  # [m/s]
     events: np.ndarray  # (n_ev, 6) as the engine's: time, kind, from, to, velocity, impulse
@@ -158,6 +165,313 @@ class _Cam:
         return (p0 + ta * s + tb * co, w * (p1 + ta * co - tb * s), w * w * (p2 - ta * s - tb * co))
 
 
+class _Peer:
+    """One case's run: its state between events and what it has recorded."""
+
+    def __init__(self, case: Case, revolutions: float, output_every: float, method: str,
+                 rtol: float, atol: float | None, start: str, capture: float) -> None:  # fmt: skip
+        sm = system_matrices(case.train)
+        self.M, self.C, self.K, self.f = sm.mass, sm.damping, sm.stiffness, sm.preload
+        self.hold_unit = modal_data(sm).hold  # the contact law's hold per unit velocity
+        self.case, self.w, self.cam = case, case.speed, _Cam(case)
+        self.method, self.rtol = method, rtol
+        self.q_ref = _static(self.K, self.f, {CAM: 0.0})[SEAT]
+        self.seat_q = self.q_ref + (case.seat if case.has_seat else 0.0)
+        self.form = case.closure == "form"
+        self.configs = {
+            c: _configuration(self.M, self.C, self.K, self.f, c, self.seat_q) for c in (1, 2, 3, 4)
+        }
+        self.eps_force = FORCE_LEVEL * (abs(self.f).max() + 1.0)
+        self.capture = capture
+        # The other contact's separation velocity per unit velocity change of the struck one,
+        # if released: the valve opening after a cam impact (configuration I), the follower
+        # lifting off the cam after a seat impact (configuration IV).
+        self.separation = (self.configs[1].kick[0][SEAT], -self.configs[4].kick[1][CAM])
+        profile = case.profile
+        lift_max = float(np.abs(profile.poly[:, 0]).max() + np.abs(profile.trig).sum(axis=1).max())
+        self.scale = np.full(7, max(lift_max, 1e-6))
+        self.scale[[2, 4, 5]] /= case.train.rocker_pushrod_arm_length
+        self.atol_frac = rtol if atol is None else atol
+        settings = RunSettings(
+            revolutions=revolutions, start=start, warmup=0, integrator="modal-exact"
+        )
+        begin = start_states([case], settings)
+        self.t = float(begin.t0[0])
+        self.q = begin.q0[0].copy()
+        self.v = begin.v0[0].copy()
+        self.cfg = int(begin.cfg0[0])
+        self.rev = math.floor(self.w * self.t / TWO_PI)
+        phi = self.w * self.t - self.rev * TWO_PI
+        piece = int(np.searchsorted(profile.breaks, phi, side="right") - 1)
+        self.piece = min(max(piece, 0), profile.n_pieces - 1)
+        self.t_end = revolutions * TWO_PI / self.w
+        n_out = int(math.floor(revolutions * TWO_PI / output_every + 1e-9)) + 1
+        self.t_out = np.arange(n_out) * output_every / self.w
+        self.q_out = np.zeros((n_out, 7))
+        self.v_out = np.zeros((n_out, 7))
+        self.k_out = 0
+        n_rev = int(math.ceil(revolutions - 1e-12))
+        self.off_cam = {False: np.zeros(n_rev), True: np.zeros(n_rev)}  # by seat held
+        self.events: list[tuple[float, ...]] = []
+        self.v_max = [0.0, 0.0]  # cam, seat
+        self.nfev = 0
+        self.segments = 0
+        self.stalled = 0
+        self.resting = {CAM: 0.0, SEAT: 0.0}  # a resting contact's hold [N]; 0: not resting
+
+    # -- the equations in the current configuration ------------------------------------------
+
+    def held_state(self, tt, x, xd):
+        """q, q̇ with the held coordinates on the cam and the seat; the cam's q̈1."""
+        fr = self.configs[self.cfg].free
+        qq = np.empty(7)
+        vv = np.empty(7)
+        qq[fr] = x
+        vv[fr] = xd
+        lift, dlift, ddlift = self.cam.at(self.piece, self.rev, tt)
+        if self.cfg in (1, 3):
+            qq[CAM], vv[CAM] = -lift, -dlift
+        if self.cfg in (3, 4):
+            qq[SEAT], vv[SEAT] = self.seat_q, 0.0
+        return qq, vv, -ddlift
+
+    def rhs(self, tt, z):
+        conf = self.configs[self.cfg]
+        nf = conf.free.size
+        out = conf.a @ z
+        out[nf:] += conf.constant
+        if self.cfg in (1, 3):
+            lift, dlift, ddlift = self.cam.at(self.piece, self.rev, tt)
+            out[nf:] += conf.cam_terms.T @ (-lift, -dlift, -ddlift)
+        return out
+
+    def force(self, tt, z, row):
+        """Contact force at coordinate ``row``: row of M·q̈ + C·q̇ + K·q − f."""
+        conf = self.configs[self.cfg]
+        nf = conf.free.size
+        qq, vv, acam = self.held_state(tt, z[:nf], z[nf:])
+        acc = np.zeros(7)
+        acc[conf.free] = self.rhs(tt, z)[nf:]
+        if self.cfg in (1, 3):
+            acc[CAM] = acam
+        return self.M[row] @ acc + self.C[row] @ vv + self.K[row] @ qq - self.f[row]
+
+    def monitors(self):
+        """solve_ivp's events (terminal, upward), their kinds, and for a gap its closing
+        velocity."""
+        fr = self.configs[self.cfg].free
+        nf = fr.size
+        cam_held, seat_held = self.cfg in (1, 3), self.cfg in (3, 4)
+        out: list[tuple[Any, int, Any]] = []
+        if not (cam_held and self.form):
+            if cam_held:
+                lv = max(self.eps_force, self.resting[CAM])
+                out.append((lambda tt, z: self.force(tt, z, CAM) - lv, CAM_SEPARATION, None))
+            else:
+                i1 = int(np.flatnonzero(fr == CAM)[0])
+                out.append((
+                    lambda tt, z: z[i1] + self.cam.at(self.piece, self.rev, tt)[0] - GAP_LEVEL,
+                    CAM_IMPACT,
+                    lambda tt, z: z[nf + i1] + self.cam.at(self.piece, self.rev, tt)[1],
+                ))  # fmt: skip
+        if seat_held:
+            lv7 = max(self.eps_force, self.resting[SEAT])
+            out.append((lambda tt, z: -self.force(tt, z, SEAT) - lv7, SEAT_SEPARATION, None))
+        elif self.case.has_seat:
+            i7 = int(np.flatnonzero(fr == SEAT)[0])
+            out.append((
+                lambda tt, z: self.seat_q - z[i7] - GAP_LEVEL,
+                SEAT_IMPACT,
+                lambda tt, z: -z[nf + i7],
+            ))  # fmt: skip
+        for g, _, _ in out:
+            g.terminal = True
+            g.direction = 1.0
+        return out
+
+    # -- one segment, up to an event or a break ----------------------------------------------
+
+    def segment(self, t_stop):
+        """Integrate to an event or ``t_stop``; returns (the event's kind or None, its time)."""
+        conf = self.configs[self.cfg]
+        fr = conf.free
+        nf = fr.size
+        monitors = self.monitors()
+        z0 = np.concatenate([self.q[fr], self.v[fr]])
+        # A monitor already above its level at the segment start is an event here (a gap
+        # only if it closes).
+        for g, kind, closing in monitors:
+            if g(self.t, z0) > 0.0 and (closing is None or closing(self.t, z0) > 0.0):
+                self.stalled += 1
+                if self.stalled > MAX_STALLED:
+                    raise ChatterError(f"contact events kept recurring at t = {self.t:.9g} s")
+                return kind, self.t
+        if t_stop - self.t <= 1e-15 * (1.0 + abs(self.t)):
+            self.t = t_stop
+            return None, t_stop
+        tol = self.atol_frac * np.concatenate([self.scale[fr], self.w * self.scale[fr]])
+        kw = {"jac": lambda tt, z, a=conf.a: a} if self.method in IMPLICIT else {}
+        sol = solve_ivp(
+            self.rhs, (self.t, t_stop), z0, method=self.method, rtol=self.rtol, atol=tol,
+            events=[m[0] for m in monitors], dense_output=True, **kw,
+        )  # fmt: skip
+        self.segments += 1
+        self.nfev += sol.nfev
+        t_seg = sol.t[-1]
+        kind = None
+        if sol.status == -1:
+            # Radau can stop an ulp short of the end, where the last step is below its
+            # minimum; that is the end.
+            if t_stop - t_seg > 8 * np.spacing(t_stop):
+                raise RuntimeError(f"solve_ivp failed at t = {t_seg:.9g} s: {sol.message}")
+            t_seg = t_stop
+        if sol.status == 1:
+            hit = [k for k, te in enumerate(sol.t_events) if len(te)]
+            k = min(hit, key=lambda k: sol.t_events[k][0])
+            kind = monitors[k][1]
+            t_seg = float(sol.t_events[k][0])
+            z_end = sol.y_events[k][0]
+            self.stalled = self.stalled + 1 if t_seg - self.t < STALL_WINDOW else 0
+            if self.stalled > MAX_STALLED:
+                raise ChatterError(
+                    f"contact events kept recurring within {STALL_WINDOW:g} s of each other "
+                    f"at t = {self.t:.9g} s (method {self.method}, rtol {self.rtol:g})"
+                )
+        else:
+            z_end = sol.y[:, -1]
+        while self.k_out < self.t_out.size and self.t_out[self.k_out] <= t_seg * (1.0 + 1e-14):
+            zs = sol.sol(self.t_out[self.k_out])
+            qv = self.held_state(self.t_out[self.k_out], zs[:nf], zs[nf:])
+            self.q_out[self.k_out], self.v_out[self.k_out] = qv[0], qv[1]
+            self.k_out += 1
+        if self.cfg not in (1, 3):
+            self.add_off_cam(self.t, t_seg, self.cfg == 4)
+        self.q, self.v, _ = self.held_state(t_seg, z_end[:nf], z_end[nf:])
+        self.t = t_seg
+        return kind, t_seg
+
+    def add_off_cam(self, ta: float, tb: float, seat_held: bool) -> None:
+        sums = self.off_cam[seat_held]
+        a, b = max(self.w * ta, 0.0), self.w * tb
+        r = int(a / TWO_PI)
+        while a < b and r < sums.size:
+            end = min(b, (r + 1) * TWO_PI)
+            sums[r] += end - a
+            a = end
+            r += 1
+
+    # -- events ------------------------------------------------------------------------------
+
+    def apply(self, kind, t_ev):
+        """A monitor fired at t_ev: release the contact, or (a closing gap) the impact."""
+        cfg = self.cfg
+        cam_held, seat_held = cfg in (1, 3), cfg in (3, 4)
+        lift, dlift, _ = self.cam.at(self.piece, self.rev, t_ev)
+        if kind in (CAM_SEPARATION, SEAT_SEPARATION):
+            seat = kind == SEAT_SEPARATION
+            new = configuration(cam_held, False) if seat else configuration(False, seat_held)
+            self.resting[SEAT if seat else CAM] = 0.0
+            if t_ev >= 0.0:
+                self.events.append((t_ev, kind, cfg, new, 0.0, 0.0))
+            self.cfg = new
+            return
+        seat = kind == SEAT_IMPACT
+        closing = -self.v[SEAT] if seat else self.v[CAM] + dlift
+        if closing <= 0.0:
+            return  # a touch that does not close is no event
+        self.impact(t_ev, seat, closing)
+        if not seat:
+            self.q[CAM], self.v[CAM] = -lift, -dlift
+
+    def impact(self, t_ev, seat, closing):
+        """The plastic impact at the cam or the seat, closing at ``closing`` > 0 [m/s]."""
+        cfg = self.cfg
+        side, coord = (1, SEAT) if seat else (0, CAM)
+        other_held = cfg in ((1, 3) if seat else (3, 4))
+        dv = closing if seat else -closing
+        if other_held and self.separation[side] * dv > self.capture:
+            other_held = False  # the impact separates the other contact: it releases
+            self.resting[CAM if seat else SEAT] = 0.0
+        new = configuration(other_held, True) if seat else configuration(True, other_held)
+        self.v = self.v + self.configs[new].kick[side] * dv
+        if seat:
+            self.q[SEAT] = self.seat_q
+        self.cfg = new
+        if closing < self.capture:
+            self.resting[coord] = self.hold_unit[new - 1, side] * closing
+            last = self.events[-1] if self.events else None
+            release = SEAT_SEPARATION if seat else CAM_SEPARATION
+            if last is not None and last[1] == release and last[3] == cfg:
+                self.events.pop()  # it never really left: the release is taken back
+                return
+        if t_ev >= 0.0:
+            self.v_max[side] = max(self.v_max[side], closing)
+            mass = self.configs[new].impact_mass[side]
+            kind = SEAT_IMPACT if seat else CAM_IMPACT
+            self.events.append((t_ev, kind, cfg, new, closing, mass * closing))
+
+    def cross_break(self, nxt, rev_next):
+        """A break of the profile: any jump in the surface's velocity, with the cam held."""
+        t, cfg = self.t, self.cfg
+        l_left, dl_left, _ = self.cam.at(self.piece, self.rev, t)
+        l_right, dl_right, _ = self.cam.at(nxt, rev_next, t)
+        seat_held = cfg in (3, 4)
+        if cfg not in (1, 3):
+            return
+        jump = dl_right - dl_left  # lift-rate jump [m/s]
+        # Rounding, or slower than an impact that would count (the capture velocity).
+        small = max(1e-9 * (abs(dl_left) + abs(dl_right) + 1e-12), self.capture)
+        if (jump < -small or l_right < l_left - 1e-12) and not self.form:
+            self.cfg = configuration(False, seat_held)
+            self.resting[CAM] = 0.0
+            if t >= 0.0:
+                self.events.append((t, CAM_SEPARATION, cfg, self.cfg, -jump, 0.0))
+            return
+        if abs(jump) > small:
+            if seat_held and self.separation[0] * -jump > self.capture:
+                seat_held = False
+                self.resting[SEAT] = 0.0
+            self.cfg = configuration(True, seat_held)
+            self.v = self.v + self.configs[self.cfg].kick[0] * (-jump)
+            if t >= 0.0:
+                self.v_max[0] = max(self.v_max[0], abs(jump))
+                mass = self.configs[self.cfg].impact_mass[0]
+                self.events.append((t, CAM_IMPACT, cfg, self.cfg, abs(jump), mass * abs(jump)))
+            self.q[CAM], self.v[CAM] = -l_right, -dl_right
+
+    def run(self, max_events: int) -> IvpResult:
+        profile = self.case.profile
+        while self.t < self.t_end:
+            if self.piece + 1 < profile.n_pieces:
+                nxt, rev_next = self.piece + 1, self.rev
+            else:
+                nxt, rev_next = 0, self.rev + 1
+            t_break = (self.rev * TWO_PI + profile.breaks[self.piece + 1]) / self.w
+            kind, t_ev = self.segment(min(t_break, self.t_end))
+            if kind is not None:
+                self.apply(kind, t_ev)
+                continue
+            if self.t >= self.t_end:
+                break
+            self.cross_break(nxt, rev_next)
+            self.piece, self.rev = nxt, rev_next
+        events = self.events[:max_events]
+        n_out = self.t_out.size
+        return IvpResult(
+            cam_angle=self.t_out * self.w,
+            q=self.q_out[: self.k_out] if self.k_out < n_out else self.q_out,
+            v=self.v_out[: self.k_out] if self.k_out < n_out else self.v_out,
+            valve_reference=float(self.q_ref),
+            separation_per_rev=self.off_cam[False],
+            seated_off_cam_per_rev=self.off_cam[True],
+            max_cam_impact_velocity=self.v_max[0],
+            max_seating_velocity=self.v_max[1],
+            events=np.array(events, dtype=float).reshape(-1, 6),
+            nfev=self.nfev,
+            segments=self.segments,
+        )
+
+
 def solve_case(
     case: Case,
     revolutions: float = 2.0,
@@ -167,6 +481,8 @@ def solve_case(
     rtol: float = 1e-8,
     atol: float | None = None,
     max_events: int = 4096,
+    start: str = "periodic",
+    capture_velocity: float = DEFAULT_CAPTURE_VELOCITY,
 ) -> IvpResult:
     """Integrate one case with ``scipy.integrate.solve_ivp``, event by event.
 
@@ -186,6 +502,10 @@ def solve_case(
         Absolute tolerance as a fraction of each state component's scale (the lift for
         translations, lift per rocker arm length for rotations, times ω for velocities);
         default ``rtol``.
+    start : {"periodic", "quasi-static"}
+        Where the run starts (the engine's ``run.start``).
+    capture_velocity : float
+        An impact closing slower than this [m/s] leaves its contact resting.
 
     Raises
     ------
@@ -194,241 +514,5 @@ def solve_case(
     RuntimeError
         If ``solve_ivp`` fails.
     """
-    sm = system_matrices(case.train)
-    M, C, K, f = sm.mass, sm.damping, sm.stiffness, sm.preload
-    w = case.speed
-    cam = _Cam(case)
-    profile = case.profile
-    n_pieces = profile.n_pieces
-    q_ref = _static(K, f, {CAM: 0.0})[SEAT]
-    has_seat = case.has_seat
-    seat_q = q_ref + (case.seat if has_seat else 0.0)
-    form = case.closure == "form"
-    configs = {c: _configuration(M, C, K, f, c, seat_q) for c in (1, 2, 3, 4)}
-    eps_force = FORCE_LEVEL * (abs(f).max() + 1.0)
-
-    lift_max = float(np.abs(profile.poly[:, 0]).max() + np.abs(profile.trig).sum(axis=1).max())
-    scale = np.full(7, max(lift_max, 1e-6))
-    scale[[2, 4, 5]] /= case.train.rocker_pushrod_arm_length
-    atol_frac = rtol if atol is None else atol
-
-    # Quasi-static start at θ = 0 on the cam (thesis Appendix B, step 1).
-    piece = int(np.searchsorted(profile.breaks, 0.0, side="right") - 1)
-    rev = 0
-    lift0, dlift0, _ = cam.at(piece, rev, 0.0)
-    q = _static(K, f, {CAM: -lift0})
-    v = _static(K, np.zeros(7), {CAM: -dlift0})
-    cfg = 1
-    if has_seat and q[SEAT] < seat_q:
-        q = _static(K, f, {CAM: -lift0, SEAT: seat_q})
-        v = _static(K, np.zeros(7), {CAM: -dlift0, SEAT: 0.0})
-        cfg = 3
-
-    t_end = revolutions * TWO_PI / w
-    n_out = int(math.floor(revolutions * TWO_PI / output_every + 1e-9)) + 1
-    t_out = np.arange(n_out) * output_every / w
-    q_out = np.zeros((n_out, 7))
-    v_out = np.zeros((n_out, 7))
-    k_out = 0
-    n_rev = int(math.ceil(revolutions - 1e-12))
-    sep = np.zeros(n_rev)
-    events: list[tuple[float, ...]] = []
-    v_cam_max = 0.0
-    v_seat_max = 0.0
-    nfev = 0
-    segments = 0
-    stalled = 0
-
-    def add_separation(ta: float, tb: float) -> None:
-        a, b = w * ta, w * tb
-        r = int(a / TWO_PI)
-        while a < b and r < n_rev:
-            end = min(b, (r + 1) * TWO_PI)
-            sep[r] += end - a
-            a = end
-            r += 1
-
-    t = 0.0
-    while t < t_end:
-        cam_held = cfg in (1, 3)
-        seat_held = cfg in (3, 4)
-        conf = configs[cfg]
-        fr = conf.free
-        nf = fr.size
-        nxt, rev_next = (piece + 1, rev) if piece + 1 < n_pieces else (0, rev + 1)
-        t_break = (rev * TWO_PI + profile.breaks[piece + 1]) / w
-        t_stop = min(t_break, t_end)
-        pc, rc = piece, rev  # bind the piece for the closures below
-
-        def held_state(tt, x, xd, pc=pc, rc=rc, cam_held=cam_held, seat_held=seat_held, fr=fr):
-            qq = np.empty(7)
-            vv = np.empty(7)
-            qq[fr] = x
-            vv[fr] = xd
-            lift, dlift, ddlift = cam.at(pc, rc, tt)
-            if cam_held:
-                qq[CAM], vv[CAM] = -lift, -dlift
-            if seat_held:
-                qq[SEAT], vv[SEAT] = seat_q, 0.0
-            return qq, vv, -ddlift, lift
-
-        def rhs(tt, z, conf=conf, nf=nf, pc=pc, rc=rc, cam_held=cam_held):
-            out = conf.a @ z
-            out[nf:] += conf.constant
-            if cam_held:
-                lift, dlift, ddlift = cam.at(pc, rc, tt)
-                out[nf:] += conf.cam_terms.T @ (-lift, -dlift, -ddlift)
-            return out
-
-        def force(tt, z, row, conf=conf, nf=nf, cam_held=cam_held, rhs=rhs, held_state=held_state):
-            """Contact force at coordinate ``row``: row of M·q̈ + C·q̇ + K·q − f."""
-            qq, vv, acam, _ = held_state(tt, z[:nf], z[nf:])
-            acc = np.zeros(7)
-            acc[conf.free] = rhs(tt, z)[nf:]
-            if cam_held:
-                acc[CAM] = acam
-            return M[row] @ acc + C[row] @ vv + K[row] @ qq - f[row]
-
-        monitors: list[Any] = []  # solve_ivp's events: callables with terminal, direction
-        kinds = []
-        if not (cam_held and form):
-            if cam_held:
-                monitors.append(lambda tt, z: force(tt, z, CAM) - eps_force)
-                kinds.append(CAM_SEPARATION)
-            else:
-                i1 = int(np.flatnonzero(fr == CAM)[0])
-                monitors.append(
-                    lambda tt, z, i1=i1, pc=pc, rc=rc: z[i1] + cam.at(pc, rc, tt)[0] - GAP_LEVEL
-                )
-                kinds.append(CAM_IMPACT)
-        if seat_held:
-            monitors.append(lambda tt, z: -force(tt, z, SEAT) - eps_force)
-            kinds.append(SEAT_SEPARATION)
-        elif has_seat:
-            i7 = int(np.flatnonzero(fr == SEAT)[0])
-            monitors.append(lambda tt, z, i7=i7: seat_q - z[i7] - GAP_LEVEL)
-            kinds.append(SEAT_IMPACT)
-        for g in monitors:
-            g.terminal = True
-            g.direction = 1.0
-
-        z0 = np.concatenate([q[fr], v[fr]])
-        # A monitor already above its level at the segment start is an event here.
-        fired = [k for k, g in enumerate(monitors) if g(t, z0) > 0.0]
-        t_ev = t
-        kind = None
-        if fired:
-            kind = kinds[fired[0]]
-            stalled += 1
-            if stalled > MAX_STALLED:
-                raise ChatterError(f"contact events kept recurring at t = {t:.9g} s")
-        elif t_stop - t > 1e-15 * (1.0 + t):
-            tol = atol_frac * np.concatenate([scale[fr], w * scale[fr]])
-            kw = {"jac": lambda tt, z, a=conf.a: a} if method in IMPLICIT else {}
-            sol = solve_ivp(
-                rhs,
-                (t, t_stop),
-                z0,
-                method=method,
-                rtol=rtol,
-                atol=tol,
-                events=monitors,
-                dense_output=True,
-                **kw,
-            )
-            segments += 1
-            nfev += sol.nfev
-            t_seg = sol.t[-1]
-            if sol.status == -1:
-                # Radau can stop an ulp short of the end, where the last step is below its
-                # minimum; that is the end.
-                if t_stop - t_seg > 8 * np.spacing(t_stop):
-                    raise RuntimeError(f"solve_ivp failed at t = {t_seg:.9g} s: {sol.message}")
-                t_seg = t_stop
-            if sol.status == 1:
-                hit = [k for k, te in enumerate(sol.t_events) if len(te)]
-                k = min(hit, key=lambda k: sol.t_events[k][0])
-                kind = kinds[k]
-                t_ev = t_seg = float(sol.t_events[k][0])
-                z_end = sol.y_events[k][0]
-                stalled = stalled + 1 if t_ev - t < STALL_WINDOW else 0
-                if stalled > MAX_STALLED:
-                    raise ChatterError(
-                        f"contact events kept recurring within "
-                        f"{STALL_WINDOW:g} s of each other at t = {t:.9g} s "
-                        f"(method {method}, rtol {rtol:g})"
-                    )
-            else:
-                z_end = sol.y[:, -1]
-            while k_out < n_out and t_out[k_out] <= t_seg * (1.0 + 1e-14):
-                zs = sol.sol(t_out[k_out])
-                q_out[k_out], v_out[k_out], _, _ = held_state(t_out[k_out], zs[:nf], zs[nf:])
-                k_out += 1
-            if not cam_held:
-                add_separation(t, t_seg)
-            q, v, _, _ = held_state(t_seg, z_end[:nf], z_end[nf:])
-            t = t_seg
-        else:
-            t = t_stop
-        if kind is not None:
-            lift, dlift, _ = cam.at(piece, rev, t_ev)
-            if kind == CAM_SEPARATION:
-                new = configuration(False, seat_held)
-                events.append((t_ev, kind, cfg, new, 0.0, 0.0))
-            elif kind == SEAT_SEPARATION:
-                new = configuration(cam_held, False)
-                events.append((t_ev, kind, cfg, new, 0.0, 0.0))
-            elif kind == CAM_IMPACT:
-                new = configuration(True, seat_held)
-                closing = v[CAM] + dlift
-                v = v + configs[new].kick[0] * (-dlift - v[CAM])
-                q[CAM] = -lift
-                v_cam_max = max(v_cam_max, closing)
-                events.append(
-                    (t_ev, kind, cfg, new, closing, configs[new].impact_mass[0] * closing)
-                )
-            else:
-                new = configuration(cam_held, True)
-                closing = -v[SEAT]
-                v = v + configs[new].kick[1] * closing
-                q[SEAT] = seat_q
-                v_seat_max = max(v_seat_max, closing)
-                events.append(
-                    (t_ev, kind, cfg, new, closing, configs[new].impact_mass[1] * closing)
-                )
-            cfg = new
-            continue
-        if t >= t_end:
-            break
-        # A break of the profile: the next piece, and any jump in the surface's velocity.
-        l_left, dl_left, _ = cam.at(piece, rev, t)
-        l_right, dl_right, _ = cam.at(nxt, rev_next, t)
-        if cam_held:
-            jump = dl_right - dl_left  # lift-rate jump [m/s]
-            small = 1e-9 * (abs(dl_left) + abs(dl_right) + 1e-12)
-            if (jump < -small or l_right < l_left - 1e-12) and not form:
-                new = configuration(False, seat_held)
-                events.append((t, CAM_SEPARATION, cfg, new, -jump, 0.0))
-                cfg = new
-            elif abs(jump) > small:
-                v = v + configs[cfg].kick[0] * (-jump)
-                v_cam_max = max(v_cam_max, abs(jump))
-                events.append(
-                    (t, CAM_IMPACT, cfg, cfg, abs(jump), configs[cfg].impact_mass[0] * abs(jump))
-                )
-                q[CAM], v[CAM] = -l_right, -dl_right
-        piece, rev = nxt, rev_next
-    if len(events) > max_events:
-        events = events[:max_events]
-    return IvpResult(
-        cam_angle=t_out * w,
-        q=q_out[:k_out] if k_out < n_out else q_out,
-        v=v_out[:k_out] if k_out < n_out else v_out,
-        valve_reference=float(q_ref),
-        separation_per_rev=sep,
-        max_cam_impact_velocity=v_cam_max,
-        max_seating_velocity=v_seat_max,
-        events=np.array(events, dtype=float).reshape(-1, 6),
-        nfev=nfev,
-        segments=segments,
-    )
+    peer = _Peer(case, revolutions, output_every, method, rtol, atol, start, capture_velocity)
+    return peer.run(max_events)

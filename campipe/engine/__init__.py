@@ -17,6 +17,7 @@ from campipe.engine.batch import (
     resolve_integrator,
     run_batch,
     stability_limit,
+    start_states,
 )
 from campipe.engine.loads import MEMBER_LOADS, member_loads
 
@@ -39,4 +40,5 @@ __all__ = [
     "resolve_integrator",
     "run_batch",
     "stability_limit",
+    "start_states",
 ]

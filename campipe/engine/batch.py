@@ -10,6 +10,7 @@ import logging
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 from numba import njit
@@ -34,7 +35,7 @@ from campipe.model.assembly import (
     SystemMatrices,
     configuration_frequencies,
 )
-from campipe.profiles import Profile, evaluate, evaluate_packed, pack
+from campipe.profiles import PackedProfiles, Profile, evaluate, evaluate_packed, pack
 from campipe.vocabulary import (
     CAM,
     CAM_CONTACT,
@@ -610,6 +611,97 @@ def _exact_runs(settings, dt_run, full_state, which, modal_trains, a_mat, omega)
     )
 
 
+class Start(NamedTuple):
+    """Where each case of a batch starts (``start_states``)."""
+
+    t0: np.ndarray  # (n,) start time [s], ≤ 0 (integrated, unrecorded, up to t = 0)
+    q0: np.ndarray  # (n, 7) coordinates [m, rad]
+    v0: np.ndarray  # (n, 7) velocities [m/s, rad/s]
+    a0: np.ndarray  # (n, 7) accelerations [m/s², rad/s²]
+    cfg0: np.ndarray  # (n,) int64 configuration
+
+
+@dataclass(frozen=True)
+class _Batch:
+    """What a batch's kernels take, but where it starts (``_prepare_batch``)."""
+
+    trains: list[ValveTrain]  # the distinct trains
+    which: np.ndarray  # each case's index into them
+    preps: list[Prepared]
+    packed: PackedProfiles
+    modal_trains: ModalTrains
+    runs: ExactRuns
+    cases: Cases  # starting nowhere yet
+
+
+def _prepare_batch(cases: Sequence[Case], settings: RunSettings, full_state: bool) -> _Batch:
+    dt_run = settings.step
+    n = len(cases)
+    trains, which = _unique_trains(cases)
+    preps = [prepare(t, dt_run or 0.0) for t in trains]
+    modal = [_modal(t) for t in trains]
+    qref = np.array([p.valve_reference for p in preps])[which]
+    has_seat = np.array([c.has_seat for c in cases], dtype=np.bool_)
+    omega = np.array([c.speed for c in cases], dtype=float)
+    modal_trains, a_mat = _modal_trains(trains, preps)
+    lift_bound, speed_bound = _bounds(cases, preps, which, qref)
+    return _Batch(
+        trains=trains,
+        which=which,
+        preps=preps,
+        packed=pack([c.profile for c in cases]),
+        modal_trains=modal_trains,
+        runs=_exact_runs(settings, dt_run, full_state, which, modal_trains, a_mat, omega),
+        cases=Cases(
+            omega=omega,
+            seat_q=qref + np.where(has_seat, [c.seat for c in cases], 0.0),
+            has_seat=has_seat,
+            form=np.array([c.closure == "form" for c in cases], dtype=np.bool_),
+            t0=np.zeros(n),
+            q0=np.zeros((n, 7)),
+            v0=np.zeros((n, 7)),
+            a0=np.zeros((n, 7)),
+            cfg0=np.full(n, CAM_CONTACT, np.int64),
+            meff=np.stack([p.impact_masses for p in preps])[which],
+            separation=np.stack([d.separation for d in modal])[which],
+            hold=np.stack([d.hold for d in modal])[which],
+            capture=np.full(n, float(settings.capture_velocity)),
+            valve_ref=qref,
+            lift_bound=lift_bound,
+            speed_bound=speed_bound,
+        ),
+    )
+
+
+def _starts(cases: Sequence[Case], settings: RunSettings, batch: _Batch) -> Start:
+    c = batch.cases
+    if settings.start == "quasi-static":
+        q0, v0, a0, cfg0 = initial_states(
+            [p.matrices for p in batch.preps],
+            batch.which,
+            batch.packed,
+            c.omega,
+            c.has_seat,
+            c.seat_q,
+            [p.start_inverses for p in batch.preps],
+        )
+        return Start(np.zeros(len(cases)), q0, v0, a0, cfg0)
+    step = settings.step if settings.method == "newmark-linear" else 0.0
+    t0, q0, v0, a0 = _periodic_starts(
+        cases, c, batch.modal_trains, batch.runs, batch.packed, np.full(len(cases), step),
+        batch.preps, batch.which,
+    )  # fmt: skip
+    return Start(t0, q0, v0, a0, np.full(len(cases), CAM_CONTACT, np.int64))
+
+
+def start_states(cases: Sequence[Case], settings: RunSettings) -> Start:
+    """The start of each case under ``settings.start``: the periodic steady state of
+    configuration I (``engine.steady``) or the thesis's quasi-static state at θ = 0. For
+    newmark-linear the periodic start falls on a whole number of its steps before t = 0."""
+    check_run(cases, settings, check_stability_limit=False)
+    return _starts(cases, settings, _prepare_batch(cases, settings, full_state=False))
+
+
 def _periodic_starts(case_list, cases, modal_trains, runs, packed, snap, preps, which):
     """Each case's start on the periodic steady state of configuration I
     (``steady.periodic_starts``): (t0, q0, v0, a0); refuses a case where configuration I holds
@@ -710,55 +802,13 @@ def run_batch(
     n_out = angles.size
     n_rev = int(math.ceil(settings.revolutions - 1e-12))
     warmup = settings.warmup_turns
-
-    trains, which = _unique_trains(cases)
-    preps = [prepare(t, dt_run or 0.0) for t in trains]
-    modal = [_modal(t) for t in trains]
-    meff = np.stack([p.impact_masses for p in preps])[which]
-    qref = np.array([p.valve_reference for p in preps])[which]
-    has_seat = np.array([c.has_seat for c in cases], dtype=np.bool_)
-    seat_q = qref + np.where(has_seat, [c.seat for c in cases], 0.0)
-    omega = np.array([c.speed for c in cases], dtype=float)
-    form = np.array([c.closure == "form" for c in cases], dtype=np.bool_)
-    packed = pack([c.profile for c in cases])
-    modal_trains, a_mat = _modal_trains(trains, preps)
-    runs = _exact_runs(settings, dt_run, full_state, which, modal_trains, a_mat, omega)
-    lift_bound, speed_bound = _bounds(cases, preps, which, qref)
-    cases_in = Cases(
-        omega=omega,
-        seat_q=seat_q,
-        has_seat=has_seat,
-        form=form,
-        t0=np.zeros(n),
-        q0=np.zeros((n, 7)),
-        v0=np.zeros((n, 7)),
-        a0=np.zeros((n, 7)),
-        cfg0=np.full(n, CAM_CONTACT, np.int64),
-        meff=meff,
-        separation=np.stack([d.separation for d in modal])[which],
-        hold=np.stack([d.hold for d in modal])[which],
-        capture=np.full(n, float(settings.capture_velocity)),
-        valve_ref=qref,
-        lift_bound=lift_bound,
-        speed_bound=speed_bound,
-    )
-    if settings.start == "quasi-static":
-        q0, v0, a0, cfg0 = initial_states(
-            [p.matrices for p in preps],
-            which,
-            packed,
-            omega,
-            has_seat,
-            seat_q,
-            [p.start_inverses for p in preps],
-        )
-        cases_in = cases_in._replace(q0=q0, v0=v0, a0=a0, cfg0=cfg0)
-    else:
-        snap = np.full(n, dt_run if settings.method == "newmark-linear" else 0.0)
-        t0, q0, v0, a0 = _periodic_starts(
-            cases, cases_in, modal_trains, runs, packed, snap, preps, which
-        )
-        cases_in = cases_in._replace(t0=t0, q0=q0, v0=v0, a0=a0)
+    batch = _prepare_batch(cases, settings, full_state)
+    start = _starts(cases, settings, batch)
+    cases_in = batch.cases._replace(**start._asdict())
+    omega, qref = cases_in.omega, cases_in.valve_ref
+    preps, which, packed, modal_trains, runs = (
+        batch.preps, batch.which, batch.packed, batch.modal_trains, batch.runs
+    )  # fmt: skip
     out = make_outputs(n, n_out, n_rev, settings.max_events)
     if settings.method == "newmark-linear":
         _run_newmark(preps, which, settings, dt_run, cases_in, packed, out)

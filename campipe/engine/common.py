@@ -189,7 +189,7 @@ def record_impact(events, n_events, counts, vmax, meff, c, w, t, seat, other_hel
 
 
 @njit(inline="always")
-def classify_break(l_left, dl_left, l_right, dl_right, w, form):
+def classify_break(l_left, dl_left, l_right, dl_right, w, form, capture):
     """What a profile break does to a follower held on the cam, and the lift-rate jump
     [m/s] there, from the lift [m] and its θ-derivative [m/rad] on either side at speed w.
 
@@ -197,12 +197,15 @@ def classify_break(l_left, dl_left, l_right, dl_right, w, form):
       force-closed follower, which keeps its own velocity and leaves;
     - JUMP: the surface's rate jumps into the follower (or drags a form-closed one): an
       impact of the follower by the cam;
-    - SMOOTH: a rate jump within rounding (JUMP_FLOOR, and 1e-9 relative).
+    - SMOOTH: a rate jump within rounding (JUMP_FLOOR, and 1e-9 relative), or slower than the
+      capture velocity ``capture`` [m/s]: the follower rests on the surface through it, as it
+      would through an impact that slow (the rounding at a polydyne's piece joins, 6e-13 m/s,
+      is no impact).
 
     Inlined: computed with the caller's floating-point flags.
     """
     jump = w * (dl_right - dl_left)
-    scale = 1e-9 * (abs(w * dl_left) + abs(w * dl_right)) + JUMP_FLOOR
+    scale = max(1e-9 * (abs(w * dl_left) + abs(w * dl_right)) + JUMP_FLOOR, capture)
     drop = l_right < l_left - DROP_FLOOR
     if (jump < -scale or drop) and not form:
         return RELEASE, jump

@@ -1066,7 +1066,9 @@ def _cross_break(cases, trains, profiles, out, ws, st):
         q[SEAT] = cases.seat_q[c]
         v[SEAT] = 0.0
     if cam_held:
-        kind, jump = classify_break(l_left, dl_left, l_right, dl_right, w, cases.form[c])
+        kind, jump = classify_break(
+            l_left, dl_left, l_right, dl_right, w, cases.form[c], cases.capture[c]
+        )
         q[CAM] = -l_left
         v[CAM] = -w * dl_left
         if kind == RELEASE:

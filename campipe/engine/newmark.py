@@ -287,7 +287,9 @@ def _cross_breaks(profiles, cases, out, c, w, th1, cfg, p, rev, pn, revn, thb):
         if holds_cam(cfg):
             l_left, dl_left, _ = piece_eval(profiles, c, p, rev, thb)
             l_right, dl_right, _ = piece_eval(profiles, c, pn, revn, thb)
-            kind, jump = classify_break(l_left, dl_left, l_right, dl_right, w, cases.form[c])
+            kind, jump = classify_break(
+                l_left, dl_left, l_right, dl_right, w, cases.form[c], cases.capture[c]
+            )
             seat_held = holds_seat(cfg)
             if kind == RELEASE:
                 # The surface falls away: the follower keeps its velocity.
