@@ -14,7 +14,15 @@ from campipe.engine import Case, IntegrationError, RunSettings, run_batch, stabi
 from campipe.engine.batch import _matrices
 from campipe.model import thesis_train
 from campipe.profiles import harmonic
-from campipe.vocabulary import CAM_IMPACT, EV_IMPULSE, EV_KIND, EV_TIME, EV_VELOCITY
+from campipe.vocabulary import (
+    CAM_IMPACT,
+    EV_IMPULSE,
+    EV_KIND,
+    EV_TIME,
+    EV_VELOCITY,
+    OK,
+    UNBOUNDED,
+)
 
 INCH = 0.0254
 TRAIN = thesis_train()
@@ -90,16 +98,24 @@ def test_modal_exact_does_not_depend_on_its_step(references, case):
 
 
 def test_newmark_linear_converges_to_the_same_history_at_first_order(references):
-    """Switching at step ends makes the thesis algorithm first order through contact events."""
+    """Switching at step ends makes the thesis algorithm first order through contact events:
+    the valve history over 2 … 0.25 µs, the event angles over 0.5 … 0.0625 µs. At 1 µs and
+    above the step also opens a grazing contact near 531° (a 1° flight the exact solution
+    does not have: the exact contact force dips to 26 N there), so the event list is
+    compared only where it has the reference's 9 events; at the thesis's 1 µs the valve is
+    still within 2e-4 in."""
     ref = references[id(SEPARATING)]
     steps = [2e-6, 1e-6, 0.5e-6, 0.25e-6]
-    runs = [run(SEPARATING, integrator="newmark-linear", dt=dt) for dt in steps]
-    valve = np.array([valve_error(r, ref) for r in runs])
-    events = np.array([event_angle_error(r, ref, SEPARATING) for r in runs])
-    assert 0.7 < slope(steps, valve) < 1.6, valve
-    assert 0.7 < slope(steps, events) < 1.6, events
+    valve = np.array(
+        [valve_error(run(SEPARATING, integrator="newmark-linear", dt=dt), ref) for dt in steps]
+    )
+    assert 0.8 < slope(steps, valve) < 1.3, valve
     assert valve[1] < 2e-4 * INCH  # 1 µs, the thesis's step
-    assert np.degrees(events[1]) < 1.0
+    fine = [0.5e-6, 0.25e-6, 0.125e-6, 0.0625e-6]
+    runs = [run(SEPARATING, integrator="newmark-linear", dt=dt) for dt in fine]
+    events = np.array([event_angle_error(r, ref, SEPARATING) for r in runs])
+    assert 0.8 < slope(fine, events) < 1.3, events
+    assert np.degrees(events[0]) < 0.05
 
 
 def test_newmark_linear_converges_on_the_seat_bounce(references):
@@ -248,19 +264,44 @@ def test_energy_balance_of_an_undamped_impact_free_run():
 
 
 def test_newmark_stability_limit_reproduced_by_runs_just_under_and_over():
+    """Just under the limit the run stays within the train's travel; just over, the highest
+    mode grows ×1.1 a step in contact and ×1.15 in flight (spectral radius of the
+    amplification matrix) and the run is stopped with an error, never stored. A limit computed
+    for the wrong configuration or a missing bound check fails one side."""
     case = Case(TRAIN, CAM, rpm(11000))  # no seat: configurations I and II
     limit = stability_limit(case)
     under = run(case, revolutions=1, integrator="newmark-linear", dt=0.99 * limit)
     assert np.isfinite(under.q).all() and np.abs(under.valve_lift).max() < 2 * INCH
-    # Just over, the highest mode grows ×1.1 a step in contact and ×1.15 in flight (spectral
-    # radius of the amplification matrix): overflow within a few thousand steps.
-    with pytest.raises(IntegrationError, match="non-finite"):
+    with pytest.raises(IntegrationError, match="physical bounds|non-finite"):
         run_batch(
             [case],
             RunSettings(revolutions=4, integrator="newmark-linear", dt=1.02 * limit),
             check_stability_limit=False,
         )
     assert math.isinf(stability_limit(case, "modal-exact"))
+
+
+@pytest.mark.parametrize("fraction", [0.99, 0.999])
+def test_newmark_near_its_limit_undamped_with_a_seat_never_stores_a_runaway(fraction):
+    """Issue 18's case: zero damping, seat at 0.1 in, 11000 rpm, a step at 0.99 and 0.999 of
+    the stated limit. The limit is linear Newmark's; switching between configurations and
+    impacts near it pump energy into the highest mode (campipe 0.1 stored 1030 m/s, then
+    3.4e37 m/s; 4.7e6 m/s at 0.999 here before the bounds). Over 20 turns both runs leave
+    the physical bounds: each is stopped, recorded UNBOUNDED with NaN results, and raises
+    naming the integrator and step; none stores a speed beyond the bound. Without the bound
+    check the run returns status OK with the runaway speeds."""
+    train = TRAIN.replace(damping_ratios=(0.0,) * 7)
+    case = Case(train, CAM, rpm(11000), seat=0.1 * INCH)
+    settings = RunSettings(
+        revolutions=20, integrator="newmark-linear", dt=fraction * stability_limit(case)
+    )
+    res = run_batch([case], settings, on_failure="record")
+    assert res.status.tolist() == [UNBOUNDED]
+    assert np.isnan(res.valve_velocity).all() and np.isnan(res.max_cam_force[0])
+    with pytest.raises(IntegrationError, match=r"physical bounds \(newmark-linear, step 3\.2"):
+        run_batch([case], settings)
+    exact = run(case, revolutions=20, integrator="modal-exact")
+    assert exact.status.tolist() == [OK]  # the same case, integrated exactly, stays bounded
 
 
 def test_contact_states_only_gives_the_same_contacts():
@@ -330,7 +371,7 @@ def test_critical_damping_is_propagated_exactly(seat):
         return _event_angles(Case(train, CAM, rpm(13205 if seat else 11000), **kw))
 
     kinds, at_one = angles(1.0)
-    assert at_one.size >= 20
+    assert at_one.size >= 12
     for zeta in (1.0 - 1e-9, 1.0 + 1e-9):
         k, a = angles(zeta)
         assert_array_equal(k, kinds)

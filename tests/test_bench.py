@@ -29,7 +29,7 @@ def separation_reference():
     return measure.reference(SEPARATION)
 
 
-@pytest.mark.parametrize(("name", "revolutions"), [("separation-11000", 2), ("seat-13205", 1)])
+@pytest.mark.parametrize(("name", "revolutions"), [("separation-11000", 2), ("seat-13205", 2)])
 def test_the_two_references_agree_to_their_stated_tolerance(name, revolutions):
     """modal-exact (tolerance 1e-14 s, 0.1 µs cap) against solve_ivp DOP853 at 1e-13."""
     scene = replace(SCENES[name], revolutions=revolutions)
@@ -166,10 +166,20 @@ def test_the_newmark_goal_is_judged_on_measured_ratios():
 
 
 def test_the_reduced_model_on_a_slow_scene_is_within_its_stated_tolerance():
-    """At 3000 rpm (contact throughout) the default cut-off's valve lift is within 1e-7 in of
-    the full model's; the probe's pick for 1e-6 in is within 1e-6 in."""
+    """At 3000 rpm (contact throughout) from the thesis's quasi-static start, whose transient
+    excites every mode, the default cut-off's valve lift is within 1e-7 in of the full
+    model's; the probe's pick for 1e-6 in is within 1e-6 in and never the lowest cut-off
+    (1e-5 in off). From the periodic start the harmonic cam, a single sinusoid, excites no
+    free vibration: the dropped modes' quasi-static response is then their whole response,
+    and every cut-off gives the full model's valve lift to rounding. A reduction that dropped
+    the static correction fails all three."""
     case = Case(thesis_train(), harmonic(INCH), rpm(3000))
-    settings = RunSettings(revolutions=2)
+    periodic = RunSettings(revolutions=2)
+    full = run_batch([case], periodic)
+    for cutoff in fidelity.CANDIDATE_CUTOFFS:
+        reduced = run_batch([case], replace(periodic, fidelity="reduced", mode_cutoff=cutoff))
+        assert np.abs(reduced.valve_lift - full.valve_lift).max() < 1e-12 * INCH
+    settings = replace(periodic, start="quasi-static")
     full = run_batch([case], settings)
     reduced = run_batch([case], replace(settings, fidelity="reduced"))
     assert np.abs(reduced.valve_lift - full.valve_lift).max() < fidelity.SLOW_SCENE_ERROR

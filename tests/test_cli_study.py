@@ -24,8 +24,8 @@ def test_validate_prints_cases_axes_and_estimates():
     assert "batches: 10 of up to 32 cases" in text
     assert re.search(r"run time: .+ on 2 workers \([\d.]+ s simulated", text)
     size = float(re.search(r"archive: about ([\d.]+) MB", text).group(1))
-    # 297 cases × 1441 angles × (6 float64 histories + the int8 contact state) ≈ 21 MB
-    assert 20.9 < size < 21.5
+    # 297 cases × 1441 angles × (8 float64 histories + the int8 contact state) ≈ 27.8 MB
+    assert 27.5 < size < 28.1
     assert "replay: 'speed_rpm == 11000 and seat is nan'" in text
 
 

@@ -268,10 +268,10 @@ def test_smooth_profile_breaks_are_not_impacts(method):
 
 
 def test_a_failing_case_is_recorded_beside_the_others_when_asked():
-    """on_failure="record": a diverging case (newmark-linear just beyond its limit) is marked
-    NONFINITE with NaN results; a train half as stiff, whose limit is √2 larger, runs in the
+    """on_failure="record": a diverging case (newmark-linear just beyond its limit) is stopped
+    when its motion leaves the physical bounds and marked UNBOUNDED with NaN results; a train half as stiff, whose limit is √2 larger, runs in the
     same batch and gives what it gives alone."""
-    from campipe.vocabulary import NONFINITE, OK
+    from campipe.vocabulary import OK, UNBOUNDED
 
     bad = Case(TRAIN, CAM, rpm(11000))  # no seat: configurations I and II
     good = Case(TRAIN.replace(elastic_modulus=TRAIN.elastic_modulus / 2), CAM, rpm(11000))
@@ -280,8 +280,8 @@ def test_a_failing_case_is_recorded_beside_the_others_when_asked():
     )
     res = run_batch([bad, good], settings, check_stability_limit=False, on_failure="record")
     alone = run_batch([good], settings)
-    assert res.status.tolist() == [NONFINITE, OK] and alone.status.tolist() == [OK]
+    assert res.status.tolist() == [UNBOUNDED, OK] and alone.status.tolist() == [OK]
     assert np.isnan(res.valve_lift[0]).all() and np.isnan(res.max_cam_force[0])
     assert_array_equal(res.valve_lift[1], alone.valve_lift[0])
-    with pytest.raises(IntegrationError, match="non-finite"):
+    with pytest.raises(IntegrationError, match="physical bounds"):
         run_batch([bad, good], settings, check_stability_limit=False)

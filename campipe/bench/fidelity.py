@@ -30,9 +30,10 @@ CANDIDATE_CUTOFFS = (3e4, 1e5, 2e5, 3e5, 6e5)
 PROBE_REVOLUTIONS = 2.0
 #: A reduced level must save this share of the full model's time to be chosen.
 MIN_SAVING = 0.05
-#: The reduced model's stated error on a slow scene: at 3000 rpm (the cam always in contact)
-#: the default cut-off (``campipe.engine.batch.DEFAULT_MODE_CUTOFF``) keeps the valve lift
-#: within this of the full model's [m] (tests/test_bench.py).
+#: The reduced model's stated error on a slow scene: at 3000 rpm (the cam always in contact),
+#: from the quasi-static start whose transient excites every mode, the default cut-off
+#: (``campipe.engine.batch.DEFAULT_MODE_CUTOFF``) keeps the valve lift within this of the
+#: full model's [m] (tests/test_bench.py).
 SLOW_SCENE_ERROR = 1e-7 * INCH
 #: Cases a probe batch holds at least (cases are repeated to fill it) so its time is stable.
 MIN_BATCH = 16
