@@ -144,10 +144,7 @@ def test_impulse_and_closing_velocity_converge_the_thesis_impact_force_does_not(
     j_err = np.abs(np.array(impulse) - first_ref[EV_IMPULSE])
     assert v_err[-1] < 0.003 * first_ref[EV_VELOCITY] and v_err[-1] < v_err[0]
     assert j_err[-1] < 0.003 * first_ref[EV_IMPULSE] and j_err[-1] < j_err[0]
-    # The impulse is the effective mass times the closing velocity (perfectly plastic).
-    assert_allclose(
-        first_ref[EV_IMPULSE] / first_ref[EV_VELOCITY], impulse[-1] / velocity[-1], rtol=1e-12
-    )
+    # The impulse itself is checked against a momentum balance M Δq̇ in tests/test_trust.py.
     # The thesis's peak "impact force" is Δv·m/Δt: it doubles each time the step halves.
     ratios = np.array(peak[1:]) / np.array(peak[:-1])
     assert np.all((ratios > 1.8) & (ratios < 2.2)), ratios

@@ -67,20 +67,29 @@ def test_no_separation_at_9000_rpm_after_the_first_revolution(no_seat):
 
 
 def test_separation_begins_between_9000_and_9524_rpm(no_seat):
+    """Calibration, not validation: the preset's spring preload (151 lbf, which the thesis
+    does not state) was chosen to put the onset between the thesis's 9000 and 9524 rpm
+    (NOTES.md). This checks the calibration still holds."""
     idx, res = no_seat
     assert sep_deg(res, idx[9524])[-1] > 0.0
 
 
 def test_45_to_60_degrees_of_separation_per_revolution_at_9524_rpm(no_seat):
+    """Calibration, not validation: the preload was chosen so that 9524 rpm separates for
+    about the thesis's 50° a turn (NOTES.md: 53°)."""
     idx, res = no_seat
     last = sep_deg(res, idx[9524])[1:]
     assert np.all((last >= 45.0) & (last <= 60.0)), last
 
 
-def test_more_than_150_degrees_with_a_rebounce_at_11000_rpm(no_seat):
+def test_about_220_degrees_with_a_rebounce_at_11000_rpm(no_seat):
+    """Not calibrated: the thesis reads ≈ 180° from its Figure 20 with a re-bounce; the
+    preset calibrated at 9000–9524 rpm predicts 219° (NOTES.md: ≈ 220°), both integrators.
+    The two-sided bound pins that prediction; the solve_ivp peer's agreement with it is in
+    tests/test_bench.py. Broken copy: a damping or preload off by 10 % moves it out."""
     idx, res = no_seat
     i = idx[11000]
-    assert np.all(sep_deg(res, i)[1:] > 150.0)
+    assert np.all((sep_deg(res, i)[1:] > 210.0) & (sep_deg(res, i)[1:] < 230.0))
     ev = res.events[i]
     period = 2 * math.pi / rpm(11000)
     last_rev = ev[ev[:, EV_TIME] >= 3 * period]
@@ -105,7 +114,8 @@ def test_never_settles_at_20000_rpm(no_seat):
     # Never in contact for long: the longest contact stretch after the first turn is short.
     state = "".join("c" if s == 1 else " " for s in res.contact_state[i, 360:])
     assert max(len(stretch) for stretch in state.split()) < 90  # degrees
-    assert np.all(sep_deg(res, i)[1:] > 180.0)
+    # Off the cam for all but the landings: 334° a turn (both integrators).
+    assert np.all((sep_deg(res, i)[1:] > 325.0) & (sep_deg(res, i)[1:] < 345.0))
     assert res.max_cam_impact_velocity[i] > res.max_cam_impact_velocity[idx[11000]]
 
 
@@ -269,8 +279,9 @@ def test_smooth_profile_breaks_are_not_impacts(method):
 
 def test_a_failing_case_is_recorded_beside_the_others_when_asked():
     """on_failure="record": a diverging case (newmark-linear just beyond its limit) is stopped
-    when its motion leaves the physical bounds and marked UNBOUNDED with NaN results; a train half as stiff, whose limit is √2 larger, runs in the
-    same batch and gives what it gives alone."""
+    when its motion leaves the physical bounds and marked UNBOUNDED with NaN results; a
+    train half as stiff, whose limit is √2 larger, runs in the same batch and gives what it
+    gives alone."""
     from campipe.vocabulary import OK, UNBOUNDED
 
     bad = Case(TRAIN, CAM, rpm(11000))  # no seat: configurations I and II

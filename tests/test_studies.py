@@ -9,7 +9,8 @@ from numpy.testing import assert_allclose, assert_array_equal
 from study_helpers import LBF, STUDIES
 
 from campipe.engine import MEMBER_LOADS, member_loads
-from campipe.model import thesis_train
+from campipe.engine.contact import impact_masses
+from campipe.model import system_matrices, thesis_train
 from campipe.study import load_study
 from campipe.study.execute import run_study
 from campipe.study.query import case_table, onset_table
@@ -41,16 +42,17 @@ def test_quickstart(tmp_path):
 
 
 def test_thesis_no_seat(tmp_path):
-    """Figures 15-22: contact holds at 9000 rpm after the first turn; ≈ 50° a turn off the
-    cam at 9524 rpm (thesis ≈ 50°); more than 150° with a re-bounce at 11000 (thesis ≈ 180°);
-    at 20000 rpm the follower never settles."""
+    """Figures 15-22: contact holds at 9000 rpm in every turn; ≈ 50° a turn off the cam at
+    9524 rpm (thesis ≈ 50°: with the 9000 rpm contact, the preload's calibration target);
+    219° with a re-bounce at 11000 (thesis ≈ 180°, a prediction: see tests/test_engine.py);
+    at 20000 rpm the follower never settles (334° a turn off the cam)."""
     ds = run(tmp_path, "thesis-no-seat")
     i = by_speed(ds)
     sep = ds.separation_deg.values
-    assert np.all(sep[i[9000], 1:] == 0.0)
+    assert np.all(sep[i[9000]] == 0.0)
     assert np.all((sep[i[9524], 1:] >= 45) & (sep[i[9524], 1:] <= 60)), sep[i[9524]]
-    assert np.all(sep[i[11000], 1:] > 150)
-    assert np.all(sep[i[20000], 1:] > 300)
+    assert np.all((sep[i[11000], 1:] > 210) & (sep[i[11000], 1:] < 230)), sep[i[11000]]
+    assert np.all((sep[i[20000], 1:] > 325) & (sep[i[20000], 1:] < 345)), sep[i[20000]]
     last = ds.event_case.values == i[11000]
     late = ds.event_time.values[last] >= 3 * 2 * math.pi / (11000 * math.pi / 30)
     kinds = ds.event_kind.values[last][late]
@@ -80,7 +82,11 @@ def test_thesis_seat(tmp_path):
 
 def test_thesis_machining_error(tmp_path):
     """Figure 33: the perfect cam holds the follower; the flat from 268° to 272° throws it
-    off at both edges, every turn, for a fraction of a degree (thesis: about 0.75°)."""
+    off at both edges, every turn, for a fraction of a degree (the thesis's plot, at 1°
+    intervals, cannot resolve it: "about 0.75°" is its spacing). The hop is checked against
+    the hand estimate 2·m·v/F: the follower leaves with the edge's velocity jump
+    v = ω·h/2·|cos 268°| and its own mass m at the cam, and the perfect cam's force F there
+    brings it back."""
     ds = run(tmp_path, "thesis-machining-error", **{"run.revolutions": 2})
     perfect, flawed = (
         list(ds.defects.values).index("none"),
@@ -93,7 +99,13 @@ def test_thesis_machining_error(tmp_path):
     kinds, angles = ds.event_kind.values[mine], ds.event_cam_angle.values[mine]
     assert_allclose(angles[kinds == CAM_SEPARATION] % 360, [268, 272, 268, 272], atol=1e-6)
     hops = angles[kinds == CAM_IMPACT] - angles[kinds == CAM_SEPARATION]
-    assert np.all((hops > 0.05) & (hops < 0.75)), hops
+    omega = 6000 * math.pi / 30
+    v = omega * 0.0127 * abs(math.cos(math.radians(268)))
+    m = impact_masses(system_matrices(thesis_train()).mass)[0]
+    force = ds.cam_force.values[perfect, 360 + 268]
+    estimate = math.degrees(omega * 2 * m * v / force)
+    assert_allclose(hops, estimate, rtol=0.25)
+    assert 0.1 < estimate < 0.25
 
 
 def test_thesis_undamped(tmp_path):
@@ -123,9 +135,11 @@ def test_thesis_polydyne(tmp_path):
 
 
 def test_thesis_member_loads(tmp_path):
-    """Figures 37-41: 15000 rpm with the seat; the recorded member loads are those of the
-    recorded coordinates, the spring never unloads below its preload, and the train is off
-    the cam for most of every turn after the first."""
+    """Figures 37-41: 15000 rpm with the seat; the archive stores the member loads of the
+    coordinates it stores (a storage check: the loads against a hand statics calculation
+    are tests/test_engine.py::test_member_loads_at_static_equilibrium), the spring never
+    unloads below its preload, and the train is off the cam for most of every turn after
+    the first."""
     ds = run(tmp_path, "thesis-member-loads", **{"run.revolutions": 2})
     train = thesis_train()
     loads = member_loads(train, ds.q.values[0])

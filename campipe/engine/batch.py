@@ -38,6 +38,7 @@ from campipe.model.assembly import (
 from campipe.profiles import PackedProfiles, Profile, evaluate, evaluate_packed, pack
 from campipe.vocabulary import (
     CAM,
+    CAM_AND_SEAT,
     CAM_CONTACT,
     CHATTER,
     CONFIGURATIONS,
@@ -46,6 +47,7 @@ from campipe.vocabulary import (
     NONFINITE,
     ROMAN,
     SEAT,
+    SEATED,
     UNBOUNDED,
 )
 
@@ -68,6 +70,8 @@ DEFAULT_MODE_CUTOFF = 2.0e5  # [rad/s]: the configurations' lower modes, about 3
 #: How a run starts: on the periodic steady state of configuration I (``engine.steady``), or
 #: the thesis's quasi-static state at θ = 0 (Appendix B, step 1), a transient.
 STARTS = ("periodic", "quasi-static")
+#: The configurations a quasi-static start can take (``initial_states``).
+START_CONFIGURATIONS = (CAM_CONTACT, CAM_AND_SEAT, SEATED)
 #: Turns integrated but left out of the metrics when a run names none, per start.
 DEFAULT_WARMUP = {"periodic": 0, "quasi-static": 1}
 #: An impact closing slower than this [m/s] leaves its contact resting (``common.captured``):
@@ -341,7 +345,7 @@ class Prepared:
     impact_masses: np.ndarray  # (4,) see contact.impact_masses [kg]
     valve_reference: float  # q7 at zero valve lift [m]
     omega_max: np.ndarray  # (4,) highest natural frequency per configuration [rad/s]
-    start_inverses: np.ndarray  # (2, 2, 7, 7) see start_inverses
+    start_inverses: np.ndarray  # (3, 2, 7, 7) see start_inverses
     valve_ratio: float  # static valve lift per unit cam lift (the rocker ratio) [-]
 
 
@@ -373,9 +377,11 @@ def valve_ratio(sm: SystemMatrices) -> float:
 
 
 def start_inverses(sm: SystemMatrices) -> np.ndarray:
-    """(2, 2, 7, 7): K_ff⁻¹ and M_ff⁻¹ (``contact.held_inverses``) in configurations I and
-    III, the quasi-static start's."""
-    return np.array([held_inverses(sm.mass, sm.stiffness, HELD[cfg - 1]) for cfg in (1, 3)])
+    """(3, 2, 7, 7): K_ff⁻¹ and M_ff⁻¹ (``contact.held_inverses``) in configurations I, III
+    and IV, the quasi-static start's (``START_CONFIGURATIONS``)."""
+    return np.array(
+        [held_inverses(sm.mass, sm.stiffness, HELD[cfg - 1]) for cfg in START_CONFIGURATIONS]
+    )
 
 
 @functools.lru_cache(maxsize=256)
@@ -466,9 +472,10 @@ def _cam_at(profiles, theta):
 
 def initial_states(mats, which, packed, omega, has_seat, seat_q, inverses=None):
     """Quasi-static start of every case at θ = 0 (thesis Appendix B, step 1): configuration
-    I, or III where the valve starts on its seat. ``mats``: the distinct trains' matrices,
-    ``which`` each case's index into them; ``inverses`` their ``start_inverses`` (computed
-    here if not given)."""
+    I; III where the valve would stand below its seat; IV where III's cam would have to pull
+    (a seat above the valve's lift there: the valve rests on it and the follower stands off
+    the cam, unloaded). ``mats``: the distinct trains' matrices, ``which`` each case's index
+    into them; ``inverses`` their ``start_inverses`` (computed here if not given)."""
     if inverses is None:
         inverses = [start_inverses(m) for m in mats]
     n = which.size
@@ -484,21 +491,25 @@ def initial_states(mats, which, packed, omega, has_seat, seat_q, inverses=None):
     C = np.stack([m.damping for m in mats])[which]
     K = np.stack([m.stiffness for m in mats])[which]
     load = np.stack([m.preload for m in mats])[which]
-    q = np.empty((n, 7))
-    v = np.empty((n, 7))
-    a = np.empty((n, 7))
-    for i_cfg, cfg in enumerate((1, 3)):
+    states = []
+    for i_cfg, number in enumerate(START_CONFIGURATIONS):
         kinv = np.stack([inv[i_cfg, 0] for inv in inverses])[which]
         minv = np.stack([inv[i_cfg, 1] for inv in inverses])[which]
-        held = np.broadcast_to(HELD[cfg - 1], (n, 7))
+        held = np.broadcast_to(HELD[number - 1], (n, 7))
         qc, vc, ac = np.empty((n, 7)), np.empty((n, 7)), np.empty((n, 7))
         quasi_static_batch(kinv, minv, M, C, K, load, held, held_q, held_v, held_a, qc, vc, ac)
-        if cfg == 1:
-            q, v, a = qc, vc, ac
-            seated = has_seat & (q[:, SEAT] < seat_q)
-        else:
-            q[seated], v[seated], a[seated] = qc[seated], vc[seated], ac[seated]
-    return q, v, a, np.where(seated, 3, 1).astype(np.int64)
+        states.append((qc, vc, ac))
+    (q, v, a), (q3, v3, a3), (q4, v4, a4) = states
+    seated = has_seat & (q[:, SEAT] < seat_q)
+    # The cam's force on the follower in III, the held coordinate's residual: positive
+    # pushes (compressive), negative would pull.
+    residual = load - np.einsum("nij,nj->ni", K, q3) - np.einsum("nij,nj->ni", C, v3)
+    pulls = (residual - np.einsum("nij,nj->ni", M, a3))[:, CAM] < 0.0
+    cfg = np.where(seated, np.where(pulls, SEATED, CAM_AND_SEAT), CAM_CONTACT)
+    for number, (qc, vc, ac) in ((CAM_AND_SEAT, (q3, v3, a3)), (SEATED, (q4, v4, a4))):
+        take = cfg == number
+        q[take], v[take], a[take] = qc[take], vc[take], ac[take]
+    return q, v, a, cfg.astype(np.int64)
 
 
 def valve_reference(sm: SystemMatrices) -> float:
@@ -836,11 +847,16 @@ def run_batch(
         )
     bad = np.flatnonzero(status == UNBOUNDED)
     if bad.size and on_failure == "raise":
-        how = f"{settings.method}, step {dt_run:g} s" if dt_run else settings.method
+        if settings.method == "newmark-linear":
+            how = f"{settings.method}, step {dt_run:g} s"
+            why = "the step is too large for this case (use a smaller run.dt or modal-exact)"
+        else:
+            how = settings.method
+            why = "this is a defect: please report it with the case"
         raise IntegrationError(
             f"cases {bad.tolist()}: the motion left its physical bounds ({how}): a valve lift "
             f"beyond {LIFT_BOUND:g}× the full lift or a speed beyond {SPEED_BOUND:g}× the cam's; "
-            "the step is too large for this case (use a smaller run.dt or modal-exact)",
+            + why,
             found=bad.tolist(),
         )
     for i in np.flatnonzero(status == EVENTS_TRUNCATED):

@@ -51,6 +51,10 @@ DROP_FLOOR = 1e-12
 #: A gap's level [m]: the penetration at which a contact closes (an impact), in both
 #: integrators, far below any output's resolution and above rounding of the coordinates.
 GAP_LEVEL = 1e-13
+#: A flight whose closing velocity times its duration stays below this [m] (twice the most
+#: the gap can have opened, a parabolic flight's height being v·t/4) never left its contact
+#: (``record_impact``): a nanometre, far below what a contact resolves.
+MICRO_FLIGHT = 1e-9
 #: What a break does to a follower held on the cam (:func:`classify_break`).
 SMOOTH, RELEASE, JUMP = 0, 1, 2
 
@@ -163,9 +167,10 @@ def record_impact(events, n_events, counts, vmax, meff, c, w, t, seat, other_hel
     held (``contact.impact_masses`` order). Nothing before t = 0 is recorded.
 
     A contact that closes slower than the capture velocity ``capture`` [m/s] right after it
-    released (its release the last event) never really left: its flight is far below any
-    length a contact resolves (0.1 nm at 1e-4 m/s over a microsecond). The release is taken
-    back and the closing is no impact."""
+    released (its release the last event, the flight's closing velocity × duration below
+    MICRO_FLIGHT) never really left: its gap stayed far below any length a contact resolves.
+    The release is taken back and the closing is no impact. A slow landing after a real
+    flight (a polydyne's valve returning to its seat) is an impact, counted."""
     if t < 0.0:
         return
     side = 1 if seat else 0
@@ -176,6 +181,7 @@ def record_impact(events, n_events, counts, vmax, meff, c, w, t, seat, other_hel
         and 0 <= k < events.shape[1]
         and events[c, k, EV_KIND] == release
         and events[c, k, EV_TO] == c_from
+        and closing * (t - events[c, k, EV_TIME]) < MICRO_FLIGHT
     ):
         n_events[c] = k
         return
