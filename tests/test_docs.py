@@ -186,3 +186,28 @@ def test_the_known_disagreement_is_explained_while_the_json_shows_it():
         "**A known disagreement.** On the form-closed polydyne scene" in BENCH_PAGE.read_text()
     )
     assert explained == ("polydyne-9000" in disagrees)
+
+
+def test_the_readme_damping_note_is_the_model_s():
+    """The README's note on the preset's ζ1 is generated from the model (docs/readme_outputs.py);
+    its dashpot is checked by hand: the first mode's generalised mass per unit valve motion
+    times 2·ζ1·ω1 (modal damping's definition), and the drag at 9000 rpm is that dashpot
+    times the valve's peak velocity, the rocker ratio times the cam's ω·h/2."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(
+        "readme_outputs", ROOT / "docs" / "readme_outputs.py"
+    )
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    note = module.damping_note()
+    assert note in README.read_text()
+    from campipe.constants import INCH, LBF
+    from campipe.model import system_matrices, thesis_train
+
+    train = thesis_train()
+    sm = system_matrices(train)
+    shape = sm.modes[:, 0] / sm.modes[6, 0]
+    dashpot = 2 * train.damping_ratios[0] * sm.frequencies[0] * (shape @ sm.mass @ shape)
+    drag = dashpot * 1.5 * 9000 * np.pi / 30 * INCH / 2 / LBF
+    assert f"{dashpot:.0f} N·s/m" in note and 250 < drag < 260 and f"{drag:.0f} lbf" in note
