@@ -5,6 +5,7 @@ import csv
 import json
 import math
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -428,3 +429,13 @@ def test_validate_prints_the_fidelity_a_spec_needs(tmp_path):
     assert "the whole study: run.fidelity:" in result.output
     bare = CliRunner().invoke(main, ["validate", str(spec), "--tolerance", "1e-3"])
     assert bare.exit_code == 2 and "without units" in bare.output
+
+
+def test_the_plots_draw_a_bench_whose_scenes_have_no_events(tmp_path):
+    """A bench of the form-closed polydyne alone has no event errors to plot: the events plot
+    says so instead of failing on an empty legend (it did, ending `campipe bench --scene
+    polydyne-9000` after the whole run)."""
+    bench = report.read_json(Path(__file__).parents[1] / "docs" / "bench" / "bench.json")
+    bench.rows = [r for r in bench.rows if r["scene"] == "polydyne-9000"]
+    path = report.plot(bench, tmp_path / "events.png", report.EVENT_ERRORS)
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

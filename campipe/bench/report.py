@@ -534,14 +534,17 @@ def plot(bench: Bench, path: Path, errors: tuple[tuple, ...] = (VALVE_LIFT,)) ->
     for ax in axes.flat:
         for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
             entries.setdefault(lab, h)
-    fig.legend(
-        list(entries.values()),
-        list(entries),
-        loc="lower center",
-        ncol=len(entries),
-        fontsize=8,
-        frameon=False,
-    )
+    if not panels:  # no chosen scene has this error (a form-closed scene has no events)
+        axes.flat[0].text(0.5, 0.5, "no scene with this error", ha="center", va="center")
+    if entries:
+        fig.legend(
+            list(entries.values()),
+            list(entries),
+            loc="lower center",
+            ncol=len(entries),
+            fontsize=8,
+            frameon=False,
+        )
     what = " and ".join(label.split(" error")[0] for _, label, _, _ in errors)
     fig.suptitle(
         f"campipe bench: wall time against {what} error" + (" (--quick)" if bench.quick else ""),
