@@ -16,12 +16,21 @@ from campipe.profiles.pieces import (
     shift_polynomial,
     split,
 )
-from campipe.profiles.shapes import POLYDYNE_POLYNOMIALS, harmonic, polydyne, table
+from campipe.profiles.shapes import (
+    POLYDYNE_POLYNOMIALS,
+    RAMP_SHAPES,
+    Ramp,
+    harmonic,
+    polydyne,
+    table,
+)
 
 __all__ = [
     "POLYDYNE_POLYNOMIALS",
+    "RAMP_SHAPES",
     "PackedProfiles",
     "Profile",
+    "Ramp",
     "bump",
     "evaluate",
     "evaluate_packed",

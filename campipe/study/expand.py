@@ -38,7 +38,17 @@ from campipe.model import (
     system_matrices,
     valve_train,
 )
-from campipe.profiles import Profile, bump, flat, harmonic, max_lift, min_lift, polydyne, table
+from campipe.profiles import (
+    Profile,
+    Ramp,
+    bump,
+    flat,
+    harmonic,
+    max_lift,
+    min_lift,
+    polydyne,
+    table,
+)
 from campipe.study.fields import (
     CASE_FIELDS,
     DEFECT_FIELDS,
@@ -284,8 +294,17 @@ def _profile(frozen: tuple, directory: Path) -> tuple[Profile, dict, dict[str, o
         if kind == "harmonic":
             profile = harmonic(si["lift"])
         elif kind.startswith("polydyne-"):
+            ramp = None
+            if "ramp_height" in si:
+                shape = str(si.get("ramp_shape", "constant-velocity"))
+                ramp = Ramp(float(si["ramp_height"]), float(si["ramp_duration"]), shape)
             profile = polydyne(
-                kind.removeprefix("polydyne-"), si["lift"], si["rise"], si["dwell"], si["fall"]
+                kind.removeprefix("polydyne-"),
+                si["lift"],
+                si["rise"],
+                si["dwell"],
+                si["fall"],
+                ramp=ramp,
             )
         else:
             path = (directory / si["file"]).resolve()

@@ -23,6 +23,7 @@ from campipe.engine import INTEGRATORS, MEMBER_LOADS, RunSettings
 from campipe.engine import batch as _engine_batch
 from campipe.errors import CampipeError, did_you_mean, excerpt
 from campipe.model import PARAMETERS, PRESETS, ModelParameterError, parse_parameter
+from campipe.profiles import RAMP_SHAPES
 from campipe.units import QuantityError, convert, parse_angular, parse_quantity
 
 #: Bounds of sense on a spec's quantities [SI]: beyond them the numbers overflow or the
@@ -397,6 +398,12 @@ PROFILE_KINDS: dict[str, tuple[str, ...]] = {
     "polydyne-4567": ("lift", "rise", "dwell", "fall"),
     "table": ("file",),
 }
+#: Profile kinds → their optional keys: opening and closing ramps (height and duration
+#: together; the shape defaults to constant-velocity).
+PROFILE_OPTIONAL: dict[str, tuple[str, ...]] = {
+    "polydyne-345": ("ramp_height", "ramp_duration", "ramp_shape"),
+    "polydyne-4567": ("ramp_height", "ramp_duration", "ramp_shape"),
+}
 
 PROFILE_FIELDS: dict[str, Field] = {
     f.key.removeprefix("profile."): f
@@ -451,6 +458,36 @@ PROFILE_FIELDS: dict[str, Field] = {
             "text",
             "lift table CSV, relative to the spec (header 'angle [deg],lift [in]')",
             archive_name="profile_file",
+        ),
+        Field(
+            "profile.ramp_height",
+            "quantity",
+            "height of the opening and closing ramps, within the full lift",
+            units="m",
+            example="mm",
+            minimum=0.0,
+            maximum=MAX_LENGTH,
+            archive_name="profile_ramp_height",
+            archive_units="m",
+        ),
+        Field(
+            "profile.ramp_duration",
+            "quantity",
+            "cam angle of each ramp, before the rise and after the fall",
+            units="rad",
+            example="deg",
+            minimum=0.0,
+            maximum=2 * math.pi,
+            archive_name="profile_ramp_duration",
+            archive_units="deg",
+        ),
+        Field(
+            "profile.ramp_shape",
+            "choice",
+            "constant-velocity (a velocity step at the base circle, taken up by the lash) or "
+            "smooth (lift, velocity and acceleration continuous)",
+            choices=RAMP_SHAPES,
+            archive_name="profile_ramp_shape",
         ),
     ]
 }

@@ -21,6 +21,7 @@ from campipe.study.fields import (
     DEFECT_KINDS,
     PROFILE_FIELDS,
     PROFILE_KINDS,
+    PROFILE_OPTIONAL,
     SAMPLE_METHODS,
     STUDY_WIDE,
     TOP_LEVEL,
@@ -71,13 +72,19 @@ def field_schema(f: Field) -> dict[str, object]:
     raise AssertionError(f.kind)
 
 
-def _one_of_kinds(kinds: dict, fields: dict) -> list[dict[str, object]]:
+def _one_of_kinds(
+    kinds: dict, fields: dict, optional: dict | None = None
+) -> list[dict[str, object]]:
     """A profile or defect: one object per kind, with that kind's keys (``kinds[kind]``), all
-    required."""
+    required, and its ``optional`` ones."""
+    optional = optional or {}
     return [
         {
             "type": "object",
-            "properties": {"kind": {"const": kind}, **{k: field_schema(fields[k]) for k in keys}},
+            "properties": {
+                "kind": {"const": kind},
+                **{k: field_schema(fields[k]) for k in keys + optional.get(kind, ())},
+            },
             "required": ["kind", *keys],
             "additionalProperties": False,
         }
@@ -219,7 +226,7 @@ def study_schema() -> dict[str, object]:
         "$defs": {
             "model": {**model, "description": TOP_LEVEL["model"]},
             "profile": {
-                "oneOf": _one_of_kinds(PROFILE_KINDS, PROFILE_FIELDS),
+                "oneOf": _one_of_kinds(PROFILE_KINDS, PROFILE_FIELDS, PROFILE_OPTIONAL),
                 "description": TOP_LEVEL["profile"],
             },
             "profile_patch": {

@@ -49,6 +49,7 @@ from campipe.study.fields import (
     DEFECT_KINDS,
     PROFILE_FIELDS,
     PROFILE_KINDS,
+    PROFILE_OPTIONAL,
     RUN_DEFAULTS,
     SAMPLE_METHODS,
     STUDY_WIDE,
@@ -191,10 +192,12 @@ def check_profile(value: object, path: str, partial: bool) -> dict:
         )
     if kind is not None:
         keys = PROFILE_KINDS[kind]
+        allowed = keys + PROFILE_OPTIONAL.get(kind, ())
         for k in value:
-            if k != "kind" and k not in keys:
+            if k != "kind" and k not in allowed:
                 raise SpecProblem(
-                    join(path, k), f"not a key of a {kind} profile (its keys: {', '.join(keys)})"
+                    join(path, k),
+                    f"not a key of a {kind} profile (its keys: {', '.join(allowed)})",
                 )
         if not partial:
             for k in keys:
@@ -205,6 +208,18 @@ def check_profile(value: object, path: str, partial: bool) -> dict:
     for k, v in value.items():
         if k != "kind":
             PROFILE_FIELDS[k].parse(v, join(path, k))
+    if not partial and ("ramp_height" in value) != ("ramp_duration" in value):
+        given, missing = (
+            ("ramp_height", "ramp_duration")
+            if "ramp_height" in value
+            else ("ramp_duration", "ramp_height")
+        )
+        raise SpecProblem(join(path, missing), f"missing; a ramp needs {missing} with {given}")
+    if not partial and "ramp_shape" in value and "ramp_height" not in value:
+        raise SpecProblem(
+            join(path, "ramp_shape"),
+            "a ramp shape without a ramp: add ramp_height and ramp_duration",
+        )
     return dict(value)
 
 
