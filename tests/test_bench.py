@@ -290,18 +290,18 @@ def test_the_verdict_judges_every_goal_reached_not_reached_or_not_shown():
         | {"rate": 1.5e7}
     ]
     goals = verdict.goals(_verdict_bench(throughput=throughput))
-    assert [(g.issue, g.status, g.figure) for g in goals] == [
+    assert [(g.area, g.status, g.figure) for g in goals] == [
         # no solve_ivp row: the two solve_ivp readings cannot be shown
-        (7, "not shown", "–"),
-        (7, "not shown", "–"),
+        ("speed", "not shown", "–"),
+        ("speed", "not shown", "–"),
         # newmark's finest point (80× the default's time) still short of the default's error
-        (7, "reached", "≥ 80×"),
+        ("speed", "reached", "≥ 80×"),
         # at 1 µs (1e-4) campipe's cheapest point is already more accurate: 2× only
-        (7, "not reached", "2×"),
+        ("speed", "not reached", "2×"),
         # the separation scene did not run
-        (4, "not shown", "–"),
-        (4, "not shown", "–"),
-        (3, "not reached", "1.5e7 case-steps/s"),
+        ("accuracy", "not shown", "–"),
+        ("accuracy", "not shown", "–"),
+        ("throughput", "not reached", "1.5e7 case-steps/s"),
     ]
     assert "solve_ivp" in goals[0].what and "no scene ran solve_ivp" == goals[0].note
     assert "the thesis's 1 µs step" in goals[3].what and "on a at dt 1 µs" in goals[3].note
@@ -377,8 +377,8 @@ def test_the_quick_verdict_names_every_goal_and_cross_check(tmp_path):
     assert [g.strip().split("  ")[0] for g in goals] == [
         g.status for g in verdict.goals(report.read_json(out / "bench.json"))
     ]
-    issues = [g.split("issue ")[1][0] for g in goals]
-    assert issues == ["7", "7", "7", "7", "4", "4", "3"]
+    areas = [g.split(":")[0].split()[-1] for g in goals]
+    assert areas == ["speed"] * 4 + ["accuracy"] * 2 + ["throughput"]
     for line, peer in zip(goals[:4], ("solve_ivp",) * 2 + ("newmark-linear",) * 2, strict=True):
         assert f"faster than {peer}" in line
     assert goals[-1].startswith("  not shown") and "--no-scaling" in goals[-1]

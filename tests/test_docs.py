@@ -47,8 +47,8 @@ def test_a_figure_that_changes_in_the_json_changes_the_pages():
     changed = pages.render(text, pages.blocks(bench))
     assert changed != text
     lines = changed.splitlines()
-    issue3 = next(line for line in lines if "case-steps/s on 2 workers" in line)
-    assert issue3.startswith("- **not reached** (issue 3)") and "**1.23e7 case-steps/s**" in issue3
+    goal = next(line for line in lines if "case-steps/s on 2 workers" in line)
+    assert goal.startswith("- **not reached** (throughput)") and "**1.23e7 case-steps/s**" in goal
     first = bench.checks[0]["scene"]
     assert f"- cross-check on {first}: **disagrees**" in changed
 
@@ -59,7 +59,7 @@ def test_the_pages_command_checks_and_rewrites(tmp_path, capsys):
     json_path = folder / "bench.json"
     json_path.write_bytes(BENCH_JSON.read_bytes())
     page = tmp_path / "page.md"
-    stale = "Intro.\n\n<!-- generated: bench-issue4 -->\n1.17×\n<!-- end generated -->\nEnd.\n"
+    stale = "Intro.\n\n<!-- generated: bench-accuracy -->\n1.17×\n<!-- end generated -->\nEnd.\n"
     page.write_text(stale)
     args = ["--json", str(json_path), str(page)]
     assert pages.main(["--check", *args]) == 1
@@ -69,7 +69,7 @@ def test_the_pages_command_checks_and_rewrites(tmp_path, capsys):
     assert pages.main(["--check", *args]) == 0
     head, body, tail = page.read_text().split("generated")
     assert head == "Intro.\n\n<!-- " and tail == " -->\nEnd.\n"
-    assert body.startswith(": bench-issue4 -->\nOn separation-11000 the default reaches")
+    assert body.startswith(": bench-accuracy -->\nOn separation-11000 the default reaches")
     assert "**1.17×**" in body  # the committed run's figure, now from the json
     assert (folder / "bench.csv").read_bytes() == (BENCH_JSON.parent / "bench.csv").read_bytes()
     page.write_text("<!-- generated: no-such-block -->\n<!-- end generated -->\n")

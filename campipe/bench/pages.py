@@ -282,7 +282,7 @@ def ratios_block(bench: Bench) -> str:
     return "\n".join(lines)
 
 
-def issue4_block(bench: Bench) -> str:
+def accuracy_block(bench: Bench) -> str:
     """Accuracy for cost on the separation scene."""
     a = bench.accuracy_for_cost
     if not a:
@@ -498,7 +498,7 @@ BLOCKS: dict[str, Callable[[Bench], str]] = {
     "bench-setup": setup_block,
     "bench-scenes": scenes_block,
     "bench-ratios": ratios_block,
-    "bench-issue4": issue4_block,
+    "bench-accuracy": accuracy_block,
     "bench-throughput": throughput_block,
     "bench-fidelity": fidelity_block,
     "bench-scaling": scaling_block,

@@ -297,7 +297,7 @@ def markdown(bench: Bench, with_plots: bool = True) -> str:
             )
     a = bench.accuracy_for_cost
     if a:
-        lines += ["", "## Accuracy for cost on 11000 rpm (issue 4)", ""]
+        lines += ["", "## Accuracy for cost on 11000 rpm", ""]
         cheapest = a["newmark_cheapest_meeting"]
         lines.append(
             f"- default: valve-lift error {a['default_error'] / INCH:.2e} in "
@@ -324,7 +324,7 @@ def markdown(bench: Bench, with_plots: bool = True) -> str:
                 f"{_num(a['ratio_contacts_only'])}."
             )
     if bench.throughput:
-        lines += ["", "## Throughput: a 256-case batch (issue 3)", ""]
+        lines += ["", "## Throughput: a 256-case batch", ""]
         lines += _table(
             [
                 "integrator",

@@ -42,7 +42,7 @@ CHECKED = (
 class Goal:
     """One goal as a run shows it."""
 
-    issue: int  # the issue that sets it
+    area: str  # which goal: "speed", "accuracy" or "throughput"
     what: str  # the goal, in words
     figure: str  # what the run measured, with its unit ("–": nothing measured)
     status: str  # REACHED, NOT_REACHED or NOT_SHOWN
@@ -83,7 +83,7 @@ def _or_inf(x) -> float:
     return x if finite(x) else math.inf
 
 
-def _issue7(bench: Bench, peer: str, goal: float) -> list[Goal]:
+def _speed_goals(bench: Bench, peer: str, goal: float) -> list[Goal]:
     """The goal at the default's error (the issue's ratio) and at the peer's own point."""
     if peer == "newmark-linear":
         point = f"the thesis's {THESIS_STEP * 1e6:g} µs step, for that step's"
@@ -95,7 +95,10 @@ def _issue7(bench: Bench, peer: str, goal: float) -> list[Goal]:
     mine = [r for r in bench.ratios if r["peer"] == peer]
     if not g or not mine:
         why = f"no scene ran {peer}"
-        return [Goal(7, at_default, "–", NOT_SHOWN, why), Goal(7, at_point, "–", NOT_SHOWN, why)]
+        return [
+            Goal("speed", at_default, "–", NOT_SHOWN, why),
+            Goal("speed", at_point, "–", NOT_SHOWN, why),
+        ]
     over = f"smallest over {len(mine)} scene{'s' if len(mine) > 1 else ''}"
 
     least = min(mine, key=lambda r: _or_inf(r["measured_ratio_at_default_error"]))
@@ -114,7 +117,7 @@ def _issue7(bench: Bench, peer: str, goal: float) -> list[Goal]:
         status = NOT_SHOWN if verdict.startswith("not shown") else NOT_REACHED
     goals = [
         Goal(
-            7,
+            "speed",
             at_default,
             f"{'≥ ' if bound else ''}{format_short(g['min_ratio_at_default_error'])}×",
             status,
@@ -127,7 +130,11 @@ def _issue7(bench: Bench, peer: str, goal: float) -> list[Goal]:
     if not compared:
         goals.append(
             Goal(
-                7, at_point, "–", NOT_SHOWN, f"campipe's ladder reaches {peer}'s error on no scene"
+                "speed",
+                at_point,
+                "–",
+                NOT_SHOWN,
+                f"campipe's ladder reaches {peer}'s error on no scene",
             )
         )
         return goals
@@ -139,7 +146,7 @@ def _issue7(bench: Bench, peer: str, goal: float) -> list[Goal]:
         note += f"; campipe's ladder does not reach it on {', '.join(g['campipe_not_reaching'])}"
     goals.append(
         Goal(
-            7,
+            "speed",
             at_point,
             f"{format_short(least['ratio_at_peer_error'])}×",
             REACHED if g["reached_at_peer_error"] else NOT_REACHED,
@@ -149,7 +156,7 @@ def _issue7(bench: Bench, peer: str, goal: float) -> list[Goal]:
     return goals
 
 
-def _issue4(bench: Bench) -> list[Goal]:
+def _accuracy_goals(bench: Bench) -> list[Goal]:
     """On the separation scene: the default's error below its target, at less cost than
     newmark-linear needs for its (looser) target."""
     error = (
@@ -163,10 +170,13 @@ def _issue4(bench: Bench) -> list[Goal]:
     a = bench.accuracy_for_cost
     if not a:
         why = f"{ACCURACY_SCENE} was not run"
-        return [Goal(4, error, "–", NOT_SHOWN, why), Goal(4, cost, "–", NOT_SHOWN, why)]
+        return [
+            Goal("accuracy", error, "–", NOT_SHOWN, why),
+            Goal("accuracy", cost, "–", NOT_SHOWN, why),
+        ]
     goals = [
         Goal(
-            4,
+            "accuracy",
             error,
             f"{format_short(a['default_error'] / INCH, 2)} in",
             REACHED if a["default_below_target"] else NOT_REACHED,
@@ -176,7 +186,13 @@ def _issue4(bench: Bench) -> list[Goal]:
     ratio = a["ratio"]
     if a["how"] not in ("cheapest", "interpolated") or not finite(ratio):
         goals.append(
-            Goal(4, cost, "–", NOT_SHOWN, f"newmark-linear's ladder does not reach it ({a['how']})")
+            Goal(
+                "accuracy",
+                cost,
+                "–",
+                NOT_SHOWN,
+                f"newmark-linear's ladder does not reach it ({a['how']})",
+            )
         )
         return goals
     cheapest = a["newmark_cheapest_meeting"]
@@ -189,7 +205,9 @@ def _issue4(bench: Bench) -> list[Goal]:
     if finite(a.get("ratio_contacts_only")):
         note += f"; {format_short(a['ratio_contacts_only'])}× sampling only the contact coordinates"
     goals.append(
-        Goal(4, cost, f"{format_short(ratio)}×", REACHED if ratio > 1 else NOT_REACHED, note)
+        Goal(
+            "accuracy", cost, f"{format_short(ratio)}×", REACHED if ratio > 1 else NOT_REACHED, note
+        )
     )
     return goals
 
@@ -208,9 +226,9 @@ def _throughput(bench: Bench) -> Goal:
         None,
     )
     if row is None:
-        return Goal(3, what, "–", NOT_SHOWN, "not measured: --no-scaling")
+        return Goal("throughput", what, "–", NOT_SHOWN, "not measured: --no-scaling")
     return Goal(
-        3,
+        "throughput",
         what,
         f"{format_short(row['rate'])} case-steps/s",
         REACHED if row["rate"] > GOAL_THROUGHPUT else NOT_REACHED,
@@ -221,9 +239,9 @@ def _throughput(bench: Bench) -> Goal:
 def goals(bench: Bench) -> list[Goal]:
     """Every goal the bench judges, in a fixed order, each shown or not by this run."""
     return [
-        *_issue7(bench, "solve_ivp", GOAL_IVP),
-        *_issue7(bench, "newmark-linear", GOAL_NEWMARK),
-        *_issue4(bench),
+        *_speed_goals(bench, "solve_ivp", GOAL_IVP),
+        *_speed_goals(bench, "newmark-linear", GOAL_NEWMARK),
+        *_accuracy_goals(bench),
         _throughput(bench),
     ]
 
@@ -286,7 +304,7 @@ def text(bench: Bench) -> str:
     ]
     width = max(len(s) for s in (REACHED, NOT_REACHED, NOT_SHOWN))
     for g in goals(bench):
-        lines.append(f"  {g.status:<{width}}  issue {g.issue}: {g.what}: {g.figure} ({g.note})")
+        lines.append(f"  {g.status:<{width}}  {g.area}: {g.what}: {g.figure} ({g.note})")
     lines.append(
         f"reference cross-checks ({bench.meta['reference']}, against "
         f"{bench.meta['reference_check']}):"
@@ -304,8 +322,7 @@ def text(bench: Bench) -> str:
 def markdown(bench: Bench) -> str:
     """The verdict as markdown bullets: the goals, then the cross-checks."""
     lines = [
-        f"- **{g.status}** (issue {g.issue}): {g.what}: **{g.figure}** ({g.note})."
-        for g in goals(bench)
+        f"- **{g.status}** ({g.area}): {g.what}: **{g.figure}** ({g.note})." for g in goals(bench)
     ]
     lines += [
         f"- cross-check on {c.scene}: **{'agrees' if c.agrees else 'disagrees'}**, {c.reason}."
