@@ -35,6 +35,7 @@ from campipe.model import (
     PARAMETERS,
     ModelParameterError,
     ValveTrain,
+    defining_values,
     system_matrices,
     valve_train,
 )
@@ -446,7 +447,7 @@ def resolve(raw: Mapping, index: int, directory: Path) -> ResolvedCase:
         }
     )
     canonical = {
-        "model": {name: _clean(getattr(train, name)) for name in PARAMETERS},
+        "model": {name: _clean(v) for name, v in defining_values(train).items()},
         "profile": canonical_profile,
         "defects": canonical_defects,
         "speed": _clean(speed),
