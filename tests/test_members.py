@@ -61,9 +61,10 @@ def test_clamped_free_bar_converges_at_the_consistent_mass_rate():
     n of the model's bar elements (stiffness n·k, mass m/n). Its frequencies converge to the
     continuous bar's ω_j = (2j − 1)π/2·√(k/m) at order 2 in 1/n, from above, within the
     consistent-mass bound (θ²/24, θ = κ·L/n), and equal the discrete chain's dispersion
-    relation ω = (n/L)·c·√(6(1 − cos θ)/(2 + cos θ)) to round-off. Fails with a lumped mass
-    (order 2 but from below, and off the dispersion relation), with (m/6)·[[1, 2], [2, 1]]
-    or a mass m instead of m/n per element (the frequencies converge to the wrong limit)."""
+    relation ω = (n/L)·c·√(6(1 − cos θ)/(2 + cos θ)) to round-off. Fails if ``bar_mass`` is
+    lumped ((m/2)·I: off the dispersion relation, converging from below) or its coupling
+    changes ((m/6)·[[2, −1], [−1, 2]], (m/4)·[[2, 1], [1, 2]]: another limit), or if
+    ``bar_stiffness`` loses a sign."""
     k, m = 3.0e5, 2.0e-3  # [N/m], [kg]
     j = np.arange(1, 3)
     theta_l = (2 * j - 1) * math.pi / 2  # κ·L of the clamped–free modes
@@ -187,11 +188,11 @@ def test_refined_train_keeps_the_thesis_coordinates_and_names_the_new_ones():
 
 
 def test_spring_surge_modes_approach_the_fixed_fixed_spring():
-    """With q4 held too (configuration III holds q1 and q7; the rocker is far stiffer than the
-    spring), the refined spring's own modes lie near its fixed–fixed surge frequencies
-    jπ·√(k/m_s) (thesis spring: 4917 rad/s), which one element cannot have. A loose check
-    (the rocker end is not rigid and n is finite): within 3 % for n = 16, and absent for
-    n = 1. Fails if the spring's mass is not spread along it."""
+    """A spring of 16 elements gives the train modes near the spring's own fixed–fixed surge
+    frequencies jπ·√(k/m_s) (4917 and 9834 rad/s for the thesis's spring: at those
+    frequencies the rest of the train barely moves q4), which the one-element spring cannot
+    have. A loose check (q4 is not quite fixed, n is finite): within 3 %. Fails if the
+    spring's mass is not spread along it."""
     base = thesis_train()
     density = base.specific_weight / STANDARD_GRAVITY
     m_s = density * math.pi * base.spring_diameter**2 / 4 * base.spring_length
