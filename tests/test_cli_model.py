@@ -93,3 +93,14 @@ def test_a_refined_train_lists_its_appended_coordinates():
     assert np.shape(out["mass_matrix"]) == (9, 9)
     assert_allclose(out["modal_damping_ratios"], [0.5] + [0.1] * 8, rtol=1e-7)
     assert out["parameters"]["spring_elements"] == {"value": 3, "units": "1"}
+
+
+def test_the_model_page_shows_what_the_commands_print():
+    """docs/model.md's ``campipe model --convergence`` blocks are the commands' output
+    (``python docs/model_outputs.py`` rewrites them). Fails when the page is stale."""
+    import runpy
+    from pathlib import Path
+
+    script = runpy.run_path(str(Path(__file__).parents[1] / "docs" / "model_outputs.py"))
+    page = script["PAGE"].read_text()
+    assert script["rewritten"](page) == page, "run python docs/model_outputs.py"
