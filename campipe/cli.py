@@ -181,10 +181,6 @@ def model(
         click.echo(model_text(train, sm, limits, preset, overrides))
 
 
-def _coordinate_units(c: Coordinate) -> str:
-    return "m" if c.kind == "translation" else "rad"
-
-
 def model_report(train, sm, limits, preset) -> dict[str, object]:
     """The JSON form of ``campipe model``: SI units throughout."""
     return {
@@ -199,7 +195,7 @@ def model_report(train, sm, limits, preset) -> dict[str, object]:
                 "name": c.name,
                 "kind": c.kind,
                 "positive": c.positive,
-                "units": _coordinate_units(c),
+                "units": "m" if c.kind == "translation" else "rad",
             }
             for c in coordinates(train)
         ],

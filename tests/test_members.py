@@ -351,3 +351,21 @@ def test_spring_element_forces_and_clash_margin_by_hand():
     one[3] = -d
     assert_allclose(spring_element_forces(base, one), [f0 + k * d], rtol=1e-12)
     assert_allclose(spring_clash_margin(base, one), travel - d, rtol=1e-12)
+
+
+def test_observed_orders_of_manufactured_sequences():
+    """ω(n) = 100 + 5/n^p gives p exactly; a column that jumps between modes (the changes'
+    order drifts) and one that changes by less than its round-off give NaN; three counts
+    give the plain estimate. Fails if the ratio of the counts or the settling check is
+    wrong."""
+    counts = (1, 2, 4, 8, 16)
+    n = np.array(counts, dtype=float)[:, None]
+    freqs = np.hstack([100 + 5 / n**2, 100 + 5 / n**4, [[900], [400], [160], [150], [149]]])
+    freqs = np.hstack([freqs, 100 + 1e-9 / n**2])
+    roundoff = np.full_like(freqs, 1e-8)
+    orders = observed_orders(freqs, roundoff, counts)
+    assert_allclose(orders[:2], [2, 4], rtol=1e-9)
+    assert np.isnan(orders[2]) and np.isnan(orders[3])
+    assert_allclose(observed_orders(freqs[2:], roundoff[2:], counts[2:])[:2], [2, 4], rtol=1e-9)
+    with pytest.raises(ValueError, match="geometric"):
+        observed_orders(freqs[:3], roundoff[:3], (1, 2, 5))

@@ -262,7 +262,8 @@ def observed_orders(
     (converged to the solver's precision), or, given four counts or more, the order from the
     three before differs by more than 0.5 (the column has not yet settled into one mode).
     """
-    ratios = {b / a for a, b in zip(counts[-4:-1], counts[-3:], strict=True)}
+    tail = counts[-4:]
+    ratios = {b / a for a, b in zip(tail[:-1], tail[1:], strict=True)}
     if len(counts) < 3 or len(ratios) != 1:
         raise ValueError(f"element counts must be geometric, three or more, not {counts}")
     ratio = ratios.pop()

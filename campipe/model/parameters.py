@@ -31,6 +31,7 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import math
+import numbers
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -350,14 +351,10 @@ def _choice(p: Parameter, value: object, key: str) -> str:
 
 def _count(p: Parameter, value: object, key: str) -> int:
     number = _number(value) if isinstance(value, str) else value
-    if (
-        isinstance(number, int | float)
-        and not isinstance(number, bool)
-        and math.isfinite(number)
-        and float(number).is_integer()
-        and p.minimum <= number <= p.maximum
-    ):
-        return int(number)
+    if isinstance(number, numbers.Real) and not isinstance(number, bool):
+        x = float(number)
+        if math.isfinite(x) and x.is_integer() and p.minimum <= x <= p.maximum:
+            return int(x)
     expected = f"a whole number from {p.minimum:g} to {p.maximum:g}"
     raise ModelParameterError.at(
         key,
@@ -431,13 +428,13 @@ def mode_damping_ratios(
     Raises
     ------
     ModelParameterError
-        More ratios than the train has modes.
+        No ratio, or more ratios than the train has modes.
     """
-    if len(ratios) > n_modes:
-        expected = f"at most {n_modes} ratios, one per mode"
+    if not 1 <= len(ratios) <= n_modes:
+        expected = f"1 to {n_modes} ratios, lowest mode first"
         raise ModelParameterError.at(
             key,
-            f"found {len(ratios)} ratios for a train of {n_modes} modes; give {expected} "
+            f"found {len(ratios)} ratios for a train of {n_modes} modes; give 1 to {n_modes} "
             "(a shorter list gives its last value to the modes above)",
             found=ratios,
             expected=expected,

@@ -7,8 +7,9 @@ also reads; the archive is SI except ``speed_rpm`` [rpm] and angles [degree].
 
 Dimensions: ``case``; ``cam_angle`` (0 … 360·revolutions at ``run.output_every``);
 ``revolution``; ``dof`` (q1–q7, when ``run.record`` holds ``q``); ``mode`` (for a varied
-``damping_ratios``, as long as the longest list, NaN beyond a shorter one); ``event`` (all cases' events, case by case: a CF contiguous ragged array
-counted by ``event_count``, with ``event_case`` naming each event's case).
+``damping_ratios``, as long as the longest list, NaN beyond a shorter one); ``event`` (all
+cases' events, case by case: a CF contiguous ragged array counted by ``event_count``, with
+``event_case`` naming each event's case).
 """
 
 from __future__ import annotations
