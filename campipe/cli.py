@@ -14,17 +14,25 @@ from campipe.constants import INCH, LBF_IN, RPM
 from campipe.errors import CampipeError
 from campipe.io.spec_yaml import SpecFileError, parse_value
 from campipe.model import (
-    COORDINATES,
+    ELEMENTS,
     PARAMETERS,
     PRESETS,
+    Coordinate,
     ModelParameterError,
+    coordinates,
+    modal_damping_ratios,
     newmark_linear_stability_limit,
     system_matrices,
+    to_display_units,
+    translations,
     valve_train,
 )
-from campipe.model.assembly import TRANSLATIONS, to_display_units
+from campipe.model.assembly import CONVERGENCE_ELEMENTS, frequency_convergence, observed_orders
 from campipe.units import convert
 from campipe.vocabulary import CONFIGURATIONS, ROMAN
+
+#: The parameters ``campipe model --convergence`` refines.
+REFINEMENTS = tuple(f"{member}_elements" for member in ELEMENTS)
 
 
 def parse_overrides(pairs: tuple[str, ...]) -> dict[str, object]:
@@ -131,13 +139,38 @@ def main(verbose: int) -> None:
     "Repeatable. Names: " + ", ".join(PARAMETERS),
 )
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object (SI units).")
-def model(preset: str, sets: tuple[str, ...], as_json: bool) -> None:
+@click.option(
+    "--convergence",
+    type=click.Choice(REFINEMENTS),
+    metavar="NAME",
+    help="Instead, show how the lowest natural frequencies converge as the parameter NAME "
+    f"(one of: {', '.join(REFINEMENTS)}) divides its member into "
+    + ", ".join(map(str, CONVERGENCE_ELEMENTS))
+    + " elements.",
+)
+@click.option(
+    "--modes",
+    default=6,
+    show_default=True,
+    type=click.IntRange(1, 64),
+    help="Modes shown with --convergence.",
+)
+def model(
+    preset: str, sets: tuple[str, ...], as_json: bool, convergence: str | None, modes: int
+) -> None:
     """Print the model's matrices, natural frequencies, mode shapes and stability limits."""
     overrides = parse_overrides(sets)
     try:
         train = valve_train(preset, overrides)
     except ModelParameterError as exc:
         raise click.UsageError(str(exc)) from None
+    if convergence is not None:
+        report = convergence_report(train, convergence, modes)
+        if as_json:
+            click.echo(json.dumps({"preset": preset, **report}, indent=1))
+        else:
+            click.echo(convergence_text(report, preset, overrides))
+        return
     sm = system_matrices(train)
     limits = {
         ROMAN[c]: newmark_linear_stability_limit(sm.mass, sm.stiffness, c) for c in CONFIGURATIONS
@@ -164,10 +197,11 @@ def model_report(train, sm, limits, preset) -> dict[str, object]:
                 "positive": c.positive,
                 "units": "m" if c.kind == "translation" else "rad",
             }
-            for c in COORDINATES
+            for c in coordinates(train)
         ],
         "natural_frequencies": sm.frequencies.tolist(),
         "natural_frequencies_rpm": (sm.frequencies / RPM).tolist(),
+        "modal_damping_ratios": modal_damping_ratios(sm.damping, sm.modes, sm.frequencies).tolist(),
         "mass_matrix": sm.mass.tolist(),
         "stiffness_matrix": sm.stiffness.tolist(),
         "damping_matrix": sm.damping.tolist(),
@@ -175,6 +209,7 @@ def model_report(train, sm, limits, preset) -> dict[str, object]:
         "stability_limit_s": limits,
         "units": {
             "natural_frequencies": "rad/s",
+            "modal_damping_ratios": "1, (Φᵀ C Φ)ⱼⱼ / (2ωⱼ)",
             "mass_matrix": "kg (translation pairs), kg·m (mixed), kg·m² (rotation pairs)",
             "stiffness_matrix": "N/m (translation pairs), N (mixed), N·m (rotation pairs)",
             "damping_matrix": "N·s/m (translation pairs), N·s (mixed), N·m·s (rotation pairs)",
@@ -184,12 +219,20 @@ def model_report(train, sm, limits, preset) -> dict[str, object]:
     }
 
 
-def _matrix_text(a: np.ndarray, scale: float) -> list[str]:
-    head = "      " + "".join(f"{c.symbol:>9}" for c in COORDINATES)
+def _matrix_text(a: np.ndarray, scale: float, coords: tuple[Coordinate, ...]) -> list[str]:
+    head = "      " + "".join(f"{c.symbol:>9}" for c in coords)
     rows = [head]
-    for c, row in zip(COORDINATES, a / scale, strict=True):
+    for c, row in zip(coords, a / scale, strict=True):
         rows.append(f"  {c.symbol:<4}" + "".join(f"{v:9.2f}" for v in row))
     return rows
+
+
+def _parameter_text(p, value) -> str:
+    if p.length:
+        return ", ".join(f"{x:g}" for x in value)
+    if p.choices or p.integer or not p.units:
+        return f"{value:g}" if isinstance(value, float) else str(value)
+    return f"{convert(value, p.units, p.thesis_units):g} {p.thesis_units}"
 
 
 def model_text(train, sm, limits, preset, overrides) -> str:
@@ -201,46 +244,105 @@ def model_text(train, sm, limits, preset, overrides) -> str:
     lines.append("")
     lines.append("Parameters (thesis units)")
     for name, p in PARAMETERS.items():
-        v = getattr(train, name)
-        text = (
-            ", ".join(f"{x:g}" for x in v)
-            if p.length
-            else f"{convert(v, p.units, p.thesis_units):g} {p.thesis_units}"
-        )
-        lines.append(f"  {name:<28} {text}")
+        lines.append(f"  {name:<30} {_parameter_text(p, getattr(train, name))}")
+    coords = coordinates(train)
+    trans = translations(train)
     lines.append("")
-    lines.append("Coordinates (thesis order and signs)")
-    for c in COORDINATES:
-        lines.append(f"  {c.symbol}  {c.name:<28} {c.kind:<11} positive {c.positive}")
+    lines.append("Coordinates (thesis order and signs; refined members' internal nodes after q7)")
+    for c in coords:
+        lines.append(f"  {c.symbol:<4} {c.name:<30} {c.kind:<11} positive {c.positive}")
     rot = "rows/cols with a rotation carry rad: ×in per translation index"
     blocks = [
         ("Mass matrix [M] (Figure 11)", sm.mass, 1e-5, "lbf·s²/in", "×1e-5"),
         ("Stiffness matrix [K] (Figure 12)", sm.stiffness, 1e5, "lbf/in", "×1e5"),
-        ("Damping matrix [C] (Figure 13)", sm.damping, 1e-2, "lbf·s/in", "×1e-2"),
+        (
+            f"Damping matrix [C] ({train.damping_kind}; Figure 13: modal)",
+            sm.damping,
+            1e-2,
+            "lbf·s/in",
+            "×1e-2",
+        ),
     ]
     for title, a, scale, unit, tag in blocks:
         lines.append("")
         lines.append(f"{title}  {tag} {unit} ({rot})")
-        lines += _matrix_text(to_display_units(a, INCH, LBF_IN), scale)
+        lines += _matrix_text(to_display_units(a, INCH, LBF_IN, trans), scale, coords)
     lines.append("")
-    lines.append("Natural frequencies (Figure 14)")
+    lines.append("Natural frequencies (Figure 14), each mode's damping ratio (Φᵀ C Φ)ⱼⱼ / (2ωⱼ)")
     lines.append(f"  {'mode':>4} {'rad/s':>14} {'rpm':>14} {'ζ':>6}")
-    for i, (w, z) in enumerate(zip(sm.frequencies, train.damping_ratios, strict=True), 1):
+    zeta = modal_damping_ratios(sm.damping, sm.modes, sm.frequencies)
+    for i, (w, z) in enumerate(zip(sm.frequencies, zeta, strict=True), 1):
         lines.append(f"  {i:>4} {w:14.1f} {w / RPM:14.1f} {z:6.3f}")
     lines.append("")
     lines.append(
         "Mode shapes (Figure 14), one column a mode, scaled to a largest translation of 1"
         " (rotations in rad/in)"
     )
-    modes = sm.modes / np.where([c.kind == "translation" for c in COORDINATES], INCH, 1.0)[:, None]
-    modes = modes / np.abs(modes[TRANSLATIONS]).max(axis=0)
-    lines.append("      " + "".join(f"{'mode ' + str(j):>9}" for j in range(1, 8)))
-    for c, row in zip(COORDINATES, modes, strict=True):
+    shapes = sm.modes / np.where(trans, INCH, 1.0)[:, None]
+    shapes = shapes / np.abs(shapes[trans]).max(axis=0)
+    lines.append("      " + "".join(f"{'mode ' + str(j):>9}" for j in range(1, len(coords) + 1)))
+    for c, row in zip(coords, shapes, strict=True):
         lines.append(f"  {c.symbol:<4}" + "".join(f"{v:9.3f}" for v in row))
     lines.append("")
     lines.append("Stability limit of newmark-linear (Δt < √12/ω_max of the held configuration)")
     for name, dt in limits.items():
         lines.append(f"  {name:<4} {dt * 1e6:8.4f} µs")
+    return "\n".join(lines)
+
+
+def convergence_report(train, parameter: str, n_modes: int) -> dict[str, object]:
+    """The natural frequencies as ``parameter`` (``spring_elements`` …) refines its member:
+    the JSON form of ``campipe model --convergence`` (SI)."""
+    member = parameter.removesuffix("_elements")
+    freqs, roundoff = frequency_convergence(train, member, CONVERGENCE_ELEMENTS, n_modes)
+    orders = observed_orders(freqs, roundoff, CONVERGENCE_ELEMENTS)
+
+    def listed(a: np.ndarray) -> list:
+        return (
+            [None if np.isnan(v) else float(v) for v in a]
+            if a.ndim == 1
+            else [listed(row) for row in a]
+        )
+
+    return {
+        "parameter": parameter,
+        "elements": list(CONVERGENCE_ELEMENTS),
+        "natural_frequencies": listed(freqs),
+        "roundoff": listed(roundoff),
+        "observed_orders": listed(orders),
+        "units": {"natural_frequencies": "rad/s", "roundoff": "rad/s", "observed_orders": "1"},
+    }
+
+
+def convergence_text(report: dict, preset: str, overrides) -> str:
+    """The human form of ``campipe model --convergence``."""
+    parameter = report["parameter"]
+    freqs = np.array(report["natural_frequencies"], dtype=float)
+    orders = np.array(report["observed_orders"], dtype=float)
+    counts = report["elements"]
+    member = parameter.removesuffix("_elements").replace("_", " ")
+    lines = [
+        f"campipe model --convergence {parameter}: preset {preset}"
+        + (f", overrides {', '.join(overrides)}" if overrides else ""),
+        "",
+        f"Lowest natural frequencies [rad/s] with the {member} divided into n equal elements.",
+        "New internal modes (a spring's surge) enter as n grows: a column is one mode once it "
+        "settles.",
+        "",
+        f"  {'n':>6}" + "".join(f"{'mode ' + str(j):>14}" for j in range(1, freqs.shape[1] + 1)),
+    ]
+    for n, row in zip(counts, freqs, strict=True):
+        lines.append(f"  {n:>6}" + "".join(f"{v:14.7g}" if v == v else f"{'':>14}" for v in row))
+    lines.append(
+        f"  {'order':>6}" + "".join(f"{v:14.2f}" if v == v else f"{'-':>14}" for v in orders)
+    )
+    lines += [
+        "",
+        f"order: the observed order in 1/n from n = {', '.join(map(str, counts[-3:]))} "
+        "(consistent mass: 2 for a bar, 4 for a beam);",
+        "'-' where the column has not settled into one mode or has converged to the "
+        "eigensolver's round-off.",
+    ]
     return "\n".join(lines)
 
 

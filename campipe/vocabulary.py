@@ -22,7 +22,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-#: Number of generalised coordinates q1 … q7.
+#: Number of the thesis's generalised coordinates q1 … q7. A train with refined members has
+#: more (``campipe.model.n_coordinates``): the internal nodes' coordinates come after these
+#: seven, so the contact coordinates keep their indices whatever the refinement.
 N_COORDINATES = 7
 #: The two contact coordinates, 0-based: q1 (pushrod foot on the cam), q7 (valve foot on the
 #: seat).
@@ -50,8 +52,8 @@ class Configuration:
 
     @property
     def free(self) -> tuple[int, ...]:
-        """Free coordinates, 0-based, in order."""
-        return tuple(i for i in range(N_COORDINATES) if i not in self.held)
+        """Free coordinates of the thesis's seven, 0-based, in order."""
+        return free_coordinates(self.number, N_COORDINATES)
 
 
 CONFIGURATIONS: dict[int, Configuration] = {
@@ -61,6 +63,16 @@ CONFIGURATIONS: dict[int, Configuration] = {
     SEATED: Configuration(SEATED, "IV", False, True, "IV_seat_only"),
 }
 ROMAN = {n: c.roman for n, c in CONFIGURATIONS.items()}
+
+
+def free_coordinates(number: int, n_coordinates: int) -> tuple[int, ...]:
+    """Free coordinates, 0-based, in order, of configuration ``number`` in a train of
+    ``n_coordinates`` coordinates (seven, or more with refined members): all but the held
+    contact coordinates, which are 0 and 6 for any refinement."""
+    if n_coordinates < N_COORDINATES:
+        raise ValueError(f"a train has at least {N_COORDINATES} coordinates, not {n_coordinates}")
+    held = CONFIGURATIONS[number].held
+    return tuple(i for i in range(n_coordinates) if i not in held)
 
 
 def configuration(cam: bool, seat: bool) -> int:

@@ -4,11 +4,12 @@ import json
 import subprocess
 
 import numpy as np
+import pytest
 from click.testing import CliRunner
 from numpy.testing import assert_allclose
 
 from campipe.cli import main
-from campipe.model import newmark_linear_stability_limit, system_matrices, valve_train
+from campipe.model import COORDINATES, newmark_linear_stability_limit, system_matrices, valve_train
 
 
 def run(*args):
@@ -59,3 +60,47 @@ def test_bad_override_is_a_usage_error_naming_the_key():
 def test_console_script_runs():
     out = subprocess.run(["campipe", "model", "--json"], capture_output=True, text=True, check=True)
     assert_allclose(json.loads(out.stdout)["natural_frequencies"][0], 679.1, rtol=1e-3)
+
+
+def test_convergence_lists_the_refined_trains_frequencies_and_orders():
+    """``--convergence spring_elements``: each row is the train's lowest frequencies with the
+    spring in n elements, and the fundamental's observed order is the consistent-mass 2.
+    Fails if a row comes from another refinement or the order from the wrong rows."""
+    result = run("--convergence", "spring_elements", "--modes", "3", "--json")
+    assert result.exit_code == 0, result.output
+    out = json.loads(result.output)
+    assert out["elements"] == [1, 2, 4, 8, 16]
+    for n, row in zip(out["elements"], out["natural_frequencies"], strict=True):
+        sm = system_matrices(valve_train(overrides={"spring_elements": n}))
+        assert row == sm.frequencies[:3].tolist()
+    assert abs(out["observed_orders"][0] - 2) < 0.05
+    text = run("--convergence", "spring_elements", "--modes", "3").output
+    rows = [line.split() for line in text.splitlines() if line.split()[:1] in (["1"], ["16"])]
+    assert [float(v) for v in rows[1][1:]] == pytest.approx(out["natural_frequencies"][4], 1e-6)
+    assert "order" in text
+    bad = CliRunner().invoke(main, ["model", "--convergence", "spring"])
+    assert bad.exit_code == 2 and "spring_elements" in bad.output
+
+
+def test_a_refined_train_lists_its_appended_coordinates():
+    """``--set spring_elements=3``: nine coordinates, the thesis's seven first, then the
+    spring's two internal nodes; 9×9 matrices; the preset's seven ratios cover nine modes
+    (the last for the rest). Fails if the appended coordinates are unnamed or the modes'
+    ratios are cut at seven."""
+    out = json.loads(run("--set", "spring_elements=3", "--json").output)
+    names = [c["name"] for c in out["coordinates"]]
+    assert names[:7] == [c.name for c in COORDINATES] and names[7:] == ["spring_1", "spring_2"]
+    assert np.shape(out["mass_matrix"]) == (9, 9)
+    assert_allclose(out["modal_damping_ratios"], [0.5] + [0.1] * 8, rtol=1e-7)
+    assert out["parameters"]["spring_elements"] == {"value": 3, "units": "1"}
+
+
+def test_the_model_page_shows_what_the_commands_print():
+    """docs/model.md's ``campipe model --convergence`` blocks are the commands' output
+    (``python docs/model_outputs.py`` rewrites them). Fails when the page is stale."""
+    import runpy
+    from pathlib import Path
+
+    script = runpy.run_path(str(Path(__file__).parents[1] / "docs" / "model_outputs.py"))
+    page = script["PAGE"].read_text()
+    assert script["rewritten"](page) == page, "run python docs/model_outputs.py"

@@ -241,9 +241,17 @@ def test_preset_values_parse_from_thesis_units():
         ("spring_rate", "260 in", "expected a quantity convertible to lbf/in"),
         ("spring_rat", "260 lbf/in", "did you mean 'spring_rate'"),
         ("pushrod_length", "-1 in", "greater than 0"),
-        ("damping_ratios", [0.5, 0.1], "list of 7 numbers"),
+        ("damping_ratios", [], "expected a list of numbers, lowest mode first"),
         ("damping_ratios", [0.5, -0.1, 0.1, 0.1, 0.1, 0.1, 0.1], "damping_ratios[1]"),
         ("spring_preload", "lots", "cannot read"),
+        ("spring_elements", 0, "found 0, expected a whole number from 1 to 64"),
+        ("spring_elements", 2.5, "found 2.5, expected a whole number from 1 to 64"),
+        ("pushrod_elements", "four", "found 'four', expected a whole number"),
+        ("valve_stem_elements", True, "found True, expected a whole number"),
+        ("damping_kind", "raleigh", "expected one of: modal, rayleigh, loss-factor; did you"),
+        ("rayleigh_beta", "1e-6", "without units"),
+        ("rayleigh_alpha", "-1 s**-1", "at least 0"),
+        ("spring_loss_factor", -0.1, "at least 0"),
     ],
 )
 def test_bad_parameters_are_refused_naming_the_key(name, value, message):

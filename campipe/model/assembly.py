@@ -1,7 +1,12 @@
-"""System matrices, modes, modal damping and the contact configurations (thesis Ch. II, III).
+"""System matrices, modes, damping and the contact configurations (thesis Ch. II, III).
 
-K = Σ βᵢᵀ Kₑᵢ βᵢ and M = Σ βᵢᵀ Mₑᵢ βᵢ (Eqs. 5, 6); the undamped eigenproblem (Eq. 14);
-C = Φ⁻ᵀ diag(2ζω) Φ⁻¹ with mass-normalised Φ (Eqs. 21–23).
+K = Σ βᵢᵀ Kₑᵢ βᵢ and M = Σ βᵢᵀ Mₑᵢ βᵢ (Eqs. 5, 6) over every finite element; the undamped
+eigenproblem (Eq. 14); the damping matrix of the train's ``damping_kind``: modal,
+C = Φ⁻ᵀ diag(2ζω) Φ⁻¹ with mass-normalised Φ (Eqs. 21–23), Rayleigh's C = α·M + β·K, or each
+member's loss factor η as C_e = (η/ω_ref)·K_e.
+
+A train of n coordinates (seven for the thesis's model, more with refined members, see
+:mod:`campipe.model.coordinates`) gives n×n matrices with q1 … q7 at indices 0–6.
 """
 
 from __future__ import annotations
@@ -12,9 +17,10 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.linalg
 
+from campipe.model.coordinates import TRANSLATIONS, translations
 from campipe.model.elements import elements
-from campipe.model.parameters import N_DOF, ValveTrain
-from campipe.vocabulary import CONFIGURATIONS
+from campipe.model.parameters import N_DOF, ValveTrain, mode_damping_ratios
+from campipe.vocabulary import CONFIGURATIONS, free_coordinates
 
 #: Newmark linear acceleration (β = 1/6, γ = 1/2) is stable for ω·Δt < √12 (= (√3/π)·T),
 #: whatever the damping (the γ = 1/2 family's limit does not depend on ζ).
@@ -22,61 +28,45 @@ NEWMARK_LINEAR_OMEGA_DT = math.sqrt(12.0)
 
 
 @dataclass(frozen=True)
-class Coordinate:
-    """One system coordinate (thesis Figure 2, lost from the thesis's copy: this order and
-    these signs are the ones that reproduce its Figures 11–14)."""
-
-    symbol: str  # q1 … q7
-    name: str  # readable name
-    kind: str  # "translation" [m] or "rotation" [rad]
-    positive: str  # positive direction
-
-
-COORDINATES: tuple[Coordinate, ...] = (
-    Coordinate("q1", "pushrod_foot", "translation", "down, away from the rocker"),
-    Coordinate("q2", "pushrod_top", "translation", "up"),
-    Coordinate("q3", "rocker_pushrod_end_rotation", "rotation", "rocker slope, pushrod to valve"),
-    Coordinate("q4", "rocker_valve_end", "translation", "up"),
-    Coordinate("q5", "rocker_valve_end_rotation", "rotation", "rocker slope, pushrod to valve"),
-    Coordinate("q6", "rocker_pivot_rotation", "rotation", "rocker slope, pushrod to valve"),
-    Coordinate("q7", "valve_foot", "translation", "down, valve opening"),
-)
-TRANSLATIONS = np.array([c.kind == "translation" for c in COORDINATES])
-
-
-@dataclass(frozen=True)
 class SystemMatrices:
-    """The assembled model of one valve train, SI (translations in m, rotations in rad)."""
+    """The assembled model of one valve train, SI (translations in m, rotations in rad); n is
+    the train's number of coordinates (7 for the thesis's model), q1 … q7 at indices 0–6."""
 
-    mass: np.ndarray  # (7, 7) M [kg, kg·m, kg·m²]
-    stiffness: np.ndarray  # (7, 7) K [N/m, N, N·m]
-    damping: np.ndarray  # (7, 7) C [N·s/m, N·s, N·m·s]
-    frequencies: np.ndarray  # (7,) undamped natural frequencies, ascending [rad/s]
-    modes: np.ndarray  # (7, 7) mass-normalised mode shapes in columns (Φᵀ M Φ = I)
-    preload: np.ndarray  # (7,) constant spring preload force vector [N]
+    mass: np.ndarray  # (n, n) M [kg, kg·m, kg·m²]
+    stiffness: np.ndarray  # (n, n) K [N/m, N, N·m]
+    damping: np.ndarray  # (n, n) C [N·s/m, N·s, N·m·s]
+    frequencies: np.ndarray  # (n,) undamped natural frequencies, ascending [rad/s]
+    modes: np.ndarray  # (n, n) mass-normalised mode shapes in columns (Φᵀ M Φ = I)
+    preload: np.ndarray  # (n,) constant spring preload force vector [N]
 
 
 def assemble(train: ValveTrain) -> tuple[np.ndarray, np.ndarray]:
-    """Mass and stiffness matrices, thesis Eqs. 5 and 6."""
-    M = np.zeros((N_DOF, N_DOF))
-    K = np.zeros((N_DOF, N_DOF))
+    """Mass and stiffness matrices, thesis Eqs. 5 and 6, (n, n) each."""
+    n = train.n_coordinates
+    M = np.zeros((n, n))
+    K = np.zeros((n, n))
     for e in elements(train):
         K += e.beta.T @ e.stiffness @ e.beta
         M += e.beta.T @ e.mass @ e.beta
     return M, K
 
 
-def normal_modes(mass: np.ndarray, stiffness: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def normal_modes(
+    mass: np.ndarray, stiffness: np.ndarray, translation: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Undamped eigenproblem (thesis Eq. 14): ascending ω [rad/s] and mass-normalised Φ.
 
-    Each mode's sign is fixed so that its largest-magnitude translation is positive.
+    Each mode's sign is fixed so that its largest-magnitude translation is positive;
+    ``translation`` (n,) bool says which coordinates are translations (by default the
+    thesis's for a 7×7 problem, else all).
     """
     lam, phi = scipy.linalg.eigh(stiffness, mass)
     omega = np.sqrt(np.clip(lam, 0.0, None))
     n = mass.shape[0]
-    trans = TRANSLATIONS if n == N_DOF else np.ones(n, bool)
+    if translation is None:
+        translation = TRANSLATIONS if n == N_DOF else np.ones(n, bool)
     for j in range(phi.shape[1]):
-        v = np.where(trans, phi[:, j], 0.0)
+        v = np.where(translation, phi[:, j], 0.0)
         if v[np.argmax(np.abs(v))] < 0:
             phi[:, j] = -phi[:, j]
     return omega, phi
@@ -85,25 +75,87 @@ def normal_modes(mass: np.ndarray, stiffness: np.ndarray) -> tuple[np.ndarray, n
 def modal_damping(
     mass: np.ndarray, modes: np.ndarray, frequencies: np.ndarray, ratios
 ) -> np.ndarray:
-    """C = Φ⁻ᵀ diag(2ζω) Φ⁻¹ (thesis Eq. 23); with Φᵀ M Φ = I, Φ⁻¹ = Φᵀ M."""
+    """C = Φ⁻ᵀ diag(2ζω) Φ⁻¹ (thesis Eq. 23); with Φᵀ M Φ = I, Φ⁻¹ = Φᵀ M. One ratio a mode."""
     zeta = np.asarray(ratios, dtype=float)
     left = mass @ modes
     C = left @ np.diag(2.0 * zeta * frequencies) @ left.T
     return 0.5 * (C + C.T)
 
 
+def rayleigh_damping(
+    mass: np.ndarray, stiffness: np.ndarray, alpha: float, beta: float
+) -> np.ndarray:
+    """C = α·M + β·K: mode j's damping ratio is α/(2ωⱼ) + β·ωⱼ/2.
+
+    Parameters
+    ----------
+    alpha : float
+        Mass coefficient [1/s].
+    beta : float
+        Stiffness coefficient [s].
+    """
+    return alpha * mass + beta * stiffness
+
+
+def loss_factor_damping(train: ValveTrain, reference_frequency: float) -> np.ndarray:
+    """Σ over the elements of βᵀ·(η/ω_ref)·Kₑ·β, η the element's member's loss factor.
+
+    A member of loss factor η dissipates, per cycle at ω_ref, 2π·η times the strain energy
+    it stores (hysteretic damping, exact at ω_ref; a viscous C_e damps faster modes more).
+    A mode whose strain energy lies all in one member then has ζ = η/2 at ω = ω_ref.
+
+    Parameters
+    ----------
+    reference_frequency : float
+        ω_ref [rad/s]; :func:`system_matrices` takes the train's fundamental.
+    """
+    n = train.n_coordinates
+    C = np.zeros((n, n))
+    for e in elements(train):
+        eta = getattr(train, f"{e.name}_loss_factor")
+        if eta:
+            C += e.beta.T @ ((eta / reference_frequency) * e.stiffness) @ e.beta
+    return C
+
+
+def damping_matrix(
+    train: ValveTrain,
+    mass: np.ndarray,
+    stiffness: np.ndarray,
+    frequencies: np.ndarray,
+    modes: np.ndarray,
+) -> np.ndarray:
+    """The damping matrix of ``train``'s ``damping_kind`` (see the module)."""
+    if train.damping_kind == "rayleigh":
+        return rayleigh_damping(mass, stiffness, train.rayleigh_alpha, train.rayleigh_beta)
+    if train.damping_kind == "loss-factor":
+        return loss_factor_damping(train, float(frequencies[0]))
+    ratios = mode_damping_ratios(train.damping_ratios, len(frequencies))
+    return modal_damping(mass, modes, frequencies, ratios)
+
+
+def modal_damping_ratios(
+    damping: np.ndarray, modes: np.ndarray, frequencies: np.ndarray
+) -> np.ndarray:
+    """Each mode's damping ratio, (Φᵀ C Φ)ⱼⱼ / (2ωⱼ): exact where C is diagonal in the modes
+    (modal, Rayleigh), the modes' own share of the damping where it is not (loss factors)."""
+    return np.einsum("ij,ik,kj->j", modes, damping, modes) / (2.0 * frequencies)
+
+
 def preload_vector(train: ValveTrain) -> np.ndarray:
-    """The installed spring force as a constant load: it pushes the rocker valve end up (+q4)."""
-    f = np.zeros(N_DOF)
+    """The installed spring force as a constant load, (n,): it pushes the rocker valve end up
+    (+q4). A refined spring carries the same force in every element, so its internal nodes
+    take none."""
+    f = np.zeros(train.n_coordinates)
     f[3] = train.spring_preload
     return f
 
 
 def system_matrices(train: ValveTrain) -> SystemMatrices:
-    """Assemble M, K, solve the modes and form the modal damping matrix for ``train``."""
+    """Assemble M, K, solve the modes and form the damping matrix for ``train``."""
     M, K = assemble(train)
-    omega, phi = normal_modes(M, K)
-    C = modal_damping(M, phi, omega, train.damping_ratios)
+    omega, phi = normal_modes(M, K, translations(train))
+    C = damping_matrix(train, M, K, omega, phi)
     return SystemMatrices(M, K, C, omega, phi, preload_vector(train))
 
 
@@ -111,7 +163,7 @@ def configuration_frequencies(
     mass: np.ndarray, stiffness: np.ndarray, configuration: int
 ) -> np.ndarray:
     """Natural frequencies [rad/s] of the train with the configuration's contacts held."""
-    free = list(CONFIGURATIONS[configuration].free)
+    free = list(free_coordinates(configuration, mass.shape[0]))
     omega, _ = normal_modes(mass[np.ix_(free, free)], stiffness[np.ix_(free, free)])
     return omega
 
@@ -131,17 +183,92 @@ def newmark_linear_stability_limit(
     )
 
 
-def unit_scale(display_length: float) -> np.ndarray:
+def unit_scale(display_length: float, translation: np.ndarray = TRANSLATIONS) -> np.ndarray:
     """Diagonal T with q_SI = T·q_display: translations scaled, rotations unchanged."""
-    return np.where(TRANSLATIONS, display_length, 1.0)
+    return np.where(translation, display_length, 1.0)
 
 
-def to_display_units(matrix: np.ndarray, length: float, energy: float) -> np.ndarray:
+def to_display_units(
+    matrix: np.ndarray, length: float, energy: float, translation: np.ndarray | None = None
+) -> np.ndarray:
     """Convert an SI system matrix to another unit system of the same layout.
 
     Energy is invariant: qᵀ A q [J] = q_dᵀ A_d q_d · ``energy`` [J per display energy unit],
     with q = T q_d, T = diag(``length`` [m per display length] on translations, 1 on rotations).
     For the thesis's units, length = 0.0254 and energy = 0.1129848 (1 lbf·in in J).
+    ``translation`` (n,) bool marks the translations (default: the thesis's seven).
     """
-    t = unit_scale(length)
+    t = unit_scale(length, TRANSLATIONS if translation is None else translation)
     return matrix * np.outer(t, t) / energy
+
+
+#: Element counts ``campipe model --convergence`` compares: each twice the one before, so an
+#: observed order follows from the last three.
+CONVERGENCE_ELEMENTS = (1, 2, 4, 8, 16)
+
+
+def frequency_convergence(
+    train: ValveTrain,
+    member: str,
+    counts: tuple[int, ...] = CONVERGENCE_ELEMENTS,
+    n_modes: int = 6,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The lowest natural frequencies of ``train`` with ``member`` divided into each number of
+    elements in ``counts`` (the other members as ``train`` has them).
+
+    New members' internal modes (a spring's surge) enter as n grows, so a column is one mode
+    only once it settles. The eigensolver's round-off in ωⱼ is about ε/2·(ω_max/ωⱼ)²·ωⱼ: a
+    refined stiff member (the rocker arms) raises ω_max and with it the noise in the low modes.
+
+    Returns
+    -------
+    frequencies : (len(counts), n_modes) array
+        Ascending [rad/s], NaN beyond a model's number of modes.
+    roundoff : (len(counts), n_modes) array
+        The round-off bound above [rad/s].
+    """
+    freqs = np.full((len(counts), n_modes), np.nan)
+    roundoff = np.full((len(counts), n_modes), np.nan)
+    for i, n in enumerate(counts):
+        omega = _eigenfrequencies(train.replace(**{f"{member}_elements": n}))
+        k = min(n_modes, omega.size)
+        freqs[i, :k] = omega[:k]
+        roundoff[i, :k] = 0.5 * np.finfo(float).eps * omega[-1] ** 2 / omega[:k]
+    return freqs, roundoff
+
+
+def _eigenfrequencies(train: ValveTrain) -> np.ndarray:
+    M, K = assemble(train)
+    return normal_modes(M, K)[0]
+
+
+def _orders(frequencies: np.ndarray, roundoff: np.ndarray, ratio: float) -> np.ndarray:
+    """Observed orders from three successive rows; NaN where the changes differ in sign or
+    the last is within 10× round-off."""
+    d1 = frequencies[0] - frequencies[1]
+    d2 = frequencies[1] - frequencies[2]
+    ok = (d1 * d2 > 0) & (np.abs(d2) > 10.0 * roundoff.max(axis=0))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(ok, np.log(d1 / d2) / math.log(ratio), np.nan)
+
+
+def observed_orders(
+    frequencies: np.ndarray, roundoff: np.ndarray, counts: tuple[int, ...] = CONVERGENCE_ELEMENTS
+) -> np.ndarray:
+    """Each column's observed order of convergence in 1/n from the last three counts,
+    p = log(d₁/d₂)/log(r), d the changes between successive counts and r their ratio.
+
+    NaN where it means nothing: the changes differ in sign, the last is within 10× round-off
+    (converged to the solver's precision), or, given four counts or more, the order from the
+    three before differs by more than 0.5 (the column has not yet settled into one mode).
+    """
+    tail = counts[-4:]
+    ratios = {b / a for a, b in zip(tail[:-1], tail[1:], strict=True)}
+    if len(counts) < 3 or len(ratios) != 1:
+        raise ValueError(f"element counts must be geometric, three or more, not {counts}")
+    ratio = ratios.pop()
+    last = _orders(frequencies[-3:], roundoff[-3:], ratio)
+    if len(counts) == 3:
+        return last
+    before = _orders(frequencies[-4:-1], roundoff[-4:-1], ratio)
+    return np.where(np.abs(last - before) <= 0.5, last, np.nan)

@@ -14,7 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from campipe.constants import STANDARD_GRAVITY
-from campipe.model.parameters import N_DOF, ValveTrain
+from campipe.model.coordinates import Dof, member_nodes
+from campipe.model.parameters import ELEMENTS, NODE_COORDINATES, ValveTrain
 
 
 def bar_stiffness(k: float) -> np.ndarray:
@@ -61,55 +62,58 @@ def beam_mass(m: float, length: float) -> np.ndarray:
     )
 
 
-def _selector(rows: list[tuple[int, float]]) -> np.ndarray:
+def _selector(rows: list[Dof], n_coordinates: int) -> np.ndarray:
     """A compatibility matrix: row i picks sign·q[index], or nothing for index −1 (ground)."""
-    beta = np.zeros((len(rows), N_DOF))
+    beta = np.zeros((len(rows), n_coordinates))
     for i, (j, sign) in enumerate(rows):
         if j >= 0:
             beta[i, j] = sign
     return beta
 
 
-GROUND = (-1, 0.0)
-
-#: Compatibility matrices [β]ᵢ (thesis Eqs. 2–4), element coordinates from system coordinates
-#: (0-based q index, sign). Axial elements use (u_lower, u_upper) measured upward; q1 and q7
-#: point down, so they enter with a minus sign. Beams use (v1, v2, θ1, θ2), v up and θ the slope
-#: along the rocker from the pushrod end towards the valve end; the pivot cannot translate.
-BETA: dict[str, np.ndarray] = {
-    "pushrod": _selector([(0, -1.0), (1, 1.0)]),
-    "rocker_pushrod_arm": _selector([(1, 1.0), GROUND, (2, 1.0), (5, 1.0)]),
-    "rocker_valve_arm": _selector([GROUND, (3, 1.0), (5, 1.0), (4, 1.0)]),
-    "spring": _selector([GROUND, (3, 1.0)]),
-    "valve_stem": _selector([(6, -1.0), (3, 1.0)]),
-}
-
-
 @dataclass(frozen=True)
 class Element:
     """One finite element of the train."""
 
-    name: str  # element name (see campipe.model.parameters)
-    beta: np.ndarray  # (n_e, 7) compatibility matrix
+    name: str  # the member it belongs to (see campipe.model.parameters.ELEMENTS)
+    index: int  # 0 … n − 1 along the member, from its first end (see MEMBER_ENDS)
+    beta: np.ndarray  # (n_e, n) compatibility matrix, n the train's coordinates
     stiffness: np.ndarray  # (n_e, n_e) element stiffness
     mass: np.ndarray  # (n_e, n_e) element consistent mass
 
 
-def elements(train: ValveTrain) -> list[Element]:
-    """The five elements of ``train`` with their matrices (thesis Eqs. 7–10)."""
+def member_matrices(train: ValveTrain, member: str) -> tuple[np.ndarray, np.ndarray]:
+    """Stiffness and consistent mass of each of the equal elements ``member`` is divided into
+    (thesis Eqs. 7–10 on a length L/n of mass m/n).
+
+    A bar's stiffness is E·A·n/L, the spring's n·``spring_rate`` (n springs in series make
+    the rate); its mass is that of the equivalent wire, spread along the chain.
+    """
+    n = train.elements_of(member)
     density = train.specific_weight / STANDARD_GRAVITY
     E = train.elastic_modulus
+    L = getattr(train, f"{member}_length") / n
+    D = getattr(train, f"{member}_diameter")
+    area = math.pi * D**2 / 4.0
+    m = density * area * L
+    if NODE_COORDINATES[member] == 2:
+        inertia = math.pi * D**4 / 64.0
+        return beam_stiffness(E * inertia, L), beam_mass(m, L)
+    k = train.spring_rate * n if member == "spring" else E * area / L
+    return bar_stiffness(k), bar_mass(m)
+
+
+def elements(train: ValveTrain) -> list[Element]:
+    """Every finite element of ``train``, member by member (thesis Eqs. 2–10), each member's
+    from its first end to its last; with one element a member, the thesis's five."""
+    nodes = member_nodes(train)
+    n_q = train.n_coordinates
     out = []
-    for name in BETA:
-        L = getattr(train, f"{name}_length")
-        D = getattr(train, f"{name}_diameter")
-        area = math.pi * D**2 / 4.0
-        m = density * area * L
-        if name.startswith("rocker"):
-            inertia = math.pi * D**4 / 64.0
-            ke, me = beam_stiffness(E * inertia, L), beam_mass(m, L)
-        else:
-            k = train.spring_rate if name == "spring" else E * area / L
-            ke, me = bar_stiffness(k), bar_mass(m)
-        out.append(Element(name, BETA[name], ke, me))
+    for member in ELEMENTS:
+        ke, me = member_matrices(train, member)
+        chain = nodes[member]
+        for i, (a, b) in enumerate(zip(chain[:-1], chain[1:], strict=True)):
+            # A bar's local order is (u_a, u_b); a beam's (v_a, v_b, θ_a, θ_b) (Eqs. 8, 10).
+            rows = [a[0], b[0]] if len(a) == 1 else [a[0], b[0], a[1], b[1]]
+            out.append(Element(member, i, _selector(rows, n_q), ke, me))
     return out

@@ -15,6 +15,15 @@ Elements (thesis Ch. II, Table II):
                           that of the equivalent wire of ``spring_length`` × ``spring_diameter``
 ``valve_stem``            element 5, axial bar from the rocker valve end (q4) to the valve (q7)
 ========================  =====================================================================
+
+Each element is a *member* that ``<member>_elements`` divides into that many equal finite
+elements (1, the default, is the thesis's model); the internal nodes' coordinates come after
+q1 … q7 (:mod:`campipe.model.coordinates`).
+
+Damping (``damping_kind``): ``modal``, the thesis's (``damping_ratios``, thesis Eq. 23);
+``rayleigh``, C = α·M + β·K (``rayleigh_alpha``, ``rayleigh_beta``); ``loss-factor``, each
+member's elements damped by its loss factor η as C_e = (η/ω_ref)·K_e
+(``<member>_loss_factor``), with ω_ref the train's fundamental frequency.
 """
 
 from __future__ import annotations
@@ -22,15 +31,31 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import math
+import numbers
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from campipe.errors import CampipeError
+from campipe.errors import CampipeError, did_you_mean, excerpt
 from campipe.units import QuantityError, parse_quantity
 
 ELEMENTS = ("pushrod", "rocker_pushrod_arm", "rocker_valve_arm", "spring", "valve_stem")
+#: Coordinates per node of each member: a bar's node moves along it, a beam's node translates
+#: and rotates.
+NODE_COORDINATES = {
+    "pushrod": 1,
+    "rocker_pushrod_arm": 2,
+    "rocker_valve_arm": 2,
+    "spring": 1,
+    "valve_stem": 1,
+}
+#: The thesis's seven coordinates (and modes).
 N_DOF = 7
+#: Most finite elements a member may be divided into: dense matrices of a few hundred
+#: coordinates at most.
+MAX_ELEMENTS = 64
+#: Damping kinds: the thesis's modal damping, Rayleigh's, per-member loss factors.
+DAMPING_KINDS = ("modal", "rayleigh", "loss-factor")
 
 
 @dataclass(frozen=True)
@@ -43,7 +68,16 @@ class Parameter:
     thesis_units: str  # units the thesis preset is written in (pint spelling)
     minimum: float  # smallest allowed value in SI (exclusive when exclusive_minimum)
     exclusive_minimum: bool = True
-    length: int = 0  # 0 for a scalar, else the number of values in the list
+    length: int = 0  # 0 for a scalar, else a list of one value or more (the thesis: this many)
+    integer: bool = False  # a whole number (a count)
+    choices: tuple[str, ...] = ()  # the words a choice takes (units then "")
+    default: object = None  # the value (spec form) where neither preset nor override gives one
+    maximum: float = math.inf  # largest allowed value (counts: the matrices stay small)
+
+    @property
+    def continuous(self) -> bool:
+        """A scalar number or quantity: what a range {from, to, num} or a sample may vary."""
+        return not (self.length or self.integer or self.choices)
 
 
 def _element_parameters() -> list[Parameter]:
@@ -59,6 +93,38 @@ def _element_parameters() -> list[Parameter]:
         out.append(Parameter(f"{element}_length", f"{label} length", "m", "in", 0.0))
         out.append(Parameter(f"{element}_diameter", f"{label} diameter", "m", "in", 0.0))
     return out
+
+
+def _refinement_parameters() -> list[Parameter]:
+    return [
+        Parameter(
+            f"{element}_elements",
+            f"number of equal finite elements of the {element.replace('_', ' ')}",
+            "",
+            "",
+            1.0,
+            exclusive_minimum=False,
+            integer=True,
+            default=1,
+            maximum=MAX_ELEMENTS,
+        )
+        for element in ELEMENTS
+    ]
+
+
+def _loss_factor_parameters() -> list[Parameter]:
+    return [
+        Parameter(
+            f"{element}_loss_factor",
+            f"loss factor η of the {element.replace('_', ' ')} (damping_kind loss-factor)",
+            "",
+            "",
+            0.0,
+            exclusive_minimum=False,
+            default=0,
+        )
+        for element in ELEMENTS
+    ]
 
 
 PARAMETERS: dict[str, Parameter] = {
@@ -78,13 +144,50 @@ PARAMETERS: dict[str, Parameter] = {
         ),
         Parameter(
             "damping_ratios",
-            "modal damping ratios, lowest mode first",
+            "modal damping ratios, lowest mode first (the last for the rest)",
             "",
             "",
             0.0,
             exclusive_minimum=False,
             length=N_DOF,
         ),
+        *_refinement_parameters(),
+        Parameter(
+            "spring_travel_to_solid",
+            "valve spring compression from its installed length to solid (coil clash)",
+            "m",
+            "in",
+            0.0,
+            default="1.6 in",
+        ),
+        Parameter(
+            "damping_kind",
+            "damping model: " + ", ".join(DAMPING_KINDS),
+            "",
+            "",
+            0.0,
+            choices=DAMPING_KINDS,
+            default="modal",
+        ),
+        Parameter(
+            "rayleigh_alpha",
+            "Rayleigh damping's mass coefficient α (C = α·M + β·K)",
+            "1/s",
+            "s**-1",
+            0.0,
+            exclusive_minimum=False,
+            default="0 s**-1",
+        ),
+        Parameter(
+            "rayleigh_beta",
+            "Rayleigh damping's stiffness coefficient β (C = α·M + β·K)",
+            "s",
+            "s",
+            0.0,
+            exclusive_minimum=False,
+            default="0 s",
+        ),
+        *_loss_factor_parameters(),
     ]
 }
 
@@ -132,7 +235,21 @@ class ValveTrain:
     specific_weight: float  # [N/m³]
     spring_rate: float  # [N/m]
     spring_preload: float  # [N] installed force, cam on the base circle
-    damping_ratios: tuple[float, ...]  # [-] seven, lowest mode first
+    damping_ratios: tuple[float, ...]  # [-] lowest mode first, the last for the rest
+    pushrod_elements: int  # [-] equal finite elements of each member; 1 is the thesis's
+    rocker_pushrod_arm_elements: int  # [-]
+    rocker_valve_arm_elements: int  # [-]
+    spring_elements: int  # [-]
+    valve_stem_elements: int  # [-]
+    spring_travel_to_solid: float  # [m] installed length minus solid length
+    damping_kind: str  # one of DAMPING_KINDS
+    rayleigh_alpha: float  # [1/s] C = α·M + β·K
+    rayleigh_beta: float  # [s]
+    pushrod_loss_factor: float  # [-] η of each member (damping_kind "loss-factor")
+    rocker_pushrod_arm_loss_factor: float  # [-]
+    rocker_valve_arm_loss_factor: float  # [-]
+    spring_loss_factor: float  # [-]
+    valve_stem_loss_factor: float  # [-]
 
     def replace(self, **changes: Any) -> ValveTrain:
         """A copy with some values (SI) changed."""
@@ -141,13 +258,25 @@ class ValveTrain:
     def as_dict(self) -> dict[str, object]:
         return dataclasses.asdict(self)
 
+    def elements_of(self, member: str) -> int:
+        """The number of finite elements ``member`` (a name of ``ELEMENTS``) is divided into."""
+        return int(getattr(self, f"{member}_elements"))
+
+    @property
+    def n_coordinates(self) -> int:
+        """Number of system coordinates: the thesis's seven, and those of the internal nodes
+        of refined members (a bar's n − 1 internal nodes one each, a beam's two each)."""
+        return N_DOF + sum((self.elements_of(m) - 1) * NODE_COORDINATES[m] for m in ELEMENTS)
+
 
 class ModelParameterError(CampipeError, ValueError):
     """A model parameter that is unknown, badly typed or out of range; ``key`` is the key path
     named in the message (``model.spring_rate``, ``damping_ratios[1]``)."""
 
 
-def parse_parameter(name: str, value: object, key: str | None = None) -> float | tuple[float, ...]:
+def parse_parameter(
+    name: str, value: object, key: str | None = None
+) -> float | int | str | tuple[float, ...]:
     """Turn a spec value (quantity string, or numbers for dimensionless) into SI.
 
     Parameters
@@ -155,7 +284,8 @@ def parse_parameter(name: str, value: object, key: str | None = None) -> float |
     name : str
         Parameter name (a key of ``PARAMETERS``).
     value : object
-        A quantity string such as ``"245 lbf/in"``; for ``damping_ratios`` a list of numbers.
+        A quantity string such as ``"245 lbf/in"``; for ``damping_ratios`` a list of numbers;
+        for a count (``spring_elements``) a whole number; for ``damping_kind`` a word.
     key : str, optional
         The key path to name in errors (defaults to ``name``).
     """
@@ -170,24 +300,13 @@ def parse_parameter(name: str, value: object, key: str | None = None) -> float |
             expected="a model parameter",
         )
     p = PARAMETERS[name]
+    if p.choices:
+        return _choice(p, value, key)
+    if p.integer:
+        return _count(p, value, key)
     try:
         if p.length:
-            if isinstance(value, str):
-                value = [v for v in value.strip("[]() ").replace(",", " ").split()]
-            if not isinstance(value, (list, tuple)) or len(value) != p.length:
-                raise ModelParameterError.at(
-                    key,
-                    f"expected a list of {p.length} numbers, lowest mode first, found {value!r}",
-                    found=value,
-                    expected=f"a list of {p.length} numbers",
-                )
-            out = tuple(
-                parse_quantity(_number(v), p.units, f"{key}[{i}]", p.thesis_units)
-                for i, v in enumerate(value)
-            )
-            for i, (v, raw) in enumerate(zip(out, value, strict=True)):
-                _check_range(p, v, f"{key}[{i}]", raw)
-            return out
+            return _list(p, value, key)
         v = parse_quantity(value, p.units, key, p.thesis_units)
     except QuantityError as exc:
         raise ModelParameterError(
@@ -195,6 +314,55 @@ def parse_parameter(name: str, value: object, key: str | None = None) -> float |
         ) from None
     _check_range(p, v, key, value)
     return v
+
+
+def _list(p: Parameter, value: object, key: str) -> tuple[float, ...]:
+    if isinstance(value, str):
+        value = [v for v in value.strip("[]() ").replace(",", " ").split()]
+    if not isinstance(value, (list, tuple)) or not value:
+        raise ModelParameterError.at(
+            key,
+            f"expected a list of numbers, lowest mode first ({p.length} for the thesis's "
+            f"model; a shorter list gives its last value to the modes above), "
+            f"found {excerpt(value)}",
+            found=value,
+            expected="a list of one or more numbers",
+        )
+    out = tuple(
+        parse_quantity(_number(v), p.units, f"{key}[{i}]", p.thesis_units)
+        for i, v in enumerate(value)
+    )
+    for i, (v, raw) in enumerate(zip(out, value, strict=True)):
+        _check_range(p, v, f"{key}[{i}]", raw)
+    return out
+
+
+def _choice(p: Parameter, value: object, key: str) -> str:
+    if isinstance(value, str) and value in p.choices:
+        return value
+    expected = "one of: " + ", ".join(p.choices)
+    raise ModelParameterError.at(
+        key,
+        f"found {excerpt(value)}, expected {expected}{did_you_mean(value, p.choices)}",
+        found=value,
+        expected=expected,
+    )
+
+
+def _count(p: Parameter, value: object, key: str) -> int:
+    number = _number(value) if isinstance(value, str) else value
+    if isinstance(number, numbers.Real) and not isinstance(number, bool):
+        x = float(number)
+        if math.isfinite(x) and x.is_integer() and p.minimum <= x <= p.maximum:
+            return int(x)
+    expected = f"a whole number from {p.minimum:g} to {p.maximum:g}"
+    raise ModelParameterError.at(
+        key,
+        f"found {excerpt(value)}, expected {expected} (1 keeps the member one element, "
+        "as in the thesis; 4 divides it into four equal elements)",
+        found=value,
+        expected=expected,
+    )
 
 
 def _number(v: object) -> object:
@@ -239,11 +407,56 @@ def valve_train(
             found=preset,
             expected="one of: " + ", ".join(PRESETS),
         )
-    values = {**PRESETS[preset], **(overrides or {})}
+    values = {**DEFAULTS, **PRESETS[preset], **(overrides or {})}
     resolved = {name: parse_parameter(name, v, key_prefix + name) for name, v in values.items()}
-    return ValveTrain(**resolved)  # type: ignore[arg-type]
+    train = ValveTrain(**resolved)  # type: ignore[arg-type]
+    mode_damping_ratios(train.damping_ratios, train.n_coordinates, key_prefix + "damping_ratios")
+    return train
 
 
 def thesis_train() -> ValveTrain:
     """The ``thesis-1971`` preset."""
     return valve_train("thesis-1971")
+
+
+def mode_damping_ratios(
+    ratios: tuple[float, ...], n_modes: int, key: str = "damping_ratios"
+) -> tuple[float, ...]:
+    """One damping ratio per mode, lowest first: the ratios given, then the last of them for
+    every mode above (``[0.5, 0.1]`` is 0.5 on the fundamental and 0.1 on all the others).
+
+    Raises
+    ------
+    ModelParameterError
+        No ratio, or more ratios than the train has modes.
+    """
+    if not 1 <= len(ratios) <= n_modes:
+        expected = f"1 to {n_modes} ratios, lowest mode first"
+        raise ModelParameterError.at(
+            key,
+            f"found {len(ratios)} ratios for a train of {n_modes} modes; give 1 to {n_modes} "
+            "(a shorter list gives its last value to the modes above)",
+            found=ratios,
+            expected=expected,
+        )
+    return tuple(ratios) + (ratios[-1],) * (n_modes - len(ratios))
+
+
+#: The parameters declared with a default, at it (spec form): the refinement, the spring's
+#: travel and the damping kinds the thesis does not have.
+DEFAULTS: dict[str, object] = {
+    name: p.default for name, p in PARAMETERS.items() if p.default is not None
+}
+_DEFAULT_VALUES = {name: parse_parameter(name, v) for name, v in DEFAULTS.items()}
+
+
+def defining_values(train: ValveTrain) -> dict[str, object]:
+    """Parameter name → SI value of the parameters that set ``train`` apart: all of them, but
+    a parameter declared with a default is left out at its default (a study's case ids hash
+    these, and a case written before such a parameter existed keeps its id)."""
+    out = {}
+    for name in PARAMETERS:
+        value = getattr(train, name)
+        if name not in _DEFAULT_VALUES or value != _DEFAULT_VALUES[name]:
+            out[name] = value
+    return out

@@ -1,10 +1,14 @@
 """JSON Schema of the model parameters, generated from the one declaration in ``PARAMETERS``.
 
 ``schemas/model.schema.json`` is this function's output (a test keeps the two equal); the
-study schema refers to it for the ``model:`` block.
+study schema refers to it for the ``model:`` block. Regenerate it with
+
+    python -m campipe.model.schema > schemas/model.schema.json
 """
 
 from __future__ import annotations
+
+import json
 
 from campipe.model.parameters import PARAMETERS, PRESETS
 
@@ -14,14 +18,25 @@ QUANTITY_PATTERN = r"^\s*[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?\s*[A-Za-z°µ][A-
 def parameter_schema(name: str) -> dict[str, object]:
     """The schema of one model parameter's value."""
     p = PARAMETERS[name]
+    if p.choices:
+        return {"enum": list(p.choices), "description": p.long_name}
+    if p.integer:
+        return {
+            "type": "integer",
+            "minimum": int(p.minimum),
+            "maximum": int(p.maximum),
+            "description": p.long_name,
+        }
+    number: dict[str, object] = {"type": "number", "minimum": p.minimum}
     if p.length:
         return {
             "type": "array",
-            "items": {"type": "number", "minimum": p.minimum},
-            "minItems": p.length,
-            "maxItems": p.length,
+            "items": number,
+            "minItems": 1,
             "description": p.long_name,
         }
+    if not p.units:
+        return {**number, "description": p.long_name}
     return {
         "type": "string",
         "pattern": QUANTITY_PATTERN,
@@ -44,3 +59,12 @@ def model_schema() -> dict[str, object]:
         "properties": properties,
         "additionalProperties": False,
     }
+
+
+def schema_text() -> str:
+    """The schema file's text."""
+    return json.dumps(model_schema(), indent=2, ensure_ascii=False) + "\n"
+
+
+if __name__ == "__main__":
+    print(schema_text(), end="")

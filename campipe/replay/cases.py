@@ -35,6 +35,7 @@ from campipe.engine import RunSettings, run_batch
 from campipe.errors import CampipeError, did_you_mean
 from campipe.io.spec_yaml import SpecFileError, parse_spec_text
 from campipe.model import PARAMETERS, ModelParameterError, ValveTrain, valve_train
+from campipe.model.parameters import Parameter
 from campipe.study.expand import ResolvedCase, Study, expand
 from campipe.study.layout import coordinate_values
 from campipe.study.query import case_table, replay_mask, select
@@ -317,11 +318,24 @@ def _train_from_columns(
     for name, p in PARAMETERS.items():
         if name in columns:
             value, units = columns[name]
-            model[name] = list(value) if p.length else f"{float(value)!r} {units}".strip()
+            model[name] = _column_value(p, value, units)
     try:
         return valve_train(preset, model)
     except ModelParameterError as exc:
         raise ReplayError(f"cannot build the case's valve train ({exc})") from None
+
+
+def _column_value(p: Parameter, value: Any, units: str) -> object:
+    """A model parameter's archive column value as a spec value."""
+    if p.length:
+        return [float(v) for v in value if v == v]  # NaN pads a shorter case's list
+    if p.integer:
+        return int(value)
+    if p.choices:
+        return str(value)
+    if not p.units:
+        return float(value)
+    return f"{float(value)!r} {units}".strip()
 
 
 def regain_q(resolved: Sequence[ResolvedCase]) -> list[tuple[np.ndarray, np.ndarray]]:

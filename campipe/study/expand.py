@@ -32,9 +32,11 @@ from campipe.engine.batch import check_stability
 from campipe.errors import excerpt
 from campipe.io.lift_table import LiftTableError, read_lift_table, table_digest
 from campipe.model import (
+    ELEMENTS,
     PARAMETERS,
     ModelParameterError,
     ValveTrain,
+    defining_values,
     system_matrices,
     valve_train,
 )
@@ -258,7 +260,18 @@ def _train(preset: str, overrides: tuple) -> ValveTrain:
 
 def check_train(train: ValveTrain) -> None:
     """The train's matrices and natural frequencies are finite and positive: parameters
-    far out of range (a spring rate of 1e300 lbf/in) are refused here, not by the engine."""
+    far out of range (a spring rate of 1e300 lbf/in) are refused here, not by the engine.
+    A train with refined members is refused until the engine runs more than q1 … q7."""
+    refined = [m for m in ELEMENTS if train.elements_of(m) > 1]
+    if refined:
+        raise SpecProblem(
+            f"model.{refined[0]}_elements",
+            f"found {train.elements_of(refined[0])}, expected 1: the engine does not yet run "
+            "refined members (more coordinates than the thesis's seven); `campipe model "
+            "--set ...` shows their matrices and frequencies",
+            found=train.elements_of(refined[0]),
+            expected="1",
+        )
     try:
         sm = system_matrices(train)
         ok = all(
@@ -465,7 +478,7 @@ def resolve(raw: Mapping, index: int, directory: Path) -> ResolvedCase:
         }
     )
     canonical = {
-        "model": {name: _clean(getattr(train, name)) for name in PARAMETERS},
+        "model": {name: _clean(v) for name, v in defining_values(train).items()},
         "profile": canonical_profile,
         "defects": canonical_defects,
         "speed": _clean(speed),

@@ -636,5 +636,5 @@ def sample_keys() -> tuple[str, ...]:
         k
         for k, f in varied_fields().items()
         if f.kind in ("quantity", "number")
-        or (f.kind == "parameter" and not PARAMETERS[k[6:]].length)
+        or (f.kind == "parameter" and PARAMETERS[k[6:]].continuous)
     )

@@ -109,6 +109,13 @@ def coordinate_values(cases: list[ResolvedCase], study: Study) -> dict[str, np.n
             out[name] = np.array([str(v) for v in raw], dtype=object)
         elif var.dtype.startswith("i"):
             out[name] = np.array(raw, dtype=var.dtype)
+        elif "mode" in var.dims:
+            # a list per case (damping_ratios), as long as the longest, NaN beyond a shorter
+            lists = [np.asarray(v, dtype=float) for v in raw]
+            values = np.full((len(lists), max(v.size for v in lists)), np.nan)
+            for i, v in enumerate(lists):
+                values[i, : v.size] = v
+            out[name] = values * factor
         else:
             values = np.array(raw, dtype=float) * factor
             if key == "speed":
@@ -134,12 +141,13 @@ def archive_layout(study: Study, n_events: int, cam_angle: np.ndarray, n_revolut
         sizes["dof"] = len(DOF_NAMES)
     specs = [_spec(n, VARIABLES[n]) for n in _axes(study.record)]
     specs.append(_spec("case_id", VARIABLES["case_id"]))
+    values = coordinate_values(study.cases, study)
     for _key, (name, var, _) in coords.items():
         if "mode" in var.dims:
-            sizes["mode"] = 7
+            sizes["mode"] = values[name].shape[1]
         specs.append(_spec(name, var))
     specs += data_specs(study.record, " ".join(coord_names))
-    static = {**axis_arrays(cam_angle, n_revolutions), **coordinate_values(study.cases, study)}
+    static = {**axis_arrays(cam_angle, n_revolutions), **values}
     static = {s.name: static[s.name] for s in specs if s.name in static}
     return sizes, specs, static
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 
+from campipe.model import PARAMETERS
 from campipe.model.schema import QUANTITY_PATTERN, model_schema, parameter_schema
 from campipe.study.fields import (
     CASE_FIELDS,
@@ -133,9 +134,26 @@ def _value(key: str) -> dict[str, object]:
     return {"$ref": f"#/$defs/{key}"}
 
 
+def _parameter_number(key: str) -> bool:
+    """``key`` is a model parameter that is a plain number (a loss factor)."""
+    p = PARAMETERS[key.removeprefix("model.")]
+    return p.continuous and not p.units
+
+
 def _range(key: str, with_num: bool) -> dict[str, object] | None:
     """A {from, to[, num]} range of a scalar quantity, or None where none applies."""
     f = varied_fields().get(key)
+    if f is not None and f.kind == "parameter" and not f.units and _parameter_number(key):
+        bound: dict[str, object] = {"type": "number"}
+        numbers: dict[str, object] = {"from": bound, "to": bound}
+        if with_num:
+            numbers["num"] = {"type": "integer", "minimum": 1}
+        return {
+            "type": "object",
+            "properties": numbers,
+            "required": list(numbers),
+            "additionalProperties": False,
+        }
     scalar = f is not None and (
         f.kind == "quantity"
         or (

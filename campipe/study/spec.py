@@ -397,7 +397,7 @@ def range_field(key: str, path: str) -> Field:
     if (
         f is None
         or f.kind not in ("quantity", "number", "parameter")
-        or (f.kind == "parameter" and PARAMETERS[key.removeprefix("model.")].length)
+        or (f.kind == "parameter" and not PARAMETERS[key.removeprefix("model.")].continuous)
     ):
         raise SpecProblem(
             path, f"{key} is not a scalar quantity; list its values instead of a range"
@@ -406,7 +406,7 @@ def range_field(key: str, path: str) -> Field:
         p = PARAMETERS[key.removeprefix("model.")]
         return Field(
             key,
-            "quantity",
+            "quantity" if p.units else "number",
             p.long_name,
             units=p.units,
             example=p.thesis_units,

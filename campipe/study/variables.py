@@ -7,8 +7,9 @@ also reads; the archive is SI except ``speed_rpm`` [rpm] and angles [degree].
 
 Dimensions: ``case``; ``cam_angle`` (0 … 360·revolutions at ``run.output_every``);
 ``revolution``; ``dof`` (q1–q7, when ``run.record`` holds ``q``); ``mode`` (for a varied
-``damping_ratios``); ``event`` (all cases' events, case by case: a CF contiguous ragged array
-counted by ``event_count``, with ``event_case`` naming each event's case).
+``damping_ratios``, as long as the longest list, NaN beyond a shorter one); ``event`` (all
+cases' events, case by case: a CF contiguous ragged array counted by ``event_count``, with
+``event_case`` naming each event's case).
 """
 
 from __future__ import annotations
@@ -300,16 +301,17 @@ def case_coordinates(varied: Iterable[str]) -> dict[str, tuple[str, Variable, fl
             continue
         f = coordinate_field(key)
         name = f.archive_name or key.replace(".", "_")
-        if f.kind in ("choice", "text"):
+        p = PARAMETERS.get(key.removeprefix("model.")) if key.startswith("model.") else None
+        if f.kind in ("choice", "text") or (p is not None and p.choices):
             var = Variable(CASE, "str", f.description, role="parameter")
             out[key] = (name, var, 1.0)
             continue
-        if f.kind == "integer":
+        if f.kind == "integer" or (p is not None and p.integer):
             out[key] = (name, Variable(CASE, "i8", f.description, role="parameter"), 1.0)
             continue
         units = f.archive_units if f.archive_units is not None else f.units
         dims: tuple[str, ...] = CASE
-        if key.startswith("model.") and PARAMETERS[key[6:]].length:
+        if p is not None and p.length:
             dims = ("case", "mode")
         var = Variable(dims, "f8", f.description, units or "1", role="parameter")
         factor = convert(1.0, f.units, units) if f.units and units and units != f.units else 1.0
