@@ -610,12 +610,29 @@ def validate_text(loaded, spec_path) -> str:
     return "\n".join(lines)
 
 
+#: The unit systems of --units (campipe.study.display.SYSTEMS, repeated so --help needs no
+#: import of the study layer; tests/test_display.py checks they agree).
+UNIT_SYSTEMS = ("spec", "si", "in-lbf")
+
+
+def units_option(command):
+    """``--units spec|si|in-lbf``: the units values are shown in."""
+    return click.option(
+        "--units",
+        type=click.Choice(UNIT_SYSTEMS),
+        default="spec",
+        show_default=True,
+        help="Show values in the units the spec wrote them in, with the rest in the spec's "
+        "system (spec), in SI as stored (si), or in inches, pounds-force and seconds (in-lbf).",
+    )(command)
+
+
 @main.command()
 @click.argument("archive", type=click.Path(exists=True, dir_okay=False))
 @click.option(
     "--where",
-    help='Keep cases where EXPR holds, e.g. "speed_rpm > 9000 and seat '
-    '> 0" (comparisons, and, or, not, parentheses; never run as '
+    help='Keep cases where EXPR holds, e.g. "speed_rpm > 9000 and seat is none" or '
+    '"spring_preload > 150 lbf" (comparisons, and, or, not, parentheses; never run as '
     "Python).",
 )
 @click.option("--columns", help="Comma-separated columns (default: parameters and metrics).")
@@ -634,27 +651,35 @@ def validate_text(loaded, spec_path) -> str:
     help="Print the axes, the failed cases and, for a speed sweep, the separation onset "
     "speeds (of the cases --where selects).",
 )
-def query(archive, where, columns, sort, fmt, summary) -> None:
-    """Print an archive's cases, one row per case."""
-    import xarray as xr
-
-    from campipe.study.query import case_table, format_rows, select
+@units_option
+def query(archive, where, columns, sort, fmt, summary, units) -> None:
+    """Print an archive's cases, one row per case, values in the units the spec was written
+    in (or --units); headers name the units."""
+    from campipe.study.display import display_units
+    from campipe.study.query import case_table, displayed, format_rows, select
     from campipe.study.query import summary as summary_text
 
-    try:
-        ds = xr.open_dataset(archive)
-    except Exception as exc:  # not netCDF, or damaged: each reader fails its own way
-        raise Failure(
-            f"{archive}: cannot read as an archive ({type(exc).__name__}: {str(exc)[:200]})"
-        ) from None
-    with ds:
+    with _open_archive(archive) as ds:
         if summary:
-            click.echo(summary_text(ds, where))
+            click.echo(summary_text(ds, where, units))
             return
         table = case_table(ds)
+        shown = display_units(table.units, ds.attrs, units)
     names = [c.strip() for c in columns.split(",") if c.strip()] if columns else table.default
     rows = select(table, where, sort)
-    click.echo(format_rows(table, rows, names, fmt))
+    click.echo(format_rows(displayed(table, shown), rows, names, fmt))
+
+
+def _open_archive(path):
+    """An archive as an xarray Dataset, or a Failure naming why it cannot be read."""
+    import xarray as xr
+
+    try:
+        return xr.open_dataset(path)
+    except Exception as exc:  # not netCDF, or damaged: each reader fails its own way
+        raise Failure(
+            f"{path}: cannot read as an archive ({type(exc).__name__}: {str(exc)[:200]})"
+        ) from None
 
 
 # -- replay -----------------------------------------------------------------------------------
@@ -667,7 +692,7 @@ def query(archive, where, columns, sort, fmt, summary) -> None:
     "case_ids",
     multiple=True,
     metavar="ID",
-    help="Replay the case with this case_id (repeatable).",
+    help="Replay the case with this case id (the archive's case coordinate; repeatable).",
 )
 @click.option(
     "--where",

@@ -26,7 +26,7 @@ def test_validate_prints_cases_axes_and_estimates():
     size = float(re.search(r"archive: about ([\d.]+) MB", text).group(1))
     # 297 cases × 1441 angles × (8 float64 histories + the int8 contact state) ≈ 27.8 MB
     assert 27.5 < size < 28.1
-    assert "replay: 'speed_rpm == 11000 and seat is nan'" in text
+    assert "replay: 'speed_rpm == 11000 and seat is none'" in text
 
 
 def test_validate_refuses_a_bad_spec_with_its_key_paths(tmp_path):

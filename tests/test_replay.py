@@ -64,7 +64,7 @@ def seated(archives):
         "replay",
         archives[0],
         "--case",
-        ds["case_id"].values[row],
+        ds["case"].values[row],
         "-o",
         archives[0].with_name("seated.rrd"),
     )
@@ -75,7 +75,7 @@ def seated(archives):
 
 def test_replay_holds_every_series_exactly_at_every_cam_angle(seated):
     ds, row, rec = seated
-    root = f"cases/{ds['case_id'].values[row]}"
+    root = f"cases/{ds['case'].values[row]}"
     angle = ds["cam_angle"].values
     assert angle.size == 721
     for name, (path, label, factor, _) in SERIES.items():
@@ -97,7 +97,7 @@ def test_replay_holds_the_events_at_their_angles(seated):
     start = int(ds["event_count"].values[:row].sum())
     ev = ds.isel(event=slice(start, start + n))
     assert int(ds["seat_impacts"].values[row]) >= 2  # it bounces on its seat
-    e = rec[f"cases/{ds['case_id'].values[row]}/events"]
+    e = rec[f"cases/{ds['case'].values[row]}/events"]
     assert_array_equal(e.times["cam_angle"], nanos(ev["event_cam_angle"].values))
     assert_array_equal(e.times["time"], nanos(ev["event_time"].values))
     names = {1: "cam separation", 2: "cam impact", 3: "seat separation", 4: "seat impact"}
@@ -119,7 +119,7 @@ def test_replay_holds_the_events_at_their_angles(seated):
 
 def test_replay_draws_the_mechanism_from_q(seated):
     ds, row, rec = seated
-    root = f"cases/{ds['case_id'].values[row]}/sketch"
+    root = f"cases/{ds['case'].values[row]}/sketch"
     assert {k.removeprefix(root + "/") for k in rec if k.startswith(root)} == (
         SKETCH
         | {"valve", "frame/seat", "frame/pivot", "frame/ground", "frame/spring_plate", "frame/note"}
@@ -145,7 +145,7 @@ def test_replay_draws_the_mechanism_from_q(seated):
     c = geom.cam_centre * 1000
     p0, p90 = np.asarray(cam[0][0]) - c, np.asarray(cam[90][0]) - c
     assert_allclose(p90, p0 @ np.array([[0.0, 1.0], [-1.0, 0.0]]).T, atol=2e-4)
-    doc = rec[f"cases/{ds['case_id'].values[row]}/parameters"].static["TextDocument:text"][0]
+    doc = rec[f"cases/{ds['case'].values[row]}/parameters"].static["TextDocument:text"][0]
     assert "| speed_rpm | 11000 | rpm |" in doc and "×10" in doc
 
 
@@ -217,7 +217,7 @@ def test_an_archive_without_q_replays_by_running_its_cases_again(archives, seate
         "replay",
         archives[1],
         "--case",
-        ds["case_id"].values[row],
+        ds["case"].values[row],
         "-o",
         archives[1].with_name("rerun.rrd"),
     )
@@ -328,5 +328,5 @@ def test_processes_scheduler_records_the_selection_from_the_archive(tmp_path):
     rec = read_recording(tmp_path / "p.rrd")
     ds = xr.load_dataset(tmp_path / "p.nc")
     row = int(np.flatnonzero(ds["seat"].values > 0)[0])
-    valve = rec[f"cases/{ds['case_id'].values[row]}/lift/valve"].scalars()
+    valve = rec[f"cases/{ds['case'].values[row]}/lift/valve"].scalars()
     assert_array_equal(valve, ds["valve_lift"].values[row] * 1000.0)

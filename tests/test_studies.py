@@ -155,7 +155,7 @@ def test_separation_map(tmp_path):
     assert list(onset) == [120, 151, 180]
     assert onset[120] < onset[151] < onset[180]
     assert 9000 < onset[151] <= 9524
-    assert ds.attrs["replay_where"] == "speed_rpm == 11000 and seat is nan"
+    assert ds.attrs["replay_where"] == "speed_rpm == 11000 and seat is none"
 
 
 @pytest.mark.slow

@@ -102,7 +102,7 @@ class StudyReplay:
                 rows = select_rows(ds, where=self.where)
             except ReplayError:
                 rows = np.zeros(0, np.int64)
-            ids = [str(ds["case_id"].values[r]) for r in rows]
+            ids = [str(ds["case"].values[r]) for r in rows]
             rest = [r for r, cid in zip(rows, ids, strict=True) if cid not in self._logged]
             if rest:
                 self._log(archive_cases(ds, rest, resolved=resolved))

@@ -35,7 +35,7 @@ def _value(value: object) -> str:
     if isinstance(value, tuple):
         return ", ".join(_value(v) for v in value)
     if isinstance(value, float):
-        return "none" if math.isnan(value) else f"{value:.10g}"
+        return "none" if math.isnan(value) or value == -math.inf else f"{value:.10g}"
     return str(value)
 
 

@@ -567,17 +567,20 @@ def check_replay_columns(
     """``replay.where`` against the columns the archive will have, with their types: an
     unknown column or text compared with a number is refused now, not after the study."""
     columns: dict[str, np.ndarray] = {}
+    units: dict[str, str] = {"case": ""}
     for name, var, _ in case_coordinates(varied).values():
         shape = (1, 7) if "mode" in var.dims else (1,)
         columns[name] = (
             np.array(["x"], dtype=object) if var.dtype == "str" else np.full(shape, np.nan)
         )
+        units[name] = var.units or ""
     for name, var in data_variables(record).items():
         if var.dims == ("case",):
             columns[name] = np.full(1, np.nan)
-    columns["case_id"] = np.array(["x"], dtype=object)
+            units[name] = var.units or ""
+    columns["case"] = np.array(["x"], dtype=object)
     try:
-        evaluate(parse_where(where), columns, 1)
+        evaluate(parse_where(where), columns, 1, units)
     except QueryError as exc:
         raise SpecError([SpecProblem("replay.where", exc.reason)], source) from None
 
