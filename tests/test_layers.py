@@ -25,7 +25,8 @@ MAY_IMPORT: dict[str, set[str]] = {
     "study": {"base", "io", "model", "profiles", "engine", "study"},
     "replay": {"base", "io", "model", "profiles", "engine", "study", "replay"},
     "bench": {"base", "model", "profiles", "engine", "study", "bench"},
-    "cli": {"base", "io", "model", "profiles", "engine", "study", "replay", "bench", "cli"},
+    "plot": {"base", "io", "model", "profiles", "engine", "study", "plot"},
+    "cli": {"base", "io", "model", "profiles", "engine", "study", "replay", "bench", "plot", "cli"},
 }
 
 
