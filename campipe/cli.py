@@ -409,15 +409,17 @@ def study(
     import shlex
 
     from campipe.study.execute import run_study
-    from campipe.study.progress import Progress
+    from campipe.study.progress import Progress, logging_cleared
 
     limits = _limits(max_cases, max_steps, max_samples, max_events, max_archive_gb)
     loaded = _load(spec, sets, limits)
     archive = _archive_path(loaded, spec, output)
     stderr = sys.stderr
+    bars: list[Progress] = []
 
     def bar(total, done):
-        return Progress(total, stderr.write, done=done, terminal=stderr.isatty())
+        bars.append(Progress(total, stderr.write, done=done, terminal=stderr.isatty()))
+        return bars[-1]
 
     replay = None
     if loaded.spec.replay:
@@ -428,18 +430,23 @@ def study(
     words += [w for pair in sets for w in ("--set", pair)]
     words += ["--scheduler", scheduler] if scheduler != "threads" else []
     command = shlex.join(words)
-    report = run_study(
-        loaded,
-        archive,
-        scheduler=scheduler,
-        workers=workers,
-        batch_size=batch_size,
-        progress=bar if progress else None,
-        keep_parts=keep_parts,
-        command=command,
-        on_batch=replay if scheduler != "processes" else None,
-        overwrite=overwrite,
-    )
+    try:
+        with logging_cleared(lambda: bars[-1] if bars else None):
+            report = run_study(
+                loaded,
+                archive,
+                scheduler=scheduler,
+                workers=workers,
+                batch_size=batch_size,
+                progress=bar if progress else None,
+                keep_parts=keep_parts,
+                command=command,
+                on_batch=replay if scheduler != "processes" else None,
+                overwrite=overwrite,
+            )
+    finally:
+        for b in bars:
+            b.close()
     for note in report.notes:
         click.echo(f"campipe study: {note}", err=True)
     click.echo(f"campipe study: {report.summary()}", err=True)
@@ -813,12 +820,18 @@ def replay(archive, case_ids, where, output, spawn, magnify) -> None:
     into one recording, each in its own cases/<case_id> subtree and blueprint tab."""
     from campipe.replay.cases import ReplayError
     from campipe.replay.record import replay_archive
+    from campipe.study.progress import Progress
     from campipe.study.where import QueryError
 
     if bool(case_ids) == (where is not None):
         raise click.UsageError("give --case ID (repeatable) or --where EXPR, one of the two")
     if spawn and output:
         raise click.UsageError("-o and --spawn exclude each other")
+    stderr = sys.stderr
+
+    def bar(total: int, unit: str) -> Progress:
+        return Progress(total, stderr.write, terminal=stderr.isatty(), unit=unit, then="")
+
     try:
         path, cases = replay_archive(
             archive,
@@ -827,6 +840,7 @@ def replay(archive, case_ids, where, output, spawn, magnify) -> None:
             output=output,
             spawn=spawn,
             magnification=magnify,
+            progress=bar,
         )
     except QueryError as exc:
         raise click.UsageError(str(exc)) from None

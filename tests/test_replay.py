@@ -330,3 +330,26 @@ def test_processes_scheduler_records_the_selection_from_the_archive(tmp_path):
     row = int(np.flatnonzero(ds["seat"].values > 0)[0])
     valve = rec[f"cases/{ds['case'].values[row]}/lift/valve"].scalars()
     assert_array_equal(valve, ds["valve_lift"].values[row] * 1000.0)
+
+
+def test_a_replay_of_several_cases_shows_its_progress(archives, tmp_path):
+    """Each step over the cases (sketching, logging) counts them on a progress line."""
+    from campipe.replay.record import replay_archive
+    from campipe.study.progress import Progress
+
+    bars: list[tuple[str, Progress, list[str]]] = []
+
+    def bar(total, unit):
+        lines: list[str] = []
+        bars.append((unit, Progress(total, lines.append, interval=0.0, unit=unit, then=""), lines))
+        return bars[-1][1]
+
+    path, cases = replay_archive(
+        archives[0], where="speed_rpm > 0", output=tmp_path / "two.rrd", progress=bar
+    )
+    assert path == tmp_path / "two.rrd" and len(cases) == 2
+    assert [(unit, b.total, b.done) for unit, b, _ in bars] == [
+        ("cases sketched", 2, 2),
+        ("cases logged", 2, 2),
+    ]
+    assert bars[1][2][-1] == "[########################] 2/2 cases logged, done\n"
