@@ -530,9 +530,7 @@ def validate(
 ) -> None:
     """Check the study SPEC and print its case count, axes and estimated cost."""
     from campipe.study.estimate import archive_bytes
-    from campipe.study.estimate import estimate as cost
     from campipe.study.execute import default_batch_size, default_workers, plan_batches
-    from campipe.study.progress import format_seconds
 
     if tolerance is not None:
         from campipe.units import QuantityError, parse_quantity
@@ -553,12 +551,7 @@ def validate(
     plans = plan_batches(loaded.cases, loaded.record, size)
     click.echo(f"batches: {len(plans)} of up to {size} cases")
     if estimate:
-        e = cost(loaded, workers)
-        click.echo(
-            f"run time: {format_seconds(e.seconds)} on {workers} "
-            f"worker{'s' if workers != 1 else ''} ({e.simulated:.3g} s simulated; "
-            "timed on a short run of one case per run-settings group)"
-        )
+        click.echo(estimate_text(loaded, workers))
     click.echo(
         f"archive: about {archive_bytes(loaded) / 1e6:.3g} MB before compression "
         f"(events not counted)"
@@ -571,6 +564,49 @@ def validate(
                 [c.case for c in loaded.cases], [c.settings for c in loaded.cases], tolerance
             )
         )
+
+
+def estimate_text(loaded, workers: int) -> str:
+    """``run time: about ...``: the estimate (campipe.study.estimate) with its parts, and the
+    spec's replay recording (campipe.replay.live.time_replay)."""
+    import dataclasses
+    import tempfile
+
+    from campipe.study.estimate import estimate
+
+    e = estimate(loaded, workers)
+    parts = [
+        f"the engine {_seconds(e.engine)}",
+        f"storing and writing the archive {_seconds(e.layer)}",
+        f"loading the engine {_seconds(e.startup)}",
+    ]
+    replayed = ""
+    if loaded.spec.replay:
+        from campipe.replay.live import time_replay
+
+        with tempfile.TemporaryDirectory(prefix="campipe-estimate-") as folder:
+            count, each = time_replay(loaded, folder)
+        if count is None:
+            replayed = f"; and {_seconds(each)} for each case the replay selects"
+        elif count:
+            e = dataclasses.replace(e, replay=count * each, seconds=e.seconds + count * each)
+            parts.append(
+                f"the replay's {count} case{'s' if count != 1 else ''} {_seconds(e.replay)}"
+            )
+    n = len(loaded.cases)
+    timed = "the whole study" if e.sample >= n else f"{e.sample} of its {n} cases, scaled"
+    return (
+        f"run time: about {_seconds(e.seconds)} on {workers} "
+        f"worker{'s' if workers != 1 else ''}: {', '.join(parts)} (timed on a run of {timed}; "
+        f"{e.simulated:.3g} s simulated; the process's own start not included){replayed}"
+    )
+
+
+def _seconds(seconds: float) -> str:
+    """An estimate's time: ``0.42 s``, ``12 s``, ``3 min 05 s``."""
+    from campipe.study.progress import format_seconds
+
+    return f"{seconds:.2g} s" if seconds < 10 else format_seconds(seconds)
 
 
 def validate_text(loaded, spec_path) -> str:
