@@ -727,6 +727,70 @@ def _open_archive(path):
         ) from None
 
 
+# -- starting without the repository -----------------------------------------------------------
+
+
+def packaged_specs() -> dict[str, bytes]:
+    """The example specs shipped in the package (``campipe/specs/``): file name → content."""
+    from importlib import resources
+
+    folder = resources.files("campipe") / "specs"
+    return {
+        entry.name: entry.read_bytes()
+        for entry in sorted(folder.iterdir(), key=lambda e: e.name)
+        if entry.name.endswith((".yaml", ".md"))
+    }
+
+
+@main.command()
+@click.argument("directory", default="studies", type=click.Path(file_okay=False))
+@click.option("--force", is_flag=True, help="Replace files of the same names in DIRECTORY.")
+def init(directory, force) -> None:
+    """Write the example specs into DIRECTORY (default: studies): the quickstart, the
+    separation map and the thesis's runs, with a README; then run one with campipe study."""
+    from pathlib import Path
+
+    folder = Path(directory)
+    specs = packaged_specs()
+    existing = [name for name in specs if (folder / name).exists()]
+    if existing and not force:
+        raise InputFailure(
+            f"{folder / existing[0]}: exists (and {len(existing) - 1} more of the example "
+            "files); choose another folder, or replace them with --force"
+            if len(existing) > 1
+            else f"{folder / existing[0]}: exists; choose another folder, or replace it "
+            "with --force"
+        )
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        for name, content in specs.items():
+            (folder / name).write_bytes(content)
+    except OSError as exc:
+        raise Failure(f"{exc.filename or folder}: cannot write ({exc.strerror or exc})") from None
+    for name in specs:
+        click.echo(str(folder / name))
+    click.echo(
+        f"campipe init: {len(specs)} files in {folder}; next: campipe study "
+        f"{folder / 'quickstart.yaml'}",
+        err=True,
+    )
+
+
+@main.command()
+@click.argument("which", default="study", type=click.Choice(["study", "model"]))
+def schema(which) -> None:
+    """Print the JSON Schema of a study spec (or of its model: block), for an editor's YAML
+    checking: campipe schema > study.schema.json."""
+    if which == "model":
+        from campipe.model.schema import model_schema
+
+        click.echo(json.dumps(model_schema(), indent=2, ensure_ascii=False))
+        return
+    from campipe.study.schema import schema_text
+
+    click.echo(schema_text(), nl=False)
+
+
 # -- plots ------------------------------------------------------------------------------------
 
 #: The plot kinds (campipe.study.plots.KINDS, repeated so --help needs no import of the study
