@@ -96,6 +96,9 @@ def toy() -> CaseTable:
         ("separation_deg_per_rev > 0 and cam_impacts < 4 or speed_rpm == 6000", [0, 2]),
         ("-1 < separation_deg_per_rev", [0, 1, 2, 3]),
         ("speed_rpm > inf", []),
+        ("seat == -inf", [0, 2]),
+        ("0.1 in is none", []),  # a quantity always has a value
+        ("none == none", [0, 1, 2, 3]),
     ],
 )
 def test_where_selects_the_rows(where, rows):
@@ -143,6 +146,14 @@ def test_malicious_where_is_refused_and_nothing_runs(tmp_path, where):
         ("", "empty"),
         ("open('x')", "a call is not allowed"),
         ("speed_rpm.real > 0", "attribute access is not allowed"),
+        ("speed_rpm == true", "true and false stand alone as conditions"),
+        ("seat > 0.00254", "seat is stored in m: write the number with its units, e.g. "),
+        ("speed_rpm > 150 Hz", "150 Hz names no angle, and speed_rpm is stored in rpm"),
+        ("seat > 1 lbf", "1 lbf [length] * [mass] / [time] ** 2 cannot be compared with seat"),
+        ("seat < none", "none compares with ==, !=, is, is not and in only"),
+        ("1 in == 2 in", "compare 1 in with a column"),
+        ("closure == 1 in", "closure is text and 1 in is not"),
+        ("speed_rpm > 1e400 rpm", "beyond the range of a float"),
     ],
 )
 def test_refusals_say_why(where, words):

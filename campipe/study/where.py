@@ -480,7 +480,12 @@ def _name(node: ast.AST, value: object = None) -> str:
 
 
 def _no_value(v) -> np.ndarray:
-    """Where ``v`` has no value: no seat (-inf) or NaN; text always has one."""
+    """Where ``v`` has no value: none itself, no seat (-inf), NaN; text and a quantity
+    always have one."""
+    if v is NONE:
+        return np.ones((), dtype=bool)
+    if isinstance(v, Quantity):
+        return np.zeros((), dtype=bool)
     if _is_text(v):
         return np.zeros(np.shape(v.values if isinstance(v, _Column) else v), dtype=bool)
     a = np.asarray(v.values if isinstance(v, _Column) else v, dtype=float)
@@ -518,7 +523,9 @@ def _convert(q: Quantity, units: str, column: _Column | None) -> float:
     """``q`` in the column's stored ``units``; its dimension must match (an angle for an
     angle or a speed, never a bare frequency)."""
     name = column.name if column is not None else "a number"
-    if column is None or units == "":
+    if column is None:
+        raise QueryError.at("--where", f"compare {q.text} with a column, e.g. 'seat == 0.1 in'")
+    if units == "":
         raise QueryError.at(
             "--where", f"{q.text} has units, but {name} has none; compare it with a bare number"
         )
@@ -556,7 +563,13 @@ def _compare(op: str, a, b, a_node, b_node) -> np.ndarray:
         for item in b:
             hit |= _compare("==", a, item, a_node, b_node)
         return hit if op == "in" else ~hit
-    if _is_text(a) != _is_text(b) or isinstance(a, bool) or isinstance(b, bool):
+    if isinstance(a, bool) or isinstance(b, bool):
+        raise QueryError.at(
+            "--where",
+            "true and false stand alone as conditions; compare a column with a number, a "
+            "quantity or a quoted string",
+        )
+    if _is_text(a) != _is_text(b):
         text, other = ((a_node, a), (b_node, b)) if _is_text(a) else ((b_node, b), (a_node, a))
         raise QueryError.at(
             "--where",
