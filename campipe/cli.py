@@ -656,7 +656,7 @@ def validate_text(loaded, spec_path) -> str:
 
 
 #: The unit systems of --units (campipe.study.display.SYSTEMS, repeated so --help needs no
-#: import of the study layer; tests/test_display.py checks they agree).
+#: import of the study layer; tests/test_plot.py checks they agree).
 UNIT_SYSTEMS = ("spec", "si", "in-lbf")
 
 

@@ -232,6 +232,16 @@ def test_every_format_by_its_suffix_and_errors_by_their_option(archive, tmp_path
         assert words in result.output and "Traceback" not in result.output
     result = runner.invoke(main, bad[0][0])
     assert result.exit_code == 2 and "expected a file ending in .png, .svg, .pdf" in result.output
+    text = tmp_path / "notes.nc"
+    text.write_text("not netCDF")
+    result = runner.invoke(main, ["plot", "metric", str(text)])
+    assert result.exit_code == 1 and f"{text}: cannot read as an archive" in result.output
+    older = xr.load_dataset(archive).rename({"case": "case_id"})
+    older.attrs["campipe_layout"] = "campipe-archive-2"
+    older.to_netcdf(tmp_path / "older.nc")
+    result = runner.invoke(main, ["plot", "metric", str(tmp_path / "older.nc")])
+    assert result.exit_code == 2 and "another layout (campipe-archive-2)" in result.output
+    assert "--overwrite" in result.output and "Traceback" not in result.output
 
 
 def test_the_command_line_lists_every_kind_and_unit_system():

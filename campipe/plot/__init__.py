@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from campipe.io.archive import ArchiveFileError
 from campipe.study.plots import PlotRequest
 
 
@@ -34,7 +35,14 @@ def plot_archive(archive: str | Path, request: PlotRequest, output: str | Path |
         output = (
             archive.parent / request.output if request.output else request.default_output(archive)
         )
-    with xr.open_dataset(archive) as ds:
+    try:
+        ds = xr.open_dataset(archive)
+    except Exception as exc:  # not netCDF, or damaged: each reader fails its own way
+        raise ArchiveFileError.at(
+            str(archive),
+            f"cannot read as an archive ({type(exc).__name__}: {str(exc)[:200]})",
+        ) from None
+    with ds:
         fig = figure(ds, request)
     return write(fig, output), fig
 

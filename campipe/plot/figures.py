@@ -26,14 +26,14 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
+from campipe.errors import did_you_mean, excerpt
+from campipe.plot.style import COLORMAP, EVENT_MARKERS, line_styles
 from campipe.study.display import display_units, format_value, label, to_display
 from campipe.study.plots import PlotError, PlotRequest, check_turn
 from campipe.study.query import CaseTable, case_table, displayed, select
 from campipe.study.variables import VARIABLES
 from campipe.units import QuantityError, convert, read_quantity
 from campipe.vocabulary import FAILURES
-
-from .style import COLORMAP, EVENT_MARKERS, line_styles
 
 #: Most cases overlaid in one history figure (beyond, lines cannot be told apart).
 MAX_OVERLAID = 10
@@ -82,6 +82,14 @@ def figure(ds, request: PlotRequest) -> Figure:
 
 def select_view(ds, request: PlotRequest) -> View:
     """The cases ``request.where`` selects, with their shown units."""
+    if "case" not in ds.variables or "event_count" not in ds.variables:
+        layout = ds.attrs.get("campipe_layout")
+        raise PlotError.at(
+            "ARCHIVE",
+            f"an archive of another layout ({layout}): rerun its study with --overwrite"
+            if layout
+            else "not a campipe archive (no case coordinate)",
+        )
     table = case_table(ds)
     rows = np.sort(select(table, request.where))
     if rows.size == 0:
@@ -167,8 +175,6 @@ def _column(view: View, name: str | None, option: str, numeric: bool = True) -> 
     usable = [k for k, v in columns.items() if v.ndim == 1 and v.dtype.kind in "iuf"]
     if name is None or name not in columns or (numeric and name not in usable):
         what = "unknown column" if name not in columns else "not a column of numbers"
-        from campipe.errors import did_you_mean, excerpt
-
         raise PlotError.at(
             option,
             f"{what} {excerpt(name)}{did_you_mean(str(name), usable)} (columns: "
@@ -435,7 +441,7 @@ def _level(request: PlotRequest, view: View, zname: str) -> float | None:
     try:
         q = read_quantity(str(level), "--level")
         return convert(float(q.magnitude), str(q.units), view.shown.units.get(zname) or "")
-    except (QuantityError, Exception) as exc:
+    except Exception as exc:  # QuantityError, or pint's for units of another dimension
         reason = exc.reason if isinstance(exc, QuantityError) else type(exc).__name__
         raise PlotError.at(
             "--level",
@@ -501,7 +507,7 @@ def cell_map(view: View, request: PlotRequest) -> Figure:
                 ax.clabel(contour, fmt=lambda v: f"{v:g}", fontsize=8)
         ax.set_title(
             ", ".join(
-                describe(n, v if not isinstance(v, str) else v, view.shown.units.get(n, ""))
+                describe(n, v, view.shown.units.get(n, ""))
                 for n, v in zip(others, key, strict=True)
             )
             or "all cases",

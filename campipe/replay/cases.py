@@ -139,7 +139,12 @@ def select_rows(ds, case_ids: Sequence[str] = (), where: str | None = None) -> n
         For an expression the query language refuses.
     """
     if "case" not in ds.variables:
-        raise ReplayError("not a campipe archive (no case variable)")
+        layout = ds.attrs.get("campipe_layout")
+        raise ReplayError(
+            f"an archive of another layout ({layout}): rerun its study with --overwrite"
+            if layout
+            else "not a campipe archive (no case coordinate)"
+        )
     table = case_table(ds)
     ids = [str(i) for i in table.columns["case"]]
     if case_ids:
