@@ -511,15 +511,17 @@ def study(
     import shlex
 
     from campipe.study.execute import run_study
-    from campipe.study.progress import Progress
+    from campipe.study.progress import Progress, logging_cleared
 
     limits = _limits(max_cases, max_steps, max_samples, max_events, max_archive_gb)
     loaded = _load(spec, sets, limits)
     archive = _archive_path(loaded, spec, output)
     stderr = sys.stderr
+    bars: list[Progress] = []
 
     def bar(total, done):
-        return Progress(total, stderr.write, done=done, terminal=stderr.isatty())
+        bars.append(Progress(total, stderr.write, done=done, terminal=stderr.isatty()))
+        return bars[-1]
 
     replay = None
     if loaded.spec.replay:
@@ -530,18 +532,23 @@ def study(
     words += [w for pair in sets for w in ("--set", pair)]
     words += ["--scheduler", scheduler] if scheduler != "threads" else []
     command = shlex.join(words)
-    report = run_study(
-        loaded,
-        archive,
-        scheduler=scheduler,
-        workers=workers,
-        batch_size=batch_size,
-        progress=bar if progress else None,
-        keep_parts=keep_parts,
-        command=command,
-        on_batch=replay if scheduler != "processes" else None,
-        overwrite=overwrite,
-    )
+    try:
+        with logging_cleared(lambda: bars[-1] if bars else None):
+            report = run_study(
+                loaded,
+                archive,
+                scheduler=scheduler,
+                workers=workers,
+                batch_size=batch_size,
+                progress=bar if progress else None,
+                keep_parts=keep_parts,
+                command=command,
+                on_batch=replay if scheduler != "processes" else None,
+                overwrite=overwrite,
+            )
+    finally:
+        for b in bars:
+            b.close()
     for note in report.notes:
         click.echo(f"campipe study: {note}", err=True)
     click.echo(f"campipe study: {report.summary()}", err=True)
@@ -560,6 +567,8 @@ def study(
             click.echo(
                 f"campipe study: replay {loaded.spec.replay!r} recorded in {recorded}", err=True
             )
+    if loaded.spec.plots:
+        _write_plots(loaded, report.archive)
     click.echo(str(report.archive))
 
 
@@ -623,9 +632,7 @@ def validate(
 ) -> None:
     """Check the study SPEC and print its case count, axes and estimated cost."""
     from campipe.study.estimate import archive_bytes
-    from campipe.study.estimate import estimate as cost
     from campipe.study.execute import default_batch_size, default_workers, plan_batches
-    from campipe.study.progress import format_seconds
 
     if tolerance is not None:
         from campipe.units import QuantityError, parse_quantity
@@ -646,12 +653,7 @@ def validate(
     plans = plan_batches(loaded.cases, loaded.record, size)
     click.echo(f"batches: {len(plans)} of up to {size} cases")
     if estimate:
-        e = cost(loaded, workers)
-        click.echo(
-            f"run time: {format_seconds(e.seconds)} on {workers} "
-            f"worker{'s' if workers != 1 else ''} ({e.simulated:.3g} s simulated; "
-            "timed on a short run of one case per run-settings group)"
-        )
+        click.echo(estimate_text(loaded, workers))
     click.echo(
         f"archive: about {archive_bytes(loaded) / 1e6:.3g} MB before compression "
         f"(events not counted)"
@@ -664,6 +666,49 @@ def validate(
                 [c.case for c in loaded.cases], [c.settings for c in loaded.cases], tolerance
             )
         )
+
+
+def estimate_text(loaded, workers: int) -> str:
+    """``run time: about ...``: the estimate (campipe.study.estimate) with its parts, and the
+    spec's replay recording (campipe.replay.live.time_replay)."""
+    import dataclasses
+    import tempfile
+
+    from campipe.study.estimate import estimate
+
+    e = estimate(loaded, workers)
+    parts = [
+        f"the engine {_seconds(e.engine)}",
+        f"storing and writing the archive {_seconds(e.layer)}",
+        f"loading the engine {_seconds(e.startup)}",
+    ]
+    replayed = ""
+    if loaded.spec.replay:
+        from campipe.replay.live import time_replay
+
+        with tempfile.TemporaryDirectory(prefix="campipe-estimate-") as folder:
+            count, each = time_replay(loaded, folder)
+        if count is None:
+            replayed = f"; and {_seconds(each)} for each case the replay selects"
+        elif count:
+            e = dataclasses.replace(e, replay=count * each, seconds=e.seconds + count * each)
+            parts.append(
+                f"the replay's {count} case{'s' if count != 1 else ''} {_seconds(e.replay)}"
+            )
+    n = len(loaded.cases)
+    timed = "the whole study" if e.sample >= n else f"{e.sample} of its {n} cases, scaled"
+    return (
+        f"run time: about {_seconds(e.seconds)} on {workers} "
+        f"worker{'s' if workers != 1 else ''}: {', '.join(parts)} (timed on a run of {timed}; "
+        f"{e.simulated:.3g} s simulated; the process's own start not included){replayed}"
+    )
+
+
+def _seconds(seconds: float) -> str:
+    """An estimate's time: ``0.42 s``, ``12 s``, ``3 min 05 s``."""
+    from campipe.study.progress import format_seconds
+
+    return f"{seconds:.2g} s" if seconds < 10 else format_seconds(seconds)
 
 
 def validate_text(loaded, spec_path) -> str:
@@ -712,12 +757,29 @@ def validate_text(loaded, spec_path) -> str:
     return "\n".join(lines)
 
 
+#: The unit systems of --units (campipe.study.display.SYSTEMS, repeated so --help needs no
+#: import of the study layer; tests/test_plot.py checks they agree).
+UNIT_SYSTEMS = ("spec", "si", "in-lbf")
+
+
+def units_option(command):
+    """``--units spec|si|in-lbf``: the units values are shown in."""
+    return click.option(
+        "--units",
+        type=click.Choice(UNIT_SYSTEMS),
+        default="spec",
+        show_default=True,
+        help="Show values in the units the spec wrote them in, with the rest in the spec's "
+        "system (spec), in SI as stored (si), or in inches, pounds-force and seconds (in-lbf).",
+    )(command)
+
+
 @main.command()
 @click.argument("archive", type=click.Path(exists=True, dir_okay=False))
 @click.option(
     "--where",
-    help='Keep cases where EXPR holds, e.g. "speed_rpm > 9000 and seat '
-    '> 0" (comparisons, and, or, not, parentheses; never run as '
+    help='Keep cases where EXPR holds, e.g. "speed_rpm > 9000 and seat is none" or '
+    '"spring_preload > 150 lbf" (comparisons, and, or, not, parentheses; never run as '
     "Python).",
 )
 @click.option("--columns", help="Comma-separated columns (default: parameters and metrics).")
@@ -736,27 +798,191 @@ def validate_text(loaded, spec_path) -> str:
     help="Print the axes, the failed cases and, for a speed sweep, the separation onset "
     "speeds (of the cases --where selects).",
 )
-def query(archive, where, columns, sort, fmt, summary) -> None:
-    """Print an archive's cases, one row per case."""
-    import xarray as xr
-
-    from campipe.study.query import case_table, format_rows, select
+@units_option
+def query(archive, where, columns, sort, fmt, summary, units) -> None:
+    """Print an archive's cases, one row per case, values in the units the spec was written
+    in (or --units); headers name the units."""
+    from campipe.study.display import display_units
+    from campipe.study.query import case_table, displayed, format_rows, select
     from campipe.study.query import summary as summary_text
 
-    try:
-        ds = xr.open_dataset(archive)
-    except Exception as exc:  # not netCDF, or damaged: each reader fails its own way
-        raise Failure(
-            f"{archive}: cannot read as an archive ({type(exc).__name__}: {str(exc)[:200]})"
-        ) from None
-    with ds:
+    with _open_archive(archive) as ds:
         if summary:
-            click.echo(summary_text(ds, where))
+            click.echo(summary_text(ds, where, units))
             return
         table = case_table(ds)
+        shown = display_units(table.units, ds.attrs, units)
     names = [c.strip() for c in columns.split(",") if c.strip()] if columns else table.default
     rows = select(table, where, sort)
-    click.echo(format_rows(table, rows, names, fmt))
+    click.echo(format_rows(displayed(table, shown), rows, names, fmt))
+
+
+def _open_archive(path):
+    """An archive as an xarray Dataset, or a Failure naming why it cannot be read."""
+    import xarray as xr
+
+    try:
+        return xr.open_dataset(path)
+    except Exception as exc:  # not netCDF, or damaged: each reader fails its own way
+        raise Failure(
+            f"{path}: cannot read as an archive ({type(exc).__name__}: {str(exc)[:200]})"
+        ) from None
+
+
+# -- starting without the repository -----------------------------------------------------------
+
+
+def packaged_specs() -> dict[str, bytes]:
+    """The example specs shipped in the package (``campipe/specs/``): file name → content."""
+    from importlib import resources
+
+    folder = resources.files("campipe") / "specs"
+    return {
+        entry.name: entry.read_bytes()
+        for entry in sorted(folder.iterdir(), key=lambda e: e.name)
+        if entry.name.endswith((".yaml", ".md"))
+    }
+
+
+@main.command()
+@click.argument("directory", default="studies", type=click.Path(file_okay=False))
+@click.option("--force", is_flag=True, help="Replace files of the same names in DIRECTORY.")
+def init(directory, force) -> None:
+    """Write the example specs into DIRECTORY (default: studies): the quickstart, the
+    separation map and the thesis's runs, with a README; then run one with campipe study."""
+    from pathlib import Path
+
+    folder = Path(directory)
+    specs = packaged_specs()
+    existing = [name for name in specs if (folder / name).exists()]
+    if existing and not force:
+        raise InputFailure(
+            f"{folder / existing[0]}: exists (and {len(existing) - 1} more of the example "
+            "files); choose another folder, or replace them with --force"
+            if len(existing) > 1
+            else f"{folder / existing[0]}: exists; choose another folder, or replace it "
+            "with --force"
+        )
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        for name, content in specs.items():
+            (folder / name).write_bytes(content)
+    except OSError as exc:
+        raise Failure(f"{exc.filename or folder}: cannot write ({exc.strerror or exc})") from None
+    for name in specs:
+        click.echo(str(folder / name))
+    click.echo(
+        f"campipe init: {len(specs)} files in {folder}; next: campipe study "
+        f"{folder / 'quickstart.yaml'}",
+        err=True,
+    )
+
+
+@main.command()
+@click.argument("which", default="study", type=click.Choice(["study", "model"]))
+def schema(which) -> None:
+    """Print the JSON Schema of a study spec (or of its model: block), for an editor's YAML
+    checking: campipe schema > study.schema.json."""
+    if which == "model":
+        from campipe.model.schema import model_schema
+
+        click.echo(json.dumps(model_schema(), indent=2, ensure_ascii=False))
+        return
+    from campipe.study.schema import schema_text
+
+    click.echo(schema_text(), nl=False)
+
+
+# -- plots ------------------------------------------------------------------------------------
+
+#: The plot kinds (campipe.study.plots.KINDS, repeated so --help needs no import of the study
+#: layer; tests/test_plot.py checks they agree).
+PLOT_KINDS = ("histories", "metric", "map", "events")
+
+
+@main.command()
+@click.argument("kind", type=click.Choice(PLOT_KINDS))
+@click.argument("archive", type=click.Path(exists=True, dir_okay=False))
+@click.option(
+    "-o",
+    "--output",
+    type=click.Path(dir_okay=False),
+    help="File to write: PNG, SVG or PDF by its suffix (default: <archive stem>-KIND.png "
+    "beside the archive).",
+)
+@click.option("--where", help="Draw the cases where EXPR holds (the language of query --where).")
+@units_option
+@click.option(
+    "--x", "x", metavar="COLUMN", help="metric, map: the column along x (default: speed_rpm)."
+)
+@click.option(
+    "--y",
+    "y",
+    metavar="COLUMN",
+    help="metric: the value drawn (default: separation_deg_per_rev); map: the column along y.",
+)
+@click.option(
+    "--z", "z", metavar="COLUMN", help="map: the value coloured (default: separation_deg_per_rev)."
+)
+@click.option(
+    "--level",
+    metavar="VALUE",
+    help="map: draw the contour at this value of z, a number in its shown units or a quantity "
+    "such as '1 deg'.",
+)
+@click.option(
+    "--turn",
+    metavar="N|last|all",
+    help="histories, events: show one cam turn (1, 2, ... or last; default all).",
+)
+def plot(kind, archive, output, where, units, x, y, z, level, turn) -> None:
+    """Draw a figure of ARCHIVE.
+
+    \b
+    histories  valve lift, velocity, acceleration, cam and follower lift, contact forces
+               against cam angle, the cases overlaid (at most 10), events marked
+    metric     a per-case value (--y) against a swept column (--x), a line per
+               combination of the other varied keys
+    map        a per-case value (--z) over two columns (--x, --y), its contour at --level
+    events     each case's separations, landings and seatings on a cam angle × case chart
+    """
+    from campipe.plot import plot_archive
+    from campipe.study.plots import PlotError, check_plot
+
+    options = {"kind": kind, "where": where, "units": units, "output": output}
+    options.update({"x": x, "y": y, "z": z, "level": level, "turn": turn})
+    given = {k: v for k, v in options.items() if v is not None}
+    try:
+        request = check_plot(given)
+    except PlotError as exc:
+        raise InputFailure(f"--{exc.key}: {exc.reason}") from None
+    path, _ = plot_archive(archive, request, output)
+    click.echo(str(path))
+
+
+def _write_plots(loaded, archive) -> None:
+    """The spec's ``plots:``, each written beside the finished archive."""
+    from collections import Counter
+
+    from campipe.plot import plot_archive
+
+    seen: Counter[str] = Counter()
+    for i, request in enumerate(loaded.spec.plots):
+        output = (
+            archive.parent / request.output
+            if request.output
+            else request.default_output(archive, seen[request.kind])
+        )
+        seen[request.kind] += 1
+        try:
+            path, _ = plot_archive(archive, request, output)
+        except Exception as exc:  # the archive is complete: a figure is an extra
+            raise Failure.of(
+                f"the archive {archive} is complete, but plots[{i}] ({request.kind}) failed: "
+                f"{str(exc)[:300]}; draw it with campipe plot {request.kind} {archive}",
+                isinstance(exc, ValueError),
+            ) from None
+        click.echo(f"campipe study: plots[{i}] ({request.kind}) written to {path}", err=True)
 
 
 # -- replay -----------------------------------------------------------------------------------
@@ -769,7 +995,7 @@ def query(archive, where, columns, sort, fmt, summary) -> None:
     "case_ids",
     multiple=True,
     metavar="ID",
-    help="Replay the case with this case_id (repeatable).",
+    help="Replay the case with this case id (the archive's case coordinate; repeatable).",
 )
 @click.option(
     "--where",
@@ -796,12 +1022,18 @@ def replay(archive, case_ids, where, output, spawn, magnify) -> None:
     into one recording, each in its own cases/<case_id> subtree and blueprint tab."""
     from campipe.replay.cases import ReplayError
     from campipe.replay.record import replay_archive
+    from campipe.study.progress import Progress
     from campipe.study.where import QueryError
 
     if bool(case_ids) == (where is not None):
         raise click.UsageError("give --case ID (repeatable) or --where EXPR, one of the two")
     if spawn and output:
         raise click.UsageError("-o and --spawn exclude each other")
+    stderr = sys.stderr
+
+    def bar(total: int, unit: str) -> Progress:
+        return Progress(total, stderr.write, terminal=stderr.isatty(), unit=unit, then="")
+
     try:
         path, cases = replay_archive(
             archive,
@@ -810,6 +1042,7 @@ def replay(archive, case_ids, where, output, spawn, magnify) -> None:
             output=output,
             spawn=spawn,
             magnification=magnify,
+            progress=bar,
         )
     except QueryError as exc:
         raise click.UsageError(str(exc)) from None

@@ -154,6 +154,35 @@ def _read(text: str, key: str, example: str) -> pint.Quantity | float:
     return q
 
 
+def read_quantity(text: str, key: str) -> pint.Quantity:
+    """``text`` (``"150 lbf"``, ``"0.1 in"``) as a pint Quantity with units, read by the
+    grammar above (nothing evaluated); a QuantityError naming ``key`` otherwise."""
+    q = _read(text, key, "in")
+    if not isinstance(q, pint.Quantity) or q.unitless:
+        raise QuantityError.at(
+            key,
+            f"found {excerpt(text)} without units; write a number and a unit, e.g. '1 in'",
+            found=text,
+            expected="a quantity with units",
+        )
+    return q
+
+
+def is_unit(name: str) -> bool:
+    """``name`` alone is a unit pint knows (``in``, ``lbf``, ``rpm``), not a prefix or text."""
+    try:
+        ureg.parse_units(name)
+    except Exception:  # pint raises several unrelated types on text that is not a unit
+        return False
+    return True
+
+
+def names_an_angle(q: pint.Quantity) -> bool:
+    """The quantity's units hold exactly one angle (``deg``, ``rpm``, ``rad/s``): pint takes
+    the radian as dimensionless, so ``150 Hz`` would otherwise pass for an angular speed."""
+    return dict(q.to_base_units().unit_items()).get("radian") == 1
+
+
 def _example_unit(unit: pint.Unit) -> str:
     return f"{unit:~}" if not unit.dimensionless else ""
 

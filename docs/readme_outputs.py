@@ -1,9 +1,10 @@
-"""Rewrite the outputs the README shows (its five-line analysis and the quickstart's query
-summary) from a fresh run of ``studies/quickstart.yaml``, and its note on the preset's
-damping from the model, so they are never typed by hand.
+"""Rewrite the outputs the README shows (its five-line analysis, the quickstart's query
+summary and its figure, ``docs/quickstart-metric.png``) from a fresh run of
+``studies/quickstart.yaml``, and its note on the preset's damping from the model, so they are
+never typed or drawn by hand.
 
-    python docs/readme_outputs.py          # rewrite README.md
-    python docs/readme_outputs.py --check  # exit 1 if README.md differs
+    python docs/readme_outputs.py          # rewrite README.md and the figure
+    python docs/readme_outputs.py --check  # exit 1 if README.md differs (the figure aside)
 
 ``tests/test_docs.py`` runs the same commands and compares them with the README.
 """
@@ -28,6 +29,9 @@ from campipe.study.execute import run_study
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
 SUMMARY = "$ campipe query studies/quickstart.nc --summary\n"
+#: The README's figure and the command that draws it (the README's first plot command).
+FIGURE = ROOT / "docs" / "quickstart-metric.png"
+PLOT = ["plot", "metric"]
 
 
 def _fenced_after(text: str, marker: str) -> tuple[int, int]:
@@ -38,8 +42,9 @@ def _fenced_after(text: str, marker: str) -> tuple[int, int]:
     return body, text.index("```", body)
 
 
-def outputs() -> tuple[str, str]:
-    """(the analysis's printout, the summary's) from a fresh quickstart run."""
+def outputs(figure: Path | None = None) -> tuple[str, str]:
+    """(the analysis's printout, the summary's) from a fresh quickstart run; with ``figure``,
+    ``campipe plot metric`` of that run is written there."""
     text = README.read_text()
     a, b = _fenced_after(text, "readme-analysis")
     code = text[a:b]
@@ -56,6 +61,10 @@ def outputs() -> tuple[str, str]:
         finally:
             os.chdir(here)
         summary = CliRunner().invoke(main, ["query", str(archive), "--summary"]).output
+        if figure is not None:
+            drawn = CliRunner().invoke(main, [*PLOT, str(archive), "-o", str(figure)])
+            if drawn.exit_code != 0:
+                raise RuntimeError(drawn.output)
     return out.getvalue(), summary
 
 
@@ -86,9 +95,9 @@ def damping_note(rpm: float = 9000.0) -> str:
     )
 
 
-def rewritten() -> str:
+def rewritten(figure: Path | None = None) -> str:
     text = README.read_text()
-    analysis, summary = outputs()
+    analysis, summary = outputs(figure)
     a, b = _fenced_after(text, "readme-analysis-output")
     text = text[:a] + analysis + text[b:]
     head, rest = text.split(SUMMARY, 1)
@@ -98,7 +107,6 @@ def rewritten() -> str:
 
 
 if __name__ == "__main__":
-    new = rewritten()
     if "--check" in sys.argv[1:]:
-        sys.exit(0 if new == README.read_text() else 1)
-    README.write_text(new)
+        sys.exit(0 if rewritten() == README.read_text() else 1)
+    README.write_text(rewritten(FIGURE))

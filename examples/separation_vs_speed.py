@@ -19,9 +19,9 @@ import xarray as xr
 
 
 def label(ds: xr.Dataset, name: str, i: int) -> str:
-    """``name = value unit`` of case ``i`` (NaN: none, as for a missing seat)."""
+    """``name = value unit`` of case ``i`` (-inf: none, the archive's missing seat)."""
     value = ds[name].values[i]
-    if isinstance(value, float | np.floating) and np.isnan(value):
+    if isinstance(value, float | np.floating) and np.isneginf(value):
         return f"{name} none"
     unit = ds[name].attrs.get("units", "")
     text = f"{value:g}" if isinstance(value, float | np.floating) else str(value)

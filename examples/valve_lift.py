@@ -29,7 +29,7 @@ def plot(ds: xr.Dataset, cases: np.ndarray):
     angle = ds.cam_angle.values
     for i in cases:
         seat = ds.seat.values[i]
-        where = "no seat" if np.isnan(seat) else f"seat {seat * 1e3:g} mm"
+        where = "no seat" if np.isneginf(seat) else f"seat {seat * 1e3:g} mm"
         ax.plot(
             angle,
             ds.valve_lift.values[i] * 1e3,

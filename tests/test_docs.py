@@ -162,8 +162,9 @@ def test_the_readme_analysis_prints_what_the_readme_shows(quickstart, monkeypatc
     assert [t for t in printed if not NUMBER.match(t)] == [t for t in shown if not NUMBER.match(t)]
     values = [float(t) for t in printed if NUMBER.match(t)]
     assert_allclose(values, [float(t) for t in shown if NUMBER.match(t)], rtol=1e-6)
-    # the table: 4 speeds × (no seat, 0.1 in): no separation at 9000 rpm without a seat
-    table = np.array(values[2:]).reshape(4, 3)
+    # the table: 4 speeds × (none, 0.1 in): no separation at 9000 rpm without a seat
+    assert values[0] == 0.00254 and printed[:3] == ["seat", "none", "0.00254"]
+    table = np.array(values[1:]).reshape(4, 3)
     assert table[:, 0].tolist() == [6000, 9000, 9524, 11000]
     assert table[1, 1] == 0 and 45 <= table[2, 1] <= 60 and np.all(table[:, 2] > 0)
 
@@ -211,3 +212,20 @@ def test_the_readme_damping_note_is_the_model_s():
     dashpot = 2 * train.damping_ratios[0] * sm.frequencies[0] * (shape @ sm.mass @ shape)
     drag = dashpot * 1.5 * 9000 * np.pi / 30 * INCH / 2 / LBF
     assert f"{dashpot:.0f} N·s/m" in note and 250 < drag < 260 and f"{drag:.0f} lbf" in note
+
+
+def test_the_readme_figure_is_drawn_by_the_script_with_the_readmes_command():
+    """docs/readme_outputs.py draws docs/quickstart-metric.png with `campipe plot metric`, the
+    README's first plot command, on a fresh quickstart run (never by hand)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(
+        "readme_outputs", ROOT / "docs" / "readme_outputs.py"
+    )
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    text = README.read_text()
+    figure = module.FIGURE.relative_to(ROOT).as_posix()
+    assert f"]({figure})" in text
+    assert f"campipe {' '.join(module.PLOT)} studies/quickstart.nc" in text
+    assert module.FIGURE.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -25,7 +25,8 @@ MAY_IMPORT: dict[str, set[str]] = {
     "study": {"base", "io", "model", "profiles", "engine", "study"},
     "replay": {"base", "io", "model", "profiles", "engine", "study", "replay"},
     "bench": {"base", "model", "profiles", "engine", "study", "bench"},
-    "cli": {"base", "io", "model", "profiles", "engine", "study", "replay", "bench", "cli"},
+    "plot": {"base", "io", "model", "profiles", "engine", "study", "plot"},
+    "cli": {"base", "io", "model", "profiles", "engine", "study", "replay", "bench", "plot", "cli"},
 }
 
 
@@ -44,12 +45,29 @@ def layer(module: str) -> str:
     return {"__main__": "cli"}.get(top, top)
 
 
+def _lazy_exports(tree: ast.Module) -> set[int]:
+    """Ids of the nodes inside the top package's module-level ``__getattr__`` (PEP 562): the
+    public names it resolves on first use (``campipe.open_study``) are the package's face,
+    not an import of its base layer."""
+    return {
+        id(inner)
+        for node in tree.body
+        if isinstance(node, ast.FunctionDef) and node.name == "__getattr__"
+        for inner in ast.walk(node)
+    }
+
+
 def imports(module: str) -> set[str]:
-    """The campipe modules ``module`` imports, anywhere in its text."""
+    """The campipe modules ``module`` imports, anywhere in its text (the top package's lazy
+    exports aside, see :func:`_lazy_exports`)."""
     path = MODULES[module]
     package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    skip = _lazy_exports(tree) if module == "campipe" else set()
     out = set()
-    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+    for node in ast.walk(tree):
+        if id(node) in skip:
+            continue
         if isinstance(node, ast.Import):
             out.update(a.name for a in node.names)
         elif isinstance(node, ast.ImportFrom):
@@ -125,3 +143,16 @@ def test_the_cycle_finder_finds_a_cycle():
 def test_function_level_imports_count():
     """The CLI imports the study layer inside its commands; the graph has those edges."""
     assert "campipe.study.execute" in GRAPH["campipe.cli"]
+
+
+def test_the_package_exports_open_study_lazily():
+    """``campipe.open_study`` resolves on first use; ``import campipe`` imports no layer."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, campipe; assert not [m for m in sys.modules if m.startswith('campipe.')]; "
+        "f = campipe.open_study; assert f.__module__ == 'campipe.study.open'"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr

@@ -64,7 +64,7 @@ def seated(archives):
         "replay",
         archives[0],
         "--case",
-        ds["case_id"].values[row],
+        ds["case"].values[row],
         "-o",
         archives[0].with_name("seated.rrd"),
     )
@@ -75,7 +75,7 @@ def seated(archives):
 
 def test_replay_holds_every_series_exactly_at_every_cam_angle(seated):
     ds, row, rec = seated
-    root = f"cases/{ds['case_id'].values[row]}"
+    root = f"cases/{ds['case'].values[row]}"
     angle = ds["cam_angle"].values
     assert angle.size == 721
     for name, (path, label, factor, _) in SERIES.items():
@@ -97,7 +97,7 @@ def test_replay_holds_the_events_at_their_angles(seated):
     start = int(ds["event_count"].values[:row].sum())
     ev = ds.isel(event=slice(start, start + n))
     assert int(ds["seat_impacts"].values[row]) >= 2  # it bounces on its seat
-    e = rec[f"cases/{ds['case_id'].values[row]}/events"]
+    e = rec[f"cases/{ds['case'].values[row]}/events"]
     assert_array_equal(e.times["cam_angle"], nanos(ev["event_cam_angle"].values))
     assert_array_equal(e.times["time"], nanos(ev["event_time"].values))
     names = {1: "cam separation", 2: "cam impact", 3: "seat separation", 4: "seat impact"}
@@ -119,7 +119,7 @@ def test_replay_holds_the_events_at_their_angles(seated):
 
 def test_replay_draws_the_mechanism_from_q(seated):
     ds, row, rec = seated
-    root = f"cases/{ds['case_id'].values[row]}/sketch"
+    root = f"cases/{ds['case'].values[row]}/sketch"
     assert {k.removeprefix(root + "/") for k in rec if k.startswith(root)} == (
         SKETCH
         | {"valve", "frame/seat", "frame/pivot", "frame/ground", "frame/spring_plate", "frame/note"}
@@ -145,7 +145,7 @@ def test_replay_draws_the_mechanism_from_q(seated):
     c = geom.cam_centre * 1000
     p0, p90 = np.asarray(cam[0][0]) - c, np.asarray(cam[90][0]) - c
     assert_allclose(p90, p0 @ np.array([[0.0, 1.0], [-1.0, 0.0]]).T, atol=2e-4)
-    doc = rec[f"cases/{ds['case_id'].values[row]}/parameters"].static["TextDocument:text"][0]
+    doc = rec[f"cases/{ds['case'].values[row]}/parameters"].static["TextDocument:text"][0]
     assert "| speed_rpm | 11000 | rpm |" in doc and "×10" in doc
 
 
@@ -217,7 +217,7 @@ def test_an_archive_without_q_replays_by_running_its_cases_again(archives, seate
         "replay",
         archives[1],
         "--case",
-        ds["case_id"].values[row],
+        ds["case"].values[row],
         "-o",
         archives[1].with_name("rerun.rrd"),
     )
@@ -328,5 +328,28 @@ def test_processes_scheduler_records_the_selection_from_the_archive(tmp_path):
     rec = read_recording(tmp_path / "p.rrd")
     ds = xr.load_dataset(tmp_path / "p.nc")
     row = int(np.flatnonzero(ds["seat"].values > 0)[0])
-    valve = rec[f"cases/{ds['case_id'].values[row]}/lift/valve"].scalars()
+    valve = rec[f"cases/{ds['case'].values[row]}/lift/valve"].scalars()
     assert_array_equal(valve, ds["valve_lift"].values[row] * 1000.0)
+
+
+def test_a_replay_of_several_cases_shows_its_progress(archives, tmp_path):
+    """Each step over the cases (sketching, logging) counts them on a progress line."""
+    from campipe.replay.record import replay_archive
+    from campipe.study.progress import Progress
+
+    bars: list[tuple[str, Progress, list[str]]] = []
+
+    def bar(total, unit):
+        lines: list[str] = []
+        bars.append((unit, Progress(total, lines.append, interval=0.0, unit=unit, then=""), lines))
+        return bars[-1][1]
+
+    path, cases = replay_archive(
+        archives[0], where="speed_rpm > 0", output=tmp_path / "two.rrd", progress=bar
+    )
+    assert path == tmp_path / "two.rrd" and len(cases) == 2
+    assert [(unit, b.total, b.done) for unit, b, _ in bars] == [
+        ("cases sketched", 2, 2),
+        ("cases logged", 2, 2),
+    ]
+    assert bars[1][2][-1] == "[########################] 2/2 cases logged, done\n"

@@ -31,14 +31,14 @@ def test_quickstart(tmp_path):
     ds = run(tmp_path, "quickstart")
     assert ds.sizes["case"] == 8
     sep = {
-        (int(s), bool(np.isnan(z))): v
+        (int(s), bool(np.isneginf(z))): v  # no seat: -inf
         for s, z, v in zip(
             ds.speed_rpm.values, ds.seat.values, ds.separation_deg_per_rev.values, strict=True
         )
     }
     assert sep[9000, True] == 0.0 and 45 <= sep[9524, True] <= 60
     onset = onset_table(case_table(ds))
-    assert onset[1].split() == ["nan", "9524"]
+    assert onset[1].split() == ["none", "9524"]
 
 
 def test_thesis_no_seat(tmp_path):
@@ -164,12 +164,12 @@ def test_separation_map(tmp_path):
     )
     assert ds.sizes["case"] == 27
     lines = onset_table(case_table(ds))
-    assert lines[0].split() == ["spring_preload", "onset_rpm"]
+    assert lines[0].split() == ["spring_preload", "[N]", "onset_rpm"]
     onset = {round(float(a) / LBF): float(b) for a, b in (line.split() for line in lines[1:])}
     assert list(onset) == [120, 151, 180]
     assert onset[120] < onset[151] < onset[180]
     assert 9000 < onset[151] <= 9524
-    assert ds.attrs["replay_where"] == "speed_rpm == 11000 and seat is nan"
+    assert ds.attrs["replay_where"] == "speed_rpm == 11000 and seat is none"
 
 
 @pytest.mark.slow

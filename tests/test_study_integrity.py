@@ -55,7 +55,7 @@ def test_every_file_carries_checksums_that_verify(reference):
     archive = reference / "small.nc"
     assert verify(archive) == []
     attrs = read_attrs(archive)
-    assert attrs["campipe_layout"] == "campipe-archive-2"
+    assert attrs["campipe_layout"] == "campipe-archive-3"
     assert attrs["campipe_numerics"].startswith("campipe 0.1.0; source ")
     assert attrs["spec_file"] == "spec.yaml"
     for path in [archive, *parts_directory(archive).glob("batch-*.nc")]:
@@ -157,7 +157,7 @@ def test_a_failing_case_is_recorded_by_case_id_and_the_others_finish(tmp_path, m
     )
     assert result.exit_code == 0, result.output
     ds = xr.load_dataset(tmp_path / "small.nc")
-    failed = ds.case_id.values[ds.status.values == CHATTER]
+    failed = ds.case.values[ds.status.values == CHATTER]
     assert len(failed) == 2 and (ds.speed_rpm.values[ds.status.values == CHATTER] == 9524).all()
     assert (ds.status.values[ds.speed_rpm.values != 9524] == OK).all()
     assert np.isfinite(ds.valve_lift.values[ds.status.values == OK]).all()
@@ -241,3 +241,25 @@ def test_an_edited_spec_may_replace_its_own_archive(reference, tmp_path):
     result = _study(tmp_path)
     assert result.exit_code == 0, result.output
     assert xr.load_dataset(tmp_path / "small.nc").sizes["case"] == 4
+
+
+def test_an_archive_of_an_older_layout_is_refused_and_replaced_only_with_overwrite(
+    reference, tmp_path
+):
+    """Layout 2 stored the ids as case_id and no seat as NaN: never mixed with layout 3."""
+    study = _copy(reference, tmp_path)
+    shutil.rmtree(parts_directory(tmp_path / "small.nc"))
+    archive = tmp_path / "small.nc"
+    with netCDF4.Dataset(archive, "a") as ds:
+        ds.setncattr("campipe_layout", "campipe-archive-2")
+    before = archive.read_bytes()
+    result = _study(tmp_path)
+    assert result.exit_code == 2, result.output
+    assert (
+        f"{archive}: exists and is an archive in another layout (campipe-archive-2; this "
+        "campipe writes campipe-archive-3)" in result.stderr
+    )
+    assert "replace it with --overwrite" in result.stderr
+    assert archive.read_bytes() == before
+    report = run_study(study, archive, scheduler="synchronous", overwrite=True)
+    assert report.computed == 6 and read_attrs(archive)["campipe_layout"] == "campipe-archive-3"

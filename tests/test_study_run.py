@@ -51,9 +51,9 @@ def test_the_archive_holds_the_engine_results(small):
     assert (report.cases, report.computed, report.batches) == (6, 6, 3)
     ds = xr.load_dataset(archive)
     ref = run_batch([c.case for c in study.cases], study.cases[0].settings)
-    assert_array_equal(ds.case_id.values, [c.case_id for c in study.cases])
+    assert_array_equal(ds.case.values, [c.case_id for c in study.cases])
     assert_array_equal(ds.speed_rpm.values, [6000, 6000, 9524, 9524, 11000, 11000])
-    assert_array_equal(ds.seat.values, [np.nan, 0.1 * INCH] * 3)
+    assert_array_equal(ds.seat.values, [-np.inf, 0.1 * INCH] * 3)
     assert set(ds.profile.values) == {"harmonic 1 in"} and set(ds.defects.values) == {"none"}
     assert_array_equal(ds.cam_angle.values, np.arange(721.0))
     assert_array_equal(ds.revolution.values, [1, 2])
@@ -108,7 +108,8 @@ def test_the_archive_carries_cf_metadata_from_the_table(small):
     assert ds.stem_force.attrs["units"] == "N" and ds.rocker_moment.attrs["units"] == "N*m"
     assert list(ds.dof.values) == [f"q{i}" for i in range(1, 8)]
     assert list(ds.dof_units.values) == ["m", "m", "rad", "m", "rad", "rad", "m"]
-    assert {"speed_rpm", "seat", "profile", "defects", "closure", "case_id"} <= set(ds.coords)
+    assert {"speed_rpm", "seat", "profile", "defects", "closure", "case"} <= set(ds.coords)
+    assert "case_id" not in ds.variables and ds.indexes["case"].dtype.kind in "OU"
     a = ds.attrs
     assert a["Conventions"] == "CF-1.10" and a["campipe_version"] == "0.1.0"
     assert a["spec"] == spec_path.read_text()
@@ -189,7 +190,7 @@ def test_a_changed_spec_reuses_only_the_unchanged_cases(tmp_path):
     changed = run_study(load_study(write_spec(tmp_path, stiffer)), archive, scheduler="synchronous")
     assert (changed.computed, changed.reused) == (6, 0)
     ds = xr.load_dataset(archive)
-    assert not set(ds.case_id.values) & {c.case_id for c in study.cases}
+    assert not set(ds.case.values) & {c.case_id for c in study.cases}
 
 
 def test_batches_share_run_settings_and_are_cut_to_size():
@@ -392,9 +393,10 @@ def test_import_campipe_does_not_pull_in_distributed_or_rerun():
     assert out.returncode == 0, out.stdout + out.stderr
 
 
-def test_seat_is_nan_where_absent_and_speed_rounds_to_whole_rpm(small):
+def test_no_seat_is_minus_inf_and_speed_rounds_to_whole_rpm(small):
     ds = xr.open_dataset(small[2])
-    assert np.isnan(ds.seat.values[::2]).all()
+    assert (ds.seat.values[::2] == -np.inf).all()
+    assert ds.seat.attrs["comment"].startswith("-inf: no seat")
     assert ds.seat.values[1] == pytest.approx(0.00254, rel=1e-15)
     assert (ds.speed_rpm.values == np.round(ds.speed_rpm.values)).all()
     assert math.isnan(ds.dt.values[0]) or ds.dt.values[0] > 0

@@ -243,7 +243,7 @@ BAD = [
         "sample.ranges.closure",
         "unknown key",
     ),
-    (with_(replay={"where": "__import__('os')"}), "replay.where", "a call is not allowed"),
+    (with_(replay={"where": "open('os')"}), "replay.where", "a call is not allowed"),
     # missing pieces
     ({k: v for k, v in BASE.items() if k != "speed"}, "speed", "missing"),
     ({k: v for k, v in BASE.items() if k != "name"}, "name", "missing"),

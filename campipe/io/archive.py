@@ -417,9 +417,11 @@ def read_attrs(path: str | Path) -> dict[str, object]:
         return {k: ds.getncattr(k) for k in ds.ncattrs()}
 
 
-def read_index(path: str | Path) -> tuple[np.ndarray, np.ndarray, dict[str, object]]:
-    """An archive's or batch file's ``case_id`` and ``event_count`` per row, and its global
-    attributes: what a rerun needs to know which cases a file can supply.
+def read_index(
+    path: str | Path, ids: str = "case"
+) -> tuple[np.ndarray, np.ndarray, dict[str, object]]:
+    """An archive's or batch file's case ids (the variable ``ids``) and ``event_count`` per
+    row, and its global attributes: what a rerun needs to know which cases a file can supply.
 
     Raises
     ------
@@ -429,12 +431,12 @@ def read_index(path: str | Path) -> tuple[np.ndarray, np.ndarray, dict[str, obje
 
     try:
         with LOCK, open_dataset(path) as ds:
-            for name in ("case_id", "event_count"):
+            for name in (ids, "event_count"):
                 if name not in ds.variables:
                     raise ArchiveFileError(f"{path}: no {name} variable", key=str(path))
-            ids = np.asarray(ds.variables["case_id"][:], dtype=object)
+            case_ids = np.asarray(ds.variables[ids][:], dtype=object)
             counts = np.asarray(ds.variables["event_count"][:], dtype=np.int64)
-            return ids, counts, {k: ds.getncattr(k) for k in ds.ncattrs()}
+            return case_ids, counts, {k: ds.getncattr(k) for k in ds.ncattrs()}
     except OSError as exc:
         raise ArchiveFileError(f"{path}: cannot read ({exc})", key=str(path)) from None
 

@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import hashlib
 import os
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Protocol
@@ -368,6 +368,7 @@ def write_recording(
     study: str,
     key: str,
     magnification: float,
+    progress: Callable[[int], object] | None = None,
 ) -> Path:
     """Write ``cases`` to one ``.rrd`` file, atomically (a temporary file renamed into place).
 
@@ -383,6 +384,8 @@ def write_recording(
         The study's key (the archive's ``study_key``), part of the recording id.
     magnification : float
         Factor on the sketch's deviations from the rigid-body motion [-], as drawn.
+    progress : callable, optional
+        Called with 1 after each case is logged.
     """
     if not cases:
         raise ValueError("no cases to record")
@@ -395,6 +398,8 @@ def write_recording(
         rec.save(tmp, default_blueprint=blueprint(cases, magnification))
         for case in cases:
             log_case(rec, case, magnification)
+            if progress is not None:
+                progress(1)
         rec.flush()
         rec.disconnect()
         os.replace(tmp, path)
@@ -406,15 +411,22 @@ def write_recording(
 
 
 def spawn_viewer(
-    cases: Sequence[CaseRecording], *, study: str, key: str, magnification: float
+    cases: Sequence[CaseRecording],
+    *,
+    study: str,
+    key: str,
+    magnification: float,
+    progress: Callable[[int], object] | None = None,
 ) -> None:
-    """Open the rerun viewer on ``cases``."""
+    """Open the rerun viewer on ``cases`` (``progress`` called with 1 after each case)."""
     rec = recording_stream(
         recording_id(key, [c.case_id for c in cases], magnification), f"{study} replay"
     )
     rec.spawn(default_blueprint=blueprint(cases, magnification))
     for case in cases:
         log_case(rec, case, magnification)
+        if progress is not None:
+            progress(1)
     rec.flush()
 
 

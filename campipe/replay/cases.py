@@ -89,9 +89,10 @@ class ReplayCase:
 
     @property
     def seat(self) -> float:
-        """Seat position as a valve lift [m]; NaN: no seat."""
-        value = self.columns.get("seat", (math.nan, "m"))[0]
-        return float(value)
+        """Seat position as a valve lift [m]; NaN: no seat (the engine's and the sketch's
+        word for it: the archive's is -inf)."""
+        value = float(self.columns.get("seat", (math.nan, "m"))[0])
+        return value if math.isfinite(value) else math.nan
 
     @property
     def valve_reference(self) -> float:
@@ -138,10 +139,15 @@ def select_rows(ds, case_ids: Sequence[str] = (), where: str | None = None) -> n
     campipe.study.where.QueryError
         For an expression the query language refuses.
     """
-    if "case_id" not in ds.variables:
-        raise ReplayError("not a campipe archive (no case_id variable)")
+    if "case" not in ds.variables:
+        layout = ds.attrs.get("campipe_layout")
+        raise ReplayError(
+            f"an archive of another layout ({layout}): rerun its study with --overwrite"
+            if layout
+            else "not a campipe archive (no case coordinate)"
+        )
     table = case_table(ds)
-    ids = [str(i) for i in table.columns["case_id"]]
+    ids = [str(i) for i in table.columns["case"]]
     if case_ids:
         picked = []
         for cid in case_ids:
@@ -149,7 +155,7 @@ def select_rows(ds, case_ids: Sequence[str] = (), where: str | None = None) -> n
                 raise ReplayError(
                     f"--case {cid}: no such case among the archive's {len(ids)} "
                     f"cases{did_you_mean(cid, ids)} (campipe query ARCHIVE "
-                    "--columns case_id lists them)",
+                    "--columns case lists them)",
                     key="--case",
                     found=cid,
                     expected="a case id of the archive",
@@ -205,7 +211,7 @@ def archive_cases(
     """
     rows = [int(r) for r in rows]
     table = case_table(ds)
-    ids = [str(table.columns["case_id"][r]) for r in rows]
+    ids = [str(table.columns["case"][r]) for r in rows]
     cam_angle = np.asarray(ds["cam_angle"].values, dtype=float)
     counts = np.asarray(ds["event_count"].values, dtype=np.int64)
     starts = np.concatenate([[0], np.cumsum(counts)])
@@ -377,7 +383,7 @@ def batch_columns(
 ) -> tuple[dict[str, np.ndarray], dict[str, str]]:
     """A batch's per-case columns and their units, as the archive will hold them."""
     columns = coordinate_values(list(plan.cases), study)
-    units = {"case_id": ""}
+    units = {"case": ""}
     for name, var, _ in case_coordinates(study.varied).values():
         units[name] = var.units or ""
     for name, var in data_variables(study.record).items():

@@ -10,8 +10,10 @@ content ``campipe replay ARCHIVE --where EXPR`` writes.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import threading
+import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -23,8 +25,10 @@ from campipe.replay.cases import ReplayCase, ReplayError, archive_cases, batch_c
 from campipe.replay.record import recording_case
 from campipe.replay.sketch import DEFAULT_MAGNIFICATION
 from campipe.study.expand import Study
-from campipe.study.layout import study_key
-from campipe.study.results import BatchData, BatchPlan
+from campipe.study.layout import coordinate_values, study_key
+from campipe.study.query import stored_units
+from campipe.study.results import BatchData, BatchPlan, compute_batch
+from campipe.study.where import evaluate, parse_where
 
 if TYPE_CHECKING:
     import rerun as rr
@@ -90,6 +94,13 @@ class StudyReplay:
             self._log(cases)
             log.info("replay: logged %d case(s) of batch %s to %s", len(cases), plan.key, self.path)
 
+    def close(self) -> None:
+        """Close the recording as it is (no blueprint): a run that ends without finishing."""
+        with self._lock:
+            if self._rec is not None:
+                self._rec.disconnect()
+                self._rec = None
+
     def finish(self, archive: str | Path) -> Path | None:
         """Log the selected cases not computed by this run from the finished archive, send
         the blueprint and close the recording. Returns its path, or None (and writes
@@ -102,7 +113,7 @@ class StudyReplay:
                 rows = select_rows(ds, where=self.where)
             except ReplayError:
                 rows = np.zeros(0, np.int64)
-            ids = [str(ds["case_id"].values[r]) for r in rows]
+            ids = [str(ds["case"].values[r]) for r in rows]
             rest = [r for r, cid in zip(rows, ids, strict=True) if cid not in self._logged]
             if rest:
                 self._log(archive_cases(ds, rest, resolved=resolved))
@@ -115,3 +126,32 @@ class StudyReplay:
         self._rec.flush()
         self._rec.disconnect()
         return self.path
+
+
+def time_replay(study: Study, folder: str | Path) -> tuple[int | None, float]:
+    """What the spec's ``replay:`` adds to a run: how many cases it selects (None when its
+    condition reads a metric, known only once the cases have run) and the time logging one
+    case takes [s], as the study's hook logs it (its q computed again when not recorded,
+    its sketch, its recording), timed on the first case it selects (or the study's first)
+    into a recording in ``folder``."""
+    if not study.spec.replay:
+        return 0, 0.0
+    where = parse_where(study.spec.replay)
+    columns = coordinate_values(study.cases, study)
+    count: int | None = None
+    first = study.cases[0]
+    if where.names <= set(columns):
+        mask = evaluate(where, columns, len(study.cases), stored_units(study.varied))
+        count = int(mask.sum())
+        if count == 0:
+            return 0, 0.0
+        first = study.cases[int(np.flatnonzero(mask)[0])]
+    plan = BatchPlan("estimate", (first,), study.record)
+    data = compute_batch(plan)
+    every = dataclasses.replace(study, spec=dataclasses.replace(study.spec, replay="true"))
+    hook = StudyReplay(every, Path(folder) / "estimate.rrd")
+    t = time.perf_counter()
+    hook(plan, data)
+    seconds = time.perf_counter() - t
+    hook.close()
+    return count, seconds

@@ -10,7 +10,7 @@ viewer). The file format itself is :mod:`campipe.io.rerun_replay`'s.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +25,7 @@ from campipe.io.rerun_replay import (
 from campipe.model import PARAMETERS
 from campipe.replay import sketch
 from campipe.replay.cases import ReplayCase, ReplayError, archive_cases, select_rows
+from campipe.study.progress import Progress
 
 #: Line radii of the sketch's parts drawn with no width of their own [m].
 HEAD_RADIUS = SPRING_RADIUS = 0.0005
@@ -35,7 +36,7 @@ def _value(value: object) -> str:
     if isinstance(value, tuple):
         return ", ".join(_value(v) for v in value)
     if isinstance(value, float):
-        return "none" if math.isnan(value) else f"{value:.10g}"
+        return "none" if math.isnan(value) or value == -math.inf else f"{value:.10g}"
     return str(value)
 
 
@@ -154,11 +155,14 @@ def replay_archive(
     output: str | Path | None = None,
     spawn: bool = False,
     magnification: float = sketch.DEFAULT_MAGNIFICATION,
+    progress: Callable[[int, str], Progress] | None = None,
 ) -> tuple[Path | None, list[ReplayCase]]:
     """Replay an archive's cases chosen by id or by a ``--where`` expression.
 
     Writes one recording (``output``, default :func:`default_output`) or, with ``spawn``,
-    opens the viewer instead. Nothing is written when the selection fails.
+    opens the viewer instead. Nothing is written when the selection fails. ``progress(total,
+    unit)`` makes a progress line for each step over the cases (sketching them, logging
+    them), as ``campipe replay`` shows.
 
     Returns
     -------
@@ -191,16 +195,35 @@ def replay_archive(
             raise ReplayError(f"{archive}: {exc}", key=exc.key, found=exc.found) from None
         cases = archive_cases(ds, rows, directories=[archive.parent, Path.cwd()])
         key = str(ds.attrs.get("study_key", ""))
-    contents = [recording_case(c, magnification) for c in cases]
+    bar = progress(len(cases), "cases sketched") if progress else None
+    contents = []
+    for c in cases:
+        contents.append(recording_case(c, magnification))
+        if bar is not None:
+            bar.advance(1)
+    if bar is not None:
+        bar.close()
     study = cases[0].study if cases else ""
-    if spawn:
-        spawn_viewer(contents, study=study, key=key, magnification=magnification)
-        return None, cases
-    path = write_recording(
-        contents,
-        output or default_output(archive),
-        study=study,
-        key=key,
-        magnification=magnification,
-    )
+    bar = progress(len(cases), "cases logged") if progress else None
+    try:
+        if spawn:
+            spawn_viewer(
+                contents,
+                study=study,
+                key=key,
+                magnification=magnification,
+                progress=bar.advance if bar else None,
+            )
+            return None, cases
+        path = write_recording(
+            contents,
+            output or default_output(archive),
+            study=study,
+            key=key,
+            magnification=magnification,
+            progress=bar.advance if bar else None,
+        )
+    finally:
+        if bar is not None:
+            bar.close()
     return path, cases

@@ -1,28 +1,44 @@
-"""Estimates for ``campipe validate``: run time and archive size.
+"""Estimates for ``campipe validate``: the run time of ``campipe study``, and the archive's size.
 
-Run time is measured, not guessed: the first case of each group of run settings is
-integrated for a short while and timed, giving the engine's speed on this machine for that
-integrator (simulated seconds per wall-clock second); each case's simulated time divided by
-its group's speed, summed and shared among the workers, is the estimate. Events and impacts
-make some cases slower than the sample, so it is a rough figure.
+The run time is measured on this machine, through the code a study runs, not guessed:
+
+- **a sample of the study** -- one batch for each worker (at the batch size the study will
+  use), its cases spread evenly through the study so its speeds, seats and events are in
+  proportion -- is run through :func:`~campipe.study.execute.run_study` into a temporary
+  folder: computing, storing the batches, assembling the compressed archive with its
+  checksums. Scaled to the study's cases, it gives the run's time beyond its fixed cost;
+- **the fixed cost** (setting up a run, a first run's imports) is a one-case run's time;
+- **start-up**: loading each run-settings group's compiled kernel, which the first run in
+  a process pays (:func:`measure_speeds`'s warm-up; a compilation is not counted, the study
+  finds the kernel in numba's cache).
+
+A study of at most twice the sample is run whole: its estimate is that run. Cases differ
+(events, impacts), so it is a rough figure: within a factor of two of the run on the bundled
+studies (``campipe bench`` lists both). Not included: the process's own start (imports, about
+a second) and a spec's ``replay:`` recording.
 """
 
 from __future__ import annotations
 
 import math
+import tempfile
 import time
 from dataclasses import dataclass, replace
+from pathlib import Path
 
 import numpy as np
 
 from campipe.constants import TWO_PI
 from campipe.engine import RunSettings, run_batch
+from campipe.study.execute import default_batch_size, plan_batches, run_study
 from campipe.study.expand import ResolvedCase, Study
+from campipe.study.limits import samples_per_case
 from campipe.study.results import n_revolutions
 from campipe.study.variables import DOF_NAMES, data_variables
 
-#: Cam turns of the timed sample run (at most the study's own).
-SAMPLE_REVOLUTIONS = 0.5
+#: Longest kernel warm-up counted as start-up [s]: a kernel loads from numba's cache in well
+#: under a second; a longer warm-up is compiling, which the study (using the cache) skips.
+MAX_LOAD_SECONDS = 1.0
 
 
 @dataclass(frozen=True)
@@ -30,9 +46,15 @@ class Estimate:
     """What ``campipe validate`` prints about cost."""
 
     simulated: float  # simulated time of all cases together [s]
-    seconds: float  # estimated wall time on `workers` workers [s]
+    seconds: float  # estimated wall time of the run on `workers` workers [s]
     workers: int  # workers assumed
     archive_bytes: int  # archive size before compression [bytes]
+    engine: float = 0.0  # of `seconds`: the engine, shared among the workers [s]
+    layer: float = 0.0  # of `seconds`: setting up, storing batches, writing the archive [s]
+    startup: float = 0.0  # of `seconds`: loading the kernels, once per process [s]
+    sample: int = 0  # cases of the timed sample run (all of them: the study ran whole)
+    replay: float = 0.0  # of `seconds`: logging the spec's replay selection (campipe
+    #                      validate adds it: campipe.replay.live.time_replay) [s]
 
 
 def simulated_seconds(study: Study) -> np.ndarray:
@@ -40,26 +62,22 @@ def simulated_seconds(study: Study) -> np.ndarray:
     return np.array([c.settings.revolutions * TWO_PI / c.case.speed for c in study.cases])
 
 
-def measure_speeds(study: Study) -> dict[RunSettings, float]:
-    """Simulated seconds per wall-clock second of one worker, per run-settings group, timed
-    on the group's first case."""
+def warm_up(study: Study) -> float:
+    """Load each run-settings group's kernel with a tiny run of its first case; the time it
+    took, each group's at most :data:`MAX_LOAD_SECONDS` [s]."""
     firsts: dict[RunSettings, ResolvedCase] = {}
     for c in study.cases:
         firsts.setdefault(c.settings, c)
-    speeds = {}
+    total = 0.0
     for settings, c in firsts.items():
-        # a warm-up run loads the compiled kernel, then the timed run
+        t = time.perf_counter()
         run_batch(
             [c.case],
             replace(settings, revolutions=min(settings.revolutions, 0.01)),
             on_failure="record",
         )
-        sample = replace(settings, revolutions=min(settings.revolutions, SAMPLE_REVOLUTIONS))
-        t = time.perf_counter()
-        run_batch([c.case], sample, on_failure="record")
-        elapsed = max(time.perf_counter() - t, 1e-6)
-        speeds[settings] = sample.revolutions * TWO_PI / c.case.speed / elapsed
-    return speeds
+        total += min(time.perf_counter() - t, MAX_LOAD_SECONDS)
+    return total
 
 
 def archive_bytes(study: Study) -> int:
@@ -79,12 +97,99 @@ def archive_bytes(study: Study) -> int:
     return len(study.cases) * per_case + n_out * 8
 
 
-def estimate(
-    study: Study, workers: int, speeds: dict[RunSettings, float] | None = None
-) -> Estimate:
-    """Estimate a study's cost; ``speeds`` (see :func:`measure_speeds`) skips the timing."""
-    speeds = speeds or measure_speeds(study)
-    simulated = simulated_seconds(study)
-    wall = sum(t / speeds[c.settings] for t, c in zip(simulated, study.cases, strict=True))
-    seconds = wall / max(min(workers, len(study.cases)), 1)
-    return Estimate(float(simulated.sum()), seconds, workers, archive_bytes(study))
+def batch_size(study: Study, n: int, workers: int) -> int:
+    """The default batch size of a run of ``n`` of the study's cases."""
+    return default_batch_size(n, workers, samples_per_case(study.revolutions, study.output_every))
+
+
+def busy_workers(study: Study, cases: list[ResolvedCase], workers: int) -> int:
+    """Workers the batches of ``cases`` keep busy (no more than there are batches)."""
+    size = batch_size(study, len(study.cases), workers)
+    return max(min(workers, len(plan_batches(cases, study.record, size))), 1)
+
+
+def time_run(
+    study: Study, cases: list[ResolvedCase], workers: int, size: int | None = None
+) -> float:
+    """Wall time of :func:`run_study` on ``cases`` of ``study`` (batches of ``size``) into a
+    temporary folder [s]."""
+    sample = replace(study, cases=list(cases))
+    with tempfile.TemporaryDirectory(prefix="campipe-estimate-") as folder:
+        t = time.perf_counter()
+        run_study(sample, Path(folder) / f"{study.name}.nc", workers=workers, batch_size=size)
+        return time.perf_counter() - t
+
+
+def time_engine(cases: list[ResolvedCase]) -> float:
+    """Wall time of the engine on ``cases`` on one worker, one call per run-settings group,
+    as the study runs them (full runs, all events) [s]."""
+    groups: dict[RunSettings, list[ResolvedCase]] = {}
+    for c in cases:
+        groups.setdefault(c.settings, []).append(c)
+    total = 0.0
+    for settings, members in groups.items():
+        t = time.perf_counter()
+        run_batch([c.case for c in members], settings, on_failure="record")
+        total += time.perf_counter() - t
+    return total
+
+
+def sample_cases(study: Study, k: int) -> list[ResolvedCase]:
+    """``k`` cases spread evenly through the study (its speeds, seats, ... in proportion)."""
+    picks = np.unique(np.round(np.linspace(0, len(study.cases) - 1, k)).astype(int))
+    return [study.cases[i] for i in picks]
+
+
+def sample_size(study: Study, workers: int) -> int:
+    """Cases of the sample run: one batch for each worker, at the study's batch size."""
+    n = len(study.cases)
+    return max(min(batch_size(study, n, workers) * workers, n), 2)
+
+
+def estimate(study: Study, workers: int) -> Estimate:
+    """Estimate the wall time of ``campipe study`` on ``workers`` workers (see the module).
+
+    Parameters
+    ----------
+    study : Study
+        The expanded study.
+    workers : int
+        Workers of the run (threads of the local scheduler).
+
+    Returns
+    -------
+    Estimate
+        ``seconds`` the whole; ``engine``, ``layer`` and ``startup`` its parts; ``sample``
+        the cases timed.
+    """
+    workers = max(int(workers), 1)
+    startup = warm_up(study)
+    simulated = float(simulated_seconds(study).sum())
+    size = archive_bytes(study)
+    n = len(study.cases)
+    k = sample_size(study, workers)
+    if n <= 2 * k:
+        engine = time_engine(study.cases) / busy_workers(study, study.cases, workers)
+        seconds = time_run(study, study.cases, workers)
+        engine = min(engine, seconds)
+        return Estimate(
+            simulated, seconds + startup, workers, size, engine, seconds - engine, startup, n
+        )
+    sample = sample_cases(study, k)
+    batch = batch_size(study, n, workers)  # the study's own batches, not the sample's
+    first = time_run(study, sample[:1], workers)  # pays what a process's first run pays
+    again = time_run(study, sample[:1], workers)
+    ran = time_run(study, sample, workers, batch)
+    scale = n / len(sample)
+    seconds = first + max(ran - again, 0.0) * scale
+    engine = min(time_engine(sample) / busy_workers(study, sample, workers) * scale, seconds)
+    return Estimate(
+        simulated,
+        seconds + startup,
+        workers,
+        size,
+        engine,
+        seconds - engine,
+        startup,
+        len(sample),
+    )

@@ -352,6 +352,14 @@ def inspect_archive(study: Study, archive: Path) -> ArchiveState:
         return ArchiveState(
             True, False, "a netCDF file that is not a campipe archive", False, attrs=attrs
         )
+    if layout != LAYOUT_VERSION:  # never mixed with this layout's cases
+        return ArchiveState(
+            True,
+            False,
+            f"an archive in another layout ({layout:.40}; this campipe writes {LAYOUT_VERSION})",
+            False,
+            attrs=attrs,
+        )
     name = attrs.get("study_name")
     if name != study.name:
         return ArchiveState(
@@ -409,7 +417,7 @@ def _clean_temporaries(archive: Path) -> None:
 
 def _statuses(archive: Path) -> dict[str, str]:
     """Case id → status name of the archive's cases that did not finish cleanly."""
-    ids = read_variable(archive, "case_id")
+    ids = read_variable(archive, "case")
     codes = read_variable(archive, "status")
     return {
         str(i): STATUS.get(int(c), str(int(c))) for i, c in zip(ids, codes, strict=True) if c != OK

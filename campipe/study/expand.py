@@ -29,7 +29,7 @@ import numpy as np
 from campipe.constants import INCH
 from campipe.engine import Case, RunSettings, RunSettingsError, resolve_integrator
 from campipe.engine.batch import check_stability
-from campipe.errors import excerpt
+from campipe.errors import did_you_mean, excerpt
 from campipe.io.lift_table import LiftTableError, read_lift_table, table_digest
 from campipe.model import (
     ELEMENTS,
@@ -576,6 +576,8 @@ def expand(spec: Spec, source: str = "spec", limits: Limits | None = None) -> St
     run = spec.base["run"]
     if spec.replay:
         check_replay_columns(spec.replay, varied_keys(spec), tuple(run["record"]), source)
+    if spec.plots:
+        check_plot_columns(spec.plots, varied_keys(spec), tuple(run["record"]), source)
     axes = [Axis(k, "sweep", len(v)) for k, v in spec.sweep.items()]
     axes += [Axis(k, "zip", len(v)) for k, v in spec.zip.items()]
     if spec.sample:
@@ -598,20 +600,63 @@ def check_replay_columns(
 ) -> None:
     """``replay.where`` against the columns the archive will have, with their types: an
     unknown column or text compared with a number is refused now, not after the study."""
+    columns, units = _future_columns(varied, record)
+    try:
+        evaluate(parse_where(where), columns, 1, units)
+    except QueryError as exc:
+        raise SpecError([SpecProblem("replay.where", exc.reason)], source) from None
+
+
+def check_plot_columns(
+    plots: list, varied: tuple[str, ...], record: tuple[str, ...], source: str
+) -> None:
+    """Each of ``plots:``'s ``where`` and its columns (x, y, z) against the columns the
+    archive will have: refused now, not after the study."""
+    columns, units = _future_columns(varied, record)
+    problems = []
+    for i, plot in enumerate(plots):
+        if plot.where is not None:
+            try:
+                evaluate(parse_where(plot.where), columns, 1, units)
+            except QueryError as exc:
+                problems.append(SpecProblem(f"plots[{i}].where", exc.reason))
+        for key in ("x", "y", "z"):
+            name = getattr(plot, key)
+            if name is None:
+                continue
+            values = columns.get(name)
+            if values is None or values.dtype.kind not in "iuf" or values.ndim != 1:
+                numeric = [k for k, v in columns.items() if v.dtype.kind in "iuf" and v.ndim == 1]
+                what = "unknown column" if values is None else "not a column of numbers"
+                problems.append(
+                    SpecProblem(
+                        f"plots[{i}].{key}",
+                        f"{what} {excerpt(name)}{did_you_mean(name, numeric)} (columns: "
+                        f"{', '.join(numeric)})",
+                    )
+                )
+    if problems:
+        raise SpecError(problems, source)
+
+
+def _future_columns(
+    varied: tuple[str, ...], record: tuple[str, ...]
+) -> tuple[dict[str, np.ndarray], dict[str, str]]:
+    """Placeholder per-case columns of the archive to come, and their stored units."""
     columns: dict[str, np.ndarray] = {}
+    units: dict[str, str] = {"case": ""}
     for name, var, _ in case_coordinates(varied).values():
         shape = (1, 7) if "mode" in var.dims else (1,)
         columns[name] = (
             np.array(["x"], dtype=object) if var.dtype == "str" else np.full(shape, np.nan)
         )
+        units[name] = var.units or ""
     for name, var in data_variables(record).items():
         if var.dims == ("case",):
             columns[name] = np.full(1, np.nan)
-    columns["case_id"] = np.array(["x"], dtype=object)
-    try:
-        evaluate(parse_where(where), columns, 1)
-    except QueryError as exc:
-        raise SpecError([SpecProblem("replay.where", exc.reason)], source) from None
+            units[name] = var.units or ""
+    columns["case"] = np.array(["x"], dtype=object)
+    return columns, units
 
 
 def check_unique(cases: list[ResolvedCase], spec: Spec, source: str) -> None:

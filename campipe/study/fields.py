@@ -568,6 +568,8 @@ TOP_LEVEL: dict[str, str] = {
     "cases": "explicit cases, each deep-merged over the base",
     "sample": "a sampled design: {method: latin-hypercube, n, seed, ranges: {key: {from, to}}}",
     "replay": "cases to log to rerun while the study runs: {where: EXPR}",
+    "plots": "figures written beside the archive when the study finishes: a list of "
+    "{kind: histories | metric | map | events, where, units, output, ...}",
 }
 
 #: Keys of a case (the base's top-level keys that describe one run).

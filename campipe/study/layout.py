@@ -15,6 +15,7 @@ from campipe.study.results import BatchData, numerics_fingerprint
 from campipe.study.variables import (
     DOF_NAMES,
     DOF_UNITS,
+    NO_SEAT,
     VARIABLES,
     Variable,
     case_coordinates,
@@ -24,7 +25,9 @@ from campipe.study.variables import (
 #: Version of the file layout: batch files and archives of another layout are not reused.
 #: 2: per-case ``status``; checksums of every variable (``campipe_checksums``); the engine's
 #: fingerprint (``campipe_numerics``); the spec's file (``spec_file``).
-LAYOUT_VERSION = "campipe-archive-2"
+#: 3: the case ids are the coordinate ``case`` of the ``case`` dimension (was ``case_id``);
+#: no seat is ``seat = -inf`` (was NaN).
+LAYOUT_VERSION = "campipe-archive-3"
 
 
 def record_text(record: Iterable[str]) -> str:
@@ -84,11 +87,11 @@ def batch_layout(data: BatchData, record: tuple[str, ...]):
     if "q" in record:
         sizes["dof"] = len(DOF_NAMES)
     specs = [_spec(n, VARIABLES[n]) for n in _axes(record)]
-    specs.append(_spec("case_id", VARIABLES["case_id"]))
-    specs += data_specs(record, "case_id")
+    specs.append(_spec("case", VARIABLES["case"]))
+    specs += data_specs(record, "")
     arrays = {
         **axis_arrays(data.cam_angle, data.n_revolutions),
-        "case_id": data.case_ids,
+        "case": data.case_ids,
         **data.arrays,
     }
     attrs = {
@@ -101,8 +104,9 @@ def batch_layout(data: BatchData, record: tuple[str, ...]):
 
 
 def coordinate_values(cases: list[ResolvedCase], study: Study) -> dict[str, np.ndarray]:
-    """Per-case coordinate arrays in archive units, in study order."""
-    out: dict[str, np.ndarray] = {"case_id": np.array([c.case_id for c in cases], dtype=object)}
+    """Per-case coordinate arrays in archive units, in study order: ``case`` (the ids), then
+    each case coordinate (no seat as :data:`~campipe.study.variables.NO_SEAT`)."""
+    out: dict[str, np.ndarray] = {"case": np.array([c.case_id for c in cases], dtype=object)}
     for key, (name, var, factor) in case_coordinates(study.varied).items():
         raw = [c.values[key] for c in cases]
         if var.dtype == "str":
@@ -122,6 +126,8 @@ def coordinate_values(cases: list[ResolvedCase], study: Study) -> dict[str, np.n
                 # rpm from rad/s: round away the conversion's last-digit noise (11000 rpm
                 # stays 11000, so `--where "speed_rpm == 11000"` finds it)
                 values = np.array([float(f"{v:.12g}") for v in values])
+            if key == "seat":
+                values = np.where(np.isnan(values), NO_SEAT, values)
             out[name] = values
     return out
 
@@ -130,7 +136,7 @@ def archive_layout(study: Study, n_events: int, cam_angle: np.ndarray, n_revolut
     """(sizes, variables, static arrays) of the study's archive; the static arrays are the
     axes and the per-case coordinates, the rest streams in from batch files."""
     coords = case_coordinates(study.varied)
-    coord_names = ["case_id", *(name for name, _, _ in coords.values())]
+    coord_names = [name for name, _, _ in coords.values()]
     sizes = {
         "case": len(study.cases),
         "cam_angle": cam_angle.size,
@@ -140,7 +146,7 @@ def archive_layout(study: Study, n_events: int, cam_angle: np.ndarray, n_revolut
     if "q" in study.record:
         sizes["dof"] = len(DOF_NAMES)
     specs = [_spec(n, VARIABLES[n]) for n in _axes(study.record)]
-    specs.append(_spec("case_id", VARIABLES["case_id"]))
+    specs.append(_spec("case", VARIABLES["case"]))
     values = coordinate_values(study.cases, study)
     for _key, (name, var, _) in coords.items():
         if "mode" in var.dims:

@@ -16,14 +16,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from campipe.errors import did_you_mean, excerpt
+from campipe.study.display import display_units, format_value, label, to_display
 from campipe.study.layout import coordinate_values
-from campipe.study.variables import VARIABLES
+from campipe.study.variables import VARIABLES, case_coordinates, data_variables
 from campipe.study.where import QueryError, Where, evaluate, parse_where
 from campipe.vocabulary import EVENTS_TRUNCATED, FAILURES, STATUS
 
 __all__ = [
     "CaseTable",
     "QueryError",
+    "displayed",
     "Where",
     "case_table",
     "evaluate",
@@ -46,11 +48,13 @@ class CaseTable:
     units: dict[str, str]  # name → units ("" for none)
     default: list[str]  # columns printed when --columns is not given
     n: int  # cases
+    study: str = ""  # the study's name
 
 
 def case_table(ds) -> CaseTable:
-    """Per-case columns of an archive (an ``xarray.Dataset``): its case coordinates, then its
-    per-case data variables; the default columns are the coordinates and the metrics."""
+    """Per-case columns of an archive (an ``xarray.Dataset``), as stored: its case coordinates
+    (``case``, the ids, first), then its per-case data variables; the default columns are the
+    coordinates and the metrics."""
     columns: dict[str, np.ndarray] = {}
     units: dict[str, str] = {}
     coords = [k for k, v in ds.coords.items() if v.dims[:1] == ("case",) and v.ndim <= 2]
@@ -63,15 +67,34 @@ def case_table(ds) -> CaseTable:
         columns[name] = values
         units[name] = str(v.attrs.get("units", ""))
     metrics = [k for k in data if VARIABLES.get(k) is None or VARIABLES[k].role == "metric"]
-    return CaseTable(columns, units, coords + metrics, ds.sizes.get("case", 0))
+    name = str(ds.attrs.get("study_name", ""))
+    return CaseTable(columns, units, coords + metrics, ds.sizes.get("case", 0), name)
+
+
+def displayed(table: CaseTable, shown: dict[str, str]) -> CaseTable:
+    """The table with each column in the units ``shown`` names (see
+    :func:`campipe.study.display.display_units`); columns not named stay as they are."""
+    columns = {
+        k: to_display(v, table.units[k], shown.get(k, table.units[k]))
+        for k, v in table.columns.items()
+    }
+    units = {k: shown.get(k, u) for k, u in table.units.items()}
+    return CaseTable(columns, units, table.default, table.n, table.study)
+
+
+def display_table(ds, system: str = "spec") -> CaseTable:
+    """The archive's case table in the units of ``system`` (``spec``, ``si`` or ``in-lbf``)."""
+    table = case_table(ds)
+    return displayed(table, display_units(table.units, ds.attrs, system))
 
 
 def select(table: CaseTable, where: str | None = None, sort: str | None = None) -> np.ndarray:
     """Row indices matching ``where``, ordered by ``sort`` (``"col"``, ``"-col"`` descending;
-    several keys separated by commas, first key first)."""
+    several keys separated by commas, first key first). ``table`` holds stored values: a
+    ``--where`` quantity is converted to each column's stored units."""
     rows = np.arange(table.n)
     if where is not None:
-        rows = rows[evaluate(parse_where(where), table.columns, table.n)]
+        rows = rows[evaluate(parse_where(where), table.columns, table.n, table.units)]
     if sort:
         for key in reversed([k.strip() for k in sort.split(",") if k.strip()]):
             descending = key.startswith("-")
@@ -88,7 +111,7 @@ def select(table: CaseTable, where: str | None = None, sort: str | None = None) 
 
 
 def _order(values: np.ndarray, descending: bool) -> np.ndarray:
-    """Stable order; NaN last either way."""
+    """Stable order; NaN last either way (no seat, -inf, first ascending)."""
     if values.dtype.kind in "iuf":
         v = values.astype(float)
         key = -v if descending else v
@@ -105,16 +128,17 @@ def _cell(value, fmt: str) -> object:
     if isinstance(value, np.floating | float):
         v = float(value)
         if fmt == "json":
-            return None if math.isnan(v) else v
+            return v if math.isfinite(v) else None
         if fmt == "csv":
-            return repr(v)
-        return f"{v:.6g}"
+            return format_value(v) if v == -math.inf else repr(v)
+        return format_value(v)
     return str(value)
 
 
 def format_rows(table: CaseTable, rows: np.ndarray, names: Sequence[str], fmt: str) -> str:
-    """The selected rows as ``table`` (aligned text with units), ``csv`` or ``json`` (an
-    array of row objects)."""
+    """The selected rows as ``table`` (aligned text, units under the names), ``csv`` (units in
+    the header: ``seat [in]``) or ``json`` (``{"study", "units", "cases": [row objects]}``).
+    No seat reads ``none`` (JSON: null, as NaN)."""
     for name in names:
         if name not in table.columns:
             raise QueryError.at(
@@ -125,11 +149,18 @@ def format_rows(table: CaseTable, rows: np.ndarray, names: Sequence[str], fmt: s
             )
     cells = [[_cell(table.columns[n][r], fmt) for n in names] for r in rows]
     if fmt == "json":
-        return json.dumps([dict(zip(names, row, strict=True)) for row in cells], indent=1)
+        return json.dumps(
+            {
+                "study": table.study,
+                "units": {n: table.units[n] for n in names},
+                "cases": [dict(zip(names, row, strict=True)) for row in cells],
+            },
+            indent=1,
+        )
     if fmt == "csv":
         buf = io.StringIO()
         writer = csv.writer(buf, lineterminator="\n")
-        writer.writerow(names)
+        writer.writerow([label(n, table.units[n]) for n in names])
         for r, row in zip(rows, cells, strict=True):
             writer.writerow(
                 [
@@ -143,7 +174,10 @@ def format_rows(table: CaseTable, rows: np.ndarray, names: Sequence[str], fmt: s
     text = [
         [", ".join(map(str, c)) if isinstance(c, list) else str(c) for c in row] for row in cells
     ]
-    head = [list(names), [f"[{table.units[n]}]" if table.units[n] else "" for n in names]]
+    head = [
+        list(names),
+        [f"[{table.units[n]}]" if table.units[n] not in ("", "1") else "" for n in names],
+    ]
     numeric = [table.columns[n].dtype.kind in "iuf" for n in names]
     widths = [max(len(r[j]) for r in head + text) for j in range(len(names))]
     lines = []
@@ -161,19 +195,21 @@ def format_rows(table: CaseTable, rows: np.ndarray, names: Sequence[str], fmt: s
 # -- the summary -------------------------------------------------------------------------------
 
 
-def summary(ds, where: str | None = None) -> str:
+def summary(ds, where: str | None = None, system: str = "spec") -> str:
     """The study's axes, the cases that failed or kept only part of their events (by case
     id) and, for a speed sweep, the separation onset speed (first speed with
-    ``separation_deg_per_rev > 0``) for each combination of the other varying parameters.
+    ``separation_deg_per_rev > 0``) for each combination of the other varying parameters,
+    values in the units of ``system`` (:mod:`campipe.study.display`).
 
     With ``where``, only the cases it selects are summarised (the axes' values among them,
     their failures, their onsets)."""
-    table = case_table(ds)
+    stored = case_table(ds)
+    table = displayed(stored, display_units(stored.units, ds.attrs, system))
     name = ds.attrs.get("study_name", "study")
     selected = ""
     if where is not None:
         total = table.n
-        table = subset(table, select(table, where))
+        table = subset(table, select(stored, where))
         selected = f" (of {total}, where {where})"
     lines = [
         f"{name}: {table.n} cases{selected}, {ds.attrs.get('revolutions', '?')} revolutions, "
@@ -202,7 +238,11 @@ def summary(ds, where: str | None = None) -> str:
 def subset(table: CaseTable, rows: np.ndarray) -> CaseTable:
     """The table's rows ``rows``, in that order."""
     return CaseTable(
-        {k: v[rows] for k, v in table.columns.items()}, table.units, table.default, rows.size
+        {k: v[rows] for k, v in table.columns.items()},
+        table.units,
+        table.default,
+        rows.size,
+        table.study,
     )
 
 
@@ -215,7 +255,7 @@ def status_lines(table: CaseTable) -> list[str]:
     status = table.columns.get("status")
     if status is None:
         return []
-    ids = table.columns["case_id"]
+    ids = table.columns.get("case", np.arange(table.n).astype(str))
     out = []
     failed = np.flatnonzero(np.isin(status, FAILURES))
     if failed.size:
@@ -236,11 +276,14 @@ def _values_text(col: np.ndarray, units: str) -> str:
     if col.ndim != 1:
         return f"{len({tuple(r) for r in col})} distinct"
     uniq = list(dict.fromkeys(_cell(v, "table") for v in col))
-    unit = f" {units}" if units else ""
+    unit = f" {units}" if units and units != "1" else ""
     if col.dtype.kind in "iuf" and len(uniq) > 6:
-        finite = col[np.isfinite(col.astype(float))]
-        nan = " and nan" if finite.size < col.size else ""
-        return f"{finite.min():.6g} … {finite.max():.6g}{unit}{nan}"
+        values = col.astype(float)
+        finite = values[np.isfinite(values)]
+        extra = (" and none" if np.any(values == -math.inf) else "") + (
+            " and nan" if np.any(np.isnan(values)) else ""
+        )
+        return f"{finite.min():.6g} … {finite.max():.6g}{unit}{extra}"
     return ", ".join(str(u) for u in uniq) + unit
 
 
@@ -255,7 +298,7 @@ def onset_table(table: CaseTable) -> list[str]:
     others = [
         n
         for n, v in cols.items()
-        if n not in ("speed_rpm", "case_id")
+        if n not in ("speed_rpm", "case")
         and n in table.default
         and n not in _metric_names(table)
         and len({_key(x) for x in v}) > 1
@@ -266,7 +309,7 @@ def onset_table(table: CaseTable) -> list[str]:
     )
     for i in np.flatnonzero(usable).tolist():
         groups.setdefault(tuple(_key(cols[n][i]) for n in others), []).append(i)
-    head = [*others, "onset_rpm"]
+    head = [*(label(n, table.units.get(n, "")) for n in others), "onset_rpm"]
     rows = []
     for members in groups.values():
         idx = np.array(members)
@@ -321,4 +364,16 @@ def replay_mask(study, plan, data) -> np.ndarray:
             if v.shape[:1] == (n,) and v.ndim == 1 and k != "event_count"
         }
     )
-    return evaluate(parse_where(study.spec.replay), columns, n)
+    return evaluate(parse_where(study.spec.replay), columns, n, stored_units(study.varied))
+
+
+def stored_units(varied: Sequence[str], record: Sequence[str] = ()) -> dict[str, str]:
+    """Per-case column → its stored units, for a study varying ``varied``: what a
+    ``--where`` converts its quantities to before the archive exists."""
+    out = {"case": ""}
+    for name, var, _ in case_coordinates(varied).values():
+        out[name] = var.units or ""
+    for name, var in data_variables(record).items():
+        if var.dims == ("case",):
+            out[name] = var.units or ""
+    return out

@@ -15,6 +15,7 @@ import json
 
 from campipe.model import PARAMETERS
 from campipe.model.schema import QUANTITY_PATTERN, model_schema, parameter_schema
+from campipe.study.display import SYSTEMS
 from campipe.study.fields import (
     CASE_FIELDS,
     CASE_KEYS,
@@ -32,6 +33,9 @@ from campipe.study.fields import (
     sweep_keys,
     varied_fields,
 )
+from campipe.study.plots import COMMON_KEYS as PLOT_COMMON_KEYS
+from campipe.study.plots import KIND_KEYS as PLOT_KIND_KEYS
+from campipe.study.plots import KINDS as PLOT_KINDS
 from campipe.study.spec import NAME_PATTERN
 
 SCHEMA_ID = "https://campipe.example/schemas/study.schema.json"
@@ -194,6 +198,39 @@ def _axes(description: str) -> dict[str, object]:
     }
 
 
+def _plot(kind: str) -> dict[str, object]:
+    """The schema of one ``plots:`` entry of ``kind``."""
+    text = {"type": "string", "minLength": 1}
+    keys: dict[str, object] = {
+        "kind": {"const": kind, "description": PLOT_KINDS[kind]},
+        "where": {**text, "description": "the cases to draw (the --where language)"},
+        "units": {"enum": list(SYSTEMS), "description": "unit system of the values shown"},
+        "output": {
+            "type": "string",
+            "pattern": r"\.(png|svg|pdf|PNG|SVG|PDF)$",
+            "description": "file to write, relative to the archive's folder",
+        },
+        "x": {**text, "description": "column along x"},
+        "y": {**text, "description": "metric: the value drawn; map: the column along y"},
+        "z": {**text, "description": "the value coloured"},
+        "level": {
+            "anyOf": [{"type": "number"}, {"type": "string", "pattern": QUANTITY_PATTERN}],
+            "description": "the contour's level: a number in the shown units, or a quantity",
+        },
+        "turn": {
+            "anyOf": [{"type": "integer", "minimum": 1}, {"enum": ["last", "all"]}],
+            "description": "the cam turn shown (default: all)",
+        },
+    }
+    allowed = (*PLOT_COMMON_KEYS, *PLOT_KIND_KEYS[kind])
+    return {
+        "type": "object",
+        "properties": {k: v for k, v in keys.items() if k in allowed},
+        "required": ["kind"],
+        "additionalProperties": False,
+    }
+
+
 def study_schema() -> dict[str, object]:
     """The JSON Schema of a study spec."""
     model = {k: v for k, v in model_schema().items() if k not in ("$schema", "$id")}
@@ -238,6 +275,11 @@ def study_schema() -> dict[str, object]:
                 "required": ["where"],
                 "additionalProperties": False,
                 "description": TOP_LEVEL["replay"],
+            },
+            "plots": {
+                "type": "array",
+                "items": {"oneOf": [_plot(kind) for kind in PLOT_KINDS]},
+                "description": TOP_LEVEL["plots"],
             },
         },
         "additionalProperties": False,

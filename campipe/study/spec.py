@@ -26,6 +26,7 @@ Grammar (all keys optional except ``name``; each case must end up with a ``speed
     cases: [{<case keys>}, ...]                          # deep-merged over the base
     sample: {method: latin-hypercube, n, seed, ranges: {<key>: {from, to}}}
     replay: {where: EXPR}
+    plots: [{kind: histories | metric | map | events, ...}, ...]   # campipe.study.plots
 """
 
 from __future__ import annotations
@@ -61,6 +62,7 @@ from campipe.study.fields import (
     sweep_keys,
     varied_fields,
 )
+from campipe.study.plots import PlotError, PlotRequest, check_plot
 from campipe.study.where import QueryError, parse_where
 
 #: A study name: it names the archive file.
@@ -117,6 +119,7 @@ class Spec:
     replay: str | None  # replay selection expression
     overrides: dict[str, object] = field(default_factory=dict)  # --set KEY=VALUE applied
     path: Path | None = None  # the spec file, when read from one
+    plots: list[PlotRequest] = field(default_factory=list)  # figures to write at the end
 
     @property
     def record(self) -> tuple[str, ...]:
@@ -661,6 +664,26 @@ def check_replay(value: object, problems: _Problems) -> str | None:
     return where
 
 
+def check_plot_list(value: object, problems: _Problems) -> list[PlotRequest]:
+    """``plots:``: a list of plots (:func:`campipe.study.plots.check_plot`), each problem at
+    its entry's key."""
+    if not isinstance(value, list):
+        problems.add("plots", f"found {_show(value)}, expected a list such as [{{kind: metric}}]")
+        return []
+    out = []
+    for i, entry in enumerate(value):
+        if not isinstance(entry, Mapping):
+            problems.add(
+                f"plots[{i}]", f"found {_show(entry)}, expected a mapping such as {{kind: map}}"
+            )
+            continue
+        try:
+            out.append(check_plot(entry, f"plots[{i}]"))
+        except PlotError as exc:
+            problems.add(str(exc.key), exc.reason)
+    return out
+
+
 # -- the spec -------------------------------------------------------------------------------
 
 
@@ -744,6 +767,7 @@ def check_spec(
     cases = check_cases(raw["cases"], problems) if "cases" in raw else []
     sample = check_sample(raw["sample"], problems, max_axis) if "sample" in raw else None
     replay = check_replay(raw["replay"], problems) if "replay" in raw else None
+    plots = check_plot_list(raw["plots"], problems) if "plots" in raw else []
     spec = Spec(
         name=name if isinstance(name, str) else "",
         description=str(description),
@@ -756,6 +780,7 @@ def check_spec(
         sample=sample,
         replay=replay,
         overrides=overrides,
+        plots=plots,
     )
     check_conflicts(spec, problems)
     if problems.items:

@@ -5,15 +5,16 @@ coordinates come from the spec's key table (:mod:`campipe.study.fields`) and the
 from the engine's :data:`~campipe.engine.MEMBER_LOADS`. Units are pint spellings that UDUNITS
 also reads; the archive is SI except ``speed_rpm`` [rpm] and angles [degree].
 
-Dimensions: ``case``; ``cam_angle`` (0 … 360·revolutions at ``run.output_every``);
-``revolution``; ``dof`` (q1–q7, when ``run.record`` holds ``q``); ``mode`` (for a varied
-``damping_ratios``, as long as the longest list, NaN beyond a shorter one); ``event`` (all
-cases' events, case by case: a CF contiguous ragged array counted by ``event_count``, with
-``event_case`` naming each event's case).
+Dimensions: ``case`` (its coordinate ``case`` holds the case ids); ``cam_angle`` (0 …
+360·revolutions at ``run.output_every``); ``revolution``; ``dof`` (q1–q7, when ``run.record``
+holds ``q``); ``mode`` (for a varied ``damping_ratios``, as long as the longest list, NaN beyond
+a shorter one); ``event`` (all cases' events, case by case: a CF contiguous ragged array counted
+by ``event_count``, with ``event_case`` naming each event's case).
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable
 from dataclasses import dataclass
 
@@ -130,8 +131,11 @@ VARIABLES: dict[str, Variable] = {
     "dof_units": Variable(
         ("dof",), "str", "units of each generalised coordinate", role="axis", record="q"
     ),
-    "case_id": Variable(
-        CASE, "str", "case id: SHA-256 of the case's canonical parameters", role="parameter"
+    "case": Variable(
+        CASE,
+        "str",
+        "case id: first 16 hex digits of the SHA-256 of the case's canonical parameters",
+        role="axis",
     ),
     "time": Variable(HISTORY, "f8", "time from the start of the run", "s"),
     "cam_lift": Variable(HISTORY, "f8", "cam lift", "m"),
@@ -253,13 +257,31 @@ def coordinate_field(key: str) -> Field:
     return CASE_FIELDS.get(key) or varied_fields()[key]
 
 
+#: The archive's ``seat`` of a case without a seat: the seat engages at valve lift ``seat``,
+#: so no seat is a seat infinitely far below, never reached. A real value (unlike NaN, which
+#: groupby, pivot tables and unstack drop), ordered below every seat; shown as ``none``.
+NO_SEAT = -math.inf
+#: How ``NO_SEAT`` is shown and written in ``--where``.
+NONE_WORD = "none"
+
 #: Standard per-case coordinates: spec key → archive variable.
 STANDARD_COORDINATES: dict[str, tuple[str, Variable]] = {
     "speed": ("speed_rpm", Variable(CASE, "f8", "cam speed", "rpm", role="parameter")),
     "seat": (
         "seat",
         Variable(
-            CASE, "f8", "valve seat position as a valve lift; NaN: no seat", "m", role="parameter"
+            CASE,
+            "f8",
+            "valve seat position as a valve lift",
+            "m",
+            role="parameter",
+            extra=(
+                (
+                    "comment",
+                    "-inf: no seat (a seat infinitely below the valve, never reached); "
+                    "campipe shows it as none",
+                ),
+            ),
         ),
     ),
     "profile": ("profile", Variable(CASE, "str", "cam profile", role="parameter")),

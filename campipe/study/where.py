@@ -6,33 +6,90 @@ parentheses::
     speed_rpm > 9000 and seat > 0
     closure == "form" or not (cam_impacts >= 2)
     9000 <= speed_rpm < 12000
-    seat is nan                  # no seat (also: seat is none, seat is not nan)
+    spring_preload > 150 lbf     # a quantity: converted to the column's units
+    seat == 0.1 in
+    seat is none                 # no seat (also: seat == none; is not none)
     profile in ["harmonic 1 in", "polydyne-4567 1 in 90/90/90/90 deg"]
 
 The text is parsed with Python's ``ast`` module and every node is checked against a short
 whitelist (comparisons, boolean operators, names of columns, numbers, strings, lists of
 them); nothing is ever evaluated as Python. Attribute access, calls, subscripts, arithmetic,
-lambdas and names that are not columns are refused. Numbers compare equal within a relative
-1e-9 (so ``speed_rpm == 11000`` finds 11000 rpm however it was converted).
+lambdas and names that are not columns are refused.
+
+A number followed by units (``150 lbf``, ``0.1 in``, ``245 lbf/in``) is a quantity, read by
+:func:`campipe.units.read_quantity` (after a number, ``in`` is the inch unless a list
+follows) and converted to the units of the column it is compared with; its dimension must
+match. A bare number compares in the column's stored units, and is accepted only where those
+are what a reader types: rpm, degrees, counts and ratios (or zero, in any units); a bare
+``0.00254`` against ``seat`` [m] is refused with the quantity to write instead.
+
+Numbers compare equal within a relative :data:`EQUAL_RTOL` (1e-9), after conversion: so
+``speed_rpm == 11000`` finds 11000 rpm however it was converted and ``seat == 0.1 in`` the
+seat written as ``0.1 in``; zero equals only zero.
+
+``none`` is the value of no seat (stored as ``-inf``: see
+:data:`campipe.study.variables.NO_SEAT`). ``x is none`` holds where ``x`` has no value: no
+seat, or NaN (a failed case's metric, ``dt`` chosen by the integrator); ``x == none`` and
+``x in [none, ...]`` mean the same, ``is not none`` and ``!= none`` the opposite. ``is nan``
+is the older spelling of ``is none`` and means the same. A seat of none orders below every
+seat: ``seat < 0.05 in`` holds for it.
 """
 
 from __future__ import annotations
 
 import ast
+import io
+import keyword
 import math
+import tokenize
 import warnings
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from campipe.errors import CampipeError, did_you_mean, excerpt
+from campipe.units import Q_, QuantityError, convert, is_unit, names_an_angle, read_quantity
 
 MAX_WHERE_LENGTH = 2000
-#: Relative tolerance of ``==`` between numbers.
+#: Relative tolerance of ``==`` between numbers (after converting a quantity).
 EQUAL_RTOL = 1e-9
+
+
+class _NoValue:
+    """The word ``none``: no seat (``-inf`` in the archive), or no value (NaN)."""
+
+    def __repr__(self) -> str:
+        return "none"
+
+
+NONE = _NoValue()
 #: Words that are values, not columns.
-WORDS = {"nan": math.nan, "none": math.nan, "inf": math.inf, "true": True, "false": False}
+WORDS: dict[str, object] = {
+    "nan": NONE,
+    "none": NONE,
+    "inf": math.inf,
+    "true": True,
+    "false": False,
+}
+#: Stored units in which a bare number is read as written (what a reader types anyway).
+BARE_UNITS = ("", "1", "rpm", "degree")
+#: Prefix of the names standing for quantities in the parsed text (a user's name may not
+#: start with an underscore, so none collides).
+_QUANTITY_NAME = "_quantity_"
+
+
+@dataclass(frozen=True)
+class Quantity:
+    """A quantity written in a ``--where``: its number and units as written."""
+
+    value: float  # the number
+    units: str  # pint spelling of its units
+    text: str  # as written, for messages
+
+    def __neg__(self) -> Quantity:
+        return Quantity(-self.value, self.units, f"-{self.text}")
+
 
 _COMPARE = {
     ast.Eq: "==",
@@ -77,6 +134,7 @@ class Where:
     text: str  # as written
     tree: ast.Expression  # checked against the whitelist
     names: frozenset[str]  # the columns it reads
+    quantities: dict[str, Quantity] = field(default_factory=dict)  # placeholder name → quantity
 
 
 def parse_where(text: str) -> Where:
@@ -94,10 +152,11 @@ def parse_where(text: str) -> Where:
         raise QueryError.at(
             "--where", f"{len(text)} characters, expected at most {MAX_WHERE_LENGTH}"
         )
+    source, quantities = _read_quantities(text.strip())
     try:
         with warnings.catch_warnings():  # e.g. "invalid decimal literal": refused below anyway
             warnings.simplefilter("ignore", SyntaxWarning)
-            tree = ast.parse(text.strip(), mode="eval")
+            tree = ast.parse(source, mode="eval")
     except (SyntaxError, ValueError, RecursionError, MemoryError) as exc:
         # ValueError: a null byte (before Python 3.12), text that is not UTF-8, an integer of
         # thousands of digits; RecursionError, MemoryError: nesting too deep for the parser
@@ -124,12 +183,11 @@ def parse_where(text: str) -> Where:
                     "a list stands only after 'in', e.g. 'speed_rpm in "
                     "[9000, 9524]'; join conditions with and, or, not",
                 )
-            if not all(
-                isinstance(e, ast.Constant)
-                or (isinstance(e, ast.UnaryOp) and isinstance(e.operand, ast.Constant))
-                for e in node.elts
-            ):
-                raise QueryError.at("--where", "the list after 'in' holds numbers or strings only")
+            if not all(_is_value(e, quantities) for e in node.elts):
+                raise QueryError.at(
+                    "--where",
+                    "the list after 'in' holds numbers, quantities, strings or none only",
+                )
         if not isinstance(node, _ALLOWED):
             raise QueryError.at(
                 "--where",
@@ -137,6 +195,8 @@ def parse_where(text: str) -> Where:
                 "of columns with numbers or strings, joined by and, or, not",
             )
         if isinstance(node, ast.Name):
+            if node.id in quantities:
+                continue
             if node.id.startswith("_"):
                 raise QueryError.at("--where", f"the name {excerpt(node.id)} is not allowed")
             if node.id.lower() not in WORDS:
@@ -153,7 +213,11 @@ def parse_where(text: str) -> Where:
         if (
             isinstance(node, ast.UnaryOp)
             and isinstance(node.op, ast.USub | ast.UAdd)
-            and not isinstance(node.operand, ast.Constant | ast.Name)
+            and not (
+                isinstance(node.operand, ast.Constant)
+                or isinstance(node.operand, ast.Name)
+                and (node.operand.id in quantities or node.operand.id.lower() == "inf")
+            )
         ):
             raise QueryError.at("--where", "a sign applies to a number only")
         if isinstance(node, ast.Compare):
@@ -163,7 +227,7 @@ def parse_where(text: str) -> Where:
                 ):
                     raise QueryError.at(
                         "--where",
-                        "'is' and 'is not' compare with nan (or none) only, e.g. 'seat is nan'",
+                        "'is' and 'is not' compare with none only, e.g. 'seat is none'",
                     )
                 if isinstance(op, ast.In | ast.NotIn) and not isinstance(
                     right, ast.List | ast.Tuple
@@ -172,7 +236,89 @@ def parse_where(text: str) -> Where:
                         "--where", "'in' takes a list, e.g. 'speed_rpm in [9000, 9524]'"
                     )
     _check_condition(tree.body)
-    return Where(text, tree, frozenset(names))
+    return Where(text, tree, frozenset(names), quantities)
+
+
+def _read_quantities(text: str) -> tuple[str, dict[str, Quantity]]:
+    """``text`` with each quantity (a number followed by units) replaced by a placeholder
+    name, and the quantities by name. Text that does not tokenize is returned as it is (the
+    parser then says why)."""
+    try:
+        tokens = list(tokenize.generate_tokens(io.StringIO(text).readline))
+    except (tokenize.TokenError, SyntaxError, IndentationError):
+        return text, {}
+    for tok in tokens:
+        if tok.type == tokenize.NAME and tok.string.startswith("_"):
+            raise QueryError.at("--where", f"the name {excerpt(tok.string)} is not allowed")
+    starts = [0]
+    for line in io.StringIO(text).readlines():  # the lines tokenize numbers its rows by
+        starts.append(starts[-1] + len(line))
+
+    def offset(pos: tuple[int, int]) -> int:
+        return starts[pos[0] - 1] + pos[1]
+
+    spans: list[tuple[int, int]] = []
+    i = 0
+    while i < len(tokens) - 1:
+        end = _units_end(tokens, i) if tokens[i].type == tokenize.NUMBER else i
+        if end > i:
+            spans.append((offset(tokens[i].start), offset(tokens[end].end)))
+        i = end + 1
+    quantities: dict[str, Quantity] = {}
+    out = []
+    last = 0
+    for k, (a, b) in enumerate(spans):
+        written = text[a:b]
+        try:
+            q = read_quantity(written, "--where")
+        except QuantityError as exc:
+            raise QueryError.at("--where", exc.reason) from None
+        name = f"{_QUANTITY_NAME}{k}"
+        quantities[name] = Quantity(float(q.magnitude), str(q.units), written)
+        out += [text[last:a], name]
+        last = b
+    out.append(text[last:])
+    return "".join(out), quantities
+
+
+def _is_unit_name(tokens: list[tokenize.TokenInfo], j: int, after_number: bool) -> bool:
+    """Token ``j`` is a unit's name: ``in`` right after a number is the inch unless a list
+    or a parenthesis follows (``speed_rpm in [..]`` never has a number before ``in``)."""
+    tok = tokens[j]
+    if tok.type != tokenize.NAME:
+        return False
+    if tok.string == "in":
+        nxt = tokens[j + 1].string if j + 1 < len(tokens) else ""
+        return not (after_number and nxt in ("[", "("))
+    if keyword.iskeyword(tok.string) or tok.string.lower() in WORDS:
+        return False
+    return is_unit(tok.string)
+
+
+def _units_end(tokens: list[tokenize.TokenInfo], i: int) -> int:
+    """The last token of the units after the number at ``i`` (``lbf``, ``lbf/in``,
+    ``m/s**2``), or ``i`` when no unit follows."""
+    if i + 1 >= len(tokens) or not _is_unit_name(tokens, i + 1, True):
+        return i
+    end = i + 1
+    while end + 2 < len(tokens):
+        op, nxt = tokens[end + 1], tokens[end + 2]
+        if op.string in ("*", "/") and _is_unit_name(tokens, end + 2, False):
+            end += 2
+        elif op.string == "**" and nxt.type == tokenize.NUMBER:
+            end += 2
+        else:
+            break
+    return end
+
+
+def _is_value(node: ast.AST, quantities: Mapping[str, Quantity]) -> bool:
+    """A plain value: a number or string, a quantity, a word (none, inf), or one signed."""
+    if isinstance(node, ast.UnaryOp) and isinstance(node.op, ast.USub | ast.UAdd):
+        node = node.operand
+    if isinstance(node, ast.Name):
+        return node.id in quantities or node.id.lower() in ("none", "nan", "inf")
+    return isinstance(node, ast.Constant)
 
 
 def _check_condition(node: ast.AST) -> None:
@@ -232,81 +378,202 @@ def check_names(where: Where, columns: Sequence[str]) -> None:
             )
 
 
-def evaluate(where: Where, columns: Mapping[str, np.ndarray], n: int) -> np.ndarray:
-    """(n,) bool: the rows where the expression holds."""
+def evaluate(
+    where: Where,
+    columns: Mapping[str, np.ndarray],
+    n: int,
+    units: Mapping[str, str] | None = None,
+) -> np.ndarray:
+    """(n,) bool: the rows where the expression holds.
+
+    Parameters
+    ----------
+    columns : mapping
+        Column name → (n,) values, as stored (no seat as ``-inf``).
+    units : mapping, optional
+        Column name → its stored units (pint spelling, "" for none): quantities convert to
+        them and bare numbers are checked against them (see the module). Without it every
+        column is taken as unitless and a quantity is refused.
+    """
     check_names(where, list(columns))
-    out = _eval(where.tree.body, columns)
+    out = _Evaluation(columns, dict(units or {}), where.quantities).eval(where.tree.body)
     return np.broadcast_to(np.asarray(out, dtype=bool), (n,)).copy()
 
 
-def _eval(node: ast.AST, cols: Mapping[str, np.ndarray]):
-    if isinstance(node, ast.BoolOp):
-        values = np.broadcast_arrays(*(np.asarray(_eval(v, cols), dtype=bool) for v in node.values))
-        reduce = np.logical_and.reduce if isinstance(node.op, ast.And) else np.logical_or.reduce
-        return reduce(values)
-    if isinstance(node, ast.UnaryOp):
-        value = _eval(node.operand, cols)
-        if isinstance(node.op, ast.Not):
-            return ~np.asarray(value, dtype=bool)
-        if not _is_number(value):
-            raise QueryError.at("--where", "a sign applies to a number only")
-        return -value if isinstance(node.op, ast.USub) else value
-    if isinstance(node, ast.Compare):
-        result = None
-        left = _eval(node.left, cols)
-        for op, right_node in zip(node.ops, node.comparators, strict=True):
-            right = _eval(right_node, cols)
-            one = _compare(_COMPARE[type(op)], left, right, node.left, right_node)
-            result = one if result is None else result & one
-            left = right
-        return result
-    if isinstance(node, ast.Name):
-        if node.id.lower() in WORDS:
-            return WORDS[node.id.lower()]
-        col = cols[node.id]
-        if col.ndim != 1:
-            raise QueryError.at(
-                "--where", f"{node.id} holds {col.shape[1]} values per case and cannot be compared"
+@dataclass
+class _Column:
+    """A column's values with its name and stored units."""
+
+    name: str
+    values: np.ndarray
+    units: str
+
+
+class _Evaluation:
+    """One expression evaluated over columns."""
+
+    def __init__(self, cols, units, quantities) -> None:
+        self.cols = cols
+        self.units = units
+        self.quantities = quantities
+
+    def eval(self, node: ast.AST):
+        if isinstance(node, ast.BoolOp):
+            values = np.broadcast_arrays(
+                *(np.asarray(self.eval(v), dtype=bool) for v in node.values)
             )
-        return col
-    if isinstance(node, ast.Constant):
-        return node.value
-    if isinstance(node, ast.List | ast.Tuple):
-        return [_eval(e, cols) for e in node.elts]
-    raise QueryError.at("--where", f"{_describe(node)} is not allowed")
+            reduce = np.logical_and.reduce if isinstance(node.op, ast.And) else np.logical_or.reduce
+            return reduce(values)
+        if isinstance(node, ast.UnaryOp):
+            value = self.eval(node.operand)
+            if isinstance(node.op, ast.Not):
+                return ~np.asarray(value, dtype=bool)
+            if not (_is_number(value) or isinstance(value, Quantity)):
+                raise QueryError.at("--where", "a sign applies to a number only")
+            return -value if isinstance(node.op, ast.USub) else value
+        if isinstance(node, ast.Compare):
+            result = None
+            left = self.eval(node.left)
+            for op, right_node in zip(node.ops, node.comparators, strict=True):
+                right = self.eval(right_node)
+                one = _compare(_COMPARE[type(op)], left, right, node.left, right_node)
+                result = one if result is None else result & one
+                left = right
+            return result
+        if isinstance(node, ast.Name):
+            if node.id in self.quantities:
+                return self.quantities[node.id]
+            if node.id.lower() in WORDS:
+                return WORDS[node.id.lower()]
+            col = self.cols[node.id]
+            if col.ndim != 1:
+                raise QueryError.at(
+                    "--where",
+                    f"{node.id} holds {col.shape[1]} values per case and cannot be compared",
+                )
+            return _Column(node.id, col, self.units.get(node.id, ""))
+        if isinstance(node, ast.Constant):
+            return node.value
+        if isinstance(node, ast.List | ast.Tuple):
+            return [self.eval(e) for e in node.elts]
+        raise QueryError.at("--where", f"{_describe(node)} is not allowed")
 
 
 def _is_text(v) -> bool:
+    if isinstance(v, _Column):
+        v = v.values
     return isinstance(v, str) or (isinstance(v, np.ndarray) and v.dtype.kind in "OUS")
 
 
 def _is_number(v) -> bool:
+    if isinstance(v, _Column):
+        v = v.values
     return (isinstance(v, int | float) and not isinstance(v, bool)) or (
         isinstance(v, np.ndarray) and v.dtype.kind in "iuf"
     )
 
 
-def _name(node: ast.AST) -> str:
+def _name(node: ast.AST, value: object = None) -> str:
+    if isinstance(value, Quantity):
+        return value.text
     return node.id if isinstance(node, ast.Name) else _source(node)
 
 
+def _no_value(v) -> np.ndarray:
+    """Where ``v`` has no value: none itself, no seat (-inf), NaN; text and a quantity
+    always have one."""
+    if v is NONE:
+        return np.ones((), dtype=bool)
+    if isinstance(v, Quantity):
+        return np.zeros((), dtype=bool)
+    if _is_text(v):
+        return np.zeros(np.shape(v.values if isinstance(v, _Column) else v), dtype=bool)
+    a = np.asarray(v.values if isinstance(v, _Column) else v, dtype=float)
+    return np.isnan(a) | np.isneginf(a)
+
+
+def _numbers(a, b) -> tuple[np.ndarray, np.ndarray]:
+    """Both sides as floats in the units of the column among them (see the module)."""
+    column = a if isinstance(a, _Column) else b if isinstance(b, _Column) else None
+    units = column.units if column is not None else ""
+    return _in_units(a, units, column), _in_units(b, units, column)
+
+
+def _in_units(v, units: str, column: _Column | None) -> np.ndarray:
+    if isinstance(v, _Column):
+        return np.asarray(v.values, dtype=float)
+    if isinstance(v, Quantity):
+        return np.asarray(_convert(v, units, column), dtype=float)
+    value = np.asarray(v, dtype=float)
+    if (
+        column is not None
+        and units not in BARE_UNITS
+        and np.any(value != 0)
+        and np.all(np.isfinite(value))
+    ):
+        raise QueryError.at(
+            "--where",
+            f"{column.name} is stored in {units}: write the number with its units, e.g. "
+            f"'{column.name} > {float(value):.6g} {units}' (or in any units of the same kind)",
+        )
+    return value
+
+
+def _convert(q: Quantity, units: str, column: _Column | None) -> float:
+    """``q`` in the column's stored ``units``; its dimension must match (an angle for an
+    angle or a speed, never a bare frequency)."""
+    name = column.name if column is not None else "a number"
+    if column is None:
+        raise QueryError.at("--where", f"compare {q.text} with a column, e.g. 'seat == 0.1 in'")
+    if units == "":
+        raise QueryError.at(
+            "--where", f"{q.text} has units, but {name} has none; compare it with a bare number"
+        )
+    stored, given = Q_(1.0, units), Q_(1.0, q.units)
+    if names_an_angle(stored) and not names_an_angle(given):
+        raise QueryError.at(
+            "--where",
+            f"{q.text} names no angle, and {name} is stored in {units}: write it in "
+            f"{units} or other units of an angle{' per time' if stored.dimensionality else ''}",
+        )
+    try:
+        return convert(q.value, q.units, units)
+    except Exception:  # pint's DimensionalityError and its kin
+        raise QueryError.at(
+            "--where",
+            f"{q.text} {given.dimensionality} cannot be compared with {name}, stored in "
+            f"{units} {stored.dimensionality}",
+        ) from None
+
+
 def _compare(op: str, a, b, a_node, b_node) -> np.ndarray:
+    if b is NONE or a is NONE:
+        other = a if b is NONE else b
+        if op in ("is", "==", "is not", "!="):
+            none = _no_value(other)
+            return none if op in ("is", "==") else ~none
+        raise QueryError.at(
+            "--where", f"none compares with ==, !=, is, is not and in only (found {op})"
+        )
     if op in ("is", "is not"):
-        if _is_text(a):
-            nan = np.zeros(np.shape(a), dtype=bool)
-        else:
-            nan = np.isnan(np.asarray(a, dtype=float))
-        return nan if op == "is" else ~nan
+        none = _no_value(a)
+        return none if op == "is" else ~none
     if op in ("in", "not in"):
-        hit = np.zeros(np.shape(a), dtype=bool)
+        hit = np.zeros(np.shape(a.values if isinstance(a, _Column) else a), dtype=bool)
         for item in b:
             hit |= _compare("==", a, item, a_node, b_node)
         return hit if op == "in" else ~hit
-    if _is_text(a) != _is_text(b) or isinstance(a, bool) or isinstance(b, bool):
-        text, other = (a_node, b_node) if _is_text(a) else (b_node, a_node)
+    if isinstance(a, bool) or isinstance(b, bool):
         raise QueryError.at(
             "--where",
-            f"{_name(text)} is text and {_name(other)} is not; "
+            "true and false stand alone as conditions; compare a column with a number, a "
+            "quantity or a quoted string",
+        )
+    if _is_text(a) != _is_text(b):
+        text, other = ((a_node, a), (b_node, b)) if _is_text(a) else ((b_node, b), (a_node, a))
+        raise QueryError.at(
+            "--where",
+            f"{_name(*text)} is text and {_name(*other)} is not; "
             'compare text with a quoted string, e.g. closure == "form"',
         )
     if _is_text(a):
@@ -314,16 +581,17 @@ def _compare(op: str, a, b, a_node, b_node) -> np.ndarray:
             raise QueryError.at(
                 "--where",
                 f"text compares with == and != only (found {op} "
-                f"between {_name(a_node)} and {_name(b_node)})",
+                f"between {_name(a_node, a)} and {_name(b_node, b)})",
             )
-        eq = np.asarray(a, dtype=object) == np.asarray(b, dtype=object)
+        left = a.values if isinstance(a, _Column) else a
+        right = b.values if isinstance(b, _Column) else b
+        eq = np.asarray(left, dtype=object) == np.asarray(right, dtype=object)
         return eq if op == "==" else ~eq
-    a = np.asarray(a, dtype=float)
-    b = np.asarray(b, dtype=float)
+    x, y = _numbers(a, b)
     if op in ("==", "!="):
-        eq = np.isclose(a, b, rtol=EQUAL_RTOL, atol=0.0)
+        eq = np.isclose(x, y, rtol=EQUAL_RTOL, atol=0.0) | ((x == y) & np.isinf(x))
         return eq if op == "==" else ~eq
     with np.errstate(invalid="ignore"):
         return {"<": np.less, "<=": np.less_equal, ">": np.greater, ">=": np.greater_equal}[op](
-            a, b
+            x, y
         )

@@ -1,0 +1,579 @@
+"""Each plot kind as a matplotlib Figure, from an archive and a request.
+
+The figures are built with matplotlib's object interface (no pyplot state: a figure lives as
+long as its caller keeps it). Every figure is titled with the study's name, labels its axes
+with units in the request's unit system (:mod:`campipe.study.display`) and draws each case
+or group in a distinct line style and marker as well as a shade (:mod:`campipe.plot.style`).
+
+- ``histories``: valve lift, valve velocity, valve acceleration, cam and follower lift, cam
+  force and (when a case has a seat) seat force against cam angle, one panel each; the cases
+  overlaid and labelled by what differs between them; cam events marked on the follower's
+  lift, seat events on the valve's.
+- ``metric``: a per-case value against a numeric column (a swept axis), one line per
+  combination of the other varied columns.
+- ``map``: a per-case value over two numeric columns as coloured cells (one per case), with
+  its contour at ``level``; one panel per combination of the other varied columns.
+- ``events``: every event of each case on a cam angle × case chart, a marker per kind.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from campipe.errors import did_you_mean, excerpt
+from campipe.plot.style import COLORMAP, EVENT_MARKERS, line_styles
+from campipe.study.display import display_units, format_value, label, to_display
+from campipe.study.plots import PlotError, PlotRequest, check_turn
+from campipe.study.query import CaseTable, case_table, displayed, select
+from campipe.study.variables import VARIABLES
+from campipe.units import QuantityError, convert, read_quantity
+from campipe.vocabulary import FAILURES
+
+#: Most cases overlaid in one history figure (beyond, lines cannot be told apart).
+MAX_OVERLAID = 10
+#: Most rows of an events chart, panels of a map.
+MAX_ROWS = 80
+MAX_PANELS = 12
+#: History panels: (title, variables drawn as the cases' lines).
+PANELS = (
+    ("valve lift", ("valve_lift",)),
+    ("valve velocity", ("valve_velocity",)),
+    ("valve acceleration", ("valve_acceleration",)),
+    ("follower lift (cam lift dotted)", ("follower_lift",)),
+    ("cam contact force", ("cam_force",)),
+    ("seat contact force", ("seat_force",)),
+)
+#: Panel whose lines carry each event kind: cam events on the follower, seat events on the
+#: valve.
+EVENT_PANELS = {1: "follower_lift", 2: "follower_lift", 3: "valve_lift", 4: "valve_lift"}
+
+
+@dataclass
+class View:
+    """The selected cases of an archive, their columns as stored and as shown."""
+
+    ds: Any  # the xarray.Dataset the cases are selected from
+    stored: CaseTable  # per-case columns, stored units
+    shown: CaseTable  # the same in the shown units
+    units: dict[str, str]  # every variable's shown units
+    study: str  # the study's name
+    rows: np.ndarray  # the selected rows of the archive
+
+
+def figure(ds, request: PlotRequest) -> Figure:
+    """The figure ``request`` asks for, drawn from the archive ``ds`` (an xarray.Dataset).
+
+    Raises
+    ------
+    PlotError
+        For a selection of no case, an unknown or unsuitable column, too many cases to tell
+        apart, each naming the option (``--where``, ``--x``, ...) and what would do.
+    """
+    view = select_view(ds, request)
+    draw = {"histories": histories, "metric": metric, "map": cell_map, "events": events}
+    return draw[request.kind](view, request)
+
+
+def select_view(ds, request: PlotRequest) -> View:
+    """The cases ``request.where`` selects, with their shown units."""
+    if "case" not in ds.variables or "event_count" not in ds.variables:
+        layout = ds.attrs.get("campipe_layout")
+        raise PlotError.at(
+            "ARCHIVE",
+            f"an archive of another layout ({layout}): rerun its study with --overwrite"
+            if layout
+            else "not a campipe archive (no case coordinate)",
+        )
+    table = case_table(ds)
+    rows = np.sort(select(table, request.where))
+    if rows.size == 0:
+        raise PlotError.at(
+            "--where",
+            f"{request.where!r} selects none of the archive's {table.n} cases; nothing drawn",
+        )
+    stored_units = {
+        name: str(v.attrs.get("units", ""))
+        for name, v in ds.variables.items()
+        if name not in table.units
+    }
+    stored_units.update(table.units)
+    units = display_units(stored_units, ds.attrs, request.units)
+    picked = CaseTable(
+        {k: v[rows] for k, v in table.columns.items()},
+        table.units,
+        table.default,
+        rows.size,
+        table.study,
+    )
+    shown = displayed(picked, units)
+    return View(ds, picked, shown, units, table.study or "study", rows)
+
+
+# -- labels ------------------------------------------------------------------------------------
+
+
+def varied_columns(view: View, exclude: Sequence[str] = ()) -> list[str]:
+    """Per-case parameters (not metrics, not the id) whose values differ among the selected
+    cases, in the archive's order."""
+    out = []
+    for name, values in view.shown.columns.items():
+        var = VARIABLES.get(name)
+        if name == "case" or name in exclude or (var is not None and var.role != "parameter"):
+            continue
+        if name in view.ds.data_vars:
+            continue  # a metric or count, not a parameter
+        keys = {_key(v) for v in values}
+        if len(keys) > 1:
+            out.append(name)
+    return out
+
+
+def _key(value: object) -> object:
+    if isinstance(value, np.ndarray):
+        return tuple(value.tolist())
+    if isinstance(value, float) and math.isnan(value):
+        return "nan"
+    return value.item() if isinstance(value, np.generic) else value
+
+
+def describe(name: str, value: object, units: str) -> str:
+    """``9524 rpm``, ``seat none``, ``spring_preload 151 lbf``, ``closure form``."""
+    if isinstance(value, np.ndarray):
+        text = ", ".join(format_value(v, 4) for v in value)
+    else:
+        text = format_value(value, 6)
+    if name == "speed_rpm":
+        return f"{text} rpm"
+    shown_units = f" {units}" if units and units != "1" and text != "none" else ""
+    return f"{name} {text}{shown_units}"
+
+
+def case_labels(view: View, names: Sequence[str]) -> list[str]:
+    """Each selected case by its values of ``names`` (the case id when none differ)."""
+    if not names:
+        return [f"case {str(c)[:8]}" for c in view.shown.columns["case"]]
+    return [
+        ", ".join(describe(n, view.shown.columns[n][i], view.shown.units.get(n, "")) for n in names)
+        for i in range(view.shown.n)
+    ]
+
+
+def _title(fig: Figure, view: View, what: str, where: str | None) -> None:
+    selection = f" — where {where}" if where else ""
+    fig.suptitle(f"{view.study}: {what}{selection}", fontsize=11)
+
+
+def _column(view: View, name: str | None, option: str, numeric: bool = True) -> np.ndarray:
+    """A per-case column as shown, or a PlotError naming the option and the columns."""
+    columns = view.shown.columns
+    usable = [k for k, v in columns.items() if v.ndim == 1 and v.dtype.kind in "iuf"]
+    if name is None or name not in columns or (numeric and name not in usable):
+        what = "unknown column" if name not in columns else "not a column of numbers"
+        raise PlotError.at(
+            option,
+            f"{what} {excerpt(name)}{did_you_mean(str(name), usable)} (columns: "
+            f"{', '.join(usable)})",
+        )
+    return np.asarray(columns[name], dtype=float)
+
+
+def _usable(view: View) -> np.ndarray:
+    """(n,) bool: the selected cases that did not fail (their results are NaN)."""
+    status = view.stored.columns.get("status")
+    return np.ones(view.stored.n, bool) if status is None else ~np.isin(status, FAILURES)
+
+
+# -- histories -------------------------------------------------------------------------------
+
+
+def _turn_mask(cam_angle: np.ndarray, turn: str | int | None) -> tuple[np.ndarray, str]:
+    """The samples of the chosen turn, and a note for the title."""
+    if turn is None or turn == "all":
+        return np.ones(cam_angle.size, bool), ""
+    turns = max(int(math.ceil(float(cam_angle[-1]) / 360.0 - 1e-9)), 1)
+    number = turns if turn == "last" else int(turn)
+    if number > turns:
+        raise PlotError.at("--turn", f"found {turn}, but the run has {turns} turns")
+    lo, hi = 360.0 * (number - 1), 360.0 * number
+    return (cam_angle >= lo - 1e-9) & (cam_angle <= hi + 1e-9), f", turn {number}"
+
+
+def histories(view: View, request: PlotRequest) -> Figure:
+    """Valve lift, velocity, acceleration, follower and cam lift and the contact forces
+    against cam angle, one panel each, the cases overlaid."""
+    n = view.stored.n
+    if n > MAX_OVERLAID:
+        raise PlotError.at(
+            "--where",
+            f"selects {n} cases; overlay at most {MAX_OVERLAID} (e.g. --where "
+            "'speed_rpm == 11000' or 'seat is none')",
+        )
+    ds = view.ds
+    cam_angle = np.asarray(ds["cam_angle"].values, dtype=float)
+    keep, turn_note = _turn_mask(cam_angle, check_turn(request.turn) if request.turn else None)
+    angle = cam_angle[keep]
+    seat = view.stored.columns.get("seat")
+    panels = [
+        p
+        for p in PANELS
+        if all(v in ds.variables for v in p[1])
+        and (p[1] != ("seat_force",) or seat is None or np.isfinite(seat).any())
+    ]
+    cols = 2
+    rows_n = -(-len(panels) // cols)
+    fig = Figure(figsize=(11, 2.6 * rows_n + 1.2), layout="constrained")
+    axes = fig.subplots(rows_n, cols, sharex=True, squeeze=False).ravel()
+    styles = line_styles(n)
+    labels = case_labels(view, varied_columns(view))
+    samples = int(keep.sum())
+    drawn: dict[str, np.ndarray] = {}
+    for ax, (title, names) in zip(axes, panels, strict=False):
+        name = names[0]
+        units = view.units.get(name, "")
+        values = to_display(
+            np.asarray(ds[name].values[view.rows][:, keep], float),
+            str(ds[name].attrs.get("units", "")),
+            units,
+        )
+        drawn[name] = values
+        if name == "follower_lift":
+            _cam_lines(ax, view, keep, angle)
+        for i in range(n):
+            ax.plot(angle, values[i], label=labels[i], **styles[i].kwargs(samples))
+        ax.set_title(title, fontsize=10)
+        ax.set_ylabel(label(name.replace("_", " "), units))
+        ax.grid(alpha=0.3)
+    for ax in axes[len(panels) :]:
+        ax.set_visible(False)
+    kinds: dict[str, Any] = {}
+    for ax, (_, names) in zip(axes, panels, strict=False):
+        kinds.update(_mark_events(ax, view, names[0], drawn, angle, styles))
+    for ax in axes[max(len(panels) - cols, 0) : len(panels)]:
+        ax.set_xlabel(label("cam angle", view.units.get("cam_angle", "degree")))
+        ax.tick_params(labelbottom=True)
+    handles, texts = axes[0].get_legend_handles_labels()
+    fig.legend(
+        handles=[*handles, *kinds.values()],
+        labels=[*texts, *kinds],
+        loc="outside lower center",
+        ncols=min(len(texts) + len(kinds), 4),
+        fontsize=8,
+    )
+    _title(fig, view, f"histories{turn_note}", request.where)
+    return fig
+
+
+def _cam_lines(ax, view: View, keep: np.ndarray, angle: np.ndarray) -> None:
+    """The cam's lift under the followers: once per distinct cam (a thin black dotted line)."""
+    ds = view.ds
+    units = view.units.get("cam_lift", "")
+    lifts = to_display(
+        np.asarray(ds["cam_lift"].values[view.rows][:, keep], float),
+        str(ds["cam_lift"].attrs.get("units", "")),
+        units,
+    )
+    seen: list[np.ndarray] = []
+    for lift in lifts:
+        # one cam for cases that differ in speed: equal to rounding (lift at angle = ω t)
+        scale = 1e-9 * float(np.nanmax(np.abs(lift), initial=1.0))
+        if any(np.allclose(lift, s, rtol=0.0, atol=scale, equal_nan=True) for s in seen):
+            continue
+        seen.append(lift)
+        ax.plot(
+            angle,
+            lift,
+            color="black",
+            linestyle=":",
+            linewidth=0.9,
+            label="cam lift" if len(seen) == 1 else None,
+        )
+
+
+def _events_of(view: View) -> list[dict[str, np.ndarray]]:
+    """Each selected case's events: cam angle [degree] and kind."""
+    ds = view.ds
+    counts = np.asarray(ds["event_count"].values, dtype=np.int64)
+    starts = np.concatenate([[0], np.cumsum(counts)])
+    angle = np.asarray(ds["event_cam_angle"].values, dtype=float)
+    kind = np.asarray(ds["event_kind"].values, dtype=np.int64)
+    out = []
+    for r in view.rows:
+        span = slice(int(starts[r]), int(starts[r + 1]))
+        out.append({"angle": angle[span], "kind": kind[span]})
+    return out
+
+
+def _mark_events(ax, view, name, drawn, angle, styles) -> dict[str, Any]:
+    """The events whose contact this panel shows, on each case's line; returns a legend
+    handle for each kind marked (its text → handle)."""
+    kinds = [k for k, panel in EVENT_PANELS.items() if panel == name]
+    marked: dict[str, Any] = {}
+    if not kinds or name not in drawn or angle.size < 2:
+        return marked
+    for i, ev in enumerate(_events_of(view)):
+        for kind in kinds:
+            at = ev["angle"][(ev["kind"] == kind) & (ev["angle"] >= angle[0])]
+            at = at[at <= angle[-1]]
+            if at.size == 0:
+                continue
+            marker, filled, text = EVENT_MARKERS[kind]
+            color = styles[i].color
+            ax.scatter(
+                at,
+                np.interp(at, angle, drawn[name][i]),
+                marker=marker,
+                s=30,
+                facecolors=color if filled else "white",
+                edgecolors=color,
+                linewidths=1.0,
+                zorder=3,
+            )
+            if text not in marked:
+                marked[text] = _event_handle(kind)
+    return marked
+
+
+def _event_handle(kind: int):
+    """A black legend entry for an event kind (the marks take each case's shade)."""
+    from matplotlib.lines import Line2D
+
+    marker, filled, text = EVENT_MARKERS[kind]
+    return Line2D(
+        [],
+        [],
+        linestyle="none",
+        marker=marker,
+        markersize=6,
+        markerfacecolor="black" if filled else "white",
+        markeredgecolor="black",
+    )
+
+
+# -- metric against an axis --------------------------------------------------------------------
+
+
+def _default_x(view: View) -> str:
+    varied = [n for n in varied_columns(view) if view.shown.columns[n].dtype.kind in "iuf"]
+    if "speed_rpm" in varied:
+        return "speed_rpm"
+    if not varied:
+        raise PlotError.at("--x", "no numeric column varies among the selected cases")
+    return varied[0]
+
+
+def _finite_axis(view: View, name: str, option: str) -> np.ndarray:
+    values = _column(view, name, option)
+    if not np.isfinite(values).all():
+        raise PlotError.at(
+            option,
+            f"{name} holds none or nan for some cases, which have no place on an axis; "
+            f"select the others (--where '{name} is not none') or draw a line per {name}",
+        )
+    return values
+
+
+def groups(view: View, exclude: Sequence[str]) -> tuple[list[str], dict[tuple, list[int]]]:
+    """The other varied columns and the selected cases grouped by their values (in order of
+    first appearance)."""
+    others = varied_columns(view, exclude)
+    out: dict[tuple, list[int]] = {}
+    for i in range(view.shown.n):
+        out.setdefault(tuple(_key(view.shown.columns[n][i]) for n in others), []).append(i)
+    return others, out
+
+
+def metric(view: View, request: PlotRequest) -> Figure:
+    """A per-case value against a numeric column, one line per group of the others."""
+    xname = request.x or _default_x(view)
+    yname = request.y or "separation_deg_per_rev"
+    x = _finite_axis(view, xname, "--x")
+    y = _column(view, yname, "--y").copy()
+    y[~_usable(view)] = np.nan
+    others, grouped = groups(view, [xname])
+    fig = Figure(figsize=(7.5, 4.8), layout="constrained")
+    ax = fig.add_subplot()
+    styles = line_styles(len(grouped))
+    for style, members in zip(styles, grouped.values(), strict=True):
+        idx = np.array(members)
+        idx = idx[np.argsort(x[idx], kind="stable")]
+        first = idx[0]
+        text = ", ".join(
+            describe(n, view.shown.columns[n][first], view.shown.units.get(n, "")) for n in others
+        )
+        ax.plot(x[idx], y[idx], label=text or "all cases", **style.kwargs())
+    ax.set_xlabel(label(xname, view.shown.units.get(xname, "")))
+    ax.set_ylabel(label(yname, view.shown.units.get(yname, "")))
+    ax.grid(alpha=0.3)
+    if others:
+        ax.legend(fontsize=8, loc="best")
+    _title(fig, view, f"{yname} against {xname}", request.where)
+    return fig
+
+
+# -- map over two axes -------------------------------------------------------------------------
+
+
+def _edges(centers: np.ndarray) -> np.ndarray:
+    """Cell edges around sorted centres: midway between neighbours, half a step outside."""
+    if centers.size == 1:
+        return np.array([centers[0] - 0.5, centers[0] + 0.5])
+    mid = (centers[1:] + centers[:-1]) / 2
+    return np.concatenate([[2 * centers[0] - mid[0]], mid, [2 * centers[-1] - mid[-1]]])
+
+
+def _level(request: PlotRequest, view: View, zname: str) -> float | None:
+    """The contour's level in z's shown units: a number as it is, a quantity converted."""
+    level = request.level
+    if level is None:
+        return None
+    if isinstance(level, int | float):
+        return float(level)
+    try:
+        return float(level)
+    except ValueError:
+        pass
+    try:
+        q = read_quantity(str(level), "--level")
+        return convert(float(q.magnitude), str(q.units), view.shown.units.get(zname) or "")
+    except Exception as exc:  # QuantityError, or pint's for units of another dimension
+        reason = exc.reason if isinstance(exc, QuantityError) else type(exc).__name__
+        raise PlotError.at(
+            "--level",
+            f"cannot read {level!r} as a level of {zname} "
+            f"[{view.shown.units.get(zname)}] ({reason})",
+        ) from None
+
+
+def cell_map(view: View, request: PlotRequest) -> Figure:
+    """A per-case value (z) over two numeric columns as coloured cells, its contour at the
+    level; one panel per group of the other varied columns."""
+    xname = request.x or _default_x(view)
+    yname = request.y
+    if yname is None:
+        numeric = [
+            n
+            for n in varied_columns(view, [xname])
+            if view.shown.columns[n].dtype.kind in "iuf"
+            and np.isfinite(view.shown.columns[n].astype(float)).all()
+        ]
+        if not numeric:
+            raise PlotError.at("--y", "no second numeric column varies; name one with --y")
+        yname = numeric[0]
+    zname = request.z or "separation_deg_per_rev"
+    x = _finite_axis(view, xname, "--x")
+    y = _finite_axis(view, yname, "--y")
+    z = _column(view, zname, "--z").copy()
+    z[~_usable(view)] = np.nan
+    level = _level(request, view, zname)
+    others, grouped = groups(view, [xname, yname])
+    if len(grouped) > MAX_PANELS:
+        raise PlotError.at(
+            "--where",
+            f"{len(grouped)} panels (one per {', '.join(others)}); at most {MAX_PANELS}: "
+            "select fewer cases",
+        )
+    xs, ys = np.unique(x), np.unique(y)
+    ncols = min(len(grouped), 3)
+    nrows = -(-len(grouped) // ncols)
+    fig = Figure(figsize=(4.2 * ncols + 1.2, 3.6 * nrows + 0.8), layout="constrained")
+    axes = fig.subplots(nrows, ncols, squeeze=False, sharex=True, sharey=True).ravel()
+    finite = z[np.isfinite(z)]
+    vmin, vmax = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0)
+    mesh = None
+    for ax, (key, members) in zip(axes, grouped.items(), strict=False):
+        grid = np.full((ys.size, xs.size), np.nan)
+        filled = np.zeros(grid.shape, bool)
+        for i in members:
+            iy, ix = np.searchsorted(ys, y[i]), np.searchsorted(xs, x[i])
+            if filled[iy, ix]:
+                raise PlotError.at(
+                    "--where",
+                    f"two cases at {xname} {x[i]:g}, {yname} {y[i]:g}: select one per cell",
+                )
+            grid[iy, ix], filled[iy, ix] = z[i], True
+        mesh = ax.pcolormesh(
+            _edges(xs), _edges(ys), np.ma.masked_invalid(grid), cmap=COLORMAP, vmin=vmin, vmax=vmax
+        )
+        if level is not None and xs.size > 1 and ys.size > 1 and np.isfinite(grid).any():
+            lo, hi = np.nanmin(grid), np.nanmax(grid)
+            if lo < level < hi:
+                contour = ax.contour(xs, ys, grid, levels=[level], colors="black", linewidths=1.6)
+                ax.clabel(contour, fmt=lambda v: f"{v:g}", fontsize=8)
+        ax.set_title(
+            ", ".join(
+                describe(n, v, view.shown.units.get(n, ""))
+                for n, v in zip(others, key, strict=True)
+            )
+            or "all cases",
+            fontsize=10,
+        )
+    for ax in axes[len(grouped) :]:
+        ax.set_visible(False)
+    for ax in axes[: len(grouped)]:
+        ax.set_xlabel(label(xname, view.shown.units.get(xname, "")))
+        ax.set_ylabel(label(yname, view.shown.units.get(yname, "")))
+    assert mesh is not None
+    bar = fig.colorbar(mesh, ax=list(axes[: len(grouped)]))
+    bar.set_label(label(zname, view.shown.units.get(zname, "")))
+    what = f"{zname} over {xname} and {yname}"
+    if level is not None:
+        what += f", contour at {level:g} {view.shown.units.get(zname, '')}".rstrip()
+        bar.ax.axhline(level, color="black", linewidth=1.6)
+    _title(fig, view, what, request.where)
+    return fig
+
+
+# -- events ------------------------------------------------------------------------------------
+
+
+def events(view: View, request: PlotRequest) -> Figure:
+    """Each selected case's events on a cam angle × case chart."""
+    n = view.stored.n
+    if n > MAX_ROWS:
+        raise PlotError.at(
+            "--where", f"selects {n} cases; an events chart shows at most {MAX_ROWS}"
+        )
+    labels = case_labels(view, varied_columns(view))
+    cam_angle = np.asarray(view.ds["cam_angle"].values, dtype=float)
+    keep, turn_note = _turn_mask(cam_angle, check_turn(request.turn) if request.turn else None)
+    lo, hi = float(cam_angle[keep][0]), float(cam_angle[keep][-1])
+    fig = Figure(figsize=(9, 1.2 + 0.32 * n + 0.8), layout="constrained")
+    ax = fig.add_subplot()
+    per_case = _events_of(view)
+    for kind, (marker, filled, text) in EVENT_MARKERS.items():
+        xs, ys = [], []
+        for i, ev in enumerate(per_case):
+            at = ev["angle"][(ev["kind"] == kind) & (ev["angle"] >= lo) & (ev["angle"] <= hi)]
+            xs.append(at)
+            ys.append(np.full(at.size, i))
+        x = np.concatenate(xs) if xs else np.zeros(0)
+        if x.size == 0:
+            continue
+        ax.scatter(
+            x,
+            np.concatenate(ys),
+            marker=marker,
+            s=36,
+            facecolors="black" if filled else "white",
+            edgecolors="black",
+            linewidths=1.0,
+            label=text,
+            zorder=3,
+        )
+    for turn in np.arange(math.ceil(lo / 360.0), math.floor(hi / 360.0) + 1) * 360.0:
+        ax.axvline(turn, color="0.6", linewidth=0.8, zorder=1)
+    ax.set_yticks(np.arange(n), labels, fontsize=8)
+    ax.set_ylim(n - 0.5, -0.5)
+    ax.set_xlim(lo, hi)
+    ax.set_xlabel(label("cam angle", view.units.get("cam_angle", "degree")))
+    ax.grid(axis="y", alpha=0.3)
+    if ax.collections:
+        fig.legend(loc="outside lower center", ncols=4, fontsize=8)
+    _title(fig, view, f"events{turn_note}", request.where)
+    return fig

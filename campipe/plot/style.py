@@ -1,0 +1,64 @@
+"""Lines, markers and labels of campipe's figures: every case distinct in grey, not only in
+colour (a figure is often printed or copied in black and white)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from campipe.vocabulary import CAM_IMPACT, CAM_SEPARATION, SEAT_IMPACT, SEAT_SEPARATION
+
+#: Line styles and markers cycled together: 4 × 7 = 28 distinct pairs before one repeats.
+LINESTYLES = ("-", "--", "-.", ":")
+MARKERS = ("o", "s", "^", "D", "v", "P", "X")
+#: A sequential colour map whose lightness rises monotonically (it reads as a grey ramp).
+COLORMAP = "cividis"
+#: Each event kind's marker and whether it is filled: shape and fill tell them apart in grey.
+EVENT_MARKERS = {
+    CAM_SEPARATION: ("^", False, "cam separation"),
+    CAM_IMPACT: ("v", True, "cam impact"),
+    SEAT_SEPARATION: ("s", False, "seat separation"),
+    SEAT_IMPACT: ("o", True, "seat impact"),
+}
+
+
+@dataclass(frozen=True)
+class LineStyle:
+    """How one case or group is drawn."""
+
+    color: tuple[float, float, float, float]  # RGBA
+    linestyle: str
+    marker: str
+
+    def kwargs(self, samples: int = 0) -> dict[str, Any]:
+        """Keyword arguments of ``Axes.plot``; on a long history, markers about every
+        twelfth of its length (so the marker, not only the colour, names the line)."""
+        out: dict[str, Any] = {
+            "color": self.color,
+            "linestyle": self.linestyle,
+            "marker": self.marker,
+            "markersize": 4,
+            "markerfacecolor": "white",
+        }
+        if samples > 24:
+            out["markevery"] = max(samples // 12, 1)
+        return out
+
+
+def line_styles(n: int) -> list[LineStyle]:
+    """``n`` styles, each a distinct (line style, marker) pair and a step darker to lighter
+    along the colour map (kept off its palest end, which vanishes on white)."""
+    from matplotlib import colormaps
+
+    cmap = colormaps[COLORMAP]
+    shades = np.linspace(0.0, 0.8, n) if n > 1 else np.array([0.0])
+    return [
+        LineStyle(
+            tuple(float(c) for c in cmap(float(shade))),  # type: ignore[arg-type]
+            LINESTYLES[i % len(LINESTYLES)],
+            MARKERS[(i + i // len(LINESTYLES)) % len(MARKERS)],
+        )
+        for i, shade in enumerate(shades)
+    ]

@@ -1,0 +1,127 @@
+"""Reading an archive as a grid: :func:`open_study`.
+
+An archive holds its cases along one dimension, ``case``, in the order the spec expands them
+(:mod:`campipe.study.expand`): for each ``cases`` entry, the ``sweep`` grid (first key
+outermost), then the ``zip`` rows, then the ``sample`` points. Where the sweep is a full grid
+whose values are plain labels (numbers without NaN, or text), :func:`open_study` turns its
+axes into dimensions of their own; what is not a grid (the zip rows, the case entries, the
+samples) stays along ``case``.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+
+log = logging.getLogger(__name__)
+#: The name the rest of the study (zip rows, case entries, samples) goes by while the sweep
+#: is unstacked; it is ``case`` again afterwards.
+_REST = "_rest"
+
+
+def sweep_axes(attrs: Mapping[str, object]) -> list[tuple[str, int]]:
+    """(archive name, size) of each sweep axis, outermost first (``study_axes``)."""
+    try:
+        axes = json.loads(str(attrs.get("study_axes", "[]")))
+    except ValueError:
+        return []
+    return [(str(a["name"]), int(a["size"])) for a in axes if a.get("kind") == "sweep"]
+
+
+def open_study(path: str | Path, **open_kwargs):
+    """Open a study's archive with its sweep's axes as dimensions, where the study is a grid.
+
+    Parameters
+    ----------
+    path : str or Path
+        The archive (``campipe study`` writes it).
+    **open_kwargs
+        Passed to :func:`xarray.open_dataset` (e.g. ``chunks={}`` to read lazily with dask).
+
+    Returns
+    -------
+    xarray.Dataset
+        For a sweep, each swept key a dimension (named as its archive coordinate,
+        ``speed_rpm``, ``seat``, ``spring_preload``, …) with its values in the spec's order,
+        and the case ids in the coordinate ``case_id`` over them. What the study varies
+        otherwise (zip rows, case entries, samples) stays along ``case``. Events keep their
+        dimension ``event``, each with its case's id (``event_case_id``) instead of its row.
+        A study that is not a full grid of plain values (no sweep, a swept vector such as
+        ``damping_ratios``, a sweep with NaN such as ``run.dt: [default, ...]``, repeated
+        labels) is returned as stored, one case per row of ``case``.
+    """
+    import xarray as xr
+
+    ds = xr.open_dataset(path, **open_kwargs)
+    try:
+        grid = as_grid(ds)
+    except Exception:
+        ds.close()
+        raise
+    return ds if grid is None else grid
+
+
+def as_grid(ds):
+    """The archive (an ``xarray.Dataset``) with its sweep axes as dimensions, or None when
+    the study is not a full grid of plain values (see :func:`open_study`)."""
+    import pandas as pd
+    import xarray as xr
+
+    n = ds.sizes.get("case", 0)
+    axes = sweep_axes(ds.attrs)
+    if not axes or n == 0 or "case" not in ds.variables:
+        return None
+    names = [name for name, _ in axes]
+    sizes = [size for _, size in axes]
+    sweep = int(np.prod(sizes, dtype=np.int64))
+    if n % sweep or any(name not in ds.coords or ds[name].dims != ("case",) for name in names):
+        log.info("not a grid: the sweep's axes are not per-case coordinates of %d cases", n)
+        return None
+    inner = _inner_length(ds.attrs, n // sweep)
+    index = np.arange(n)
+    rest = (index // (sweep * inner)) * inner + index % inner
+    values = [ds[name].values for name in names]
+    for name, v, size in zip(names, values, sizes, strict=True):
+        if len(pd.unique(v)) != size or (v.dtype.kind == "f" and np.isnan(v).any()):
+            log.info("not a grid: %s does not take %d distinct plain values", name, size)
+            return None
+    levels = [*values, rest] if n > sweep else values
+    level_names = [*names, _REST] if n > sweep else names
+    multi = pd.MultiIndex.from_arrays(levels, names=level_names)
+    if not multi.is_unique:
+        log.info("not a grid: two cases share one point of the sweep")
+        return None
+    ids = ds["case"].values
+    flat = ds.drop_vars(["case", *names])
+    if "event_case" in flat.variables:
+        rows = flat["event_case"].values
+        flat = flat.drop_vars("event_case").assign_coords(
+            event_case_id=("event", ids[rows] if rows.size else np.array([], dtype=ids.dtype))
+        )
+        flat["event_case_id"].attrs["long_name"] = "case id of the event's case"
+    flat = flat.assign_coords(case_id=("case", ids))
+    flat["case_id"].attrs.update(ds["case"].attrs)
+    coords = xr.Coordinates.from_pandas_multiindex(multi, "case")
+    grid = flat.assign_coords(coords).unstack("case")
+    order = {name: pd.unique(v) for name, v in zip(names, values, strict=True)}
+    grid = grid.reindex(order)
+    for name in names:
+        grid[name].attrs.update(ds[name].attrs)
+    if n > sweep:
+        grid = grid.drop_vars(_REST).rename_dims({_REST: "case"})
+    return grid.transpose(*names, *(["case"] if n > sweep else []), ...)
+
+
+def _inner_length(attrs: Mapping[str, object], rest: int) -> int:
+    """The zip rows × samples of the study (the rest of a case entry after its sweep):
+    the archive's ``rest`` cases per sweep point, divided by its case entries."""
+    try:
+        axes = json.loads(str(attrs.get("study_axes", "[]")))
+    except ValueError:
+        return rest
+    entries = next((int(a["size"]) for a in axes if a.get("kind") == "cases"), 1)
+    return rest // entries if entries and rest % entries == 0 else rest

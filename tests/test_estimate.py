@@ -1,0 +1,89 @@
+"""campipe validate's estimate: a sample of the study run through run_study and scaled (how it
+compares with a run on the bundled studies is campipe bench's to show, not a timed test)."""
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from study_helpers import write_spec
+
+import campipe.study.estimate as est
+from campipe.cli import main
+from campipe.study import load_study
+
+SPEC = """
+name: e
+profile: {kind: harmonic, lift: 1 in}
+run: {revolutions: 1, output_every: 4 deg}
+sweep:
+  speed: {from: 6000 rpm, to: 12000 rpm, num: 25}
+  seat: [none, 0.1 in]
+"""
+
+
+@pytest.fixture(scope="module")
+def study(tmp_path_factory):
+    return load_study(write_spec(tmp_path_factory.mktemp("e"), SPEC))
+
+
+def test_the_sample_is_one_batch_per_worker_spread_through_the_study(study):
+    assert len(study.cases) == 50
+    size = est.batch_size(study, 50, 2)
+    assert est.sample_size(study, 2) == size * 2 == 14  # batches of 7: four per worker
+    sample = est.sample_cases(study, 14)
+    index = [c.index for c in sample]
+    assert index[0] == 0 and index[-1] == 49 and np.all(np.diff(index) >= 3)
+    speeds = {c.case.speed for c in sample}
+    seats = {np.isnan(c.case.seat) for c in sample}
+    assert len(speeds) >= 7 and seats == {True, False}
+
+
+def test_the_estimate_scales_the_sample_beyond_the_fixed_cost(study, monkeypatch):
+    """first: a one-case run in a fresh process; again: the same warm; the sample's run
+    beyond it scales with the cases (50 / 14)."""
+    runs = {1: [0.30, 0.10], 14: [0.80]}
+    calls = []
+
+    def time_run(s, cases, workers, size=None):
+        calls.append((len(cases), size))
+        return runs[len(cases)].pop(0)
+
+    monkeypatch.setattr(est, "time_run", time_run)
+    monkeypatch.setattr(est, "time_engine", lambda cases: 0.01 * len(cases))
+    monkeypatch.setattr(est, "warm_up", lambda s: 0.25)
+    e = est.estimate(study, 2)
+    assert calls == [(1, None), (1, None), (14, 7)]  # the sample in the study's batches
+    assert e.seconds == pytest.approx(0.25 + 0.30 + (0.80 - 0.10) * 50 / 14)
+    assert e.engine == pytest.approx(0.01 * 14 / 2 * 50 / 14)  # two batches, two workers
+    assert e.engine + e.layer + e.startup == pytest.approx(e.seconds)
+    assert e.sample == 14 and e.workers == 2
+
+
+def test_a_small_study_is_timed_whole(tmp_path, monkeypatch):
+    small = load_study(write_spec(tmp_path, SPEC.replace("num: 25", "num: 3")))
+    monkeypatch.setattr(est, "warm_up", lambda s: 0.0)
+    e = est.estimate(small, 2)
+    assert e.sample == len(small.cases) == 6
+    assert e.seconds > 0 and 0 <= e.engine <= e.seconds
+    assert e.engine + e.layer == pytest.approx(e.seconds)
+    assert not list(tmp_path.glob("*.nc"))  # the timed run wrote only in a temporary folder
+
+
+def test_validate_prints_the_estimate_with_its_parts(tmp_path):
+    spec = write_spec(tmp_path, SPEC.replace("num: 25", "num: 2"))
+    out = CliRunner().invoke(main, ["validate", str(spec), "--workers", "1"])
+    assert out.exit_code == 0, out.output
+    line = next(x for x in out.output.splitlines() if x.startswith("run time:"))
+    assert "on 1 worker: the engine " in line and "storing and writing the archive" in line
+    assert "(timed on a run of the whole study;" in line
+
+
+def test_the_replay_selection_is_counted_and_one_case_timed(tmp_path):
+    from campipe.replay.live import time_replay
+
+    spec = write_spec(tmp_path, SPEC + 'replay: {where: "speed_rpm >= 11500 rpm"}\n')
+    count, each = time_replay(load_study(spec), tmp_path)
+    assert count == 6 and each > 0  # 11500, 11750, 12000 rpm, with and without a seat
+    assert (tmp_path / "estimate.rrd").stat().st_size > 0
+    spec.write_text(SPEC + 'replay: {where: "separation_deg_per_rev > 0"}\n')
+    count, each = time_replay(load_study(spec), tmp_path)
+    assert count is None and each > 0  # known only once the cases have run

@@ -1,0 +1,293 @@
+"""campipe plot: each kind drawn from a small study, inspected as a matplotlib figure (its
+lines, cells, labels and units), written as PNG, SVG or PDF; and a spec's plots: list."""
+
+import numpy as np
+import pytest
+import xarray as xr
+from click.testing import CliRunner
+from matplotlib.collections import PathCollection, QuadMesh
+from matplotlib.contour import ContourSet
+from matplotlib.image import imread
+from numpy.testing import assert_allclose
+from study_helpers import INCH, LBF, write_spec
+
+from campipe import cli
+from campipe.cli import main
+from campipe.plot import plot_archive
+from campipe.plot.figures import figure
+from campipe.study import load_study
+from campipe.study.display import SYSTEMS
+from campipe.study.execute import run_study
+from campipe.study.plots import KINDS, PlotError, PlotRequest
+from campipe.vocabulary import CAM_IMPACT, CAM_SEPARATION, SEAT_IMPACT, SEAT_SEPARATION
+
+SPEC = """
+name: small-map
+profile: {kind: harmonic, lift: 1 in}
+run: {revolutions: 2, output_every: 2 deg}
+sweep:
+  speed: [6000 rpm, 9524 rpm, 11000 rpm]
+  seat: [none, 0.1 in]
+  model.spring_preload: [120 lbf, 180 lbf]
+"""
+SPEEDS = [6000.0, 9524.0, 11000.0]
+
+
+@pytest.fixture(scope="module")
+def archive(tmp_path_factory):
+    d = tmp_path_factory.mktemp("plot")
+    run_study(load_study(write_spec(d, SPEC)), d / "small-map.nc", scheduler="synchronous")
+    return d / "small-map.nc"
+
+
+@pytest.fixture(scope="module")
+def ds(archive):
+    return xr.load_dataset(archive)
+
+
+def _not_blank(path):
+    """The PNG's pixels: not all one colour, and a fair share not white."""
+    pixels = imread(path)[..., :3]
+    assert pixels.std() > 0.05
+    assert (pixels.sum(axis=-1) < 2.9).mean() > 0.02
+
+
+def _rows(ds, **values):
+    keep = np.ones(ds.sizes["case"], bool)
+    for name, v in values.items():
+        keep &= np.isclose(ds[name].values, v) | (ds[name].values == v)
+    return np.flatnonzero(keep)
+
+
+def test_histories_overlay_the_chosen_cases_one_panel_each(archive, ds, tmp_path):
+    where = "spring_preload == 120 lbf and speed_rpm >= 9524"
+    path, fig = plot_archive(
+        archive, PlotRequest("histories", where=where), tmp_path / "histories.png"
+    )
+    _not_blank(path)
+    axes = [ax for ax in fig.axes if ax.get_visible()]
+    assert [ax.get_title() for ax in axes] == [
+        "valve lift",
+        "valve velocity",
+        "valve acceleration",
+        "follower lift (cam lift dotted)",
+        "cam contact force",
+        "seat contact force",
+    ]
+    assert [ax.get_ylabel() for ax in axes] == [
+        "valve lift [in]",
+        "valve velocity [in/s]",
+        "valve acceleration [in/s^2]",
+        "follower lift [in]",
+        "cam force [lbf]",
+        "seat force [lbf]",
+    ]
+    assert axes[-1].get_xlabel() == "cam angle [degree]"
+    assert "small-map: histories" in fig.get_suptitle()
+    rows = _rows(ds, spring_preload=120 * LBF)
+    rows = rows[ds.speed_rpm.values[rows] >= 9524]
+    labels = ["9524 rpm, seat none", "9524 rpm, seat 0.1 in"]
+    labels += ["11000 rpm, seat none", "11000 rpm, seat 0.1 in"]
+    lift = axes[0].get_lines()
+    assert [line.get_label() for line in lift] == labels
+    for line, r in zip(lift, rows, strict=True):
+        assert_allclose(line.get_xdata(), ds.cam_angle.values)
+        assert_allclose(line.get_ydata(), ds.valve_lift.values[r] / INCH, rtol=1e-12)
+    # the follower panel: the cam once (one cam for all cases), then the four followers
+    follower = axes[3].get_lines()
+    assert len(follower) == 5 and follower[0].get_label() == "cam lift"
+    # in grey: every case its own line style and marker, not only its shade
+    assert len({(line.get_linestyle(), line.get_marker()) for line in lift}) == 4
+    # events: seat events on the valve's line, cam events on the follower's
+    kinds = ds.event_kind.values
+    case = ds.event_case.values
+    for ax, wanted in (
+        (axes[0], (SEAT_SEPARATION, SEAT_IMPACT)),
+        (axes[3], (CAM_SEPARATION, CAM_IMPACT)),
+    ):
+        marked = sum(len(c.get_offsets()) for c in ax.collections if isinstance(c, PathCollection))
+        expected = (np.isin(case, rows) & np.isin(kinds, wanted)).sum()
+        assert marked == expected > 0
+    legend = [t.get_text() for t in fig.legends[0].get_texts()]
+    assert legend[:4] == labels and {"seat impact", "cam impact"} <= set(legend)
+
+
+def test_histories_of_one_turn_and_in_si(archive, ds):
+    fig = figure(
+        ds,
+        PlotRequest(
+            "histories",
+            where="speed_rpm == 6000 rpm and spring_preload < 150 lbf",
+            units="si",
+            turn="last",
+        ),
+    )
+    axes = [ax for ax in fig.axes if ax.get_visible()]
+    assert axes[0].get_ylabel() == "valve lift [m]" and axes[4].get_ylabel() == "cam force [N]"
+    x = axes[0].get_lines()[0].get_xdata()
+    assert x[0] == 360 and x[-1] == 720 and len(axes[0].get_lines()) == 2
+    assert "turn 2" in fig.get_suptitle()
+
+
+def test_metric_draws_a_line_per_combination_of_the_other_axes(archive, ds, tmp_path):
+    path, fig = plot_archive(archive, PlotRequest("metric"), tmp_path / "metric.png")
+    _not_blank(path)
+    ax = fig.axes[0]
+    lines = ax.get_lines()
+    assert len(lines) == 4  # seat × preload
+    assert [line.get_label() for line in lines] == [
+        "seat none, spring_preload 120 lbf",
+        "seat none, spring_preload 180 lbf",
+        "seat 0.1 in, spring_preload 120 lbf",
+        "seat 0.1 in, spring_preload 180 lbf",
+    ]
+    assert ax.get_xlabel() == "speed_rpm [rpm]"
+    assert ax.get_ylabel() == "separation_deg_per_rev [degree]"
+    assert fig.get_suptitle() == "small-map: separation_deg_per_rev against speed_rpm"
+    for line, (seat, preload) in zip(
+        lines, [(-np.inf, 120), (-np.inf, 180), (0.1 * INCH, 120), (0.1 * INCH, 180)], strict=True
+    ):
+        rows = _rows(ds, seat=seat, spring_preload=preload * LBF)
+        assert line.get_xdata().tolist() == SPEEDS
+        assert_allclose(line.get_ydata(), ds.separation_deg_per_rev.values[rows])
+    # no seat, 120 lbf: on the cam at 6000 rpm, off it at 11000 rpm
+    assert lines[0].get_ydata()[0] == 0 and lines[0].get_ydata()[2] > 50
+
+
+def test_metric_seating_velocity_against_speed_in_chosen_units(ds):
+    fig = figure(
+        ds,
+        PlotRequest("metric", y="max_seating_velocity", where="seat is not none", units="si"),
+    )
+    ax = fig.axes[0]
+    assert ax.get_ylabel() == "max_seating_velocity [m/s]"
+    assert [line.get_label() for line in ax.get_lines()] == [
+        "spring_preload 533.787 N",
+        "spring_preload 800.68 N",
+    ]
+    rows = _rows(ds, seat=0.1 * INCH, spring_preload=120 * LBF)
+    assert_allclose(ax.get_lines()[0].get_ydata(), ds.max_seating_velocity.values[rows])
+
+
+def test_map_colours_one_cell_per_case_with_its_contour(archive, ds, tmp_path):
+    request = PlotRequest("map", x="speed_rpm", y="spring_preload", level="1 deg")
+    path, fig = plot_archive(archive, request, tmp_path / "map.png")
+    _not_blank(path)
+    panels = [ax for ax in fig.axes if ax.get_title()]
+    assert [ax.get_title() for ax in panels] == ["seat none", "seat 0.1 in"]
+    for ax, seat in zip(panels, (-np.inf, 0.1 * INCH), strict=True):
+        (mesh,) = [c for c in ax.collections if isinstance(c, QuadMesh)]
+        cells = mesh.get_array()
+        assert cells.size == 3 * 2  # speeds × preloads
+        rows = _rows(ds, seat=seat)
+        expected = ds.separation_deg_per_rev.values[rows]  # speed outer, preload inner
+        assert_allclose(np.asarray(cells).reshape(2, 3), expected.reshape(3, 2).T)
+        assert ax.get_xlabel() == "speed_rpm [rpm]" and ax.get_ylabel() == "spring_preload [lbf]"
+    # without a seat the follower leaves the cam between 6000 and 9524 rpm: a contour there
+    contours = [c for c in panels[0].get_children() if isinstance(c, ContourSet)]
+    assert len(contours) == 1 and list(contours[0].levels) == [1.0]
+    colorbar = fig.axes[-1]
+    assert colorbar.get_ylabel() == "separation_deg_per_rev [degree]"
+    assert "contour at 1 degree" in fig.get_suptitle()
+
+
+def test_events_put_each_case_on_a_row(archive, ds, tmp_path):
+    where = "spring_preload == 120 lbf"
+    path, fig = plot_archive(archive, PlotRequest("events", where=where), tmp_path / "ev.png")
+    _not_blank(path)
+    ax = fig.axes[0]
+    labels = [t.get_text() for t in ax.get_yticklabels()]
+    assert labels == [f"{s:g} rpm, seat {seat}" for s in SPEEDS for seat in ("none", "0.1 in")]
+    rows = _rows(ds, spring_preload=120 * LBF)
+    kinds = ds.event_kind.values[np.isin(ds.event_case.values, rows)]
+    marks = {c.get_label(): len(c.get_offsets()) for c in ax.collections}
+    names = {1: "cam separation", 2: "cam impact", 3: "seat separation", 4: "seat impact"}
+    assert marks == {names[k]: int((kinds == k).sum()) for k in np.unique(kinds)}
+    # each mark sits on its case's row at its cam angle
+    impacts = next(c for c in ax.collections if c.get_label() == "seat impact")
+    y = impacts.get_offsets()[:, 1].astype(int)
+    assert set(y) == {1, 3, 5}  # the rows with a seat
+    assert ax.get_xlabel() == "cam angle [degree]"
+
+
+def test_every_format_by_its_suffix_and_errors_by_their_option(archive, tmp_path):
+    runner = CliRunner()
+    for suffix, magic in ((".svg", b"<?xml"), (".pdf", b"%PDF"), (".png", b"\x89PNG")):
+        out = tmp_path / f"metric{suffix}"
+        result = runner.invoke(main, ["plot", "metric", str(archive), "-o", str(out)])
+        assert result.exit_code == 0, result.output
+        assert result.output.strip() == str(out) and out.read_bytes().startswith(magic)
+    bad = [
+        (["plot", "metric", str(archive), "-o", str(tmp_path / "x.jpg")], "--output"),
+        (["plot", "metric", str(archive), "--y", "separation"], "--y: unknown column"),
+        (["plot", "histories", str(archive)], "selects 12 cases; overlay at most 10"),
+        (["plot", "events", str(archive), "--where", "speed_rpm > 20000"], "selects none"),
+        (["plot", "map", str(archive), "--level", "1 in"], "--level"),
+        (["plot", "metric", str(archive), "--x", "seat"], "--x: seat holds none"),
+        (["plot", "histories", str(archive), "--turn", "0"], "--turn"),
+    ]
+    for args, words in bad[1:]:
+        result = runner.invoke(main, args)
+        assert result.exit_code == 2, (args, result.output)
+        assert words in result.output and "Traceback" not in result.output
+    result = runner.invoke(main, bad[0][0])
+    assert result.exit_code == 2 and "expected a file ending in .png, .svg, .pdf" in result.output
+    text = tmp_path / "notes.nc"
+    text.write_text("not netCDF")
+    result = runner.invoke(main, ["plot", "metric", str(text)])
+    assert result.exit_code == 1 and f"{text}: cannot read as an archive" in result.output
+    older = xr.load_dataset(archive).rename({"case": "case_id"})
+    older.attrs["campipe_layout"] = "campipe-archive-2"
+    older.to_netcdf(tmp_path / "older.nc")
+    result = runner.invoke(main, ["plot", "metric", str(tmp_path / "older.nc")])
+    assert result.exit_code == 2 and "another layout (campipe-archive-2)" in result.output
+    assert "--overwrite" in result.output and "Traceback" not in result.output
+
+
+def test_the_command_line_lists_every_kind_and_unit_system():
+    assert cli.PLOT_KINDS == tuple(KINDS) and cli.UNIT_SYSTEMS == SYSTEMS
+
+
+def test_a_spec_writes_its_plots_beside_the_archive(tmp_path):
+    spec = write_spec(
+        tmp_path,
+        SPEC.replace("[6000 rpm, 9524 rpm, 11000 rpm]", "[6000 rpm, 11000 rpm]")
+        + """
+plots:
+  - {kind: metric}
+  - {kind: metric, y: max_cam_force, output: force.svg}
+  - {kind: events, where: "seat is none", turn: last}
+""",
+    )
+    result = CliRunner().invoke(main, ["study", str(spec), "--no-progress"])
+    assert result.exit_code == 0, result.output
+    written = sorted(p.name for p in tmp_path.iterdir() if p.suffix in (".png", ".svg"))
+    assert written == ["force.svg", "small-map-events.png", "small-map-metric.png"]
+    assert "plots[2] (events) written to" in result.stderr
+    _not_blank(tmp_path / "small-map-metric.png")
+
+
+@pytest.mark.parametrize(
+    ("entry", "path", "words"),
+    [
+        ("{kind: metrc}", "plots[0].kind", "did you mean 'metric'"),
+        ("{kind: metric, z: a}", "plots[0].z", "not a key of a metric plot (a key of map plots)"),
+        ("{kind: metric, y: sepration_deg_per_rev}", "plots[0].y", "unknown column"),
+        ("{kind: map, output: m.jpg}", "plots[0].output", "expected a file ending in .png"),
+        ('{kind: events, where: "seat > 0.00254"}', "plots[0].where", "write the number with"),
+        ("{kind: histories, turn: first}", "plots[0].turn", "expected a turn"),
+    ],
+)
+def test_a_spec_with_a_bad_plot_is_refused_at_its_key(tmp_path, entry, path, words):
+    spec = write_spec(tmp_path, SPEC + f"plots:\n  - {entry}\n")
+    result = CliRunner().invoke(main, ["validate", str(spec), "--no-estimate"])
+    assert result.exit_code == 2
+    assert f"{path}: " in result.output and words in result.output, result.output
+
+
+def test_a_request_is_checked_like_a_spec_entry():
+    from campipe.study.plots import check_plot
+
+    assert check_plot({"kind": "events", "turn": "2"}).turn == 2
+    with pytest.raises(PlotError, match="x: not a key of a histories plot"):
+        check_plot({"kind": "histories", "x": "speed_rpm"})
