@@ -21,7 +21,7 @@ def test_validate_prints_cases_axes_and_estimates():
     assert re.search(r"speed_rpm\s+sweep\s+33 values: 6000 rpm … 14000 rpm", text)
     assert re.search(r"seat\s+sweep\s+3 values: none, 0 in, 0.1 in", text)
     assert re.search(r"spring_preload\s+sweep\s+3 values: 120 lbf, 151 lbf, 180 lbf", text)
-    assert "batches: 10 of up to 32 cases" in text
+    assert "batches: 8 of up to 38 cases" in text
     assert re.search(r"run time: .+ on 2 workers \([\d.]+ s simulated", text)
     size = float(re.search(r"archive: about ([\d.]+) MB", text).group(1))
     # 297 cases × 1441 angles × (8 float64 histories + the int8 contact state) ≈ 27.8 MB
