@@ -1,4 +1,9 @@
-"""The ``campipe`` command line (click). I/O only: every number comes from the numerics layer."""
+"""The ``campipe`` command line (click). I/O only: every number comes from the numerics layer.
+
+Each command imports what it uses when it runs (``campipe --help`` loads click, the model's
+parameter table and NumPy, nothing else): dask, xarray, netCDF4, pint, SciPy, numba and
+rerun load only in the commands that need them.
+"""
 
 from __future__ import annotations
 
@@ -12,7 +17,6 @@ import numpy as np
 from campipe import __version__
 from campipe.constants import INCH, LBF_IN, RPM
 from campipe.errors import CampipeError
-from campipe.io.spec_yaml import SpecFileError, parse_value
 from campipe.model import (
     COORDINATES,
     PARAMETERS,
@@ -27,8 +31,24 @@ from campipe.units import convert
 from campipe.vocabulary import CONFIGURATIONS, ROMAN
 
 
+def _load_pint() -> None:
+    """Import pint without its dask support. pint imports dask, when it is installed, to
+    wrap dask arrays in quantities: 90 ms of every command that reads a quantity, for
+    nothing campipe does. This process is the command's own, so pint is loaded here with
+    dask hidden from it (dask itself stays importable)."""
+    if "pint" in sys.modules or "dask" in sys.modules:
+        return
+    sys.modules["dask"] = None  # type: ignore[assignment]  # find_spec("dask") is None
+    try:
+        import pint  # noqa: F401
+    finally:
+        del sys.modules["dask"]
+
+
 def parse_overrides(pairs: tuple[str, ...]) -> dict[str, object]:
     """``("spring_rate=260 lbf/in", …)`` → ``{"spring_rate": "260 lbf/in"}``, values as YAML."""
+    from campipe.io.spec_yaml import SpecFileError, parse_value
+
     out: dict[str, object] = {}
     for pair in pairs:
         key, sep, text = pair.partition("=")
@@ -133,6 +153,7 @@ def main(verbose: int) -> None:
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object (SI units).")
 def model(preset: str, sets: tuple[str, ...], as_json: bool) -> None:
     """Print the model's matrices, natural frequencies, mode shapes and stability limits."""
+    _load_pint()
     overrides = parse_overrides(sets)
     try:
         train = valve_train(preset, overrides)
@@ -257,8 +278,10 @@ class SpecRefused(CampipeError, click.ClickException):
 
 
 def _load(spec_path, sets, limits=None):
+    from campipe.io.spec_yaml import SpecFileError
     from campipe.study import SpecError, load_study
 
+    _load_pint()
     overrides = parse_overrides(sets)
     try:
         return load_study(spec_path, overrides, limits)
@@ -364,7 +387,7 @@ _SET_HELP = (
 @click.option(
     "--batch-size",
     type=click.IntRange(min=1),
-    help="Cases per batch (default: about four batches per worker, 4 to 32 cases).",
+    help="Cases per batch (default: about four batches per worker, 4 to 256 cases).",
 )
 @click.option(
     "--keep-parts",
@@ -408,10 +431,19 @@ def study(
     """
     import shlex
 
-    from campipe.study.execute import run_study
+    from campipe.study.execute import finished, run_study
+    from campipe.study.limits import Limits
     from campipe.study.progress import Progress
 
     limits = _limits(max_cases, max_steps, max_samples, max_events, max_archive_gb)
+    if limits == Limits() and not overwrite:
+        # A finished study answers from its spec's text and its archive's checksums alone.
+        done = finished(spec, parse_overrides(sets), output)
+        if done is not None:
+            click.echo(f"campipe study: {done.summary()}", err=True)
+            _report_statuses(done)
+            click.echo(str(done.archive))
+            return
     loaded = _load(spec, sets, limits)
     archive = _archive_path(loaded, spec, output)
     stderr = sys.stderr
@@ -525,6 +557,7 @@ def validate(
     from campipe.study.execute import default_batch_size, default_workers, plan_batches
     from campipe.study.progress import format_seconds
 
+    _load_pint()
     if tolerance is not None:
         from campipe.units import QuantityError, parse_quantity
 

@@ -377,9 +377,7 @@ def run_bench(
             )
         chosen = tuple(s for s in chosen if s.name in scenes)
     if quick:
-        chosen = tuple(
-            Scene(s.name, s.description, s.case, QUICK_REVOLUTIONS) for s in chosen
-        )
+        chosen = tuple(Scene(s.name, s.description, s.case, QUICK_REVOLUTIONS) for s in chosen)
     bench = Bench(quick, _meta(quick, ladder, chosen))
     say("loading the compiled kernels")
     measure.warm_up()

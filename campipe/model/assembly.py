@@ -10,7 +10,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg
 
 from campipe.model.elements import elements
 from campipe.model.parameters import N_DOF, ValveTrain
@@ -71,6 +70,8 @@ def normal_modes(mass: np.ndarray, stiffness: np.ndarray) -> tuple[np.ndarray, n
 
     Each mode's sign is fixed so that its largest-magnitude translation is positive.
     """
+    import scipy.linalg  # 0.1 s to import: not for --help, nor a finished study
+
     lam, phi = scipy.linalg.eigh(stiffness, mass)
     omega = np.sqrt(np.clip(lam, 0.0, None))
     n = mass.shape[0]
