@@ -471,6 +471,7 @@ def study(
         command=command,
         on_batch=replay if scheduler != "processes" else None,
         overwrite=overwrite,
+        notice=lambda text: click.echo(f"campipe study: {text}", err=True),
     )
     for note in report.notes:
         click.echo(f"campipe study: {note}", err=True)
@@ -577,6 +578,11 @@ def validate(
     plans = plan_batches(loaded.cases, loaded.record, size)
     click.echo(f"batches: {len(plans)} of up to {size} cases")
     if estimate:
+        from campipe.engine.kernels import compile_notice
+
+        text = compile_notice(c.settings for c in loaded.cases)
+        if text:
+            click.echo(f"campipe validate: {text}", err=True)
         e = cost(loaded, workers)
         click.echo(
             f"run time: {format_seconds(e.seconds)} on {workers} "

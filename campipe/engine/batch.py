@@ -259,7 +259,7 @@ def _unique_trains(cases: Sequence[Case]) -> tuple[list[ValveTrain], np.ndarray]
 
 
 @njit(cache=True, nogil=True)
-def _cam_at(profiles, theta):
+def cam_at(profiles, theta):
     """(n, 3): lift [m] and its θ-derivatives of every packed profile at one angle."""
     n = profiles.n_pieces.shape[0]
     out = np.empty((n, 3))
@@ -276,7 +276,7 @@ def initial_states(mats, which, packed, omega, has_seat, seat_q, inverses=None):
     if inverses is None:
         inverses = [start_inverses(m) for m in mats]
     n = which.size
-    cam = _cam_at(packed, 0.0)
+    cam = cam_at(packed, 0.0)
     held_q = np.zeros((n, 7))
     held_v = np.zeros((n, 7))
     held_a = np.zeros((n, 7))

@@ -503,6 +503,7 @@ def run_study(
     on_batch: BatchHook | None = None,
     overwrite: bool = False,
     workers_store: bool = True,
+    notice: Callable[[str], None] | None = None,
 ) -> StudyReport:
     """Run a study into one archive, resuming from whatever earlier runs left.
 
@@ -533,6 +534,9 @@ def run_study(
         On a dask.distributed cluster, workers that can reach the archive's folder write
         their batch files themselves (default); False: this process stores every batch, as
         it does for any worker that cannot reach the folder. The archive is the same.
+    notice : callable, optional
+        Called with a line of text before a wait the user should hear about: numba
+        compiling the kernels the study needs (the first run after an install or upgrade).
 
     A case that fails (non-finite, chatter) does not stop the study: the archive records its
     ``status`` and :attr:`StudyReport.statuses` names it by case id.
@@ -631,6 +635,8 @@ def run_study(
 
         try:
             sink.advance()  # the cases reused from earlier runs, as far as they reach
+            if plans and local:
+                _compile_first(plans, scheduler, notice)
             if plans:
                 if local:
                     _run_local(plans, scheduler, workers, parts, study.record, on_batch, stored)
@@ -659,6 +665,25 @@ def run_study(
             tuple(notes),
             sink.statuses,
         )
+
+
+def _compile_first(
+    plans: list[BatchPlan], scheduler: str, notice: Callable[[str], None] | None
+) -> None:
+    """Say so before numba compiles the kernels the plans need (nothing when they are
+    cached); under the processes scheduler compile them here, once, before the workers
+    start, so they load them from the cache instead of each compiling its own."""
+    from campipe.engine.kernels import compile_notice
+
+    firsts = {p.cases[0].settings: p for p in plans}
+    text = compile_notice(firsts)
+    if text is None:
+        return
+    if notice is not None:
+        notice(text)
+    if scheduler == "processes":
+        for plan in firsts.values():
+            compute_batch(BatchPlan(plan.key, plan.cases[:1], plan.record))
 
 
 def _up_to_date(archive: Path, total: int, started: float) -> StudyReport:
