@@ -794,12 +794,26 @@ def replay(archive, case_ids, where, output, spawn, magnify) -> None:
     help="Measure throughput, time against cases and workers, archive size.",
 )
 @click.option(
+    "--suite/--no-suite",
+    default=True,
+    show_default=True,
+    help="Run the scenes: references, integrators, peers, fidelity.",
+)
+@click.option(
+    "--study/--no-study",
+    "study_section",
+    default=True,
+    show_default=True,
+    help="Time campipe study end to end against the engine: start-up, 1 to 10000 cases, "
+    "the client's ceiling, local worker processes, validate's estimates.",
+)
+@click.option(
     "--plot/--no-plot",
     default=True,
     show_default=True,
     help="Write bench.png (needs matplotlib: pip install 'campipe[plot]').",
 )
-def bench(quick, output, scenes, scaling, plot) -> None:
+def bench(quick, output, scenes, scaling, suite, study_section, plot) -> None:
     """Speed against error: the suite of scenes, every integrator and fidelity, peers, scaling.
 
     Ends with the verdict: each goal with its measured figure (reached, not reached or not
@@ -823,7 +837,14 @@ def bench(quick, output, scenes, scaling, plot) -> None:
         stderr.write(f"campipe bench: {text}\n")
 
     try:
-        result = run_bench(quick, scenes or None, with_scaling=scaling, progress=say)
+        result = run_bench(
+            quick,
+            scenes or None,
+            with_scaling=scaling,
+            with_suite=suite,
+            with_study=study_section,
+            progress=say,
+        )
     except ValueError as exc:
         raise click.UsageError(str(exc)) from None
     paths = write_report(result, output, with_plot=plot)

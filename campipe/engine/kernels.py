@@ -10,12 +10,13 @@ are compiled: a modal-exact study never compiles newmark-linear.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import logging
 from collections.abc import Iterable
 
 from campipe.engine import batch, contact, exact, modal, newmark, steady
-from campipe.engine.settings import RunSettings
+from campipe.engine.settings import Case, RunSettings
 
 log = logging.getLogger(__name__)
 
@@ -79,3 +80,40 @@ def compile_notice(settings: Iterable[RunSettings]) -> str | None:
         "after an install or an upgrade takes a minute or two; later runs load them from "
         "numba's cache in a fraction of a second"
     )
+
+
+def _start_kernels(case: Case, settings: RunSettings) -> None:
+    batch.start_states([case], settings)
+
+
+def compile_kernels(case: Case, settings: RunSettings) -> None:
+    """Compile (or load) every kernel a run with ``settings`` calls, the periodic start's
+    and the integrator's at once: the start's in a second process, while this one compiles
+    the integrator through a short quasi-static run (the same kernel types). numba compiles
+    one kernel at a time in a process, so the two cost the time of the longer on two cores,
+    not their sum; both land in numba's cache, from which the study's own run then loads
+    them."""
+    short = dataclasses.replace(settings, revolutions=0.01, warmup=0)
+    if settings.start != "periodic":
+        batch.run_batch([case], short, full_state=False, on_failure="record")
+        return
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    try:
+        pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"))
+        start = pool.submit(_start_kernels, case, settings)
+    except OSError as exc:  # no second process: compile in turn, in this one
+        log.debug("compiling in one process: %s", exc)
+        batch.start_states([case], settings)
+        start = None
+    try:
+        quasi_static = dataclasses.replace(short, start="quasi-static")
+        batch.run_batch([case], quasi_static, full_state=False, on_failure="record")
+        if start is not None:
+            start.result()
+    except Exception as exc:  # the run itself compiles whatever is still missing
+        log.debug("compiling ahead failed: %s", exc)
+    finally:
+        if start is not None:
+            pool.shutdown(wait=True, cancel_futures=True)

@@ -671,9 +671,10 @@ def _compile_first(
     plans: list[BatchPlan], scheduler: str, notice: Callable[[str], None] | None
 ) -> None:
     """Say so before numba compiles the kernels the plans need (nothing when they are
-    cached); under the processes scheduler compile them here, once, before the workers
-    start, so they load them from the cache instead of each compiling its own."""
-    from campipe.engine.kernels import compile_notice
+    cached), and compile them here, a run's start and integrator in two processes at once
+    (:func:`campipe.engine.kernels.compile_kernels`), before the workers start: they load
+    them from the cache instead of each compiling its own."""
+    from campipe.engine.kernels import compile_kernels, compile_notice
 
     firsts = {p.cases[0].settings: p for p in plans}
     text = compile_notice(firsts)
@@ -681,9 +682,8 @@ def _compile_first(
         return
     if notice is not None:
         notice(text)
-    if scheduler == "processes":
-        for plan in firsts.values():
-            compute_batch(BatchPlan(plan.key, plan.cases[:1], plan.record))
+    for settings, plan in firsts.items():
+        compile_kernels(plan.cases[0].case, settings)
 
 
 def _up_to_date(archive: Path, total: int, started: float) -> StudyReport:
@@ -888,6 +888,17 @@ def _submit_all(client, as_completed, plans, token, task, stored) -> None:
         nxt = next(pending, None)
         if nxt is not None:
             queue.add(submit(nxt))
+
+
+def assemble(study: Study, archive: Path, found: Found, command: str = "campipe study") -> Path:
+    """Write the archive from files that already hold every case (``found``, see
+    :func:`find_results`): what this process does on a cluster whose workers store their
+    batches (``campipe bench`` times it as the client's ceiling)."""
+    sink = _Assembly(study, Path(archive), found, command, spec_file(study, Path(archive)))
+    try:
+        return sink.finish()
+    finally:
+        sink.abort()
 
 
 #: Bytes of rows the assembly holds at a time (the rows of one write to the archive).
