@@ -551,7 +551,8 @@ def study_block(bench: Bench) -> str:
             "",
             f"First run (the quickstart with numba's and pint's caches empty): "
             f"{_duration(first['seconds'])}; its first line on the terminal came after "
-            f"{_duration(first['first_line_seconds'])}: `{first['first_line'][:160]}`.",
+            f"{_duration(first['first_line_seconds'])}, saying "
+            f"“{first['first_line'].split(': ')[1] if first['notice'] else first['first_line']}”.",
         ]
     c = s["ceiling"]
     engine_rate = next((r["engine_rate"] for r in s["cluster"] if r["workers"] == 1), None)

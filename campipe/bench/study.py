@@ -23,6 +23,7 @@ Specs and archives are written under the folder given (and nowhere else).
 from __future__ import annotations
 
 import functools
+import logging
 import math
 import os
 import shutil
@@ -300,7 +301,11 @@ def cluster(directory: Path, n: int, worker_counts: Sequence[int] = CLUSTER_WORK
     for k in worker_counts:
         with (
             LocalCluster(
-                n_workers=k, threads_per_worker=1, processes=True, dashboard_address=":0"
+                n_workers=k,
+                threads_per_worker=1,
+                processes=True,
+                dashboard_address=":0",
+                silence_logs=logging.ERROR,
             ) as lc,
             Client(lc) as client,
         ):

@@ -244,7 +244,8 @@ def _issue14(bench: Bench) -> list[Goal]:
                 f"{_seconds(at['wall'])} against {_seconds(at['goal'])}",
                 REACHED if at["wall"] <= at["goal"] else NOT_REACHED,
                 f"engine {_seconds(at['engine'])} on {at['workers']} workers, "
-                f"{format_short(at['ratio'], 2)}× end to end",
+                f"{format_short(at['ratio'], 2)}× end to end; the study section of "
+                f"{s['date']}, load average {format_short(s['load_average_at_start'], 2)}",
             )
         )
     lat = s["latencies"]

@@ -98,8 +98,6 @@ LOCAL_SCHEDULERS = ("threads", "synchronous", "processes")
 #: cases on two workers: 32-case batches take 1.3 s in the study layer, 125-case ones 0.85 s).
 MIN_BATCH_SIZE = 4
 MAX_BATCH_SIZE = 256
-#: Rows read at a time when copying reused cases out of an existing archive.
-COPY_ROWS = 64
 
 #: Called with each newly computed batch after it is stored (in the process that stores it:
 #: a worker thread for local schedulers, this process for distributed). The replay logger,
