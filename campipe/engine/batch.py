@@ -1,6 +1,8 @@
 """Run a batch of cases through an integrator: pack, check, call the compiled kernel, unpack.
 
-Pure numerics: arrays in, arrays out; no files, no printing.
+Pure numerics: arrays in, arrays out; no files, no printing. The run settings and cases live
+in :mod:`campipe.engine.settings` (no numba); the names this module held before are imported
+from there under their own names (``X as X``), so they stay importable from here.
 """
 
 from __future__ import annotations
@@ -28,6 +30,14 @@ from campipe.engine.contact import (
     quasi_static_state,
 )
 from campipe.engine.modal import NS, ModalData, harmonic_responses, modal_data
+from campipe.engine.settings import CLOSURES as CLOSURES
+from campipe.engine.settings import DEFAULT_CAPTURE_VELOCITY as DEFAULT_CAPTURE_VELOCITY
+from campipe.engine.settings import DEFAULT_INTEGRATOR as DEFAULT_INTEGRATOR
+from campipe.engine.settings import DEFAULT_MODE_CUTOFF as DEFAULT_MODE_CUTOFF
+from campipe.engine.settings import DEFAULT_STEPS as DEFAULT_STEPS
+from campipe.engine.settings import DEFAULT_WARMUP as DEFAULT_WARMUP
+from campipe.engine.settings import FIDELITIES as FIDELITIES
+from campipe.engine.settings import INTEGRATORS as INTEGRATORS
 from campipe.engine.settings import (
     LIFT_BOUND,
     SPEED_BOUND,
@@ -38,6 +48,13 @@ from campipe.engine.settings import (
     check_run,
     output_angles,
 )
+from campipe.engine.settings import STARTS as STARTS
+from campipe.engine.settings import RunSettingsError as RunSettingsError
+from campipe.engine.settings import StabilityError as StabilityError
+from campipe.engine.settings import check_stability as check_stability
+from campipe.engine.settings import resolve_integrator as resolve_integrator
+from campipe.engine.settings import stability_limit as stability_limit
+from campipe.engine.settings import visited_configurations as visited_configurations
 from campipe.model import ValveTrain, system_matrices
 from campipe.model.assembly import SystemMatrices, configuration_frequencies
 from campipe.profiles import evaluate

@@ -256,9 +256,8 @@ class NetCDFWriter:
         digest = self._digests.get(name)
         if digest is None:
             return
-        if index == slice(None) and digest.rows == 0:
-            start = 0
-        elif isinstance(index, slice) and index.step in (None, 1):
+        # a slice from the next row on (a whole variable: from row 0) continues it
+        if isinstance(index, slice) and index.step in (None, 1):
             start = index.start or 0
         else:
             start = -1
