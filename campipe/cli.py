@@ -1,4 +1,9 @@
-"""The ``campipe`` command line (click). I/O only: every number comes from the numerics layer."""
+"""The ``campipe`` command line (click). I/O only: every number comes from the numerics layer.
+
+Each command imports what it uses when it runs (``campipe --help`` loads click, the model's
+parameter table and NumPy, nothing else): dask, xarray, netCDF4, pint, SciPy, numba and
+rerun load only in the commands that need them.
+"""
 
 from __future__ import annotations
 
@@ -12,7 +17,6 @@ import numpy as np
 from campipe import __version__
 from campipe.constants import INCH, LBF_IN, RPM
 from campipe.errors import CampipeError
-from campipe.io.spec_yaml import SpecFileError, parse_value
 from campipe.model import (
     ELEMENTS,
     PARAMETERS,
@@ -35,8 +39,24 @@ from campipe.vocabulary import CONFIGURATIONS, ROMAN
 REFINEMENTS = tuple(f"{member}_elements" for member in ELEMENTS)
 
 
+def _load_pint() -> None:
+    """Import pint without its dask support. pint imports dask, when it is installed, to
+    wrap dask arrays in quantities: 90 ms of every command that reads a quantity, for
+    nothing campipe does. This process is the command's own, so pint is loaded here with
+    dask hidden from it (dask itself stays importable)."""
+    if "pint" in sys.modules or "dask" in sys.modules:
+        return
+    sys.modules["dask"] = None  # type: ignore[assignment]  # find_spec("dask") is None
+    try:
+        import pint  # noqa: F401
+    finally:
+        del sys.modules["dask"]
+
+
 def parse_overrides(pairs: tuple[str, ...]) -> dict[str, object]:
     """``("spring_rate=260 lbf/in", …)`` → ``{"spring_rate": "260 lbf/in"}``, values as YAML."""
+    from campipe.io.spec_yaml import SpecFileError, parse_value
+
     out: dict[str, object] = {}
     for pair in pairs:
         key, sep, text = pair.partition("=")
@@ -159,6 +179,7 @@ def model(
     preset: str, sets: tuple[str, ...], as_json: bool, convergence: str | None, modes: int
 ) -> None:
     """Print the model's matrices, natural frequencies, mode shapes and stability limits."""
+    _load_pint()
     overrides = parse_overrides(sets)
     try:
         train = valve_train(preset, overrides)
@@ -359,8 +380,10 @@ class SpecRefused(CampipeError, click.ClickException):
 
 
 def _load(spec_path, sets, limits=None):
+    from campipe.io.spec_yaml import SpecFileError
     from campipe.study import SpecError, load_study
 
+    _load_pint()
     overrides = parse_overrides(sets)
     try:
         return load_study(spec_path, overrides, limits)
@@ -466,7 +489,7 @@ _SET_HELP = (
 @click.option(
     "--batch-size",
     type=click.IntRange(min=1),
-    help="Cases per batch (default: about four batches per worker, 4 to 32 cases).",
+    help="Cases per batch (default: about four batches per worker, 4 to 256 cases).",
 )
 @click.option(
     "--keep-parts",
@@ -510,10 +533,19 @@ def study(
     """
     import shlex
 
-    from campipe.study.execute import run_study
+    from campipe.study.execute import finished, run_study
+    from campipe.study.limits import Limits
     from campipe.study.progress import Progress, logging_cleared
 
     limits = _limits(max_cases, max_steps, max_samples, max_events, max_archive_gb)
+    if limits == Limits() and not overwrite:
+        # A finished study answers from its spec's text and its archive's checksums alone.
+        done = finished(spec, parse_overrides(sets), output)
+        if done is not None:
+            click.echo(f"campipe study: {done.summary()}", err=True)
+            _report_statuses(done)
+            click.echo(str(done.archive))
+            return
     loaded = _load(spec, sets, limits)
     archive = _archive_path(loaded, spec, output)
     stderr = sys.stderr
@@ -545,6 +577,7 @@ def study(
                 command=command,
                 on_batch=replay if scheduler != "processes" else None,
                 overwrite=overwrite,
+                notice=lambda text: click.echo(f"campipe study: {text}", err=True),
             )
     finally:
         for b in bars:
@@ -634,6 +667,7 @@ def validate(
     from campipe.study.estimate import archive_bytes
     from campipe.study.execute import default_batch_size, default_workers, plan_batches
 
+    _load_pint()
     if tolerance is not None:
         from campipe.units import QuantityError, parse_quantity
 
@@ -653,6 +687,11 @@ def validate(
     plans = plan_batches(loaded.cases, loaded.record, size)
     click.echo(f"batches: {len(plans)} of up to {size} cases")
     if estimate:
+        from campipe.engine.kernels import compile_notice
+
+        text = compile_notice(c.settings for c in loaded.cases)
+        if text:
+            click.echo(f"campipe validate: {text}", err=True)
         click.echo(estimate_text(loaded, workers))
     click.echo(
         f"archive: about {archive_bytes(loaded) / 1e6:.3g} MB before compression "
@@ -1090,12 +1129,26 @@ def replay(archive, case_ids, where, output, spawn, magnify) -> None:
     help="Measure throughput, time against cases and workers, archive size.",
 )
 @click.option(
+    "--suite/--no-suite",
+    default=True,
+    show_default=True,
+    help="Run the scenes: references, integrators, peers, fidelity.",
+)
+@click.option(
+    "--study/--no-study",
+    "study_section",
+    default=True,
+    show_default=True,
+    help="Time campipe study end to end against the engine: start-up, 1 to 10000 cases, "
+    "the client's ceiling, local worker processes, validate's estimates.",
+)
+@click.option(
     "--plot/--no-plot",
     default=True,
     show_default=True,
     help="Write bench.png (needs matplotlib: pip install 'campipe[plot]').",
 )
-def bench(quick, output, scenes, scaling, plot) -> None:
+def bench(quick, output, scenes, scaling, suite, study_section, plot) -> None:
     """Speed against error: the suite of scenes, every integrator and fidelity, peers, scaling.
 
     Ends with the verdict: each goal with its measured figure (reached, not reached or not
@@ -1119,7 +1172,14 @@ def bench(quick, output, scenes, scaling, plot) -> None:
         stderr.write(f"campipe bench: {text}\n")
 
     try:
-        result = run_bench(quick, scenes or None, with_scaling=scaling, progress=say)
+        result = run_bench(
+            quick,
+            scenes or None,
+            with_scaling=scaling,
+            with_suite=suite,
+            with_study=study_section,
+            progress=say,
+        )
     except ValueError as exc:
         raise click.UsageError(str(exc)) from None
     paths = write_report(result, output, with_plot=plot)

@@ -302,11 +302,13 @@ def test_the_verdict_judges_every_goal_reached_not_reached_or_not_shown():
         ("accuracy", "not shown", "–"),
         ("accuracy", "not shown", "–"),
         ("throughput", "not reached", "1.5e7 case-steps/s"),
+        # no study section (--no-study)
+        ("study", "not shown", "–"),
     ]
     assert "solve_ivp" in goals[0].what and "no scene ran solve_ivp" == goals[0].note
     assert "the thesis's 1 µs step" in goals[3].what and "on a at dt 1 µs" in goals[3].note
     assert goals[4].note == "separation-11000 was not run"
-    assert [g.status for g in verdict.goals(_verdict_bench())][-1] == "not shown"
+    assert [g.status for g in verdict.goals(_verdict_bench())][6] == "not shown"
     # Issue 4 from its record: the error below 1e-6 in, the cost 1.2× below newmark-linear's.
     a = {
         "default_error": 4e-13,
@@ -364,7 +366,7 @@ def test_the_quick_verdict_names_every_goal_and_cross_check(tmp_path):
     does until its events are fixed)."""
     out = tmp_path / "bench"
     scenes = ("separation-11000", "polydyne-9000")
-    args = ["bench", "--quick", "--no-scaling", "--no-plot", "-o", str(out)]
+    args = ["bench", "--quick", "--no-scaling", "--no-study", "--no-plot", "-o", str(out)]
     result = CliRunner().invoke(main, args + [a for s in scenes for a in ("--scene", s)])
     checks = json.loads((out / "bench.json").read_text())["checks"]
     assert [c["scene"] for c in checks] == list(scenes)
@@ -373,20 +375,21 @@ def test_the_quick_verdict_names_every_goal_and_cross_check(tmp_path):
     lines = result.stdout.splitlines()  # the progress lines go to stderr
     block = lines[lines.index("verdict (--quick, 2 scenes):") :]
     assert block[1] == "goals:"
-    goals = block[2:9]
+    goals = block[2:10]
     assert [g.strip().split("  ")[0] for g in goals] == [
         g.status for g in verdict.goals(report.read_json(out / "bench.json"))
     ]
     areas = [g.split(":")[0].split()[-1] for g in goals]
-    assert areas == ["speed"] * 4 + ["accuracy"] * 2 + ["throughput"]
+    assert areas == ["speed"] * 4 + ["accuracy"] * 2 + ["throughput", "study"]
     for line, peer in zip(goals[:4], ("solve_ivp",) * 2 + ("newmark-linear",) * 2, strict=True):
         assert f"faster than {peer}" in line
-    assert goals[-1].startswith("  not shown") and "--no-scaling" in goals[-1]
-    assert block[9].startswith("reference cross-checks (modal-exact, tolerance 1e-14 s")
-    for line, scene, ok in zip(block[10:12], scenes, agreed, strict=True):
+    assert goals[-2].startswith("  not shown") and "--no-scaling" in goals[-2]
+    assert goals[-1].startswith("  not shown") and "--no-study" in goals[-1]
+    assert block[10].startswith("reference cross-checks (modal-exact, tolerance 1e-14 s")
+    for line, scene, ok in zip(block[11:13], scenes, agreed, strict=True):
         assert line.split()[:2] == ["agree" if ok else "disagree", f"{scene}:"]
-    assert block[12].startswith(f"{sum(agreed)} of 2 cross-checks agree")
-    assert len(block) == 13
+    assert block[13].startswith(f"{sum(agreed)} of 2 cross-checks agree")
+    assert len(block) == 14
 
 
 @pytest.mark.slow
@@ -395,12 +398,14 @@ def test_the_whole_quick_bench_shows_every_goal_and_checks_every_scene(tmp_path)
     seven goals, each judged from a measured figure (none left not shown for want of data,
     only where a ladder's lower bound cannot show it)."""
     out = tmp_path / "bench"
-    result = CliRunner().invoke(main, ["bench", "--quick", "--no-plot", "-o", str(out)])
+    result = CliRunner().invoke(
+        main, ["bench", "--quick", "--no-study", "--no-plot", "-o", str(out)]
+    )
     bench = report.read_json(out / "bench.json")
     assert result.exit_code == (0 if verdict.all_agree(bench) else 1), result.output
     lines = result.stdout.splitlines()
     block = lines[lines.index("verdict (--quick, 6 scenes):") :]
-    assert len(block) == 2 + 7 + 1 + 6 + 1
+    assert len(block) == 2 + 8 + 1 + 6 + 1  # the eighth goal: issue 14's, --no-study
     for line, goal in zip(block[2:9], verdict.goals(bench), strict=True):
         assert line.strip().startswith(f"{goal.status}  ") and goal.figure != "–"
     for line, scene in zip(block[10:16], SCENES, strict=True):

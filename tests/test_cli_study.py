@@ -21,11 +21,11 @@ def test_validate_prints_cases_axes_and_estimates():
     assert re.search(r"speed_rpm\s+sweep\s+33 values: 6000 rpm … 14000 rpm", text)
     assert re.search(r"seat\s+sweep\s+3 values: none, 0 in, 0.1 in", text)
     assert re.search(r"spring_preload\s+sweep\s+3 values: 120 lbf, 151 lbf, 180 lbf", text)
-    assert "batches: 10 of up to 32 cases" in text
+    assert "batches: 8 of up to 38 cases" in text
     assert re.search(
         r"run time: about [\d.]+ s on 2 workers: the engine [\d.]+ s, storing and writing the "
         r"archive [\d.]+ s, loading the engine [\d.]+ s, the replay's 3 cases [\d.]+ s \(timed "
-        r"on a run of 64 of its 297 cases, scaled; 7.58 s simulated",
+        r"on a run of \d+ of its 297 cases, scaled; 7.58 s simulated",
         text,
     )
     size = float(re.search(r"archive: about ([\d.]+) MB", text).group(1))

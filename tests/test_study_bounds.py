@@ -237,7 +237,8 @@ def test_where_takes_conditions_only():
 def test_long_histories_make_smaller_default_batches():
     from campipe.study.execute import default_batch_size
 
-    assert default_batch_size(1000, 2) == 32
-    assert default_batch_size(1000, 2, samples=1441) == 32  # 4 turns at 1 deg
+    assert default_batch_size(1000, 2) == 125  # four batches per worker
+    assert default_batch_size(10_000, 2) == 256  # at most MAX_BATCH_SIZE
+    assert default_batch_size(1000, 2, samples=1441) == 125  # 4 turns at 1 deg
     assert default_batch_size(1000, 2, samples=100_000) == 16  # 512 MiB / (1e5 × 320 B)
     assert default_batch_size(1000, 2, samples=10_000_000) == 1

@@ -164,6 +164,55 @@ def test_synchronous_threaded_processes_and_distributed_archives_are_identical(t
     xr.testing.assert_identical(out["synchronous"], out["processes"])
     xr.testing.assert_identical(out["synchronous"], out["distributed"])
     assert out["synchronous"].sizes["case"] == 6
+    sums = {name: _variable_checksums(tmp_path / f"{name}.nc") for name in out}
+    assert all(s == sums["synchronous"] for s in sums.values())  # bit for bit
+
+
+def _variable_checksums(path):
+    sums = json.loads(netCDF4.Dataset(path).getncattr("campipe_checksums"))
+    sums.pop("/attributes")
+    return sums
+
+
+def test_batches_stored_by_the_workers_or_by_this_process_make_the_same_archive(
+    tmp_path, monkeypatch
+):
+    """On a cluster whose workers reach the archive's folder (here, this machine) each
+    worker writes its own batch files and this process only assembles; with
+    workers_store=False the workers return their batches and this process stores them. The
+    two archives are the same, variable for variable (their checksums are equal)."""
+    import threading
+
+    from distributed import LocalCluster
+
+    import campipe.study.execute as execute
+
+    study = load_study(write_spec(tmp_path, SMALL))
+    stored_by = []
+    real = execute._store
+
+    def spied(*args):
+        stored_by.append(threading.current_thread() is threading.main_thread())
+        return real(*args)
+
+    monkeypatch.setattr(execute, "_store", spied)
+    with LocalCluster(
+        n_workers=1, threads_per_worker=2, processes=False, dashboard_address=":0"
+    ) as cluster:
+        address = cluster.scheduler_address
+        by_workers = run_study(study, tmp_path / "workers.nc", scheduler=address, batch_size=2)
+        assert stored_by == [False] * 3  # written in the workers' threads
+        stored_by.clear()
+        by_client = run_study(
+            study, tmp_path / "client.nc", scheduler=address, batch_size=2, workers_store=False
+        )
+        assert stored_by == [True] * 3  # written here
+    assert by_workers.computed == by_client.computed == 6
+    assert not list(parts_directory(tmp_path / "workers.nc").parent.glob("*.parts"))
+    xr.testing.assert_identical(load(tmp_path / "workers.nc"), load(tmp_path / "client.nc"))
+    assert _variable_checksums(tmp_path / "workers.nc") == _variable_checksums(
+        tmp_path / "client.nc"
+    )
 
 
 def test_a_finished_study_is_not_run_again(small, tmp_path):
@@ -391,6 +440,70 @@ def test_import_campipe_does_not_pull_in_distributed_or_rerun():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert out.returncode == 0, out.stdout + out.stderr
+
+
+HEAVY = ("numba", "scipy", "pint", "dask", "distributed", "xarray", "netCDF4", "rerun")
+
+
+def _loaded_by(args, cwd=None) -> tuple[str, list[str]]:
+    """Run the CLI in a fresh interpreter; its stderr and the heavy packages it imported."""
+    code = (
+        "import sys\n"
+        "from campipe.cli import main\n"
+        f"main({list(args)!r}, standalone_mode=False)\n"
+        f"heavy = sorted({{m.split('.')[0] for m in sys.modules}} & {set(HEAVY)!r})\n"
+        "print('loaded:', *heavy)\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, cwd=cwd, check=True
+    )
+    return out.stderr, out.stdout.splitlines()[-1].split()[1:]
+
+
+def test_help_loads_none_of_the_heavy_packages():
+    _, heavy = _loaded_by(["--help"])
+    assert heavy == []
+
+
+def test_a_finished_study_answers_from_its_spec_text_and_the_archive_alone(small, tmp_path):
+    """Rerunning a finished study reads the spec's text and verifies the archive's checksums:
+    no unit is parsed and no model built (pint, SciPy, numba stay unloaded). Another
+    override, or an archive without the spec's key, takes the full check (still up to
+    date where the cases are the same)."""
+    import shutil
+
+    from campipe.study.execute import finished
+
+    _, _, original, original_spec = small
+    spec, archive = tmp_path / original_spec.name, tmp_path / original.name
+    shutil.copy(original_spec, spec)
+    shutil.copy(original, archive)
+    stderr, heavy = _loaded_by(["study", str(spec), "--no-progress"])
+    assert "up to date (6 cases, checksums verified)" in stderr
+    assert heavy == ["netCDF4"]
+    assert finished(spec, {}, archive).up_to_date
+    stderr, heavy = _loaded_by(["study", str(spec), "--no-progress", "--set", "speed=9000 rpm"])
+    assert "6 cases (6 reused, 0 computed" in stderr and "pint" in heavy  # the full check
+
+    assert finished(spec, {"speed": "9000 rpm"}, archive).up_to_date
+    assert finished(spec, {}, archive) is None  # written with another override
+    assert finished(spec, {"speed": "9000 rpm"}, tmp_path / "elsewhere.nc") is None
+
+
+def test_the_first_run_says_what_it_compiles(tmp_path, monkeypatch):
+    """Before numba compiles a kernel the study says so on the terminal (here the cache is
+    made to look empty)."""
+    import campipe.engine.kernels as kernels
+
+    monkeypatch.setattr(kernels, "uncompiled", lambda settings: ["modal-exact"])
+    spec = write_spec(tmp_path, SMALL.replace("[6000 rpm, 9524 rpm, 11000 rpm]", "[6000 rpm]"))
+    result = CliRunner().invoke(main, ["study", str(spec), "--no-progress"])
+    assert result.exit_code == 0, result.output
+    assert "campipe study: compiling modal-exact with numba" in result.stderr
+    monkeypatch.setattr(kernels, "uncompiled", lambda settings: [])
+    (tmp_path / "small.nc").unlink()
+    result = CliRunner().invoke(main, ["study", str(spec), "--no-progress"])
+    assert "compiling" not in result.stderr
 
 
 def test_no_seat_is_minus_inf_and_speed_rounds_to_whole_rpm(small):

@@ -41,8 +41,9 @@ import numpy as np
 from scipy.integrate import solve_ivp
 
 from campipe.constants import TWO_PI
-from campipe.engine.batch import DEFAULT_CAPTURE_VELOCITY, Case, RunSettings, start_states
+from campipe.engine.batch import start_states
 from campipe.engine.modal import modal_data
+from campipe.engine.settings import DEFAULT_CAPTURE_VELOCITY, Case, RunSettings
 from campipe.errors import CampipeError
 from campipe.model import system_matrices
 from campipe.vocabulary import (

@@ -16,11 +16,13 @@ From the repository's root::
     python -m campipe.bench.pages           # README.md, docs/bench.md, docs/bench/bench.{md,csv}
     python -m campipe.bench.pages --check   # exit 1 if a committed file differs (a test runs it)
     python -m campipe.bench.pages --plots   # also re-draw docs/bench/*.png (needs matplotlib)
+    python -m campipe.bench.pages --merge-study DIR/bench.json   # a newer study section
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import re
 import sys
@@ -492,6 +494,144 @@ def scaling_block(bench: Bench) -> str:
     return "\n".join(lines)
 
 
+def _rate(bytes_per_second: float) -> str:
+    return f"{format_short(bytes_per_second / 1e6, 3)} MB/s"
+
+
+def study_block(bench: Bench) -> str:
+    """campipe study end to end against the engine: sizes, start-up, the client's
+    ceiling on a cluster, local worker processes, validate's estimates."""
+    s = bench.study
+    if not s:
+        return "Not measured in this run (`--no-study`)."
+    w = s["workers"]
+    lines = [
+        f"Measured {s['date']} on {w} worker thread{'s' if w != 1 else ''}, load average "
+        f"{format_short(s['load_average_at_start'], 2)} at the start and "
+        f"{format_short(s['load_average_at_end'], 2)} at the end ({_duration(s['seconds'])}). "
+        "End to end: `python -m campipe study SPEC` in a fresh process, best of 3 (one run "
+        "above 1000 cases); in process: `run_study` with the kernels loaded; engine: "
+        "`run_batch` on the same cases, one batch per worker thread.",
+        "",
+    ]
+    rows = [
+        [
+            str(r["n_cases"]),
+            _duration(r["wall"]),
+            _duration(r["study"]),
+            _duration(r["engine"]),
+            f"{format_short(r['ratio'], 3)}×",
+            _duration(r["goal"]),
+            f"{format_short(r['bytes_per_case'] / 1e3)} kB",
+        ]
+        for r in s["sizes"]
+    ]
+    lines += _table(
+        [
+            "cases",
+            "end to end",
+            "in process",
+            "engine",
+            "end to end / engine",
+            "1.5 × engine + 0.5 s",
+            "archive per case",
+        ],
+        rows,
+    )
+    lat = s["latencies"]
+    lines += [
+        "",
+        f"Start-up, best of {lat['repeats']} fresh processes: `campipe --help` "
+        f"{_duration(lat['help'])}; a one-case study {_duration(lat['one_case'])}; "
+        f"a finished {lat['finished_cases']}-case study run again {_duration(lat['finished'])}.",
+    ]
+    first = s.get("first_run")
+    if first:
+        lines += [
+            "",
+            f"First run (the quickstart with numba's and pint's caches empty): "
+            f"{_duration(first['seconds'])}; its first line on the terminal came after "
+            f"{_duration(first['first_line_seconds'])}, saying "
+            f"“{first['first_line'].split(': ')[1] if first['notice'] else first['first_line']}”.",
+        ]
+    c = s["ceiling"]
+    engine_rate = next((r["engine_rate"] for r in s["cluster"] if r["workers"] == 1), None)
+    lines += [
+        "",
+        f"The client's ceiling: assembling {c['n_cases']} cases from stored batch files took "
+        f"{_duration(c['seconds'])}, **{format_short(c['cases_per_second'], 3)} cases/s**, "
+        f"writing {_rate(c['write_rate'])} of raw histories; zlib at the archive's level with "
+        f"the shuffle compresses {_rate(c['compress_rate'])} on one core (to "
+        f"{format_short(100 * c['compressed_bytes'] / c['raw_bytes'], 2)} %) and the disk "
+        f"takes {_rate(c['disk_rate'])}: the assembly runs at "
+        f"{format_short(100 * c['write_rate'] / c['compress_rate'], 2)} % of the compression "
+        "limit.",
+    ]
+    if engine_rate:
+        compress = c["raw_bytes_per_case"] / c["compress_rate"]
+        lines[-1] += (
+            f" One worker's engine computes {format_short(engine_rate, 3)} cases/s, so the "
+            f"client binds at about {format_short(c['cases_per_second'] / engine_rate, 2)} "
+            "workers. With one compressed file per batch, written by its worker and read as "
+            f"one dataset, each worker would compress at {_ms(compress, 2)} ms per case "
+            f"beside its engine's {_ms(1 / engine_rate, 2)} ms "
+            f"(+{format_short(100 * compress * engine_rate, 2)} %), and the client would only "
+            "track batches."
+        )
+    lines += [""]
+    lines += _table(
+        ["worker processes", "study, cases/s", "engine, cases/s", "study / engine"],
+        [
+            [
+                str(r["workers"]),
+                format_short(r["study_rate"], 3),
+                format_short(r["engine_rate"], 3),
+                format_short(r["study_rate"] / r["engine_rate"], 2),
+            ]
+            for r in s["cluster"]
+        ],
+    )
+    n = s["cluster"][0]["n_cases"] if s["cluster"] else 0
+    lines += [
+        "",
+        f"({n} cases on a local dask cluster of single-threaded worker processes, which write "
+        "their own batch files; cluster start-up left out.)",
+    ]
+    if s.get("estimates"):
+        lines += [
+            "",
+            "`campipe validate`'s run-time estimate of each bundled study beside its run "
+            "(in process, kernels loaded):",
+            "",
+        ]
+        lines += _table(
+            ["study", "cases", "validate's estimate", "measured", "measured / estimate"],
+            [
+                [
+                    f"`{e['study']}`",
+                    str(e["cases"]),
+                    _duration(e["estimate"]),
+                    _duration(e["measured"]),
+                    f"{format_short(e['measured'] / e['estimate'], 2)}×",
+                ]
+                for e in s["estimates"]
+            ],
+        )
+    v = s.get("validate")
+    if v:
+        lines += [
+            "",
+            f"`campipe validate --no-estimate` of {format_short(v['n_cases'])} cases: "
+            + (
+                f"{_duration(v['seconds'])}, {format_short(v['peak_bytes'] / 1e6, 3)} MB at "
+                "its peak."
+                if "seconds" in v
+                else f"failed ({v['failed']})."
+            ),
+        ]
+    return "\n".join(lines)
+
+
 #: Every block a page may hold, by name.
 BLOCKS: dict[str, Callable[[Bench], str]] = {
     "bench-verdict": verdict_block,
@@ -502,6 +642,7 @@ BLOCKS: dict[str, Callable[[Bench], str]] = {
     "bench-throughput": throughput_block,
     "bench-fidelity": fidelity_block,
     "bench-scaling": scaling_block,
+    "bench-study": study_block,
 }
 
 
@@ -552,7 +693,18 @@ def main(argv: Sequence[str] | None = None) -> int:
         "--check", action="store_true", help="change nothing; exit 1 if a file differs"
     )
     parser.add_argument("--plots", action="store_true", help="also re-draw the bench's PNG plots")
+    parser.add_argument(
+        "--merge-study",
+        type=Path,
+        metavar="BENCH_JSON",
+        help="first take the study section of another run's bench.json, such as "
+        "campipe bench --no-suite --no-scaling -o DIR, into --json",
+    )
     args = parser.parse_args(argv)
+    if args.merge_study and not args.check:
+        data = json.loads(args.json.read_text())
+        data["study"] = json.loads(args.merge_study.read_text())["study"]
+        args.json.write_text(json.dumps(data, indent=1))
     bench = report.read_json(args.json)
     stale = []
     for path, text in rendered(bench, args.json, args.pages).items():

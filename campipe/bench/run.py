@@ -15,6 +15,7 @@ import tempfile
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -90,6 +91,8 @@ class Bench:
     scaling: list[dict] = field(default_factory=list)  # time against cases and workers
     fidelity: list[dict] = field(default_factory=list)  # recommended level per scene
     seconds: float = 0.0  # wall time of the whole bench [s]
+    #: campipe study end to end against the engine (campipe.bench.study.measure)
+    study: dict = field(default_factory=dict)
 
 
 def _meta(quick: bool, ladder: Ladder, scenes: Sequence[Scene]) -> dict:
@@ -347,6 +350,8 @@ def run_bench(
     *,
     scaling_directory: str | None = None,
     with_scaling: bool = True,
+    with_suite: bool = True,
+    with_study: bool = True,
     progress: Callable[[str], None] | None = None,
 ) -> Bench:
     """Run the bench.
@@ -362,6 +367,10 @@ def run_bench(
         removed afterwards).
     with_scaling : bool
         Run the throughput and scaling measurements.
+    with_suite : bool
+        Run the scenes: references, ladders, peers and fidelity.
+    with_study : bool
+        Time ``campipe study`` end to end against the engine (:mod:`campipe.bench.study`).
     progress : callable, optional
         Called with a line of text as each stage starts.
     """
@@ -379,9 +388,10 @@ def run_bench(
     if quick:
         chosen = tuple(Scene(s.name, s.description, s.case, QUICK_REVOLUTIONS) for s in chosen)
     bench = Bench(quick, _meta(quick, ladder, chosen))
-    say("loading the compiled kernels")
-    measure.warm_up()
-    for scene in chosen:
+    if with_suite:
+        say("loading the compiled kernels")
+        measure.warm_up()
+    for scene in chosen if with_suite else ():
         say(f"{scene.name}: reference and its check")
         ref = measure.reference(scene)
         check = measure.check_reference(scene, ref)
@@ -497,6 +507,12 @@ def run_bench(
         else:
             points += scaling.study_scaling(counts, scaling_directory)
         bench.scaling = [{**asdict(p), "per_case": p.per_case} for p in points]
+    if with_study:
+        from campipe.bench import study
+
+        studies = Path(__file__).resolve().parents[2] / "studies"
+        with tempfile.TemporaryDirectory(prefix="campipe-bench-study-") as tmp:
+            bench.study = study.measure(tmp, quick=quick, studies=studies, progress=say)
     bench.seconds = time.perf_counter() - started
     bench.meta["load_average_at_end"] = os.getloadavg()[0]
     return bench

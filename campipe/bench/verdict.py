@@ -236,6 +236,94 @@ def _throughput(bench: Bench) -> Goal:
     )
 
 
+def _seconds(x: float) -> str:
+    return f"{format_short(x, 2)} s"
+
+
+def _study_goals(bench: Bench) -> list[Goal]:
+    """A study as fast as its engine: the study layer, start-up, first run, validate."""
+    s = bench.study
+    g = s.get("goals", {})
+    if not s:
+        return [
+            Goal("study", "campipe study end to end", "–", NOT_SHOWN, "not measured: --no-study")
+        ]
+    out = []
+    at = next((r for r in s.get("sizes", []) if r["n_cases"] == g["cases"]), None)
+    what = (
+        f"a {g['cases']}-case study end to end at most {format_short(g['factor'])} × the "
+        f"engine's time + {format_short(g['offset'])} s"
+    )
+    if at is None:
+        out.append(Goal("study", what, "–", NOT_SHOWN, "not measured: --quick"))
+    else:
+        out.append(
+            Goal(
+                "study",
+                what,
+                f"{_seconds(at['wall'])} against {_seconds(at['goal'])}",
+                REACHED if at["wall"] <= at["goal"] else NOT_REACHED,
+                f"engine {_seconds(at['engine'])} on {at['workers']} workers, "
+                f"{format_short(at['ratio'], 2)}× end to end; the study section of "
+                f"{s['date']}, load average {format_short(s['load_average_at_start'], 2)}",
+            )
+        )
+    lat = s["latencies"]
+    for key, words in (
+        ("help", "campipe --help"),
+        ("one_case", "a one-case study, warm"),
+        ("finished", f"a finished {lat['finished_cases']}-case study run again"),
+    ):
+        out.append(
+            Goal(
+                "study",
+                f"{words} under {format_short(g[key])} s",
+                _seconds(lat[key]),
+                REACHED if lat[key] < g[key] else NOT_REACHED,
+                f"best of {lat['repeats']} fresh processes",
+            )
+        )
+    what = f"the quickstart from a fresh install under {format_short(g['first_run'])} s"
+    first = s.get("first_run")
+    if first is None:
+        out.append(Goal("study", what, "–", NOT_SHOWN, "not measured: --quick"))
+    else:
+        said = (
+            f"it says what it compiles after {_seconds(first['first_line_seconds'])}"
+            if first["notice"]
+            else "silent while numba compiles"
+        )
+        out.append(
+            Goal(
+                "study",
+                what,
+                _seconds(first["seconds"]),
+                REACHED if first["seconds"] < g["first_run"] else NOT_REACHED,
+                f"numba's and pint's caches empty; {said}",
+            )
+        )
+    v = s.get("validate")
+    what = (
+        f"campipe validate of {format_short(g['validate_cases'])} cases under "
+        f"{format_short(g['validate_seconds'])} s and {format_short(g['validate_bytes'] / 1e6)} MB"
+    )
+    if v is None or "seconds" not in v:
+        why = v["failed"] if v else "not measured: --quick"
+        out.append(Goal("study", what, "–", NOT_SHOWN, why))
+    else:
+        ok = v["seconds"] < g["validate_seconds"] and v["peak_bytes"] < g["validate_bytes"]
+        out.append(
+            Goal(
+                "study",
+                what,
+                f"{_seconds(v['seconds'])}, {format_short(v['peak_bytes'] / 1e6)} MB",
+                REACHED if ok else NOT_REACHED,
+                "--no-estimate, peak memory of the process",
+            )
+        )
+    return out
+
+
 def goals(bench: Bench) -> list[Goal]:
     """Every goal the bench judges, in a fixed order, each shown or not by this run."""
     return [
@@ -243,6 +331,7 @@ def goals(bench: Bench) -> list[Goal]:
         *_speed_goals(bench, "newmark-linear", GOAL_NEWMARK),
         *_accuracy_goals(bench),
         _throughput(bench),
+        *_study_goals(bench),
     ]
 
 

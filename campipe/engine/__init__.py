@@ -1,44 +1,90 @@
-"""The engine: contact configurations, integrators over batches of cases, member loads."""
+"""The engine: contact configurations, integrators over batches of cases, member loads.
 
-from campipe.engine.batch import (
-    DEFAULT_INTEGRATOR,
-    DEFAULT_MODE_CUTOFF,
-    DEFAULT_STEPS,
-    FIDELITIES,
-    INTEGRATORS,
-    BatchResult,
-    Case,
-    CaseError,
-    IntegrationError,
-    RunSettings,
-    RunSettingsError,
-    StabilityError,
-    check_run,
-    resolve_integrator,
-    run_batch,
-    stability_limit,
-    start_states,
-)
-from campipe.engine.loads import MEMBER_LOADS, member_loads
+Names load on first use (PEP 562): a run's settings, cases and limits
+(:mod:`~campipe.engine.settings`) cost no numba; ``run_batch`` and the results load the
+compiled kernels' module (:mod:`~campipe.engine.batch`) when first asked for.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from campipe.engine.batch import BatchResult, initial_state, run_batch, start_states
+    from campipe.engine.loads import MEMBER_LOADS, member_loads
+    from campipe.engine.settings import (
+        DEFAULT_INTEGRATOR,
+        DEFAULT_MODE_CUTOFF,
+        DEFAULT_STEPS,
+        FIDELITIES,
+        INTEGRATORS,
+        Case,
+        CaseError,
+        IntegrationError,
+        RunSettings,
+        RunSettingsError,
+        StabilityError,
+        check_run,
+        resolve_integrator,
+        stability_limit,
+    )
+
+#: Where each public name lives.
+_MODULES = {
+    "campipe.engine.settings": (
+        "DEFAULT_INTEGRATOR",
+        "DEFAULT_MODE_CUTOFF",
+        "DEFAULT_STEPS",
+        "FIDELITIES",
+        "INTEGRATORS",
+        "Case",
+        "CaseError",
+        "IntegrationError",
+        "RunSettings",
+        "RunSettingsError",
+        "StabilityError",
+        "check_run",
+        "resolve_integrator",
+        "stability_limit",
+    ),
+    "campipe.engine.batch": ("BatchResult", "initial_state", "run_batch", "start_states"),
+    "campipe.engine.loads": ("MEMBER_LOADS", "member_loads"),
+}
+_WHERE = {name: module for module, names in _MODULES.items() for name in names}
 
 __all__ = [
+    "BatchResult",
+    "Case",
+    "CaseError",
     "DEFAULT_INTEGRATOR",
     "DEFAULT_MODE_CUTOFF",
     "DEFAULT_STEPS",
     "FIDELITIES",
     "INTEGRATORS",
-    "MEMBER_LOADS",
-    "BatchResult",
-    "Case",
-    "CaseError",
     "IntegrationError",
+    "MEMBER_LOADS",
     "RunSettings",
     "RunSettingsError",
     "StabilityError",
     "check_run",
+    "initial_state",
     "member_loads",
     "resolve_integrator",
     "run_batch",
     "stability_limit",
     "start_states",
 ]
+
+
+def __getattr__(name: str) -> object:
+    module = _WHERE.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *_WHERE})

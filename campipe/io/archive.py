@@ -6,8 +6,10 @@ either the whole file or none. Files are netCDF-4 (HDF5): variables along ``case
 ``CASE_CHUNK`` cases per chunk and, in an archive, zlib-compressed; ``xarray.open_dataset``
 reads them as they are.
 
-Rows are written one case at a time, so a writer holds no more than the rows it is given:
-the archive is assembled by streaming batch after batch into it.
+Rows are written a block at a time, so a writer holds no more than the rows it is given: the
+archive is assembled by streaming batch after batch into it. A variable written in row order
+(whole, or block after block from its first row) is checksummed as it is written; only one
+written out of order is read back for its checksum when the file is committed.
 
 netCDF-C and HDF5 are not thread-safe: every call into netCDF4 here holds :data:`LOCK`.
 """
@@ -61,6 +63,9 @@ COMPLEVEL = 1
 CASE_CHUNK = 8
 #: Cases per chunk of a 1-D per-case variable, events per chunk of an event variable.
 ROW_CHUNK = 4096
+#: Chunk cache of each such variable in an archive [bytes] and its hash slots.
+VECTOR_CACHE = 2**20
+VECTOR_CACHE_SLOTS = 101
 #: Packages whose versions an archive records.
 DEPENDENCIES = ("numpy", "scipy", "numba", "xarray", "netCDF4", "dask", "distributed", "pint")
 _counter = itertools.count()
@@ -146,13 +151,15 @@ def is_temporary(path: Path) -> bool:
 class NetCDFWriter:
     """Creates a netCDF file at a temporary path; :meth:`commit` renames it into place.
 
+    ``sizes`` maps each dimension to its length, or to None for an unlimited dimension that
+    :meth:`append` extends (the archive's ``event``: its length is known only at the end).
     Use as a context manager: leaving the block by an exception removes the temporary file.
     """
 
     def __init__(
         self,
         path: str | Path,
-        sizes: Mapping[str, int],
+        sizes: Mapping[str, int | None],
         variables: Iterable[VariableSpec],
         attrs: Mapping[str, object],
         complevel: int = COMPLEVEL,
@@ -163,20 +170,34 @@ class NetCDFWriter:
         self.complevel = complevel
         self.tmp = temporary_path(self.path)
         self.variables = {v.name: v for v in variables}
+        #: name → the running checksum of a variable written in row order so far
+        self._digests: dict[str, _RunningDigest] = {}
         with LOCK, _writes(self.path):
-            self._ds = netCDF4.Dataset(self.tmp, "w", format="NETCDF4")
+            cache = netCDF4.get_chunk_cache()
+            if complevel:
+                # No chunk cache for the histories: each chunk is compressed as its rows are
+                # written (they come in whole chunks), while later batches are computed,
+                # not all at once when the file is closed. netCDF-C gives the variables the
+                # process's setting when it creates them, at the end of define mode.
+                netCDF4.set_chunk_cache(0, 0, 1.0)
             try:
-                for dim, size in sizes.items():
-                    self._ds.createDimension(dim, size)
-                for v in self.variables.values():
-                    self._create(v, sizes)
-                self._ds.setncatts({k: _attr(val) for k, val in attrs.items()})
-            except BaseException:
-                self.abort()
-                raise
+                self._ds = netCDF4.Dataset(self.tmp, "w", format="NETCDF4")
+                try:
+                    for dim, size in sizes.items():
+                        self._ds.createDimension(dim, size)
+                    for v in self.variables.values():
+                        self._create(v, sizes)
+                    self._ds.setncatts({k: _attr(val) for k, val in attrs.items()})
+                    self._ds.sync()  # the end of define mode: the variables are created
+                except BaseException:
+                    self.abort()
+                    raise
+            finally:
+                netCDF4.set_chunk_cache(*cache)
 
-    def _create(self, v: VariableSpec, sizes: Mapping[str, int]) -> None:
-        shape = [sizes[d] for d in v.dims]
+    def _create(self, v: VariableSpec, sizes: Mapping[str, int | None]) -> None:
+        # an unlimited dimension (None) is chunked as if ROW_CHUNK long
+        shape = [ROW_CHUNK if (n := sizes[d]) is None else n for d in v.dims]
         kwargs: dict[str, Any] = {"fill_value": False}
         if v.dtype != "str" and all(shape):
             chunks = [
@@ -192,10 +213,14 @@ class NetCDFWriter:
         if v.dtype == "str":
             kwargs.pop("fill_value")
         var = self._ds.createVariable(v.name, dtype, v.dims, **kwargs)
+        if self.complevel and not (v.dims[0] == "case" and len(v.dims) > 1):
+            # Rows along event or a 1-D case axis come in parts of a chunk: keep a cache.
+            var.set_var_chunk_cache(size=VECTOR_CACHE, nelems=VECTOR_CACHE_SLOTS)
         attrs = dict(v.attrs)
         if "flag_values" in attrs:
             attrs["flag_values"] = np.asarray(attrs["flag_values"], dtype=np.dtype(v.dtype))
         var.setncatts({k: _attr(val) for k, val in attrs.items()})
+        self._digests[v.name] = _RunningDigest(var)
 
     def write(self, name: str, values: np.ndarray, index: object = slice(None)) -> None:
         """Write ``values`` at ``index`` (a slice, an int, or a tuple of them)."""
@@ -205,30 +230,75 @@ class NetCDFWriter:
                 values = np.asarray(values, dtype=object)
                 if isinstance(index, int | np.integer):
                     var[int(index)] = str(values[()])
+                    self._digests.pop(name, None)
                     return
             var[index] = values
+        self._track(name, values, index)  # outside the lock: other threads may write
+
+    def append(self, name: str, values: np.ndarray) -> None:
+        """Extend a variable along its unlimited first dimension by ``values``' rows."""
+        start = self._rows_written(name)
+        if len(values):
+            with LOCK, _writes(self.path):
+                self._ds.variables[name][start : start + len(values)] = values
+        self._track(name, values, slice(start, start + len(values)))
+
+    def _rows_written(self, name: str) -> int:
+        digest = self._digests.get(name)
+        if digest is not None:
+            return digest.rows
+        with LOCK:
+            return len(self._ds.variables[name])
+
+    def _track(self, name: str, values: np.ndarray, index: object) -> None:
+        """Extend the variable's running checksum by ``values`` if they continue its rows, or
+        give it up (the variable is then read back at :meth:`commit`)."""
+        digest = self._digests.get(name)
+        if digest is None:
+            return
+        # a slice from the next row on (a whole variable: from row 0) continues it
+        if isinstance(index, slice) and index.step in (None, 1):
+            start = index.start or 0
+        else:
+            start = -1
+        if start != digest.rows or not digest.update(values):
+            del self._digests[name]
 
     def write_rows(self, name: str, positions: np.ndarray, values: np.ndarray) -> None:
         """Row ``k`` of ``values`` to row ``positions[k]`` along the first dimension; runs of
         consecutive positions are written in one call."""
         positions = np.asarray(positions, dtype=np.int64)
         string = self.variables[name].dtype == "str"
-        with LOCK, _writes(self.path):
-            var = self._ds.variables[name]
-            for start, stop in runs(positions):
-                p0 = int(positions[start])
-                block = values[start:stop]
-                if string:
-                    block = np.array([str(v) for v in block], dtype=object)
-                var[p0 : p0 + (stop - start)] = block
+        for start, stop in runs(positions):
+            p0 = int(positions[start])
+            block = values[start:stop]
+            if string:
+                block = np.array([str(v) for v in block], dtype=object)
+            self.write(name, block, slice(p0, p0 + (stop - start)))
+
+    def checksums(self) -> dict[str, str]:
+        """Every variable's checksum (:func:`variable_digest`): the running one of a variable
+        written whole in row order, else read back from the file; and the attributes'."""
+        out = {}
+        for name, var in self._ds.variables.items():
+            digest = self._digests.get(name)
+            if digest is not None and digest.rows == (var.shape[0] if var.shape else 0):
+                out[name] = digest.hexdigest()
+            else:
+                out[name] = variable_digest(var)
+        h = hashlib.sha256()
+        _attributes_digest(self._ds, h)
+        out[ATTRIBUTES_ENTRY] = h.hexdigest()
+        return out
 
     def commit(self) -> Path:
         """Checksum every variable and the attributes (:data:`CHECKSUM_ATTR`), close, flush
         to disk and rename into place; returns the final path."""
         with LOCK, _writes(self.path):
             self._ds.set_auto_mask(False)
-            self._ds.setncattr(CHECKSUM_ATTR, json.dumps(checksums(self._ds), sort_keys=True))
+            self._ds.setncattr(CHECKSUM_ATTR, json.dumps(self.checksums(), sort_keys=True))
             self._ds.close()
+        with _writes(self.path):
             with open(self.tmp, "rb") as f:
                 os.fsync(f.fileno())
             os.replace(self.tmp, self.path)
@@ -358,12 +428,40 @@ def _values_bytes(values: np.ndarray) -> bytes:
     return np.ascontiguousarray(values).tobytes()
 
 
-def variable_digest(var) -> str:
-    """SHA-256 of a netCDF4 variable: name, dimensions, type, attributes and values (read a
-    block of rows at a time, so memory stays bounded)."""
+def _header_digest(var):
+    """A variable's checksum so far: its name, dimensions, type and attributes."""
     h = hashlib.sha256()
     h.update(f"{var.name}|{var.dimensions}|{var.dtype}|".encode())
     _attributes_digest(var, h)
+    return h
+
+
+class _RunningDigest:
+    """:func:`variable_digest` of a variable computed from the values as they are written,
+    in row order: the same bytes the file gives back, without reading them."""
+
+    def __init__(self, var) -> None:
+        self.hash = _header_digest(var)
+        self.dtype = None if var.dtype is str else np.dtype(var.dtype)
+        self.rows = 0  # rows hashed so far
+
+    def update(self, values) -> bool:
+        """Hash the next rows; False if they cannot be hashed as the file will read them."""
+        a = np.asarray(values, dtype=object if self.dtype is None else self.dtype)
+        if a.ndim == 0:
+            return False
+        self.hash.update(_values_bytes(a))
+        self.rows += a.shape[0]
+        return True
+
+    def hexdigest(self) -> str:
+        return self.hash.hexdigest()
+
+
+def variable_digest(var) -> str:
+    """SHA-256 of a netCDF4 variable: name, dimensions, type, attributes and values (read a
+    block of rows at a time, so memory stays bounded)."""
+    h = _header_digest(var)
     shape = var.shape
     if not shape or shape[0] == 0:
         h.update(_values_bytes(np.asarray(var[...])))
@@ -434,9 +532,9 @@ def read_index(
             for name in (ids, "event_count"):
                 if name not in ds.variables:
                     raise ArchiveFileError(f"{path}: no {name} variable", key=str(path))
-            case_ids = np.asarray(ds.variables[ids][:], dtype=object)
+            values = np.asarray(ds.variables[ids][:], dtype=object)
             counts = np.asarray(ds.variables["event_count"][:], dtype=np.int64)
-            return case_ids, counts, {k: ds.getncattr(k) for k in ds.ncattrs()}
+            return values, counts, {k: ds.getncattr(k) for k in ds.ncattrs()}
     except OSError as exc:
         raise ArchiveFileError(f"{path}: cannot read ({exc})", key=str(path)) from None
 

@@ -15,7 +15,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg
 
 from campipe.model.coordinates import TRANSLATIONS, translations
 from campipe.model.elements import elements
@@ -60,6 +59,8 @@ def normal_modes(
     ``translation`` (n,) bool says which coordinates are translations (by default the
     thesis's for a 7×7 problem, else all).
     """
+    import scipy.linalg  # 0.1 s to import: not for --help, nor a finished study
+
     lam, phi = scipy.linalg.eigh(stiffness, mass)
     omega = np.sqrt(np.clip(lam, 0.0, None))
     n = mass.shape[0]

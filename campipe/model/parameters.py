@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import functools
 import math
 import numbers
 from collections.abc import Mapping
@@ -447,7 +448,13 @@ def mode_damping_ratios(
 DEFAULTS: dict[str, object] = {
     name: p.default for name, p in PARAMETERS.items() if p.default is not None
 }
-_DEFAULT_VALUES = {name: parse_parameter(name, v) for name, v in DEFAULTS.items()}
+
+
+@functools.cache
+def _default_values() -> dict[str, object]:
+    """DEFAULTS in SI, parsed on first use (parsing loads pint, which `campipe --help` need
+    not)."""
+    return {name: parse_parameter(name, v) for name, v in DEFAULTS.items()}
 
 
 def defining_values(train: ValveTrain) -> dict[str, object]:
@@ -457,6 +464,7 @@ def defining_values(train: ValveTrain) -> dict[str, object]:
     out = {}
     for name in PARAMETERS:
         value = getattr(train, name)
-        if name not in _DEFAULT_VALUES or value != _DEFAULT_VALUES[name]:
+        defaults = _default_values()
+        if name not in defaults or value != defaults[name]:
             out[name] = value
     return out

@@ -4,10 +4,17 @@ Every profile — harmonic, polydyne, measured table, with any defects — is a
 :class:`Profile`: pieces of a degree-7 polynomial in the local angle plus sin θ and cos θ
 terms, over one turn, SI units (rad, m). :func:`pack` turns a batch of them into padded
 arrays for :func:`evaluate_packed`, the compiled evaluator the integrator calls every step.
+
+The compiled part (:mod:`~campipe.profiles.packed`, numba) loads when its names are first
+used: a spec is checked without it.
 """
 
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING
+
 from campipe.profiles.defects import bump, flat
-from campipe.profiles.packed import PackedProfiles, evaluate_packed, pack
 from campipe.profiles.pieces import (
     Profile,
     evaluate,
@@ -24,6 +31,11 @@ from campipe.profiles.shapes import (
     polydyne,
     table,
 )
+
+if TYPE_CHECKING:
+    from campipe.profiles.packed import PackedProfiles, evaluate_packed, pack
+
+_PACKED = ("PackedProfiles", "evaluate_packed", "pack")
 
 __all__ = [
     "POLYDYNE_POLYNOMIALS",
@@ -44,3 +56,11 @@ __all__ = [
     "split",
     "table",
 ]
+
+
+def __getattr__(name: str) -> object:
+    if name not in _PACKED:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module("campipe.profiles.packed"), name)
+    globals()[name] = value
+    return value

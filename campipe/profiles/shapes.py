@@ -12,7 +12,6 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 from numpy.polynomial import Polynomial
-from scipy.interpolate import CubicSpline
 
 from campipe.profiles.pieces import (
     BREAK_TOL,
@@ -275,6 +274,8 @@ def table(angles: npt.ArrayLike, lifts: npt.ArrayLike) -> Profile:
         raise ValueError(f"lift table angles must lie within [0, 2π) rad, got {a[0]!r} … {a[-1]!r}")
     if not np.all(np.diff(a) > 0.0):
         raise ValueError("lift table angles must be strictly increasing")
+
+    from scipy.interpolate import CubicSpline  # 0.15 s to import: only for a lift table
 
     spline = CubicSpline(np.append(a, a[0] + TWO_PI), np.append(y, y[0]), bc_type="periodic")
     poly = np.zeros((a.size, N_COEFFS))

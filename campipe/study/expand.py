@@ -28,7 +28,7 @@ import numpy as np
 
 from campipe.constants import INCH
 from campipe.engine import Case, RunSettings, RunSettingsError, resolve_integrator
-from campipe.engine.batch import check_stability
+from campipe.engine.settings import check_stability
 from campipe.errors import did_you_mean, excerpt
 from campipe.io.lift_table import LiftTableError, read_lift_table, table_digest
 from campipe.model import (

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from campipe.engine import INTEGRATORS, MEMBER_LOADS, RunSettings
-from campipe.engine import batch as _engine_batch
+from campipe.engine import settings as _engine_settings
 from campipe.errors import CampipeError, did_you_mean, excerpt
 from campipe.model import PARAMETERS, PRESETS, ModelParameterError, parse_parameter
 from campipe.profiles import RAMP_SHAPES
@@ -261,7 +261,7 @@ _RUN_METADATA: dict[str, Field] = {
             "run.fidelity",
             "choice",
             "full: every mode; reduced: the modes up to mode_cutoff (modal-exact only)",
-            choices=tuple(getattr(_engine_batch, "FIDELITIES", ("full",))),
+            choices=tuple(getattr(_engine_settings, "FIDELITIES", ("full",))),
             archive_name="fidelity",
         ),
         Field(
@@ -281,7 +281,7 @@ _RUN_METADATA: dict[str, Field] = {
             "periodic: on the periodic steady state of configuration I (where it does not "
             "hold at θ = 0, from the latest angle where it does, unrecorded up to θ = 0); "
             "quasi-static: the thesis's start at θ = 0 (Appendix B, step 1), a transient",
-            choices=tuple(getattr(_engine_batch, "STARTS", ("periodic",))),
+            choices=tuple(getattr(_engine_settings, "STARTS", ("periodic",))),
             archive_name="start",
         ),
         Field(

@@ -3,13 +3,18 @@ built from the declarations in :mod:`campipe.study.variables`."""
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
+from importlib import metadata
+from pathlib import Path
 
 import numpy as np
 
+import campipe
 from campipe.io.archive import VariableSpec
+from campipe.io.spec_yaml import SpecFileError, parse_spec_text
 from campipe.study.expand import ResolvedCase, Study
 from campipe.study.results import BatchData, numerics_fingerprint
 from campipe.study.variables import (
@@ -28,6 +33,11 @@ from campipe.study.variables import (
 #: 3: the case ids are the coordinate ``case`` of the ``case`` dimension (was ``case_id``);
 #: no seat is ``seat = -inf`` (was NaN).
 LAYOUT_VERSION = "campipe-archive-3"
+
+
+#: The variable along ``case`` holding each case's id, in batch files and the archive: named
+#: here only.
+CASE_ID = "case"
 
 
 def record_text(record: Iterable[str]) -> str:
@@ -87,11 +97,11 @@ def batch_layout(data: BatchData, record: tuple[str, ...]):
     if "q" in record:
         sizes["dof"] = len(DOF_NAMES)
     specs = [_spec(n, VARIABLES[n]) for n in _axes(record)]
-    specs.append(_spec("case", VARIABLES["case"]))
+    specs.append(_spec(CASE_ID, VARIABLES[CASE_ID]))
     specs += data_specs(record, "")
     arrays = {
         **axis_arrays(data.cam_angle, data.n_revolutions),
-        "case": data.case_ids,
+        CASE_ID: data.case_ids,
         **data.arrays,
     }
     attrs = {
@@ -106,7 +116,7 @@ def batch_layout(data: BatchData, record: tuple[str, ...]):
 def coordinate_values(cases: list[ResolvedCase], study: Study) -> dict[str, np.ndarray]:
     """Per-case coordinate arrays in archive units, in study order: ``case`` (the ids), then
     each case coordinate (no seat as :data:`~campipe.study.variables.NO_SEAT`)."""
-    out: dict[str, np.ndarray] = {"case": np.array([c.case_id for c in cases], dtype=object)}
+    out: dict[str, np.ndarray] = {CASE_ID: np.array([c.case_id for c in cases], dtype=object)}
     for key, (name, var, factor) in case_coordinates(study.varied).items():
         raw = [c.values[key] for c in cases]
         if var.dtype == "str":
@@ -132,12 +142,13 @@ def coordinate_values(cases: list[ResolvedCase], study: Study) -> dict[str, np.n
     return out
 
 
-def archive_layout(study: Study, n_events: int, cam_angle: np.ndarray, n_revolutions: int):
+def archive_layout(study: Study, n_events: int | None, cam_angle: np.ndarray, n_revolutions: int):
     """(sizes, variables, static arrays) of the study's archive; the static arrays are the
-    axes and the per-case coordinates, the rest streams in from batch files."""
+    axes and the per-case coordinates, the rest streams in from batch files. ``n_events``
+    None makes ``event`` unlimited: the events are appended as the cases are written."""
     coords = case_coordinates(study.varied)
     coord_names = [name for name, _, _ in coords.values()]
-    sizes = {
+    sizes: dict[str, int | None] = {
         "case": len(study.cases),
         "cam_angle": cam_angle.size,
         "revolution": n_revolutions,
@@ -146,7 +157,7 @@ def archive_layout(study: Study, n_events: int, cam_angle: np.ndarray, n_revolut
     if "q" in study.record:
         sizes["dof"] = len(DOF_NAMES)
     specs = [_spec(n, VARIABLES[n]) for n in _axes(study.record)]
-    specs.append(_spec("case", VARIABLES["case"]))
+    specs.append(_spec(CASE_ID, VARIABLES[CASE_ID]))
     values = coordinate_values(study.cases, study)
     for _key, (name, var, _) in coords.items():
         if "mode" in var.dims:
@@ -186,7 +197,82 @@ def study_attrs(study: Study) -> dict[str, object]:
         "campipe_record": record_text(study.record),
         "campipe_numerics": numerics_fingerprint(),
         "study_key": study_key(study),
+        "spec_key": spec_key(spec.text, spec.overrides, spec.directory),
     }
+
+
+#: The modules that turn a spec's text into cases and their ids (beside the engine's, which
+#: :func:`numerics_fingerprint` covers): a spec read by the same code gives the same study.
+SPEC_SOURCES = (
+    "study/spec.py",
+    "study/fields.py",
+    "study/expand.py",
+    "study/limits.py",
+    "study/layout.py",
+    "study/variables.py",
+    "study/where.py",
+    "io/spec_yaml.py",
+    "io/lift_table.py",
+    "units.py",
+    "errors.py",
+)
+
+
+@functools.cache
+def _spec_code() -> str:
+    root = Path(campipe.__file__).parent
+    h = hashlib.sha256()
+    for name in SPEC_SOURCES:
+        h.update(name.encode() + b"\0" + (root / name).read_bytes())
+    try:
+        pint = metadata.version("pint")  # unit conversions
+    except metadata.PackageNotFoundError:
+        pint = "?"
+    return f"{h.hexdigest()[:16]} pint=={pint}"
+
+
+def referenced_files(raw: object, directory: Path) -> dict[str, Path]:
+    """Files a spec's values name (lift tables), relative to its folder: every string value
+    that is the path of a regular file, as written → its path, in order."""
+    found: dict[str, Path] = {}
+
+    def walk(v: object) -> None:
+        if isinstance(v, dict):
+            for item in v.values():
+                walk(item)
+        elif isinstance(v, list | tuple):
+            for item in v:
+                walk(item)
+        elif isinstance(v, str) and 0 < len(v) < 4096 and "\n" not in v:
+            path = directory / v
+            try:
+                if path.is_file():
+                    found.setdefault(v, path)
+            except (OSError, ValueError):
+                pass
+
+    walk(raw)
+    return found
+
+
+def spec_key(text: str, overrides: Mapping[str, object], directory: Path) -> str:
+    """Equal for two runs that read the same spec text, overrides and referenced files
+    (lift tables) with the same campipe: they expand to the same cases, so an archive that
+    records this key (``spec_key``) and verifies is up to date without the spec being checked
+    or expanded again (:func:`campipe.study.execute.finished`)."""
+    h = hashlib.sha256()
+    for part in (LAYOUT_VERSION, numerics_fingerprint(), _spec_code(), text):
+        h.update(part.encode("utf-8", "surrogatepass") + b"\0")
+    h.update(json.dumps(dict(overrides), sort_keys=True, default=str).encode() + b"\0")
+    raw: object = None
+    try:
+        raw = parse_spec_text(text, "spec")
+    except SpecFileError:
+        pass
+    for name, path in referenced_files([raw, dict(overrides)], directory).items():
+        h.update(name.encode("utf-8", "surrogatepass") + b"\0")
+        h.update(hashlib.sha256(path.read_bytes()).digest())
+    return h.hexdigest()[:16]
 
 
 def study_key(study: Study) -> str:

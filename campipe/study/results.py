@@ -13,14 +13,19 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from importlib import metadata
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 import campipe
-from campipe.engine import MEMBER_LOADS, BatchResult, member_loads, run_batch
+from campipe import engine
+from campipe.engine.loads import MEMBER_LOADS, member_loads
 from campipe.study.expand import ResolvedCase
 from campipe.study.variables import PER_REVOLUTION_METRICS, data_variables
 from campipe.vocabulary import EV_FROM, EV_IMPULSE, EV_KIND, EV_TIME, EV_TO, EV_VELOCITY
+
+if TYPE_CHECKING:
+    from campipe.engine import BatchResult
 
 #: Where the numbers come from: the source of these packages and modules enters
 #: :func:`numerics_fingerprint`.
@@ -99,6 +104,12 @@ class BatchData:
 def cam_angle_degrees(cam_angle: np.ndarray) -> np.ndarray:
     """Output angles [rad] → [degree], rounded to 1e-9 degree so 1° steps read as integers."""
     return np.round(np.degrees(cam_angle), 9)
+
+
+def run_batch(cases, settings, **options) -> BatchResult:
+    """:func:`campipe.engine.run_batch`, looked up when a batch first runs: the compiled
+    kernels load then, not when a study is planned or found up to date."""
+    return engine.run_batch(cases, settings, **options)
 
 
 def compute_batch(plan: BatchPlan) -> BatchData:

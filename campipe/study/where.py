@@ -49,7 +49,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from campipe.errors import CampipeError, did_you_mean, excerpt
-from campipe.units import Q_, QuantityError, convert, is_unit, names_an_angle, read_quantity
+from campipe.units import QuantityError, convert, is_unit, names_an_angle, read_quantity, registry
 
 MAX_WHERE_LENGTH = 2000
 #: Relative tolerance of ``==`` between numbers (after converting a quantity).
@@ -529,7 +529,8 @@ def _convert(q: Quantity, units: str, column: _Column | None) -> float:
         raise QueryError.at(
             "--where", f"{q.text} has units, but {name} has none; compare it with a bare number"
         )
-    stored, given = Q_(1.0, units), Q_(1.0, q.units)
+    ureg = registry()
+    stored, given = ureg.Quantity(1.0, units), ureg.Quantity(1.0, q.units)
     if names_an_angle(stored) and not names_an_angle(given):
         raise QueryError.at(
             "--where",

@@ -1,0 +1,507 @@
+"""A study as fast as its engine: ``campipe study`` end to end against the engine.
+
+Everything a user waits for is timed as the user runs it, in a fresh ``python -m campipe``
+process (imports, the compiled kernels' loading, the spec, the batches, the archive), best of
+a few runs; the engine alone is timed on the same cases and the same number of worker
+threads, in this process with its kernels loaded (the engine's best: one batch per worker).
+
+- :func:`latencies`: ``campipe --help``, a one-case study, a finished study run again.
+- :func:`sizes`: 1 … 10000 cases: end-to-end wall, in-process study time, engine time, their
+  ratio, archive bytes per case.
+- :func:`ceiling`: the client's side of a cluster whose workers store their batches: the
+  archive assembled from stored batch files (cases per second), against what compression
+  and the disk allow.
+- :func:`cluster`: a study on 1, 2, 4 local dask worker processes against the engine's
+  throughput on the same workers.
+- :func:`estimates`: each bundled study (``studies/*.yaml``): validate's run-time estimate
+  beside the measured run.
+- :func:`validate_at_scale`: ``campipe validate`` of a million-case spec, wall and memory.
+
+Specs and archives are written under the folder given (and nowhere else).
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+import math
+import os
+import shutil
+import subprocess
+import sys
+import time
+import zlib
+from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from campipe.bench.scaling import scaling_spec
+from campipe.engine import Case, RunSettings, run_batch
+from campipe.study import load_study
+from campipe.study.execute import (
+    assemble,
+    default_workers,
+    find_results,
+    parts_directory,
+    run_study,
+)
+from campipe.study.expand import Study
+from campipe.study.variables import data_variables
+
+#: Case counts of the study section, and of --quick.
+COUNTS = (1, 32, 1000, 10000)
+QUICK_COUNTS = (1, 32, 256)
+#: The size the study-layer goal is judged at: wall ≤ GOAL_FACTOR × engine + GOAL_OFFSET.
+GOAL_CASES = 1000
+GOAL_FACTOR = 1.5
+GOAL_OFFSET = 0.5  # [s]
+#: Start-up goals [s]: --help, a one-case study (warm), a finished study run again.
+GOAL_HELP = 0.3
+GOAL_ONE_CASE = 0.8
+GOAL_FINISHED = 0.5
+#: First run: the quickstart from a fresh install [s] (measured outside the bench: it needs a
+#: fresh environment; see the README).
+GOAL_FIRST_RUN = 10.0
+#: validate at scale: cases, wall [s] and peak memory [bytes].
+VALIDATE_CASES = 1_000_000
+GOAL_VALIDATE_SECONDS = 3.0
+GOAL_VALIDATE_BYTES = 300e6
+#: Cases of the cluster runs (--quick: fewer), and the worker processes tried.
+CLUSTER_CASES = 4000
+QUICK_CLUSTER_CASES = 256
+CLUSTER_WORKERS = (1, 2, 4)
+
+
+def _campipe(args: Sequence[str], cwd: Path) -> tuple[float, subprocess.CompletedProcess]:
+    """Wall time of ``python -m campipe ARGS`` in a fresh process, as a user runs it."""
+    t0 = time.perf_counter()
+    out = subprocess.run(
+        [sys.executable, "-m", "campipe", *args], cwd=cwd, capture_output=True, text=True
+    )
+    seconds = time.perf_counter() - t0
+    if out.returncode != 0:
+        raise RuntimeError(f"campipe {' '.join(args)} failed: {out.stderr.strip()[-500:]}")
+    return seconds, out
+
+
+def _best(run: Callable[[], float], repeats: int) -> float:
+    return min(run() for _ in range(max(repeats, 1)))
+
+
+def write_spec(directory: Path, n: int) -> Path:
+    """The scaling spec of ``n`` cases (``campipe.bench.scaling.scaling_spec``) in
+    ``directory``."""
+    path = directory / f"study-{n}.yaml"
+    path.write_text(yaml.safe_dump(scaling_spec(n), sort_keys=False))
+    return path
+
+
+def engine_seconds(study: Study, workers: int, repeats: int = 3) -> float:
+    """The engine alone on the study's cases: one batch per worker (per run settings), on
+    ``workers`` threads, sampling what the study stores; best of ``repeats``."""
+    wanted = data_variables(study.record)
+    full_state = "q" in wanted or any(n in wanted for n in ("pushrod_force", "stem_force"))
+    groups: dict[RunSettings, list[Case]] = {}
+    for c in study.cases:
+        groups.setdefault(c.settings, []).append(c.case)
+    jobs = []
+    for settings, cases in groups.items():
+        size = -(-len(cases) // workers)
+        jobs += [(cases[i : i + size], settings) for i in range(0, len(cases), size)]
+
+    def once() -> float:
+        t0 = time.perf_counter()
+        with ThreadPoolExecutor(workers) as pool:
+            list(
+                pool.map(
+                    lambda job: run_batch(
+                        job[0], job[1], full_state=full_state, on_failure="record"
+                    ),
+                    jobs,
+                )
+            )
+        return time.perf_counter() - t0
+
+    run_batch(jobs[0][0][:1], jobs[0][1], full_state=full_state, on_failure="record")
+    return _best(once, repeats)
+
+
+def latencies(directory: Path, workers: int, repeats: int = 5) -> dict:
+    """``campipe --help``, a one-case study (a new archive each time) and a finished
+    1000-case study run again, each in a fresh process, best of ``repeats``."""
+    one = write_spec(directory, 1)
+    _campipe(["study", one.name, "--no-progress"], directory)  # kernels compiled and cached
+
+    def help_once() -> float:
+        return _campipe(["--help"], directory)[0]
+
+    def one_case() -> float:
+        (directory / "bench-scaling-1.nc").unlink(missing_ok=True)
+        return _campipe(["study", one.name, "--no-progress", "--workers", str(workers)], directory)[
+            0
+        ]
+
+    finished = write_spec(directory, GOAL_CASES)
+    archive = directory / f"bench-scaling-{GOAL_CASES}.nc"
+    if not archive.exists():
+        _campipe(["study", finished.name, "--no-progress", "--workers", str(workers)], directory)
+
+    def finished_once() -> float:
+        seconds, out = _campipe(["study", finished.name, "--no-progress"], directory)
+        assert "up to date" in out.stderr, out.stderr
+        return seconds
+
+    return {
+        "help": _best(help_once, repeats),
+        "one_case": _best(one_case, repeats),
+        "finished": _best(finished_once, repeats),
+        "finished_cases": GOAL_CASES,
+        "repeats": repeats,
+    }
+
+
+def _cli_study(spec: Path, archive: Path, workers: int) -> float:
+    archive.unlink(missing_ok=True)
+    args = ["study", spec.name, "--no-progress", "--workers", str(workers)]
+    return _campipe(args, spec.parent)[0]
+
+
+def _in_process(study: Study, archive: Path, workers: int) -> float:
+    archive.unlink(missing_ok=True)
+    t0 = time.perf_counter()
+    run_study(study, archive, scheduler="threads", workers=workers)
+    return time.perf_counter() - t0
+
+
+def sizes(directory: Path, counts: Sequence[int], workers: int, repeats: int = 3) -> list[dict]:
+    """For each count: ``campipe study`` end to end (best of ``repeats``; one run above 1000
+    cases), the study in this process (``run_study``, process start left out), the engine
+    alone, and the archive's size."""
+    out = []
+    for n in counts:
+        spec = write_spec(directory, n)
+        study = load_study(spec)
+        archive = directory / f"bench-scaling-{n}.nc"
+        r = repeats if n <= GOAL_CASES else 1
+        wall = _best(functools.partial(_cli_study, spec, archive, workers), r)
+        study_seconds = _best(functools.partial(_in_process, study, archive, workers), r)
+        engine = engine_seconds(study, workers, r)
+        out.append(
+            {
+                "n_cases": len(study.cases),
+                "workers": workers,
+                "wall": wall,
+                "study": study_seconds,
+                "engine": engine,
+                "ratio": wall / engine,
+                "archive_bytes": archive.stat().st_size,
+                "bytes_per_case": archive.stat().st_size / len(study.cases),
+                "goal": GOAL_FACTOR * engine + GOAL_OFFSET,
+            }
+        )
+    return out
+
+
+def _raw_histories(study: Study, found: dict) -> list[np.ndarray]:
+    """The histories of a few stored batches, as the archive's assembly reads them."""
+    import netCDF4
+
+    names = [n for n, v in data_variables(study.record).items() if "cam_angle" in v.dims]
+    arrays = []
+    for path in list(dict.fromkeys(p for p, _, _ in found.values()))[:4]:
+        with netCDF4.Dataset(path) as ds:
+            ds.set_auto_mask(False)
+            arrays += [np.asarray(ds[n][:]) for n in names]
+    return arrays
+
+
+def compression_limit(arrays: list[np.ndarray], level: int, cases: int) -> dict:
+    """What the archive's compression and this disk allow, in raw bytes per second: zlib at
+    the archive's ``level`` with HDF5's byte shuffle, on one core, chunk by chunk of
+    ``cases`` cases; and writing the same bytes uncompressed to a file and flushing it."""
+    raw = sum(a.nbytes for a in arrays)
+    t0 = time.perf_counter()
+    packed = 0
+    for a in arrays:
+        for i in range(0, a.shape[0], cases):
+            chunk = np.ascontiguousarray(a[i : i + cases])
+            shuffled = chunk.view(np.uint8).reshape(-1, chunk.itemsize).T.tobytes()
+            packed += len(zlib.compress(shuffled, level))
+    compress = time.perf_counter() - t0
+    blob = b"".join(np.ascontiguousarray(a).tobytes() for a in arrays)
+    scratch = Path(os.environ.get("TMPDIR", "/tmp")) / f".campipe-bench-{os.getpid()}"
+    t0 = time.perf_counter()
+    with open(scratch, "wb") as f:
+        f.write(blob)
+        f.flush()
+        os.fsync(f.fileno())
+    disk = time.perf_counter() - t0
+    scratch.unlink(missing_ok=True)
+    return {
+        "raw_bytes": raw,
+        "compressed_bytes": packed,
+        "compress_rate": raw / compress,
+        "disk_rate": raw / disk,
+    }
+
+
+def ceiling(directory: Path, n: int, workers: int) -> dict:
+    """The client's ceiling on a cluster whose workers store their own batches: the archive
+    assembled from ``n`` cases' stored batch files (read, compressed, checksummed, written),
+    in cases per second, against the compression and disk limits."""
+    spec = write_spec(directory, n)
+    study = load_study(spec)
+    archive = directory / f"ceiling-{n}.nc"
+    run_study(study, archive, scheduler="threads", workers=workers, keep_parts=True)
+    found, _ = find_results(study, archive, archive_usable=False)
+    arrays = _raw_histories(study, found)
+    best = math.inf
+    for _ in range(2):
+        target = directory / f"ceiling-{n}-assembled.nc"
+        target.unlink(missing_ok=True)
+        t0 = time.perf_counter()
+        assemble(study, target, found)
+        best = min(best, time.perf_counter() - t0)
+    names = [k for k, v in data_variables(study.record).items() if "cam_angle" in v.dims]
+    raw_per_case = sum(
+        np.dtype(data_variables(study.record)[k].dtype).itemsize for k in names
+    ) * int(arrays[0].shape[1])
+    import netCDF4
+
+    with netCDF4.Dataset(target) as ds:  # the archive's own compression and chunks
+        var = ds["valve_lift"]
+        level, cases = var.filters()["complevel"], var.chunking()[0]
+    limit = compression_limit(arrays, level, cases)
+    shutil.rmtree(parts_directory(archive), ignore_errors=True)
+    return {
+        "n_cases": n,
+        "seconds": best,
+        "cases_per_second": n / best,
+        "raw_bytes_per_case": raw_per_case,
+        "write_rate": n * raw_per_case / best,
+        **limit,
+    }
+
+
+def cluster(directory: Path, n: int, worker_counts: Sequence[int] = CLUSTER_WORKERS) -> list[dict]:
+    """A study of ``n`` cases on a local dask cluster of 1, 2, 4 single-threaded worker
+    processes (they write their batch files; this process assembles), against the engine
+    alone on the same workers, in cases per second (cluster start-up left out)."""
+    from distributed import Client, LocalCluster
+
+    spec = write_spec(directory, n)
+    study = load_study(spec)
+    groups: dict[RunSettings, list[Case]] = {}
+    for c in study.cases:
+        groups.setdefault(c.settings, []).append(c.case)
+    out = []
+    for k in worker_counts:
+        with (
+            LocalCluster(
+                n_workers=k,
+                threads_per_worker=1,
+                processes=True,
+                dashboard_address=":0",
+                silence_logs=logging.ERROR,
+            ) as lc,
+            Client(lc) as client,
+        ):
+            jobs = []
+            size = max(1, -(-n // (4 * k)))
+            for settings, cases in groups.items():
+                jobs += [(cases[i : i + size], settings) for i in range(0, len(cases), size)]
+            client.gather(client.map(_engine_job, jobs[:k], pure=False))  # kernels loaded
+            t0 = time.perf_counter()
+            client.gather(client.map(_engine_job, jobs, pure=False))
+            engine = time.perf_counter() - t0
+            archive = directory / f"cluster-{n}-{k}.nc"
+            archive.unlink(missing_ok=True)
+            t0 = time.perf_counter()
+            run_study(study, archive, scheduler=lc.scheduler_address, batch_size=size)
+            wall = time.perf_counter() - t0
+        out.append(
+            {
+                "workers": k,
+                "n_cases": n,
+                "study_seconds": wall,
+                "engine_seconds": engine,
+                "study_rate": n / wall,
+                "engine_rate": n / engine,
+            }
+        )
+    return out
+
+
+def _engine_job(job) -> int:
+    cases, settings = job
+    run_batch(cases, settings, full_state=False, on_failure="record")
+    return len(cases)
+
+
+def first_run(studies: Path, directory: Path) -> dict:
+    """The quickstart as on a fresh install: numba's cache and the per-user caches (pint's
+    definitions) empty, in a fresh process. Wall time, the seconds before its first line on
+    the terminal (a compile notice, or nothing until the end), and that line."""
+    import tempfile
+
+    spec = directory / "quickstart.yaml"
+    shutil.copy(studies / "quickstart.yaml", spec)
+    (directory / "quickstart.nc").unlink(missing_ok=True)
+    with tempfile.TemporaryDirectory(prefix="campipe-fresh-") as empty:
+        env = {**os.environ, "NUMBA_CACHE_DIR": f"{empty}/numba", "XDG_CACHE_HOME": empty}
+        t0 = time.perf_counter()
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "campipe", "study", spec.name],
+            cwd=directory,
+            env=env,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        assert proc.stderr is not None
+        first = proc.stderr.readline()
+        first_seconds = time.perf_counter() - t0
+        rest = proc.stderr.read()
+        proc.wait()
+        seconds = time.perf_counter() - t0
+    if proc.returncode != 0:
+        raise RuntimeError(f"the quickstart failed: {(first + rest).strip()[-500:]}")
+    return {
+        "seconds": seconds,
+        "first_line_seconds": first_seconds,
+        "first_line": first.strip(),
+        "notice": "compiling" in first,
+    }
+
+
+def validate_estimate(study: Study, workers: int) -> float:
+    """``campipe validate``'s run-time estimate [s] of a study on ``workers`` workers: the
+    one place the bench asks for it."""
+    from campipe.study.estimate import estimate
+
+    return estimate(study, workers).seconds
+
+
+def estimates(studies: Path, directory: Path, workers: int) -> list[dict]:
+    """Each bundled study: validate's estimate beside the study's measured run
+    (``run_study`` in this process, kernels loaded, a new archive)."""
+    out = []
+    for spec in sorted(studies.glob("*.yaml")):
+        study = load_study(spec)
+        estimate = validate_estimate(study, workers)
+        archive = directory / f"estimate-{spec.stem}.nc"
+        archive.unlink(missing_ok=True)
+        t0 = time.perf_counter()
+        run_study(study, archive, scheduler="threads", workers=workers)
+        measured = time.perf_counter() - t0
+        out.append(
+            {
+                "study": spec.name,
+                "cases": len(study.cases),
+                "estimate": estimate,
+                "measured": measured,
+            }
+        )
+    return out
+
+
+def validate_at_scale(directory: Path, n: int = VALIDATE_CASES) -> dict:
+    """``campipe validate --no-estimate`` of an ``n``-case spec (speed × spring preload) in
+    a fresh process: wall time and the process's peak memory."""
+    side = int(round(math.sqrt(n)))
+    spec = directory / f"validate-{n}.yaml"
+    spec.write_text(
+        yaml.safe_dump(
+            {
+                "name": f"validate-{n}",
+                "profile": {"kind": "harmonic", "lift": "1 in"},
+                "run": {"revolutions": 2, "output_every": "10 deg"},
+                "sweep": {
+                    "speed": {"from": "1000 rpm", "to": "20000 rpm", "num": side},
+                    "model.spring_preload": {"from": "100 lbf", "to": "200 lbf", "num": n // side},
+                },
+            },
+            sort_keys=False,
+        )
+    )
+    code = (
+        "import resource, runpy, sys\n"
+        f"sys.argv = ['campipe', 'validate', {spec.name!r}, '--no-estimate', "
+        f"'--max-cases', '{n}', '--max-archive-gb', '1000']\n"
+        "try:\n"
+        "    runpy.run_module('campipe', run_name='__main__')\n"
+        "except SystemExit:\n"
+        "    pass\n"
+        "print('peak', resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, file=sys.stderr)\n"
+    )
+    t0 = time.perf_counter()
+    out = subprocess.run(
+        [sys.executable, "-c", code], cwd=directory, capture_output=True, text=True
+    )
+    seconds = time.perf_counter() - t0
+    peak = [line for line in out.stderr.splitlines() if line.startswith("peak ")]
+    if "valid;" not in out.stdout or not peak:
+        raise RuntimeError(f"campipe validate failed: {out.stderr.strip()[-500:]}")
+    return {"n_cases": n, "seconds": seconds, "peak_bytes": int(peak[-1].split()[1]) * 1024}
+
+
+def measure(
+    directory: str | Path,
+    *,
+    quick: bool = False,
+    workers: int | None = None,
+    studies: Path | None = None,
+    progress: Callable[[str], None] | None = None,
+) -> dict:
+    """The whole study section, in one run."""
+    say = progress or (lambda text: None)
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    workers = workers or default_workers()
+    started = time.perf_counter()
+    out: dict = {
+        "workers": workers,
+        "load_average_at_start": os.getloadavg()[0],
+        "date": time.strftime("%Y-%m-%d %H:%M:%S %Z"),
+        "goals": {
+            "cases": GOAL_CASES,
+            "factor": GOAL_FACTOR,
+            "offset": GOAL_OFFSET,
+            "help": GOAL_HELP,
+            "one_case": GOAL_ONE_CASE,
+            "finished": GOAL_FINISHED,
+            "first_run": GOAL_FIRST_RUN,
+            "validate_cases": VALIDATE_CASES,
+            "validate_seconds": GOAL_VALIDATE_SECONDS,
+            "validate_bytes": GOAL_VALIDATE_BYTES,
+        },
+    }
+    say("study: --help, a one-case study, a finished study (fresh processes)")
+    out["latencies"] = latencies(directory, workers)
+    counts = QUICK_COUNTS if quick else COUNTS
+    say(f"study: {', '.join(map(str, counts))} cases end to end against the engine")
+    out["sizes"] = sizes(directory, counts, workers)
+    n = counts[-1]
+    say(f"study: the client's ceiling, assembling {n} cases from stored batches")
+    out["ceiling"] = ceiling(directory, n, workers)
+    m = QUICK_CLUSTER_CASES if quick else CLUSTER_CASES
+    say(f"study: {m} cases on 1, 2, 4 local worker processes")
+    out["cluster"] = cluster(directory, m)
+    if studies is not None and studies.is_dir():
+        say("study: validate's estimates of the bundled studies against their runs")
+        out["estimates"] = estimates(studies, directory, workers)
+    if not quick and studies is not None:
+        say("study: the quickstart as on a fresh install (numba compiles: a minute or two)")
+        out["first_run"] = first_run(studies, directory)
+    if not quick:
+        say(f"study: campipe validate of {VALIDATE_CASES} cases")
+        try:
+            out["validate"] = validate_at_scale(directory)
+        except RuntimeError as exc:
+            out["validate"] = {"n_cases": VALIDATE_CASES, "failed": str(exc)[:300]}
+    out["seconds"] = time.perf_counter() - started
+    out["load_average_at_end"] = os.getloadavg()[0]
+    return out

@@ -1,0 +1,119 @@
+"""Which compiled kernels a run calls, and whether numba would have to compile them first.
+
+numba compiles a kernel on its first call and keeps it in its cache (``cache=True``,
+``__pycache__`` beside the source): a later process loads it in a fraction of a second, but
+the first run after an install or an edit compiles for a minute or more. A caller that wants
+to say so on the terminal (the CLI) asks :func:`uncompiled` before running; the engine itself
+prints nothing. Only the kernels of the run's integrator and start are named, and only those
+are compiled: a modal-exact study never compiles newmark-linear.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import logging
+from collections.abc import Iterable
+
+from campipe.engine import batch, contact, exact, modal, newmark, steady
+from campipe.engine.settings import Case, RunSettings
+
+log = logging.getLogger(__name__)
+
+
+def kernels(settings: RunSettings) -> dict[str, object]:
+    """The compiled kernels (numba dispatchers) a run with ``settings`` calls, by name; each
+    takes the helpers it calls with it (inlined, or compiled and cached along)."""
+    out: dict[str, object] = {
+        "quasi-static state": contact.quasi_static_batch,
+        "harmonic responses": modal.harmonic_responses,
+    }
+    if settings.start == "quasi-static":
+        out["cam lift"] = batch.cam_at
+    else:
+        out["periodic start"] = steady.periodic_starts
+    if settings.method == "newmark-linear":
+        out["newmark-linear"] = newmark.newmark_linear_batch
+    else:
+        out["modal-exact"] = exact.modal_exact_batch
+    return out
+
+
+def _cached(dispatcher, magic: tuple) -> bool:
+    """A kernel is loaded in this process, or numba's cache holds it for this source, this
+    numba and this machine (its index read, nothing loaded)."""
+    if dispatcher.signatures:
+        return True
+    index = dispatcher._cache._cache_file._load_index()  # {} if stale or absent
+    code = hashlib.sha256(dispatcher.py_func.__code__.co_code).hexdigest()
+    return any(key[1] == magic and key[2][0] == code for key in index)
+
+
+def uncompiled(settings: RunSettings) -> list[str] | None:
+    """Names of the kernels a run with ``settings`` would compile before it runs: ``[]``
+    when every one is loaded or cached; None when numba's cache cannot be inspected (its
+    internals changed): a caller may then say that compiling *may* happen."""
+    from numba.core.registry import cpu_target
+
+    try:
+        magic = cpu_target.target_context.codegen().magic_tuple()
+        return [name for name, kernel in kernels(settings).items() if not _cached(kernel, magic)]
+    except Exception as exc:  # numba's private cache API: never fail a run over it
+        log.debug("cannot inspect numba's cache: %s", exc)
+        return None
+
+
+def compile_notice(settings: Iterable[RunSettings]) -> str | None:
+    """A line saying which kernels runs with these settings would compile first, or None
+    when all are loaded or cached: for a caller to show before the wait."""
+    missing: dict[str, None] = {}
+    unknown = False
+    for one in dict.fromkeys(settings):
+        names = uncompiled(one)
+        unknown = unknown or names is None
+        missing.update(dict.fromkeys(names or []))
+    if not missing and not unknown:
+        return None
+    what = ", ".join(missing) if missing else "the engine's kernels"
+    return (
+        f"compiling {what} with numba{' (if not cached)' if unknown else ''}: the first run "
+        "after an install or an upgrade takes a minute or two; later runs load them from "
+        "numba's cache in a fraction of a second"
+    )
+
+
+def _start_kernels(case: Case, settings: RunSettings) -> None:
+    batch.start_states([case], settings)
+
+
+def compile_kernels(case: Case, settings: RunSettings) -> None:
+    """Compile (or load) every kernel a run with ``settings`` calls, the periodic start's
+    and the integrator's at once: the start's in a second process, while this one compiles
+    the integrator through a short quasi-static run (the same kernel types). numba compiles
+    one kernel at a time in a process, so the two cost the time of the longer on two cores,
+    not their sum; both land in numba's cache, from which the study's own run then loads
+    them."""
+    short = dataclasses.replace(settings, revolutions=0.01, warmup=0)
+    if settings.start != "periodic":
+        batch.run_batch([case], short, full_state=False, on_failure="record")
+        return
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    try:
+        pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"))
+        start = pool.submit(_start_kernels, case, settings)
+    except OSError as exc:  # no second process: compile in turn, in this one
+        log.debug("compiling in one process: %s", exc)
+        batch.start_states([case], settings)
+        start = None
+    try:
+        quasi_static = dataclasses.replace(short, start="quasi-static")
+        batch.run_batch([case], quasi_static, full_state=False, on_failure="record")
+        if start is not None:
+            start.result()
+    except Exception as exc:  # the run itself compiles whatever is still missing
+        log.debug("compiling ahead failed: %s", exc)
+    finally:
+        if start is not None:
+            pool.shutdown(wait=True, cancel_futures=True)

@@ -1,0 +1,287 @@
+"""What a run is and how it is integrated, checked before anything is compiled: the cases,
+the run settings, the integrators' names and limits, and the errors that refuse them.
+
+Plain Python and NumPy (the model's matrices for the stability limit): a spec is checked and
+a study planned without loading numba or a compiled kernel (``campipe.engine.batch`` runs
+them).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from campipe.errors import CampipeError
+from campipe.model import ValveTrain, system_matrices
+from campipe.model.assembly import NEWMARK_LINEAR_OMEGA_DT, configuration_frequencies
+from campipe.profiles import Profile
+from campipe.vocabulary import ROMAN
+
+#: Integrators by name; ``default`` in a spec means DEFAULT_INTEGRATOR.
+INTEGRATORS = ("modal-exact", "newmark-linear")
+DEFAULT_INTEGRATOR = "modal-exact"
+#: The step an integrator uses when a run names none [s]: the thesis's 1 µs for its
+#: integrator; modal-exact is exact between events and sizes its own steps (a run's dt only
+#: caps them).
+DEFAULT_STEPS: dict[str, float | None] = {"newmark-linear": 1e-6, "modal-exact": None}
+CLOSURES = ("force", "form")
+#: Model fidelity of a run: "full" keeps all seven coordinates' modes in every configuration;
+#: "reduced" keeps the modes up to ``mode_cutoff`` in each configuration, and the rest only
+#: through their quasi-static response (static correction): it does not pay for the 1.07e6
+#: rad/s mode where a scene does not need it.
+FIDELITIES = ("full", "reduced")
+DEFAULT_MODE_CUTOFF = 2.0e5  # [rad/s]: the configurations' lower modes, about 32 kHz
+#: How a run starts: on the periodic steady state of configuration I (``engine.steady``), or
+#: the thesis's quasi-static state at θ = 0 (Appendix B, step 1), a transient.
+STARTS = ("periodic", "quasi-static")
+#: Turns integrated but left out of the metrics when a run names none, per start.
+DEFAULT_WARMUP = {"periodic": 0, "quasi-static": 1}
+#: An impact closing slower than this [m/s] leaves its contact resting (``common.captured``):
+#: 1 mm/s, two to three orders below the seating velocities a designer reads (0.1–1 m/s) and
+#: far above what the event location resolves (about 1e-8 m/s at 1e-12 s).
+DEFAULT_CAPTURE_VELOCITY = 1e-3
+#: Motion out of physical bounds ends a run (status UNBOUNDED): a valve lift beyond this many
+#: times the full valve lift (plus the seat's offset), a closing or valve speed beyond this
+#: many times the fastest the cam's surface moves (times the rocker ratio).
+LIFT_BOUND = 3.0
+SPEED_BOUND = 10.0
+
+
+class RunSettingsError(CampipeError, ValueError):
+    """Run settings the engine refuses; ``key`` is the spec key (``run.integrator``,
+    ``run.fidelity``, ``run.mode_cutoff``, ``run.dt``, ``run.tolerance``)."""
+
+
+class StabilityError(RunSettingsError):
+    """A step beyond the integrator's stability limit (``key`` ``run.dt``, ``found`` the
+    step [s]); its ``reason`` leaves out which case of the batch set the limit."""
+
+
+class CaseError(CampipeError, ValueError):
+    """A case the engine refuses; ``key`` is ``closure`` or ``speed``."""
+
+
+class IntegrationError(CampipeError, RuntimeError):
+    """A run that produced a non-finite state, or chattered; ``found`` lists the cases."""
+
+
+def resolve_integrator(name: str) -> str:
+    """``default`` → the default integrator's name; refuse an unknown name."""
+    resolved = DEFAULT_INTEGRATOR if name == "default" else name
+    if resolved not in INTEGRATORS:
+        known = ", ".join(("default", *INTEGRATORS))
+        raise RunSettingsError.at(
+            "run.integrator",
+            f"unknown integrator {name!r}; known: {known}",
+            found=name,
+            expected=f"one of: {known}",
+        )
+    return resolved
+
+
+@dataclass(frozen=True)
+class Case:
+    """One run: a valve train, a cam and how it is driven."""
+
+    train: ValveTrain  # model parameters [SI]
+    profile: Profile  # cam lift over one turn, defects applied
+    speed: float  # cam speed [rad/s]
+    seat: float = math.nan  # seat position as a valve lift [m]; NaN: no seat
+    closure: str = "force"  # "force": spring-held, may separate; "form": never leaves the cam
+
+    @property
+    def has_seat(self) -> bool:
+        return not math.isnan(self.seat)
+
+
+@dataclass(frozen=True)
+class RunSettings:
+    """How a batch is integrated and sampled."""
+
+    revolutions: float = 4.0  # cam turns, starting at θ = 0
+    dt: float | None = None  # time step [s] (modal-exact: largest step); None: DEFAULT_STEPS
+    output_every: float = math.radians(1.0)  # output spacing in cam angle [rad]
+    integrator: str = "default"  # "default" or a name in INTEGRATORS
+    tolerance: float = 1e-12  # event-time tolerance of integrators that locate events [s]
+    max_events: int = 4096  # events kept per case
+    fidelity: str = "full"  # "full" or "reduced" (see FIDELITIES)
+    mode_cutoff: float | None = None  # reduced: highest mode kept [rad/s]; None: the default
+    start: str = "periodic"  # "periodic" or "quasi-static" (see STARTS)
+    warmup: int | None = None  # turns left out of the metrics; None: DEFAULT_WARMUP[start]
+    capture_velocity: float = DEFAULT_CAPTURE_VELOCITY  # resting contact below this [m/s]
+
+    @property
+    def warmup_turns(self) -> int:
+        """The turns integrated but left out of every metric."""
+        if self.start not in STARTS:
+            raise RunSettingsError.at(
+                "run.start",
+                f"unknown start {self.start!r}; known: {', '.join(STARTS)}",
+                found=self.start,
+                expected=f"one of: {', '.join(STARTS)}",
+            )
+        turns = DEFAULT_WARMUP[self.start] if self.warmup is None else self.warmup
+        if not (0 <= turns < math.ceil(self.revolutions - 1e-12)):
+            raise RunSettingsError.at(
+                "run.warmup",
+                f"found {turns!r} turns; a run of {self.revolutions:g} needs at least one "
+                "measured turn after its warm-up",
+                found=turns,
+                expected=f"0 … {math.ceil(self.revolutions - 1e-12) - 1} turns",
+            )
+        return int(turns)
+
+    @property
+    def cutoff(self) -> float:
+        """The highest mode frequency modal-exact keeps [rad/s]; 0 keeps every mode."""
+        if self.fidelity not in FIDELITIES:
+            raise RunSettingsError.at(
+                "run.fidelity",
+                f"unknown fidelity {self.fidelity!r}; known: {', '.join(FIDELITIES)}",
+                found=self.fidelity,
+                expected=f"one of: {', '.join(FIDELITIES)}",
+            )
+        if self.fidelity == "full":
+            return 0.0
+        if self.method != "modal-exact":
+            raise RunSettingsError.at(
+                "run.fidelity",
+                f"{self.fidelity} needs integrator modal-exact (or default), found {self.method}",
+                found=self.fidelity,
+                expected="full, or integrator modal-exact",
+            )
+        cutoff = DEFAULT_MODE_CUTOFF if self.mode_cutoff is None else self.mode_cutoff
+        if not cutoff > 0:
+            raise RunSettingsError.at(
+                "run.mode_cutoff",
+                f"found {cutoff!r} rad/s, expected > 0",
+                found=cutoff,
+                expected="> 0 rad/s",
+            )
+        return float(cutoff)
+
+    @property
+    def method(self) -> str:
+        """The integrator's resolved name."""
+        return resolve_integrator(self.integrator)
+
+    @property
+    def step(self) -> float | None:
+        """The time step [s] (modal-exact: the cap on its steps, None for none)."""
+        return DEFAULT_STEPS[self.method] if self.dt is None else self.dt
+
+
+@functools.lru_cache(maxsize=256)
+def configuration_omega_max(train: ValveTrain) -> np.ndarray:
+    """(4,) the highest natural frequency of each configuration I–IV [rad/s]."""
+    sm = system_matrices(train)
+    return np.array(
+        [configuration_frequencies(sm.mass, sm.stiffness, c).max() for c in (1, 2, 3, 4)]
+    )
+
+
+def visited_configurations(case: Case) -> tuple[int, ...]:
+    """The configurations a case can reach: no seat keeps it in I/II; form closure in I/III."""
+    if case.closure == "form":
+        return (1, 3) if case.has_seat else (1,)
+    return (1, 2, 3, 4) if case.has_seat else (1, 2)
+
+
+def _newmark_limit(case: Case) -> tuple[float, int]:
+    """newmark-linear's stability limit √12/ω_max [s] over the configurations a case can
+    visit (thesis Appendix B), and the configuration that sets it."""
+    omega_max = configuration_omega_max(case.train)
+    worst = max(visited_configurations(case), key=lambda c: omega_max[c - 1])
+    return float(NEWMARK_LINEAR_OMEGA_DT / omega_max[worst - 1]), worst
+
+
+def stability_limit(case: Case, integrator: str = "newmark-linear") -> float:
+    """Largest step [s] the integrator accepts for a case, over the configurations it can
+    visit: newmark-linear's stability limit √12/ω_max (thesis Appendix B); modal-exact has
+    none (inf): it is exact between events and sizes its own steps."""
+    if resolve_integrator(integrator) != "newmark-linear":
+        return math.inf
+    return _newmark_limit(case)[0]
+
+
+def check_stability(cases: Sequence[Case], settings: RunSettings) -> None:
+    """Refuse a step beyond newmark-linear's stability limit in any configuration a case can
+    visit, naming the limit."""
+    if settings.method != "newmark-linear":
+        return
+    dt_run = settings.step
+    assert dt_run is not None  # newmark-linear always has a step
+    for i, case in enumerate(cases):
+        limit, worst = _newmark_limit(case)
+        if dt_run >= limit:
+            beyond = f"{dt_run * 1e6:.4g} µs is beyond the stability limit of newmark-linear"
+            bound = (
+                f"({limit * 1e6:.4g} µs, configuration {ROMAN[worst]}); "
+                f"use a step below {limit * 1e6:.4g} µs"
+            )
+            raise StabilityError(
+                f"run.dt: {beyond} for case {i} {bound}",
+                key="run.dt",
+                found=dt_run,
+                expected=f"a step below {limit * 1e6:.4g} µs",
+                reason=f"{beyond} {bound}",
+            )
+
+
+def output_angles(settings: RunSettings) -> np.ndarray:
+    """Sample angles 0 … 2π·revolutions at ``output_every`` [rad]."""
+    n = int(math.floor(settings.revolutions * 2 * math.pi / settings.output_every + 1e-9)) + 1
+    return np.arange(n) * settings.output_every
+
+
+def check_run(
+    cases: Sequence[Case], settings: RunSettings, *, check_stability_limit: bool = True
+) -> None:
+    """Everything ``run_batch`` refuses, checked without running: an unknown integrator or
+    fidelity, a non-positive step or tolerance, an unknown closure, a non-positive speed, a
+    newmark-linear step beyond the stability limit.
+
+    Raises
+    ------
+    RunSettingsError
+        (StabilityError for the step limit) for a run setting, its ``key`` ``run.<name>``.
+    CaseError
+        For a case's closure or speed, its ``key`` ``closure`` or ``speed``.
+    """
+    dt_run = settings.step  # also refuses an unknown integrator
+    _ = settings.cutoff  # refuses an unknown fidelity, or reduced with newmark-linear
+    if dt_run is not None and not (dt_run > 0 and math.isfinite(dt_run)):
+        raise RunSettingsError.at(
+            "run.dt",
+            f"found {dt_run!r} s, expected a positive step",
+            found=dt_run,
+            expected="> 0 s",
+        )
+    if not (settings.tolerance > 0 and math.isfinite(settings.tolerance)):
+        raise RunSettingsError.at(
+            "run.tolerance",
+            f"found {settings.tolerance!r} s, expected > 0",
+            found=settings.tolerance,
+            expected="> 0 s",
+        )
+    for i, case in enumerate(cases):
+        if case.closure not in CLOSURES:
+            raise CaseError.at(
+                "closure",
+                f"case {i} has {case.closure!r}, expected force or form",
+                found=case.closure,
+                expected="force or form",
+            )
+        if not case.speed > 0:
+            raise CaseError.at(
+                "speed",
+                f"case {i} has {case.speed!r} rad/s, expected > 0",
+                found=case.speed,
+                expected="> 0 rad/s",
+            )
+    if check_stability_limit:
+        check_stability(cases, settings)
