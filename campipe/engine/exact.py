@@ -86,6 +86,8 @@ from campipe.engine.closed_form import (
     WLL2,
     block_basis,
     block_derivative,
+    eval_monitor,
+    force_monitor,
     forcing,
     particular,
 )
@@ -133,35 +135,10 @@ ROOT_ITERATIONS = 200
 
 
 @njit(inline="always", nogil=True)
-def _eval3(WC, MC, nact, G, GT, m, tau, w, x, th):
-    """Monitor m and its first two time derivatives τ after the segment start (local angle x,
-    cam angle θ), exactly: the active blocks, the polynomial and the harmonic part."""
-    g = 0.0
-    dg = 0.0
-    d2g = 0.0
-    for jj in range(nact):
-        f1, f2 = block_basis(MC[LBAR, jj], MC[DSQ, jj], tau)
-        g += WC[W1, m, jj] * f1 + WC[W2, m, jj] * f2
-        dg += WC[WL1, m, jj] * f1 + WC[WL2, m, jj] * f2
-        d2g += WC[WLL1, m, jj] * f1 + WC[WLL2, m, jj] * f2
-    p0, p1, p2 = horner(G[m], x)
-    g += p0
-    dg += w * p1
-    d2g += w * w * p2
-    if GT[m] != 0.0:
-        ct = np.cos(th)
-        sn = np.sin(th)
-        g += GT[m].real * ct - GT[m].imag * sn
-        dg -= w * (GT[m].real * sn + GT[m].imag * ct)
-        d2g -= w * w * (GT[m].real * ct - GT[m].imag * sn)
-    return g, dg, d2g
-
-
-@njit(inline="always", nogil=True)
 def _at(deriv, WC, MC, nact, G, GT, m, t_s, t, w, th0):
     """Monitor m (deriv False) or its time derivative (deriv True) at time t, and the next
     derivative."""
-    g, dg, d2g = _eval3(WC, MC, nact, G, GT, m, t - t_s, w, w * t - th0, w * t)
+    g, dg, d2g = eval_monitor(WC, MC, nact, G, GT, m, t - t_s, w, w * t - th0, w * t)
     return (dg, d2g) if deriv else (g, dg)
 
 
@@ -493,30 +470,6 @@ def _modal_start(trains, ws, st, x_s, ct, sn):
 
 
 @njit(inline="always", nogil=True)
-def _force_monitor(trains, ws, st, m, sign, level):
-    """Monitor m as a held contact's force (sign·F: F1 for the cam, −F7 for the seat):
-    thesis Eqs. 26, 27 through ``modal.ModalData``'s ρ, σ; its forced part (the blocks' part
-    is ``_block_columns``')."""
-    tr, ci, ns = st.tr, st.cfg - 1, st.ns
-    ws.level[m] = level
-    for k in range(st.kmax + 1):
-        acc = 0.0
-        for s in range(ns):
-            acc += trains.rho[tr, ci, m, s] * ws.Z[k, s]
-        for kind in range(3):
-            for hc in range(2):
-                acc += trains.sigma[tr, ci, m, kind, hc] * ws.inp[kind, hc, k]
-        ws.G[m, k] = sign * acc
-    ws.G[m, 0] += sign * trains.sigma0[tr, ci, m]
-    acc_c = 0.0 + 0.0j
-    for s in range(ns):
-        acc_c += trains.rho[tr, ci, m, s] * ws.ZT[s]
-    for kind in range(3):
-        acc_c += trains.sigma[tr, ci, m, kind, 0] * ws.inp_t[kind, 0]
-    ws.GT[m] = sign * acc_c
-
-
-@njit(inline="always", nogil=True)
 def _row_of(trains, st, coord):
     """The state row of free coordinate ``coord`` in the segment's configuration."""
     row = 0
@@ -567,7 +520,7 @@ def _monitors(cases, trains, profiles, ws, st):
             rest = st.rest_cam if m == 0 else st.rest_seat
             hold = st.hold_cam if m == 0 else st.hold_seat
             level = max(st.eps_force, hold) if rest else st.eps_force
-            _force_monitor(trains, ws, st, m, sign, level)
+            force_monitor(trains, ws, st, m, sign, level)
         else:
             _gap_monitor(cases, trains, profiles, ws, st, m, sign)
     gdeg = 0
@@ -692,7 +645,7 @@ def _begin_segment(cases, trains, profiles, runs, out, ws, st):
     _block_columns(cases, trains, runs, ws, st)
     for m in range(2):
         if ws.ready[m]:
-            ws.gval[m], ws.dprev[m], _ = _eval3(
+            ws.gval[m], ws.dprev[m], _ = eval_monitor(
                 ws.WC, ws.MC, st.nact, ws.G, ws.GT, m, 0.0, st.w, x_s, th_s
             )
             ws.gprev[m] = ws.gval[m]

@@ -1,0 +1,267 @@
+"""The steady-state path: the periodic state below the no-follow onset without integrating
+turns, its margin, and the onset speed as the margin's root.
+
+Below the onset the follower never leaves the cam, so the train stays in configuration I,
+linear and driven with the cam's period: its steady state is the closed form of
+``campipe.engine.steady`` (z(0) = (I − e^{AT})⁻¹ b, exact piece by piece). Its *margin* is the
+least cam compression −F1 over the turn: positive, the follower follows; the no-follow onset
+is the lowest speed where it reaches zero. Where the valve reaches its seat the steady state
+is piecewise (configurations I, III, IV, with plastic impacts at the seat and the cam): it is
+then the fixed point of the turn map over the exact piece propagators, which is what
+``modal-exact`` integrates turn by turn; the heavy damping of the seated phase makes that map
+contract within a turn or two (``SEATED_TURNS``, checked), and no-follow is configuration II
+in its last turn.
+
+Pure numerics: arrays in, arrays out; no files, no printing.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from campipe.constants import TWO_PI
+from campipe.engine import steady
+from campipe.engine.batch import (
+    Case,
+    CaseError,
+    RunSettings,
+    _matrices,
+    _modal,
+    _unique_trains,
+    check_run,
+    run_batch,
+    valve_reference,
+)
+from campipe.engine.closed_form import STATE, ExactRuns, ModalTrains, make_workspace
+from campipe.engine.common import Cases
+from campipe.engine.modal import NS, ModalData
+from campipe.model import ValveTrain
+from campipe.model.assembly import preload_vector
+from campipe.profiles import evaluate, pack
+from campipe.vocabulary import CAM, CAM_CONTACT, CONFIGURATIONS, SEAT
+
+#: Turns the engine integrates for a steady state with the valve seated on part of the turn
+#: (from the periodic start of configuration I); the last is the steady state when it agrees
+#: with the one before to SEATED_AGREEMENT [rad] of no-follow, else more turns follow, up to
+#: MAX_SEATED_TURNS.
+SEATED_TURNS = 3
+MAX_SEATED_TURNS = 24
+SEATED_AGREEMENT = 1e-9
+#: Speeds at which the onset search first looks across a speed range (the first sign change
+#: of the margin is then refined): a dip of the margin narrower than the range / (SCAN − 1)
+#: can be missed.
+SCAN_SPEEDS = 33
+#: The onset's default tolerance [rpm] and the time-domain check's offset either side of it.
+DEFAULT_ONSET_TOLERANCE_RPM = 0.1
+CONFIRM_OFFSET = 0.005
+CONFIRM_TURNS = 4
+RPM = TWO_PI / 60.0  # [rad/s] per rpm
+
+
+# --------------------------------------------------------------------------- packing
+
+
+@functools.lru_cache(maxsize=1024)
+def _unit_preload(train: ValveTrain) -> ModalData:
+    return _modal(train)
+
+
+def _modal_at_preload(train: ValveTrain) -> ModalData:
+    """The closed-form data of a train, its modes shared by every preload: the preload only
+    enters the constant forcing and the contact forces' constant part, linearly."""
+    unit = _unit_preload(train.replace(spring_preload=1.0))
+    p = train.spring_preload
+    return dataclasses.replace(unit, b_load=unit.b_load * p, sigma0=unit.sigma0 * p)
+
+
+@dataclass
+class _SteadyBatch:
+    """What the steady-state kernels take for a batch of cases, built once: the speeds
+    (``cases.omega``) change in place between calls."""
+
+    cases: Cases
+    trains: ModalTrains
+    packed: object
+    runs: ExactRuns
+    z_turn: np.ndarray
+    matrices: list  # the distinct trains' SystemMatrices, or None where not needed
+    which: np.ndarray
+
+    def extremes(self, omega: np.ndarray, with_max: bool = True) -> np.ndarray:
+        """(n, N_EXTREMES) at the speeds ``omega`` [rad/s] (``steady.steady_extremes``)."""
+        self.cases.omega[:] = omega
+        out = np.empty((omega.size, steady.N_EXTREMES))
+        steady.steady_extremes(
+            self.cases, self.trains, self.packed, self.runs, make_workspace(),
+            np.zeros(1, STATE), self.z_turn, with_max, out,
+        )  # fmt: skip
+        return out
+
+
+def _prepare(cases: Sequence[Case], *, need_matrices: bool = False) -> _SteadyBatch:
+    n = len(cases)
+    trains, which = _unique_trains(cases)
+    data = [_modal_at_preload(t) for t in trains]
+    has_seat = np.array([c.has_seat for c in cases], dtype=np.bool_)
+    matrices: list = [None] * len(trains)
+    seated_trains = set(which[has_seat].tolist())
+    for k, t in enumerate(trains):
+        if need_matrices or k in seated_trains:
+            matrices[k] = _matrices(t)
+    qref = np.array([valve_reference(matrices[k]) if matrices[k] else 0.0 for k in which])
+    modal_trains = ModalTrains(
+        load=np.stack([preload_vector(t) for t in trains]),
+        **{f: np.stack([getattr(d, f) for d in data]) for f in ModalTrains._fields if f != "load"},
+    )
+    packed = pack([c.profile for c in cases])
+    zeros = np.zeros(n)
+    runs = ExactRuns(
+        train=which, t_sample=zeros, t_end=zeros, zeta=np.zeros((n, 4, NS), np.complex128),
+        dt_cap=0.0, tolerance=1e-12, mode_cutoff=0.0, full_state=True,
+    )  # fmt: skip
+    state = Cases(
+        omega=np.array([c.speed for c in cases], dtype=float),
+        seat_q=qref + np.where(has_seat, [c.seat for c in cases], 0.0),
+        has_seat=has_seat,
+        form=np.array([c.closure == "form" for c in cases], dtype=np.bool_),
+        t0=zeros, q0=np.zeros((n, 7)), v0=np.zeros((n, 7)), a0=np.zeros((n, 7)),
+        cfg0=np.full(n, CAM_CONTACT, np.int64), meff=np.zeros((n, 4)),
+        separation=np.zeros((n, 2)), hold=np.zeros((n, 4, 2)), capture=zeros,
+        valve_ref=qref, lift_bound=zeros, speed_bound=zeros,
+    )  # fmt: skip
+    z_turn = np.zeros((n, packed.n_pieces.max() + 1, NS))
+    return _SteadyBatch(state, modal_trains, packed, runs, z_turn, matrices, which)
+
+
+# --------------------------------------------------------------------------- margins
+
+
+@dataclass(frozen=True)
+class SteadyExtremes:
+    """Configuration I's periodic state over one turn, per case (``steady_extremes``)."""
+
+    min_cam_force: np.ndarray  # (n,) least cam compression −F1: the margin [N]; inf: form closure
+    min_cam_force_angle: np.ndarray  # (n,) where [rad]
+    max_cam_force: np.ndarray  # (n,) largest cam compression [N]
+    min_seat_height: np.ndarray  # (n,) the valve's least height above its seat [m]; inf: none
+    min_seat_height_angle: np.ndarray  # (n,) where [rad]
+
+    @property
+    def holds(self) -> np.ndarray:
+        """(n,) bool: configuration I holds all turn (the cam pushes, the valve stays off its
+        seat), so the closed form is the steady state."""
+        return (self.min_cam_force >= 0.0) & (self.min_seat_height >= 0.0)
+
+
+def _as_extremes(out: np.ndarray) -> SteadyExtremes:
+    return SteadyExtremes(*(out[:, k].copy() for k in range(steady.N_EXTREMES)))
+
+
+def steady_extremes(cases: Sequence[Case]) -> SteadyExtremes:
+    """The no-follow margin and the other extremes of configuration I's periodic state over a
+    turn, for each case at its speed, in closed form (no turn integrated).
+
+    The extremes are sampled at ``steady.EXTREME_SAMPLES`` a turn and refined by golden-section
+    search; each holds for the closed form whether or not configuration I holds (see
+    ``SteadyExtremes.holds``).
+    """
+    check_run(cases, RunSettings(), check_stability_limit=False)
+    batch = _prepare(cases)
+    return _as_extremes(batch.extremes(batch.cases.omega.copy()))
+
+
+# --------------------------------------------------------------------------- histories
+
+
+@dataclass(frozen=True)
+class SteadyState:
+    """The periodic steady state over one turn at the output angles, SI (as ``BatchResult``'s
+    histories of one turn)."""
+
+    cam_angle: np.ndarray  # (n_out,) [rad], 0 … 2π
+    q: np.ndarray  # (n, n_out, 7) [m, rad]
+    v: np.ndarray  # (n, n_out, 7) [m/s, rad/s]
+    acc: np.ndarray  # (n, n_out, 2) accelerations of q1 and q7 [m/s²]
+    cam_force: np.ndarray  # (n, n_out) cam compression [N]
+    valve_reference: np.ndarray  # (n,) q7 at zero valve lift [m]
+    extremes: SteadyExtremes
+
+    @property
+    def valve_lift(self) -> np.ndarray:
+        """(n, n_out) valve opening from its base-circle static position [m]."""
+        return self.q[:, :, SEAT] - self.valve_reference[:, None]
+
+    @property
+    def follower_lift(self) -> np.ndarray:
+        """(n, n_out) pushrod foot height in the cam's lift coordinate [m]."""
+        return -self.q[:, :, CAM]
+
+
+def steady_state(cases: Sequence[Case], output_every: float = math.radians(1.0)) -> SteadyState:
+    """The periodic steady state of each case over one turn, in closed form: what the
+    event-driven engine's turns settle to below the no-follow onset, for one turn's samples.
+
+    Parameters
+    ----------
+    cases : sequence of Case
+        Any mix of trains, profiles, speeds and closures; a seat must stay clear of the valve.
+    output_every : float
+        Output spacing in cam angle [rad].
+
+    Raises
+    ------
+    CaseError
+        (key ``speed``) for a case whose follower leaves the cam somewhere on the turn, (key
+        ``seat``) one whose valve reaches its seat: its steady state is not configuration I's.
+    """
+    check_run(cases, RunSettings(output_every=output_every), check_stability_limit=False)
+    batch = _prepare(cases, need_matrices=True)
+    ext = _as_extremes(batch.extremes(batch.cases.omega.copy()))
+    for key, bad, why in (
+        ("speed", ext.min_cam_force < 0, "the follower leaves the cam (no-follow)"),
+        ("seat", ext.min_seat_height < 0, "the valve reaches its seat"),
+    ):
+        if bad.any():
+            idx = np.flatnonzero(bad).tolist()
+            raise CaseError.at(
+                key,
+                f"cases {idx}: {why} in the steady state, so it is not configuration I's "
+                "closed form; run them through run_batch",
+                found=idx,
+                expected="cases below the no-follow onset with the valve clear of its seat",
+            )
+    n_out = int(math.floor(TWO_PI / output_every + 1e-9)) + 1
+    angles = np.minimum(np.arange(n_out) * output_every, TWO_PI)
+    n = len(cases)
+    q = np.empty((n, n_out, 7))
+    v = np.empty((n, n_out, 7))
+    force = np.empty((n, n_out))
+    steady.steady_samples(
+        batch.cases, batch.trains, batch.packed, batch.runs, make_workspace(),
+        np.zeros(1, STATE), batch.z_turn, angles, q, v, force,
+    )  # fmt: skip
+    return SteadyState(
+        angles, q, v, _accelerations(cases, batch, angles, q, v), force, batch.cases.valve_ref.copy(), ext
+    )
+
+
+def _accelerations(cases, batch: _SteadyBatch, angles, q, v) -> np.ndarray:
+    """(n, n_out, 2): q1's from the cam, q7's from the equation of motion with q1 held."""
+    free = list(CONFIGURATIONS[CAM_CONTACT].free)
+    out = np.empty((*q.shape[:2], 2))
+    for c, case in enumerate(cases):
+        sm = batch.matrices[batch.which[c]]
+        _, _, ddlift = evaluate(case.profile, angles)
+        a = np.zeros((angles.size, 7))
+        a[:, CAM] = -(case.speed**2) * np.asarray(ddlift)
+        force = sm.preload - q[c] @ sm.stiffness.T - v[c] @ sm.damping.T - a @ sm.mass.T
+        a[:, free] = np.linalg.solve(sm.mass[np.ix_(free, free)], force[:, free].T).T
+        out[c, :, 0] = a[:, CAM]
+        out[c, :, 1] = a[:, SEAT]
+    return out
