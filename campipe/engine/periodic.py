@@ -93,13 +93,18 @@ class _SteadyBatch:
     matrices: list  # the distinct trains' SystemMatrices, or None where not needed
     which: np.ndarray
 
-    def extremes(self, omega: np.ndarray, with_max: bool = True) -> np.ndarray:
-        """(n, N_EXTREMES) at the speeds ``omega`` [rad/s] (``steady.steady_extremes``)."""
+    def extremes(
+        self, omega: np.ndarray, with_max: bool = True, active: np.ndarray | None = None
+    ) -> np.ndarray:
+        """(n, N_EXTREMES) at the speeds ``omega`` [rad/s] (``steady.steady_extremes``), NaN
+        outside ``active``."""
         self.cases.omega[:] = omega
-        out = np.empty((omega.size, steady.N_EXTREMES))
+        out = np.full((omega.size, steady.N_EXTREMES), np.nan)
+        if active is None:
+            active = np.ones(omega.size, np.bool_)
         steady.steady_extremes(
             self.cases, self.trains, self.packed, self.runs, make_workspace(),
-            np.zeros(1, STATE), self.z_turn, with_max, out,
+            np.zeros(1, STATE), self.z_turn, with_max, active, out,
         )  # fmt: skip
         return out
 
@@ -265,3 +270,182 @@ def _accelerations(cases, batch: _SteadyBatch, angles, q, v) -> np.ndarray:
         out[c, :, 0] = a[:, CAM]
         out[c, :, 1] = a[:, SEAT]
     return out
+
+
+# --------------------------------------------------------------------------- the onset
+
+
+def seated_no_follow(cases: Sequence[Case]) -> tuple[np.ndarray, np.ndarray]:
+    """No-follow per turn in the steady state of cases whose valve seats on part of the turn:
+    the fixed point of the turn map over the exact piece propagators, by ``modal-exact`` from
+    configuration I's periodic start, SEATED_TURNS turns and more until the last two turns'
+    no-follow agree to SEATED_AGREEMENT.
+
+    Returns
+    -------
+    separation : (n,) configuration II in the last turn [rad] (NaN: the run failed)
+    converged : (n,) bool, the last two turns agreed
+    """
+    n = len(cases)
+    sep = np.full(n, np.nan)
+    converged = np.zeros(n, np.bool_)
+    todo = np.arange(n)
+    turns = SEATED_TURNS
+    while todo.size and turns <= MAX_SEATED_TURNS:
+        settings = RunSettings(revolutions=turns, output_every=math.radians(5.0))
+        res = run_batch([cases[i] for i in todo], settings, full_state=False, on_failure="record")
+        last = res.separation_per_rev[:, -1]
+        ok = np.abs(last - res.separation_per_rev[:, -2]) <= SEATED_AGREEMENT
+        sep[todo] = last
+        converged[todo] = ok
+        todo = todo[~ok & np.isfinite(last)]
+        turns *= 2
+    return sep, converged
+
+
+@dataclass(frozen=True)
+class Onset:
+    """The no-follow onset of each design over a speed range (``onset_speeds``)."""
+
+    speed: np.ndarray  # (n,) the onset [rad/s], within ± tolerance/2; NaN where none is found
+    #: (n,) str: "found"; "below" (no-follow already at the range's lowest speed); "none" (the
+    #: follower follows across the range)
+    status: np.ndarray
+    scan_speed: np.ndarray  # (n_scan,) the speeds looked at first [rad/s]
+    #: (n, n_scan) the margin there, the least cam compression over the steady turn [N]; NaN
+    #: where the valve seats on part of the turn (then the sign comes from ``seated_no_follow``)
+    scan_margin: np.ndarray
+    scan_no_follow: np.ndarray  # (n, n_scan) bool: no-follow in the steady state
+    seated: np.ndarray  # (n,) bool: the onset's bracket needed the seated steady state
+    tolerance: float  # [rad/s]
+    evaluations: np.ndarray  # (n,) steady states computed (closed form and seated)
+
+
+def _separates(designs, batch, speeds, todo):
+    """(margin [N], no-follow, seated) at speeds[i] for the designs ``todo`` (bool mask)."""
+    n = len(designs)
+    margin = np.full(n, np.nan)
+    out = batch.extremes(np.where(todo, speeds, 1.0), with_max=False, active=todo)
+    seated = todo & (out[:, steady.MIN_HEIGHT] < 0.0)
+    closed = todo & ~seated
+    margin[closed] = out[closed, steady.MIN_FORCE]
+    no_follow = closed & (margin < 0.0)
+    if seated.any():
+        idx = np.flatnonzero(seated)
+        sep, _ = seated_no_follow([dataclasses.replace(designs[i], speed=speeds[i]) for i in idx])
+        no_follow[idx] = sep > 0.0
+    return margin, no_follow, seated
+
+
+def onset_speeds(
+    designs: Sequence[Case],
+    low: float,
+    high: float,
+    tolerance: float = DEFAULT_ONSET_TOLERANCE_RPM * RPM,
+    scan: int = SCAN_SPEEDS,
+) -> Onset:
+    """The no-follow onset of each design: the lowest speed in [low, high] at which its steady
+    state leaves the cam with the valve off its seat (configuration II).
+
+    The margin (``steady_extremes``) is looked at on ``scan`` speeds across the range; the
+    first sign change is refined to ``tolerance`` by the Illinois method on the margin where
+    the closed form holds at both ends, by bisection where the valve seats (the seated steady
+    state, ``seated_no_follow``, gives only whether no-follow occurs).
+
+    Parameters
+    ----------
+    designs : sequence of Case
+        Each design's train, profile, seat and closure (their ``speed`` is ignored).
+    low, high : float
+        The speed range [rad/s].
+    tolerance : float
+        Width of the final bracket [rad/s]; the onset is its middle.
+    scan : int
+        Speeds looked at first, at least 2.
+    """
+    if not (0 < low < high and math.isfinite(high)):
+        raise CaseError.at(
+            "speed",
+            f"found the range {low!r} … {high!r} rad/s, expected 0 < low < high",
+            found=(low, high),
+            expected="0 < low < high",
+        )
+    if not tolerance > 0:
+        raise CaseError.at(
+            "tolerance", f"found {tolerance!r} rad/s, expected > 0", found=tolerance,
+            expected="> 0",
+        )  # fmt: skip
+    designs = [dataclasses.replace(d, speed=low) for d in designs]
+    check_run(designs, RunSettings(), check_stability_limit=False)
+    n = len(designs)
+    batch = _prepare(designs)
+    grid = np.linspace(low, high, max(2, int(scan)))
+    margin = np.full((n, grid.size), np.nan)
+    no_follow = np.zeros((n, grid.size), np.bool_)
+    every = np.ones(n, np.bool_)
+    for k, s in enumerate(grid):
+        margin[:, k], no_follow[:, k], _ = _separates(designs, batch, np.full(n, s), every)
+    evaluations = np.full(n, grid.size)
+    first = np.where(no_follow.any(axis=1), no_follow.argmax(axis=1), -1)
+    status = np.where(first < 0, "none", np.where(first == 0, "below", "found"))
+    todo = first > 0
+    k = np.maximum(first, 1)
+    a = np.where(todo, grid[k - 1], np.nan)
+    b = np.where(todo, grid[k], np.nan)
+    fa = margin[np.arange(n), k - 1]
+    fb = margin[np.arange(n), k]
+    bisect = ~(np.isfinite(fa) & np.isfinite(fb))
+    seated = np.where(todo, bisect, False)
+    side = np.zeros(n, np.int64)  # the end the last step replaced: −1 a, +1 b (Illinois)
+    for _ in range(200):
+        todo &= (b - a) > tolerance
+        if not todo.any():
+            break
+        with np.errstate(invalid="ignore", divide="ignore"):
+            x = np.where(bisect, 0.5 * (a + b), b - fb * (b - a) / (fb - fa))
+        x = np.clip(x, a + 0.25 * tolerance, b - 0.25 * tolerance)
+        fx, sep_x, seated_x = _separates(designs, batch, x, todo)
+        evaluations += todo
+        bisect |= seated_x
+        below = todo & ~sep_x
+        above = todo & sep_x
+        # Illinois: halve the kept end's value when the same end is replaced twice in a row.
+        fb = np.where(below & (side < 0), 0.5 * fb, fb)
+        fa = np.where(above & (side > 0), 0.5 * fa, fa)
+        a = np.where(below, x, a)
+        fa = np.where(below, fx, fa)
+        b = np.where(above, x, b)
+        fb = np.where(above, fx, fb)
+        side = np.where(below, -1, np.where(above, 1, side))
+        seated |= seated_x
+    speed = np.where(status == "found", 0.5 * (a + b), np.nan)
+    return Onset(speed, status, grid, margin, no_follow, seated, float(tolerance), evaluations)
+
+
+def confirm_onsets(
+    designs: Sequence[Case], onset: np.ndarray, offset: float = CONFIRM_OFFSET,
+    revolutions: float = CONFIRM_TURNS,
+) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """The time-domain engine just below and just above each onset: no-follow in the last of
+    ``revolutions`` turns from the periodic start at onset·(1 ∓ offset) [rad].
+
+    Returns
+    -------
+    below, above : (n,) configuration II in the last turn [rad]; NaN where there is no onset
+    """
+    n = len(designs)
+    below = np.full(n, np.nan)
+    above = np.full(n, np.nan)
+    idx = np.flatnonzero(np.isfinite(onset))
+    if idx.size:
+        cases = [
+            dataclasses.replace(designs[i], speed=onset[i] * f)
+            for f in (1 - offset, 1 + offset)
+            for i in idx
+        ]
+        res = run_batch(cases, RunSettings(revolutions=revolutions), full_state=False,
+                        on_failure="record")  # fmt: skip
+        last = res.separation_per_rev[:, -1]
+        below[idx] = last[: idx.size]
+        above[idx] = last[idx.size :]
+    return below, above

@@ -515,7 +515,7 @@ def _turn_minimum(cases, trains, profiles, runs, ws, st, zt, which):
 
 
 @njit(**KERNEL)
-def steady_extremes(cases, trains, profiles, runs, ws, state, z_turn, with_max, out):
+def steady_extremes(cases, trains, profiles, runs, ws, state, z_turn, with_max, active, out):
     """For each case at its speed ``cases.omega``: configuration I's periodic state and its
     extremes over the turn.
 
@@ -528,6 +528,8 @@ def steady_extremes(cases, trains, profiles, runs, ws, state, z_turn, with_max, 
         Out: the periodic state at each break of the turn.
     with_max : bool
         Also find the largest compression (else MAX_FORCE is NaN).
+    active : (n,) bool
+        The cases to compute (the others' rows are left as they are).
     out : (n, N_EXTREMES)
         Out, by column: the least cam compression −F1 over the turn [N] (MIN_FORCE: the
         no-follow margin; +inf with form closure) and its angle [rad], the largest [N], the
@@ -535,6 +537,8 @@ def steady_extremes(cases, trains, profiles, runs, ws, state, z_turn, with_max, 
     """
     st = state[0]
     for c in range(cases.omega.shape[0]):
+        if not active[c]:
+            continue
         _begin_case(cases, trains, runs, st, c)
         _harmonic_response(trains, runs, ws, st)
         _periodic_turn(cases, trains, profiles, runs, ws, st, z_turn[c])
