@@ -426,12 +426,17 @@ def confirm_onsets(
     designs: Sequence[Case], onset: np.ndarray, offset: float = CONFIRM_OFFSET,
     revolutions: float = CONFIRM_TURNS,
 ) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
-    """The time-domain engine just below and just above each onset: no-follow in the last of
-    ``revolutions`` turns from the periodic start at onset·(1 ∓ offset) [rad].
+    """The time-domain engine just below and just above each onset: no-follow per turn, the
+    mean over ``revolutions`` turns from the periodic start (the study archive's
+    ``separation_deg_per_rev``) at onset·(1 ∓ offset).
+
+    Any turn counts: just above the onset the engine leaves the cam in its first turn, lands
+    slower than its capture velocity and may then rest on the cam (``common.captured``), so
+    its later turns can follow for a few tenths of a per cent above the steady state's onset.
 
     Returns
     -------
-    below, above : (n,) configuration II in the last turn [rad]; NaN where there is no onset
+    below, above : (n,) [rad]; NaN where there is no onset
     """
     n = len(designs)
     below = np.full(n, np.nan)
@@ -445,7 +450,6 @@ def confirm_onsets(
         ]
         res = run_batch(cases, RunSettings(revolutions=revolutions), full_state=False,
                         on_failure="record")  # fmt: skip
-        last = res.separation_per_rev[:, -1]
-        below[idx] = last[: idx.size]
-        above[idx] = last[idx.size :]
+        below[idx] = res.separation[: idx.size]
+        above[idx] = res.separation[idx.size :]
     return below, above
