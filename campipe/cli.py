@@ -500,19 +500,12 @@ def _report_statuses(report) -> None:
     show_default=True,
     help="Time a short sample run to estimate the run time.",
 )
-@click.option(
-    "--tolerance",
-    metavar="LENGTH",
-    help="Valve-lift tolerance such as '1e-4 in': probe the cases and print the "
-    "fidelity level (run.fidelity, run.mode_cutoff) they need for it.",
-)
 @limit_options
 def validate(
     spec,
     sets,
     workers,
     estimate,
-    tolerance,
     max_cases,
     max_steps,
     max_samples,
@@ -525,13 +518,6 @@ def validate(
     from campipe.study.execute import default_batch_size, default_workers, plan_batches
     from campipe.study.progress import format_seconds
 
-    if tolerance is not None:
-        from campipe.units import QuantityError, parse_quantity
-
-        try:
-            tolerance = parse_quantity(tolerance, "m", "--tolerance", "in")
-        except QuantityError as exc:
-            raise click.BadParameter(str(exc), param_hint="--tolerance") from None
     loaded = _load(
         spec, sets, _limits(max_cases, max_steps, max_samples, max_events, max_archive_gb)
     )
@@ -554,14 +540,6 @@ def validate(
         f"archive: about {archive_bytes(loaded) / 1e6:.3g} MB before compression "
         f"(events not counted)"
     )
-    if tolerance is not None:
-        from campipe.bench.fidelity import study_needs
-
-        click.echo(
-            study_needs(
-                [c.case for c in loaded.cases], [c.settings for c in loaded.cases], tolerance
-            )
-        )
 
 
 def validate_text(loaded, spec_path) -> str:

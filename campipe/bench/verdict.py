@@ -13,6 +13,7 @@ import math
 from dataclasses import dataclass
 from typing import TypeGuard
 
+from campipe.bench.onset import GOAL_MAP_SECONDS, GOAL_MAP_WORKERS
 from campipe.bench.run import (
     ACCURACY_DEFAULT_ERROR,
     ACCURACY_NEWMARK_ERROR,
@@ -218,6 +219,26 @@ def _throughput(bench: Bench) -> Goal:
     )
 
 
+def _onset_map(bench: Bench) -> Goal:
+    what = (
+        f"an onset map of 1000 designs in under {format_short(GOAL_MAP_SECONDS)} s on "
+        f"{GOAL_MAP_WORKERS} workers"
+    )
+    o = bench.onset
+    if not o:
+        return Goal(15, what, "–", NOT_SHOWN, "not measured")
+    if o["designs"] < 1000:
+        return Goal(15, what, "–", NOT_SHOWN, f"--quick maps {o['designs']} designs")
+    return Goal(
+        15,
+        what,
+        f"{format_short(o['seconds'], 2)} s",
+        REACHED if o["seconds"] < GOAL_MAP_SECONDS else NOT_REACHED,
+        f"{o['designs']} designs to {format_short(o['tolerance_rpm'])} rpm; the "
+        f"{o['grid_speeds']}-speed time-domain grid takes {format_short(o['grid_seconds'], 2)} s",
+    )
+
+
 def goals(bench: Bench) -> list[Goal]:
     """Every goal the bench judges, in a fixed order, each shown or not by this run."""
     return [
@@ -225,6 +246,7 @@ def goals(bench: Bench) -> list[Goal]:
         *_issue7(bench, "newmark-linear", GOAL_NEWMARK),
         *_issue4(bench),
         _throughput(bench),
+        _onset_map(bench),
     ]
 
 

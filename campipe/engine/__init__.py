@@ -2,7 +2,6 @@
 
 from campipe.engine.batch import (
     DEFAULT_INTEGRATOR,
-    DEFAULT_MODE_CUTOFF,
     DEFAULT_STEPS,
     FIDELITIES,
     INTEGRATORS,
@@ -23,7 +22,6 @@ from campipe.engine.loads import MEMBER_LOADS, member_loads
 
 __all__ = [
     "DEFAULT_INTEGRATOR",
-    "DEFAULT_MODE_CUTOFF",
     "DEFAULT_STEPS",
     "FIDELITIES",
     "INTEGRATORS",

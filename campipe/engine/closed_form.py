@@ -68,7 +68,6 @@ class ExactRuns(NamedTuple):
     zeta: np.ndarray  # (n, 4, NS) complex ``modal.harmonic_responses`` at the case's speed
     dt_cap: float  # largest step [s]; 0: none
     tolerance: float  # event-time tolerance [s]
-    mode_cutoff: float  # reduced fidelity: highest mode kept on the grid [rad/s]; 0: all
     full_state: bool  # sample all seven coordinates (else q1 and q7 only)
 
 
@@ -152,8 +151,7 @@ STATE = np.dtype(
         ("kmax", "i8"),  # degree of the held inputs' polynomials
         ("deg", "i8"),  # degree of the particular solution's polynomial
         ("gdeg", "i8"),  # degree of the monitors' polynomials
-        ("nact", "i8"),  # active block columns; the first ``lo`` are left off the grid
-        ("lo", "i8"),
+        ("nact", "i8"),  # active block columns
         ("k_out", "i8"),  # the next output sample
         ("stalled", "i8"),  # events in a row without time advancing
         ("done", "?"),  # the run reached its end

@@ -43,8 +43,8 @@ from campipe.engine.common import Cases
 from campipe.engine.modal import NS, ModalData
 from campipe.model import ValveTrain
 from campipe.model.assembly import preload_vector
-from campipe.profiles import evaluate, pack
-from campipe.vocabulary import CAM, CAM_CONTACT, CONFIGURATIONS, SEAT
+from campipe.profiles import pack
+from campipe.vocabulary import CAM, CAM_CONTACT, SEAT
 
 #: Turns the engine integrates for a steady state with the valve seated on part of the turn
 #: (from the periodic start of configuration I); the last is the steady state when it agrees
@@ -90,7 +90,7 @@ class _SteadyBatch:
     packed: object
     runs: ExactRuns
     z_turn: np.ndarray
-    matrices: list  # the distinct trains' SystemMatrices, or None where not needed
+    matrices: list  # the distinct trains' SystemMatrices where a valve reference was needed
     which: np.ndarray
 
     def extremes(
@@ -109,7 +109,7 @@ class _SteadyBatch:
         return out
 
 
-def _prepare(cases: Sequence[Case], *, need_matrices: bool = False) -> _SteadyBatch:
+def _prepare(cases: Sequence[Case], *, need_reference: bool = False) -> _SteadyBatch:
     n = len(cases)
     trains, which = _unique_trains(cases)
     data = [_modal_at_preload(t) for t in trains]
@@ -117,7 +117,7 @@ def _prepare(cases: Sequence[Case], *, need_matrices: bool = False) -> _SteadyBa
     matrices: list = [None] * len(trains)
     seated_trains = set(which[has_seat].tolist())
     for k, t in enumerate(trains):
-        if need_matrices or k in seated_trains:
+        if need_reference or k in seated_trains:
             matrices[k] = _matrices(t)
     qref = np.array([valve_reference(matrices[k]) if matrices[k] else 0.0 for k in which])
     modal_trains = ModalTrains(
@@ -128,7 +128,7 @@ def _prepare(cases: Sequence[Case], *, need_matrices: bool = False) -> _SteadyBa
     zeros = np.zeros(n)
     runs = ExactRuns(
         train=which, t_sample=zeros, t_end=zeros, zeta=np.zeros((n, 4, NS), np.complex128),
-        dt_cap=0.0, tolerance=1e-12, mode_cutoff=0.0, full_state=True,
+        dt_cap=0.0, tolerance=1e-12, full_state=True,
     )  # fmt: skip
     state = Cases(
         omega=np.array([c.speed for c in cases], dtype=float),
@@ -226,7 +226,7 @@ def steady_state(cases: Sequence[Case], output_every: float = math.radians(1.0))
         ``seat``) one whose valve reaches its seat: its steady state is not configuration I's.
     """
     check_run(cases, RunSettings(output_every=output_every), check_stability_limit=False)
-    batch = _prepare(cases, need_matrices=True)
+    batch = _prepare(cases, need_reference=True)
     ext = _as_extremes(batch.extremes(batch.cases.omega.copy()))
     for key, bad, why in (
         ("speed", ext.min_cam_force < 0, "the follower leaves the cam (no-follow)"),
@@ -246,30 +246,13 @@ def steady_state(cases: Sequence[Case], output_every: float = math.radians(1.0))
     n = len(cases)
     q = np.empty((n, n_out, 7))
     v = np.empty((n, n_out, 7))
+    acc = np.empty((n, n_out, 2))
     force = np.empty((n, n_out))
     steady.steady_samples(
         batch.cases, batch.trains, batch.packed, batch.runs, make_workspace(),
-        np.zeros(1, STATE), batch.z_turn, angles, q, v, force,
+        np.zeros(1, STATE), batch.z_turn, angles, np.ones(n, np.bool_), q, v, acc, force,
     )  # fmt: skip
-    return SteadyState(
-        angles, q, v, _accelerations(cases, batch, angles, q, v), force, batch.cases.valve_ref.copy(), ext
-    )
-
-
-def _accelerations(cases, batch: _SteadyBatch, angles, q, v) -> np.ndarray:
-    """(n, n_out, 2): q1's from the cam, q7's from the equation of motion with q1 held."""
-    free = list(CONFIGURATIONS[CAM_CONTACT].free)
-    out = np.empty((*q.shape[:2], 2))
-    for c, case in enumerate(cases):
-        sm = batch.matrices[batch.which[c]]
-        _, _, ddlift = evaluate(case.profile, angles)
-        a = np.zeros((angles.size, 7))
-        a[:, CAM] = -(case.speed**2) * np.asarray(ddlift)
-        force = sm.preload - q[c] @ sm.stiffness.T - v[c] @ sm.damping.T - a @ sm.mass.T
-        a[:, free] = np.linalg.solve(sm.mass[np.ix_(free, free)], force[:, free].T).T
-        out[c, :, 0] = a[:, CAM]
-        out[c, :, 1] = a[:, SEAT]
-    return out
+    return SteadyState(angles, q, v, acc, force, batch.cases.valve_ref.copy(), ext)
 
 
 # --------------------------------------------------------------------------- the onset

@@ -259,20 +259,10 @@ _RUN_METADATA: dict[str, Field] = {
         Field(
             "run.fidelity",
             "choice",
-            "full: every mode; reduced: the modes up to mode_cutoff (modal-exact only)",
+            "full: every mode, through every event (the only level: the reduced one was "
+            "removed, as it did not pay)",
             choices=tuple(getattr(_engine_batch, "FIDELITIES", ("full",))),
             archive_name="fidelity",
-        ),
-        Field(
-            "run.mode_cutoff",
-            "quantity",
-            "highest mode kept by the reduced fidelity; default: the engine's",
-            units="rad/s",
-            example="rad/s",
-            minimum=0.0,
-            allow_default=True,
-            archive_name="mode_cutoff",
-            archive_units="rad/s",
         ),
         Field(
             "run.start",

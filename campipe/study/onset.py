@@ -70,7 +70,7 @@ def _combinations(study: Study) -> tuple[tuple[str, ...], list[int]]:
     return keys, list(first.values())
 
 
-def _search(designs, low, high, tolerance, workers) -> periodic.Onset:
+def search_designs(designs, low, high, tolerance, workers) -> periodic.Onset:
     """``periodic.onset_speeds`` on ``workers`` threads (the kernels release the GIL)."""
     n = len(designs)
     parts = [p for p in np.array_split(np.arange(n), min(max(1, workers), n)) if p.size]
@@ -135,7 +135,7 @@ def onset_study(
     keys, firsts = _combinations(study)
     designs = [study.cases[i].case for i in firsts]
     t0 = time.perf_counter()
-    onset = _search(designs, low, high, tolerance, workers)
+    onset = search_designs(designs, low, high, tolerance, workers)
     t1 = time.perf_counter()
     nan = np.full(len(designs), np.nan)
     below, above = periodic.confirm_onsets(designs, onset.speed) if confirm else (nan, nan)
@@ -239,4 +239,3 @@ def summary_lines(result: OnsetStudy) -> list[str]:
             "it does not follow just below the onset, or does not leave just above it"
         )
     return lines
-
