@@ -414,6 +414,11 @@ def study(
     limits = _limits(max_cases, max_steps, max_samples, max_events, max_archive_gb)
     loaded = _load(spec, sets, limits)
     archive = _archive_path(loaded, spec, output)
+    if loaded.spec.search == "onset":
+        from campipe.engine.periodic import DEFAULT_ONSET_TOLERANCE_RPM, RPM
+
+        _onset(loaded, spec, archive, DEFAULT_ONSET_TOLERANCE_RPM * RPM, "table", True, workers)
+        return
     stderr = sys.stderr
 
     def bar(total, done):
@@ -679,10 +684,6 @@ def onset(spec, sets, tolerance, fmt, output, check, workers) -> None:
     engine either side. Exit status 1 when a check disagrees."""
     from pathlib import Path
 
-    from campipe.io.archive import provenance, write_file
-    from campipe.study.execute import default_workers
-    from campipe.study.onset import file_contents, onset_study, summary_lines
-    from campipe.study.query import format_rows
     from campipe.units import QuantityError, parse_quantity
 
     try:
@@ -690,10 +691,22 @@ def onset(spec, sets, tolerance, fmt, output, check, workers) -> None:
     except QuantityError as exc:
         raise click.BadParameter(str(exc), param_hint="--tolerance") from None
     loaded = _load(spec, sets)
-    result = onset_study(loaded, tol, confirm=check, workers=workers or default_workers())
     path = Path(output) if output else Path(spec).parent / f"{loaded.name}-onset.nc"
+    _onset(loaded, spec, path, tol, fmt, check, workers)
+
+
+def _onset(loaded, spec_path, path, tolerance, fmt, check, workers) -> None:
+    """``campipe onset``'s work (and ``campipe study``'s for a spec with ``search``)."""
+    from campipe.io.archive import provenance, write_file
+    from campipe.study.execute import default_workers
+    from campipe.study.onset import file_contents, onset_study, summary_lines
+    from campipe.study.query import format_rows
+
+    result = onset_study(loaded, tolerance, confirm=check, workers=workers or default_workers())
     sizes, variables, arrays, attrs = file_contents(result)
-    write_file(path, sizes, variables, arrays, {**attrs, **provenance(f"campipe onset {spec}")})
+    write_file(
+        path, sizes, variables, arrays, {**attrs, **provenance(f"campipe onset {spec_path}")}
+    )
     table = result.table
     click.echo(format_rows(table, np.arange(table.n), table.default, fmt))
     for line in summary_lines(result):

@@ -149,3 +149,17 @@ def test_onset_statuses_and_refusals(tmp_path):
     path = write_spec(tmp_path, one_speed.replace("AXIS", "") + "speed: 9000 rpm\n")
     out = CliRunner().invoke(main, ["onset", str(path)])
     assert out.exit_code == 2 and "speed: the spec runs one speed (9000 rpm)" in out.output
+
+
+def test_a_study_with_a_search_runs_the_onset(tmp_path):
+    """``search: {onset: no-follow, axis: speed}``: ``campipe study`` writes the onset file at
+    the archive's path; a bad value is refused at its key."""
+    spec = SPEC.replace("LOW", "6000").replace("HIGH", "14000").replace("AXIS", "")
+    path = write_spec(tmp_path, spec + "search: {onset: no-follow, axis: speed}\n")
+    out = CliRunner().invoke(main, ["study", str(path)])
+    assert out.exit_code == 0, out.output
+    with xr.open_dataset(tmp_path / "onsets.nc") as ds:
+        assert_allclose(ds.onset_speed_rpm.values, [9383], atol=0.1)
+    path = write_spec(tmp_path, spec + "search: {onset: follow}\n")
+    out = CliRunner().invoke(main, ["study", str(path)])
+    assert out.exit_code == 2 and "search.onset: found 'follow', expected no-follow" in out.output

@@ -127,9 +127,10 @@ def onset_map(quick: bool = False, repeats: int = 3) -> dict:
     settings = RunSettings(revolutions=GRID_TURNS, output_every=OUTPUT_EVERY)
     # A design that flies off beyond the physical bounds at the top speeds ends early, as
     # the grid's own run of it would.
-    kw = {"full_state": False, "on_failure": "record"}
-    run_batch(sample[:2], settings, **kw)
-    per_case = _best(lambda: run_batch(sample, settings, **kw), repeats)
+    run_batch(sample[:2], settings, full_state=False, on_failure="record")
+    per_case = _best(
+        lambda: run_batch(sample, settings, full_state=False, on_failure="record"), repeats
+    )
     per_case /= len(sample)
     n = len(designs)
     points = seconds / (n * per_case)

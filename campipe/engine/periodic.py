@@ -276,7 +276,8 @@ def seated_no_follow(cases: Sequence[Case]) -> tuple[np.ndarray, np.ndarray]:
     turns = SEATED_TURNS
     while todo.size and turns <= MAX_SEATED_TURNS:
         settings = RunSettings(revolutions=turns, output_every=math.radians(5.0))
-        res = run_batch([cases[i] for i in todo], settings, full_state=False, on_failure="record")
+        res = run_batch([cases[int(i)] for i in todo], settings, full_state=False,
+                        on_failure="record")  # fmt: skip
         last = res.separation_per_rev[:, -1]
         ok = np.abs(last - res.separation_per_rev[:, -2]) <= SEATED_AGREEMENT
         sep[todo] = last
@@ -372,11 +373,11 @@ def onset_speeds(
     first = np.where(no_follow.any(axis=1), no_follow.argmax(axis=1), -1)
     status = np.where(first < 0, "none", np.where(first == 0, "below", "found"))
     todo = first > 0
-    k = np.maximum(first, 1)
-    a = np.where(todo, grid[k - 1], np.nan)
-    b = np.where(todo, grid[k], np.nan)
-    fa = margin[np.arange(n), k - 1]
-    fb = margin[np.arange(n), k]
+    right = np.maximum(first, 1)
+    a = np.where(todo, grid[right - 1], np.nan)
+    b = np.where(todo, grid[right], np.nan)
+    fa = margin[np.arange(n), right - 1]
+    fb = margin[np.arange(n), right]
     bisect = ~(np.isfinite(fa) & np.isfinite(fb))
     seated = np.where(todo, bisect, False)
     side = np.zeros(n, np.int64)  # the end the last step replaced: −1 a, +1 b (Illinois)
@@ -427,7 +428,7 @@ def confirm_onsets(
     idx = np.flatnonzero(np.isfinite(onset))
     if idx.size:
         cases = [
-            dataclasses.replace(designs[i], speed=onset[i] * f)
+            dataclasses.replace(designs[int(i)], speed=onset[i] * f)
             for f in (1 - offset, 1 + offset)
             for i in idx
         ]

@@ -521,7 +521,11 @@ TOP_LEVEL: dict[str, str] = {
     "cases": "explicit cases, each deep-merged over the base",
     "sample": "a sampled design: {method: latin-hypercube, n, seed, ranges: {key: {from, to}}}",
     "replay": "cases to log to rerun while the study runs: {where: EXPR}",
+    "search": "search the speed axis instead of running every case: {onset: no-follow, "
+    "axis: speed}, the no-follow onset of every combination of the other axes (campipe onset)",
 }
+#: What ``search`` may ask for (``campipe onset``).
+SEARCHES = {"onset": ("no-follow",), "axis": ("speed",)}
 
 #: Keys of a case (the base's top-level keys that describe one run).
 CASE_KEYS = ("model", "profile", "defects", "closure", "seat", "speed", "run")

@@ -155,7 +155,7 @@ def _table(study, keys, firsts, onset, below, above) -> CaseTable:
             columns[name] = np.array([str(v) for v in raw], dtype=object)
         else:
             columns[name] = np.array(raw, dtype=float) * factor
-        units[name] = var.units if var.units != "1" else ""
+        units[name] = var.units if var.units and var.units != "1" else ""
     checked = np.isfinite(below)
     agrees = (below == 0.0) & (above > 0.0)
     columns["onset_speed_rpm"] = onset.speed / periodic.RPM
@@ -188,8 +188,8 @@ def file_contents(result: OnsetStudy) -> tuple[dict, list[VariableSpec], dict, d
         if name in ONSET_COLUMNS:
             continue
         col = t.columns[name]
-        attrs = {"units": t.units[name]} if t.units[name] else {}
-        add(name, ("combination",), "str" if col.dtype == object else "f8", col, **attrs)
+        units = {"units": t.units[name]} if t.units[name] else {}
+        add(name, ("combination",), "str" if col.dtype == object else "f8", col, **units)
     add("onset_speed_rpm", ("combination",), "f8", t.columns["onset_speed_rpm"], units="rpm",
         long_name="no-follow onset speed (steady state; NaN: none inside the speed range)",
         tolerance_rpm=on.tolerance / periodic.RPM)  # fmt: skip
@@ -211,7 +211,7 @@ def file_contents(result: OnsetStudy) -> tuple[dict, list[VariableSpec], dict, d
         "of the turn)")  # fmt: skip
     add("no_follow", ("combination", "scan"), "i1", on.scan_no_follow.astype(np.int8),
         long_name="the steady state leaves the cam with the valve off its seat")  # fmt: skip
-    attrs = {
+    attrs: dict[str, object] = {
         "title": f"{result.name}: no-follow onset speeds",
         "study_name": result.name,
         "speed_range_rpm": [result.low / periodic.RPM, result.high / periodic.RPM],

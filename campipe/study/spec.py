@@ -51,6 +51,7 @@ from campipe.study.fields import (
     PROFILE_KINDS,
     RUN_DEFAULTS,
     SAMPLE_METHODS,
+    SEARCHES,
     STUDY_WIDE,
     TOP_LEVEL,
     WHOLE_KEYS,
@@ -114,6 +115,7 @@ class Spec:
     cases: list[dict]  # case entries, deep-merged over the base
     sample: Sample | None  # sampled design
     replay: str | None  # replay selection expression
+    search: str | None = None  # "onset": search the speed axis instead (campipe onset)
     overrides: dict[str, object] = field(default_factory=dict)  # --set KEY=VALUE applied
     path: Path | None = None  # the spec file, when read from one
 
@@ -646,6 +648,25 @@ def check_replay(value: object, problems: _Problems) -> str | None:
     return where
 
 
+def check_search(value: object, problems: _Problems) -> str | None:
+    """``search: {onset: no-follow, axis: speed}`` → "onset"."""
+    block = problems.check(_mapping, value, "search", "{onset: no-follow, axis: speed}")
+    if block is None:
+        return None
+    ok = True
+    for k, v in block.items():
+        if k not in SEARCHES:
+            problems.items.append(_unknown("search", k, list(SEARCHES)))
+            ok = False
+        elif v not in SEARCHES[k]:
+            problems.add(f"search.{k}", f"found {_show(v)}, expected {' or '.join(SEARCHES[k])}")
+            ok = False
+    if "onset" not in block:
+        problems.add("search.onset", "missing: what to search for (no-follow)")
+        ok = False
+    return "onset" if ok else None
+
+
 # -- the spec -------------------------------------------------------------------------------
 
 
@@ -729,6 +750,7 @@ def check_spec(
     cases = check_cases(raw["cases"], problems) if "cases" in raw else []
     sample = check_sample(raw["sample"], problems, max_axis) if "sample" in raw else None
     replay = check_replay(raw["replay"], problems) if "replay" in raw else None
+    search = check_search(raw["search"], problems) if "search" in raw else None
     spec = Spec(
         name=name if isinstance(name, str) else "",
         description=str(description),
@@ -740,6 +762,7 @@ def check_spec(
         cases=cases,
         sample=sample,
         replay=replay,
+        search=search,
         overrides=overrides,
     )
     check_conflicts(spec, problems)
