@@ -90,7 +90,6 @@ def map_designs(n_preloads: int | None = None, n_rates: int | None = None) -> li
 
 def _clear_caches() -> None:
     """The engine's per-train caches, so a timing includes each design's modes."""
-    periodic._unit_preload.cache_clear()
     batch._modal.cache_clear()
     batch._matrices.cache_clear()
 

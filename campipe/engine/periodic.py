@@ -18,7 +18,6 @@ Pure numerics: arrays in, arrays out; no files, no printing.
 from __future__ import annotations
 
 import dataclasses
-import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -67,15 +66,11 @@ RPM = TWO_PI / 60.0  # [rad/s] per rpm
 # --------------------------------------------------------------------------- packing
 
 
-@functools.lru_cache(maxsize=1024)
-def _unit_preload(train: ValveTrain) -> ModalData:
-    return _modal(train)
-
-
 def _modal_at_preload(train: ValveTrain) -> ModalData:
-    """The closed-form data of a train, its modes shared by every preload: the preload only
-    enters the constant forcing and the contact forces' constant part, linearly."""
-    unit = _unit_preload(train.replace(spring_preload=1.0))
+    """The closed-form data of a train, its modes shared by every preload (``batch._modal``
+    caches them): the preload only enters the constant forcing and the contact forces'
+    constant part, linearly."""
+    unit = _modal(train.replace(spring_preload=1.0))
     p = train.spring_preload
     return dataclasses.replace(unit, b_load=unit.b_load * p, sigma0=unit.sigma0 * p)
 

@@ -63,21 +63,27 @@ def _particular_at(ws, st, theta):
 
 
 @njit(inline="always", nogil=True)
+def _apply_block(trains, st, u, b, f1, f2):
+    """u_b ← f1·u_b + f2·N_b u_b: e^{B_b τ} u_b from the block's basis functions at τ."""
+    tr, ci = st.tr, st.cfg - 1
+    i0 = trains.bstart[tr, ci, b]
+    if trains.bdim[tr, ci, b] == 1:
+        u[i0] *= f1
+    else:
+        a0 = u[i0]
+        a1 = u[i0 + 1]
+        n = trains.block_n
+        u[i0] = f1 * a0 + f2 * (n[tr, ci, i0, i0] * a0 + n[tr, ci, i0, i0 + 1] * a1)
+        u[i0 + 1] = f1 * a1 + f2 * (n[tr, ci, i0 + 1, i0] * a0 + n[tr, ci, i0 + 1, i0 + 1] * a1)
+
+
+@njit(inline="always", nogil=True)
 def _propagate(trains, ws, st, u, tau):
-    """u ← e^{Bτ} u, block by block: f1·u_b + f2·N_b u_b."""
+    """u ← e^{Bτ} u, block by block."""
     tr, ci = st.tr, st.cfg - 1
     for b in range(trains.n_blocks[tr, ci]):
         f1, f2 = block_basis(trains.lam_bar[tr, ci, b], trains.delta2[tr, ci, b], tau)
-        i0 = trains.bstart[tr, ci, b]
-        k = trains.bdim[tr, ci, b]
-        if k == 1:
-            u[i0] *= f1
-        else:
-            a0 = u[i0]
-            a1 = u[i0 + 1]
-            n = trains.block_n
-            u[i0] = f1 * a0 + f2 * (n[tr, ci, i0, i0] * a0 + n[tr, ci, i0, i0 + 1] * a1)
-            u[i0 + 1] = f1 * a1 + f2 * (n[tr, ci, i0 + 1, i0] * a0 + n[tr, ci, i0 + 1, i0 + 1] * a1)
+        _apply_block(trains, st, u, b, f1, f2)
 
 
 @njit(inline="always", nogil=True)
@@ -561,9 +567,9 @@ def steady_extremes(cases, trains, profiles, runs, ws, state, z_turn, with_max, 
 
 
 @njit(inline="always", nogil=True)
-def _row_at(trains, ws, st, s_row, x, ct, sn, rate):
-    """Row s_row of the state (rate False) or of its time derivative (rate True) at the
-    prepared piece's local angle x (cos θ, sin θ given), from ws.u = e^{Bτ}u."""
+def _rate(trains, ws, st, s_row, x, ct, sn):
+    """ż[s_row] at the prepared piece's local angle x (cos θ, sin θ given), from
+    ws.u = e^{Bτ}u: X·B·e^{Bτ}u (B_b = λ̄I + N_b) plus the particular solution's rate."""
     tr, ci = st.tr, st.cfg - 1
     acc = 0.0
     for b in range(trains.n_blocks[tr, ci]):
@@ -571,18 +577,12 @@ def _row_at(trains, ws, st, s_row, x, ct, sn, rate):
         i1 = i0 + trains.bdim[tr, ci, b]
         lbar = trains.lam_bar[tr, ci, b]
         for j in range(i0, i1):
-            y = ws.u[j]
-            if rate:  # B_b = λ̄I + N_b
-                y = lbar * ws.u[j]
-                for k in range(i0, i1):
-                    y += trains.block_n[tr, ci, j, k] * ws.u[k]
+            y = lbar * ws.u[j]
+            for k in range(i0, i1):
+                y += trains.block_n[tr, ci, j, k] * ws.u[k]
             acc += trains.basis[tr, ci, s_row, j] * y
-    p0, p1, _ = horner(ws.Z[:, s_row], x, st.deg)
-    a = ws.ZT[s_row].real
-    b = ws.ZT[s_row].imag
-    if rate:
-        return acc + st.w * (p1 - a * sn - b * ct)
-    return acc + p0 + a * ct - b * sn
+    dz = horner(ws.Z[:, s_row], x, st.deg)[1]
+    return acc + st.w * (dz - ws.ZT[s_row].real * sn - ws.ZT[s_row].imag * ct)
 
 
 @njit(**KERNEL)
@@ -642,7 +642,7 @@ def steady_samples(cases, trains, profiles, runs, ws, state, z_turn, angles, act
             q[c, k, CAM] = -lift
             v[c, k, CAM] = -w * dlift
             acc[c, k, 0] = -w * w * ddlift
-            acc[c, k, 1] = _row_at(trains, ws, st, nf + row, x, ct, sn, True)
+            acc[c, k, 1] = _rate(trains, ws, st, nf + row, x, ct, sn)
             # F1 = ρX·e^{Bτ}u plus the piece's forced part (``closed_form.force_monitor``).
             f1 = horner(ws.G[0], x, st.kmax)[0] + ws.GT[0].real * ct - ws.GT[0].imag * sn
             for j in range(ns):
@@ -653,16 +653,5 @@ def steady_samples(cases, trains, profiles, runs, ws, state, z_turn, angles, act
 @njit(inline="always", nogil=True)
 def _propagate_by(trains, ws, st, u):
     """u ← e^{Bh} u with the blocks' step factors (f1(h), f2(h)) in ws.MC rows D1, D2."""
-    tr, ci = st.tr, st.cfg - 1
-    for b in range(trains.n_blocks[tr, ci]):
-        f1 = ws.MC[D1, b]
-        f2 = ws.MC[D2, b]
-        i0 = trains.bstart[tr, ci, b]
-        if trains.bdim[tr, ci, b] == 1:
-            u[i0] *= f1
-        else:
-            a0 = u[i0]
-            a1 = u[i0 + 1]
-            n = trains.block_n
-            u[i0] = f1 * a0 + f2 * (n[tr, ci, i0, i0] * a0 + n[tr, ci, i0, i0 + 1] * a1)
-            u[i0 + 1] = f1 * a1 + f2 * (n[tr, ci, i0 + 1, i0] * a0 + n[tr, ci, i0 + 1, i0 + 1] * a1)
+    for b in range(trains.n_blocks[st.tr, st.cfg - 1]):
+        _apply_block(trains, st, u, b, ws.MC[D1, b], ws.MC[D2, b])

@@ -37,7 +37,8 @@ class OnsetStudy:
     keys: tuple[str, ...]  # the varied spec keys, speed left out
     table: CaseTable  # one row per combination: the keys' archive columns, then ONSET_COLUMNS
     onset: periodic.Onset  # the search's result (SI)
-    below: np.ndarray  # (n,) no-follow at onset·(1 − offset), last turn [rad]; NaN: unchecked
+    #: (n,) the engine's no-follow per turn at onset·(1 − offset) [rad]; NaN: unchecked
+    below: np.ndarray
     above: np.ndarray  # (n,) likewise at onset·(1 + offset)
     low: float  # the spec's speed range [rad/s]
     high: float
