@@ -548,6 +548,11 @@ def study(
             return
     loaded = _load(spec, sets, limits)
     archive = _archive_path(loaded, spec, output)
+    if loaded.spec.search == "onset":
+        from campipe.engine.periodic import DEFAULT_ONSET_TOLERANCE_RPM, RPM
+
+        _onset(loaded, spec, archive, DEFAULT_ONSET_TOLERANCE_RPM * RPM, "table", True, workers)
+        return
     stderr = sys.stderr
     bars: list[Progress] = []
 
@@ -644,19 +649,12 @@ def _report_statuses(report) -> None:
     show_default=True,
     help="Time a short sample run to estimate the run time.",
 )
-@click.option(
-    "--tolerance",
-    metavar="LENGTH",
-    help="Valve-lift tolerance such as '1e-4 in': probe the cases and print the "
-    "fidelity level (run.fidelity, run.mode_cutoff) they need for it.",
-)
 @limit_options
 def validate(
     spec,
     sets,
     workers,
     estimate,
-    tolerance,
     max_cases,
     max_steps,
     max_samples,
@@ -667,14 +665,6 @@ def validate(
     from campipe.study.estimate import archive_bytes
     from campipe.study.execute import default_batch_size, default_workers, plan_batches
 
-    _load_pint()
-    if tolerance is not None:
-        from campipe.units import QuantityError, parse_quantity
-
-        try:
-            tolerance = parse_quantity(tolerance, "m", "--tolerance", "in")
-        except QuantityError as exc:
-            raise click.BadParameter(str(exc), param_hint="--tolerance") from None
     loaded = _load(
         spec, sets, _limits(max_cases, max_steps, max_samples, max_events, max_archive_gb)
     )
@@ -697,14 +687,6 @@ def validate(
         f"archive: about {archive_bytes(loaded) / 1e6:.3g} MB before compression "
         f"(events not counted)"
     )
-    if tolerance is not None:
-        from campipe.bench.fidelity import study_needs
-
-        click.echo(
-            study_needs(
-                [c.case for c in loaded.cases], [c.settings for c in loaded.cases], tolerance
-            )
-        )
 
 
 def estimate_text(loaded, workers: int) -> str:
@@ -1022,6 +1004,84 @@ def _write_plots(loaded, archive) -> None:
                 isinstance(exc, ValueError),
             ) from None
         click.echo(f"campipe study: plots[{i}] ({request.kind}) written to {path}", err=True)
+
+
+# -- onset ------------------------------------------------------------------------------------
+
+
+@main.command()
+@click.argument("spec", type=click.Path(exists=True, dir_okay=False))
+@click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=_SET_HELP)
+@click.option(
+    "--tolerance",
+    default="0.1 rpm",
+    show_default=True,
+    metavar="SPEED",
+    help="The onset's tolerance (the width of its final bracket).",
+)
+@click.option(
+    "--format",
+    "fmt",
+    type=click.Choice(["table", "csv", "json"]),
+    default="table",
+    show_default=True,
+    help="json: {study, units, cases: [row objects]} as campipe query's (null: no onset in "
+    "the range, or no seat).",
+)
+@click.option(
+    "-o",
+    "--output",
+    type=click.Path(dir_okay=False),
+    help="The netCDF file written (default: <name>-onset.nc beside SPEC).",
+)
+@click.option(
+    "--check/--no-check",
+    default=True,
+    show_default=True,
+    help="Run the time-domain engine 0.5 % below and above each onset.",
+)
+@click.option(
+    "--workers",
+    type=click.IntRange(min=1),
+    help="Threads for the search (default: the cores available).",
+)
+def onset(spec, sets, tolerance, fmt, output, check, workers) -> None:
+    """The no-follow onset speed of every combination of SPEC's other axes, within its
+    speed range: the root of the steady state's least cam force, checked by the time-domain
+    engine either side. Exit status 1 when a check disagrees."""
+    from pathlib import Path
+
+    from campipe.units import QuantityError, parse_quantity
+
+    try:
+        tol = parse_quantity(tolerance, "rad/s", "--tolerance", "rpm")
+    except QuantityError as exc:
+        raise click.BadParameter(str(exc), param_hint="--tolerance") from None
+    loaded = _load(spec, sets)
+    path = Path(output) if output else Path(spec).parent / f"{loaded.name}-onset.nc"
+    _onset(loaded, spec, path, tol, fmt, check, workers)
+
+
+def _onset(loaded, spec_path, path, tolerance, fmt, check, workers) -> None:
+    """``campipe onset``'s work (and ``campipe study``'s for a spec with ``search``)."""
+    from campipe.io.archive import provenance, write_file
+    from campipe.study.display import display_units
+    from campipe.study.execute import default_workers
+    from campipe.study.onset import file_contents, onset_study, summary_lines
+    from campipe.study.query import displayed, format_rows
+
+    result = onset_study(loaded, tolerance, confirm=check, workers=workers or default_workers())
+    sizes, variables, arrays, attrs = file_contents(result)
+    write_file(
+        path, sizes, variables, arrays, {**attrs, **provenance(f"campipe onset {spec_path}")}
+    )
+    table = displayed(result.table, display_units(result.table.units, attrs))
+    click.echo(format_rows(table, np.arange(table.n), table.default, fmt))
+    for line in summary_lines(result):
+        click.echo(line, err=True)
+    click.echo(f"wrote {path}", err=True)
+    if result.disagreements.size:
+        raise Failure(summary_lines(result)[-1])
 
 
 # -- replay -----------------------------------------------------------------------------------

@@ -8,6 +8,9 @@ seat; grouped as in ``separation_vs_speed.py``), the lowest speed with
 numpy. Printed as a table and drawn one marker per group: a circle at the onset, a downward
 triangle at the lowest speed where the follower is already off the cam there ("at or below"),
 a cross at the highest where it never leaves ("none up to").
+
+This reads the onset off the sweep's grid, so it is only as fine as the grid: ``campipe onset
+SPEC`` finds it to 0.1 rpm on the steady state, without the sweep.
 """
 
 from __future__ import annotations

@@ -12,13 +12,11 @@ import pytest
 from click.testing import CliRunner
 from numpy.testing import assert_allclose
 
-from campipe.bench import fidelity, measure, report, run, scaling, verdict
+from campipe.bench import measure, onset, report, run, scaling, verdict
 from campipe.bench.ivp import solve_case
-from campipe.bench.suite import INCH, QUICK, rpm, suite
+from campipe.bench.suite import INCH, QUICK, suite
 from campipe.cli import main
-from campipe.engine import Case, RunSettings, run_batch
-from campipe.model import thesis_train
-from campipe.profiles import harmonic
+from campipe.engine import RunSettings, run_batch
 from campipe.vocabulary import EV_KIND, EV_TIME
 
 SCENES = {s.name: s for s in suite()}
@@ -166,33 +164,26 @@ def test_the_newmark_goal_is_judged_on_measured_ratios():
     assert goal["verdict_at_default_error"] == "not shown (a lower bound)"
 
 
-def test_the_reduced_model_on_a_slow_scene_is_within_its_stated_tolerance():
-    """At 3000 rpm (contact throughout) from the thesis's quasi-static start, whose transient
-    excites every mode, the default cut-off's valve lift is within 1e-7 in of the full
-    model's; the probe's pick for 1e-6 in is within 1e-6 in and never the lowest cut-off
-    (1e-5 in off). From the periodic start the harmonic cam, a single sinusoid, excites no
-    free vibration: the dropped modes' quasi-static response is then their whole response,
-    and every cut-off gives the full model's valve lift to rounding. A reduction that dropped
-    the static correction fails all three."""
-    case = Case(thesis_train(), harmonic(INCH), rpm(3000))
-    periodic = RunSettings(revolutions=2)
-    full = run_batch([case], periodic)
-    for cutoff in fidelity.CANDIDATE_CUTOFFS:
-        reduced = run_batch([case], replace(periodic, fidelity="reduced", mode_cutoff=cutoff))
-        assert np.abs(reduced.valve_lift - full.valve_lift).max() < 1e-12 * INCH
-    settings = replace(periodic, start="quasi-static")
-    full = run_batch([case], settings)
-    reduced = run_batch([case], replace(settings, fidelity="reduced"))
-    assert np.abs(reduced.valve_lift - full.valve_lift).max() < fidelity.SLOW_SCENE_ERROR
-    assert fidelity.SLOW_SCENE_ERROR == 1e-7 * INCH
-    tol = 1e-6 * INCH
-    p = fidelity.probe([case], tol, settings, repeats=1)
-    assert [lv.mode_cutoff for lv in p.levels] == [None, *fidelity.CANDIDATE_CUTOFFS]
-    chosen, cutoff = p.setting(0)
-    again = run_batch([case], replace(settings, fidelity=chosen, mode_cutoff=cutoff))
-    assert np.abs(again.valve_lift - full.valve_lift).max() <= tol
-    # The lowest cut-off is too coarse at 1e-6 in; the probe never picks it.
-    assert p.levels[1].errors[0] > tol and p.choice[0] != 1
+def test_the_steady_state_path_on_the_scenes():
+    """Where a scene follows the cam with the valve off its seat, one turn of the closed form
+    is the reference's last turn to rounding; where it does not, the path says why."""
+    rows = {r["scene"]: r for r in onset.steady_scenes(SCENES.values(), copies=2, repeats=1)}
+    assert [k for k, r in rows.items() if r["applies"]] == ["smooth-9000", "polydyne-9000"]
+    for name in ("smooth-9000", "polydyne-9000"):
+        assert rows[name]["valve_lift"] < 1e-12 * INCH
+    assert rows["smooth-9000"]["margin"] > 0 and rows["polydyne-9000"]["margin"] == np.inf
+    assert rows["separation-11000"]["margin"] < 0
+    assert rows["seat-13205"]["seat_height"] < 0
+
+
+def test_the_onset_map_agrees_with_its_time_domain_check():
+    """The quick map (16 designs): every onset inside the range, each checked either side."""
+    o = onset.onset_map(quick=True, repeats=1)
+    assert (o["designs"], o["found"], o["checked"], o["agree"]) == (16, 16, 16, 16)
+    assert o["grid_resolution_rpm"] == pytest.approx(250.0)
+    assert o["equal_time_speeds"] == pytest.approx(
+        o["seconds"] / (o["designs"] * o["grid_per_case"]) * o["workers"]
+    )
 
 
 def test_scaling_runs_through_dask_and_the_study_layer(tmp_path):
@@ -219,7 +210,6 @@ def test_quick_bench_writes_its_table_and_plot(tmp_path):
         rows = list(csv.DictReader(fh))
     expected = (
         [("modal-exact", f"tol {t:g} s") for t in QUICK.modal_tolerances]
-        + [("reduced", f"cutoff {c:.3g} rad/s") for c in QUICK.reduced_cutoffs]
         + [("contacts only", "full")]
         + [("newmark-linear", f"dt {dt * 1e6:g} µs") for dt in QUICK.newmark_steps]
         + [("solve_ivp", f"Radau rtol {r:g}") for r in QUICK.ivp_rtols]
@@ -290,6 +280,13 @@ def test_the_verdict_judges_every_goal_reached_not_reached_or_not_shown():
         | {"rate": 1.5e7}
     ]
     goals = verdict.goals(_verdict_bench(throughput=throughput))
+    mapped = {"designs": 1000, "seconds": 1.2, "tolerance_rpm": 0.1, "grid_speeds": 33}
+    onset_goal = verdict.goals(_verdict_bench(onset={**mapped, "grid_seconds": 13.0}))[-2]
+    assert (onset_goal.area, onset_goal.status, onset_goal.figure) == (
+        "onset",
+        "not reached",
+        "1.2 s",
+    )
     assert [(g.area, g.status, g.figure) for g in goals] == [
         # no solve_ivp row: the two solve_ivp readings cannot be shown
         ("speed", "not shown", "–"),
@@ -302,6 +299,8 @@ def test_the_verdict_judges_every_goal_reached_not_reached_or_not_shown():
         ("accuracy", "not shown", "–"),
         ("accuracy", "not shown", "–"),
         ("throughput", "not reached", "1.5e7 case-steps/s"),
+        # no onset map in this bench
+        ("onset", "not shown", "–"),
         # no study section (--no-study)
         ("study", "not shown", "–"),
     ]
@@ -375,21 +374,22 @@ def test_the_quick_verdict_names_every_goal_and_cross_check(tmp_path):
     lines = result.stdout.splitlines()  # the progress lines go to stderr
     block = lines[lines.index("verdict (--quick, 2 scenes):") :]
     assert block[1] == "goals:"
-    goals = block[2:10]
+    goals = block[2:11]
     assert [g.strip().split("  ")[0] for g in goals] == [
         g.status for g in verdict.goals(report.read_json(out / "bench.json"))
     ]
     areas = [g.split(":")[0].split()[-1] for g in goals]
-    assert areas == ["speed"] * 4 + ["accuracy"] * 2 + ["throughput", "study"]
+    assert areas == ["speed"] * 4 + ["accuracy"] * 2 + ["throughput", "onset", "study"]
     for line, peer in zip(goals[:4], ("solve_ivp",) * 2 + ("newmark-linear",) * 2, strict=True):
         assert f"faster than {peer}" in line
-    assert goals[-2].startswith("  not shown") and "--no-scaling" in goals[-2]
+    assert goals[-3].startswith("  not shown") and "--no-scaling" in goals[-3]
+    assert goals[-2].startswith("  not shown") and "--quick maps 16 designs" in goals[-2]
     assert goals[-1].startswith("  not shown") and "--no-study" in goals[-1]
-    assert block[10].startswith("reference cross-checks (modal-exact, tolerance 1e-14 s")
-    for line, scene, ok in zip(block[11:13], scenes, agreed, strict=True):
+    assert block[11].startswith("reference cross-checks (modal-exact, tolerance 1e-14 s")
+    for line, scene, ok in zip(block[12:14], scenes, agreed, strict=True):
         assert line.split()[:2] == ["agree" if ok else "disagree", f"{scene}:"]
-    assert block[13].startswith(f"{sum(agreed)} of 2 cross-checks agree")
-    assert len(block) == 14
+    assert block[14].startswith(f"{sum(agreed)} of 2 cross-checks agree")
+    assert len(block) == 15
 
 
 @pytest.mark.slow
@@ -417,23 +417,6 @@ def test_bench_refuses_an_unknown_scene(tmp_path):
         main, ["bench", "--quick", "--scene", "nope", "--no-scaling", "-o", str(tmp_path)]
     )
     assert result.exit_code == 2 and "known: smooth-9000" in result.output
-
-
-def test_validate_prints_the_fidelity_a_spec_needs(tmp_path):
-    spec = tmp_path / "slow.yaml"
-    spec.write_text(
-        "name: slow\nmodel: {preset: thesis-1971}\nprofile: {kind: harmonic, lift: 1 in}\n"
-        "closure: force\nseat: none\nrun: {revolutions: 1, output_every: 1 deg}\n"
-        "sweep:\n  speed: [3000 rpm, 4000 rpm]\n"
-    )
-    result = CliRunner().invoke(
-        main, ["validate", str(spec), "--no-estimate", "--tolerance", "1e-3 in"]
-    )
-    assert result.exit_code == 0, result.output
-    assert "fidelity for a valve-lift tolerance of 0.001 in (probe: 2 of 2 cases" in result.output
-    assert "the whole study: run.fidelity:" in result.output
-    bare = CliRunner().invoke(main, ["validate", str(spec), "--tolerance", "1e-3"])
-    assert bare.exit_code == 2 and "without units" in bare.output
 
 
 def test_the_plots_draw_a_bench_whose_scenes_have_no_events(tmp_path):

@@ -32,7 +32,7 @@ def test_the_committed_pages_are_generated_from_the_committed_bench_json():
             f"{path.relative_to(ROOT)} differs from what {pages.BENCH_JSON} gives: "
             "run python -m campipe.bench.pages"
         )
-    assert pages.block_names(README.read_text()) == ["bench-verdict"]
+    assert pages.block_names(README.read_text()) == ["bench-onset", "bench-verdict"]
     assert sorted(pages.block_names(BENCH_PAGE.read_text())) == sorted(pages.BLOCKS)
 
 
@@ -70,7 +70,8 @@ def test_the_pages_command_checks_and_rewrites(tmp_path, capsys):
     head, body, tail = page.read_text().split("generated")
     assert head == "Intro.\n\n<!-- " and tail == " -->\nEnd.\n"
     assert body.startswith(": bench-accuracy -->\nOn separation-11000 the default reaches")
-    assert "**1.17×**" in body  # the committed run's figure, now from the json
+    ratio = report.read_json(BENCH_JSON).accuracy_for_cost["ratio"]
+    assert f"**{pages.format_short(ratio)}×**" in body  # the committed run's figure, from the json
     assert (folder / "bench.csv").read_bytes() == (BENCH_JSON.parent / "bench.csv").read_bytes()
     page.write_text("<!-- generated: no-such-block -->\n<!-- end generated -->\n")
     with pytest.raises(KeyError, match="unknown generated block 'no-such-block'"):

@@ -279,9 +279,9 @@ def test_smooth_profile_breaks_are_not_impacts(method):
 
 def test_a_failing_case_is_recorded_beside_the_others_when_asked():
     """on_failure="record": a diverging case (newmark-linear just beyond its limit) is stopped
-    when its motion leaves the physical bounds and marked UNBOUNDED with NaN results; a
-    train half as stiff, whose limit is √2 larger, runs in the same batch and gives what it
-    gives alone."""
+    when its motion leaves the physical bounds and marked UNBOUNDED with NaN results; a train
+    half as stiff, whose limit is √2 larger, runs in the same batch and gives what it gives
+    alone."""
     from campipe.vocabulary import OK, UNBOUNDED
 
     bad = Case(TRAIN, CAM, rpm(11000))  # no seat: configurations I and II

@@ -99,13 +99,11 @@ def test_engine_errors_name_the_run_key_as_an_attribute():
     with pytest.raises(RunSettingsError) as info:
         resolve_integrator("euler")
     assert (info.value.key, info.value.found) == ("run.integrator", "euler")
-    with pytest.raises(RunSettingsError) as info:
-        _ = RunSettings(integrator="newmark-linear", fidelity="reduced").cutoff
-    assert (info.value.key, info.value.found) == ("run.fidelity", "reduced")
-    with pytest.raises(RunSettingsError) as info:
-        _ = RunSettings(fidelity="reduced", mode_cutoff=-1.0).cutoff
-    assert (info.value.key, info.value.found) == ("run.mode_cutoff", -1.0)
     case = Case(thesis_train(), harmonic(0.0254), 1000.0)
+    with pytest.raises(RunSettingsError) as info:
+        check_run([case], RunSettings(fidelity="reduced"))
+    assert (info.value.key, info.value.found) == ("run.fidelity", "reduced")
+    assert "'reduced' was removed: it saved at most a fifth" in str(info.value)
     with pytest.raises(RunSettingsError) as info:
         check_run([case], RunSettings(tolerance=0.0))
     assert info.value.key == "run.tolerance"

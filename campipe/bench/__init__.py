@@ -1,12 +1,13 @@
-"""Speed against error: the bench suite, its converged references, the peers and the fidelity
-probe.
+"""Speed against error: the bench suite, its converged references, the peers, the steady-state
+path and the onset map.
 
 - :mod:`~campipe.bench.suite`: the fixed cases and the ladders of steps and tolerances.
 - :mod:`~campipe.bench.ivp`: the SciPy ``solve_ivp`` peer, an independent event-driven
   implementation of the same model.
 - :mod:`~campipe.bench.measure`: timing, errors against a reference, the references and their
   check, time-to-error ratios.
-- :mod:`~campipe.bench.fidelity`: which fidelity level a case needs for a tolerance.
+- :mod:`~campipe.bench.onset`: the steady-state path against the engine on the scenes that
+  follow the cam, and the onset map over many designs against the time-domain grid.
 - :mod:`~campipe.bench.scaling`: time against number of cases and workers, archive size.
 - :mod:`~campipe.bench.run`: the whole bench as one call; :mod:`~campipe.bench.report` writes
   its table and plot and reads its json back (the only module here that writes files, with

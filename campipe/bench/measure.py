@@ -132,7 +132,6 @@ def warm_up() -> None:
     for settings in (
         RunSettings(revolutions=0.3, integrator="newmark-linear"),
         RunSettings(revolutions=0.3, integrator="modal-exact"),
-        RunSettings(revolutions=0.3, fidelity="reduced"),
     ):
         run_batch([seat.case, seat.case], settings)
 

@@ -37,7 +37,7 @@ from campipe.bench.run import (
     Bench,
 )
 from campipe.bench.verdict import finite, format_short
-from campipe.constants import INCH
+from campipe.constants import INCH, LBF
 
 #: The committed latest full run, and the pages generated from it (relative to the root).
 BENCH_JSON = Path("docs/bench/bench.json")
@@ -135,13 +135,7 @@ def setup_block(bench: Bench) -> str:
             if lad["modal_caps"]
             else ""
         )
-        + "; reduced fidelity at cut-offs "
-        + ", ".join(format_short(c) for c in lad["reduced_cutoffs"])
-        + " rad/s; contacts only at "
-        + ", ".join(
-            "full fidelity" if c is None else f"cut-off {format_short(c)} rad/s"
-            for c in lad["contacts_only"]
-        )
+        + ("; the default sampling only the contact coordinates" if lad["contacts_only"] else "")
         + "; newmark-linear at steps "
         + ", ".join(f"{dt * 1e6:g}" for dt in lad["newmark_steps"])
         + f" µs; solve_ivp {lad['ivp_method']} at rtol "
@@ -363,76 +357,73 @@ def _change(r: dict | None, default: dict) -> str:
 
 
 def fidelity_block(bench: Bench) -> str:
-    """Contacts only and the reduced fidelity against the default, per scene; the probe's
-    recommendation."""
-    cutoffs = bench.meta["ladder"]["reduced_cutoffs"]
+    """Per scene: the default, contacts only, and the steady-state path where the scene follows
+    the cam (its margin, the margin's cost, one turn's cost and its error)."""
+    steady = {r["scene"]: r for r in bench.steady}
     rows = []
     for scene in _scenes(bench):
         mine = _rows(bench, scene)
         default = _pick(mine, lambda r: r.get("default"))
         if default is None:
             continue
-        lean = _pick(mine, lambda r: r["family"] == "contacts only" and r["setting"] == "full")
-
-        reduced = {r["setting"]: r for r in _rows(bench, scene, "reduced")}
+        lean = _pick(mine, lambda r: r["family"] == "contacts only")
         row = [scene, _ms(default["seconds"]), _change(lean, default)]
-        for c in cutoffs:
-            r = reduced.get(f"cutoff {c:.3g} rad/s")
-            row.append(f"{_change(r, default)} ({_inch(r['valve_lift'])} in)" if r else "–")
+        st = steady.get(scene)
+        if st is None:
+            row += ["–"] * 3
+        elif not st["applies"]:
+            why = "the valve seats" if finite(st["seat_height"]) and st["seat_height"] < 0 else ""
+            margin = f"{format_short(st['margin'] / LBF)} lbf" if finite(st["margin"]) else "–"
+            row += [f"no ({margin}{', ' + why if why else ''})", "–", "–"]
+        else:
+            margin = f"{format_short(st['margin'] / LBF)} lbf" if finite(st["margin"]) else "form"
+            row += [
+                f"yes ({margin})",
+                f"{format_short(st['margin_seconds'] * 1e6)} µs",
+                f"{_ms(st['seconds'])} ms ({_inch(st['valve_lift'])} in)",
+            ]
         rows.append(row)
-    lines = _table(
-        [
-            "scene",
-            "default ms/case",
-            "contacts only: time",
-            *(f"reduced {format_short(c)} rad/s: time (err)" for c in cutoffs),
-        ],
-        rows,
-    )
-    if bench.fidelity:
-        lines += [
-            "",
-            "The level `campipe.bench.fidelity.recommend` picks for each scene and tolerance "
-            "(the valve-lift error against the full model's; a timed probe):",
-            "",
-        ]
-        lines += _table(
+    return "\n".join(
+        _table(
             [
                 "scene",
-                "tolerance [in]",
-                "level",
-                "cut-off [rad/s]",
-                "its error [in]",
-                "ms/case",
-                "full ms/case",
+                "default ms/case",
+                "contacts only: time",
+                "steady state (least cam force)",
+                "its margin: µs/case",
+                "one turn of it: ms/case (err)",
             ],
-            [
-                [
-                    f["scene"],
-                    _inch(f["tolerance"]),
-                    f["fidelity"],
-                    format_short(f["mode_cutoff"]) if finite(f["mode_cutoff"]) else "–",
-                    _inch(f["error"], 2),
-                    _ms(f["seconds"]),
-                    _ms(f["full_seconds"]),
-                ]
-                for f in bench.fidelity
-            ],
+            rows,
         )
-        for tol in dict.fromkeys(f["tolerance"] for f in bench.fidelity):
-            mine = [f for f in bench.fidelity if f["tolerance"] == tol]
-            full = [f["scene"] for f in mine if f["fidelity"] == "full"]
-            nr = len(mine) - len(full)
-            lines += [
-                "",
-                f"At {_inch(tol)} in: "
-                + (
-                    f"the full model on {', '.join(full)}, a reduced level on the other {nr}."
-                    if full
-                    else f"a reduced level on all {nr} scenes."
-                ),
-            ]
-    return "\n".join(lines)
+    )
+
+
+def onset_block(bench: Bench) -> str:
+    """The onset map of many designs against the time-domain grid it replaces."""
+    o = bench.onset
+    if not o:
+        return "Not measured in this run."
+    return "\n".join(
+        [
+            f"- **The map**: {o['designs']} designs (preload {format_short(o['preloads_lbf'][0])}"
+            f"–{format_short(o['preloads_lbf'][1])} lbf × spring rate "
+            f"{format_short(o['rates_lbf_per_in'][0])}–{format_short(o['rates_lbf_per_in'][1])}"
+            f" lbf/in, harmonic cam), each onset in {format_short(o['range_rpm'][0])}–"
+            f"{format_short(o['range_rpm'][1])} rpm to {format_short(o['tolerance_rpm'])} rpm: "
+            f"**{format_short(o['seconds'], 2)} s** on {o['workers']} workers, the designs' "
+            f"modes included ({o['steady_states']} steady states, "
+            f"{format_short(o['seconds'] / o['designs'] * 1e3, 2)} ms a design); "
+            f"{o['found']} onsets inside the range.",
+            f"- **Its check**: {o['agree']} of {o['checked']} onsets checked by the time-domain "
+            "engine either side (0.5 % below: follows; 0.5 % above: leaves the cam) agree.",
+            f"- **The time-domain grid it replaces**: {o['grid_speeds']} speeds a design, "
+            f"{o['grid_turns']} turns each ({format_short(o['grid_per_case'] * 1e3)} ms a run): "
+            f"**{format_short(o['grid_seconds'], 2)} s** on {o['workers']} workers for a "
+            f"resolution of {format_short(o['grid_resolution_rpm'])} rpm; in the map's time it "
+            f"affords {format_short(o['equal_time_speeds'], 2)} speeds a design (a resolution of "
+            f"{format_short(o['equal_time_resolution_rpm'], 2)} rpm).",
+        ]
+    )
 
 
 def scaling_block(bench: Bench) -> str:
@@ -641,6 +632,7 @@ BLOCKS: dict[str, Callable[[Bench], str]] = {
     "bench-accuracy": accuracy_block,
     "bench-throughput": throughput_block,
     "bench-fidelity": fidelity_block,
+    "bench-onset": onset_block,
     "bench-scaling": scaling_block,
     "bench-study": study_block,
 }

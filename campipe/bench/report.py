@@ -11,7 +11,6 @@ import csv
 import io
 import json
 import math
-import operator
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
@@ -92,15 +91,15 @@ def _clean(obj):
 
 
 def summary_rows(bench: Bench) -> list[list[str]]:
-    """Per scene: the default, the fastest reduced level, the default with only the contact
+    """Per scene: the default, the steady fidelity, the default with only the contact
     coordinates sampled, the thesis algorithm at 1 µs and the solve_ivp peer's most accurate
     point, with time and errors."""
     out = []
     for scene in dict.fromkeys(r["scene"] for r in bench.rows):
         mine = [r for r in bench.rows if r["scene"] == scene]
         picks = [next((r for r in mine if r.get("default")), None)]
-        reduced = [r for r in mine if r["family"] == "reduced"]
-        picks.append(min(reduced, key=lambda r: r["seconds"]) if reduced else None)
+        steady = [r for r in mine if r["family"] == "steady"]
+        picks.append(min(steady, key=lambda r: r["seconds"]) if steady else None)
         picks.append(
             next(
                 (r for r in mine if r["family"] == "contacts only" and r["setting"] == "full"), None
@@ -189,7 +188,7 @@ def markdown(bench: Bench, with_plots: bool = True) -> str:
     )
     lines += [
         "",
-        "## Summary: default, fastest reduced level, contacts only, thesis algorithm, solve_ivp",
+        "## Summary: default, steady fidelity, contacts only, thesis algorithm, solve_ivp",
         "",
     ]
     lines += _table(
@@ -386,37 +385,6 @@ def markdown(bench: Bench, with_plots: bool = True) -> str:
                 for p in bench.scaling
             ],
         )
-    if bench.fidelity:
-        lines += ["", "## Fidelity the scenes need", ""]
-        lines.append(
-            "`campipe.bench.fidelity.recommend`: the cheapest level whose valve lift "
-            "stays within the tolerance of the full model's (timed probe; a reduced "
-            "level must save ≥ 5 %)."
-        )
-        lines.append("")
-        lines += _table(
-            [
-                "scene",
-                "tolerance [in]",
-                "level",
-                "cutoff [rad/s]",
-                "its error [in]",
-                "ms/case",
-                "full ms/case",
-            ],
-            [
-                [
-                    f["scene"],
-                    _num(f["tolerance"], 1 / INCH, "g"),
-                    f["fidelity"],
-                    _num(f["mode_cutoff"], fmt=".3g"),
-                    _num(f["error"], 1 / INCH, ".2e"),
-                    _num(f["seconds"], 1e3),
-                    _num(f["full_seconds"], 1e3),
-                ]
-                for f in bench.fidelity
-            ],
-        )
     lines += ["", "## Every run", ""]
     lines += _table(
         [c[1] or c[0] for c in COLUMNS],
@@ -479,7 +447,7 @@ def plot(bench: Bench, path: Path, errors: tuple[tuple, ...] = (VALVE_LIFT,)) ->
     styles = {
         "modal-exact": ("C0", "o-"),
         "modal-exact capped": ("C9", "s:"),
-        "reduced": ("C2", "^--"),
+        "steady": ("C2", "^"),
         "contacts only": ("C4", "P"),
         "newmark-linear": ("C3", "D-"),
         "solve_ivp": ("C1", "v-"),
@@ -494,8 +462,6 @@ def plot(bench: Bench, path: Path, errors: tuple[tuple, ...] = (VALVE_LIFT,)) ->
             pts = [r for r in mine if r["family"] == fam]
             if not pts:
                 continue
-            if fam == "reduced":
-                pts = sorted(pts, key=operator.itemgetter(key))
             color, style = styles[fam]
             ax.plot(
                 [x_of(r) for r in pts],

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from campipe.bench import fidelity, measure, scaling
+from campipe.bench import measure, onset, scaling
 from campipe.bench.ivp import ChatterError
 from campipe.bench.suite import FULL, QUICK, Ladder, Scene, suite
 from campipe.constants import INCH
@@ -50,14 +50,11 @@ QUICK_REVOLUTIONS = 1.5
 #: Scaling counts: the full run, and --quick.
 SCALING_COUNTS = (1, 10, 100, 1000, 10000)
 QUICK_SCALING_COUNTS = (1, 16, 256)
-#: Fidelity recommendations are shown for these valve-lift tolerances [m].
-FIDELITY_TOLERANCES = (1e-3 * INCH, 1e-5 * INCH)
 
 #: Families of rows: how each is labelled in the table and the plot.
 FAMILIES = (
     "modal-exact",
     "modal-exact capped",
-    "reduced",
     "contacts only",
     "newmark-linear",
     "solve_ivp",
@@ -89,7 +86,8 @@ class Bench:
     accuracy_for_cost: dict = field(default_factory=dict)  # the error target on 11000 rpm
     throughput: list[dict] = field(default_factory=list)  # newmark-linear's throughput, 256 cases
     scaling: list[dict] = field(default_factory=list)  # time against cases and workers
-    fidelity: list[dict] = field(default_factory=list)  # recommended level per scene
+    steady: list[dict] = field(default_factory=list)  # the steady-state path per scene
+    onset: dict = field(default_factory=dict)  # the onset map against the time-domain grid
     seconds: float = 0.0  # wall time of the whole bench [s]
     #: campipe study end to end against the engine (campipe.bench.study.measure)
     study: dict = field(default_factory=dict)
@@ -140,19 +138,8 @@ def _settings_rows(ladder: Ladder) -> list[tuple[str, str, RunSettings, bool]]:
         ("modal-exact capped", f"cap {c * 1e6:g} µs", RunSettings(dt=c), True)
         for c in ladder.modal_caps
     ]
-    rows += [
-        ("reduced", f"cutoff {c:.3g} rad/s", RunSettings(fidelity="reduced", mode_cutoff=c), True)
-        for c in ladder.reduced_cutoffs
-    ]
-    rows += [
-        (
-            "contacts only",
-            "full" if c is None else f"cutoff {c:.3g} rad/s",
-            RunSettings() if c is None else RunSettings(fidelity="reduced", mode_cutoff=c),
-            False,
-        )
-        for c in ladder.contacts_only
-    ]
+    if ladder.contacts_only:
+        rows.append(("contacts only", "full", RunSettings(), False))
     rows += [
         (
             "newmark-linear",
@@ -464,28 +451,10 @@ def run_bench(
                 )
             )
         bench.ratios += _ratios(scene.name, bench.rows)
-        say(f"{scene.name}: fidelity probe")
-        for tol in FIDELITY_TOLERANCES:
-            p = fidelity.probe(
-                [scene.case],
-                tol,
-                RunSettings(revolutions=scene.revolutions),
-                repeats=2 if quick else 3,
-            )
-            fid, cutoff = p.setting(0)
-            full_seconds = p.levels[0].seconds
-            pick = p.levels[p.choice[0]]
-            bench.fidelity.append(
-                {
-                    "scene": scene.name,
-                    "tolerance": tol,
-                    "fidelity": fid,
-                    "mode_cutoff": cutoff,
-                    "seconds": pick.seconds,
-                    "full_seconds": full_seconds,
-                    "error": float(pick.errors[0]),
-                }
-            )
+    say("the steady-state path on the scenes that follow the cam")
+    bench.steady = onset.steady_scenes(chosen, ladder.copies, ladder.repeats)
+    say("onset map: designs × speed range against the time-domain grid")
+    bench.onset = onset.onset_map(quick, repeats=ladder.repeats)
     bench.goals = _goals(bench.ratios)
     bench.accuracy_for_cost = _accuracy_for_cost(bench.rows)
     if with_scaling:

@@ -13,6 +13,7 @@ import math
 from dataclasses import dataclass
 from typing import TypeGuard
 
+from campipe.bench.onset import GOAL_MAP_SECONDS, GOAL_MAP_WORKERS
 from campipe.bench.run import (
     ACCURACY_DEFAULT_ERROR,
     ACCURACY_NEWMARK_ERROR,
@@ -42,7 +43,7 @@ CHECKED = (
 class Goal:
     """One goal as a run shows it."""
 
-    area: str  # which goal: "speed", "accuracy" or "throughput"
+    area: str  # which goal: "speed", "accuracy", "throughput", "onset" or "study"
     what: str  # the goal, in words
     figure: str  # what the run measured, with its unit ("–": nothing measured)
     status: str  # REACHED, NOT_REACHED or NOT_SHOWN
@@ -324,6 +325,26 @@ def _study_goals(bench: Bench) -> list[Goal]:
     return out
 
 
+def _onset_map(bench: Bench) -> Goal:
+    what = (
+        f"an onset map of 1000 designs in under {format_short(GOAL_MAP_SECONDS)} s on "
+        f"{GOAL_MAP_WORKERS} workers"
+    )
+    o = bench.onset
+    if not o:
+        return Goal("onset", what, "–", NOT_SHOWN, "not measured")
+    if o["designs"] < 1000:
+        return Goal("onset", what, "–", NOT_SHOWN, f"--quick maps {o['designs']} designs")
+    return Goal(
+        "onset",
+        what,
+        f"{format_short(o['seconds'], 2)} s",
+        REACHED if o["seconds"] < GOAL_MAP_SECONDS else NOT_REACHED,
+        f"{o['designs']} designs to {format_short(o['tolerance_rpm'])} rpm; the "
+        f"{o['grid_speeds']}-speed time-domain grid takes {format_short(o['grid_seconds'], 2)} s",
+    )
+
+
 def goals(bench: Bench) -> list[Goal]:
     """Every goal the bench judges, in a fixed order, each shown or not by this run."""
     return [
@@ -331,6 +352,7 @@ def goals(bench: Bench) -> list[Goal]:
         *_speed_goals(bench, "newmark-linear", GOAL_NEWMARK),
         *_accuracy_goals(bench),
         _throughput(bench),
+        _onset_map(bench),
         *_study_goals(bench),
     ]
 

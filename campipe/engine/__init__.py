@@ -15,7 +15,6 @@ if TYPE_CHECKING:
     from campipe.engine.loads import MEMBER_LOADS, member_loads
     from campipe.engine.settings import (
         DEFAULT_INTEGRATOR,
-        DEFAULT_MODE_CUTOFF,
         DEFAULT_STEPS,
         FIDELITIES,
         INTEGRATORS,
@@ -34,7 +33,6 @@ if TYPE_CHECKING:
 _MODULES = {
     "campipe.engine.settings": (
         "DEFAULT_INTEGRATOR",
-        "DEFAULT_MODE_CUTOFF",
         "DEFAULT_STEPS",
         "FIDELITIES",
         "INTEGRATORS",
@@ -58,7 +56,6 @@ __all__ = [
     "Case",
     "CaseError",
     "DEFAULT_INTEGRATOR",
-    "DEFAULT_MODE_CUTOFF",
     "DEFAULT_STEPS",
     "FIDELITIES",
     "INTEGRATORS",

@@ -33,7 +33,6 @@ from campipe.engine.modal import NS, ModalData, harmonic_responses, modal_data
 from campipe.engine.settings import CLOSURES as CLOSURES
 from campipe.engine.settings import DEFAULT_CAPTURE_VELOCITY as DEFAULT_CAPTURE_VELOCITY
 from campipe.engine.settings import DEFAULT_INTEGRATOR as DEFAULT_INTEGRATOR
-from campipe.engine.settings import DEFAULT_MODE_CUTOFF as DEFAULT_MODE_CUTOFF
 from campipe.engine.settings import DEFAULT_STEPS as DEFAULT_STEPS
 from campipe.engine.settings import DEFAULT_WARMUP as DEFAULT_WARMUP
 from campipe.engine.settings import FIDELITIES as FIDELITIES
@@ -384,7 +383,6 @@ def _exact_runs(settings, dt_run, full_state, which, modal_trains, a_mat, omega)
         zeta=harmonic_responses(which, modal_trains.n_free, a_mat, modal_trains.b_in, omega),
         dt_cap=float(dt_run or 0.0),
         tolerance=float(settings.tolerance),
-        mode_cutoff=float(settings.cutoff),
         full_state=bool(full_state),
     )
 

@@ -13,7 +13,7 @@ from numba import njit
 
 from campipe.engine.common import KERNEL, holds_cam, holds_seat
 from campipe.engine.modal import NS
-from campipe.profiles.packed import degree
+from campipe.profiles.packed import degree, horner
 
 # Rows of the per-block work array ``MC`` (one column per active block, fastest first): the
 # basis functions (f1, f2) at the current grid point, their values at the grid step h (the
@@ -68,7 +68,6 @@ class ExactRuns(NamedTuple):
     zeta: np.ndarray  # (n, 4, NS) complex ``modal.harmonic_responses`` at the case's speed
     dt_cap: float  # largest step [s]; 0: none
     tolerance: float  # event-time tolerance [s]
-    mode_cutoff: float  # reduced fidelity: highest mode kept on the grid [rad/s]; 0: all
     full_state: bool  # sample all seven coordinates (else q1 and q7 only)
 
 
@@ -152,8 +151,7 @@ STATE = np.dtype(
         ("kmax", "i8"),  # degree of the held inputs' polynomials
         ("deg", "i8"),  # degree of the particular solution's polynomial
         ("gdeg", "i8"),  # degree of the monitors' polynomials
-        ("nact", "i8"),  # active block columns; the first ``lo`` are left off the grid
-        ("lo", "i8"),
+        ("nact", "i8"),  # active block columns
         ("k_out", "i8"),  # the next output sample
         ("stalled", "i8"),  # events in a row without time advancing
         ("done", "?"),  # the run reached its end
@@ -276,3 +274,52 @@ def particular(trains, profiles, runs, ws, st):
 def block_derivative(w1, w2, lbar, d2):
     """The coefficients of f1 and f2 in d/dτ (w1·f1 + w2·f2): f1' = λ̄f1 + δ²f2, f2' = λ̄f2 + f1."""
     return lbar * w1 + w2, d2 * w1 + lbar * w2
+
+
+@njit(inline="always", nogil=True)
+def eval_monitor(WC, MC, nact, G, GT, m, tau, w, x, th):
+    """Monitor m and its first two time derivatives τ after the segment start (local angle x,
+    cam angle θ), exactly: the active blocks, the polynomial and the harmonic part."""
+    g = 0.0
+    dg = 0.0
+    d2g = 0.0
+    for jj in range(nact):
+        f1, f2 = block_basis(MC[LBAR, jj], MC[DSQ, jj], tau)
+        g += WC[W1, m, jj] * f1 + WC[W2, m, jj] * f2
+        dg += WC[WL1, m, jj] * f1 + WC[WL2, m, jj] * f2
+        d2g += WC[WLL1, m, jj] * f1 + WC[WLL2, m, jj] * f2
+    p0, p1, p2 = horner(G[m], x)
+    g += p0
+    dg += w * p1
+    d2g += w * w * p2
+    if GT[m] != 0.0:
+        ct = np.cos(th)
+        sn = np.sin(th)
+        g += GT[m].real * ct - GT[m].imag * sn
+        dg -= w * (GT[m].real * sn + GT[m].imag * ct)
+        d2g -= w * w * (GT[m].real * ct - GT[m].imag * sn)
+    return g, dg, d2g
+
+
+@njit(inline="always", nogil=True)
+def force_monitor(trains, ws, st, m, sign, level):
+    """Monitor m as a held contact's force (sign·F: F1 for the cam, −F7 for the seat):
+    thesis Eqs. 26, 27 through ``modal.ModalData``'s ρ, σ; its forced part (the blocks' part
+    is ``exact._block_columns``')."""
+    tr, ci, ns = st.tr, st.cfg - 1, st.ns
+    ws.level[m] = level
+    for k in range(st.kmax + 1):
+        acc = 0.0
+        for s in range(ns):
+            acc += trains.rho[tr, ci, m, s] * ws.Z[k, s]
+        for kind in range(3):
+            for hc in range(2):
+                acc += trains.sigma[tr, ci, m, kind, hc] * ws.inp[kind, hc, k]
+        ws.G[m, k] = sign * acc
+    ws.G[m, 0] += sign * trains.sigma0[tr, ci, m]
+    acc_c = 0.0 + 0.0j
+    for s in range(ns):
+        acc_c += trains.rho[tr, ci, m, s] * ws.ZT[s]
+    for kind in range(3):
+        acc_c += trains.sigma[tr, ci, m, kind, 0] * ws.inp_t[kind, 0]
+    ws.GT[m] = sign * acc_c

@@ -86,6 +86,8 @@ from campipe.engine.closed_form import (
     WLL2,
     block_basis,
     block_derivative,
+    eval_monitor,
+    force_monitor,
     forcing,
     particular,
 )
@@ -133,35 +135,10 @@ ROOT_ITERATIONS = 200
 
 
 @njit(inline="always", nogil=True)
-def _eval3(WC, MC, nact, G, GT, m, tau, w, x, th):
-    """Monitor m and its first two time derivatives τ after the segment start (local angle x,
-    cam angle θ), exactly: the active blocks, the polynomial and the harmonic part."""
-    g = 0.0
-    dg = 0.0
-    d2g = 0.0
-    for jj in range(nact):
-        f1, f2 = block_basis(MC[LBAR, jj], MC[DSQ, jj], tau)
-        g += WC[W1, m, jj] * f1 + WC[W2, m, jj] * f2
-        dg += WC[WL1, m, jj] * f1 + WC[WL2, m, jj] * f2
-        d2g += WC[WLL1, m, jj] * f1 + WC[WLL2, m, jj] * f2
-    p0, p1, p2 = horner(G[m], x)
-    g += p0
-    dg += w * p1
-    d2g += w * w * p2
-    if GT[m] != 0.0:
-        ct = np.cos(th)
-        sn = np.sin(th)
-        g += GT[m].real * ct - GT[m].imag * sn
-        dg -= w * (GT[m].real * sn + GT[m].imag * ct)
-        d2g -= w * w * (GT[m].real * ct - GT[m].imag * sn)
-    return g, dg, d2g
-
-
-@njit(inline="always", nogil=True)
 def _at(deriv, WC, MC, nact, G, GT, m, t_s, t, w, th0):
     """Monitor m (deriv False) or its time derivative (deriv True) at time t, and the next
     derivative."""
-    g, dg, d2g = _eval3(WC, MC, nact, G, GT, m, t - t_s, w, w * t - th0, w * t)
+    g, dg, d2g = eval_monitor(WC, MC, nact, G, GT, m, t - t_s, w, w * t - th0, w * t)
     return (dg, d2g) if deriv else (g, dg)
 
 
@@ -261,8 +238,8 @@ def _state_at(trains, ws, st, t):
 
 
 @njit(inline="always", nogil=True)
-def _state_active(q, v, z, VY, MC, Z, ZT, free, c, ci, nf, lo, nact, x, ct, sn, deg, full_state):
-    """Free coordinates and velocities from the blocks lo … nact − 1 (an output sample):
+def _state_active(q, v, z, VY, MC, Z, ZT, free, c, ci, nf, nact, x, ct, sn, deg, full_state):
+    """Free coordinates and velocities from the blocks 0 … nact − 1 (an output sample):
     VY[:, jj, s] holds the state's coefficients of f1 and f2 in block column jj; plus the
     particular solution. Without ``full_state`` only
     the contact coordinates q1 and q7 (and their velocities) are computed: the others keep
@@ -271,7 +248,7 @@ def _state_active(q, v, z, VY, MC, Z, ZT, free, c, ci, nf, lo, nact, x, ct, sn, 
     if full_state:
         for s in range(ns):
             z[s] = ZT[s].real * ct - ZT[s].imag * sn
-        for jj in range(lo, nact):
+        for jj in range(nact):
             f1 = MC[F1, jj]
             f2 = MC[F2, jj]
             for s in range(ns):
@@ -283,7 +260,7 @@ def _state_active(q, v, z, VY, MC, Z, ZT, free, c, ci, nf, lo, nact, x, ct, sn, 
                 continue
             for s in (k, k + nf):
                 acc = ZT[s].real * ct - ZT[s].imag * sn
-                for jj in range(lo, nact):
+                for jj in range(nact):
                     acc += VY[0, jj, s] * MC[F1, jj] + VY[1, jj, s] * MC[F2, jj]
                 z[s] = acc
         q[coord] = z[k] + horner(Z[:, k], x, deg)[0]
@@ -291,14 +268,14 @@ def _state_active(q, v, z, VY, MC, Z, ZT, free, c, ci, nf, lo, nact, x, ct, sn, 
 
 
 @njit(inline="always", nogil=True)
-def _slope_bound(WC, G, GT, m, MC, lo, nact, gdeg, w, xa, xb, tau_b):
+def _slope_bound(WC, G, GT, m, MC, nact, gdeg, w, xa, xb, tau_b):
     """An upper bound on |dg/dt| of monitor m over a step from local angle xa to xb (τ_b after
     the segment start at its end), with the block envelopes at its start (they only decay):
     Σ(|WL1| + |WL2|·min(τ_b, 1/|δ|))·e^{rate·τ} + max|P'| + ω|G_T|. The polynomial part is
     bounded by its derivative's values at the ends plus its second derivative's, which is ample
     for a step of at most one output interval."""
     bound = 0.0
-    for jj in range(lo, nact):
+    for jj in range(nact):
         s2 = min(tau_b, MC[INVD, jj])
         bound += (WC[WL1_ABS, m, jj] + WC[WL2_ABS, m, jj] * s2) * MC[EABS, jj]
     pa = 0.0
@@ -315,11 +292,11 @@ def _slope_bound(WC, G, GT, m, MC, lo, nact, gdeg, w, xa, xb, tau_b):
 
 
 @njit(inline="always", nogil=True)
-def _free_acceleration(VY, MC, Z, ZT, s, lo, nact, x, cth, sth, w, deg):
+def _free_acceleration(VY, MC, Z, ZT, s, nact, x, cth, sth, w, deg):
     """The time derivative of state row s (a velocity row: an acceleration) at the grid point,
-    from the blocks lo … nact − 1 and the particular solution."""
+    from the blocks 0 … nact − 1 and the particular solution."""
     acc = 0.0
-    for jj in range(lo, nact):
+    for jj in range(nact):
         a = VY[0, jj, s]
         b = VY[1, jj, s]
         lbar = MC[LBAR, jj]
@@ -368,13 +345,13 @@ def _out_of_bounds(cases, c, q, v):
 
 
 @njit(**KERNEL)
-def _sample(cases, trains, profiles, runs, out, ws, st, lo, nact, x, cth, sth):
+def _sample(cases, trains, profiles, runs, out, ws, st, nact, x, cth, sth):
     """The output sample at the grid point (local angle x, cam angle with cosine cth and sine
-    sth) from the blocks lo … nact − 1; a motion out of bounds ends the case (UNBOUNDED)."""
+    sth) from the blocks 0 … nact − 1; a motion out of bounds ends the case (UNBOUNDED)."""
     tr, ci, nf, c, w, deg = st.tr, st.cfg - 1, st.nf, st.c, st.w, st.deg
     q, v = ws.q, ws.v
     _state_active(
-        q, v, ws.z, ws.VY, ws.MC, ws.Z, ws.ZT, trains.free, tr, ci, nf, lo, nact, x, cth, sth,
+        q, v, ws.z, ws.VY, ws.MC, ws.Z, ws.ZT, trains.free, tr, ci, nf, nact, x, cth, sth,
         deg, runs.full_state,
     )  # fmt: skip
     acc1 = 0.0  # q̈1, q̈7 where free (the held ones come from the cam and the seat)
@@ -382,13 +359,9 @@ def _sample(cases, trains, profiles, runs, out, ws, st, lo, nact, x, cth, sth):
     for k in range(nf):
         coord = trains.free[tr, ci, k]
         if coord == CAM:
-            acc1 = _free_acceleration(
-                ws.VY, ws.MC, ws.Z, ws.ZT, nf + k, lo, nact, x, cth, sth, w, deg
-            )
+            acc1 = _free_acceleration(ws.VY, ws.MC, ws.Z, ws.ZT, nf + k, nact, x, cth, sth, w, deg)
         elif coord == SEAT:
-            acc7 = _free_acceleration(
-                ws.VY, ws.MC, ws.Z, ws.ZT, nf + k, lo, nact, x, cth, sth, w, deg
-            )
+            acc7 = _free_acceleration(ws.VY, ws.MC, ws.Z, ws.ZT, nf + k, nact, x, cth, sth, w, deg)
     _write_sample(
         out, c, st.k_out, q, v, ws.gval, profiles.poly, profiles.trig, st.cfg, st.p, x, cth,
         sth, w, runs.full_state, acc1, acc7,
@@ -399,10 +372,10 @@ def _sample(cases, trains, profiles, runs, out, ws, st, lo, nact, x, cth, sth):
 
 
 @njit(inline="always", nogil=True)
-def _advance(MC, lo, nact, cth, sth, cwh, swh):
-    """One grid step: the basis functions of the blocks lo … nact − 1 by their addition
+def _advance(MC, nact, cth, sth, cwh, swh):
+    """One grid step: the basis functions of the blocks 0 … nact − 1 by their addition
     theorems (f1 ← f1·D1 + δ²·f2·D2, f2 ← f2·D1 + f1·D2) and (cos θ, sin θ) by rotation."""
-    for jj in range(lo, nact):
+    for jj in range(nact):
         f1 = MC[F1, jj]
         f2 = MC[F2, jj]
         MC[F1, jj] = f1 * MC[D1, jj] + MC[DSQ, jj] * f2 * MC[D2, jj]
@@ -412,12 +385,12 @@ def _advance(MC, lo, nact, cth, sth, cwh, swh):
 
 
 @njit(inline="always", nogil=True)
-def _monitor_at_grid(WC, MC, lo, nact, G, GT, m, gdeg, w, x, cth, sth):
+def _monitor_at_grid(WC, MC, nact, G, GT, m, gdeg, w, x, cth, sth):
     """Monitor m and its time derivative at the current grid point from the blocks
-    lo … nact − 1 and their advanced basis functions (no exp or sin/cos)."""
+    0 … nact − 1 and their advanced basis functions (no exp or sin/cos)."""
     g = 0.0
     dg = 0.0
-    for jj in range(lo, nact):
+    for jj in range(nact):
         f1 = MC[F1, jj]
         f2 = MC[F2, jj]
         g += WC[W1, m, jj] * f1 + WC[W2, m, jj] * f2
@@ -493,30 +466,6 @@ def _modal_start(trains, ws, st, x_s, ct, sn):
 
 
 @njit(inline="always", nogil=True)
-def _force_monitor(trains, ws, st, m, sign, level):
-    """Monitor m as a held contact's force (sign·F: F1 for the cam, −F7 for the seat):
-    thesis Eqs. 26, 27 through ``modal.ModalData``'s ρ, σ; its forced part (the blocks' part
-    is ``_block_columns``')."""
-    tr, ci, ns = st.tr, st.cfg - 1, st.ns
-    ws.level[m] = level
-    for k in range(st.kmax + 1):
-        acc = 0.0
-        for s in range(ns):
-            acc += trains.rho[tr, ci, m, s] * ws.Z[k, s]
-        for kind in range(3):
-            for hc in range(2):
-                acc += trains.sigma[tr, ci, m, kind, hc] * ws.inp[kind, hc, k]
-        ws.G[m, k] = sign * acc
-    ws.G[m, 0] += sign * trains.sigma0[tr, ci, m]
-    acc_c = 0.0 + 0.0j
-    for s in range(ns):
-        acc_c += trains.rho[tr, ci, m, s] * ws.ZT[s]
-    for kind in range(3):
-        acc_c += trains.sigma[tr, ci, m, kind, 0] * ws.inp_t[kind, 0]
-    ws.GT[m] = sign * acc_c
-
-
-@njit(inline="always", nogil=True)
 def _row_of(trains, st, coord):
     """The state row of free coordinate ``coord`` in the segment's configuration."""
     row = 0
@@ -567,7 +516,7 @@ def _monitors(cases, trains, profiles, ws, st):
             rest = st.rest_cam if m == 0 else st.rest_seat
             hold = st.hold_cam if m == 0 else st.hold_seat
             level = max(st.eps_force, hold) if rest else st.eps_force
-            _force_monitor(trains, ws, st, m, sign, level)
+            force_monitor(trains, ws, st, m, sign, level)
         else:
             _gap_monitor(cases, trains, profiles, ws, st, m, sign)
     gdeg = 0
@@ -583,22 +532,14 @@ def _monitors(cases, trains, profiles, ws, st):
 def _block_columns(cases, trains, runs, ws, st):
     """One column per block, fastest first: the state's coefficients of f1 and f2 (VY), the
     monitors' (WC) and their derivatives', the block's shares of coordinates and forces (MC);
-    sets st.nact and st.lo.
-
-    Reduced fidelity leaves the blocks above the cut-off (the first ``lo`` columns) out of the
-    grid, the samples and the step size: there they keep only their quasi-static part (inside
-    the particular solution). Event location and the state at events use every block.
-    """
+    sets st.nact."""
     tr, ci, ns = st.tr, st.cfg - 1, st.ns
     cam_held = holds_cam(st.cfg)
     seat_held = holds_seat(st.cfg)
     rows = (_row_of(trains, st, CAM), _row_of(trains, st, SEAT))
     MC, WC, VY, u = ws.MC, ws.WC, ws.VY, ws.u
     nb = trains.n_blocks[tr, ci]
-    lo = 0
     for jj in range(nb):
-        if runs.mode_cutoff > 0.0 and trains.speed[tr, ci, jj] > runs.mode_cutoff:
-            lo += 1
         i0 = trains.bstart[tr, ci, jj]
         i1 = i0 + trains.bdim[tr, ci, jj]
         lbar = trains.lam_bar[tr, ci, jj]
@@ -664,7 +605,6 @@ def _block_columns(cases, trains, runs, ws, st):
             WC[WL1_ABS, m, jj] = abs(wl1)
             WC[WL2_ABS, m, jj] = abs(wl2)
     st.nact = nb
-    st.lo = lo
 
 
 @njit(inline="always", nogil=True)
@@ -692,7 +632,7 @@ def _begin_segment(cases, trains, profiles, runs, out, ws, st):
     _block_columns(cases, trains, runs, ws, st)
     for m in range(2):
         if ws.ready[m]:
-            ws.gval[m], ws.dprev[m], _ = _eval3(
+            ws.gval[m], ws.dprev[m], _ = eval_monitor(
                 ws.WC, ws.MC, st.nact, ws.G, ws.GT, m, 0.0, st.w, x_s, th_s
             )
             ws.gprev[m] = ws.gval[m]
@@ -701,18 +641,18 @@ def _begin_segment(cases, trains, profiles, runs, out, ws, st):
         # A sample due at the segment start (the initial state, or a break or event that
         # falls on an output angle) is the state here (gval holds its monitors).
         # (The blocks' basis functions are at τ = 0: f1 = 1, f2 = 0; every block counts.)
-        _sample(cases, trains, profiles, runs, out, ws, st, 0, st.nact, x_s, ct, sn)
+        _sample(cases, trains, profiles, runs, out, ws, st, st.nact, x_s, ct, sn)
 
 
 # --------------------------------------------------------------------------- walk the grid
 
 
 @njit(inline="always", nogil=True)
-def _drop_decayed(MC, WC, VY, act, lo, nact, ns, eps_force, tau):
+def _drop_decayed(MC, WC, VY, act, nact, ns, eps_force, tau):
     """Drop the blocks that have decayed below what any output can show (τ after the segment
     start), keeping the fastest-first order; returns the new count."""
-    kept = lo
-    for jj in range(lo, nact):
+    kept = 0
+    for jj in range(nact):
         s2 = min(tau, MC[INVD, jj])
         env = MC[EABS, jj]
         if (MC[AMP_QA, jj] + MC[AMP_QB, jj] * s2) * env < MODE_FLOOR and (
@@ -726,7 +666,7 @@ def _drop_decayed(MC, WC, VY, act, lo, nact, ns, eps_force, tau):
 
 
 @njit(inline="always", nogil=True)
-def _fastest_needed(WC, MC, watch, level, gval, lo, nact, tau):
+def _fastest_needed(WC, MC, watch, level, gval, nact, tau):
     """The first column whose block could bring a watched monitor to its level (nact if
     none) up to τ after the segment start: the fastest blocks are skipped while their summed
     amplitudes (which only decay) stay under half of every monitor's distance from its level."""
@@ -734,7 +674,7 @@ def _fastest_needed(WC, MC, watch, level, gval, lo, nact, tau):
     for m in range(2):
         if watch[m]:
             margin = min(margin, level[m] - gval[m])
-    k = lo
+    k = 0
     spent = 0.0
     while k < nact:
         s2 = min(tau, MC[INVD, k])
@@ -750,10 +690,10 @@ def _fastest_needed(WC, MC, watch, level, gval, lo, nact, tau):
 
 
 @njit(inline="always", nogil=True)
-def _refresh(MC, lo, nact, h, tau):
+def _refresh(MC, nact, h, tau):
     """Exact basis functions at the grid step h and at τ (from the segment start to the next
-    grid point) of the blocks lo … nact − 1, and their envelopes."""
-    for jj in range(lo, nact):
+    grid point) of the blocks 0 … nact − 1, and their envelopes."""
+    for jj in range(nact):
         MC[D1, jj], MC[D2, jj] = block_basis(MC[LBAR, jj], MC[DSQ, jj], h)
         MC[F1, jj], MC[F2, jj] = block_basis(MC[LBAR, jj], MC[DSQ, jj], tau)
         MC[DABS, jj] = np.exp(MC[RATE, jj] * h)
@@ -776,7 +716,7 @@ def _earliest_crossing(ws, st, nact, tolerance, t_prev, t_eval):
     from its values at both ends, or from a maximum inside the step that the bound on its
     slope cannot rule out (found by a root of its derivative). Returns (monitor or −1, time).
     """
-    w, t_s, th0, gdeg, lo = st.w, st.t_s, st.th0, st.gdeg, st.lo
+    w, t_s, th0, gdeg = st.w, st.t_s, st.th0, st.gdeg
     WC, G, GT, MC = ws.WC, ws.G, ws.GT, ws.MC
     first = -1
     t_ev = t_eval
@@ -800,7 +740,6 @@ def _earliest_crossing(ws, st, nact, tolerance, t_prev, t_eval):
                 GT,
                 m,
                 MC,
-                lo,
                 nact,
                 gdeg,
                 w,
@@ -818,11 +757,10 @@ def _earliest_crossing(ws, st, nact, tolerance, t_prev, t_eval):
             if g_hi > level:
                 t_hi = t_max
         if not np.isnan(t_hi):
-            # The value root starts from what the grid (or the maximum's search) has, unless
-            # reduced fidelity leaves pairs out of the grid.
+            # The value root starts from what the grid (or the maximum's search) has.
             te = _root(
                 False, 1.0, WC, MC, nact, G, GT, m, t_s, t_prev, t_hi, level, w, th0,
-                tolerance, lo == 0, ws.gprev[m] - level, g_hi - level, dg_hi,
+                tolerance, True, ws.gprev[m] - level, g_hi - level, dg_hi,
             )  # fmt: skip
             if first < 0 or te < t_ev:
                 t_ev = te
@@ -841,7 +779,7 @@ def _walk(cases, trains, profiles, runs, out, ws, st):
     crossing, a sample, an event, a break) is a compiled function of its own.
     """
     c, w, t_s, th0, t_break = st.c, st.w, st.t_s, st.th0, st.t_break
-    lo, nact, ns, gdeg, eps_force = st.lo, st.nact, st.ns, st.gdeg, st.eps_force
+    nact, ns, gdeg, eps_force = st.nact, st.ns, st.gdeg, st.eps_force
     speed_row = trains.speed[st.tr, st.cfg - 1]
     cam_held = holds_cam(st.cfg)
     seat_held = holds_seat(st.cfg)
@@ -874,14 +812,14 @@ def _walk(cases, trains, profiles, runs, out, ws, st):
         if replan:
             if since_check >= 32:
                 since_check = 0
-                nact = _drop_decayed(MC, WC, ws.VY, act, lo, nact, ns, eps_force, t_prev - t_s)
+                nact = _drop_decayed(MC, WC, ws.VY, act, nact, ns, eps_force, t_prev - t_s)
             # The step need only resolve the modes that could bring a watched monitor to its
             # level.
             t_from = t_prev
             k_out = st.k_out
             to_sample = k_out < n_out and k_out * t_sample < t_end * (1.0 + 1e-13)
             t_next = k_out * t_sample if to_sample else t_end
-            k = _fastest_needed(WC, MC, watch, level, gval, lo, nact, t_next - t_s)
+            k = _fastest_needed(WC, MC, watch, level, gval, nact, t_next - t_s)
             fastest = speed_row[act[k]] if k < nact else 0.0
             h_allow = RESOLUTION * np.pi / fastest if fastest > 0.0 else np.inf
             if dt_cap > 0.0:
@@ -895,7 +833,7 @@ def _walk(cases, trains, profiles, runs, out, ws, st):
             if abs(h_new - h) > 1e-12 * h or since_refresh > 256 or t_from == t_s:
                 # New step, a fresh segment, or time to refresh: exact exponentials.
                 h = h_new
-                _refresh(MC, lo, nact, h, t_from + h - t_s)
+                _refresh(MC, nact, h, t_from + h - t_s)
                 cwh = np.cos(w * h)
                 swh = np.sin(w * h)
                 cth = np.cos(w * (t_from + h))
@@ -903,7 +841,7 @@ def _walk(cases, trains, profiles, runs, out, ws, st):
                 since_refresh = 0
             else:
                 # Same step: E and (cos θ, sin θ) advance from the sample point.
-                cth, sth = _advance(MC, lo, nact, cth, sth, cwh, swh)
+                cth, sth = _advance(MC, nact, cth, sth, cwh, swh)
             replan = False
         i_step += 1
         steps[c] += 1
@@ -920,7 +858,7 @@ def _walk(cases, trains, profiles, runs, out, ws, st):
             for m in range(2):
                 if ready[m]:
                     gval[m], dval[m] = _monitor_at_grid(
-                        WC, MC, lo, nact, G, GT, m, gdeg, w, x_n, cth, sth
+                        WC, MC, nact, G, GT, m, gdeg, w, x_n, cth, sth
                     )
         if t_eval > t_s and _suspect(watch, level, gval, dval, dprev):
             first, t_ev = _earliest_crossing(ws, st, nact, runs.tolerance, t_prev, t_eval)
@@ -944,10 +882,10 @@ def _walk(cases, trains, profiles, runs, out, ws, st):
                 fmax[c, turn, 1] = max(fmax[c, turn, 1], -gval[1])
         t_prev = t_n
         if i_step < n_steps:
-            cth, sth = _advance(MC, lo, nact, cth, sth, cwh, swh)
+            cth, sth = _advance(MC, nact, cth, sth, cwh, swh)
             continue
         if to_sample:
-            _sample(cases, trains, profiles, runs, out, ws, st, lo, nact, w * t_n - th0, cth, sth)
+            _sample(cases, trains, profiles, runs, out, ws, st, nact, w * t_n - th0, cth, sth)
             if out.status[c] != 0:
                 st.done = True
                 return

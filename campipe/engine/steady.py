@@ -21,9 +21,29 @@ import numpy as np
 from numba import njit
 
 from campipe.constants import TWO_PI
-from campipe.engine.closed_form import block_basis, forcing, particular
+from campipe.engine.closed_form import (
+    D1,
+    D2,
+    DSQ,
+    F1,
+    F2,
+    LBAR,
+    W1,
+    W2,
+    WL1,
+    WL2,
+    WLL1,
+    WLL2,
+    block_basis,
+    block_derivative,
+    eval_monitor,
+    force_monitor,
+    forcing,
+    particular,
+)
 from campipe.engine.common import KERNEL
-from campipe.profiles.packed import evaluate_packed, horner
+from campipe.engine.modal import NS
+from campipe.profiles.packed import evaluate_packed, horner, piece_eval
 from campipe.vocabulary import CAM, CAM_CONTACT, SEAT
 
 #: Samples per turn at which the start's search for an angle where configuration I holds
@@ -43,21 +63,27 @@ def _particular_at(ws, st, theta):
 
 
 @njit(inline="always", nogil=True)
+def _apply_block(trains, st, u, b, f1, f2):
+    """u_b ← f1·u_b + f2·N_b u_b: e^{B_b τ} u_b from the block's basis functions at τ."""
+    tr, ci = st.tr, st.cfg - 1
+    i0 = trains.bstart[tr, ci, b]
+    if trains.bdim[tr, ci, b] == 1:
+        u[i0] *= f1
+    else:
+        a0 = u[i0]
+        a1 = u[i0 + 1]
+        n = trains.block_n
+        u[i0] = f1 * a0 + f2 * (n[tr, ci, i0, i0] * a0 + n[tr, ci, i0, i0 + 1] * a1)
+        u[i0 + 1] = f1 * a1 + f2 * (n[tr, ci, i0 + 1, i0] * a0 + n[tr, ci, i0 + 1, i0 + 1] * a1)
+
+
+@njit(inline="always", nogil=True)
 def _propagate(trains, ws, st, u, tau):
-    """u ← e^{Bτ} u, block by block: f1·u_b + f2·N_b u_b."""
+    """u ← e^{Bτ} u, block by block."""
     tr, ci = st.tr, st.cfg - 1
     for b in range(trains.n_blocks[tr, ci]):
         f1, f2 = block_basis(trains.lam_bar[tr, ci, b], trains.delta2[tr, ci, b], tau)
-        i0 = trains.bstart[tr, ci, b]
-        k = trains.bdim[tr, ci, b]
-        if k == 1:
-            u[i0] *= f1
-        else:
-            a0 = u[i0]
-            a1 = u[i0 + 1]
-            n = trains.block_n
-            u[i0] = f1 * a0 + f2 * (n[tr, ci, i0, i0] * a0 + n[tr, ci, i0, i0 + 1] * a1)
-            u[i0 + 1] = f1 * a1 + f2 * (n[tr, ci, i0 + 1, i0] * a0 + n[tr, ci, i0 + 1, i0 + 1] * a1)
+        _apply_block(trains, st, u, b, f1, f2)
 
 
 @njit(inline="always", nogil=True)
@@ -130,30 +156,132 @@ def _state_in_prepared_piece(trains, profiles, ws, st, z_start, theta, z):
 
 
 @njit(inline="always", nogil=True)
+def _compression(trains, profiles, st, z, theta):
+    """The cam's compression −F1 [N] at angle θ with state z in configuration I (thesis
+    Eq. 26 with ẍ eliminated: ``modal.ModalData.rho``, ``sigma``, ``sigma0``)."""
+    tr, ci = st.tr, st.cfg - 1
+    w = st.w
+    lift, dlift, ddlift = evaluate_packed(profiles, st.c, theta)
+    f1 = trains.sigma0[tr, ci, 0]
+    for s in range(st.ns):
+        f1 += trains.rho[tr, ci, 0, s] * z[s]
+    f1 += trains.sigma[tr, ci, 0, 0, 0] * -lift
+    f1 += trains.sigma[tr, ci, 0, 1, 0] * -w * dlift
+    f1 += trains.sigma[tr, ci, 0, 2, 0] * -w * w * ddlift
+    return -f1
+
+
+@njit(inline="always", nogil=True)
+def _seat_row(trains, st):
+    """The row of q7 among configuration I's free coordinates."""
+    row = 0
+    for k in range(st.nf):
+        if trains.free[st.tr, st.cfg - 1, k] == SEAT:
+            row = k
+    return row
+
+
+@njit(inline="always", nogil=True)
 def _margin(cases, trains, profiles, st, z, theta):
     """Whether configuration I holds at angle θ with state z, as a number that is negative
     where it does not: the smaller of the cam's compression −F1 [N] (not with form closure)
     and the valve's height above its seat q7 − q7_seat [m] (times 1e5 N/m: only the sign of
     either matters)."""
-    c, tr, ci = st.c, st.tr, st.cfg - 1
-    w = st.w
+    c = st.c
     margin = np.inf
     if not cases.form[c]:
-        lift, dlift, ddlift = evaluate_packed(profiles, c, theta)
-        f1 = trains.sigma0[tr, ci, 0]
-        for s in range(st.ns):
-            f1 += trains.rho[tr, ci, 0, s] * z[s]
-        f1 += trains.sigma[tr, ci, 0, 0, 0] * -lift
-        f1 += trains.sigma[tr, ci, 0, 1, 0] * -w * dlift
-        f1 += trains.sigma[tr, ci, 0, 2, 0] * -w * w * ddlift
-        margin = -f1
+        margin = _compression(trains, profiles, st, z, theta)
     if cases.has_seat[c]:
-        row = 0
-        for k in range(st.nf):
-            if trains.free[tr, ci, k] == SEAT:
-                row = k
-        margin = min(margin, 1e5 * (z[row] - cases.seat_q[c]))
+        margin = min(margin, 1e5 * (z[_seat_row(trains, st)] - cases.seat_q[c]))
     return margin
+
+
+@njit(inline="always", nogil=True)
+def _harmonic_response(trains, runs, ws, st):
+    """ζ of configuration I at the case's speed (``modal.harmonic_responses``), written to
+    ``runs.zeta[c, 0]``, through the block form: (iωI − A)⁻¹ = X (iωI − B)⁻¹ X⁻¹, and for a
+    block (sI − B_b)⁻¹ = ((s − λ̄)I + N_b) / ((s − λ̄)² − δ²) since N_b² = δ²I."""
+    tr, ci, ns, w = st.tr, st.cfg - 1, st.ns, st.w
+    y = ws.ZT  # scratch: particular() overwrites it
+    for j in range(ns):
+        acc = 0.0j
+        for s in range(ns):
+            r = (
+                -trains.b_in[tr, ci, s, 0, 0]
+                - 1j * w * trains.b_in[tr, ci, s, 1, 0]
+                + w * w * trains.b_in[tr, ci, s, 2, 0]
+            )
+            acc += trains.basis_inv[tr, ci, j, s] * r
+        y[j] = acc
+    for b in range(trains.n_blocks[tr, ci]):
+        i0 = trains.bstart[tr, ci, b]
+        sl = 1j * w - trains.lam_bar[tr, ci, b]
+        if trains.bdim[tr, ci, b] == 1:
+            y[i0] = y[i0] / sl
+        else:
+            n = trains.block_n
+            den = sl * sl - trains.delta2[tr, ci, b]
+            a0 = y[i0]
+            a1 = y[i0 + 1]
+            y[i0] = ((sl + n[tr, ci, i0, i0]) * a0 + n[tr, ci, i0, i0 + 1] * a1) / den
+            y[i0 + 1] = (n[tr, ci, i0 + 1, i0] * a0 + (sl + n[tr, ci, i0 + 1, i0 + 1]) * a1) / den
+    for s in range(NS):
+        acc = 0.0j
+        if s < ns:
+            for j in range(ns):
+                acc += trains.basis[tr, ci, s, j] * y[j]
+        runs.zeta[st.c, ci, s] = acc
+
+
+@njit(inline="always", nogil=True)
+def _begin_case(cases, trains, runs, st, c):
+    """Point the scalars at case c in configuration I."""
+    tr = runs.train[c]
+    st.c = c
+    st.tr = tr
+    st.w = cases.omega[c]
+    st.cfg = CAM_CONTACT
+    st.nf = trains.n_free[tr, CAM_CONTACT - 1]
+    st.ns = 2 * st.nf
+
+
+@njit(inline="always", nogil=True)
+def _periodic_turn(cases, trains, profiles, runs, ws, st, zt):
+    """The periodic state of configuration I at each break of the turn: zt (P + 1, NS), row P
+    (at 2π) the same as row 0. z(0) = (I − e^{AT})⁻¹ b, b the turn's response from rest."""
+    tr, ci, ns = st.tr, st.cfg - 1, st.ns
+    n_p = profiles.n_pieces[st.c]
+    period = TWO_PI / st.w
+    z = ws.z
+    for s in range(ns):
+        z[s] = 0.0
+    for p in range(n_p):
+        _advance_piece(cases, trains, profiles, runs, ws, st, p, z)
+    # z(0) = (I − e^{AT})⁻¹ b, block by block: u0 = (I − e^{BT})⁻¹ X⁻¹ b.
+    _to_basis(trains, st, z, ws.u)
+    for b in range(trains.n_blocks[tr, ci]):
+        f1, f2 = block_basis(trains.lam_bar[tr, ci, b], trains.delta2[tr, ci, b], period)
+        i0 = trains.bstart[tr, ci, b]
+        if trains.bdim[tr, ci, b] == 1:
+            ws.u[i0] /= 1.0 - f1
+        else:
+            n = trains.block_n
+            m00 = 1.0 - f1 - f2 * n[tr, ci, i0, i0]
+            m01 = -f2 * n[tr, ci, i0, i0 + 1]
+            m10 = -f2 * n[tr, ci, i0 + 1, i0]
+            m11 = 1.0 - f1 - f2 * n[tr, ci, i0 + 1, i0 + 1]
+            det = m00 * m11 - m01 * m10
+            a0 = ws.u[i0]
+            a1 = ws.u[i0 + 1]
+            ws.u[i0] = (m11 * a0 - m01 * a1) / det
+            ws.u[i0 + 1] = (m00 * a1 - m10 * a0) / det
+    _from_basis(trains, st, ws.u, z)
+    for s in range(ns):
+        zt[0, s] = z[s]
+    for p in range(n_p):
+        _advance_piece(cases, trains, profiles, runs, ws, st, p, z)
+        for s in range(ns):
+            zt[p + 1, s] = z[s]
 
 
 @njit(**KERNEL)
@@ -176,47 +304,9 @@ def periodic_starts(cases, trains, profiles, runs, ws, state, snap, z_turn, t_st
     st = state[0]
     z = ws.z
     for c in range(cases.omega.shape[0]):
-        tr = runs.train[c]
-        st.c = c
-        st.tr = tr
-        st.w = cases.omega[c]
-        st.cfg = CAM_CONTACT
-        ci = CAM_CONTACT - 1
-        st.nf = trains.n_free[tr, ci]
-        st.ns = 2 * st.nf
-        ns = st.ns
-        n_p = profiles.n_pieces[c]
-        period = TWO_PI / st.w
-        # The turn's response from rest, b = z(T) with z(0) = 0.
-        for s in range(ns):
-            z[s] = 0.0
-        for p in range(n_p):
-            _advance_piece(cases, trains, profiles, runs, ws, st, p, z)
-        # z(0) = (I − e^{AT})⁻¹ b, block by block: u0 = (I − e^{BT})⁻¹ X⁻¹ b.
-        _to_basis(trains, st, z, ws.u)
-        for b in range(trains.n_blocks[tr, ci]):
-            f1, f2 = block_basis(trains.lam_bar[tr, ci, b], trains.delta2[tr, ci, b], period)
-            i0 = trains.bstart[tr, ci, b]
-            if trains.bdim[tr, ci, b] == 1:
-                ws.u[i0] /= 1.0 - f1
-            else:
-                n = trains.block_n
-                m00 = 1.0 - f1 - f2 * n[tr, ci, i0, i0]
-                m01 = -f2 * n[tr, ci, i0, i0 + 1]
-                m10 = -f2 * n[tr, ci, i0 + 1, i0]
-                m11 = 1.0 - f1 - f2 * n[tr, ci, i0 + 1, i0 + 1]
-                det = m00 * m11 - m01 * m10
-                a0 = ws.u[i0]
-                a1 = ws.u[i0 + 1]
-                ws.u[i0] = (m11 * a0 - m01 * a1) / det
-                ws.u[i0 + 1] = (m00 * a1 - m10 * a0) / det
-        _from_basis(trains, st, ws.u, z)
-        for s in range(ns):
-            z_turn[c, 0, s] = z[s]
-        for p in range(n_p):
-            _advance_piece(cases, trains, profiles, runs, ws, st, p, z)
-            for s in range(ns):
-                z_turn[c, p + 1, s] = z[s]
+        _begin_case(cases, trains, runs, st, c)
+        tr, ci = st.tr, st.cfg - 1
+        _periodic_turn(cases, trains, profiles, runs, ws, st, z_turn[c])
         # Where the run starts: θ = 0 (2π) if configuration I holds there, else the latest
         # earlier angle where it does.
         theta_s = _latest_hold(cases, trains, profiles, runs, ws, st, z_turn, snap[c])
@@ -289,3 +379,279 @@ def _latest_hold(cases, trains, profiles, runs, ws, st, z_turn, step):
             theta_hi = theta
         theta_b = lo
     return -1.0
+
+
+# --------------------------------------------------------------------------- the turn's extremes
+
+#: Samples per turn at which ``steady_extremes`` scans for the contact force's and the valve's
+#: least values (at least two per piece); the least sample is then refined by a safeguarded
+#: Newton search on the closed form's derivative between the samples beside it, to
+#: REFINE_TOLERANCE of the bracket.
+EXTREME_SAMPLES = 256
+REFINE_STEPS = 40
+REFINE_TOLERANCE = 1e-13
+#: Columns of ``steady_extremes``'s output.
+MIN_FORCE, MIN_FORCE_ANGLE, MAX_FORCE, MIN_HEIGHT, MIN_HEIGHT_ANGLE = range(5)
+N_EXTREMES = 5
+#: What ``_piece_monitor`` prepares: the cam's compression −F1 [N], F1, the valve's height
+#: above its seat q7 − q7_seat [m].
+COMPRESSION, TENSION, HEIGHT = 0, 1, 2
+
+
+@njit(inline="always", nogil=True)
+def _piece_monitor(cases, trains, profiles, runs, ws, st, zt, p, which):
+    """On piece p of the periodic turn, ``which`` as a monitor in exact's form (slot 0 of
+    ws.G, ws.GT, ws.WC; the blocks' λ̄, δ² in ws.MC): Σ_b (W1_b f1 + W2_b f2)(τ) + Σ_k G_k x^k
+    + Re(GT e^{iθ}), τ and x from the piece's start."""
+    tr, ci, ns = st.tr, st.cfg - 1, st.ns
+    _on_piece(cases, trains, profiles, runs, ws, st, p)
+    theta_a = profiles.breaks[st.c, p]
+    _particular_at(ws, st, theta_a)
+    for s in range(ns):
+        ws.zh[s] = zt[p, s] - ws.zb[s]
+    _to_basis(trains, st, ws.zh, ws.u)
+    for k in range(8):
+        ws.G[0, k] = 0.0
+    if which == HEIGHT:
+        row = _seat_row(trains, st)
+        for k in range(st.deg + 1):
+            ws.G[0, k] = ws.Z[k, row]
+        ws.G[0, 0] -= cases.seat_q[st.c]
+        ws.GT[0] = ws.ZT[row]
+    else:
+        force_monitor(trains, ws, st, 0, 1.0 if which == TENSION else -1.0, 0.0)
+    sign = -1.0 if which == COMPRESSION else 1.0
+    for b in range(trains.n_blocks[tr, ci]):
+        i0 = trains.bstart[tr, ci, b]
+        w1 = 0.0
+        w2 = 0.0
+        for j in range(i0, i0 + trains.bdim[tr, ci, b]):
+            if which == HEIGHT:
+                w1 += trains.basis[tr, ci, _seat_row(trains, st), j] * ws.u[j]
+                w2 += trains.basis_n[tr, ci, _seat_row(trains, st), j] * ws.u[j]
+            else:
+                w1 += sign * trains.rho_x[tr, ci, 0, j] * ws.u[j]
+                w2 += sign * trains.rho_xn[tr, ci, 0, j] * ws.u[j]
+        lbar = trains.lam_bar[tr, ci, b]
+        d2 = trains.delta2[tr, ci, b]
+        ws.MC[LBAR, b] = lbar
+        ws.MC[DSQ, b] = d2
+        ws.WC[W1, 0, b] = w1
+        ws.WC[W2, 0, b] = w2
+        ws.WC[WL1, 0, b], ws.WC[WL2, 0, b] = block_derivative(w1, w2, lbar, d2)
+        ws.WC[WLL1, 0, b], ws.WC[WLL2, 0, b] = block_derivative(
+            ws.WC[WL1, 0, b], ws.WC[WL2, 0, b], lbar, d2
+        )
+
+
+@njit(inline="always", nogil=True)
+def _monitor_value(ws, nb, st, theta_a, theta):
+    """The prepared monitor, its first and second derivatives in time, at θ."""
+    return eval_monitor(
+        ws.WC, ws.MC, nb, ws.G, ws.GT, 0, (theta - theta_a) / st.w, st.w, theta - theta_a, theta
+    )
+
+
+@njit(**KERNEL)
+def _turn_minimum(cases, trains, profiles, runs, ws, st, zt, which):
+    """(θ, value) of the least value of ``which`` over the periodic turn: scanned at
+    EXTREME_SAMPLES a turn (the breaks included; the blocks and the harmonic advanced by their
+    step factors), then refined between the samples beside the least by Newton's method on
+    the derivative, kept inside that bracket by bisection."""
+    c = st.c
+    nb = trains.n_blocks[st.tr, st.cfg - 1]
+    d_theta = TWO_PI / EXTREME_SAMPLES
+    best = np.inf
+    best_p = 0
+    lo = 0.0
+    hi = 0.0
+    for p in range(profiles.n_pieces[c]):
+        a = profiles.breaks[c, p]
+        b = profiles.breaks[c, p + 1]
+        n = max(2, int(np.ceil((b - a) / d_theta)))
+        step = (b - a) / n
+        _piece_monitor(cases, trains, profiles, runs, ws, st, zt, p, which)
+        for jj in range(nb):
+            ws.MC[F1, jj] = 1.0
+            ws.MC[F2, jj] = 0.0
+            ws.MC[D1, jj], ws.MC[D2, jj] = block_basis(ws.MC[LBAR, jj], ws.MC[DSQ, jj], step / st.w)
+        ct, sn = np.cos(a), np.sin(a)
+        ch, sh = np.cos(step), np.sin(step)
+        gt = ws.GT[0]
+        for i in range(n + 1):
+            g = horner(ws.G[0], step * i)[0] + gt.real * ct - gt.imag * sn
+            for jj in range(nb):
+                f1 = ws.MC[F1, jj]
+                f2 = ws.MC[F2, jj]
+                g += ws.WC[W1, 0, jj] * f1 + ws.WC[W2, 0, jj] * f2
+                ws.MC[F1, jj] = f1 * ws.MC[D1, jj] + ws.MC[DSQ, jj] * f2 * ws.MC[D2, jj]
+                ws.MC[F2, jj] = f1 * ws.MC[D2, jj] + f2 * ws.MC[D1, jj]
+            ct, sn = ct * ch - sn * sh, sn * ch + ct * sh
+            if g < best:
+                best = g
+                best_p = p
+                lo = a + step * max(i - 1, 0)
+                hi = a + step * min(i + 1, n)
+    # Refine: the least of the bracket's ends and the derivative's zero between them.
+    _piece_monitor(cases, trains, profiles, runs, ws, st, zt, best_p, which)
+    a = profiles.breaks[c, best_p]
+    g_lo, d_lo, _ = _monitor_value(ws, nb, st, a, lo)
+    g_hi, _, _ = _monitor_value(ws, nb, st, a, hi)
+    best, theta_best = (g_lo, lo) if g_lo <= g_hi else (g_hi, hi)
+    if d_lo < 0.0:
+        x = 0.5 * (lo + hi)
+        width = hi - lo
+        for _ in range(REFINE_STEPS):
+            g, dg, d2g = _monitor_value(ws, nb, st, a, x)
+            if g < best:
+                best, theta_best = g, x
+            if dg < 0.0:
+                lo = x
+            else:
+                hi = x
+            if hi - lo <= REFINE_TOLERANCE * width:
+                break
+            # Newton in θ: the derivatives are in τ, d/dθ = d/dτ / ω.
+            nxt = x - st.w * dg / d2g if d2g > 0.0 else 0.5 * (lo + hi)
+            x = nxt if lo < nxt < hi else 0.5 * (lo + hi)
+        g, _, _ = _monitor_value(ws, nb, st, a, x)
+        if g < best:
+            best, theta_best = g, x
+    return theta_best, best
+
+
+@njit(**KERNEL)
+def steady_extremes(cases, trains, profiles, runs, ws, state, z_turn, with_max, active, out):
+    """For each case at its speed ``cases.omega``: configuration I's periodic state and its
+    extremes over the turn.
+
+    Parameters
+    ----------
+    cases, trains, profiles, runs, ws, state
+        As ``periodic_starts``'s; ``runs.zeta[:, 0]`` is overwritten with configuration I's
+        harmonic responses at each case's speed.
+    z_turn : (n, P + 1, NS)
+        Out: the periodic state at each break of the turn.
+    with_max : bool
+        Also find the largest compression (else MAX_FORCE is NaN).
+    active : (n,) bool
+        The cases to compute (the others' rows are left as they are).
+    out : (n, N_EXTREMES)
+        Out, by column: the least cam compression −F1 over the turn [N] (MIN_FORCE: the
+        no-follow margin; +inf with form closure) and its angle [rad], the largest [N], the
+        valve's least height above its seat [m] (+inf without a seat) and its angle [rad].
+    """
+    st = state[0]
+    for c in range(cases.omega.shape[0]):
+        if not active[c]:
+            continue
+        _begin_case(cases, trains, runs, st, c)
+        _harmonic_response(trains, runs, ws, st)
+        _periodic_turn(cases, trains, profiles, runs, ws, st, z_turn[c])
+        out[c, MIN_FORCE] = np.inf
+        out[c, MIN_FORCE_ANGLE] = np.nan
+        out[c, MAX_FORCE] = np.nan
+        if not cases.form[c]:
+            theta, f = _turn_minimum(cases, trains, profiles, runs, ws, st, z_turn[c], COMPRESSION)
+            out[c, MIN_FORCE] = f
+            out[c, MIN_FORCE_ANGLE] = theta
+        if with_max:
+            theta, f = _turn_minimum(cases, trains, profiles, runs, ws, st, z_turn[c], TENSION)
+            out[c, MAX_FORCE] = -f
+        out[c, MIN_HEIGHT] = np.inf
+        out[c, MIN_HEIGHT_ANGLE] = np.nan
+        if cases.has_seat[c]:
+            theta, f = _turn_minimum(cases, trains, profiles, runs, ws, st, z_turn[c], HEIGHT)
+            out[c, MIN_HEIGHT] = f
+            out[c, MIN_HEIGHT_ANGLE] = theta
+
+
+@njit(inline="always", nogil=True)
+def _rate(trains, ws, st, s_row, x, ct, sn):
+    """ż[s_row] at the prepared piece's local angle x (cos θ, sin θ given), from
+    ws.u = e^{Bτ}u: X·B·e^{Bτ}u (B_b = λ̄I + N_b) plus the particular solution's rate."""
+    tr, ci = st.tr, st.cfg - 1
+    acc = 0.0
+    for b in range(trains.n_blocks[tr, ci]):
+        i0 = trains.bstart[tr, ci, b]
+        i1 = i0 + trains.bdim[tr, ci, b]
+        lbar = trains.lam_bar[tr, ci, b]
+        for j in range(i0, i1):
+            y = lbar * ws.u[j]
+            for k in range(i0, i1):
+                y += trains.block_n[tr, ci, j, k] * ws.u[k]
+            acc += trains.basis[tr, ci, s_row, j] * y
+    dz = horner(ws.Z[:, s_row], x, st.deg)[1]
+    return acc + st.w * (dz - ws.ZT[s_row].real * sn - ws.ZT[s_row].imag * ct)
+
+
+@njit(**KERNEL)
+def steady_samples(cases, trains, profiles, runs, ws, state, z_turn, angles, active, q, v, acc,
+                   force):  # fmt: skip
+    """Configuration I's periodic state at the cam angles ``angles`` (n_out,) in [0, 2π],
+    ascending, for the ``active`` cases, whose ``z_turn`` and ``runs.zeta``
+    ``steady_extremes`` has filled: q, v (n, n_out, 7) [m, rad, m/s, rad/s], the
+    accelerations of q1 and q7 (n, n_out, 2) [m/s²] and the cam's compression (n, n_out) [N]."""
+    st = state[0]
+    for c in range(cases.omega.shape[0]):
+        if not active[c]:
+            continue
+        _begin_case(cases, trains, runs, st, c)
+        tr, ci, nf, ns = st.tr, st.cfg - 1, st.nf, st.ns
+        nb = trains.n_blocks[tr, ci]
+        row = _seat_row(trains, st)
+        w = st.w
+        p = -1
+        theta_prev = 0.0
+        h_prev = -1.0
+        for k in range(angles.shape[0]):
+            theta = angles[k]
+            pk = _piece_of(profiles, c, theta)
+            if pk != p:
+                # A new piece: e^{Bτ}u at θ in closed form (left in ws.u).
+                p = pk
+                _on_piece(cases, trains, profiles, runs, ws, st, p)
+                for i in range(8):
+                    ws.G[0, i] = 0.0
+                force_monitor(trains, ws, st, 0, 1.0, 0.0)
+                _state_in_prepared_piece(trains, profiles, ws, st, z_turn[c, p], theta, ws.z)
+            else:
+                # Along the piece: e^{Bτ}u advanced block by block by its step factors.
+                h = (theta - theta_prev) / w
+                # Sample spacings equal but for rounding share their factors.
+                if abs(h - h_prev) > 1e-12 * h:
+                    for b in range(nb):
+                        ws.MC[D1, b], ws.MC[D2, b] = block_basis(
+                            trains.lam_bar[tr, ci, b], trains.delta2[tr, ci, b], h
+                        )
+                    h_prev = h
+                _propagate_by(trains, ws, st, ws.u)
+                _from_basis(trains, st, ws.u, ws.z)
+                _particular_at(ws, st, theta)
+                for s in range(ns):
+                    ws.z[s] += ws.zb[s]
+            theta_prev = theta
+            x = theta - st.th0
+            ct = np.cos(theta)
+            sn = np.sin(theta)
+            lift, dlift, ddlift = piece_eval(profiles, c, p, 0, theta)
+            for j in range(nf):
+                coord = trains.free[tr, ci, j]
+                q[c, k, coord] = ws.z[j]
+                v[c, k, coord] = ws.z[nf + j]
+            q[c, k, CAM] = -lift
+            v[c, k, CAM] = -w * dlift
+            acc[c, k, 0] = -w * w * ddlift
+            acc[c, k, 1] = _rate(trains, ws, st, nf + row, x, ct, sn)
+            # F1 = ρX·e^{Bτ}u plus the piece's forced part (``closed_form.force_monitor``).
+            f1 = horner(ws.G[0], x, st.kmax)[0] + ws.GT[0].real * ct - ws.GT[0].imag * sn
+            for j in range(ns):
+                f1 += trains.rho_x[tr, ci, 0, j] * ws.u[j]
+            force[c, k] = -f1
+
+
+@njit(inline="always", nogil=True)
+def _propagate_by(trains, ws, st, u):
+    """u ← e^{Bh} u with the blocks' step factors (f1(h), f2(h)) in ws.MC rows D1, D2."""
+    for b in range(trains.n_blocks[st.tr, st.cfg - 1]):
+        _apply_block(trains, st, u, b, ws.MC[D1, b], ws.MC[D2, b])

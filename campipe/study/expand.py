@@ -514,8 +514,9 @@ def check_settings(settings: RunSettings) -> None:
     """Run the settings' own checks (integrator, step, fidelity) before anything runs, each
     refusal a problem at its key (``run.fidelity``)."""
     try:
-        for name in ("method", "step", "cutoff", "warmup_turns"):
+        for name in ("method", "step", "warmup_turns"):
             getattr(settings, name, None)
+        settings.check_fidelity()
     except RunSettingsError as exc:
         raise SpecProblem.from_error(exc) from None
 

@@ -260,20 +260,10 @@ _RUN_METADATA: dict[str, Field] = {
         Field(
             "run.fidelity",
             "choice",
-            "full: every mode; reduced: the modes up to mode_cutoff (modal-exact only)",
+            "full: every mode, through every event (the only level: the reduced one was "
+            "removed, as it did not pay)",
             choices=tuple(getattr(_engine_settings, "FIDELITIES", ("full",))),
             archive_name="fidelity",
-        ),
-        Field(
-            "run.mode_cutoff",
-            "quantity",
-            "highest mode kept by the reduced fidelity; default: the engine's",
-            units="rad/s",
-            example="rad/s",
-            minimum=0.0,
-            allow_default=True,
-            archive_name="mode_cutoff",
-            archive_units="rad/s",
         ),
         Field(
             "run.start",
@@ -570,7 +560,11 @@ TOP_LEVEL: dict[str, str] = {
     "replay": "cases to log to rerun while the study runs: {where: EXPR}",
     "plots": "figures written beside the archive when the study finishes: a list of "
     "{kind: histories | metric | map | events, where, units, output, ...}",
+    "search": "search the speed axis instead of running every case: {onset: no-follow, "
+    "axis: speed}, the no-follow onset of every combination of the other axes (campipe onset)",
 }
+#: What ``search`` may ask for (``campipe onset``).
+SEARCHES = {"onset": ("no-follow",), "axis": ("speed",)}
 
 #: Keys of a case (the base's top-level keys that describe one run).
 CASE_KEYS = ("model", "profile", "defects", "closure", "seat", "speed", "run")

@@ -53,6 +53,7 @@ from campipe.study.fields import (
     PROFILE_OPTIONAL,
     RUN_DEFAULTS,
     SAMPLE_METHODS,
+    SEARCHES,
     STUDY_WIDE,
     TOP_LEVEL,
     WHOLE_KEYS,
@@ -117,6 +118,7 @@ class Spec:
     cases: list[dict]  # case entries, deep-merged over the base
     sample: Sample | None  # sampled design
     replay: str | None  # replay selection expression
+    search: str | None = None  # "onset": search the speed axis instead (campipe onset)
     overrides: dict[str, object] = field(default_factory=dict)  # --set KEY=VALUE applied
     path: Path | None = None  # the spec file, when read from one
     plots: list[PlotRequest] = field(default_factory=list)  # figures to write at the end
@@ -684,6 +686,25 @@ def check_plot_list(value: object, problems: _Problems) -> list[PlotRequest]:
     return out
 
 
+def check_search(value: object, problems: _Problems) -> str | None:
+    """``search: {onset: no-follow, axis: speed}`` → "onset"."""
+    block = problems.check(_mapping, value, "search", "{onset: no-follow, axis: speed}")
+    if block is None:
+        return None
+    ok = True
+    for k, v in block.items():
+        if k not in SEARCHES:
+            problems.items.append(_unknown("search", k, list(SEARCHES)))
+            ok = False
+        elif v not in SEARCHES[k]:
+            problems.add(f"search.{k}", f"found {_show(v)}, expected {' or '.join(SEARCHES[k])}")
+            ok = False
+    if "onset" not in block:
+        problems.add("search.onset", "missing: what to search for (no-follow)")
+        ok = False
+    return "onset" if ok else None
+
+
 # -- the spec -------------------------------------------------------------------------------
 
 
@@ -768,6 +789,7 @@ def check_spec(
     sample = check_sample(raw["sample"], problems, max_axis) if "sample" in raw else None
     replay = check_replay(raw["replay"], problems) if "replay" in raw else None
     plots = check_plot_list(raw["plots"], problems) if "plots" in raw else []
+    search = check_search(raw["search"], problems) if "search" in raw else None
     spec = Spec(
         name=name if isinstance(name, str) else "",
         description=str(description),
@@ -779,6 +801,7 @@ def check_spec(
         cases=cases,
         sample=sample,
         replay=replay,
+        search=search,
         overrides=overrides,
         plots=plots,
     )

@@ -1,0 +1,434 @@
+"""The steady-state path: the periodic state below the no-follow onset without integrating
+turns, its margin, and the onset speed as the margin's root.
+
+Below the onset the follower never leaves the cam, so the train stays in configuration I,
+linear and driven with the cam's period: its steady state is the closed form of
+``campipe.engine.steady`` (z(0) = (I − e^{AT})⁻¹ b, exact piece by piece). Its *margin* is the
+least cam compression −F1 over the turn: positive, the follower follows; the no-follow onset
+is the lowest speed where it reaches zero. Where the valve reaches its seat the steady state
+is piecewise (configurations I, III, IV, with plastic impacts at the seat and the cam): it is
+then the fixed point of the turn map over the exact piece propagators, which is what
+``modal-exact`` integrates turn by turn; the heavy damping of the seated phase makes that map
+contract within a turn or two (``SEATED_TURNS``, checked), and no-follow is configuration II
+in its last turn.
+
+Pure numerics: arrays in, arrays out; no files, no printing.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from campipe.constants import TWO_PI
+from campipe.engine import steady
+from campipe.engine.batch import (
+    Case,
+    CaseError,
+    RunSettings,
+    _matrices,
+    _modal,
+    _unique_trains,
+    check_run,
+    run_batch,
+    valve_reference,
+)
+from campipe.engine.closed_form import STATE, ExactRuns, ModalTrains, make_workspace
+from campipe.engine.common import Cases
+from campipe.engine.modal import NS, ModalData
+from campipe.model import ValveTrain
+from campipe.model.assembly import preload_vector
+from campipe.profiles import pack
+from campipe.vocabulary import CAM, CAM_CONTACT, SEAT
+
+#: Turns the engine integrates for a steady state with the valve seated on part of the turn
+#: (from the periodic start of configuration I); the last is the steady state when it agrees
+#: with the one before to SEATED_AGREEMENT [rad] of no-follow, else more turns follow, up to
+#: MAX_SEATED_TURNS.
+SEATED_TURNS = 3
+MAX_SEATED_TURNS = 24
+SEATED_AGREEMENT = 1e-9
+#: Speeds at which the onset search first looks across a speed range (the first sign change
+#: of the margin is then refined): a dip of the margin narrower than the range / (SCAN − 1)
+#: can be missed.
+SCAN_SPEEDS = 33
+#: The onset's default tolerance [rpm] and the time-domain check's offset either side of it.
+DEFAULT_ONSET_TOLERANCE_RPM = 0.1
+CONFIRM_OFFSET = 0.005
+CONFIRM_TURNS = 4
+RPM = TWO_PI / 60.0  # [rad/s] per rpm
+
+
+# --------------------------------------------------------------------------- packing
+
+
+def _modal_at_preload(train: ValveTrain) -> ModalData:
+    """The closed-form data of a train, its modes shared by every preload (``batch._modal``
+    caches them): the preload only enters the constant forcing and the contact forces'
+    constant part, linearly."""
+    unit = _modal(train.replace(spring_preload=1.0))
+    p = train.spring_preload
+    return dataclasses.replace(unit, b_load=unit.b_load * p, sigma0=unit.sigma0 * p)
+
+
+@dataclass
+class _SteadyBatch:
+    """What the steady-state kernels take for a batch of cases, built once: the speeds
+    (``cases.omega``) change in place between calls."""
+
+    cases: Cases
+    trains: ModalTrains
+    packed: object
+    runs: ExactRuns
+    z_turn: np.ndarray
+    matrices: list  # the distinct trains' SystemMatrices where a valve reference was needed
+    which: np.ndarray
+
+    def extremes(
+        self, omega: np.ndarray, with_max: bool = True, active: np.ndarray | None = None
+    ) -> np.ndarray:
+        """(n, N_EXTREMES) at the speeds ``omega`` [rad/s] (``steady.steady_extremes``), NaN
+        outside ``active``."""
+        self.cases.omega[:] = omega
+        out = np.full((omega.size, steady.N_EXTREMES), np.nan)
+        if active is None:
+            active = np.ones(omega.size, np.bool_)
+        steady.steady_extremes(
+            self.cases, self.trains, self.packed, self.runs, make_workspace(),
+            np.zeros(1, STATE), self.z_turn, with_max, active, out,
+        )  # fmt: skip
+        return out
+
+
+def _prepare(cases: Sequence[Case], *, need_reference: bool = False) -> _SteadyBatch:
+    n = len(cases)
+    trains, which = _unique_trains(cases)
+    data = [_modal_at_preload(t) for t in trains]
+    has_seat = np.array([c.has_seat for c in cases], dtype=np.bool_)
+    matrices: list = [None] * len(trains)
+    seated_trains = set(which[has_seat].tolist())
+    for k, t in enumerate(trains):
+        if need_reference or k in seated_trains:
+            matrices[k] = _matrices(t)
+    qref = np.array([valve_reference(matrices[k]) if matrices[k] else 0.0 for k in which])
+    modal_trains = ModalTrains(
+        load=np.stack([preload_vector(t) for t in trains]),
+        **{f: np.stack([getattr(d, f) for d in data]) for f in ModalTrains._fields if f != "load"},
+    )
+    packed = pack([c.profile for c in cases])
+    zeros = np.zeros(n)
+    runs = ExactRuns(
+        train=which, t_sample=zeros, t_end=zeros, zeta=np.zeros((n, 4, NS), np.complex128),
+        dt_cap=0.0, tolerance=1e-12, full_state=True,
+    )  # fmt: skip
+    state = Cases(
+        omega=np.array([c.speed for c in cases], dtype=float),
+        seat_q=qref + np.where(has_seat, [c.seat for c in cases], 0.0),
+        has_seat=has_seat,
+        form=np.array([c.closure == "form" for c in cases], dtype=np.bool_),
+        t0=zeros, q0=np.zeros((n, 7)), v0=np.zeros((n, 7)), a0=np.zeros((n, 7)),
+        cfg0=np.full(n, CAM_CONTACT, np.int64), meff=np.zeros((n, 4)),
+        separation=np.zeros((n, 2)), hold=np.zeros((n, 4, 2)), capture=zeros,
+        valve_ref=qref, lift_bound=zeros, speed_bound=zeros,
+    )  # fmt: skip
+    z_turn = np.zeros((n, packed.n_pieces.max() + 1, NS))
+    return _SteadyBatch(state, modal_trains, packed, runs, z_turn, matrices, which)
+
+
+# --------------------------------------------------------------------------- margins
+
+
+@dataclass(frozen=True)
+class SteadyExtremes:
+    """Configuration I's periodic state over one turn, per case (``steady_extremes``)."""
+
+    min_cam_force: np.ndarray  # (n,) least cam compression −F1: the margin [N]; inf: form closure
+    min_cam_force_angle: np.ndarray  # (n,) where [rad]
+    max_cam_force: np.ndarray  # (n,) largest cam compression [N]
+    min_seat_height: np.ndarray  # (n,) the valve's least height above its seat [m]; inf: none
+    min_seat_height_angle: np.ndarray  # (n,) where [rad]
+
+    @property
+    def holds(self) -> np.ndarray:
+        """(n,) bool: configuration I holds all turn (the cam pushes, the valve stays off its
+        seat), so the closed form is the steady state."""
+        return (self.min_cam_force >= 0.0) & (self.min_seat_height >= 0.0)
+
+
+def _as_extremes(out: np.ndarray) -> SteadyExtremes:
+    return SteadyExtremes(*(out[:, k].copy() for k in range(steady.N_EXTREMES)))
+
+
+def steady_extremes(cases: Sequence[Case]) -> SteadyExtremes:
+    """The no-follow margin and the other extremes of configuration I's periodic state over a
+    turn, for each case at its speed, in closed form (no turn integrated).
+
+    The extremes are sampled at ``steady.EXTREME_SAMPLES`` a turn and refined by golden-section
+    search; each holds for the closed form whether or not configuration I holds (see
+    ``SteadyExtremes.holds``).
+    """
+    check_run(cases, RunSettings(), check_stability_limit=False)
+    batch = _prepare(cases)
+    return _as_extremes(batch.extremes(batch.cases.omega.copy()))
+
+
+# --------------------------------------------------------------------------- histories
+
+
+@dataclass(frozen=True)
+class SteadyState:
+    """The periodic steady state over one turn at the output angles, SI (as ``BatchResult``'s
+    histories of one turn)."""
+
+    cam_angle: np.ndarray  # (n_out,) [rad], 0 … 2π
+    q: np.ndarray  # (n, n_out, 7) [m, rad]
+    v: np.ndarray  # (n, n_out, 7) [m/s, rad/s]
+    acc: np.ndarray  # (n, n_out, 2) accelerations of q1 and q7 [m/s²]
+    cam_force: np.ndarray  # (n, n_out) cam compression [N]
+    valve_reference: np.ndarray  # (n,) q7 at zero valve lift [m]
+    extremes: SteadyExtremes
+
+    @property
+    def valve_lift(self) -> np.ndarray:
+        """(n, n_out) valve opening from its base-circle static position [m]."""
+        return self.q[:, :, SEAT] - self.valve_reference[:, None]
+
+    @property
+    def follower_lift(self) -> np.ndarray:
+        """(n, n_out) pushrod foot height in the cam's lift coordinate [m]."""
+        return -self.q[:, :, CAM]
+
+
+def steady_state(cases: Sequence[Case], output_every: float = math.radians(1.0)) -> SteadyState:
+    """The periodic steady state of each case over one turn, in closed form: what the
+    event-driven engine's turns settle to below the no-follow onset, for one turn's samples.
+
+    Parameters
+    ----------
+    cases : sequence of Case
+        Any mix of trains, profiles, speeds and closures; a seat must stay clear of the valve.
+    output_every : float
+        Output spacing in cam angle [rad].
+
+    Raises
+    ------
+    CaseError
+        (key ``speed``) for a case whose follower leaves the cam somewhere on the turn, (key
+        ``seat``) one whose valve reaches its seat: its steady state is not configuration I's.
+    """
+    check_run(cases, RunSettings(output_every=output_every), check_stability_limit=False)
+    batch = _prepare(cases, need_reference=True)
+    ext = _as_extremes(batch.extremes(batch.cases.omega.copy()))
+    for key, bad, why in (
+        ("speed", ext.min_cam_force < 0, "the follower leaves the cam (no-follow)"),
+        ("seat", ext.min_seat_height < 0, "the valve reaches its seat"),
+    ):
+        if bad.any():
+            idx = np.flatnonzero(bad).tolist()
+            raise CaseError.at(
+                key,
+                f"cases {idx}: {why} in the steady state, so it is not configuration I's "
+                "closed form; run them through run_batch",
+                found=idx,
+                expected="cases below the no-follow onset with the valve clear of its seat",
+            )
+    n_out = int(math.floor(TWO_PI / output_every + 1e-9)) + 1
+    angles = np.minimum(np.arange(n_out) * output_every, TWO_PI)
+    n = len(cases)
+    q = np.empty((n, n_out, 7))
+    v = np.empty((n, n_out, 7))
+    acc = np.empty((n, n_out, 2))
+    force = np.empty((n, n_out))
+    steady.steady_samples(
+        batch.cases, batch.trains, batch.packed, batch.runs, make_workspace(),
+        np.zeros(1, STATE), batch.z_turn, angles, np.ones(n, np.bool_), q, v, acc, force,
+    )  # fmt: skip
+    return SteadyState(angles, q, v, acc, force, batch.cases.valve_ref.copy(), ext)
+
+
+# --------------------------------------------------------------------------- the onset
+
+
+def seated_no_follow(cases: Sequence[Case]) -> tuple[np.ndarray, np.ndarray]:
+    """No-follow per turn in the steady state of cases whose valve seats on part of the turn:
+    the fixed point of the turn map over the exact piece propagators, by ``modal-exact`` from
+    configuration I's periodic start, SEATED_TURNS turns and more until the last two turns'
+    no-follow agree to SEATED_AGREEMENT.
+
+    Returns
+    -------
+    separation : (n,) configuration II in the last turn [rad] (NaN: the run failed)
+    converged : (n,) bool, the last two turns agreed
+    """
+    n = len(cases)
+    sep = np.full(n, np.nan)
+    converged = np.zeros(n, np.bool_)
+    todo = np.arange(n)
+    turns = SEATED_TURNS
+    while todo.size and turns <= MAX_SEATED_TURNS:
+        settings = RunSettings(revolutions=turns, output_every=math.radians(5.0))
+        res = run_batch([cases[int(i)] for i in todo], settings, full_state=False,
+                        on_failure="record")  # fmt: skip
+        last = res.separation_per_rev[:, -1]
+        ok = np.abs(last - res.separation_per_rev[:, -2]) <= SEATED_AGREEMENT
+        sep[todo] = last
+        converged[todo] = ok
+        todo = todo[~ok & np.isfinite(last)]
+        turns *= 2
+    return sep, converged
+
+
+@dataclass(frozen=True)
+class Onset:
+    """The no-follow onset of each design over a speed range (``onset_speeds``)."""
+
+    speed: np.ndarray  # (n,) the onset [rad/s], within ± tolerance/2; NaN where none is found
+    #: (n,) str: "found"; "below" (no-follow already at the range's lowest speed); "none" (the
+    #: follower follows across the range)
+    status: np.ndarray
+    scan_speed: np.ndarray  # (n_scan,) the speeds looked at first [rad/s]
+    #: (n, n_scan) the margin there, the least cam compression over the steady turn [N]; NaN
+    #: where the valve seats on part of the turn (then the sign comes from ``seated_no_follow``)
+    scan_margin: np.ndarray
+    scan_no_follow: np.ndarray  # (n, n_scan) bool: no-follow in the steady state
+    seated: np.ndarray  # (n,) bool: the onset's bracket needed the seated steady state
+    tolerance: float  # [rad/s]
+    evaluations: np.ndarray  # (n,) steady states computed (closed form and seated)
+
+
+def _separates(designs, batch, speeds, todo):
+    """(margin [N], no-follow, seated) at speeds[i] for the designs ``todo`` (bool mask)."""
+    n = len(designs)
+    margin = np.full(n, np.nan)
+    out = batch.extremes(np.where(todo, speeds, 1.0), with_max=False, active=todo)
+    seated = todo & (out[:, steady.MIN_HEIGHT] < 0.0)
+    closed = todo & ~seated
+    margin[closed] = out[closed, steady.MIN_FORCE]
+    no_follow = closed & (margin < 0.0)
+    if seated.any():
+        idx = np.flatnonzero(seated)
+        sep, _ = seated_no_follow([dataclasses.replace(designs[i], speed=speeds[i]) for i in idx])
+        no_follow[idx] = sep > 0.0
+    return margin, no_follow, seated
+
+
+def onset_speeds(
+    designs: Sequence[Case],
+    low: float,
+    high: float,
+    tolerance: float = DEFAULT_ONSET_TOLERANCE_RPM * RPM,
+    scan: int = SCAN_SPEEDS,
+) -> Onset:
+    """The no-follow onset of each design: the lowest speed in [low, high] at which its steady
+    state leaves the cam with the valve off its seat (configuration II).
+
+    The margin (``steady_extremes``) is looked at on ``scan`` speeds across the range; the
+    first sign change is refined to ``tolerance`` by the Illinois method on the margin where
+    the closed form holds at both ends, by bisection where the valve seats (the seated steady
+    state, ``seated_no_follow``, gives only whether no-follow occurs).
+
+    Parameters
+    ----------
+    designs : sequence of Case
+        Each design's train, profile, seat and closure (their ``speed`` is ignored).
+    low, high : float
+        The speed range [rad/s].
+    tolerance : float
+        Width of the final bracket [rad/s]; the onset is its middle.
+    scan : int
+        Speeds looked at first, at least 2.
+    """
+    if not (0 < low < high and math.isfinite(high)):
+        raise CaseError.at(
+            "speed",
+            f"found the range {low!r} … {high!r} rad/s, expected 0 < low < high",
+            found=(low, high),
+            expected="0 < low < high",
+        )
+    if not tolerance > 0:
+        raise CaseError.at(
+            "tolerance", f"found {tolerance!r} rad/s, expected > 0", found=tolerance,
+            expected="> 0",
+        )  # fmt: skip
+    designs = [dataclasses.replace(d, speed=low) for d in designs]
+    check_run(designs, RunSettings(), check_stability_limit=False)
+    n = len(designs)
+    batch = _prepare(designs)
+    grid = np.linspace(low, high, max(2, int(scan)))
+    margin = np.full((n, grid.size), np.nan)
+    no_follow = np.zeros((n, grid.size), np.bool_)
+    every = np.ones(n, np.bool_)
+    for k, s in enumerate(grid):
+        margin[:, k], no_follow[:, k], _ = _separates(designs, batch, np.full(n, s), every)
+    evaluations = np.full(n, grid.size)
+    first = np.where(no_follow.any(axis=1), no_follow.argmax(axis=1), -1)
+    status = np.where(first < 0, "none", np.where(first == 0, "below", "found"))
+    todo = first > 0
+    right = np.maximum(first, 1)
+    a = np.where(todo, grid[right - 1], np.nan)
+    b = np.where(todo, grid[right], np.nan)
+    fa = margin[np.arange(n), right - 1]
+    fb = margin[np.arange(n), right]
+    bisect = ~(np.isfinite(fa) & np.isfinite(fb))
+    seated = np.where(todo, bisect, False)
+    side = np.zeros(n, np.int64)  # the end the last step replaced: −1 a, +1 b (Illinois)
+    for _ in range(200):
+        todo &= (b - a) > tolerance
+        if not todo.any():
+            break
+        with np.errstate(invalid="ignore", divide="ignore"):
+            x = np.where(bisect, 0.5 * (a + b), b - fb * (b - a) / (fb - fa))
+        x = np.clip(x, a + 0.25 * tolerance, b - 0.25 * tolerance)
+        fx, sep_x, seated_x = _separates(designs, batch, x, todo)
+        evaluations += todo
+        bisect |= seated_x
+        below = todo & ~sep_x
+        above = todo & sep_x
+        # Illinois: halve the kept end's value when the same end is replaced twice in a row.
+        fb = np.where(below & (side < 0), 0.5 * fb, fb)
+        fa = np.where(above & (side > 0), 0.5 * fa, fa)
+        a = np.where(below, x, a)
+        fa = np.where(below, fx, fa)
+        b = np.where(above, x, b)
+        fb = np.where(above, fx, fb)
+        side = np.where(below, -1, np.where(above, 1, side))
+        seated |= seated_x
+    speed = np.where(status == "found", 0.5 * (a + b), np.nan)
+    return Onset(speed, status, grid, margin, no_follow, seated, float(tolerance), evaluations)
+
+
+def confirm_onsets(
+    designs: Sequence[Case], onset: np.ndarray, offset: float = CONFIRM_OFFSET,
+    revolutions: float = CONFIRM_TURNS,
+) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """The time-domain engine just below and just above each onset: no-follow per turn, the
+    mean over ``revolutions`` turns from the periodic start (the study archive's
+    ``separation_deg_per_rev``) at onset·(1 ∓ offset).
+
+    Any turn counts: just above the onset the engine leaves the cam in its first turn, lands
+    slower than its capture velocity and may then rest on the cam (``common.captured``), so
+    its later turns can follow for a few tenths of a per cent above the steady state's onset.
+
+    Returns
+    -------
+    below, above : (n,) [rad]; NaN where there is no onset
+    """
+    n = len(designs)
+    below = np.full(n, np.nan)
+    above = np.full(n, np.nan)
+    idx = np.flatnonzero(np.isfinite(onset))
+    if idx.size:
+        cases = [
+            dataclasses.replace(designs[int(i)], speed=onset[i] * f)
+            for f in (1 - offset, 1 + offset)
+            for i in idx
+        ]
+        res = run_batch(cases, RunSettings(revolutions=revolutions), full_state=False,
+                        on_failure="record")  # fmt: skip
+        below[idx] = res.separation[: idx.size]
+        above[idx] = res.separation[idx.size :]
+    return below, above

@@ -1,0 +1,253 @@
+"""``campipe onset``: the no-follow onset speed of every combination of a spec's other axes,
+found on the steady state (``campipe.engine.periodic``) and checked by the time-domain engine
+either side of it.
+
+Orchestration: a study in, an :class:`OnsetStudy` out; the netCDF file is written by
+``campipe.io.archive``.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import json
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from campipe.engine import periodic
+from campipe.errors import CampipeError
+from campipe.io.archive import VariableSpec
+from campipe.study.expand import Study
+from campipe.study.query import CaseTable
+from campipe.study.variables import NO_SEAT, case_coordinates
+
+#: The columns every onset table has after the varied parameters.
+ONSET_COLUMNS = ("onset_speed_rpm", "onset_status", "confirmed")
+
+
+class OnsetError(CampipeError, ValueError):
+    """A spec ``campipe onset`` cannot search (``key`` the spec key)."""
+
+
+@dataclass(frozen=True)
+class OnsetStudy:
+    """The onset of each combination of a spec's other varied keys."""
+
+    name: str  # the study's name
+    keys: tuple[str, ...]  # the varied spec keys, speed left out
+    table: CaseTable  # one row per combination: the keys' archive columns, then ONSET_COLUMNS
+    onset: periodic.Onset  # the search's result (SI)
+    #: (n,) the engine's no-follow per turn at onset·(1 − offset) [rad]; NaN: unchecked
+    below: np.ndarray
+    above: np.ndarray  # (n,) likewise at onset·(1 + offset)
+    low: float  # the spec's speed range [rad/s]
+    high: float
+    search_seconds: float  # wall time of the search
+    check_seconds: float  # wall time of the time-domain check
+    spec_text: str = ""  # the spec as written (its units are the table's display units)
+    spec_overrides: dict = field(default_factory=dict)  # its --set values
+
+    @property
+    def disagreements(self) -> np.ndarray:
+        """Rows whose time-domain check does not bracket the onset."""
+        checked = np.isfinite(self.below)
+        return np.flatnonzero(checked & ~((self.below == 0.0) & (self.above > 0.0)))
+
+
+def _frozen(value: object) -> object:
+    return tuple(value) if isinstance(value, list | tuple | np.ndarray) else value
+
+
+def _combinations(study: Study) -> tuple[tuple[str, ...], list[int]]:
+    """The varied keys other than the speed, and the first case of each combination of
+    their values (in study order)."""
+    values = [c.values for c in study.cases]
+    keys = tuple(
+        k
+        for k in dict.fromkeys(k for v in values for k in v)
+        if k != "speed" and len({repr(_frozen(v.get(k))) for v in values}) > 1
+    )
+    first: dict[tuple, int] = {}
+    for i, v in enumerate(values):
+        first.setdefault(tuple(repr(_frozen(v.get(k))) for k in keys), i)
+    return keys, list(first.values())
+
+
+def search_designs(designs, low, high, tolerance, workers) -> periodic.Onset:
+    """``periodic.onset_speeds`` on ``workers`` threads (the kernels release the GIL)."""
+    n = len(designs)
+    parts = [p for p in np.array_split(np.arange(n), min(max(1, workers), n)) if p.size]
+    if len(parts) == 1:
+        return periodic.onset_speeds(designs, low, high, tolerance)
+    with concurrent.futures.ThreadPoolExecutor(len(parts)) as pool:
+        done = list(
+            pool.map(
+                lambda p: periodic.onset_speeds([designs[i] for i in p], low, high, tolerance),
+                parts,
+            )
+        )
+    first = done[0]
+    return periodic.Onset(
+        speed=np.concatenate([d.speed for d in done]),
+        status=np.concatenate([d.status for d in done]),
+        scan_speed=first.scan_speed,
+        scan_margin=np.concatenate([d.scan_margin for d in done]),
+        scan_no_follow=np.concatenate([d.scan_no_follow for d in done]),
+        seated=np.concatenate([d.seated for d in done]),
+        tolerance=first.tolerance,
+        evaluations=np.concatenate([d.evaluations for d in done]),
+    )
+
+
+def onset_study(
+    study: Study,
+    tolerance: float = periodic.DEFAULT_ONSET_TOLERANCE_RPM * periodic.RPM,
+    *,
+    confirm: bool = True,
+    workers: int = 1,
+) -> OnsetStudy:
+    """The no-follow onset of each combination of the study's varied keys but the speed,
+    within the range of its speeds.
+
+    Parameters
+    ----------
+    study : Study
+        An expanded spec whose speeds span a range.
+    tolerance : float
+        The onset's tolerance [rad/s] (the width of its final bracket).
+    confirm : bool
+        Check each onset with the time-domain engine at ±``periodic.CONFIRM_OFFSET``.
+    workers : int
+        Threads the search runs on.
+
+    Raises
+    ------
+    OnsetError
+        (key ``speed``) when the spec's speeds do not span a range.
+    """
+    speeds = np.array([c.case.speed for c in study.cases])
+    low, high = float(speeds.min()), float(speeds.max())
+    if not high > low:
+        raise OnsetError.at(
+            "speed",
+            f"the spec runs one speed ({low / periodic.RPM:g} rpm); campipe onset searches a "
+            "range: sweep it, e.g. sweep: {speed: {from: 6000 rpm, to: 14000 rpm, num: 2}}",
+            found=low,
+            expected="a speed range",
+        )
+    keys, firsts = _combinations(study)
+    designs = [study.cases[i].case for i in firsts]
+    t0 = time.perf_counter()
+    onset = search_designs(designs, low, high, tolerance, workers)
+    t1 = time.perf_counter()
+    nan = np.full(len(designs), np.nan)
+    below, above = periodic.confirm_onsets(designs, onset.speed) if confirm else (nan, nan)
+    t2 = time.perf_counter()
+    table = _table(study, keys, firsts, onset, below, above)
+    spec = study.spec
+    return OnsetStudy(
+        study.name, keys, table, onset, below, above, low, high, t1 - t0, t2 - t1,
+        spec.text, dict(spec.overrides),
+    )  # fmt: skip
+
+
+def _table(study, keys, firsts, onset, below, above) -> CaseTable:
+    columns: dict[str, np.ndarray] = {}
+    units: dict[str, str] = {}
+    coords = case_coordinates(keys)
+    for key in keys:
+        name, var, factor = coords[key]
+        raw = [study.cases[i].values.get(key) for i in firsts]
+        if var.dtype == "str":
+            columns[name] = np.array([str(v) for v in raw], dtype=object)
+        else:
+            values = np.array(raw, dtype=float) * factor
+            # no seat as in the study archive (campipe.study.layout)
+            columns[name] = np.where(np.isnan(values), NO_SEAT, values) if key == "seat" else values
+        units[name] = var.units if var.units and var.units != "1" else ""
+    checked = np.isfinite(below)
+    agrees = (below == 0.0) & (above > 0.0)
+    columns["onset_speed_rpm"] = onset.speed / periodic.RPM
+    units["onset_speed_rpm"] = "rpm"
+    columns["onset_status"] = onset.status.astype(object)
+    units["onset_status"] = ""
+    columns["confirmed"] = np.where(checked, np.where(agrees, "yes", "NO"), "-").astype(object)
+    units["confirmed"] = ""
+    return CaseTable(columns, units, list(columns), len(firsts), study.name)
+
+
+# --------------------------------------------------------------------------- the file
+
+
+def file_contents(result: OnsetStudy) -> tuple[dict, list[VariableSpec], dict, dict]:
+    """(sizes, variables, arrays, attributes) of the onset's netCDF file: one row per
+    combination along ``combination``, the search's margins along ``scan``; SI but the
+    speeds, in rpm as the study archive's ``speed_rpm``."""
+    t = result.table
+    on = result.onset
+    n = t.n
+    variables: list[VariableSpec] = []
+    arrays: dict[str, np.ndarray] = {}
+
+    def add(name, dims, dtype, values, **attrs):
+        variables.append(VariableSpec(name, dims, dtype, attrs))
+        arrays[name] = values
+
+    for name in t.columns:
+        if name in ONSET_COLUMNS:
+            continue
+        col = t.columns[name]
+        units = {"units": t.units[name]} if t.units[name] else {}
+        add(name, ("combination",), "str" if col.dtype == object else "f8", col, **units)
+    add("onset_speed_rpm", ("combination",), "f8", t.columns["onset_speed_rpm"], units="rpm",
+        long_name="no-follow onset speed (steady state; NaN: none inside the speed range)",
+        tolerance_rpm=on.tolerance / periodic.RPM)  # fmt: skip
+    add("onset_status", ("combination",), "str", t.columns["onset_status"],
+        long_name="found; below: no-follow at the range's lowest speed; none: follows across "
+        "the range")  # fmt: skip
+    for name, values, side in (
+        ("check_below_deg", result.below, "1 −"),
+        ("check_above_deg", result.above, "1 +"),
+    ):
+        add(name, ("combination",), "f8", np.degrees(values), units="degree",
+            long_name=f"no-follow in the last of {periodic.CONFIRM_TURNS} turns of the "
+            f"time-domain engine at onset × ({side} {periodic.CONFIRM_OFFSET:g}); NaN: not "
+            "checked")  # fmt: skip
+    add("scan_speed_rpm", ("scan",), "f8", on.scan_speed / periodic.RPM, units="rpm",
+        long_name="speeds the search looked at first")  # fmt: skip
+    add("margin", ("combination", "scan"), "f8", on.scan_margin, units="N",
+        long_name="least cam compression over the steady turn (NaN: the valve seats on part "
+        "of the turn)")  # fmt: skip
+    add("no_follow", ("combination", "scan"), "i1", on.scan_no_follow.astype(np.int8),
+        long_name="the steady state leaves the cam with the valve off its seat")  # fmt: skip
+    attrs: dict[str, object] = {
+        "title": f"{result.name}: no-follow onset speeds",
+        "study_name": result.name,
+        "speed_range_rpm": [result.low / periodic.RPM, result.high / periodic.RPM],
+        "varied_keys": ", ".join(result.keys),
+        "spec": result.spec_text,
+        "spec_overrides": json.dumps(result.spec_overrides, default=str),
+    }
+    return {"combination": n, "scan": on.scan_speed.size}, variables, arrays, attrs
+
+
+def summary_lines(result: OnsetStudy) -> list[str]:
+    """What the command says after the table: the range, the cost, the check."""
+    on = result.onset
+    n = result.table.n
+    lines = [
+        f"{result.name}: {n} combination{'s' if n != 1 else ''}, speeds "
+        f"{result.low / periodic.RPM:g} … {result.high / periodic.RPM:g} rpm, tolerance "
+        f"{on.tolerance / periodic.RPM:g} rpm; search {result.search_seconds:.3g} s "
+        f"({int(on.evaluations.sum())} steady states), time-domain check "
+        f"{result.check_seconds:.3g} s",
+    ]
+    bad = result.disagreements
+    if bad.size:
+        lines.append(
+            f"the time-domain check disagrees on {bad.size} combination"
+            f"{'s' if bad.size != 1 else ''} (rows {', '.join(map(str, bad[:10].tolist()))}): "
+            "it does not follow just below the onset, or does not leave just above it"
+        )
+    return lines
