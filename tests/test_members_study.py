@@ -85,8 +85,6 @@ def test_a_train_is_rebuilt_from_the_archive_columns():
         ("{spring_elements: 0}", "model.spring_elements", "expected a whole number from 1 to 64"),
         ("{spring_elements: 2.5}", "model.spring_elements", "found 2.5"),
         ("{damping_kind: viscous}", "model.damping_kind", "one of: modal, rayleigh"),
-        # Until the engine runs more than seven coordinates (then this case goes).
-        ("{valve_stem_elements: 2}", "model.valve_stem_elements", "does not yet run refined"),
         (
             "{damping_ratios: [0.1, 0.1, 0.1, 0.1, 0.1, 0.1, 0.1, 0.1]}",
             "model.damping_ratios",

@@ -37,9 +37,9 @@ from campipe.engine.batch import (
     run_batch,
     valve_reference,
 )
-from campipe.engine.closed_form import STATE, ExactRuns, ModalTrains, make_workspace
+from campipe.engine.closed_form import STATE, ExactRuns, ModalTrains, make_workspace, stack_trains
 from campipe.engine.common import Cases
-from campipe.engine.modal import NS, ModalData
+from campipe.engine.modal import ModalData
 from campipe.model import ValveTrain
 from campipe.model.assembly import preload_vector
 from campipe.profiles import pack
@@ -98,8 +98,9 @@ class _SteadyBatch:
         if active is None:
             active = np.ones(omega.size, np.bool_)
         steady.steady_extremes(
-            self.cases, self.trains, self.packed, self.runs, make_workspace(),
-            np.zeros(1, STATE), self.z_turn, with_max, active, out,
+            self.cases, self.trains, self.packed, self.runs,
+            make_workspace(self.trains.load.shape[1]), np.zeros(1, STATE), self.z_turn,
+            with_max, active, out,
         )  # fmt: skip
         return out
 
@@ -115,14 +116,12 @@ def _prepare(cases: Sequence[Case], *, need_reference: bool = False) -> _SteadyB
         if need_reference or k in seated_trains:
             matrices[k] = _matrices(t)
     qref = np.array([valve_reference(matrices[k]) if matrices[k] else 0.0 for k in which])
-    modal_trains = ModalTrains(
-        load=np.stack([preload_vector(t) for t in trains]),
-        **{f: np.stack([getattr(d, f) for d in data]) for f in ModalTrains._fields if f != "load"},
-    )
+    modal_trains = stack_trains(data, [preload_vector(t) for t in trains])
+    n_q = modal_trains.load.shape[1]  # the batch's most coordinates
     packed = pack([c.profile for c in cases])
     zeros = np.zeros(n)
     runs = ExactRuns(
-        train=which, t_sample=zeros, t_end=zeros, zeta=np.zeros((n, 4, NS), np.complex128),
+        train=which, t_sample=zeros, t_end=zeros, zeta=np.zeros((n, 4, 2 * n_q), np.complex128),
         dt_cap=0.0, tolerance=1e-12, full_state=True,
     )  # fmt: skip
     state = Cases(
@@ -130,12 +129,12 @@ def _prepare(cases: Sequence[Case], *, need_reference: bool = False) -> _SteadyB
         seat_q=qref + np.where(has_seat, [c.seat for c in cases], 0.0),
         has_seat=has_seat,
         form=np.array([c.closure == "form" for c in cases], dtype=np.bool_),
-        t0=zeros, q0=np.zeros((n, 7)), v0=np.zeros((n, 7)), a0=np.zeros((n, 7)),
+        t0=zeros, q0=np.zeros((n, n_q)), v0=np.zeros((n, n_q)), a0=np.zeros((n, n_q)),
         cfg0=np.full(n, CAM_CONTACT, np.int64), meff=np.zeros((n, 4)),
         separation=np.zeros((n, 2)), hold=np.zeros((n, 4, 2)), capture=zeros,
         valve_ref=qref, lift_bound=zeros, speed_bound=zeros,
     )  # fmt: skip
-    z_turn = np.zeros((n, packed.n_pieces.max() + 1, NS))
+    z_turn = np.zeros((n, packed.n_pieces.max() + 1, 2 * n_q))
     return _SteadyBatch(state, modal_trains, packed, runs, z_turn, matrices, which)
 
 
@@ -185,8 +184,8 @@ class SteadyState:
     histories of one turn)."""
 
     cam_angle: np.ndarray  # (n_out,) [rad], 0 … 2π
-    q: np.ndarray  # (n, n_out, 7) [m, rad]
-    v: np.ndarray  # (n, n_out, 7) [m/s, rad/s]
+    q: np.ndarray  # (n, n_out, n_q) [m, rad] (n_q: the most coordinates; NaN beyond a train's)
+    v: np.ndarray  # (n, n_out, n_q) [m/s, rad/s]
     acc: np.ndarray  # (n, n_out, 2) accelerations of q1 and q7 [m/s²]
     cam_force: np.ndarray  # (n, n_out) cam compression [N]
     valve_reference: np.ndarray  # (n,) q7 at zero valve lift [m]
@@ -239,12 +238,13 @@ def steady_state(cases: Sequence[Case], output_every: float = math.radians(1.0))
     n_out = int(math.floor(TWO_PI / output_every + 1e-9)) + 1
     angles = np.minimum(np.arange(n_out) * output_every, TWO_PI)
     n = len(cases)
-    q = np.empty((n, n_out, 7))
-    v = np.empty((n, n_out, 7))
+    n_q = batch.trains.load.shape[1]
+    q = np.full((n, n_out, n_q), np.nan)
+    v = np.full((n, n_out, n_q), np.nan)
     acc = np.empty((n, n_out, 2))
     force = np.empty((n, n_out))
     steady.steady_samples(
-        batch.cases, batch.trains, batch.packed, batch.runs, make_workspace(),
+        batch.cases, batch.trains, batch.packed, batch.runs, make_workspace(n_q),
         np.zeros(1, STATE), batch.z_turn, angles, np.ones(n, np.bool_), q, v, acc, force,
     )  # fmt: skip
     return SteadyState(angles, q, v, acc, force, batch.cases.valve_ref.copy(), ext)

@@ -19,7 +19,7 @@ from campipe.errors import CampipeError
 from campipe.model import ValveTrain, system_matrices
 from campipe.model.assembly import NEWMARK_LINEAR_OMEGA_DT, configuration_frequencies
 from campipe.profiles import Profile
-from campipe.vocabulary import ROMAN
+from campipe.vocabulary import N_COORDINATES, ROMAN
 
 #: Integrators by name; ``default`` in a spec means DEFAULT_INTEGRATOR.
 INTEGRATORS = ("modal-exact", "newmark-linear")
@@ -223,11 +223,36 @@ def output_angles(settings: RunSettings) -> np.ndarray:
     return np.arange(n) * settings.output_every
 
 
+def check_coordinates(cases: Sequence[Case], settings: RunSettings) -> None:
+    """newmark-linear runs the thesis's seven coordinates only: a train with refined members
+    (``<member>_elements`` > 1) is refused at ``run.integrator``, naming modal-exact, which
+    runs any number.
+
+    Raises
+    ------
+    RunSettingsError
+        Key ``run.integrator``.
+    """
+    if settings.method != "newmark-linear":
+        return
+    refined = sorted({c.train.n_coordinates for c in cases} - {N_COORDINATES})
+    if refined:
+        raise RunSettingsError.at(
+            "run.integrator",
+            f"newmark-linear integrates the thesis's {N_COORDINATES} coordinates only, found "
+            f"a train of {refined[-1]} (refined members, <member>_elements > 1); integrate it "
+            "with run.integrator: modal-exact",
+            found=refined,
+            expected=f"{N_COORDINATES} coordinates, or run.integrator: modal-exact",
+        )
+
+
 def check_run(
     cases: Sequence[Case], settings: RunSettings, *, check_stability_limit: bool = True
 ) -> None:
     """Everything ``run_batch`` refuses, checked without running: an unknown integrator or
-    fidelity, a non-positive step or tolerance, an unknown closure, a non-positive speed, a
+    fidelity, a non-positive step or tolerance, an unknown closure, a non-positive speed,
+    newmark-linear on a train of refined members (more than seven coordinates), a
     newmark-linear step beyond the stability limit.
 
     Raises
@@ -268,5 +293,6 @@ def check_run(
                 found=case.speed,
                 expected="> 0 rad/s",
             )
+    check_coordinates(cases, settings)
     if check_stability_limit:
         check_stability(cases, settings)

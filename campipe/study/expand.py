@@ -28,11 +28,10 @@ import numpy as np
 
 from campipe.constants import INCH
 from campipe.engine import Case, RunSettings, RunSettingsError, resolve_integrator
-from campipe.engine.settings import check_stability
+from campipe.engine.settings import check_coordinates, check_stability
 from campipe.errors import did_you_mean, excerpt
 from campipe.io.lift_table import LiftTableError, read_lift_table, table_digest
 from campipe.model import (
-    ELEMENTS,
     PARAMETERS,
     ModelParameterError,
     ValveTrain,
@@ -260,18 +259,7 @@ def _train(preset: str, overrides: tuple) -> ValveTrain:
 
 def check_train(train: ValveTrain) -> None:
     """The train's matrices and natural frequencies are finite and positive: parameters
-    far out of range (a spring rate of 1e300 lbf/in) are refused here, not by the engine.
-    A train with refined members is refused until the engine runs more than q1 … q7."""
-    refined = [m for m in ELEMENTS if train.elements_of(m) > 1]
-    if refined:
-        raise SpecProblem(
-            f"model.{refined[0]}_elements",
-            f"found {train.elements_of(refined[0])}, expected 1: the engine does not yet run "
-            "refined members (more coordinates than the thesis's seven); `campipe model "
-            "--set ...` shows their matrices and frequencies",
-            found=train.elements_of(refined[0]),
-            expected="1",
-        )
+    far out of range (a spring rate of 1e300 lbf/in) are refused here, not by the engine."""
     try:
         sm = system_matrices(train)
         ok = all(
@@ -464,6 +452,7 @@ def resolve(raw: Mapping, index: int, directory: Path) -> ResolvedCase:
     check_settings(settings)
     case = Case(train, profile, speed, math.nan if seat is None else seat, closure)
     try:
+        check_coordinates([case], settings)
         check_stability([case], settings)
     except RunSettingsError as exc:
         raise SpecProblem.from_error(exc) from None
