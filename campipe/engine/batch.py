@@ -237,14 +237,14 @@ def prepare(train: ValveTrain, dt: float) -> Prepared:
     omega_max = np.array(
         [configuration_frequencies(sm.mass, sm.stiffness, c).max() for c in (1, 2, 3, 4)]
     )
-    thesis_size = sm.mass.shape[0] == N_COORDINATES
+    step_A: np.ndarray | None = None
+    step_G: np.ndarray | None = None
+    if sm.mass.shape[0] == N_COORDINATES:
+        step_A, step_G = newmark_step_maps(sm.mass, sm.damping, sm.stiffness, dt)
     return Prepared(
         sm,
-        *(
-            newmark_step_maps(sm.mass, sm.damping, sm.stiffness, dt)
-            if thesis_size
-            else (None, None)
-        ),
+        step_A,
+        step_G,
         impact_masses(sm.mass),
         valve_reference(sm),
         omega_max,

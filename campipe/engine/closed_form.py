@@ -13,8 +13,8 @@ from numba import njit
 
 from campipe.engine.common import KERNEL, holds_cam, holds_seat
 from campipe.engine.modal import ModalData, pad_stack
-from campipe.vocabulary import N_COORDINATES
 from campipe.profiles.packed import degree, horner
+from campipe.vocabulary import N_COORDINATES
 
 # Rows of the per-block work array ``MC`` (one column per active block, fastest first): the
 # basis functions (f1, f2) at the current grid point, their values at the grid step h (the
@@ -91,7 +91,8 @@ class ExactRuns(NamedTuple):
 
 class Workspace(NamedTuple):
     """Work arrays of one case's segment, allocated once per batch (``make_workspace``) for
-    the batch's most coordinates n and largest state ns = 2n (``modal.NS`` for the thesis's train)."""
+    the batch's most coordinates n and largest state ns = 2n (``modal.NS`` for the thesis's
+    train)."""
 
     q: np.ndarray  # (n,) coordinates at the segment start / an event [m, rad]
     v: np.ndarray  # (n,) velocities

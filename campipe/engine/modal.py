@@ -313,8 +313,9 @@ def modal_data(sm: SystemMatrices) -> ModalData:
 
 @njit(cache=True, nogil=True)
 def harmonic_responses(train, n_free, a_mat, b_in, omega):
-    """(n, 4, ns) complex ζ per case (ns the padded state size of ``a_mat``): the particular solution for a cam harmonic
-    Re(β e^{iθ}) of the lift is Z_T = β·ζ, with θ = ωt (configurations I and III hold the cam).
+    """(n, 4, ns) complex ζ per case (ns the padded state size of ``a_mat``): the particular
+    solution for a cam harmonic Re(β e^{iθ}) of the lift is Z_T = β·ζ, with θ = ωt
+    (configurations I and III hold the cam).
 
     The cam coordinate is q1 = −lift, so (q1, q̇1, q̈1) = Re(β (−1, −iω, ω²) e^{iθ}) and
     (iωI − A) ζ = −b_q − iω b_v + ω² b_a.  Arrays as ``ModalData`` with a leading train axis;
@@ -352,5 +353,6 @@ def pad_stack(arrays: list[np.ndarray], fill=0) -> np.ndarray:
     shape = tuple(max(a.shape[k] for a in arrays) for k in range(arrays[0].ndim))
     out = np.full((len(arrays), *shape), fill, dtype=arrays[0].dtype)
     for i, a in enumerate(arrays):
-        out[(i, *(slice(0, m) for m in a.shape))] = a
+        region: tuple[int | slice, ...] = (i, *(slice(0, m) for m in a.shape))
+        out[region] = a
     return out

@@ -19,7 +19,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
-from campipe.engine import INTEGRATORS, MEMBER_LOADS, RunSettings
+from campipe.engine import INTEGRATORS, MEMBER_LOADS, SPRING_HISTORIES, RunSettings
 from campipe.engine import settings as _engine_settings
 from campipe.errors import CampipeError, did_you_mean, excerpt
 from campipe.model import PARAMETERS, PRESETS, ModelParameterError, parse_parameter
@@ -360,9 +360,11 @@ CASE_FIELDS: dict[str, Field] = {
         Field(
             "run.record",
             "record",
-            "optional histories to store: q (all seven coordinates), member_loads (all "
-            "member loads) or single member loads by name",
-            choices=("q", "member_loads", *MEMBER_LOADS),
+            "optional histories to store: q (the thesis's seven coordinates), member_loads "
+            "(all member loads) or single member loads by name, spring (the spring's force, "
+            "largest element force and coil-clash margin, and their per-revolution metrics) "
+            "or single spring histories by name",
+            choices=("q", "member_loads", *MEMBER_LOADS, "spring", *SPRING_HISTORIES),
         ),
     ]
 }
