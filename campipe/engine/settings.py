@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from campipe.errors import CampipeError
-from campipe.model import ValveTrain, system_matrices
+from campipe.model import ValveTrain, lash_seat, system_matrices
 from campipe.model.assembly import NEWMARK_LINEAR_OMEGA_DT, configuration_frequencies
 from campipe.profiles import Profile
 from campipe.vocabulary import ROMAN
@@ -94,6 +94,21 @@ class Case:
     speed: float  # cam speed [rad/s]
     seat: float = math.nan  # seat position as a valve lift [m]; NaN: no seat
     closure: str = "force"  # "force": spring-held, may separate; "form": never leaves the cam
+
+    def __post_init__(self) -> None:
+        lash = getattr(self.train, "lash", math.nan)
+        if math.isnan(lash):
+            return
+        seat = lash_seat(system_matrices(self.train), lash)
+        if not math.isnan(self.seat) and self.seat != seat:
+            raise CaseError.at(
+                "seat",
+                f"a seat at {self.seat:.6g} m beside a train's lash of {lash:.6g} m (which "
+                f"places it at {seat:.6g} m); give one of them",
+                found=self.seat,
+                expected="no seat (NaN), or a train without lash",
+            )
+        object.__setattr__(self, "seat", seat)  # the lash places the seat
 
     @property
     def has_seat(self) -> bool:

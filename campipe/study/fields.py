@@ -583,6 +583,7 @@ def model_field(name: str) -> Field:
         example=p.thesis_units,
         minimum=p.minimum,
         exclusive_minimum=p.exclusive_minimum,
+        allow_none=p.allow_none,
         archive_name=name,
         archive_units=p.units,
     )
