@@ -31,10 +31,10 @@ DEFAULT_STEPS: dict[str, float | None] = {"newmark-linear": 1e-6, "modal-exact":
 CLOSURES = ("force", "form")
 #: Model fidelity of a run: "full", every case through its events with every mode. The
 #: levels below it were measured and removed because they did not pay (docs/bench.md, "Model
-#: only what a scene needs"): "reduced" (the upper modes quasi-static between events) saved
-#: 4–24 % for valve-lift errors of 1e-5 to 1e-1 in and changed the event sequence of up to a
-#: third of seated cases; a closed-form "steady" level cost as much as integrating, the
-#: samples being the cost. The steady state's own path is ``engine.periodic``.
+#: only what a scene needs"; the CHANGELOG has the figures): "reduced" (the upper modes
+#: quasi-static between events) saved little for its error and changed the event sequence of
+#: many seated cases; a closed-form "steady" level cost as much as integrating, the samples
+#: being the cost. The steady state's own path is ``engine.periodic``.
 FIDELITIES = ("full",)
 REMOVED_FIDELITIES = {"reduced": "it saved at most a fifth of the time for errors up to 0.1 in"}
 #: How a run starts: on the periodic steady state of configuration I (``engine.steady``), or

@@ -19,7 +19,7 @@ import numpy as np
 from campipe.model.coordinates import TRANSLATIONS, translations
 from campipe.model.elements import elements
 from campipe.model.parameters import N_DOF, ValveTrain, mode_damping_ratios
-from campipe.vocabulary import CONFIGURATIONS, free_coordinates
+from campipe.vocabulary import CAM, CONFIGURATIONS, SEAT, free_coordinates
 
 #: Newmark linear acceleration (β = 1/6, γ = 1/2) is stable for ω·Δt < √12 (= (√3/π)·T),
 #: whatever the damping (the γ = 1/2 family's limit does not depend on ζ).
@@ -181,9 +181,8 @@ def lash_seat(sm: SystemMatrices, lash: float) -> float:
     load: it grows by the preload's deflection, all but the stem's share (the stem still
     carries the spring's force to the seat). So the seat is the rocker ratio times the lash
     plus that deflection, solved here from the two static states (linear in the seat)."""
-    cam, valve = 0, 6  # q1, q7 (campipe.vocabulary.CAM, SEAT)
-    reference = static_state(sm.stiffness, sm.preload, {cam: 0.0})[valve]
-    gap = [-static_state(sm.stiffness, sm.preload, {valve: reference + s})[cam] for s in (0, 1)]
+    reference = static_state(sm.stiffness, sm.preload, {CAM: 0.0})[SEAT]
+    gap = [-static_state(sm.stiffness, sm.preload, {SEAT: reference + s})[CAM] for s in (0, 1)]
     return (lash - gap[0]) / (gap[1] - gap[0])
 
 
