@@ -69,14 +69,14 @@ def test_no_separation_at_9000_rpm_after_the_first_revolution(no_seat):
 def test_separation_begins_between_9000_and_9524_rpm(no_seat):
     """Calibration, not validation: the preset's spring preload (151 lbf, which the thesis
     does not state) was chosen to put the onset between the thesis's 9000 and 9524 rpm
-    (NOTES.md). This checks the calibration still holds."""
+    (docs/model.md, the preset). This checks the calibration still holds."""
     idx, res = no_seat
     assert sep_deg(res, idx[9524])[-1] > 0.0
 
 
 def test_45_to_60_degrees_of_separation_per_revolution_at_9524_rpm(no_seat):
     """Calibration, not validation: the preload was chosen so that 9524 rpm separates for
-    about the thesis's 50° a turn (NOTES.md: 53°)."""
+    about the thesis's 50° a turn (docs/model.md, the preset)."""
     idx, res = no_seat
     last = sep_deg(res, idx[9524])[1:]
     assert np.all((last >= 45.0) & (last <= 60.0)), last
@@ -84,7 +84,7 @@ def test_45_to_60_degrees_of_separation_per_revolution_at_9524_rpm(no_seat):
 
 def test_about_220_degrees_with_a_rebounce_at_11000_rpm(no_seat):
     """Not calibrated: the thesis reads ≈ 180° from its Figure 20 with a re-bounce; the
-    preset calibrated at 9000–9524 rpm predicts 219° (NOTES.md: ≈ 220°), both integrators.
+    preset calibrated at 9000–9524 rpm predicts about 219°, both integrators.
     The two-sided bound pins that prediction; the solve_ivp peer's agreement with it is in
     tests/test_bench.py. Broken copy: a damping or preload off by 10 % moves it out."""
     idx, res = no_seat

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from campipe.errors import CampipeError
-from campipe.model import ValveTrain, system_matrices
+from campipe.model import ValveTrain, lash_seat, system_matrices
 from campipe.model.assembly import NEWMARK_LINEAR_OMEGA_DT, configuration_frequencies
 from campipe.profiles import Profile
 from campipe.vocabulary import N_COORDINATES, ROMAN
@@ -31,10 +31,10 @@ DEFAULT_STEPS: dict[str, float | None] = {"newmark-linear": 1e-6, "modal-exact":
 CLOSURES = ("force", "form")
 #: Model fidelity of a run: "full", every case through its events with every mode. The
 #: levels below it were measured and removed because they did not pay (docs/bench.md, "Model
-#: only what a scene needs"): "reduced" (the upper modes quasi-static between events) saved
-#: 4–24 % for valve-lift errors of 1e-5 to 1e-1 in and changed the event sequence of up to a
-#: third of seated cases; a closed-form "steady" level cost as much as integrating, the
-#: samples being the cost. The steady state's own path is ``engine.periodic``.
+#: only what a scene needs"; the CHANGELOG has the figures): "reduced" (the upper modes
+#: quasi-static between events) saved little for its error and changed the event sequence of
+#: many seated cases; a closed-form "steady" level cost as much as integrating, the samples
+#: being the cost. The steady state's own path is ``engine.periodic``.
 FIDELITIES = ("full",)
 REMOVED_FIDELITIES = {"reduced": "it saved at most a fifth of the time for errors up to 0.1 in"}
 #: How a run starts: on the periodic steady state of configuration I (``engine.steady``), or
@@ -94,6 +94,21 @@ class Case:
     speed: float  # cam speed [rad/s]
     seat: float = math.nan  # seat position as a valve lift [m]; NaN: no seat
     closure: str = "force"  # "force": spring-held, may separate; "form": never leaves the cam
+
+    def __post_init__(self) -> None:
+        lash = getattr(self.train, "lash", math.nan)
+        if math.isnan(lash):
+            return
+        seat = lash_seat(system_matrices(self.train), lash)
+        if not math.isnan(self.seat) and self.seat != seat:
+            raise CaseError.at(
+                "seat",
+                f"a seat at {self.seat:.6g} m beside a train's lash of {lash:.6g} m (which "
+                f"places it at {seat:.6g} m); give one of them",
+                found=self.seat,
+                expected="no seat (NaN), or a train without lash",
+            )
+        object.__setattr__(self, "seat", seat)  # the lash places the seat
 
     @property
     def has_seat(self) -> bool:

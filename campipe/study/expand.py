@@ -36,6 +36,7 @@ from campipe.model import (
     ModelParameterError,
     ValveTrain,
     defining_values,
+    lash_seat,
     system_matrices,
     valve_train,
 )
@@ -435,15 +436,32 @@ def resolve(raw: Mapping, index: int, directory: Path) -> ResolvedCase:
     speed = _parse("speed", _freeze(raw["speed"]), "speed")
     seat = _parse("seat", _freeze(raw["seat"]), "seat")
     closure = _parse("closure", raw["closure"], "closure")
-    if seat is not None:
-        ratio = train.rocker_valve_arm_length / train.rocker_pushrod_arm_length
-        if seat >= full * ratio:
+    ratio = train.rocker_valve_arm_length / train.rocker_pushrod_arm_length
+    if not math.isnan(train.lash):
+        if seat is not None:
             raise SpecProblem(
                 "seat",
-                f"found {excerpt(raw['seat'])}, expected a valve lift below "
-                f"the full valve lift {full * ratio / INCH:.4g} in (cam lift "
-                f"{full / INCH:.4g} in × rocker ratio {ratio:.4g}): above it "
-                "the valve never leaves its seat",
+                f"found {excerpt(raw['seat'])} beside model.lash "
+                f"{train.lash / INCH:.4g} in: the lash places the seat; give one of them "
+                "(seat: none, or model.lash: none)",
+            )
+        seat = lash_seat(system_matrices(train), train.lash)
+    if seat is not None:
+        if seat >= full * ratio:
+            raise (
+                SpecProblem(
+                    "seat",
+                    f"found {excerpt(raw['seat'])}, expected a valve lift below "
+                    f"the full valve lift {full * ratio / INCH:.4g} in (cam lift "
+                    f"{full / INCH:.4g} in × rocker ratio {ratio:.4g}): above it "
+                    "the valve never leaves its seat",
+                )
+                if math.isnan(train.lash)
+                else SpecProblem(
+                    "model.lash",
+                    f"found {train.lash / INCH:.4g} in, expected less than the cam's full lift "
+                    f"{full / INCH:.4g} in: the follower would never reach the rocker",
+                )
             )
     run = raw["run"]
     rs = {k: _parse(f"run.{k}", _freeze(v), f"run.{k}") for k, v in run.items() if k != "record"}

@@ -19,6 +19,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
+from campipe.constants import RPM
 from campipe.engine import INTEGRATORS, MEMBER_LOADS, SPRING_HISTORIES, RunSettings
 from campipe.engine import settings as _engine_settings
 from campipe.errors import CampipeError, did_you_mean, excerpt
@@ -28,7 +29,7 @@ from campipe.units import QuantityError, convert, parse_angular, parse_quantity
 
 #: Bounds of sense on a spec's quantities [SI]: beyond them the numbers overflow or the
 #: geometry stops meaning anything (a lift of a kilometre, a cam at a million rpm).
-MAX_SPEED = 1e6 * math.pi / 30  # [rad/s]: 1e6 rpm
+MAX_SPEED = 1e6 * RPM  # [rad/s]: 1e6 rpm
 MAX_LENGTH = 1.0  # [m]: lifts, seat positions, bump heights
 MAX_ANGLE = 4 * math.pi  # [rad]: defect angles, up to 720 deg (a flat may wrap past 360)
 
@@ -585,6 +586,7 @@ def model_field(name: str) -> Field:
         example=p.thesis_units,
         minimum=p.minimum,
         exclusive_minimum=p.exclusive_minimum,
+        allow_none=p.allow_none,
         archive_name=name,
         archive_units=p.units,
     )
