@@ -16,7 +16,7 @@ from campipe.engine import (
     run_batch,
     spring_histories,
 )
-from campipe.engine.batch import _matrices, initial_state, valve_reference
+from campipe.engine.batch import initial_state, train_matrices, valve_reference
 from campipe.model import spring_clash_margin, spring_element_forces, thesis_train
 from campipe.profiles import harmonic, polydyne
 from campipe.vocabulary import CAM_IMPACT, EV_KIND, SEAT_IMPACT
@@ -132,7 +132,7 @@ def test_member_loads_of_refined_members_at_static_equilibrium():
     )
     loads = []
     for train in (TRAIN, refined):
-        sm = _matrices(train)
+        sm = train_matrices(train)
         q, _, _, _ = initial_state(Case(train, CAM, rpm(1)), sm, valve_reference(sm))
         loads.append(member_loads(train, q))
     for name in loads[0]:

@@ -69,6 +69,7 @@ from campipe.vocabulary import (
     CAM_AND_SEAT,
     CAM_CONTACT,
     CHATTER,
+    CONFIGURATIONS,
     EVENTS_TRUNCATED,
     FAILURES,
     N_COORDINATES,
@@ -210,7 +211,8 @@ class BatchResult:
 
 
 @functools.lru_cache(maxsize=256)
-def _matrices(train: ValveTrain) -> SystemMatrices:
+def train_matrices(train: ValveTrain) -> SystemMatrices:
+    """The train's system matrices, cached per train (``cache_clear`` to time them)."""
     return system_matrices(train)
 
 
@@ -233,9 +235,9 @@ class Prepared:
 
 @functools.lru_cache(maxsize=256)
 def prepare(train: ValveTrain, dt: float) -> Prepared:
-    sm = _matrices(train)
+    sm = train_matrices(train)
     omega_max = np.array(
-        [configuration_frequencies(sm.mass, sm.stiffness, c).max() for c in (1, 2, 3, 4)]
+        [configuration_frequencies(sm.mass, sm.stiffness, c).max() for c in CONFIGURATIONS]
     )
     step_A: np.ndarray | None = None
     step_G: np.ndarray | None = None
@@ -275,8 +277,9 @@ def start_inverses(sm: SystemMatrices) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=256)
-def _modal(train: ValveTrain) -> ModalData:
-    return modal_data(_matrices(train))
+def train_modal(train: ValveTrain) -> ModalData:
+    """The train's closed-form data per configuration, cached per train."""
+    return modal_data(train_matrices(train))
 
 
 def initial_state(case: Case, sm: SystemMatrices, seat_q: float):
@@ -293,7 +296,7 @@ def initial_state(case: Case, sm: SystemMatrices, seat_q: float):
     return q[0], v[0], a[0], int(cfg[0])
 
 
-def _unique_trains(cases: Sequence[Case]) -> tuple[list[ValveTrain], np.ndarray]:
+def unique_trains(cases: Sequence[Case]) -> tuple[list[ValveTrain], np.ndarray]:
     """The distinct trains of a batch and each case's index into them."""
     index: dict[ValveTrain, int] = {}
     which = np.empty(len(cases), np.int64)
@@ -390,7 +393,7 @@ def _run_newmark(preps, which, settings, dt_run, cases, packed, out) -> None:
 def _modal_trains(trains, preps) -> tuple[ModalTrains, np.ndarray]:
     """The distinct trains' closed-form data, indexed in the kernels by each case's train, and
     their state matrices (for the harmonic responses)."""
-    data = [_modal(t) for t in trains]
+    data = [train_modal(t) for t in trains]
     modal_trains = stack_trains(data, [p.matrices.preload for p in preps])
     return modal_trains, pad_stack([d.a_mat for d in data])
 
@@ -433,9 +436,9 @@ class _Batch:
 def _prepare_batch(cases: Sequence[Case], settings: RunSettings, full_state: bool) -> _Batch:
     dt_run = settings.step
     n = len(cases)
-    trains, which = _unique_trains(cases)
+    trains, which = unique_trains(cases)
     preps = [prepare(t, dt_run or 0.0) for t in trains]
-    modal = [_modal(t) for t in trains]
+    modal = [train_modal(t) for t in trains]
     qref = np.array([p.valve_reference for p in preps])[which]
     has_seat = np.array([c.has_seat for c in cases], dtype=np.bool_)
     omega = np.array([c.speed for c in cases], dtype=float)

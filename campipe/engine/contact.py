@@ -15,7 +15,7 @@ from campipe.vocabulary import CAM, CONFIGURATIONS, N_COORDINATES, SEAT, free_co
 #: HELD[c - 1, i]: coordinate i is prescribed in configuration c (the thesis's seven; a
 #: refined member's internal coordinates are never held, ``held_mask``).
 HELD = np.array(
-    [[i in CONFIGURATIONS[c].held for i in range(7)] for c in (1, 2, 3, 4)], dtype=np.bool_
+    [[i in CONFIGURATIONS[c].held for i in range(7)] for c in CONFIGURATIONS], dtype=np.bool_
 )
 
 
@@ -32,7 +32,7 @@ def effective_mass_inverses(mass, damping, stiffness, dt: float) -> np.ndarray:
     zero in the held rows and columns (thesis Eq. 67, partitioned as in Appendix A)."""
     meff = mass + 0.5 * dt * damping + dt * dt / 6.0 * stiffness
     out = np.zeros((4, 7, 7))
-    for c in (1, 2, 3, 4):
+    for c in CONFIGURATIONS:
         free = list(CONFIGURATIONS[c].free)
         out[c - 1][np.ix_(free, free)] = np.linalg.inv(meff[np.ix_(free, free)])
     return out
@@ -74,7 +74,7 @@ def newmark_step_maps(mass, damping, stiffness, dt: float) -> tuple[np.ndarray, 
     columns = np.r_[X_Q : X_Q + 7, X_V : X_V + 7, X_A : X_A + 7]
     A = np.zeros((4, N_X, N_Z))
     G = np.zeros((4, N_Z, N_Z))
-    for c in (1, 2, 3, 4):
+    for c in CONFIGURATIONS:
         held = HELD[c - 1]
         free = np.diag(~held).astype(float)
         # The predictors as maps of x = (q, v, a).

@@ -237,7 +237,7 @@ def modal_data(sm: SystemMatrices) -> ModalData:
         "hold": np.zeros((4, 2)),
         "separation": np.zeros(2),
     }
-    for ci, cfg in enumerate((1, 2, 3, 4)):
+    for ci, cfg in enumerate(CONFIGURATIONS):
         fr = np.array(free_coordinates(cfg, n))
         nf = fr.size
         ns = 2 * nf

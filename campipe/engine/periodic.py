@@ -24,17 +24,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from campipe.constants import TWO_PI
+from campipe.constants import RPM, TWO_PI
 from campipe.engine import steady
 from campipe.engine.batch import (
     Case,
     CaseError,
     RunSettings,
-    _matrices,
-    _modal,
-    _unique_trains,
     check_run,
     run_batch,
+    train_matrices,
+    train_modal,
+    unique_trains,
     valve_reference,
 )
 from campipe.engine.closed_form import STATE, ExactRuns, ModalTrains, make_workspace, stack_trains
@@ -60,17 +60,16 @@ SCAN_SPEEDS = 33
 DEFAULT_ONSET_TOLERANCE_RPM = 0.1
 CONFIRM_OFFSET = 0.005
 CONFIRM_TURNS = 4
-RPM = TWO_PI / 60.0  # [rad/s] per rpm
 
 
 # --------------------------------------------------------------------------- packing
 
 
 def _modal_at_preload(train: ValveTrain) -> ModalData:
-    """The closed-form data of a train, its modes shared by every preload (``batch._modal``
+    """The closed-form data of a train, its modes shared by every preload (``batch.train_modal``
     caches them): the preload only enters the constant forcing and the contact forces'
     constant part, linearly."""
-    unit = _modal(train.replace(spring_preload=1.0))
+    unit = train_modal(train.replace(spring_preload=1.0))
     p = train.spring_preload
     return dataclasses.replace(unit, b_load=unit.b_load * p, sigma0=unit.sigma0 * p)
 
@@ -107,14 +106,14 @@ class _SteadyBatch:
 
 def _prepare(cases: Sequence[Case], *, need_reference: bool = False) -> _SteadyBatch:
     n = len(cases)
-    trains, which = _unique_trains(cases)
+    trains, which = unique_trains(cases)
     data = [_modal_at_preload(t) for t in trains]
     has_seat = np.array([c.has_seat for c in cases], dtype=np.bool_)
     matrices: list = [None] * len(trains)
     seated_trains = set(which[has_seat].tolist())
     for k, t in enumerate(trains):
         if need_reference or k in seated_trains:
-            matrices[k] = _matrices(t)
+            matrices[k] = train_matrices(t)
     qref = np.array([valve_reference(matrices[k]) if matrices[k] else 0.0 for k in which])
     modal_trains = stack_trains(data, [preload_vector(t) for t in trains])
     n_q = modal_trains.load.shape[1]  # the batch's most coordinates

@@ -19,7 +19,7 @@ from campipe.errors import CampipeError
 from campipe.model import ValveTrain, lash_seat, system_matrices
 from campipe.model.assembly import NEWMARK_LINEAR_OMEGA_DT, configuration_frequencies
 from campipe.profiles import Profile
-from campipe.vocabulary import N_COORDINATES, ROMAN
+from campipe.vocabulary import CAM_AND_SEAT, CAM_CONTACT, CONFIGURATIONS, FREE, N_COORDINATES, ROMAN
 
 #: Integrators by name; ``default`` in a spec means DEFAULT_INTEGRATOR.
 INTEGRATORS = ("modal-exact", "newmark-linear")
@@ -180,15 +180,15 @@ def configuration_omega_max(train: ValveTrain) -> np.ndarray:
     """(4,) the highest natural frequency of each configuration I–IV [rad/s]."""
     sm = system_matrices(train)
     return np.array(
-        [configuration_frequencies(sm.mass, sm.stiffness, c).max() for c in (1, 2, 3, 4)]
+        [configuration_frequencies(sm.mass, sm.stiffness, c).max() for c in CONFIGURATIONS]
     )
 
 
 def visited_configurations(case: Case) -> tuple[int, ...]:
     """The configurations a case can reach: no seat keeps it in I/II; form closure in I/III."""
     if case.closure == "form":
-        return (1, 3) if case.has_seat else (1,)
-    return (1, 2, 3, 4) if case.has_seat else (1, 2)
+        return (CAM_CONTACT, CAM_AND_SEAT) if case.has_seat else (CAM_CONTACT,)
+    return tuple(CONFIGURATIONS) if case.has_seat else (CAM_CONTACT, FREE)
 
 
 def _newmark_limit(case: Case) -> tuple[float, int]:
