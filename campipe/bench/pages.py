@@ -403,6 +403,11 @@ def onset_block(bench: Bench) -> str:
     o = bench.onset
     if not o:
         return "Not measured in this run."
+    equal = (
+        f"a resolution of {format_short(o['equal_time_resolution_rpm'], 2)} rpm"
+        if o["equal_time_speeds"] >= 2
+        else "fewer than the two a bracket needs"
+    )
     return "\n".join(
         [
             f"- **The map**: {o['designs']} designs (preload {format_short(o['preloads_lbf'][0])}"
@@ -420,8 +425,7 @@ def onset_block(bench: Bench) -> str:
             f"{o['grid_turns']} turns each ({format_short(o['grid_per_case'] * 1e3)} ms a run): "
             f"**{format_short(o['grid_seconds'], 2)} s** on {o['workers']} workers for a "
             f"resolution of {format_short(o['grid_resolution_rpm'])} rpm; in the map's time it "
-            f"affords {format_short(o['equal_time_speeds'], 2)} speeds a design (a resolution of "
-            f"{format_short(o['equal_time_resolution_rpm'], 2)} rpm).",
+            f"affords {format_short(o['equal_time_speeds'], 2)} speeds a design ({equal}).",
         ]
     )
 
