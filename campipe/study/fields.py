@@ -242,7 +242,8 @@ _RUN_METADATA: dict[str, Field] = {
         Field(
             "run.tolerance",
             "quantity",
-            "event-time tolerance of integrators that locate events",
+            "event-time tolerance of integrators that locate events (compliant: the relative "
+            "tolerance, no finer than 1e-10)",
             units="s",
             example="s",
             minimum=0.0,
@@ -361,8 +362,9 @@ CASE_FIELDS: dict[str, Field] = {
             "run.record",
             "record",
             "optional histories to store: q (all seven coordinates), member_loads (all "
-            "member loads) or single member loads by name",
-            choices=("q", "member_loads", *MEMBER_LOADS),
+            "member loads) or single member loads by name; contact_pressure: the peak Hertz "
+            "pressure at the cam and the seat per revolution",
+            choices=("q", "member_loads", *MEMBER_LOADS, "contact_pressure"),
         ),
     ]
 }

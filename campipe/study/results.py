@@ -21,7 +21,11 @@ import campipe
 from campipe import engine
 from campipe.engine.loads import MEMBER_LOADS, member_loads
 from campipe.study.expand import ResolvedCase
-from campipe.study.variables import PER_REVOLUTION_METRICS, data_variables
+from campipe.study.variables import (
+    CONTACT_PRESSURE_METRICS,
+    PER_REVOLUTION_METRICS,
+    data_variables,
+)
 from campipe.vocabulary import EV_FROM, EV_IMPULSE, EV_KIND, EV_TIME, EV_TO, EV_VELOCITY
 
 if TYPE_CHECKING:
@@ -157,7 +161,12 @@ def batch_arrays(plan: BatchPlan, result: BatchResult) -> BatchData:
         "max_cam_force_by_rev": result.max_cam_force_per_rev,
         "max_seat_force_by_rev": result.max_seat_force_per_rev,
     }
-    for summary, name, dtype, _, _, how in PER_REVOLUTION_METRICS:
+    metrics = PER_REVOLUTION_METRICS
+    if "max_cam_pressure" in wanted:
+        per_rev["max_cam_pressure_by_rev"] = result.max_cam_pressure_per_rev
+        per_rev["max_seat_pressure_by_rev"] = result.max_seat_pressure_per_rev
+        metrics = metrics + CONTACT_PRESSURE_METRICS
+    for summary, name, dtype, _, _, how in metrics:
         values = per_rev[name]
         measured = values[:, result.measured]
         arrays[summary] = measured.mean(axis=1) if how == "mean" else measured.max(axis=1)

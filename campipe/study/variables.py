@@ -106,15 +106,50 @@ PER_REVOLUTION_METRICS = (
 )
 
 
-def _metric_variables(summary, per_rev, dtype, long_name, units, how) -> dict[str, Variable]:
+#: Metrics stored when ``run.record`` holds ``contact_pressure``: the peak Hertz pressure of
+#: the largest contact force (``campipe.model.contact_laws``; NaN where the contact's geometry
+#: does not give it), as PER_REVOLUTION_METRICS.
+CONTACT_PRESSURE_METRICS = (
+    (
+        "max_cam_pressure",
+        "max_cam_pressure_by_rev",
+        "f8",
+        "peak Hertz pressure at the cam contact",
+        "Pa",
+        "max",
+    ),
+    (
+        "max_seat_pressure",
+        "max_seat_pressure_by_rev",
+        "f8",
+        "peak Hertz pressure at the valve seat contact",
+        "Pa",
+        "max",
+    ),
+)
+
+
+def _metric_variables(
+    summary, per_rev, dtype, long_name, units, how, record=None
+) -> dict[str, Variable]:
     """A metric's two variables: per revolution, and its summary over the measured ones."""
     reads = "per revolution, mean over" if how == "mean" else "largest in"
     return {
         summary: Variable(
-            CASE, "f8", f"{long_name}, {reads} the measured revolutions", units, role="metric"
+            CASE,
+            "f8",
+            f"{long_name}, {reads} the measured revolutions",
+            units,
+            role="metric",
+            record=record,
         ),
         per_rev: Variable(
-            PER_REV, dtype, f"{long_name}, per revolution", units, role="per_revolution"
+            PER_REV,
+            dtype,
+            f"{long_name}, per revolution",
+            units,
+            role="per_revolution",
+            record=record,
         ),
     }
 
@@ -180,6 +215,11 @@ VARIABLES: dict[str, Variable] = {
         name: var
         for metric in PER_REVOLUTION_METRICS
         for name, var in _metric_variables(*metric).items()
+    },
+    **{
+        name: var
+        for metric in CONTACT_PRESSURE_METRICS
+        for name, var in _metric_variables(*metric, record="contact_pressure").items()
     },
     "steps": Variable(CASE, "i8", "integration steps taken", role="count"),
     "status": Variable(
