@@ -121,6 +121,28 @@ def test_a_hertz_impact_matches_hertz_s_duration_and_peak_force():
     )
 
 
+def test_a_hunt_crossley_impact_rebounds_at_its_exact_restitution():
+    """Hertz's sphere again with Hunt–Crossley damping α: m·v·dv = −Kδ^{3/2}(1 + αv)dδ, so
+    m·(αv − ln(1 + αv))/α² + (2/5)Kδ^{5/2} is conserved; the force cannot reach zero with
+    δ > 0 (v = −1/α lies at infinite energy), so the sphere leaves at δ = 0 with
+    αv_f − ln(1 + αv_f) = αv₀ − ln(1 + αv₀), v_f < 0 (solved by brentq), whatever K and m.
+    At αv₀ = 0.2 that is e = 0.8822, near Hunt and Crossley's 1 − (2/3)αv₀ = 0.8667."""
+    from scipy.optimize import brentq
+
+    train = valve_train(
+        "thesis-1971",
+        {"cam_contact": "hertz", "cam_curvature_radius": "10 mm", "cam_hunt_crossley": "0.4 s/m"},
+    )
+    law = contact_law(train, "cam")
+    v0, alpha = 0.5, 0.4
+    g0 = alpha * v0 - math.log1p(alpha * v0)
+    v_f = brentq(lambda v: alpha * v - math.log1p(alpha * v) - g0, -1 / alpha + 1e-12, -1e-9)
+    _, v_end = strike(law, 0.1, v0, 1e-3)
+    assert_allclose(v_end, v_f, rtol=1e-7)
+    assert_allclose(-v_f / v0, 0.8822, atol=1e-4)
+    assert abs(-v_f / v0 - (1 - 2 / 3 * alpha * v0)) < 0.02
+
+
 def thesis_case(overrides, speed_rpm=11000.0):
     return Case(valve_train("thesis-1971", overrides), harmonic(1 * INCH), speed_rpm * RPM)
 
