@@ -31,6 +31,7 @@ EXAMPLE_CASES = {
     "thesis-polydyne": 3,
     "thesis-member-loads": 1,
     "separation-map": 297,
+    "contact-stiffness": 39,
 }
 
 

@@ -742,7 +742,7 @@ def _run_by_contacts(cases: Sequence[Case], settings: RunSettings, options) -> B
         index = np.flatnonzero(which)
         if index.size:
             run = dataclasses.replace(settings, integrator=name)
-            parts.append((index, run_batch([cases[i] for i in index], run, **options)))
+            parts.append((index, run_batch([cases[int(i)] for i in index], run, **options)))
     if len(parts) == 1:
         return parts[0][1]
     n = len(cases)

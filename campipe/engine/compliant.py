@@ -469,7 +469,7 @@ def compliant_start(system: CompliantSystem, q: np.ndarray, v: np.ndarray, a: np
     s = system
     reaction = s.mass @ a + s.damping @ v + s.stiffness @ q - s.load
     dq = np.zeros(q.size)
-    moved = []
+    moved: list[int] = []
     if cam_held:
         dq[CAM] = s.cam.approach(-reaction[CAM])
         moved.append(CAM)
@@ -477,7 +477,8 @@ def compliant_start(system: CompliantSystem, q: np.ndarray, v: np.ndarray, a: np
         dq[SEAT] = -s.seat.approach(reaction[SEAT])
         moved.append(SEAT)
     if moved:
-        free = np.setdiff1d(np.arange(q.size), moved)
+        held = np.array(moved)
+        free = np.setdiff1d(np.arange(q.size), held)
         kff = s.stiffness[np.ix_(free, free)]
-        dq[free] = -np.linalg.solve(kff, s.stiffness[np.ix_(free, moved)] @ dq[moved])
+        dq[free] = -np.linalg.solve(kff, s.stiffness[np.ix_(free, held)] @ dq[held])
     return np.concatenate([q + dq, v])

@@ -21,12 +21,14 @@ from campipe.model.assembly import NEWMARK_LINEAR_OMEGA_DT, configuration_freque
 from campipe.profiles import Profile
 from campipe.vocabulary import ROMAN
 
-#: Integrators by name; ``default`` in a spec means DEFAULT_INTEGRATOR, or COMPLIANT for a
-#: case with a compliant contact law (``engine.compliant``: the contacts as force elements,
-#: error-controlled). The others integrate rigid contacts only.
-INTEGRATORS = ("modal-exact", "newmark-linear", "compliant")
+#: The integrators of rigid contacts (the thesis's) by name; ``default`` in a spec means
+#: DEFAULT_INTEGRATOR, or COMPLIANT for a case with a compliant contact law
+#: (``engine.compliant``: the contacts as force elements, error-controlled).
+INTEGRATORS = ("modal-exact", "newmark-linear")
 DEFAULT_INTEGRATOR = "modal-exact"
 COMPLIANT = "compliant"
+#: Every integrator a run may name.
+ALL_INTEGRATORS = (*INTEGRATORS, COMPLIANT)
 #: The compliant integrator's relative tolerance is run.tolerance, but no finer than this
 #: (the default 1e-12, modal-exact's event-time tolerance, is finer than Radau can reach).
 COMPLIANT_RTOL_FLOOR = 1e-10
@@ -84,8 +86,8 @@ class IntegrationError(CampipeError, RuntimeError):
 def resolve_integrator(name: str) -> str:
     """``default`` → the default integrator's name; refuse an unknown name."""
     resolved = DEFAULT_INTEGRATOR if name == "default" else name
-    if resolved not in INTEGRATORS:
-        known = ", ".join(("default", *INTEGRATORS))
+    if resolved not in ALL_INTEGRATORS:
+        known = ", ".join(("default", *ALL_INTEGRATORS))
         raise RunSettingsError.at(
             "run.integrator",
             f"unknown integrator {name!r}; known: {known}",

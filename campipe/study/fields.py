@@ -19,8 +19,9 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
-from campipe.engine import INTEGRATORS, MEMBER_LOADS, RunSettings
+from campipe.engine import MEMBER_LOADS, RunSettings
 from campipe.engine import settings as _engine_settings
+from campipe.engine.settings import ALL_INTEGRATORS
 from campipe.errors import CampipeError, did_you_mean, excerpt
 from campipe.model import PARAMETERS, PRESETS, ModelParameterError, parse_parameter
 from campipe.profiles import RAMP_SHAPES
@@ -236,7 +237,7 @@ _RUN_METADATA: dict[str, Field] = {
             "run.integrator",
             "choice",
             "integrator name; default: the engine's default integrator",
-            choices=("default", *INTEGRATORS),
+            choices=("default", *ALL_INTEGRATORS),
             archive_name="integrator",
         ),
         Field(

@@ -161,7 +161,7 @@ def batch_arrays(plan: BatchPlan, result: BatchResult) -> BatchData:
         "max_cam_force_by_rev": result.max_cam_force_per_rev,
         "max_seat_force_by_rev": result.max_seat_force_per_rev,
     }
-    metrics = PER_REVOLUTION_METRICS
+    metrics: tuple[tuple[str, str, str, str, str | None, str], ...] = PER_REVOLUTION_METRICS
     if "max_cam_pressure" in wanted:
         per_rev["max_cam_pressure_by_rev"] = result.max_cam_pressure_per_rev
         per_rev["max_seat_pressure_by_rev"] = result.max_seat_pressure_per_rev
