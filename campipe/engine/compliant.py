@@ -12,7 +12,7 @@ its approach and its law's force are both positive: its monitor min(δ, F/k) (fo
 min(δ, 1 + α·δ̇), the sign of its force) crosses zero upward where it closes (the surfaces
 meet, or a relaxed damper's force turns compressive again) and downward where it opens (the
 force reaches zero: no tension). Between these events, and between the profile's breaks,
-the equations are smooth, and ``scipy.integrate.solve_ivp`` (Radau, L-stable: the train's
+the equations are smooth, and (hertz) ``scipy.integrate.solve_ivp`` (Radau, L-stable: the train's
 highest modes and a stiff contact cost no stability limit) integrates them to the run's
 tolerance, with the Jacobian given (constant per contact state for kelvin-voigt). Each event
 is located on the step's dense output (a terminal event: the integration restarts from it
@@ -20,8 +20,12 @@ with the contact switched), and so is each maximum of a contact force (its rate'
 zero): the peak contact force is a located extremum, not the largest sample, and it converges
 as the tolerance shrinks.
 
-Kelvin–Voigt is linear in each contact state and could be propagated exactly by modal-exact's
-closed form; that is not done: it goes through this integrator, as hertz does.
+Kelvin–Voigt is linear in each contact state, so it keeps exact propagation: with the cam's
+polynomial and harmonic made states of one homogeneous linear system, e^{A·τ} (balanced, on a
+grid of STEPS_PER_PERIOD steps a period of its fastest oscillation) propagates it to
+rounding, whatever the tolerance (``exact_segment``), and its events are located on that
+exact state. This is done here, in Python, not in modal-exact's compiled kernel; hertz, being
+nonlinear in contact, goes through solve_ivp.
 
 Results go into the same :class:`~campipe.engine.common.Outputs` the compiled kernels fill,
 so ``run_batch`` returns the same ``BatchResult``: a closing is a cam (seat) impact event with
@@ -166,6 +170,8 @@ class _Run:
         self.closed = [False, False]  # cam, seat
         self.piece = 0
         self.rev = 0
+        #: (closed, piece) → (grid step, propagator) of the exact kelvin-voigt propagation
+        self.exact_cache: dict[tuple, tuple[float, _Propagator]] = {}
 
     # -- the equations in the current contact state -----------------------------------------
 
@@ -325,6 +331,7 @@ def integrate(
     k_out = 0
     stalled = 0
     atol = rtol * system.scale
+    exact = is_linear(system)
 
     def turn(tt: float) -> int:
         return min(max(int(math.floor(w * tt / TWO_PI + TURN_GUARD)), 0), n_rev - 1)
@@ -360,10 +367,13 @@ def integrate(
         t_stop = min(lift.break_after(run.piece, run.rev), t_end)
         if t_stop - t > 1e-15 * (1.0 + abs(t)):
             events = run.monitors()
-            sol = solve_ivp(
-                run.rhs, (t, t_stop), z, method=METHOD, rtol=rtol, atol=atol,
-                events=events, dense_output=True, jac=run.jac, max_step=max_step,
-            )  # fmt: skip
+            if exact:
+                sol = exact_segment(run, t, t_stop, z, events, max_step)
+            else:
+                sol = solve_ivp(
+                    run.rhs, (t, t_stop), z, method=METHOD, rtol=rtol, atol=atol,
+                    events=events, dense_output=True, jac=run.jac, max_step=max_step,
+                )  # fmt: skip
             out.steps += sol.t.size - 1
             if sol.status == -1 or not np.all(np.isfinite(sol.y[:, -1])):
                 out.status = NONFINITE
@@ -427,6 +437,196 @@ def integrate(
     if out.n_events > out.events.shape[0] and out.status == 0:
         out.status = EVENTS_TRUNCATED
     return out
+
+
+def is_linear(system: CompliantSystem) -> bool:
+    """Every contact the case can touch is kelvin-voigt: linear in each contact state, so
+    propagated exactly (``exact_segment``)."""
+    return system.cam.law == KELVIN_VOIGT and (
+        system.seat is None or system.seat.law == KELVIN_VOIGT
+    )
+
+
+#: Polynomial states of the augmented system: x^j, j = 0 … 7 (x the angle into the piece).
+N_POLY = 8
+#: Grid steps per period of the fastest oscillation of a contact state's modes.
+STEPS_PER_PERIOD = 8
+#: Bracketed root search tolerance [s], as solve_ivp's (4 ulp).
+EVENT_XTOL = 4 * np.finfo(float).eps
+
+
+@dataclass
+class _ExactResult:
+    """What ``integrate`` reads of a segment (solve_ivp's names)."""
+
+    status: int  # 0: reached the end; 1: a terminal event
+    t: np.ndarray  # grid times [s]
+    y: np.ndarray  # (2n, n_t) states on the grid
+    t_events: list[np.ndarray]
+    y_events: list[np.ndarray]
+    sol: Any  # t → state
+
+
+def _augmented(run: _Run) -> np.ndarray:
+    """The kelvin-voigt system in the current contact state and piece as one homogeneous
+    linear system ẇ = A w, w = (q, q̇, x⁰ … x⁷, sin ωt, cos ωt): the cam's lift on the piece is
+    a polynomial in x = θ − the piece's start plus a harmonic, and each of those is itself
+    the solution of a linear system, so e^{A·τ} propagates the state exactly."""
+    s, n = run.s, run.n
+    w = s.lift.w
+    m = 2 * n + N_POLY + 2
+    a = np.zeros((m, m))
+    k_eff = s.stiffness.copy()
+    c_eff = s.damping.copy()
+    force = s.load.copy()  # on the constant state x⁰
+    cam = np.zeros(N_POLY + 2)  # k·L + c·L' per forcing state
+    poly = s.lift.poly[run.piece]
+    ta, tb = s.lift.trig[run.piece]
+    if run.closed[0]:
+        k, c = s.cam.stiffness, s.cam.damping
+        k_eff[CAM, CAM] += k
+        c_eff[CAM, CAM] += c
+        cam[:N_POLY] = k * poly
+        cam[: N_POLY - 1] += c * w * np.arange(1, N_POLY) * poly[1:]
+        cam[N_POLY:] = (k * ta - c * w * tb, k * tb + c * w * ta)
+    if run.closed[1] and s.seat is not None:
+        k_eff[SEAT, SEAT] += s.seat.stiffness
+        c_eff[SEAT, SEAT] += s.seat.damping
+        force[SEAT] += s.seat.stiffness * s.seat_q
+    a[:n, n : 2 * n] = np.eye(n)
+    a[n : 2 * n, :n] = -s.minv @ k_eff
+    a[n : 2 * n, n : 2 * n] = -s.minv @ c_eff
+    a[n : 2 * n, 2 * n :] = -np.outer(s.minv[:, CAM], cam)
+    a[n : 2 * n, 2 * n] += s.minv @ force
+    for j in range(1, N_POLY):
+        a[2 * n + j, 2 * n + j - 1] = j * w
+    a[m - 2, m - 1] = w
+    a[m - 1, m - 2] = -w
+    return a
+
+
+class _Propagator:
+    """e^{A·τ} for 0 ≤ τ ≤ h, applied to a state: e^{A·h} once, and e^{A·h·2^−j} − I for
+    j = 1 … levels (each from the next by E ← 2E + E², the smallest by its Taylor series), so
+    τ = h·Σ b_j 2^−j costs a matrix–vector product per set bit, not a Padé approximant. The
+    matrix is balanced first: the state mixes metres, metres per second and the forcing's
+    powers of the angle, and the contact force is a small difference of positions, so an
+    unbalanced exponential loses digits it needs."""
+
+    def __init__(self, a: np.ndarray, h: float) -> None:
+        from scipy.linalg import matrix_balance
+
+        b, (d, _) = matrix_balance(a * h, permute=False, separate=True)
+        norm = float(np.abs(b).sum(axis=1).max())
+        self.levels = int(max(48, math.ceil(math.log2(max(norm, 1.0))) + 24))
+        x = b / 2.0**self.levels
+        e = x.copy()
+        term = x.copy()
+        for k in range(2, 8):
+            term = term @ x / k
+            e = e + term
+        steps = [e]
+        for _ in range(self.levels):
+            e = 2.0 * e + e @ e
+            steps.append(e)
+        self.minus_one = steps[::-1]  # [j]: e^{b·2^−j} − I
+        self.d = d
+        self.h = h
+        self.phi = (np.eye(b.shape[0]) + self.minus_one[0]) * d[:, None] / d[None, :]
+
+    def advance(self, w: np.ndarray, tau: float) -> np.ndarray:
+        """e^{A·τ}·w, 0 ≤ τ ≤ h."""
+        f = tau / self.h
+        if f >= 1.0:
+            return self.phi @ w
+        wb = w / self.d
+        for j in range(1, self.levels + 1):
+            part = 2.0**-j
+            if f >= part:
+                wb = wb + self.minus_one[j] @ wb
+                f -= part
+            if f <= 0.0:
+                break
+        return wb * self.d
+
+
+def _forcing_state(run: _Run, t: float) -> np.ndarray:
+    lift = run.s.lift
+    x = lift.w * t - run.rev * TWO_PI - lift.breaks[run.piece]
+    theta = lift.w * t
+    return np.concatenate([x ** np.arange(N_POLY), [math.sin(theta), math.cos(theta)]])
+
+
+def exact_segment(run: _Run, t_a: float, t_b: float, z_a: np.ndarray, events: list[Any],
+                  max_step: float) -> _ExactResult:  # fmt: skip
+    """Propagate a kelvin-voigt case exactly from t_a to t_b (or its first terminal event):
+    e^{A·h} on a grid fine enough to see each monitor's sign change (STEPS_PER_PERIOD a
+    period of the fastest oscillation), each crossing found by brentq on the exact state, as
+    solve_ivp's events are on its dense output."""
+    from scipy.optimize import brentq
+
+    n2 = z_a.size
+    key = (tuple(run.closed), run.piece)
+    cache = run.exact_cache
+    if key not in cache:
+        a = _augmented(run)
+        top = np.abs(np.linalg.eigvals(a[:n2, :n2]).imag).max()
+        h = min(TWO_PI / (STEPS_PER_PERIOD * top) if top > 0 else math.inf, max_step)
+        h = min(h, TWO_PI / (STEPS_PER_PERIOD * run.s.lift.w))
+        cache[key] = (h, _Propagator(a, h))
+    h, prop = cache[key]
+    phi = prop.phi
+
+    def state(t0: float, w0: np.ndarray, t: float) -> np.ndarray:
+        return prop.advance(w0, t - t0)
+
+    ts, ws = [t_a], [np.concatenate([z_a, _forcing_state(run, t_a)])]
+    g_old = [ev(t_a, z_a) for ev in events]
+    t_events: list[list[float]] = [[] for _ in events]
+    y_events: list[list[np.ndarray]] = [[] for _ in events]
+    status = 0
+    while ts[-1] < t_b:
+        t, w = ts[-1], ws[-1]
+        if t + h >= t_b * (1.0 - 1e-15):
+            t_new, w_new = t_b, state(t, w, t_b)
+        else:
+            t_new, w_new = t + h, phi @ w
+        g_new = [ev(t_new, w_new[:n2]) for ev in events]
+        found = []
+        for k, ev in enumerate(events):
+            up = g_old[k] <= 0.0 <= g_new[k]
+            down = g_old[k] >= 0.0 >= g_new[k]
+            if (up and ev.direction > 0) or (down and ev.direction < 0):
+                root = brentq(
+                    lambda tt, ev=ev, t=t, w=w: ev(tt, state(t, w, tt)[:n2]),
+                    t, t_new, xtol=EVENT_XTOL, rtol=EVENT_XTOL,
+                )  # fmt: skip
+                found.append((root, k))
+        terminal = [(tt, k) for tt, k in found if events[k].terminal]
+        if terminal:
+            t_stop, _ = min(terminal)
+            t_new, w_new = t_stop, state(t, w, t_stop)
+            status = 1
+        for tt, k in found:
+            if tt <= t_new:
+                t_events[k].append(tt)
+                y_events[k].append(state(t, w, tt)[:n2])
+        ts.append(t_new)
+        ws.append(w_new)
+        g_old = g_new
+        if status:
+            break
+    grid = np.array(ts)
+    states = np.array(ws)
+
+    def sol(tt: float) -> np.ndarray:
+        i = min(max(int(np.searchsorted(grid, tt, side="right")) - 1, 0), grid.size - 1)
+        return state(grid[i], states[i], tt)[:n2]
+
+    return _ExactResult(
+        status, grid, states[:, :n2].T,
+        [np.array(te) for te in t_events], [np.array(ye) for ye in y_events], sol,
+    )  # fmt: skip
 
 
 def _sample(run: _Run, t: float, z: np.ndarray, out: CaseOutputs, k: int) -> None:
