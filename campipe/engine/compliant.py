@@ -69,6 +69,9 @@ METHOD = "Radau"
 #: chattering (a grazing contact switching at one instant).
 MAX_STALLED = 64
 STALL_WINDOW = 1e-12
+#: How long after a switch a monitor reads its value at the end of this interval [s]
+#: (``_Run.monitors``): far below any contact's time scale, far above rounding of t.
+SWITCH_GUARD = 1e-11
 
 
 class Lift:
@@ -231,15 +234,25 @@ class _Run:
                 out[i] = kd * r + cd * a
         return out[0], out[1]
 
-    def monitors(self) -> list[Any]:
-        """solve_ivp's events: each contact's switch (terminal), then each closed contact's
-        force maximum (not terminal)."""
+    def monitors(self, t_a: float, z_a: np.ndarray) -> list[Any]:
+        """solve_ivp's events from (t_a, z_a): each contact's switch (terminal), then each
+        closed contact's force maximum (not terminal).
+
+        A segment starts where a switch has just put a monitor at zero, so its value there
+        has no sign to compare with; up to SWITCH_GUARD after t_a each switch reads its value
+        at t_a + SWITCH_GUARD (the state extrapolated along its rate), so a monitor that turns
+        back within the first step (a force that reaches zero and turns compressive again) is
+        seen to cross rather than missed, which would leave a contact open in overlap."""
         out: list[Any] = []
+        t_guard = t_a + SWITCH_GUARD
+        z_guard = z_a + SWITCH_GUARD * self.rhs(t_a, z_a)
         for i, law in enumerate((self.s.cam, self.s.seat)):
             if law is None:
                 continue
 
             def switch(t, z, i=i, law=law):
+                if t < t_guard:
+                    t, z = t_guard, z_guard
                 d = self.approaches(t, z)
                 return _monitor(law, d[2 * i], d[2 * i + 1])
 
@@ -366,7 +379,7 @@ def integrate(
     while t < t_end:
         t_stop = min(lift.break_after(run.piece, run.rev), t_end)
         if t_stop - t > 1e-15 * (1.0 + abs(t)):
-            events = run.monitors()
+            events = run.monitors(t, z)
             if exact:
                 sol = exact_segment(run, t, t_stop, z, events, max_step)
             else:
