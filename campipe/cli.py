@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import sys
 
 import click
@@ -202,12 +203,17 @@ def model(
         click.echo(model_text(train, sm, limits, preset, overrides))
 
 
+def _json_value(value: object) -> object:
+    """NaN (a parameter given as none) as JSON's null."""
+    return None if isinstance(value, float) and math.isnan(value) else value
+
+
 def model_report(train, sm, limits, preset) -> dict[str, object]:
     """The JSON form of ``campipe model``: SI units throughout."""
     return {
         "preset": preset,
         "parameters": {
-            name: {"value": getattr(train, name), "units": p.units or "1"}
+            name: {"value": _json_value(getattr(train, name)), "units": p.units or "1"}
             for name, p in PARAMETERS.items()
         },
         "coordinates": [
@@ -251,6 +257,8 @@ def _matrix_text(a: np.ndarray, scale: float, coords: tuple[Coordinate, ...]) ->
 def _parameter_text(p, value) -> str:
     if p.length:
         return ", ".join(f"{x:g}" for x in value)
+    if p.allow_none and isinstance(value, float) and math.isnan(value):
+        return "none"
     if p.choices or p.integer or not p.units:
         return f"{value:g}" if isinstance(value, float) else str(value)
     return f"{convert(value, p.units, p.thesis_units):g} {p.thesis_units}"

@@ -11,7 +11,7 @@ import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
 from campipe.engine import Case, IntegrationError, RunSettings, run_batch, stability_limit
-from campipe.engine.batch import _matrices
+from campipe.engine.batch import train_matrices
 from campipe.model import thesis_train
 from campipe.profiles import harmonic
 from campipe.vocabulary import (
@@ -164,7 +164,7 @@ def test_default_reaches_a_micro_inch_on_the_separation_case(references):
 def steady_state_cam_force(train, speed, lift, theta):
     """Contact force of the harmonic cam in configuration I once transients have decayed: the
     frequency response of the train with q1 prescribed, q1 = −h/2 + (h/2)·sin θ."""
-    sm = _matrices(train)
+    sm = train_matrices(train)
     M, C, K, f = sm.mass, sm.damping, sm.stiffness, sm.preload
     fr = np.arange(1, 7)
     q1_mean, q1_amp = -lift / 2, -1j * lift / 2  # (h/2) sin θ = Re(−i·h/2·e^{iθ})
@@ -197,7 +197,7 @@ def test_steady_state_contact_force_matches_the_frequency_response(method):
 def free_flight(train, q0, v0, t):
     """Configuration II from (q0, v0): classical modal damping, each mode a damped
     oscillator about the static deflection under the preload (the full train's real modes)."""
-    sm = _matrices(train)
+    sm = train_matrices(train)
     qs = np.linalg.solve(sm.stiffness, sm.preload)
     phi, w = sm.modes, sm.frequencies
     zeta = np.asarray(train.damping_ratios)
@@ -238,7 +238,7 @@ def test_energy_balance_of_an_undamped_impact_free_run():
         integrator="modal-exact",
         output_every=math.radians(0.25),
     )
-    sm = _matrices(undamped)
+    sm = train_matrices(undamped)
     q, v = res.q[0], res.v[0]
     energy = (
         0.5 * np.einsum("ki,ij,kj->k", v, sm.mass, v)
@@ -333,10 +333,10 @@ def test_overdamped_modes_against_an_independent_integrator():
     import dataclasses
 
     from campipe.bench.ivp import solve_case
-    from campipe.engine.batch import _modal
+    from campipe.engine.batch import train_modal
 
     train = dataclasses.replace(TRAIN, damping_ratios=(1.8, 0.1, 1.5, 0.1, 0.1, 0.1, 0.1))
-    data = _modal(train)
+    data = train_modal(train)
     ns = 2 * data.n_free[1]
     # configuration II: two overdamped modes
     assert np.sum(data.eigenvalues[1, :ns].imag == 0.0) == 4

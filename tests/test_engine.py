@@ -16,7 +16,7 @@ from campipe.engine import (
     run_batch,
     stability_limit,
 )
-from campipe.engine.batch import _matrices, initial_state, valve_reference
+from campipe.engine.batch import initial_state, train_matrices, valve_reference
 from campipe.engine.contact import impact_masses
 from campipe.model import thesis_train
 from campipe.profiles import flat, harmonic, polydyne
@@ -69,14 +69,14 @@ def test_no_separation_at_9000_rpm_after_the_first_revolution(no_seat):
 def test_separation_begins_between_9000_and_9524_rpm(no_seat):
     """Calibration, not validation: the preset's spring preload (151 lbf, which the thesis
     does not state) was chosen to put the onset between the thesis's 9000 and 9524 rpm
-    (NOTES.md). This checks the calibration still holds."""
+    (docs/model.md, the preset). This checks the calibration still holds."""
     idx, res = no_seat
     assert sep_deg(res, idx[9524])[-1] > 0.0
 
 
 def test_45_to_60_degrees_of_separation_per_revolution_at_9524_rpm(no_seat):
     """Calibration, not validation: the preload was chosen so that 9524 rpm separates for
-    about the thesis's 50° a turn (NOTES.md: 53°)."""
+    about the thesis's 50° a turn (docs/model.md, the preset)."""
     idx, res = no_seat
     last = sep_deg(res, idx[9524])[1:]
     assert np.all((last >= 45.0) & (last <= 60.0)), last
@@ -84,7 +84,7 @@ def test_45_to_60_degrees_of_separation_per_revolution_at_9524_rpm(no_seat):
 
 def test_about_220_degrees_with_a_rebounce_at_11000_rpm(no_seat):
     """Not calibrated: the thesis reads ≈ 180° from its Figure 20 with a re-bounce; the
-    preset calibrated at 9000–9524 rpm predicts 219° (NOTES.md: ≈ 220°), both integrators.
+    preset calibrated at 9000–9524 rpm predicts about 219°, both integrators.
     The two-sided bound pins that prediction; the solve_ivp peer's agreement with it is in
     tests/test_bench.py. Broken copy: a damping or preload off by 10 % moves it out."""
     idx, res = no_seat
@@ -142,7 +142,7 @@ def test_undamped_at_the_fundamental_the_contact_force_barely_swings(integrator)
     """Figure 34: at 6485 rpm (ω1) the spring supplies the train's inertia, so the cam force
     stays near its mean; off resonance it swings with the spring's full stroke."""
     undamped = TRAIN.replace(damping_ratios=(0.0,) * 7)
-    omega1 = _matrices(undamped).frequencies[0]
+    omega1 = train_matrices(undamped).frequencies[0]
     res = run(
         [Case(undamped, CAM, omega1), Case(undamped, CAM, rpm(3000))],
         revolutions=3,
@@ -229,7 +229,7 @@ def test_flat_edges_throw_the_follower_off_for_the_estimated_hop(speed_rpm, inte
     assert_allclose(ev[0, EV_TIME] * speed - 2 * math.pi, start, atol=1e-9)
     v = speed * INCH / 2 * abs(math.cos(start))
     assert_allclose(ev[0, 4], v, rtol=1e-9)  # the velocity jump, recorded with the event
-    m = impact_masses(_matrices(TRAIN).mass)[0]
+    m = impact_masses(train_matrices(TRAIN).mass)[0]
     ref = run([Case(TRAIN, CAM, speed)], revolutions=2, integrator=integrator)
     force = ref.cam_force[0, 360 + 268]
     estimate = 2 * m * v / force
@@ -241,7 +241,7 @@ def test_flat_edges_throw_the_follower_off_for_the_estimated_hop(speed_rpm, inte
 
 
 def test_initial_state_is_quasi_static():
-    sm = _matrices(TRAIN)
+    sm = train_matrices(TRAIN)
     case = Case(TRAIN, CAM, rpm(9000))
     q, v, a, cfg = initial_state(case, sm, valve_reference(sm))
     assert cfg == 1
@@ -253,7 +253,7 @@ def test_initial_state_is_quasi_static():
 
 
 def test_member_loads_at_static_equilibrium():
-    sm = _matrices(TRAIN)
+    sm = train_matrices(TRAIN)
     case = Case(TRAIN, CAM, rpm(1))
     q, _, _, _ = initial_state(case, sm, valve_reference(sm))
     loads = member_loads(TRAIN, q)

@@ -44,7 +44,8 @@ def test_init_writes_the_specs_and_refuses_to_overwrite(tmp_path):
     (target / "quickstart.yaml").write_text("name: edited\n")
     again = runner.invoke(main, ["init", str(target)])
     assert again.exit_code == 2
-    assert f"{target / 'README.md'}: exists (and 9 more of the example files)" in again.output
+    more = len(packaged_specs()) - 1
+    assert f"{target / 'README.md'}: exists (and {more} more of the example files)" in again.output
     assert "replace them with --force" in again.output
     assert (target / "quickstart.yaml").read_text() == "name: edited\n"
     forced = runner.invoke(main, ["init", str(target), "--force"])

@@ -85,8 +85,6 @@ def test_a_train_is_rebuilt_from_the_archive_columns():
         ("{spring_elements: 0}", "model.spring_elements", "expected a whole number from 1 to 64"),
         ("{spring_elements: 2.5}", "model.spring_elements", "found 2.5"),
         ("{damping_kind: viscous}", "model.damping_kind", "one of: modal, rayleigh"),
-        # Until the engine runs more than seven coordinates (then this case goes).
-        ("{valve_stem_elements: 2}", "model.valve_stem_elements", "does not yet run refined"),
         (
             "{damping_ratios: [0.1, 0.1, 0.1, 0.1, 0.1, 0.1, 0.1, 0.1]}",
             "model.damping_ratios",
@@ -121,3 +119,24 @@ def test_loss_factors_take_a_range_and_counts_a_list(tmp_path):
     with pytest.raises(SpecError) as err:
         load_study(write_spec(tmp_path, spec))
     assert "list its values instead of a range" in str(err.value)
+
+
+def test_a_refined_train_runs_in_a_study_and_newmark_linear_refuses_it(tmp_path):
+    """A study may vary spring_elements (modal-exact); newmark-linear refuses the refined
+    case at run.integrator, naming modal-exact."""
+    spec = (
+        "name: refined\nprofile: {kind: harmonic, lift: 1 in}\nspeed: 9000 rpm\n"
+        "run: {revolutions: 1, record: [spring]}\n"
+        "sweep: {model.spring_elements: [1, 4]}\n"
+    )
+    study = load_study(write_spec(tmp_path, spec))
+    run_study(study, tmp_path / "refined.nc", scheduler="synchronous")
+    ds = xr.load_dataset(tmp_path / "refined.nc")
+    assert_array_equal(ds.spring_elements.values, [1, 4])
+    assert np.isfinite(ds.min_spring_clash_margin.values).all()
+    assert ds.max_spring_force.values[1] > ds.max_spring_force.values[0]
+    newmark = spec.replace("record: [spring]", "integrator: newmark-linear, dt: 1 us")
+    with pytest.raises(SpecError) as err:
+        load_study(write_spec(tmp_path, newmark))
+    problem = err.value.problems[0]
+    assert problem.key == "run.integrator" and "modal-exact" in problem.message

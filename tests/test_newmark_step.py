@@ -5,13 +5,13 @@ import pytest
 from numba import njit
 from numpy.testing import assert_array_equal
 
-from campipe.engine.batch import _matrices
+from campipe.engine.batch import train_matrices
 from campipe.engine.contact import HELD, effective_mass_inverses, newmark_step_maps
 from campipe.engine.newmark import N_X, N_Z, NP, X_A, X_Q, X_V, _newmark_step
 from campipe.model import thesis_train
 
 DT = 1e-6
-SM = _matrices(thesis_train())
+SM = train_matrices(thesis_train())
 M, C, K, LOAD = SM.mass, SM.damping, SM.stiffness, SM.preload
 
 

@@ -8,7 +8,7 @@ from numpy.testing import assert_allclose
 from study_helpers import write_spec
 
 from campipe.engine import INTEGRATORS, Case, RunSettings, run_batch
-from campipe.engine.batch import _matrices, valve_ratio
+from campipe.engine.batch import train_matrices, valve_ratio
 from campipe.model import thesis_train
 from campipe.profiles import RAMP_SHAPES, Ramp, evaluate, polydyne
 from campipe.study import load_study
@@ -93,7 +93,7 @@ def test_a_valve_seats_at_the_ramp_s_velocity_at_low_speed(integrator):
     the ramp no longer sets the seating alone. Broken copy: seating on the steep flank (no
     ramp) lands ten times faster."""
     train = thesis_train()
-    ratio = valve_ratio(_matrices(train))
+    ratio = valve_ratio(train_matrices(train))
     profile = polydyne("4567", 0.4 * INCH, *SCHEDULE, ramp=RAMP)
     speeds = [300, 1000, 2000, 3000]
     cases = [Case(train, profile, r * math.pi / 30, seat=ratio * RAMP.height / 2) for r in speeds]

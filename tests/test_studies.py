@@ -215,3 +215,37 @@ def test_full_studies_run(tmp_path, name):
     assert ds.sizes["case"] == len(load_study(STUDIES / f"{name}.yaml").cases)
     assert np.isfinite(ds.valve_lift.values).all()
     assert np.isfinite(ds.separation_deg_per_rev.values).all()
+
+
+def test_lash_ramp(tmp_path):
+    """Quick variant (2 ramp heights × 3 speeds, 2 turns). At 1000 rpm the valve lands on its
+    seat at the closing ramp's velocity: the static valve ratio × ω × height / duration
+    (a hand calculation from the ramp, to 1 %), so twice as fast at 2000 rpm; at 6000 rpm the
+    train no longer follows and lands at least 30 % faster than its ramp."""
+    from campipe.engine.batch import valve_ratio
+
+    ds = run(
+        tmp_path,
+        "lash-ramp",
+        **{
+            "run.revolutions": 2,
+            "sweep.speed": ["1000 rpm", "2000 rpm", "6000 rpm"],
+            "sweep.profile.ramp_height": ["0.25 mm", "0.4 mm"],
+        },
+    )
+    assert ds.sizes["case"] == 6
+    ratio = valve_ratio(system_matrices(thesis_train()))
+    duration = math.radians(30)
+    for rpm, height, v in zip(
+        ds.speed_rpm.values,
+        ds.profile_ramp_height.values,
+        ds.max_seating_velocity.values,
+        strict=True,
+    ):
+        ramp = ratio * rpm * math.pi / 30 * height / duration
+        if rpm < 3000:
+            assert v == pytest.approx(ramp, rel=0.01), (rpm, height)
+        else:
+            assert v > 1.3 * ramp, (rpm, height)
+    assert np.all(ds.separation_deg_per_rev.values[ds.speed_rpm.values < 3000] == 0)
+    assert np.all(ds.separation_deg_per_rev.values[ds.speed_rpm.values > 3000] > 10)

@@ -31,6 +31,8 @@ EXAMPLE_CASES = {
     "thesis-polydyne": 3,
     "thesis-member-loads": 1,
     "separation-map": 297,
+    "lash-ramp": 27,
+    "spring-surge": 57,
     "contact-stiffness": 39,
 }
 

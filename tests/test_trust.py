@@ -10,7 +10,7 @@ from numpy.testing import assert_allclose
 
 from campipe.bench.suite import suite
 from campipe.engine import INTEGRATORS, Case, RunSettings, run_batch
-from campipe.engine.batch import DEFAULT_CAPTURE_VELOCITY, _matrices
+from campipe.engine.batch import DEFAULT_CAPTURE_VELOCITY, train_matrices
 from campipe.engine.contact import impact_masses
 from campipe.model import thesis_train
 from campipe.profiles import evaluate, flat, harmonic, polydyne
@@ -221,7 +221,7 @@ def test_an_impact_balances_momentum(speed, seat, kind, into, start):
     theta = hit[EV_TIME] * case.speed
     before = _velocities_at(case, theta - 1e-9, start)
     after = _velocities_at(case, theta + 1e-9, start)
-    impulse = _matrices(TRAIN).mass @ (after - before)
+    impulse = train_matrices(TRAIN).mass @ (after - before)
     j = hit[EV_IMPULSE]
     if kind == CAM_IMPACT:
         assert_allclose(-impulse[0], j, rtol=1e-5)
@@ -236,7 +236,7 @@ def test_an_impact_balances_momentum(speed, seat, kind, into, start):
         # Compressive, or tensile by less than would part the other contact at the capture
         # velocity (the engine leaves slower separations unresolved: other_releases).
         side = 2 if kind == CAM_IMPACT else 0  # the other contact, alone
-        slack = impact_masses(_matrices(TRAIN).mass)[side] * DEFAULT_CAPTURE_VELOCITY
+        slack = impact_masses(train_matrices(TRAIN).mass)[side] * DEFAULT_CAPTURE_VELOCITY
         assert other > -slack, (other, slack)
     else:
         assert abs(other) < 1e-5 * j

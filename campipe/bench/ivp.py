@@ -55,6 +55,8 @@ from campipe.vocabulary import (
     SEAT_IMPACT,
     SEAT_SEPARATION,
     configuration,
+    holds_cam,
+    holds_seat,
 )
 
 #: Monitor levels, as a contact switch is decided: penetration [m] and tension [N per N of
@@ -180,7 +182,8 @@ class _Peer:
         self.seat_q = self.q_ref + (case.seat if case.has_seat else 0.0)
         self.form = case.closure == "form"
         self.configs = {
-            c: _configuration(self.M, self.C, self.K, self.f, c, self.seat_q) for c in (1, 2, 3, 4)
+            c: _configuration(self.M, self.C, self.K, self.f, c, self.seat_q)
+            for c in CONFIGURATIONS
         }
         self.eps_force = FORCE_LEVEL * (abs(self.f).max() + 1.0)
         self.capture = capture
@@ -230,9 +233,9 @@ class _Peer:
         qq[fr] = x
         vv[fr] = xd
         lift, dlift, ddlift = self.cam.at(self.piece, self.rev, tt)
-        if self.cfg in (1, 3):
+        if holds_cam(self.cfg):
             qq[CAM], vv[CAM] = -lift, -dlift
-        if self.cfg in (3, 4):
+        if holds_seat(self.cfg):
             qq[SEAT], vv[SEAT] = self.seat_q, 0.0
         return qq, vv, -ddlift
 
@@ -241,7 +244,7 @@ class _Peer:
         nf = conf.free.size
         out = conf.a @ z
         out[nf:] += conf.constant
-        if self.cfg in (1, 3):
+        if holds_cam(self.cfg):
             lift, dlift, ddlift = self.cam.at(self.piece, self.rev, tt)
             out[nf:] += conf.cam_terms.T @ (-lift, -dlift, -ddlift)
         return out
@@ -253,7 +256,7 @@ class _Peer:
         qq, vv, acam = self.held_state(tt, z[:nf], z[nf:])
         acc = np.zeros(7)
         acc[conf.free] = self.rhs(tt, z)[nf:]
-        if self.cfg in (1, 3):
+        if holds_cam(self.cfg):
             acc[CAM] = acam
         return self.M[row] @ acc + self.C[row] @ vv + self.K[row] @ qq - self.f[row]
 
@@ -262,7 +265,7 @@ class _Peer:
         velocity."""
         fr = self.configs[self.cfg].free
         nf = fr.size
-        cam_held, seat_held = self.cfg in (1, 3), self.cfg in (3, 4)
+        cam_held, seat_held = holds_cam(self.cfg), holds_seat(self.cfg)
         out: list[tuple[Any, int, Any]] = []
         if not (cam_held and self.form):
             if cam_held:
@@ -345,7 +348,7 @@ class _Peer:
             qv = self.held_state(self.t_out[self.k_out], zs[:nf], zs[nf:])
             self.q_out[self.k_out], self.v_out[self.k_out] = qv[0], qv[1]
             self.k_out += 1
-        if self.cfg not in (1, 3):
+        if not holds_cam(self.cfg):
             self.add_off_cam(self.t, t_seg, self.cfg == 4)
         self.q, self.v, _ = self.held_state(t_seg, z_end[:nf], z_end[nf:])
         self.t = t_seg
@@ -366,7 +369,7 @@ class _Peer:
     def apply(self, kind, t_ev):
         """A monitor fired at t_ev: release the contact, or (a closing gap) the impact."""
         cfg = self.cfg
-        cam_held, seat_held = cfg in (1, 3), cfg in (3, 4)
+        cam_held, seat_held = holds_cam(cfg), holds_seat(cfg)
         lift, dlift, _ = self.cam.at(self.piece, self.rev, t_ev)
         if kind in (CAM_SEPARATION, SEAT_SEPARATION):
             seat = kind == SEAT_SEPARATION
@@ -388,7 +391,7 @@ class _Peer:
         """The plastic impact at the cam or the seat, closing at ``closing`` > 0 [m/s]."""
         cfg = self.cfg
         side, coord = (1, SEAT) if seat else (0, CAM)
-        other_held = cfg in ((1, 3) if seat else (3, 4))
+        other_held = holds_cam(cfg) if seat else holds_seat(cfg)
         dv = closing if seat else -closing
         if other_held and self.separation[side] * dv > self.capture:
             other_held = False  # the impact separates the other contact: it releases
@@ -416,7 +419,7 @@ class _Peer:
         t, cfg = self.t, self.cfg
         l_left, dl_left, _ = self.cam.at(self.piece, self.rev, t)
         l_right, dl_right, _ = self.cam.at(nxt, rev_next, t)
-        seat_held = cfg in (3, 4)
+        seat_held = holds_seat(cfg)
         if cfg not in (1, 3):
             return
         jump = dl_right - dl_left  # lift-rate jump [m/s]

@@ -14,7 +14,7 @@ import numpy as np
 
 from campipe.bench.measure import OUTPUT_EVERY, reference
 from campipe.bench.suite import Scene
-from campipe.constants import INCH, LBF
+from campipe.constants import INCH, LBF, RPM
 from campipe.engine import Case, RunSettings, batch, periodic, run_batch
 from campipe.model import thesis_train
 from campipe.profiles import harmonic
@@ -24,7 +24,7 @@ from campipe.study.onset import search_designs
 #: this speed range, to the default tolerance.
 MAP_PRELOADS = np.linspace(120.0, 180.0, 25) * LBF
 MAP_RATES = np.linspace(200.0, 300.0, 40) * LBF / INCH
-MAP_RANGE = (6000.0 * periodic.RPM, 14000.0 * periodic.RPM)
+MAP_RANGE = (6000.0 * RPM, 14000.0 * RPM)
 QUICK_MAP = (4, 4)
 #: The onset goal: the map of 1000 designs within this many seconds on this many workers.
 GOAL_MAP_SECONDS = 1.0
@@ -90,8 +90,8 @@ def map_designs(n_preloads: int | None = None, n_rates: int | None = None) -> li
 
 def _clear_caches() -> None:
     """The engine's per-train caches, so a timing includes each design's modes."""
-    batch._modal.cache_clear()
-    batch._matrices.cache_clear()
+    batch.train_modal.cache_clear()
+    batch.train_matrices.cache_clear()
 
 
 def onset_map(quick: bool = False, repeats: int = 3) -> dict:
@@ -104,7 +104,7 @@ def onset_map(quick: bool = False, repeats: int = 3) -> dict:
     """
     designs = map_designs(*QUICK_MAP) if quick else map_designs()
     low, high = MAP_RANGE
-    tol = periodic.DEFAULT_ONSET_TOLERANCE_RPM * periodic.RPM
+    tol = periodic.DEFAULT_ONSET_TOLERANCE_RPM * RPM
     search_designs(designs[:2], low, high, tol, GOAL_MAP_WORKERS)  # compiled kernels loaded
 
     def run():
@@ -137,8 +137,8 @@ def onset_map(quick: bool = False, repeats: int = 3) -> dict:
         "designs": n,
         "preloads_lbf": [float(MAP_PRELOADS[0] / LBF), float(MAP_PRELOADS[-1] / LBF)],
         "rates_lbf_per_in": [float(MAP_RATES[0] * INCH / LBF), float(MAP_RATES[-1] * INCH / LBF)],
-        "range_rpm": [low / periodic.RPM, high / periodic.RPM],
-        "tolerance_rpm": tol / periodic.RPM,
+        "range_rpm": [low / RPM, high / RPM],
+        "tolerance_rpm": tol / RPM,
         "workers": GOAL_MAP_WORKERS,
         "seconds": seconds,
         "steady_states": int(found.evaluations.sum()),
@@ -149,11 +149,11 @@ def onset_map(quick: bool = False, repeats: int = 3) -> dict:
         "grid_per_case": per_case,
         "grid_speeds": GRID_SPEEDS,
         "grid_seconds": n * GRID_SPEEDS * per_case / GOAL_MAP_WORKERS,
-        "grid_resolution_rpm": (high - low) / (GRID_SPEEDS - 1) / periodic.RPM,
+        "grid_resolution_rpm": (high - low) / (GRID_SPEEDS - 1) / RPM,
         # Speeds a design the grid affords in the map's time on as many workers.
         "equal_time_speeds": points * GOAL_MAP_WORKERS,
         "equal_time_resolution_rpm": (
-            (high - low) / (points * GOAL_MAP_WORKERS - 1) / periodic.RPM
+            (high - low) / (points * GOAL_MAP_WORKERS - 1) / RPM
             if points * GOAL_MAP_WORKERS > 1
             else math.inf
         ),

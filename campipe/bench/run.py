@@ -41,7 +41,7 @@ ACCURACY_SCENE = "separation-11000"
 #: and than newmark-linear; reported, not asserted.
 GOAL_IVP = 100.0
 GOAL_NEWMARK = 10.0
-#: Issue 3: newmark-linear's throughput on the 256-case batch with this many workers
+#: The throughput goal: newmark-linear's throughput on the 256-case batch with this many workers
 #: [case-steps/s], judged in the verdict (``campipe.bench.verdict``).
 GOAL_THROUGHPUT = 2e7
 GOAL_THROUGHPUT_WORKERS = 2

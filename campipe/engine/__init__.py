@@ -12,7 +12,13 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from campipe.engine.batch import BatchResult, initial_state, run_batch, start_states
-    from campipe.engine.loads import MEMBER_LOADS, member_loads
+    from campipe.engine.loads import (
+        MEMBER_LOADS,
+        SPRING_HISTORIES,
+        member_loads,
+        per_turn,
+        spring_histories,
+    )
     from campipe.engine.settings import (
         DEFAULT_INTEGRATOR,
         DEFAULT_STEPS,
@@ -47,7 +53,13 @@ _MODULES = {
         "stability_limit",
     ),
     "campipe.engine.batch": ("BatchResult", "initial_state", "run_batch", "start_states"),
-    "campipe.engine.loads": ("MEMBER_LOADS", "member_loads"),
+    "campipe.engine.loads": (
+        "MEMBER_LOADS",
+        "SPRING_HISTORIES",
+        "member_loads",
+        "per_turn",
+        "spring_histories",
+    ),
 }
 _WHERE = {name: module for module, names in _MODULES.items() for name in names}
 
@@ -63,12 +75,15 @@ __all__ = [
     "MEMBER_LOADS",
     "RunSettings",
     "RunSettingsError",
+    "SPRING_HISTORIES",
     "StabilityError",
     "check_run",
     "initial_state",
     "member_loads",
+    "per_turn",
     "resolve_integrator",
     "run_batch",
+    "spring_histories",
     "stability_limit",
     "start_states",
 ]

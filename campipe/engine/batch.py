@@ -20,17 +20,23 @@ from numba import njit
 
 from campipe.constants import TWO_PI
 from campipe.engine import compliant, exact, newmark, steady
-from campipe.engine.closed_form import STATE, ExactRuns, ModalTrains, make_workspace
+from campipe.engine.closed_form import (
+    STATE,
+    ExactRuns,
+    ModalTrains,
+    make_workspace,
+    stack_trains,
+)
 from campipe.engine.common import Cases, make_outputs
 from campipe.engine.contact import (
-    HELD,
     held_inverses,
+    held_mask,
     impact_masses,
     newmark_step_maps,
     quasi_static_batch,
     quasi_static_state,
 )
-from campipe.engine.modal import NS, ModalData, harmonic_responses, modal_data
+from campipe.engine.modal import ModalData, harmonic_responses, modal_data, pad_stack
 from campipe.engine.settings import CLOSURES as CLOSURES
 from campipe.engine.settings import (
     COMPLIANT,
@@ -70,10 +76,12 @@ from campipe.vocabulary import (
     CONFIGURATIONS,
     EVENTS_TRUNCATED,
     FAILURES,
+    N_COORDINATES,
     NONFINITE,
     SEAT,
     SEATED,
     UNBOUNDED,
+    free_coordinates,
     holds_cam,
     holds_seat,
 )
@@ -95,8 +103,11 @@ class BatchResult:
 
     cam_angle: np.ndarray  # (n_out,) cam angle of each sample [rad]
     time: np.ndarray  # (n_cases, n_out) [s]
-    q: np.ndarray  # (n_cases, n_out, 7) coordinates [m, rad]
-    v: np.ndarray  # (n_cases, n_out, 7) velocities [m/s, rad/s]
+    #: (n_cases, n_out, n) coordinates [m, rad]: q1 … q7, then the internal coordinates of
+    #: refined members (``campipe.model.coordinates``); n is the batch's most coordinates, a
+    #: train with fewer has NaN beyond its own
+    q: np.ndarray
+    v: np.ndarray  # (n_cases, n_out, n) velocities [m/s, rad/s]
     acc: np.ndarray  # (n_cases, n_out, 2) accelerations of q1 and q7 [m/s²]
     cam_lift: np.ndarray  # (n_cases, n_out) [m]
     cam_force: np.ndarray  # (n_cases, n_out) cam contact force, compressive positive [N]
@@ -220,7 +231,8 @@ class BatchResult:
 
 
 @functools.lru_cache(maxsize=256)
-def _matrices(train: ValveTrain) -> SystemMatrices:
+def train_matrices(train: ValveTrain) -> SystemMatrices:
+    """The train's system matrices, cached per train (``cache_clear`` to time them)."""
     return system_matrices(train)
 
 
@@ -229,24 +241,32 @@ class Prepared:
     """What a step size and a train fix for every case that shares them (cached)."""
 
     matrices: SystemMatrices  # M, C, K, modes, preload
-    step_A: np.ndarray  # (4, 24, 8) newmark-linear's step per configuration: forces, and
-    step_G: np.ndarray  # (4, 8, 8) accelerations and contact forces (contact.newmark_step_maps)
+    #: (4, 24, 8) newmark-linear's step per configuration: forces, and (4, 8, 8)
+    #: accelerations and contact forces (contact.newmark_step_maps); None for a train of more
+    #: than seven coordinates, which newmark-linear refuses (``settings.check_run``)
+    step_A: np.ndarray | None
+    step_G: np.ndarray | None
     impact_masses: np.ndarray  # (4,) see contact.impact_masses [kg]
     valve_reference: float  # q7 at zero valve lift [m]
     omega_max: np.ndarray  # (4,) highest natural frequency per configuration [rad/s]
-    start_inverses: np.ndarray  # (3, 2, 7, 7) see start_inverses
+    start_inverses: np.ndarray  # (3, 2, n, n) see start_inverses
     valve_ratio: float  # static valve lift per unit cam lift (the rocker ratio) [-]
 
 
 @functools.lru_cache(maxsize=256)
 def prepare(train: ValveTrain, dt: float) -> Prepared:
-    sm = _matrices(train)
+    sm = train_matrices(train)
     omega_max = np.array(
-        [configuration_frequencies(sm.mass, sm.stiffness, c).max() for c in (1, 2, 3, 4)]
+        [configuration_frequencies(sm.mass, sm.stiffness, c).max() for c in CONFIGURATIONS]
     )
+    step_A: np.ndarray | None = None
+    step_G: np.ndarray | None = None
+    if sm.mass.shape[0] == N_COORDINATES:
+        step_A, step_G = newmark_step_maps(sm.mass, sm.damping, sm.stiffness, dt)
     return Prepared(
         sm,
-        *newmark_step_maps(sm.mass, sm.damping, sm.stiffness, dt),
+        step_A,
+        step_G,
         impact_masses(sm.mass),
         valve_reference(sm),
         omega_max,
@@ -257,25 +277,29 @@ def prepare(train: ValveTrain, dt: float) -> Prepared:
 
 def valve_ratio(sm: SystemMatrices) -> float:
     """The static valve lift per unit cam lift: the rocker ratio with the members' give."""
-    lifted = np.zeros(7)
+    n = sm.mass.shape[0]
+    lifted = np.zeros(n)
     lifted[CAM] = -1.0  # one metre of cam lift
     q, _, _ = quasi_static_state(
-        sm.mass, sm.damping, sm.stiffness, sm.preload, HELD[0], lifted, np.zeros(7), np.zeros(7)
-    )
+        sm.mass, sm.damping, sm.stiffness, sm.preload, held_mask(CAM_CONTACT, n), lifted,
+        np.zeros(n), np.zeros(n),
+    )  # fmt: skip
     return float(q[SEAT] - valve_reference(sm))
 
 
 def start_inverses(sm: SystemMatrices) -> np.ndarray:
-    """(3, 2, 7, 7): K_ff⁻¹ and M_ff⁻¹ (``contact.held_inverses``) in configurations I, III
+    """(3, 2, n, n): K_ff⁻¹ and M_ff⁻¹ (``contact.held_inverses``) in configurations I, III
     and IV, the quasi-static start's (``START_CONFIGURATIONS``)."""
+    n = sm.mass.shape[0]
     return np.array(
-        [held_inverses(sm.mass, sm.stiffness, HELD[cfg - 1]) for cfg in START_CONFIGURATIONS]
+        [held_inverses(sm.mass, sm.stiffness, held_mask(c, n)) for c in START_CONFIGURATIONS]
     )
 
 
 @functools.lru_cache(maxsize=256)
-def _modal(train: ValveTrain) -> ModalData:
-    return modal_data(_matrices(train))
+def train_modal(train: ValveTrain) -> ModalData:
+    """The train's closed-form data per configuration, cached per train."""
+    return modal_data(train_matrices(train))
 
 
 def initial_state(case: Case, sm: SystemMatrices, seat_q: float):
@@ -292,7 +316,7 @@ def initial_state(case: Case, sm: SystemMatrices, seat_q: float):
     return q[0], v[0], a[0], int(cfg[0])
 
 
-def _unique_trains(cases: Sequence[Case]) -> tuple[list[ValveTrain], np.ndarray]:
+def unique_trains(cases: Sequence[Case]) -> tuple[list[ValveTrain], np.ndarray]:
     """The distinct trains of a batch and each case's index into them."""
     index: dict[ValveTrain, int] = {}
     which = np.empty(len(cases), np.int64)
@@ -320,24 +344,25 @@ def initial_states(mats, which, packed, omega, has_seat, seat_q, inverses=None):
     if inverses is None:
         inverses = [start_inverses(m) for m in mats]
     n = which.size
+    n_q = max(m.mass.shape[0] for m in mats)  # the most coordinates: the others zero-padded
     cam = cam_at(packed, 0.0)
-    held_q = np.zeros((n, 7))
-    held_v = np.zeros((n, 7))
-    held_a = np.zeros((n, 7))
+    held_q = np.zeros((n, n_q))
+    held_v = np.zeros((n, n_q))
+    held_a = np.zeros((n, n_q))
     held_q[:, CAM] = -cam[:, 0]
     held_v[:, CAM] = -omega * cam[:, 1]
     held_a[:, CAM] = -(omega**2) * cam[:, 2]
     held_q[:, SEAT] = seat_q
-    M = np.stack([m.mass for m in mats])[which]
-    C = np.stack([m.damping for m in mats])[which]
-    K = np.stack([m.stiffness for m in mats])[which]
-    load = np.stack([m.preload for m in mats])[which]
+    M = pad_stack([m.mass for m in mats])[which]
+    C = pad_stack([m.damping for m in mats])[which]
+    K = pad_stack([m.stiffness for m in mats])[which]
+    load = pad_stack([m.preload for m in mats])[which]
     states = []
     for i_cfg, number in enumerate(START_CONFIGURATIONS):
-        kinv = np.stack([inv[i_cfg, 0] for inv in inverses])[which]
-        minv = np.stack([inv[i_cfg, 1] for inv in inverses])[which]
-        held = np.broadcast_to(HELD[number - 1], (n, 7))
-        qc, vc, ac = np.empty((n, 7)), np.empty((n, 7)), np.empty((n, 7))
+        kinv = pad_stack([inv[i_cfg, 0] for inv in inverses])[which]
+        minv = pad_stack([inv[i_cfg, 1] for inv in inverses])[which]
+        held = np.broadcast_to(held_mask(number, n_q), (n, n_q))
+        qc, vc, ac = np.empty((n, n_q)), np.empty((n, n_q)), np.empty((n, n_q))
         quasi_static_batch(kinv, minv, M, C, K, load, held, held_q, held_v, held_a, qc, vc, ac)
         states.append((qc, vc, ac))
     (q, v, a), (q3, v3, a3), (q4, v4, a4) = states
@@ -355,15 +380,16 @@ def initial_states(mats, which, packed, omega, has_seat, seat_q, inverses=None):
 
 def valve_reference(sm: SystemMatrices) -> float:
     """q7 with the cam on its base circle, no seat, in static equilibrium [m]."""
+    n = sm.mass.shape[0]
     q, _, _ = quasi_static_state(
         sm.mass,
         sm.damping,
         sm.stiffness,
         sm.preload,
-        HELD[0],
-        np.zeros(7),
-        np.zeros(7),
-        np.zeros(7),
+        held_mask(CAM_CONTACT, n),
+        np.zeros(n),
+        np.zeros(n),
+        np.zeros(n),
     )
     return float(q[SEAT])
 
@@ -387,12 +413,9 @@ def _run_newmark(preps, which, settings, dt_run, cases, packed, out) -> None:
 def _modal_trains(trains, preps) -> tuple[ModalTrains, np.ndarray]:
     """The distinct trains' closed-form data, indexed in the kernels by each case's train, and
     their state matrices (for the harmonic responses)."""
-    data = [_modal(t) for t in trains]
-    modal_trains = ModalTrains(
-        load=np.stack([p.matrices.preload for p in preps]),
-        **{f: np.stack([getattr(d, f) for d in data]) for f in ModalTrains._fields if f != "load"},
-    )
-    return modal_trains, np.stack([d.a_mat for d in data])
+    data = [train_modal(t) for t in trains]
+    modal_trains = stack_trains(data, [p.matrices.preload for p in preps])
+    return modal_trains, pad_stack([d.a_mat for d in data])
 
 
 def _exact_runs(settings, dt_run, full_state, which, modal_trains, a_mat, omega) -> ExactRuns:
@@ -411,9 +434,9 @@ class Start(NamedTuple):
     """Where each case of a batch starts (``start_states``)."""
 
     t0: np.ndarray  # (n,) start time [s], ≤ 0 (integrated, unrecorded, up to t = 0)
-    q0: np.ndarray  # (n, 7) coordinates [m, rad]
-    v0: np.ndarray  # (n, 7) velocities [m/s, rad/s]
-    a0: np.ndarray  # (n, 7) accelerations [m/s², rad/s²]
+    q0: np.ndarray  # (n, n_q) coordinates [m, rad] (n_q: the batch's most coordinates)
+    v0: np.ndarray  # (n, n_q) velocities [m/s, rad/s]
+    a0: np.ndarray  # (n, n_q) accelerations [m/s², rad/s²]
     cfg0: np.ndarray  # (n,) int64 configuration
 
 
@@ -433,13 +456,14 @@ class _Batch:
 def _prepare_batch(cases: Sequence[Case], settings: RunSettings, full_state: bool) -> _Batch:
     dt_run = settings.step
     n = len(cases)
-    trains, which = _unique_trains(cases)
+    trains, which = unique_trains(cases)
     preps = [prepare(t, dt_run or 0.0) for t in trains]
-    modal = [_modal(t) for t in trains]
+    modal = [train_modal(t) for t in trains]
     qref = np.array([p.valve_reference for p in preps])[which]
     has_seat = np.array([c.has_seat for c in cases], dtype=np.bool_)
     omega = np.array([c.speed for c in cases], dtype=float)
     modal_trains, a_mat = _modal_trains(trains, preps)
+    n_q = modal_trains.load.shape[1]
     lift_bound, speed_bound = _bounds(cases, preps, which, qref)
     return _Batch(
         trains=trains,
@@ -454,9 +478,9 @@ def _prepare_batch(cases: Sequence[Case], settings: RunSettings, full_state: boo
             has_seat=has_seat,
             form=np.array([c.closure == "form" for c in cases], dtype=np.bool_),
             t0=np.zeros(n),
-            q0=np.zeros((n, 7)),
-            v0=np.zeros((n, 7)),
-            a0=np.zeros((n, 7)),
+            q0=np.zeros((n, n_q)),
+            v0=np.zeros((n, n_q)),
+            a0=np.zeros((n, n_q)),
             cfg0=np.full(n, CAM_CONTACT, np.int64),
             meff=np.stack([p.impact_masses for p in preps])[which],
             separation=np.stack([d.separation for d in modal])[which],
@@ -503,13 +527,14 @@ def _periodic_starts(case_list, cases, modal_trains, runs, packed, snap, preps, 
     (``steady.periodic_starts``): (t0, q0, v0, a0); refuses a case where configuration I holds
     nowhere on the turn."""
     n = cases.omega.size
+    n_q = modal_trains.load.shape[1]
     t0 = np.empty(n)
-    q0 = np.empty((n, 7))
-    v0 = np.empty((n, 7))
-    z_turn = np.zeros((n, packed.n_pieces.max() + 1, NS))
+    q0 = np.empty((n, n_q))
+    v0 = np.empty((n, n_q))
+    z_turn = np.zeros((n, packed.n_pieces.max() + 1, 2 * n_q))
     state = np.zeros(1, STATE)
     steady.periodic_starts(
-        cases, modal_trains, packed, runs, make_workspace(), state, snap, z_turn, t0, q0, v0
+        cases, modal_trains, packed, runs, make_workspace(n_q), state, snap, z_turn, t0, q0, v0
     )
     bad = np.flatnonzero(np.isnan(t0))
     if bad.size:
@@ -522,14 +547,15 @@ def _periodic_starts(case_list, cases, modal_trains, runs, packed, snap, preps, 
             expected="a seat below the valve's full lift",
         )
     # Accelerations from the equation of motion with the cam held (newmark-linear's start).
-    a0 = np.zeros((n, 7))
+    a0 = np.zeros((n, n_q))
     theta = cases.omega * t0
     for c in range(n):
         sm = preps[which[c]].matrices
+        k = sm.mass.shape[0]
         _, _, ddlift = evaluate(case_list[c].profile, theta[c])
         a0[c, CAM] = -(cases.omega[c] ** 2) * float(ddlift)
-        free = np.array(CONFIGURATIONS[CAM_CONTACT].free)
-        force = sm.preload - sm.stiffness @ q0[c] - sm.damping @ v0[c] - sm.mass @ a0[c]
+        free = np.array(free_coordinates(CAM_CONTACT, k))
+        force = sm.preload - sm.stiffness @ q0[c, :k] - sm.damping @ v0[c, :k] - sm.mass @ a0[c, :k]
         a0[c, free] = np.linalg.solve(sm.mass[np.ix_(free, free)], force[free])
     return t0, q0, v0, a0
 
@@ -612,14 +638,16 @@ def run_batch(
     preps, which, packed, modal_trains, runs = (
         batch.preps, batch.which, batch.packed, batch.modal_trains, batch.runs
     )  # fmt: skip
-    out = make_outputs(n, n_out, n_rev, settings.max_events)
+    n_q = modal_trains.load.shape[1]
+    out = make_outputs(n, n_out, n_rev, settings.max_events, n_q)
     if settings.method == "newmark-linear":
         _run_newmark(preps, which, settings, dt_run, cases_in, packed, out)
     elif settings.method == COMPLIANT:
         _run_compliant(cases, cases_in, settings, out)
     else:
         state = np.zeros(1, STATE)
-        exact.modal_exact_batch(cases_in, modal_trains, packed, runs, out, make_workspace(), state)
+        ws = make_workspace(n_q)
+        exact.modal_exact_batch(cases_in, modal_trains, packed, runs, out, ws, state)
     status, n_events = out.status, out.n_events
     bad = np.flatnonzero(status == NONFINITE)
     if bad.size and on_failure == "raise":
@@ -719,7 +747,8 @@ def _run_compliant(cases: Sequence[Case], c: Cases, settings: RunSettings, out) 
             case.train, case.profile, case.speed, float(c.seat_q[i]) if case.has_seat else None
         )
         held = (holds_cam(int(c.cfg0[i])), holds_seat(int(c.cfg0[i])))
-        z0 = compliant.compliant_start(system, c.q0[i], c.v0[i], c.a0[i], *held)
+        m = system.load.size  # the train's coordinates of the batch's
+        z0 = compliant.compliant_start(system, c.q0[i, :m], c.v0[i, :m], c.a0[i, :m], *held)
         one = compliant.CaseOutputs(
             out.q[i], out.v[i], out.force[i], out.cam[i], out.cfg[i], out.acc[i],
             out.sep_rev[i], out.seated_rev[i], out.counts[i], out.vmax[i], out.fmax[i],

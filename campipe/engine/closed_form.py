@@ -12,8 +12,9 @@ import numpy as np
 from numba import njit
 
 from campipe.engine.common import KERNEL, holds_cam, holds_seat
-from campipe.engine.modal import NS
+from campipe.engine.modal import ModalData, pad_stack
 from campipe.profiles.packed import degree, horner
+from campipe.vocabulary import N_COORDINATES
 
 # Rows of the per-block work array ``MC`` (one column per active block, fastest first): the
 # basis functions (f1, f2) at the current grid point, their values at the grid step h (the
@@ -33,7 +34,8 @@ class ModalTrains(NamedTuple):
     """The distinct trains of a batch: preload and ``modal.ModalData`` per configuration
     (leading axes (n_trains, 4); see ``modal.ModalData`` for each field)."""
 
-    load: np.ndarray  # (n_trains, 7) preload [N]
+    load: np.ndarray  # (n_trains, n) preload [N] (n: the batch's most coordinates, 0-padded)
+    n_coordinates: np.ndarray  # (n_trains,) int: each train's coordinates (7: the thesis's)
     n_free: np.ndarray
     free: np.ndarray
     a_inv: np.ndarray
@@ -58,6 +60,22 @@ class ModalTrains(NamedTuple):
     rho_xn: np.ndarray
 
 
+def stack_trains(data: list[ModalData], loads: list[np.ndarray]) -> ModalTrains:
+    """The kernels' ``ModalTrains`` of a batch's distinct trains (their ``modal.ModalData``
+    and preload vectors), each padded to the batch's most coordinates (``modal.pad_stack``):
+    a train of the thesis's seven coordinates keeps its numbers whatever it is batched with."""
+    fields = {
+        f: pad_stack([getattr(d, f) for d in data], -1 if f == "free" else 0)
+        for f in ModalTrains._fields
+        if f not in ("load", "n_coordinates")
+    }
+    return ModalTrains(
+        load=pad_stack(loads),
+        n_coordinates=np.array([d.free.shape[1] for d in data], np.int64),
+        **fields,
+    )
+
+
 class ExactRuns(NamedTuple):
     """How each case is run: its train, sampling, end, harmonic responses, and the settings
     shared by the batch."""
@@ -65,28 +83,30 @@ class ExactRuns(NamedTuple):
     train: np.ndarray  # (n,) int64 index into ModalTrains
     t_sample: np.ndarray  # (n,) output spacing in time [s]
     t_end: np.ndarray  # (n,) the run's end [s]
-    zeta: np.ndarray  # (n, 4, NS) complex ``modal.harmonic_responses`` at the case's speed
+    zeta: np.ndarray  # (n, 4, ns) complex ``modal.harmonic_responses`` at the case's speed
     dt_cap: float  # largest step [s]; 0: none
     tolerance: float  # event-time tolerance [s]
-    full_state: bool  # sample all seven coordinates (else q1 and q7 only)
+    full_state: bool  # sample every coordinate (else q1 and q7 only)
 
 
 class Workspace(NamedTuple):
-    """Work arrays of one case's segment, allocated once per batch (``make_workspace``)."""
+    """Work arrays of one case's segment, allocated once per batch (``make_workspace``) for
+    the batch's most coordinates n and largest state ns = 2n (``modal.NS`` for the thesis's
+    train)."""
 
-    q: np.ndarray  # (7,) coordinates at the segment start / an event [m, rad]
-    v: np.ndarray  # (7,) velocities
-    z: np.ndarray  # (NS,) a state z
-    zh: np.ndarray  # (NS,) the homogeneous part at the segment start
-    zb: np.ndarray  # (NS,) scratch
-    Z: np.ndarray  # (9, NS) polynomial particular solution Z_k (row k)
-    ZT: np.ndarray  # (NS,) complex harmonic particular solution Z_T
-    bpoly: np.ndarray  # (8, NS) the forcing's polynomial coefficients b_k
-    u: np.ndarray  # (NS,) the state's homogeneous part in the blocks' basis at t_s: X⁻¹ zh
-    act: np.ndarray  # (NS,) int64 the block of each active column
-    MC: np.ndarray  # (N_MC, NS) per-block work, rows F1 … RATE
-    WC: np.ndarray  # (N_WC, 2, NS) monitor coefficients per block, rows W1 … WL2_ABS
-    VY: np.ndarray  # (2, NS, NS) the state's coefficients of f1 and f2: X_b u_b, X_b N_b u_b
+    q: np.ndarray  # (n,) coordinates at the segment start / an event [m, rad]
+    v: np.ndarray  # (n,) velocities
+    z: np.ndarray  # (ns,) a state z
+    zh: np.ndarray  # (ns,) the homogeneous part at the segment start
+    zb: np.ndarray  # (ns,) scratch
+    Z: np.ndarray  # (9, ns) polynomial particular solution Z_k (row k)
+    ZT: np.ndarray  # (ns,) complex harmonic particular solution Z_T
+    bpoly: np.ndarray  # (8, ns) the forcing's polynomial coefficients b_k
+    u: np.ndarray  # (ns,) the state's homogeneous part in the blocks' basis at t_s: X⁻¹ zh
+    act: np.ndarray  # (ns,) int64 the block of each active column
+    MC: np.ndarray  # (N_MC, ns) per-block work, rows F1 … RATE
+    WC: np.ndarray  # (N_WC, 2, ns) monitor coefficients per block, rows W1 … WL2_ABS
+    VY: np.ndarray  # (2, ns, ns) the state's coefficients of f1 and f2: X_b u_b, X_b N_b u_b
     gval: np.ndarray  # (2,) monitors at the latest point
     dval: np.ndarray  # (2,) their time derivatives
     gprev: np.ndarray  # (2,) monitors at the previous grid point
@@ -100,22 +120,23 @@ class Workspace(NamedTuple):
     inp_t: np.ndarray  # (3, 2) complex held coordinates' harmonic parts
 
 
-def make_workspace() -> Workspace:
-    """A zeroed workspace."""
+def make_workspace(n_coordinates: int = N_COORDINATES) -> Workspace:
+    """A zeroed workspace for trains of up to ``n_coordinates`` coordinates."""
+    ns = 2 * n_coordinates
     return Workspace(
-        q=np.zeros(7),
-        v=np.zeros(7),
-        z=np.zeros(NS),
-        zh=np.zeros(NS),
-        zb=np.zeros(NS),
-        Z=np.zeros((9, NS)),
-        ZT=np.zeros(NS, np.complex128),
-        bpoly=np.zeros((8, NS)),
-        u=np.zeros(NS),
-        act=np.zeros(NS, np.int64),
-        MC=np.zeros((N_MC, NS)),
-        WC=np.zeros((N_WC, 2, NS)),
-        VY=np.zeros((2, NS, NS)),
+        q=np.zeros(n_coordinates),
+        v=np.zeros(n_coordinates),
+        z=np.zeros(ns),
+        zh=np.zeros(ns),
+        zb=np.zeros(ns),
+        Z=np.zeros((9, ns)),
+        ZT=np.zeros(ns, np.complex128),
+        bpoly=np.zeros((8, ns)),
+        u=np.zeros(ns),
+        act=np.zeros(ns, np.int64),
+        MC=np.zeros((N_MC, ns)),
+        WC=np.zeros((N_WC, 2, ns)),
+        VY=np.zeros((2, ns, ns)),
         gval=np.zeros(2),
         dval=np.zeros(2),
         gprev=np.zeros(2),
@@ -266,7 +287,7 @@ def particular(trains, profiles, runs, ws, st):
     trig = profiles.trig
     has_trig = holds_cam(st.cfg) and (trig[c, p, 0] != 0.0 or trig[c, p, 1] != 0.0)
     beta = trig[c, p, 1] - 1j * trig[c, p, 0]
-    for s in range(NS):
+    for s in range(ws.ZT.shape[0]):
         ws.ZT[s] = beta * runs.zeta[c, ci, s] if has_trig else 0.0
 
 

@@ -68,9 +68,9 @@ class Cases(NamedTuple):
     has_seat: np.ndarray  # (n,) bool: the valve has a seat
     form: np.ndarray  # (n,) bool: form closure (the cam never releases the follower)
     t0: np.ndarray  # (n,) start time [s], ≤ 0: integrated, not recorded, up to t = 0
-    q0: np.ndarray  # (n, 7) start coordinates [m, rad]
-    v0: np.ndarray  # (n, 7) start velocities [m/s, rad/s]
-    a0: np.ndarray  # (n, 7) start accelerations [m/s², rad/s²]
+    q0: np.ndarray  # (n, n_q) start coordinates [m, rad] (n_q: the batch's most coordinates)
+    v0: np.ndarray  # (n, n_q) start velocities [m/s, rad/s]
+    a0: np.ndarray  # (n, n_q) start accelerations [m/s², rad/s²]
     cfg0: np.ndarray  # (n,) int64 start configuration
     meff: np.ndarray  # (n, 4) impact masses [kg] (``contact.impact_masses`` order)
     #: (n, 2) the other contact's separation velocity per unit velocity change of the struck
@@ -89,8 +89,8 @@ class Cases(NamedTuple):
 class Outputs(NamedTuple):
     """The arrays a kernel fills in place (leading axis: case)."""
 
-    q: np.ndarray  # (n, n_out, 7) coordinates at the output angles [m, rad]
-    v: np.ndarray  # (n, n_out, 7) velocities [m/s, rad/s]
+    q: np.ndarray  # (n, n_out, n_q) coordinates at the output angles [m, rad]
+    v: np.ndarray  # (n, n_out, n_q) velocities [m/s, rad/s]
     force: np.ndarray  # (n, n_out, 2) (F1, F7), thesis signs [N]
     cam: np.ndarray  # (n, n_out) cam lift [m]
     cfg: np.ndarray  # (n, n_out) int8 configuration
@@ -109,11 +109,14 @@ class Outputs(NamedTuple):
     steps: np.ndarray  # (n,) int64 integration steps taken
 
 
-def make_outputs(n: int, n_out: int, n_rev: int, max_events: int) -> Outputs:
-    """Outputs for n cases, zeroed (events uninitialised past each case's count)."""
+def make_outputs(
+    n: int, n_out: int, n_rev: int, max_events: int, n_coordinates: int = N_COORDINATES
+) -> Outputs:
+    """Outputs for n cases of up to ``n_coordinates`` coordinates, zeroed (events
+    uninitialised past each case's count)."""
     return Outputs(
-        q=np.zeros((n, n_out, N_COORDINATES)),
-        v=np.zeros((n, n_out, N_COORDINATES)),
+        q=np.zeros((n, n_out, n_coordinates)),
+        v=np.zeros((n, n_out, n_coordinates)),
         force=np.zeros((n, n_out, 2)),
         cam=np.zeros((n, n_out)),
         cfg=np.zeros((n, n_out), np.int8),

@@ -45,7 +45,7 @@ import numpy as np
 
 from campipe.constants import TWO_PI
 from campipe.engine.common import TURN_GUARD
-from campipe.model import ValveTrain, system_matrices
+from campipe.model import ValveTrain, coordinates, system_matrices
 from campipe.model.contact_laws import KELVIN_VOIGT, ContactLaw, contact_law
 from campipe.profiles import Profile
 from campipe.vocabulary import (
@@ -646,8 +646,10 @@ def _sample(run: _Run, t: float, z: np.ndarray, out: CaseOutputs, k: int) -> Non
     n = run.n
     fc, fs = run.forces(t, z)
     acc = run.rhs(t, z)[n:]
-    out.q[k] = z[:7]
-    out.v[k] = z[n : n + 7]
+    m = min(n, out.q.shape[1])
+    out.q[k, :m] = z[:m]
+    out.v[k, :m] = z[n : n + m]
+    out.q[k, m:] = out.v[k, m:] = np.nan  # a batch's coordinates beyond this train's
     out.force[k] = (-fc, fs)
     out.cam[k] = run.s.lift.at(run.piece, run.rev, t)[0]
     out.cfg[k] = configuration(*run.closed)
@@ -662,7 +664,8 @@ def compliant_system(train: ValveTrain, profile: Profile, speed: float, seat_q: 
     lift_max = float(np.abs(profile.poly[:, 0]).max() + np.abs(profile.trig).sum(axis=1).max())
     n = sm.preload.size
     scale = np.full(n, max(lift_max, 1e-6))
-    scale[[2, 4, 5]] /= train.rocker_pushrod_arm_length
+    rotations = [i for i, c in enumerate(coordinates(train)) if c.kind != "translation"]
+    scale[rotations] /= train.rocker_pushrod_arm_length
     return CompliantSystem(
         sm.mass, sm.damping, sm.stiffness, sm.preload,
         contact_law(train, "cam"),

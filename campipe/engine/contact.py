@@ -10,12 +10,21 @@ import numpy as np
 from numba import njit
 
 from campipe.engine.newmark import N_X, N_Z, X_A, X_Q, X_V
-from campipe.vocabulary import CAM, CONFIGURATIONS, SEAT
+from campipe.vocabulary import CAM, CONFIGURATIONS, N_COORDINATES, SEAT, free_coordinates
 
-#: HELD[c - 1, i]: coordinate i is prescribed in configuration c.
+#: HELD[c - 1, i]: coordinate i is prescribed in configuration c (the thesis's seven; a
+#: refined member's internal coordinates are never held, ``held_mask``).
 HELD = np.array(
-    [[i in CONFIGURATIONS[c].held for i in range(7)] for c in (1, 2, 3, 4)], dtype=np.bool_
+    [[i in CONFIGURATIONS[c].held for i in range(7)] for c in CONFIGURATIONS], dtype=np.bool_
 )
+
+
+def held_mask(configuration: int, n_coordinates: int = N_COORDINATES) -> np.ndarray:
+    """(n_coordinates,) bool: the coordinates configuration ``configuration`` prescribes in a
+    train of ``n_coordinates`` (only q1 and q7 ever are)."""
+    out = np.zeros(n_coordinates, np.bool_)
+    out[:N_COORDINATES] = HELD[configuration - 1]
+    return out
 
 
 def effective_mass_inverses(mass, damping, stiffness, dt: float) -> np.ndarray:
@@ -23,7 +32,7 @@ def effective_mass_inverses(mass, damping, stiffness, dt: float) -> np.ndarray:
     zero in the held rows and columns (thesis Eq. 67, partitioned as in Appendix A)."""
     meff = mass + 0.5 * dt * damping + dt * dt / 6.0 * stiffness
     out = np.zeros((4, 7, 7))
-    for c in (1, 2, 3, 4):
+    for c in CONFIGURATIONS:
         free = list(CONFIGURATIONS[c].free)
         out[c - 1][np.ix_(free, free)] = np.linalg.inv(meff[np.ix_(free, free)])
     return out
@@ -65,7 +74,7 @@ def newmark_step_maps(mass, damping, stiffness, dt: float) -> tuple[np.ndarray, 
     columns = np.r_[X_Q : X_Q + 7, X_V : X_V + 7, X_A : X_A + 7]
     A = np.zeros((4, N_X, N_Z))
     G = np.zeros((4, N_Z, N_Z))
-    for c in (1, 2, 3, 4):
+    for c in CONFIGURATIONS:
         held = HELD[c - 1]
         free = np.diag(~held).astype(float)
         # The predictors as maps of x = (q, v, a).
@@ -87,7 +96,7 @@ def impact_mass(mass: np.ndarray, struck: int, configuration_after: int) -> floa
     A perfectly plastic impact against an infinite mass that changes the struck coordinate's
     velocity by Δv delivers the impulse m·Δv.
     """
-    free = list(CONFIGURATIONS[configuration_after].free)
+    free = list(free_coordinates(configuration_after, mass.shape[0]))
     mpf = mass[struck, free]
     return float(mass[struck, struck] - mpf @ np.linalg.solve(mass[np.ix_(free, free)], mpf))
 
@@ -114,13 +123,13 @@ def quasi_static_state(
 
     Parameters
     ----------
-    held : (7,) bool
+    held : (n,) bool
         Prescribed coordinates.
-    held_q, held_v, held_a : (7,) float
+    held_q, held_v, held_a : (n,) float
         Their displacement [m], velocity [m/s] and acceleration [m/s²] (other entries ignored).
     """
     kinv, minv = held_inverses(mass, stiffness, held)
-    q, v, a = (np.empty((1, 7)) for _ in range(3))
+    q, v, a = (np.empty((1, mass.shape[0])) for _ in range(3))
     quasi_static_batch(
         kinv[None],
         minv[None],
@@ -140,10 +149,11 @@ def quasi_static_state(
 
 
 def held_inverses(mass, stiffness, held) -> tuple[np.ndarray, np.ndarray]:
-    """K_ff⁻¹ and M_ff⁻¹ over the free coordinates, zero-padded to 7×7."""
+    """K_ff⁻¹ and M_ff⁻¹ over the free coordinates, zero-padded to n×n."""
     free = np.flatnonzero(~held)
-    kinv = np.zeros((7, 7))
-    minv = np.zeros((7, 7))
+    n = mass.shape[0]
+    kinv = np.zeros((n, n))
+    minv = np.zeros((n, n))
     kinv[np.ix_(free, free)] = np.linalg.inv(stiffness[np.ix_(free, free)])
     minv[np.ix_(free, free)] = np.linalg.inv(mass[np.ix_(free, free)])
     return kinv, minv
@@ -152,36 +162,39 @@ def held_inverses(mass, stiffness, held) -> tuple[np.ndarray, np.ndarray]:
 @njit(cache=True, nogil=True)
 def quasi_static_batch(kinv, minv, M, C, K, load, held, held_q, held_v, held_a, q, v, a):
     """``quasi_static_state`` for each case c (arrays with a leading case axis; kinv, minv
-    from ``held_inverses``), by plain loops so a case's result does not depend on its batch."""
+    from ``held_inverses``), by plain loops so a case's result does not depend on its batch
+    (a train of fewer coordinates than the batch's most is zero-padded: the padding adds
+    exact zeros)."""
+    n = held_q.shape[1]
     for c in range(held_q.shape[0]):
-        for i in range(7):
+        for i in range(n):
             q[c, i] = held_q[c, i] if held[c, i] else 0.0
             v[c, i] = held_v[c, i] if held[c, i] else 0.0
             a[c, i] = held_a[c, i] if held[c, i] else 0.0
-        rq = np.zeros(7)
-        rv = np.zeros(7)
-        for i in range(7):
+        rq = np.zeros(n)
+        rv = np.zeros(n)
+        for i in range(n):
             rq[i] = load[c, i]
-            for j in range(7):
+            for j in range(n):
                 rq[i] -= K[c, i, j] * q[c, j]
                 rv[i] -= K[c, i, j] * v[c, j]
-        for i in range(7):
+        for i in range(n):
             if not held[c, i]:
                 sq = 0.0
                 sv = 0.0
-                for j in range(7):
+                for j in range(n):
                     sq += kinv[c, i, j] * rq[j]
                     sv += kinv[c, i, j] * rv[j]
                 q[c, i] = sq
                 v[c, i] = sv
-        ra = np.zeros(7)
-        for i in range(7):
+        ra = np.zeros(n)
+        for i in range(n):
             ra[i] = load[c, i]
-            for j in range(7):
+            for j in range(n):
                 ra[i] -= K[c, i, j] * q[c, j] + C[c, i, j] * v[c, j] + M[c, i, j] * a[c, j]
-        for i in range(7):
+        for i in range(n):
             if not held[c, i]:
                 s = 0.0
-                for j in range(7):
+                for j in range(n):
                     s += minv[c, i, j] * ra[j]
                 a[c, i] = s

@@ -307,10 +307,11 @@ def _free_acceleration(VY, MC, Z, ZT, s, nact, x, cth, sth, w, deg):
 
 @njit(inline="always", nogil=True)
 def _write_sample(
-    out, c, k, q, v, gval, poly, trig, cfg, p, x, ct, sn, w, full_state, acc1, acc7,
+    out, c, k, q, v, gval, poly, trig, cfg, p, x, ct, sn, w, full_state, acc1, acc7, n_coord,
 ):  # fmt: skip
     """Output sample k of case c: coordinates and velocities q, v (held ones on the cam and
-    seat; without ``full_state`` only q1 and q7, the others NaN), forces from the monitors
+    seat; without ``full_state`` only q1 and q7, the others NaN; beyond the train's
+    ``n_coord`` coordinates, in a batch of larger trains, NaN), forces from the monitors
     gval, the contact coordinates' accelerations (a free one's acc1, acc7; a held one's from
     the cam or the seat), and the cam lift on piece p at local angle x, cam angle with cosine
     ct and sine sn."""
@@ -318,8 +319,8 @@ def _write_sample(
     lift += trig[c, p, 0] * sn + trig[c, p, 1] * ct
     dlift += trig[c, p, 0] * ct - trig[c, p, 1] * sn
     ddlift -= trig[c, p, 0] * sn + trig[c, p, 1] * ct
-    for i in range(7):
-        shown = full_state or i == CAM or i == SEAT
+    for i in range(out.q.shape[2]):
+        shown = (full_state or i == CAM or i == SEAT) and i < n_coord
         out.q[c, k, i] = q[i] if shown else np.nan
         out.v[c, k, i] = v[i] if shown else np.nan
     cam_held = holds_cam(cfg)
@@ -364,7 +365,7 @@ def _sample(cases, trains, profiles, runs, out, ws, st, nact, x, cth, sth):
             acc7 = _free_acceleration(ws.VY, ws.MC, ws.Z, ws.ZT, nf + k, nact, x, cth, sth, w, deg)
     _write_sample(
         out, c, st.k_out, q, v, ws.gval, profiles.poly, profiles.trig, st.cfg, st.p, x, cth,
-        sth, w, runs.full_state, acc1, acc7,
+        sth, w, runs.full_state, acc1, acc7, trains.n_coordinates[tr],
     )  # fmt: skip
     st.k_out += 1
     if _out_of_bounds(cases, c, q, v):
@@ -923,7 +924,7 @@ def _impact(cases, trains, out, ws, st, seat, closing, t, vcam, lift):
         else:
             st.rest_seat = False
     new = configuration(True, other_held) if not seat else configuration(other_held, True)
-    for i in range(7):
+    for i in range(trains.n_coordinates[tr]):
         v[i] += trains.impulse[tr, new - 1, side, i] * dv
     if seat:
         q[SEAT] = cases.seat_q[c]
@@ -1022,7 +1023,7 @@ def _cross_break(cases, trains, profiles, out, ws, st):
                     seat_held = False
                     st.rest_seat = False
                 new = configuration(True, seat_held)
-                for i in range(7):
+                for i in range(trains.n_coordinates[tr]):
                     v[i] += trains.impulse[tr, new - 1, 0, i] * dv
                 if abs(jump) > cases.speed_bound[c]:
                     out.status[c] = UNBOUNDED
@@ -1046,7 +1047,7 @@ def _start_case(cases, trains, profiles, ws, st, c, tr):
     st.tr = tr
     st.w = cases.omega[c]
     st.eps_force = 1e-9 * (abs(trains.load[tr, 3]) + 1.0)
-    for i in range(7):
+    for i in range(trains.n_coordinates[tr]):
         ws.q[i] = cases.q0[c, i]
         ws.v[i] = cases.v0[c, i]
     st.cfg = cases.cfg0[c]
@@ -1092,7 +1093,7 @@ def modal_exact_batch(cases, trains, profiles, runs, out, ws, state):
                 out.status[c] = CHATTER
                 break
             finite = True
-            for i in range(7):
+            for i in range(trains.n_coordinates[st.tr]):
                 if not (np.isfinite(ws.q[i]) and np.isfinite(ws.v[i])):
                     finite = False
             if not finite:

@@ -1,15 +1,20 @@
-"""Member loads from the coordinates: forces in the bars, the spring, and rocker bending.
+"""Member loads and the valve spring's histories from the coordinates, and their per-turn
+extremes.
 
 Element end forces are Kₑ·β·q (thesis Eqs. 2, 7, 8); these are the histories a scene asks for
-(thesis Figures 37–39). Pure functions over arrays of any leading shape.
+(thesis Figures 37–39). A refined member's load is taken from the element at the thesis's
+place: the pushrod's and the stem's at their upper ends (q2, q4), the spring's on the rocker,
+the rocker's moment at the pivot on the valve side. Pure functions over arrays of any leading
+shape.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from campipe.model import ValveTrain
-from campipe.model.elements import elements
+from campipe.constants import TWO_PI
+from campipe.model import ValveTrain, spring_clash_margin, spring_element_forces
+from campipe.model.elements import Element, elements
 
 #: name → (long name, units)
 MEMBER_LOADS = {
@@ -18,10 +23,32 @@ MEMBER_LOADS = {
     "spring_force": ("valve spring force on the rocker, compressive positive", "N"),
     "rocker_moment": ("rocker arm bending moment at the pivot, valve side", "N m"),
 }
+#: The spring's histories besides ``spring_force`` (name → (long name, units)): with one
+#: element the largest element force is the spring force.
+SPRING_HISTORIES = {
+    "max_spring_element_force": (
+        "largest compressive force along the valve spring (its most loaded element)",
+        "N",
+    ),
+    "spring_clash_margin": (
+        "valve spring coil-clash margin: travel left before the most compressed element goes "
+        "solid, as a length of the whole spring",
+        "m",
+    ),
+}
+#: Turns [-] by which an output angle may fall short of a turn's start and still count to it
+#: (as the kernels' ``common.TURN_GUARD``).
+TURN_GUARD = 1e-9
+
+
+def _own(train: ValveTrain, q: np.ndarray) -> np.ndarray:
+    """q's first ``train.n_coordinates`` coordinates: a batch of larger trains pads the rest."""
+    return np.asarray(q, dtype=float)[..., : train.n_coordinates]
 
 
 def member_loads(train: ValveTrain, q: np.ndarray) -> dict[str, np.ndarray]:
-    """Member loads for coordinates ``q`` (..., 7) [m, rad] of ``train``.
+    """Member loads for coordinates ``q`` (..., n) [m, rad] of ``train`` (n ≥ its
+    coordinates, any beyond them ignored).
 
     Returns
     -------
@@ -29,18 +56,45 @@ def member_loads(train: ValveTrain, q: np.ndarray) -> dict[str, np.ndarray]:
         ``pushrod_force``, ``stem_force``, ``spring_force`` [N] and ``rocker_moment`` [N·m],
         each of q's leading shape.
     """
-    q = np.asarray(q, dtype=float)
-    by_name = {e.name: e for e in elements(train)}
+    q = _own(train, q)
+    members: dict[str, list[Element]] = {}
+    for e in elements(train):
+        members.setdefault(e.name, []).append(e)
 
-    def end_forces(name: str) -> np.ndarray:
-        e = by_name[name]
+    def end_forces(e: Element) -> np.ndarray:
         return q @ (e.stiffness @ e.beta).T  # (..., n_e): forces on the element's ends
 
     # Axial elements use (lower, upper) measured upward: the upper end force is the tension.
     return {
-        "pushrod_force": -end_forces("pushrod")[..., 1],
-        "stem_force": -end_forces("valve_stem")[..., 1],
-        "spring_force": train.spring_preload - end_forces("spring")[..., 1],
-        # The rocker's valve arm starts at the pivot: its θ1 end moment.
-        "rocker_moment": end_forces("rocker_valve_arm")[..., 2],
+        "pushrod_force": -end_forces(members["pushrod"][-1])[..., 1],
+        "stem_force": -end_forces(members["valve_stem"][-1])[..., 1],
+        "spring_force": train.spring_preload - end_forces(members["spring"][-1])[..., 1],
+        # The rocker's valve arm starts at the pivot: its first element's θ1 end moment.
+        "rocker_moment": end_forces(members["rocker_valve_arm"][0])[..., 2],
     }
+
+
+def spring_histories(train: ValveTrain, q: np.ndarray) -> dict[str, np.ndarray]:
+    """The spring's largest element force [N] and its coil-clash margin [m]
+    (``campipe.model.spring_element_forces``, ``spring_clash_margin``) for coordinates ``q``
+    (..., n) of ``train``, each of q's leading shape."""
+    q = _own(train, q)
+    return {
+        "max_spring_element_force": spring_element_forces(train, q).max(axis=-1),
+        "spring_clash_margin": spring_clash_margin(train, q),
+    }
+
+
+def per_turn(history: np.ndarray, cam_angle: np.ndarray, n_rev: int, how: str) -> np.ndarray:
+    """Each turn's largest (``how`` "max") or least ("min") value of a history sampled at the
+    output angles ``cam_angle`` (n_out,) [rad]: (..., n_out) → (..., n_rev). A sample on a
+    turn's start counts to that turn; the run's last sample (the end of its last turn) to the
+    last turn. NaN where a turn has no sample or a failed case's history is NaN."""
+    turn = np.minimum(np.floor(cam_angle / TWO_PI + TURN_GUARD).astype(np.int64), n_rev - 1)
+    reduce = np.max if how == "max" else np.min
+    out = np.full((*history.shape[:-1], n_rev), np.nan)
+    for r in range(n_rev):
+        take = turn == r
+        if take.any():
+            out[..., r] = reduce(history[..., take], axis=-1)
+    return out

@@ -41,9 +41,17 @@ from scipy.linalg import lapack
 
 from campipe.errors import CampipeError
 from campipe.model.assembly import SystemMatrices
-from campipe.vocabulary import CAM, CAM_CONTACT, CONFIGURATIONS, CONTACTS, SEAT, SEATED
+from campipe.vocabulary import (
+    CAM,
+    CAM_CONTACT,
+    CONFIGURATIONS,
+    CONTACTS,
+    SEAT,
+    SEATED,
+    free_coordinates,
+)
 
-NS = 14  # padded state size: 2 × 7 free coordinates (configuration II)
+NS = 14  # the thesis train's state size: 2 × 7 free coordinates (configuration II)
 # Index hc of the held-coordinate axes below follows vocabulary.CONTACTS: 0 the cam, 1 the seat.
 #: Two real eigenvalues closer than this (relative) share a 2×2 block: their eigenvectors
 #: are nearly parallel (a mode near critical damping), the block's basis is not.
@@ -59,13 +67,15 @@ class DefectiveModesError(CampipeError, ValueError):
 
 @dataclass(frozen=True)
 class ModalData:
-    """Per-configuration closed-form data of one train, padded to NS states.
+    """Per-configuration closed-form data of one train of n coordinates, padded to its
+    configuration II's ns = 2n states (NS = 14 for the thesis's seven coordinates; a batch
+    pads every train's to its largest, ``pad_stack``).
 
     Index 0–3 of the leading axis is configuration I–IV; blocks are ordered fastest first.
     """
 
     n_free: np.ndarray  # (4,) int: free coordinates; the state has 2·n_free entries
-    free: np.ndarray  # (4, 7) int: the free coordinates in order, −1 padded
+    free: np.ndarray  # (4, n) int: the free coordinates in order, −1 padded
     eigenvalues: np.ndarray  # (4, NS) complex eigenvalues of A [1/s] (for reports)
     a_mat: np.ndarray  # (4, NS, NS) real state matrix A [1/s]
     a_inv: np.ndarray  # (4, NS, NS) real A⁻¹ [s]
@@ -74,7 +84,7 @@ class ModalData:
     rho: np.ndarray  # (4, 2, NS) contact-force rows on the state, for (q1, q7)
     sigma: np.ndarray  # (4, 2, 3, 2) contact-force coefficients on the held inputs
     sigma0: np.ndarray  # (4, 2) constant part of the contact forces [N]
-    impulse: np.ndarray  # (4, 2, 7) Δv of each coordinate per unit Δv of a held one
+    impulse: np.ndarray  # (4, 2, n) Δv of each coordinate per unit Δv of a held one
     n_blocks: np.ndarray  # (4,) int: blocks of the real block-diagonal form
     bstart: np.ndarray  # (4, NS) int: first basis column of block b
     bdim: np.ndarray  # (4, NS) int: 1 or 2
@@ -197,36 +207,38 @@ def modal_data(sm: SystemMatrices) -> ModalData:
         conditioned worse than MAX_CONDITION.
     """
     M, C, K, f = sm.mass, sm.damping, sm.stiffness, sm.preload
+    n = M.shape[0]
+    size = 2 * n  # the state size of configuration II, which pads the others'
     out = {
         "n_free": np.zeros(4, np.int64),
-        "free": np.full((4, 7), -1, np.int64),
-        "eigenvalues": np.zeros((4, NS), complex),
-        "a_mat": np.zeros((4, NS, NS)),
-        "a_inv": np.zeros((4, NS, NS)),
-        "b_in": np.zeros((4, NS, 3, 2)),
-        "b_load": np.zeros((4, NS)),
-        "rho": np.zeros((4, 2, NS)),
+        "free": np.full((4, n), -1, np.int64),
+        "eigenvalues": np.zeros((4, size), complex),
+        "a_mat": np.zeros((4, size, size)),
+        "a_inv": np.zeros((4, size, size)),
+        "b_in": np.zeros((4, size, 3, 2)),
+        "b_load": np.zeros((4, size)),
+        "rho": np.zeros((4, 2, size)),
         "sigma": np.zeros((4, 2, 3, 2)),
         "sigma0": np.zeros((4, 2)),
-        "impulse": np.zeros((4, 2, 7)),
+        "impulse": np.zeros((4, 2, n)),
         "n_blocks": np.zeros(4, np.int64),
-        "bstart": np.zeros((4, NS), np.int64),
-        "bdim": np.zeros((4, NS), np.int64),
-        "lam_bar": np.zeros((4, NS)),
-        "delta2": np.zeros((4, NS)),
-        "rate": np.zeros((4, NS)),
-        "speed": np.zeros((4, NS)),
-        "basis": np.zeros((4, NS, NS)),
-        "basis_inv": np.zeros((4, NS, NS)),
-        "basis_n": np.zeros((4, NS, NS)),
-        "block_n": np.zeros((4, NS, NS)),
-        "rho_x": np.zeros((4, 2, NS)),
-        "rho_xn": np.zeros((4, 2, NS)),
+        "bstart": np.zeros((4, size), np.int64),
+        "bdim": np.zeros((4, size), np.int64),
+        "lam_bar": np.zeros((4, size)),
+        "delta2": np.zeros((4, size)),
+        "rate": np.zeros((4, size)),
+        "speed": np.zeros((4, size)),
+        "basis": np.zeros((4, size, size)),
+        "basis_inv": np.zeros((4, size, size)),
+        "basis_n": np.zeros((4, size, size)),
+        "block_n": np.zeros((4, size, size)),
+        "rho_x": np.zeros((4, 2, size)),
+        "rho_xn": np.zeros((4, 2, size)),
         "hold": np.zeros((4, 2)),
         "separation": np.zeros(2),
     }
-    for ci, cfg in enumerate((1, 2, 3, 4)):
-        fr = np.array(CONFIGURATIONS[cfg].free)
+    for ci, cfg in enumerate(CONFIGURATIONS):
+        fr = np.array(free_coordinates(cfg, n))
         nf = fr.size
         ns = 2 * nf
         mff_inv = np.linalg.inv(M[np.ix_(fr, fr)])
@@ -301,15 +313,16 @@ def modal_data(sm: SystemMatrices) -> ModalData:
 
 @njit(cache=True, nogil=True)
 def harmonic_responses(train, n_free, a_mat, b_in, omega):
-    """(n, 4, NS) complex ζ per case: the particular solution for a cam harmonic
-    Re(β e^{iθ}) of the lift is Z_T = β·ζ, with θ = ωt (configurations I and III hold the cam).
+    """(n, 4, ns) complex ζ per case (ns the padded state size of ``a_mat``): the particular
+    solution for a cam harmonic Re(β e^{iθ}) of the lift is Z_T = β·ζ, with θ = ωt
+    (configurations I and III hold the cam).
 
     The cam coordinate is q1 = −lift, so (q1, q̇1, q̈1) = Re(β (−1, −iω, ω²) e^{iθ}) and
     (iωI − A) ζ = −b_q − iω b_v + ω² b_a.  Arrays as ``ModalData`` with a leading train axis;
     case c runs train ``train[c]`` at speed ``omega[c]``.
     """
     n = omega.shape[0]
-    out = np.zeros((n, 4, NS), np.complex128)
+    out = np.zeros((n, 4, a_mat.shape[2]), np.complex128)
     for c in range(n):
         w = omega[c]
         t = train[c]
@@ -329,4 +342,17 @@ def harmonic_responses(train, n_free, a_mat, b_in, omega):
             sol = np.linalg.solve(mat, rhs)
             for s in range(ns):
                 out[c, ci, s] = sol[s]
+    return out
+
+
+def pad_stack(arrays: list[np.ndarray], fill=0) -> np.ndarray:
+    """Stack arrays of one field of several trains' ``ModalData`` along a new leading axis,
+    each padded at the end of every axis to the largest size there (trains of more
+    coordinates have longer coordinate and state axes) with ``fill``. A train's numbers are
+    unchanged by the padding: the kernels loop over its own sizes (``n_free``)."""
+    shape = tuple(max(a.shape[k] for a in arrays) for k in range(arrays[0].ndim))
+    out = np.full((len(arrays), *shape), fill, dtype=arrays[0].dtype)
+    for i, a in enumerate(arrays):
+        region: tuple[int | slice, ...] = (i, *(slice(0, m) for m in a.shape))
+        out[region] = a
     return out

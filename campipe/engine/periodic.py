@@ -24,22 +24,22 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from campipe.constants import TWO_PI
+from campipe.constants import RPM, TWO_PI
 from campipe.engine import steady
 from campipe.engine.batch import (
     Case,
     CaseError,
     RunSettings,
-    _matrices,
-    _modal,
-    _unique_trains,
     check_run,
     run_batch,
+    train_matrices,
+    train_modal,
+    unique_trains,
     valve_reference,
 )
-from campipe.engine.closed_form import STATE, ExactRuns, ModalTrains, make_workspace
+from campipe.engine.closed_form import STATE, ExactRuns, ModalTrains, make_workspace, stack_trains
 from campipe.engine.common import Cases
-from campipe.engine.modal import NS, ModalData
+from campipe.engine.modal import ModalData
 from campipe.model import ValveTrain
 from campipe.model.assembly import preload_vector
 from campipe.profiles import pack
@@ -60,17 +60,16 @@ SCAN_SPEEDS = 33
 DEFAULT_ONSET_TOLERANCE_RPM = 0.1
 CONFIRM_OFFSET = 0.005
 CONFIRM_TURNS = 4
-RPM = TWO_PI / 60.0  # [rad/s] per rpm
 
 
 # --------------------------------------------------------------------------- packing
 
 
 def _modal_at_preload(train: ValveTrain) -> ModalData:
-    """The closed-form data of a train, its modes shared by every preload (``batch._modal``
+    """The closed-form data of a train, its modes shared by every preload (``batch.train_modal``
     caches them): the preload only enters the constant forcing and the contact forces'
     constant part, linearly."""
-    unit = _modal(train.replace(spring_preload=1.0))
+    unit = train_modal(train.replace(spring_preload=1.0))
     p = train.spring_preload
     return dataclasses.replace(unit, b_load=unit.b_load * p, sigma0=unit.sigma0 * p)
 
@@ -98,8 +97,9 @@ class _SteadyBatch:
         if active is None:
             active = np.ones(omega.size, np.bool_)
         steady.steady_extremes(
-            self.cases, self.trains, self.packed, self.runs, make_workspace(),
-            np.zeros(1, STATE), self.z_turn, with_max, active, out,
+            self.cases, self.trains, self.packed, self.runs,
+            make_workspace(self.trains.load.shape[1]), np.zeros(1, STATE), self.z_turn,
+            with_max, active, out,
         )  # fmt: skip
         return out
 
@@ -115,23 +115,21 @@ def _prepare(cases: Sequence[Case], *, need_reference: bool = False) -> _SteadyB
             expected="rigid contacts",
         )
     n = len(cases)
-    trains, which = _unique_trains(cases)
+    trains, which = unique_trains(cases)
     data = [_modal_at_preload(t) for t in trains]
     has_seat = np.array([c.has_seat for c in cases], dtype=np.bool_)
     matrices: list = [None] * len(trains)
     seated_trains = set(which[has_seat].tolist())
     for k, t in enumerate(trains):
         if need_reference or k in seated_trains:
-            matrices[k] = _matrices(t)
+            matrices[k] = train_matrices(t)
     qref = np.array([valve_reference(matrices[k]) if matrices[k] else 0.0 for k in which])
-    modal_trains = ModalTrains(
-        load=np.stack([preload_vector(t) for t in trains]),
-        **{f: np.stack([getattr(d, f) for d in data]) for f in ModalTrains._fields if f != "load"},
-    )
+    modal_trains = stack_trains(data, [preload_vector(t) for t in trains])
+    n_q = modal_trains.load.shape[1]  # the batch's most coordinates
     packed = pack([c.profile for c in cases])
     zeros = np.zeros(n)
     runs = ExactRuns(
-        train=which, t_sample=zeros, t_end=zeros, zeta=np.zeros((n, 4, NS), np.complex128),
+        train=which, t_sample=zeros, t_end=zeros, zeta=np.zeros((n, 4, 2 * n_q), np.complex128),
         dt_cap=0.0, tolerance=1e-12, full_state=True,
     )  # fmt: skip
     state = Cases(
@@ -139,12 +137,12 @@ def _prepare(cases: Sequence[Case], *, need_reference: bool = False) -> _SteadyB
         seat_q=qref + np.where(has_seat, [c.seat for c in cases], 0.0),
         has_seat=has_seat,
         form=np.array([c.closure == "form" for c in cases], dtype=np.bool_),
-        t0=zeros, q0=np.zeros((n, 7)), v0=np.zeros((n, 7)), a0=np.zeros((n, 7)),
+        t0=zeros, q0=np.zeros((n, n_q)), v0=np.zeros((n, n_q)), a0=np.zeros((n, n_q)),
         cfg0=np.full(n, CAM_CONTACT, np.int64), meff=np.zeros((n, 4)),
         separation=np.zeros((n, 2)), hold=np.zeros((n, 4, 2)), capture=zeros,
         valve_ref=qref, lift_bound=zeros, speed_bound=zeros,
     )  # fmt: skip
-    z_turn = np.zeros((n, packed.n_pieces.max() + 1, NS))
+    z_turn = np.zeros((n, packed.n_pieces.max() + 1, 2 * n_q))
     return _SteadyBatch(state, modal_trains, packed, runs, z_turn, matrices, which)
 
 
@@ -194,8 +192,8 @@ class SteadyState:
     histories of one turn)."""
 
     cam_angle: np.ndarray  # (n_out,) [rad], 0 … 2π
-    q: np.ndarray  # (n, n_out, 7) [m, rad]
-    v: np.ndarray  # (n, n_out, 7) [m/s, rad/s]
+    q: np.ndarray  # (n, n_out, n_q) [m, rad] (n_q: the most coordinates; NaN beyond a train's)
+    v: np.ndarray  # (n, n_out, n_q) [m/s, rad/s]
     acc: np.ndarray  # (n, n_out, 2) accelerations of q1 and q7 [m/s²]
     cam_force: np.ndarray  # (n, n_out) cam compression [N]
     valve_reference: np.ndarray  # (n,) q7 at zero valve lift [m]
@@ -248,12 +246,13 @@ def steady_state(cases: Sequence[Case], output_every: float = math.radians(1.0))
     n_out = int(math.floor(TWO_PI / output_every + 1e-9)) + 1
     angles = np.minimum(np.arange(n_out) * output_every, TWO_PI)
     n = len(cases)
-    q = np.empty((n, n_out, 7))
-    v = np.empty((n, n_out, 7))
+    n_q = batch.trains.load.shape[1]
+    q = np.full((n, n_out, n_q), np.nan)
+    v = np.full((n, n_out, n_q), np.nan)
     acc = np.empty((n, n_out, 2))
     force = np.empty((n, n_out))
     steady.steady_samples(
-        batch.cases, batch.trains, batch.packed, batch.runs, make_workspace(),
+        batch.cases, batch.trains, batch.packed, batch.runs, make_workspace(n_q),
         np.zeros(1, STATE), batch.z_turn, angles, np.ones(n, np.bool_), q, v, acc, force,
     )  # fmt: skip
     return SteadyState(angles, q, v, acc, force, batch.cases.valve_ref.copy(), ext)

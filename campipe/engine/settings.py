@@ -16,10 +16,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from campipe.errors import CampipeError
-from campipe.model import ValveTrain, system_matrices
+from campipe.model import ValveTrain, lash_seat, system_matrices
 from campipe.model.assembly import NEWMARK_LINEAR_OMEGA_DT, configuration_frequencies
 from campipe.profiles import Profile
-from campipe.vocabulary import ROMAN
+from campipe.vocabulary import CAM_AND_SEAT, CAM_CONTACT, CONFIGURATIONS, FREE, N_COORDINATES, ROMAN
 
 #: The integrators of rigid contacts (the thesis's) by name; ``default`` in a spec means
 #: DEFAULT_INTEGRATOR, or COMPLIANT for a case with a compliant contact law
@@ -43,10 +43,10 @@ DEFAULT_STEPS: dict[str, float | None] = {
 CLOSURES = ("force", "form")
 #: Model fidelity of a run: "full", every case through its events with every mode. The
 #: levels below it were measured and removed because they did not pay (docs/bench.md, "Model
-#: only what a scene needs"): "reduced" (the upper modes quasi-static between events) saved
-#: 4–24 % for valve-lift errors of 1e-5 to 1e-1 in and changed the event sequence of up to a
-#: third of seated cases; a closed-form "steady" level cost as much as integrating, the
-#: samples being the cost. The steady state's own path is ``engine.periodic``.
+#: only what a scene needs"; the CHANGELOG has the figures): "reduced" (the upper modes
+#: quasi-static between events) saved little for its error and changed the event sequence of
+#: many seated cases; a closed-form "steady" level cost as much as integrating, the samples
+#: being the cost. The steady state's own path is ``engine.periodic``.
 FIDELITIES = ("full",)
 REMOVED_FIDELITIES = {"reduced": "it saved at most a fifth of the time for errors up to 0.1 in"}
 #: How a run starts: on the periodic steady state of configuration I (``engine.steady``), or
@@ -119,6 +119,21 @@ class Case:
     speed: float  # cam speed [rad/s]
     seat: float = math.nan  # seat position as a valve lift [m]; NaN: no seat
     closure: str = "force"  # "force": spring-held, may separate; "form": never leaves the cam
+
+    def __post_init__(self) -> None:
+        lash = getattr(self.train, "lash", math.nan)
+        if math.isnan(lash):
+            return
+        seat = lash_seat(system_matrices(self.train), lash)
+        if not math.isnan(self.seat) and self.seat != seat:
+            raise CaseError.at(
+                "seat",
+                f"a seat at {self.seat:.6g} m beside a train's lash of {lash:.6g} m (which "
+                f"places it at {seat:.6g} m); give one of them",
+                found=self.seat,
+                expected="no seat (NaN), or a train without lash",
+            )
+        object.__setattr__(self, "seat", seat)  # the lash places the seat
 
     @property
     def has_seat(self) -> bool:
@@ -195,15 +210,15 @@ def configuration_omega_max(train: ValveTrain) -> np.ndarray:
     """(4,) the highest natural frequency of each configuration I–IV [rad/s]."""
     sm = system_matrices(train)
     return np.array(
-        [configuration_frequencies(sm.mass, sm.stiffness, c).max() for c in (1, 2, 3, 4)]
+        [configuration_frequencies(sm.mass, sm.stiffness, c).max() for c in CONFIGURATIONS]
     )
 
 
 def visited_configurations(case: Case) -> tuple[int, ...]:
     """The configurations a case can reach: no seat keeps it in I/II; form closure in I/III."""
     if case.closure == "form":
-        return (1, 3) if case.has_seat else (1,)
-    return (1, 2, 3, 4) if case.has_seat else (1, 2)
+        return (CAM_CONTACT, CAM_AND_SEAT) if case.has_seat else (CAM_CONTACT,)
+    return tuple(CONFIGURATIONS) if case.has_seat else (CAM_CONTACT, FREE)
 
 
 def _newmark_limit(case: Case) -> tuple[float, int]:
@@ -253,11 +268,36 @@ def output_angles(settings: RunSettings) -> np.ndarray:
     return np.arange(n) * settings.output_every
 
 
+def check_coordinates(cases: Sequence[Case], settings: RunSettings) -> None:
+    """newmark-linear runs the thesis's seven coordinates only: a train with refined members
+    (``<member>_elements`` > 1) is refused at ``run.integrator``, naming modal-exact, which
+    runs any number.
+
+    Raises
+    ------
+    RunSettingsError
+        Key ``run.integrator``.
+    """
+    if settings.method != "newmark-linear":
+        return
+    refined = sorted({c.train.n_coordinates for c in cases} - {N_COORDINATES})
+    if refined:
+        raise RunSettingsError.at(
+            "run.integrator",
+            f"newmark-linear integrates the thesis's {N_COORDINATES} coordinates only, found "
+            f"a train of {refined[-1]} (refined members, <member>_elements > 1); integrate it "
+            "with run.integrator: modal-exact",
+            found=refined,
+            expected=f"{N_COORDINATES} coordinates, or run.integrator: modal-exact",
+        )
+
+
 def check_run(
     cases: Sequence[Case], settings: RunSettings, *, check_stability_limit: bool = True
 ) -> None:
     """Everything ``run_batch`` refuses, checked without running: an unknown integrator or
-    fidelity, a non-positive step or tolerance, an unknown closure, a non-positive speed, a
+    fidelity, a non-positive step or tolerance, an unknown closure, a non-positive speed,
+    newmark-linear on a train of refined members (more than seven coordinates), a
     newmark-linear step beyond the stability limit.
 
     Raises
@@ -299,6 +339,7 @@ def check_run(
                 expected="> 0 rad/s",
             )
     check_contacts(cases, settings)
+    check_coordinates(cases, settings)
     if check_stability_limit:
         check_stability(cases, settings)
 

@@ -42,7 +42,6 @@ from campipe.engine.closed_form import (
     particular,
 )
 from campipe.engine.common import KERNEL
-from campipe.engine.modal import NS
 from campipe.profiles.packed import evaluate_packed, horner, piece_eval
 from campipe.vocabulary import CAM, CAM_CONTACT, SEAT
 
@@ -225,7 +224,7 @@ def _harmonic_response(trains, runs, ws, st):
             a1 = y[i0 + 1]
             y[i0] = ((sl + n[tr, ci, i0, i0]) * a0 + n[tr, ci, i0, i0 + 1] * a1) / den
             y[i0 + 1] = (n[tr, ci, i0 + 1, i0] * a0 + (sl + n[tr, ci, i0 + 1, i0 + 1]) * a1) / den
-    for s in range(NS):
+    for s in range(runs.zeta.shape[2]):
         acc = 0.0j
         if s < ns:
             for j in range(ns):
@@ -247,7 +246,7 @@ def _begin_case(cases, trains, runs, st, c):
 
 @njit(inline="always", nogil=True)
 def _periodic_turn(cases, trains, profiles, runs, ws, st, zt):
-    """The periodic state of configuration I at each break of the turn: zt (P + 1, NS), row P
+    """The periodic state of configuration I at each break of the turn: zt (P + 1, ns), row P
     (at 2π) the same as row 0. z(0) = (I − e^{AT})⁻¹ b, b the turn's response from rest."""
     tr, ci, ns = st.tr, st.cfg - 1, st.ns
     n_p = profiles.n_pieces[st.c]
@@ -294,11 +293,11 @@ def periodic_starts(cases, trains, profiles, runs, ws, state, snap, z_turn, t_st
         As ``exact.modal_exact_batch``'s (``cases.t0``, ``q0``, ``v0`` are not read).
     snap : (n,) float
         A step [s] the start must be a whole number of (newmark-linear's), or 0.
-    z_turn : (n, P + 1, NS)
+    z_turn : (n, P + 1, ns)
         Out: the periodic state at each break of the turn (row P: at 2π, the same as row 0).
     t_start : (n,)
         Out: the start time [s], ≤ 0; NaN where configuration I holds nowhere on the turn.
-    q, v : (n, 7)
+    q, v : (n, n_coordinates)
         Out: the coordinates and velocities there [m, m/s, rad, rad/s].
     """
     st = state[0]
@@ -315,7 +314,7 @@ def periodic_starts(cases, trains, profiles, runs, ws, state, snap, z_turn, t_st
             p = _piece_of(profiles, c, theta_s)
             _state_in_piece(cases, trains, profiles, runs, ws, st, p, z_turn[c, p], theta_s, z)
             lift, dlift, _ = evaluate_packed(profiles, c, theta_s)
-            for i in range(7):
+            for i in range(q.shape[1]):
                 q[c, i] = 0.0
                 v[c, i] = 0.0
             for k in range(st.nf):
@@ -530,7 +529,7 @@ def steady_extremes(cases, trains, profiles, runs, ws, state, z_turn, with_max, 
     cases, trains, profiles, runs, ws, state
         As ``periodic_starts``'s; ``runs.zeta[:, 0]`` is overwritten with configuration I's
         harmonic responses at each case's speed.
-    z_turn : (n, P + 1, NS)
+    z_turn : (n, P + 1, ns)
         Out: the periodic state at each break of the turn.
     with_max : bool
         Also find the largest compression (else MAX_FORCE is NaN).
@@ -590,7 +589,7 @@ def steady_samples(cases, trains, profiles, runs, ws, state, z_turn, angles, act
                    force):  # fmt: skip
     """Configuration I's periodic state at the cam angles ``angles`` (n_out,) in [0, 2π],
     ascending, for the ``active`` cases, whose ``z_turn`` and ``runs.zeta``
-    ``steady_extremes`` has filled: q, v (n, n_out, 7) [m, rad, m/s, rad/s], the
+    ``steady_extremes`` has filled: q, v (n, n_out, n) [m, rad, m/s, rad/s], the
     accelerations of q1 and q7 (n, n_out, 2) [m/s²] and the cam's compression (n, n_out) [N]."""
     st = state[0]
     for c in range(cases.omega.shape[0]):

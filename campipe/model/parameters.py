@@ -78,6 +78,7 @@ class Parameter:
     choices: tuple[str, ...] = ()  # the words a choice takes (units then "")
     default: object = None  # the value (spec form) where neither preset nor override gives one
     maximum: float = math.inf  # largest allowed value (counts: the matrices stay small)
+    allow_none: bool = False  # "none" (or null) accepted, meaning absent: NaN in SI
 
     @property
     def continuous(self) -> bool:
@@ -247,6 +248,17 @@ PARAMETERS: dict[str, Parameter] = {
         ),
         *_refinement_parameters(),
         Parameter(
+            "lash",
+            "clearance between the cam's base circle and the follower with the valve seated "
+            "(none: the case's seat decides); it places the seat (campipe.model.lash_seat)",
+            "m",
+            "in",
+            0.0,
+            exclusive_minimum=False,
+            default="none",
+            allow_none=True,
+        ),
+        Parameter(
             "spring_travel_to_solid",
             "valve spring compression from its installed length to solid (coil clash)",
             "m",
@@ -336,6 +348,7 @@ class ValveTrain:
     rocker_valve_arm_elements: int  # [-]
     spring_elements: int  # [-]
     valve_stem_elements: int  # [-]
+    lash: float  # [m] cam-side clearance of a seated train; NaN: none (the case's seat)
     spring_travel_to_solid: float  # [m] installed length minus solid length
     damping_kind: str  # one of DAMPING_KINDS
     rayleigh_alpha: float  # [1/s] C = α·M + β·K
@@ -412,6 +425,8 @@ def parse_parameter(
             expected="a model parameter",
         )
     p = PARAMETERS[name]
+    if p.allow_none and (value is None or value == "none"):
+        return math.nan
     if p.choices:
         return _choice(p, value, key)
     if p.integer:
@@ -571,6 +586,12 @@ def _default_values() -> dict[str, object]:
     return {name: parse_parameter(name, v) for name, v in DEFAULTS.items()}
 
 
+def _same(a: object, b: object) -> bool:
+    """Equal values, NaN (none) equal to NaN."""
+    nan = isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b)
+    return nan or a == b
+
+
 def defining_values(train: ValveTrain) -> dict[str, object]:
     """Parameter name → SI value of the parameters that set ``train`` apart: all of them, but
     a parameter declared with a default is left out at its default (a study's case ids hash
@@ -579,7 +600,7 @@ def defining_values(train: ValveTrain) -> dict[str, object]:
     for name in PARAMETERS:
         value = getattr(train, name)
         defaults = _default_values()
-        if name not in defaults or value != defaults[name]:
+        if name not in defaults or not _same(value, defaults[name]):
             out[name] = value
     return out
 

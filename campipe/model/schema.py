@@ -37,11 +37,14 @@ def parameter_schema(name: str) -> dict[str, object]:
         }
     if not p.units:
         return {**number, "description": p.long_name}
-    return {
-        "type": "string",
-        "pattern": QUANTITY_PATTERN,
-        "description": f"{p.long_name}, a quantity with units, e.g. '1 {p.thesis_units}'",
-    }
+    quantity = {"type": "string", "pattern": QUANTITY_PATTERN}
+    example = f"a quantity with units, e.g. '1 {p.thesis_units}'"
+    if p.allow_none:
+        return {
+            "anyOf": [quantity, {"const": "none"}, {"type": "null"}],
+            "description": f"{p.long_name}; {example}, or none",
+        }
+    return {**quantity, "description": f"{p.long_name}, {example}"}
 
 
 def model_schema() -> dict[str, object]:

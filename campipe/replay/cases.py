@@ -42,6 +42,7 @@ from campipe.study.query import case_table, replay_mask, select
 from campipe.study.results import BatchData, BatchPlan
 from campipe.study.spec import SpecError, check_spec
 from campipe.study.variables import VARIABLES, case_coordinates, data_variables
+from campipe.vocabulary import N_COORDINATES
 
 log = logging.getLogger(__name__)
 
@@ -346,7 +347,8 @@ def _column_value(p: Parameter, value: Any, units: str) -> object:
 
 def regain_q(resolved: Sequence[ResolvedCase]) -> list[tuple[np.ndarray, np.ndarray]]:
     """Run resolved cases through the engine again (one batch per run-settings group):
-    each case's (q [m, rad], valve lift [m]) at the output angles."""
+    each case's (q1 … q7 [m, rad], valve lift [m]) at the output angles (a refined member's
+    internal coordinates are not drawn)."""
     groups: dict[RunSettings, list[int]] = {}
     for i, rc in enumerate(resolved):
         groups.setdefault(rc.settings, []).append(i)
@@ -354,7 +356,7 @@ def regain_q(resolved: Sequence[ResolvedCase]) -> list[tuple[np.ndarray, np.ndar
     for settings, idx in groups.items():
         result = run_batch([resolved[i].case for i in idx], settings)
         for k, i in enumerate(idx):
-            out[i] = (result.q[k], result.valve_lift[k])
+            out[i] = (result.q[k, :, :N_COORDINATES], result.valve_lift[k])
     return out
 
 

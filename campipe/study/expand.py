@@ -28,15 +28,20 @@ import numpy as np
 
 from campipe.constants import INCH
 from campipe.engine import Case, CaseError, RunSettings, RunSettingsError
-from campipe.engine.settings import case_integrator, check_contacts, check_stability
+from campipe.engine.settings import (
+    case_integrator,
+    check_contacts,
+    check_coordinates,
+    check_stability,
+)
 from campipe.errors import did_you_mean, excerpt
 from campipe.io.lift_table import LiftTableError, read_lift_table, table_digest
 from campipe.model import (
-    ELEMENTS,
     PARAMETERS,
     ModelParameterError,
     ValveTrain,
     defining_values,
+    lash_seat,
     system_matrices,
     valve_train,
 )
@@ -260,18 +265,7 @@ def _train(preset: str, overrides: tuple) -> ValveTrain:
 
 def check_train(train: ValveTrain) -> None:
     """The train's matrices and natural frequencies are finite and positive: parameters
-    far out of range (a spring rate of 1e300 lbf/in) are refused here, not by the engine.
-    A train with refined members is refused until the engine runs more than q1 … q7."""
-    refined = [m for m in ELEMENTS if train.elements_of(m) > 1]
-    if refined:
-        raise SpecProblem(
-            f"model.{refined[0]}_elements",
-            f"found {train.elements_of(refined[0])}, expected 1: the engine does not yet run "
-            "refined members (more coordinates than the thesis's seven); `campipe model "
-            "--set ...` shows their matrices and frequencies",
-            found=train.elements_of(refined[0]),
-            expected="1",
-        )
+    far out of range (a spring rate of 1e300 lbf/in) are refused here, not by the engine."""
     try:
         sm = system_matrices(train)
         ok = all(
@@ -447,15 +441,32 @@ def resolve(raw: Mapping, index: int, directory: Path) -> ResolvedCase:
     speed = _parse("speed", _freeze(raw["speed"]), "speed")
     seat = _parse("seat", _freeze(raw["seat"]), "seat")
     closure = _parse("closure", raw["closure"], "closure")
-    if seat is not None:
-        ratio = train.rocker_valve_arm_length / train.rocker_pushrod_arm_length
-        if seat >= full * ratio:
+    ratio = train.rocker_valve_arm_length / train.rocker_pushrod_arm_length
+    if not math.isnan(train.lash):
+        if seat is not None:
             raise SpecProblem(
                 "seat",
-                f"found {excerpt(raw['seat'])}, expected a valve lift below "
-                f"the full valve lift {full * ratio / INCH:.4g} in (cam lift "
-                f"{full / INCH:.4g} in × rocker ratio {ratio:.4g}): above it "
-                "the valve never leaves its seat",
+                f"found {excerpt(raw['seat'])} beside model.lash "
+                f"{train.lash / INCH:.4g} in: the lash places the seat; give one of them "
+                "(seat: none, or model.lash: none)",
+            )
+        seat = lash_seat(system_matrices(train), train.lash)
+    if seat is not None:
+        if seat >= full * ratio:
+            raise (
+                SpecProblem(
+                    "seat",
+                    f"found {excerpt(raw['seat'])}, expected a valve lift below "
+                    f"the full valve lift {full * ratio / INCH:.4g} in (cam lift "
+                    f"{full / INCH:.4g} in × rocker ratio {ratio:.4g}): above it "
+                    "the valve never leaves its seat",
+                )
+                if math.isnan(train.lash)
+                else SpecProblem(
+                    "model.lash",
+                    f"found {train.lash / INCH:.4g} in, expected less than the cam's full lift "
+                    f"{full / INCH:.4g} in: the follower would never reach the rocker",
+                )
             )
     run = raw["run"]
     rs = {k: _parse(f"run.{k}", _freeze(v), f"run.{k}") for k, v in run.items() if k != "record"}
@@ -465,6 +476,7 @@ def resolve(raw: Mapping, index: int, directory: Path) -> ResolvedCase:
     case = Case(train, profile, speed, math.nan if seat is None else seat, closure)
     try:
         check_contacts([case], settings)
+        check_coordinates([case], settings)
         check_stability([case], settings)
     except RunSettingsError as exc:
         raise SpecProblem.from_error(exc) from None

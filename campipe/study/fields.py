@@ -19,7 +19,8 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
-from campipe.engine import MEMBER_LOADS, RunSettings
+from campipe.constants import RPM
+from campipe.engine import MEMBER_LOADS, SPRING_HISTORIES, RunSettings
 from campipe.engine import settings as _engine_settings
 from campipe.engine.settings import ALL_INTEGRATORS
 from campipe.errors import CampipeError, did_you_mean, excerpt
@@ -29,7 +30,7 @@ from campipe.units import QuantityError, convert, parse_angular, parse_quantity
 
 #: Bounds of sense on a spec's quantities [SI]: beyond them the numbers overflow or the
 #: geometry stops meaning anything (a lift of a kilometre, a cam at a million rpm).
-MAX_SPEED = 1e6 * math.pi / 30  # [rad/s]: 1e6 rpm
+MAX_SPEED = 1e6 * RPM  # [rad/s]: 1e6 rpm
 MAX_LENGTH = 1.0  # [m]: lifts, seat positions, bump heights
 MAX_ANGLE = 4 * math.pi  # [rad]: defect angles, up to 720 deg (a flat may wrap past 360)
 
@@ -362,10 +363,19 @@ CASE_FIELDS: dict[str, Field] = {
         Field(
             "run.record",
             "record",
-            "optional histories to store: q (all seven coordinates), member_loads (all "
-            "member loads) or single member loads by name; contact_pressure: the peak Hertz "
-            "pressure at the cam and the seat per revolution",
-            choices=("q", "member_loads", *MEMBER_LOADS, "contact_pressure"),
+            "optional histories to store: q (the thesis's seven coordinates), member_loads "
+            "(all member loads) or single member loads by name, spring (the spring's force, "
+            "largest element force and coil-clash margin, and their per-revolution metrics) "
+            "or single spring histories by name; contact_pressure: the peak Hertz pressure "
+            "at the cam and the seat per revolution",
+            choices=(
+                "q",
+                "member_loads",
+                *MEMBER_LOADS,
+                "spring",
+                *SPRING_HISTORIES,
+                "contact_pressure",
+            ),  # fmt: skip
         ),
     ]
 }
@@ -586,6 +596,7 @@ def model_field(name: str) -> Field:
         example=p.thesis_units,
         minimum=p.minimum,
         exclusive_minimum=p.exclusive_minimum,
+        allow_none=p.allow_none,
         archive_name=name,
         archive_units=p.units,
     )

@@ -15,6 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from campipe.constants import RPM
 from campipe.engine import periodic
 from campipe.errors import CampipeError
 from campipe.io.archive import VariableSpec
@@ -102,7 +103,7 @@ def search_designs(designs, low, high, tolerance, workers) -> periodic.Onset:
 
 def onset_study(
     study: Study,
-    tolerance: float = periodic.DEFAULT_ONSET_TOLERANCE_RPM * periodic.RPM,
+    tolerance: float = periodic.DEFAULT_ONSET_TOLERANCE_RPM * RPM,
     *,
     confirm: bool = True,
     workers: int = 1,
@@ -131,7 +132,7 @@ def onset_study(
     if not high > low:
         raise OnsetError.at(
             "speed",
-            f"the spec runs one speed ({low / periodic.RPM:g} rpm); campipe onset searches a "
+            f"the spec runs one speed ({low / RPM:g} rpm); campipe onset searches a "
             "range: sweep it, e.g. sweep: {speed: {from: 6000 rpm, to: 14000 rpm, num: 2}}",
             found=low,
             expected="a speed range",
@@ -168,7 +169,7 @@ def _table(study, keys, firsts, onset, below, above) -> CaseTable:
         units[name] = var.units if var.units and var.units != "1" else ""
     checked = np.isfinite(below)
     agrees = (below == 0.0) & (above > 0.0)
-    columns["onset_speed_rpm"] = onset.speed / periodic.RPM
+    columns["onset_speed_rpm"] = onset.speed / RPM
     units["onset_speed_rpm"] = "rpm"
     columns["onset_status"] = onset.status.astype(object)
     units["onset_status"] = ""
@@ -202,7 +203,7 @@ def file_contents(result: OnsetStudy) -> tuple[dict, list[VariableSpec], dict, d
         add(name, ("combination",), "str" if col.dtype == object else "f8", col, **units)
     add("onset_speed_rpm", ("combination",), "f8", t.columns["onset_speed_rpm"], units="rpm",
         long_name="no-follow onset speed (steady state; NaN: none inside the speed range)",
-        tolerance_rpm=on.tolerance / periodic.RPM)  # fmt: skip
+        tolerance_rpm=on.tolerance / RPM)  # fmt: skip
     add("onset_status", ("combination",), "str", t.columns["onset_status"],
         long_name="found; below: no-follow at the range's lowest speed; none: follows across "
         "the range")  # fmt: skip
@@ -214,7 +215,7 @@ def file_contents(result: OnsetStudy) -> tuple[dict, list[VariableSpec], dict, d
             long_name=f"no-follow in the last of {periodic.CONFIRM_TURNS} turns of the "
             f"time-domain engine at onset × ({side} {periodic.CONFIRM_OFFSET:g}); NaN: not "
             "checked")  # fmt: skip
-    add("scan_speed_rpm", ("scan",), "f8", on.scan_speed / periodic.RPM, units="rpm",
+    add("scan_speed_rpm", ("scan",), "f8", on.scan_speed / RPM, units="rpm",
         long_name="speeds the search looked at first")  # fmt: skip
     add("margin", ("combination", "scan"), "f8", on.scan_margin, units="N",
         long_name="least cam compression over the steady turn (NaN: the valve seats on part "
@@ -224,7 +225,7 @@ def file_contents(result: OnsetStudy) -> tuple[dict, list[VariableSpec], dict, d
     attrs: dict[str, object] = {
         "title": f"{result.name}: no-follow onset speeds",
         "study_name": result.name,
-        "speed_range_rpm": [result.low / periodic.RPM, result.high / periodic.RPM],
+        "speed_range_rpm": [result.low / RPM, result.high / RPM],
         "varied_keys": ", ".join(result.keys),
         "spec": result.spec_text,
         "spec_overrides": json.dumps(result.spec_overrides, default=str),
@@ -238,8 +239,8 @@ def summary_lines(result: OnsetStudy) -> list[str]:
     n = result.table.n
     lines = [
         f"{result.name}: {n} combination{'s' if n != 1 else ''}, speeds "
-        f"{result.low / periodic.RPM:g} … {result.high / periodic.RPM:g} rpm, tolerance "
-        f"{on.tolerance / periodic.RPM:g} rpm; search {result.search_seconds:.3g} s "
+        f"{result.low / RPM:g} … {result.high / RPM:g} rpm, tolerance "
+        f"{on.tolerance / RPM:g} rpm; search {result.search_seconds:.3g} s "
         f"({int(on.evaluations.sum())} steady states), time-domain check "
         f"{result.check_seconds:.3g} s",
     ]

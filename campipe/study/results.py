@@ -19,14 +19,29 @@ import numpy as np
 
 import campipe
 from campipe import engine
-from campipe.engine.loads import MEMBER_LOADS, member_loads
+from campipe.engine.loads import (
+    MEMBER_LOADS,
+    SPRING_HISTORIES,
+    member_loads,
+    per_turn,
+    spring_histories,
+)
 from campipe.study.expand import ResolvedCase
 from campipe.study.variables import (
     CONTACT_PRESSURE_METRICS,
     PER_REVOLUTION_METRICS,
+    SPRING_METRICS,
     data_variables,
 )
-from campipe.vocabulary import EV_FROM, EV_IMPULSE, EV_KIND, EV_TIME, EV_TO, EV_VELOCITY
+from campipe.vocabulary import (
+    EV_FROM,
+    EV_IMPULSE,
+    EV_KIND,
+    EV_TIME,
+    EV_TO,
+    EV_VELOCITY,
+    N_COORDINATES,
+)
 
 if TYPE_CHECKING:
     from campipe.engine import BatchResult
@@ -125,7 +140,8 @@ def compute_batch(plan: BatchPlan) -> BatchData:
     """
     settings = plan.cases[0].settings
     wanted = set(data_variables(plan.record))
-    full_state = "q" in wanted or bool(set(MEMBER_LOADS) & wanted)
+    full_state = "q" in wanted or bool(set(MEMBER_LOADS) & wanted) or "spring_force" in wanted
+    full_state = full_state or bool(set(SPRING_HISTORIES) & wanted)
     result = run_batch(
         [c.case for c in plan.cases], settings, full_state=full_state, on_failure="record"
     )
@@ -175,12 +191,13 @@ def batch_arrays(plan: BatchPlan, result: BatchResult) -> BatchData:
             np.where(np.isnan(values), -1, values).astype(dtype) if dtype == "i4" else values
         )
     if "q" in wanted:
-        arrays["q"] = result.q
+        arrays["q"] = result.q[:, :, :N_COORDINATES]  # the dof axis: q1 … q7
     loads = set(MEMBER_LOADS) & set(wanted)
     if loads:
         per_case = [member_loads(c.case.train, result.q[i]) for i, c in enumerate(plan.cases)]
         for name in loads:
             arrays[name] = np.stack([p[name] for p in per_case])
+    arrays.update(_spring_arrays(plan, result, set(wanted)))
     arrays.update(event_arrays(result.events, [c.case.speed for c in plan.cases]))
     missing = set(wanted) - set(arrays)
     assert not missing, missing
@@ -193,6 +210,30 @@ def batch_arrays(plan: BatchPlan, result: BatchResult) -> BatchData:
         n_revolutions=result.separation_per_rev.shape[1],
         numerics=numerics_fingerprint(),
     )
+
+
+def _spring_arrays(plan: BatchPlan, result: BatchResult, wanted: set[str]) -> dict:
+    """The spring's histories and, with ``run.record: [spring]``, its per-revolution metrics
+    and their summaries (``variables.SPRING_METRICS``), as far as ``wanted`` asks."""
+    names = set(SPRING_HISTORIES) | {m[0] for m in SPRING_METRICS}
+    if not names & wanted:
+        return {}
+    per_case = [spring_histories(c.case.train, result.q[i]) for i, c in enumerate(plan.cases)]
+    histories = {name: np.stack([p[name] for p in per_case]) for name in SPRING_HISTORIES}
+    arrays = {name: h for name, h in histories.items() if name in wanted}
+    n_rev = result.separation_per_rev.shape[1]
+    source = {
+        "max_spring_force": histories["max_spring_element_force"],
+        "min_spring_clash_margin": histories["spring_clash_margin"],
+    }
+    for summary, name, _, _, _, how in SPRING_METRICS:
+        if summary not in wanted:
+            continue
+        values = per_turn(source[summary], result.cam_angle, n_rev, how)
+        measured = values[:, result.measured]
+        arrays[name] = values
+        arrays[summary] = measured.max(axis=1) if how == "max" else measured.min(axis=1)
+    return arrays
 
 
 def event_arrays(events: Sequence[np.ndarray], speeds: Sequence[float]) -> dict[str, np.ndarray]:

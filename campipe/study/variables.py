@@ -7,7 +7,8 @@ also reads; the archive is SI except ``speed_rpm`` [rpm] and angles [degree].
 
 Dimensions: ``case`` (its coordinate ``case`` holds the case ids); ``cam_angle`` (0 …
 360·revolutions at ``run.output_every``); ``revolution``; ``dof`` (q1–q7, when ``run.record``
-holds ``q``); ``mode`` (for a varied ``damping_ratios``, as long as the longest list, NaN beyond
+holds ``q``; a refined member's internal coordinates are not stored); ``mode`` (for a varied
+``damping_ratios``, as long as the longest list, NaN beyond
 a shorter one); ``event`` (all cases' events, case by case: a CF contiguous ragged array counted
 by ``event_count``, with ``event_case`` naming each event's case).
 """
@@ -18,7 +19,7 @@ import math
 from collections.abc import Iterable
 from dataclasses import dataclass
 
-from campipe.engine import MEMBER_LOADS
+from campipe.engine import MEMBER_LOADS, SPRING_HISTORIES
 from campipe.model import COORDINATES, PARAMETERS
 from campipe.study.fields import CASE_FIELDS, Field, varied_fields
 from campipe.units import convert
@@ -127,13 +128,36 @@ CONTACT_PRESSURE_METRICS = (
         "max",
     ),
 )
+#: The spring's metrics, stored with ``run.record: [spring]`` (as PER_REVOLUTION_METRICS;
+#: "min": the summary is the least over the measured revolutions). Read from the histories
+#: at the output angles (``run.output_every``), which must resolve the spring's surge.
+SPRING_METRICS = (
+    (
+        "max_spring_force",
+        "max_spring_force_by_rev",
+        "f8",
+        "largest compressive force along the valve spring (any element) at the output angles",
+        "N",
+        "max",
+    ),
+    (
+        "min_spring_clash_margin",
+        "min_spring_clash_margin_by_rev",
+        "f8",
+        "least valve spring coil-clash margin at the output angles",
+        "m",
+        "min",
+    ),
+)
+#: The record item that stores the spring's histories and metrics.
+SPRING_RECORD = "spring"
 
 
 def _metric_variables(
     summary, per_rev, dtype, long_name, units, how, record=None
 ) -> dict[str, Variable]:
     """A metric's two variables: per revolution, and its summary over the measured ones."""
-    reads = "per revolution, mean over" if how == "mean" else "largest in"
+    reads = {"mean": "per revolution, mean over", "max": "largest in", "min": "least in"}[how]
     return {
         summary: Variable(
             CASE,
@@ -261,10 +285,23 @@ VARIABLES: dict[str, Variable] = {
         name: Variable(HISTORY, "f8", long_name, units.replace(" ", "*"), record=name)
         for name, (long_name, units) in MEMBER_LOADS.items()
     },
+    **{
+        name: Variable(HISTORY, "f8", long_name, units, record=name)
+        for name, (long_name, units) in SPRING_HISTORIES.items()
+    },
+    **{
+        name: var
+        for metric in SPRING_METRICS
+        for name, var in _metric_variables(*metric, record=SPRING_RECORD).items()
+    },
 }
 
-#: Record items that store more than one variable.
-RECORD_GROUPS = {"member_loads": tuple(MEMBER_LOADS)}
+#: Record items that store more than one variable (``spring``: its force on the rocker, its
+#: histories and its metrics, which are recorded under the item's own name).
+RECORD_GROUPS = {
+    "member_loads": tuple(MEMBER_LOADS),
+    SPRING_RECORD: ("spring_force", *SPRING_HISTORIES, SPRING_RECORD),
+}
 #: dof coordinate values and units.
 DOF_NAMES = tuple(c.symbol for c in COORDINATES)
 DOF_UNITS = tuple("m" if c.kind == "translation" else "rad" for c in COORDINATES)

@@ -1,0 +1,101 @@
+"""Lash (``model.lash``): the clearance a seated train stands off its cam, taken up by the
+opening ramp; the seat it places; how a spec refuses it beside a seat."""
+
+import math
+
+import numpy as np
+import pytest
+from study_helpers import write_spec
+
+from campipe.engine import Case, CaseError, RunSettings, run_batch
+from campipe.model import lash_seat, system_matrices, thesis_train, valve_train
+from campipe.profiles import Ramp, evaluate, polydyne
+from campipe.study import load_study
+from campipe.study.spec import SpecError
+from campipe.vocabulary import CAM_IMPACT, EV_KIND, EV_TIME, EV_VELOCITY, SEAT_IMPACT
+
+INCH = 0.0254
+RAMP = Ramp(0.3e-3, math.radians(30))
+PROFILE = polydyne("4567", 0.3 * INCH, *np.radians([100, 20, 100]), ramp=RAMP)
+LASH = 0.2e-3
+
+
+def test_the_lash_places_the_seat():
+    """Seated, the train sheds the preload that compressed it: the seat is the rocker ratio
+    times the lash plus the preload's give at the valve (all members but the stem). Checks:
+    a train a million times stiffer seats at exactly 1.5 × lash (rigid kinematics); the
+    thesis train's give is the preload over its stiffness seen from the valve, here against
+    the two-spring hand estimate F·(1/k_train) within 5 %; the engine's Case places it."""
+    train = thesis_train().replace(lash=LASH)
+    ratio = train.rocker_valve_arm_length / train.rocker_pushrod_arm_length
+    assert ratio == pytest.approx(1.5)
+    stiff = train.replace(elastic_modulus=train.elastic_modulus * 1e6)
+    assert lash_seat(system_matrices(stiff), LASH) == pytest.approx(1.5 * LASH, rel=1e-6)
+    give = lash_seat(system_matrices(train), LASH) - 1.5 * LASH
+    assert 0.05e-3 < give < 0.1e-3
+    case = Case(train, PROFILE, 300 * math.pi / 30)
+    assert case.seat == lash_seat(system_matrices(train), LASH)
+    with pytest.raises(CaseError, match="give one of them") as exc:
+        Case(train, PROFILE, 300 * math.pi / 30, seat=1e-3)
+    assert exc.value.key == "seat"
+    assert math.isnan(Case(thesis_train(), PROFILE, 1.0).seat)  # no lash: no seat
+
+
+@pytest.mark.parametrize("rpm", [300, 1000])
+def test_the_cam_takes_the_lash_up_where_its_lift_equals_the_lash(rpm):
+    """With the valve at rest on its seat the train carries no load, so the follower stands
+    exactly ``lash`` off the base circle: the cam meets it where the opening ramp's lift
+    equals the lash (here 2/3 of the way up a 0.3 mm ramp over 30°: at 20°), at the ramp's
+    velocity height/duration·ω, the follower being at rest. Hand calculation, independent
+    of the engine: θ = lash / height · duration."""
+    omega = rpm * math.pi / 30
+    case = Case(thesis_train().replace(lash=LASH), PROFILE, omega)
+    res = run_batch([case], RunSettings(revolutions=3))
+    ev = res.events[0]
+    cam = ev[ev[:, EV_KIND] == CAM_IMPACT]
+    late = cam[cam[:, EV_TIME] * omega > 4 * math.pi]  # the third turn, long after seating
+    assert len(late) == 1
+    theta = late[0, EV_TIME] * omega - 4 * math.pi
+    assert math.degrees(theta) == pytest.approx(LASH / RAMP.height * 30, abs=1e-6)
+    assert float(evaluate(PROFILE, theta)[0]) == pytest.approx(LASH, abs=1e-12)
+    closing = RAMP.height / RAMP.duration * omega
+    assert late[0, EV_VELOCITY] == pytest.approx(closing, rel=1e-6)
+    seats = ev[ev[:, EV_KIND] == SEAT_IMPACT]
+    assert len(seats) >= 2  # the valve seats on the closing ramp every turn
+
+
+SPEC = """
+name: lash
+model: {preset: thesis-1971, lash: 0.2 mm}
+profile: {kind: polydyne-4567, lift: 0.3 in, rise: 100 deg, dwell: 20 deg, fall: 100 deg,
+          ramp_height: 0.3 mm, ramp_duration: 30 deg}
+speed: 1000 rpm
+"""
+
+
+def test_a_spec_with_lash(tmp_path):
+    study = load_study(write_spec(tmp_path, SPEC + "sweep: {model.lash: [0.1 mm, 0.2 mm]}\n"))
+    sm = system_matrices(thesis_train())
+    seats = [lash_seat(sm, 1e-4), lash_seat(sm, 2e-4)]
+    assert [c.case.seat for c in study.cases] == pytest.approx(seats, rel=1e-12)
+    assert seats[1] - seats[0] == pytest.approx(1.5e-4, rel=0.01)  # the rocker ratio
+    assert [c.values["model.lash"] for c in study.cases] == pytest.approx([1e-4, 2e-4])
+    none = load_study(write_spec(tmp_path, SPEC), {"model.lash": "none", "seat": "0.1 in"})
+    assert none.cases[0].case.seat == pytest.approx(0.1 * INCH)
+    assert valve_train(overrides={"lash": "none"}) == thesis_train()
+
+
+@pytest.mark.parametrize(
+    ("extra", "key", "words"),
+    [
+        ("seat: 0.1 in\n", "seat", "give one of them"),
+        ("", "model.lash", "cam's full lift"),
+    ],
+)
+def test_bad_lash_names_its_key(tmp_path, extra, key, words):
+    text = SPEC + extra
+    if not extra:
+        text = text.replace("lash: 0.2 mm", "lash: 0.4 in")
+    with pytest.raises(SpecError) as exc:
+        load_study(write_spec(tmp_path, text))
+    assert key in str(exc.value) and words in str(exc.value)
