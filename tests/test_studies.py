@@ -8,9 +8,11 @@ import xarray as xr
 from numpy.testing import assert_allclose, assert_array_equal
 from study_helpers import LBF, STUDIES
 
-from campipe.engine import MEMBER_LOADS, member_loads
+from campipe.constants import INCH, TWO_PI
+from campipe.engine import MEMBER_LOADS, Case, RunSettings, member_loads, run_batch
 from campipe.engine.contact import impact_masses
 from campipe.model import system_matrices, thesis_train
+from campipe.profiles import harmonic
 from campipe.study import load_study
 from campipe.study.execute import run_study
 from campipe.study.query import case_table, onset_table
@@ -172,8 +174,42 @@ def test_separation_map(tmp_path):
     assert ds.attrs["replay_where"] == "speed_rpm == 11000 and seat is none"
 
 
+def test_contact_stiffness(tmp_path):
+    """Quick variant (9000 and 11000 rpm, two turns): at 9000 rpm the follower stays on the
+    cam whatever the stiffness and the stiffest contact's peak force is the rigid model's to
+    0.2 %; at 11000 rpm every stiffness separates and the landing's peak force rises with the
+    stiffness; the peak pressure is the line contact's √(F'E*/(πR'))."""
+    ds = run(
+        tmp_path,
+        "contact-stiffness",
+        **{"run.revolutions": 2, "sweep.speed": ["9000 rpm", "11000 rpm"]},
+    )
+    assert ds.sizes["case"] == 6
+    assert set(ds.integrator.values) == {"compliant"}
+    slow = ds.speed_rpm.values == 9000
+    assert np.all(ds.separation_deg_per_rev.values[slow] == 0)
+    assert np.all(ds.separation_deg_per_rev.values[~slow] > 90)
+    rigid = run_batch(
+        [Case(thesis_train(), harmonic(INCH), 9000 * TWO_PI / 60)], RunSettings(revolutions=2)
+    )
+    stiffness = ds.cam_contact_stiffness.values
+    stiffest = slow & (stiffness == stiffness.max())
+    assert_allclose(ds.max_cam_force.values[stiffest], rigid.max_cam_force, rtol=2e-3)
+    fast = np.flatnonzero(~slow)
+    peaks = ds.max_cam_force.values[fast[np.argsort(stiffness[fast])]]
+    assert np.all(np.diff(peaks) > 0)
+    e_star = 30e6 * LBF / INCH**2 / (2 * (1 - 0.3**2))
+    line = ds.max_cam_force.values / (0.5 * INCH)
+    assert_allclose(
+        ds.max_cam_pressure.values, np.sqrt(line * e_star / (math.pi * 0.5 * INCH)), rtol=1e-12
+    )
+    assert np.isnan(ds.max_seat_pressure.values).all()
+
+
 @pytest.mark.slow
-@pytest.mark.parametrize("name", ["separation-map", "thesis-seat", "thesis-member-loads"])
+@pytest.mark.parametrize(
+    "name", ["separation-map", "thesis-seat", "thesis-member-loads", "contact-stiffness"]
+)
 def test_full_studies_run(tmp_path, name):
     ds = run(tmp_path, name)
     assert ds.sizes["case"] == len(load_study(STUDIES / f"{name}.yaml").cases)

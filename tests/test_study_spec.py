@@ -33,6 +33,7 @@ EXAMPLE_CASES = {
     "separation-map": 297,
     "lash-ramp": 27,
     "spring-surge": 57,
+    "contact-stiffness": 39,
 }
 
 

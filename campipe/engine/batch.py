@@ -7,6 +7,7 @@ from there under their own names (``X as X``), so they stay importable from here
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import logging
 import math
@@ -18,7 +19,7 @@ import numpy as np
 from numba import njit
 
 from campipe.constants import TWO_PI
-from campipe.engine import exact, newmark, steady
+from campipe.engine import compliant, exact, newmark, steady
 from campipe.engine.closed_form import (
     STATE,
     ExactRuns,
@@ -37,13 +38,9 @@ from campipe.engine.contact import (
 )
 from campipe.engine.modal import ModalData, harmonic_responses, modal_data, pad_stack
 from campipe.engine.settings import CLOSURES as CLOSURES
-from campipe.engine.settings import DEFAULT_CAPTURE_VELOCITY as DEFAULT_CAPTURE_VELOCITY
-from campipe.engine.settings import DEFAULT_INTEGRATOR as DEFAULT_INTEGRATOR
-from campipe.engine.settings import DEFAULT_STEPS as DEFAULT_STEPS
-from campipe.engine.settings import DEFAULT_WARMUP as DEFAULT_WARMUP
-from campipe.engine.settings import FIDELITIES as FIDELITIES
-from campipe.engine.settings import INTEGRATORS as INTEGRATORS
 from campipe.engine.settings import (
+    COMPLIANT,
+    COMPLIANT_RTOL_FLOOR,
     LIFT_BOUND,
     SPEED_BOUND,
     Case,
@@ -53,6 +50,12 @@ from campipe.engine.settings import (
     check_run,
     output_angles,
 )
+from campipe.engine.settings import DEFAULT_CAPTURE_VELOCITY as DEFAULT_CAPTURE_VELOCITY
+from campipe.engine.settings import DEFAULT_INTEGRATOR as DEFAULT_INTEGRATOR
+from campipe.engine.settings import DEFAULT_STEPS as DEFAULT_STEPS
+from campipe.engine.settings import DEFAULT_WARMUP as DEFAULT_WARMUP
+from campipe.engine.settings import FIDELITIES as FIDELITIES
+from campipe.engine.settings import INTEGRATORS as INTEGRATORS
 from campipe.engine.settings import STARTS as STARTS
 from campipe.engine.settings import RunSettingsError as RunSettingsError
 from campipe.engine.settings import StabilityError as StabilityError
@@ -62,6 +65,7 @@ from campipe.engine.settings import stability_limit as stability_limit
 from campipe.engine.settings import visited_configurations as visited_configurations
 from campipe.model import ValveTrain, system_matrices
 from campipe.model.assembly import SystemMatrices, configuration_frequencies
+from campipe.model.contact_laws import contact_law
 from campipe.profiles import evaluate
 from campipe.profiles.packed import PackedProfiles, evaluate_packed, pack
 from campipe.vocabulary import (
@@ -78,6 +82,8 @@ from campipe.vocabulary import (
     SEATED,
     UNBOUNDED,
     free_coordinates,
+    holds_cam,
+    holds_seat,
 )
 
 log = logging.getLogger(__name__)
@@ -129,6 +135,10 @@ class BatchResult:
     #: a failure (``vocabulary.FAILURES``) whose histories and metrics are NaN
     status: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     start_time: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (n_cases,) t0 ≤ 0 [s]
+    #: (n_cases, n_rev) per turn: the peak Hertz pressure of the largest cam and seat forces
+    #: (``model.contact_laws``; NaN where the contact's geometry does not give it) [Pa]
+    max_cam_pressure_per_rev: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    max_seat_pressure_per_rev: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
 
     def _mean(self, per_rev: np.ndarray) -> np.ndarray:
         return per_rev[:, self.measured].mean(axis=1)
@@ -183,6 +193,16 @@ class BatchResult:
         does not converge; modal-exact applies impulses instantly, so it equals
         max_cam_force."""
         return self._max(self.thesis_impact_force_per_rev)
+
+    @property
+    def max_cam_pressure(self) -> np.ndarray:
+        """(n_cases,) peak Hertz pressure at the cam in the measured turns [Pa]."""
+        return self._max(self.max_cam_pressure_per_rev)
+
+    @property
+    def max_seat_pressure(self) -> np.ndarray:
+        """(n_cases,) peak Hertz pressure at the seat in the measured turns [Pa]."""
+        return self._max(self.max_seat_pressure_per_rev)
 
     @property
     def follower_lift(self) -> np.ndarray:
@@ -598,6 +618,13 @@ def run_batch(
     if on_failure not in ("raise", "record"):
         raise ValueError(f"on_failure: found {on_failure!r}, expected 'raise' or 'record'")
     check_run(cases, settings, check_stability_limit=check_stability_limit)
+    if settings.integrator == "default" and any(c.compliant for c in cases):
+        options = {
+            "full_state": full_state,
+            "check_stability_limit": check_stability_limit,
+            "on_failure": on_failure,
+        }
+        return _run_by_contacts(cases, settings, options)
     dt_run = settings.step
     n = len(cases)
     angles = output_angles(settings)
@@ -615,6 +642,8 @@ def run_batch(
     out = make_outputs(n, n_out, n_rev, settings.max_events, n_q)
     if settings.method == "newmark-linear":
         _run_newmark(preps, which, settings, dt_run, cases_in, packed, out)
+    elif settings.method == COMPLIANT:
+        _run_compliant(cases, cases_in, settings, out)
     else:
         state = np.zeros(1, STATE)
         ws = make_workspace(n_q)
@@ -693,4 +722,74 @@ def run_batch(
         steps=out.steps,
         status=status,
         start_time=cases_in.t0,
+        **_pressures(cases, out.fmax),
     )
+
+
+def _pressures(cases: Sequence[Case], fmax: np.ndarray) -> dict[str, np.ndarray]:
+    """The peak Hertz pressures per turn of the largest contact forces (NaN without the
+    geometry; a pressure rises with its force, so its peak is the peak force's)."""
+    out = {}
+    for k, contact in enumerate(("cam", "seat")):
+        out[f"max_{contact}_pressure_per_rev"] = np.stack(
+            [contact_law(c.train, contact).pressure(fmax[i, :, k]) for i, c in enumerate(cases)]
+        ).reshape(fmax.shape[:2])
+    return out
+
+
+def _run_compliant(cases: Sequence[Case], c: Cases, settings: RunSettings, out) -> None:
+    """Each case through ``engine.compliant`` from its start, into the batch's outputs."""
+    angles = output_angles(settings)
+    rtol = max(float(settings.tolerance), COMPLIANT_RTOL_FLOOR)
+    max_step = settings.step or math.inf
+    for i, case in enumerate(cases):
+        system = compliant.compliant_system(
+            case.train, case.profile, case.speed, float(c.seat_q[i]) if case.has_seat else None
+        )
+        held = (holds_cam(int(c.cfg0[i])), holds_seat(int(c.cfg0[i])))
+        m = system.load.size  # the train's coordinates of the batch's
+        z0 = compliant.compliant_start(system, c.q0[i, :m], c.v0[i, :m], c.a0[i, :m], *held)
+        one = compliant.CaseOutputs(
+            out.q[i], out.v[i], out.force[i], out.cam[i], out.cfg[i], out.acc[i],
+            out.sep_rev[i], out.seated_rev[i], out.counts[i], out.vmax[i], out.fmax[i],
+            out.events[i],
+        )  # fmt: skip
+        compliant.integrate(
+            system, float(c.t0[i]), z0, held, angles / case.speed, one,
+            rtol=rtol, max_step=max_step, capture=float(c.capture[i]),
+            lift_bound=float(c.lift_bound[i]), valve_ref=float(c.valve_ref[i]),
+        )  # fmt: skip
+        out.n_events[i], out.status[i], out.steps[i] = one.n_events, one.status, one.steps
+
+
+def _run_by_contacts(cases: Sequence[Case], settings: RunSettings, options) -> BatchResult:
+    """A batch under the default integrator with compliant cases: those through the
+    compliant integrator, the others through the default, the results in case order."""
+    flags = np.array([c.compliant for c in cases])
+    parts = []
+    for which, name in ((flags, COMPLIANT), (~flags, "default")):
+        index = np.flatnonzero(which)
+        if index.size:
+            run = dataclasses.replace(settings, integrator=name)
+            parts.append((index, run_batch([cases[int(i)] for i in index], run, **options)))
+    if len(parts) == 1:
+        return parts[0][1]
+    n = len(cases)
+    merged: dict[str, object] = {}
+    first = parts[0][1]
+    for f in dataclasses.fields(BatchResult):
+        value = getattr(first, f.name)
+        if f.name in ("cam_angle", "measured"):
+            merged[f.name] = value
+        elif f.name == "events":
+            events: list[np.ndarray] = [np.zeros((0, 6))] * n
+            for index, part in parts:
+                for j, i in enumerate(index):
+                    events[i] = part.events[j]
+            merged[f.name] = events
+        else:
+            array = np.empty((n, *value.shape[1:]), value.dtype)
+            for index, part in parts:
+                array[index] = getattr(part, f.name)
+            merged[f.name] = array
+    return BatchResult(**merged)  # type: ignore[arg-type]

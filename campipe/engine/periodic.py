@@ -105,6 +105,15 @@ class _SteadyBatch:
 
 
 def _prepare(cases: Sequence[Case], *, need_reference: bool = False) -> _SteadyBatch:
+    compliant = [i for i, c in enumerate(cases) if c.compliant]
+    if compliant:
+        raise CaseError.at(
+            "cam_contact",
+            f"cases {compliant} have a compliant contact: the steady-state path (and the "
+            "onset) is the rigid model's closed form; integrate them (campipe study)",
+            found=compliant,
+            expected="rigid contacts",
+        )
     n = len(cases)
     trains, which = unique_trains(cases)
     data = [_modal_at_preload(t) for t in trains]

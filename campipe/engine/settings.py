@@ -21,13 +21,25 @@ from campipe.model.assembly import NEWMARK_LINEAR_OMEGA_DT, configuration_freque
 from campipe.profiles import Profile
 from campipe.vocabulary import CAM_AND_SEAT, CAM_CONTACT, CONFIGURATIONS, FREE, N_COORDINATES, ROMAN
 
-#: Integrators by name; ``default`` in a spec means DEFAULT_INTEGRATOR.
+#: The integrators of rigid contacts (the thesis's) by name; ``default`` in a spec means
+#: DEFAULT_INTEGRATOR, or COMPLIANT for a case with a compliant contact law
+#: (``engine.compliant``: the contacts as force elements, error-controlled).
 INTEGRATORS = ("modal-exact", "newmark-linear")
 DEFAULT_INTEGRATOR = "modal-exact"
+COMPLIANT = "compliant"
+#: Every integrator a run may name.
+ALL_INTEGRATORS = (*INTEGRATORS, COMPLIANT)
+#: The compliant integrator's relative tolerance is run.tolerance, but no finer than this
+#: (the default 1e-12, modal-exact's event-time tolerance, is finer than Radau can reach).
+COMPLIANT_RTOL_FLOOR = 1e-10
 #: The step an integrator uses when a run names none [s]: the thesis's 1 µs for its
 #: integrator; modal-exact is exact between events and sizes its own steps (a run's dt only
 #: caps them).
-DEFAULT_STEPS: dict[str, float | None] = {"newmark-linear": 1e-6, "modal-exact": None}
+DEFAULT_STEPS: dict[str, float | None] = {
+    "newmark-linear": 1e-6,
+    "modal-exact": None,
+    "compliant": None,
+}
 CLOSURES = ("force", "form")
 #: Model fidelity of a run: "full", every case through its events with every mode. The
 #: levels below it were measured and removed because they did not pay (docs/bench.md, "Model
@@ -74,8 +86,8 @@ class IntegrationError(CampipeError, RuntimeError):
 def resolve_integrator(name: str) -> str:
     """``default`` → the default integrator's name; refuse an unknown name."""
     resolved = DEFAULT_INTEGRATOR if name == "default" else name
-    if resolved not in INTEGRATORS:
-        known = ", ".join(("default", *INTEGRATORS))
+    if resolved not in ALL_INTEGRATORS:
+        known = ", ".join(("default", *ALL_INTEGRATORS))
         raise RunSettingsError.at(
             "run.integrator",
             f"unknown integrator {name!r}; known: {known}",
@@ -83,6 +95,19 @@ def resolve_integrator(name: str) -> str:
             expected=f"one of: {known}",
         )
     return resolved
+
+
+def case_integrator(name: str, train: ValveTrain, has_seat: bool = True) -> str:
+    """``default`` → the integrator a case takes: COMPLIANT where a contact it can touch is
+    compliant, else DEFAULT_INTEGRATOR; another name is resolved as given."""
+    if name == "default" and compliant_contacts(train, has_seat):
+        return COMPLIANT
+    return resolve_integrator(name)
+
+
+def compliant_contacts(train: ValveTrain, has_seat: bool) -> bool:
+    """A train whose cam contact, or seat contact where there is a seat, is compliant."""
+    return train.cam_contact != "rigid" or (has_seat and train.seat_contact != "rigid")
 
 
 @dataclass(frozen=True)
@@ -113,6 +138,11 @@ class Case:
     @property
     def has_seat(self) -> bool:
         return not math.isnan(self.seat)
+
+    @property
+    def compliant(self) -> bool:
+        """A compliant law at a contact the case can touch (``engine.compliant``)."""
+        return compliant_contacts(self.train, self.has_seat)
 
 
 @dataclass(frozen=True)
@@ -308,6 +338,53 @@ def check_run(
                 found=case.speed,
                 expected="> 0 rad/s",
             )
+    check_contacts(cases, settings)
     check_coordinates(cases, settings)
     if check_stability_limit:
         check_stability(cases, settings)
+
+
+def check_contacts(cases: Sequence[Case], settings: RunSettings) -> None:
+    """Refuse a compliant case for a rigid integrator (or a rigid one for ``compliant``), and
+    a compliant case the compliant integrator cannot run: a rigid contact beside a compliant
+    one, or form closure."""
+    for i, case in enumerate(cases):
+        if not (case.compliant or settings.method == COMPLIANT):
+            continue
+        if not case.compliant:
+            raise RunSettingsError.at(
+                "run.integrator",
+                f"compliant integrates compliant contacts, but case {i}'s are rigid: use "
+                "default (or set model.cam_contact)",
+                found=settings.integrator,
+                expected="default, modal-exact or newmark-linear",
+            )
+        law = "cam_contact" if case.train.cam_contact != "rigid" else "seat_contact"
+        if settings.integrator != "default" and settings.method != COMPLIANT:
+            raise RunSettingsError.at(
+                "run.integrator",
+                f"{settings.method} integrates rigid contacts only, but case {i} has "
+                f"{law}: {getattr(case.train, law)}: use default or compliant",
+                found=settings.integrator,
+                expected="default or compliant",
+            )
+        if case.train.cam_contact == "rigid" or (
+            case.has_seat and case.train.seat_contact == "rigid"
+        ):
+            rigid = "cam_contact" if case.train.cam_contact == "rigid" else "seat_contact"
+            raise CaseError.at(
+                rigid,
+                f"case {i} has a rigid {rigid.split('_')[0]} contact beside a compliant "
+                f"{law.split('_')[0]} one: the compliant integrator takes both contacts "
+                f"compliant; set {rigid} to kelvin-voigt or hertz",
+                found="rigid",
+                expected="kelvin-voigt or hertz",
+            )
+        if case.closure == "form":
+            raise CaseError.at(
+                "closure",
+                f"case {i} has form closure with a compliant cam contact: a compliant "
+                "contact never pulls, so the follower is held by the spring: use force",
+                found="form",
+                expected="force",
+            )

@@ -57,6 +57,10 @@ N_DOF = 7
 MAX_ELEMENTS = 64
 #: Damping kinds: the thesis's modal damping, Rayleigh's, per-member loss factors.
 DAMPING_KINDS = ("modal", "rayleigh", "loss-factor")
+#: Contact laws at the cam–follower and valve–seat contacts: the thesis's rigid plastic
+#: impact, a linear spring and damper (no tension), Hertz's point contact with Hunt–Crossley
+#: damping (:mod:`campipe.model.contact_laws`).
+CONTACT_LAWS = ("rigid", "kelvin-voigt", "hertz")
 
 
 @dataclass(frozen=True)
@@ -127,6 +131,95 @@ def _loss_factor_parameters() -> list[Parameter]:
         )
         for element in ELEMENTS
     ]
+
+
+def _contact_parameters() -> list[Parameter]:
+    """Each contact's law and its constants (:mod:`campipe.model.contact_laws`); 0 for a
+    constant means "not given" (a stiffness then comes from the geometry)."""
+
+    def zero(name, long_name, units, thesis_units):
+        return Parameter(
+            name, long_name, units, thesis_units, 0.0, exclusive_minimum=False,
+            default=f"0 {thesis_units}",
+        )  # fmt: skip
+
+    out = []
+    for contact, label in (("cam", "cam–follower"), ("seat", "valve–seat")):
+        out += [
+            Parameter(
+                f"{contact}_contact",
+                f"{label} contact law: " + ", ".join(CONTACT_LAWS),
+                "",
+                "",
+                0.0,
+                choices=CONTACT_LAWS,
+                default="rigid",
+            ),
+            zero(
+                f"{contact}_contact_stiffness",
+                f"{label} contact stiffness k (kelvin-voigt; 0: from the line contact)",
+                "N/m",
+                "lbf/in",
+            ),
+            zero(
+                f"{contact}_contact_damping",
+                f"{label} contact damping coefficient c (kelvin-voigt)",
+                "N*s/m",
+                "lbf*s/in",
+            ),
+            zero(
+                f"{contact}_hertz_constant",
+                f"{label} Hertz constant K of F = K·δ^(3/2) (hertz; 0: from the radius)",
+                "N/m**1.5",
+                "lbf/in**1.5",
+            ),
+            zero(
+                f"{contact}_hunt_crossley",
+                f"{label} Hunt–Crossley damping factor α of F = K·δ^(3/2)·(1 + α·dδ/dt) (hertz)",
+                "s/m",
+                "s/in",
+            ),
+            zero(
+                f"{contact}_contact_width",
+                f"{label} line contact length (0: not a line contact)",
+                "m",
+                "in",
+            ),
+        ]
+    out += [
+        zero(
+            "cam_curvature_radius",
+            "cam's radius of curvature at the contact (0: not given)",
+            "m",
+            "in",
+        ),
+        zero("cam_roller_radius", "follower roller radius (0: a flat-faced follower)", "m", "in"),
+        zero(
+            "seat_contact_radius",
+            "relative radius of curvature at the valve–seat contact (0: not given)",
+            "m",
+            "in",
+        ),
+        Parameter(
+            "contact_modulus",
+            "elastic modulus of both bodies at the compliant contacts",
+            "Pa",
+            "lbf/in**2",
+            0.0,
+            default="30e6 lbf/in**2",
+        ),
+        Parameter(
+            "contact_poisson",
+            "Poisson's ratio of both bodies at the compliant contacts",
+            "",
+            "",
+            0.0,
+            exclusive_minimum=False,
+            default=0.3,
+            maximum=0.5,
+        ),
+    ]
+    return out
 
 
 PARAMETERS: dict[str, Parameter] = {
@@ -201,6 +294,7 @@ PARAMETERS: dict[str, Parameter] = {
             default="0 s",
         ),
         *_loss_factor_parameters(),
+        *_contact_parameters(),
     ]
 }
 
@@ -264,6 +358,23 @@ class ValveTrain:
     rocker_valve_arm_loss_factor: float  # [-]
     spring_loss_factor: float  # [-]
     valve_stem_loss_factor: float  # [-]
+    cam_contact: str = "rigid"  # one of CONTACT_LAWS
+    cam_contact_stiffness: float = 0.0  # [N/m] k; 0: from the line contact
+    cam_contact_damping: float = 0.0  # [N·s/m] c
+    cam_hertz_constant: float = 0.0  # [N/m^1.5] K; 0: from the radius
+    cam_hunt_crossley: float = 0.0  # [s/m] α
+    cam_contact_width: float = 0.0  # [m] line contact length; 0: none
+    seat_contact: str = "rigid"  # one of CONTACT_LAWS
+    seat_contact_stiffness: float = 0.0  # [N/m]
+    seat_contact_damping: float = 0.0  # [N·s/m]
+    seat_hertz_constant: float = 0.0  # [N/m^1.5]
+    seat_hunt_crossley: float = 0.0  # [s/m]
+    seat_contact_width: float = 0.0  # [m]
+    cam_curvature_radius: float = 0.0  # [m] the cam's at the contact; 0: not given
+    cam_roller_radius: float = 0.0  # [m] 0: a flat-faced follower
+    seat_contact_radius: float = 0.0  # [m] 0: not given
+    contact_modulus: float = 30e6 * 4.4482216152605 / 0.0254**2  # [Pa] both bodies (steel)
+    contact_poisson: float = 0.3  # [-]
 
     def replace(self, **changes: Any) -> ValveTrain:
         """A copy with some values (SI) changed."""
@@ -392,11 +503,13 @@ def _number(v: object) -> object:
 
 def _check_range(p: Parameter, v: float, key: str, raw: object) -> None:
     bad = v <= p.minimum if p.exclusive_minimum else v < p.minimum
-    if bad or not math.isfinite(v):
+    if bad or not math.isfinite(v) or v > p.maximum:
         relation = "greater than" if p.exclusive_minimum else "at least"
         expected = f"a finite value {relation} {p.minimum:g}" + (
             f" {p.thesis_units}" if p.thesis_units else ""
         )
+        if math.isfinite(p.maximum):
+            expected += f" and at most {p.maximum:g}"
         raise ModelParameterError.at(
             key, f"found {raw!r}, expected {expected}", found=raw, expected=expected
         )
@@ -427,6 +540,7 @@ def valve_train(
     resolved = {name: parse_parameter(name, v, key_prefix + name) for name, v in values.items()}
     train = ValveTrain(**resolved)  # type: ignore[arg-type]
     mode_damping_ratios(train.damping_ratios, train.n_coordinates, key_prefix + "damping_ratios")
+    check_contacts(train, key_prefix)
     return train
 
 
@@ -489,3 +603,79 @@ def defining_values(train: ValveTrain) -> dict[str, object]:
         if name not in defaults or not _same(value, defaults[name]):
             out[name] = value
     return out
+
+
+#: Each compliant law's own constants: (name suffix, what it is), the stiffness first.
+CONTACT_CONSTANTS = {
+    "kelvin-voigt": ("contact_stiffness", "contact_damping"),
+    "hertz": ("hertz_constant", "hunt_crossley"),
+}
+
+
+def _contact_geometry(train: ValveTrain, contact: str) -> tuple[float, float]:
+    """(line contact length [m], relative radius of curvature R' [m]) of a contact; 0 where
+    not given."""
+    width = getattr(train, f"{contact}_contact_width")
+    if contact == "seat":
+        return width, train.seat_contact_radius
+    rho, roller = train.cam_curvature_radius, train.cam_roller_radius
+    if rho <= 0.0:
+        return width, 0.0
+    return width, rho if roller <= 0.0 else rho * roller / (rho + roller)
+
+
+def check_contacts(train: ValveTrain, key_prefix: str = "") -> None:
+    """Refuse a contact law's constants that do not go together, naming the key and the fix:
+    another law's constants (a hertz constant under kelvin-voigt, a stiffness under rigid), a
+    compliant law with no stiffness (neither given nor from its geometry), a hertz law from a
+    line contact (its approach is linear in the force up to a logarithm: kelvin-voigt)."""
+    for contact in ("cam", "seat"):
+        law = getattr(train, f"{contact}_contact")
+        law_key = f"{key_prefix}{contact}_contact"
+        for other, names in CONTACT_CONSTANTS.items():
+            if other == law:
+                continue
+            for suffix in names:
+                name = f"{contact}_{suffix}"
+                if getattr(train, name) != 0.0:
+                    fix = (
+                        f"set {law_key}: {other}, or leave {name} out"
+                        if law == "rigid"
+                        else f"{law} takes {contact}_{CONTACT_CONSTANTS[law][0]} and "
+                        f"{contact}_{CONTACT_CONSTANTS[law][1]}; leave {name} out"
+                    )
+                    raise ModelParameterError.at(
+                        key_prefix + name,
+                        f"is {other}'s constant but {law_key} is {law}: {fix}",
+                        found=getattr(train, name),
+                        expected=f"0 (not given) with {contact}_contact {law}",
+                    )
+        if law == "rigid":
+            continue
+        width, radius = _contact_geometry(train, contact)
+        stiffness = getattr(train, f"{contact}_{CONTACT_CONSTANTS[law][0]}")
+        geometry = (
+            f"{contact}_contact_width (a line contact)"
+            if law == "kelvin-voigt"
+            else ("cam_curvature_radius" if contact == "cam" else "seat_contact_radius")
+            + " (a point contact)"
+        )
+        if law == "hertz" and stiffness == 0.0 and width > 0.0:
+            raise ModelParameterError.at(
+                key_prefix + f"{contact}_contact_width",
+                f"a line contact under {law_key}: hertz is Hertz's point contact "
+                "(F = K·δ^(3/2)); a line contact's approach is linear in its force up to a "
+                f"logarithm: set {law_key}: kelvin-voigt (its stiffness then comes from the "
+                f"width), or give {contact}_hertz_constant",
+                found=width,
+                expected=f"0 with {contact}_contact hertz",
+            )
+        has_geometry = width > 0.0 if law == "kelvin-voigt" else radius > 0.0
+        if stiffness == 0.0 and not has_geometry:
+            name = f"{contact}_{CONTACT_CONSTANTS[law][0]}"
+            raise ModelParameterError.at(
+                key_prefix + name,
+                f"{law_key} is {law} but no stiffness: give {name} or {geometry}",
+                found=0.0,
+                expected=f"a positive {name}, or {geometry}",
+            )

@@ -27,8 +27,13 @@ from typing import Any
 import numpy as np
 
 from campipe.constants import INCH
-from campipe.engine import Case, RunSettings, RunSettingsError, resolve_integrator
-from campipe.engine.settings import check_coordinates, check_stability
+from campipe.engine import Case, CaseError, RunSettings, RunSettingsError
+from campipe.engine.settings import (
+    case_integrator,
+    check_contacts,
+    check_coordinates,
+    check_stability,
+)
 from campipe.errors import did_you_mean, excerpt
 from campipe.io.lift_table import LiftTableError, read_lift_table, table_digest
 from campipe.model import (
@@ -465,15 +470,19 @@ def resolve(raw: Mapping, index: int, directory: Path) -> ResolvedCase:
             )
     run = raw["run"]
     rs = {k: _parse(f"run.{k}", _freeze(v), f"run.{k}") for k, v in run.items() if k != "record"}
-    rs["integrator"] = resolve_integrator(rs["integrator"])
+    rs["integrator"] = case_integrator(rs["integrator"], train, seat is not None)
     settings = RunSettings(**{name: rs[name] for name in RUN_SETTINGS})
     check_settings(settings)
     case = Case(train, profile, speed, math.nan if seat is None else seat, closure)
     try:
+        check_contacts([case], settings)
         check_coordinates([case], settings)
         check_stability([case], settings)
     except RunSettingsError as exc:
         raise SpecProblem.from_error(exc) from None
+    except CaseError as exc:  # a contact law's key is a model parameter
+        path = f"model.{exc.key}" if exc.key in PARAMETERS else None
+        raise SpecProblem.from_error(exc, path) from None
     values.update(
         {
             "speed": speed,

@@ -20,8 +20,9 @@ from dataclasses import dataclass
 from typing import Any
 
 from campipe.constants import RPM
-from campipe.engine import INTEGRATORS, MEMBER_LOADS, SPRING_HISTORIES, RunSettings
+from campipe.engine import MEMBER_LOADS, SPRING_HISTORIES, RunSettings
 from campipe.engine import settings as _engine_settings
+from campipe.engine.settings import ALL_INTEGRATORS
 from campipe.errors import CampipeError, did_you_mean, excerpt
 from campipe.model import PARAMETERS, PRESETS, ModelParameterError, parse_parameter
 from campipe.profiles import RAMP_SHAPES
@@ -237,13 +238,14 @@ _RUN_METADATA: dict[str, Field] = {
             "run.integrator",
             "choice",
             "integrator name; default: the engine's default integrator",
-            choices=("default", *INTEGRATORS),
+            choices=("default", *ALL_INTEGRATORS),
             archive_name="integrator",
         ),
         Field(
             "run.tolerance",
             "quantity",
-            "event-time tolerance of integrators that locate events",
+            "event-time tolerance of integrators that locate events (compliant: the relative "
+            "tolerance, no finer than 1e-10)",
             units="s",
             example="s",
             minimum=0.0,
@@ -364,8 +366,16 @@ CASE_FIELDS: dict[str, Field] = {
             "optional histories to store: q (the thesis's seven coordinates), member_loads "
             "(all member loads) or single member loads by name, spring (the spring's force, "
             "largest element force and coil-clash margin, and their per-revolution metrics) "
-            "or single spring histories by name",
-            choices=("q", "member_loads", *MEMBER_LOADS, "spring", *SPRING_HISTORIES),
+            "or single spring histories by name; contact_pressure: the peak Hertz pressure "
+            "at the cam and the seat per revolution",
+            choices=(
+                "q",
+                "member_loads",
+                *MEMBER_LOADS,
+                "spring",
+                *SPRING_HISTORIES,
+                "contact_pressure",
+            ),  # fmt: skip
         ),
     ]
 }

@@ -27,7 +27,12 @@ from campipe.engine.loads import (
     spring_histories,
 )
 from campipe.study.expand import ResolvedCase
-from campipe.study.variables import PER_REVOLUTION_METRICS, SPRING_METRICS, data_variables
+from campipe.study.variables import (
+    CONTACT_PRESSURE_METRICS,
+    PER_REVOLUTION_METRICS,
+    SPRING_METRICS,
+    data_variables,
+)
 from campipe.vocabulary import (
     EV_FROM,
     EV_IMPULSE,
@@ -172,7 +177,12 @@ def batch_arrays(plan: BatchPlan, result: BatchResult) -> BatchData:
         "max_cam_force_by_rev": result.max_cam_force_per_rev,
         "max_seat_force_by_rev": result.max_seat_force_per_rev,
     }
-    for summary, name, dtype, _, _, how in PER_REVOLUTION_METRICS:
+    metrics: tuple[tuple[str, str, str, str, str | None, str], ...] = PER_REVOLUTION_METRICS
+    if "max_cam_pressure" in wanted:
+        per_rev["max_cam_pressure_by_rev"] = result.max_cam_pressure_per_rev
+        per_rev["max_seat_pressure_by_rev"] = result.max_seat_pressure_per_rev
+        metrics = metrics + CONTACT_PRESSURE_METRICS
+    for summary, name, dtype, _, _, how in metrics:
         values = per_rev[name]
         measured = values[:, result.measured]
         arrays[summary] = measured.mean(axis=1) if how == "mean" else measured.max(axis=1)

@@ -107,6 +107,27 @@ PER_REVOLUTION_METRICS = (
 )
 
 
+#: Metrics stored when ``run.record`` holds ``contact_pressure``: the peak Hertz pressure of
+#: the largest contact force (``campipe.model.contact_laws``; NaN where the contact's geometry
+#: does not give it), as PER_REVOLUTION_METRICS.
+CONTACT_PRESSURE_METRICS = (
+    (
+        "max_cam_pressure",
+        "max_cam_pressure_by_rev",
+        "f8",
+        "peak Hertz pressure at the cam contact",
+        "Pa",
+        "max",
+    ),
+    (
+        "max_seat_pressure",
+        "max_seat_pressure_by_rev",
+        "f8",
+        "peak Hertz pressure at the valve seat contact",
+        "Pa",
+        "max",
+    ),
+)
 #: The spring's metrics, stored with ``run.record: [spring]`` (as PER_REVOLUTION_METRICS;
 #: "min": the summary is the least over the measured revolutions). Read from the histories
 #: at the output angles (``run.output_every``), which must resolve the spring's surge.
@@ -218,6 +239,11 @@ VARIABLES: dict[str, Variable] = {
         name: var
         for metric in PER_REVOLUTION_METRICS
         for name, var in _metric_variables(*metric).items()
+    },
+    **{
+        name: var
+        for metric in CONTACT_PRESSURE_METRICS
+        for name, var in _metric_variables(*metric, record="contact_pressure").items()
     },
     "steps": Variable(CASE, "i8", "integration steps taken", role="count"),
     "status": Variable(

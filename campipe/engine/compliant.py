@@ -1,0 +1,700 @@
+"""The compliant integrator: the contacts as force elements, integrated with error control.
+
+With a compliant law at the cam (and at the seat, where there is one), no coordinate is held:
+all of them are free, and the contacts act as forces of their approach δ and its rate
+(:mod:`campipe.model.contact_laws`):
+
+    M q̈ + C q̇ + K q = f − F_cam(δ_c, δ̇_c)·e₁ + F_seat(δ_s, δ̇_s)·e₇,
+    δ_c = q1 + lift(θ),  δ_s = q7_seat − q7,
+
+(q1 points down, away from the cam; q7 down, away from the seat). A contact is closed while
+its approach and its law's force are both positive: its monitor min(δ, F/k) (for hertz
+min(δ, 1 + α·δ̇), the sign of its force) crosses zero upward where it closes (the surfaces
+meet, or a relaxed damper's force turns compressive again) and downward where it opens (the
+force reaches zero: no tension). Between these events, and between the profile's breaks,
+the equations are smooth, and (hertz) ``scipy.integrate.solve_ivp`` (Radau, L-stable: the train's
+highest modes and a stiff contact cost no stability limit) integrates them to the run's
+tolerance, with the Jacobian given (constant per contact state for kelvin-voigt). Each event
+is located on the step's dense output (a terminal event: the integration restarts from it
+with the contact switched), and so is each maximum of a contact force (its rate's downward
+zero): the peak contact force is a located extremum, not the largest sample, and it converges
+as the tolerance shrinks.
+
+Kelvin–Voigt is linear in each contact state, so it keeps exact propagation: with the cam's
+polynomial and harmonic made states of one homogeneous linear system, e^{A·τ} (balanced, on a
+grid of STEPS_PER_PERIOD steps a period of its fastest oscillation) propagates it to
+rounding, whatever the tolerance (``exact_segment``), and its events are located on that
+exact state. This is done here, in Python, not in modal-exact's compiled kernel; hertz, being
+nonlinear in contact, goes through solve_ivp.
+
+Results go into the same :class:`~campipe.engine.common.Outputs` the compiled kernels fill,
+so ``run_batch`` returns the same ``BatchResult``: a closing is a cam (seat) impact event with
+its closing velocity δ̇ and no impulse (the force is finite), an opening a separation; the
+configuration number says which contacts are closed (thesis Table I).
+
+Pure numerics: arrays in, arrays out. SciPy is imported where it is used.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from campipe.constants import TWO_PI
+from campipe.engine.common import TURN_GUARD
+from campipe.model import ValveTrain, coordinates, system_matrices
+from campipe.model.contact_laws import KELVIN_VOIGT, ContactLaw, contact_law
+from campipe.profiles import Profile
+from campipe.vocabulary import (
+    CAM,
+    CAM_IMPACT,
+    CAM_SEPARATION,
+    CHATTER,
+    EVENTS_TRUNCATED,
+    NONFINITE,
+    SEAT,
+    SEAT_IMPACT,
+    SEAT_SEPARATION,
+    UNBOUNDED,
+    configuration,
+)
+
+#: The solve_ivp method: implicit and L-stable, so a stiff contact or the train's top mode
+#: (1.07e6 rad/s) sets no step limit.
+METHOD = "Radau"
+#: Events in a row each within STALL_WINDOW [s] of the last before a case is declared
+#: chattering (a grazing contact switching at one instant).
+MAX_STALLED = 64
+STALL_WINDOW = 1e-12
+#: How long after a switch a monitor reads its value at the end of this interval [s]
+#: (``_Run.monitors``): far below any contact's time scale, far above rounding of t.
+SWITCH_GUARD = 1e-11
+
+
+class Lift:
+    """A profile's lift as a scalar function of time (Horner's scheme on the piece)."""
+
+    def __init__(self, profile: Profile, speed: float) -> None:
+        self.breaks = profile.breaks
+        self.poly = profile.poly
+        self.trig = profile.trig
+        self.w = speed
+
+    def piece_at(self, t: float) -> tuple[int, int]:
+        """(piece, turn) holding time t, by its position on the turn."""
+        theta = self.w * t
+        rev = math.floor(theta / TWO_PI)
+        phi = theta - rev * TWO_PI
+        piece = int(np.searchsorted(self.breaks, phi, side="right") - 1)
+        return min(max(piece, 0), self.poly.shape[0] - 1), rev
+
+    def break_after(self, piece: int, rev: int) -> float:
+        """The time the piece ends [s]."""
+        return (rev * TWO_PI + self.breaks[piece + 1]) / self.w
+
+    def at(self, piece: int, rev: int, t: float) -> tuple[float, float, float]:
+        """Lift [m], its rate [m/s] and acceleration [m/s²] on ``piece`` of turn ``rev``."""
+        theta = self.w * t
+        x = theta - rev * TWO_PI - self.breaks[piece]
+        c = self.poly[piece]
+        p0 = p1 = p2 = 0.0
+        for k in range(7, -1, -1):
+            p2 = p2 * x + 2.0 * p1
+            p1 = p1 * x + p0
+            p0 = p0 * x + c[k]
+        s, co = math.sin(theta), math.cos(theta)
+        ta, tb = self.trig[piece]
+        w = self.w
+        return (p0 + ta * s + tb * co, w * (p1 + ta * co - tb * s), w * w * (p2 - ta * s - tb * co))
+
+
+@dataclass
+class CompliantSystem:
+    """One case's equations: the train's matrices, its contact laws, its cam."""
+
+    mass: np.ndarray  # (n, n) [kg, kg·m, kg·m²]
+    damping: np.ndarray  # (n, n)
+    stiffness: np.ndarray  # (n, n)
+    load: np.ndarray  # (n,) the spring's preload [N]
+    cam: ContactLaw
+    seat: ContactLaw | None  # None: no seat
+    seat_q: float  # q7 where the valve meets its seat [m]
+    lift: Lift
+    scale: np.ndarray  # (2n,) each state component's scale (atol = rtol × scale)
+    minv: np.ndarray = field(init=False)
+    a_mat: np.ndarray = field(init=False)
+
+    def __post_init__(self) -> None:
+        n = self.load.size
+        self.minv = np.linalg.inv(self.mass)
+        self.a_mat = np.zeros((2 * n, 2 * n))
+        self.a_mat[:n, n:] = np.eye(n)
+        self.a_mat[n:, :n] = -self.minv @ self.stiffness
+        self.a_mat[n:, n:] = -self.minv @ self.damping
+        self.accel0 = self.minv @ self.load
+
+
+def _law_force(law: ContactLaw, d: float, r: float) -> float:
+    if law.law == KELVIN_VOIGT:
+        return law.stiffness * d + law.damping * r
+    return law.stiffness * max(d, 0.0) ** 1.5 * (1.0 + law.damping * r)
+
+
+def _law_slopes(law: ContactLaw, d: float, r: float) -> tuple[float, float]:
+    """∂F/∂δ, ∂F/∂δ̇."""
+    if law.law == KELVIN_VOIGT:
+        return law.stiffness, law.damping
+    root = math.sqrt(max(d, 0.0))
+    return 1.5 * law.stiffness * root * (1.0 + law.damping * r), law.stiffness * root**3 * (
+        law.damping
+    )
+
+
+def _monitor(law: ContactLaw, d: float, r: float) -> float:
+    """Positive exactly where the contact is closed: approach and force both positive [m]."""
+    if law.law == KELVIN_VOIGT:
+        return min(d, d + law.damping / law.stiffness * r)
+    if law.damping == 0.0:
+        return d
+    return min(d, 1e-3 * (1.0 + law.damping * r))
+
+
+class _Run:
+    """One case through its segments: the state, the closed contacts, what is recorded."""
+
+    def __init__(self, system: CompliantSystem, rtol: float, max_step: float) -> None:
+        self.s = system
+        self.n = system.load.size
+        self.rtol = rtol
+        self.max_step = max_step
+        self.closed = [False, False]  # cam, seat
+        self.piece = 0
+        self.rev = 0
+        #: (closed, piece) → (grid step, propagator) of the exact kelvin-voigt propagation
+        self.exact_cache: dict[tuple, tuple[float, _Propagator]] = {}
+
+    # -- the equations in the current contact state -----------------------------------------
+
+    def approaches(self, t: float, z: np.ndarray) -> tuple[float, float, float, float]:
+        """(δ_cam, δ̇_cam, δ_seat, δ̇_seat) [m, m/s]."""
+        n = self.n
+        lift, rate, _ = self.s.lift.at(self.piece, self.rev, t)
+        dc, rc = z[CAM] + lift, z[n + CAM] + rate
+        if self.s.seat is None:
+            return dc, rc, -1.0, 0.0
+        return dc, rc, self.s.seat_q - z[SEAT], -z[n + SEAT]
+
+    def forces(self, t: float, z: np.ndarray) -> tuple[float, float]:
+        """Compressive cam and seat forces [N] in the current contact state."""
+        dc, rc, ds, rs = self.approaches(t, z)
+        fc = _law_force(self.s.cam, dc, rc) if self.closed[0] else 0.0
+        fs = _law_force(self.s.seat, ds, rs) if self.closed[1] and self.s.seat else 0.0
+        return fc, fs
+
+    def rhs(self, t: float, z: np.ndarray) -> np.ndarray:
+        s, n = self.s, self.n
+        out = s.a_mat @ z
+        out[n:] += s.accel0
+        fc, fs = self.forces(t, z)
+        if fc != 0.0:
+            out[n:] -= s.minv[:, CAM] * fc
+        if fs != 0.0:
+            out[n:] += s.minv[:, SEAT] * fs
+        return out
+
+    def jac(self, t: float, z: np.ndarray) -> np.ndarray:
+        s, n = self.s, self.n
+        j = s.a_mat.copy()
+        dc, rc, ds, rs = self.approaches(t, z)
+        if self.closed[0]:
+            kd, cd = _law_slopes(s.cam, dc, rc)
+            j[n:, CAM] -= s.minv[:, CAM] * kd
+            j[n:, n + CAM] -= s.minv[:, CAM] * cd
+        if self.closed[1] and s.seat is not None:
+            kd, cd = _law_slopes(s.seat, ds, rs)
+            j[n:, SEAT] -= s.minv[:, SEAT] * kd
+            j[n:, n + SEAT] -= s.minv[:, SEAT] * cd
+        return j
+
+    def force_rates(self, t: float, z: np.ndarray) -> tuple[float, float]:
+        """dF/dt of the cam and seat forces [N/s] (closed contacts)."""
+        n = self.n
+        acc = self.rhs(t, z)[n:]
+        _, _, ddlift = self.s.lift.at(self.piece, self.rev, t)
+        dc, rc, ds, rs = self.approaches(t, z)
+        out = [0.0, 0.0]
+        for i, (law, d, r, a) in enumerate(
+            ((self.s.cam, dc, rc, acc[CAM] + ddlift), (self.s.seat, ds, rs, -acc[SEAT]))
+        ):
+            if law is not None and self.closed[i]:
+                kd, cd = _law_slopes(law, d, r)
+                out[i] = kd * r + cd * a
+        return out[0], out[1]
+
+    def monitors(self, t_a: float, z_a: np.ndarray) -> list[Any]:
+        """solve_ivp's events from (t_a, z_a): each contact's switch (terminal), then each
+        closed contact's force maximum (not terminal).
+
+        A segment starts where a switch has just put a monitor at zero, so its value there
+        has no sign to compare with; up to SWITCH_GUARD after t_a each switch reads its value
+        at t_a + SWITCH_GUARD (the state extrapolated along its rate), so a monitor that turns
+        back within the first step (a force that reaches zero and turns compressive again) is
+        seen to cross rather than missed, which would leave a contact open in overlap."""
+        out: list[Any] = []
+        t_guard = t_a + SWITCH_GUARD
+        z_guard = z_a + SWITCH_GUARD * self.rhs(t_a, z_a)
+        for i, law in enumerate((self.s.cam, self.s.seat)):
+            if law is None:
+                continue
+
+            def switch(t, z, i=i, law=law):
+                if t < t_guard:
+                    t, z = t_guard, z_guard
+                d = self.approaches(t, z)
+                return _monitor(law, d[2 * i], d[2 * i + 1])
+
+            switch.terminal = True  # type: ignore[attr-defined]
+            switch.direction = -1.0 if self.closed[i] else 1.0  # type: ignore[attr-defined]
+            switch.contact = i  # type: ignore[attr-defined]
+            out.append(switch)
+        for i in (0, 1):
+            if self.closed[i]:
+
+                def peak(t, z, i=i):
+                    return self.force_rates(t, z)[i]
+
+                peak.terminal = False  # type: ignore[attr-defined]
+                peak.direction = -1.0  # type: ignore[attr-defined]
+                peak.contact = i + 2  # type: ignore[attr-defined]
+                out.append(peak)
+        return out
+
+
+@dataclass
+class CaseOutputs:
+    """One case's slices of the batch's Outputs, filled in place."""
+
+    q: np.ndarray  # (n_out, 7)
+    v: np.ndarray  # (n_out, 7)
+    force: np.ndarray  # (n_out, 2) thesis signs
+    cam: np.ndarray  # (n_out,)
+    cfg: np.ndarray  # (n_out,)
+    acc: np.ndarray  # (n_out, 2)
+    sep_rev: np.ndarray  # (n_rev,)
+    seated_rev: np.ndarray  # (n_rev,)
+    counts: np.ndarray  # (n_rev, 2)
+    vmax: np.ndarray  # (n_rev, 2)
+    fmax: np.ndarray  # (n_rev, 3)
+    events: np.ndarray  # (max_events, 6)
+    n_events: int = 0
+    status: int = 0
+    steps: int = 0
+
+
+def integrate(
+    system: CompliantSystem,
+    t0: float,
+    z0: np.ndarray,
+    closed: tuple[bool, bool],
+    t_out: np.ndarray,
+    out: CaseOutputs,
+    *,
+    rtol: float,
+    max_step: float = math.inf,
+    capture: float = 1e-3,
+    lift_bound: float = math.inf,
+    valve_ref: float = 0.0,
+) -> CaseOutputs:
+    """Integrate one case from t0 to t_out[-1], recording into ``out``.
+
+    Parameters
+    ----------
+    system : CompliantSystem
+    t0 : float
+        Start time [s] (≤ t_out[0]; nothing before t = 0 is recorded).
+    z0 : (2n,) array
+        Start state: coordinates, then velocities [SI].
+    closed : (bool, bool)
+        Cam and seat contacts closed at the start.
+    t_out : (n_out,) array
+        Sample times [s], from 0.
+    rtol : float
+        Relative tolerance; the absolute one is rtol × ``system.scale``.
+    max_step : float
+        Largest step [s].
+    capture : float
+        A closing slower than this [m/s] is a touch: switched and recorded as an event, but
+        not counted as an impact in the per-turn counts and closing velocities.
+    lift_bound : float
+        |q7 − valve_ref| beyond this [m] ends the case with status UNBOUNDED.
+    """
+    from scipy.integrate import solve_ivp
+
+    run = _Run(system, rtol, max_step)
+    run.closed = [bool(closed[0]), bool(closed[1] and system.seat is not None)]
+    lift = system.lift
+    w = lift.w
+    n_rev = out.sep_rev.size
+    t_end = float(t_out[-1])
+    t, z = float(t0), np.asarray(z0, dtype=float).copy()
+    run.piece, run.rev = lift.piece_at(t)
+    k_out = 0
+    stalled = 0
+    atol = rtol * system.scale
+    exact = is_linear(system)
+
+    def turn(tt: float) -> int:
+        return min(max(int(math.floor(w * tt / TWO_PI + TURN_GUARD)), 0), n_rev - 1)
+
+    def peak(tt: float, zz: np.ndarray) -> None:
+        if tt < 0.0:
+            return
+        fc, fs = run.forces(tt, zz)
+        r = turn(tt)
+        out.fmax[r, 0] = max(out.fmax[r, 0], fc)
+        out.fmax[r, 2] = out.fmax[r, 0]
+        out.fmax[r, 1] = max(out.fmax[r, 1], fs)
+
+    def event(tt, kind, c_from, c_to, velocity):
+        if tt < 0.0:
+            return
+        if out.n_events < out.events.shape[0]:
+            out.events[out.n_events] = (tt, kind, c_from, c_to, velocity, 0.0)
+        out.n_events += 1
+
+    def off_cam(ta: float, tb: float, seated: bool) -> None:
+        sums = out.seated_rev if seated else out.sep_rev
+        a, b = max(w * ta, 0.0), w * tb
+        r = int(a / TWO_PI)
+        while a < b and r < n_rev:
+            stop = min(b, (r + 1) * TWO_PI)
+            sums[r] += stop - a
+            a = stop
+            r += 1
+
+    peak(t, z)
+    while t < t_end:
+        t_stop = min(lift.break_after(run.piece, run.rev), t_end)
+        if t_stop - t > 1e-15 * (1.0 + abs(t)):
+            events = run.monitors(t, z)
+            if exact:
+                sol = exact_segment(run, t, t_stop, z, events, max_step)
+            else:
+                sol = solve_ivp(
+                    run.rhs, (t, t_stop), z, method=METHOD, rtol=rtol, atol=atol,
+                    events=events, dense_output=True, jac=run.jac, max_step=max_step,
+                )  # fmt: skip
+            out.steps += sol.t.size - 1
+            if sol.status == -1 or not np.all(np.isfinite(sol.y[:, -1])):
+                out.status = NONFINITE
+                return out
+            t_seg, z_seg, hit = t_stop, sol.y[:, -1], -1
+            if sol.status == 1:
+                firsts = [
+                    (te[0], k)
+                    for k, te in enumerate(sol.t_events)
+                    if events[k].terminal and len(te)
+                ]
+                t_seg, k = min(firsts)
+                z_seg = sol.y_events[k][0]
+                hit = events[k].contact
+            for k, te in enumerate(sol.t_events):
+                if not events[k].terminal:
+                    for j, tt in enumerate(te):
+                        if tt <= t_seg:
+                            peak(float(tt), sol.y_events[k][j])
+            while k_out < t_out.size and t_out[k_out] <= t_seg * (1.0 + 1e-14):
+                zs = sol.sol(t_out[k_out])
+                _sample(run, t_out[k_out], zs, out, k_out)
+                if abs(zs[SEAT] - valve_ref) > lift_bound:
+                    out.status = UNBOUNDED
+                    return out
+                k_out += 1
+            if not run.closed[0]:
+                off_cam(t, t_seg, run.closed[1])
+            peak(t_seg, z_seg)
+            stalled = stalled + 1 if t_seg - t < STALL_WINDOW else 0
+            t, z = float(t_seg), np.array(z_seg)
+        else:
+            t, hit = t_stop, -1
+        if hit >= 0:
+            if stalled > MAX_STALLED:
+                out.status = CHATTER
+                return out
+            before = configuration(*run.closed)
+            d = run.approaches(t, z)
+            run.closed[hit] = not run.closed[hit]
+            after = configuration(*run.closed)
+            closing = run.closed[hit]
+            kinds = ((CAM_SEPARATION, CAM_IMPACT), (SEAT_SEPARATION, SEAT_IMPACT))
+            velocity = d[2 * hit + 1] if closing else 0.0
+            event(t, kinds[hit][closing], before, after, velocity)
+            if closing and t >= 0.0 and velocity >= capture:
+                r = turn(t)
+                out.counts[r, hit] += 1
+                out.vmax[r, hit] = max(out.vmax[r, hit], velocity)
+            peak(t, z)
+            continue
+        if t >= t_end:
+            break
+        if run.piece + 1 < lift.poly.shape[0]:
+            run.piece += 1
+        else:
+            run.piece, run.rev = 0, run.rev + 1
+    while k_out < t_out.size:  # the last sample, to rounding
+        _sample(run, t_out[k_out], z, out, k_out)
+        k_out += 1
+    if out.n_events > out.events.shape[0] and out.status == 0:
+        out.status = EVENTS_TRUNCATED
+    return out
+
+
+def is_linear(system: CompliantSystem) -> bool:
+    """Every contact the case can touch is kelvin-voigt: linear in each contact state, so
+    propagated exactly (``exact_segment``)."""
+    return system.cam.law == KELVIN_VOIGT and (
+        system.seat is None or system.seat.law == KELVIN_VOIGT
+    )
+
+
+#: Polynomial states of the augmented system: x^j, j = 0 … 7 (x the angle into the piece).
+N_POLY = 8
+#: Grid steps per period of the fastest oscillation of a contact state's modes.
+STEPS_PER_PERIOD = 8
+#: Bracketed root search tolerance [s], as solve_ivp's (4 ulp).
+EVENT_XTOL = 4 * np.finfo(float).eps
+
+
+@dataclass
+class _ExactResult:
+    """What ``integrate`` reads of a segment (solve_ivp's names)."""
+
+    status: int  # 0: reached the end; 1: a terminal event
+    t: np.ndarray  # grid times [s]
+    y: np.ndarray  # (2n, n_t) states on the grid
+    t_events: list[np.ndarray]
+    y_events: list[np.ndarray]
+    sol: Any  # t → state
+
+
+def _augmented(run: _Run) -> np.ndarray:
+    """The kelvin-voigt system in the current contact state and piece as one homogeneous
+    linear system ẇ = A w, w = (q, q̇, x⁰ … x⁷, sin ωt, cos ωt): the cam's lift on the piece is
+    a polynomial in x = θ − the piece's start plus a harmonic, and each of those is itself
+    the solution of a linear system, so e^{A·τ} propagates the state exactly."""
+    s, n = run.s, run.n
+    w = s.lift.w
+    m = 2 * n + N_POLY + 2
+    a = np.zeros((m, m))
+    k_eff = s.stiffness.copy()
+    c_eff = s.damping.copy()
+    force = s.load.copy()  # on the constant state x⁰
+    cam = np.zeros(N_POLY + 2)  # k·L + c·L' per forcing state
+    poly = s.lift.poly[run.piece]
+    ta, tb = s.lift.trig[run.piece]
+    if run.closed[0]:
+        k, c = s.cam.stiffness, s.cam.damping
+        k_eff[CAM, CAM] += k
+        c_eff[CAM, CAM] += c
+        cam[:N_POLY] = k * poly
+        cam[: N_POLY - 1] += c * w * np.arange(1, N_POLY) * poly[1:]
+        cam[N_POLY:] = (k * ta - c * w * tb, k * tb + c * w * ta)
+    if run.closed[1] and s.seat is not None:
+        k_eff[SEAT, SEAT] += s.seat.stiffness
+        c_eff[SEAT, SEAT] += s.seat.damping
+        force[SEAT] += s.seat.stiffness * s.seat_q
+    a[:n, n : 2 * n] = np.eye(n)
+    a[n : 2 * n, :n] = -s.minv @ k_eff
+    a[n : 2 * n, n : 2 * n] = -s.minv @ c_eff
+    a[n : 2 * n, 2 * n :] = -np.outer(s.minv[:, CAM], cam)
+    a[n : 2 * n, 2 * n] += s.minv @ force
+    for j in range(1, N_POLY):
+        a[2 * n + j, 2 * n + j - 1] = j * w
+    a[m - 2, m - 1] = w
+    a[m - 1, m - 2] = -w
+    return a
+
+
+class _Propagator:
+    """e^{A·τ} for 0 ≤ τ ≤ h, applied to a state: e^{A·h} once, and e^{A·h·2^−j} − I for
+    j = 1 … levels (each from the next by E ← 2E + E², the smallest by its Taylor series), so
+    τ = h·Σ b_j 2^−j costs a matrix–vector product per set bit, not a Padé approximant. The
+    matrix is balanced first: the state mixes metres, metres per second and the forcing's
+    powers of the angle, and the contact force is a small difference of positions, so an
+    unbalanced exponential loses digits it needs."""
+
+    def __init__(self, a: np.ndarray, h: float) -> None:
+        from scipy.linalg import matrix_balance
+
+        b, (d, _) = matrix_balance(a * h, permute=False, separate=True)
+        norm = float(np.abs(b).sum(axis=1).max())
+        self.levels = int(max(48, math.ceil(math.log2(max(norm, 1.0))) + 24))
+        x = b / 2.0**self.levels
+        e = x.copy()
+        term = x.copy()
+        for k in range(2, 8):
+            term = term @ x / k
+            e = e + term
+        steps = [e]
+        for _ in range(self.levels):
+            e = 2.0 * e + e @ e
+            steps.append(e)
+        self.minus_one = steps[::-1]  # [j]: e^{b·2^−j} − I
+        self.d = d
+        self.h = h
+        self.phi = (np.eye(b.shape[0]) + self.minus_one[0]) * d[:, None] / d[None, :]
+
+    def advance(self, w: np.ndarray, tau: float) -> np.ndarray:
+        """e^{A·τ}·w, 0 ≤ τ ≤ h."""
+        f = tau / self.h
+        if f >= 1.0:
+            return self.phi @ w
+        wb = w / self.d
+        for j in range(1, self.levels + 1):
+            part = 2.0**-j
+            if f >= part:
+                wb = wb + self.minus_one[j] @ wb
+                f -= part
+            if f <= 0.0:
+                break
+        return wb * self.d
+
+
+def _forcing_state(run: _Run, t: float) -> np.ndarray:
+    lift = run.s.lift
+    x = lift.w * t - run.rev * TWO_PI - lift.breaks[run.piece]
+    theta = lift.w * t
+    return np.concatenate([x ** np.arange(N_POLY), [math.sin(theta), math.cos(theta)]])
+
+
+def exact_segment(run: _Run, t_a: float, t_b: float, z_a: np.ndarray, events: list[Any],
+                  max_step: float) -> _ExactResult:  # fmt: skip
+    """Propagate a kelvin-voigt case exactly from t_a to t_b (or its first terminal event):
+    e^{A·h} on a grid fine enough to see each monitor's sign change (STEPS_PER_PERIOD a
+    period of the fastest oscillation), each crossing found by brentq on the exact state, as
+    solve_ivp's events are on its dense output."""
+    from scipy.optimize import brentq
+
+    n2 = z_a.size
+    key = (tuple(run.closed), run.piece)
+    cache = run.exact_cache
+    if key not in cache:
+        a = _augmented(run)
+        top = np.abs(np.linalg.eigvals(a[:n2, :n2]).imag).max()
+        h = min(TWO_PI / (STEPS_PER_PERIOD * top) if top > 0 else math.inf, max_step)
+        h = min(h, TWO_PI / (STEPS_PER_PERIOD * run.s.lift.w))
+        cache[key] = (h, _Propagator(a, h))
+    h, prop = cache[key]
+    phi = prop.phi
+
+    def state(t0: float, w0: np.ndarray, t: float) -> np.ndarray:
+        return prop.advance(w0, t - t0)
+
+    ts, ws = [t_a], [np.concatenate([z_a, _forcing_state(run, t_a)])]
+    g_old = [ev(t_a, z_a) for ev in events]
+    t_events: list[list[float]] = [[] for _ in events]
+    y_events: list[list[np.ndarray]] = [[] for _ in events]
+    status = 0
+    while ts[-1] < t_b:
+        t, w = ts[-1], ws[-1]
+        if t + h >= t_b * (1.0 - 1e-15):
+            t_new, w_new = t_b, state(t, w, t_b)
+        else:
+            t_new, w_new = t + h, phi @ w
+        g_new = [ev(t_new, w_new[:n2]) for ev in events]
+        found = []
+        for k, ev in enumerate(events):
+            up = g_old[k] <= 0.0 <= g_new[k]
+            down = g_old[k] >= 0.0 >= g_new[k]
+            if (up and ev.direction > 0) or (down and ev.direction < 0):
+                root = brentq(
+                    lambda tt, ev=ev, t=t, w=w: ev(tt, state(t, w, tt)[:n2]),
+                    t, t_new, xtol=EVENT_XTOL, rtol=EVENT_XTOL,
+                )  # fmt: skip
+                found.append((root, k))
+        terminal = [(tt, k) for tt, k in found if events[k].terminal]
+        if terminal:
+            t_stop, _ = min(terminal)
+            t_new, w_new = t_stop, state(t, w, t_stop)
+            status = 1
+        for tt, k in found:
+            if tt <= t_new:
+                t_events[k].append(tt)
+                y_events[k].append(state(t, w, tt)[:n2])
+        ts.append(t_new)
+        ws.append(w_new)
+        g_old = g_new
+        if status:
+            break
+    grid = np.array(ts)
+    states = np.array(ws)
+
+    def sol(tt: float) -> np.ndarray:
+        i = min(max(int(np.searchsorted(grid, tt, side="right")) - 1, 0), grid.size - 1)
+        return state(grid[i], states[i], tt)[:n2]
+
+    return _ExactResult(
+        status, grid, states[:, :n2].T,
+        [np.array(te) for te in t_events], [np.array(ye) for ye in y_events], sol,
+    )  # fmt: skip
+
+
+def _sample(run: _Run, t: float, z: np.ndarray, out: CaseOutputs, k: int) -> None:
+    n = run.n
+    fc, fs = run.forces(t, z)
+    acc = run.rhs(t, z)[n:]
+    m = min(n, out.q.shape[1])
+    out.q[k, :m] = z[:m]
+    out.v[k, :m] = z[n : n + m]
+    out.q[k, m:] = out.v[k, m:] = np.nan  # a batch's coordinates beyond this train's
+    out.force[k] = (-fc, fs)
+    out.cam[k] = run.s.lift.at(run.piece, run.rev, t)[0]
+    out.cfg[k] = configuration(*run.closed)
+    out.acc[k] = (acc[CAM], acc[SEAT])
+
+
+def compliant_system(train: ValveTrain, profile: Profile, speed: float, seat_q: float | None
+                     ) -> CompliantSystem:  # fmt: skip
+    """A case's equations: ``seat_q`` the q7 of its seat [m], None for no seat."""
+    sm = system_matrices(train)
+    lift = Lift(profile, speed)
+    lift_max = float(np.abs(profile.poly[:, 0]).max() + np.abs(profile.trig).sum(axis=1).max())
+    n = sm.preload.size
+    scale = np.full(n, max(lift_max, 1e-6))
+    rotations = [i for i, c in enumerate(coordinates(train)) if c.kind != "translation"]
+    scale[rotations] /= train.rocker_pushrod_arm_length
+    return CompliantSystem(
+        sm.mass, sm.damping, sm.stiffness, sm.preload,
+        contact_law(train, "cam"),
+        None if seat_q is None else contact_law(train, "seat"),
+        math.nan if seat_q is None else seat_q,
+        lift,
+        np.concatenate([scale, speed * scale]),
+    )  # fmt: skip
+
+
+def compliant_start(system: CompliantSystem, q: np.ndarray, v: np.ndarray, a: np.ndarray,
+                    cam_held: bool, seat_held: bool) -> np.ndarray:  # fmt: skip
+    """The state z = (q, q̇) a compliant case starts from, from the rigid model's (q, v, a)
+    with the given contacts held: each held contact compressed by its static approach under
+    the rigid reaction, the other coordinates moved by their static response to it, so the
+    start carries no spurious contact transient (the difference is O(1/k) and damps out)."""
+    s = system
+    reaction = s.mass @ a + s.damping @ v + s.stiffness @ q - s.load
+    dq = np.zeros(q.size)
+    moved: list[int] = []
+    if cam_held:
+        dq[CAM] = s.cam.approach(-reaction[CAM])
+        moved.append(CAM)
+    if seat_held and s.seat is not None:
+        dq[SEAT] = -s.seat.approach(reaction[SEAT])
+        moved.append(SEAT)
+    if moved:
+        held = np.array(moved)
+        free = np.setdiff1d(np.arange(q.size), held)
+        kff = s.stiffness[np.ix_(free, free)]
+        dq[free] = -np.linalg.solve(kff, s.stiffness[np.ix_(free, held)] @ dq[held])
+    return np.concatenate([q + dq, v])
