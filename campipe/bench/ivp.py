@@ -420,7 +420,7 @@ class _Peer:
         l_left, dl_left, _ = self.cam.at(self.piece, self.rev, t)
         l_right, dl_right, _ = self.cam.at(nxt, rev_next, t)
         seat_held = holds_seat(cfg)
-        if cfg not in (1, 3):
+        if not holds_cam(cfg):
             return
         jump = dl_right - dl_left  # lift-rate jump [m/s]
         # Rounding, or slower than an impact that would count (the capture velocity).
