@@ -19,6 +19,7 @@ if TYPE_CHECKING:
         per_turn,
         spring_histories,
     )
+    from campipe.engine.periodic import run_at_fidelity
     from campipe.engine.settings import (
         DEFAULT_INTEGRATOR,
         DEFAULT_STEPS,
@@ -53,6 +54,7 @@ _MODULES = {
         "stability_limit",
     ),
     "campipe.engine.batch": ("BatchResult", "initial_state", "run_batch", "start_states"),
+    "campipe.engine.periodic": ("run_at_fidelity",),
     "campipe.engine.loads": (
         "MEMBER_LOADS",
         "SPRING_HISTORIES",
@@ -82,6 +84,7 @@ __all__ = [
     "member_loads",
     "per_turn",
     "resolve_integrator",
+    "run_at_fidelity",
     "run_batch",
     "spring_histories",
     "stability_limit",

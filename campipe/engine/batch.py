@@ -77,6 +77,7 @@ from campipe.vocabulary import (
     EVENTS_TRUNCATED,
     FAILURES,
     N_COORDINATES,
+    N_EVENT_FIELDS,
     NONFINITE,
     SEAT,
     SEATED,
@@ -722,11 +723,11 @@ def run_batch(
         steps=out.steps,
         status=status,
         start_time=cases_in.t0,
-        **_pressures(cases, out.fmax),
+        **peak_pressures(cases, out.fmax),
     )
 
 
-def _pressures(cases: Sequence[Case], fmax: np.ndarray) -> dict[str, np.ndarray]:
+def peak_pressures(cases: Sequence[Case], fmax: np.ndarray) -> dict[str, np.ndarray]:
     """The peak Hertz pressures per turn of the largest contact forces (NaN without the
     geometry; a pressure rises with its force, so its peak is the peak force's)."""
     out = {}
@@ -772,24 +773,35 @@ def _run_by_contacts(cases: Sequence[Case], settings: RunSettings, options) -> B
         if index.size:
             run = dataclasses.replace(settings, integrator=name)
             parts.append((index, run_batch([cases[int(i)] for i in index], run, **options)))
+    return merge_results(len(cases), parts)
+
+
+def merge_results(n: int, parts: Sequence[tuple[np.ndarray, BatchResult]]) -> BatchResult:
+    """One batch's result from the results of its parts, each with the indices of its cases
+    (in order, covering 0 … n − 1 once); q and v padded with NaN to the most coordinates."""
     if len(parts) == 1:
         return parts[0][1]
-    n = len(cases)
     merged: dict[str, object] = {}
     first = parts[0][1]
+    n_q = max(part.q.shape[2] for _, part in parts)
     for f in dataclasses.fields(BatchResult):
         value = getattr(first, f.name)
         if f.name in ("cam_angle", "measured"):
             merged[f.name] = value
         elif f.name == "events":
-            events: list[np.ndarray] = [np.zeros((0, 6))] * n
+            events: list[np.ndarray] = [np.zeros((0, N_EVENT_FIELDS))] * n
             for index, part in parts:
                 for j, i in enumerate(index):
                     events[i] = part.events[j]
             merged[f.name] = events
         else:
-            array = np.empty((n, *value.shape[1:]), value.dtype)
+            shape = (n, *value.shape[1:2], n_q) if f.name in ("q", "v") else (n, *value.shape[1:])
+            array = np.full(shape, np.nan) if f.name in ("q", "v") else np.empty(shape, value.dtype)
             for index, part in parts:
-                array[index] = getattr(part, f.name)
+                part_value = getattr(part, f.name)
+                if f.name in ("q", "v"):
+                    array[index, :, : part_value.shape[2]] = part_value
+                else:
+                    array[index] = part_value
             merged[f.name] = array
     return BatchResult(**merged)  # type: ignore[arg-type]

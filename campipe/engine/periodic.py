@@ -27,10 +27,14 @@ import numpy as np
 from campipe.constants import RPM, TWO_PI
 from campipe.engine import steady
 from campipe.engine.batch import (
+    BatchResult,
     Case,
     CaseError,
     RunSettings,
     check_run,
+    merge_results,
+    output_angles,
+    peak_pressures,
     run_batch,
     train_matrices,
     train_modal,
@@ -43,7 +47,7 @@ from campipe.engine.modal import ModalData
 from campipe.model import ValveTrain
 from campipe.model.assembly import preload_vector
 from campipe.profiles import pack
-from campipe.vocabulary import CAM, CAM_CONTACT, SEAT
+from campipe.vocabulary import CAM, CAM_CONTACT, N_EVENT_FIELDS, OK, SEAT
 
 #: Turns the engine integrates for a steady state with the valve seated on part of the turn
 #: (from the periodic start of configuration I); the last is the steady state when it agrees
@@ -123,7 +127,8 @@ def _prepare(cases: Sequence[Case], *, need_reference: bool = False) -> _SteadyB
     for k, t in enumerate(trains):
         if need_reference or k in seated_trains:
             matrices[k] = train_matrices(t)
-    qref = np.array([valve_reference(matrices[k]) if matrices[k] else 0.0 for k in which])
+    refs = [valve_reference(m) if m else 0.0 for m in matrices]  # per train
+    qref = np.array([refs[k] for k in which])
     modal_trains = stack_trains(data, [preload_vector(t) for t in trains])
     n_q = modal_trains.load.shape[1]  # the batch's most coordinates
     packed = pack([c.profile for c in cases])
@@ -245,7 +250,13 @@ def steady_state(cases: Sequence[Case], output_every: float = math.radians(1.0))
             )
     n_out = int(math.floor(TWO_PI / output_every + 1e-9)) + 1
     angles = np.minimum(np.arange(n_out) * output_every, TWO_PI)
-    n = len(cases)
+    return _samples(batch, ext, angles)
+
+
+def _samples(batch: _SteadyBatch, ext: SteadyExtremes, angles: np.ndarray) -> SteadyState:
+    """The steady state at ``angles`` (ascending, within one turn) of a prepared batch."""
+    n = batch.cases.omega.size
+    n_out = angles.size
     n_q = batch.trains.load.shape[1]
     q = np.full((n, n_out, n_q), np.nan)
     v = np.full((n, n_out, n_q), np.nan)
@@ -256,6 +267,75 @@ def steady_state(cases: Sequence[Case], output_every: float = math.radians(1.0))
         np.zeros(1, STATE), batch.z_turn, angles, np.ones(n, np.bool_), q, v, acc, force,
     )  # fmt: skip
     return SteadyState(angles, q, v, acc, force, batch.cases.valve_ref.copy(), ext)
+
+
+# --------------------------------------------------------------------------- the level
+
+
+def run_at_fidelity(cases: Sequence[Case], settings: RunSettings, **options) -> BatchResult:
+    """:func:`~campipe.engine.batch.run_batch` at the run's fidelity level
+    (``RunSettings.level``). ``full``: run_batch. ``steady``: each case whose periodic steady
+    state is configuration I's all turn (``SteadyExtremes.holds``: it follows the cam with
+    the valve clear of its seat) from that closed form, one turn's samples repeated over the
+    run's turns with no events; the others (and compliant cases) by run_batch; the results
+    in case order. The margin that decides it is the level's probe, paid per case."""
+    if settings.level == "full":
+        return run_batch(cases, settings, **options)
+    check_run(cases, settings, check_stability_limit=options.get("check_stability_limit", True))
+    rigid = np.flatnonzero([not c.compliant for c in cases])
+    holds = np.zeros(len(cases), np.bool_)
+    if rigid.size:
+        holds[rigid] = steady_extremes([cases[int(i)] for i in rigid]).holds
+    full = dataclasses.replace(settings, fidelity="full", fidelity_tolerance=None)
+    parts = []
+    for which, run in ((~holds, True), (holds, False)):
+        index = np.flatnonzero(which)
+        if not index.size:
+            continue
+        some = [cases[int(i)] for i in index]
+        result = run_batch(some, full, **options) if run else _steady_result(some, settings)
+        parts.append((index, result))
+    return merge_results(len(cases), parts)
+
+
+def _steady_result(cases: Sequence[Case], settings: RunSettings) -> BatchResult:
+    """The run of cases whose steady state holds, from its closed form (``run_at_fidelity``)."""
+    batch = _prepare(cases, need_reference=True)
+    ext = _as_extremes(batch.extremes(batch.cases.omega.copy()))
+    angles = output_angles(settings)
+    turn, back = np.unique(np.mod(angles, TWO_PI), return_inverse=True)
+    st = _samples(batch, ext, turn)
+    n, n_rev = len(cases), int(math.ceil(settings.revolutions - 1e-12))
+    per_rev = np.zeros((n, n_rev))
+    fmax = np.repeat(ext.max_cam_force[:, None], n_rev, axis=1)
+    q = st.q[:, back]
+    return BatchResult(
+        cam_angle=angles,
+        time=angles[None, :] / batch.cases.omega[:, None],
+        q=q,
+        v=st.v[:, back],
+        acc=st.acc[:, back],
+        cam_lift=-q[:, :, CAM],  # the follower is on the cam
+        cam_force=st.cam_force[:, back],
+        seat_force=np.zeros((n, angles.size)),
+        contact_state=np.full((n, angles.size), CAM_CONTACT, np.int8),
+        valve_reference=st.valve_reference,
+        measured=np.arange(n_rev) >= settings.warmup_turns,
+        separation_per_rev=per_rev.copy(),
+        seated_off_cam_per_rev=per_rev.copy(),
+        cam_impacts_per_rev=np.zeros((n, n_rev), np.int64),
+        seat_impacts_per_rev=np.zeros((n, n_rev), np.int64),
+        max_cam_impact_velocity_per_rev=per_rev.copy(),
+        max_seating_velocity_per_rev=per_rev.copy(),
+        max_cam_force_per_rev=fmax,
+        max_seat_force_per_rev=per_rev.copy(),
+        thesis_impact_force_per_rev=per_rev.copy(),
+        events=[np.zeros((0, N_EVENT_FIELDS)) for _ in range(n)],
+        steps=np.zeros(n, np.int64),
+        status=np.full(n, OK, np.int64),
+        start_time=np.zeros(n),
+        **peak_pressures(cases, np.stack([fmax, per_rev, per_rev], axis=2)),
+    )
 
 
 # --------------------------------------------------------------------------- the onset

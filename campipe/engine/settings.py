@@ -41,14 +41,24 @@ DEFAULT_STEPS: dict[str, float | None] = {
     "compliant": None,
 }
 CLOSURES = ("force", "form")
-#: Model fidelity of a run: "full", every case through its events with every mode. The
-#: levels below it were measured and removed because they did not pay (docs/bench.md, "Model
-#: only what a scene needs"; the CHANGELOG has the figures): "reduced" (the upper modes
-#: quasi-static between events) saved little for its error and changed the event sequence of
-#: many seated cases; a closed-form "steady" level cost as much as integrating, the samples
-#: being the cost. The steady state's own path is ``engine.periodic``.
-FIDELITIES = ("full",)
+#: Model fidelity of a run, cheapest last: "full", every case through its events with every
+#: mode; "steady", each case whose periodic steady state is configuration I's all turn (it
+#: follows the cam, the valve clear of its seat) from that closed form, one turn computed and
+#: repeated (``engine.periodic.run_at_fidelity``), the others in full. The full run starts on
+#: that same steady state and stays there, so the two agree to STEADY_ERROR. A level that did
+#: not pay was removed (docs/bench.md, "Model only what a scene needs"; the CHANGELOG has the
+#: figures): "reduced" (the upper modes quasi-static between events) saved little for its
+#: error and changed the event sequence of many seated cases.
+FIDELITIES = ("full", "steady")
 REMOVED_FIDELITIES = {"reduced": "it saved at most a fifth of the time for errors up to 0.1 in"}
+#: Each level's stated valve-lift error against the full engine [m], what a run's
+#: ``fidelity_tolerance`` is compared with (the steady level's is checked by
+#: tests/test_fidelity.py).
+FIDELITY_ERRORS = {"full": 0.0, "steady": 1e-9 * 0.0254}
+#: The steady level samples one turn in closed form at about twice modal-exact's cost per
+#: sample and repeats it: it pays from about four turns on (``campipe bench``'s fidelity
+#: table), so a run that names a tolerance takes it from this many turns.
+STEADY_MIN_TURNS = 6
 #: How a run starts: on the periodic steady state of configuration I (``engine.steady``), or
 #: the thesis's quasi-static state at θ = 0 (Appendix B, step 1), a transient.
 STARTS = ("periodic", "quasi-static")
@@ -155,7 +165,10 @@ class RunSettings:
     integrator: str = "default"  # "default" or a name in INTEGRATORS
     tolerance: float = 1e-12  # event-time tolerance of integrators that locate events [s]
     max_events: int = 4096  # events kept per case
-    fidelity: str = "full"  # "full" (see FIDELITIES)
+    fidelity: str = "full"  # a name in FIDELITIES
+    #: a valve-lift error [m] the run accepts instead of a level: the cheapest level whose
+    #: FIDELITY_ERRORS is within it (``level``); None: ``fidelity`` as named
+    fidelity_tolerance: float | None = None
     start: str = "periodic"  # "periodic" or "quasi-static" (see STARTS)
     warmup: int | None = None  # turns left out of the metrics; None: DEFAULT_WARMUP[start]
     capture_velocity: float = DEFAULT_CAPTURE_VELOCITY  # resting contact below this [m/s]
@@ -181,8 +194,40 @@ class RunSettings:
             )
         return int(turns)
 
+    @property
+    def level(self) -> str:
+        """The fidelity the run uses: ``fidelity``, or with ``fidelity_tolerance`` the cheapest
+        level whose stated error is within it: steady for runs of STEADY_MIN_TURNS turns or
+        more (shorter, full costs no more), from the periodic start with modal-exact (the
+        full run it stands for)."""
+        self.check_fidelity()
+        if self.fidelity_tolerance is None:
+            return self.fidelity
+        steady_ok = self.start == "periodic" and self.method == "modal-exact"
+        pays = self.revolutions >= STEADY_MIN_TURNS
+        if steady_ok and pays and FIDELITY_ERRORS["steady"] <= self.fidelity_tolerance:
+            return "steady"
+        return "full"
+
     def check_fidelity(self) -> None:
-        """Refuse an unknown fidelity (a removed one with the reason)."""
+        """Refuse an unknown fidelity (a removed one with the reason), and the steady level
+        without what it stands for (the periodic start, modal-exact)."""
+        tol = self.fidelity_tolerance
+        if tol is not None and not (tol >= 0 and math.isfinite(tol)):
+            raise RunSettingsError.at(
+                "run.fidelity_tolerance",
+                f"found {tol!r} m, expected a valve-lift error of 0 or more",
+                found=tol,
+                expected="a length ≥ 0, e.g. 1e-6 in",
+            )
+        if self.fidelity == "steady" and (self.start != "periodic" or self.method != "modal-exact"):
+            raise RunSettingsError.at(
+                "run.fidelity",
+                f"steady stands for modal-exact from the periodic start; found start "
+                f"{self.start!r} and integrator {self.method!r} (use run.fidelity: full)",
+                found=self.fidelity,
+                expected="full, or start periodic with integrator modal-exact",
+            )
         if self.fidelity not in FIDELITIES:
             why = REMOVED_FIDELITIES.get(self.fidelity)
             what = f"{self.fidelity!r} was removed: {why}" if why else f"unknown {self.fidelity!r}"

@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from campipe.constants import TWO_PI
-from campipe.engine import RunSettings, run_batch
+from campipe.engine import RunSettings, run_at_fidelity, run_batch
 from campipe.study.execute import default_batch_size, plan_batches, run_study
 from campipe.study.expand import ResolvedCase, Study
 from campipe.study.limits import samples_per_case
@@ -129,7 +129,7 @@ def time_engine(cases: list[ResolvedCase]) -> float:
     total = 0.0
     for settings, members in groups.items():
         t = time.perf_counter()
-        run_batch([c.case for c in members], settings, on_failure="record")
+        run_at_fidelity([c.case for c in members], settings, on_failure="record")
         total += time.perf_counter() - t
     return total
 

@@ -263,10 +263,26 @@ _RUN_METADATA: dict[str, Field] = {
         Field(
             "run.fidelity",
             "choice",
-            "full: every mode, through every event (the only level: the reduced one was "
-            "removed, as it did not pay)",
+            "full: every case through its events with every mode; steady: a case that follows "
+            "the cam with the valve clear of its seat from its closed-form steady state (one "
+            "turn, repeated), the others in full (periodic start, modal-exact)",
             choices=tuple(getattr(_engine_settings, "FIDELITIES", ("full",))),
             archive_name="fidelity",
+        ),
+        Field(
+            "run.fidelity_tolerance",
+            "quantity",
+            "a valve-lift error the run accepts instead of a level: campipe takes the "
+            "cheapest level whose stated error is within it (steady: 1e-9 in); default: "
+            "run.fidelity as named",
+            units="m",
+            example="in",
+            minimum=0.0,
+            exclusive_minimum=False,
+            allow_default=True,
+            allow_none=True,
+            archive_name="fidelity_tolerance",
+            archive_units="m",
         ),
         Field(
             "run.start",

@@ -126,9 +126,10 @@ def cam_angle_degrees(cam_angle: np.ndarray) -> np.ndarray:
 
 
 def run_batch(cases, settings, **options) -> BatchResult:
-    """:func:`campipe.engine.run_batch`, looked up when a batch first runs: the compiled
-    kernels load then, not when a study is planned or found up to date."""
-    return engine.run_batch(cases, settings, **options)
+    """:func:`campipe.engine.run_at_fidelity` (run_batch at the run's fidelity level), looked
+    up when a batch first runs: the compiled kernels load then, not when a study is planned
+    or found up to date."""
+    return engine.run_at_fidelity(cases, settings, **options)
 
 
 def compute_batch(plan: BatchPlan) -> BatchData:
