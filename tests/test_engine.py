@@ -218,7 +218,9 @@ def test_form_closure_never_leaves_the_cam(integrator):
 def test_flat_edges_throw_the_follower_off_for_the_estimated_hop(speed_rpm, integrator):
     """Across the nose both edges of the thesis's flat (268°–272°) are surfaces falling away:
     the follower leaves with the velocity jump v and its own mass m at the cam (the mass an
-    impulse there meets) is brought back by the contact force F in 2·m·v/F."""
+    impulse there meets) is brought back by the contact force F in 2·m·v/F. Broken copy: a
+    flat that is not applied (no hop at all) or a break classified as smooth (no separation)
+    fail the event count; a hop ten times the estimate fails its bound."""
     speed = rpm(speed_rpm)
     start = math.radians(268)
     prof = flat(CAM, start, math.radians(272))
@@ -253,6 +255,12 @@ def test_initial_state_is_quasi_static():
 
 
 def test_member_loads_at_static_equilibrium():
+    """Hand statics at the quasi-static state at θ = 0 (mid-lift, 0.5 in of cam lift): the
+    spring carries its preload plus its rate times 0.75 in of valve travel, the pushrod the
+    rocker ratio times that, the stem nothing (the valve has no seat), and the rocker moment
+    at the pivot is the spring force times the valve arm. Broken copy: loads taken from the
+    element next to the intended one (the moment at the rocker's valve end, 0) or a rocker
+    ratio inverted fail by orders of magnitude or by 1.5²."""
     sm = train_matrices(TRAIN)
     case = Case(TRAIN, CAM, rpm(1))
     q, _, _, _ = initial_state(case, sm, valve_reference(sm))

@@ -88,7 +88,8 @@ def test_thesis_machining_error(tmp_path):
     intervals, cannot resolve it: "about 0.75°" is its spacing). The hop is checked against
     the hand estimate 2·m·v/F: the follower leaves with the edge's velocity jump
     v = ω·h/2·|cos 268°| and its own mass m at the cam, and the perfect cam's force F there
-    brings it back."""
+    brings it back. Broken copy: a flat dropped from the profile (the flawed cam then holds
+    the follower like the perfect one) fails the separation check."""
     ds = run(tmp_path, "thesis-machining-error", **{"run.revolutions": 2})
     perfect, flawed = (
         list(ds.defects.values).index("none"),
