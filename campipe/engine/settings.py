@@ -120,6 +120,12 @@ def compliant_contacts(train: ValveTrain, has_seat: bool) -> bool:
     return train.cam_contact != "rigid" or (has_seat and train.seat_contact != "rigid")
 
 
+@functools.lru_cache(maxsize=256)
+def _lash_seat(train: ValveTrain) -> float:
+    """The seat a train's lash places (``campipe.model.lash_seat``), once per train."""
+    return lash_seat(system_matrices(train), train.lash)
+
+
 @dataclass(frozen=True)
 class Case:
     """One run: a valve train, a cam and how it is driven."""
@@ -134,7 +140,7 @@ class Case:
         lash = getattr(self.train, "lash", math.nan)
         if math.isnan(lash):
             return
-        seat = lash_seat(system_matrices(self.train), lash)
+        seat = _lash_seat(self.train)
         if not math.isnan(self.seat) and self.seat != seat:
             raise CaseError.at(
                 "seat",
