@@ -117,19 +117,10 @@ def _on_piece(cases, trains, profiles, runs, ws, st, p):
 
 @njit(inline="always", nogil=True)
 def _advance_piece(cases, trains, profiles, runs, ws, st, p, z):
-    """z at the start of piece p → z at its end (the next break), exactly."""
-    _on_piece(cases, trains, profiles, runs, ws, st, p)
-    theta_a = profiles.breaks[st.c, p]
+    """z at the start of piece p → z at its end (the next break), exactly (in place: z is
+    read into the workspace before it is written)."""
     theta_b = profiles.breaks[st.c, p + 1]
-    _particular_at(ws, st, theta_a)
-    for s in range(st.ns):
-        ws.zh[s] = z[s] - ws.zb[s]
-    _to_basis(trains, st, ws.zh, ws.u)
-    _propagate(trains, ws, st, ws.u, (theta_b - theta_a) / st.w)
-    _from_basis(trains, st, ws.u, z)
-    _particular_at(ws, st, theta_b)
-    for s in range(st.ns):
-        z[s] += ws.zb[s]
+    _state_in_piece(cases, trains, profiles, runs, ws, st, p, z, theta_b, z)
 
 
 @njit(inline="always", nogil=True)
