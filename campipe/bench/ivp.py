@@ -46,6 +46,7 @@ from campipe.engine.modal import modal_data
 from campipe.engine.settings import DEFAULT_CAPTURE_VELOCITY, Case, RunSettings
 from campipe.errors import CampipeError
 from campipe.model import system_matrices
+from campipe.profiles import Lift
 from campipe.vocabulary import (
     CAM,
     CAM_IMPACT,
@@ -144,30 +145,6 @@ def _static(K, f, held_q: dict[int, float]) -> np.ndarray:
     return q
 
 
-class _Cam:
-    """The profile's lift on one piece as a scalar function of time (Horner's scheme)."""
-
-    def __init__(self, case: Case) -> None:
-        self.profile = case.profile
-        self.w = case.speed
-
-    def at(self, piece: int, rev: int, t: float) -> tuple[float, float, float]:
-        """Lift [m], its rate [m/s] and acceleration [m/s²] on ``piece`` of turn ``rev``."""
-        pr = self.profile
-        theta = self.w * t
-        x = theta - rev * TWO_PI - pr.breaks[piece]
-        c = pr.poly[piece]
-        p0 = p1 = p2 = 0.0
-        for k in range(7, -1, -1):
-            p2 = p2 * x + 2.0 * p1
-            p1 = p1 * x + p0
-            p0 = p0 * x + c[k]
-        s, co = math.sin(theta), math.cos(theta)
-        ta, tb = pr.trig[piece]
-        w = self.w
-        return (p0 + ta * s + tb * co, w * (p1 + ta * co - tb * s), w * w * (p2 - ta * s - tb * co))
-
-
 class _Peer:
     """One case's run: its state between events and what it has recorded."""
 
@@ -176,7 +153,7 @@ class _Peer:
         sm = system_matrices(case.train)
         self.M, self.C, self.K, self.f = sm.mass, sm.damping, sm.stiffness, sm.preload
         self.hold_unit = modal_data(sm).hold  # the contact law's hold per unit velocity
-        self.case, self.w, self.cam = case, case.speed, _Cam(case)
+        self.case, self.w, self.cam = case, case.speed, Lift(case.profile, case.speed)
         self.method, self.rtol = method, rtol
         self.q_ref = _static(self.K, self.f, {CAM: 0.0})[SEAT]
         self.seat_q = self.q_ref + (case.seat if case.has_seat else 0.0)

@@ -47,7 +47,7 @@ from campipe.constants import TWO_PI
 from campipe.engine.common import TURN_GUARD
 from campipe.model import ValveTrain, coordinates, system_matrices
 from campipe.model.contact_laws import KELVIN_VOIGT, ContactLaw, contact_law
-from campipe.profiles import Profile
+from campipe.profiles import Lift, Profile
 from campipe.vocabulary import (
     CAM,
     CAM_IMPACT,
@@ -72,43 +72,6 @@ STALL_WINDOW = 1e-12
 #: How long after a switch a monitor reads its value at the end of this interval [s]
 #: (``_Run.monitors``): far below any contact's time scale, far above rounding of t.
 SWITCH_GUARD = 1e-11
-
-
-class Lift:
-    """A profile's lift as a scalar function of time (Horner's scheme on the piece)."""
-
-    def __init__(self, profile: Profile, speed: float) -> None:
-        self.breaks = profile.breaks
-        self.poly = profile.poly
-        self.trig = profile.trig
-        self.w = speed
-
-    def piece_at(self, t: float) -> tuple[int, int]:
-        """(piece, turn) holding time t, by its position on the turn."""
-        theta = self.w * t
-        rev = math.floor(theta / TWO_PI)
-        phi = theta - rev * TWO_PI
-        piece = int(np.searchsorted(self.breaks, phi, side="right") - 1)
-        return min(max(piece, 0), self.poly.shape[0] - 1), rev
-
-    def break_after(self, piece: int, rev: int) -> float:
-        """The time the piece ends [s]."""
-        return (rev * TWO_PI + self.breaks[piece + 1]) / self.w
-
-    def at(self, piece: int, rev: int, t: float) -> tuple[float, float, float]:
-        """Lift [m], its rate [m/s] and acceleration [m/s²] on ``piece`` of turn ``rev``."""
-        theta = self.w * t
-        x = theta - rev * TWO_PI - self.breaks[piece]
-        c = self.poly[piece]
-        p0 = p1 = p2 = 0.0
-        for k in range(7, -1, -1):
-            p2 = p2 * x + 2.0 * p1
-            p1 = p1 * x + p0
-            p0 = p0 * x + c[k]
-        s, co = math.sin(theta), math.cos(theta)
-        ta, tb = self.trig[piece]
-        w = self.w
-        return (p0 + ta * s + tb * co, w * (p1 + ta * co - tb * s), w * w * (p2 - ta * s - tb * co))
 
 
 @dataclass

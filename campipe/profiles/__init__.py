@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 
 from campipe.profiles.defects import bump, flat
 from campipe.profiles.pieces import (
+    Lift,
     Profile,
     evaluate,
     max_lift,
@@ -40,6 +41,7 @@ _PACKED = ("PackedProfiles", "evaluate_packed", "pack")
 __all__ = [
     "POLYDYNE_POLYNOMIALS",
     "RAMP_SHAPES",
+    "Lift",
     "PackedProfiles",
     "Profile",
     "Ramp",
