@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import textwrap
 from pathlib import Path
 
@@ -35,3 +36,15 @@ def die(plan):
     import os
 
     os._exit(9)
+
+
+def changed(base: dict, **changes: object) -> dict:
+    """A deep copy of a raw spec with ``a__b=value`` setting ``raw["a"]["b"]``."""
+    raw = json.loads(json.dumps(base))
+    for key, value in changes.items():
+        node = raw
+        *parents, last = key.split("__")
+        for p in parents:
+            node = node.setdefault(p, {})
+        node[last] = value
+    return raw

@@ -7,7 +7,7 @@ import sys
 
 import numpy as np
 import pytest
-from study_helpers import write_spec
+from study_helpers import changed, write_spec
 
 from campipe.io.spec_yaml import MAX_DEPTH, SpecFileError, parse_spec_text
 from campipe.profiles import flat, harmonic
@@ -25,14 +25,7 @@ BASE = {
 
 
 def spec(**changes):
-    raw = json.loads(json.dumps(BASE))
-    for key, value in changes.items():
-        node = raw
-        *parents, last = key.split("__")
-        for p in parents:
-            node = node.setdefault(p, {})
-        node[last] = value
-    return raw
+    return changed(BASE, **changes)
 
 
 def refused(raw, limits=None) -> list[tuple[str, str]]:

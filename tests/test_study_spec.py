@@ -1,13 +1,11 @@
 """Study specs: the schema, safe YAML, and every class of bad input refused with its key path."""
 
-import json
-
 import jsonschema
 import pytest
 import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from study_helpers import ROOT, STUDIES, write_spec
+from study_helpers import ROOT, STUDIES, changed, write_spec
 
 from campipe.io.spec_yaml import SpecFileError, parse_spec_text, read_spec
 from campipe.model import PARAMETERS
@@ -45,14 +43,7 @@ def refused(raw, **kw) -> SpecError:
 
 
 def with_(**changes):
-    raw = json.loads(json.dumps(BASE))
-    for key, value in changes.items():
-        node = raw
-        *parents, last = key.split("__")
-        for p in parents:
-            node = node.setdefault(p, {})
-        node[last] = value
-    return raw
+    return changed(BASE, **changes)
 
 
 def test_schema_file_is_generated_from_the_key_table():
