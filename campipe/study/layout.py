@@ -117,7 +117,17 @@ def coordinate_values(cases: list[ResolvedCase], study: Study) -> dict[str, np.n
     """Per-case coordinate arrays in archive units, in study order: ``case`` (the ids), then
     each case coordinate (no seat as :data:`~campipe.study.variables.NO_SEAT`)."""
     out: dict[str, np.ndarray] = {CASE_ID: np.array([c.case_id for c in cases], dtype=object)}
-    for key, (name, var, factor) in case_coordinates(study.varied).items():
+    return {**out, **key_columns(cases, case_coordinates(study.varied))}
+
+
+def key_columns(
+    cases: list[ResolvedCase], coordinates: Mapping[str, tuple[str, Variable, float]]
+) -> dict[str, np.ndarray]:
+    """The case coordinates ``coordinates`` names (spec key → (name, variable, factor), as
+    :func:`~campipe.study.variables.case_coordinates` gives them), each an array in archive
+    units over ``cases`` (no seat as :data:`~campipe.study.variables.NO_SEAT`)."""
+    out: dict[str, np.ndarray] = {}
+    for key, (name, var, factor) in coordinates.items():
         raw = [c.values[key] for c in cases]
         if var.dtype == "str":
             out[name] = np.array([str(v) for v in raw], dtype=object)

@@ -20,8 +20,9 @@ from campipe.engine import periodic
 from campipe.errors import CampipeError
 from campipe.io.archive import VariableSpec
 from campipe.study.expand import Study
+from campipe.study.layout import key_columns
 from campipe.study.query import CaseTable
-from campipe.study.variables import NO_SEAT, case_coordinates
+from campipe.study.variables import case_coordinates
 
 #: The columns every onset table has after the varied parameters.
 ONSET_COLUMNS = ("onset_speed_rpm", "onset_status", "confirmed")
@@ -154,18 +155,11 @@ def onset_study(
 
 
 def _table(study, keys, firsts, onset, below, above) -> CaseTable:
-    columns: dict[str, np.ndarray] = {}
-    units: dict[str, str] = {}
     coords = case_coordinates(keys)
+    columns = key_columns([study.cases[i] for i in firsts], {k: coords[k] for k in keys})
+    units: dict[str, str] = {}
     for key in keys:
-        name, var, factor = coords[key]
-        raw = [study.cases[i].values.get(key) for i in firsts]
-        if var.dtype == "str":
-            columns[name] = np.array([str(v) for v in raw], dtype=object)
-        else:
-            values = np.array(raw, dtype=float) * factor
-            # no seat as in the study archive (campipe.study.layout)
-            columns[name] = np.where(np.isnan(values), NO_SEAT, values) if key == "seat" else values
+        name, var, _ = coords[key]
         units[name] = var.units if var.units and var.units != "1" else ""
     checked = np.isfinite(below)
     agrees = (below == 0.0) & (above > 0.0)
