@@ -253,9 +253,13 @@ def steady_state(cases: Sequence[Case], output_every: float = math.radians(1.0))
     return _samples(batch, ext, angles)
 
 
-def _samples(batch: _SteadyBatch, ext: SteadyExtremes, angles: np.ndarray) -> SteadyState:
-    """The steady state at ``angles`` (ascending, within one turn) of a prepared batch."""
+def _samples(
+    batch: _SteadyBatch, ext: SteadyExtremes, angles: np.ndarray, active: np.ndarray | None = None
+) -> SteadyState:
+    """The steady state at ``angles`` (ascending, within one turn) of a prepared batch, for
+    its ``active`` cases (default all; the others' samples are left NaN or unset)."""
     n = batch.cases.omega.size
+    active = np.ones(n, np.bool_) if active is None else active
     n_out = angles.size
     n_q = batch.trains.load.shape[1]
     q = np.full((n, n_out, n_q), np.nan)
@@ -264,7 +268,7 @@ def _samples(batch: _SteadyBatch, ext: SteadyExtremes, angles: np.ndarray) -> St
     force = np.empty((n, n_out))
     steady.steady_samples(
         batch.cases, batch.trains, batch.packed, batch.runs, make_workspace(n_q),
-        np.zeros(1, STATE), batch.z_turn, angles, np.ones(n, np.bool_), q, v, acc, force,
+        np.zeros(1, STATE), batch.z_turn, angles, active, q, v, acc, force,
     )  # fmt: skip
     return SteadyState(angles, q, v, acc, force, batch.cases.valve_ref.copy(), ext)
 
@@ -284,42 +288,46 @@ def run_at_fidelity(cases: Sequence[Case], settings: RunSettings, **options) -> 
     check_run(cases, settings, check_stability_limit=options.get("check_stability_limit", True))
     rigid = np.flatnonzero([not c.compliant for c in cases])
     holds = np.zeros(len(cases), np.bool_)
-    if rigid.size:
-        holds[rigid] = steady_extremes([cases[int(i)] for i in rigid]).holds
-    full = dataclasses.replace(settings, fidelity="full", fidelity_tolerance=None)
     parts = []
-    for which, run in ((~holds, True), (holds, False)):
-        index = np.flatnonzero(which)
-        if not index.size:
-            continue
-        some = [cases[int(i)] for i in index]
-        result = run_batch(some, full, **options) if run else _steady_result(some, settings)
-        parts.append((index, result))
+    if rigid.size:
+        batch = _prepare([cases[int(i)] for i in rigid], need_reference=True)
+        ext = _as_extremes(batch.extremes(batch.cases.omega.copy()))  # the probe
+        holds[rigid] = ext.holds
+        if ext.holds.any():
+            some = [cases[int(i)] for i in rigid[ext.holds]]
+            parts.append((rigid[ext.holds], _steady_result(batch, ext, some, settings)))
+    if not holds.all():
+        index = np.flatnonzero(~holds)
+        full = dataclasses.replace(settings, fidelity="full", fidelity_tolerance=None)
+        parts.append((index, run_batch([cases[int(i)] for i in index], full, **options)))
     return merge_results(len(cases), parts)
 
 
-def _steady_result(cases: Sequence[Case], settings: RunSettings) -> BatchResult:
-    """The run of cases whose steady state holds, from its closed form (``run_at_fidelity``)."""
-    batch = _prepare(cases, need_reference=True)
-    ext = _as_extremes(batch.extremes(batch.cases.omega.copy()))
+def _steady_result(
+    batch: _SteadyBatch, ext: SteadyExtremes, cases: Sequence[Case], settings: RunSettings
+) -> BatchResult:
+    """The run of the cases of ``batch`` whose steady state holds (``cases``, in order), from
+    its closed form, the probe's batch and extremes reused (``run_at_fidelity``)."""
     angles = output_angles(settings)
     turn, back = np.unique(np.mod(angles, TWO_PI), return_inverse=True)
-    st = _samples(batch, ext, turn)
+    held = ext.holds
+    st = _samples(batch, ext, turn, held)
+    omega = batch.cases.omega[held]
     n, n_rev = len(cases), int(math.ceil(settings.revolutions - 1e-12))
     per_rev = np.zeros((n, n_rev))
-    fmax = np.repeat(ext.max_cam_force[:, None], n_rev, axis=1)
-    q = st.q[:, back]
+    fmax = np.repeat(ext.max_cam_force[held, None], n_rev, axis=1)
+    q = st.q[held][:, back]
     return BatchResult(
         cam_angle=angles,
-        time=angles[None, :] / batch.cases.omega[:, None],
+        time=angles[None, :] / omega[:, None],
         q=q,
-        v=st.v[:, back],
-        acc=st.acc[:, back],
+        v=st.v[held][:, back],
+        acc=st.acc[held][:, back],
         cam_lift=-q[:, :, CAM],  # the follower is on the cam
-        cam_force=st.cam_force[:, back],
+        cam_force=st.cam_force[held][:, back],
         seat_force=np.zeros((n, angles.size)),
         contact_state=np.full((n, angles.size), CAM_CONTACT, np.int8),
-        valve_reference=st.valve_reference,
+        valve_reference=st.valve_reference[held],
         measured=np.arange(n_rev) >= settings.warmup_turns,
         separation_per_rev=per_rev.copy(),
         seated_off_cam_per_rev=per_rev.copy(),
