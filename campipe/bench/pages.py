@@ -544,11 +544,17 @@ def study_block(bench: Bench) -> str:
     if first:
         lines += [
             "",
-            f"First run (the quickstart with numba's and pint's caches empty): "
+            f"First run (the quickstart with numba's, pint's and campipe's caches empty): "
             f"{_duration(first['seconds'])}; its first line on the terminal came after "
             f"{_duration(first['first_line_seconds'])}, saying "
             f"“{first['first_line'].split(': ')[1] if first['notice'] else first['first_line']}”.",
         ]
+        if "reinstall_seconds" in first:
+            lines[-1] += (
+                f" A second copy of campipe at another path (a new clone or venv) then ran it "
+                f"in {_duration(first['reinstall_seconds'])}, its kernels loaded from campipe's "
+                "kernel cache."
+            )
     c = s["ceiling"]
     engine_rate = next((r["engine_rate"] for r in s["cluster"] if r["workers"] == 1), None)
     lines += [

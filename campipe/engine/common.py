@@ -13,7 +13,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from campipe import vocabulary
+from campipe import kernel_cache, vocabulary
 from campipe.constants import TWO_PI
 from campipe.vocabulary import (
     CAM_IMPACT,
@@ -29,6 +29,8 @@ from campipe.vocabulary import (
     SEAT_IMPACT,
     SEAT_SEPARATION,
 )
+
+kernel_cache.install()  # before this module's kernels are defined: numba picks their cache then
 
 #: How the kernels and their steps compile: cached, releasing the GIL, and without numba's
 #: reference counting of arrays (``_nrt=False``). They allocate nothing (every array, work

@@ -1,11 +1,12 @@
 """Which compiled kernels a run calls, and whether numba would have to compile them first.
 
-numba compiles a kernel on its first call and keeps it in its cache (``cache=True``,
-``__pycache__`` beside the source): a later process loads it in a fraction of a second, but
-the first run after an install or an edit compiles for a minute or more. A caller that wants
-to say so on the terminal (the CLI) asks :func:`uncompiled` before running; the engine itself
-prints nothing. Only the kernels of the run's integrator and start are named, and only those
-are compiled: a modal-exact study never compiles newmark-linear.
+numba compiles a kernel on its first call and keeps it in campipe's kernel cache
+(:mod:`campipe.kernel_cache`, one user-wide folder per version of the kernels' source): a
+later process, of this install or of another of the same campipe, loads it in a fraction of a
+second, but the first run of a version on a machine compiles for half a minute or more. A
+caller that wants to say so on the terminal (the CLI) asks :func:`uncompiled` before running;
+the engine itself prints nothing. Only the kernels of the run's integrator and start are named,
+and only those are compiled: a modal-exact study never compiles newmark-linear.
 """
 
 from __future__ import annotations
@@ -77,8 +78,8 @@ def compile_notice(settings: Iterable[RunSettings]) -> str | None:
     what = ", ".join(missing) if missing else "the engine's kernels"
     return (
         f"compiling {what} with numba{' (if not cached)' if unknown else ''}: the first run "
-        "after an install or an upgrade takes a minute or two; later runs load them from "
-        "numba's cache in a fraction of a second"
+        "of a campipe version on a machine takes a minute or two; later runs, of any install "
+        "of it, load them from campipe's kernel cache in a fraction of a second"
     )
 
 
@@ -91,7 +92,7 @@ def compile_kernels(case: Case, settings: RunSettings) -> None:
     and the integrator's at once: the start's in a second process, while this one compiles
     the integrator through a short quasi-static run (the same kernel types). numba compiles
     one kernel at a time in a process, so the two cost the time of the longer on two cores,
-    not their sum; both land in numba's cache, from which the study's own run then loads
+    not their sum; both land in the kernel cache, from which the study's own run then loads
     them."""
     short = dataclasses.replace(settings, revolutions=0.01, warmup=0)
     if settings.start != "periodic":

@@ -39,6 +39,7 @@ import scipy.linalg
 from numba import njit
 from scipy.linalg import lapack
 
+from campipe import kernel_cache
 from campipe.errors import CampipeError
 from campipe.model.assembly import SystemMatrices
 from campipe.vocabulary import (
@@ -50,6 +51,8 @@ from campipe.vocabulary import (
     SEATED,
     free_coordinates,
 )
+
+kernel_cache.install()  # before this module's kernels are defined: numba picks their cache then
 
 NS = 14  # the thesis train's state size: 2 × 7 free coordinates (configuration II)
 # Index hc of the held-coordinate axes below follows vocabulary.CONTACTS: 0 the cam, 1 the seat.

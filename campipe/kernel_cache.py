@@ -1,0 +1,151 @@
+"""Where numba keeps campipe's compiled kernels: one user-wide folder per version of their
+source, so that a fresh install or clone of a campipe this machine has run before loads its
+kernels instead of compiling them again.
+
+numba's own cache sits beside each source file (``__pycache__``): every new clone or venv
+starts it empty and compiles for half a minute or more. Here a kernel is cached under
+``<root>/<kernel source>/<package folder>``, where
+
+- ``root`` is ``$NUMBA_CACHE_DIR/campipe`` when numba's cache folder is set, else campipe's
+  user cache folder (``~/.cache/campipe/numba`` on Linux);
+- ``kernel source`` is the first hex digits of a SHA-256 over every file the kernels compile
+  from (:data:`SOURCES`) and the numba and numpy versions. An edit anywhere in them moves
+  every kernel to a new folder: numba's per-file stamp would keep a caller whose callee, in
+  another file, changed.
+
+Installing :class:`KernelCacheLocator` (:func:`install`, called by every module that defines
+kernels before it defines them: numba picks a kernel's cache when it is decorated) puts it
+ahead of numba's locators for campipe's files only. Any other function keeps numba's
+behaviour, and so does everything when ``NUMBA_CACHE_LOCATOR_CLASSES`` is set or the folder
+cannot be written (numba then falls back to ``__pycache__``). Older kernel-source folders
+beyond the newest :data:`KEEP` are removed when a new one is made.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import logging
+import shutil
+import sys
+import time
+from pathlib import Path
+
+import numba
+import numpy as np
+from numba.core import caching, config
+
+log = logging.getLogger(__name__)
+
+ROOT = Path(__file__).resolve().parent
+#: What the kernels compile from: the engine, the profiles, the model, and the base modules
+#: they read constants from.
+SOURCES = ("engine", "profiles", "model", "vocabulary.py", "constants.py", "kernel_cache.py")
+#: Kernel-source folders kept: the newest, by modification time.
+KEEP = 3
+#: A folder used this recently [s] is never removed (another process may be loading from it).
+IN_USE = 3600.0
+
+
+def hash_sources(root: Path) -> str:
+    """SHA-256 (hex) of the :data:`SOURCES` under the package folder ``root``, each file with
+    its path, and of the numba and numpy versions."""
+    h = hashlib.sha256(f"numba {numba.__version__}; numpy {np.__version__}".encode())
+    for name in SOURCES:
+        top = root / name
+        for path in sorted(top.rglob("*.py")) if top.is_dir() else [top]:
+            h.update(path.relative_to(root).as_posix().encode())
+            h.update(path.read_bytes())
+    return h.hexdigest()
+
+
+@functools.cache
+def source_hash() -> str:
+    """:func:`hash_sources` of this campipe, once a process."""
+    return hash_sources(ROOT)
+
+
+def cache_root() -> Path:
+    """The folder holding one folder per kernel source."""
+    if config.CACHE_DIR:
+        return Path(config.CACHE_DIR) / "campipe"
+    from numba.misc.appdirs import AppDirs
+
+    return Path(AppDirs(appname="campipe", appauthor=False).user_cache_dir) / "numba"
+
+
+def cache_folder() -> Path:
+    """The folder of this source's kernels."""
+    return cache_root() / source_hash()[:16]
+
+
+def prune(root: Path, keep: int = KEEP, now: float | None = None) -> list[Path]:
+    """Remove the kernel-source folders under ``root`` beyond the newest ``keep`` that have
+    not changed for :data:`IN_USE` seconds; returns those removed."""
+    now = time.time() if now is None else now
+    folders = [p for p in root.iterdir() if p.is_dir() and _is_source_folder(p.name)]
+    folders.sort(key=lambda p: p.stat().st_mtime, reverse=True)
+    removed = []
+    for old in folders[keep:]:
+        if now - old.stat().st_mtime > IN_USE:
+            shutil.rmtree(old, ignore_errors=True)
+            removed.append(old)
+    return removed
+
+
+def _is_source_folder(name: str) -> bool:
+    return len(name) == 16 and all(c in "0123456789abcdef" for c in name)
+
+
+class KernelCacheLocator(caching._CacheLocator):
+    """numba's cache locator for campipe's kernels (see the module's docstring)."""
+
+    def __init__(self, py_func, py_file: str):
+        self._lineno = py_func.__code__.co_firstlineno
+        package = Path(py_file).resolve().parent.relative_to(ROOT)
+        self._cache_path = str(cache_folder().joinpath(*package.parts))
+
+    def ensure_cache_path(self) -> None:
+        new = not cache_folder().exists()
+        super().ensure_cache_path()
+        if new:
+            log.debug("new kernel cache folder %s", cache_folder())
+            prune(cache_root())
+
+    def get_cache_path(self) -> str:
+        return self._cache_path
+
+    def get_source_stamp(self) -> str:
+        return source_hash()
+
+    def get_disambiguator(self) -> str:
+        return str(self._lineno)
+
+    @classmethod
+    def from_function(cls, py_func, py_file):
+        try:
+            Path(py_file).resolve().relative_to(ROOT)
+        except (ValueError, OSError):
+            return None  # not campipe's: numba's own locators
+        if getattr(sys, "frozen", False):
+            return None
+        try:
+            self = cls(py_func, py_file)
+            self.ensure_cache_path()
+        except OSError as exc:  # not writable: numba's own locators
+            log.debug("kernel cache folder unusable (%s); numba's __pycache__ instead", exc)
+            return None
+        return self
+
+
+def install() -> None:
+    """Put :class:`KernelCacheLocator` first among numba's cache locators (once). numba's
+    locator list is internal (``CacheImpl``, ``_CacheImpl`` before 0.68): if it is not found,
+    numba's own caching stays."""
+    impl = getattr(caching, "CacheImpl", None) or getattr(caching, "_CacheImpl", None)
+    classes = getattr(impl, "_locator_classes", None)
+    if not isinstance(classes, list):
+        log.debug("numba's cache locators not found: kernels cached in __pycache__")
+        return
+    if KernelCacheLocator not in classes:
+        classes.insert(0, KernelCacheLocator)

@@ -1,0 +1,122 @@
+"""campipe's kernel cache (``campipe.kernel_cache``): a fresh copy of campipe at another path
+loads the kernels an earlier copy compiled, and an edit to any file the kernels compile from
+(not only the kernel's own) makes them compile again."""
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from campipe import kernel_cache
+from campipe.engine import batch
+
+#: Run in a copy of campipe: the lift at θ = 0 of a harmonic cam through ``batch.cam_at`` (a
+#: small kernel, about a second to compile), then where its cache is and whether it was
+#: compiled (a cache miss) or loaded (a hit).
+PROBE = """
+import json, campipe
+from campipe.engine import batch
+from campipe.profiles import harmonic
+from campipe.profiles.packed import pack
+lift = batch.cam_at(pack([harmonic(0.0254)]), 0.0)[0].tolist()
+print(json.dumps({
+    "package": campipe.__file__,
+    "cache": batch.cam_at._cache._cache_path,
+    "hits": sum(batch.cam_at.stats.cache_hits.values()),
+    "misses": sum(batch.cam_at.stats.cache_misses.values()),
+    "lift": lift,
+}))
+"""
+
+
+def _copy(tmp_path: Path, name: str) -> Path:
+    root = tmp_path / name
+    shutil.copytree(
+        kernel_cache.ROOT, root / "campipe", ignore=shutil.ignore_patterns("__pycache__")
+    )
+    return root
+
+
+def _probe(copy: Path, cache: Path) -> dict:
+    env = {**os.environ, "PYTHONPATH": str(copy), "NUMBA_CACHE_DIR": str(cache)}
+    out = subprocess.run(
+        [sys.executable, "-c", PROBE], cwd=copy, env=env, capture_output=True, text=True, check=True
+    )
+    return json.loads(out.stdout.splitlines()[-1])
+
+
+def test_a_fresh_copy_loads_what_another_compiled_and_an_edit_recompiles(tmp_path):
+    """Three copies of campipe at three paths share one cache folder. The first compiles
+    ``cam_at``; the second, identical, loads it (numba's own cache, beside each copy's source,
+    would compile again); the third has a comment added to ``engine/common.py``, a file
+    ``cam_at``'s module imports but that does not define it, and compiles again (numba's
+    per-file stamp would have loaded the first copy's).
+
+    Broken copy: with :func:`kernel_cache.install` doing nothing, the second copy compiles
+    (``misses`` 1); with :data:`kernel_cache.SOURCES` holding only the kernel's own file, the
+    third loads (``hits`` 1)."""
+    cache = tmp_path / "cache"
+    first, second, edited = (_copy(tmp_path, n) for n in ("first", "second", "edited"))
+    common = edited / "campipe" / "engine" / "common.py"
+    common.write_text(common.read_text() + "\n# an edit\n")
+
+    a = _probe(first, cache)
+    b = _probe(second, cache)
+    c = _probe(edited, cache)
+    assert a["package"].startswith(str(first)) and b["package"].startswith(str(second))
+    assert (a["misses"], a["hits"]) == (1, 0)
+    assert (b["misses"], b["hits"]) == (0, 1)
+    assert (c["misses"], c["hits"]) == (1, 0)
+    assert a["cache"] == b["cache"] != c["cache"]
+    assert Path(a["cache"]).is_relative_to(cache / "campipe")
+    assert a["lift"] == b["lift"] == c["lift"]
+    assert a["lift"][0] == pytest.approx(0.0254 / 2, rel=1e-12)  # θ = 0 is mid-lift
+
+
+def test_the_source_hash_covers_the_kernel_sources_and_nothing_else(tmp_path):
+    """An edit to the engine, the profiles, the model or the vocabulary changes the hash;
+    one to the study layer does not (it compiles nothing)."""
+    root = _copy(tmp_path, "copy") / "campipe"
+    base = kernel_cache.hash_sources(root)
+    assert base == kernel_cache.source_hash()  # the copy is this campipe
+    (root / "study" / "query.py").write_text("# edited\n")
+    assert kernel_cache.hash_sources(root) == base
+    for name in ("engine/steady.py", "profiles/packed.py", "model/spring.py", "vocabulary.py"):
+        path = root / name
+        text = path.read_text()
+        path.write_text(text + "\n")
+        assert kernel_cache.hash_sources(root) != base, name
+        path.write_text(text)
+    assert kernel_cache.hash_sources(root) == base
+
+
+def test_prune_keeps_the_newest_and_those_in_use(tmp_path):
+    """Of six kernel-source folders, the three newest stay; of the three older, the one
+    touched within the last hour stays too; a folder not named like a kernel source is
+    never touched."""
+    now = time.time()
+    ages = [10, 20, 30, 40, 5000, 9000]  # seconds since last change, newest first
+    names = [f"{i:016x}" for i in range(len(ages))]
+    for name, age in zip(names, ages, strict=True):
+        (tmp_path / name).mkdir()
+        os.utime(tmp_path / name, (now - age, now - age))
+    (tmp_path / "not-a-source").mkdir()
+    os.utime(tmp_path / "not-a-source", (now - 1e6, now - 1e6))
+    removed = kernel_cache.prune(tmp_path, keep=3, now=now)
+    assert sorted(p.name for p in removed) == names[4:]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [*names[:4], "not-a-source"]
+
+
+def test_this_process_caches_its_kernels_in_the_kernel_cache():
+    """The kernels of this very process (engine and profiles alike) cache under this
+    source's folder, not in ``__pycache__``."""
+    from campipe.profiles import packed
+
+    folder = kernel_cache.cache_folder()
+    assert Path(batch.cam_at._cache._cache_path) == folder / "engine"
+    assert Path(packed.evaluate_packed._cache._cache_path) == folder / "profiles"
