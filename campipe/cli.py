@@ -671,7 +671,7 @@ def validate(
 ) -> None:
     """Check the study SPEC and print its case count, axes and estimated cost."""
     from campipe.study.estimate import archive_bytes
-    from campipe.study.execute import default_batch_size, default_workers, plan_batches
+    from campipe.study.execute import count_batches, default_batch_size, default_workers
 
     loaded = _load(
         spec, sets, _limits(max_cases, max_steps, max_samples, max_events, max_archive_gb)
@@ -682,12 +682,12 @@ def validate(
 
     samples = samples_per_case(loaded.revolutions, loaded.output_every)
     size = default_batch_size(len(loaded.cases), workers, samples)
-    plans = plan_batches(loaded.cases, loaded.record, size)
-    click.echo(f"batches: {len(plans)} of up to {size} cases")
+    click.echo(f"batches: {count_batches(loaded.cases, size)} of up to {size} cases")
     if estimate:
         from campipe.engine.kernels import compile_notice
+        from campipe.study.expand import distinct_but_speed
 
-        text = compile_notice(c.settings for c in loaded.cases)
+        text = compile_notice(c.settings for c in distinct_but_speed(loaded.cases)[0])
         if text:
             click.echo(f"campipe validate: {text}", err=True)
         click.echo(estimate_text(loaded, workers))
@@ -742,6 +742,7 @@ def _seconds(seconds: float) -> str:
 
 def validate_text(loaded, spec_path) -> str:
     """The checked study in words: cases, axes (values as the spec wrote them), run."""
+    from campipe.study.expand import distinct_but_speed
     from campipe.study.layout import coordinate_values
     from campipe.study.variables import case_coordinates
 
@@ -753,7 +754,7 @@ def validate_text(loaded, spec_path) -> str:
         f"case{'s' if len(loaded.cases) != 1 else ''}"
     ]
     coords = case_coordinates(loaded.varied)
-    values = coordinate_values(loaded.cases, loaded)
+    values = coordinate_values(distinct_but_speed(loaded.cases)[0], loaded)  # labels only
     lines.append("axes:" if loaded.axes else "axes: none (a single case)")
     for a in loaded.axes:
         listed = s.sweep.get(a.key) or s.zip.get(a.key)

@@ -65,6 +65,20 @@ def parse_quantity(text: object, units: str, key: str, example_units: str | None
     QuantityError
         With the key, what was found and what is expected.
     """
+    if isinstance(text, str):
+        return _parse_text(text, units, key, example_units)
+    return _parse(text, units, key, example_units)
+
+
+@functools.lru_cache(maxsize=8192)
+def _parse_text(text: str, units: str, key: str, example_units: str | None) -> float:
+    """A quantity's text read once a process: every case of a grid repeats its preset's and
+    its base's values (a refusal is raised again each time, never kept)."""
+    return _parse(text, units, key, example_units)
+
+
+def _parse(text: object, units: str, key: str, example_units: str | None) -> float:
+    """:func:`parse_quantity`, uncached."""
     import pint
 
     ureg = registry()

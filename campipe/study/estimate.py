@@ -23,6 +23,7 @@ from __future__ import annotations
 import math
 import tempfile
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -102,14 +103,14 @@ def batch_size(study: Study, n: int, workers: int) -> int:
     return default_batch_size(n, workers, samples_per_case(study.revolutions, study.output_every))
 
 
-def busy_workers(study: Study, cases: list[ResolvedCase], workers: int) -> int:
+def busy_workers(study: Study, cases: Sequence[ResolvedCase], workers: int) -> int:
     """Workers the batches of ``cases`` keep busy (no more than there are batches)."""
     size = batch_size(study, len(study.cases), workers)
     return max(min(workers, len(plan_batches(cases, study.record, size))), 1)
 
 
 def time_run(
-    study: Study, cases: list[ResolvedCase], workers: int, size: int | None = None
+    study: Study, cases: Sequence[ResolvedCase], workers: int, size: int | None = None
 ) -> float:
     """Wall time of :func:`run_study` on ``cases`` of ``study`` (batches of ``size``) into a
     temporary folder [s]."""
@@ -120,7 +121,7 @@ def time_run(
         return time.perf_counter() - t
 
 
-def time_engine(cases: list[ResolvedCase]) -> float:
+def time_engine(cases: Sequence[ResolvedCase]) -> float:
     """Wall time of the engine on ``cases`` on one worker, one call per run-settings group,
     as the study runs them (full runs, all events) [s]."""
     groups: dict[RunSettings, list[ResolvedCase]] = {}

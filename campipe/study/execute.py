@@ -34,6 +34,7 @@ import shutil
 import stat
 import time
 import uuid
+from collections import Counter
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import (
     BrokenExecutor,
@@ -65,7 +66,7 @@ from campipe.io.archive import (
     writing,
 )
 from campipe.io.spec_yaml import SpecFileError, read_spec
-from campipe.study.expand import ResolvedCase, Study
+from campipe.study.expand import ResolvedCase, Study, distinct_but_speed
 from campipe.study.layout import (
     CASE_ID,
     LAYOUT_VERSION,
@@ -223,6 +224,14 @@ def default_batch_size(n_cases: int, workers: int, samples: int = 0) -> int:
     if samples:
         size = min(size, max(1, BATCH_MEMORY // (samples * BYTES_PER_SAMPLE)))
     return size
+
+
+def count_batches(cases: Sequence[ResolvedCase], batch_size: int) -> int:
+    """How many batches :func:`plan_batches` cuts ``cases`` into, without building them (a
+    speed sweep's cases counted by its other axes' combinations)."""
+    others, speeds = distinct_but_speed(cases)
+    groups = Counter(c.settings for c in others)
+    return sum(-(-n * speeds // batch_size) for n in groups.values())
 
 
 def plan_batches(

@@ -6,7 +6,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import json
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from importlib import metadata
 from pathlib import Path
 
@@ -113,7 +113,7 @@ def batch_layout(data: BatchData, record: tuple[str, ...]):
     return sizes, specs, arrays, attrs
 
 
-def coordinate_values(cases: list[ResolvedCase], study: Study) -> dict[str, np.ndarray]:
+def coordinate_values(cases: Sequence[ResolvedCase], study: Study) -> dict[str, np.ndarray]:
     """Per-case coordinate arrays in archive units, in study order: ``case`` (the ids), then
     each case coordinate (no seat as :data:`~campipe.study.variables.NO_SEAT`)."""
     out: dict[str, np.ndarray] = {CASE_ID: np.array([c.case_id for c in cases], dtype=object)}
@@ -121,7 +121,7 @@ def coordinate_values(cases: list[ResolvedCase], study: Study) -> dict[str, np.n
 
 
 def key_columns(
-    cases: list[ResolvedCase], coordinates: Mapping[str, tuple[str, Variable, float]]
+    cases: Sequence[ResolvedCase], coordinates: Mapping[str, tuple[str, Variable, float]]
 ) -> dict[str, np.ndarray]:
     """The case coordinates ``coordinates`` names (spec key → (name, variable, factor), as
     :func:`~campipe.study.variables.case_coordinates` gives them), each an array in archive
