@@ -148,3 +148,17 @@ def test_validate_builds_no_case_of_a_million(tmp_path, monkeypatch):
     assert "1000000 cases" in out.output
     assert "batches: 3907 of up to 256 cases" in out.output  # ⌈1e6 / 256⌉, one settings group
     assert built == [0]
+
+
+def test_the_simulated_time_is_summed_without_building_a_case(tmp_path, monkeypatch):
+    """``estimate.simulated_seconds`` of a speed sweep (turns of the other axes' combinations
+    × Σ 2π/ω over the speeds) against the sum case by case, with no case built; and the
+    value by hand: one turn at each of 6000, 9000, 9524 and 11000 rpm, 3 seats × 2 preloads."""
+    from campipe.study.estimate import simulated_seconds
+
+    swept = expand(_spec(SPECS["speed inside two sweeps"], tmp_path))
+    each = expand(_spec(SPECS["speed inside two sweeps"], tmp_path), by_speed=False)
+    monkeypatch.setattr(SpeedSweep, "_build", lambda self, i: pytest.fail("a case was built"))
+    total = simulated_seconds(swept)
+    assert total == pytest.approx(simulated_seconds(each), rel=1e-12)
+    assert total == pytest.approx(3 * 2 * sum(60 / rpm for rpm in (6000, 9000, 9524, 11000)))

@@ -443,7 +443,9 @@ def estimates(studies: Path, directory: Path, workers: int) -> list[dict]:
 
 def validate_at_scale(directory: Path, n: int = VALIDATE_CASES) -> dict:
     """``campipe validate --no-estimate`` of an ``n``-case spec (speed × spring preload) in
-    a fresh process: wall time and the process's peak memory."""
+    a fresh process: wall time and the process's peak memory (its own: Linux's ``ru_maxrss``
+    keeps, across the exec, the peak of the forked bench process, so VmHWM is read where
+    there is one)."""
     side = int(round(math.sqrt(n)))
     spec = directory / f"validate-{n}.yaml"
     spec.write_text(
@@ -468,7 +470,12 @@ def validate_at_scale(directory: Path, n: int = VALIDATE_CASES) -> dict:
         "    runpy.run_module('campipe', run_name='__main__')\n"
         "except SystemExit:\n"
         "    pass\n"
-        "print('peak', resource.getrusage(resource.RUSAGE_SELF).ru_maxrss, file=sys.stderr)\n"
+        "try:\n"
+        "    with open('/proc/self/status') as f:\n"
+        "        kb = next(int(x.split()[1]) for x in f if x.startswith('VmHWM:'))\n"
+        "except (OSError, StopIteration):\n"
+        "    kb = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss\n"
+        "print('peak', kb, file=sys.stderr)\n"
     )
     t0 = time.perf_counter()
     out = subprocess.run(

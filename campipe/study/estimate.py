@@ -32,7 +32,7 @@ import numpy as np
 from campipe.constants import TWO_PI
 from campipe.engine import RunSettings, run_at_fidelity, run_batch
 from campipe.study.execute import default_batch_size, plan_batches, run_study
-from campipe.study.expand import ResolvedCase, Study
+from campipe.study.expand import ResolvedCase, SpeedSweep, Study, distinct_but_speed
 from campipe.study.limits import samples_per_case
 from campipe.study.results import n_revolutions
 from campipe.study.variables import DOF_NAMES, data_variables
@@ -58,16 +58,21 @@ class Estimate:
     #                      validate adds it: campipe.replay.live.time_replay) [s]
 
 
-def simulated_seconds(study: Study) -> np.ndarray:
-    """(n_cases,) simulated time of each case [s]."""
-    return np.array([c.settings.revolutions * TWO_PI / c.case.speed for c in study.cases])
+def simulated_seconds(study: Study) -> float:
+    """Simulated time of all the study's cases [s]; a speed sweep's summed over its other
+    axes' combinations (their turns) times its speeds (Σ 1/ω), no case built."""
+    if isinstance(study.cases, SpeedSweep):
+        per_turn = sum(TWO_PI / speed for speed in study.cases.speeds)
+        return sum(c.settings.revolutions for c in study.cases.others()) * per_turn
+    return sum(c.settings.revolutions * TWO_PI / c.case.speed for c in study.cases)
 
 
 def warm_up(study: Study) -> float:
     """Load each run-settings group's kernel with a tiny run of its first case; the time it
-    took, each group's at most :data:`MAX_LOAD_SECONDS` [s]."""
+    took, each group's at most :data:`MAX_LOAD_SECONDS` [s]. (A speed sweep's group starts
+    with its first combination of the other axes, at the first speed.)"""
     firsts: dict[RunSettings, ResolvedCase] = {}
-    for c in study.cases:
+    for c in distinct_but_speed(study.cases)[0]:
         firsts.setdefault(c.settings, c)
     total = 0.0
     for settings, c in firsts.items():
@@ -165,7 +170,7 @@ def estimate(study: Study, workers: int) -> Estimate:
     """
     workers = max(int(workers), 1)
     startup = warm_up(study)
-    simulated = float(simulated_seconds(study).sum())
+    simulated = simulated_seconds(study)
     size = archive_bytes(study)
     n = len(study.cases)
     k = sample_size(study, workers)

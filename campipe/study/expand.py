@@ -120,7 +120,7 @@ class SpeedSweep(Sequence[ResolvedCase]):
 
     def __init__(self, others: list[tuple[ResolvedCase, dict]], speeds: list[float], inner: int):
         self._others = others
-        self._speeds = speeds
+        self._speeds = tuple(speeds)
         self._inner = inner
         self._kept: list[ResolvedCase] | None = None
 
@@ -128,9 +128,9 @@ class SpeedSweep(Sequence[ResolvedCase]):
         return len(self._others) * len(self._speeds)
 
     @property
-    def speeds(self) -> int:
-        """How many speeds each combination of the other axes runs at."""
-        return len(self._speeds)
+    def speeds(self) -> tuple[float, ...]:
+        """The speeds each combination of the other axes runs at [rad/s], in axis order."""
+        return self._speeds
 
     def others(self) -> list[ResolvedCase]:
         """One case per combination of the other axes (at the first speed), in study order."""
@@ -179,7 +179,7 @@ def distinct_but_speed(cases: Sequence[ResolvedCase]) -> tuple[Sequence[Resolved
     """Cases standing for all (one per combination of the axes other than a speed sweep's)
     and how many speeds each stands for: what a count by anything but the speed needs."""
     if isinstance(cases, SpeedSweep):
-        return cases.others(), cases.speeds
+        return cases.others(), len(cases.speeds)
     return cases, 1
 
 
