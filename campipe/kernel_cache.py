@@ -17,8 +17,8 @@ Installing :class:`KernelCacheLocator` (:func:`install`, called by every module 
 kernels before it defines them: numba picks a kernel's cache when it is decorated) puts it
 ahead of numba's locators for campipe's files only. Any other function keeps numba's
 behaviour, and so does everything when ``NUMBA_CACHE_LOCATOR_CLASSES`` is set or the folder
-cannot be written (numba then falls back to ``__pycache__``). Older kernel-source folders
-beyond the newest :data:`KEEP` are removed when a new one is made.
+cannot be written (numba then falls back to ``__pycache__``). When a new kernel-source
+folder is made, those beyond the :data:`KEEP` used last are removed.
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import logging
+import os
 import shutil
 import sys
 import time
@@ -41,7 +42,7 @@ ROOT = Path(__file__).resolve().parent
 #: What the kernels compile from: the engine, the profiles, the model, and the base modules
 #: they read constants from.
 SOURCES = ("engine", "profiles", "model", "vocabulary.py", "constants.py", "kernel_cache.py")
-#: Kernel-source folders kept: the newest, by modification time.
+#: Kernel-source folders kept: those used last (their modification time, :func:`mark_used`).
 KEEP = 3
 #: A folder used this recently [s] is never removed (another process may be loading from it).
 IN_USE = 3600.0
@@ -80,17 +81,35 @@ def cache_folder() -> Path:
 
 
 def prune(root: Path, keep: int = KEEP, now: float | None = None) -> list[Path]:
-    """Remove the kernel-source folders under ``root`` beyond the newest ``keep`` that have
-    not changed for :data:`IN_USE` seconds; returns those removed."""
+    """Remove the kernel-source folders under ``root`` beyond the ``keep`` used last (a
+    process marks its folder used, :func:`mark_used`) that no process used for
+    :data:`IN_USE` seconds; returns those removed. A folder another process removes meanwhile
+    is passed over."""
     now = time.time() if now is None else now
-    folders = [p for p in root.iterdir() if p.is_dir() and _is_source_folder(p.name)]
-    folders.sort(key=lambda p: p.stat().st_mtime, reverse=True)
+    used = []
+    for p in root.iterdir():
+        try:
+            if p.is_dir() and _is_source_folder(p.name):
+                used.append((p.stat().st_mtime, p))
+        except OSError:
+            continue
+    used.sort(reverse=True)
     removed = []
-    for old in folders[keep:]:
-        if now - old.stat().st_mtime > IN_USE:
+    for when, old in used[keep:]:
+        if now - when > IN_USE:
             shutil.rmtree(old, ignore_errors=True)
             removed.append(old)
     return removed
+
+
+@functools.cache
+def mark_used() -> None:
+    """Set this source's folder's modification time to now, once a process: :func:`prune`
+    keeps the folders used last."""
+    try:
+        os.utime(cache_folder())
+    except OSError as exc:
+        log.debug("cannot mark the kernel cache folder used: %s", exc)
 
 
 def _is_source_folder(name: str) -> bool:
@@ -108,9 +127,13 @@ class KernelCacheLocator(caching._CacheLocator):
     def ensure_cache_path(self) -> None:
         new = not cache_folder().exists()
         super().ensure_cache_path()
+        mark_used()
         if new:
             log.debug("new kernel cache folder %s", cache_folder())
-            prune(cache_root())
+            try:
+                prune(cache_root())
+            except OSError as exc:  # never fail a kernel over the clean-up
+                log.debug("kernel cache folders not pruned: %s", exc)
 
     def get_cache_path(self) -> str:
         return self._cache_path

@@ -55,7 +55,8 @@ def test_a_fresh_copy_loads_what_another_compiled_and_an_edit_recompiles(tmp_pat
     ``cam_at``; the second, identical, loads it (numba's own cache, beside each copy's source,
     would compile again); the third has a comment added to ``engine/common.py``, a file
     ``cam_at``'s module imports but that does not define it, and compiles again (numba's
-    per-file stamp would have loaded the first copy's).
+    per-file stamp would have loaded the first copy's). The second, loading only, marks the
+    folder used.
 
     Broken copy: with :func:`kernel_cache.install` doing nothing, the second copy compiles
     (``misses`` 1); with :data:`kernel_cache.SOURCES` holding only the kernel's own file, the
@@ -66,7 +67,11 @@ def test_a_fresh_copy_loads_what_another_compiled_and_an_edit_recompiles(tmp_pat
     common.write_text(common.read_text() + "\n# an edit\n")
 
     a = _probe(first, cache)
+    folder = Path(a["cache"]).parent  # the kernel source's folder (cam_at's is its engine/)
+    hours_ago = time.time() - 7200
+    os.utime(folder, (hours_ago, hours_ago))
     b = _probe(second, cache)
+    assert folder.stat().st_mtime > hours_ago + 3600  # marked used by a load (prune keeps it)
     c = _probe(edited, cache)
     assert a["package"].startswith(str(first)) and b["package"].startswith(str(second))
     assert (a["misses"], a["hits"]) == (1, 0)
