@@ -24,7 +24,6 @@ folder is made, those beyond the :data:`KEEP` used last are removed.
 from __future__ import annotations
 
 import functools
-import hashlib
 import logging
 import os
 import shutil
@@ -36,12 +35,22 @@ import numba
 import numpy as np
 from numba.core import caching, config
 
+from campipe.sources import PACKAGE, source_digest
+
 log = logging.getLogger(__name__)
 
-ROOT = Path(__file__).resolve().parent
-#: What the kernels compile from: the engine, the profiles, the model, and the base modules
-#: they read constants from.
-SOURCES = ("engine", "profiles", "model", "vocabulary.py", "constants.py", "kernel_cache.py")
+ROOT = PACKAGE
+#: What the kernels compile from: the engine, the profiles, the model and the base modules
+#: they read constants from; and the two modules that compute this hash.
+SOURCES = (
+    "engine",
+    "profiles",
+    "model",
+    "vocabulary.py",
+    "constants.py",
+    "kernel_cache.py",
+    "sources.py",
+)
 #: Kernel-source folders kept: those used last (their modification time, :func:`mark_used`).
 KEEP = 3
 #: A folder used this recently [s] is never removed (another process may be loading from it).
@@ -49,15 +58,9 @@ IN_USE = 3600.0
 
 
 def hash_sources(root: Path) -> str:
-    """SHA-256 (hex) of the :data:`SOURCES` under the package folder ``root``, each file with
-    its path, and of the numba and numpy versions."""
-    h = hashlib.sha256(f"numba {numba.__version__}; numpy {np.__version__}".encode())
-    for name in SOURCES:
-        top = root / name
-        for path in sorted(top.rglob("*.py")) if top.is_dir() else [top]:
-            h.update(path.relative_to(root).as_posix().encode())
-            h.update(path.read_bytes())
-    return h.hexdigest()
+    """SHA-256 (hex) of the numba and numpy versions and of the :data:`SOURCES` under the
+    package folder ``root`` (``campipe.sources.source_digest``)."""
+    return source_digest(SOURCES, root, f"numba {numba.__version__}; numpy {np.__version__}")
 
 
 @functools.cache
@@ -75,8 +78,9 @@ def cache_root() -> Path:
     return Path(AppDirs(appname="campipe", appauthor=False).user_cache_dir) / "numba"
 
 
+@functools.cache
 def cache_folder() -> Path:
-    """The folder of this source's kernels."""
+    """The folder of this source's kernels (once a process: every kernel asks)."""
     return cache_root() / source_hash()[:16]
 
 

@@ -21,6 +21,7 @@ BASE = {
     "campipe.vocabulary",
     "campipe.errors",
     "campipe.kernel_cache",
+    "campipe.sources",
 }
 #: Layer → the layers its modules may import (their own included).
 MAY_IMPORT: dict[str, set[str]] = {

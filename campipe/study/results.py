@@ -7,12 +7,10 @@ files); the caller stores the :class:`BatchData` (:mod:`campipe.io.archive`).
 from __future__ import annotations
 
 import functools
-import hashlib
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from importlib import metadata
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -26,6 +24,7 @@ from campipe.engine.loads import (
     per_turn,
     spring_histories,
 )
+from campipe.sources import source_digest
 from campipe.study.expand import ResolvedCase
 from campipe.study.variables import (
     CONTACT_PRESSURE_METRICS,
@@ -70,21 +69,14 @@ def numerics_fingerprint() -> str:
     are never reused, so an upgraded (or edited) engine never mixes its numbers with an older
     one's. A case id says *what* was run; this says *by what*.
     """
-    root = Path(campipe.__file__).parent
-    h = hashlib.sha256()
-    for name in NUMERICS_SOURCES:
-        top = root / name
-        files = sorted(top.rglob("*.py")) if top.is_dir() else [top]
-        for path in files:
-            h.update(str(path.relative_to(root)).encode())
-            h.update(path.read_bytes())
+    digest = source_digest(NUMERICS_SOURCES)
     versions = []
     for lib in NUMERICS_LIBRARIES:
         try:
             versions.append(f"{lib}=={metadata.version(lib)}")
         except metadata.PackageNotFoundError:
             versions.append(f"{lib}==?")
-    return f"campipe {campipe.__version__}; source {h.hexdigest()[:16]}; " + ", ".join(versions)
+    return f"campipe {campipe.__version__}; source {digest[:16]}; " + ", ".join(versions)
 
 
 @dataclass(frozen=True)
