@@ -241,6 +241,15 @@ def _seconds(x: float) -> str:
     return f"{format_short(x, 2)} s"
 
 
+def _under(words: str, seconds: float | None, limit: float, note: str, missing: str) -> Goal:
+    """The study goal "``words`` under ``limit`` s": reached below it, not shown (saying
+    ``missing``) where nothing was measured."""
+    what = f"{words} under {format_short(limit)} s"
+    if seconds is None:
+        return Goal("study", what, "–", NOT_SHOWN, missing)
+    return Goal("study", what, _seconds(seconds), REACHED if seconds < limit else NOT_REACHED, note)
+
+
 def _study_goals(bench: Bench) -> list[Goal]:
     """A study as fast as its engine: the study layer, start-up, first run, validate."""
     s = bench.study
@@ -275,52 +284,33 @@ def _study_goals(bench: Bench) -> list[Goal]:
         ("one_case", "a one-case study, warm"),
         ("finished", f"a finished {lat['finished_cases']}-case study run again"),
     ):
-        out.append(
-            Goal(
-                "study",
-                f"{words} under {format_short(g[key])} s",
-                _seconds(lat[key]),
-                REACHED if lat[key] < g[key] else NOT_REACHED,
-                f"best of {lat['repeats']} fresh processes",
-            )
-        )
-    what = f"the quickstart from a fresh install under {format_short(g['first_run'])} s"
+        out.append(_under(words, lat[key], g[key], f"best of {lat['repeats']} fresh processes", ""))
     first = s.get("first_run")
-    if first is None:
-        out.append(Goal("study", what, "–", NOT_SHOWN, "not measured: --quick"))
-    else:
-        said = (
-            f"it says what it compiles after {_seconds(first['first_line_seconds'])}"
-            if first["notice"]
-            else "silent while numba compiles"
+    said = (
+        f"it says what it compiles after {_seconds(first['first_line_seconds'])}"
+        if first and first["notice"]
+        else "silent while numba compiles"
+    )
+    out.append(
+        _under(
+            "the quickstart from a fresh install",
+            None if first is None else first["seconds"],
+            g["first_run"],
+            f"numba's, pint's and campipe's caches empty; {said}",
+            "not measured: --quick",
         )
+    )
+    if first is not None:
         out.append(
-            Goal(
-                "study",
-                what,
-                _seconds(first["seconds"]),
-                REACHED if first["seconds"] < g["first_run"] else NOT_REACHED,
-                f"numba's, pint's and campipe's caches empty; {said}",
+            _under(
+                "the quickstart from a fresh install of a campipe this machine has run,",
+                first.get("reinstall_seconds"),
+                g["first_run"],
+                "a second copy of campipe at another path, no __pycache__; the kernels "
+                "from campipe's kernel cache",
+                "not measured in this run",
             )
         )
-        again = first.get("reinstall_seconds")
-        what = (
-            f"the quickstart from a fresh install of a campipe this machine has run, under "
-            f"{format_short(g['first_run'])} s"
-        )
-        if again is None:
-            out.append(Goal("study", what, "–", NOT_SHOWN, "not measured in this run"))
-        else:
-            out.append(
-                Goal(
-                    "study",
-                    what,
-                    _seconds(again),
-                    REACHED if again < g["first_run"] else NOT_REACHED,
-                    "a second copy of campipe at another path, no __pycache__; the kernels "
-                    "from campipe's kernel cache",
-                )
-            )
     v = s.get("validate")
     what = (
         f"campipe validate of {format_short(g['validate_cases'])} cases under "
