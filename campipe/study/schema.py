@@ -151,16 +151,7 @@ def _range(key: str, with_num: bool) -> dict[str, object] | None:
     """A {from, to[, num]} range of a scalar quantity, or None where none applies."""
     f = varied_fields().get(key)
     if f is not None and f.kind == "parameter" and not f.units and _parameter_number(key):
-        bound: dict[str, object] = {"type": "number"}
-        numbers: dict[str, object] = {"from": bound, "to": bound}
-        if with_num:
-            numbers["num"] = {"type": "integer", "minimum": 1}
-        return {
-            "type": "object",
-            "properties": numbers,
-            "required": list(numbers),
-            "additionalProperties": False,
-        }
+        return _range_object({"type": "number"}, with_num)
     scalar = f is not None and (
         f.kind == "quantity"
         or (
@@ -172,10 +163,12 @@ def _range(key: str, with_num: bool) -> dict[str, object] | None:
     )
     if not scalar:
         return None
-    props: dict[str, object] = {
-        "from": {"$ref": "#/$defs/quantity"},
-        "to": {"$ref": "#/$defs/quantity"},
-    }
+    return _range_object({"$ref": "#/$defs/quantity"}, with_num)
+
+
+def _range_object(bound: dict[str, object], with_num: bool) -> dict[str, object]:
+    """{from, to[, num]}, ``from`` and ``to`` each matching ``bound``."""
+    props: dict[str, object] = {"from": bound, "to": bound}
     if with_num:
         props["num"] = {"type": "integer", "minimum": 1}
     return {
