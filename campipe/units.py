@@ -77,6 +77,13 @@ def _parse_text(text: str, units: str, key: str, example_units: str | None) -> f
     return _parse(text, units, key, example_units)
 
 
+def _sweep_hint(text: object, key: str) -> str:
+    """A list where one value goes: how a spec varies it."""
+    if not isinstance(text, list):
+        return ""
+    return f"; to vary it, list its values under sweep: {{{key}: [...]}}"
+
+
 def _parse(text: object, units: str, key: str, example_units: str | None) -> float:
     """:func:`parse_quantity`, uncached."""
     import pint
@@ -87,9 +94,10 @@ def _parse(text: object, units: str, key: str, example_units: str | None) -> flo
     example = example_units or _example_unit(target)
     expected = f"a quantity in {example}" if example else "a number"
     if isinstance(text, bool) or not isinstance(text, (str, int, float)):
+        such = f"a quantity such as '1 {example}'" if example else "a number"
         raise QuantityError.at(
             key,
-            f"expected a quantity such as '1 {example}', found {excerpt(text)}",
+            f"expected {such}, found {excerpt(text)}{_sweep_hint(text, key)}",
             found=text,
             expected=expected,
         )
@@ -266,7 +274,8 @@ def parse_angular(text: object, units: str, key: str, example_units: str) -> flo
             )
         raise QuantityError.at(
             key,
-            f"expected a quantity such as '1 {example_units}', found {excerpt(text)}",
+            f"expected a quantity such as '1 {example_units}', found {excerpt(text)}"
+            + _sweep_hint(text, key),
             found=text,
             expected=expected,
         )

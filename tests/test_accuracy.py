@@ -380,3 +380,27 @@ def test_critical_damping_is_propagated_exactly(seat):
     big = np.abs(d5) > 1e-5  # events that move measurably
     assert big.sum() >= 10
     assert_allclose(d6[big] / d5[big], 0.1, atol=0.002)
+
+
+def test_a_millionth_off_critical_damping_moves_the_events_in_an_independent_integrator_too():
+    """ζ1 = 1 − 1e-6 moves the events of the 11000 rpm run by about 6e-5° from ζ1 = 1, not by
+    less than 1e-6°: the solve_ivp peer (``campipe.bench.ivp``: DOP853 on the matrices, which
+    never forms the block form) moves them by the same amounts to 1e-8°. The sensitivity to
+    ζ1 is the model's, not the propagation's. Broken copy (run): a block form that takes a
+    nearly critical block as critical (δ² rounded to 0 below 1e-5·λ̄²) moves the events by up
+    to 3e-4°, the other way, and fails."""
+    from campipe.bench.ivp import solve_case
+
+    def angles(zeta):
+        train = TRAIN.replace(damping_ratios=(zeta,) + TRAIN.damping_ratios[1:])
+        case = Case(train, CAM, rpm(11000))
+        ours = run(case, revolutions=2, tolerance=1e-14).events[0]
+        peer = solve_case(case, 2, method="DOP853", rtol=1e-13).events
+        assert_array_equal(ours[:, EV_KIND], peer[:, EV_KIND])
+        return (np.degrees(ev[:, EV_TIME] * case.speed) for ev in (ours, peer))
+
+    ours_1, peer_1 = angles(1.0)
+    ours_6, peer_6 = angles(1.0 - 1e-6)
+    shift = ours_6 - ours_1
+    assert len(shift) >= 12 and np.all((np.abs(shift) > 4e-5) & (np.abs(shift) < 1e-4))
+    assert_allclose(shift, peer_6 - peer_1, rtol=0, atol=1e-8)

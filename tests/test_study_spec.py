@@ -144,6 +144,9 @@ BAD = [
     (with_(profile="harmonic"), "profile", "expected a mapping"),
     (with_(defects={"kind": "flat"}), "defects", "expected a list of defects"),
     (with_(speed=["9000 rpm"]), "speed", "expected a quantity"),
+    (with_(speed=["9000 rpm"]), "speed", "list its values under sweep: {speed: [...]}"),
+    (with_(model__seat_restitution=[0, 0.5]), "model.seat_restitution", "expected a number"),
+    (with_(model__seat_restitution=1.5), "model.seat_restitution", "at most 1"),
     (with_(run__record="q"), "run.record", "expected a list"),
     # bare numbers and wrong dimensions
     (with_(speed=9000), "speed", "bare number"),

@@ -19,14 +19,17 @@ upward, on a monitor (thesis Table I):
 
 Impacts are the thesis's (Ch. IV): infinite cam (seat) mass, perfectly plastic; the struck
 coordinate takes the obstacle's velocity and the free velocities jump by −M_ff⁻¹ M_fp Δv_p
-(the consistent mass carries the impulse). A velocity jump of the profile at a break (a flat's
-edges) releases the follower where the surface falls away, and is an impact where it rises
-into it. The contact rules are the engine's, written again here: an impact needs a positive
-closing velocity; with the other contact held, it releases where the impact would separate it
-faster than the capture velocity; an impact slower than that leaves its contact resting (held
-until it pulls beyond the hold ``modal.ModalData.hold`` × the closing velocity), and a
-release it closes again at once is taken back. The run starts where the engine's does
-(``campipe.engine.start_states``): the scenario is the same, the integration independent.
+(the consistent mass carries the impulse). With a coefficient of restitution e the impulse is
+(1 + e) times that and the struck coordinate leaves at e·v_closing, until a bounce slower than
+the capture velocity, or after a flight below ``MICRO_FLIGHT``, is plastic. A velocity jump
+of the profile at a break (a flat's edges) releases the follower where the surface falls away,
+and is an impact where it rises into it. The contact rules are the engine's, written again
+here: an impact needs a positive closing velocity; with the other contact held, it releases
+where the impact would separate it faster than the capture velocity; an impact slower than
+that leaves its contact resting (held until it pulls beyond the hold ``modal.ModalData.hold`` ×
+the closing velocity), and a release it closes again at once is taken back. The run starts
+where the engine's does (``campipe.engine.start_states``): the scenario is the same, the
+integration independent.
 
 Pure numerics: arrays in, arrays out.
 """
@@ -42,6 +45,7 @@ from scipy.integrate import solve_ivp
 
 from campipe.constants import TWO_PI
 from campipe.engine.batch import start_states
+from campipe.engine.common import MICRO_FLIGHT
 from campipe.engine.modal import modal_data
 from campipe.engine.settings import DEFAULT_CAPTURE_VELOCITY, Case, RunSettings
 from campipe.errors import CampipeError
@@ -164,6 +168,9 @@ class _Peer:
         }
         self.eps_force = FORCE_LEVEL * (abs(self.f).max() + 1.0)
         self.capture = capture
+        # Newton's restitution at the cam and the seat, and when each last bounced [s].
+        self.restitution = (case.train.cam_restitution, case.train.seat_restitution)
+        self.bounced = [-math.inf, -math.inf]
         # The other contact's separation velocity per unit velocity change of the struck one,
         # if released: the valve opening after a cam impact (configuration I), the follower
         # lifting off the cam after a seat impact (configuration IV).
@@ -360,36 +367,50 @@ class _Peer:
         closing = -self.v[SEAT] if seat else self.v[CAM] + dlift
         if closing <= 0.0:
             return  # a touch that does not close is no event
-        self.impact(t_ev, seat, closing)
+        e = self.impact(t_ev, seat, closing)
         if not seat:
-            self.q[CAM], self.v[CAM] = -lift, -dlift
+            self.q[CAM], self.v[CAM] = -lift, -dlift - e * closing
 
     def impact(self, t_ev, seat, closing):
-        """The plastic impact at the cam or the seat, closing at ``closing`` > 0 [m/s]."""
+        """The impact at the cam or the seat, closing at ``closing`` > 0 [m/s]: plastic, or
+        with a coefficient of restitution e > 0 a bounce that leaves at e·closing, unless it is
+        slower than the capture velocity or its flight since the last bounce there stayed
+        below ``MICRO_FLIGHT`` (the series has converged): then plastic, and resting. Returns
+        the e it bounced with (0: plastic)."""
         cfg = self.cfg
         side, coord = (1, SEAT) if seat else (0, CAM)
         other_held = holds_cam(cfg) if seat else holds_seat(cfg)
-        dv = closing if seat else -closing
+        converged = closing * (t_ev - self.bounced[side]) < MICRO_FLIGHT
+        bounce = self.restitution[side] > 0.0 and closing >= self.capture and not converged
+        e = self.restitution[side] if bounce else 0.0
+        dv = (closing if seat else -closing) * (1.0 + e)
         if other_held and self.separation[side] * dv > self.capture:
             other_held = False  # the impact separates the other contact: it releases
             self.resting[CAM if seat else SEAT] = 0.0
-        new = configuration(other_held, True) if seat else configuration(True, other_held)
-        self.v = self.v + self.configs[new].kick[side] * dv
+        held = configuration(other_held, True) if seat else configuration(True, other_held)
+        self.v = self.v + self.configs[held].kick[side] * dv
         if seat:
             self.q[SEAT] = self.seat_q
+        new = held
+        if bounce:
+            new = configuration(other_held, False) if seat else configuration(False, other_held)
+            self.bounced[side] = t_ev
+            self.resting[coord] = 0.0
         self.cfg = new
-        if closing < self.capture:
+        if closing < self.capture or (self.restitution[side] > 0.0 and not bounce):
             self.resting[coord] = self.hold_unit[new - 1, side] * closing
             last = self.events[-1] if self.events else None
             release = SEAT_SEPARATION if seat else CAM_SEPARATION
-            if last is not None and last[1] == release and last[3] == cfg:
-                self.events.pop()  # it never really left: the release is taken back
-                return
+            if closing < self.capture and last is not None and last[1] == release:
+                if last[3] == cfg:
+                    self.events.pop()  # it never really left: the release is taken back
+                    return e
         if t_ev >= 0.0:
             self.v_max[side] = max(self.v_max[side], closing)
-            mass = self.configs[new].impact_mass[side]
+            mass = self.configs[held].impact_mass[side]
             kind = SEAT_IMPACT if seat else CAM_IMPACT
-            self.events.append((t_ev, kind, cfg, new, closing, mass * closing))
+            self.events.append((t_ev, kind, cfg, new, closing, mass * (1.0 + e) * closing))
+        return e
 
     def cross_break(self, nxt, rev_next):
         """A break of the profile: any jump in the surface's velocity, with the cam held."""
@@ -409,16 +430,24 @@ class _Peer:
                 self.events.append((t, CAM_SEPARATION, cfg, self.cfg, -jump, 0.0))
             return
         if abs(jump) > small:
-            if seat_held and self.separation[0] * -jump > self.capture:
+            # With restitution, a surface jumping into a force-closed follower throws it off.
+            bounce = jump > 0.0 and self.restitution[0] > 0.0 and not self.form
+            e = self.restitution[0] if bounce else 0.0
+            dv = -jump * (1.0 + e)
+            if seat_held and self.separation[0] * dv > self.capture:
                 seat_held = False
                 self.resting[SEAT] = 0.0
-            self.cfg = configuration(True, seat_held)
-            self.v = self.v + self.configs[self.cfg].kick[0] * (-jump)
+            held = configuration(True, seat_held)
+            self.v = self.v + self.configs[held].kick[0] * dv
+            self.cfg = configuration(False, seat_held) if bounce else held
+            if bounce:
+                self.bounced[0] = t
+                self.resting[CAM] = 0.0
             if t >= 0.0:
                 self.v_max[0] = max(self.v_max[0], abs(jump))
-                mass = self.configs[self.cfg].impact_mass[0]
+                mass = self.configs[held].impact_mass[0] * (1.0 + e)
                 self.events.append((t, CAM_IMPACT, cfg, self.cfg, abs(jump), mass * abs(jump)))
-            self.q[CAM], self.v[CAM] = -l_right, -dl_right
+            self.q[CAM], self.v[CAM] = -l_right, -dl_right - e * jump
 
     def run(self, max_events: int) -> IvpResult:
         profile = self.case.profile

@@ -487,6 +487,7 @@ def _prepare_batch(cases: Sequence[Case], settings: RunSettings, full_state: boo
             separation=np.stack([d.separation for d in modal])[which],
             hold=np.stack([d.hold for d in modal])[which],
             capture=np.full(n, float(settings.capture_velocity)),
+            restitution=np.array([[t.cam_restitution, t.seat_restitution] for t in trains])[which],
             valve_ref=qref,
             lift_bound=lift_bound,
             speed_bound=speed_bound,

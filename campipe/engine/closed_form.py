@@ -182,6 +182,10 @@ STATE = np.dtype(
         ("rest_seat", "?"),
         ("hold_cam", "f8"),
         ("hold_seat", "f8"),
+        # Restitution: when the follower (the valve) last bounced off the cam (the seat) [s];
+        # −inf: not since the case began.
+        ("bounced_cam", "f8"),
+        ("bounced_seat", "f8"),
     ],
     align=True,
 )

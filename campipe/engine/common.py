@@ -83,6 +83,9 @@ class Cases(NamedTuple):
     #: must pull beyond it times its capturing impact's closing velocity to release
     hold: np.ndarray
     capture: np.ndarray  # (n,) capture velocity [m/s]: slower impacts leave the contact resting
+    #: (n, 2) coefficient of restitution of an impact at the cam and at the seat [-]: 0, the
+    #: thesis's plastic impact; above 0 the struck contact bounces off (modal-exact only)
+    restitution: np.ndarray
     valve_ref: np.ndarray  # (n,) q7 at zero valve lift [m]
     lift_bound: np.ndarray  # (n,) |valve lift| beyond this [m] is motion out of bounds
     speed_bound: np.ndarray  # (n,) a closing or valve speed beyond this [m/s] is out of bounds
@@ -165,11 +168,12 @@ def record_event(events, n_events, c, t, kind, c_from, c_to, velocity, impulse):
 
 @njit(**KERNEL)
 def record_impact(events, n_events, counts, vmax, meff, c, w, t, seat, other_held, c_from, c_to,
-                  closing, capture):  # fmt: skip
-    """Count a plastic impact of case c at time t [s] (speed w) on the cam (``seat`` False)
-    or the seat in its turn, keep the turn's largest closing velocity [m/s] in ``vmax`` and
-    record the event with its impulse m_eff·v_closing; ``other_held``: the other contact is
-    held (``contact.impact_masses`` order). Nothing before t = 0 is recorded.
+                  closing, capture, restitution):  # fmt: skip
+    """Count an impact of case c at time t [s] (speed w) on the cam (``seat`` False) or the
+    seat in its turn, keep the turn's largest closing velocity [m/s] in ``vmax`` and record
+    the event with its impulse m_eff·(1 + e)·v_closing, e the ``restitution`` it bounced with
+    (0: plastic); ``other_held``: the other contact is held (``contact.impact_masses``
+    order). Nothing before t = 0 is recorded.
 
     A contact that closes slower than the capture velocity ``capture`` [m/s] right after it
     released (its release the last event, the flight's closing velocity × duration below
@@ -196,7 +200,8 @@ def record_impact(events, n_events, counts, vmax, meff, c, w, t, seat, other_hel
         vmax[c, turn, side] = max(vmax[c, turn, side], closing)
     mass = meff[c, 2 * side + (1 if other_held else 0)]
     kind = SEAT_IMPACT if seat else CAM_IMPACT
-    record_event(events, n_events, c, t, kind, c_from, c_to, closing, mass * closing)
+    record_event(events, n_events, c, t, kind, c_from, c_to, closing,
+                 mass * (1.0 + restitution) * closing)  # fmt: skip
 
 
 @njit(inline="always")

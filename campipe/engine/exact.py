@@ -18,7 +18,10 @@ Monitors, each an event when it rises through its level (direction: upward only)
 Impacts are the thesis's: infinite cam (seat) mass, perfectly plastic; the struck coordinate
 takes the obstacle's velocity and, through the consistent mass, the free coordinates change
 velocity by −M_ff⁻¹ M_fp Δv_p: the impulse m_eff·v_closing is applied at the instant of
-contact, so no force measures 1/Δt.
+contact, so no force measures 1/Δt. With a coefficient of restitution e (``cam_restitution``,
+``seat_restitution``) the impulse is (1 + e) times that and the contact is left open, the
+struck coordinate leaving at e·v_closing, until a series of bounces is captured
+(``_impact``).
 
 There is no step-size limit to trip: a step is at most ``RESOLUTION``·π/|λ| of the fastest
 mode that could bring a monitor to its level, so a monitor's maximum inside a step shows as a
@@ -94,6 +97,7 @@ from campipe.engine.closed_form import (
 from campipe.engine.common import (
     GAP_LEVEL,
     KERNEL,
+    MICRO_FLIGHT,
     RELEASE,
     SMOOTH,
     captured,
@@ -903,35 +907,60 @@ def _walk(cases, trains, profiles, runs, out, ws, st):
 
 @njit(inline="always", nogil=True)
 def _impact(cases, trains, out, ws, st, seat, closing, t, vcam, lift):
-    """The plastic impact of a closing contact (the cam, or with ``seat`` the seat) at time t
-    [s], closing at ``closing`` > 0 [m/s]: the struck coordinate takes the obstacle's velocity
-    and the free ones change by the impulse's share (``modal.ModalData.impulse``). The other
-    contact, if held, stays held unless releasing it would separate it
-    (``common.other_releases``). A slow impact leaves the contact resting
-    (``common.captured``). Returns the configuration after it."""
+    """The impact of a closing contact (the cam, or with ``seat`` the seat) at time t [s],
+    closing at ``closing`` > 0 [m/s]. Plastic (the thesis's): the struck coordinate takes the
+    obstacle's velocity and the free ones change by the impulse's share
+    (``modal.ModalData.impulse``). With a coefficient of restitution e > 0 (``cases.
+    restitution``) the impulse is (1 + e) times that, and the struck coordinate leaves the
+    obstacle at e times its closing velocity: the contact is not held. The other contact, if
+    held, stays held unless releasing it would separate it (``common.other_releases``). A slow
+    impact is plastic whatever e, and leaves the contact resting (``common.captured``): the
+    bounces of a series end there, or where the series has converged, a bounce's flight
+    (closing velocity × time since the last bounce there) below MICRO_FLIGHT, far below any
+    gap a contact resolves. Returns the configuration after it."""
     c, tr, w, cfg = st.c, st.tr, st.w, st.cfg
     q, v = ws.q, ws.v
     side = 1 if seat else 0
     other_held = holds_cam(cfg) if seat else holds_seat(cfg)
+    capture = cases.capture[c]
+    e = cases.restitution[c, side]
+    rest = captured(closing, capture)
+    if e > 0.0:
+        bounced = st.bounced_seat if seat else st.bounced_cam
+        rest = rest or closing * (t - bounced) < MICRO_FLIGHT
+    bounce = e > 0.0 and not rest
+    if not bounce:
+        e = 0.0
     # The struck coordinate's velocity change, thesis signs: q1 (down) approaches the cam
     # moving down, q7 (down, opening) approaches the seat moving up.
     dv = closing if seat else -closing
-    capture = cases.capture[c]
+    if bounce:
+        dv *= 1.0 + e
     if other_held and other_releases(cases.separation, capture, c, seat, dv):
         other_held = False
         if seat:
             st.rest_cam = False
         else:
             st.rest_seat = False
-    new = configuration(True, other_held) if not seat else configuration(other_held, True)
+    held = configuration(True, other_held) if not seat else configuration(other_held, True)
     for i in range(trains.n_coordinates[tr]):
-        v[i] += trains.impulse[tr, new - 1, side, i] * dv
+        v[i] += trains.impulse[tr, held - 1, side, i] * dv
+    new = held
     if seat:
         q[SEAT] = cases.seat_q[c]
+        if bounce:
+            v[SEAT] = e * closing
+            new = configuration(other_held, False)
+            st.rest_seat = False
+            st.bounced_seat = t
     else:
         q[CAM] = -lift
-        v[CAM] = vcam
-    if captured(closing, capture):
+        v[CAM] = vcam - e * closing if bounce else vcam
+        if bounce:
+            new = configuration(False, other_held)
+            st.rest_cam = False
+            st.bounced_cam = t
+    if rest:
         hold = cases.hold[c, new - 1, side] * closing
         if seat:
             st.rest_seat = True
@@ -943,7 +972,7 @@ def _impact(cases, trains, out, ws, st, seat, closing, t, vcam, lift):
         out.status[c] = UNBOUNDED
     record_impact(
         out.events, out.n_events, out.counts, out.vmax, cases.meff, c, w, t, seat, other_held,
-        cfg, new, closing, capture,
+        cfg, new, closing, capture, e,
     )  # fmt: skip
     return new
 
@@ -1017,23 +1046,30 @@ def _cross_break(cases, trains, profiles, out, ws, st):
                          -jump, 0.0)  # fmt: skip
             st.cfg = new
         else:
+            # A surface jumping into a force-closed follower with restitution throws it off.
+            e = cases.restitution[c, 0]
+            bounce = kind != SMOOTH and jump > 0.0 and e > 0.0 and not cases.form[c]
             if kind != SMOOTH:
-                dv = -jump
+                dv = -jump * (1.0 + e) if bounce else -jump
                 if seat_held and other_releases(cases.separation, cases.capture[c], c, False, dv):
                     seat_held = False
                     st.rest_seat = False
                 new = configuration(True, seat_held)
                 for i in range(trains.n_coordinates[tr]):
                     v[i] += trains.impulse[tr, new - 1, 0, i] * dv
+                if bounce:
+                    new = configuration(False, seat_held)
+                    st.rest_cam = False
+                    st.bounced_cam = t_break
                 if abs(jump) > cases.speed_bound[c]:
                     out.status[c] = UNBOUNDED
                 record_impact(
                     out.events, out.n_events, out.counts, out.vmax, cases.meff, c, w, t_break,
-                    False, seat_held, cfg, new, abs(jump), 0.0,
+                    False, seat_held, cfg, new, abs(jump), 0.0, e if bounce else 0.0,
                 )  # fmt: skip
                 st.cfg = new
             q[CAM] = -l_right
-            v[CAM] = -w * dl_right
+            v[CAM] = -w * dl_right - e * jump if bounce else -w * dl_right
     st.p = st.nb
     st.rev = st.revb
     st.t_s = t_break
@@ -1060,6 +1096,8 @@ def _start_case(cases, trains, profiles, ws, st, c, tr):
     st.done = False
     st.rest_cam = False
     st.rest_seat = False
+    st.bounced_cam = -np.inf
+    st.bounced_seat = -np.inf
     st.hold_cam = 0.0
     st.hold_seat = 0.0
 

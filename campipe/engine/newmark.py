@@ -308,7 +308,8 @@ def _cross_breaks(profiles, cases, out, c, w, th1, cfg, p, rev, pn, revn, thb):
                 if abs(jump) > cases.speed_bound[c]:
                     out.status[c] = UNBOUNDED
                 record_impact(out.events, out.n_events, out.counts, out.vmax, cases.meff, c,
-                              w, thb / w, False, seat_held, cfg, new, abs(jump), 0.0)  # fmt: skip
+                              w, thb / w, False, seat_held, cfg, new, abs(jump), 0.0,
+                              0.0)  # fmt: skip
                 cfg = new
         p = pn
         rev = revn
@@ -435,7 +436,7 @@ def _switch(
         if closing > cases.speed_bound[c]:
             out.status[c] = UNBOUNDED
         record_impact(events, n_events, counts, vmax, meff, c, w, t1, False, seat_next, cfg,
-                      new, closing, cases.capture[c])  # fmt: skip
+                      new, closing, cases.capture[c], 0.0)  # fmt: skip
     if hit_seat:
         closing = -xn[X_V + SEAT]
         seat_next = True
@@ -449,7 +450,7 @@ def _switch(
         if closing > cases.speed_bound[c]:
             out.status[c] = UNBOUNDED
         record_impact(events, n_events, counts, vmax, meff, c, w, t1, True, cam_next, cfg,
-                      new, closing, cases.capture[c])  # fmt: skip
+                      new, closing, cases.capture[c], 0.0)  # fmt: skip
     return configuration(cam_next, seat_next), hit_cam, hit_seat
 
 

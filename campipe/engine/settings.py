@@ -320,9 +320,10 @@ def output_angles(settings: RunSettings) -> np.ndarray:
 
 
 def check_coordinates(cases: Sequence[Case], settings: RunSettings) -> None:
-    """newmark-linear runs the thesis's seven coordinates only: a train with refined members
-    (``<member>_elements`` > 1) is refused at ``run.integrator``, naming modal-exact, which
-    runs any number.
+    """newmark-linear runs the thesis's seven coordinates and plastic impacts only: a train
+    with refined members (``<member>_elements`` > 1), or with a coefficient of restitution
+    (``cam_restitution``, ``seat_restitution``), is refused at ``run.integrator``, naming
+    modal-exact, which runs both.
 
     Raises
     ------
@@ -331,6 +332,18 @@ def check_coordinates(cases: Sequence[Case], settings: RunSettings) -> None:
     """
     if settings.method != "newmark-linear":
         return
+    for c in cases:
+        for name in ("cam_restitution", "seat_restitution"):
+            e = getattr(c.train, name)
+            if e > 0.0:
+                raise RunSettingsError.at(
+                    "run.integrator",
+                    f"newmark-linear applies the thesis's plastic impacts only, found {name} "
+                    f"{e:g}; integrate it with run.integrator: modal-exact, or set "
+                    f"model.{name}: 0",
+                    found=e,
+                    expected=f"{name} 0, or run.integrator: modal-exact",
+                )
     refined = sorted({c.train.n_coordinates for c in cases} - {N_COORDINATES})
     if refined:
         raise RunSettingsError.at(

@@ -185,6 +185,17 @@ def _contact_parameters() -> list[Parameter]:
                 "m",
                 "in",
             ),
+            Parameter(
+                f"{contact}_restitution",
+                f"{label} coefficient of restitution of a rigid impact (0: the thesis's "
+                "plastic impact)",
+                "",
+                "",
+                0.0,
+                exclusive_minimum=False,
+                default=0,
+                maximum=1.0,
+            ),
         ]
     out += [
         zero(
@@ -364,12 +375,14 @@ class ValveTrain:
     cam_hertz_constant: float = 0.0  # [N/m^1.5] K; 0: from the radius
     cam_hunt_crossley: float = 0.0  # [s/m] α
     cam_contact_width: float = 0.0  # [m] line contact length; 0: none
+    cam_restitution: float = 0.0  # [-] e of a rigid impact; 0: plastic (the thesis's)
     seat_contact: str = "rigid"  # one of CONTACT_LAWS
     seat_contact_stiffness: float = 0.0  # [N/m]
     seat_contact_damping: float = 0.0  # [N·s/m]
     seat_hertz_constant: float = 0.0  # [N/m^1.5]
     seat_hunt_crossley: float = 0.0  # [s/m]
     seat_contact_width: float = 0.0  # [m]
+    seat_restitution: float = 0.0  # [-]
     cam_curvature_radius: float = 0.0  # [m] the cam's at the contact; 0: not given
     cam_roller_radius: float = 0.0  # [m] 0: a flat-faced follower
     seat_contact_radius: float = 0.0  # [m] 0: not given
@@ -605,8 +618,10 @@ def defining_values(train: ValveTrain) -> dict[str, object]:
     return out
 
 
-#: Each compliant law's own constants: (name suffix, what it is), the stiffness first.
+#: Each law's own constants (name suffixes): a compliant law's, the stiffness first; the rigid
+#: law's coefficient of restitution (a compliant law's comes from its damping).
 CONTACT_CONSTANTS = {
+    "rigid": ("restitution",),
     "kelvin-voigt": ("contact_stiffness", "contact_damping"),
     "hertz": ("hertz_constant", "hunt_crossley"),
 }
@@ -638,12 +653,18 @@ def check_contacts(train: ValveTrain, key_prefix: str = "") -> None:
             for suffix in names:
                 name = f"{contact}_{suffix}"
                 if getattr(train, name) != 0.0:
-                    fix = (
-                        f"set {law_key}: {other}, or leave {name} out"
-                        if law == "rigid"
-                        else f"{law} takes {contact}_{CONTACT_CONSTANTS[law][0]} and "
-                        f"{contact}_{CONTACT_CONSTANTS[law][1]}; leave {name} out"
-                    )
+                    if law == "rigid":
+                        fix = f"set {law_key}: {other}, or leave {name} out"
+                    elif other == "rigid":
+                        fix = (
+                            f"a {law} contact's restitution comes from its damping "
+                            f"({contact}_{CONTACT_CONSTANTS[law][1]}); leave {name} out"
+                        )
+                    else:
+                        fix = (
+                            f"{law} takes {contact}_{CONTACT_CONSTANTS[law][0]} and "
+                            f"{contact}_{CONTACT_CONSTANTS[law][1]}; leave {name} out"
+                        )
                     raise ModelParameterError.at(
                         key_prefix + name,
                         f"is {other}'s constant but {law_key} is {law}: {fix}",
