@@ -207,9 +207,44 @@ def test_contact_stiffness(tmp_path):
     assert np.isnan(ds.max_seat_pressure.values).all()
 
 
+def test_valve_bounce(tmp_path):
+    """Quick variant (1000 and 9000 rpm, e = 0 and 0.6, two turns). Restitution 0 is the
+    thesis's plastic impact: its cases equal the preset's run (no restitution) bit for bit.
+    At 1000 rpm every landing is the same gentle one whatever e (a bounce is slower than the
+    landing that starts it), so the seating velocity is e = 0's to 1e-9; each landing
+    becomes a series of bounces, at least four times the plastic count at e = 0.6."""
+    quick = {
+        "run.revolutions": 2,
+        "sweep.speed": ["1000 rpm", "9000 rpm"],
+        "sweep.model.seat_restitution": [0, 0.6],
+    }
+    ds = run(tmp_path, "valve-bounce", **quick)
+    assert ds.sizes["case"] == 4
+    e = ds.seat_restitution.values
+    rpm = ds.speed_rpm.values
+    cases = [c.case for c in load_study(STUDIES / "valve-bounce.yaml", quick).cases]
+    speed = {round(c.speed * 30 / math.pi): c.speed for c in cases}  # [rad/s], as the study's
+    plastic = run_batch(
+        [Case(thesis_train(), harmonic(INCH), speed[r], seat=0.1 * INCH) for r in (1000, 9000)],
+        RunSettings(revolutions=2),
+        full_state=False,  # as the study: it stores no coordinate but the valve's
+    )
+    for i, r in enumerate((1000, 9000)):
+        k = np.flatnonzero((rpm == r) & (e == 0))[0]
+        assert_array_equal(ds.valve_lift.values[k], plastic.valve_lift[i])
+        assert ds.seat_impacts.values[k] == plastic.seat_impacts[i]
+    slow = rpm == 1000
+    assert_allclose(ds.max_seating_velocity.values[slow & (e == 0.6)],
+                    ds.max_seating_velocity.values[slow & (e == 0)], rtol=1e-9)  # fmt: skip
+    for r in (1000, 9000):
+        counts = {float(x): ds.seat_impacts.values[(rpm == r) & (e == x)][0] for x in (0, 0.6)}
+        assert counts[0.6] >= 4 * counts[0.0] > 0
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize(
-    "name", ["separation-map", "thesis-seat", "thesis-member-loads", "contact-stiffness"]
+    "name",
+    ["separation-map", "thesis-seat", "thesis-member-loads", "contact-stiffness", "valve-bounce"],
 )
 def test_full_studies_run(tmp_path, name):
     ds = run(tmp_path, name)

@@ -32,6 +32,7 @@ EXAMPLE_CASES = {
     "lash-ramp": 27,
     "spring-surge": 57,
     "contact-stiffness": 39,
+    "valve-bounce": 21,
 }
 
 
