@@ -319,11 +319,10 @@ def output_angles(settings: RunSettings) -> np.ndarray:
     return np.arange(n) * settings.output_every
 
 
-def check_coordinates(cases: Sequence[Case], settings: RunSettings) -> None:
-    """newmark-linear runs the thesis's seven coordinates and plastic impacts only: a train
-    with refined members (``<member>_elements`` > 1), or with a coefficient of restitution
-    (``cam_restitution``, ``seat_restitution``), is refused at ``run.integrator``, naming
-    modal-exact, which runs both.
+def check_impacts(cases: Sequence[Case], settings: RunSettings) -> None:
+    """newmark-linear applies the thesis's plastic impacts only: a train with a coefficient of
+    restitution (``cam_restitution``, ``seat_restitution``) is refused at ``run.integrator``,
+    naming modal-exact, which bounces.
 
     Raises
     ------
@@ -344,6 +343,20 @@ def check_coordinates(cases: Sequence[Case], settings: RunSettings) -> None:
                     found=e,
                     expected=f"{name} 0, or run.integrator: modal-exact",
                 )
+
+
+def check_coordinates(cases: Sequence[Case], settings: RunSettings) -> None:
+    """newmark-linear runs the thesis's seven coordinates only: a train with refined members
+    (``<member>_elements`` > 1) is refused at ``run.integrator``, naming modal-exact, which
+    runs any number.
+
+    Raises
+    ------
+    RunSettingsError
+        Key ``run.integrator``.
+    """
+    if settings.method != "newmark-linear":
+        return
     refined = sorted({c.train.n_coordinates for c in cases} - {N_COORDINATES})
     if refined:
         raise RunSettingsError.at(
@@ -361,8 +374,8 @@ def check_run(
 ) -> None:
     """Everything ``run_batch`` refuses, checked without running: an unknown integrator or
     fidelity, a non-positive step or tolerance, an unknown closure, a non-positive speed,
-    newmark-linear on a train of refined members (more than seven coordinates), a
-    newmark-linear step beyond the stability limit.
+    newmark-linear on a train of refined members (more than seven coordinates) or with a
+    coefficient of restitution, a newmark-linear step beyond the stability limit.
 
     Raises
     ------
@@ -404,6 +417,7 @@ def check_run(
             )
     check_contacts(cases, settings)
     check_coordinates(cases, settings)
+    check_impacts(cases, settings)
     if check_stability_limit:
         check_stability(cases, settings)
 

@@ -32,6 +32,7 @@ from campipe.engine.settings import (
     case_integrator,
     check_contacts,
     check_coordinates,
+    check_impacts,
     check_stability,
 )
 from campipe.errors import did_you_mean, excerpt
@@ -568,6 +569,7 @@ def _resolve(raw: Mapping, index: int, directory: Path) -> tuple[ResolvedCase, d
     try:
         check_contacts([case], settings)
         check_coordinates([case], settings)
+        check_impacts([case], settings)
         check_stability([case], settings)
     except RunSettingsError as exc:
         raise SpecProblem.from_error(exc) from None
