@@ -18,7 +18,8 @@ kernels before it defines them: numba picks a kernel's cache when it is decorate
 ahead of numba's locators for campipe's files only. Any other function keeps numba's
 behaviour, and so does everything when ``NUMBA_CACHE_LOCATOR_CLASSES`` is set or the folder
 cannot be written (numba then falls back to ``__pycache__``). When a new kernel-source
-folder is made, those beyond the :data:`KEEP` used last are removed.
+folder is made, those beyond the :data:`KEEP` used last are removed; with them go the other
+files a process keeps there for the next (``campipe.disk_cache``, :func:`ensure_folder`).
 """
 
 from __future__ import annotations
@@ -116,6 +117,26 @@ def mark_used() -> None:
         log.debug("cannot mark the kernel cache folder used: %s", exc)
 
 
+def ensure_folder(path: Path) -> None:
+    """Make ``path``, this source's folder or one in it, for files other than kernels
+    (``campipe.disk_cache``): made as numba makes a kernel's, so that making this source's
+    folder prunes the others all the same (:func:`prune`)."""
+    new = not cache_folder().exists()
+    path.mkdir(parents=True, exist_ok=True)
+    _made(new)
+
+
+def _made(new: bool) -> None:
+    """This source's folder exists: mark it used; prune the others if it is ``new``."""
+    mark_used()
+    if new:
+        log.debug("new kernel cache folder %s", cache_folder())
+        try:
+            prune(cache_root())
+        except OSError as exc:  # never fail a kernel over the clean-up
+            log.debug("kernel cache folders not pruned: %s", exc)
+
+
 def _is_source_folder(name: str) -> bool:
     return len(name) == 16 and all(c in "0123456789abcdef" for c in name)
 
@@ -131,13 +152,7 @@ class KernelCacheLocator(caching._CacheLocator):
     def ensure_cache_path(self) -> None:
         new = not cache_folder().exists()
         super().ensure_cache_path()
-        mark_used()
-        if new:
-            log.debug("new kernel cache folder %s", cache_folder())
-            try:
-                prune(cache_root())
-            except OSError as exc:  # never fail a kernel over the clean-up
-                log.debug("kernel cache folders not pruned: %s", exc)
+        _made(new)
 
     def get_cache_path(self) -> str:
         return self._cache_path

@@ -5,14 +5,23 @@ Specs and ``--set`` write quantities as strings with units (``"9 in"``, ``"245 l
 units (names joined by ``*``, ``/``, small integer powers ``**2`` and parentheses): the text
 is checked against that grammar before pint reads the units, so no arithmetic is evaluated
 (``9**9**9 rpm`` is refused at once instead of computing a number with 369 million digits).
+
+The value of each text read, and of each conversion, is kept for later processes
+(``campipe.disk_cache``, keyed by pint's version and this module's source): a run whose
+quantities were all read before never imports pint (0.1 s). A refusal is never kept.
 """
 
 from __future__ import annotations
 
+import atexit
 import functools
+import json
 import logging
 import math
 import re
+import sys
+import threading
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from campipe.errors import CampipeError, excerpt
@@ -22,6 +31,36 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
+#: Values kept for later processes, at most (those found last).
+KEEP_VALUES = 2048
+
+_hide_dask = False  # import pint without dask (pint_without_dask)
+_lock = threading.Lock()
+_known: dict[str, float] | None = None  # values found by this process or kept by others
+_found: dict[str, float] = {}  # values this process found, to keep at exit
+
+
+def pint_without_dask() -> None:
+    """Have pint, when this process first needs it, imported without its dask support. pint
+    imports dask, when it is installed, to wrap dask arrays in quantities: 90 ms of every
+    command that reads a quantity, for nothing campipe does. For the command line, whose
+    process is the command's own (dask itself stays importable)."""
+    global _hide_dask
+    _hide_dask = True
+
+
+def _pint():
+    """The pint module, imported on first use (see :func:`pint_without_dask`)."""
+    if _hide_dask and "pint" not in sys.modules and "dask" not in sys.modules:
+        sys.modules["dask"] = None  # type: ignore[assignment]  # find_spec("dask") is None
+        try:
+            import pint
+        finally:
+            del sys.modules["dask"]
+    import pint
+
+    return pint
+
 
 @functools.cache
 def registry() -> pint.UnitRegistry:
@@ -30,8 +69,7 @@ def registry() -> pint.UnitRegistry:
     ``cache_folder=":auto:"``, a per-user folder): reading them back takes a fifth of the
     time parsing them does (0.03 s against 0.13 s), and a cache that cannot be read or
     written is passed over."""
-    import pint
-
+    pint = _pint()
     try:
         return pint.UnitRegistry(cache_folder=":auto:")
     except Exception as exc:  # a damaged or unwritable cache: parse the definitions
@@ -72,9 +110,10 @@ def parse_quantity(text: object, units: str, key: str, example_units: str | None
 
 @functools.lru_cache(maxsize=8192)
 def _parse_text(text: str, units: str, key: str, example_units: str | None) -> float:
-    """A quantity's text read once a process: every case of a grid repeats its preset's and
-    its base's values (a refusal is raised again each time, never kept)."""
-    return _parse(text, units, key, example_units)
+    """A quantity's text read once a process, or by an earlier one (:func:`_kept`): every
+    case of a grid repeats its preset's and its base's values (a refusal is raised again each
+    time, never kept)."""
+    return _kept(("quantity", text, units), lambda: _parse(text, units, key, example_units))
 
 
 def _sweep_hint(text: object, key: str) -> str:
@@ -86,9 +125,12 @@ def _sweep_hint(text: object, key: str) -> str:
 
 def _parse(text: object, units: str, key: str, example_units: str | None) -> float:
     """:func:`parse_quantity`, uncached."""
-    import pint
-
+    if not units and isinstance(text, (int, float)) and not isinstance(text, bool):
+        # a bare number where none are wanted: no units to read
+        expected = f"a quantity in {example_units}" if example_units else "a number"
+        return _finite(float(text), text, key, expected)
     ureg = registry()
+    pint = _pint()
     target = ureg.Unit(units) if units else ureg.dimensionless
     dimensionless = target.dimensionless
     example = example_units or _example_unit(target)
@@ -202,8 +244,8 @@ def _read(text: str, key: str, example: str) -> pint.Quantity | float:
 def read_quantity(text: str, key: str) -> pint.Quantity:
     """``text`` (``"150 lbf"``, ``"0.1 in"``) as a pint Quantity with units, read by the
     grammar above (nothing evaluated); a QuantityError naming ``key`` otherwise."""
-    import pint
-
+    registry()
+    pint = _pint()
     q = _read(text, key, "in")
     if not isinstance(q, pint.Quantity) or q.unitless:
         raise QuantityError.at(
@@ -236,7 +278,10 @@ def _example_unit(unit: pint.Unit) -> str:
 
 def convert(value: float, from_units: str, to_units: str) -> float:
     """Convert a float between two pint unit spellings."""
-    return float(registry().Quantity(value, from_units).to(to_units).magnitude)
+    return _kept(
+        ("convert", f"{type(value).__name__} {value!r}", from_units, to_units),
+        lambda: float(registry().Quantity(value, from_units).to(to_units).magnitude),
+    )
 
 
 def parse_angular(text: object, units: str, key: str, example_units: str) -> float:
@@ -279,8 +324,14 @@ def parse_angular(text: object, units: str, key: str, example_units: str) -> flo
             found=text,
             expected=expected,
         )
-    import pint
+    return _kept(("angular", text, units), lambda: _angular(text, units, key, example_units))
 
+
+def _angular(text: str, units: str, key: str, example_units: str) -> float:
+    """:func:`parse_angular` of a text, uncached."""
+    expected = f"a quantity in {example_units}"
+    registry()
+    pint = _pint()
     q = _read(text, key, example_units)
     if not isinstance(q, pint.Quantity) or dict(q.to_base_units().unit_items()).get("radian") != 1:
         raise QuantityError.at(
@@ -301,3 +352,76 @@ def parse_angular(text: object, units: str, key: str, example_units: str) -> flo
             expected=expected,
         ) from None
     return _finite(value, text, key, expected)
+
+
+def _kept(what: tuple[str, ...], compute: Callable[[], float]) -> float:
+    """``compute()``, the value of ``what`` (the function and its arguments), or the value
+    this process or an earlier one found for it (kept at exit, :func:`_keep_found`); an error
+    is raised, never kept."""
+    key = json.dumps(what)
+    known = _known_values()
+    value = known.get(key)
+    if value is None:
+        value = compute()
+        with _lock:
+            if not _found:
+                atexit.register(_keep_found)
+            known[key] = _found[key] = value
+    return value
+
+
+def _known_values() -> dict[str, float]:
+    global _known
+    with _lock:
+        if _known is None:
+            _known = _read_kept()
+        return _known
+
+
+@functools.cache
+def _store_key() -> str | None:
+    """What the values depend on: pint's version and this module's source; None where pint's
+    version is unknown (nothing is then kept)."""
+    from importlib import metadata
+
+    from campipe.sources import source_digest
+
+    try:
+        version = metadata.version("pint")
+    except metadata.PackageNotFoundError:
+        return None
+    return f"pint {version}; " + source_digest(["units.py"])
+
+
+def _read_kept() -> dict[str, float]:
+    """The values earlier processes kept; none if their file is missing or damaged."""
+    from campipe import disk_cache
+
+    key = _store_key()
+    content = None if key is None else disk_cache.read("quantities", key)
+    try:
+        values = json.loads(content) if content else {}
+    except ValueError:
+        return {}
+    if not isinstance(values, dict) or not all(type(v) is float for v in values.values()):
+        return {}
+    return values
+
+
+def _keep_found() -> None:
+    """Keep the values this process found, with those kept before (the :data:`KEEP_VALUES`
+    found last)."""
+    from campipe import disk_cache
+
+    key = _store_key()
+    with _lock:
+        found = dict(_found)
+        _found.clear()
+    if key is None or not found:
+        return
+    values = _read_kept()
+    for k in found:
+        values.pop(k, None)
+    values.update(found)
+    values = dict(list(values.items())[-KEEP_VALUES:])
+    disk_cache.write("quantities", key, json.dumps(values).encode())

@@ -1,6 +1,8 @@
 """`campipe study`, `campipe validate` and `campipe query` from the command line."""
 
 import re
+import subprocess
+import sys
 
 import xarray as xr
 from click.testing import CliRunner
@@ -102,3 +104,20 @@ def test_study_refuses_an_unknown_scheduler(tmp_path):
     )
     assert out.exit_code == 2 and "expected one of threads, synchronous, processes" in out.output
     assert not (tmp_path / "q.nc").exists()
+
+
+def test_a_command_leaves_its_objects_to_the_operating_system_at_exit():
+    """A command's process freezes the garbage collector at exit (``gc.freeze``), after the
+    exit handlers registered since it started: the interpreter then does not collect numba's
+    object graph. Broken copy: without ``cli._exit_without_collecting``, nothing is frozen."""
+    code = (
+        "import atexit, gc, sys\n"
+        "atexit.register(lambda: print('frozen', gc.get_freeze_count(), file=sys.stderr))\n"
+        "from campipe.cli import main\n"
+        "main(['schema'], standalone_mode=False)\n"
+        "print('unfrozen', gc.get_freeze_count(), file=sys.stderr)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    counts = dict(line.split() for line in out.stderr.splitlines())
+    assert int(counts["unfrozen"]) == 0 and int(counts["frozen"]) > 0
+    assert out.stdout.startswith("{")  # the command's output, whole

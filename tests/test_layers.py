@@ -13,7 +13,8 @@ import pytest
 import campipe
 
 ROOT = Path(campipe.__file__).parent
-#: Below everything, importing no other layer (kernel_cache: where numba caches the kernels).
+#: Below everything, importing no other layer (kernel_cache: where numba caches the kernels;
+#: disk_cache: what else a process keeps for the next, beside them).
 BASE = {
     "campipe",
     "campipe.units",
@@ -21,6 +22,7 @@ BASE = {
     "campipe.vocabulary",
     "campipe.errors",
     "campipe.kernel_cache",
+    "campipe.disk_cache",
     "campipe.sources",
 }
 #: Layer → the layers its modules may import (their own included).

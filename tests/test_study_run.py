@@ -483,11 +483,29 @@ def test_a_finished_study_answers_from_its_spec_text_and_the_archive_alone(small
     assert heavy == ["netCDF4"]
     assert finished(spec, {}, archive).up_to_date
     stderr, heavy = _loaded_by(["study", str(spec), "--no-progress", "--set", "speed=9000 rpm"])
-    assert "6 cases (6 reused, 0 computed" in stderr and "pint" in heavy  # the full check
+    assert "6 cases (6 reused, 0 computed" in stderr and "scipy" in heavy  # the full check
 
     assert finished(spec, {"speed": "9000 rpm"}, archive).up_to_date
     assert finished(spec, {}, archive) is None  # written with another override
     assert finished(spec, {"speed": "9000 rpm"}, tmp_path / "elsewhere.nc") is None
+
+
+def test_a_warm_one_case_study_reads_its_quantities_without_pint(tmp_path):
+    """Run again, a one-case study reads its quantities' values where the first run kept them
+    (``campipe.units``, ``campipe.disk_cache``): pint stays unloaded, and the archive is the
+    same. (SciPy's linear algebra loads all the same: numba imports it with its kernels.)
+
+    Broken copy: with ``units._kept`` computing every time, pint is loaded."""
+    one = SMALL.replace("[6000 rpm, 9524 rpm, 11000 rpm]", "[6000 rpm]")
+    spec = write_spec(tmp_path, one.replace("seat: [none, 0.1 in]", "seat: [none]"))
+    archive = tmp_path / "small.nc"
+    _loaded_by(["study", str(spec), "--no-progress"], cwd=tmp_path)
+    first = load(archive)
+    archive.unlink()
+    stderr, heavy = _loaded_by(["study", str(spec), "--no-progress"], cwd=tmp_path)
+    assert "1 cases (0 reused, 1 computed" in stderr
+    assert "numba" in heavy and "pint" not in heavy
+    xr.testing.assert_identical(load(archive), first)
 
 
 def test_the_first_run_says_what_it_compiles(tmp_path, monkeypatch):

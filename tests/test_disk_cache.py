@@ -1,0 +1,157 @@
+"""What a process keeps for the next (``campipe.disk_cache``): the quantity texts' SI values
+(``campipe.units``) read back bit for bit, under their own key only, never from a damaged file,
+and nothing kept (silently) where the folder cannot be written."""
+
+import os
+import struct
+import time
+
+import pytest
+
+from campipe import disk_cache, kernel_cache, units
+from campipe.units import QuantityError, parse_angular, parse_quantity
+
+#: Texts and units whose SI values are inexact binary fractions, one negative zero among them.
+QUANTITIES = [
+    ("0.1 in", "m"),
+    ("245 lbf/in", "N/m"),
+    ("0.283 lbf/in**3", "N/m**3"),
+    ("-0 in", "m"),
+    ("30e6 lbf/in**2", "Pa"),
+]
+ANGULAR = [("9524 rpm", "rad/s"), ("268 deg", "rad")]
+
+
+@pytest.fixture
+def folder(tmp_path, monkeypatch):
+    """A kernel cache of its own (this source's folder under ``tmp_path``), and units'
+    values as a fresh process finds them: none read yet."""
+    source = tmp_path / "0123456789abcdef"
+    monkeypatch.setattr(kernel_cache, "cache_root", lambda: tmp_path)
+    monkeypatch.setattr(kernel_cache, "cache_folder", lambda: source)
+    fresh_process(monkeypatch)
+    return source
+
+
+def fresh_process(monkeypatch) -> None:
+    monkeypatch.setattr(units, "_known", None)
+    monkeypatch.setattr(units, "_found", {})
+    units._parse_text.cache_clear()
+
+
+def values() -> list[float]:
+    return [parse_quantity(t, u, "k") for t, u in QUANTITIES] + [
+        parse_angular(t, u, "k", "rpm") for t, u in ANGULAR
+    ]
+
+
+def bits(xs: list[float]) -> list[bytes]:
+    return [struct.pack("<d", x) for x in xs]
+
+
+def no_pint(monkeypatch) -> None:
+    def refuse():
+        raise AssertionError("pint consulted")
+
+    monkeypatch.setattr(units, "_pint", refuse)
+    monkeypatch.setattr(units, "registry", refuse)
+
+
+def test_kept_values_are_read_back_bit_for_bit_without_pint(folder, monkeypatch):
+    """A later process reads every value the first found, bit for bit (-0.0 included),
+    without pint."""
+    first = values()
+    assert struct.pack("<d", first[3]) == struct.pack("<d", -0.0)
+    units._keep_found()
+    assert len(list((folder / "quantities").iterdir())) == 1
+    fresh_process(monkeypatch)
+    no_pint(monkeypatch)
+    assert bits(values()) == bits(first)
+
+
+def test_conversions_are_kept_by_type_and_value(folder, monkeypatch):
+    rpm = units.convert(1.0, "rad/s", "rpm")
+    units._keep_found()
+    fresh_process(monkeypatch)
+    no_pint(monkeypatch)
+    assert struct.pack("<d", units.convert(1.0, "rad/s", "rpm")) == struct.pack("<d", rpm)
+    with pytest.raises(AssertionError, match="pint consulted"):
+        units.convert(1, "rad/s", "rpm")  # an int is another argument
+
+
+def test_another_pint_or_units_source_misses(folder, monkeypatch):
+    """The values are kept under pint's version and this units module's source: another of
+    either reads none of them (and keeps its own beside them)."""
+    values()
+    units._keep_found()
+    key = units._store_key()
+    assert key is not None and "pint " in key
+    for other in (key.replace("pint ", "pint 0.0-other "), key[:-1] + chr(ord(key[-1]) ^ 1)):
+        with monkeypatch.context() as m:
+            m.setattr(units, "_store_key", lambda other=other: other)
+            assert units._read_kept() == {}
+    assert len(units._read_kept()) == len(QUANTITIES) + len(ANGULAR)
+
+
+@pytest.mark.parametrize(
+    "damage",
+    [
+        lambda data: data[:-3],  # cut short
+        lambda data: data[:-5] + bytes([data[-5] ^ 1]) + data[-4:],  # one bit flipped
+        lambda data: b"",
+        lambda data: b"\x00" * len(data),
+    ],
+    ids=["truncated", "bit-flip", "empty", "zeros"],
+)
+def test_a_damaged_file_is_passed_over_and_the_values_computed(folder, monkeypatch, damage):
+    first = values()
+    units._keep_found()
+    (path,) = (folder / "quantities").iterdir()
+    path.write_bytes(damage(path.read_bytes()))
+    assert disk_cache.read("quantities", units._store_key()) is None
+    fresh_process(monkeypatch)
+    assert bits(values()) == bits(first)  # computed by pint again
+    assert len(units._found) == len(first)
+
+
+def test_a_file_of_another_key_is_not_read_as_this_ones(folder):
+    disk_cache.write("quantities", "a", b"{}")
+    (path,) = (folder / "quantities").iterdir()
+    path.rename(path.with_name(disk_cache._digest("quantities", "b")[:32]))
+    assert disk_cache.read("quantities", "b") is None
+    disk_cache.write("quantities", "b", b"[1]")
+    assert disk_cache.read("quantities", "b") == b"[1]"
+
+
+def test_a_refusal_is_never_kept(folder):
+    with pytest.raises(QuantityError):
+        parse_quantity("9 furlong/fortnight", "N", "k")
+    with pytest.raises(QuantityError):
+        parse_angular("9 Hz", "rad/s", "k", "rpm")
+    assert units._found == {}
+
+
+def test_an_unwritable_folder_keeps_nothing_silently(tmp_path, monkeypatch):
+    """A cache folder that cannot be made (a file stands in its way): nothing kept, nothing
+    raised, and the values still found."""
+    blocked = tmp_path / "file"
+    blocked.write_text("")
+    monkeypatch.setattr(kernel_cache, "cache_root", lambda: blocked)
+    monkeypatch.setattr(kernel_cache, "cache_folder", lambda: blocked / "0123456789abcdef")
+    fresh_process(monkeypatch)
+    first = values()
+    units._keep_found()
+    assert disk_cache.read("quantities", units._store_key()) is None
+    fresh_process(monkeypatch)
+    assert bits(values()) == bits(first)
+
+
+def test_each_kind_keeps_the_files_written_last(folder):
+    n = disk_cache.KEEP + 3
+    then = time.time() - 1000
+    for i in range(n):
+        disk_cache.write("quantities", f"key {i}", b"{}")
+        path = folder / "quantities" / disk_cache._digest("quantities", f"key {i}")[:32]
+        os.utime(path, (then + i, then + i))  # written in this order
+    kept = [disk_cache.read("quantities", f"key {i}") is not None for i in range(n)]
+    assert kept == [False] * (n - disk_cache.KEEP) + [True] * disk_cache.KEEP
