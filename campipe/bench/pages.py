@@ -36,7 +36,7 @@ from campipe.bench.run import (
     THESIS_STEP,
     Bench,
 )
-from campipe.bench.verdict import finite, format_short
+from campipe.bench.verdict import bytecode_note, finite, format_short
 from campipe.constants import INCH, LBF
 
 #: The committed latest full run, and the pages generated from it (relative to the root).
@@ -536,7 +536,7 @@ def study_block(bench: Bench) -> str:
     lat = s["latencies"]
     lines += [
         "",
-        f"Start-up, best of {lat['repeats']} fresh processes: `campipe --help` "
+        f"Start-up, best of {lat['repeats']} fresh processes{bytecode_note(lat)}: `campipe --help` "
         f"{_duration(lat['help'])}; a one-case study {_duration(lat['one_case'])}; "
         f"a finished {lat['finished_cases']}-case study run again {_duration(lat['finished'])}.",
     ]

@@ -241,6 +241,12 @@ def _seconds(x: float) -> str:
     return f"{format_short(x, 2)} s"
 
 
+def bytecode_note(latencies: dict) -> str:
+    """How the start-up latencies were timed, where the run says: with Python's bytecode
+    cache, as an installed campipe has it (``campipe.bench.study._campipe``)."""
+    return ", Python's bytecode cached" if latencies.get("bytecode") else ""
+
+
 def _under(words: str, seconds: float | None, limit: float, note: str, missing: str) -> Goal:
     """The study goal "``words`` under ``limit`` s": reached below it, not shown (saying
     ``missing``) where nothing was measured."""
@@ -284,7 +290,8 @@ def _study_goals(bench: Bench) -> list[Goal]:
         ("one_case", "a one-case study, warm"),
         ("finished", f"a finished {lat['finished_cases']}-case study run again"),
     ):
-        out.append(_under(words, lat[key], g[key], f"best of {lat['repeats']} fresh processes", ""))
+        how = f"best of {lat['repeats']} fresh processes{bytecode_note(lat)}"
+        out.append(_under(words, lat[key], g[key], how, ""))
     first = s.get("first_run")
     said = (
         f"it says what it compiles after {_seconds(first['first_line_seconds'])}"
