@@ -6,11 +6,11 @@ linear and driven with the cam's period: its steady state is the closed form of
 ``campipe.engine.steady`` (z(0) = (I − e^{AT})⁻¹ b, exact piece by piece). Its *margin* is the
 least cam compression −F1 over the turn: positive, the follower follows; the no-follow onset
 is the lowest speed where it reaches zero. Where the valve reaches its seat the steady state
-is piecewise (configurations I, III, IV, with plastic impacts at the seat and the cam): it is
-then the fixed point of the turn map over the exact piece propagators, which is what
-``modal-exact`` integrates turn by turn; the heavy damping of the seated phase makes that map
-contract within a turn or two (``SEATED_TURNS``, checked), and no-follow is configuration II
-in its last turn.
+is piecewise (configurations I, III, IV, with impacts at the seat and the cam, plastic or with
+the train's restitution): it is then the fixed point of the turn map over the exact piece
+propagators, which is what ``modal-exact`` integrates turn by turn; the heavy damping of the
+seated phase makes that map contract within a turn or two (``SEATED_TURNS``, checked), and
+no-follow is configuration II in its last turn.
 
 Pure numerics: arrays in, arrays out; no files, no printing.
 """
