@@ -380,8 +380,10 @@ class _Peer:
         cfg = self.cfg
         side, coord = (1, SEAT) if seat else (0, CAM)
         other_held = holds_cam(cfg) if seat else holds_seat(cfg)
+        elastic = self.restitution[side] > 0.0
         converged = closing * (t_ev - self.bounced[side]) < MICRO_FLIGHT
-        bounce = self.restitution[side] > 0.0 and closing >= self.capture and not converged
+        rest = closing < self.capture or (elastic and converged)
+        bounce = elastic and not rest
         e = self.restitution[side] if bounce else 0.0
         dv = (closing if seat else -closing) * (1.0 + e)
         if other_held and self.separation[side] * dv > self.capture:
@@ -397,14 +399,14 @@ class _Peer:
             self.bounced[side] = t_ev
             self.resting[coord] = 0.0
         self.cfg = new
-        if closing < self.capture or (self.restitution[side] > 0.0 and not bounce):
+        if rest:
             self.resting[coord] = self.hold_unit[new - 1, side] * closing
             last = self.events[-1] if self.events else None
             release = SEAT_SEPARATION if seat else CAM_SEPARATION
-            if closing < self.capture and last is not None and last[1] == release:
-                if last[3] == cfg:
-                    self.events.pop()  # it never really left: the release is taken back
-                    return e
+            taken_back = last is not None and last[1] == release and last[3] == cfg
+            if closing < self.capture and taken_back:
+                self.events.pop()  # it never really left: the release is taken back
+                return e
         if t_ev >= 0.0:
             self.v_max[side] = max(self.v_max[side], closing)
             mass = self.configs[held].impact_mass[side]

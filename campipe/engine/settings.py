@@ -319,36 +319,11 @@ def output_angles(settings: RunSettings) -> np.ndarray:
     return np.arange(n) * settings.output_every
 
 
-def check_impacts(cases: Sequence[Case], settings: RunSettings) -> None:
-    """newmark-linear applies the thesis's plastic impacts only: a train with a coefficient of
-    restitution (``cam_restitution``, ``seat_restitution``) is refused at ``run.integrator``,
-    naming modal-exact, which bounces.
-
-    Raises
-    ------
-    RunSettingsError
-        Key ``run.integrator``.
-    """
-    if settings.method != "newmark-linear":
-        return
-    for c in cases:
-        for name in ("cam_restitution", "seat_restitution"):
-            e = getattr(c.train, name)
-            if e > 0.0:
-                raise RunSettingsError.at(
-                    "run.integrator",
-                    f"newmark-linear applies the thesis's plastic impacts only, found {name} "
-                    f"{e:g}; integrate it with run.integrator: modal-exact, or set "
-                    f"model.{name}: 0",
-                    found=e,
-                    expected=f"{name} 0, or run.integrator: modal-exact",
-                )
-
-
-def check_coordinates(cases: Sequence[Case], settings: RunSettings) -> None:
-    """newmark-linear runs the thesis's seven coordinates only: a train with refined members
-    (``<member>_elements`` > 1) is refused at ``run.integrator``, naming modal-exact, which
-    runs any number.
+def check_newmark_linear(cases: Sequence[Case], settings: RunSettings) -> None:
+    """What newmark-linear cannot run, refused at ``run.integrator`` naming modal-exact, which
+    runs both: a train of refined members (``<member>_elements`` > 1; it integrates the
+    thesis's seven coordinates only), and one with a coefficient of restitution
+    (``cam_restitution``, ``seat_restitution``; it applies the thesis's plastic impacts only).
 
     Raises
     ------
@@ -367,6 +342,18 @@ def check_coordinates(cases: Sequence[Case], settings: RunSettings) -> None:
             found=refined,
             expected=f"{N_COORDINATES} coordinates, or run.integrator: modal-exact",
         )
+    for c in cases:
+        for name in ("cam_restitution", "seat_restitution"):
+            e = getattr(c.train, name)
+            if e > 0.0:
+                raise RunSettingsError.at(
+                    "run.integrator",
+                    f"newmark-linear applies the thesis's plastic impacts only, found {name} "
+                    f"{e:g}; integrate it with run.integrator: modal-exact, or set "
+                    f"model.{name}: 0",
+                    found=e,
+                    expected=f"{name} 0, or run.integrator: modal-exact",
+                )
 
 
 def check_run(
@@ -416,8 +403,7 @@ def check_run(
                 expected="> 0 rad/s",
             )
     check_contacts(cases, settings)
-    check_coordinates(cases, settings)
-    check_impacts(cases, settings)
+    check_newmark_linear(cases, settings)
     if check_stability_limit:
         check_stability(cases, settings)
 
