@@ -145,6 +145,7 @@ class KernelCacheLocator(caching._CacheLocator):
     """numba's cache locator for campipe's kernels (see the module's docstring)."""
 
     def __init__(self, py_func, py_file: str):
+        self._py_file = py_file  # numba names it when it warns that a kernel cannot be cached
         self._lineno = py_func.__code__.co_firstlineno
         package = Path(py_file).resolve().parent.relative_to(ROOT)
         self._cache_path = str(cache_folder().joinpath(*package.parts))

@@ -125,3 +125,59 @@ def test_this_process_caches_its_kernels_in_the_kernel_cache():
     folder = kernel_cache.cache_folder()
     assert Path(batch.cam_at._cache._cache_path) == folder / "engine"
     assert Path(packed.evaluate_packed._cache._cache_path) == folder / "profiles"
+
+
+def test_compiling_ahead_compiles_the_signatures_a_run_calls(monkeypatch):
+    """A first run compiles modal-exact's kernel ahead from the types ``batch.integrator_types``
+    gives, found without running the start's or the harmonic responses' kernels
+    (``kernels.compile_kernels``); the quasi-static kernel is called from the batch's starts
+    and from the trains' valve references. Each must be called with the types it was compiled
+    for, or the run compiles it again (about 15 s for modal-exact). Checked here on the types
+    of every call a run makes, over batches that differ in what could change a type: a seat,
+    form closure, restitution, a refined train (more coordinates), both starts, both
+    ``full_state``. Broken copies, run: ``integrator_types`` with float zeta (modal-exact's
+    types differ); the quasi-static start's held mask broadcast, as it was (two signatures).
+    """
+    from numba.core.typing.typeof import Purpose, typeof
+
+    from campipe.engine import contact, exact
+    from campipe.engine.batch import Case, RunSettings, run_batch
+    from campipe.model import thesis_train
+    from campipe.profiles import harmonic
+
+    calls: dict[str, list[tuple]] = {"exact": [], "quasi-static": []}
+
+    def recording(name, kernel):
+        def record(*args):
+            calls[name].append(tuple(typeof(a, Purpose.argument) for a in args))
+            return kernel(*args)
+
+        return record
+
+    monkeypatch.setattr(exact, "modal_exact_batch", recording("exact", exact.modal_exact_batch))
+    monkeypatch.setattr(
+        batch, "quasi_static_batch", recording("quasi-static", contact.quasi_static_batch)
+    )
+    monkeypatch.setattr(
+        contact, "quasi_static_batch", recording("quasi-static", contact.quasi_static_batch)
+    )
+    batch.prepare.cache_clear()  # so that the valve references are computed again
+    cam = harmonic(0.0254)
+    speed = 9000 * 2 * 3.141592653589793 / 60
+    train = thesis_train()
+    batches = [
+        [Case(train, cam, speed)],
+        [Case(train, cam, speed, seat=0.00254), Case(train, cam, 1.2 * speed)],
+        [Case(train, cam, speed, closure="form")],
+        [Case(train.replace(seat_restitution=0.5), cam, speed, seat=0.00254)],
+        [Case(train.replace(spring_elements=3), cam, speed), Case(train, cam, speed)],
+    ]
+    expected = []
+    for cases in batches:
+        for start in ("periodic", "quasi-static"):
+            for full_state in (False, True):
+                settings = RunSettings(revolutions=0.05, warmup=0, start=start)
+                expected.append(batch.integrator_types(cases, settings, full_state))
+                run_batch(cases, settings, full_state=full_state)
+    assert calls["exact"] == expected
+    assert len(calls["quasi-static"]) > len(batches) and len(set(calls["quasi-static"])) == 1

@@ -17,6 +17,7 @@ from typing import NamedTuple
 
 import numpy as np
 from numba import njit
+from numba.core.typing.typeof import Purpose, typeof
 
 from campipe.constants import TWO_PI
 from campipe.engine import compliant, exact, newmark, steady
@@ -362,7 +363,8 @@ def initial_states(mats, which, packed, omega, has_seat, seat_q, inverses=None):
     for i_cfg, number in enumerate(START_CONFIGURATIONS):
         kinv = pad_stack([inv[i_cfg, 0] for inv in inverses])[which]
         minv = pad_stack([inv[i_cfg, 1] for inv in inverses])[which]
-        held = np.broadcast_to(held_mask(number, n_q), (n, n_q))
+        # A writable array, as ``quasi_static_state`` passes: one compiled kernel serves both.
+        held = np.tile(held_mask(number, n_q), (n, 1))
         qc, vc, ac = np.empty((n, n_q)), np.empty((n, n_q)), np.empty((n, n_q))
         quasi_static_batch(kinv, minv, M, C, K, load, held, held_q, held_v, held_a, qc, vc, ac)
         states.append((qc, vc, ac))
@@ -419,12 +421,19 @@ def _modal_trains(trains, preps) -> tuple[ModalTrains, np.ndarray]:
     return modal_trains, pad_stack([d.a_mat for d in data])
 
 
-def _exact_runs(settings, dt_run, full_state, which, modal_trains, a_mat, omega) -> ExactRuns:
+def _exact_runs(
+    settings, dt_run, full_state, which, modal_trains, a_mat, omega, responses=True
+) -> ExactRuns:
+    zeta = (
+        harmonic_responses(which, modal_trains.n_free, a_mat, modal_trains.b_in, omega)
+        if responses
+        else np.zeros((omega.size, 4, a_mat.shape[2]), np.complex128)
+    )
     return ExactRuns(
         train=which,
         t_sample=settings.output_every / omega,
         t_end=settings.revolutions * TWO_PI / omega,
-        zeta=harmonic_responses(which, modal_trains.n_free, a_mat, modal_trains.b_in, omega),
+        zeta=zeta,
         dt_cap=float(dt_run or 0.0),
         tolerance=float(settings.tolerance),
         full_state=bool(full_state),
@@ -454,7 +463,12 @@ class _Batch:
     cases: Cases  # starting nowhere yet
 
 
-def _prepare_batch(cases: Sequence[Case], settings: RunSettings, full_state: bool) -> _Batch:
+def _prepare_batch(
+    cases: Sequence[Case], settings: RunSettings, full_state: bool, responses: bool = True
+) -> _Batch:
+    """What the batch's kernels take. Without ``responses`` the harmonic responses are left
+    zero, their kernel not run: for the types of the kernels' arguments
+    (:func:`integrator_types`), not for a run."""
     dt_run = settings.step
     n = len(cases)
     trains, which = unique_trains(cases)
@@ -472,7 +486,9 @@ def _prepare_batch(cases: Sequence[Case], settings: RunSettings, full_state: boo
         preps=preps,
         packed=pack([c.profile for c in cases]),
         modal_trains=modal_trains,
-        runs=_exact_runs(settings, dt_run, full_state, which, modal_trains, a_mat, omega),
+        runs=_exact_runs(
+            settings, dt_run, full_state, which, modal_trains, a_mat, omega, responses
+        ),
         cases=Cases(
             omega=omega,
             seat_q=qref + np.where(has_seat, [c.seat for c in cases], 0.0),
@@ -522,6 +538,20 @@ def start_states(cases: Sequence[Case], settings: RunSettings) -> Start:
     newmark-linear the periodic start falls on a whole number of its steps before t = 0."""
     check_run(cases, settings, check_stability_limit=False)
     return _starts(cases, settings, _prepare_batch(cases, settings, full_state=False))
+
+
+def integrator_types(cases: Sequence[Case], settings: RunSettings, full_state: bool) -> tuple:
+    """The numba types of modal-exact's arguments in ``run_batch`` for these cases: the
+    signature to compile its kernel ahead for (``campipe.engine.kernels.compile_kernels``),
+    found without running the kernels of the start or of the harmonic responses (only the
+    quasi-static state's, for the trains' valve references)."""
+    batch = _prepare_batch(cases, settings, full_state, responses=False)
+    n, n_q = len(cases), batch.modal_trains.load.shape[1]
+    n_rev = int(math.ceil(settings.revolutions - 1e-12))
+    out = make_outputs(n, output_angles(settings).size, n_rev, settings.max_events, n_q)
+    args = (batch.cases, batch.modal_trains, batch.packed, batch.runs, out,
+            make_workspace(n_q), np.zeros(1, STATE))  # fmt: skip
+    return tuple(typeof(a, Purpose.argument) for a in args)  # as a call types them
 
 
 def _periodic_starts(case_list, cases, modal_trains, runs, packed, snap, preps, which):

@@ -301,7 +301,7 @@ def block_derivative(w1, w2, lbar, d2):
     return lbar * w1 + w2, d2 * w1 + lbar * w2
 
 
-@njit(inline="always", nogil=True)
+@njit(**KERNEL)
 def eval_monitor(WC, MC, nact, G, GT, m, tau, w, x, th):
     """Monitor m and its first two time derivatives τ after the segment start (local angle x,
     cam angle θ), exactly: the active blocks, the polynomial and the harmonic part."""

@@ -612,7 +612,7 @@ def _block_columns(cases, trains, runs, ws, st):
     st.nact = nb
 
 
-@njit(inline="always", nogil=True)
+@njit(**KERNEL)
 def _begin_segment(cases, trains, profiles, runs, out, ws, st):
     """Begin a segment at st.t_s in configuration st.cfg on piece st.p, from the state in
     ws.q, ws.v: forcing, particular solution, modal start, monitors, the break ahead, the mode

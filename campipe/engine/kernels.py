@@ -78,7 +78,7 @@ def compile_notice(settings: Iterable[RunSettings]) -> str | None:
     what = ", ".join(missing) if missing else "the engine's kernels"
     return (
         f"compiling {what} with numba{' (if not cached)' if unknown else ''}: the first run "
-        "of a campipe version on a machine takes a minute or two; later runs, of any install "
+        "of a campipe version on a machine takes half a minute or more; later runs, of any install "
         "of it, load them from campipe's kernel cache in a fraction of a second"
     )
 
@@ -89,11 +89,12 @@ def _start_kernels(case: Case, settings: RunSettings) -> None:
 
 def compile_kernels(case: Case, settings: RunSettings) -> None:
     """Compile (or load) every kernel a run with ``settings`` calls, the periodic start's
-    and the integrator's at once: the start's in a second process, while this one compiles
-    the integrator through a short quasi-static run (the same kernel types). numba compiles
-    one kernel at a time in a process, so the two cost the time of the longer on two cores,
-    not their sum; both land in the kernel cache, from which the study's own run then loads
-    them."""
+    and the integrator's at once: the start's (and the harmonic responses') in a second
+    process, while this one compiles the integrator: modal-exact for the types of its
+    arguments (``batch.integrator_types``, no other kernel run but the quasi-static one),
+    newmark-linear through a short quasi-static run. numba compiles one kernel at a time in a
+    process, so the two cost the time of the longer on two cores, not their sum; both land in
+    the kernel cache, from which the study's own run then loads them."""
     short = dataclasses.replace(settings, revolutions=0.01, warmup=0)
     if settings.start != "periodic":
         batch.run_batch([case], short, full_state=False, on_failure="record")
@@ -109,8 +110,11 @@ def compile_kernels(case: Case, settings: RunSettings) -> None:
         batch.start_states([case], settings)
         start = None
     try:
-        quasi_static = dataclasses.replace(short, start="quasi-static")
-        batch.run_batch([case], quasi_static, full_state=False, on_failure="record")
+        if settings.method == "modal-exact":
+            exact.modal_exact_batch.compile(batch.integrator_types([case], settings, False))
+        else:
+            quasi_static = dataclasses.replace(short, start="quasi-static")
+            batch.run_batch([case], quasi_static, full_state=False, on_failure="record")
         if start is not None:
             start.result()
     except Exception as exc:  # the run itself compiles whatever is still missing
