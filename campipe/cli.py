@@ -558,7 +558,8 @@ def study(
     if loaded.spec.search == "onset":
         from campipe.engine.periodic import DEFAULT_ONSET_TOLERANCE_RPM, RPM
 
-        _onset(loaded, spec, archive, DEFAULT_ONSET_TOLERANCE_RPM * RPM, "table", True, workers)
+        tolerance = DEFAULT_ONSET_TOLERANCE_RPM * RPM
+        _onset(loaded, spec, archive, tolerance, "table", True, workers, command="study")
         return
     stderr = sys.stderr
     bars: list[Progress] = []
@@ -1070,7 +1071,7 @@ def onset(spec, sets, tolerance, fmt, output, check, workers) -> None:
     _onset(loaded, spec, path, tol, fmt, check, workers)
 
 
-def _onset(loaded, spec_path, path, tolerance, fmt, check, workers) -> None:
+def _onset(loaded, spec_path, path, tolerance, fmt, check, workers, command="onset") -> None:
     """``campipe onset``'s work (and ``campipe study``'s for a spec with ``search``)."""
     from campipe.io.archive import provenance, write_file
     from campipe.study.display import display_units
@@ -1078,7 +1079,13 @@ def _onset(loaded, spec_path, path, tolerance, fmt, check, workers) -> None:
     from campipe.study.onset import file_contents, onset_study, summary_lines
     from campipe.study.query import displayed, format_rows
 
-    result = onset_study(loaded, tolerance, confirm=check, workers=workers or default_workers())
+    result = onset_study(
+        loaded,
+        tolerance,
+        confirm=check,
+        workers=workers or default_workers(),
+        notice=lambda text: click.echo(f"campipe {command}: {text}", err=True),
+    )
     sizes, variables, arrays, attrs = file_contents(result)
     write_file(
         path, sizes, variables, arrays, {**attrs, **provenance(f"campipe onset {spec_path}")}

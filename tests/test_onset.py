@@ -165,3 +165,29 @@ def test_a_study_with_a_search_runs_the_onset(tmp_path):
     path = write_spec(tmp_path, spec + "search: {onset: follow}\n")
     out = CliRunner().invoke(main, ["study", str(path)])
     assert out.exit_code == 2 and "search.onset: found 'follow', expected no-follow" in out.output
+
+
+def test_the_onset_says_what_it_compiles_and_compiles_the_check_ahead(tmp_path, monkeypatch):
+    """Before numba compiles the search's kernels (and, with the check, the time-domain
+    engine's) ``campipe onset`` says which on the terminal, as ``campipe study`` does, and
+    compiles the check's beside the search's in two processes; with every kernel cached it
+    says nothing. (The cache is made to look empty; the compiling itself is recorded, not
+    run.) Broken copy, run: onset_study without ``_compile_first``: no notice."""
+    import campipe.engine.kernels as kernels
+
+    compiled = []
+    monkeypatch.setattr(kernels, "_missing", lambda named: list(named))
+    monkeypatch.setattr(kernels, "compile_kernels", lambda *a, **k: compiled.append(k))
+    spec = SPEC.replace("LOW", "6000").replace("HIGH", "14000").replace("AXIS", "")
+    path = write_spec(tmp_path, spec)
+    out = CliRunner().invoke(main, ["onset", str(path)])
+    assert out.exit_code == 0, out.output
+    first = out.stderr.splitlines()[0]
+    assert first.startswith("campipe onset: compiling quasi-static state, steady extremes, ")
+    assert "modal-exact" in first and compiled == [{"search": True}]
+    out = CliRunner().invoke(main, ["onset", str(path), "--no-check"])
+    assert "compiling quasi-static state, steady extremes with numba" in out.stderr
+    assert "modal-exact" not in out.stderr and len(compiled) == 1
+    monkeypatch.setattr(kernels, "_missing", lambda named: [])
+    out = CliRunner().invoke(main, ["onset", str(path)])
+    assert out.exit_code == 0 and "compiling" not in out.stderr

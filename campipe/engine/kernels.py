@@ -40,6 +40,14 @@ def kernels(settings: RunSettings) -> dict[str, object]:
     return out
 
 
+def search_kernels() -> dict[str, object]:
+    """The compiled kernels the onset's search calls (``periodic.onset_speeds``), by name."""
+    return {
+        "quasi-static state": contact.quasi_static_batch,
+        "steady extremes": steady.steady_extremes,
+    }
+
+
 def _cached(dispatcher, magic: tuple) -> bool:
     """A kernel is loaded in this process, or numba's cache holds it for this source, this
     numba and this machine (its index read, nothing loaded)."""
@@ -50,27 +58,35 @@ def _cached(dispatcher, magic: tuple) -> bool:
     return any(key[1] == magic and key[2][0] == code for key in index)
 
 
-def uncompiled(settings: RunSettings) -> list[str] | None:
-    """Names of the kernels a run with ``settings`` would compile before it runs: ``[]``
-    when every one is loaded or cached; None when numba's cache cannot be inspected (its
-    internals changed): a caller may then say that compiling *may* happen."""
+def _missing(named: dict[str, object]) -> list[str] | None:
+    """The names of ``named``'s kernels neither loaded nor cached; None when numba's cache
+    cannot be inspected (its internals changed)."""
     from numba.core.registry import cpu_target
 
     try:
         magic = cpu_target.target_context.codegen().magic_tuple()
-        return [name for name, kernel in kernels(settings).items() if not _cached(kernel, magic)]
+        return [name for name, kernel in named.items() if not _cached(kernel, magic)]
     except Exception as exc:  # numba's private cache API: never fail a run over it
         log.debug("cannot inspect numba's cache: %s", exc)
         return None
 
 
-def compile_notice(settings: Iterable[RunSettings]) -> str | None:
-    """A line saying which kernels runs with these settings would compile first, or None
-    when all are loaded or cached: for a caller to show before the wait."""
+def uncompiled(settings: RunSettings) -> list[str] | None:
+    """Names of the kernels a run with ``settings`` would compile before it runs: ``[]``
+    when every one is loaded or cached; None when numba's cache cannot be inspected (its
+    internals changed): a caller may then say that compiling *may* happen."""
+    return _missing(kernels(settings))
+
+
+def compile_notice(settings: Iterable[RunSettings], search: bool = False) -> str | None:
+    """A line saying which kernels runs with these settings (and, with ``search``, the
+    onset's search) would compile first, or None when all are loaded or cached: for a
+    caller to show before the wait."""
     missing: dict[str, None] = {}
     unknown = False
-    for one in dict.fromkeys(settings):
-        names = uncompiled(one)
+    found = [_missing(search_kernels())] if search else []
+    found += [uncompiled(one) for one in dict.fromkeys(settings)]
+    for names in found:
         unknown = unknown or names is None
         missing.update(dict.fromkeys(names or []))
     if not missing and not unknown:
@@ -83,20 +99,25 @@ def compile_notice(settings: Iterable[RunSettings]) -> str | None:
     )
 
 
-def _start_kernels(case: Case, settings: RunSettings) -> None:
+def _start_kernels(case: Case, settings: RunSettings, search: bool = False) -> None:
     batch.start_states([case], settings)
+    if search:
+        from campipe.engine import periodic
+
+        periodic.steady_extremes([case])
 
 
-def compile_kernels(case: Case, settings: RunSettings) -> None:
+def compile_kernels(case: Case, settings: RunSettings, search: bool = False) -> None:
     """Compile (or load) every kernel a run with ``settings`` calls, the periodic start's
     and the integrator's at once: the start's (and the harmonic responses') in a second
     process, while this one compiles the integrator: modal-exact for the types of its
     arguments (``batch.integrator_types``, no other kernel run but the quasi-static one),
     newmark-linear through a short quasi-static run. numba compiles one kernel at a time in a
     process, so the two cost the time of the longer on two cores, not their sum; both land in
-    the kernel cache, from which the study's own run then loads them."""
+    the kernel cache, from which the study's own run then loads them. With ``search`` the
+    second process also compiles the onset's search (``search_kernels``)."""
     short = dataclasses.replace(settings, revolutions=0.01, warmup=0)
-    if settings.start != "periodic":
+    if settings.start != "periodic" and not search:
         batch.run_batch([case], short, full_state=False, on_failure="record")
         return
     import multiprocessing
@@ -104,10 +125,10 @@ def compile_kernels(case: Case, settings: RunSettings) -> None:
 
     try:
         pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"))
-        start = pool.submit(_start_kernels, case, settings)
+        start = pool.submit(_start_kernels, case, settings, search)
     except OSError as exc:  # no second process: compile in turn, in this one
         log.debug("compiling in one process: %s", exc)
-        batch.start_states([case], settings)
+        _start_kernels(case, settings, search)
         start = None
     try:
         if settings.method == "modal-exact":

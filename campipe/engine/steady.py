@@ -384,8 +384,10 @@ REFINE_TOLERANCE = 1e-13
 MIN_FORCE, MIN_FORCE_ANGLE, MAX_FORCE, MIN_HEIGHT, MIN_HEIGHT_ANGLE = range(5)
 N_EXTREMES = 5
 #: What ``_piece_monitor`` prepares: the cam's compression −F1 [N], F1, the valve's height
-#: above its seat q7 − q7_seat [m].
-COMPRESSION, TENSION, HEIGHT = 0, 1, 2
+#: above its seat q7 − q7_seat [m]. NumPy integers, not Python's: numba compiles a kernel
+#: called with a Python int constant once per value (a literal type), ``_turn_minimum`` three
+#: times over.
+COMPRESSION, TENSION, HEIGHT = np.int64(0), np.int64(1), np.int64(2)
 
 
 @njit(inline="always", nogil=True)
@@ -452,7 +454,7 @@ def _turn_minimum(cases, trains, profiles, runs, ws, st, zt, which):
     nb = trains.n_blocks[st.tr, st.cfg - 1]
     d_theta = TWO_PI / EXTREME_SAMPLES
     best = np.inf
-    best_p = 0
+    best_p = np.int64(0)  # not a literal: ``_on_piece`` is compiled for int64 pieces
     lo = 0.0
     hi = 0.0
     for p in range(profiles.n_pieces[c]):

@@ -11,6 +11,7 @@ from __future__ import annotations
 import concurrent.futures
 import json
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -108,6 +109,7 @@ def onset_study(
     *,
     confirm: bool = True,
     workers: int = 1,
+    notice: Callable[[str], None] | None = None,
 ) -> OnsetStudy:
     """The no-follow onset of each combination of the study's varied keys but the speed,
     within the range of its speeds.
@@ -122,6 +124,10 @@ def onset_study(
         Check each onset with the time-domain engine at ±``periodic.CONFIRM_OFFSET``.
     workers : int
         Threads the search runs on.
+    notice : callable, optional
+        Given a line to show before numba compiles the search's kernels and the check's
+        (nothing when they are cached). The check's are then compiled ahead, beside the
+        search's, in two processes (``campipe.engine.kernels.compile_kernels``).
 
     Raises
     ------
@@ -140,6 +146,7 @@ def onset_study(
         )
     keys, firsts = _combinations(study)
     designs = [study.cases[i].case for i in firsts]
+    _compile_first(designs[0], confirm, notice)
     t0 = time.perf_counter()
     onset = search_designs(designs, low, high, tolerance, workers)
     t1 = time.perf_counter()
@@ -152,6 +159,22 @@ def onset_study(
         study.name, keys, table, onset, below, above, low, high, t1 - t0, t2 - t1,
         spec.text, dict(spec.overrides),
     )  # fmt: skip
+
+
+def _compile_first(design, confirm: bool, notice: Callable[[str], None] | None) -> None:
+    """Say so before numba compiles the search's kernels (and the check's), and compile the
+    check's ahead with the search's in a second process."""
+    from campipe.engine.kernels import compile_kernels, compile_notice
+    from campipe.engine.settings import RunSettings
+
+    checking = RunSettings(revolutions=periodic.CONFIRM_TURNS)
+    text = compile_notice([checking] if confirm else [], search=True)
+    if text is None:
+        return
+    if notice is not None:
+        notice(text)
+    if confirm:
+        compile_kernels(design, checking, search=True)
 
 
 def _table(study, keys, firsts, onset, below, above) -> CaseTable:
