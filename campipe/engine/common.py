@@ -48,6 +48,11 @@ KERNEL = {"cache": True, "nogil": True, "_nrt": False}
 #: ``exact._begin_segment``, ``steady._state_in_piece``) is a kernel of its own. That cut a
 #: first run's compiling by about half, for about 1 % of modal-exact's run time.
 
+#: A kernel of its own called with a constant argument (a Python int or bool) is compiled
+#: once per value: numba types the constant as a literal. Such arguments are passed as NumPy
+#: scalars (``np.int64``, ``np.bool_``), one compile for all values; so are these event kinds.
+CAM_SEP, SEAT_SEP = np.int64(CAM_SEPARATION), np.int64(SEAT_SEPARATION)
+
 #: The configuration arithmetic of :mod:`campipe.vocabulary`, compiled and inlined.
 configuration = njit(inline="always")(vocabulary.configuration)
 holds_cam = njit(inline="always")(vocabulary.holds_cam)

@@ -95,10 +95,12 @@ from campipe.engine.closed_form import (
     particular,
 )
 from campipe.engine.common import (
+    CAM_SEP,
     GAP_LEVEL,
     KERNEL,
     MICRO_FLIGHT,
     RELEASE,
+    SEAT_SEP,
     SMOOTH,
     captured,
     classify_break,
@@ -111,17 +113,7 @@ from campipe.engine.common import (
     turn_of,
 )
 from campipe.profiles.packed import horner, locate, next_break, piece_eval
-from campipe.vocabulary import (
-    CAM,
-    CAM_SEPARATION,
-    CHATTER,
-    EVENTS_TRUNCATED,
-    NONFINITE,
-    OK,
-    SEAT,
-    SEAT_SEPARATION,
-    UNBOUNDED,
-)
+from campipe.vocabulary import CAM, CHATTER, EVENTS_TRUNCATED, NONFINITE, OK, SEAT, UNBOUNDED
 
 #: Steps are at most RESOLUTION·π/|λ| of the fastest mode still present: under half its period,
 #: so that mode's part of a monitor's derivative changes sign at most once per step, and a
@@ -656,7 +648,7 @@ def _begin_segment(cases, trains, profiles, runs, out, ws, st):
 def _drop_decayed(MC, WC, VY, act, nact, ns, eps_force, tau):
     """Drop the blocks that have decayed below what any output can show (τ after the segment
     start), keeping the fastest-first order; returns the new count."""
-    kept = 0
+    kept = np.int64(0)  # not a literal: one compiled ``_keep_column`` (``common.KERNEL``)
     for jj in range(nact):
         s2 = min(tau, MC[INVD, jj])
         env = MC[EABS, jj]
@@ -755,8 +747,8 @@ def _earliest_crossing(ws, st, nact, tolerance, t_prev, t_eval):
             > level
         ):
             t_max = _root(
-                True, -1.0, WC, MC, nact, G, GT, m, t_s, t_prev, t_eval, 0.0, w, th0,
-                tolerance, False, 0.0, 0.0, 0.0,
+                np.bool_(True), -1.0, WC, MC, nact, G, GT, m, t_s, t_prev, t_eval, 0.0, w, th0,
+                tolerance, np.bool_(False), 0.0, 0.0, 0.0,
             )  # fmt: skip
             g_hi, dg_hi = _at(False, WC, MC, nact, G, GT, m, t_s, t_max, w, th0)
             if g_hi > level:
@@ -764,8 +756,8 @@ def _earliest_crossing(ws, st, nact, tolerance, t_prev, t_eval):
         if not np.isnan(t_hi):
             # The value root starts from what the grid (or the maximum's search) has.
             te = _root(
-                False, 1.0, WC, MC, nact, G, GT, m, t_s, t_prev, t_hi, level, w, th0,
-                tolerance, True, ws.gprev[m] - level, g_hi - level, dg_hi,
+                np.bool_(False), 1.0, WC, MC, nact, G, GT, m, t_s, t_prev, t_hi, level, w, th0,
+                tolerance, np.bool_(True), ws.gprev[m] - level, g_hi - level, dg_hi,
             )  # fmt: skip
             if first < 0 or te < t_ev:
                 t_ev = te
@@ -1001,11 +993,11 @@ def _apply_event(cases, trains, profiles, out, ws, st, first, t_ev):
     if first == 0 and cam_held:
         new = configuration(False, seat_held)
         st.rest_cam = False
-        record_event(out.events, out.n_events, c, t_ev, CAM_SEPARATION, cfg, new, 0.0, 0.0)
+        record_event(out.events, out.n_events, c, t_ev, CAM_SEP, cfg, new, 0.0, 0.0)
     elif first == 1 and seat_held:
         new = configuration(cam_held, False)
         st.rest_seat = False
-        record_event(out.events, out.n_events, c, t_ev, SEAT_SEPARATION, cfg, new, 0.0, 0.0)
+        record_event(out.events, out.n_events, c, t_ev, SEAT_SEP, cfg, new, 0.0, 0.0)
     else:
         seat = first == 1
         closing = -v[SEAT] if seat else v[CAM] - vcam
@@ -1042,8 +1034,7 @@ def _cross_break(cases, trains, profiles, out, ws, st):
         if kind == RELEASE:
             new = configuration(False, seat_held)
             st.rest_cam = False
-            record_event(out.events, out.n_events, c, t_break, CAM_SEPARATION, cfg, new,
-                         -jump, 0.0)  # fmt: skip
+            record_event(out.events, out.n_events, c, t_break, CAM_SEP, cfg, new, -jump, 0.0)
             st.cfg = new
         else:
             # A surface jumping into a force-closed follower with restitution throws it off.
@@ -1065,7 +1056,7 @@ def _cross_break(cases, trains, profiles, out, ws, st):
                     out.status[c] = UNBOUNDED
                 record_impact(
                     out.events, out.n_events, out.counts, out.vmax, cases.meff, c, w, t_break,
-                    False, seat_held, cfg, new, abs(jump), 0.0, e if bounce else 0.0,
+                    np.bool_(False), seat_held, cfg, new, abs(jump), 0.0, e if bounce else 0.0,
                 )  # fmt: skip
                 st.cfg = new
             q[CAM] = -l_right

@@ -49,10 +49,12 @@ from numba.extending import intrinsic
 
 from campipe.constants import TWO_PI
 from campipe.engine.common import (
+    CAM_SEP,
     GAP_LEVEL,
     JUMP,
     KERNEL,
     RELEASE,
+    SEAT_SEP,
     TURN_GUARD,
     captured,
     classify_break,
@@ -65,13 +67,11 @@ from campipe.engine.common import (
 )
 from campipe.profiles.packed import degree, evaluate_packed, horner, locate, next_break, piece_eval
 from campipe.vocabulary import (
-    CAM_SEPARATION,
     EVENTS_TRUNCATED,
     N_COORDINATES,
     NONFINITE,
     OK,
     SEAT,
-    SEAT_SEPARATION,
     UNBOUNDED,
 )
 
@@ -294,7 +294,7 @@ def _cross_breaks(profiles, cases, out, c, w, th1, cfg, p, rev, pn, revn, thb):
             if kind == RELEASE:
                 # The surface falls away: the follower keeps its velocity.
                 new = configuration(False, seat_held)
-                record_event(out.events, out.n_events, c, thb / w, CAM_SEPARATION, cfg, new,
+                record_event(out.events, out.n_events, c, thb / w, CAM_SEP, cfg, new,
                              -jump, 0.0)  # fmt: skip
                 cfg = new
             elif kind == JUMP:
@@ -308,7 +308,7 @@ def _cross_breaks(profiles, cases, out, c, w, th1, cfg, p, rev, pn, revn, thb):
                 if abs(jump) > cases.speed_bound[c]:
                     out.status[c] = UNBOUNDED
                 record_impact(out.events, out.n_events, out.counts, out.vmax, cases.meff, c,
-                              w, thb / w, False, seat_held, cfg, new, abs(jump), 0.0,
+                              w, thb / w, np.bool_(False), seat_held, cfg, new, abs(jump), 0.0,
                               0.0)  # fmt: skip
                 cfg = new
         p = pn
@@ -417,12 +417,12 @@ def _switch(
         cam_next = False
         ct.rest_cam = False
         new = configuration(False, seat_held and not f7 < 0.0)
-        record_event(events, n_events, c, t1, CAM_SEPARATION, cfg, new, 0.0, 0.0)
+        record_event(events, n_events, c, t1, CAM_SEP, cfg, new, 0.0, 0.0)
     if release_seat:
         seat_next = False
         ct.rest_seat = False
         new = configuration(cam_next, False)
-        record_event(events, n_events, c, t1, SEAT_SEPARATION, cfg, new, 0.0, 0.0)
+        record_event(events, n_events, c, t1, SEAT_SEP, cfg, new, 0.0, 0.0)
     if hit_cam:
         closing = xn[X_V] - vc
         cam_next = True
@@ -435,8 +435,8 @@ def _switch(
             ct.hold_cam = cases.hold[c, new - 1, 0] * closing
         if closing > cases.speed_bound[c]:
             out.status[c] = UNBOUNDED
-        record_impact(events, n_events, counts, vmax, meff, c, w, t1, False, seat_next, cfg,
-                      new, closing, cases.capture[c], 0.0)  # fmt: skip
+        record_impact(events, n_events, counts, vmax, meff, c, w, t1, np.bool_(False), seat_next,
+                      cfg, new, closing, cases.capture[c], 0.0)  # fmt: skip
     if hit_seat:
         closing = -xn[X_V + SEAT]
         seat_next = True
@@ -449,8 +449,8 @@ def _switch(
             ct.hold_seat = cases.hold[c, new - 1, 1] * closing
         if closing > cases.speed_bound[c]:
             out.status[c] = UNBOUNDED
-        record_impact(events, n_events, counts, vmax, meff, c, w, t1, True, cam_next, cfg,
-                      new, closing, cases.capture[c], 0.0)  # fmt: skip
+        record_impact(events, n_events, counts, vmax, meff, c, w, t1, np.bool_(True), cam_next,
+                      cfg, new, closing, cases.capture[c], 0.0)  # fmt: skip
     return configuration(cam_next, seat_next), hit_cam, hit_seat
 
 

@@ -440,7 +440,16 @@ def _piece_monitor(cases, trains, profiles, runs, ws, st, zt, p, which):
 def _monitor_value(ws, nb, st, theta_a, theta):
     """The prepared monitor, its first and second derivatives in time, at θ."""
     return eval_monitor(
-        ws.WC, ws.MC, nb, ws.G, ws.GT, 0, (theta - theta_a) / st.w, st.w, theta - theta_a, theta
+        ws.WC,
+        ws.MC,
+        nb,
+        ws.G,
+        ws.GT,
+        np.int64(0),
+        (theta - theta_a) / st.w,
+        st.w,
+        theta - theta_a,
+        theta,
     )
 
 
@@ -481,7 +490,7 @@ def _turn_minimum(cases, trains, profiles, runs, ws, st, zt, which):
             ct, sn = ct * ch - sn * sh, sn * ch + ct * sh
             if g < best:
                 best = g
-                best_p = p
+                best_p = np.int64(p)
                 lo = a + step * max(i - 1, 0)
                 hi = a + step * min(i + 1, n)
     # Refine: the least of the bracket's ends and the derivative's zero between them.
