@@ -126,8 +126,8 @@ def onset_study(
         Threads the search runs on.
     notice : callable, optional
         Given a line to show before numba compiles the search's kernels and the check's
-        (nothing when they are cached). The check's are then compiled ahead, beside the
-        search's, in two processes (``campipe.engine.kernels.compile_kernels``).
+        (not called when they are cached). Either way the check's are compiled first,
+        beside the search's, in two processes (``campipe.engine.kernels.compile_kernels``).
 
     Raises
     ------
