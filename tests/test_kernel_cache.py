@@ -181,3 +181,55 @@ def test_compiling_ahead_compiles_the_signatures_a_run_calls(monkeypatch):
                 run_batch(cases, settings, full_state=full_state)
     assert calls["exact"] == expected
     assert len(calls["quasi-static"]) > len(batches) and len(set(calls["quasi-static"])) == 1
+
+
+#: Run in a fresh process: the kernels of runs of each integrator and start, with and without a
+#: seat, form closure and restitution, of the steady state and of the onset's search; then
+#: every campipe kernel that holds more than one compiled signature, with the arguments that
+#: differ.
+ONE_SIGNATURE = """
+import json, math
+import numba
+from campipe.engine import batch, contact, closed_form, common, exact, modal, newmark
+from campipe.engine import periodic, steady
+from campipe.engine.batch import Case, RunSettings, run_batch
+from campipe.model import thesis_train
+from campipe.profiles import harmonic, packed
+train, cam, w = thesis_train(), harmonic(0.0254), 9000 * math.pi / 30
+cases = [Case(train, cam, w), Case(train, cam, 1.3 * w, seat=0.00254),
+         Case(train, cam, w, closure="form"),
+         Case(train.replace(seat_restitution=0.5), cam, 1.3 * w, seat=0.00254)]
+for integrator, dt, n in (("modal-exact", None, 4), ("newmark-linear", 1e-6, 3)):
+    for start in ("periodic", "quasi-static"):  # (newmark-linear refuses restitution)
+        run_batch(cases[:n], RunSettings(revolutions=1.5, warmup=0, start=start,
+                                         integrator=integrator, dt=dt), on_failure="record")
+periodic.steady_state(cases[:1])
+periodic.onset_speeds(cases[:1], 6000 * math.pi / 30, 14000 * math.pi / 30, 1.0)
+many = {}
+for module in (batch, contact, closed_form, common, exact, modal, newmark, steady, packed):
+    for name, kernel in vars(module).items():
+        if isinstance(kernel, numba.core.registry.CPUDispatcher) and len(kernel.signatures) > 1:
+            sigs = kernel.signatures
+            many[f"{kernel.py_func.__module__}.{name}"] = [
+                [str(s[i]) for s in sigs] for i in range(len(sigs[0]))
+                if len({str(s[i]) for s in sigs}) > 1
+            ]
+print(json.dumps(many))
+"""
+
+
+@pytest.mark.slow
+def test_no_kernel_is_compiled_once_per_constant_it_is_called_with(tmp_path):
+    """A kernel of its own that another calls with a Python int or bool constant is compiled
+    once per value (numba types the constant as a literal), each compile a second or more of
+    a first run: ``steady._turn_minimum`` was compiled three times, ``record_event`` three.
+    Runs of both integrators and starts, the steady state and the onset's search must leave
+    each kernel with one signature. Only a compile shows it (a kernel loaded from the cache
+    brings its callees along, their dispatchers untouched), so this compiles every kernel on
+    an empty cache, about a minute: ``slow``. Broken copy, run: ``exact._drop_decayed``
+    counting from the constant 0 again (``_keep_column`` gets two signatures)."""
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba")}
+    out = subprocess.run(
+        [sys.executable, "-c", ONE_SIGNATURE], capture_output=True, text=True, check=True, env=env
+    )
+    assert json.loads(out.stdout.splitlines()[-1]) == {}

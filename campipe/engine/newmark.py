@@ -358,8 +358,9 @@ def _write_samples(
         # A contact that the step end releases may show a little tension inside the step; a
         # force-closed contact cannot pull, so it reports zero there.
         M, C, K, load = trains.M, trains.C, trains.K, trains.load
-        fs1 = _row_force(M, C, K, load, c, 0, at, vt, qt) if cam_held else 0.0
-        fs7 = _row_force(M, C, K, load, c, SEAT, at, vt, qt) if seat_held else 0.0
+        # (NumPy integers: a Python-int constant would compile ``_row_force`` once per row.)
+        fs1 = _row_force(M, C, K, load, c, np.int64(0), at, vt, qt) if cam_held else 0.0
+        fs7 = _row_force(M, C, K, load, c, np.int64(SEAT), at, vt, qt) if seat_held else 0.0
         out.force[c, k_out, 0] = fs1 if cases.form[c] else min(fs1, 0.0)
         out.force[c, k_out, 1] = max(fs7, 0.0)
         out.cam[c, k_out] = ls
@@ -503,7 +504,7 @@ def newmark_linear_batch(cases, trains, profiles, runs, out, work, contact):
         impulse_seat = False
         quiet_cam = 0  # steps left whose cam force measures an impulse, not the train
         quiet_seat = 0
-        k_out = 0
+        k_out = np.int64(0)  # not a literal: one compiled ``_write_samples`` (``common``)
         t_sample = 0.0
         rev, p = locate(profiles, c, w * n0 * h)
         pdeg = degree(profiles, c, p)

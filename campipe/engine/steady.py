@@ -635,7 +635,7 @@ def steady_samples(cases, trains, profiles, runs, ws, state, z_turn, angles, act
             x = theta - st.th0
             ct = np.cos(theta)
             sn = np.sin(theta)
-            lift, dlift, ddlift = piece_eval(profiles, c, p, 0, theta)
+            lift, dlift, ddlift = piece_eval(profiles, c, p, np.int64(0), theta)
             for j in range(nf):
                 coord = trains.free[tr, ci, j]
                 q[c, k, coord] = ws.z[j]
