@@ -11,7 +11,7 @@ from typing import NamedTuple
 import numpy as np
 from numba import njit
 
-from campipe.engine.common import KERNEL, holds_cam, holds_seat
+from campipe.engine.common import HELPER, holds_cam, holds_seat
 from campipe.engine.modal import ModalData, pad_stack
 from campipe.profiles.packed import degree, horner
 from campipe.vocabulary import N_COORDINATES
@@ -191,7 +191,7 @@ STATE = np.dtype(
 )
 
 
-@njit(**KERNEL)
+@njit(**HELPER)
 def held_inputs(profiles, c, p, w, seat_q, cam_held, seat_held, inp, inp_t):
     """Held coordinates' (q, q̇, q̈) as polynomials in the piece's local angle x (inp, shape
     (3, 2, 8)) and harmonic parts Re(inp_t·e^{iθ}) (inp_t (3, 2) complex)."""
@@ -301,7 +301,7 @@ def block_derivative(w1, w2, lbar, d2):
     return lbar * w1 + w2, d2 * w1 + lbar * w2
 
 
-@njit(**KERNEL)
+@njit(**HELPER)
 def eval_monitor(WC, MC, nact, G, GT, m, tau, w, x, th):
     """Monitor m and its first two time derivatives τ after the segment start (local angle x,
     cam angle θ), exactly: the active blocks, the polynomial and the harmonic part."""

@@ -39,8 +39,13 @@ kernel_cache.install()  # before this module's kernels are defined: numba picks 
 #: structures and its steps costs 30–60 % of a run. An allocation in a kernel is then a
 #: compile error, not a silent slowdown.
 KERNEL = {"cache": True, "nogil": True, "_nrt": False}
+#: How a kernel's helper that is compiled on its own (see below) compiles: as a kernel, but
+#: without the CPython wrapper (the code that unboxes its arguments, the batch's named
+#: tuples, from Python objects): it is only called from other kernels, and the wrapper was
+#: about two thirds of such a helper's compile.
+HELPER = {**KERNEL, "no_cpython_wrapper": True}
 # Which helpers are inlined (``inline="always"``, numba's IR inlining) and which are kernels
-# of their own (``KERNEL``) is set by compile time as much as run time: numba copies an
+# of their own (``HELPER``) is set by compile time as much as run time: numba copies an
 # inlined helper's IR into every call site and compiles each copy, while a helper of its own
 # compiles once but costs about 0.7 s for its arguments alone when it takes the batch's named
 # tuples. So the work of a grid step (a step's loop) is inlined; a helper called once per
@@ -162,7 +167,7 @@ def turn_of(w, t):
     return int(np.floor(w * t / TWO_PI + TURN_GUARD))
 
 
-@njit(**KERNEL)
+@njit(**HELPER)
 def record_event(events, n_events, c, t, kind, c_from, c_to, velocity, impulse):
     """Append an event to case c's record (counted beyond the kept rows); nothing before
     t = 0 (the start's run-up) is recorded."""
@@ -179,7 +184,7 @@ def record_event(events, n_events, c, t, kind, c_from, c_to, velocity, impulse):
     n_events[c] = k + 1
 
 
-@njit(**KERNEL)
+@njit(**HELPER)
 def record_impact(events, n_events, counts, vmax, meff, c, w, t, seat, other_held, c_from, c_to,
                   closing, capture, restitution):  # fmt: skip
     """Count an impact of case c at time t [s] (speed w) on the cam (``seat`` False) or the

@@ -97,6 +97,7 @@ from campipe.engine.closed_form import (
 from campipe.engine.common import (
     CAM_SEP,
     GAP_LEVEL,
+    HELPER,
     KERNEL,
     MICRO_FLIGHT,
     RELEASE,
@@ -138,7 +139,7 @@ def _at(deriv, WC, MC, nact, G, GT, m, t_s, t, w, th0):
     return (dg, d2g) if deriv else (g, dg)
 
 
-@njit(**KERNEL)
+@njit(**HELPER)
 def _root(
     deriv, sgn, WC, MC, nact, G, GT, m, t_s, ta, tb, level, w, th0, tolerance, known, fa, fb,
     dfb,
@@ -206,7 +207,7 @@ def _root(
     return ta if ta > t_s else tb
 
 
-@njit(**KERNEL)
+@njit(**HELPER)
 def _state_at(trains, ws, st, t):
     """The free coordinates and velocities at time t [s] of the segment, from every block,
     into ws.q, ws.v (the held ones are left as they are)."""
@@ -341,7 +342,7 @@ def _out_of_bounds(cases, c, q, v):
     )
 
 
-@njit(**KERNEL)
+@njit(**HELPER)
 def _sample(cases, trains, profiles, runs, out, ws, st, nact, x, cth, sth):
     """The output sample at the grid point (local angle x, cam angle with cosine cth and sine
     sth) from the blocks 0 … nact − 1; a motion out of bounds ends the case (UNBOUNDED)."""
@@ -398,7 +399,7 @@ def _monitor_at_grid(WC, MC, nact, G, GT, m, gdeg, w, x, cth, sth):
     return g, dg
 
 
-@njit(**KERNEL)
+@njit(**HELPER)
 def _keep_column(MC, WC, VY, act, ns, src, dst):
     """Move block column ``src``'s data to column ``dst`` (dropping the columns between)."""
     act[dst] = act[src]
@@ -419,7 +420,7 @@ def _off_cam(out, cfg, c, w, ta, tb):
         _separation(out.seated_rev if holds_seat(cfg) else out.sep_rev, c, w, ta, tb)
 
 
-@njit(**KERNEL)
+@njit(**HELPER)
 def _separation(sep_rev, c, w, ta, tb):
     """Add the cam angle of [ta, tb] ∩ [0, ∞) off the cam to each revolution it overlaps."""
     n_rev = sep_rev.shape[1]
@@ -604,7 +605,7 @@ def _block_columns(cases, trains, runs, ws, st):
     st.nact = nb
 
 
-@njit(**KERNEL)
+@njit(**HELPER)
 def _begin_segment(cases, trains, profiles, runs, out, ws, st):
     """Begin a segment at st.t_s in configuration st.cfg on piece st.p, from the state in
     ws.q, ws.v: forcing, particular solution, modal start, monitors, the break ahead, the mode
@@ -707,7 +708,7 @@ def _suspect(watch, level, gval, dval, dprev):
     return False
 
 
-@njit(**KERNEL)
+@njit(**HELPER)
 def _earliest_crossing(ws, st, nact, tolerance, t_prev, t_eval):
     """The earliest monitor to rise through its level in (t_prev, t_eval] [s] and when,
     from its values at both ends, or from a maximum inside the step that the bound on its
@@ -969,7 +970,7 @@ def _impact(cases, trains, out, ws, st, seat, closing, t, vcam, lift):
     return new
 
 
-@njit(**KERNEL)
+@njit(**HELPER)
 def _apply_event(cases, trains, profiles, out, ws, st, first, t_ev):
     """Monitor ``first`` rose through its level at t_ev [s]: take the exact state there, and
     release the contact (a force monitor) or, if the contact closes, apply the plastic impact
@@ -1008,7 +1009,7 @@ def _apply_event(cases, trains, profiles, out, ws, st, first, t_ev):
     st.t_s = t_ev
 
 
-@njit(**KERNEL)
+@njit(**HELPER)
 def _cross_break(cases, trains, profiles, out, ws, st):
     """The segment reached the next break of the profile: take the exact state there, and
     with the cam held apply what the break does (``common.classify_break``): release, an

@@ -51,6 +51,7 @@ from campipe.constants import TWO_PI
 from campipe.engine.common import (
     CAM_SEP,
     GAP_LEVEL,
+    HELPER,
     JUMP,
     KERNEL,
     RELEASE,
@@ -130,7 +131,7 @@ class NewmarkRuns(NamedTuple):
     d_theta_out: float  # output spacing in cam angle [rad]
 
 
-@njit(**KERNEL, fastmath=FAST)
+@njit(**HELPER, fastmath=FAST)
 def _row_force(M, C, K, load, c, i, a, v, q):
     """Contact force at coordinate i: row i of M·a + C·v + K·q − load (thesis Eqs. 26, 27)."""
     fm = 0.0
@@ -275,7 +276,7 @@ CONTACT_STATE = np.dtype(
 )
 
 
-@njit(**KERNEL, fastmath=FAST)
+@njit(**HELPER, fastmath=FAST)
 def _cross_breaks(profiles, cases, out, c, w, th1, cfg, p, rev, pn, revn, thb):
     """Move case c's piece cursor (piece p of turn rev; the next break thb [rad] starts piece
     pn of turn revn) up to the step end θ1 [rad], classifying each break crossed with the cam
@@ -317,7 +318,7 @@ def _cross_breaks(profiles, cases, out, c, w, th1, cfg, p, rev, pn, revn, thb):
     return cfg, impulse_cam, p, rev, pn, revn, thb
 
 
-@njit(**KERNEL, fastmath=FAST)
+@njit(**HELPER, fastmath=FAST)
 def _write_samples(
     trains, cases, profiles, runs, out, c, k_out, t_sample, t0, t1, h, x, xn, qt, vt, at, cfg
 ):
@@ -399,7 +400,7 @@ def _tripped(cfg, form, has_seat, impulsive, f1, f7, hold1, hold7, q1, q7, v1, v
     return release_cam, release_seat, hit_cam, hit_seat
 
 
-@njit(**KERNEL, fastmath=FAST)
+@njit(**HELPER, fastmath=FAST)
 def _switch(
     cases, out, ct, c, t1, cfg, f7, xn, vc, release_cam, release_seat, hit_cam, hit_seat
 ):  # fmt: skip

@@ -41,7 +41,7 @@ from campipe.engine.closed_form import (
     forcing,
     particular,
 )
-from campipe.engine.common import KERNEL
+from campipe.engine.common import HELPER, KERNEL
 from campipe.profiles.packed import evaluate_packed, horner, piece_eval
 from campipe.vocabulary import CAM, CAM_CONTACT, SEAT
 
@@ -105,7 +105,7 @@ def _from_basis(trains, st, u, z):
         z[s] = acc
 
 
-@njit(**KERNEL)
+@njit(**HELPER)
 def _on_piece(cases, trains, profiles, runs, ws, st, p):
     """Prepare piece p of turn 0 in configuration I: its particular solution."""
     st.p = p
@@ -123,7 +123,7 @@ def _advance_piece(cases, trains, profiles, runs, ws, st, p, z):
     _state_in_piece(cases, trains, profiles, runs, ws, st, p, z, theta_b, z)
 
 
-@njit(**KERNEL)
+@njit(**HELPER)
 def _state_in_piece(cases, trains, profiles, runs, ws, st, p, z_start, theta, z):
     """z at angle θ inside piece p of the periodic turn, from the state at its start."""
     _on_piece(cases, trains, profiles, runs, ws, st, p)
@@ -235,7 +235,7 @@ def _begin_case(cases, trains, runs, st, c):
     st.ns = 2 * st.nf
 
 
-@njit(**KERNEL)
+@njit(**HELPER)
 def _periodic_turn(cases, trains, profiles, runs, ws, st, zt):
     """The periodic state of configuration I at each break of the turn: zt (P + 1, ns), row P
     (at 2π) the same as row 0. z(0) = (I − e^{AT})⁻¹ b, b the turn's response from rest."""
@@ -333,7 +333,7 @@ def _snapped(theta, w, step):
     return TWO_PI + n * step * w
 
 
-@njit(**KERNEL)
+@njit(**HELPER)
 def _latest_hold(cases, trains, profiles, runs, ws, st, z_turn, step):
     """The latest angle θ ∈ [0, 2π] of the periodic turn where configuration I holds, on a
     step's grid (``step`` > 0) or to SEARCH_TOLERANCE of a turn; −1 if it holds nowhere.
@@ -453,7 +453,7 @@ def _monitor_value(ws, nb, st, theta_a, theta):
     )
 
 
-@njit(**KERNEL)
+@njit(**HELPER)
 def _turn_minimum(cases, trains, profiles, runs, ws, st, zt, which):
     """(θ, value) of the least value of ``which`` over the periodic turn: scanned at
     EXTREME_SAMPLES a turn (the breaks included; the blocks and the harmonic advanced by their
