@@ -47,11 +47,12 @@ HELPER = {**KERNEL, "no_cpython_wrapper": True}
 # Which helpers are inlined (``inline="always"``, numba's IR inlining) and which are kernels
 # of their own (``HELPER``) is set by compile time as much as run time: numba copies an
 # inlined helper's IR into every call site and compiles each copy, while a helper of its own
-# compiles once but costs about 0.7 s for its arguments alone when it takes the batch's named
-# tuples. So the work of a grid step (a step's loop) is inlined; a helper called once per
-# segment, piece or event, or from many places (``closed_form.eval_monitor``,
-# ``exact._begin_segment``, ``steady._state_in_piece``) is a kernel of its own. That cut a
-# first run's compiling by about half, for 1–2 % of modal-exact's run time.
+# compiles once but pays for its arguments when it takes the batch's named tuples (about
+# 0.25 s for a one-line helper, 0.8 s with the CPython wrapper ``HELPER`` leaves out). So the work
+# of a grid step (a step's loop) is inlined; a helper called once per segment, piece or
+# event, or from many places (``closed_form.eval_monitor``, ``exact._begin_segment``,
+# ``steady._state_in_piece``) is a kernel of its own. That cut a first run's compiling by
+# about half, for 1–2 % of modal-exact's run time.
 
 #: A kernel of its own called with a constant argument (a Python int or bool) is compiled
 #: once per value: numba types the constant as a literal. Such arguments are passed as NumPy
