@@ -546,12 +546,23 @@ def integrator_types(cases: Sequence[Case], settings: RunSettings, full_state: b
     found without running the kernels of the start or of the harmonic responses (only the
     quasi-static state's, for the trains' valve references)."""
     batch = _prepare_batch(cases, settings, full_state, responses=False)
-    n, n_q = len(cases), batch.modal_trains.load.shape[1]
-    n_rev = int(math.ceil(settings.revolutions - 1e-12))
-    out = make_outputs(n, output_angles(settings).size, n_rev, settings.max_events, n_q)
-    args = (batch.cases, batch.modal_trains, batch.packed, batch.runs, out,
-            make_workspace(n_q), np.zeros(1, STATE))  # fmt: skip
+    args = _exact_arguments(batch, batch.cases, _outputs(batch, settings))
     return tuple(typeof(a, Purpose.argument) for a in args)  # as a call types them
+
+
+def _outputs(batch: _Batch, settings: RunSettings):
+    """The kernels' output arrays for a batch run with ``settings`` (``common.make_outputs``)."""
+    n_rev = int(math.ceil(settings.revolutions - 1e-12))
+    n_out = output_angles(settings).size
+    n_q = batch.modal_trains.load.shape[1]
+    return make_outputs(len(batch.which), n_out, n_rev, settings.max_events, n_q)
+
+
+def _exact_arguments(batch: _Batch, cases: Cases, out) -> tuple:
+    """modal-exact's arguments for a batch starting as ``cases`` says, with fresh work arrays."""
+    n_q = batch.modal_trains.load.shape[1]
+    work = make_workspace(n_q), np.zeros(1, STATE)
+    return (cases, batch.modal_trains, batch.packed, batch.runs, out, *work)
 
 
 def _periodic_starts(case_list, cases, modal_trains, runs, packed, snap, preps, which):
@@ -660,26 +671,20 @@ def run_batch(
     dt_run = settings.step
     n = len(cases)
     angles = output_angles(settings)
-    n_out = angles.size
-    n_rev = int(math.ceil(settings.revolutions - 1e-12))
     warmup = settings.warmup_turns
     batch = _prepare_batch(cases, settings, full_state)
     start = _starts(cases, settings, batch)
     cases_in = batch.cases._replace(**start._asdict())
     omega, qref = cases_in.omega, cases_in.valve_ref
-    preps, which, packed, modal_trains, runs = (
-        batch.preps, batch.which, batch.packed, batch.modal_trains, batch.runs
-    )  # fmt: skip
-    n_q = modal_trains.load.shape[1]
-    out = make_outputs(n, n_out, n_rev, settings.max_events, n_q)
+    preps, which, packed = batch.preps, batch.which, batch.packed
+    out = _outputs(batch, settings)
+    n_rev = out.fmax.shape[1]  # turns, a partial last one included
     if settings.method == "newmark-linear":
         _run_newmark(preps, which, settings, dt_run, cases_in, packed, out)
     elif settings.method == COMPLIANT:
         _run_compliant(cases, cases_in, settings, out)
     else:
-        state = np.zeros(1, STATE)
-        ws = make_workspace(n_q)
-        exact.modal_exact_batch(cases_in, modal_trains, packed, runs, out, ws, state)
+        exact.modal_exact_batch(*_exact_arguments(batch, cases_in, out))
     status, n_events = out.status, out.n_events
     bad = np.flatnonzero(status == NONFINITE)
     if bad.size and on_failure == "raise":

@@ -649,7 +649,7 @@ def _begin_segment(cases, trains, profiles, runs, out, ws, st):
 def _drop_decayed(MC, WC, VY, act, nact, ns, eps_force, tau):
     """Drop the blocks that have decayed below what any output can show (τ after the segment
     start), keeping the fastest-first order; returns the new count."""
-    kept = np.int64(0)  # not a literal: one compiled ``_keep_column`` (``common.KERNEL``)
+    kept = np.int64(0)  # not a literal: one compiled ``_keep_column`` (``common``)
     for jj in range(nact):
         s2 = min(tau, MC[INVD, jj])
         env = MC[EABS, jj]

@@ -14,7 +14,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import logging
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable, Mapping
 
 from campipe.engine import batch, contact, exact, modal, newmark, steady
 from campipe.engine.settings import Case, RunSettings
@@ -143,3 +143,22 @@ def compile_kernels(case: Case, settings: RunSettings, search: bool = False) -> 
     finally:
         if start is not None:
             pool.shutdown(wait=True, cancel_futures=True)
+
+
+def compile_first(
+    firsts: Mapping[RunSettings, Case],
+    notice: Callable[[str], None] | None,
+    search: bool = False,
+) -> None:
+    """Before runs with each of these settings (a case of each given), and with ``search``
+    the onset's search: say on ``notice`` which kernels numba compiles (nothing when all are
+    cached), and compile them here (:func:`compile_kernels`, the start's and the
+    integrator's in two processes at once), so that the runs, on any number of workers, load
+    them from the cache."""
+    text = compile_notice(firsts, search=search)
+    if text is None:
+        return
+    if notice is not None:
+        notice(text)
+    for settings, case in firsts.items():
+        compile_kernels(case, settings, search=search)

@@ -651,7 +651,10 @@ def run_study(
         try:
             sink.advance()  # the cases reused from earlier runs, as far as they reach
             if plans and local:
-                _compile_first(plans, scheduler, notice)
+                from campipe.engine.kernels import compile_first
+
+                # The kernels compiled here, before the workers start: they load them.
+                compile_first({p.cases[0].settings: p.cases[0].case for p in plans}, notice)
             if plans:
                 if local:
                     _run_local(plans, scheduler, workers, parts, study.record, on_batch, stored)
@@ -680,25 +683,6 @@ def run_study(
             tuple(notes),
             sink.statuses,
         )
-
-
-def _compile_first(
-    plans: list[BatchPlan], scheduler: str, notice: Callable[[str], None] | None
-) -> None:
-    """Say so before numba compiles the kernels the plans need (nothing when they are
-    cached), and compile them here, a run's start and integrator in two processes at once
-    (:func:`campipe.engine.kernels.compile_kernels`), before the workers start: they load
-    them from the cache instead of each compiling its own."""
-    from campipe.engine.kernels import compile_kernels, compile_notice
-
-    firsts = {p.cases[0].settings: p for p in plans}
-    text = compile_notice(firsts)
-    if text is None:
-        return
-    if notice is not None:
-        notice(text)
-    for settings, plan in firsts.items():
-        compile_kernels(plan.cases[0].case, settings)
 
 
 def _up_to_date(archive: Path, total: int, started: float) -> StudyReport:

@@ -18,6 +18,8 @@ import numpy as np
 
 from campipe.constants import RPM
 from campipe.engine import periodic
+from campipe.engine.kernels import compile_first
+from campipe.engine.settings import RunSettings
 from campipe.errors import CampipeError
 from campipe.io.archive import VariableSpec
 from campipe.study.expand import Study
@@ -146,7 +148,8 @@ def onset_study(
         )
     keys, firsts = _combinations(study)
     designs = [study.cases[i].case for i in firsts]
-    _compile_first(designs[0], confirm, notice)
+    checking = RunSettings(revolutions=periodic.CONFIRM_TURNS)  # ``confirm_onsets``'s run
+    compile_first({checking: designs[0]} if confirm else {}, notice, search=True)
     t0 = time.perf_counter()
     onset = search_designs(designs, low, high, tolerance, workers)
     t1 = time.perf_counter()
@@ -159,22 +162,6 @@ def onset_study(
         study.name, keys, table, onset, below, above, low, high, t1 - t0, t2 - t1,
         spec.text, dict(spec.overrides),
     )  # fmt: skip
-
-
-def _compile_first(design, confirm: bool, notice: Callable[[str], None] | None) -> None:
-    """Say so before numba compiles the search's kernels (and the check's), and compile the
-    check's ahead with the search's in a second process."""
-    from campipe.engine.kernels import compile_kernels, compile_notice
-    from campipe.engine.settings import RunSettings
-
-    checking = RunSettings(revolutions=periodic.CONFIRM_TURNS)
-    text = compile_notice([checking] if confirm else [], search=True)
-    if text is None:
-        return
-    if notice is not None:
-        notice(text)
-    if confirm:
-        compile_kernels(design, checking, search=True)
 
 
 def _table(study, keys, firsts, onset, below, above) -> CaseTable:
