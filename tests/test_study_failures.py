@@ -73,7 +73,7 @@ def test_a_scheduler_that_goes_away_mid_study_leaves_what_was_stored(tmp_path):
             batch_size=1,
             on_batch=close_after_the_first,
         )
-    assert len(list(parts_directory(tmp_path / "small.nc").glob("batch-*.nc"))) >= 1
+    assert len(list(parts_directory(tmp_path / "small.nc").glob("batch-*.npz"))) >= 1
     report = run_study(load_study(spec), tmp_path / "small.nc", scheduler="synchronous")
     assert report.reused >= 1 and report.reused + report.computed == 3
 
@@ -170,7 +170,7 @@ def test_sigterm_leaves_a_state_the_rerun_resumes(tmp_path):
     parts = parts_directory(tmp_path / "small.nc")
     try:
         for _ in range(2400):
-            if list(parts.glob("batch-*.nc")):
+            if list(parts.glob("batch-*.npz")):
                 break
             if proc.poll() is not None:
                 break

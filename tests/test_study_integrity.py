@@ -2,6 +2,7 @@
 per-case status, and no file replaced without asking."""
 
 import shutil
+import zipfile
 
 import netCDF4
 import numpy as np
@@ -12,6 +13,7 @@ from study_helpers import load, write_spec
 
 import campipe.study.results as results
 from campipe.cli import main
+from campipe.io import batch_file
 from campipe.io.archive import CHECKSUM_ATTR, read_attrs, verify
 from campipe.study import load_study
 from campipe.study.execute import parts_directory, run_study
@@ -58,19 +60,23 @@ def test_every_file_carries_checksums_that_verify(reference):
     assert attrs["campipe_layout"] == "campipe-archive-3"
     assert attrs["campipe_numerics"].startswith("campipe 0.1.0; source ")
     assert attrs["spec_file"] == "spec.yaml"
-    for path in [archive, *parts_directory(archive).glob("batch-*.nc")]:
-        with netCDF4.Dataset(path) as ds:
-            sums = __import__("json").loads(ds.getncattr(CHECKSUM_ATTR))
-            assert set(sums) == {*ds.variables, "/attributes"}
-        assert verify(path) == []
+    with netCDF4.Dataset(archive) as ds:
+        sums = __import__("json").loads(ds.getncattr(CHECKSUM_ATTR))
+        assert set(sums) == {*ds.variables, "/attributes"}
+    batches = sorted(parts_directory(archive).glob("batch-*.npz"))
+    assert len(batches) == 3  # six cases, two a batch
+    for path in batches:
+        with zipfile.ZipFile(path) as z:  # every member carries the zip's CRC-32
+            assert {"case.npy", "valve_lift.npy", "attributes.npy"} <= set(z.namelist())
+        assert batch_file.verify(path) == []
+        assert batch_file.read_attrs(path)["campipe_layout"] == "campipe-archive-3"
 
 
 def test_a_flipped_byte_in_a_batch_files_data_is_detected_and_recomputed(reference, tmp_path):
     study = _copy(reference, tmp_path)
     (tmp_path / "small.nc").unlink()  # the batch files alone must supply the cases
-    batch = sorted(parts_directory(tmp_path / "small.nc").glob("batch-*.nc"))[1]
-    with netCDF4.Dataset(batch) as ds:
-        lift = np.asarray(ds["valve_lift"][0, 100:104])
+    batch = sorted(parts_directory(tmp_path / "small.nc").glob("batch-*.npz"))[1]
+    lift = batch_file.read(batch)["valve_lift"][0, 100:104]
     offset = batch.read_bytes().find(lift.tobytes())
     assert offset > 0  # batch files are uncompressed: the values are there as written
     _flip(batch, offset + 3)
@@ -86,7 +92,7 @@ def test_a_flipped_byte_anywhere_in_a_batch_file_never_reaches_the_archive(
 ):
     study = _copy(reference, tmp_path)
     (tmp_path / "small.nc").unlink()
-    batch = sorted(parts_directory(tmp_path / "small.nc").glob("batch-*.nc"))[0]
+    batch = sorted(parts_directory(tmp_path / "small.nc").glob("batch-*.npz"))[0]
     _flip(batch, int(fraction * batch.stat().st_size))
     run_study(study, tmp_path / "small.nc", scheduler="synchronous", batch_size=2)
     xr.testing.assert_identical(load(tmp_path / "small.nc"), load(reference / "small.nc"))

@@ -9,6 +9,7 @@ import socket
 import subprocess
 import sys
 import time
+import zipfile
 
 import netCDF4
 import numpy as np
@@ -282,10 +283,11 @@ def test_interleaved_batches_fill_shared_chunks_and_batch_files_are_uncompressed
         ref = run_batch([c.case for c in cases], settings, full_state=False)
         assert_array_equal(ds.valve_lift.values[rows], ref.valve_lift)
         assert_array_equal(ds.cam_impacts.values[rows], ref.cam_impacts)
-    parts = list(parts_directory(archive).glob("batch-*.nc"))
+    parts = list(parts_directory(archive).glob("batch-*.npz"))
     assert len(parts) == 8
-    with netCDF4.Dataset(parts[0]) as nc:
-        assert not nc["valve_lift"].filters()["zlib"]
+    with zipfile.ZipFile(parts[0]) as z:  # uncompressed: only the archive is compressed
+        assert {i.compress_type for i in z.infolist()} == {zipfile.ZIP_STORED}
+        assert "valve_lift.npy" in z.namelist()
 
 
 KILLED = """
@@ -318,7 +320,7 @@ def test_a_killed_study_resumes_computing_only_the_missing_batches(tmp_path):
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     try:
         deadline = time.monotonic() + 120
-        while not list(parts.glob("batch-*.nc")):
+        while not list(parts.glob("batch-*.npz")):
             assert proc.poll() is None, proc.communicate()
             assert time.monotonic() < deadline
             time.sleep(0.005)
@@ -331,7 +333,7 @@ def test_a_killed_study_resumes_computing_only_the_missing_batches(tmp_path):
     assert not (killed / "slow.nc").exists()  # never a half-written archive
     # the killed run's lock names it; the rerun takes it over (its process is gone)
     assert json.loads(lock_path(killed / "slow.nc").read_text())["pid"] == proc.pid
-    done = {p: (p.stat().st_ino, p.stat().st_mtime_ns) for p in parts.glob("batch-*.nc")}
+    done = {p: (p.stat().st_ino, p.stat().st_mtime_ns) for p in parts.glob("batch-*.npz")}
     assert 1 <= len(done) < 24
     rerun = subprocess.run(cmd, capture_output=True, text=True, check=True)
     assert (
@@ -361,7 +363,7 @@ def test_a_second_run_on_a_busy_archive_stops_and_touches_nothing(small, tmp_pat
     lock = lock_path(target)
     parts = parts_directory(target)
     parts.mkdir()
-    in_progress = parts / ".batch-x.nc.1-2-3.tmp"  # the holder's batch being written
+    in_progress = parts / ".batch-x.npz.1-2-3.tmp"  # the holder's batch being written
     in_progress.write_bytes(b"partial")
     holder = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(120)"])
     try:
@@ -423,9 +425,9 @@ def test_stale_and_temporary_files_are_ignored_and_cleaned(small, tmp_path):
         )
     )
     run_study(other, tmp_path / "other.nc", scheduler="synchronous", keep_parts=True)
-    for p in parts_directory(tmp_path / "other.nc").glob("batch-*.nc"):
+    for p in parts_directory(tmp_path / "other.nc").glob("batch-*.npz"):
         p.rename(parts / p.name)
-    (parts / ".batch-x.nc.1-2-3.tmp").write_bytes(b"partial")
+    (parts / ".batch-x.npz.1-2-3.tmp").write_bytes(b"partial")
     report = run_study(study, target, scheduler="synchronous")
     assert (report.computed, report.reused) == (6, 0)
     assert not parts.exists()
@@ -567,7 +569,7 @@ def test_memory_is_bounded_by_the_batch_not_the_study(tmp_path, monkeypatch):
     )
     lock = threading.Lock()
     live = {"now": 0, "max": 0, "rows": 0}
-    compute, store, read = execute.compute_batch, execute._store, execute.read_rows
+    compute, store, read = execute.compute_batch, execute._store, execute.read_batch
 
     def counted_compute(plan):
         data = compute(plan)
@@ -582,15 +584,39 @@ def test_memory_is_bounded_by_the_batch_not_the_study(tmp_path, monkeypatch):
             live["now"] -= 1
         return out
 
-    def counted_read(path, rows, *args):
-        live["rows"] = max(live["rows"], len(rows))
-        return read(path, rows, *args)
+    def counted_read(path):
+        arrays = read(path)
+        live["rows"] = max(live["rows"], len(arrays["case"]))
+        return arrays
 
     monkeypatch.setattr(execute, "compute_batch", counted_compute)
     monkeypatch.setattr(execute, "_store", counted_store)
-    monkeypatch.setattr(execute, "read_rows", counted_read)
+    monkeypatch.setattr(execute, "read_batch", counted_read)
     study = load_study(write_spec(tmp_path, spec))
     report = run_study(study, tmp_path / "m.nc", scheduler="threads", workers=2, batch_size=1)
     assert report.batches == 40
     assert live["max"] <= 3  # two workers, at most one batch waiting to be stored
     assert live["rows"] <= 1  # the archive is filled batch file by batch file
+
+
+def test_the_engine_threads_leave_a_core_to_the_archive(small, tmp_path):
+    """The archive is written in the calling thread, one chunk after another: the study's
+    serial stage. The batch threads run WORKER_NICENESS below it (Linux), so it gets a core
+    when it has rows to write; the archive is the same."""
+    import threading
+
+    from campipe.study.execute import WORKER_NICENESS
+
+    study, _, archive, _ = small
+    own = os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
+    seen = set()
+
+    def hook(plan, data):  # runs in the batch's worker thread
+        seen.add(os.getpriority(os.PRIO_PROCESS, threading.get_native_id()))
+
+    target = tmp_path / "niced.nc"
+    run_study(study, target, scheduler="threads", workers=2, batch_size=2, on_batch=hook)
+    lowered = min(own + WORKER_NICENESS, 19) if sys.platform.startswith("linux") else own
+    assert seen == {lowered}
+    assert os.getpriority(os.PRIO_PROCESS, threading.get_native_id()) == own
+    xr.testing.assert_identical(load(target), load(archive))

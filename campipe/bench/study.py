@@ -3,7 +3,7 @@
 Everything a user waits for is timed as the user runs it, in a fresh ``python -m campipe``
 process (imports, the compiled kernels' loading, the spec, the batches, the archive), best of
 a few runs; the engine alone is timed on the same cases and the same number of worker
-threads, in this process with its kernels loaded (the engine's best: one batch per worker).
+threads, in this process with its kernels loaded, in the study's own batches.
 
 - :func:`latencies`: ``campipe --help``, a one-case study, a finished study run again.
 - :func:`sizes`: 1 … 10000 cases: end-to-end wall, in-process study time, engine time, their
@@ -43,12 +43,16 @@ from campipe.engine import Case, RunSettings, run_batch
 from campipe.study import load_study
 from campipe.study.execute import (
     assemble,
+    default_batch_size,
     default_workers,
     find_results,
     parts_directory,
+    plan_batches,
+    read_batch,
     run_study,
 )
 from campipe.study.expand import Study
+from campipe.study.limits import samples_per_case
 from campipe.study.variables import data_variables
 
 #: Case counts of the study section, and of --quick.
@@ -104,17 +108,19 @@ def write_spec(directory: Path, n: int) -> Path:
 
 
 def engine_seconds(study: Study, workers: int, repeats: int = 3) -> float:
-    """The engine alone on the study's cases: one batch per worker (per run settings), on
-    ``workers`` threads, sampling what the study stores; best of ``repeats``."""
+    """The engine alone on the study's cases, in the batches the study runs (its default
+    batch size for ``workers``) on ``workers`` threads, sampling what the study stores; best
+    of ``repeats``. The study's batches, not one batch per worker: the ratio is then the
+    study layer's cost alone, and a batch's work arrays stay the size the study uses."""
     wanted = data_variables(study.record)
     full_state = "q" in wanted or any(n in wanted for n in ("pushrod_force", "stem_force"))
-    groups: dict[RunSettings, list[Case]] = {}
-    for c in study.cases:
-        groups.setdefault(c.settings, []).append(c.case)
-    jobs = []
-    for settings, cases in groups.items():
-        size = -(-len(cases) // workers)
-        jobs += [(cases[i : i + size], settings) for i in range(0, len(cases), size)]
+    size = default_batch_size(
+        len(study.cases), workers, samples_per_case(study.revolutions, study.output_every)
+    )
+    jobs = [
+        ([c.case for c in p.cases], p.cases[0].settings)
+        for p in plan_batches(study.cases, study.record, size)
+    ]
 
     def once() -> float:
         t0 = time.perf_counter()
@@ -212,14 +218,11 @@ def sizes(directory: Path, counts: Sequence[int], workers: int, repeats: int = 3
 
 def _raw_histories(study: Study, found: dict) -> list[np.ndarray]:
     """The histories of a few stored batches, as the archive's assembly reads them."""
-    import netCDF4
-
     names = [n for n, v in data_variables(study.record).items() if "cam_angle" in v.dims]
     arrays = []
     for path in list(dict.fromkeys(p for p, _, _ in found.values()))[:4]:
-        with netCDF4.Dataset(path) as ds:
-            ds.set_auto_mask(False)
-            arrays += [np.asarray(ds[n][:]) for n in names]
+        stored = read_batch(path)
+        arrays += [stored[n] for n in names]
     return arrays
 
 

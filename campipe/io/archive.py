@@ -1,4 +1,5 @@
-"""netCDF files of a study: batch files and the archive, written atomically.
+"""netCDF files of a study, the archive above all, written atomically (its batch files are
+:mod:`campipe.io.batch_file`'s).
 
 Every file is written at a temporary path in its final folder and renamed into place
 (``os.replace``) only once complete and flushed, so a reader (or a rerun after a crash) sees
@@ -54,8 +55,7 @@ log = logging.getLogger(__name__)
 #: Serialises netCDF4 calls from this process's threads.
 LOCK = threading.RLock()
 #: zlib level of an archive's variables: level 1 compresses these histories as well as 4
-#: (within 2 %) in less time. Batch files, which live only until the archive is assembled, are
-#: written uncompressed (level 0).
+#: (within 2 %) in less time. 0: uncompressed.
 COMPLEVEL = 1
 #: Cases per chunk of a variable along case and samples (a history): eight cases' histories
 #: compress a third better than one case's alone and cost HDF5 an eighth of the chunks; reading
@@ -518,7 +518,7 @@ def read_attrs(path: str | Path) -> dict[str, object]:
 def read_index(
     path: str | Path, ids: str = "case"
 ) -> tuple[np.ndarray, np.ndarray, dict[str, object]]:
-    """An archive's or batch file's case ids (the variable ``ids``) and ``event_count`` per
+    """An archive's case ids (the variable ``ids``) and ``event_count`` per
     row, and its global attributes: what a rerun needs to know which cases a file can supply.
 
     Raises
@@ -550,7 +550,7 @@ def read_variable(path: str | Path, name: str) -> np.ndarray:
 def read_rows(
     path: str | Path, rows: np.ndarray, case_names: Iterable[str], event_names: Iterable[str]
 ) -> dict[str, np.ndarray]:
-    """Some cases' rows of an archive or batch file, with their events.
+    """Some cases' rows of an archive, with their events.
 
     Parameters
     ----------

@@ -1,0 +1,91 @@
+"""Batch files: one finished batch of a study, kept until the archive holds its cases.
+
+A batch file is a NumPy ``.npz`` (an uncompressed zip of ``.npy`` arrays, written by
+``numpy.savez`` and read with ``allow_pickle=False``) holding the batch's arrays and, as the
+member :data:`ATTRS`, its attributes as JSON. It is written at a temporary path, flushed and
+renamed into place (``os.replace``), so a rerun sees a whole file or none; every member
+carries the zip's CRC-32, which :func:`verify` checks.
+
+Not netCDF: HDF5 is not thread-safe, so every netCDF call of a process is serialised
+(``campipe.io.archive.LOCK``), and a worker storing its batch waited while the archive's
+compression held that lock. A batch file involves no HDF5: a worker stores it in a few
+milliseconds, beside the archive being written. Its members are the names the archive gives
+the same variables; the case ids are the member ``case``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import zipfile
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from campipe.io.archive import temporary_path, write_error
+
+#: The member holding a batch file's attributes (JSON text).
+ATTRS = "attributes"
+#: How a batch file's name ends.
+SUFFIX = ".npz"
+
+
+def write(path: Path, arrays: Mapping[str, np.ndarray], attrs: Mapping[str, object]) -> Path:
+    """Write ``arrays`` (text arrays as fixed-width unicode) and ``attrs`` to ``path``
+    atomically; returns the path.
+
+    Raises
+    ------
+    campipe.io.archive.ArchiveWriteError
+        If the file cannot be written; nothing is left at ``path`` then.
+    """
+    members: dict[str, Any] = {
+        name: np.asarray(a, dtype=str) if np.asarray(a).dtype == object else np.asarray(a)
+        for name, a in arrays.items()
+    }
+    members[ATTRS] = np.array(json.dumps(dict(attrs), sort_keys=True))
+    tmp = temporary_path(path)
+    try:
+        with open(tmp, "wb") as f:
+            np.savez(f, **members)  # no object arrays: nothing is pickled
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        raise write_error(path, exc) from None
+    return path
+
+
+def read(path: Path) -> dict[str, np.ndarray]:
+    """Every array of a batch file (text arrays as object arrays of str), without its
+    attributes."""
+    with np.load(path, allow_pickle=False) as z:
+        out = {name: z[name] for name in z.files if name != ATTRS}
+    return {k: v.astype(object) if v.dtype.kind == "U" else v for k, v in out.items()}
+
+
+def read_attrs(path: Path) -> dict[str, object]:
+    """A batch file's attributes."""
+    with np.load(path, allow_pickle=False) as z:
+        attrs = json.loads(str(z[ATTRS][()]))
+    if not isinstance(attrs, dict):
+        raise ValueError(f"{path}: its attributes are not a mapping")
+    return attrs
+
+
+def verify(path: Path) -> list[str]:
+    """``[]`` if every member of the file reads back as written (the zip's CRC-32 of each,
+    and each a readable array), else why not. Reads the whole file."""
+    try:
+        with zipfile.ZipFile(path) as z:
+            bad = z.testzip()
+        if bad is not None:
+            return [f"its member {bad} differs from its checksum"]
+        read(path)
+        read_attrs(path)
+    except Exception as exc:  # a damaged zip fails in many ways; each means the same
+        return [f"it cannot be read ({type(exc).__name__}: {str(exc)[:200]})"]
+    return []
