@@ -50,6 +50,12 @@ BLOCK = re.compile(
 )
 
 
+def _workers(n: float) -> str:
+    """``n`` workers to two figures: "1 worker", "1.4 workers"."""
+    shown = format_short(n, 2)
+    return f"{shown} worker{'' if shown == '1' else 's'}"
+
+
 def _ms(seconds: float | None, digits: int = 3) -> str:
     return format_short(seconds * 1e3, digits) if finite(seconds) else "–"
 
@@ -506,7 +512,7 @@ def study_block(bench: Bench) -> str:
         f"{format_short(s['load_average_at_end'], 2)} at the end ({_duration(s['seconds'])}). "
         "End to end: `python -m campipe study SPEC` in a fresh process, best of 3 (one run "
         "above 1000 cases); in process: `run_study` with the kernels loaded; engine: "
-        "`run_batch` on the same cases, one batch per worker thread.",
+        "`run_batch` on the same cases in the study's own batches, on as many threads.",
         "",
     ]
     rows = [
@@ -572,8 +578,8 @@ def study_block(bench: Bench) -> str:
         compress = c["raw_bytes_per_case"] / c["compress_rate"]
         lines[-1] += (
             f" One worker's engine computes {format_short(engine_rate, 3)} cases/s, so the "
-            f"client binds at about {format_short(c['cases_per_second'] / engine_rate, 2)} "
-            "workers. With one compressed file per batch, written by its worker and read as "
+            f"client binds at about {_workers(c['cases_per_second'] / engine_rate)}. With one "
+            "compressed file per batch, written by its worker and read as "
             f"one dataset, each worker would compress at {_ms(compress, 2)} ms per case "
             f"beside its engine's {_ms(1 / engine_rate, 2)} ms "
             f"(+{format_short(100 * compress * engine_rate, 2)} %), and the client would only "
