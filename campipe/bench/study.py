@@ -305,6 +305,7 @@ def cluster(directory: Path, n: int, worker_counts: Sequence[int] = CLUSTER_WORK
     groups: dict[RunSettings, list[Case]] = {}
     for c in study.cases:
         groups.setdefault(c.settings, []).append(c.case)
+    samples = samples_per_case(study.revolutions, study.output_every)
     out = []
     for k in worker_counts:
         with (
@@ -318,7 +319,7 @@ def cluster(directory: Path, n: int, worker_counts: Sequence[int] = CLUSTER_WORK
             Client(lc) as client,
         ):
             jobs = []
-            size = max(1, -(-n // (4 * k)))
+            size = default_batch_size(n, k, samples)
             for settings, cases in groups.items():
                 jobs += [(cases[i : i + size], settings) for i in range(0, len(cases), size)]
             client.gather(client.map(_engine_job, jobs[:k], pure=False))  # kernels loaded

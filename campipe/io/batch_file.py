@@ -18,7 +18,7 @@ from __future__ import annotations
 import json
 import os
 import zipfile
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -59,11 +59,12 @@ def write(path: Path, arrays: Mapping[str, np.ndarray], attrs: Mapping[str, obje
     return path
 
 
-def read(path: Path) -> dict[str, np.ndarray]:
-    """Every array of a batch file (text arrays as object arrays of str), without its
-    attributes."""
+def read(path: Path, names: Iterable[str] | None = None) -> dict[str, np.ndarray]:
+    """The arrays ``names`` of a batch file (default: all but its attributes; text arrays as
+    object arrays of str). Reading a member whole checks its CRC-32."""
     with np.load(path, allow_pickle=False) as z:
-        out = {name: z[name] for name in z.files if name != ATTRS}
+        wanted = [n for n in z.files if n != ATTRS] if names is None else list(names)
+        out = {name: z[name] for name in wanted}
     return {k: v.astype(object) if v.dtype.kind == "U" else v for k, v in out.items()}
 
 
@@ -77,14 +78,13 @@ def read_attrs(path: Path) -> dict[str, object]:
 
 
 def verify(path: Path) -> list[str]:
-    """``[]`` if every member of the file reads back as written (the zip's CRC-32 of each,
-    and each a readable array), else why not. Reads the whole file."""
+    """``[]`` if every member of the file reads back as written (the zip's CRC-32 of each)
+    and its attributes read, else why not. Reads the whole file once."""
     try:
         with zipfile.ZipFile(path) as z:
             bad = z.testzip()
         if bad is not None:
             return [f"its member {bad} differs from its checksum"]
-        read(path)
         read_attrs(path)
     except Exception as exc:  # a damaged zip fails in many ways; each means the same
         return [f"it cannot be read ({type(exc).__name__}: {str(exc)[:200]})"]

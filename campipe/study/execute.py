@@ -288,7 +288,7 @@ def _mismatch(attrs: dict, record: tuple[str, ...]) -> str | None:
 
 def _index_of(path: Path, found: Found, wanted: set[str]) -> None:
     if path.suffix == batch_file.SUFFIX:
-        arrays = read_batch(path)
+        arrays = batch_file.read(path, (CASE_ID, "event_count"))
         ids, counts = arrays[CASE_ID], arrays["event_count"]
     else:
         ids, counts, _ = read_index(path, CASE_ID)
