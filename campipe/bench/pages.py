@@ -602,7 +602,8 @@ def study_block(bench: Bench) -> str:
     lines += [
         "",
         f"({n} cases on a local dask cluster of single-threaded worker processes, which write "
-        "their own batch files; cluster start-up left out.)",
+        "their own batch files; the study's default batches for the engine and the study "
+        "alike; cluster start-up left out.)",
     ]
     if s.get("estimates"):
         lines += [
