@@ -53,6 +53,7 @@ from campipe.study.execute import (
 )
 from campipe.study.expand import Study
 from campipe.study.limits import samples_per_case
+from campipe.study.results import full_state
 from campipe.study.variables import data_variables
 
 #: Case counts of the study section, and of --quick.
@@ -112,31 +113,32 @@ def engine_seconds(study: Study, workers: int, repeats: int = 3) -> float:
     batch size for ``workers``) on ``workers`` threads, sampling what the study stores; best
     of ``repeats``. The study's batches, not one batch per worker: the ratio is then the
     study layer's cost alone, and a batch's work arrays stay the size the study uses."""
-    wanted = data_variables(study.record)
-    full_state = "q" in wanted or any(n in wanted for n in ("pushrod_force", "stem_force"))
-    size = default_batch_size(
-        len(study.cases), workers, samples_per_case(study.revolutions, study.output_every)
-    )
-    jobs = [
-        ([c.case for c in p.cases], p.cases[0].settings)
-        for p in plan_batches(study.cases, study.record, size)
-    ]
+    jobs = _engine_jobs(study, _batch_size(study, workers))
 
     def once() -> float:
         t0 = time.perf_counter()
         with ThreadPoolExecutor(workers) as pool:
-            list(
-                pool.map(
-                    lambda job: run_batch(
-                        job[0], job[1], full_state=full_state, on_failure="record"
-                    ),
-                    jobs,
-                )
-            )
+            list(pool.map(_engine_job, jobs))
         return time.perf_counter() - t0
 
-    run_batch(jobs[0][0][:1], jobs[0][1], full_state=full_state, on_failure="record")
+    _engine_job((jobs[0][0][:1], *jobs[0][1:]))  # kernels loaded
     return _best(once, repeats)
+
+
+def _batch_size(study: Study, workers: int) -> int:
+    """The batch size the study runs with on ``workers`` by default."""
+    samples = samples_per_case(study.revolutions, study.output_every)
+    return default_batch_size(len(study.cases), workers, samples)
+
+
+def _engine_jobs(study: Study, size: int) -> list[tuple[list[Case], RunSettings, bool]]:
+    """The engine's part of each batch of ``size`` the study runs: (cases, settings,
+    full_state) for :func:`_engine_job`."""
+    full = full_state(study.record)
+    return [
+        ([c.case for c in p.cases], p.cases[0].settings, full)
+        for p in plan_batches(study.cases, study.record, size)
+    ]
 
 
 def latencies(directory: Path, workers: int, repeats: int = 5) -> dict:
@@ -302,10 +304,6 @@ def cluster(directory: Path, n: int, worker_counts: Sequence[int] = CLUSTER_WORK
 
     spec = write_spec(directory, n)
     study = load_study(spec)
-    groups: dict[RunSettings, list[Case]] = {}
-    for c in study.cases:
-        groups.setdefault(c.settings, []).append(c.case)
-    samples = samples_per_case(study.revolutions, study.output_every)
     out = []
     for k in worker_counts:
         with (
@@ -318,10 +316,8 @@ def cluster(directory: Path, n: int, worker_counts: Sequence[int] = CLUSTER_WORK
             ) as lc,
             Client(lc) as client,
         ):
-            jobs = []
-            size = default_batch_size(n, k, samples)
-            for settings, cases in groups.items():
-                jobs += [(cases[i : i + size], settings) for i in range(0, len(cases), size)]
+            size = _batch_size(study, k)
+            jobs = _engine_jobs(study, size)
             client.gather(client.map(_engine_job, jobs[:k], pure=False))  # kernels loaded
             t0 = time.perf_counter()
             client.gather(client.map(_engine_job, jobs, pure=False))
@@ -344,9 +340,10 @@ def cluster(directory: Path, n: int, worker_counts: Sequence[int] = CLUSTER_WORK
     return out
 
 
-def _engine_job(job) -> int:
-    cases, settings = job
-    run_batch(cases, settings, full_state=False, on_failure="record")
+def _engine_job(job: tuple[list[Case], RunSettings, bool]) -> int:
+    """Run one batch's cases through the engine (:func:`_engine_jobs`); their number."""
+    cases, settings, full = job
+    run_batch(cases, settings, full_state=full, on_failure="record")
     return len(cases)
 
 

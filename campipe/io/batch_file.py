@@ -41,10 +41,10 @@ def write(path: Path, arrays: Mapping[str, np.ndarray], attrs: Mapping[str, obje
     campipe.io.archive.ArchiveWriteError
         If the file cannot be written; nothing is left at ``path`` then.
     """
-    members: dict[str, Any] = {
-        name: np.asarray(a, dtype=str) if np.asarray(a).dtype == object else np.asarray(a)
-        for name, a in arrays.items()
-    }
+    members: dict[str, Any] = {name: np.asarray(a) for name, a in arrays.items()}
+    for name, a in members.items():
+        if a.dtype == object:
+            members[name] = a.astype(str)
     members[ATTRS] = np.array(json.dumps(dict(attrs), sort_keys=True))
     tmp = temporary_path(path)
     try:

@@ -124,6 +124,19 @@ def run_batch(cases, settings, **options) -> BatchResult:
     return engine.run_at_fidelity(cases, settings, **options)
 
 
+def full_state(record: tuple[str, ...]) -> bool:
+    """Whether a run recording ``record`` needs every coordinate's history (``run_batch``'s
+    ``full_state``): the coordinates, the member loads or the spring's histories; else only
+    the contacts' coordinates are sampled."""
+    wanted = set(data_variables(record))
+    return (
+        "q" in wanted
+        or "spring_force" in wanted
+        or bool(set(MEMBER_LOADS) & wanted)
+        or bool(set(SPRING_HISTORIES) & wanted)
+    )
+
+
 def compute_batch(plan: BatchPlan) -> BatchData:
     """Run a batch's cases in one engine call and lay out its archive arrays.
 
@@ -132,11 +145,11 @@ def compute_batch(plan: BatchPlan) -> BatchData:
     and metrics are NaN.
     """
     settings = plan.cases[0].settings
-    wanted = set(data_variables(plan.record))
-    full_state = "q" in wanted or bool(set(MEMBER_LOADS) & wanted) or "spring_force" in wanted
-    full_state = full_state or bool(set(SPRING_HISTORIES) & wanted)
     result = run_batch(
-        [c.case for c in plan.cases], settings, full_state=full_state, on_failure="record"
+        [c.case for c in plan.cases],
+        settings,
+        full_state=full_state(plan.record),
+        on_failure="record",
     )
     return batch_arrays(plan, result)
 
