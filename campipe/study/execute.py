@@ -1055,7 +1055,7 @@ class _Assembly:
         if first in self.held:
             cam_angle = self.held[first][0].cam_angle
         elif first.suffix == batch_file.SUFFIX:
-            cam_angle = read_batch(first)["cam_angle"]
+            cam_angle = batch_file.read(first, ("cam_angle",))["cam_angle"]
         else:
             cam_angle = read_variable(first, "cam_angle")
         sizes, specs, static = archive_layout(
