@@ -678,9 +678,9 @@ def validate(
     )
     workers = workers or default_workers()
     click.echo(validate_text(loaded, spec))
-    from campipe.study.limits import samples_per_case
+    from campipe.engine.settings import sample_count
 
-    samples = samples_per_case(loaded.revolutions, loaded.output_every)
+    samples = sample_count(loaded.revolutions, loaded.output_every)
     size = default_batch_size(len(loaded.cases), workers, samples)
     click.echo(f"batches: {count_batches(loaded.cases, size)} of up to {size} cases")
     if estimate:

@@ -47,7 +47,13 @@ from campipe.constants import TWO_PI
 from campipe.engine.batch import start_states
 from campipe.engine.common import MICRO_FLIGHT
 from campipe.engine.modal import modal_data
-from campipe.engine.settings import DEFAULT_CAPTURE_VELOCITY, Case, RunSettings
+from campipe.engine.settings import (
+    DEFAULT_CAPTURE_VELOCITY,
+    Case,
+    RunSettings,
+    sample_count,
+    turn_count,
+)
 from campipe.errors import CampipeError
 from campipe.model import system_matrices
 from campipe.profiles import Lift
@@ -193,12 +199,12 @@ class _Peer:
         piece = int(np.searchsorted(profile.breaks, phi, side="right") - 1)
         self.piece = min(max(piece, 0), profile.n_pieces - 1)
         self.t_end = revolutions * TWO_PI / self.w
-        n_out = int(math.floor(revolutions * TWO_PI / output_every + 1e-9)) + 1
+        n_out = sample_count(revolutions, output_every)
         self.t_out = np.arange(n_out) * output_every / self.w
         self.q_out = np.zeros((n_out, 7))
         self.v_out = np.zeros((n_out, 7))
         self.k_out = 0
-        n_rev = int(math.ceil(revolutions - 1e-12))
+        n_rev = turn_count(revolutions)
         self.off_cam = {False: np.zeros(n_rev), True: np.zeros(n_rev)}  # by seat held
         self.events: list[tuple[float, ...]] = []
         self.v_max = [0.0, 0.0]  # cam, seat

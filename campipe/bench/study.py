@@ -40,6 +40,7 @@ import yaml
 
 from campipe.bench.scaling import scaling_spec
 from campipe.engine import Case, RunSettings, run_batch
+from campipe.engine.settings import sample_count
 from campipe.study import load_study
 from campipe.study.execute import (
     assemble,
@@ -52,7 +53,6 @@ from campipe.study.execute import (
     run_study,
 )
 from campipe.study.expand import Study
-from campipe.study.limits import samples_per_case
 from campipe.study.results import full_state
 from campipe.study.variables import data_variables
 
@@ -127,7 +127,7 @@ def engine_seconds(study: Study, workers: int, repeats: int = 3) -> float:
 
 def _batch_size(study: Study, workers: int) -> int:
     """The batch size the study runs with on ``workers`` by default."""
-    samples = samples_per_case(study.revolutions, study.output_every)
+    samples = sample_count(study.revolutions, study.output_every)
     return default_batch_size(len(study.cases), workers, samples)
 
 

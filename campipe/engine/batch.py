@@ -50,6 +50,7 @@ from campipe.engine.settings import (
     RunSettings,
     check_run,
     output_angles,
+    turn_count,
 )
 from campipe.engine.settings import DEFAULT_CAPTURE_VELOCITY as DEFAULT_CAPTURE_VELOCITY
 from campipe.engine.settings import DEFAULT_INTEGRATOR as DEFAULT_INTEGRATOR
@@ -552,7 +553,7 @@ def integrator_types(cases: Sequence[Case], settings: RunSettings, full_state: b
 
 def _outputs(batch: _Batch, settings: RunSettings):
     """The kernels' output arrays for a batch run with ``settings`` (``common.make_outputs``)."""
-    n_rev = int(math.ceil(settings.revolutions - 1e-12))
+    n_rev = turn_count(settings.revolutions)
     n_out = output_angles(settings).size
     n_q = batch.modal_trains.load.shape[1]
     return make_outputs(len(batch.which), n_out, n_rev, settings.max_events, n_q)

@@ -44,6 +44,7 @@ from campipe.engine.batch import (
 from campipe.engine.closed_form import STATE, ExactRuns, ModalTrains, make_workspace, stack_trains
 from campipe.engine.common import Cases
 from campipe.engine.modal import ModalData
+from campipe.engine.settings import sample_count, turn_count
 from campipe.model import ValveTrain
 from campipe.model.assembly import preload_vector
 from campipe.profiles import pack
@@ -249,7 +250,7 @@ def steady_state(cases: Sequence[Case], output_every: float = math.radians(1.0))
                 found=idx,
                 expected="cases below the no-follow onset with the valve clear of its seat",
             )
-    n_out = int(math.floor(TWO_PI / output_every + 1e-9)) + 1
+    n_out = sample_count(1.0, output_every)
     angles = np.minimum(np.arange(n_out) * output_every, TWO_PI)
     return _samples(batch, ext, angles)
 
@@ -314,7 +315,7 @@ def _steady_result(
     held = ext.holds
     st = _samples(batch, ext, turn, held)
     omega = batch.cases.omega[held]
-    n, n_rev = len(cases), int(math.ceil(settings.revolutions - 1e-12))
+    n, n_rev = len(cases), turn_count(settings.revolutions)
     per_rev = np.zeros((n, n_rev))
     fmax = np.repeat(ext.max_cam_force[held, None], n_rev, axis=1)
     q = st.q[held][:, back]
@@ -498,6 +499,12 @@ def onset_speeds(
     return Onset(speed, status, grid, margin, no_follow, seated, float(tolerance), evaluations)
 
 
+def confirm_settings(revolutions: float = CONFIRM_TURNS) -> RunSettings:
+    """The settings of :func:`confirm_onsets`'s runs (for a caller that compiles their kernels
+    first)."""
+    return RunSettings(revolutions=revolutions)
+
+
 def confirm_onsets(
     designs: Sequence[Case], onset: np.ndarray, offset: float = CONFIRM_OFFSET,
     revolutions: float = CONFIRM_TURNS,
@@ -524,7 +531,7 @@ def confirm_onsets(
             for f in (1 - offset, 1 + offset)
             for i in idx
         ]
-        res = run_batch(cases, RunSettings(revolutions=revolutions), full_state=False,
+        res = run_batch(cases, confirm_settings(revolutions), full_state=False,
                         on_failure="record")  # fmt: skip
         below[idx] = res.separation[: idx.size]
         above[idx] = res.separation[idx.size :]

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from campipe.constants import TWO_PI
 from campipe.errors import CampipeError
 from campipe.model import ValveTrain, lash_seat, system_matrices
 from campipe.model.assembly import NEWMARK_LINEAR_OMEGA_DT, configuration_frequencies
@@ -91,6 +92,18 @@ class CaseError(CampipeError, ValueError):
 
 class IntegrationError(CampipeError, RuntimeError):
     """A run that produced a non-finite state, or chattered; ``found`` lists the cases."""
+
+
+def turn_count(revolutions: float) -> int:
+    """The turns a run of ``revolutions`` covers, a partial last turn included: the length of
+    its per-turn metrics (the archive's ``revolution`` axis)."""
+    return int(math.ceil(revolutions - 1e-12))
+
+
+def sample_count(revolutions: float, output_every: float) -> int:
+    """The output samples of a run of ``revolutions`` turns, every ``output_every`` [rad] from
+    θ = 0 (the last within 2π·revolutions)."""
+    return int(math.floor(revolutions * TWO_PI / output_every + 1e-9)) + 1
 
 
 def resolve_integrator(name: str) -> str:
@@ -190,13 +203,13 @@ class RunSettings:
                 expected=f"one of: {', '.join(STARTS)}",
             )
         turns = DEFAULT_WARMUP[self.start] if self.warmup is None else self.warmup
-        if not (0 <= turns < math.ceil(self.revolutions - 1e-12)):
+        if not (0 <= turns < turn_count(self.revolutions)):
             raise RunSettingsError.at(
                 "run.warmup",
                 f"found {turns!r} turns; a run of {self.revolutions:g} needs at least one "
                 "measured turn after its warm-up",
                 found=turns,
-                expected=f"0 … {math.ceil(self.revolutions - 1e-12) - 1} turns",
+                expected=f"0 … {turn_count(self.revolutions) - 1} turns",
             )
         return int(turns)
 
@@ -315,8 +328,9 @@ def check_stability(cases: Sequence[Case], settings: RunSettings) -> None:
 
 def output_angles(settings: RunSettings) -> np.ndarray:
     """Sample angles 0 … 2π·revolutions at ``output_every`` [rad]."""
-    n = int(math.floor(settings.revolutions * 2 * math.pi / settings.output_every + 1e-9)) + 1
-    return np.arange(n) * settings.output_every
+    return (
+        np.arange(sample_count(settings.revolutions, settings.output_every)) * settings.output_every
+    )
 
 
 def check_newmark_linear(cases: Sequence[Case], settings: RunSettings) -> None:

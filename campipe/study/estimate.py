@@ -20,7 +20,6 @@ a second) and a spec's ``replay:`` recording.
 
 from __future__ import annotations
 
-import math
 import tempfile
 import time
 from collections.abc import Sequence
@@ -31,10 +30,9 @@ import numpy as np
 
 from campipe.constants import TWO_PI
 from campipe.engine import RunSettings, run_at_fidelity, run_batch
+from campipe.engine.settings import sample_count, turn_count
 from campipe.study.execute import default_batch_size, plan_batches, run_study
 from campipe.study.expand import ResolvedCase, SpeedSweep, Study, distinct_but_speed
-from campipe.study.limits import samples_per_case
-from campipe.study.results import n_revolutions
 from campipe.study.variables import DOF_NAMES, data_variables
 
 #: Longest kernel warm-up counted as start-up [s]: a kernel loads from numba's cache in well
@@ -88,8 +86,8 @@ def warm_up(study: Study) -> float:
 
 def archive_bytes(study: Study) -> int:
     """Size of the archive's variables before compression [bytes] (events not counted)."""
-    n_out = int(math.floor(study.revolutions * 360 / math.degrees(study.output_every) + 1e-9)) + 1
-    n_rev = n_revolutions(study.revolutions)
+    n_out = sample_count(study.revolutions, study.output_every)
+    n_rev = turn_count(study.revolutions)
     sizes = {"cam_angle": n_out, "revolution": n_rev, "dof": len(DOF_NAMES), "event": 0}
     per_case = 0
     for var in data_variables(study.record).values():
@@ -105,7 +103,7 @@ def archive_bytes(study: Study) -> int:
 
 def batch_size(study: Study, n: int, workers: int) -> int:
     """The default batch size of a run of ``n`` of the study's cases."""
-    return default_batch_size(n, workers, samples_per_case(study.revolutions, study.output_every))
+    return default_batch_size(n, workers, sample_count(study.revolutions, study.output_every))
 
 
 def busy_workers(study: Study, cases: Sequence[ResolvedCase], workers: int) -> int:

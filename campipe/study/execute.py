@@ -51,6 +51,7 @@ from pathlib import Path
 
 import numpy as np
 
+from campipe.engine.settings import sample_count, turn_count
 from campipe.errors import CampipeError
 from campipe.io import batch_file
 from campipe.io.archive import (
@@ -81,13 +82,11 @@ from campipe.study.layout import (
     study_attrs,
     study_key,
 )
-from campipe.study.limits import samples_per_case
 from campipe.study.progress import Progress
 from campipe.study.results import (
     BatchData,
     BatchPlan,
     compute_batch,
-    n_revolutions,
     numerics_fingerprint,
 )
 from campipe.vocabulary import EVENTS_TRUNCATED, FAILURES, OK, STATUS
@@ -624,7 +623,7 @@ def run_study(
         notes += more
         missing = [c for c in study.cases if c.case_id not in found]
         workers = workers or (1 if scheduler == "synchronous" else default_workers())
-        samples = samples_per_case(study.revolutions, study.output_every)
+        samples = sample_count(study.revolutions, study.output_every)
         size = batch_size or default_batch_size(len(missing), workers, samples)
         plans = plan_batches(missing, study.record, size)
         log.info(
@@ -1058,9 +1057,7 @@ class _Assembly:
             cam_angle = batch_file.read(first, ("cam_angle",))["cam_angle"]
         else:
             cam_angle = read_variable(first, "cam_angle")
-        sizes, specs, static = archive_layout(
-            study, None, cam_angle, n_revolutions(study.revolutions)
-        )
+        sizes, specs, static = archive_layout(study, None, cam_angle, turn_count(study.revolutions))
         attrs = {**study_attrs(study), "spec_file": self.spec, **provenance(self.command)}
         self.case_names = [
             s.name for s in specs if s.dims[:1] == ("case",) and s.name not in static

@@ -18,6 +18,7 @@ import numpy as np
 
 from campipe.constants import TWO_PI
 from campipe.engine import DEFAULT_STEPS, resolve_integrator
+from campipe.engine.settings import sample_count, turn_count
 from campipe.errors import CampipeError
 from campipe.study.fields import CASE_FIELDS, SpecProblem, varied_fields
 from campipe.study.spec import MAX_AXIS_LENGTH, Spec, leaf_keys
@@ -103,11 +104,6 @@ def _parsed(spec: Spec, key: str) -> list:
     return out
 
 
-def samples_per_case(revolutions: float, output_every: float) -> int:
-    """Stored samples of a run of ``revolutions`` turns at ``output_every`` [rad]."""
-    return int(math.floor(revolutions * TWO_PI / output_every + 1e-9)) + 1
-
-
 def bytes_per_case(record: tuple[str, ...], samples: int, revolutions: int) -> int:
     """An archive's bytes per case before compression (events not counted)."""
     sizes = {"cam_angle": samples, "revolution": revolutions, "dof": len(DOF_NAMES)}
@@ -134,7 +130,7 @@ def check_limits(spec: Spec, limits: Limits) -> list[SpecProblem]:
         output_every = float(CASE_FIELDS["run.output_every"].parse(run["output_every"], "run"))
     except SpecProblem:
         return problems  # refused by the spec's own checks
-    samples = samples_per_case(revolutions, output_every)
+    samples = sample_count(revolutions, output_every)
     if samples > limits.samples:
         problems.append(
             _over(
@@ -160,7 +156,7 @@ def check_limits(spec: Spec, limits: Limits) -> list[SpecProblem]:
     steps, why = _steps(spec, revolutions)
     if steps > limits.steps:
         problems.append(_over(why[0], why[1], steps, limits.steps, Limits.OPTIONS["steps"]))
-    size = n * bytes_per_case(tuple(run["record"]), samples, math.ceil(revolutions - 1e-12))
+    size = n * bytes_per_case(tuple(run["record"]), samples, turn_count(revolutions))
     if size > limits.archive_bytes:
         problems.append(
             _over(

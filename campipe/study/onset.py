@@ -19,7 +19,6 @@ import numpy as np
 from campipe.constants import RPM
 from campipe.engine import periodic
 from campipe.engine.kernels import compile_first
-from campipe.engine.settings import RunSettings
 from campipe.errors import CampipeError
 from campipe.io.archive import VariableSpec
 from campipe.study.expand import Study
@@ -148,8 +147,7 @@ def onset_study(
         )
     keys, firsts = _combinations(study)
     designs = [study.cases[i].case for i in firsts]
-    checking = RunSettings(revolutions=periodic.CONFIRM_TURNS)  # ``confirm_onsets``'s run
-    compile_first({checking: designs[0]} if confirm else {}, notice, search=True)
+    compile_first({periodic.confirm_settings(): designs[0]} if confirm else {}, notice, search=True)
     t0 = time.perf_counter()
     onset = search_designs(designs, low, high, tolerance, workers)
     t1 = time.perf_counter()

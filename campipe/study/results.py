@@ -7,7 +7,6 @@ files); the caller stores the :class:`BatchData` (:mod:`campipe.io.archive`).
 from __future__ import annotations
 
 import functools
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from importlib import metadata
@@ -269,8 +268,3 @@ def event_arrays(events: Sequence[np.ndarray], speeds: Sequence[float]) -> dict[
         "event_velocity": ev[:, EV_VELOCITY].copy(),
         "event_impulse": ev[:, EV_IMPULSE].copy(),
     }
-
-
-def n_revolutions(revolutions: float) -> int:
-    """Length of the revolution axis for ``revolutions`` turns (a partial last turn counts)."""
-    return int(math.ceil(revolutions - 1e-12))
