@@ -6,9 +6,11 @@ units (names joined by ``*``, ``/``, small integer powers ``**2`` and parenthese
 is checked against that grammar before pint reads the units, so no arithmetic is evaluated
 (``9**9**9 rpm`` is refused at once instead of computing a number with 369 million digits).
 
-The value of each text read, and of each conversion, is kept for later processes
+A text ``<number> <units>`` is read as the number times its units' factor, as pint converts
+it (:func:`_by_factor`): the values of a range are not read through pint one by one. Each
+units' factor, each other text read and each conversion are kept for later processes
 (``campipe.disk_cache``, keyed by pint's version and this module's source): a run whose
-quantities were all read before never imports pint (0.1 s). A refusal is never kept.
+units were all read before never imports pint (0.1 s). A refusal is never kept.
 """
 
 from __future__ import annotations
@@ -112,8 +114,12 @@ def parse_quantity(text: object, units: str, key: str, example_units: str | None
 def _parse_text(text: str, units: str, key: str, example_units: str | None) -> float:
     """A quantity's text read once a process, or by an earlier one (:func:`_kept`): every
     case of a grid repeats its preset's and its base's values (a refusal is raised again each
-    time, never kept)."""
-    return _kept(("quantity", text, units), lambda: _parse(text, units, key, example_units))
+    time, never kept); or by its units' factor (:func:`_by_factor`)."""
+
+    def parse(text: str) -> float:
+        return _kept(("quantity", text, units), lambda: _parse(text, units, key, example_units))
+
+    return _by_factor(text, parse)
 
 
 def _sweep_hint(text: object, key: str) -> str:
@@ -324,7 +330,11 @@ def parse_angular(text: object, units: str, key: str, example_units: str) -> flo
             found=text,
             expected=expected,
         )
-    return _kept(("angular", text, units), lambda: _angular(text, units, key, example_units))
+
+    def parse(text: str) -> float:
+        return _kept(("angular", text, units), lambda: _angular(text, units, key, example_units))
+
+    return _by_factor(text, parse)
 
 
 def _angular(text: str, units: str, key: str, example_units: str) -> float:
@@ -352,6 +362,30 @@ def _angular(text: str, units: str, key: str, example_units: str) -> float:
             expected=expected,
         ) from None
     return _finite(value, text, key, expected)
+
+
+def _by_factor(text: str, parse: Callable[[str], float]) -> float:
+    """``parse(text)`` of a ``<number> <units>`` text as the number times ``parse("1
+    <units>")``, when ``parse("0 <units>")`` is 0 (no offset, such as degC's): what pint
+    computes, bit for bit (a quantity's conversion is its magnitude times one factor of its
+    units), without reading each value of a range (``6000.5 rpm``, ``6001 rpm``, …) through
+    pint or keeping it (:func:`_kept`). Any other text, or units ``parse`` refuses, is
+    ``parse(text)`` itself, whose errors name the text."""
+    m = _QUANTITY.match(text)
+    if m is None or m["number"] is None or not m["units"] or len(text) > MAX_QUANTITY_LENGTH:
+        return parse(text)
+    number = float(m["number"])
+    if not math.isfinite(number):
+        return parse(text)
+    try:
+        factor = parse(f"1 {m['units']}")
+        offset = parse(f"0 {m['units']}")
+    except QuantityError:
+        return parse(text)
+    value = number * factor
+    if offset != 0.0 or not math.isfinite(value):
+        return parse(text)
+    return value
 
 
 def _kept(what: tuple[str, ...], compute: Callable[[], float]) -> float:

@@ -2,7 +2,9 @@
 (``campipe.units``) read back bit for bit, under their own key only, never from a damaged file,
 and nothing kept (silently) where the folder cannot be written."""
 
+import json
 import os
+import random
 import struct
 import time
 
@@ -20,6 +22,14 @@ QUANTITIES = [
     ("30e6 lbf/in**2", "Pa"),
 ]
 ANGULAR = [("9524 rpm", "rad/s"), ("268 deg", "rad")]
+#: What the values above keep: each units' factor and offset (``units._by_factor``), read
+#: once for "0.1 in" and "-0 in" alike.
+KEPT = {
+    (kind, f"{n} {text.split(' ', 1)[1]}", to)
+    for kind, texts in (("quantity", QUANTITIES), ("angular", ANGULAR))
+    for text, to in texts
+    for n in (0, 1)
+}
 
 
 @pytest.fixture
@@ -90,7 +100,7 @@ def test_another_pint_or_units_source_misses(folder, monkeypatch):
         with monkeypatch.context() as m:
             m.setattr(units, "_store_key", lambda other=other: other)
             assert units._read_kept() == {}
-    assert len(units._read_kept()) == len(QUANTITIES) + len(ANGULAR)
+    assert {tuple(json.loads(k)) for k in units._read_kept()} == KEPT
 
 
 @pytest.mark.parametrize(
@@ -111,7 +121,7 @@ def test_a_damaged_file_is_passed_over_and_the_values_computed(folder, monkeypat
     assert disk_cache.read("quantities", units._store_key()) is None
     fresh_process(monkeypatch)
     assert bits(values()) == bits(first)  # computed by pint again
-    assert len(units._found) == len(first)
+    assert {tuple(json.loads(k)) for k in units._found} == KEPT
 
 
 def test_a_file_of_another_key_is_not_read_as_this_ones(folder):
@@ -155,3 +165,53 @@ def test_each_kind_keeps_the_files_written_last(folder):
         os.utime(path, (then + i, then + i))  # written in this order
     kept = [disk_cache.read("quantities", f"key {i}") is not None for i in range(n)]
     assert kept == [False] * (n - disk_cache.KEEP) + [True] * disk_cache.KEEP
+
+
+#: Units a range may be written in, and the SI units read, by kind.
+RANGE_UNITS = [
+    ("quantity", "in", "m"),
+    ("quantity", "mm", "m"),
+    ("quantity", "lbf/in", "N/m"),
+    ("quantity", "lbf*s/in", "N*s/m"),
+    ("quantity", "lb*in**2", "kg*m**2"),
+    ("quantity", "psi", "Pa"),
+    ("angular", "rpm", "rad/s"),
+    ("angular", "deg", "rad"),
+    ("angular", "revolution/min", "rad/s"),
+]
+
+
+def test_a_ranges_values_are_read_as_pint_reads_them_bit_for_bit_keeping_only_factors(folder):
+    """Each value of a range is its number times its units' factor (``units._by_factor``):
+    the same float, bit for bit, as pint converting the text itself (``units._parse``,
+    ``units._angular``, uncached), over numbers as ranges write them (whole, decimal, tiny,
+    huge, negative); and only each units' factor and offset are kept, not the values."""
+    rng = random.Random(7)
+    numbers = [0.0, -0.0, 6000.0, 6000.5, 1e-9, 3.7e12, -12.25]
+    numbers += [rng.uniform(-2e4, 2e4) for _ in range(300)]
+    numbers += [round(rng.uniform(0, 2e4), 3) for _ in range(300)]
+    numbers += [10 ** rng.uniform(-8, 8) for _ in range(300)]
+    for kind, unit, to in RANGE_UNITS:
+        for x in numbers:
+            text = f"{x!r} {unit}"
+            if kind == "angular":
+                got, pint_reads = (
+                    parse_angular(text, to, "k", "rpm"),
+                    units._angular(text, to, "k", "rpm"),
+                )
+            else:
+                got, pint_reads = parse_quantity(text, to, "k"), units._parse(text, to, "k", None)
+            assert struct.pack("<d", got) == struct.pack("<d", pint_reads), text
+    kept = {tuple(json.loads(k)) for k in units._found}
+    assert kept == {(kind, f"{n} {unit}", to) for kind, unit, to in RANGE_UNITS for n in (0, 1)}
+
+
+def test_units_with_an_offset_and_refused_texts_are_read_by_pint_whole(folder):
+    """degC's zero is not 0 K: its text is converted by pint whole; a refusal names the text
+    as written, not the units' factor."""
+    assert parse_quantity("20 degC", "K", "k") == units._parse("20 degC", "K", "k", None)
+    assert ("quantity", "20 degC", "K") in {tuple(json.loads(k)) for k in units._found}
+    with pytest.raises(QuantityError, match="'9000 Hz'"):
+        parse_angular("9000 Hz", "rad/s", "k", "rpm")
+    with pytest.raises(QuantityError, match="'1e305 lbf/in\\*\\*4'.*beyond the range"):
+        parse_quantity("1e305 lbf/in**4", "N/m**4", "k")
