@@ -162,3 +162,25 @@ def test_the_simulated_time_is_summed_without_building_a_case(tmp_path, monkeypa
     total = simulated_seconds(swept)
     assert total == pytest.approx(simulated_seconds(each), rel=1e-12)
     assert total == pytest.approx(3 * 2 * sum(60 / rpm for rpm in (6000, 9000, 9524, 11000)))
+
+
+@pytest.mark.parametrize(
+    "canonical",
+    [
+        {"model": {"spring_rate": 42.0}, "seat": None, "speed": 1.0, "zeta": [1, 2]},
+        {"speed": 1.0},  # the speed alone
+        {"aaa": "speed", "speed": 1.0},  # the key's text as another's value
+        {"speed": 1.0, "zz": {"speed": 2.0}},  # a nested key of the same name
+    ],
+)
+def test_a_speeds_case_id_hashes_the_whole_canonical_json(canonical):
+    """``speed_case_ids`` hashes the JSON before the speed once: each id is still
+    ``case_id`` of the whole canonical parameters, for speeds whose JSON differs (negative
+    zero, exponents, many digits)."""
+    from campipe.study.expand import _clean, case_id, speed_case_ids
+
+    ids = speed_case_ids(canonical)
+    for speed in (-0.0, 0.0, 1e-300, 628.3185307179587, 1.5e22, 1047.1975511965977, 7.0):
+        assert ids(speed) == case_id({**canonical, "speed": _clean(speed)}), speed
+    with pytest.raises(ValueError):
+        ids(float("nan"))
