@@ -171,6 +171,7 @@ def test_the_simulated_time_is_summed_without_building_a_case(tmp_path, monkeypa
         {"speed": 1.0},  # the speed alone
         {"aaa": "speed", "speed": 1.0},  # the key's text as another's value
         {"speed": 1.0, "zz": {"speed": 2.0}},  # a nested key of the same name
+        {"a": "\x00speed\x00", "speed": 1.0},  # a value that is the mark itself
     ],
 )
 def test_a_speeds_case_id_hashes_the_whole_canonical_json(canonical):
