@@ -484,10 +484,14 @@ def _clean(v: object) -> object:
     return v
 
 
+def _canonical_json(value: object) -> str:
+    """The text a case id hashes: JSON with sorted keys, no spaces, no NaN."""
+    return json.dumps(value, sort_keys=True, separators=(",", ":"), allow_nan=False)
+
+
 def case_id(canonical: Mapping) -> str:
     """The first 16 hex digits of the SHA-256 of the canonical parameters as sorted JSON."""
-    text = json.dumps(canonical, sort_keys=True, separators=(",", ":"), allow_nan=False)
-    return hashlib.sha256(text.encode()).hexdigest()[:CASE_ID_LENGTH]
+    return hashlib.sha256(_canonical_json(canonical).encode()).hexdigest()[:CASE_ID_LENGTH]
 
 
 #: Where the speed goes in :func:`speed_case_ids`'s canonical JSON.
@@ -498,18 +502,16 @@ def speed_case_ids(canonical: Mapping) -> Callable[[float], str]:
     """The :func:`case_id` of ``canonical`` at any speed (``canonical["speed"]`` replaced):
     the JSON before the speed is hashed once, and each id hashes only the speed and what
     follows it (2 µs a case instead of 15 for the thesis's parameters)."""
-    text = json.dumps(
-        {**canonical, "speed": _SPEED_MARK}, sort_keys=True, separators=(",", ":"), allow_nan=False
-    )
-    head, mark, tail = text.partition(json.dumps(_SPEED_MARK))
-    if not mark or json.dumps(_SPEED_MARK) in tail:  # a value that is the mark itself: whole
+    mark = _canonical_json(_SPEED_MARK)
+    head, found, tail = _canonical_json({**canonical, "speed": _SPEED_MARK}).partition(mark)
+    if not found or mark in tail:  # a value that is the mark itself: the whole JSON each time
         return lambda speed: case_id({**canonical, "speed": _clean(speed)})
     before = hashlib.sha256(head.encode())
     after = tail.encode()
 
     def one(speed: float) -> str:
         h = before.copy()
-        h.update(json.dumps(_clean(speed), allow_nan=False).encode())
+        h.update(_canonical_json(_clean(speed)).encode())
         h.update(after)
         return h.hexdigest()[:CASE_ID_LENGTH]
 
