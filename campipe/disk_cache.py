@@ -1,6 +1,8 @@
 """Files a process leaves for the next, beside the compiled kernels: the SI values of the
 quantity texts it read (``campipe.units``), so that a run whose quantities were all read
-before never imports pint (0.1 s of a one-case study's start).
+before never imports pint (0.1 s of a one-case study's start); and the results of the
+model's LAPACK calls (:func:`arrays`: a train's modes and its configurations' block forms),
+so that a run of trains solved before never imports ``scipy.linalg`` (0.12 s).
 
 They are kept in this source's folder of the kernel cache (``campipe.kernel_cache``: one
 folder per version of the engine, the profiles, the model, numba and numpy, pruned with the
@@ -13,10 +15,15 @@ computes. A folder that cannot be written keeps nothing, silently.
 from __future__ import annotations
 
 import hashlib
+import io
 import logging
 import os
 import tempfile
+import threading
+from collections.abc import Callable, Sequence
 from pathlib import Path
+
+import numpy as np
 
 log = logging.getLogger(__name__)
 
@@ -25,6 +32,9 @@ MAGIC = b"campipe disk cache 1\n"
 #: Files kept per kind, those written last (another key's, such as an older pint's, are left
 #: behind by an upgrade).
 KEEP = 8
+
+_written: dict[str, int] = {}  # files of each kind :func:`arrays` wrote in this process
+_written_lock = threading.Lock()
 
 
 def folder(kind: str) -> Path:
@@ -92,3 +102,47 @@ def prune(where: Path, keep: int = KEEP) -> None:
     written.sort(reverse=True)
     for _, old in written[keep:]:
         old.unlink(missing_ok=True)
+
+
+def arrays(
+    kind: str,
+    inputs: Sequence[np.ndarray],
+    version: str,
+    compute: Callable[[], Sequence[np.ndarray]],
+) -> list[np.ndarray]:
+    """``compute()``'s arrays, a pure function of ``inputs`` and of the library versions
+    named in ``version``: read back if kept for exactly these inputs (dtype, shape and every
+    bit), else computed and kept. The arrays are stored in numpy's ``.npy`` format and read
+    back bit for bit, never unpickled; each is returned contiguous, in the order it was
+    computed in (C or Fortran), whether computed or read, so that what is done with it next
+    cannot depend on where it came from.
+
+    A process writes at most :data:`KEEP` files of a kind: a study of hundreds of trains
+    computes every one as before, without a write each; a study of a few reads them all."""
+    digest = hashlib.sha256(version.encode())
+    for a in inputs:
+        digest.update(f"{a.dtype.str} {a.shape}\n".encode())
+        digest.update(np.ascontiguousarray(a).tobytes())
+    key = digest.hexdigest()
+    content = read(kind, key)
+    if content is not None:
+        try:
+            f = io.BytesIO(content)
+            count = int(np.load(f, allow_pickle=False))
+            return [np.load(f, allow_pickle=False) for _ in range(count)]
+        except (ValueError, OSError, EOFError):
+            log.debug("%s: unreadable arrays, computed again", kind)
+    out = [
+        a if a.flags.c_contiguous or a.flags.f_contiguous else np.ascontiguousarray(a)
+        for a in map(np.asarray, compute())
+    ]
+    with _written_lock:
+        if _written.get(kind, 0) >= KEEP:
+            return out
+        _written[kind] = _written.get(kind, 0) + 1
+    f = io.BytesIO()
+    np.save(f, np.int64(len(out)), allow_pickle=False)
+    for a in out:
+        np.save(f, a, allow_pickle=False)
+    write(kind, key, f.getvalue())
+    return out

@@ -182,7 +182,8 @@ class KernelCacheLocator(caching._CacheLocator):
 
 
 def install() -> None:
-    """Put :class:`KernelCacheLocator` first among numba's cache locators (once). numba's
+    """Put :class:`KernelCacheLocator` first among numba's cache locators (once), and load
+    campipe's kernels without preparing numba to compile (:func:`_load_overload`). numba's
     locator list is internal (``CacheImpl``, ``_CacheImpl`` before 0.68): if it is not found,
     numba's own caching stays."""
     impl = getattr(caching, "CacheImpl", None) or getattr(caching, "_CacheImpl", None)
@@ -192,3 +193,28 @@ def install() -> None:
         return
     if KernelCacheLocator not in classes:
         classes.insert(0, KernelCacheLocator)
+    cache = caching.Cache
+    if getattr(cache.load_overload, "__wrapped__", None) is None and all(
+        hasattr(cache, name) for name in ("_load_overload", "_guard_against_spurious_io_errors")
+    ):
+        _load_overload.__wrapped__ = cache.load_overload  # type: ignore[attr-defined]
+        cache.load_overload = _load_overload
+
+
+def _load_overload(self, sig, target_context):
+    """numba's ``Cache.load_overload`` (which this replaces), without its
+    ``target_context.refresh()`` for campipe's kernels.
+
+    That refresh imports and registers every implementation numba compiles from (numba.np,
+    numba.cpython, ...; and through them ``scipy.linalg``): 0.2 s of a study's start that
+    loading compiled code does not use. What loading does use is set up here: numba's runtime
+    (NRT: the kernels that allocate call it). Anything that compiles (a kernel of a new
+    signature) refreshes the context itself, as numba's compiler always does."""
+    if not isinstance(self._impl.locator, KernelCacheLocator):
+        return _load_overload.__wrapped__(self, sig, target_context)  # type: ignore[attr-defined]
+    from numba.core.runtime import rtsys
+
+    rtsys.initialize(target_context)
+    with self._guard_against_spurious_io_errors():
+        return self._load_overload(sig, target_context)
+    return None  # the guard swallowed an error: not cached

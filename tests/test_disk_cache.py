@@ -8,6 +8,7 @@ import random
 import struct
 import time
 
+import numpy as np
 import pytest
 
 from campipe import disk_cache, kernel_cache, units
@@ -215,3 +216,87 @@ def test_units_with_an_offset_and_refused_texts_are_read_by_pint_whole(folder):
         parse_angular("9000 Hz", "rad/s", "k", "rpm")
     with pytest.raises(QuantityError, match="'1e305 lbf/in\\*\\*4'.*beyond the range"):
         parse_quantity("1e305 lbf/in**4", "N/m**4", "k")
+
+
+def _arrays_kept(monkeypatch) -> None:
+    """A process that has written no arrays yet."""
+    monkeypatch.setattr(disk_cache, "_written", {})
+
+
+def test_arrays_are_read_back_bit_for_bit_in_the_order_they_were_computed(folder, monkeypatch):
+    """``disk_cache.arrays``: what ``compute`` gave is read back bit for bit (a negative zero,
+    a NaN's payload, complex and integer arrays), contiguous in the order it was computed in
+    (Fortran stays Fortran; a strided view is made C-contiguous, computed or read alike),
+    without calling ``compute``."""
+    _arrays_kept(monkeypatch)
+    rng = np.random.default_rng(7)
+    x = rng.normal(size=(5, 4))
+    x[0, 0], x[1, 1] = -0.0, np.frombuffer(struct.pack("<Q", 0x7FF8DEADBEEF0001), "<f8")[0]
+    made = [
+        np.asfortranarray(x),
+        x[::2, 1:3],
+        rng.normal(size=3) + 1j * rng.normal(size=3),
+        np.arange(6, dtype=np.int32),
+    ]
+    calls = []
+
+    def compute():
+        calls.append(1)
+        return made
+
+    first = disk_cache.arrays("test", [x], "v1", compute)
+    again = disk_cache.arrays("test", [x], "v1", compute)
+    assert len(calls) == 1
+    for a, b, m in zip(first, again, made, strict=True):
+        assert a.dtype == b.dtype == m.dtype and a.shape == b.shape == m.shape
+        assert a.tobytes("A") == b.tobytes("A") and np.array_equal(a, m, equal_nan=True)
+        assert a.flags.f_contiguous == b.flags.f_contiguous
+        assert a.flags.c_contiguous or a.flags.f_contiguous
+        assert b.flags.writeable
+    assert first[0].flags.f_contiguous and not first[0].flags.c_contiguous
+    assert first[1].flags.c_contiguous
+
+
+def test_arrays_of_other_inputs_or_versions_are_computed(folder, monkeypatch):
+    """A bit of an input changed, the same bytes in another shape or type, or another
+    version: computed, never another key's arrays. A damaged file: computed."""
+    _arrays_kept(monkeypatch)
+    x = np.linspace(0.0, 1.0, 6)
+    calls = []
+
+    def compute(tag):
+        def run():
+            calls.append(tag)
+            return [np.full(2, float(len(calls)))]
+
+        return run
+
+    base = disk_cache.arrays("test", [x], "v1", compute("base"))
+    flipped = x.copy()
+    flipped.view(np.uint64)[3] ^= 1
+    for inputs, version, tag in [
+        ([flipped], "v1", "bit"),
+        ([x.reshape(2, 3)], "v1", "shape"),
+        ([x.view(np.int64)], "v1", "type"),
+        ([x], "v2", "version"),
+        ([x, x], "v1", "more"),
+    ]:
+        got = disk_cache.arrays("test", inputs, version, compute(tag))
+        assert calls[-1] == tag and got[0][0] != base[0][0]
+    assert disk_cache.arrays("test", [x], "v1", compute("again"))[0][0] == base[0][0]
+    assert calls[-1] != "again"
+    for path in (folder / "test").iterdir():
+        path.write_bytes(path.read_bytes()[:-3] + b"xyz")
+    disk_cache.arrays("test", [x], "v1", compute("damaged"))
+    assert calls[-1] == "damaged"
+
+
+def test_a_process_writes_few_arrays_of_a_kind(folder, monkeypatch):
+    """Past ``KEEP`` files of a kind written, a process computes without writing: a study of
+    hundreds of trains pays no write for each."""
+    _arrays_kept(monkeypatch)
+    n = disk_cache.KEEP + 4
+    for i in range(n):
+        disk_cache.arrays("test", [np.array([float(i)])], "v1", lambda: [np.zeros(1)])
+    assert len(list((folder / "test").iterdir())) == disk_cache.KEEP
+    assert disk_cache._written["test"] == disk_cache.KEEP

@@ -129,7 +129,7 @@ def test_this_process_caches_its_kernels_in_the_kernel_cache():
 
 def test_compiling_ahead_compiles_the_signatures_a_run_calls(monkeypatch):
     """A first run compiles modal-exact's kernel ahead from the types ``batch.integrator_types``
-    gives, found without running the start's or the harmonic responses' kernels
+    gives, found without running the start's kernels
     (``kernels.compile_kernels``); the quasi-static kernel is called from the batch's starts
     and from the trains' valve references. Each must be called with the types it was compiled
     for, or the run compiles it again (about 15 s for modal-exact). Checked here on the types

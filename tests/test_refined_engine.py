@@ -183,3 +183,37 @@ def test_the_steady_state_path_runs_refined_trains():
     change = -np.diff(onset)
     assert np.all(change > 0)
     assert np.all((change[:-1] / change[1:] > 3.0) & (change[:-1] / change[1:] < 4.5))
+
+
+def test_harmonic_responses_solve_their_equation_for_trains_of_several_sizes():
+    """``modal.harmonic_responses`` stacks the cases by train, each train's state padded to
+    the largest: every case's ζ solves (iωI − A)ζ = −b_q − iω b_v + ω² b_a of its own train
+    and configuration (I and III, the cam held) to rounding, the padding and the
+    configurations that leave the cam free stay zero, and cases given in any order get the
+    answers they get alone. Checked by the residual, computed here from the matrices."""
+    from campipe.engine.batch import train_modal
+    from campipe.engine.modal import harmonic_responses, pad_stack
+
+    data = [train_modal(TRAIN), train_modal(TRAIN.replace(spring_elements=4))]
+    a_mat = pad_stack([d.a_mat for d in data])
+    b_in = pad_stack([d.b_in for d in data])
+    n_free = np.stack([d.n_free for d in data])
+    train = np.array([1, 0, 1, 0, 0])
+    omega = rpm(np.array([6000.0, 9000.0, 9524.0, 14000.0, 300.0]))
+    zeta = harmonic_responses(train, n_free, a_mat, b_in, omega)
+    assert zeta.shape == (5, 4, a_mat.shape[2])
+    for c, (t, w) in enumerate(zip(train, omega, strict=True)):
+        for ci in range(4):
+            ns = 2 * n_free[t, ci]
+            if ci in (1, 3):
+                assert not zeta[c, ci].any()
+                continue
+            a = a_mat[t, ci, :ns, :ns]
+            b = b_in[t, ci, :ns, :, 0]
+            rhs = -b[:, 0] - 1j * w * b[:, 1] + w * w * b[:, 2]
+            residual = (1j * w * np.eye(ns) - a) @ zeta[c, ci, :ns] - rhs
+            scale = np.abs(a).max() * np.abs(zeta[c, ci]).max() + np.abs(rhs).max()
+            assert np.abs(residual).max() < 1e-13 * scale
+            assert not zeta[c, ci, ns:].any()
+        alone = harmonic_responses(train[c : c + 1], n_free, a_mat, b_in, omega[c : c + 1])
+        assert_array_equal(alone[0], zeta[c])

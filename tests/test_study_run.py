@@ -3,6 +3,7 @@
 import json
 import math
 import os
+import random
 import re
 import signal
 import socket
@@ -447,13 +448,20 @@ def test_import_campipe_does_not_pull_in_distributed_or_rerun():
 HEAVY = ("numba", "scipy", "pint", "dask", "distributed", "xarray", "netCDF4", "rerun")
 
 
-def _loaded_by(args, cwd=None) -> tuple[str, list[str]]:
-    """Run the CLI in a fresh interpreter; its stderr and the heavy packages it imported."""
+#: Modules that only compiling kernels or solving a new train's modes needs: numba's
+#: implementations for its compiler (they import SciPy's linear algebra), and that.
+COMPILING = ("numba.np.arraymath", "numba.np.linalg", "scipy.linalg")
+
+
+def _loaded_by(args, cwd=None, modules=()) -> tuple[str, list[str]]:
+    """Run the CLI in a fresh interpreter; its stderr and the heavy packages it imported,
+    and which of ``modules`` it imported."""
     code = (
         "import sys\n"
         "from campipe.cli import main\n"
         f"main({list(args)!r}, standalone_mode=False)\n"
         f"heavy = sorted({{m.split('.')[0] for m in sys.modules}} & {set(HEAVY)!r})\n"
+        f"heavy += sorted(set(sys.modules) & {set(modules)!r})\n"
         "print('loaded:', *heavy)\n"
     )
     out = subprocess.run(
@@ -492,22 +500,31 @@ def test_a_finished_study_answers_from_its_spec_text_and_the_archive_alone(small
     assert finished(spec, {"speed": "9000 rpm"}, tmp_path / "elsewhere.nc") is None
 
 
-def test_a_warm_one_case_study_reads_its_quantities_without_pint(tmp_path):
-    """Run again, a one-case study reads its quantities' values where the first run kept them
-    (``campipe.units``, ``campipe.disk_cache``): pint stays unloaded, and the archive is the
-    same. (SciPy's linear algebra loads all the same: numba imports it with its kernels.)
+def test_a_warm_one_case_study_reads_what_earlier_runs_kept(tmp_path):
+    """Run again, a one-case study reads its quantities' values, its train's modes and block
+    forms where the first run kept them (``campipe.units``, ``campipe.disk_cache``), and
+    loads its compiled kernels without numba's compiler: pint, SciPy's linear algebra and
+    the implementations numba compiles from stay unloaded, and the archive is the same, bit
+    for bit. A train of another spring then solves its modes (``scipy.linalg``).
 
-    Broken copy: with ``units._kept`` computing every time, pint is loaded."""
+    Broken copies: with ``units._kept`` computing every time, pint is loaded; with numba's
+    own ``Cache.load_overload`` (``kernel_cache.install`` not replacing it), or the modes
+    computed every time, ``scipy.linalg`` is."""
     one = SMALL.replace("[6000 rpm, 9524 rpm, 11000 rpm]", "[6000 rpm]")
     spec = write_spec(tmp_path, one.replace("seat: [none, 0.1 in]", "seat: [none]"))
     archive = tmp_path / "small.nc"
     _loaded_by(["study", str(spec), "--no-progress"], cwd=tmp_path)
     first = load(archive)
     archive.unlink()
-    stderr, heavy = _loaded_by(["study", str(spec), "--no-progress"], cwd=tmp_path)
+    run = ["study", str(spec), "--no-progress"]
+    stderr, heavy = _loaded_by(run, cwd=tmp_path, modules=COMPILING)
     assert "1 cases (0 reused, 1 computed" in stderr
     assert "numba" in heavy and "pint" not in heavy
+    assert not set(COMPILING) & set(heavy)
     xr.testing.assert_identical(load(archive), first)
+    stiffer = ["--set", f"model.spring_rate={random.uniform(250, 260):.6f} lbf/in"]
+    _, heavy = _loaded_by([*run, "-o", "other.nc", *stiffer], cwd=tmp_path, modules=COMPILING)
+    assert "scipy.linalg" in heavy
 
 
 def test_the_first_run_says_what_it_compiles(tmp_path, monkeypatch):

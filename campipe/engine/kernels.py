@@ -16,7 +16,7 @@ import hashlib
 import logging
 from collections.abc import Callable, Iterable, Mapping
 
-from campipe.engine import batch, contact, exact, modal, newmark, steady
+from campipe.engine import batch, contact, exact, newmark, steady
 from campipe.engine.settings import Case, RunSettings
 
 log = logging.getLogger(__name__)
@@ -25,10 +25,7 @@ log = logging.getLogger(__name__)
 def kernels(settings: RunSettings) -> dict[str, object]:
     """The compiled kernels (numba dispatchers) a run with ``settings`` calls, by name; each
     takes the helpers it calls with it (inlined, or compiled and cached along)."""
-    out: dict[str, object] = {
-        "quasi-static state": contact.quasi_static_batch,
-        "harmonic responses": modal.harmonic_responses,
-    }
+    out: dict[str, object] = {"quasi-static state": contact.quasi_static_batch}
     if settings.start == "quasi-static":
         out["cam lift"] = batch.cam_at
     else:
@@ -109,13 +106,13 @@ def _start_kernels(case: Case, settings: RunSettings, search: bool = False) -> N
 
 def compile_kernels(case: Case, settings: RunSettings, search: bool = False) -> None:
     """Compile (or load) every kernel a run with ``settings`` calls, the periodic start's
-    and the integrator's at once: the start's (and the harmonic responses') in a second
-    process, while this one compiles the integrator: modal-exact for the types of its
-    arguments (``batch.integrator_types``, no other kernel run but the quasi-static one),
-    newmark-linear through a short quasi-static run. numba compiles one kernel at a time in a
-    process, so the two cost the time of the longer on two cores, not their sum; both land in
-    the kernel cache, from which the study's own run then loads them. With ``search`` the
-    second process also compiles the onset's search (``search_kernels``)."""
+    and the integrator's at once: the start's in a second process, while this one compiles
+    the integrator: modal-exact for the types of its arguments (``batch.integrator_types``,
+    no other kernel run but the quasi-static one), newmark-linear through a short
+    quasi-static run. numba compiles one kernel at a time in a process, so the two cost the
+    time of the longer on two cores, not their sum; both land in the kernel cache, from which
+    the study's own run then loads them. With ``search`` the second process also compiles the
+    onset's search (``search_kernels``)."""
     short = dataclasses.replace(settings, revolutions=0.01, warmup=0)
     if settings.start != "periodic" and not search:
         batch.run_batch([case], short, full_state=False, on_failure="record")

@@ -35,13 +35,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg
-from numba import njit
-from scipy.linalg import lapack
 
-from campipe import kernel_cache
+from campipe import disk_cache
 from campipe.errors import CampipeError
-from campipe.model.assembly import SystemMatrices
+from campipe.model.assembly import SystemMatrices, lapack_version
 from campipe.vocabulary import (
     CAM,
     CAM_CONTACT,
@@ -51,8 +48,6 @@ from campipe.vocabulary import (
     SEATED,
     free_coordinates,
 )
-
-kernel_cache.install()  # before this module's kernels are defined: numba picks their cache then
 
 NS = 14  # the thesis train's state size: 2 × 7 free coordinates (configuration II)
 # Index hc of the held-coordinate axes below follows vocabulary.CONTACTS: 0 the cam, 1 the seat.
@@ -153,7 +148,17 @@ def _schur_groups(T: np.ndarray) -> list[list[int]]:
 def block_form(A: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
     """A = X·blockdiag(B_b)·X⁻¹: the blocks' bases X (ns × ns, block b in its columns) and the
     blocks B_b, fastest first. Each basis is orthonormal in the balanced coordinates, from the
-    real Schur form reordered to put the block first (LAPACK dtrsen)."""
+    real Schur form reordered to put the block first (LAPACK dtrsen). Kept on disk for the
+    next process (``campipe.disk_cache.arrays``), as the train's modes are."""
+    X, *blocks = disk_cache.arrays("block-forms", [A], lapack_version(), lambda: _block_form(A))
+    return X, blocks
+
+
+def _block_form(A: np.ndarray) -> list[np.ndarray]:
+    """X and the blocks, in one list (:func:`block_form`)."""
+    import scipy.linalg  # 0.1 s to import: not for a train solved before
+    from scipy.linalg import lapack
+
     ns = A.shape[0]
     balanced, (scale, _) = scipy.linalg.matrix_balance(A, permute=False, separate=True)
     T, Q = scipy.linalg.schur(balanced, output="real")
@@ -168,7 +173,7 @@ def block_form(A: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
         blocks.append(ts[:m, :m])
     speed = [_block_speed(b) for b in blocks]
     order = np.argsort(speed, kind="stable")[::-1]
-    return np.hstack([cols[k] for k in order]), [blocks[k] for k in order]
+    return [np.hstack([cols[k] for k in order]), *[blocks[k] for k in order]]
 
 
 def _block_numbers(B: np.ndarray) -> tuple[float, float]:
@@ -314,7 +319,6 @@ def modal_data(sm: SystemMatrices) -> ModalData:
     return ModalData(**out)
 
 
-@njit(cache=True, nogil=True)
 def harmonic_responses(train, n_free, a_mat, b_in, omega):
     """(n, 4, ns) complex ζ per case (ns the padded state size of ``a_mat``): the particular
     solution for a cam harmonic Re(β e^{iθ}) of the lift is Z_T = β·ζ, with θ = ωt
@@ -322,29 +326,23 @@ def harmonic_responses(train, n_free, a_mat, b_in, omega):
 
     The cam coordinate is q1 = −lift, so (q1, q̇1, q̈1) = Re(β (−1, −iω, ω²) e^{iθ}) and
     (iωI − A) ζ = −b_q − iω b_v + ω² b_a.  Arrays as ``ModalData`` with a leading train axis;
-    case c runs train ``train[c]`` at speed ``omega[c]``.
+    case c runs train ``train[c]`` at speed ``omega[c]``. One LAPACK solve (zgesv) per case
+    and configuration, stacked by train: numpy's batched ``solve`` costs what a compiled loop
+    over them did (4 µs a case) without its 3 s of compile.
     """
-    n = omega.shape[0]
-    out = np.zeros((n, 4, a_mat.shape[2]), np.complex128)
-    for c in range(n):
-        w = omega[c]
-        t = train[c]
+    out = np.zeros((omega.shape[0], 4, a_mat.shape[2]), np.complex128)
+    for t in np.unique(train):
+        cases = np.flatnonzero(train == t)
+        w = omega[cases][:, None]
         for ci in (0, 2):
             ns = 2 * n_free[t, ci]
-            mat = np.zeros((ns, ns), np.complex128)
-            rhs = np.zeros(ns, np.complex128)
-            for s in range(ns):
-                for j in range(ns):
-                    mat[s, j] = -a_mat[t, ci, s, j]
-                mat[s, s] += 1j * w
-                rhs[s] = (
-                    -b_in[t, ci, s, 0, 0]
-                    - 1j * w * b_in[t, ci, s, 1, 0]
-                    + w * w * b_in[t, ci, s, 2, 0]
-                )
-            sol = np.linalg.solve(mat, rhs)
-            for s in range(ns):
-                out[c, ci, s] = sol[s]
+            diagonal = np.arange(ns)
+            mat = np.zeros((cases.size, ns, ns), np.complex128)
+            mat[:] = -a_mat[t, ci, :ns, :ns]
+            mat[:, diagonal, diagonal] += 1j * w
+            b = b_in[t, ci, :ns, :, 0]
+            rhs = -b[:, 0] - 1j * w * b[:, 1] + w * w * b[:, 2]
+            out[cases, ci, :ns] = np.linalg.solve(mat, rhs[..., None])[..., 0]
     return out
 
 

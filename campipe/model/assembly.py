@@ -11,11 +11,13 @@ A train of n coordinates (seven for the thesis's model, more with refined member
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
+from campipe import disk_cache
 from campipe.model.coordinates import TRANSLATIONS, translations
 from campipe.model.elements import elements
 from campipe.model.parameters import N_DOF, ValveTrain, mode_damping_ratios
@@ -57,20 +59,44 @@ def normal_modes(
 
     Each mode's sign is fixed so that its largest-magnitude translation is positive;
     ``translation`` (n,) bool says which coordinates are translations (by default the
-    thesis's for a 7×7 problem, else all).
+    thesis's for a 7×7 problem, else all). Kept on disk for the next process
+    (``campipe.disk_cache.arrays``): a study of trains solved before never imports
+    ``scipy.linalg``.
     """
-    import scipy.linalg  # 0.1 s to import: not for --help, nor a finished study
-
-    lam, phi = scipy.linalg.eigh(stiffness, mass)
-    omega = np.sqrt(np.clip(lam, 0.0, None))
     n = mass.shape[0]
     if translation is None:
         translation = TRANSLATIONS if n == N_DOF else np.ones(n, bool)
+    translation = np.asarray(translation, bool)
+    omega, phi = disk_cache.arrays(
+        "modes",
+        [mass, stiffness, translation],
+        lapack_version(),
+        lambda: _normal_modes(mass, stiffness, translation),
+    )
+    return omega, phi
+
+
+def _normal_modes(
+    mass: np.ndarray, stiffness: np.ndarray, translation: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    import scipy.linalg  # 0.1 s to import: not for --help, a finished study or a known train
+
+    lam, phi = scipy.linalg.eigh(stiffness, mass)
+    omega = np.sqrt(np.clip(lam, 0.0, None))
     for j in range(phi.shape[1]):
         v = np.where(translation, phi[:, j], 0.0)
         if v[np.argmax(np.abs(v))] < 0:
             phi[:, j] = -phi[:, j]
     return omega, phi
+
+
+@functools.cache
+def lapack_version() -> str:
+    """What the LAPACK results kept on disk (``campipe.disk_cache.arrays``) depend on beyond
+    their inputs: the numpy and SciPy that computed them (SciPy's LAPACK)."""
+    import scipy  # numba imports it too: its top level only, a few ms
+
+    return f"numpy {np.__version__}; scipy {scipy.__version__}"
 
 
 def modal_damping(
