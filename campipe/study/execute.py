@@ -51,7 +51,7 @@ from pathlib import Path
 
 import numpy as np
 
-from campipe.engine.settings import sample_count, turn_count
+from campipe.engine.settings import output_angles, sample_count, turn_count
 from campipe.errors import CampipeError
 from campipe.io import batch_file
 from campipe.io.archive import (
@@ -86,6 +86,7 @@ from campipe.study.progress import Progress
 from campipe.study.results import (
     BatchData,
     BatchPlan,
+    cam_angle_degrees,
     compute_batch,
     numerics_fingerprint,
 )
@@ -670,8 +671,18 @@ def run_study(
                 compile_first({p.cases[0].settings: p.cases[0].case for p in plans}, notice)
             if plans:
                 if local:
-                    _run_local(plans, scheduler, workers, parts, study.record, on_batch, stored)
+                    _run_local(
+                        plans,
+                        scheduler,
+                        workers,
+                        parts,
+                        study.record,
+                        on_batch,
+                        stored,
+                        sink.create,
+                    )
                 else:
+                    sink.create()
                     _run_distributed(
                         plans,
                         scheduler,
@@ -809,10 +820,13 @@ def _run_local(
     record: tuple[str, ...],
     on_batch: BatchHook | None,
     stored: Callable[[_Stored | BatchData], None],
+    started: Callable[[], None] = lambda: None,
 ) -> None:
     """Batches on this machine: in order in this thread (``synchronous``), or on a pool of
     threads (the engine releases the GIL) or of processes, each worker storing its batches.
-    This thread hands each stored batch to ``stored`` as it finishes."""
+    This thread calls ``started`` once they are under way (while the workers load their
+    kernels and compute the first batches, it would wait), then hands each stored batch to
+    ``stored`` as it finishes."""
     # The hook runs where the batch is stored: a worker thread, or this process.
     in_worker = scheduler != "processes" or on_batch is None
     task = functools.partial(
@@ -824,6 +838,7 @@ def _run_local(
         on_batch if in_worker else None,
     )
     if scheduler == "synchronous":
+        started()
         for p in plans:
             stored(task(p))
         return
@@ -840,6 +855,7 @@ def _run_local(
         )
     try:
         futures = [pool.submit(task, p) for p in plans]
+        started()
         for future in as_completed(futures):
             stored(future.result())
     except BrokenExecutor as exc:
@@ -971,6 +987,8 @@ class _Assembly:
         self.case_names: list[str] = []
         self.event_names: list[str] = []
         self.held: dict[Path, tuple[BatchData, int]] = {}  # batches in memory, their bytes
+        # Every batch's: the study's run settings set them (``fields.STUDY_WIDE``)
+        self.cam_angle = cam_angle_degrees(output_angles(study.cases[0].settings))
         self.held_bytes = 0
         self.position = {cid: pos for pos, cid in enumerate(self.ids)}
         self.last_row: dict[Path, int] = {}  # the last case each file supplies
@@ -986,6 +1004,8 @@ class _Assembly:
             self.found[cid] = (s.path, row, n_ev)
         self.last_row[s.path] = max(self.position[cid] for cid in s.case_ids)
         if s.data is not None:
+            if not np.array_equal(s.data.cam_angle, self.cam_angle):
+                raise RuntimeError(f"batch {s.key}: other cam angles than the study's; a defect")
             size = sum(a.nbytes for a in s.data.arrays.values())
             if self.held_bytes + size <= HELD_BYTES:
                 self.held[s.path] = (s.data, size)
@@ -1042,6 +1062,12 @@ class _Assembly:
         log.info("wrote %s (%d cases)", self.archive, len(self.ids))
         return self.archive
 
+    def create(self) -> None:
+        """Create the archive now, if there is anything to write, rather than with the first
+        block (:meth:`advance`): its variables and axes depend on the study alone."""
+        if self.writer is None and self.cursor < len(self.ids):
+            self._create()
+
     def abort(self) -> None:
         """Remove the unfinished archive (nothing once :meth:`finish` put it in place)."""
         if self.writer is not None:
@@ -1050,14 +1076,8 @@ class _Assembly:
 
     def _create(self) -> None:
         study = self.study
-        first = self.found[self.ids[0]][0]
-        if first in self.held:
-            cam_angle = self.held[first][0].cam_angle
-        elif first.suffix == batch_file.SUFFIX:
-            cam_angle = batch_file.read(first, ("cam_angle",))["cam_angle"]
-        else:
-            cam_angle = read_variable(first, "cam_angle")
-        sizes, specs, static = archive_layout(study, None, cam_angle, turn_count(study.revolutions))
+        n_rev = turn_count(study.revolutions)
+        sizes, specs, static = archive_layout(study, None, self.cam_angle, n_rev)
         attrs = {**study_attrs(study), "spec_file": self.spec, **provenance(self.command)}
         self.case_names = [
             s.name for s in specs if s.dims[:1] == ("case",) and s.name not in static
