@@ -50,6 +50,7 @@ from campipe.engine.settings import (
     RunSettings,
     check_run,
     output_angles,
+    sample_count,
     turn_count,
 )
 from campipe.engine.settings import DEFAULT_CAPTURE_VELOCITY as DEFAULT_CAPTURE_VELOCITY
@@ -554,7 +555,7 @@ def integrator_types(cases: Sequence[Case], settings: RunSettings, full_state: b
 def _outputs(batch: _Batch, settings: RunSettings):
     """The kernels' output arrays for a batch run with ``settings`` (``common.make_outputs``)."""
     n_rev = turn_count(settings.revolutions)
-    n_out = output_angles(settings).size
+    n_out = sample_count(settings.revolutions, settings.output_every)
     n_q = batch.modal_trains.load.shape[1]
     return make_outputs(len(batch.which), n_out, n_rev, settings.max_events, n_q)
 
