@@ -3,7 +3,7 @@ source, so that a fresh install or clone of a campipe this machine has run befor
 kernels instead of compiling them again.
 
 numba's own cache sits beside each source file (``__pycache__``): every new clone or venv
-starts it empty and compiles for half a minute or more. Here a kernel is cached under
+starts it empty and compiles every kernel again. Here a kernel is cached under
 ``<root>/<kernel source>/<package folder>``, where
 
 - ``root`` is ``$NUMBA_CACHE_DIR/campipe`` when numba's cache folder is set, else campipe's
@@ -20,6 +20,10 @@ behaviour, and so does everything when ``NUMBA_CACHE_LOCATOR_CLASSES`` is set or
 cannot be written (numba then falls back to ``__pycache__``). When a new kernel-source
 folder is made, those beyond the :data:`KEEP` used last are removed; with them go the other
 files a process keeps there for the next (``campipe.disk_cache``, :func:`ensure_folder`).
+
+A process that loads its kernels does not set numba up to compile (:func:`_load_overload`);
+one that compiles inlines campipe's helpers without numba's copies of their IR
+(:func:`_inline_without_copies`).
 """
 
 from __future__ import annotations
@@ -215,6 +219,56 @@ def _load_overload(self, sig, target_context):
     from numba.core.runtime import rtsys
 
     rtsys.initialize(target_context)
+    loaded = None  # stays None when the guard swallows an error: not cached
     with self._guard_against_spurious_io_errors():
-        return self._load_overload(sig, target_context)
-    return None  # the guard swallowed an error: not cached
+        loaded = self._load_overload(sig, target_context)
+    if loaded is None:  # numba compiles the kernel next
+        _inline_without_copies()
+    return loaded
+
+
+@functools.cache
+def _inline_without_copies() -> None:
+    """Let numba inline campipe's ``inline="always"`` helpers without copying their IR (once a
+    process, before the first of campipe's kernels compiles).
+
+    For each call site, numba's ``InlineWorker.inline_function`` builds the helper's IR afresh
+    (the untyped passes) and hands it to ``inline_ir``, which deep-copies it twice before
+    splicing it into the caller: once to mutate, once to return unmutated; block by block, so
+    each block copies the helper's whole scope again. No one else holds that fresh IR, and
+    ``inline_function``'s caller (the ``InlineInlinables`` pass) drops the unmutated copy, so
+    neither copy is needed; they were a sixth of a first run's compiling (numba/numba#8989).
+    Here the fresh blocks copy as themselves while they are spliced in; the IR, and so the
+    compiled code, is what numba's copies give. Only campipe's helpers are inlined this way,
+    and only while numba's inliner has the shape this was written for (``inline_ir`` copies
+    through a nested ``copy_ir`` alone); otherwise numba's own method stays."""
+    from numba.core import inline_closurecall, ir
+
+    worker = inline_closurecall.InlineWorker
+    original = getattr(worker, "inline_function", None)
+    code = getattr(getattr(worker, "inline_ir", None), "__code__", None)
+    nested = [c.co_name for c in code.co_consts if hasattr(c, "co_name")] if code else []
+    if original is None or nested != ["copy_ir"] or not hasattr(worker, "run_untyped_passes"):
+        log.debug("numba's inliner has changed: helpers inlined with numba's copies")
+        return
+
+    class Fresh(ir.Block):
+        def __deepcopy__(self, memo):
+            return self
+
+    def inline_function(self, caller_ir, block, i, function, arg_typs=None):
+        if not (getattr(function, "__module__", None) or "").startswith("campipe."):
+            return original(self, caller_ir, block, i, function, arg_typs)
+        callee_ir = self.run_untyped_passes(function)
+        fresh = list(callee_ir.blocks.values())
+        for one in fresh:
+            one.__class__ = Fresh
+        try:
+            freevars = function.__code__.co_freevars
+            return self.inline_ir(caller_ir, block, i, callee_ir, freevars, arg_typs=arg_typs)
+        finally:
+            for one in fresh:
+                one.__class__ = ir.Block
+
+    inline_function.__wrapped__ = original  # type: ignore[attr-defined]
+    worker.inline_function = inline_function

@@ -2,14 +2,17 @@
 loads the kernels an earlier copy compiled, and an edit to any file the kernels compile from
 (not only the kernel's own) makes them compile again."""
 
+import copy
 import json
 import os
 import shutil
 import subprocess
 import sys
 import time
+import types
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from campipe import kernel_cache
@@ -17,15 +20,17 @@ from campipe.engine import batch
 
 #: Run in a copy of campipe: the lift at θ = 0 of a harmonic cam through ``batch.cam_at`` (a
 #: small kernel, about a second to compile), then where its cache is and whether it was
-#: compiled (a cache miss) or loaded (a hit).
+#: compiled (a cache miss) or loaded (a hit), and whether campipe's inliner was set up.
 PROBE = """
 import json, campipe
 from campipe.engine import batch
 from campipe.profiles import harmonic
 from campipe.profiles.packed import pack
 lift = batch.cam_at(pack([harmonic(0.0254)]), 0.0)[0].tolist()
+from numba.core.inline_closurecall import InlineWorker
 print(json.dumps({
     "package": campipe.__file__,
+    "inliner": hasattr(InlineWorker.inline_function, "__wrapped__"),
     "cache": batch.cam_at._cache._cache_path,
     "hits": sum(batch.cam_at.stats.cache_hits.values()),
     "misses": sum(batch.cam_at.stats.cache_misses.values()),
@@ -77,6 +82,7 @@ def test_a_fresh_copy_loads_what_another_compiled_and_an_edit_recompiles(tmp_pat
     assert (a["misses"], a["hits"]) == (1, 0)
     assert (b["misses"], b["hits"]) == (0, 1)
     assert (c["misses"], c["hits"]) == (1, 0)
+    assert a["inliner"] and not b["inliner"]  # set up to compile only when compiling
     assert a["cache"] == b["cache"] != c["cache"]
     assert Path(a["cache"]).is_relative_to(cache / "campipe")
     assert a["lift"] == b["lift"] == c["lift"]
@@ -233,3 +239,74 @@ def test_no_kernel_is_compiled_once_per_constant_it_is_called_with(tmp_path):
         [sys.executable, "-c", ONE_SIGNATURE], capture_output=True, text=True, check=True, env=env
     )
     assert json.loads(out.stdout.splitlines()[-1]) == {}
+
+
+#: A helper inlined twice into a kernel, with branches (several blocks of IR) and a loop.
+INLINED = """
+import numba
+
+@numba.njit(inline="always")
+def clip(x, lo, hi):
+    if x < lo:
+        return lo
+    if x > hi:
+        return hi
+    return x
+
+@numba.njit
+def kernel(a):
+    total = 0.0
+    for x in a:
+        total += clip(x, -1.0, 1.0) * clip(2.0 * x, 0.0, 3.0) + x
+    return total
+"""
+
+
+def _inlining_module(name: str):
+    module = types.ModuleType(name)
+    exec(compile(INLINED, f"<{name}>", "exec"), module.__dict__)  # test code, not input
+    return module
+
+
+def test_campipe_helpers_are_inlined_without_copying_their_ir(monkeypatch):
+    """Once campipe compiles, numba inlines campipe's ``inline="always"`` helpers from their
+    fresh IR without deep-copying it (``kernel_cache._inline_without_copies``), and still
+    copies any other package's: counted here by a deep copy of an IR block that records
+    itself. The blocks spliced in are plain blocks again, and both kernels give what the same
+    Python code gives.
+
+    Broken copy: with the helper's blocks copied (the method not replaced), the campipe
+    module's count is above zero; with the replacement applied to every package, the other
+    module's count is zero."""
+    from numba.core import inline_closurecall, ir
+
+    kernel_cache._inline_without_copies()
+    assert hasattr(inline_closurecall.InlineWorker.inline_function, "__wrapped__")
+    copied: list[object] = []
+
+    def deepcopy(block, memo):  # numba's default deep copy of a block, counted
+        copied.append(block)
+        new = copy.copy(block)
+        memo[id(block)] = new
+        new.__dict__.update(copy.deepcopy(block.__dict__, memo))
+        return new
+
+    monkeypatch.setattr(ir.Block, "__deepcopy__", deepcopy, raising=False)
+    spliced: list[object] = []
+    inline_ir = inline_closurecall.InlineWorker.inline_ir
+
+    def spy(self, caller_ir, block, i, callee_ir, *args, **kwargs):
+        spliced.extend(callee_ir.blocks.values())
+        return inline_ir(self, caller_ir, block, i, callee_ir, *args, **kwargs)
+
+    monkeypatch.setattr(inline_closurecall.InlineWorker, "inline_ir", spy)
+    a = np.linspace(-2.0, 3.0, 23)
+    counts = {}
+    for name in ("campipe._inlining_probe", "elsewhere._inlining_probe"):
+        module = _inlining_module(name)
+        copied.clear()
+        assert module.kernel(a) == module.kernel.py_func(a)
+        counts[name] = len(copied)
+    assert spliced and all(type(b) is ir.Block for b in spliced)  # plain blocks once spliced
+    assert counts["campipe._inlining_probe"] == 0
+    assert counts["elsewhere._inlining_probe"] > 4  # two sites, each of several blocks, twice

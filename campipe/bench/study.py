@@ -540,7 +540,7 @@ def measure(
         say("study: validate's estimates of the bundled studies against their runs")
         out["estimates"] = estimates(studies, directory, workers)
     if not quick and studies is not None:
-        say("study: the quickstart as on a fresh install (numba compiles: half a minute or more)")
+        say("study: the quickstart as on a fresh install (numba compiles)")
         out["first_run"] = first_run(studies, directory)
     if not quick:
         say(f"study: campipe validate of {VALIDATE_CASES} cases")

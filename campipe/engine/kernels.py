@@ -3,7 +3,7 @@
 numba compiles a kernel on its first call and keeps it in campipe's kernel cache
 (:mod:`campipe.kernel_cache`, one user-wide folder per version of the kernels' source): a
 later process, of this install or of another of the same campipe, loads it in a fraction of a
-second, but the first run of a version on a machine compiles for half a minute or more. A
+second, but the first run of a version on a machine compiles them first, for seconds. A
 caller that wants to say so on the terminal (the CLI) asks :func:`uncompiled` before running;
 the engine itself prints nothing. Only the kernels of the run's integrator and start are named,
 and only those are compiled: a modal-exact study never compiles newmark-linear.
@@ -90,9 +90,9 @@ def compile_notice(settings: Iterable[RunSettings], search: bool = False) -> str
         return None
     what = ", ".join(missing) if missing else "the engine's kernels"
     return (
-        f"compiling {what} with numba{' (if not cached)' if unknown else ''}: the first run "
-        "of a campipe version on a machine takes half a minute or more; later runs, of any install "
-        "of it, load them from campipe's kernel cache in a fraction of a second"
+        f"compiling {what} with numba{' (if not cached)' if unknown else ''}, once for this "
+        "campipe version on this machine (seconds); later runs, of any install of it, load them "
+        "from campipe's kernel cache in a fraction of a second"
     )
 
 
