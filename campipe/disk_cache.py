@@ -39,7 +39,7 @@ _written_lock = threading.Lock()
 
 def folder(kind: str) -> Path:
     """The folder of ``kind``'s files, in this source's folder of the kernel cache."""
-    from campipe import kernel_cache  # numba: a run loads it for its kernels anyway
+    from campipe import kernel_cache  # the folder only: numba is not imported
 
     return kernel_cache.cache_folder() / kind
 

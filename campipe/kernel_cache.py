@@ -6,24 +6,26 @@ numba's own cache sits beside each source file (``__pycache__``): every new clon
 starts it empty and compiles every kernel again. Here a kernel is cached under
 ``<root>/<kernel source>/<package folder>``, where
 
-- ``root`` is ``$NUMBA_CACHE_DIR/campipe`` when numba's cache folder is set, else campipe's
-  user cache folder (``~/.cache/campipe/numba`` on Linux);
+- ``root`` is ``$NUMBA_CACHE_DIR/campipe`` when the environment sets numba's cache folder,
+  else campipe's user cache folder (``~/.cache/campipe/numba`` on Linux);
 - ``kernel source`` is the first hex digits of a SHA-256 over every file the kernels compile
   from (:data:`SOURCES`) and the numba and numpy versions. An edit anywhere in them moves
   every kernel to a new folder: numba's per-file stamp would keep a caller whose callee, in
   another file, changed.
 
-Installing :class:`KernelCacheLocator` (:func:`install`, called by every module that defines
-kernels before it defines them: numba picks a kernel's cache when it is decorated) puts it
-ahead of numba's locators for campipe's files only. Any other function keeps numba's
-behaviour, and so does everything when ``NUMBA_CACHE_LOCATOR_CLASSES`` is set or the folder
-cannot be written (numba then falls back to ``__pycache__``). When a new kernel-source
+Installing campipe's cache locator (:func:`locator`; :func:`install`, called by every module
+that defines kernels before it defines them: numba picks a kernel's cache when it is
+decorated) puts it ahead of numba's locators for campipe's files only. Any other function
+keeps numba's behaviour, and so does everything when ``NUMBA_CACHE_LOCATOR_CLASSES`` is set
+or the folder cannot be written (numba then falls back to ``__pycache__``). When a new kernel-source
 folder is made, those beyond the :data:`KEEP` used last are removed; with them go the other
 files a process keeps there for the next (``campipe.disk_cache``, :func:`ensure_folder`).
 
 A process that loads its kernels does not set numba up to compile (:func:`_load_overload`);
 one that compiles inlines campipe's helpers without numba's copies of their IR
-(:func:`_inline_without_copies`).
+(:func:`_inline_without_copies`). numba itself is imported only by those and the locator:
+finding the folder does not import it, so the commands that only read the disk cache kept
+there (``campipe query``, ``model``, ``validate``) do not.
 """
 
 from __future__ import annotations
@@ -34,11 +36,10 @@ import os
 import shutil
 import sys
 import time
+from importlib import metadata
 from pathlib import Path
 
-import numba
 import numpy as np
-from numba.core import caching, config
 
 from campipe.sources import PACKAGE, source_digest
 
@@ -65,7 +66,8 @@ IN_USE = 3600.0
 def hash_sources(root: Path) -> str:
     """SHA-256 (hex) of the numba and numpy versions and of the :data:`SOURCES` under the
     package folder ``root`` (``campipe.sources.source_digest``)."""
-    return source_digest(SOURCES, root, f"numba {numba.__version__}; numpy {np.__version__}")
+    numba = metadata.version("numba")  # as numba.__version__, without importing numba
+    return source_digest(SOURCES, root, f"numba {numba}; numpy {np.__version__}")
 
 
 @functools.cache
@@ -75,12 +77,14 @@ def source_hash() -> str:
 
 
 def cache_root() -> Path:
-    """The folder holding one folder per kernel source."""
-    if config.CACHE_DIR:
-        return Path(config.CACHE_DIR) / "campipe"
-    from numba.misc.appdirs import AppDirs
+    """The folder holding one folder per kernel source: numba's cache folder (the environment's
+    ``NUMBA_CACHE_DIR``, read here without importing numba) or campipe's user cache folder."""
+    numba_folder = os.environ.get("NUMBA_CACHE_DIR")
+    if numba_folder:
+        return Path(numba_folder) / "campipe"
+    import platformdirs
 
-    return Path(AppDirs(appname="campipe", appauthor=False).user_cache_dir) / "numba"
+    return Path(platformdirs.user_cache_dir("campipe", appauthor=False)) / "numba"
 
 
 @functools.cache
@@ -145,58 +149,66 @@ def _is_source_folder(name: str) -> bool:
     return len(name) == 16 and all(c in "0123456789abcdef" for c in name)
 
 
-class KernelCacheLocator(caching._CacheLocator):
-    """numba's cache locator for campipe's kernels (see the module's docstring)."""
+@functools.cache
+def locator() -> type:
+    """numba's cache locator for campipe's kernels (see the module's docstring): a class made
+    once numba is imported, so that reading this module (for the folder) does not import it."""
+    from numba.core import caching
 
-    def __init__(self, py_func, py_file: str):
-        self._py_file = py_file  # numba names it when it warns that a kernel cannot be cached
-        self._lineno = py_func.__code__.co_firstlineno
-        package = Path(py_file).resolve().parent.relative_to(ROOT)
-        self._cache_path = str(cache_folder().joinpath(*package.parts))
+    class KernelCacheLocator(caching._CacheLocator):
+        def __init__(self, py_func, py_file: str):
+            self._py_file = py_file  # numba names it when it warns that a kernel cannot be cached
+            self._lineno = py_func.__code__.co_firstlineno
+            package = Path(py_file).resolve().parent.relative_to(ROOT)
+            self._cache_path = str(cache_folder().joinpath(*package.parts))
 
-    def ensure_cache_path(self) -> None:
-        new = not cache_folder().exists()
-        super().ensure_cache_path()
-        _made(new)
+        def ensure_cache_path(self) -> None:
+            new = not cache_folder().exists()
+            super().ensure_cache_path()
+            _made(new)
 
-    def get_cache_path(self) -> str:
-        return self._cache_path
+        def get_cache_path(self) -> str:
+            return self._cache_path
 
-    def get_source_stamp(self) -> str:
-        return source_hash()
+        def get_source_stamp(self) -> str:
+            return source_hash()
 
-    def get_disambiguator(self) -> str:
-        return str(self._lineno)
+        def get_disambiguator(self) -> str:
+            return str(self._lineno)
 
-    @classmethod
-    def from_function(cls, py_func, py_file):
-        try:
-            Path(py_file).resolve().relative_to(ROOT)
-        except (ValueError, OSError):
-            return None  # not campipe's: numba's own locators
-        if getattr(sys, "frozen", False):
-            return None
-        try:
-            self = cls(py_func, py_file)
-            self.ensure_cache_path()
-        except OSError as exc:  # not writable: numba's own locators
-            log.debug("kernel cache folder unusable (%s); numba's __pycache__ instead", exc)
-            return None
-        return self
+        @classmethod
+        def from_function(cls, py_func, py_file):
+            try:
+                Path(py_file).resolve().relative_to(ROOT)
+            except (ValueError, OSError):
+                return None  # not campipe's: numba's own locators
+            if getattr(sys, "frozen", False):
+                return None
+            try:
+                self = cls(py_func, py_file)
+                self.ensure_cache_path()
+            except OSError as exc:  # not writable: numba's own locators
+                log.debug("kernel cache folder unusable (%s); numba's __pycache__ instead", exc)
+                return None
+            return self
+
+    return KernelCacheLocator
 
 
 def install() -> None:
-    """Put :class:`KernelCacheLocator` first among numba's cache locators (once), and load
+    """Put :func:`locator`'s class first among numba's cache locators (once), and load
     campipe's kernels without preparing numba to compile (:func:`_load_overload`). numba's
     locator list is internal (``CacheImpl``, ``_CacheImpl`` before 0.68): if it is not found,
     numba's own caching stays."""
+    from numba.core import caching
+
     impl = getattr(caching, "CacheImpl", None) or getattr(caching, "_CacheImpl", None)
     classes = getattr(impl, "_locator_classes", None)
     if not isinstance(classes, list):
         log.debug("numba's cache locators not found: kernels cached in __pycache__")
         return
-    if KernelCacheLocator not in classes:
-        classes.insert(0, KernelCacheLocator)
+    if locator() not in classes:
+        classes.insert(0, locator())
     cache = caching.Cache
     if getattr(cache.load_overload, "__wrapped__", None) is None and all(
         hasattr(cache, name) for name in ("_load_overload", "_guard_against_spurious_io_errors")
@@ -214,7 +226,7 @@ def _load_overload(self, sig, target_context):
     loading compiled code does not use. What loading does use is set up here: numba's runtime
     (NRT: the kernels that allocate call it). Anything that compiles (a kernel of a new
     signature) refreshes the context itself, as numba's compiler always does."""
-    if not isinstance(self._impl.locator, KernelCacheLocator):
+    if not isinstance(self._impl.locator, locator()):
         return _load_overload.__wrapped__(self, sig, target_context)  # type: ignore[attr-defined]
     from numba.core.runtime import rtsys
 

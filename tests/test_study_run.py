@@ -475,6 +475,25 @@ def test_help_loads_none_of_the_heavy_packages():
     assert heavy == []
 
 
+def test_commands_that_run_no_kernel_do_not_import_numba(small, tmp_path):
+    """A query of an archive, the model's matrices and a spec's check without the estimate
+    (which runs the engine) import no numba: the disk cache they read finds its folder without
+    it (``kernel_cache.cache_root``), and the estimate imports the engine only when it runs.
+    The estimate itself does.
+
+    Broken copy: ``kernel_cache`` importing numba at its top, or ``study.estimate`` importing
+    the engine at its top, loads numba in the first or the third command."""
+    _, _, archive, spec = small
+    _, heavy = _loaded_by(["query", str(archive), "--summary"])
+    assert "numba" not in heavy and "xarray" in heavy  # it did read the archive
+    _, heavy = _loaded_by(["model"])
+    assert "numba" not in heavy
+    _, heavy = _loaded_by(["validate", str(spec), "--no-estimate"])
+    assert "numba" not in heavy
+    _, heavy = _loaded_by(["validate", str(spec)], cwd=tmp_path)
+    assert "numba" in heavy
+
+
 def test_a_finished_study_answers_from_its_spec_text_and_the_archive_alone(small, tmp_path):
     """Rerunning a finished study reads the spec's text and verifies the archive's checksums:
     no unit is parsed and no model built (pint, SciPy, numba stay unloaded). Another

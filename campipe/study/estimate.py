@@ -29,8 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from campipe.constants import TWO_PI
-from campipe.engine import RunSettings, run_at_fidelity, run_batch
-from campipe.engine.settings import sample_count, turn_count
+from campipe.engine.settings import RunSettings, sample_count, turn_count
 from campipe.study.execute import default_batch_size, plan_batches, run_study
 from campipe.study.expand import ResolvedCase, SpeedSweep, Study, distinct_but_speed
 from campipe.study.variables import DOF_NAMES, data_variables
@@ -69,6 +68,8 @@ def warm_up(study: Study) -> float:
     """Load each run-settings group's kernel with a tiny run of its first case; the time it
     took, each group's at most :data:`MAX_LOAD_SECONDS` [s]. (A speed sweep's group starts
     with its first combination of the other axes, at the first speed.)"""
+    from campipe.engine import run_batch  # numba: not for validate --no-estimate
+
     firsts: dict[RunSettings, ResolvedCase] = {}
     for c in distinct_but_speed(study.cases)[0]:
         firsts.setdefault(c.settings, c)
@@ -127,6 +128,8 @@ def time_run(
 def time_engine(cases: Sequence[ResolvedCase]) -> float:
     """Wall time of the engine on ``cases`` on one worker, one call per run-settings group,
     as the study runs them (full runs, all events) [s]."""
+    from campipe.engine import run_at_fidelity
+
     groups: dict[RunSettings, list[ResolvedCase]] = {}
     for c in cases:
         groups.setdefault(c.settings, []).append(c)
