@@ -190,9 +190,9 @@ def test_compiling_ahead_compiles_the_signatures_a_run_calls(monkeypatch):
 
 
 #: Run in a fresh process: the kernels of runs of each integrator and start, with and without a
-#: seat, form closure and restitution, of the steady state and of the onset's search; then
-#: every campipe kernel that holds more than one compiled signature, with the arguments that
-#: differ.
+#: seat, form closure and restitution, the helpers a first run compiles ahead, the steady state
+#: and the onset's search; then every campipe kernel that holds more than one compiled
+#: signature, with the arguments that differ.
 ONE_SIGNATURE = """
 import json, math
 import numba
@@ -209,6 +209,9 @@ for integrator, dt, n in (("modal-exact", None, 4), ("newmark-linear", 1e-6, 3))
     for start in ("periodic", "quasi-static"):  # (newmark-linear refuses restitution)
         run_batch(cases[:n], RunSettings(revolutions=1.5, warmup=0, start=start,
                                          integrator=integrator, dt=dt), on_failure="record")
+ahead = batch.integrator_types(cases, RunSettings(revolutions=1.5, warmup=0), False)
+for helper, signature in exact.ahead_signatures(ahead).items():  # as a first run compiles
+    helper.compile(signature)
 periodic.steady_state(cases[:1])
 periodic.onset_speeds(cases[:1], 6000 * math.pi / 30, 14000 * math.pi / 30, 1.0)
 many = {}
@@ -230,10 +233,13 @@ def test_no_kernel_is_compiled_once_per_constant_it_is_called_with(tmp_path):
     once per value (numba types the constant as a literal), each compile a second or more of
     a first run: ``steady._turn_minimum`` was compiled three times, ``record_event`` three.
     Runs of both integrators and starts, the steady state and the onset's search must leave
-    each kernel with one signature. Only a compile shows it (a kernel loaded from the cache
-    brings its callees along, their dispatchers untouched), so this compiles every kernel on
-    an empty cache, about a minute: ``slow``. Broken copy, run: ``exact._drop_decayed``
-    counting from the constant 0 again (``_keep_column`` gets two signatures)."""
+    each kernel with one signature; so must the helpers a first run compiles ahead for
+    modal-exact's types (``exact.ahead_signatures``), or the kernel compiles them again.
+    Only a compile shows it (a kernel loaded from the cache brings its callees along, their
+    dispatchers untouched), so this compiles every kernel on an empty cache, about a minute:
+    ``slow``. Broken copies, run: ``exact._drop_decayed`` counting from the constant 0 again
+    (``_keep_column`` gets two signatures); ``ahead_signatures`` giving ``first`` as int32
+    (``_apply_event`` gets two)."""
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba")}
     out = subprocess.run(
         [sys.executable, "-c", ONE_SIGNATURE], capture_output=True, text=True, check=True, env=env
@@ -310,3 +316,34 @@ def test_campipe_helpers_are_inlined_without_copying_their_ir(monkeypatch):
     assert spliced and all(type(b) is ir.Block for b in spliced)  # plain blocks once spliced
     assert counts["campipe._inlining_probe"] == 0
     assert counts["elsewhere._inlining_probe"] > 4  # two sites, each of several blocks, twice
+
+
+def test_the_second_process_compiles_modal_exacts_helpers_ahead_before_the_start(monkeypatch):
+    """``kernels._start_kernels`` (the second process of a first run) compiles each helper
+    ``exact.ahead_signatures`` names for the run's modal-exact types before the start's
+    kernels, so that the first process, compiling the kernel, finds it cached; a
+    newmark-linear run has none. Whether those are the types the kernel calls the helper with
+    is the ``slow`` one-signature test's."""
+    from campipe.engine import exact, kernels
+    from campipe.engine.batch import Case, RunSettings
+    from campipe.model import thesis_train
+    from campipe.profiles import harmonic
+
+    done: list[object] = []
+
+    class Recorder:
+        def compile(self, signature):
+            done.append(("helper", signature))
+
+    monkeypatch.setattr(exact, "ahead_signatures", lambda types: {Recorder(): types[:2]})
+    monkeypatch.setattr(batch, "start_states", lambda cases, settings: done.append("start"))
+    case = Case(thesis_train(), harmonic(0.0254), 900.0)
+    settings = RunSettings(revolutions=0.05, warmup=0)
+    kernels._start_kernels(case, settings)
+    expected = batch.integrator_types([case], settings, False)[:2]
+    assert done == [("helper", expected), "start"]
+    done.clear()
+    kernels._start_kernels(
+        case, RunSettings(revolutions=0.05, integrator="newmark-linear", dt=1e-6)
+    )
+    assert done == ["start"]

@@ -58,8 +58,10 @@ it (``_apply_event``), cross a profile break (``_cross_break``).
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
-from numba import njit
+from numba import njit, types
 
 from campipe.constants import TWO_PI
 from campipe.engine.closed_form import (
@@ -1133,3 +1135,15 @@ def modal_exact_batch(cases, trains, profiles, runs, out, ws, state):
             out.fmax[c, turn, 2] = out.fmax[c, turn, 0]
         if out.n_events[c] > out.events.shape[1] and out.status[c] == OK:
             out.status[c] = EVENTS_TRUNCATED
+
+
+def ahead_signatures(kernel_types: tuple) -> dict[Any, tuple]:
+    """The helpers of :func:`modal_exact_batch` that a first run compiles in its second
+    process (``kernels.compile_kernels``), each with the types the kernel calls it with, given
+    the kernel's own argument types (``batch.integrator_types``). ``_apply_event``, a tenth
+    of the kernel's compile, there before the periodic start: the two processes then end
+    nearer together, and the kernel, compiled in the first, loads it from the cache. Types
+    that differ from the kernel's call cost a second compile, not a wrong result."""
+    cases, trains, profiles, _, out, ws, state = kernel_types
+    st = state.dtype  # the kernel's ``state[0]``
+    return {_apply_event: (cases, trains, profiles, out, ws, st, types.int64, types.float64)}

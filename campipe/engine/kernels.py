@@ -97,6 +97,10 @@ def compile_notice(settings: Iterable[RunSettings], search: bool = False) -> str
 
 
 def _start_kernels(case: Case, settings: RunSettings, search: bool = False) -> None:
+    if settings.method == "modal-exact":
+        kernel_types = batch.integrator_types([case], settings, False)
+        for helper, signature in exact.ahead_signatures(kernel_types).items():
+            helper.compile(signature)
     batch.start_states([case], settings)
     if search:
         from campipe.engine import periodic
@@ -111,8 +115,10 @@ def compile_kernels(case: Case, settings: RunSettings, search: bool = False) -> 
     no other kernel run but the quasi-static one), newmark-linear through a short
     quasi-static run. numba compiles one kernel at a time in a process, so the two cost the
     time of the longer on two cores, not their sum; both land in the kernel cache, from which
-    the study's own run then loads them. With ``search`` the second process also compiles the
-    onset's search (``search_kernels``)."""
+    the study's own run then loads them. The second process first compiles a modal-exact
+    helper that this one then loads (``exact.ahead_signatures``), so that the two end nearer
+    together. With ``search`` the second process also compiles the onset's search
+    (``search_kernels``)."""
     short = dataclasses.replace(settings, revolutions=0.01, warmup=0)
     if settings.start != "periodic" and not search:
         batch.run_batch([case], short, full_state=False, on_failure="record")
