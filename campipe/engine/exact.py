@@ -1140,10 +1140,14 @@ def modal_exact_batch(cases, trains, profiles, runs, out, ws, state):
 def ahead_signatures(kernel_types: tuple) -> dict[Any, tuple]:
     """The helpers of :func:`modal_exact_batch` that a first run compiles in its second
     process (``kernels.compile_kernels``), each with the types the kernel calls it with, given
-    the kernel's own argument types (``batch.integrator_types``). ``_apply_event``, a tenth
-    of the kernel's compile, there before the periodic start: the two processes then end
-    nearer together, and the kernel, compiled in the first, loads it from the cache. Types
-    that differ from the kernel's call cost a second compile, not a wrong result."""
+    the kernel's own argument types (``batch.integrator_types``): ``_apply_event`` and
+    ``_cross_break``, about a fifth of the kernel's compile, there before the periodic start,
+    so that the two processes end together; the kernel, compiled in the first, loads them
+    from the cache (it reaches them late). Types that differ from the kernel's call would
+    cost a second compile, not a wrong result."""
     cases, trains, profiles, _, out, ws, state = kernel_types
     st = state.dtype  # the kernel's ``state[0]``
-    return {_apply_event: (cases, trains, profiles, out, ws, st, types.int64, types.float64)}
+    return {
+        _apply_event: (cases, trains, profiles, out, ws, st, types.int64, types.float64),
+        _cross_break: (cases, trains, profiles, out, ws, st),
+    }

@@ -115,8 +115,8 @@ def compile_kernels(case: Case, settings: RunSettings, search: bool = False) -> 
     no other kernel run but the quasi-static one), newmark-linear through a short
     quasi-static run. numba compiles one kernel at a time in a process, so the two cost the
     time of the longer on two cores, not their sum; both land in the kernel cache, from which
-    the study's own run then loads them. The second process first compiles a modal-exact
-    helper that this one then loads (``exact.ahead_signatures``), so that the two end nearer
+    the study's own run then loads them. The second process first compiles modal-exact
+    helpers that this one then loads (``exact.ahead_signatures``), so that the two end
     together. With ``search`` the second process also compiles the onset's search
     (``search_kernels``)."""
     short = dataclasses.replace(settings, revolutions=0.01, warmup=0)
