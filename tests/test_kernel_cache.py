@@ -223,7 +223,17 @@ for module in (batch, contact, closed_form, common, exact, modal, newmark, stead
                 [str(s[i]) for s in sigs] for i in range(len(sigs[0]))
                 if len({str(s[i]) for s in sigs}) > 1
             ]
-print(json.dumps(many))
+# A helper of its own (no CPython wrapper) that takes one of the batch's named tuples by
+# value is compiled with a parameter for every scalar of its arrays (``common.by_ref``).
+by_value = sorted(
+    f"{kernel.py_func.__module__}.{name}"
+    for module in (batch, contact, closed_form, common, exact, modal, newmark, steady, packed)
+    for name, kernel in vars(module).items()
+    if isinstance(kernel, numba.core.registry.CPUDispatcher)
+    and kernel.targetoptions.get("no_cpython_wrapper")
+    and any(isinstance(t, numba.types.BaseNamedTuple) for s in kernel.signatures for t in s)
+)
+print(json.dumps({"more than one signature": many, "named tuples by value": by_value}))
 """
 
 
@@ -237,14 +247,17 @@ def test_no_kernel_is_compiled_once_per_constant_it_is_called_with(tmp_path):
     modal-exact's types (``exact.ahead_signatures``), or the kernel compiles them again.
     Only a compile shows it (a kernel loaded from the cache brings its callees along, their
     dispatchers untouched), so this compiles every kernel on an empty cache, about a minute:
-    ``slow``. Broken copies, run: ``exact._drop_decayed`` counting from the constant 0 again
-    (``_keep_column`` gets two signatures); ``ahead_signatures`` giving ``first`` as int32
-    (``_apply_event`` gets two)."""
+    ``slow``. The same compiles show every helper of its own taking no named tuple by value
+    (``common.by_ref``). Broken copies, run: ``exact._drop_decayed`` counting from the
+    constant 0 again (``_keep_column`` gets two signatures); ``ahead_signatures`` giving
+    ``first`` as int32 (``_apply_event`` gets two); ``closed_form.held_inputs`` taking the
+    packed profiles' tuple again (listed)."""
     env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba")}
     out = subprocess.run(
         [sys.executable, "-c", ONE_SIGNATURE], capture_output=True, text=True, check=True, env=env
     )
-    assert json.loads(out.stdout.splitlines()[-1]) == {}
+    found = json.loads(out.stdout.splitlines()[-1])
+    assert found == {"more than one signature": {}, "named tuples by value": []}
 
 
 #: A helper inlined twice into a kernel, with branches (several blocks of IR) and a loop.
@@ -318,12 +331,61 @@ def test_campipe_helpers_are_inlined_without_copying_their_ir(monkeypatch):
     assert counts["elsewhere._inlining_probe"] > 4  # two sites, each of several blocks, twice
 
 
-def test_the_second_process_compiles_modal_exacts_helpers_ahead_before_the_start(monkeypatch):
-    """``kernels._start_kernels`` (the second process of a first run) compiles each helper
-    ``exact.ahead_signatures`` names for the run's modal-exact types before the start's
-    kernels, so that the first process, compiling the kernel, finds it cached; a
+def test_the_second_process_reports_and_ends_at_once(monkeypatch):
+    """The second process of a first run compiles with the types it is sent, reports (None,
+    or why it failed) and ends with ``os._exit``, skipping a compiled numba's teardown (a few
+    tenths of a second that the first process would wait for). Broken copies, run: a failure
+    not reported (the first would wait on a closed pipe for nothing it can log); the exit
+    left out."""
+    from campipe.engine import kernels
+
+    class Ended(Exception):
+        pass
+
+    class Pipe:
+        def __init__(self):
+            self.sent, self.closed = [], False
+
+        def recv(self):
+            return "types"
+
+        def send(self, value):
+            self.sent.append(value)
+
+        def close(self):
+            self.closed = True
+
+    def exit_now(code):
+        raise Ended(code)
+
+    compiled = []
+    monkeypatch.setattr(os, "_exit", exit_now)
+    monkeypatch.setattr(kernels, "_start_kernels", lambda *args: compiled.append(args))
+    pipe = Pipe()
+    with pytest.raises(Ended):
+        kernels._second_process(pipe, "case", "settings", False)
+    assert compiled == [("case", "settings", False, "types")]
+    assert pipe.sent == [None] and pipe.closed
+
+    def fails(*args):
+        raise RuntimeError("no LLVM today")
+
+    monkeypatch.setattr(kernels, "_start_kernels", fails)
+    pipe = Pipe()
+    with pytest.raises(Ended):
+        kernels._second_process(pipe, "case", "settings", False)
+    assert pipe.sent == ["RuntimeError: no LLVM today"] and pipe.closed
+
+
+def test_a_first_run_finds_modal_exacts_types_once_and_compiles_its_helpers_ahead(monkeypatch):
+    """``kernels.compile_kernels`` finds modal-exact's argument types once (running the
+    quasi-static kernel) and hands them to the start's side (the second process of a first
+    run, here run in this one), which compiles each helper ``exact.ahead_signatures`` names
+    for them before the start's kernels, so that compiling the kernel finds them cached; a
     newmark-linear run has none. Whether those are the types the kernel calls the helper with
     is the ``slow`` one-signature test's."""
+    import multiprocessing
+
     from campipe.engine import exact, kernels
     from campipe.engine.batch import Case, RunSettings
     from campipe.model import thesis_train
@@ -335,15 +397,24 @@ def test_the_second_process_compiles_modal_exacts_helpers_ahead_before_the_start
         def compile(self, signature):
             done.append(("helper", signature))
 
+    def no_process(method):
+        raise OSError("no second process here")
+
+    found = batch.integrator_types
+    monkeypatch.setattr(multiprocessing, "get_context", no_process)
     monkeypatch.setattr(exact, "ahead_signatures", lambda types: {Recorder(): types[:2]})
+    monkeypatch.setattr(exact, "modal_exact_batch", Recorder())  # records ("helper", types)
     monkeypatch.setattr(batch, "start_states", lambda cases, settings: done.append("start"))
+    monkeypatch.setattr(batch, "run_batch", lambda *args, **kwargs: done.append("newmark"))
+    monkeypatch.setattr(
+        batch, "integrator_types", lambda *args: done.append("types") or found(*args)
+    )
     case = Case(thesis_train(), harmonic(0.0254), 900.0)
     settings = RunSettings(revolutions=0.05, warmup=0)
-    kernels._start_kernels(case, settings)
-    expected = batch.integrator_types([case], settings, False)[:2]
-    assert done == [("helper", expected), "start"]
+    kernels.compile_kernels(case, settings)
+    types = found([case], settings, False)
+    assert done == ["types", ("helper", types[:2]), "start", ("helper", types)]
     done.clear()
-    kernels._start_kernels(
-        case, RunSettings(revolutions=0.05, integrator="newmark-linear", dt=1e-6)
-    )
-    assert done == ["start"]
+    newmark = RunSettings(revolutions=0.05, warmup=0, integrator="newmark-linear", dt=1e-6)
+    kernels.compile_kernels(case, newmark)
+    assert done == ["start", "newmark"]

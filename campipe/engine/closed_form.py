@@ -192,11 +192,10 @@ STATE = np.dtype(
 
 
 @njit(**HELPER)
-def held_inputs(profiles, c, p, w, seat_q, cam_held, seat_held, inp, inp_t):
+def held_inputs(poly, trig, c, p, w, seat_q, cam_held, seat_held, inp, inp_t):
     """Held coordinates' (q, q̇, q̈) as polynomials in the piece's local angle x (inp, shape
-    (3, 2, 8)) and harmonic parts Re(inp_t·e^{iθ}) (inp_t (3, 2) complex)."""
-    poly = profiles.poly
-    trig = profiles.trig
+    (3, 2, 8)) and harmonic parts Re(inp_t·e^{iθ}) (inp_t (3, 2) complex), from the packed
+    profiles' ``poly`` and ``trig`` (arrays, not the named tuple: ``common.by_ref``)."""
     for kind in range(3):
         for hc in range(2):
             inp_t[kind, hc] = 0.0
@@ -250,8 +249,8 @@ def forcing(cases, trains, profiles, ws, st):
     c, tr, ci, ns = st.c, st.tr, st.cfg - 1, st.ns
     cam_held = holds_cam(st.cfg)
     held_inputs(
-        profiles, c, st.p, st.w, cases.seat_q[c], cam_held, holds_seat(st.cfg), ws.inp,
-        ws.inp_t,
+        profiles.poly, profiles.trig, c, st.p, st.w, cases.seat_q[c], cam_held,
+        holds_seat(st.cfg), ws.inp, ws.inp_t,
     )  # fmt: skip
     # The held inputs are polynomials of the piece's degree at most (the seat's a constant),
     # and so is the forcing.

@@ -105,9 +105,11 @@ from campipe.engine.common import (
     RELEASE,
     SEAT_SEP,
     SMOOTH,
+    by_ref,
     captured,
     classify_break,
     configuration,
+    deref,
     holds_cam,
     holds_seat,
     other_releases,
@@ -210,9 +212,10 @@ def _root(
 
 
 @njit(**HELPER)
-def _state_at(trains, ws, st, t):
+def _state_at(ref, st, t):
     """The free coordinates and velocities at time t [s] of the segment, from every block,
     into ws.q, ws.v (the held ones are left as they are)."""
+    _, trains, _, _, _, ws = deref(ref)
     tr = st.tr
     ci = st.cfg - 1
     ns = st.ns
@@ -345,9 +348,10 @@ def _out_of_bounds(cases, c, q, v):
 
 
 @njit(**HELPER)
-def _sample(cases, trains, profiles, runs, out, ws, st, nact, x, cth, sth):
+def _sample(ref, st, nact, x, cth, sth):
     """The output sample at the grid point (local angle x, cam angle with cosine cth and sine
     sth) from the blocks 0 … nact − 1; a motion out of bounds ends the case (UNBOUNDED)."""
+    cases, trains, profiles, runs, out, ws = deref(ref)
     tr, ci, nf, c, w, deg = st.tr, st.cfg - 1, st.nf, st.c, st.w, st.deg
     q, v = ws.q, ws.v
     _state_active(
@@ -608,10 +612,11 @@ def _block_columns(cases, trains, runs, ws, st):
 
 
 @njit(**HELPER)
-def _begin_segment(cases, trains, profiles, runs, out, ws, st):
+def _begin_segment(ref, st):
     """Begin a segment at st.t_s in configuration st.cfg on piece st.p, from the state in
     ws.q, ws.v: forcing, particular solution, modal start, monitors, the break ahead, the mode
     pairs; the monitors' values there, and the sample due there, if any."""
+    cases, trains, profiles, runs, out, ws = deref(ref)
     ci = st.cfg - 1
     st.nf = trains.n_free[st.tr, ci]
     st.ns = 2 * st.nf
@@ -641,7 +646,7 @@ def _begin_segment(cases, trains, profiles, runs, out, ws, st):
         # A sample due at the segment start (the initial state, or a break or event that
         # falls on an output angle) is the state here (gval holds its monitors).
         # (The blocks' basis functions are at τ = 0: f1 = 1, f2 = 0; every block counts.)
-        _sample(cases, trains, profiles, runs, out, ws, st, st.nact, x_s, ct, sn)
+        _sample(ref, st, st.nact, x_s, ct, sn)
 
 
 # --------------------------------------------------------------------------- walk the grid
@@ -711,11 +716,13 @@ def _suspect(watch, level, gval, dval, dprev):
 
 
 @njit(**HELPER)
-def _earliest_crossing(ws, st, nact, tolerance, t_prev, t_eval):
+def _earliest_crossing(ref, st, nact, t_prev, t_eval):
     """The earliest monitor to rise through its level in (t_prev, t_eval] [s] and when,
     from its values at both ends, or from a maximum inside the step that the bound on its
     slope cannot rule out (found by a root of its derivative). Returns (monitor or −1, time).
     """
+    _, _, _, runs, _, ws = deref(ref)
+    tolerance = runs.tolerance
     w, t_s, th0, gdeg = st.w, st.t_s, st.th0, st.gdeg
     WC, G, GT, MC = ws.WC, ws.G, ws.GT, ws.MC
     first = -1
@@ -769,7 +776,7 @@ def _earliest_crossing(ws, st, nact, tolerance, t_prev, t_eval):
 
 
 @njit(inline="always", nogil=True)
-def _walk(cases, trains, profiles, runs, out, ws, st):
+def _walk(ref, st):
     """Walk the segment's grid from st.t_s until an event, a profile break or the run's end,
     and handle what ended it (``_apply_event``, ``_cross_break``, or st.done).
 
@@ -778,6 +785,7 @@ def _walk(cases, trains, profiles, runs, out, ws, st):
     on every pass otherwise. Anything rarer (replanning with dropped pairs, a suspected
     crossing, a sample, an event, a break) is a compiled function of its own.
     """
+    cases, trains, profiles, runs, out, ws = deref(ref)
     c, w, t_s, th0, t_break = st.c, st.w, st.t_s, st.th0, st.t_break
     nact, ns, gdeg, eps_force = st.nact, st.ns, st.gdeg, st.eps_force
     speed_row = trains.speed[st.tr, st.cfg - 1]
@@ -798,7 +806,7 @@ def _walk(cases, trains, profiles, runs, out, ws, st):
     for m in range(2):
         held = cam_held if m == 0 else seat_held
         if watch[m] and gval[m] > level[m] and (held or dprev[m] > 0.0):
-            _apply_event(cases, trains, profiles, out, ws, st, m, t_s)
+            _apply_event(ref, st, m, t_s)
             return
     t_prev = t_s
     h = -1.0
@@ -861,14 +869,14 @@ def _walk(cases, trains, profiles, runs, out, ws, st):
                         WC, MC, nact, G, GT, m, gdeg, w, x_n, cth, sth
                     )
         if t_eval > t_s and _suspect(watch, level, gval, dval, dprev):
-            first, t_ev = _earliest_crossing(ws, st, nact, runs.tolerance, t_prev, t_eval)
+            first, t_ev = _earliest_crossing(ref, st, nact, t_prev, t_eval)
             if first >= 0:
                 st.nact = nact
-                _apply_event(cases, trains, profiles, out, ws, st, first, t_ev)
+                _apply_event(ref, st, first, t_ev)
                 return
         if at_break:
             st.nact = nact
-            _cross_break(cases, trains, profiles, out, ws, st)
+            _cross_break(ref, st)
             return
         # Accept the grid point: force maxima, output sample, end of run.
         for m in range(2):
@@ -885,7 +893,7 @@ def _walk(cases, trains, profiles, runs, out, ws, st):
             cth, sth = _advance(MC, nact, cth, sth, cwh, swh)
             continue
         if to_sample:
-            _sample(cases, trains, profiles, runs, out, ws, st, nact, w * t_n - th0, cth, sth)
+            _sample(ref, st, nact, w * t_n - th0, cth, sth)
             if out.status[c] != 0:
                 st.done = True
                 return
@@ -973,16 +981,17 @@ def _impact(cases, trains, out, ws, st, seat, closing, t, vcam, lift):
 
 
 @njit(**HELPER)
-def _apply_event(cases, trains, profiles, out, ws, st, first, t_ev):
+def _apply_event(ref, st, first, t_ev):
     """Monitor ``first`` rose through its level at t_ev [s]: take the exact state there, and
     release the contact (a force monitor) or, if the contact closes, apply the plastic impact
     (a gap monitor; ``_impact``): a touch that does not close is no event. Starts the next
     segment there."""
+    cases, trains, profiles, runs, out, ws = deref(ref)
     c, w, cfg = st.c, st.w, st.cfg
     cam_held = holds_cam(cfg)
     seat_held = holds_seat(cfg)
     q, v = ws.q, ws.v
-    _state_at(trains, ws, st, t_ev)
+    _state_at(ref, st, t_ev)
     lift_e, dl_e, _ = piece_eval(profiles, c, st.p, st.rev, w * t_ev)
     vcam = -w * dl_e
     if cam_held:
@@ -1012,16 +1021,17 @@ def _apply_event(cases, trains, profiles, out, ws, st, first, t_ev):
 
 
 @njit(**HELPER)
-def _cross_break(cases, trains, profiles, out, ws, st):
+def _cross_break(ref, st):
     """The segment reached the next break of the profile: take the exact state there, and
     with the cam held apply what the break does (``common.classify_break``): release, an
     impact of the cam's rate jump (the seat, if held, releasing where it would separate),
     or nothing. Starts the next segment on the next piece."""
+    cases, trains, profiles, runs, out, ws = deref(ref)
     c, tr, w, cfg, t_break = st.c, st.tr, st.w, st.cfg, st.t_break
     cam_held = holds_cam(cfg)
     seat_held = holds_seat(cfg)
     q, v = ws.q, ws.v
-    _state_at(trains, ws, st, t_break)
+    _state_at(ref, st, t_break)
     _off_cam(out, cfg, c, w, st.t_s, t_break)
     l_left, dl_left, _ = piece_eval(profiles, c, st.p, st.rev, w * t_break)
     l_right, dl_right, _ = piece_eval(profiles, c, st.nb, st.revb, w * t_break)
@@ -1114,11 +1124,12 @@ def modal_exact_batch(cases, trains, profiles, runs, out, ws, state):
         The run's scalars.
     """
     st = state[0]
+    ref = by_ref((cases, trains, profiles, runs, out, ws))
     for c in range(cases.omega.shape[0]):
         _start_case(cases, trains, profiles, ws, st, c, runs.train[c])
         while not st.done:
-            _begin_segment(cases, trains, profiles, runs, out, ws, st)
-            _walk(cases, trains, profiles, runs, out, ws, st)
+            _begin_segment(ref, st)
+            _walk(ref, st)
             if out.status[c] != OK:
                 break
             if st.stalled > MAX_STALLED_EVENTS:
@@ -1140,14 +1151,19 @@ def modal_exact_batch(cases, trains, profiles, runs, out, ws, state):
 def ahead_signatures(kernel_types: tuple) -> dict[Any, tuple]:
     """The helpers of :func:`modal_exact_batch` that a first run compiles in its second
     process (``kernels.compile_kernels``), each with the types the kernel calls it with, given
-    the kernel's own argument types (``batch.integrator_types``): ``_apply_event`` and
-    ``_cross_break``, about a fifth of the kernel's compile, there before the periodic start,
-    so that the two processes end together; the kernel, compiled in the first, loads them
-    from the cache (it reaches them late). Types that differ from the kernel's call would
-    cost a second compile, not a wrong result."""
-    cases, trains, profiles, _, out, ws, state = kernel_types
+    the kernel's own argument types (``batch.integrator_types``): ``_sample``,
+    ``_apply_event`` and ``_earliest_crossing``, about a quarter of the kernel's compile, there
+    before the periodic start, so that the two processes end together. The kernel, compiled in
+    the first, loads them from the cache: it reaches ``_sample`` most of a second after the
+    second process has it (typing ``_begin_segment`` first), the others seconds after.
+    ``_sample`` comes first: reached sooner, it would be compiled twice. Types that differ
+    from the kernel's call would cost a second compile, not a wrong result."""
+    *tuples, state = kernel_types
+    ref = types.CPointer(types.BaseTuple.from_types(tuples))  # the kernel's ``by_ref``
     st = state.dtype  # the kernel's ``state[0]``
+    i8, f8 = types.int64, types.float64
     return {
-        _apply_event: (cases, trains, profiles, out, ws, st, types.int64, types.float64),
-        _cross_break: (cases, trains, profiles, out, ws, st),
+        _sample: (ref, st, i8, f8, f8, f8),
+        _apply_event: (ref, st, i8, f8),
+        _earliest_crossing: (ref, st, i8, f8, f8),
     }

@@ -14,6 +14,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import logging
+import os
 from collections.abc import Callable, Iterable, Mapping
 
 from campipe.engine import batch, contact, exact, newmark, steady
@@ -96,9 +97,10 @@ def compile_notice(settings: Iterable[RunSettings], search: bool = False) -> str
     )
 
 
-def _start_kernels(case: Case, settings: RunSettings, search: bool = False) -> None:
-    if settings.method == "modal-exact":
-        kernel_types = batch.integrator_types([case], settings, False)
+def _start_kernels(
+    case: Case, settings: RunSettings, search: bool = False, kernel_types: tuple | None = None
+) -> None:
+    if kernel_types is not None:  # modal-exact's
         for helper, signature in exact.ahead_signatures(kernel_types).items():
             helper.compile(signature)
     batch.start_states([case], settings)
@@ -108,6 +110,22 @@ def _start_kernels(case: Case, settings: RunSettings, search: bool = False) -> N
         periodic.steady_extremes([case])
 
 
+def _second_process(connection, case: Case, settings: RunSettings, search: bool) -> None:
+    """The second process of a first run: imports the engine, waits for modal-exact's types
+    (or None), compiles the helpers ahead and the start's kernels, reports, and ends at once
+    (``os._exit``: everything it compiled is in the kernel cache by then, and a process that
+    has compiled tears down its numba for a few tenths of a second, which the first would
+    wait for)."""
+    try:
+        _start_kernels(case, settings, search, connection.recv())
+        connection.send(None)
+    except BaseException as exc:  # the first process logs it; the run compiles what is missing
+        connection.send(f"{type(exc).__name__}: {exc}")
+    finally:
+        connection.close()
+        os._exit(0)
+
+
 def compile_kernels(case: Case, settings: RunSettings, search: bool = False) -> None:
     """Compile (or load) every kernel a run with ``settings`` calls, the periodic start's
     and the integrator's at once: the start's in a second process, while this one compiles
@@ -115,37 +133,55 @@ def compile_kernels(case: Case, settings: RunSettings, search: bool = False) -> 
     no other kernel run but the quasi-static one), newmark-linear through a short
     quasi-static run. numba compiles one kernel at a time in a process, so the two cost the
     time of the longer on two cores, not their sum; both land in the kernel cache, from which
-    the study's own run then loads them. The second process first compiles modal-exact
-    helpers that this one then loads (``exact.ahead_signatures``), so that the two end
-    together. With ``search`` the second process also compiles the onset's search
-    (``search_kernels``)."""
+    the study's own run then loads them. The second process, started first, imports the
+    engine while this one finds modal-exact's types (compiling the quasi-static kernel, which
+    it then need not); given them, it first compiles modal-exact helpers that this one then
+    loads (``exact.ahead_signatures``), so that the two end together. With ``search`` the
+    second process also compiles the onset's search (``search_kernels``)."""
     short = dataclasses.replace(settings, revolutions=0.01, warmup=0)
     if settings.start != "periodic" and not search:
         batch.run_batch([case], short, full_state=False, on_failure="record")
         return
     import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
 
     try:
-        pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"))
-        start = pool.submit(_start_kernels, case, settings, search)
+        spawn = multiprocessing.get_context("spawn")
+        ours, theirs = spawn.Pipe()
+        second = spawn.Process(
+            target=_second_process, args=(theirs, case, settings, search), daemon=True
+        )
+        second.start()  # it imports the engine while this one goes on
+        theirs.close()  # its end is its own now: should it die, our end reads EOFError
     except OSError as exc:  # no second process: compile in turn, in this one
         log.debug("compiling in one process: %s", exc)
-        _start_kernels(case, settings, search)
-        start = None
+        second = None
     try:
+        # Found here (running the quasi-static kernel, compiled here) and handed over: the
+        # second process then compiles the helpers without that kernel.
+        kernel_types = None
         if settings.method == "modal-exact":
-            exact.modal_exact_batch.compile(batch.integrator_types([case], settings, False))
+            kernel_types = batch.integrator_types([case], settings, False)
+        if second is not None:
+            ours.send(kernel_types)
+        else:
+            _start_kernels(case, settings, search, kernel_types)
+        if kernel_types is not None:
+            exact.modal_exact_batch.compile(kernel_types)
         else:
             quasi_static = dataclasses.replace(short, start="quasi-static")
             batch.run_batch([case], quasi_static, full_state=False, on_failure="record")
-        if start is not None:
-            start.result()
+        if second is not None and (failed := ours.recv()) is not None:
+            log.debug("the second process failed: %s", failed)
     except Exception as exc:  # the run itself compiles whatever is still missing
         log.debug("compiling ahead failed: %s", exc)
+    except BaseException:  # an interrupt: the second process stops too
+        if second is not None:
+            second.terminate()
+        raise
     finally:
-        if start is not None:
-            pool.shutdown(wait=True, cancel_futures=True)
+        if second is not None:
+            ours.close()
+            second.join()
 
 
 def compile_first(

@@ -57,9 +57,11 @@ from campipe.engine.common import (
     RELEASE,
     SEAT_SEP,
     TURN_GUARD,
+    by_ref,
     captured,
     classify_break,
     configuration,
+    deref,
     holds_cam,
     holds_seat,
     other_releases,
@@ -277,12 +279,13 @@ CONTACT_STATE = np.dtype(
 
 
 @njit(**HELPER, fastmath=FAST)
-def _cross_breaks(profiles, cases, out, c, w, th1, cfg, p, rev, pn, revn, thb):
+def _cross_breaks(ref, c, w, th1, cfg, p, rev, pn, revn, thb):
     """Move case c's piece cursor (piece p of turn rev; the next break thb [rad] starts piece
     pn of turn revn) up to the step end θ1 [rad], classifying each break crossed with the cam
     held (``common.classify_break``): a surface falling away releases the follower, one
     jumping into it is a cam impact (the seat, if held, releasing where it would separate).
     Returns the configuration, whether that impact's impulse starts now, and the cursor."""
+    cases, _, profiles, _, out = deref(ref)
     impulse_cam = False
     while th1 >= thb:
         if holds_cam(cfg):
@@ -319,12 +322,11 @@ def _cross_breaks(profiles, cases, out, c, w, th1, cfg, p, rev, pn, revn, thb):
 
 
 @njit(**HELPER, fastmath=FAST)
-def _write_samples(
-    trains, cases, profiles, runs, out, c, k_out, t_sample, t0, t1, h, x, xn, qt, vt, at, cfg
-):
+def _write_samples(ref, c, k_out, t_sample, t0, t1, h, x, xn, qt, vt, at, cfg):
     """Output samples of case c inside the step (t0, t1] [s], from the step's cubic (thesis
     Eqs. 55–57); the held coordinates from the cam and the seat. A valve out of its bounds ends
     the case (UNBOUNDED). Returns the next sample's index and time."""
+    cases, trains, profiles, runs, out = deref(ref)
     w = cases.omega[c]
     n_out = out.q.shape[1]
     cam_held = holds_cam(cfg)
@@ -401,14 +403,13 @@ def _tripped(cfg, form, has_seat, impulsive, f1, f7, hold1, hold7, q1, q7, v1, v
 
 
 @njit(**HELPER, fastmath=FAST)
-def _switch(
-    cases, out, ct, c, t1, cfg, f7, xn, vc, release_cam, release_seat, hit_cam, hit_seat
-):  # fmt: skip
+def _switch(ref, ct, c, t1, cfg, f7, xn, vc, release_cam, release_seat, hit_cam, hit_seat):
     """Apply what the monitors tripped at the step end t1 [s] (``_tripped``): record the
     releases and impacts, and return the next configuration and whether a cam or seat impulse
     starts. The other contact, if held, releases where the impact would separate it
     (``common.other_releases``); a slow impact leaves its contact resting (in the contact
     state ``ct``)."""
+    cases, _, _, _, out = deref(ref)
     events, n_events, counts, vmax = out.events, out.n_events, out.counts, out.vmax
     meff = cases.meff
     w = cases.omega[c]
@@ -481,6 +482,7 @@ def newmark_linear_batch(cases, trains, profiles, runs, out, work, contact):
     n_rev = out.sep_rev.shape[1]
     x, xn, z, f, qt, vt, at = work
     ct = contact[0]
+    ref = by_ref((cases, trains, profiles, runs, out))
     for c in range(n_cases):
         h = runs.dt[c]
         w = cases.omega[c]
@@ -529,7 +531,7 @@ def newmark_linear_batch(cases, trains, profiles, runs, out, work, contact):
             if th1 >= thb:
                 p_was = p
                 cfg, jumped, p, rev, pn, revn, thb = _cross_breaks(
-                    profiles, cases, out, c, w, th1, cfg, p, rev, pn, revn, thb
+                    ref, c, w, th1, cfg, p, rev, pn, revn, thb
                 )
                 impulse_cam = impulse_cam or jumped
                 if p != p_was:
@@ -598,9 +600,8 @@ def newmark_linear_batch(cases, trains, profiles, runs, out, work, contact):
                 quiet_seat -= 1
             if k_out < n_out and t_sample <= t1 * (1.0 + 1e-12):
                 k_out, t_sample = _write_samples(
-                    trains, cases, profiles, runs, out, c, k_out, t_sample, t0, t1, h, x, xn,
-                    qt, vt, at, cfg,
-                )  # fmt: skip
+                    ref, c, k_out, t_sample, t0, t1, h, x, xn, qt, vt, at, cfg
+                )
             hold1 = ct.hold_cam if ct.rest_cam else 0.0
             hold7 = ct.hold_seat if ct.rest_seat else 0.0
             tripped = _tripped(
@@ -608,9 +609,7 @@ def newmark_linear_batch(cases, trains, profiles, runs, out, work, contact):
                 hold7, xn[X_Q], xn[X_Q + SEAT], xn[X_V], xn[X_V + SEAT], qc, vc, qs,
             )  # fmt: skip
             if tripped[0] or tripped[1] or tripped[2] or tripped[3]:
-                cfg, impulse_cam, impulse_seat = _switch(
-                    cases, out, ct, c, t1, cfg, f7, xn, vc, *tripped
-                )
+                cfg, impulse_cam, impulse_seat = _switch(ref, ct, c, t1, cfg, f7, xn, vc, *tripped)
             else:
                 impulse_cam = False
                 impulse_seat = False

@@ -41,7 +41,7 @@ from campipe.engine.closed_form import (
     forcing,
     particular,
 )
-from campipe.engine.common import HELPER, KERNEL
+from campipe.engine.common import HELPER, KERNEL, by_ref, deref
 from campipe.profiles.packed import evaluate_packed, horner, piece_eval
 from campipe.vocabulary import CAM, CAM_CONTACT, SEAT
 
@@ -106,8 +106,9 @@ def _from_basis(trains, st, u, z):
 
 
 @njit(**HELPER)
-def _on_piece(cases, trains, profiles, runs, ws, st, p):
+def _on_piece(ref, st, p):
     """Prepare piece p of turn 0 in configuration I: its particular solution."""
+    cases, trains, profiles, runs, ws = deref(ref)
     st.p = p
     st.rev = 0
     st.th0 = profiles.breaks[st.c, p]
@@ -116,23 +117,25 @@ def _on_piece(cases, trains, profiles, runs, ws, st, p):
 
 
 @njit(inline="always", nogil=True)
-def _advance_piece(cases, trains, profiles, runs, ws, st, p, z):
+def _advance_piece(ref, st, p, z):
     """z at the start of piece p → z at its end (the next break), exactly (in place: z is
     read into the workspace before it is written)."""
+    cases, trains, profiles, runs, ws = deref(ref)
     theta_b = profiles.breaks[st.c, p + 1]
-    _state_in_piece(cases, trains, profiles, runs, ws, st, p, z, theta_b, z)
+    _state_in_piece(ref, st, p, z, theta_b, z)
 
 
 @njit(**HELPER)
-def _state_in_piece(cases, trains, profiles, runs, ws, st, p, z_start, theta, z):
+def _state_in_piece(ref, st, p, z_start, theta, z):
     """z at angle θ inside piece p of the periodic turn, from the state at its start."""
-    _on_piece(cases, trains, profiles, runs, ws, st, p)
-    _state_in_prepared_piece(trains, profiles, ws, st, z_start, theta, z)
+    _on_piece(ref, st, p)
+    _state_in_prepared_piece(ref, st, z_start, theta, z)
 
 
-@njit(inline="always", nogil=True)
-def _state_in_prepared_piece(trains, profiles, ws, st, z_start, theta, z):
+@njit(**HELPER)
+def _state_in_prepared_piece(ref, st, z_start, theta, z):
     """z at angle θ inside the piece ``_on_piece`` prepared, from the state at its start."""
+    _, trains, profiles, _, ws = deref(ref)
     theta_a = profiles.breaks[st.c, st.p]
     _particular_at(ws, st, theta_a)
     for s in range(st.ns):
@@ -186,6 +189,15 @@ def _margin(cases, trains, profiles, st, z, theta):
     return margin
 
 
+@njit(**HELPER)
+def _margin_in_piece(ref, st, z_start, theta, z):
+    """``_margin`` at angle θ inside the piece ``_on_piece`` prepared, its state (from z_start
+    at the piece's start) left in z. Compiled once for ``_latest_hold``'s scan and bisection."""
+    cases, trains, profiles, runs, ws = deref(ref)
+    _state_in_prepared_piece(ref, st, z_start, theta, z)
+    return _margin(cases, trains, profiles, st, z, theta)
+
+
 @njit(inline="always", nogil=True)
 def _harmonic_response(trains, runs, ws, st):
     """ζ of configuration I at the case's speed (``modal.harmonic_responses``), written to
@@ -236,9 +248,10 @@ def _begin_case(cases, trains, runs, st, c):
 
 
 @njit(**HELPER)
-def _periodic_turn(cases, trains, profiles, runs, ws, st, zt):
+def _periodic_turn(ref, st, zt):
     """The periodic state of configuration I at each break of the turn: zt (P + 1, ns), row P
     (at 2π) the same as row 0. z(0) = (I − e^{AT})⁻¹ b, b the turn's response from rest."""
+    cases, trains, profiles, runs, ws = deref(ref)
     tr, ci, ns = st.tr, st.cfg - 1, st.ns
     n_p = profiles.n_pieces[st.c]
     period = TWO_PI / st.w
@@ -246,7 +259,7 @@ def _periodic_turn(cases, trains, profiles, runs, ws, st, zt):
     for s in range(ns):
         z[s] = 0.0
     for p in range(n_p):
-        _advance_piece(cases, trains, profiles, runs, ws, st, p, z)
+        _advance_piece(ref, st, p, z)
     # z(0) = (I − e^{AT})⁻¹ b, block by block: u0 = (I − e^{BT})⁻¹ X⁻¹ b.
     _to_basis(trains, st, z, ws.u)
     for b in range(trains.n_blocks[tr, ci]):
@@ -269,7 +282,7 @@ def _periodic_turn(cases, trains, profiles, runs, ws, st, zt):
     for s in range(ns):
         zt[0, s] = z[s]
     for p in range(n_p):
-        _advance_piece(cases, trains, profiles, runs, ws, st, p, z)
+        _advance_piece(ref, st, p, z)
         for s in range(ns):
             zt[p + 1, s] = z[s]
 
@@ -292,18 +305,19 @@ def periodic_starts(cases, trains, profiles, runs, ws, state, snap, z_turn, t_st
         Out: the coordinates and velocities there [m, m/s, rad, rad/s].
     """
     st = state[0]
+    ref = by_ref((cases, trains, profiles, runs, ws))
     z = ws.z
     for c in range(cases.omega.shape[0]):
         _begin_case(cases, trains, runs, st, c)
         tr, ci = st.tr, st.cfg - 1
-        _periodic_turn(cases, trains, profiles, runs, ws, st, z_turn[c])
+        _periodic_turn(ref, st, z_turn[c])
         # Where the run starts: θ = 0 (2π) if configuration I holds there, else the latest
         # earlier angle where it does.
-        theta_s = _latest_hold(cases, trains, profiles, runs, ws, st, z_turn, snap[c])
+        theta_s = _latest_hold(ref, st, z_turn, snap[c])
         t_start[c] = (theta_s - TWO_PI) / st.w if theta_s >= 0.0 else np.nan
         if theta_s >= 0.0:
             p = _piece_of(profiles, c, theta_s)
-            _state_in_piece(cases, trains, profiles, runs, ws, st, p, z_turn[c, p], theta_s, z)
+            _state_in_piece(ref, st, p, z_turn[c, p], theta_s, z)
             lift, dlift, _ = evaluate_packed(profiles, c, theta_s)
             for i in range(q.shape[1]):
                 q[c, i] = 0.0
@@ -334,10 +348,11 @@ def _snapped(theta, w, step):
 
 
 @njit(**HELPER)
-def _latest_hold(cases, trains, profiles, runs, ws, st, z_turn, step):
+def _latest_hold(ref, st, z_turn, step):
     """The latest angle θ ∈ [0, 2π] of the periodic turn where configuration I holds, on a
     step's grid (``step`` > 0) or to SEARCH_TOLERANCE of a turn; −1 if it holds nowhere.
     Looks back piece by piece at SEARCH_SAMPLES a turn, then bisects to the boundary."""
+    cases, trains, profiles, runs, ws = deref(ref)
     c, w = st.c, st.w
     z = ws.z
     d_theta = TWO_PI / SEARCH_SAMPLES
@@ -346,21 +361,19 @@ def _latest_hold(cases, trains, profiles, runs, ws, st, z_turn, step):
         lo = profiles.breaks[c, p]
         if theta_b < lo:
             continue
-        _on_piece(cases, trains, profiles, runs, ws, st, p)
+        _on_piece(ref, st, p)
         z_start = z_turn[c, p]
         theta_hi = theta_b
         n = max(1, int(np.ceil((theta_b - lo) / d_theta)))
         for i in range(n + 1):
             theta = theta_b - (theta_b - lo) * i / n
-            _state_in_prepared_piece(trains, profiles, ws, st, z_start, theta, z)
-            if _margin(cases, trains, profiles, st, z, theta) >= 0.0:
+            if _margin_in_piece(ref, st, z_start, theta, z) >= 0.0:
                 if i == 0:
                     return theta  # holds at the latest angle looked at
                 theta_a = theta
                 while theta_hi - theta_a > SEARCH_TOLERANCE * TWO_PI:
                     mid = 0.5 * (theta_a + theta_hi)
-                    _state_in_prepared_piece(trains, profiles, ws, st, z_start, mid, z)
-                    if _margin(cases, trains, profiles, st, z, mid) >= 0.0:
+                    if _margin_in_piece(ref, st, z_start, mid, z) >= 0.0:
                         theta_a = mid
                     else:
                         theta_hi = mid
@@ -391,12 +404,13 @@ COMPRESSION, TENSION, HEIGHT = np.int64(0), np.int64(1), np.int64(2)
 
 
 @njit(inline="always", nogil=True)
-def _piece_monitor(cases, trains, profiles, runs, ws, st, zt, p, which):
+def _piece_monitor(ref, st, zt, p, which):
     """On piece p of the periodic turn, ``which`` as a monitor in exact's form (slot 0 of
     ws.G, ws.GT, ws.WC; the blocks' λ̄, δ² in ws.MC): Σ_b (W1_b f1 + W2_b f2)(τ) + Σ_k G_k x^k
     + Re(GT e^{iθ}), τ and x from the piece's start."""
+    cases, trains, profiles, runs, ws = deref(ref)
     tr, ci, ns = st.tr, st.cfg - 1, st.ns
-    _on_piece(cases, trains, profiles, runs, ws, st, p)
+    _on_piece(ref, st, p)
     theta_a = profiles.breaks[st.c, p]
     _particular_at(ws, st, theta_a)
     for s in range(ns):
@@ -454,11 +468,12 @@ def _monitor_value(ws, nb, st, theta_a, theta):
 
 
 @njit(**HELPER)
-def _turn_minimum(cases, trains, profiles, runs, ws, st, zt, which):
+def _turn_minimum(ref, st, zt, which):
     """(θ, value) of the least value of ``which`` over the periodic turn: scanned at
     EXTREME_SAMPLES a turn (the breaks included; the blocks and the harmonic advanced by their
     step factors), then refined between the samples beside the least by Newton's method on
     the derivative, kept inside that bracket by bisection."""
+    cases, trains, profiles, runs, ws = deref(ref)
     c = st.c
     nb = trains.n_blocks[st.tr, st.cfg - 1]
     d_theta = TWO_PI / EXTREME_SAMPLES
@@ -471,7 +486,7 @@ def _turn_minimum(cases, trains, profiles, runs, ws, st, zt, which):
         b = profiles.breaks[c, p + 1]
         n = max(2, int(np.ceil((b - a) / d_theta)))
         step = (b - a) / n
-        _piece_monitor(cases, trains, profiles, runs, ws, st, zt, p, which)
+        _piece_monitor(ref, st, zt, p, which)
         for jj in range(nb):
             ws.MC[F1, jj] = 1.0
             ws.MC[F2, jj] = 0.0
@@ -494,7 +509,7 @@ def _turn_minimum(cases, trains, profiles, runs, ws, st, zt, which):
                 lo = a + step * max(i - 1, 0)
                 hi = a + step * min(i + 1, n)
     # Refine: the least of the bracket's ends and the derivative's zero between them.
-    _piece_monitor(cases, trains, profiles, runs, ws, st, zt, best_p, which)
+    _piece_monitor(ref, st, zt, best_p, which)
     a = profiles.breaks[c, best_p]
     g_lo, d_lo, _ = _monitor_value(ws, nb, st, a, lo)
     g_hi, _, _ = _monitor_value(ws, nb, st, a, hi)
@@ -543,26 +558,27 @@ def steady_extremes(cases, trains, profiles, runs, ws, state, z_turn, with_max, 
         valve's least height above its seat [m] (+inf without a seat) and its angle [rad].
     """
     st = state[0]
+    ref = by_ref((cases, trains, profiles, runs, ws))
     for c in range(cases.omega.shape[0]):
         if not active[c]:
             continue
         _begin_case(cases, trains, runs, st, c)
         _harmonic_response(trains, runs, ws, st)
-        _periodic_turn(cases, trains, profiles, runs, ws, st, z_turn[c])
+        _periodic_turn(ref, st, z_turn[c])
         out[c, MIN_FORCE] = np.inf
         out[c, MIN_FORCE_ANGLE] = np.nan
         out[c, MAX_FORCE] = np.nan
         if not cases.form[c]:
-            theta, f = _turn_minimum(cases, trains, profiles, runs, ws, st, z_turn[c], COMPRESSION)
+            theta, f = _turn_minimum(ref, st, z_turn[c], COMPRESSION)
             out[c, MIN_FORCE] = f
             out[c, MIN_FORCE_ANGLE] = theta
         if with_max:
-            theta, f = _turn_minimum(cases, trains, profiles, runs, ws, st, z_turn[c], TENSION)
+            theta, f = _turn_minimum(ref, st, z_turn[c], TENSION)
             out[c, MAX_FORCE] = -f
         out[c, MIN_HEIGHT] = np.inf
         out[c, MIN_HEIGHT_ANGLE] = np.nan
         if cases.has_seat[c]:
-            theta, f = _turn_minimum(cases, trains, profiles, runs, ws, st, z_turn[c], HEIGHT)
+            theta, f = _turn_minimum(ref, st, z_turn[c], HEIGHT)
             out[c, MIN_HEIGHT] = f
             out[c, MIN_HEIGHT_ANGLE] = theta
 
@@ -594,6 +610,7 @@ def steady_samples(cases, trains, profiles, runs, ws, state, z_turn, angles, act
     ``steady_extremes`` has filled: q, v (n, n_out, n) [m, rad, m/s, rad/s], the
     accelerations of q1 and q7 (n, n_out, 2) [m/s²] and the cam's compression (n, n_out) [N]."""
     st = state[0]
+    ref = by_ref((cases, trains, profiles, runs, ws))
     for c in range(cases.omega.shape[0]):
         if not active[c]:
             continue
@@ -611,11 +628,11 @@ def steady_samples(cases, trains, profiles, runs, ws, state, z_turn, angles, act
             if pk != p:
                 # A new piece: e^{Bτ}u at θ in closed form (left in ws.u).
                 p = pk
-                _on_piece(cases, trains, profiles, runs, ws, st, p)
+                _on_piece(ref, st, p)
                 for i in range(8):
                     ws.G[0, i] = 0.0
                 force_monitor(trains, ws, st, 0, 1.0, 0.0)
-                _state_in_prepared_piece(trains, profiles, ws, st, z_turn[c, p], theta, ws.z)
+                _state_in_prepared_piece(ref, st, z_turn[c, p], theta, ws.z)
             else:
                 # Along the piece: e^{Bτ}u advanced block by block by its step factors.
                 h = (theta - theta_prev) / w
