@@ -414,6 +414,9 @@ def onset_block(bench: Bench) -> str:
         if o["equal_time_speeds"] >= 2
         else "fewer than the two a bracket needs"
     )
+    speeds = format_short(o["equal_time_speeds"])
+    if float(speeds) >= 2 > o["equal_time_speeds"]:  # not rounded up to the two it lacks
+        speeds = f"{math.floor(o['equal_time_speeds'] * 100) / 100:g}"
     return "\n".join(
         [
             f"- **The map**: {o['designs']} designs (preload {format_short(o['preloads_lbf'][0])}"
@@ -431,7 +434,7 @@ def onset_block(bench: Bench) -> str:
             f"{o['grid_turns']} turns each ({format_short(o['grid_per_case'] * 1e3)} ms a run): "
             f"**{format_short(o['grid_seconds'], 2)} s** on {o['workers']} workers for a "
             f"resolution of {format_short(o['grid_resolution_rpm'])} rpm; in the map's time it "
-            f"affords {format_short(o['equal_time_speeds'], 2)} speeds a design ({equal}).",
+            f"affords {speeds} speeds a design ({equal}).",
         ]
     )
 
