@@ -9,6 +9,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 import time
 import zipfile
 
@@ -22,7 +23,7 @@ from study_helpers import INCH, load, write_spec
 
 from campipe.cli import main
 from campipe.engine import MEMBER_LOADS, member_loads, run_batch
-from campipe.io.archive import ArchiveBusyError, lock_path, writing
+from campipe.io.archive import ArchiveBusyError, lock_path, verify, writing
 from campipe.io.spec_yaml import parse_spec_text
 from campipe.study import check_spec, expand, load_study
 from campipe.study.execute import parts_directory, plan_batches, run_study
@@ -289,6 +290,45 @@ def test_interleaved_batches_fill_shared_chunks_and_batch_files_are_uncompressed
     with zipfile.ZipFile(parts[0]) as z:  # uncompressed: only the archive is compressed
         assert {i.compress_type for i in z.infolist()} == {zipfile.ZIP_STORED}
         assert "valve_lift.npy" in z.namelist()
+
+
+def test_an_assembly_from_batch_files_reads_each_once_wherever_its_rows_fall(tmp_path, monkeypatch):
+    """The archive assembled from the batch files a run kept (as a client assembles what
+    its workers stored) is the run's own; a batch file whose rows span two of the assembly's
+    blocks is read once, kept for the next block and then dropped, not read for each block.
+    Here 20 cases in batches of 6 and blocks of 8 (one chunk): the second and third files
+    span two blocks. Files are read ahead, on a thread of their own, while the block before
+    compresses. Broken copy, run: the file not kept (each of them read twice)."""
+    from collections import Counter
+
+    from campipe.study import execute
+
+    spec = SMALL.replace(
+        "[6000 rpm, 9524 rpm, 11000 rpm]", "{from: 6000 rpm, to: 11000 rpm, num: 10}"
+    )
+    study = load_study(write_spec(tmp_path, spec))
+    assert len(study.cases) == 20
+    archive = tmp_path / "run.nc"
+    run_study(study, archive, scheduler="synchronous", batch_size=6, keep_parts=True)
+    found, _ = execute.find_results(study, archive, archive_usable=False)
+    assert {path.suffix for path, _, _ in found.values()} == {".npz"}
+    reads: Counter = Counter()
+    threads: set[str] = set()
+    read = execute.read_batch
+
+    def counted(path):
+        reads.update([path])
+        threads.add(threading.current_thread().name.split("_")[0])
+        return read(path)
+
+    monkeypatch.setattr(execute, "read_batch", counted)
+    monkeypatch.setattr(execute, "ASSEMBLY_BYTES", 1)  # a block per chunk of eight cases
+    target = tmp_path / "assembled.nc"
+    execute.assemble(study, target, found)
+    assert len(reads) == 4 and set(reads.values()) == {1}
+    assert threads == {"MainThread", "campipe-read"}  # the first block's, then read ahead
+    xr.testing.assert_equal(load(target), load(archive))
+    assert verify(target) == []
 
 
 KILLED = """

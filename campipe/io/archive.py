@@ -28,6 +28,7 @@ import shutil
 import socket
 import threading
 from collections.abc import Iterable, Iterator, Mapping
+from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import contextmanager
 from dataclasses import dataclass
 from datetime import UTC, datetime
@@ -172,6 +173,10 @@ class NetCDFWriter:
         self.variables = {v.name: v for v in variables}
         #: name → the running checksum of a variable written in row order so far
         self._digests: dict[str, _RunningDigest] = {}
+        #: the checksums' updates, computed in order on a thread of their own beside the
+        #: writes (SHA-256 of an archive's rows is a tenth of what compressing them takes)
+        self._hashing: ThreadPoolExecutor | None = None
+        self._hashed: list[Future] = []
         with LOCK, _writes(self.path):
             cache = netCDF4.get_chunk_cache()
             if complevel:
@@ -223,7 +228,8 @@ class NetCDFWriter:
         self._digests[v.name] = _RunningDigest(var)
 
     def write(self, name: str, values: np.ndarray, index: object = slice(None)) -> None:
-        """Write ``values`` at ``index`` (a slice, an int, or a tuple of them)."""
+        """Write ``values`` at ``index`` (a slice, an int, or a tuple of them). ``values``
+        must stay as they are until :meth:`commit`: they are checksummed in the background."""
         with LOCK, _writes(self.path):
             var = self._ds.variables[name]
             if self.variables[name].dtype == "str":
@@ -236,7 +242,8 @@ class NetCDFWriter:
         self._track(name, values, index)  # outside the lock: other threads may write
 
     def append(self, name: str, values: np.ndarray) -> None:
-        """Extend a variable along its unlimited first dimension by ``values``' rows."""
+        """Extend a variable along its unlimited first dimension by ``values``' rows (kept as
+        they are until :meth:`commit`, as :meth:`write`'s)."""
         start = self._rows_written(name)
         if len(values):
             with LOCK, _writes(self.path):
@@ -261,8 +268,23 @@ class NetCDFWriter:
             start = index.start or 0
         else:
             start = -1
-        if start != digest.rows or not digest.update(values):
+        if start != digest.rows or np.ndim(values) == 0:
             del self._digests[name]
+            return
+        digest.rows += len(values)
+        if self._hashing is None:
+            self._hashing = ThreadPoolExecutor(1, thread_name_prefix="campipe-checksum")
+        self._hashed.append(self._hashing.submit(digest.update, values))
+
+    def _stop_hashing(self, wait: bool) -> None:
+        """Wait for the checksums' updates (``wait``; their errors raised), or drop them."""
+        hashed, self._hashed = self._hashed, []
+        if wait:
+            for update in hashed:
+                update.result()
+        if self._hashing is not None:
+            self._hashing.shutdown(wait=wait, cancel_futures=not wait)
+            self._hashing = None
 
     def write_rows(self, name: str, positions: np.ndarray, values: np.ndarray) -> None:
         """Row ``k`` of ``values`` to row ``positions[k]`` along the first dimension; runs of
@@ -279,6 +301,7 @@ class NetCDFWriter:
     def checksums(self) -> dict[str, str]:
         """Every variable's checksum (:func:`variable_digest`): the running one of a variable
         written whole in row order, else read back from the file; and the attributes'."""
+        self._stop_hashing(wait=True)
         out = {}
         for name, var in self._ds.variables.items():
             digest = self._digests.get(name)
@@ -306,6 +329,7 @@ class NetCDFWriter:
 
     def abort(self) -> None:
         """Close and remove the temporary file."""
+        self._stop_hashing(wait=False)
         with LOCK:
             try:
                 if self._ds.isopen():
@@ -443,16 +467,12 @@ class _RunningDigest:
     def __init__(self, var) -> None:
         self.hash = _header_digest(var)
         self.dtype = None if var.dtype is str else np.dtype(var.dtype)
-        self.rows = 0  # rows hashed so far
+        self.rows = 0  # rows written so far, hashed or to be (``NetCDFWriter._track``)
 
-    def update(self, values) -> bool:
-        """Hash the next rows; False if they cannot be hashed as the file will read them."""
+    def update(self, values) -> None:
+        """Hash the next rows (at least one dimension: a scalar is not rows)."""
         a = np.asarray(values, dtype=object if self.dtype is None else self.dtype)
-        if a.ndim == 0:
-            return False
         self.hash.update(_values_bytes(a))
-        self.rows += a.shape[0]
-        return True
 
     def hexdigest(self) -> str:
         return self.hash.hexdigest()

@@ -42,6 +42,7 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import (
     BrokenExecutor,
     Executor,
+    Future,
     ProcessPoolExecutor,
     ThreadPoolExecutor,
     as_completed,
@@ -986,7 +987,13 @@ class _Assembly:
         self.block = CASE_CHUNK  # cases per write, set when the archive is created
         self.case_names: list[str] = []
         self.event_names: list[str] = []
-        self.held: dict[Path, tuple[BatchData, int]] = {}  # batches in memory, their bytes
+        #: batches in memory (stored here, or read from their files for an earlier block):
+        #: path → (arrays, bytes)
+        self.held: dict[Path, tuple[dict[str, np.ndarray], int]] = {}
+        #: batch files of the next block being read on a thread of their own while this
+        #: block compresses (``_read_ahead``)
+        self.reading: dict[Path, Future] = {}
+        self.reader: ThreadPoolExecutor | None = None
         # Every batch's: the study's run settings set them (``fields.STUDY_WIDE``)
         self.cam_angle = cam_angle_degrees(output_angles(study.cases[0].settings))
         self.held_bytes = 0
@@ -1006,27 +1013,40 @@ class _Assembly:
         if s.data is not None:
             if not np.array_equal(s.data.cam_angle, self.cam_angle):
                 raise RuntimeError(f"batch {s.key}: other cam angles than the study's; a defect")
-            size = sum(a.nbytes for a in s.data.arrays.values())
-            if self.held_bytes + size <= HELD_BYTES:
-                self.held[s.path] = (s.data, size)
-                self.held_bytes += size
+            self._hold(s.path, s.data.arrays)
 
-    def _rows(self, path: Path, rows: np.ndarray) -> dict[str, np.ndarray]:
-        """Rows of a batch (from memory if held, else from its file) or of an archive, as
-        :func:`read_rows` gives them."""
+    def _hold(self, path: Path, arrays: dict[str, np.ndarray]) -> None:
+        """Keep a batch's arrays in memory until its rows are written, within HELD_BYTES."""
+        size = sum(a.nbytes for a in arrays.values())
+        if self.held_bytes + size <= HELD_BYTES:
+            self.held[path] = (arrays, size)
+            self.held_bytes += size
+
+    def _rows(self, path: Path, rows: np.ndarray, hi: int) -> dict[str, np.ndarray]:
+        """Rows (ascending) of a batch (from memory if held, else from its file, then held if
+        it has rows past case ``hi``, the block's end) or of an archive, as :func:`read_rows`
+        gives them. Consecutive rows are sliced, not gathered."""
         if path in self.held:
-            arrays = self.held[path][0].arrays
+            arrays = self.held[path][0]
         elif path.suffix == batch_file.SUFFIX:
-            arrays = read_batch(path)
+            ahead = self.reading.pop(path, None)
+            arrays = read_batch(path) if ahead is None else ahead.result()
+            if self.last_row[path] >= hi:  # read once, not again for the next block
+                self._hold(path, arrays)
         else:
             return read_rows(path, rows, self.case_names, self.event_names[1:])
-        out = {name: arrays[name][rows] for name in self.case_names}
         counts = arrays["event_count"].astype(np.int64)
         starts = np.concatenate([[0], np.cumsum(counts)])
-        pick = np.concatenate([np.arange(starts[r], starts[r + 1]) for r in rows])
+        if rows[-1] - rows[0] + 1 == rows.size:
+            take: slice | np.ndarray = slice(int(rows[0]), int(rows[-1]) + 1)
+            pick: slice | np.ndarray = slice(int(starts[rows[0]]), int(starts[rows[-1] + 1]))
+        else:
+            take = rows
+            pick = np.concatenate([np.arange(starts[r], starts[r + 1]) for r in rows])
+        out = {name: arrays[name][take] for name in self.case_names}
         for name in self.event_names[1:]:
-            out[name] = arrays[name][pick.astype(np.int64)]
-        out["event_count"] = counts[rows].astype(np.int32)
+            out[name] = arrays[name][pick]
+        out["event_count"] = counts[take].astype(np.int32)
         return out
 
     def _release(self, paths: Iterable[Path], upto: int) -> None:
@@ -1057,6 +1077,7 @@ class _Assembly:
             missing = [cid for cid in self.ids[self.cursor :] if cid not in self.found]
             raise RuntimeError(f"cases {missing[:5]} have no results; this is a defect")
         assert self.writer is not None
+        self._stop_reading()
         self.writer.commit()
         self.writer = None
         log.info("wrote %s (%d cases)", self.archive, len(self.ids))
@@ -1070,6 +1091,7 @@ class _Assembly:
 
     def abort(self) -> None:
         """Remove the unfinished archive (nothing once :meth:`finish` put it in place)."""
+        self._stop_reading()
         if self.writer is not None:
             self.writer.abort()
             self.writer = None
@@ -1096,28 +1118,73 @@ class _Assembly:
         for name, values in static.items():
             self.writer.write(name, values)
 
+    def _read_ahead(self, lo: int, hi: int) -> None:
+        """Start reading the batch files that hold cases lo … hi-1 (those already stored) and
+        are neither in memory nor being read: their reading (file, CRC-32, arrays) overlaps
+        the compression of the block before, as it does when a client assembles what a
+        cluster's workers stored. Within HELD_BYTES with what is held (a file's size for its
+        arrays'); the others are read when their rows are written."""
+        try:
+            room = HELD_BYTES - self.held_bytes - sum(p.stat().st_size for p in self.reading)
+            for cid in self.ids[lo:hi]:
+                entry = self.found.get(cid)
+                if entry is None:
+                    break
+                path = entry[0]
+                if path.suffix != batch_file.SUFFIX or path in self.held or path in self.reading:
+                    continue
+                room -= path.stat().st_size
+                if room < 0:
+                    break
+                self._read(path)
+        except OSError:  # a file gone: its reading, when its rows are written, says so
+            return
+
+    def _read(self, path: Path) -> None:
+        """Read a batch file on the reading thread (``_rows`` takes it)."""
+        if self.reader is None:
+            self.reader = ThreadPoolExecutor(1, thread_name_prefix="campipe-read")
+        self.reading[path] = self.reader.submit(read_batch, path)
+
+    def _stop_reading(self) -> None:
+        """Drop what is being read ahead and the reading thread."""
+        self.reading.clear()
+        if self.reader is not None:
+            self.reader.shutdown(wait=False, cancel_futures=True)
+            self.reader = None
+
     def _write(self, lo: int, hi: int) -> None:
         """Cases lo … hi-1 from the files that hold them, in one write per variable."""
         w = self.writer
         assert w is not None
+        self._read_ahead(hi, min(hi + self.block, len(self.ids)))
         by_file: dict[Path, list[tuple[int, int]]] = {}
         for k in range(hi - lo):
             path, row, _ = self.found[self.ids[lo + k]]
             by_file.setdefault(path, []).append((row, k))
         block: dict[str, np.ndarray] = {}
-        events: list[tuple[dict, int, int]] = [({}, 0, 0)] * (hi - lo)
+        # (first case, rows' data, first event, end): runs of cases whose events are
+        # consecutive in both the block and their file's rows
+        events: list[tuple[int, dict, int, int]] = []
         for path, pairs in by_file.items():
             pairs.sort()
             rows = np.array([r for r, _ in pairs], dtype=np.int64)
             ks = np.array([k for _, k in pairs], dtype=np.int64)
-            data = self._rows(path, rows)
+            data = self._rows(path, rows, hi)
+            run = ks[-1] - ks[0] + 1 == ks.size and bool(np.all(np.diff(ks) > 0))
+            at: slice | np.ndarray = slice(int(ks[0]), int(ks[-1]) + 1) if run else ks
             for name in self.case_names:
                 if name not in block:
                     block[name] = np.empty((hi - lo, *data[name].shape[1:]), data[name].dtype)
-                block[name][ks] = data[name]
+                block[name][at] = data[name]
             starts = np.concatenate([[0], np.cumsum(data["event_count"])])
-            for j, k in enumerate(ks):
-                events[k] = (data, int(starts[j]), int(starts[j + 1]))
+            if run:
+                events.append((int(ks[0]), data, 0, int(starts[-1])))
+            else:
+                events += [
+                    (int(k), data, int(starts[j]), int(starts[j + 1])) for j, k in enumerate(ks)
+                ]
+        events.sort(key=lambda e: e[0])
         for name in self.case_names:
             w.write(name, block[name], slice(lo, hi))
         for name in self.event_names:
@@ -1125,7 +1192,7 @@ class _Assembly:
                 values = np.repeat(np.arange(lo, hi, dtype=np.int32), block["event_count"])
                 w.append(name, values)
             else:
-                w.append(name, np.concatenate([d[name][a:b] for d, a, b in events]))
+                w.append(name, np.concatenate([d[name][a:b] for _, d, a, b in events]))
         for row in np.flatnonzero(block["status"] != OK).tolist():
             code = int(block["status"][row])
             self.statuses[self.ids[lo + row]] = STATUS.get(code, str(code))
