@@ -382,9 +382,11 @@ def test_a_first_run_finds_modal_exacts_types_once_and_compiles_its_helpers_ahea
     quasi-static kernel) and hands them to the start's side (the second process of a first
     run, here run in this one), which compiles each helper ``exact.ahead_signatures`` names
     for them before the start's kernels, so that compiling the kernel finds them cached; a
-    newmark-linear run has none. Whether those are the types the kernel calls the helper with
-    is the ``slow`` one-signature test's."""
+    newmark-linear run has none. A second process gone before it read the types leaves its
+    share to this one. Whether those are the types the kernel calls the helper with is the
+    ``slow`` one-signature test's."""
     import multiprocessing
+    from types import SimpleNamespace
 
     from campipe.engine import exact, kernels
     from campipe.engine.batch import Case, RunSettings
@@ -413,6 +415,25 @@ def test_a_first_run_finds_modal_exacts_types_once_and_compiles_its_helpers_ahea
     settings = RunSettings(revolutions=0.05, warmup=0)
     kernels.compile_kernels(case, settings)
     types = found([case], settings, False)
+    assert done == ["types", ("helper", types[:2]), "start", ("helper", types)]
+    done.clear()
+
+    class Gone:  # a second process that died before it read the types
+        def __init__(self, target, args, daemon):
+            self.theirs = args[0]
+
+        def start(self):
+            pass
+
+        def join(self):
+            pass
+
+    monkeypatch.setattr(
+        multiprocessing,
+        "get_context",
+        lambda method: SimpleNamespace(Pipe=multiprocessing.Pipe, Process=Gone),
+    )
+    kernels.compile_kernels(case, settings)  # its share is compiled here instead
     assert done == ["types", ("helper", types[:2]), "start", ("helper", types)]
     done.clear()
     newmark = RunSettings(revolutions=0.05, warmup=0, integrator="newmark-linear", dt=1e-6)

@@ -161,16 +161,21 @@ def compile_kernels(case: Case, settings: RunSettings, search: bool = False) -> 
         kernel_types = None
         if settings.method == "modal-exact":
             kernel_types = batch.integrator_types([case], settings, False)
+        handed = False
         if second is not None:
-            ours.send(kernel_types)
-        else:
+            try:
+                ours.send(kernel_types)
+                handed = True
+            except OSError as exc:  # it is gone (it could not start): its share is ours
+                log.debug("the second process is gone: %s", exc)
+        if not handed:
             _start_kernels(case, settings, search, kernel_types)
         if kernel_types is not None:
             exact.modal_exact_batch.compile(kernel_types)
         else:
             quasi_static = dataclasses.replace(short, start="quasi-static")
             batch.run_batch([case], quasi_static, full_state=False, on_failure="record")
-        if second is not None and (failed := ours.recv()) is not None:
+        if handed and (failed := ours.recv()) is not None:
             log.debug("the second process failed: %s", failed)
     except Exception as exc:  # the run itself compiles whatever is still missing
         log.debug("compiling ahead failed: %s", exc)
