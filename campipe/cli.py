@@ -106,6 +106,10 @@ def failure(exc: BaseException) -> Failure | None:
         return Failure(f"{where}{exc.strerror or exc}")
     if isinstance(exc, MemoryError):
         return Failure("out of memory; run a smaller study, or on a larger machine")
+    from campipe.io.archive import missing_filter
+
+    if (plugin := missing_filter(exc)) is not None:
+        return Failure(f"cannot read the archive ({exc}): {plugin}")
     return None
 
 
@@ -851,12 +855,12 @@ def _open_archive(path):
     """An archive as an xarray Dataset, or a Failure naming why it cannot be read."""
     import xarray as xr
 
+    from campipe.io.archive import unreadable
+
     try:
         return xr.open_dataset(path)
-    except Exception as exc:  # not netCDF, or damaged: each reader fails its own way
-        raise Failure(
-            f"{path}: cannot read as an archive ({type(exc).__name__}: {str(exc)[:200]})"
-        ) from None
+    except Exception as exc:
+        raise Failure(f"{path}: {unreadable(exc)}") from None
 
 
 # -- starting without the repository -----------------------------------------------------------
@@ -1088,7 +1092,12 @@ def _onset(loaded, spec_path, path, tolerance, fmt, check, workers, command="ons
     )
     sizes, variables, arrays, attrs = file_contents(result)
     write_file(
-        path, sizes, variables, arrays, {**attrs, **provenance(f"campipe onset {spec_path}")}
+        path,
+        sizes,
+        variables,
+        arrays,
+        {**attrs, **provenance(f"campipe onset {spec_path}")},
+        loaded.compression,
     )
     table = displayed(result.table, display_units(result.table.units, attrs))
     click.echo(format_rows(table, np.arange(table.n), table.default, fmt))

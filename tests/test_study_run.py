@@ -122,12 +122,12 @@ def test_the_archive_carries_cf_metadata_from_the_table(small):
         {"key": "speed", "name": "speed_rpm", "kind": "sweep", "size": 3},
         {"key": "seat", "name": "seat", "kind": "sweep", "size": 2},
     ]
-    # compressed, up to eight cases per chunk (this study has six)
+    # compressed (zstd by default), up to eight cases per chunk (this study has six)
     enc = ds.valve_lift.encoding
-    assert enc["zlib"] and enc["chunksizes"] == (6, 721)
+    assert enc["zstd"] and enc["complevel"] == 1 and enc["chunksizes"] == (6, 721)
     assert ds.q.encoding["chunksizes"] == (6, 721, 7)
     with netCDF4.Dataset(archive) as nc:
-        assert nc["cam_force"].filters()["zlib"]
+        assert nc["cam_force"].filters()["zstd"] and not nc["cam_force"].filters()["zlib"]
     # smaller than its raw arrays (float histories barely compress; time and flags do)
     raw = sum(ds[v].nbytes for v in ds.variables)
     assert os.path.getsize(archive) < raw

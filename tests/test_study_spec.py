@@ -411,7 +411,10 @@ def test_the_run_block_follows_the_engines_run_settings():
     from campipe.study.fields import RUN_DEFAULTS, RUN_SETTINGS, undeclared_run_settings
 
     assert undeclared_run_settings() == []
-    assert set(RUN_DEFAULTS) == {f.name for f in dataclasses.fields(RunSettings)} | {"record"}
+    assert set(RUN_DEFAULTS) == {f.name for f in dataclasses.fields(RunSettings)} | {
+        "record",
+        "compression",
+    }
     assert set(RUN_SETTINGS) == {f.name for f in dataclasses.fields(RunSettings)}
     settings = expand(check_spec(BASE)).cases[0].settings
     defaults = RunSettings()

@@ -4,7 +4,7 @@
 Every file is written at a temporary path in its final folder and renamed into place
 (``os.replace``) only once complete and flushed, so a reader (or a rerun after a crash) sees
 either the whole file or none. Files are netCDF-4 (HDF5): variables along ``case`` are chunked
-``CASE_CHUNK`` cases per chunk and, in an archive, zlib-compressed; ``xarray.open_dataset``
+``CASE_CHUNK`` cases per chunk and compressed (:data:`COMPRESSIONS`); ``xarray.open_dataset``
 reads them as they are.
 
 Rows are written a block at a time, so a writer holds no more than the rows it is given: the
@@ -55,9 +55,19 @@ log = logging.getLogger(__name__)
 
 #: Serialises netCDF4 calls from this process's threads.
 LOCK = threading.RLock()
-#: zlib level of an archive's variables: level 1 compresses these histories as well as 4
-#: (within 2 %) in less time. 0: uncompressed.
-COMPLEVEL = 1
+#: How an archive's variables may be compressed (the spec's ``run.compression``) → the
+#: keywords netCDF4 takes for it. zstd (HDF5 filter 32015, netCDF-C 4.9 and later, built into
+#: the netCDF4 wheels): written and read faster than zlib, the file somewhat larger (``campipe
+#: bench`` measures both); netCDF4 applies no byte shuffle before it. zlib with the byte
+#: shuffle: read by every netCDF-4 reader. Level 1 of either compresses these histories
+#: nearly as well as higher levels in less time.
+COMPRESSIONS: dict[str, dict[str, Any]] = {
+    "zstd": {"compression": "zstd", "complevel": 1},
+    "zlib": {"compression": "zlib", "complevel": 1, "shuffle": True},
+    "none": {},
+}
+#: The default compression.
+COMPRESSION = "zstd"
 #: Cases per chunk of a variable along case and samples (a history): eight cases' histories
 #: compress a third better than one case's alone and cost HDF5 an eighth of the chunks; reading
 #: one case decompresses eight cases' rows of a variable (46 kB of a 721-sample history).
@@ -111,10 +121,35 @@ def _writes(path: Path) -> Iterator[None]:
         raise write_error(path, exc) from None
 
 
+def missing_filter(exc: BaseException) -> str | None:
+    """What to do about netCDF-C's "Filter error" (the HDF5 plugin of a compression not
+    found, as when ``HDF5_PLUGIN_PATH`` names a folder without it), or None for another
+    error."""
+    if not isinstance(exc, RuntimeError) or "Filter error" not in str(exc):
+        return None
+    where = os.environ.get("HDF5_PLUGIN_PATH")
+    return (
+        "netCDF-C found no HDF5 plugin for the compression (HDF5_PLUGIN_PATH "
+        f"{'is ' + repr(where) if where else 'is unset'}); unset HDF5_PLUGIN_PATH to use "
+        "the plugins the netCDF4 package installs, or add their folder to it; for archives "
+        "that need no plugin, set run.compression: zlib"
+    )
+
+
+def unreadable(exc: BaseException) -> str:
+    """Why a file cannot be read as an archive, from the exception its reader raised (not
+    netCDF, damaged, or a compression without its plugin: each reader fails its own way)."""
+    why = f"cannot read as an archive ({type(exc).__name__}: {str(exc)[:200]})"
+    plugin = missing_filter(exc)
+    return why if plugin is None else f"{why}: {plugin}"
+
+
 def write_error(path: Path, exc: BaseException) -> ArchiveWriteError:
     """An ArchiveWriteError for ``exc`` raised while writing ``path``."""
     code = getattr(exc, "errno", None)
     why = getattr(exc, "strerror", None) or str(exc) or type(exc).__name__
+    if (plugin := missing_filter(exc)) is not None:
+        return ArchiveWriteError.at(str(path), f"cannot write ({why}): {plugin}")
     try:
         free = shutil.disk_usage(path.parent).free
         shown = f"{free / 1e9:.3g} GB" if free >= 1e9 else f"{free / 1e6:.3g} MB"
@@ -163,12 +198,12 @@ class NetCDFWriter:
         sizes: Mapping[str, int | None],
         variables: Iterable[VariableSpec],
         attrs: Mapping[str, object],
-        complevel: int = COMPLEVEL,
+        compression: str = COMPRESSION,
     ):
         import netCDF4
 
         self.path = Path(path)
-        self.complevel = complevel
+        self.filters = COMPRESSIONS[compression]
         self.tmp = temporary_path(self.path)
         self.variables = {v.name: v for v in variables}
         #: name → the running checksum of a variable written in row order so far
@@ -179,7 +214,7 @@ class NetCDFWriter:
         self._hashed: list[Future] = []
         with LOCK, _writes(self.path):
             cache = netCDF4.get_chunk_cache()
-            if complevel:
+            if self.filters:
                 # No chunk cache for the histories: each chunk is compressed as its rows are
                 # written (they come in whole chunks), while later batches are computed,
                 # not all at once when the file is closed. netCDF-C gives the variables the
@@ -212,13 +247,12 @@ class NetCDFWriter:
             if len(v.dims) == 1:
                 chunks = [min(shape[0], ROW_CHUNK)]
             kwargs["chunksizes"] = chunks
-            if self.complevel:
-                kwargs.update(zlib=True, complevel=self.complevel, shuffle=True)
+            kwargs.update(self.filters)
         dtype = str if v.dtype == "str" else np.dtype(v.dtype)
         if v.dtype == "str":
             kwargs.pop("fill_value")
         var = self._ds.createVariable(v.name, dtype, v.dims, **kwargs)
-        if self.complevel and not (v.dims[0] == "case" and len(v.dims) > 1):
+        if self.filters and not (v.dims[0] == "case" and len(v.dims) > 1):
             # Rows along event or a 1-D case axis come in parts of a chunk: keep a cache.
             var.set_var_chunk_cache(size=VECTOR_CACHE, nelems=VECTOR_CACHE_SLOTS)
         attrs = dict(v.attrs)
@@ -369,11 +403,11 @@ def write_file(
     variables: Iterable[VariableSpec],
     arrays: Mapping[str, np.ndarray],
     attrs: Mapping[str, object],
-    complevel: int = COMPLEVEL,
+    compression: str = COMPRESSION,
 ) -> Path:
-    """Write a whole small file (a batch) atomically: every variable from ``arrays``."""
+    """Write a whole small file atomically: every variable from ``arrays``."""
     variables = list(variables)
-    with NetCDFWriter(path, sizes, variables, attrs, complevel) as w:
+    with NetCDFWriter(path, sizes, variables, attrs, compression) as w:
         for v in variables:
             w.write(v.name, arrays[v.name])
         return w.commit()

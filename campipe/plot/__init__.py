@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from campipe.io.archive import ArchiveFileError
+from campipe.io.archive import ArchiveFileError, unreadable
 from campipe.study.plots import PlotRequest
 
 
@@ -37,11 +37,8 @@ def plot_archive(archive: str | Path, request: PlotRequest, output: str | Path |
         )
     try:
         ds = xr.open_dataset(archive)
-    except Exception as exc:  # not netCDF, or damaged: each reader fails its own way
-        raise ArchiveFileError.at(
-            str(archive),
-            f"cannot read as an archive ({type(exc).__name__}: {str(exc)[:200]})",
-        ) from None
+    except Exception as exc:
+        raise ArchiveFileError.at(str(archive), unreadable(exc)) from None
     with ds:
         fig = figure(ds, request)
     return write(fig, output), fig

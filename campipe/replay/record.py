@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from campipe.io.archive import unreadable
 from campipe.io.rerun_replay import (
     MM,
     CaseRecording,
@@ -184,10 +185,8 @@ def replay_archive(
         raise ReplayError(f"{archive}: no such archive", key=str(archive))
     try:
         ds = xr.open_dataset(archive)
-    except (OSError, ValueError) as exc:
-        raise ReplayError(
-            f"{archive}: cannot read as an archive ({exc})", key=str(archive)
-        ) from None
+    except (OSError, ValueError, RuntimeError) as exc:
+        raise ReplayError(f"{archive}: {unreadable(exc)}", key=str(archive)) from None
     with ds:
         try:
             rows = select_rows(ds, case_ids, where)

@@ -1114,7 +1114,7 @@ class _Assembly:
                 n = np.prod([sizes[d] for d in s.dims[1:]], dtype=np.int64)
                 per_case += int(n) * np.dtype(s.dtype).itemsize
         self.block = max(CASE_CHUNK, ASSEMBLY_BYTES // max(per_case, 1) // CASE_CHUNK * CASE_CHUNK)
-        self.writer = NetCDFWriter(self.archive, sizes, specs, attrs)
+        self.writer = NetCDFWriter(self.archive, sizes, specs, attrs, study.compression)
         for name, values in static.items():
             self.writer.write(name, values)
 

@@ -35,6 +35,7 @@ from campipe.engine.settings import (
     check_stability,
 )
 from campipe.errors import did_you_mean, excerpt
+from campipe.io.archive import COMPRESSION
 from campipe.io.lift_table import LiftTableError, read_lift_table, table_digest
 from campipe.model import (
     PARAMETERS,
@@ -195,6 +196,7 @@ class Study:
     revolutions: float  # cam turns, shared [-]
     output_every: float  # output spacing, shared [rad]
     record: tuple[str, ...]  # optional histories stored
+    compression: str = COMPRESSION  # the archive's (campipe.io.archive.COMPRESSIONS)
 
     @property
     def name(self) -> str:
@@ -589,7 +591,11 @@ def _resolve(raw: Mapping, index: int, directory: Path) -> tuple[ResolvedCase, d
                 )
             )
     run = raw["run"]
-    rs = {k: _parse(f"run.{k}", _freeze(v), f"run.{k}") for k, v in run.items() if k != "record"}
+    rs = {
+        k: _parse(f"run.{k}", _freeze(v), f"run.{k}")
+        for k, v in run.items()
+        if k not in ("record", "compression")
+    }
     rs["integrator"] = case_integrator(rs["integrator"], train, seat is not None)
     settings = RunSettings(**{name: rs[name] for name in RUN_SETTINGS})
     check_settings(settings)
@@ -716,6 +722,7 @@ def expand(
         revolutions=float(run["revolutions"]),
         output_every=float(_parse("run.output_every", run["output_every"], "run.output_every")),
         record=tuple(run["record"]),
+        compression=str(run["compression"]),
     )
 
 

@@ -25,6 +25,7 @@ from campipe.engine import MEMBER_LOADS, SPRING_HISTORIES, RunSettings
 from campipe.engine import settings as _engine_settings
 from campipe.engine.settings import ALL_INTEGRATORS
 from campipe.errors import CampipeError, did_you_mean, excerpt
+from campipe.io.archive import COMPRESSION, COMPRESSIONS
 from campipe.model import PARAMETERS, PRESETS, ModelParameterError, parse_parameter
 from campipe.profiles import RAMP_SHAPES
 from campipe.units import QuantityError, convert, parse_angular, parse_quantity
@@ -394,12 +395,28 @@ CASE_FIELDS: dict[str, Field] = {
                 "contact_pressure",
             ),  # fmt: skip
         ),
+        Field(
+            "run.compression",
+            "choice",
+            "how the archive is compressed: zstd (the default: written and read faster than "
+            "zlib, the file somewhat larger; read by netCDF-C 4.9 or later with its filter "
+            "plugins, as the netCDF4 wheels install them); zlib: readable by every netCDF-4 "
+            "reader; none",
+            choices=tuple(COMPRESSIONS),
+        ),
     ]
 }
 
 #: Run keys whose value the whole study shares: they fix the archive's cam_angle axis and
 #: its variables, so a sweep, zip, sample or case may not vary them.
-STUDY_WIDE = ("run.revolutions", "run.output_every", "run.record", "run.start", "run.warmup")
+STUDY_WIDE = (
+    "run.revolutions",
+    "run.output_every",
+    "run.record",
+    "run.start",
+    "run.warmup",
+    "run.compression",
+)
 
 #: Defaults of the run keys, in spec spelling, from the engine's RunSettings.
 RUN_DEFAULTS: dict[str, object] = {
@@ -409,6 +426,7 @@ RUN_DEFAULTS: dict[str, object] = {
         if f.name in _RUN_METADATA
     },
     "record": [],
+    "compression": COMPRESSION,
 }
 
 #: Profile kinds → their keys (all required).

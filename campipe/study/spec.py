@@ -308,8 +308,8 @@ def check_run(value: object, path: str, study_wide: bool, problems: _Problems) -
         if not study_wide and f"run.{k}" in STUDY_WIDE:
             problems.add(
                 join(path, k),
-                "the whole study shares it (it fixes the archive's "
-                "cam_angle axis and variables); set it in the base run",
+                "the whole study shares it (it fixes the archive's cam_angle axis, "
+                "variables or compression); set it in the base run",
             )
             continue
         problems.check(CASE_FIELDS[f"run.{k}"].parse, v, join(path, k))
@@ -450,7 +450,7 @@ def check_axes(
                 problems.add(
                     p,
                     "the whole study shares it (it fixes the archive's cam_angle "
-                    "axis and variables); it cannot vary",
+                    "axis, variables or compression); it cannot vary",
                 )
             else:
                 problems.items.append(_unknown(path, key, keys))
