@@ -136,6 +136,29 @@ def test_a_flipped_byte_anywhere_in_a_batch_file_never_reaches_the_archive(
     xr.testing.assert_identical(load(tmp_path / "small.nc"), load(reference / "small.nc"))
 
 
+@pytest.mark.parametrize("damage", ["zeroed tail", "truncated", "empty"])
+def test_what_a_system_crash_leaves_of_a_batch_file_is_recomputed(reference, tmp_path, damage):
+    """Batch files are not synced to the disk: after a system crash one may hold zeros where
+    its data had not reached the disk, end early, or be empty. Each fails its checks, is
+    named, and its cases are computed again; the archive equals the untouched one."""
+    study = _copy(reference, tmp_path)
+    (tmp_path / "small.nc").unlink()
+    batch = sorted(parts_directory(tmp_path / "small.nc").glob("batch-*.npz"))[2]
+    data = batch.read_bytes()
+    half = len(data) // 2
+    batch.write_bytes(
+        {
+            "zeroed tail": data[:half] + bytes(len(data) - half),
+            "truncated": data[:half],
+            "empty": b"",
+        }[damage]
+    )
+    report = run_study(study, tmp_path / "small.nc", scheduler="synchronous", batch_size=2)
+    assert (report.computed, report.reused) == (2, 4)
+    assert any(str(batch) in n and "failed its checks" in n for n in report.notes)
+    xr.testing.assert_identical(load(tmp_path / "small.nc"), load(reference / "small.nc"))
+
+
 def test_a_flipped_byte_in_the_archive_is_not_up_to_date_and_is_recomputed(reference, tmp_path):
     """The archive is compressed: bytes at several places of it are flipped in turn. Each
     damage that changes a value or attribute is detected before "up to date", and the

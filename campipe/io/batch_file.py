@@ -2,9 +2,14 @@
 
 A batch file is a NumPy ``.npz`` (an uncompressed zip of ``.npy`` arrays, written by
 ``numpy.savez`` and read with ``allow_pickle=False``) holding the batch's arrays and, as the
-member :data:`ATTRS`, its attributes as JSON. It is written at a temporary path, flushed and
-renamed into place (``os.replace``), so a rerun sees a whole file or none; every member
-carries the zip's CRC-32, which :func:`verify` checks.
+member :data:`ATTRS`, its attributes as JSON. It is written at a temporary path and renamed
+into place (``os.replace``), so a rerun after a killed run sees a whole file or none; every
+member carries the zip's CRC-32, which :func:`verify` checks. It is not synced to the disk
+(``fsync``): a killed process leaves its writes to the system, and what a system crash
+leaves of a file not yet on the disk fails those checks, so a rerun computes its cases
+again. A batch file is scratch, no copy of anything else; the archive, the product, is
+synced before it is renamed into place. Syncing each batch file cost the worker that wrote
+it a wait for the disk, batch after batch.
 
 Not netCDF: HDF5 is not thread-safe, so every netCDF call of a process is serialised
 (``campipe.io.archive.LOCK``), and a worker storing its batch waited while the archive's
@@ -50,8 +55,6 @@ def write(path: Path, arrays: Mapping[str, np.ndarray], attrs: Mapping[str, obje
     try:
         with open(tmp, "wb") as f:
             np.savez(f, **members)  # no object arrays: nothing is pickled
-            f.flush()
-            os.fsync(f.fileno())
         os.replace(tmp, path)
     except OSError as exc:
         tmp.unlink(missing_ok=True)
