@@ -257,6 +257,41 @@ def test_initial_state_is_quasi_static():
     assert_allclose(v[6], -1.5 * rpm(9000) * INCH / 2, rtol=0.01)
 
 
+@pytest.mark.parametrize("refined", [False, True])
+def test_static_position_is_the_quasi_static_kernels_bit_for_bit(refined):
+    """``static_position`` (NumPy, no kernel: what ``prepare`` uses for the valve's
+    reference and the rocker ratio) equals the quasi-static kernel's positions exactly, for
+    each start configuration's held coordinates at random positions, for the thesis train
+    and a refined one; and it is the static equilibrium: K q = load on the free rows.
+    Broken copy, run: the sums taken by ``@`` (BLAS order) differ in the last bits on the
+    refined train (9 of its 15 positions)."""
+    from campipe.engine.batch import START_CONFIGURATIONS, start_inverses
+    from campipe.engine.contact import held_mask, quasi_static_batch, static_position
+
+    train = TRAIN.replace(pushrod_elements=3, spring_elements=4) if refined else TRAIN
+    sm = train_matrices(train)
+    n = sm.mass.shape[0]
+    rng = np.random.default_rng(7)
+    inverses = start_inverses(sm)
+    for i_cfg, number in enumerate(START_CONFIGURATIONS):
+        held = held_mask(number, n)
+        for _ in range(5):
+            held_q = rng.normal(scale=0.01, size=n)
+            ours = static_position(sm.mass, sm.stiffness, sm.preload, held, held_q)
+            q, v, a = (np.empty((1, n)) for _ in range(3))
+            kinv, minv = inverses[i_cfg]
+            zeros = np.zeros((1, n))
+            quasi_static_batch(
+                kinv[None], minv[None], sm.mass[None], sm.damping[None], sm.stiffness[None],
+                sm.preload[None], held[None].copy(), held_q[None], zeros, zeros, q, v, a,
+            )  # fmt: skip
+            assert_array_equal(ours, q[0])
+            free = ~held
+            residual = sm.stiffness @ ours - sm.preload
+            assert_allclose(residual[free], 0.0, atol=1e-9 * np.abs(sm.preload).max())
+            assert_array_equal(ours[held], held_q[held])
+
+
 def test_member_loads_at_static_equilibrium():
     """Hand statics at the quasi-static state at θ = 0 (mid-lift, 0.5 in of cam lift): the
     spring carries its preload plus its rate times 0.75 in of valve travel, the pushrod the

@@ -183,10 +183,10 @@ def test_the_onset_says_what_it_compiles_and_compiles_the_check_ahead(tmp_path, 
     out = CliRunner().invoke(main, ["onset", str(path)])
     assert out.exit_code == 0, out.output
     first = out.stderr.splitlines()[0]
-    assert first.startswith("campipe onset: compiling quasi-static state, steady extremes, ")
+    assert first.startswith("campipe onset: compiling steady extremes, periodic start, ")
     assert "modal-exact" in first and compiled == [{"search": True}]
     out = CliRunner().invoke(main, ["onset", str(path), "--no-check"])
-    assert "compiling quasi-static state, steady extremes with numba" in out.stderr
+    assert "compiling steady extremes with numba" in out.stderr
     assert "modal-exact" not in out.stderr and len(compiled) == 1
     monkeypatch.setattr(kernels, "_missing", lambda named: [])
     out = CliRunner().invoke(main, ["onset", str(path)])

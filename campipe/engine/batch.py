@@ -35,7 +35,7 @@ from campipe.engine.contact import (
     impact_masses,
     newmark_step_maps,
     quasi_static_batch,
-    quasi_static_state,
+    static_position,
 )
 from campipe.engine.modal import ModalData, harmonic_responses, modal_data, pad_stack
 from campipe.engine.settings import CLOSURES as CLOSURES
@@ -284,10 +284,7 @@ def valve_ratio(sm: SystemMatrices) -> float:
     n = sm.mass.shape[0]
     lifted = np.zeros(n)
     lifted[CAM] = -1.0  # one metre of cam lift
-    q, _, _ = quasi_static_state(
-        sm.mass, sm.damping, sm.stiffness, sm.preload, held_mask(CAM_CONTACT, n), lifted,
-        np.zeros(n), np.zeros(n),
-    )  # fmt: skip
+    q = static_position(sm.mass, sm.stiffness, sm.preload, held_mask(CAM_CONTACT, n), lifted)
     return float(q[SEAT] - valve_reference(sm))
 
 
@@ -365,7 +362,6 @@ def initial_states(mats, which, packed, omega, has_seat, seat_q, inverses=None):
     for i_cfg, number in enumerate(START_CONFIGURATIONS):
         kinv = pad_stack([inv[i_cfg, 0] for inv in inverses])[which]
         minv = pad_stack([inv[i_cfg, 1] for inv in inverses])[which]
-        # A writable array, as ``quasi_static_state`` passes: one compiled kernel serves both.
         held = np.tile(held_mask(number, n_q), (n, 1))
         qc, vc, ac = np.empty((n, n_q)), np.empty((n, n_q)), np.empty((n, n_q))
         quasi_static_batch(kinv, minv, M, C, K, load, held, held_q, held_v, held_a, qc, vc, ac)
@@ -386,16 +382,7 @@ def initial_states(mats, which, packed, omega, has_seat, seat_q, inverses=None):
 def valve_reference(sm: SystemMatrices) -> float:
     """q7 with the cam on its base circle, no seat, in static equilibrium [m]."""
     n = sm.mass.shape[0]
-    q, _, _ = quasi_static_state(
-        sm.mass,
-        sm.damping,
-        sm.stiffness,
-        sm.preload,
-        held_mask(CAM_CONTACT, n),
-        np.zeros(n),
-        np.zeros(n),
-        np.zeros(n),
-    )
+    q = static_position(sm.mass, sm.stiffness, sm.preload, held_mask(CAM_CONTACT, n), np.zeros(n))
     return float(q[SEAT])
 
 
@@ -545,8 +532,7 @@ def start_states(cases: Sequence[Case], settings: RunSettings) -> Start:
 def integrator_types(cases: Sequence[Case], settings: RunSettings, full_state: bool) -> tuple:
     """The numba types of modal-exact's arguments in ``run_batch`` for these cases: the
     signature to compile its kernel ahead for (``campipe.engine.kernels.compile_kernels``),
-    found without running the kernels of the start or of the harmonic responses (only the
-    quasi-static state's, for the trains' valve references)."""
+    found without running a kernel (the start's, the harmonic responses' or another)."""
     batch = _prepare_batch(cases, settings, full_state, responses=False)
     args = _exact_arguments(batch, batch.cases, _outputs(batch, settings))
     return tuple(typeof(a, Purpose.argument) for a in args)  # as a call types them

@@ -117,38 +117,23 @@ def impact_masses(mass: np.ndarray) -> np.ndarray:
     )
 
 
-def quasi_static_state(
-    mass, damping, stiffness, load, held, held_q, held_v, held_a
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The static solution for the held coordinates' position, moving with the velocity that
-    solution has for their velocity; accelerations from the equation of motion (thesis
-    Appendix B, step 1). One case of ``quasi_static_batch``.
-
-    Parameters
-    ----------
-    held : (n,) bool
-        Prescribed coordinates.
-    held_q, held_v, held_a : (n,) float
-        Their displacement [m], velocity [m/s] and acceleration [m/s²] (other entries ignored).
-    """
-    kinv, minv = held_inverses(mass, stiffness, held)
-    q, v, a = (np.empty((1, mass.shape[0])) for _ in range(3))
-    quasi_static_batch(
-        kinv[None],
-        minv[None],
-        mass[None],
-        damping[None],
-        stiffness[None],
-        load[None],
-        np.asarray(held)[None],
-        np.asarray(held_q)[None],
-        np.asarray(held_v)[None],
-        np.asarray(held_a)[None],
-        q,
-        v,
-        a,
-    )
-    return q[0], v[0], a[0]
+def static_position(mass, stiffness, load, held, held_q) -> np.ndarray:
+    """(n,) The held coordinates at ``held_q`` and the free ones in static equilibrium with
+    the load: the positions of :func:`quasi_static_batch` for one case (thesis Appendix B,
+    step 1), without its compiled kernel. The same products and sums in the same order, each
+    sum over j one NumPy step (IEEE arithmetic, element by element), so the result equals
+    the kernel's bit for bit. ``batch.prepare`` needs it for every train; a run from the
+    periodic start then loads no quasi-static kernel."""
+    kinv, _ = held_inverses(mass, stiffness, held)
+    held = np.asarray(held, dtype=bool)
+    q = np.where(held, held_q, 0.0)
+    rq = np.array(load, dtype=float)
+    for j in range(q.size):
+        rq -= stiffness[:, j] * q[j]
+    free = np.zeros(q.size)
+    for j in range(q.size):
+        free += kinv[:, j] * rq[j]
+    return np.where(held, q, free)
 
 
 def held_inverses(mass, stiffness, held) -> tuple[np.ndarray, np.ndarray]:
@@ -164,8 +149,12 @@ def held_inverses(mass, stiffness, held) -> tuple[np.ndarray, np.ndarray]:
 
 @njit(cache=True, nogil=True)
 def quasi_static_batch(kinv, minv, M, C, K, load, held, held_q, held_v, held_a, q, v, a):
-    """``quasi_static_state`` for each case c (arrays with a leading case axis; kinv, minv
-    from ``held_inverses``), by plain loops so a case's result does not depend on its batch
+    """The static solution for the held coordinates' position, moving with the velocity that
+    solution has for their velocity; accelerations from the equation of motion (thesis
+    Appendix B, step 1), for each case c (arrays with a leading case axis; kinv, minv from
+    ``held_inverses``; ``held`` (n, n_q) bool, the prescribed coordinates, ``held_q``,
+    ``held_v``, ``held_a`` their displacement [m], velocity [m/s] and acceleration [m/s²],
+    other entries ignored), by plain loops so a case's result does not depend on its batch
     (a train of fewer coordinates than the batch's most is zero-padded: the padding adds
     exact zeros)."""
     n = held_q.shape[1]

@@ -26,7 +26,10 @@ log = logging.getLogger(__name__)
 def kernels(settings: RunSettings) -> dict[str, object]:
     """The compiled kernels (numba dispatchers) a run with ``settings`` calls, by name; each
     takes the helpers it calls with it (inlined, or compiled and cached along)."""
-    out: dict[str, object] = {"quasi-static state": contact.quasi_static_batch}
+    out: dict[str, object] = {}
+    if settings.start == "quasi-static" or settings.method == "newmark-linear":
+        # newmark-linear's first run compiles it through a short quasi-static run
+        out["quasi-static state"] = contact.quasi_static_batch
     if settings.start == "quasi-static":
         out["cam lift"] = batch.cam_at
     else:
@@ -40,10 +43,7 @@ def kernels(settings: RunSettings) -> dict[str, object]:
 
 def search_kernels() -> dict[str, object]:
     """The compiled kernels the onset's search calls (``periodic.onset_speeds``), by name."""
-    return {
-        "quasi-static state": contact.quasi_static_batch,
-        "steady extremes": steady.steady_extremes,
-    }
+    return {"steady extremes": steady.steady_extremes}
 
 
 def _cached(dispatcher, magic: tuple) -> bool:
@@ -130,14 +130,13 @@ def compile_kernels(case: Case, settings: RunSettings, search: bool = False) -> 
     """Compile (or load) every kernel a run with ``settings`` calls, the periodic start's
     and the integrator's at once: the start's in a second process, while this one compiles
     the integrator: modal-exact for the types of its arguments (``batch.integrator_types``,
-    no other kernel run but the quasi-static one), newmark-linear through a short
-    quasi-static run. numba compiles one kernel at a time in a process, so the two cost the
-    time of the longer on two cores, not their sum; both land in the kernel cache, from which
-    the study's own run then loads them. The second process, started first, imports the
-    engine while this one finds modal-exact's types (compiling the quasi-static kernel, which
-    it then need not); given them, it first compiles modal-exact helpers that this one then
-    loads (``exact.ahead_signatures``), so that the two end together. With ``search`` the
-    second process also compiles the onset's search (``search_kernels``)."""
+    no kernel run), newmark-linear through a short quasi-static run. numba compiles one
+    kernel at a time in a process, so the two cost the time of the longer on two cores, not
+    their sum; both land in the kernel cache, from which the study's own run then loads
+    them. The second process, started first, imports the engine while this one finds
+    modal-exact's types; given them, it first compiles modal-exact helpers that this one
+    then loads (``exact.ahead_signatures``), so that the two end together. With ``search``
+    the second process also compiles the onset's search (``search_kernels``)."""
     short = dataclasses.replace(settings, revolutions=0.01, warmup=0)
     if settings.start != "periodic" and not search:
         batch.run_batch([case], short, full_state=False, on_failure="record")
@@ -156,8 +155,8 @@ def compile_kernels(case: Case, settings: RunSettings, search: bool = False) -> 
         log.debug("compiling in one process: %s", exc)
         second = None
     try:
-        # Found here (running the quasi-static kernel, compiled here) and handed over: the
-        # second process then compiles the helpers without that kernel.
+        # Found here (no kernel run) and handed over: the second process then compiles the
+        # helpers ahead.
         kernel_types = None
         if settings.method == "modal-exact":
             kernel_types = batch.integrator_types([case], settings, False)
