@@ -149,3 +149,19 @@ def test_without_the_plugin_reading_and_writing_say_what_to_do_and_lose_nothing(
     result = _study(spec)
     assert result.exit_code == 0, result.output
     assert "(4 reused, 2 computed" in result.output and verify(archive) == []
+
+
+def test_a_netcdf4_without_zstd_is_refused_naming_the_key(tmp_path, monkeypatch):
+    """A netCDF4 built without zstd (not its wheel) cannot write the default: the error says
+    so and names run.compression, before any file is made."""
+    from campipe.io.archive import ArchiveWriteError, NetCDFWriter, VariableSpec
+
+    monkeypatch.setattr(netCDF4, "__has_zstandard_support__", 0)
+    specs = [VariableSpec("history", ("case",), "f8", {})]
+    with pytest.raises(ArchiveWriteError, match="set run.compression: zlib"):
+        NetCDFWriter(tmp_path / "w.nc", {"case": 2}, specs, {})
+    assert list(tmp_path.iterdir()) == []
+    with NetCDFWriter(tmp_path / "w.nc", {"case": 2}, specs, {}, "zlib") as w:
+        w.write("history", np.ones(2))
+        w.commit()
+    assert verify(tmp_path / "w.nc") == []

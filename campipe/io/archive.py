@@ -204,6 +204,13 @@ class NetCDFWriter:
 
         self.path = Path(path)
         self.filters = COMPRESSIONS[compression]
+        if compression == "zstd" and not getattr(netCDF4, "__has_zstandard_support__", False):
+            raise ArchiveWriteError.at(
+                str(self.path),
+                f"cannot write zstd: this netCDF4 (netCDF-C {netCDF4.__netcdf4libversion__}) "
+                "was built without it; set run.compression: zlib, or install netCDF4's wheel "
+                "(pip install netCDF4), which has it",
+            )
         self.tmp = temporary_path(self.path)
         self.variables = {v.name: v for v in variables}
         #: name → the running checksum of a variable written in row order so far
