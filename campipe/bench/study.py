@@ -235,6 +235,7 @@ def _netcdf_write(arrays: list[np.ndarray], compression: str, cases: int) -> tup
     import netCDF4
 
     scratch = Path(os.environ.get("TMPDIR", "/tmp")) / f".campipe-bench-{os.getpid()}.nc"
+    filters = COMPRESSIONS[compression]
     cache = netCDF4.get_chunk_cache()
     netCDF4.set_chunk_cache(0, 0, 1.0)  # as the archive: each chunk compressed as written
     try:
@@ -245,7 +246,6 @@ def _netcdf_write(arrays: list[np.ndarray], compression: str, cases: int) -> tup
                 for d, n in zip(dims, a.shape, strict=True):
                     ds.createDimension(d, n)
                 chunks = (min(cases, a.shape[0]), *a.shape[1:])
-                filters = COMPRESSIONS[compression]
                 ds.createVariable(f"v{i}", a.dtype, dims, chunksizes=chunks, **filters)[:] = a
         return time.perf_counter() - t0, scratch.stat().st_size
     finally:

@@ -407,8 +407,8 @@ CASE_FIELDS: dict[str, Field] = {
     ]
 }
 
-#: Run keys whose value the whole study shares: they fix the archive's cam_angle axis and
-#: its variables, so a sweep, zip, sample or case may not vary them.
+#: Run keys whose value the whole study shares: they fix the archive's cam_angle axis, its
+#: variables or its compression, so a sweep, zip, sample or case may not vary them.
 STUDY_WIDE = (
     "run.revolutions",
     "run.output_every",
