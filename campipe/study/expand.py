@@ -591,13 +591,10 @@ def _resolve(raw: Mapping, index: int, directory: Path) -> tuple[ResolvedCase, d
                 )
             )
     run = raw["run"]
-    rs = {
-        k: _parse(f"run.{k}", _freeze(v), f"run.{k}")
-        for k, v in run.items()
-        if k not in ("record", "compression")
-    }
+    # the engine's settings; the study's own (record, compression) are read by ``expand``
+    rs = {k: _parse(f"run.{k}", _freeze(run[k]), f"run.{k}") for k in RUN_SETTINGS}
     rs["integrator"] = case_integrator(rs["integrator"], train, seat is not None)
-    settings = RunSettings(**{name: rs[name] for name in RUN_SETTINGS})
+    settings = RunSettings(**rs)
     check_settings(settings)
     case = Case(train, profile, speed, math.nan if seat is None else seat, closure)
     try:
