@@ -251,6 +251,29 @@ def test_quick_bench_writes_its_table_and_plot(tmp_path):
     assert "## Peers at equal valve-lift error" in md and "](bench.png)" in md
     assert "](bench-events.png)" in md
     assert "| separation-11000 | default (modal-exact) | tol 1e-12 s |" in md
+    # The study section (issue 14), measured in the same run: each size end to end against
+    # the engine with its archive's bytes, the start-up latencies (a finished study answered
+    # "up to date", asserted where it is timed), the client's ceiling against each compression.
+    from campipe.bench.study import GOAL_CASES, GOAL_FACTOR, GOAL_OFFSET, QUICK_COUNTS
+    from campipe.study.fields import COMPRESSIONS
+
+    study = report["study"]
+    assert [r["n_cases"] for r in study["sizes"]] == list(QUICK_COUNTS)
+    for r in study["sizes"]:
+        assert r["wall"] > r["study"] > 0 and r["engine"] > 0 and r["archive_bytes"] > 0
+        assert r["ratio"] == pytest.approx(r["wall"] / r["engine"])
+        assert r["bytes_per_case"] == pytest.approx(r["archive_bytes"] / r["n_cases"])
+        assert r["goal"] == pytest.approx(GOAL_FACTOR * r["engine"] + GOAL_OFFSET)
+    lat = study["latencies"]
+    assert lat["finished_cases"] == GOAL_CASES
+    assert min(lat["help"], lat["one_case"], lat["finished"]) > 0
+    c = study["ceiling"]
+    assert c["n_cases"] == QUICK_COUNTS[-1]
+    assert c["cases_per_second"] == pytest.approx(c["n_cases"] / c["seconds"])
+    assert c["compression"] == "zstd" and set(c["compressions"]) == set(COMPRESSIONS)
+    assert c["compressions"]["none"]["bytes"] >= c["raw_bytes"] > c["compressed_bytes"] > 0
+    assert c["compressions"]["zstd"]["bytes"] == c["compressed_bytes"]
+    assert [r["workers"] for r in study["cluster"]] == [1, 2, 4]
 
 
 def _checked(scene, agrees, events_match=True, valve_lift=1e-10 * INCH, reference_events=None):
