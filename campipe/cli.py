@@ -403,7 +403,7 @@ def _load(spec_path, sets, limits=None):
 
 
 #: The defaults of campipe.study.limits.Limits, repeated here so --help needs no import of
-#: the engine (tests/test_fuzz.py checks they agree).
+#: the engine (tests/integration/test_fuzz.py checks they agree).
 DEFAULT_LIMITS = {
     "cases": 100_000,
     "steps": 1e9,
@@ -792,7 +792,7 @@ def validate_text(loaded, spec_path) -> str:
 
 
 #: The unit systems of --units (campipe.study.display.SYSTEMS, repeated so --help needs no
-#: import of the study layer; tests/test_plot.py checks they agree).
+#: import of the study layer; tests/integration/test_plot.py checks they agree).
 UNIT_SYSTEMS = ("spec", "si", "in-lbf")
 
 
@@ -930,7 +930,7 @@ def schema(which) -> None:
 # -- plots ------------------------------------------------------------------------------------
 
 #: The plot kinds (campipe.study.plots.KINDS, repeated so --help needs no import of the study
-#: layer; tests/test_plot.py checks they agree).
+#: layer; tests/integration/test_plot.py checks they agree).
 PLOT_KINDS = ("histories", "metric", "map", "events")
 
 

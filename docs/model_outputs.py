@@ -4,7 +4,7 @@ command itself, so they are never typed by hand.
     python docs/model_outputs.py          # rewrite docs/model.md
     python docs/model_outputs.py --check  # exit 1 if docs/model.md differs
 
-``tests/test_cli_model.py`` runs the same commands and compares them with the page.
+``tests/integration/test_cli_model.py`` runs the same commands and compares them with the page.
 """
 
 from __future__ import annotations

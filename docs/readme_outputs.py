@@ -6,7 +6,7 @@ never typed or drawn by hand.
     python docs/readme_outputs.py          # rewrite README.md and the figure
     python docs/readme_outputs.py --check  # exit 1 if README.md differs (the figure aside)
 
-``tests/test_docs.py`` runs the same commands and compares them with the README.
+``tests/integration/test_docs.py`` runs the same commands and compares them with the README.
 """
 
 from __future__ import annotations

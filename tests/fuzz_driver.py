@@ -1,4 +1,4 @@
-"""Runs in a subprocess of tests/test_fuzz.py, so its peak memory can be measured alone:
+"""Runs in a subprocess of tests/integration/test_fuzz.py, so its peak memory can be measured alone:
 ``python tests/fuzz_driver.py known|specs|where DIR``.
 
 Every input goes through the command line (click's runner, in this process) and must end in

@@ -71,7 +71,7 @@ def by_ref(typingctx, value):
     call pushed all of them (modal-exact calls its sample helper at every output angle). By
     reference, a first run compiled about a tenth less, and modal-exact ran a quarter faster
     (the bench's 1000-case study on one thread: 0.45 s before, 0.33 s after); the results
-    are the same to the bit (``tests/test_digest.py``).
+    are the same to the bit (``tests/integration/test_digest.py``).
     """
 
     def codegen(context, builder, signature, args):

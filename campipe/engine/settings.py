@@ -54,7 +54,7 @@ FIDELITIES = ("full", "steady")
 REMOVED_FIDELITIES = {"reduced": "it saved at most a fifth of the time for errors up to 0.1 in"}
 #: Each level's stated valve-lift error against the full engine [m], what a run's
 #: ``fidelity_tolerance`` is compared with (the steady level's is checked by
-#: tests/test_fidelity.py).
+#: tests/unit/test_fidelity.py).
 FIDELITY_ERRORS = {"full": 0.0, "steady": 1e-9 * 0.0254}
 #: The steady level samples one turn in closed form at about twice modal-exact's cost per
 #: sample and repeats it: it pays from about four turns on (``campipe bench``'s fidelity

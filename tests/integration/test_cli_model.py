@@ -101,6 +101,6 @@ def test_the_model_page_shows_what_the_commands_print():
     import runpy
     from pathlib import Path
 
-    script = runpy.run_path(str(Path(__file__).parents[1] / "docs" / "model_outputs.py"))
+    script = runpy.run_path(str(Path(__file__).parents[2] / "docs" / "model_outputs.py"))
     page = script["PAGE"].read_text()
     assert script["rewritten"](page) == page, "run python docs/model_outputs.py"

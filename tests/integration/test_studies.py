@@ -46,7 +46,7 @@ def test_quickstart(tmp_path):
 def test_thesis_no_seat(tmp_path):
     """Figures 15-22: contact holds at 9000 rpm in every turn; ≈ 50° a turn off the cam at
     9524 rpm (thesis ≈ 50°: with the 9000 rpm contact, the preload's calibration target);
-    219° with a re-bounce at 11000 (thesis ≈ 180°, a prediction: see tests/test_engine.py);
+    219° with a re-bounce at 11000 (thesis ≈ 180°, a prediction: see tests/thesis/test_engine.py);
     at 20000 rpm the follower never settles (334° a turn off the cam)."""
     ds = run(tmp_path, "thesis-no-seat")
     i = by_speed(ds)
@@ -140,7 +140,7 @@ def test_thesis_polydyne(tmp_path):
 def test_thesis_member_loads(tmp_path):
     """Figures 37-41: 15000 rpm with the seat; the archive stores the member loads of the
     coordinates it stores (a storage check: the loads against a hand statics calculation
-    are tests/test_engine.py::test_member_loads_at_static_equilibrium), the spring never
+    are tests/thesis/test_engine.py::test_member_loads_at_static_equilibrium), the spring never
     unloads below its preload, and the train is off the cam for most of every turn after
     the first."""
     ds = run(tmp_path, "thesis-member-loads", **{"run.revolutions": 2})

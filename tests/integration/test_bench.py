@@ -461,7 +461,7 @@ def test_the_plots_draw_a_bench_whose_scenes_have_no_events(tmp_path):
     """A bench of the form-closed polydyne alone has no event errors to plot: the events plot
     says so instead of failing on an empty legend (it did, ending `campipe bench --scene
     polydyne-9000` after the whole run)."""
-    bench = report.read_json(Path(__file__).parents[1] / "docs" / "bench" / "bench.json")
+    bench = report.read_json(Path(__file__).parents[2] / "docs" / "bench" / "bench.json")
     bench.rows = [r for r in bench.rows if r["scene"] == "polydyne-9000"]
     path = report.plot(bench, tmp_path / "events.png", report.EVENT_ERRORS)
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
@@ -475,7 +475,7 @@ def test_the_onset_block_never_rounds_a_grid_short_of_two_speeds_up_to_two():
 
     from campipe.bench import pages
 
-    o = json.loads((Path(__file__).parents[1] / "docs/bench/bench.json").read_text())["onset"]
+    o = json.loads((Path(__file__).parents[2] / "docs/bench/bench.json").read_text())["onset"]
     for speeds, shown in ((1.955, "1.96"), (1.9996, "1.99")):
         text = pages.onset_block(SimpleNamespace(onset={**o, "equal_time_speeds": speeds}))
         assert f"affords {shown} speeds a design (fewer than the two a bracket needs)" in text

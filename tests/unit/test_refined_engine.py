@@ -101,8 +101,8 @@ def test_a_batch_mixing_seven_and_more_coordinates_gives_each_case_its_own_resul
 
 def test_one_element_per_member_is_the_thesis_run_to_the_bit():
     """spring_elements = 1 is the thesis's model: its run, batched with 4- and 16-element
-    springs, equals the preset's run alone (the mixed study's digest, tests/test_digest.py,
-    holds the rest)."""
+    springs, equals the preset's run alone (the mixed study's digest,
+    tests/integration/test_digest.py, holds the rest)."""
     base = Case(TRAIN, polydyne("345", INCH, *np.radians([90, 90, 90])), rpm(9000), closure="form")
     refined = [Case(TRAIN.replace(spring_elements=n), base.profile, base.speed, closure="form")
                for n in (1, 4, 16)]  # fmt: skip

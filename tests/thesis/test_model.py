@@ -276,7 +276,7 @@ def test_model_schema_file_is_generated_from_the_parameter_table():
     from campipe.model.parameters import THESIS_1971
     from campipe.model.schema import model_schema
 
-    path = Path(__file__).parents[1] / "schemas" / "model.schema.json"
+    path = Path(__file__).parents[2] / "schemas" / "model.schema.json"
     assert json.loads(path.read_text()) == model_schema()
     validator = jsonschema.Draft202012Validator(model_schema())
     assert not list(validator.iter_errors({"preset": "thesis-1971", **THESIS_1971}))

@@ -9,6 +9,7 @@ import math
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
+from references import steady_state_cam_force
 
 from campipe.engine import Case, IntegrationError, RunSettings, run_batch, stability_limit
 from campipe.engine.batch import train_matrices
@@ -144,7 +145,8 @@ def test_impulse_and_closing_velocity_converge_the_thesis_impact_force_does_not(
     j_err = np.abs(np.array(impulse) - first_ref[EV_IMPULSE])
     assert v_err[-1] < 0.003 * first_ref[EV_VELOCITY] and v_err[-1] < v_err[0]
     assert j_err[-1] < 0.003 * first_ref[EV_IMPULSE] and j_err[-1] < j_err[0]
-    # The impulse itself is checked against a momentum balance M Δq̇ in tests/test_trust.py.
+    # The impulse itself is checked against a momentum balance M Δq̇ in
+    # tests/integration/test_trust.py.
     # The thesis's peak "impact force" is Δv·m/Δt: it doubles each time the step halves.
     ratios = np.array(peak[1:]) / np.array(peak[:-1])
     assert np.all((ratios > 1.8) & (ratios < 2.2)), ratios
@@ -159,29 +161,6 @@ def test_default_reaches_a_micro_inch_on_the_separation_case(references):
     """The accuracy half of 'accuracy for cost' (the cost half is in `campipe bench`)."""
     res = run(SEPARATING)  # integrator: default, its own steps
     assert valve_error(res, references[id(SEPARATING)]) < 1e-6 * INCH
-
-
-def steady_state_cam_force(train, speed, lift, theta):
-    """Contact force of the harmonic cam in configuration I once transients have decayed: the
-    frequency response of the train with q1 prescribed, q1 = −h/2 + (h/2)·sin θ."""
-    sm = train_matrices(train)
-    M, C, K, f = sm.mass, sm.damping, sm.stiffness, sm.preload
-    fr = np.arange(1, 7)
-    q1_mean, q1_amp = -lift / 2, -1j * lift / 2  # (h/2) sin θ = Re(−i·h/2·e^{iθ})
-    x0 = np.linalg.solve(K[np.ix_(fr, fr)], f[fr] - K[fr, 0] * q1_mean)
-
-    def dyn(rows, cols):
-        return (
-            K[np.ix_(rows, cols)]
-            - speed**2 * M[np.ix_(rows, cols)]
-            + 1j * speed * C[np.ix_(rows, cols)]
-        )
-
-    x1 = np.linalg.solve(dyn(fr, fr), -dyn(fr, [0])[:, 0] * q1_amp)
-    # F1 = row 1 of (K − ω²M + iωC) applied to the complex amplitude, plus the static part.
-    static = K[0, fr] @ x0 + K[0, 0] * q1_mean - f[0]
-    amp = dyn([0], fr)[0] @ x1 + dyn([0], [0])[0, 0] * q1_amp
-    return static + np.real(amp * np.exp(1j * theta))
 
 
 @pytest.mark.parametrize("method", ["modal-exact", "newmark-linear"])

@@ -14,7 +14,7 @@ import pytest
 from campipe.cli import DEFAULT_LIMITS
 from campipe.study.limits import Limits
 
-HERE = Path(__file__).parent
+HERE = Path(__file__).parents[1]  # tests/: fuzz_driver.py and the helpers
 ROOT = HERE.parent
 
 

@@ -15,7 +15,7 @@ import numpy as np
 from campipe.study import load_study
 from campipe.study.execute import run_study
 
-DATA = Path(__file__).parent / "data"
+DATA = Path(__file__).parents[1] / "data"
 DIGEST = DATA / "mixed-study.sha256"
 
 

@@ -89,7 +89,7 @@ def test_about_220_degrees_with_a_rebounce_at_11000_rpm(no_seat):
     """Not calibrated: the thesis reads ≈ 180° from its Figure 20 with a re-bounce; the
     preset calibrated at 9000–9524 rpm predicts about 219°, both integrators.
     The two-sided bound pins that prediction; the solve_ivp peer's agreement with it is in
-    tests/test_bench.py. Broken copy: a damping or preload off by 10 % moves it out."""
+    tests/integration/test_bench.py. Broken copy: a damping or preload off by 10 % moves it out."""
     idx, res = no_seat
     i = idx[11000]
     assert np.all((sep_deg(res, i)[1:] > 210.0) & (sep_deg(res, i)[1:] < 230.0))

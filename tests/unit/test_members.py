@@ -29,7 +29,7 @@ from campipe.model.assembly import assemble, frequency_convergence, observed_ord
 from campipe.model.elements import bar_mass, bar_stiffness, elements
 from campipe.vocabulary import CONFIGURATIONS, free_coordinates
 
-THESIS_MATRICES = Path(__file__).parent / "data" / "thesis-matrices.sha256"
+THESIS_MATRICES = Path(__file__).parents[1] / "data" / "thesis-matrices.sha256"
 COUNTS = (2, 4, 8, 16)
 
 

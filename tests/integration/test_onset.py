@@ -10,8 +10,8 @@ import pytest
 import xarray as xr
 from click.testing import CliRunner
 from numpy.testing import assert_allclose
+from references import steady_state_cam_force
 from study_helpers import write_spec
-from test_accuracy import steady_state_cam_force
 
 from campipe.cli import main
 from campipe.constants import INCH, LBF
@@ -28,7 +28,7 @@ LAST = slice(-361, None)
 
 def test_the_margin_is_the_least_of_the_frequency_response():
     """The closed form's least cam force against the frequency response of the constrained
-    train (tests/test_accuracy.py, written from M, C, K alone), minimised on a 0.001° grid."""
+    train (tests/unit/test_accuracy.py, written from M, C, K alone), minimised on a 0.001° grid."""
     speeds = [P.RPM * r for r in (3000, 8000, 9383, 10000)]
     ext = P.steady_extremes([Case(TRAIN, CAM, w) for w in speeds])
     theta = np.radians(np.arange(0, 360, 1e-3))
