@@ -12,7 +12,7 @@ import functools
 import logging
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
@@ -38,6 +38,8 @@ from campipe.engine.contact import (
     static_position,
 )
 from campipe.engine.modal import ModalData, harmonic_responses, modal_data, pad_stack
+from campipe.engine.result import BatchResult as BatchResult
+from campipe.engine.result import merge_results
 from campipe.engine.settings import CLOSURES as CLOSURES
 from campipe.engine.settings import (
     COMPLIANT,
@@ -68,7 +70,6 @@ from campipe.engine.settings import stability_limit as stability_limit
 from campipe.engine.settings import visited_configurations as visited_configurations
 from campipe.model import ValveTrain, system_matrices
 from campipe.model.assembly import SystemMatrices, configuration_frequencies
-from campipe.model.contact_laws import contact_law
 from campipe.profiles import evaluate
 from campipe.profiles.packed import PackedProfiles, evaluate_packed, pack
 from campipe.vocabulary import (
@@ -80,7 +81,6 @@ from campipe.vocabulary import (
     EVENTS_TRUNCATED,
     FAILURES,
     N_COORDINATES,
-    N_EVENT_FIELDS,
     NONFINITE,
     SEAT,
     SEATED,
@@ -94,144 +94,6 @@ log = logging.getLogger(__name__)
 
 #: The configurations a quasi-static start can take (``initial_states``).
 START_CONFIGURATIONS = (CAM_CONTACT, CAM_AND_SEAT, SEATED)
-
-
-@dataclass
-class BatchResult:
-    """Histories at the output angles and metrics at full internal resolution, SI.
-
-    Every metric comes per turn (``*_per_rev``, (n_cases, n_rev)) and as a summary over the
-    measured turns (those after ``warmup``): the largest of a maximum, the mean per turn of a
-    count or an angle.
-    """
-
-    cam_angle: np.ndarray  # (n_out,) cam angle of each sample [rad]
-    time: np.ndarray  # (n_cases, n_out) [s]
-    #: (n_cases, n_out, n) coordinates [m, rad]: q1 … q7, then the internal coordinates of
-    #: refined members (``campipe.model.coordinates``); n is the batch's most coordinates, a
-    #: train with fewer has NaN beyond its own
-    q: np.ndarray
-    v: np.ndarray  # (n_cases, n_out, n) velocities [m/s, rad/s]
-    acc: np.ndarray  # (n_cases, n_out, 2) accelerations of q1 and q7 [m/s²]
-    cam_lift: np.ndarray  # (n_cases, n_out) [m]
-    cam_force: np.ndarray  # (n_cases, n_out) cam contact force, compressive positive [N]
-    seat_force: np.ndarray  # (n_cases, n_out) seat contact force, compressive positive [N]
-    contact_state: np.ndarray  # (n_cases, n_out) int8, 1–4 = configurations I–IV
-    valve_reference: np.ndarray  # (n_cases,) q7 at zero valve lift [m]
-    measured: np.ndarray  # (n_rev,) bool: the turn counts in the summaries (after warm-up)
-    #: (n_cases, n_rev) per turn: cam angle in configuration II, the follower off the cam with
-    #: the valve off its seat (no-follow) [rad]
-    separation_per_rev: np.ndarray
-    #: (n_cases, n_rev) per turn: cam angle in configuration IV, the valve seated and the
-    #: follower off the cam (the lash of a seated train) [rad]
-    seated_off_cam_per_rev: np.ndarray
-    cam_impacts_per_rev: np.ndarray  # (n_cases, n_rev) int
-    seat_impacts_per_rev: np.ndarray  # (n_cases, n_rev) int
-    max_cam_impact_velocity_per_rev: np.ndarray  # (n_cases, n_rev) [m/s]
-    max_seating_velocity_per_rev: np.ndarray  # (n_cases, n_rev) [m/s]
-    max_cam_force_per_rev: np.ndarray  # (n_cases, n_rev) [N]
-    max_seat_force_per_rev: np.ndarray  # (n_cases, n_rev) [N]
-    thesis_impact_force_per_rev: np.ndarray  # (n_cases, n_rev) [N]
-    #: per case (n_ev, 6): columns vocabulary.EV_*
-    events: list[np.ndarray] = field(default_factory=list)
-    steps: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # (n_cases,)
-    #: (n_cases,) int64 vocabulary status: OK, EVENTS_TRUNCATED, or (``on_failure="record"``)
-    #: a failure (``vocabulary.FAILURES``) whose histories and metrics are NaN
-    status: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
-    start_time: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (n_cases,) t0 ≤ 0 [s]
-    #: (n_cases, n_rev) per turn: the peak Hertz pressure of the largest cam and seat forces
-    #: (``model.contact_laws``; NaN where the contact's geometry does not give it) [Pa]
-    max_cam_pressure_per_rev: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
-    max_seat_pressure_per_rev: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
-
-    def _mean(self, per_rev: np.ndarray) -> np.ndarray:
-        return per_rev[:, self.measured].mean(axis=1)
-
-    def _max(self, per_rev: np.ndarray) -> np.ndarray:
-        return per_rev[:, self.measured].max(axis=1)
-
-    @property
-    def separation(self) -> np.ndarray:
-        """(n_cases,) no-follow per turn, mean over the measured turns [rad]."""
-        return self._mean(self.separation_per_rev)
-
-    @property
-    def seated_off_cam(self) -> np.ndarray:
-        """(n_cases,) configuration IV per turn, mean over the measured turns [rad]."""
-        return self._mean(self.seated_off_cam_per_rev)
-
-    @property
-    def cam_impacts(self) -> np.ndarray:
-        """(n_cases,) cam impacts per turn, mean over the measured turns."""
-        return self._mean(self.cam_impacts_per_rev)
-
-    @property
-    def seat_impacts(self) -> np.ndarray:
-        """(n_cases,) seat impacts per turn, mean over the measured turns."""
-        return self._mean(self.seat_impacts_per_rev)
-
-    @property
-    def max_cam_impact_velocity(self) -> np.ndarray:
-        """(n_cases,) largest closing velocity of a cam impact in the measured turns [m/s]."""
-        return self._max(self.max_cam_impact_velocity_per_rev)
-
-    @property
-    def max_seating_velocity(self) -> np.ndarray:
-        """(n_cases,) largest closing velocity of a seat impact in the measured turns [m/s]."""
-        return self._max(self.max_seating_velocity_per_rev)
-
-    @property
-    def max_cam_force(self) -> np.ndarray:
-        """(n_cases,) largest compressive cam force between impacts, measured turns [N]."""
-        return self._max(self.max_cam_force_per_rev)
-
-    @property
-    def max_seat_force(self) -> np.ndarray:
-        """(n_cases,) largest compressive seat force between impacts, measured turns [N]."""
-        return self._max(self.max_seat_force_per_rev)
-
-    @property
-    def thesis_impact_force(self) -> np.ndarray:
-        """(n_cases,) largest cam force including the steps an impact's impulse passes
-        through: the thesis's peak "impact force" [N]. For newmark-linear it measures 1/Δt and
-        does not converge; modal-exact applies impulses instantly, so it equals
-        max_cam_force."""
-        return self._max(self.thesis_impact_force_per_rev)
-
-    @property
-    def max_cam_pressure(self) -> np.ndarray:
-        """(n_cases,) peak Hertz pressure at the cam in the measured turns [Pa]."""
-        return self._max(self.max_cam_pressure_per_rev)
-
-    @property
-    def max_seat_pressure(self) -> np.ndarray:
-        """(n_cases,) peak Hertz pressure at the seat in the measured turns [Pa]."""
-        return self._max(self.max_seat_pressure_per_rev)
-
-    @property
-    def follower_lift(self) -> np.ndarray:
-        """(n_cases, n_out) pushrod foot height in the cam's lift coordinate [m]."""
-        return -self.q[:, :, CAM]
-
-    @property
-    def valve_lift(self) -> np.ndarray:
-        """(n_cases, n_out) valve opening from its base-circle static position [m]."""
-        return self.q[:, :, SEAT] - self.valve_reference[:, None]
-
-    @property
-    def valve_velocity(self) -> np.ndarray:
-        """(n_cases, n_out) valve opening velocity [m/s]."""
-        return self.v[:, :, SEAT]
-
-    @property
-    def valve_acceleration(self) -> np.ndarray:
-        """(n_cases, n_out) valve opening acceleration [m/s²]."""
-        return self.acc[:, :, 1]
-
-    @property
-    def follower_acceleration(self) -> np.ndarray:
-        """(n_cases, n_out) pushrod foot acceleration in the cam's lift coordinate [m/s²]."""
-        return -self.acc[:, :, 0]
 
 
 @functools.lru_cache(maxsize=256)
@@ -666,7 +528,7 @@ def run_batch(
     omega, qref = cases_in.omega, cases_in.valve_ref
     preps, which, packed = batch.preps, batch.which, batch.packed
     out = _outputs(batch, settings)
-    n_rev = out.fmax.shape[1]  # turns, a partial last one included
+    n_rev = out.per_rev.shape[1]  # turns, a partial last one included
     if settings.method == "newmark-linear":
         _run_newmark(preps, which, settings, dt_run, cases_in, packed, out)
     elif settings.method == COMPLIANT:
@@ -714,12 +576,8 @@ def run_batch(
             settings.max_events,
         )
     failed = np.flatnonzero(np.isin(status, FAILURES))
-    for array in (out.q, out.v, out.acc, out.force, out.cam, out.sep_rev, out.seated_rev,
-                  out.vmax, out.fmax):  # fmt: skip
+    for array in (out.q, out.v, out.acc, out.force, out.cam, out.per_rev):
         array[failed] = np.nan
-    counts = out.counts.astype(float)
-    counts[failed] = np.nan
-    out = out._replace(counts=counts)
     kept = np.minimum(n_events, settings.max_events)
     measured = np.arange(n_rev) >= warmup
     return BatchResult(
@@ -734,32 +592,13 @@ def run_batch(
         contact_state=out.cfg,
         valve_reference=qref,
         measured=measured,
-        separation_per_rev=out.sep_rev,
-        seated_off_cam_per_rev=out.seated_rev,
-        cam_impacts_per_rev=out.counts[:, :, 0],
-        seat_impacts_per_rev=out.counts[:, :, 1],
-        max_cam_impact_velocity_per_rev=out.vmax[:, :, 0],
-        max_seating_velocity_per_rev=out.vmax[:, :, 1],
-        max_cam_force_per_rev=out.fmax[:, :, 0],
-        max_seat_force_per_rev=out.fmax[:, :, 1],
-        thesis_impact_force_per_rev=out.fmax[:, :, 2],
+        per_rev=out.per_rev,
+        trains=[c.train for c in cases],
         events=[out.events[i, : kept[i]].copy() for i in range(n)],
         steps=out.steps,
         status=status,
         start_time=cases_in.t0,
-        **peak_pressures(cases, out.fmax),
     )
-
-
-def peak_pressures(cases: Sequence[Case], fmax: np.ndarray) -> dict[str, np.ndarray]:
-    """The peak Hertz pressures per turn of the largest contact forces (NaN without the
-    geometry; a pressure rises with its force, so its peak is the peak force's)."""
-    out = {}
-    for k, contact in enumerate(("cam", "seat")):
-        out[f"max_{contact}_pressure_per_rev"] = np.stack(
-            [contact_law(c.train, contact).pressure(fmax[i, :, k]) for i, c in enumerate(cases)]
-        ).reshape(fmax.shape[:2])
-    return out
 
 
 def _run_compliant(cases: Sequence[Case], c: Cases, settings: RunSettings, out) -> None:
@@ -776,8 +615,7 @@ def _run_compliant(cases: Sequence[Case], c: Cases, settings: RunSettings, out) 
         z0 = compliant.compliant_start(system, c.q0[i, :m], c.v0[i, :m], c.a0[i, :m], *held)
         one = compliant.CaseOutputs(
             out.q[i], out.v[i], out.force[i], out.cam[i], out.cfg[i], out.acc[i],
-            out.sep_rev[i], out.seated_rev[i], out.counts[i], out.vmax[i], out.fmax[i],
-            out.events[i],
+            out.per_rev[i], out.events[i],
         )  # fmt: skip
         compliant.integrate(
             system, float(c.t0[i]), z0, held, angles / case.speed, one,
@@ -798,34 +636,3 @@ def _run_by_contacts(cases: Sequence[Case], settings: RunSettings, options) -> B
             run = dataclasses.replace(settings, integrator=name)
             parts.append((index, run_batch([cases[int(i)] for i in index], run, **options)))
     return merge_results(len(cases), parts)
-
-
-def merge_results(n: int, parts: Sequence[tuple[np.ndarray, BatchResult]]) -> BatchResult:
-    """One batch's result from the results of its parts, each with the indices of its cases
-    (in order, covering 0 … n − 1 once); q and v padded with NaN to the most coordinates."""
-    if len(parts) == 1:
-        return parts[0][1]
-    merged: dict[str, object] = {}
-    first = parts[0][1]
-    n_q = max(part.q.shape[2] for _, part in parts)
-    for f in dataclasses.fields(BatchResult):
-        value = getattr(first, f.name)
-        if f.name in ("cam_angle", "measured"):
-            merged[f.name] = value
-        elif f.name == "events":
-            events: list[np.ndarray] = [np.zeros((0, N_EVENT_FIELDS))] * n
-            for index, part in parts:
-                for j, i in enumerate(index):
-                    events[i] = part.events[j]
-            merged[f.name] = events
-        else:
-            shape = (n, *value.shape[1:2], n_q) if f.name in ("q", "v") else (n, *value.shape[1:])
-            array = np.full(shape, np.nan) if f.name in ("q", "v") else np.empty(shape, value.dtype)
-            for index, part in parts:
-                part_value = getattr(part, f.name)
-                if f.name in ("q", "v"):
-                    array[index, :, : part_value.shape[2]] = part_value
-                else:
-                    array[index] = part_value
-            merged[f.name] = array
-    return BatchResult(**merged)  # type: ignore[arg-type]

@@ -19,6 +19,13 @@ from numba.extending import intrinsic
 
 from campipe import kernel_cache, vocabulary
 from campipe.constants import TWO_PI
+from campipe.engine.metrics import (
+    CAM_IMPACTS,
+    MAX_CAM_IMPACT_VELOCITY,
+    MAX_SEATING_VELOCITY,
+    N_ENGINE,
+    SEAT_IMPACTS,
+)
 from campipe.vocabulary import (
     CAM_IMPACT,
     CAM_SEPARATION,
@@ -161,14 +168,9 @@ class Outputs(NamedTuple):
     cam: np.ndarray  # (n, n_out) cam lift [m]
     cfg: np.ndarray  # (n, n_out) int8 configuration
     acc: np.ndarray  # (n, n_out, 2) accelerations of q1 and q7 [m/s²]
-    sep_rev: np.ndarray  # (n, n_rev) per turn: cam angle in configuration II (no-follow) [rad]
-    seated_rev: np.ndarray  # (n, n_rev) per turn: cam angle in configuration IV [rad]
-    counts: np.ndarray  # (n, n_rev, 2) int64 per turn: cam and seat impacts
-    vmax: np.ndarray  # (n, n_rev, 2) per turn: largest cam and seat closing velocity [m/s]
-    #: (n, n_rev, 3) per turn: largest compressive cam and seat force between impacts, and
-    #: the cam force including the steps an impulse passes through (the thesis's "impact
-    #: force") [N]
-    fmax: np.ndarray
+    #: (n, n_rev, N_ENGINE) per turn: the engine's metrics, a column each
+    #: (``campipe.engine.metrics``: SEPARATION, CAM_IMPACTS, MAX_CAM_FORCE, …), SI
+    per_rev: np.ndarray
     events: np.ndarray  # (n, max_events, N_EVENT_FIELDS), rows below n_events
     n_events: np.ndarray  # (n,) int64 events of each case (may exceed max_events)
     status: np.ndarray  # (n,) int64 vocabulary status code
@@ -187,11 +189,7 @@ def make_outputs(
         cam=np.zeros((n, n_out)),
         cfg=np.zeros((n, n_out), np.int8),
         acc=np.zeros((n, n_out, 2)),
-        sep_rev=np.zeros((n, n_rev)),
-        seated_rev=np.zeros((n, n_rev)),
-        counts=np.zeros((n, n_rev, 2), np.int64),
-        vmax=np.zeros((n, n_rev, 2)),
-        fmax=np.zeros((n, n_rev, 3)),
+        per_rev=np.zeros((n, n_rev, N_ENGINE)),
         events=sparse_empty((n, max_events, N_EVENT_FIELDS)),
         n_events=np.zeros(n, np.int64),
         status=np.zeros(n, np.int64),
@@ -252,10 +250,10 @@ def record_event(events, n_events, c, t, kind, c_from, c_to, velocity, impulse):
 
 
 @njit(**HELPER)
-def record_impact(events, n_events, counts, vmax, meff, c, w, t, seat, other_held, c_from, c_to,
+def record_impact(events, n_events, per_rev, meff, c, w, t, seat, other_held, c_from, c_to,
                   closing, capture, restitution):  # fmt: skip
     """Count an impact of case c at time t [s] (speed w) on the cam (``seat`` False) or the
-    seat in its turn, keep the turn's largest closing velocity [m/s] in ``vmax`` and record
+    seat in its turn, keep the turn's largest closing velocity [m/s] (``per_rev``) and record
     the event with its impulse m_eff·(1 + e)·v_closing, e the ``restitution`` it bounced with
     (0: plastic); ``other_held``: the other contact is held (``contact.impact_masses``
     order). Nothing before t = 0 is recorded.
@@ -280,9 +278,11 @@ def record_impact(events, n_events, counts, vmax, meff, c, w, t, seat, other_hel
         n_events[c] = k
         return
     turn = turn_of(w, t)
-    if turn < counts.shape[1]:
-        counts[c, turn, side] += 1
-        vmax[c, turn, side] = max(vmax[c, turn, side], closing)
+    if turn < per_rev.shape[1]:
+        count = SEAT_IMPACTS if seat else CAM_IMPACTS
+        fastest = MAX_SEATING_VELOCITY if seat else MAX_CAM_IMPACT_VELOCITY
+        per_rev[c, turn, count] += 1.0
+        per_rev[c, turn, fastest] = max(per_rev[c, turn, fastest], closing)
     mass = meff[c, 2 * side + (1 if other_held else 0)]
     kind = SEAT_IMPACT if seat else CAM_IMPACT
     record_event(events, n_events, c, t, kind, c_from, c_to, closing,

@@ -45,6 +45,17 @@ import numpy as np
 
 from campipe.constants import TWO_PI
 from campipe.engine.common import TURN_GUARD
+from campipe.engine.metrics import (
+    CAM_IMPACTS,
+    MAX_CAM_FORCE,
+    MAX_CAM_IMPACT_VELOCITY,
+    MAX_SEAT_FORCE,
+    MAX_SEATING_VELOCITY,
+    SEAT_IMPACTS,
+    SEATED_OFF_CAM,
+    SEPARATION,
+    THESIS_IMPACT_FORCE,
+)
 from campipe.model import ValveTrain, coordinates, system_matrices
 from campipe.model.contact_laws import KELVIN_VOIGT, ContactLaw, contact_law
 from campipe.profiles import Lift, Profile
@@ -246,11 +257,7 @@ class CaseOutputs:
     cam: np.ndarray  # (n_out,)
     cfg: np.ndarray  # (n_out,)
     acc: np.ndarray  # (n_out, 2)
-    sep_rev: np.ndarray  # (n_rev,)
-    seated_rev: np.ndarray  # (n_rev,)
-    counts: np.ndarray  # (n_rev, 2)
-    vmax: np.ndarray  # (n_rev, 2)
-    fmax: np.ndarray  # (n_rev, 3)
+    per_rev: np.ndarray  # (n_rev, metrics.N_ENGINE) the engine's metrics per turn
     events: np.ndarray  # (max_events, 6)
     n_events: int = 0
     status: int = 0
@@ -300,7 +307,7 @@ def integrate(
     run.closed = [bool(closed[0]), bool(closed[1] and system.seat is not None)]
     lift = system.lift
     w = lift.w
-    n_rev = out.sep_rev.size
+    n_rev = out.per_rev.shape[0]
     t_end = float(t_out[-1])
     t, z = float(t0), np.asarray(z0, dtype=float).copy()
     run.piece, run.rev = lift.piece_at(t)
@@ -317,9 +324,9 @@ def integrate(
             return
         fc, fs = run.forces(tt, zz)
         r = turn(tt)
-        out.fmax[r, 0] = max(out.fmax[r, 0], fc)
-        out.fmax[r, 2] = out.fmax[r, 0]
-        out.fmax[r, 1] = max(out.fmax[r, 1], fs)
+        out.per_rev[r, MAX_CAM_FORCE] = max(out.per_rev[r, MAX_CAM_FORCE], fc)
+        out.per_rev[r, THESIS_IMPACT_FORCE] = out.per_rev[r, MAX_CAM_FORCE]
+        out.per_rev[r, MAX_SEAT_FORCE] = max(out.per_rev[r, MAX_SEAT_FORCE], fs)
 
     def event(tt, kind, c_from, c_to, velocity):
         if tt < 0.0:
@@ -329,12 +336,12 @@ def integrate(
         out.n_events += 1
 
     def off_cam(ta: float, tb: float, seated: bool) -> None:
-        sums = out.seated_rev if seated else out.sep_rev
+        k = SEATED_OFF_CAM if seated else SEPARATION
         a, b = max(w * ta, 0.0), w * tb
         r = int(a / TWO_PI)
         while a < b and r < n_rev:
             stop = min(b, (r + 1) * TWO_PI)
-            sums[r] += stop - a
+            out.per_rev[r, k] += stop - a
             a = stop
             r += 1
 
@@ -397,8 +404,10 @@ def integrate(
             event(t, kinds[hit][closing], before, after, velocity)
             if closing and t >= 0.0 and velocity >= capture:
                 r = turn(t)
-                out.counts[r, hit] += 1
-                out.vmax[r, hit] = max(out.vmax[r, hit], velocity)
+                count = (CAM_IMPACTS, SEAT_IMPACTS)[hit]
+                fastest = (MAX_CAM_IMPACT_VELOCITY, MAX_SEATING_VELOCITY)[hit]
+                out.per_rev[r, count] += 1.0
+                out.per_rev[r, fastest] = max(out.per_rev[r, fastest], velocity)
             peak(t, z)
             continue
         if t >= t_end:

@@ -117,6 +117,13 @@ from campipe.engine.common import (
     record_impact,
     turn_of,
 )
+from campipe.engine.metrics import (
+    MAX_CAM_FORCE,
+    MAX_SEAT_FORCE,
+    SEATED_OFF_CAM,
+    SEPARATION,
+    THESIS_IMPACT_FORCE,
+)
 from campipe.profiles.packed import horner, locate, next_break, piece_eval
 from campipe.vocabulary import CAM, CHATTER, EVENTS_TRUNCATED, NONFINITE, OK, SEAT, UNBOUNDED
 
@@ -423,19 +430,20 @@ def _keep_column(MC, WC, VY, act, ns, src, dst):
 def _off_cam(out, cfg, c, w, ta, tb):
     """Count [ta, tb] in configuration ``cfg``: no-follow (II) or seated off the cam (IV)."""
     if not holds_cam(cfg):
-        _separation(out.seated_rev if holds_seat(cfg) else out.sep_rev, c, w, ta, tb)
+        _separation(out.per_rev, SEATED_OFF_CAM if holds_seat(cfg) else SEPARATION, c, w, ta, tb)
 
 
 @njit(**HELPER)
-def _separation(sep_rev, c, w, ta, tb):
-    """Add the cam angle of [ta, tb] ∩ [0, ∞) off the cam to each revolution it overlaps."""
-    n_rev = sep_rev.shape[1]
+def _separation(per_rev, k, c, w, ta, tb):
+    """Add the cam angle of [ta, tb] ∩ [0, ∞) off the cam to each revolution it overlaps, in
+    metric column k."""
+    n_rev = per_rev.shape[1]
     a = max(w * ta, 0.0)
     b = w * tb
     r = int(a / TWO_PI)
     while a < b and r < n_rev:
         end = min(b, (r + 1) * TWO_PI)
-        sep_rev[c, r] += end - a
+        per_rev[c, r, k] += end - a
         a = end
         r += 1
 
@@ -796,8 +804,8 @@ def _walk(ref, st):
     t_end = runs.t_end[c]
     dt_cap = runs.dt_cap
     steps = out.steps
-    fmax = out.fmax
-    n_rev = fmax.shape[1]
+    per_rev = out.per_rev
+    n_rev = per_rev.shape[1]
     MC, WC, G, GT, act = ws.MC, ws.WC, ws.G, ws.GT, ws.act
     gval, dval, gprev, dprev = ws.gval, ws.dval, ws.gprev, ws.dprev
     watch, ready, level = ws.watch, ws.ready, ws.level
@@ -885,9 +893,9 @@ def _walk(ref, st):
         turn = turn_of(w, t_n)
         if 0 <= turn < n_rev:
             if cam_held:
-                fmax[c, turn, 0] = max(fmax[c, turn, 0], -gval[0])
+                per_rev[c, turn, MAX_CAM_FORCE] = max(per_rev[c, turn, MAX_CAM_FORCE], -gval[0])
             if seat_held:
-                fmax[c, turn, 1] = max(fmax[c, turn, 1], -gval[1])
+                per_rev[c, turn, MAX_SEAT_FORCE] = max(per_rev[c, turn, MAX_SEAT_FORCE], -gval[1])
         t_prev = t_n
         if i_step < n_steps:
             cth, sth = _advance(MC, nact, cth, sth, cwh, swh)
@@ -974,7 +982,7 @@ def _impact(cases, trains, out, ws, st, seat, closing, t, vcam, lift):
     if closing > cases.speed_bound[c]:
         out.status[c] = UNBOUNDED
     record_impact(
-        out.events, out.n_events, out.counts, out.vmax, cases.meff, c, w, t, seat, other_held,
+        out.events, out.n_events, out.per_rev, cases.meff, c, w, t, seat, other_held,
         cfg, new, closing, capture, e,
     )  # fmt: skip
     return new
@@ -1068,7 +1076,7 @@ def _cross_break(ref, st):
                 if abs(jump) > cases.speed_bound[c]:
                     out.status[c] = UNBOUNDED
                 record_impact(
-                    out.events, out.n_events, out.counts, out.vmax, cases.meff, c, w, t_break,
+                    out.events, out.n_events, out.per_rev, cases.meff, c, w, t_break,
                     np.bool_(False), seat_held, cfg, new, abs(jump), 0.0, e if bounce else 0.0,
                 )  # fmt: skip
                 st.cfg = new
@@ -1142,8 +1150,8 @@ def modal_exact_batch(cases, trains, profiles, runs, out, ws, state):
             if not finite:
                 out.status[c] = NONFINITE
                 break
-        for turn in range(out.fmax.shape[1]):  # no force measures a step: impulses are instant
-            out.fmax[c, turn, 2] = out.fmax[c, turn, 0]
+        for turn in range(out.per_rev.shape[1]):  # no force measures a step: impulses are instant
+            out.per_rev[c, turn, THESIS_IMPACT_FORCE] = out.per_rev[c, turn, MAX_CAM_FORCE]
         if out.n_events[c] > out.events.shape[1] and out.status[c] == OK:
             out.status[c] = EVENTS_TRUNCATED
 

@@ -68,6 +68,13 @@ from campipe.engine.common import (
     record_event,
     record_impact,
 )
+from campipe.engine.metrics import (
+    MAX_CAM_FORCE,
+    MAX_SEAT_FORCE,
+    SEATED_OFF_CAM,
+    SEPARATION,
+    THESIS_IMPACT_FORCE,
+)
 from campipe.profiles.packed import degree, evaluate_packed, horner, locate, next_break, piece_eval
 from campipe.vocabulary import (
     EVENTS_TRUNCATED,
@@ -311,7 +318,7 @@ def _cross_breaks(ref, c, w, th1, cfg, p, rev, pn, revn, thb):
                 new = configuration(True, seat_held)
                 if abs(jump) > cases.speed_bound[c]:
                     out.status[c] = UNBOUNDED
-                record_impact(out.events, out.n_events, out.counts, out.vmax, cases.meff, c,
+                record_impact(out.events, out.n_events, out.per_rev, cases.meff, c,
                               w, thb / w, np.bool_(False), seat_held, cfg, new, abs(jump), 0.0,
                               0.0)  # fmt: skip
                 cfg = new
@@ -410,7 +417,7 @@ def _switch(ref, ct, c, t1, cfg, f7, xn, vc, release_cam, release_seat, hit_cam,
     (``common.other_releases``); a slow impact leaves its contact resting (in the contact
     state ``ct``)."""
     cases, _, _, _, out = deref(ref)
-    events, n_events, counts, vmax = out.events, out.n_events, out.counts, out.vmax
+    events, n_events, per_rev = out.events, out.n_events, out.per_rev
     meff = cases.meff
     w = cases.omega[c]
     seat_held = holds_seat(cfg)
@@ -438,7 +445,7 @@ def _switch(ref, ct, c, t1, cfg, f7, xn, vc, release_cam, release_seat, hit_cam,
             ct.hold_cam = cases.hold[c, new - 1, 0] * closing
         if closing > cases.speed_bound[c]:
             out.status[c] = UNBOUNDED
-        record_impact(events, n_events, counts, vmax, meff, c, w, t1, np.bool_(False), seat_next,
+        record_impact(events, n_events, per_rev, meff, c, w, t1, np.bool_(False), seat_next,
                       cfg, new, closing, cases.capture[c], 0.0)  # fmt: skip
     if hit_seat:
         closing = -xn[X_V + SEAT]
@@ -452,7 +459,7 @@ def _switch(ref, ct, c, t1, cfg, f7, xn, vc, release_cam, release_seat, hit_cam,
             ct.hold_seat = cases.hold[c, new - 1, 1] * closing
         if closing > cases.speed_bound[c]:
             out.status[c] = UNBOUNDED
-        record_impact(events, n_events, counts, vmax, meff, c, w, t1, np.bool_(True), cam_next,
+        record_impact(events, n_events, per_rev, meff, c, w, t1, np.bool_(True), cam_next,
                       cfg, new, closing, cases.capture[c], 0.0)  # fmt: skip
     return configuration(cam_next, seat_next), hit_cam, hit_seat
 
@@ -479,7 +486,7 @@ def newmark_linear_batch(cases, trains, profiles, runs, out, work, contact):
         raise ValueError("step_A, step_G: expected (n, 4, N_X, N_Z) and (n, 4, N_Z, N_Z)")
     n_cases = cases.omega.shape[0]
     n_out = out.q.shape[1]
-    n_rev = out.sep_rev.shape[1]
+    n_rev = out.per_rev.shape[1]
     x, xn, z, f, qt, vt, at = work
     ct = contact[0]
     ref = by_ref((cases, trains, profiles, runs, out))
@@ -585,15 +592,21 @@ def newmark_linear_batch(cases, trains, profiles, runs, out, work, contact):
                 if turn < n_rev:
                     if not cam_held:
                         if seat_held:
-                            out.seated_rev[c, turn] += w * h
+                            out.per_rev[c, turn, SEATED_OFF_CAM] += w * h
                         else:
-                            out.sep_rev[c, turn] += w * h
+                            out.per_rev[c, turn, SEPARATION] += w * h
                     if quiet_cam == 0 and cam_held:
-                        out.fmax[c, turn, 0] = max(out.fmax[c, turn, 0], -f1)
+                        out.per_rev[c, turn, MAX_CAM_FORCE] = max(
+                            out.per_rev[c, turn, MAX_CAM_FORCE], -f1
+                        )
                     if cam_held:
-                        out.fmax[c, turn, 2] = max(out.fmax[c, turn, 2], -f1)
+                        out.per_rev[c, turn, THESIS_IMPACT_FORCE] = max(
+                            out.per_rev[c, turn, THESIS_IMPACT_FORCE], -f1
+                        )
                     if quiet_seat == 0 and seat_held:
-                        out.fmax[c, turn, 1] = max(out.fmax[c, turn, 1], f7)
+                        out.per_rev[c, turn, MAX_SEAT_FORCE] = max(
+                            out.per_rev[c, turn, MAX_SEAT_FORCE], f7
+                        )
             if quiet_cam > 0:
                 quiet_cam -= 1
             if quiet_seat > 0:

@@ -34,7 +34,6 @@ from campipe.engine.batch import (
     check_run,
     merge_results,
     output_angles,
-    peak_pressures,
     run_batch,
     train_matrices,
     train_modal,
@@ -43,6 +42,7 @@ from campipe.engine.batch import (
 )
 from campipe.engine.closed_form import STATE, ExactRuns, ModalTrains, make_workspace, stack_trains
 from campipe.engine.common import Cases
+from campipe.engine.metrics import MAX_CAM_FORCE, N_ENGINE
 from campipe.engine.modal import ModalData
 from campipe.engine.settings import sample_count, turn_count
 from campipe.model import ValveTrain
@@ -316,8 +316,8 @@ def _steady_result(
     st = _samples(batch, ext, turn, held)
     omega = batch.cases.omega[held]
     n, n_rev = len(cases), turn_count(settings.revolutions)
-    per_rev = np.zeros((n, n_rev))
-    fmax = np.repeat(ext.max_cam_force[held, None], n_rev, axis=1)
+    per_rev = np.zeros((n, n_rev, N_ENGINE))
+    per_rev[:, :, MAX_CAM_FORCE] = ext.max_cam_force[held, None]
     q = st.q[held][:, back]
     return BatchResult(
         cam_angle=angles,
@@ -331,20 +331,12 @@ def _steady_result(
         contact_state=np.full((n, angles.size), CAM_CONTACT, np.int8),
         valve_reference=st.valve_reference[held],
         measured=np.arange(n_rev) >= settings.warmup_turns,
-        separation_per_rev=per_rev.copy(),
-        seated_off_cam_per_rev=per_rev.copy(),
-        cam_impacts_per_rev=np.zeros((n, n_rev), np.int64),
-        seat_impacts_per_rev=np.zeros((n, n_rev), np.int64),
-        max_cam_impact_velocity_per_rev=per_rev.copy(),
-        max_seating_velocity_per_rev=per_rev.copy(),
-        max_cam_force_per_rev=fmax,
-        max_seat_force_per_rev=per_rev.copy(),
-        thesis_impact_force_per_rev=per_rev.copy(),
+        per_rev=per_rev,
+        trains=[c.train for c in cases],
         events=[np.zeros((0, N_EVENT_FIELDS)) for _ in range(n)],
         steps=np.zeros(n, np.int64),
         status=np.full(n, OK, np.int64),
         start_time=np.zeros(n),
-        **peak_pressures(cases, np.stack([fmax, per_rev, per_rev], axis=2)),
     )
 
 

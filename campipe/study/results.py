@@ -16,21 +16,11 @@ import numpy as np
 
 import campipe
 from campipe import engine
-from campipe.engine.loads import (
-    MEMBER_LOADS,
-    SPRING_HISTORIES,
-    member_loads,
-    per_turn,
-    spring_histories,
-)
+from campipe.engine.loads import MEMBER_LOADS, SPRING_HISTORIES, member_loads
+from campipe.engine.metrics import archived_metrics
 from campipe.sources import source_digest
 from campipe.study.expand import ResolvedCase
-from campipe.study.variables import (
-    CONTACT_PRESSURE_METRICS,
-    PER_REVOLUTION_METRICS,
-    SPRING_METRICS,
-    data_variables,
-)
+from campipe.study.variables import data_variables
 from campipe.vocabulary import (
     EV_FROM,
     EV_IMPULSE,
@@ -167,33 +157,19 @@ def batch_arrays(plan: BatchPlan, result: BatchResult) -> BatchData:
         "valve_velocity": result.valve_velocity,
         "valve_acceleration": result.valve_acceleration,
         "steps": np.asarray(result.steps, np.int64),
-        "measured": np.broadcast_to(
-            result.measured.astype(np.int8), result.cam_impacts_per_rev.shape
-        ),
+        "measured": np.broadcast_to(result.measured.astype(np.int8), result.per_rev.shape[:2]),
         "status": np.asarray(result.status, np.int8),
     }
-    per_rev = {
-        "separation_deg": np.degrees(result.separation_per_rev),
-        "seated_off_cam_deg": np.degrees(result.seated_off_cam_per_rev),
-        "cam_impacts_by_rev": result.cam_impacts_per_rev,
-        "seat_impacts_by_rev": result.seat_impacts_per_rev,
-        "max_cam_impact_velocity_by_rev": result.max_cam_impact_velocity_per_rev,
-        "max_seating_velocity_by_rev": result.max_seating_velocity_per_rev,
-        "max_cam_force_by_rev": result.max_cam_force_per_rev,
-        "max_seat_force_by_rev": result.max_seat_force_per_rev,
-    }
-    metrics: tuple[tuple[str, str, str, str, str | None, str], ...] = PER_REVOLUTION_METRICS
-    if "max_cam_pressure" in wanted:
-        per_rev["max_cam_pressure_by_rev"] = result.max_cam_pressure_per_rev
-        per_rev["max_seat_pressure_by_rev"] = result.max_seat_pressure_per_rev
-        metrics = metrics + CONTACT_PRESSURE_METRICS
-    for summary, name, dtype, _, _, how in metrics:
-        values = per_rev[name]
-        measured = values[:, result.measured]
-        arrays[summary] = measured.mean(axis=1) if how == "mean" else measured.max(axis=1)
+    for metric in archived_metrics():
+        if metric.summary not in wanted:
+            continue
+        values = metric.to_archive(result.metric_per_rev(metric.key))
+        arrays[metric.summary] = metric.summarise(values, result.measured)
         # A failed case's counts are NaN: its per-revolution integers are written as -1.
-        arrays[name] = (
-            np.where(np.isnan(values), -1, values).astype(dtype) if dtype == "i4" else values
+        arrays[metric.per_rev] = (
+            np.where(np.isnan(values), -1, values).astype(metric.dtype)
+            if metric.dtype == "i4"
+            else values
         )
     if "q" in wanted:
         arrays["q"] = result.q[:, :, :N_COORDINATES]  # the dof axis: q1 … q7
@@ -212,33 +188,18 @@ def batch_arrays(plan: BatchPlan, result: BatchResult) -> BatchData:
         case_ids=np.array([c.case_id for c in plan.cases], dtype=object),
         arrays=arrays,
         cam_angle=cam_angle_degrees(result.cam_angle),
-        n_revolutions=result.separation_per_rev.shape[1],
+        n_revolutions=result.n_turns,
         numerics=numerics_fingerprint(),
     )
 
 
 def _spring_arrays(plan: BatchPlan, result: BatchResult, wanted: set[str]) -> dict:
-    """The spring's histories and, with ``run.record: [spring]``, its per-revolution metrics
-    and their summaries (``variables.SPRING_METRICS``), as far as ``wanted`` asks."""
-    names = set(SPRING_HISTORIES) | {m[0] for m in SPRING_METRICS}
-    if not names & wanted:
+    """The spring's histories, as far as ``wanted`` asks (its metrics are the metrics
+    table's)."""
+    if not set(SPRING_HISTORIES) & wanted:
         return {}
-    per_case = [spring_histories(c.case.train, result.q[i]) for i, c in enumerate(plan.cases)]
-    histories = {name: np.stack([p[name] for p in per_case]) for name in SPRING_HISTORIES}
-    arrays = {name: h for name, h in histories.items() if name in wanted}
-    n_rev = result.separation_per_rev.shape[1]
-    source = {
-        "max_spring_force": histories["max_spring_element_force"],
-        "min_spring_clash_margin": histories["spring_clash_margin"],
-    }
-    for summary, name, _, _, _, how in SPRING_METRICS:
-        if summary not in wanted:
-            continue
-        values = per_turn(source[summary], result.cam_angle, n_rev, how)
-        measured = values[:, result.measured]
-        arrays[name] = values
-        arrays[summary] = measured.max(axis=1) if how == "max" else measured.min(axis=1)
-    return arrays
+    histories = result.spring_histories([c.case.train for c in plan.cases])
+    return {name: h for name, h in histories.items() if name in wanted}
 
 
 def event_arrays(events: Sequence[np.ndarray], speeds: Sequence[float]) -> dict[str, np.ndarray]:

@@ -16,10 +16,11 @@ by ``event_count``, with ``event_case`` naming each event's case).
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 
 from campipe.engine import MEMBER_LOADS, SPRING_HISTORIES
+from campipe.engine.metrics import READS, Metric, archived_metrics
 from campipe.model import COORDINATES, PARAMETERS
 from campipe.study.fields import CASE_FIELDS, Field, varied_fields
 from campipe.units import convert
@@ -51,135 +52,37 @@ CASE = ("case",)
 HISTORY = ("case", "cam_angle")
 PER_REV = ("case", "revolution")
 
-#: The metrics: (summary name, per-revolution name, dtype per revolution, long name, units,
-#: how the summary reads the measured revolutions: "mean" per revolution or "max").
-PER_REVOLUTION_METRICS = (
-    (
-        "separation_deg_per_rev",
-        "separation_deg",
-        "f8",
-        "no-follow: cam angle in configuration II (follower off the cam, valve off its seat)",
-        "degree",
-        "mean",
-    ),
-    (
-        "seated_off_cam_deg_per_rev",
-        "seated_off_cam_deg",
-        "f8",
-        "cam angle in configuration IV (valve seated, follower off the cam: the lash)",
-        "degree",
-        "mean",
-    ),
-    ("cam_impacts", "cam_impacts_by_rev", "i4", "cam impacts", None, "mean"),
-    ("seat_impacts", "seat_impacts_by_rev", "i4", "valve seat impacts", None, "mean"),
-    (
-        "max_cam_impact_velocity",
-        "max_cam_impact_velocity_by_rev",
-        "f8",
-        "largest closing velocity at a cam impact",
-        "m/s",
-        "max",
-    ),
-    (
-        "max_seating_velocity",
-        "max_seating_velocity_by_rev",
-        "f8",
-        "largest closing velocity at a seat impact",
-        "m/s",
-        "max",
-    ),
-    (
-        "max_cam_force",
-        "max_cam_force_by_rev",
-        "f8",
-        "largest compressive cam force between impacts",
-        "N",
-        "max",
-    ),
-    (
-        "max_seat_force",
-        "max_seat_force_by_rev",
-        "f8",
-        "largest compressive seat force between impacts",
-        "N",
-        "max",
-    ),
-)
-
-
-#: Metrics stored when ``run.record`` holds ``contact_pressure``: the peak Hertz pressure of
-#: the largest contact force (``campipe.model.contact_laws``; NaN where the contact's geometry
-#: does not give it), as PER_REVOLUTION_METRICS.
-CONTACT_PRESSURE_METRICS = (
-    (
-        "max_cam_pressure",
-        "max_cam_pressure_by_rev",
-        "f8",
-        "peak Hertz pressure at the cam contact",
-        "Pa",
-        "max",
-    ),
-    (
-        "max_seat_pressure",
-        "max_seat_pressure_by_rev",
-        "f8",
-        "peak Hertz pressure at the valve seat contact",
-        "Pa",
-        "max",
-    ),
-)
-#: The spring's metrics, stored with ``run.record: [spring]`` (as PER_REVOLUTION_METRICS;
-#: "min": the summary is the least over the measured revolutions). Read from the histories
-#: at the output angles (``run.output_every``), which must resolve the spring's surge.
-SPRING_METRICS = (
-    (
-        "max_spring_force",
-        "max_spring_force_by_rev",
-        "f8",
-        "largest compressive force along the valve spring (any element) at the output angles",
-        "N",
-        "max",
-    ),
-    (
-        "min_spring_clash_margin",
-        "min_spring_clash_margin_by_rev",
-        "f8",
-        "least valve spring coil-clash margin at the output angles",
-        "m",
-        "min",
-    ),
-)
 #: The record item that stores the spring's histories and metrics.
 SPRING_RECORD = "spring"
 
 
-def _metric_variables(
-    summary, per_rev, dtype, long_name, units, how, record=None
-) -> dict[str, Variable]:
-    """A metric's two variables: per revolution, and its summary over the measured ones."""
-    reads = {"mean": "per revolution, mean over", "max": "largest in", "min": "least in"}[how]
+def metric_variables(metric: Metric) -> dict[str, Variable]:
+    """A metric's two variables (``campipe.engine.metrics``): per revolution, and its
+    summary over the measured ones."""
+    reads = READS[metric.summary_of_turns]
     return {
-        summary: Variable(
+        metric.summary: Variable(
             CASE,
             "f8",
-            f"{long_name}, {reads} the measured revolutions",
-            units,
+            f"{metric.description}, {reads} the measured revolutions",
+            metric.units,
             role="metric",
-            record=record,
+            record=metric.record,
         ),
-        per_rev: Variable(
+        metric.per_rev: Variable(
             PER_REV,
-            dtype,
-            f"{long_name}, per revolution",
-            units,
+            metric.dtype,
+            f"{metric.description}, per revolution",
+            metric.units,
             role="per_revolution",
-            record=record,
+            record=metric.record,
         ),
     }
 
 
-#: Variables every archive holds (member loads and q only when run.record asks).
-VARIABLES: dict[str, Variable] = {
+#: Variables every archive holds (member loads and q only when run.record asks), but the
+#: metrics' (``VARIABLES`` has them all).
+_BEFORE_METRICS: dict[str, Variable] = {
     "cam_angle": Variable(
         ("cam_angle",), "f8", "cam angle from the start of the run", "degree", role="axis"
     ),
@@ -235,16 +138,8 @@ VARIABLES: dict[str, Variable] = {
         role="per_revolution",
         extra=(("flag_values", [0, 1]), ("flag_meanings", "warm_up measured")),
     ),
-    **{
-        name: var
-        for metric in PER_REVOLUTION_METRICS
-        for name, var in _metric_variables(*metric).items()
-    },
-    **{
-        name: var
-        for metric in CONTACT_PRESSURE_METRICS
-        for name, var in _metric_variables(*metric, record="contact_pressure").items()
-    },
+}
+_AFTER_METRICS: dict[str, Variable] = {
     "steps": Variable(CASE, "i8", "integration steps taken", role="count"),
     "status": Variable(
         CASE,
@@ -289,12 +184,37 @@ VARIABLES: dict[str, Variable] = {
         name: Variable(HISTORY, "f8", long_name, units, record=name)
         for name, (long_name, units) in SPRING_HISTORIES.items()
     },
-    **{
-        name: var
-        for metric in SPRING_METRICS
-        for name, var in _metric_variables(*metric, record=SPRING_RECORD).items()
-    },
 }
+
+
+class _Variables(Mapping[str, Variable]):
+    """Every archive variable by name: the fixed ones and, after ``measured``, two per
+    archived metric of the metrics table as it is when read (a metric registered at run time
+    included)."""
+
+    def __init__(self) -> None:
+        self._rows: tuple[int, ...] = ()
+        self._table: dict[str, Variable] = {}
+
+    def _all(self) -> dict[str, Variable]:
+        rows = archived_metrics()
+        if tuple(map(id, rows)) != self._rows:
+            metric_vars = {n: v for m in rows for n, v in metric_variables(m).items()}
+            self._table = {**_BEFORE_METRICS, **metric_vars, **_AFTER_METRICS}
+            self._rows = tuple(map(id, rows))
+        return self._table
+
+    def __getitem__(self, name: str) -> Variable:
+        return self._all()[name]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._all())
+
+    def __len__(self) -> int:
+        return len(self._all())
+
+
+VARIABLES: Mapping[str, Variable] = _Variables()
 
 #: Record items that store more than one variable (``spring``: its force on the rocker, its
 #: histories and its metrics, which are recorded under the item's own name).

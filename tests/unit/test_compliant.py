@@ -11,6 +11,7 @@ from scipy.special import beta
 from campipe.constants import INCH, TWO_PI
 from campipe.engine import Case, CaseError, RunSettings, RunSettingsError, run_batch
 from campipe.engine.compliant import CaseOutputs, CompliantSystem, Lift, integrate
+from campipe.engine.metrics import MAX_CAM_FORCE, N_ENGINE
 from campipe.model import ModelParameterError, valve_train
 from campipe.model.contact_laws import KELVIN_VOIGT, ContactLaw, contact_law
 from campipe.profiles import Profile, harmonic
@@ -38,8 +39,7 @@ def strike(law: ContactLaw, mass: float, velocity: float, t_end: float, rtol: fl
     t_out = np.linspace(0.0, t_end, 5)
     out = CaseOutputs(
         np.zeros((5, 7)), np.zeros((5, 7)), np.zeros((5, 2)), np.zeros(5),
-        np.zeros(5, np.int8), np.zeros((5, 2)), np.zeros(1), np.zeros(1),
-        np.zeros((1, 2), np.int64), np.zeros((1, 2)), np.zeros((1, 3)), np.zeros((16, 6)),
+        np.zeros(5, np.int8), np.zeros((5, 2)), np.zeros((1, N_ENGINE)), np.zeros((16, 6)),
     )  # fmt: skip
     integrate(system, 0.0, z0, (False, False), t_out, out, rtol=rtol)
     assert out.status == 0
@@ -81,7 +81,7 @@ def test_a_kelvin_voigt_impact_rebounds_at_its_closed_form_restitution(zeta):
     t_c = (math.pi - 2 * math.atan(a)) / omega
     assert_allclose(ev[1, EV_TIME] - ev[0, EV_TIME], t_c, rtol=1e-8)
     # KV's force jumps to c·v₀ at the touch; underdamped, its peak is later and higher
-    assert out.fmax[0, 0] >= c * v0 * (1 - 1e-12)
+    assert out.per_rev[0, MAX_CAM_FORCE] >= c * v0 * (1 - 1e-12)
 
 
 def test_a_hertz_impact_matches_hertz_s_duration_and_peak_force():
@@ -112,7 +112,7 @@ def test_a_hertz_impact_matches_hertz_s_duration_and_peak_force():
     ev = out.events[: out.n_events]
     assert ev[:, EV_KIND].tolist() == [CAM_IMPACT, CAM_SEPARATION]
     assert_allclose(ev[1, EV_TIME] - ev[0, EV_TIME], duration, rtol=1e-6)
-    assert_allclose(out.fmax[0, 0], f_max, rtol=1e-6)
+    assert_allclose(out.per_rev[0, MAX_CAM_FORCE], f_max, rtol=1e-6)
     assert_allclose(-v_end, v, rtol=1e-6)
     # the peak Hertz pressure of a point contact: (6FE*²/(π³R²))^(1/3)
     e_star = e_modulus / (2 * (1 - nu**2))

@@ -1,0 +1,294 @@
+"""The per-turn metrics, declared once: name, units, reduction over a turn, description.
+
+Every metric is a row of :data:`METRICS`. From the table follow
+
+- the engine's per-turn output array (``common.Outputs.per_rev``, one column per row whose
+  ``source`` is ``"engine"``, at the index :func:`column` gives it: the integrators
+  accumulate into it with :data:`COLUMNS`' constants);
+- :class:`~campipe.engine.batch.BatchResult`'s ``<key>_per_rev`` (SI, per case and turn) and
+  ``<key>`` (over the measured turns, as the row's ``summary`` says);
+- the archive's two variables per row (``per_rev`` per revolution, ``summary`` over the
+  measured ones: :mod:`campipe.study.variables`), and so ``campipe query``'s columns;
+- the variable table of ``docs/studies.md`` (``python -m campipe.engine.metrics``).
+
+Adding a metric an integrator produces is its row here plus the lines in each integrator
+that accumulate it into its column. A metric computed from what a run already gives (its
+histories, or other metrics) is its row with a ``derive`` function and nothing else
+(:func:`register` adds one at run time; the tests add a toy one that way).
+
+No numba here: the study layer reads the table without loading the kernels.
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from campipe.engine.loads import per_turn
+from campipe.model.contact_laws import contact_law
+
+#: Reductions over a turn, and what the summary over the measured turns takes of them: an
+#: angle or a count accumulated over the turn reads as its mean per turn; an extreme as the
+#: extreme of the turns.
+SUMMARY = {"sum": "mean", "count": "mean", "max": "max", "min": "min"}
+#: How an archive's long name says the summary.
+READS = {"mean": "per revolution, mean over", "max": "largest in", "min": "least in"}
+
+
+@dataclass(frozen=True)
+class Metric:
+    """One per-turn metric."""
+
+    key: str  # BatchResult's name: ``<key>_per_rev`` per turn, ``<key>`` summary (SI)
+    summary: str  # the archive's (and query's) name of the summary over the measured turns
+    per_rev: str  # the archive's name of the per-revolution values
+    description: str  # what it is (the archive's long name starts with it)
+    units: str | None  # the archive's units (pint spelling; None for a count)
+    reduction: str  # over a turn: "sum", "count", "max" or "min" (:data:`SUMMARY`)
+    si_units: str | None = None  # the engine's units where the archive's differ (rad)
+    dtype: str = "f8"  # the archive's type per revolution ("i4" for counts)
+    record: str | None = None  # the run.record item that stores it (None: always)
+    source: str = "engine"  # "engine": an integrator accumulates it; "derived": ``derive``
+    archived: bool = True  # stored in a study's archive
+    #: (result, per-case trains) → (n_cases, n_turns) SI values, for a derived metric
+    derive: Callable[[Any, Any], np.ndarray] | None = None
+
+    @property
+    def summary_of_turns(self) -> str:
+        """How the summary reads the measured turns: "mean", "max" or "min"."""
+        return SUMMARY[self.reduction]
+
+    def to_archive(self, values: np.ndarray) -> np.ndarray:
+        """SI per-turn values in the archive's units."""
+        return np.degrees(values) if self.si_units == "rad" else values
+
+    def summarise(self, values: np.ndarray, measured: np.ndarray) -> np.ndarray:
+        """(n_cases,) the summary of (n_cases, n_turns) values over the ``measured`` turns."""
+        kept = values[:, measured]
+        how = self.summary_of_turns
+        return (
+            kept.mean(axis=1)
+            if how == "mean"
+            else kept.max(axis=1)
+            if how == "max"
+            else (kept.min(axis=1))
+        )
+
+
+def _pressure(side: int) -> Callable[[Any, Any], np.ndarray]:
+    def derive(result, trains) -> np.ndarray:
+        # A pressure rises with its force: the turn's peak pressure is its peak force's.
+        force = result.max_cam_force_per_rev if side == 0 else result.max_seat_force_per_rev
+        contact = ("cam", "seat")[side]
+        return np.stack(
+            [contact_law(t, contact).pressure(force[i]) for i, t in enumerate(trains)]
+        ).reshape(force.shape)
+
+    return derive
+
+
+def _spring(name: str, how: str) -> Callable[[Any, Any], np.ndarray]:
+    def derive(result, trains) -> np.ndarray:
+        histories = result.spring_histories(trains)
+        return per_turn(histories[name], result.cam_angle, result.n_turns, how)
+
+    return derive
+
+
+#: The metrics, in the engine's column order (those of source "engine" first).
+METRICS: list[Metric] = [
+    Metric(
+        "separation",
+        "separation_deg_per_rev",
+        "separation_deg",
+        "no-follow: cam angle in configuration II (follower off the cam, valve off its seat)",
+        "degree",
+        "sum",
+        si_units="rad",
+    ),
+    Metric(
+        "seated_off_cam",
+        "seated_off_cam_deg_per_rev",
+        "seated_off_cam_deg",
+        "cam angle in configuration IV (valve seated, follower off the cam: the lash)",
+        "degree",
+        "sum",
+        si_units="rad",
+    ),
+    Metric(
+        "cam_impacts", "cam_impacts", "cam_impacts_by_rev", "cam impacts", None, "count", dtype="i4"
+    ),  # fmt: skip
+    Metric(
+        "seat_impacts",
+        "seat_impacts",
+        "seat_impacts_by_rev",
+        "valve seat impacts",
+        None,
+        "count",
+        dtype="i4",
+    ),  # fmt: skip
+    Metric(
+        "max_cam_impact_velocity",
+        "max_cam_impact_velocity",
+        "max_cam_impact_velocity_by_rev",
+        "largest closing velocity at a cam impact",
+        "m/s",
+        "max",
+    ),
+    Metric(
+        "max_seating_velocity",
+        "max_seating_velocity",
+        "max_seating_velocity_by_rev",
+        "largest closing velocity at a seat impact",
+        "m/s",
+        "max",
+    ),
+    Metric(
+        "max_cam_force",
+        "max_cam_force",
+        "max_cam_force_by_rev",
+        "largest compressive cam force between impacts",
+        "N",
+        "max",
+    ),
+    Metric(
+        "max_seat_force",
+        "max_seat_force",
+        "max_seat_force_by_rev",
+        "largest compressive seat force between impacts",
+        "N",
+        "max",
+    ),
+    Metric(
+        "thesis_impact_force",
+        "thesis_impact_force",
+        "thesis_impact_force_by_rev",
+        "largest cam force including the steps an impact's impulse passes through (the "
+        "thesis's impact force; measures 1/dt for newmark-linear)",
+        "N",
+        "max",
+        archived=False,
+    ),
+    Metric(
+        "max_cam_pressure",
+        "max_cam_pressure",
+        "max_cam_pressure_by_rev",
+        "peak Hertz pressure at the cam contact",
+        "Pa",
+        "max",
+        record="contact_pressure",
+        source="derived",
+        derive=_pressure(0),
+    ),
+    Metric(
+        "max_seat_pressure",
+        "max_seat_pressure",
+        "max_seat_pressure_by_rev",
+        "peak Hertz pressure at the valve seat contact",
+        "Pa",
+        "max",
+        record="contact_pressure",
+        source="derived",
+        derive=_pressure(1),
+    ),
+    Metric(
+        "max_spring_force",
+        "max_spring_force",
+        "max_spring_force_by_rev",
+        "largest compressive force along the valve spring (any element) at the output angles",
+        "N",
+        "max",
+        record="spring",
+        source="derived",
+        derive=_spring("max_spring_element_force", "max"),
+    ),
+    Metric(
+        "min_spring_clash_margin",
+        "min_spring_clash_margin",
+        "min_spring_clash_margin_by_rev",
+        "least valve spring coil-clash margin at the output angles",
+        "m",
+        "min",
+        record="spring",
+        source="derived",
+        derive=_spring("spring_clash_margin", "min"),
+    ),
+]
+
+#: The engine's columns: every metric an integrator accumulates, in the table's order. Fixed
+#: at import: the compiled kernels take these indices as constants.
+ENGINE = tuple(m.key for m in METRICS if m.source == "engine")
+
+
+def column(key: str) -> int:
+    """The column of an engine metric in ``Outputs.per_rev``."""
+    return ENGINE.index(key)
+
+
+#: The engine metrics' columns by name, for the kernels (module-level constants numba folds).
+SEPARATION = column("separation")
+SEATED_OFF_CAM = column("seated_off_cam")
+CAM_IMPACTS = column("cam_impacts")
+SEAT_IMPACTS = column("seat_impacts")
+MAX_CAM_IMPACT_VELOCITY = column("max_cam_impact_velocity")
+MAX_SEATING_VELOCITY = column("max_seating_velocity")
+MAX_CAM_FORCE = column("max_cam_force")
+MAX_SEAT_FORCE = column("max_seat_force")
+THESIS_IMPACT_FORCE = column("thesis_impact_force")
+N_ENGINE = len(ENGINE)
+
+
+def by_key() -> dict[str, Metric]:
+    """The metrics by key (the table as it is now, rows registered at run time included)."""
+    return {m.key: m for m in METRICS}
+
+
+def archived_metrics() -> list[Metric]:
+    """The metrics a study's archive stores (those of the table as it is now)."""
+    return [m for m in METRICS if m.archived]
+
+
+def register(metric: Metric) -> None:
+    """Add a derived metric to the table (an engine metric needs its integrators' code, so
+    it is a row written above, not registered)."""
+    if metric.source != "derived" or metric.derive is None:
+        raise ValueError(f"{metric.key}: only a derived metric (with derive) is registered")
+    if metric.key in by_key():
+        raise ValueError(f"{metric.key}: a metric of that name exists")
+    METRICS.append(metric)
+
+
+@contextmanager
+def registered(metric: Metric) -> Iterator[Metric]:
+    """:func:`register` for the duration of a ``with`` block."""
+    register(metric)
+    try:
+        yield metric
+    finally:
+        METRICS.remove(metric)
+
+
+def markdown_table() -> str:
+    """The metrics as the Markdown table of ``docs/studies.md``."""
+    lines = [
+        "| summary | per revolution | units | over a turn | summary of the turns | record | "
+        "what it is |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for m in METRICS:
+        if not m.archived:
+            continue
+        lines.append(
+            f"| `{m.summary}` | `{m.per_rev}` | {m.units or '1'} | {m.reduction} | "
+            f"{m.summary_of_turns} | {m.record or 'always'} | {m.description} |"
+        )
+    return "\n".join(lines)
+
+
+if __name__ == "__main__":  # pragma: no cover - the docs' table
+    sys.stdout.write(markdown_table() + "\n")

@@ -1,0 +1,163 @@
+"""A batch's results: histories at the output angles and the metrics of
+:mod:`campipe.engine.metrics` per turn, SI; and the merge of the results of a batch's parts.
+
+No numba here: results are plain arrays.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from campipe.engine import metrics
+from campipe.engine.loads import spring_histories
+from campipe.model import ValveTrain
+from campipe.vocabulary import CAM, N_EVENT_FIELDS, SEAT
+
+
+@dataclass
+class BatchResult:
+    """Histories at the output angles and metrics at full internal resolution, SI.
+
+    Every metric of :data:`campipe.engine.metrics.METRICS` reads per turn as
+    ``<key>_per_rev`` ((n_cases, n_rev)) and as ``<key>``, its summary over the measured
+    turns (those after ``warmup``: the largest of a maximum, the mean per turn of a count or
+    an angle): ``result.separation_per_rev``, ``result.max_cam_force``. The engine's metrics
+    come from the integrators (``per_rev``); a derived one is computed when first read.
+    """
+
+    cam_angle: np.ndarray  # (n_out,) cam angle of each sample [rad]
+    time: np.ndarray  # (n_cases, n_out) [s]
+    #: (n_cases, n_out, n) coordinates [m, rad]: q1 … q7, then the internal coordinates of
+    #: refined members (``campipe.model.coordinates``); n is the batch's most coordinates, a
+    #: train with fewer has NaN beyond its own
+    q: np.ndarray
+    v: np.ndarray  # (n_cases, n_out, n) velocities [m/s, rad/s]
+    acc: np.ndarray  # (n_cases, n_out, 2) accelerations of q1 and q7 [m/s²]
+    cam_lift: np.ndarray  # (n_cases, n_out) [m]
+    cam_force: np.ndarray  # (n_cases, n_out) cam contact force, compressive positive [N]
+    seat_force: np.ndarray  # (n_cases, n_out) seat contact force, compressive positive [N]
+    contact_state: np.ndarray  # (n_cases, n_out) int8, 1–4 = configurations I–IV
+    valve_reference: np.ndarray  # (n_cases,) q7 at zero valve lift [m]
+    measured: np.ndarray  # (n_rev,) bool: the turn counts in the summaries (after warm-up)
+    #: (n_cases, n_rev, metrics.N_ENGINE) the engine's metrics per turn, in the columns of
+    #: ``metrics.ENGINE`` (NaN for a failed case)
+    per_rev: np.ndarray
+    trains: list[ValveTrain]  # each case's train (for the derived metrics)
+    #: per case (n_ev, 6): columns vocabulary.EV_*
+    events: list[np.ndarray] = field(default_factory=list)
+    steps: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # (n_cases,)
+    #: (n_cases,) int64 vocabulary status: OK, EVENTS_TRUNCATED, or (``on_failure="record"``)
+    #: a failure (``vocabulary.FAILURES``) whose histories and metrics are NaN
+    status: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    start_time: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (n_cases,) t0 ≤ 0 [s]
+    _derived: dict[str, object] = field(default_factory=dict, repr=False, compare=False)
+
+    @property
+    def n_turns(self) -> int:
+        """Turns of the run, a partial last one included."""
+        return int(self.per_rev.shape[1])
+
+    def metric_per_rev(self, key: str) -> np.ndarray:
+        """(n_cases, n_rev) a metric per turn, SI (``metrics.METRICS``' key)."""
+        metric = metrics.by_key()[key]
+        if metric.source == "engine":
+            return self.per_rev[:, :, metrics.column(key)]
+        cached = self._derived.get(key)
+        if cached is None:
+            assert metric.derive is not None
+            cached = self._derived[key] = np.asarray(metric.derive(self, self.trains), float)
+        return cached  # type: ignore[return-value]
+
+    def metric(self, key: str) -> np.ndarray:
+        """(n_cases,) a metric's summary over the measured turns, SI."""
+        return metrics.by_key()[key].summarise(self.metric_per_rev(key), self.measured)
+
+    def spring_histories(self, trains: Sequence[ValveTrain]) -> dict[str, np.ndarray]:
+        """The spring's histories (``engine.loads.SPRING_HISTORIES``), (n_cases, n_out) each,
+        computed once from q."""
+        cached = self._derived.get("spring_histories")
+        if cached is None:
+            per_case = [spring_histories(t, self.q[i]) for i, t in enumerate(trains)]
+            cached = self._derived["spring_histories"] = {
+                name: np.stack([p[name] for p in per_case]) for name in per_case[0]
+            }
+        return cached  # type: ignore[return-value]
+
+    def __getattr__(self, name: str) -> np.ndarray:
+        # Only names not found otherwise: a metric's ``<key>_per_rev`` or ``<key>``.
+        if not name.startswith("_"):
+            table = metrics.by_key()
+            if name.endswith("_per_rev") and name[: -len("_per_rev")] in table:
+                return self.metric_per_rev(name[: -len("_per_rev")])
+            if name in table:
+                return self.metric(name)
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
+
+    @property
+    def follower_lift(self) -> np.ndarray:
+        """(n_cases, n_out) pushrod foot height in the cam's lift coordinate [m]."""
+        return -self.q[:, :, CAM]
+
+    @property
+    def valve_lift(self) -> np.ndarray:
+        """(n_cases, n_out) valve opening from its base-circle static position [m]."""
+        return self.q[:, :, SEAT] - self.valve_reference[:, None]
+
+    @property
+    def valve_velocity(self) -> np.ndarray:
+        """(n_cases, n_out) valve opening velocity [m/s]."""
+        return self.v[:, :, SEAT]
+
+    @property
+    def valve_acceleration(self) -> np.ndarray:
+        """(n_cases, n_out) valve opening acceleration [m/s²]."""
+        return self.acc[:, :, 1]
+
+    @property
+    def follower_acceleration(self) -> np.ndarray:
+        """(n_cases, n_out) pushrod foot acceleration in the cam's lift coordinate [m/s²]."""
+        return -self.acc[:, :, 0]
+
+
+#: Fields of a result shared by its parts (not per case).
+_SHARED = ("cam_angle", "measured")
+#: Per-case fields held in lists.
+_LISTS = ("events", "trains")
+
+
+def merge_results(n: int, parts: Sequence[tuple[np.ndarray, BatchResult]]) -> BatchResult:
+    """One batch's result from the results of its parts, each with the indices of its cases
+    (in order, covering 0 … n − 1 once); q and v padded with NaN to the most coordinates."""
+    if len(parts) == 1:
+        return parts[0][1]
+    merged: dict[str, object] = {}
+    first = parts[0][1]
+    n_q = max(part.q.shape[2] for _, part in parts)
+    for f in dataclasses.fields(BatchResult):
+        if f.name == "_derived":
+            continue
+        value = getattr(first, f.name)
+        if f.name in _SHARED:
+            merged[f.name] = value
+        elif f.name in _LISTS:
+            empty = np.zeros((0, N_EVENT_FIELDS)) if f.name == "events" else None
+            items: list[object] = [empty] * n
+            for index, part in parts:
+                for j, i in enumerate(index):
+                    items[i] = getattr(part, f.name)[j]
+            merged[f.name] = items
+        else:
+            shape = (n, *value.shape[1:2], n_q) if f.name in ("q", "v") else (n, *value.shape[1:])
+            array = np.full(shape, np.nan) if f.name in ("q", "v") else np.empty(shape, value.dtype)
+            for index, part in parts:
+                part_value = getattr(part, f.name)
+                if f.name in ("q", "v"):
+                    array[index, :, : part_value.shape[2]] = part_value
+                else:
+                    array[index] = part_value
+            merged[f.name] = array
+    return BatchResult(**merged)  # type: ignore[arg-type]
