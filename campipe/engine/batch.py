@@ -10,7 +10,6 @@ from __future__ import annotations
 import dataclasses
 import functools
 import logging
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -20,7 +19,7 @@ from numba import njit
 from numba.core.typing.typeof import Purpose, typeof
 
 from campipe.constants import TWO_PI
-from campipe.engine import compliant, exact, newmark, steady
+from campipe.engine import integrators, steady
 from campipe.engine.closed_form import (
     STATE,
     ExactRuns,
@@ -37,13 +36,13 @@ from campipe.engine.contact import (
     quasi_static_batch,
     static_position,
 )
+from campipe.engine.integrators.modal_exact import arguments
 from campipe.engine.modal import ModalData, harmonic_responses, modal_data, pad_stack
 from campipe.engine.result import BatchResult as BatchResult
 from campipe.engine.result import merge_results
 from campipe.engine.settings import CLOSURES as CLOSURES
 from campipe.engine.settings import (
     COMPLIANT,
-    COMPLIANT_RTOL_FLOOR,
     LIFT_BOUND,
     SPEED_BOUND,
     Case,
@@ -86,8 +85,6 @@ from campipe.vocabulary import (
     SEATED,
     UNBOUNDED,
     free_coordinates,
-    holds_cam,
-    holds_seat,
 )
 
 log = logging.getLogger(__name__)
@@ -248,22 +245,6 @@ def valve_reference(sm: SystemMatrices) -> float:
     return float(q[SEAT])
 
 
-def _run_newmark(preps, which, settings, dt_run, cases, packed, out) -> None:
-    trains = newmark.NewmarkTrains(
-        M=np.stack([p.matrices.mass for p in preps])[which],
-        C=np.stack([p.matrices.damping for p in preps])[which],
-        K=np.stack([p.matrices.stiffness for p in preps])[which],
-        load=np.stack([p.matrices.preload for p in preps])[which],
-        step_A=np.stack([p.step_A for p in preps])[which],
-        step_G=np.stack([p.step_G for p in preps])[which],
-    )
-    dt = np.full(len(which), dt_run)
-    n_steps = np.ceil(settings.revolutions * TWO_PI / (cases.omega * dt) - 1e-9)
-    runs = newmark.NewmarkRuns(dt, n_steps.astype(np.int64), float(settings.output_every))
-    contact = np.zeros(1, newmark.CONTACT_STATE)
-    newmark.newmark_linear_batch(cases, trains, packed, runs, out, newmark.make_work(), contact)
-
-
 def _modal_trains(trains, preps) -> tuple[ModalTrains, np.ndarray]:
     """The distinct trains' closed-form data, indexed in the kernels by each case's train, and
     their state matrices (for the harmonic responses)."""
@@ -302,9 +283,10 @@ class Start(NamedTuple):
 
 
 @dataclass(frozen=True)
-class _Batch:
+class PreparedBatch:
     """What a batch's kernels take, but where it starts (``_prepare_batch``)."""
 
+    case_list: Sequence[Case]  # the batch's cases
     trains: list[ValveTrain]  # the distinct trains
     which: np.ndarray  # each case's index into them
     preps: list[Prepared]
@@ -316,7 +298,7 @@ class _Batch:
 
 def _prepare_batch(
     cases: Sequence[Case], settings: RunSettings, full_state: bool, responses: bool = True
-) -> _Batch:
+) -> PreparedBatch:
     """What the batch's kernels take. Without ``responses`` the harmonic responses are left
     zero, their kernel not run: for the types of the kernels' arguments
     (:func:`integrator_types`), not for a run."""
@@ -331,7 +313,8 @@ def _prepare_batch(
     modal_trains, a_mat = _modal_trains(trains, preps)
     n_q = modal_trains.load.shape[1]
     lift_bound, speed_bound = _bounds(cases, preps, which, qref)
-    return _Batch(
+    return PreparedBatch(
+        case_list=cases,
         trains=trains,
         which=which,
         preps=preps,
@@ -362,7 +345,7 @@ def _prepare_batch(
     )
 
 
-def _starts(cases: Sequence[Case], settings: RunSettings, batch: _Batch) -> Start:
+def _starts(cases: Sequence[Case], settings: RunSettings, batch: PreparedBatch) -> Start:
     c = batch.cases
     if settings.start == "quasi-static":
         q0, v0, a0, cfg0 = initial_states(
@@ -375,7 +358,7 @@ def _starts(cases: Sequence[Case], settings: RunSettings, batch: _Batch) -> Star
             [p.start_inverses for p in batch.preps],
         )
         return Start(np.zeros(len(cases)), q0, v0, a0, cfg0)
-    step = settings.step if settings.method == "newmark-linear" else 0.0
+    step = settings.step if integrators.get(settings.method).fixed_step else 0.0
     t0, q0, v0, a0 = _periodic_starts(
         cases, c, batch.modal_trains, batch.runs, batch.packed, np.full(len(cases), step),
         batch.preps, batch.which,
@@ -396,23 +379,18 @@ def integrator_types(cases: Sequence[Case], settings: RunSettings, full_state: b
     signature to compile its kernel ahead for (``campipe.engine.kernels.compile_kernels``),
     found without running a kernel (the start's, the harmonic responses' or another)."""
     batch = _prepare_batch(cases, settings, full_state, responses=False)
-    args = _exact_arguments(batch, batch.cases, _outputs(batch, settings))
+    modal_exact = integrators.get("modal-exact")
+    prepared = modal_exact.prepare(batch, settings)
+    args = arguments(prepared, batch.cases, _outputs(batch, settings))
     return tuple(typeof(a, Purpose.argument) for a in args)  # as a call types them
 
 
-def _outputs(batch: _Batch, settings: RunSettings):
+def _outputs(batch: PreparedBatch, settings: RunSettings):
     """The kernels' output arrays for a batch run with ``settings`` (``common.make_outputs``)."""
     n_rev = turn_count(settings.revolutions)
     n_out = sample_count(settings.revolutions, settings.output_every)
     n_q = batch.modal_trains.load.shape[1]
     return make_outputs(len(batch.which), n_out, n_rev, settings.max_events, n_q)
-
-
-def _exact_arguments(batch: _Batch, cases: Cases, out) -> tuple:
-    """modal-exact's arguments for a batch starting as ``cases`` says, with fresh work arrays."""
-    n_q = batch.modal_trains.load.shape[1]
-    work = make_workspace(n_q), np.zeros(1, STATE)
-    return (cases, batch.modal_trains, batch.packed, batch.runs, out, *work)
 
 
 def _periodic_starts(case_list, cases, modal_trains, runs, packed, snap, preps, which):
@@ -526,15 +504,10 @@ def run_batch(
     start = _starts(cases, settings, batch)
     cases_in = batch.cases._replace(**start._asdict())
     omega, qref = cases_in.omega, cases_in.valve_ref
-    preps, which, packed = batch.preps, batch.which, batch.packed
     out = _outputs(batch, settings)
     n_rev = out.per_rev.shape[1]  # turns, a partial last one included
-    if settings.method == "newmark-linear":
-        _run_newmark(preps, which, settings, dt_run, cases_in, packed, out)
-    elif settings.method == COMPLIANT:
-        _run_compliant(cases, cases_in, settings, out)
-    else:
-        exact.modal_exact_batch(*_exact_arguments(batch, cases_in, out))
+    integrator = integrators.get(settings.method)
+    integrator.run(integrator.prepare(batch, settings), cases_in, out)
     status, n_events = out.status, out.n_events
     bad = np.flatnonzero(status == NONFINITE)
     if bad.size and on_failure == "raise":
@@ -556,12 +529,8 @@ def run_batch(
         )
     bad = np.flatnonzero(status == UNBOUNDED)
     if bad.size and on_failure == "raise":
-        if settings.method == "newmark-linear":
-            how = f"{settings.method}, step {dt_run:g} s"
-            why = "the step is too large for this case (use a smaller run.dt or modal-exact)"
-        else:
-            how = settings.method
-            why = "this is a defect: please report it with the case"
+        how = f"{settings.method}, step {dt_run:g} s" if integrator.fixed_step else settings.method
+        why = integrator.unbounded_advice or "this is a defect: please report it with the case"
         raise IntegrationError(
             f"cases {bad.tolist()}: the motion left its physical bounds ({how}): a valve lift "
             f"beyond {LIFT_BOUND:g}× the full lift or a speed beyond {SPEED_BOUND:g}× the cam's; "
@@ -599,30 +568,6 @@ def run_batch(
         status=status,
         start_time=cases_in.t0,
     )
-
-
-def _run_compliant(cases: Sequence[Case], c: Cases, settings: RunSettings, out) -> None:
-    """Each case through ``engine.compliant`` from its start, into the batch's outputs."""
-    angles = output_angles(settings)
-    rtol = max(float(settings.tolerance), COMPLIANT_RTOL_FLOOR)
-    max_step = settings.step or math.inf
-    for i, case in enumerate(cases):
-        system = compliant.compliant_system(
-            case.train, case.profile, case.speed, float(c.seat_q[i]) if case.has_seat else None
-        )
-        held = (holds_cam(int(c.cfg0[i])), holds_seat(int(c.cfg0[i])))
-        m = system.load.size  # the train's coordinates of the batch's
-        z0 = compliant.compliant_start(system, c.q0[i, :m], c.v0[i, :m], c.a0[i, :m], *held)
-        one = compliant.CaseOutputs(
-            out.q[i], out.v[i], out.force[i], out.cam[i], out.cfg[i], out.acc[i],
-            out.per_rev[i], out.events[i],
-        )  # fmt: skip
-        compliant.integrate(
-            system, float(c.t0[i]), z0, held, angles / case.speed, one,
-            rtol=rtol, max_step=max_step, capture=float(c.capture[i]),
-            lift_bound=float(c.lift_bound[i]), valve_ref=float(c.valve_ref[i]),
-        )  # fmt: skip
-        out.n_events[i], out.status[i], out.steps[i] = one.n_events, one.status, one.steps
 
 
 def _run_by_contacts(cases: Sequence[Case], settings: RunSettings, options) -> BatchResult:

@@ -8,40 +8,39 @@ them).
 
 from __future__ import annotations
 
-import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-import numpy as np
+from campipe.engine import integrators
+from campipe.engine.case import CLOSURES as CLOSURES
+from campipe.engine.case import Case as Case
+from campipe.engine.case import CaseError as CaseError
+from campipe.engine.case import IntegrationError as IntegrationError
+from campipe.engine.case import RunSettingsError as RunSettingsError
+from campipe.engine.case import StabilityError as StabilityError
+from campipe.engine.case import compliant_contacts as compliant_contacts
+from campipe.engine.case import output_angles as output_angles
+from campipe.engine.case import sample_count as sample_count
+from campipe.engine.case import turn_count as turn_count
+from campipe.engine.case import visited_configurations as visited_configurations
+from campipe.model import ValveTrain
+from campipe.vocabulary import ROMAN
 
-from campipe.constants import TWO_PI
-from campipe.errors import CampipeError
-from campipe.model import ValveTrain, lash_seat, system_matrices
-from campipe.model.assembly import NEWMARK_LINEAR_OMEGA_DT, configuration_frequencies
-from campipe.profiles import Profile
-from campipe.vocabulary import CAM_AND_SEAT, CAM_CONTACT, CONFIGURATIONS, FREE, N_COORDINATES, ROMAN
-
-#: The integrators of rigid contacts (the thesis's) by name; ``default`` in a spec means
-#: DEFAULT_INTEGRATOR, or COMPLIANT for a case with a compliant contact law
-#: (``engine.compliant``: the contacts as force elements, error-controlled).
-INTEGRATORS = ("modal-exact", "newmark-linear")
-DEFAULT_INTEGRATOR = "modal-exact"
-COMPLIANT = "compliant"
+#: The integrators of rigid contacts (the thesis's) by name (``campipe.engine.integrators``);
+#: ``default`` in a spec means DEFAULT_INTEGRATOR, or COMPLIANT for a case with a compliant
+#: contact law (the contacts as force elements, error-controlled).
+INTEGRATORS = integrators.names("rigid")
+DEFAULT_INTEGRATOR = integrators.DEFAULT
+COMPLIANT = integrators.names("compliant")[0]
 #: Every integrator a run may name.
-ALL_INTEGRATORS = (*INTEGRATORS, COMPLIANT)
-#: The compliant integrator's relative tolerance is run.tolerance, but no finer than this
-#: (the default 1e-12, modal-exact's event-time tolerance, is finer than Radau can reach).
-COMPLIANT_RTOL_FLOOR = 1e-10
-#: The step an integrator uses when a run names none [s]: the thesis's 1 µs for its
+ALL_INTEGRATORS = integrators.names()
+#: The step each integrator uses when a run names none [s]: the thesis's 1 µs for its
 #: integrator; modal-exact is exact between events and sizes its own steps (a run's dt only
 #: caps them).
 DEFAULT_STEPS: dict[str, float | None] = {
-    "newmark-linear": 1e-6,
-    "modal-exact": None,
-    "compliant": None,
+    name: integrator.default_step for name, integrator in integrators.REGISTRY.items()
 }
-CLOSURES = ("force", "form")
 #: Model fidelity of a run, cheapest last: "full", every case through its events with every
 #: mode; "steady", each case whose periodic steady state is configuration I's all turn (it
 #: follows the cam, the valve clear of its seat) from that closed form, one turn computed and
@@ -76,47 +75,11 @@ LIFT_BOUND = 3.0
 SPEED_BOUND = 10.0
 
 
-class RunSettingsError(CampipeError, ValueError):
-    """Run settings the engine refuses; ``key`` is the spec key (``run.integrator``,
-    ``run.fidelity``, ``run.dt``, ``run.tolerance``)."""
-
-
-class StabilityError(RunSettingsError):
-    """A step beyond the integrator's stability limit (``key`` ``run.dt``, ``found`` the
-    step [s]); its ``reason`` leaves out which case of the batch set the limit."""
-
-
-class CaseError(CampipeError, ValueError):
-    """A case the engine refuses; ``key`` is ``closure`` or ``speed``."""
-
-
-class IntegrationError(CampipeError, RuntimeError):
-    """A run that produced a non-finite state, or chattered; ``found`` lists the cases."""
-
-
-def turn_count(revolutions: float) -> int:
-    """The turns a run of ``revolutions`` covers, a partial last turn included: the length of
-    its per-turn metrics (the archive's ``revolution`` axis)."""
-    return int(math.ceil(revolutions - 1e-12))
-
-
-def sample_count(revolutions: float, output_every: float) -> int:
-    """The output samples of a run of ``revolutions`` turns, every ``output_every`` [rad] from
-    θ = 0 (the last within 2π·revolutions)."""
-    return int(math.floor(revolutions * TWO_PI / output_every + 1e-9)) + 1
-
-
 def resolve_integrator(name: str) -> str:
     """``default`` → the default integrator's name; refuse an unknown name."""
     resolved = DEFAULT_INTEGRATOR if name == "default" else name
-    if resolved not in ALL_INTEGRATORS:
-        known = ", ".join(("default", *ALL_INTEGRATORS))
-        raise RunSettingsError.at(
-            "run.integrator",
-            f"unknown integrator {name!r}; known: {known}",
-            found=name,
-            expected=f"one of: {known}",
-        )
+    if resolved not in integrators.REGISTRY:
+        integrators.get(name)  # raises, naming the known ones
     return resolved
 
 
@@ -126,52 +89,6 @@ def case_integrator(name: str, train: ValveTrain, has_seat: bool = True) -> str:
     if name == "default" and compliant_contacts(train, has_seat):
         return COMPLIANT
     return resolve_integrator(name)
-
-
-def compliant_contacts(train: ValveTrain, has_seat: bool) -> bool:
-    """A train whose cam contact, or seat contact where there is a seat, is compliant."""
-    return train.cam_contact != "rigid" or (has_seat and train.seat_contact != "rigid")
-
-
-@functools.lru_cache(maxsize=256)
-def _lash_seat(train: ValveTrain) -> float:
-    """The seat a train's lash places (``campipe.model.lash_seat``), once per train."""
-    return lash_seat(system_matrices(train), train.lash)
-
-
-@dataclass(frozen=True)
-class Case:
-    """One run: a valve train, a cam and how it is driven."""
-
-    train: ValveTrain  # model parameters [SI]
-    profile: Profile  # cam lift over one turn, defects applied
-    speed: float  # cam speed [rad/s]
-    seat: float = math.nan  # seat position as a valve lift [m]; NaN: no seat
-    closure: str = "force"  # "force": spring-held, may separate; "form": never leaves the cam
-
-    def __post_init__(self) -> None:
-        lash = getattr(self.train, "lash", math.nan)
-        if math.isnan(lash):
-            return
-        seat = _lash_seat(self.train)
-        if not math.isnan(self.seat) and self.seat != seat:
-            raise CaseError.at(
-                "seat",
-                f"a seat at {self.seat:.6g} m beside a train's lash of {lash:.6g} m (which "
-                f"places it at {seat:.6g} m); give one of them",
-                found=self.seat,
-                expected="no seat (NaN), or a train without lash",
-            )
-        object.__setattr__(self, "seat", seat)  # the lash places the seat
-
-    @property
-    def has_seat(self) -> bool:
-        return not math.isnan(self.seat)
-
-    @property
-    def compliant(self) -> bool:
-        """A compliant law at a contact the case can touch (``engine.compliant``)."""
-        return compliant_contacts(self.train, self.has_seat)
 
 
 @dataclass(frozen=True)
@@ -269,50 +186,24 @@ class RunSettings:
         return DEFAULT_STEPS[self.method] if self.dt is None else self.dt
 
 
-@functools.lru_cache(maxsize=256)
-def configuration_omega_max(train: ValveTrain) -> np.ndarray:
-    """(4,) the highest natural frequency of each configuration I–IV [rad/s]."""
-    sm = system_matrices(train)
-    return np.array(
-        [configuration_frequencies(sm.mass, sm.stiffness, c).max() for c in CONFIGURATIONS]
-    )
-
-
-def visited_configurations(case: Case) -> tuple[int, ...]:
-    """The configurations a case can reach: no seat keeps it in I/II; form closure in I/III."""
-    if case.closure == "form":
-        return (CAM_CONTACT, CAM_AND_SEAT) if case.has_seat else (CAM_CONTACT,)
-    return tuple(CONFIGURATIONS) if case.has_seat else (CAM_CONTACT, FREE)
-
-
-def _newmark_limit(case: Case) -> tuple[float, int]:
-    """newmark-linear's stability limit √12/ω_max [s] over the configurations a case can
-    visit (thesis Appendix B), and the configuration that sets it."""
-    omega_max = configuration_omega_max(case.train)
-    worst = max(visited_configurations(case), key=lambda c: omega_max[c - 1])
-    return float(NEWMARK_LINEAR_OMEGA_DT / omega_max[worst - 1]), worst
-
-
 def stability_limit(case: Case, integrator: str = "newmark-linear") -> float:
     """Largest step [s] the integrator accepts for a case, over the configurations it can
     visit: newmark-linear's stability limit √12/ω_max (thesis Appendix B); modal-exact has
     none (inf): it is exact between events and sizes its own steps."""
-    if resolve_integrator(integrator) != "newmark-linear":
-        return math.inf
-    return _newmark_limit(case)[0]
+    return integrators.get(resolve_integrator(integrator)).stability_limit(case)[0]
 
 
 def check_stability(cases: Sequence[Case], settings: RunSettings) -> None:
-    """Refuse a step beyond newmark-linear's stability limit in any configuration a case can
+    """Refuse a step beyond the integrator's stability limit in any configuration a case can
     visit, naming the limit."""
-    if settings.method != "newmark-linear":
-        return
     dt_run = settings.step
-    assert dt_run is not None  # newmark-linear always has a step
+    if dt_run is None:
+        return
+    integrator = integrators.get(settings.method)
     for i, case in enumerate(cases):
-        limit, worst = _newmark_limit(case)
+        limit, worst = integrator.stability_limit(case)
         if dt_run >= limit:
-            beyond = f"{dt_run * 1e6:.4g} µs is beyond the stability limit of newmark-linear"
+            beyond = f"{dt_run * 1e6:.4g} µs is beyond the stability limit of {integrator.name}"
             bound = (
                 f"({limit * 1e6:.4g} µs, configuration {ROMAN[worst]}); "
                 f"use a step below {limit * 1e6:.4g} µs"
@@ -324,50 +215,6 @@ def check_stability(cases: Sequence[Case], settings: RunSettings) -> None:
                 expected=f"a step below {limit * 1e6:.4g} µs",
                 reason=f"{beyond} {bound}",
             )
-
-
-def output_angles(settings: RunSettings) -> np.ndarray:
-    """Sample angles 0 … 2π·revolutions at ``output_every`` [rad]."""
-    return (
-        np.arange(sample_count(settings.revolutions, settings.output_every)) * settings.output_every
-    )
-
-
-def check_newmark_linear(cases: Sequence[Case], settings: RunSettings) -> None:
-    """What newmark-linear cannot run, refused at ``run.integrator`` naming modal-exact, which
-    runs both: a train of refined members (``<member>_elements`` > 1; it integrates the
-    thesis's seven coordinates only), and one with a coefficient of restitution
-    (``cam_restitution``, ``seat_restitution``; it applies the thesis's plastic impacts only).
-
-    Raises
-    ------
-    RunSettingsError
-        Key ``run.integrator``.
-    """
-    if settings.method != "newmark-linear":
-        return
-    refined = sorted({c.train.n_coordinates for c in cases} - {N_COORDINATES})
-    if refined:
-        raise RunSettingsError.at(
-            "run.integrator",
-            f"newmark-linear integrates the thesis's {N_COORDINATES} coordinates only, found "
-            f"a train of {refined[-1]} (refined members, <member>_elements > 1); integrate it "
-            "with run.integrator: modal-exact",
-            found=refined,
-            expected=f"{N_COORDINATES} coordinates, or run.integrator: modal-exact",
-        )
-    for c in cases:
-        for name in ("cam_restitution", "seat_restitution"):
-            e = getattr(c.train, name)
-            if e > 0.0:
-                raise RunSettingsError.at(
-                    "run.integrator",
-                    f"newmark-linear applies the thesis's plastic impacts only, found {name} "
-                    f"{e:g}; integrate it with run.integrator: modal-exact, or set "
-                    f"model.{name}: 0",
-                    found=e,
-                    expected=f"{name} 0, or run.integrator: modal-exact",
-                )
 
 
 def check_run(
@@ -417,52 +264,35 @@ def check_run(
                 expected="> 0 rad/s",
             )
     check_contacts(cases, settings)
-    check_newmark_linear(cases, settings)
     if check_stability_limit:
         check_stability(cases, settings)
 
 
 def check_contacts(cases: Sequence[Case], settings: RunSettings) -> None:
-    """Refuse a compliant case for a rigid integrator (or a rigid one for ``compliant``), and
-    a compliant case the compliant integrator cannot run: a rigid contact beside a compliant
-    one, or form closure."""
+    """Refuse a compliant case for an integrator of rigid contacts (or a rigid one for one of
+    compliant contacts), then what the run's integrator refuses (its ``check``)."""
+    integrator = integrators.get(settings.method)
     for i, case in enumerate(cases):
-        if not (case.compliant or settings.method == COMPLIANT):
+        if not (case.compliant or integrator.contacts == "compliant"):
             continue
         if not case.compliant:
             raise RunSettingsError.at(
                 "run.integrator",
-                f"compliant integrates compliant contacts, but case {i}'s are rigid: use "
-                "default (or set model.cam_contact)",
+                f"{integrator.name} integrates compliant contacts, but case {i}'s are rigid: "
+                "use default (or set model.cam_contact)",
                 found=settings.integrator,
-                expected="default, modal-exact or newmark-linear",
+                expected=f"default, {', '.join(INTEGRATORS)}",
             )
         law = "cam_contact" if case.train.cam_contact != "rigid" else "seat_contact"
-        if settings.integrator != "default" and settings.method != COMPLIANT:
+        if settings.integrator != "default" and integrator.contacts != "compliant":
             raise RunSettingsError.at(
                 "run.integrator",
                 f"{settings.method} integrates rigid contacts only, but case {i} has "
-                f"{law}: {getattr(case.train, law)}: use default or compliant",
+                f"{law}: {getattr(case.train, law)}: use default or {COMPLIANT}",
                 found=settings.integrator,
-                expected="default or compliant",
+                expected=f"default or {COMPLIANT}",
             )
-        if case.train.cam_contact == "rigid" or (
-            case.has_seat and case.train.seat_contact == "rigid"
-        ):
-            rigid = "cam_contact" if case.train.cam_contact == "rigid" else "seat_contact"
-            raise CaseError.at(
-                rigid,
-                f"case {i} has a rigid {rigid.split('_')[0]} contact beside a compliant "
-                f"{law.split('_')[0]} one: the compliant integrator takes both contacts "
-                f"compliant; set {rigid} to kelvin-voigt or hertz",
-                found="rigid",
-                expected="kelvin-voigt or hertz",
-            )
-        if case.closure == "form":
-            raise CaseError.at(
-                "closure",
-                f"case {i} has form closure with a compliant cam contact: a compliant "
-                "contact never pulls, so the follower is held by the spring: use force",
-                found="form",
-                expected="force",
-            )
+    if any(c.compliant for c in cases):
+        integrators.get(COMPLIANT).check(cases, settings)
+    if integrator.contacts != "compliant":
+        integrator.check(cases, settings)

@@ -31,7 +31,6 @@ from campipe.engine import Case, CaseError, RunSettings, RunSettingsError
 from campipe.engine.settings import (
     case_integrator,
     check_contacts,
-    check_newmark_linear,
     check_stability,
 )
 from campipe.errors import did_you_mean, excerpt
@@ -599,7 +598,6 @@ def _resolve(raw: Mapping, index: int, directory: Path) -> tuple[ResolvedCase, d
     case = Case(train, profile, speed, math.nan if seat is None else seat, closure)
     try:
         check_contacts([case], settings)
-        check_newmark_linear([case], settings)
         check_stability([case], settings)
     except RunSettingsError as exc:
         raise SpecProblem.from_error(exc) from None

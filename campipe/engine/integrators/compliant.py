@@ -1,0 +1,83 @@
+"""compliant: contacts as force elements (Kelvin–Voigt, Hertz), each case through SciPy's
+error-controlled integration with the contacts' opening and closing located as events
+(``campipe.engine.compliant``). The default integrator's choice for a compliant case."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+from campipe.engine.case import Case, CaseError, output_angles
+from campipe.engine.integrators.base import RunLike
+from campipe.vocabulary import holds_cam, holds_seat
+
+#: Its relative tolerance is run.tolerance, but no finer than this (the default 1e-12,
+#: modal-exact's event-time tolerance, is finer than Radau can reach).
+RTOL_FLOOR = 1e-10
+
+
+class Compliant:
+    name = "compliant"
+    description = "compliant contacts as force elements, error-controlled (SciPy)"
+    contacts = "compliant"
+    default_step: float | None = None
+    fixed_step = False
+    unbounded_advice: str | None = None
+
+    def check(self, cases: Sequence[Case], run: RunLike) -> None:
+        """Refuse, for each compliant case, a rigid contact beside a compliant one, and form
+        closure."""
+        for i, case in enumerate(cases):
+            if not case.compliant:
+                continue  # another integrator's, in a batch under the default
+            law = "cam_contact" if case.train.cam_contact != "rigid" else "seat_contact"
+            if case.train.cam_contact == "rigid" or (
+                case.has_seat and case.train.seat_contact == "rigid"
+            ):
+                rigid = "cam_contact" if case.train.cam_contact == "rigid" else "seat_contact"
+                raise CaseError.at(
+                    rigid,
+                    f"case {i} has a rigid {rigid.split('_')[0]} contact beside a compliant "
+                    f"{law.split('_')[0]} one: the compliant integrator takes both contacts "
+                    f"compliant; set {rigid} to kelvin-voigt or hertz",
+                    found="rigid",
+                    expected="kelvin-voigt or hertz",
+                )
+            if case.closure == "form":
+                raise CaseError.at(
+                    "closure",
+                    f"case {i} has form closure with a compliant cam contact: a compliant "
+                    "contact never pulls, so the follower is held by the spring: use force",
+                    found="form",
+                    expected="force",
+                )
+
+    def stability_limit(self, case: Case) -> tuple[float, int]:
+        return math.inf, 0
+
+    def prepare(self, batch: Any, run: RunLike) -> Any:
+        rtol = max(float(run.tolerance), RTOL_FLOOR)
+        return batch.case_list, output_angles(run), rtol, run.step or math.inf
+
+    def run(self, prepared: Any, cases: Any, out: Any) -> None:
+        from campipe.engine import compliant  # SciPy's integration, loaded when first run
+
+        case_list, angles, rtol, max_step = prepared
+        c = cases
+        for i, case in enumerate(case_list):
+            seat = float(c.seat_q[i]) if case.has_seat else None
+            system = compliant.compliant_system(case.train, case.profile, case.speed, seat)
+            held = (holds_cam(int(c.cfg0[i])), holds_seat(int(c.cfg0[i])))
+            m = system.load.size  # the train's coordinates of the batch's
+            z0 = compliant.compliant_start(system, c.q0[i, :m], c.v0[i, :m], c.a0[i, :m], *held)
+            one = compliant.CaseOutputs(
+                out.q[i], out.v[i], out.force[i], out.cam[i], out.cfg[i], out.acc[i],
+                out.per_rev[i], out.events[i],
+            )  # fmt: skip
+            compliant.integrate(
+                system, float(c.t0[i]), z0, held, angles / case.speed, one,
+                rtol=rtol, max_step=max_step, capture=float(c.capture[i]),
+                lift_bound=float(c.lift_bound[i]), valve_ref=float(c.valve_ref[i]),
+            )  # fmt: skip
+            out.n_events[i], out.status[i], out.steps[i] = one.n_events, one.status, one.steps

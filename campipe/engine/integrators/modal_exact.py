@@ -1,0 +1,47 @@
+"""modal-exact: the default for rigid contacts. Exact between contact events (each
+configuration's closed form over a cam piece), the events located by a bracketed root
+search to the run's tolerance (``campipe.engine.exact``)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from campipe.engine.case import Case
+from campipe.engine.integrators.base import RunLike
+
+
+class ModalExact:
+    name = "modal-exact"
+    description = "exact between contact events, events located to run.tolerance"
+    contacts = "rigid"
+    default_step: float | None = None
+    fixed_step = False
+    unbounded_advice: str | None = None
+
+    def check(self, cases: Sequence[Case], run: RunLike) -> None:
+        """It runs every rigid case (refined members, restitution, form closure)."""
+
+    def stability_limit(self, case: Case) -> tuple[float, int]:
+        return math.inf, 0
+
+    def prepare(self, batch: Any, run: RunLike) -> Any:
+        return batch.modal_trains, batch.packed, batch.runs
+
+    def run(self, prepared: Any, cases: Any, out: Any) -> None:
+        from campipe.engine import exact  # the compiled kernel, loaded when first run
+
+        exact.modal_exact_batch(*arguments(prepared, cases, out))
+
+
+def arguments(prepared: Any, cases: Any, out: Any) -> tuple:
+    """The kernel's arguments for a batch starting as ``cases`` says, with fresh work
+    arrays."""
+    from campipe.engine.closed_form import STATE, make_workspace
+
+    modal_trains, packed, runs = prepared
+    n_q = modal_trains.load.shape[1]
+    return (cases, modal_trains, packed, runs, out, make_workspace(n_q), np.zeros(1, STATE))
