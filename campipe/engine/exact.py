@@ -97,24 +97,17 @@ from campipe.engine.closed_form import (
     particular,
 )
 from campipe.engine.common import (
-    CAM_SEP,
     GAP_LEVEL,
     HELPER,
     KERNEL,
-    MICRO_FLIGHT,
     RELEASE,
-    SEAT_SEP,
     SMOOTH,
     by_ref,
-    captured,
     classify_break,
     configuration,
     deref,
     holds_cam,
     holds_seat,
-    other_releases,
-    record_event,
-    record_impact,
     turn_of,
 )
 from campipe.engine.metrics import (
@@ -124,6 +117,7 @@ from campipe.engine.metrics import (
     SEPARATION,
     THESIS_IMPACT_FORCE,
 )
+from campipe.engine.policy import release, strike, strike_at_break
 from campipe.profiles.packed import horner, locate, next_break, piece_eval
 from campipe.vocabulary import CAM, CHATTER, EVENTS_TRUNCATED, NONFINITE, OK, SEAT, UNBOUNDED
 
@@ -919,72 +913,26 @@ def _walk(ref, st):
 @njit(inline="always", nogil=True)
 def _impact(cases, trains, out, ws, st, seat, closing, t, vcam, lift):
     """The impact of a closing contact (the cam, or with ``seat`` the seat) at time t [s],
-    closing at ``closing`` > 0 [m/s]. Plastic (the thesis's): the struck coordinate takes the
-    obstacle's velocity and the free ones change by the impulse's share
-    (``modal.ModalData.impulse``). With a coefficient of restitution e > 0 (``cases.
-    restitution``) the impulse is (1 + e) times that, and the struck coordinate leaves the
-    obstacle at e times its closing velocity: the contact is not held. The other contact, if
-    held, stays held unless releasing it would separate it (``common.other_releases``). A slow
-    impact is plastic whatever e, and leaves the contact resting (``common.captured``): the
-    bounces of a series end there, or where the series has converged, a bounce's flight
-    (closing velocity × time since the last bounce there) below MICRO_FLIGHT, far below any
-    gap a contact resolves. Returns the configuration after it."""
-    c, tr, w, cfg = st.c, st.tr, st.w, st.cfg
+    closing at ``closing`` > 0 [m/s], under Table I's policy (``policy.strike``, with
+    restitution): the struck coordinate takes the obstacle's velocity (or, bouncing, leaves
+    it at e times its closing velocity) and the free ones change by the impulse's share
+    (``modal.ModalData.impulse``). Returns the configuration after it."""
+    c, tr, cfg = st.c, st.tr, st.cfg
     q, v = ws.q, ws.v
     side = 1 if seat else 0
     other_held = holds_cam(cfg) if seat else holds_seat(cfg)
-    capture = cases.capture[c]
-    e = cases.restitution[c, side]
-    rest = captured(closing, capture)
-    if e > 0.0:
-        bounced = st.bounced_seat if seat else st.bounced_cam
-        rest = rest or closing * (t - bounced) < MICRO_FLIGHT
-    bounce = e > 0.0 and not rest
-    if not bounce:
-        e = 0.0
-    # The struck coordinate's velocity change, thesis signs: q1 (down) approaches the cam
-    # moving down, q7 (down, opening) approaches the seat moving up.
-    dv = closing if seat else -closing
-    if bounce:
-        dv *= 1.0 + e
-    if other_held and other_releases(cases.separation, capture, c, seat, dv):
-        other_held = False
-        if seat:
-            st.rest_cam = False
-        else:
-            st.rest_seat = False
-    held = configuration(True, other_held) if not seat else configuration(other_held, True)
+    held, new, other_held, e, dv = strike(
+        cases, out, st, c, st.w, t, seat, other_held, cfg, closing, True
+    )
     for i in range(trains.n_coordinates[tr]):
         v[i] += trains.impulse[tr, held - 1, side, i] * dv
-    new = held
     if seat:
         q[SEAT] = cases.seat_q[c]
-        if bounce:
+        if e > 0.0:
             v[SEAT] = e * closing
-            new = configuration(other_held, False)
-            st.rest_seat = False
-            st.bounced_seat = t
     else:
         q[CAM] = -lift
-        v[CAM] = vcam - e * closing if bounce else vcam
-        if bounce:
-            new = configuration(False, other_held)
-            st.rest_cam = False
-            st.bounced_cam = t
-    if rest:
-        hold = cases.hold[c, new - 1, side] * closing
-        if seat:
-            st.rest_seat = True
-            st.hold_seat = hold
-        else:
-            st.rest_cam = True
-            st.hold_cam = hold
-    if closing > cases.speed_bound[c]:
-        out.status[c] = UNBOUNDED
-    record_impact(
-        out.events, out.n_events, out.per_rev, cases.meff, c, w, t, seat, other_held,
-        cfg, new, closing, capture, e,
-    )  # fmt: skip
+        v[CAM] = vcam - e * closing if e > 0.0 else vcam
     return new
 
 
@@ -1012,12 +960,10 @@ def _apply_event(ref, st, first, t_ev):
     new = cfg
     if first == 0 and cam_held:
         new = configuration(False, seat_held)
-        st.rest_cam = False
-        record_event(out.events, out.n_events, c, t_ev, CAM_SEP, cfg, new, 0.0, 0.0)
+        release(out, st, c, t_ev, False, cfg, new, 0.0)
     elif first == 1 and seat_held:
         new = configuration(cam_held, False)
-        st.rest_seat = False
-        record_event(out.events, out.n_events, c, t_ev, SEAT_SEP, cfg, new, 0.0, 0.0)
+        release(out, st, c, t_ev, True, cfg, new, 0.0)
     else:
         seat = first == 1
         closing = -v[SEAT] if seat else v[CAM] - vcam
@@ -1054,34 +1000,18 @@ def _cross_break(ref, st):
         v[CAM] = -w * dl_left
         if kind == RELEASE:
             new = configuration(False, seat_held)
-            st.rest_cam = False
-            record_event(out.events, out.n_events, c, t_break, CAM_SEP, cfg, new, -jump, 0.0)
+            release(out, st, c, t_break, False, cfg, new, -jump)
             st.cfg = new
         else:
-            # A surface jumping into a force-closed follower with restitution throws it off.
-            e = cases.restitution[c, 0]
-            bounce = kind != SMOOTH and jump > 0.0 and e > 0.0 and not cases.form[c]
+            held, new, seat_held, e, dv = strike_at_break(
+                cases, out, st, c, w, t_break, seat_held, cfg, kind, jump, True
+            )
             if kind != SMOOTH:
-                dv = -jump * (1.0 + e) if bounce else -jump
-                if seat_held and other_releases(cases.separation, cases.capture[c], c, False, dv):
-                    seat_held = False
-                    st.rest_seat = False
-                new = configuration(True, seat_held)
                 for i in range(trains.n_coordinates[tr]):
-                    v[i] += trains.impulse[tr, new - 1, 0, i] * dv
-                if bounce:
-                    new = configuration(False, seat_held)
-                    st.rest_cam = False
-                    st.bounced_cam = t_break
-                if abs(jump) > cases.speed_bound[c]:
-                    out.status[c] = UNBOUNDED
-                record_impact(
-                    out.events, out.n_events, out.per_rev, cases.meff, c, w, t_break,
-                    np.bool_(False), seat_held, cfg, new, abs(jump), 0.0, e if bounce else 0.0,
-                )  # fmt: skip
+                    v[i] += trains.impulse[tr, held - 1, 0, i] * dv
                 st.cfg = new
             q[CAM] = -l_right
-            v[CAM] = -w * dl_right - e * jump if bounce else -w * dl_right
+            v[CAM] = -w * dl_right - e * jump if e > 0.0 else -w * dl_right
     st.p = st.nb
     st.rev = st.revb
     st.t_s = t_break

@@ -49,24 +49,18 @@ from numba.extending import intrinsic
 
 from campipe.constants import TWO_PI
 from campipe.engine.common import (
-    CAM_SEP,
     GAP_LEVEL,
     HELPER,
     JUMP,
     KERNEL,
     RELEASE,
-    SEAT_SEP,
     TURN_GUARD,
     by_ref,
-    captured,
     classify_break,
     configuration,
     deref,
     holds_cam,
     holds_seat,
-    other_releases,
-    record_event,
-    record_impact,
 )
 from campipe.engine.metrics import (
     MAX_CAM_FORCE,
@@ -75,6 +69,7 @@ from campipe.engine.metrics import (
     SEPARATION,
     THESIS_IMPACT_FORCE,
 )
+from campipe.engine.policy import release, strike, strike_at_break
 from campipe.profiles.packed import degree, evaluate_packed, horner, locate, next_break, piece_eval
 from campipe.vocabulary import (
     EVENTS_TRUNCATED,
@@ -280,13 +275,15 @@ CONTACT_STATE = np.dtype(
         ("rest_seat", "?"),
         ("hold_cam", "f8"),
         ("hold_seat", "f8"),
+        ("bounced_cam", "f8"),  # not read: newmark-linear's impacts are plastic
+        ("bounced_seat", "f8"),
     ],
     align=True,
 )
 
 
 @njit(**HELPER, fastmath=FAST)
-def _cross_breaks(ref, c, w, th1, cfg, p, rev, pn, revn, thb):
+def _cross_breaks(ref, ct, c, w, th1, cfg, p, rev, pn, revn, thb):
     """Move case c's piece cursor (piece p of turn rev; the next break thb [rad] starts piece
     pn of turn revn) up to the step end θ1 [rad], classifying each break crossed with the cam
     held (``common.classify_break``): a surface falling away releases the follower, one
@@ -305,23 +302,14 @@ def _cross_breaks(ref, c, w, th1, cfg, p, rev, pn, revn, thb):
             if kind == RELEASE:
                 # The surface falls away: the follower keeps its velocity.
                 new = configuration(False, seat_held)
-                record_event(out.events, out.n_events, c, thb / w, CAM_SEP, cfg, new,
-                             -jump, 0.0)  # fmt: skip
+                release(out, ct, c, thb / w, False, cfg, new, -jump)
                 cfg = new
             elif kind == JUMP:
                 # The surface jumps into the follower (or, form-closed, drags it).
                 impulse_cam = True
-                if seat_held and other_releases(
-                    cases.separation, cases.capture[c], c, False, -jump
-                ):
-                    seat_held = False
-                new = configuration(True, seat_held)
-                if abs(jump) > cases.speed_bound[c]:
-                    out.status[c] = UNBOUNDED
-                record_impact(out.events, out.n_events, out.per_rev, cases.meff, c,
-                              w, thb / w, np.bool_(False), seat_held, cfg, new, abs(jump), 0.0,
-                              0.0)  # fmt: skip
-                cfg = new
+                _, cfg, _, _, _ = strike_at_break(
+                    cases, out, ct, c, w, thb / w, seat_held, cfg, kind, jump, False
+                )
         p = pn
         rev = revn
         pn, revn, thb = next_break(profiles, c, p, rev)
@@ -417,50 +405,28 @@ def _switch(ref, ct, c, t1, cfg, f7, xn, vc, release_cam, release_seat, hit_cam,
     (``common.other_releases``); a slow impact leaves its contact resting (in the contact
     state ``ct``)."""
     cases, _, _, _, out = deref(ref)
-    events, n_events, per_rev = out.events, out.n_events, out.per_rev
-    meff = cases.meff
     w = cases.omega[c]
     seat_held = holds_seat(cfg)
     cam_next = holds_cam(cfg)
     seat_next = seat_held
     if release_cam:
         cam_next = False
-        ct.rest_cam = False
-        new = configuration(False, seat_held and not f7 < 0.0)
-        record_event(events, n_events, c, t1, CAM_SEP, cfg, new, 0.0, 0.0)
+        release(out, ct, c, t1, False, cfg, configuration(False, seat_held and not f7 < 0.0), 0.0)
     if release_seat:
         seat_next = False
-        ct.rest_seat = False
-        new = configuration(cam_next, False)
-        record_event(events, n_events, c, t1, SEAT_SEP, cfg, new, 0.0, 0.0)
+        release(out, ct, c, t1, True, cfg, configuration(cam_next, False), 0.0)
     if hit_cam:
         closing = xn[X_V] - vc
+        seat_next = strike(
+            cases, out, ct, c, w, t1, np.bool_(False), seat_next, cfg, closing, False
+        )[2]
         cam_next = True
-        if seat_next and other_releases(cases.separation, cases.capture[c], c, False, -closing):
-            seat_next = False
-            ct.rest_seat = False
-        new = configuration(True, seat_next)
-        if captured(closing, cases.capture[c]):
-            ct.rest_cam = True
-            ct.hold_cam = cases.hold[c, new - 1, 0] * closing
-        if closing > cases.speed_bound[c]:
-            out.status[c] = UNBOUNDED
-        record_impact(events, n_events, per_rev, meff, c, w, t1, np.bool_(False), seat_next,
-                      cfg, new, closing, cases.capture[c], 0.0)  # fmt: skip
     if hit_seat:
         closing = -xn[X_V + SEAT]
+        cam_next = strike(cases, out, ct, c, w, t1, np.bool_(True), cam_next, cfg, closing, False)[
+            2
+        ]
         seat_next = True
-        if cam_next and other_releases(cases.separation, cases.capture[c], c, True, closing):
-            cam_next = False
-            ct.rest_cam = False
-        new = configuration(cam_next, True)
-        if captured(closing, cases.capture[c]):
-            ct.rest_seat = True
-            ct.hold_seat = cases.hold[c, new - 1, 1] * closing
-        if closing > cases.speed_bound[c]:
-            out.status[c] = UNBOUNDED
-        record_impact(events, n_events, per_rev, meff, c, w, t1, np.bool_(True), cam_next,
-                      cfg, new, closing, cases.capture[c], 0.0)  # fmt: skip
     return configuration(cam_next, seat_next), hit_cam, hit_seat
 
 
@@ -538,7 +504,7 @@ def newmark_linear_batch(cases, trains, profiles, runs, out, work, contact):
             if th1 >= thb:
                 p_was = p
                 cfg, jumped, p, rev, pn, revn, thb = _cross_breaks(
-                    ref, c, w, th1, cfg, p, rev, pn, revn, thb
+                    ref, ct, c, w, th1, cfg, p, rev, pn, revn, thb
                 )
                 impulse_cam = impulse_cam or jumped
                 if p != p_was:
