@@ -430,6 +430,80 @@ def _switch(ref, ct, c, t1, cfg, f7, xn, vc, release_cam, release_seat, hit_cam,
     return configuration(cam_next, seat_next), hit_cam, hit_seat
 
 
+@njit(inline="always")
+def _cam(profiles, c, p, pdeg, x1, sn, cs, w):
+    """q1, q̇1, q̈1 of a follower held on piece p of case c's cam, x1 [rad] into the piece
+    (sin θ, cos θ given for its harmonic part)."""
+    lift1, dl1, ddl1 = horner(profiles.poly[c, p], x1, pdeg)
+    ta = profiles.trig[c, p, 0]
+    tb = profiles.trig[c, p, 1]
+    if ta != 0.0 or tb != 0.0:
+        lift1 += ta * sn + tb * cs
+        dl1 += ta * cs - tb * sn
+        ddl1 -= ta * sn + tb * cs
+    return -lift1, -w * dl1, -w * w * ddl1
+
+
+@njit(inline="always")
+def _hold(x, cam_held, seat_held, impulse_cam, impulse_seat, qc, vc, ac, qs, h):
+    """The held coordinates take their step-end values in the state x: the cam's (qc, vc,
+    ac), the seat's (qs at rest); over an impulse's first step the acceleration is its
+    velocity change over the step h [s] (thesis Eq. 28)."""
+    if cam_held:
+        x[X_A] = (vc - x[X_V]) / h if impulse_cam else ac
+        x[X_Q] = qc
+        x[X_V] = vc
+    if seat_held:
+        x[X_A + SEAT] = (0.0 - x[X_V + SEAT]) / h if impulse_seat else 0.0
+        x[X_Q + SEAT] = qs
+        x[X_V + SEAT] = 0.0
+
+
+@njit(inline="always")
+def _held_forces(x, xn, z, cam_held, seat_held):
+    """The held coordinates carried to the step end xn, and the contact forces (F1, F7) the
+    step map gave in z (0 for a contact not held)."""
+    f1 = 0.0
+    f7 = 0.0
+    if cam_held:
+        xn[X_Q] = x[X_Q]
+        xn[X_V] = x[X_V]
+        xn[X_A] = x[X_A]
+        f1 = z[0]
+    if seat_held:
+        xn[X_Q + SEAT] = x[X_Q + SEAT]
+        xn[X_V + SEAT] = x[X_V + SEAT]
+        xn[X_A + SEAT] = x[X_A + SEAT]
+        f7 = z[SEAT]
+    return f1, f7
+
+
+@njit(inline="always")
+def _step_metrics(per_rev, c, turn, dtheta, cam_held, seat_held, cam_clean, seat_clean, f1, f7):
+    """A step's share of its turn's metrics: dtheta [rad] off the cam (no-follow, or seated),
+    and the largest contact forces of the steps no impulse passes through (``cam_clean``,
+    ``seat_clean``); the thesis's impact force counts every step."""
+    if not cam_held:
+        if seat_held:
+            per_rev[c, turn, SEATED_OFF_CAM] += dtheta
+        else:
+            per_rev[c, turn, SEPARATION] += dtheta
+    if cam_clean and cam_held:
+        per_rev[c, turn, MAX_CAM_FORCE] = max(per_rev[c, turn, MAX_CAM_FORCE], -f1)
+    if cam_held:
+        per_rev[c, turn, THESIS_IMPACT_FORCE] = max(per_rev[c, turn, THESIS_IMPACT_FORCE], -f1)
+    if seat_clean and seat_held:
+        per_rev[c, turn, MAX_SEAT_FORCE] = max(per_rev[c, turn, MAX_SEAT_FORCE], f7)
+
+
+@njit(inline="always")
+def _finite(x):
+    for i in range(N_X):
+        if not np.isfinite(x[i]):
+            return False
+    return True
+
+
 @njit(**KERNEL, fastmath=FAST)
 def newmark_linear_batch(cases, trains, profiles, runs, out, work, contact):
     """Advance every case of a batch; fill ``out`` (``common.Outputs``) in place.
@@ -443,8 +517,8 @@ def newmark_linear_batch(cases, trains, profiles, runs, out, work, contact):
     profiles : campipe.profiles.PackedProfiles
     runs : NewmarkRuns
     out : common.Outputs
-        ``fmax[..., 2]`` is the cam force including the steps an impulse passes through (the
-        thesis's "impact force", which measures 1/Δt).
+        Its THESIS_IMPACT_FORCE column is the cam force including the steps an impulse
+        passes through (the thesis's "impact force", which measures 1/Δt).
     work : NewmarkWork
     contact : (1,) array of CONTACT_STATE
     """
@@ -511,41 +585,14 @@ def newmark_linear_batch(cases, trains, profiles, runs, out, work, contact):
                     pdeg = degree(profiles, c, p)
             cam_held = holds_cam(cfg)
             seat_held = holds_seat(cfg)
-            x1 = th1 - rev * TWO_PI - profiles.breaks[c, p]
-            lift1, dl1, ddl1 = horner(profiles.poly[c, p], x1, pdeg)
-            ta = profiles.trig[c, p, 0]
-            tb = profiles.trig[c, p, 1]
-            if ta != 0.0 or tb != 0.0:
-                lift1 += ta * sn + tb * cs
-                dl1 += ta * cs - tb * sn
-                ddl1 -= ta * sn + tb * cs
-            qc = -lift1
-            vc = -w * dl1
-            ac = -w * w * ddl1
+            qc, vc, ac = _cam(profiles, c, p, pdeg, th1 - rev * TWO_PI - profiles.breaks[c, p],
+                              sn, cs, w)  # fmt: skip
             # Thesis Appendix B, steps 2–6: the held coordinates take their step-end values
             # (over an impulse's first step, its velocity change over Δt: Eq. 28); one step
             # map advances the free coordinates and gives the contact forces at the step end.
-            if cam_held:
-                x[X_A] = (vc - x[X_V]) / h if impulse_cam else ac
-                x[X_Q] = qc
-                x[X_V] = vc
-            if seat_held:
-                x[X_A + SEAT] = (0.0 - x[X_V + SEAT]) / h if impulse_seat else 0.0
-                x[X_Q + SEAT] = qs
-                x[X_V + SEAT] = 0.0
+            _hold(x, cam_held, seat_held, impulse_cam, impulse_seat, qc, vc, ac, qs, h)
             _newmark_step(trains.step_A, trains.step_G, c, cfg - 1, f, h, x, xn, z)
-            f1 = 0.0
-            f7 = 0.0
-            if cam_held:
-                xn[X_Q] = x[X_Q]
-                xn[X_V] = x[X_V]
-                xn[X_A] = x[X_A]
-                f1 = z[0]
-            if seat_held:
-                xn[X_Q + SEAT] = x[X_Q + SEAT]
-                xn[X_V + SEAT] = x[X_V + SEAT]
-                xn[X_A + SEAT] = x[X_A + SEAT]
-                f7 = z[SEAT]
+            f1, f7 = _held_forces(x, xn, z, cam_held, seat_held)
             if impulse_cam:
                 quiet_cam = 2
             if impulse_seat:
@@ -556,23 +603,8 @@ def newmark_linear_batch(cases, trains, profiles, runs, out, work, contact):
                     turn += 1
                     t_turn = (turn + 1) * TWO_PI / w
                 if turn < n_rev:
-                    if not cam_held:
-                        if seat_held:
-                            out.per_rev[c, turn, SEATED_OFF_CAM] += w * h
-                        else:
-                            out.per_rev[c, turn, SEPARATION] += w * h
-                    if quiet_cam == 0 and cam_held:
-                        out.per_rev[c, turn, MAX_CAM_FORCE] = max(
-                            out.per_rev[c, turn, MAX_CAM_FORCE], -f1
-                        )
-                    if cam_held:
-                        out.per_rev[c, turn, THESIS_IMPACT_FORCE] = max(
-                            out.per_rev[c, turn, THESIS_IMPACT_FORCE], -f1
-                        )
-                    if quiet_seat == 0 and seat_held:
-                        out.per_rev[c, turn, MAX_SEAT_FORCE] = max(
-                            out.per_rev[c, turn, MAX_SEAT_FORCE], f7
-                        )
+                    _step_metrics(out.per_rev, c, turn, w * h, cam_held, seat_held,
+                                  quiet_cam == 0, quiet_seat == 0, f1, f7)  # fmt: skip
             if quiet_cam > 0:
                 quiet_cam -= 1
             if quiet_seat > 0:
@@ -593,13 +625,8 @@ def newmark_linear_batch(cases, trains, profiles, runs, out, work, contact):
                 impulse_cam = False
                 impulse_seat = False
             x, xn = xn, x
-            if (n - n0) % 1024 == 0 or n == n_steps - 1:
-                finite = True
-                for i in range(N_X):
-                    if not np.isfinite(x[i]):
-                        finite = False
-                if not finite:
-                    out.status[c] = NONFINITE
+            if ((n - n0) % 1024 == 0 or n == n_steps - 1) and not _finite(x):
+                out.status[c] = NONFINITE
             if out.status[c] != OK:
                 break
         if out.n_events[c] > out.events.shape[1] and out.status[c] == OK:
