@@ -1,0 +1,520 @@
+"""modal-exact's kernel: walk the grid of a segment, apply events, cross profile breaks,
+and the batch loop (the package's docstring has the method and its notation)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numba import njit, types
+
+from campipe.engine.closed_form import (
+    AMP_FA,
+    AMP_FB,
+    AMP_QA,
+    AMP_QB,
+    D1,
+    D2,
+    DABS,
+    DSQ,
+    EABS,
+    F1,
+    F2,
+    INVD,
+    LBAR,
+    RATE,
+    W1_ABS,
+    W2_ABS,
+    block_basis,
+)
+from campipe.engine.common import (
+    HELPER,
+    KERNEL,
+    RELEASE,
+    SMOOTH,
+    by_ref,
+    classify_break,
+    configuration,
+    deref,
+    holds_cam,
+    holds_seat,
+    turn_of,
+)
+from campipe.engine.exact.segment import _begin_segment
+from campipe.engine.exact.state import (
+    MAX_STALLED_EVENTS,
+    MODE_FLOOR,
+    RESOLUTION,
+    _advance,
+    _at,
+    _keep_column,
+    _monitor_at_grid,
+    _off_cam,
+    _root,
+    _sample,
+    _slope_bound,
+    _state_at,
+)
+from campipe.engine.metrics import (
+    MAX_CAM_FORCE,
+    MAX_SEAT_FORCE,
+    THESIS_IMPACT_FORCE,
+)
+from campipe.engine.policy import release, strike, strike_at_break
+from campipe.profiles.packed import locate, piece_eval
+from campipe.vocabulary import CAM, CHATTER, EVENTS_TRUNCATED, NONFINITE, OK, SEAT
+
+# --------------------------------------------------------------------------- walk the grid
+
+
+@njit(inline="always", nogil=True)
+def _drop_decayed(MC, WC, VY, act, nact, ns, eps_force, tau):
+    """Drop the blocks that have decayed below what any output can show (τ after the segment
+    start), keeping the fastest-first order; returns the new count."""
+    kept = np.int64(0)  # not a literal: one compiled ``_keep_column`` (``common``)
+    for jj in range(nact):
+        s2 = min(tau, MC[INVD, jj])
+        env = MC[EABS, jj]
+        if (MC[AMP_QA, jj] + MC[AMP_QB, jj] * s2) * env < MODE_FLOOR and (
+            MC[AMP_FA, jj] + MC[AMP_FB, jj] * s2
+        ) * env < eps_force:
+            continue
+        if kept != jj:
+            _keep_column(MC, WC, VY, act, ns, jj, kept)
+        kept += 1
+    return kept
+
+
+@njit(inline="always", nogil=True)
+def _fastest_needed(WC, MC, watch, level, gval, nact, tau):
+    """The first column whose block could bring a watched monitor to its level (nact if
+    none) up to τ after the segment start: the fastest blocks are skipped while their summed
+    amplitudes (which only decay) stay under half of every monitor's distance from its level."""
+    margin = np.inf
+    for m in range(2):
+        if watch[m]:
+            margin = min(margin, level[m] - gval[m])
+    k = 0
+    spent = 0.0
+    while k < nact:
+        s2 = min(tau, MC[INVD, k])
+        amp = 0.0
+        for m in range(2):
+            if watch[m]:
+                amp = max(amp, (WC[W1_ABS, m, k] + WC[W2_ABS, m, k] * s2) * MC[EABS, k])
+        if spent + amp >= 0.5 * margin:
+            break
+        spent += amp
+        k += 1
+    return k
+
+
+@njit(inline="always", nogil=True)
+def _refresh(MC, nact, h, tau):
+    """Exact basis functions at the grid step h and at τ (from the segment start to the next
+    grid point) of the blocks 0 … nact − 1, and their envelopes."""
+    for jj in range(nact):
+        MC[D1, jj], MC[D2, jj] = block_basis(MC[LBAR, jj], MC[DSQ, jj], h)
+        MC[F1, jj], MC[F2, jj] = block_basis(MC[LBAR, jj], MC[DSQ, jj], tau)
+        MC[DABS, jj] = np.exp(MC[RATE, jj] * h)
+        MC[EABS, jj] = np.exp(MC[RATE, jj] * tau)
+
+
+@njit(inline="always", nogil=True)
+def _suspect(watch, level, gval, dval, dprev):
+    """A watched monitor above its level at the grid point, or past a maximum inside the
+    step (its derivative turned from + to −): ``_earliest_crossing`` must look."""
+    for m in range(2):
+        if watch[m] and (gval[m] > level[m] or (dprev[m] > 0.0 and dval[m] < 0.0)):
+            return True
+    return False
+
+
+@njit(**HELPER)
+def _earliest_crossing(ref, st, nact, t_prev, t_eval):
+    """The earliest monitor to rise through its level in (t_prev, t_eval] [s] and when,
+    from its values at both ends, or from a maximum inside the step that the bound on its
+    slope cannot rule out (found by a root of its derivative). Returns (monitor or −1, time).
+    """
+    _, _, _, runs, _, ws = deref(ref)
+    tolerance = runs.tolerance
+    w, t_s, th0, gdeg = st.w, st.t_s, st.th0, st.gdeg
+    WC, G, GT, MC = ws.WC, ws.G, ws.GT, ws.MC
+    first = -1
+    t_ev = t_eval
+    for m in range(2):
+        if not ws.watch[m]:
+            continue
+        level = ws.level[m]
+        t_hi = np.nan  # where the monitor is known above its level (times may be < 0)
+        g_hi = ws.gval[m]
+        dg_hi = ws.dval[m]
+        if ws.gval[m] > level:
+            t_hi = t_eval
+        elif (
+            ws.dprev[m] > 0.0
+            and ws.dval[m] < 0.0
+            and max(ws.gprev[m], ws.gval[m])
+            + (t_eval - t_prev)
+            * _slope_bound(
+                WC,
+                G,
+                GT,
+                m,
+                MC,
+                nact,
+                gdeg,
+                w,
+                w * t_prev - th0,
+                w * t_eval - th0,
+                t_eval - t_s,
+            )
+            > level
+        ):
+            t_max = _root(
+                np.bool_(True), -1.0, WC, MC, nact, G, GT, m, t_s, t_prev, t_eval, 0.0, w, th0,
+                tolerance, np.bool_(False), 0.0, 0.0, 0.0,
+            )  # fmt: skip
+            g_hi, dg_hi = _at(False, WC, MC, nact, G, GT, m, t_s, t_max, w, th0)
+            if g_hi > level:
+                t_hi = t_max
+        if not np.isnan(t_hi):
+            # The value root starts from what the grid (or the maximum's search) has.
+            te = _root(
+                np.bool_(False), 1.0, WC, MC, nact, G, GT, m, t_s, t_prev, t_hi, level, w, th0,
+                tolerance, np.bool_(True), ws.gprev[m] - level, g_hi - level, dg_hi,
+            )  # fmt: skip
+            if first < 0 or te < t_ev:
+                t_ev = te
+                first = m
+    return first, t_ev
+
+
+@njit(inline="always", nogil=True)
+def _walk(ref, st):
+    """Walk the segment's grid from st.t_s until an event, a profile break or the run's end,
+    and handle what ended it (``_apply_event``, ``_cross_break``, or st.done).
+
+    The grid step's work is inlined and makes no calls, on arrays and scalars held in locals:
+    numba reference-counts a named tuple's arrays (or an array handed to an inlined helper)
+    on every pass otherwise. Anything rarer (replanning with dropped pairs, a suspected
+    crossing, a sample, an event, a break) is a compiled function of its own.
+    """
+    cases, trains, profiles, runs, out, ws = deref(ref)
+    c, w, t_s, th0, t_break = st.c, st.w, st.t_s, st.th0, st.t_break
+    nact, ns, gdeg, eps_force = st.nact, st.ns, st.gdeg, st.eps_force
+    speed_row = trains.speed[st.tr, st.cfg - 1]
+    cam_held = holds_cam(st.cfg)
+    seat_held = holds_seat(st.cfg)
+    n_out = out.q.shape[1]
+    t_sample = runs.t_sample[c]
+    t_end = runs.t_end[c]
+    dt_cap = runs.dt_cap
+    steps = out.steps
+    per_rev = out.per_rev
+    n_rev = per_rev.shape[1]
+    MC, WC, G, GT, act = ws.MC, ws.WC, ws.G, ws.GT, ws.act
+    gval, dval, gprev, dprev = ws.gval, ws.dval, ws.gprev, ws.dprev
+    watch, ready, level = ws.watch, ws.ready, ws.level
+    # A monitor already above its level at the segment start (a contact that pulls the
+    # instant after an impact; a gap that closes) is an event there.
+    for m in range(2):
+        held = cam_held if m == 0 else seat_held
+        if watch[m] and gval[m] > level[m] and (held or dprev[m] > 0.0):
+            _apply_event(ref, st, m, t_s)
+            return
+    t_prev = t_s
+    h = -1.0
+    since_refresh = 0
+    since_check = 0
+    replan = True
+    i_step = n_steps = 0
+    t_from = t_next = cth = sth = cwh = swh = 0.0
+    to_sample = False
+    while True:
+        if replan:
+            if since_check >= 32:
+                since_check = 0
+                nact = _drop_decayed(MC, WC, ws.VY, act, nact, ns, eps_force, t_prev - t_s)
+            # The step need only resolve the modes that could bring a watched monitor to its
+            # level.
+            t_from = t_prev
+            k_out = st.k_out
+            to_sample = k_out < n_out and k_out * t_sample < t_end * (1.0 + 1e-13)
+            t_next = k_out * t_sample if to_sample else t_end
+            k = _fastest_needed(WC, MC, watch, level, gval, nact, t_next - t_s)
+            fastest = speed_row[act[k]] if k < nact else 0.0
+            h_allow = RESOLUTION * np.pi / fastest if fastest > 0.0 else np.inf
+            if dt_cap > 0.0:
+                h_allow = min(h_allow, dt_cap)
+            n_steps = max(1, int(np.ceil((t_next - t_from) / h_allow - 1e-9)))
+            h_new = (t_next - t_from) / n_steps
+            i_step = 0
+            since_refresh += n_steps
+            since_check += n_steps
+            # (A step within 1e-12 of the last one keeps D: the difference is rounding.)
+            if abs(h_new - h) > 1e-12 * h or since_refresh > 256 or t_from == t_s:
+                # New step, a fresh segment, or time to refresh: exact exponentials.
+                h = h_new
+                _refresh(MC, nact, h, t_from + h - t_s)
+                cwh = np.cos(w * h)
+                swh = np.sin(w * h)
+                cth = np.cos(w * (t_from + h))
+                sth = np.sin(w * (t_from + h))
+                since_refresh = 0
+            else:
+                # Same step: E and (cos θ, sin θ) advance from the sample point.
+                cth, sth = _advance(MC, nact, cth, sth, cwh, swh)
+            replan = False
+        i_step += 1
+        steps[c] += 1
+        t_n = t_next if i_step == n_steps else t_from + i_step * h
+        at_break = t_break <= t_n
+        if at_break:
+            t_eval = t_break
+            for m in range(2):
+                if ready[m]:
+                    gval[m], dval[m] = _at(False, WC, MC, nact, G, GT, m, t_s, t_break, w, th0)
+        else:
+            t_eval = t_n
+            x_n = w * t_n - th0
+            for m in range(2):
+                if ready[m]:
+                    gval[m], dval[m] = _monitor_at_grid(
+                        WC, MC, nact, G, GT, m, gdeg, w, x_n, cth, sth
+                    )
+        if t_eval > t_s and _suspect(watch, level, gval, dval, dprev):
+            first, t_ev = _earliest_crossing(ref, st, nact, t_prev, t_eval)
+            if first >= 0:
+                st.nact = nact
+                _apply_event(ref, st, first, t_ev)
+                return
+        if at_break:
+            st.nact = nact
+            _cross_break(ref, st)
+            return
+        # Accept the grid point: force maxima, output sample, end of run.
+        for m in range(2):
+            dprev[m] = dval[m]
+            gprev[m] = gval[m]
+        turn = turn_of(w, t_n)
+        if 0 <= turn < n_rev:
+            if cam_held:
+                per_rev[c, turn, MAX_CAM_FORCE] = max(per_rev[c, turn, MAX_CAM_FORCE], -gval[0])
+            if seat_held:
+                per_rev[c, turn, MAX_SEAT_FORCE] = max(per_rev[c, turn, MAX_SEAT_FORCE], -gval[1])
+        t_prev = t_n
+        if i_step < n_steps:
+            cth, sth = _advance(MC, nact, cth, sth, cwh, swh)
+            continue
+        if to_sample:
+            _sample(ref, st, nact, w * t_n - th0, cth, sth)
+            if out.status[c] != 0:
+                st.done = True
+                return
+        if t_n >= t_end:
+            _off_cam(out, st.cfg, c, w, t_s, t_n)
+            st.nact = nact
+            st.done = True
+            return
+        replan = True
+
+
+# --------------------------------------------------------------------------- events, breaks
+
+
+@njit(inline="always", nogil=True)
+def _impact(cases, trains, out, ws, st, seat, closing, t, vcam, lift):
+    """The impact of a closing contact (the cam, or with ``seat`` the seat) at time t [s],
+    closing at ``closing`` > 0 [m/s], under Table I's policy (``policy.strike``, with
+    restitution): the struck coordinate takes the obstacle's velocity (or, bouncing, leaves
+    it at e times its closing velocity) and the free ones change by the impulse's share
+    (``modal.ModalData.impulse``). Returns the configuration after it."""
+    c, tr, cfg = st.c, st.tr, st.cfg
+    q, v = ws.q, ws.v
+    side = 1 if seat else 0
+    other_held = holds_cam(cfg) if seat else holds_seat(cfg)
+    held, new, other_held, e, dv = strike(
+        cases, out, st, c, st.w, t, seat, other_held, cfg, closing, True
+    )
+    for i in range(trains.n_coordinates[tr]):
+        v[i] += trains.impulse[tr, held - 1, side, i] * dv
+    if seat:
+        q[SEAT] = cases.seat_q[c]
+        if e > 0.0:
+            v[SEAT] = e * closing
+    else:
+        q[CAM] = -lift
+        v[CAM] = vcam - e * closing if e > 0.0 else vcam
+    return new
+
+
+@njit(**HELPER)
+def _apply_event(ref, st, first, t_ev):
+    """Monitor ``first`` rose through its level at t_ev [s]: take the exact state there, and
+    release the contact (a force monitor) or, if the contact closes, apply the plastic impact
+    (a gap monitor; ``_impact``): a touch that does not close is no event. Starts the next
+    segment there."""
+    cases, trains, profiles, runs, out, ws = deref(ref)
+    c, w, cfg = st.c, st.w, st.cfg
+    cam_held = holds_cam(cfg)
+    seat_held = holds_seat(cfg)
+    q, v = ws.q, ws.v
+    _state_at(ref, st, t_ev)
+    lift_e, dl_e, _ = piece_eval(profiles, c, st.p, st.rev, w * t_ev)
+    vcam = -w * dl_e
+    if cam_held:
+        q[CAM] = -lift_e
+        v[CAM] = vcam
+    if seat_held:
+        q[SEAT] = cases.seat_q[c]
+        v[SEAT] = 0.0
+    _off_cam(out, cfg, c, w, st.t_s, t_ev)
+    new = cfg
+    if first == 0 and cam_held:
+        new = configuration(False, seat_held)
+        release(out, st, c, t_ev, False, cfg, new, 0.0)
+    elif first == 1 and seat_held:
+        new = configuration(cam_held, False)
+        release(out, st, c, t_ev, True, cfg, new, 0.0)
+    else:
+        seat = first == 1
+        closing = -v[SEAT] if seat else v[CAM] - vcam
+        if closing > 0.0:
+            new = _impact(cases, trains, out, ws, st, seat, closing, t_ev, vcam, lift_e)
+    st.cfg = new
+    st.stalled = st.stalled + 1 if t_ev - st.t_s <= 1e-15 * (1.0 + abs(st.t_s)) else 0
+    st.t_s = t_ev
+
+
+@njit(**HELPER)
+def _cross_break(ref, st):
+    """The segment reached the next break of the profile: take the exact state there, and
+    with the cam held apply what the break does (``common.classify_break``): release, an
+    impact of the cam's rate jump (the seat, if held, releasing where it would separate),
+    or nothing. Starts the next segment on the next piece."""
+    cases, trains, profiles, runs, out, ws = deref(ref)
+    c, tr, w, cfg, t_break = st.c, st.tr, st.w, st.cfg, st.t_break
+    cam_held = holds_cam(cfg)
+    seat_held = holds_seat(cfg)
+    q, v = ws.q, ws.v
+    _state_at(ref, st, t_break)
+    _off_cam(out, cfg, c, w, st.t_s, t_break)
+    l_left, dl_left, _ = piece_eval(profiles, c, st.p, st.rev, w * t_break)
+    l_right, dl_right, _ = piece_eval(profiles, c, st.nb, st.revb, w * t_break)
+    if seat_held:
+        q[SEAT] = cases.seat_q[c]
+        v[SEAT] = 0.0
+    if cam_held:
+        kind, jump = classify_break(
+            l_left, dl_left, l_right, dl_right, w, cases.form[c], cases.capture[c]
+        )
+        q[CAM] = -l_left
+        v[CAM] = -w * dl_left
+        if kind == RELEASE:
+            new = configuration(False, seat_held)
+            release(out, st, c, t_break, False, cfg, new, -jump)
+            st.cfg = new
+        else:
+            held, new, seat_held, e, dv = strike_at_break(
+                cases, out, st, c, w, t_break, seat_held, cfg, kind, jump, True
+            )
+            if kind != SMOOTH:
+                for i in range(trains.n_coordinates[tr]):
+                    v[i] += trains.impulse[tr, held - 1, 0, i] * dv
+                st.cfg = new
+            q[CAM] = -l_right
+            v[CAM] = -w * dl_right - e * jump if e > 0.0 else -w * dl_right
+    st.p = st.nb
+    st.rev = st.revb
+    st.t_s = t_break
+    st.stalled = 0
+
+
+@njit(inline="always", nogil=True)
+def _start_case(cases, trains, profiles, ws, st, c, tr):
+    """Case c's run from its start state at t0 ≤ 0."""
+    st.c = c
+    st.tr = tr
+    st.w = cases.omega[c]
+    st.eps_force = 1e-9 * (abs(trains.load[tr, 3]) + 1.0)
+    for i in range(trains.n_coordinates[tr]):
+        ws.q[i] = cases.q0[c, i]
+        ws.v[i] = cases.v0[c, i]
+    st.cfg = cases.cfg0[c]
+    st.t_s = cases.t0[c]
+    rev, p = locate(profiles, c, st.w * st.t_s)
+    st.rev = rev
+    st.p = p
+    st.k_out = 0
+    st.stalled = 0
+    st.done = False
+    st.rest_cam = False
+    st.rest_seat = False
+    st.bounced_cam = -np.inf
+    st.bounced_seat = -np.inf
+    st.hold_cam = 0.0
+    st.hold_seat = 0.0
+
+
+@njit(**KERNEL)
+def modal_exact_batch(cases, trains, profiles, runs, out, ws, state):
+    """Advance every case of a batch exactly between events; fill ``out`` in place.
+
+    Parameters
+    ----------
+    cases : common.Cases
+    trains : ModalTrains
+        The distinct trains; case c runs train ``runs.train[c]``.
+    profiles : campipe.profiles.PackedProfiles
+    runs : ExactRuns
+    out : common.Outputs
+    ws : Workspace
+        Work arrays (``make_workspace``).
+    state : (1,) array of STATE
+        The run's scalars.
+    """
+    st = state[0]
+    ref = by_ref((cases, trains, profiles, runs, out, ws))
+    for c in range(cases.omega.shape[0]):
+        _start_case(cases, trains, profiles, ws, st, c, runs.train[c])
+        while not st.done:
+            _begin_segment(ref, st)
+            _walk(ref, st)
+            if out.status[c] != OK:
+                break
+            if st.stalled > MAX_STALLED_EVENTS:
+                out.status[c] = CHATTER
+                break
+            finite = True
+            for i in range(trains.n_coordinates[st.tr]):
+                if not (np.isfinite(ws.q[i]) and np.isfinite(ws.v[i])):
+                    finite = False
+            if not finite:
+                out.status[c] = NONFINITE
+                break
+        for turn in range(out.per_rev.shape[1]):  # no force measures a step: impulses are instant
+            out.per_rev[c, turn, THESIS_IMPACT_FORCE] = out.per_rev[c, turn, MAX_CAM_FORCE]
+        if out.n_events[c] > out.events.shape[1] and out.status[c] == OK:
+            out.status[c] = EVENTS_TRUNCATED
+
+
+def ahead_signatures(kernel_types: tuple) -> dict[Any, tuple]:
+    """The helpers of :func:`modal_exact_batch` that a first run compiles in its second
+    process (``kernels.compile_kernels``), each with the types the kernel calls it with, given
+    the kernel's own argument types (``batch.integrator_types``): ``_sample``,
+    ``_apply_event`` and ``_earliest_crossing``, about a quarter of the kernel's compile, there
+    before the periodic start, so that the two processes end together. The kernel, compiled in
+    the first, loads them from the cache: it reaches ``_sample`` most of a second after the
+    second process has it (typing ``_begin_segment`` first), the others seconds after.
+    ``_sample`` comes first: reached sooner, it would be compiled twice. Types that differ
+    from the kernel's call would cost a second compile, not a wrong result."""
+    *tuples, state = kernel_types
+    ref = types.CPointer(types.BaseTuple.from_types(tuples))  # the kernel's ``by_ref``
+    st = state.dtype  # the kernel's ``state[0]``
+    i8, f8 = types.int64, types.float64
+    return {
+        _sample: (ref, st, i8, f8, f8, f8),
+        _apply_event: (ref, st, i8, f8),
+        _earliest_crossing: (ref, st, i8, f8, f8),
+    }
