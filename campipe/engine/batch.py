@@ -68,7 +68,7 @@ from campipe.engine.settings import stability_limit as stability_limit
 from campipe.engine.settings import visited_configurations as visited_configurations
 from campipe.model import ValveTrain, system_matrices
 from campipe.model.assembly import SystemMatrices, configuration_frequencies
-from campipe.model.contact_laws import contact_law
+from campipe.model.contact import contact_law
 from campipe.profiles import evaluate
 from campipe.profiles.packed import PackedProfiles, evaluate_packed, pack
 from campipe.vocabulary import (
@@ -140,7 +140,7 @@ class BatchResult:
     status: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     start_time: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (n_cases,) t0 ≤ 0 [s]
     #: (n_cases, n_rev) per turn: the peak Hertz pressure of the largest cam and seat forces
-    #: (``model.contact_laws``; NaN where the contact's geometry does not give it) [Pa]
+    #: (``model.contact``; NaN where the contact's geometry does not give it) [Pa]
     max_cam_pressure_per_rev: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     max_seat_pressure_per_rev: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
 
