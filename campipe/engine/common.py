@@ -326,10 +326,14 @@ def other_releases(separation, capture, c, seat, dv):
     return separation[c, 1 if seat else 0] * dv > capture
 
 
-@njit(inline="always")
-def captured(closing, capture):
+def is_captured(closing: float, capture: float) -> bool:
     """An impact closing slower than the capture velocity [m/s] leaves its contact resting: it
     stays held until its force pulls beyond what that impact's own vibration can (the hold,
     ``modal.ModalData.hold`` × the closing velocity), so the micro-bounces of a valve resting
-    on its seat with no force to spare do not chatter."""
+    on its seat with no force to spare do not chatter; and it is no impact in the per-turn
+    counts. Every integrator asks this (the compiled ones through :func:`captured`)."""
     return closing < capture
+
+
+#: :func:`is_captured`, compiled and inlined for the kernels.
+captured = njit(inline="always")(is_captured)

@@ -2,7 +2,7 @@
 
 With a compliant law at the cam (and at the seat, where there is one), no coordinate is held:
 all of them are free, and the contacts act as forces of their approach δ and its rate
-(:mod:`campipe.model.contact_laws`):
+(:mod:`campipe.model.contact`):
 
     M q̈ + C q̇ + K q = f − F_cam(δ_c, δ̇_c)·e₁ + F_seat(δ_s, δ̇_s)·e₇,
     δ_c = q1 + lift(θ),  δ_s = q7_seat − q7,
@@ -44,7 +44,7 @@ from typing import Any
 import numpy as np
 
 from campipe.constants import TWO_PI
-from campipe.engine.common import TURN_GUARD
+from campipe.engine.common import TURN_GUARD, is_captured
 from campipe.engine.metrics import (
     CAM_IMPACTS,
     MAX_CAM_FORCE,
@@ -57,7 +57,7 @@ from campipe.engine.metrics import (
     THESIS_IMPACT_FORCE,
 )
 from campipe.model import ValveTrain, coordinates, system_matrices
-from campipe.model.contact_laws import KELVIN_VOIGT, ContactLaw, contact_law
+from campipe.model.contact import ContactLaw, contact_law
 from campipe.profiles import Lift, Profile
 from campipe.vocabulary import (
     CAM,
@@ -111,31 +111,6 @@ class CompliantSystem:
         self.accel0 = self.minv @ self.load
 
 
-def _law_force(law: ContactLaw, d: float, r: float) -> float:
-    if law.law == KELVIN_VOIGT:
-        return law.stiffness * d + law.damping * r
-    return law.stiffness * max(d, 0.0) ** 1.5 * (1.0 + law.damping * r)
-
-
-def _law_slopes(law: ContactLaw, d: float, r: float) -> tuple[float, float]:
-    """∂F/∂δ, ∂F/∂δ̇."""
-    if law.law == KELVIN_VOIGT:
-        return law.stiffness, law.damping
-    root = math.sqrt(max(d, 0.0))
-    return 1.5 * law.stiffness * root * (1.0 + law.damping * r), law.stiffness * root**3 * (
-        law.damping
-    )
-
-
-def _monitor(law: ContactLaw, d: float, r: float) -> float:
-    """Positive exactly where the contact is closed: approach and force both positive [m]."""
-    if law.law == KELVIN_VOIGT:
-        return min(d, d + law.damping / law.stiffness * r)
-    if law.damping == 0.0:
-        return d
-    return min(d, 1e-3 * (1.0 + law.damping * r))
-
-
 class _Run:
     """One case through its segments: the state, the closed contacts, what is recorded."""
 
@@ -164,8 +139,8 @@ class _Run:
     def forces(self, t: float, z: np.ndarray) -> tuple[float, float]:
         """Compressive cam and seat forces [N] in the current contact state."""
         dc, rc, ds, rs = self.approaches(t, z)
-        fc = _law_force(self.s.cam, dc, rc) if self.closed[0] else 0.0
-        fs = _law_force(self.s.seat, ds, rs) if self.closed[1] and self.s.seat else 0.0
+        fc = self.s.cam.force(dc, rc) if self.closed[0] else 0.0
+        fs = self.s.seat.force(ds, rs) if self.closed[1] and self.s.seat else 0.0
         return fc, fs
 
     def rhs(self, t: float, z: np.ndarray) -> np.ndarray:
@@ -184,11 +159,11 @@ class _Run:
         j = s.a_mat.copy()
         dc, rc, ds, rs = self.approaches(t, z)
         if self.closed[0]:
-            kd, cd = _law_slopes(s.cam, dc, rc)
+            kd, cd = s.cam.slopes(dc, rc)
             j[n:, CAM] -= s.minv[:, CAM] * kd
             j[n:, n + CAM] -= s.minv[:, CAM] * cd
         if self.closed[1] and s.seat is not None:
-            kd, cd = _law_slopes(s.seat, ds, rs)
+            kd, cd = s.seat.slopes(ds, rs)
             j[n:, SEAT] -= s.minv[:, SEAT] * kd
             j[n:, n + SEAT] -= s.minv[:, SEAT] * cd
         return j
@@ -204,7 +179,7 @@ class _Run:
             ((self.s.cam, dc, rc, acc[CAM] + ddlift), (self.s.seat, ds, rs, -acc[SEAT]))
         ):
             if law is not None and self.closed[i]:
-                kd, cd = _law_slopes(law, d, r)
+                kd, cd = law.slopes(d, r)
                 out[i] = kd * r + cd * a
         return out[0], out[1]
 
@@ -228,7 +203,7 @@ class _Run:
                 if t < t_guard:
                     t, z = t_guard, z_guard
                 d = self.approaches(t, z)
-                return _monitor(law, d[2 * i], d[2 * i + 1])
+                return law.monitor(d[2 * i], d[2 * i + 1])
 
             switch.terminal = True  # type: ignore[attr-defined]
             switch.direction = -1.0 if self.closed[i] else 1.0  # type: ignore[attr-defined]
@@ -262,6 +237,111 @@ class CaseOutputs:
     n_events: int = 0
     status: int = 0
     steps: int = 0
+
+
+class _Recorder:
+    """What ``integrate`` records of a case beside its samples: each turn's peak forces, the
+    events, the closings counted as impacts, the time off the cam."""
+
+    def __init__(self, run: _Run, out: CaseOutputs) -> None:
+        self.run = run
+        self.out = out
+        self.w = run.s.lift.w
+        self.n_rev = out.per_rev.shape[0]
+
+    def turn(self, tt: float) -> int:
+        return min(max(int(math.floor(self.w * tt / TWO_PI + TURN_GUARD)), 0), self.n_rev - 1)
+
+    def peak(self, tt: float, zz: np.ndarray) -> None:
+        if tt < 0.0:
+            return
+        out = self.out
+        fc, fs = self.run.forces(tt, zz)
+        r = self.turn(tt)
+        out.per_rev[r, MAX_CAM_FORCE] = max(out.per_rev[r, MAX_CAM_FORCE], fc)
+        out.per_rev[r, THESIS_IMPACT_FORCE] = out.per_rev[r, MAX_CAM_FORCE]
+        out.per_rev[r, MAX_SEAT_FORCE] = max(out.per_rev[r, MAX_SEAT_FORCE], fs)
+
+    def peaks(self, sol: Any, events: list[Any], t_seg: float) -> None:
+        """The force maxima located in a segment up to its end ``t_seg`` [s]."""
+        for k, te in enumerate(sol.t_events):
+            if not events[k].terminal:
+                for j, tt in enumerate(te):
+                    if tt <= t_seg:
+                        self.peak(float(tt), sol.y_events[k][j])
+
+    def event(self, tt: float, kind: int, c_from: int, c_to: int, velocity: float) -> None:
+        out = self.out
+        if tt < 0.0:
+            return
+        if out.n_events < out.events.shape[0]:
+            out.events[out.n_events] = (tt, kind, c_from, c_to, velocity, 0.0)
+        out.n_events += 1
+
+    def off_cam(self, ta: float, tb: float, seated: bool) -> None:
+        """Cam angle [rad] spent off the cam from ta to tb [s], per turn."""
+        k = SEATED_OFF_CAM if seated else SEPARATION
+        a, b = max(self.w * ta, 0.0), self.w * tb
+        r = int(a / TWO_PI)
+        while a < b and r < self.n_rev:
+            stop = min(b, (r + 1) * TWO_PI)
+            self.out.per_rev[r, k] += stop - a
+            a = stop
+            r += 1
+
+    def switch(self, t: float, z: np.ndarray, hit: int, capture: float) -> None:
+        """Switch contact ``hit`` (0 cam, 1 seat) at t and record it: a closing as an impact
+        with its closing velocity (counted from ``capture`` [m/s]), an opening as a
+        separation."""
+        run, out = self.run, self.out
+        before = configuration(*run.closed)
+        d = run.approaches(t, z)
+        run.closed[hit] = not run.closed[hit]
+        after = configuration(*run.closed)
+        closing = run.closed[hit]
+        kinds = ((CAM_SEPARATION, CAM_IMPACT), (SEAT_SEPARATION, SEAT_IMPACT))
+        velocity = d[2 * hit + 1] if closing else 0.0
+        self.event(t, kinds[hit][closing], before, after, velocity)
+        if closing and t >= 0.0 and not is_captured(velocity, capture):
+            r = self.turn(t)
+            count = (CAM_IMPACTS, SEAT_IMPACTS)[hit]
+            fastest = (MAX_CAM_IMPACT_VELOCITY, MAX_SEATING_VELOCITY)[hit]
+            out.per_rev[r, count] += 1.0
+            out.per_rev[r, fastest] = max(out.per_rev[r, fastest], velocity)
+        self.peak(t, z)
+
+
+def _segment(run: _Run, t: float, t_stop: float, z: np.ndarray, exact: bool, atol: np.ndarray
+             ) -> tuple[Any, list[Any]]:  # fmt: skip
+    """One smooth segment from (t, z) to t_stop or its first switch: (its solution, its
+    events)."""
+    from scipy.integrate import solve_ivp
+
+    events = run.monitors(t, z)
+    if exact:
+        return exact_segment(run, t, t_stop, z, events, run.max_step), events
+    sol = solve_ivp(
+        run.rhs, (t, t_stop), z, method=METHOD, rtol=run.rtol, atol=atol,
+        events=events, dense_output=True, jac=run.jac, max_step=run.max_step,
+    )  # fmt: skip
+    return sol, events
+
+
+def _segment_end(sol: Any, events: list[Any], t_stop: float) -> tuple[float, np.ndarray, int]:
+    """Where a segment ends: (t [s], z, the contact switched there, -1 for none)."""
+    if sol.status != 1:
+        return t_stop, sol.y[:, -1], -1
+    firsts = [(te[0], k) for k, te in enumerate(sol.t_events) if events[k].terminal and len(te)]
+    t_seg, k = min(firsts)
+    return t_seg, sol.y_events[k][0], events[k].contact
+
+
+def _next_piece(run: _Run) -> None:
+    """Into the profile's next piece (the next turn's first after the last)."""
+    if run.piece + 1 < run.s.lift.poly.shape[0]:
+        run.piece += 1
+    else:
+        run.piece, run.rev = 0, run.rev + 1
 
 
 def integrate(
@@ -301,81 +381,28 @@ def integrate(
     lift_bound : float
         |q7 − valve_ref| beyond this [m] ends the case with status UNBOUNDED.
     """
-    from scipy.integrate import solve_ivp
-
     run = _Run(system, rtol, max_step)
     run.closed = [bool(closed[0]), bool(closed[1] and system.seat is not None)]
-    lift = system.lift
-    w = lift.w
-    n_rev = out.per_rev.shape[0]
+    rec = _Recorder(run, out)
     t_end = float(t_out[-1])
     t, z = float(t0), np.asarray(z0, dtype=float).copy()
-    run.piece, run.rev = lift.piece_at(t)
+    run.piece, run.rev = system.lift.piece_at(t)
     k_out = 0
     stalled = 0
     atol = rtol * system.scale
     exact = is_linear(system)
 
-    def turn(tt: float) -> int:
-        return min(max(int(math.floor(w * tt / TWO_PI + TURN_GUARD)), 0), n_rev - 1)
-
-    def peak(tt: float, zz: np.ndarray) -> None:
-        if tt < 0.0:
-            return
-        fc, fs = run.forces(tt, zz)
-        r = turn(tt)
-        out.per_rev[r, MAX_CAM_FORCE] = max(out.per_rev[r, MAX_CAM_FORCE], fc)
-        out.per_rev[r, THESIS_IMPACT_FORCE] = out.per_rev[r, MAX_CAM_FORCE]
-        out.per_rev[r, MAX_SEAT_FORCE] = max(out.per_rev[r, MAX_SEAT_FORCE], fs)
-
-    def event(tt, kind, c_from, c_to, velocity):
-        if tt < 0.0:
-            return
-        if out.n_events < out.events.shape[0]:
-            out.events[out.n_events] = (tt, kind, c_from, c_to, velocity, 0.0)
-        out.n_events += 1
-
-    def off_cam(ta: float, tb: float, seated: bool) -> None:
-        k = SEATED_OFF_CAM if seated else SEPARATION
-        a, b = max(w * ta, 0.0), w * tb
-        r = int(a / TWO_PI)
-        while a < b and r < n_rev:
-            stop = min(b, (r + 1) * TWO_PI)
-            out.per_rev[r, k] += stop - a
-            a = stop
-            r += 1
-
-    peak(t, z)
+    rec.peak(t, z)
     while t < t_end:
-        t_stop = min(lift.break_after(run.piece, run.rev), t_end)
+        t_stop = min(system.lift.break_after(run.piece, run.rev), t_end)
         if t_stop - t > 1e-15 * (1.0 + abs(t)):
-            events = run.monitors(t, z)
-            if exact:
-                sol = exact_segment(run, t, t_stop, z, events, max_step)
-            else:
-                sol = solve_ivp(
-                    run.rhs, (t, t_stop), z, method=METHOD, rtol=rtol, atol=atol,
-                    events=events, dense_output=True, jac=run.jac, max_step=max_step,
-                )  # fmt: skip
+            sol, events = _segment(run, t, t_stop, z, exact, atol)
             out.steps += sol.t.size - 1
             if sol.status == -1 or not np.all(np.isfinite(sol.y[:, -1])):
                 out.status = NONFINITE
                 return out
-            t_seg, z_seg, hit = t_stop, sol.y[:, -1], -1
-            if sol.status == 1:
-                firsts = [
-                    (te[0], k)
-                    for k, te in enumerate(sol.t_events)
-                    if events[k].terminal and len(te)
-                ]
-                t_seg, k = min(firsts)
-                z_seg = sol.y_events[k][0]
-                hit = events[k].contact
-            for k, te in enumerate(sol.t_events):
-                if not events[k].terminal:
-                    for j, tt in enumerate(te):
-                        if tt <= t_seg:
-                            peak(float(tt), sol.y_events[k][j])
+            t_seg, z_seg, hit = _segment_end(sol, events, t_stop)
+            rec.peaks(sol, events, t_seg)
             while k_out < t_out.size and t_out[k_out] <= t_seg * (1.0 + 1e-14):
                 zs = sol.sol(t_out[k_out])
                 _sample(run, t_out[k_out], zs, out, k_out)
@@ -384,8 +411,8 @@ def integrate(
                     return out
                 k_out += 1
             if not run.closed[0]:
-                off_cam(t, t_seg, run.closed[1])
-            peak(t_seg, z_seg)
+                rec.off_cam(t, t_seg, run.closed[1])
+            rec.peak(t_seg, z_seg)
             stalled = stalled + 1 if t_seg - t < STALL_WINDOW else 0
             t, z = float(t_seg), np.array(z_seg)
         else:
@@ -394,28 +421,11 @@ def integrate(
             if stalled > MAX_STALLED:
                 out.status = CHATTER
                 return out
-            before = configuration(*run.closed)
-            d = run.approaches(t, z)
-            run.closed[hit] = not run.closed[hit]
-            after = configuration(*run.closed)
-            closing = run.closed[hit]
-            kinds = ((CAM_SEPARATION, CAM_IMPACT), (SEAT_SEPARATION, SEAT_IMPACT))
-            velocity = d[2 * hit + 1] if closing else 0.0
-            event(t, kinds[hit][closing], before, after, velocity)
-            if closing and t >= 0.0 and velocity >= capture:
-                r = turn(t)
-                count = (CAM_IMPACTS, SEAT_IMPACTS)[hit]
-                fastest = (MAX_CAM_IMPACT_VELOCITY, MAX_SEATING_VELOCITY)[hit]
-                out.per_rev[r, count] += 1.0
-                out.per_rev[r, fastest] = max(out.per_rev[r, fastest], velocity)
-            peak(t, z)
+            rec.switch(t, z, hit, capture)
             continue
         if t >= t_end:
             break
-        if run.piece + 1 < lift.poly.shape[0]:
-            run.piece += 1
-        else:
-            run.piece, run.rev = 0, run.rev + 1
+        _next_piece(run)
     while k_out < t_out.size:  # the last sample, to rounding
         _sample(run, t_out[k_out], z, out, k_out)
         k_out += 1
@@ -425,11 +435,9 @@ def integrate(
 
 
 def is_linear(system: CompliantSystem) -> bool:
-    """Every contact the case can touch is kelvin-voigt: linear in each contact state, so
-    propagated exactly (``exact_segment``)."""
-    return system.cam.law == KELVIN_VOIGT and (
-        system.seat is None or system.seat.law == KELVIN_VOIGT
-    )
+    """Every contact the case can touch has a linear law (kelvin-voigt): linear in each
+    contact state, so propagated exactly (``exact_segment``)."""
+    return system.cam.linear and (system.seat is None or system.seat.linear)
 
 
 #: Polynomial states of the augmented system: x^j, j = 0 … 7 (x the angle into the piece).

@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from campipe.engine.loads import per_turn
-from campipe.model.contact_laws import contact_law
+from campipe.model.contact import contact_law
 
 #: Reductions over a turn, and what the summary over the measured turns takes of them: an
 #: angle or a count accumulated over the turn reads as its mean per turn; an extreme as the

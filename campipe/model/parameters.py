@@ -59,7 +59,7 @@ MAX_ELEMENTS = 64
 DAMPING_KINDS = ("modal", "rayleigh", "loss-factor")
 #: Contact laws at the cam–follower and valve–seat contacts: the thesis's rigid plastic
 #: impact, a linear spring and damper (no tension), Hertz's point contact with Hunt–Crossley
-#: damping (:mod:`campipe.model.contact_laws`).
+#: damping (:mod:`campipe.model.contact`).
 CONTACT_LAWS = ("rigid", "kelvin-voigt", "hertz")
 
 
@@ -134,7 +134,7 @@ def _loss_factor_parameters() -> list[Parameter]:
 
 
 def _contact_parameters() -> list[Parameter]:
-    """Each contact's law and its constants (:mod:`campipe.model.contact_laws`); 0 for a
+    """Each contact's law and its constants (:mod:`campipe.model.contact`); 0 for a
     constant means "not given" (a stiffness then comes from the geometry)."""
 
     def zero(name, long_name, units, thesis_units):

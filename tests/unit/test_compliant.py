@@ -13,7 +13,7 @@ from campipe.engine import Case, CaseError, RunSettings, RunSettingsError, run_b
 from campipe.engine.compliant import CaseOutputs, CompliantSystem, Lift, integrate
 from campipe.engine.metrics import MAX_CAM_FORCE, N_ENGINE
 from campipe.model import ModelParameterError, valve_train
-from campipe.model.contact_laws import KELVIN_VOIGT, ContactLaw, contact_law
+from campipe.model.contact import ContactLaw, KelvinVoigt, contact_law
 from campipe.profiles import Profile, harmonic
 from campipe.vocabulary import CAM_IMPACT, CAM_SEPARATION, EV_KIND, EV_TIME, EV_VELOCITY
 
@@ -65,7 +65,7 @@ def test_a_kelvin_voigt_impact_rebounds_at_its_closed_form_restitution(zeta):
     """
     mass, k = 0.5, 2e6
     c = 2 * zeta * math.sqrt(k * mass)
-    law = ContactLaw(KELVIN_VOIGT, k, c, 1.0, 0.0, 0.0)
+    law = KelvinVoigt(k, c, 1.0, 0.0, 0.0)
     v0 = 1.5
     out, v_end = strike(law, mass, v0, 0.02)
     a = zeta / math.sqrt(1 - zeta**2)
