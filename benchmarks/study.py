@@ -77,8 +77,8 @@ GOAL_OFFSET = 0.5  # [s]
 GOAL_HELP = 0.3
 GOAL_ONE_CASE = 0.8
 GOAL_FINISHED = 0.5
-#: First run: the quickstart from a fresh install [s] (measured outside the bench: it needs a
-#: fresh environment; see the README).
+#: First run: the quickstart from a fresh install [s] (:func:`first_run`, with empty caches in
+#: a fresh process; the full run only).
 GOAL_FIRST_RUN = 10.0
 #: validate at scale: cases, wall [s] and peak memory [bytes].
 VALIDATE_CASES = 1_000_000
@@ -451,7 +451,7 @@ def first_run(studies: Path, directory: Path) -> dict:
 
 def validate_estimate(study: Study, workers: int) -> float:
     """``campipe validate``'s run-time estimate [s] of a study on ``workers`` workers: the
-    one place the bench asks for it."""
+    one place the benchmark asks for it."""
     from campipe.study.estimate import estimate
 
     return estimate(study, workers).seconds
@@ -483,7 +483,7 @@ def estimates(studies: Path, directory: Path, workers: int) -> list[dict]:
 def validate_at_scale(directory: Path, n: int = VALIDATE_CASES) -> dict:
     """``campipe validate --no-estimate`` of an ``n``-case spec (speed × spring preload) in
     a fresh process: wall time and the process's peak memory (its own: Linux's ``ru_maxrss``
-    keeps, across the exec, the peak of the forked bench process, so VmHWM is read where
+    keeps, across the exec, the peak of the forked benchmark process, so VmHWM is read where
     there is one)."""
     side = int(round(math.sqrt(n)))
     spec = directory / f"validate-{n}.yaml"
