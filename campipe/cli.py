@@ -1210,7 +1210,7 @@ def replay(archive, case_ids, where, output, spawn, magnify) -> None:
     "--scaling/--no-scaling",
     default=True,
     show_default=True,
-    help="Measure throughput, time against cases and workers, archive size.",
+    help="Measure throughput and the engine's time against cases and workers.",
 )
 @click.option(
     "--suite/--no-suite",
@@ -1219,20 +1219,12 @@ def replay(archive, case_ids, where, output, spawn, magnify) -> None:
     help="Run the scenes: references, integrators, peers, fidelity.",
 )
 @click.option(
-    "--study/--no-study",
-    "study_section",
-    default=True,
-    show_default=True,
-    help="Time campipe study end to end against the engine: start-up, 1 to 10000 cases, "
-    "the client's ceiling, local worker processes, validate's estimates.",
-)
-@click.option(
     "--plot/--no-plot",
     default=True,
     show_default=True,
     help="Write bench.png (needs matplotlib: pip install 'campipe[plot]').",
 )
-def bench(quick, output, scenes, scaling, suite, study_section, plot) -> None:
+def bench(quick, output, scenes, scaling, suite, plot) -> None:
     """Speed against error: the suite of scenes, every integrator and fidelity, peers, scaling.
 
     Ends with the verdict: each goal with its measured figure (reached, not reached or not
@@ -1261,7 +1253,6 @@ def bench(quick, output, scenes, scaling, suite, study_section, plot) -> None:
             scenes or None,
             with_scaling=scaling,
             with_suite=suite,
-            with_study=study_section,
             progress=say,
         )
     except ValueError as exc:

@@ -8,7 +8,8 @@ path and the onset map.
   check, time-to-error ratios.
 - :mod:`~campipe.bench.onset`: the steady-state path against the engine on the scenes that
   follow the cam, and the onset map over many designs against the time-domain grid.
-- :mod:`~campipe.bench.scaling`: time against number of cases and workers, archive size.
+- :mod:`~campipe.bench.scaling`: the engine's time against number of cases and workers,
+  and its throughput.
 - :mod:`~campipe.bench.run`: the whole bench as one call; :mod:`~campipe.bench.report` writes
   its table and plot and reads its json back (the only module here that writes files, with
   :mod:`~campipe.bench.pages`).
@@ -17,5 +18,8 @@ path and the onset map.
 - :mod:`~campipe.bench.pages`: the documentation's bench figures, generated from a
   ``bench.json`` (``python -m campipe.bench.pages``).
 
-Nothing here is imported by ``import campipe``.
+Nothing here is imported by ``import campipe``. campipe's own latencies and study layer
+(``campipe study`` end to end against the engine, start-up, ``validate`` at scale) are a
+developer's benchmark outside the package, ``benchmarks/`` in the repository, which imports
+this package and is imported by none of it.
 """

@@ -9,20 +9,21 @@ A page holds generated blocks between two markers::
 :func:`blocks` turns a :class:`~campipe.bench.run.Bench` into the text of every block,
 :func:`render` puts them into a page; the prose around them is written by hand and carries no
 figure. The bench's own report files (``bench.md``, ``bench.csv`` beside the json) are
-rendered from the same json by ``campipe.bench.report``.
+rendered from the same json by ``campipe.bench.report``. Its blocks are named ``bench-…``; a
+page's ``study-…`` blocks belong to the developer's benchmark of campipe's own latencies
+(``benchmarks/pages.py`` in the repository, from ``docs/bench/study.json``) and are left as
+they are.
 
 From the repository's root::
 
     python -m campipe.bench.pages           # README.md, docs/bench.md, docs/bench/bench.{md,csv}
     python -m campipe.bench.pages --check   # exit 1 if a committed file differs (a test runs it)
     python -m campipe.bench.pages --plots   # also re-draw docs/bench/*.png (needs matplotlib)
-    python -m campipe.bench.pages --merge-study DIR/bench.json   # a newer study section
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import re
 import sys
@@ -36,7 +37,7 @@ from campipe.bench.run import (
     THESIS_STEP,
     Bench,
 )
-from campipe.bench.verdict import bytecode_note, finite, format_short
+from campipe.bench.verdict import finite, format_short
 from campipe.constants import INCH, LBF
 
 #: The committed latest full run, and the pages generated from it (relative to the root).
@@ -50,13 +51,7 @@ BLOCK = re.compile(
 )
 
 
-def _workers(n: float) -> str:
-    """``n`` workers to two figures: "1 worker", "1.4 workers"."""
-    shown = format_short(n, 2)
-    return f"{shown} worker{'' if shown == '1' else 's'}"
-
-
-def _ms(seconds: float | None, digits: int = 3) -> str:
+def ms(seconds: float | None, digits: int = 3) -> str:
     return format_short(seconds * 1e3, digits) if finite(seconds) else "–"
 
 
@@ -64,13 +59,13 @@ def _inch(metres: float | None, digits: int = 1) -> str:
     return format_short(metres / INCH, digits) if finite(metres) else "–"
 
 
-def _duration(seconds: float) -> str:
+def duration(seconds: float) -> str:
     return (
         f"{format_short(seconds * 1e3, 2)} ms" if seconds < 0.1 else f"{format_short(seconds, 2)} s"
     )
 
 
-def _span(values: Sequence[float], digits: int = 2, unit: str = "") -> str:
+def span(values: Sequence[float], digits: int = 2, unit: str = "") -> str:
     """The range of the finite values, "a–b unit" ("a unit" when they round alike)."""
     kept = [v for v in values if finite(v)]
     if not kept:
@@ -79,7 +74,7 @@ def _span(values: Sequence[float], digits: int = 2, unit: str = "") -> str:
     return (low if low == high else f"{low}–{high}") + (f" {unit}" if unit else "")
 
 
-def _table(header: list[str], rows: list[list[str]]) -> list[str]:
+def table(header: list[str], rows: list[list[str]]) -> list[str]:
     lines = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
     return lines + ["| " + " | ".join(r) + " |" for r in rows]
 
@@ -161,7 +156,7 @@ def setup_block(bench: Bench) -> str:
 
 def _point(r: dict | None) -> str:
     """A run's time and valve-lift error."""
-    return f"{_ms(r['seconds'])} ({_inch(r['valve_lift'])})" if r else "–"
+    return f"{ms(r['seconds'])} ({_inch(r['valve_lift'])})" if r else "–"
 
 
 def _at_default(r: dict | None) -> str:
@@ -188,7 +183,7 @@ def scenes_block(bench: Bench) -> str:
             [
                 scene,
                 _point(default),
-                _ms(lean["seconds"]) if lean else "–",
+                ms(lean["seconds"]) if lean else "–",
                 _point(thesis),
                 f"{_point(best)}, {best['setting'].split(' ', 1)[1]}" if best else "–",
                 _at_default(nm),
@@ -206,7 +201,7 @@ def scenes_block(bench: Bench) -> str:
         "vs solve_ivp at the default's error",
         f"vs newmark-linear {THESIS_STEP * 1e6:g} µs at its error",
     ]
-    return "\n".join(_table(header, out))
+    return "\n".join(table(header, out))
 
 
 def ratios_block(bench: Bench) -> str:
@@ -232,18 +227,18 @@ def ratios_block(bench: Bench) -> str:
         )
         extrapolated = [r["ratio_at_default_error"] for r in short if r["how"] == "extrapolated"]
         lines.append(
-            f"- {peer}'s most accurate point ({finest}) is still {_span(factors, 1)} times less "
+            f"- {peer}'s most accurate point ({finest}) is still {span(factors, 1)} times less "
             f"accurate than the default on {len(short)} of {len(_scenes(bench))} scenes "
             f"({', '.join(r['scene'] for r in short)}); extrapolating along its time/error "
-            f"curve puts the ratio at the default's error at {_span(extrapolated, 2)}×."
+            f"curve puts the ratio at the default's error at {span(extrapolated, 2)}×."
         )
     nm = [r for r in bench.ratios if r["peer"] == "newmark-linear"]
     if nm:
         accuracy = [r["peer_point_error"] / r["default_error"] for r in nm]
         lines.append(
             f"- At newmark-linear's {THESIS_STEP * 1e6:g} µs step the default is "
-            f"{_span([r['ratio_at_peer_error'] for r in nm], 2)}× faster for the step's error, "
-            f"while it is {_span(accuracy, 1)} times more accurate itself."
+            f"{span([r['ratio_at_peer_error'] for r in nm], 2)}× faster for the step's error, "
+            f"while it is {span(accuracy, 1)} times more accurate itself."
         )
     goal = bench.goals.get("newmark-linear")
     if goal and goal.get("goal_reached_below_error"):
@@ -266,7 +261,7 @@ def ratios_block(bench: Bench) -> str:
         scenes = [r["scene"] for r in nm]
         settings = list(dict.fromkeys(p["setting"] for r in nm for p in r["ladder"]))
         by = {(r["scene"], p["setting"]): p for r in nm for p in r["ladder"]}
-        lines += _table(
+        lines += table(
             ["newmark-linear step", *scenes],
             [
                 [
@@ -293,7 +288,7 @@ def accuracy_block(bench: Bench) -> str:
     text = (
         f"On {ACCURACY_SCENE} the default reaches a valve-lift error of "
         f"{_inch(a['default_error'], 2)} in (goal: below {_inch(ACCURACY_DEFAULT_ERROR)} in) in "
-        f"{_ms(a['default_seconds'])} ms per case ({a['default_steps']} grid steps, "
+        f"{ms(a['default_seconds'])} ms per case ({a['default_steps']} grid steps, "
         f"{format_short(turns)} turns)."
     )
     cheapest = a["newmark_cheapest_meeting"]
@@ -301,7 +296,7 @@ def accuracy_block(bench: Bench) -> str:
         text += (
             f" newmark-linear's cheapest ladder point meeting {_inch(a['newmark_target'])} in "
             f"is {cheapest['setting']} ({_inch(cheapest['error'], 2)} in, {cheapest['steps']} "
-            f"steps) at {_ms(cheapest['seconds'])} ms"
+            f"steps) at {ms(cheapest['seconds'])} ms"
         )
         text += ", the ladder's coarsest step" if a["how"] == "cheapest" else ""
         text += "."
@@ -312,7 +307,7 @@ def accuracy_block(bench: Bench) -> str:
     if finite(a.get("ratio_contacts_only")):
         text += (
             f"; sampling only the contact coordinates the default takes "
-            f"{_ms(a['contacts_only_seconds'])} ms, **{format_short(a['ratio_contacts_only'])}×**"
+            f"{ms(a['contacts_only_seconds'])} ms, **{format_short(a['ratio_contacts_only'])}×**"
         )
     return text + "."
 
@@ -321,7 +316,7 @@ def throughput_block(bench: Bench) -> str:
     """The 256-case batch: case-steps per second on one and two workers."""
     if not bench.throughput:
         return "Not measured in this run (`--no-scaling`)."
-    lines = _table(
+    lines = table(
         [
             "integrator",
             "cases",
@@ -373,7 +368,7 @@ def fidelity_block(bench: Bench) -> str:
         if default is None:
             continue
         lean = _pick(mine, lambda r: r["family"] == "contacts only")
-        row = [scene, _ms(default["seconds"]), _change(lean, default)]
+        row = [scene, ms(default["seconds"]), _change(lean, default)]
         st = steady.get(scene)
         if st is None:
             row += ["–"] * 3
@@ -386,11 +381,11 @@ def fidelity_block(bench: Bench) -> str:
             row += [
                 f"yes ({margin})",
                 f"{format_short(st['margin_seconds'] * 1e6)} µs",
-                f"{_ms(st['seconds'])} ms ({_inch(st['valve_lift'])} in)",
+                f"{ms(st['seconds'])} ms ({_inch(st['valve_lift'])} in)",
             ]
         rows.append(row)
     return "\n".join(
-        _table(
+        table(
             [
                 "scene",
                 "default ms/case",
@@ -439,36 +434,29 @@ def onset_block(bench: Bench) -> str:
     )
 
 
-def scaling_block(bench: Bench) -> str:
-    """Time against cases and workers, engine and study layer, and the archive's size."""
-    if not bench.scaling:
-        return "Not measured in this run (`--no-scaling`)."
-    at = {(p["layer"], p["n_cases"], p["workers"]): p for p in bench.scaling}
-    counts = sorted({p["n_cases"] for p in bench.scaling})
-    workers = sorted({p["workers"] for p in bench.scaling})
-    layers = ("engine", "study")
+def scaling_table(points: Sequence[dict]) -> str:
+    """Time against cases and workers of each layer of ``points`` (``ScalingPoint`` rows: the
+    engine's here, the study layer's in the developer's benchmark), with the archive's size
+    where a layer writes one."""
+    at = {(p["layer"], p["n_cases"], p["workers"]): p for p in points}
+    counts = sorted({p["n_cases"] for p in points})
+    workers = sorted({p["workers"] for p in points})
+    layers = list(dict.fromkeys(p["layer"] for p in points))
+    archives = any(p["archive_bytes"] for p in points)
     rows = []
     for n in counts:
         row = [str(n)]
         for layer in layers:
             for w in workers:
                 p = at.get((layer, n, w))
-                row.append(_duration(p["seconds"]) if p else "–")
-        study = next((at[k] for k in at if k[0] == "study" and k[1] == n), None)
-        row.append(
-            f"{format_short(study['archive_bytes'] / n / 1e3)} kB"
-            if study and study["archive_bytes"]
-            else "–"
-        )
+                row.append(duration(p["seconds"]) if p else "–")
+        stored = next((at[k] for k in at if k[1] == n and at[k]["archive_bytes"]), None)
+        if archives:
+            row.append(f"{format_short(stored['archive_bytes'] / n / 1e3)} kB" if stored else "–")
         rows.append(row)
-    lines = _table(
-        [
-            "cases",
-            *(f"{layer}, {w} worker{'s' if w > 1 else ''}" for layer in layers for w in workers),
-            "archive per case",
-        ],
-        rows,
-    )
+    header = ["cases"]
+    header += [f"{layer}, {w} worker{'s' if w > 1 else ''}" for layer in layers for w in workers]
+    lines = table(header + (["archive per case"] if archives else []), rows)
     large = counts[-2:]
     if len(counts) > 2:
         parts = []
@@ -476,8 +464,8 @@ def scaling_block(bench: Bench) -> str:
             for w in workers:
                 per = [at[layer, n, w]["per_case"] for n in large if (layer, n, w) in at]
                 if per:
-                    span = _span([p * 1e3 for p in per], 2, "ms")
-                    parts.append(f"{layer} on {w} worker{'s' if w > 1 else ''} {span}")
+                    shown = span([p * 1e3 for p in per], 2, "ms")
+                    parts.append(f"{layer} on {w} worker{'s' if w > 1 else ''} {shown}")
         top, one, most = max(counts), workers[0], workers[-1]
         gains = [
             f"{layer} {format_short(at[k1]['seconds'] / at[k2]['seconds'], 2)}×"
@@ -498,160 +486,11 @@ def scaling_block(bench: Bench) -> str:
     return "\n".join(lines)
 
 
-def _rate(bytes_per_second: float) -> str:
-    return f"{format_short(bytes_per_second / 1e6, 3)} MB/s"
-
-
-def study_block(bench: Bench) -> str:
-    """campipe study end to end against the engine: sizes, start-up, the client's
-    ceiling on a cluster, local worker processes, validate's estimates."""
-    s = bench.study
-    if not s:
-        return "Not measured in this run (`--no-study`)."
-    w = s["workers"]
-    lines = [
-        f"Measured {s['date']} on {w} worker thread{'s' if w != 1 else ''}, load average "
-        f"{format_short(s['load_average_at_start'], 2)} at the start and "
-        f"{format_short(s['load_average_at_end'], 2)} at the end ({_duration(s['seconds'])}). "
-        "End to end: `python -m campipe study SPEC` in a fresh process, best of 3 (one run "
-        "above 1000 cases); in process: `run_study` with the kernels loaded; engine: "
-        "`run_batch` on the same cases in the study's own batches, on as many threads.",
-        "",
-    ]
-    rows = [
-        [
-            str(r["n_cases"]),
-            _duration(r["wall"]),
-            _duration(r["study"]),
-            _duration(r["engine"]),
-            f"{format_short(r['ratio'], 3)}×",
-            _duration(r["goal"]),
-            f"{format_short(r['bytes_per_case'] / 1e3)} kB",
-        ]
-        for r in s["sizes"]
-    ]
-    lines += _table(
-        [
-            "cases",
-            "end to end",
-            "in process",
-            "engine",
-            "end to end / engine",
-            "1.5 × engine + 0.5 s",
-            "archive per case",
-        ],
-        rows,
-    )
-    lat = s["latencies"]
-    lines += [
-        "",
-        f"Start-up, best of {lat['repeats']} fresh processes{bytecode_note(lat)}: `campipe --help` "
-        f"{_duration(lat['help'])}; a one-case study {_duration(lat['one_case'])}; "
-        f"a finished {lat['finished_cases']}-case study run again {_duration(lat['finished'])}.",
-    ]
-    first = s.get("first_run")
-    if first:
-        lines += [
-            "",
-            f"First run (the quickstart with numba's, pint's and campipe's caches empty): "
-            f"{_duration(first['seconds'])}; its first line on the terminal came after "
-            f"{_duration(first['first_line_seconds'])}, saying "
-            f"“{first['first_line'].split(': ')[1] if first['notice'] else first['first_line']}”.",
-        ]
-        if "reinstall_seconds" in first:
-            lines[-1] += (
-                f" A second copy of campipe at another path (a new clone or venv) then ran it "
-                f"in {_duration(first['reinstall_seconds'])}, its kernels loaded from campipe's "
-                "kernel cache."
-            )
-    c = s["ceiling"]
-    packed = c["compressed_bytes"] / c["raw_bytes"]
-    disk = c["disk_rate"] / packed  # raw bytes a second, the disk taking them compressed
-    limit = min(c["compress_rate"], disk)
-    engine_rate = next((r["engine_rate"] for r in s["cluster"] if r["workers"] == 1), None)
-    lines += [
-        "",
-        f"The client's ceiling: assembling {c['n_cases']} cases from stored batch files took "
-        f"{_duration(c['seconds'])}, **{format_short(c['cases_per_second'], 3)} cases/s**, "
-        f"writing {_rate(c['write_rate'])} of raw histories; netCDF-C writes the same "
-        f"histories with the archive's compression ({c.get('compression', 'zlib')}) at "
-        f"{_rate(c['compress_rate'])} on one core, given them all at once (to "
-        f"{format_short(100 * packed, 2)} %), and the disk takes {_rate(c['disk_rate'])} "
-        f"flushed, {_rate(disk)} of raw histories so compressed: the assembly runs at "
-        f"{format_short(100 * c['write_rate'] / limit, 2)} % of the lower limit, "
-        f"{'the compression' if limit == c['compress_rate'] else 'the disk'}'s.",
-    ]
-    others = [
-        f"{name} at {_rate(o['rate'])} (to {format_short(100 * o['bytes'] / c['raw_bytes'], 2)} %)"
-        for name, o in c.get("compressions", {}).items()
-        if name != c.get("compression")
-    ]
-    if others:
-        lines[-1] += f" The other values of `run.compression` write them {' and '.join(others)}."
-    if engine_rate:
-        compress = c["raw_bytes_per_case"] / c["compress_rate"]
-        lines[-1] += (
-            f" One worker's engine computes {format_short(engine_rate, 3)} cases/s, so the "
-            f"client binds at about {_workers(c['cases_per_second'] / engine_rate)}. With one "
-            "compressed file per batch, written by its worker and read as "
-            f"one dataset, each worker would compress at {_ms(compress, 2)} ms per case "
-            f"beside its engine's {_ms(1 / engine_rate, 2)} ms "
-            f"(+{format_short(100 * compress * engine_rate, 2)} %), and the client would only "
-            "track batches."
-        )
-    lines += [""]
-    lines += _table(
-        ["worker processes", "study, cases/s", "engine, cases/s", "study / engine"],
-        [
-            [
-                str(r["workers"]),
-                format_short(r["study_rate"], 3),
-                format_short(r["engine_rate"], 3),
-                format_short(r["study_rate"] / r["engine_rate"], 2),
-            ]
-            for r in s["cluster"]
-        ],
-    )
-    n = s["cluster"][0]["n_cases"] if s["cluster"] else 0
-    lines += [
-        "",
-        f"({n} cases on a local dask cluster of single-threaded worker processes, which write "
-        "their own batch files; the study's default batches for the engine and the study "
-        "alike; cluster start-up left out.)",
-    ]
-    if s.get("estimates"):
-        lines += [
-            "",
-            "`campipe validate`'s run-time estimate of each bundled study beside its run "
-            "(in process, kernels loaded):",
-            "",
-        ]
-        lines += _table(
-            ["study", "cases", "validate's estimate", "measured", "measured / estimate"],
-            [
-                [
-                    f"`{e['study']}`",
-                    str(e["cases"]),
-                    _duration(e["estimate"]),
-                    _duration(e["measured"]),
-                    f"{format_short(e['measured'] / e['estimate'], 2)}×",
-                ]
-                for e in s["estimates"]
-            ],
-        )
-    v = s.get("validate")
-    if v:
-        lines += [
-            "",
-            f"`campipe validate --no-estimate` of {format_short(v['n_cases'])} cases: "
-            + (
-                f"{_duration(v['seconds'])}, {format_short(v['peak_bytes'] / 1e6, 3)} MB at "
-                "its peak."
-                if "seconds" in v
-                else f"failed ({v['failed']})."
-            ),
-        ]
-    return "\n".join(lines)
+def scaling_block(bench: Bench) -> str:
+    """The engine's time against cases and workers."""
+    if not bench.scaling:
+        return "Not measured in this run (`--no-scaling`)."
+    return scaling_table(bench.scaling)
 
 
 #: Every block a page may hold, by name.
@@ -665,7 +504,6 @@ BLOCKS: dict[str, Callable[[Bench], str]] = {
     "bench-fidelity": fidelity_block,
     "bench-onset": onset_block,
     "bench-scaling": scaling_block,
-    "bench-study": study_block,
 }
 
 
@@ -679,11 +517,15 @@ def block_names(text: str) -> list[str]:
     return [m["name"] for m in BLOCK.finditer(text)]
 
 
-def render(text: str, generated: dict[str, str]) -> str:
-    """``text`` with each generated block's body replaced by ``generated[name]``."""
+def render(text: str, generated: dict[str, str], prefix: str = "bench-") -> str:
+    """``text`` with each generated block named ``prefix``… replaced by ``generated[name]``;
+    the blocks of another generator (another prefix: the developer's benchmark writes
+    ``study-`` blocks) are left as they are."""
 
     def fill(m: re.Match) -> str:
         name = m["name"]
+        if not name.startswith(prefix):
+            return m[0]
         if name not in generated:
             raise KeyError(f"unknown generated block {name!r}; known: {', '.join(generated)}")
         return f"{m['open']}{generated[name].rstrip()}\n{m['close']}"
@@ -703,6 +545,18 @@ def rendered(bench: Bench, bench_json: Path, pages: Sequence[Path]) -> dict[Path
     return out
 
 
+def update(files: dict[Path, str], check: bool) -> list[Path]:
+    """The files of ``files`` whose bytes differ from their text (a CSV's ``\\r\\n``, which
+    reading as text would hide, included); each rewritten unless ``check``."""
+    stale = []
+    for path, text in files.items():
+        if not path.exists() or path.read_bytes() != text.encode():
+            stale.append(path)
+            if not check:
+                path.write_bytes(text.encode())
+    return stale
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="python -m campipe.bench.pages",
@@ -716,26 +570,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         "--check", action="store_true", help="change nothing; exit 1 if a file differs"
     )
     parser.add_argument("--plots", action="store_true", help="also re-draw the bench's PNG plots")
-    parser.add_argument(
-        "--merge-study",
-        type=Path,
-        metavar="BENCH_JSON",
-        help="first take the study section of another run's bench.json, such as "
-        "campipe bench --no-suite --no-scaling -o DIR, into --json",
-    )
     args = parser.parse_args(argv)
-    if args.merge_study and not args.check:
-        data = json.loads(args.json.read_text())
-        data["study"] = json.loads(args.merge_study.read_text())["study"]
-        args.json.write_text(json.dumps(data, indent=1))
     bench = report.read_json(args.json)
-    stale = []
-    for path, text in rendered(bench, args.json, args.pages).items():
-        # Bytes: the CSV's lines end in \r\n, which reading as text would hide.
-        if not path.exists() or path.read_bytes() != text.encode():
-            stale.append(path)
-            if not args.check:
-                path.write_bytes(text.encode())
+    stale = update(rendered(bench, args.json, args.pages), args.check)
     if args.plots and not args.check:
         folder = args.json.parent
         report.plot(bench, folder / report.FILES["plot"])

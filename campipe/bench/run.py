@@ -1,8 +1,9 @@
 """The whole bench as one call: suite × methods × ladders, references, peers, ratios, scaling.
 
-:func:`run_bench` returns a :class:`Bench` of plain rows and numbers; it writes nothing but
-the scaling study's archives, under the directory it is given. ``campipe.bench.report``
-turns a Bench into a table and a plot.
+:func:`run_bench` returns a :class:`Bench` of plain rows and numbers and writes nothing;
+``campipe.bench.report`` turns a Bench into a table and a plot. campipe's own latencies and
+its study layer are the developer's benchmark's (``benchmarks/`` in the repository), not
+this one's.
 """
 
 from __future__ import annotations
@@ -11,11 +12,9 @@ import logging
 import math
 import os
 import platform
-import tempfile
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
-from pathlib import Path
 
 import numpy as np
 
@@ -85,12 +84,10 @@ class Bench:
     goals: dict = field(default_factory=dict)  # the speed goals, reached or not
     accuracy_for_cost: dict = field(default_factory=dict)  # the error target on 11000 rpm
     throughput: list[dict] = field(default_factory=list)  # newmark-linear's throughput, 256 cases
-    scaling: list[dict] = field(default_factory=list)  # time against cases and workers
+    scaling: list[dict] = field(default_factory=list)  # the engine's time against cases, workers
     steady: list[dict] = field(default_factory=list)  # the steady-state path per scene
     onset: dict = field(default_factory=dict)  # the onset map against the time-domain grid
     seconds: float = 0.0  # wall time of the whole bench [s]
-    #: campipe study end to end against the engine (campipe.bench.study.measure)
-    study: dict = field(default_factory=dict)
 
 
 def _meta(quick: bool, ladder: Ladder, scenes: Sequence[Scene]) -> dict:
@@ -335,10 +332,8 @@ def run_bench(
     quick: bool = False,
     scenes: Sequence[str] | None = None,
     *,
-    scaling_directory: str | None = None,
     with_scaling: bool = True,
     with_suite: bool = True,
-    with_study: bool = True,
     progress: Callable[[str], None] | None = None,
 ) -> Bench:
     """Run the bench.
@@ -349,15 +344,10 @@ def run_bench(
         Small ladders, one cam turn per scene, scaling up to 256 cases (under a minute).
     scenes : sequence of str, optional
         Scene names to run (default: the whole suite).
-    scaling_directory : str, optional
-        Where the scaling study writes its spec and archives (default: a temporary folder,
-        removed afterwards).
     with_scaling : bool
-        Run the throughput and scaling measurements.
+        Run the throughput and the engine's scaling measurements.
     with_suite : bool
         Run the scenes: references, ladders, peers and fidelity.
-    with_study : bool
-        Time ``campipe study`` end to end against the engine (:mod:`campipe.bench.study`).
     progress : callable, optional
         Called with a line of text as each stage starts.
     """
@@ -469,19 +459,7 @@ def run_bench(
         counts = QUICK_SCALING_COUNTS if quick else SCALING_COUNTS
         say(f"scaling: engine on dask threads, {counts[0]}–{counts[-1]} cases")
         points = scaling.engine_scaling(counts)
-        say(f"scaling: study layer with archive, {counts[0]}–{counts[-1]} cases")
-        if scaling_directory is None:
-            with tempfile.TemporaryDirectory(prefix="campipe-bench-") as tmp:
-                points += scaling.study_scaling(counts, tmp)
-        else:
-            points += scaling.study_scaling(counts, scaling_directory)
         bench.scaling = [{**asdict(p), "per_case": p.per_case} for p in points]
-    if with_study:
-        from campipe.bench import study
-
-        studies = Path(__file__).resolve().parents[2] / "studies"
-        with tempfile.TemporaryDirectory(prefix="campipe-bench-study-") as tmp:
-            bench.study = study.measure(tmp, quick=quick, studies=studies, progress=say)
     bench.seconds = time.perf_counter() - started
     bench.meta["load_average_at_end"] = os.getloadavg()[0]
     return bench

@@ -1,13 +1,11 @@
-"""How cost grows: time against number of cases and workers, throughput, archive size.
+"""How the engine's cost grows: time against number of cases and workers, throughput.
 
 - :func:`engine_scaling`: batches of the engine alone on dask's threaded scheduler (the
   kernels release the GIL), 1 and 2 workers.
-- :func:`study_scaling`: the same cases as a study through the study layer's executor
-  (:func:`campipe.study.execute.run_study`), archive included; the archive's size per case.
 - :func:`throughput`: case-steps per second of newmark-linear on a 256-case batch.
 
-These functions time runs; :func:`study_scaling` writes its spec and archives under the
-directory it is given (and nowhere else).
+These functions time runs and write nothing. The same cases through the study layer, archive
+included, are the developer's benchmark's (``benchmarks/scaling.py`` in the repository).
 """
 
 from __future__ import annotations
@@ -16,18 +14,14 @@ import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from pathlib import Path
 
 import numpy as np
-import yaml
 
 from campipe.bench.suite import OUTPUT_EVERY, rpm
 from campipe.constants import INCH
 from campipe.engine import Case, RunSettings, run_batch
 from campipe.model import thesis_train
 from campipe.profiles import harmonic
-from campipe.study import load_study
-from campipe.study.execute import run_study
 
 #: The population the scaling runs sweep: the harmonic cam over this speed range [rpm],
 #: alternately without a seat and with one at 0.1 in.
@@ -52,11 +46,11 @@ def scaling_cases(n: int) -> list[Case]:
 class ScalingPoint:
     """One timed run of n cases on w workers."""
 
-    layer: str  # "engine" (dask threads, no storage) or "study" (run_study, archive written)
+    layer: str  # "engine" (dask threads, no storage); the developer's benchmark adds "study"
     n_cases: int  # cases
     workers: int  # dask workers (threads)
     seconds: float  # wall time [s]
-    archive_bytes: int  # archive file size (study only; 0 for engine) [bytes]
+    archive_bytes: int  # archive file size (a study's; 0 for the engine) [bytes]
 
     @property
     def per_case(self) -> float:
@@ -96,63 +90,6 @@ def engine_scaling(
                 _run_threads(cases, settings, w)
                 best = min(best, time.perf_counter() - t0)
             out.append(ScalingPoint("engine", n, w, best, 0))
-    return out
-
-
-def scaling_spec(n: int) -> dict:
-    """A study spec of ``n`` cases like :func:`scaling_cases` (the speeds of a sweep)."""
-    spec = {
-        "name": f"bench-scaling-{n}",
-        "description": "campipe bench: time against number of cases",
-        "model": {"preset": "thesis-1971"},
-        "profile": {"kind": "harmonic", "lift": "1 in"},
-        "closure": "force",
-        "seat": "none",
-        "speed": "9000 rpm",
-        "run": {"revolutions": SCALING_REVOLUTIONS, "output_every": "1 deg"},
-    }
-    if n > 1:
-        half = n // 2
-        spec["sweep"] = (
-            {
-                "speed": {
-                    "from": f"{SPEED_RANGE[0]:g} rpm",
-                    "to": f"{SPEED_RANGE[1]:g} rpm",
-                    "num": max(half, 1),
-                },
-                "seat": ["none", "0.1 in"],
-            }
-            if n % 2 == 0
-            else {
-                "speed": {
-                    "from": f"{SPEED_RANGE[0]:g} rpm",
-                    "to": f"{SPEED_RANGE[1]:g} rpm",
-                    "num": n,
-                }
-            }
-        )
-    return spec
-
-
-def study_scaling(
-    counts: Sequence[int], directory: str | Path, workers: Sequence[int] = (1, 2)
-) -> list[ScalingPoint]:
-    """Wall time of ``campipe study`` on n cases (spec check, batches, archive) and the
-    archive's size; spec and archives are written under ``directory``."""
-    directory = Path(directory)
-    directory.mkdir(parents=True, exist_ok=True)
-    out = []
-    for n in counts:
-        path = directory / f"bench-scaling-{n}.yaml"
-        path.write_text(yaml.safe_dump(scaling_spec(n), sort_keys=False))
-        for w in workers:
-            archive = directory / f"bench-scaling-{n}-w{w}.nc"
-            archive.unlink(missing_ok=True)
-            t0 = time.perf_counter()
-            study = load_study(path)
-            run_study(study, archive, scheduler="threads", workers=w)
-            seconds = time.perf_counter() - t0
-            out.append(ScalingPoint("study", len(study.cases), w, seconds, archive.stat().st_size))
     return out
 
 

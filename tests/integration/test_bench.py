@@ -197,14 +197,12 @@ def test_the_onset_map_agrees_with_its_time_domain_check():
     )
 
 
-def test_scaling_runs_through_dask_and_the_study_layer(tmp_path):
+def test_scaling_runs_the_engine_through_dask():
+    """The engine's scaling (the study layer's is the developer benchmark's,
+    tests/integration/test_benchmarks.py)."""
     points = scaling.engine_scaling([3], workers=(1, 2), repeats=1)
     assert [(p.layer, p.n_cases, p.workers) for p in points] == [("engine", 3, 1), ("engine", 3, 2)]
-    points = scaling.study_scaling([4], tmp_path, workers=(1,))
-    assert [(p.layer, p.n_cases, p.workers) for p in points] == [("study", 4, 1)]
-    # 4 cases × 721 samples × several float64 histories: tens of kB per case.
-    assert 5e3 < points[0].archive_bytes / 4 < 2e5
-    assert (tmp_path / "bench-scaling-4-w1.nc").exists()
+    assert all(p.archive_bytes == 0 and p.per_case == p.seconds / 3 for p in points)
 
 
 def test_quick_bench_writes_its_table_and_plot(tmp_path):
@@ -251,29 +249,9 @@ def test_quick_bench_writes_its_table_and_plot(tmp_path):
     assert "## Peers at equal valve-lift error" in md and "](bench.png)" in md
     assert "](bench-events.png)" in md
     assert "| separation-11000 | default (modal-exact) | tol 1e-12 s |" in md
-    # The study section (issue 14), measured in the same run: each size end to end against
-    # the engine with its archive's bytes, the start-up latencies (a finished study answered
-    # "up to date", asserted where it is timed), the client's ceiling against each compression.
-    from campipe.bench.study import GOAL_CASES, GOAL_FACTOR, GOAL_OFFSET, QUICK_COUNTS
-    from campipe.study.fields import COMPRESSIONS
-
-    study = report["study"]
-    assert [r["n_cases"] for r in study["sizes"]] == list(QUICK_COUNTS)
-    for r in study["sizes"]:
-        assert r["wall"] > r["study"] > 0 and r["engine"] > 0 and r["archive_bytes"] > 0
-        assert r["ratio"] == pytest.approx(r["wall"] / r["engine"])
-        assert r["bytes_per_case"] == pytest.approx(r["archive_bytes"] / r["n_cases"])
-        assert r["goal"] == pytest.approx(GOAL_FACTOR * r["engine"] + GOAL_OFFSET)
-    lat = study["latencies"]
-    assert lat["finished_cases"] == GOAL_CASES
-    assert min(lat["help"], lat["one_case"], lat["finished"]) > 0
-    c = study["ceiling"]
-    assert c["n_cases"] == QUICK_COUNTS[-1]
-    assert c["cases_per_second"] == pytest.approx(c["n_cases"] / c["seconds"])
-    assert c["compression"] == "zstd" and set(c["compressions"]) == set(COMPRESSIONS)
-    assert c["compressions"]["none"]["bytes"] >= c["raw_bytes"] > c["compressed_bytes"] > 0
-    assert c["compressions"]["zstd"]["bytes"] == c["compressed_bytes"]
-    assert [r["workers"] for r in study["cluster"]] == [1, 2, 4]
+    # campipe's own latencies and study layer are the developer benchmark's (benchmarks/,
+    # tests/integration/test_benchmarks.py), not the user's bench.
+    assert "study" not in report and "with_study" not in run.run_bench.__kwdefaults__
 
 
 def _checked(scene, agrees, events_match=True, valve_lift=1e-10 * INCH, reference_events=None):
@@ -315,7 +293,7 @@ def test_the_verdict_judges_every_goal_reached_not_reached_or_not_shown():
     ]
     goals = verdict.goals(_verdict_bench(throughput=throughput))
     mapped = {"designs": 1000, "seconds": 1.2, "tolerance_rpm": 0.1, "grid_speeds": 33}
-    onset_goal = verdict.goals(_verdict_bench(onset={**mapped, "grid_seconds": 13.0}))[-2]
+    onset_goal = verdict.goals(_verdict_bench(onset={**mapped, "grid_seconds": 13.0}))[-1]
     assert (onset_goal.area, onset_goal.status, onset_goal.figure) == (
         "onset",
         "not reached",
@@ -335,8 +313,6 @@ def test_the_verdict_judges_every_goal_reached_not_reached_or_not_shown():
         ("throughput", "not reached", "1.5e7 case-steps/s"),
         # no onset map in this bench
         ("onset", "not shown", "–"),
-        # no study section (--no-study)
-        ("study", "not shown", "–"),
     ]
     assert "solve_ivp" in goals[0].what and "no scene ran solve_ivp" == goals[0].note
     assert "the thesis's 1 µs step" in goals[3].what and "on a at dt 1 µs" in goals[3].note
@@ -398,7 +374,7 @@ def test_the_quick_verdict_names_every_goal_and_cross_check(tmp_path):
     cross-check; its exit status is 1 exactly when a cross-check disagrees (none does)."""
     out = tmp_path / "bench"
     scenes = ("separation-11000", "polydyne-9000")
-    args = ["bench", "--quick", "--no-scaling", "--no-study", "--no-plot", "-o", str(out)]
+    args = ["bench", "--quick", "--no-scaling", "--no-plot", "-o", str(out)]
     result = CliRunner().invoke(main, args + [a for s in scenes for a in ("--scene", s)])
     checks = json.loads((out / "bench.json").read_text())["checks"]
     assert [c["scene"] for c in checks] == list(scenes)
@@ -408,45 +384,42 @@ def test_the_quick_verdict_names_every_goal_and_cross_check(tmp_path):
     lines = result.stdout.splitlines()  # the progress lines go to stderr
     block = lines[lines.index("verdict (--quick, 2 scenes):") :]
     assert block[1] == "goals:"
-    goals = block[2:11]
+    goals = block[2:10]
     assert [g.strip().split("  ")[0] for g in goals] == [
         g.status for g in verdict.goals(report.read_json(out / "bench.json"))
     ]
     areas = [g.split(":")[0].split()[-1] for g in goals]
-    assert areas == ["speed"] * 4 + ["accuracy"] * 2 + ["throughput", "onset", "study"]
+    assert areas == ["speed"] * 4 + ["accuracy"] * 2 + ["throughput", "onset"]
     for line, peer in zip(goals[:4], ("solve_ivp",) * 2 + ("newmark-linear",) * 2, strict=True):
         assert f"faster than {peer}" in line
-    assert goals[-3].startswith("  not shown") and "--no-scaling" in goals[-3]
-    assert goals[-2].startswith("  not shown") and "--quick maps 16 designs" in goals[-2]
-    assert goals[-1].startswith("  not shown") and "--no-study" in goals[-1]
-    assert block[11].startswith("reference cross-checks (modal-exact, tolerance 1e-14 s")
-    for line, scene, ok in zip(block[12:14], scenes, agreed, strict=True):
+    assert goals[-2].startswith("  not shown") and "--no-scaling" in goals[-2]
+    assert goals[-1].startswith("  not shown") and "--quick maps 16 designs" in goals[-1]
+    assert block[10].startswith("reference cross-checks (modal-exact, tolerance 1e-14 s")
+    for line, scene, ok in zip(block[11:13], scenes, agreed, strict=True):
         assert line.split()[:2] == ["agree" if ok else "disagree", f"{scene}:"]
-    assert block[14].startswith(f"{sum(agreed)} of 2 cross-checks agree")
-    assert len(block) == 15
+    assert block[13].startswith(f"{sum(agreed)} of 2 cross-checks agree")
+    assert len(block) == 14
 
 
 @pytest.mark.slow
 def test_the_whole_quick_bench_shows_every_goal_and_checks_every_scene(tmp_path):
     """``campipe bench --quick`` as the README gives it (about a minute): six cross-checks,
-    nine goals, the first seven judged from a measured figure (none left not shown for want
+    eight goals, the first seven judged from a measured figure (none left not shown for want
     of data, only where a ladder's lower bound cannot show it); the onset map's is not shown
-    (--quick maps 16 designs), nor the study's (--no-study)."""
+    (--quick maps 16 designs)."""
     out = tmp_path / "bench"
-    result = CliRunner().invoke(
-        main, ["bench", "--quick", "--no-study", "--no-plot", "-o", str(out)]
-    )
+    result = CliRunner().invoke(main, ["bench", "--quick", "--no-plot", "-o", str(out)])
     bench = report.read_json(out / "bench.json")
     assert result.exit_code == (0 if verdict.all_agree(bench) else 1), result.output
     lines = result.stdout.splitlines()
     block = lines[lines.index("verdict (--quick, 6 scenes):") :]
     goals = verdict.goals(bench)
-    assert len(goals) == 9 and len(block) == 2 + 9 + 1 + 6 + 1
+    assert len(goals) == 8 and len(block) == 2 + 8 + 1 + 6 + 1
     for line, goal in zip(block[2:9], goals[:7], strict=True):
         assert line.strip().startswith(f"{goal.status}  ") and goal.figure != "–"
-    assert "--quick maps 16 designs" in block[9] and "--no-study" in block[10]
-    assert [g.status for g in goals[7:]] == ["not shown"] * 2
-    for line, scene in zip(block[12:18], SCENES, strict=True):
+    assert "--quick maps 16 designs" in block[9]
+    assert [g.status for g in goals[7:]] == ["not shown"]
+    for line, scene in zip(block[11:17], SCENES, strict=True):
         assert line.split()[1] == f"{scene}:"
 
 

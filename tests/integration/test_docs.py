@@ -1,9 +1,13 @@
 """The documentation tells the truth: its bench figures are those the committed bench.json
-holds, and the README's commands and analysis print what it shows."""
+and study.json hold, and the README's commands and analysis print what it shows."""
 
 import contextlib
 import io
+import json
+import os
 import re
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -16,7 +20,13 @@ from campipe.cli import main
 from campipe.study import load_study
 from campipe.study.execute import run_study
 
+if str(ROOT) not in sys.path:  # benchmarks/ is not installed: imported from the repository
+    sys.path.insert(0, str(ROOT))
+
+from benchmarks import pages as study_pages  # noqa: E402
+
 BENCH_JSON = ROOT / pages.BENCH_JSON
+STUDY_JSON = ROOT / study_pages.STUDY_JSON
 README = ROOT / "README.md"
 BENCH_PAGE = ROOT / "docs" / "bench.md"
 DOCS = [README, *sorted((ROOT / "docs").glob("*.md")), ROOT / "examples" / "README.md"]
@@ -33,7 +43,52 @@ def test_the_committed_pages_are_generated_from_the_committed_bench_json():
             "run python -m campipe.bench.pages"
         )
     assert pages.block_names(README.read_text()) == ["bench-onset", "bench-verdict"]
-    assert sorted(pages.block_names(BENCH_PAGE.read_text())) == sorted(pages.BLOCKS)
+    names = pages.block_names(BENCH_PAGE.read_text())
+    assert sorted(n for n in names if n.startswith("bench-")) == sorted(pages.BLOCKS)
+    assert sorted(n for n in names if n.startswith("study-")) == sorted(study_pages.BLOCKS)
+    assert len(names) == len(pages.BLOCKS) + len(study_pages.BLOCKS)
+
+
+def test_the_developer_benchmarks_figures_are_generated_from_the_committed_study_json():
+    """docs/bench.md's study blocks are what benchmarks.pages writes from study.json, and
+    python -m benchmarks.pages --check, run from the root as documented, says so."""
+    data = study_pages.read_json(STUDY_JSON)
+    expected = study_pages.rendered(data, [BENCH_PAGE])
+    assert BENCH_PAGE.read_bytes() == expected[BENCH_PAGE].encode(), (
+        f"docs/bench.md differs from what {study_pages.STUDY_JSON} gives: "
+        "run python -m benchmarks.pages"
+    )
+    path = os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]).rstrip(os.pathsep)
+    done = subprocess.run(
+        [sys.executable, "-m", "benchmarks.pages", "--check"],
+        cwd=ROOT,
+        env={**os.environ, "PYTHONPATH": path},
+        capture_output=True,
+        text=True,
+    )
+    assert (done.returncode, done.stdout) == (0, ""), done.stderr
+    # The figures moved from bench.json unchanged: the 1000-case goal's, from the json.
+    at = next(r for r in data["study"]["sizes"] if r["n_cases"] == 1000)
+    goal = next(
+        line for line in expected[BENCH_PAGE].splitlines() if "1000-case study end to end" in line
+    )
+    assert f"**{pages.format_short(at['wall'], 2)} s against " in goal
+    assert "study" not in json.loads(BENCH_JSON.read_text())
+    assert {p["layer"] for p in report.read_json(BENCH_JSON).scaling} == {"engine"}
+    assert {p["layer"] for p in data["scaling"]} == {"study"}
+
+
+def test_a_study_figure_that_changes_in_its_json_changes_only_its_blocks():
+    data = study_pages.read_json(STUDY_JSON)
+    text = BENCH_PAGE.read_text()
+    data["study"]["latencies"]["help"] = 0.61
+    changed = study_pages.render(text, study_pages.blocks(data), study_pages.PREFIX)
+    goal = next(line for line in changed.splitlines() if "campipe --help under" in line)
+    assert goal.startswith("- **not reached** (study)") and "**0.61 s**" in goal
+    assert "`campipe --help` 0.61 s;" in changed
+    # campipe.bench.pages leaves the study blocks as they are, and the other way round
+    bench_blocks = pages.blocks(report.read_json(BENCH_JSON))
+    assert pages.render(changed, bench_blocks) == changed
 
 
 def test_a_figure_that_changes_in_the_json_changes_the_pages():
@@ -73,8 +128,12 @@ def test_the_pages_command_checks_and_rewrites(tmp_path, capsys):
     ratio = report.read_json(BENCH_JSON).accuracy_for_cost["ratio"]
     assert f"**{pages.format_short(ratio)}×**" in body  # the committed run's figure, from the json
     assert (folder / "bench.csv").read_bytes() == (BENCH_JSON.parent / "bench.csv").read_bytes()
-    page.write_text("<!-- generated: no-such-block -->\n<!-- end generated -->\n")
-    with pytest.raises(KeyError, match="unknown generated block 'no-such-block'"):
+    # another generator's block is left as it is; an unknown block of its own is refused
+    other = "<!-- generated: study-verdict -->\nkept\n<!-- end generated -->\n"
+    page.write_text(other)
+    assert pages.main(args) == 0 and page.read_text() == other
+    page.write_text("<!-- generated: bench-no-such-block -->\n<!-- end generated -->\n")
+    with pytest.raises(KeyError, match="unknown generated block 'bench-no-such-block'"):
         pages.main(args)
 
 

@@ -1,5 +1,7 @@
 """The import layers: model → profiles → engine → study → replay → cli, bench beside cli, the
-base modules below everything and io at the edges, with no import cycle anywhere.
+base modules below everything and io at the edges, with no import cycle anywhere; the
+developer's benchmark (``benchmarks/`` at the repository's root, not installed) above them
+all, imported by none.
 
 Every import of every module counts, at module level and inside functions (and under
 ``TYPE_CHECKING``): a function-level import hides a cycle from Python, not from this test.
@@ -166,3 +168,45 @@ def test_the_package_exports_open_study_lazily():
     )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
+
+
+#: The developer's benchmark of campipe's own latencies and study layer, beside the package.
+BENCHMARKS = ROOT.parent / "benchmarks"
+
+
+def _top_imports(path: Path) -> set[str]:
+    """Every module ``path`` imports, absolute, anywhere in its text."""
+    out = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import):
+            out.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom) and node.module and not node.level:
+            out.update(f"{node.module}.{a.name}" for a in node.names)
+            out.add(node.module)
+    return out
+
+
+def test_nothing_in_campipe_imports_the_developer_benchmark():
+    """campipe (campipe.bench included) runs without benchmarks/: an installed campipe has
+    none."""
+    wrong = {
+        m: sorted(t for t in _top_imports(p) if t.split(".")[0] == "benchmarks")
+        for m, p in MODULES.items()
+    }
+    assert not {m: t for m, t in wrong.items() if t}
+
+
+def test_the_developer_benchmark_imports_campipe_from_above():
+    """benchmarks/ may import any of campipe (it sits above the cli), and only modules that
+    exist; it holds the study section's measurements, which campipe.bench no longer has."""
+    files = sorted(BENCHMARKS.glob("*.py"))
+    assert {p.stem for p in files} >= {"__init__", "study", "scaling", "goals", "pages"}
+    used = set()
+    for path in files:
+        for target in _top_imports(path):
+            if target.split(".")[0] == "campipe":
+                used.add(target)
+    assert {t for t in used if t in MODULES} >= {"campipe.bench.pages", "campipe.study.execute"}
+    # an imported name, if not a module, belongs to a module that exists
+    assert all(t in MODULES or t.rpartition(".")[0] in MODULES for t in used)
+    assert "campipe.bench.study" not in MODULES

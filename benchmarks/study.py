@@ -1,5 +1,12 @@
 """A study as fast as its engine: ``campipe study`` end to end against the engine.
 
+The developer's benchmark of campipe's own latencies and study layer (``campipe bench``, in
+the package, is the user's speed against error). From the repository's root::
+
+    python -m benchmarks.study -o docs/bench       # the full run: docs/bench/study.json
+    python -m benchmarks.study --quick -o DIR      # sizes up to 256 cases, no first run
+    python -m benchmarks.pages                     # docs/bench.md's study blocks from the json
+
 Everything a user waits for is timed as the user runs it, in a fresh ``python -m campipe``
 process (imports, the compiled kernels' loading, the spec, the batches, the archive), best of
 a few runs; the engine alone is timed on the same cases and the same number of worker
@@ -16,6 +23,9 @@ threads, in this process with its kernels loaded, in the study's own batches.
 - :func:`estimates`: each bundled study (``studies/*.yaml``): validate's run-time estimate
   beside the measured run.
 - :func:`validate_at_scale`: ``campipe validate`` of a million-case spec, wall and memory.
+- :func:`benchmarks.scaling.study_scaling`: the engine's scaling cases of ``campipe bench``
+  through the study layer, archive included, on 1 and 2 threads.
+- :func:`run`: all of it, with the machine's description; :func:`main` writes ``study.json``.
 
 Specs and archives are written under the folder given (and nowhere else).
 """
@@ -37,7 +47,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from campipe.bench.scaling import scaling_spec
+from benchmarks.scaling import scaling_spec, study_scaling
 from campipe.engine import Case, RunSettings, run_batch
 from campipe.engine.settings import sample_count
 from campipe.study import load_study
@@ -67,8 +77,8 @@ GOAL_OFFSET = 0.5  # [s]
 GOAL_HELP = 0.3
 GOAL_ONE_CASE = 0.8
 GOAL_FINISHED = 0.5
-#: First run: the quickstart from a fresh install [s] (measured outside the bench: it needs a
-#: fresh environment; see the README).
+#: First run: the quickstart from a fresh install [s] (:func:`first_run`, with empty caches in
+#: a fresh process; the full run only).
 GOAL_FIRST_RUN = 10.0
 #: validate at scale: cases, wall [s] and peak memory [bytes].
 VALIDATE_CASES = 1_000_000
@@ -101,7 +111,7 @@ def _best(run: Callable[[], float], repeats: int) -> float:
 
 
 def write_spec(directory: Path, n: int) -> Path:
-    """The scaling spec of ``n`` cases (``campipe.bench.scaling.scaling_spec``) in
+    """The scaling spec of ``n`` cases (:func:`benchmarks.scaling.scaling_spec`) in
     ``directory``."""
     path = directory / f"study-{n}.yaml"
     path.write_text(yaml.safe_dump(scaling_spec(n), sort_keys=False))
@@ -441,7 +451,7 @@ def first_run(studies: Path, directory: Path) -> dict:
 
 def validate_estimate(study: Study, workers: int) -> float:
     """``campipe validate``'s run-time estimate [s] of a study on ``workers`` workers: the
-    one place the bench asks for it."""
+    one place the benchmark asks for it."""
     from campipe.study.estimate import estimate
 
     return estimate(study, workers).seconds
@@ -473,7 +483,7 @@ def estimates(studies: Path, directory: Path, workers: int) -> list[dict]:
 def validate_at_scale(directory: Path, n: int = VALIDATE_CASES) -> dict:
     """``campipe validate --no-estimate`` of an ``n``-case spec (speed × spring preload) in
     a fresh process: wall time and the process's peak memory (its own: Linux's ``ru_maxrss``
-    keeps, across the exec, the peak of the forked bench process, so VmHWM is read where
+    keeps, across the exec, the peak of the forked benchmark process, so VmHWM is read where
     there is one)."""
     side = int(round(math.sqrt(n)))
     spec = directory / f"validate-{n}.yaml"
@@ -574,3 +584,112 @@ def measure(
     out["seconds"] = time.perf_counter() - started
     out["load_average_at_end"] = os.getloadavg()[0]
     return out
+
+
+#: The bundled studies (validate's estimates, the quickstart of the first run).
+STUDIES = Path(__file__).resolve().parents[1] / "studies"
+#: The file :func:`main` writes into its output folder.
+STUDY_JSON = "study.json"
+
+
+def _meta(quick: bool) -> dict:
+    """The machine and versions a run measured on, as ``campipe bench`` records them."""
+    import platform
+
+    import numba
+    import scipy
+
+    return {
+        "machine": f"{platform.machine()}, {os.cpu_count()} cores, {platform.system()}",
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "scipy": scipy.__version__,
+        "numba": numba.__version__,
+        "date": time.strftime("%Y-%m-%d %H:%M:%S %Z"),
+        "quick": quick,
+    }
+
+
+def run(
+    *,
+    quick: bool = False,
+    workers: int | None = None,
+    with_scaling: bool = True,
+    progress: Callable[[str], None] | None = None,
+) -> dict:
+    """The whole developer benchmark: ``{"meta", "study", "scaling"}``, the machine, the study
+    section (:func:`measure`) and the study layer's scaling points
+    (:func:`benchmarks.scaling.study_scaling`, empty without ``with_scaling``); its specs
+    and archives in a temporary folder, removed afterwards."""
+    import tempfile
+    from dataclasses import asdict
+
+    from campipe.bench.run import QUICK_SCALING_COUNTS, SCALING_COUNTS
+
+    say = progress or (lambda text: None)
+    out: dict = {"meta": _meta(quick), "study": {}, "scaling": []}
+    with tempfile.TemporaryDirectory(prefix="campipe-benchmarks-") as tmp:
+        out["study"] = measure(tmp, quick=quick, workers=workers, studies=STUDIES, progress=say)
+        if with_scaling:
+            counts = QUICK_SCALING_COUNTS if quick else SCALING_COUNTS
+            say(f"scaling: the study layer with its archive, {counts[0]}–{counts[-1]} cases")
+            points = study_scaling(counts, Path(tmp) / "scaling")
+            out["scaling"] = [{**asdict(p), "per_case": p.per_case} for p in points]
+    out["meta"]["load_average_at_end"] = os.getloadavg()[0]
+    return out
+
+
+def _clean(obj: object) -> object:
+    """JSON-safe: NaN and inf become null (as ``campipe bench`` writes its json)."""
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if isinstance(obj, dict):
+        return {str(k): _clean(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_clean(v) for v in obj]
+    return obj
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    import argparse
+    import json
+
+    from benchmarks import goals
+
+    parser = argparse.ArgumentParser(
+        prog="python -m benchmarks.study",
+        description="campipe's own latencies and study layer against the engine (a developer's "
+        "benchmark; campipe bench is the user's speed against error). Writes study.json.",
+    )
+    parser.add_argument(
+        "-o", "--output", type=Path, default=Path("bench-results"), help="default: bench-results"
+    )
+    parser.add_argument(
+        "--quick",
+        action="store_true",
+        help=f"sizes {', '.join(map(str, QUICK_COUNTS))}, {QUICK_CLUSTER_CASES} cases on the "
+        "worker processes, no first run nor validate at scale (a few minutes)",
+    )
+    parser.add_argument("--workers", type=int, help="worker threads (default: the study's)")
+    parser.add_argument(
+        "--no-scaling",
+        dest="scaling",
+        action="store_false",
+        help="leave out the study layer's time against cases and workers",
+    )
+    args = parser.parse_args(argv)
+
+    def say(text: str) -> None:
+        sys.stderr.write(f"benchmarks: {text}\n")
+
+    data = run(quick=args.quick, workers=args.workers, with_scaling=args.scaling, progress=say)
+    args.output.mkdir(parents=True, exist_ok=True)
+    path = args.output / STUDY_JSON
+    path.write_text(json.dumps(_clean(data), indent=1))
+    print(path)
+    print(goals.text(data["study"]))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
