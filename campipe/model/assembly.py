@@ -3,7 +3,7 @@
 K = Σ βᵢᵀ Kₑᵢ βᵢ and M = Σ βᵢᵀ Mₑᵢ βᵢ (Eqs. 5, 6) over every finite element; the undamped
 eigenproblem (Eq. 14); the damping matrix of the train's ``damping_kind``: modal,
 C = Φ⁻ᵀ diag(2ζω) Φ⁻¹ with mass-normalised Φ (Eqs. 21–23), Rayleigh's C = α·M + β·K, or each
-member's loss factor η as C_e = (η/ω_ref)·K_e.
+member's loss factor η as structural damping: ζ = η/2 weighted by each mode's strain energy.
 
 A train of n coordinates (seven for the thesis's model, more with refined members, see
 :mod:`campipe.model.coordinates`) gives n×n matrices with q1 … q7 at indices 0–6.
@@ -124,25 +124,27 @@ def rayleigh_damping(
     return alpha * mass + beta * stiffness
 
 
-def loss_factor_damping(train: ValveTrain, reference_frequency: float) -> np.ndarray:
-    """Σ over the elements of βᵀ·(η/ω_ref)·Kₑ·β, η the element's member's loss factor.
+def loss_factor_damping(
+    train: ValveTrain, mass: np.ndarray, modes: np.ndarray, frequencies: np.ndarray
+) -> np.ndarray:
+    """Each member's loss factor η as structural damping: mode j is damped by
 
-    A member of loss factor η dissipates, per cycle at ω_ref, 2π·η times the strain energy
-    it stores (hysteretic damping, exact at ω_ref; a viscous C_e damps faster modes more).
-    A mode whose strain energy lies all in one member then has ζ = η/2 at ω = ω_ref.
+        ζⱼ = ½ Σₑ ηₑ Uₑⱼ / Uⱼ,
 
-    Parameters
-    ----------
-    reference_frequency : float
-        ω_ref [rad/s]; :func:`system_matrices` takes the train's fundamental.
-    """
-    n = train.n_coordinates
-    C = np.zeros((n, n))
+    the loss factors weighted by the share of the mode's strain energy each element stores
+    (Uₑⱼ = ½ φⱼᵀ βᵀKₑβ φⱼ of Uⱼ = ½ φⱼᵀ K φⱼ: the modal strain energy method), and
+    C = Φ⁻ᵀ diag(2ζω) Φ⁻¹ (thesis Eq. 23's form). A hysteretic member dissipates 2π·η times
+    its strain energy a cycle at every frequency; ζ = η/2 is its usual time-domain
+    equivalent, on every mode (not only at one reference frequency, as a viscous C = (η/ω)·K
+    would be), so one η on every member gives ζ = η/2 on every mode."""
+    share = np.zeros(len(frequencies))
     for e in elements(train):
         eta = getattr(train, f"{e.name}_loss_factor")
         if eta:
-            C += e.beta.T @ ((eta / reference_frequency) * e.stiffness) @ e.beta
-    return C
+            global_k = e.beta.T @ e.stiffness @ e.beta
+            share += eta * np.einsum("ij,ik,kj->j", modes, global_k, modes)
+    zeta = 0.5 * share / frequencies**2  # φⱼᵀ K φⱼ = ωⱼ² for mass-normalised modes
+    return modal_damping(mass, modes, frequencies, zeta)
 
 
 def damping_matrix(
@@ -156,7 +158,7 @@ def damping_matrix(
     if train.damping_kind == "rayleigh":
         return rayleigh_damping(mass, stiffness, train.rayleigh_alpha, train.rayleigh_beta)
     if train.damping_kind == "loss-factor":
-        return loss_factor_damping(train, float(frequencies[0]))
+        return loss_factor_damping(train, mass, modes, frequencies)
     ratios = mode_damping_ratios(train.damping_ratios, len(frequencies))
     return modal_damping(mass, modes, frequencies, ratios)
 
@@ -165,7 +167,7 @@ def modal_damping_ratios(
     damping: np.ndarray, modes: np.ndarray, frequencies: np.ndarray
 ) -> np.ndarray:
     """Each mode's damping ratio, (Φᵀ C Φ)ⱼⱼ / (2ωⱼ): exact where C is diagonal in the modes
-    (modal, Rayleigh), the modes' own share of the damping where it is not (loss factors)."""
+    (every damping kind campipe forms)."""
     return np.einsum("ij,ik,kj->j", modes, damping, modes) / (2.0 * frequencies)
 
 

@@ -22,8 +22,8 @@ q1 … q7 (:mod:`campipe.model.coordinates`).
 
 Damping (``damping_kind``): ``modal``, the thesis's (``damping_ratios``, thesis Eq. 23);
 ``rayleigh``, C = α·M + β·K (``rayleigh_alpha``, ``rayleigh_beta``); ``loss-factor``, each
-member's elements damped by its loss factor η as C_e = (η/ω_ref)·K_e
-(``<member>_loss_factor``), with ω_ref the train's fundamental frequency.
+member's loss factor η (``<member>_loss_factor``) as structural damping: every mode damped by
+ζ = η/2 weighted by the share of its strain energy the member stores.
 """
 
 from __future__ import annotations
