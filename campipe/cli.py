@@ -402,7 +402,7 @@ def _load(spec_path, sets, limits=None):
         raise SpecRefused(str(exc)) from None
 
 
-#: The defaults of campipe.study.limits.Limits, repeated here so --help needs no import of
+#: The defaults of campipe.study.spec.limits.Limits, repeated here so --help needs no import of
 #: the engine (tests/integration/test_fuzz.py checks they agree).
 DEFAULT_LIMITS = {
     "cases": 100_000,
@@ -459,7 +459,7 @@ def limit_options(command):
 
 
 def _limits(max_cases, max_steps, max_samples, max_events, max_archive_gb):
-    from campipe.study.limits import Limits
+    from campipe.study.spec.limits import Limits
 
     return Limits(max_cases, max_steps, max_samples, max_events, max_archive_gb * 1e9)
 
@@ -544,9 +544,10 @@ def study(
     """
     import shlex
 
-    from campipe.study.execute import finished, run_study
-    from campipe.study.limits import Limits
-    from campipe.study.progress import Progress, logging_cleared
+    from campipe.study.run.execute import run_study
+    from campipe.study.run.progress import Progress, logging_cleared
+    from campipe.study.run.resume import finished
+    from campipe.study.spec.limits import Limits
 
     limits = _limits(max_cases, max_steps, max_samples, max_events, max_archive_gb)
     if limits == Limits() and not overwrite:
@@ -674,8 +675,8 @@ def validate(
     max_archive_gb,
 ) -> None:
     """Check the study SPEC and print its case count, axes and estimated cost."""
-    from campipe.study.estimate import archive_bytes
-    from campipe.study.execute import count_batches, default_batch_size, default_workers
+    from campipe.study.run.batches import count_batches, default_batch_size, default_workers
+    from campipe.study.run.estimate import archive_bytes
 
     loaded = _load(
         spec, sets, _limits(max_cases, max_steps, max_samples, max_events, max_archive_gb)
@@ -689,7 +690,7 @@ def validate(
     click.echo(f"batches: {count_batches(loaded.cases, size)} of up to {size} cases")
     if estimate:
         from campipe.engine.kernels import compile_notice
-        from campipe.study.expand import distinct_but_speed
+        from campipe.study.spec.expand import distinct_but_speed
 
         text = compile_notice(c.settings for c in distinct_but_speed(loaded.cases)[0])
         if text:
@@ -702,12 +703,12 @@ def validate(
 
 
 def estimate_text(loaded, workers: int) -> str:
-    """``run time: about ...``: the estimate (campipe.study.estimate) with its parts, and the
+    """``run time: about ...``: the estimate (campipe.study.run.estimate) with its parts, and the
     spec's replay recording (campipe.replay.live.time_replay)."""
     import dataclasses
     import tempfile
 
-    from campipe.study.estimate import estimate
+    from campipe.study.run.estimate import estimate
 
     e = estimate(loaded, workers)
     parts = [
@@ -739,16 +740,16 @@ def estimate_text(loaded, workers: int) -> str:
 
 def _seconds(seconds: float) -> str:
     """An estimate's time: ``0.42 s``, ``12 s``, ``3 min 05 s``."""
-    from campipe.study.progress import format_seconds
+    from campipe.study.run.progress import format_seconds
 
     return f"{seconds:.2g} s" if seconds < 10 else format_seconds(seconds)
 
 
 def validate_text(loaded, spec_path) -> str:
     """The checked study in words: cases, axes (values as the spec wrote them), run."""
-    from campipe.study.expand import distinct_but_speed
-    from campipe.study.layout import coordinate_values
-    from campipe.study.variables import case_coordinates
+    from campipe.study.archive.layout import coordinate_values
+    from campipe.study.spec.expand import distinct_but_speed
+    from campipe.study.spec.variables import case_coordinates
 
     s = loaded.spec
     run = s.base["run"]
@@ -791,7 +792,7 @@ def validate_text(loaded, spec_path) -> str:
     return "\n".join(lines)
 
 
-#: The unit systems of --units (campipe.study.display.SYSTEMS, repeated so --help needs no
+#: The unit systems of --units (campipe.study.spec.plots.SYSTEMS, repeated so --help needs no
 #: import of the study layer; tests/integration/test_plot.py checks they agree).
 UNIT_SYSTEMS = ("spec", "si", "in-lbf")
 
@@ -836,9 +837,9 @@ def units_option(command):
 def query(archive, where, columns, sort, fmt, summary, units) -> None:
     """Print an archive's cases, one row per case, values in the units the spec was written
     in (or --units); headers name the units."""
-    from campipe.study.display import display_units
-    from campipe.study.query import case_table, displayed, format_rows, select
-    from campipe.study.query import summary as summary_text
+    from campipe.study.query.display import display_units
+    from campipe.study.query.tables import case_table, displayed, format_rows, select
+    from campipe.study.query.tables import summary as summary_text
 
     with _open_archive(archive) as ds:
         if summary:
@@ -922,14 +923,14 @@ def schema(which) -> None:
 
         click.echo(json.dumps(model_schema(), indent=2, ensure_ascii=False))
         return
-    from campipe.study.schema import schema_text
+    from campipe.study.spec.schema import schema_text
 
     click.echo(schema_text(), nl=False)
 
 
 # -- plots ------------------------------------------------------------------------------------
 
-#: The plot kinds (campipe.study.plots.KINDS, repeated so --help needs no import of the study
+#: The plot kinds (campipe.study.spec.plots.KINDS, repeated so --help needs no import of the study
 #: layer; tests/integration/test_plot.py checks they agree).
 PLOT_KINDS = ("histories", "metric", "map", "events")
 
@@ -981,7 +982,7 @@ def plot(kind, archive, output, where, units, x, y, z, level, turn) -> None:
     events     each case's separations, landings and seatings on a cam angle × case chart
     """
     from campipe.plot import plot_archive
-    from campipe.study.plots import PlotError, check_plot
+    from campipe.study.spec.plots import PlotError, check_plot
 
     options = {"kind": kind, "where": where, "units": units, "output": output}
     options.update({"x": x, "y": y, "z": z, "level": level, "turn": turn})
@@ -1078,10 +1079,10 @@ def onset(spec, sets, tolerance, fmt, output, check, workers) -> None:
 def _onset(loaded, spec_path, path, tolerance, fmt, check, workers, command="onset") -> None:
     """``campipe onset``'s work (and ``campipe study``'s for a spec with ``search``)."""
     from campipe.io.archive import provenance, write_file
-    from campipe.study.display import display_units
-    from campipe.study.execute import default_workers
     from campipe.study.onset import file_contents, onset_study, summary_lines
-    from campipe.study.query import displayed, format_rows
+    from campipe.study.query.display import display_units
+    from campipe.study.query.tables import displayed, format_rows
+    from campipe.study.run.batches import default_workers
 
     result = onset_study(
         loaded,
@@ -1145,7 +1146,7 @@ def replay(archive, case_ids, where, output, spawn, magnify) -> None:
     into one recording, each in its own cases/<case_id> subtree and blueprint tab."""
     from campipe.replay.cases import ReplayError
     from campipe.replay.record import replay_archive
-    from campipe.study.progress import Progress
+    from campipe.study.run.progress import Progress
     from campipe.study.where import QueryError
 
     if bool(case_ids) == (where is not None):

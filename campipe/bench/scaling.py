@@ -3,7 +3,7 @@
 - :func:`engine_scaling`: batches of the engine alone on dask's threaded scheduler (the
   kernels release the GIL), 1 and 2 workers.
 - :func:`study_scaling`: the same cases as a study through the study layer's executor
-  (:func:`campipe.study.execute.run_study`), archive included; the archive's size per case.
+  (:func:`campipe.study.run.execute.run_study`), archive included; the archive's size per case.
 - :func:`throughput`: case-steps per second of newmark-linear on a 256-case batch.
 
 These functions time runs; :func:`study_scaling` writes its spec and archives under the
@@ -27,7 +27,7 @@ from campipe.engine import Case, RunSettings, run_batch
 from campipe.model import thesis_train
 from campipe.profiles import harmonic
 from campipe.study import load_study
-from campipe.study.execute import run_study
+from campipe.study.run.execute import run_study
 
 #: The population the scaling runs sweep: the harmonic cam over this speed range [rpm],
 #: alternately without a seat and with one at 0.1 in.

@@ -255,7 +255,7 @@ def test_quick_bench_writes_its_table_and_plot(tmp_path):
     # the engine with its archive's bytes, the start-up latencies (a finished study answered
     # "up to date", asserted where it is timed), the client's ceiling against each compression.
     from campipe.bench.study import GOAL_CASES, GOAL_FACTOR, GOAL_OFFSET, QUICK_COUNTS
-    from campipe.study.fields import COMPRESSIONS
+    from campipe.study.spec.fields import COMPRESSIONS
 
     study = report["study"]
     assert [r["n_cases"] for r in study["sizes"]] == list(QUICK_COUNTS)

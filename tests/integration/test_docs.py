@@ -14,7 +14,7 @@ from study_helpers import ROOT, STUDIES
 from campipe.bench import pages, report
 from campipe.cli import main
 from campipe.study import load_study
-from campipe.study.execute import run_study
+from campipe.study.run.execute import run_study
 
 BENCH_JSON = ROOT / pages.BENCH_JSON
 README = ROOT / "README.md"

@@ -16,9 +16,9 @@ from campipe.cli import main
 from campipe.plot import plot_archive
 from campipe.plot.figures import figure
 from campipe.study import load_study
-from campipe.study.display import SYSTEMS
-from campipe.study.execute import run_study
-from campipe.study.plots import KINDS, PlotError, PlotRequest
+from campipe.study.query.display import SYSTEMS
+from campipe.study.run.execute import run_study
+from campipe.study.spec.plots import KINDS, PlotError, PlotRequest
 from campipe.vocabulary import CAM_IMPACT, CAM_SEPARATION, SEAT_IMPACT, SEAT_SEPARATION
 
 SPEC = """
@@ -286,7 +286,7 @@ def test_a_spec_with_a_bad_plot_is_refused_at_its_key(tmp_path, entry, path, wor
 
 
 def test_a_request_is_checked_like_a_spec_entry():
-    from campipe.study.plots import check_plot
+    from campipe.study.spec.plots import check_plot
 
     assert check_plot({"kind": "events", "turn": "2"}).turn == 2
     with pytest.raises(PlotError, match="x: not a key of a histories plot"):

@@ -1,6 +1,10 @@
 """The import layers: model → profiles → engine → study → replay → cli, bench beside cli, the
 base modules below everything and io at the edges, with no import cycle anywhere.
 
+Inside study, its packages along the user's path: the where language, then spec, archive, run
+and query (run and query each above the archive, neither importing the other), the package's
+face and ``campipe onset`` above them all.
+
 Every import of every module counts, at module level and inside functions (and under
 ``TYPE_CHECKING``): a function-level import hides a cycle from Python, not from this test.
 """
@@ -25,6 +29,9 @@ BASE = {
     "campipe.disk_cache",
     "campipe.sources",
 }
+#: The study's layers, lowest first (``study``: the package itself and ``campipe onset``).
+STUDY = ("study.where", "study.spec", "study.archive", "study.run", "study.query", "study")
+BELOW_STUDY = {"base", "io", "model", "profiles", "engine"}
 #: Layer → the layers its modules may import (their own included).
 MAY_IMPORT: dict[str, set[str]] = {
     "base": {"base"},
@@ -32,11 +39,18 @@ MAY_IMPORT: dict[str, set[str]] = {
     "model": {"base", "model"},
     "profiles": {"base", "model", "profiles"},
     "engine": {"base", "model", "profiles", "engine"},
-    "study": {"base", "io", "model", "profiles", "engine", "study"},
-    "replay": {"base", "io", "model", "profiles", "engine", "study", "replay"},
-    "bench": {"base", "model", "profiles", "engine", "study", "bench"},
-    "plot": {"base", "io", "model", "profiles", "engine", "study", "plot"},
-    "cli": {"base", "io", "model", "profiles", "engine", "study", "replay", "bench", "plot", "cli"},
+    # the --where language: a spec's replay.where and plots are written in it
+    "study.where": {"base", "study.where"},
+    # checking and expanding a spec: nothing of the archive, the run or the queries
+    "study.spec": BELOW_STUDY | {"study.where", "study.spec"},
+    "study.archive": BELOW_STUDY | {"study.spec", "study.archive"},
+    "study.run": BELOW_STUDY | {"study.spec", "study.archive", "study.run"},
+    "study.query": BELOW_STUDY | {"study.where", "study.spec", "study.archive", "study.query"},
+    "study": BELOW_STUDY | set(STUDY),
+    "replay": BELOW_STUDY | set(STUDY) | {"replay"},
+    "bench": BELOW_STUDY - {"io"} | set(STUDY) | {"bench"},
+    "plot": BELOW_STUDY | set(STUDY) | {"plot"},
+    "cli": BELOW_STUDY | set(STUDY) | {"replay", "bench", "plot", "cli"},
 }
 
 
@@ -51,8 +65,10 @@ MODULES = {module_name(p): p for p in sorted(ROOT.rglob("*.py"))}
 def layer(module: str) -> str:
     if module in BASE:
         return "base"
-    top = module.split(".")[1]
-    return {"__main__": "cli"}.get(top, top)
+    parts = module.split(".")
+    if parts[1] == "study" and len(parts) > 2 and f"study.{parts[2]}" in STUDY:
+        return f"study.{parts[2]}"
+    return {"__main__": "cli"}.get(parts[1], parts[1])
 
 
 def _lazy_exports(tree: ast.Module) -> set[int]:
@@ -152,7 +168,7 @@ def test_the_cycle_finder_finds_a_cycle():
 
 def test_function_level_imports_count():
     """The CLI imports the study layer inside its commands; the graph has those edges."""
-    assert "campipe.study.execute" in GRAPH["campipe.cli"]
+    assert "campipe.study.run.execute" in GRAPH["campipe.cli"]
 
 
 def test_the_package_exports_open_study_lazily():
@@ -162,7 +178,7 @@ def test_the_package_exports_open_study_lazily():
 
     code = (
         "import sys, campipe; assert not [m for m in sys.modules if m.startswith('campipe.')]; "
-        "f = campipe.open_study; assert f.__module__ == 'campipe.study.open'"
+        "f = campipe.open_study; assert f.__module__ == 'campipe.study.archive.open'"
     )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert done.returncode == 0, done.stderr

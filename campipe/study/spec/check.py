@@ -1,11 +1,11 @@
 """Checking a study spec's structure and values, every problem named by its key path.
 
 The spec arrives as plain data (parsed by :mod:`campipe.io.spec_yaml`); this module refuses
-anything it does not declare (:mod:`campipe.study.fields`) with the key's path, what was
+anything it does not declare (:mod:`campipe.study.spec.fields`) with the key's path, what was
 found and what is expected, and returns a :class:`Spec`: the base case with the run defaults
 filled in, and the axes (sweep, zip, cases, sample) with ranges expanded into value lists.
 Checks that need a whole case (a seat above full lift, a step beyond the stability limit)
-run when the cases are resolved (:mod:`campipe.study.expand`).
+run when the cases are resolved (:mod:`campipe.study.spec.expand`).
 
 Grammar (all keys optional except ``name``; each case must end up with a ``speed`` and a
 ``profile`` from the base or an axis)::
@@ -26,7 +26,7 @@ Grammar (all keys optional except ``name``; each case must end up with a ``speed
     cases: [{<case keys>}, ...]                          # deep-merged over the base
     sample: {method: latin-hypercube, n, seed, ranges: {<key>: {from, to}}}
     replay: {where: EXPR}
-    plots: [{kind: histories | metric | map | events, ...}, ...]   # campipe.study.plots
+    plots: [{kind: histories | metric | map | events, ...}, ...]   # campipe.study.spec.plots
 """
 
 from __future__ import annotations
@@ -43,7 +43,7 @@ import numpy as np
 
 from campipe.errors import CampipeError, did_you_mean, excerpt
 from campipe.model import PARAMETERS
-from campipe.study.fields import (
+from campipe.study.spec.fields import (
     CASE_FIELDS,
     CASE_KEYS,
     DEFECT_FIELDS,
@@ -63,7 +63,7 @@ from campipe.study.fields import (
     sweep_keys,
     varied_fields,
 )
-from campipe.study.plots import PlotError, PlotRequest, check_plot
+from campipe.study.spec.plots import PlotError, PlotRequest, check_plot
 from campipe.study.where import QueryError, parse_where
 
 #: A study name: it names the archive file.
@@ -73,7 +73,7 @@ _KEYED_BY_CASE_KEY = ("sweep", "zip", "ranges")
 #: Problems reported at most, so a large bad grid stays readable.
 MAX_PROBLEMS = 20
 #: Longest axis (a range's num, a sample's n) by default: also the default limit on cases
-#: (campipe.study.limits), so one axis alone never exceeds it.
+#: (campipe.study.spec.limits), so one axis alone never exceeds it.
 MAX_AXIS_LENGTH = 100_000
 
 T = TypeVar("T")
@@ -667,7 +667,7 @@ def check_replay(value: object, problems: _Problems) -> str | None:
 
 
 def check_plot_list(value: object, problems: _Problems) -> list[PlotRequest]:
-    """``plots:``: a list of plots (:func:`campipe.study.plots.check_plot`), each problem at
+    """``plots:``: a list of plots (:func:`campipe.study.spec.plots.check_plot`), each problem at
     its entry's key."""
     if not isinstance(value, list):
         problems.add("plots", f"found {_show(value)}, expected a list such as [{{kind: metric}}]")
@@ -732,7 +732,7 @@ def check_spec(
         ``{"run.revolutions": 1}``: applied over ``raw`` first (``campipe study --set``).
     max_axis : int
         Longest axis (a range's num, a sample's n): refused beyond it, before any value is
-        made (the case count is checked by :func:`campipe.study.limits.check_limits`).
+        made (the case count is checked by :func:`campipe.study.spec.limits.check_limits`).
 
     Raises
     ------

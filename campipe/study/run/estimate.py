@@ -4,7 +4,7 @@ The run time is measured on this machine, through the code a study runs, not gue
 
 - **a sample of the study** -- one batch for each worker (at the batch size the study will
   use), its cases spread evenly through the study so its speeds, seats and events are in
-  proportion -- is run through :func:`~campipe.study.execute.run_study` into a temporary
+  proportion -- is run through :func:`~campipe.study.run.execute.run_study` into a temporary
   folder: computing, storing the batches, assembling the compressed archive with its
   checksums. Scaled to the study's cases, it gives the run's time beyond its fixed cost;
 - **the fixed cost** (setting up a run, a first run's imports) is a one-case run's time;
@@ -30,9 +30,10 @@ import numpy as np
 
 from campipe.constants import TWO_PI
 from campipe.engine.settings import RunSettings, sample_count, turn_count
-from campipe.study.execute import default_batch_size, plan_batches, run_study
-from campipe.study.expand import ResolvedCase, SpeedSweep, Study, distinct_but_speed
-from campipe.study.variables import DOF_NAMES, data_variables
+from campipe.study.run.batches import default_batch_size, plan_batches
+from campipe.study.run.execute import run_study
+from campipe.study.spec.expand import ResolvedCase, SpeedSweep, Study, distinct_but_speed
+from campipe.study.spec.variables import DOF_NAMES, data_variables
 
 #: Longest kernel warm-up counted as start-up [s]: a kernel loads from numba's cache in well
 #: under a second; a longer warm-up is compiling, which the study (using the cache) skips.

@@ -24,8 +24,8 @@ from campipe.engine.loads import (
     spring_histories,
 )
 from campipe.sources import source_digest
-from campipe.study.expand import ResolvedCase
-from campipe.study.variables import (
+from campipe.study.spec.expand import ResolvedCase
+from campipe.study.spec.variables import (
     CONTACT_PRESSURE_METRICS,
     PER_REVOLUTION_METRICS,
     SPRING_METRICS,
@@ -52,7 +52,7 @@ NUMERICS_SOURCES = (
     "model",
     "vocabulary.py",
     "constants.py",
-    "study/results.py",  # this module: the engine's results as archive arrays
+    "study/run/results.py",  # this module: the engine's results as archive arrays
 )
 #: Libraries whose versions enter :func:`numerics_fingerprint`: they compute the numbers too.
 NUMERICS_LIBRARIES = ("numpy", "scipy", "numba")
@@ -97,7 +97,7 @@ class BatchData:
 
     key: str  # the batch key
     case_ids: np.ndarray  # (n,) str
-    arrays: dict[str, np.ndarray]  # data variables, see campipe.study.variables
+    arrays: dict[str, np.ndarray]  # data variables, see campipe.study.spec.variables
     cam_angle: np.ndarray  # (n_out,) [degree]
     n_revolutions: int  # length of the revolution axis
     numerics: str = ""  # numerics_fingerprint() of the process that computed it

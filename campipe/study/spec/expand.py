@@ -35,7 +35,7 @@ from campipe.engine.settings import (
     check_stability,
 )
 from campipe.errors import did_you_mean, excerpt
-from campipe.io.archive import COMPRESSION
+from campipe.io.compression import COMPRESSION
 from campipe.io.lift_table import LiftTableError, read_lift_table, table_digest
 from campipe.model import (
     PARAMETERS,
@@ -57,16 +57,7 @@ from campipe.profiles import (
     polydyne,
     table,
 )
-from campipe.study.fields import (
-    CASE_FIELDS,
-    DEFECT_FIELDS,
-    PROFILE_FIELDS,
-    RUN_SETTINGS,
-    SpecProblem,
-    varied_fields,
-)
-from campipe.study.limits import Limits, check_limits
-from campipe.study.spec import (
+from campipe.study.spec.check import (
     MAX_PROBLEMS,
     Spec,
     SpecError,
@@ -74,7 +65,16 @@ from campipe.study.spec import (
     check_profile,
     leaf_keys,
 )
-from campipe.study.variables import case_coordinates, data_variables
+from campipe.study.spec.fields import (
+    CASE_FIELDS,
+    DEFECT_FIELDS,
+    PROFILE_FIELDS,
+    RUN_SETTINGS,
+    SpecProblem,
+    varied_fields,
+)
+from campipe.study.spec.limits import Limits, check_limits
+from campipe.study.spec.variables import case_coordinates, data_variables
 from campipe.study.where import QueryError, evaluate, parse_where
 
 #: Lift below the base circle tolerated as round-off [m].
@@ -856,7 +856,7 @@ def check_unique(cases: list[ResolvedCase], spec: Spec, source: str) -> None:
         seen[c.case_id] = c.index
 
 
-#: Keys always stored per case (their archive names: see campipe.study.variables).
+#: Keys always stored per case (their archive names: see campipe.study.spec.variables).
 STANDARD_KEYS = ("speed", "seat", "profile", "defects", "closure", "run.integrator", "run.dt")
 
 
