@@ -690,7 +690,7 @@ def validate(
     click.echo(f"batches: {count_batches(loaded.cases, size)} of up to {size} cases")
     if estimate:
         from campipe.engine.kernels import compile_notice
-        from campipe.study.spec.expand import distinct_but_speed
+        from campipe.study.spec.resolve import distinct_but_speed
 
         text = compile_notice(c.settings for c in distinct_but_speed(loaded.cases)[0])
         if text:
@@ -748,7 +748,7 @@ def _seconds(seconds: float) -> str:
 def validate_text(loaded, spec_path) -> str:
     """The checked study in words: cases, axes (values as the spec wrote them), run."""
     from campipe.study.archive.layout import coordinate_values
-    from campipe.study.spec.expand import distinct_but_speed
+    from campipe.study.spec.resolve import distinct_but_speed
     from campipe.study.spec.variables import case_coordinates
 
     s = loaded.spec

@@ -40,7 +40,8 @@ from campipe.study.archive.layout import coordinate_values
 from campipe.study.query.tables import case_table, replay_mask, select
 from campipe.study.run.results import BatchData, BatchPlan
 from campipe.study.spec.check import SpecError, check_spec
-from campipe.study.spec.expand import ResolvedCase, Study, expand
+from campipe.study.spec.expand import Study, expand
+from campipe.study.spec.resolve import ResolvedCase
 from campipe.study.spec.variables import VARIABLES, case_coordinates, data_variables
 from campipe.vocabulary import N_COORDINATES
 
@@ -397,7 +398,7 @@ def batch_columns(
 
 def batch_cases(study: Study, plan: BatchPlan, data: BatchData) -> list[ReplayCase]:
     """The cases of a computed batch that the spec's ``replay: {where: ...}`` selects
-    (:func:`campipe.study.query.replay_mask`), as replay cases (q computed again for a study
+    (:func:`campipe.study.query.tables.replay_mask`), as replay cases (q computed again for a study
     that does not record it).
 
     Parameters

@@ -22,8 +22,9 @@ from pathlib import Path
 
 from campipe.io.spec_yaml import read_spec
 from campipe.study.spec.check import Spec, SpecError, check_spec
-from campipe.study.spec.expand import ResolvedCase, Study, expand
+from campipe.study.spec.expand import Study, expand
 from campipe.study.spec.limits import Limits
+from campipe.study.spec.resolve import ResolvedCase
 
 __all__ = [
     "Limits",

@@ -13,7 +13,8 @@ from campipe.cli import main
 from campipe.study import SpecError
 from campipe.study.run.batches import count_batches, plan_batches
 from campipe.study.spec.check import check_spec
-from campipe.study.spec.expand import SpeedSweep, expand
+from campipe.study.spec.expand import expand
+from campipe.study.spec.resolve import SpeedSweep
 
 SPECS = {
     "speed inside two sweeps": """
@@ -178,10 +179,10 @@ def test_a_speeds_case_id_hashes_the_whole_canonical_json(canonical):
     """``speed_case_ids`` hashes the JSON before the speed once: each id is still
     ``case_id`` of the whole canonical parameters, for speeds whose JSON differs (negative
     zero, exponents, many digits)."""
-    from campipe.study.spec.expand import _clean, case_id, speed_case_ids
+    from campipe.study.spec.resolve import case_id, clean_value, speed_case_ids
 
     ids = speed_case_ids(canonical)
     for speed in (-0.0, 0.0, 1e-300, 628.3185307179587, 1.5e22, 1047.1975511965977, 7.0):
-        assert ids(speed) == case_id({**canonical, "speed": _clean(speed)}), speed
+        assert ids(speed) == case_id({**canonical, "speed": clean_value(speed)}), speed
     with pytest.raises(ValueError):
         ids(float("nan"))

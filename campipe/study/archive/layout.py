@@ -10,7 +10,8 @@ from collections.abc import Iterable, Mapping, Sequence
 import numpy as np
 
 from campipe.io.archive import VariableSpec
-from campipe.study.spec.expand import ResolvedCase, Study
+from campipe.study.spec.expand import Study
+from campipe.study.spec.resolve import ResolvedCase
 from campipe.study.spec.variables import (
     DOF_NAMES,
     DOF_UNITS,

@@ -31,7 +31,7 @@ from campipe.study.archive.layout import (
 )
 from campipe.study.run.keys import batch_key
 from campipe.study.run.results import BatchData, BatchPlan
-from campipe.study.spec.expand import ResolvedCase, distinct_but_speed
+from campipe.study.spec.resolve import ResolvedCase, distinct_but_speed
 from campipe.study.spec.variables import DOF_NAMES, VARIABLES
 
 #: Default batches hold MIN_BATCH_SIZE … MAX_BATCH_SIZE cases: about four batches per worker,

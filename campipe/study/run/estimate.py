@@ -32,7 +32,8 @@ from campipe.constants import TWO_PI
 from campipe.engine.settings import RunSettings, sample_count, turn_count
 from campipe.study.run.batches import default_batch_size, plan_batches
 from campipe.study.run.execute import run_study
-from campipe.study.spec.expand import ResolvedCase, SpeedSweep, Study, distinct_but_speed
+from campipe.study.spec.expand import Study
+from campipe.study.spec.resolve import ResolvedCase, SpeedSweep, distinct_but_speed
 from campipe.study.spec.variables import DOF_NAMES, data_variables
 
 #: Longest kernel warm-up counted as start-up [s]: a kernel loads from numba's cache in well

@@ -57,7 +57,8 @@ from campipe.study.run.resume import (
     up_to_date,
 )
 from campipe.study.run.workers import run_distributed, run_local, stored_here
-from campipe.study.spec.expand import ResolvedCase, Study
+from campipe.study.spec.expand import Study
+from campipe.study.spec.resolve import ResolvedCase
 from campipe.vocabulary import OK, STATUS
 
 log = logging.getLogger(__name__)

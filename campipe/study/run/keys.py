@@ -65,11 +65,14 @@ def study_attrs(study: Study) -> dict[str, object]:
 #: :func:`numerics_fingerprint` covers): a spec read by the same code gives the same study.
 SPEC_SOURCES = (
     "study/spec/check.py",
+    "study/spec/blocks.py",
     "study/spec/fields.py",
     "study/spec/expand.py",
+    "study/spec/resolve.py",
     "study/spec/limits.py",
-    "study/archive/layout.py",
     "study/spec/variables.py",
+    "study/archive/layout.py",
+    "study/run/keys.py",
     "study/where.py",
     "io/spec_yaml.py",
     "io/lift_table.py",
@@ -119,7 +122,7 @@ def spec_key(text: str, overrides: Mapping[str, object], directory: Path) -> str
     """Equal for two runs that read the same spec text, overrides and referenced files
     (lift tables) with the same campipe: they expand to the same cases, so an archive that
     records this key (``spec_key``) and verifies is up to date without the spec being checked
-    or expanded again (:func:`campipe.study.run.execute.finished`)."""
+    or expanded again (:func:`campipe.study.run.resume.finished`)."""
     h = hashlib.sha256()
     for part in (LAYOUT_VERSION, numerics_fingerprint(), _spec_code(), text):
         h.update(part.encode("utf-8", "surrogatepass") + b"\0")

@@ -24,7 +24,7 @@ from campipe.engine.loads import (
     spring_histories,
 )
 from campipe.sources import source_digest
-from campipe.study.spec.expand import ResolvedCase
+from campipe.study.spec.resolve import ResolvedCase
 from campipe.study.spec.variables import (
     CONTACT_PRESSURE_METRICS,
     PER_REVOLUTION_METRICS,

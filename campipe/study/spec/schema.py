@@ -5,7 +5,7 @@ and the model's own schema (:func:`campipe.model.schema.model_schema`).
 regenerate it with ``python -m campipe.study.spec.schema > schemas/study.schema.json``.
 
 The schema checks a spec's shape (keys, types, quantities written with units, enumerations);
-:func:`campipe.study.spec.check_spec` checks the rest (units of the right dimension, ranges,
+:func:`campipe.study.spec.check.check_spec` checks the rest (units of the right dimension, ranges,
 a seat below full lift, the step limit) and names the key path of every problem.
 """
 
