@@ -42,15 +42,11 @@ from campipe.engine import Case, RunSettings, run_batch
 from campipe.engine.settings import sample_count
 from campipe.study import load_study
 from campipe.study.run.assembly import assemble, read_batch
-from campipe.study.run.batches import (
-    default_batch_size,
-    default_workers,
-    parts_directory,
-    plan_batches,
-)
+from campipe.study.run.batches import parts_directory, plan_batches
 from campipe.study.run.execute import run_study
 from campipe.study.run.results import full_state
 from campipe.study.run.resume import find_results
+from campipe.study.run.sizing import default_batch_size, default_workers
 from campipe.study.spec.expand import Study
 from campipe.study.spec.fields import COMPRESSIONS
 from campipe.study.spec.variables import data_variables

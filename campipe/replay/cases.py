@@ -36,10 +36,10 @@ from campipe.errors import CampipeError, did_you_mean
 from campipe.io.spec_yaml import SpecFileError, parse_spec_text
 from campipe.model import PARAMETERS, ModelParameterError, ValveTrain, valve_train
 from campipe.model.parameters import Parameter
-from campipe.study.archive.layout import coordinate_values
 from campipe.study.query.tables import case_table, replay_mask, select
 from campipe.study.run.results import BatchData, BatchPlan
 from campipe.study.spec.check import SpecError, check_spec
+from campipe.study.spec.coordinates import coordinate_values
 from campipe.study.spec.expand import Study, expand
 from campipe.study.spec.resolve import ResolvedCase
 from campipe.study.spec.variables import VARIABLES, case_coordinates, data_variables

@@ -24,10 +24,10 @@ from campipe.io import rerun_replay as rrio
 from campipe.replay.cases import ReplayCase, ReplayError, archive_cases, batch_cases, select_rows
 from campipe.replay.record import recording_case
 from campipe.replay.sketch import DEFAULT_MAGNIFICATION
-from campipe.study.archive.layout import coordinate_values
 from campipe.study.query.tables import stored_units
 from campipe.study.run.keys import study_key
 from campipe.study.run.results import BatchData, BatchPlan, compute_batch
+from campipe.study.spec.coordinates import coordinate_values
 from campipe.study.spec.expand import Study
 from campipe.study.where import evaluate, parse_where
 

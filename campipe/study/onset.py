@@ -21,8 +21,8 @@ from campipe.engine import periodic
 from campipe.engine.kernels import compile_first
 from campipe.errors import CampipeError
 from campipe.io.archive import VariableSpec
-from campipe.study.archive.layout import key_columns
 from campipe.study.query.tables import CaseTable
+from campipe.study.spec.coordinates import key_columns
 from campipe.study.spec.expand import Study
 from campipe.study.spec.variables import case_coordinates
 

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from campipe.cli import DEFAULT_LIMITS
+from campipe.cli.base import DEFAULT_LIMITS
 from campipe.study.spec.limits import Limits
 
 HERE = Path(__file__).parents[1]  # tests/: fuzz_driver.py and the helpers

@@ -11,8 +11,9 @@ from matplotlib.image import imread
 from numpy.testing import assert_allclose
 from study_helpers import INCH, LBF, write_spec
 
-from campipe import cli
 from campipe.cli import main
+from campipe.cli.base import UNIT_SYSTEMS
+from campipe.cli.plot import PLOT_KINDS
 from campipe.plot import plot_archive
 from campipe.plot.figures import figure
 from campipe.study import load_study
@@ -245,7 +246,7 @@ def test_every_format_by_its_suffix_and_errors_by_their_option(archive, tmp_path
 
 
 def test_the_command_line_lists_every_kind_and_unit_system():
-    assert cli.PLOT_KINDS == tuple(KINDS) and cli.UNIT_SYSTEMS == SYSTEMS
+    assert PLOT_KINDS == tuple(KINDS) and UNIT_SYSTEMS == SYSTEMS
 
 
 def test_a_spec_writes_its_plots_beside_the_archive(tmp_path):

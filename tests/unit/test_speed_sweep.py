@@ -11,7 +11,8 @@ from click.testing import CliRunner
 
 from campipe.cli import main
 from campipe.study import SpecError
-from campipe.study.run.batches import count_batches, plan_batches
+from campipe.study.run.batches import plan_batches
+from campipe.study.run.sizing import count_batches
 from campipe.study.spec.check import check_spec
 from campipe.study.spec.expand import expand
 from campipe.study.spec.resolve import SpeedSweep

@@ -228,7 +228,7 @@ def test_where_takes_conditions_only():
 
 
 def test_long_histories_make_smaller_default_batches():
-    from campipe.study.run.batches import default_batch_size
+    from campipe.study.run.sizing import default_batch_size
 
     assert default_batch_size(1000, 2) == 125  # four batches per worker
     assert default_batch_size(10_000, 2) == 256  # at most MAX_BATCH_SIZE

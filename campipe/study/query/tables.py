@@ -16,8 +16,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from campipe.errors import did_you_mean, excerpt
-from campipe.study.archive.layout import coordinate_values
 from campipe.study.query.display import display_units, format_value, label, to_display
+from campipe.study.spec.coordinates import coordinate_values
 from campipe.study.spec.variables import VARIABLES, case_coordinates, data_variables
 from campipe.study.where import QueryError, Where, evaluate, parse_where
 from campipe.vocabulary import EVENTS_TRUNCATED, FAILURES, STATUS

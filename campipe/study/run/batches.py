@@ -9,19 +9,14 @@ its key hashes the case ids it holds, so a changed spec never picks up another s
 
 from __future__ import annotations
 
-import os
-from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-
-import numpy as np
 
 from campipe.errors import CampipeError
 from campipe.io import batch_file
 from campipe.io.archive import write_error
 from campipe.study.archive.layout import (
-    CASE_ID,
     LAYOUT_VERSION,
     axis_arrays,
     axis_names,
@@ -31,15 +26,9 @@ from campipe.study.archive.layout import (
 )
 from campipe.study.run.keys import batch_key
 from campipe.study.run.results import BatchData, BatchPlan
-from campipe.study.spec.resolve import ResolvedCase, distinct_but_speed
+from campipe.study.spec.coordinates import CASE_ID
+from campipe.study.spec.resolve import ResolvedCase
 from campipe.study.spec.variables import DOF_NAMES, VARIABLES
-
-#: Default batches hold MIN_BATCH_SIZE … MAX_BATCH_SIZE cases: about four batches per worker,
-#: so the workers finish together, but not so small that the archive's per-batch work or the
-#: engine's per-call set-up outweighs computing it (1000 cases on two workers, with netCDF
-#: batch files: 32-case batches took 1.3 s in the study layer, 125-case ones 0.85 s).
-MIN_BATCH_SIZE = 4
-MAX_BATCH_SIZE = 256
 
 #: Called with each newly computed batch after it is stored (in the process that stores it:
 #: a worker thread for local schedulers, this process for distributed). The replay logger,
@@ -86,39 +75,6 @@ class Stored:
 def parts_directory(archive: Path) -> Path:
     """Where the batch files of an archive live: ``<archive>.parts`` beside it."""
     return archive.with_name(archive.name + ".parts")
-
-
-def default_workers() -> int:
-    """Cores this process may use."""
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # not on Linux
-        return os.cpu_count() or 1
-
-
-#: Memory a batch's histories may take in the engine [bytes]; a batch of long histories
-#: (many samples per case) is cut smaller to stay within it.
-BATCH_MEMORY = 512 * 2**20
-#: The engine's bytes per case and stored sample (q and v of seven coordinates, forces,
-#: lifts, state, and the archive arrays made from them), roughly.
-BYTES_PER_SAMPLE = 320
-
-
-def default_batch_size(n_cases: int, workers: int, samples: int = 0) -> int:
-    """About four batches per worker, within MIN_BATCH_SIZE … MAX_BATCH_SIZE cases, and
-    fewer (down to one) when ``samples`` per case would take more than BATCH_MEMORY."""
-    size = int(np.clip(-(-n_cases // (4 * max(workers, 1))), MIN_BATCH_SIZE, MAX_BATCH_SIZE))
-    if samples:
-        size = min(size, max(1, BATCH_MEMORY // (samples * BYTES_PER_SAMPLE)))
-    return size
-
-
-def count_batches(cases: Sequence[ResolvedCase], batch_size: int) -> int:
-    """How many batches :func:`plan_batches` cuts ``cases`` into, without building them (a
-    speed sweep's cases counted by its other axes' combinations)."""
-    others, speeds = distinct_but_speed(cases)
-    groups = Counter(c.settings for c in others)
-    return sum(-(-n * speeds // batch_size) for n in groups.values())
 
 
 def plan_batches(

@@ -34,15 +34,7 @@ from pathlib import Path
 from campipe.engine.settings import sample_count
 from campipe.io.archive import write_error, writing
 from campipe.study.run.assembly import Assembly
-from campipe.study.run.batches import (
-    BatchHook,
-    OptionError,
-    Stored,
-    default_batch_size,
-    default_workers,
-    parts_directory,
-    plan_batches,
-)
+from campipe.study.run.batches import BatchHook, OptionError, Stored, parts_directory, plan_batches
 from campipe.study.run.progress import Progress
 from campipe.study.run.results import BatchData, BatchPlan
 from campipe.study.run.resume import (
@@ -56,6 +48,7 @@ from campipe.study.run.resume import (
     spec_file,
     up_to_date,
 )
+from campipe.study.run.sizing import default_batch_size, default_workers
 from campipe.study.run.workers import run_distributed, run_local, stored_here
 from campipe.study.spec.expand import Study
 from campipe.study.spec.resolve import ResolvedCase

@@ -29,10 +29,11 @@ from campipe.io.archive import (
     verify,
 )
 from campipe.io.spec_yaml import SpecFileError, read_spec
-from campipe.study.archive.layout import CASE_ID, LAYOUT_VERSION, record_text
+from campipe.study.archive.layout import LAYOUT_VERSION, record_text
 from campipe.study.run.batches import OptionError, parts_directory
 from campipe.study.run.keys import spec_key, study_key
 from campipe.study.run.results import numerics_fingerprint
+from campipe.study.spec.coordinates import CASE_ID
 from campipe.study.spec.expand import Study
 from campipe.vocabulary import EVENTS_TRUNCATED, FAILURES, OK, STATUS
 

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from campipe.engine.settings import sample_count, turn_count
 from campipe.errors import did_you_mean, excerpt
 from campipe.io.compression import COMPRESSION
 from campipe.study.spec.blocks import leaf_keys
@@ -38,7 +39,7 @@ from campipe.study.spec.resolve import (
     resolve,
     resolve_canonical,
 )
-from campipe.study.spec.variables import case_coordinates, data_variables
+from campipe.study.spec.variables import DOF_NAMES, case_coordinates, data_variables
 from campipe.study.where import QueryError, evaluate, parse_where
 
 
@@ -67,6 +68,23 @@ class Study:
     @property
     def name(self) -> str:
         return self.spec.name
+
+
+def archive_bytes(study: Study) -> int:
+    """Size of the archive's variables before compression [bytes] (events not counted)."""
+    n_out = sample_count(study.revolutions, study.output_every)
+    n_rev = turn_count(study.revolutions)
+    sizes = {"cam_angle": n_out, "revolution": n_rev, "dof": len(DOF_NAMES), "event": 0}
+    per_case = 0
+    for var in data_variables(study.record).values():
+        if "case" not in var.dims:
+            continue
+        n = 1
+        for d in var.dims[1:]:
+            n *= sizes[d]
+        per_case += n * np.dtype(var.dtype).itemsize
+    per_case += 16 + 8 * 8 + 64  # case id, numeric coordinates, labels (about)
+    return len(study.cases) * per_case + n_out * 8
 
 
 # -- expansion ------------------------------------------------------------------------------
