@@ -4,10 +4,11 @@ The packages, in the order a study passes through them, each importing only thos
 
 - :mod:`~campipe.study.spec`: the spec's keys (``fields``), checking (``check``, ``blocks``),
   expansion and each case resolved to engine inputs and a stable id (``expand``,
-  ``resolve``), the limits, the variables a study records, plot requests, the JSON Schema.
+  ``resolve``), the limits, the variables a study records and each case's coordinates,
+  plot requests, the JSON Schema.
 - :mod:`~campipe.study.archive`: the archive's layout, and an archive read as a grid.
-- :mod:`~campipe.study.run`: one batch through the engine (``results``), batches on dask,
-  batch files and resume, the archive's assembly, the progress line, the estimate.
+- :mod:`~campipe.study.run`: one batch through the engine (``results``), batch sizes, batches
+  on dask, batch files and resume, the archive's assembly, the progress line, the estimate.
 - :mod:`~campipe.study.query`: tables, ``--where`` selections, the summary, units shown.
 
 :mod:`~campipe.study.where` (the ``--where`` language) lies below them all: a spec's
