@@ -359,7 +359,7 @@ def markdown(bench: Bench, with_plots: bool = True) -> str:
             "Default integrator, 2 turns per case, harmonic cam 6000–14000 rpm, "
             "alternately without and with a seat. *engine*: batches of 32 as dask "
             "tasks on the threaded scheduler, nothing stored; *study*: "
-            "`campipe.study.run.execute.run_study` from a spec, archive written."
+            "`campipe.study.execute.run_study` from a spec, archive written."
         )
         lines.append("")
         lines += _table(

@@ -17,9 +17,8 @@ from campipe.cli.plot import PLOT_KINDS
 from campipe.plot import plot_archive
 from campipe.plot.figures import figure
 from campipe.study import load_study
-from campipe.study.query.display import SYSTEMS
 from campipe.study.run.execute import run_study
-from campipe.study.spec.plots import KINDS, PlotError, PlotRequest
+from campipe.study.spec.plots import KINDS, SYSTEMS, PlotError, PlotRequest
 from campipe.vocabulary import CAM_IMPACT, CAM_SEPARATION, SEAT_IMPACT, SEAT_SEPARATION
 
 SPEC = """
