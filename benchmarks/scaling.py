@@ -3,7 +3,7 @@
 - :func:`scaling_spec`: a spec of ``n`` cases, the speeds and seats of
   :func:`campipe.bench.scaling.scaling_cases` as a sweep.
 - :func:`study_scaling`: that study through the study layer's executor
-  (:func:`campipe.study.execute.run_study`), archive included, on 1 and 2 worker threads; the
+  (:func:`campipe.study.run.execute.run_study`), archive included, on 1 and 2 worker threads; the
   archive's size per case. Its points sit beside ``campipe bench``'s engine points (the same
   :class:`~campipe.bench.scaling.ScalingPoint`, layer ``"study"``).
 
@@ -20,7 +20,7 @@ import yaml
 
 from campipe.bench.scaling import SCALING_REVOLUTIONS, SPEED_RANGE, ScalingPoint
 from campipe.study import load_study
-from campipe.study.execute import run_study
+from campipe.study.run.execute import run_study
 
 
 def scaling_spec(n: int) -> dict:

@@ -51,20 +51,15 @@ from benchmarks.scaling import scaling_spec, study_scaling
 from campipe.engine import Case, RunSettings, run_batch
 from campipe.engine.settings import sample_count
 from campipe.study import load_study
-from campipe.study.execute import (
-    assemble,
-    default_batch_size,
-    default_workers,
-    find_results,
-    parts_directory,
-    plan_batches,
-    read_batch,
-    run_study,
-)
-from campipe.study.expand import Study
-from campipe.study.fields import COMPRESSIONS
-from campipe.study.results import full_state
-from campipe.study.variables import data_variables
+from campipe.study.run.assembly import assemble, read_batch
+from campipe.study.run.batches import parts_directory, plan_batches
+from campipe.study.run.execute import run_study
+from campipe.study.run.results import full_state
+from campipe.study.run.resume import find_results
+from campipe.study.run.sizing import default_batch_size, default_workers
+from campipe.study.spec.expand import Study
+from campipe.study.spec.fields import COMPRESSIONS
+from campipe.study.spec.variables import data_variables
 
 #: Case counts of the study section, and of --quick.
 COUNTS = (1, 32, 1000, 10000)
@@ -452,7 +447,7 @@ def first_run(studies: Path, directory: Path) -> dict:
 def validate_estimate(study: Study, workers: int) -> float:
     """``campipe validate``'s run-time estimate [s] of a study on ``workers`` workers: the
     one place the benchmark asks for it."""
-    from campipe.study.estimate import estimate
+    from campipe.study.run.estimate import estimate
 
     return estimate(study, workers).seconds
 

@@ -13,7 +13,7 @@ __all__ = ["__version__", "open_study"]
 def __getattr__(name: str):
     # PEP 562: campipe.open_study without importing xarray and the study layer at import
     if name == "open_study":
-        from campipe.study.open import open_study
+        from campipe.study.archive.open import open_study
 
         return open_study
     raise AttributeError(f"module 'campipe' has no attribute {name!r}")

@@ -1,5 +1,5 @@
 """Digests of campipe's own source files: of what computes the numbers
-(``campipe.study.results.numerics_fingerprint``) and of what the kernels compile from
+(``campipe.study.run.results.numerics_fingerprint``) and of what the kernels compile from
 (``campipe.kernel_cache``)."""
 
 from __future__ import annotations

@@ -24,7 +24,7 @@ from campipe.cli import main
 from campipe.constants import INCH, LBF
 from campipe.model import system_matrices, thesis_train
 from campipe.study import load_study
-from campipe.study.execute import run_study
+from campipe.study.run.execute import run_study
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"

@@ -15,7 +15,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 import xarray as xr
 
-from campipe.study.query import case_table, select
+from campipe.study.query.tables import case_table, select
 
 
 def chosen(ds: xr.Dataset, where: str | None) -> np.ndarray:

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import xarray as xr
 
-from campipe.study.variables import VOLATILE_ATTRS
+from campipe.study.spec.variables import VOLATILE_ATTRS
 
 ROOT = Path(__file__).parents[1]
 STUDIES = ROOT / "studies"

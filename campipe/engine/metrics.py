@@ -8,7 +8,7 @@ Every metric is a row of :data:`METRICS`. From the table follow
 - :class:`~campipe.engine.batch.BatchResult`'s ``<key>_per_rev`` (SI, per case and turn) and
   ``<key>`` (over the measured turns, as the row's ``summary`` says);
 - the archive's two variables per row (``per_rev`` per revolution, ``summary`` over the
-  measured ones: :mod:`campipe.study.variables`), and so ``campipe query``'s columns;
+  measured ones: :mod:`campipe.study.spec.variables`), and so ``campipe query``'s columns;
 - the variable table of ``docs/studies.md`` (``python -m campipe.engine.metrics``).
 
 Adding a metric an integrator produces is its row here plus the lines in each integrator

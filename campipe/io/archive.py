@@ -40,9 +40,12 @@ import numpy as np
 
 from campipe import __version__
 from campipe.errors import CampipeError
+from campipe.io.compression import COMPRESSION, COMPRESSIONS
 from campipe.io.lock import ArchiveBusyError, lock_path, writing
 
 __all__ = [
+    "COMPRESSION",
+    "COMPRESSIONS",
     "ArchiveBusyError",
     "ArchiveFileError",
     "NetCDFWriter",
@@ -55,19 +58,6 @@ log = logging.getLogger(__name__)
 
 #: Serialises netCDF4 calls from this process's threads.
 LOCK = threading.RLock()
-#: How an archive's variables may be compressed (the spec's ``run.compression``) → the
-#: keywords netCDF4 takes for it. zstd (HDF5 filter 32015, netCDF-C 4.9 and later, built into
-#: the netCDF4 wheels): written and read faster than zlib, the file somewhat larger (``campipe
-#: bench`` measures both); netCDF4 applies no byte shuffle before it. zlib with the byte
-#: shuffle: read by every netCDF-4 reader. Level 1 of either compresses these histories
-#: nearly as well as higher levels in less time.
-COMPRESSIONS: dict[str, dict[str, Any]] = {
-    "zstd": {"compression": "zstd", "complevel": 1},
-    "zlib": {"compression": "zlib", "complevel": 1, "shuffle": True},
-    "none": {},
-}
-#: The default compression.
-COMPRESSION = "zstd"
 #: Cases per chunk of a variable along case and samples (a history): eight cases' histories
 #: compress a third better than one case's alone and cost HDF5 an eighth of the chunks; reading
 #: one case decompresses eight cases' rows of a variable (46 kB of a 721-sample history).

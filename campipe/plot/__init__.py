@@ -1,7 +1,7 @@
 """Figures of an archive: ``campipe plot KIND ARCHIVE`` and a spec's ``plots:`` list.
 
 - :mod:`~campipe.plot.figures`: each kind as a matplotlib Figure, built from an archive (an
-  ``xarray.Dataset``) and a :class:`~campipe.study.plots.PlotRequest`; pure, nothing written;
+  ``xarray.Dataset``) and a :class:`~campipe.study.spec.plots.PlotRequest`; pure, nothing written;
 - :mod:`~campipe.plot.style`: lines and markers that read in grey, labels with units.
 
 matplotlib is imported by these modules only, so ``campipe --help`` and the other commands
@@ -13,13 +13,13 @@ from __future__ import annotations
 from pathlib import Path
 
 from campipe.io.archive import ArchiveFileError, unreadable
-from campipe.study.plots import PlotRequest
+from campipe.study.spec.plots import PlotRequest
 
 
 def plot_archive(archive: str | Path, request: PlotRequest, output: str | Path | None = None):
     """Draw ``request`` from the archive at ``archive`` and write it to ``output`` (default
     ``request.output`` relative to the archive's folder, else
-    :meth:`~campipe.study.plots.PlotRequest.default_output`); the format follows the suffix.
+    :meth:`~campipe.study.spec.plots.PlotRequest.default_output`); the format follows the suffix.
 
     Returns
     -------
@@ -46,7 +46,7 @@ def plot_archive(archive: str | Path, request: PlotRequest, output: str | Path |
 
 def write(fig, path: str | Path) -> Path:
     """Write a figure; PNG, SVG or PDF by the suffix of ``path``."""
-    from campipe.study.plots import FORMATS, PlotError
+    from campipe.study.spec.plots import FORMATS, PlotError
 
     path = Path(path)
     if path.suffix.lower() not in FORMATS:

@@ -2,7 +2,7 @@
 
 The figures are built with matplotlib's object interface (no pyplot state: a figure lives as
 long as its caller keeps it). Every figure is titled with the study's name, labels its axes
-with units in the request's unit system (:mod:`campipe.study.display`) and draws each case
+with units in the request's unit system (:mod:`campipe.study.query.display`) and draws each case
 or group in a distinct line style and marker as well as a shade (:mod:`campipe.plot.style`).
 
 - ``histories``: valve lift, valve velocity, valve acceleration, cam and follower lift, cam
@@ -28,10 +28,10 @@ from matplotlib.figure import Figure
 
 from campipe.errors import did_you_mean, excerpt
 from campipe.plot.style import COLORMAP, EVENT_MARKERS, line_styles
-from campipe.study.display import display_units, format_value, label, to_display
-from campipe.study.plots import PlotError, PlotRequest, check_turn
-from campipe.study.query import CaseTable, case_table, displayed, select
-from campipe.study.variables import VARIABLES
+from campipe.study.query.display import display_units, format_value, label, to_display
+from campipe.study.query.tables import CaseTable, case_table, displayed, select
+from campipe.study.spec.plots import PlotError, PlotRequest, check_turn
+from campipe.study.spec.variables import VARIABLES
 from campipe.units import QuantityError, convert, read_quantity
 from campipe.vocabulary import FAILURES
 

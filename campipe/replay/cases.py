@@ -36,12 +36,13 @@ from campipe.errors import CampipeError, did_you_mean
 from campipe.io.spec_yaml import SpecFileError, parse_spec_text
 from campipe.model import PARAMETERS, ModelParameterError, ValveTrain, valve_train
 from campipe.model.parameters import Parameter
-from campipe.study.expand import ResolvedCase, Study, expand
-from campipe.study.layout import coordinate_values
-from campipe.study.query import case_table, replay_mask, select
-from campipe.study.results import BatchData, BatchPlan
-from campipe.study.spec import SpecError, check_spec
-from campipe.study.variables import VARIABLES, case_coordinates, data_variables
+from campipe.study.query.tables import case_table, replay_mask, select
+from campipe.study.run.results import BatchData, BatchPlan
+from campipe.study.spec.check import SpecError, check_spec
+from campipe.study.spec.coordinates import coordinate_values
+from campipe.study.spec.expand import Study, expand
+from campipe.study.spec.resolve import ResolvedCase
+from campipe.study.spec.variables import VARIABLES, case_coordinates, data_variables
 from campipe.vocabulary import N_COORDINATES
 
 log = logging.getLogger(__name__)
@@ -397,14 +398,14 @@ def batch_columns(
 
 def batch_cases(study: Study, plan: BatchPlan, data: BatchData) -> list[ReplayCase]:
     """The cases of a computed batch that the spec's ``replay: {where: ...}`` selects
-    (:func:`campipe.study.query.replay_mask`), as replay cases (q computed again for a study
+    (:func:`campipe.study.query.tables.replay_mask`), as replay cases (q computed again for a study
     that does not record it).
 
     Parameters
     ----------
     study : campipe.study.Study
-    plan : campipe.study.results.BatchPlan
-    data : campipe.study.results.BatchData
+    plan : campipe.study.run.results.BatchPlan
+    data : campipe.study.run.results.BatchData
         The batch's archive arrays, as stored.
     """
     rows = np.flatnonzero(replay_mask(study, plan, data))

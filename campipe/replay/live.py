@@ -1,6 +1,6 @@
 """A study's ``replay: {where: EXPR}``: its cases logged to rerun while the study runs.
 
-:class:`StudyReplay` is the study layer's batch hook (:data:`campipe.study.execute.BatchHook`):
+:class:`StudyReplay` is the study layer's batch hook (:data:`campipe.study.run.execute.BatchHook`):
 each newly computed batch's cases that the expression selects are logged as soon as the batch
 is stored, into ``<archive stem>.rrd`` beside the archive. :meth:`StudyReplay.finish` then
 adds the selected cases this run did not compute (taken from an earlier run's batches or
@@ -24,10 +24,11 @@ from campipe.io import rerun_replay as rrio
 from campipe.replay.cases import ReplayCase, ReplayError, archive_cases, batch_cases, select_rows
 from campipe.replay.record import recording_case
 from campipe.replay.sketch import DEFAULT_MAGNIFICATION
-from campipe.study.expand import Study
-from campipe.study.layout import coordinate_values, study_key
-from campipe.study.query import stored_units
-from campipe.study.results import BatchData, BatchPlan, compute_batch
+from campipe.study.query.tables import stored_units
+from campipe.study.run.keys import study_key
+from campipe.study.run.results import BatchData, BatchPlan, compute_batch
+from campipe.study.spec.coordinates import coordinate_values
+from campipe.study.spec.expand import Study
 from campipe.study.where import evaluate, parse_where
 
 if TYPE_CHECKING:

@@ -26,7 +26,7 @@ from campipe.io.rerun_replay import (
 from campipe.model import PARAMETERS
 from campipe.replay import sketch
 from campipe.replay.cases import ReplayCase, ReplayError, archive_cases, select_rows
-from campipe.study.progress import Progress
+from campipe.study.run.progress import Progress
 
 #: Line radii of the sketch's parts drawn with no width of their own [m].
 HEAD_RADIUS = SPRING_RADIUS = 0.0005

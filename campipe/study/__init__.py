@@ -1,19 +1,19 @@
 """Studies: a YAML spec expanded into cases, run in batches on dask, stored in one archive.
 
-Layers, in the order a study passes through them:
+The packages, in the order a study passes through them, each importing only those before it:
 
-- :mod:`~campipe.study.fields`: the spec's keys, declared once.
-- :mod:`~campipe.study.spec`: checking a spec (key paths in every message).
-- :mod:`~campipe.study.expand`: expansion (sweep, zip, cases, sample) and resolution of each
-  case to engine inputs and a stable id.
-- :mod:`~campipe.study.results`: one batch through the engine, as archive arrays.
-- :mod:`~campipe.study.variables`, :mod:`~campipe.study.layout`: the archive's variables.
-- :mod:`~campipe.study.execute`: batches on dask, resume, the archive.
-- :mod:`~campipe.study.where`: the ``--where`` language.
-- :mod:`~campipe.study.query`: tables, the summary and the replay selection.
-- :mod:`~campipe.study.schema`: the JSON Schema of a spec.
+- :mod:`~campipe.study.spec`: the spec's keys (``fields``), checking (``check``, ``blocks``),
+  expansion and each case resolved to engine inputs and a stable id (``expand``,
+  ``resolve``), the limits, the variables a study records and each case's coordinates,
+  plot requests, the JSON Schema.
+- :mod:`~campipe.study.archive`: the archive's layout, and an archive read as a grid.
+- :mod:`~campipe.study.run`: one batch through the engine (``results``), batch sizes, batches
+  on dask, batch files and resume, the archive's assembly, the progress line, the estimate.
+- :mod:`~campipe.study.query`: tables, ``--where`` selections, the summary, units shown.
 
-File formats live in :mod:`campipe.io`.
+:mod:`~campipe.study.where` (the ``--where`` language) lies below them all: a spec's
+``replay.where`` and plots are written in it. :mod:`~campipe.study.onset` (``campipe onset``)
+lies above them all. File formats live in :mod:`campipe.io`.
 """
 
 from __future__ import annotations
@@ -22,9 +22,10 @@ from collections.abc import Mapping
 from pathlib import Path
 
 from campipe.io.spec_yaml import read_spec
-from campipe.study.expand import ResolvedCase, Study, expand
-from campipe.study.limits import Limits
-from campipe.study.spec import Spec, SpecError, check_spec
+from campipe.study.spec.check import Spec, SpecError, check_spec
+from campipe.study.spec.expand import Study, expand
+from campipe.study.spec.limits import Limits
+from campipe.study.spec.resolve import ResolvedCase
 
 __all__ = [
     "Limits",

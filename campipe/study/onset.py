@@ -21,10 +21,10 @@ from campipe.engine import periodic
 from campipe.engine.kernels import compile_first
 from campipe.errors import CampipeError
 from campipe.io.archive import VariableSpec
-from campipe.study.expand import Study
-from campipe.study.layout import key_columns
-from campipe.study.query import CaseTable
-from campipe.study.variables import case_coordinates
+from campipe.study.query.tables import CaseTable
+from campipe.study.spec.coordinates import key_columns
+from campipe.study.spec.expand import Study
+from campipe.study.spec.variables import case_coordinates
 
 #: The columns every onset table has after the varied parameters.
 ONSET_COLUMNS = ("onset_speed_rpm", "onset_status", "confirmed")

@@ -28,7 +28,7 @@ Numbers compare equal within a relative :data:`EQUAL_RTOL` (1e-9), after convers
 seat written as ``0.1 in``; zero equals only zero.
 
 ``none`` is the value of no seat (stored as ``-inf``: see
-:data:`campipe.study.variables.NO_SEAT`). ``x is none`` holds where ``x`` has no value: no
+:data:`campipe.study.spec.variables.NO_SEAT`). ``x is none`` holds where ``x`` has no value: no
 seat, or NaN (a failed case's metric, ``dt`` chosen by the integrator); ``x == none`` and
 ``x in [none, ...]`` mean the same, ``is not none`` and ``!= none`` the opposite. ``is nan``
 is the older spelling of ``is none`` and means the same. A seat of none orders below every

@@ -24,7 +24,7 @@ from campipe.io.archive import (
     read_attrs,
     verify,
 )
-from campipe.study.execute import parts_directory
+from campipe.study.run.batches import parts_directory
 
 SPEC = """
 name: small

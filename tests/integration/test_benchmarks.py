@@ -14,7 +14,7 @@ if str(ROOT) not in sys.path:  # benchmarks/ is not installed: imported from the
     sys.path.insert(0, str(ROOT))
 
 from benchmarks import goals, scaling, study  # noqa: E402
-from campipe.study.fields import COMPRESSIONS  # noqa: E402
+from campipe.study.spec.fields import COMPRESSIONS  # noqa: E402
 
 
 def _benchmarks(*args: str) -> subprocess.CompletedProcess:

@@ -13,7 +13,7 @@ import netCDF4
 import numpy as np
 
 from campipe.study import load_study
-from campipe.study.execute import run_study
+from campipe.study.run.execute import run_study
 
 DATA = Path(__file__).parents[1] / "data"
 DIGEST = DATA / "mixed-study.sha256"

@@ -18,7 +18,7 @@ from study_helpers import ROOT, STUDIES
 from campipe.bench import pages, report
 from campipe.cli import main
 from campipe.study import load_study
-from campipe.study.execute import run_study
+from campipe.study.run.execute import run_study
 
 if str(ROOT) not in sys.path:  # benchmarks/ is not installed: imported from the repository
     sys.path.insert(0, str(ROOT))

@@ -6,7 +6,7 @@ import pytest
 from click.testing import CliRunner
 from study_helpers import write_spec
 
-import campipe.study.estimate as est
+import campipe.study.run.estimate as est
 from campipe.cli import main
 from campipe.study import load_study
 

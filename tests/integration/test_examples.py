@@ -12,8 +12,8 @@ from numpy.testing import assert_allclose
 from study_helpers import INCH, ROOT, STUDIES
 
 from campipe.study import load_study
-from campipe.study.execute import run_study
-from campipe.study.query import case_table, onset_table
+from campipe.study.query.tables import case_table, onset_table
+from campipe.study.run.execute import run_study
 
 EXAMPLES = ROOT / "examples"
 SPEEDS = [6000.0, 9000.0, 9524.0, 11000.0]

@@ -11,8 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from campipe.cli import DEFAULT_LIMITS
-from campipe.study.limits import Limits
+from campipe.cli.base import DEFAULT_LIMITS
+from campipe.study.spec.limits import Limits
 
 HERE = Path(__file__).parents[1]  # tests/: fuzz_driver.py and the helpers
 ROOT = HERE.parent

@@ -6,7 +6,8 @@ import json
 from click.testing import CliRunner
 from study_helpers import ROOT, STUDIES
 
-from campipe.cli import main, packaged_specs
+from campipe.cli import main
+from campipe.cli.model import packaged_specs
 from campipe.study import load_study
 
 

@@ -10,7 +10,7 @@ from study_helpers import write_spec
 from campipe.model import thesis_train, valve_train
 from campipe.replay.cases import _train_from_columns
 from campipe.study import SpecError, load_study
-from campipe.study.execute import run_study
+from campipe.study.run.execute import run_study
 
 DAMPING = """
 name: damping

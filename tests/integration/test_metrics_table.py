@@ -13,7 +13,7 @@ import campipe
 from campipe.engine import metrics
 from campipe.engine.metrics import Metric
 from campipe.study import load_study
-from campipe.study.execute import run_study
+from campipe.study.run.execute import run_study
 
 DOCS = Path(__file__).parents[2] / "docs" / "studies.md"
 
@@ -34,7 +34,7 @@ def _twice_the_no_follow(result, trains):
 def test_a_toy_metric_added_through_the_table_reaches_the_archive_with_its_units(tmp_path):
     """Only the row below is written: the run, the archive's variables, their units and long
     names and the grid view follow from the table. Broken copy: the archive's variables
-    declared in a list of their own (study/variables.py before the table) leaves the toy
+    declared in a list of their own (study/spec/variables.py before the table) leaves the toy
     metric out of the archive."""
     toy = Metric(
         "toy_twice_no_follow",

@@ -10,7 +10,7 @@ from study_helpers import INCH, LBF, write_spec
 
 import campipe
 from campipe.study import load_study
-from campipe.study.execute import run_study
+from campipe.study.run.execute import run_study
 
 SWEEP = """
 name: grid

@@ -11,14 +11,14 @@ from matplotlib.image import imread
 from numpy.testing import assert_allclose
 from study_helpers import INCH, LBF, write_spec
 
-from campipe import cli
 from campipe.cli import main
+from campipe.cli.base import UNIT_SYSTEMS
+from campipe.cli.plot import PLOT_KINDS
 from campipe.plot import plot_archive
 from campipe.plot.figures import figure
 from campipe.study import load_study
-from campipe.study.display import SYSTEMS
-from campipe.study.execute import run_study
-from campipe.study.plots import KINDS, PlotError, PlotRequest
+from campipe.study.run.execute import run_study
+from campipe.study.spec.plots import KINDS, SYSTEMS, PlotError, PlotRequest
 from campipe.vocabulary import CAM_IMPACT, CAM_SEPARATION, SEAT_IMPACT, SEAT_SEPARATION
 
 SPEC = """
@@ -245,7 +245,7 @@ def test_every_format_by_its_suffix_and_errors_by_their_option(archive, tmp_path
 
 
 def test_the_command_line_lists_every_kind_and_unit_system():
-    assert cli.PLOT_KINDS == tuple(KINDS) and cli.UNIT_SYSTEMS == SYSTEMS
+    assert PLOT_KINDS == tuple(KINDS) and UNIT_SYSTEMS == SYSTEMS
 
 
 def test_a_spec_writes_its_plots_beside_the_archive(tmp_path):
@@ -286,7 +286,7 @@ def test_a_spec_with_a_bad_plot_is_refused_at_its_key(tmp_path, entry, path, wor
 
 
 def test_a_request_is_checked_like_a_spec_entry():
-    from campipe.study.plots import check_plot
+    from campipe.study.spec.plots import check_plot
 
     assert check_plot({"kind": "events", "turn": "2"}).turn == 2
     with pytest.raises(PlotError, match="x: not a key of a histories plot"):

@@ -335,7 +335,7 @@ def test_processes_scheduler_records_the_selection_from_the_archive(tmp_path):
 def test_a_replay_of_several_cases_shows_its_progress(archives, tmp_path):
     """Each step over the cases (sketching, logging) counts them on a progress line."""
     from campipe.replay.record import replay_archive
-    from campipe.study.progress import Progress
+    from campipe.study.run.progress import Progress
 
     bars: list[tuple[str, Progress, list[str]]] = []
 

@@ -14,8 +14,8 @@ from campipe.engine.contact import impact_masses
 from campipe.model import system_matrices, thesis_train
 from campipe.profiles import harmonic
 from campipe.study import load_study
-from campipe.study.execute import run_study
-from campipe.study.query import case_table, onset_table
+from campipe.study.query.tables import case_table, onset_table
+from campipe.study.run.execute import run_study
 from campipe.vocabulary import CAM_IMPACT, CAM_SEPARATION
 
 

@@ -16,10 +16,11 @@ import xarray as xr
 from click.testing import CliRunner
 from study_helpers import ROOT, load, write_spec
 
-import campipe.study.execute as execute
+import campipe.study.run.workers as workers
 from campipe.cli import main
 from campipe.study import load_study
-from campipe.study.execute import parts_directory, run_study
+from campipe.study.run.batches import parts_directory
+from campipe.study.run.execute import run_study
 
 SPEC = """
 name: small
@@ -43,7 +44,7 @@ def assert_message(result, status, *phrases):
 
 
 def test_an_unreachable_scheduler(tmp_path, monkeypatch):
-    monkeypatch.setattr(execute, "CONNECT_TIMEOUT", 1)
+    monkeypatch.setattr(workers, "CONNECT_TIMEOUT", 1)
     spec = write_spec(tmp_path, SPEC)
     result = study(spec, "--scheduler", "tcp://127.0.0.1:9")
     assert_message(
@@ -65,7 +66,7 @@ def test_a_scheduler_that_goes_away_mid_study_leaves_what_was_stored(tmp_path):
     def close_after_the_first(plan, data):
         cluster.close()
 
-    with pytest.raises(execute.SchedulerError, match=f"the dask cluster at {address} failed"):
+    with pytest.raises(workers.SchedulerError, match=f"the dask cluster at {address} failed"):
         run_study(
             load_study(spec),
             tmp_path / "small.nc",
@@ -81,7 +82,7 @@ def test_a_scheduler_that_goes_away_mid_study_leaves_what_was_stored(tmp_path):
 def test_a_worker_process_that_dies(tmp_path, monkeypatch):
     from study_helpers import die
 
-    monkeypatch.setattr(execute, "compute_batch", die)
+    monkeypatch.setattr(workers, "compute_batch", die)
     spec = write_spec(tmp_path, SPEC)
     result = study(spec, "--scheduler", "processes", "--workers", "1")
     assert_message(result, 1, "a worker process of the processes scheduler died", "rerun")

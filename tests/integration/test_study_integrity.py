@@ -11,12 +11,13 @@ import xarray as xr
 from click.testing import CliRunner
 from study_helpers import load, write_spec
 
-import campipe.study.results as results
+import campipe.study.run.results as results
 from campipe.cli import main
 from campipe.io import batch_file
 from campipe.io.archive import CHECKSUM_ATTR, read_attrs, verify
 from campipe.study import load_study
-from campipe.study.execute import parts_directory, run_study
+from campipe.study.run.batches import parts_directory
+from campipe.study.run.execute import run_study
 from campipe.vocabulary import CHATTER, EVENTS_TRUNCATED, OK, STATUS, STATUS_FLAGS
 
 SPEC = """
@@ -184,12 +185,11 @@ def test_a_flipped_byte_in_the_archive_is_not_up_to_date_and_is_recomputed(refer
 
 def test_results_of_another_engine_are_never_reused(reference, tmp_path, monkeypatch):
     study = _copy(reference, tmp_path)
-    monkeypatch.setattr(
-        "campipe.study.execute.numerics_fingerprint", lambda: "campipe 9; source x; numpy==9"
-    )
-    monkeypatch.setattr(
-        "campipe.study.layout.numerics_fingerprint", lambda: "campipe 9; source x; numpy==9"
-    )
+    for module in ("resume", "workers", "keys"):
+        monkeypatch.setattr(
+            f"campipe.study.run.{module}.numerics_fingerprint",
+            lambda: "campipe 9; source x; numpy==9",
+        )
     monkeypatch.setattr(results, "numerics_fingerprint", lambda: "campipe 9; source x; numpy==9")
     report = run_study(study, tmp_path / "small.nc", scheduler="synchronous", batch_size=2)
     assert not report.up_to_date and (report.computed, report.reused) == (6, 0)

@@ -14,8 +14,7 @@ from study_helpers import write_spec
 
 from campipe.cli import main
 from campipe.study import load_study
-from campipe.study.execute import run_study
-from campipe.study.query import (
+from campipe.study.query.tables import (
     CaseTable,
     QueryError,
     case_table,
@@ -25,6 +24,7 @@ from campipe.study.query import (
     select,
     summary,
 )
+from campipe.study.run.execute import run_study
 
 SPEC = """
 name: q

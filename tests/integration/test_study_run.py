@@ -26,8 +26,9 @@ from campipe.engine import MEMBER_LOADS, member_loads, run_batch
 from campipe.io.archive import ArchiveBusyError, lock_path, verify, writing
 from campipe.io.spec_yaml import parse_spec_text
 from campipe.study import check_spec, expand, load_study
-from campipe.study.execute import parts_directory, plan_batches, run_study
-from campipe.study.variables import VARIABLES
+from campipe.study.run.batches import parts_directory, plan_batches
+from campipe.study.run.execute import run_study
+from campipe.study.spec.variables import VARIABLES
 
 SMALL = """
 name: small
@@ -188,17 +189,17 @@ def test_batches_stored_by_the_workers_or_by_this_process_make_the_same_archive(
 
     from distributed import LocalCluster
 
-    import campipe.study.execute as execute
+    import campipe.study.run.workers as workers
 
     study = load_study(write_spec(tmp_path, SMALL))
     stored_by = []
-    real = execute._store
+    real = workers._store
 
     def spied(*args):
         stored_by.append(threading.current_thread() is threading.main_thread())
         return real(*args)
 
-    monkeypatch.setattr(execute, "_store", spied)
+    monkeypatch.setattr(workers, "_store", spied)
     with LocalCluster(
         n_workers=1, threads_per_worker=2, processes=False, dashboard_address=":0"
     ) as cluster:
@@ -301,7 +302,7 @@ def test_an_assembly_from_batch_files_reads_each_once_wherever_its_rows_fall(tmp
     compresses. Broken copy, run: the file not kept (each of them read twice)."""
     from collections import Counter
 
-    from campipe.study import execute
+    from campipe.study.run import assembly, resume
 
     spec = SMALL.replace(
         "[6000 rpm, 9524 rpm, 11000 rpm]", "{from: 6000 rpm, to: 11000 rpm, num: 10}"
@@ -310,21 +311,21 @@ def test_an_assembly_from_batch_files_reads_each_once_wherever_its_rows_fall(tmp
     assert len(study.cases) == 20
     archive = tmp_path / "run.nc"
     run_study(study, archive, scheduler="synchronous", batch_size=6, keep_parts=True)
-    found, _ = execute.find_results(study, archive, archive_usable=False)
+    found, _ = resume.find_results(study, archive, archive_usable=False)
     assert {path.suffix for path, _, _ in found.values()} == {".npz"}
     reads: Counter = Counter()
     threads: set[str] = set()
-    read = execute.read_batch
+    read = assembly.read_batch
 
     def counted(path):
         reads.update([path])
         threads.add(threading.current_thread().name.split("_")[0])
         return read(path)
 
-    monkeypatch.setattr(execute, "read_batch", counted)
-    monkeypatch.setattr(execute, "ASSEMBLY_BYTES", 1)  # a block per chunk of eight cases
+    monkeypatch.setattr(assembly, "read_batch", counted)
+    monkeypatch.setattr(assembly, "ASSEMBLY_BYTES", 1)  # a block per chunk of eight cases
     target = tmp_path / "assembled.nc"
-    execute.assemble(study, target, found)
+    assembly.assemble(study, target, found)
     assert len(reads) == 4 and set(reads.values()) == {1}
     assert threads == {"MainThread", "campipe-read"}  # the first block's, then read ahead
     xr.testing.assert_equal(load(target), load(archive))
@@ -477,7 +478,7 @@ def test_stale_and_temporary_files_are_ignored_and_cleaned(small, tmp_path):
 
 def test_import_campipe_does_not_pull_in_distributed_or_rerun():
     code = (
-        "import sys, campipe, campipe.cli, campipe.study.execute, campipe.study.query; "
+        "import sys, campipe, campipe.cli, campipe.study.run.execute, campipe.study.query.tables; "
         "bad = [m for m in sys.modules if m.split('.')[0] in ('distributed', 'rerun')]; "
         "print(bad); sys.exit(bool(bad))"
     )
@@ -541,7 +542,7 @@ def test_a_finished_study_answers_from_its_spec_text_and_the_archive_alone(small
     date where the cases are the same)."""
     import shutil
 
-    from campipe.study.execute import finished
+    from campipe.study.run.resume import finished
 
     _, _, original, original_spec = small
     spec, archive = tmp_path / original_spec.name, tmp_path / original.name
@@ -614,7 +615,7 @@ def test_no_seat_is_minus_inf_and_speed_rounds_to_whole_rpm(small):
 def test_the_batch_hook_sees_every_batch_and_the_replay_selection(tmp_path):
     """The replay hook: called once per computed batch with its data; replay.where picks
     cases by parameters and metrics (logging them to rerun is a later feature)."""
-    from campipe.study.query import replay_mask
+    from campipe.study.query.tables import replay_mask
 
     spec = SMALL + 'replay: {where: "speed_rpm == 9524 and separation_deg_per_rev > 0"}\n'
     study = load_study(write_spec(tmp_path, spec))
@@ -638,14 +639,15 @@ def test_memory_is_bounded_by_the_batch_not_the_study(tmp_path, monkeypatch):
     assembled a few rows at a time."""
     import threading
 
-    import campipe.study.execute as execute
+    import campipe.study.run.assembly as assembly
+    import campipe.study.run.workers as workers
 
     spec = SMALL.replace(
         "[6000 rpm, 9524 rpm, 11000 rpm]", "{from: 3000 rpm, to: 12000 rpm, num: 20}"
     )
     lock = threading.Lock()
     live = {"now": 0, "max": 0, "rows": 0}
-    compute, store, read = execute.compute_batch, execute._store, execute.read_batch
+    compute, store, read = workers.compute_batch, workers._store, assembly.read_batch
 
     def counted_compute(plan):
         data = compute(plan)
@@ -665,9 +667,9 @@ def test_memory_is_bounded_by_the_batch_not_the_study(tmp_path, monkeypatch):
         live["rows"] = max(live["rows"], len(arrays["case"]))
         return arrays
 
-    monkeypatch.setattr(execute, "compute_batch", counted_compute)
-    monkeypatch.setattr(execute, "_store", counted_store)
-    monkeypatch.setattr(execute, "read_batch", counted_read)
+    monkeypatch.setattr(workers, "compute_batch", counted_compute)
+    monkeypatch.setattr(workers, "_store", counted_store)
+    monkeypatch.setattr(assembly, "read_batch", counted_read)
     study = load_study(write_spec(tmp_path, spec))
     report = run_study(study, tmp_path / "m.nc", scheduler="threads", workers=2, batch_size=1)
     assert report.batches == 40
@@ -681,7 +683,7 @@ def test_the_engine_threads_leave_a_core_to_the_archive(small, tmp_path):
     when it has rows to write; the archive is the same."""
     import threading
 
-    from campipe.study.execute import WORKER_NICENESS
+    from campipe.study.run.workers import WORKER_NICENESS
 
     study, _, archive, _ = small
     own = os.getpriority(os.PRIO_PROCESS, threading.get_native_id())

@@ -12,7 +12,7 @@ from campipe.constants import STANDARD_GRAVITY
 from campipe.engine import member_loads, run_batch
 from campipe.model import spring_clash_margin, system_matrices, thesis_train
 from campipe.study import load_study
-from campipe.study.execute import run_study
+from campipe.study.run.execute import run_study
 
 SPEEDS = [2000, 8000, 9000]
 

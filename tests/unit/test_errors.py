@@ -23,7 +23,7 @@ from campipe.errors import CampipeError
 from campipe.model import ModelParameterError, parse_parameter, thesis_train
 from campipe.profiles import harmonic
 from campipe.study import SpecError, check_spec, expand
-from campipe.study.fields import SpecProblem
+from campipe.study.spec.fields import SpecProblem
 from campipe.units import QuantityError, parse_angular, parse_quantity
 
 ROOT = Path(campipe.__file__).parent

@@ -12,7 +12,7 @@ from campipe.engine.settings import FIDELITY_ERRORS, STEADY_MIN_TURNS
 from campipe.model import thesis_train
 from campipe.profiles import harmonic, polydyne
 from campipe.study import load_study
-from campipe.study.execute import run_study
+from campipe.study.run.execute import run_study
 
 INCH = 0.0254
 RPM = math.pi / 30

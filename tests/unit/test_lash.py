@@ -11,7 +11,7 @@ from campipe.engine import Case, CaseError, RunSettings, run_batch
 from campipe.model import lash_seat, system_matrices, thesis_train, valve_train
 from campipe.profiles import Ramp, evaluate, polydyne
 from campipe.study import load_study
-from campipe.study.spec import SpecError
+from campipe.study.spec.check import SpecError
 from campipe.vocabulary import CAM_IMPACT, EV_KIND, EV_TIME, EV_VELOCITY, SEAT_IMPACT
 
 INCH = 0.0254

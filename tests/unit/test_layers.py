@@ -3,6 +3,10 @@ base modules below everything and io at the edges, with no import cycle anywhere
 developer's benchmark (``benchmarks/`` at the repository's root, not installed) above them
 all, imported by none.
 
+Inside study, its packages along the user's path: the where language, then spec, archive, run
+and query (run and query each above the archive, neither importing the other), the package's
+face and ``campipe onset`` above them all.
+
 Every import of every module counts, at module level and inside functions (and under
 ``TYPE_CHECKING``): a function-level import hides a cycle from Python, not from this test.
 """
@@ -27,6 +31,9 @@ BASE = {
     "campipe.disk_cache",
     "campipe.sources",
 }
+#: The study's layers, lowest first (``study``: the package itself and ``campipe onset``).
+STUDY = ("study.where", "study.spec", "study.archive", "study.run", "study.query", "study")
+BELOW_STUDY = {"base", "io", "model", "profiles", "engine"}
 #: Layer → the layers its modules may import (their own included).
 MAY_IMPORT: dict[str, set[str]] = {
     "base": {"base"},
@@ -34,11 +41,18 @@ MAY_IMPORT: dict[str, set[str]] = {
     "model": {"base", "model"},
     "profiles": {"base", "model", "profiles"},
     "engine": {"base", "model", "profiles", "engine"},
-    "study": {"base", "io", "model", "profiles", "engine", "study"},
-    "replay": {"base", "io", "model", "profiles", "engine", "study", "replay"},
-    "bench": {"base", "model", "profiles", "engine", "study", "bench"},
-    "plot": {"base", "io", "model", "profiles", "engine", "study", "plot"},
-    "cli": {"base", "io", "model", "profiles", "engine", "study", "replay", "bench", "plot", "cli"},
+    # the --where language: a spec's replay.where and plots are written in it
+    "study.where": {"base", "study.where"},
+    # checking and expanding a spec: nothing of the archive, the run or the queries
+    "study.spec": BELOW_STUDY | {"study.where", "study.spec"},
+    "study.archive": BELOW_STUDY | {"study.spec", "study.archive"},
+    "study.run": BELOW_STUDY | {"study.spec", "study.archive", "study.run"},
+    "study.query": BELOW_STUDY | {"study.where", "study.spec", "study.archive", "study.query"},
+    "study": BELOW_STUDY | set(STUDY),
+    "replay": BELOW_STUDY | set(STUDY) | {"replay"},
+    "bench": BELOW_STUDY - {"io"} | set(STUDY) | {"bench"},
+    "plot": BELOW_STUDY | set(STUDY) | {"plot"},
+    "cli": BELOW_STUDY | set(STUDY) | {"replay", "bench", "plot", "cli"},
 }
 
 
@@ -53,8 +67,10 @@ MODULES = {module_name(p): p for p in sorted(ROOT.rglob("*.py"))}
 def layer(module: str) -> str:
     if module in BASE:
         return "base"
-    top = module.split(".")[1]
-    return {"__main__": "cli"}.get(top, top)
+    parts = module.split(".")
+    if parts[1] == "study" and len(parts) > 2 and f"study.{parts[2]}" in STUDY:
+        return f"study.{parts[2]}"
+    return {"__main__": "cli"}.get(parts[1], parts[1])
 
 
 def _lazy_exports(tree: ast.Module) -> set[int]:
@@ -154,7 +170,7 @@ def test_the_cycle_finder_finds_a_cycle():
 
 def test_function_level_imports_count():
     """The CLI imports the study layer inside its commands; the graph has those edges."""
-    assert "campipe.study.execute" in GRAPH["campipe.cli"]
+    assert "campipe.study.run.execute" in GRAPH["campipe.cli.study"]
 
 
 def test_the_package_exports_open_study_lazily():
@@ -164,7 +180,7 @@ def test_the_package_exports_open_study_lazily():
 
     code = (
         "import sys, campipe; assert not [m for m in sys.modules if m.startswith('campipe.')]; "
-        "f = campipe.open_study; assert f.__module__ == 'campipe.study.open'"
+        "f = campipe.open_study; assert f.__module__ == 'campipe.study.archive.open'"
     )
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
@@ -206,7 +222,103 @@ def test_the_developer_benchmark_imports_campipe_from_above():
         for target in _top_imports(path):
             if target.split(".")[0] == "campipe":
                 used.add(target)
-    assert {t for t in used if t in MODULES} >= {"campipe.bench.pages", "campipe.study.execute"}
+    assert {t for t in used if t in MODULES} >= {"campipe.bench.pages", "campipe.study.run.execute"}
     # an imported name, if not a module, belongs to a module that exists
     assert all(t in MODULES or t.rpartition(".")[0] in MODULES for t in used)
     assert "campipe.bench.study" not in MODULES
+
+
+def reached(start: set[str]) -> set[str]:
+    """The modules ``start`` imports, directly or through others (themselves included)."""
+    seen, todo = set(start), list(start)
+    while todo:
+        for target in GRAPH[todo.pop()] - seen:
+            seen.add(target)
+            todo.append(target)
+    return seen
+
+
+def in_layers(*layers: str) -> set[str]:
+    return {m for m in MODULES if layer(m) in layers}
+
+
+#: Modules that read or write archive files, or hold the queries over them.
+ARCHIVE_FILES = {"campipe.io.archive", "campipe.io.batch_file"}
+
+
+def test_the_study_packages_point_one_way():
+    """Along the user's path: the spec imports nothing of the archive, the run or the
+    queries, not even through another module; the archive's layout nothing of the run or
+    the queries; the queries nothing of the run, the run nothing of the queries. Broken
+    copy, run: a `from campipe.study.archive.layout import CASE_ID` in spec/expand.py fails
+    the first assertion (and the layer test above)."""
+    later = {"study.archive", "study.run", "study.query", "study"}
+    from_spec = reached(in_layers("study.spec", "study.where"))
+    assert not {m for m in from_spec if layer(m) in later} | (from_spec & ARCHIVE_FILES)
+    from_archive = reached(in_layers("study.archive"))
+    assert not {m for m in from_archive if layer(m) in {"study.run", "study.query", "study"}}
+    assert not {m for m in reached(in_layers("study.query")) if layer(m) == "study.run"}
+    assert not {m for m in reached(in_layers("study.run")) if layer(m) == "study.query"}
+    # and the table says so: a later package never among those an earlier one may import
+    for earlier, forbidden in [
+        ("study.spec", later),
+        ("study.archive", {"study.run", "study.query", "study"}),
+        ("study.query", {"study.run", "study"}),
+        ("study.run", {"study.query", "study"}),
+    ]:
+        assert not MAY_IMPORT[earlier] & forbidden, earlier
+
+
+SPEC = Path(__file__).parents[2] / "studies" / "separation-map.yaml"
+#: What checking a spec must not load: the archive's and the run's modules, the queries over
+#: an archive, the libraries that read one, and the compiler (pint may load dask's config).
+NOT_FOR_A_SPEC = (
+    "campipe.study.archive",
+    "campipe.study.query",
+    "campipe.study.run.",  # the run's own modules (its batch sizes, run.sizing, are counted)
+    "campipe.io.archive",
+    "campipe.io.batch_file",
+    "xarray",
+    "netCDF4",
+    "numba",
+)
+
+
+def _loaded(code: str) -> tuple[list[str], list[str]]:
+    """Run ``code`` in a fresh interpreter: (the campipe modules it loaded, those of them and
+    the libraries in NOT_FOR_A_SPEC)."""
+    import subprocess
+    import sys
+
+    code += (
+        "\nimport sys; print(' '.join(sorted(m for m in sys.modules if m.startswith('campipe'))))"
+        "\nprint(' '.join(sorted(sys.modules)))"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    ours, every = done.stdout.splitlines()[-2:]
+    wrong = [
+        m
+        for m in every.split()
+        if m.startswith(NOT_FOR_A_SPEC)
+        and m != "campipe.study.run.sizing"
+        or m.split(".")[0] in NOT_FOR_A_SPEC
+    ]
+    return ours.split(), wrong
+
+
+def test_checking_a_spec_loads_neither_the_archive_nor_the_run_nor_the_queries():
+    """``load_study`` (check and expand) and ``campipe validate --no-estimate``, on a spec
+    with a replay selection and plots (their ``where`` is parsed and checked against the
+    columns to come, in the where language, campipe.study.where), in a fresh interpreter.
+    Broken copy, run: validate importing run.batches for its batch count fails it."""
+    assert "replay:" in SPEC.read_text() and "plots:" in SPEC.read_text()
+    ours, wrong = _loaded(f"from campipe.study import load_study; load_study({str(SPEC)!r})")
+    assert "campipe.study.spec.expand" in ours and "campipe.study.where" in ours
+    assert wrong == []
+    ours, wrong = _loaded(
+        "from campipe.cli import main\n"
+        f"main(['validate', '--no-estimate', {str(SPEC)!r}], standalone_mode=False)"
+    )
+    assert "campipe.study.spec.check" in ours and "campipe.study.run.sizing" in ours
+    assert wrong == []

@@ -3,7 +3,7 @@
 
 import logging
 
-from campipe.study.progress import ERASE, Progress, format_seconds, logging_cleared
+from campipe.study.run.progress import ERASE, Progress, format_seconds, logging_cleared
 
 
 class Screen:

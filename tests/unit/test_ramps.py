@@ -12,7 +12,7 @@ from campipe.engine.batch import train_matrices, valve_ratio
 from campipe.model import thesis_train
 from campipe.profiles import RAMP_SHAPES, Ramp, evaluate, polydyne
 from campipe.study import load_study
-from campipe.study.spec import SpecError
+from campipe.study.spec.check import SpecError
 from campipe.vocabulary import EV_KIND, EV_TIME, EV_VELOCITY, SEAT_IMPACT
 
 INCH = 0.0254

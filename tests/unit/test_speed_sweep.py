@@ -11,9 +11,11 @@ from click.testing import CliRunner
 
 from campipe.cli import main
 from campipe.study import SpecError
-from campipe.study.execute import count_batches, plan_batches
-from campipe.study.expand import SpeedSweep, expand
-from campipe.study.spec import check_spec
+from campipe.study.run.batches import plan_batches
+from campipe.study.run.sizing import count_batches
+from campipe.study.spec.check import check_spec
+from campipe.study.spec.expand import expand
+from campipe.study.spec.resolve import SpeedSweep
 
 SPECS = {
     "speed inside two sweeps": """
@@ -154,7 +156,7 @@ def test_the_simulated_time_is_summed_without_building_a_case(tmp_path, monkeypa
     """``estimate.simulated_seconds`` of a speed sweep (turns of the other axes' combinations
     × Σ 2π/ω over the speeds) against the sum case by case, with no case built; and the
     value by hand: one turn at each of 6000, 9000, 9524 and 11000 rpm, 3 seats × 2 preloads."""
-    from campipe.study.estimate import simulated_seconds
+    from campipe.study.run.estimate import simulated_seconds
 
     swept = expand(_spec(SPECS["speed inside two sweeps"], tmp_path))
     each = expand(_spec(SPECS["speed inside two sweeps"], tmp_path), by_speed=False)
@@ -178,10 +180,10 @@ def test_a_speeds_case_id_hashes_the_whole_canonical_json(canonical):
     """``speed_case_ids`` hashes the JSON before the speed once: each id is still
     ``case_id`` of the whole canonical parameters, for speeds whose JSON differs (negative
     zero, exponents, many digits)."""
-    from campipe.study.expand import _clean, case_id, speed_case_ids
+    from campipe.study.spec.resolve import case_id, clean_value, speed_case_ids
 
     ids = speed_case_ids(canonical)
     for speed in (-0.0, 0.0, 1e-300, 628.3185307179587, 1.5e22, 1047.1975511965977, 7.0):
-        assert ids(speed) == case_id({**canonical, "speed": _clean(speed)}), speed
+        assert ids(speed) == case_id({**canonical, "speed": clean_value(speed)}), speed
     with pytest.raises(ValueError):
         ids(float("nan"))

@@ -12,7 +12,7 @@ from study_helpers import changed, write_spec
 from campipe.io.spec_yaml import MAX_DEPTH, SpecFileError, parse_spec_text
 from campipe.profiles import flat, harmonic
 from campipe.study import Limits, SpecError, check_spec, expand, load_study
-from campipe.study.limits import case_count
+from campipe.study.spec.limits import case_count
 from campipe.study.where import QueryError, evaluate, parse_where
 from campipe.units import QuantityError, parse_angular
 
@@ -155,7 +155,7 @@ def test_a_flat_through_zero_is_written_past_360_degrees():
 def test_a_spec_beyond_a_limit_is_refused_before_any_case_is_built(
     raw, limits, path, words, monkeypatch
 ):
-    expand_module = sys.modules["campipe.study.expand"]
+    expand_module = sys.modules["campipe.study.spec.expand"]
 
     def no_cases(spec):
         raise AssertionError("a case was built")
@@ -228,7 +228,7 @@ def test_where_takes_conditions_only():
 
 
 def test_long_histories_make_smaller_default_batches():
-    from campipe.study.execute import default_batch_size
+    from campipe.study.run.sizing import default_batch_size
 
     assert default_batch_size(1000, 2) == 125  # four batches per worker
     assert default_batch_size(10_000, 2) == 256  # at most MAX_BATCH_SIZE

@@ -9,7 +9,7 @@ from study_helpers import INCH, LBF, write_spec
 
 from campipe.model import thesis_train
 from campipe.study import check_spec, expand, load_study
-from campipe.study.expand import count_cases, deep_merge, raw_cases
+from campipe.study.spec.expand import count_cases, deep_merge, raw_cases
 
 BASE = {
     "name": "t",

@@ -10,8 +10,8 @@ from study_helpers import ROOT, STUDIES, changed, write_spec
 from campipe.io.spec_yaml import SpecFileError, parse_spec_text, read_spec
 from campipe.model import PARAMETERS
 from campipe.study import SpecError, check_spec, expand, load_study
-from campipe.study.fields import CASE_FIELDS, PROFILE_FIELDS, TOP_LEVEL, sweep_keys
-from campipe.study.schema import schema_text, study_schema
+from campipe.study.spec.fields import CASE_FIELDS, PROFILE_FIELDS, TOP_LEVEL, sweep_keys
+from campipe.study.spec.schema import schema_text, study_schema
 
 BASE = {
     "name": "t",
@@ -408,7 +408,7 @@ def test_the_run_block_follows_the_engines_run_settings():
     import dataclasses
 
     from campipe.engine import RunSettings
-    from campipe.study.fields import RUN_DEFAULTS, RUN_SETTINGS, undeclared_run_settings
+    from campipe.study.spec.fields import RUN_DEFAULTS, RUN_SETTINGS, undeclared_run_settings
 
     assert undeclared_run_settings() == []
     assert set(RUN_DEFAULTS) == {f.name for f in dataclasses.fields(RunSettings)} | {

@@ -1,9 +1,10 @@
 """The keys of a study spec, declared once.
 
-Validation (:mod:`campipe.study.spec`), the JSON Schema (:mod:`campipe.study.schema`) and the
-archive's per-case coordinates (:mod:`campipe.study.variables`) all read these tables; the
-model's parameters come from :data:`campipe.model.PARAMETERS` and the run defaults from
-:class:`campipe.engine.RunSettings`, so nothing here repeats them.
+Validation (:mod:`campipe.study.spec.check`), the JSON Schema
+(:mod:`campipe.study.spec.schema`) and the archive's per-case coordinates
+(:mod:`campipe.study.spec.variables`) all read these tables; the model's parameters come from
+:data:`campipe.model.PARAMETERS` and the run defaults from :class:`campipe.engine.RunSettings`,
+so nothing here repeats them.
 
 A *case* is one run: a valve train (``model``), a cam (``profile`` plus ``defects``), how it is
 driven (``speed``, ``seat``, ``closure``) and how it is integrated (``run``). Keys inside a case
@@ -25,7 +26,7 @@ from campipe.engine import MEMBER_LOADS, SPRING_HISTORIES, RunSettings
 from campipe.engine import settings as _engine_settings
 from campipe.engine.settings import ALL_INTEGRATORS
 from campipe.errors import CampipeError, did_you_mean, excerpt
-from campipe.io.archive import COMPRESSION, COMPRESSIONS
+from campipe.io.compression import COMPRESSION, COMPRESSIONS
 from campipe.model import PARAMETERS, PRESETS, ModelParameterError, parse_parameter
 from campipe.profiles import RAMP_SHAPES
 from campipe.units import QuantityError, convert, parse_angular, parse_quantity

@@ -1,10 +1,11 @@
-"""Estimates for ``campipe validate``: the run time of ``campipe study``, and the archive's size.
+"""Estimates for ``campipe validate``: the run time of ``campipe study`` (the archive's size is
+:func:`campipe.study.spec.expand.archive_bytes`).
 
 The run time is measured on this machine, through the code a study runs, not guessed:
 
 - **a sample of the study** -- one batch for each worker (at the batch size the study will
   use), its cases spread evenly through the study so its speeds, seats and events are in
-  proportion -- is run through :func:`~campipe.study.execute.run_study` into a temporary
+  proportion -- is run through :func:`~campipe.study.run.execute.run_study` into a temporary
   folder: computing, storing the batches, assembling the compressed archive with its
   checksums. Scaled to the study's cases, it gives the run's time beyond its fixed cost;
 - **the fixed cost** (setting up a run, a first run's imports) is a one-case run's time;
@@ -29,10 +30,12 @@ from pathlib import Path
 import numpy as np
 
 from campipe.constants import TWO_PI
-from campipe.engine.settings import RunSettings, sample_count, turn_count
-from campipe.study.execute import default_batch_size, plan_batches, run_study
-from campipe.study.expand import ResolvedCase, SpeedSweep, Study, distinct_but_speed
-from campipe.study.variables import DOF_NAMES, data_variables
+from campipe.engine.settings import RunSettings, sample_count
+from campipe.study.run.batches import plan_batches
+from campipe.study.run.execute import run_study
+from campipe.study.run.sizing import default_batch_size
+from campipe.study.spec.expand import Study, archive_bytes
+from campipe.study.spec.resolve import ResolvedCase, SpeedSweep, distinct_but_speed
 
 #: Longest kernel warm-up counted as start-up [s]: a kernel loads from numba's cache in well
 #: under a second; a longer warm-up is compiling, which the study (using the cache) skips.
@@ -83,23 +86,6 @@ def warm_up(study: Study) -> float:
         )
         total += min(time.perf_counter() - t, MAX_LOAD_SECONDS)
     return total
-
-
-def archive_bytes(study: Study) -> int:
-    """Size of the archive's variables before compression [bytes] (events not counted)."""
-    n_out = sample_count(study.revolutions, study.output_every)
-    n_rev = turn_count(study.revolutions)
-    sizes = {"cam_angle": n_out, "revolution": n_rev, "dof": len(DOF_NAMES), "event": 0}
-    per_case = 0
-    for var in data_variables(study.record).values():
-        if "case" not in var.dims:
-            continue
-        n = 1
-        for d in var.dims[1:]:
-            n *= sizes[d]
-        per_case += n * np.dtype(var.dtype).itemsize
-    per_case += 16 + 8 * 8 + 64  # case id, numeric coordinates, labels (about)
-    return len(study.cases) * per_case + n_out * 8
 
 
 def batch_size(study: Study, n: int, workers: int) -> int:

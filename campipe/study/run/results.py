@@ -19,8 +19,8 @@ from campipe import engine
 from campipe.engine.loads import MEMBER_LOADS, SPRING_HISTORIES, member_loads
 from campipe.engine.metrics import archived_metrics
 from campipe.sources import source_digest
-from campipe.study.expand import ResolvedCase
-from campipe.study.variables import data_variables
+from campipe.study.spec.resolve import ResolvedCase
+from campipe.study.spec.variables import data_variables
 from campipe.vocabulary import (
     EV_FROM,
     EV_IMPULSE,
@@ -42,7 +42,7 @@ NUMERICS_SOURCES = (
     "model",
     "vocabulary.py",
     "constants.py",
-    "study/results.py",  # this module: the engine's results as archive arrays
+    "study/run/results.py",  # this module: the engine's results as archive arrays
 )
 #: Libraries whose versions enter :func:`numerics_fingerprint`: they compute the numbers too.
 NUMERICS_LIBRARIES = ("numpy", "scipy", "numba")
@@ -87,7 +87,7 @@ class BatchData:
 
     key: str  # the batch key
     case_ids: np.ndarray  # (n,) str
-    arrays: dict[str, np.ndarray]  # data variables, see campipe.study.variables
+    arrays: dict[str, np.ndarray]  # data variables, see campipe.study.spec.variables
     cam_angle: np.ndarray  # (n_out,) [degree]
     n_revolutions: int  # length of the revolution axis
     numerics: str = ""  # numerics_fingerprint() of the process that computed it

@@ -1,33 +1,6 @@
-"""Checking a study spec's structure and values, every problem named by its key path.
-
-The spec arrives as plain data (parsed by :mod:`campipe.io.spec_yaml`); this module refuses
-anything it does not declare (:mod:`campipe.study.fields`) with the key's path, what was
-found and what is expected, and returns a :class:`Spec`: the base case with the run defaults
-filled in, and the axes (sweep, zip, cases, sample) with ranges expanded into value lists.
-Checks that need a whole case (a seat above full lift, a step beyond the stability limit)
-run when the cases are resolved (:mod:`campipe.study.expand`).
-
-Grammar (all keys optional except ``name``; each case must end up with a ``speed`` and a
-``profile`` from the base or an axis)::
-
-    name: separation-map
-    description: free text
-    model: {preset: thesis-1971, <parameter>: <quantity>, ...}
-    profile: {kind: harmonic, lift: 1 in}
-           | {kind: polydyne-345 | polydyne-4567, lift, rise, dwell, fall}
-           | {kind: table, file: lift.csv}
-    defects: [{kind: flat, from: 268 deg, to: 272 deg}, {kind: bump, center, height, width}]
-    closure: force | form
-    seat: none | <length>
-    speed: <angular speed>
-    run: {revolutions, integrator, dt, output_every, tolerance, max_events, record: [...]}
-    sweep: {<key>: [values] | {from, to, num}, ...}     # full grid
-    zip: {<key>: [values] | {from, to, num}, ...}       # varied together
-    cases: [{<case keys>}, ...]                          # deep-merged over the base
-    sample: {method: latin-hypercube, n, seed, ranges: {<key>: {from, to}}}
-    replay: {where: EXPR}
-    plots: [{kind: histories | metric | map | events, ...}, ...]   # campipe.study.plots
-"""
+"""The blocks of a spec checked one by one: a case's profile, defects, model and run, the
+axes (sweep, zip, ranges), the case entries and the sampled design; each problem with its key
+path (:mod:`campipe.study.spec.check` puts them together)."""
 
 from __future__ import annotations
 
@@ -35,15 +8,14 @@ import copy
 import math
 import re
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
-from pathlib import Path
+from dataclasses import dataclass
 from typing import TypeVar
 
 import numpy as np
 
-from campipe.errors import CampipeError, did_you_mean, excerpt
+from campipe.errors import did_you_mean, excerpt
 from campipe.model import PARAMETERS
-from campipe.study.fields import (
+from campipe.study.spec.fields import (
     CASE_FIELDS,
     CASE_KEYS,
     DEFECT_FIELDS,
@@ -51,11 +23,8 @@ from campipe.study.fields import (
     PROFILE_FIELDS,
     PROFILE_KINDS,
     PROFILE_OPTIONAL,
-    RUN_DEFAULTS,
     SAMPLE_METHODS,
-    SEARCHES,
     STUDY_WIDE,
-    TOP_LEVEL,
     WHOLE_KEYS,
     Field,
     SpecProblem,
@@ -63,35 +32,12 @@ from campipe.study.fields import (
     sweep_keys,
     varied_fields,
 )
-from campipe.study.plots import PlotError, PlotRequest, check_plot
-from campipe.study.where import QueryError, parse_where
 
-#: A study name: it names the archive file.
-NAME_PATTERN = r"^[A-Za-z0-9][A-Za-z0-9_.-]*$"
-#: Containers whose keys are dotted case keys (so ``--set`` takes the rest of a path whole).
-_KEYED_BY_CASE_KEY = ("sweep", "zip", "ranges")
-#: Problems reported at most, so a large bad grid stays readable.
-MAX_PROBLEMS = 20
 #: Longest axis (a range's num, a sample's n) by default: also the default limit on cases
-#: (campipe.study.limits), so one axis alone never exceeds it.
+#: (campipe.study.spec.limits), so one axis alone never exceeds it.
 MAX_AXIS_LENGTH = 100_000
 
 T = TypeVar("T")
-
-
-class SpecError(CampipeError, ValueError):
-    """A spec refused before anything runs: one or more problems (``problems``), each with
-    its key path."""
-
-    def __init__(self, problems: list[SpecProblem], source: str = "spec"):
-        self.problems = problems
-        self.source = source
-        head = f"{source}: {len(problems)} problem{'s' if len(problems) != 1 else ''}"
-        super().__init__("\n".join([head, *(f"  {p}" for p in problems)]))
-
-    @property
-    def paths(self) -> list[str]:
-        return [p.path for p in self.problems]
 
 
 @dataclass(frozen=True)
@@ -104,31 +50,7 @@ class Sample:
     ranges: dict[str, tuple[float, float]]  # key → (from, to) in SI
 
 
-@dataclass
-class Spec:
-    """A checked spec: the base case and its axes, values still in spec spelling."""
-
-    name: str  # study name
-    description: str  # free text
-    text: str  # the spec's text as read (kept in the archive)
-    directory: Path  # where relative paths (lift tables) are resolved
-    base: dict  # the base case: CASE_KEYS, run defaults filled in
-    sweep: dict[str, list]  # key → values; full grid, first key outermost
-    zip: dict[str, list]  # key → values, all the same length
-    cases: list[dict]  # case entries, deep-merged over the base
-    sample: Sample | None  # sampled design
-    replay: str | None  # replay selection expression
-    search: str | None = None  # "onset": search the speed axis instead (campipe onset)
-    overrides: dict[str, object] = field(default_factory=dict)  # --set KEY=VALUE applied
-    path: Path | None = None  # the spec file, when read from one
-    plots: list[PlotRequest] = field(default_factory=list)  # figures to write at the end
-
-    @property
-    def record(self) -> tuple[str, ...]:
-        return tuple(self.base["run"]["record"])
-
-
-class _Problems:
+class Problems:
     """Collects problems; ``check`` runs one check and keeps its problem."""
 
     def __init__(self) -> None:
@@ -152,20 +74,20 @@ def join(path: str, key: str | int) -> str:
     return f"{path}.{key}" if path else key
 
 
-def _mapping(value: object, path: str, what: str) -> Mapping:
+def as_mapping(value: object, path: str, what: str) -> Mapping:
     if not isinstance(value, Mapping):
-        raise SpecProblem(path, f"found {_show(value)}, expected a mapping ({what})")
+        raise SpecProblem(path, f"found {show(value)}, expected a mapping ({what})")
     for k in value:
         if not isinstance(k, str):
             raise SpecProblem(path, f"found the key {excerpt(k)}, expected keys that are strings")
     return value
 
 
-def _show(value: object) -> str:
+def show(value: object) -> str:
     return excerpt(value)
 
 
-def _unknown(path: str, key: str, known) -> SpecProblem:
+def unknown_key(path: str, key: str, known) -> SpecProblem:
     known = list(known)
     listing = ", ".join(known) if len(known) <= 16 else ", ".join(known[:16]) + ", ..."
     return SpecProblem(
@@ -179,11 +101,11 @@ def _unknown(path: str, key: str, known) -> SpecProblem:
 
 def check_profile(value: object, path: str, partial: bool) -> dict:
     """A profile mapping; ``partial`` (a case entry merging over the base) needs no kind."""
-    value = _mapping(value, path, "a cam profile such as {kind: harmonic, lift: 1 in}")
+    value = as_mapping(value, path, "a cam profile such as {kind: harmonic, lift: 1 in}")
     known = ("kind", *PROFILE_FIELDS)
     for k in value:
         if k not in known:
-            raise _unknown(path, k, known)
+            raise unknown_key(path, k, known)
     kind = value.get("kind")
     if kind is None and not partial:
         raise SpecProblem(
@@ -232,12 +154,12 @@ def check_defects(value: object, path: str) -> list:
     if not isinstance(value, list):
         raise SpecProblem(
             path,
-            f"found {_show(value)}, expected a list of defects such as "
+            f"found {show(value)}, expected a list of defects such as "
             "[{kind: flat, from: 268 deg, to: 272 deg}] (or [])",
         )
     for i, d in enumerate(value):
         p = join(path, i)
-        d = _mapping(d, p, "a defect such as {kind: flat, from: 268 deg, to: 272 deg}")
+        d = as_mapping(d, p, "a defect such as {kind: flat, from: 268 deg, to: 272 deg}")
         kind = d.get("kind")
         if not isinstance(kind, str) or kind not in DEFECT_KINDS:
             found = "missing" if kind is None else f"found {excerpt(kind)}"
@@ -288,22 +210,22 @@ def check_flat(start: float, end: float, d: Mapping, path: str) -> None:
 
 
 def check_model(value: object, path: str) -> dict:
-    value = _mapping(value, path, "a preset plus parameter overrides")
+    value = as_mapping(value, path, "a preset plus parameter overrides")
     fields = varied_fields()
     for k, v in value.items():
         key = f"model.{k}"
         if key not in fields:
-            raise _unknown(path, k, ["preset", *PARAMETERS])
+            raise unknown_key(path, k, ["preset", *PARAMETERS])
         fields[key].parse(v, join(path, k))
     return dict(value)
 
 
-def check_run(value: object, path: str, study_wide: bool, problems: _Problems) -> dict:
-    value = _mapping(value, path, "run settings")
+def check_run(value: object, path: str, study_wide: bool, problems: Problems) -> dict:
+    value = as_mapping(value, path, "run settings")
     known = [k.removeprefix("run.") for k in CASE_FIELDS if k.startswith("run.")]
     for k, v in value.items():
         if k not in known:
-            problems.items.append(_unknown(path, k, known))
+            problems.items.append(unknown_key(path, k, known))
             continue
         if not study_wide and f"run.{k}" in STUDY_WIDE:
             problems.add(
@@ -316,7 +238,7 @@ def check_run(value: object, path: str, study_wide: bool, problems: _Problems) -
     return dict(value)
 
 
-def check_case_block(value: Mapping, path: str, partial: bool, problems: _Problems) -> dict:
+def check_case_block(value: Mapping, path: str, partial: bool, problems: Problems) -> dict:
     """The case keys of the base (``partial=False``) or of one case entry."""
     out: dict = {}
     for k, v in value.items():
@@ -348,7 +270,7 @@ def expand_range(
     need = ("from", "to", "num") if with_num else ("from", "to")
     for k in value:
         if k not in need:
-            raise _unknown(path, k, need)
+            raise unknown_key(path, k, need)
     for k in need:
         if k not in value:
             raise SpecProblem(join(path, k), f"missing; a range needs {', '.join(need)}")
@@ -432,10 +354,10 @@ def check_axis_value(key: str, value: object, path: str) -> object:
 
 
 def check_axes(
-    value: object, path: str, zipped: bool, problems: _Problems, max_len: int = MAX_AXIS_LENGTH
+    value: object, path: str, zipped: bool, problems: Problems, max_len: int = MAX_AXIS_LENGTH
 ) -> dict[str, list]:
     """A ``sweep:`` or ``zip:`` mapping: key → values or range (at most ``max_len`` each)."""
-    block = problems.check(_mapping, value, path, "key → list of values or {from, to, num}")
+    block = problems.check(as_mapping, value, path, "key → list of values or {from, to, num}")
     if block is None:
         return {}
     if not block:
@@ -453,7 +375,7 @@ def check_axes(
                     "axis, variables or compression); it cannot vary",
                 )
             else:
-                problems.items.append(_unknown(path, key, keys))
+                problems.items.append(unknown_key(path, key, keys))
             continue
         if isinstance(values, Mapping) and key not in WHOLE_KEYS:
             got = problems.check(expand_range, values, key, p, True, max_len)
@@ -470,7 +392,7 @@ def check_axes(
         else:
             problems.add(
                 p,
-                f"found {_show(values)}, expected a list of values"
+                f"found {show(values)}, expected a list of values"
                 + ("" if key in WHOLE_KEYS else " or {from, to, num}"),
             )
             continue
@@ -512,7 +434,7 @@ def _freeze_parsed(value: Mapping, fields: Mapping[str, Field]) -> tuple:
     )
 
 
-def _check_repeats(problems: _Problems, path: str, values: list, what: str = "value") -> None:
+def _check_repeats(problems: Problems, path: str, values: list, what: str = "value") -> None:
     """Refuse an axis that lists one value twice: it would run one case twice (two rows with
     one case id)."""
     first: dict[object, int] = {}
@@ -528,9 +450,9 @@ def _check_repeats(problems: _Problems, path: str, values: list, what: str = "va
         first[v] = i
 
 
-def check_cases(value: object, problems: _Problems) -> list[dict]:
+def check_cases(value: object, problems: Problems) -> list[dict]:
     if not isinstance(value, list):
-        problems.add("cases", f"found {_show(value)}, expected a list of case mappings")
+        problems.add("cases", f"found {show(value)}, expected a list of case mappings")
         return []
     if not value:
         problems.add("cases", "empty list; expected at least one case (or leave cases out)")
@@ -538,12 +460,12 @@ def check_cases(value: object, problems: _Problems) -> list[dict]:
     out = []
     for i, entry in enumerate(value):
         p = join("cases", i)
-        entry = problems.check(_mapping, entry, p, "case keys merged over the base")
+        entry = problems.check(as_mapping, entry, p, "case keys merged over the base")
         if entry is None:
             continue
         for k in entry:
             if k not in CASE_KEYS:
-                problems.items.append(_unknown(p, k, CASE_KEYS))
+                problems.items.append(unknown_key(p, k, CASE_KEYS))
         out.append(
             check_case_block({k: v for k, v in entry.items() if k in CASE_KEYS}, p, True, problems)
         )
@@ -551,10 +473,10 @@ def check_cases(value: object, problems: _Problems) -> list[dict]:
 
 
 def check_sample(
-    value: object, problems: _Problems, max_len: int = MAX_AXIS_LENGTH
+    value: object, problems: Problems, max_len: int = MAX_AXIS_LENGTH
 ) -> Sample | None:
     block = problems.check(
-        _mapping, value, "sample", "{method: latin-hypercube, n, seed, ranges: {key: {from, to}}}"
+        as_mapping, value, "sample", "{method: latin-hypercube, n, seed, ranges: {key: {from, to}}}"
     )
     if block is None:
         return None
@@ -563,7 +485,7 @@ def check_sample(
     ok = True
     for k in block:
         if k not in need:
-            problems.items.append(_unknown("sample", k, need))
+            problems.items.append(unknown_key("sample", k, need))
             ok = False
     for k in need:
         if k not in block:
@@ -588,7 +510,7 @@ def check_sample(
         )
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         problems.add("sample.seed", f"found {excerpt(seed)}, expected an integer ≥ 0")
-    ranges = problems.check(_mapping, block["ranges"], "sample.ranges", "key → {from, to}")
+    ranges = problems.check(as_mapping, block["ranges"], "sample.ranges", "key → {from, to}")
     out: dict[str, tuple[float, float]] = {}
     if ranges is not None:
         if not ranges:
@@ -597,9 +519,9 @@ def check_sample(
         for key, r in ranges.items():
             p = f"sample.ranges.{key}"
             if key not in keys:
-                problems.items.append(_unknown("sample.ranges", key, keys))
+                problems.items.append(unknown_key("sample.ranges", key, keys))
                 continue
-            r = problems.check(_mapping, r, p, "{from, to}")
+            r = problems.check(as_mapping, r, p, "{from, to}")
             if r is not None:
                 got = problems.check(expand_range, r, key, p, False)
                 if got is not None:
@@ -607,29 +529,6 @@ def check_sample(
     if len(problems.items) > before:
         return None
     return Sample(method, n, seed, out)
-
-
-def check_conflicts(spec: Spec, problems: _Problems) -> None:
-    """A key may be varied by one axis only, and not also set by a case entry."""
-    owners: dict[str, str] = {}
-    axes = [("sweep", k) for k in spec.sweep] + [("zip", k) for k in spec.zip]
-    if spec.sample:
-        axes += [("sample.ranges", k) for k in spec.sample.ranges]
-    for where, key in axes:
-        for other, owner in owners.items():
-            if key == other or key.startswith(other + ".") or other.startswith(key + "."):
-                problems.add(
-                    f"{where}.{key}",
-                    f"{other} is already varied by {owner}.{other}; vary each key in one place",
-                )
-        owners[key] = where
-    for i, entry in enumerate(spec.cases):
-        for key in leaf_keys(entry):
-            for other, owner in owners.items():
-                if key == other or key.startswith(other + "."):
-                    problems.add(
-                        f"cases[{i}].{key}", f"also varied by {owner}.{other}; vary it in one place"
-                    )
 
 
 def leaf_keys(entry: Mapping, prefix: str = "") -> list[str]:
@@ -642,232 +541,3 @@ def leaf_keys(entry: Mapping, prefix: str = "") -> list[str]:
         else:
             out.append(key)
     return out
-
-
-def check_replay(value: object, problems: _Problems) -> str | None:
-    block = problems.check(_mapping, value, "replay", "{where: EXPR}")
-    if block is None:
-        return None
-    for k in block:
-        if k != "where":
-            problems.items.append(_unknown("replay", k, ["where"]))
-    where = block.get("where")
-    if not isinstance(where, str) or not where.strip():
-        problems.add(
-            "replay.where",
-            f'found {_show(where)}, expected an expression such as "speed_rpm == 11000"',
-        )
-        return None
-    try:
-        parse_where(where)
-    except QueryError as exc:
-        problems.add("replay.where", str(exc))
-        return None
-    return where
-
-
-def check_plot_list(value: object, problems: _Problems) -> list[PlotRequest]:
-    """``plots:``: a list of plots (:func:`campipe.study.plots.check_plot`), each problem at
-    its entry's key."""
-    if not isinstance(value, list):
-        problems.add("plots", f"found {_show(value)}, expected a list such as [{{kind: metric}}]")
-        return []
-    out = []
-    for i, entry in enumerate(value):
-        if not isinstance(entry, Mapping):
-            problems.add(
-                f"plots[{i}]", f"found {_show(entry)}, expected a mapping such as {{kind: map}}"
-            )
-            continue
-        try:
-            out.append(check_plot(entry, f"plots[{i}]"))
-        except PlotError as exc:
-            problems.add(str(exc.key), exc.reason)
-    return out
-
-
-def check_search(value: object, problems: _Problems) -> str | None:
-    """``search: {onset: no-follow, axis: speed}`` → "onset"."""
-    block = problems.check(_mapping, value, "search", "{onset: no-follow, axis: speed}")
-    if block is None:
-        return None
-    ok = True
-    for k, v in block.items():
-        if k not in SEARCHES:
-            problems.items.append(_unknown("search", k, list(SEARCHES)))
-            ok = False
-        elif v not in SEARCHES[k]:
-            problems.add(f"search.{k}", f"found {_show(v)}, expected {' or '.join(SEARCHES[k])}")
-            ok = False
-    if "onset" not in block:
-        problems.add("search.onset", "missing: what to search for (no-follow)")
-        ok = False
-    return "onset" if ok else None
-
-
-# -- the spec -------------------------------------------------------------------------------
-
-
-def check_spec(
-    raw: object,
-    text: str = "",
-    directory: str | Path = ".",
-    source: str = "spec",
-    overrides: Mapping[str, object] | None = None,
-    max_axis: int = MAX_AXIS_LENGTH,
-) -> Spec:
-    """Check a parsed spec and return it with defaults filled in and ranges expanded.
-
-    Parameters
-    ----------
-    raw : object
-        The parsed YAML (see :func:`campipe.io.spec_yaml.read_spec`).
-    text : str
-        The spec's text, kept in the archive.
-    directory : str or Path
-        The spec's folder: lift-table files are relative to it.
-    source : str
-        The spec's name in error messages.
-    overrides : mapping, optional
-        ``{"run.revolutions": 1}``: applied over ``raw`` first (``campipe study --set``).
-    max_axis : int
-        Longest axis (a range's num, a sample's n): refused beyond it, before any value is
-        made (the case count is checked by :func:`campipe.study.limits.check_limits`).
-
-    Raises
-    ------
-    SpecError
-        Listing every problem found, each with its key path.
-    """
-    problems = _Problems()
-    overrides = dict(overrides or {})
-    if overrides:
-        raw = copy.deepcopy(raw)
-        for key, value in overrides.items():
-            try:
-                raw = apply_override(raw, key, value)
-            except SpecProblem as exc:
-                problems.items.append(exc)
-    if not isinstance(raw, Mapping):
-        raise SpecError(
-            [
-                SpecProblem(
-                    "",
-                    f"found {_show(raw)}, expected a mapping of the keys: " + ", ".join(TOP_LEVEL),
-                )
-            ],
-            source,
-        )
-    for k in raw:
-        if k not in TOP_LEVEL:
-            problems.items.append(_unknown("", str(k), TOP_LEVEL))
-    name = raw.get("name")
-    if name is None:
-        problems.add(
-            "name", "missing; expected a study name such as 'separation-map' (it names the archive)"
-        )
-    elif not isinstance(name, str) or not re.match(NAME_PATTERN, name):
-        problems.add(
-            "name",
-            f"found {_show(name)}, expected letters, digits, '-', '_' or '.', "
-            "starting with a letter or digit (it names the archive file)",
-        )
-    description = raw.get("description", "")
-    if not isinstance(description, str):
-        problems.add("description", f"found {_show(description)}, expected text")
-    base = check_case_block({k: raw[k] for k in CASE_KEYS if k in raw}, "", False, problems)
-    base.setdefault("model", {})
-    base["model"] = {"preset": "thesis-1971", **(base["model"] or {})}
-    base.setdefault("defects", [])
-    base.setdefault("closure", "force")
-    base.setdefault("seat", "none")
-    base["run"] = {**RUN_DEFAULTS, **(base.get("run") or {})}
-    problems.check(check_output_every, base["run"])
-    sweep = check_axes(raw["sweep"], "sweep", False, problems, max_axis) if "sweep" in raw else {}
-    zipped = check_axes(raw["zip"], "zip", True, problems, max_axis) if "zip" in raw else {}
-    cases = check_cases(raw["cases"], problems) if "cases" in raw else []
-    sample = check_sample(raw["sample"], problems, max_axis) if "sample" in raw else None
-    replay = check_replay(raw["replay"], problems) if "replay" in raw else None
-    plots = check_plot_list(raw["plots"], problems) if "plots" in raw else []
-    search = check_search(raw["search"], problems) if "search" in raw else None
-    spec = Spec(
-        name=name if isinstance(name, str) else "",
-        description=str(description),
-        text=text,
-        directory=Path(directory),
-        base=base,
-        sweep=sweep,
-        zip=zipped,
-        cases=cases,
-        sample=sample,
-        replay=replay,
-        search=search,
-        overrides=overrides,
-        plots=plots,
-    )
-    check_conflicts(spec, problems)
-    if problems.items:
-        raise SpecError(problems.items[:MAX_PROBLEMS], source)
-    return spec
-
-
-def check_output_every(run: Mapping) -> None:
-    """The stored histories need at least two samples: ``output_every`` within the run."""
-    try:
-        revolutions = CASE_FIELDS["run.revolutions"].parse(run["revolutions"], "run.revolutions")
-        every = CASE_FIELDS["run.output_every"].parse(run["output_every"], "run.output_every")
-    except SpecProblem:
-        return  # refused where the run block is checked
-    if every > revolutions * 2 * math.pi:
-        raise SpecProblem(
-            "run.output_every",
-            f"found {excerpt(run['output_every'])}, longer than the run "
-            f"({revolutions:g} revolutions = {revolutions * 360:g} deg): the histories would "
-            "hold the start alone",
-            found=run["output_every"],
-            expected=f"at most {revolutions * 360:g} deg",
-        )
-
-
-def apply_override(raw: object, key: str, value: object) -> object:
-    """Set ``key`` (a dotted path, list indices as numbers) in a copy of ``raw``.
-
-    Inside ``sweep``, ``zip`` and ``sample.ranges`` the rest of the path is one key:
-    ``sweep.model.spring_preload`` sets the sweep's ``model.spring_preload``.
-    """
-    if not isinstance(raw, dict):
-        raise SpecProblem(key, "the spec is not a mapping")
-    parts = key.split(".")
-    node: object = raw
-    i = 0
-    while i < len(parts) - 1:
-        part = parts[i]
-        if isinstance(node, list):
-            idx = _index(part, node, key)
-            node = node[idx]
-            i += 1
-            continue
-        if not isinstance(node, dict):
-            raise SpecProblem(key, f"{'.'.join(parts[:i])} is not a mapping")
-        if part in _KEYED_BY_CASE_KEY:
-            node = node.setdefault(part, {})
-            if not isinstance(node, dict):
-                raise SpecProblem(key, f"{'.'.join(parts[: i + 1])} is not a mapping")
-            node[".".join(parts[i + 1 :])] = value
-            return raw
-        node = node.setdefault(part, {})
-        i += 1
-    last = parts[-1]
-    if isinstance(node, list):
-        node[_index(last, node, key)] = value
-    elif isinstance(node, dict):
-        node[last] = value
-    else:
-        raise SpecProblem(key, f"{'.'.join(parts[:-1])} is not a mapping")
-    return raw
-
-
-def _index(part: str, node: list, key: str) -> int:
-    if not part.isdigit() or int(part) >= len(node):
-        raise SpecProblem(key, f"found {excerpt(part)}, expected a list index below {len(node)}")
-    return int(part)

@@ -1,7 +1,7 @@
 """Reading an archive as a grid: :func:`open_study`.
 
 An archive holds its cases along one dimension, ``case``, in the order the spec expands them
-(:mod:`campipe.study.expand`): for each ``cases`` entry, the ``sweep`` grid (first key
+(:mod:`campipe.study.spec.expand`): for each ``cases`` entry, the ``sweep`` grid (first key
 outermost), then the ``zip`` rows, then the ``sample`` points. Where the sweep is a full grid
 whose values are plain labels (numbers without NaN, or text), :func:`open_study` turns its
 axes into dimensions of their own; what is not a grid (the zip rows, the case entries, the

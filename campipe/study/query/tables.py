@@ -16,9 +16,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from campipe.errors import did_you_mean, excerpt
-from campipe.study.display import display_units, format_value, label, to_display
-from campipe.study.layout import coordinate_values
-from campipe.study.variables import VARIABLES, case_coordinates, data_variables
+from campipe.study.query.display import display_units, format_value, label, to_display
+from campipe.study.spec.coordinates import coordinate_values
+from campipe.study.spec.variables import VARIABLES, case_coordinates, data_variables
 from campipe.study.where import QueryError, Where, evaluate, parse_where
 from campipe.vocabulary import EVENTS_TRUNCATED, FAILURES, STATUS
 
@@ -73,7 +73,7 @@ def case_table(ds) -> CaseTable:
 
 def displayed(table: CaseTable, shown: dict[str, str]) -> CaseTable:
     """The table with each column in the units ``shown`` names (see
-    :func:`campipe.study.display.display_units`); columns not named stay as they are."""
+    :func:`campipe.study.query.display.display_units`); columns not named stay as they are."""
     columns = {
         k: to_display(v, table.units[k], shown.get(k, table.units[k]))
         for k, v in table.columns.items()
@@ -199,7 +199,7 @@ def summary(ds, where: str | None = None, system: str = "spec") -> str:
     """The study's axes, the cases that failed or kept only part of their events (by case
     id) and, for a speed sweep, the separation onset speed (first speed with
     ``separation_deg_per_rev > 0``) for each combination of the other varying parameters,
-    values in the units of ``system`` (:mod:`campipe.study.display`).
+    values in the units of ``system`` (:mod:`campipe.study.query.display`).
 
     With ``where``, only the cases it selects are summarised (the axes' values among them,
     their failures, their onsets)."""
@@ -351,7 +351,7 @@ def replay_mask(study, plan, data) -> np.ndarray:
 
     The expression sees the cases' archive coordinates and per-case metrics, as
     ``campipe query`` would; this is what a replay logger (the study's
-    :data:`~campipe.study.execute.BatchHook`) calls to pick the cases to log.
+    :data:`~campipe.study.run.execute.BatchHook`) calls to pick the cases to log.
     """
     n = plan.size
     if not study.spec.replay:

@@ -1,7 +1,7 @@
 """The archive's variables, declared once: dimensions, type, units, long name, role.
 
 Every netCDF attribute of an archive comes from here (:func:`layout`); the per-case
-coordinates come from the spec's key table (:mod:`campipe.study.fields`) and the member loads
+coordinates come from the spec's key table (:mod:`campipe.study.spec.fields`) and the member loads
 from the engine's :data:`~campipe.engine.MEMBER_LOADS`. Units are pint spellings that UDUNITS
 also reads; the archive is SI except ``speed_rpm`` [rpm] and angles [degree].
 
@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from campipe.engine import MEMBER_LOADS, SPRING_HISTORIES
 from campipe.engine.metrics import READS, Metric, archived_metrics
 from campipe.model import COORDINATES, PARAMETERS
-from campipe.study.fields import CASE_FIELDS, Field, varied_fields
+from campipe.study.spec.fields import CASE_FIELDS, Field, varied_fields
 from campipe.units import convert
 from campipe.vocabulary import CONTACT_FLAGS, EVENT_FLAGS, STATUS_FLAGS
 

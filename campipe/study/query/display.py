@@ -10,7 +10,7 @@ The archive stores SI (with ``speed_rpm`` in rpm and angles in degrees); ``campi
 - ``si``: the archive's own units;
 - ``in-lbf``: inches, pounds-force and seconds (the thesis's units), rpm and degrees.
 
-No seat (``-inf`` in the archive, :data:`~campipe.study.variables.NO_SEAT`) reads ``none``.
+No seat (``-inf`` in the archive, :data:`~campipe.study.spec.variables.NO_SEAT`) reads ``none``.
 """
 
 from __future__ import annotations
@@ -23,11 +23,10 @@ import numpy as np
 
 from campipe.errors import CampipeError, excerpt
 from campipe.io.spec_yaml import SpecFileError, parse_spec_text
-from campipe.study.variables import NONE_WORD, STANDARD_COORDINATES
+from campipe.study.spec.plots import SYSTEMS
+from campipe.study.spec.variables import NONE_WORD, STANDARD_COORDINATES
 from campipe.units import convert
 
-#: The unit systems of ``--units``.
-SYSTEMS = ("spec", "si", "in-lbf")
 #: Stored (SI) units → their in-lbf counterparts (units not listed stay as stored).
 IN_LBF = {
     "m": "in",

@@ -1,11 +1,11 @@
-"""JSON Schema of a study spec, generated from the key table (:mod:`campipe.study.fields`)
+"""JSON Schema of a study spec, generated from the key table (:mod:`campipe.study.spec.fields`)
 and the model's own schema (:func:`campipe.model.schema.model_schema`).
 
 ``schemas/study.schema.json`` is this module's output (a test keeps the two equal);
-regenerate it with ``python -m campipe.study.schema > schemas/study.schema.json``.
+regenerate it with ``python -m campipe.study.spec.schema > schemas/study.schema.json``.
 
 The schema checks a spec's shape (keys, types, quantities written with units, enumerations);
-:func:`campipe.study.spec.check_spec` checks the rest (units of the right dimension, ranges,
+:func:`campipe.study.spec.check.check_spec` checks the rest (units of the right dimension, ranges,
 a seat below full lift, the step limit) and names the key path of every problem.
 """
 
@@ -15,8 +15,8 @@ import json
 
 from campipe.model import PARAMETERS
 from campipe.model.schema import QUANTITY_PATTERN, model_schema, parameter_schema
-from campipe.study.display import SYSTEMS
-from campipe.study.fields import (
+from campipe.study.spec.check import NAME_PATTERN
+from campipe.study.spec.fields import (
     CASE_FIELDS,
     CASE_KEYS,
     DEFECT_FIELDS,
@@ -34,10 +34,10 @@ from campipe.study.fields import (
     sweep_keys,
     varied_fields,
 )
-from campipe.study.plots import COMMON_KEYS as PLOT_COMMON_KEYS
-from campipe.study.plots import KIND_KEYS as PLOT_KIND_KEYS
-from campipe.study.plots import KINDS as PLOT_KINDS
-from campipe.study.spec import NAME_PATTERN
+from campipe.study.spec.plots import COMMON_KEYS as PLOT_COMMON_KEYS
+from campipe.study.spec.plots import KIND_KEYS as PLOT_KIND_KEYS
+from campipe.study.spec.plots import KINDS as PLOT_KINDS
+from campipe.study.spec.plots import SYSTEMS
 
 SCHEMA_ID = "https://campipe.example/schemas/study.schema.json"
 

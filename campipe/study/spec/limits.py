@@ -20,9 +20,10 @@ from campipe.constants import TWO_PI
 from campipe.engine import DEFAULT_STEPS, resolve_integrator
 from campipe.engine.settings import sample_count, turn_count
 from campipe.errors import CampipeError
-from campipe.study.fields import CASE_FIELDS, SpecProblem, varied_fields
-from campipe.study.spec import MAX_AXIS_LENGTH, Spec, leaf_keys
-from campipe.study.variables import DOF_NAMES, data_variables
+from campipe.study.spec.blocks import MAX_AXIS_LENGTH, leaf_keys
+from campipe.study.spec.check import Spec
+from campipe.study.spec.fields import CASE_FIELDS, SpecProblem, varied_fields
+from campipe.study.spec.variables import DOF_NAMES, data_variables
 
 
 @dataclass(frozen=True)

@@ -21,8 +21,11 @@ from pathlib import Path
 from typing import Any
 
 from campipe.errors import CampipeError, did_you_mean, excerpt
-from campipe.study.display import SYSTEMS
 from campipe.study.where import QueryError, parse_where
+
+#: The unit systems of ``--units`` (a plot's ``units``; :mod:`campipe.study.query.display`
+#: converts to them).
+SYSTEMS = ("spec", "si", "in-lbf")
 
 #: Plot kinds and what each draws.
 KINDS = {
@@ -57,7 +60,7 @@ class PlotRequest:
 
     kind: str  # one of KINDS
     where: str | None = None  # --where selection of cases
-    units: str = "spec"  # unit system (campipe.study.display.SYSTEMS)
+    units: str = "spec"  # unit system (SYSTEMS)
     output: str | None = None  # file to write (.png, .svg, .pdf)
     x: str | None = None  # column along x (metric, map)
     y: str | None = None  # metric: the value plotted; map: the column along y

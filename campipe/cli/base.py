@@ -1,0 +1,234 @@
+"""The ``campipe`` group and what its commands share: errors mapped to messages and exit
+statuses (:func:`failure`), ``--set`` overrides, a spec loaded and refused, the limit and
+unit options."""
+
+from __future__ import annotations
+
+import atexit
+import functools
+import gc
+import logging
+
+import click
+
+from campipe import __version__
+from campipe.errors import CampipeError
+from campipe.units import pint_without_dask
+
+
+def parse_overrides(pairs: tuple[str, ...]) -> dict[str, object]:
+    """``("spring_rate=260 lbf/in", …)`` → ``{"spring_rate": "260 lbf/in"}``, values as YAML."""
+    from campipe.io.spec_yaml import SpecFileError, parse_value
+
+    out: dict[str, object] = {}
+    for pair in pairs:
+        key, sep, text = pair.partition("=")
+        key = key.strip()
+        if not sep or not key:
+            raise click.BadParameter(
+                f"{pair!r}: write NAME=VALUE, e.g. spring_rate='260 lbf/in'", param_hint="--set"
+            )
+        try:
+            out[key] = parse_value(text, key)
+        except SpecFileError as exc:
+            raise click.BadParameter(str(exc), param_hint="--set") from None
+    return out
+
+
+#: Longest line of an error message shown: a message quoting a huge value stays readable.
+MAX_MESSAGE_LINE = 1000
+
+
+class Failure(CampipeError, click.ClickException):
+    """A CampipeError or a system error as the command's message: one line or a few naming
+    the cause and what to do. Exit status 2 for the user's input (the error is a
+    ValueError: a spec, an option, a path), 1 for the environment (a RuntimeError or
+    OSError: a full or read-only disk, a busy archive, a scheduler or worker gone)."""
+
+    exit_code = 1
+
+    def __init__(self, message: str) -> None:
+        lines = [
+            line if len(line) <= MAX_MESSAGE_LINE else line[: MAX_MESSAGE_LINE - 3] + "..."
+            for line in message.splitlines()[:60]
+        ]
+        super().__init__("\n".join(lines))
+
+    def show(self, file=None) -> None:
+        click.echo(f"Error: {self.format_message()}", err=True)
+
+    @staticmethod
+    def of(message: str, user_input: bool) -> Failure:
+        """An InputFailure (exit status 2) or an environment Failure (1)."""
+        return InputFailure(message) if user_input else Failure(message)
+
+
+class InputFailure(Failure):
+    """A Failure caused by the user's input: exit status 2."""
+
+    exit_code = 2
+
+
+def failure(exc: BaseException) -> Failure | None:
+    """The Failure for an exception a user can act on, or None for a defect (left to raise
+    with its traceback)."""
+    if isinstance(exc, CampipeError):
+        return Failure.of(str(exc), isinstance(exc, ValueError))
+    if isinstance(exc, OSError):
+        where = f"{exc.filename}: " if exc.filename else ""
+        return Failure(f"{where}{exc.strerror or exc}")
+    if isinstance(exc, MemoryError):
+        return Failure("out of memory; run a smaller study, or on a larger machine")
+    from campipe.io.archive import missing_filter
+
+    if (plugin := missing_filter(exc)) is not None:
+        return Failure(f"cannot read the archive ({exc}): {plugin}")
+    return None
+
+
+class CampipeGroup(click.Group):
+    """The ``campipe`` group: maps errors to messages and exit statuses (:func:`failure`)."""
+
+    def invoke(self, ctx: click.Context):
+        try:
+            return super().invoke(ctx)
+        except (click.ClickException, click.exceptions.Exit, click.Abort):
+            raise
+        except Exception as exc:
+            mapped = failure(exc)
+            if mapped is None:
+                raise
+            raise mapped from None
+
+
+@click.group(cls=CampipeGroup)
+@click.version_option(version=__version__, package_name="campipe")
+@click.option("-v", "--verbose", count=True, help="More log output (-v info, -vv debug).")
+def main(verbose: int) -> None:
+    """campipe: parametric studies of cam-driven valve-train dynamics."""
+    logging.basicConfig(level=[logging.WARNING, logging.INFO, logging.DEBUG][min(verbose, 2)])
+    _exit_without_collecting()
+
+
+@functools.cache
+def _exit_without_collecting() -> None:
+    """At exit, leave the objects still alive to the operating system (``gc.freeze``, once
+    the exit handlers registered since have run) instead of the interpreter's last garbage
+    collections: once a kernel has run, those go through numba's object graph, 0.15 s of a
+    one-case study. Exit handlers still run; a command closes its files before it returns."""
+    atexit.register(gc.freeze)
+
+
+# -- studies ----------------------------------------------------------------------------------
+
+
+class SpecRefused(CampipeError, click.ClickException):
+    """A spec refused before anything runs (exit status 2, like a usage error)."""
+
+    exit_code = 2
+
+    def show(self, file=None) -> None:
+        click.echo(self.format_message(), err=True)
+
+
+def load_spec(spec_path, sets, limits=None):
+    from campipe.io.spec_yaml import SpecFileError
+    from campipe.study import SpecError, load_study
+
+    pint_without_dask()  # this process is the command's own
+    overrides = parse_overrides(sets)
+    try:
+        return load_study(spec_path, overrides, limits)
+    except (SpecFileError, SpecError) as exc:
+        raise SpecRefused(str(exc)) from None
+
+
+#: The defaults of campipe.study.spec.limits.Limits, repeated here so --help needs no import of
+#: the engine (tests/integration/test_fuzz.py checks they agree).
+DEFAULT_LIMITS = {
+    "cases": 100_000,
+    "steps": 1e9,
+    "samples": 100_000,
+    "events": 100_000,
+    "archive_gb": 20.0,
+}
+
+
+def limit_options(command):
+    """``--max-cases`` … ``--max-archive-gb``: the limits a spec is checked against."""
+    d = DEFAULT_LIMITS
+    options = [
+        click.option(
+            "--max-archive-gb",
+            type=click.FloatRange(min=0, min_open=True),
+            default=d["archive_gb"],
+            show_default=True,
+            help="Largest archive before compression [GB].",
+        ),
+        click.option(
+            "--max-events",
+            type=click.IntRange(min=1),
+            default=d["events"],
+            show_default=True,
+            help="Largest run.max_events (events kept per case).",
+        ),
+        click.option(
+            "--max-samples",
+            type=click.IntRange(min=2),
+            default=d["samples"],
+            show_default=True,
+            help="Most stored samples per case (revolutions × 360° / output_every).",
+        ),
+        click.option(
+            "--max-steps",
+            type=click.FloatRange(min=1),
+            default=d["steps"],
+            show_default=True,
+            help="Most integration steps per case (the slowest speed with the smallest step).",
+        ),
+        click.option(
+            "--max-cases",
+            type=click.IntRange(min=1),
+            default=d["cases"],
+            show_default=True,
+            help="Most cases in the study (counted from the axes' lengths).",
+        ),
+    ]
+    for option in options:
+        command = option(command)
+    return command
+
+
+def limits_given(max_cases, max_steps, max_samples, max_events, max_archive_gb):
+    from campipe.study.spec.limits import Limits
+
+    return Limits(max_cases, max_steps, max_samples, max_events, max_archive_gb * 1e9)
+
+
+def archive_path(study, spec_path, output):
+    from pathlib import Path
+
+    return Path(output) if output else Path(spec_path).parent / f"{study.name}.nc"
+
+
+SET_HELP = (
+    "Override a spec key before checking it, value as YAML: --set run.revolutions=1, "
+    "--set sweep.speed='[9000 rpm, 9524 rpm]'. Repeatable."
+)
+
+
+#: The unit systems of --units (campipe.study.spec.plots.SYSTEMS, repeated so --help needs no
+#: import of the study layer; tests/integration/test_plot.py checks they agree).
+UNIT_SYSTEMS = ("spec", "si", "in-lbf")
+
+
+def units_option(command):
+    """``--units spec|si|in-lbf``: the units values are shown in."""
+    return click.option(
+        "--units",
+        type=click.Choice(UNIT_SYSTEMS),
+        default="spec",
+        show_default=True,
+        help="Show values in the units the spec wrote them in, with the rest in the spec's "
+        "system (spec), in SI as stored (si), or in inches, pounds-force and seconds (in-lbf).",
+    )(command)

@@ -1,0 +1,88 @@
+"""``campipe bench``: speed against error."""
+
+from __future__ import annotations
+
+import sys
+
+import click
+
+
+@click.command()
+@click.option(
+    "--quick",
+    is_flag=True,
+    help="Small ladders, one cam turn per scene, scaling up to 256 cases (< 1 min).",
+)
+@click.option(
+    "-o",
+    "--output",
+    "output",
+    default="bench-results",
+    show_default=True,
+    type=click.Path(file_okay=False),
+    help="Folder for bench.md/.csv/.json/.png.",
+)
+@click.option(
+    "--scene",
+    "scenes",
+    multiple=True,
+    metavar="NAME",
+    help="Run only this scene of the suite (repeatable).",
+)
+@click.option(
+    "--scaling/--no-scaling",
+    default=True,
+    show_default=True,
+    help="Measure throughput and the engine's time against cases and workers.",
+)
+@click.option(
+    "--suite/--no-suite",
+    default=True,
+    show_default=True,
+    help="Run the scenes: references, integrators, peers, fidelity.",
+)
+@click.option(
+    "--plot/--no-plot",
+    default=True,
+    show_default=True,
+    help="Write bench.png (needs matplotlib: pip install 'campipe[plot]').",
+)
+def bench(quick, output, scenes, scaling, suite, plot) -> None:
+    """Speed against error: the suite of scenes, every integrator and fidelity, peers, scaling.
+
+    Ends with the verdict: each goal with its measured figure (reached, not reached or not
+    shown), each reference cross-check (agree or disagree, and why). Exit status 1 when a
+    cross-check disagrees.
+    """
+    from campipe.bench import verdict
+    from campipe.bench.report import write_report
+    from campipe.bench.run import run_bench
+
+    if plot:
+        try:
+            import matplotlib  # noqa: F401
+        except ImportError:
+            raise click.UsageError(
+                "--plot needs matplotlib: pip install 'campipe[plot]', or pass --no-plot"
+            ) from None
+    stderr = sys.stderr
+
+    def say(text: str) -> None:
+        stderr.write(f"campipe bench: {text}\n")
+
+    try:
+        result = run_bench(
+            quick,
+            scenes or None,
+            with_scaling=scaling,
+            with_suite=suite,
+            progress=say,
+        )
+    except ValueError as exc:
+        raise click.UsageError(str(exc)) from None
+    paths = write_report(result, output, with_plot=plot)
+    for path in paths.values():
+        click.echo(str(path))
+    click.echo(verdict.text(result))
+    if not verdict.all_agree(result):
+        sys.exit(1)

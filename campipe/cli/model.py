@@ -1,0 +1,329 @@
+"""``campipe model``, ``campipe init`` and ``campipe schema``: the model's matrices and limits, the
+example specs, the JSON Schemas."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import click
+import numpy as np
+
+from campipe.cli.base import Failure, InputFailure, parse_overrides
+from campipe.constants import INCH, LBF_IN, RPM
+from campipe.model import (
+    ELEMENTS,
+    PARAMETERS,
+    PRESETS,
+    Coordinate,
+    ModelParameterError,
+    coordinates,
+    modal_damping_ratios,
+    newmark_linear_stability_limit,
+    system_matrices,
+    to_display_units,
+    translations,
+    valve_train,
+)
+from campipe.model.assembly import CONVERGENCE_ELEMENTS, frequency_convergence, observed_orders
+from campipe.units import convert, pint_without_dask
+from campipe.vocabulary import CONFIGURATIONS, ROMAN
+
+#: The parameters ``campipe model --convergence`` refines.
+REFINEMENTS = tuple(f"{member}_elements" for member in ELEMENTS)
+
+
+@click.command()
+@click.option(
+    "--preset",
+    default="thesis-1971",
+    show_default=True,
+    type=click.Choice(sorted(PRESETS)),
+    help="Named parameter set.",
+)
+@click.option(
+    "--set",
+    "sets",
+    multiple=True,
+    metavar="NAME=VALUE",
+    help="Override a model parameter, with units: --set spring_rate='260 lbf/in'. "
+    "Repeatable. Names: " + ", ".join(PARAMETERS),
+)
+@click.option("--json", "as_json", is_flag=True, help="Print one JSON object (SI units).")
+@click.option(
+    "--convergence",
+    type=click.Choice(REFINEMENTS),
+    metavar="NAME",
+    help="Instead, show how the lowest natural frequencies converge as the parameter NAME "
+    f"(one of: {', '.join(REFINEMENTS)}) divides its member into "
+    + ", ".join(map(str, CONVERGENCE_ELEMENTS))
+    + " elements.",
+)
+@click.option(
+    "--modes",
+    default=6,
+    show_default=True,
+    type=click.IntRange(1, 64),
+    help="Modes shown with --convergence.",
+)
+def model(
+    preset: str, sets: tuple[str, ...], as_json: bool, convergence: str | None, modes: int
+) -> None:
+    """Print the model's matrices, natural frequencies, mode shapes and stability limits."""
+    pint_without_dask()  # this process is the command's own
+    overrides = parse_overrides(sets)
+    try:
+        train = valve_train(preset, overrides)
+    except ModelParameterError as exc:
+        raise click.UsageError(str(exc)) from None
+    if convergence is not None:
+        report = convergence_report(train, convergence, modes)
+        if as_json:
+            click.echo(json.dumps({"preset": preset, **report}, indent=1))
+        else:
+            click.echo(convergence_text(report, preset, overrides))
+        return
+    sm = system_matrices(train)
+    limits = {
+        ROMAN[c]: newmark_linear_stability_limit(sm.mass, sm.stiffness, c) for c in CONFIGURATIONS
+    }
+    if as_json:
+        click.echo(json.dumps(model_report(train, sm, limits, preset), indent=1))
+    else:
+        click.echo(model_text(train, sm, limits, preset, overrides))
+
+
+def _json_value(value: object) -> object:
+    """NaN (a parameter given as none) as JSON's null."""
+    return None if isinstance(value, float) and math.isnan(value) else value
+
+
+def model_report(train, sm, limits, preset) -> dict[str, object]:
+    """The JSON form of ``campipe model``: SI units throughout."""
+    return {
+        "preset": preset,
+        "parameters": {
+            name: {"value": _json_value(getattr(train, name)), "units": p.units or "1"}
+            for name, p in PARAMETERS.items()
+        },
+        "coordinates": [
+            {
+                "symbol": c.symbol,
+                "name": c.name,
+                "kind": c.kind,
+                "positive": c.positive,
+                "units": "m" if c.kind == "translation" else "rad",
+            }
+            for c in coordinates(train)
+        ],
+        "natural_frequencies": sm.frequencies.tolist(),
+        "natural_frequencies_rpm": (sm.frequencies / RPM).tolist(),
+        "modal_damping_ratios": modal_damping_ratios(sm.damping, sm.modes, sm.frequencies).tolist(),
+        "mass_matrix": sm.mass.tolist(),
+        "stiffness_matrix": sm.stiffness.tolist(),
+        "damping_matrix": sm.damping.tolist(),
+        "mode_shapes": sm.modes.tolist(),
+        "stability_limit_s": limits,
+        "units": {
+            "natural_frequencies": "rad/s",
+            "modal_damping_ratios": "1, (Φᵀ C Φ)ⱼⱼ / (2ωⱼ)",
+            "mass_matrix": "kg (translation pairs), kg·m (mixed), kg·m² (rotation pairs)",
+            "stiffness_matrix": "N/m (translation pairs), N (mixed), N·m (rotation pairs)",
+            "damping_matrix": "N·s/m (translation pairs), N·s (mixed), N·m·s (rotation pairs)",
+            "mode_shapes": "mass-normalised (Φᵀ M Φ = I, SI)",
+            "stability_limit_s": "s",
+        },
+    }
+
+
+def _matrix_text(a: np.ndarray, scale: float, coords: tuple[Coordinate, ...]) -> list[str]:
+    head = "      " + "".join(f"{c.symbol:>9}" for c in coords)
+    rows = [head]
+    for c, row in zip(coords, a / scale, strict=True):
+        rows.append(f"  {c.symbol:<4}" + "".join(f"{v:9.2f}" for v in row))
+    return rows
+
+
+def _parameter_text(p, value) -> str:
+    if p.length:
+        return ", ".join(f"{x:g}" for x in value)
+    if p.allow_none and isinstance(value, float) and math.isnan(value):
+        return "none"
+    if p.choices or p.integer or not p.units:
+        return f"{value:g}" if isinstance(value, float) else str(value)
+    return f"{convert(value, p.units, p.thesis_units):g} {p.thesis_units}"
+
+
+def model_text(train, sm, limits, preset, overrides) -> str:
+    """The human form of ``campipe model``, in the thesis's units and layout."""
+    lines = [
+        f"campipe model: preset {preset}"
+        + (f", overrides {', '.join(overrides)}" if overrides else "")
+    ]
+    lines.append("")
+    lines.append("Parameters (thesis units)")
+    for name, p in PARAMETERS.items():
+        lines.append(f"  {name:<30} {_parameter_text(p, getattr(train, name))}")
+    coords = coordinates(train)
+    trans = translations(train)
+    lines.append("")
+    lines.append("Coordinates (thesis order and signs; refined members' internal nodes after q7)")
+    for c in coords:
+        lines.append(f"  {c.symbol:<4} {c.name:<30} {c.kind:<11} positive {c.positive}")
+    rot = "rows/cols with a rotation carry rad: ×in per translation index"
+    blocks = [
+        ("Mass matrix [M] (Figure 11)", sm.mass, 1e-5, "lbf·s²/in", "×1e-5"),
+        ("Stiffness matrix [K] (Figure 12)", sm.stiffness, 1e5, "lbf/in", "×1e5"),
+        (
+            f"Damping matrix [C] ({train.damping_kind}; Figure 13: modal)",
+            sm.damping,
+            1e-2,
+            "lbf·s/in",
+            "×1e-2",
+        ),
+    ]
+    for title, a, scale, unit, tag in blocks:
+        lines.append("")
+        lines.append(f"{title}  {tag} {unit} ({rot})")
+        lines += _matrix_text(to_display_units(a, INCH, LBF_IN, trans), scale, coords)
+    lines.append("")
+    lines.append("Natural frequencies (Figure 14), each mode's damping ratio (Φᵀ C Φ)ⱼⱼ / (2ωⱼ)")
+    lines.append(f"  {'mode':>4} {'rad/s':>14} {'rpm':>14} {'ζ':>6}")
+    zeta = modal_damping_ratios(sm.damping, sm.modes, sm.frequencies)
+    for i, (w, z) in enumerate(zip(sm.frequencies, zeta, strict=True), 1):
+        lines.append(f"  {i:>4} {w:14.1f} {w / RPM:14.1f} {z:6.3f}")
+    lines.append("")
+    lines.append(
+        "Mode shapes (Figure 14), one column a mode, scaled to a largest translation of 1"
+        " (rotations in rad/in)"
+    )
+    shapes = sm.modes / np.where(trans, INCH, 1.0)[:, None]
+    shapes = shapes / np.abs(shapes[trans]).max(axis=0)
+    lines.append("      " + "".join(f"{'mode ' + str(j):>9}" for j in range(1, len(coords) + 1)))
+    for c, row in zip(coords, shapes, strict=True):
+        lines.append(f"  {c.symbol:<4}" + "".join(f"{v:9.3f}" for v in row))
+    lines.append("")
+    lines.append("Stability limit of newmark-linear (Δt < √12/ω_max of the held configuration)")
+    for name, dt in limits.items():
+        lines.append(f"  {name:<4} {dt * 1e6:8.4f} µs")
+    return "\n".join(lines)
+
+
+def convergence_report(train, parameter: str, n_modes: int) -> dict[str, object]:
+    """The natural frequencies as ``parameter`` (``spring_elements`` …) refines its member:
+    the JSON form of ``campipe model --convergence`` (SI)."""
+    member = parameter.removesuffix("_elements")
+    freqs, roundoff = frequency_convergence(train, member, CONVERGENCE_ELEMENTS, n_modes)
+    orders = observed_orders(freqs, roundoff, CONVERGENCE_ELEMENTS)
+
+    def listed(a: np.ndarray) -> list:
+        return (
+            [None if np.isnan(v) else float(v) for v in a]
+            if a.ndim == 1
+            else [listed(row) for row in a]
+        )
+
+    return {
+        "parameter": parameter,
+        "elements": list(CONVERGENCE_ELEMENTS),
+        "natural_frequencies": listed(freqs),
+        "roundoff": listed(roundoff),
+        "observed_orders": listed(orders),
+        "units": {"natural_frequencies": "rad/s", "roundoff": "rad/s", "observed_orders": "1"},
+    }
+
+
+def convergence_text(report: dict, preset: str, overrides) -> str:
+    """The human form of ``campipe model --convergence``."""
+    parameter = report["parameter"]
+    freqs = np.array(report["natural_frequencies"], dtype=float)
+    orders = np.array(report["observed_orders"], dtype=float)
+    counts = report["elements"]
+    member = parameter.removesuffix("_elements").replace("_", " ")
+    lines = [
+        f"campipe model --convergence {parameter}: preset {preset}"
+        + (f", overrides {', '.join(overrides)}" if overrides else ""),
+        "",
+        f"Lowest natural frequencies [rad/s] with the {member} divided into n equal elements.",
+        "New internal modes (a spring's surge) enter as n grows: a column is one mode once it "
+        "settles.",
+        "",
+        f"  {'n':>6}" + "".join(f"{'mode ' + str(j):>14}" for j in range(1, freqs.shape[1] + 1)),
+    ]
+    for n, row in zip(counts, freqs, strict=True):
+        lines.append(f"  {n:>6}" + "".join(f"{v:14.7g}" if v == v else f"{'':>14}" for v in row))
+    lines.append(
+        f"  {'order':>6}" + "".join(f"{v:14.2f}" if v == v else f"{'-':>14}" for v in orders)
+    )
+    lines += [
+        "",
+        f"order: the observed order in 1/n from n = {', '.join(map(str, counts[-3:]))} "
+        "(consistent mass: 2 for a bar, 4 for a beam);",
+        "'-' where the column has not settled into one mode or has converged to the "
+        "eigensolver's round-off.",
+    ]
+    return "\n".join(lines)
+
+
+# -- starting without the repository -----------------------------------------------------------
+
+
+def packaged_specs() -> dict[str, bytes]:
+    """The example specs shipped in the package (``campipe/specs/``): file name → content."""
+    from importlib import resources
+
+    folder = resources.files("campipe") / "specs"
+    return {
+        entry.name: entry.read_bytes()
+        for entry in sorted(folder.iterdir(), key=lambda e: e.name)
+        if entry.name.endswith((".yaml", ".md"))
+    }
+
+
+@click.command()
+@click.argument("directory", default="studies", type=click.Path(file_okay=False))
+@click.option("--force", is_flag=True, help="Replace files of the same names in DIRECTORY.")
+def init(directory, force) -> None:
+    """Write the example specs into DIRECTORY (default: studies): the quickstart, the
+    separation map and the thesis's runs, with a README; then run one with campipe study."""
+    from pathlib import Path
+
+    folder = Path(directory)
+    specs = packaged_specs()
+    existing = [name for name in specs if (folder / name).exists()]
+    if existing and not force:
+        raise InputFailure(
+            f"{folder / existing[0]}: exists (and {len(existing) - 1} more of the example "
+            "files); choose another folder, or replace them with --force"
+            if len(existing) > 1
+            else f"{folder / existing[0]}: exists; choose another folder, or replace it "
+            "with --force"
+        )
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        for name, content in specs.items():
+            (folder / name).write_bytes(content)
+    except OSError as exc:
+        raise Failure(f"{exc.filename or folder}: cannot write ({exc.strerror or exc})") from None
+    for name in specs:
+        click.echo(str(folder / name))
+    click.echo(
+        f"campipe init: {len(specs)} files in {folder}; next: campipe study "
+        f"{folder / 'quickstart.yaml'}",
+        err=True,
+    )
+
+
+@click.command()
+@click.argument("which", default="study", type=click.Choice(["study", "model"]))
+def schema(which) -> None:
+    """Print the JSON Schema of a study spec (or of its model: block), for an editor's YAML
+    checking: campipe schema > study.schema.json."""
+    if which == "model":
+        from campipe.model.schema import model_schema
+
+        click.echo(json.dumps(model_schema(), indent=2, ensure_ascii=False))
+        return
+    from campipe.study.spec.schema import schema_text
+
+    click.echo(schema_text(), nl=False)

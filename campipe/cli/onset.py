@@ -1,0 +1,94 @@
+"""``campipe onset``: the speed where separation begins, for each design of a spec."""
+
+from __future__ import annotations
+
+import click
+import numpy as np
+
+from campipe.cli.base import SET_HELP, Failure, load_spec
+
+
+@click.command()
+@click.argument("spec", type=click.Path(exists=True, dir_okay=False))
+@click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=SET_HELP)
+@click.option(
+    "--tolerance",
+    default="0.1 rpm",
+    show_default=True,
+    metavar="SPEED",
+    help="The onset's tolerance (the width of its final bracket).",
+)
+@click.option(
+    "--format",
+    "fmt",
+    type=click.Choice(["table", "csv", "json"]),
+    default="table",
+    show_default=True,
+    help="json: {study, units, cases: [row objects]} as campipe query's (null: no onset in "
+    "the range, or no seat).",
+)
+@click.option(
+    "-o",
+    "--output",
+    type=click.Path(dir_okay=False),
+    help="The netCDF file written (default: <name>-onset.nc beside SPEC).",
+)
+@click.option(
+    "--check/--no-check",
+    default=True,
+    show_default=True,
+    help="Run the time-domain engine 0.5 % below and above each onset.",
+)
+@click.option(
+    "--workers",
+    type=click.IntRange(min=1),
+    help="Threads for the search (default: the cores available).",
+)
+def onset(spec, sets, tolerance, fmt, output, check, workers) -> None:
+    """The no-follow onset speed of every combination of SPEC's other axes, within its
+    speed range: the root of the steady state's least cam force, checked by the time-domain
+    engine either side. Exit status 1 when a check disagrees."""
+    from pathlib import Path
+
+    from campipe.units import QuantityError, parse_quantity
+
+    try:
+        tol = parse_quantity(tolerance, "rad/s", "--tolerance", "rpm")
+    except QuantityError as exc:
+        raise click.BadParameter(str(exc), param_hint="--tolerance") from None
+    loaded = load_spec(spec, sets)
+    path = Path(output) if output else Path(spec).parent / f"{loaded.name}-onset.nc"
+    run_onset(loaded, spec, path, tol, fmt, check, workers)
+
+
+def run_onset(loaded, spec_path, path, tolerance, fmt, check, workers, command="onset") -> None:
+    """``campipe onset``'s work (and ``campipe study``'s for a spec with ``search``)."""
+    from campipe.io.archive import provenance, write_file
+    from campipe.study.onset import file_contents, onset_study, summary_lines
+    from campipe.study.query.display import display_units
+    from campipe.study.query.tables import displayed, format_rows
+    from campipe.study.run.sizing import default_workers
+
+    result = onset_study(
+        loaded,
+        tolerance,
+        confirm=check,
+        workers=workers or default_workers(),
+        notice=lambda text: click.echo(f"campipe {command}: {text}", err=True),
+    )
+    sizes, variables, arrays, attrs = file_contents(result)
+    write_file(
+        path,
+        sizes,
+        variables,
+        arrays,
+        {**attrs, **provenance(f"campipe onset {spec_path}")},
+        loaded.compression,
+    )
+    table = displayed(result.table, display_units(result.table.units, attrs))
+    click.echo(format_rows(table, np.arange(table.n), table.default, fmt))
+    for line in summary_lines(result):
+        click.echo(line, err=True)
+    click.echo(f"wrote {path}", err=True)
+    if result.disagreements.size:
+        raise Failure(summary_lines(result)[-1])

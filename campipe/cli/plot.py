@@ -1,0 +1,96 @@
+"""``campipe plot``: the figures of an archive, and those a spec asks for when its study ends."""
+
+from __future__ import annotations
+
+import click
+
+from campipe.cli.base import Failure, InputFailure, units_option
+
+#: The plot kinds (campipe.study.spec.plots.KINDS, repeated so --help needs no import of the study
+#: layer; tests/integration/test_plot.py checks they agree).
+PLOT_KINDS = ("histories", "metric", "map", "events")
+
+
+@click.command()
+@click.argument("kind", type=click.Choice(PLOT_KINDS))
+@click.argument("archive", type=click.Path(exists=True, dir_okay=False))
+@click.option(
+    "-o",
+    "--output",
+    type=click.Path(dir_okay=False),
+    help="File to write: PNG, SVG or PDF by its suffix (default: <archive stem>-KIND.png "
+    "beside the archive).",
+)
+@click.option("--where", help="Draw the cases where EXPR holds (the language of query --where).")
+@units_option
+@click.option(
+    "--x", "x", metavar="COLUMN", help="metric, map: the column along x (default: speed_rpm)."
+)
+@click.option(
+    "--y",
+    "y",
+    metavar="COLUMN",
+    help="metric: the value drawn (default: separation_deg_per_rev); map: the column along y.",
+)
+@click.option(
+    "--z", "z", metavar="COLUMN", help="map: the value coloured (default: separation_deg_per_rev)."
+)
+@click.option(
+    "--level",
+    metavar="VALUE",
+    help="map: draw the contour at this value of z, a number in its shown units or a quantity "
+    "such as '1 deg'.",
+)
+@click.option(
+    "--turn",
+    metavar="N|last|all",
+    help="histories, events: show one cam turn (1, 2, ... or last; default all).",
+)
+def plot(kind, archive, output, where, units, x, y, z, level, turn) -> None:
+    """Draw a figure of ARCHIVE.
+
+    \b
+    histories  valve lift, velocity, acceleration, cam and follower lift, contact forces
+               against cam angle, the cases overlaid (at most 10), events marked
+    metric     a per-case value (--y) against a swept column (--x), a line per
+               combination of the other varied keys
+    map        a per-case value (--z) over two columns (--x, --y), its contour at --level
+    events     each case's separations, landings and seatings on a cam angle × case chart
+    """
+    from campipe.plot import plot_archive
+    from campipe.study.spec.plots import PlotError, check_plot
+
+    options = {"kind": kind, "where": where, "units": units, "output": output}
+    options.update({"x": x, "y": y, "z": z, "level": level, "turn": turn})
+    given = {k: v for k, v in options.items() if v is not None}
+    try:
+        request = check_plot(given)
+    except PlotError as exc:
+        raise InputFailure(f"--{exc.key}: {exc.reason}") from None
+    path, _ = plot_archive(archive, request, output)
+    click.echo(str(path))
+
+
+def write_plots(loaded, archive) -> None:
+    """The spec's ``plots:``, each written beside the finished archive."""
+    from collections import Counter
+
+    from campipe.plot import plot_archive
+
+    seen: Counter[str] = Counter()
+    for i, request in enumerate(loaded.spec.plots):
+        output = (
+            archive.parent / request.output
+            if request.output
+            else request.default_output(archive, seen[request.kind])
+        )
+        seen[request.kind] += 1
+        try:
+            path, _ = plot_archive(archive, request, output)
+        except Exception as exc:  # the archive is complete: a figure is an extra
+            raise Failure.of(
+                f"the archive {archive} is complete, but plots[{i}] ({request.kind}) failed: "
+                f"{str(exc)[:300]}; draw it with campipe plot {request.kind} {archive}",
+                isinstance(exc, ValueError),
+            ) from None
+        click.echo(f"campipe study: plots[{i}] ({request.kind}) written to {path}", err=True)

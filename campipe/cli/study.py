@@ -1,0 +1,392 @@
+"""``campipe study``, ``campipe validate`` and ``campipe query``: run a spec into an archive,
+check it (with the run's estimate), read an archive's cases."""
+
+from __future__ import annotations
+
+import sys
+
+import click
+
+from campipe.cli.base import (
+    SET_HELP,
+    Failure,
+    archive_path,
+    limit_options,
+    limits_given,
+    load_spec,
+    parse_overrides,
+    units_option,
+)
+from campipe.cli.onset import run_onset
+from campipe.cli.plot import write_plots
+
+
+@click.command()
+@click.argument("spec", type=click.Path(exists=True, dir_okay=False))
+@click.option(
+    "-o",
+    "--output",
+    type=click.Path(dir_okay=False),
+    help="Archive to write (default: <name>.nc beside the spec).",
+)
+@click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=SET_HELP)
+@click.option(
+    "--scheduler",
+    default="threads",
+    show_default=True,
+    help="threads, synchronous, processes, or a dask.distributed scheduler address "
+    "such as tcp://127.0.0.1:8786.",
+)
+@click.option(
+    "--workers",
+    type=click.IntRange(min=1),
+    help="Threads or processes of a local scheduler (default: the cores available).",
+)
+@click.option(
+    "--batch-size",
+    type=click.IntRange(min=1),
+    help="Cases per batch (default: about four batches per worker, 4 to 256 cases).",
+)
+@click.option(
+    "--keep-parts",
+    is_flag=True,
+    help="Keep the batch files (<archive>.parts/) after writing the archive.",
+)
+@click.option(
+    "--progress/--no-progress",
+    default=True,
+    show_default=True,
+    help="Show a progress line on stderr.",
+)
+@click.option(
+    "--overwrite",
+    is_flag=True,
+    help="Replace a file at the archive path that is not this study's archive (another "
+    "study's archive, any other file); cases it shares by id are reused.",
+)
+@limit_options
+def study(
+    spec,
+    output,
+    sets,
+    scheduler,
+    workers,
+    batch_size,
+    keep_parts,
+    progress,
+    overwrite,
+    max_cases,
+    max_steps,
+    max_samples,
+    max_events,
+    max_archive_gb,
+) -> None:
+    """Run the study SPEC (YAML) into one netCDF archive.
+
+    Rerunning the same command after an interruption computes only the cases whose batches
+    were not stored; a finished archive that already holds the study (its checksums
+    verified) is left as it is.
+    """
+    import shlex
+
+    from campipe.study.run.execute import run_study
+    from campipe.study.run.progress import Progress, logging_cleared
+    from campipe.study.run.resume import finished
+    from campipe.study.spec.limits import Limits
+
+    limits = limits_given(max_cases, max_steps, max_samples, max_events, max_archive_gb)
+    if limits == Limits() and not overwrite:
+        # A finished study answers from its spec's text and its archive's checksums alone.
+        done = finished(spec, parse_overrides(sets), output)
+        if done is not None:
+            click.echo(f"campipe study: {done.summary()}", err=True)
+            _report_statuses(done)
+            click.echo(str(done.archive))
+            return
+    loaded = load_spec(spec, sets, limits)
+    archive = archive_path(loaded, spec, output)
+    if loaded.spec.search == "onset":
+        from campipe.engine.periodic import DEFAULT_ONSET_TOLERANCE_RPM, RPM
+
+        tolerance = DEFAULT_ONSET_TOLERANCE_RPM * RPM
+        run_onset(loaded, spec, archive, tolerance, "table", True, workers, command="study")
+        return
+    stderr = sys.stderr
+    bars: list[Progress] = []
+
+    def bar(total, done):
+        bars.append(Progress(total, stderr.write, done=done, terminal=stderr.isatty()))
+        return bars[-1]
+
+    replay = None
+    if loaded.spec.replay:
+        from campipe.replay.live import StudyReplay, recording_path
+
+        replay = StudyReplay(loaded, recording_path(archive))
+    words = ["campipe", "study", spec, *(["-o", output] if output else [])]
+    words += [w for pair in sets for w in ("--set", pair)]
+    words += ["--scheduler", scheduler] if scheduler != "threads" else []
+    command = shlex.join(words)
+    try:
+        with logging_cleared(lambda: bars[-1] if bars else None):
+            report = run_study(
+                loaded,
+                archive,
+                scheduler=scheduler,
+                workers=workers,
+                batch_size=batch_size,
+                progress=bar if progress else None,
+                keep_parts=keep_parts,
+                command=command,
+                on_batch=replay if scheduler != "processes" else None,
+                overwrite=overwrite,
+                notice=lambda text: click.echo(f"campipe study: {text}", err=True),
+            )
+    finally:
+        for b in bars:
+            b.close()
+    for note in report.notes:
+        click.echo(f"campipe study: {note}", err=True)
+    click.echo(f"campipe study: {report.summary()}", err=True)
+    _report_statuses(report)
+    if replay is not None:
+        try:
+            recorded = replay.finish(report.archive)
+        except Exception as exc:  # the archive is complete: the recording is an extra
+            raise Failure.of(
+                f"the archive {report.archive} is complete, but the replay recording "
+                f"{replay.path} failed ({type(exc).__name__}: {str(exc)[:300]}); "
+                f"write it with campipe replay {report.archive} --where EXPR",
+                isinstance(exc, ValueError),
+            ) from None
+        if recorded:
+            click.echo(
+                f"campipe study: replay {loaded.spec.replay!r} recorded in {recorded}", err=True
+            )
+    if loaded.spec.plots:
+        write_plots(loaded, report.archive)
+    click.echo(str(report.archive))
+
+
+def _report_statuses(report) -> None:
+    """Name the cases that failed or kept only part of their events, by case id."""
+    failed = report.failures()
+    if failed:
+        shown = ", ".join(f"{cid} ({status})" for cid, status in list(failed.items())[:10])
+        more = f" and {len(failed) - 10} more" if len(failed) > 10 else ""
+        click.echo(
+            f"campipe study: {len(failed)} case{'s' if len(failed) != 1 else ''} failed: "
+            f"{shown}{more}; their histories and metrics are NaN (status in the archive; "
+            "campipe query ARCHIVE --summary lists them)",
+            err=True,
+        )
+    truncated = report.truncated()
+    if truncated:
+        shown = ", ".join(truncated[:10]) + (
+            f" and {len(truncated) - 10} more" if len(truncated) > 10 else ""
+        )
+        click.echo(
+            f"campipe study: {len(truncated)} case{'s' if len(truncated) != 1 else ''} kept "
+            f"only run.max_events events: {shown} (status events_truncated); raise "
+            "run.max_events to keep them all",
+            err=True,
+        )
+
+
+@click.command()
+@click.argument("spec", type=click.Path(exists=True, dir_okay=False))
+@click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=SET_HELP)
+@click.option(
+    "--workers",
+    type=click.IntRange(min=1),
+    help="Workers to estimate the run time for (default: the cores available).",
+)
+@click.option(
+    "--estimate/--no-estimate",
+    default=True,
+    show_default=True,
+    help="Time a short sample run to estimate the run time.",
+)
+@limit_options
+def validate(
+    spec,
+    sets,
+    workers,
+    estimate,
+    max_cases,
+    max_steps,
+    max_samples,
+    max_events,
+    max_archive_gb,
+) -> None:
+    """Check the study SPEC and print its case count, axes and estimated cost."""
+    from campipe.study.run.sizing import count_batches, default_batch_size, default_workers
+    from campipe.study.spec.expand import archive_bytes
+
+    loaded = load_spec(
+        spec, sets, limits_given(max_cases, max_steps, max_samples, max_events, max_archive_gb)
+    )
+    workers = workers or default_workers()
+    click.echo(validate_text(loaded, spec))
+    from campipe.engine.settings import sample_count
+
+    samples = sample_count(loaded.revolutions, loaded.output_every)
+    size = default_batch_size(len(loaded.cases), workers, samples)
+    click.echo(f"batches: {count_batches(loaded.cases, size)} of up to {size} cases")
+    if estimate:
+        from campipe.engine.kernels import compile_notice
+        from campipe.study.spec.resolve import distinct_but_speed
+
+        text = compile_notice(c.settings for c in distinct_but_speed(loaded.cases)[0])
+        if text:
+            click.echo(f"campipe validate: {text}", err=True)
+        click.echo(estimate_text(loaded, workers))
+    click.echo(
+        f"archive: about {archive_bytes(loaded) / 1e6:.3g} MB before compression "
+        f"(events not counted)"
+    )
+
+
+def estimate_text(loaded, workers: int) -> str:
+    """``run time: about ...``: the estimate (campipe.study.run.estimate) with its parts, and the
+    spec's replay recording (campipe.replay.live.time_replay)."""
+    import dataclasses
+    import tempfile
+
+    from campipe.study.run.estimate import estimate
+
+    e = estimate(loaded, workers)
+    parts = [
+        f"the engine {_seconds(e.engine)}",
+        f"storing and writing the archive {_seconds(e.layer)}",
+        f"loading the engine {_seconds(e.startup)}",
+    ]
+    replayed = ""
+    if loaded.spec.replay:
+        from campipe.replay.live import time_replay
+
+        with tempfile.TemporaryDirectory(prefix="campipe-estimate-") as folder:
+            count, each = time_replay(loaded, folder)
+        if count is None:
+            replayed = f"; and {_seconds(each)} for each case the replay selects"
+        elif count:
+            e = dataclasses.replace(e, replay=count * each, seconds=e.seconds + count * each)
+            parts.append(
+                f"the replay's {count} case{'s' if count != 1 else ''} {_seconds(e.replay)}"
+            )
+    n = len(loaded.cases)
+    timed = "the whole study" if e.sample >= n else f"{e.sample} of its {n} cases, scaled"
+    return (
+        f"run time: about {_seconds(e.seconds)} on {workers} "
+        f"worker{'s' if workers != 1 else ''}: {', '.join(parts)} (timed on a run of {timed}; "
+        f"{e.simulated:.3g} s simulated; the process's own start not included){replayed}"
+    )
+
+
+def _seconds(seconds: float) -> str:
+    """An estimate's time: ``0.42 s``, ``12 s``, ``3 min 05 s``."""
+    from campipe.study.run.progress import format_seconds
+
+    return f"{seconds:.2g} s" if seconds < 10 else format_seconds(seconds)
+
+
+def validate_text(loaded, spec_path) -> str:
+    """The checked study in words: cases, axes (values as the spec wrote them), run."""
+    from campipe.study.spec.coordinates import coordinate_values
+    from campipe.study.spec.resolve import distinct_but_speed
+    from campipe.study.spec.variables import case_coordinates
+
+    s = loaded.spec
+    run = s.base["run"]
+    first = loaded.cases[0]
+    lines = [
+        f"{spec_path}: valid; study {s.name!r}, {len(loaded.cases)} "
+        f"case{'s' if len(loaded.cases) != 1 else ''}"
+    ]
+    coords = case_coordinates(loaded.varied)
+    values = coordinate_values(distinct_but_speed(loaded.cases)[0], loaded)  # labels only
+    lines.append("axes:" if loaded.axes else "axes: none (a single case)")
+    for a in loaded.axes:
+        listed = s.sweep.get(a.key) or s.zip.get(a.key)
+        if a.key in ("profile", "defects"):
+            shown = list(dict.fromkeys(values[a.key]))
+        elif listed is not None:
+            shown = [str(v) for v in listed]
+        elif a.kind == "sample":
+            lo, hi = s.sample.ranges[a.key]
+            units = coords[a.key][1].units if a.key in coords else ""
+            factor = coords[a.key][2] if a.key in coords else 1.0
+            shown = [
+                f"{s.sample.method} over {lo * factor:.6g} … {hi * factor:.6g} {units}, "
+                f"seed {s.sample.seed}"
+            ]
+        else:
+            shown = [f"{len(s.cases)} entries"]
+        text = ", ".join(shown) if len(shown) <= 6 else f"{shown[0]} … {shown[-1]}"
+        name = coords[a.key][0] if a.key in coords else a.key
+        lines.append(f"  {name:<22} {a.kind:<7} {a.size:>4} values: {text}")
+    step = first.settings.step
+    dt = "chosen by the integrator" if step is None else f"{step * 1e6:.4g} µs"
+    lines.append(
+        f"run: {run['revolutions']:g} revolutions, integrator "
+        f"{first.settings.method}, dt {dt}, output every {run['output_every']}, "
+        f"record: {', '.join(loaded.record) or '-'}"
+    )
+    if s.replay:
+        lines.append(f"replay: {s.replay!r} (logged to <archive stem>.rrd as the study runs)")
+    return "\n".join(lines)
+
+
+@click.command()
+@click.argument("archive", type=click.Path(exists=True, dir_okay=False))
+@click.option(
+    "--where",
+    help='Keep cases where EXPR holds, e.g. "speed_rpm > 9000 and seat is none" or '
+    '"spring_preload > 150 lbf" (comparisons, and, or, not, parentheses; never run as '
+    "Python).",
+)
+@click.option("--columns", help="Comma-separated columns (default: parameters and metrics).")
+@click.option("--sort", help="Sort by these comma-separated columns; -col for descending.")
+@click.option(
+    "--format",
+    "fmt",
+    type=click.Choice(["table", "csv", "json"]),
+    default="table",
+    show_default=True,
+    help="json: an array of row objects.",
+)
+@click.option(
+    "--summary",
+    is_flag=True,
+    help="Print the axes, the failed cases and, for a speed sweep, the separation onset "
+    "speeds (of the cases --where selects).",
+)
+@units_option
+def query(archive, where, columns, sort, fmt, summary, units) -> None:
+    """Print an archive's cases, one row per case, values in the units the spec was written
+    in (or --units); headers name the units."""
+    from campipe.study.query.display import display_units
+    from campipe.study.query.tables import case_table, displayed, format_rows, select
+    from campipe.study.query.tables import summary as summary_text
+
+    with _open_archive(archive) as ds:
+        if summary:
+            click.echo(summary_text(ds, where, units))
+            return
+        table = case_table(ds)
+        shown = display_units(table.units, ds.attrs, units)
+    names = [c.strip() for c in columns.split(",") if c.strip()] if columns else table.default
+    rows = select(table, where, sort)
+    click.echo(format_rows(displayed(table, shown), rows, names, fmt))
+
+
+def _open_archive(path):
+    """An archive as an xarray Dataset, or a Failure naming why it cannot be read."""
+    import xarray as xr
+
+    from campipe.io.archive import unreadable
+
+    try:
+        return xr.open_dataset(path)
+    except Exception as exc:
+        raise Failure(f"{path}: {unreadable(exc)}") from None

@@ -1,0 +1,95 @@
+"""What goes into the archive (and a batch file): sizes, variables, axes and per-case
+coordinates, all built from the declarations in :mod:`campipe.study.spec.variables`. What names
+a run's results (the keys, the attributes that record them) is
+:mod:`campipe.study.run.keys`'s."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+
+import numpy as np
+
+from campipe.io.archive import VariableSpec
+from campipe.study.spec.coordinates import CASE_ID, coordinate_values
+from campipe.study.spec.expand import Study
+from campipe.study.spec.variables import (
+    DOF_NAMES,
+    DOF_UNITS,
+    VARIABLES,
+    Variable,
+    case_coordinates,
+    data_variables,
+)
+
+#: Version of the file layout: batch files and archives of another layout are not reused.
+#: 2: per-case ``status``; checksums of every variable (``campipe_checksums``); the engine's
+#: fingerprint (``campipe_numerics``); the spec's file (``spec_file``).
+#: 3: the case ids are the coordinate ``case`` of the ``case`` dimension (was ``case_id``);
+#: no seat is ``seat = -inf`` (was NaN).
+LAYOUT_VERSION = "campipe-archive-3"
+
+
+def record_text(record: Iterable[str]) -> str:
+    return " ".join(record) or "-"
+
+
+def variable_spec(name: str, var: Variable, coordinates: str | None = None) -> VariableSpec:
+    attrs = var.attrs()
+    if coordinates:
+        attrs["coordinates"] = coordinates
+    return VariableSpec(name, var.dims, var.dtype, attrs)
+
+
+def axis_names(record: Iterable[str]) -> list[str]:
+    names = ["cam_angle", "revolution"]
+    if "q" in record:
+        names += ["dof", "dof_units"]
+    return names
+
+
+def axis_arrays(cam_angle: np.ndarray, n_revolutions: int) -> dict[str, np.ndarray]:
+    return {
+        "cam_angle": cam_angle,
+        "revolution": np.arange(1, n_revolutions + 1, dtype=np.int32),
+        "dof": np.array(DOF_NAMES, dtype=object),
+        "dof_units": np.array(DOF_UNITS, dtype=object),
+    }
+
+
+def data_specs(record: Iterable[str], case_coords: str) -> list[VariableSpec]:
+    out = []
+    for name, var in data_variables(record).items():
+        coords = (
+            case_coords
+            if "case" in var.dims
+            else ("event_case" if name != "event_case" and "event" in var.dims else None)
+        )
+        out.append(variable_spec(name, var, coords))
+    return out
+
+
+def archive_layout(study: Study, n_events: int | None, cam_angle: np.ndarray, n_revolutions: int):
+    """(sizes, variables, static arrays) of the study's archive; the static arrays are the
+    axes and the per-case coordinates, the rest streams in from batch files. ``n_events``
+    None makes ``event`` unlimited: the events are appended as the cases are written."""
+    coords = case_coordinates(study.varied)
+    coord_names = [name for name, _, _ in coords.values()]
+    sizes: dict[str, int | None] = {
+        "case": len(study.cases),
+        "cam_angle": cam_angle.size,
+        "revolution": n_revolutions,
+        "event": n_events,
+    }
+    if "q" in study.record:
+        sizes["dof"] = len(DOF_NAMES)
+    specs = [variable_spec(n, VARIABLES[n]) for n in axis_names(study.record)]
+    specs.append(variable_spec(CASE_ID, VARIABLES[CASE_ID]))
+    values = coordinate_values(study.cases, study)
+    for _key, (name, var, _) in coords.items():
+        if "mode" in var.dims:
+            sizes["mode"] = values[name].shape[1]
+        specs.append(variable_spec(name, var))
+    specs += data_specs(study.record, " ".join(coord_names))
+    static = {**axis_arrays(cam_angle, n_revolutions), **values}
+    static = {s.name: static[s.name] for s in specs if s.name in static}
+    return sizes, specs, static

@@ -1,0 +1,133 @@
+"""Batches: how large, of which cases, and their files (``<archive>.parts/batch-<key>.npz``).
+
+Cases are grouped by their :class:`~campipe.engine.RunSettings` and cut into batches of
+``batch_size``; one task runs a batch through the engine (one compiled call,
+:func:`~campipe.study.run.results.compute_batch`). Each finished batch is written to its file
+atomically (:mod:`campipe.io.batch_file`: no HDF5, so storing it never waits for the archive);
+its key hashes the case ids it holds, so a changed spec never picks up another spec's results.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from campipe.errors import CampipeError
+from campipe.io import batch_file
+from campipe.io.archive import write_error
+from campipe.study.archive.layout import (
+    LAYOUT_VERSION,
+    axis_arrays,
+    axis_names,
+    data_specs,
+    record_text,
+    variable_spec,
+)
+from campipe.study.run.keys import batch_key
+from campipe.study.run.results import BatchData, BatchPlan
+from campipe.study.spec.coordinates import CASE_ID
+from campipe.study.spec.resolve import ResolvedCase
+from campipe.study.spec.variables import DOF_NAMES, VARIABLES
+
+#: Called with each newly computed batch after it is stored (in the process that stores it:
+#: a worker thread for local schedulers, this process for distributed). The replay logger,
+#: :class:`campipe.replay.live.StudyReplay`, plugs in here (selecting with
+#: :func:`campipe.study.query.tables.replay_mask`); ``campipe study`` leaves it out under the
+#: processes scheduler, whose workers cannot log into this process's recording.
+BatchHook = Callable[[BatchPlan, BatchData], None]
+
+
+class OptionError(CampipeError, ValueError):
+    """An option of a run that is refused (``key`` the option, such as ``--scheduler``)."""
+
+
+class SchedulerError(CampipeError, RuntimeError):
+    """The scheduler or a worker failed: unreachable, gone, killed, or running another
+    campipe (``key`` ``--scheduler``, ``found`` the scheduler)."""
+
+
+@dataclass(frozen=True)
+class Stored:
+    """A batch as stored in its file: where, its cases and what they hold."""
+
+    key: str  # batch key
+    path: Path  # the batch file
+    case_ids: tuple[str, ...]  # its cases, in row order
+    event_counts: tuple[int, ...]  # events of each
+    statuses: tuple[int, ...]  # status of each (vocabulary.STATUS)
+    numerics: str  # numerics_fingerprint() of the process that computed it
+    #: the batch's arrays, when it was stored in this process: the archive takes its rows
+    #: from here instead of reading the file back (never sent between processes)
+    data: BatchData | None = field(default=None, compare=False, repr=False)
+
+    def __getstate__(self) -> dict:
+        return {**self.__dict__, "data": None}
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)
+
+    @property
+    def n_cases(self) -> int:
+        return len(self.case_ids)
+
+
+def parts_directory(archive: Path) -> Path:
+    """Where the batch files of an archive live: ``<archive>.parts`` beside it."""
+    return archive.with_name(archive.name + ".parts")
+
+
+def plan_batches(
+    cases: Sequence[ResolvedCase], record: tuple[str, ...], batch_size: int
+) -> list[BatchPlan]:
+    """Group cases by run settings (study order kept inside a group), then cut into batches."""
+    groups: dict[object, list[ResolvedCase]] = {}
+    for c in cases:
+        groups.setdefault(c.settings, []).append(c)
+    plans = []
+    for group in groups.values():
+        for i in range(0, len(group), batch_size):
+            chunk = tuple(group[i : i + batch_size])
+            plans.append(BatchPlan(batch_key([c.case_id for c in chunk], record), chunk, record))
+    return plans
+
+
+def batch_layout(data: BatchData, record: tuple[str, ...]):
+    """(sizes, variables, arrays, attributes) of a batch file."""
+    sizes = {
+        "case": data.n_cases,
+        "cam_angle": data.cam_angle.size,
+        "revolution": data.n_revolutions,
+        "event": data.n_events,
+    }
+    if "q" in record:
+        sizes["dof"] = len(DOF_NAMES)
+    specs = [variable_spec(n, VARIABLES[n]) for n in axis_names(record)]
+    specs.append(variable_spec(CASE_ID, VARIABLES[CASE_ID]))
+    specs += data_specs(record, "")
+    arrays = {
+        **axis_arrays(data.cam_angle, data.n_revolutions),
+        CASE_ID: data.case_ids,
+        **data.arrays,
+    }
+    attrs = {
+        "campipe_layout": LAYOUT_VERSION,
+        "campipe_record": record_text(record),
+        "campipe_numerics": data.numerics,
+        "batch_key": data.key,
+    }
+    return sizes, specs, arrays, attrs
+
+
+def store_batch(data: BatchData, directory: Path, record: tuple[str, ...]) -> Path:
+    """Write a batch file atomically; returns its path."""
+    _, specs, arrays, attrs = batch_layout(data, record)
+    names = {v.name for v in specs}
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise write_error(directory, exc) from None
+    # Uncompressed: a batch file lives only until the archive is assembled (compressing it
+    # would cost as much again as the archive's own compression).
+    path = directory / f"batch-{data.key}{batch_file.SUFFIX}"
+    return batch_file.write(path, {k: a for k, a in arrays.items() if k in names}, attrs)

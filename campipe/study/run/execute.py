@@ -1,0 +1,306 @@
+"""Running a study: batches on a pool of workers, each stored as it finishes, one archive.
+
+- Cases are grouped by their :class:`~campipe.engine.RunSettings` and cut into batches
+  (:mod:`~campipe.study.run.batches`); one task runs a batch through the engine (one
+  compiled call) and writes ``<archive>.parts/batch-<key>.npz``, on the worker that computed
+  it wherever it can reach the folder (:mod:`~campipe.study.run.workers`).
+- A rerun computes only the cases no batch file (and no existing archive) holds: an
+  interrupted study resumes where it stopped (:mod:`~campipe.study.run.resume`).
+- The archive is assembled while the batches run (:mod:`~campipe.study.run.assembly`): this
+  process streams the stored rows, in case order, into one new file at a temporary path,
+  renamed into place when complete; memory stays bounded by a block of rows.
+- A run holds ``<archive>.lock`` throughout (``campipe.io.archive.writing``): a second run on
+  the same archive stops with a clear error instead of removing the first one's files; the
+  lock of a run that died on this host is taken over.
+
+Schedulers: ``threads`` (a pool of threads, one per core: the engine releases the GIL),
+``synchronous`` (in order, in this thread), ``processes`` (a pool of processes), or the
+address of a dask.distributed scheduler (``tcp://host:8786``; dask.distributed is imported
+only then). On a cluster, a worker that can reach the archive's folder (a shared file system,
+or this machine) writes its own batch files, so this process only tracks and assembles; for
+a worker that cannot, this process stores what it returns.
+"""
+
+from __future__ import annotations
+
+import logging
+import shutil
+import stat
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from campipe.engine.settings import sample_count
+from campipe.io.archive import write_error, writing
+from campipe.study.run.assembly import Assembly
+from campipe.study.run.batches import BatchHook, OptionError, Stored, parts_directory, plan_batches
+from campipe.study.run.progress import Progress
+from campipe.study.run.results import BatchData, BatchPlan
+from campipe.study.run.resume import (
+    ArchiveState,
+    Found,
+    StudyReport,
+    clean_temporaries,
+    find_results,
+    inspect_archive,
+    refuse,
+    spec_file,
+    up_to_date,
+)
+from campipe.study.run.sizing import default_batch_size, default_workers
+from campipe.study.run.workers import run_distributed, run_local, stored_here
+from campipe.study.spec.expand import Study
+from campipe.study.spec.resolve import ResolvedCase
+from campipe.vocabulary import OK, STATUS
+
+log = logging.getLogger(__name__)
+
+#: Local dask schedulers by name; anything with "://" is a dask.distributed address.
+LOCAL_SCHEDULERS = ("threads", "synchronous", "processes")
+
+
+def run_study(
+    study: Study,
+    archive: str | Path,
+    *,
+    scheduler: str = "threads",
+    workers: int | None = None,
+    batch_size: int | None = None,
+    progress: Callable[[int, int], Progress] | None = None,
+    keep_parts: bool = False,
+    command: str = "campipe study",
+    on_batch: BatchHook | None = None,
+    overwrite: bool = False,
+    workers_store: bool = True,
+    notice: Callable[[str], None] | None = None,
+) -> StudyReport:
+    """Run a study into one archive, resuming from whatever earlier runs left.
+
+    Parameters
+    ----------
+    study : Study
+        The expanded study (:func:`campipe.study.load_study`).
+    archive : str or Path
+        The archive to write.
+    scheduler : str
+        ``threads``, ``synchronous``, ``processes`` or a dask.distributed scheduler address
+        such as ``tcp://127.0.0.1:8786``.
+    workers : int, optional
+        Threads or processes of a local scheduler (default: the cores available).
+    batch_size : int, optional
+        Cases per batch (default: about four batches per worker, at most 256 cases).
+    progress : callable, optional
+        ``progress(total, done) -> Progress``: makes the progress line.
+    keep_parts : bool
+        Keep the batch files after the archive is written (default: remove them).
+    command : str
+        The command line, recorded in the archive's ``history``.
+    on_batch : callable, optional
+        The replay hook, see :data:`BatchHook`.
+    overwrite : bool
+        Replace a file at ``archive`` that is not this study's archive (default: refuse).
+    workers_store : bool
+        On a dask.distributed cluster, workers that can reach the archive's folder write
+        their batch files themselves (default); False: this process stores every batch, as
+        it does for any worker that cannot reach the folder. The archive is the same.
+    notice : callable, optional
+        Called with a line of text before a wait the user should hear about: numba
+        compiling the kernels the study needs (the first run after an install or upgrade).
+
+    A case that fails (non-finite, chatter) does not stop the study: the archive records its
+    ``status`` and :attr:`StudyReport.statuses` names it by case id.
+
+    Raises
+    ------
+    ArchiveExistsError
+        If ``archive`` is a file that is not this study's archive and ``overwrite`` is False.
+    campipe.io.archive.ArchiveBusyError
+        If another run is writing the same archive (its lock, ``<archive>.lock``, is held).
+    campipe.io.archive.ArchiveWriteError
+        If a file cannot be written (a full disk, a read-only folder); what was stored stays.
+    SchedulerError
+        If the scheduler cannot be reached, or it or a worker fails.
+    """
+    started = time.monotonic()
+    archive = Path(archive)
+    check_scheduler(scheduler)
+    total = len(study.cases)
+    # Checked before the lock, so a finished study in a read-only folder is still up to date.
+    state = inspect_archive(study, archive)
+    if state.up_to_date:
+        log.info("%s already holds this study", archive)
+        return up_to_date(archive, total, started)
+    _check_replaceable(archive, state, overwrite)
+    if state.what and not stat.S_ISREG(archive.stat().st_mode):
+        raise refuse(archive, state)  # a folder is never replaced
+    try:
+        archive.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise write_error(archive, exc) from None
+    with writing(archive):
+        state = inspect_archive(study, archive)  # another run may have finished it meanwhile
+        if state.up_to_date:
+            return up_to_date(archive, total, started)
+        _check_replaceable(archive, state, overwrite)
+        notes = _state_notes(archive, state)
+        clean_temporaries(archive)
+        found, more = find_results(study, archive, archive_usable=not state.problems)
+        notes += more
+        missing = [c for c in study.cases if c.case_id not in found]
+        workers = workers or (1 if scheduler == "synchronous" else default_workers())
+        plans = _plan(study, missing, scheduler, workers, batch_size)
+        run = _Run(scheduler, workers, on_batch, workers_store, notice, command)
+        bar = progress(total, total - len(missing)) if progress else None
+        statuses = _compute_and_assemble(study, archive, found, plans, run, bar)
+        parts = parts_directory(archive)
+        if not keep_parts and parts.is_dir():
+            shutil.rmtree(parts, ignore_errors=True)
+        return StudyReport(
+            archive,
+            total,
+            total - len(missing),
+            len(missing),
+            len(plans),
+            False,
+            time.monotonic() - started,
+            tuple(notes),
+            statuses,
+        )
+
+
+def check_scheduler(scheduler: str) -> bool:
+    """Whether ``scheduler`` runs on this machine (else it is a dask.distributed address);
+    a local name that is not one of LOCAL_SCHEDULERS is refused."""
+    local = "://" not in scheduler
+    if local and scheduler not in LOCAL_SCHEDULERS:
+        raise OptionError.at(
+            "--scheduler",
+            f"found {scheduler!r}, expected one of {', '.join(LOCAL_SCHEDULERS)} or an "
+            "address such as tcp://127.0.0.1:8786",
+            found=scheduler,
+        )
+    return local
+
+
+def _check_replaceable(archive: Path, state: ArchiveState, overwrite: bool) -> None:
+    """Refuse a file at the archive's path that is not this study's archive, unless the run
+    may overwrite it."""
+    if not state.ours and not overwrite:
+        raise refuse(archive, state)
+
+
+def _state_notes(archive: Path, state: ArchiveState) -> list[str]:
+    """What the run does about the file it found at the archive's path, in words."""
+    notes: list[str] = []
+    if state.problems:
+        notes.append(
+            f"{archive} failed its checks ({'; '.join(state.problems)}): it is written again"
+        )
+        log.warning("%s", notes[-1])
+    elif state.what:
+        notes.append(f"{archive} was {state.what}: replaced (--overwrite)")
+    return notes
+
+
+def _plan(
+    study: Study,
+    missing: list[ResolvedCase],
+    scheduler: str,
+    workers: int,
+    batch_size: int | None,
+) -> list[BatchPlan]:
+    """The batches of the cases no file holds yet."""
+    total = len(study.cases)
+    samples = sample_count(study.revolutions, study.output_every)
+    size = batch_size or default_batch_size(len(missing), workers, samples)
+    plans = plan_batches(missing, study.record, size)
+    log.info(
+        "%s: %d cases, %d reused from earlier runs; computing %d in %d batches of up to %d on %s",
+        study.name,
+        total,
+        total - len(missing),
+        len(missing),
+        len(plans),
+        size,
+        scheduler,
+    )
+    return plans
+
+
+@dataclass(frozen=True)
+class _Run:
+    """How a run computes its batches (:func:`run_study`'s options)."""
+
+    scheduler: str  # a local scheduler's name, or a dask.distributed address
+    workers: int  # threads or processes of a local scheduler
+    on_batch: BatchHook | None  # the replay hook
+    workers_store: bool  # a cluster's workers write their batch files where they can
+    notice: Callable[[str], None] | None  # told before the kernels compile
+    command: str  # recorded in the archive's history
+
+    @property
+    def local(self) -> bool:
+        return "://" not in self.scheduler
+
+
+def _compute_and_assemble(
+    study: Study,
+    archive: Path,
+    found: Found,
+    plans: list[BatchPlan],
+    run: _Run,
+    bar: Progress | None,
+) -> dict[str, str]:
+    """Compute ``plans`` and write the archive as their batches are stored; case id → status
+    name of the cases that did not finish cleanly."""
+    parts = parts_directory(archive)
+    by_id = {c.case_id: c for c in study.cases}
+    by_key = {p.key: p for p in plans}
+    sink = Assembly(study, archive, found, run.command, spec_file(study, archive))
+
+    def stored(result: Stored | BatchData) -> None:
+        """A finished batch: stored here if its worker did not, then its rows go into the
+        archive as far as the cases before them allow."""
+        s = stored_here(result, parts, study.record, run.on_batch, by_key)
+        log.debug("batch %s stored (%d cases)", s.key, s.n_cases)
+        sink.add(s)
+        for cid, code in zip(s.case_ids, s.statuses, strict=True):
+            if code != OK:
+                log.warning("case %s (index %d): %s", cid, by_id[cid].index, STATUS.get(code, code))
+        if bar:
+            bar.advance(s.n_cases)
+        sink.advance()
+
+    try:
+        sink.advance()  # the cases reused from earlier runs, as far as they reach
+        if plans and run.local:
+            from campipe.engine.kernels import compile_first  # numba: not before it is needed
+
+            # The kernels compiled here, before the workers start: they load them.
+            compile_first({p.cases[0].settings: p.cases[0].case for p in plans}, run.notice)
+        if plans and run.local:
+            run_local(
+                plans,
+                run.scheduler,
+                run.workers,
+                parts,
+                study.record,
+                run.on_batch,
+                stored,
+                sink.create,
+            )
+        elif plans:
+            sink.create()
+            run_distributed(
+                plans,
+                run.scheduler,
+                parts,
+                study.record,
+                run.on_batch is None and run.workers_store,
+                stored,
+            )
+        sink.finish()
+    finally:
+        sink.abort()
+    return sink.statuses

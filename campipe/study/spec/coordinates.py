@@ -1,0 +1,56 @@
+"""Each case's coordinates as the archive stores them: its id (the coordinate ``case``) and the
+values of the standard and varied keys (:func:`~campipe.study.spec.variables.case_coordinates`)
+in archive units, from the resolved cases alone."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from campipe.study.spec.expand import Study
+from campipe.study.spec.resolve import ResolvedCase
+from campipe.study.spec.variables import NO_SEAT, Variable, case_coordinates
+
+#: The variable along ``case`` holding each case's id, in batch files and the archive: named
+#: here only.
+CASE_ID = "case"
+
+
+def coordinate_values(cases: Sequence[ResolvedCase], study: Study) -> dict[str, np.ndarray]:
+    """Per-case coordinate arrays in archive units, in study order: ``case`` (the ids), then
+    each case coordinate (no seat as :data:`~campipe.study.spec.variables.NO_SEAT`)."""
+    out: dict[str, np.ndarray] = {CASE_ID: np.array([c.case_id for c in cases], dtype=object)}
+    return {**out, **key_columns(cases, case_coordinates(study.varied))}
+
+
+def key_columns(
+    cases: Sequence[ResolvedCase], coordinates: Mapping[str, tuple[str, Variable, float]]
+) -> dict[str, np.ndarray]:
+    """The case coordinates ``coordinates`` names (spec key → (name, variable, factor), as
+    :func:`~campipe.study.spec.variables.case_coordinates` gives them), each an array in archive
+    units over ``cases`` (no seat as :data:`~campipe.study.spec.variables.NO_SEAT`)."""
+    out: dict[str, np.ndarray] = {}
+    for key, (name, var, factor) in coordinates.items():
+        raw = [c.values[key] for c in cases]
+        if var.dtype == "str":
+            out[name] = np.array([str(v) for v in raw], dtype=object)
+        elif var.dtype.startswith("i"):
+            out[name] = np.array(raw, dtype=var.dtype)
+        elif "mode" in var.dims:
+            # a list per case (damping_ratios), as long as the longest, NaN beyond a shorter
+            lists = [np.asarray(v, dtype=float) for v in raw]
+            values = np.full((len(lists), max(v.size for v in lists)), np.nan)
+            for i, v in enumerate(lists):
+                values[i, : v.size] = v
+            out[name] = values * factor
+        else:
+            values = np.array(raw, dtype=float) * factor
+            if key == "speed":
+                # rpm from rad/s: round away the conversion's last-digit noise (11000 rpm
+                # stays 11000, so `--where "speed_rpm == 11000"` finds it)
+                values = np.array([float(f"{v:.12g}") for v in values])
+            if key == "seat":
+                values = np.where(np.isnan(values), NO_SEAT, values)
+            out[name] = values
+    return out
