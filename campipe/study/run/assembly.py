@@ -32,7 +32,8 @@ read_batch = batch_file.read
 def assemble(study: Study, archive: Path, found: Found, command: str = "campipe study") -> Path:
     """Write the archive from files that already hold every case (``found``, see
     :func:`find_results`): what this process does on a cluster whose workers store their
-    batches (``campipe bench`` times it as the client's ceiling)."""
+    batches (the developer benchmark, ``benchmarks/study.py``, times it as the
+    client's ceiling)."""
     sink = Assembly(study, Path(archive), found, command, spec_file(study, Path(archive)))
     try:
         return sink.finish()

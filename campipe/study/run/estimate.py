@@ -15,8 +15,8 @@ The run time is measured on this machine, through the code a study runs, not gue
 
 A study of at most twice the sample is run whole: its estimate is that run. Cases differ
 (events, impacts), so it is a rough figure: within a factor of two of the run on the bundled
-studies (``campipe bench`` lists both). Not included: the process's own start (imports, about
-a second) and a spec's ``replay:`` recording.
+studies (the developer benchmark, ``benchmarks/study.py``, lists both). Not included: the
+process's own start (imports, about a second) and a spec's ``replay:`` recording.
 """
 
 from __future__ import annotations
