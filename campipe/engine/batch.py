@@ -16,8 +16,7 @@ from dataclasses import dataclass, field
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
-from numba.core.typing.typeof import Purpose, typeof
+from numba import njit, typeof
 
 from campipe.constants import TWO_PI
 from campipe.engine import compliant, exact, newmark, steady
@@ -535,7 +534,7 @@ def integrator_types(cases: Sequence[Case], settings: RunSettings, full_state: b
     found without running a kernel (the start's, the harmonic responses' or another)."""
     batch = _prepare_batch(cases, settings, full_state, responses=False)
     args = _exact_arguments(batch, batch.cases, _outputs(batch, settings))
-    return tuple(typeof(a, Purpose.argument) for a in args)  # as a call types them
+    return tuple(typeof(a) for a in args)  # as a call types them
 
 
 def _outputs(batch: _Batch, settings: RunSettings):
