@@ -154,17 +154,23 @@ def configure() -> str | None:
     return os.environ.get(NUMBA_CACHE_DIR) or None
 
 
-@functools.cache
-def numba_stamp() -> str:
-    """SHA-256 (hex) of what numba checks before it loads a cached kernel beyond this
-    source's folder: the folder it caches in and each source file's path, modification
-    time and size. A copy of campipe at another path, or the same files written again, has
+def stamp_of(root: Path, numba_folder: str) -> str:
+    """SHA-256 (hex) of what numba checks before it loads a cached kernel, beyond the
+    source's folder: the folder it caches in (``numba_folder``, "" for its default) and the
+    path, modification time and size of each of the :data:`SOURCES` under the package folder
+    ``root``. A copy of campipe at another path, or the same files written again, has
     another stamp: numba compiles its kernels again."""
-    h = hashlib.sha256(os.environ.get(NUMBA_CACHE_DIR, "").encode())
-    for path in source_files(SOURCES, ROOT):
+    h = hashlib.sha256(numba_folder.encode())
+    for path in source_files(SOURCES, root):
         st = path.stat()
         h.update(f"\n{path}\0{st.st_mtime_ns}\0{st.st_size}".encode())
     return h.hexdigest()
+
+
+@functools.cache
+def numba_stamp() -> str:
+    """:func:`stamp_of` this campipe and numba's cache folder, once a process."""
+    return stamp_of(ROOT, os.environ.get(NUMBA_CACHE_DIR, ""))
 
 
 def compiled_marker(name: str) -> Path:
