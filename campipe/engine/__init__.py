@@ -10,6 +10,11 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING
 
+from campipe import kernel_cache
+
+# numba's cache folder, set before the engine's modules import numba
+kernel_cache.configure()
+
 if TYPE_CHECKING:
     from campipe.engine.batch import BatchResult, initial_state, run_batch, start_states
     from campipe.engine.loads import (

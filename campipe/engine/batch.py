@@ -15,8 +15,7 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
-from numba import njit
-from numba.core.typing.typeof import Purpose, typeof
+from numba import njit, typeof
 
 from campipe.constants import TWO_PI
 from campipe.engine import integrators, steady
@@ -382,7 +381,7 @@ def integrator_types(cases: Sequence[Case], settings: RunSettings, full_state: b
     modal_exact = integrators.get("modal-exact")
     prepared = modal_exact.prepare(batch, settings)
     args = arguments(prepared, batch.cases, _outputs(batch, settings))
-    return tuple(typeof(a, Purpose.argument) for a in args)  # as a call types them
+    return tuple(typeof(a) for a in args)  # as a call types them
 
 
 def _outputs(batch: PreparedBatch, settings: RunSettings):

@@ -17,7 +17,7 @@ from numba.core import cgutils
 from numba.core.errors import TypingError
 from numba.extending import intrinsic
 
-from campipe import kernel_cache, vocabulary
+from campipe import vocabulary
 from campipe.constants import TWO_PI
 from campipe.engine.metrics import (
     CAM_IMPACTS,
@@ -40,8 +40,6 @@ from campipe.vocabulary import (
     SEAT_IMPACT,
     SEAT_SEPARATION,
 )
-
-kernel_cache.install()  # before this module's kernels are defined: numba picks their cache then
 
 #: How the kernels and their steps compile: cached, releasing the GIL, and without numba's
 #: reference counting of arrays (``_nrt=False``). They allocate nothing (every array, work

@@ -9,11 +9,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from campipe import kernel_cache
 from campipe.engine.newmark import N_X, N_Z, X_A, X_Q, X_V
 from campipe.vocabulary import CAM, CONFIGURATIONS, N_COORDINATES, SEAT, free_coordinates
-
-kernel_cache.install()  # before this module's kernels are defined: numba picks their cache then
 
 #: HELD[c - 1, i]: coordinate i is prescribed in configuration c (the thesis's seven; a
 #: refined member's internal coordinates are never held, ``held_mask``).

@@ -1,23 +1,26 @@
 """Which compiled kernels a run calls, and whether numba would have to compile them first.
 
-numba compiles a kernel on its first call and keeps it in campipe's kernel cache
-(:mod:`campipe.kernel_cache`, one user-wide folder per version of the kernels' source): a
-later process, of this install or of another of the same campipe, loads it in a fraction of a
-second, but the first run of a version on a machine compiles them first, for seconds. A
-caller that wants to say so on the terminal (the CLI) asks :func:`uncompiled` before running;
-the engine itself prints nothing. Only the kernels of the run's integrator and start are named,
-and only those are compiled: a modal-exact study never compiles newmark-linear.
+numba compiles a kernel on its first call and keeps it in its cache (``cache=True``, in the
+folder :mod:`campipe.kernel_cache` gives it): a later process loads it in a fraction of a
+second, but the first run of a campipe version on a machine (or of a new clone or venv of it)
+compiles them first, for tens of seconds. A caller that wants to say so on the terminal (the
+CLI) asks :func:`uncompiled` before running; the engine itself prints nothing. numba offers no
+public way to ask whether its cache holds a kernel: campipe records it itself once it has
+compiled them (``kernel_cache.mark_compiled``, beside numba's cache). Only the kernels of the
+run's integrator and start are named, and only those are compiled: a modal-exact study never
+compiles newmark-linear.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 import logging
 import os
 from collections.abc import Callable, Iterable, Mapping
+from typing import Any
 
-from campipe.engine import batch, contact, exact, newmark, steady
+from campipe import kernel_cache
+from campipe.engine import batch, contact, exact, integrators, steady
 from campipe.engine.settings import Case, RunSettings
 
 log = logging.getLogger(__name__)
@@ -26,18 +29,15 @@ log = logging.getLogger(__name__)
 def kernels(settings: RunSettings) -> dict[str, object]:
     """The compiled kernels (numba dispatchers) a run with ``settings`` calls, by name; each
     takes the helpers it calls with it (inlined, or compiled and cached along)."""
+    own = integrators.get(settings.method).kernels()
     out: dict[str, object] = {}
-    if settings.start == "quasi-static" or settings.method == "newmark-linear":
-        # newmark-linear's first run compiles it through a short quasi-static run
+    if settings.start == "quasi-static" or "quasi-static state" in own:
         out["quasi-static state"] = contact.quasi_static_batch
     if settings.start == "quasi-static":
         out["cam lift"] = batch.cam_at
     else:
         out["periodic start"] = steady.periodic_starts
-    if settings.method == "newmark-linear":
-        out["newmark-linear"] = newmark.newmark_linear_batch
-    else:
-        out["modal-exact"] = exact.modal_exact_batch
+    out.update(own)
     return out
 
 
@@ -46,33 +46,19 @@ def search_kernels() -> dict[str, object]:
     return {"steady extremes": steady.steady_extremes}
 
 
-def _cached(dispatcher, magic: tuple) -> bool:
-    """A kernel is loaded in this process, or numba's cache holds it for this source, this
-    numba and this machine (its index read, nothing loaded)."""
-    if dispatcher.signatures:
-        return True
-    index = dispatcher._cache._cache_file._load_index()  # {} if stale or absent
-    code = hashlib.sha256(dispatcher.py_func.__code__.co_code).hexdigest()
-    return any(key[1] == magic and key[2][0] == code for key in index)
+def _missing(named: Mapping[str, Any]) -> list[str]:
+    """The names of ``named``'s kernels neither loaded in this process nor recorded as
+    compiled into numba's cache (``kernel_cache.compiled_marker``)."""
+    return [
+        name
+        for name, kernel in named.items()
+        if not kernel.signatures and not kernel_cache.compiled_marker(name).exists()
+    ]
 
 
-def _missing(named: dict[str, object]) -> list[str] | None:
-    """The names of ``named``'s kernels neither loaded nor cached; None when numba's cache
-    cannot be inspected (its internals changed)."""
-    from numba.core.registry import cpu_target
-
-    try:
-        magic = cpu_target.target_context.codegen().magic_tuple()
-        return [name for name, kernel in named.items() if not _cached(kernel, magic)]
-    except Exception as exc:  # numba's private cache API: never fail a run over it
-        log.debug("cannot inspect numba's cache: %s", exc)
-        return None
-
-
-def uncompiled(settings: RunSettings) -> list[str] | None:
+def uncompiled(settings: RunSettings) -> list[str]:
     """Names of the kernels a run with ``settings`` would compile before it runs: ``[]``
-    when every one is loaded or cached; None when numba's cache cannot be inspected (its
-    internals changed): a caller may then say that compiling *may* happen."""
+    when every one is loaded or was compiled into numba's cache before."""
     return _missing(kernels(settings))
 
 
@@ -81,19 +67,16 @@ def compile_notice(settings: Iterable[RunSettings], search: bool = False) -> str
     onset's search) would compile first, or None when all are loaded or cached: for a
     caller to show before the wait."""
     missing: dict[str, None] = {}
-    unknown = False
     found = [_missing(search_kernels())] if search else []
     found += [uncompiled(one) for one in dict.fromkeys(settings)]
     for names in found:
-        unknown = unknown or names is None
-        missing.update(dict.fromkeys(names or []))
-    if not missing and not unknown:
+        missing.update(dict.fromkeys(names))
+    if not missing:
         return None
-    what = ", ".join(missing) if missing else "the engine's kernels"
     return (
-        f"compiling {what} with numba{' (if not cached)' if unknown else ''}, once for this "
-        "campipe version on this machine (seconds); later runs, of any install of it, load them "
-        "from campipe's kernel cache in a fraction of a second"
+        f"compiling {', '.join(missing)} with numba, once for this campipe install on this "
+        "machine (tens of seconds); later runs load them from numba's cache in a fraction of "
+        "a second"
     )
 
 
@@ -126,7 +109,7 @@ def _second_process(connection, case: Case, settings: RunSettings, search: bool)
         os._exit(0)
 
 
-def compile_kernels(case: Case, settings: RunSettings, search: bool = False) -> None:
+def compile_kernels(case: Case, settings: RunSettings, search: bool = False) -> bool:
     """Compile (or load) every kernel a run with ``settings`` calls, the periodic start's
     and the integrator's at once: the start's in a second process, while this one compiles
     the integrator: modal-exact for the types of its arguments (``batch.integrator_types``,
@@ -136,11 +119,16 @@ def compile_kernels(case: Case, settings: RunSettings, search: bool = False) -> 
     them. The second process, started first, imports the engine while this one finds
     modal-exact's types; given them, it first compiles modal-exact helpers that this one
     then loads (``exact.ahead_signatures``), so that the two end together. With ``search``
-    the second process also compiles the onset's search (``search_kernels``)."""
+    the second process also compiles the onset's search (``search_kernels``).
+
+    Both processes use numba's public interface only: ``Dispatcher.compile`` and calls,
+    each kernel written to numba's cache by its own ``cache=True`` (the second process
+    inherits ``NUMBA_CACHE_DIR``). True when every kernel was compiled (or loaded); False
+    when something failed, logged: the run then compiles what is missing itself."""
     short = dataclasses.replace(settings, revolutions=0.01, warmup=0)
     if settings.start != "periodic" and not search:
         batch.run_batch([case], short, full_state=False, on_failure="record")
-        return
+        return True
     import multiprocessing
 
     try:
@@ -176,8 +164,11 @@ def compile_kernels(case: Case, settings: RunSettings, search: bool = False) -> 
             batch.run_batch([case], quasi_static, full_state=False, on_failure="record")
         if handed and (failed := ours.recv()) is not None:
             log.debug("the second process failed: %s", failed)
+            return False
+        return True
     except Exception as exc:  # the run itself compiles whatever is still missing
         log.debug("compiling ahead failed: %s", exc)
+        return False
     except BaseException:  # an interrupt: the second process stops too
         if second is not None:
             second.terminate()
@@ -197,11 +188,22 @@ def compile_first(
     the onset's search: say on ``notice`` which kernels numba compiles (nothing when all are
     cached), and compile them here (:func:`compile_kernels`, the start's and the
     integrator's in two processes at once), so that the runs, on any number of workers, load
-    them from the cache."""
+    them from the cache; then record them as compiled (``kernel_cache.mark_compiled``), so
+    that the next run says nothing."""
     text = compile_notice(firsts, search=search)
     if text is None:
         return
     if notice is not None:
         notice(text)
     for settings, case in firsts.items():
-        compile_kernels(case, settings, search=search)
+        if compile_kernels(case, settings, search=search):
+            names = [*kernels(settings), *(search_kernels() if search else ())]
+            kernel_cache.mark_compiled(names)
+
+
+def record_loaded(named: Mapping[str, Any]) -> None:
+    """Record as compiled (``kernel_cache.mark_compiled``) those of ``named``'s kernels this
+    process has loaded or compiled (and numba then cached): for a caller that ran them
+    without :func:`compile_first` compiling them ahead (the onset's search without the
+    check)."""
+    kernel_cache.mark_compiled(name for name, kernel in named.items() if kernel.signatures)

@@ -14,6 +14,7 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING
 
+from campipe import kernel_cache
 from campipe.profiles.defects import bump, flat
 from campipe.profiles.pieces import (
     Lift,
@@ -32,6 +33,9 @@ from campipe.profiles.shapes import (
     polydyne,
     table,
 )
+
+# numba's cache folder, set before this package's compiled part imports numba
+kernel_cache.configure()
 
 if TYPE_CHECKING:
     from campipe.profiles.packed import PackedProfiles, evaluate_packed, pack

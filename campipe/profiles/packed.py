@@ -19,11 +19,8 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from campipe import kernel_cache
 from campipe.constants import TWO_PI
 from campipe.profiles.pieces import N_COEFFS, Profile
-
-kernel_cache.install()  # before this module's kernels are defined: numba picks their cache then
 
 
 class PackedProfiles(NamedTuple):

@@ -18,7 +18,7 @@ import numpy as np
 
 from campipe.constants import RPM
 from campipe.engine import periodic
-from campipe.engine.kernels import compile_first
+from campipe.engine.kernels import compile_first, record_loaded, search_kernels
 from campipe.errors import CampipeError
 from campipe.io.archive import VariableSpec
 from campipe.study.query.tables import CaseTable
@@ -150,6 +150,7 @@ def onset_study(
     compile_first({periodic.confirm_settings(): designs[0]} if confirm else {}, notice, search=True)
     t0 = time.perf_counter()
     onset = search_designs(designs, low, high, tolerance, workers)
+    record_loaded(search_kernels())  # the search's kernels, compiled ahead or not
     t1 = time.perf_counter()
     nan = np.full(len(designs), np.nan)
     below, above = periodic.confirm_onsets(designs, onset.speed) if confirm else (nan, nan)

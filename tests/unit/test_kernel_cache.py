@@ -1,39 +1,48 @@
-"""campipe's kernel cache (``campipe.kernel_cache``): a fresh copy of campipe at another path
-loads the kernels an earlier copy compiled, and an edit to any file the kernels compile from
-(not only the kernel's own) makes them compile again."""
+"""Where numba caches campipe's kernels (``campipe.kernel_cache``): numba's own ``cache=True``
+in the folder campipe gives it through ``NUMBA_CACHE_DIR``, one per version of the kernels'
+source (an edit to any file the kernels compile from, not only the kernel's own, makes them
+compile again), and campipe's record of which kernels it compiled there (the first run's
+notice, ``campipe.engine.kernels``)."""
 
-import copy
 import json
 import os
 import shutil
 import subprocess
 import sys
 import time
-import types
 from pathlib import Path
+from types import SimpleNamespace
 
-import numpy as np
 import pytest
 
 from campipe import kernel_cache
 from campipe.engine import batch
 
 #: Run in a copy of campipe: the lift at θ = 0 of a harmonic cam through ``batch.cam_at`` (a
-#: small kernel, about a second to compile), then where its cache is and whether it was
-#: compiled (a cache miss) or loaded (a hit), and whether campipe's inliner was set up.
+#: small kernel, about a second to compile), then numba's cache folder and how many
+#: functions numba compiled for it (numba's event API: none when all were loaded from its
+#: cache).
 PROBE = """
-import json, campipe
-from campipe.engine import batch
+import json, os
+import campipe
+from campipe.engine import batch  # before numba: campipe sets its cache folder first
 from campipe.profiles import harmonic
 from campipe.profiles.packed import pack
-lift = batch.cam_at(pack([harmonic(0.0254)]), 0.0)[0].tolist()
-from numba.core.inline_closurecall import InlineWorker
+from numba.core import event
+
+class Count(event.Listener):
+    compiled = 0
+    def on_start(self, ev):
+        Count.compiled += 1
+    def on_end(self, ev):
+        pass
+
+with event.install_listener("numba:compile", Count()):
+    lift = batch.cam_at(pack([harmonic(0.0254)]), 0.0)[0].tolist()
 print(json.dumps({
     "package": campipe.__file__,
-    "inliner": hasattr(InlineWorker.inline_function, "__wrapped__"),
-    "cache": batch.cam_at._cache._cache_path,
-    "hits": sum(batch.cam_at.stats.cache_hits.values()),
-    "misses": sum(batch.cam_at.stats.cache_misses.values()),
+    "cache": os.environ.get("NUMBA_CACHE_DIR"),
+    "compiled": Count.compiled,
     "lift": lift,
 }))
 """
@@ -47,46 +56,137 @@ def _copy(tmp_path: Path, name: str) -> Path:
     return root
 
 
-def _probe(copy: Path, cache: Path) -> dict:
-    env = {**os.environ, "PYTHONPATH": str(copy), "NUMBA_CACHE_DIR": str(cache)}
+def _probe(copy: Path, home: Path) -> dict:
+    """The probe in a fresh process of ``copy``, its user cache folder under ``home``
+    (``XDG_CACHE_HOME``) and no ``NUMBA_CACHE_DIR`` of its own."""
+    env = {**os.environ, "PYTHONPATH": str(copy), "XDG_CACHE_HOME": str(home)}
+    env.pop("NUMBA_CACHE_DIR", None)
     out = subprocess.run(
         [sys.executable, "-c", PROBE], cwd=copy, env=env, capture_output=True, text=True, check=True
     )
     return json.loads(out.stdout.splitlines()[-1])
 
 
-def test_a_fresh_copy_loads_what_another_compiled_and_an_edit_recompiles(tmp_path):
-    """Three copies of campipe at three paths share one cache folder. The first compiles
-    ``cam_at``; the second, identical, loads it (numba's own cache, beside each copy's source,
-    would compile again); the third has a comment added to ``engine/common.py``, a file
-    ``cam_at``'s module imports but that does not define it, and compiles again (numba's
-    per-file stamp would have loaded the first copy's). The second, loading only, marks the
-    folder used.
+def test_numba_caches_in_the_source_folder_and_an_edit_elsewhere_recompiles(tmp_path):
+    """A copy of campipe run twice compiles ``cam_at`` (and the profile evaluators it calls)
+    once: numba caches them in ``<user cache>/campipe/kernels/<source hash>/numba``, where the
+    second run loads them. A copy with a comment added to ``engine/common.py``, a file
+    ``cam_at``'s module imports but that does not define it, gets another folder and
+    compiles again (numba's per-file stamp alone would have loaded the first copy's, were it
+    at the same path). The lift is the same in all three.
 
-    Broken copy: with :func:`kernel_cache.install` doing nothing, the second copy compiles
-    (``misses`` 1); with :data:`kernel_cache.SOURCES` holding only the kernel's own file, the
-    third loads (``hits`` 1)."""
-    cache = tmp_path / "cache"
-    first, second, edited = (_copy(tmp_path, n) for n in ("first", "second", "edited"))
+    Broken copies: ``kernel_cache.configure`` not setting ``NUMBA_CACHE_DIR`` (cache None);
+    :data:`kernel_cache.SOURCES` holding only the kernel's own file (one folder for both)."""
+    home = tmp_path / "home"
+    first, edited = _copy(tmp_path, "first"), _copy(tmp_path, "edited")
     common = edited / "campipe" / "engine" / "common.py"
     common.write_text(common.read_text() + "\n# an edit\n")
 
-    a = _probe(first, cache)
-    folder = Path(a["cache"]).parent  # the kernel source's folder (cam_at's is its engine/)
-    hours_ago = time.time() - 7200
-    os.utime(folder, (hours_ago, hours_ago))
-    b = _probe(second, cache)
-    assert folder.stat().st_mtime > hours_ago + 3600  # marked used by a load (prune keeps it)
-    c = _probe(edited, cache)
-    assert a["package"].startswith(str(first)) and b["package"].startswith(str(second))
-    assert (a["misses"], a["hits"]) == (1, 0)
-    assert (b["misses"], b["hits"]) == (0, 1)
-    assert (c["misses"], c["hits"]) == (1, 0)
-    assert a["inliner"] and not b["inliner"]  # set up to compile only when compiling
+    a = _probe(first, home)
+    b = _probe(first, home)
+    c = _probe(edited, home)
+    assert a["package"].startswith(str(first)) and c["package"].startswith(str(edited))
+    source = kernel_cache.hash_sources(first / "campipe")[:16]
+    assert a["cache"] == str(home / "campipe" / "kernels" / source / "numba")
+    assert a["compiled"] >= 2 and b["compiled"] == 0 and c["compiled"] >= 2
+    assert list(Path(a["cache"]).rglob("*.nbi"))  # numba's index files, under that folder
     assert a["cache"] == b["cache"] != c["cache"]
-    assert Path(a["cache"]).is_relative_to(cache / "campipe")
+    assert Path(c["cache"]).parent.parent == Path(a["cache"]).parent.parent
     assert a["lift"] == b["lift"] == c["lift"]
     assert a["lift"][0] == pytest.approx(0.0254 / 2, rel=1e-12)  # θ = 0 is mid-lift
+
+
+def test_configure_sets_numbas_folder_only_where_numba_would_read_it(tmp_path, monkeypatch):
+    """``configure`` sets ``NUMBA_CACHE_DIR`` to this source's folder when neither the
+    environment sets it nor numba is imported (numba reads it once, at import); it leaves a
+    user's setting alone, sets nothing once numba is imported, and nothing where the
+    folder cannot be made (numba's own default then)."""
+    source = tmp_path / "0123456789abcdef"
+    monkeypatch.setattr(kernel_cache, "cache_root", lambda: tmp_path)
+    monkeypatch.setattr(kernel_cache, "cache_folder", lambda: source)
+    monkeypatch.delenv("NUMBA_CACHE_DIR", raising=False)
+    assert kernel_cache.configure() is None  # numba is imported in this process
+    assert "NUMBA_CACHE_DIR" not in os.environ and not source.exists()
+    monkeypatch.delitem(sys.modules, "numba")  # as a process that has not imported it
+    assert kernel_cache.configure() == str(source / "numba")
+    assert os.environ["NUMBA_CACHE_DIR"] == str(source / "numba") and (source / "numba").is_dir()
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "mine"))
+    assert kernel_cache.configure() == str(tmp_path / "mine")
+    assert os.environ["NUMBA_CACHE_DIR"] == str(tmp_path / "mine")
+    monkeypatch.delenv("NUMBA_CACHE_DIR")
+    blocked = tmp_path / "a file"
+    blocked.write_text("")
+    monkeypatch.setattr(kernel_cache, "cache_folder", lambda: blocked / "0123456789abcdef")
+    assert kernel_cache.configure() is None and "NUMBA_CACHE_DIR" not in os.environ
+
+
+def test_the_compiled_record_follows_what_numba_checks(tmp_path, monkeypatch):
+    """A kernel recorded as compiled (``mark_compiled``) is recorded for numba's cache
+    folder, and for this copy's source files as they are: another ``NUMBA_CACHE_DIR``, a
+    copy at another path or a source file written again (its time stamp) each has no
+    record, as numba would compile again for each."""
+    source = tmp_path / "0123456789abcdef"
+    monkeypatch.setattr(kernel_cache, "cache_root", lambda: tmp_path)
+    monkeypatch.setattr(kernel_cache, "cache_folder", lambda: source)
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "numba"))
+    kernel_cache.numba_stamp.cache_clear()
+    marker = kernel_cache.compiled_marker("modal-exact")
+    assert not marker.exists()
+    kernel_cache.mark_compiled(["modal-exact"])
+    assert marker.exists() and not kernel_cache.compiled_marker("periodic start").exists()
+    stamp = kernel_cache.numba_stamp()
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "other"))
+    kernel_cache.numba_stamp.cache_clear()
+    assert kernel_cache.numba_stamp() != stamp
+    assert not kernel_cache.compiled_marker("modal-exact").exists()
+    monkeypatch.setenv("NUMBA_CACHE_DIR", str(tmp_path / "numba"))
+    root = _copy(tmp_path, "copy") / "campipe"
+    assert kernel_cache.stamp_of(root, str(tmp_path / "numba")) != stamp  # another path
+    same = kernel_cache.stamp_of(kernel_cache.ROOT, str(tmp_path / "numba"))
+    assert same == stamp
+    copied = root / "engine" / "steady.py"
+    before = kernel_cache.stamp_of(root, str(tmp_path / "numba"))
+    os.utime(copied, ns=(time.time_ns(), copied.stat().st_mtime_ns + 10**9))
+    assert kernel_cache.stamp_of(root, str(tmp_path / "numba")) != before  # written again
+    kernel_cache.numba_stamp.cache_clear()
+
+
+def test_the_first_run_says_it_compiles_and_the_next_does_not(tmp_path, monkeypatch):
+    """``compile_first`` says which kernels it compiles when none is recorded, compiles
+    them (here recorded, not run) and records them; the next run says nothing and compiles
+    nothing. A compile that failed records nothing: the next run says it again. Broken
+    copies, run: no ``mark_compiled`` (the second says it again); marking after a failure
+    (the third says nothing)."""
+    from campipe.engine import kernels
+    from campipe.engine.batch import Case, RunSettings
+    from campipe.model import thesis_train
+    from campipe.profiles import harmonic
+
+    source = tmp_path / "0123456789abcdef"
+    monkeypatch.setattr(kernel_cache, "cache_root", lambda: tmp_path)
+    monkeypatch.setattr(kernel_cache, "cache_folder", lambda: source)
+    unloaded = SimpleNamespace(signatures=[])  # as a process that has loaded no kernel
+    named = {"periodic start": unloaded, "modal-exact": unloaded}
+    monkeypatch.setattr(kernels, "kernels", lambda settings: dict(named))
+    compiled: list[object] = []
+    ok = [True]
+    monkeypatch.setattr(
+        kernels, "compile_kernels", lambda case, settings, search: compiled.append(case) or ok[0]
+    )
+    settings = RunSettings(revolutions=0.05, warmup=0)
+    case = Case(thesis_train(), harmonic(0.0254), 900.0)
+    said: list[str] = []
+    kernels.compile_first({settings: case}, said.append)
+    assert len(said) == 1 and compiled == [case]
+    assert said[0].startswith("compiling periodic start, modal-exact with numba")
+    kernels.compile_first({settings: case}, said.append)
+    assert len(said) == 1 and compiled == [case]
+    named["newmark-linear"] = unloaded
+    ok[0] = False
+    kernels.compile_first({settings: case}, said.append)
+    kernels.compile_first({settings: case}, said.append)
+    assert said[1] == said[2] and said[1].startswith("compiling newmark-linear with numba,")
+    assert len(compiled) == 3
 
 
 def test_the_source_hash_covers_the_kernel_sources_and_nothing_else(tmp_path):
@@ -123,16 +223,6 @@ def test_prune_keeps_the_newest_and_those_in_use(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == [*names[:4], "not-a-source"]
 
 
-def test_this_process_caches_its_kernels_in_the_kernel_cache():
-    """The kernels of this very process (engine and profiles alike) cache under this
-    source's folder, not in ``__pycache__``."""
-    from campipe.profiles import packed
-
-    folder = kernel_cache.cache_folder()
-    assert Path(batch.cam_at._cache._cache_path) == folder / "engine"
-    assert Path(packed.evaluate_packed._cache._cache_path) == folder / "profiles"
-
-
 def test_compiling_ahead_compiles_the_signatures_a_run_calls(monkeypatch):
     """A first run compiles modal-exact's kernel ahead from the types ``batch.integrator_types``
     gives, found without running the start's kernels
@@ -144,7 +234,7 @@ def test_compiling_ahead_compiles_the_signatures_a_run_calls(monkeypatch):
     ``full_state``. Broken copies, run: ``integrator_types`` with float zeta (modal-exact's
     types differ); the quasi-static start's held mask broadcast, as it was (two signatures).
     """
-    from numba.core.typing.typeof import Purpose, typeof
+    from numba import typeof
 
     from campipe.engine import contact, exact
     from campipe.engine.batch import Case, RunSettings, run_batch
@@ -155,7 +245,7 @@ def test_compiling_ahead_compiles_the_signatures_a_run_calls(monkeypatch):
 
     def recording(name, kernel):
         def record(*args):
-            calls[name].append(tuple(typeof(a, Purpose.argument) for a in args))
+            calls[name].append(tuple(typeof(a) for a in args))
             return kernel(*args)
 
         return record
@@ -217,7 +307,7 @@ periodic.onset_speeds(cases[:1], 6000 * math.pi / 30, 14000 * math.pi / 30, 1.0)
 many = {}
 for module in (batch, contact, closed_form, common, exact, modal, newmark, steady, packed):
     for name, kernel in vars(module).items():
-        if isinstance(kernel, numba.core.registry.CPUDispatcher) and len(kernel.signatures) > 1:
+        if hasattr(kernel, "signatures") and len(kernel.signatures) > 1:
             sigs = kernel.signatures
             many[f"{kernel.py_func.__module__}.{name}"] = [
                 [str(s[i]) for s in sigs] for i in range(len(sigs[0]))
@@ -229,7 +319,7 @@ by_value = sorted(
     f"{kernel.py_func.__module__}.{name}"
     for module in (batch, contact, closed_form, common, exact, modal, newmark, steady, packed)
     for name, kernel in vars(module).items()
-    if isinstance(kernel, numba.core.registry.CPUDispatcher)
+    if hasattr(kernel, "signatures")
     and kernel.targetoptions.get("no_cpython_wrapper")
     and any(isinstance(t, numba.types.BaseNamedTuple) for s in kernel.signatures for t in s)
 )
@@ -258,77 +348,6 @@ def test_no_kernel_is_compiled_once_per_constant_it_is_called_with(tmp_path):
     )
     found = json.loads(out.stdout.splitlines()[-1])
     assert found == {"more than one signature": {}, "named tuples by value": []}
-
-
-#: A helper inlined twice into a kernel, with branches (several blocks of IR) and a loop.
-INLINED = """
-import numba
-
-@numba.njit(inline="always")
-def clip(x, lo, hi):
-    if x < lo:
-        return lo
-    if x > hi:
-        return hi
-    return x
-
-@numba.njit
-def kernel(a):
-    total = 0.0
-    for x in a:
-        total += clip(x, -1.0, 1.0) * clip(2.0 * x, 0.0, 3.0) + x
-    return total
-"""
-
-
-def _inlining_module(name: str):
-    module = types.ModuleType(name)
-    exec(compile(INLINED, f"<{name}>", "exec"), module.__dict__)  # test code, not input
-    return module
-
-
-def test_campipe_helpers_are_inlined_without_copying_their_ir(monkeypatch):
-    """Once campipe compiles, numba inlines campipe's ``inline="always"`` helpers from their
-    fresh IR without deep-copying it (``kernel_cache._inline_without_copies``), and still
-    copies any other package's: counted here by a deep copy of an IR block that records
-    itself. The blocks spliced in are plain blocks again, and both kernels give what the same
-    Python code gives.
-
-    Broken copy: with the helper's blocks copied (the method not replaced), the campipe
-    module's count is above zero; with the replacement applied to every package, the other
-    module's count is zero."""
-    from numba.core import inline_closurecall, ir
-
-    kernel_cache._inline_without_copies()
-    assert hasattr(inline_closurecall.InlineWorker.inline_function, "__wrapped__")
-    copied: list[object] = []
-
-    def deepcopy(block, memo):  # numba's default deep copy of a block, counted
-        copied.append(block)
-        new = copy.copy(block)
-        memo[id(block)] = new
-        new.__dict__.update(copy.deepcopy(block.__dict__, memo))
-        return new
-
-    monkeypatch.setattr(ir.Block, "__deepcopy__", deepcopy, raising=False)
-    spliced: list[object] = []
-    inline_ir = inline_closurecall.InlineWorker.inline_ir
-
-    def spy(self, caller_ir, block, i, callee_ir, *args, **kwargs):
-        spliced.extend(callee_ir.blocks.values())
-        return inline_ir(self, caller_ir, block, i, callee_ir, *args, **kwargs)
-
-    monkeypatch.setattr(inline_closurecall.InlineWorker, "inline_ir", spy)
-    a = np.linspace(-2.0, 3.0, 23)
-    counts = {}
-    for name in ("campipe._inlining_probe", "elsewhere._inlining_probe"):
-        module = _inlining_module(name)
-        copied.clear()
-        assert module.kernel(a) == module.kernel.py_func(a)
-        counts[name] = len(copied)
-    assert spliced and all(type(b) is ir.Block for b in spliced)  # plain blocks once spliced
-    assert counts["campipe._inlining_probe"] == 0
-    assert counts["elsewhere._inlining_probe"] > 4  # two sites, each of several blocks, twice
 
 
 def test_the_second_process_reports_and_ends_at_once(monkeypatch):
@@ -386,7 +405,6 @@ def test_a_first_run_finds_modal_exacts_types_once_and_compiles_its_helpers_ahea
     share to this one. Whether those are the types the kernel calls the helper with is the
     ``slow`` one-signature test's."""
     import multiprocessing
-    from types import SimpleNamespace
 
     from campipe.engine import exact, kernels
     from campipe.engine.batch import Case, RunSettings
@@ -413,7 +431,7 @@ def test_a_first_run_finds_modal_exacts_types_once_and_compiles_its_helpers_ahea
     )
     case = Case(thesis_train(), harmonic(0.0254), 900.0)
     settings = RunSettings(revolutions=0.05, warmup=0)
-    kernels.compile_kernels(case, settings)
+    assert kernels.compile_kernels(case, settings)
     types = found([case], settings, False)
     assert done == ["types", ("helper", types[:2]), "start", ("helper", types)]
     done.clear()
@@ -433,9 +451,9 @@ def test_a_first_run_finds_modal_exacts_types_once_and_compiles_its_helpers_ahea
         "get_context",
         lambda method: SimpleNamespace(Pipe=multiprocessing.Pipe, Process=Gone),
     )
-    kernels.compile_kernels(case, settings)  # its share is compiled here instead
+    assert kernels.compile_kernels(case, settings)  # its share is compiled here instead
     assert done == ["types", ("helper", types[:2]), "start", ("helper", types)]
     done.clear()
     newmark = RunSettings(revolutions=0.05, warmup=0, integrator="newmark-linear", dt=1e-6)
-    kernels.compile_kernels(case, newmark)
+    assert kernels.compile_kernels(case, newmark)
     assert done == ["start", "newmark"]

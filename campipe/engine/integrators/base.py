@@ -58,6 +58,11 @@ class Integrator(Protocol):
         (``inf`` and 0 for an integrator without a limit)."""
         ...
 
+    def kernels(self) -> dict[str, Any]:
+        """Its compiled kernels (numba dispatchers) by the name a first run's notice gives
+        them, loading them (``campipe.engine.kernels``); none for one that compiles none."""
+        ...
+
     def prepare(self, batch: Any, run: RunLike) -> Any:
         """What its kernel takes beside the cases and the outputs, from a prepared batch
         (``campipe.engine.batch.PreparedBatch``)."""

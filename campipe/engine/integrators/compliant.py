@@ -56,6 +56,9 @@ class Compliant:
     def stability_limit(self, case: Case) -> tuple[float, int]:
         return math.inf, 0
 
+    def kernels(self) -> dict[str, Any]:
+        return {}  # SciPy's integration: nothing to compile
+
     def prepare(self, batch: Any, run: RunLike) -> Any:
         rtol = max(float(run.tolerance), RTOL_FLOOR)
         return batch.case_list, output_angles(run), rtol, run.step or math.inf

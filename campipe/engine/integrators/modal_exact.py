@@ -28,6 +28,11 @@ class ModalExact:
     def stability_limit(self, case: Case) -> tuple[float, int]:
         return math.inf, 0
 
+    def kernels(self) -> dict[str, Any]:
+        from campipe.engine import exact
+
+        return {"modal-exact": exact.modal_exact_batch}
+
     def prepare(self, batch: Any, run: RunLike) -> Any:
         return batch.modal_trains, batch.packed, batch.runs
 

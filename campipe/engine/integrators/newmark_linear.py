@@ -64,6 +64,16 @@ class NewmarkLinear:
         worst = max(visited_configurations(case), key=lambda c: omega_max[c - 1])
         return float(NEWMARK_LINEAR_OMEGA_DT / omega_max[worst - 1]), worst
 
+    def kernels(self) -> dict[str, Any]:
+        """Its step, and the quasi-static state its first run compiles through (a short
+        quasi-static run, ``campipe.engine.kernels.compile_kernels``)."""
+        from campipe.engine import contact, newmark
+
+        return {
+            "quasi-static state": contact.quasi_static_batch,
+            "newmark-linear": newmark.newmark_linear_batch,
+        }
+
     def prepare(self, batch: Any, run: RunLike) -> Any:
         from campipe.engine import newmark  # the compiled kernel, loaded when first run
 
