@@ -112,10 +112,11 @@ class SmallArchive:
         shutil.copytree(self.parts, copy.parts)
         return copy
 
-    def snapshot(self) -> list[tuple[str, int, int]]:
-        """Every file under the folder with its size and modification time."""
-        return sorted(
-            (str(p.relative_to(self.directory)), p.stat().st_size, p.stat().st_mtime_ns)
-            for p in self.directory.rglob("*")
-            if p.is_file()
-        )
+
+def snapshot(directory: Path) -> list[tuple[str, int, int]]:
+    """Every file under ``directory`` with its size and modification time."""
+    return sorted(
+        (str(p.relative_to(directory)), p.stat().st_size, p.stat().st_mtime_ns)
+        for p in directory.rglob("*")
+        if p.is_file()
+    )
