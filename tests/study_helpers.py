@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 import textwrap
 from pathlib import Path
 
@@ -48,3 +49,74 @@ def changed(base: dict, **changes: object) -> dict:
             node = node.setdefault(p, {})
         node[last] = value
     return raw
+
+
+#: The small study the integration tests share (``small_archive`` in conftest.py): the thesis's
+#: harmonic cam at three speeds across the separation onset, without a seat and with one at
+#: 0.1 in (six cases, the speed outermost), two turns, with q and the member loads recorded.
+SMALL_SPEC = """
+name: small
+profile: {kind: harmonic, lift: 1 in}
+run: {revolutions: 2, record: [q, member_loads]}
+sweep:
+  speed: [6000 rpm, 9524 rpm, 11000 rpm]
+  seat: [none, 0.1 in]
+"""
+
+
+class SmallArchive:
+    """The small study run into ``directory``: ``spec.yaml``, ``small.nc`` and the batch
+    files the run kept (``small.nc.parts``), in batches of two cases on the synchronous
+    scheduler."""
+
+    def __init__(self, directory: Path, study=None, report=None) -> None:
+        self.directory = directory
+        self.spec = directory / "spec.yaml"
+        self.archive = directory / "small.nc"
+        self._study = study
+        #: the run that built the archive (None for a copy)
+        self.report = report
+
+    @property
+    def study(self):
+        """The study loaded from this folder's spec."""
+        if self._study is None:
+            from campipe.study import load_study
+
+            self._study = load_study(self.spec)
+        return self._study
+
+    @property
+    def parts(self) -> Path:
+        """The folder of the run's batch files."""
+        from campipe.study.run.batches import parts_directory
+
+        return parts_directory(self.archive)
+
+    @classmethod
+    def build(cls, directory: Path) -> SmallArchive:
+        from campipe.study import load_study
+        from campipe.study.run.execute import run_study
+
+        study = load_study(write_spec(directory, SMALL_SPEC))
+        archive = directory / "small.nc"
+        report = run_study(study, archive, scheduler="synchronous", batch_size=2, keep_parts=True)
+        return cls(directory, study, report)
+
+    def copy_to(self, directory: Path) -> SmallArchive:
+        """A copy of the spec, the archive and its batch files in ``directory``, for a test
+        that changes or deletes them."""
+        shutil.copy(self.spec, directory / self.spec.name)
+        shutil.copy(self.archive, directory / self.archive.name)
+        copy = SmallArchive(directory)
+        shutil.copytree(self.parts, copy.parts)
+        return copy
+
+
+def snapshot(directory: Path) -> list[tuple[str, int, int]]:
+    """Every file under ``directory`` with its size and modification time."""
+    return sorted(
+        (str(p.relative_to(directory)), p.stat().st_size, p.stat().st_mtime_ns)
+        for p in directory.rglob("*")
+        if p.is_file()
+    )

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 
@@ -14,7 +15,7 @@ import numpy as np
 import pytest
 import xarray as xr
 from click.testing import CliRunner
-from study_helpers import ROOT, write_spec
+from study_helpers import ROOT, SMALL_SPEC, write_spec
 
 from campipe.cli import main
 from campipe.io.archive import (
@@ -26,19 +27,12 @@ from campipe.io.archive import (
 )
 from campipe.study.run.batches import parts_directory
 
-SPEC = """
-name: small
-profile: {{kind: harmonic, lift: 1 in}}
-run: {{revolutions: 1, output_every: 2 deg{extra}}}
-sweep:
-  speed: [6000 rpm, 9524 rpm, 11000 rpm]
-  seat: [none, 0.1 in]
-"""
-
 
 def _spec(directory, compression=None):
+    """The small study's spec, with ``run.compression`` if given."""
     extra = f", compression: {compression}" if compression else ""
-    return write_spec(directory, SPEC.format(extra=extra))
+    run = "run: {revolutions: 2"
+    return write_spec(directory, SMALL_SPEC.replace(run, run + extra))
 
 
 def _study(*args):
@@ -74,12 +68,13 @@ def test_a_writer_compresses_incompressible_rows_as_asked_and_reads_them_back(
     assert found["shuffle"] == (compression == "zlib")
 
 
-def test_the_default_is_zstd_and_another_compression_reuses_every_case(tmp_path):
+def test_the_default_is_zstd_and_another_compression_reuses_every_case(
+    small_archive_copy, tmp_path
+):
     """The default archive is zstd. Asking for zlib afterwards rewrites it from the cases it
     holds (none computed again) with the same values and the same checksums; none stores
     the rows as they are, larger than either."""
-    spec = _spec(tmp_path)
-    archive = tmp_path / "small.nc"
+    spec, archive = small_archive_copy.spec, small_archive_copy.archive
     assert _study(spec).exit_code == 0
     histories, metrics = _filters(archive)
     assert histories["zstd"] and metrics["zstd"]
@@ -124,14 +119,16 @@ def _campipe(args, cwd):
     return subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=cwd)
 
 
-def test_without_the_plugin_reading_and_writing_say_what_to_do_and_lose_nothing(tmp_path):
+def test_without_the_plugin_reading_and_writing_say_what_to_do_and_lose_nothing(
+    small_archive_copy, tmp_path
+):
     """With HDF5_PLUGIN_PATH naming a folder without netCDF's plugins, a zstd archive cannot
     be read, nor one written: each message says why and names the fixes. The run stops
     before it computes anything (one batch at a time: the archive is created first) and the
     archive already there is left as it was: the same command, the plugins found again,
     reuses its cases."""
-    spec = _spec(tmp_path)
-    archive = tmp_path / "small.nc"
+    spec, archive = small_archive_copy.spec, small_archive_copy.archive
+    shutil.rmtree(small_archive_copy.parts)  # only the archive holds the cases
     assert _study(spec).exit_code == 0
     before = archive.read_bytes()
     query = _campipe(["query", "small.nc"], tmp_path)

@@ -13,12 +13,10 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 from numpy.testing import assert_allclose
-from study_helpers import ROOT, STUDIES
+from study_helpers import ROOT
 
 from campipe.bench import pages, report
 from campipe.cli import main
-from campipe.study import load_study
-from campipe.study.run.execute import run_study
 
 if str(ROOT) not in sys.path:  # benchmarks/ is not installed: imported from the repository
     sys.path.insert(0, str(ROOT))
@@ -190,16 +188,6 @@ def test_the_readme_keeps_its_two_set_up_commands_and_its_length():
     assert len(lines) <= 200
 
 
-@pytest.fixture(scope="module")
-def quickstart(tmp_path_factory):
-    """A folder holding studies/quickstart.nc as the README's first command writes it."""
-    root = tmp_path_factory.mktemp("readme")
-    archive = root / "studies" / "quickstart.nc"
-    archive.parent.mkdir()
-    run_study(load_study(STUDIES / "quickstart.yaml"), archive, scheduler="threads")
-    return root
-
-
 def _fenced_after(text: str, marker: str) -> str:
     """The body of the first fenced block after ``<!-- marker -->``."""
     after = text.split(f"<!-- {marker} -->\n", 1)[1]
@@ -209,12 +197,12 @@ def _fenced_after(text: str, marker: str) -> str:
 NUMBER = re.compile(r"^[-+]?(\d+\.?\d*(e[-+]?\d+)?|nan)$", re.IGNORECASE)
 
 
-def test_the_readme_analysis_prints_what_the_readme_shows(quickstart, monkeypatch):
+def test_the_readme_analysis_prints_what_the_readme_shows(quickstart_archive, monkeypatch):
     text = README.read_text()
     code = _fenced_after(text, "readme-analysis")
     shown = _fenced_after(text, "readme-analysis-output").split()
     assert len(code.strip().splitlines()) == 5
-    monkeypatch.chdir(quickstart)
+    monkeypatch.chdir(quickstart_archive.parents[1])  # the README's studies/quickstart.nc
     out = io.StringIO()
     with contextlib.redirect_stdout(out):
         exec(compile(code, "README.md", "exec"), {})
@@ -229,10 +217,10 @@ def test_the_readme_analysis_prints_what_the_readme_shows(quickstart, monkeypatc
     assert table[1, 1] == 0 and 45 <= table[2, 1] <= 60 and np.all(table[:, 2] > 0)
 
 
-def test_the_readme_summary_is_what_campipe_query_prints(quickstart):
+def test_the_readme_summary_is_what_campipe_query_prints(quickstart_archive):
     text = README.read_text()
     shown = text.split("$ campipe query studies/quickstart.nc --summary\n")[1].split("```")[0]
-    archive = quickstart / "studies" / "quickstart.nc"
+    archive = quickstart_archive
     result = CliRunner().invoke(main, ["query", str(archive), "--summary"])
     assert result.exit_code == 0, result.output
     assert result.output == shown

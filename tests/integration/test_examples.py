@@ -9,23 +9,18 @@ import numpy as np
 import pytest
 import xarray as xr
 from numpy.testing import assert_allclose
-from study_helpers import INCH, ROOT, STUDIES
+from study_helpers import INCH, ROOT
 
-from campipe.study import load_study
 from campipe.study.query.tables import case_table, onset_table
-from campipe.study.run.execute import run_study
 
 EXAMPLES = ROOT / "examples"
 SPEEDS = [6000.0, 9000.0, 9524.0, 11000.0]
 
 
-@pytest.fixture(scope="module")
-def archive(tmp_path_factory):
-    """The quickstart study with two turns per case: 4 speeds × (no seat, seat at 0.1 in)."""
-    path = tmp_path_factory.mktemp("examples") / "quickstart.nc"
-    study = load_study(STUDIES / "quickstart.yaml", {"run.revolutions": 2})
-    run_study(study, path, scheduler="threads")
-    return path
+@pytest.fixture
+def archive(quickstart_archive):
+    """The session's quickstart archive (conftest.py): 4 speeds × (no seat, seat at 0.1 in)."""
+    return quickstart_archive
 
 
 @pytest.fixture

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import xarray as xr
 from click.testing import CliRunner
-from study_helpers import load, write_spec
+from study_helpers import SMALL_SPEC, load, write_spec
 
 import campipe.study.run.results as results
 from campipe.cli import main
@@ -19,26 +19,6 @@ from campipe.study import load_study
 from campipe.study.run.batches import parts_directory
 from campipe.study.run.execute import run_study
 from campipe.vocabulary import CHATTER, EVENTS_TRUNCATED, OK, STATUS, STATUS_FLAGS
-
-SPEC = """
-name: small
-profile: {kind: harmonic, lift: 1 in}
-run: {revolutions: 1}
-sweep:
-  speed: [6000 rpm, 9524 rpm, 11000 rpm]
-  seat: [none, 0.1 in]
-"""
-
-
-@pytest.fixture(scope="module")
-def reference(tmp_path_factory):
-    """The study run once, untouched: its archive and its batch files."""
-    d = tmp_path_factory.mktemp("ref")
-    spec = write_spec(d, SPEC)
-    run_study(
-        load_study(spec), d / "small.nc", scheduler="synchronous", batch_size=2, keep_parts=True
-    )
-    return d
 
 
 def test_a_writers_checksums_are_those_read_back_however_its_rows_came(tmp_path):
@@ -79,21 +59,14 @@ def test_a_writers_checksums_are_those_read_back_however_its_rows_came(tmp_path)
     assert list(tmp_path.iterdir()) == [path]
 
 
-def _copy(reference, tmp_path):
-    shutil.copy(reference / "spec.yaml", tmp_path / "spec.yaml")
-    shutil.copy(reference / "small.nc", tmp_path / "small.nc")
-    shutil.copytree(parts_directory(reference / "small.nc"), parts_directory(tmp_path / "small.nc"))
-    return load_study(tmp_path / "spec.yaml")
-
-
 def _flip(path, offset):
     data = bytearray(path.read_bytes())
     data[offset] ^= 0x40
     path.write_bytes(bytes(data))
 
 
-def test_every_file_carries_checksums_that_verify(reference):
-    archive = reference / "small.nc"
+def test_every_file_carries_checksums_that_verify(small_archive):
+    archive = small_archive.archive
     assert verify(archive) == []
     attrs = read_attrs(archive)
     assert attrs["campipe_layout"] == "campipe-archive-3"
@@ -111,8 +84,10 @@ def test_every_file_carries_checksums_that_verify(reference):
         assert batch_file.read_attrs(path)["campipe_layout"] == "campipe-archive-3"
 
 
-def test_a_flipped_byte_in_a_batch_files_data_is_detected_and_recomputed(reference, tmp_path):
-    study = _copy(reference, tmp_path)
+def test_a_flipped_byte_in_a_batch_files_data_is_detected_and_recomputed(
+    small_archive, small_archive_copy, tmp_path
+):
+    study = small_archive_copy.study
     (tmp_path / "small.nc").unlink()  # the batch files alone must supply the cases
     batch = sorted(parts_directory(tmp_path / "small.nc").glob("batch-*.npz"))[1]
     lift = batch_file.read(batch)["valve_lift"][0, 100:104]
@@ -122,27 +97,29 @@ def test_a_flipped_byte_in_a_batch_files_data_is_detected_and_recomputed(referen
     report = run_study(study, tmp_path / "small.nc", scheduler="synchronous", batch_size=2)
     assert (report.computed, report.reused) == (2, 4)
     assert any(str(batch) in n and "failed its checks" in n for n in report.notes)
-    xr.testing.assert_identical(load(tmp_path / "small.nc"), load(reference / "small.nc"))
+    xr.testing.assert_identical(load(tmp_path / "small.nc"), load(small_archive.archive))
 
 
 @pytest.mark.parametrize("fraction", [0.3, 0.45, 0.6, 0.75, 0.9])
 def test_a_flipped_byte_anywhere_in_a_batch_file_never_reaches_the_archive(
-    reference, tmp_path, fraction
+    small_archive, small_archive_copy, tmp_path, fraction
 ):
-    study = _copy(reference, tmp_path)
+    study = small_archive_copy.study
     (tmp_path / "small.nc").unlink()
     batch = sorted(parts_directory(tmp_path / "small.nc").glob("batch-*.npz"))[0]
     _flip(batch, int(fraction * batch.stat().st_size))
     run_study(study, tmp_path / "small.nc", scheduler="synchronous", batch_size=2)
-    xr.testing.assert_identical(load(tmp_path / "small.nc"), load(reference / "small.nc"))
+    xr.testing.assert_identical(load(tmp_path / "small.nc"), load(small_archive.archive))
 
 
 @pytest.mark.parametrize("damage", ["zeroed tail", "truncated", "empty"])
-def test_what_a_system_crash_leaves_of_a_batch_file_is_recomputed(reference, tmp_path, damage):
+def test_what_a_system_crash_leaves_of_a_batch_file_is_recomputed(
+    small_archive, small_archive_copy, tmp_path, damage
+):
     """Batch files are not synced to the disk: after a system crash one may hold zeros where
     its data had not reached the disk, end early, or be empty. Each fails its checks, is
     named, and its cases are computed again; the archive equals the untouched one."""
-    study = _copy(reference, tmp_path)
+    study = small_archive_copy.study
     (tmp_path / "small.nc").unlink()
     batch = sorted(parts_directory(tmp_path / "small.nc").glob("batch-*.npz"))[2]
     data = batch.read_bytes()
@@ -157,20 +134,20 @@ def test_what_a_system_crash_leaves_of_a_batch_file_is_recomputed(reference, tmp
     report = run_study(study, tmp_path / "small.nc", scheduler="synchronous", batch_size=2)
     assert (report.computed, report.reused) == (2, 4)
     assert any(str(batch) in n and "failed its checks" in n for n in report.notes)
-    xr.testing.assert_identical(load(tmp_path / "small.nc"), load(reference / "small.nc"))
+    xr.testing.assert_identical(load(tmp_path / "small.nc"), load(small_archive.archive))
 
 
-def test_a_flipped_byte_in_the_archive_is_not_up_to_date_and_is_recomputed(reference, tmp_path):
+def test_a_flipped_byte_in_the_archive_is_not_up_to_date_and_is_recomputed(small_archive, tmp_path):
     """The archive is compressed: bytes at several places of it are flipped in turn. Each
     damage that changes a value or attribute is detected before "up to date", and the
     rerun's archive always equals the untouched one."""
-    pristine = (reference / "small.nc").read_bytes()
+    pristine = small_archive.archive.read_bytes()
     size = len(pristine)
     detected = 0
     for fraction in np.linspace(0.1, 0.95, 16):
         d = tmp_path / f"f{fraction:.2f}"
         d.mkdir()
-        shutil.copy(reference / "spec.yaml", d / "spec.yaml")
+        shutil.copy(small_archive.spec, d / "spec.yaml")
         (d / "small.nc").write_bytes(pristine)
         _flip(d / "small.nc", int(fraction * size))
         damaged = bool(verify(d / "small.nc"))
@@ -179,12 +156,12 @@ def test_a_flipped_byte_in_the_archive_is_not_up_to_date_and_is_recomputed(refer
         if damaged:
             detected += 1
             assert report.computed == 6 and "failed its checks" in report.notes[0]
-        xr.testing.assert_identical(load(d / "small.nc"), load(reference / "small.nc"))
+        xr.testing.assert_identical(load(d / "small.nc"), load(small_archive.archive))
     assert detected >= 3  # the others hit bytes no value or attribute is read from
 
 
-def test_results_of_another_engine_are_never_reused(reference, tmp_path, monkeypatch):
-    study = _copy(reference, tmp_path)
+def test_results_of_another_engine_are_never_reused(small_archive_copy, tmp_path, monkeypatch):
+    study = small_archive_copy.study
     for module in ("resume", "workers", "keys"):
         monkeypatch.setattr(
             f"campipe.study.run.{module}.numerics_fingerprint",
@@ -217,7 +194,7 @@ def test_a_failing_case_is_recorded_by_case_id_and_the_others_finish(tmp_path, m
         return out
 
     monkeypatch.setattr(results, "run_batch", chatter_on_9524)
-    spec = write_spec(tmp_path, SPEC)
+    spec = write_spec(tmp_path, SMALL_SPEC)
     result = CliRunner().invoke(
         main,
         ["study", str(spec), "--scheduler", "synchronous", "--batch-size", "4", "--no-progress"],
@@ -242,7 +219,8 @@ def test_a_failing_case_is_recorded_by_case_id_and_the_others_finish(tmp_path, m
 
 def test_events_beyond_max_events_are_a_visible_status(tmp_path):
     spec = write_spec(
-        tmp_path, SPEC.replace("run: {revolutions: 1}", "run: {revolutions: 1, max_events: 2}")
+        tmp_path,
+        SMALL_SPEC.replace("run: {revolutions: 2,", "run: {revolutions: 2, max_events: 2,"),
     )
     result = CliRunner().invoke(main, ["study", str(spec), "--scheduler", "synchronous"])
     assert result.exit_code == 0, result.output
@@ -263,15 +241,15 @@ def _study(tmp_path, output=None, *extra):
 
 
 @pytest.mark.parametrize("target", ["spec", "text", "other-spec"])
-def test_a_file_that_is_not_this_studys_archive_is_refused(reference, tmp_path, target):
-    shutil.copy(reference / "spec.yaml", tmp_path / "spec.yaml")
+def test_a_file_that_is_not_this_studys_archive_is_refused(small_archive, tmp_path, target):
+    shutil.copy(small_archive.spec, tmp_path / "spec.yaml")
     if target == "spec":
         victim = tmp_path / "spec.yaml"
     elif target == "text":
         victim = tmp_path / "notes.txt"
         victim.write_text("my notes\n")
     else:  # a second spec with the same name, in the same folder: the same default archive
-        shutil.copy(reference / "spec.yaml", tmp_path / "first.yaml")
+        shutil.copy(small_archive.spec, tmp_path / "first.yaml")
         first = CliRunner().invoke(
             main, ["study", str(tmp_path / "first.yaml"), "--scheduler", "synchronous"]
         )
@@ -286,10 +264,12 @@ def test_a_file_that_is_not_this_studys_archive_is_refused(reference, tmp_path, 
     assert not list(tmp_path.glob("*.lock")) and not list(tmp_path.glob("*.parts"))
 
 
-def test_overwrite_replaces_another_studys_archive_reusing_the_cases_it_shares(reference, tmp_path):
+def test_overwrite_replaces_another_studys_archive_reusing_the_cases_it_shares(
+    small_archive, tmp_path
+):
     other = tmp_path / "other.yaml"
-    other.write_text(SPEC.replace("name: small", "name: other").replace(", 11000 rpm", ""))
-    shutil.copy(reference / "spec.yaml", tmp_path / "spec.yaml")
+    other.write_text(SMALL_SPEC.replace("name: small", "name: other").replace(", 11000 rpm", ""))
+    shutil.copy(small_archive.spec, tmp_path / "spec.yaml")
     assert (
         CliRunner().invoke(main, ["study", str(other), "-o", str(tmp_path / "small.nc")]).exit_code
         == 0
@@ -298,23 +278,22 @@ def test_overwrite_replaces_another_studys_archive_reusing_the_cases_it_shares(r
     result = _study(tmp_path, None, "--overwrite")
     assert result.exit_code == 0, result.output
     assert "(4 reused, 2 computed in 1 batches)" in result.stderr
-    xr.testing.assert_identical(load(tmp_path / "small.nc"), load(reference / "small.nc"))
+    xr.testing.assert_identical(load(tmp_path / "small.nc"), load(small_archive.archive))
 
 
-def test_an_edited_spec_may_replace_its_own_archive(reference, tmp_path):
-    shutil.copy(reference / "spec.yaml", tmp_path / "spec.yaml")
+def test_an_edited_spec_may_replace_its_own_archive(small_archive_copy, tmp_path):
     assert _study(tmp_path).exit_code == 0
-    (tmp_path / "spec.yaml").write_text(SPEC.replace(", 11000 rpm", ""))
+    (tmp_path / "spec.yaml").write_text(SMALL_SPEC.replace(", 11000 rpm", ""))
     result = _study(tmp_path)
     assert result.exit_code == 0, result.output
     assert xr.load_dataset(tmp_path / "small.nc").sizes["case"] == 4
 
 
 def test_an_archive_of_an_older_layout_is_refused_and_replaced_only_with_overwrite(
-    reference, tmp_path
+    small_archive_copy, tmp_path
 ):
     """Layout 2 stored the ids as case_id and no seat as NaN: never mixed with layout 3."""
-    study = _copy(reference, tmp_path)
+    study = small_archive_copy.study
     shutil.rmtree(parts_directory(tmp_path / "small.nc"))
     archive = tmp_path / "small.nc"
     with netCDF4.Dataset(archive, "a") as ds:

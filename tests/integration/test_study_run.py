@@ -19,7 +19,7 @@ import pytest
 import xarray as xr
 from click.testing import CliRunner
 from numpy.testing import assert_array_equal
-from study_helpers import INCH, load, write_spec
+from study_helpers import INCH, SMALL_SPEC, load, write_spec
 
 from campipe import kernel_cache
 from campipe.cli import main
@@ -31,28 +31,9 @@ from campipe.study.run.batches import parts_directory, plan_batches
 from campipe.study.run.execute import run_study
 from campipe.study.spec.variables import VARIABLES
 
-SMALL = """
-name: small
-profile: {kind: harmonic, lift: 1 in}
-run: {revolutions: 2, record: [q, member_loads]}
-sweep:
-  speed: [6000 rpm, 9524 rpm, 11000 rpm]
-  seat: [none, 0.1 in]
-"""
 
-
-@pytest.fixture(scope="module")
-def small(tmp_path_factory):
-    """The small study and its archive, run on the synchronous scheduler."""
-    d = tmp_path_factory.mktemp("small")
-    path = write_spec(d, SMALL)
-    study = load_study(path)
-    report = run_study(study, d / "small.nc", scheduler="synchronous", batch_size=2)
-    return study, report, d / "small.nc", path
-
-
-def test_the_archive_holds_the_engine_results(small):
-    study, report, archive, _ = small
+def test_the_archive_holds_the_engine_results(small_archive):
+    study, report, archive = small_archive.study, small_archive.report, small_archive.archive
     assert (report.cases, report.computed, report.batches) == (6, 6, 3)
     ds = xr.load_dataset(archive)
     ref = run_batch([c.case for c in study.cases], study.cases[0].settings)
@@ -100,8 +81,8 @@ def test_the_archive_holds_the_engine_results(small):
     assert ds.event_count.attrs["sample_dimension"] == "event"
 
 
-def test_the_archive_carries_cf_metadata_from_the_table(small):
-    _, _, archive, spec_path = small
+def test_the_archive_carries_cf_metadata_from_the_table(small_archive):
+    archive, spec_path = small_archive.archive, small_archive.spec
     ds = xr.open_dataset(archive)
     for name, var in VARIABLES.items():
         if name in ds.variables:
@@ -164,7 +145,7 @@ def _schedulers(tmp_path, spec_text):
 
 
 def test_synchronous_threaded_processes_and_distributed_archives_are_identical(tmp_path):
-    out = _schedulers(tmp_path, SMALL)
+    out = _schedulers(tmp_path, SMALL_SPEC)
     xr.testing.assert_identical(out["synchronous"], out["threads"])
     xr.testing.assert_identical(out["synchronous"], out["processes"])
     xr.testing.assert_identical(out["synchronous"], out["distributed"])
@@ -192,7 +173,7 @@ def test_batches_stored_by_the_workers_or_by_this_process_make_the_same_archive(
 
     import campipe.study.run.workers as workers
 
-    study = load_study(write_spec(tmp_path, SMALL))
+    study = load_study(write_spec(tmp_path, SMALL_SPEC))
     stored_by = []
     real = workers._store
 
@@ -220,8 +201,8 @@ def test_batches_stored_by_the_workers_or_by_this_process_make_the_same_archive(
     )
 
 
-def test_a_finished_study_is_not_run_again(small, tmp_path):
-    study, _, archive, _ = small
+def test_a_finished_study_is_not_run_again(small_archive_copy):
+    study, archive = small_archive_copy.study, small_archive_copy.archive
     before = os.stat(archive).st_mtime_ns
     report = run_study(study, archive, scheduler="synchronous")
     assert report.up_to_date and report.computed == 0
@@ -229,18 +210,18 @@ def test_a_finished_study_is_not_run_again(small, tmp_path):
 
 
 def test_a_changed_spec_reuses_only_the_unchanged_cases(tmp_path):
-    two = SMALL.replace("[6000 rpm, 9524 rpm, 11000 rpm]", "[6000 rpm, 9524 rpm]")
+    two = SMALL_SPEC.replace("[6000 rpm, 9524 rpm, 11000 rpm]", "[6000 rpm, 9524 rpm]")
     archive = tmp_path / "small.nc"
     first = run_study(load_study(write_spec(tmp_path, two)), archive, scheduler="synchronous")
     assert (first.computed, first.reused) == (4, 0)
-    study = load_study(write_spec(tmp_path, SMALL))
+    study = load_study(write_spec(tmp_path, SMALL_SPEC))
     grown = run_study(study, archive, scheduler="synchronous")
     assert (grown.computed, grown.reused) == (2, 4)
     fresh = run_study(study, tmp_path / "fresh.nc", scheduler="synchronous")
     xr.testing.assert_identical(load(archive), load(tmp_path / "fresh.nc"))
     assert fresh.computed == 6
     # a changed model parameter changes every id: nothing stale is reused
-    stiffer = SMALL.replace("name: small", "name: small\nmodel: {spring_preload: 160 lbf}")
+    stiffer = SMALL_SPEC.replace("name: small", "name: small\nmodel: {spring_preload: 160 lbf}")
     changed = run_study(load_study(write_spec(tmp_path, stiffer)), archive, scheduler="synchronous")
     assert (changed.computed, changed.reused) == (6, 0)
     ds = xr.load_dataset(archive)
@@ -248,7 +229,7 @@ def test_a_changed_spec_reuses_only_the_unchanged_cases(tmp_path):
 
 
 def test_batches_share_run_settings_and_are_cut_to_size():
-    spec = SMALL.replace(
+    spec = SMALL_SPEC.replace(
         "run: {revolutions: 2, record: [q, member_loads]}",
         "run: {revolutions: 2, integrator: newmark-linear}",
     )
@@ -265,7 +246,7 @@ def test_interleaved_batches_fill_shared_chunks_and_batch_files_are_uncompressed
     """Two run settings alternate along the study, so each batch writes every other row and
     each archive chunk of eight cases is filled by several batches; the archive still holds
     each case's own results. Batch files (kept here) are written uncompressed."""
-    spec = SMALL.replace(
+    spec = SMALL_SPEC.replace(
         "run: {revolutions: 2, record: [q, member_loads]}", "run: {revolutions: 1}"
     )
     spec = spec.replace(
@@ -305,7 +286,7 @@ def test_an_assembly_from_batch_files_reads_each_once_wherever_its_rows_fall(tmp
 
     from campipe.study.run import assembly, resume
 
-    spec = SMALL.replace(
+    spec = SMALL_SPEC.replace(
         "[6000 rpm, 9524 rpm, 11000 rpm]", "{from: 6000 rpm, to: 11000 rpm, num: 10}"
     )
     study = load_study(write_spec(tmp_path, spec))
@@ -397,11 +378,11 @@ def test_a_killed_study_resumes_computing_only_the_missing_batches(tmp_path):
     xr.testing.assert_identical(load(killed / "slow.nc"), load(whole / "slow.nc"))
 
 
-def test_a_second_run_on_a_busy_archive_stops_and_touches_nothing(small, tmp_path):
+def test_a_second_run_on_a_busy_archive_stops_and_touches_nothing(small_archive, tmp_path):
     """While another live process holds the archive's lock, a run (API or CLI) stops with an
     error naming the holder and the lock, and leaves the holder's files alone; once the
     holder is gone its lock is taken over and released at the end."""
-    study, _, archive, spec = small
+    study, archive, spec = small_archive.study, small_archive.archive, small_archive.spec
     target = tmp_path / "small.nc"
     lock = lock_path(target)
     parts = parts_directory(target)
@@ -454,8 +435,8 @@ def test_a_lock_that_cannot_be_checked_is_left_alone(tmp_path, content):
     assert lock.read_text() == (json.dumps(content) if content else "")
 
 
-def test_stale_and_temporary_files_are_ignored_and_cleaned(small, tmp_path):
-    study, _, archive, _ = small
+def test_stale_and_temporary_files_are_ignored_and_cleaned(small_archive, tmp_path):
+    study, archive = small_archive.study, small_archive.archive
     target = tmp_path / "small.nc"
     parts = parts_directory(target)
     parts.mkdir()
@@ -463,7 +444,7 @@ def test_stale_and_temporary_files_are_ignored_and_cleaned(small, tmp_path):
     other = load_study(
         write_spec(
             tmp_path,
-            SMALL.replace("name: small", "name: small\nmodel: {spring_preload: 160 lbf}"),
+            SMALL_SPEC.replace("name: small", "name: small\nmodel: {spring_preload: 160 lbf}"),
             "o.yaml",
         )
     )
@@ -516,7 +497,7 @@ def test_help_loads_none_of_the_heavy_packages():
     assert heavy == []
 
 
-def test_commands_that_run_no_kernel_do_not_import_numba(small, tmp_path):
+def test_commands_that_run_no_kernel_do_not_import_numba(small_archive, tmp_path):
     """A query of an archive, the model's matrices and a spec's check without the estimate
     (which runs the engine) import no numba: the disk cache they read finds its folder without
     it (``kernel_cache.cache_folder``), and the estimate imports the engine only when it runs.
@@ -524,7 +505,7 @@ def test_commands_that_run_no_kernel_do_not_import_numba(small, tmp_path):
 
     Broken copy: ``kernel_cache`` importing numba at its top, or ``study.estimate`` importing
     the engine at its top, loads numba in the first or the third command."""
-    _, _, archive, spec = small
+    archive, spec = small_archive.archive, small_archive.spec
     _, heavy = _loaded_by(["query", str(archive), "--summary"])
     assert "numba" not in heavy and "xarray" in heavy  # it did read the archive
     _, heavy = _loaded_by(["model"])
@@ -535,19 +516,17 @@ def test_commands_that_run_no_kernel_do_not_import_numba(small, tmp_path):
     assert "numba" in heavy
 
 
-def test_a_finished_study_answers_from_its_spec_text_and_the_archive_alone(small, tmp_path):
+def test_a_finished_study_answers_from_its_spec_text_and_the_archive_alone(
+    small_archive_copy, tmp_path
+):
     """Rerunning a finished study reads the spec's text and verifies the archive's checksums:
     no unit is parsed and no model built (pint, SciPy, numba stay unloaded). Another
     override, or an archive without the spec's key, takes the full check (still up to
     date where the cases are the same)."""
-    import shutil
 
     from campipe.study.run.resume import finished
 
-    _, _, original, original_spec = small
-    spec, archive = tmp_path / original_spec.name, tmp_path / original.name
-    shutil.copy(original_spec, spec)
-    shutil.copy(original, archive)
+    spec, archive = small_archive_copy.spec, small_archive_copy.archive
     stderr, heavy = _loaded_by(["study", str(spec), "--no-progress"])
     assert "up to date (6 cases, checksums verified)" in stderr
     assert heavy == ["netCDF4"]
@@ -570,7 +549,7 @@ def test_a_warm_one_case_study_reads_what_earlier_runs_kept(tmp_path):
 
     Broken copies: with ``units._kept`` computing every time, pint is loaded; with
     ``disk_cache.read`` finding nothing, the second run writes its modes again."""
-    one = SMALL.replace("[6000 rpm, 9524 rpm, 11000 rpm]", "[6000 rpm]")
+    one = SMALL_SPEC.replace("[6000 rpm, 9524 rpm, 11000 rpm]", "[6000 rpm]")
     spec = write_spec(tmp_path, one.replace("seat: [none, 0.1 in]", "seat: [none]"))
     archive = tmp_path / "small.nc"
     env = {"XDG_CACHE_HOME": str(tmp_path / "home")}
@@ -601,7 +580,7 @@ def test_the_first_run_says_what_it_compiles(tmp_path, monkeypatch):
     import campipe.engine.kernels as kernels
 
     monkeypatch.setattr(kernels, "uncompiled", lambda settings: ["modal-exact"])
-    spec = write_spec(tmp_path, SMALL.replace("[6000 rpm, 9524 rpm, 11000 rpm]", "[6000 rpm]"))
+    spec = write_spec(tmp_path, SMALL_SPEC.replace("[6000 rpm, 9524 rpm, 11000 rpm]", "[6000 rpm]"))
     result = CliRunner().invoke(main, ["study", str(spec), "--no-progress"])
     assert result.exit_code == 0, result.output
     assert "campipe study: compiling modal-exact with numba" in result.stderr
@@ -611,8 +590,8 @@ def test_the_first_run_says_what_it_compiles(tmp_path, monkeypatch):
     assert "compiling" not in result.stderr
 
 
-def test_no_seat_is_minus_inf_and_speed_rounds_to_whole_rpm(small):
-    ds = xr.open_dataset(small[2])
+def test_no_seat_is_minus_inf_and_speed_rounds_to_whole_rpm(small_archive):
+    ds = xr.open_dataset(small_archive.archive)
     assert (ds.seat.values[::2] == -np.inf).all()
     assert ds.seat.attrs["comment"].startswith("-inf: no seat")
     assert ds.seat.values[1] == pytest.approx(0.00254, rel=1e-15)
@@ -625,7 +604,7 @@ def test_the_batch_hook_sees_every_batch_and_the_replay_selection(tmp_path):
     cases by parameters and metrics (logging them to rerun is a later feature)."""
     from campipe.study.query.tables import replay_mask
 
-    spec = SMALL + 'replay: {where: "speed_rpm == 9524 and separation_deg_per_rev > 0"}\n'
+    spec = SMALL_SPEC + 'replay: {where: "speed_rpm == 9524 and separation_deg_per_rev > 0"}\n'
     study = load_study(write_spec(tmp_path, spec))
     seen = {}
 
@@ -650,7 +629,7 @@ def test_memory_is_bounded_by_the_batch_not_the_study(tmp_path, monkeypatch):
     import campipe.study.run.assembly as assembly
     import campipe.study.run.workers as workers
 
-    spec = SMALL.replace(
+    spec = SMALL_SPEC.replace(
         "[6000 rpm, 9524 rpm, 11000 rpm]", "{from: 3000 rpm, to: 12000 rpm, num: 20}"
     )
     lock = threading.Lock()
@@ -685,7 +664,7 @@ def test_memory_is_bounded_by_the_batch_not_the_study(tmp_path, monkeypatch):
     assert live["rows"] <= 1  # the archive is filled batch file by batch file
 
 
-def test_the_engine_threads_leave_a_core_to_the_archive(small, tmp_path):
+def test_the_engine_threads_leave_a_core_to_the_archive(small_archive, tmp_path):
     """The archive is written in the calling thread, one chunk after another: the study's
     serial stage. The batch threads run WORKER_NICENESS below it (Linux), so it gets a core
     when it has rows to write; the archive is the same."""
@@ -693,7 +672,7 @@ def test_the_engine_threads_leave_a_core_to_the_archive(small, tmp_path):
 
     from campipe.study.run.workers import WORKER_NICENESS
 
-    study, _, archive, _ = small
+    study, archive = small_archive.study, small_archive.archive
     own = os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
     seen = set()
 
