@@ -589,20 +589,9 @@ STUDY_JSON = "study.json"
 
 def _meta(quick: bool) -> dict:
     """The machine and versions a run measured on, as ``campipe bench`` records them."""
-    import platform
+    from campipe.bench.run import machine
 
-    import numba
-    import scipy
-
-    return {
-        "machine": f"{platform.machine()}, {os.cpu_count()} cores, {platform.system()}",
-        "python": platform.python_version(),
-        "numpy": np.__version__,
-        "scipy": scipy.__version__,
-        "numba": numba.__version__,
-        "date": time.strftime("%Y-%m-%d %H:%M:%S %Z"),
-        "quick": quick,
-    }
+    return {**machine(), "quick": quick}
 
 
 def run(

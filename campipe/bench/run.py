@@ -90,7 +90,8 @@ class Bench:
     seconds: float = 0.0  # wall time of the whole bench [s]
 
 
-def _meta(quick: bool, ladder: Ladder, scenes: Sequence[Scene]) -> dict:
+def machine() -> dict:
+    """The machine, versions, date and load a run measures on (every bench records them)."""
     import numba
     import scipy
 
@@ -102,6 +103,12 @@ def _meta(quick: bool, ladder: Ladder, scenes: Sequence[Scene]) -> dict:
         "numba": numba.__version__,
         "date": time.strftime("%Y-%m-%d %H:%M:%S %Z"),
         "load_average_at_start": os.getloadavg()[0],
+    }
+
+
+def _meta(quick: bool, ladder: Ladder, scenes: Sequence[Scene]) -> dict:
+    return {
+        **machine(),
         "scenes": {
             s.name: {"description": s.description, "revolutions": s.revolutions} for s in scenes
         },
