@@ -84,8 +84,8 @@ def goals(s: dict) -> list[Goal]:
                 "the quickstart from a fresh install of a campipe this machine has run,",
                 first.get("reinstall_seconds"),
                 g["first_run"],
-                "a second copy of campipe at another path, no __pycache__; the kernels "
-                "from campipe's kernel cache",
+                "a second copy of campipe at another path, no __pycache__: numba keys its "
+                "cache by the source files' paths, so the copy compiles again",
                 "not measured in this run",
             )
         )

@@ -120,9 +120,11 @@ def section_block(data: dict) -> str:
         if "reinstall_seconds" in first:
             lines[-1] += (
                 f" A second copy of campipe at another path (a new clone or venv) then ran it "
-                f"in {duration(first['reinstall_seconds'])}, its kernels loaded from campipe's "
-                "kernel cache."
+                f"in {duration(first['reinstall_seconds'])}: numba keys its cache by the "
+                "source files' paths and time stamps, so a new copy compiles again."
             )
+        if "measured" in first:
+            lines[-1] += f" ({first['measured']})"
     c = s["ceiling"]
     packed = c["compressed_bytes"] / c["raw_bytes"]
     disk = c["disk_rate"] / packed  # raw bytes a second, the disk taking them compressed

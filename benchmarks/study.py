@@ -73,8 +73,12 @@ GOAL_HELP = 0.3
 GOAL_ONE_CASE = 0.8
 GOAL_FINISHED = 0.5
 #: First run: the quickstart from a fresh install [s] (:func:`first_run`, with empty caches in
-#: a fresh process; the full run only).
-GOAL_FIRST_RUN = 10.0
+#: a fresh process; the full run only). Restated from 10 s when campipe gave up patching numba
+#: (issue 33): through numba's public interface the quickstart's first run took 14.9–16.0 s
+#: here where the patched numba took 12.9–14.5 s in the same conditions (2026-11-27, load
+#: average 0.8–1.8 on 2 cores), and a new clone or venv compiles again (numba keys its cache
+#: by the source files' paths and time stamps).
+GOAL_FIRST_RUN = 20.0
 #: validate at scale: cases, wall [s] and peak memory [bytes].
 VALIDATE_CASES = 1_000_000
 GOAL_VALIDATE_SECONDS = 3.0
