@@ -30,7 +30,7 @@ import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from campipe.bench import report, verdict
+from campipe.bench import gate, report, verdict
 from campipe.bench.run import (
     ACCURACY_DEFAULT_ERROR,
     ACCURACY_SCENE,
@@ -493,6 +493,12 @@ def scaling_block(bench: Bench) -> str:
     return scaling_table(bench.scaling)
 
 
+def regressions_block(bench: Bench) -> str:
+    """The figures more than 10 % slower than the previous run's, none, or why none could be
+    compared (``campipe.bench.gate``)."""
+    return gate.markdown(bench)
+
+
 #: Every block a page may hold, by name.
 BLOCKS: dict[str, Callable[[Bench], str]] = {
     "bench-verdict": verdict_block,
@@ -504,6 +510,7 @@ BLOCKS: dict[str, Callable[[Bench], str]] = {
     "bench-fidelity": fidelity_block,
     "bench-onset": onset_block,
     "bench-scaling": scaling_block,
+    "bench-regressions": regressions_block,
 }
 
 

@@ -1,8 +1,9 @@
 """The bench's files: a markdown report, the rows as CSV, everything as JSON, and PNG plots of
 wall time against the valve-lift error and against the event errors (separation angle, seating
-velocity); :func:`read_json` reads a run back. With ``campipe.bench.pages`` the only module of
-``campipe.bench`` that writes files; matplotlib (the ``plot`` extra) is imported only inside
-:func:`plot`.
+velocity); :func:`read_json` reads a run back, :func:`with_previous` compares a run with the
+previous one (``campipe.bench.gate``) before its json is overwritten. With
+``campipe.bench.pages`` the only module of ``campipe.bench`` that writes files; matplotlib
+(the ``plot`` extra) is imported only inside :func:`plot`.
 """
 
 from __future__ import annotations
@@ -11,11 +12,11 @@ import csv
 import io
 import json
 import math
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Any
 
-from campipe.bench import verdict
+from campipe.bench import gate, verdict
 from campipe.bench.run import FAMILIES, Bench
 from campipe.bench.verdict import finite
 from campipe.constants import INCH
@@ -152,7 +153,9 @@ def markdown(bench: Bench, with_plots: bool = True) -> str:
             f"({FILES['events_plot']})",
             "",
         ]
-    lines += ["## Verdict", "", verdict.markdown(bench), "", "## The reference, checked", ""]
+    lines += ["## Verdict", "", verdict.markdown(bench), ""]
+    lines += ["## Against the previous run", "", gate.markdown(bench), ""]
+    lines += ["## The reference, checked", ""]
     lines.append(
         f"Second reference: {m['reference_check']}. Stated agreement: valve lift "
         f"{m['agreement']['valve_lift'] / INCH:g} in, event angles "
@@ -527,11 +530,40 @@ def read_json(path: str | Path) -> Bench:
     return Bench(**json.loads(Path(path).read_text()))
 
 
-def write_report(bench: Bench, directory: str | Path, with_plot: bool = True) -> dict[str, Path]:
-    """Write the report's files into ``directory`` (created if missing); returns their paths."""
+def with_previous(bench: Bench, path: str | Path) -> Bench:
+    """``bench`` with the previous run at ``path`` (a ``bench.json``) compared and kept: its
+    ``previous`` block and ``regressions`` (:func:`campipe.bench.gate.compare`). A missing or
+    unreadable file is said, not raised."""
+    path = Path(path)
+    previous, problem = None, None
+    if path.is_file():
+        try:
+            previous = json.loads(path.read_text())
+        except (OSError, UnicodeDecodeError, ValueError) as exc:
+            problem = str(exc)
+        else:
+            if not isinstance(previous, dict):
+                previous, problem = None, "not a bench.json (no object at its top)"
+    block, regressions = gate.compare(bench, previous, str(path), problem)
+    return replace(bench, previous=block, regressions=regressions)
+
+
+def write_report(
+    bench: Bench,
+    directory: str | Path,
+    with_plot: bool = True,
+    previous: str | Path | None = None,
+) -> dict[str, Path]:
+    """Write the report's files into ``directory`` (created if missing); returns their paths.
+
+    Unless ``bench`` was compared already (:func:`with_previous`), the previous run is read
+    first, before its files are overwritten: ``previous``, by default the ``bench.json``
+    already in ``directory``; the written json keeps its figures beside the new ones."""
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
     paths = {k: directory / v for k, v in FILES.items()}
+    if not bench.previous:
+        bench = with_previous(bench, paths["json"] if previous is None else previous)
     if with_plot:
         plot(bench, paths["plot"])
         plot(bench, paths["events_plot"], EVENT_ERRORS)

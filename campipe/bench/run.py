@@ -88,6 +88,10 @@ class Bench:
     steady: list[dict] = field(default_factory=list)  # the steady-state path per scene
     onset: dict = field(default_factory=dict)  # the onset map against the time-domain grid
     seconds: float = 0.0  # wall time of the whole bench [s]
+    # The previous run's timed figures and how they compare (campipe.bench.gate.compare):
+    # empty until the report is written; then the figures more than 10 % slower.
+    previous: dict = field(default_factory=dict)
+    regressions: list[dict] = field(default_factory=list)
 
 
 def machine() -> dict:

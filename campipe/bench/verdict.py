@@ -2,7 +2,8 @@
 every reference cross-check with whether it agrees and why.
 
 Pure functions of a :class:`~campipe.bench.run.Bench`, a live run or one read back from its
-``bench.json`` (where a missing figure is None). ``campipe bench`` prints :func:`text` last and
+``bench.json`` (where a missing figure is None). :func:`text` names the figures that got slower
+than the previous run's too (``campipe.bench.gate``). ``campipe bench`` prints it last and
 exits with status 1 unless :func:`all_agree`; ``campipe.bench.pages`` writes
 :func:`markdown` into the documentation.
 """
@@ -13,6 +14,7 @@ import math
 from dataclasses import dataclass
 from typing import TypeGuard
 
+from campipe.bench import gate
 from campipe.bench.onset import GOAL_MAP_SECONDS, GOAL_MAP_WORKERS
 from campipe.bench.run import (
     ACCURACY_DEFAULT_ERROR,
@@ -328,6 +330,7 @@ def text(bench: Bench) -> str:
     width = max(len(s) for s in (REACHED, NOT_REACHED, NOT_SHOWN))
     for g in goals(bench):
         lines.append(f"  {g.status:<{width}}  {g.area}: {g.what}: {g.figure} ({g.note})")
+    lines += gate.text(bench)
     lines.append(
         f"reference cross-checks ({bench.meta['reference']}, against "
         f"{bench.meta['reference_check']}):"

@@ -42,20 +42,30 @@ import click
     help="Run the scenes: references, integrators, peers, fidelity.",
 )
 @click.option(
+    "--previous",
+    "previous",
+    default=None,
+    type=click.Path(dir_okay=False),
+    help="The previous run's bench.json to compare with [default: the output folder's].",
+)
+@click.option(
     "--plot/--no-plot",
     default=True,
     show_default=True,
     help="Write bench.png (needs matplotlib: pip install 'campipe[plot]').",
 )
-def bench(quick, output, scenes, scaling, suite, plot) -> None:
+def bench(quick, output, scenes, scaling, suite, previous, plot) -> None:
     """Speed against error: the suite of scenes, every integrator and fidelity, peers, scaling.
 
     Ends with the verdict: each goal with its measured figure (reached, not reached or not
-    shown), each reference cross-check (agree or disagree, and why). Exit status 1 when a
-    cross-check disagrees.
+    shown), every timed figure more than 10 % slower than the previous run's on the same
+    machine (kept beside the new ones in bench.json), each reference cross-check (agree or
+    disagree, and why). Exit status 1 when a cross-check disagrees.
     """
+    from pathlib import Path
+
     from campipe.bench import verdict
-    from campipe.bench.report import write_report
+    from campipe.bench.report import FILES, with_previous, write_report
     from campipe.bench.run import run_bench
 
     if plot:
@@ -80,6 +90,8 @@ def bench(quick, output, scenes, scaling, suite, plot) -> None:
         )
     except ValueError as exc:
         raise click.UsageError(str(exc)) from None
+    # Read before the report overwrites it.
+    result = with_previous(result, previous or Path(output) / FILES["json"])
     paths = write_report(result, output, with_plot=plot)
     for path in paths.values():
         click.echo(str(path))
