@@ -71,7 +71,7 @@ def figures(run: Mapping[str, Any]) -> list[dict]:
     out: list[dict] = []
     for r in run.get("rows") or ():
         if r.get("family") in TIMED_FAMILIES:
-            name = f"{r['family']} {r['setting']}"
+            name = f"{r['family']}, {r['setting']}"
             out += _figure(r["scene"], name, r.get("seconds"), turns.get(r["scene"]))
     for s in run.get("steady") or ():
         if s.get("applies"):

@@ -20,6 +20,8 @@ from campipe.engine import RunSettings, run_batch
 from campipe.vocabulary import EV_KIND, EV_TIME
 
 SCENES = {s.name: s for s in suite()}
+#: The committed full run (docs/bench/bench.json).
+COMMITTED = Path(__file__).parents[2] / "docs" / "bench" / "bench.json"
 SEPARATION = SCENES["separation-11000"]
 
 
@@ -231,6 +233,9 @@ def test_quick_bench_writes_its_table_and_plot(tmp_path):
     assert float(by_setting["dt 1 µs"]["valve err [in]"]) > 1e-6
     report = json.loads((out / "bench.json").read_text())
     assert report["quick"] and [c["agrees"] for c in report["checks"]] == [True]
+    # a new folder: no previous run to compare with, said in the json and the verdict
+    assert report["previous"]["status"] == "no previous run" and report["regressions"] == []
+    assert f"No previous run to compare with: no {out / 'bench.json'}." in result.stdout
     assert {r["peer"] for r in report["ratios"]} == {"newmark-linear", "solve_ivp"}
     # The thesis algorithm's ratio at every step of its ladder, coarsest error first.
     ladder = next(r for r in report["ratios"] if r["peer"] == "newmark-linear")["ladder"]
@@ -375,6 +380,7 @@ def test_the_quick_verdict_names_every_goal_and_cross_check(tmp_path):
     out = tmp_path / "bench"
     scenes = ("separation-11000", "polydyne-9000")
     args = ["bench", "--quick", "--no-scaling", "--no-plot", "-o", str(out)]
+    args += ["--previous", str(COMMITTED)]
     result = CliRunner().invoke(main, args + [a for s in scenes for a in ("--scene", s)])
     checks = json.loads((out / "bench.json").read_text())["checks"]
     assert [c["scene"] for c in checks] == list(scenes)
@@ -394,11 +400,23 @@ def test_the_quick_verdict_names_every_goal_and_cross_check(tmp_path):
         assert f"faster than {peer}" in line
     assert goals[-2].startswith("  not shown") and "--no-scaling" in goals[-2]
     assert goals[-1].startswith("  not shown") and "--quick maps 16 designs" in goals[-1]
-    assert block[10].startswith("reference cross-checks (modal-exact, tolerance 1e-14 s")
-    for line, scene, ok in zip(block[11:13], scenes, agreed, strict=True):
+    # --previous: the committed full run, which a --quick run is not compared with
+    assert block[10].startswith(f"Not compared with the previous run ({COMMITTED}, 20")
+    assert block[10].endswith(
+        ": the previous run was a full run, this one a --quick run: only runs of the same kind "
+        "are compared; no figure is named slower."
+    )
+    assert block[11].startswith("reference cross-checks (modal-exact, tolerance 1e-14 s")
+    for line, scene, ok in zip(block[12:14], scenes, agreed, strict=True):
         assert line.split()[:2] == ["agree" if ok else "disagree", f"{scene}:"]
-    assert block[13].startswith(f"{sum(agreed)} of 2 cross-checks agree")
-    assert len(block) == 14
+    assert block[14].startswith(f"{sum(agreed)} of 2 cross-checks agree")
+    assert len(block) == 15
+    kept = json.loads((out / "bench.json").read_text())["previous"]
+    assert (kept["status"], kept["quick"], kept["source"]) == (
+        "another kind of run",
+        False,
+        str(COMMITTED),
+    )
 
 
 @pytest.mark.slow
@@ -414,12 +432,13 @@ def test_the_whole_quick_bench_shows_every_goal_and_checks_every_scene(tmp_path)
     lines = result.stdout.splitlines()
     block = lines[lines.index("verdict (--quick, 6 scenes):") :]
     goals = verdict.goals(bench)
-    assert len(goals) == 8 and len(block) == 2 + 8 + 1 + 6 + 1
+    assert len(goals) == 8 and len(block) == 2 + 8 + 1 + 1 + 6 + 1
     for line, goal in zip(block[2:9], goals[:7], strict=True):
         assert line.strip().startswith(f"{goal.status}  ") and goal.figure != "–"
     assert "--quick maps 16 designs" in block[9]
+    assert block[10] == f"No previous run to compare with: no {out / 'bench.json'}."
     assert [g.status for g in goals[7:]] == ["not shown"]
-    for line, scene in zip(block[11:17], SCENES, strict=True):
+    for line, scene in zip(block[12:18], SCENES, strict=True):
         assert line.split()[1] == f"{scene}:"
 
 
