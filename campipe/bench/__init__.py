@@ -15,6 +15,7 @@ path and the onset map.
   :mod:`~campipe.bench.pages`).
 - :mod:`~campipe.bench.verdict`: each goal reached or not, each reference cross-check agreeing
   or not, and why.
+- :mod:`~campipe.bench.figures`: how a figure is written (significant digits), shared.
 - :mod:`~campipe.bench.gate`: the regression gate, every timed figure more than 10 % slower than
   the previous run's on the same machine.
 - :mod:`~campipe.bench.pages`: the documentation's bench figures, generated from a

@@ -20,10 +20,10 @@ dicts and a :class:`~campipe.bench.run.Bench`; ``campipe.bench.report`` reads th
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from typing import Any
 
+from campipe.bench.figures import finite, format_short
 from campipe.bench.run import Bench
 
 #: A figure more than this fraction slower than the previous run's is named (0.1: 10 %).
@@ -40,17 +40,6 @@ OTHER_KIND = "another kind of run"
 NOTHING_IN_COMMON = "no figure in common"
 #: The families of rows whose time is campipe's own (solve_ivp's is the peer's).
 TIMED_FAMILIES = ("modal-exact", "modal-exact capped", "contacts only", "newmark-linear")
-
-
-def finite(x: object) -> bool:
-    """``x`` is a finite number (not None, as bench.json holds NaN, nor a flag)."""
-    return isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)
-
-
-def short(x: float) -> str:
-    """``x`` to three significant digits (``campipe.bench.verdict`` imports this module, so
-    its ``format_short`` is not used here)."""
-    return format(x, ".3g")
 
 
 def _figure(scene: str, figure: str, seconds: Any, turns: Any = None) -> list[dict]:
@@ -80,7 +69,7 @@ def figures(run: Mapping[str, Any]) -> list[dict]:
             out += _figure(s["scene"], "steady state, one turn", s.get("seconds"), at)
     for t in run.get("throughput") or ():
         name = (
-            f"{t['integrator']}, {t['n_cases']} cases × {short(t['revolutions'])} turns, "
+            f"{t['integrator']}, {t['n_cases']} cases × {format_short(t['revolutions'])} turns, "
             f"{_workers(t['workers'])}"
         )
         out += _figure("throughput", name, t.get("seconds"))
@@ -197,14 +186,14 @@ def slower_scenes(bench: Bench) -> list[str]:
 
 
 def _seconds(x: float) -> str:
-    return f"{short(x * 1e3)} ms" if x < 1 else f"{short(x)} s"
+    return f"{format_short(x * 1e3)} ms" if x < 1 else f"{format_short(x)} s"
 
 
 def summary(bench: Bench) -> str:
     """One sentence: which scenes got slower than the previous run, none, or why none could
     be compared."""
     p = bench.previous
-    percent = f"{short(SLOWER * 100)} %"
+    percent = f"{format_short(SLOWER * 100)} %"
     if not p:
         return "No previous run to compare with: this run's bench.json keeps none."
     if p["status"] in (NO_PREVIOUS, UNREADABLE):
@@ -234,7 +223,7 @@ def rows(bench: Bench) -> list[list[str]]:
             r["figure"],
             _seconds(r["previous"]),
             _seconds(r["new"]),
-            f"{short(r['ratio'])}×",
+            f"{format_short(r['ratio'])}×",
         ]
         for r in bench.regressions
     ]

@@ -31,13 +31,13 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 
 from campipe.bench import gate, report, verdict
+from campipe.bench.figures import finite, format_short
 from campipe.bench.run import (
     ACCURACY_DEFAULT_ERROR,
     ACCURACY_SCENE,
     THESIS_STEP,
     Bench,
 )
-from campipe.bench.verdict import finite, format_short
 from campipe.constants import INCH, LBF
 
 #: The committed latest full run, and the pages generated from it (relative to the root).

@@ -17,8 +17,8 @@ from pathlib import Path
 from typing import Any
 
 from campipe.bench import gate, verdict
+from campipe.bench.figures import finite
 from campipe.bench.run import FAMILIES, Bench
-from campipe.bench.verdict import finite
 from campipe.constants import INCH
 
 #: File names written into the output folder.

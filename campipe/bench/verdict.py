@@ -12,9 +12,9 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TypeGuard
 
 from campipe.bench import gate
+from campipe.bench.figures import finite, format_short
 from campipe.bench.onset import GOAL_MAP_SECONDS, GOAL_MAP_WORKERS
 from campipe.bench.run import (
     ACCURACY_DEFAULT_ERROR,
@@ -60,27 +60,6 @@ class Check:
     scene: str  # scene name
     agrees: bool  # every difference within the stated agreement, and the same events
     reason: str  # the differences against their limits; what differs first
-
-
-def format_short(x: float, digits: int = 3) -> str:
-    """``x`` to ``digits`` significant digits: plain from 1e-3 to 1e5 (0.0963, 15000), else
-    with a short exponent (2.1e-8, 2.68e7); trailing zeros dropped."""
-    if x == 0 or not math.isfinite(x):
-        return format(x, "g")
-    if 1e-3 <= abs(x) < 1e5:
-        rounded = float(format(x, f".{digits}g"))
-        decimals = max(digits - 1 - math.floor(math.log10(abs(rounded))), 0)
-        text = format(rounded, f".{decimals}f")
-        return text.rstrip("0").rstrip(".") if "." in text else text
-    mantissa, _, exponent = format(x, f".{digits - 1}e").partition("e")
-    if "." in mantissa:
-        mantissa = mantissa.rstrip("0").rstrip(".")
-    return f"{mantissa}e{int(exponent)}"
-
-
-def finite(x: object) -> TypeGuard[float]:
-    """``x`` is a finite number (not None, as bench.json holds NaN, nor a flag)."""
-    return isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)
 
 
 def _or_inf(x) -> float:
