@@ -100,6 +100,7 @@ def _meta_of(previous: Mapping[str, Any]) -> dict:
         "date": meta.get("date"),
         "quick": bool(previous.get("quick")),
         **{k: meta.get(k) for k in SAME_MACHINE},
+        "load_average_at_start": meta.get("load_average_at_start"),
     }
 
 
@@ -205,14 +206,23 @@ def summary(bench: Bench) -> str:
     if not bench.regressions:
         return (
             f"Against {was}, on {p['reason']}: none of {p['compared']} timed figures is more "
-            f"than {percent} slower ({p['faster']} more than {percent} faster)."
+            f"than {percent} slower ({p['faster']} more than {percent} faster){_load(bench)}."
         )
     scenes = slower_scenes(bench)
     return (
         f"Against {was}, on {p['reason']}: {len(bench.regressions)} of {p['compared']} timed "
         f"figures more than {percent} slower, on {', '.join(scenes)} ({p['faster']} more than "
-        f"{percent} faster)."
+        f"{percent} faster){_load(bench)}."
     )
+
+
+def _load(bench: Bench) -> str:
+    """The two runs' load averages at their start, where both are known: other work on the
+    machine slows a run's timings."""
+    was, now = bench.previous.get("load_average_at_start"), bench.meta.get("load_average_at_start")
+    if not (finite(was) and finite(now)):
+        return ""
+    return f"; load average {format_short(was, 2)} then, {format_short(now, 2)} now"
 
 
 def rows(bench: Bench) -> list[list[str]]:

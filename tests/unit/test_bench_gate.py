@@ -187,6 +187,11 @@ def test_the_report_keeps_the_previous_figures_beside_the_new_ones(tmp_path):
     block = pages.regressions_block(back)
     assert f"1 of {len(kept)} timed figures more than 10 % slower, on seat-13205 " in block
     assert f"| seat-13205 | {figure} | " in block and " | 1.25× |" in block
+    new.meta["load_average_at_start"] = 1.5
+    load = pages.format_short(previous["meta"]["load_average_at_start"], 2)
+    assert f"faster); load average {load} then, 1.5 now.\n" in pages.regressions_block(
+        report.with_previous(new, COMMITTED)
+    )
     md = (tmp_path / "bench.md").read_text()
     assert "## Against the previous run\n\n" + block in md
     assert f"  slower  seat-13205: {figure}: " in verdict.text(back)
