@@ -1,0 +1,75 @@
+"""The batch's per-train and per-profile preparation is cached (issue 34: per-call overhead),
+and the caches leave every number of a run unchanged.
+
+``MIXED_DIGEST`` was computed on main before the caches (commit 7a8cc9a): a mixed batch run
+as one call, again (its caches warm), and case by case, through modal-exact and
+newmark-linear, from the periodic and the quasi-static start.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import math
+
+import numpy as np
+import pytest
+
+from campipe.engine import Case, RunSettings, run_batch
+from campipe.engine import batch as batch_module
+from campipe.model import thesis_train
+from campipe.profiles import harmonic, polydyne
+
+INCH = 0.0254
+MIXED_DIGEST = "c73001b6cbeb365de397be9ad9bc7525025ad9712bb53223729b414589bc12d6"
+
+
+def _cases() -> list[Case]:
+    thesis = thesis_train()
+    stiff = dataclasses.replace(thesis, spring_rate=1.3 * thesis.spring_rate)
+    harm = harmonic(INCH)
+    poly = polydyne("345", 0.4 * INCH, math.radians(80), math.radians(20), math.radians(80))
+    cases = []
+    for i, rpm in enumerate((1500.0, 4000.0, 9000.0)):
+        w = rpm * 2 * math.pi / 60
+        cases.append(Case(thesis, harm, w))
+        cases.append(Case(stiff, poly, w, seat=-0.0005 * (i + 1)))
+        cases.append(Case(thesis, poly, 1.2 * w, seat=-0.001))
+        cases.append(Case(stiff, harm, 0.8 * w))
+    return cases
+
+
+def _digest(results, h) -> None:
+    for r in results:
+        for name in (
+            "cam_angle", "time", "q", "v", "acc", "cam_lift", "cam_force", "seat_force",
+            "contact_state", "valve_reference", "measured", "per_rev", "steps", "status",
+            "start_time",
+        ):  # fmt: skip
+            a = np.ascontiguousarray(getattr(r, name))
+            h.update(f"{name}|{a.dtype}|{a.shape}|".encode())
+            h.update(a.tobytes())
+        for ev in r.events:
+            h.update(np.ascontiguousarray(ev).tobytes())
+
+
+def mixed_digest() -> str:
+    cases = _cases()
+    h = hashlib.sha256()
+    runs = (
+        RunSettings(revolutions=2),
+        RunSettings(revolutions=1.5, start="quasi-static"),
+        RunSettings(revolutions=1, integrator="newmark-linear", dt=3e-6),
+    )
+    refined = dataclasses.replace(thesis_train(), spring_elements=2)
+    for settings in runs:
+        if settings.integrator != "newmark-linear":  # it runs the thesis's 7 coordinates
+            cases = [*cases, Case(refined, cases[0].profile, 600.0, seat=-0.0004)]
+        _digest([run_batch(cases, settings), run_batch(cases, settings)], h)
+        _digest([run_batch([c], settings) for c in cases], h)
+        cases = cases[:12]
+    return h.hexdigest()
+
+
+def test_a_mixed_batch_runs_bit_identical_to_before_the_caches():
+    assert mixed_digest() == MIXED_DIGEST
