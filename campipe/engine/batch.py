@@ -36,7 +36,7 @@ from campipe.engine.contact import (
     static_position,
 )
 from campipe.engine.integrators.modal_exact import arguments
-from campipe.engine.modal import ModalData, harmonic_responses, modal_data, pad_stack
+from campipe.engine.modal import ModalData, modal_data, pad_stack, response_parts, responses_of
 from campipe.engine.result import BatchResult as BatchResult
 from campipe.engine.result import merge_results
 from campipe.engine.settings import CLOSURES as CLOSURES
@@ -270,6 +270,7 @@ class TrainStack(NamedTuple):
     #: per train: configuration I's free coordinates and its free mass block M_ff
     free: tuple[np.ndarray, ...]
     mass_ff: tuple[np.ndarray, ...]
+    responses: tuple  # ``modal.response_parts`` per train
 
 
 @functools.lru_cache(maxsize=256)
@@ -291,16 +292,16 @@ def train_stack(trains: tuple[ValveTrain, ...], dt: float) -> TrainStack:
         restitution=np.array([[t.cam_restitution, t.seat_restitution] for t in trains]),
         free=free,
         mass_ff=tuple(p.matrices.mass[np.ix_(f, f)] for p, f in zip(preps, free, strict=True)),
+        responses=response_parts(modal_trains.n_free, a_mat, modal_trains.b_in),
     )
 
 
-def _exact_runs(
-    settings, dt_run, full_state, which, modal_trains, a_mat, omega, responses=True
-) -> ExactRuns:
+def _exact_runs(settings, dt_run, full_state, which, stack, omega, responses=True) -> ExactRuns:
+    ns = stack.a_mat.shape[2]
     zeta = (
-        harmonic_responses(which, modal_trains.n_free, a_mat, modal_trains.b_in, omega)
+        responses_of(stack.responses, which, omega, ns)
         if responses
-        else np.zeros((omega.size, 4, a_mat.shape[2]), np.complex128)
+        else np.zeros((omega.size, 4, ns), np.complex128)
     )
     return ExactRuns(
         train=which,
@@ -365,9 +366,7 @@ def _prepare_batch(
         preps=list(stack.preps),
         packed=pack_cached([c.profile for c in cases]),
         modal_trains=modal_trains,
-        runs=_exact_runs(
-            settings, dt_run, full_state, which, modal_trains, stack.a_mat, omega, responses
-        ),
+        runs=_exact_runs(settings, dt_run, full_state, which, stack, omega, responses),
         cases=Cases(
             omega=omega,
             seat_q=qref + seat,
@@ -555,7 +554,6 @@ def run_batch(
             "on_failure": on_failure,
         }
         return _run_by_contacts(cases, settings, options)
-    dt_run = settings.step
     n = len(cases)
     angles = output_angles(settings)
     warmup = settings.warmup_turns
@@ -567,6 +565,36 @@ def run_batch(
     n_rev = out.per_rev.shape[1]  # turns, a partial last one included
     integrator = integrators.get(settings.method)
     integrator.run(integrator.prepare(batch, settings), cases_in, out)
+    status, n_events = out.status, out.n_events
+    if status.any():  # not every case OK
+        _failures(out, settings, on_failure, check_stability_limit, integrator)
+    kept = np.minimum(n_events, settings.max_events)
+    measured = np.arange(n_rev) >= warmup
+    return BatchResult(
+        cam_angle=angles,
+        time=angles[None, :] / omega[:, None],
+        q=out.q,
+        v=out.v,
+        acc=out.acc,
+        cam_lift=out.cam,
+        cam_force=-out.force[:, :, 0],
+        seat_force=out.force[:, :, 1],
+        contact_state=out.cfg,
+        valve_reference=qref,
+        measured=measured,
+        per_rev=out.per_rev,
+        trains=[c.train for c in cases],
+        events=[out.events[i, : kept[i]].copy() for i in range(n)],
+        steps=out.steps,
+        status=status,
+        start_time=cases_in.t0,
+    )
+
+
+def _failures(out, settings: RunSettings, on_failure, check_stability_limit, integrator) -> None:
+    """Raise for the failed cases (``on_failure`` "raise"), warn of truncated events, and
+    set a failed case's histories and metrics NaN."""
+    dt_run = settings.step
     status, n_events = out.status, out.n_events
     bad = np.flatnonzero(status == NONFINITE)
     if bad.size and on_failure == "raise":
@@ -606,27 +634,6 @@ def run_batch(
     failed = np.flatnonzero(np.isin(status, FAILURES))
     for array in (out.q, out.v, out.acc, out.force, out.cam, out.per_rev):
         array[failed] = np.nan
-    kept = np.minimum(n_events, settings.max_events)
-    measured = np.arange(n_rev) >= warmup
-    return BatchResult(
-        cam_angle=angles,
-        time=angles[None, :] / omega[:, None],
-        q=out.q,
-        v=out.v,
-        acc=out.acc,
-        cam_lift=out.cam,
-        cam_force=-out.force[:, :, 0],
-        seat_force=out.force[:, :, 1],
-        contact_state=out.cfg,
-        valve_reference=qref,
-        measured=measured,
-        per_rev=out.per_rev,
-        trains=[c.train for c in cases],
-        events=[out.events[i, : kept[i]].copy() for i in range(n)],
-        steps=out.steps,
-        status=status,
-        start_time=cases_in.t0,
-    )
 
 
 def _run_by_contacts(cases: Sequence[Case], settings: RunSettings, options) -> BatchResult:
