@@ -370,12 +370,13 @@ def responses_of(parts, train, omega, ns_pad: int) -> np.ndarray:
         m = w.shape[0]
         if m == 0:
             continue
+        iw = 1j * w
+        w2 = w * w
         for ci, ns, minus_a, b in per_train:
-            diagonal = np.arange(ns)
             mat = np.empty((m, ns, ns), np.complex128)
             mat[:] = minus_a
-            mat[:, diagonal, diagonal] += 1j * w
-            rhs = -b[:, 0] - 1j * w * b[:, 1] + w * w * b[:, 2]
+            mat.reshape(m, ns * ns)[:, :: ns + 1] += iw  # the diagonal
+            rhs = -b[:, 0] - iw * b[:, 1] + w2 * b[:, 2]
             out[cases, ci, :ns] = np.linalg.solve(mat, rhs[..., None])[..., 0]
     return out
 

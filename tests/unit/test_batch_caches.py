@@ -13,7 +13,6 @@ import hashlib
 import math
 
 import numpy as np
-import pytest
 
 from campipe.engine import Case, RunSettings, run_batch
 from campipe.engine import batch as batch_module
@@ -73,3 +72,69 @@ def mixed_digest() -> str:
 
 def test_a_mixed_batch_runs_bit_identical_to_before_the_caches():
     assert mixed_digest() == MIXED_DIGEST
+
+
+def _arrays(value) -> list[np.ndarray]:
+    """Every array in a (nested) named tuple or tuple."""
+    if isinstance(value, np.ndarray):
+        return [value]
+    if isinstance(value, tuple):
+        return [a for item in value for a in _arrays(item)]
+    return []
+
+
+def test_a_second_one_case_call_reuses_what_its_train_and_profile_fix(monkeypatch):
+    from campipe.profiles import packed
+
+    train = dataclasses.replace(thesis_train(), spring_rate=1.1 * thesis_train().spring_rate)
+    counts = {"stack": 0, "pack": 0, "grid": 0}
+
+    def counted(name, function, grid=False):
+        def wrapper(*args, **kwargs):
+            if not grid or np.size(args[1]) == 2049:
+                counts[name] += 1
+            return function(*args, **kwargs)
+
+        return wrapper
+
+    monkeypatch.setattr(batch_module, "stack_trains", counted("stack", batch_module.stack_trains))
+    monkeypatch.setattr(packed, "pack", counted("pack", packed.pack))
+    monkeypatch.setattr(batch_module, "evaluate", counted("grid", batch_module.evaluate, True))
+    for cache in (batch_module.train_stack, packed._pack_keyed, batch_module._peaks):
+        cache.cache_clear()
+    settings = RunSettings(revolutions=2)
+    first = run_batch([Case(train, harmonic(INCH), 300.0)], settings)
+    assert counts == {"stack": 1, "pack": 1, "grid": 1}
+    # Another speed and seat, and the profile rebuilt (equal numbers, a new object): the
+    # train's stack, the packed profile and its peaks come from the caches.
+    second = run_batch([Case(train, harmonic(INCH), 900.0, seat=-0.001)], settings)
+    assert counts == {"stack": 1, "pack": 1, "grid": 1}
+    assert batch_module.train_stack.cache_info().hits >= 1
+    # A profile of other numbers is packed and bounded anew; the train's stack is reused.
+    run_batch([Case(train, harmonic(0.9 * INCH), 900.0)], settings)
+    assert counts == {"stack": 1, "pack": 2, "grid": 2}
+    assert first.q.shape == second.q.shape == (1, 721, 7)
+    assert not np.array_equal(first.valve_lift, second.valve_lift)
+
+
+def test_the_caches_are_bounded_and_no_run_writes_into_what_they_hold():
+    from campipe.profiles import packed
+
+    for cache in (batch_module.train_stack, packed._pack_keyed, batch_module._peaks):
+        assert cache.cache_info().maxsize == 256
+    cases = _cases()
+    trains = tuple(dict.fromkeys(c.train for c in cases))
+    held = [
+        batch_module.train_stack(trains, 0.0),
+        batch_module.train_stack(trains, 3e-6),
+        packed.pack_cached([c.profile for c in cases]),
+    ]
+    before = [a.tobytes() for a in _arrays(tuple(held))]
+    assert len(before) > 40
+    for settings in (
+        RunSettings(revolutions=2),
+        RunSettings(revolutions=1.5, start="quasi-static"),
+        RunSettings(revolutions=1, integrator="newmark-linear", dt=3e-6),
+    ):
+        run_batch(cases, settings)
+    assert [a.tobytes() for a in _arrays(tuple(held))] == before
