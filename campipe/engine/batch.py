@@ -463,18 +463,28 @@ def _periodic_starts(case_list, cases, modal_trains, runs, packed, snap, stack, 
             found=bad.tolist(),
             expected="a seat below the valve's full lift",
         )
-    # Accelerations from the equation of motion with the cam held (newmark-linear's start),
-    # by profile and by train over their cases at once (the same numbers as case by case:
-    # numpy's stacked matmul and solve take each case's matrix product and LAPACK solve).
+    return t0, q0, v0, _start_accelerations(case_list, cases.omega, t0, q0, v0, stack, which)
+
+
+def _start_accelerations(case_list, omega, t0, q0, v0, stack: TrainStack, which) -> np.ndarray:
+    """Accelerations from the equation of motion with the cam held (newmark-linear's start),
+    by profile and by train over their cases at once (the same numbers as case by case:
+    numpy's stacked matmul and solve take each case's matrix product and LAPACK solve)."""
+    n, n_q = q0.shape
     a0 = np.zeros((n, n_q))
-    theta = cases.omega * t0
-    by_profile: dict[Profile, list[int]] = {}
-    for c, case in enumerate(case_list):
-        by_profile.setdefault(case.profile, []).append(c)
-    for profile, members in by_profile.items():
-        a0[members, CAM] = -(cases.omega[members] ** 2) * cam_accelerations(profile, theta[members])
+    theta = omega * t0
+    profile = case_list[0].profile
+    if all(case.profile is profile for case in case_list):
+        a0[:, CAM] = -(omega**2) * cam_accelerations(profile, theta)
+    else:
+        by_profile: dict[Profile, list[int]] = {}
+        for c, case in enumerate(case_list):
+            by_profile.setdefault(case.profile, []).append(c)
+        for profile, members in by_profile.items():
+            a0[members, CAM] = -(omega[members] ** 2) * cam_accelerations(profile, theta[members])
+    single = len(stack.preps) == 1
     for t, prep in enumerate(stack.preps):
-        rows = np.flatnonzero(which == t)
+        rows = np.arange(n) if single else np.flatnonzero(which == t)
         if rows.size == 0:
             continue
         sm, free = prep.matrices, stack.free[t]
@@ -484,10 +494,9 @@ def _periodic_starts(case_list, cases, modal_trains, runs, packed, snap, stack, 
             return (matrix[None] @ x[rows, :k, None])[..., 0]
 
         force = sm.preload - times(sm.stiffness, q0) - times(sm.damping, v0) - times(sm.mass, a0)
-        a0[rows[:, None], free] = np.linalg.solve(stack.mass_ff[t][None], force[:, free, None])[
-            ..., 0
-        ]
-    return t0, q0, v0, a0
+        solved = np.linalg.solve(stack.mass_ff[t][None], force[:, free, None])
+        a0[rows[:, None], free] = solved[..., 0]
+    return a0
 
 
 @functools.lru_cache(maxsize=256)
