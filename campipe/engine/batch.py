@@ -274,9 +274,22 @@ class TrainStack(NamedTuple):
     responses: tuple  # ``modal.response_parts`` per train
 
 
-@functools.lru_cache(maxsize=256)
+#: The most distinct trains whose stack ``train_stack`` caches: the batches whose
+#: preparation weighs on a call; a larger one's stack is made per call, so that the cache
+#: holds at most 256 stacks of a few trains.
+CACHED_TRAINS = 4
+
+
 def train_stack(trains: tuple[ValveTrain, ...], dt: float) -> TrainStack:
-    """The ``TrainStack`` of a batch's distinct trains at step ``dt`` (0: none), cached."""
+    """The ``TrainStack`` of a batch's distinct trains at step ``dt`` (0: none), cached for
+    up to ``CACHED_TRAINS`` trains."""
+    if len(trains) > CACHED_TRAINS:
+        return _train_stack.__wrapped__(trains, dt)
+    return _train_stack(trains, dt)
+
+
+@functools.lru_cache(maxsize=256)
+def _train_stack(trains: tuple[ValveTrain, ...], dt: float) -> TrainStack:
     preps = tuple(prepare(t, dt) for t in trains)
     modal = [train_modal(t) for t in trains]
     modal_trains, a_mat = _modal_trains(trains, preps)

@@ -66,11 +66,20 @@ def keyed(profile: Profile) -> Keyed:
     return found
 
 
+#: The most profiles (cases) whose packing :func:`pack_cached` caches: the batches whose
+#: preparation weighs on a call; a larger batch is packed per call, so that the cache holds
+#: at most 256 packings of a few cases.
+CACHED_PROFILES = 16
+
+
 def pack_cached(profiles: Sequence[Profile]) -> PackedProfiles:
-    """:func:`pack`, cached by the profiles' numbers (the last 256 batches of profiles). The
-    kernels only read the packed arrays: callers must not write into them."""
+    """:func:`pack`, cached by the profiles' numbers (the last 256 batches of up to
+    ``CACHED_PROFILES`` cases). The kernels only read the packed arrays: callers must not
+    write into them."""
     if len(profiles) == 0:
         raise ValueError("pack needs at least one profile")
+    if len(profiles) > CACHED_PROFILES:
+        return pack(profiles)
     return _pack_keyed(tuple(keyed(p) for p in profiles))
 
 

@@ -100,7 +100,7 @@ def test_a_second_one_case_call_reuses_what_its_train_and_profile_fix(monkeypatc
     monkeypatch.setattr(batch_module, "stack_trains", counted("stack", batch_module.stack_trains))
     monkeypatch.setattr(packed, "pack", counted("pack", packed.pack))
     monkeypatch.setattr(batch_module, "evaluate", counted("grid", batch_module.evaluate, True))
-    for cache in (batch_module.train_stack, packed._pack_keyed, batch_module._peaks):
+    for cache in (batch_module._train_stack, packed._pack_keyed, batch_module._peaks):
         cache.cache_clear()
     settings = RunSettings(revolutions=2)
     first = run_batch([Case(train, harmonic(INCH), 300.0)], settings)
@@ -109,7 +109,7 @@ def test_a_second_one_case_call_reuses_what_its_train_and_profile_fix(monkeypatc
     # train's stack, the packed profile and its peaks come from the caches.
     second = run_batch([Case(train, harmonic(INCH), 900.0, seat=-0.001)], settings)
     assert counts == {"stack": 1, "pack": 1, "grid": 1}
-    assert batch_module.train_stack.cache_info().hits >= 1
+    assert batch_module._train_stack.cache_info().hits >= 1
     # A profile of other numbers is packed and bounded anew; the train's stack is reused.
     run_batch([Case(train, harmonic(0.9 * INCH), 900.0)], settings)
     assert counts == {"stack": 1, "pack": 2, "grid": 2}
@@ -120,7 +120,7 @@ def test_a_second_one_case_call_reuses_what_its_train_and_profile_fix(monkeypatc
 def test_the_caches_are_bounded_and_no_run_writes_into_what_they_hold():
     from campipe.profiles import packed
 
-    for cache in (batch_module.train_stack, packed._pack_keyed, batch_module._peaks):
+    for cache in (batch_module._train_stack, packed._pack_keyed, batch_module._peaks):
         assert cache.cache_info().maxsize == 256
     cases = _cases()
     trains = tuple(dict.fromkeys(c.train for c in cases))
@@ -138,6 +138,17 @@ def test_the_caches_are_bounded_and_no_run_writes_into_what_they_hold():
     ):
         run_batch(cases, settings)
     assert [a.tobytes() for a in _arrays(tuple(held))] == before
+    assert batch_module.train_stack(trains, 0.0) is held[0]  # what the runs took
+    assert packed.pack_cached([c.profile for c in cases]) is held[2]
+    # A batch of more cases, or of more trains, than the caches keep is prepared per call.
+    many = [c.profile for c in cases] * 2
+    assert len(many) > packed.CACHED_PROFILES
+    assert packed.pack_cached(many) is not packed.pack_cached(many)
+    more = tuple(
+        dataclasses.replace(cases[0].train, spring_rate=(1 + i / 10) * cases[0].train.spring_rate)
+        for i in range(batch_module.CACHED_TRAINS + 1)
+    )
+    assert batch_module.train_stack(more, 0.0) is not batch_module.train_stack(more, 0.0)
 
 
 def test_the_start_accelerations_are_evaluate_s_numbers_to_the_bit():
