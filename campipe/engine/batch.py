@@ -260,6 +260,7 @@ class TrainStack(NamedTuple):
     (copies)."""
 
     preps: tuple[Prepared, ...]
+    modal: tuple[ModalData, ...]  # ``train_modal`` per train
     modal_trains: ModalTrains
     a_mat: np.ndarray  # (n_trains, 4, ns, ns) the state matrices (harmonic responses)
     valve_ref: np.ndarray  # (n_trains,) ``Prepared.valve_reference``
@@ -285,7 +286,17 @@ def train_stack(trains: tuple[ValveTrain, ...], dt: float) -> TrainStack:
     up to ``CACHED_TRAINS`` trains."""
     if len(trains) > CACHED_TRAINS:
         return _train_stack.__wrapped__(trains, dt)
-    return _train_stack(trains, dt)
+    stack = _train_stack(trains, dt)
+    # The per-train caches cleared (``prepare``, ``train_modal``: a test that swaps a
+    # train's matrices) leave every stack made from them stale.
+    current = [(prepare(t, dt), train_modal(t)) for t in trains]
+    if any(
+        p is not sp or m is not sm
+        for (p, m), sp, sm in zip(current, stack.preps, stack.modal, strict=True)
+    ):
+        _train_stack.cache_clear()
+        stack = _train_stack(trains, dt)
+    return stack
 
 
 @functools.lru_cache(maxsize=256)
@@ -296,6 +307,7 @@ def _train_stack(trains: tuple[ValveTrain, ...], dt: float) -> TrainStack:
     free = tuple(np.array(free_coordinates(CAM_CONTACT, p.matrices.mass.shape[0])) for p in preps)
     return TrainStack(
         preps=preps,
+        modal=tuple(modal),
         modal_trains=modal_trains,
         a_mat=a_mat,
         valve_ref=np.array([p.valve_reference for p in preps]),

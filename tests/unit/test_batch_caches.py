@@ -167,3 +167,15 @@ def test_the_start_accelerations_are_evaluate_s_numbers_to_the_bit():
                 got = batch_module.cam_accelerations(profile, theta[start : start + size])
                 assert got.tobytes() == expected[start : start + size].tobytes()
         assert batch_module.cam_accelerations(profile, theta).tobytes() == expected.tobytes()
+
+
+def test_clearing_the_per_train_caches_makes_the_stacks_anew():
+    trains = (thesis_train(),)
+    first = batch_module.train_stack(trains, 0.0)
+    assert batch_module.train_stack(trains, 0.0) is first
+    batch_module.prepare.cache_clear()
+    batch_module.train_modal.cache_clear()
+    again = batch_module.train_stack(trains, 0.0)
+    assert again is not first
+    assert again.preps[0] is batch_module.prepare(trains[0], 0.0)
+    assert again.modal_trains.basis.tobytes() == first.modal_trains.basis.tobytes()
