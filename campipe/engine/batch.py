@@ -36,7 +36,7 @@ from campipe.engine.contact import (
     static_position,
 )
 from campipe.engine.integrators.modal_exact import arguments
-from campipe.engine.modal import ModalData, harmonic_responses, modal_data, pad_stack
+from campipe.engine.modal import ModalData, modal_data, pad_stack, response_parts, responses_of
 from campipe.engine.result import BatchResult as BatchResult
 from campipe.engine.result import merge_results
 from campipe.engine.settings import CLOSURES as CLOSURES
@@ -68,8 +68,9 @@ from campipe.engine.settings import stability_limit as stability_limit
 from campipe.engine.settings import visited_configurations as visited_configurations
 from campipe.model import ValveTrain, system_matrices
 from campipe.model.assembly import SystemMatrices, configuration_frequencies
-from campipe.profiles import evaluate
-from campipe.profiles.packed import PackedProfiles, evaluate_packed, pack
+from campipe.profiles import Profile, evaluate
+from campipe.profiles.packed import Keyed, PackedProfiles, evaluate_packed, keyed, pack, pack_cached
+from campipe.profiles.pieces import N_COEFFS, piece_index, wrap
 from campipe.vocabulary import (
     CAM,
     CAM_AND_SEAT,
@@ -252,13 +253,81 @@ def _modal_trains(trains, preps) -> tuple[ModalTrains, np.ndarray]:
     return modal_trains, pad_stack([d.a_mat for d in data])
 
 
-def _exact_runs(
-    settings, dt_run, full_state, which, modal_trains, a_mat, omega, responses=True
-) -> ExactRuns:
+class TrainStack(NamedTuple):
+    """What a batch's distinct trains (in order) give its kernels, stacked along a leading
+    train axis (``train_stack``). Cached and shared by the batches of these trains: the
+    kernels only read these arrays, and a batch takes its per-case rows by fancy indexing
+    (copies)."""
+
+    preps: tuple[Prepared, ...]
+    modal: tuple[ModalData, ...]  # ``train_modal`` per train
+    modal_trains: ModalTrains
+    a_mat: np.ndarray  # (n_trains, 4, ns, ns) the state matrices (harmonic responses)
+    valve_ref: np.ndarray  # (n_trains,) ``Prepared.valve_reference``
+    ratio: np.ndarray  # (n_trains,) |``Prepared.valve_ratio``|
+    meff: np.ndarray  # (n_trains, 4) ``Prepared.impact_masses``
+    separation: np.ndarray  # (n_trains, 2) ``ModalData.separation``
+    hold: np.ndarray  # (n_trains, 2) ``ModalData.hold``
+    restitution: np.ndarray  # (n_trains, 2) cam and seat coefficients of restitution
+    #: per train: configuration I's free coordinates and its free mass block M_ff
+    free: tuple[np.ndarray, ...]
+    mass_ff: tuple[np.ndarray, ...]
+    responses: tuple  # ``modal.response_parts`` per train
+
+
+#: The most distinct trains whose stack ``train_stack`` caches: the batches whose
+#: preparation weighs on a call; a larger one's stack is made per call, so that the cache
+#: holds at most 256 stacks of a few trains.
+CACHED_TRAINS = 4
+
+
+def train_stack(trains: tuple[ValveTrain, ...], dt: float) -> TrainStack:
+    """The ``TrainStack`` of a batch's distinct trains at step ``dt`` (0: none), cached for
+    up to ``CACHED_TRAINS`` trains."""
+    if len(trains) > CACHED_TRAINS:
+        return _train_stack.__wrapped__(trains, dt)
+    stack = _train_stack(trains, dt)
+    # The per-train caches cleared (``prepare``, ``train_modal``: a test that swaps a
+    # train's matrices) leave every stack made from them stale.
+    current = [(prepare(t, dt), train_modal(t)) for t in trains]
+    if any(
+        p is not sp or m is not sm
+        for (p, m), sp, sm in zip(current, stack.preps, stack.modal, strict=True)
+    ):
+        _train_stack.cache_clear()
+        stack = _train_stack(trains, dt)
+    return stack
+
+
+@functools.lru_cache(maxsize=256)
+def _train_stack(trains: tuple[ValveTrain, ...], dt: float) -> TrainStack:
+    preps = tuple(prepare(t, dt) for t in trains)
+    modal = [train_modal(t) for t in trains]
+    modal_trains, a_mat = _modal_trains(trains, preps)
+    free = tuple(np.array(free_coordinates(CAM_CONTACT, p.matrices.mass.shape[0])) for p in preps)
+    return TrainStack(
+        preps=preps,
+        modal=tuple(modal),
+        modal_trains=modal_trains,
+        a_mat=a_mat,
+        valve_ref=np.array([p.valve_reference for p in preps]),
+        ratio=np.array([abs(p.valve_ratio) for p in preps]),
+        meff=np.stack([p.impact_masses for p in preps]),
+        separation=np.stack([d.separation for d in modal]),
+        hold=np.stack([d.hold for d in modal]),
+        restitution=np.array([[t.cam_restitution, t.seat_restitution] for t in trains]),
+        free=free,
+        mass_ff=tuple(p.matrices.mass[np.ix_(f, f)] for p, f in zip(preps, free, strict=True)),
+        responses=response_parts(modal_trains.n_free, a_mat, modal_trains.b_in),
+    )
+
+
+def _exact_runs(settings, dt_run, full_state, which, stack, omega, responses=True) -> ExactRuns:
+    ns = stack.a_mat.shape[2]
     zeta = (
-        harmonic_responses(which, modal_trains.n_free, a_mat, modal_trains.b_in, omega)
+        responses_of(stack.responses, which, omega, ns)
         if responses
-        else np.zeros((omega.size, 4, a_mat.shape[2]), np.complex128)
+        else np.zeros((omega.size, 4, ns), np.complex128)
     )
     return ExactRuns(
         train=which,
@@ -293,6 +362,7 @@ class PreparedBatch:
     modal_trains: ModalTrains
     runs: ExactRuns
     cases: Cases  # starting nowhere yet
+    stack: TrainStack  # the distinct trains' cached data
 
 
 def _prepare_batch(
@@ -300,31 +370,32 @@ def _prepare_batch(
 ) -> PreparedBatch:
     """What the batch's kernels take. Without ``responses`` the harmonic responses are left
     zero, their kernel not run: for the types of the kernels' arguments
-    (:func:`integrator_types`), not for a run."""
+    (:func:`integrator_types`), not for a run. What the trains and the profiles fix comes
+    from caches (``train_stack``, ``pack_cached``, ``_peaks``); only the per-case rows are
+    made here."""
     dt_run = settings.step
     n = len(cases)
     trains, which = unique_trains(cases)
-    preps = [prepare(t, dt_run or 0.0) for t in trains]
-    modal = [train_modal(t) for t in trains]
-    qref = np.array([p.valve_reference for p in preps])[which]
+    stack = train_stack(tuple(trains), dt_run or 0.0)
+    qref = stack.valve_ref[which]
     has_seat = np.array([c.has_seat for c in cases], dtype=np.bool_)
     omega = np.array([c.speed for c in cases], dtype=float)
-    modal_trains, a_mat = _modal_trains(trains, preps)
+    modal_trains = stack.modal_trains
     n_q = modal_trains.load.shape[1]
-    lift_bound, speed_bound = _bounds(cases, preps, which, qref)
+    profiles = [keyed(c.profile) for c in cases]
+    seat = np.where(has_seat, [c.seat for c in cases], 0.0)
+    lift_bound, speed_bound = _bounds(profiles, stack.ratio[which], omega, has_seat, seat)
     return PreparedBatch(
         case_list=cases,
         trains=trains,
         which=which,
-        preps=preps,
-        packed=pack([c.profile for c in cases]),
+        preps=list(stack.preps),
+        packed=pack_cached([c.profile for c in cases]),
         modal_trains=modal_trains,
-        runs=_exact_runs(
-            settings, dt_run, full_state, which, modal_trains, a_mat, omega, responses
-        ),
+        runs=_exact_runs(settings, dt_run, full_state, which, stack, omega, responses),
         cases=Cases(
             omega=omega,
-            seat_q=qref + np.where(has_seat, [c.seat for c in cases], 0.0),
+            seat_q=qref + seat,
             has_seat=has_seat,
             form=np.array([c.closure == "form" for c in cases], dtype=np.bool_),
             t0=np.zeros(n),
@@ -332,15 +403,16 @@ def _prepare_batch(
             v0=np.zeros((n, n_q)),
             a0=np.zeros((n, n_q)),
             cfg0=np.full(n, CAM_CONTACT, np.int64),
-            meff=np.stack([p.impact_masses for p in preps])[which],
-            separation=np.stack([d.separation for d in modal])[which],
-            hold=np.stack([d.hold for d in modal])[which],
+            meff=stack.meff[which],
+            separation=stack.separation[which],
+            hold=stack.hold[which],
             capture=np.full(n, float(settings.capture_velocity)),
-            restitution=np.array([[t.cam_restitution, t.seat_restitution] for t in trains])[which],
+            restitution=stack.restitution[which],
             valve_ref=qref,
             lift_bound=lift_bound,
             speed_bound=speed_bound,
         ),
+        stack=stack,
     )
 
 
@@ -360,7 +432,7 @@ def _starts(cases: Sequence[Case], settings: RunSettings, batch: PreparedBatch) 
     step = settings.step if integrators.get(settings.method).fixed_step else 0.0
     t0, q0, v0, a0 = _periodic_starts(
         cases, c, batch.modal_trains, batch.runs, batch.packed, np.full(len(cases), step),
-        batch.preps, batch.which,
+        batch.stack, batch.which,
     )  # fmt: skip
     return Start(t0, q0, v0, a0, np.full(len(cases), CAM_CONTACT, np.int64))
 
@@ -392,7 +464,7 @@ def _outputs(batch: PreparedBatch, settings: RunSettings):
     return make_outputs(len(batch.which), n_out, n_rev, settings.max_events, n_q)
 
 
-def _periodic_starts(case_list, cases, modal_trains, runs, packed, snap, preps, which):
+def _periodic_starts(case_list, cases, modal_trains, runs, packed, snap, stack, which):
     """Each case's start on the periodic steady state of configuration I
     (``steady.periodic_starts``): (t0, q0, v0, a0); refuses a case where configuration I holds
     nowhere on the turn."""
@@ -416,36 +488,86 @@ def _periodic_starts(case_list, cases, modal_trains, runs, packed, snap, preps, 
             found=bad.tolist(),
             expected="a seat below the valve's full lift",
         )
-    # Accelerations from the equation of motion with the cam held (newmark-linear's start).
+    return t0, q0, v0, _start_accelerations(case_list, cases.omega, t0, q0, v0, stack, which)
+
+
+def _start_accelerations(case_list, omega, t0, q0, v0, stack: TrainStack, which) -> np.ndarray:
+    """Accelerations from the equation of motion with the cam held (newmark-linear's start),
+    by profile and by train over their cases at once (the same numbers as case by case:
+    numpy's stacked matmul and solve take each case's matrix product and LAPACK solve)."""
+    n, n_q = q0.shape
     a0 = np.zeros((n, n_q))
-    theta = cases.omega * t0
-    for c in range(n):
-        sm = preps[which[c]].matrices
+    theta = omega * t0
+    profile = case_list[0].profile
+    if all(case.profile is profile for case in case_list):
+        a0[:, CAM] = -(omega**2) * cam_accelerations(profile, theta)
+    else:
+        by_profile: dict[Profile, list[int]] = {}
+        for c, case in enumerate(case_list):
+            by_profile.setdefault(case.profile, []).append(c)
+        for profile, members in by_profile.items():
+            a0[members, CAM] = -(omega[members] ** 2) * cam_accelerations(profile, theta[members])
+    single = len(stack.preps) == 1
+    for t, prep in enumerate(stack.preps):
+        rows = np.arange(n) if single else np.flatnonzero(which == t)
+        if rows.size == 0:
+            continue
+        sm, free = prep.matrices, stack.free[t]
         k = sm.mass.shape[0]
-        _, _, ddlift = evaluate(case_list[c].profile, theta[c])
-        a0[c, CAM] = -(cases.omega[c] ** 2) * float(ddlift)
-        free = np.array(free_coordinates(CAM_CONTACT, k))
-        force = sm.preload - sm.stiffness @ q0[c, :k] - sm.damping @ v0[c, :k] - sm.mass @ a0[c, :k]
-        a0[c, free] = np.linalg.solve(sm.mass[np.ix_(free, free)], force[free])
-    return t0, q0, v0, a0
+
+        def times(matrix, x, rows=rows, k=k):
+            return (matrix[None] @ x[rows, :k, None])[..., 0]
+
+        force = sm.preload - times(sm.stiffness, q0) - times(sm.damping, v0) - times(sm.mass, a0)
+        solved = np.linalg.solve(stack.mass_ff[t][None], force[:, free, None])
+        a0[rows[:, None], free] = solved[..., 0]
+    return a0
 
 
-def _bounds(cases: Sequence[Case], preps, which, qref) -> tuple[np.ndarray, np.ndarray]:
-    """Each case's bounds on valve lift [m] and on closing and valve speeds [m/s]."""
-    lift = np.empty(len(cases))
-    speed = np.empty(len(cases))
-    grid = np.linspace(0.0, TWO_PI, 2049)
-    slopes: dict[int, tuple[float, float]] = {}
-    for i, case in enumerate(cases):
-        key = id(case.profile)
-        if key not in slopes:
-            lifts, rates, _ = evaluate(case.profile, grid)
-            slopes[key] = (float(np.max(np.abs(lifts))), float(np.max(np.abs(rates))))
-        max_lift, max_rate = slopes[key]
-        ratio = abs(preps[which[i]].valve_ratio)
-        seat = abs(case.seat) if case.has_seat else 0.0
-        lift[i] = LIFT_BOUND * max_lift * ratio + seat
-        speed[i] = SPEED_BOUND * case.speed * max_rate * max(ratio, 1.0)
+@functools.lru_cache(maxsize=256)
+def _peaks(profile: Keyed) -> tuple[float, float]:
+    """A profile's largest |lift| [m] and |dlift/dθ| [m/rad] on a grid of 2049 angles."""
+    lifts, rates, _ = evaluate(profile.profile, np.linspace(0.0, TWO_PI, 2049))
+    return float(np.max(np.abs(lifts))), float(np.max(np.abs(rates)))
+
+
+#: Angles up to which :func:`cam_accelerations` evaluates in Python floats (numpy's calls cost
+#: more than their arithmetic for a few angles; above, ``profiles.evaluate`` on the array).
+FEW_ANGLES = 8
+
+
+def cam_accelerations(profile: Profile, theta: np.ndarray) -> np.ndarray:
+    """d²lift/dθ² [m/rad²] at the angles ``theta`` (1-d): ``profiles.evaluate``'s numbers to
+    the bit (the same operations in the same order: IEEE products and sums are the same in
+    numpy and in Python floats; sine and cosine are numpy's), for a few angles without
+    numpy's per-call cost."""
+    if theta.size > FEW_ANGLES:
+        return evaluate(profile, theta)[2]
+    t = wrap(theta)
+    index = piece_index(profile, t)
+    sin, cos = np.sin(t).tolist(), np.cos(t).tolist()
+    out = np.empty(theta.size)
+    for j, (tj, i) in enumerate(zip(t.tolist(), index.tolist(), strict=True)):
+        x = tj - float(profile.breaks[i])
+        c = profile.poly[i].tolist()
+        p, dp, ddp = c[N_COEFFS - 1], 0.0, 0.0
+        for k in range(N_COEFFS - 2, -1, -1):
+            ddp = ddp * x + 2.0 * dp
+            dp = dp * x + p
+            p = p * x + c[k]
+        a, b = profile.trig[i].tolist()
+        out[j] = ddp - a * sin[j] - b * cos[j]
+    return out
+
+
+def _bounds(
+    profiles: Sequence[Keyed], ratio, omega, has_seat, seat
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each case's bounds on valve lift [m] and on closing and valve speeds [m/s], from its
+    profile's peaks, its train's |valve ratio| and its seat (0 where it has none)."""
+    peaks = np.array([_peaks(p) for p in profiles]).reshape(len(profiles), 2)
+    lift = LIFT_BOUND * peaks[:, 0] * ratio + np.abs(seat)
+    speed = SPEED_BOUND * omega * peaks[:, 1] * np.maximum(ratio, 1.0)
     return lift, speed
 
 
@@ -495,7 +617,6 @@ def run_batch(
             "on_failure": on_failure,
         }
         return _run_by_contacts(cases, settings, options)
-    dt_run = settings.step
     n = len(cases)
     angles = output_angles(settings)
     warmup = settings.warmup_turns
@@ -507,6 +628,36 @@ def run_batch(
     n_rev = out.per_rev.shape[1]  # turns, a partial last one included
     integrator = integrators.get(settings.method)
     integrator.run(integrator.prepare(batch, settings), cases_in, out)
+    status, n_events = out.status, out.n_events
+    if status.any():  # not every case OK
+        _failures(out, settings, on_failure, check_stability_limit, integrator)
+    kept = np.minimum(n_events, settings.max_events)
+    measured = np.arange(n_rev) >= warmup
+    return BatchResult(
+        cam_angle=angles,
+        time=angles[None, :] / omega[:, None],
+        q=out.q,
+        v=out.v,
+        acc=out.acc,
+        cam_lift=out.cam,
+        cam_force=-out.force[:, :, 0],
+        seat_force=out.force[:, :, 1],
+        contact_state=out.cfg,
+        valve_reference=qref,
+        measured=measured,
+        per_rev=out.per_rev,
+        trains=[c.train for c in cases],
+        events=[out.events[i, : kept[i]].copy() for i in range(n)],
+        steps=out.steps,
+        status=status,
+        start_time=cases_in.t0,
+    )
+
+
+def _failures(out, settings: RunSettings, on_failure, check_stability_limit, integrator) -> None:
+    """Raise for the failed cases (``on_failure`` "raise"), warn of truncated events, and
+    set a failed case's histories and metrics NaN."""
+    dt_run = settings.step
     status, n_events = out.status, out.n_events
     bad = np.flatnonzero(status == NONFINITE)
     if bad.size and on_failure == "raise":
@@ -546,27 +697,6 @@ def run_batch(
     failed = np.flatnonzero(np.isin(status, FAILURES))
     for array in (out.q, out.v, out.acc, out.force, out.cam, out.per_rev):
         array[failed] = np.nan
-    kept = np.minimum(n_events, settings.max_events)
-    measured = np.arange(n_rev) >= warmup
-    return BatchResult(
-        cam_angle=angles,
-        time=angles[None, :] / omega[:, None],
-        q=out.q,
-        v=out.v,
-        acc=out.acc,
-        cam_lift=out.cam,
-        cam_force=-out.force[:, :, 0],
-        seat_force=out.force[:, :, 1],
-        contact_state=out.cfg,
-        valve_reference=qref,
-        measured=measured,
-        per_rev=out.per_rev,
-        trains=[c.train for c in cases],
-        events=[out.events[i, : kept[i]].copy() for i in range(n)],
-        steps=out.steps,
-        status=status,
-        start_time=cases_in.t0,
-    )
 
 
 def _run_by_contacts(cases: Sequence[Case], settings: RunSettings, options) -> BatchResult:

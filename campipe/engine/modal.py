@@ -33,6 +33,7 @@ Eqs. 26, 27 with ẍ eliminated through the equation of motion).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -330,18 +331,52 @@ def harmonic_responses(train, n_free, a_mat, b_in, omega):
     and configuration, stacked by train: numpy's batched ``solve`` costs what a compiled loop
     over them did (4 µs a case) without its 3 s of compile.
     """
-    out = np.zeros((omega.shape[0], 4, a_mat.shape[2]), np.complex128)
-    for t in np.unique(train):
-        cases = np.flatnonzero(train == t)
-        w = omega[cases][:, None]
+    parts = response_parts(n_free, a_mat, b_in)
+    return responses_of(parts, train, omega, a_mat.shape[2])
+
+
+class ResponsePart(NamedTuple):
+    """What one train's configuration fixes in ``harmonic_responses``: the configuration's
+    index, its state's size, −A (complex) and the input's rows b_q, b_v, b_a."""
+
+    ci: int
+    ns: int
+    minus_a: np.ndarray  # (ns, ns) complex −A
+    b: np.ndarray  # (ns, 3) the input's b_q, b_v, b_a for the cam
+
+
+def response_parts(n_free, a_mat, b_in) -> tuple[tuple[ResponsePart, ...], ...]:
+    """Per train (arrays as ``harmonic_responses``'), its configurations' ``ResponsePart``:
+    computed once per batch's trains (``batch.train_stack``)."""
+    parts = []
+    for t in range(a_mat.shape[0]):
+        per_train = []
         for ci in (0, 2):
-            ns = 2 * n_free[t, ci]
-            diagonal = np.arange(ns)
-            mat = np.zeros((cases.size, ns, ns), np.complex128)
-            mat[:] = -a_mat[t, ci, :ns, :ns]
-            mat[:, diagonal, diagonal] += 1j * w
-            b = b_in[t, ci, :ns, :, 0]
-            rhs = -b[:, 0] - 1j * w * b[:, 1] + w * w * b[:, 2]
+            ns = int(2 * n_free[t, ci])
+            minus_a = np.zeros((ns, ns), np.complex128)
+            minus_a[:] = -a_mat[t, ci, :ns, :ns]
+            per_train.append(ResponsePart(ci, ns, minus_a, b_in[t, ci, :ns, :, 0]))
+        parts.append(tuple(per_train))
+    return tuple(parts)
+
+
+def responses_of(parts, train, omega, ns_pad: int) -> np.ndarray:
+    """``harmonic_responses`` from the trains' ``response_parts`` (the same numbers)."""
+    out = np.zeros((omega.shape[0], 4, ns_pad), np.complex128)
+    single = len(parts) == 1
+    for t, per_train in enumerate(parts):
+        cases = slice(None) if single else np.flatnonzero(train == t)
+        w = omega[cases][:, None]
+        m = w.shape[0]
+        if m == 0:
+            continue
+        iw = 1j * w
+        w2 = w * w
+        for ci, ns, minus_a, b in per_train:
+            mat = np.empty((m, ns, ns), np.complex128)
+            mat[:] = minus_a
+            mat.reshape(m, ns * ns)[:, :: ns + 1] += iw  # the diagonal
+            rhs = -b[:, 0] - iw * b[:, 1] + w2 * b[:, 2]
             out[cases, ci, :ns] = np.linalg.solve(mat, rhs[..., None])[..., 0]
     return out
 

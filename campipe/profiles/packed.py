@@ -13,6 +13,8 @@ piece first.
 
 from __future__ import annotations
 
+import functools
+import weakref
 from collections.abc import Sequence
 from typing import NamedTuple
 
@@ -31,6 +33,59 @@ class PackedProfiles(NamedTuple):
     poly: np.ndarray  # (n_cases, P, 8) polynomial coefficients, zero-padded [m/rad**k]
     trig: np.ndarray  # (n_cases, P, 2) sin θ and cos θ coefficients, zero-padded [m]
     n_pieces: np.ndarray  # (n_cases,) int64 number of real pieces of each case
+
+
+class Keyed:
+    """A profile keyed by its numbers (breaks, coefficients): equal and of one hash for two
+    profiles of the same numbers, so a cache keyed by it serves a profile rebuilt per case
+    (a study's), and holds no bare ``id``. A profile's arrays are read-only, so its key stays
+    its numbers'."""
+
+    __slots__ = ("_hash", "key", "profile")
+
+    def __init__(self, profile: Profile) -> None:
+        self.profile = profile
+        self.key = (profile.breaks.tobytes(), profile.poly.tobytes(), profile.trig.tobytes())
+        self._hash = hash(self.key)
+
+    def __hash__(self) -> int:
+        return self._hash
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, Keyed) and self.key == other.key
+
+
+_KEYED: weakref.WeakKeyDictionary[Profile, Keyed] = weakref.WeakKeyDictionary()
+
+
+def keyed(profile: Profile) -> Keyed:
+    """The profile's :class:`Keyed`, made once per profile object."""
+    found = _KEYED.get(profile)
+    if found is None:
+        found = _KEYED[profile] = Keyed(profile)
+    return found
+
+
+#: The most profiles (cases) whose packing :func:`pack_cached` caches: the batches whose
+#: preparation weighs on a call; a larger batch is packed per call, so that the cache holds
+#: at most 256 packings of a few cases.
+CACHED_PROFILES = 16
+
+
+def pack_cached(profiles: Sequence[Profile]) -> PackedProfiles:
+    """:func:`pack`, cached by the profiles' numbers (the last 256 batches of up to
+    ``CACHED_PROFILES`` cases). The kernels only read the packed arrays: callers must not
+    write into them."""
+    if len(profiles) == 0:
+        raise ValueError("pack needs at least one profile")
+    if len(profiles) > CACHED_PROFILES:
+        return pack(profiles)
+    return _pack_keyed(tuple(keyed(p) for p in profiles))
+
+
+@functools.lru_cache(maxsize=256)
+def _pack_keyed(profiles: tuple[Keyed, ...]) -> PackedProfiles:
+    return pack([k.profile for k in profiles])
 
 
 def pack(profiles: Sequence[Profile]) -> PackedProfiles:

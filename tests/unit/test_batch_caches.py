@@ -1,0 +1,181 @@
+"""The batch's per-train and per-profile preparation is cached (issue 34: per-call overhead),
+and the caches leave every number of a run unchanged.
+
+``MIXED_DIGEST`` was computed on main before the caches (commit 7a8cc9a): a mixed batch run
+as one call, again (its caches warm), and case by case, through modal-exact and
+newmark-linear, from the periodic and the quasi-static start.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import math
+
+import numpy as np
+
+from campipe.engine import Case, RunSettings, run_batch
+from campipe.engine import batch as batch_module
+from campipe.model import thesis_train
+from campipe.profiles import harmonic, polydyne
+
+INCH = 0.0254
+MIXED_DIGEST = "c73001b6cbeb365de397be9ad9bc7525025ad9712bb53223729b414589bc12d6"
+
+
+def _cases() -> list[Case]:
+    thesis = thesis_train()
+    stiff = dataclasses.replace(thesis, spring_rate=1.3 * thesis.spring_rate)
+    harm = harmonic(INCH)
+    poly = polydyne("345", 0.4 * INCH, math.radians(80), math.radians(20), math.radians(80))
+    cases = []
+    for i, rpm in enumerate((1500.0, 4000.0, 9000.0)):
+        w = rpm * 2 * math.pi / 60
+        cases.append(Case(thesis, harm, w))
+        cases.append(Case(stiff, poly, w, seat=-0.0005 * (i + 1)))
+        cases.append(Case(thesis, poly, 1.2 * w, seat=-0.001))
+        cases.append(Case(stiff, harm, 0.8 * w))
+    return cases
+
+
+def _digest(results, h) -> None:
+    for r in results:
+        for name in (
+            "cam_angle", "time", "q", "v", "acc", "cam_lift", "cam_force", "seat_force",
+            "contact_state", "valve_reference", "measured", "per_rev", "steps", "status",
+            "start_time",
+        ):  # fmt: skip
+            a = np.ascontiguousarray(getattr(r, name))
+            h.update(f"{name}|{a.dtype}|{a.shape}|".encode())
+            h.update(a.tobytes())
+        for ev in r.events:
+            h.update(np.ascontiguousarray(ev).tobytes())
+
+
+def mixed_digest() -> str:
+    cases = _cases()
+    h = hashlib.sha256()
+    runs = (
+        RunSettings(revolutions=2),
+        RunSettings(revolutions=1.5, start="quasi-static"),
+        RunSettings(revolutions=1, integrator="newmark-linear", dt=3e-6),
+    )
+    refined = dataclasses.replace(thesis_train(), spring_elements=2)
+    for settings in runs:
+        if settings.integrator != "newmark-linear":  # it runs the thesis's 7 coordinates
+            cases = [*cases, Case(refined, cases[0].profile, 600.0, seat=-0.0004)]
+        _digest([run_batch(cases, settings), run_batch(cases, settings)], h)
+        _digest([run_batch([c], settings) for c in cases], h)
+        cases = cases[:12]
+    return h.hexdigest()
+
+
+def test_a_mixed_batch_runs_bit_identical_to_before_the_caches():
+    assert mixed_digest() == MIXED_DIGEST
+
+
+def _arrays(value) -> list[np.ndarray]:
+    """Every array in a (nested) named tuple or tuple."""
+    if isinstance(value, np.ndarray):
+        return [value]
+    if isinstance(value, tuple):
+        return [a for item in value for a in _arrays(item)]
+    return []
+
+
+def test_a_second_one_case_call_reuses_what_its_train_and_profile_fix(monkeypatch):
+    from campipe.profiles import packed
+
+    train = dataclasses.replace(thesis_train(), spring_rate=1.1 * thesis_train().spring_rate)
+    counts = {"stack": 0, "pack": 0, "grid": 0}
+
+    def counted(name, function, grid=False):
+        def wrapper(*args, **kwargs):
+            if not grid or np.size(args[1]) == 2049:
+                counts[name] += 1
+            return function(*args, **kwargs)
+
+        return wrapper
+
+    monkeypatch.setattr(batch_module, "stack_trains", counted("stack", batch_module.stack_trains))
+    monkeypatch.setattr(packed, "pack", counted("pack", packed.pack))
+    monkeypatch.setattr(batch_module, "evaluate", counted("grid", batch_module.evaluate, True))
+    for cache in (batch_module._train_stack, packed._pack_keyed, batch_module._peaks):
+        cache.cache_clear()
+    settings = RunSettings(revolutions=2)
+    first = run_batch([Case(train, harmonic(INCH), 300.0)], settings)
+    assert counts == {"stack": 1, "pack": 1, "grid": 1}
+    # Another speed and seat, and the profile rebuilt (equal numbers, a new object): the
+    # train's stack, the packed profile and its peaks come from the caches.
+    second = run_batch([Case(train, harmonic(INCH), 900.0, seat=-0.001)], settings)
+    assert counts == {"stack": 1, "pack": 1, "grid": 1}
+    assert batch_module._train_stack.cache_info().hits >= 1
+    # A profile of other numbers is packed and bounded anew; the train's stack is reused.
+    run_batch([Case(train, harmonic(0.9 * INCH), 900.0)], settings)
+    assert counts == {"stack": 1, "pack": 2, "grid": 2}
+    assert first.q.shape == second.q.shape == (1, 721, 7)
+    assert not np.array_equal(first.valve_lift, second.valve_lift)
+
+
+def test_the_caches_are_bounded_and_no_run_writes_into_what_they_hold():
+    from campipe.profiles import packed
+
+    for cache in (batch_module._train_stack, packed._pack_keyed, batch_module._peaks):
+        assert cache.cache_info().maxsize == 256
+    cases = _cases()
+    trains = tuple(dict.fromkeys(c.train for c in cases))
+    held = [
+        batch_module.train_stack(trains, 0.0),
+        batch_module.train_stack(trains, 3e-6),
+        packed.pack_cached([c.profile for c in cases]),
+    ]
+    before = [a.tobytes() for a in _arrays(tuple(held))]
+    assert len(before) > 40
+    for settings in (
+        RunSettings(revolutions=2),
+        RunSettings(revolutions=1.5, start="quasi-static"),
+        RunSettings(revolutions=1, integrator="newmark-linear", dt=3e-6),
+    ):
+        run_batch(cases, settings)
+    assert [a.tobytes() for a in _arrays(tuple(held))] == before
+    assert batch_module.train_stack(trains, 0.0) is held[0]  # what the runs took
+    assert packed.pack_cached([c.profile for c in cases]) is held[2]
+    # A batch of more cases, or of more trains, than the caches keep is prepared per call.
+    many = [c.profile for c in cases] * 2
+    assert len(many) > packed.CACHED_PROFILES
+    assert packed.pack_cached(many) is not packed.pack_cached(many)
+    more = tuple(
+        dataclasses.replace(cases[0].train, spring_rate=(1 + i / 10) * cases[0].train.spring_rate)
+        for i in range(batch_module.CACHED_TRAINS + 1)
+    )
+    assert batch_module.train_stack(more, 0.0) is not batch_module.train_stack(more, 0.0)
+
+
+def test_the_start_accelerations_are_evaluate_s_numbers_to_the_bit():
+    from campipe.profiles import evaluate
+
+    rng = np.random.default_rng(34)
+    harm = harmonic(INCH)
+    poly = polydyne("4567", 0.3 * INCH, math.radians(70), math.radians(10), math.radians(90))
+    for profile in (harm, poly):
+        theta = np.concatenate(
+            [rng.uniform(-20.0, 20.0, 300), profile.breaks, profile.breaks - 2 * math.pi]
+        )
+        expected = evaluate(profile, theta)[2]
+        for size in (1, 3, batch_module.FEW_ANGLES):
+            for start in range(0, theta.size - size, size):
+                got = batch_module.cam_accelerations(profile, theta[start : start + size])
+                assert got.tobytes() == expected[start : start + size].tobytes()
+        assert batch_module.cam_accelerations(profile, theta).tobytes() == expected.tobytes()
+
+
+def test_clearing_the_per_train_caches_makes_the_stacks_anew():
+    trains = (thesis_train(),)
+    first = batch_module.train_stack(trains, 0.0)
+    assert batch_module.train_stack(trains, 0.0) is first
+    batch_module.prepare.cache_clear()
+    batch_module.train_modal.cache_clear()
+    again = batch_module.train_stack(trains, 0.0)
+    assert again is not first
+    assert again.preps[0] is batch_module.prepare(trains[0], 0.0)
+    assert again.modal_trains.basis.tobytes() == first.modal_trains.basis.tobytes()
