@@ -70,7 +70,6 @@ from campipe.model import ValveTrain, system_matrices
 from campipe.model.assembly import SystemMatrices, configuration_frequencies
 from campipe.profiles import Profile, evaluate
 from campipe.profiles.packed import Keyed, PackedProfiles, evaluate_packed, keyed, pack, pack_cached
-from campipe.profiles.pieces import N_COEFFS, piece_index, wrap
 from campipe.vocabulary import (
     CAM,
     CAM_AND_SEAT,
@@ -500,13 +499,13 @@ def _start_accelerations(case_list, omega, t0, q0, v0, stack: TrainStack, which)
     theta = omega * t0
     profile = case_list[0].profile
     if all(case.profile is profile for case in case_list):
-        a0[:, CAM] = -(omega**2) * cam_accelerations(profile, theta)
+        a0[:, CAM] = -(omega**2) * evaluate(profile, theta)[2]
     else:
         by_profile: dict[Profile, list[int]] = {}
         for c, case in enumerate(case_list):
             by_profile.setdefault(case.profile, []).append(c)
         for profile, members in by_profile.items():
-            a0[members, CAM] = -(omega[members] ** 2) * cam_accelerations(profile, theta[members])
+            a0[members, CAM] = -(omega[members] ** 2) * evaluate(profile, theta[members])[2]
     single = len(stack.preps) == 1
     for t, prep in enumerate(stack.preps):
         rows = np.arange(n) if single else np.flatnonzero(which == t)
@@ -529,35 +528,6 @@ def _peaks(profile: Keyed) -> tuple[float, float]:
     """A profile's largest |lift| [m] and |dlift/dθ| [m/rad] on a grid of 2049 angles."""
     lifts, rates, _ = evaluate(profile.profile, np.linspace(0.0, TWO_PI, 2049))
     return float(np.max(np.abs(lifts))), float(np.max(np.abs(rates)))
-
-
-#: Angles up to which :func:`cam_accelerations` evaluates in Python floats (numpy's calls cost
-#: more than their arithmetic for a few angles; above, ``profiles.evaluate`` on the array).
-FEW_ANGLES = 8
-
-
-def cam_accelerations(profile: Profile, theta: np.ndarray) -> np.ndarray:
-    """d²lift/dθ² [m/rad²] at the angles ``theta`` (1-d): ``profiles.evaluate``'s numbers to
-    the bit (the same operations in the same order: IEEE products and sums are the same in
-    numpy and in Python floats; sine and cosine are numpy's), for a few angles without
-    numpy's per-call cost."""
-    if theta.size > FEW_ANGLES:
-        return evaluate(profile, theta)[2]
-    t = wrap(theta)
-    index = piece_index(profile, t)
-    sin, cos = np.sin(t).tolist(), np.cos(t).tolist()
-    out = np.empty(theta.size)
-    for j, (tj, i) in enumerate(zip(t.tolist(), index.tolist(), strict=True)):
-        x = tj - float(profile.breaks[i])
-        c = profile.poly[i].tolist()
-        p, dp, ddp = c[N_COEFFS - 1], 0.0, 0.0
-        for k in range(N_COEFFS - 2, -1, -1):
-            ddp = ddp * x + 2.0 * dp
-            dp = dp * x + p
-            p = p * x + c[k]
-        a, b = profile.trig[i].tolist()
-        out[j] = ddp - a * sin[j] - b * cos[j]
-    return out
 
 
 def _bounds(

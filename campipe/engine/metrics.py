@@ -94,7 +94,7 @@ def _pressure(side: int) -> Callable[[Any, Any], np.ndarray]:
 
 def _spring(name: str, how: str) -> Callable[[Any, Any], np.ndarray]:
     def derive(result, trains) -> np.ndarray:
-        histories = result.spring_histories(trains)
+        histories = result.spring_histories()
         return per_turn(histories[name], result.cam_angle, result.n_turns, how)
 
     return derive

@@ -76,12 +76,12 @@ class BatchResult:
         """(n_cases,) a metric's summary over the measured turns, SI."""
         return metrics.by_key()[key].summarise(self.metric_per_rev(key), self.measured)
 
-    def spring_histories(self, trains: Sequence[ValveTrain]) -> dict[str, np.ndarray]:
-        """The spring's histories (``engine.loads.SPRING_HISTORIES``), (n_cases, n_out) each,
-        computed once from q."""
+    def spring_histories(self) -> dict[str, np.ndarray]:
+        """The spring's histories (``engine.loads.SPRING_HISTORIES``) of each case's train,
+        (n_cases, n_out) each, computed once from q."""
         cached = self._derived.get("spring_histories")
         if cached is None:
-            per_case = [spring_histories(t, self.q[i]) for i, t in enumerate(trains)]
+            per_case = [spring_histories(t, self.q[i]) for i, t in enumerate(self.trains)]
             cached = self._derived["spring_histories"] = {
                 name: np.stack([p[name] for p in per_case]) for name in per_case[0]
             }

@@ -151,24 +151,6 @@ def test_the_caches_are_bounded_and_no_run_writes_into_what_they_hold():
     assert batch_module.train_stack(more, 0.0) is not batch_module.train_stack(more, 0.0)
 
 
-def test_the_start_accelerations_are_evaluate_s_numbers_to_the_bit():
-    from campipe.profiles import evaluate
-
-    rng = np.random.default_rng(34)
-    harm = harmonic(INCH)
-    poly = polydyne("4567", 0.3 * INCH, math.radians(70), math.radians(10), math.radians(90))
-    for profile in (harm, poly):
-        theta = np.concatenate(
-            [rng.uniform(-20.0, 20.0, 300), profile.breaks, profile.breaks - 2 * math.pi]
-        )
-        expected = evaluate(profile, theta)[2]
-        for size in (1, 3, batch_module.FEW_ANGLES):
-            for start in range(0, theta.size - size, size):
-                got = batch_module.cam_accelerations(profile, theta[start : start + size])
-                assert got.tobytes() == expected[start : start + size].tobytes()
-        assert batch_module.cam_accelerations(profile, theta).tobytes() == expected.tobytes()
-
-
 def test_clearing_the_per_train_caches_makes_the_stacks_anew():
     trains = (thesis_train(),)
     first = batch_module.train_stack(trains, 0.0)

@@ -178,7 +178,7 @@ def batch_arrays(plan: BatchPlan, result: BatchResult) -> BatchData:
         per_case = [member_loads(c.case.train, result.q[i]) for i, c in enumerate(plan.cases)]
         for name in loads:
             arrays[name] = np.stack([p[name] for p in per_case])
-    arrays.update(_spring_arrays(plan, result, set(wanted)))
+    arrays.update(_spring_arrays(result, set(wanted)))
     arrays.update(event_arrays(result.events, [c.case.speed for c in plan.cases]))
     missing = set(wanted) - set(arrays)
     assert not missing, missing
@@ -193,12 +193,12 @@ def batch_arrays(plan: BatchPlan, result: BatchResult) -> BatchData:
     )
 
 
-def _spring_arrays(plan: BatchPlan, result: BatchResult, wanted: set[str]) -> dict:
+def _spring_arrays(result: BatchResult, wanted: set[str]) -> dict:
     """The spring's histories, as far as ``wanted`` asks (its metrics are the metrics
     table's)."""
     if not set(SPRING_HISTORIES) & wanted:
         return {}
-    histories = result.spring_histories([c.case.train for c in plan.cases])
+    histories = result.spring_histories()
     return {name: h for name, h in histories.items() if name in wanted}
 
 
