@@ -613,7 +613,7 @@ def run_batch(
         cam_force=-out.force[:, :, 0],
         seat_force=out.force[:, :, 1],
         contact_state=out.cfg,
-        valve_reference=qref,
+        valve_reference=qref + np.array([c.lift_zero for c in cases]),  # 0 on a lash's seat
         measured=measured,
         per_rev=out.per_rev,
         trains=[c.train for c in cases],

@@ -77,8 +77,9 @@ def compliant_contacts(train: ValveTrain, has_seat: bool) -> bool:
 
 @functools.lru_cache(maxsize=256)
 def _lash_seat(train: ValveTrain) -> float:
-    """The seat a train's lash places (``campipe.model.lash_seat``), once per train."""
-    return lash_seat(system_matrices(train), train.lash)
+    """The seat a train's lash places (``campipe.model.lash_seat``, on the train's
+    ``lash_side``), once per train."""
+    return lash_seat(system_matrices(train), train.lash, train.lash_side)
 
 
 @dataclass(frozen=True)
@@ -88,7 +89,9 @@ class Case:
     train: ValveTrain  # model parameters [SI]
     profile: Profile  # cam lift over one turn, defects applied
     speed: float  # cam speed [rad/s]
-    seat: float = math.nan  # seat position as a valve lift [m]; NaN: no seat
+    #: seat position as a valve lift from the valve's static position on the base circle
+    #: with no seat [m]; NaN: no seat. A train with lash places it (``lift_zero``).
+    seat: float = math.nan
     closure: str = "force"  # "force": spring-held, may separate; "form": never leaves the cam
 
     def __post_init__(self) -> None:
@@ -97,10 +100,11 @@ class Case:
             return
         seat = _lash_seat(self.train)
         if not math.isnan(self.seat) and self.seat != seat:
+            side = getattr(self.train, "lash_side", "valve")
             raise CaseError.at(
                 "seat",
-                f"a seat at {self.seat:.6g} m beside a train's lash of {lash:.6g} m (which "
-                f"places it at {seat:.6g} m); give one of them",
+                f"a seat at {self.seat:.6g} m beside a train's lash of {lash:.6g} m on the "
+                f"{side} side, which places the seat at {seat:.6g} m; give one of them",
                 found=self.seat,
                 expected="no seat (NaN), or a train without lash",
             )
@@ -109,6 +113,14 @@ class Case:
     @property
     def has_seat(self) -> bool:
         return not math.isnan(self.seat)
+
+    @property
+    def lift_zero(self) -> float:
+        """Where the case's valve lift reads 0, as a valve lift from the valve's static
+        position on the base circle with no seat [m]: the seat in a train with lash (the
+        valve's closed position: valve lift 0 on the seat), else 0 (that static position,
+        the thesis's)."""
+        return self.seat if not math.isnan(getattr(self.train, "lash", math.nan)) else 0.0
 
     @property
     def compliant(self) -> bool:

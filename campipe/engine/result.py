@@ -41,7 +41,9 @@ class BatchResult:
     cam_force: np.ndarray  # (n_cases, n_out) cam contact force, compressive positive [N]
     seat_force: np.ndarray  # (n_cases, n_out) seat contact force, compressive positive [N]
     contact_state: np.ndarray  # (n_cases, n_out) int8, 1–4 = configurations I–IV
-    valve_reference: np.ndarray  # (n_cases,) q7 at zero valve lift [m]
+    #: (n_cases,) q7 at zero valve lift [m]: the valve's static position on the base circle
+    #: with no seat, or its seated one in a train with lash (``Case.lift_zero``)
+    valve_reference: np.ndarray
     measured: np.ndarray  # (n_rev,) bool: the turn counts in the summaries (after warm-up)
     #: (n_cases, n_rev, metrics.N_ENGINE) the engine's metrics per turn, in the columns of
     #: ``metrics.ENGINE`` (NaN for a failed case)
@@ -104,7 +106,8 @@ class BatchResult:
 
     @property
     def valve_lift(self) -> np.ndarray:
-        """(n_cases, n_out) valve opening from its base-circle static position [m]."""
+        """(n_cases, n_out) valve opening from its base-circle static position, or from its
+        seat in a train with lash [m]."""
         return self.q[:, :, SEAT] - self.valve_reference[:, None]
 
     @property

@@ -5,7 +5,6 @@ from campipe.model.assembly import (
     assemble,
     configuration_frequencies,
     damping_matrix,
-    lash_seat,
     loss_factor_damping,
     modal_damping,
     modal_damping_ratios,
@@ -24,9 +23,11 @@ from campipe.model.coordinates import (
     n_coordinates,
     translations,
 )
+from campipe.model.lash import cam_gap, lash_ratio, lash_seat
 from campipe.model.parameters import (
     DAMPING_KINDS,
     ELEMENTS,
+    LASH_SIDES,
     PARAMETERS,
     PRESETS,
     ModelParameterError,
@@ -43,6 +44,7 @@ __all__ = [
     "COORDINATES",
     "DAMPING_KINDS",
     "ELEMENTS",
+    "LASH_SIDES",
     "PARAMETERS",
     "PRESETS",
     "Coordinate",
@@ -53,6 +55,8 @@ __all__ = [
     "configuration_frequencies",
     "coordinates",
     "damping_matrix",
+    "cam_gap",
+    "lash_ratio",
     "lash_seat",
     "defining_values",
     "loss_factor_damping",

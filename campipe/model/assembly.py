@@ -21,7 +21,7 @@ from campipe import disk_cache
 from campipe.model.coordinates import TRANSLATIONS, translations
 from campipe.model.elements import elements
 from campipe.model.parameters import N_DOF, ValveTrain, mode_damping_ratios
-from campipe.vocabulary import CAM, CONFIGURATIONS, SEAT, free_coordinates
+from campipe.vocabulary import CONFIGURATIONS, free_coordinates
 
 #: Newmark linear acceleration (β = 1/6, γ = 1/2) is stable for ω·Δt < √12 (= (√3/π)·T),
 #: whatever the damping (the γ = 1/2 family's limit does not depend on ζ).
@@ -198,20 +198,6 @@ def static_state(stiffness: np.ndarray, load: np.ndarray, held: dict[int, float]
     q[h] = [held[i] for i in h]
     q[f] = np.linalg.solve(stiffness[np.ix_(f, f)], load[f] - stiffness[np.ix_(f, h)] @ q[h])
     return q
-
-
-def lash_seat(sm: SystemMatrices, lash: float) -> float:
-    """The seat, as a valve lift, at which the train with its valve seated and its cam on the
-    base circle stands ``lash`` off the cam [m].
-
-    Valve lift is q7 measured from the valve's static position with the follower on the base
-    circle and no seat (the preload compressing the train). Seated, the train sheds that
-    load: it grows by the preload's deflection, all but the stem's share (the stem still
-    carries the spring's force to the seat). So the seat is the rocker ratio times the lash
-    plus that deflection, solved here from the two static states (linear in the seat)."""
-    reference = static_state(sm.stiffness, sm.preload, {CAM: 0.0})[SEAT]
-    gap = [-static_state(sm.stiffness, sm.preload, {SEAT: reference + s})[CAM] for s in (0, 1)]
-    return (lash - gap[0]) / (gap[1] - gap[0])
 
 
 def configuration_frequencies(

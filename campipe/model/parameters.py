@@ -55,6 +55,10 @@ N_DOF = 7
 #: Most finite elements a member may be divided into: dense matrices of a few hundred
 #: coordinates at most.
 MAX_ELEMENTS = 64
+#: Where a train's ``lash`` is measured: at the rocker's valve end (a designer's feeler gauge
+#: between the rocker and the valve stem; the default) or at the cam, between the base circle
+#: and the follower (:mod:`campipe.model.lash`).
+LASH_SIDES = ("valve", "cam")
 #: Damping kinds: the thesis's modal damping, Rayleigh's, per-member loss factors.
 DAMPING_KINDS = ("modal", "rayleigh", "loss-factor")
 #: Contact laws at the cam–follower and valve–seat contacts: the thesis's rigid plastic
@@ -260,14 +264,25 @@ PARAMETERS: dict[str, Parameter] = {
         *_refinement_parameters(),
         Parameter(
             "lash",
-            "clearance between the cam's base circle and the follower with the valve seated "
-            "(none: the case's seat decides); it places the seat (campipe.model.lash_seat)",
+            "valve lash: the clearance of the seated train on the cam's base circle, measured "
+            "where lash_side says (none: the case's seat decides); it places the seat "
+            "(campipe.model.lash_seat), where valve lift reads 0",
             "m",
             "in",
             0.0,
             exclusive_minimum=False,
             default="none",
             allow_none=True,
+        ),
+        Parameter(
+            "lash_side",
+            "where the lash is measured: valve (at the rocker's valve end, against the valve "
+            "stem) or cam (between the cam's base circle and the follower)",
+            "",
+            "",
+            0.0,
+            choices=LASH_SIDES,
+            default="valve",
         ),
         Parameter(
             "spring_travel_to_solid",
@@ -359,7 +374,7 @@ class ValveTrain:
     rocker_valve_arm_elements: int  # [-]
     spring_elements: int  # [-]
     valve_stem_elements: int  # [-]
-    lash: float  # [m] cam-side clearance of a seated train; NaN: none (the case's seat)
+    lash: float  # [m] clearance of a seated train, on ``lash_side``; NaN: none (the seat)
     spring_travel_to_solid: float  # [m] installed length minus solid length
     damping_kind: str  # one of DAMPING_KINDS
     rayleigh_alpha: float  # [1/s] C = α·M + β·K
@@ -369,6 +384,7 @@ class ValveTrain:
     rocker_valve_arm_loss_factor: float  # [-]
     spring_loss_factor: float  # [-]
     valve_stem_loss_factor: float  # [-]
+    lash_side: str = "valve"  # one of LASH_SIDES: where ``lash`` is measured
     cam_contact: str = "rigid"  # one of CONTACT_LAWS
     cam_contact_stiffness: float = 0.0  # [N/m] k; 0: from the line contact
     cam_contact_damping: float = 0.0  # [N·s/m] c

@@ -1,5 +1,6 @@
-"""Lash (``model.lash``): the clearance a seated train stands off its cam, taken up by the
-opening ramp; the seat it places; how a spec refuses it beside a seat."""
+"""Lash (``model.lash``) measured at the cam (``lash_side: cam``): the clearance a seated train
+stands off its cam, taken up by the opening ramp; the seat it places; how a spec refuses it
+beside a seat. The valve side, the default, is tests/unit/test_lash_side.py."""
 
 import math
 
@@ -26,15 +27,15 @@ def test_the_lash_places_the_seat():
     a train a million times stiffer seats at exactly 1.5 × lash (rigid kinematics); the
     thesis train's give is the preload over its stiffness seen from the valve, here against
     the two-spring hand estimate F·(1/k_train) within 5 %; the engine's Case places it."""
-    train = thesis_train().replace(lash=LASH)
+    train = thesis_train().replace(lash=LASH, lash_side="cam")
     ratio = train.rocker_valve_arm_length / train.rocker_pushrod_arm_length
     assert ratio == pytest.approx(1.5)
     stiff = train.replace(elastic_modulus=train.elastic_modulus * 1e6)
-    assert lash_seat(system_matrices(stiff), LASH) == pytest.approx(1.5 * LASH, rel=1e-6)
-    give = lash_seat(system_matrices(train), LASH) - 1.5 * LASH
+    assert lash_seat(system_matrices(stiff), LASH, "cam") == pytest.approx(1.5 * LASH, rel=1e-6)
+    give = lash_seat(system_matrices(train), LASH, "cam") - 1.5 * LASH
     assert 0.05e-3 < give < 0.1e-3
     case = Case(train, PROFILE, 300 * math.pi / 30)
-    assert case.seat == lash_seat(system_matrices(train), LASH)
+    assert case.seat == lash_seat(system_matrices(train), LASH, "cam")
     with pytest.raises(CaseError, match="give one of them") as exc:
         Case(train, PROFILE, 300 * math.pi / 30, seat=1e-3)
     assert exc.value.key == "seat"
@@ -49,7 +50,7 @@ def test_the_cam_takes_the_lash_up_where_its_lift_equals_the_lash(rpm):
     velocity height/duration·ω, the follower being at rest. Hand calculation, independent
     of the engine: θ = lash / height · duration."""
     omega = rpm * math.pi / 30
-    case = Case(thesis_train().replace(lash=LASH), PROFILE, omega)
+    case = Case(thesis_train().replace(lash=LASH, lash_side="cam"), PROFILE, omega)
     res = run_batch([case], RunSettings(revolutions=3))
     ev = res.events[0]
     cam = ev[ev[:, EV_KIND] == CAM_IMPACT]
@@ -66,7 +67,7 @@ def test_the_cam_takes_the_lash_up_where_its_lift_equals_the_lash(rpm):
 
 SPEC = """
 name: lash
-model: {preset: thesis-1971, lash: 0.2 mm}
+model: {preset: thesis-1971, lash: 0.2 mm, lash_side: cam}
 profile: {kind: polydyne-4567, lift: 0.3 in, rise: 100 deg, dwell: 20 deg, fall: 100 deg,
           ramp_height: 0.3 mm, ramp_duration: 30 deg}
 speed: 1000 rpm
@@ -76,7 +77,7 @@ speed: 1000 rpm
 def test_a_spec_with_lash(tmp_path):
     study = load_study(write_spec(tmp_path, SPEC + "sweep: {model.lash: [0.1 mm, 0.2 mm]}\n"))
     sm = system_matrices(thesis_train())
-    seats = [lash_seat(sm, 1e-4), lash_seat(sm, 2e-4)]
+    seats = [lash_seat(sm, 1e-4, "cam"), lash_seat(sm, 2e-4, "cam")]
     assert [c.case.seat for c in study.cases] == pytest.approx(seats, rel=1e-12)
     assert seats[1] - seats[0] == pytest.approx(1.5e-4, rel=0.01)  # the rocker ratio
     assert [c.values["model.lash"] for c in study.cases] == pytest.approx([1e-4, 2e-4])
@@ -89,7 +90,7 @@ def test_a_spec_with_lash(tmp_path):
     ("extra", "key", "words"),
     [
         ("seat: 0.1 in\n", "seat", "give one of them"),
-        ("", "model.lash", "cam's full lift"),
+        ("", "model.lash", "below the full valve lift"),
     ],
 )
 def test_bad_lash_names_its_key(tmp_path, extra, key, words):

@@ -59,6 +59,7 @@ from campipe.study.spec.fields import (
     SpecProblem,
     varied_fields,
 )
+from campipe.units import QuantityError, convert, read_quantity
 
 #: Lift below the base circle tolerated as round-off [m].
 LIFT_TOLERANCE = 1e-12
@@ -403,31 +404,25 @@ def resolve_canonical(raw: Mapping, index: int, directory: Path) -> tuple[Resolv
     closure = parse_value("closure", raw["closure"], "closure")
     ratio = train.rocker_valve_arm_length / train.rocker_pushrod_arm_length
     if not math.isnan(train.lash):
-        if seat is not None:
-            raise SpecProblem(
+        seat = _lash_placed_seat(raw, model, train, seat)
+    if seat is not None and seat >= full * ratio:
+        raise (
+            SpecProblem(
                 "seat",
-                f"found {excerpt(raw['seat'])} beside model.lash "
-                f"{train.lash / INCH:.4g} in: the lash places the seat; give one of them "
-                "(seat: none, or model.lash: none)",
+                f"found {excerpt(raw['seat'])}, expected a valve lift below "
+                f"the full valve lift {full * ratio / INCH:.4g} in (cam lift "
+                f"{full / INCH:.4g} in × rocker ratio {ratio:.4g}): above it "
+                "the valve never leaves its seat",
             )
-        seat = lash_seat(system_matrices(train), train.lash)
-    if seat is not None:
-        if seat >= full * ratio:
-            raise (
-                SpecProblem(
-                    "seat",
-                    f"found {excerpt(raw['seat'])}, expected a valve lift below "
-                    f"the full valve lift {full * ratio / INCH:.4g} in (cam lift "
-                    f"{full / INCH:.4g} in × rocker ratio {ratio:.4g}): above it "
-                    "the valve never leaves its seat",
-                )
-                if math.isnan(train.lash)
-                else SpecProblem(
-                    "model.lash",
-                    f"found {train.lash / INCH:.4g} in, expected less than the cam's full lift "
-                    f"{full / INCH:.4g} in: the follower would never reach the rocker",
-                )
+            if math.isnan(train.lash)
+            else SpecProblem(
+                "model.lash",
+                f"found {_lash_words(model, train)}, which places the seat at "
+                f"{_in_units(seat, model.get('lash'))}, expected a seat below the full "
+                f"valve lift {_in_units(full * ratio, model.get('lash'))}: the follower would "
+                "never reach the rocker",
             )
+        )
     run = raw["run"]
     # the engine's settings; the study's own (record, compression) are read by ``expand``
     rs = {k: parse_value(f"run.{k}", freeze(run[k]), f"run.{k}") for k in RUN_SETTINGS}
@@ -446,7 +441,7 @@ def resolve_canonical(raw: Mapping, index: int, directory: Path) -> tuple[Resolv
     values.update(
         {
             "speed": speed,
-            "seat": math.nan if seat is None else seat,
+            "seat": math.nan if seat is None else case.seat - case.lift_zero,  # 0: a lash's
             "closure": closure,
             **{f"run.{name}": _archive_value(getattr(settings, name)) for name in RUN_SETTINGS},
             "run.integrator": settings.method,
@@ -484,6 +479,43 @@ def canonical_run(settings: RunSettings) -> dict[str, object]:
         if f.name not in CANONICAL_RUN and getattr(settings, f.name) != f.default:
             out[f.name] = clean_value(getattr(settings, f.name))
     return out
+
+
+def _lash_placed_seat(raw: Mapping, model: Mapping, train: ValveTrain, seat: float | None) -> float:
+    """The seat a train's lash places (``campipe.model.lash_seat``); a seat given beside it
+    refused at ``seat``, with the seat the lash places in the spec's units."""
+    placed = lash_seat(system_matrices(train), train.lash, train.lash_side)
+    if seat is not None:
+        where = _in_units(placed, model.get("lash"), raw["seat"])
+        raise SpecProblem(
+            "seat",
+            f"found {excerpt(raw['seat'])} beside model.lash {_lash_words(model, train)}, "
+            f"which places the seat at {where} (a valve lift from the valve's static position "
+            "on the base circle, as seat is given); give one of them (seat: none, or "
+            "model.lash: none)",
+        )
+    return placed
+
+
+def _lash_words(model: Mapping, train: ValveTrain) -> str:
+    """The train's lash as the spec wrote it and its side: ``0.2 mm on the valve side``."""
+    written = model.get("lash")
+    lash = excerpt(written) if isinstance(written, str) else _in_units(train.lash)
+    return f"{lash} on the {train.lash_side} side"
+
+
+def _in_units(value: float, *written: object) -> str:
+    """A length ``value`` [m] in the units of the first of the spec's values ``written``
+    that is a length with units (``0.2 mm``), else in inches."""
+    for text in written:
+        if isinstance(text, str):
+            try:
+                q = read_quantity(text, "")
+            except QuantityError:
+                continue
+            if q.check("[length]"):
+                return f"{convert(value, 'm', str(q.units)):.4g} {q.units:~}"
+    return f"{value / INCH:.4g} in"
 
 
 def check_settings(settings: RunSettings) -> None:
