@@ -41,13 +41,14 @@ from campipe.engine.batch import (
     valve_reference,
 )
 from campipe.engine.closed_form import STATE, ExactRuns, ModalTrains, make_workspace, stack_trains
-from campipe.engine.common import Cases
+from campipe.engine.common import SMOOTH, Cases, classify_break
 from campipe.engine.metrics import MAX_CAM_FORCE, N_ENGINE
 from campipe.engine.modal import ModalData
 from campipe.engine.settings import sample_count, turn_count
 from campipe.model import ValveTrain
 from campipe.model.assembly import preload_vector
-from campipe.profiles import pack
+from campipe.profiles import Profile, pack
+from campipe.profiles.pieces import evaluate_pieces
 from campipe.vocabulary import CAM, CAM_CONTACT, N_EVENT_FIELDS, OK, SEAT
 
 #: Turns the engine integrates for a steady state with the valve seated on part of the turn
@@ -169,8 +170,10 @@ class SteadyExtremes:
     @property
     def holds(self) -> np.ndarray:
         """(n,) bool: configuration I holds all turn (the cam pushes, the valve stays off its
-        seat), so the closed form is the steady state."""
-        return (self.min_cam_force >= 0.0) & (self.min_seat_height >= 0.0)
+        seat; a least force or height of zero is the edge of a separation or a seating, and
+        does not hold), so the closed form is the steady state wherever the profile has no
+        break the follower cannot cross held (``break_events``)."""
+        return (self.min_cam_force > 0.0) & (self.min_seat_height > 0.0)
 
 
 def _as_extremes(out: np.ndarray) -> SteadyExtremes:
@@ -278,41 +281,112 @@ def _samples(
 # --------------------------------------------------------------------------- the level
 
 
+def _break_limits(profile: Profile) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Each break's one-sided lift [m] and lift rate [m/rad], left and right: break k ends
+    piece k and starts piece k + 1 (the last, at 2π, starts the next turn's piece 0)."""
+    n = profile.n_pieces
+    left = evaluate_pieces(profile, np.arange(n), profile.breaks[1:])
+    right_piece = np.arange(1, n + 1) % n
+    right = evaluate_pieces(profile, right_piece, profile.breaks[right_piece])
+    return left[0], left[1], right[0], right[1]
+
+
+def break_events(cases: Sequence[Case], capture: float) -> np.ndarray:
+    """(n,) bool: the case's profile has a break that a follower held on the cam cannot cross
+    held at the case's speed (``common.classify_break``, the test the integrators apply: a lift
+    rate that drops or a lift that steps down under a force-closed follower releases it; a
+    rate that jumps into it, by more than the capture velocity ``capture`` [m/s], strikes it).
+
+    Every turn of such a case has events (a release and a landing, or an impact) that
+    configuration I's closed form cannot have: the thesis's flat across the nose, a
+    constant-velocity ramp's velocity steps. A rate jump within rounding or below the capture
+    velocity is crossed held, as the integrators cross it."""
+    classify = classify_break.py_func  # the compiled test's own Python (numba's public py_func)
+    limits: dict[int, tuple[np.ndarray, ...]] = {}
+    out = np.zeros(len(cases), np.bool_)
+    for i, case in enumerate(cases):
+        key = id(case.profile)
+        if key not in limits:
+            limits[key] = _break_limits(case.profile)
+        form = case.closure == "form"
+        out[i] = any(
+            classify(l0, d0, l1, d1, case.speed, form, capture)[0] != SMOOTH
+            for l0, d0, l1, d1 in zip(*limits[key], strict=True)
+        )
+    return out
+
+
+def steady_cases(cases: Sequence[Case], settings: RunSettings) -> np.ndarray:
+    """(n,) bool: the cases ``run_at_fidelity`` takes from the closed form at the steady
+    level (``_steady_mask``; compliant cases never). The probe it pays, alone."""
+    check_run(cases, settings, check_stability_limit=False)
+    take = np.zeros(len(cases), np.bool_)
+    rigid = np.flatnonzero([not c.compliant for c in cases])
+    if rigid.size:
+        some = [cases[int(i)] for i in rigid]
+        batch = _prepare(some)
+        ext = _as_extremes(batch.extremes(batch.cases.omega.copy()))
+        take[rigid] = _steady_mask(some, ext, settings)
+    return take
+
+
+def _steady_mask(cases: Sequence[Case], ext: SteadyExtremes, settings: RunSettings) -> np.ndarray:
+    """Which of the rigid ``cases`` (their extremes ``ext``) the steady level takes: those whose
+    periodic state is configuration I's all turn (``SteadyExtremes.holds``: the least cam force
+    above zero, the valve clear of its seat) and whose profile the follower crosses held
+    (no ``break_events``). The others have events every turn: the full engine runs them."""
+    holds = ext.holds
+    if holds.any():
+        idx = np.flatnonzero(holds)
+        jumps = break_events([cases[int(i)] for i in idx], settings.capture_velocity)
+        holds = holds.copy()
+        holds[idx[jumps]] = False
+    return holds
+
+
 def run_at_fidelity(cases: Sequence[Case], settings: RunSettings, **options) -> BatchResult:
     """:func:`~campipe.engine.batch.run_batch` at the run's fidelity level
     (``RunSettings.level``). ``full``: run_batch. ``steady``: each case whose periodic steady
     state is configuration I's all turn (``SteadyExtremes.holds``: it follows the cam with
-    the valve clear of its seat) from that closed form, one turn's samples repeated over the
-    run's turns with no events; the others (and compliant cases) by run_batch; the results
-    in case order. The margin that decides it is the level's probe, paid per case."""
+    the valve clear of its seat) and whose profile has no break the follower cannot cross
+    held at its speed (``break_events``: a velocity jump above the capture velocity, a step
+    down) from that closed form, one turn's samples repeated over the run's turns with no
+    events; the others (and compliant cases) by run_batch; the results in case order
+    (``steady_cases`` names the first). The margin that decides it is the level's probe, paid
+    per case."""
     if settings.level == "full":
         return run_batch(cases, settings, **options)
     check_run(cases, settings, check_stability_limit=options.get("check_stability_limit", True))
     rigid = np.flatnonzero([not c.compliant for c in cases])
-    holds = np.zeros(len(cases), np.bool_)
+    take = np.zeros(len(cases), np.bool_)
     parts = []
     if rigid.size:
-        batch = _prepare([cases[int(i)] for i in rigid], need_reference=True)
+        some = [cases[int(i)] for i in rigid]
+        batch = _prepare(some, need_reference=True)
         ext = _as_extremes(batch.extremes(batch.cases.omega.copy()))  # the probe
-        holds[rigid] = ext.holds
-        if ext.holds.any():
-            some = [cases[int(i)] for i in rigid[ext.holds]]
-            parts.append((rigid[ext.holds], _steady_result(batch, ext, some, settings)))
-    if not holds.all():
-        index = np.flatnonzero(~holds)
+        mask = _steady_mask(some, ext, settings)
+        take[rigid] = mask
+        if mask.any():
+            held = [cases[int(i)] for i in rigid[mask]]
+            parts.append((rigid[mask], _steady_result(batch, ext, mask, held, settings)))
+    if not take.all():
+        index = np.flatnonzero(~take)
         full = dataclasses.replace(settings, fidelity="full", fidelity_tolerance=None)
         parts.append((index, run_batch([cases[int(i)] for i in index], full, **options)))
     return merge_results(len(cases), parts)
 
 
 def _steady_result(
-    batch: _SteadyBatch, ext: SteadyExtremes, cases: Sequence[Case], settings: RunSettings
+    batch: _SteadyBatch,
+    ext: SteadyExtremes,
+    held: np.ndarray,
+    cases: Sequence[Case],
+    settings: RunSettings,
 ) -> BatchResult:
-    """The run of the cases of ``batch`` whose steady state holds (``cases``, in order), from
-    its closed form, the probe's batch and extremes reused (``run_at_fidelity``)."""
+    """The run of the cases ``held`` (a mask) of ``batch`` (``cases``, in order), from its
+    closed form, the probe's batch and extremes reused (``run_at_fidelity``)."""
     angles = output_angles(settings)
     turn, back = np.unique(np.mod(angles, TWO_PI), return_inverse=True)
-    held = ext.holds
     st = _samples(batch, ext, turn, held)
     omega = batch.cases.omega[held]
     n, n_rev = len(cases), turn_count(settings.revolutions)

@@ -43,9 +43,12 @@ DEFAULT_STEPS: dict[str, float | None] = {
 }
 #: Model fidelity of a run, cheapest last: "full", every case through its events with every
 #: mode; "steady", each case whose periodic steady state is configuration I's all turn (it
-#: follows the cam, the valve clear of its seat) from that closed form, one turn computed and
-#: repeated (``engine.periodic.run_at_fidelity``), the others in full. The full run starts on
-#: that same steady state and stays there, so the two agree to FIDELITY_ERRORS. A level that did
+#: follows the cam with a least force above zero, the valve clear of its seat) and whose
+#: profile has no velocity jump at its speed above the capture velocity (a flat, a
+#: constant-velocity ramp: events every turn, ``engine.periodic.break_events``) from that
+#: closed form, one turn computed and repeated (``engine.periodic.run_at_fidelity``), the
+#: others in full. The full run starts on that same steady state and stays there, so the two
+#: agree to FIDELITY_ERRORS. A level that did
 #: not pay was removed (docs/bench.md, "Model only what a scene needs"; the CHANGELOG has the
 #: figures): "reduced" (the upper modes quasi-static between events) saved little for its
 #: error and changed the event sequence of many seated cases.
