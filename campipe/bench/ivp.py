@@ -28,9 +28,8 @@ here: an impact needs a positive closing velocity; with the other contact held, 
 where the impact would separate it faster than the capture velocity; an impact slower than
 that leaves its contact resting (held as any other: it releases where its force reaches
 zero, to ``common.RESTING_LEVEL`` of the force level), and a release it closes again at once
-is taken back. The run starts
-where the engine's does (``campipe.engine.start_states``): the scenario is the same, the
-integration independent.
+is taken back. The run starts where the engine's does (``campipe.engine.start_states``): the
+scenario is the same, the integration independent.
 
 Pure numerics: arrays in, arrays out.
 """
