@@ -26,10 +26,10 @@ of the profile at a break (a flat's edges) releases the follower where the surfa
 and is an impact where it rises into it. The contact rules are the engine's, written again
 here: an impact needs a positive closing velocity; with the other contact held, it releases
 where the impact would separate it faster than the capture velocity; an impact slower than
-that leaves its contact resting (held until it pulls beyond the hold ``modal.ModalData.hold`` ×
-the closing velocity), and a release it closes again at once is taken back. The run starts
-where the engine's does (``campipe.engine.start_states``): the scenario is the same, the
-integration independent.
+that leaves its contact resting (held as any other: it releases where its force reaches
+zero, to ``common.RESTING_LEVEL`` of the force level), and a release it closes again at once
+is taken back. The run starts where the engine's does (``campipe.engine.start_states``): the
+scenario is the same, the integration independent.
 
 Pure numerics: arrays in, arrays out.
 """
@@ -45,8 +45,7 @@ from scipy.integrate import solve_ivp
 
 from campipe.constants import TWO_PI
 from campipe.engine.batch import start_states
-from campipe.engine.common import MICRO_FLIGHT
-from campipe.engine.modal import modal_data
+from campipe.engine.common import MICRO_FLIGHT, RESTING_LEVEL
 from campipe.engine.settings import (
     DEFAULT_CAPTURE_VELOCITY,
     Case,
@@ -162,7 +161,6 @@ class _Peer:
                  rtol: float, atol: float | None, start: str, capture: float) -> None:  # fmt: skip
         sm = system_matrices(case.train)
         self.M, self.C, self.K, self.f = sm.mass, sm.damping, sm.stiffness, sm.preload
-        self.hold_unit = modal_data(sm).hold  # the contact law's hold per unit velocity
         self.case, self.w, self.cam = case, case.speed, Lift(case.profile, case.speed)
         self.method, self.rtol = method, rtol
         self.q_ref = _static(self.K, self.f, {CAM: 0.0})[SEAT]
@@ -211,7 +209,7 @@ class _Peer:
         self.nfev = 0
         self.segments = 0
         self.stalled = 0
-        self.resting = {CAM: 0.0, SEAT: 0.0}  # a resting contact's hold [N]; 0: not resting
+        self.resting = {CAM: False, SEAT: False}  # captured by a slow impact (``impact``)
 
     # -- the equations in the current configuration ------------------------------------------
 
@@ -259,7 +257,7 @@ class _Peer:
         out: list[tuple[Any, int, Any]] = []
         if not (cam_held and self.form):
             if cam_held:
-                lv = max(self.eps_force, self.resting[CAM])
+                lv = self.eps_force * (RESTING_LEVEL if self.resting[CAM] else 1.0)
                 out.append((lambda tt, z: self.force(tt, z, CAM) - lv, CAM_SEPARATION, None))
             else:
                 i1 = int(np.flatnonzero(fr == CAM)[0])
@@ -269,7 +267,7 @@ class _Peer:
                     lambda tt, z: z[nf + i1] + self.cam.at(self.piece, self.rev, tt)[1],
                 ))  # fmt: skip
         if seat_held:
-            lv7 = max(self.eps_force, self.resting[SEAT])
+            lv7 = self.eps_force * (RESTING_LEVEL if self.resting[SEAT] else 1.0)
             out.append((lambda tt, z: -self.force(tt, z, SEAT) - lv7, SEAT_SEPARATION, None))
         elif self.case.has_seat:
             i7 = int(np.flatnonzero(fr == SEAT)[0])
@@ -364,7 +362,7 @@ class _Peer:
         if kind in (CAM_SEPARATION, SEAT_SEPARATION):
             seat = kind == SEAT_SEPARATION
             new = configuration(cam_held, False) if seat else configuration(False, seat_held)
-            self.resting[SEAT if seat else CAM] = 0.0
+            self.resting[SEAT if seat else CAM] = False
             if t_ev >= 0.0:
                 self.events.append((t_ev, kind, cfg, new, 0.0, 0.0))
             self.cfg = new
@@ -394,7 +392,7 @@ class _Peer:
         dv = (closing if seat else -closing) * (1.0 + e)
         if other_held and self.separation[side] * dv > self.capture:
             other_held = False  # the impact separates the other contact: it releases
-            self.resting[CAM if seat else SEAT] = 0.0
+            self.resting[CAM if seat else SEAT] = False
         held = configuration(other_held, True) if seat else configuration(True, other_held)
         self.v = self.v + self.configs[held].kick[side] * dv
         if seat:
@@ -403,10 +401,10 @@ class _Peer:
         if bounce:
             new = configuration(other_held, False) if seat else configuration(False, other_held)
             self.bounced[side] = t_ev
-            self.resting[coord] = 0.0
+            self.resting[coord] = False
         self.cfg = new
         if rest:
-            self.resting[coord] = self.hold_unit[new - 1, side] * closing
+            self.resting[coord] = True
             last = self.events[-1] if self.events else None
             release = SEAT_SEPARATION if seat else CAM_SEPARATION
             taken_back = last is not None and last[1] == release and last[3] == cfg
@@ -433,7 +431,7 @@ class _Peer:
         small = max(1e-9 * (abs(dl_left) + abs(dl_right) + 1e-12), self.capture)
         if (jump < -small or l_right < l_left - 1e-12) and not self.form:
             self.cfg = configuration(False, seat_held)
-            self.resting[CAM] = 0.0
+            self.resting[CAM] = False
             if t >= 0.0:
                 self.events.append((t, CAM_SEPARATION, cfg, self.cfg, -jump, 0.0))
             return
@@ -444,13 +442,13 @@ class _Peer:
             dv = -jump * (1.0 + e)
             if seat_held and self.separation[0] * dv > self.capture:
                 seat_held = False
-                self.resting[SEAT] = 0.0
+                self.resting[SEAT] = False
             held = configuration(True, seat_held)
             self.v = self.v + self.configs[held].kick[0] * dv
             self.cfg = configuration(False, seat_held) if bounce else held
             if bounce:
                 self.bounced[0] = t
-                self.resting[CAM] = 0.0
+                self.resting[CAM] = False
             if t >= 0.0:
                 self.v_max[0] = max(self.v_max[0], abs(jump))
                 mass = self.configs[held].impact_mass[0] * (1.0 + e)

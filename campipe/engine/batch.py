@@ -266,7 +266,6 @@ class TrainStack(NamedTuple):
     ratio: np.ndarray  # (n_trains,) |``Prepared.valve_ratio``|
     meff: np.ndarray  # (n_trains, 4) ``Prepared.impact_masses``
     separation: np.ndarray  # (n_trains, 2) ``ModalData.separation``
-    hold: np.ndarray  # (n_trains, 2) ``ModalData.hold``
     restitution: np.ndarray  # (n_trains, 2) cam and seat coefficients of restitution
     #: per train: configuration I's free coordinates and its free mass block M_ff
     free: tuple[np.ndarray, ...]
@@ -313,7 +312,6 @@ def _train_stack(trains: tuple[ValveTrain, ...], dt: float) -> TrainStack:
         ratio=np.array([abs(p.valve_ratio) for p in preps]),
         meff=np.stack([p.impact_masses for p in preps]),
         separation=np.stack([d.separation for d in modal]),
-        hold=np.stack([d.hold for d in modal]),
         restitution=np.array([[t.cam_restitution, t.seat_restitution] for t in trains]),
         free=free,
         mass_ff=tuple(p.matrices.mass[np.ix_(f, f)] for p, f in zip(preps, free, strict=True)),
@@ -404,7 +402,6 @@ def _prepare_batch(
             cfg0=np.full(n, CAM_CONTACT, np.int64),
             meff=stack.meff[which],
             separation=stack.separation[which],
-            hold=stack.hold[which],
             capture=np.full(n, float(settings.capture_velocity)),
             restitution=stack.restitution[which],
             valve_ref=qref,

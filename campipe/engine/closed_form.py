@@ -176,12 +176,10 @@ STATE = np.dtype(
         ("k_out", "i8"),  # the next output sample
         ("stalled", "i8"),  # events in a row without time advancing
         ("done", "?"),  # the run reached its end
-        # Resting contact: a contact captured by a slow impact (``common.captured``) releases
-        # only when its force pulls beyond ``hold`` [N].
+        # Resting contact: a contact captured by a slow impact (``common.captured``), whose
+        # force may hover about zero: it releases at ``common.RESTING_LEVEL`` of the level.
         ("rest_cam", "?"),
         ("rest_seat", "?"),
-        ("hold_cam", "f8"),
-        ("hold_seat", "f8"),
         # Restitution: when the follower (the valve) last bounced off the cam (the seat) [s];
         # −inf: not since the case began.
         ("bounced_cam", "f8"),

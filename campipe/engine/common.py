@@ -123,6 +123,13 @@ GAP_LEVEL = 1e-13
 #: the gap can have opened, a parabolic flight's height being v·t/4) never left its contact
 #: (``record_impact``): a nanometre, far below what a contact resolves.
 MICRO_FLIGHT = 1e-9
+#: The tension [N] at which a resting contact releases (:func:`is_captured`), as a fraction of
+#: modal-exact's force level (``eps_force``: 1e-9 × (preload + 1 N), where the other held
+#: contacts release; their force falls through zero steeply, and that level moves their
+#: release by under 1e-13 s, inside the event tolerance). A resting contact's force can hover
+#: about zero, and its level is then the most tension a sample shows: a thousandth, 7e-10 N
+#: for the thesis's train, under 1e-9 N and far above the rounding of the force (1e-13 N).
+RESTING_LEVEL = 1e-3
 #: What a break does to a follower held on the cam (:func:`classify_break`).
 SMOOTH, RELEASE, JUMP = 0, 1, 2
 
@@ -144,10 +151,6 @@ class Cases(NamedTuple):
     #: (n, 2) the other contact's separation velocity per unit velocity change of the struck
     #: one (struck: cam, seat) [-] (``modal.ModalData.separation``)
     separation: np.ndarray
-    #: (n, 4, 2) per configuration and contact: the bound on the force of the free vibration a
-    #: unit-velocity impact there leaves [N·s/m] (``modal.ModalData.hold``); a resting contact
-    #: must pull beyond it times its capturing impact's closing velocity to release
-    hold: np.ndarray
     capture: np.ndarray  # (n,) capture velocity [m/s]: slower impacts leave the contact resting
     #: (n, 2) coefficient of restitution of an impact at the cam and at the seat [-]: 0, the
     #: thesis's plastic impact; above 0 the struck contact bounces off (modal-exact only)
@@ -325,11 +328,16 @@ def other_releases(separation, capture, c, seat, dv):
 
 
 def is_captured(closing: float, capture: float) -> bool:
-    """An impact closing slower than the capture velocity [m/s] leaves its contact resting: it
-    stays held until its force pulls beyond what that impact's own vibration can (the hold,
-    ``modal.ModalData.hold`` × the closing velocity), so the micro-bounces of a valve resting
-    on its seat with no force to spare do not chatter; and it is no impact in the per-turn
-    counts. Every integrator asks this (the compiled ones through :func:`captured`)."""
+    """An impact closing slower than the capture velocity [m/s] leaves its contact resting,
+    and is no impact in the per-turn counts. Every integrator asks this (the compiled ones
+    through :func:`captured`).
+
+    A resting contact is held as any other: it releases where its force reaches zero (to
+    RESTING_LEVEL in modal-exact), never held in tension. A valve landing with no force to
+    spare then lifts off and lands again in a short series of bounces, each slower than the
+    last, the model's own answer (newmark-linear's step ends find the same series); a
+    release whose flight closes again at once, slower than the capture velocity, is taken
+    back (``record_impact``), so the converged series leaves the contact resting."""
     return closing < capture
 
 

@@ -97,9 +97,6 @@ class ModalData:
     block_n: np.ndarray  # (4, NS, NS) N, block-diagonal: the N_b
     rho_x: np.ndarray  # (4, 2, NS) ρ·X
     rho_xn: np.ndarray  # (4, 2, NS) ρ·X·N
-    #: (4, 2) bound on the force at held contact hc (its free vibration) per unit closing
-    #: velocity of a plastic impact there that brings the train into the configuration [N·s/m]
-    hold: np.ndarray
     #: (2,) an impact at one contact (cam, seat) with the other held: the velocity at which the
     #: other would separate, per unit velocity change of the struck one, if it were released
     #: (the impact taken in the single-contact configuration, I or IV) [-]; positive where it
@@ -190,22 +187,6 @@ def _block_speed(B: np.ndarray) -> float:
     return float(np.sqrt(lbar * lbar - d2)) if d2 < 0.0 else abs(lbar) + float(np.sqrt(d2))
 
 
-def _free_response_bound(A, X, Xinv, rho_row, blocks_n, dz) -> float:
-    """Σ_b (|ρX_b u_b| + |ρX_bN_b u_b|·s_max) for the free response to a state jump dz,
-    u = X⁻¹ dz: a bound on the response's force (s_max bounds S(τ)·e^{λ̄τ} by 1/|λ̄|)."""
-    u = Xinv @ dz
-    total = 0.0
-    col = 0
-    for B, N in blocks_n:
-        k = B.shape[0]
-        lbar, _ = _block_numbers(B)
-        a = rho_row @ X[:, col : col + k] @ u[col : col + k]
-        b = rho_row @ X[:, col : col + k] @ N @ u[col : col + k]
-        total += abs(a) + abs(b) / max(abs(lbar), 1e-300)
-        col += k
-    return float(total)
-
-
 def modal_data(sm: SystemMatrices) -> ModalData:
     """Closed-form data of every configuration for one train.
 
@@ -243,7 +224,6 @@ def modal_data(sm: SystemMatrices) -> ModalData:
         "block_n": np.zeros((4, size, size)),
         "rho_x": np.zeros((4, 2, size)),
         "rho_xn": np.zeros((4, 2, size)),
-        "hold": np.zeros((4, 2)),
         "separation": np.zeros(2),
     }
     for ci, cfg in enumerate(CONFIGURATIONS):
@@ -282,7 +262,6 @@ def modal_data(sm: SystemMatrices) -> ModalData:
         # The blocks.
         XN = np.zeros((ns, ns))
         col = 0
-        blocks_n = []
         out["n_blocks"][ci] = len(blocks)
         for b, B in enumerate(blocks):
             k = B.shape[0]
@@ -296,7 +275,6 @@ def modal_data(sm: SystemMatrices) -> ModalData:
             out["delta2"][ci, b] = d2
             out["rate"][ci, b] = lbar + np.sqrt(d2) if d2 > 0.0 else lbar
             out["speed"][ci, b] = _block_speed(B)
-            blocks_n.append((B, N))
             col += k
         out["basis"][ci, :ns, :ns] = X
         out["basis_inv"][ci, :ns, :ns] = Xinv
@@ -308,11 +286,6 @@ def modal_data(sm: SystemMatrices) -> ModalData:
         for hc, p in enumerate(CONTACTS):
             out["impulse"][ci, hc, fr] = -mff_inv @ M[fr, p]
             out["impulse"][ci, hc, p] = 1.0
-            if p not in fr:  # held here: the force's free response to a unit impact
-                dz = np.r_[np.zeros(nf), out["impulse"][ci, hc, fr]]
-                out["hold"][ci, hc] = _free_response_bound(
-                    A, X, Xinv, out["rho"][ci, hc, :ns], blocks_n, dz
-                )
     # The other contact's separation velocity if released: q7 opening (+) leaves the seat, q1
     # moving up (−) leaves the cam.
     out["separation"][0] = out["impulse"][CAM_CONTACT - 1, 0, SEAT]

@@ -267,14 +267,12 @@ def _newmark_step(typingctx, A, G, c, k, load, h, x, xn, z):
     return types.void(A, G, c, k, load, h, x, xn, z), codegen
 
 
-#: A case's contact state between steps (a record): resting contacts (``common.captured``)
-#: and the force [N] they must pull beyond to release.
+#: A case's contact state between steps (a record): resting contacts (``common.captured``;
+#: not read: a held contact releases where its force at a step end pulls, resting or not).
 CONTACT_STATE = np.dtype(
     [
         ("rest_cam", "?"),
         ("rest_seat", "?"),
-        ("hold_cam", "f8"),
-        ("hold_seat", "f8"),
         ("bounced_cam", "f8"),  # not read: newmark-linear's impacts are plastic
         ("bounced_seat", "f8"),
     ],
@@ -374,10 +372,10 @@ def _write_samples(ref, c, k_out, t_sample, t0, t1, h, x, xn, qt, vt, at, cfg):
 
 
 @njit(inline="always")
-def _tripped(cfg, form, has_seat, impulsive, f1, f7, hold1, hold7, q1, q7, v1, v7, qc, vc, qs):
-    """The monitors of thesis Table I at a step end (F1, F7 the contact forces, hold1, hold7
-    what a resting contact must pull beyond, q1, q7 and v1, v7 the contact coordinates and
-    velocities, qc, vc the cam's q1 and q̇1, qs the seat's q7): the cam or the seat would pull,
+def _tripped(cfg, form, has_seat, impulsive, f1, f7, q1, q7, v1, v7, qc, vc, qs):
+    """The monitors of thesis Table I at a step end (F1, F7 the contact forces, q1, q7 and
+    v1, v7 the contact coordinates and velocities, qc, vc the cam's q1 and q̇1, qs the seat's
+    q7): the cam or the seat would pull (a resting contact as any other),
     the follower passed the cam surface closing on it, the valve passed its seat closing on
     it (an impact needs a positive closing velocity).
 
@@ -390,8 +388,8 @@ def _tripped(cfg, form, has_seat, impulsive, f1, f7, hold1, hold7, q1, q7, v1, v
     """
     cam_held = holds_cam(cfg)
     seat_held = holds_seat(cfg)
-    release_cam = cam_held and not form and not impulsive and f1 > hold1
-    release_seat = seat_held and not impulsive and f7 < -hold7
+    release_cam = cam_held and not form and not impulsive and f1 > 0.0
+    release_seat = seat_held and not impulsive and f7 < 0.0
     hit_cam = not cam_held and q1 > qc + GAP_LEVEL and v1 - vc > 0.0
     hit_seat = has_seat and not seat_held and q7 < qs - GAP_LEVEL and v7 < 0.0
     return release_cam, release_seat, hit_cam, hit_seat
@@ -613,11 +611,9 @@ def newmark_linear_batch(cases, trains, profiles, runs, out, work, contact):
                 k_out, t_sample = _write_samples(
                     ref, c, k_out, t_sample, t0, t1, h, x, xn, qt, vt, at, cfg
                 )
-            hold1 = ct.hold_cam if ct.rest_cam else 0.0
-            hold7 = ct.hold_seat if ct.rest_seat else 0.0
             tripped = _tripped(
-                cfg, form_c, has_seat_c, quiet_cam == 1 or quiet_seat == 1, f1, f7, hold1,
-                hold7, xn[X_Q], xn[X_Q + SEAT], xn[X_V], xn[X_V + SEAT], qc, vc, qs,
+                cfg, form_c, has_seat_c, quiet_cam == 1 or quiet_seat == 1, f1, f7,
+                xn[X_Q], xn[X_Q + SEAT], xn[X_V], xn[X_V + SEAT], qc, vc, qs,
             )  # fmt: skip
             if tripped[0] or tripped[1] or tripped[2] or tripped[3]:
                 cfg, impulse_cam, impulse_seat = _switch(ref, ct, c, t1, cfg, f7, xn, vc, *tripped)

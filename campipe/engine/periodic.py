@@ -146,7 +146,7 @@ def _prepare(cases: Sequence[Case], *, need_reference: bool = False) -> _SteadyB
         form=np.array([c.closure == "form" for c in cases], dtype=np.bool_),
         t0=zeros, q0=np.zeros((n, n_q)), v0=np.zeros((n, n_q)), a0=np.zeros((n, n_q)),
         cfg0=np.full(n, CAM_CONTACT, np.int64), meff=np.zeros((n, 4)),
-        separation=np.zeros((n, 2)), hold=np.zeros((n, 4, 2)), capture=zeros,
+        separation=np.zeros((n, 2)), capture=zeros,
         restitution=np.zeros((n, 2)),
         valve_ref=qref, lift_bound=zeros, speed_bound=zeros,
     )  # fmt: skip

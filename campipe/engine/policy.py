@@ -8,8 +8,11 @@ calls one of these; what it does to its own state (modal-exact applies the impul
 modes, newmark-linear spreads it over the next step) stays in the integrator.
 
 Each function takes the contact state ``rest`` (a record with ``rest_cam``, ``rest_seat``,
-``hold_cam``, ``hold_seat``, ``bounced_cam``, ``bounced_seat``: modal-exact's run state or
-newmark-linear's contact state) and is inlined, so it compiles with its caller's flags.
+``bounced_cam``, ``bounced_seat``: modal-exact's run state or newmark-linear's contact state)
+and is inlined, so it compiles with its caller's flags.
+
+No contact is ever held in tension: a held contact, resting or not, releases where its
+reaction reaches zero (the integrators' monitors; ``common.is_captured``).
 """
 
 from __future__ import annotations
@@ -43,9 +46,10 @@ def strike(cases, out, rest, c, w, t, seat, other_held, c_from, closing, bounces
     one and the struck contact is left. A slow impact is plastic whatever e, and leaves the
     contact resting (``common.captured``): the bounces of a series end there, or where the
     series has converged, a bounce's flight (closing velocity × time since the last bounce
-    there) below MICRO_FLIGHT. The other contact, if held, stays held unless releasing it
-    would separate it (``common.other_releases``). A closing faster than the case's speed
-    bound ends the run (UNBOUNDED). The impact is recorded.
+    there) below MICRO_FLIGHT. A resting contact releases where its force reaches zero, as
+    any held one (``common.is_captured``). The other contact, if held, stays held unless
+    releasing it would separate it (``common.other_releases``). A closing faster than the
+    case's speed bound ends the run (UNBOUNDED). The impact is recorded.
 
     Returns (held, new, other_held, e, dv): the configuration the impulse acts in (both the
     struck contact and the other as held after it), the configuration after the impact, the
@@ -82,13 +86,10 @@ def strike(cases, out, rest, c, w, t, seat, other_held, c_from, closing, bounces
             rest.rest_cam = False
             rest.bounced_cam = t
     if resting:
-        hold = cases.hold[c, new - 1, side] * closing
         if seat:
             rest.rest_seat = True
-            rest.hold_seat = hold
         else:
             rest.rest_cam = True
-            rest.hold_cam = hold
     if closing > cases.speed_bound[c]:
         out.status[c] = UNBOUNDED
     record_impact(

@@ -453,8 +453,6 @@ def _start_case(cases, trains, profiles, ws, st, c, tr):
     st.rest_seat = False
     st.bounced_cam = -np.inf
     st.bounced_seat = -np.inf
-    st.hold_cam = 0.0
-    st.hold_seat = 0.0
 
 
 @njit(**KERNEL)

@@ -38,6 +38,7 @@ from campipe.engine.closed_form import (
 from campipe.engine.common import (
     GAP_LEVEL,
     HELPER,
+    RESTING_LEVEL,
     deref,
     holds_cam,
     holds_seat,
@@ -122,10 +123,10 @@ def _monitors(cases, trains, profiles, ws, st):
         for k in range(8):
             ws.G[m, k] = 0.0
         if held:
-            # A resting contact releases only when it pulls beyond its hold.
+            # A held contact releases where its force reaches zero: to the force level, a
+            # resting one (its force may hover about zero) to RESTING_LEVEL of it.
             rest = st.rest_cam if m == 0 else st.rest_seat
-            hold = st.hold_cam if m == 0 else st.hold_seat
-            level = max(st.eps_force, hold) if rest else st.eps_force
+            level = RESTING_LEVEL * st.eps_force if rest else st.eps_force
             force_monitor(trains, ws, st, m, sign, level)
         else:
             _gap_monitor(cases, trains, profiles, ws, st, m, sign)

@@ -309,8 +309,8 @@ _RUN_METADATA: dict[str, Field] = {
         Field(
             "run.capture_velocity",
             "quantity",
-            "an impact closing slower than this leaves its contact resting (held until it "
-            "pulls beyond the impact's own vibration); 0: never",
+            "an impact closing slower than this leaves its contact resting (not counted; a "
+            "release it closes again at once is taken back); 0: never",
             units="m/s",
             example="mm/s",
             minimum=0.0,
