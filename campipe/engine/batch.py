@@ -548,6 +548,7 @@ def run_batch(
     full_state: bool = True,
     check_stability_limit: bool = True,
     on_failure: str = "raise",
+    start: Start | None = None,
 ) -> BatchResult:
     """Integrate every case of a batch in one compiled call.
 
@@ -569,6 +570,9 @@ def run_batch(
         naming them (default), or record it in ``BatchResult.status`` and return the others'
         results; a failed case's histories and metrics are then NaN (its events are those
         before the failure).
+    start : Start, optional
+        Where each case starts, at t = 0 (a run of automatic length starts each turn where
+        the last ended: ``engine.settle``); default: ``settings.start``'s.
 
     Raises
     ------
@@ -580,18 +584,28 @@ def run_batch(
     if on_failure not in ("raise", "record"):
         raise ValueError(f"on_failure: found {on_failure!r}, expected 'raise' or 'record'")
     check_run(cases, settings, check_stability_limit=check_stability_limit)
+    if settings.settle:
+        from campipe.engine.settle import run_settled
+
+        return run_settled(
+            cases,
+            settings,
+            check_stability_limit=check_stability_limit,
+            on_failure=on_failure,
+        )
     if settings.integrator == "default" and any(c.compliant for c in cases):
         options = {
             "full_state": full_state,
             "check_stability_limit": check_stability_limit,
             "on_failure": on_failure,
         }
-        return _run_by_contacts(cases, settings, options)
+        return _run_by_contacts(cases, settings, options, start)
     n = len(cases)
     angles = output_angles(settings)
     warmup = settings.warmup_turns
     batch = _prepare_batch(cases, settings, full_state)
-    start = _starts(cases, settings, batch)
+    if start is None:
+        start = _starts(cases, settings, batch)
     cases_in = batch.cases._replace(**start._asdict())
     omega, qref = cases_in.omega, cases_in.valve_ref
     out = _outputs(batch, settings)
@@ -669,7 +683,9 @@ def _failures(out, settings: RunSettings, on_failure, check_stability_limit, int
         array[failed] = np.nan
 
 
-def _run_by_contacts(cases: Sequence[Case], settings: RunSettings, options) -> BatchResult:
+def _run_by_contacts(
+    cases: Sequence[Case], settings: RunSettings, options, start: Start | None = None
+) -> BatchResult:
     """A batch under the default integrator with compliant cases: those through the
     compliant integrator, the others through the default, the results in case order."""
     flags = np.array([c.compliant for c in cases])
@@ -678,5 +694,7 @@ def _run_by_contacts(cases: Sequence[Case], settings: RunSettings, options) -> B
         index = np.flatnonzero(which)
         if index.size:
             run = dataclasses.replace(settings, integrator=name)
-            parts.append((index, run_batch([cases[int(i)] for i in index], run, **options)))
+            part_start = None if start is None else Start(*(a[index] for a in start))
+            part = run_batch([cases[int(i)] for i in index], run, start=part_start, **options)
+            parts.append((index, part))
     return merge_results(len(cases), parts)

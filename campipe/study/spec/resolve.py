@@ -475,7 +475,9 @@ def canonical_run(settings: RunSettings) -> dict[str, object]:
     out: dict[str, object] = {
         "integrator": settings.method,
         "dt": None if settings.step is None else clean_value(settings.step),
-        "revolutions": clean_value(float(settings.revolutions)),
+        "revolutions": "auto"
+        if settings.revolutions is None
+        else clean_value(float(settings.revolutions)),
         "output_every": clean_value(settings.output_every),
         "tolerance": clean_value(settings.tolerance),
         "max_events": settings.max_events,
