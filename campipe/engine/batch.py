@@ -331,7 +331,7 @@ def _exact_runs(settings, dt_run, full_state, which, stack, omega, responses=Tru
     return ExactRuns(
         train=which,
         t_sample=settings.output_every / omega,
-        t_end=settings.revolutions * TWO_PI / omega,
+        t_end=settings.recorded_revolutions * TWO_PI / omega,
         zeta=zeta,
         dt_cap=float(dt_run or 0.0),
         tolerance=float(settings.tolerance),
@@ -457,8 +457,8 @@ def integrator_types(cases: Sequence[Case], settings: RunSettings, full_state: b
 
 def _outputs(batch: PreparedBatch, settings: RunSettings):
     """The kernels' output arrays for a batch run with ``settings`` (``common.make_outputs``)."""
-    n_rev = turn_count(settings.revolutions)
-    n_out = sample_count(settings.revolutions, settings.output_every)
+    n_rev = turn_count(settings.recorded_revolutions)
+    n_out = sample_count(settings.recorded_revolutions, settings.output_every)
     n_q = batch.modal_trains.load.shape[1]
     return make_outputs(len(batch.which), n_out, n_rev, settings.max_events, n_q)
 

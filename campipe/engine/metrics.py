@@ -87,8 +87,9 @@ class Metric:
         kept = np.where(measured, values, np.nan)
         out = np.full(values.shape[0], np.nan)
         some = np.isfinite(kept).any(axis=1)
-        how = {"mean": np.nanmean, "max": np.nanmax, "min": np.nanmin}[self.summary_of_turns]
-        out[some] = how(kept[some], axis=1)
+        how = self.summary_of_turns
+        reduce = np.nanmean if how == "mean" else np.nanmax if how == "max" else np.nanmin
+        out[some] = reduce(kept[some], axis=1)
         return out
 
 

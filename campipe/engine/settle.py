@@ -162,7 +162,8 @@ def run_settled(cases: Sequence[Case], settings, **options) -> BatchResult:
     first_start = reference = np.zeros(n)
     boundary = kept = None
     for k in range(cap):
-        part = run_batch([cases[i] for i in active], one, start=start, full_state=True, **options)
+        members = [cases[i] for i in active.tolist()]
+        part = run_batch(members, one, start=start, full_state=True, **options)
         if boundary is None:  # the first turn: the arrays' shapes
             n_q = part.q.shape[2]
             boundary = Boundary(
@@ -173,11 +174,15 @@ def run_settled(cases: Sequence[Case], settings, **options) -> BatchResult:
             boundary.q[:, 0], boundary.v[:, 0] = part.q[:, 0], part.v[:, 0]
             first_start = part.start_time.copy()
             reference = part.valve_reference.copy()
+            samples = (n, turns, per_turn + 1)
             kept = _Kept(
-                np.full((n, turns, per_turn + 1, n_q), np.nan),
-                np.full((n, turns, per_turn + 1, n_q), np.nan),
-                *(np.full((n, turns, per_turn + 1, *s), np.nan) for s in ((2,), (), (), ())),
-                np.zeros((n, turns, per_turn + 1), np.int8),
+                np.full((*samples, n_q), np.nan),
+                np.full((*samples, n_q), np.nan),
+                np.full((*samples, 2), np.nan),
+                np.full(samples, np.nan),
+                np.full(samples, np.nan),
+                np.full(samples, np.nan),
+                np.zeros(samples, np.int8),
                 [[np.zeros((0, N_EVENT_FIELDS))] * turns for _ in range(n)],
             )
         assert kept is not None
@@ -193,7 +198,7 @@ def run_settled(cases: Sequence[Case], settings, **options) -> BatchResult:
         steps[active] += part.steps
         _keep(kept, active, np.full(active.size, k % turns), part)
         offset = k * TWO_PI / omega
-        for j, i in enumerate(active):
+        for j, i in enumerate(active.tolist()):
             events = part.events[j].copy()
             events[:, EV_TIME] += offset[i]
             kept.events[i][k % turns] = events
@@ -201,7 +206,7 @@ def run_settled(cases: Sequence[Case], settings, **options) -> BatchResult:
         failed = np.isin(part.status, FAILURES)
         status[active] = np.where(part.status != 0, part.status, status[active])
         still = []
-        for j, i in enumerate(active):
+        for j, i in enumerate(active.tolist()):
             if failed[j]:
                 continue
             for p in range(1, p_max + 1):
@@ -219,15 +224,19 @@ def run_settled(cases: Sequence[Case], settings, **options) -> BatchResult:
         q0, v0 = part.q[rows, -1], part.v[rows, -1]
         cfg0 = part.contact_state[rows, -1].astype(np.int64)
         a0 = consistent_accelerations(
-            [cases[i] for i in active], [matrices[i] for i in active], q0, v0, cfg0
+            [cases[i] for i in active.tolist()],
+            [matrices[i] for i in active.tolist()],
+            q0,
+            v0,
+            cfg0,
         )
         start = Start(np.zeros(active.size), q0, v0, a0, cfg0)
     never = period == 0
     settled[never] = done[never] // 2
     measured = np.zeros((n, cap), np.bool_)
     for i in range(n):
-        last = done[i] if period[i] == 0 else done[i] - (done[i] - settled[i]) % period[i]
-        measured[i, settled[i] : last] = True
+        last = int(done[i] - (done[i] - settled[i]) % period[i]) if period[i] else int(done[i])
+        measured[i, int(settled[i]) : last] = True
     return _result(cases, settings, kept, per_rev, measured, period, settled, done, status,
                    steps, first_start, reference)  # fmt: skip
 
