@@ -237,6 +237,14 @@ def check_settling(settings: RunSettings) -> None:
     not divide a turn (each turn starts where the last ended, on a sample), a cap below the
     turns recorded, a period bound below 1, a tolerance not above 0."""
     turns = whole_turns(settings)
+    if settings.warmup is not None:
+        raise RunSettingsError.at(
+            "run.warmup",
+            f"found {settings.warmup!r}: with run.revolutions: auto the settled window says "
+            "which turns count; leave run.warmup out (or fix run.revolutions)",
+            found=settings.warmup,
+            expected="default",
+        )
     per_turn = TWO_PI / settings.output_every
     if abs(per_turn - round(per_turn)) > 1e-9 * per_turn:
         raise RunSettingsError.at(

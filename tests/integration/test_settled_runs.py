@@ -137,3 +137,19 @@ def test_settling_settings_that_cannot_work_are_refused_naming_the_key():
     with pytest.raises(RunSettingsError) as info:
         run_batch([case], RunSettings(revolutions=None, max_revolutions=6, max_period=4))
     assert info.value.key == "run.max_revolutions"
+
+
+@pytest.mark.parametrize(
+    ("run", "key"),
+    [("{output_every: 0.7 deg}", "run.output_every"), ("{warmup: 1}", "run.warmup")],
+)
+def test_a_spec_of_automatic_length_that_cannot_work_is_refused_at_its_key(tmp_path, run, key):
+    """Refused when the spec is checked, before anything runs, naming the key. Fails on a
+    copy that leaves the check to the engine (a worker would fail every case)."""
+    from campipe.study.spec.check import SpecError
+
+    spec = write_spec(tmp_path, f"name: bad\nprofile: {{kind: harmonic, lift: 1 in}}\nspeed: "
+                      f"9000 rpm\nrun: {run}\n")  # fmt: skip
+    with pytest.raises(SpecError) as info:
+        load_study(spec)
+    assert key in str(info.value)

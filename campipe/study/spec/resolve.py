@@ -26,6 +26,7 @@ from campipe.engine import Case, CaseError, RunSettings, RunSettingsError
 from campipe.engine.settings import (
     case_integrator,
     check_contacts,
+    check_settling,
     check_stability,
 )
 from campipe.errors import excerpt
@@ -495,6 +496,8 @@ def check_settings(settings: RunSettings) -> None:
         for name in ("method", "step", "warmup_turns"):
             getattr(settings, name, None)
         settings.check_fidelity()
+        if settings.settle:
+            check_settling(settings)
     except RunSettingsError as exc:
         raise SpecProblem.from_error(exc) from None
 
