@@ -66,6 +66,7 @@ from campipe.engine.settings import check_stability as check_stability
 from campipe.engine.settings import resolve_integrator as resolve_integrator
 from campipe.engine.settings import stability_limit as stability_limit
 from campipe.engine.settings import visited_configurations as visited_configurations
+from campipe.engine.settle import run_settled
 from campipe.model import ValveTrain, system_matrices
 from campipe.model.assembly import SystemMatrices, configuration_frequencies
 from campipe.profiles import Profile, evaluate
@@ -585,11 +586,11 @@ def run_batch(
         raise ValueError(f"on_failure: found {on_failure!r}, expected 'raise' or 'record'")
     check_run(cases, settings, check_stability_limit=check_stability_limit)
     if settings.settle:
-        from campipe.engine.settle import run_settled
-
         return run_settled(
             cases,
             settings,
+            _run_turn,
+            [train_matrices(c.train) for c in cases],
             check_stability_limit=check_stability_limit,
             on_failure=on_failure,
         )
@@ -636,6 +637,12 @@ def run_batch(
         status=status,
         start_time=cases_in.t0,
     )
+
+
+def _run_turn(cases, settings, start=None, **options) -> BatchResult:
+    """One turn of a run of automatic length (``settle.run_settled``), from ``start``'s
+    (t0, q0, v0, a0, cfg0) or, for the first, from ``settings.start``'s."""
+    return run_batch(cases, settings, start=None if start is None else Start(*start), **options)
 
 
 def _failures(out, settings: RunSettings, on_failure, check_stability_limit, integrator) -> None:

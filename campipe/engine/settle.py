@@ -26,7 +26,7 @@ Pure numerics: arrays in, arrays out.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import NamedTuple
 
 import numpy as np
@@ -135,13 +135,21 @@ def _keep(kept: _Kept, rows: np.ndarray, slot: np.ndarray, part: BatchResult) ->
     kept.cfg[rows, slot] = part.contact_state
 
 
-def run_settled(cases: Sequence[Case], settings, **options) -> BatchResult:
-    """Run every case until its response repeats (see the module's docstring); the options
-    are ``batch.run_batch``'s. The result's ``per_rev`` has ``max_revolutions`` turns (NaN
-    beyond a case's last), ``measured`` each case's window, and ``period_turns``,
-    ``settled_turn``, ``turns_run`` and ``recorded_from`` say how each settled."""
-    from campipe.engine.batch import Start, run_batch, train_matrices
+def run_settled(
+    cases: Sequence[Case],
+    settings,
+    run_turn: Callable[..., BatchResult],
+    matrices: Sequence[SystemMatrices],
+    **options,
+) -> BatchResult:
+    """Run every case until its response repeats (see the module's docstring).
 
+    ``run_turn(cases, settings, start=..., full_state=..., **options)`` runs one turn
+    (``batch.run_batch``; ``start`` None or (t0, q0, v0, a0, cfg0) arrays), ``matrices`` are
+    each case's train's; the options are run_batch's. The result's ``per_rev`` has
+    ``max_revolutions`` turns (NaN beyond a case's last), ``measured`` each case's window,
+    and ``period_turns``, ``settled_turn``, ``turns_run`` and ``recorded_from`` say how each
+    settled."""
     check_settling(settings)
     turns = whole_turns(settings)
     options.pop("full_state", None)  # every coordinate: a turn's end is the next's start
@@ -150,7 +158,6 @@ def run_settled(cases: Sequence[Case], settings, **options) -> BatchResult:
     one = dataclasses.replace(settings, revolutions=1.0, warmup=0)
     per_turn = sample_count(1.0, settings.output_every) - 1
     omega = np.array([c.speed for c in cases])
-    matrices = [train_matrices(c.train) for c in cases]
     period = np.zeros(n, np.int64)
     settled = np.zeros(n, np.int64)
     done = np.zeros(n, np.int64)  # turns run
@@ -158,12 +165,12 @@ def run_settled(cases: Sequence[Case], settings, **options) -> BatchResult:
     steps = np.zeros(n, np.int64)
     per_rev = np.full((n, cap, metrics.N_ENGINE), np.nan)
     active = np.arange(n)
-    start: Start | None = None
+    start: tuple | None = None
     first_start = reference = np.zeros(n)
     boundary = kept = None
     for k in range(cap):
         members = [cases[i] for i in active.tolist()]
-        part = run_batch(members, one, start=start, full_state=True, **options)
+        part = run_turn(members, one, start=start, full_state=True, **options)
         if boundary is None:  # the first turn: the arrays' shapes
             n_q = part.q.shape[2]
             boundary = Boundary(
@@ -230,7 +237,7 @@ def run_settled(cases: Sequence[Case], settings, **options) -> BatchResult:
             v0,
             cfg0,
         )
-        start = Start(np.zeros(active.size), q0, v0, a0, cfg0)
+        start = (np.zeros(active.size), q0, v0, a0, cfg0)
     never = period == 0
     settled[never] = done[never] // 2
     measured = np.zeros((n, cap), np.bool_)

@@ -456,6 +456,8 @@ STUDY_WIDE = (
     "run.revolutions",
     "run.history_turns",
     "run.max_revolutions",
+    "run.settle_tolerance",
+    "run.max_period",
     "run.output_every",
     "run.record",
     "run.start",
