@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import xarray as xr
+from study_helpers import INCH, write_spec
 
 from campipe.constants import RPM
 from campipe.engine import Case, RunSettings, run_batch
@@ -20,7 +21,6 @@ from campipe.model import thesis_train
 from campipe.profiles.shapes import harmonic
 from campipe.study import load_study
 from campipe.study.run.execute import run_study
-from tests.study_helpers import INCH, write_spec
 
 #: A sweep through the no-follow onset (about 9524 rpm without a seat), without a seat and
 #: with one at 0.1 in: the default run settings (``run.revolutions`` left to ``auto``).

@@ -76,6 +76,8 @@ FROM_RECORDED = {
     "(recorded_revolution)",
     "event_cam_angle": "cam angle at the event, from the start of the case's first recorded "
     "revolution (recorded_revolution)",
+    "measured": "revolution counted in the summary metrics (1: in the settled window), or "
+    "not (0: before it, or not run)",
 }
 
 

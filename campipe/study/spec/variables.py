@@ -137,8 +137,7 @@ _BEFORE_METRICS: dict[str, Variable] = {
     "measured": Variable(
         PER_REV,
         "i1",
-        "revolution counted in the summary metrics (1), or not (0: a warm-up revolution, one "
-        "before the settled window, or one not run)",
+        "revolution counted in the summary metrics (1), or a warm-up revolution (0)",
         role="per_revolution",
         extra=(("flag_values", [0, 1]), ("flag_meanings", "warm_up measured")),
     ),
