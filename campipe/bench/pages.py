@@ -30,7 +30,7 @@ import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from campipe.bench import gate, report, verdict
+from campipe.bench import gate, report, settling, verdict
 from campipe.bench.figures import finite, format_short
 from campipe.bench.run import (
     ACCURACY_DEFAULT_ERROR,
@@ -493,6 +493,11 @@ def scaling_block(bench: Bench) -> str:
     return scaling_table(bench.scaling)
 
 
+def settling_block(bench: Bench) -> str:
+    """Automatic run length against a fixed 4 turns on a sweep through the onset."""
+    return settling.markdown(bench.settling)
+
+
 def regressions_block(bench: Bench) -> str:
     """The figures more than 10 % slower than the previous run's, none, or why none could be
     compared (``campipe.bench.gate``)."""
@@ -509,6 +514,7 @@ BLOCKS: dict[str, Callable[[Bench], str]] = {
     "bench-throughput": throughput_block,
     "bench-fidelity": fidelity_block,
     "bench-onset": onset_block,
+    "bench-settling": settling_block,
     "bench-scaling": scaling_block,
     "bench-regressions": regressions_block,
 }

@@ -16,7 +16,7 @@ from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Any
 
-from campipe.bench import gate, verdict
+from campipe.bench import gate, settling, verdict
 from campipe.bench.figures import finite
 from campipe.bench.run import FAMILIES, Bench
 from campipe.constants import INCH
@@ -356,6 +356,7 @@ def markdown(bench: Bench, with_plots: bool = True) -> str:
             "so its case-steps are not newmark-linear's; the goal (> 2e7 case-steps/s "
             "on 2 cores) is newmark-linear's."
         )
+    lines += ["", "## Automatic run length", "", settling.markdown(bench.settling)]
     if bench.scaling:
         lines += ["", "## Scaling", ""]
         lines.append(

@@ -18,7 +18,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from campipe.bench import measure, onset, scaling
+from campipe.bench import measure, onset, scaling, settling
 from campipe.bench.ivp import ChatterError
 from campipe.bench.suite import FULL, QUICK, Ladder, Scene, suite
 from campipe.constants import INCH
@@ -87,6 +87,7 @@ class Bench:
     scaling: list[dict] = field(default_factory=list)  # the engine's time against cases, workers
     steady: list[dict] = field(default_factory=list)  # the steady-state path per scene
     onset: dict = field(default_factory=dict)  # the onset map against the time-domain grid
+    settling: dict = field(default_factory=dict)  # automatic run length against 4 turns
     seconds: float = 0.0  # wall time of the whole bench [s]
     # The previous run's timed figures and how they compare (campipe.bench.gate.compare):
     # empty until the report is written; then the figures more than 10 % slower.
@@ -456,6 +457,9 @@ def run_bench(
     bench.steady = onset.steady_scenes(chosen, ladder.copies, ladder.repeats)
     say("onset map: designs × speed range against the time-domain grid")
     bench.onset = onset.onset_map(quick, repeats=ladder.repeats)
+    if with_suite and not scenes:
+        say("automatic run length: a sweep through the onset against a fixed 4 turns")
+        bench.settling = settling.settling_cost(quick, repeats=1 if quick else 2)
     bench.goals = _goals(bench.ratios)
     bench.accuracy_for_cost = _accuracy_for_cost(bench.rows)
     if with_scaling:

@@ -327,10 +327,16 @@ def validate_text(loaded, spec_path) -> str:
         lines.append(f"  {name:<22} {a.kind:<7} {a.size:>4} values: {text}")
     step = first.settings.step
     dt = "chosen by the integrator" if step is None else f"{step * 1e6:.4g} µs"
+    length = (
+        f"until each case repeats (at most {run['max_revolutions']} revolutions, the last "
+        f"{run['history_turns']} recorded)"
+        if run["revolutions"] == "auto"
+        else f"{run['revolutions']:g} revolutions"
+    )
     lines.append(
-        f"run: {run['revolutions']:g} revolutions, integrator "
+        f"run: {length}, integrator "
         f"{first.settings.method}, dt {dt}, output every {run['output_every']}, "
-        f"record: {', '.join(loaded.record) or '-'}"
+        f"record: {', '.join(r for r in loaded.record if r != 'settling') or '-'}"
     )
     if s.replay:
         lines.append(f"replay: {s.replay!r} (logged to <archive stem>.rrd as the study runs)")

@@ -66,6 +66,7 @@ from campipe.engine.settings import check_stability as check_stability
 from campipe.engine.settings import resolve_integrator as resolve_integrator
 from campipe.engine.settings import stability_limit as stability_limit
 from campipe.engine.settings import visited_configurations as visited_configurations
+from campipe.engine.settle import run_settled
 from campipe.model import ValveTrain, system_matrices
 from campipe.model.assembly import SystemMatrices, configuration_frequencies
 from campipe.profiles import Profile, evaluate
@@ -329,7 +330,7 @@ def _exact_runs(settings, dt_run, full_state, which, stack, omega, responses=Tru
     return ExactRuns(
         train=which,
         t_sample=settings.output_every / omega,
-        t_end=settings.revolutions * TWO_PI / omega,
+        t_end=settings.recorded_revolutions * TWO_PI / omega,
         zeta=zeta,
         dt_cap=float(dt_run or 0.0),
         tolerance=float(settings.tolerance),
@@ -454,8 +455,8 @@ def integrator_types(cases: Sequence[Case], settings: RunSettings, full_state: b
 
 def _outputs(batch: PreparedBatch, settings: RunSettings):
     """The kernels' output arrays for a batch run with ``settings`` (``common.make_outputs``)."""
-    n_rev = turn_count(settings.revolutions)
-    n_out = sample_count(settings.revolutions, settings.output_every)
+    n_rev = turn_count(settings.recorded_revolutions)
+    n_out = sample_count(settings.recorded_revolutions, settings.output_every)
     n_q = batch.modal_trains.load.shape[1]
     return make_outputs(len(batch.which), n_out, n_rev, settings.max_events, n_q)
 
@@ -545,6 +546,7 @@ def run_batch(
     full_state: bool = True,
     check_stability_limit: bool = True,
     on_failure: str = "raise",
+    start: Start | None = None,
 ) -> BatchResult:
     """Integrate every case of a batch in one compiled call.
 
@@ -566,6 +568,9 @@ def run_batch(
         naming them (default), or record it in ``BatchResult.status`` and return the others'
         results; a failed case's histories and metrics are then NaN (its events are those
         before the failure).
+    start : Start, optional
+        Where each case starts, at t = 0 (a run of automatic length starts each turn where
+        the last ended: ``engine.settle``); default: ``settings.start``'s.
 
     Raises
     ------
@@ -577,18 +582,28 @@ def run_batch(
     if on_failure not in ("raise", "record"):
         raise ValueError(f"on_failure: found {on_failure!r}, expected 'raise' or 'record'")
     check_run(cases, settings, check_stability_limit=check_stability_limit)
+    if settings.settle:
+        return run_settled(
+            cases,
+            settings,
+            _run_turn,
+            [train_matrices(c.train) for c in cases],
+            check_stability_limit=check_stability_limit,
+            on_failure=on_failure,
+        )
     if settings.integrator == "default" and any(c.compliant for c in cases):
         options = {
             "full_state": full_state,
             "check_stability_limit": check_stability_limit,
             "on_failure": on_failure,
         }
-        return _run_by_contacts(cases, settings, options)
+        return _run_by_contacts(cases, settings, options, start)
     n = len(cases)
     angles = output_angles(settings)
     warmup = settings.warmup_turns
     batch = _prepare_batch(cases, settings, full_state)
-    start = _starts(cases, settings, batch)
+    if start is None:
+        start = _starts(cases, settings, batch)
     cases_in = batch.cases._replace(**start._asdict())
     omega, qref = cases_in.omega, cases_in.valve_ref
     out = _outputs(batch, settings)
@@ -619,6 +634,12 @@ def run_batch(
         status=status,
         start_time=cases_in.t0,
     )
+
+
+def _run_turn(cases, settings, start=None, **options) -> BatchResult:
+    """One turn of a run of automatic length (``settle.run_settled``), from ``start``'s
+    (t0, q0, v0, a0, cfg0) or, for the first, from ``settings.start``'s."""
+    return run_batch(cases, settings, start=None if start is None else Start(*start), **options)
 
 
 def _failures(out, settings: RunSettings, on_failure, check_stability_limit, integrator) -> None:
@@ -666,7 +687,9 @@ def _failures(out, settings: RunSettings, on_failure, check_stability_limit, int
         array[failed] = np.nan
 
 
-def _run_by_contacts(cases: Sequence[Case], settings: RunSettings, options) -> BatchResult:
+def _run_by_contacts(
+    cases: Sequence[Case], settings: RunSettings, options, start: Start | None = None
+) -> BatchResult:
     """A batch under the default integrator with compliant cases: those through the
     compliant integrator, the others through the default, the results in case order."""
     flags = np.array([c.compliant for c in cases])
@@ -675,5 +698,7 @@ def _run_by_contacts(cases: Sequence[Case], settings: RunSettings, options) -> B
         index = np.flatnonzero(which)
         if index.size:
             run = dataclasses.replace(settings, integrator=name)
-            parts.append((index, run_batch([cases[int(i)] for i in index], run, **options)))
+            part_start = None if start is None else Start(*(a[index] for a in start))
+            part = run_batch([cases[int(i)] for i in index], run, start=part_start, **options)
+            parts.append((index, part))
     return merge_results(len(cases), parts)

@@ -57,17 +57,16 @@ class Sampled(Protocol):
     """What fixes a run's output samples (``RunSettings``)."""
 
     @property
-    def revolutions(self) -> float: ...  # cam turns from θ = 0
+    def recorded_revolutions(self) -> float: ...  # cam turns the histories cover
 
     @property
     def output_every(self) -> float: ...  # output spacing in cam angle [rad]
 
 
 def output_angles(settings: Sampled) -> np.ndarray:
-    """Sample angles 0 … 2π·revolutions at ``output_every`` [rad]."""
-    return (
-        np.arange(sample_count(settings.revolutions, settings.output_every)) * settings.output_every
-    )
+    """Sample angles 0 … 2π·revolutions at ``output_every`` [rad] (the recorded turns')."""
+    n_out = sample_count(settings.recorded_revolutions, settings.output_every)
+    return np.arange(n_out) * settings.output_every
 
 
 def compliant_contacts(train: ValveTrain, has_seat: bool) -> bool:

@@ -68,7 +68,11 @@ class Metric:
         return np.degrees(values) if self.si_units == "rad" else values
 
     def summarise(self, values: np.ndarray, measured: np.ndarray) -> np.ndarray:
-        """(n_cases,) the summary of (n_cases, n_turns) values over the ``measured`` turns."""
+        """(n_cases,) the summary of (n_cases, n_turns) values over the ``measured`` turns:
+        (n_turns,) for every case, or (n_cases, n_turns) each case's own (a run of automatic
+        length; a turn whose value is NaN, beyond a case's run, is left out)."""
+        if measured.ndim == 2:
+            return self._summarise_windows(values, measured)
         kept = values[:, measured]
         how = self.summary_of_turns
         return (
@@ -78,6 +82,15 @@ class Metric:
             if how == "max"
             else (kept.min(axis=1))
         )
+
+    def _summarise_windows(self, values: np.ndarray, measured: np.ndarray) -> np.ndarray:
+        kept = np.where(measured, values, np.nan)
+        out = np.full(values.shape[0], np.nan)
+        some = np.isfinite(kept).any(axis=1)
+        how = self.summary_of_turns
+        reduce = np.nanmean if how == "mean" else np.nanmax if how == "max" else np.nanmin
+        out[some] = reduce(kept[some], axis=1)
+        return out
 
 
 def _pressure(side: int) -> Callable[[Any, Any], np.ndarray]:

@@ -389,7 +389,7 @@ def _steady_result(
     turn, back = np.unique(np.mod(angles, TWO_PI), return_inverse=True)
     st = _samples(batch, ext, turn, held)
     omega = batch.cases.omega[held]
-    n, n_rev = len(cases), turn_count(settings.revolutions)
+    n, n_rev = len(cases), turn_count(settings.recorded_revolutions)
     per_rev = np.zeros((n, n_rev, N_ENGINE))
     per_rev[:, :, MAX_CAM_FORCE] = ext.max_cam_force[held, None]
     q = st.q[held][:, back]

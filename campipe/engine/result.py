@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from campipe.constants import TWO_PI
 from campipe.engine import metrics
 from campipe.engine.loads import spring_histories
 from campipe.model import ValveTrain
@@ -44,7 +45,9 @@ class BatchResult:
     #: (n_cases,) q7 at zero valve lift [m]: the valve's static position on the base circle
     #: with no seat, or its seated one in a train with lash (``Case.lift_zero``)
     valve_reference: np.ndarray
-    measured: np.ndarray  # (n_rev,) bool: the turn counts in the summaries (after warm-up)
+    #: (n_rev,) bool: the turn counts in the summaries (after warm-up); (n_cases, n_rev) for
+    #: a run of automatic length (``engine.settle``): each case's settled window
+    measured: np.ndarray
     #: (n_cases, n_rev, metrics.N_ENGINE) the engine's metrics per turn, in the columns of
     #: ``metrics.ENGINE`` (NaN for a failed case)
     per_rev: np.ndarray
@@ -56,6 +59,14 @@ class BatchResult:
     #: a failure (``vocabulary.FAILURES``) whose histories and metrics are NaN
     status: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     start_time: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (n_cases,) t0 ≤ 0 [s]
+    # A run of automatic length (``engine.settle``) says how each case settled (empty else):
+    #: (n_cases,) the period its response repeats with [turns]; 0: it did not within the cap
+    period_turns: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    #: (n_cases,) the first turn (from 0) of its metrics' window
+    settled_turn: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    turns_run: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # (n_cases,)
+    #: (n_cases,) the turn (from 0) its histories and events start at
+    recorded_from: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     _derived: dict[str, object] = field(default_factory=dict, repr=False, compare=False)
 
     @property
@@ -71,8 +82,29 @@ class BatchResult:
         cached = self._derived.get(key)
         if cached is None:
             assert metric.derive is not None
-            cached = self._derived[key] = np.asarray(metric.derive(self, self.trains), float)
+            if self.recorded_from.size:
+                cached = self._derived[key] = self._derived_in_window(metric)
+            else:
+                cached = self._derived[key] = np.asarray(metric.derive(self, self.trains), float)
         return cached  # type: ignore[return-value]
+
+    def _derived_in_window(self, metric) -> np.ndarray:
+        """A derived metric of a run of automatic length: its histories hold each case's last
+        recorded turns only, so it is derived on those turns and placed at theirs (NaN at the
+        others, which its summary then leaves out)."""
+        recorded = int(round(self.cam_angle[-1] / TWO_PI))
+        turns = self.recorded_from[:, None] + np.arange(recorded)
+        window = dataclasses.replace(
+            self,
+            per_rev=np.take_along_axis(self.per_rev, turns[:, :, None], axis=1),
+            measured=np.ones(recorded, np.bool_),
+            recorded_from=np.zeros(0, np.int64),
+            _derived={},
+        )
+        values = np.asarray(metric.derive(window, self.trains), float)
+        out = np.full(self.per_rev.shape[:2], np.nan)
+        np.put_along_axis(out, turns, values, axis=1)
+        return out
 
     def metric(self, key: str) -> np.ndarray:
         """(n_cases,) a metric's summary over the measured turns, SI."""
@@ -127,7 +159,7 @@ class BatchResult:
 
 
 #: Fields of a result shared by its parts (not per case).
-_SHARED = ("cam_angle", "measured")
+_SHARED = ("cam_angle",)
 #: Per-case fields held in lists.
 _LISTS = ("events", "trains")
 
@@ -145,6 +177,10 @@ def merge_results(n: int, parts: Sequence[tuple[np.ndarray, BatchResult]]) -> Ba
             continue
         value = getattr(first, f.name)
         if f.name in _SHARED:
+            merged[f.name] = value
+        elif (f.name == "measured" and value.ndim == 1) or (
+            f.name not in _LISTS and value.size == 0  # a field of automatic length's
+        ):
             merged[f.name] = value
         elif f.name in _LISTS:
             empty = np.zeros((0, N_EVENT_FIELDS)) if f.name == "events" else None

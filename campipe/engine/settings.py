@@ -12,6 +12,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+from campipe.constants import TWO_PI
 from campipe.engine import integrators
 from campipe.engine.case import CLOSURES as CLOSURES
 from campipe.engine.case import Case as Case
@@ -98,7 +99,9 @@ def case_integrator(name: str, train: ValveTrain, has_seat: bool = True) -> str:
 class RunSettings:
     """How a batch is integrated and sampled."""
 
-    revolutions: float = 4.0  # cam turns, starting at θ = 0
+    #: cam turns, starting at θ = 0; None: each case until its response repeats
+    #: (``engine.settle``), its last ``history_turns`` recorded
+    revolutions: float | None = 4.0
     dt: float | None = None  # time step [s] (modal-exact: largest step); None: DEFAULT_STEPS
     output_every: float = math.radians(1.0)  # output spacing in cam angle [rad]
     integrator: str = "default"  # "default" or a name in INTEGRATORS
@@ -111,6 +114,24 @@ class RunSettings:
     start: str = "periodic"  # "periodic" or "quasi-static" (see STARTS)
     warmup: int | None = None  # turns left out of the metrics; None: DEFAULT_WARMUP[start]
     capture_velocity: float = DEFAULT_CAPTURE_VELOCITY  # resting contact below this [m/s]
+    # Run length by convergence (``revolutions`` None, ``engine.settle``):
+    history_turns: int = 1  # the last turns whose histories and events are recorded
+    max_revolutions: int = 48  # the cap on a case's turns
+    #: a settling case's states at turn boundaries p turns apart agree to this, relative to
+    #: each coordinate's and velocity's range over a turn [-]
+    settle_tolerance: float = 1e-5
+    max_period: int = 4  # the longest period [turns] a settling case is checked for
+
+    @property
+    def settle(self) -> bool:
+        """Whether each case runs until its response repeats (``revolutions`` None)."""
+        return self.revolutions is None
+
+    @property
+    def recorded_revolutions(self) -> float:
+        """The turns the histories cover: ``revolutions``, or ``history_turns`` when each
+        case runs until settled."""
+        return float(self.history_turns) if self.revolutions is None else self.revolutions
 
     @property
     def warmup_turns(self) -> int:
@@ -123,13 +144,15 @@ class RunSettings:
                 expected=f"one of: {', '.join(STARTS)}",
             )
         turns = DEFAULT_WARMUP[self.start] if self.warmup is None else self.warmup
-        if not (0 <= turns < turn_count(self.revolutions)):
+        if self.settle:
+            return 0  # the settled window says which turns count (``engine.settle``)
+        if not (0 <= turns < turn_count(self.recorded_revolutions)):
             raise RunSettingsError.at(
                 "run.warmup",
-                f"found {turns!r} turns; a run of {self.revolutions:g} needs at least one "
+                f"found {turns!r} turns; a run of {self.recorded_revolutions:g} needs at least one "
                 "measured turn after its warm-up",
                 found=turns,
-                expected=f"0 … {turn_count(self.revolutions) - 1} turns",
+                expected=f"0 … {turn_count(self.recorded_revolutions) - 1} turns",
             )
         return int(turns)
 
@@ -140,10 +163,10 @@ class RunSettings:
         more (shorter, full costs no more), from the periodic start with modal-exact (the
         full run it stands for)."""
         self.check_fidelity()
-        if self.fidelity_tolerance is None:
+        if self.fidelity_tolerance is None or self.settle:
             return self.fidelity
         steady_ok = self.start == "periodic" and self.method == "modal-exact"
-        pays = self.revolutions >= STEADY_MIN_TURNS
+        pays = self.recorded_revolutions >= STEADY_MIN_TURNS
         if steady_ok and pays and FIDELITY_ERRORS["steady"] <= self.fidelity_tolerance:
             return "steady"
         return "full"
@@ -167,6 +190,15 @@ class RunSettings:
                 found=self.fidelity,
                 expected="full, or start periodic with integrator modal-exact",
             )
+        if self.fidelity == "steady" and self.settle:
+            raise RunSettingsError.at(
+                "run.fidelity",
+                "steady repeats one closed-form turn, and a run of automatic length settles a "
+                "case that follows the cam in its first turn anyway: use run.fidelity: full "
+                "(or fix run.revolutions)",
+                found=self.fidelity,
+                expected="full with run.revolutions: auto",
+            )
         if self.fidelity not in FIDELITIES:
             why = REMOVED_FIDELITIES.get(self.fidelity)
             what = f"{self.fidelity!r} was removed: {why}" if why else f"unknown {self.fidelity!r}"
@@ -187,6 +219,67 @@ class RunSettings:
     def step(self) -> float | None:
         """The time step [s] (modal-exact: the cap on its steps, None for none)."""
         return DEFAULT_STEPS[self.method] if self.dt is None else self.dt
+
+
+def whole_turns(settings: RunSettings) -> int:
+    """The turns a settling run records: ``history_turns``, a whole number ≥ 1 (refused
+    otherwise, naming the key)."""
+    turns = settings.history_turns
+    if isinstance(turns, bool) or not (float(turns).is_integer() and turns >= 1):
+        raise RunSettingsError.at(
+            "run.history_turns",
+            f"found {turns!r}: a run of automatic length records a whole number of its last turns",
+            found=turns,
+            expected="a whole number of turns ≥ 1",
+        )
+    return int(turns)
+
+
+def check_settling(settings: RunSettings) -> None:
+    """Refuse settling settings that cannot work, naming the key: a sample spacing that does
+    not divide a turn (each turn starts where the last ended, on a sample), a cap below the
+    turns recorded, a period bound below 1, a tolerance not above 0."""
+    turns = whole_turns(settings)
+    if settings.warmup is not None:
+        raise RunSettingsError.at(
+            "run.warmup",
+            f"found {settings.warmup!r}: with run.revolutions: auto the settled window says "
+            "which turns count; leave run.warmup out (or fix run.revolutions)",
+            found=settings.warmup,
+            expected="default",
+        )
+    per_turn = TWO_PI / settings.output_every
+    if abs(per_turn - round(per_turn)) > 1e-9 * per_turn:
+        raise RunSettingsError.at(
+            "run.output_every",
+            f"{math.degrees(settings.output_every):.6g} deg does not divide a turn: with "
+            "run.revolutions: auto every turn starts on a sample (use e.g. 1 deg or 0.5 deg)",
+            found=math.degrees(settings.output_every),
+            expected="360 deg / a whole number",
+        )
+    if settings.max_period < 1:
+        raise RunSettingsError.at(
+            "run.max_period",
+            f"found {settings.max_period!r}, expected a period of 1 turn or more",
+            found=settings.max_period,
+            expected="≥ 1",
+        )
+    if settings.max_revolutions < max(turns, 2 * settings.max_period):
+        least = max(turns, 2 * settings.max_period)
+        raise RunSettingsError.at(
+            "run.max_revolutions",
+            f"found {settings.max_revolutions!r}: it must allow the recorded turns and two "
+            f"of the longest period ({least} turns)",
+            found=settings.max_revolutions,
+            expected=f"≥ {least}",
+        )
+    if not (settings.settle_tolerance > 0 and math.isfinite(settings.settle_tolerance)):
+        raise RunSettingsError.at(
+            "run.settle_tolerance",
+            f"found {settings.settle_tolerance!r}, expected a relative tolerance above 0",
+            found=settings.settle_tolerance,
+            expected="> 0, e.g. 1e-5",
+        )
 
 
 def stability_limit(case: Case, integrator: str = "newmark-linear") -> float:
@@ -237,6 +330,8 @@ def check_run(
     """
     dt_run = settings.step  # also refuses an unknown integrator
     settings.check_fidelity()
+    if settings.settle:
+        check_settling(settings)
     if dt_run is not None and not (dt_run > 0 and math.isfinite(dt_run)):
         raise RunSettingsError.at(
             "run.dt",

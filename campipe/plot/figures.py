@@ -217,6 +217,10 @@ def histories(view: View, request: PlotRequest) -> Figure:
     ds = view.ds
     cam_angle = np.asarray(ds["cam_angle"].values, dtype=float)
     keep, turn_note = _turn_mask(cam_angle, check_turn(request.turn) if request.turn else None)
+    if "recorded_revolution" in ds.variables:  # a run of automatic length
+        turn_note = turn_note.replace(", turn", ", recorded turn") + (
+            ", each case's last turns (settled: query's period_turns)"
+        )
     angle = cam_angle[keep]
     seat = view.stored.columns.get("seat")
     panels = [
@@ -407,13 +411,33 @@ def metric(view: View, request: PlotRequest) -> Figure:
             describe(n, view.shown.columns[n][first], view.shown.units.get(n, "")) for n in others
         )
         ax.plot(x[idx], y[idx], label=text or "all cases", **style.kwargs())
+    ringed = _mark_unsettled(ax, view, x, y)
     ax.set_xlabel(label(xname, view.shown.units.get(xname, "")))
     ax.set_ylabel(label(yname, view.shown.units.get(yname, "")))
     ax.grid(alpha=0.3)
-    if others:
+    if others or ringed:
         ax.legend(fontsize=8, loc="best")
     _title(fig, view, f"{yname} against {xname}", request.where)
     return fig
+
+
+def _mark_unsettled(ax, view: View, x: np.ndarray, y: np.ndarray) -> bool:
+    """Ring the cases of a run of automatic length that did not repeat within its cap: their
+    values are statistics over a window (mean per turn, largest), not a settled response's."""
+    period = view.stored.columns.get("period_turns")
+    never = np.zeros(x.size, bool) if period is None else np.asarray(period) == 0
+    if never.any():
+        ax.scatter(
+            x[never],
+            y[never],
+            s=90,
+            facecolors="none",
+            edgecolors="black",
+            linewidths=1.0,
+            zorder=4,
+            label="did not repeat: statistics over its window",
+        )
+    return bool(never.any())
 
 
 # -- map over two axes -------------------------------------------------------------------------

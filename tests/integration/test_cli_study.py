@@ -27,12 +27,17 @@ def test_validate_prints_cases_axes_and_estimates():
     assert re.search(
         r"run time: about [\d.]+ s on 2 workers: the engine [\d.]+ s, storing and writing the "
         r"archive [\d.]+ s, loading the engine [\d.]+ s, the replay's 3 cases [\d.]+ s \(timed "
-        r"on a run of \d+ of its 297 cases, scaled; 7.58 s simulated",
+        r"on a run of \d+ of its 297 cases, scaled; 22.7 s simulated",
         text,
     )
+    # run.revolutions: auto: a case runs until it repeats, guessed at a quarter of its cap
+    # (12 turns; the timed sample run corrects the time), and one turn is stored
+    assert "until each case repeats (at most 48 revolutions, the last 1 recorded)" in text
     size = float(re.search(r"archive: about ([\d.]+) MB", text).group(1))
-    # 297 cases × 1441 angles × (8 float64 histories + the int8 contact state) ≈ 27.8 MB
-    assert 27.5 < size < 28.1
+    # 297 cases × 361 angles × (8 float64 histories + the int8 contact state) ≈ 6.97 MB, and
+    # 48 revolutions × (9 float64 + 3 int32 per-revolution metrics + the int8 measured)
+    # ≈ 1.2 MB
+    assert 7.6 < size < 8.1
     assert "replay: 'speed_rpm == 11000 and seat is none'" in text
 
 

@@ -21,7 +21,10 @@ class RunLike(Protocol):
     def integrator(self) -> str: ...  # as the run names it ("default" or a registered name)
 
     @property
-    def revolutions(self) -> float: ...  # cam turns
+    def revolutions(self) -> float | None: ...  # cam turns (None: until settled)
+
+    @property
+    def recorded_revolutions(self) -> float: ...  # cam turns the histories cover
 
     @property
     def output_every(self) -> float: ...  # output spacing [rad]

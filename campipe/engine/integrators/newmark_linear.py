@@ -88,7 +88,7 @@ class NewmarkLinear:
         )
         omega = batch.cases.omega
         dt = np.full(len(which), run.step)
-        n_steps = np.ceil(run.revolutions * TWO_PI / (omega * dt) - 1e-9)
+        n_steps = np.ceil(run.recorded_revolutions * TWO_PI / (omega * dt) - 1e-9)
         runs = newmark.NewmarkRuns(dt, n_steps.astype(np.int64), float(run.output_every))
         return trains, batch.packed, runs
 

@@ -5,6 +5,7 @@ a run's results (the keys, the attributes that record them) is
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Iterable
 
 import numpy as np
@@ -68,6 +69,24 @@ def data_specs(record: Iterable[str], case_coords: str) -> list[VariableSpec]:
     return out
 
 
+#: What a run of automatic length's angles count from: its histories hold each case's last
+#: recorded revolutions only (``recorded_revolution``).
+FROM_RECORDED = {
+    "cam_angle": "cam angle from the start of the case's first recorded revolution "
+    "(recorded_revolution)",
+    "event_cam_angle": "cam angle at the event, from the start of the case's first recorded "
+    "revolution (recorded_revolution)",
+    "measured": "revolution counted in the summary metrics (1: in the settled window), or "
+    "not (0: before it, or not run)",
+}
+
+
+def _from_recorded(spec: VariableSpec) -> VariableSpec:
+    if spec.name not in FROM_RECORDED:
+        return spec
+    return dataclasses.replace(spec, attrs={**spec.attrs, "long_name": FROM_RECORDED[spec.name]})
+
+
 def archive_layout(study: Study, n_events: int | None, cam_angle: np.ndarray, n_revolutions: int):
     """(sizes, variables, static arrays) of the study's archive; the static arrays are the
     axes and the per-case coordinates, the rest streams in from batch files. ``n_events``
@@ -90,6 +109,8 @@ def archive_layout(study: Study, n_events: int | None, cam_angle: np.ndarray, n_
             sizes["mode"] = values[name].shape[1]
         specs.append(variable_spec(name, var))
     specs += data_specs(study.record, " ".join(coord_names))
+    if study.settle:
+        specs = [_from_recorded(s) for s in specs]
     static = {**axis_arrays(cam_angle, n_revolutions), **values}
     static = {s.name: static[s.name] for s in specs if s.name in static}
     return sizes, specs, static

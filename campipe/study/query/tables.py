@@ -211,10 +211,14 @@ def summary(ds, where: str | None = None, system: str = "spec") -> str:
         total = table.n
         table = subset(table, select(stored, where))
         selected = f" (of {total}, where {where})"
-    lines = [
-        f"{name}: {table.n} cases{selected}, {ds.attrs.get('revolutions', '?')} revolutions, "
-        f"record: {ds.attrs.get('record', '-')}"
-    ]
+    revolutions = ds.attrs.get("revolutions", "?")
+    length = (
+        f"revolutions until settled (at most {ds.attrs.get('max_revolutions', '?')})"
+        if revolutions == "auto"
+        else f"{revolutions} revolutions"
+    )
+    record = ", ".join(r for r in str(ds.attrs.get("record", "")).split(", ") if r != "settling")
+    lines = [f"{name}: {table.n} cases{selected}, {length}, record: {record or '-'}"]
     try:
         axes = json.loads(ds.attrs.get("study_axes", "[]"))
     except json.JSONDecodeError:
@@ -227,6 +231,7 @@ def summary(ds, where: str | None = None, system: str = "spec") -> str:
             + (f": {_values_text(col, table.units.get(a['name'], ''))}" if col is not None else "")
         )
     lines += status_lines(table)
+    lines += settling_lines(table, ds.attrs.get("max_revolutions", "?"))
     onset = onset_table(table)
     if onset:
         lines.append("")
@@ -269,6 +274,30 @@ def status_lines(table: CaseTable) -> list[str]:
         shown = ", ".join(str(ids[i]) for i in truncated[:MAX_LISTED])
         more = f" and {truncated.size - MAX_LISTED} more" if truncated.size > MAX_LISTED else ""
         out.append(f"events truncated (run.max_events reached): {shown}{more}")
+    return out
+
+
+def settling_lines(table: CaseTable, cap: object) -> list[str]:
+    """How a run of automatic length's cases settled: how many repeat with each period, and
+    the ids of those that did not repeat (their metrics are statistics over their window)."""
+    period = table.columns.get("period_turns")
+    if period is None:
+        return []
+    period = np.asarray(period, int)
+    counts = ", ".join(
+        f"{np.count_nonzero(period == p)} every {'turn' if p == 1 else f'{p} turns'}"
+        for p in np.unique(period[period > 0])
+    )
+    out = [f"settled: {counts or 'none'}"]
+    never = np.flatnonzero(period == 0)
+    if never.size:
+        ids = table.columns.get("case", np.arange(table.n).astype(str))
+        shown = ", ".join(str(ids[i]) for i in never[:MAX_LISTED])
+        more = f" and {never.size - MAX_LISTED} more" if never.size > MAX_LISTED else ""
+        out.append(
+            f"not repeating within {cap} revolutions: {shown}{more} (metrics: mean per turn "
+            "and largest over the run's second half)"
+        )
     return out
 
 

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from campipe.engine.settings import output_angles, turn_count
+from campipe.engine.settings import output_angles
 from campipe.io import batch_file
 from campipe.io.archive import CASE_CHUNK, NetCDFWriter, provenance, read_rows
 from campipe.study.archive.layout import archive_layout
@@ -182,7 +182,7 @@ class Assembly:
 
     def _create(self) -> None:
         study = self.study
-        n_rev = turn_count(study.revolutions)
+        n_rev = study.n_revolutions
         sizes, specs, static = archive_layout(study, None, self.cam_angle, n_rev)
         attrs = {**study_attrs(study), "spec_file": self.spec, **provenance(self.command)}
         self.case_names = [

@@ -63,8 +63,17 @@ def simulated_seconds(study: Study) -> float:
     axes' combinations (their turns) times its speeds (Σ 1/ω), no case built."""
     if isinstance(study.cases, SpeedSweep):
         per_turn = sum(TWO_PI / speed for speed in study.cases.speeds)
-        return sum(c.settings.revolutions for c in study.cases.others()) * per_turn
-    return sum(c.settings.revolutions * TWO_PI / c.case.speed for c in study.cases)
+        return sum(expected_turns(c.settings) for c in study.cases.others()) * per_turn
+    return sum(expected_turns(c.settings) * TWO_PI / c.case.speed for c in study.cases)
+
+
+def expected_turns(settings: RunSettings) -> float:
+    """The turns a case runs: its fixed ``revolutions``, or for a run of automatic length
+    a quarter of its cap (a case that follows the cam settles in one turn, one that never
+    repeats runs the cap: a guess, which the timed sample run corrects)."""
+    if settings.revolutions is None:
+        return settings.max_revolutions / 4.0
+    return settings.revolutions
 
 
 def warm_up(study: Study) -> float:
@@ -81,7 +90,7 @@ def warm_up(study: Study) -> float:
         t = time.perf_counter()
         run_batch(
             [c.case],
-            replace(settings, revolutions=min(settings.revolutions, 0.01)),
+            replace(settings, revolutions=min(settings.revolutions or 1.0, 0.01)),
             on_failure="record",
         )
         total += min(time.perf_counter() - t, MAX_LOAD_SECONDS)

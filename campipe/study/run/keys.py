@@ -50,7 +50,12 @@ def study_attrs(study: Study) -> dict[str, object]:
         "spec_overrides": json.dumps(spec.overrides, default=str),
         "study_axes": json.dumps(axes),
         "record": record_text(study.record),
-        "revolutions": float(study.revolutions),
+        "revolutions": "auto" if study.settle else float(study.revolutions),
+        **(
+            {"history_turns": int(study.revolutions), "max_revolutions": study.max_revolutions}
+            if study.settle
+            else {}
+        ),
         "output_every_deg": float(np.round(np.degrees(study.output_every), 9)),
         "replay_where": spec.replay or "",
         "campipe_layout": LAYOUT_VERSION,

@@ -160,6 +160,11 @@ def batch_arrays(plan: BatchPlan, result: BatchResult) -> BatchData:
         "measured": np.broadcast_to(result.measured.astype(np.int8), result.per_rev.shape[:2]),
         "status": np.asarray(result.status, np.int8),
     }
+    if result.period_turns.size:  # a run of automatic length (``engine.settle``)
+        arrays["period_turns"] = result.period_turns.astype(np.int32)
+        arrays["settled_revolution"] = (result.settled_turn + 1).astype(np.int32)
+        arrays["revolutions_run"] = result.turns_run.astype(np.int32)
+        arrays["recorded_revolution"] = (result.recorded_from + 1).astype(np.int32)
     for metric in archived_metrics():
         if metric.summary not in wanted:
             continue
@@ -179,7 +184,13 @@ def batch_arrays(plan: BatchPlan, result: BatchResult) -> BatchData:
         for name in loads:
             arrays[name] = np.stack([p[name] for p in per_case])
     arrays.update(_spring_arrays(result, set(wanted)))
-    arrays.update(event_arrays(result.events, [c.case.speed for c in plan.cases]))
+    arrays.update(
+        event_arrays(
+            result.events,
+            [c.case.speed for c in plan.cases],
+            result.recorded_from if result.recorded_from.size else None,
+        )
+    )
     missing = set(wanted) - set(arrays)
     assert not missing, missing
     arrays = {k: np.ascontiguousarray(v) for k, v in arrays.items() if k in wanted}
@@ -202,7 +213,9 @@ def _spring_arrays(result: BatchResult, wanted: set[str]) -> dict:
     return {name: h for name, h in histories.items() if name in wanted}
 
 
-def event_arrays(events: Sequence[np.ndarray], speeds: Sequence[float]) -> dict[str, np.ndarray]:
+def event_arrays(
+    events: Sequence[np.ndarray], speeds: Sequence[float], first_turn: np.ndarray | None = None
+) -> dict[str, np.ndarray]:
     """Per-case event lists → the contiguous ragged event variables.
 
     Parameters
@@ -211,6 +224,9 @@ def event_arrays(events: Sequence[np.ndarray], speeds: Sequence[float]) -> dict[
         Columns as ``campipe.vocabulary.EV_*``.
     speeds : sequence of float
         Each case's cam speed [rad/s], to give each event its cam angle.
+    first_turn : (n_cases,) int, optional
+        Each case's first recorded turn (a run of automatic length): the cam angle counts
+        from its start, as its histories' do.
     """
     counts = np.array([e.shape[0] for e in events], dtype=np.int32)
     ev = np.concatenate([e for e in events]) if len(events) else np.zeros((0, 6))
@@ -222,7 +238,8 @@ def event_arrays(events: Sequence[np.ndarray], speeds: Sequence[float]) -> dict[
         "event_count": counts,
         "event_case": case,
         "event_time": ev[:, EV_TIME].copy(),
-        "event_cam_angle": np.degrees(ev[:, EV_TIME] * omega),
+        "event_cam_angle": np.degrees(ev[:, EV_TIME] * omega)
+        - (0.0 if first_turn is None else 360.0 * np.asarray(first_turn)[case]),
         "event_kind": ev[:, EV_KIND].astype(np.int8),
         "event_from": ev[:, EV_FROM].astype(np.int8),
         "event_to": ev[:, EV_TO].astype(np.int8),

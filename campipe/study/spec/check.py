@@ -304,6 +304,10 @@ def check_output_every(run: Mapping) -> None:
     """The stored histories need at least two samples: ``output_every`` within the run."""
     try:
         revolutions = CASE_FIELDS["run.revolutions"].parse(run["revolutions"], "run.revolutions")
+        if revolutions is None:  # auto: the recorded turns'
+            revolutions = CASE_FIELDS["run.history_turns"].parse(
+                run["history_turns"], "run.history_turns"
+            )
         every = CASE_FIELDS["run.output_every"].parse(run["output_every"], "run.output_every")
     except SpecProblem:
         return  # refused where the run block is checked

@@ -39,7 +39,12 @@ from campipe.study.spec.resolve import (
     resolve,
     resolve_canonical,
 )
-from campipe.study.spec.variables import DOF_NAMES, case_coordinates, data_variables
+from campipe.study.spec.variables import (
+    DOF_NAMES,
+    SETTLING_RECORD,
+    case_coordinates,
+    data_variables,
+)
 from campipe.study.where import QueryError, evaluate, parse_where
 
 
@@ -60,10 +65,24 @@ class Study:
     cases: Sequence[ResolvedCase]  # in archive order (a SpeedSweep or a list)
     axes: list[Axis]  # what varies, in expansion order
     varied: tuple[str, ...]  # extra dotted keys with a per-case coordinate in the archive
-    revolutions: float  # cam turns, shared [-]
+    revolutions: float  # cam turns the histories cover, shared [-]
     output_every: float  # output spacing, shared [rad]
     record: tuple[str, ...]  # optional histories stored
     compression: str = COMPRESSION  # the archive's (campipe.io.compression.COMPRESSIONS)
+    #: each case runs until its response repeats (``run.revolutions: auto``), at most this
+    #: many turns; 0: the run is ``revolutions`` long
+    max_revolutions: int = 0
+
+    @property
+    def settle(self) -> bool:
+        """Whether each case runs until its response repeats (``run.revolutions: auto``)."""
+        return self.max_revolutions > 0
+
+    @property
+    def n_revolutions(self) -> int:
+        """The length of the archive's revolution axis: the turns of a fixed run (a partial
+        last one included), or the cap on a case's turns."""
+        return self.max_revolutions if self.settle else turn_count(self.revolutions)
 
     @property
     def name(self) -> str:
@@ -73,7 +92,7 @@ class Study:
 def archive_bytes(study: Study) -> int:
     """Size of the archive's variables before compression [bytes] (events not counted)."""
     n_out = sample_count(study.revolutions, study.output_every)
-    n_rev = turn_count(study.revolutions)
+    n_rev = study.n_revolutions
     sizes = {"cam_angle": n_out, "revolution": n_rev, "dof": len(DOF_NAMES), "event": 0}
     per_case = 0
     for var in data_variables(study.record).values():
@@ -249,17 +268,19 @@ def expand(
         axes += [Axis(k, "sample", spec.sample.n) for k in spec.sample.ranges]
     if spec.cases:
         axes.append(Axis("cases", "cases", len(spec.cases)))
+    settle = run["revolutions"] == "auto"
     return Study(
         spec=spec,
         cases=cases,
         axes=axes,
         varied=varied_keys(spec),
-        revolutions=float(run["revolutions"]),
+        revolutions=float(run["history_turns"] if settle else run["revolutions"]),
         output_every=float(
             parse_value("run.output_every", run["output_every"], "run.output_every")
         ),
-        record=tuple(run["record"]),
+        record=tuple(run["record"]) + ((SETTLING_RECORD,) if settle else ()),
         compression=str(run["compression"]),
+        max_revolutions=int(run["max_revolutions"]) if settle else 0,
     )
 
 

@@ -80,6 +80,7 @@ class Field:
     choices: tuple[str, ...] = ()  # allowed words ("choice"), allowed items ("record")
     allow_none: bool = False  # "none" (or null) accepted, meaning absent (seat)
     allow_default: bool = False  # "default" accepted, meaning the engine's choice (run.dt)
+    allow_auto: bool = False  # "auto" accepted, meaning until settled (run.revolutions)
     archive_name: str | None = None  # name of its per-case coordinate in the archive
     archive_units: str | None = None  # units of that coordinate (pint spelling)
 
@@ -101,7 +102,7 @@ class Field:
     def _parse(self, value: object, path: str) -> Any:
         if self.allow_none and (value is None or value == "none"):
             return None
-        if self.allow_default and value == "default":
+        if (self.allow_default and value == "default") or (self.allow_auto and value == "auto"):
             return None
         if self.kind == "quantity":
             return self._quantity(value, path)
@@ -216,7 +217,48 @@ def _choice(value: object, choices: Iterable[str], path: str, what: str) -> str:
 _RUN_METADATA: dict[str, Field] = {
     f.key.removeprefix("run."): f
     for f in [
-        Field("run.revolutions", "number", "cam turns to integrate, from θ = 0", minimum=0.0),
+        Field(
+            "run.revolutions",
+            "number",
+            "cam turns to integrate, from θ = 0; auto (the default): each case until its "
+            "response repeats (with a period of up to run.max_period turns, to "
+            "run.settle_tolerance) or run.max_revolutions, its metrics the settled response's "
+            "and its last run.history_turns recorded",
+            minimum=0.0,
+            allow_auto=True,
+        ),
+        Field(
+            "run.history_turns",
+            "integer",
+            "with run.revolutions: auto, the last turns whose histories and events are stored",
+            minimum=1.0,
+            exclusive_minimum=False,
+        ),
+        Field(
+            "run.max_revolutions",
+            "integer",
+            "with run.revolutions: auto, the most turns a case runs; a case not repeating by "
+            "then reports its second half's statistics (mean per turn, largest) and "
+            "period_turns 0",
+            minimum=2.0,
+            exclusive_minimum=False,
+        ),
+        Field(
+            "run.settle_tolerance",
+            "number",
+            "with run.revolutions: auto, how closely the states at turn boundaries a period "
+            "apart must agree, relative to each coordinate's and velocity's range over a turn "
+            "(and the distance left to the periodic response, from the transient's "
+            "contraction per period)",
+            minimum=0.0,
+        ),
+        Field(
+            "run.max_period",
+            "integer",
+            "with run.revolutions: auto, the longest period [turns] a response is checked for",
+            minimum=1.0,
+            exclusive_minimum=False,
+        ),
         Field(
             "run.dt",
             "quantity",
@@ -412,6 +454,10 @@ CASE_FIELDS: dict[str, Field] = {
 #: variables or its compression, so a sweep, zip, sample or case may not vary them.
 STUDY_WIDE = (
     "run.revolutions",
+    "run.history_turns",
+    "run.max_revolutions",
+    "run.settle_tolerance",
+    "run.max_period",
     "run.output_every",
     "run.record",
     "run.start",
@@ -428,6 +474,9 @@ RUN_DEFAULTS: dict[str, object] = {
     },
     "record": [],
     "compression": COMPRESSION,
+    # a spec's run length is by convergence unless it fixes one (the engine's RunSettings
+    # keeps a fixed default, for its callers)
+    "revolutions": "auto",
 }
 
 #: Profile kinds → their keys (all required).

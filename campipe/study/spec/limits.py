@@ -127,7 +127,12 @@ def check_limits(spec: Spec, limits: Limits) -> list[SpecProblem]:
         problems.append(_over(longest, f"cases ({axes})", n, limits.cases, Limits.OPTIONS["cases"]))
     run = spec.base["run"]
     try:
-        revolutions = float(CASE_FIELDS["run.revolutions"].parse(run["revolutions"], "run"))
+        fixed = CASE_FIELDS["run.revolutions"].parse(run["revolutions"], "run")
+        # auto: its recorded turns are stored, and it runs at most max_revolutions
+        stored = CASE_FIELDS["run.history_turns"].parse(run["history_turns"], "run")
+        longest = CASE_FIELDS["run.max_revolutions"].parse(run["max_revolutions"], "run")
+        revolutions = float(stored if fixed is None else fixed)
+        run_turns = float(longest if fixed is None else fixed)
         output_every = float(CASE_FIELDS["run.output_every"].parse(run["output_every"], "run"))
     except SpecProblem:
         return problems  # refused by the spec's own checks
@@ -154,10 +159,11 @@ def check_limits(spec: Spec, limits: Limits) -> list[SpecProblem]:
                 Limits.OPTIONS["events"],
             )
         )
-    steps, why = _steps(spec, revolutions)
+    steps, why = _steps(spec, run_turns)
     if steps > limits.steps:
         problems.append(_over(why[0], why[1], steps, limits.steps, Limits.OPTIONS["steps"]))
-    size = n * bytes_per_case(tuple(run["record"]), samples, turn_count(revolutions))
+    n_rev = turn_count(revolutions) if fixed is not None else int(run_turns)
+    size = n * bytes_per_case(tuple(run["record"]), samples, n_rev)
     if size > limits.archive_bytes:
         problems.append(
             _over(

@@ -26,6 +26,7 @@ from campipe.engine import Case, CaseError, RunSettings, RunSettingsError
 from campipe.engine.settings import (
     case_integrator,
     check_contacts,
+    check_settling,
     check_stability,
 )
 from campipe.errors import excerpt
@@ -470,7 +471,9 @@ def canonical_run(settings: RunSettings) -> dict[str, object]:
     out: dict[str, object] = {
         "integrator": settings.method,
         "dt": None if settings.step is None else clean_value(settings.step),
-        "revolutions": clean_value(float(settings.revolutions)),
+        "revolutions": "auto"
+        if settings.revolutions is None
+        else clean_value(float(settings.revolutions)),
         "output_every": clean_value(settings.output_every),
         "tolerance": clean_value(settings.tolerance),
         "max_events": settings.max_events,
@@ -525,6 +528,8 @@ def check_settings(settings: RunSettings) -> None:
         for name in ("method", "step", "warmup_turns"):
             getattr(settings, name, None)
         settings.check_fidelity()
+        if settings.settle:
+            check_settling(settings)
     except RunSettingsError as exc:
         raise SpecProblem.from_error(exc) from None
 

@@ -63,8 +63,9 @@ def field_schema(f: Field) -> dict[str, object]:
         out = {"type": f.kind, "description": f.description}
         if f.minimum is not None:
             out["exclusiveMinimum" if f.exclusive_minimum else "minimum"] = f.minimum
-        if f.allow_default:  # run.warmup: default
-            return {"anyOf": [{"enum": ["default"]}, out], "description": out.pop("description")}
+        if f.allow_default or f.allow_auto:  # run.warmup: default; run.revolutions: auto
+            word = "default" if f.allow_default else "auto"
+            return {"anyOf": [{"enum": [word]}, out], "description": out.pop("description")}
         return out
     if f.kind == "choice":
         return {"enum": list(f.choices), "description": f.description}

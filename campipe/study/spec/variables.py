@@ -54,6 +54,9 @@ PER_REV = ("case", "revolution")
 
 #: The record item that stores the spring's histories and metrics.
 SPRING_RECORD = "spring"
+#: The record item of a run of automatic length (``run.revolutions: auto``): how each case
+#: settled. Not a spec's to name: the study adds it.
+SETTLING_RECORD = "settling"
 
 
 def metric_variables(metric: Metric) -> dict[str, Variable]:
@@ -141,6 +144,33 @@ _BEFORE_METRICS: dict[str, Variable] = {
 }
 _AFTER_METRICS: dict[str, Variable] = {
     "steps": Variable(CASE, "i8", "integration steps taken", role="count"),
+    "period_turns": Variable(
+        CASE,
+        "i4",
+        "turns after which the settled response repeats (1: every turn); 0: it did not repeat "
+        "within run.max_revolutions, and its metrics are statistics over its window",
+        role="count",
+        record=SETTLING_RECORD,
+    ),
+    "settled_revolution": Variable(
+        CASE,
+        "i4",
+        "first revolution (from 1) of the window the summary metrics are taken over: whole "
+        "periods of the settled response, or the run's second half if it did not repeat",
+        role="count",
+        record=SETTLING_RECORD,
+    ),
+    "revolutions_run": Variable(
+        CASE, "i4", "revolutions integrated", role="count", record=SETTLING_RECORD
+    ),
+    "recorded_revolution": Variable(
+        CASE,
+        "i4",
+        "first revolution (from 1) of the stored histories and events (the run's last "
+        "run.history_turns)",
+        role="count",
+        record=SETTLING_RECORD,
+    ),
     "status": Variable(
         CASE,
         "i1",

@@ -1,0 +1,296 @@
+"""Run length by convergence (``RunSettings.settle``): each case runs turn by turn until its
+response repeats, and its metrics are the settled response's.
+
+The periodic start is the steady state of a train that *follows* the cam. A case that does
+follows it and repeats from its first turn; a case past the onset leaves it, and its first
+turns are a transient away from it, which a fixed run of a few turns averages into its
+metrics. Here a batch runs one turn at a time (``batch.run_batch`` on the cases not yet
+settled, each turn started from the state its last ended in), and after each turn every case's
+state at the turn boundaries is compared with the one p turns before (p = 1 … max_period):
+
+- a case whose last turns repeat with a period p, to ``settle_tolerance`` (see
+  :func:`repeats`), has settled; its metrics are taken over the whole periods of its settled
+  window (``settled_turn`` on), and it runs no more;
+- a case that has not repeated within ``max_revolutions`` turns never settled
+  (``period_turns`` 0): its metrics are statistics (mean per turn, largest) over the second
+  half of its run, its window.
+
+The histories kept are those of each case's last ``revolutions`` turns (a whole number: the
+settled window's last period when it is at least the period), from the turn
+``recorded_from``; the events kept are those of the same turns. Times are from the start of
+the run.
+
+Pure numerics: arrays in, arrays out.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Sequence
+from typing import NamedTuple
+
+import numpy as np
+
+from campipe.constants import TWO_PI
+from campipe.engine import metrics
+from campipe.engine.case import Case, sample_count
+from campipe.engine.result import BatchResult
+from campipe.engine.settings import check_settling, whole_turns
+from campipe.model.assembly import SystemMatrices
+from campipe.profiles import evaluate
+from campipe.vocabulary import CAM, EV_TIME, FAILURES, N_EVENT_FIELDS, SEAT, holds_cam, holds_seat
+
+#: A boundary state's difference below this fraction of the tolerance is a repetition at
+#: once, whatever the estimated contraction (a case that follows the cam from the periodic
+#: start repeats to rounding in its first turn).
+AT_ONCE = 1e-3
+
+
+class Boundary(NamedTuple):
+    """The states at a case's turn boundaries (``run_settled``'s bookkeeping)."""
+
+    q: np.ndarray  # (n, max_revolutions + 1, n_q) coordinates at θ = 2πk [m, rad]
+    v: np.ndarray  # (n, max_revolutions + 1, n_q) velocities [m/s, rad/s]
+    scale: np.ndarray  # (n, 2, n_q) each coordinate's and velocity's range over a turn
+
+
+def boundary_difference(boundary: Boundary, c: int, k: int, p: int) -> float:
+    """Case c's largest difference between its states at turns k and k − p, each coordinate
+    and velocity relative to its range over a turn [-]."""
+    dq = np.abs(boundary.q[c, k] - boundary.q[c, k - p]) / boundary.scale[c, 0]
+    dv = np.abs(boundary.v[c, k] - boundary.v[c, k - p]) / boundary.scale[c, 1]
+    return float(max(np.nanmax(dq), np.nanmax(dv)))
+
+
+def repeats(boundary: Boundary, c: int, k: int, p: int, tolerance: float) -> bool:
+    """Has case c, after k turns, settled with period p? Its state at turn k differs from the
+    one at k − p by at most ``tolerance`` (relative, :func:`boundary_difference`), and so will
+    every later one: where two differences p apart are known, their ratio r is the transient's
+    contraction per period, and the distance left to the periodic response, d·r/(1 − r), must
+    be within the tolerance too (a slowly decaying transient changes little per turn long
+    before it has settled)."""
+    if k < p:
+        return False
+    d = boundary_difference(boundary, c, k, p)
+    if d <= AT_ONCE * tolerance:
+        return True
+    if d > tolerance or k < 2 * p:
+        return False
+    before = boundary_difference(boundary, c, k - p, p)
+    r = d / before if before > 0 else 1.0
+    return r < 1.0 and d * r / (1.0 - r) <= tolerance
+
+
+def settled_from(boundary: Boundary, c: int, k: int, p: int, tolerance: float) -> int:
+    """The first turn of case c's settled window after k turns with period p: back from k in
+    whole periods while the states p apart still agree to the tolerance."""
+    start = k - p
+    while start - p >= 0 and boundary_difference(boundary, c, start, p) <= tolerance:
+        start -= p
+    return start
+
+
+def consistent_accelerations(
+    cases: Sequence[Case], matrices: Sequence[SystemMatrices], q, v, cfg
+) -> np.ndarray:
+    """(n, n_q) accelerations from the equation of motion at θ = 0 of a turn, with the
+    contacts that ``cfg`` holds prescribed (the cam's surface accelerating the follower, the
+    seat at rest): the start an integrator that carries accelerations takes."""
+    n, n_q = q.shape
+    a = np.zeros((n, n_q))
+    for i, (case, sm) in enumerate(zip(cases, matrices, strict=True)):
+        k = sm.mass.shape[0]
+        held = np.zeros(k, np.bool_)
+        if holds_cam(int(cfg[i])):
+            held[CAM] = True
+            a[i, CAM] = -(case.speed**2) * float(evaluate(case.profile, np.zeros(1))[2][0])
+        if holds_seat(int(cfg[i])):
+            held[SEAT] = True
+        free = ~held
+        force = sm.preload - sm.stiffness @ q[i, :k] - sm.damping @ v[i, :k] - sm.mass @ a[i, :k]
+        a[i, :k][free] = np.linalg.solve(sm.mass[np.ix_(free, free)], force[free])
+    return a
+
+
+class _Kept(NamedTuple):
+    """The last turns' histories of every case, in a ring of ``turns`` slots by turn."""
+
+    q: np.ndarray  # (n, turns, per_turn + 1, n_q)
+    v: np.ndarray
+    acc: np.ndarray  # (n, turns, per_turn + 1, 2)
+    cam: np.ndarray  # (n, turns, per_turn + 1)
+    cam_force: np.ndarray
+    seat_force: np.ndarray
+    cfg: np.ndarray  # int8
+    events: list[list[np.ndarray]]  # per case, per slot: that turn's events (times absolute)
+
+
+def _keep(kept: _Kept, rows: np.ndarray, slot: np.ndarray, part: BatchResult) -> None:
+    kept.q[rows, slot] = part.q
+    kept.v[rows, slot] = part.v
+    kept.acc[rows, slot] = part.acc
+    kept.cam[rows, slot] = part.cam_lift
+    kept.cam_force[rows, slot] = part.cam_force
+    kept.seat_force[rows, slot] = part.seat_force
+    kept.cfg[rows, slot] = part.contact_state
+
+
+def run_settled(
+    cases: Sequence[Case],
+    settings,
+    run_turn: Callable[..., BatchResult],
+    matrices: Sequence[SystemMatrices],
+    **options,
+) -> BatchResult:
+    """Run every case until its response repeats (see the module's docstring).
+
+    ``run_turn(cases, settings, start=..., full_state=..., **options)`` runs one turn
+    (``batch.run_batch``; ``start`` None or (t0, q0, v0, a0, cfg0) arrays), ``matrices`` are
+    each case's train's; the options are run_batch's. The result's ``per_rev`` has
+    ``max_revolutions`` turns (NaN beyond a case's last), ``measured`` each case's window,
+    and ``period_turns``, ``settled_turn``, ``turns_run`` and ``recorded_from`` say how each
+    settled."""
+    check_settling(settings)
+    turns = whole_turns(settings)
+    options.pop("full_state", None)  # every coordinate: a turn's end is the next's start
+    n = len(cases)
+    cap, tol, p_max = settings.max_revolutions, settings.settle_tolerance, settings.max_period
+    one = dataclasses.replace(settings, revolutions=1.0, warmup=0)
+    per_turn = sample_count(1.0, settings.output_every) - 1
+    omega = np.array([c.speed for c in cases])
+    period = np.zeros(n, np.int64)
+    settled = np.zeros(n, np.int64)
+    done = np.zeros(n, np.int64)  # turns run
+    status = np.zeros(n, np.int64)
+    steps = np.zeros(n, np.int64)
+    per_rev = np.full((n, cap, metrics.N_ENGINE), np.nan)
+    active = np.arange(n)
+    start: tuple | None = None
+    first_start = reference = np.zeros(n)
+    boundary = kept = None
+    for k in range(cap):
+        members = [cases[i] for i in active.tolist()]
+        part = run_turn(members, one, start=start, full_state=True, **options)
+        if boundary is None:  # the first turn: the arrays' shapes
+            n_q = part.q.shape[2]
+            boundary = Boundary(
+                np.full((n, cap + 1, n_q), np.nan),
+                np.full((n, cap + 1, n_q), np.nan),
+                np.ones((n, 2, n_q)),
+            )
+            boundary.q[:, 0], boundary.v[:, 0] = part.q[:, 0], part.v[:, 0]
+            first_start = part.start_time.copy()
+            reference = part.valve_reference.copy()
+            samples = (n, turns, per_turn + 1)
+            kept = _Kept(
+                np.full((*samples, n_q), np.nan),
+                np.full((*samples, n_q), np.nan),
+                np.full((*samples, 2), np.nan),
+                np.full(samples, np.nan),
+                np.full(samples, np.nan),
+                np.full(samples, np.nan),
+                np.zeros(samples, np.int8),
+                [[np.zeros((0, N_EVENT_FIELDS))] * turns for _ in range(n)],
+            )
+        assert kept is not None
+        boundary.q[active, k + 1] = part.q[:, -1]
+        boundary.v[active, k + 1] = part.v[:, -1]
+        ranges = np.stack([np.ptp(part.q, axis=1), np.ptp(part.v, axis=1)], axis=1)
+        floor = (
+            np.array([1e-9, 1e-9])[None, :, None]
+            * np.maximum(omega[active], 1.0)[:, None, None] ** np.array([0.0, 1.0])[None, :, None]
+        )
+        boundary.scale[active] = np.fmax(ranges, floor)
+        per_rev[active, k] = part.per_rev[:, 0]
+        steps[active] += part.steps
+        _keep(kept, active, np.full(active.size, k % turns), part)
+        offset = k * TWO_PI / omega
+        for j, i in enumerate(active.tolist()):
+            events = part.events[j].copy()
+            events[:, EV_TIME] += offset[i]
+            kept.events[i][k % turns] = events
+        done[active] = k + 1
+        failed = np.isin(part.status, FAILURES)
+        status[active] = np.where(part.status != 0, part.status, status[active])
+        still = []
+        for j, i in enumerate(active.tolist()):
+            if failed[j]:
+                continue
+            for p in range(1, p_max + 1):
+                if repeats(boundary, i, k + 1, p, tol):
+                    period[i] = p
+                    settled[i] = settled_from(boundary, i, k + 1, p, tol)
+                    break
+            else:
+                if k + 1 < cap:
+                    still.append(j)
+        if not still:
+            break
+        rows = np.array(still)
+        active = active[rows]
+        q0, v0 = part.q[rows, -1], part.v[rows, -1]
+        cfg0 = part.contact_state[rows, -1].astype(np.int64)
+        a0 = consistent_accelerations(
+            [cases[i] for i in active.tolist()],
+            [matrices[i] for i in active.tolist()],
+            q0,
+            v0,
+            cfg0,
+        )
+        start = (np.zeros(active.size), q0, v0, a0, cfg0)
+    never = period == 0
+    settled[never] = done[never] // 2
+    measured = np.zeros((n, cap), np.bool_)
+    for i in range(n):
+        last = int(done[i] - (done[i] - settled[i]) % period[i]) if period[i] else int(done[i])
+        measured[i, int(settled[i]) : last] = True
+    return _result(cases, settings, kept, per_rev, measured, period, settled, done, status,
+                   steps, first_start, reference)  # fmt: skip
+
+
+def _result(cases, settings, kept, per_rev, measured, period, settled, done, status, steps,
+            first_start, reference) -> BatchResult:  # fmt: skip
+    """The settled run's BatchResult: each case's last recorded turns in order (a failed
+    case's histories and metrics NaN, as ``run_batch`` records them)."""
+    n, turns = kept.cfg.shape[:2]
+    recorded_from = np.maximum(done - turns, 0)
+    # slot of the j-th recorded turn: (recorded_from + j) % turns
+    order = (recorded_from[:, None] + np.arange(turns)) % turns
+    rows = np.arange(n)[:, None]
+
+    def join(array):
+        ring = array[rows, order]  # (n, turns, per_turn + 1, ...)
+        head = ring[:, :, :-1].reshape(n, -1, *ring.shape[3:])
+        return np.concatenate([head, ring[:, -1, -1:]], axis=1)
+
+    angles = np.arange(join(kept.cam).shape[1]) * settings.output_every
+    omega = np.array([c.speed for c in cases])
+    events = [np.concatenate([kept.events[i][s] for s in order[i]]) for i in range(n)]
+    result = BatchResult(
+        cam_angle=angles,
+        time=(recorded_from[:, None] * TWO_PI + angles[None, :]) / omega[:, None],
+        q=join(kept.q),
+        v=join(kept.v),
+        acc=join(kept.acc),
+        cam_lift=join(kept.cam),
+        cam_force=join(kept.cam_force),
+        seat_force=join(kept.seat_force),
+        contact_state=join(kept.cfg),
+        valve_reference=reference,
+        measured=measured,
+        per_rev=per_rev,
+        trains=[c.train for c in cases],
+        events=events,
+        steps=steps,
+        status=status,
+        start_time=first_start,
+        period_turns=period,
+        settled_turn=settled,
+        turns_run=done,
+        recorded_from=recorded_from,
+    )
+    failed = np.isin(status, FAILURES)
+    for name in ("q", "v", "acc", "cam_lift", "cam_force", "seat_force"):
+        getattr(result, name)[failed] = np.nan
+    result.per_rev[failed] = np.nan
+    return result

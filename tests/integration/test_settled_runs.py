@@ -1,0 +1,155 @@
+"""Run length by convergence (``run.revolutions: auto``, ``campipe.engine.settle``): the
+default study's metrics are the settled response's, checked against an independent long run.
+
+The reference is the thesis's algorithm (campipe's newmark-linear: its own kernel, events at
+step ends) run for 60 turns, its first 20 left out. Its own error at the seat is first order
+in its step (no-follow at 9000 rpm with the seat at 0.1 in: 86.05, 84.94, 84.15° at 1, 0.5,
+0.25 µs, toward modal-exact's 83.14°), so it runs at 0.25 µs.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import xarray as xr
+from study_helpers import INCH, write_spec
+
+from campipe.constants import RPM
+from campipe.engine import Case, RunSettings, run_batch
+from campipe.engine.settings import RunSettingsError
+from campipe.model import thesis_train
+from campipe.profiles.shapes import harmonic
+from campipe.study import load_study
+from campipe.study.run.execute import run_study
+
+#: A sweep through the no-follow onset (about 9524 rpm without a seat), without a seat and
+#: with one at 0.1 in: the default run settings (``run.revolutions`` left to ``auto``).
+SWEEP = """
+name: settled
+profile: {kind: harmonic, lift: 1 in}
+sweep:
+  speed: [9000 rpm, 9700 rpm, 11000 rpm, 12000 rpm, 13000 rpm]
+  seat: [none, 0.1 in]
+"""
+
+
+@pytest.fixture(scope="module")
+def settled(tmp_path_factory) -> xr.Dataset:
+    directory = tmp_path_factory.mktemp("settled")
+    path = directory / "settled.nc"
+    run_study(load_study(write_spec(directory, SWEEP)), path, scheduler="synchronous")
+    return xr.load_dataset(path)
+
+
+def long_reference(speed_rpm, seat) -> np.ndarray:
+    """No-follow per turn [deg], mean over turns 21–60 of newmark-linear at 0.25 µs; ``seat``
+    as the archive stores it [m] (−inf: none)."""
+    cases = [
+        Case(thesis_train(), harmonic(INCH), s * RPM, np.nan if np.isinf(z) else z)
+        for s, z in zip(speed_rpm, seat, strict=True)
+    ]
+    run = RunSettings(revolutions=60, warmup=20, integrator="newmark-linear", dt=0.25e-6)
+    return np.degrees(run_batch(cases, run).separation)
+
+
+def test_the_default_study_gives_the_settled_no_follow_of_a_long_independent_run(settled):
+    """Within 2 % of the long run on cases that settled, 3 % on those that never repeat
+    (statistics over a window). Fails on a copy whose metrics average every turn from the
+    start (``measured`` all turns run): the first turns' transient leaves the 11000 rpm case
+    without a seat 15 % low (the issue's 174° against 219°)."""
+    speed = settled.speed_rpm.values
+    seat = settled.seat.values
+    ours = settled.separation_deg_per_rev.values
+    period = settled.period_turns.values
+    reference = long_reference(speed, seat)
+    off = ours > 0
+    assert off.sum() >= 8  # past the onset: the cases the issue is about
+    rel = np.abs(ours[off] / reference[off] - 1.0)
+    limit = np.where(period[off] > 0, 0.02, 0.03)
+    assert np.all(rel <= limit), list(
+        zip(speed[off], seat[off], ours[off], reference[off], strict=True)
+    )
+    # below the onset without a seat the train follows the cam: no-follow 0 in both
+    follows = (speed == 9000) & np.isinf(seat)
+    assert ours[follows] == 0.0 and reference[follows] == 0.0
+
+
+def test_period_turns_is_one_on_a_steady_case_and_two_on_an_alternating_one(settled):
+    """11000 rpm without a seat leaves the cam the same every turn from its third; 12000 rpm
+    alternates (275.1° and 295.1° in the long run). Fails on a copy that checks period 1
+    only (12000 rpm then never repeats: period 0)."""
+    no_seat = np.isinf(settled.seat.values)
+    by_speed = dict(
+        zip(settled.speed_rpm.values[no_seat], settled.period_turns.values[no_seat], strict=True)
+    )
+    assert by_speed[11000.0] == 1
+    assert by_speed[12000.0] == 2
+    # the alternating case's window is whole periods: an even number of turns
+    i = np.flatnonzero(no_seat & (settled.speed_rpm.values == 12000.0))[0]
+    measured = settled.measured.values[i].astype(bool)
+    assert measured.sum() % 2 == 0
+    per_rev = settled.separation_deg.values[i][measured]
+    assert abs(per_rev[0] - per_rev[1]) > 10.0  # the two turns differ: it is a period of two
+
+
+def test_a_case_that_follows_the_cam_settles_in_its_first_turn(settled):
+    """From the periodic start, the 9000 rpm case without a seat repeats at once: one turn
+    run (no slower than a fixed run where nothing happens). Fails on a copy whose check needs
+    two differences before it accepts a repetition."""
+    follows = (settled.speed_rpm.values == 9000) & np.isinf(settled.seat.values)
+    assert settled.revolutions_run.values[follows] == 1
+    assert settled.period_turns.values[follows] == 1
+
+
+def test_histories_and_events_are_the_last_turn_of_the_settled_run(settled):
+    """One turn stored per case (run.history_turns 1), the events on the same angles: every
+    event's cam angle within 0–360°, its time that of the recorded turn. Fails on a copy that
+    leaves the events' angles counted from the start of the run."""
+    assert settled.cam_angle.values[-1] == 360.0
+    angle = settled.event_cam_angle.values
+    assert angle.size > 0 and angle.min() >= -1e-6 and angle.max() <= 360.0 + 1e-6
+    first = settled.recorded_revolution.values - 1
+    run = settled.revolutions_run.values
+    assert np.all(first == run - 1)
+    omega = settled.speed_rpm.values * RPM
+    t0 = first * 2 * np.pi / omega
+    assert np.allclose(settled.time.values[:, 0], t0)
+
+
+def test_a_fixed_run_has_no_settling_variables(tmp_path):
+    """``run.revolutions: 2`` keeps today's archive: no period_turns (the digest's study fixes
+    its revolutions; tests/integration/test_digest.py holds its numbers)."""
+    spec = write_spec(tmp_path, SWEEP.replace("sweep:", "run: {revolutions: 2}\nsweep:"))
+    path = tmp_path / "fixed.nc"
+    study = load_study(spec)
+    assert not study.settle
+    run_study(study, path, scheduler="synchronous")
+    with xr.open_dataset(path) as ds:
+        assert "period_turns" not in ds and ds.revolution.size == 2
+
+
+def test_settling_settings_that_cannot_work_are_refused_naming_the_key():
+    """A sample spacing that does not divide a turn; a cap below two of the longest period."""
+    case = Case(thesis_train(), harmonic(INCH), 9000 * RPM)
+    with pytest.raises(RunSettingsError) as info:
+        run_batch([case], RunSettings(revolutions=None, output_every=np.radians(0.7)))
+    assert info.value.key == "run.output_every"
+    with pytest.raises(RunSettingsError) as info:
+        run_batch([case], RunSettings(revolutions=None, max_revolutions=6, max_period=4))
+    assert info.value.key == "run.max_revolutions"
+
+
+@pytest.mark.parametrize(
+    ("run", "key"),
+    [("{output_every: 0.7 deg}", "run.output_every"), ("{warmup: 1}", "run.warmup")],
+)
+def test_a_spec_of_automatic_length_that_cannot_work_is_refused_at_its_key(tmp_path, run, key):
+    """Refused when the spec is checked, before anything runs, naming the key. Fails on a
+    copy that leaves the check to the engine (a worker would fail every case)."""
+    from campipe.study.spec.check import SpecError
+
+    spec = write_spec(tmp_path, f"name: bad\nprofile: {{kind: harmonic, lift: 1 in}}\nspeed: "
+                      f"9000 rpm\nrun: {run}\n")  # fmt: skip
+    with pytest.raises(SpecError) as info:
+        load_study(spec)
+    assert key in str(info.value)
