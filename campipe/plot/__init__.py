@@ -13,6 +13,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from campipe.io.archive import ArchiveFileError, unreadable
+from campipe.study.archive.open import open_archive
 from campipe.study.spec.plots import PlotRequest
 
 
@@ -26,8 +27,6 @@ def plot_archive(archive: str | Path, request: PlotRequest, output: str | Path |
     (Path, matplotlib.figure.Figure)
         The file written and the figure.
     """
-    import xarray as xr
-
     from campipe.plot.figures import figure
 
     archive = Path(archive)
@@ -36,7 +35,7 @@ def plot_archive(archive: str | Path, request: PlotRequest, output: str | Path |
             archive.parent / request.output if request.output else request.default_output(archive)
         )
     try:
-        ds = xr.open_dataset(archive)
+        ds = open_archive(archive)  # a file, or a parts archive's folder
     except Exception as exc:
         raise ArchiveFileError.at(str(archive), unreadable(exc)) from None
     with ds:
