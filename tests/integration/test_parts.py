@@ -245,3 +245,53 @@ def test_the_command_line_writes_queries_and_packs_a_parts_archive(tmp_path):
     assert result.exit_code == 2 and "exists" in result.output
     index = json.loads((tmp_path / "small.parts" / INDEX).read_text())
     assert index["attrs"]["study_name"] == "small"
+
+
+def _die_once(plan):
+    """The first batch to run kills its worker process (the marker file says it did); every
+    other batch, and that one again on another worker, is computed."""
+    import os
+
+    from campipe.study.run.results import compute_batch
+
+    try:
+        Path(os.environ["CAMPIPE_TEST_DIE_ONCE"]).touch(exist_ok=False)
+    except FileExistsError:
+        return compute_batch(plan)
+    os._exit(9)
+
+
+def test_a_worker_killed_mid_study_leaves_the_archive_of_an_undisturbed_run(
+    mixed, tmp_path, monkeypatch
+):
+    """A worker process dies in its first batch: dask runs that batch again on a worker, the
+    study completes into parts and equals the undisturbed single-file run. Broken copy it
+    fails on: a client that indexes a batch once per attempt or a part half written by the
+    dead worker (the index would name a part twice, or one that does not verify)."""
+    from distributed import LocalCluster
+
+    import campipe.study.run.workers as workers
+
+    study, directory, _, _ = mixed
+    marker = tmp_path / "died"
+    monkeypatch.setenv("CAMPIPE_TEST_DIE_ONCE", str(marker))
+    monkeypatch.setattr(workers, "compute_batch", _die_once)
+    with LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0"
+    ) as cluster:
+        report = run_study(
+            study,
+            tmp_path / "mixed.parts",
+            scheduler=cluster.scheduler_address,
+            batch_size=2,
+            parts=True,
+        )
+    assert marker.exists()  # a worker did die
+    assert (report.computed, report.batches) == (10, 6)
+    index = read_index(tmp_path / "mixed.parts")
+    assert len({p["file"] for p in index["parts"]}) == len(index["parts"]) == 6
+    with (
+        xr.open_dataset(directory / "mixed.nc") as one,
+        open_archive(tmp_path / "mixed.parts") as many,
+    ):
+        xr.testing.assert_identical(_without_global_attrs(one), _without_global_attrs(many))
