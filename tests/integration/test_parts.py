@@ -21,6 +21,7 @@ from campipe.io.parts import INDEX, part_files, read_index
 from campipe.study import load_study
 from campipe.study.archive.open import open_archive
 from campipe.study.run.execute import run_study
+from campipe.study.run.keys import study_key
 from campipe.study.run.parts import pack
 from campipe.study.run.resume import ArchiveExistsError
 
@@ -157,8 +158,10 @@ def test_a_damaged_or_missing_part_is_computed_again_and_the_rest_reused(mixed, 
 
 def test_a_changed_study_keeps_only_its_own_cases_in_the_index(tmp_path):
     """A spec that drops a speed: the rerun reuses the parts, writes an index of the
-    remaining cases only, and removes the part that holds none of them. Broken copy it fails
-    on: an index of every part in the folder (the dropped speed's cases would read back)."""
+    remaining cases only (with the new spec's attributes: the next rerun finds it up to
+    date), and removes the part that holds none of them. Broken copies it fails on: an index
+    of every part in the folder (the dropped speed's cases would read back), or one whose
+    attributes are a reused part's (the old spec's study_key)."""
     spec = write_spec(tmp_path, SMALL_SPEC)
     archive = tmp_path / "small.parts"
     run_study(load_study(spec), archive, scheduler="synchronous", batch_size=2, parts=True)
@@ -169,6 +172,8 @@ def test_a_changed_study_keeps_only_its_own_cases_in_the_index(tmp_path):
     assert len(part_files(archive)) == 1
     with open_archive(archive) as ds:
         assert_array_equal(ds["speed_rpm"].values, [6000, 6000])
+        assert ds.attrs["study_key"] == study_key(load_study(spec))  # not the old spec's
+    assert run_study(load_study(spec), archive, parts=True).up_to_date
 
 
 def test_a_parts_archive_never_replaces_a_file_or_a_foreign_folder(tmp_path):

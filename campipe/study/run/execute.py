@@ -370,9 +370,8 @@ def _run_parts(
         workers = run.workers or (1 if run.scheduler == "synchronous" else default_workers())
         run = dataclasses.replace(run, workers=workers)
         plans = _plan(study, missing, run.scheduler, workers, batch_size)
-        storage = Storage(
-            archive, study.record, part_layout(study, run.command, spec_file(study, archive))
-        )
+        layout = part_layout(study, run.command, spec_file(study, archive))
+        storage = Storage(archive, study.record, layout)
         bar = progress(total, total - len(missing)) if progress else None
         by_key = {p.key: p for p in plans}
 
@@ -385,7 +384,7 @@ def _run_parts(
         _compute(plans, run, storage, stored)
         for cid, name in found.statuses.items():
             log.warning("case %s: %s", cid, name)
-        found.write_index()
+        found.write_index(layout.attrs)
         return StudyReport(
             archive,
             total,

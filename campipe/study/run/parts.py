@@ -13,6 +13,7 @@ from __future__ import annotations
 import logging
 import stat
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -68,7 +69,9 @@ def inspect_parts(study: Study, archive: Path) -> ArchiveState:
         foreign = [
             p.name
             for p in archive.iterdir()
-            if not (p.name.startswith("part-") and p.name.endswith(".nc")) and not is_temporary(p)
+            if not (p.name.startswith("part-") and p.name.endswith(".nc"))
+            and not is_temporary(p)
+            and not p.name.startswith(".reach-")  # a killed cluster run's token
         ]
         if foreign:
             what = f"a folder that is not a parts archive (it holds {foreign[0]!r})"
@@ -147,9 +150,11 @@ class Parts:
             if code != OK:
                 self.statuses[cid] = STATUS.get(code, str(code))
 
-    def write_index(self) -> Path:
-        """The index: the parts that supply a case of the study, ordered by the first case
-        they supply; then every other part is removed from the folder."""
+    def write_index(self, attrs: Mapping[str, object]) -> Path:
+        """The index, with the archive's global attributes ``attrs`` (this run's: a part
+        reused from an earlier run records that run's): the parts that supply a case of the
+        study, ordered by the first case they supply; then every other part is removed from
+        the folder."""
         ids = [c.case_id for c in self.study.cases]
         position = {cid: k for k, cid in enumerate(ids)}
         missing = [cid for cid in ids if cid not in self.found]
@@ -170,7 +175,6 @@ class Parts:
             }
             for path in listed
         ]
-        attrs = _index_attrs(listed[0]) if listed else {}
         index = write_index(self.archive, attrs, ids, entries, self.study.compression)
         keep = {p.name for p in listed}
         for path in part_files(self.archive):
@@ -178,17 +182,6 @@ class Parts:
                 log.info("removing %s: no case of this study", path)
                 path.unlink(missing_ok=True)
         return index
-
-
-def _index_attrs(part: Path) -> dict[str, object]:
-    """The archive's global attributes: a part's, but its checksums and its batch's key
-    (those of the newest part: every part of a run records the study's)."""
-    attrs = read_attrs(part)
-    return {
-        k: (v.tolist() if hasattr(v, "tolist") else v)
-        for k, v in attrs.items()
-        if k not in (CHECKSUM_ATTR, "batch_key")
-    }
 
 
 def find_parts(study: Study, archive: Path) -> tuple[Parts, list[str]]:
