@@ -300,3 +300,24 @@ def test_a_worker_killed_mid_study_leaves_the_archive_of_an_undisturbed_run(
         open_archive(tmp_path / "mixed.parts") as many,
     ):
         xr.testing.assert_identical(_without_global_attrs(one), _without_global_attrs(many))
+
+
+def test_parts_of_a_spec_that_varied_other_keys_are_set_aside(tmp_path):
+    """A spec that adds a swept key (spring_preload: its archive gains that coordinate):
+    the earlier parts hold cases of the same ids (preload 151 lbf is the preset's) but not
+    its variables, so they are set aside and every case is computed into parts that read
+    back as the single-file run. Broken copy it fails on: a resume that reuses parts by case
+    id alone (the archive would lack spring_preload in those cases' parts and not read as
+    one)."""
+    spec = write_spec(tmp_path, SMALL_SPEC)
+    archive = tmp_path / "small.parts"
+    run_study(load_study(spec), archive, scheduler="synchronous", batch_size=2, parts=True)
+    write_spec(tmp_path, SMALL_SPEC + "  model.spring_preload: [151 lbf, 180 lbf]\n")
+    study = load_study(spec)
+    report = run_study(study, archive, scheduler="synchronous", parts=True)
+    assert (report.reused, report.computed) == (0, 12)
+    assert any("3 parts" in n and "other variables" in n for n in report.notes)
+    run_study(study, tmp_path / "small.nc", scheduler="synchronous")
+    with xr.open_dataset(tmp_path / "small.nc") as one, open_archive(archive) as many:
+        xr.testing.assert_identical(_without_global_attrs(one), _without_global_attrs(many))
+        assert_array_equal(np.unique(many["spring_preload"].values).size, 2)

@@ -364,13 +364,13 @@ def _run_parts(
         )
         clean_part_temporaries(archive)
         index_path(archive).unlink(missing_ok=True)  # the parts change: no index meanwhile
-        found, more = find_parts(study, archive)
+        layout = part_layout(study, run.command, spec_file(study, archive))
+        found, more = find_parts(study, archive, layout)
         notes += more
         missing = [c for c in study.cases if c.case_id not in found.found]
         workers = run.workers or (1 if run.scheduler == "synchronous" else default_workers())
         run = dataclasses.replace(run, workers=workers)
         plans = _plan(study, missing, run.scheduler, workers, batch_size)
-        layout = part_layout(study, run.command, spec_file(study, archive))
         storage = Storage(archive, study.record, layout)
         bar = progress(total, total - len(missing)) if progress else None
         by_key = {p.key: p for p in plans}

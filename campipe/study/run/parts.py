@@ -42,6 +42,7 @@ from campipe.study.archive.layout import LAYOUT_VERSION
 from campipe.study.run.assembly import Assembly, Layout
 from campipe.study.run.batches import Stored
 from campipe.study.run.keys import study_key
+from campipe.study.run.part_files import PartLayout
 from campipe.study.run.resume import ArchiveState, StudyReport, mismatch, spec_file
 from campipe.study.spec.coordinates import CASE_ID
 from campipe.study.spec.expand import Study
@@ -184,10 +185,11 @@ class Parts:
         return index
 
 
-def find_parts(study: Study, archive: Path) -> tuple[Parts, list[str]]:
+def find_parts(study: Study, archive: Path, layout: PartLayout) -> tuple[Parts, list[str]]:
     """The parts earlier runs left in ``archive`` that serve this study, and notes on those
-    set aside: a part of another layout, record or engine is left out of the index (and
-    removed with it); a damaged one is removed now, its cases computed again."""
+    set aside: a part of another layout, record or engine, or with other variables than
+    ``layout``'s (a spec that varies other keys), is left out of the index (and removed with
+    it); a damaged one is removed now, its cases computed again."""
     wanted = {c.case_id for c in study.cases}
     out = Parts(study, archive)
     notes: list[str] = []
@@ -195,7 +197,7 @@ def find_parts(study: Study, archive: Path) -> tuple[Parts, list[str]]:
     for path in part_files(archive) if archive.is_dir() else []:
         try:
             attrs = read_attrs(path)
-            why = mismatch(attrs, study.record)
+            why = mismatch(attrs, study.record) or _misfit(path, layout)
             problems = [] if why else verify(path)
         except Exception as exc:  # a damaged file fails to open in many ways
             why, problems = None, [f"it cannot be read ({type(exc).__name__})"]
@@ -219,6 +221,25 @@ def find_parts(study: Study, archive: Path) -> tuple[Parts, list[str]]:
     for note in notes:
         log.warning("%s", note)
     return out, notes
+
+
+def _misfit(path: Path, layout: PartLayout) -> str | None:
+    """Why a part's variables are not those of ``layout``'s parts (names, dimensions and
+    their lengths, coordinates), or None if they are: only such parts read as one."""
+    with LOCK, open_dataset(path) as ds:
+        if set(ds.variables) != {v.name for v in layout.specs}:
+            return "other variables (the spec varies other keys)"
+        for d, n in layout.sizes.items():
+            if d not in ("case", "event") and (
+                d not in ds.dimensions or len(ds.dimensions[d]) != n
+            ):
+                return f"another length of {d}"
+        for v in layout.specs:
+            var = ds.variables[v.name]
+            theirs = var.getncattr("coordinates") if "coordinates" in var.ncattrs() else None
+            if var.dimensions != v.dims or theirs != v.attrs.get("coordinates"):
+                return f"another {v.name} (the spec varies other keys)"
+    return None
 
 
 def _part_rows(path: Path) -> tuple[tuple[str, ...], tuple[int, ...], tuple[int, ...]]:
