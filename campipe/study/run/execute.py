@@ -9,6 +9,9 @@
 - The archive is assembled while the batches run (:mod:`~campipe.study.run.assembly`): this
   process streams the stored rows, in case order, into one new file at a temporary path,
   renamed into place when complete; memory stays bounded by a block of rows.
+- With ``parts=True`` the archive is a folder of parts (:mod:`campipe.io.parts`): each
+  batch's worker writes its part, compressed, and this process only keeps count and writes
+  the index last (:mod:`~campipe.study.run.parts`); nothing is assembled here.
 - A run holds ``<archive>.lock`` throughout (``campipe.io.archive.writing``): a second run on
   the same archive stops with a clear error instead of removing the first one's files; the
   lock of a run that died on this host is taken over.
@@ -49,6 +52,7 @@ from campipe.study.run.parts import (
     clean_part_temporaries,
     find_parts,
     inspect_parts,
+    refuse_parts,
     up_to_date_parts,
 )
 from campipe.study.run.progress import Progress
@@ -345,7 +349,7 @@ def _run_parts(
         log.info("%s already holds this study", archive)
         return up_to_date_parts(archive, total, started)
     if not state.ours:
-        raise refuse(archive, state)  # a parts archive never replaces a file or a folder
+        raise refuse_parts(archive, state)  # never a file or another folder
     try:
         archive.mkdir(parents=True, exist_ok=True)
     except OSError as exc:

@@ -43,7 +43,13 @@ from campipe.study.run.assembly import Assembly, Layout
 from campipe.study.run.batches import Stored
 from campipe.study.run.keys import study_key
 from campipe.study.run.part_files import PartLayout
-from campipe.study.run.resume import ArchiveState, StudyReport, mismatch, spec_file
+from campipe.study.run.resume import (
+    ArchiveExistsError,
+    ArchiveState,
+    StudyReport,
+    mismatch,
+    spec_file,
+)
 from campipe.study.spec.coordinates import CASE_ID
 from campipe.study.spec.expand import Study
 from campipe.vocabulary import OK, STATUS
@@ -98,6 +104,18 @@ def inspect_parts(study: Study, archive: Path) -> ArchiveState:
         return ArchiveState(True, True, "", False, attrs=attrs)
     problems = tuple(check_parts(archive, index))
     return ArchiveState(True, True, "", not problems, problems, attrs)
+
+
+def refuse_parts(archive: Path, state: ArchiveState) -> ArchiveExistsError:
+    """What a parts archive says of a path it will not write into."""
+    return ArchiveExistsError.at(
+        str(archive),
+        f"exists and is {state.what}, not this study's parts archive; a parts archive "
+        "replaces nothing (not with --overwrite either): choose another path (-o), or remove "
+        "it",
+        found=state.what,
+        expected="no file, or this study's parts archive",
+    )
 
 
 def check_parts(archive: Path, index: dict) -> list[str]:
@@ -338,5 +356,6 @@ __all__ = [
     "find_parts",
     "inspect_parts",
     "pack",
+    "refuse_parts",
     "up_to_date_parts",
 ]
