@@ -17,6 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
+from campipe.io.parts import PartsIndexError, read_index
+
 log = logging.getLogger(__name__)
 #: The name the rest of the study (zip rows, case entries, samples) goes by while the sweep
 #: is unstacked; it is ``case`` again afterwards.
@@ -88,8 +90,6 @@ def open_parts(path: str | Path, **open_kwargs):
     """
     import xarray as xr
 
-    from campipe.io.parts import read_index
-
     path = Path(path)
     index = read_index(path)
     parts = [xr.open_dataset(path / str(p["file"]), **open_kwargs) for p in index["parts"]]
@@ -115,8 +115,6 @@ def _combine(path: Path, parts: list, ids: list[str]):
     cases ``ids`` picked in that order (the first part holding each)."""
     import pandas as pd
     import xarray as xr
-
-    from campipe.io.parts import PartsIndexError
 
     if not parts:
         raise PartsIndexError.at(str(path), "its index names no part")
