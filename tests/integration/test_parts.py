@@ -348,3 +348,39 @@ def test_replay_reads_the_cases_of_a_parts_archive(mixed, tmp_path):
         assert_array_equal(a.events["event_time"], b.events["event_time"])
         assert_array_equal(a.histories["valve_lift"], b.histories["valve_lift"])
         assert_array_equal(a.q, b.q)
+
+
+def test_a_parts_run_holds_the_lock_and_stores_what_its_workers_return(tmp_path):
+    """A second run on a parts archive whose lock is held stops before writing a part; on a
+    cluster whose workers return their batches (workers_store=False) this process writes
+    the parts, and the archive is the one the workers write. Broken copies it fails on: a
+    parts run that takes no lock, or a client that drops a returned batch's part."""
+    from distributed import LocalCluster
+
+    from campipe.io.archive import ArchiveBusyError, writing
+
+    spec = write_spec(tmp_path, SMALL_SPEC)
+    study = load_study(spec)
+    archive = tmp_path / "small.parts"
+    with writing(archive), pytest.raises(ArchiveBusyError):
+        run_study(study, archive, scheduler="synchronous", parts=True)
+    assert not archive.exists() or part_files(archive) == []
+    with LocalCluster(
+        n_workers=1, threads_per_worker=2, processes=False, dashboard_address=":0"
+    ) as cluster:
+        for name, store in (("workers.parts", True), ("client.parts", False)):
+            report = run_study(
+                study,
+                tmp_path / name,
+                scheduler=cluster.scheduler_address,
+                batch_size=2,
+                parts=True,
+                workers_store=store,
+            )
+            assert (report.computed, report.batches) == (6, 3)
+    with (
+        open_archive(tmp_path / "workers.parts") as a,
+        open_archive(tmp_path / "client.parts") as b,
+    ):
+        xr.testing.assert_identical(_without_global_attrs(a), _without_global_attrs(b))
+        assert a.sizes["case"] == 6
