@@ -59,7 +59,7 @@ MAX_SEATED_TURNS = 24
 SEATED_AGREEMENT = 1e-9
 #: Speeds at which the onset search first looks across a speed range; the intervals between
 #: them are then certified free of no-follow or halved (``onset_speeds``).
-SCAN_SPEEDS = 33
+SCAN_SPEEDS = 17
 #: The certificate's safety factor: between two speeds where the design follows, the slope
 #: of its margin is taken to be at most ONSET_SLOPE_FACTOR times the steepest of the chord
 #: between them and the chords either side (``onset_speeds``).
