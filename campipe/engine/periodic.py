@@ -506,15 +506,17 @@ class _Points:
         return np.where(secant & np.isfinite(root), root, x)
 
     def push(self, todo, x, value, kind, no_follow) -> None:
-        """Put the points just looked at on the stacks of the designs ``todo``."""
+        """Put the points just looked at on the stacks of the designs ``todo``; a point with
+        no-follow replaces the whole stack (nothing above it matters any more), so the stack
+        holds the scan and at most the halvings down to the tolerance."""
         rows = np.flatnonzero(todo)
-        j = self.depth[rows]
+        j = np.where(no_follow[rows], 0, self.depth[rows])
         nb = self.top(1)[3][rows]
         self.speed[rows, j] = x[rows]
         self.value[rows, j] = value[rows]
         self.kind[rows, j] = kind[rows]
         self.no_follow[rows, j] = no_follow[rows]
-        self.depth[rows] += 1
+        self.depth[rows] = j + 1
         # Illinois: the end replaced twice in a row halves the other end's weight.
         replaced = np.where(no_follow[rows], 1, -1)
         again = replaced == self.side[rows]
@@ -532,7 +534,7 @@ class _Points:
 def _start(grid, value, kind, no_follow) -> _Points:
     """The search's state after the scan: ``a`` its lowest speed, the others on the stack."""
     n, m = value.shape
-    cap = m + 256  # the scan's speeds, and halvings down to any tolerance (~60 at most)
+    cap = m + 128  # the scan's speeds, and halvings down to any tolerance (~60 at most)
     stack = np.full((n, cap), np.nan)
     speeds = stack.copy()
     kinds = np.zeros((n, cap), np.int8)

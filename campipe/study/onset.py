@@ -247,7 +247,8 @@ def file_contents(result: OnsetStudy) -> tuple[dict, list[VariableSpec], dict, d
         long_name="least cam compression over the steady turn (NaN: the valve seats on part "
         "of the turn)")  # fmt: skip
     add("no_follow", ("combination", "scan"), "i1", on.scan_no_follow.astype(np.int8),
-        long_name="the steady state leaves the cam with the valve off its seat")  # fmt: skip
+        long_name="the steady state leaves the cam with the valve off its seat (with a seat: "
+        "for at least the level a turn)")  # fmt: skip
     attrs: dict[str, object] = {
         "title": f"{result.name}: no-follow onset speeds",
         "study_name": result.name,
