@@ -10,7 +10,9 @@ is piecewise (configurations I, III, IV, with impacts at the seat and the cam, p
 the train's restitution): it is then the fixed point of the turn map over the exact piece
 propagators, which is what ``modal-exact`` integrates turn by turn; the heavy damping of the
 seated phase makes that map contract within a turn or two (``SEATED_TURNS``, checked), and
-no-follow is configuration II in its last turn.
+no-follow is configuration II in its last turn; with a seat the onset is where that
+no-follow reaches a level (``onset_speeds``). The search certifies each interval it passes
+free of no-follow, so it misses no window of it inside the range (``onset_speeds``).
 
 Pure numerics: arrays in, arrays out; no files, no printing.
 """
