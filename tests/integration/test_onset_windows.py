@@ -54,21 +54,26 @@ def first_root_of_the_margin(design, low, high):
     return brentq(at, grid[i], grid[i + 1], xtol=1e-4), grid[changes]
 
 
-def test_the_onset_misses_no_window_of_the_margin():
-    """A window of no-follow 16 rpm wide, far narrower than the first scan's step (187.5 rpm
-    over 2000-8000 rpm): every range enclosing it gives its lower edge, the first root of a
-    dense scan of the margin, to the tolerance. Broken copy: the search without its
-    certificate (the first sign change among the 33 scanned speeds, as before issue 32)
-    gives 5628.5 rpm over 2000-8000 and 1000-12000 rpm, the end of the window past it.
-    (The closed form of a constant-velocity ramp without lash leaves out the ramp's velocity
-    steps, so the engine disagrees with this margin; the window tests the search.)"""
-    root, changes = first_root_of_the_margin(WINDOW, 5000, 6000)
-    assert len(changes) == 3 and changes[1] - changes[0] < 20  # the window, then the onset
-    for low, high in ((2000, 8000), (1000, 12000), (5000, 6000), (5400, 5600), (5480, 5490)):
-        speed, status = onset_rpm(WINDOW, low, high)
+@pytest.mark.parametrize(
+    "preload, width", [(101.0, 20.0), (101.0135, 2.5)], ids=["16rpm", "1.8rpm"]
+)
+def test_the_onset_misses_no_window_of_the_margin(preload, width):
+    """A window of no-follow 16 rpm wide (1.8 rpm at 101.0135 lbf, near where it closes), far
+    narrower than the first scan's step (375 rpm over 2000-8000 rpm): every range enclosing
+    it gives its lower edge, the first root of a dense scan of the margin, to the tolerance.
+    Broken copy: the search without its certificate (the first sign change among the 33
+    scanned speeds, as before issue 32) gives 5628.5 rpm over 2000-8000 and 5000-6000 rpm,
+    the end of the follow band past the window, and at 1.8 rpm none over 5400-5600. (The closed form of a constant-velocity ramp
+    without lash does not match the engine at the ramp's velocity steps, so the engine
+    disagrees with this margin: the window tests the search, not the physics.)"""
+    design = dataclasses.replace(WINDOW, train=WINDOW.train.replace(spring_preload=preload * LBF))
+    root, changes = first_root_of_the_margin(design, 5000, 6000)
+    assert len(changes) == 3 and changes[1] - changes[0] < width  # the window, then the onset
+    for low, high in ((2000, 8000), (1000, 12000), (5000, 6000), (5400, 5600), (5480, 5495)):
+        speed, status = onset_rpm(design, low, high)
         assert status == "found" and abs(speed - root) <= 0.5 * TOL + 1e-3, (low, high, speed)
     # A range that starts inside the follow band between the window and the onset.
-    speed, _ = onset_rpm(WINDOW, 5510, 6000)
+    speed, _ = onset_rpm(design, 5510, 6000)
     assert abs(speed - changes[2]) < 0.5 + TOL
 
 
