@@ -55,8 +55,9 @@ from campipe.cli.base import SET_HELP, Failure, load_spec
 )
 def onset(spec, sets, tolerance, level, fmt, output, check, workers) -> None:
     """The no-follow onset speed of every combination of SPEC's other axes, within its
-    speed range: the root of the steady state's least cam force, checked by the time-domain
-    engine either side. Exit status 1 when a check disagrees."""
+    speed range, missing no window of no-follow in it: the root of the steady state's least
+    cam force (with a seat, where its no-follow reaches --level a turn), checked by the
+    time-domain engine either side. Exit status 1 when a check disagrees."""
     from pathlib import Path
 
     from campipe.units import QuantityError, parse_quantity

@@ -63,9 +63,10 @@ def test_the_onset_misses_no_window_of_the_margin(preload, width):
     it gives its lower edge, the first root of a dense scan of the margin, to the tolerance.
     Broken copy: the search without its certificate (the first sign change among the 33
     scanned speeds, as before issue 32) gives 5628.5 rpm over 2000-8000 and 5000-6000 rpm,
-    the end of the follow band past the window, and at 1.8 rpm none over 5400-5600. (The closed form of a constant-velocity ramp
-    without lash does not match the engine at the ramp's velocity steps, so the engine
-    disagrees with this margin: the window tests the search, not the physics.)"""
+    the end of the follow band past the window, and at 1.8 rpm none over 5400-5600. (The
+    closed form of a constant-velocity ramp without lash does not match the engine at the
+    ramp's velocity steps, so the engine disagrees with this margin: the window tests the
+    search, not the physics.)"""
     design = dataclasses.replace(WINDOW, train=WINDOW.train.replace(spring_preload=preload * LBF))
     root, changes = first_root_of_the_margin(design, 5000, 6000)
     assert len(changes) == 3 and changes[1] - changes[0] < width  # the window, then the onset
