@@ -19,6 +19,14 @@ from campipe.cli.base import SET_HELP, Failure, load_spec
     help="The onset's tolerance (the width of its final bracket).",
 )
 @click.option(
+    "--level",
+    default="0.5 deg",  # periodic.DEFAULT_ONSET_LEVEL_DEG (not imported: numba loads)
+    show_default=True,
+    metavar="ANGLE",
+    help="With a seat, the no-follow a turn the onset reaches (0 deg: the first separation). "
+    "Without a seat the onset is the first separation.",
+)
+@click.option(
     "--format",
     "fmt",
     type=click.Choice(["table", "csv", "json"]),
@@ -37,17 +45,19 @@ from campipe.cli.base import SET_HELP, Failure, load_spec
     "--check/--no-check",
     default=True,
     show_default=True,
-    help="Run the time-domain engine 0.5 % below and above each onset.",
+    help="Run the time-domain engine 0.5 % below and above each onset (10 turns, the first "
+    "2 left out): below it must stay under the level, above reach it.",
 )
 @click.option(
     "--workers",
     type=click.IntRange(min=1),
     help="Threads for the search (default: the cores available).",
 )
-def onset(spec, sets, tolerance, fmt, output, check, workers) -> None:
+def onset(spec, sets, tolerance, level, fmt, output, check, workers) -> None:
     """The no-follow onset speed of every combination of SPEC's other axes, within its
-    speed range: the root of the steady state's least cam force, checked by the time-domain
-    engine either side. Exit status 1 when a check disagrees."""
+    speed range, missing no window of no-follow in it: the root of the steady state's least
+    cam force (with a seat, where its no-follow reaches --level a turn), checked by the
+    time-domain engine either side. Exit status 1 when a check disagrees."""
     from pathlib import Path
 
     from campipe.units import QuantityError, parse_quantity
@@ -56,12 +66,20 @@ def onset(spec, sets, tolerance, fmt, output, check, workers) -> None:
         tol = parse_quantity(tolerance, "rad/s", "--tolerance", "rpm")
     except QuantityError as exc:
         raise click.BadParameter(str(exc), param_hint="--tolerance") from None
+    try:
+        angle = parse_quantity(level, "rad", "--level", "deg")
+    except QuantityError as exc:
+        raise click.BadParameter(str(exc), param_hint="--level") from None
+    if not angle >= 0:
+        raise click.BadParameter(f"found {level!r}, expected ≥ 0 deg", param_hint="--level")
     loaded = load_spec(spec, sets)
     path = Path(output) if output else Path(spec).parent / f"{loaded.name}-onset.nc"
-    run_onset(loaded, spec, path, tol, fmt, check, workers)
+    run_onset(loaded, spec, path, tol, fmt, check, workers, level=angle)
 
 
-def run_onset(loaded, spec_path, path, tolerance, fmt, check, workers, command="onset") -> None:
+def run_onset(
+    loaded, spec_path, path, tolerance, fmt, check, workers, command="onset", level=None
+) -> None:
     """``campipe onset``'s work (and ``campipe study``'s for a spec with ``search``)."""
     from campipe.io.archive import provenance, write_file
     from campipe.study.onset import file_contents, onset_study, summary_lines
@@ -72,6 +90,7 @@ def run_onset(loaded, spec_path, path, tolerance, fmt, check, workers, command="
     result = onset_study(
         loaded,
         tolerance,
+        **({} if level is None else {"level": level}),
         confirm=check,
         workers=workers or default_workers(),
         notice=lambda text: click.echo(f"campipe {command}: {text}", err=True),
