@@ -216,26 +216,30 @@ def run_settled(
         for j, i in enumerate(active.tolist()):
             if failed[j]:
                 continue
-            for p in range(1, p_max + 1):
+            for p in range(1, p_max + 1) if period[i] == 0 else ():
                 if repeats(boundary, i, k + 1, p, tol):
                     period[i] = p
                     settled[i] = settled_from(boundary, i, k + 1, p, tol)
                     break
-            else:
-                if k + 1 < cap:
-                    still.append(j)
+            # a settled case runs on until it has the turns it records
+            if k + 1 < cap and (period[i] == 0 or k + 1 < turns):
+                still.append(j)
         if not still:
             break
         rows = np.array(still)
         active = active[rows]
         q0, v0 = part.q[rows, -1], part.v[rows, -1]
         cfg0 = part.contact_state[rows, -1].astype(np.int64)
-        a0 = consistent_accelerations(
-            [cases[i] for i in active.tolist()],
-            [matrices[i] for i in active.tolist()],
-            q0,
-            v0,
-            cfg0,
+        a0 = (
+            np.zeros_like(q0)  # modal-exact starts from the coordinates and velocities alone
+            if settings.method == "modal-exact"
+            else consistent_accelerations(
+                [cases[i] for i in active.tolist()],
+                [matrices[i] for i in active.tolist()],
+                q0,
+                v0,
+                cfg0,
+            )
         )
         start = (np.zeros(active.size), q0, v0, a0, cfg0)
     never = period == 0
