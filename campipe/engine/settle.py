@@ -1,8 +1,9 @@
-"""Run length by convergence (``RunSettings.settle``): each case runs turn by turn until its
+"""Run length by convergence (``RunSettings.revolutions`` None, a study's ``run.revolutions:
+auto``): each case runs turn by turn until its
 response repeats, and its metrics are the settled response's.
 
 The periodic start is the steady state of a train that *follows* the cam. A case that does
-follows it and repeats from its first turn; a case past the onset leaves it, and its first
+follow it repeats from its first turn; a case past the onset leaves it, and its first
 turns are a transient away from it, which a fixed run of a few turns averages into its
 metrics. Here a batch runs one turn at a time (``batch.run_batch`` on the cases not yet
 settled, each turn started from the state its last ended in), and after each turn every case's
@@ -10,15 +11,14 @@ state at the turn boundaries is compared with the one p turns before (p = 1 … 
 
 - a case whose last turns repeat with a period p, to ``settle_tolerance`` (see
   :func:`repeats`), has settled; its metrics are taken over the whole periods of its settled
-  window (``settled_turn`` on), and it runs no more;
+  window (``settled_turn`` on), and it runs no more once it has the turns it records;
 - a case that has not repeated within ``max_revolutions`` turns never settled
   (``period_turns`` 0): its metrics are statistics (mean per turn, largest) over the second
   half of its run, its window.
 
-The histories kept are those of each case's last ``revolutions`` turns (a whole number: the
-settled window's last period when it is at least the period), from the turn
-``recorded_from``; the events kept are those of the same turns. Times are from the start of
-the run.
+The histories kept are those of each case's last ``history_turns`` turns (the settled
+window's last period when it is at least the period), from the turn ``recorded_from``; the
+events kept are those of the same turns. Times are from the start of the run.
 
 Pure numerics: arrays in, arrays out.
 """
