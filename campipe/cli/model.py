@@ -10,7 +10,7 @@ import click
 import numpy as np
 
 from campipe.cli.base import Failure, InputFailure, parse_overrides
-from campipe.constants import INCH, LBF_IN, RPM
+from campipe.constants import INCH, LBF_IN, RPM, TWO_PI
 from campipe.model import (
     ELEMENTS,
     PARAMETERS,
@@ -118,6 +118,7 @@ def model_report(train, sm, limits, preset) -> dict[str, object]:
         ],
         "natural_frequencies": sm.frequencies.tolist(),
         "natural_frequencies_rpm": (sm.frequencies / RPM).tolist(),
+        "natural_frequencies_hz": (sm.frequencies / TWO_PI).tolist(),
         "modal_damping_ratios": modal_damping_ratios(sm.damping, sm.modes, sm.frequencies).tolist(),
         "mass_matrix": sm.mass.tolist(),
         "stiffness_matrix": sm.stiffness.tolist(),
@@ -188,10 +189,10 @@ def model_text(train, sm, limits, preset, overrides) -> str:
         lines += _matrix_text(to_display_units(a, INCH, LBF_IN, trans), scale, coords)
     lines.append("")
     lines.append("Natural frequencies (Figure 14), each mode's damping ratio (Φᵀ C Φ)ⱼⱼ / (2ωⱼ)")
-    lines.append(f"  {'mode':>4} {'rad/s':>14} {'rpm':>14} {'ζ':>6}")
+    lines.append(f"  {'mode':>4} {'rad/s':>14} {'Hz':>12} {'rpm':>14} {'ζ':>6}")
     zeta = modal_damping_ratios(sm.damping, sm.modes, sm.frequencies)
     for i, (w, z) in enumerate(zip(sm.frequencies, zeta, strict=True), 1):
-        lines.append(f"  {i:>4} {w:14.1f} {w / RPM:14.1f} {z:6.3f}")
+        lines.append(f"  {i:>4} {w:14.1f} {w / TWO_PI:12.1f} {w / RPM:14.1f} {z:6.3f}")
     lines.append("")
     lines.append(
         "Mode shapes (Figure 14), one column a mode, scaled to a largest translation of 1"
