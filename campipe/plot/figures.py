@@ -27,8 +27,8 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from campipe.errors import did_you_mean, excerpt
-from campipe.plot.style import COLORMAP, EVENT_MARKERS, line_styles
-from campipe.study.query.display import display_units, format_value, label, to_display
+from campipe.plot.style import COLORMAP, EVENT_MARKERS, axis_label, axis_words, line_styles
+from campipe.study.query.display import display_units, format_value, to_display
 from campipe.study.query.tables import CaseTable, case_table, displayed, select
 from campipe.study.spec.plots import PlotError, PlotRequest, check_turn
 from campipe.study.spec.variables import VARIABLES
@@ -251,7 +251,7 @@ def histories(view: View, request: PlotRequest) -> Figure:
         for i in range(n):
             ax.plot(angle, values[i], label=labels[i], **styles[i].kwargs(samples))
         ax.set_title(title, fontsize=10)
-        ax.set_ylabel(label(name.replace("_", " "), units))
+        ax.set_ylabel(axis_label(name, units))
         ax.grid(alpha=0.3)
     for ax in axes[len(panels) :]:
         ax.set_visible(False)
@@ -259,7 +259,7 @@ def histories(view: View, request: PlotRequest) -> Figure:
     for ax, (_, names) in zip(axes, panels, strict=False):
         kinds.update(_mark_events(ax, view, names[0], drawn, angle, styles))
     for ax in axes[max(len(panels) - cols, 0) : len(panels)]:
-        ax.set_xlabel(label("cam angle", view.units.get("cam_angle", "degree")))
+        ax.set_xlabel(axis_label("cam_angle", view.units.get("cam_angle", "degree")))
         ax.tick_params(labelbottom=True)
     handles, texts = axes[0].get_legend_handles_labels()
     fig.legend(
@@ -412,12 +412,12 @@ def metric(view: View, request: PlotRequest) -> Figure:
         )
         ax.plot(x[idx], y[idx], label=text or "all cases", **style.kwargs())
     ringed = _mark_unsettled(ax, view, x, y)
-    ax.set_xlabel(label(xname, view.shown.units.get(xname, "")))
-    ax.set_ylabel(label(yname, view.shown.units.get(yname, "")))
+    ax.set_xlabel(axis_label(xname, view.shown.units.get(xname, "")))
+    ax.set_ylabel(axis_label(yname, view.shown.units.get(yname, "")))
     ax.grid(alpha=0.3)
     if others or ringed:
         ax.legend(fontsize=8, loc="best")
-    _title(fig, view, f"{yname} against {xname}", request.where)
+    _title(fig, view, f"{axis_words(yname)} against {axis_words(xname).lower()}", request.where)
     return fig
 
 
@@ -540,11 +540,11 @@ def cell_map(view: View, request: PlotRequest) -> Figure:
     for ax in axes[len(grouped) :]:
         ax.set_visible(False)
     for ax in axes[: len(grouped)]:
-        ax.set_xlabel(label(xname, view.shown.units.get(xname, "")))
-        ax.set_ylabel(label(yname, view.shown.units.get(yname, "")))
+        ax.set_xlabel(axis_label(xname, view.shown.units.get(xname, "")))
+        ax.set_ylabel(axis_label(yname, view.shown.units.get(yname, "")))
     assert mesh is not None
     bar = fig.colorbar(mesh, ax=list(axes[: len(grouped)]))
-    bar.set_label(label(zname, view.shown.units.get(zname, "")))
+    bar.set_label(axis_label(zname, view.shown.units.get(zname, "")))
     what = f"{zname} over {xname} and {yname}"
     if level is not None:
         what += f", contour at {level:g} {view.shown.units.get(zname, '')}".rstrip()
@@ -595,7 +595,7 @@ def events(view: View, request: PlotRequest) -> Figure:
     ax.set_yticks(np.arange(n), labels, fontsize=8)
     ax.set_ylim(n - 0.5, -0.5)
     ax.set_xlim(lo, hi)
-    ax.set_xlabel(label("cam angle", view.units.get("cam_angle", "degree")))
+    ax.set_xlabel(axis_label("cam_angle", view.units.get("cam_angle", "degree")))
     ax.grid(axis="y", alpha=0.3)
     if ax.collections:
         fig.legend(loc="outside lower center", ncols=4, fontsize=8)
