@@ -156,17 +156,25 @@ class RunSettings:
                 found=turns,
                 expected=f"0 … {turn_count(self.recorded_revolutions) - 1} turns",
             )
-        whole = whole_turn_count(self.recorded_revolutions)
-        if 1 <= self.recorded_revolutions and whole <= turns:
+        return int(turns)
+
+    def check_whole_turns(self) -> None:
+        """Refuse a fixed run with no whole turn after its warm-up (1.5 turns from the
+        quasi-static start, 0.5 turns), naming ``run.revolutions``: its metrics would read a
+        part of a turn as a turn. A study's spec is checked so (``campipe validate``); the
+        engine itself runs such a run and reads its part (its warm-up and timing runs)."""
+        if self.settle:
+            return
+        turns = self.warmup_turns
+        if whole_turn_count(self.recorded_revolutions) <= turns:
             raise RunSettingsError.at(
                 "run.revolutions",
-                f"found {self.recorded_revolutions:g}: after {turns} turn(s) of warm-up only a "
-                "part of a turn is left, and the metrics read whole turns; run at least "
+                f"found {self.recorded_revolutions:g}: after {turns} turn(s) of warm-up no whole "
+                "turn is left, and the metrics read whole turns; run at least "
                 f"{turns + 1} turns (a whole number reads best)",
                 found=self.recorded_revolutions,
                 expected=f"≥ {turns + 1} turns",
             )
-        return int(turns)
 
     def measured_turns(self, n_rev: int) -> np.ndarray:
         """(n_rev,) bool: the turns the metrics' summaries read. Those after the warm-up, and

@@ -1,22 +1,30 @@
 """A fractional ``run.revolutions``: the summaries read whole turns only. The partial last
 turn stays in the per-turn metrics but is left out of the summaries (2.5 turns averaged half
 a turn's separation as a whole one's: 35.2° against 52.6° at 2 and 3 turns, no-follow at
-9524 rpm); a run with no whole turn after its warm-up is refused at run.revolutions."""
+9524 rpm); a spec with no whole turn after its warm-up is refused at run.revolutions."""
 
 import math
 
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
+from study_helpers import write_spec
 
 from campipe.constants import INCH
-from campipe.engine import Case, RunSettings, RunSettingsError, run_batch
+from campipe.engine import Case, RunSettings, run_batch
 from campipe.model import thesis_train
 from campipe.profiles import harmonic
+from campipe.study import SpecError, load_study
 
 RPM = 2 * math.pi / 60
 #: The thesis's train on the 1 in harmonic cam at 9524 rpm: it leaves the cam every turn.
 CASE = Case(thesis_train(), harmonic(INCH), 9524 * RPM)
+SPEC = """
+name: turns
+profile: {{kind: harmonic, lift: 1 in}}
+speed: 9524 rpm
+run: {{revolutions: {revolutions}, start: {start}}}
+"""
 
 
 @pytest.fixture(scope="module")
@@ -57,15 +65,24 @@ def test_whole_runs_and_runs_shorter_than_a_turn_are_unchanged():
     assert_array_equal(RunSettings(revolutions=3.5, warmup=1).measured_turns(4), [0, 1, 1, 0])
 
 
-def test_no_whole_turn_after_the_warm_up_is_refused_at_run_revolutions():
-    """1.5 turns from the quasi-static start (one turn of warm-up) leave half a turn to
-    measure: refused, naming run.revolutions and the turns needed. Broken copy: without the
-    check in warmup_turns the summary is the half turn's."""
-    with pytest.raises(RunSettingsError) as info:
-        RunSettings(revolutions=1.5, start="quasi-static").warmup_turns  # noqa: B018
-    assert info.value.key == "run.revolutions"
-    assert "run at least 2 turns" in str(info.value)
-    assert RunSettings(revolutions=2, start="quasi-static").warmup_turns == 1
+@pytest.mark.parametrize(
+    ("revolutions", "start", "needed"), [(1.5, "quasi-static", 2), (0.5, "periodic", 1)]
+)
+def test_a_spec_with_no_whole_turn_after_the_warm_up_is_refused(
+    tmp_path, revolutions, start, needed
+):
+    """1.5 turns from the quasi-static start (one turn of warm-up) or 0.5 turns leave no
+    whole turn to measure: the spec is refused, naming run.revolutions and the turns needed
+    (the engine itself runs them, reading the part: its warm-up and timing runs). Broken
+    copy: check_settings without check_whole_turns accepts them."""
+    spec = write_spec(tmp_path, SPEC.format(revolutions=revolutions, start=start))
+    with pytest.raises(SpecError) as info:
+        load_study(spec)
+    assert "run.revolutions: found" in str(info.value)
+    assert f"run at least {needed} turns" in str(info.value)
+    ran = run_batch([CASE], RunSettings(revolutions=revolutions, start=start))
+    assert ran.measured.tolist() == ([False, True] if start == "quasi-static" else [True])
+    assert load_study(write_spec(tmp_path, SPEC.format(revolutions=2, start=start))).cases
 
 
 def test_the_steady_level_measures_whole_turns_too():
