@@ -141,6 +141,8 @@ def study(
             overwrite=overwrite,
             inputs=[(spec, "the spec")],
         )
+        if recording.is_symlink():  # allowed by --overwrite: the link, not its target
+            recording.unlink()
         replay = StudyReplay(loaded, recording)
     words = ["campipe", "study", spec, *(["-o", output] if output else [])]
     words += [w for pair in sets for w in ("--set", pair)]

@@ -10,6 +10,7 @@ never load it.
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 from campipe.io.archive import ArchiveFileError, unreadable
@@ -79,5 +80,11 @@ def write(fig, path: str | Path) -> Path:
         raise PlotError.at(
             "-o", f"{path}: expected a file ending in {', '.join(FORMATS)} (the suffix chooses)"
         )
-    fig.savefig(path, dpi=120)
+    # at a temporary name, renamed into place: a link at the path is replaced, not followed
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        fig.savefig(tmp, dpi=120, format=path.suffix.lower()[1:])
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
     return path

@@ -263,3 +263,19 @@ def test_init_replaces_a_link_inside_its_folder_only_with_overwrite(tmp_path):
     assert not (folder / "target.yaml").exists()
     again = invoke("init", folder)
     assert again.exit_code == 0, again.output
+
+
+def test_a_figure_replaces_a_link_at_its_path_not_the_link_s_target(tiny, tmp_path):
+    """``plot -o link.png`` where link.png links to another figure: the link is replaced by
+    the new figure (written at a temporary name, renamed), the other figure's bytes are
+    unchanged. Broken copy: write() saving straight to the path writes through the link."""
+    _, archive = tiny
+    other = tmp_path / "other.png"
+    assert invoke("plot", "events", archive, "-o", other).exit_code == 0
+    before = other.read_bytes()
+    link = tmp_path / "link.png"
+    link.symlink_to(other)
+    out = invoke("plot", "histories", archive, "-o", link)
+    assert out.exit_code == 0, out.output
+    assert not link.is_symlink() and link.read_bytes()[:4] == b"\x89PNG"
+    assert other.read_bytes() == before and link.read_bytes() != before
