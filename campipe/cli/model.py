@@ -283,27 +283,29 @@ def packaged_specs() -> dict[str, bytes]:
 
 @click.command()
 @click.argument("directory", default="studies", type=click.Path(file_okay=False))
-@click.option("--force", is_flag=True, help="Replace files of the same names in DIRECTORY.")
-def init(directory, force) -> None:
+@click.option(
+    "--overwrite",
+    "--force",
+    "overwrite",
+    is_flag=True,
+    help="Replace files of the same names in DIRECTORY that differ from the examples.",
+)
+def init(directory, overwrite) -> None:
     """Write the example specs into DIRECTORY (default: studies): the quickstart, the
     separation map and the thesis's runs, with a README; then run one with campipe study."""
+    import os
     from pathlib import Path
 
     folder = Path(directory)
     specs = packaged_specs()
-    existing = [name for name in specs if (folder / name).exists()]
-    if existing and not force:
-        raise InputFailure(
-            f"{folder / existing[0]}: exists (and {len(existing) - 1} more of the example "
-            "files); choose another folder, or replace them with --force"
-            if len(existing) > 1
-            else f"{folder / existing[0]}: exists; choose another folder, or replace it "
-            "with --force"
-        )
+    _check_init(folder, specs, overwrite)
     try:
         folder.mkdir(parents=True, exist_ok=True)
         for name, content in specs.items():
-            (folder / name).write_bytes(content)
+            # a new file renamed into place: a link at the path is replaced, never followed
+            tmp = folder / f".{name}.{os.getpid()}.tmp"
+            tmp.write_bytes(content)
+            os.replace(tmp, folder / name)
     except OSError as exc:
         raise Failure(f"{exc.filename or folder}: cannot write ({exc.strerror or exc})") from None
     for name in specs:
@@ -313,6 +315,31 @@ def init(directory, force) -> None:
         f"{folder / 'quickstart.yaml'}",
         err=True,
     )
+
+
+def _check_init(folder, specs: dict[str, bytes], overwrite: bool) -> None:
+    """The output rule (``campipe.io.outputs``) for each example: inside ``folder`` (a link
+    out of it refused), a file identical to the example left as it is, any other file
+    replaced only with ``overwrite``."""
+    import functools
+
+    from campipe.io.outputs import Kind, OutputExistsError, check_output
+
+    refused: list[OutputExistsError] = []
+    for name, content in specs.items():
+        same = Kind("the example", functools.partial(_holds, content=content))
+        try:
+            check_output(folder / name, "DIRECTORY", same, overwrite=overwrite, inside=folder)
+        except OutputExistsError as exc:
+            refused.append(exc)
+    if refused:
+        more = f" (and {len(refused) - 1} more of the example files)" if len(refused) > 1 else ""
+        raise InputFailure(f"{refused[0]}{more}")
+
+
+def _holds(path, content: bytes) -> bool:
+    """The file at ``path`` holds exactly ``content``."""
+    return path.stat().st_size == len(content) and path.read_bytes() == content
 
 
 @click.command()

@@ -42,6 +42,12 @@ from campipe.cli.base import SET_HELP, Failure, load_spec
     help="The netCDF file written (default: <name>-onset.nc beside SPEC).",
 )
 @click.option(
+    "--overwrite",
+    is_flag=True,
+    help="Replace a file at the output path that is not this spec's onset archive (another "
+    "study's archive, any other file); never the spec.",
+)
+@click.option(
     "--check/--no-check",
     default=True,
     show_default=True,
@@ -53,7 +59,7 @@ from campipe.cli.base import SET_HELP, Failure, load_spec
     type=click.IntRange(min=1),
     help="Threads for the search (default: the cores available).",
 )
-def onset(spec, sets, tolerance, level, fmt, output, check, workers) -> None:
+def onset(spec, sets, tolerance, level, fmt, output, overwrite, check, workers) -> None:
     """The no-follow onset speed of every combination of SPEC's other axes, within its
     speed range, missing no window of no-follow in it: the root of the steady state's least
     cam force (with a seat, where its no-follow reaches --level a turn), checked by the
@@ -74,14 +80,64 @@ def onset(spec, sets, tolerance, level, fmt, output, check, workers) -> None:
         raise click.BadParameter(f"found {level!r}, expected ≥ 0 deg", param_hint="--level")
     loaded = load_spec(spec, sets)
     path = Path(output) if output else Path(spec).parent / f"{loaded.name}-onset.nc"
-    run_onset(loaded, spec, path, tol, fmt, check, workers, level=angle)
+    run_onset(loaded, spec, path, tol, fmt, check, workers, overwrite=overwrite, level=angle)
 
 
 def run_onset(
-    loaded, spec_path, path, tolerance, fmt, check, workers, command="onset", level=None
+    loaded,
+    spec_path,
+    path,
+    tolerance,
+    fmt,
+    check,
+    workers,
+    command="onset",
+    overwrite=False,
+    level=None,
 ) -> None:
-    """``campipe onset``'s work (and ``campipe study``'s for a spec with ``search``)."""
+    """``campipe onset``'s work (and ``campipe study``'s for a spec with ``search``): the
+    output checked by the output rule (``campipe.io.outputs``) before the search, and
+    written under the lock ``campipe study`` holds on an archive."""
+    from pathlib import Path
+
+    from campipe.io.lock import writing
+
+    path = Path(path)
+    spec_file = onset_output(loaded, spec_path, path, overwrite)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with writing(path):
+        onset_output(loaded, spec_path, path, overwrite)  # another run may have written it
+        _search_and_write(
+            loaded, spec_path, path, spec_file, tolerance, fmt, check, workers, command, level
+        )
+
+
+def onset_output(loaded, spec_path, path, overwrite) -> str:
+    """Refuse an output the onset may not replace (the spec, another study's archive, a file
+    campipe did not write for this spec's onset) unless ``overwrite``; returns the spec's path
+    relative to the output's folder, which the file records."""
+    import os
+    from pathlib import Path
+
+    from campipe.io.outputs import check_output, describe_netcdf, onset_kind
+
+    spec_file = os.path.relpath(Path(spec_path).resolve(), Path(path).parent.resolve())
+    check_output(
+        path,
+        "-o",
+        onset_kind(loaded.name, spec_file),
+        overwrite=overwrite,
+        inputs=[(spec_path, "the spec")],
+        describe=describe_netcdf,
+    )
+    return spec_file
+
+
+def _search_and_write(
+    loaded, spec_path, path, spec_file, tolerance, fmt, check, workers, command, level
+):
     from campipe.io.archive import provenance, write_file
+    from campipe.io.outputs import ONSET_FILE
     from campipe.study.onset import file_contents, onset_study, summary_lines
     from campipe.study.query.display import display_units
     from campipe.study.query.tables import displayed, format_rows
@@ -101,7 +157,12 @@ def run_onset(
         sizes,
         variables,
         arrays,
-        {**attrs, **provenance(f"campipe onset {spec_path}")},
+        {
+            **attrs,
+            **provenance(f"campipe onset {spec_path}"),
+            "campipe_file": ONSET_FILE,
+            "spec_file": spec_file,
+        },
         loaded.compression,
     )
     table = displayed(result.table, display_units(result.table.units, attrs))

@@ -600,21 +600,19 @@ def run_batch(
         return _run_by_contacts(cases, settings, options, start)
     n = len(cases)
     angles = output_angles(settings)
-    warmup = settings.warmup_turns
+    measured = settings.measured_turns(turn_count(settings.recorded_revolutions))
     batch = _prepare_batch(cases, settings, full_state)
     if start is None:
         start = _starts(cases, settings, batch)
     cases_in = batch.cases._replace(**start._asdict())
     omega, qref = cases_in.omega, cases_in.valve_ref
     out = _outputs(batch, settings)
-    n_rev = out.per_rev.shape[1]  # turns, a partial last one included
     integrator = integrators.get(settings.method)
     integrator.run(integrator.prepare(batch, settings), cases_in, out)
     status, n_events = out.status, out.n_events
     if status.any():  # not every case OK
         _failures(out, settings, on_failure, check_stability_limit, integrator)
     kept = np.minimum(n_events, settings.max_events)
-    measured = np.arange(n_rev) >= warmup
     return BatchResult(
         cam_angle=angles,
         time=angles[None, :] / omega[:, None],

@@ -415,7 +415,7 @@ def _steady_result(
         seat_force=np.zeros((n, angles.size)),
         contact_state=np.full((n, angles.size), CAM_CONTACT, np.int8),
         valve_reference=st.valve_reference[held],
-        measured=np.arange(n_rev) >= settings.warmup_turns,
+        measured=settings.measured_turns(n_rev),
         per_rev=per_rev,
         trains=[c.train for c in cases],
         events=[np.zeros((0, N_EVENT_FIELDS)) for _ in range(n)],
