@@ -124,9 +124,16 @@ def test_histories_of_one_turn_and_in_si(archive, ds):
     )
     axes = [ax for ax in fig.axes if ax.get_visible()]
     assert axes[0].get_ylabel() == "Valve lift [m]" and axes[4].get_ylabel() == "Cam force [N]"
+    # turn 2 of 2 drawn on 0–360° (issue 37: not at 360–720°), its values the archive's
+    # samples at 360–720°
     x = axes[0].get_lines()[0].get_xdata()
-    assert x[0] == 360 and x[-1] == 720 and len(axes[0].get_lines()) == 2
+    assert x[0] == 0 and x[-1] == 360 and len(axes[0].get_lines()) == 2
     assert "turn 2" in fig.get_suptitle()
+    i = np.flatnonzero(
+        (ds.speed_rpm.values == 6000) & (ds.spring_preload.values < 150 * 4.4482216152605)
+    )[0]
+    lift = ds.valve_lift.values[i][(ds.cam_angle.values >= 360) & (ds.cam_angle.values <= 720)]
+    assert np.array_equal(axes[0].get_lines()[0].get_ydata(), lift)
 
 
 def test_metric_draws_a_line_per_combination_of_the_other_axes(archive, ds, tmp_path):
