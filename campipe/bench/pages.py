@@ -30,7 +30,7 @@ import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from campipe.bench import gate, report, verdict
+from campipe.bench import gate, report, sweep, verdict
 from campipe.bench.figures import finite, format_short
 from campipe.bench.run import (
     ACCURACY_DEFAULT_ERROR,
@@ -493,6 +493,16 @@ def scaling_block(bench: Bench) -> str:
     return scaling_table(bench.scaling)
 
 
+def sweep_block(bench: Bench) -> str:
+    """The speed sweep: the default against the thesis's loop and newmark-linear, the
+    overhead a call, each against the earlier figures."""
+    if not bench.sweep:
+        return "Not measured in this run (`--no-scaling`, or a run from before the sweep).\n"
+    lines = sweep.notes(bench.sweep) + [""]
+    lines += table(sweep.HEADER, sweep.table_rows(bench.sweep))
+    return "\n".join(lines) + "\n"
+
+
 def regressions_block(bench: Bench) -> str:
     """The figures more than 10 % slower than the previous run's, none, or why none could be
     compared (``campipe.bench.gate``)."""
@@ -510,6 +520,7 @@ BLOCKS: dict[str, Callable[[Bench], str]] = {
     "bench-fidelity": fidelity_block,
     "bench-onset": onset_block,
     "bench-scaling": scaling_block,
+    "bench-sweep": sweep_block,
     "bench-regressions": regressions_block,
 }
 
