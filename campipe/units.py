@@ -64,6 +64,11 @@ def _pint():
     return pint
 
 
+#: Spellings of the trade pint does not know: a speed written ``9000 rev/min`` or
+#: ``9000 r/min`` (ISO 80000's r/min) is the ``9000 rpm`` pint reads.
+TRADE_ALIASES = ("@alias revolution = rev = r",)
+
+
 @functools.cache
 def registry() -> pint.UnitRegistry:
     """The package's one pint registry, made on first use (``campipe --help`` never pays
@@ -73,10 +78,13 @@ def registry() -> pint.UnitRegistry:
     written is passed over."""
     pint = _pint()
     try:
-        return pint.UnitRegistry(cache_folder=":auto:")
+        reg = pint.UnitRegistry(cache_folder=":auto:")
     except Exception as exc:  # a damaged or unwritable cache: parse the definitions
         log.debug("pint's definition cache is not usable (%s): parsing the definitions", exc)
-        return pint.UnitRegistry()
+        reg = pint.UnitRegistry()
+    for alias in TRADE_ALIASES:
+        reg.define(alias)
+    return reg
 
 
 class QuantityError(CampipeError, ValueError):

@@ -7,7 +7,8 @@ names what got slower"):
   contacts only, newmark-linear at each step); not solve_ivp's, the peer's time is SciPy's;
 - the steady-state path on each scene that follows the cam, its margin and one turn of it;
 - the throughput batches (the batch's time), the engine's scaling points, the onset map and
-  the time-domain grid it replaces.
+  the time-domain grid it replaces;
+- the speed sweep's default, quasi-static start, one-case calls and newmark-linear.
 
 :func:`compare` matches the new figures with the previous run's by scene, figure and cam
 turns, and names every one more than :data:`SLOWER` slower. Two runs are compared only when
@@ -38,6 +39,14 @@ UNREADABLE = "unreadable"
 OTHER_MACHINE = "another machine"
 OTHER_KIND = "another kind of run"
 NOTHING_IN_COMMON = "no figure in common"
+#: The speed sweep's timed figures (``campipe.bench.sweep``), by key and name; not the thesis's
+#: loop, the reference the others are measured against.
+SWEEP_FIGURES = (
+    ("default", "default, 32 cases"),
+    ("default_quasi_static", "default with the quasi-static start, 32 cases"),
+    ("one_case_calls", "32 one-case calls"),
+    ("newmark", "newmark-linear at 1 µs, 32 cases"),
+)
 #: The families of rows whose time is campipe's own (solve_ivp's is the peer's).
 TIMED_FAMILIES = ("modal-exact", "modal-exact capped", "contacts only", "newmark-linear")
 
@@ -76,6 +85,9 @@ def figures(run: Mapping[str, Any]) -> list[dict]:
     for p in run.get("scaling") or ():
         name = f"{p['layer']}, {p['n_cases']} cases, {_workers(p['workers'])}"
         out += _figure("scaling", name, p.get("seconds"))
+    sweep = run.get("sweep") or {}
+    for key, name in SWEEP_FIGURES:
+        out += _figure("speed sweep", name, (sweep.get("seconds") or {}).get(key))
     o = run.get("onset") or {}
     if o:
         out += _figure(

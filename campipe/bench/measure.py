@@ -64,8 +64,9 @@ def outcome_of_batch(result: BatchResult, i: int, case: Case) -> Outcome:
         result.valve_lift[i].copy(),
         result.events[i].copy(),
         result.separation_per_rev[i].copy(),
-        float(result.max_seating_velocity[i]),
-        float(result.max_cam_impact_velocity[i]),
+        # over every turn, as the peer's: a fractional run's summaries leave its last turn out
+        float(np.max(result.max_seating_velocity_per_rev[i])),
+        float(np.max(result.max_cam_impact_velocity_per_rev[i])),
         case.speed,
         case.has_seat,
     )

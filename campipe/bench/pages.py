@@ -30,7 +30,7 @@ import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from campipe.bench import gate, report, settling, verdict
+from campipe.bench import gate, report, settling, sweep, verdict
 from campipe.bench.figures import finite, format_short
 from campipe.bench.run import (
     ACCURACY_DEFAULT_ERROR,
@@ -498,6 +498,16 @@ def settling_block(bench: Bench) -> str:
     return settling.markdown(bench.settling)
 
 
+def sweep_block(bench: Bench) -> str:
+    """The speed sweep: the default against the thesis's loop and newmark-linear, the
+    overhead a call, each against the earlier figures."""
+    if not bench.sweep:
+        return "Not measured in this run (`--no-scaling`, or a run from before the sweep).\n"
+    lines = sweep.notes(bench.sweep) + [""]
+    lines += table(sweep.HEADER, sweep.table_rows(bench.sweep))
+    return "\n".join(lines) + "\n"
+
+
 def regressions_block(bench: Bench) -> str:
     """The figures more than 10 % slower than the previous run's, none, or why none could be
     compared (``campipe.bench.gate``)."""
@@ -516,6 +526,7 @@ BLOCKS: dict[str, Callable[[Bench], str]] = {
     "bench-onset": onset_block,
     "bench-settling": settling_block,
     "bench-scaling": scaling_block,
+    "bench-sweep": sweep_block,
     "bench-regressions": regressions_block,
 }
 

@@ -16,7 +16,7 @@ from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Any
 
-from campipe.bench import gate, settling, verdict
+from campipe.bench import gate, settling, sweep, verdict
 from campipe.bench.figures import finite
 from campipe.bench.run import FAMILIES, Bench
 from campipe.constants import INCH
@@ -325,6 +325,10 @@ def markdown(bench: Bench, with_plots: bool = True) -> str:
                 f"in {a['contacts_only_seconds'] * 1e3:.3g} ms/case. Ratio newmark/that: "
                 f"{_num(a['ratio_contacts_only'])}."
             )
+    if bench.sweep:
+        lines += ["", "## The speed sweep: the default against the thesis's algorithm", ""]
+        lines += sweep.notes(bench.sweep) + [""]
+        lines += _table(sweep.HEADER, sweep.table_rows(bench.sweep))
     if bench.throughput:
         lines += ["", "## Throughput: a 256-case batch", ""]
         lines += _table(

@@ -18,7 +18,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from campipe.bench import measure, onset, scaling, settling
+from campipe.bench import measure, onset, scaling, settling, sweep
 from campipe.bench.ivp import ChatterError
 from campipe.bench.suite import FULL, QUICK, Ladder, Scene, suite
 from campipe.constants import INCH
@@ -88,6 +88,7 @@ class Bench:
     steady: list[dict] = field(default_factory=list)  # the steady-state path per scene
     onset: dict = field(default_factory=dict)  # the onset map against the time-domain grid
     settling: dict = field(default_factory=dict)  # automatic run length against 4 turns
+    sweep: dict = field(default_factory=dict)  # the speed sweep: ratios, overhead (issue 34)
     seconds: float = 0.0  # wall time of the whole bench [s]
     # The previous run's timed figures and how they compare (campipe.bench.gate.compare):
     # empty until the report is written; then the figures more than 10 % slower.
@@ -357,7 +358,7 @@ def run_bench(
     scenes : sequence of str, optional
         Scene names to run (default: the whole suite).
     with_scaling : bool
-        Run the throughput and the engine's scaling measurements.
+        Run the speed sweep, the throughput and the engine's scaling measurements.
     with_suite : bool
         Run the scenes: references, ladders, peers and fidelity.
     progress : callable, optional
@@ -463,6 +464,8 @@ def run_bench(
     bench.goals = _goals(bench.ratios)
     bench.accuracy_for_cost = _accuracy_for_cost(bench.rows)
     if with_scaling:
+        say("speed sweep: 32 speeds, the default against the thesis's loop and newmark-linear")
+        bench.sweep = sweep.speed_sweep(quick)
         say("throughput: 256 cases, newmark-linear and modal-exact")
         for integrator, workers in (
             ("newmark-linear", 1),

@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from campipe.bench import gate
+from campipe.bench import gate, sweep
 from campipe.bench.figures import finite, format_short
 from campipe.bench.onset import GOAL_MAP_SECONDS, GOAL_MAP_WORKERS
 from campipe.bench.run import (
@@ -219,6 +219,34 @@ def _throughput(bench: Bench) -> Goal:
     )
 
 
+def _sweep_goals(bench: Bench) -> list[Goal]:
+    """Issue 34's goals on the speed sweep (``campipe.bench.sweep``)."""
+    s = bench.sweep
+    whats = (
+        ("thesis_ratio", f"the default at least ×{format_short(sweep.GOAL_THESIS)} faster than "
+         "the thesis's algorithm (a compiled scalar loop at 1 µs)"),
+        ("newmark_ratio", f"the default at least ×{format_short(sweep.GOAL_NEWMARK)} faster than "
+         "newmark-linear at 1 µs"),
+        ("overhead", f"at most {format_short(sweep.GOAL_OVERHEAD * 1e3)} ms overhead a call, 32 "
+         f"one-case calls within {format_short(sweep.GOAL_CALLS)}× one 32-case call"),
+    )  # fmt: skip
+    if not s:
+        return [Goal("sweep", w, "–", NOT_SHOWN, "not measured: --no-scaling") for _, w in whats]
+    note = f"{s['cases']} speeds, {format_short(s['revolutions'])} turns, least of several runs"
+    out = []
+    for key, what in whats:
+        if key == "overhead":
+            figure = (
+                f"{format_short(s['overhead'] * 1e3, 2)} ms, {format_short(s['calls_ratio'], 3)}×"
+            )
+            reached = s["reached"]["overhead"] and s["reached"]["calls_ratio"]
+        else:
+            figure = f"×{format_short(s[key], 3)}"
+            reached = s["reached"][key]
+        out.append(Goal("sweep", what, figure, REACHED if reached else NOT_REACHED, note))
+    return out
+
+
 def _onset_map(bench: Bench) -> Goal:
     what = (
         f"an onset map of 1000 designs in under {format_short(GOAL_MAP_SECONDS)} s on "
@@ -247,6 +275,7 @@ def goals(bench: Bench) -> list[Goal]:
         *_accuracy_goals(bench),
         _throughput(bench),
         _onset_map(bench),
+        *_sweep_goals(bench),
     ]
 
 

@@ -13,6 +13,7 @@ import click
 
 from campipe import __version__
 from campipe.errors import CampipeError
+from campipe.memory import reuse_freed_memory
 from campipe.units import pint_without_dask
 
 
@@ -108,6 +109,7 @@ def main(verbose: int) -> None:
     """campipe: parametric studies of cam-driven valve-train dynamics."""
     logging.basicConfig(level=[logging.WARNING, logging.INFO, logging.DEBUG][min(verbose, 2)])
     _exit_without_collecting()
+    reuse_freed_memory()  # this process is the command's own (campipe.memory)
 
 
 @functools.cache

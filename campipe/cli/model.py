@@ -10,7 +10,7 @@ import click
 import numpy as np
 
 from campipe.cli.base import Failure, InputFailure, parse_overrides
-from campipe.constants import INCH, LBF_IN, RPM
+from campipe.constants import INCH, LBF_IN, RPM, TWO_PI
 from campipe.model import (
     ELEMENTS,
     PARAMETERS,
@@ -118,6 +118,7 @@ def model_report(train, sm, limits, preset) -> dict[str, object]:
         ],
         "natural_frequencies": sm.frequencies.tolist(),
         "natural_frequencies_rpm": (sm.frequencies / RPM).tolist(),
+        "natural_frequencies_hz": (sm.frequencies / TWO_PI).tolist(),
         "modal_damping_ratios": modal_damping_ratios(sm.damping, sm.modes, sm.frequencies).tolist(),
         "mass_matrix": sm.mass.tolist(),
         "stiffness_matrix": sm.stiffness.tolist(),
@@ -188,10 +189,10 @@ def model_text(train, sm, limits, preset, overrides) -> str:
         lines += _matrix_text(to_display_units(a, INCH, LBF_IN, trans), scale, coords)
     lines.append("")
     lines.append("Natural frequencies (Figure 14), each mode's damping ratio (Φᵀ C Φ)ⱼⱼ / (2ωⱼ)")
-    lines.append(f"  {'mode':>4} {'rad/s':>14} {'rpm':>14} {'ζ':>6}")
+    lines.append(f"  {'mode':>4} {'rad/s':>14} {'Hz':>12} {'rpm':>14} {'ζ':>6}")
     zeta = modal_damping_ratios(sm.damping, sm.modes, sm.frequencies)
     for i, (w, z) in enumerate(zip(sm.frequencies, zeta, strict=True), 1):
-        lines.append(f"  {i:>4} {w:14.1f} {w / RPM:14.1f} {z:6.3f}")
+        lines.append(f"  {i:>4} {w:14.1f} {w / TWO_PI:12.1f} {w / RPM:14.1f} {z:6.3f}")
     lines.append("")
     lines.append(
         "Mode shapes (Figure 14), one column a mode, scaled to a largest translation of 1"
@@ -282,27 +283,29 @@ def packaged_specs() -> dict[str, bytes]:
 
 @click.command()
 @click.argument("directory", default="studies", type=click.Path(file_okay=False))
-@click.option("--force", is_flag=True, help="Replace files of the same names in DIRECTORY.")
-def init(directory, force) -> None:
+@click.option(
+    "--overwrite",
+    "--force",
+    "overwrite",
+    is_flag=True,
+    help="Replace files of the same names in DIRECTORY that differ from the examples.",
+)
+def init(directory, overwrite) -> None:
     """Write the example specs into DIRECTORY (default: studies): the quickstart, the
     separation map and the thesis's runs, with a README; then run one with campipe study."""
+    import os
     from pathlib import Path
 
     folder = Path(directory)
     specs = packaged_specs()
-    existing = [name for name in specs if (folder / name).exists()]
-    if existing and not force:
-        raise InputFailure(
-            f"{folder / existing[0]}: exists (and {len(existing) - 1} more of the example "
-            "files); choose another folder, or replace them with --force"
-            if len(existing) > 1
-            else f"{folder / existing[0]}: exists; choose another folder, or replace it "
-            "with --force"
-        )
+    _check_init(folder, specs, overwrite)
     try:
         folder.mkdir(parents=True, exist_ok=True)
         for name, content in specs.items():
-            (folder / name).write_bytes(content)
+            # a new file renamed into place: a link at the path is replaced, never followed
+            tmp = folder / f".{name}.{os.getpid()}.tmp"
+            tmp.write_bytes(content)
+            os.replace(tmp, folder / name)
     except OSError as exc:
         raise Failure(f"{exc.filename or folder}: cannot write ({exc.strerror or exc})") from None
     for name in specs:
@@ -312,6 +315,31 @@ def init(directory, force) -> None:
         f"{folder / 'quickstart.yaml'}",
         err=True,
     )
+
+
+def _check_init(folder, specs: dict[str, bytes], overwrite: bool) -> None:
+    """The output rule (``campipe.io.outputs``) for each example: inside ``folder`` (a link
+    out of it refused), a file identical to the example left as it is, any other file
+    replaced only with ``overwrite``."""
+    import functools
+
+    from campipe.io.outputs import Kind, OutputExistsError, check_output
+
+    refused: list[OutputExistsError] = []
+    for name, content in specs.items():
+        same = Kind("the example", functools.partial(_holds, content=content))
+        try:
+            check_output(folder / name, "DIRECTORY", same, overwrite=overwrite, inside=folder)
+        except OutputExistsError as exc:
+            refused.append(exc)
+    if refused:
+        more = f" (and {len(refused) - 1} more of the example files)" if len(refused) > 1 else ""
+        raise InputFailure(f"{refused[0]}{more}")
+
+
+def _holds(path, content: bytes) -> bool:
+    """The file at ``path`` holds exactly ``content``."""
+    return path.stat().st_size == len(content) and path.read_bytes() == content
 
 
 @click.command()

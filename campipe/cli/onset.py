@@ -19,6 +19,14 @@ from campipe.cli.base import SET_HELP, Failure, load_spec
     help="The onset's tolerance (the width of its final bracket).",
 )
 @click.option(
+    "--level",
+    default="0.5 deg",  # periodic.DEFAULT_ONSET_LEVEL_DEG (not imported: numba loads)
+    show_default=True,
+    metavar="ANGLE",
+    help="With a seat, the no-follow a turn the onset reaches (0 deg: the first separation). "
+    "Without a seat the onset is the first separation.",
+)
+@click.option(
     "--format",
     "fmt",
     type=click.Choice(["table", "csv", "json"]),
@@ -34,20 +42,28 @@ from campipe.cli.base import SET_HELP, Failure, load_spec
     help="The netCDF file written (default: <name>-onset.nc beside SPEC).",
 )
 @click.option(
+    "--overwrite",
+    is_flag=True,
+    help="Replace a file at the output path that is not this spec's onset archive (another "
+    "study's archive, any other file); never the spec.",
+)
+@click.option(
     "--check/--no-check",
     default=True,
     show_default=True,
-    help="Run the time-domain engine 0.5 % below and above each onset.",
+    help="Run the time-domain engine 0.5 % below and above each onset (10 turns, the first "
+    "2 left out): below it must stay under the level, above reach it.",
 )
 @click.option(
     "--workers",
     type=click.IntRange(min=1),
     help="Threads for the search (default: the cores available).",
 )
-def onset(spec, sets, tolerance, fmt, output, check, workers) -> None:
+def onset(spec, sets, tolerance, level, fmt, output, overwrite, check, workers) -> None:
     """The no-follow onset speed of every combination of SPEC's other axes, within its
-    speed range: the root of the steady state's least cam force, checked by the time-domain
-    engine either side. Exit status 1 when a check disagrees."""
+    speed range, missing no window of no-follow in it: the root of the steady state's least
+    cam force (with a seat, where its no-follow reaches --level a turn), checked by the
+    time-domain engine either side. Exit status 1 when a check disagrees."""
     from pathlib import Path
 
     from campipe.units import QuantityError, parse_quantity
@@ -56,14 +72,72 @@ def onset(spec, sets, tolerance, fmt, output, check, workers) -> None:
         tol = parse_quantity(tolerance, "rad/s", "--tolerance", "rpm")
     except QuantityError as exc:
         raise click.BadParameter(str(exc), param_hint="--tolerance") from None
+    try:
+        angle = parse_quantity(level, "rad", "--level", "deg")
+    except QuantityError as exc:
+        raise click.BadParameter(str(exc), param_hint="--level") from None
+    if not angle >= 0:
+        raise click.BadParameter(f"found {level!r}, expected ≥ 0 deg", param_hint="--level")
     loaded = load_spec(spec, sets)
     path = Path(output) if output else Path(spec).parent / f"{loaded.name}-onset.nc"
-    run_onset(loaded, spec, path, tol, fmt, check, workers)
+    run_onset(loaded, spec, path, tol, fmt, check, workers, overwrite=overwrite, level=angle)
 
 
-def run_onset(loaded, spec_path, path, tolerance, fmt, check, workers, command="onset") -> None:
-    """``campipe onset``'s work (and ``campipe study``'s for a spec with ``search``)."""
+def run_onset(
+    loaded,
+    spec_path,
+    path,
+    tolerance,
+    fmt,
+    check,
+    workers,
+    command="onset",
+    overwrite=False,
+    level=None,
+) -> None:
+    """``campipe onset``'s work (and ``campipe study``'s for a spec with ``search``): the
+    output checked by the output rule (``campipe.io.outputs``) before the search, and
+    written under the lock ``campipe study`` holds on an archive."""
+    from pathlib import Path
+
+    from campipe.io.lock import writing
+
+    path = Path(path)
+    spec_file = onset_output(loaded, spec_path, path, overwrite)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with writing(path):
+        onset_output(loaded, spec_path, path, overwrite)  # another run may have written it
+        _search_and_write(
+            loaded, spec_path, path, spec_file, tolerance, fmt, check, workers, command, level
+        )
+
+
+def onset_output(loaded, spec_path, path, overwrite) -> str:
+    """Refuse an output the onset may not replace (the spec, another study's archive, a file
+    campipe did not write for this spec's onset) unless ``overwrite``; returns the spec's path
+    relative to the output's folder, which the file records."""
+    import os
+    from pathlib import Path
+
+    from campipe.io.outputs import check_output, describe_netcdf, onset_kind
+
+    spec_file = os.path.relpath(Path(spec_path).resolve(), Path(path).parent.resolve())
+    check_output(
+        path,
+        "-o",
+        onset_kind(loaded.name, spec_file),
+        overwrite=overwrite,
+        inputs=[(spec_path, "the spec")],
+        describe=describe_netcdf,
+    )
+    return spec_file
+
+
+def _search_and_write(
+    loaded, spec_path, path, spec_file, tolerance, fmt, check, workers, command, level
+):
     from campipe.io.archive import provenance, write_file
+    from campipe.io.outputs import ONSET_FILE
     from campipe.study.onset import file_contents, onset_study, summary_lines
     from campipe.study.query.display import display_units
     from campipe.study.query.tables import displayed, format_rows
@@ -72,6 +146,7 @@ def run_onset(loaded, spec_path, path, tolerance, fmt, check, workers, command="
     result = onset_study(
         loaded,
         tolerance,
+        **({} if level is None else {"level": level}),
         confirm=check,
         workers=workers or default_workers(),
         notice=lambda text: click.echo(f"campipe {command}: {text}", err=True),
@@ -82,7 +157,12 @@ def run_onset(loaded, spec_path, path, tolerance, fmt, check, workers, command="
         sizes,
         variables,
         arrays,
-        {**attrs, **provenance(f"campipe onset {spec_path}")},
+        {
+            **attrs,
+            **provenance(f"campipe onset {spec_path}"),
+            "campipe_file": ONSET_FILE,
+            "spec_file": spec_file,
+        },
         loaded.compression,
     )
     table = displayed(result.table, display_units(result.table.units, attrs))

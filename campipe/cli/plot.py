@@ -21,6 +21,12 @@ PLOT_KINDS = ("histories", "metric", "map", "events")
     help="File to write: PNG, SVG or PDF by its suffix (default: <archive stem>-KIND.png "
     "beside the archive).",
 )
+@click.option(
+    "--overwrite",
+    is_flag=True,
+    help="Replace a file at the output path that is not a figure of its format (never the "
+    "archive or its spec).",
+)
 @click.option("--where", help="Draw the cases where EXPR holds (the language of query --where).")
 @units_option
 @click.option(
@@ -46,7 +52,7 @@ PLOT_KINDS = ("histories", "metric", "map", "events")
     metavar="N|last|all",
     help="histories, events: show one cam turn (1, 2, ... or last; default all).",
 )
-def plot(kind, archive, output, where, units, x, y, z, level, turn) -> None:
+def plot(kind, archive, output, overwrite, where, units, x, y, z, level, turn) -> None:
     """Draw a figure of ARCHIVE.
 
     \b
@@ -67,12 +73,13 @@ def plot(kind, archive, output, where, units, x, y, z, level, turn) -> None:
         request = check_plot(given)
     except PlotError as exc:
         raise InputFailure(f"--{exc.key}: {exc.reason}") from None
-    path, _ = plot_archive(archive, request, output)
+    path, _ = plot_archive(archive, request, output, overwrite=overwrite)
     click.echo(str(path))
 
 
-def write_plots(loaded, archive) -> None:
-    """The spec's ``plots:``, each written beside the finished archive."""
+def write_plots(loaded, archive, overwrite=False) -> None:
+    """The spec's ``plots:``, each written beside the finished archive, inside its folder
+    (the output rule, ``campipe.io.outputs``)."""
     from collections import Counter
 
     from campipe.plot import plot_archive
@@ -86,7 +93,14 @@ def write_plots(loaded, archive) -> None:
         )
         seen[request.kind] += 1
         try:
-            path, _ = plot_archive(archive, request, output)
+            path, _ = plot_archive(
+                archive,
+                request,
+                output,
+                overwrite=overwrite,
+                key=f"plots[{i}].output" if request.output else f"plots[{i}]",
+                inside=archive.parent,
+            )
         except Exception as exc:  # the archive is complete: a figure is an extra
             raise Failure.of(
                 f"the archive {archive} is complete, but plots[{i}] ({request.kind}) failed: "

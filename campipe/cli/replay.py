@@ -27,6 +27,12 @@ import click
     type=click.Path(dir_okay=False),
     help="Recording to write (default: <archive stem>.replay.rrd beside it).",
 )
+@click.option(
+    "--overwrite",
+    is_flag=True,
+    help="Replace a file at the output path that is not a rerun recording (never the archive "
+    "or its spec).",
+)
 @click.option("--spawn", is_flag=True, help="Open the rerun viewer instead of writing a file.")
 @click.option(
     "--magnify",
@@ -35,7 +41,7 @@ import click
     show_default=True,
     help="Factor on the sketch's deviations from the rigid-body motion.",
 )
-def replay(archive, case_ids, where, output, spawn, magnify) -> None:
+def replay(archive, case_ids, where, output, overwrite, spawn, magnify) -> None:
     """Write a rerun recording of cases of ARCHIVE: lift, force and contact plots, events,
     parameters and the moving mechanism, on the timelines cam_angle and time. All cases go
     into one recording, each in its own cases/<case_id> subtree and blueprint tab."""
@@ -62,6 +68,7 @@ def replay(archive, case_ids, where, output, spawn, magnify) -> None:
             spawn=spawn,
             magnification=magnify,
             progress=bar,
+            overwrite=overwrite,
         )
     except QueryError as exc:
         raise click.UsageError(str(exc)) from None

@@ -72,7 +72,8 @@ from campipe.cli.plot import write_plots
     "--overwrite",
     is_flag=True,
     help="Replace a file at the archive path that is not this study's archive (another "
-    "study's archive, any other file); cases it shares by id are reused.",
+    "study's archive, any other file); cases it shares by id are reused. Also lets the "
+    "spec's plots and recording replace files campipe did not write (never the spec).",
 )
 @limit_options
 def study(
@@ -120,7 +121,17 @@ def study(
         from campipe.engine.periodic import DEFAULT_ONSET_TOLERANCE_RPM, RPM
 
         tolerance = DEFAULT_ONSET_TOLERANCE_RPM * RPM
-        run_onset(loaded, spec, archive, tolerance, "table", True, workers, command="study")
+        run_onset(
+            loaded,
+            spec,
+            archive,
+            tolerance,
+            "table",
+            True,
+            workers,
+            command="study",
+            overwrite=overwrite,
+        )
         return
     stderr = sys.stderr
     bars: list[Progress] = []
@@ -131,9 +142,19 @@ def study(
 
     replay = None
     if loaded.spec.replay:
+        from campipe.io.outputs import RECORDING, check_output
         from campipe.replay.live import StudyReplay, recording_path
 
-        replay = StudyReplay(loaded, recording_path(archive))
+        recording = check_output(
+            recording_path(archive),
+            "replay",
+            RECORDING,
+            overwrite=overwrite,
+            inputs=[(spec, "the spec")],
+        )
+        if recording.is_symlink():  # allowed by --overwrite: the link, not its target
+            recording.unlink()
+        replay = StudyReplay(loaded, recording)
     words = ["campipe", "study", spec, *(["-o", output] if output else [])]
     words += [w for pair in sets for w in ("--set", pair)]
     words += ["--scheduler", scheduler] if scheduler != "threads" else []
@@ -177,7 +198,7 @@ def study(
                 f"campipe study: replay {loaded.spec.replay!r} recorded in {recorded}", err=True
             )
     if loaded.spec.plots:
-        write_plots(loaded, report.archive)
+        write_plots(loaded, report.archive, overwrite)
     click.echo(str(report.archive))
 
 

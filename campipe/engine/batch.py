@@ -413,7 +413,16 @@ def _prepare_batch(
     )
 
 
-def _starts(cases: Sequence[Case], settings: RunSettings, batch: PreparedBatch) -> Start:
+#: The integrators that start from q and v alone (modal-exact's closed form): ``run_batch``
+#: leaves their periodic start's accelerations zero instead of solving for them.
+NO_START_ACCELERATIONS = ("modal-exact",)
+
+
+def _starts(
+    cases: Sequence[Case], settings: RunSettings, batch: PreparedBatch, in_run: bool = False
+) -> Start:
+    """Where each case starts (``start_states``); ``in_run``: for ``run_batch``, which needs
+    no accelerations for the integrators of ``NO_START_ACCELERATIONS``."""
     c = batch.cases
     if settings.start == "quasi-static":
         q0, v0, a0, cfg0 = initial_states(
@@ -427,9 +436,10 @@ def _starts(cases: Sequence[Case], settings: RunSettings, batch: PreparedBatch) 
         )
         return Start(np.zeros(len(cases)), q0, v0, a0, cfg0)
     step = settings.step if integrators.get(settings.method).fixed_step else 0.0
+    accelerations = not in_run or settings.method not in NO_START_ACCELERATIONS
     t0, q0, v0, a0 = _periodic_starts(
         cases, c, batch.modal_trains, batch.runs, batch.packed, np.full(len(cases), step),
-        batch.stack, batch.which,
+        batch.stack, batch.which, accelerations,
     )  # fmt: skip
     return Start(t0, q0, v0, a0, np.full(len(cases), CAM_CONTACT, np.int64))
 
@@ -461,7 +471,9 @@ def _outputs(batch: PreparedBatch, settings: RunSettings):
     return make_outputs(len(batch.which), n_out, n_rev, settings.max_events, n_q)
 
 
-def _periodic_starts(case_list, cases, modal_trains, runs, packed, snap, stack, which):
+def _periodic_starts(
+    case_list, cases, modal_trains, runs, packed, snap, stack, which, accelerations=True
+):
     """Each case's start on the periodic steady state of configuration I
     (``steady.periodic_starts``): (t0, q0, v0, a0); refuses a case where configuration I holds
     nowhere on the turn."""
@@ -485,6 +497,8 @@ def _periodic_starts(case_list, cases, modal_trains, runs, packed, snap, stack, 
             found=bad.tolist(),
             expected="a seat below the valve's full lift",
         )
+    if not accelerations:
+        return t0, q0, v0, np.zeros_like(q0)
     return t0, q0, v0, _start_accelerations(case_list, cases.omega, t0, q0, v0, stack, which)
 
 
@@ -600,21 +614,19 @@ def run_batch(
         return _run_by_contacts(cases, settings, options, start)
     n = len(cases)
     angles = output_angles(settings)
-    warmup = settings.warmup_turns
+    measured = settings.measured_turns(turn_count(settings.recorded_revolutions))
     batch = _prepare_batch(cases, settings, full_state)
     if start is None:
-        start = _starts(cases, settings, batch)
+        start = _starts(cases, settings, batch, in_run=True)
     cases_in = batch.cases._replace(**start._asdict())
     omega, qref = cases_in.omega, cases_in.valve_ref
     out = _outputs(batch, settings)
-    n_rev = out.per_rev.shape[1]  # turns, a partial last one included
     integrator = integrators.get(settings.method)
     integrator.run(integrator.prepare(batch, settings), cases_in, out)
     status, n_events = out.status, out.n_events
     if status.any():  # not every case OK
         _failures(out, settings, on_failure, check_stability_limit, integrator)
     kept = np.minimum(n_events, settings.max_events)
-    measured = np.arange(n_rev) >= warmup
     return BatchResult(
         cam_angle=angles,
         time=angles[None, :] / omega[:, None],

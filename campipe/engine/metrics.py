@@ -57,6 +57,7 @@ class Metric:
     archived: bool = True  # stored in a study's archive
     #: (result, per-case trains) → (n_cases, n_turns) SI values, for a derived metric
     derive: Callable[[Any, Any], np.ndarray] | None = None
+    label: str = ""  # a figure's words for it ("No-follow"); "": its description's first words
 
     @property
     def summary_of_turns(self) -> str:
@@ -123,6 +124,7 @@ METRICS: list[Metric] = [
         "degree",
         "sum",
         si_units="rad",
+        label="No-follow",
     ),
     Metric(
         "seated_off_cam",
@@ -132,9 +134,17 @@ METRICS: list[Metric] = [
         "degree",
         "sum",
         si_units="rad",
+        label="Seated off the cam",
     ),
     Metric(
-        "cam_impacts", "cam_impacts", "cam_impacts_by_rev", "cam impacts", None, "count", dtype="i4"
+        "cam_impacts",
+        "cam_impacts",
+        "cam_impacts_by_rev",
+        "cam impacts",
+        None,
+        "count",
+        dtype="i4",
+        label="Cam impacts",
     ),  # fmt: skip
     Metric(
         "seat_impacts",
@@ -144,6 +154,7 @@ METRICS: list[Metric] = [
         None,
         "count",
         dtype="i4",
+        label="Seat impacts",
     ),  # fmt: skip
     Metric(
         "max_cam_impact_velocity",
@@ -152,6 +163,7 @@ METRICS: list[Metric] = [
         "largest closing velocity at a cam impact",
         "m/s",
         "max",
+        label="Cam impact velocity",
     ),
     Metric(
         "max_seating_velocity",
@@ -160,6 +172,7 @@ METRICS: list[Metric] = [
         "largest closing velocity at a seat impact",
         "m/s",
         "max",
+        label="Seating velocity",
     ),
     Metric(
         "max_cam_force",
@@ -168,6 +181,7 @@ METRICS: list[Metric] = [
         "largest compressive cam force between impacts",
         "N",
         "max",
+        label="Cam force",
     ),
     Metric(
         "max_seat_force",
@@ -176,6 +190,7 @@ METRICS: list[Metric] = [
         "largest compressive seat force between impacts",
         "N",
         "max",
+        label="Seat force",
     ),
     Metric(
         "thesis_impact_force",
@@ -186,6 +201,7 @@ METRICS: list[Metric] = [
         "N",
         "max",
         archived=False,
+        label="Cam force with impacts",
     ),
     Metric(
         "max_cam_pressure",
@@ -197,6 +213,7 @@ METRICS: list[Metric] = [
         record="contact_pressure",
         source="derived",
         derive=_pressure(0),
+        label="Cam contact pressure",
     ),
     Metric(
         "max_seat_pressure",
@@ -208,6 +225,7 @@ METRICS: list[Metric] = [
         record="contact_pressure",
         source="derived",
         derive=_pressure(1),
+        label="Seat contact pressure",
     ),
     Metric(
         "max_spring_force",
@@ -219,6 +237,7 @@ METRICS: list[Metric] = [
         record="spring",
         source="derived",
         derive=_spring("max_spring_element_force", "max"),
+        label="Spring force",
     ),
     Metric(
         "min_spring_clash_margin",
@@ -230,6 +249,7 @@ METRICS: list[Metric] = [
         record="spring",
         source="derived",
         derive=_spring("spring_clash_margin", "min"),
+        label="Coil-clash margin",
     ),
 ]
 

@@ -10,7 +10,9 @@ is piecewise (configurations I, III, IV, with impacts at the seat and the cam, p
 the train's restitution): it is then the fixed point of the turn map over the exact piece
 propagators, which is what ``modal-exact`` integrates turn by turn; the heavy damping of the
 seated phase makes that map contract within a turn or two (``SEATED_TURNS``, checked), and
-no-follow is configuration II in its last turn.
+no-follow is configuration II in its last turn; with a seat the onset is where that
+no-follow reaches a level (``onset_speeds``). The search certifies each interval it passes
+free of no-follow, so it misses no window of it inside the range (``onset_speeds``).
 
 Pure numerics: arrays in, arrays out; no files, no printing.
 """
@@ -58,14 +60,23 @@ from campipe.vocabulary import CAM, CAM_CONTACT, N_EVENT_FIELDS, OK, SEAT
 SEATED_TURNS = 3
 MAX_SEATED_TURNS = 24
 SEATED_AGREEMENT = 1e-9
-#: Speeds at which the onset search first looks across a speed range (the first sign change
-#: of the margin is then refined): a dip of the margin narrower than the range / (SCAN − 1)
-#: can be missed.
-SCAN_SPEEDS = 33
-#: The onset's default tolerance [rpm] and the time-domain check's offset either side of it.
+#: Speeds at which the onset search first looks across a speed range; the intervals between
+#: them are then certified free of no-follow or halved (``onset_speeds``).
+SCAN_SPEEDS = 17
+#: The certificate's safety factor: between two speeds where the design follows, the slope
+#: of its margin is taken to be at most ONSET_SLOPE_FACTOR times the steepest of the chord
+#: between them and the chords either side (``onset_speeds``).
+ONSET_SLOPE_FACTOR = 2.0
+#: The onset's default tolerance [rpm]; with a seat, its default level [deg of no-follow a
+#: turn] (``onset_speeds``: why 0.5°).
 DEFAULT_ONSET_TOLERANCE_RPM = 0.1
+DEFAULT_ONSET_LEVEL_DEG = 0.5
+DEFAULT_ONSET_LEVEL = math.radians(DEFAULT_ONSET_LEVEL_DEG)  # [rad]
+#: The time-domain check: its offset either side of the onset, its turns from the periodic
+#: start and the first of them left out (``confirm_onsets``).
 CONFIRM_OFFSET = 0.005
-CONFIRM_TURNS = 4
+CONFIRM_TURNS = 10
+CONFIRM_WARMUP = 2
 
 
 # --------------------------------------------------------------------------- packing
@@ -404,7 +415,7 @@ def _steady_result(
         seat_force=np.zeros((n, angles.size)),
         contact_state=np.full((n, angles.size), CAM_CONTACT, np.int8),
         valve_reference=st.valve_reference[held],
-        measured=np.arange(n_rev) >= settings.warmup_turns,
+        measured=settings.measured_turns(n_rev),
         per_rev=per_rev,
         trains=[c.train for c in cases],
         events=[np.zeros((0, N_EVENT_FIELDS)) for _ in range(n)],
@@ -458,26 +469,162 @@ class Onset:
     #: (n, n_scan) the margin there, the least cam compression over the steady turn [N]; NaN
     #: where the valve seats on part of the turn (then the sign comes from ``seated_no_follow``)
     scan_margin: np.ndarray
-    scan_no_follow: np.ndarray  # (n, n_scan) bool: no-follow in the steady state
+    scan_no_follow: np.ndarray  # (n, n_scan) bool: no-follow in the steady state (at the level)
     seated: np.ndarray  # (n,) bool: the onset's bracket needed the seated steady state
     tolerance: float  # [rad/s]
     evaluations: np.ndarray  # (n,) steady states computed (closed form and seated)
+    #: (n,) the level [rad of no-follow a turn] each design's onset reaches: 0 (first
+    #: separation) without a seat
+    level: np.ndarray | None = None
 
 
-def _separates(designs, batch, speeds, todo):
-    """(margin [N], no-follow, seated) at speeds[i] for the designs ``todo`` (bool mask)."""
+#: The kinds of a point of the search: its value is the closed form's margin [N], or the
+#: level less the seated steady state's no-follow per turn [rad] (``_Points``).
+_CLOSED, _TURN = 0, 1
+
+
+def _evaluate(designs, batch, speeds, todo, level):
+    """The steady state of the designs ``todo`` at speeds[i]: (value, kind, no-follow,
+    margin). The value is positive where the design follows: the closed form's margin [N]
+    where configuration I holds, or leaves the cam without a seat or at level 0; else (the
+    valve seats on part of the turn, or it leaves the cam and a level is asked for) the
+    level less the seated steady state's no-follow per turn [rad]. The margin is the closed
+    form's, NaN where the valve seats."""
     n = len(designs)
-    margin = np.full(n, np.nan)
+    value = np.full(n, np.nan)
+    kind = np.zeros(n, np.int8)
+    no_follow = np.zeros(n, np.bool_)
     out = batch.extremes(np.where(todo, speeds, 1.0), with_max=False, active=todo)
-    seated = todo & (out[:, steady.MIN_HEIGHT] < 0.0)
-    closed = todo & ~seated
-    margin[closed] = out[closed, steady.MIN_FORCE]
-    no_follow = closed & (margin < 0.0)
-    if seated.any():
-        idx = np.flatnonzero(seated)
+    force = out[:, steady.MIN_FORCE]
+    seats = todo & (out[:, steady.MIN_HEIGHT] < 0.0)
+    turn = seats | (todo & (force < 0.0) & (level > 0.0))
+    closed = todo & ~turn
+    value[closed] = force[closed]
+    no_follow[closed] = force[closed] < 0.0
+    if turn.any():
+        idx = np.flatnonzero(turn)
         sep, _ = seated_no_follow([dataclasses.replace(designs[i], speed=speeds[i]) for i in idx])
-        no_follow[idx] = sep > 0.0
-    return margin, no_follow, seated
+        kind[idx] = _TURN
+        value[idx] = level[idx] - sep
+        no_follow[idx] = np.where(level[idx] > 0.0, sep >= level[idx], sep > 0.0)
+    margin = np.where(todo & ~seats, force, np.nan)
+    return value, kind, no_follow, margin
+
+
+@dataclass
+class _Points:
+    """The search's state per design: ``a`` the highest speed up to which no-follow is
+    excluded (its value, kind), and a stack of speeds above it still to pass (the top the
+    nearest), each with its value, kind and whether it is no-follow."""
+
+    a: np.ndarray
+    a_value: np.ndarray
+    a_kind: np.ndarray
+    slope: np.ndarray  # the last certified chord's slope (NaN: none of a's kind)
+    speed: np.ndarray  # (n, capacity) the stack
+    value: np.ndarray
+    kind: np.ndarray
+    no_follow: np.ndarray
+    depth: np.ndarray  # (n,) the stack's height
+    active: np.ndarray  # (n,) bool: still searching
+    scale: np.ndarray  # (n, 2) Illinois's factors on a's and the top's values
+    side: np.ndarray  # (n,) the end the last split replaced: −1 a, +1 the top, 0 none
+
+    def top(self, k: int = 1) -> tuple[np.ndarray, ...]:
+        """The k-th point from the top (k = 1: the top): speed, value, kind, no-follow;
+        the bottom's where the stack is shallower."""
+        rows = np.arange(self.depth.size)
+        j = np.maximum(self.depth - k, 0)
+        return (self.speed[rows, j], self.value[rows, j], self.kind[rows, j],
+                self.no_follow[rows, j])  # fmt: skip
+
+    def certify(self, tolerance: float) -> None:
+        """Move ``a`` up through every interval to the top that is certified free of
+        no-follow: both ends follow, of one kind, and (value_a + value_b) ≥ L·(b − a) with
+        L = ONSET_SLOPE_FACTOR × the steepest of the chord, the chord certified before it
+        and the chord after it; or the interval is no wider than the tolerance."""
+        while True:
+            live = self.active & (self.depth > 0)
+            b, vb, kb, nb = self.top(1)
+            c, vc, kc, _ = self.top(2)
+            width = b - self.a
+            same = self.a_kind == kb
+            with np.errstate(invalid="ignore", divide="ignore"):
+                # Equal values (form closure's +inf among them) make a flat chord.
+                chord = np.where(vb == self.a_value, 0.0, (vb - self.a_value) / width)
+                after = np.where(vc == vb, 0.0, (vc - vb) / (c - b))
+                after = np.where((self.depth > 1) & (kc == kb), after, np.nan)
+                steep = np.fmax(np.fmax(np.abs(chord), np.abs(after)), np.abs(self.slope))
+                bound = ONSET_SLOPE_FACTOR * steep * width
+                free = same & (self.a_value + vb >= bound)
+            ok = live & ~nb & (free | (width <= tolerance))
+            if not ok.any():
+                return
+            self.slope = np.where(ok, np.where(same, chord, np.nan), self.slope)
+            self.a = np.where(ok, b, self.a)
+            self.a_value = np.where(ok, vb, self.a_value)
+            self.a_kind = np.where(ok, kb, self.a_kind)
+            self.depth = self.depth - ok
+            self.scale[ok, 0] = 1.0
+
+    def split(self, tolerance: float) -> np.ndarray:
+        """Where each live design looks next: the middle of a and the top, or, when the top
+        is no-follow and both are the closed form's margins, the Illinois point (the chord's
+        root, the end kept twice in a row weighted by ½) kept tolerance/4 inside."""
+        b, vb, kb, nb = self.top(1)
+        x = 0.5 * (self.a + b)
+        secant = nb & (self.a_kind == _CLOSED) & (kb == _CLOSED)
+        fa = self.a_value * self.scale[:, 0]
+        fb = vb * self.scale[:, 1]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            root = b - fb * (b - self.a) / (fb - fa)
+        root = np.clip(root, self.a + 0.25 * tolerance, b - 0.25 * tolerance)
+        return np.where(secant & np.isfinite(root), root, x)
+
+    def push(self, todo, x, value, kind, no_follow) -> None:
+        """Put the points just looked at on the stacks of the designs ``todo``; a point with
+        no-follow replaces the whole stack (nothing above it matters any more), so the stack
+        holds the scan and at most the halvings down to the tolerance."""
+        rows = np.flatnonzero(todo)
+        j = np.where(no_follow[rows], 0, self.depth[rows])
+        nb = self.top(1)[3][rows]
+        self.speed[rows, j] = x[rows]
+        self.value[rows, j] = value[rows]
+        self.kind[rows, j] = kind[rows]
+        self.no_follow[rows, j] = no_follow[rows]
+        self.depth[rows] = j + 1
+        # Illinois: the end replaced twice in a row halves the other end's weight.
+        replaced = np.where(no_follow[rows], 1, -1)
+        again = replaced == self.side[rows]
+        bracket = nb  # only while the top was no-follow is the split a chord's root
+        self.scale[rows, 0] = np.where(
+            bracket & again & (replaced > 0), 0.5 * self.scale[rows, 0], self.scale[rows, 0]
+        )
+        self.scale[rows, 1] = np.where(
+            bracket & again & (replaced < 0), 0.5 * self.scale[rows, 1],
+            np.where(replaced > 0, 1.0, self.scale[rows, 1]),
+        )  # fmt: skip
+        self.side[rows] = np.where(bracket, replaced, 0)
+
+
+def _start(grid, value, kind, no_follow) -> _Points:
+    """The search's state after the scan: ``a`` its lowest speed, the others on the stack."""
+    n, m = value.shape
+    cap = m + 128  # the scan's speeds, and halvings down to any tolerance (~60 at most)
+    stack = np.full((n, cap), np.nan)
+    speeds = stack.copy()
+    kinds = np.zeros((n, cap), np.int8)
+    flags = np.zeros((n, cap), np.bool_)
+    speeds[:, : m - 1] = grid[:0:-1]
+    stack[:, : m - 1] = value[:, :0:-1]
+    kinds[:, : m - 1] = kind[:, :0:-1]
+    flags[:, : m - 1] = no_follow[:, :0:-1]
+    return _Points(
+        a=np.full(n, grid[0]), a_value=value[:, 0].copy(), a_kind=kind[:, 0].copy(),
+        slope=np.full(n, np.nan), speed=speeds, value=stack, kind=kinds, no_follow=flags,
+        depth=np.full(n, m - 1), active=~no_follow[:, 0], scale=np.ones((n, 2)),
+        side=np.zeros(n, np.int64),
+    )  # fmt: skip
 
 
 def onset_speeds(
@@ -486,14 +633,42 @@ def onset_speeds(
     high: float,
     tolerance: float = DEFAULT_ONSET_TOLERANCE_RPM * RPM,
     scan: int = SCAN_SPEEDS,
+    level: float = DEFAULT_ONSET_LEVEL,
 ) -> Onset:
     """The no-follow onset of each design: the lowest speed in [low, high] at which its steady
-    state leaves the cam with the valve off its seat (configuration II).
+    state leaves the cam with the valve off its seat (configuration II) — with a seat, for
+    at least ``level`` of each turn.
 
-    The margin (``steady_extremes``) is looked at on ``scan`` speeds across the range; the
-    first sign change is refined to ``tolerance`` by the Illinois method on the margin where
-    the closed form holds at both ends, by bisection where the valve seats (the seated steady
-    state, ``seated_no_follow``, gives only whether no-follow occurs).
+    **Missing no window.** The steady state is looked at on ``scan`` speeds across the
+    range; then, from the lowest speed up, each interval [a, b] between speeds where the
+    design follows is *certified* free of no-follow, or halved and its halves looked at in
+    turn. The value v of a speed is positive where it follows: the closed form's margin
+    (the least cam compression over the turn) [N]; with a seat where the valve seats (or the
+    train leaves the cam), the level less the seated steady state's no-follow per turn.
+    Away from a jump v is Lipschitz in the speed (the margin is the least over the turn of a
+    response smooth in ω; kinks where the least moves from one dip of the turn to another),
+    so |v'| ≤ L on [a, b] gives v ≥ (v_a + v_b − L·(b − a))/2 there: the interval is
+    certified when v_a + v_b ≥ L·(b − a), L taken as ONSET_SLOPE_FACTOR × the steepest of
+    the chord over [a, b], the chord certified before it and the chord after it (of the
+    same kind of value), or when b − a is no wider than the tolerance. The first speed
+    found with no-follow closes a bracket [a, b] with everything below a certified; it is
+    refined by the same rule (a point that follows moves a only once [a, point] is
+    certified), split at the Illinois point of the margin's chord where both ends are the
+    closed form's and halved otherwise, until b − a ≤ tolerance. So a range enclosing
+    another gives the same onset to the tolerance as long as the bound holds: a window of
+    no-follow is missed only if it is narrower than the tolerance or the margin falls to
+    zero across it more than twice as steeply as on the chords either side — a slope no
+    chord of the refinement sees. With a seat at level 0 (first separation) a follow point's
+    value is 0, so only intervals flat on every chord certify: the bound says nothing there
+    (the scan's and the refinement's speeds alone).
+
+    **The level.** With a seat, the seat's and the ramp's impacts throw the follower off the
+    cam for thousandths to tenths of a degree a turn over a wide band of speeds below the
+    train's loss of control, where no-follow jumps to degrees a turn (a polydyne with ramps
+    and 0.2 mm lash: under 0.12° a turn up to 5420 rpm, 3.3° at 5430 rpm, where the closed
+    form's margin falls through zero). The default level, 0.5° a turn, sits between the two:
+    the onset a designer means, the loss of control, not the first bounce; 0 gives the first
+    separation. Without a seat the level is not used: the onset is the margin's root.
 
     Parameters
     ----------
@@ -505,6 +680,8 @@ def onset_speeds(
         Width of the final bracket [rad/s]; the onset is its middle.
     scan : int
         Speeds looked at first, at least 2.
+    level : float
+        With a seat, the no-follow a turn [rad] the onset reaches (≥ 0; 0: the first).
     """
     if not (0 < low < high and math.isfinite(high)):
         raise CaseError.at(
@@ -518,57 +695,53 @@ def onset_speeds(
             "tolerance", f"found {tolerance!r} rad/s, expected > 0", found=tolerance,
             expected="> 0",
         )  # fmt: skip
+    if not (level >= 0 and math.isfinite(level)):
+        raise CaseError.at(
+            "level", f"found {level!r} rad, expected ≥ 0", found=level, expected="≥ 0"
+        )
     designs = [dataclasses.replace(d, speed=low) for d in designs]
     check_run(designs, RunSettings(), check_stability_limit=False)
     n = len(designs)
     batch = _prepare(designs)
+    levels = np.where(batch.cases.has_seat, float(level), 0.0)
     grid = np.linspace(low, high, max(2, int(scan)))
-    margin = np.full((n, grid.size), np.nan)
+    value = np.full((n, grid.size), np.nan)
+    kind = np.zeros((n, grid.size), np.int8)
     no_follow = np.zeros((n, grid.size), np.bool_)
+    margin = np.full((n, grid.size), np.nan)
     every = np.ones(n, np.bool_)
     for k, s in enumerate(grid):
-        margin[:, k], no_follow[:, k], _ = _separates(designs, batch, np.full(n, s), every)
+        value[:, k], kind[:, k], no_follow[:, k], margin[:, k] = _evaluate(
+            designs, batch, np.full(n, s), every, levels
+        )
     evaluations = np.full(n, grid.size)
-    first = np.where(no_follow.any(axis=1), no_follow.argmax(axis=1), -1)
-    status = np.where(first < 0, "none", np.where(first == 0, "below", "found"))
-    todo = first > 0
-    right = np.maximum(first, 1)
-    a = np.where(todo, grid[right - 1], np.nan)
-    b = np.where(todo, grid[right], np.nan)
-    fa = margin[np.arange(n), right - 1]
-    fb = margin[np.arange(n), right]
-    bisect = ~(np.isfinite(fa) & np.isfinite(fb))
-    seated = np.where(todo, bisect, False)
-    side = np.zeros(n, np.int64)  # the end the last step replaced: −1 a, +1 b (Illinois)
-    for _ in range(200):
-        todo &= (b - a) > tolerance
-        if not todo.any():
+    pts = _start(grid, value, kind, no_follow)
+    status = np.where(no_follow[:, 0], "below", "none").astype(object)
+    for _ in range(100_000):
+        pts.certify(tolerance)
+        pts.active &= pts.depth > 0  # nothing left above a: follows across the range
+        b, _, _, nb = pts.top(1)
+        done = pts.active & nb & (b - pts.a <= tolerance)
+        status[done] = "found"
+        pts.active &= ~done
+        if not pts.active.any():
             break
-        with np.errstate(invalid="ignore", divide="ignore"):
-            x = np.where(bisect, 0.5 * (a + b), b - fb * (b - a) / (fb - fa))
-        x = np.clip(x, a + 0.25 * tolerance, b - 0.25 * tolerance)
-        fx, sep_x, seated_x = _separates(designs, batch, x, todo)
-        evaluations += todo
-        bisect |= seated_x
-        below = todo & ~sep_x
-        above = todo & sep_x
-        # Illinois: halve the kept end's value when the same end is replaced twice in a row.
-        fb = np.where(below & (side < 0), 0.5 * fb, fb)
-        fa = np.where(above & (side > 0), 0.5 * fa, fa)
-        a = np.where(below, x, a)
-        fa = np.where(below, fx, fa)
-        b = np.where(above, x, b)
-        fb = np.where(above, fx, fb)
-        side = np.where(below, -1, np.where(above, 1, side))
-        seated |= seated_x
-    speed = np.where(status == "found", 0.5 * (a + b), np.nan)
-    return Onset(speed, status, grid, margin, no_follow, seated, float(tolerance), evaluations)
+        x = pts.split(tolerance)
+        vx, kx, nx, _ = _evaluate(designs, batch, x, pts.active, levels)
+        evaluations += pts.active
+        pts.push(pts.active, x, vx, kx, nx)
+    b, _, kb, _ = pts.top(1)
+    found = status == "found"
+    speed = np.where(found, 0.5 * (pts.a + b), np.nan)
+    seated = found & ((pts.a_kind == _TURN) | (kb == _TURN))
+    return Onset(speed, status.astype(str), grid, margin, no_follow, seated, float(tolerance),
+                 evaluations, levels)  # fmt: skip
 
 
 def confirm_settings(revolutions: float = CONFIRM_TURNS) -> RunSettings:
     """The settings of :func:`confirm_onsets`'s runs (for a caller that compiles their kernels
     first)."""
-    return RunSettings(revolutions=revolutions)
+    return RunSettings(revolutions=revolutions, warmup=min(CONFIRM_WARMUP, int(revolutions) - 1))
 
 
 def confirm_onsets(
@@ -576,12 +749,9 @@ def confirm_onsets(
     revolutions: float = CONFIRM_TURNS,
 ) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
     """The time-domain engine just below and just above each onset: no-follow per turn, the
-    mean over ``revolutions`` turns from the periodic start (the study archive's
-    ``separation_deg_per_rev``) at onset·(1 ∓ offset).
-
-    Any turn counts: just above the onset the engine leaves the cam in its first turn, lands
-    slower than its capture velocity and may then rest on the cam (``common.captured``), so
-    its later turns can follow for a few tenths of a per cent above the steady state's onset.
+    mean over the measured turns (``revolutions`` from the periodic start, the first
+    CONFIRM_WARMUP left out: the study archive's ``separation_deg_per_rev``) at
+    onset·(1 ∓ offset). :func:`confirmed` says whether they agree with the onset.
 
     Returns
     -------
@@ -602,3 +772,14 @@ def confirm_onsets(
         below[idx] = res.separation[: idx.size]
         above[idx] = res.separation[idx.size :]
     return below, above
+
+
+def confirmed(below: np.ndarray, above: np.ndarray, level: np.ndarray | float = 0.0) -> np.ndarray:
+    """(n,) bool: the time-domain check agrees with the onset — below it the engine's
+    no-follow a turn stays under the level (at level 0: none), above it reaches the level
+    (at level 0: some). False where unchecked (NaN)."""
+    level = np.broadcast_to(np.asarray(level, float), np.shape(below))
+    with np.errstate(invalid="ignore"):
+        under = np.where(level > 0.0, below < level, below == 0.0)
+        over = np.where(level > 0.0, above >= level, above > 0.0)
+    return np.isfinite(below) & np.isfinite(above) & under & over

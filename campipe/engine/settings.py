@@ -12,6 +12,8 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import numpy as np
+
 from campipe.constants import TWO_PI
 from campipe.engine import integrators
 from campipe.engine.case import CLOSURES as CLOSURES
@@ -156,6 +158,36 @@ class RunSettings:
             )
         return int(turns)
 
+    def check_whole_turns(self) -> None:
+        """Refuse a fixed run with no whole turn after its warm-up (1.5 turns from the
+        quasi-static start, 0.5 turns), naming ``run.revolutions``: its metrics would read a
+        part of a turn as a turn. A study's spec is checked so (``campipe validate``); the
+        engine itself runs such a run and reads its part (its warm-up and timing runs)."""
+        if self.settle:
+            return
+        turns = self.warmup_turns
+        if whole_turn_count(self.recorded_revolutions) <= turns:
+            raise RunSettingsError.at(
+                "run.revolutions",
+                f"found {self.recorded_revolutions:g}: after {turns} turn(s) of warm-up no whole "
+                "turn is left, and the metrics read whole turns; run at least "
+                f"{turns + 1} turns (a whole number reads best)",
+                found=self.recorded_revolutions,
+                expected=f"≥ {turns + 1} turns",
+            )
+
+    def measured_turns(self, n_rev: int) -> np.ndarray:
+        """(n_rev,) bool: the turns the metrics' summaries read. Those after the warm-up, and
+        whole: a fractional ``revolutions`` ends in a part of a turn, whose angles and counts
+        are not a turn's (2.5 turns would average half a turn's separation as a whole one's),
+        so it is left out (its values stay in the per-turn metrics). A run shorter than one
+        turn (the engine's warm-up and timing runs) has only that part, and reads it."""
+        measured = np.arange(n_rev) >= self.warmup_turns
+        partial = whole_turn_count(self.recorded_revolutions) < n_rev
+        if partial and measured[:-1].any():
+            measured[-1] = False
+        return measured
+
     @property
     def level(self) -> str:
         """The fidelity the run uses: ``fidelity``, or with ``fidelity_tolerance`` the cheapest
@@ -219,6 +251,11 @@ class RunSettings:
     def step(self) -> float | None:
         """The time step [s] (modal-exact: the cap on its steps, None for none)."""
         return DEFAULT_STEPS[self.method] if self.dt is None else self.dt
+
+
+def whole_turn_count(revolutions: float) -> int:
+    """The whole turns of a run of ``revolutions`` (its partial last turn not counted)."""
+    return int(math.floor(revolutions + 1e-12))
 
 
 def whole_turns(settings: RunSettings) -> int:

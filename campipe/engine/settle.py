@@ -1,8 +1,9 @@
-"""Run length by convergence (``RunSettings.settle``): each case runs turn by turn until its
+"""Run length by convergence (``RunSettings.revolutions`` None, a study's ``run.revolutions:
+auto``): each case runs turn by turn until its
 response repeats, and its metrics are the settled response's.
 
 The periodic start is the steady state of a train that *follows* the cam. A case that does
-follows it and repeats from its first turn; a case past the onset leaves it, and its first
+follow it repeats from its first turn; a case past the onset leaves it, and its first
 turns are a transient away from it, which a fixed run of a few turns averages into its
 metrics. Here a batch runs one turn at a time (``batch.run_batch`` on the cases not yet
 settled, each turn started from the state its last ended in), and after each turn every case's
@@ -10,15 +11,14 @@ state at the turn boundaries is compared with the one p turns before (p = 1 … 
 
 - a case whose last turns repeat with a period p, to ``settle_tolerance`` (see
   :func:`repeats`), has settled; its metrics are taken over the whole periods of its settled
-  window (``settled_turn`` on), and it runs no more;
+  window (``settled_turn`` on), and it runs no more once it has the turns it records;
 - a case that has not repeated within ``max_revolutions`` turns never settled
   (``period_turns`` 0): its metrics are statistics (mean per turn, largest) over the second
   half of its run, its window.
 
-The histories kept are those of each case's last ``revolutions`` turns (a whole number: the
-settled window's last period when it is at least the period), from the turn
-``recorded_from``; the events kept are those of the same turns. Times are from the start of
-the run.
+The histories kept are those of each case's last ``history_turns`` turns (the settled
+window's last period when it is at least the period), from the turn ``recorded_from``; the
+events kept are those of the same turns. Times are from the start of the run.
 
 Pure numerics: arrays in, arrays out.
 """
@@ -216,26 +216,30 @@ def run_settled(
         for j, i in enumerate(active.tolist()):
             if failed[j]:
                 continue
-            for p in range(1, p_max + 1):
+            for p in range(1, p_max + 1) if period[i] == 0 else ():
                 if repeats(boundary, i, k + 1, p, tol):
                     period[i] = p
                     settled[i] = settled_from(boundary, i, k + 1, p, tol)
                     break
-            else:
-                if k + 1 < cap:
-                    still.append(j)
+            # a settled case runs on until it has the turns it records
+            if k + 1 < cap and (period[i] == 0 or k + 1 < turns):
+                still.append(j)
         if not still:
             break
         rows = np.array(still)
         active = active[rows]
         q0, v0 = part.q[rows, -1], part.v[rows, -1]
         cfg0 = part.contact_state[rows, -1].astype(np.int64)
-        a0 = consistent_accelerations(
-            [cases[i] for i in active.tolist()],
-            [matrices[i] for i in active.tolist()],
-            q0,
-            v0,
-            cfg0,
+        a0 = (
+            np.zeros_like(q0)  # modal-exact starts from the coordinates and velocities alone
+            if settings.method == "modal-exact"
+            else consistent_accelerations(
+                [cases[i] for i in active.tolist()],
+                [matrices[i] for i in active.tolist()],
+                q0,
+                v0,
+                cfg0,
+            )
         )
         start = (np.zeros(active.size), q0, v0, a0, cfg0)
     never = period == 0

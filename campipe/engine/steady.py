@@ -347,6 +347,119 @@ def _snapped(theta, w, step):
     return TWO_PI + n * step * w
 
 
+#: The scan's monitors are summed from their terms in another order than ``_margin``'s: a
+#: sample whose monitor is within this fraction of its terms' magnitudes of zero is looked at
+#: again with ``_margin`` itself, so the scan finds the sample ``_margin`` would.
+RECHECK = 1e-7
+
+
+@njit(inline="always", nogil=True)
+def _margin_monitors(ref, st, z_start):
+    """The prepared piece's (``_on_piece``) margins as monitors in exact's form, the blocks'
+    λ̄, δ² in ws.MC: slot 0 the cam's compression −F1 (not with form closure), slot 1 the
+    valve's height above its seat (with a seat), Σ_b (W1 f1 + W2 f2)(τ) + Σ_k G_k x^k +
+    Re(GT e^{iθ}), τ and x from the piece's start (``_piece_monitor``'s, both at once)."""
+    cases, trains, profiles, runs, ws = deref(ref)
+    tr, ci, ns, c = st.tr, st.cfg - 1, st.ns, st.c
+    theta_a = profiles.breaks[c, st.p]
+    _particular_at(ws, st, theta_a)
+    for s in range(ns):
+        ws.zh[s] = z_start[s] - ws.zb[s]
+    _to_basis(trains, st, ws.zh, ws.u)
+    row = _seat_row(trains, st)
+    for m in range(2):
+        for k in range(8):
+            ws.G[m, k] = 0.0
+        ws.GT[m] = 0.0
+    if not cases.form[c]:
+        force_monitor(trains, ws, st, 0, -1.0, 0.0)
+    if cases.has_seat[c]:
+        for k in range(st.deg + 1):
+            ws.G[1, k] = ws.Z[k, row]
+        ws.G[1, 0] -= cases.seat_q[c]
+        ws.GT[1] = ws.ZT[row]
+    for b in range(trains.n_blocks[tr, ci]):
+        i0 = trains.bstart[tr, ci, b]
+        w1 = 0.0
+        w2 = 0.0
+        h1 = 0.0
+        h2 = 0.0
+        for j in range(i0, i0 + trains.bdim[tr, ci, b]):
+            w1 -= trains.rho_x[tr, ci, 0, j] * ws.u[j]
+            w2 -= trains.rho_xn[tr, ci, 0, j] * ws.u[j]
+            h1 += trains.basis[tr, ci, row, j] * ws.u[j]
+            h2 += trains.basis_n[tr, ci, row, j] * ws.u[j]
+        ws.MC[LBAR, b] = trains.lam_bar[tr, ci, b]
+        ws.MC[DSQ, b] = trains.delta2[tr, ci, b]
+        ws.WC[W1, 0, b] = w1
+        ws.WC[W2, 0, b] = w2
+        ws.WC[W1, 1, b] = h1
+        ws.WC[W2, 1, b] = h2
+
+
+@njit(**HELPER)
+def _scan_piece(ref, st, z_start, lo, theta_b, n):
+    """The first i in 1 … n where configuration I holds at θ_i = θ_b − (θ_b − lo)·i/n on the
+    prepared piece (``_on_piece``, z_start at its start), as ``_margin_in_piece`` finds it;
+    0 if at none. The samples' margins come from ``_margin_monitors``, the blocks' basis
+    functions and (cos θ, sin θ) stepped back by their step factors (no exp, sin or cos a
+    sample); a sample within ``RECHECK`` of zero, and the one found, are evaluated again by
+    ``_margin_in_piece``."""
+    cases, trains, profiles, runs, ws = deref(ref)
+    c, w = st.c, st.w
+    watch_force = not cases.form[c]
+    watch_seat = cases.has_seat[c]
+    _margin_monitors(ref, st, z_start)
+    nb = trains.n_blocks[st.tr, st.cfg - 1]
+    theta_a = profiles.breaks[c, st.p]
+    d = (theta_b - lo) / n
+    tau = (theta_b - theta_a) / w
+    for jj in range(nb):
+        ws.MC[F1, jj], ws.MC[F2, jj] = block_basis(ws.MC[LBAR, jj], ws.MC[DSQ, jj], tau)
+        # A step back: f1(−h) = e^{−λ̄h}C(h), f2(−h) = −e^{−λ̄h}S(h) (``block_basis`` takes
+        # τ ≥ 0).
+        back1, back2 = block_basis(-ws.MC[LBAR, jj], ws.MC[DSQ, jj], d / w)
+        ws.MC[D1, jj] = back1
+        ws.MC[D2, jj] = -back2
+    ct, sn = np.cos(theta_b), np.sin(theta_b)
+    cd, sd = np.cos(d), np.sin(d)
+    for i in range(1, n + 1):
+        for jj in range(nb):
+            f1 = ws.MC[F1, jj]
+            f2 = ws.MC[F2, jj]
+            ws.MC[F1, jj] = f1 * ws.MC[D1, jj] + ws.MC[DSQ, jj] * f2 * ws.MC[D2, jj]
+            ws.MC[F2, jj] = f2 * ws.MC[D1, jj] + f1 * ws.MC[D2, jj]
+        ct, sn = ct * cd + sn * sd, sn * cd - ct * sd
+        theta = theta_b - (theta_b - lo) * i / n
+        x = theta - st.th0
+        holds = True
+        near = False
+        for m in range(2):
+            if not (watch_force if m == 0 else watch_seat):
+                continue
+            g = 0.0
+            size = 0.0
+            for jj in range(nb):
+                a = ws.WC[W1, m, jj] * ws.MC[F1, jj]
+                b = ws.WC[W2, m, jj] * ws.MC[F2, jj]
+                g += a + b
+                size += abs(a) + abs(b)
+            pk = 0.0
+            xk = 1.0
+            for k in range(8):
+                pk += abs(ws.G[m, k]) * xk
+                xk *= abs(x)
+            g += horner(ws.G[m], x)[0] + ws.GT[m].real * ct - ws.GT[m].imag * sn
+            size += pk + abs(ws.GT[m])
+            if g < 0.0:
+                holds = False
+            if abs(g) <= RECHECK * size:
+                near = True
+        if (holds or near) and _margin_in_piece(ref, st, z_start, theta, ws.z) >= 0.0:
+            return i
+    return 0
+
+
 @njit(**HELPER)
 def _latest_hold(ref, st, z_turn, step):
     """The latest angle θ ∈ [0, 2π] of the periodic turn where configuration I holds, on a
@@ -363,23 +476,21 @@ def _latest_hold(ref, st, z_turn, step):
             continue
         _on_piece(ref, st, p)
         z_start = z_turn[c, p]
-        theta_hi = theta_b
         n = max(1, int(np.ceil((theta_b - lo) / d_theta)))
-        for i in range(n + 1):
-            theta = theta_b - (theta_b - lo) * i / n
-            if _margin_in_piece(ref, st, z_start, theta, z) >= 0.0:
-                if i == 0:
-                    return theta  # holds at the latest angle looked at
-                theta_a = theta
-                while theta_hi - theta_a > SEARCH_TOLERANCE * TWO_PI:
-                    mid = 0.5 * (theta_a + theta_hi)
-                    if _margin_in_piece(ref, st, z_start, mid, z) >= 0.0:
-                        theta_a = mid
-                    else:
-                        theta_hi = mid
-                snapped = _snapped(theta_a, w, step)
-                return snapped if snapped >= 0.0 else -1.0
-            theta_hi = theta
+        if _margin_in_piece(ref, st, z_start, theta_b, z) >= 0.0:
+            return theta_b  # holds at the latest angle looked at
+        i = _scan_piece(ref, st, z_start, lo, theta_b, n)
+        if i > 0:
+            theta_a = theta_b - (theta_b - lo) * i / n
+            theta_hi = theta_b - (theta_b - lo) * (i - 1) / n
+            while theta_hi - theta_a > SEARCH_TOLERANCE * TWO_PI:
+                mid = 0.5 * (theta_a + theta_hi)
+                if _margin_in_piece(ref, st, z_start, mid, z) >= 0.0:
+                    theta_a = mid
+                else:
+                    theta_hi = mid
+            snapped = _snapped(theta_a, w, step)
+            return snapped if snapped >= 0.0 else -1.0
         theta_b = lo
     return -1.0
 

@@ -10,17 +10,32 @@ never load it.
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 from campipe.io.archive import ArchiveFileError, unreadable
+from campipe.io.outputs import FIGURE, check_output
 from campipe.study.archive.open import open_archive
 from campipe.study.spec.plots import PlotRequest
 
 
-def plot_archive(archive: str | Path, request: PlotRequest, output: str | Path | None = None):
+def plot_archive(
+    archive: str | Path,
+    request: PlotRequest,
+    output: str | Path | None = None,
+    *,
+    overwrite: bool = False,
+    key: str = "-o",
+    inside: str | Path | None = None,
+):
     """Draw ``request`` from the archive at ``archive`` and write it to ``output`` (default
     ``request.output`` relative to the archive's folder, else
     :meth:`~campipe.study.spec.plots.PlotRequest.default_output`); the format follows the suffix.
+
+    The figure follows the output rule (``campipe.io.outputs``), checked before drawing: it
+    never replaces the archive or its spec, replaces a file that is not a figure of its
+    format only with ``overwrite``, and stays inside the folder ``inside`` when given (a
+    spec's ``plots[].output``); ``key`` names the option or spec key in the refusal.
 
     Returns
     -------
@@ -39,6 +54,18 @@ def plot_archive(archive: str | Path, request: PlotRequest, output: str | Path |
     except Exception as exc:
         raise ArchiveFileError.at(str(archive), unreadable(exc)) from None
     with ds:
+        spec = str(ds.attrs.get("spec_file") or "")
+        check_output(
+            output,
+            key,
+            FIGURE,
+            overwrite=overwrite,
+            inside=inside,
+            inputs=[
+                (archive, "the archive drawn"),
+                (archive.parent / spec if spec else None, "the archive's spec"),
+            ],
+        )
         fig = figure(ds, request)
     return write(fig, output), fig
 
@@ -52,5 +79,11 @@ def write(fig, path: str | Path) -> Path:
         raise PlotError.at(
             "-o", f"{path}: expected a file ending in {', '.join(FORMATS)} (the suffix chooses)"
         )
-    fig.savefig(path, dpi=120)
+    # at a temporary name, renamed into place: a link at the path is replaced, not followed
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        fig.savefig(tmp, dpi=120, format=path.suffix.lower()[1:])
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
     return path

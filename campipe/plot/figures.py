@@ -27,8 +27,8 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from campipe.errors import did_you_mean, excerpt
-from campipe.plot.style import COLORMAP, EVENT_MARKERS, line_styles
-from campipe.study.query.display import display_units, format_value, label, to_display
+from campipe.plot.style import COLORMAP, EVENT_MARKERS, axis_label, axis_words, line_styles
+from campipe.study.query.display import display_units, format_value, to_display
 from campipe.study.query.tables import CaseTable, case_table, displayed, select
 from campipe.study.spec.plots import PlotError, PlotRequest, check_turn
 from campipe.study.spec.variables import VARIABLES
@@ -222,6 +222,8 @@ def histories(view: View, request: PlotRequest) -> Figure:
             ", each case's last turns (settled: query's period_turns)"
         )
     angle = cam_angle[keep]
+    # one turn chosen: its angles read 0–360°, as a designer reads a turn (the events too)
+    offset = float(angle[0]) if turn_note else 0.0
     seat = view.stored.columns.get("seat")
     panels = [
         p
@@ -247,19 +249,19 @@ def histories(view: View, request: PlotRequest) -> Figure:
         )
         drawn[name] = values
         if name == "follower_lift":
-            _cam_lines(ax, view, keep, angle)
+            _cam_lines(ax, view, keep, angle - offset)
         for i in range(n):
-            ax.plot(angle, values[i], label=labels[i], **styles[i].kwargs(samples))
+            ax.plot(angle - offset, values[i], label=labels[i], **styles[i].kwargs(samples))
         ax.set_title(title, fontsize=10)
-        ax.set_ylabel(label(name.replace("_", " "), units))
+        ax.set_ylabel(axis_label(name, units))
         ax.grid(alpha=0.3)
     for ax in axes[len(panels) :]:
         ax.set_visible(False)
     kinds: dict[str, Any] = {}
     for ax, (_, names) in zip(axes, panels, strict=False):
-        kinds.update(_mark_events(ax, view, names[0], drawn, angle, styles))
+        kinds.update(_mark_events(ax, view, names[0], drawn, angle, styles, offset))
     for ax in axes[max(len(panels) - cols, 0) : len(panels)]:
-        ax.set_xlabel(label("cam angle", view.units.get("cam_angle", "degree")))
+        ax.set_xlabel(axis_label("cam_angle", view.units.get("cam_angle", "degree")))
         ax.tick_params(labelbottom=True)
     handles, texts = axes[0].get_legend_handles_labels()
     fig.legend(
@@ -313,9 +315,10 @@ def _events_of(view: View) -> list[dict[str, np.ndarray]]:
     return out
 
 
-def _mark_events(ax, view, name, drawn, angle, styles) -> dict[str, Any]:
-    """The events whose contact this panel shows, on each case's line; returns a legend
-    handle for each kind marked (its text → handle)."""
+def _mark_events(ax, view, name, drawn, angle, styles, offset=0.0) -> dict[str, Any]:
+    """The events whose contact this panel shows, on each case's line, drawn ``offset``
+    degrees back (a chosen turn from 0°); returns a legend handle for each kind marked (its
+    text → handle)."""
     kinds = [k for k, panel in EVENT_PANELS.items() if panel == name]
     marked: dict[str, Any] = {}
     if not kinds or name not in drawn or angle.size < 2:
@@ -329,7 +332,7 @@ def _mark_events(ax, view, name, drawn, angle, styles) -> dict[str, Any]:
             marker, filled, text = EVENT_MARKERS[kind]
             color = styles[i].color
             ax.scatter(
-                at,
+                at - offset,
                 np.interp(at, angle, drawn[name][i]),
                 marker=marker,
                 s=30,
@@ -412,12 +415,12 @@ def metric(view: View, request: PlotRequest) -> Figure:
         )
         ax.plot(x[idx], y[idx], label=text or "all cases", **style.kwargs())
     ringed = _mark_unsettled(ax, view, x, y)
-    ax.set_xlabel(label(xname, view.shown.units.get(xname, "")))
-    ax.set_ylabel(label(yname, view.shown.units.get(yname, "")))
+    ax.set_xlabel(axis_label(xname, view.shown.units.get(xname, "")))
+    ax.set_ylabel(axis_label(yname, view.shown.units.get(yname, "")))
     ax.grid(alpha=0.3)
     if others or ringed:
         ax.legend(fontsize=8, loc="best")
-    _title(fig, view, f"{yname} against {xname}", request.where)
+    _title(fig, view, f"{axis_words(yname)} against {axis_words(xname).lower()}", request.where)
     return fig
 
 
@@ -540,11 +543,11 @@ def cell_map(view: View, request: PlotRequest) -> Figure:
     for ax in axes[len(grouped) :]:
         ax.set_visible(False)
     for ax in axes[: len(grouped)]:
-        ax.set_xlabel(label(xname, view.shown.units.get(xname, "")))
-        ax.set_ylabel(label(yname, view.shown.units.get(yname, "")))
+        ax.set_xlabel(axis_label(xname, view.shown.units.get(xname, "")))
+        ax.set_ylabel(axis_label(yname, view.shown.units.get(yname, "")))
     assert mesh is not None
     bar = fig.colorbar(mesh, ax=list(axes[: len(grouped)]))
-    bar.set_label(label(zname, view.shown.units.get(zname, "")))
+    bar.set_label(axis_label(zname, view.shown.units.get(zname, "")))
     what = f"{zname} over {xname} and {yname}"
     if level is not None:
         what += f", contour at {level:g} {view.shown.units.get(zname, '')}".rstrip()
@@ -567,6 +570,7 @@ def events(view: View, request: PlotRequest) -> Figure:
     cam_angle = np.asarray(view.ds["cam_angle"].values, dtype=float)
     keep, turn_note = _turn_mask(cam_angle, check_turn(request.turn) if request.turn else None)
     lo, hi = float(cam_angle[keep][0]), float(cam_angle[keep][-1])
+    offset = lo if turn_note else 0.0  # one turn chosen: its angles read 0–360°
     fig = Figure(figsize=(9, 1.2 + 0.32 * n + 0.8), layout="constrained")
     ax = fig.add_subplot()
     per_case = _events_of(view)
@@ -574,7 +578,7 @@ def events(view: View, request: PlotRequest) -> Figure:
         xs, ys = [], []
         for i, ev in enumerate(per_case):
             at = ev["angle"][(ev["kind"] == kind) & (ev["angle"] >= lo) & (ev["angle"] <= hi)]
-            xs.append(at)
+            xs.append(at - offset)
             ys.append(np.full(at.size, i))
         x = np.concatenate(xs) if xs else np.zeros(0)
         if x.size == 0:
@@ -591,11 +595,11 @@ def events(view: View, request: PlotRequest) -> Figure:
             zorder=3,
         )
     for turn in np.arange(math.ceil(lo / 360.0), math.floor(hi / 360.0) + 1) * 360.0:
-        ax.axvline(turn, color="0.6", linewidth=0.8, zorder=1)
+        ax.axvline(turn - offset, color="0.6", linewidth=0.8, zorder=1)
     ax.set_yticks(np.arange(n), labels, fontsize=8)
     ax.set_ylim(n - 0.5, -0.5)
-    ax.set_xlim(lo, hi)
-    ax.set_xlabel(label("cam angle", view.units.get("cam_angle", "degree")))
+    ax.set_xlim(lo - offset, hi - offset)
+    ax.set_xlabel(axis_label("cam_angle", view.units.get("cam_angle", "degree")))
     ax.grid(axis="y", alpha=0.3)
     if ax.collections:
         fig.legend(loc="outside lower center", ncols=4, fontsize=8)

@@ -62,3 +62,37 @@ def line_styles(n: int) -> list[LineStyle]:
         )
         for i, shade in enumerate(shades)
     ]
+
+
+#: A figure's words for the per-case columns that are not metrics (a metric's are its
+#: ``label`` in :data:`campipe.engine.metrics.METRICS`).
+WORDS = {
+    "speed_rpm": "Cam speed",
+    "seat": "Seat (valve lift)",
+    "cam_angle": "Cam angle",
+    "spring_preload": "Spring preload",
+    "spring_rate": "Spring rate",
+}
+#: Units as a figure writes them.
+SHORT_UNITS = {"degree": "deg", "1": "", "": ""}
+
+
+def axis_words(name: str) -> str:
+    """A figure's words for a column, without its units (``No-follow``, ``Cam speed``)."""
+    return axis_label(name, "").split(" [")[0]
+
+
+def axis_label(name: str, units: str) -> str:
+    """A figure's label for a column: words with units, a metric's mean over turns per turn
+    (``No-follow [deg/turn]``, ``Cam impacts [per turn]``, ``Cam speed [rpm]``)."""
+    from campipe.engine.metrics import METRICS
+
+    metric = next((m for m in METRICS if name in (m.summary, m.per_rev)), None)
+    shown = SHORT_UNITS.get(units, units)
+    if metric is None:
+        words = WORDS.get(name, name.replace("_", " ").capitalize())
+        return f"{words} [{shown}]" if shown else words
+    words = metric.label or metric.description.split(":")[0].capitalize()
+    if metric.summary_of_turns == "mean" and name == metric.summary:
+        shown = f"{shown}/turn" if shown else "per turn"
+    return f"{words} [{shown}]" if shown else words

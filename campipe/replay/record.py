@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from campipe.io.archive import unreadable
+from campipe.io.outputs import RECORDING, check_output
 from campipe.io.rerun_replay import (
     MM,
     CaseRecording,
@@ -149,6 +150,22 @@ def default_output(archive: str | Path) -> Path:
     return Path(archive).with_suffix(".replay.rrd")
 
 
+def check_recording(archive: Path, attrs: dict, output: str | Path | None, overwrite: bool) -> Path:
+    """The recording's path (``output`` or :func:`default_output`), refused by the output rule
+    where it would replace the archive, its spec or a file that is not a recording."""
+    spec = str(attrs.get("spec_file") or "")
+    return check_output(
+        output or default_output(archive),
+        "-o",
+        RECORDING,
+        overwrite=overwrite,
+        inputs=[
+            (archive, "the archive replayed"),
+            (archive.parent / spec if spec else None, "the archive's spec"),
+        ],
+    )
+
+
 def replay_archive(
     archive: str | Path,
     *,
@@ -158,13 +175,16 @@ def replay_archive(
     spawn: bool = False,
     magnification: float = sketch.DEFAULT_MAGNIFICATION,
     progress: Callable[[int, str], Progress] | None = None,
+    overwrite: bool = False,
 ) -> tuple[Path | None, list[ReplayCase]]:
     """Replay an archive's cases chosen by id or by a ``--where`` expression.
 
     Writes one recording (``output``, default :func:`default_output`) or, with ``spawn``,
     opens the viewer instead. Nothing is written when the selection fails. ``progress(total,
     unit)`` makes a progress line for each step over the cases (sketching them, logging
-    them), as ``campipe replay`` shows.
+    them), as ``campipe replay`` shows. The recording follows the output rule
+    (``campipe.io.outputs``): it never replaces the archive or its spec, and replaces a file
+    that is not a recording only with ``overwrite``.
 
     Returns
     -------
@@ -179,7 +199,6 @@ def replay_archive(
     campipe.study.where.QueryError
         For a ``--where`` expression the query language refuses.
     """
-
     archive = Path(archive)
     if not archive.exists():
         raise ReplayError(f"{archive}: no such archive", key=str(archive))
@@ -188,6 +207,8 @@ def replay_archive(
     except (OSError, ValueError, RuntimeError) as exc:
         raise ReplayError(f"{archive}: {unreadable(exc)}", key=str(archive)) from None
     with ds:
+        if not spawn:
+            check_recording(archive, ds.attrs, output, overwrite)
         try:
             rows = select_rows(ds, case_ids, where)
         except ReplayError as exc:

@@ -42,7 +42,8 @@ class OnsetStudy:
     keys: tuple[str, ...]  # the varied spec keys, speed left out
     table: CaseTable  # one row per combination: the keys' archive columns, then ONSET_COLUMNS
     onset: periodic.Onset  # the search's result (SI)
-    #: (n,) the engine's no-follow per turn at onset·(1 − offset) [rad]; NaN: unchecked
+    #: (n,) the engine's no-follow per turn at onset·(1 − offset) [rad] (the mean over the
+    #: check's measured turns); NaN: unchecked
     below: np.ndarray
     above: np.ndarray  # (n,) likewise at onset·(1 + offset)
     low: float  # the spec's speed range [rad/s]
@@ -53,10 +54,18 @@ class OnsetStudy:
     spec_overrides: dict = field(default_factory=dict)  # its --set values
 
     @property
+    def levels(self) -> np.ndarray:
+        """(n,) the level each row's onset reaches [rad of no-follow a turn]; 0 without a
+        seat (the first separation)."""
+        level = self.onset.level
+        return np.zeros(self.table.n) if level is None else level
+
+    @property
     def disagreements(self) -> np.ndarray:
-        """Rows whose time-domain check does not bracket the onset."""
+        """Rows whose time-domain check does not bracket the onset (``periodic.confirmed``):
+        below it the engine reaches the level, or above it does not."""
         checked = np.isfinite(self.below)
-        return np.flatnonzero(checked & ~((self.below == 0.0) & (self.above > 0.0)))
+        return np.flatnonzero(checked & ~periodic.confirmed(self.below, self.above, self.levels))
 
 
 def _frozen(value: object) -> object:
@@ -78,19 +87,21 @@ def _combinations(study: Study) -> tuple[tuple[str, ...], list[int]]:
     return keys, list(first.values())
 
 
-def search_designs(designs, low, high, tolerance, workers) -> periodic.Onset:
+def search_designs(
+    designs, low, high, tolerance, workers, level=periodic.DEFAULT_ONSET_LEVEL
+) -> periodic.Onset:
     """``periodic.onset_speeds`` on ``workers`` threads (the kernels release the GIL)."""
     n = len(designs)
     parts = [p for p in np.array_split(np.arange(n), min(max(1, workers), n)) if p.size]
+
+    def search(part):
+        return periodic.onset_speeds([designs[i] for i in part], low, high, tolerance,
+                                     level=level)  # fmt: skip
+
     if len(parts) == 1:
-        return periodic.onset_speeds(designs, low, high, tolerance)
+        return search(parts[0])
     with concurrent.futures.ThreadPoolExecutor(len(parts)) as pool:
-        done = list(
-            pool.map(
-                lambda p: periodic.onset_speeds([designs[i] for i in p], low, high, tolerance),
-                parts,
-            )
-        )
+        done = list(pool.map(search, parts))
     first = done[0]
     return periodic.Onset(
         speed=np.concatenate([d.speed for d in done]),
@@ -101,6 +112,7 @@ def search_designs(designs, low, high, tolerance, workers) -> periodic.Onset:
         seated=np.concatenate([d.seated for d in done]),
         tolerance=first.tolerance,
         evaluations=np.concatenate([d.evaluations for d in done]),
+        level=np.concatenate([d.level for d in done if d.level is not None]),
     )
 
 
@@ -108,6 +120,7 @@ def onset_study(
     study: Study,
     tolerance: float = periodic.DEFAULT_ONSET_TOLERANCE_RPM * RPM,
     *,
+    level: float = periodic.DEFAULT_ONSET_LEVEL,
     confirm: bool = True,
     workers: int = 1,
     notice: Callable[[str], None] | None = None,
@@ -121,8 +134,12 @@ def onset_study(
         An expanded spec whose speeds span a range.
     tolerance : float
         The onset's tolerance [rad/s] (the width of its final bracket).
+    level : float
+        With a seat, the no-follow a turn [rad] the onset reaches (``periodic.onset_speeds``;
+        0: the first separation). Without a seat the onset is the first separation.
     confirm : bool
-        Check each onset with the time-domain engine at ±``periodic.CONFIRM_OFFSET``.
+        Check each onset with the time-domain engine at ±``periodic.CONFIRM_OFFSET``
+        (``periodic.confirm_onsets``): below it must stay under the level, above reach it.
     workers : int
         Threads the search runs on.
     notice : callable, optional
@@ -149,7 +166,7 @@ def onset_study(
     designs = [study.cases[i].case for i in firsts]
     compile_first({periodic.confirm_settings(): designs[0]} if confirm else {}, notice, search=True)
     t0 = time.perf_counter()
-    onset = search_designs(designs, low, high, tolerance, workers)
+    onset = search_designs(designs, low, high, tolerance, workers, level)
     record_loaded(search_kernels())  # the search's kernels, compiled ahead or not
     t1 = time.perf_counter()
     nan = np.full(len(designs), np.nan)
@@ -171,7 +188,7 @@ def _table(study, keys, firsts, onset, below, above) -> CaseTable:
         name, var, _ = coords[key]
         units[name] = var.units if var.units and var.units != "1" else ""
     checked = np.isfinite(below)
-    agrees = (below == 0.0) & (above > 0.0)
+    agrees = periodic.confirmed(below, above, onset.level if onset.level is not None else 0.0)
     columns["onset_speed_rpm"] = onset.speed / RPM
     units["onset_speed_rpm"] = "rpm"
     columns["onset_status"] = onset.status.astype(object)
@@ -210,21 +227,28 @@ def file_contents(result: OnsetStudy) -> tuple[dict, list[VariableSpec], dict, d
     add("onset_status", ("combination",), "str", t.columns["onset_status"],
         long_name="found; below: no-follow at the range's lowest speed; none: follows across "
         "the range")  # fmt: skip
+    add("onset_level_deg", ("combination",), "f8", np.degrees(result.levels), units="degree",
+        long_name="no-follow a turn the onset reaches (0: the first separation; a level "
+        "only with a seat)")  # fmt: skip
     for name, values, side in (
         ("check_below_deg", result.below, "1 −"),
         ("check_above_deg", result.above, "1 +"),
     ):
         add(name, ("combination",), "f8", np.degrees(values), units="degree",
-            long_name=f"no-follow in the last of {periodic.CONFIRM_TURNS} turns of the "
-            f"time-domain engine at onset × ({side} {periodic.CONFIRM_OFFSET:g}); NaN: not "
-            "checked")  # fmt: skip
+            long_name=f"no-follow per turn, the mean over turns {periodic.CONFIRM_WARMUP + 1}"
+            f"–{periodic.CONFIRM_TURNS} of the time-domain engine from the periodic start at "
+            f"onset × ({side} {periodic.CONFIRM_OFFSET:g}); NaN: not checked")  # fmt: skip
+    add("confirmed", ("combination",), "str", t.columns["confirmed"],
+        long_name="the time-domain check agrees: yes (under the level below the onset, at "
+        "or over it above), NO (it disagrees), - (not checked)")  # fmt: skip
     add("scan_speed_rpm", ("scan",), "f8", on.scan_speed / RPM, units="rpm",
         long_name="speeds the search looked at first")  # fmt: skip
     add("margin", ("combination", "scan"), "f8", on.scan_margin, units="N",
         long_name="least cam compression over the steady turn (NaN: the valve seats on part "
         "of the turn)")  # fmt: skip
     add("no_follow", ("combination", "scan"), "i1", on.scan_no_follow.astype(np.int8),
-        long_name="the steady state leaves the cam with the valve off its seat")  # fmt: skip
+        long_name="the steady state leaves the cam with the valve off its seat (with a seat: "
+        "for at least the level a turn)")  # fmt: skip
     attrs: dict[str, object] = {
         "title": f"{result.name}: no-follow onset speeds",
         "study_name": result.name,
@@ -247,11 +271,18 @@ def summary_lines(result: OnsetStudy) -> list[str]:
         f"({int(on.evaluations.sum())} steady states), time-domain check "
         f"{result.check_seconds:.3g} s",
     ]
+    levels = np.degrees(result.levels)
+    if (levels > 0).any():
+        lines.append(
+            f"with a seat the onset is where no-follow reaches {levels.max():g}° a turn "
+            "(--level); without one, the first separation"
+        )
     bad = result.disagreements
     if bad.size:
         lines.append(
             f"the time-domain check disagrees on {bad.size} combination"
             f"{'s' if bad.size != 1 else ''} (rows {', '.join(map(str, bad[:10].tolist()))}): "
-            "it does not follow just below the onset, or does not leave just above it"
+            "just below the onset it leaves the cam (reaches the level), or just above it "
+            "does not"
         )
     return lines

@@ -12,7 +12,7 @@ import pytest
 from click.testing import CliRunner
 from numpy.testing import assert_allclose
 
-from campipe.bench import measure, onset, report, run, scaling, verdict
+from campipe.bench import measure, onset, report, run, scaling, sweep, verdict
 from campipe.bench.ivp import solve_case
 from campipe.bench.suite import INCH, QUICK, suite
 from campipe.cli import main
@@ -298,7 +298,7 @@ def test_the_verdict_judges_every_goal_reached_not_reached_or_not_shown():
     ]
     goals = verdict.goals(_verdict_bench(throughput=throughput))
     mapped = {"designs": 1000, "seconds": 1.2, "tolerance_rpm": 0.1, "grid_speeds": 33}
-    onset_goal = verdict.goals(_verdict_bench(onset={**mapped, "grid_seconds": 13.0}))[-1]
+    onset_goal = verdict.goals(_verdict_bench(onset={**mapped, "grid_seconds": 13.0}))[7]
     assert (onset_goal.area, onset_goal.status, onset_goal.figure) == (
         "onset",
         "not reached",
@@ -318,6 +318,10 @@ def test_the_verdict_judges_every_goal_reached_not_reached_or_not_shown():
         ("throughput", "not reached", "1.5e7 case-steps/s"),
         # no onset map in this bench
         ("onset", "not shown", "–"),
+        # no speed sweep (it runs with the scaling)
+        ("sweep", "not shown", "–"),
+        ("sweep", "not shown", "–"),
+        ("sweep", "not shown", "–"),
     ]
     assert "solve_ivp" in goals[0].what and "no scene ran solve_ivp" == goals[0].note
     assert "the thesis's 1 µs step" in goals[3].what and "on a at dt 1 µs" in goals[3].note
@@ -340,6 +344,45 @@ def test_the_verdict_judges_every_goal_reached_not_reached_or_not_shown():
     ]
     a.update(ratio=0.9)
     assert verdict.goals(_verdict_bench(accuracy_for_cost=a))[5].status == "not reached"
+
+
+def test_the_verdict_judges_the_speed_sweep_against_issue_34s_goals():
+    """The sweep's goals from its times: ×150 against the thesis's loop, ×10 against
+    newmark-linear at 1 µs, and the overhead judged on both its figures (0.1 ms a call and
+    32 one-case calls within 1.5× one 32-case call).
+
+    Fails on a verdict that judges the overhead on its milliseconds alone (here 0.09 ms, but
+    1.6× the batch), or that takes the ratios the wrong way up (default over peer).
+    """
+
+    def judged(default, thesis, newmark, calls):
+        times = {"default": default, "thesis": thesis, "newmark": newmark}
+        times["one_case_calls"] = calls
+        ratios = {
+            "thesis_ratio": thesis / default,
+            "newmark_ratio": newmark / default,
+            "calls_ratio": calls / default,
+            "overhead": (calls - default) / 31,
+        }
+        reached = {
+            "thesis_ratio": ratios["thesis_ratio"] >= sweep.GOAL_THESIS,
+            "newmark_ratio": ratios["newmark_ratio"] >= sweep.GOAL_NEWMARK,
+            "calls_ratio": ratios["calls_ratio"] <= sweep.GOAL_CALLS,
+            "overhead": ratios["overhead"] <= sweep.GOAL_OVERHEAD,
+        }
+        s = {"cases": 32, "revolutions": 4.0, "seconds": times, "reached": reached, **ratios}
+        return [(g.status, g.figure) for g in verdict.goals(_verdict_bench(sweep=s))[-3:]]
+
+    assert judged(5e-3, 1.2, 55e-3, 7e-3) == [
+        ("reached", "×240"),
+        ("reached", "×11"),
+        ("reached", "0.065 ms, 1.4×"),
+    ]
+    assert judged(4.5e-3, 0.6, 40e-3, 7.3e-3) == [
+        ("not reached", "×133"),
+        ("not reached", "×8.89"),
+        ("not reached", "0.09 ms, 1.62×"),
+    ]
 
 
 def test_the_verdict_says_why_a_cross_check_disagrees():
@@ -390,27 +433,29 @@ def test_the_quick_verdict_names_every_goal_and_cross_check(tmp_path):
     lines = result.stdout.splitlines()  # the progress lines go to stderr
     block = lines[lines.index("verdict (--quick, 2 scenes):") :]
     assert block[1] == "goals:"
-    goals = block[2:10]
+    goals = block[2:13]
     assert [g.strip().split("  ")[0] for g in goals] == [
         g.status for g in verdict.goals(report.read_json(out / "bench.json"))
     ]
     areas = [g.split(":")[0].split()[-1] for g in goals]
-    assert areas == ["speed"] * 4 + ["accuracy"] * 2 + ["throughput", "onset"]
+    assert areas == ["speed"] * 4 + ["accuracy"] * 2 + ["throughput", "onset"] + ["sweep"] * 3
     for line, peer in zip(goals[:4], ("solve_ivp",) * 2 + ("newmark-linear",) * 2, strict=True):
         assert f"faster than {peer}" in line
-    assert goals[-2].startswith("  not shown") and "--no-scaling" in goals[-2]
-    assert goals[-1].startswith("  not shown") and "--quick maps 16 designs" in goals[-1]
+    assert goals[-5].startswith("  not shown") and "--no-scaling" in goals[-5]
+    assert goals[-4].startswith("  not shown") and "--quick maps 16 designs" in goals[-4]
+    for line in goals[-3:]:  # the speed sweep is measured with the scaling
+        assert line.startswith("  not shown") and "--no-scaling" in line
     # --previous: the committed full run, which a --quick run is not compared with
-    assert block[10].startswith(f"Not compared with the previous run ({COMMITTED}, 20")
-    assert block[10].endswith(
+    assert block[13].startswith(f"Not compared with the previous run ({COMMITTED}, 20")
+    assert block[13].endswith(
         ": the previous run was a full run, this one a --quick run: only runs of the same kind "
         "are compared; no figure is named slower."
     )
-    assert block[11].startswith("reference cross-checks (modal-exact, tolerance 1e-14 s")
-    for line, scene, ok in zip(block[12:14], scenes, agreed, strict=True):
+    assert block[14].startswith("reference cross-checks (modal-exact, tolerance 1e-14 s")
+    for line, scene, ok in zip(block[15:17], scenes, agreed, strict=True):
         assert line.split()[:2] == ["agree" if ok else "disagree", f"{scene}:"]
-    assert block[14].startswith(f"{sum(agreed)} of 2 cross-checks agree")
-    assert len(block) == 15
+    assert block[17].startswith(f"{sum(agreed)} of 2 cross-checks agree")
+    assert len(block) == 18
     kept = json.loads((out / "bench.json").read_text())["previous"]
     assert (kept["status"], kept["quick"], kept["source"]) == (
         "another kind of run",
@@ -422,9 +467,9 @@ def test_the_quick_verdict_names_every_goal_and_cross_check(tmp_path):
 @pytest.mark.slow
 def test_the_whole_quick_bench_shows_every_goal_and_checks_every_scene(tmp_path):
     """``campipe bench --quick`` as the README gives it (about a minute): six cross-checks,
-    eight goals, the first seven judged from a measured figure (none left not shown for want
-    of data, only where a ladder's lower bound cannot show it); the onset map's is not shown
-    (--quick maps 16 designs)."""
+    eleven goals, all but the onset map's judged from a measured figure (none left not shown
+    for want of data, only where a ladder's lower bound cannot show it); the onset map's is
+    not shown (--quick maps 16 designs)."""
     out = tmp_path / "bench"
     result = CliRunner().invoke(main, ["bench", "--quick", "--no-plot", "-o", str(out)])
     bench = report.read_json(out / "bench.json")
@@ -432,13 +477,15 @@ def test_the_whole_quick_bench_shows_every_goal_and_checks_every_scene(tmp_path)
     lines = result.stdout.splitlines()
     block = lines[lines.index("verdict (--quick, 6 scenes):") :]
     goals = verdict.goals(bench)
-    assert len(goals) == 8 and len(block) == 2 + 8 + 1 + 1 + 6 + 1
-    for line, goal in zip(block[2:9], goals[:7], strict=True):
-        assert line.strip().startswith(f"{goal.status}  ") and goal.figure != "–"
+    assert len(goals) == 11 and len(block) == 2 + 11 + 1 + 1 + 6 + 1
+    shown = [*range(2, 9), *range(10, 13)]
+    for i in shown:
+        goal = goals[i - 2]
+        assert block[i].strip().startswith(f"{goal.status}  ") and goal.figure != "–"
     assert "--quick maps 16 designs" in block[9]
-    assert block[10] == f"No previous run to compare with: no {out / 'bench.json'}."
-    assert [g.status for g in goals[7:]] == ["not shown"]
-    for line, scene in zip(block[12:18], SCENES, strict=True):
+    assert block[13] == f"No previous run to compare with: no {out / 'bench.json'}."
+    assert [g.status for g in goals[7:8]] == ["not shown"]
+    for line, scene in zip(block[15:21], SCENES, strict=True):
         assert line.split()[1] == f"{scene}:"
 
 

@@ -23,6 +23,7 @@ def test_json_matches_the_numerics_layer():
     sm = system_matrices(valve_train("thesis-1971", {"spring_rate": "260 lbf/in"}))
     assert out["natural_frequencies"] == sm.frequencies.tolist()
     assert out["natural_frequencies"] == sorted(out["natural_frequencies"])
+    assert_allclose(np.array(out["natural_frequencies_hz"]) * 2 * np.pi, sm.frequencies, rtol=1e-15)
     assert_allclose(out["mass_matrix"], sm.mass, rtol=0)
     assert_allclose(out["stiffness_matrix"], sm.stiffness, rtol=0)
     assert_allclose(out["damping_matrix"], sm.damping, rtol=0)
@@ -47,7 +48,9 @@ def test_text_shows_the_thesis_layout():
     text = result.output
     assert "Mass matrix [M] (Figure 11)" in text
     assert "    15.54    -7.77" in text  # M11, M12 ×1e-5 lbf·s²/in
-    assert "679.1" in text and "6485.3" in text  # ω1 in rad/s and rpm
+    # ω1 in rad/s, Hz (679.1/2π = 108.08) and rpm (679.1·60/2π): fails on a copy that prints
+    # the rad/s figure as Hz
+    assert "679.1" in text and "108.1" in text and "6485.3" in text
     assert "  II     3.2364 µs" in text
 
 

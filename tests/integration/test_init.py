@@ -42,14 +42,18 @@ def test_init_writes_the_specs_and_refuses_to_overwrite(tmp_path):
     for path in target.glob("*.yaml"):
         study = load_study(path)  # every example checks and expands
         assert study.cases and study.name == path.stem
+    assert runner.invoke(main, ["init", str(target)]).exit_code == 0  # identical: left
     (target / "quickstart.yaml").write_text("name: edited\n")
+    (target / "README.md").write_text("notes\n")
     again = runner.invoke(main, ["init", str(target)])
     assert again.exit_code == 2
-    more = len(packaged_specs()) - 1
-    assert f"{target / 'README.md'}: exists (and {more} more of the example files)" in again.output
-    assert "replace them with --force" in again.output
+    assert (
+        f"DIRECTORY: {target / 'README.md'} exists and is a file that is not the example "
+        "campipe wrote; choose another path (DIRECTORY), or replace it with --overwrite "
+        "(and 1 more of the example files)"
+    ) in again.output
     assert (target / "quickstart.yaml").read_text() == "name: edited\n"
-    forced = runner.invoke(main, ["init", str(target), "--force"])
+    forced = runner.invoke(main, ["init", str(target), "--force"])  # --overwrite's old name
     assert forced.exit_code == 0
     assert (target / "quickstart.yaml").read_bytes() == packaged_specs()["quickstart.yaml"]
 

@@ -98,10 +98,10 @@ sweep:
 """
 
 
-def onset_cli(tmp_path, low, high, axis):
+def onset_cli(tmp_path, low, high, axis, *options):
     spec = SPEC.replace("LOW", str(low)).replace("HIGH", str(high)).replace("AXIS", axis)
     path = write_spec(tmp_path, spec)
-    out = CliRunner().invoke(main, ["onset", str(path), "--format", "json"])
+    out = CliRunner().invoke(main, ["onset", str(path), "--format", "json", *options])
     assert out.exit_code == 0, out.output
     printed = json.loads(out.stdout)
     assert printed["units"]["onset_speed_rpm"] == "rpm"
@@ -129,8 +129,9 @@ def test_onset_agrees_with_a_time_domain_bisection_at_three_preloads(tmp_path):
 def test_onset_with_the_seat_agrees_with_a_time_domain_bisection(tmp_path):
     """Seat at 0.1 in: the valve seats on every turn, so the steady state is piecewise
     (I, III, IV); the seat's impact throws the train off the cam with the valve off its
-    seat (configuration II) from about 560 rpm up."""
-    rows, _ = onset_cli(tmp_path, 200, 3000, "seat: [0.1 in, none]")
+    seat (configuration II) from about 560 rpm up: the first separation, ``--level 0 deg``
+    (the default level, 0.5° a turn, is tests/integration/test_onset_windows.py's)."""
+    rows, _ = onset_cli(tmp_path, 200, 3000, "seat: [0.1 in, none]", "--level", "0 deg")
     assert [r["seat"] for r in rows] == [pytest.approx(0.1), None]  # the spec's units, in
     assert rows[1]["onset_status"] == "none"  # no seat: follows up to 3000 rpm
     assert rows[1]["onset_speed_rpm"] is None

@@ -75,14 +75,14 @@ def test_histories_overlay_the_chosen_cases_one_panel_each(archive, ds, tmp_path
         "seat contact force",
     ]
     assert [ax.get_ylabel() for ax in axes] == [
-        "valve lift [in]",
-        "valve velocity [in/s]",
-        "valve acceleration [in/s^2]",
-        "follower lift [in]",
-        "cam force [lbf]",
-        "seat force [lbf]",
+        "Valve lift [in]",
+        "Valve velocity [in/s]",
+        "Valve acceleration [in/s^2]",
+        "Follower lift [in]",
+        "Cam force [lbf]",
+        "Seat force [lbf]",
     ]
-    assert axes[-1].get_xlabel() == "cam angle [degree]"
+    assert axes[-1].get_xlabel() == "Cam angle [deg]"
     assert "small-map: histories" in fig.get_suptitle()
     rows = _rows(ds, spring_preload=120 * LBF)
     rows = rows[ds.speed_rpm.values[rows] >= 9524]
@@ -123,10 +123,17 @@ def test_histories_of_one_turn_and_in_si(archive, ds):
         ),
     )
     axes = [ax for ax in fig.axes if ax.get_visible()]
-    assert axes[0].get_ylabel() == "valve lift [m]" and axes[4].get_ylabel() == "cam force [N]"
+    assert axes[0].get_ylabel() == "Valve lift [m]" and axes[4].get_ylabel() == "Cam force [N]"
+    # turn 2 of 2 drawn on 0–360° (issue 37: not at 360–720°), its values the archive's
+    # samples at 360–720°
     x = axes[0].get_lines()[0].get_xdata()
-    assert x[0] == 360 and x[-1] == 720 and len(axes[0].get_lines()) == 2
+    assert x[0] == 0 and x[-1] == 360 and len(axes[0].get_lines()) == 2
     assert "turn 2" in fig.get_suptitle()
+    i = np.flatnonzero(
+        (ds.speed_rpm.values == 6000) & (ds.spring_preload.values < 150 * 4.4482216152605)
+    )[0]
+    lift = ds.valve_lift.values[i][(ds.cam_angle.values >= 360) & (ds.cam_angle.values <= 720)]
+    assert np.array_equal(axes[0].get_lines()[0].get_ydata(), lift)
 
 
 def test_metric_draws_a_line_per_combination_of_the_other_axes(archive, ds, tmp_path):
@@ -141,9 +148,10 @@ def test_metric_draws_a_line_per_combination_of_the_other_axes(archive, ds, tmp_
         "seat 0.1 in, spring_preload 120 lbf",
         "seat 0.1 in, spring_preload 180 lbf",
     ]
-    assert ax.get_xlabel() == "speed_rpm [rpm]"
-    assert ax.get_ylabel() == "separation_deg_per_rev [degree]"
-    assert fig.get_suptitle() == "small-map: separation_deg_per_rev against speed_rpm"
+    # words with units, a mean over turns per turn (issue 37)
+    assert ax.get_xlabel() == "Cam speed [rpm]"
+    assert ax.get_ylabel() == "No-follow [deg/turn]"
+    assert fig.get_suptitle() == "small-map: No-follow against cam speed"
     for line, (seat, preload) in zip(
         lines, [(-np.inf, 120), (-np.inf, 180), (0.1 * INCH, 120), (0.1 * INCH, 180)], strict=True
     ):
@@ -160,7 +168,7 @@ def test_metric_seating_velocity_against_speed_in_chosen_units(ds):
         PlotRequest("metric", y="max_seating_velocity", where="seat is not none", units="si"),
     )
     ax = fig.axes[0]
-    assert ax.get_ylabel() == "max_seating_velocity [m/s]"
+    assert ax.get_ylabel() == "Seating velocity [m/s]"
     assert [line.get_label() for line in ax.get_lines()] == [
         "spring_preload 533.787 N",
         "spring_preload 800.68 N",
@@ -182,12 +190,12 @@ def test_map_colours_one_cell_per_case_with_its_contour(archive, ds, tmp_path):
         rows = _rows(ds, seat=seat)
         expected = ds.separation_deg_per_rev.values[rows]  # speed outer, preload inner
         assert_allclose(np.asarray(cells).reshape(2, 3), expected.reshape(3, 2).T)
-        assert ax.get_xlabel() == "speed_rpm [rpm]" and ax.get_ylabel() == "spring_preload [lbf]"
+        assert ax.get_xlabel() == "Cam speed [rpm]" and ax.get_ylabel() == "Spring preload [lbf]"
     # without a seat the follower leaves the cam between 6000 and 9524 rpm: a contour there
     contours = [c for c in panels[0].get_children() if isinstance(c, ContourSet)]
     assert len(contours) == 1 and list(contours[0].levels) == [1.0]
     colorbar = fig.axes[-1]
-    assert colorbar.get_ylabel() == "separation_deg_per_rev [degree]"
+    assert colorbar.get_ylabel() == "No-follow [deg/turn]"
     assert "contour at 1 degree" in fig.get_suptitle()
 
 
@@ -207,7 +215,7 @@ def test_events_put_each_case_on_a_row(archive, ds, tmp_path):
     impacts = next(c for c in ax.collections if c.get_label() == "seat impact")
     y = impacts.get_offsets()[:, 1].astype(int)
     assert set(y) == {1, 3, 5}  # the rows with a seat
-    assert ax.get_xlabel() == "cam angle [degree]"
+    assert ax.get_xlabel() == "Cam angle [deg]"
 
 
 def test_every_format_by_its_suffix_and_errors_by_their_option(archive, tmp_path):

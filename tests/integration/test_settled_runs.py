@@ -153,3 +153,32 @@ def test_a_spec_of_automatic_length_that_cannot_work_is_refused_at_its_key(tmp_p
     with pytest.raises(SpecError) as info:
         load_study(spec)
     assert key in str(info.value)
+
+
+def test_more_recorded_turns_than_it_took_to_settle_are_all_run_and_stored():
+    """A case that follows the cam settles in one turn; with history_turns 3 it runs three,
+    and its three recorded turns are equal (period 1). Fails on a copy that stops a case at
+    its settling turn (its later recorded turns would be NaN)."""
+    case = Case(thesis_train(), harmonic(INCH), 9000 * RPM)
+    r = run_batch([case], RunSettings(revolutions=None, history_turns=3))
+    assert r.turns_run[0] == 3 and r.period_turns[0] == 1 and r.recorded_from[0] == 0
+    lift = r.valve_lift[0]
+    assert np.isfinite(lift).all() and lift.size == 3 * 360 + 1
+    turn = 360
+    assert np.allclose(lift[:turn], lift[turn : 2 * turn], atol=1e-9 * np.ptp(lift))
+    assert np.allclose(lift[:turn], lift[2 * turn : 3 * turn], atol=1e-9 * np.ptp(lift))
+
+
+def test_newmark_linear_runs_until_settled_too():
+    """The restart carries accelerations consistent with the configuration (newmark-linear
+    steps from them): 11000 rpm without a seat repeats every turn, as the same integrator's
+    long fixed run does, and leaves the cam as much. Fails on a copy that restarts with zero
+    accelerations (a kick at each turn boundary: it finds a period of 2)."""
+    case = Case(thesis_train(), harmonic(INCH), 11000 * RPM)
+    run = dict(integrator="newmark-linear", dt=1e-6)
+    r = run_batch([case], RunSettings(revolutions=None, **run))
+    ref = run_batch([case], RunSettings(revolutions=30, warmup=15, **run))
+    last = ref.separation_per_rev[0, -6:]
+    assert np.ptp(last) < 5e-3 * last.mean()  # the long run repeats every turn (its grid)
+    assert r.period_turns[0] == 1
+    assert abs(r.separation[0] / ref.separation[0] - 1) < 0.005

@@ -20,8 +20,10 @@ import campipe
 
 ROOT = Path(campipe.__file__).parent
 #: Below everything, importing no other layer (kernel_cache: where numba caches the kernels;
-#: disk_cache: what else a process keeps for the next, beside them).
+#: disk_cache: what else a process keeps for the next, beside them; memory: a command's
+#: allocator).
 BASE = {
+    "campipe.memory",
     "campipe",
     "campipe.units",
     "campipe.constants",

@@ -36,7 +36,7 @@ from campipe.engine.metrics import (
     SEATED_OFF_CAM,
     SEPARATION,
 )
-from campipe.profiles.packed import horner
+from campipe.profiles.packed import degree, horner
 from campipe.vocabulary import CAM, SEAT, UNBOUNDED
 
 #: Steps are at most RESOLUTION·π/|λ| of the fastest mode still present: under half its period,
@@ -229,14 +229,15 @@ def _free_acceleration(VY, MC, Z, ZT, s, nact, x, cth, sth, w, deg):
 @njit(inline="always", nogil=True)
 def _write_sample(
     out, c, k, q, v, gval, poly, trig, cfg, p, x, ct, sn, w, full_state, acc1, acc7, n_coord,
+    pdeg,
 ):  # fmt: skip
     """Output sample k of case c: coordinates and velocities q, v (held ones on the cam and
     seat; without ``full_state`` only q1 and q7, the others NaN; beyond the train's
     ``n_coord`` coordinates, in a batch of larger trains, NaN), forces from the monitors
     gval, the contact coordinates' accelerations (a free one's acc1, acc7; a held one's from
     the cam or the seat), and the cam lift on piece p at local angle x, cam angle with cosine
-    ct and sine sn."""
-    lift, dlift, ddlift = horner(poly[c, p], x)
+    ct and sine sn, of degree ``pdeg`` (its leading zeros add exact zeros: skipped)."""
+    lift, dlift, ddlift = horner(poly[c, p], x, pdeg)
     lift += trig[c, p, 0] * sn + trig[c, p, 1] * ct
     dlift += trig[c, p, 0] * ct - trig[c, p, 1] * sn
     ddlift -= trig[c, p, 0] * sn + trig[c, p, 1] * ct
@@ -287,7 +288,7 @@ def _sample(ref, st, nact, x, cth, sth):
             acc7 = _free_acceleration(ws.VY, ws.MC, ws.Z, ws.ZT, nf + k, nact, x, cth, sth, w, deg)
     _write_sample(
         out, c, st.k_out, q, v, ws.gval, profiles.poly, profiles.trig, st.cfg, st.p, x, cth,
-        sth, w, runs.full_state, acc1, acc7, trains.n_coordinates[tr],
+        sth, w, runs.full_state, acc1, acc7, trains.n_coordinates[tr], degree(profiles, c, st.p),
     )  # fmt: skip
     st.k_out += 1
     if _out_of_bounds(cases, c, q, v):

@@ -75,11 +75,27 @@ def displayed(table: CaseTable, shown: dict[str, str]) -> CaseTable:
     """The table with each column in the units ``shown`` names (see
     :func:`campipe.study.query.display.display_units`); columns not named stay as they are."""
     columns = {
-        k: to_display(v, table.units[k], shown.get(k, table.units[k]))
+        k: _without_noise(to_display(v, table.units[k], shown.get(k, table.units[k])))
+        if shown.get(k, table.units[k]) != table.units[k]
+        else v
         for k, v in table.columns.items()
     }
     units = {k: shown.get(k, u) for k, u in table.units.items()}
     return CaseTable(columns, units, table.default, table.n, table.study)
+
+
+#: Significant digits a converted value keeps: a double holds 15 to 17, and the last one or
+#: two of a value converted there and back are the conversion's rounding (200 lbf stored in
+#: newtons reads back as 200.00000000000009 lbf).
+DISPLAY_DIGITS = 15
+
+
+def _without_noise(values: np.ndarray) -> np.ndarray:
+    """Converted floats rounded to DISPLAY_DIGITS significant digits (others as they are)."""
+    if values.dtype.kind != "f":
+        return values
+    flat = [float(f"{v:.{DISPLAY_DIGITS}g}") for v in values.ravel().tolist()]
+    return np.array(flat, dtype=values.dtype).reshape(values.shape)
 
 
 def display_table(ds, system: str = "spec") -> CaseTable:

@@ -15,6 +15,7 @@ the archive's folder; default ``<archive stem>-<kind>.png``, numbered when a kin
 
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from pathlib import Path
@@ -128,6 +129,14 @@ def check_plot(raw: Mapping[str, object], path: str = "") -> PlotRequest:
             f"found {excerpt(output)}, expected a file ending in {', '.join(FORMATS)} "
             "(the suffix chooses the format)",
         )
+    if path and output is not None and _leaves_folder(str(output)):
+        raise PlotError.at(
+            at("output"),
+            f"found {excerpt(output)}: a spec's plot is written inside the archive's folder; "
+            f"write a relative path without '..', such as {Path(str(output)).name}",
+            found=output,
+            expected="a path relative to the archive's folder, inside it",
+        )
     turn = values.get("turn")
     if turn is not None:
         values["turn"] = check_turn(turn, at("turn"))
@@ -138,6 +147,13 @@ def check_plot(raw: Mapping[str, object], path: str = "") -> PlotRequest:
         )
     known = {f.name for f in fields(PlotRequest)}
     return PlotRequest(**{k: v for k, v in values.items() if k in known})
+
+
+def _leaves_folder(output: str) -> bool:
+    """A spec's ``output`` that is absolute or climbs out of the archive's folder (links are
+    followed when it is written: ``campipe.io.outputs``)."""
+    path = Path(output)
+    return path.is_absolute() or os.path.normpath(output).split(os.sep)[0] == ".."
 
 
 def check_turn(turn: object, key: str = "--turn") -> str | int:

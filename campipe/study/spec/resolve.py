@@ -528,6 +528,7 @@ def check_settings(settings: RunSettings) -> None:
         for name in ("method", "step", "warmup_turns"):
             getattr(settings, name, None)
         settings.check_fidelity()
+        settings.check_whole_turns()
         if settings.settle:
             check_settling(settings)
     except RunSettingsError as exc:

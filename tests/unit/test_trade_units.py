@@ -1,0 +1,57 @@
+"""The speed units of the trade (issue 37): ``rpm``, ``rev/min`` and ``r/min`` read alike in
+a spec, a ``--set`` and a ``--where``."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from campipe.study.where import evaluate, parse_where
+from campipe.units import parse_angular
+
+
+@pytest.mark.parametrize("text", ["9000 rpm", "9000 rev/min", "9000 r/min", "150 rev/s"])
+def test_a_speed_in_revolutions_per_minute_reads_as_its_radians_per_second(text):
+    """9000 revolutions a minute is 9000·2π/60 rad/s (and 150 a second the same). Fails on a
+    copy without the trade's aliases: pint knows neither ``rev`` nor ``r``."""
+    assert parse_angular(text, "rad/s", "speed", "rpm") == pytest.approx(
+        9000 * 2 * math.pi / 60, rel=1e-15
+    )
+
+
+def test_a_where_in_rev_per_min_selects_what_rpm_does():
+    """``speed_rpm >= 9524 rev/min`` keeps the same rows as ``speed_rpm >= 9524``."""
+    import numpy as np
+
+    columns = {"speed_rpm": np.array([9000.0, 9524.0, 11000.0])}
+    units = {"speed_rpm": "rpm"}
+    for text in ("speed_rpm >= 9524 rev/min", "speed_rpm >= 9524 r/min"):
+        kept = evaluate(parse_where(text), columns, 3, units)
+        assert kept.tolist() == [False, True, True]
+
+
+def test_a_converted_value_reads_at_its_precision_without_conversion_noise():
+    """200 lbf, stored in newtons (889.6443230521002 N), reads back as 200.0 lbf in a query's
+    table, CSV and JSON; a value stored in the units shown is untouched to the last bit.
+    Fails on a copy that prints the conversion as it falls (200.00000000000009 lbf)."""
+    import numpy as np
+
+    from campipe.study.query.display import to_display
+    from campipe.study.query.tables import CaseTable, displayed, format_rows
+    from campipe.units import parse_quantity
+
+    stored = parse_quantity("200 lbf", "N", "x", "lbf")
+    assert to_display(np.array([stored]), "N", "lbf")[0] != 200.0  # the noise is there
+    exact = 0.1 + 0.2  # 0.30000000000000004: stored as it is shown, kept whole
+    table = CaseTable(
+        {"spring_preload": np.array([stored]), "ratio": np.array([exact])},
+        {"spring_preload": "N", "ratio": ""},
+        ["spring_preload", "ratio"],
+        1,
+    )
+    shown = displayed(table, {"spring_preload": "lbf"})
+    assert shown.columns["spring_preload"][0] == 200.0
+    assert shown.columns["ratio"][0] == exact
+    csv = format_rows(shown, np.arange(1), ["spring_preload", "ratio"], "csv")
+    assert csv.splitlines()[1] == "200.0,0.30000000000000004"
