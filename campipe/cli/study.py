@@ -10,7 +10,6 @@ import click
 from campipe.cli.base import (
     SET_HELP,
     Failure,
-    InputFailure,
     archive_path,
     limit_options,
     limits_given,
@@ -443,17 +442,30 @@ def _open_archive(path):
     type=click.Path(dir_okay=False),
     help="The netCDF file to write (default: the archive's name with .nc).",
 )
-@click.option("--overwrite", is_flag=True, help="Replace a file at the output path.")
+@click.option(
+    "--overwrite",
+    is_flag=True,
+    help="Replace a file at the output path that is not this study's archive (never the "
+    "parts archive's own files).",
+)
 def pack(archive, output, overwrite) -> None:
     """Write the single netCDF archive of the parts archive ARCHIVE (campipe study --parts):
     the file campipe study writes without --parts, variable for variable."""
     from pathlib import Path
 
+    from campipe.io.outputs import check_output, describe_netcdf
     from campipe.study.run.parts import pack as pack_parts
+    from campipe.study.run.parts import pack_inputs, pack_kind
 
     archive = Path(archive)
     target = Path(output) if output else archive.with_suffix(".nc")
-    if target.exists() and not overwrite:
-        raise InputFailure(f"{target}: exists; choose another output (-o) or --overwrite")
+    check_output(
+        target,
+        "-o",
+        pack_kind(archive),
+        overwrite=overwrite,
+        inputs=pack_inputs(archive),
+        describe=describe_netcdf,
+    )
     words = ["campipe", "pack", str(archive), "-o", str(target)]
     click.echo(str(pack_parts(archive, target, command=" ".join(words))))

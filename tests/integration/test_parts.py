@@ -221,9 +221,10 @@ def test_a_study_on_two_worker_processes_equals_the_local_run(mixed, tmp_path):
 
 def test_the_command_line_writes_queries_and_packs_a_parts_archive(tmp_path):
     """``campipe study --parts`` writes ``<name>.parts``; ``campipe query`` reads the folder
-    as it reads the file; ``campipe pack`` writes the single file (refusing to replace one
-    without --overwrite). Broken copies it fails on: a query that reads only the first
-    part, a pack that replaces an existing file."""
+    as it reads the file; ``campipe pack`` writes the single file under the output rule
+    (its own earlier pack replaced, another file only with --overwrite, a part never).
+    Broken copies it fails on: a query that reads only the first part, a pack that replaces
+    a file it did not write, or a part of the archive it reads."""
     spec = write_spec(tmp_path, SMALL_SPEC)
     runner = CliRunner()
     result = runner.invoke(
@@ -244,10 +245,25 @@ def test_the_command_line_writes_queries_and_packs_a_parts_archive(tmp_path):
     )
     assert result.exit_code == 0, result.output
     assert archive_digest(tmp_path / "one.nc") == archive_digest(tmp_path / "small.nc")
+    # the output rule: its own earlier pack is replaced; a file it did not write only with
+    # --overwrite; a file of the parts archive never
     result = runner.invoke(
         main, ["pack", str(tmp_path / "small.parts"), "-o", str(tmp_path / "one.nc")]
     )
+    assert result.exit_code == 0, result.output
+    (tmp_path / "notes.nc").write_text("mine")
+    pack_to = ["pack", str(tmp_path / "small.parts"), "-o", str(tmp_path / "notes.nc")]
+    result = runner.invoke(main, pack_to)
     assert result.exit_code == 2 and "exists" in result.output
+    assert (tmp_path / "notes.nc").read_text() == "mine"
+    assert runner.invoke(main, [*pack_to, "--overwrite"]).exit_code == 0
+    part = part_files(tmp_path / "small.parts")[0]
+    before = part.read_bytes()
+    result = runner.invoke(
+        main, ["pack", str(tmp_path / "small.parts"), "-o", str(part), "--overwrite"]
+    )
+    assert result.exit_code == 2 and "which this command reads" in result.output
+    assert part.read_bytes() == before
     index = json.loads((tmp_path / "small.parts" / INDEX).read_text())
     assert index["attrs"]["study_name"] == "small"
     figures = []

@@ -28,6 +28,7 @@ from campipe.io.archive import (
     read_attrs,
     verify,
 )
+from campipe.io.outputs import Kind, netcdf_attrs
 from campipe.io.parts import (
     INDEX,
     PartsIndexError,
@@ -328,6 +329,24 @@ def pack(archive: str | Path, output: str | Path, command: str = "campipe pack")
         sink.abort()
 
 
+def pack_kind(archive: Path) -> Kind:
+    """What ``campipe pack`` may replace without ``--overwrite``: a netCDF archive of the
+    same study (its ``study_key`` the index's), as an earlier pack wrote it."""
+    key = read_index(archive)["attrs"].get("study_key")
+
+    def ours(path: Path) -> bool:
+        attrs = netcdf_attrs(path)
+        return attrs is not None and key is not None and attrs.get("study_key") == key
+
+    return Kind("this parts archive's single file", ours)
+
+
+def pack_inputs(archive: Path) -> list[tuple[Path, str]]:
+    """What ``campipe pack`` reads, which its output never replaces: the index and parts."""
+    files = [index_path(archive), *part_files(archive)]
+    return [(p, f"a file of the parts archive {archive.name}") for p in files]
+
+
 def _layout_of(part: Path, n_cases: int, attrs: dict, compression: str) -> Layout:
     """The single-file archive's layout, read from one of its parts: its dimensions (case the
     study's, event unlimited), variables and axes."""
@@ -356,6 +375,8 @@ __all__ = [
     "find_parts",
     "inspect_parts",
     "pack",
+    "pack_inputs",
+    "pack_kind",
     "refuse_parts",
     "up_to_date_parts",
 ]
