@@ -5,7 +5,7 @@ parameter table and NumPy, nothing else): dask, xarray, netCDF4, pint, SciPy, nu
 rerun load only in the commands that need them.
 
 The group and what the commands share are :mod:`~campipe.cli.base`'s; one module per family
-of commands: :mod:`~campipe.cli.study` (study, validate, query), :mod:`~campipe.cli.plot`,
+of commands: :mod:`~campipe.cli.study` (study, validate, query, pack), :mod:`~campipe.cli.plot`,
 :mod:`~campipe.cli.onset`, :mod:`~campipe.cli.replay`, :mod:`~campipe.cli.model` (model,
 init, schema) and :mod:`~campipe.cli.bench`.
 """
@@ -21,6 +21,7 @@ for _command in (
     model.model,
     model.schema,
     onset.onset,
+    study.pack,
     plot.plot,
     study.query,
     replay.replay,

@@ -207,10 +207,14 @@ def limits_given(max_cases, max_steps, max_samples, max_events, max_archive_gb):
     return Limits(max_cases, max_steps, max_samples, max_events, max_archive_gb * 1e9)
 
 
-def archive_path(study, spec_path, output):
+def archive_path(study, spec_path, output, parts: bool = False):
+    """``-o``, or the default archive beside the spec: ``<name>.nc``, or the folder
+    ``<name>.parts`` for a parts archive."""
     from pathlib import Path
 
-    return Path(output) if output else Path(spec_path).parent / f"{study.name}.nc"
+    if output:
+        return Path(output)
+    return Path(spec_path).parent / f"{study.name}{'.parts' if parts else '.nc'}"
 
 
 SET_HELP = (

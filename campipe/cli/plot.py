@@ -13,7 +13,7 @@ PLOT_KINDS = ("histories", "metric", "map", "events")
 
 @click.command()
 @click.argument("kind", type=click.Choice(PLOT_KINDS))
-@click.argument("archive", type=click.Path(exists=True, dir_okay=False))
+@click.argument("archive", type=click.Path(exists=True))
 @click.option(
     "-o",
     "--output",

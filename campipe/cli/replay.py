@@ -8,7 +8,7 @@ import click
 
 
 @click.command()
-@click.argument("archive", type=click.Path(dir_okay=False))
+@click.argument("archive", type=click.Path())
 @click.option(
     "--case",
     "case_ids",

@@ -26,8 +26,9 @@ from campipe.cli.plot import write_plots
 @click.option(
     "-o",
     "--output",
-    type=click.Path(dir_okay=False),
-    help="Archive to write (default: <name>.nc beside the spec).",
+    type=click.Path(),
+    help="Archive to write (default: <name>.nc beside the spec; with --parts, the folder "
+    "<name>.parts).",
 )
 @click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=SET_HELP)
 @click.option(
@@ -53,6 +54,14 @@ from campipe.cli.plot import write_plots
     help="Keep the batch files (<archive>.parts/) after writing the archive.",
 )
 @click.option(
+    "--parts",
+    is_flag=True,
+    help="Write a parts archive: a folder of one compressed netCDF file per batch, each "
+    "written by the worker that computed it, and an index (the way to run on a cluster: "
+    "this process only keeps count). Read as one archive by query, plot, replay and "
+    "campipe.open_study; campipe pack writes the single file.",
+)
+@click.option(
     "--progress/--no-progress",
     default=True,
     show_default=True,
@@ -74,6 +83,7 @@ def study(
     workers,
     batch_size,
     keep_parts,
+    parts,
     progress,
     overwrite,
     max_cases,
@@ -96,7 +106,7 @@ def study(
     from campipe.study.spec.limits import Limits
 
     limits = limits_given(max_cases, max_steps, max_samples, max_events, max_archive_gb)
-    if limits == Limits() and not overwrite:
+    if limits == Limits() and not overwrite and not parts:
         # A finished study answers from its spec's text and its archive's checksums alone.
         done = finished(spec, parse_overrides(sets), output)
         if done is not None:
@@ -105,7 +115,7 @@ def study(
             click.echo(str(done.archive))
             return
     loaded = load_spec(spec, sets, limits)
-    archive = archive_path(loaded, spec, output)
+    archive = archive_path(loaded, spec, output, parts)
     if loaded.spec.search == "onset":
         from campipe.engine.periodic import DEFAULT_ONSET_TOLERANCE_RPM, RPM
 
@@ -147,6 +157,7 @@ def study(
     words = ["campipe", "study", spec, *(["-o", output] if output else [])]
     words += [w for pair in sets for w in ("--set", pair)]
     words += ["--scheduler", scheduler] if scheduler != "threads" else []
+    words += ["--parts"] if parts else []
     command = shlex.join(words)
     try:
         with logging_cleared(lambda: bars[-1] if bars else None):
@@ -161,6 +172,7 @@ def study(
                 command=command,
                 on_batch=replay if scheduler != "processes" else None,
                 overwrite=overwrite,
+                parts=parts,
                 notice=lambda text: click.echo(f"campipe study: {text}", err=True),
             )
     finally:
@@ -365,7 +377,7 @@ def validate_text(loaded, spec_path) -> str:
 
 
 @click.command()
-@click.argument("archive", type=click.Path(exists=True, dir_okay=False))
+@click.argument("archive", type=click.Path(exists=True))
 @click.option(
     "--where",
     help='Keep cases where EXPR holds, e.g. "speed_rpm > 9000 and seat is none" or '
@@ -408,12 +420,52 @@ def query(archive, where, columns, sort, fmt, summary, units) -> None:
 
 
 def _open_archive(path):
-    """An archive as an xarray Dataset, or a Failure naming why it cannot be read."""
-    import xarray as xr
-
+    """An archive (a file, or a parts archive's folder) as an xarray Dataset, or a Failure
+    naming why it cannot be read."""
+    from campipe.errors import CampipeError
     from campipe.io.archive import unreadable
+    from campipe.study.archive.open import open_archive
 
     try:
-        return xr.open_dataset(path)
+        return open_archive(path)
+    except CampipeError:
+        raise
     except Exception as exc:
         raise Failure(f"{path}: {unreadable(exc)}") from None
+
+
+@click.command()
+@click.argument("archive", type=click.Path(exists=True, file_okay=False))
+@click.option(
+    "-o",
+    "--output",
+    type=click.Path(dir_okay=False),
+    help="The netCDF file to write (default: the archive's name with .nc).",
+)
+@click.option(
+    "--overwrite",
+    is_flag=True,
+    help="Replace a file at the output path that is not this study's archive (never the "
+    "parts archive's own files).",
+)
+def pack(archive, output, overwrite) -> None:
+    """Write the single netCDF archive of the parts archive ARCHIVE (campipe study --parts):
+    the file campipe study writes without --parts, variable for variable."""
+    from pathlib import Path
+
+    from campipe.io.outputs import check_output, describe_netcdf
+    from campipe.study.run.parts import pack as pack_parts
+    from campipe.study.run.parts import pack_inputs, pack_kind
+
+    archive = Path(archive)
+    target = Path(output) if output else archive.with_suffix(".nc")
+    check_output(
+        target,
+        "-o",
+        pack_kind(archive),
+        overwrite=overwrite,
+        inputs=pack_inputs(archive),
+        describe=describe_netcdf,
+    )
+    words = ["campipe", "pack", str(archive), "-o", str(target)]
+    click.echo(str(pack_parts(archive, target, command=" ".join(words))))

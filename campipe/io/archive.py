@@ -203,6 +203,8 @@ class NetCDFWriter:
             )
         self.tmp = temporary_path(self.path)
         self.variables = {v.name: v for v in variables}
+        #: the stored checksums' text (:data:`CHECKSUM_ATTR`), once committed
+        self.checksum_text = ""
         #: name → the running checksum of a variable written in row order so far
         self._digests: dict[str, _RunningDigest] = {}
         #: the checksums' updates, computed in order on a thread of their own beside the
@@ -350,7 +352,8 @@ class NetCDFWriter:
         to disk and rename into place; returns the final path."""
         with LOCK, _writes(self.path):
             self._ds.set_auto_mask(False)
-            self._ds.setncattr(CHECKSUM_ATTR, json.dumps(self.checksums(), sort_keys=True))
+            self.checksum_text = json.dumps(self.checksums(), sort_keys=True)
+            self._ds.setncattr(CHECKSUM_ATTR, self.checksum_text)
             self._ds.close()
         with _writes(self.path):
             with open(self.tmp, "rb") as f:

@@ -15,6 +15,7 @@ from pathlib import Path
 
 from campipe.io.archive import ArchiveFileError, unreadable
 from campipe.io.outputs import FIGURE, check_output
+from campipe.study.archive.open import open_archive
 from campipe.study.spec.plots import PlotRequest
 
 
@@ -41,8 +42,6 @@ def plot_archive(
     (Path, matplotlib.figure.Figure)
         The file written and the figure.
     """
-    import xarray as xr
-
     from campipe.plot.figures import figure
 
     archive = Path(archive)
@@ -51,7 +50,7 @@ def plot_archive(
             archive.parent / request.output if request.output else request.default_output(archive)
         )
     try:
-        ds = xr.open_dataset(archive)
+        ds = open_archive(archive)  # a file, or a parts archive's folder
     except Exception as exc:
         raise ArchiveFileError.at(str(archive), unreadable(exc)) from None
     with ds:

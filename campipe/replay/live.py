@@ -24,6 +24,7 @@ from campipe.io import rerun_replay as rrio
 from campipe.replay.cases import ReplayCase, ReplayError, archive_cases, batch_cases, select_rows
 from campipe.replay.record import recording_case
 from campipe.replay.sketch import DEFAULT_MAGNIFICATION
+from campipe.study.archive.open import open_archive
 from campipe.study.query.tables import stored_units
 from campipe.study.run.keys import study_key
 from campipe.study.run.results import BatchData, BatchPlan, compute_batch
@@ -106,10 +107,8 @@ class StudyReplay:
         """Log the selected cases not computed by this run from the finished archive, send
         the blueprint and close the recording. Returns its path, or None (and writes
         nothing) when the selection holds no case."""
-        import xarray as xr
-
         resolved = {c.case_id: c for c in self.study.cases}
-        with xr.open_dataset(archive) as ds:
+        with open_archive(archive) as ds:
             try:
                 rows = select_rows(ds, where=self.where)
             except ReplayError:

@@ -27,6 +27,7 @@ from campipe.io.rerun_replay import (
 from campipe.model import PARAMETERS
 from campipe.replay import sketch
 from campipe.replay.cases import ReplayCase, ReplayError, archive_cases, select_rows
+from campipe.study.archive.open import open_archive
 from campipe.study.run.progress import Progress
 
 #: Line radii of the sketch's parts drawn with no width of their own [m].
@@ -198,13 +199,11 @@ def replay_archive(
     campipe.study.where.QueryError
         For a ``--where`` expression the query language refuses.
     """
-    import xarray as xr
-
     archive = Path(archive)
-    if not archive.is_file():
+    if not archive.exists():
         raise ReplayError(f"{archive}: no such archive", key=str(archive))
     try:
-        ds = xr.open_dataset(archive)
+        ds = open_archive(archive)  # a file, or a parts archive's folder
     except (OSError, ValueError, RuntimeError) as exc:
         raise ReplayError(f"{archive}: {unreadable(exc)}", key=str(archive)) from None
     with ds:

@@ -17,6 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
+from campipe.io.parts import PartsIndexError, read_index
+
 log = logging.getLogger(__name__)
 #: The name the rest of the study (zip rows, case entries, samples) goes by while the sweep
 #: is unstacked; it is ``case`` again afterwards.
@@ -38,7 +40,8 @@ def open_study(path: str | Path, **open_kwargs):
     Parameters
     ----------
     path : str or Path
-        The archive (``campipe study`` writes it).
+        The archive (``campipe study`` writes it): one netCDF file, or a parts archive's
+        folder (``campipe study --parts``), read as one dataset (:func:`open_archive`).
     **open_kwargs
         Passed to :func:`xarray.open_dataset` (e.g. ``chunks={}`` to read lazily with dask).
 
@@ -54,15 +57,99 @@ def open_study(path: str | Path, **open_kwargs):
         ``damping_ratios``, a sweep with NaN such as ``run.dt: [default, ...]``, repeated
         labels) is returned as stored, one case per row of ``case``.
     """
-    import xarray as xr
-
-    ds = xr.open_dataset(path, **open_kwargs)
+    ds = open_archive(path, **open_kwargs)
     try:
         grid = as_grid(ds)
     except Exception:
         ds.close()
         raise
     return ds if grid is None else grid
+
+
+def open_archive(path: str | Path, **open_kwargs):
+    """An archive as stored, one case per row of ``case`` in the study's order: a netCDF
+    file (:func:`xarray.open_dataset`), or a parts archive's folder, its parts read as one
+    dataset (:func:`open_parts`)."""
+    import xarray as xr
+
+    if Path(path).is_dir():
+        return open_parts(path, **open_kwargs)
+    return xr.open_dataset(path, **open_kwargs)
+
+
+def open_parts(path: str | Path, **open_kwargs):
+    """A parts archive (:mod:`campipe.io.parts`) as one dataset, the single-file archive's:
+    its parts' variables along ``case`` and along ``event`` concatenated in the index's
+    order, the cases put in the study's order (``event_case`` their rows again), the
+    index's global attributes.
+
+    Raises
+    ------
+    campipe.io.parts.PartsIndexError
+        If the folder holds no readable index (not a parts archive, or a run not finished).
+    """
+    import xarray as xr
+
+    path = Path(path)
+    index = read_index(path)
+    parts = [xr.open_dataset(path / str(p["file"]), **open_kwargs) for p in index["parts"]]
+    try:
+        ds = _combine(path, parts, [str(c) for c in index["case"]])
+    except Exception:
+        for p in parts:
+            p.close()
+        raise
+    ds.attrs = dict(index["attrs"])
+
+    def close() -> None:
+        for p in parts:
+            p.close()
+
+    ds.set_close(close)
+    return ds
+
+
+def _combine(path: Path, parts: list, ids: list[str]):
+    """Parts (xarray Datasets) as one: per-case variables concatenated along ``case``,
+    events along ``event`` (each part's ``event_count`` their ragged lengths), then the
+    cases ``ids`` picked in that order (the first part holding each)."""
+    import pandas as pd
+    import xarray as xr
+
+    if not parts:
+        raise PartsIndexError.at(str(path), "its index names no part")
+
+    def concat(datasets, dim):
+        return xr.concat(
+            datasets, dim, data_vars="minimal", coords="minimal", compat="override", join="exact"
+        )
+
+    cases = concat([p.drop_dims("event") for p in parts], "case")
+    events = concat(
+        [p.drop_vars([n for n in p.variables if "event" not in p[n].dims]) for p in parts],
+        "event",
+    )
+    held = pd.Index(cases["case"].values)
+    first = np.flatnonzero(~held.duplicated())  # a case two parts hold: the first's
+    rows = held[first].get_indexer(ids)
+    if (rows < 0).any():
+        missing = ids[int(np.argmax(rows < 0))]
+        raise PartsIndexError.at(str(path), f"case {missing} is in no part its index names")
+    rows = first[rows]
+    counts = cases["event_count"].values.astype(np.int64)
+    starts = np.concatenate([[0], np.cumsum(counts)])
+    if not np.array_equal(rows, np.arange(len(ids))) or starts[-1] != events.sizes["event"]:
+        taken = counts[rows]
+        offsets = np.repeat(starts[rows] - np.concatenate([[0], np.cumsum(taken)[:-1]]), taken)
+        cases = cases.isel(case=rows)
+        events = events.isel(event=np.arange(int(taken.sum())) + offsets)
+        counts = taken
+    event_case = events["event_case"]
+    values = np.repeat(np.arange(len(ids), dtype=event_case.dtype), counts)
+    events = events.assign_coords(
+        event_case=xr.Variable("event", values, event_case.attrs, event_case.encoding)
+    )
+    return xr.merge([cases, events], compat="override", join="exact", combine_attrs="override")
 
 
 def as_grid(ds):

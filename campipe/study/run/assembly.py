@@ -5,15 +5,16 @@ bounded by a block of rows."""
 from __future__ import annotations
 
 import logging
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from campipe.engine.settings import output_angles
 from campipe.io import batch_file
-from campipe.io.archive import CASE_CHUNK, NetCDFWriter, provenance, read_rows
+from campipe.io.archive import CASE_CHUNK, NetCDFWriter, VariableSpec, provenance, read_rows
 from campipe.study.archive.layout import archive_layout
 from campipe.study.run.batches import Stored
 from campipe.study.run.keys import study_attrs
@@ -34,11 +35,42 @@ def assemble(study: Study, archive: Path, found: Found, command: str = "campipe 
     :func:`find_results`): what this process does on a cluster whose workers store their
     batches (the developer benchmark, ``benchmarks/study.py``, times it as the
     client's ceiling)."""
-    sink = Assembly(study, Path(archive), found, command, spec_file(study, Path(archive)))
+    sink = study_assembly(study, Path(archive), found, command, spec_file(study, Path(archive)))
     try:
         return sink.finish()
     finally:
         sink.abort()
+
+
+@dataclass(frozen=True)
+class Layout:
+    """What an archive holds before its rows: dimensions (``event`` None: unlimited),
+    variables, the arrays written whole (axes, case coordinates), global attributes."""
+
+    sizes: Mapping[str, int | None]
+    specs: Sequence[VariableSpec]
+    static: Mapping[str, np.ndarray]
+    attrs: Mapping[str, object]
+    compression: str
+
+
+def study_layout(study: Study, command: str, spec: str) -> Layout:
+    """The layout of ``study``'s single-file archive (:func:`archive_layout`)."""
+    cam_angle = cam_angle_degrees(output_angles(study.cases[0].settings))
+    sizes, specs, static = archive_layout(study, None, cam_angle, study.n_revolutions)
+    attrs = {**study_attrs(study), "spec_file": spec, **provenance(command)}
+    return Layout(sizes, specs, static, attrs, study.compression)
+
+
+def study_assembly(study: Study, archive: Path, found: Found, command: str, spec: str) -> Assembly:
+    """The assembly of ``study``'s archive (its layout made when the archive is created)."""
+    return Assembly(
+        [c.case_id for c in study.cases],
+        archive,
+        found,
+        lambda: study_layout(study, command, spec),
+        cam_angle_degrees(output_angles(study.cases[0].settings)),
+    )
 
 
 #: Bytes of rows the assembly holds at a time (the rows of one write to the archive).
@@ -58,13 +90,18 @@ class Assembly:
     is written twice.
     """
 
-    def __init__(self, study: Study, archive: Path, found: Found, command: str, spec: str):
-        self.study = study
+    def __init__(
+        self,
+        ids: list[str],
+        archive: Path,
+        found: Found,
+        layout: Callable[[], Layout],
+        cam_angle: np.ndarray | None = None,
+    ):
         self.archive = archive
         self.found = found  # case id → (file, row, events); grows as batches are stored
-        self.ids = [c.case_id for c in study.cases]
-        self.command = command
-        self.spec = spec
+        self.ids = ids
+        self.layout = layout  # made when the archive is created
         self.cursor = 0  # cases written
         self.writer: NetCDFWriter | None = None
         self.statuses: dict[str, str] = {}  # case id → status name, cases not ok
@@ -78,8 +115,8 @@ class Assembly:
         #: block compresses (``_read_ahead``)
         self.reading: dict[Path, Future] = {}
         self.reader: ThreadPoolExecutor | None = None
-        # Every batch's: the study's run settings set them (``fields.STUDY_WIDE``)
-        self.cam_angle = cam_angle_degrees(output_angles(study.cases[0].settings))
+        #: every batch's (the study's run settings set them: ``fields.STUDY_WIDE``)
+        self.cam_angle = cam_angle
         self.held_bytes = 0
         self.position = {cid: pos for pos, cid in enumerate(self.ids)}
         self.last_row: dict[Path, int] = {}  # the last case each file supplies
@@ -95,7 +132,7 @@ class Assembly:
             self.found[cid] = (s.path, row, n_ev)
         self.last_row[s.path] = max(self.position[cid] for cid in s.case_ids)
         if s.data is not None:
-            if not np.array_equal(s.data.cam_angle, self.cam_angle):
+            if self.cam_angle is not None and not np.array_equal(s.data.cam_angle, self.cam_angle):
                 raise RuntimeError(f"batch {s.key}: other cam angles than the study's; a defect")
             self._hold(s.path, s.data.arrays)
 
@@ -181,10 +218,8 @@ class Assembly:
             self.writer = None
 
     def _create(self) -> None:
-        study = self.study
-        n_rev = study.n_revolutions
-        sizes, specs, static = archive_layout(study, None, self.cam_angle, n_rev)
-        attrs = {**study_attrs(study), "spec_file": self.spec, **provenance(self.command)}
+        layout = self.layout()
+        sizes, specs, static = layout.sizes, layout.specs, layout.static
         self.case_names = [
             s.name for s in specs if s.dims[:1] == ("case",) and s.name not in static
         ]
@@ -195,10 +230,10 @@ class Assembly:
         per_case = 0
         for s in specs:
             if s.name in self.case_names:
-                n = np.prod([sizes[d] for d in s.dims[1:]], dtype=np.int64)
+                n = np.prod([int(sizes[d] or 0) for d in s.dims[1:]], dtype=np.int64)
                 per_case += int(n) * np.dtype(s.dtype).itemsize
         self.block = max(CASE_CHUNK, ASSEMBLY_BYTES // max(per_case, 1) // CASE_CHUNK * CASE_CHUNK)
-        self.writer = NetCDFWriter(self.archive, sizes, specs, attrs, study.compression)
+        self.writer = NetCDFWriter(self.archive, sizes, specs, layout.attrs, layout.compression)
         for name, values in static.items():
             self.writer.write(name, values)
 

@@ -25,6 +25,7 @@ from campipe.study.archive.layout import (
     variable_spec,
 )
 from campipe.study.run.keys import batch_key
+from campipe.study.run.part_files import PartLayout, store_part
 from campipe.study.run.results import BatchData, BatchPlan
 from campipe.study.spec.coordinates import CASE_ID
 from campipe.study.spec.resolve import ResolvedCase
@@ -57,6 +58,9 @@ class Stored:
     event_counts: tuple[int, ...]  # events of each
     statuses: tuple[int, ...]  # status of each (vocabulary.STATUS)
     numerics: str  # numerics_fingerprint() of the process that computed it
+    #: a part's checksum in a parts archive's index (campipe.io.parts.checksum_digest);
+    #: "" for a batch file
+    checksum: str = ""
     #: the batch's arrays, when it was stored in this process: the archive takes its rows
     #: from here instead of reading the file back (never sent between processes)
     data: BatchData | None = field(default=None, compare=False, repr=False)
@@ -70,6 +74,28 @@ class Stored:
     @property
     def n_cases(self) -> int:
         return len(self.case_ids)
+
+
+@dataclass(frozen=True)
+class Storage:
+    """Where finished batches go: batch files in ``directory`` (scratch, the single-file
+    archive is assembled from them), or, with a part ``layout``, the parts of the parts
+    archive ``directory`` (:mod:`campipe.study.run.part_files`). Sent with every task."""
+
+    directory: Path  # <archive>.parts, or the parts archive itself
+    record: tuple[str, ...]  # run.record of the study
+    layout: PartLayout | None = None  # the parts' layout; None: batch files
+
+    @property
+    def parts(self) -> bool:
+        return self.layout is not None
+
+    def store(self, data: BatchData, plan: BatchPlan) -> tuple[Path, str]:
+        """Write a batch's file atomically: its path, and its checksum for the index ("" for
+        a batch file)."""
+        if self.layout is None:
+            return store_batch(data, self.directory, self.record), ""
+        return store_part(data, plan, self.directory, self.layout)
 
 
 def parts_directory(archive: Path) -> Path:

@@ -9,6 +9,9 @@
 - The archive is assembled while the batches run (:mod:`~campipe.study.run.assembly`): this
   process streams the stored rows, in case order, into one new file at a temporary path,
   renamed into place when complete; memory stays bounded by a block of rows.
+- With ``parts=True`` the archive is a folder of parts (:mod:`campipe.io.parts`): each
+  batch's worker writes its part, compressed, and this process only keeps count and writes
+  the index last (:mod:`~campipe.study.run.parts`); nothing is assembled here.
 - A run holds ``<archive>.lock`` throughout (``campipe.io.archive.writing``): a second run on
   the same archive stops with a clear error instead of removing the first one's files; the
   lock of a run that died on this host is taken over.
@@ -23,6 +26,7 @@ a worker that cannot, this process stores what it returns.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import shutil
 import stat
@@ -33,8 +37,24 @@ from pathlib import Path
 
 from campipe.engine.settings import sample_count
 from campipe.io.archive import write_error, writing
-from campipe.study.run.assembly import Assembly
-from campipe.study.run.batches import BatchHook, OptionError, Stored, parts_directory, plan_batches
+from campipe.io.parts import index_path
+from campipe.study.run.assembly import study_assembly
+from campipe.study.run.batches import (
+    BatchHook,
+    OptionError,
+    Storage,
+    Stored,
+    parts_directory,
+    plan_batches,
+)
+from campipe.study.run.part_files import part_layout
+from campipe.study.run.parts import (
+    clean_part_temporaries,
+    find_parts,
+    inspect_parts,
+    refuse_parts,
+    up_to_date_parts,
+)
 from campipe.study.run.progress import Progress
 from campipe.study.run.results import BatchData, BatchPlan
 from campipe.study.run.resume import (
@@ -74,6 +94,7 @@ def run_study(
     overwrite: bool = False,
     workers_store: bool = True,
     notice: Callable[[str], None] | None = None,
+    parts: bool = False,
 ) -> StudyReport:
     """Run a study into one archive, resuming from whatever earlier runs left.
 
@@ -107,6 +128,11 @@ def run_study(
     notice : callable, optional
         Called with a line of text before a wait the user should hear about: numba
         compiling the kernels the study needs (the first run after an install or upgrade).
+    parts : bool
+        Write a parts archive (:mod:`campipe.io.parts`): ``archive`` is a folder of one
+        compressed netCDF file per batch, each written by the worker that computed it, and
+        an index; this process only keeps count (``campipe pack`` writes the single file).
+        ``keep_parts`` does not apply. Default: one netCDF file.
 
     A case that fails (non-finite, chatter) does not stop the study: the archive records its
     ``status`` and :attr:`StudyReport.statuses` names it by case id.
@@ -125,6 +151,9 @@ def run_study(
     started = time.monotonic()
     archive = Path(archive)
     check_scheduler(scheduler)
+    run = _Run(scheduler, workers or 0, on_batch, workers_store, notice, command)
+    if parts:
+        return _run_parts(study, archive, run, batch_size, progress, started)
     total = len(study.cases)
     # Checked before the lock, so a finished study in a read-only folder is still up to date.
     state = inspect_archive(study, archive)
@@ -153,9 +182,9 @@ def run_study(
         run = _Run(scheduler, workers, on_batch, workers_store, notice, command)
         bar = progress(total, total - len(missing)) if progress else None
         statuses = _compute_and_assemble(study, archive, found, plans, run, bar)
-        parts = parts_directory(archive)
-        if not keep_parts and parts.is_dir():
-            shutil.rmtree(parts, ignore_errors=True)
+        scratch = parts_directory(archive)
+        if not keep_parts and scratch.is_dir():
+            shutil.rmtree(scratch, ignore_errors=True)
         return StudyReport(
             archive,
             total,
@@ -254,15 +283,15 @@ def _compute_and_assemble(
 ) -> dict[str, str]:
     """Compute ``plans`` and write the archive as their batches are stored; case id → status
     name of the cases that did not finish cleanly."""
-    parts = parts_directory(archive)
+    storage = Storage(parts_directory(archive), study.record)
     by_id = {c.case_id: c for c in study.cases}
     by_key = {p.key: p for p in plans}
-    sink = Assembly(study, archive, found, run.command, spec_file(study, archive))
+    sink = study_assembly(study, archive, found, run.command, spec_file(study, archive))
 
     def stored(result: Stored | BatchData) -> None:
         """A finished batch: stored here if its worker did not, then its rows go into the
         archive as far as the cases before them allow."""
-        s = stored_here(result, parts, study.record, run.on_batch, by_key)
+        s = stored_here(result, storage, run.on_batch, by_key)
         log.debug("batch %s stored (%d cases)", s.key, s.n_cases)
         sink.add(s)
         for cid, code in zip(s.case_ids, s.statuses, strict=True):
@@ -284,8 +313,7 @@ def _compute_and_assemble(
                 plans,
                 run.scheduler,
                 run.workers,
-                parts,
-                study.record,
+                storage,
                 run.on_batch,
                 stored,
                 sink.create,
@@ -295,8 +323,7 @@ def _compute_and_assemble(
             run_distributed(
                 plans,
                 run.scheduler,
-                parts,
-                study.record,
+                storage,
                 run.on_batch is None and run.workers_store,
                 stored,
             )
@@ -304,3 +331,100 @@ def _compute_and_assemble(
     finally:
         sink.abort()
     return sink.statuses
+
+
+def _run_parts(
+    study: Study,
+    archive: Path,
+    run: _Run,
+    batch_size: int | None,
+    progress: Callable[[int, int], Progress] | None,
+    started: float,
+) -> StudyReport:
+    """:func:`run_study` into a parts archive: the same checks, lock and resume; each batch a
+    part its worker writes; the index written last."""
+    total = len(study.cases)
+    state = inspect_parts(study, archive)
+    if state.up_to_date:
+        log.info("%s already holds this study", archive)
+        return up_to_date_parts(archive, total, started)
+    if not state.ours:
+        raise refuse_parts(archive, state)  # never a file or another folder
+    try:
+        archive.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise write_error(archive, exc) from None
+    with writing(archive):
+        state = inspect_parts(study, archive)  # another run may have finished it meanwhile
+        if state.up_to_date:
+            return up_to_date_parts(archive, total, started)
+        notes = (
+            [
+                f"{archive} failed its checks ({'; '.join(state.problems)}): its damaged "
+                "parts are computed again"
+            ]
+            if state.problems
+            else []
+        )
+        clean_part_temporaries(archive)
+        index_path(archive).unlink(missing_ok=True)  # the parts change: no index meanwhile
+        layout = part_layout(study, run.command, spec_file(study, archive))
+        found, more = find_parts(study, archive, layout)
+        notes += more
+        missing = [c for c in study.cases if c.case_id not in found.found]
+        workers = run.workers or (1 if run.scheduler == "synchronous" else default_workers())
+        run = dataclasses.replace(run, workers=workers)
+        plans = _plan(study, missing, run.scheduler, workers, batch_size)
+        storage = Storage(archive, study.record, layout)
+        bar = progress(total, total - len(missing)) if progress else None
+        by_key = {p.key: p for p in plans}
+
+        def stored(result: Stored | BatchData) -> None:
+            s = stored_here(result, storage, run.on_batch, by_key)
+            found.add(s)
+            if bar:
+                bar.advance(s.n_cases)
+
+        _compute(plans, run, storage, stored)
+        for cid, name in found.statuses.items():
+            log.warning("case %s: %s", cid, name)
+        found.write_index(layout.attrs)
+        return StudyReport(
+            archive,
+            total,
+            total - len(missing),
+            len(missing),
+            len(plans),
+            False,
+            time.monotonic() - started,
+            tuple(notes),
+            {
+                c.case_id: found.statuses[c.case_id]
+                for c in study.cases
+                if c.case_id in found.statuses
+            },
+        )
+
+
+def _compute(
+    plans: list[BatchPlan],
+    run: _Run,
+    storage: Storage,
+    stored: Callable[[Stored | BatchData], None],
+) -> None:
+    """Compute ``plans`` on the run's workers, each stored batch handed to ``stored``."""
+    if not plans:
+        return
+    if run.local:
+        from campipe.engine.kernels import compile_first  # numba: not before it is needed
+
+        compile_first({p.cases[0].settings: p.cases[0].case for p in plans}, run.notice)
+        run_local(plans, run.scheduler, run.workers, storage, run.on_batch, stored)
+    else:
+        run_distributed(
+            plans,
+            run.scheduler,
+            storage,
+            run.on_batch is None and run.workers_store,
+            stored,
+        )

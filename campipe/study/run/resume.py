@@ -100,7 +100,7 @@ class ArchiveState:
 Found = dict[str, tuple[Path, int, int]]
 
 
-def _mismatch(attrs: dict, record: tuple[str, ...]) -> str | None:
+def mismatch(attrs: dict, record: tuple[str, ...]) -> str | None:
     """Why a file's results cannot serve this study, or None if they can."""
     if attrs.get("campipe_layout") != LAYOUT_VERSION:
         return f"another layout ({attrs.get('campipe_layout', 'none')})"
@@ -128,7 +128,7 @@ def find_results(
     """Where the study's cases already are, and notes on files set aside.
 
     Batch files first, then the archive (when ``archive_usable``: it passed its checks). A
-    file is used only if it has this layout, record and engine (:func:`_mismatch`) and its
+    file is used only if it has this layout, record and engine (:func:`mismatch`) and its
     checksums verify; a batch file that fails them is removed (its cases are computed again)
     and named in the notes.
     """
@@ -140,7 +140,7 @@ def find_results(
     other: dict[str, int] = {}
     for path in files:
         try:
-            why = _mismatch(batch_file.read_attrs(path), study.record)
+            why = mismatch(batch_file.read_attrs(path), study.record)
         except Exception as exc:  # a damaged file fails to open in many ways
             why = None
             problems = [f"it cannot be read ({type(exc).__name__})"]
@@ -164,7 +164,7 @@ def find_results(
         notes.append(f"{n} batch file{'s' if n != 1 else ''} in {parts} set aside: {why}")
     if archive_usable and archive.is_file():
         try:
-            why = _mismatch(read_attrs(archive), study.record)
+            why = mismatch(read_attrs(archive), study.record)
         except Exception:  # not an archive at all (replaced with --overwrite)
             why = "it is not a campipe archive"
         if why:

@@ -29,27 +29,25 @@ from pathlib import Path
 
 from campipe.errors import CampipeError
 from campipe.io.archive import ArchiveWriteError, write_error
-from campipe.study.run.batches import BatchHook, SchedulerError, Stored, store_batch
+from campipe.study.run.batches import BatchHook, SchedulerError, Storage, Stored
 from campipe.study.run.results import BatchData, BatchPlan, compute_batch, numerics_fingerprint
 
 
 def stored_here(
     result: Stored | BatchData,
-    parts: Path,
-    record: tuple[str, ...],
+    storage: Storage,
     on_batch: BatchHook | None,
     plans: dict[str, BatchPlan],
 ) -> Stored:
     """A finished batch as stored: by this process if its worker returned the data (``plans``
     by key), else as the worker stored it."""
     if isinstance(result, BatchData):
-        return _store(parts, record, on_batch, result, plans[result.key])
+        return _store(storage, on_batch, result, plans[result.key])
     return _checked(result)
 
 
 def _store(
-    parts: Path,
-    record: tuple[str, ...],
+    storage: Storage,
     on_batch: BatchHook | None,
     data: BatchData,
     plan: BatchPlan,
@@ -58,7 +56,7 @@ def _store(
     archive's folder, or in this process."""
     if data.numerics != numerics_fingerprint():
         raise _other_campipe(data.numerics)
-    path = store_batch(data, parts, record)
+    path, checksum = storage.store(data, plan)
     if on_batch is not None:
         on_batch(plan, data)
     return Stored(
@@ -68,7 +66,8 @@ def _store(
         tuple(int(n) for n in data.arrays["event_count"]),
         tuple(int(s) for s in data.arrays["status"]),
         data.numerics,
-        data,
+        checksum,
+        None if storage.parts else data,  # a part's rows are not assembled here
     )
 
 
@@ -94,8 +93,7 @@ SAME_MACHINE = ""
 
 def _batch_task(
     compute: Callable[[BatchPlan], BatchData],
-    parts: Path,
-    record: tuple[str, ...],
+    storage: Storage,
     reach: str | None,
     on_batch: BatchHook | None,
     plan: BatchPlan,
@@ -105,9 +103,9 @@ def _batch_task(
     :func:`_reach_token` left there), returning only what was stored; otherwise (``reach``
     None, or the token not found) return the data for this process to store."""
     data = compute(plan)
-    if reach is None or (reach != SAME_MACHINE and not _reaches(parts, reach)):
+    if reach is None or (reach != SAME_MACHINE and not _reaches(storage.directory, reach)):
         return data
-    return _store(parts, record, on_batch, data, plan)
+    return _store(storage, on_batch, data, plan)
 
 
 def _reach_file(parts: Path, token: str) -> Path:
@@ -148,8 +146,7 @@ def run_local(
     plans: list[BatchPlan],
     scheduler: str,
     workers: int,
-    parts: Path,
-    record: tuple[str, ...],
+    storage: Storage,
     on_batch: BatchHook | None,
     stored: Callable[[Stored | BatchData], None],
     started: Callable[[], None] = lambda: None,
@@ -164,8 +161,7 @@ def run_local(
     task = functools.partial(
         _batch_task,
         compute_batch,
-        parts,
-        record,
+        storage,
         SAME_MACHINE if in_worker else None,
         on_batch if in_worker else None,
     )
@@ -208,8 +204,7 @@ CONNECT_TIMEOUT = 10
 def run_distributed(
     plans: list[BatchPlan],
     address: str,
-    parts: Path,
-    record: tuple[str, ...],
+    storage: Storage,
     workers_store: bool,
     stored: Callable[[Stored | BatchData], None],
 ) -> None:
@@ -227,10 +222,11 @@ def run_distributed(
         ) from None
     token = uuid.uuid4().hex
     reach = None
+    parts = storage.directory
     try:
         if workers_store:
             reach = _reach_token(parts, token)
-        task = functools.partial(_batch_task, compute_batch, parts, record, reach, None)
+        task = functools.partial(_batch_task, compute_batch, storage, reach, None)
         with client:
             _submit_all(client, as_completed, plans, token[:8], task, stored)
     except (SchedulerError, ArchiveWriteError, CampipeError):
