@@ -54,6 +54,28 @@ def test_an_unreachable_scheduler(tmp_path, monkeypatch):
     assert not (tmp_path / "small.nc.lock").exists()
 
 
+def test_a_server_that_is_not_a_dask_scheduler_is_refused_not_waited_on(tmp_path, monkeypatch):
+    """An HTTP server accepts the connection and never answers dask's handshake: refused
+    after the connect timeout (issue 39, item 5; it held a study 11 minutes), naming
+    --scheduler, nothing written. Fails on a copy that leaves the wait to distributed's own
+    timeout, which covers the connection and not the handshake (this test then hangs: the
+    suite's own timeout, or a reader, stops it)."""
+    import http.server
+    import threading
+
+    server = http.server.ThreadingHTTPServer(("127.0.0.1", 0), http.server.BaseHTTPRequestHandler)
+    threading.Thread(target=server.serve_forever, daemon=True).start()
+    monkeypatch.setattr(workers, "CONNECT_TIMEOUT", 2)
+    spec = write_spec(tmp_path, SPEC)
+    address = f"tcp://127.0.0.1:{server.server_address[1]}"
+    try:
+        result = study(spec, "--scheduler", address)
+    finally:
+        server.shutdown()
+    assert_message(result, 1, f"cannot reach a dask scheduler at {address}", "--scheduler threads")
+    assert not (tmp_path / "small.nc").exists()
+
+
 def test_a_scheduler_that_goes_away_mid_study_leaves_what_was_stored(tmp_path):
     from distributed import LocalCluster
 

@@ -208,10 +208,10 @@ def run_distributed(
     workers_store: bool,
     stored: Callable[[Stored | BatchData], None],
 ) -> None:
-    from distributed import Client, as_completed
+    from distributed import as_completed
 
     try:
-        client = Client(address, set_as_default=False, timeout=f"{CONNECT_TIMEOUT}s")
+        client = _connect(address)
     except (OSError, TimeoutError, ValueError, TypeError) as exc:
         raise SchedulerError.at(
             "--scheduler",
@@ -241,6 +241,34 @@ def run_distributed(
     finally:
         if reach is not None:
             _reach_file(parts, reach).unlink(missing_ok=True)
+
+
+def _connect(address: str):
+    """A dask.distributed client of the scheduler at ``address``, or TimeoutError after
+    CONNECT_TIMEOUT seconds: distributed's own timeout covers the connection, not the
+    handshake, so a server that accepts and never answers as dask does (an HTTP server) held
+    a study for good. The client is made on a thread of its own and waited for; one that
+    never comes is left to the process's end (a daemon thread)."""
+    import threading
+
+    from distributed import Client
+
+    made: list = []
+
+    def connect() -> None:
+        try:
+            made.append(Client(address, set_as_default=False, timeout=f"{CONNECT_TIMEOUT}s"))
+        except BaseException as exc:  # noqa: BLE001 - handed to the caller below
+            made.append(exc)
+
+    thread = threading.Thread(target=connect, name="campipe-connect", daemon=True)
+    thread.start()
+    thread.join(CONNECT_TIMEOUT + 1)
+    if not made:
+        raise TimeoutError(f"no dask handshake within {CONNECT_TIMEOUT} s")
+    if isinstance(made[0], BaseException):
+        raise made[0]
+    return made[0]
 
 
 def _reach_token(parts: Path, token: str) -> str:
