@@ -22,8 +22,11 @@ from campipe.vocabulary import N_COORDINATES
 # step's factors), the envelope e^{rate·τ} and its step factor, the block's largest share of a
 # coordinate or velocity (with f1, with f2) and of the contact forces (likewise) at the segment
 # start, and the block's constants λ̄, δ², 1/|δ| (inf at δ = 0) and slowest rate.
+# Then the block's coefficients of f1 and f2 in the time derivative of the cam's and the seat's
+# velocity rows: their accelerations where free (``exact.segment._block_columns``).
 F1, F2, D1, D2, EABS, DABS, AMP_QA, AMP_QB, AMP_FA, AMP_FB, LBAR, DSQ, INVD, RATE = range(14)
-N_MC = 14
+ACC_CAM1, ACC_CAM2, ACC_SEAT1, ACC_SEAT2 = range(14, 18)
+N_MC = 18
 # Rows of the monitor coefficients ``WC`` (row, monitor, block): the coefficients of f1 and f2
 # in the monitor, in its time derivative and in its second derivative, then |W1|, |W2|,
 # |WL1|, |WL2|.
@@ -105,7 +108,7 @@ class Workspace(NamedTuple):
     bpoly: np.ndarray  # (8, ns) the forcing's polynomial coefficients b_k
     u: np.ndarray  # (ns,) the state's homogeneous part in the blocks' basis at t_s: X⁻¹ zh
     act: np.ndarray  # (ns,) int64 the block of each active column
-    MC: np.ndarray  # (N_MC, ns) per-block work, rows F1 … RATE
+    MC: np.ndarray  # (N_MC, ns) per-block work, rows F1 … ACC_SEAT2
     WC: np.ndarray  # (N_WC, 2, ns) monitor coefficients per block, rows W1 … WL2_ABS
     VY: np.ndarray  # (2, ns, ns) the state's coefficients of f1 and f2: X_b u_b, X_b N_b u_b
     gval: np.ndarray  # (2,) monitors at the latest point
@@ -185,6 +188,7 @@ STATE = np.dtype(
         ("ns", "i8"),
         ("kmax", "i8"),  # degree of the held inputs' polynomials
         ("deg", "i8"),  # degree of the particular solution's polynomial
+        ("pdeg", "i8"),  # degree of the piece's polynomial (``profiles.packed.degree``)
         ("gdeg", "i8"),  # degree of the monitors' polynomials
         ("nact", "i8"),  # active block columns
         ("k_out", "i8"),  # the next output sample

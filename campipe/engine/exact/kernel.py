@@ -110,6 +110,19 @@ def _fastest_needed(WC, MC, watch, level, gval, nact, tau):
 
 
 @njit(inline="always", nogil=True)
+def _shortest_allowed(speed_row, act, nact, dt_cap):
+    """The shortest step any choice of blocks to resolve allows (``_walk``): the one of the
+    fastest of the blocks 0 … nact − 1, or the step cap."""
+    fastest = 0.0
+    for jj in range(nact):
+        fastest = max(fastest, speed_row[act[jj]])
+    h_all = RESOLUTION * np.pi / fastest if fastest > 0.0 else np.inf
+    if dt_cap > 0.0:
+        h_all = min(h_all, dt_cap)
+    return h_all
+
+
+@njit(inline="always", nogil=True)
 def _refresh(MC, nact, h, tau):
     """Exact basis functions at the grid step h and at τ (from the segment start to the next
     grid point) of the blocks 0 … nact − 1, and their envelopes."""
@@ -231,23 +244,30 @@ def _walk(ref, st):
     i_step = n_steps = 0
     t_from = t_next = cth = sth = cwh = swh = 0.0
     to_sample = False
+    h_all = _shortest_allowed(speed_row, act, nact, dt_cap)
     while True:
         if replan:
             if since_check >= 32:
                 since_check = 0
                 nact = _drop_decayed(MC, WC, ws.VY, act, nact, ns, eps_force, t_prev - t_s)
+                h_all = _shortest_allowed(speed_row, act, nact, dt_cap)
             # The step need only resolve the modes that could bring a watched monitor to its
             # level.
             t_from = t_prev
             k_out = st.k_out
             to_sample = k_out < n_out and k_out * t_sample < t_end * (1.0 + 1e-13)
             t_next = k_out * t_sample if to_sample else t_end
-            k = _fastest_needed(WC, MC, watch, level, gval, nact, t_next - t_s)
-            fastest = speed_row[act[k]] if k < nact else 0.0
-            h_allow = RESOLUTION * np.pi / fastest if fastest > 0.0 else np.inf
-            if dt_cap > 0.0:
-                h_allow = min(h_allow, dt_cap)
-            n_steps = max(1, int(np.ceil((t_next - t_from) / h_allow - 1e-9)))
+            if (t_next - t_from) / h_all - 1e-9 <= 1.0:
+                # One step resolves every active block: which of them must be resolved
+                # cannot change the step (h_allow ≥ h_all below).
+                n_steps = 1
+            else:
+                k = _fastest_needed(WC, MC, watch, level, gval, nact, t_next - t_s)
+                fastest = speed_row[act[k]] if k < nact else 0.0
+                h_allow = RESOLUTION * np.pi / fastest if fastest > 0.0 else np.inf
+                if dt_cap > 0.0:
+                    h_allow = min(h_allow, dt_cap)
+                n_steps = max(1, int(np.ceil((t_next - t_from) / h_allow - 1e-9)))
             h_new = (t_next - t_from) / n_steps
             i_step = 0
             since_refresh += n_steps

@@ -8,6 +8,10 @@ from numba import njit
 
 from campipe.constants import TWO_PI
 from campipe.engine.closed_form import (
+    ACC_CAM1,
+    ACC_CAM2,
+    ACC_SEAT1,
+    ACC_SEAT2,
     AMP_FA,
     AMP_FB,
     AMP_QA,
@@ -44,7 +48,7 @@ from campipe.engine.common import (
     holds_seat,
 )
 from campipe.engine.exact.state import _sample
-from campipe.profiles.packed import horner, next_break
+from campipe.profiles.packed import degree, horner, next_break
 from campipe.vocabulary import CAM, SEAT
 
 # --------------------------------------------------------------------------- begin a segment
@@ -189,6 +193,16 @@ def _block_columns(cases, trains, runs, ws, st):
         MC[DSQ, jj] = d2
         MC[INVD, jj] = 1.0 / np.sqrt(abs(d2)) if d2 != 0.0 else np.inf
         MC[RATE, jj] = trains.rate[tr, ci, jj]
+        # The contact coordinates' accelerations (``state._free_acceleration``): the time
+        # derivative of their velocity rows, f1' = λ̄f1 + δ²f2, f2' = λ̄f2 + f1.
+        a = VY[0, jj, rows[0] + st.nf]
+        b = VY[1, jj, rows[0] + st.nf]
+        MC[ACC_CAM1, jj] = lbar * a + b
+        MC[ACC_CAM2, jj] = d2 * a + lbar * b
+        a = VY[0, jj, rows[1] + st.nf]
+        b = VY[1, jj, rows[1] + st.nf]
+        MC[ACC_SEAT1, jj] = lbar * a + b
+        MC[ACC_SEAT2, jj] = d2 * a + lbar * b
         for m in range(2):
             w1 = 0.0
             w2 = 0.0
@@ -241,6 +255,7 @@ def _begin_segment(ref, st):
     st.nb = nb
     st.revb = revb
     st.t_break = th_b / st.w
+    st.pdeg = degree(profiles, st.c, st.p)
     _block_columns(cases, trains, runs, ws, st)
     for m in range(2):
         if ws.ready[m]:

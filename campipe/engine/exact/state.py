@@ -8,6 +8,8 @@ from numba import njit
 
 from campipe.constants import TWO_PI
 from campipe.engine.closed_form import (
+    ACC_CAM1,
+    ACC_SEAT1,
     D1,
     D2,
     DABS,
@@ -16,7 +18,6 @@ from campipe.engine.closed_form import (
     F1,
     F2,
     INVD,
-    LBAR,
     W1,
     W2,
     WL1,
@@ -36,7 +37,7 @@ from campipe.engine.metrics import (
     SEATED_OFF_CAM,
     SEPARATION,
 )
-from campipe.profiles.packed import degree, horner
+from campipe.profiles.packed import horner
 from campipe.vocabulary import CAM, SEAT, UNBOUNDED
 
 #: Steps are at most RESOLUTION·π/|λ| of the fastest mode still present: under half its period,
@@ -213,15 +214,13 @@ def _slope_bound(WC, G, GT, m, MC, nact, gdeg, w, xa, xb, tau_b):
 
 
 @njit(inline="always", nogil=True)
-def _free_acceleration(VY, MC, Z, ZT, s, nact, x, cth, sth, w, deg):
+def _free_acceleration(MC, r, Z, ZT, s, nact, x, cth, sth, w, deg):
     """The time derivative of state row s (a velocity row: an acceleration) at the grid point,
-    from the blocks 0 … nact − 1 and the particular solution."""
+    from the blocks 0 … nact − 1 (their coefficients of f1 and f2 in it, rows r and r + 1 of
+    MC: ``segment._block_columns``) and the particular solution."""
     acc = 0.0
     for jj in range(nact):
-        a = VY[0, jj, s]
-        b = VY[1, jj, s]
-        lbar = MC[LBAR, jj]
-        acc += (lbar * a + b) * MC[F1, jj] + (MC[DSQ, jj] * a + lbar * b) * MC[F2, jj]
+        acc += MC[r, jj] * MC[F1, jj] + MC[r + 1, jj] * MC[F2, jj]
     acc += w * horner(Z[:, s], x, deg)[1]
     return acc - w * (ZT[s].real * sth + ZT[s].imag * cth)
 
@@ -241,10 +240,16 @@ def _write_sample(
     lift += trig[c, p, 0] * sn + trig[c, p, 1] * ct
     dlift += trig[c, p, 0] * ct - trig[c, p, 1] * sn
     ddlift -= trig[c, p, 0] * sn + trig[c, p, 1] * ct
-    for i in range(out.q.shape[2]):
-        shown = (full_state or i == CAM or i == SEAT) and i < n_coord
-        out.q[c, k, i] = q[i] if shown else np.nan
-        out.v[c, k, i] = v[i] if shown else np.nan
+    if full_state and n_coord == out.q.shape[2]:  # every coordinate shown
+        for i in range(n_coord):
+            out.q[c, k, i] = q[i]
+        for i in range(n_coord):
+            out.v[c, k, i] = v[i]
+    else:
+        for i in range(out.q.shape[2]):
+            shown = (full_state or i == CAM or i == SEAT) and i < n_coord
+            out.q[c, k, i] = q[i] if shown else np.nan
+            out.v[c, k, i] = v[i] if shown else np.nan
     cam_held = holds_cam(cfg)
     seat_held = holds_seat(cfg)
     if cam_held:
@@ -273,7 +278,7 @@ def _sample(ref, st, nact, x, cth, sth):
     sth) from the blocks 0 … nact − 1; a motion out of bounds ends the case (UNBOUNDED)."""
     cases, trains, profiles, runs, out, ws = deref(ref)
     tr, ci, nf, c, w, deg = st.tr, st.cfg - 1, st.nf, st.c, st.w, st.deg
-    q, v = ws.q, ws.v
+    q, v, MC, Z, ZT = ws.q, ws.v, ws.MC, ws.Z, ws.ZT
     _state_active(
         q, v, ws.z, ws.VY, ws.MC, ws.Z, ws.ZT, trains.free, tr, ci, nf, nact, x, cth, sth,
         deg, runs.full_state,
@@ -283,12 +288,12 @@ def _sample(ref, st, nact, x, cth, sth):
     for k in range(nf):
         coord = trains.free[tr, ci, k]
         if coord == CAM:
-            acc1 = _free_acceleration(ws.VY, ws.MC, ws.Z, ws.ZT, nf + k, nact, x, cth, sth, w, deg)
+            acc1 = _free_acceleration(MC, ACC_CAM1, Z, ZT, nf + k, nact, x, cth, sth, w, deg)
         elif coord == SEAT:
-            acc7 = _free_acceleration(ws.VY, ws.MC, ws.Z, ws.ZT, nf + k, nact, x, cth, sth, w, deg)
+            acc7 = _free_acceleration(MC, ACC_SEAT1, Z, ZT, nf + k, nact, x, cth, sth, w, deg)
     _write_sample(
         out, c, st.k_out, q, v, ws.gval, profiles.poly, profiles.trig, st.cfg, st.p, x, cth,
-        sth, w, runs.full_state, acc1, acc7, trains.n_coordinates[tr], degree(profiles, c, st.p),
+        sth, w, runs.full_state, acc1, acc7, trains.n_coordinates[tr], st.pdeg,
     )  # fmt: skip
     st.k_out += 1
     if _out_of_bounds(cases, c, q, v):
