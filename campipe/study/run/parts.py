@@ -48,7 +48,7 @@ from campipe.study.run.resume import (
     ArchiveExistsError,
     ArchiveState,
     StudyReport,
-    mismatch,
+    checked_files,
     spec_file,
 )
 from campipe.study.spec.coordinates import CASE_ID
@@ -212,31 +212,16 @@ def find_parts(study: Study, archive: Path, layout: PartLayout) -> tuple[Parts, 
     wanted = {c.case_id for c in study.cases}
     out = Parts(study, archive)
     notes: list[str] = []
-    other: dict[str, int] = {}
-    for path in part_files(archive) if archive.is_dir() else []:
-        try:
-            attrs = read_attrs(path)
-            why = mismatch(attrs, study.record) or _misfit(path, layout)
-            problems = [] if why else verify(path)
-        except Exception as exc:  # a damaged file fails to open in many ways
-            why, problems = None, [f"it cannot be read ({type(exc).__name__})"]
-        if why:
-            other[why] = other.get(why, 0) + 1
-            continue
-        if problems:
-            notes.append(
-                f"{path} failed its checks ({'; '.join(problems)}): removed, its cases are "
-                "computed again"
-            )
-            path.unlink(missing_ok=True)
-            continue
+    checked = checked_files(
+        part_files(archive) if archive.is_dir() else [], read_attrs, verify, study.record,
+        notes, f"part in {archive}", lambda path: _misfit(path, layout),
+    )  # fmt: skip
+    for path, attrs in checked:
         ids, counts, statuses = _part_rows(path)
         if not wanted.intersection(ids):
             continue
         checksum = checksum_digest(str(attrs.get(CHECKSUM_ATTR, "")))
         out.add(Stored("", path, ids, counts, statuses, "", checksum))
-    for why, n in other.items():
-        notes.append(f"{n} part{'s' if n != 1 else ''} in {archive} set aside: {why}")
     for note in notes:
         log.warning("%s", note)
     return out, notes

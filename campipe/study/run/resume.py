@@ -14,7 +14,7 @@ import logging
 import os
 import stat
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -122,6 +122,44 @@ def _index_of(path: Path, found: Found, wanted: set[str]) -> None:
             found[cid] = (path, row, int(n_ev))
 
 
+def checked_files(
+    paths: Iterable[Path],
+    read: Callable[[Path], dict],
+    check: Callable[[Path], list[str]],
+    record: tuple[str, ...],
+    notes: list[str],
+    what: str,
+    misfit: Callable[[Path], str | None] | None = None,
+) -> Iterator[tuple[Path, dict]]:
+    """The files among ``paths`` to reuse, each with its attributes (``read``): those of this
+    layout, record and engine (:func:`mismatch`), fit (``misfit``, when given) and whose
+    checksums verify (``check``). One that fails its checks or cannot be read is removed and
+    named in ``notes`` (its cases are computed again); the others are set aside, counted in
+    one note a reason (``what``: "batch file in <folder>", "part in <archive>")."""
+    other: dict[str, int] = {}
+    for path in paths:
+        try:
+            attrs = read(path)
+            why = mismatch(attrs, record) or (misfit(path) if misfit else None)
+            problems = [] if why else check(path)
+        except Exception as exc:  # a damaged file fails to open in many ways
+            why, problems = None, [f"it cannot be read ({type(exc).__name__})"]
+        if why:
+            other[why] = other.get(why, 0) + 1
+            continue
+        if problems:
+            notes.append(
+                f"{path} failed its checks ({'; '.join(problems)}): removed, its cases are "
+                "computed again"
+            )
+            path.unlink(missing_ok=True)
+            continue
+        yield path, attrs
+    noun, _, where = what.partition(" in ")
+    for why, n in other.items():
+        notes.append(f"{n} {noun}{'s' if n != 1 else ''} in {where} set aside: {why}")
+
+
 def find_results(
     study: Study, archive: Path, archive_usable: bool = True
 ) -> tuple[Found, list[str]]:
@@ -137,31 +175,15 @@ def find_results(
     notes: list[str] = []
     parts = parts_directory(archive)
     files = sorted(parts.glob(f"batch-*{batch_file.SUFFIX}")) if parts.is_dir() else []
-    other: dict[str, int] = {}
-    for path in files:
-        try:
-            why = mismatch(batch_file.read_attrs(path), study.record)
-        except Exception as exc:  # a damaged file fails to open in many ways
-            why = None
-            problems = [f"it cannot be read ({type(exc).__name__})"]
-        else:
-            problems = [] if why else batch_file.verify(path)
-        if why:
-            other[why] = other.get(why, 0) + 1
-            continue
-        if problems:
-            notes.append(
-                f"{path} failed its checks ({'; '.join(problems)}): removed, its cases are "
-                "computed again"
-            )
-            path.unlink(missing_ok=True)
-            continue
+    checked = checked_files(
+        files, batch_file.read_attrs, batch_file.verify, study.record, notes,
+        f"batch file in {parts}",
+    )  # fmt: skip
+    for path, _ in checked:
         try:
             _index_of(path, found, wanted)
         except (ArchiveFileError, OSError, RuntimeError, ValueError, KeyError) as exc:
             notes.append(f"{path} cannot be read ({exc}): its cases are computed again")
-    for why, n in other.items():
-        notes.append(f"{n} batch file{'s' if n != 1 else ''} in {parts} set aside: {why}")
     if archive_usable and archive.is_file():
         try:
             why = mismatch(read_attrs(archive), study.record)
