@@ -54,31 +54,32 @@ class Boundary(NamedTuple):
     scale: np.ndarray  # (n, 2, n_q) each coordinate's and velocity's range over a turn
 
 
-def boundary_difference(boundary: Boundary, c: int, k: int, p: int) -> float:
-    """Case c's largest difference between its states at turns k and k − p, each coordinate
-    and velocity relative to its range over a turn [-]."""
+def boundary_difference(boundary: Boundary, c, k: int, p: int):
+    """Case c's (or each of an array of cases') largest difference between its states at
+    turns k and k − p, each coordinate and velocity relative to its range over a turn [-]."""
     dq = np.abs(boundary.q[c, k] - boundary.q[c, k - p]) / boundary.scale[c, 0]
     dv = np.abs(boundary.v[c, k] - boundary.v[c, k - p]) / boundary.scale[c, 1]
-    return float(max(np.nanmax(dq), np.nanmax(dv)))
+    return np.fmax(np.nanmax(dq, axis=-1), np.nanmax(dv, axis=-1))
 
 
-def repeats(boundary: Boundary, c: int, k: int, p: int, tolerance: float) -> bool:
-    """Has case c, after k turns, settled with period p? Its state at turn k differs from the
-    one at k − p by at most ``tolerance`` (relative, :func:`boundary_difference`), and so will
-    every later one: where two differences p apart are known, their ratio r is the transient's
-    contraction per period, and the distance left to the periodic response, d·r/(1 − r), must
-    be within the tolerance too (a slowly decaying transient changes little per turn long
-    before it has settled)."""
+def repeats(boundary: Boundary, c, k: int, p: int, tolerance: float):
+    """Has case c (or each of an array of cases), after k turns, settled with period p? Its
+    state at turn k differs from the one at k − p by at most ``tolerance`` (relative,
+    :func:`boundary_difference`), and so will every later one: where two differences p apart
+    are known, their ratio r is the transient's contraction per period, and the distance left
+    to the periodic response, d·r/(1 − r), must be within the tolerance too (a slowly
+    decaying transient changes little per turn long before it has settled)."""
     if k < p:
-        return False
+        return np.zeros(np.shape(c), np.bool_)[()]
     d = boundary_difference(boundary, c, k, p)
-    if d <= AT_ONCE * tolerance:
-        return True
-    if d > tolerance or k < 2 * p:
-        return False
+    at_once = d <= AT_ONCE * tolerance
+    if k < 2 * p:
+        return at_once
     before = boundary_difference(boundary, c, k - p, p)
-    r = d / before if before > 0 else 1.0
-    return r < 1.0 and d * r / (1.0 - r) <= tolerance
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = np.where(before > 0, d / before, 1.0)
+        left = d * r / (1.0 - r)
+    return at_once | ((d <= tolerance) & (r < 1.0) & (left <= tolerance))
 
 
 def settled_from(boundary: Boundary, c: int, k: int, p: int, tolerance: float) -> int:
@@ -212,21 +213,19 @@ def run_settled(
         done[active] = k + 1
         failed = np.isin(part.status, FAILURES)
         status[active] = np.where(part.status != 0, part.status, status[active])
-        still = []
-        for j, i in enumerate(active.tolist()):
-            if failed[j]:
-                continue
-            for p in range(1, p_max + 1) if period[i] == 0 else ():
-                if repeats(boundary, i, k + 1, p, tol):
-                    period[i] = p
-                    settled[i] = settled_from(boundary, i, k + 1, p, tol)
-                    break
-            # a settled case runs on until it has the turns it records
-            if k + 1 < cap and (period[i] == 0 or k + 1 < turns):
-                still.append(j)
-        if not still:
+        # the least period each case not yet settled repeats with, all cases at once
+        open_ = ~failed & (period[active] == 0)
+        for p in range(1, p_max + 1):
+            hit = open_ & repeats(boundary, active, k + 1, p, tol)
+            for i in active[hit].tolist():
+                period[i] = p
+                settled[i] = settled_from(boundary, i, k + 1, p, tol)
+            open_ &= ~hit
+        # a settled case runs on until it has the turns it records
+        go_on = ~failed & (k + 1 < cap) & ((period[active] == 0) | (k + 1 < turns))
+        rows = np.flatnonzero(go_on)
+        if not rows.size:
             break
-        rows = np.array(still)
         active = active[rows]
         q0, v0 = part.q[rows, -1], part.v[rows, -1]
         cfg0 = part.contact_state[rows, -1].astype(np.int64)
