@@ -20,7 +20,7 @@ from campipe.cli.base import SET_HELP, Failure, load_spec
 )
 @click.option(
     "--level",
-    default="0.5 deg",  # periodic.DEFAULT_ONSET_LEVEL_DEG (not imported: numba loads)
+    default="0.5 deg",  # engine.onset.DEFAULT_ONSET_LEVEL_DEG (not imported: numba loads)
     show_default=True,
     metavar="ANGLE",
     help="With a seat, the no-follow a turn the onset reaches (0 deg: the first separation). "

@@ -117,7 +117,7 @@ def study(
     loaded = load_spec(spec, sets, limits)
     archive = archive_path(loaded, spec, output, parts)
     if loaded.spec.search == "onset":
-        from campipe.engine.periodic import DEFAULT_ONSET_TOLERANCE_RPM, RPM
+        from campipe.engine.onset import DEFAULT_ONSET_TOLERANCE_RPM, RPM
 
         tolerance = DEFAULT_ONSET_TOLERANCE_RPM * RPM
         run_onset(
