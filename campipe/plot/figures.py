@@ -183,6 +183,11 @@ def _column(view: View, name: str | None, option: str, numeric: bool = True) -> 
     return np.asarray(columns[name], dtype=float)
 
 
+def _cam_speed(view: View) -> np.ndarray | None:
+    """(n,) the selected cases' cam speeds [rpm], for values shown per degree."""
+    return view.stored.columns.get("speed_rpm")
+
+
 def _usable(view: View) -> np.ndarray:
     """(n,) bool: the selected cases that did not fail (their results are NaN)."""
     status = view.stored.columns.get("status")
@@ -246,6 +251,7 @@ def histories(view: View, request: PlotRequest) -> Figure:
             np.asarray(ds[name].values[view.rows][:, keep], float),
             str(ds[name].attrs.get("units", "")),
             units,
+            _cam_speed(view),
         )
         drawn[name] = values
         if name == "follower_lift":
@@ -283,6 +289,7 @@ def _cam_lines(ax, view: View, keep: np.ndarray, angle: np.ndarray) -> None:
         np.asarray(ds["cam_lift"].values[view.rows][:, keep], float),
         str(ds["cam_lift"].attrs.get("units", "")),
         units,
+        _cam_speed(view),
     )
     seen: list[np.ndarray] = []
     for lift in lifts:

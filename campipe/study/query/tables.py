@@ -74,8 +74,9 @@ def case_table(ds) -> CaseTable:
 def displayed(table: CaseTable, shown: dict[str, str]) -> CaseTable:
     """The table with each column in the units ``shown`` names (see
     :func:`campipe.study.query.display.display_units`); columns not named stay as they are."""
+    speed = table.columns.get("speed_rpm")  # the cam's, for units per degree
     columns = {
-        k: _without_noise(to_display(v, table.units[k], shown.get(k, table.units[k])))
+        k: without_noise(to_display(v, table.units[k], shown.get(k, table.units[k]), speed))
         if shown.get(k, table.units[k]) != table.units[k]
         else v
         for k, v in table.columns.items()
@@ -90,7 +91,7 @@ def displayed(table: CaseTable, shown: dict[str, str]) -> CaseTable:
 DISPLAY_DIGITS = 15
 
 
-def _without_noise(values: np.ndarray) -> np.ndarray:
+def without_noise(values: np.ndarray) -> np.ndarray:
     """Converted floats rounded to DISPLAY_DIGITS significant digits (others as they are)."""
     if values.dtype.kind != "f":
         return values
@@ -99,7 +100,8 @@ def _without_noise(values: np.ndarray) -> np.ndarray:
 
 
 def display_table(ds, system: str = "spec") -> CaseTable:
-    """The archive's case table in the units of ``system`` (``spec``, ``si`` or ``in-lbf``)."""
+    """The archive's case table in the units of ``system`` (``spec``, ``si``, ``in-lbf`` or
+    ``mm-deg``)."""
     table = case_table(ds)
     return displayed(table, display_units(table.units, ds.attrs, system))
 
