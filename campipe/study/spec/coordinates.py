@@ -46,7 +46,7 @@ def key_columns(
             out[name] = values * factor
         else:
             values = np.array(raw, dtype=float) * factor
-            if key == "speed":
+            if key in ("speed", "engine_speed"):
                 # rpm from rad/s: round away the conversion's last-digit noise (11000 rpm
                 # stays 11000, so `--where "speed_rpm == 11000"` finds it)
                 values = np.array([float(f"{v:.12g}") for v in values])
