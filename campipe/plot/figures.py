@@ -27,6 +27,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from campipe.errors import did_you_mean, excerpt
+from campipe.plot.kinematics import kinematic_lift, rocker_ratios
 from campipe.plot.style import (
     COLORMAP,
     EVENT_MARKERS,
@@ -280,6 +281,7 @@ def histories(view: View, request: PlotRequest) -> Figure:
         for i in range(n):
             ax.plot(x, values[i], label=labels[i], **styles[i].kwargs(samples))
         if name == "valve_lift":
+            _kinematic_lines(ax, view, keep, x)
             _seat_bands(ax, view, values)
         ax.set_title(title, fontsize=10)
         ax.set_ylabel(axis_label(name, units))
@@ -347,6 +349,39 @@ def angle_axis(view: View, request: PlotRequest, offset: float) -> AngleAxis:
             "0.5}); draw --angle cam",
         )
     return AngleAxis("crank_angle", offset, 1.0 / float(crank.attrs["cam_per_crank"]))
+
+
+def _kinematic_lines(ax, view: View, keep: np.ndarray, x: np.ndarray) -> None:
+    """The kinematic valve lift (a rigid train's: :mod:`campipe.plot.kinematics`) under the
+    cases' valve lifts, once per distinct curve (thin black dashes)."""
+    ds = view.ds
+    if "cam_lift" not in ds.variables:
+        return
+    ratios = rocker_ratios(ds.attrs, view.stored.columns)
+    seats = view.stored.columns.get("seat", np.full(view.stored.n, -np.inf))
+    stored = str(ds["cam_lift"].attrs.get("units", ""))
+    lifts = kinematic_lift(
+        np.asarray(ds["cam_lift"].values[view.rows][:, keep], float), ratios, seats
+    )
+    shown = to_display(lifts, stored, view.units.get("valve_lift", stored), _cam_speed(view))
+    seen: list[np.ndarray] = []
+    for lift in shown:
+        if not np.isfinite(lift).any():
+            continue
+        scale = 1e-9 * float(np.nanmax(np.abs(lift), initial=1.0))
+        if any(np.allclose(lift, s, rtol=0.0, atol=scale, equal_nan=True) for s in seen):
+            continue
+        seen.append(lift)
+        ax.plot(
+            x,
+            lift,
+            color="black",
+            linestyle=(0, (4, 2)),
+            linewidth=0.9,
+            label="kinematic lift" if len(seen) == 1 else None,
+            gid="kinematic",
+            zorder=1,
+        )
 
 
 def _seat_bands(ax, view: View, lifts: np.ndarray) -> None:

@@ -84,7 +84,7 @@ def test_histories_against_crank_angle_over_a_range(ds):
     fig = figure(ds, request)
     axes = [ax for ax in fig.axes if ax.get_visible()]
     assert axes[-1].get_xlabel() == "Crank angle [deg]"
-    lines = axes[0].get_lines()
+    lines = [line for line in axes[0].get_lines() if line.get_gid() != "kinematic"]
     assert [line.get_label() for line in lines] == ["engine 12000 rpm", "engine 19048 rpm"]
     crank = 2 * ds.cam_angle.values
     inside = (crank >= 100) & (crank <= 400)
@@ -152,3 +152,47 @@ def test_metric_against_engine_speed_with_limit_lines(ds):
     assert limits["limit-1"] == pytest.approx(1000 * 4.4482216152605, rel=1e-12)
     with pytest.raises(PlotError, match="--limit"):
         figure(ds, PlotRequest("metric", y="max_cam_force", limit=("3 in",)))
+
+
+def test_the_kinematic_lift_is_the_cam_s_times_the_rocker_ratio_floored_at_the_seat(ds):
+    """The valve-lift panel overlays a rigid train's lift once per distinct curve: the cam's
+    lift × 1.5 (the thesis rocker's ratio, campipe.model.lash_ratio) without a seat, and no
+    lower than 0.1 in with one; close to the dynamic lift at 6000 rpm where the follower
+    stays on the cam. Fails on a copy that overlays the cam's lift itself (ratio 1) or
+    ignores the seat."""
+    fig = figure(ds, PlotRequest("histories", where="speed_rpm == 6000"))
+    ax = fig.axes[0]
+    kinematic = [line for line in ax.get_lines() if line.get_gid() == "kinematic"]
+    assert len(kinematic) == 2 and kinematic[0].get_label() == "kinematic lift"
+    row = int(np.flatnonzero((ds.speed_rpm.values == 6000) & np.isinf(ds.seat.values))[0])
+    cam = ds.cam_lift.values[row] / INCH
+    assert_allclose(kinematic[0].get_ydata(), 1.5 * cam, rtol=1e-9)
+    assert_allclose(kinematic[1].get_ydata(), np.maximum(1.5 * cam, 0.1), rtol=1e-9)
+    dynamic = ds.valve_lift.values[row] / INCH
+    assert np.abs(dynamic - 1.5 * cam).max() < 0.02  # in: the elastic train's give
+
+
+def test_export_and_onset_give_the_crank_angle_and_the_engine_speed(archive, tmp_path):
+    """campipe export writes crank_angle [deg] beside cam_angle (twice it); campipe onset
+    gives the onset at the engine's speed beside the cam's (twice it) and says which is
+    which. Fails on a copy that writes the cam's numbers under the engine's name."""
+    import csv
+
+    out = tmp_path / "e.csv"
+    result = CliRunner().invoke(
+        main, ["export", str(archive), "--where", "speed_rpm == 6000 and seat is none", "-o", out]
+    )
+    assert result.exit_code == 0, result.output
+    with open(out, newline="") as f:
+        rows = list(csv.reader(f))
+    assert rows[0][:4] == ["case", "cam_angle [deg]", "crank_angle [deg]", "time [s]"]
+    assert all(float(r[2]) == 2 * float(r[1]) for r in rows[1:])
+    spec = write_spec(tmp_path, SPEC.replace("seat: [none, 0.1 in]", "seat: [none]"))
+    result = CliRunner().invoke(main, ["onset", str(spec), "-o", str(tmp_path / "o.nc")])
+    assert result.exit_code == 0, result.output
+    assert "onset_engine_speed_rpm the engine's" in result.output
+    lines = result.output.splitlines()
+    head = next(i for i, line in enumerate(lines) if line.startswith("onset_speed_rpm"))
+    assert lines[head].split()[:2] == ["onset_speed_rpm", "onset_engine_speed_rpm"]
+    cam, engine = (float(v) for v in lines[head + 2].split()[:2])
+    assert 6000 < cam < 9524 and engine == pytest.approx(2 * cam, rel=1e-5)

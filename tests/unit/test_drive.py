@@ -9,6 +9,7 @@ import jsonschema
 import pytest
 
 from campipe.study import SpecError, check_spec, expand
+from campipe.study.spec.coordinates import coordinate_values
 from campipe.study.spec.schema import study_schema
 
 RPM = 2 * math.pi / 60
@@ -34,7 +35,8 @@ def test_an_engine_speed_gives_the_cam_speed_by_the_drive_s_ratio():
     )
     assert engine.cases[0].case.speed == pytest.approx(6000 * RPM, rel=1e-15)
     assert engine.cases[0].case_id == cam.cases[0].case_id
-    assert engine.cases[0].values["engine_speed"] == pytest.approx(12000 * RPM, rel=1e-15)
+    assert coordinate_values(engine.cases, engine)["engine_speed_rpm"].tolist() == [12000.0]
+    assert "engine_speed_rpm" not in coordinate_values(cam.cases, cam)
     assert engine.spec.drive == 0.5 and cam.spec.drive is None
     assert "engine_speed" in engine.varied and "engine_speed" not in cam.varied
 
@@ -50,9 +52,9 @@ def test_an_engine_speed_sweep_is_the_cam_s_speed_sweep_in_its_order(units):
     )
     assert [a.key for a in study.axes] == ["speed", "seat"]
     speeds = [c.case.speed / RPM for c in study.cases]
-    engines = [c.values["engine_speed"] / RPM for c in study.cases]
+    engines = coordinate_values(study.cases, study)["engine_speed_rpm"].tolist()
     assert speeds == pytest.approx([6000, 6000, 9524, 9524], rel=1e-13)
-    assert engines == pytest.approx([12000, 12000, 19048, 19048], rel=1e-13)
+    assert engines == [12000, 12000, 19048, 19048]
 
 
 def test_a_range_and_a_case_entry_of_engine_speeds():

@@ -1,7 +1,8 @@
 """A case's histories as a table: one row per sample, one column per history
 (``campipe export``).
 
-The columns: ``case`` (the case's id), ``cam_angle``, ``time``, then each history the
+The columns: ``case`` (the case's id), ``cam_angle`` (and ``crank_angle``, for a spec with a
+drive), ``time``, then each history the
 archive holds along ``(case, cam_angle)`` in its order (``q`` as ``q1`` … ``q7``), each in
 the units of the chosen system (:mod:`campipe.study.query.display`; velocities and
 accelerations per degree at each case's cam speed in ``mm-deg``). Several cases follow one
@@ -105,6 +106,9 @@ def history_table(ds, rows: np.ndarray, system: str = "spec") -> HistoryTable:
         "cam_angle": np.tile(angle, rows.size),
     }
     units = {"case": "", "cam_angle": shown["cam_angle"]}
+    if "crank_angle" in ds.variables:  # a drive's: the crank angle beside the cam's
+        columns["crank_angle"] = np.tile(np.asarray(ds["crank_angle"].values, float), rows.size)
+        units["crank_angle"] = str(ds["crank_angle"].attrs.get("units", "degree"))
     for name in ["time", *(n for n in names if n != "time")] if "time" in names else names:
         values = np.asarray(ds[name].values)[rows]
         if values.ndim == 3:  # q: a column per coordinate

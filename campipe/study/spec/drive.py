@@ -148,7 +148,12 @@ def _scaled(value: object, ratio: float, path: str) -> object:
 
 
 def with_drive(values: dict[str, object], ratio: float) -> None:
-    """A resolved case's values (``ResolvedCase.values``) with the drive's: its ratio
-    (``drive.cam_per_crank``) and the engine's speed [rad/s], the cam's over it."""
+    """A resolved case's values (``ResolvedCase.values``) with the drive's ratio
+    (:data:`RATIO_KEY`): the same for every case, so nothing groups cases by it, and a
+    speed sweep's cases (``SpeedSweep``) copy it with the rest."""
     values[RATIO_KEY] = ratio
-    values[ENGINE_SPEED.key] = float(values["speed"]) / ratio  # type: ignore[arg-type]
+
+
+def engine_speed(values: Mapping[str, object]) -> float:
+    """A resolved case's engine speed [rad/s]: its cam's over the drive's ratio."""
+    return float(values["speed"]) / float(values[RATIO_KEY])  # type: ignore[arg-type]

@@ -52,7 +52,6 @@ from campipe.profiles import (
     table,
 )
 from campipe.study.spec.blocks import check_defects, check_profile
-from campipe.study.spec.drive import RATIO_KEY, with_drive
 from campipe.study.spec.fields import (
     CASE_FIELDS,
     DEFECT_FIELDS,
@@ -123,8 +122,6 @@ class SpeedSweep(Sequence[ResolvedCase]):
         speed = self._speeds[j]
         values = dict(case.values)
         values["speed"] = speed
-        if RATIO_KEY in values:  # a drive: the engine's speed beside the cam's
-            with_drive(values, float(values[RATIO_KEY]))  # type: ignore[arg-type]
         ids = self._ids.get(k)
         if ids is None:
             ids = self._ids[k] = speed_case_ids(canonical)
