@@ -88,7 +88,7 @@ def apply_drive(raw: Mapping, problems: Problems) -> tuple[Mapping, float | None
         elif ratio is not None:
             speed = problems.check(_scaled, value, ratio, at)
         # in the engine speed's place: a sweep's first key stays outermost
-        items = [(k, v) for k, v in block.items() if k != "speed" or speed is None]
+        items = list(block.items())
         block.clear()
         for k, v in items:
             if k != ENGINE_SPEED.key:
