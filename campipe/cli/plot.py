@@ -52,12 +52,36 @@ PLOT_KINDS = ("histories", "metric", "map", "events")
     metavar="N|last|all",
     help="histories, events: show one cam turn (1, 2, ... or last; default all).",
 )
-def plot(kind, archive, output, overwrite, where, units, x, y, z, level, turn) -> None:
+@click.option(
+    "--angle",
+    type=click.Choice(["cam", "crank"]),
+    help="histories, events: draw against the cam angle (default) or the crank angle (an "
+    "archive whose spec gives a drive).",
+)
+@click.option(
+    "--range",
+    "span",
+    metavar="LO:HI",
+    help="histories, events: show the angles LO to HI [deg of the angle drawn], e.g. 60:120 "
+    "(with --turn, of that turn).",
+)
+@click.option(
+    "--limit",
+    "limits",
+    multiple=True,
+    metavar="VALUE",
+    help="metric: draw a limit line at this value of y, a number in its shown units or a "
+    "quantity such as '0.5 m/s'. Repeatable.",
+)
+def plot(
+    kind, archive, output, overwrite, where, units, x, y, z, level, turn, angle, span, limits
+) -> None:
     """Draw a figure of ARCHIVE.
 
     \b
-    histories  valve lift, velocity, acceleration, cam and follower lift, contact forces
-               against cam angle, the cases overlaid (at most 10), events marked
+    histories  valve lift (the seat hatched), velocity, acceleration, cam and follower
+               lift, contact forces against cam (or crank) angle, the cases overlaid (at
+               most 10), events marked
     metric     a per-case value (--y) against a swept column (--x), a line per
                combination of the other varied keys
     map        a per-case value (--z) over two columns (--x, --y), its contour at --level
@@ -68,6 +92,7 @@ def plot(kind, archive, output, overwrite, where, units, x, y, z, level, turn) -
 
     options = {"kind": kind, "where": where, "units": units, "output": output}
     options.update({"x": x, "y": y, "z": z, "level": level, "turn": turn})
+    options.update({"angle": angle, "range": span, "limit": list(limits) or None})
     given = {k: v for k, v in options.items() if v is not None}
     try:
         request = check_plot(given)

@@ -20,6 +20,8 @@ Grammar (all keys optional except ``name``; each case must end up with a ``speed
     closure: force | form
     seat: none | <length>
     speed: <angular speed>
+    drive: {cam_per_crank: <number>}                   # campipe.study.spec.drive
+    engine_speed: <angular speed>                      # instead of speed, with a drive
     run: {revolutions, integrator, dt, output_every, tolerance, max_events, record: [...]}
     sweep: {<key>: [values] | {from, to, num}, ...}     # full grid
     zip: {<key>: [values] | {from, to, num}, ...}       # varied together
@@ -52,6 +54,7 @@ from campipe.study.spec.blocks import (
     show,
     unknown_key,
 )
+from campipe.study.spec.drive import apply_drive
 from campipe.study.spec.fields import (
     CASE_FIELDS,
     CASE_KEYS,
@@ -101,6 +104,7 @@ class Spec:
     sample: Sample | None  # sampled design
     replay: str | None  # replay selection expression
     search: str | None = None  # "onset": search the speed axis instead (campipe onset)
+    drive: float | None = None  # camshaft turns per crankshaft turn (drive.cam_per_crank)
     overrides: dict[str, object] = field(default_factory=dict)  # --set KEY=VALUE applied
     path: Path | None = None  # the spec file, when read from one
     plots: list[PlotRequest] = field(default_factory=list)  # figures to write at the end
@@ -247,6 +251,7 @@ def check_spec(
             ],
             source,
         )
+    raw, drive = apply_drive(raw, problems)
     for k in raw:
         if k not in TOP_LEVEL:
             problems.items.append(unknown_key("", str(k), TOP_LEVEL))
@@ -291,6 +296,7 @@ def check_spec(
         sample=sample,
         replay=replay,
         search=search,
+        drive=drive,
         overrides=overrides,
         plots=plots,
     )
