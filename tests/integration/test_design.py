@@ -273,3 +273,20 @@ def test_design_spring_rate_study():
     one_key = Evaluator(study, design_study(study))([196.66 * LBF, 245 * LBF / INCH])
     assert one_key.feasible and math.isfinite(best.objective)
     assert best.objective < one_key.objective
+
+
+def test_a_spec_campipe_design_cannot_serve_is_refused_with_status_2(tmp_path):
+    """A spec without a design section, and one requiring the onset at one speed: exit 2,
+    naming ``design`` and ``speed``; nothing written. Fails if the single speed were taken
+    as a range of width 0 (every onset 'below')."""
+    single = write_spec(tmp_path, BASE.format(name="one", design="""
+      vary: {model.spring_preload: {from: 80 lbf, to: 250 lbf}}
+      require: {onset_speed_rpm: {min: 9500 rpm}}
+      minimize: model.spring_preload
+    """).replace("sweep:\n  speed: {from: 3000 rpm, to: 20000 rpm, num: 2}\n", "speed: 6000 rpm\n"),
+        "one.yaml")  # fmt: skip
+    out = invoke("design", single)
+    assert out.exit_code == 2 and "speed: the spec runs one speed (6000 rpm)" in out.output
+    assert not (tmp_path / "one-design.nc").exists()
+    plain = invoke("design", STUDIES / "quickstart.yaml", "-o", tmp_path / "q.nc")
+    assert plain.exit_code == 2 and "design: missing" in plain.output
