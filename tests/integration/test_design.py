@@ -137,43 +137,95 @@ def test_the_least_preload_is_the_frequency_response_bisection(tmp_path, target)
     assert 0 < found - max(below) <= 0.01
 
 
-def test_two_keys_against_a_brute_force_grid(tmp_path):
-    """Preload and spring rate, the onset at least 9500 rpm, the least peak cam force at
-    6000 rpm (a trade-off: either key raises the onset and the force): COBYQA's answer is
-    feasible, the onset binds, and the best feasible point of a 13 × 13 grid of the same
-    model (the same evaluations) is no better than it, within the grid's resolution (the
-    largest change of the force between neighbouring grid points). Fails on a search that
-    returns an infeasible point, or stops far from the constraint."""
-    design = """
-      vary:
-        model.spring_preload: {from: 80 lbf, to: 250 lbf}
-        model.spring_rate: {from: 150 lbf/in, to: 450 lbf/in}
-      require:
-        onset_speed_rpm: {min: 9500 rpm}
-        max_cam_force: {at: 6000 rpm}
-      minimize: max_cam_force
-    """
-    study = load_study(spec(tmp_path, design))
-    result = run_design(study)
-    best = result.best
-    assert result.feasible and result.method == "local"
-    assert best.onset >= 9500 and best.binding.startswith("onset_speed_rpm")
-    assert best.margins["margin_onset_speed_rpm_min"] < 1.0  # it binds: within 1 rpm
+TWO_KEYS = """
+  vary:
+    model.spring_preload: {{from: 80 lbf, to: 250 lbf}}
+    model.spring_rate: {{from: 150 lbf/in, to: 450 lbf/in}}
+  require:
+    onset_speed_rpm: {{min: 9500 rpm}}
+    max_cam_force: {{at: 6000 rpm}}
+  minimize: max_cam_force
+  method: {method}
+"""
 
-    grid = Evaluator(study, design_study(study))
+
+@pytest.fixture(scope="module")
+def grid(tmp_path_factory):
+    """A 13 × 13 grid of preload and spring rate through the same evaluations: the peak
+    cam force at 6000 rpm and whether the onset reaches 9500 rpm."""
+    study = load_study(spec(tmp_path_factory.mktemp("grid"), TWO_KEYS.format(method="local")))
+    evaluate = Evaluator(study, design_study(study))
     preloads = np.linspace(80, 250, 13) * LBF
     rates = np.linspace(150, 450, 13) * LBF / INCH
     force = np.full((13, 13), np.nan)
     feasible = np.zeros((13, 13), bool)
     for i, p in enumerate(preloads):
         for j, k in enumerate(rates):
-            e = grid([p, k])
+            e = evaluate([p, k])
             force[i, j], feasible[i, j] = e.objective, e.feasible
+    return force, feasible
+
+
+@pytest.mark.parametrize("method", ["local", "global"])
+def test_two_keys_against_a_brute_force_grid(tmp_path, grid, method):
+    """Preload and spring rate, the onset at least 9500 rpm, the least peak cam force at
+    6000 rpm (a trade-off: either key raises the onset and the force): the optimiser's
+    answer (COBYQA; differential evolution then COBYQA) is feasible, the onset binds, and
+    the best feasible point of a 13 × 13 grid of the same model (the same evaluations) is no
+    better than it, within the grid's resolution (the largest change of the force between
+    neighbouring grid points). Fails on a search that returns an infeasible point, or stops
+    far from the constraint."""
+    result = run_design(load_study(spec(tmp_path, TWO_KEYS.format(method=method))))
+    best = result.best
+    assert result.feasible and result.method == method
+    assert best.onset >= 9500 and best.binding.startswith("onset_speed_rpm")
+    assert best.margins["margin_onset_speed_rpm_min"] < 1.0  # it binds: within 1 rpm
+    force, feasible = grid
     assert feasible.any() and not feasible.all()
     resolution = max(np.abs(np.diff(force, axis=0)).max(), np.abs(np.diff(force, axis=1)).max())
     grid_best = force[feasible].min()
     assert grid_best >= best.objective - resolution
-    assert best.objective <= grid_best + 1e-9 * grid_best  # and here strictly no worse
+    assert best.objective <= grid_best * (1 + 1e-9)  # and here strictly no worse
+
+
+def test_two_objectives_give_a_pareto_front_that_plot_pareto_draws(tmp_path):
+    """Minimize the peak cam force and maximize the onset: the front first in the output
+    (chosen "front"), each of its designs feasible and undominated by any feasible design
+    evaluated (checked here by brute force), the force rising with the onset along it; and
+    campipe plot pareto draws the file. Fails if a dominated design were on the front."""
+    design = """
+      vary:
+        model.spring_preload: {from: 80 lbf, to: 250 lbf}
+        model.spring_rate: {from: 150 lbf/in, to: 450 lbf/in}
+      require:
+        onset_speed_rpm: {min: 9000 rpm}
+        max_cam_force: {at: 6000 rpm}
+      minimize: max_cam_force
+      maximize: onset_speed_rpm
+      max_evaluations: 40
+    """
+    path = spec(tmp_path, design, "front")
+    out = invoke("design", path, "--format", "json")
+    assert out.exit_code == 0, out.output
+    text = out.output
+    rows = json.loads(text[text.index("{") : text.rindex("}") + 1])["cases"]
+    assert len(rows) == 40 and "Pareto front of" in text
+    force, onset = "max_cam_force_at_6000rpm", "onset_speed_rpm"
+    front = [r for r in rows if r["chosen"] == "front"]
+    assert len(front) >= 3 and rows[: len(front)] == front
+    ok = [r for r in rows if r["feasible"] == "yes"]
+    for r in front:
+        assert r["feasible"] == "yes"
+        assert not any(o[force] <= r[force] and o[onset] >= r[onset] and
+                       (o[force] < r[force] or o[onset] > r[onset]) for o in ok)  # fmt: skip
+    for r in ok:
+        if r not in front:
+            assert any(f[force] <= r[force] and f[onset] >= r[onset] for f in front)
+    assert all(a[onset] < b[onset] for a, b in zip(front, front[1:], strict=False))
+    figure = tmp_path / "front.png"
+    drawn = invoke("plot", "pareto", tmp_path / "front-design.nc", "-o", figure)
+    assert drawn.exit_code == 0, drawn.output
+    assert figure.stat().st_size > 1000
 
 
 def invoke(*args):

@@ -23,7 +23,7 @@ from campipe.constants import RPM
 from campipe.engine import periodic
 from campipe.engine.metrics import archived_metrics
 from campipe.errors import CampipeError
-from campipe.study.spec.design import ONSET, Design, Requirement
+from campipe.study.spec.design import ONSET, Design, Requirement, onset_required
 from campipe.study.spec.expand import Study
 from campipe.units import convert
 from campipe.vocabulary import FAILURES
@@ -91,7 +91,12 @@ class Evaluation:
     margins: dict[str, float] = field(default_factory=dict)  # Bound.name → margin
     relative: float = math.inf  # the least relative margin (inf: no bound)
     binding: str = ""  # the Bound.label of the least
-    objective: float = math.nan  # the objective's value (its units)
+    objectives: tuple[float, ...] = ()  # each objective's value (its units; NaN: not found)
+
+    @property
+    def objective(self) -> float:
+        """The (first) objective's value."""
+        return self.objectives[0] if self.objectives else math.nan
 
     @property
     def feasible(self) -> bool:
@@ -120,7 +125,7 @@ class Evaluator:
         self._seen: dict[bytes, Evaluation] = {}
         speeds = np.array([c.case.speed for c in study.cases])
         self.low, self.high = float(speeds.min()), float(speeds.max())
-        self.needs_onset = design.objective == ONSET or any(r.key == ONSET for r in design.require)
+        self.needs_onset = onset_required(design)
         if self.needs_onset and not self.high > self.low:
             raise DesignError.at(
                 "speed",
@@ -199,20 +204,21 @@ class Evaluator:
             rel = b.relative(ev.margins[b.name])
             if rel < ev.relative:
                 ev.relative, ev.binding = rel, b.label
-        ev.objective = self.objective_value(ev)
+        ev.objectives = tuple(self.objective_value(ev, k, s) for k, s in self.design.objectives)
 
-    def objective_value(self, ev: Evaluation) -> float:
-        d = self.design
-        keys = [v.key for v in d.vary]
-        if d.objective in keys:
-            return float(ev.x[keys.index(d.objective)])
-        if d.objective == ONSET:
+    def objective_value(self, ev: Evaluation, key: str, sense: str) -> float:
+        """The value of the objective ``key`` (a metric's the worst over its speeds for
+        ``sense``)."""
+        keys = [v.key for v in self.design.vary]
+        if key in keys:
+            return float(ev.x[keys.index(key)])
+        if key == ONSET:
             return self.onset_value(ev)
-        r = next(r for r in d.require if r.key == d.objective)
+        r = next(r for r in self.design.require if r.key == key)
         values = [ev.metrics[r.key, s] for s in r.speeds]
         if any(map(math.isnan, values)):
             return math.nan
-        return max(values) if d.sense == "minimize" else min(values)
+        return max(values) if sense == "minimize" else min(values)
 
     def better(self, a: Evaluation, b: Evaluation) -> bool:
         """``a``'s objective is better than ``b``'s (NaN never is)."""

@@ -52,7 +52,8 @@ def design_table(result: DesignResult) -> CaseTable:
     add("case", [f"d{result.order[i]:04d}" for i in range(n)])
     add("evaluation", [float(i + 1) for i in result.order])
     answer = "yes" if result.feasible else "closest"
-    add("chosen", [answer if i == 0 else "" for i in range(n)])
+    on_front = len(result.front)
+    add("chosen", ["front" if i < on_front else answer if i == 0 else "" for i in range(n)])
     for j, v in enumerate(design.vary):
         add(key_column(v.key), [float(e.x[j]) for e in evals], v.units)
     if any(e.onset_status for e in evals):
@@ -63,10 +64,34 @@ def design_table(result: DesignResult) -> CaseTable:
             add(metric_column(r.key, s), [e.metrics[r.key, s] for e in evals], r.units)
     for b in bounds_of(design):
         add(b.name, [_finite(e.margins[b.name]) for e in evals], b.requirement.units)
+    for name, (key, sense) in zip(objective_columns(result), design.objectives, strict=True):
+        if name not in columns:  # a metric at several speeds: its worst over them
+            k = design.objectives.index((key, sense))
+            add(name, [e.objectives[k] for e in evals], _units_of(result, key))
     add("feasible", ["yes" if e.feasible else "no" for e in evals])
     add("binding", [e.binding or "-" for e in evals])
     columns["evaluation"] = columns["evaluation"].astype(np.int64)
     return CaseTable(columns, units, list(columns), n, result.study.name)
+
+
+def objective_columns(result: DesignResult) -> list[str]:
+    """Each objective's column: a varied key's, the onset's, a metric's at its one speed, or
+    ``<metric>_worst`` (the largest over its speeds to minimize, the least to maximize)."""
+    design = result.design
+    out = []
+    for key, _ in design.objectives:
+        if key in [v.key for v in design.vary]:
+            out.append(key_column(key))
+        elif key == ONSET:
+            out.append(ONSET)
+        else:
+            r = next(r for r in design.require if r.key == key)
+            out.append(metric_column(key, r.speeds[0]) if len(r.speeds) == 1 else f"{key}_worst")
+    return out
+
+
+def _units_of(result: DesignResult, key: str) -> str:
+    return next(r.units for r in result.design.require if r.key == key)
 
 
 def _finite(margin: float) -> float:
@@ -109,7 +134,8 @@ def file_contents(result: DesignResult, table: CaseTable) -> tuple[dict, list, d
         "design_feasible": "yes" if result.feasible else "no",
         "design_method": result.method,
         "design_binding": best.binding,
-        "design_objective": f"{design.sense} {design.objective}",
+        "design_objective": ", ".join(f"{s} {k}" for k, s in design.objectives),
+        "design_objective_columns": json.dumps(objective_columns(result)),
         "study_axes": json.dumps(
             [{"name": key_column(v.key), "key": v.key} for v in design.vary]
         ),  # fmt: skip
@@ -128,7 +154,16 @@ def summary_lines(result: DesignResult) -> list[str]:
     values = ", ".join(f"{v.key} = {_value(best.x[j], v.units, v.written)}"
                        for j, v in enumerate(design.vary))  # fmt: skip
     lines = []
-    if result.feasible:
+    if result.front:
+        names = objective_columns(result)
+        ends = [result.evaluations[i] for i in (result.front[0], result.front[-1])]
+        span = " to ".join(
+            "(" + ", ".join(f"{n} {v:.6g}" for n, v in zip(names, e.objectives, strict=True)) + ")"
+            for e in ends
+        )
+        lines.append(f"{result.study.name}: Pareto front of {len(result.front)} designs, "
+                     f"from {span}")  # fmt: skip
+    elif result.feasible:
         lines.append(f"{result.study.name}: {design.sense} {design.objective}: {values}")
         if best.binding:
             lines.append(f"binding: {best.binding} (relative margin {best.relative:.3g})")

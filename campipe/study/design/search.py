@@ -8,6 +8,10 @@
   end that meets them (never the root's estimate, which may not). Where neither bound meets
   them, :data:`SCAN` values across the bounds are looked at, and the root is
   searched between the best feasible one and its neighbour towards the better bound.
+- **Two objectives**: a Latin hypercube of ``max_evaluations`` designs over the bounds
+  (``scipy.stats.qmc``, seeded), and the Pareto front of those that meet the requirements:
+  the designs no other feasible design is at least as good as in both objectives and better
+  in one.
 - **Otherwise**: SciPy's optimisers on the keys scaled to [0, 1] with the relative margins
   as inequality constraints: ``minimize(method="COBYQA")`` from the middle of the bounds
   (``method: local``), or ``differential_evolution`` (``method: global``, seeded, then
@@ -23,7 +27,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -49,9 +53,11 @@ class DesignResult:
     evaluations: list[Evaluation]  # in the order evaluated
     chosen: int  # index of the answer (feasible) or of the closest design (infeasible)
     feasible: bool  # whether any design meets every requirement
-    method: str  # "root", "local" or "global"
+    method: str  # "root", "local", "global" or "pareto"
     seconds: float  # wall time of the search
     stopped: bool = False  # the search ran out of evaluations (design.max_evaluations)
+    #: two objectives: the Pareto front's indices, by the first objective (chosen: its first)
+    front: list[int] = field(default_factory=list)
 
     @property
     def design(self) -> Design:
@@ -65,8 +71,10 @@ class DesignResult:
 
     @property
     def order(self) -> list[int]:
-        """The rows shown: the answer first, then every other evaluation in order."""
-        return [self.chosen, *(i for i in range(len(self.evaluations)) if i != self.chosen)]
+        """The rows shown: the answer first (the Pareto front, with two objectives), then every
+        other evaluation in order."""
+        first = self.front or [self.chosen]
+        return [*first, *(i for i in range(len(self.evaluations)) if i not in first)]
 
 
 def design_study(study: Study) -> Callable[[np.ndarray], Study]:
@@ -97,10 +105,12 @@ def run_design(study: Study, evaluate: Evaluator | None = None) -> DesignResult:
     evaluate = evaluate or Evaluator(study, design_study(study))
     t0 = time.perf_counter()
     one = len(design.vary) == 1 and design.objective == design.vary[0].key
-    method = "root" if one else design.method
+    method = "pareto" if design.pareto else "root" if one else design.method
     stopped = False
     try:
-        if one:
+        if design.pareto:
+            _sample(evaluate, design)
+        elif one:
             _root(evaluate, design)
         elif design.method == "global":
             _global(evaluate, design)
@@ -117,8 +127,37 @@ def run_design(study: Study, evaluate: Evaluator | None = None) -> DesignResult:
                 chosen = i
     else:
         chosen = max(range(len(evals)), key=lambda i: evals[i].relative)
+    front = pareto_front(evals, design) if design.pareto else []
+    if front:
+        chosen = front[0]
     return DesignResult(study, evals, chosen, bool(feasible), method,
-                        time.perf_counter() - t0, stopped)  # fmt: skip
+                        time.perf_counter() - t0, stopped, front)  # fmt: skip
+
+
+def pareto_front(evals: list[Evaluation], design: Design) -> list[int]:
+    """The feasible evaluations no other feasible one dominates (at least as good in both
+    objectives, better in one; a NaN objective is never on the front), by the first
+    objective."""
+    signs = np.array([1.0 if s == "minimize" else -1.0 for _, s in design.objectives])
+    idx = [i for i, e in enumerate(evals) if e.feasible and np.isfinite(e.objectives).all()]
+    values = np.array([np.array(evals[i].objectives) * signs for i in idx]).reshape(-1, 2)
+    front = []
+    for a, v in zip(idx, values, strict=True):
+        dominated = np.any(np.all(values <= v, axis=1) & np.any(values < v, axis=1))
+        if not dominated:
+            front.append(a)
+    return sorted(front, key=lambda i: signs[0] * evals[i].objectives[0])
+
+
+def _sample(evaluate: Evaluator, design: Design) -> None:
+    from scipy.stats import qmc
+
+    call = _budget(evaluate, design)
+    low = np.array([v.low for v in design.vary])
+    high = np.array([v.high for v in design.vary])
+    points = qmc.LatinHypercube(d=len(design.vary), seed=0).random(design.max_evaluations)
+    for u in points:
+        call(low + u * (high - low))
 
 
 def _budget(evaluate: Evaluator, design: Design) -> Callable[[np.ndarray], Evaluation]:

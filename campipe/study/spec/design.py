@@ -10,6 +10,7 @@ Grammar::
         onset_speed_rpm: {min: <speed>, max: <speed>}         # either bound or both
         <metric>: {min: <value>, max: <value>, at: <speed> | [<speed>, ...]}
       minimize: <key> | maximize: <key>     # a varied key, onset_speed_rpm or a required metric
+                                            # (two objectives: a list, or one of each: Pareto)
       method: local | global                # several keys: SciPy's bounded local or global
       max_evaluations: <integer>
 
@@ -40,7 +41,7 @@ DESIGN_KEYS: dict[str, str] = {
     "require": "bounds a design must meet: {onset_speed_rpm: {min, max}} and per-case metrics "
     "at stated speeds {<metric>: {min, max, at}}",
     "minimize": "a varied key, onset_speed_rpm or a required metric, made as small as the "
-    "requirements allow",
+    "requirements allow; two (a list, or one here and one in maximize): the Pareto front",
     "maximize": "likewise, made as large as they allow",
     "method": "with several keys (or an objective other than the one varied key): local "
     "(SciPy's COBYQA, bounded, from the middle of the bounds, the default) or global "
@@ -88,10 +89,24 @@ class Design:
 
     vary: tuple[Vary, ...]
     require: tuple[Requirement, ...]
-    objective: str  # a varied key, ONSET or a required metric
-    sense: str  # "minimize" or "maximize"
+    #: (key, "minimize" | "maximize") each: a varied key, ONSET or a required metric; two:
+    #: the Pareto front of the designs evaluated
+    objectives: tuple[tuple[str, str], ...]
     method: str = "local"
     max_evaluations: int = DEFAULT_MAX_EVALUATIONS
+
+    @property
+    def objective(self) -> str:
+        """The (first) objective's key."""
+        return self.objectives[0][0]
+
+    @property
+    def sense(self) -> str:
+        return self.objectives[0][1]
+
+    @property
+    def pareto(self) -> bool:
+        return len(self.objectives) == 2
 
 
 def metric_units() -> dict[str, str]:
@@ -123,7 +138,7 @@ def check_design(value: object, problems: Problems) -> Design | None:
             problems.items.append(unknown_key("design", str(k), DESIGN_KEYS))
     vary = _vary(block.get("vary"), problems)
     require = _require(block.get("require"), problems)
-    objective, sense = _objective(block, vary, require, problems)
+    objectives = _objectives(block, vary, require, problems)
     method = block.get("method", "local")
     if method not in METHODS:
         problems.add(
@@ -139,7 +154,7 @@ def check_design(value: object, problems: Problems) -> Design | None:
         )
     if len(problems.items) > before or vary is None or require is None:
         return None
-    return Design(vary, require, objective, sense, str(method), int(most))
+    return Design(vary, require, objectives, str(method), int(most))
 
 
 def _vary(value: object, problems: Problems) -> tuple[Vary, ...] | None:
@@ -290,37 +305,45 @@ def _speeds(value: object, path: str, problems: Problems) -> tuple[float, ...]:
     return tuple(float(v) for v in out if v is not None)
 
 
-def _objective(
+def _objectives(
     block: Mapping,
     vary: tuple[Vary, ...] | None,
     require: tuple[Requirement, ...] | None,
     problems: Problems,
-) -> tuple[str, str]:
-    given = [k for k in ("minimize", "maximize") if k in block]
-    if len(given) != 1:
+) -> tuple[tuple[str, str], ...]:
+    given = [
+        (sense, key)
+        for sense in ("minimize", "maximize")
+        if sense in block
+        for key in (block[sense] if isinstance(block[sense], list) else [block[sense]])
+    ]
+    if not given or len(given) > 2:
         problems.add(
             "design.minimize",
             "missing: minimize or maximize, e.g. minimize: model.spring_preload"
             if not given
-            else "found both minimize and maximize, expected one of them",
+            else f"found {len(given)} objectives, expected one, or two for a Pareto front",
         )
-        return "", "minimize"
-    sense = given[0]
-    key = block[sense]
+        return ()
     choices = [
         *(v.key for v in vary or ()),
         *(r.key for r in require or () if r.key != ONSET),
         ONSET,
     ]
-    if not isinstance(key, str) or key not in choices:
-        problems.add(
-            f"design.{sense}",
-            f"found {show(key)}, expected a varied key, onset_speed_rpm or a required metric "
-            f"(one of: {', '.join(choices)})"
-            + (did_you_mean(key, choices) if isinstance(key, str) else ""),
-        )
-        return "", sense
-    return key, sense
+    out = []
+    for sense, key in given:
+        if not isinstance(key, str) or key not in choices:
+            problems.add(
+                f"design.{sense}",
+                f"found {show(key)}, expected a varied key, onset_speed_rpm or a required "
+                f"metric (one of: {', '.join(choices)})"
+                + (did_you_mean(key, choices) if isinstance(key, str) else ""),
+            )
+        else:
+            out.append((key, sense))
+    if len(out) == 2 and out[0][0] == out[1][0]:
+        problems.add(f"design.{given[1][0]}", f"found {out[0][0]} twice, expected two objectives")
+    return tuple(out)
 
 
 def check_design_axes(axes: Mapping[str, str], design: Design, problems: Problems) -> None:
@@ -337,4 +360,6 @@ def check_design_axes(axes: Mapping[str, str], design: Design, problems: Problem
 
 
 def onset_required(design: Design) -> bool:
-    return design.objective == ONSET or any(r.key == ONSET for r in design.require)
+    return any(k == ONSET for k, _ in design.objectives) or any(
+        r.key == ONSET for r in design.require
+    )

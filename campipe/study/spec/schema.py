@@ -254,7 +254,8 @@ def _design() -> dict[str, object]:
         props = {"min": bound, "max": bound, "at": speeds}
         require[name] = {"type": "object", "properties": props, "required": ["at"],
                          "additionalProperties": False}  # fmt: skip
-    key = {"type": "string", "minLength": 1}
+    one = {"type": "string", "minLength": 1}
+    key = {"oneOf": [one, {"type": "array", "items": one, "minItems": 1, "maxItems": 2}]}
     return {
         "type": "object",
         "properties": {
