@@ -68,6 +68,32 @@ def _kind(study_name: str, spec_file: str):
     return Kind("a design file of this spec", ours)
 
 
+def _search(loaded):
+    """The search, with campipe study's progress line on stderr (redrawn in a terminal,
+    every 2 s elsewhere) counting designs against the most the search may take."""
+    import sys
+
+    from campipe.study.design.search import most_evaluations, run_design
+    from campipe.study.run.progress import Progress
+
+    stderr = sys.stderr
+    progress = Progress(
+        most_evaluations(loaded.spec.design),
+        stderr.write,
+        terminal=stderr.isatty(),
+        unit="designs at most",
+        then="writing the file",
+    )
+    try:
+        return run_design(
+            loaded,
+            notice=lambda text: click.echo(f"campipe design: {text}", err=True),
+            on_evaluation=lambda _: progress.advance(1),
+        )
+    finally:
+        progress.close()
+
+
 def _run(loaded, spec_path, path, fmt, overwrite) -> None:
     import os
     from pathlib import Path
@@ -84,7 +110,6 @@ def _run(loaded, spec_path, path, fmt, overwrite) -> None:
         shown_units,
         summary_lines,
     )
-    from campipe.study.design.search import run_design
     from campipe.study.query.tables import displayed, format_rows
 
     spec_file = os.path.relpath(Path(spec_path).resolve(), Path(path).parent.resolve())
@@ -92,7 +117,7 @@ def _run(loaded, spec_path, path, fmt, overwrite) -> None:
     inputs = [(spec_path, "the spec")]
     check_output(path, "-o", kind, overwrite=overwrite, inputs=inputs, describe=describe_netcdf)
     path.parent.mkdir(parents=True, exist_ok=True)
-    result = run_design(loaded)
+    result = _search(loaded)
     table = design_table(result)
     sizes, variables, arrays, attrs = file_contents(result, table)
     with writing(path):

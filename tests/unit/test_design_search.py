@@ -25,6 +25,7 @@ class Stub:
         self.bounds = (Bound(req, "min"),)
         self.evaluations = []
         self._seen = {}
+        self.needs_onset = False
 
     def seen(self, x):
         return self._seen.get(np.array(x, float).tobytes())

@@ -113,13 +113,21 @@ class Evaluator:
     cases_at : callable
         x (SI values of design.vary's keys) → the spec's expanded study with those values
         (``campipe.study.design.search.design_study``).
+    on_evaluation : callable, optional
+        Given each new evaluation (a progress line).
     """
 
-    def __init__(self, study: Study, cases_at: Callable[[np.ndarray], Study]) -> None:
+    def __init__(
+        self,
+        study: Study,
+        cases_at: Callable[[np.ndarray], Study],
+        on_evaluation: Callable[[Evaluation], None] | None = None,
+    ) -> None:
         design = study.spec.design
         assert design is not None
         self.design = design
         self.cases_at = cases_at
+        self.on_evaluation = on_evaluation  # told of each new evaluation (a progress line)
         self.bounds = bounds_of(design)
         self.evaluations: list[Evaluation] = []
         self._seen: dict[bytes, Evaluation] = {}
@@ -156,6 +164,8 @@ class Evaluator:
         self._judge(ev)
         self.evaluations.append(ev)
         self._seen[x.tobytes()] = ev
+        if self.on_evaluation is not None:
+            self.on_evaluation(ev)
         return ev
 
     def seen(self, x: Sequence[float] | np.ndarray) -> Evaluation | None:

@@ -97,12 +97,35 @@ def design_study(study: Study) -> Callable[[np.ndarray], Study]:
     return cases_at
 
 
-def run_design(study: Study, evaluate: Evaluator | None = None) -> DesignResult:
-    """Search the design ``study.spec.design`` asks for (see the module's description)."""
+def run_design(
+    study: Study,
+    evaluate: Evaluator | None = None,
+    *,
+    notice: Callable[[str], None] | None = None,
+    on_evaluation: Callable[[Evaluation], None] | None = None,
+) -> DesignResult:
+    """Search the design ``study.spec.design`` asks for (see the module's description).
+
+    Parameters
+    ----------
+    study : Study
+        The spec expanded, with its ``design`` section.
+    evaluate : Evaluator, optional
+        What evaluates a design (default: the spec's onset and engine,
+        :class:`~campipe.study.design.evaluate.Evaluator`).
+    notice : callable, optional
+        Given a line to show before numba compiles the kernels the evaluations need (the
+        onset's search, the run's integrator; not called when they are cached); they are
+        compiled first, as ``campipe onset`` does.
+    on_evaluation : callable, optional
+        Given each new evaluation (a progress line).
+    """
     design = study.spec.design
     if design is None:
         raise ValueError("the spec has no design section")
-    evaluate = evaluate or Evaluator(study, design_study(study))
+    if evaluate is None:
+        evaluate = Evaluator(study, design_study(study), on_evaluation)
+        _compile(study, evaluate, notice)
     t0 = time.perf_counter()
     one = len(design.vary) == 1 and design.objective == design.vary[0].key
     method = "pareto" if design.pareto else "root" if one else design.method
@@ -118,6 +141,10 @@ def run_design(study: Study, evaluate: Evaluator | None = None) -> DesignResult:
             _local(evaluate, design)
     except _Spent:
         stopped = True
+    if evaluate.needs_onset and evaluate.evaluations:
+        from campipe.engine.kernels import record_loaded, search_kernels
+
+        record_loaded(search_kernels())  # the search's kernels, compiled ahead or not
     evals = evaluate.evaluations
     feasible = [i for i, e in enumerate(evals) if e.feasible]
     if feasible:
@@ -132,6 +159,24 @@ def run_design(study: Study, evaluate: Evaluator | None = None) -> DesignResult:
         chosen = front[0]
     return DesignResult(study, evals, chosen, bool(feasible), method,
                         time.perf_counter() - t0, stopped, front)  # fmt: skip
+
+
+def _compile(study: Study, evaluate: Evaluator, notice: Callable[[str], None] | None) -> None:
+    from campipe.engine.kernels import compile_first
+
+    first = study.cases[0]
+    compile_first({first.settings: first.case} if evaluate.speeds else {}, notice,
+                  search=evaluate.needs_onset)  # fmt: skip
+
+
+def most_evaluations(design: Design) -> int:
+    """The evaluations a search takes at most: the budget, or for a root search its scan and
+    a bisection to the tolerance at worst (brentq takes fewer)."""
+    if design.pareto or len(design.vary) > 1 or design.objective != design.vary[0].key:
+        return design.max_evaluations
+    v = design.vary[0]
+    halvings = math.ceil(math.log2(max((v.high - v.low) / v.tolerance, 2.0)))
+    return min(design.max_evaluations, 2 + SCAN + 2 * halvings)
 
 
 def pareto_front(evals: list[Evaluation], design: Design) -> list[int]:
