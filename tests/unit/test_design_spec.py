@@ -139,3 +139,17 @@ def test_the_spec_may_vary_the_speed_only():
     raw = spec(ISSUE, sweep={"speed": ["3000 rpm", "9000 rpm"], "seat": ["none", "0.1 in"]})
     found = problems(raw)
     assert "sweep.seat" in found and "speed only" in found["sweep.seat"]
+
+
+def test_a_design_file_shows_its_varied_keys_in_the_units_the_section_wrote():
+    """campipe query's units for a design file: a varied key in the units of design.vary's
+    bounds (mm here, in a spec otherwise SI). Fails if the design section were not read (the
+    lash would show in m)."""
+    from campipe.study.query.display import display_units
+
+    text = "name: d\ndesign:\n  vary: {model.lash: {from: 0.1 mm, to: 0.5 mm}}\n"
+    attrs = {"spec": text, "study_axes": '[{"name": "lash", "key": "model.lash"}]'}
+    assert display_units({"lash": "m", "onset_speed_rpm": "rpm"}, attrs) == {
+        "lash": "mm",
+        "onset_speed_rpm": "rpm",
+    }
