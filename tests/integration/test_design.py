@@ -342,3 +342,23 @@ def test_a_spec_campipe_design_cannot_serve_is_refused_with_status_2(tmp_path):
     assert not (tmp_path / "one-design.nc").exists()
     plain = invoke("design", STUDIES / "quickstart.yaml", "-o", tmp_path / "q.nc")
     assert plain.exit_code == 2 and "design: missing" in plain.output
+
+
+def test_bounds_the_spec_refuses_somewhere_are_refused_at_design_vary(tmp_path):
+    """A lift range reaching below the seat's lift: the design at the bound is refused by the
+    spec's own check (seat above full lift), reported at design.vary with that problem, exit
+    2. Fails if the refusal escaped as a traceback or were read as an infeasible design."""
+    path = write_spec(tmp_path, """
+        name: v
+        profile: {kind: harmonic, lift: 1 in}
+        seat: 0.1 in
+        sweep:
+          speed: {from: 3000 rpm, to: 20000 rpm, num: 2}
+        design:
+          vary: {profile.lift: {from: 0.01 in, to: 1 in}}
+          require: {onset_speed_rpm: {min: 9500 rpm}}
+          maximize: profile.lift
+    """, "v.yaml")  # fmt: skip
+    out = invoke("design", path)
+    assert out.exit_code == 2, out.output
+    assert "design.vary: the design profile.lift = 0.000254 m (SI) is refused: seat:" in out.output

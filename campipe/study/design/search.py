@@ -32,8 +32,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from campipe.io.spec_yaml import parse_spec_text
-from campipe.study.design.evaluate import Evaluation, Evaluator
-from campipe.study.spec.check import check_spec
+from campipe.study.design.evaluate import DesignError, Evaluation, Evaluator
+from campipe.study.spec.check import SpecError, check_spec
 from campipe.study.spec.design import Design
 from campipe.study.spec.expand import Study, expand
 
@@ -74,7 +74,8 @@ class DesignResult:
         """The rows shown: the answer first (the Pareto front, with two objectives), then every
         other evaluation in order."""
         first = self.front or [self.chosen]
-        return [*first, *(i for i in range(len(self.evaluations)) if i not in first)]
+        shown = set(first)
+        return [*first, *(i for i in range(len(self.evaluations)) if i not in shown)]
 
 
 def design_study(study: Study) -> Callable[[np.ndarray], Study]:
@@ -90,9 +91,19 @@ def design_study(study: Study) -> Callable[[np.ndarray], Study]:
         overrides = dict(spec.overrides)
         for v, value in zip(design.vary, x, strict=True):
             overrides[v.key] = f"{float(value)!r} {v.units}" if v.units else float(value)
-        checked = check_spec(raw, spec.text, spec.directory, source, overrides)
-        checked.path = spec.path
-        return expand(checked, source)
+        try:
+            checked = check_spec(raw, spec.text, spec.directory, source, overrides)
+            checked.path = spec.path
+            return expand(checked, source)
+        except SpecError as exc:
+            values = ", ".join(f"{v.key} = {value:.6g} {v.units}".rstrip()
+                               for v, value in zip(design.vary, x, strict=True))  # fmt: skip
+            raise DesignError.at(
+                "design.vary",
+                f"the design {values} (SI) is refused: {exc.problems[0]}; narrow the bounds",
+                found=values,
+                expected="bounds whose every value the spec accepts",
+            ) from None
 
     return cases_at
 
@@ -122,7 +133,7 @@ def run_design(
     """
     design = study.spec.design
     if design is None:
-        raise ValueError("the spec has no design section")
+        raise DesignError.at("design", "missing: the spec has no design section")
     if evaluate is None:
         evaluate = Evaluator(study, design_study(study), on_evaluation)
         _compile(study, evaluate, notice)
