@@ -362,3 +362,17 @@ def test_bounds_the_spec_refuses_somewhere_are_refused_at_design_vary(tmp_path):
     out = invoke("design", path)
     assert out.exit_code == 2, out.output
     assert "design.vary: the design profile.lift = 0.000254 m (SI) is refused: seat:" in out.output
+
+
+def test_a_metric_the_model_does_not_define_is_refused_at_its_requirement(tmp_path):
+    """The thesis's train has no contact radii: its Hertz pressure is NaN. Required, it is
+    refused at design.require.max_cam_pressure, exit 2, not read as a failing design (every
+    design 'infeasible'). Fails if NaN became a margin of -inf."""
+    design = """
+      vary: {model.spring_preload: {from: 80 lbf, to: 250 lbf}}
+      require: {max_cam_pressure: {max: 1 GPa, at: 6000 rpm}}
+      minimize: model.spring_preload
+    """
+    out = invoke("design", spec(tmp_path, design, "hertz"))
+    assert out.exit_code == 2, out.output
+    assert "design.require.max_cam_pressure: the run at 6000 rpm gives no value" in out.output

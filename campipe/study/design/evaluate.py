@@ -186,6 +186,15 @@ class Evaluator:
         for m in wanted:
             values = m.summarise(m.to_archive(result.metric_per_rev(m.key)), result.measured)
             for i, s in enumerate(self.speeds):
+                if not failed[i] and math.isnan(values[i]):
+                    raise DesignError.at(
+                        f"design.require.{m.summary}",
+                        f"the run at {s / RPM:g} rpm gives no value of {m.summary} (NaN): the "
+                        "model lacks what it needs (a Hertz pressure: the contact's radii "
+                        "and modulus, docs/model.md); require another metric",
+                        found="NaN",
+                        expected="a metric the model defines",
+                    )
                 out[m.summary, s] = math.nan if failed[i] else float(values[i])
         return out
 
