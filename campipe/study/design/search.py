@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from campipe.errors import CampipeError
 from campipe.io.spec_yaml import parse_spec_text
 from campipe.study.design.evaluate import DesignError, Evaluation, Evaluator
 from campipe.study.spec.check import SpecError, check_spec
@@ -41,8 +42,8 @@ from campipe.study.spec.expand import Study, expand
 SCAN = 9
 
 
-class _Spent(Exception):
-    """The evaluations allowed are spent (stops an optimiser)."""
+class _Spent(CampipeError, RuntimeError):
+    """The evaluations allowed are spent (stops an optimiser; never leaves the search)."""
 
 
 @dataclass
@@ -219,7 +220,7 @@ def _sample(evaluate: Evaluator, design: Design) -> None:
 def _budget(evaluate: Evaluator, design: Design) -> Callable[[np.ndarray], Evaluation]:
     def call(x: np.ndarray) -> Evaluation:
         if evaluate.seen(x) is None and len(evaluate.evaluations) >= design.max_evaluations:
-            raise _Spent
+            raise _Spent.at("design.max_evaluations", f"{design.max_evaluations} designs evaluated")
         return evaluate(x)
 
     return call
@@ -254,6 +255,8 @@ def _root(evaluate: Evaluator, design: Design) -> None:
     if abs(b - a) > v.tolerance:
         try:
             brentq(g, a, b, xtol=v.tolerance / 4, maxiter=200)
+        except _Spent:
+            raise
         except (ValueError, RuntimeError):
             pass  # a margin without a sign change (-inf: a failed run): bisection below
     a, b = _bracket(evaluate, good, far)
