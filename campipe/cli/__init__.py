@@ -6,12 +6,12 @@ rerun load only in the commands that need them.
 
 The group and what the commands share are :mod:`~campipe.cli.base`'s; one module per family
 of commands: :mod:`~campipe.cli.study` (study, validate, query, pack), :mod:`~campipe.cli.export`,
-:mod:`~campipe.cli.plot`,
-:mod:`~campipe.cli.onset`, :mod:`~campipe.cli.replay`, :mod:`~campipe.cli.model` (model,
-init, schema) and :mod:`~campipe.cli.bench`.
+:mod:`~campipe.cli.plot`, :mod:`~campipe.cli.onset`, :mod:`~campipe.cli.design`,
+:mod:`~campipe.cli.replay`, :mod:`~campipe.cli.model` (model, init, schema) and
+:mod:`~campipe.cli.bench`.
 """
 
-from campipe.cli import bench, export, model, onset, plot, replay, study
+from campipe.cli import bench, design, export, model, onset, plot, replay, study
 from campipe.cli.base import main
 
 __all__ = ["main"]
@@ -19,6 +19,7 @@ __all__ = ["main"]
 for _command in (
     bench.bench,
     export.export,
+    design.design,
     model.init,
     model.model,
     model.schema,

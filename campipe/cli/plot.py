@@ -8,7 +8,7 @@ from campipe.cli.base import Failure, InputFailure, units_option
 
 #: The plot kinds (campipe.study.spec.plots.KINDS, repeated so --help needs no import of the study
 #: layer; tests/integration/test_plot.py checks they agree).
-PLOT_KINDS = ("histories", "metric", "map", "events")
+PLOT_KINDS = ("histories", "metric", "map", "events", "pareto")
 
 
 @click.command()
@@ -30,13 +30,17 @@ PLOT_KINDS = ("histories", "metric", "map", "events")
 @click.option("--where", help="Draw the cases where EXPR holds (the language of query --where).")
 @units_option
 @click.option(
-    "--x", "x", metavar="COLUMN", help="metric, map: the column along x (default: speed_rpm)."
+    "--x",
+    "x",
+    metavar="COLUMN",
+    help="metric, map: the column along x (default: speed_rpm); pareto: the first objective's.",
 )
 @click.option(
     "--y",
     "y",
     metavar="COLUMN",
-    help="metric: the value drawn (default: separation_deg_per_rev); map: the column along y.",
+    help="metric: the value drawn (default: separation_deg_per_rev); map: the column along y; "
+    "pareto: the second objective's.",
 )
 @click.option(
     "--z", "z", metavar="COLUMN", help="map: the value coloured (default: separation_deg_per_rev)."
@@ -86,6 +90,7 @@ def plot(
                combination of the other varied keys
     map        a per-case value (--z) over two columns (--x, --y), its contour at --level
     events     each case's separations, landings and seatings on a cam angle × case chart
+    pareto     a campipe design file's two objectives (--x, --y), its Pareto front
     """
     from campipe.plot import plot_archive
     from campipe.study.spec.plots import PlotError, check_plot

@@ -14,6 +14,8 @@ or group in a distinct line style and marker as well as a shade (:mod:`campipe.p
 - ``map``: a per-case value over two numeric columns as coloured cells (one per case), with
   its contour at ``level``; one panel per combination of the other varied columns.
 - ``events``: every event of each case on a cam angle × case chart, a marker per kind.
+- ``pareto``: a design file's (``campipe design``) two objectives, every design evaluated
+  (those meeting the requirements filled), the Pareto front joined.
 """
 
 from __future__ import annotations
@@ -86,6 +88,7 @@ def figure(ds, request: PlotRequest) -> Figure:
     """
     view = select_view(ds, request)
     draw = {"histories": histories, "metric": metric, "map": cell_map, "events": events}
+    draw["pareto"] = pareto
     return draw[request.kind](view, request)
 
 
@@ -754,4 +757,38 @@ def events(view: View, request: PlotRequest) -> Figure:
     if ax.collections:
         fig.legend(loc="outside lower center", ncols=4, fontsize=8)
     _title(fig, view, f"events{turn_note}", request.where)
+    return fig
+
+
+def pareto(view: View, request: PlotRequest) -> Figure:
+    """A design file's two objectives (``--x``, ``--y``; default its
+    ``design_objective_columns``): the designs evaluated, hollow where they fail a
+    requirement, filled where they meet them, the front (``chosen == "front"``) joined."""
+    import json
+
+    names = json.loads(str(view.ds.attrs.get("design_objective_columns", "[]")))
+    if "chosen" not in view.shown.columns or len(names) != 2 and not (request.x and request.y):
+        raise PlotError.at(
+            "ARCHIVE",
+            "not the file of a campipe design with two objectives (minimize and maximize, or "
+            "a list of two); give --x and --y to draw two columns of a design file",
+        )
+    xname = request.x or names[0]
+    yname = request.y or names[1]
+    x, y = _column(view, xname, "--x"), _column(view, yname, "--y")
+    chosen = view.shown.columns["chosen"]
+    feasible = view.shown.columns.get("feasible", np.full(view.shown.n, "yes")) == "yes"
+    front = np.flatnonzero(chosen == "front")
+    front = front[np.argsort(x[front], kind="stable")]
+    fig = Figure(figsize=(7.5, 4.8), layout="constrained")
+    ax = fig.add_subplot()
+    ax.plot(x[~feasible], y[~feasible], "o", mfc="none", color="0.6", label="fails a requirement")
+    ax.plot(x[feasible], y[feasible], "o", color="0.35", ms=4, label="meets the requirements")
+    if front.size:
+        ax.plot(x[front], y[front], "s-", color="black", ms=5, label="Pareto front")
+    ax.set_xlabel(axis_label(xname, view.shown.units.get(xname, "")))
+    ax.set_ylabel(axis_label(yname, view.shown.units.get(yname, "")))
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="best")
+    _title(fig, view, f"{front.size} designs on the Pareto front", request.where)
     return fig

@@ -73,6 +73,8 @@ def written_units(attrs: Mapping[str, object]) -> dict[str, str]:
     sample = _mapping(raw.get("sample"))
     for key, values in _mapping(sample.get("ranges")).items():
         _note(out, str(key), values)
+    for key, values in _mapping(_mapping(raw.get("design")).get("vary")).items():
+        _note(out, str(key), values)  # campipe design's varied keys
     for entry in [raw, *(e for e in raw.get("cases") or [] if isinstance(e, Mapping))]:
         for key, value in _leaves(entry):
             _note(out, key, value)

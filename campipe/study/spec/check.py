@@ -29,6 +29,7 @@ Grammar (all keys optional except ``name``; each case must end up with a ``speed
     sample: {method: latin-hypercube, n, seed, ranges: {<key>: {from, to}}}
     replay: {where: EXPR}
     plots: [{kind: histories | metric | map | events, ...}, ...]   # campipe.study.spec.plots
+    design: {vary, require, minimize | maximize, ...}   # campipe.study.spec.design
 """
 
 from __future__ import annotations
@@ -54,6 +55,7 @@ from campipe.study.spec.blocks import (
     show,
     unknown_key,
 )
+from campipe.study.spec.design import Design, check_design, check_design_axes
 from campipe.study.spec.drive import apply_drive
 from campipe.study.spec.fields import (
     CASE_FIELDS,
@@ -108,6 +110,7 @@ class Spec:
     overrides: dict[str, object] = field(default_factory=dict)  # --set KEY=VALUE applied
     path: Path | None = None  # the spec file, when read from one
     plots: list[PlotRequest] = field(default_factory=list)  # figures to write at the end
+    design: Design | None = None  # what campipe design searches for
 
     @property
     def record(self) -> tuple[str, ...]:
@@ -135,6 +138,15 @@ def check_conflicts(spec: Spec, problems: Problems) -> None:
                     problems.add(
                         f"cases[{i}].{key}", f"also varied by {owner}.{other}; vary it in one place"
                     )
+
+
+def _axis_keys(spec: Spec) -> dict[str, str]:
+    """Key → where the spec varies it (its axes and case entries)."""
+    out = {k: "sweep" for k in spec.sweep} | {k: "zip" for k in spec.zip}
+    out |= {k: "sample.ranges" for k in (spec.sample.ranges if spec.sample else {})}
+    for entry in spec.cases:
+        out |= {k: "cases" for k in leaf_keys(entry)}
+    return out
 
 
 def check_replay(value: object, problems: Problems) -> str | None:
@@ -284,6 +296,7 @@ def check_spec(
     replay = check_replay(raw["replay"], problems) if "replay" in raw else None
     plots = check_plot_list(raw["plots"], problems) if "plots" in raw else []
     search = check_search(raw["search"], problems) if "search" in raw else None
+    design = check_design(raw["design"], problems) if "design" in raw else None
     spec = Spec(
         name=name if isinstance(name, str) else "",
         description=str(description),
@@ -299,8 +312,11 @@ def check_spec(
         drive=drive,
         overrides=overrides,
         plots=plots,
+        design=design,
     )
     check_conflicts(spec, problems)
+    if design is not None:
+        check_design_axes(_axis_keys(spec), design, problems)
     if problems.items:
         raise SpecError(problems.items[:MAX_PROBLEMS], source)
     return spec

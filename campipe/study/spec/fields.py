@@ -679,6 +679,8 @@ TOP_LEVEL: dict[str, str] = {
     "{kind: histories | metric | map | events, where, units, output, ...}",
     "search": "search the speed axis instead of running every case: {onset: no-follow, "
     "axis: speed}, the no-follow onset of every combination of the other axes (campipe onset)",
+    "design": "the keys campipe design varies, the requirements a design must meet and the "
+    "objective: {vary, require, minimize | maximize, method, max_evaluations}",
 }
 #: What ``search`` may ask for (``campipe onset``).
 SEARCHES = {"onset": ("no-follow",), "axis": ("speed",)}

@@ -38,6 +38,8 @@ KINDS = {
     "map": "a per-case value (z) over two swept axes (x, y) as coloured cells, with its "
     "contour at level; one panel per combination of the other varied keys",
     "events": "each case's events on a cam angle × case chart",
+    "pareto": "a campipe design file's two objectives (x, y), the designs evaluated and their "
+    "Pareto front",
 }
 #: File types by the output's suffix.
 FORMATS = (".png", ".svg", ".pdf")
@@ -47,6 +49,7 @@ KIND_KEYS = {
     "metric": ("x", "y", "limit"),
     "map": ("x", "y", "z", "level"),
     "events": ("turn", "angle", "range"),
+    "pareto": ("x", "y"),
 }
 #: The angles a histories or events figure may draw along x.
 ANGLES = ("cam", "crank")

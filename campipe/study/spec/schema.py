@@ -16,6 +16,7 @@ import json
 from campipe.model import PARAMETERS
 from campipe.model.schema import QUANTITY_PATTERN, model_schema, parameter_schema
 from campipe.study.spec.check import NAME_PATTERN
+from campipe.study.spec.design import DESIGN_KEYS, METHODS, ONSET, metric_units
 from campipe.study.spec.drive import DRIVE_FIELDS
 from campipe.study.spec.fields import (
     CASE_FIELDS,
@@ -259,6 +260,66 @@ def _plot(kind: str) -> dict[str, object]:
     }
 
 
+def _design() -> dict[str, object]:
+    """The ``design:`` section (:mod:`campipe.study.spec.design`)."""
+    vary = {}
+    for k in sample_keys():
+        rng = _range(k, False)
+        if k != "speed" and rng is not None:
+            bound = rng["properties"]["from"]  # type: ignore[index]
+            props = {**rng["properties"], "tolerance": bound}  # type: ignore[dict-item]
+            vary[k] = {**rng, "properties": props}
+    bounded = {"min": {"$ref": "#/$defs/quantity"}, "max": {"$ref": "#/$defs/quantity"}}
+    speeds = {"oneOf": [{"$ref": "#/$defs/quantity"}, {"type": "array", "minItems": 1,
+              "items": {"$ref": "#/$defs/quantity"}}]}  # fmt: skip
+    require: dict[str, object] = {
+        ONSET: {
+            "type": "object",
+            "properties": bounded,
+            "minProperties": 1,
+            "additionalProperties": False,
+        },  # fmt: skip
+    }
+    for name, units in metric_units().items():
+        bound = {"$ref": "#/$defs/quantity"} if units else {"type": "number"}
+        props = {"min": bound, "max": bound, "at": speeds}
+        require[name] = {"type": "object", "properties": props, "required": ["at"],
+                         "additionalProperties": False}  # fmt: skip
+    one = {"type": "string", "minLength": 1}
+    key = {"oneOf": [one, {"type": "array", "items": one, "minItems": 1, "maxItems": 2}]}
+    return {
+        "type": "object",
+        "properties": {
+            "vary": {
+                "type": "object",
+                "minProperties": 1,
+                "properties": vary,
+                "additionalProperties": False,
+                "description": DESIGN_KEYS["vary"],
+            },
+            "require": {
+                "type": "object",
+                "minProperties": 1,
+                "properties": require,
+                "additionalProperties": False,
+                "description": DESIGN_KEYS["require"],
+            },
+            "minimize": {**key, "description": DESIGN_KEYS["minimize"]},
+            "maximize": {**key, "description": DESIGN_KEYS["maximize"]},
+            "method": {"enum": list(METHODS), "description": DESIGN_KEYS["method"]},
+            "max_evaluations": {
+                "type": "integer",
+                "minimum": 2,
+                "description": DESIGN_KEYS["max_evaluations"],
+            },
+        },  # fmt: skip
+        "required": ["vary", "require"],
+        "oneOf": [{"required": ["minimize"]}, {"required": ["maximize"]}],
+        "additionalProperties": False,
+        "description": TOP_LEVEL["design"],
+    }
+
+
 def study_schema() -> dict[str, object]:
     """The JSON Schema of a study spec."""
     model = {k: v for k, v in model_schema().items() if k not in ("$schema", "$id")}
@@ -324,6 +385,7 @@ def study_schema() -> dict[str, object]:
                 "additionalProperties": False,
                 "description": TOP_LEVEL["search"],
             },
+            "design": _design(),
         },
         "additionalProperties": False,
         "$defs": {
