@@ -47,6 +47,7 @@ from campipe.study.run.batches import (
     parts_directory,
     plan_batches,
 )
+from campipe.study.run.cluster import PartCount
 from campipe.study.run.part_files import part_layout
 from campipe.study.run.parts import (
     clean_part_temporaries,
@@ -288,7 +289,7 @@ def _compute_and_assemble(
     by_key = {p.key: p for p in plans}
     sink = study_assembly(study, archive, found, run.command, spec_file(study, archive))
 
-    def stored(result: Stored | BatchData) -> None:
+    def stored(result: Stored | BatchData | PartCount) -> None:
         """A finished batch: stored here if its worker did not, then its rows go into the
         archive as far as the cases before them allow."""
         s = stored_here(result, storage, run.on_batch, by_key)
@@ -379,7 +380,7 @@ def _run_parts(
         bar = progress(total, total - len(missing)) if progress else None
         by_key = {p.key: p for p in plans}
 
-        def stored(result: Stored | BatchData) -> None:
+        def stored(result: Stored | BatchData | PartCount) -> None:
             s = stored_here(result, storage, run.on_batch, by_key)
             found.add(s)
             if bar:
@@ -410,7 +411,7 @@ def _compute(
     plans: list[BatchPlan],
     run: _Run,
     storage: Storage,
-    stored: Callable[[Stored | BatchData], None],
+    stored: Callable[[Stored | BatchData | PartCount], None],
 ) -> None:
     """Compute ``plans`` on the run's workers, each stored batch handed to ``stored``."""
     if not plans:
