@@ -503,3 +503,23 @@ def test_a_cluster_run_reads_back_whole_through_open_study_and_open_mfdataset(mi
         ref = np.argsort(one["case"].values)
         assert_array_equal(cases["speed_rpm"].values[order], one["speed_rpm"].values[ref])
         assert_array_equal(cases["valve_lift"].values[order], one["valve_lift"].values[ref])
+
+
+def test_parts_dir_puts_the_parts_archive_in_the_shared_folder(tmp_path):
+    """``--parts-dir DIR`` writes the parts archive ``DIR/<name>.parts`` (``--parts``
+    implied) and refuses ``-o`` beside it. Broken copies it fails on: a --parts-dir that
+    writes the single file, or the archive beside the spec."""
+    spec = write_spec(tmp_path, SMALL_SPEC)
+    shared = tmp_path / "shared" / "scratch"
+    runner = CliRunner()
+    result = runner.invoke(
+        main, ["study", str(spec), "--parts-dir", str(shared), "--no-progress", "--batch-size", "3"]
+    )
+    assert result.exit_code == 0, result.output
+    assert result.output.strip().splitlines()[-1] == str(shared / "small.parts")
+    index = read_index(shared / "small.parts")
+    assert (len(index["case"]), len(index["parts"])) == (6, 2)
+    assert not (tmp_path / "small.parts").exists() and not (tmp_path / "small.nc").exists()
+    both = ["study", str(spec), "--parts-dir", str(shared), "-o", str(tmp_path / "x.parts")]
+    result = runner.invoke(main, both)
+    assert result.exit_code == 2 and "not both" in result.output
