@@ -41,7 +41,8 @@ from campipe.cli.plot import write_plots
 @click.option(
     "--workers",
     type=click.IntRange(min=1),
-    help="Threads or processes of a local scheduler (default: the cores available).",
+    help="Threads or processes of a local scheduler (default: the cores available); on a "
+    "dask cluster, its worker threads, for which the batches are sized.",
 )
 @click.option(
     "--batch-size",
