@@ -11,7 +11,9 @@
   renamed into place when complete; memory stays bounded by a block of rows.
 - With ``parts=True`` the archive is a folder of parts (:mod:`campipe.io.parts`): each
   batch's worker writes its part, compressed, and this process only keeps count and writes
-  the index last (:mod:`~campipe.study.run.parts`); nothing is assembled here.
+  the index last (:mod:`~campipe.study.run.parts`); nothing is assembled here. On a dask
+  cluster every worker is checked first and the batches go out once
+  (:mod:`~campipe.study.run.cluster`).
 - A run holds ``<archive>.lock`` throughout (``campipe.io.archive.writing``): a second run on
   the same archive stops with a clear error instead of removing the first one's files; the
   lock of a run that died on this host is taken over.
