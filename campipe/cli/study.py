@@ -41,7 +41,8 @@ from campipe.cli.plot import write_plots
 @click.option(
     "--workers",
     type=click.IntRange(min=1),
-    help="Threads or processes of a local scheduler (default: the cores available).",
+    help="Threads or processes of a local scheduler (default: the cores available); on a "
+    "dask cluster, its worker threads, for which the batches are sized.",
 )
 @click.option(
     "--batch-size",
@@ -60,6 +61,13 @@ from campipe.cli.plot import write_plots
     "written by the worker that computed it, and an index (the way to run on a cluster: "
     "this process only keeps count). Read as one archive by query, plot, replay and "
     "campipe.open_study; campipe pack writes the single file.",
+)
+@click.option(
+    "--parts-dir",
+    type=click.Path(file_okay=False),
+    help="Write the parts archive (--parts) into this folder, as <name>.parts: a path every "
+    "worker of a cluster reaches and can write (a shared file system). Each worker is "
+    "checked first; the study stops before computing if one cannot write there.",
 )
 @click.option(
     "--progress/--no-progress",
@@ -84,6 +92,7 @@ def study(
     batch_size,
     keep_parts,
     parts,
+    parts_dir,
     progress,
     overwrite,
     max_cases,
@@ -106,6 +115,11 @@ def study(
     from campipe.study.spec.limits import Limits
 
     limits = limits_given(max_cases, max_steps, max_samples, max_events, max_archive_gb)
+    if parts_dir and output:
+        raise click.UsageError(
+            "give the parts archive's path (-o) or the folder it goes into (--parts-dir), not both"
+        )
+    parts = parts or bool(parts_dir)
     if limits == Limits() and not overwrite and not parts:
         # A finished study answers from its spec's text and its archive's checksums alone.
         done = finished(spec, parse_overrides(sets), output)
@@ -115,6 +129,10 @@ def study(
             click.echo(str(done.archive))
             return
     loaded = load_spec(spec, sets, limits)
+    if parts_dir:
+        from pathlib import Path
+
+        output = str(Path(parts_dir) / f"{loaded.name}.parts")
     archive = archive_path(loaded, spec, output, parts)
     if loaded.spec.search == "onset":
         from campipe.engine.onset import DEFAULT_ONSET_TOLERANCE_RPM, RPM
