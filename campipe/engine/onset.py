@@ -148,14 +148,17 @@ def _evaluate(designs, batch, speeds, todo, level):
 
 
 @functools.lru_cache(maxsize=4096)
-def _transfer(train: ValveTrain) -> slope_bound.Transfer:
-    return slope_bound.transfer(train_matrices(train))
+def _transfer(train: ValveTrain) -> slope_bound.Transfer | None:
+    """The train's transfer (``slope_bound.transfer``), None where it fails its check."""
+    sm = train_matrices(train)
+    tr = slope_bound.transfer(sm)
+    return tr if slope_bound.checked(tr, sm) else None
 
 
 class _Proof:
     """The proven bound of the designs' configuration I (``slope_bound``), per train and
-    profile computed once when first needed, for designs whose profile is ``provable`` (no
-    step in lift, lift rate or lift acceleration)."""
+    profile computed once, for designs whose profile is ``provable`` (no step in lift, lift
+    rate or lift acceleration) and whose train's transfer passes its check."""
 
     def __init__(self, designs: Sequence[Case]) -> None:
         self.designs = designs
@@ -166,6 +169,8 @@ class _Proof:
         self._first = [firsts[k] for k in range(len(profiles))]
         ok = [slope_bound.provable(designs[i].profile) for i in self._first]
         self.provable = np.array(ok)[self.profile]
+        for i in np.flatnonzero(self.provable):
+            self.provable[i] = _transfer(designs[int(i)].train) is not None
         self._spectra: dict[int, slope_bound.Spectrum] = {}
 
     def bounds(self, rows: np.ndarray, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -177,7 +182,7 @@ class _Proof:
             pick = np.flatnonzero(self.profile[rows] == p)
             if p not in self._spectra:
                 self._spectra[p] = slope_bound.spectrum(self.designs[self._first[p]].profile)
-            trs = slope_bound.stack([_transfer(self.designs[int(i)].train) for i in rows[pick]])
+            trs = slope_bound.stack([_transfer(self.designs[int(i)].train) for i in rows[pick]])  # type: ignore[misc]
             force[pick], height[pick] = slope_bound.slope_bounds_many(
                 trs, self._spectra[p], a[pick], b[pick]
             )

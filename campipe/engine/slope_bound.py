@@ -115,6 +115,22 @@ def transfer(sm: SystemMatrices) -> Transfer:
     return Transfer(float(mass), float(damping), lam, rho, valve, float(static.real))
 
 
+def checked(tr: Transfer, sm: SystemMatrices, tolerance: float = 1e-6) -> bool:
+    """The pole–residue form agrees with a direct solve of the dynamic stiffness to
+    ``tolerance`` (relative) at a decade of frequencies around the poles: False for a train
+    whose free coordinates' companion matrix is defective (repeated poles), where the
+    residues are not to be trusted."""
+    f = [i for i in range(sm.mass.shape[0]) if i != CAM]
+    top = float(np.max(np.abs(tr.poles)))
+    for omega in top * np.logspace(-4, 1, 6):
+        s = 1j * omega
+        D = sm.stiffness + s * sm.damping + s * s * sm.mass
+        direct = D[CAM, CAM] - D[CAM, f] @ np.linalg.solve(D[np.ix_(f, f)], D[f, CAM])
+        if not abs(force_transfer(tr, s) - direct) <= tolerance * abs(direct):
+            return False
+    return True
+
+
 def force_transfer(tr: Transfer, s: np.ndarray) -> np.ndarray:
     """G(s), the reaction on q1 per unit of q1, from the pole–residue form (for checks)."""
     s = np.asarray(s, complex)[..., None]

@@ -144,3 +144,15 @@ def test_steps_are_not_provable():
     assert S.provable(bump(POLYDYNE, 1.0, 1e-5, 0.1))
     assert not S.provable(RAMPED)
     assert not S.provable(flat(harmonic(INCH), math.radians(170), math.radians(190)))
+
+
+def test_a_transfer_that_disagrees_with_the_direct_solve_is_refused():
+    """``checked`` passes the thesis's transfer and refuses one whose residues are off by
+    1e-4 (the static part's cancellation makes that 0.7 off at low frequencies), so such a
+    train is not provable. Broken copy: a check only at and above the highest pole (9e-6
+    off there) passes the perturbed one."""
+    sm = train_matrices(thesis_train())
+    tr = S.transfer(sm)
+    assert S.checked(tr, sm)
+    bad = dataclasses.replace(tr, force=tr.force * (1 + 1e-4))
+    assert not S.checked(bad, sm)
