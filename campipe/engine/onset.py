@@ -175,14 +175,16 @@ class _Proof:
 
     def bounds(self, rows: np.ndarray, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, ...]:
         """The slope bounds of the cam force and the valve's height of the designs ``rows``
-        over [a[i], b[i]], a profile at a time."""
+        over [a[i], b[i]], a profile and a size of train at a time."""
         force = np.empty(rows.size)
         height = np.empty(rows.size)
-        for p in np.unique(self.profile[rows]):
-            pick = np.flatnonzero(self.profile[rows] == p)
+        transfers = [_transfer(self.designs[int(i)].train) for i in rows]
+        size = np.array([t.poles.size if t is not None else 0 for t in transfers])
+        for p, n in {(int(p), int(n)) for p, n in zip(self.profile[rows], size, strict=True)}:
+            pick = np.flatnonzero((self.profile[rows] == p) & (size == n))
             if p not in self._spectra:
                 self._spectra[p] = slope_bound.spectrum(self.designs[self._first[p]].profile)
-            trs = slope_bound.stack([_transfer(self.designs[int(i)].train) for i in rows[pick]])  # type: ignore[misc]
+            trs = slope_bound.stack([t for j in pick if (t := transfers[j]) is not None])
             force[pick], height[pick] = slope_bound.slope_bounds_many(
                 trs, self._spectra[p], a[pick], b[pick]
             )
