@@ -84,6 +84,12 @@ def failure(exc: BaseException) -> Failure | None:
 
     if (plugin := missing_filter(exc)) is not None:
         return Failure(f"cannot read the archive ({exc}): {plugin}")
+    if isinstance(exc, RuntimeError) and "NetCDF: HDF error" in str(exc):
+        return Failure(
+            f"cannot read the archive ({exc}): a part of it is damaged (a chunk whose "
+            "Fletcher-32 checksum differs, or the file's structure); read it without "
+            "--no-verify to name the variables, or run the study again to write it anew"
+        )
     return None
 
 
@@ -226,6 +232,19 @@ SET_HELP = (
 #: The unit systems of --units (campipe.study.spec.plots.SYSTEMS, repeated so --help needs no
 #: import of the study layer; tests/integration/test_plot.py checks they agree).
 UNIT_SYSTEMS = ("spec", "si", "in-lbf")
+
+
+def verify_option(command):
+    """``--no-verify``: read an archive without first checking it against its checksums."""
+    return click.option(
+        "--verify/--no-verify",
+        default=True,
+        show_default=True,
+        help="Check every variable of the archive against the checksums stored when it was "
+        "written before reading it (one more read of the archive); a damaged one is refused, "
+        "its variables named. --no-verify skips that check (HDF5 still checks each chunk it "
+        "reads of archives written since campipe 0.1's Fletcher-32).",
+    )(command)
 
 
 def units_option(command):

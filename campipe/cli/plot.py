@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from campipe.cli.base import Failure, InputFailure, units_option
+from campipe.cli.base import Failure, InputFailure, units_option, verify_option
 
 #: The plot kinds (campipe.study.spec.plots.KINDS, repeated so --help needs no import of the study
 #: layer; tests/integration/test_plot.py checks they agree).
@@ -52,7 +52,8 @@ PLOT_KINDS = ("histories", "metric", "map", "events")
     metavar="N|last|all",
     help="histories, events: show one cam turn (1, 2, ... or last; default all).",
 )
-def plot(kind, archive, output, overwrite, where, units, x, y, z, level, turn) -> None:
+@verify_option
+def plot(kind, archive, output, overwrite, where, units, x, y, z, level, turn, verify) -> None:
     """Draw a figure of ARCHIVE.
 
     \b
@@ -73,7 +74,7 @@ def plot(kind, archive, output, overwrite, where, units, x, y, z, level, turn) -
         request = check_plot(given)
     except PlotError as exc:
         raise InputFailure(f"--{exc.key}: {exc.reason}") from None
-    path, _ = plot_archive(archive, request, output, overwrite=overwrite)
+    path, _ = plot_archive(archive, request, output, overwrite=overwrite, verify=verify)
     click.echo(str(path))
 
 

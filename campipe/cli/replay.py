@@ -6,6 +6,8 @@ import sys
 
 import click
 
+from campipe.cli.base import verify_option
+
 
 @click.command()
 @click.argument("archive", type=click.Path())
@@ -41,7 +43,8 @@ import click
     show_default=True,
     help="Factor on the sketch's deviations from the rigid-body motion.",
 )
-def replay(archive, case_ids, where, output, overwrite, spawn, magnify) -> None:
+@verify_option
+def replay(archive, case_ids, where, output, overwrite, spawn, magnify, verify) -> None:
     """Write a rerun recording of cases of ARCHIVE: lift, force and contact plots, events,
     parameters and the moving mechanism, on the timelines cam_angle and time. All cases go
     into one recording, each in its own cases/<case_id> subtree and blueprint tab."""
@@ -69,6 +72,7 @@ def replay(archive, case_ids, where, output, overwrite, spawn, magnify) -> None:
             magnification=magnify,
             progress=bar,
             overwrite=overwrite,
+            verify=verify,
         )
     except QueryError as exc:
         raise click.UsageError(str(exc)) from None

@@ -16,6 +16,7 @@ from campipe.cli.base import (
     load_spec,
     parse_overrides,
     units_option,
+    verify_option,
 )
 from campipe.cli.onset import run_onset
 from campipe.cli.plot import write_plots
@@ -401,14 +402,15 @@ def validate_text(loaded, spec_path) -> str:
     "speeds (of the cases --where selects).",
 )
 @units_option
-def query(archive, where, columns, sort, fmt, summary, units) -> None:
+@verify_option
+def query(archive, where, columns, sort, fmt, summary, units, verify) -> None:
     """Print an archive's cases, one row per case, values in the units the spec was written
     in (or --units); headers name the units."""
     from campipe.study.query.display import display_units
     from campipe.study.query.tables import case_table, displayed, format_rows, select
     from campipe.study.query.tables import summary as summary_text
 
-    with _open_archive(archive) as ds:
+    with _open_archive(archive, verify) as ds:
         if summary:
             click.echo(summary_text(ds, where, units))
             return
@@ -419,7 +421,7 @@ def query(archive, where, columns, sort, fmt, summary, units) -> None:
     click.echo(format_rows(displayed(table, shown), rows, names, fmt))
 
 
-def _open_archive(path):
+def _open_archive(path, verify: bool = True):
     """An archive (a file, or a parts archive's folder) as an xarray Dataset, or a Failure
     naming why it cannot be read."""
     from campipe.errors import CampipeError
@@ -427,7 +429,7 @@ def _open_archive(path):
     from campipe.study.archive.open import open_archive
 
     try:
-        return open_archive(path)
+        return open_archive(path, verify)
     except CampipeError:
         raise
     except Exception as exc:

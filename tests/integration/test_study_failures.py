@@ -101,6 +101,67 @@ def test_a_scheduler_that_goes_away_mid_study_leaves_what_was_stored(tmp_path):
     assert report.reused >= 1 and report.reused + report.computed == 3
 
 
+def test_a_cluster_without_workers_is_reported_at_once_and_stops_resumable(
+    tmp_path, monkeypatch, caplog
+):
+    """A scheduler with no worker (LocalCluster, n_workers=0): a warning names it as soon as
+    the first batches wait, the study stops after WORKER_TIMEOUT with a message saying how
+    to resume, and a rerun elsewhere computes every case. Broken copy, _submit_all: the
+    batches waited on as before (as_completed without a timeout): this test hangs."""
+    import logging
+
+    from distributed import LocalCluster
+
+    monkeypatch.setattr(workers, "WORKER_TIMEOUT", 2)
+    spec = write_spec(tmp_path, SPEC)
+    with LocalCluster(n_workers=0, processes=False, dashboard_address=":0") as cluster:
+        address = cluster.scheduler_address
+        started = time.monotonic()
+        with caplog.at_level(logging.WARNING, logger="campipe.study.run.workers"):
+            with pytest.raises(workers.SchedulerError, match="had no worker for 2 s") as caught:
+                run_study(load_study(spec), tmp_path / "small.nc", scheduler=address)
+        waited = time.monotonic() - started
+    assert f"dask cluster at {address} has no worker: waiting up to 2 s" in caplog.text
+    assert "rerun the same command to resume" in str(caught.value)
+    assert caught.value.key == "--scheduler" and caught.value.found == address
+    assert waited < 60  # stopped, not waited on: a bound far above the 2 s, no timing test
+    assert not (tmp_path / "small.nc").exists()
+    report = run_study(load_study(spec), tmp_path / "small.nc", scheduler="synchronous")
+    assert (report.computed, report.reused) == (3, 0)
+
+
+def test_losing_every_worker_stops_the_study_resumable(tmp_path, monkeypatch, caplog):
+    """The cluster's only worker retired after the first batch: reported, the study stops
+    after WORKER_TIMEOUT, the first batch kept for the rerun. Broken copy, _Idle.check:
+    workers counted only at the start: this test hangs."""
+    import logging
+
+    from distributed import LocalCluster
+
+    monkeypatch.setattr(workers, "WORKER_TIMEOUT", 2)
+    spec = write_spec(tmp_path, SPEC)
+    with LocalCluster(
+        n_workers=1, threads_per_worker=1, processes=False, dashboard_address=":0"
+    ) as cluster:
+
+        def retire_after_the_first(plan, data):
+            cluster.scale(0)
+
+        with caplog.at_level(logging.WARNING, logger="campipe.study.run.workers"):
+            with pytest.raises(workers.SchedulerError, match="had no worker for 2 s"):
+                run_study(
+                    load_study(spec),
+                    tmp_path / "small.nc",
+                    scheduler=cluster.scheduler_address,
+                    batch_size=1,
+                    on_batch=retire_after_the_first,
+                )
+    assert "has no worker: waiting up to 2 s" in caplog.text
+    assert len(list(parts_directory(tmp_path / "small.nc").glob("batch-*.npz"))) >= 1
+    report = run_study(load_study(spec), tmp_path / "small.nc", scheduler="synchronous")
+    assert report.reused >= 1 and report.reused + report.computed == 3
+
+
 def test_a_worker_process_that_dies(tmp_path, monkeypatch):
     from study_helpers import die
 

@@ -17,7 +17,9 @@ from pathlib import Path
 
 import numpy as np
 
-from campipe.io.parts import PartsIndexError, read_index
+from campipe.io.archive import ArchiveDamagedError, ArchiveFileError, check
+from campipe.io.parts import INDEX, PartsIndexError, part_checksum, read_index
+from campipe.study.archive.layout import LAYOUT_VERSION
 
 log = logging.getLogger(__name__)
 #: The name the rest of the study (zip rows, case entries, samples) goes by while the sweep
@@ -34,7 +36,7 @@ def sweep_axes(attrs: Mapping[str, object]) -> list[tuple[str, int]]:
     return [(str(a["name"]), int(a["size"])) for a in axes if a.get("kind") == "sweep"]
 
 
-def open_study(path: str | Path, **open_kwargs):
+def open_study(path: str | Path, verify: bool = True, **open_kwargs):
     """Open a study's archive with its sweep's axes as dimensions, where the study is a grid.
 
     Parameters
@@ -42,6 +44,9 @@ def open_study(path: str | Path, **open_kwargs):
     path : str or Path
         The archive (``campipe study`` writes it): one netCDF file, or a parts archive's
         folder (``campipe study --parts``), read as one dataset (:func:`open_archive`).
+    verify : bool
+        Check every variable against the checksums stored when the archive was written
+        before returning it (:func:`open_archive`); False skips that read of the archive.
     **open_kwargs
         Passed to :func:`xarray.open_dataset` (e.g. ``chunks={}`` to read lazily with dask).
 
@@ -57,27 +62,50 @@ def open_study(path: str | Path, **open_kwargs):
         ``damping_ratios``, a sweep with NaN such as ``run.dt: [default, ...]``, repeated
         labels) is returned as stored, one case per row of ``case``.
     """
-    ds = open_archive(path, **open_kwargs)
+    ds = open_archive(path, verify, **open_kwargs)
     try:
         grid = as_grid(ds)
     except Exception:
         ds.close()
         raise
-    return ds if grid is None else grid
+    if grid is None:
+        return ds
+    grid.set_close(ds.close)  # the grid's close closes the file (else it stays open)
+    return grid
 
 
-def open_archive(path: str | Path, **open_kwargs):
+def open_archive(path: str | Path, verify: bool = True, **open_kwargs):
     """An archive as stored, one case per row of ``case`` in the study's order: a netCDF
     file (:func:`xarray.open_dataset`), or a parts archive's folder, its parts read as one
-    dataset (:func:`open_parts`)."""
+    dataset (:func:`open_parts`).
+
+    With ``verify`` (the default), every variable and the global attributes are first
+    checked against the checksums stored when the file (each part) was written, reading it
+    once: a damaged archive raises :class:`~campipe.io.archive.ArchiveDamagedError` naming
+    the variables that differ. Archives store each chunk's Fletcher-32 as well, which HDF5
+    checks on any read, verified or not.
+
+    Raises
+    ------
+    campipe.io.archive.ArchiveFileError
+        For a path that is neither a regular file nor a folder (a pipe, a device: opening
+        one would wait on it), or a damaged archive (its subclass ArchiveDamagedError).
+    """
     import xarray as xr
 
-    if Path(path).is_dir():
-        return open_parts(path, **open_kwargs)
+    path = Path(path)
+    if path.is_dir():
+        return open_parts(path, verify, **open_kwargs)
+    if path.exists() and not path.is_file():
+        raise ArchiveFileError.at(
+            str(path), "not a regular file; an archive is a netCDF file or a parts folder"
+        )
+    if verify:
+        check(path, layout=LAYOUT_VERSION)
     return xr.open_dataset(path, **open_kwargs)
 
 
-def open_parts(path: str | Path, **open_kwargs):
+def open_parts(path: str | Path, verify: bool = True, **open_kwargs):
     """A parts archive (:mod:`campipe.io.parts`) as one dataset, the single-file archive's:
     its parts' variables along ``case`` and along ``event`` concatenated in the index's
     order, the cases put in the study's order (``event_case`` their rows again), the
@@ -92,6 +120,9 @@ def open_parts(path: str | Path, **open_kwargs):
 
     path = Path(path)
     index = read_index(path)
+    if verify:
+        for p in index["parts"]:
+            _check_part(path, p)
     parts = [xr.open_dataset(path / str(p["file"]), **open_kwargs) for p in index["parts"]]
     try:
         ds = _combine(path, parts, [str(c) for c in index["case"]])
@@ -107,6 +138,23 @@ def open_parts(path: str | Path, **open_kwargs):
 
     ds.set_close(close)
     return ds
+
+
+def _check_part(archive: Path, entry: Mapping[str, object]) -> None:
+    """A part the index names: the same file (its stored checksums those the index
+    recorded) and undamaged (:func:`~campipe.io.archive.check`)."""
+    part = archive / str(entry["file"])
+    recorded = entry.get("checksum")
+    if recorded is not None and part.is_file() and part_checksum(part) != recorded:
+        raise ArchiveDamagedError.at(
+            str(part),
+            f"not the part {INDEX} names (its checksums differ from those the index "
+            "recorded: replaced or damaged); run the study again to write it anew, or read "
+            "it as it is with --no-verify",
+            found=["checksums"],
+            expected=str(recorded),
+        )
+    check(part, layout=LAYOUT_VERSION)
 
 
 def _combine(path: Path, parts: list, ids: list[str]):

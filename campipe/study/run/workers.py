@@ -12,10 +12,12 @@ from __future__ import annotations
 
 import functools
 import itertools
+import logging
 import multiprocessing
 import os
 import sys
 import threading
+import time
 import uuid
 from collections.abc import Callable
 from concurrent.futures import (
@@ -31,6 +33,8 @@ from campipe.errors import CampipeError
 from campipe.io.archive import ArchiveWriteError, write_error
 from campipe.study.run.batches import BatchHook, SchedulerError, Storage, Stored
 from campipe.study.run.results import BatchData, BatchPlan, compute_batch, numerics_fingerprint
+
+log = logging.getLogger(__name__)
 
 
 def stored_here(
@@ -199,6 +203,11 @@ def run_local(
 
 #: How long to wait for a dask.distributed scheduler to answer [s].
 CONNECT_TIMEOUT = 10
+#: How long a study waits on a cluster without a worker (none at the start, or every one
+#: lost) before it stops, resumable [s].
+WORKER_TIMEOUT = 120
+#: How often the cluster's workers are counted while no batch finishes [s].
+WORKER_POLL = 0.5
 
 
 def run_distributed(
@@ -208,7 +217,7 @@ def run_distributed(
     workers_store: bool,
     stored: Callable[[Stored | BatchData], None],
 ) -> None:
-    from distributed import as_completed
+    from distributed import wait
 
     try:
         client = _connect(address)
@@ -227,8 +236,8 @@ def run_distributed(
         if workers_store:
             reach = _reach_token(parts, token)
         task = functools.partial(_batch_task, compute_batch, storage, reach, None)
-        with client:
-            _submit_all(client, as_completed, plans, token[:8], task, stored)
+        with client, client.as_current():  # distributed.wait takes the current client
+            _submit_all(client, wait, plans, token[:8], task, stored)
     except (SchedulerError, ArchiveWriteError, CampipeError):
         raise
     except Exception as exc:  # distributed raises many kinds when the cluster goes away
@@ -281,7 +290,7 @@ def _reach_token(parts: Path, token: str) -> str:
     return token
 
 
-def _submit_all(client, as_completed, plans, token, task, stored) -> None:
+def _submit_all(client, wait, plans, token, task, stored) -> None:
     threads = max(sum(client.nthreads().values()), 1)
     pending = iter(plans)
 
@@ -289,13 +298,55 @@ def _submit_all(client, as_completed, plans, token, task, stored) -> None:
         return client.submit(task, p, key=f"campipe-{p.key}-{token}", pure=False)
 
     # Keep at most two batches per worker thread in flight: memory stays bounded.
-    queue = as_completed(
-        [submit(p) for p in itertools.islice(pending, 2 * threads)], loop=client.loop
-    )
-    for future in queue:
-        result = future.result()
-        future.release()
-        stored(result)
-        nxt = next(pending, None)
-        if nxt is not None:
-            queue.add(submit(nxt))
+    in_flight = [submit(p) for p in itertools.islice(pending, 2 * threads)]
+    idle = _Idle(client)
+    while in_flight:
+        try:  # the first to finish, or none within the poll: then count the workers
+            done = set(wait(in_flight, timeout=WORKER_POLL, return_when="FIRST_COMPLETED")[0])
+        except TimeoutError:
+            idle.check()
+            continue
+        for future in [f for f in in_flight if f in done]:
+            in_flight.remove(future)
+            result = future.result()
+            future.release()
+            stored(result)
+            nxt = next(pending, None)
+            if nxt is not None:
+                in_flight.append(submit(nxt))
+
+
+class _Idle:
+    """A cluster without a worker, reported at once (a warning) and refused after
+    :data:`WORKER_TIMEOUT` seconds without one: batches in flight on a cluster that has no
+    worker (none joined, or all gone) would be waited on for good."""
+
+    def __init__(self, client) -> None:
+        self.client = client
+        self.since: float | None = None  # monotonic time the workers were first missed
+
+    def check(self) -> None:
+        if self.client.nthreads():
+            if self.since is not None:
+                log.warning("the dask cluster has workers again; the study goes on")
+            self.since = None
+            return
+        now = time.monotonic()
+        if self.since is None:
+            self.since = now
+            log.warning(
+                "the dask cluster at %s has no worker: waiting up to %d s for one (dask "
+                "worker %s), then stopping; the batches finished are kept",
+                self.client.scheduler.address,
+                WORKER_TIMEOUT,
+                self.client.scheduler.address,
+            )
+        elif now - self.since > WORKER_TIMEOUT:
+            address = self.client.scheduler.address
+            raise SchedulerError.at(
+                "--scheduler",
+                f"the dask cluster at {address} had no worker for {WORKER_TIMEOUT} s; start "
+                f"workers (dask worker {address}) and rerun the same command to resume (the "
+                "batches finished are stored), or run on this machine (--scheduler threads)",
+                found=address,
+            )
