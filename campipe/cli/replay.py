@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import os
 import sys
 
 import click
 
-from campipe.cli.base import verify_option
+from campipe.cli.base import InputFailure, verify_option
 
 
 @click.command()
@@ -57,6 +58,11 @@ def replay(archive, case_ids, where, output, overwrite, spawn, magnify, verify) 
         raise click.UsageError("give --case ID (repeatable) or --where EXPR, one of the two")
     if spawn and output:
         raise click.UsageError("-o and --spawn exclude each other")
+    if output and not os.path.isdir(os.path.dirname(os.path.abspath(output))):
+        raise InputFailure(
+            f"-o {output}: its folder {os.path.dirname(os.path.abspath(output))} does not "
+            "exist; create it, or write the recording elsewhere"
+        )
     stderr = sys.stderr
 
     def bar(total: int, unit: str) -> Progress:

@@ -267,3 +267,54 @@ def test_sigterm_leaves_a_state_the_rerun_resumes(tmp_path):
     rerun = study(spec, "--scheduler", "synchronous")
     assert rerun.exit_code == 0, rerun.output
     assert "reused" in rerun.stderr
+
+
+def test_ctrl_c_says_what_stays_and_the_rerun_resumes(tmp_path):
+    """SIGINT once the first batch is stored: one line saying the batches are kept and how
+    to resume, exit status 130, no traceback; the rerun reuses them. Broken copy,
+    CampipeGroup.invoke: KeyboardInterrupt left to click: "Aborted!" and status 1."""
+    slow = SPEC.replace(
+        "run: {revolutions: 1}", "run: {revolutions: 4, integrator: newmark-linear}"
+    ).replace("[6000 rpm, 9524 rpm, 11000 rpm]", "{from: 500 rpm, to: 600 rpm, num: 12}")
+    spec = write_spec(tmp_path, slow)
+    cmd = [sys.executable, "-m", "campipe", "study", str(spec), "--scheduler", "synchronous"]
+    cmd += ["--batch-size", "1", "--no-progress"]
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True, cwd=ROOT, env=env)
+    parts = parts_directory(tmp_path / "small.nc")
+    try:
+        for _ in range(2400):
+            if list(parts.glob("batch-*.npz")) or proc.poll() is not None:
+                break
+            time.sleep(0.05)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert "Traceback" not in err and "Aborted!" not in err, err
+    if proc.returncode == 0:  # finished before the signal came: nothing to show
+        return
+    assert proc.returncode in (130, -signal.SIGINT), err
+    assert "campipe study: interrupted (Ctrl-C); the batches finished are kept" in err
+    rerun = study(spec, "--scheduler", "synchronous")
+    assert rerun.exit_code == 0 and "reused" in rerun.stderr, rerun.output
+
+
+def test_ctrl_c_while_the_command_line_loads_is_a_line_not_a_traceback():
+    """The handler campipe.cli sets as it loads (its process only): one line, status 130.
+    Broken copy, campipe/cli/__init__.py: no handler: an import's KeyboardInterrupt
+    traceback."""
+    code = (
+        "import sys; sys.argv[0] = 'campipe'; import campipe.cli, os, signal, time; "
+        "os.kill(os.getpid(), signal.SIGINT); time.sleep(30)"
+    )
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
+    assert done.returncode == 130, done.stderr
+    assert done.stderr == "campipe: interrupted (Ctrl-C) while starting; nothing was done\n"
+    imported = "import campipe.cli, signal; print(signal.getsignal(signal.SIGINT).__name__)"
+    other = subprocess.run(
+        [sys.executable, "-c", imported], capture_output=True, text=True, env=env
+    )
+    assert other.stdout.strip() == "default_int_handler"  # a program importing it keeps its own
