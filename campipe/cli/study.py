@@ -19,7 +19,7 @@ from campipe.cli.base import (
     verify_option,
 )
 from campipe.cli.onset import run_onset
-from campipe.cli.plot import write_plots
+from campipe.cli.plot import check_spec_plots, write_plots
 
 
 @click.command()
@@ -116,6 +116,7 @@ def study(
             click.echo(str(done.archive))
             return
     loaded = load_spec(spec, sets, limits)
+    check_spec_plots(loaded)
     archive = archive_path(loaded, spec, output, parts)
     if loaded.spec.search == "onset":
         from campipe.engine.periodic import DEFAULT_ONSET_TOLERANCE_RPM, RPM
@@ -260,6 +261,7 @@ def validate(
     loaded = load_spec(
         spec, sets, limits_given(max_cases, max_steps, max_samples, max_events, max_archive_gb)
     )
+    check_spec_plots(loaded)
     workers = workers or default_workers()
     click.echo(validate_text(loaded, spec))
     from campipe.engine.settings import sample_count

@@ -53,7 +53,7 @@ def content_hash(members: Mapping[str, np.ndarray]) -> str:
             continue
         a = np.ascontiguousarray(members[name])
         h.update(f"{name}|{a.dtype.str}|{a.shape}|".encode())
-        h.update(a.reshape(-1).view(np.uint8))
+        h.update(a.reshape(-1).view(np.uint8).data)
     return h.hexdigest()
 
 
