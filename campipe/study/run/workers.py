@@ -21,11 +21,12 @@ import time
 import uuid
 from collections.abc import Callable
 from concurrent.futures import (
+    FIRST_COMPLETED,
     BrokenExecutor,
     Executor,
     ProcessPoolExecutor,
     ThreadPoolExecutor,
-    as_completed,
+    wait,
 )
 from pathlib import Path
 
@@ -186,10 +187,19 @@ def run_local(
             initializer=_yield_to_assembly,
         )
     try:
-        futures = [pool.submit(task, p) for p in plans]
+        # At most two batches per worker in flight, each future dropped once stored: a
+        # finished future holds its batch's arrays, so submitting every batch at once kept
+        # the whole study's results in memory until the end.
+        pending = iter(plans)
+        in_flight = {pool.submit(task, p) for p in itertools.islice(pending, 2 * workers)}
         started()
-        for future in as_completed(futures):
-            stored(future.result())
+        while in_flight:
+            done, in_flight = wait(in_flight, return_when=FIRST_COMPLETED)
+            for future in done:
+                stored(future.result())
+                nxt = next(pending, None)
+                if nxt is not None:
+                    in_flight.add(pool.submit(task, nxt))
     except BrokenExecutor as exc:
         raise SchedulerError.at(
             "--scheduler",
