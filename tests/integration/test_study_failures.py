@@ -101,6 +101,53 @@ def test_a_scheduler_that_goes_away_mid_study_leaves_what_was_stored(tmp_path):
     assert report.reused >= 1 and report.reused + report.computed == 3
 
 
+def test_a_scheduler_gone_is_one_message_without_distributed_s_tracebacks(tmp_path, capfd):
+    """The scheduler (its own process) killed mid-study: campipe study ends in its one
+    message, status 1, none of distributed's logged tracebacks (some 30 lines before).
+    Broken copy, _distributed_quiet: distributed imported after its loggers are set (its
+    import resets them): its ERROR lines and tracebacks come back."""
+    spec = write_spec(tmp_path, SPEC.replace("revolutions: 1", "revolutions: 40"))
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    scheduler = subprocess.Popen(
+        [sys.executable, "-m", "distributed.cli.dask_scheduler", "--port", "0",
+         "--dashboard-address", ":0", "--scheduler-file", str(tmp_path / "s.json")],
+        stderr=subprocess.DEVNULL, env=env,
+    )  # fmt: skip
+    worker = None
+    try:
+        for _ in range(600):
+            if (tmp_path / "s.json").exists():
+                break
+            time.sleep(0.05)
+        address = __import__("json").loads((tmp_path / "s.json").read_text())["address"]
+        worker = subprocess.Popen(
+            [sys.executable, "-m", "distributed.cli.dask_worker", address, "--nthreads", "1",
+             "--dashboard-address", ":0"],
+            stderr=subprocess.DEVNULL, env=env,
+        )  # fmt: skip
+        cmd = [sys.executable, "-m", "campipe", "study", str(spec), "--no-progress"]
+        cmd += ["--scheduler", address, "--batch-size", "1"]
+        proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True, cwd=ROOT, env=env)
+        parts = parts_directory(tmp_path / "small.nc")
+        for _ in range(2400):
+            if list(parts.glob("batch-*.npz")) or proc.poll() is not None:
+                break
+            time.sleep(0.05)
+        scheduler.kill()
+        _, err = proc.communicate(timeout=120)
+    finally:
+        for p in (scheduler, worker):
+            if p is not None and p.poll() is None:
+                p.kill()
+    if proc.returncode == 0:  # finished before the scheduler went: nothing to show
+        return
+    assert proc.returncode == 1, err
+    assert "Traceback" not in err and "distributed.client" not in err, err
+    lines = [line for line in err.splitlines() if "campipe.study.run.workers" not in line]
+    assert lines[0].startswith(f"Error: --scheduler: the dask cluster at {address} failed")
+    assert len(lines) <= 3, err
+
+
 def test_a_cluster_without_workers_is_reported_at_once_and_stops_resumable(
     tmp_path, monkeypatch, caplog
 ):

@@ -19,7 +19,7 @@ import sys
 import threading
 import time
 import uuid
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from concurrent.futures import (
     FIRST_COMPLETED,
     BrokenExecutor,
@@ -28,6 +28,7 @@ from concurrent.futures import (
     ThreadPoolExecutor,
     wait,
 )
+from contextlib import contextmanager
 from pathlib import Path
 
 from campipe.errors import CampipeError
@@ -220,7 +221,53 @@ WORKER_TIMEOUT = 120
 WORKER_POLL = 0.5
 
 
+#: distributed's loggers silenced while a study runs on a cluster (unless campipe logs
+#: below WARNING, ``campipe -v``): a scheduler gone logged some 30 lines of its tracebacks
+#: before the study's own message said the same.
+DISTRIBUTED_LOGGERS = (
+    "distributed",
+    "distributed.client",
+    "distributed.core",
+    "distributed.comm",
+    "distributed.batched",
+)
+
+
 def run_distributed(
+    plans: list[BatchPlan],
+    address: str,
+    storage: Storage,
+    workers_store: bool,
+    stored: Callable[[Stored | BatchData], None],
+) -> None:
+    """Batches on the dask.distributed scheduler at ``address``, each stored batch handed to
+    ``stored``; a SchedulerError, resumable, if the cluster cannot be reached, has no
+    worker for WORKER_TIMEOUT seconds, or fails."""
+    with _distributed_quiet():
+        _run_distributed(plans, address, storage, workers_store, stored)
+
+
+@contextmanager
+def _distributed_quiet() -> Iterator[None]:
+    """:data:`DISTRIBUTED_LOGGERS` at CRITICAL for the block, unless campipe logs below
+    WARNING (then theirs help). After a failure they stay so: the client's closing tasks
+    log their tracebacks after the block has ended, repeating what the SchedulerError
+    says."""
+    import distributed  # noqa: F401 - its import sets its loggers' levels: first, then ours
+
+    if logging.getLogger("campipe").getEffectiveLevel() < logging.WARNING:
+        yield
+        return
+    loggers = [logging.getLogger(name) for name in DISTRIBUTED_LOGGERS]
+    levels = [logger.level for logger in loggers]
+    for logger in loggers:
+        logger.setLevel(logging.CRITICAL)
+    yield  # an exception leaves them quiet
+    for logger, level in zip(loggers, levels, strict=True):
+        logger.setLevel(level)
+
+
+def _run_distributed(
     plans: list[BatchPlan],
     address: str,
     storage: Storage,
