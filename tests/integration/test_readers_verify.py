@@ -11,6 +11,7 @@ from click.testing import CliRunner
 from study_helpers import write_spec
 
 import campipe
+import campipe.io.archive
 from campipe.cli import main
 from campipe.io.archive import ArchiveDamagedError, check, damaged
 from campipe.study import load_study
@@ -148,3 +149,19 @@ def test_closing_open_study_s_grid_closes_its_file(archive):
         assert ds["max_cam_force"].dims == ("speed_rpm",)
         assert open_elsewhere(archive)
     assert not open_elsewhere(archive)
+
+
+def test_a_foreign_netcdf_is_refused_not_shown_as_no_cases(tmp_path):
+    """A netCDF file campipe did not write: query, plot and open_study refuse it (exit
+    status 1), not "(0 of 0 cases)" with status 0. Broken copy, open_archive: no check of
+    the case variable and layout attribute: query exits 0."""
+    path = tmp_path / "foreign.nc"
+    with netCDF4.Dataset(path, "w") as ds:
+        ds.createDimension("x", 3)
+        ds.createVariable("t", "f8", ("x",))[:] = [1.0, 2.0, 3.0]
+    for args in (["query", path], ["plot", "metric", path, "-o", tmp_path / "f.png"]):
+        out = invoke(*args)
+        assert out.exit_code == 1, out.output
+        assert "not a campipe archive" in out.output and "0 of 0" not in out.output
+    with pytest.raises(campipe.io.archive.ArchiveFileError, match="not a campipe archive"):
+        campipe.open_study(path)

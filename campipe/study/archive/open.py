@@ -89,7 +89,8 @@ def open_archive(path: str | Path, verify: bool = True, **open_kwargs):
     ------
     campipe.io.archive.ArchiveFileError
         For a path that is neither a regular file nor a folder (a pipe, a device: opening
-        one would wait on it), or a damaged archive (its subclass ArchiveDamagedError).
+        one would wait on it), a netCDF file campipe did not write, or a damaged archive
+        (its subclass ArchiveDamagedError).
     """
     import xarray as xr
 
@@ -102,7 +103,15 @@ def open_archive(path: str | Path, verify: bool = True, **open_kwargs):
         )
     if verify:
         check(path, layout=LAYOUT_VERSION)
-    return xr.open_dataset(path, **open_kwargs)
+    ds = xr.open_dataset(path, **open_kwargs)
+    if "case" not in ds.variables and "campipe_layout" not in ds.attrs:
+        ds.close()
+        raise ArchiveFileError.at(
+            str(path),
+            "not a campipe archive (netCDF without a case variable or a campipe_layout "
+            "attribute); campipe study writes one",
+        )
+    return ds
 
 
 def open_parts(path: str | Path, verify: bool = True, **open_kwargs):
