@@ -101,6 +101,40 @@ def test_a_scheduler_that_goes_away_mid_study_leaves_what_was_stored(tmp_path):
     assert report.reused >= 1 and report.reused + report.computed == 3
 
 
+def test_a_service_that_greets_with_a_banner_is_not_out_of_memory(tmp_path, monkeypatch):
+    """A TCP service that sends a banner first (SSH): distributed reads its text as a
+    message length and raises MemoryError; refused naming --scheduler, not "out of
+    memory". Broken copy, run_distributed: MemoryError not caught: "out of memory"."""
+    import socket
+    import threading
+
+    server = socket.create_server(("127.0.0.1", 0))
+    held = []
+
+    def greet():
+        while True:
+            try:
+                conn, _ = server.accept()
+            except OSError:
+                return
+            conn.sendall(b"SSH-2.0-OpenSSH_8.9p1 Ubuntu-3ubuntu0.1\r\n")
+            held.append(conn)
+
+    threading.Thread(target=greet, daemon=True).start()
+    monkeypatch.setattr(workers, "CONNECT_TIMEOUT", 3)
+    spec = write_spec(tmp_path, SPEC)
+    address = f"tcp://127.0.0.1:{server.getsockname()[1]}"
+    try:
+        result = study(spec, "--scheduler", address)
+    finally:
+        server.close()
+        for conn in held:
+            conn.close()
+    assert_message(result, 1, f"cannot reach a dask scheduler at {address}", "not as dask does")
+    assert "out of memory" not in result.stderr
+    assert not (tmp_path / "small.nc").exists()
+
+
 def test_a_scheduler_gone_is_one_message_without_distributed_s_tracebacks(tmp_path, capfd):
     """The scheduler (its own process) killed mid-study: campipe study ends in its one
     message, status 1, none of distributed's logged tracebacks (some 30 lines before).

@@ -278,12 +278,15 @@ def _run_distributed(
 
     try:
         client = _connect(address)
-    except (OSError, TimeoutError, ValueError, TypeError) as exc:
+    except (OSError, TimeoutError, ValueError, TypeError, MemoryError) as exc:
+        # MemoryError: a service that greets with a banner (SSH), its text read as the
+        # length of a dask message
+        why = "it answers, not as dask does" if isinstance(exc, MemoryError) else ""
         raise SchedulerError.at(
             "--scheduler",
             f"cannot reach a dask scheduler at {address} within {CONNECT_TIMEOUT} s "
-            f"({type(exc).__name__}); start one (dask scheduler, then dask worker {address}) "
-            "or run on this machine (--scheduler threads)",
+            f"({why or type(exc).__name__}); start one (dask scheduler, then dask worker "
+            f"{address}) or run on this machine (--scheduler threads)",
             found=address,
         ) from None
     token = uuid.uuid4().hex
