@@ -22,11 +22,13 @@ def _interrupted_early(signum, frame) -> None:
     os._exit(128 + signal.SIGINT)
 
 
-# Only in campipe's own process (its console script, python -m campipe), and where Ctrl-C is
-# Python's (not ignored, as in a background job): a program that imports the command line
-# keeps its handler. main() puts Python's back.
+# Only in campipe's own process (its console script, python -m campipe: read from the
+# interpreter's own arguments, which a spawned worker process does not share even where it
+# copies sys.argv), and where Ctrl-C is Python's (not ignored, as in a background job): a
+# program that imports the command line keeps its handler. main() puts Python's back.
 if signal.getsignal(signal.SIGINT) is signal.default_int_handler and (
-    os.path.basename(sys.argv[0]) == "campipe" or sys.orig_argv[1:3] == ["-m", "campipe"]
+    os.path.basename(sys.orig_argv[1] if len(sys.orig_argv) > 1 else "") == "campipe"
+    or sys.orig_argv[1:3] == ["-m", "campipe"]
 ):
     signal.signal(signal.SIGINT, _interrupted_early)
 

@@ -382,16 +382,18 @@ def test_ctrl_c_says_what_stays_and_the_rerun_resumes(tmp_path):
     assert rerun.exit_code == 0 and "reused" in rerun.stderr, rerun.output
 
 
-def test_ctrl_c_while_the_command_line_loads_is_a_line_not_a_traceback():
+def test_ctrl_c_while_the_command_line_loads_is_a_line_not_a_traceback(tmp_path):
     """The handler campipe.cli sets as it loads (its process only): one line, status 130.
     Broken copy, campipe/cli/__init__.py: no handler: an import's KeyboardInterrupt
     traceback."""
     code = (
-        "import sys; sys.argv[0] = 'campipe'; import campipe.cli, os, signal, time; "
-        "os.kill(os.getpid(), signal.SIGINT); time.sleep(30)"
+        "import campipe.cli, os, signal, time; os.kill(os.getpid(), signal.SIGINT); "
+        "time.sleep(30)\n"
     )
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
+    (tmp_path / "campipe").write_text(code)  # a script named as the console script
+    cmd = [sys.executable, str(tmp_path / "campipe")]
+    done = subprocess.run(cmd, capture_output=True, text=True, env=env)
     assert done.returncode == 130, done.stderr
     assert done.stderr == "campipe: interrupted (Ctrl-C) while starting; nothing was done\n"
     imported = "import campipe.cli, signal; print(signal.getsignal(signal.SIGINT).__name__)"
