@@ -431,7 +431,7 @@ def _open_archive(path, verify: bool = True):
     from campipe.study.archive.open import open_archive
 
     try:
-        return open_archive(path, verify)
+        return open_archive(path, verify, unread_dims=("cam_angle",))  # no history read
     except CampipeError:
         raise
     except Exception as exc:

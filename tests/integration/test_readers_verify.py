@@ -27,13 +27,23 @@ sweep:
 """
 
 
-@pytest.fixture(scope="module", params=["none", "zstd"])
-def archive(request, tmp_path_factory):
-    d = tmp_path_factory.mktemp(f"flip-{request.param}")
-    spec = write_spec(d, SPEC.format(compression=request.param))
+def _run(tmp_path_factory, compression):
+    d = tmp_path_factory.mktemp(f"flip-{compression}")
+    spec = write_spec(d, SPEC.format(compression=compression))
     path = d / "flip.nc"
     run_study(load_study(spec), path, scheduler="synchronous")
     return path
+
+
+@pytest.fixture(scope="module", params=["none", "zstd"])
+def archive(request, tmp_path_factory):
+    return _run(tmp_path_factory, request.param)
+
+
+@pytest.fixture(scope="module")
+def uncompressed(tmp_path_factory):
+    """An uncompressed archive: its histories' values are found by their bytes."""
+    return _run(tmp_path_factory, "none")
 
 
 def _flipped(archive, tmp_path, name="max_cam_force"):
@@ -165,3 +175,18 @@ def test_a_foreign_netcdf_is_refused_not_shown_as_no_cases(tmp_path):
         assert "not a campipe archive" in out.output and "0 of 0" not in out.output
     with pytest.raises(campipe.io.archive.ArchiveFileError, match="not a campipe archive"):
         campipe.open_study(path)
+
+
+def test_query_leaves_the_histories_it_never_reads_unchecked(uncompressed, tmp_path):
+    """A flipped byte inside a history (valve_lift): query, which reads no history, skips
+    their check (unread_dims) and answers; plot histories and open_study refuse, naming
+    valve_lift. Broken copy, damaged: skip_dims ignored: query refuses too (its check then
+    reads every history, the bulk of an archive)."""
+    copy, _ = _flipped(uncompressed, tmp_path, "valve_lift")
+    assert damaged(copy) == ["valve_lift"]
+    assert damaged(copy, skip_dims=["cam_angle"]) == []
+    assert invoke("query", copy).exit_code == 0
+    out = invoke("plot", "histories", copy, "--where", "speed_rpm > 9000", "-o", tmp_path / "h.png")
+    assert out.exit_code == 1 and "damaged: valve_lift differs" in out.output, out.output
+    with pytest.raises(ArchiveDamagedError, match="valve_lift"):
+        campipe.open_study(copy)

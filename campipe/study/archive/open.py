@@ -74,7 +74,9 @@ def open_study(path: str | Path, verify: bool = True, **open_kwargs):
     return grid
 
 
-def open_archive(path: str | Path, verify: bool = True, **open_kwargs):
+def open_archive(
+    path: str | Path, verify: bool = True, unread_dims: tuple[str, ...] = (), **open_kwargs
+):
     """An archive as stored, one case per row of ``case`` in the study's order: a netCDF
     file (:func:`xarray.open_dataset`), or a parts archive's folder, its parts read as one
     dataset (:func:`open_parts`).
@@ -82,7 +84,9 @@ def open_archive(path: str | Path, verify: bool = True, **open_kwargs):
     With ``verify`` (the default), every variable and the global attributes are first
     checked against the checksums stored when the file (each part) was written, reading it
     once: a damaged archive raises :class:`~campipe.io.archive.ArchiveDamagedError` naming
-    the variables that differ. Archives store each chunk's Fletcher-32 as well, which HDF5
+    the variables that differ. A reader that never reads the variables along some dimensions
+    names them in ``unread_dims`` (``campipe query``: ``("cam_angle",)``, the histories),
+    and those are left unchecked. Archives store each chunk's Fletcher-32 as well, which HDF5
     checks on any read, verified or not.
 
     Raises
@@ -96,13 +100,13 @@ def open_archive(path: str | Path, verify: bool = True, **open_kwargs):
 
     path = Path(path)
     if path.is_dir():
-        return open_parts(path, verify, **open_kwargs)
+        return open_parts(path, verify, unread_dims, **open_kwargs)
     if path.exists() and not path.is_file():
         raise ArchiveFileError.at(
             str(path), "not a regular file; an archive is a netCDF file or a parts folder"
         )
     if verify:
-        check(path, layout=LAYOUT_VERSION)
+        check(path, layout=LAYOUT_VERSION, skip_dims=unread_dims)
     ds = xr.open_dataset(path, **open_kwargs)
     if "case" not in ds.variables and "campipe_layout" not in ds.attrs:
         ds.close()
@@ -114,7 +118,9 @@ def open_archive(path: str | Path, verify: bool = True, **open_kwargs):
     return ds
 
 
-def open_parts(path: str | Path, verify: bool = True, **open_kwargs):
+def open_parts(
+    path: str | Path, verify: bool = True, unread_dims: tuple[str, ...] = (), **open_kwargs
+):
     """A parts archive (:mod:`campipe.io.parts`) as one dataset, the single-file archive's:
     its parts' variables along ``case`` and along ``event`` concatenated in the index's
     order, the cases put in the study's order (``event_case`` their rows again), the
@@ -131,7 +137,7 @@ def open_parts(path: str | Path, verify: bool = True, **open_kwargs):
     index = read_index(path)
     if verify:
         for p in index["parts"]:
-            _check_part(path, p)
+            _check_part(path, p, unread_dims)
     parts = [xr.open_dataset(path / str(p["file"]), **open_kwargs) for p in index["parts"]]
     try:
         ds = _combine(path, parts, [str(c) for c in index["case"]])
@@ -149,7 +155,7 @@ def open_parts(path: str | Path, verify: bool = True, **open_kwargs):
     return ds
 
 
-def _check_part(archive: Path, entry: Mapping[str, object]) -> None:
+def _check_part(archive: Path, entry: Mapping[str, object], unread_dims: tuple[str, ...]) -> None:
     """A part the index names: the same file (its stored checksums those the index
     recorded) and undamaged (:func:`~campipe.io.archive.check`)."""
     part = archive / str(entry["file"])
@@ -163,7 +169,7 @@ def _check_part(archive: Path, entry: Mapping[str, object]) -> None:
             found=["checksums"],
             expected=str(recorded),
         )
-    check(part, layout=LAYOUT_VERSION)
+    check(part, layout=LAYOUT_VERSION, skip_dims=unread_dims)
 
 
 def _combine(path: Path, parts: list, ids: list[str]):
