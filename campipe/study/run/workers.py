@@ -303,13 +303,18 @@ def _run_distributed(
     except Exception as exc:  # distributed raises many kinds when the cluster goes away
         raise SchedulerError.at(
             "--scheduler",
-            f"the dask cluster at {address} failed ({type(exc).__name__}: {str(exc)[:200]}); "
+            f"the dask cluster at {address} failed ({type(exc).__name__}: {_line(exc)}); "
             "the batches finished before it are stored: rerun the same command to resume",
             found=address,
         ) from None
     finally:
         if reach is not None:
             _reach_file(parts, reach).unlink(missing_ok=True)
+
+
+def _line(exc: BaseException) -> str:
+    """An exception's text on one line, at most 200 characters (distributed's span several)."""
+    return " ".join(str(exc).split())[:200]
 
 
 def _connect(address: str):
