@@ -56,6 +56,7 @@ from campipe.engine.metrics import (
     SEPARATION,
     THESIS_IMPACT_FORCE,
 )
+from campipe.errors import CampipeError
 from campipe.model import ValveTrain, coordinates, system_matrices
 from campipe.model.contact import ContactLaw, contact_law
 from campipe.profiles import Lift, Profile
@@ -311,7 +312,7 @@ class _Recorder:
         self.peak(t, z)
 
 
-class UnresolvedSwitch(ArithmeticError):
+class UnresolvedSwitch(CampipeError, RuntimeError):
     """A contact switch whose instant the root search cannot locate: the monitor's sign
     change lost to rounding or to non-finite states (a stiff undamped contact). It ends its
     case with status NONFINITE, as a failed step does; the batch's other cases go on."""
@@ -606,7 +607,9 @@ def exact_segment(run: _Run, t_a: float, t_b: float, z_a: np.ndarray, events: li
                         t, t_new, xtol=EVENT_XTOL, rtol=EVENT_XTOL,
                     )  # fmt: skip
                 except (ValueError, RuntimeError) as exc:  # no bracket, or no convergence
-                    raise UnresolvedSwitch(f"a switch in [{t}, {t_new}] s: {exc}") from None
+                    raise UnresolvedSwitch(
+                        f"a switch in [{t}, {t_new}] s: {exc}", key="compliant", found=(t, t_new)
+                    ) from None
                 found.append((root, k))
         terminal = [(tt, k) for tt, k in found if events[k].terminal]
         if terminal:
