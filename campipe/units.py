@@ -467,3 +467,116 @@ def _keep_found() -> None:
     values.update(found)
     values = dict(list(values.items())[-KEEP_VALUES:])
     disk_cache.write("quantities", key, json.dumps(values).encode())
+
+
+# -- unit systems ------------------------------------------------------------------------------
+
+#: The unit systems a value is shown in (``--units``, ``open_study(path, units=...)``):
+#: stored (SI) units → the system's (units not listed stay as stored). ``spec`` (the units the
+#: spec wrote, :mod:`campipe.study.query.display`) is read from an archive's spec, not listed.
+UNIT_SYSTEMS: dict[str, dict[str, str]] = {
+    "si": {},
+    # the thesis's units: inches, pounds-force and seconds
+    "in-lbf": {
+        "m": "in",
+        "N": "lbf",
+        "m/s": "in/s",
+        "m/s^2": "in/s^2",
+        "N*m": "lbf*in",
+        "N*s": "lbf*s",
+        "N/m": "lbf/in",
+        "kg": "lbf*s^2/in",
+    },
+    # the designer's: lift in mm, velocity and acceleration per degree of cam angle (at each
+    # case's cam speed), forces in N, stresses in MPa
+    "mm-deg": {
+        "m": "mm",
+        "m/s": "mm/deg",
+        "m/s^2": "mm/deg^2",
+        "N/m": "N/mm",
+        "Pa": "MPa",
+    },
+}
+#: Degrees of cam angle a second at 1 rpm (a turn a minute): 360/60.
+DEG_PER_S_PER_RPM = 6.0
+_PER_DEGREE = re.compile(r"^(?P<length>[A-Za-z]+)/deg(?:\^(?P<power>[12]))?$")
+
+
+class UnitSystemError(CampipeError, ValueError):
+    """A unit system that is not one (``key`` the option naming it)."""
+
+
+def system_units(system: str, key: str = "units") -> dict[str, str]:
+    """Stored units → the units of ``system`` (one of :data:`UNIT_SYSTEMS`)."""
+    if system not in UNIT_SYSTEMS:
+        raise UnitSystemError.at(
+            key,
+            f"found {excerpt(system)}, expected one of: {', '.join(UNIT_SYSTEMS)}",
+            found=system,
+            expected=", ".join(UNIT_SYSTEMS),
+        )
+    return UNIT_SYSTEMS[system]
+
+
+def per_degree(units: str) -> tuple[str, int]:
+    """``mm/deg`` → (``mm``, 1), ``mm/deg^2`` → (``mm``, 2), other units → (units, 0): a
+    length per degree of cam angle (or per degree squared), which a velocity [length/s] or an
+    acceleration [length/s²] becomes only at a cam speed."""
+    m = _PER_DEGREE.match(units.replace("**", "^").replace(" ", ""))
+    if m is None:
+        return units, 0
+    return m["length"], int(m["power"] or 1)
+
+
+def convert_values(values, from_units: str, to_units: str, cam_speed_rpm=None):
+    """``values`` (an array in ``from_units``) in ``to_units``.
+
+    A velocity or an acceleration shown per degree of cam angle (``mm/deg``, ``mm/deg^2``)
+    depends on the cam's speed: v [m/s] is v·1000/(ω·180/π) mm/deg with ω the cam speed
+    [rad/s], a [m/s²] is a·1000/(ω·180/π)² mm/deg².
+
+    Parameters
+    ----------
+    values : array_like
+        Floats in ``from_units`` (other kinds, such as text, are returned as they are).
+    from_units, to_units : str
+        Pint spellings (``""`` for none: the values are returned as they are).
+    cam_speed_rpm : array_like, optional
+        The cam speed [rpm] of each value along the first axis of ``values`` (or one speed);
+        needed only for per-degree units.
+
+    Raises
+    ------
+    UnitSystemError
+        For per-degree units without a cam speed, or from units that are not a length per
+        second (squared, for ``/deg^2``).
+    """
+    import numpy as np
+
+    values = np.asarray(values)
+    if values.dtype.kind != "f" or not from_units or not to_units or from_units == to_units:
+        return values
+    length, power = per_degree(to_units)
+    if not power:
+        return values * convert(1.0, from_units, to_units)
+    if cam_speed_rpm is None:
+        raise UnitSystemError.at(
+            "units",
+            f"{to_units} needs each case's cam speed (speed_rpm)",
+            found=to_units,
+            expected="a cam speed",
+        )
+    per_second = f"{length}/s" if power == 1 else f"{length}/s^2"
+    try:
+        scale = convert(1.0, from_units, per_second)
+    except Exception:  # pint's DimensionalityError: not a length per second
+        raise UnitSystemError.at(
+            "units",
+            f"cannot show {from_units} in {to_units}: not a {per_second}",
+            found=from_units,
+            expected=per_second,
+        ) from None
+    speed = np.asarray(cam_speed_rpm, dtype=float)
+    if speed.ndim:
+        speed = speed.reshape(speed.shape + (1,) * (values.ndim - 1))
+    return values * scale / (speed * DEG_PER_S_PER_RPM) ** power

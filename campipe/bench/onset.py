@@ -15,7 +15,7 @@ import numpy as np
 from campipe.bench.measure import OUTPUT_EVERY, reference
 from campipe.bench.suite import Scene
 from campipe.constants import INCH, LBF, RPM
-from campipe.engine import Case, RunSettings, batch, periodic, run_batch
+from campipe.engine import Case, RunSettings, batch, onset, periodic, run_batch
 from campipe.model import thesis_train
 from campipe.profiles import harmonic
 from campipe.study.onset import search_designs
@@ -104,7 +104,7 @@ def onset_map(quick: bool = False, repeats: int = 3) -> dict:
     """
     designs = map_designs(*QUICK_MAP) if quick else map_designs()
     low, high = MAP_RANGE
-    tol = periodic.DEFAULT_ONSET_TOLERANCE_RPM * RPM
+    tol = onset.DEFAULT_ONSET_TOLERANCE_RPM * RPM
     search_designs(designs[:2], low, high, tol, GOAL_MAP_WORKERS)  # compiled kernels loaded
 
     def run():
@@ -114,7 +114,7 @@ def onset_map(quick: bool = False, repeats: int = 3) -> dict:
     seconds = _best(run, repeats)
     found = run()
     pick = np.unique(np.linspace(0, len(designs) - 1, MAP_CHECKED).round().astype(int))
-    below, above = periodic.confirm_onsets([designs[i] for i in pick], found.speed[pick])
+    below, above = onset.confirm_onsets([designs[i] for i in pick], found.speed[pick])
     checked = np.isfinite(below)
     agree = int(((below == 0) & (above > 0))[checked].sum())
     # The time-domain grid's cost per case, on a sample of the map's design × speed cases.

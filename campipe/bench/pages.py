@@ -30,7 +30,7 @@ import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from campipe.bench import gate, report, settling, sweep, verdict
+from campipe.bench import cluster, gate, report, settling, sweep, verdict
 from campipe.bench.figures import finite, format_short
 from campipe.bench.run import (
     ACCURACY_DEFAULT_ERROR,
@@ -493,6 +493,19 @@ def scaling_block(bench: Bench) -> str:
     return scaling_table(bench.scaling)
 
 
+def cluster_block(bench: Bench) -> str:
+    """A study with --parts on 1, 2, 4 worker processes: cases per second against the
+    client's CPU per case."""
+    if not bench.cluster:
+        return (
+            "Not measured in this run (`--no-scaling` or `--no-cluster`, or a run from before "
+            "the block): `python -m campipe.bench.cluster` runs it alone.\n"
+        )
+    lines = cluster.notes(bench.cluster) + [""]
+    lines += table(cluster.HEADER, cluster.table_rows(bench.cluster))
+    return "\n".join(lines) + "\n"
+
+
 def settling_block(bench: Bench) -> str:
     """Automatic run length against a fixed 4 turns on a sweep through the onset."""
     return settling.markdown(bench.settling)
@@ -526,6 +539,7 @@ BLOCKS: dict[str, Callable[[Bench], str]] = {
     "bench-onset": onset_block,
     "bench-settling": settling_block,
     "bench-scaling": scaling_block,
+    "bench-cluster": cluster_block,
     "bench-sweep": sweep_block,
     "bench-regressions": regressions_block,
 }

@@ -16,7 +16,7 @@ from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Any
 
-from campipe.bench import gate, settling, sweep, verdict
+from campipe.bench import cluster, gate, settling, sweep, verdict
 from campipe.bench.figures import finite
 from campipe.bench.run import FAMILIES, Bench
 from campipe.constants import INCH
@@ -392,6 +392,10 @@ def markdown(bench: Bench, with_plots: bool = True) -> str:
                 for p in bench.scaling
             ],
         )
+    if bench.cluster:
+        lines += ["", "## A study on a dask cluster", ""]
+        lines += cluster.notes(bench.cluster) + [""]
+        lines += _table(cluster.HEADER, cluster.table_rows(bench.cluster))
     lines += ["", "## Every run", ""]
     lines += _table(
         [c[1] or c[0] for c in COLUMNS],

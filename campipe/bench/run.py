@@ -12,13 +12,14 @@ import logging
 import math
 import os
 import platform
+import tempfile
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from campipe.bench import measure, onset, scaling, settling, sweep
+from campipe.bench import cluster, measure, onset, scaling, settling, sweep
 from campipe.bench.ivp import ChatterError
 from campipe.bench.suite import FULL, QUICK, Ladder, Scene, suite
 from campipe.constants import INCH
@@ -85,6 +86,8 @@ class Bench:
     accuracy_for_cost: dict = field(default_factory=dict)  # the error target on 11000 rpm
     throughput: list[dict] = field(default_factory=list)  # newmark-linear's throughput, 256 cases
     scaling: list[dict] = field(default_factory=list)  # the engine's time against cases, workers
+    #: a study with --parts on 1, 2, … worker processes: cases/s, the client's CPU
+    cluster: list[dict] = field(default_factory=list)
     steady: list[dict] = field(default_factory=list)  # the steady-state path per scene
     onset: dict = field(default_factory=dict)  # the onset map against the time-domain grid
     settling: dict = field(default_factory=dict)  # automatic run length against 4 turns
@@ -348,6 +351,7 @@ def run_bench(
     with_scaling: bool = True,
     with_suite: bool = True,
     progress: Callable[[str], None] | None = None,
+    with_cluster: bool | None = None,
 ) -> Bench:
     """Run the bench.
 
@@ -363,6 +367,9 @@ def run_bench(
         Run the scenes: references, ladders, peers and fidelity.
     progress : callable, optional
         Called with a line of text as each stage starts.
+    with_cluster : bool, optional
+        Run a study with ``--parts`` on a local dask cluster of 1, 2 and 4 worker processes
+        (:mod:`campipe.bench.cluster`; default: with the scaling measurements).
     """
     started = time.perf_counter()
     say = progress or (lambda text: log.info("%s", text))
@@ -478,6 +485,15 @@ def run_bench(
         say(f"scaling: engine on dask threads, {counts[0]}–{counts[-1]} cases")
         points = scaling.engine_scaling(counts)
         bench.scaling = [{**asdict(p), "per_case": p.per_case} for p in points]
+    if with_scaling if with_cluster is None else with_cluster:
+        sizes, processes = (
+            (cluster.QUICK_CLUSTER_COUNTS, cluster.QUICK_CLUSTER_WORKERS)
+            if quick
+            else (cluster.CLUSTER_COUNTS, cluster.CLUSTER_WORKERS)
+        )
+        say(f"cluster: a study with --parts on {', '.join(map(str, processes))} worker processes")
+        with tempfile.TemporaryDirectory(prefix="campipe-cluster-") as folder:
+            bench.cluster = cluster.as_dicts(cluster.cluster_scaling(folder, sizes, processes))
     bench.seconds = time.perf_counter() - started
     bench.meta["load_average_at_end"] = os.getloadavg()[0]
     return bench

@@ -5,9 +5,10 @@ parameter table and NumPy, nothing else): dask, xarray, netCDF4, pint, SciPy, nu
 rerun load only in the commands that need them.
 
 The group and what the commands share are :mod:`~campipe.cli.base`'s; one module per family
-of commands: :mod:`~campipe.cli.study` (study, validate, query, pack), :mod:`~campipe.cli.plot`,
-:mod:`~campipe.cli.onset`, :mod:`~campipe.cli.replay`, :mod:`~campipe.cli.model` (model,
-init, schema) and :mod:`~campipe.cli.bench`.
+of commands: :mod:`~campipe.cli.study` (study, validate, query, pack), :mod:`~campipe.cli.export`,
+:mod:`~campipe.cli.plot`, :mod:`~campipe.cli.onset`, :mod:`~campipe.cli.design`,
+:mod:`~campipe.cli.replay`, :mod:`~campipe.cli.model` (model, init, schema) and
+:mod:`~campipe.cli.bench`.
 """
 
 import os
@@ -32,13 +33,15 @@ if signal.getsignal(signal.SIGINT) is signal.default_int_handler and (
 ):
     signal.signal(signal.SIGINT, _interrupted_early)
 
-from campipe.cli import bench, model, onset, plot, replay, study  # noqa: E402
+from campipe.cli import bench, design, export, model, onset, plot, replay, study  # noqa: E402
 from campipe.cli.base import main  # noqa: E402
 
 __all__ = ["main"]
 
 for _command in (
     bench.bench,
+    export.export,
+    design.design,
     model.init,
     model.model,
     model.schema,

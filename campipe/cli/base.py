@@ -259,7 +259,7 @@ SET_HELP = (
 
 #: The unit systems of --units (campipe.study.spec.plots.SYSTEMS, repeated so --help needs no
 #: import of the study layer; tests/integration/test_plot.py checks they agree).
-UNIT_SYSTEMS = ("spec", "si", "in-lbf")
+UNIT_SYSTEMS = ("spec", "si", "in-lbf", "mm-deg")
 
 
 def verify_option(command):
@@ -276,12 +276,14 @@ def verify_option(command):
 
 
 def units_option(command):
-    """``--units spec|si|in-lbf``: the units values are shown in."""
+    """``--units spec|si|in-lbf|mm-deg``: the units values are shown in."""
     return click.option(
         "--units",
         type=click.Choice(UNIT_SYSTEMS),
         default="spec",
         show_default=True,
         help="Show values in the units the spec wrote them in, with the rest in the spec's "
-        "system (spec), in SI as stored (si), or in inches, pounds-force and seconds (in-lbf).",
+        "system (spec), in SI as stored (si), in inches, pounds-force and seconds (in-lbf), "
+        "or in mm, mm/deg and mm/deg^2 of cam angle at each case's cam speed, N and MPa "
+        "(mm-deg).",
     )(command)

@@ -36,6 +36,12 @@ import click
     help="Measure throughput and the engine's time against cases and workers.",
 )
 @click.option(
+    "--cluster/--no-cluster",
+    default=None,
+    help="Run a study with --parts on a local dask cluster of 1, 2 and 4 worker processes: "
+    "cases per second against the client's CPU per case [default: with --scaling].",
+)
+@click.option(
     "--suite/--no-suite",
     default=True,
     show_default=True,
@@ -54,7 +60,7 @@ import click
     show_default=True,
     help="Write bench.png (needs matplotlib: pip install 'campipe[plot]').",
 )
-def bench(quick, output, scenes, scaling, suite, previous, plot) -> None:
+def bench(quick, output, scenes, scaling, cluster, suite, previous, plot) -> None:
     """Speed against error: the suite of scenes, every integrator and fidelity, peers, scaling.
 
     Ends with the verdict: each goal with its measured figure (reached, not reached or not
@@ -87,6 +93,7 @@ def bench(quick, output, scenes, scaling, suite, previous, plot) -> None:
             with_scaling=scaling,
             with_suite=suite,
             progress=say,
+            with_cluster=cluster,
         )
     except ValueError as exc:
         raise click.UsageError(str(exc)) from None

@@ -20,7 +20,7 @@ from campipe.cli.base import SET_HELP, Failure, load_spec
 )
 @click.option(
     "--level",
-    default="0.5 deg",  # periodic.DEFAULT_ONSET_LEVEL_DEG (not imported: numba loads)
+    default="0.5 deg",  # engine.onset.DEFAULT_ONSET_LEVEL_DEG (not imported: numba loads)
     show_default=True,
     metavar="ANGLE",
     help="With a seat, the no-follow a turn the onset reaches (0 deg: the first separation). "
@@ -165,10 +165,37 @@ def _search_and_write(
         },
         loaded.compression,
     )
-    table = displayed(result.table, display_units(result.table.units, attrs))
+    table = with_engine_speed(result.table, loaded.spec.drive)
+    table = displayed(table, display_units(table.units, attrs))
     click.echo(format_rows(table, np.arange(table.n), table.default, fmt))
+    if loaded.spec.drive is not None:
+        click.echo(
+            f"onset_speed_rpm is the cam's speed, onset_engine_speed_rpm the engine's "
+            f"(the cam's / drive.cam_per_crank {loaded.spec.drive:g})",
+            err=True,
+        )
     for line in summary_lines(result):
         click.echo(line, err=True)
     click.echo(f"wrote {path}", err=True)
     if result.disagreements.size:
         raise Failure(summary_lines(result)[-1])
+
+
+def with_engine_speed(table, drive: float | None):
+    """The onset table (a CaseTable) with, for a spec with a drive, the onset at the
+    engine's speed beside the cam's (``onset_engine_speed_rpm``, after ``onset_speed_rpm``)."""
+    from campipe.study.query.tables import CaseTable
+
+    if drive is None or "onset_speed_rpm" not in table.columns:
+        return table
+    columns, units, default = {}, {}, []
+    for name, values in table.columns.items():
+        columns[name], units[name] = values, table.units[name]
+        if name == "onset_speed_rpm":
+            columns["onset_engine_speed_rpm"] = np.asarray(values, float) / drive
+            units["onset_engine_speed_rpm"] = table.units[name]
+    for name in table.default:
+        default.append(name)
+        if name == "onset_speed_rpm":
+            default.append("onset_engine_speed_rpm")
+    return CaseTable(columns, units, default, table.n, table.study)

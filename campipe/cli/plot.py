@@ -8,7 +8,7 @@ from campipe.cli.base import Failure, InputFailure, SpecRefused, units_option, v
 
 #: The plot kinds (campipe.study.spec.plots.KINDS, repeated so --help needs no import of the study
 #: layer; tests/integration/test_plot.py checks they agree).
-PLOT_KINDS = ("histories", "metric", "map", "events")
+PLOT_KINDS = ("histories", "metric", "map", "events", "pareto")
 
 
 @click.command()
@@ -30,13 +30,17 @@ PLOT_KINDS = ("histories", "metric", "map", "events")
 @click.option("--where", help="Draw the cases where EXPR holds (the language of query --where).")
 @units_option
 @click.option(
-    "--x", "x", metavar="COLUMN", help="metric, map: the column along x (default: speed_rpm)."
+    "--x",
+    "x",
+    metavar="COLUMN",
+    help="metric, map: the column along x (default: speed_rpm); pareto: the first objective's.",
 )
 @click.option(
     "--y",
     "y",
     metavar="COLUMN",
-    help="metric: the value drawn (default: separation_deg_per_rev); map: the column along y.",
+    help="metric: the value drawn (default: separation_deg_per_rev); map: the column along y; "
+    "pareto: the second objective's.",
 )
 @click.option(
     "--z", "z", metavar="COLUMN", help="map: the value coloured (default: separation_deg_per_rev)."
@@ -52,23 +56,63 @@ PLOT_KINDS = ("histories", "metric", "map", "events")
     metavar="N|last|all",
     help="histories, events: show one cam turn (1, 2, ... or last; default all).",
 )
+@click.option(
+    "--angle",
+    type=click.Choice(["cam", "crank"]),
+    help="histories, events: draw against the cam angle (default) or the crank angle (an "
+    "archive whose spec gives a drive).",
+)
+@click.option(
+    "--range",
+    "span",
+    metavar="LO:HI",
+    help="histories, events: show the angles LO to HI [deg of the angle drawn], e.g. 60:120 "
+    "(with --turn, of that turn).",
+)
+@click.option(
+    "--limit",
+    "limits",
+    multiple=True,
+    metavar="VALUE",
+    help="metric: draw a limit line at this value of y, a number in its shown units or a "
+    "quantity such as '0.5 m/s'. Repeatable.",
+)
 @verify_option
-def plot(kind, archive, output, overwrite, where, units, x, y, z, level, turn, verify) -> None:
+def plot(
+    kind,
+    archive,
+    output,
+    overwrite,
+    where,
+    units,
+    x,
+    y,
+    z,
+    level,
+    turn,
+    angle,
+    span,
+    limits,
+    verify,
+) -> None:
     """Draw a figure of ARCHIVE.
 
     \b
-    histories  valve lift, velocity, acceleration, cam and follower lift, contact forces
-               against cam angle, the cases overlaid (at most 10), events marked
+    histories  valve lift (the seat hatched), velocity, acceleration, cam and follower
+               lift, contact forces against cam (or crank) angle, the cases overlaid (at
+               most 10), events marked
     metric     a per-case value (--y) against a swept column (--x), a line per
                combination of the other varied keys
     map        a per-case value (--z) over two columns (--x, --y), its contour at --level
     events     each case's separations, landings and seatings on a cam angle × case chart
+    pareto     a campipe design file's two objectives (--x, --y), its Pareto front
     """
     from campipe.plot import plot_archive
     from campipe.study.spec.plots import PlotError, check_plot
 
     options = {"kind": kind, "where": where, "units": units, "output": output}
     options.update({"x": x, "y": y, "z": z, "level": level, "turn": turn})
+    options.update({"angle": angle, "range": span, "limit": list(limits) or None})
     given = {k: v for k, v in options.items() if v is not None}
     try:
         request = check_plot(given)

@@ -42,7 +42,8 @@ from campipe.cli.plot import check_spec_plots, write_plots
 @click.option(
     "--workers",
     type=click.IntRange(min=1),
-    help="Threads or processes of a local scheduler (default: the cores available).",
+    help="Threads or processes of a local scheduler (default: the cores available); on a "
+    "dask cluster, its worker threads, for which the batches are sized.",
 )
 @click.option(
     "--batch-size",
@@ -61,6 +62,13 @@ from campipe.cli.plot import check_spec_plots, write_plots
     "written by the worker that computed it, and an index (the way to run on a cluster: "
     "this process only keeps count). Read as one archive by query, plot, replay and "
     "campipe.open_study; campipe pack writes the single file.",
+)
+@click.option(
+    "--parts-dir",
+    type=click.Path(file_okay=False),
+    help="Write the parts archive (--parts) into this folder, as <name>.parts: a path every "
+    "worker of a cluster reaches and can write (a shared file system). Each worker is "
+    "checked first; the study stops before computing if one cannot write there.",
 )
 @click.option(
     "--progress/--no-progress",
@@ -85,6 +93,7 @@ def study(
     batch_size,
     keep_parts,
     parts,
+    parts_dir,
     progress,
     overwrite,
     max_cases,
@@ -107,6 +116,11 @@ def study(
     from campipe.study.spec.limits import Limits
 
     limits = limits_given(max_cases, max_steps, max_samples, max_events, max_archive_gb)
+    if parts_dir and output:
+        raise click.UsageError(
+            "give the parts archive's path (-o) or the folder it goes into (--parts-dir), not both"
+        )
+    parts = parts or bool(parts_dir)
     if limits == Limits() and not overwrite and not parts:
         # A finished study answers from its spec's text and its archive's checksums alone.
         done = finished(spec, parse_overrides(sets), output)
@@ -117,9 +131,13 @@ def study(
             return
     loaded = load_spec(spec, sets, limits)
     check_spec_plots(loaded)
+    if parts_dir:
+        from pathlib import Path
+
+        output = str(Path(parts_dir) / f"{loaded.name}.parts")
     archive = archive_path(loaded, spec, output, parts)
     if loaded.spec.search == "onset":
-        from campipe.engine.periodic import DEFAULT_ONSET_TOLERANCE_RPM, RPM
+        from campipe.engine.onset import DEFAULT_ONSET_TOLERANCE_RPM, RPM
 
         tolerance = DEFAULT_ONSET_TOLERANCE_RPM * RPM
         run_onset(
@@ -412,7 +430,7 @@ def query(archive, where, columns, sort, fmt, summary, units, verify) -> None:
     from campipe.study.query.tables import case_table, displayed, format_rows, select
     from campipe.study.query.tables import summary as summary_text
 
-    with _open_archive(archive, verify) as ds:
+    with _open_archive(archive, verify, ("cam_angle",)) as ds:  # query reads no history
         if summary:
             click.echo(summary_text(ds, where, units))
             return
@@ -423,7 +441,7 @@ def query(archive, where, columns, sort, fmt, summary, units, verify) -> None:
     click.echo(format_rows(displayed(table, shown), rows, names, fmt))
 
 
-def _open_archive(path, verify: bool = True):
+def _open_archive(path, verify: bool = True, unread_dims: tuple[str, ...] = ()):
     """An archive (a file, or a parts archive's folder) as an xarray Dataset, or a Failure
     naming why it cannot be read."""
     from campipe.errors import CampipeError
@@ -431,7 +449,7 @@ def _open_archive(path, verify: bool = True):
     from campipe.study.archive.open import open_archive
 
     try:
-        return open_archive(path, verify, unread_dims=("cam_angle",))  # no history read
+        return open_archive(path, verify, unread_dims)
     except CampipeError:
         raise
     except Exception as exc:

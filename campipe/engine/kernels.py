@@ -42,7 +42,7 @@ def kernels(settings: RunSettings) -> dict[str, object]:
 
 
 def search_kernels() -> dict[str, object]:
-    """The compiled kernels the onset's search calls (``periodic.onset_speeds``), by name."""
+    """The compiled kernels the onset's search calls (``onset.onset_speeds``), by name."""
     return {"steady extremes": steady.steady_extremes}
 
 

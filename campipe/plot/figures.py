@@ -14,6 +14,8 @@ or group in a distinct line style and marker as well as a shade (:mod:`campipe.p
 - ``map``: a per-case value over two numeric columns as coloured cells (one per case), with
   its contour at ``level``; one panel per combination of the other varied columns.
 - ``events``: every event of each case on a cam angle × case chart, a marker per kind.
+- ``pareto``: a design file's (``campipe design``) two objectives, every design evaluated
+  (those meeting the requirements filled), the Pareto front joined.
 """
 
 from __future__ import annotations
@@ -27,9 +29,18 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from campipe.errors import did_you_mean, excerpt
-from campipe.plot.style import COLORMAP, EVENT_MARKERS, axis_label, axis_words, line_styles
+from campipe.plot.kinematics import kinematic_lift, rocker_ratios
+from campipe.plot.style import (
+    COLORMAP,
+    EVENT_MARKERS,
+    SHORT_UNITS,
+    axis_label,
+    axis_words,
+    line_styles,
+)
 from campipe.study.query.display import display_units, format_value, to_display
 from campipe.study.query.tables import CaseTable, case_table, displayed, select
+from campipe.study.spec.drive import ENGINE_SPEED_NAME
 from campipe.study.spec.plots import PlotError, PlotRequest, check_turn
 from campipe.study.spec.variables import VARIABLES
 from campipe.units import QuantityError, convert, read_quantity
@@ -77,6 +88,7 @@ def figure(ds, request: PlotRequest) -> Figure:
     """
     view = select_view(ds, request)
     draw = {"histories": histories, "metric": metric, "map": cell_map, "events": events}
+    draw["pareto"] = pareto
     return draw[request.kind](view, request)
 
 
@@ -126,6 +138,13 @@ def varied_columns(view: View, exclude: Sequence[str] = ()) -> list[str]:
         var = VARIABLES.get(name)
         if name == "case" or name in exclude or (var is not None and var.role != "parameter"):
             continue
+        # the engine's speed is the cam's over the drive's ratio: one of the two is an axis
+        if name in ("speed_rpm", ENGINE_SPEED_NAME) and {"speed_rpm", ENGINE_SPEED_NAME} & set(
+            exclude
+        ):
+            continue
+        if name == ENGINE_SPEED_NAME and "speed_rpm" in out:
+            continue
         if name in view.ds.data_vars:
             continue  # a metric or count, not a parameter
         keys = {_key(v) for v in values}
@@ -150,6 +169,8 @@ def describe(name: str, value: object, units: str) -> str:
         text = format_value(value, 6)
     if name == "speed_rpm":
         return f"{text} rpm"
+    if name == ENGINE_SPEED_NAME:
+        return f"engine {text} rpm"
     shown_units = f" {units}" if units and units != "1" and text != "none" else ""
     return f"{name} {text}{shown_units}"
 
@@ -158,6 +179,8 @@ def case_labels(view: View, names: Sequence[str]) -> list[str]:
     """Each selected case by its values of ``names`` (the case id when none differ)."""
     if not names:
         return [f"case {str(c)[:8]}" for c in view.shown.columns["case"]]
+    if ENGINE_SPEED_NAME in view.shown.columns:  # a drive: the speed the spec gave
+        names = [ENGINE_SPEED_NAME if n == "speed_rpm" else n for n in names]
     return [
         ", ".join(describe(n, view.shown.columns[n][i], view.shown.units.get(n, "")) for n in names)
         for i in range(view.shown.n)
@@ -181,6 +204,11 @@ def _column(view: View, name: str | None, option: str, numeric: bool = True) -> 
             f"{', '.join(usable)})",
         )
     return np.asarray(columns[name], dtype=float)
+
+
+def _cam_speed(view: View) -> np.ndarray | None:
+    """(n,) the selected cases' cam speeds [rpm], for values shown per degree."""
+    return view.stored.columns.get("speed_rpm")
 
 
 def _usable(view: View) -> np.ndarray:
@@ -221,9 +249,11 @@ def histories(view: View, request: PlotRequest) -> Figure:
         turn_note = turn_note.replace(", turn", ", recorded turn") + (
             ", each case's last turns (settled: query's period_turns)"
         )
-    angle = cam_angle[keep]
     # one turn chosen: its angles read 0–360°, as a designer reads a turn (the events too)
-    offset = float(angle[0]) if turn_note else 0.0
+    axis = angle_axis(view, request, float(cam_angle[keep][0]) if turn_note else 0.0)
+    keep &= axis.within(cam_angle, request.range)
+    angle = cam_angle[keep]
+    x = axis.shown(angle)
     seat = view.stored.columns.get("seat")
     panels = [
         p
@@ -246,12 +276,16 @@ def histories(view: View, request: PlotRequest) -> Figure:
             np.asarray(ds[name].values[view.rows][:, keep], float),
             str(ds[name].attrs.get("units", "")),
             units,
+            _cam_speed(view),
         )
         drawn[name] = values
         if name == "follower_lift":
-            _cam_lines(ax, view, keep, angle - offset)
+            _cam_lines(ax, view, keep, x)
         for i in range(n):
-            ax.plot(angle - offset, values[i], label=labels[i], **styles[i].kwargs(samples))
+            ax.plot(x, values[i], label=labels[i], **styles[i].kwargs(samples))
+        if name == "valve_lift":
+            _kinematic_lines(ax, view, keep, x)
+            _seat_bands(ax, view, values)
         ax.set_title(title, fontsize=10)
         ax.set_ylabel(axis_label(name, units))
         ax.grid(alpha=0.3)
@@ -259,9 +293,9 @@ def histories(view: View, request: PlotRequest) -> Figure:
         ax.set_visible(False)
     kinds: dict[str, Any] = {}
     for ax, (_, names) in zip(axes, panels, strict=False):
-        kinds.update(_mark_events(ax, view, names[0], drawn, angle, styles, offset))
+        kinds.update(_mark_events(ax, view, names[0], drawn, angle, styles, axis))
     for ax in axes[max(len(panels) - cols, 0) : len(panels)]:
-        ax.set_xlabel(axis_label("cam_angle", view.units.get("cam_angle", "degree")))
+        ax.set_xlabel(axis_label(axis.name, "degree"))
         ax.tick_params(labelbottom=True)
     handles, texts = axes[0].get_legend_handles_labels()
     fig.legend(
@@ -275,6 +309,106 @@ def histories(view: View, request: PlotRequest) -> Figure:
     return fig
 
 
+@dataclass(frozen=True)
+class AngleAxis:
+    """The angle a figure's x axis shows: the cam's or the crank's (``--angle``), from
+    ``offset`` cam degrees (a chosen turn's start: it reads from 0°)."""
+
+    name: str  # "cam_angle" or "crank_angle"
+    offset: float  # [deg of cam angle] subtracted
+    scale: float  # shown degrees per cam degree: 1, or 1 / drive.cam_per_crank
+
+    def shown(self, cam_angle: np.ndarray) -> np.ndarray:
+        """Cam angles [deg] as the axis shows them."""
+        return (np.asarray(cam_angle, float) - self.offset) * self.scale
+
+    def within(self, cam_angle: np.ndarray, span: tuple[float, float] | None) -> np.ndarray:
+        """(samples,) bool: the cam angles whose shown angle is in ``span`` (``--range``;
+        all for None); a PlotError for a span that holds no sample."""
+        if span is None:
+            return np.ones(np.shape(cam_angle), bool)
+        shown = self.shown(cam_angle)
+        inside = (shown >= span[0] - 1e-9) & (shown <= span[1] + 1e-9)
+        if inside.sum() < 2:
+            raise PlotError.at(
+                "--range",
+                f"{span[0]:g}:{span[1]:g} deg holds {int(inside.sum())} of the samples "
+                f"({float(shown.min()):g} … {float(shown.max()):g} deg of "
+                f"{axis_words(self.name).lower()}); choose a range inside it",
+            )
+        return inside
+
+
+def angle_axis(view: View, request: PlotRequest, offset: float) -> AngleAxis:
+    """The x axis ``request.angle`` asks for: the cam angle (the default) or, for an archive
+    of a spec with a drive, the crank angle (``crank_angle``, the cam's over the ratio)."""
+    if request.angle != "crank":
+        return AngleAxis("cam_angle", offset, 1.0)
+    crank = view.ds.variables.get("crank_angle")
+    if crank is None:
+        raise PlotError.at(
+            "--angle",
+            "the archive has no crank angle: its spec gives no drive (drive: {cam_per_crank: "
+            "0.5}); draw --angle cam",
+        )
+    return AngleAxis("crank_angle", offset, 1.0 / float(crank.attrs["cam_per_crank"]))
+
+
+def _kinematic_lines(ax, view: View, keep: np.ndarray, x: np.ndarray) -> None:
+    """The kinematic valve lift (a rigid train's: :mod:`campipe.plot.kinematics`) under the
+    cases' valve lifts, once per distinct curve (thin black dashes)."""
+    ds = view.ds
+    if "cam_lift" not in ds.variables:
+        return
+    ratios = rocker_ratios(ds.attrs, view.stored.columns)
+    seats = view.stored.columns.get("seat", np.full(view.stored.n, -np.inf))
+    stored = str(ds["cam_lift"].attrs.get("units", ""))
+    lifts = kinematic_lift(
+        np.asarray(ds["cam_lift"].values[view.rows][:, keep], float), ratios, seats
+    )
+    shown = to_display(lifts, stored, view.units.get("valve_lift", stored), _cam_speed(view))
+    seen: list[np.ndarray] = []
+    for lift in shown:
+        if not np.isfinite(lift).any():
+            continue
+        scale = 1e-9 * float(np.nanmax(np.abs(lift), initial=1.0))
+        if any(np.allclose(lift, s, rtol=0.0, atol=scale, equal_nan=True) for s in seen):
+            continue
+        seen.append(lift)
+        ax.plot(
+            x,
+            lift,
+            color="black",
+            linestyle=(0, (4, 2)),
+            linewidth=0.9,
+            label="kinematic lift" if len(seen) == 1 else None,
+            gid="kinematic",
+            zorder=1,
+        )
+
+
+def _seat_bands(ax, view: View, lifts: np.ndarray) -> None:
+    """Each distinct seat of the cases drawn as a hatched band whose top is the seat's valve
+    lift (the valve rests there, never below)."""
+    seat = view.shown.columns.get("seat")
+    if seat is None:
+        return
+    seats = np.unique(np.asarray(seat, float)[np.isfinite(np.asarray(seat, float))])
+    finite = lifts[np.isfinite(lifts)]
+    depth = 0.04 * (float(finite.max() - finite.min()) if finite.size else 1.0) or 1.0
+    for k, at in enumerate(seats):
+        ax.axhspan(
+            at - depth,
+            at,
+            facecolor="0.85",
+            edgecolor="0.3",
+            hatch="///",
+            linewidth=0.8,
+            zorder=0,
+            label="seat" if k == 0 else None,
+        )
+
+
 def _cam_lines(ax, view: View, keep: np.ndarray, angle: np.ndarray) -> None:
     """The cam's lift under the followers: once per distinct cam (a thin black dotted line)."""
     ds = view.ds
@@ -283,6 +417,7 @@ def _cam_lines(ax, view: View, keep: np.ndarray, angle: np.ndarray) -> None:
         np.asarray(ds["cam_lift"].values[view.rows][:, keep], float),
         str(ds["cam_lift"].attrs.get("units", "")),
         units,
+        _cam_speed(view),
     )
     seen: list[np.ndarray] = []
     for lift in lifts:
@@ -315,10 +450,10 @@ def _events_of(view: View) -> list[dict[str, np.ndarray]]:
     return out
 
 
-def _mark_events(ax, view, name, drawn, angle, styles, offset=0.0) -> dict[str, Any]:
-    """The events whose contact this panel shows, on each case's line, drawn ``offset``
-    degrees back (a chosen turn from 0°); returns a legend handle for each kind marked (its
-    text → handle)."""
+def _mark_events(ax, view, name, drawn, angle, styles, axis: AngleAxis) -> dict[str, Any]:
+    """The events whose contact this panel shows, on each case's line, at their angle as
+    ``axis`` shows it (a chosen turn from 0°); returns a legend handle for each kind marked
+    (its text → handle)."""
     kinds = [k for k, panel in EVENT_PANELS.items() if panel == name]
     marked: dict[str, Any] = {}
     if not kinds or name not in drawn or angle.size < 2:
@@ -332,7 +467,7 @@ def _mark_events(ax, view, name, drawn, angle, styles, offset=0.0) -> dict[str, 
             marker, filled, text = EVENT_MARKERS[kind]
             color = styles[i].color
             ax.scatter(
-                at - offset,
+                axis.shown(at),
                 np.interp(at, angle, drawn[name][i]),
                 marker=marker,
                 s=30,
@@ -415,10 +550,22 @@ def metric(view: View, request: PlotRequest) -> Figure:
         )
         ax.plot(x[idx], y[idx], label=text or "all cases", **style.kwargs())
     ringed = _mark_unsettled(ax, view, x, y)
+    units = view.shown.units.get(yname, "")
+    for k, limit in enumerate(request.limit):
+        at = shown_value(limit, view, yname, "--limit")
+        ax.axhline(
+            at,
+            color="black",
+            linestyle=(0, (6, 3)),
+            linewidth=1.3,
+            zorder=1,
+            label=f"limit {at:g} {SHORT_UNITS.get(units, units)}".rstrip(),
+            gid=f"limit-{k}",
+        )
     ax.set_xlabel(axis_label(xname, view.shown.units.get(xname, "")))
-    ax.set_ylabel(axis_label(yname, view.shown.units.get(yname, "")))
+    ax.set_ylabel(axis_label(yname, units))
     ax.grid(alpha=0.3)
-    if others or ringed:
+    if others or ringed or request.limit:
         ax.legend(fontsize=8, loc="best")
     _title(fig, view, f"{axis_words(yname)} against {axis_words(xname).lower()}", request.where)
     return fig
@@ -456,24 +603,28 @@ def _edges(centers: np.ndarray) -> np.ndarray:
 
 def _level(request: PlotRequest, view: View, zname: str) -> float | None:
     """The contour's level in z's shown units: a number as it is, a quantity converted."""
-    level = request.level
-    if level is None:
+    if request.level is None:
         return None
-    if isinstance(level, int | float):
-        return float(level)
+    return shown_value(request.level, view, zname, "--level")
+
+
+def shown_value(value: str | float, view: View, name: str, key: str) -> float:
+    """A value of the column ``name`` in its shown units: a number as it is, a quantity
+    (``1 deg``, ``0.5 m/s``) converted; a PlotError naming ``key`` otherwise."""
+    if isinstance(value, int | float):
+        return float(value)
     try:
-        return float(level)
+        return float(value)
     except ValueError:
         pass
     try:
-        q = read_quantity(str(level), "--level")
-        return convert(float(q.magnitude), str(q.units), view.shown.units.get(zname) or "")
+        q = read_quantity(str(value), key)
+        return convert(float(q.magnitude), str(q.units), view.shown.units.get(name) or "")
     except Exception as exc:  # QuantityError, or pint's for units of another dimension
         reason = exc.reason if isinstance(exc, QuantityError) else type(exc).__name__
         raise PlotError.at(
-            "--level",
-            f"cannot read {level!r} as a level of {zname} "
-            f"[{view.shown.units.get(zname)}] ({reason})",
+            key,
+            f"cannot read {value!r} as a value of {name} [{view.shown.units.get(name)}] ({reason})",
         ) from None
 
 
@@ -569,8 +720,10 @@ def events(view: View, request: PlotRequest) -> Figure:
     labels = case_labels(view, varied_columns(view))
     cam_angle = np.asarray(view.ds["cam_angle"].values, dtype=float)
     keep, turn_note = _turn_mask(cam_angle, check_turn(request.turn) if request.turn else None)
+    # one turn chosen: its angles read 0–360°
+    axis = angle_axis(view, request, float(cam_angle[keep][0]) if turn_note else 0.0)
+    keep &= axis.within(cam_angle, request.range)
     lo, hi = float(cam_angle[keep][0]), float(cam_angle[keep][-1])
-    offset = lo if turn_note else 0.0  # one turn chosen: its angles read 0–360°
     fig = Figure(figsize=(9, 1.2 + 0.32 * n + 0.8), layout="constrained")
     ax = fig.add_subplot()
     per_case = _events_of(view)
@@ -578,7 +731,7 @@ def events(view: View, request: PlotRequest) -> Figure:
         xs, ys = [], []
         for i, ev in enumerate(per_case):
             at = ev["angle"][(ev["kind"] == kind) & (ev["angle"] >= lo) & (ev["angle"] <= hi)]
-            xs.append(at - offset)
+            xs.append(axis.shown(at))
             ys.append(np.full(at.size, i))
         x = np.concatenate(xs) if xs else np.zeros(0)
         if x.size == 0:
@@ -595,13 +748,47 @@ def events(view: View, request: PlotRequest) -> Figure:
             zorder=3,
         )
     for turn in np.arange(math.ceil(lo / 360.0), math.floor(hi / 360.0) + 1) * 360.0:
-        ax.axvline(turn - offset, color="0.6", linewidth=0.8, zorder=1)
+        ax.axvline(float(axis.shown(turn)), color="0.6", linewidth=0.8, zorder=1)
     ax.set_yticks(np.arange(n), labels, fontsize=8)
     ax.set_ylim(n - 0.5, -0.5)
-    ax.set_xlim(lo - offset, hi - offset)
-    ax.set_xlabel(axis_label("cam_angle", view.units.get("cam_angle", "degree")))
+    ax.set_xlim(*axis.shown(np.array([lo, hi])))
+    ax.set_xlabel(axis_label(axis.name, "degree"))
     ax.grid(axis="y", alpha=0.3)
     if ax.collections:
         fig.legend(loc="outside lower center", ncols=4, fontsize=8)
     _title(fig, view, f"events{turn_note}", request.where)
+    return fig
+
+
+def pareto(view: View, request: PlotRequest) -> Figure:
+    """A design file's two objectives (``--x``, ``--y``; default its
+    ``design_objective_columns``): the designs evaluated, hollow where they fail a
+    requirement, filled where they meet them, the front (``chosen == "front"``) joined."""
+    import json
+
+    names = json.loads(str(view.ds.attrs.get("design_objective_columns", "[]")))
+    if "chosen" not in view.shown.columns or len(names) != 2 and not (request.x and request.y):
+        raise PlotError.at(
+            "ARCHIVE",
+            "not the file of a campipe design with two objectives (minimize and maximize, or "
+            "a list of two); give --x and --y to draw two columns of a design file",
+        )
+    xname = request.x or names[0]
+    yname = request.y or names[1]
+    x, y = _column(view, xname, "--x"), _column(view, yname, "--y")
+    chosen = view.shown.columns["chosen"]
+    feasible = view.shown.columns.get("feasible", np.full(view.shown.n, "yes")) == "yes"
+    front = np.flatnonzero(chosen == "front")
+    front = front[np.argsort(x[front], kind="stable")]
+    fig = Figure(figsize=(7.5, 4.8), layout="constrained")
+    ax = fig.add_subplot()
+    ax.plot(x[~feasible], y[~feasible], "o", mfc="none", color="0.6", label="fails a requirement")
+    ax.plot(x[feasible], y[feasible], "o", color="0.35", ms=4, label="meets the requirements")
+    if front.size:
+        ax.plot(x[front], y[front], "s-", color="black", ms=5, label="Pareto front")
+    ax.set_xlabel(axis_label(xname, view.shown.units.get(xname, "")))
+    ax.set_ylabel(axis_label(yname, view.shown.units.get(yname, "")))
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="best")
+    _title(fig, view, f"{front.size} designs on the Pareto front", request.where)
     return fig

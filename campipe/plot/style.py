@@ -68,8 +68,10 @@ def line_styles(n: int) -> list[LineStyle]:
 #: ``label`` in :data:`campipe.engine.metrics.METRICS`).
 WORDS = {
     "speed_rpm": "Cam speed",
+    "engine_speed_rpm": "Engine speed",
     "seat": "Seat (valve lift)",
     "cam_angle": "Cam angle",
+    "crank_angle": "Crank angle",
     "spring_preload": "Spring preload",
     "spring_rate": "Spring rate",
 }

@@ -1,6 +1,6 @@
 """``campipe onset``: the no-follow onset speed of every combination of a spec's other axes,
-found on the steady state (``campipe.engine.periodic``) and checked by the time-domain engine
-either side of it.
+found on the steady state by ``campipe.engine.onset``'s search and checked by the time-domain
+engine either side of it.
 
 Orchestration: a study in, an :class:`OnsetStudy` out; the netCDF file is written by
 ``campipe.io.archive``.
@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from campipe.constants import RPM
-from campipe.engine import periodic
+from campipe.engine import onset as engine_onset
 from campipe.engine.kernels import compile_first, record_loaded, search_kernels
 from campipe.errors import CampipeError
 from campipe.io.archive import VariableSpec
@@ -41,7 +41,7 @@ class OnsetStudy:
     name: str  # the study's name
     keys: tuple[str, ...]  # the varied spec keys, speed left out
     table: CaseTable  # one row per combination: the keys' archive columns, then ONSET_COLUMNS
-    onset: periodic.Onset  # the search's result (SI)
+    onset: engine_onset.Onset  # the search's result (SI)
     #: (n,) the engine's no-follow per turn at onset·(1 − offset) [rad] (the mean over the
     #: check's measured turns); NaN: unchecked
     below: np.ndarray
@@ -62,10 +62,12 @@ class OnsetStudy:
 
     @property
     def disagreements(self) -> np.ndarray:
-        """Rows whose time-domain check does not bracket the onset (``periodic.confirmed``):
+        """Rows whose time-domain check does not bracket the onset (``engine_onset.confirmed``):
         below it the engine reaches the level, or above it does not."""
         checked = np.isfinite(self.below)
-        return np.flatnonzero(checked & ~periodic.confirmed(self.below, self.above, self.levels))
+        return np.flatnonzero(
+            checked & ~engine_onset.confirmed(self.below, self.above, self.levels)
+        )
 
 
 def _frozen(value: object) -> object:
@@ -88,14 +90,14 @@ def _combinations(study: Study) -> tuple[tuple[str, ...], list[int]]:
 
 
 def search_designs(
-    designs, low, high, tolerance, workers, level=periodic.DEFAULT_ONSET_LEVEL
-) -> periodic.Onset:
-    """``periodic.onset_speeds`` on ``workers`` threads (the kernels release the GIL)."""
+    designs, low, high, tolerance, workers, level=engine_onset.DEFAULT_ONSET_LEVEL
+) -> engine_onset.Onset:
+    """``engine_onset.onset_speeds`` on ``workers`` threads (the kernels release the GIL)."""
     n = len(designs)
     parts = [p for p in np.array_split(np.arange(n), min(max(1, workers), n)) if p.size]
 
     def search(part):
-        return periodic.onset_speeds([designs[i] for i in part], low, high, tolerance,
+        return engine_onset.onset_speeds([designs[i] for i in part], low, high, tolerance,
                                      level=level)  # fmt: skip
 
     if len(parts) == 1:
@@ -103,7 +105,7 @@ def search_designs(
     with concurrent.futures.ThreadPoolExecutor(len(parts)) as pool:
         done = list(pool.map(search, parts))
     first = done[0]
-    return periodic.Onset(
+    return engine_onset.Onset(
         speed=np.concatenate([d.speed for d in done]),
         status=np.concatenate([d.status for d in done]),
         scan_speed=first.scan_speed,
@@ -113,14 +115,15 @@ def search_designs(
         tolerance=first.tolerance,
         evaluations=np.concatenate([d.evaluations for d in done]),
         level=np.concatenate([d.level for d in done if d.level is not None]),
+        proven=np.concatenate([d.proven for d in done if d.proven is not None]),
     )
 
 
 def onset_study(
     study: Study,
-    tolerance: float = periodic.DEFAULT_ONSET_TOLERANCE_RPM * RPM,
+    tolerance: float = engine_onset.DEFAULT_ONSET_TOLERANCE_RPM * RPM,
     *,
-    level: float = periodic.DEFAULT_ONSET_LEVEL,
+    level: float = engine_onset.DEFAULT_ONSET_LEVEL,
     confirm: bool = True,
     workers: int = 1,
     notice: Callable[[str], None] | None = None,
@@ -135,11 +138,11 @@ def onset_study(
     tolerance : float
         The onset's tolerance [rad/s] (the width of its final bracket).
     level : float
-        With a seat, the no-follow a turn [rad] the onset reaches (``periodic.onset_speeds``;
+        With a seat, the no-follow a turn [rad] the onset reaches (``engine_onset.onset_speeds``;
         0: the first separation). Without a seat the onset is the first separation.
     confirm : bool
-        Check each onset with the time-domain engine at ±``periodic.CONFIRM_OFFSET``
-        (``periodic.confirm_onsets``): below it must stay under the level, above reach it.
+        Check each onset with the time-domain engine at ±``engine_onset.CONFIRM_OFFSET``
+        (``engine_onset.confirm_onsets``): below it must stay under the level, above reach it.
     workers : int
         Threads the search runs on.
     notice : callable, optional
@@ -164,13 +167,15 @@ def onset_study(
         )
     keys, firsts = _combinations(study)
     designs = [study.cases[i].case for i in firsts]
-    compile_first({periodic.confirm_settings(): designs[0]} if confirm else {}, notice, search=True)
+    compile_first(
+        {engine_onset.confirm_settings(): designs[0]} if confirm else {}, notice, search=True
+    )
     t0 = time.perf_counter()
     onset = search_designs(designs, low, high, tolerance, workers, level)
     record_loaded(search_kernels())  # the search's kernels, compiled ahead or not
     t1 = time.perf_counter()
     nan = np.full(len(designs), np.nan)
-    below, above = periodic.confirm_onsets(designs, onset.speed) if confirm else (nan, nan)
+    below, above = engine_onset.confirm_onsets(designs, onset.speed) if confirm else (nan, nan)
     t2 = time.perf_counter()
     table = _table(study, keys, firsts, onset, below, above)
     spec = study.spec
@@ -188,7 +193,7 @@ def _table(study, keys, firsts, onset, below, above) -> CaseTable:
         name, var, _ = coords[key]
         units[name] = var.units if var.units and var.units != "1" else ""
     checked = np.isfinite(below)
-    agrees = periodic.confirmed(below, above, onset.level if onset.level is not None else 0.0)
+    agrees = engine_onset.confirmed(below, above, onset.level if onset.level is not None else 0.0)
     columns["onset_speed_rpm"] = onset.speed / RPM
     units["onset_speed_rpm"] = "rpm"
     columns["onset_status"] = onset.status.astype(object)
@@ -227,6 +232,12 @@ def file_contents(result: OnsetStudy) -> tuple[dict, list[VariableSpec], dict, d
     add("onset_status", ("combination",), "str", t.columns["onset_status"],
         long_name="found; below: no-follow at the range's lowest speed; none: follows across "
         "the range")  # fmt: skip
+    proven = on.proven if on.proven is not None else np.zeros(n, np.bool_)
+    add("onset_proven", ("combination",), "i1", proven.astype(np.int8),
+        long_name="1: every speed interval below the onset (or across the range) proven free "
+        "of no-follow to the tolerance (configuration I's steady state, a profile without "
+        "steps); 0: some certified on the chords' estimate (a seated steady state, a profile "
+        "with steps)")  # fmt: skip
     add("onset_level_deg", ("combination",), "f8", np.degrees(result.levels), units="degree",
         long_name="no-follow a turn the onset reaches (0: the first separation; a level "
         "only with a seat)")  # fmt: skip
@@ -235,9 +246,9 @@ def file_contents(result: OnsetStudy) -> tuple[dict, list[VariableSpec], dict, d
         ("check_above_deg", result.above, "1 +"),
     ):
         add(name, ("combination",), "f8", np.degrees(values), units="degree",
-            long_name=f"no-follow per turn, the mean over turns {periodic.CONFIRM_WARMUP + 1}"
-            f"–{periodic.CONFIRM_TURNS} of the time-domain engine from the periodic start at "
-            f"onset × ({side} {periodic.CONFIRM_OFFSET:g}); NaN: not checked")  # fmt: skip
+            long_name=f"no-follow per turn, the mean over turns {engine_onset.CONFIRM_WARMUP + 1}"
+            f"–{engine_onset.CONFIRM_TURNS} of the time-domain engine from the periodic start at "
+            f"onset × ({side} {engine_onset.CONFIRM_OFFSET:g}); NaN: not checked")  # fmt: skip
     add("confirmed", ("combination",), "str", t.columns["confirmed"],
         long_name="the time-domain check agrees: yes (under the level below the onset, at "
         "or over it above), NO (it disagrees), - (not checked)")  # fmt: skip
@@ -271,6 +282,15 @@ def summary_lines(result: OnsetStudy) -> list[str]:
         f"({int(on.evaluations.sum())} steady states), time-domain check "
         f"{result.check_seconds:.3g} s",
     ]
+    if on.proven is not None:
+        estimated = int(np.count_nonzero(~on.proven))
+        lines.append(
+            "no window of no-follow wider than the tolerance below any onset: proven"
+            if not estimated
+            else f"{estimated} combination{'s' if estimated != 1 else ''} searched past "
+            "speeds on the chords' estimate, not proven (a seated steady state or a profile "
+            "with steps): a window of no-follow narrower than the scan may be missed"
+        )
     levels = np.degrees(result.levels)
     if (levels > 0).any():
         lines.append(

@@ -518,3 +518,18 @@ def test_the_onset_block_never_rounds_a_grid_short_of_two_speeds_up_to_two():
     for speeds, shown in ((1.955, "1.96"), (1.9996, "1.99")):
         text = pages.onset_block(SimpleNamespace(onset={**o, "equal_time_speeds": speeds}))
         assert f"affords {shown} speeds a design (fewer than the two a bracket needs)" in text
+
+
+@pytest.mark.slow
+def test_the_cluster_block_runs_a_parts_study_on_worker_processes(tmp_path):
+    """cluster_scaling on one worker process, two small sizes: each study's parts archive
+    complete, the client's CPU counted. Broken copy it fails on: a local cluster whose
+    address never comes back, or a study run on this machine instead of the cluster (no
+    batches of the cluster's sizing)."""
+    from campipe.bench import cluster
+    from campipe.io.parts import read_index
+
+    points = cluster.cluster_scaling(tmp_path, counts=(8, 16), workers=(1,))
+    assert [(p.workers, p.n_cases, p.batches) for p in points] == [(1, 8, 2), (1, 16, 4)]
+    assert all(p.client_cpu > 0 and p.seconds > 0 for p in points)
+    assert len(read_index(tmp_path / "cluster-16-1.parts")["case"]) == 16

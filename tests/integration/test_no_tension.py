@@ -12,7 +12,7 @@ from numpy.testing import assert_allclose
 
 from campipe.bench.ivp import solve_case
 from campipe.engine import Case, RunSettings, run_batch
-from campipe.engine.periodic import onset_speeds
+from campipe.engine.onset import onset_speeds
 from campipe.model import thesis_train
 from campipe.profiles import harmonic, polydyne
 from campipe.units import convert
@@ -103,7 +103,7 @@ DESIGNS = [
 
 
 def test_one_rpm_above_each_onset_the_train_leaves_the_cam_every_turn():
-    """The onset search (``periodic.onset_speeds``) for each design, then the time-domain
+    """The onset search (``onset.onset_speeds``) for each design, then the time-domain
     engine from its periodic start 1 rpm above and below: above, no-follow in each of the
     eight measured turns of twelve (four of warm-up), the same every turn; below, none in
     any turn. The solve_ivp peer (its own integration and contact rules) gives the same

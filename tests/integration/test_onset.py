@@ -14,8 +14,9 @@ from references import steady_state_cam_force
 from study_helpers import write_spec
 
 from campipe.cli import main
-from campipe.constants import INCH, LBF
+from campipe.constants import INCH, LBF, RPM
 from campipe.engine import Case, CaseError, RunSettings, run_batch
+from campipe.engine import onset as O
 from campipe.engine import periodic as P
 from campipe.model import thesis_train
 from campipe.profiles import harmonic, polydyne
@@ -29,7 +30,7 @@ LAST = slice(-361, None)
 def test_the_margin_is_the_least_of_the_frequency_response():
     """The closed form's least cam force against the frequency response of the constrained
     train (tests/unit/test_accuracy.py, written from M, C, K alone), minimised on a 0.001° grid."""
-    speeds = [P.RPM * r for r in (3000, 8000, 9383, 10000)]
+    speeds = [RPM * r for r in (3000, 8000, 9383, 10000)]
     ext = P.steady_extremes([Case(TRAIN, CAM, w) for w in speeds])
     theta = np.radians(np.arange(0, 360, 1e-3))
     for k, w in enumerate(speeds):
@@ -43,10 +44,10 @@ def test_the_margin_is_the_least_of_the_frequency_response():
 @pytest.mark.parametrize(
     "case, start, revolutions",
     [
-        (Case(TRAIN, CAM, P.RPM * 8000), "periodic", 4),
-        (Case(TRAIN, CAM, P.RPM * 8000), "quasi-static", 8),
-        (Case(TRAIN, POLY, P.RPM * 3000), "quasi-static", 8),
-        (Case(TRAIN, POLY, P.RPM * 12000, closure="form"), "quasi-static", 8),
+        (Case(TRAIN, CAM, RPM * 8000), "periodic", 4),
+        (Case(TRAIN, CAM, RPM * 8000), "quasi-static", 8),
+        (Case(TRAIN, POLY, RPM * 3000), "quasi-static", 8),
+        (Case(TRAIN, POLY, RPM * 12000, closure="form"), "quasi-static", 8),
     ],
     ids=["harmonic-periodic", "harmonic-quasi-static", "polydyne", "polydyne-form"],
 )
@@ -65,10 +66,10 @@ def test_steady_histories_equal_the_engines_last_turn(case, start, revolutions):
 
 def test_the_steady_state_refuses_a_case_that_leaves_the_cam_or_seats():
     with pytest.raises(CaseError) as info:
-        P.steady_state([Case(TRAIN, CAM, P.RPM * 8000), Case(TRAIN, CAM, P.RPM * 9500)])
+        P.steady_state([Case(TRAIN, CAM, RPM * 8000), Case(TRAIN, CAM, RPM * 9500)])
     assert (info.value.key, info.value.found) == ("speed", [1])
     with pytest.raises(CaseError) as info:
-        P.steady_state([Case(TRAIN, CAM, P.RPM * 3000, seat=0.1 * INCH)])
+        P.steady_state([Case(TRAIN, CAM, RPM * 3000, seat=0.1 * INCH)])
     assert info.value.key == "seat"
 
 
@@ -113,7 +114,7 @@ def test_onset_agrees_with_a_time_domain_bisection_at_three_preloads(tmp_path):
     found = np.array([r["onset_speed_rpm"] for r in rows])
     assert [r["confirmed"] for r in rows] == ["yes"] * 3
     designs = [Case(TRAIN.replace(spring_preload=p * LBF), CAM, 1.0) for p in (120, 151, 180)]
-    bisected = time_domain_onsets(designs, P.RPM * 6000, P.RPM * 14000, P.RPM * 0.05) / P.RPM
+    bisected = time_domain_onsets(designs, RPM * 6000, RPM * 14000, RPM * 0.05) / RPM
     assert np.abs(found - bisected).max() < 1.0
     # The onsets the thesis notes give (frequency response of the constrained train).
     assert_allclose(found, [8939, 9383, 9769], atol=1.0)
@@ -136,17 +137,17 @@ def test_onset_with_the_seat_agrees_with_a_time_domain_bisection(tmp_path):
     assert rows[1]["onset_status"] == "none"  # no seat: follows up to 3000 rpm
     assert rows[1]["onset_speed_rpm"] is None
     design = Case(TRAIN, CAM, 1.0, seat=0.1 * INCH)
-    bisected = time_domain_onsets([design], P.RPM * 200, P.RPM * 3000, P.RPM * 0.05) / P.RPM
+    bisected = time_domain_onsets([design], RPM * 200, RPM * 3000, RPM * 0.05) / RPM
     assert rows[0]["confirmed"] == "yes"
     assert abs(rows[0]["onset_speed_rpm"] - bisected[0]) < 1.0
 
 
 def test_onset_statuses_and_refusals(tmp_path):
-    on = P.onset_speeds([Case(TRAIN, CAM, 1.0), Case(TRAIN, POLY, 1.0, closure="form")],
-                        P.RPM * 9500, P.RPM * 12000)  # fmt: skip
+    on = O.onset_speeds([Case(TRAIN, CAM, 1.0), Case(TRAIN, POLY, 1.0, closure="form")],
+                        RPM * 9500, RPM * 12000)  # fmt: skip
     assert list(on.status) == ["below", "none"] and np.isnan(on.speed).all()
     with pytest.raises(CaseError) as info:
-        P.onset_speeds([Case(TRAIN, CAM, 1.0)], P.RPM * 9000, P.RPM * 8000)
+        O.onset_speeds([Case(TRAIN, CAM, 1.0)], RPM * 9000, RPM * 8000)
     assert info.value.key == "speed"
     one_speed = SPEC.replace("speed: {from: LOW rpm, to: HIGH rpm, num: 2}", "seat: [none]")
     path = write_spec(tmp_path, one_speed.replace("AXIS", "") + "speed: 9000 rpm\n")

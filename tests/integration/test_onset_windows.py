@@ -16,11 +16,12 @@ import campipe.study.onset as study_onset
 from campipe.cli import main
 from campipe.constants import INCH, LBF, RPM
 from campipe.engine import Case, CaseError, RunSettings, run_batch
+from campipe.engine import onset as O
 from campipe.engine import periodic as P
 from campipe.model import thesis_train
 from campipe.profiles import Ramp, harmonic, polydyne
 
-TOL = P.DEFAULT_ONSET_TOLERANCE_RPM
+TOL = O.DEFAULT_ONSET_TOLERANCE_RPM
 #: The polydyne with constant-velocity ramps of studies/lash-ramp.yaml (0.3 mm over 30°).
 RAMPED = polydyne(
     "4567", 0.3 * INCH, *np.radians([100, 20, 100]), ramp=Ramp(0.3e-3, math.radians(30))
@@ -36,7 +37,7 @@ WINDOW = Case(thesis_train().replace(damping_ratios=(0.05, 0.1), spring_preload=
 
 
 def onset_rpm(design, low, high, **options):
-    on = P.onset_speeds([design], low * RPM, high * RPM, **options)
+    on = O.onset_speeds([design], low * RPM, high * RPM, **options)
     return on.speed[0] / RPM, on.status[0]
 
 
@@ -79,7 +80,7 @@ def test_the_onset_misses_no_window_of_the_margin(preload, width):
     assert abs(speed - changes[2]) < 0.5 + TOL
 
 
-@pytest.mark.parametrize("level_deg", [P.DEFAULT_ONSET_LEVEL_DEG, 0.0])
+@pytest.mark.parametrize("level_deg", [O.DEFAULT_ONSET_LEVEL_DEG, 0.0])
 def test_nested_ranges_of_the_lash_ramp_design_agree(level_deg):
     """The polydyne with ramps and 0.2 mm lash (studies/lash-ramp.yaml at 0.3 mm ramps): the
     valve seats every turn, so each speed's steady state is the seated one (the turn map's
@@ -104,7 +105,7 @@ def test_nested_ranges_of_the_lash_ramp_design_agree(level_deg):
     if level:
         assert 0.0 < below < level <= above
         # The first separation's check would say no: below the loss of control it bounces.
-        assert not P.confirmed(np.array([below]), np.array([above]), 0.0)[0]
+        assert not O.confirmed(np.array([below]), np.array([above]), 0.0)[0]
     else:
         assert below == 0.0 < above
 
@@ -148,9 +149,46 @@ def test_a_confirmation_that_fails(tmp_path, monkeypatch):
 def test_the_level_is_checked(tmp_path):
     """A negative or non-angle level is refused at its key."""
     with pytest.raises(CaseError) as info:
-        P.onset_speeds([Case(thesis_train(), harmonic(INCH), 1.0)], 6000 * RPM, 9000 * RPM,
+        O.onset_speeds([Case(thesis_train(), harmonic(INCH), 1.0)], 6000 * RPM, 9000 * RPM,
                        level=-1e-3)  # fmt: skip
     assert info.value.key == "level"
     for bad in ("-1 deg", "3 rpm"):
         out = CliRunner().invoke(main, ["onset", str(write_spec(tmp_path, SPEC)), "--level", bad])
         assert out.exit_code == 2 and "--level" in out.output
+
+
+#: A smooth polydyne (no ramps: lift, rate and acceleration continuous) on a lightly damped
+#: train: its margin's slope is within 1.3-30x of the proven bound (tests/unit/test_slope_bound).
+SMOOTH = Case(thesis_train().replace(damping_ratios=(0.02, 0.05), spring_preload=100 * LBF),
+              polydyne("4567", 0.3 * INCH, *np.radians([100, 20, 100])), 1.0)  # fmt: skip
+
+
+def test_a_smooth_design_s_onset_is_proven_over_nested_ranges():
+    """Every range enclosing the onset gives the first root of a dense scan of the margin (a
+    second method: 0.5 rpm grid and Brent's method) to the tolerance, each search proven
+    (every interval certified by the proven bound); the ramped design's search is not proven
+    (its closed form drops the ramps' impulses), nor a seated one's. Broken copy: ``_Proof``
+    taking every design as provable marks the ramped search proven; the search certifying
+    on the bound without the valve's height, or with the bound's slope halved where it is
+    tight (1.3x), still finds this onset: the proof's soundness is the unit tests'."""
+    root, _ = first_root_of_the_margin(SMOOTH, 4000, 7000)
+    for low, high in ((1000, 12000), (2000, 8000), (5000, 6000), (root - 30, root + 5)):
+        on = O.onset_speeds([SMOOTH], low * RPM, high * RPM)
+        assert on.status[0] == "found" and on.proven[0]
+        assert abs(on.speed[0] / RPM - root) <= 0.5 * TOL + 1e-3, (low, high)
+    assert not O.onset_speeds([WINDOW], 5000 * RPM, 6000 * RPM).proven[0]
+    seated = dataclasses.replace(SMOOTH, seat=0.0)
+    on = O.onset_speeds([seated], 4000 * RPM, 7000 * RPM)
+    assert on.status[0] == "found" and not on.proven[0]
+
+
+def test_the_onset_file_says_whether_the_search_is_proven(tmp_path):
+    """The thesis's harmonic train (smooth, no seat): the command says its search is proven
+    and the file stores onset_proven = 1. Broken copy: the flag from the first design of a
+    threaded search only, or the summary line printed for estimated searches: fails."""
+    path = write_spec(tmp_path, SPEC)
+    out = CliRunner().invoke(main, ["onset", str(path), "--format", "csv"])
+    assert out.exit_code == 0, out.output
+    assert "no window of no-follow wider than the tolerance below any onset: proven" in out.stderr
+    with xr.open_dataset(tmp_path / "onsets-onset.nc") as ds:
+        assert ds.onset_proven.values.tolist() == [1]

@@ -3,6 +3,7 @@ its worker, an index written by the client; read back as one archive, packed int
 file, resumed after damage, and run on a cluster of worker processes."""
 
 import json
+import os
 import shutil
 from pathlib import Path
 
@@ -400,3 +401,125 @@ def test_a_parts_run_holds_the_lock_and_stores_what_its_workers_return(tmp_path)
     ):
         xr.testing.assert_identical(_without_global_attrs(a), _without_global_attrs(b))
         assert a.sizes["case"] == 6
+
+
+def _drop_to_nobody(dask_worker) -> int:
+    """Run on a worker: make the worker process an unprivileged user (a worker on another
+    machine, under another account), its scratch folder still its own to remove; its uid."""
+    for folder, _, names in os.walk(dask_worker.local_directory):
+        for path in [folder, *(os.path.join(folder, n) for n in names)]:
+            os.chmod(path, 0o777)
+    os.setgid(65534)
+    os.setuid(65534)
+    return os.getuid()
+
+
+@pytest.mark.skipif(not hasattr(os, "geteuid") or os.geteuid() != 0, reason="needs root")
+def test_workers_that_cannot_write_the_parts_folder_stop_the_study_before_computing(tmp_path):
+    """The client (root) can write the parts archive's folder, its two worker processes
+    (made an unprivileged user) cannot: the probe stops the study before any batch runs,
+    naming the folder and why. Broken copies it fails on: no probe (the first batch fails
+    after the others computed, or the client stores what the workers return), or a probe
+    whose answers are not checked."""
+    from distributed import Client, LocalCluster
+
+    from campipe.study.run.cluster import PartsPathError
+
+    spec = write_spec(tmp_path, SMALL_SPEC)
+    study = load_study(spec)
+    private = tmp_path / "private"
+    private.mkdir(mode=0o700)
+    archive = private / "small.parts"
+    scratch = tmp_path / "scratch"
+    scratch.mkdir()
+    scratch.chmod(0o777)
+    with (
+        LocalCluster(
+            n_workers=2,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=":0",
+            local_directory=scratch,
+        ) as cluster,
+        Client(cluster) as client,
+    ):
+        assert set(client.run(_drop_to_nobody).values()) == {65534}
+        with pytest.raises(PartsPathError) as caught:
+            run_study(study, archive, scheduler=cluster.scheduler_address, parts=True)
+    assert caught.value.key == str(archive)
+    assert "2 of 2 workers cannot write" in str(caught.value)
+    assert "Permission denied" in str(caught.value) and "nothing was computed" in str(caught.value)
+    assert part_files(archive) == [] and not (archive / INDEX).exists()
+    assert sorted(p.name for p in archive.iterdir()) == []  # the token removed, no probe left
+
+
+def test_a_cluster_run_reads_back_whole_through_open_study_and_open_mfdataset(mixed, tmp_path):
+    """The mixed study on two worker processes into parts, against the same study run on
+    this machine (its single file and its parts): ``open_study`` gives the same grid case
+    for case, ``open_mfdataset`` every case and event, and each part holds the same cases
+    and values as the local run's part of the same batch. Broken copies it fails on: a
+    worker that writes a part from another batch's cases (SentBatch's index), or case
+    coordinates read from the wrong case of a batch (its values)."""
+    from distributed import LocalCluster
+
+    study, directory, _, _ = mixed
+    archive = tmp_path / "mixed.parts"
+    with LocalCluster(
+        n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0"
+    ) as cluster:
+        run_study(study, archive, scheduler=cluster.scheduler_address, batch_size=2, parts=True)
+    with (
+        campipe.open_study(directory / "mixed.nc") as one,
+        campipe.open_study(archive) as many,
+    ):
+        xr.testing.assert_identical(_without_global_attrs(one), _without_global_attrs(many))
+        assert many.sizes["case"] == 10
+    files = part_files(archive)
+    assert [f.name for f in files] == [f.name for f in part_files(directory / "mixed.parts")]
+    for mine in files:
+        with (
+            xr.open_dataset(mine) as a,
+            xr.open_dataset(directory / "mixed.parts" / mine.name) as b,
+        ):
+            xr.testing.assert_identical(_without_global_attrs(a), _without_global_attrs(b))
+    options = {
+        "combine": "nested",
+        "data_vars": "minimal",
+        "coords": "minimal",
+        "compat": "override",
+    }
+    with (
+        xr.open_mfdataset(
+            files, concat_dim="case", preprocess=lambda ds: ds.drop_dims("event"), **options
+        ) as cases,
+        xr.open_mfdataset(
+            files, concat_dim="event", preprocess=lambda ds: ds.drop_dims("case"), **options
+        ) as events,
+        xr.open_dataset(directory / "mixed.nc") as one,
+    ):
+        assert sorted(cases["case"].values) == sorted(one["case"].values)
+        assert events.sizes["event"] == one.sizes["event"] == int(cases["event_count"].sum())
+        order = np.argsort(cases["case"].values)
+        ref = np.argsort(one["case"].values)
+        assert_array_equal(cases["speed_rpm"].values[order], one["speed_rpm"].values[ref])
+        assert_array_equal(cases["valve_lift"].values[order], one["valve_lift"].values[ref])
+
+
+def test_parts_dir_puts_the_parts_archive_in_the_shared_folder(tmp_path):
+    """``--parts-dir DIR`` writes the parts archive ``DIR/<name>.parts`` (``--parts``
+    implied) and refuses ``-o`` beside it. Broken copies it fails on: a --parts-dir that
+    writes the single file, or the archive beside the spec."""
+    spec = write_spec(tmp_path, SMALL_SPEC)
+    shared = tmp_path / "shared" / "scratch"
+    runner = CliRunner()
+    result = runner.invoke(
+        main, ["study", str(spec), "--parts-dir", str(shared), "--no-progress", "--batch-size", "3"]
+    )
+    assert result.exit_code == 0, result.output
+    assert result.output.strip().splitlines()[-1] == str(shared / "small.parts")
+    index = read_index(shared / "small.parts")
+    assert (len(index["case"]), len(index["parts"])) == (6, 2)
+    assert not (tmp_path / "small.parts").exists() and not (tmp_path / "small.nc").exists()
+    both = ["study", str(spec), "--parts-dir", str(shared), "-o", str(tmp_path / "x.parts")]
+    result = runner.invoke(main, both)
+    assert result.exit_code == 2 and "not both" in result.output

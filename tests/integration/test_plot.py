@@ -88,7 +88,7 @@ def test_histories_overlay_the_chosen_cases_one_panel_each(archive, ds, tmp_path
     rows = rows[ds.speed_rpm.values[rows] >= 9524]
     labels = ["9524 rpm, seat none", "9524 rpm, seat 0.1 in"]
     labels += ["11000 rpm, seat none", "11000 rpm, seat 0.1 in"]
-    lift = axes[0].get_lines()
+    lift = [line for line in axes[0].get_lines() if line.get_gid() != "kinematic"]
     assert [line.get_label() for line in lift] == labels
     for line, r in zip(lift, rows, strict=True):
         assert_allclose(line.get_xdata(), ds.cam_angle.values)
@@ -127,13 +127,39 @@ def test_histories_of_one_turn_and_in_si(archive, ds):
     # turn 2 of 2 drawn on 0–360° (issue 37: not at 360–720°), its values the archive's
     # samples at 360–720°
     x = axes[0].get_lines()[0].get_xdata()
-    assert x[0] == 0 and x[-1] == 360 and len(axes[0].get_lines()) == 2
+    cases = [line for line in axes[0].get_lines() if line.get_gid() != "kinematic"]
+    assert x[0] == 0 and x[-1] == 360 and len(cases) == 2
     assert "turn 2" in fig.get_suptitle()
     i = np.flatnonzero(
         (ds.speed_rpm.values == 6000) & (ds.spring_preload.values < 150 * 4.4482216152605)
     )[0]
     lift = ds.valve_lift.values[i][(ds.cam_angle.values >= 360) & (ds.cam_angle.values <= 720)]
     assert np.array_equal(axes[0].get_lines()[0].get_ydata(), lift)
+
+
+def test_histories_in_mm_deg_are_per_degree_at_each_case_s_speed(ds):
+    """--units mm-deg: lift in mm, velocity in mm/deg and acceleration in mm/deg² of cam
+    angle, each case's line at its own cam speed (issue 37). Fails on a copy that converts
+    every case at one speed or leaves velocity per second."""
+    where = "spring_preload == 120 lbf and seat is none and speed_rpm >= 9524"
+    fig = figure(ds, PlotRequest("histories", where=where, units="mm-deg"))
+    axes = [ax for ax in fig.axes if ax.get_visible()]
+    assert [ax.get_ylabel() for ax in axes[:3]] == [
+        "Valve lift [mm]",
+        "Valve velocity [mm/deg]",
+        "Valve acceleration [mm/deg^2]",
+    ]
+    rows = _rows(ds, spring_preload=120 * LBF, seat=-np.inf)
+    rows = rows[ds.speed_rpm.values[rows] >= 9524]
+    for k, r in enumerate(rows):
+        w = ds.speed_rpm.values[r] * 6.0  # deg/s
+        v = axes[1].get_lines()[k].get_ydata()
+        a = axes[2].get_lines()[k].get_ydata()
+        assert_allclose(v, ds.valve_velocity.values[r] * 1000 / w, rtol=1e-12)
+        assert_allclose(a, ds.valve_acceleration.values[r] * 1000 / w**2, rtol=1e-12)
+    # each speed its own factor: the two velocity traces' peaks differ by more than rounding
+    peaks = [np.abs(line.get_ydata()).max() for line in axes[1].get_lines()]
+    assert abs(peaks[0] - peaks[1]) > 1e-3
 
 
 def test_metric_draws_a_line_per_combination_of_the_other_axes(archive, ds, tmp_path):

@@ -287,7 +287,7 @@ ONE_SIGNATURE = """
 import json, math
 import numba
 from campipe.engine import batch, contact, closed_form, common, exact, modal, newmark
-from campipe.engine import periodic, steady
+from campipe.engine import onset, periodic, steady
 from campipe.engine.batch import Case, RunSettings, run_batch
 from campipe.model import thesis_train
 from campipe.profiles import harmonic, packed
@@ -303,7 +303,7 @@ ahead = batch.integrator_types(cases, RunSettings(revolutions=1.5, warmup=0), Fa
 for helper, signature in exact.ahead_signatures(ahead).items():  # as a first run compiles
     helper.compile(signature)
 periodic.steady_state(cases[:1])
-periodic.onset_speeds(cases[:1], 6000 * math.pi / 30, 14000 * math.pi / 30, 1.0)
+onset.onset_speeds(cases[:1], 6000 * math.pi / 30, 14000 * math.pi / 30, 1.0)
 many = {}
 for module in (batch, contact, closed_form, common, exact, modal, newmark, steady, packed):
     for name, kernel in vars(module).items():

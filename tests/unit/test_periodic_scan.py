@@ -14,7 +14,7 @@ import numpy as np
 from campipe.constants import TWO_PI
 from campipe.engine import Case, RunSettings
 from campipe.engine.batch import start_states, train_matrices, valve_reference
-from campipe.engine.periodic import _as_extremes, _prepare, _samples
+from campipe.engine.periodic import _as_extremes, _samples, prepare_steady
 from campipe.engine.steady import SEARCH_SAMPLES
 from campipe.model import thesis_train
 from campipe.profiles import harmonic, polydyne
@@ -47,7 +47,7 @@ def test_harmonic_start_is_the_latest_hold():
     start = start_states(cases, RunSettings(revolutions=1))
     assert (start.t0 < 0).all()  # each start needed the scan
     theta_s = TWO_PI + speeds * start.t0
-    batch = _prepare(cases)
+    batch = prepare_steady(cases)
     ext = _as_extremes(batch.extremes(batch.cases.omega.copy()))
     for i, case in enumerate(cases):
         f1, scale = _contact_force(case, start.q0[i], start.v0[i], start.a0[i])

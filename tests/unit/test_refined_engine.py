@@ -16,6 +16,7 @@ from campipe.engine import (
     run_batch,
     spring_histories,
 )
+from campipe.engine import onset as onset_search
 from campipe.engine.batch import initial_state, train_matrices, valve_reference
 from campipe.model import spring_clash_margin, spring_element_forces, thesis_train
 from campipe.profiles import harmonic, polydyne
@@ -178,7 +179,7 @@ def test_the_steady_state_path_runs_refined_trains():
     assert steady.q.shape == res.q.shape == (2, 361, 15)
     assert_allclose(steady.q, res.q, atol=1e-12)
     designs = [Case(TRAIN.replace(spring_elements=n), CAM, rpm(9000)) for n in (1, 2, 4, 8, 16)]
-    onset = periodic.onset_speeds(designs, rpm(8000), rpm(11000)).speed / rpm(1)
+    onset = onset_search.onset_speeds(designs, rpm(8000), rpm(11000)).speed / rpm(1)
     assert_allclose(onset[[0, -1]], [9382.9, 9371.1], atol=0.2)
     change = -np.diff(onset)
     assert np.all(change > 0)

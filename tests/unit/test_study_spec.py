@@ -33,6 +33,8 @@ EXAMPLE_CASES = {
     "spring-surge": 57,
     "contact-stiffness": 39,
     "valve-bounce": 21,
+    "design-spring": 2,
+    "design-spring-rate": 2,
 }
 
 

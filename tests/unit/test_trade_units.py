@@ -55,3 +55,28 @@ def test_a_converted_value_reads_at_its_precision_without_conversion_noise():
     assert shown.columns["ratio"][0] == exact
     csv = format_rows(shown, np.arange(1), ["spring_preload", "ratio"], "csv")
     assert csv.splitlines()[1] == "200.0,0.30000000000000004"
+
+
+def test_per_degree_units_divide_by_the_cam_speed_in_degrees_per_second():
+    """At 6000 rpm (36000 deg/s) 1 m/s is 1000/36000 mm/deg and 1 m/s² 1000/36000² mm/deg²,
+    each row at its own speed; mm and MPa are pure scales. Fails on a copy that divides by ω
+    in rad/s (a factor 180/π off) or squares nothing."""
+    import numpy as np
+
+    from campipe.units import UNIT_SYSTEMS, convert_values, per_degree
+
+    mm_deg = UNIT_SYSTEMS["mm-deg"]
+    assert (mm_deg["m/s"], mm_deg["m/s^2"], mm_deg["Pa"]) == ("mm/deg", "mm/deg^2", "MPa")
+    assert per_degree("mm/deg") == ("mm", 1) and per_degree("mm/deg^2") == ("mm", 2)
+    assert per_degree("mm") == ("mm", 0)
+    v = np.array([[1.0, 2.0], [1.0, 2.0]])
+    speeds = np.array([6000.0, 3000.0])
+    got = convert_values(v, "m/s", "mm/deg", speeds)
+    np.testing.assert_allclose(got, [[1 / 36, 2 / 36], [1 / 18, 2 / 18]], rtol=1e-15)
+    acc = convert_values(np.array([1.0]), "m/s^2", "mm/deg^2", 6000.0)
+    assert acc[0] == pytest.approx(1000 / 36000**2, rel=1e-15)
+    assert convert_values(np.array([2.5e6]), "Pa", "MPa")[0] == pytest.approx(2.5, rel=1e-15)
+    with pytest.raises(ValueError, match="cam speed"):
+        convert_values(v, "m/s", "mm/deg")
+    with pytest.raises(ValueError, match="not a mm/s"):
+        convert_values(v, "N", "mm/deg", speeds)

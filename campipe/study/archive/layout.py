@@ -12,6 +12,7 @@ import numpy as np
 
 from campipe.io.archive import VariableSpec
 from campipe.study.spec.coordinates import CASE_ID, coordinate_values
+from campipe.study.spec.drive import CRANK_ANGLE_NAME
 from campipe.study.spec.expand import Study
 from campipe.study.spec.variables import (
     DOF_NAMES,
@@ -112,5 +113,35 @@ def archive_layout(study: Study, n_events: int | None, cam_angle: np.ndarray, n_
     if study.settle:
         specs = [_from_recorded(s) for s in specs]
     static = {**axis_arrays(cam_angle, n_revolutions), **values}
+    if study.spec.drive is not None:  # the crank angle beside the cam's
+        specs = _with_crank_angle(specs, study.spec.drive, study.settle)
+        static[CRANK_ANGLE_NAME] = np.asarray(cam_angle, float) / study.spec.drive
     static = {s.name: static[s.name] for s in specs if s.name in static}
     return sizes, specs, static
+
+
+def _with_crank_angle(specs: list[VariableSpec], ratio: float, settle: bool) -> list[VariableSpec]:
+    """The archive's variables with the coordinate ``crank_angle`` along ``cam_angle`` (the
+    cam angle over the drive's ``ratio``), named in the ``coordinates`` of each variable along
+    ``cam_angle``."""
+    since = "the case's first recorded revolution" if settle else "the start of the run"
+    crank = VariableSpec(
+        CRANK_ANGLE_NAME,
+        ("cam_angle",),
+        "f8",
+        {
+            "long_name": f"crank angle from {since}: cam_angle / drive.cam_per_crank",
+            "units": "degree",
+            "cam_per_crank": float(ratio),
+        },
+    )
+    out = []
+    for spec in specs:
+        if "cam_angle" in spec.dims and spec.name != "cam_angle":
+            names = str(spec.attrs.get("coordinates", "")).split()
+            attrs = {**spec.attrs, "coordinates": " ".join([*names, CRANK_ANGLE_NAME])}
+            spec = dataclasses.replace(spec, attrs=attrs)
+        out.append(spec)
+        if spec.name == "cam_angle":
+            out.append(crank)
+    return out

@@ -20,6 +20,7 @@ import numpy as np
 from campipe.io.archive import ArchiveDamagedError, ArchiveFileError, check
 from campipe.io.parts import INDEX, PartsIndexError, part_checksum, read_index
 from campipe.study.archive.layout import LAYOUT_VERSION
+from campipe.units import convert_values, per_degree, system_units
 
 log = logging.getLogger(__name__)
 #: The name the rest of the study (zip rows, case entries, samples) goes by while the sweep
@@ -36,7 +37,7 @@ def sweep_axes(attrs: Mapping[str, object]) -> list[tuple[str, int]]:
     return [(str(a["name"]), int(a["size"])) for a in axes if a.get("kind") == "sweep"]
 
 
-def open_study(path: str | Path, verify: bool = True, **open_kwargs):
+def open_study(path: str | Path, units: str = "si", verify: bool = True, **open_kwargs):
     """Open a study's archive with its sweep's axes as dimensions, where the study is a grid.
 
     Parameters
@@ -44,6 +45,11 @@ def open_study(path: str | Path, verify: bool = True, **open_kwargs):
     path : str or Path
         The archive (``campipe study`` writes it): one netCDF file, or a parts archive's
         folder (``campipe study --parts``), read as one dataset (:func:`open_archive`).
+    units : str
+        The unit system of the values (:data:`campipe.units.UNIT_SYSTEMS`): ``si``, as stored
+        (the default); ``in-lbf``; or ``mm-deg`` (lift mm, velocity mm/deg and acceleration
+        mm/deg² of cam angle at each case's cam speed, force N, stress MPa). Each converted
+        variable's ``units`` attribute names its new units (:func:`in_units`).
     verify : bool
         Check every variable against the checksums stored when the archive was written
         before returning it (:func:`open_archive`); False skips that read of the archive.
@@ -62,8 +68,11 @@ def open_study(path: str | Path, verify: bool = True, **open_kwargs):
         ``damping_ratios``, a sweep with NaN such as ``run.dt: [default, ...]``, repeated
         labels) is returned as stored, one case per row of ``case``.
     """
+    system = system_units(units, "units")
     ds = open_archive(path, verify, **open_kwargs)
     try:
+        if system:
+            ds = in_units(ds, units)
         grid = as_grid(ds)
     except Exception:
         ds.close()
@@ -72,6 +81,43 @@ def open_study(path: str | Path, verify: bool = True, **open_kwargs):
         return ds
     grid.set_close(ds.close)  # the grid's close closes the file (else it stays open)
     return grid
+
+
+def in_units(ds, units: str):
+    """The archive ``ds`` (an ``xarray.Dataset`` along ``case``, as stored) with every
+    variable whose units the system ``units`` lists converted
+    (:data:`campipe.units.UNIT_SYSTEMS`), its ``units`` attribute the new units. Per-degree
+    units take each case's cam speed (``speed_rpm``; an event's, its case's); lazy (dask)
+    variables stay lazy."""
+    system = system_units(units, "units")
+    speeds = {}  # dimension → the cam speed [rpm] along it
+    if "speed_rpm" in ds.variables and ds["speed_rpm"].dims == ("case",):
+        speeds["case"] = ds["speed_rpm"].variable
+        if "event_case" in ds.variables:
+            rows = ds["event_case"].values
+            speeds["event"] = type(speeds["case"])("event", ds["speed_rpm"].values[rows])
+    out = ds.copy()
+    for name, var in ds.variables.items():
+        stored = str(var.attrs.get("units", ""))
+        shown = system.get(stored)
+        if shown is None or var.dtype.kind != "f" or name in ds.dims:
+            continue
+        power = per_degree(shown)[1]
+        at_1rpm = float(convert_values(1.0, stored, shown, 1.0))
+        if not power:
+            new = var * at_1rpm
+        else:
+            dim = next((d for d in var.dims if d in speeds), None)
+            if dim is None:
+                continue  # no cam speed along it: left as stored
+            new = var * (at_1rpm / speeds[dim] ** power)
+        new.attrs = {**var.attrs, "units": shown}
+        new.encoding = dict(var.encoding)
+        if name in ds.coords:
+            out = out.assign_coords({name: new})
+        else:
+            out[name] = new
+    return out
 
 
 def open_archive(

@@ -1,14 +1,18 @@
 """Units a designer reads: which units each archive value is shown in, and how it reads.
 
-The archive stores SI (with ``speed_rpm`` in rpm and angles in degrees); ``campipe query`` and
-``campipe plot`` show values in one of three unit systems (``--units``):
+The archive stores SI (with ``speed_rpm`` in rpm and angles in degrees); ``campipe query``,
+``campipe plot`` and ``campipe export`` show values in one of four unit systems (``--units``):
 
 - ``spec`` (the default): each value the spec wrote with units in the units it wrote
   (``seat: [none, 0.1 in]`` shows in, ``spring_preload: 151 lbf`` in lbf), and every other
   value in the system the spec writes its lengths and forces in (in-lbf for a spec that writes
   ``in`` or ``lbf``, else SI);
 - ``si``: the archive's own units;
-- ``in-lbf``: inches, pounds-force and seconds (the thesis's units), rpm and degrees.
+- ``in-lbf``: inches, pounds-force and seconds (the thesis's units), rpm and degrees;
+- ``mm-deg``: the designer's: lift in mm, velocity in mm/deg and acceleration in mm/deg² of
+  cam angle (each case's at its cam speed), forces in N, stresses in MPa, rpm and degrees.
+
+The systems but ``spec`` are :data:`campipe.units.UNIT_SYSTEMS`.
 
 No seat (``-inf`` in the archive, :data:`~campipe.study.spec.variables.NO_SEAT`) reads ``none``.
 """
@@ -25,19 +29,10 @@ from campipe.errors import CampipeError, excerpt
 from campipe.io.spec_yaml import SpecFileError, parse_spec_text
 from campipe.study.spec.plots import SYSTEMS
 from campipe.study.spec.variables import NONE_WORD, STANDARD_COORDINATES
-from campipe.units import convert
+from campipe.units import UNIT_SYSTEMS, convert, convert_values
 
 #: Stored (SI) units → their in-lbf counterparts (units not listed stay as stored).
-IN_LBF = {
-    "m": "in",
-    "N": "lbf",
-    "m/s": "in/s",
-    "m/s^2": "in/s^2",
-    "N*m": "lbf*in",
-    "N*s": "lbf*s",
-    "N/m": "lbf/in",
-    "kg": "lbf*s^2/in",
-}
+IN_LBF = UNIT_SYSTEMS["in-lbf"]
 #: Units that mark a spec as written in inches and pounds.
 _IN_LBF_WORDS = {"in", "inch", "inches", "lbf", "lb", "ft", "foot", "feet", "thou", "mil"}
 _WRITTEN = re.compile(r"^\s*[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?\s*(?P<units>\S.*?)\s*$")
@@ -78,6 +73,8 @@ def written_units(attrs: Mapping[str, object]) -> dict[str, str]:
     sample = _mapping(raw.get("sample"))
     for key, values in _mapping(sample.get("ranges")).items():
         _note(out, str(key), values)
+    for key, values in _mapping(_mapping(raw.get("design")).get("vary")).items():
+        _note(out, str(key), values)  # campipe design's varied keys
     for entry in [raw, *(e for e in raw.get("cases") or [] if isinstance(e, Mapping))]:
         for key, value in _leaves(entry):
             _note(out, key, value)
@@ -151,7 +148,7 @@ def display_units(
     if system == "si":
         return dict(stored)
     written = written_units(attrs) if system == "spec" else {}
-    fallback = spec_system(written) if system == "spec" else system
+    fallback = UNIT_SYSTEMS[spec_system(written) if system == "spec" else system]
     names_to_keys = dict(keys) if keys is not None else column_keys(attrs)
     out = {}
     for name, units in stored.items():
@@ -159,10 +156,8 @@ def display_units(
         shown = written.get(key)
         if shown is not None and units and _convertible(units, shown):
             out[name] = shown
-        elif fallback == "in-lbf":
-            out[name] = IN_LBF.get(units, units)
         else:
-            out[name] = units
+            out[name] = fallback.get(units, units)
     return out
 
 
@@ -196,12 +191,13 @@ def factor(stored: str, shown: str) -> float:
     return convert(1.0, stored, shown)
 
 
-def to_display(values: np.ndarray, stored: str, shown: str) -> np.ndarray:
-    """``values`` (stored units) in ``shown`` units; text and no-seat values pass through."""
-    values = np.asarray(values)
-    if values.dtype.kind not in "f" or not stored or stored == shown:
-        return values
-    return values * factor(stored, shown)
+def to_display(
+    values: np.ndarray, stored: str, shown: str, cam_speed_rpm: np.ndarray | None = None
+) -> np.ndarray:
+    """``values`` (stored units) in ``shown`` units; text and no-seat values pass through.
+    Per-degree units (``mm/deg``, ``mm/deg^2``) need ``cam_speed_rpm``, each row's cam speed
+    [rpm] along the first axis (:func:`campipe.units.convert_values`)."""
+    return convert_values(values, stored, shown, cam_speed_rpm)
 
 
 def format_value(value: object, digits: int = 6) -> str:

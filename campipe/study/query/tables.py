@@ -18,6 +18,7 @@ import numpy as np
 from campipe.errors import did_you_mean, excerpt
 from campipe.study.query.display import display_units, format_value, label, to_display
 from campipe.study.spec.coordinates import coordinate_values
+from campipe.study.spec.drive import ENGINE_SPEED_NAME
 from campipe.study.spec.variables import VARIABLES, case_coordinates, data_variables
 from campipe.study.where import QueryError, Where, evaluate, parse_where
 from campipe.vocabulary import EVENTS_TRUNCATED, FAILURES, STATUS
@@ -74,8 +75,9 @@ def case_table(ds) -> CaseTable:
 def displayed(table: CaseTable, shown: dict[str, str]) -> CaseTable:
     """The table with each column in the units ``shown`` names (see
     :func:`campipe.study.query.display.display_units`); columns not named stay as they are."""
+    speed = table.columns.get("speed_rpm")  # the cam's, for units per degree
     columns = {
-        k: _without_noise(to_display(v, table.units[k], shown.get(k, table.units[k])))
+        k: without_noise(to_display(v, table.units[k], shown.get(k, table.units[k]), speed))
         if shown.get(k, table.units[k]) != table.units[k]
         else v
         for k, v in table.columns.items()
@@ -90,7 +92,7 @@ def displayed(table: CaseTable, shown: dict[str, str]) -> CaseTable:
 DISPLAY_DIGITS = 15
 
 
-def _without_noise(values: np.ndarray) -> np.ndarray:
+def without_noise(values: np.ndarray) -> np.ndarray:
     """Converted floats rounded to DISPLAY_DIGITS significant digits (others as they are)."""
     if values.dtype.kind != "f":
         return values
@@ -99,7 +101,8 @@ def _without_noise(values: np.ndarray) -> np.ndarray:
 
 
 def display_table(ds, system: str = "spec") -> CaseTable:
-    """The archive's case table in the units of ``system`` (``spec``, ``si`` or ``in-lbf``)."""
+    """The archive's case table in the units of ``system`` (``spec``, ``si``, ``in-lbf`` or
+    ``mm-deg``)."""
     table = case_table(ds)
     return displayed(table, display_units(table.units, ds.attrs, system))
 
@@ -251,7 +254,8 @@ def summary(ds, where: str | None = None, system: str = "spec") -> str:
     onset = onset_table(table)
     if onset:
         lines.append("")
-        lines.append("separation onset (first speed with separation_deg_per_rev > 0):")
+        which = "cam speed" if ENGINE_SPEED_NAME in table.columns else "speed"
+        lines.append(f"separation onset (first {which} with separation_deg_per_rev > 0):")
         lines += onset
     return "\n".join(lines)
 
@@ -340,10 +344,11 @@ def onset_table(table: CaseTable) -> list[str]:
     speed = cols["speed_rpm"].astype(float)
     if np.unique(speed).size < 2:
         return []
+    engine = cols.get(ENGINE_SPEED_NAME)  # a drive's: the onset at the engine's speed too
     others = [
         n
         for n, v in cols.items()
-        if n not in ("speed_rpm", "case")
+        if n not in ("speed_rpm", "case", ENGINE_SPEED_NAME)
         and n in table.default
         and n not in _metric_names(table)
         and len({_key(x) for x in v}) > 1
@@ -355,25 +360,32 @@ def onset_table(table: CaseTable) -> list[str]:
     for i in np.flatnonzero(usable).tolist():
         groups.setdefault(tuple(_key(cols[n][i]) for n in others), []).append(i)
     head = [*(label(n, table.units.get(n, "")) for n in others), "onset_rpm"]
+    head += ["onset_engine_rpm"] if engine is not None else []
     rows = []
     for members in groups.values():
         idx = np.array(members)
         order = idx[np.argsort(speed[idx], kind="stable")]
         sep = cols["separation_deg_per_rev"][order]
         hit = np.flatnonzero(sep > 0)
-        if hit.size == 0:
-            onset = f"none up to {speed[order[-1]]:.6g}"
-        elif hit[0] == 0:
-            onset = f"at or below {speed[order[0]]:.6g}"
-        else:
-            onset = f"{speed[order[hit[0]]]:.6g}"
-        rows.append([_cell(cols[n][idx[0]], "table") for n in others] + [onset])
+        onsets = [_onset(speed[order], hit)]
+        if engine is not None:
+            onsets.append(_onset(np.asarray(engine, float)[order], hit))
+        rows.append([_cell(cols[n][idx[0]], "table") for n in others] + onsets)
     text = [[", ".join(map(str, c)) if isinstance(c, list) else str(c) for c in r] for r in rows]
     widths = [max(len(r[j]) for r in [head, *text]) for j in range(len(head))]
     return [
         "  " + "  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip()
         for r in [head, *text]
     ]
+
+
+def _onset(speed: np.ndarray, hit: np.ndarray) -> str:
+    """The onset among ``speed`` (ascending) where the cases ``hit`` leave the cam."""
+    if hit.size == 0:
+        return f"none up to {speed[-1]:.6g}"
+    if hit[0] == 0:
+        return f"at or below {speed[0]:.6g}"
+    return f"{speed[hit[0]]:.6g}"
 
 
 def _metric_names(table: CaseTable) -> set[str]:

@@ -11,7 +11,9 @@
   renamed into place when complete; memory stays bounded by a block of rows.
 - With ``parts=True`` the archive is a folder of parts (:mod:`campipe.io.parts`): each
   batch's worker writes its part, compressed, and this process only keeps count and writes
-  the index last (:mod:`~campipe.study.run.parts`); nothing is assembled here.
+  the index last (:mod:`~campipe.study.run.parts`); nothing is assembled here. On a dask
+  cluster every worker is checked first and the batches go out once
+  (:mod:`~campipe.study.run.cluster`).
 - A run holds ``<archive>.lock`` throughout (``campipe.io.archive.writing``): a second run on
   the same archive stops with a clear error instead of removing the first one's files; the
   lock of a run that died on this host is taken over.
@@ -47,6 +49,7 @@ from campipe.study.run.batches import (
     parts_directory,
     plan_batches,
 )
+from campipe.study.run.cluster import PartCount
 from campipe.study.run.part_files import part_layout
 from campipe.study.run.parts import (
     clean_part_temporaries,
@@ -288,7 +291,7 @@ def _compute_and_assemble(
     by_key = {p.key: p for p in plans}
     sink = study_assembly(study, archive, found, run.command, spec_file(study, archive))
 
-    def stored(result: Stored | BatchData) -> None:
+    def stored(result: Stored | BatchData | PartCount) -> None:
         """A finished batch: stored here if its worker did not, then its rows go into the
         archive as far as the cases before them allow."""
         s = stored_here(result, storage, run.on_batch, by_key)
@@ -379,7 +382,7 @@ def _run_parts(
         bar = progress(total, total - len(missing)) if progress else None
         by_key = {p.key: p for p in plans}
 
-        def stored(result: Stored | BatchData) -> None:
+        def stored(result: Stored | BatchData | PartCount) -> None:
             s = stored_here(result, storage, run.on_batch, by_key)
             found.add(s)
             if bar:
@@ -410,7 +413,7 @@ def _compute(
     plans: list[BatchPlan],
     run: _Run,
     storage: Storage,
-    stored: Callable[[Stored | BatchData], None],
+    stored: Callable[[Stored | BatchData | PartCount], None],
 ) -> None:
     """Compute ``plans`` on the run's workers, each stored batch handed to ``stored``."""
     if not plans:

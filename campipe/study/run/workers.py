@@ -34,21 +34,24 @@ from pathlib import Path
 from campipe.errors import CampipeError
 from campipe.io.archive import ArchiveWriteError, write_error
 from campipe.study.run.batches import BatchHook, SchedulerError, Storage, Stored
+from campipe.study.run.cluster import PartCount, run_parts
 from campipe.study.run.results import BatchData, BatchPlan, compute_batch, numerics_fingerprint
 
 log = logging.getLogger(__name__)
 
 
 def stored_here(
-    result: Stored | BatchData,
+    result: Stored | BatchData | PartCount,
     storage: Storage,
     on_batch: BatchHook | None,
     plans: dict[str, BatchPlan],
 ) -> Stored:
     """A finished batch as stored: by this process if its worker returned the data (``plans``
-    by key), else as the worker stored it."""
+    by key), else as the worker stored it (a part's counts: its cases from ``plans``)."""
     if isinstance(result, BatchData):
         return _store(storage, on_batch, result, plans[result.key])
+    if isinstance(result, PartCount):
+        return _checked(result.stored(plans[result.key], storage.directory))
     return _checked(result)
 
 
@@ -238,11 +241,12 @@ def run_distributed(
     address: str,
     storage: Storage,
     workers_store: bool,
-    stored: Callable[[Stored | BatchData], None],
+    stored: Callable[[Stored | BatchData | PartCount], None],
 ) -> None:
-    """Batches on the dask.distributed scheduler at ``address``, each stored batch handed to
-    ``stored``; a SchedulerError, resumable, if the cluster cannot be reached, has no
-    worker for WORKER_TIMEOUT seconds, or fails."""
+    """Batches on the dask.distributed cluster at ``address``, each stored batch handed to
+    ``stored`` (a parts archive's workers write their parts and return their counts:
+    :func:`campipe.study.run.cluster.run_parts`); a SchedulerError, resumable, if the
+    cluster cannot be reached, has no worker for WORKER_TIMEOUT seconds, or fails."""
     with _distributed_quiet():
         _run_distributed(plans, address, storage, workers_store, stored)
 
@@ -272,9 +276,9 @@ def _run_distributed(
     address: str,
     storage: Storage,
     workers_store: bool,
-    stored: Callable[[Stored | BatchData], None],
+    stored: Callable[[Stored | BatchData | PartCount], None],
 ) -> None:
-    from distributed import wait
+    from distributed import as_completed, wait
 
     try:
         client = _connect(address)
@@ -297,7 +301,13 @@ def _run_distributed(
             reach = _reach_token(parts, token)
         task = functools.partial(_batch_task, compute_batch, storage, reach, None)
         with client, client.as_current():  # distributed.wait takes the current client
-            _submit_all(client, wait, plans, token[:8], task, stored)
+            if storage.parts and reach is not None:
+                tag, reached = token[:8], _reach_file(parts, reach)
+                run_parts(
+                    client, as_completed, plans, storage, reached, reach, compute_batch, stored, tag
+                )
+            else:
+                _submit_all(client, wait, plans, token[:8], task, stored)
     except (SchedulerError, ArchiveWriteError, CampipeError):
         raise
     except Exception as exc:  # distributed raises many kinds when the cluster goes away

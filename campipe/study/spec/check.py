@@ -20,6 +20,8 @@ Grammar (all keys optional except ``name``; each case must end up with a ``speed
     closure: force | form
     seat: none | <length>
     speed: <angular speed>
+    drive: {cam_per_crank: <number>}                   # campipe.study.spec.drive
+    engine_speed: <angular speed>                      # instead of speed, with a drive
     run: {revolutions, integrator, dt, output_every, tolerance, max_events, record: [...]}
     sweep: {<key>: [values] | {from, to, num}, ...}     # full grid
     zip: {<key>: [values] | {from, to, num}, ...}       # varied together
@@ -27,6 +29,7 @@ Grammar (all keys optional except ``name``; each case must end up with a ``speed
     sample: {method: latin-hypercube, n, seed, ranges: {<key>: {from, to}}}
     replay: {where: EXPR}
     plots: [{kind: histories | metric | map | events, ...}, ...]   # campipe.study.spec.plots
+    design: {vary, require, minimize | maximize, ...}   # campipe.study.spec.design
 """
 
 from __future__ import annotations
@@ -52,6 +55,8 @@ from campipe.study.spec.blocks import (
     show,
     unknown_key,
 )
+from campipe.study.spec.design import Design, check_design, check_design_axes
+from campipe.study.spec.drive import apply_drive
 from campipe.study.spec.fields import (
     CASE_FIELDS,
     CASE_KEYS,
@@ -101,9 +106,11 @@ class Spec:
     sample: Sample | None  # sampled design
     replay: str | None  # replay selection expression
     search: str | None = None  # "onset": search the speed axis instead (campipe onset)
+    drive: float | None = None  # camshaft turns per crankshaft turn (drive.cam_per_crank)
     overrides: dict[str, object] = field(default_factory=dict)  # --set KEY=VALUE applied
     path: Path | None = None  # the spec file, when read from one
     plots: list[PlotRequest] = field(default_factory=list)  # figures to write at the end
+    design: Design | None = None  # what campipe design searches for
 
     @property
     def record(self) -> tuple[str, ...]:
@@ -131,6 +138,15 @@ def check_conflicts(spec: Spec, problems: Problems) -> None:
                     problems.add(
                         f"cases[{i}].{key}", f"also varied by {owner}.{other}; vary it in one place"
                     )
+
+
+def _axis_keys(spec: Spec) -> dict[str, str]:
+    """Key → where the spec varies it (its axes and case entries)."""
+    out = {k: "sweep" for k in spec.sweep} | {k: "zip" for k in spec.zip}
+    out |= {k: "sample.ranges" for k in (spec.sample.ranges if spec.sample else {})}
+    for entry in spec.cases:
+        out |= {k: "cases" for k in leaf_keys(entry)}
+    return out
 
 
 def check_replay(value: object, problems: Problems) -> str | None:
@@ -247,6 +263,7 @@ def check_spec(
             ],
             source,
         )
+    raw, drive = apply_drive(raw, problems)
     for k in raw:
         if k not in TOP_LEVEL:
             problems.items.append(unknown_key("", str(k), TOP_LEVEL))
@@ -279,6 +296,7 @@ def check_spec(
     replay = check_replay(raw["replay"], problems) if "replay" in raw else None
     plots = check_plot_list(raw["plots"], problems) if "plots" in raw else []
     search = check_search(raw["search"], problems) if "search" in raw else None
+    design = check_design(raw["design"], problems) if "design" in raw else None
     spec = Spec(
         name=name if isinstance(name, str) else "",
         description=str(description),
@@ -291,10 +309,14 @@ def check_spec(
         sample=sample,
         replay=replay,
         search=search,
+        drive=drive,
         overrides=overrides,
         plots=plots,
+        design=design,
     )
     check_conflicts(spec, problems)
+    if design is not None:
+        check_design_axes(_axis_keys(spec), design, problems)
     if problems.items:
         raise SpecError(problems.items[:MAX_PROBLEMS], source)
     return spec

@@ -8,7 +8,9 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from campipe.study.spec.drive import engine_speed
 from campipe.study.spec.expand import Study
+from campipe.study.spec.fields import ENGINE_SPEED
 from campipe.study.spec.resolve import ResolvedCase
 from campipe.study.spec.variables import NO_SEAT, Variable, case_coordinates
 
@@ -32,7 +34,10 @@ def key_columns(
     units over ``cases`` (no seat as :data:`~campipe.study.spec.variables.NO_SEAT`)."""
     out: dict[str, np.ndarray] = {}
     for key, (name, var, factor) in coordinates.items():
-        raw = [c.values[key] for c in cases]
+        if key == ENGINE_SPEED.key:  # a drive's: the cam's speed over its ratio
+            raw: list = [engine_speed(c.values) for c in cases]
+        else:
+            raw = [c.values[key] for c in cases]
         if var.dtype == "str":
             out[name] = np.array([str(v) for v in raw], dtype=object)
         elif var.dtype.startswith("i"):
@@ -46,7 +51,7 @@ def key_columns(
             out[name] = values * factor
         else:
             values = np.array(raw, dtype=float) * factor
-            if key == "speed":
+            if key in ("speed", "engine_speed"):
                 # rpm from rad/s: round away the conversion's last-digit noise (11000 rpm
                 # stays 11000, so `--where "speed_rpm == 11000"` finds it)
                 values = np.array([float(f"{v:.12g}") for v in values])

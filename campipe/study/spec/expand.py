@@ -25,7 +25,9 @@ from campipe.errors import did_you_mean, excerpt
 from campipe.io.compression import COMPRESSION
 from campipe.study.spec.blocks import leaf_keys
 from campipe.study.spec.check import MAX_PROBLEMS, Spec, SpecError
+from campipe.study.spec.drive import with_drive
 from campipe.study.spec.fields import (
+    ENGINE_SPEED,
     SpecProblem,
     varied_fields,
 )
@@ -257,6 +259,9 @@ def expand(
         raise SpecError(over, source)
     swept = _speed_sweep(spec) if by_speed else None
     cases: Sequence[ResolvedCase] = swept if swept is not None else _each_case(spec, source)
+    if spec.drive is not None:  # the engine's speed beside the cam's
+        for case in swept.others() if swept is not None else cases:
+            with_drive(case.values, spec.drive)
     run = spec.base["run"]
     if spec.replay:
         check_replay_columns(spec.replay, varied_keys(spec), tuple(run["record"]), source)
@@ -434,4 +439,6 @@ def varied_keys(spec: Spec) -> tuple[str, ...]:
         if k in STANDARD_KEYS or k not in fields or k in out:
             continue
         out.append(k)
+    if spec.drive is not None:  # the engine's speed, stored beside the cam's
+        out.append(ENGINE_SPEED.key)
     return tuple(out)

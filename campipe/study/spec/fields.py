@@ -450,6 +450,21 @@ CASE_FIELDS: dict[str, Field] = {
     ]
 }
 
+#: The engine's speed, where a spec gives it instead of the cam's (with ``drive``; written as
+#: the cam's ``speed`` before the spec is checked: :mod:`campipe.study.spec.drive`).
+ENGINE_SPEED = Field(
+    "engine_speed",
+    "quantity",
+    "engine (crankshaft) speed, instead of the cam's speed: the cam turns at engine_speed "
+    "× drive.cam_per_crank (needs drive)",
+    units="rad/s",
+    example="rpm",
+    minimum=0.0,
+    maximum=MAX_SPEED,
+    archive_name="engine_speed_rpm",
+    archive_units="rpm",
+)
+
 #: Run keys whose value the whole study shares: they fix the archive's cam_angle axis, its
 #: variables or its compression, so a sweep, zip, sample or case may not vary them.
 STUDY_WIDE = (
@@ -650,6 +665,10 @@ TOP_LEVEL: dict[str, str] = {
     "closure": CASE_FIELDS["closure"].description,
     "seat": CASE_FIELDS["seat"].description,
     "speed": CASE_FIELDS["speed"].description,
+    "drive": "the drive from the crankshaft: {cam_per_crank: 0.5}; with it, a speed may be "
+    "given as the engine's (engine_speed) and the archive carries engine_speed_rpm and "
+    "crank_angle",
+    "engine_speed": ENGINE_SPEED.description,
     "run": "how cases are integrated and what is stored",
     "sweep": "full grid: key → list of values or {from, to, num}",
     "zip": "axes varied together: key → list of values or {from, to, num}, equal lengths",
@@ -660,6 +679,8 @@ TOP_LEVEL: dict[str, str] = {
     "{kind: histories | metric | map | events, where, units, output, ...}",
     "search": "search the speed axis instead of running every case: {onset: no-follow, "
     "axis: speed}, the no-follow onset of every combination of the other axes (campipe onset)",
+    "design": "the keys campipe design varies, the requirements a design must meet and the "
+    "objective: {vary, require, minimize | maximize, method, max_evaluations}",
 }
 #: What ``search`` may ask for (``campipe onset``).
 SEARCHES = {"onset": ("no-follow",), "axis": ("speed",)}
@@ -696,6 +717,7 @@ def varied_fields() -> Mapping[str, Field]:
     for key, f in CASE_FIELDS.items():
         if key not in STUDY_WIDE:
             out[key] = f
+    out[ENGINE_SPEED.key] = ENGINE_SPEED
     for name, f in PROFILE_FIELDS.items():
         out[f"profile.{name}"] = f
     out["profile.kind"] = Field(

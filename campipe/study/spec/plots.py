@@ -15,6 +15,7 @@ the archive's folder; default ``<archive stem>-<kind>.png``, numbered when a kin
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
@@ -26,7 +27,7 @@ from campipe.study.where import QueryError, parse_where
 
 #: The unit systems of ``--units`` (a plot's ``units``; :mod:`campipe.study.query.display`
 #: converts to them).
-SYSTEMS = ("spec", "si", "in-lbf")
+SYSTEMS = ("spec", "si", "in-lbf", "mm-deg")
 
 #: Plot kinds and what each draws.
 KINDS = {
@@ -37,16 +38,21 @@ KINDS = {
     "map": "a per-case value (z) over two swept axes (x, y) as coloured cells, with its "
     "contour at level; one panel per combination of the other varied keys",
     "events": "each case's events on a cam angle × case chart",
+    "pareto": "a campipe design file's two objectives (x, y), the designs evaluated and their "
+    "Pareto front",
 }
 #: File types by the output's suffix.
 FORMATS = (".png", ".svg", ".pdf")
 #: Keys each kind takes beyond kind, where, units and output.
 KIND_KEYS = {
-    "histories": ("turn",),
-    "metric": ("x", "y"),
+    "histories": ("turn", "angle", "range"),
+    "metric": ("x", "y", "limit"),
     "map": ("x", "y", "z", "level"),
-    "events": ("turn",),
+    "events": ("turn", "angle", "range"),
+    "pareto": ("x", "y"),
 }
+#: The angles a histories or events figure may draw along x.
+ANGLES = ("cam", "crank")
 COMMON_KEYS = ("kind", "where", "units", "output")
 
 
@@ -69,6 +75,9 @@ class PlotRequest:
     level: str | float | None = None  # map: the contour's level, a number in z's shown
     #                                   units or a quantity ("1 deg")
     turn: str | int | None = None  # histories, events: a turn (1, 2, ... or "last")
+    angle: str | None = None  # histories, events: along the cam angle or the crank angle
+    range: tuple[float, float] | None = None  # histories, events: the angles shown [deg]
+    limit: tuple[str | float, ...] = ()  # metric: y values drawn as limit lines
 
     def default_output(self, archive: str | Path, number: int = 0) -> Path:
         """``<archive stem>-<kind>.png`` beside the archive (``-<number>`` from the second
@@ -140,6 +149,14 @@ def check_plot(raw: Mapping[str, object], path: str = "") -> PlotRequest:
     turn = values.get("turn")
     if turn is not None:
         values["turn"] = check_turn(turn, at("turn"))
+    if "angle" in values and values["angle"] not in ANGLES:
+        raise PlotError.at(
+            at("angle"), f"found {excerpt(values['angle'])}, expected one of: {', '.join(ANGLES)}"
+        )
+    if "range" in values:
+        values["range"] = check_range(values["range"], at("range"))
+    if "limit" in values:
+        values["limit"] = check_limits(values["limit"], at("limit"))
     level = values.get("level")
     if level is not None and (isinstance(level, bool) or not isinstance(level, int | float | str)):
         raise PlotError.at(
@@ -167,3 +184,39 @@ def check_turn(turn: object, key: str = "--turn") -> str | int:
     if isinstance(turn, bool) or number < 1 or str(number) != str(turn).strip():
         raise PlotError.at(key, f"found {excerpt(turn)}, expected a turn 1, 2, ..., last or all")
     return number
+
+
+def check_range(value: object, key: str = "--range") -> tuple[float, float]:
+    """An angle range ``LO:HI`` (or ``[LO, HI]``) [deg], LO below HI."""
+    parts: list[object]
+    if isinstance(value, str):
+        parts = [p.strip().removesuffix("deg").strip() for p in value.split(":")]
+    elif isinstance(value, list | tuple):
+        parts = list(value)
+    else:
+        parts = []
+    try:
+        if len(parts) != 2 or any(isinstance(p, bool) for p in parts):
+            raise ValueError
+        lo, hi = (float(p) for p in parts)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        lo = hi = math.nan
+    if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+        raise PlotError.at(
+            key, f"found {excerpt(value)}, expected an angle range LO:HI in degrees, LO < HI"
+        )
+    return lo, hi
+
+
+def check_limits(value: object, key: str = "--limit") -> tuple[str | float, ...]:
+    """Limit lines: a number (in the y column's shown units) or a quantity (``0.5 m/s``),
+    or a list of them."""
+    values = value if isinstance(value, list | tuple) else [value]
+    out: list[str | float] = []
+    for v in values:
+        if isinstance(v, bool) or not isinstance(v, int | float | str) or not str(v).strip():
+            raise PlotError.at(
+                key, f"found {excerpt(v)}, expected a number or a quantity ('0.5 m/s')"
+            )
+        out.append(float(v) if isinstance(v, int | float) else v.strip())
+    return tuple(out)

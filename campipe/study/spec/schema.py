@@ -16,11 +16,14 @@ import json
 from campipe.model import PARAMETERS
 from campipe.model.schema import QUANTITY_PATTERN, model_schema, parameter_schema
 from campipe.study.spec.check import NAME_PATTERN
+from campipe.study.spec.design import DESIGN_KEYS, METHODS, ONSET, metric_units
+from campipe.study.spec.drive import DRIVE_FIELDS
 from campipe.study.spec.fields import (
     CASE_FIELDS,
     CASE_KEYS,
     DEFECT_FIELDS,
     DEFECT_KINDS,
+    ENGINE_SPEED,
     PROFILE_FIELDS,
     PROFILE_KINDS,
     PROFILE_OPTIONAL,
@@ -34,6 +37,7 @@ from campipe.study.spec.fields import (
     sweep_keys,
     varied_fields,
 )
+from campipe.study.spec.plots import ANGLES as PLOT_ANGLES
 from campipe.study.spec.plots import COMMON_KEYS as PLOT_COMMON_KEYS
 from campipe.study.spec.plots import KIND_KEYS as PLOT_KIND_KEYS
 from campipe.study.spec.plots import KINDS as PLOT_KINDS
@@ -218,6 +222,34 @@ def _plot(kind: str) -> dict[str, object]:
             "anyOf": [{"type": "integer", "minimum": 1}, {"enum": ["last", "all"]}],
             "description": "the cam turn shown (default: all)",
         },
+        "angle": {
+            "enum": list(PLOT_ANGLES),
+            "description": "the angle along x: the cam's (default) or the crank's (with drive)",
+        },
+        "range": {
+            "anyOf": [
+                {"type": "string", "minLength": 3},
+                {"type": "array", "items": {"type": "number"}, "minItems": 2, "maxItems": 2},
+            ],
+            "description": "the angles shown, LO:HI in degrees of the angle along x",
+        },
+        "limit": {
+            "anyOf": [
+                {"type": "number"},
+                {"type": "string", "pattern": QUANTITY_PATTERN},
+                {
+                    "type": "array",
+                    "items": {
+                        "anyOf": [
+                            {"type": "number"},
+                            {"type": "string", "pattern": QUANTITY_PATTERN},
+                        ]
+                    },
+                },
+            ],
+            "description": "limit lines across the plot at these values of y (a number in "
+            "the shown units, or a quantity)",
+        },
     }
     allowed = (*PLOT_COMMON_KEYS, *PLOT_KIND_KEYS[kind])
     return {
@@ -225,6 +257,66 @@ def _plot(kind: str) -> dict[str, object]:
         "properties": {k: v for k, v in keys.items() if k in allowed},
         "required": ["kind"],
         "additionalProperties": False,
+    }
+
+
+def _design() -> dict[str, object]:
+    """The ``design:`` section (:mod:`campipe.study.spec.design`)."""
+    vary = {}
+    for k in sample_keys():
+        rng = _range(k, False)
+        if k != "speed" and rng is not None:
+            bound = rng["properties"]["from"]  # type: ignore[index]
+            props = {**rng["properties"], "tolerance": bound}  # type: ignore[dict-item]
+            vary[k] = {**rng, "properties": props}
+    bounded = {"min": {"$ref": "#/$defs/quantity"}, "max": {"$ref": "#/$defs/quantity"}}
+    speeds = {"oneOf": [{"$ref": "#/$defs/quantity"}, {"type": "array", "minItems": 1,
+              "items": {"$ref": "#/$defs/quantity"}}]}  # fmt: skip
+    require: dict[str, object] = {
+        ONSET: {
+            "type": "object",
+            "properties": bounded,
+            "minProperties": 1,
+            "additionalProperties": False,
+        },  # fmt: skip
+    }
+    for name, units in metric_units().items():
+        bound = {"$ref": "#/$defs/quantity"} if units else {"type": "number"}
+        props = {"min": bound, "max": bound, "at": speeds}
+        require[name] = {"type": "object", "properties": props, "required": ["at"],
+                         "additionalProperties": False}  # fmt: skip
+    one = {"type": "string", "minLength": 1}
+    key = {"oneOf": [one, {"type": "array", "items": one, "minItems": 1, "maxItems": 2}]}
+    return {
+        "type": "object",
+        "properties": {
+            "vary": {
+                "type": "object",
+                "minProperties": 1,
+                "properties": vary,
+                "additionalProperties": False,
+                "description": DESIGN_KEYS["vary"],
+            },
+            "require": {
+                "type": "object",
+                "minProperties": 1,
+                "properties": require,
+                "additionalProperties": False,
+                "description": DESIGN_KEYS["require"],
+            },
+            "minimize": {**key, "description": DESIGN_KEYS["minimize"]},
+            "maximize": {**key, "description": DESIGN_KEYS["maximize"]},
+            "method": {"enum": list(METHODS), "description": DESIGN_KEYS["method"]},
+            "max_evaluations": {
+                "type": "integer",
+                "minimum": 2,
+                "description": DESIGN_KEYS["max_evaluations"],
+            },
+        },  # fmt: skip
+        "required": ["vary", "require"],
+        "oneOf": [{"required": ["minimize"]}, {"required": ["maximize"]}],
+        "additionalProperties": False,
+        "description": TOP_LEVEL["design"],
     }
 
 
@@ -241,6 +333,14 @@ def study_schema() -> dict[str, object]:
             "name": {"type": "string", "pattern": NAME_PATTERN, "description": TOP_LEVEL["name"]},
             "description": {"type": "string", "description": TOP_LEVEL["description"]},
             **_case(patch=False),
+            "engine_speed": {"$ref": "#/$defs/engine_speed"},
+            "drive": {
+                "type": "object",
+                "properties": {k: field_schema(f) for k, f in DRIVE_FIELDS.items()},
+                "required": list(DRIVE_FIELDS),
+                "additionalProperties": False,
+                "description": TOP_LEVEL["drive"],
+            },
             "sweep": {"$ref": "#/$defs/axes", "description": TOP_LEVEL["sweep"]},
             "zip": {"$ref": "#/$defs/axes", "description": TOP_LEVEL["zip"]},
             "cases": {
@@ -285,6 +385,7 @@ def study_schema() -> dict[str, object]:
                 "additionalProperties": False,
                 "description": TOP_LEVEL["search"],
             },
+            "design": _design(),
         },
         "additionalProperties": False,
         "$defs": {
@@ -308,6 +409,7 @@ def study_schema() -> dict[str, object]:
                 "description": TOP_LEVEL["defects"],
             },
             **{k: field_schema(CASE_FIELDS[k]) for k in ("closure", "seat", "speed")},
+            "engine_speed": field_schema(ENGINE_SPEED),
             "quantity": {
                 "type": "string",
                 "pattern": QUANTITY_PATTERN,
@@ -318,7 +420,10 @@ def study_schema() -> dict[str, object]:
             "case_run": _run(study_wide=False),
             "case": {
                 "type": "object",
-                "properties": _case(patch=True),
+                "properties": {
+                    **_case(patch=True),
+                    "engine_speed": {"$ref": "#/$defs/engine_speed"},
+                },
                 "additionalProperties": False,
                 "description": TOP_LEVEL["cases"],
             },

@@ -1,0 +1,146 @@
+"""``campipe design``: the values of a spec's keys that meet its requirements best."""
+
+from __future__ import annotations
+
+import click
+
+from campipe.cli.base import SET_HELP, Failure, InputFailure, load_spec
+
+
+@click.command()
+@click.argument("spec", type=click.Path(exists=True, dir_okay=False))
+@click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=SET_HELP)
+@click.option(
+    "--format",
+    "fmt",
+    type=click.Choice(["table", "csv", "json"]),
+    default="table",
+    show_default=True,
+    help="json: {study, units, cases: [row objects]} as campipe query's, the chosen design first.",
+)
+@click.option(
+    "-o",
+    "--output",
+    type=click.Path(dir_okay=False),
+    help="The netCDF file of the designs evaluated (default: <name>-design.nc beside SPEC).",
+)
+@click.option(
+    "--overwrite",
+    is_flag=True,
+    help="Replace a file at the output path that is not this spec's design file; never the spec.",
+)
+def design(spec, sets, fmt, output, overwrite) -> None:
+    """The design SPEC's design: section asks for: the values of design.vary's keys, within
+    their bounds, that meet design.require (the no-follow onset, metrics at stated speeds)
+    with the least (minimize) or greatest (maximize) objective. One varied key that is the
+    objective: a root search to its tolerance; else SciPy's optimisers (design.method).
+
+    Prints the chosen design first, then every other design evaluated, with the margin on
+    each requirement and the one that binds; writes them to a netCDF file campipe query and
+    campipe plot read. Exit status 1 when no design meets the requirements (the closest is
+    printed first, marked closest, with the requirement it fails)."""
+    from pathlib import Path
+
+    loaded = load_spec(spec, sets)
+    if loaded.spec.design is None:
+        raise InputFailure(
+            f"{spec}: design: missing; campipe design needs a design section, e.g. design: "
+            "{vary: {model.spring_preload: {from: 80 lbf, to: 250 lbf}}, require: "
+            "{onset_speed_rpm: {min: 9500 rpm}}, minimize: model.spring_preload}"
+        )
+    path = Path(output) if output else Path(spec).parent / f"{loaded.name}-design.nc"
+    _run(loaded, spec, path, fmt, overwrite)
+
+
+def _kind(study_name: str, spec_file: str):
+    from campipe.io.outputs import Kind, netcdf_attrs
+    from campipe.study.design.output import DESIGN_FILE
+
+    def ours(path) -> bool:
+        attrs = netcdf_attrs(path)
+        return (
+            attrs is not None
+            and attrs.get("campipe_file") == DESIGN_FILE
+            and attrs.get("study_name") == study_name
+            and str(attrs.get("spec_file", "")) in ("", spec_file)
+        )
+
+    return Kind("a design file of this spec", ours)
+
+
+def _search(loaded):
+    """The search, with campipe study's progress line on stderr (redrawn in a terminal,
+    every 2 s elsewhere) counting designs against the most the search may take."""
+    import sys
+
+    from campipe.study.design.search import most_evaluations, run_design
+    from campipe.study.run.progress import Progress
+
+    stderr = sys.stderr
+    progress = Progress(
+        most_evaluations(loaded.spec.design),
+        stderr.write,
+        terminal=stderr.isatty(),
+        unit="designs at most",
+        then="writing the file",
+    )
+    try:
+        return run_design(
+            loaded,
+            notice=lambda text: click.echo(f"campipe design: {text}", err=True),
+            on_evaluation=lambda _: progress.advance(1),
+        )
+    finally:
+        progress.close()
+
+
+def _run(loaded, spec_path, path, fmt, overwrite) -> None:
+    import os
+    from pathlib import Path
+
+    import numpy as np
+
+    from campipe.io.archive import provenance, write_file
+    from campipe.io.lock import writing
+    from campipe.io.outputs import check_output, describe_netcdf
+    from campipe.study.design.output import (
+        DESIGN_FILE,
+        design_table,
+        file_contents,
+        shown_units,
+        summary_lines,
+    )
+    from campipe.study.query.tables import displayed, format_rows
+
+    spec_file = os.path.relpath(Path(spec_path).resolve(), Path(path).parent.resolve())
+    kind = _kind(loaded.name, spec_file)
+    inputs = [(spec_path, "the spec")]
+    check_output(path, "-o", kind, overwrite=overwrite, inputs=inputs, describe=describe_netcdf)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    result = _search(loaded)
+    table = design_table(result)
+    sizes, variables, arrays, attrs = file_contents(result, table)
+    with writing(path):
+        check_output(path, "-o", kind, overwrite=overwrite, inputs=inputs,
+                     describe=describe_netcdf)  # fmt: skip
+        write_file(
+            path,
+            sizes,
+            variables,
+            arrays,
+            {
+                **attrs,
+                **provenance(f"campipe design {spec_path}"),
+                "campipe_file": DESIGN_FILE,
+                "spec_file": spec_file,
+            },
+            loaded.compression,
+        )
+    shown = displayed(table, shown_units(result))
+    click.echo(format_rows(shown, np.arange(shown.n), shown.default, fmt))
+    lines = summary_lines(result)
+    for line in lines:
+        click.echo(line, err=True)
+    click.echo(f"wrote {path}", err=True)
+    if not result.feasible:
+        raise Failure(lines[0])

@@ -1,0 +1,255 @@
+"""One design evaluated: the spec's base case with the design's values, its no-follow onset
+(``campipe.engine.onset.onset_speeds``, as ``campipe onset`` finds it) and its metrics at
+the requirements' speeds (the engine, as a study's batch runs), and the margin on each
+requirement.
+
+A margin is in the requirement's units, positive where it holds: the value less the minimum,
+the maximum less the value (a metric's value the worst over its speeds). The search compares
+requirements by their *relative* margins (the margin over the bound, or over 1 for a bound of
+0): the least of them is the design's, and names the requirement that binds.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from campipe import engine
+from campipe.constants import RPM
+from campipe.engine import onset as engine_onset
+from campipe.engine.metrics import archived_metrics
+from campipe.errors import CampipeError
+from campipe.study.spec.design import ONSET, Design, Requirement, onset_required
+from campipe.study.spec.expand import Study
+from campipe.units import convert
+from campipe.vocabulary import FAILURES
+
+
+class DesignError(CampipeError, ValueError):
+    """A design section the spec's cases cannot serve (``key`` the spec key)."""
+
+
+@dataclass(frozen=True)
+class Bound:
+    """One bound of a requirement: ``onset_speed_rpm ≥ 9500 rpm``."""
+
+    requirement: Requirement
+    side: str  # "min" or "max"
+
+    @property
+    def value(self) -> float:
+        r = self.requirement
+        return r.minimum if self.side == "min" else r.maximum
+
+    @property
+    def name(self) -> str:
+        """The margin's column: ``margin_onset_speed_rpm_min``."""
+        return f"margin_{self.requirement.key}_{self.side}"
+
+    @property
+    def label(self) -> str:
+        r = self.requirement
+        sign = "≥" if self.side == "min" else "≤"
+        value, units = self.value, r.units
+        if r.written and units and r.written != units:
+            value, units = convert(value, units, r.written), r.written
+        return f"{r.key} {sign} {value:.6g}{' ' + units if units else ''}"
+
+    def margin(self, value: float) -> float:
+        """The margin of ``value`` (the requirement's units); -inf for a value not found."""
+        if math.isnan(value):
+            return -math.inf
+        return value - self.value if self.side == "min" else self.value - value
+
+    def relative(self, margin: float) -> float:
+        return margin / (abs(self.value) if self.value != 0 else 1.0)
+
+
+def bounds_of(design: Design) -> tuple[Bound, ...]:
+    return tuple(
+        Bound(r, side)
+        for r in design.require
+        for side, v in (("min", r.minimum), ("max", r.maximum))
+        if not math.isnan(v)
+    )
+
+
+@dataclass
+class Evaluation:
+    """A design and what it gives."""
+
+    x: np.ndarray  # the varied keys' values (SI), in design.vary's order
+    onset: float = math.nan  # the no-follow onset [rpm]; NaN: not asked for, or none
+    onset_status: str = ""  # engine.onset.Onset's: found, below, none ("" not asked for)
+    #: (metric, speed [rad/s]) → the metric's summary (the archive's units); NaN: failed run
+    metrics: dict[tuple[str, float], float] = field(default_factory=dict)
+    values: dict[str, float] = field(default_factory=dict)  # requirement → worst value
+    margins: dict[str, float] = field(default_factory=dict)  # Bound.name → margin
+    relative: float = math.inf  # the least relative margin (inf: no bound)
+    binding: str = ""  # the Bound.label of the least
+    objectives: tuple[float, ...] = ()  # each objective's value (its units; NaN: not found)
+
+    @property
+    def objective(self) -> float:
+        """The (first) objective's value."""
+        return self.objectives[0] if self.objectives else math.nan
+
+    @property
+    def feasible(self) -> bool:
+        return self.relative >= 0.0
+
+
+class Evaluator:
+    """Evaluates designs of a spec's ``design`` section.
+
+    Parameters
+    ----------
+    study : Study
+        The spec expanded (its speeds the onset's range).
+    cases_at : callable
+        x (SI values of design.vary's keys) → the spec's expanded study with those values
+        (``campipe.study.design.search.design_study``).
+    on_evaluation : callable, optional
+        Given each new evaluation (a progress line).
+    """
+
+    def __init__(
+        self,
+        study: Study,
+        cases_at: Callable[[np.ndarray], Study],
+        on_evaluation: Callable[[Evaluation], None] | None = None,
+    ) -> None:
+        design = study.spec.design
+        assert design is not None
+        self.design = design
+        self.cases_at = cases_at
+        self.on_evaluation = on_evaluation  # told of each new evaluation (a progress line)
+        self.bounds = bounds_of(design)
+        self.evaluations: list[Evaluation] = []
+        self._seen: dict[bytes, Evaluation] = {}
+        speeds = np.array([c.case.speed for c in study.cases])
+        self.low, self.high = float(speeds.min()), float(speeds.max())
+        self.needs_onset = onset_required(design)
+        if self.needs_onset and not self.high > self.low:
+            raise DesignError.at(
+                "speed",
+                f"the spec runs one speed ({self.low / RPM:g} rpm); the onset requirement is "
+                "searched over the spec's speed range: sweep it, e.g. sweep: {speed: {from: "
+                "3000 rpm, to: 20000 rpm, num: 2}}",
+                found=self.low,
+                expected="a speed range",
+            )
+        self.metrics = {m.summary: m for m in archived_metrics()}
+        self.speeds = sorted({s for r in design.require for s in r.speeds})
+
+    def __call__(self, values: Sequence[float] | np.ndarray) -> Evaluation:
+        """Evaluate the design ``x`` (kept in :attr:`evaluations`; a design evaluated
+        before is not evaluated again)."""
+        x = np.array(values, float)
+        if x.tobytes() in self._seen:
+            return self._seen[x.tobytes()]
+        study = self.cases_at(x)
+        first = study.cases[0]
+        ev = Evaluation(x)
+        if self.needs_onset:
+            on = engine_onset.onset_speeds([first.case], self.low, self.high)
+            ev.onset = float(on.speed[0] / RPM)
+            ev.onset_status = str(on.status[0])
+        if self.speeds:
+            ev.metrics = self._metrics(first)
+        self._judge(ev)
+        self.evaluations.append(ev)
+        self._seen[x.tobytes()] = ev
+        if self.on_evaluation is not None:
+            self.on_evaluation(ev)
+        return ev
+
+    def seen(self, x: Sequence[float] | np.ndarray) -> Evaluation | None:
+        """The evaluation of ``x`` if it was evaluated."""
+        return self._seen.get(np.array(x, float).tobytes())
+
+    def _metrics(self, first) -> dict[tuple[str, float], float]:
+        wanted = [self.metrics[r.key] for r in self.design.require if r.speeds]
+        cases = [dataclasses.replace(first.case, speed=s) for s in self.speeds]
+        result = engine.run_at_fidelity(
+            cases,
+            first.settings,
+            full_state=any(m.record for m in wanted),
+            on_failure="record",
+        )
+        failed = np.isin(np.asarray(result.status), FAILURES)
+        out = {}
+        for m in wanted:
+            values = m.summarise(m.to_archive(result.metric_per_rev(m.key)), result.measured)
+            for i, s in enumerate(self.speeds):
+                if not failed[i] and math.isnan(values[i]):
+                    raise DesignError.at(
+                        f"design.require.{m.summary}",
+                        f"the run at {s / RPM:g} rpm gives no value of {m.summary} (NaN): the "
+                        "model lacks what it needs (a Hertz pressure: the contact's radii "
+                        "and modulus, docs/model.md); require another metric",
+                        found="NaN",
+                        expected="a metric the model defines",
+                    )
+                out[m.summary, s] = math.nan if failed[i] else float(values[i])
+        return out
+
+    def onset_value(self, ev: Evaluation) -> float:
+        """The onset a requirement compares [rpm]: none in the range reads as its top, no-follow
+        already at its bottom as its bottom."""
+        if ev.onset_status == "none":
+            return self.high / RPM
+        if ev.onset_status == "below":
+            return self.low / RPM
+        return ev.onset
+
+    def _judge(self, ev: Evaluation) -> None:
+        for r in self.design.require:
+            if r.key == ONSET:
+                ev.values[r.key] = self.onset_value(ev)
+        for b in self.bounds:
+            r = b.requirement
+            if r.key == ONSET:
+                value = ev.values[r.key]
+            else:
+                per_speed = [ev.metrics[r.key, s] for s in r.speeds]
+                value = math.nan if any(map(math.isnan, per_speed)) else (
+                    min(per_speed) if b.side == "min" else max(per_speed))  # fmt: skip
+            ev.margins[b.name] = b.margin(value)
+            rel = b.relative(ev.margins[b.name])
+            if rel < ev.relative:
+                ev.relative, ev.binding = rel, b.label
+        ev.objectives = tuple(self.objective_value(ev, k, s) for k, s in self.design.objectives)
+
+    def objective_value(self, ev: Evaluation, key: str, sense: str) -> float:
+        """The value of the objective ``key`` (a metric's the worst over its speeds for
+        ``sense``)."""
+        keys = [v.key for v in self.design.vary]
+        if key in keys:
+            return float(ev.x[keys.index(key)])
+        if key == ONSET:
+            return self.onset_value(ev)
+        r = next(r for r in self.design.require if r.key == key)
+        values = [ev.metrics[r.key, s] for s in r.speeds]
+        if any(map(math.isnan, values)):
+            return math.nan
+        return max(values) if sense == "minimize" else min(values)
+
+    def better(self, a: Evaluation, b: Evaluation) -> bool:
+        """``a``'s objective is better than ``b``'s (NaN never is)."""
+        if math.isnan(a.objective):
+            return False
+        if math.isnan(b.objective):
+            return True
+        if self.design.sense == "minimize":
+            return a.objective < b.objective
+        return a.objective > b.objective
+
+
+def margin_columns(bounds: Sequence[Bound]) -> Mapping[str, str]:
+    """Bound.name → its units."""
+    return {b.name: b.requirement.units for b in bounds}
