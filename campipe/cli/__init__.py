@@ -11,8 +11,30 @@ of commands: :mod:`~campipe.cli.study` (study, validate, query, pack), :mod:`~ca
 :mod:`~campipe.cli.bench`.
 """
 
-from campipe.cli import bench, design, export, model, onset, plot, replay, study
-from campipe.cli.base import main
+import os
+import signal
+import sys
+
+
+def _interrupted_early(signum, frame) -> None:
+    """Ctrl-C while the command line loads (before ``main`` maps it to a message): a line,
+    exit status 130, no traceback of an import."""
+    sys.stderr.write("campipe: interrupted (Ctrl-C) while starting; nothing was done\n")
+    os._exit(128 + signal.SIGINT)
+
+
+# Only in campipe's own process (its console script, python -m campipe: read from the
+# interpreter's own arguments, which a spawned worker process does not share even where it
+# copies sys.argv), and where Ctrl-C is Python's (not ignored, as in a background job): a
+# program that imports the command line keeps its handler. main() puts Python's back.
+if signal.getsignal(signal.SIGINT) is signal.default_int_handler and (
+    os.path.basename(sys.orig_argv[1] if len(sys.orig_argv) > 1 else "") == "campipe"
+    or sys.orig_argv[1:3] == ["-m", "campipe"]
+):
+    signal.signal(signal.SIGINT, _interrupted_early)
+
+from campipe.cli import bench, design, export, model, onset, plot, replay, study  # noqa: E402
+from campipe.cli.base import main  # noqa: E402
 
 __all__ = ["main"]
 

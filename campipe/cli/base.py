@@ -84,15 +84,39 @@ def failure(exc: BaseException) -> Failure | None:
 
     if (plugin := missing_filter(exc)) is not None:
         return Failure(f"cannot read the archive ({exc}): {plugin}")
+    if isinstance(exc, RuntimeError) and "NetCDF: HDF error" in str(exc):
+        return Failure(
+            f"cannot read the archive ({exc}): a part of it is damaged (a chunk whose "
+            "Fletcher-32 checksum differs, or the file's structure); read it without "
+            "--no-verify to name the variables, or run the study again to write it anew"
+        )
     return None
 
 
+class Interrupted(Failure):
+    """Ctrl-C (SIGINT): exit status 130, as a shell reports it."""
+
+    exit_code = 128 + 2
+
+
+#: What an interrupted command leaves, by command.
+AFTER_INTERRUPT = {
+    "study": "the batches finished are kept: rerun the same command to resume",
+    "onset": "nothing was written; rerun the same command to search again",
+}
+
+
 class CampipeGroup(click.Group):
-    """The ``campipe`` group: maps errors to messages and exit statuses (:func:`failure`)."""
+    """The ``campipe`` group: maps errors to messages and exit statuses (:func:`failure`),
+    and Ctrl-C to a line saying what stays (not click's bare "Aborted!")."""
 
     def invoke(self, ctx: click.Context):
         try:
             return super().invoke(ctx)
+        except KeyboardInterrupt:
+            name = ctx.invoked_subcommand or ""
+            after = f"; {AFTER_INTERRUPT[name]}" if name in AFTER_INTERRUPT else ""
+            raise Interrupted(f"campipe {name}: interrupted (Ctrl-C){after}") from None
         except (click.ClickException, click.exceptions.Exit, click.Abort):
             raise
         except Exception as exc:
@@ -108,8 +132,18 @@ class CampipeGroup(click.Group):
 def main(verbose: int) -> None:
     """campipe: parametric studies of cam-driven valve-train dynamics."""
     logging.basicConfig(level=[logging.WARNING, logging.INFO, logging.DEBUG][min(verbose, 2)])
+    _restore_interrupt()
     _exit_without_collecting()
     reuse_freed_memory()  # this process is the command's own (campipe.memory)
+
+
+def _restore_interrupt() -> None:
+    """Python's own Ctrl-C (KeyboardInterrupt, which :class:`CampipeGroup` maps) in place of
+    the handler ``campipe.cli`` sets while it loads."""
+    import signal
+
+    if getattr(signal.getsignal(signal.SIGINT), "__name__", "") == "_interrupted_early":
+        signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 @functools.cache
@@ -226,6 +260,19 @@ SET_HELP = (
 #: The unit systems of --units (campipe.study.spec.plots.SYSTEMS, repeated so --help needs no
 #: import of the study layer; tests/integration/test_plot.py checks they agree).
 UNIT_SYSTEMS = ("spec", "si", "in-lbf", "mm-deg")
+
+
+def verify_option(command):
+    """``--no-verify``: read an archive without first checking it against its checksums."""
+    return click.option(
+        "--verify/--no-verify",
+        default=True,
+        show_default=True,
+        help="Check every variable of the archive against the checksums stored when it was "
+        "written before reading it (one more read of the archive); a damaged one is refused, "
+        "its variables named. --no-verify skips that check (HDF5 still checks each chunk it "
+        "reads of archives written since campipe 0.1's Fletcher-32).",
+    )(command)
 
 
 def units_option(command):

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from campipe.cli.base import Failure, InputFailure, units_option
+from campipe.cli.base import Failure, InputFailure, SpecRefused, units_option, verify_option
 
 #: The plot kinds (campipe.study.spec.plots.KINDS, repeated so --help needs no import of the study
 #: layer; tests/integration/test_plot.py checks they agree).
@@ -77,8 +77,23 @@ PLOT_KINDS = ("histories", "metric", "map", "events", "pareto")
     help="metric: draw a limit line at this value of y, a number in its shown units or a "
     "quantity such as '0.5 m/s'. Repeatable.",
 )
+@verify_option
 def plot(
-    kind, archive, output, overwrite, where, units, x, y, z, level, turn, angle, span, limits
+    kind,
+    archive,
+    output,
+    overwrite,
+    where,
+    units,
+    x,
+    y,
+    z,
+    level,
+    turn,
+    angle,
+    span,
+    limits,
+    verify,
 ) -> None:
     """Draw a figure of ARCHIVE.
 
@@ -103,8 +118,62 @@ def plot(
         request = check_plot(given)
     except PlotError as exc:
         raise InputFailure(f"--{exc.key}: {exc.reason}") from None
-    path, _ = plot_archive(archive, request, output, overwrite=overwrite)
+    path, _ = plot_archive(archive, request, output, overwrite=overwrite, verify=verify)
     click.echo(str(path))
+
+
+#: The map's z when a request names none (campipe.plot.figures.cell_map's).
+DEFAULT_Z = "separation_deg_per_rev"
+
+
+def check_spec_plots(loaded) -> None:
+    """Refuse, before anything runs, a spec's ``plots:`` option that drawing would refuse
+    once the archive is written: a ``turn`` past the turns the histories cover, a map's
+    ``level`` in units of another dimension than its z's. ``campipe validate`` and
+    ``campipe study`` call it; a SpecRefused naming ``plots[i].<key>``."""
+    import math
+
+    from campipe.units import QuantityError, convert, read_quantity
+
+    turns = max(int(math.ceil(float(loaded.revolutions) - 1e-9)), 1)
+    units = _column_units(loaded)
+    for i, request in enumerate(loaded.spec.plots):
+        turn = request.turn
+        if isinstance(turn, int) and turn > turns:
+            raise SpecRefused(
+                f"plots[{i}].turn: found {turn}, but the study's histories cover {turns} "
+                f"turn{'s' if turns != 1 else ''} (run.revolutions); expected 1 to {turns}, "
+                "last or all"
+            )
+        level = request.level
+        zname = request.z or DEFAULT_Z
+        if request.kind != "map" or not isinstance(level, str) or units.get(zname) is None:
+            continue
+        try:
+            float(level)
+            continue  # a number: in z's shown units
+        except ValueError:
+            pass
+        try:
+            q = read_quantity(level, f"plots[{i}].level")
+            convert(1.0, str(q.units), str(units[zname]))
+        except Exception as exc:  # QuantityError, or pint's for another dimension
+            why = exc.reason if isinstance(exc, QuantityError) else type(exc).__name__
+            raise SpecRefused(
+                f"plots[{i}].level: cannot read {level!r} as a level of {zname} "
+                f"[{units[zname]}] ({why})"
+            ) from None
+
+
+def _column_units(loaded) -> dict[str, str | None]:
+    """The SI units of the archive's columns a plot may name: its variables (metrics
+    included) and its per-case coordinates."""
+    from campipe.study.spec.variables import case_coordinates, data_variables
+
+    out = {name: var.units for name, var in data_variables(loaded.record).items()}
+    for name, var, _ in case_coordinates(loaded.varied).values():
+        out[name] = var.units
+    return out
 
 
 def write_plots(loaded, archive, overwrite=False) -> None:

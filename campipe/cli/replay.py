@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+import os
 import sys
 
 import click
+
+from campipe.cli.base import InputFailure, verify_option
 
 
 @click.command()
@@ -41,7 +44,8 @@ import click
     show_default=True,
     help="Factor on the sketch's deviations from the rigid-body motion.",
 )
-def replay(archive, case_ids, where, output, overwrite, spawn, magnify) -> None:
+@verify_option
+def replay(archive, case_ids, where, output, overwrite, spawn, magnify, verify) -> None:
     """Write a rerun recording of cases of ARCHIVE: lift, force and contact plots, events,
     parameters and the moving mechanism, on the timelines cam_angle and time. All cases go
     into one recording, each in its own cases/<case_id> subtree and blueprint tab."""
@@ -54,6 +58,11 @@ def replay(archive, case_ids, where, output, overwrite, spawn, magnify) -> None:
         raise click.UsageError("give --case ID (repeatable) or --where EXPR, one of the two")
     if spawn and output:
         raise click.UsageError("-o and --spawn exclude each other")
+    if output and not os.path.isdir(os.path.dirname(os.path.abspath(output))):
+        raise InputFailure(
+            f"-o {output}: its folder {os.path.dirname(os.path.abspath(output))} does not "
+            "exist; create it, or write the recording elsewhere"
+        )
     stderr = sys.stderr
 
     def bar(total: int, unit: str) -> Progress:
@@ -69,6 +78,7 @@ def replay(archive, case_ids, where, output, overwrite, spawn, magnify) -> None:
             magnification=magnify,
             progress=bar,
             overwrite=overwrite,
+            verify=verify,
         )
     except QueryError as exc:
         raise click.UsageError(str(exc)) from None

@@ -16,9 +16,10 @@ from campipe.cli.base import (
     load_spec,
     parse_overrides,
     units_option,
+    verify_option,
 )
 from campipe.cli.onset import run_onset
-from campipe.cli.plot import write_plots
+from campipe.cli.plot import check_spec_plots, write_plots
 
 
 @click.command()
@@ -129,6 +130,7 @@ def study(
             click.echo(str(done.archive))
             return
     loaded = load_spec(spec, sets, limits)
+    check_spec_plots(loaded)
     if parts_dir:
         from pathlib import Path
 
@@ -277,6 +279,7 @@ def validate(
     loaded = load_spec(
         spec, sets, limits_given(max_cases, max_steps, max_samples, max_events, max_archive_gb)
     )
+    check_spec_plots(loaded)
     workers = workers or default_workers()
     click.echo(validate_text(loaded, spec))
     from campipe.engine.settings import sample_count
@@ -419,14 +422,15 @@ def validate_text(loaded, spec_path) -> str:
     "speeds (of the cases --where selects).",
 )
 @units_option
-def query(archive, where, columns, sort, fmt, summary, units) -> None:
+@verify_option
+def query(archive, where, columns, sort, fmt, summary, units, verify) -> None:
     """Print an archive's cases, one row per case, values in the units the spec was written
     in (or --units); headers name the units."""
     from campipe.study.query.display import display_units
     from campipe.study.query.tables import case_table, displayed, format_rows, select
     from campipe.study.query.tables import summary as summary_text
 
-    with _open_archive(archive) as ds:
+    with _open_archive(archive, verify, ("cam_angle",)) as ds:  # query reads no history
         if summary:
             click.echo(summary_text(ds, where, units))
             return
@@ -437,7 +441,7 @@ def query(archive, where, columns, sort, fmt, summary, units) -> None:
     click.echo(format_rows(displayed(table, shown), rows, names, fmt))
 
 
-def _open_archive(path):
+def _open_archive(path, verify: bool = True, unread_dims: tuple[str, ...] = ()):
     """An archive (a file, or a parts archive's folder) as an xarray Dataset, or a Failure
     naming why it cannot be read."""
     from campipe.errors import CampipeError
@@ -445,7 +449,7 @@ def _open_archive(path):
     from campipe.study.archive.open import open_archive
 
     try:
-        return open_archive(path)
+        return open_archive(path, verify, unread_dims)
     except CampipeError:
         raise
     except Exception as exc:

@@ -56,6 +56,7 @@ from campipe.engine.metrics import (
     SEPARATION,
     THESIS_IMPACT_FORCE,
 )
+from campipe.errors import CampipeError
 from campipe.model import ValveTrain, coordinates, system_matrices
 from campipe.model.contact import ContactLaw, contact_law
 from campipe.profiles import Lift, Profile
@@ -311,6 +312,12 @@ class _Recorder:
         self.peak(t, z)
 
 
+class UnresolvedSwitch(CampipeError, RuntimeError):
+    """A contact switch whose instant the root search cannot locate: the monitor's sign
+    change lost to rounding or to non-finite states (a stiff undamped contact). It ends its
+    case with status NONFINITE, as a failed step does; the batch's other cases go on."""
+
+
 def _segment(run: _Run, t: float, t_stop: float, z: np.ndarray, exact: bool, atol: np.ndarray
              ) -> tuple[Any, list[Any]]:  # fmt: skip
     """One smooth segment from (t, z) to t_stop or its first switch: (its solution, its
@@ -396,7 +403,11 @@ def integrate(
     while t < t_end:
         t_stop = min(system.lift.break_after(run.piece, run.rev), t_end)
         if t_stop - t > 1e-15 * (1.0 + abs(t)):
-            sol, events = _segment(run, t, t_stop, z, exact, atol)
+            try:
+                sol, events = _segment(run, t, t_stop, z, exact, atol)
+            except UnresolvedSwitch:
+                out.status = NONFINITE
+                return out
             out.steps += sol.t.size - 1
             if sol.status == -1 or not np.all(np.isfinite(sol.y[:, -1])):
                 out.status = NONFINITE
@@ -590,10 +601,15 @@ def exact_segment(run: _Run, t_a: float, t_b: float, z_a: np.ndarray, events: li
             up = g_old[k] <= 0.0 <= g_new[k]
             down = g_old[k] >= 0.0 >= g_new[k]
             if (up and ev.direction > 0) or (down and ev.direction < 0):
-                root = brentq(
-                    lambda tt, ev=ev, t=t, w=w: ev(tt, state(t, w, tt)[:n2]),
-                    t, t_new, xtol=EVENT_XTOL, rtol=EVENT_XTOL,
-                )  # fmt: skip
+                try:
+                    root = brentq(
+                        lambda tt, ev=ev, t=t, w=w: ev(tt, state(t, w, tt)[:n2]),
+                        t, t_new, xtol=EVENT_XTOL, rtol=EVENT_XTOL,
+                    )  # fmt: skip
+                except (ValueError, RuntimeError) as exc:  # no bracket, or no convergence
+                    raise UnresolvedSwitch(
+                        f"a switch in [{t}, {t_new}] s: {exc}", key="compliant", found=(t, t_new)
+                    ) from None
                 found.append((root, k))
         terminal = [(tt, k) for tt, k in found if events[k].terminal]
         if terminal:

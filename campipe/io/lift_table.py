@@ -104,28 +104,46 @@ def read_lift_table(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
             if not math.isfinite(v):
                 raise LiftTableError.at(
                     f"{path}:{n}",
-                    f"found {excerpt(cell.strip())} in column {j + 1}, expected a finite number",
-                    found=cell.strip(),
+                    f"found {_shown(cell)} in column {j + 1}, expected a finite number",
+                    found=cell.strip() if _SHOWN.match(cell) else None,
                     expected="a finite number",
                 )
             values[k, j] = v * scale[j]
     return values[:, 0].copy(), values[:, 1].copy()
 
 
+#: A cell quoted in a message: a short word, number or header cell. Anything else is not
+#: echoed: a path given as a lift table may name a file that is no table (``/etc/shadow``),
+#: whose content no message should show.
+_SHOWN = re.compile(r"^\s*[\w.+\- ]{0,24}(\[[\w./*^ ]{0,16}\])?\s*$")
+
+
+def _shown(cell: str) -> str:
+    """``cell`` quoted if it is :data:`_SHOWN`, else its length only."""
+    if _SHOWN.match(cell):
+        return excerpt(cell.strip())
+    return f"a value of {len(cell)} characters that is no number (not shown)"
+
+
 def _read_header(path: Path, line: int, header: list[str]) -> tuple[float, float]:
     expected = "expected a header such as 'angle [deg],lift [in]'"
     if len(header) != 2:
-        raise LiftTableError.at(
-            f"{path}:{line}", f"found {excerpt(','.join(header))}, {expected}", found=header
+        shown = ",".join(header)
+        what = (
+            excerpt(shown)
+            if all(_SHOWN.match(c) for c in header)
+            else f"a first line of {len(header)} field{'s' if len(header) != 1 else ''} "
+            "that is no header (not shown)"
         )
+        raise LiftTableError.at(f"{path}:{line}", f"found {what}, {expected}", found=len(header))
     scale = []
     for cell, (name, (units, example)) in zip(header, COLUMNS.items(), strict=True):
         m = _HEADER.match(cell)
         if not m or m["name"].lower() != name:
             raise LiftTableError.at(
                 f"{path}:{line}",
-                f"found column {excerpt(cell.strip())} where '{name} [units]' belongs; " + expected,
-                found=cell.strip(),
+                f"found column {_shown(cell)} where '{name} [units]' belongs; " + expected,
+                found=cell.strip() if _SHOWN.match(cell) else None,
             )
         try:
             parse = parse_angular if name == "angle" else parse_quantity

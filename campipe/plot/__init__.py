@@ -13,7 +13,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from campipe.io.archive import ArchiveFileError, unreadable
+from campipe.io.archive import ArchiveDamagedError, ArchiveFileError, unreadable
 from campipe.io.outputs import FIGURE, check_output
 from campipe.study.archive.open import open_archive
 from campipe.study.spec.plots import PlotRequest
@@ -27,6 +27,7 @@ def plot_archive(
     overwrite: bool = False,
     key: str = "-o",
     inside: str | Path | None = None,
+    verify: bool = True,
 ):
     """Draw ``request`` from the archive at ``archive`` and write it to ``output`` (default
     ``request.output`` relative to the archive's folder, else
@@ -36,6 +37,7 @@ def plot_archive(
     never replaces the archive or its spec, replaces a file that is not a figure of its
     format only with ``overwrite``, and stays inside the folder ``inside`` when given (a
     spec's ``plots[].output``); ``key`` names the option or spec key in the refusal.
+    ``verify``: check the archive against its checksums first (``open_archive``).
 
     Returns
     -------
@@ -50,7 +52,9 @@ def plot_archive(
             archive.parent / request.output if request.output else request.default_output(archive)
         )
     try:
-        ds = open_archive(archive)  # a file, or a parts archive's folder
+        ds = open_archive(archive, verify)  # a file, or a parts archive's folder
+    except ArchiveDamagedError:
+        raise
     except Exception as exc:
         raise ArchiveFileError.at(str(archive), unreadable(exc)) from None
     with ds:

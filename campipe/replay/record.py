@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from campipe.io.archive import unreadable
+from campipe.io.archive import ArchiveDamagedError, unreadable
 from campipe.io.outputs import RECORDING, check_output
 from campipe.io.rerun_replay import (
     MM,
@@ -176,6 +176,7 @@ def replay_archive(
     magnification: float = sketch.DEFAULT_MAGNIFICATION,
     progress: Callable[[int, str], Progress] | None = None,
     overwrite: bool = False,
+    verify: bool = True,
 ) -> tuple[Path | None, list[ReplayCase]]:
     """Replay an archive's cases chosen by id or by a ``--where`` expression.
 
@@ -184,7 +185,8 @@ def replay_archive(
     unit)`` makes a progress line for each step over the cases (sketching them, logging
     them), as ``campipe replay`` shows. The recording follows the output rule
     (``campipe.io.outputs``): it never replaces the archive or its spec, and replaces a file
-    that is not a recording only with ``overwrite``.
+    that is not a recording only with ``overwrite``. ``verify``: check the archive against
+    its checksums first (``open_archive``; a damaged one raises ArchiveDamagedError).
 
     Returns
     -------
@@ -203,7 +205,9 @@ def replay_archive(
     if not archive.exists():
         raise ReplayError(f"{archive}: no such archive", key=str(archive))
     try:
-        ds = open_archive(archive)  # a file, or a parts archive's folder
+        ds = open_archive(archive, verify)  # a file, or a parts archive's folder
+    except ArchiveDamagedError:
+        raise
     except (OSError, ValueError, RuntimeError) as exc:
         raise ReplayError(f"{archive}: {unreadable(exc)}", key=str(archive)) from None
     with ds:

@@ -319,6 +319,42 @@ def test_a_spec_with_a_bad_plot_is_refused_at_its_key(tmp_path, entry, path, wor
     assert f"{path}: " in result.output and words in result.output, result.output
 
 
+@pytest.mark.parametrize(
+    ("entry", "words"),
+    [
+        ("{kind: histories, turn: 99}", "plots[0].turn: found 99, but the study's histories "),
+        ("{kind: events, turn: 3}", "plots[0].turn: found 3, but the study's histories cover 2"),
+        (
+            "{kind: map, x: speed_rpm, y: seat, level: 1 kg}",
+            "plots[0].level: cannot read '1 kg' as a level of separation_deg_per_rev [degree]",
+        ),
+        (
+            "{kind: map, x: speed_rpm, y: seat, z: max_cam_force, level: 1 deg}",
+            "plots[0].level: cannot read '1 deg' as a level of max_cam_force [N]",
+        ),
+    ],
+)
+def test_plot_options_drawing_would_refuse_are_refused_before_the_run(tmp_path, entry, words):
+    """validate and study refuse a turn past the run's turns and a level of another
+    dimension than z's, naming the key, before anything runs: no archive written. Broken
+    copy, check_spec_plots: not called by study: the archive is written, then the figure
+    fails (exit status 2 after the run)."""
+    spec = write_spec(tmp_path, SPEC + f"plots:\n  - {entry}\n")
+    for command in (["validate", str(spec), "--no-estimate"], ["study", str(spec)]):
+        result = CliRunner().invoke(main, command)
+        assert result.exit_code == 2, result.output
+        assert words in result.output and "Traceback" not in result.output
+    assert not list(tmp_path.glob("*.nc"))
+
+
+def test_plot_options_within_the_run_pass_validate(tmp_path):
+    """The bounds are the run's: turn 2 of two turns and a level in degrees pass."""
+    entries = "  - {kind: events, turn: 2}\n  - {kind: map, x: speed_rpm, y: seat, level: 1 deg}\n"
+    spec = write_spec(tmp_path, SPEC + "plots:\n" + entries)
+    result = CliRunner().invoke(main, ["validate", str(spec), "--no-estimate"])
+    assert result.exit_code == 0, result.output
+
+
 def test_a_request_is_checked_like_a_spec_entry():
     from campipe.study.spec.plots import check_plot
 

@@ -263,6 +263,11 @@ def test_missing_archive_unknown_case_and_bad_options_are_clear_errors(archives,
     assert out.exit_code == 2 and "give --case ID (repeatable) or --where EXPR" in out.output
     out = invoke("replay", archives[0], "--where", "seat > 0", "--spawn", "-o", "x.rrd")
     assert out.exit_code == 2 and "-o and --spawn exclude each other" in out.output
+    missing = tmp_path / "missing" / "x.rrd"
+    out = invoke("replay", archives[0], "--where", "seat > 0", "-o", missing)
+    assert out.exit_code == 2 and "Traceback" not in out.output
+    assert f"its folder {missing.parent} does not exist" in out.output
+    assert not missing.parent.exists()
     assert not list(tmp_path.glob("*.rrd"))
 
 

@@ -101,6 +101,148 @@ def test_a_scheduler_that_goes_away_mid_study_leaves_what_was_stored(tmp_path):
     assert report.reused >= 1 and report.reused + report.computed == 3
 
 
+def test_a_service_that_greets_with_a_banner_is_not_out_of_memory(tmp_path, monkeypatch):
+    """A TCP service that sends a banner first (SSH): distributed reads its text as a
+    message length and raises MemoryError; refused naming --scheduler, not "out of
+    memory". Broken copy, run_distributed: MemoryError not caught: "out of memory"."""
+    import socket
+    import threading
+
+    server = socket.create_server(("127.0.0.1", 0))
+    held = []
+
+    def greet():
+        while True:
+            try:
+                conn, _ = server.accept()
+            except OSError:
+                return
+            conn.sendall(b"SSH-2.0-OpenSSH_8.9p1 Ubuntu-3ubuntu0.1\r\n")
+            held.append(conn)
+
+    threading.Thread(target=greet, daemon=True).start()
+    monkeypatch.setattr(workers, "CONNECT_TIMEOUT", 3)
+    spec = write_spec(tmp_path, SPEC)
+    address = f"tcp://127.0.0.1:{server.getsockname()[1]}"
+    try:
+        result = study(spec, "--scheduler", address)
+    finally:
+        server.close()
+        for conn in held:
+            conn.close()
+    assert_message(result, 1, f"cannot reach a dask scheduler at {address}", "not as dask does")
+    assert "out of memory" not in result.stderr
+    assert not (tmp_path / "small.nc").exists()
+
+
+def test_a_scheduler_gone_is_one_message_without_distributed_s_tracebacks(tmp_path, capfd):
+    """The scheduler (its own process) killed mid-study: campipe study ends in its one
+    message, status 1, none of distributed's logged tracebacks (some 30 lines before).
+    Broken copy, _distributed_quiet: distributed imported after its loggers are set (its
+    import resets them): its ERROR lines and tracebacks come back."""
+    spec = write_spec(tmp_path, SPEC.replace("revolutions: 1", "revolutions: 40"))
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    scheduler = subprocess.Popen(
+        [sys.executable, "-m", "distributed.cli.dask_scheduler", "--port", "0",
+         "--dashboard-address", ":0", "--scheduler-file", str(tmp_path / "s.json")],
+        stderr=subprocess.DEVNULL, env=env,
+    )  # fmt: skip
+    worker = None
+    try:
+        for _ in range(600):
+            if (tmp_path / "s.json").exists():
+                break
+            time.sleep(0.05)
+        address = __import__("json").loads((tmp_path / "s.json").read_text())["address"]
+        worker = subprocess.Popen(
+            [sys.executable, "-m", "distributed.cli.dask_worker", address, "--nthreads", "1",
+             "--dashboard-address", ":0"],
+            stderr=subprocess.DEVNULL, env=env,
+        )  # fmt: skip
+        cmd = [sys.executable, "-m", "campipe", "study", str(spec), "--no-progress"]
+        cmd += ["--scheduler", address, "--batch-size", "1"]
+        proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True, cwd=ROOT, env=env)
+        parts = parts_directory(tmp_path / "small.nc")
+        for _ in range(2400):
+            if list(parts.glob("batch-*.npz")) or proc.poll() is not None:
+                break
+            time.sleep(0.05)
+        scheduler.kill()
+        _, err = proc.communicate(timeout=120)
+    finally:
+        for p in (scheduler, worker):
+            if p is not None and p.poll() is None:
+                p.kill()
+    if proc.returncode == 0:  # finished before the scheduler went: nothing to show
+        return
+    assert proc.returncode == 1, err
+    assert "Traceback" not in err and "distributed.client" not in err, err
+    lines = [line for line in err.splitlines() if "campipe.study.run.workers" not in line]
+    assert lines[0].startswith(f"Error: --scheduler: the dask cluster at {address} failed")
+    assert len(lines) <= 3, err
+
+
+def test_a_cluster_without_workers_is_reported_at_once_and_stops_resumable(
+    tmp_path, monkeypatch, caplog
+):
+    """A scheduler with no worker (LocalCluster, n_workers=0): a warning names it as soon as
+    the first batches wait, the study stops after WORKER_TIMEOUT with a message saying how
+    to resume, and a rerun elsewhere computes every case. Broken copy, _submit_all: the
+    batches waited on as before (as_completed without a timeout): this test hangs."""
+    import logging
+
+    from distributed import LocalCluster
+
+    monkeypatch.setattr(workers, "WORKER_TIMEOUT", 2)
+    spec = write_spec(tmp_path, SPEC)
+    with LocalCluster(n_workers=0, processes=False, dashboard_address=":0") as cluster:
+        address = cluster.scheduler_address
+        started = time.monotonic()
+        with caplog.at_level(logging.WARNING, logger="campipe.study.run.workers"):
+            with pytest.raises(workers.SchedulerError, match="had no worker for 2 s") as caught:
+                run_study(load_study(spec), tmp_path / "small.nc", scheduler=address)
+        waited = time.monotonic() - started
+    assert f"dask cluster at {address} has no worker: waiting up to 2 s" in caplog.text
+    assert "rerun the same command to resume" in str(caught.value)
+    assert caught.value.key == "--scheduler" and caught.value.found == address
+    assert waited < 60  # stopped, not waited on: a bound far above the 2 s, no timing test
+    assert not (tmp_path / "small.nc").exists()
+    report = run_study(load_study(spec), tmp_path / "small.nc", scheduler="synchronous")
+    assert (report.computed, report.reused) == (3, 0)
+
+
+def test_losing_every_worker_stops_the_study_resumable(tmp_path, monkeypatch, caplog):
+    """The cluster's only worker retired after the first batch: reported, the study stops
+    after WORKER_TIMEOUT, the first batch kept for the rerun. Broken copy, _Idle.check:
+    workers counted only at the start: this test hangs."""
+    import logging
+
+    from distributed import LocalCluster
+
+    monkeypatch.setattr(workers, "WORKER_TIMEOUT", 2)
+    spec = write_spec(tmp_path, SPEC)
+    with LocalCluster(
+        n_workers=1, threads_per_worker=1, processes=False, dashboard_address=":0"
+    ) as cluster:
+
+        def retire_after_the_first(plan, data):
+            cluster.scale(0)
+
+        with caplog.at_level(logging.WARNING, logger="campipe.study.run.workers"):
+            with pytest.raises(workers.SchedulerError, match="had no worker for 2 s"):
+                run_study(
+                    load_study(spec),
+                    tmp_path / "small.nc",
+                    scheduler=cluster.scheduler_address,
+                    batch_size=1,
+                    on_batch=retire_after_the_first,
+                )
+    assert "has no worker: waiting up to 2 s" in caplog.text
+    assert len(list(parts_directory(tmp_path / "small.nc").glob("batch-*.npz"))) >= 1
+    report = run_study(load_study(spec), tmp_path / "small.nc", scheduler="synchronous")
+    assert report.reused >= 1 and report.reused + report.computed == 3
+
+
 def test_a_worker_process_that_dies(tmp_path, monkeypatch):
     from study_helpers import die
 
@@ -206,3 +348,56 @@ def test_sigterm_leaves_a_state_the_rerun_resumes(tmp_path):
     rerun = study(spec, "--scheduler", "synchronous")
     assert rerun.exit_code == 0, rerun.output
     assert "reused" in rerun.stderr
+
+
+def test_ctrl_c_says_what_stays_and_the_rerun_resumes(tmp_path):
+    """SIGINT once the first batch is stored: one line saying the batches are kept and how
+    to resume, exit status 130, no traceback; the rerun reuses them. Broken copy,
+    CampipeGroup.invoke: KeyboardInterrupt left to click: "Aborted!" and status 1."""
+    slow = SPEC.replace(
+        "run: {revolutions: 1}", "run: {revolutions: 4, integrator: newmark-linear}"
+    ).replace("[6000 rpm, 9524 rpm, 11000 rpm]", "{from: 500 rpm, to: 600 rpm, num: 12}")
+    spec = write_spec(tmp_path, slow)
+    cmd = [sys.executable, "-m", "campipe", "study", str(spec), "--scheduler", "synchronous"]
+    cmd += ["--batch-size", "1", "--no-progress"]
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True, cwd=ROOT, env=env)
+    parts = parts_directory(tmp_path / "small.nc")
+    try:
+        for _ in range(2400):
+            if list(parts.glob("batch-*.npz")) or proc.poll() is not None:
+                break
+            time.sleep(0.05)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert "Traceback" not in err and "Aborted!" not in err, err
+    if proc.returncode == 0:  # finished before the signal came: nothing to show
+        return
+    assert proc.returncode in (130, -signal.SIGINT), err
+    assert "campipe study: interrupted (Ctrl-C); the batches finished are kept" in err
+    rerun = study(spec, "--scheduler", "synchronous")
+    assert rerun.exit_code == 0 and "reused" in rerun.stderr, rerun.output
+
+
+def test_ctrl_c_while_the_command_line_loads_is_a_line_not_a_traceback(tmp_path):
+    """The handler campipe.cli sets as it loads (its process only): one line, status 130.
+    Broken copy, campipe/cli/__init__.py: no handler: an import's KeyboardInterrupt
+    traceback."""
+    code = (
+        "import campipe.cli, os, signal, time; os.kill(os.getpid(), signal.SIGINT); "
+        "time.sleep(30)\n"
+    )
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    (tmp_path / "campipe").write_text(code)  # a script named as the console script
+    cmd = [sys.executable, str(tmp_path / "campipe")]
+    done = subprocess.run(cmd, capture_output=True, text=True, env=env)
+    assert done.returncode == 130, done.stderr
+    assert done.stderr == "campipe: interrupted (Ctrl-C) while starting; nothing was done\n"
+    imported = "import campipe.cli, signal; print(signal.getsignal(signal.SIGINT).__name__)"
+    other = subprocess.run(
+        [sys.executable, "-c", imported], capture_output=True, text=True, env=env
+    )
+    assert other.stdout.strip() == "default_int_handler"  # a program importing it keeps its own

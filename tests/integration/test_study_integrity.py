@@ -100,6 +100,35 @@ def test_a_flipped_byte_in_a_batch_files_data_is_detected_and_recomputed(
     xr.testing.assert_identical(load(tmp_path / "small.nc"), load(small_archive.archive))
 
 
+def test_a_batch_file_edited_and_saved_again_is_recomputed(
+    small_archive, small_archive_copy, tmp_path
+):
+    """A batch file read, one value changed and saved again with numpy (every member, its
+    attributes and its content hash copied): the zip's CRC-32s are new and pass, the content
+    hash does not; its cases are computed again and the archive equals the untouched one.
+    Broken copy, batch_file.verify: the CRCs alone checked: the edited lift reaches the
+    archive."""
+    study = small_archive_copy.study
+    (tmp_path / "small.nc").unlink()
+    batch = sorted(parts_directory(tmp_path / "small.nc").glob("batch-*.npz"))[1]
+    with np.load(batch, allow_pickle=False) as z:
+        members = {name: z[name] for name in z.files}
+    assert set(members) >= {batch_file.ATTRS, batch_file.HASH, "valve_lift", "case"}
+    members["valve_lift"] = members["valve_lift"].copy()
+    members["valve_lift"][0, 100] += 1e-3
+    with open(batch, "wb") as f:
+        np.savez(f, **members)
+    with zipfile.ZipFile(batch) as z:
+        assert z.testzip() is None  # the CRCs are the new content's
+    assert batch_file.verify(batch) == [
+        "its content differs from its hash (edited and saved again?)"
+    ]
+    report = run_study(study, tmp_path / "small.nc", scheduler="synchronous", batch_size=2)
+    assert (report.computed, report.reused) == (2, 4)
+    assert any(str(batch) in n and "failed its checks" in n for n in report.notes)
+    xr.testing.assert_identical(load(tmp_path / "small.nc"), load(small_archive.archive))
+
+
 @pytest.mark.parametrize("fraction", [0.3, 0.45, 0.6, 0.75, 0.9])
 def test_a_flipped_byte_anywhere_in_a_batch_file_never_reaches_the_archive(
     small_archive, small_archive_copy, tmp_path, fraction

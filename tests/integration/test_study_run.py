@@ -664,6 +664,39 @@ def test_memory_is_bounded_by_the_batch_not_the_study(tmp_path, monkeypatch):
     assert live["rows"] <= 1  # the archive is filled batch file by batch file
 
 
+def test_a_stored_batch_is_not_kept_by_its_finished_future(tmp_path, monkeypatch):
+    """Issue 39, item 4: at most two batches a worker in flight, each future dropped once its
+    batch is stored, so the batches alive at once (computed, not yet freed) stay a few
+    whatever the study's length. Broken copy, run_local: every batch submitted at once and
+    waited on with as_completed (the futures list keeps every result to the end): all 40
+    stay alive."""
+    import threading
+    import weakref
+
+    import campipe.study.run.workers as workers
+
+    spec = SMALL_SPEC.replace(
+        "[6000 rpm, 9524 rpm, 11000 rpm]", "{from: 3000 rpm, to: 12000 rpm, num: 20}"
+    )
+    lock = threading.Lock()
+    refs: list = []
+    most = [0]
+    compute = workers.compute_batch
+
+    def counted_compute(plan):
+        data = compute(plan)
+        with lock:
+            refs.append(weakref.ref(data))
+            most[0] = max(most[0], sum(r() is not None for r in refs))
+        return data
+
+    monkeypatch.setattr(workers, "compute_batch", counted_compute)
+    study = load_study(write_spec(tmp_path, spec))
+    report = run_study(study, tmp_path / "m.nc", scheduler="threads", workers=2, batch_size=1)
+    assert report.batches == 40 and len(refs) == 40
+    assert most[0] <= 8  # 2 workers × 2 in flight, and what the assembly holds to write
+
+
 def test_the_engine_threads_leave_a_core_to_the_archive(small_archive, tmp_path):
     """The archive is written in the calling thread, one chunk after another: the study's
     serial stage. The batch threads run WORKER_NICENESS below it (Linux), so it gets a core

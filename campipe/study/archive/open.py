@@ -17,7 +17,9 @@ from pathlib import Path
 
 import numpy as np
 
-from campipe.io.parts import PartsIndexError, read_index
+from campipe.io.archive import ArchiveDamagedError, ArchiveFileError, check
+from campipe.io.parts import INDEX, PartsIndexError, part_checksum, read_index
+from campipe.study.archive.layout import LAYOUT_VERSION
 from campipe.units import convert_values, per_degree, system_units
 
 log = logging.getLogger(__name__)
@@ -35,7 +37,7 @@ def sweep_axes(attrs: Mapping[str, object]) -> list[tuple[str, int]]:
     return [(str(a["name"]), int(a["size"])) for a in axes if a.get("kind") == "sweep"]
 
 
-def open_study(path: str | Path, units: str = "si", **open_kwargs):
+def open_study(path: str | Path, units: str = "si", verify: bool = True, **open_kwargs):
     """Open a study's archive with its sweep's axes as dimensions, where the study is a grid.
 
     Parameters
@@ -48,6 +50,9 @@ def open_study(path: str | Path, units: str = "si", **open_kwargs):
         (the default); ``in-lbf``; or ``mm-deg`` (lift mm, velocity mm/deg and acceleration
         mm/deg² of cam angle at each case's cam speed, force N, stress MPa). Each converted
         variable's ``units`` attribute names its new units (:func:`in_units`).
+    verify : bool
+        Check every variable against the checksums stored when the archive was written
+        before returning it (:func:`open_archive`); False skips that read of the archive.
     **open_kwargs
         Passed to :func:`xarray.open_dataset` (e.g. ``chunks={}`` to read lazily with dask).
 
@@ -64,7 +69,7 @@ def open_study(path: str | Path, units: str = "si", **open_kwargs):
         labels) is returned as stored, one case per row of ``case``.
     """
     system = system_units(units, "units")
-    ds = open_archive(path, **open_kwargs)
+    ds = open_archive(path, verify, **open_kwargs)
     try:
         if system:
             ds = in_units(ds, units)
@@ -72,7 +77,10 @@ def open_study(path: str | Path, units: str = "si", **open_kwargs):
     except Exception:
         ds.close()
         raise
-    return ds if grid is None else grid
+    if grid is None:
+        return ds
+    grid.set_close(ds.close)  # the grid's close closes the file (else it stays open)
+    return grid
 
 
 def in_units(ds, units: str):
@@ -112,18 +120,53 @@ def in_units(ds, units: str):
     return out
 
 
-def open_archive(path: str | Path, **open_kwargs):
+def open_archive(
+    path: str | Path, verify: bool = True, unread_dims: tuple[str, ...] = (), **open_kwargs
+):
     """An archive as stored, one case per row of ``case`` in the study's order: a netCDF
     file (:func:`xarray.open_dataset`), or a parts archive's folder, its parts read as one
-    dataset (:func:`open_parts`)."""
+    dataset (:func:`open_parts`).
+
+    With ``verify`` (the default), every variable and the global attributes are first
+    checked against the checksums stored when the file (each part) was written, reading it
+    once: a damaged archive raises :class:`~campipe.io.archive.ArchiveDamagedError` naming
+    the variables that differ. A reader that never reads the variables along some dimensions
+    names them in ``unread_dims`` (``campipe query``: ``("cam_angle",)``, the histories),
+    and those are left unchecked. Archives store each chunk's Fletcher-32 as well, which HDF5
+    checks on any read, verified or not.
+
+    Raises
+    ------
+    campipe.io.archive.ArchiveFileError
+        For a path that is neither a regular file nor a folder (a pipe, a device: opening
+        one would wait on it), a netCDF file campipe did not write, or a damaged archive
+        (its subclass ArchiveDamagedError).
+    """
     import xarray as xr
 
-    if Path(path).is_dir():
-        return open_parts(path, **open_kwargs)
-    return xr.open_dataset(path, **open_kwargs)
+    path = Path(path)
+    if path.is_dir():
+        return open_parts(path, verify, unread_dims, **open_kwargs)
+    if path.exists() and not path.is_file():
+        raise ArchiveFileError.at(
+            str(path), "not a regular file; an archive is a netCDF file or a parts folder"
+        )
+    if verify:
+        check(path, layout=LAYOUT_VERSION, skip_dims=unread_dims)
+    ds = xr.open_dataset(path, **open_kwargs)
+    if "case" not in ds.variables and "campipe_layout" not in ds.attrs:
+        ds.close()
+        raise ArchiveFileError.at(
+            str(path),
+            "not a campipe archive (netCDF without a case variable or a campipe_layout "
+            "attribute); campipe study writes one",
+        )
+    return ds
 
 
-def open_parts(path: str | Path, **open_kwargs):
+def open_parts(
+    path: str | Path, verify: bool = True, unread_dims: tuple[str, ...] = (), **open_kwargs
+):
     """A parts archive (:mod:`campipe.io.parts`) as one dataset, the single-file archive's:
     its parts' variables along ``case`` and along ``event`` concatenated in the index's
     order, the cases put in the study's order (``event_case`` their rows again), the
@@ -138,6 +181,9 @@ def open_parts(path: str | Path, **open_kwargs):
 
     path = Path(path)
     index = read_index(path)
+    if verify:
+        for p in index["parts"]:
+            _check_part(path, p, unread_dims)
     parts = [xr.open_dataset(path / str(p["file"]), **open_kwargs) for p in index["parts"]]
     try:
         ds = _combine(path, parts, [str(c) for c in index["case"]])
@@ -153,6 +199,23 @@ def open_parts(path: str | Path, **open_kwargs):
 
     ds.set_close(close)
     return ds
+
+
+def _check_part(archive: Path, entry: Mapping[str, object], unread_dims: tuple[str, ...]) -> None:
+    """A part the index names: the same file (its stored checksums those the index
+    recorded) and undamaged (:func:`~campipe.io.archive.check`)."""
+    part = archive / str(entry["file"])
+    recorded = entry.get("checksum")
+    if recorded is not None and part.is_file() and part_checksum(part) != recorded:
+        raise ArchiveDamagedError.at(
+            str(part),
+            f"not the part {INDEX} names (its checksums differ from those the index "
+            "recorded: replaced or damaged); run the study again to write it anew, or read "
+            "it as it is with --no-verify",
+            found=["checksums"],
+            expected=str(recorded),
+        )
+    check(part, layout=LAYOUT_VERSION, skip_dims=unread_dims)
 
 
 def _combine(path: Path, parts: list, ids: list[str]):

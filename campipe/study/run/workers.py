@@ -12,19 +12,23 @@ from __future__ import annotations
 
 import functools
 import itertools
+import logging
 import multiprocessing
 import os
 import sys
 import threading
+import time
 import uuid
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from concurrent.futures import (
+    FIRST_COMPLETED,
     BrokenExecutor,
     Executor,
     ProcessPoolExecutor,
     ThreadPoolExecutor,
-    as_completed,
+    wait,
 )
+from contextlib import contextmanager
 from pathlib import Path
 
 from campipe.errors import CampipeError
@@ -32,6 +36,8 @@ from campipe.io.archive import ArchiveWriteError, write_error
 from campipe.study.run.batches import BatchHook, SchedulerError, Storage, Stored
 from campipe.study.run.cluster import PartCount, run_parts
 from campipe.study.run.results import BatchData, BatchPlan, compute_batch, numerics_fingerprint
+
+log = logging.getLogger(__name__)
 
 
 def stored_here(
@@ -185,10 +191,19 @@ def run_local(
             initializer=_yield_to_assembly,
         )
     try:
-        futures = [pool.submit(task, p) for p in plans]
+        # At most two batches per worker in flight, each future dropped once stored: a
+        # finished future holds its batch's arrays, so submitting every batch at once kept
+        # the whole study's results in memory until the end.
+        pending = iter(plans)
+        in_flight = {pool.submit(task, p) for p in itertools.islice(pending, 2 * workers)}
         started()
-        for future in as_completed(futures):
-            stored(future.result())
+        while in_flight:
+            done, in_flight = wait(in_flight, return_when=FIRST_COMPLETED)
+            for future in done:
+                stored(future.result())
+                nxt = next(pending, None)
+                if nxt is not None:
+                    in_flight.add(pool.submit(task, nxt))
     except BrokenExecutor as exc:
         raise SchedulerError.at(
             "--scheduler",
@@ -202,6 +217,23 @@ def run_local(
 
 #: How long to wait for a dask.distributed scheduler to answer [s].
 CONNECT_TIMEOUT = 10
+#: How long a study waits on a cluster without a worker (none at the start, or every one
+#: lost) before it stops, resumable [s].
+WORKER_TIMEOUT = 120
+#: How often the cluster's workers are counted while no batch finishes [s].
+WORKER_POLL = 0.5
+
+
+#: distributed's loggers silenced while a study runs on a cluster (unless campipe logs
+#: below WARNING, ``campipe -v``): a scheduler gone logged some 30 lines of its tracebacks
+#: before the study's own message said the same.
+DISTRIBUTED_LOGGERS = (
+    "distributed",
+    "distributed.client",
+    "distributed.core",
+    "distributed.comm",
+    "distributed.batched",
+)
 
 
 def run_distributed(
@@ -211,18 +243,54 @@ def run_distributed(
     workers_store: bool,
     stored: Callable[[Stored | BatchData | PartCount], None],
 ) -> None:
-    """Batches on the dask.distributed cluster at ``address``; a parts archive's workers
-    write their parts and return their counts (:func:`campipe.study.run.cluster.run_parts`)."""
-    from distributed import as_completed
+    """Batches on the dask.distributed cluster at ``address``, each stored batch handed to
+    ``stored`` (a parts archive's workers write their parts and return their counts:
+    :func:`campipe.study.run.cluster.run_parts`); a SchedulerError, resumable, if the
+    cluster cannot be reached, has no worker for WORKER_TIMEOUT seconds, or fails."""
+    with _distributed_quiet():
+        _run_distributed(plans, address, storage, workers_store, stored)
+
+
+@contextmanager
+def _distributed_quiet() -> Iterator[None]:
+    """:data:`DISTRIBUTED_LOGGERS` at CRITICAL for the block, unless campipe logs below
+    WARNING (then theirs help). After a failure they stay so: the client's closing tasks
+    log their tracebacks after the block has ended, repeating what the SchedulerError
+    says."""
+    import distributed  # noqa: F401 - its import sets its loggers' levels: first, then ours
+
+    if logging.getLogger("campipe").getEffectiveLevel() < logging.WARNING:
+        yield
+        return
+    loggers = [logging.getLogger(name) for name in DISTRIBUTED_LOGGERS]
+    levels = [logger.level for logger in loggers]
+    for logger in loggers:
+        logger.setLevel(logging.CRITICAL)
+    yield  # an exception leaves them quiet
+    for logger, level in zip(loggers, levels, strict=True):
+        logger.setLevel(level)
+
+
+def _run_distributed(
+    plans: list[BatchPlan],
+    address: str,
+    storage: Storage,
+    workers_store: bool,
+    stored: Callable[[Stored | BatchData | PartCount], None],
+) -> None:
+    from distributed import as_completed, wait
 
     try:
         client = _connect(address)
-    except (OSError, TimeoutError, ValueError, TypeError) as exc:
+    except (OSError, TimeoutError, ValueError, TypeError, MemoryError) as exc:
+        # MemoryError: a service that greets with a banner (SSH), its text read as the
+        # length of a dask message
+        why = "it answers, not as dask does" if isinstance(exc, MemoryError) else ""
         raise SchedulerError.at(
             "--scheduler",
             f"cannot reach a dask scheduler at {address} within {CONNECT_TIMEOUT} s "
-            f"({type(exc).__name__}); start one (dask scheduler, then dask worker {address}) "
-            "or run on this machine (--scheduler threads)",
+            f"({why or type(exc).__name__}); start one (dask scheduler, then dask worker "
+            f"{address}) or run on this machine (--scheduler threads)",
             found=address,
         ) from None
     token = uuid.uuid4().hex
@@ -232,26 +300,31 @@ def run_distributed(
         if workers_store:
             reach = _reach_token(parts, token)
         task = functools.partial(_batch_task, compute_batch, storage, reach, None)
-        with client:
+        with client, client.as_current():  # distributed.wait takes the current client
             if storage.parts and reach is not None:
                 tag, reached = token[:8], _reach_file(parts, reach)
                 run_parts(
                     client, as_completed, plans, storage, reached, reach, compute_batch, stored, tag
                 )
             else:
-                _submit_all(client, as_completed, plans, token[:8], task, stored)
+                _submit_all(client, wait, plans, token[:8], task, stored)
     except (SchedulerError, ArchiveWriteError, CampipeError):
         raise
     except Exception as exc:  # distributed raises many kinds when the cluster goes away
         raise SchedulerError.at(
             "--scheduler",
-            f"the dask cluster at {address} failed ({type(exc).__name__}: {str(exc)[:200]}); "
+            f"the dask cluster at {address} failed ({type(exc).__name__}: {_line(exc)}); "
             "the batches finished before it are stored: rerun the same command to resume",
             found=address,
         ) from None
     finally:
         if reach is not None:
             _reach_file(parts, reach).unlink(missing_ok=True)
+
+
+def _line(exc: BaseException) -> str:
+    """An exception's text on one line, at most 200 characters (distributed's span several)."""
+    return " ".join(str(exc).split())[:200]
 
 
 def _connect(address: str):
@@ -292,7 +365,7 @@ def _reach_token(parts: Path, token: str) -> str:
     return token
 
 
-def _submit_all(client, as_completed, plans, token, task, stored) -> None:
+def _submit_all(client, wait, plans, token, task, stored) -> None:
     threads = max(sum(client.nthreads().values()), 1)
     pending = iter(plans)
 
@@ -300,13 +373,55 @@ def _submit_all(client, as_completed, plans, token, task, stored) -> None:
         return client.submit(task, p, key=f"campipe-{p.key}-{token}", pure=False)
 
     # Keep at most two batches per worker thread in flight: memory stays bounded.
-    queue = as_completed(
-        [submit(p) for p in itertools.islice(pending, 2 * threads)], loop=client.loop
-    )
-    for future in queue:
-        result = future.result()
-        future.release()
-        stored(result)
-        nxt = next(pending, None)
-        if nxt is not None:
-            queue.add(submit(nxt))
+    in_flight = [submit(p) for p in itertools.islice(pending, 2 * threads)]
+    idle = _Idle(client)
+    while in_flight:
+        try:  # the first to finish, or none within the poll: then count the workers
+            done = set(wait(in_flight, timeout=WORKER_POLL, return_when="FIRST_COMPLETED")[0])
+        except TimeoutError:
+            idle.check()
+            continue
+        for future in [f for f in in_flight if f in done]:
+            in_flight.remove(future)
+            result = future.result()
+            future.release()
+            stored(result)
+            nxt = next(pending, None)
+            if nxt is not None:
+                in_flight.append(submit(nxt))
+
+
+class _Idle:
+    """A cluster without a worker, reported at once (a warning) and refused after
+    :data:`WORKER_TIMEOUT` seconds without one: batches in flight on a cluster that has no
+    worker (none joined, or all gone) would be waited on for good."""
+
+    def __init__(self, client) -> None:
+        self.client = client
+        self.since: float | None = None  # monotonic time the workers were first missed
+
+    def check(self) -> None:
+        if self.client.nthreads():
+            if self.since is not None:
+                log.warning("the dask cluster has workers again; the study goes on")
+            self.since = None
+            return
+        now = time.monotonic()
+        if self.since is None:
+            self.since = now
+            log.warning(
+                "the dask cluster at %s has no worker: waiting up to %d s for one (dask "
+                "worker %s), then stopping; the batches finished are kept",
+                self.client.scheduler.address,
+                WORKER_TIMEOUT,
+                self.client.scheduler.address,
+            )
+        elif now - self.since > WORKER_TIMEOUT:
+            address = self.client.scheduler.address
+            raise SchedulerError.at(
+                "--scheduler",
+                f"the dask cluster at {address} had no worker for {WORKER_TIMEOUT} s; start "
+                f"workers (dask worker {address}) and rerun the same command to resume (the "
+                "batches finished are stored), or run on this machine (--scheduler threads)",
+                found=address,
+            )
