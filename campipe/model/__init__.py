@@ -24,6 +24,7 @@ from campipe.model.coordinates import (
     translations,
 )
 from campipe.model.lash import cam_gap, lash_ratio, lash_seat
+from campipe.model.layouts import LAYOUTS, placeholders, used_coordinates
 from campipe.model.parameters import (
     DAMPING_KINDS,
     ELEMENTS,
@@ -45,6 +46,7 @@ __all__ = [
     "DAMPING_KINDS",
     "ELEMENTS",
     "LASH_SIDES",
+    "LAYOUTS",
     "PARAMETERS",
     "PRESETS",
     "Coordinate",
@@ -67,6 +69,7 @@ __all__ = [
     "newmark_linear_stability_limit",
     "normal_modes",
     "parse_parameter",
+    "placeholders",
     "preload_vector",
     "rayleigh_damping",
     "static_state",
@@ -76,5 +79,6 @@ __all__ = [
     "thesis_train",
     "to_display_units",
     "translations",
+    "used_coordinates",
     "valve_train",
 ]

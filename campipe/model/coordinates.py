@@ -14,7 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from campipe.model.parameters import ELEMENTS, N_DOF, NODE_COORDINATES, ValveTrain
+from campipe.model.layouts import lumped_coordinates
+from campipe.model.parameters import ELEMENTS, LUMPED, N_DOF, NODE_COORDINATES, ValveTrain
 
 #: A node's coordinate as (0-based q index, sign), or GROUND (−1, 0): fixed.
 Dof = tuple[int, float]
@@ -84,7 +85,14 @@ def n_coordinates(train: ValveTrain) -> int:
 def coordinates(train: ValveTrain) -> tuple[Coordinate, ...]:
     """``train``'s coordinates in order: :data:`COORDINATES`, then each refined member's
     internal nodes (``spring_1`` … for a bar, ``rocker_valve_arm_1`` and
-    ``rocker_valve_arm_1_rotation`` … for a beam), node 1 next to the member's first end."""
+    ``rocker_valve_arm_1_rotation`` … for a beam), node 1 next to the member's first end.
+    A lumped chain's (:func:`campipe.model.layouts.lumped_coordinates`): ``cam_mass``,
+    ``mass_2`` …, ``valve``, and its placeholders ``unused``."""
+    if train.layout == LUMPED:
+        return tuple(
+            Coordinate(f"q{i + 1}", name, "translation", positive)
+            for i, name, positive in lumped_coordinates(len(train.masses))
+        )
     out = list(COORDINATES)
     for member in ELEMENTS:
         for node in range(1, train.elements_of(member)):

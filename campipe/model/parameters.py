@@ -65,6 +65,12 @@ DAMPING_KINDS = ("modal", "rayleigh", "loss-factor")
 #: impact, a linear spring and damper (no tension), Hertz's point contact with Hunt–Crossley
 #: damping (:mod:`campipe.model.contact`).
 CONTACT_LAWS = ("rigid", "kelvin-voigt", "hertz")
+#: Layouts (:mod:`campipe.model.layouts`): the thesis's train from its members' geometry, or a
+#: chain of masses given directly.
+PUSHROD_ROCKER, LUMPED = "pushrod-rocker", "lumped"
+LAYOUTS = (PUSHROD_ROCKER, LUMPED)
+MAX_MASSES = 64  # most masses of a lumped chain
+_LAYOUT = "valve-train layout: " + ", ".join(LAYOUTS) + " (campipe.model.layouts)"
 
 
 @dataclass(frozen=True)
@@ -83,6 +89,7 @@ class Parameter:
     default: object = None  # the value (spec form) where neither preset nor override gives one
     maximum: float = math.inf  # largest allowed value (counts: the matrices stay small)
     allow_none: bool = False  # "none" (or null) accepted, meaning absent: NaN in SI
+    min_length: int = 1  # fewest values of a list (0: an empty list, "not given")
 
     @property
     def continuous(self) -> bool:
@@ -237,9 +244,21 @@ def _contact_parameters() -> list[Parameter]:
     return out
 
 
+def _chain_list(name: str, what: str, units: str, shown: str) -> Parameter:
+    return Parameter(
+        name, f"lumped chain's {what} (layout lumped)", units, shown, 0.0,
+        length=MAX_MASSES, min_length=0, default=[],
+    )  # fmt: skip
+
+
 PARAMETERS: dict[str, Parameter] = {
     p.name: p
     for p in [
+        Parameter("layout", _LAYOUT, "", "", 0.0, choices=LAYOUTS, default=PUSHROD_ROCKER),
+        _chain_list("masses", "masses from the cam side, the last the valve", "kg", "kg"),
+        _chain_list(
+            "stiffnesses", "stiffnesses between neighbours, from the cam side", "N/m", "N/mm"
+        ),
         *_element_parameters(),
         Parameter("elastic_modulus", "elastic modulus of all members", "Pa", "lbf/in**2", 0.0),
         Parameter("specific_weight", "specific weight of all members", "N/m**3", "lbf/in**3", 0.0),
@@ -404,6 +423,9 @@ class ValveTrain:
     seat_contact_radius: float = 0.0  # [m] 0: not given
     contact_modulus: float = 30e6 * 4.4482216152605 / 0.0254**2  # [Pa] both bodies (steel)
     contact_poisson: float = 0.3  # [-]
+    layout: str = PUSHROD_ROCKER  # one of LAYOUTS
+    masses: tuple[float, ...] = ()  # [kg] a lumped chain's, the cam's first, the valve last
+    stiffnesses: tuple[float, ...] = ()  # [N/m] between neighbouring masses, the cam's first
 
     def replace(self, **changes: Any) -> ValveTrain:
         """A copy with some values (SI) changed."""
@@ -419,7 +441,10 @@ class ValveTrain:
     @property
     def n_coordinates(self) -> int:
         """Number of system coordinates: the thesis's seven, and those of the internal nodes
-        of refined members (a bar's n − 1 internal nodes one each, a beam's two each)."""
+        of refined members (a bar's n − 1 internal nodes one each, a beam's two each); a
+        lumped chain's masses, seven at least (:mod:`campipe.model.layouts`)."""
+        if self.layout == LUMPED:
+            return max(N_DOF, len(self.masses))
         return N_DOF + sum((self.elements_of(m) - 1) * NODE_COORDINATES[m] for m in ELEMENTS)
 
 
@@ -473,22 +498,27 @@ def parse_parameter(
 
 
 def _list(p: Parameter, value: object, key: str) -> tuple[float, ...]:
-    if isinstance(value, str):
-        value = [v for v in value.strip("[]() ").replace(",", " ").split()]
-    if not isinstance(value, (list, tuple)) or not value:
+    if isinstance(value, str):  # a list of quantities splits at its commas only
+        inner = value.strip("[]() ")
+        parts = inner.split(",") if p.units else inner.replace(",", " ").split()
+        value = [v.strip() for v in parts if v.strip()]
+    items = value if isinstance(value, (list, tuple)) else None
+    if items is None or not p.min_length <= len(items) <= (p.length if p.units else math.inf):
+        hint = f"with units, e.g. [1 {p.thesis_units}, 2 {p.thesis_units}], at most {p.length}"
+        if not p.units:
+            hint = f"lowest mode first ({p.length} for the thesis's model; a shorter list "
+            hint += "gives its last value to the modes above)"
         raise ModelParameterError.at(
             key,
-            f"expected a list of numbers, lowest mode first ({p.length} for the thesis's "
-            f"model; a shorter list gives its last value to the modes above), "
-            f"found {excerpt(value)}",
+            f"expected a list of numbers, {hint}, found {excerpt(value)}",
             found=value,
-            expected="a list of one or more numbers",
+            expected=f"a list of {p.min_length} or more numbers",
         )
     out = tuple(
         parse_quantity(_number(v), p.units, f"{key}[{i}]", p.thesis_units)
-        for i, v in enumerate(value)
+        for i, v in enumerate(items)
     )
-    for i, (v, raw) in enumerate(zip(out, value, strict=True)):
+    for i, (v, raw) in enumerate(zip(out, items, strict=True)):
         _check_range(p, v, f"{key}[{i}]", raw)
     return out
 
@@ -568,9 +598,58 @@ def valve_train(
     values = {**DEFAULTS, **PRESETS[preset], **(overrides or {})}
     resolved = {name: parse_parameter(name, v, key_prefix + name) for name, v in values.items()}
     train = ValveTrain(**resolved)  # type: ignore[arg-type]
-    mode_damping_ratios(train.damping_ratios, train.n_coordinates, key_prefix + "damping_ratios")
+    check_layout(train, overrides or {}, key_prefix)
+    modes = len(train.masses) if train.layout == LUMPED else train.n_coordinates
+    mode_damping_ratios(train.damping_ratios, modes, key_prefix + "damping_ratios")
     check_contacts(train, key_prefix)
     return train
+
+
+def layout_of_key(name: str) -> str | None:
+    """The layout a parameter belongs to (None: every layout's): the thesis's members,
+    material and lash to pushrod-rocker, ``masses`` and ``stiffnesses`` to lumped."""
+    ends = ("_length", "_diameter", "_elements", "_loss_factor")
+    thesis = name.startswith(ELEMENTS) and name.endswith(ends)
+    if thesis or name in ("elastic_modulus", "specific_weight", "lash"):
+        return PUSHROD_ROCKER
+    return LUMPED if name in ("masses", "stiffnesses") else None
+
+
+def check_layout(train: ValveTrain, overrides: Mapping[str, object], key_prefix: str = "") -> None:
+    """Refuse another layout's keys (:func:`layout_of_key`; and damping_kind loss-factor on a
+    chain), naming the key, a chain of one mass (not yet supported) and ``stiffnesses`` not
+    one fewer than ``masses``."""
+    lumped = train.layout == LUMPED
+    for name in overrides:
+        owner = layout_of_key(name)
+        if lumped and name == "damping_kind" and overrides[name] == "loss-factor":
+            owner = PUSHROD_ROCKER
+        if owner not in (None, train.layout):
+            raise ModelParameterError.at(
+                key_prefix + name,
+                f"is a key of layout {owner} but layout is {train.layout}: leave it out or "
+                f"set {key_prefix}layout: {owner}" + (" (not yet for a chain)" * (name == "lash")),
+                found=overrides[name],
+                expected=f"no {name} with layout {train.layout}",
+            )
+    n = len(train.masses)
+    if lumped and n < 2:
+        raise ModelParameterError.at(
+            key_prefix + "masses",
+            f"found {n} masses; a lumped chain needs two or more (the first on the cam, the "
+            "last the valve): one mass, a rigid follower with no free coordinate while it "
+            "rides the cam, is not yet supported",
+            found=train.masses,
+            expected="two or more masses",
+        )
+    if lumped and len(train.stiffnesses) != n - 1:
+        raise ModelParameterError.at(
+            key_prefix + "stiffnesses",
+            f"found {len(train.stiffnesses)} stiffnesses for {n} masses: give one fewer than "
+            "masses, the links between neighbours from the cam side",
+            found=train.stiffnesses,
+            expected=f"{n - 1} stiffnesses",
+        )
 
 
 def thesis_train() -> ValveTrain:

@@ -40,6 +40,7 @@ from campipe.model import (
     system_matrices,
     valve_train,
 )
+from campipe.model.layouts import LUMPED
 from campipe.profiles import (
     Profile,
     Ramp,
@@ -190,6 +191,14 @@ def _train(preset: str, overrides: tuple) -> ValveTrain:
         raise SpecProblem.from_error(exc) from None
     check_train(train)
     return train
+
+
+def valve_lift_ratio(train: ValveTrain) -> float:
+    """The valve's lift per unit cam lift as a rigid train: the rocker's arm ratio, 1 for a
+    lumped chain."""
+    if train.layout == LUMPED:
+        return 1.0
+    return train.rocker_valve_arm_length / train.rocker_pushrod_arm_length
 
 
 def check_train(train: ValveTrain) -> None:
@@ -403,7 +412,7 @@ def resolve_canonical(raw: Mapping, index: int, directory: Path) -> tuple[Resolv
     speed = parse_value("speed", freeze(raw["speed"]), "speed")
     seat = parse_value("seat", freeze(raw["seat"]), "seat")
     closure = parse_value("closure", raw["closure"], "closure")
-    ratio = train.rocker_valve_arm_length / train.rocker_pushrod_arm_length
+    ratio = valve_lift_ratio(train)
     if not math.isnan(train.lash):
         seat = _lash_placed_seat(raw, model, train, seat)
     if seat is not None and seat >= full * ratio:
