@@ -19,7 +19,7 @@ from campipe.model import (
     used_coordinates,
     valve_train,
 )
-from campipe.model.assembly import configuration_frequencies
+from campipe.model.assembly import configuration_frequencies, normal_modes
 from campipe.profiles import harmonic
 from campipe.vocabulary import CAM_AND_SEAT, CAM_CONTACT, FREE, SEAT, SEATED
 
@@ -72,8 +72,6 @@ def test_the_chain_s_frequencies_are_the_two_mass_closed_forms():
     # the chain's own modes (the placeholders left out) carry damping_ratios exactly
     used = used_coordinates(chain())
     sub = np.ix_(used, used)
-    from campipe.model.assembly import normal_modes
-
     omega, phi = normal_modes(sm.mass[sub], sm.stiffness[sub], np.ones(2, bool))
     assert_allclose(omega, free, rtol=1e-12)
     assert_allclose(modal_damping_ratios(sm.damping[sub], phi, omega), [ZETA, ZETA], rtol=1e-9)
@@ -174,8 +172,9 @@ def test_steady_response_below_the_onset_is_the_harmonic_closed_form(speed_rpm):
 
 def test_placeholders_stay_at_rest_through_separation_and_seat_impacts():
     """Above the onset with a seat: the follower leaves the cam and the valve strikes its
-    seat, and the placeholders stay at rest (to round-off) in both rigid integrators. Fails on a copy
-    that couples a placeholder to the chain (a stiffness or damping off its diagonal)."""
+    seat, and the placeholders stay at rest (to round-off) in both rigid integrators. Fails
+    on a copy that couples a placeholder to the chain (a stiffness or damping off its
+    diagonal)."""
     case = Case(chain(), harmonic(LIFT), 16000 * RPM, seat=0.0)
     for settings in (
         RunSettings(revolutions=3),
