@@ -31,8 +31,8 @@ from campipe.model.assembly import (
     normal_modes,
     observed_orders,
 )
-from campipe.model.layouts import LUMPED, PUSHROD_ROCKER, used_coordinates
-from campipe.model.parameters import layout_of_key
+from campipe.model.checks import DIRECT_ACTING, LUMPED, PUSHROD_ROCKER, layout_of_key
+from campipe.model.layouts import used_coordinates
 from campipe.units import convert, pint_without_dask
 from campipe.vocabulary import CONFIGURATIONS, ROMAN
 
@@ -109,7 +109,8 @@ def _shown(train, sm) -> tuple[SystemMatrices, tuple[Coordinate, ...], list[str]
     """What ``campipe model`` shows of ``train``: its matrices, coordinates and parameters,
     without a lumped chain's placeholders (its modes the chain's own) or another layout's
     keys."""
-    names = [n for n in PARAMETERS if layout_of_key(n) in (None, train.layout)]
+    shown = (None, train.layout, LUMPED if train.chain else None)
+    names = [n for n in PARAMETERS if layout_of_key(n, ELEMENTS) in shown]
     coords = coordinates(train)
     used = used_coordinates(train)
     if used.size == len(coords):
@@ -193,6 +194,7 @@ DISPLAY = {
     ),
     LUMPED: ((1.0, 1.0), ((1.0, "kg", "×1"), (1e6, "N/m", "×1e6"), (1.0, "N·s/m", "×1"))),
 }
+DISPLAY[DIRECT_ACTING] = DISPLAY[LUMPED]
 
 
 def model_text(train, sm, limits, preset, overrides) -> str:

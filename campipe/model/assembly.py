@@ -21,7 +21,7 @@ from campipe import disk_cache
 from campipe.model.coordinates import TRANSLATIONS, translations
 from campipe.model.elements import elements
 from campipe.model.layouts import placeholder_dynamics, placeholders, used_coordinates
-from campipe.model.parameters import LUMPED, N_DOF, ValveTrain, mode_damping_ratios
+from campipe.model.parameters import N_DOF, ValveTrain, mode_damping_ratios
 from campipe.vocabulary import CONFIGURATIONS, SEAT, free_coordinates
 
 #: Newmark linear acceleration (β = 1/6, γ = 1/2) is stable for ω·Δt < √12 (= (√3/π)·T),
@@ -162,7 +162,7 @@ def damping_matrix(
 ) -> np.ndarray:
     """The damping matrix of ``train``'s ``damping_kind`` (see the module); a lumped chain's
     from its own modes (:func:`chain_damping`)."""
-    if train.layout == LUMPED:
+    if train.chain:
         return chain_damping(train, mass, stiffness)
     if train.damping_kind == "rayleigh":
         return rayleigh_damping(mass, stiffness, train.rayleigh_alpha, train.rayleigh_beta)
@@ -204,7 +204,7 @@ def preload_vector(train: ValveTrain) -> np.ndarray:
     (+q4). A refined spring carries the same force in every element, so its internal nodes
     take none. A lumped chain's spring pushes its valve closed (−q7)."""
     f = np.zeros(train.n_coordinates)
-    if train.layout == LUMPED:
+    if train.chain:
         f[SEAT] = -train.spring_preload
     else:
         f[3] = train.spring_preload

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from campipe.model.layouts import lumped_coordinates
-from campipe.model.parameters import ELEMENTS, LUMPED, N_DOF, NODE_COORDINATES, ValveTrain
+from campipe.model.parameters import ELEMENTS, N_DOF, NODE_COORDINATES, ValveTrain
 
 #: A node's coordinate as (0-based q index, sign), or GROUND (−1, 0): fixed.
 Dof = tuple[int, float]
@@ -88,7 +88,7 @@ def coordinates(train: ValveTrain) -> tuple[Coordinate, ...]:
     ``rocker_valve_arm_1_rotation`` … for a beam), node 1 next to the member's first end.
     A lumped chain's (:func:`campipe.model.layouts.lumped_coordinates`): ``cam_mass``,
     ``mass_2`` …, ``valve``, and its placeholders ``unused``."""
-    if train.layout == LUMPED:
+    if train.chain:
         return tuple(
             Coordinate(f"q{i + 1}", name, "translation", positive)
             for i, name, positive in lumped_coordinates(len(train.masses))

@@ -16,7 +16,7 @@ import numpy as np
 from campipe.constants import STANDARD_GRAVITY
 from campipe.model.coordinates import GROUND, Dof, member_nodes
 from campipe.model.layouts import chain_placement
-from campipe.model.parameters import ELEMENTS, LUMPED, NODE_COORDINATES, ValveTrain
+from campipe.model.parameters import ELEMENTS, NODE_COORDINATES, ValveTrain
 from campipe.vocabulary import SEAT
 
 
@@ -108,8 +108,8 @@ def member_matrices(train: ValveTrain, member: str) -> tuple[np.ndarray, np.ndar
 def elements(train: ValveTrain) -> list[Element]:
     """Every finite element of ``train``, member by member (thesis Eqs. 2–10), each member's
     from its first end to its last; with one element a member, the thesis's five. A lumped
-    chain's (:func:`chain_elements`) for ``layout`` lumped."""
-    if train.layout == LUMPED:
+    chain's (:func:`chain_elements`) for a chain (layout lumped, direct-acting)."""
+    if train.chain:
         return chain_elements(train)
     nodes = member_nodes(train)
     n_q = train.n_coordinates

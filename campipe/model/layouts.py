@@ -10,6 +10,10 @@ coordinates.
                     (``masses``, the first on the cam, the last the valve), the stiffnesses
                     between neighbours (``stiffnesses``, one fewer) and the valve spring to
                     ground on the valve (``spring_rate``, ``spring_preload``)
+``direct-acting``   a bucket tappet on its valve, from named masses and stiffnesses
+                    (``tappet_mass``, ``valve_mass``, ``stem_stiffness``,
+                    ``tappet_contact_stiffness``), built as a two-mass chain
+                    (:func:`campipe.model.checks.direct_acting_chain`)
 ==================  ===========================================================================
 
 The engine holds the cam contact at coordinate 0 (q1) and the seat at coordinate 6 (q7) for
@@ -32,10 +36,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from campipe.model.parameters import LAYOUTS, LUMPED, PUSHROD_ROCKER, ValveTrain
+from campipe.model.checks import DIRECT_ACTING, LAYOUTS, LUMPED, PUSHROD_ROCKER
+from campipe.model.parameters import ValveTrain
 from campipe.vocabulary import CAM, N_COORDINATES, SEAT
 
 __all__ = [
+    "DIRECT_ACTING",
     "LAYOUTS",
     "LUMPED",
     "PUSHROD_ROCKER",
@@ -83,7 +89,7 @@ def n_coordinates(n_masses: int) -> int:
 def used_coordinates(train: ValveTrain) -> np.ndarray:
     """The coordinates (0-based, ascending) that carry ``train``'s masses: all of them but a
     lumped chain's placeholders."""
-    if train.layout != LUMPED:
+    if not train.chain:
         return np.arange(train.n_coordinates)
     return np.sort(chain_placement(len(train.masses))[0])
 

@@ -37,7 +37,14 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from campipe.errors import CampipeError, did_you_mean, excerpt
+from campipe.errors import did_you_mean, excerpt
+from campipe.model.checks import (
+    CHAINS,
+    LAYOUTS,
+    PUSHROD_ROCKER,
+    ModelParameterError,
+    resolve_layout,
+)
 from campipe.units import QuantityError, parse_quantity
 
 ELEMENTS = ("pushrod", "rocker_pushrod_arm", "rocker_valve_arm", "spring", "valve_stem")
@@ -65,10 +72,6 @@ DAMPING_KINDS = ("modal", "rayleigh", "loss-factor")
 #: impact, a linear spring and damper (no tension), Hertz's point contact with Hunt–Crossley
 #: damping (:mod:`campipe.model.contact`).
 CONTACT_LAWS = ("rigid", "kelvin-voigt", "hertz")
-#: Layouts (:mod:`campipe.model.layouts`): the thesis's train from its members' geometry, or a
-#: chain of masses given directly.
-PUSHROD_ROCKER, LUMPED = "pushrod-rocker", "lumped"
-LAYOUTS = (PUSHROD_ROCKER, LUMPED)
 MAX_MASSES = 64  # most masses of a lumped chain
 _LAYOUT = "valve-train layout: " + ", ".join(LAYOUTS) + " (campipe.model.layouts)"
 
@@ -251,6 +254,13 @@ def _chain_list(name: str, what: str, units: str, shown: str) -> Parameter:
     )  # fmt: skip
 
 
+def _direct(name: str, what: str, units: str, shown: str) -> Parameter:
+    return Parameter(
+        name, f"{what} (layout direct-acting)", units, shown, 0.0, allow_none=True,
+        default="none",
+    )  # fmt: skip
+
+
 PARAMETERS: dict[str, Parameter] = {
     p.name: p
     for p in [
@@ -259,6 +269,10 @@ PARAMETERS: dict[str, Parameter] = {
         _chain_list(
             "stiffnesses", "stiffnesses between neighbours, from the cam side", "N/m", "N/mm"
         ),
+        _direct("tappet_mass", "bucket tappet's mass with its shim", "kg", "kg"),
+        _direct("valve_mass", "valve's mass with retainer, keepers, spring share", "kg", "kg"),
+        _direct("stem_stiffness", "valve stem's axial stiffness, tip to head", "N/m", "N/mm"),
+        _direct("tappet_contact_stiffness", "tappet's contact on the stem tip", "N/m", "N/mm"),
         *_element_parameters(),
         Parameter("elastic_modulus", "elastic modulus of all members", "Pa", "lbf/in**2", 0.0),
         Parameter("specific_weight", "specific weight of all members", "N/m**3", "lbf/in**3", 0.0),
@@ -426,6 +440,10 @@ class ValveTrain:
     layout: str = PUSHROD_ROCKER  # one of LAYOUTS
     masses: tuple[float, ...] = ()  # [kg] a lumped chain's, the cam's first, the valve last
     stiffnesses: tuple[float, ...] = ()  # [N/m] between neighbouring masses, the cam's first
+    tappet_mass: float = math.nan  # [kg] direct-acting: the bucket tappet with its shim
+    valve_mass: float = math.nan  # [kg] direct-acting: valve, retainer, keepers, spring share
+    stem_stiffness: float = math.nan  # [N/m] direct-acting: the valve stem, tip to head
+    tappet_contact_stiffness: float = math.nan  # [N/m] direct-acting: tappet on the stem tip
 
     def replace(self, **changes: Any) -> ValveTrain:
         """A copy with some values (SI) changed."""
@@ -433,6 +451,11 @@ class ValveTrain:
 
     def as_dict(self) -> dict[str, object]:
         return dataclasses.asdict(self)
+
+    @property
+    def chain(self) -> bool:
+        """A chain of masses (layout lumped, or built as one: :mod:`campipe.model.layouts`)."""
+        return self.layout in CHAINS
 
     def elements_of(self, member: str) -> int:
         """The number of finite elements ``member`` (a name of ``ELEMENTS``) is divided into."""
@@ -443,14 +466,9 @@ class ValveTrain:
         """Number of system coordinates: the thesis's seven, and those of the internal nodes
         of refined members (a bar's n − 1 internal nodes one each, a beam's two each); a
         lumped chain's masses, seven at least (:mod:`campipe.model.layouts`)."""
-        if self.layout == LUMPED:
+        if self.chain:
             return max(N_DOF, len(self.masses))
         return N_DOF + sum((self.elements_of(m) - 1) * NODE_COORDINATES[m] for m in ELEMENTS)
-
-
-class ModelParameterError(CampipeError, ValueError):
-    """A model parameter that is unknown, badly typed or out of range; ``key`` is the key path
-    named in the message (``model.spring_rate``, ``damping_ratios[1]``)."""
 
 
 def parse_parameter(
@@ -598,58 +616,11 @@ def valve_train(
     values = {**DEFAULTS, **PRESETS[preset], **(overrides or {})}
     resolved = {name: parse_parameter(name, v, key_prefix + name) for name, v in values.items()}
     train = ValveTrain(**resolved)  # type: ignore[arg-type]
-    check_layout(train, overrides or {}, key_prefix)
-    modes = len(train.masses) if train.layout == LUMPED else train.n_coordinates
+    train = resolve_layout(train, overrides or {}, ELEMENTS, key_prefix)
+    modes = len(train.masses) if train.chain else train.n_coordinates
     mode_damping_ratios(train.damping_ratios, modes, key_prefix + "damping_ratios")
     check_contacts(train, key_prefix)
     return train
-
-
-def layout_of_key(name: str) -> str | None:
-    """The layout a parameter belongs to (None: every layout's): the thesis's members,
-    material and lash to pushrod-rocker, ``masses`` and ``stiffnesses`` to lumped."""
-    ends = ("_length", "_diameter", "_elements", "_loss_factor")
-    thesis = name.startswith(ELEMENTS) and name.endswith(ends)
-    if thesis or name in ("elastic_modulus", "specific_weight", "lash"):
-        return PUSHROD_ROCKER
-    return LUMPED if name in ("masses", "stiffnesses") else None
-
-
-def check_layout(train: ValveTrain, overrides: Mapping[str, object], key_prefix: str = "") -> None:
-    """Refuse another layout's keys (:func:`layout_of_key`; and damping_kind loss-factor on a
-    chain), naming the key, a chain of one mass (not yet supported) and ``stiffnesses`` not
-    one fewer than ``masses``."""
-    lumped = train.layout == LUMPED
-    for name in overrides:
-        owner = layout_of_key(name)
-        if lumped and name == "damping_kind" and overrides[name] == "loss-factor":
-            owner = PUSHROD_ROCKER
-        if owner not in (None, train.layout):
-            raise ModelParameterError.at(
-                key_prefix + name,
-                f"is a key of layout {owner} but layout is {train.layout}: leave it out or "
-                f"set {key_prefix}layout: {owner}" + (" (not yet for a chain)" * (name == "lash")),
-                found=overrides[name],
-                expected=f"no {name} with layout {train.layout}",
-            )
-    n = len(train.masses)
-    if lumped and n < 2:
-        raise ModelParameterError.at(
-            key_prefix + "masses",
-            f"found {n} masses; a lumped chain needs two or more (the first on the cam, the "
-            "last the valve): one mass, a rigid follower with no free coordinate while it "
-            "rides the cam, is not yet supported",
-            found=train.masses,
-            expected="two or more masses",
-        )
-    if lumped and len(train.stiffnesses) != n - 1:
-        raise ModelParameterError.at(
-            key_prefix + "stiffnesses",
-            f"found {len(train.stiffnesses)} stiffnesses for {n} masses: give one fewer than "
-            "masses, the links between neighbours from the cam side",
-            found=train.stiffnesses,
-            expected=f"{n - 1} stiffnesses",
-        )
 
 
 def thesis_train() -> ValveTrain:

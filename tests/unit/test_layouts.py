@@ -218,3 +218,44 @@ def test_the_thesis_train_is_unchanged_by_the_layout_key():
     assert train.layout == "pushrod-rocker" and train.masses == ()
     assert valve_train("thesis-1971", {"layout": "pushrod-rocker"}) == train
     assert train.n_coordinates == 7 and placeholders(train).size == 0
+
+
+DIRECT = {
+    "layout": "direct-acting",
+    "tappet_mass": "0.05 kg",
+    "valve_mass": "0.06 kg",
+    "stem_stiffness": "30000 N/mm",
+    "tappet_contact_stiffness": "60000 N/mm",
+    "spring_rate": "40 N/mm",
+    "spring_preload": "250 N",
+    "damping_ratios": [0.05],
+}
+
+
+def test_direct_acting_is_the_two_mass_chain_of_its_named_keys():
+    """A bucket tappet on its valve: the tappet's and the valve's masses, the stem and the
+    tappet's contact in series (1/(1/30000 + 1/60000) = 20000 N/mm): the issue's chain, its
+    matrices to the bit. Fails on a copy that adds the two stiffnesses (in parallel) or puts
+    the valve's mass on the cam."""
+    train = valve_train("thesis-1971", DIRECT)
+    assert train.masses == (M1, M2)
+    assert train.stiffnesses == pytest.approx((LINK,), rel=1e-15)
+    a, b = system_matrices(train), system_matrices(chain())
+    assert_allclose(a.mass, b.mass, rtol=0)
+    assert_allclose(a.stiffness, b.stiffness, rtol=1e-15)
+    assert_allclose(a.damping, b.damping, rtol=1e-12)
+    assert [c.name for c in coordinates(train)][::6] == ["cam_mass", "valve"]
+
+
+def test_direct_acting_refusals_name_their_keys():
+    """A direct-acting key left out, a lumped chain's masses on it, its keys on the thesis's
+    train: each refused naming the key. Fails on a copy that defaults a missing mass."""
+    for changes, key, words in [
+        ({"stem_stiffness": "none"}, "model.stem_stiffness", "needs stem_stiffness"),
+        ({"masses": ["1 kg", "1 kg"]}, "model.masses", "layout lumped"),
+        ({"layout": "pushrod-rocker"}, "model.tappet_mass", "layout direct-acting"),
+    ]:
+        with pytest.raises(ModelParameterError) as info:
+            valve_train("thesis-1971", {**DIRECT, **changes}, key_prefix="model.")
+        assert info.value.key == key, (changes, info.value)
+        assert words in str(info.value)

@@ -40,7 +40,6 @@ from campipe.model import (
     system_matrices,
     valve_train,
 )
-from campipe.model.layouts import LUMPED
 from campipe.profiles import (
     Profile,
     Ramp,
@@ -196,7 +195,7 @@ def _train(preset: str, overrides: tuple) -> ValveTrain:
 def valve_lift_ratio(train: ValveTrain) -> float:
     """The valve's lift per unit cam lift as a rigid train: the rocker's arm ratio, 1 for a
     lumped chain."""
-    if train.layout == LUMPED:
+    if train.chain:
         return 1.0
     return train.rocker_valve_arm_length / train.rocker_pushrod_arm_length
 
