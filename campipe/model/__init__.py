@@ -23,7 +23,7 @@ from campipe.model.coordinates import (
     n_coordinates,
     translations,
 )
-from campipe.model.lash import cam_gap, lash_ratio, lash_seat
+from campipe.model.lash import cam_gap, lash_ratio, lash_seat, train_lash_seat
 from campipe.model.layouts import LAYOUTS, placeholders, used_coordinates
 from campipe.model.parameters import (
     DAMPING_KINDS,
@@ -78,6 +78,7 @@ __all__ = [
     "system_matrices",
     "thesis_train",
     "to_display_units",
+    "train_lash_seat",
     "translations",
     "used_coordinates",
     "valve_train",

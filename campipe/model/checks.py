@@ -34,10 +34,10 @@ class ModelParameterError(CampipeError, ValueError):
 
 def layout_of_key(name: str, members: tuple[str, ...]) -> str | None:
     """The layout a parameter belongs to (None: every layout's): the thesis's ``members``'
-    geometry, refinement and loss factors, its material and lash to pushrod-rocker,
+    geometry, refinement and loss factors and its material to pushrod-rocker,
     ``masses`` and ``stiffnesses`` to lumped, :data:`DIRECT_ACTING_KEYS` to direct-acting."""
     thesis = name.startswith(members) and name.endswith(_MEMBER_ENDS)
-    if thesis or name in ("elastic_modulus", "specific_weight", "lash"):
+    if thesis or name in ("elastic_modulus", "specific_weight"):
         return PUSHROD_ROCKER
     if name in ("masses", "stiffnesses"):
         return LUMPED
@@ -61,7 +61,7 @@ def resolve_layout(
             raise ModelParameterError.at(
                 key_prefix + name,
                 f"is a key of layout {owner} but layout is {train.layout}: leave it out or "
-                f"set {key_prefix}layout: {owner}" + (" (not yet for a chain)" * (name == "lash")),
+                f"set {key_prefix}layout: {owner}",
                 found=overrides[name],
                 expected=f"no {name} with layout {train.layout}",
             )

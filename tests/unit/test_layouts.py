@@ -16,6 +16,7 @@ from campipe.model import (
     placeholders,
     system_matrices,
     thesis_train,
+    train_lash_seat,
     used_coordinates,
     valve_train,
 )
@@ -197,7 +198,6 @@ def test_lumped_refusals_name_their_keys():
         ({"masses": ["0.05 kg"], "stiffnesses": []}, "model.masses", "not yet supported"),
         ({"stiffnesses": ["1 N/mm", "2 N/mm"]}, "model.stiffnesses", "one fewer"),
         ({"pushrod_length": "9 in"}, "model.pushrod_length", "layout pushrod-rocker"),
-        ({"lash": "0.01 in"}, "model.lash", "not yet"),
         ({"damping_ratios": [0.1, 0.1, 0.1]}, "model.damping_ratios", "2 modes"),
         ({"masses": ["0.05", "0.06 kg"]}, "model.masses[0]", "units"),
     ]
@@ -259,3 +259,18 @@ def test_direct_acting_refusals_name_their_keys():
             valve_train("thesis-1971", {**DIRECT, **changes}, key_prefix="model.")
         assert info.value.key == key, (changes, info.value)
         assert words in str(info.value)
+
+
+@pytest.mark.parametrize("side", ["valve", "cam"])
+def test_a_chain_s_lash_places_the_seat_at_the_lash_plus_the_preload_s_give(side):
+    """Seated and off its cam, the chain sheds the preload that compressed its link: the
+    seat is the lash plus P/(k + ks), on either side (a chain takes the gap up as a rigid
+    body); the valve then reads 0 on its seat and the follower stands off the cam on the base
+    circle (configuration IV). Fails on a copy that measures a chain's valve-side lash at the
+    thesis's rocker end (q4, a placeholder)."""
+    train = chain(lash="0.2 mm", lash_side=side)
+    seat = train_lash_seat(train)
+    assert seat == pytest.approx(0.2e-3 + PRELOAD / (LINK + RATE), rel=1e-12)
+    run = run_batch([Case(train, harmonic(LIFT), 3000 * RPM)], RunSettings(revolutions=2))
+    assert run.status[0] == 0 and run.valve_lift[0].min() == 0.0
+    assert np.any(run.contact_state[0] == SEATED)

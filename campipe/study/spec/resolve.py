@@ -36,8 +36,8 @@ from campipe.model import (
     ModelParameterError,
     ValveTrain,
     defining_values,
-    lash_seat,
     system_matrices,
+    train_lash_seat,
     valve_train,
 )
 from campipe.profiles import (
@@ -495,7 +495,7 @@ def canonical_run(settings: RunSettings) -> dict[str, object]:
 def _lash_placed_seat(raw: Mapping, model: Mapping, train: ValveTrain, seat: float | None) -> float:
     """The seat a train's lash places (``campipe.model.lash_seat``); a seat given beside it
     refused at ``seat``, with the seat the lash places in the spec's units."""
-    placed = lash_seat(system_matrices(train), train.lash, train.lash_side)
+    placed = train_lash_seat(train)
     if seat is not None:
         where = _in_units(placed, model.get("lash"), raw["seat"])
         raise SpecProblem(
