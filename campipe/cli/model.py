@@ -83,6 +83,10 @@ def model(
         train = valve_train(preset, overrides)
     except ModelParameterError as exc:
         raise click.UsageError(str(exc)) from None
+    if convergence is not None and train.chain:
+        raise click.UsageError(
+            f"--convergence refines the thesis's members; layout {train.layout} has none"
+        )
     if convergence is not None:
         report = convergence_report(train, convergence, modes)
         if as_json:

@@ -94,3 +94,12 @@ def test_a_lumped_study_runs_archives_and_queries(tmp_path):
     assert table.exit_code == 0, table.output
     rows = json.loads(table.output)["cases"]
     assert sorted(r["speed_rpm"] for r in rows) == [9000, 9000, 16000, 16000]
+
+
+def test_campipe_model_refuses_convergence_on_a_chain():
+    """--convergence refines the thesis's members, which a chain has none of: a usage error
+    naming the layout, not a table of unchanged frequencies. Fails on a copy that refines the
+    preset's members beside the chain."""
+    out = invoke("model", *SETS, "--convergence", "spring_elements")
+    assert out.exit_code == 2
+    assert "layout lumped has none" in out.output
