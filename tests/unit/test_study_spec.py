@@ -33,6 +33,7 @@ EXAMPLE_CASES = {
     "spring-surge": 57,
     "contact-stiffness": 39,
     "valve-bounce": 21,
+    "bucket-tappet-lash": 18,
 }
 
 
