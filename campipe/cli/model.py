@@ -180,6 +180,8 @@ def _matrix_text(a: np.ndarray, scale: float, coords: tuple[Coordinate, ...]) ->
 
 
 def _parameter_text(p, value) -> str:
+    if p.length and p.units:
+        return ", ".join(f"{convert(x, p.units, p.thesis_units):g} {p.thesis_units}" for x in value)
     if p.length:
         return ", ".join(f"{x:g}" for x in value)
     if p.allow_none and isinstance(value, float) and math.isnan(value):
@@ -223,18 +225,25 @@ def model_text(train, sm, limits, preset, overrides) -> str:
     )
     for c in coords:
         lines.append(f"  {c.symbol:<4} {c.name:<30} {c.kind:<11} positive {c.positive}")
-    rot = "rows/cols with a rotation carry rad: ×in per translation index"
+    rot = " (rows/cols with a rotation carry rad: ×in per translation index)"
     (length, energy), scales = DISPLAY[train.layout]
     titles = (
         "Mass matrix [M] (Figure 11)",
         "Stiffness matrix [K] (Figure 12)",
         f"Damping matrix [C] ({train.damping_kind}; Figure 13: modal)",
     )
+    if train.chain:
+        rot = ""
+        titles = (
+            "Mass matrix [M]",
+            "Stiffness matrix [K]",
+            f"Damping matrix [C] ({train.damping_kind})",
+        )
     for title, a, (scale, unit, tag) in zip(
         titles, (sm.mass, sm.stiffness, sm.damping), scales, strict=True
     ):
         lines.append("")
-        lines.append(f"{title}  {tag} {unit} ({rot})")
+        lines.append(f"{title}  {tag} {unit}{rot}")
         lines += _matrix_text(to_display_units(a, length, energy, trans), scale, coords)
     lines.append("")
     lines.append("Natural frequencies (Figure 14), each mode's damping ratio (Φᵀ C Φ)ⱼⱼ / (2ωⱼ)")

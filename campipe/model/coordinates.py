@@ -5,7 +5,9 @@ always coordinate 0 and the seat coordinate 6. A member divided into n equal ele
 n − 1 internal nodes, counted from the member's first end (see :data:`MEMBER_ENDS`); their
 coordinates follow q7, member by member in the order of
 :data:`campipe.model.parameters.ELEMENTS`: one per node of a bar (its axial displacement, up),
-two per node of a beam (v up, then θ). Pure Python and numpy.
+two per node of a beam (v up, then θ). A chain of masses (``layout`` lumped or
+direct-acting) keeps the same two places, its cam's mass q1 and its valve q7
+(:mod:`campipe.model.layouts`). Pure Python and numpy.
 """
 
 from __future__ import annotations

@@ -618,6 +618,14 @@ def valve_train(
     train = ValveTrain(**resolved)  # type: ignore[arg-type]
     train = resolve_layout(train, overrides or {}, ELEMENTS, key_prefix)
     modes = len(train.masses) if train.chain else train.n_coordinates
+    if train.chain and "damping_ratios" not in (overrides or {}):
+        raise ModelParameterError.at(
+            key_prefix + "damping_ratios",
+            f"layout {train.layout} needs its own: the preset's are the thesis's train's; give "
+            f"1 to {modes} ratios of the chain's modes, lowest first (e.g. [0.05])",
+            found=None,
+            expected=f"1 to {modes} damping ratios",
+        )
     mode_damping_ratios(train.damping_ratios, modes, key_prefix + "damping_ratios")
     check_contacts(train, key_prefix)
     return train

@@ -192,8 +192,9 @@ def test_placeholders_stay_at_rest_through_separation_and_seat_impacts():
 
 def test_lumped_refusals_name_their_keys():
     """One mass, stiffnesses not one fewer, the thesis's members on a chain, a chain's masses
-    on the thesis's train, damping ratios for more modes than masses: each refused naming its
-    key. Fails on a copy that pads missing stiffnesses or runs a one-mass chain as two."""
+    on the thesis's train, damping ratios for more modes than masses or none of its own (the
+    preset's): each refused naming its key. Fails on a copy that pads missing stiffnesses or
+    runs a one-mass chain as two."""
     cases = [
         ({"masses": ["0.05 kg"], "stiffnesses": []}, "model.masses", "not yet supported"),
         ({"stiffnesses": ["1 N/mm", "2 N/mm"]}, "model.stiffnesses", "one fewer"),
@@ -209,6 +210,11 @@ def test_lumped_refusals_name_their_keys():
     with pytest.raises(ModelParameterError) as info:
         valve_train("thesis-1971", {"masses": ["1 kg"]}, key_prefix="model.")
     assert info.value.key == "model.masses" and "layout lumped" in str(info.value)
+    # the preset's seven ratios are the thesis's train's, not the chain's
+    own = {k: v for k, v in LUMPED.items() if k != "damping_ratios"}
+    with pytest.raises(ModelParameterError) as info:
+        valve_train("thesis-1971", own, key_prefix="model.")
+    assert info.value.key == "model.damping_ratios" and "needs its own" in str(info.value)
 
 
 def test_the_thesis_train_is_unchanged_by_the_layout_key():
