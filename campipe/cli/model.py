@@ -22,10 +22,17 @@ from campipe.model import (
     newmark_linear_stability_limit,
     system_matrices,
     to_display_units,
-    translations,
     valve_train,
 )
-from campipe.model.assembly import CONVERGENCE_ELEMENTS, frequency_convergence, observed_orders
+from campipe.model.assembly import (
+    CONVERGENCE_ELEMENTS,
+    SystemMatrices,
+    frequency_convergence,
+    normal_modes,
+    observed_orders,
+)
+from campipe.model.checks import DIRECT_ACTING, LUMPED, PUSHROD_ROCKER, layout_of_key
+from campipe.model.layouts import used_coordinates
 from campipe.units import convert, pint_without_dask
 from campipe.vocabulary import CONFIGURATIONS, ROMAN
 
@@ -76,6 +83,10 @@ def model(
         train = valve_train(preset, overrides)
     except ModelParameterError as exc:
         raise click.UsageError(str(exc)) from None
+    if convergence is not None and train.chain:
+        raise click.UsageError(
+            f"--convergence refines the thesis's members; layout {train.layout} has none"
+        )
     if convergence is not None:
         report = convergence_report(train, convergence, modes)
         if as_json:
@@ -98,13 +109,36 @@ def _json_value(value: object) -> object:
     return None if isinstance(value, float) and math.isnan(value) else value
 
 
+def _shown(train, sm) -> tuple[SystemMatrices, tuple[Coordinate, ...], list[str]]:
+    """What ``campipe model`` shows of ``train``: its matrices, coordinates and parameters,
+    without a lumped chain's placeholders (its modes the chain's own) or another layout's
+    keys."""
+    shown = (None, train.layout, LUMPED if train.chain else None)
+    names = [n for n in PARAMETERS if layout_of_key(n, ELEMENTS) in shown]
+    coords = coordinates(train)
+    used = used_coordinates(train)
+    if used.size == len(coords):
+        return sm, coords, names
+    sub = np.ix_(used, used)
+    omega, phi = normal_modes(sm.mass[sub], sm.stiffness[sub], np.ones(used.size, bool))
+    view = SystemMatrices(
+        sm.mass[sub], sm.stiffness[sub], sm.damping[sub], omega, phi, sm.preload[used]
+    )
+    return view, tuple(coords[i] for i in used), names
+
+
 def model_report(train, sm, limits, preset) -> dict[str, object]:
     """The JSON form of ``campipe model``: SI units throughout."""
+    sm, coords, names = _shown(train, sm)
     return {
         "preset": preset,
+        "layout": train.layout,
         "parameters": {
-            name: {"value": _json_value(getattr(train, name)), "units": p.units or "1"}
-            for name, p in PARAMETERS.items()
+            name: {
+                "value": _json_value(getattr(train, name)),
+                "units": PARAMETERS[name].units or "1",
+            }
+            for name in names
         },
         "coordinates": [
             {
@@ -114,7 +148,7 @@ def model_report(train, sm, limits, preset) -> dict[str, object]:
                 "positive": c.positive,
                 "units": "m" if c.kind == "translation" else "rad",
             }
-            for c in coordinates(train)
+            for c in coords
         ],
         "natural_frequencies": sm.frequencies.tolist(),
         "natural_frequencies_rpm": (sm.frequencies / RPM).tolist(),
@@ -146,6 +180,8 @@ def _matrix_text(a: np.ndarray, scale: float, coords: tuple[Coordinate, ...]) ->
 
 
 def _parameter_text(p, value) -> str:
+    if p.length and p.units:
+        return ", ".join(f"{convert(x, p.units, p.thesis_units):g} {p.thesis_units}" for x in value)
     if p.length:
         return ", ".join(f"{x:g}" for x in value)
     if p.allow_none and isinstance(value, float) and math.isnan(value):
@@ -155,38 +191,60 @@ def _parameter_text(p, value) -> str:
     return f"{convert(value, p.units, p.thesis_units):g} {p.thesis_units}"
 
 
+#: How ``campipe model`` shows each layout's matrices: (length, energy) of the display units
+#: in SI, and each matrix's scale and units.
+DISPLAY = {
+    PUSHROD_ROCKER: (
+        (INCH, LBF_IN),
+        ((1e-5, "lbf·s²/in", "×1e-5"), (1e5, "lbf/in", "×1e5"), (1e-2, "lbf·s/in", "×1e-2")),
+    ),
+    LUMPED: ((1.0, 1.0), ((1.0, "kg", "×1"), (1e6, "N/m", "×1e6"), (1.0, "N·s/m", "×1"))),
+}
+DISPLAY[DIRECT_ACTING] = DISPLAY[LUMPED]
+
+
 def model_text(train, sm, limits, preset, overrides) -> str:
-    """The human form of ``campipe model``, in the thesis's units and layout."""
+    """The human form of ``campipe model``, in the thesis's units and layout (a lumped
+    chain's in SI)."""
     lines = [
-        f"campipe model: preset {preset}"
+        f"campipe model: preset {preset}, layout {train.layout}"
         + (f", overrides {', '.join(overrides)}" if overrides else "")
     ]
+    sm, coords, names = _shown(train, sm)
     lines.append("")
     lines.append("Parameters (thesis units)")
-    for name, p in PARAMETERS.items():
-        lines.append(f"  {name:<30} {_parameter_text(p, getattr(train, name))}")
-    coords = coordinates(train)
-    trans = translations(train)
+    for name in names:
+        lines.append(f"  {name:<30} {_parameter_text(PARAMETERS[name], getattr(train, name))}")
+    trans = np.array([c.kind == "translation" for c in coords])
     lines.append("")
-    lines.append("Coordinates (thesis order and signs; refined members' internal nodes after q7)")
+    lines.append(
+        "Coordinates (thesis order and signs; refined members' internal nodes after q7)"
+        if train.layout == PUSHROD_ROCKER
+        else "Coordinates (the cam's mass q1, the valve q7, the chain's others between and "
+        "after; a chain of fewer than seven masses leaves the rest unused)"
+    )
     for c in coords:
         lines.append(f"  {c.symbol:<4} {c.name:<30} {c.kind:<11} positive {c.positive}")
-    rot = "rows/cols with a rotation carry rad: ×in per translation index"
-    blocks = [
-        ("Mass matrix [M] (Figure 11)", sm.mass, 1e-5, "lbf·s²/in", "×1e-5"),
-        ("Stiffness matrix [K] (Figure 12)", sm.stiffness, 1e5, "lbf/in", "×1e5"),
-        (
-            f"Damping matrix [C] ({train.damping_kind}; Figure 13: modal)",
-            sm.damping,
-            1e-2,
-            "lbf·s/in",
-            "×1e-2",
-        ),
-    ]
-    for title, a, scale, unit, tag in blocks:
+    rot = " (rows/cols with a rotation carry rad: ×in per translation index)"
+    (length, energy), scales = DISPLAY[train.layout]
+    titles = (
+        "Mass matrix [M] (Figure 11)",
+        "Stiffness matrix [K] (Figure 12)",
+        f"Damping matrix [C] ({train.damping_kind}; Figure 13: modal)",
+    )
+    if train.chain:
+        rot = ""
+        titles = (
+            "Mass matrix [M]",
+            "Stiffness matrix [K]",
+            f"Damping matrix [C] ({train.damping_kind})",
+        )
+    for title, a, (scale, unit, tag) in zip(
+        titles, (sm.mass, sm.stiffness, sm.damping), scales, strict=True
+    ):
         lines.append("")
-        lines.append(f"{title}  {tag} {unit} ({rot})")
-        lines += _matrix_text(to_display_units(a, INCH, LBF_IN, trans), scale, coords)
+        lines.append(f"{title}  {tag} {unit}{rot}")
+        lines += _matrix_text(to_display_units(a, length, energy, trans), scale, coords)
     lines.append("")
     lines.append("Natural frequencies (Figure 14), each mode's damping ratio (Φᵀ C Φ)ⱼⱼ / (2ωⱼ)")
     lines.append(f"  {'mode':>4} {'rad/s':>14} {'Hz':>12} {'rpm':>14} {'ζ':>6}")
@@ -198,7 +256,7 @@ def model_text(train, sm, limits, preset, overrides) -> str:
         "Mode shapes (Figure 14), one column a mode, scaled to a largest translation of 1"
         " (rotations in rad/in)"
     )
-    shapes = sm.modes / np.where(trans, INCH, 1.0)[:, None]
+    shapes = sm.modes / np.where(trans, length, 1.0)[:, None]
     shapes = shapes / np.abs(shapes[trans]).max(axis=0)
     lines.append("      " + "".join(f"{'mode ' + str(j):>9}" for j in range(1, len(coords) + 1)))
     for c, row in zip(coords, shapes, strict=True):

@@ -15,7 +15,7 @@ import numpy as np
 
 from campipe.constants import TWO_PI
 from campipe.errors import CampipeError
-from campipe.model import ValveTrain, lash_seat, system_matrices
+from campipe.model import ValveTrain, system_matrices, train_lash_seat
 from campipe.model.assembly import configuration_frequencies
 from campipe.profiles import Profile
 from campipe.vocabulary import CAM_AND_SEAT, CAM_CONTACT, CONFIGURATIONS, FREE
@@ -78,7 +78,7 @@ def compliant_contacts(train: ValveTrain, has_seat: bool) -> bool:
 def _lash_seat(train: ValveTrain) -> float:
     """The seat a train's lash places (``campipe.model.lash_seat``, on the train's
     ``lash_side``), once per train."""
-    return lash_seat(system_matrices(train), train.lash, train.lash_side)
+    return train_lash_seat(train)
 
 
 @dataclass(frozen=True)

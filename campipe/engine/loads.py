@@ -54,7 +54,8 @@ def member_loads(train: ValveTrain, q: np.ndarray) -> dict[str, np.ndarray]:
     -------
     dict
         ``pushrod_force``, ``stem_force``, ``spring_force`` [N] and ``rocker_moment`` [N·m],
-        each of q's leading shape.
+        each of q's leading shape; for a lumped chain the pushrod's and the stem's are its
+        links' next to the cam and to the valve, and it has no rocker (NaN).
     """
     q = _own(train, q)
     members: dict[str, list[Element]] = {}
@@ -65,6 +66,13 @@ def member_loads(train: ValveTrain, q: np.ndarray) -> dict[str, np.ndarray]:
         return q @ (e.stiffness @ e.beta).T  # (..., n_e): forces on the element's ends
 
     # Axial elements use (lower, upper) measured upward: the upper end force is the tension.
+    if "link" in members:  # a lumped chain: its links next to the cam and to the valve
+        return {
+            "pushrod_force": -end_forces(members["link"][0])[..., 1],
+            "stem_force": -end_forces(members["link"][-1])[..., 1],
+            "spring_force": train.spring_preload - end_forces(members["spring"][-1])[..., 1],
+            "rocker_moment": np.full(q.shape[:-1], np.nan),
+        }
     return {
         "pushrod_force": -end_forces(members["pushrod"][-1])[..., 1],
         "stem_force": -end_forces(members["valve_stem"][-1])[..., 1],

@@ -23,7 +23,8 @@ from campipe.model.coordinates import (
     n_coordinates,
     translations,
 )
-from campipe.model.lash import cam_gap, lash_ratio, lash_seat
+from campipe.model.lash import cam_gap, lash_ratio, lash_seat, train_lash_seat
+from campipe.model.layouts import LAYOUTS, placeholders, used_coordinates
 from campipe.model.parameters import (
     DAMPING_KINDS,
     ELEMENTS,
@@ -45,6 +46,7 @@ __all__ = [
     "DAMPING_KINDS",
     "ELEMENTS",
     "LASH_SIDES",
+    "LAYOUTS",
     "PARAMETERS",
     "PRESETS",
     "Coordinate",
@@ -67,6 +69,7 @@ __all__ = [
     "newmark_linear_stability_limit",
     "normal_modes",
     "parse_parameter",
+    "placeholders",
     "preload_vector",
     "rayleigh_damping",
     "static_state",
@@ -75,6 +78,8 @@ __all__ = [
     "system_matrices",
     "thesis_train",
     "to_display_units",
+    "train_lash_seat",
     "translations",
+    "used_coordinates",
     "valve_train",
 ]

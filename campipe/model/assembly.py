@@ -20,8 +20,9 @@ import numpy as np
 from campipe import disk_cache
 from campipe.model.coordinates import TRANSLATIONS, translations
 from campipe.model.elements import elements
+from campipe.model.layouts import placeholder_dynamics, placeholders, used_coordinates
 from campipe.model.parameters import N_DOF, ValveTrain, mode_damping_ratios
-from campipe.vocabulary import CONFIGURATIONS, free_coordinates
+from campipe.vocabulary import CONFIGURATIONS, SEAT, free_coordinates
 
 #: Newmark linear acceleration (β = 1/6, γ = 1/2) is stable for ω·Δt < √12 (= (√3/π)·T),
 #: whatever the damping (the γ = 1/2 family's limit does not depend on ζ).
@@ -49,6 +50,11 @@ def assemble(train: ValveTrain) -> tuple[np.ndarray, np.ndarray]:
     for e in elements(train):
         K += e.beta.T @ e.stiffness @ e.beta
         M += e.beta.T @ e.mass @ e.beta
+    spare = placeholders(train)
+    if spare.size:  # a short lumped chain's placeholders: decoupled, at rest
+        m, k, _ = placeholder_dynamics(train)
+        M[spare, spare] = m
+        K[spare, spare] = k
     return M, K
 
 
@@ -154,13 +160,35 @@ def damping_matrix(
     frequencies: np.ndarray,
     modes: np.ndarray,
 ) -> np.ndarray:
-    """The damping matrix of ``train``'s ``damping_kind`` (see the module)."""
+    """The damping matrix of ``train``'s ``damping_kind`` (see the module); a lumped chain's
+    from its own modes (:func:`chain_damping`)."""
+    if train.chain:
+        return chain_damping(train, mass, stiffness)
     if train.damping_kind == "rayleigh":
         return rayleigh_damping(mass, stiffness, train.rayleigh_alpha, train.rayleigh_beta)
     if train.damping_kind == "loss-factor":
         return loss_factor_damping(train, mass, modes, frequencies)
     ratios = mode_damping_ratios(train.damping_ratios, len(frequencies))
     return modal_damping(mass, modes, frequencies, ratios)
+
+
+def chain_damping(train: ValveTrain, mass: np.ndarray, stiffness: np.ndarray) -> np.ndarray:
+    """A lumped chain's damping matrix: its ``damping_kind`` on the chain's own coordinates
+    (modal: ``damping_ratios`` on the chain's modes with every mass free, Rayleigh's), each
+    placeholder's own (:func:`campipe.model.layouts.placeholder_dynamics`) on its diagonal."""
+    used = used_coordinates(train)
+    chain = np.ix_(used, used)
+    m, k = mass[chain], stiffness[chain]
+    if train.damping_kind == "rayleigh":
+        c = rayleigh_damping(m, k, train.rayleigh_alpha, train.rayleigh_beta)
+    else:
+        omega, phi = normal_modes(m, k, np.ones(used.size, bool))
+        c = modal_damping(m, phi, omega, mode_damping_ratios(train.damping_ratios, used.size))
+    out = np.zeros_like(mass)
+    out[chain] = c
+    spare = placeholders(train)
+    out[spare, spare] = placeholder_dynamics(train)[2]
+    return out
 
 
 def modal_damping_ratios(
@@ -174,9 +202,12 @@ def modal_damping_ratios(
 def preload_vector(train: ValveTrain) -> np.ndarray:
     """The installed spring force as a constant load, (n,): it pushes the rocker valve end up
     (+q4). A refined spring carries the same force in every element, so its internal nodes
-    take none."""
+    take none. A lumped chain's spring pushes its valve closed (−q7)."""
     f = np.zeros(train.n_coordinates)
-    f[3] = train.spring_preload
+    if train.chain:
+        f[SEAT] = -train.spring_preload
+    else:
+        f[3] = train.spring_preload
     return f
 
 

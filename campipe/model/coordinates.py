@@ -5,7 +5,9 @@ always coordinate 0 and the seat coordinate 6. A member divided into n equal ele
 n − 1 internal nodes, counted from the member's first end (see :data:`MEMBER_ENDS`); their
 coordinates follow q7, member by member in the order of
 :data:`campipe.model.parameters.ELEMENTS`: one per node of a bar (its axial displacement, up),
-two per node of a beam (v up, then θ). Pure Python and numpy.
+two per node of a beam (v up, then θ). A chain of masses (``layout`` lumped or
+direct-acting) keeps the same two places, its cam's mass q1 and its valve q7
+(:mod:`campipe.model.layouts`). Pure Python and numpy.
 """
 
 from __future__ import annotations
@@ -14,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from campipe.model.layouts import lumped_coordinates
 from campipe.model.parameters import ELEMENTS, N_DOF, NODE_COORDINATES, ValveTrain
 
 #: A node's coordinate as (0-based q index, sign), or GROUND (−1, 0): fixed.
@@ -84,7 +87,14 @@ def n_coordinates(train: ValveTrain) -> int:
 def coordinates(train: ValveTrain) -> tuple[Coordinate, ...]:
     """``train``'s coordinates in order: :data:`COORDINATES`, then each refined member's
     internal nodes (``spring_1`` … for a bar, ``rocker_valve_arm_1`` and
-    ``rocker_valve_arm_1_rotation`` … for a beam), node 1 next to the member's first end."""
+    ``rocker_valve_arm_1_rotation`` … for a beam), node 1 next to the member's first end.
+    A lumped chain's (:func:`campipe.model.layouts.lumped_coordinates`): ``cam_mass``,
+    ``mass_2`` …, ``valve``, and its placeholders ``unused``."""
+    if train.chain:
+        return tuple(
+            Coordinate(f"q{i + 1}", name, "translation", positive)
+            for i, name, positive in lumped_coordinates(len(train.masses))
+        )
     out = list(COORDINATES)
     for member in ELEMENTS:
         for node in range(1, train.elements_of(member)):

@@ -14,8 +14,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from campipe.constants import STANDARD_GRAVITY
-from campipe.model.coordinates import Dof, member_nodes
+from campipe.model.coordinates import GROUND, Dof, member_nodes
+from campipe.model.layouts import chain_placement
 from campipe.model.parameters import ELEMENTS, NODE_COORDINATES, ValveTrain
+from campipe.vocabulary import SEAT
 
 
 def bar_stiffness(k: float) -> np.ndarray:
@@ -105,7 +107,10 @@ def member_matrices(train: ValveTrain, member: str) -> tuple[np.ndarray, np.ndar
 
 def elements(train: ValveTrain) -> list[Element]:
     """Every finite element of ``train``, member by member (thesis Eqs. 2–10), each member's
-    from its first end to its last; with one element a member, the thesis's five."""
+    from its first end to its last; with one element a member, the thesis's five. A lumped
+    chain's (:func:`chain_elements`) for a chain (layout lumped, direct-acting)."""
+    if train.chain:
+        return chain_elements(train)
     nodes = member_nodes(train)
     n_q = train.n_coordinates
     out = []
@@ -116,4 +121,26 @@ def elements(train: ValveTrain) -> list[Element]:
             # A bar's local order is (u_a, u_b); a beam's (v_a, v_b, θ_a, θ_b) (Eqs. 8, 10).
             rows = [a[0], b[0]] if len(a) == 1 else [a[0], b[0], a[1], b[1]]
             out.append(Element(member, i, _selector(rows, n_q), ke, me))
+    return out
+
+
+def chain_elements(train: ValveTrain) -> list[Element]:
+    """A lumped chain's elements (:mod:`campipe.model.layouts`): a point mass ``mass`` on
+    each of its coordinates, a bar ``link`` (stiffness only) between neighbours, measured
+    along the lift from the cam's side, and the valve ``spring`` from ground (its lower end)
+    up to the valve: the valve's opening (+q7) compresses it, as the thesis's spring's
+    (its extension is −q7)."""
+    index, sign = chain_placement(len(train.masses))
+    n_q = train.n_coordinates
+    node = [(int(i), float(s)) for i, s in zip(index, sign, strict=True)]
+    none = np.zeros((1, 1))
+    out = [
+        Element("mass", j, _selector([node[j]], n_q), none, np.array([[m]]))
+        for j, m in enumerate(train.masses)
+    ]
+    zero = np.zeros((2, 2))
+    for j, k in enumerate(train.stiffnesses):
+        out.append(Element("link", j, _selector(node[j : j + 2], n_q), bar_stiffness(k), zero))
+    spring = _selector([GROUND, (SEAT, -1.0)], n_q)
+    out.append(Element("spring", 0, spring, bar_stiffness(train.spring_rate), zero))
     return out

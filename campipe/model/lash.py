@@ -22,9 +22,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from campipe.model.assembly import SystemMatrices, static_state
+from campipe.model.assembly import SystemMatrices, static_state, system_matrices
 from campipe.model.coordinates import COORDINATES
-from campipe.model.parameters import LASH_SIDES, ModelParameterError
+from campipe.model.parameters import LASH_SIDES, ModelParameterError, ValveTrain
 from campipe.vocabulary import CAM, SEAT
 
 #: q4, the rocker's valve end (up positive): where a valve-side lash is measured.
@@ -74,3 +74,11 @@ def lash_seat(sm: SystemMatrices, lash: float, side: str) -> float:
     low, high = _seated(sm)
     gap = _gap(low, high, lash, side)
     return float((gap + low[CAM]) / (low[CAM] - high[CAM]))
+
+
+def train_lash_seat(train: ValveTrain) -> float:
+    """The seat ``train``'s lash places (:func:`lash_seat` on its ``lash_side``). A chain of
+    masses (:mod:`campipe.model.layouts`) takes a gap up as a rigid body, so its lash is the
+    same measured at the valve or at the cam."""
+    side = "cam" if train.chain else train.lash_side
+    return lash_seat(system_matrices(train), train.lash, side)

@@ -37,7 +37,14 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from campipe.errors import CampipeError, did_you_mean, excerpt
+from campipe.errors import did_you_mean, excerpt
+from campipe.model.checks import (
+    CHAINS,
+    LAYOUTS,
+    PUSHROD_ROCKER,
+    ModelParameterError,
+    resolve_layout,
+)
 from campipe.units import QuantityError, parse_quantity
 
 ELEMENTS = ("pushrod", "rocker_pushrod_arm", "rocker_valve_arm", "spring", "valve_stem")
@@ -65,6 +72,8 @@ DAMPING_KINDS = ("modal", "rayleigh", "loss-factor")
 #: impact, a linear spring and damper (no tension), Hertz's point contact with Hunt–Crossley
 #: damping (:mod:`campipe.model.contact`).
 CONTACT_LAWS = ("rigid", "kelvin-voigt", "hertz")
+MAX_MASSES = 64  # most masses of a lumped chain
+_LAYOUT = "valve-train layout: " + ", ".join(LAYOUTS) + " (campipe.model.layouts)"
 
 
 @dataclass(frozen=True)
@@ -83,6 +92,7 @@ class Parameter:
     default: object = None  # the value (spec form) where neither preset nor override gives one
     maximum: float = math.inf  # largest allowed value (counts: the matrices stay small)
     allow_none: bool = False  # "none" (or null) accepted, meaning absent: NaN in SI
+    min_length: int = 1  # fewest values of a list (0: an empty list, "not given")
 
     @property
     def continuous(self) -> bool:
@@ -237,9 +247,32 @@ def _contact_parameters() -> list[Parameter]:
     return out
 
 
+def _chain_list(name: str, what: str, units: str, shown: str) -> Parameter:
+    return Parameter(
+        name, f"lumped chain's {what} (layout lumped)", units, shown, 0.0,
+        length=MAX_MASSES, min_length=0, default=[],
+    )  # fmt: skip
+
+
+def _direct(name: str, what: str, units: str, shown: str) -> Parameter:
+    return Parameter(
+        name, f"{what} (layout direct-acting)", units, shown, 0.0, allow_none=True,
+        default="none",
+    )  # fmt: skip
+
+
 PARAMETERS: dict[str, Parameter] = {
     p.name: p
     for p in [
+        Parameter("layout", _LAYOUT, "", "", 0.0, choices=LAYOUTS, default=PUSHROD_ROCKER),
+        _chain_list("masses", "masses from the cam side, the last the valve", "kg", "kg"),
+        _chain_list(
+            "stiffnesses", "stiffnesses between neighbours, from the cam side", "N/m", "N/mm"
+        ),
+        _direct("tappet_mass", "bucket tappet's mass with its shim", "kg", "kg"),
+        _direct("valve_mass", "valve's mass with retainer, keepers, spring share", "kg", "kg"),
+        _direct("stem_stiffness", "valve stem's axial stiffness, tip to head", "N/m", "N/mm"),
+        _direct("tappet_contact_stiffness", "tappet's contact on the stem tip", "N/m", "N/mm"),
         *_element_parameters(),
         Parameter("elastic_modulus", "elastic modulus of all members", "Pa", "lbf/in**2", 0.0),
         Parameter("specific_weight", "specific weight of all members", "N/m**3", "lbf/in**3", 0.0),
@@ -404,6 +437,13 @@ class ValveTrain:
     seat_contact_radius: float = 0.0  # [m] 0: not given
     contact_modulus: float = 30e6 * 4.4482216152605 / 0.0254**2  # [Pa] both bodies (steel)
     contact_poisson: float = 0.3  # [-]
+    layout: str = PUSHROD_ROCKER  # one of LAYOUTS
+    masses: tuple[float, ...] = ()  # [kg] a lumped chain's, the cam's first, the valve last
+    stiffnesses: tuple[float, ...] = ()  # [N/m] between neighbouring masses, the cam's first
+    tappet_mass: float = math.nan  # [kg] direct-acting: the bucket tappet with its shim
+    valve_mass: float = math.nan  # [kg] direct-acting: valve, retainer, keepers, spring share
+    stem_stiffness: float = math.nan  # [N/m] direct-acting: the valve stem, tip to head
+    tappet_contact_stiffness: float = math.nan  # [N/m] direct-acting: tappet on the stem tip
 
     def replace(self, **changes: Any) -> ValveTrain:
         """A copy with some values (SI) changed."""
@@ -412,6 +452,11 @@ class ValveTrain:
     def as_dict(self) -> dict[str, object]:
         return dataclasses.asdict(self)
 
+    @property
+    def chain(self) -> bool:
+        """A chain of masses (layout lumped, or built as one: :mod:`campipe.model.layouts`)."""
+        return self.layout in CHAINS
+
     def elements_of(self, member: str) -> int:
         """The number of finite elements ``member`` (a name of ``ELEMENTS``) is divided into."""
         return int(getattr(self, f"{member}_elements"))
@@ -419,13 +464,11 @@ class ValveTrain:
     @property
     def n_coordinates(self) -> int:
         """Number of system coordinates: the thesis's seven, and those of the internal nodes
-        of refined members (a bar's n − 1 internal nodes one each, a beam's two each)."""
+        of refined members (a bar's n − 1 internal nodes one each, a beam's two each); a
+        lumped chain's masses, seven at least (:mod:`campipe.model.layouts`)."""
+        if self.chain:
+            return max(N_DOF, len(self.masses))
         return N_DOF + sum((self.elements_of(m) - 1) * NODE_COORDINATES[m] for m in ELEMENTS)
-
-
-class ModelParameterError(CampipeError, ValueError):
-    """A model parameter that is unknown, badly typed or out of range; ``key`` is the key path
-    named in the message (``model.spring_rate``, ``damping_ratios[1]``)."""
 
 
 def parse_parameter(
@@ -473,22 +516,27 @@ def parse_parameter(
 
 
 def _list(p: Parameter, value: object, key: str) -> tuple[float, ...]:
-    if isinstance(value, str):
-        value = [v for v in value.strip("[]() ").replace(",", " ").split()]
-    if not isinstance(value, (list, tuple)) or not value:
+    if isinstance(value, str):  # a list of quantities splits at its commas only
+        inner = value.strip("[]() ")
+        parts = inner.split(",") if p.units else inner.replace(",", " ").split()
+        value = [v.strip() for v in parts if v.strip()]
+    items = value if isinstance(value, (list, tuple)) else None
+    if items is None or not p.min_length <= len(items) <= (p.length if p.units else math.inf):
+        hint = f"with units, e.g. [1 {p.thesis_units}, 2 {p.thesis_units}], at most {p.length}"
+        if not p.units:
+            hint = f"lowest mode first ({p.length} for the thesis's model; a shorter list "
+            hint += "gives its last value to the modes above)"
         raise ModelParameterError.at(
             key,
-            f"expected a list of numbers, lowest mode first ({p.length} for the thesis's "
-            f"model; a shorter list gives its last value to the modes above), "
-            f"found {excerpt(value)}",
+            f"expected a list of numbers, {hint}, found {excerpt(value)}",
             found=value,
-            expected="a list of one or more numbers",
+            expected=f"a list of {p.min_length} or more numbers",
         )
     out = tuple(
         parse_quantity(_number(v), p.units, f"{key}[{i}]", p.thesis_units)
-        for i, v in enumerate(value)
+        for i, v in enumerate(items)
     )
-    for i, (v, raw) in enumerate(zip(out, value, strict=True)):
+    for i, (v, raw) in enumerate(zip(out, items, strict=True)):
         _check_range(p, v, f"{key}[{i}]", raw)
     return out
 
@@ -568,7 +616,17 @@ def valve_train(
     values = {**DEFAULTS, **PRESETS[preset], **(overrides or {})}
     resolved = {name: parse_parameter(name, v, key_prefix + name) for name, v in values.items()}
     train = ValveTrain(**resolved)  # type: ignore[arg-type]
-    mode_damping_ratios(train.damping_ratios, train.n_coordinates, key_prefix + "damping_ratios")
+    train = resolve_layout(train, overrides or {}, ELEMENTS, key_prefix)
+    modes = len(train.masses) if train.chain else train.n_coordinates
+    if train.chain and "damping_ratios" not in (overrides or {}):
+        raise ModelParameterError.at(
+            key_prefix + "damping_ratios",
+            f"layout {train.layout} needs its own: the preset's are the thesis's train's; give "
+            f"1 to {modes} ratios of the chain's modes, lowest first (e.g. [0.05])",
+            found=None,
+            expected=f"1 to {modes} damping ratios",
+        )
+    mode_damping_ratios(train.damping_ratios, modes, key_prefix + "damping_ratios")
     check_contacts(train, key_prefix)
     return train
 

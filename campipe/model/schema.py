@@ -28,16 +28,18 @@ def parameter_schema(name: str) -> dict[str, object]:
             "description": p.long_name,
         }
     number: dict[str, object] = {"type": "number", "minimum": p.minimum}
+    quantity = {"type": "string", "pattern": QUANTITY_PATTERN}
     if p.length:
         return {
             "type": "array",
-            "items": number,
-            "minItems": 1,
-            "description": p.long_name,
+            "items": quantity if p.units else number,
+            "minItems": p.min_length,
+            **({"maxItems": p.length} if p.units else {}),
+            "description": p.long_name
+            + (f", each a quantity with units, e.g. '1 {p.thesis_units}'" if p.units else ""),
         }
     if not p.units:
         return {**number, "description": p.long_name}
-    quantity = {"type": "string", "pattern": QUANTITY_PATTERN}
     example = f"a quantity with units, e.g. '1 {p.thesis_units}'"
     if p.allow_none:
         return {

@@ -287,3 +287,34 @@ def test_lash_ramp(tmp_path):
             assert v > 1.3 * ramp, (rpm, height)
     assert np.all(ds.separation_deg_per_rev.values[ds.speed_rpm.values < 3000] == 0)
     assert np.all(ds.separation_deg_per_rev.values[ds.speed_rpm.values > 3000] > 10)
+
+
+def test_bucket_tappet_lash(tmp_path):
+    """Quick variant (2 speeds × 2 lashes, 2 turns) of the direct-acting bucket tappet. At
+    2000 rpm the valve lands on its seat at the closing ramp's velocity, the static valve
+    ratio × ω × height / duration (a hand calculation from the ramp, to 1 %), whatever the
+    lash within the ramp; at 6000 rpm the train leaves the cam for most of the turn and lands
+    faster than its ramp. Fails on a copy whose direct-acting chain adds the stem and contact
+    stiffnesses in parallel (a stiffer train follows to 6000 rpm)."""
+    from campipe.engine.batch import valve_ratio
+
+    ds = run(
+        tmp_path,
+        "bucket-tappet-lash",
+        **{
+            "run.revolutions": 2,
+            "sweep.speed": ["2000 rpm", "6000 rpm"],
+            "sweep.model.lash": ["0.1 mm", "0.25 mm"],
+        },
+    )
+    assert ds.sizes["case"] == 4 and (ds.status == 0).all()
+    train = load_study(STUDIES / "bucket-tappet-lash.yaml").cases[0].case.train
+    assert train.layout == "direct-acting" and train.masses == (0.045, 0.065)
+    ratio = valve_ratio(system_matrices(train))
+    rpm, v = ds.speed_rpm.values, ds.max_seating_velocity.values
+    ramp = ratio * rpm * math.pi / 30 * 0.3e-3 / math.radians(30)
+    slow = rpm == 2000
+    assert_allclose(v[slow], ramp[slow], rtol=0.01)
+    assert np.all(ds.separation_deg_per_rev.values[slow] == 0)
+    assert np.all(ds.separation_deg_per_rev.values[~slow] > 100)
+    assert np.all(v[~slow] > 1.3 * ramp[~slow])

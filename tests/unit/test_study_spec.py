@@ -35,6 +35,7 @@ EXAMPLE_CASES = {
     "valve-bounce": 21,
     "design-spring": 2,
     "design-spring-rate": 2,
+    "bucket-tappet-lash": 18,
 }
 
 

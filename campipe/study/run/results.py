@@ -18,6 +18,7 @@ import campipe
 from campipe import engine
 from campipe.engine.loads import MEMBER_LOADS, SPRING_HISTORIES, member_loads
 from campipe.engine.metrics import archived_metrics
+from campipe.model.layouts import placeholders
 from campipe.sources import source_digest
 from campipe.study.spec.resolve import ResolvedCase
 from campipe.study.spec.variables import data_variables
@@ -177,7 +178,9 @@ def batch_arrays(plan: BatchPlan, result: BatchResult) -> BatchData:
             else values
         )
     if "q" in wanted:
-        arrays["q"] = result.q[:, :, :N_COORDINATES]  # the dof axis: q1 … q7
+        arrays["q"] = result.q[:, :, :N_COORDINATES].copy()  # the dof axis: q1 … q7
+        for i, c in enumerate(plan.cases):  # a short lumped chain's placeholders: NaN
+            arrays["q"][i, :, placeholders(c.case.train)] = np.nan
     loads = set(MEMBER_LOADS) & set(wanted)
     if loads:
         per_case = [member_loads(c.case.train, result.q[i]) for i, c in enumerate(plan.cases)]

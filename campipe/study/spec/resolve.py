@@ -36,8 +36,8 @@ from campipe.model import (
     ModelParameterError,
     ValveTrain,
     defining_values,
-    lash_seat,
     system_matrices,
+    train_lash_seat,
     valve_train,
 )
 from campipe.profiles import (
@@ -190,6 +190,14 @@ def _train(preset: str, overrides: tuple) -> ValveTrain:
         raise SpecProblem.from_error(exc) from None
     check_train(train)
     return train
+
+
+def valve_lift_ratio(train: ValveTrain) -> float:
+    """The valve's lift per unit cam lift as a rigid train: the rocker's arm ratio, 1 for a
+    lumped chain."""
+    if train.chain:
+        return 1.0
+    return train.rocker_valve_arm_length / train.rocker_pushrod_arm_length
 
 
 def check_train(train: ValveTrain) -> None:
@@ -403,7 +411,7 @@ def resolve_canonical(raw: Mapping, index: int, directory: Path) -> tuple[Resolv
     speed = parse_value("speed", freeze(raw["speed"]), "speed")
     seat = parse_value("seat", freeze(raw["seat"]), "seat")
     closure = parse_value("closure", raw["closure"], "closure")
-    ratio = train.rocker_valve_arm_length / train.rocker_pushrod_arm_length
+    ratio = valve_lift_ratio(train)
     if not math.isnan(train.lash):
         seat = _lash_placed_seat(raw, model, train, seat)
     if seat is not None and seat >= full * ratio:
@@ -487,7 +495,7 @@ def canonical_run(settings: RunSettings) -> dict[str, object]:
 def _lash_placed_seat(raw: Mapping, model: Mapping, train: ValveTrain, seat: float | None) -> float:
     """The seat a train's lash places (``campipe.model.lash_seat``); a seat given beside it
     refused at ``seat``, with the seat the lash places in the spec's units."""
-    placed = lash_seat(system_matrices(train), train.lash, train.lash_side)
+    placed = train_lash_seat(train)
     if seat is not None:
         where = _in_units(placed, model.get("lash"), raw["seat"])
         raise SpecProblem(

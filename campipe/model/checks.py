@@ -1,0 +1,111 @@
+"""The model's parameter error, and the rules across parameters that name a layout: which
+layout a key belongs to, what each layout needs, and the named-parameter layouts built over
+the lumped chain (``direct-acting``).
+
+Pure Python; :mod:`campipe.model.parameters` calls :func:`resolve_layout` on every train it
+resolves (its table and :class:`~campipe.model.parameters.ValveTrain` are its own: this module
+reads a train by its attributes only).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+from campipe.errors import CampipeError
+
+#: Layouts (:mod:`campipe.model.layouts`): the thesis's train from its members' geometry; a
+#: chain of masses given directly; a bucket tappet on its valve from named masses and
+#: stiffnesses, built as a two-mass chain.
+PUSHROD_ROCKER, LUMPED, DIRECT_ACTING = "pushrod-rocker", "lumped", "direct-acting"
+LAYOUTS = (PUSHROD_ROCKER, LUMPED, DIRECT_ACTING)
+#: The layouts that are chains of masses (the lumped chain's coordinates and numerics).
+CHAINS = (LUMPED, DIRECT_ACTING)
+#: A direct-acting train's keys, in the order its chain takes them.
+DIRECT_ACTING_KEYS = ("tappet_mass", "valve_mass", "stem_stiffness", "tappet_contact_stiffness")
+#: The thesis's members' keys end so (with ``ELEMENTS``' names before).
+_MEMBER_ENDS = ("_length", "_diameter", "_elements", "_loss_factor")
+
+
+class ModelParameterError(CampipeError, ValueError):
+    """A model parameter that is unknown, badly typed or out of range; ``key`` is the key path
+    named in the message (``model.spring_rate``, ``damping_ratios[1]``)."""
+
+
+def layout_of_key(name: str, members: tuple[str, ...]) -> str | None:
+    """The layout a parameter belongs to (None: every layout's): the thesis's ``members``'
+    geometry, refinement and loss factors and its material to pushrod-rocker,
+    ``masses`` and ``stiffnesses`` to lumped, :data:`DIRECT_ACTING_KEYS` to direct-acting."""
+    thesis = name.startswith(members) and name.endswith(_MEMBER_ENDS)
+    if thesis or name in ("elastic_modulus", "specific_weight"):
+        return PUSHROD_ROCKER
+    if name in ("masses", "stiffnesses"):
+        return LUMPED
+    return DIRECT_ACTING if name in DIRECT_ACTING_KEYS else None
+
+
+def resolve_layout(
+    train: Any, overrides: Mapping[str, object], members: tuple[str, ...], key_prefix: str = ""
+) -> Any:
+    """``train`` checked against its layout, and a direct-acting train built as its chain
+    (``masses`` and ``stiffnesses`` from its named keys: :func:`direct_acting_chain`).
+
+    Refuses, naming the key: another layout's keys given in ``overrides`` (``damping_kind:
+    loss-factor`` on a chain: it needs members), a direct-acting key not given, a chain of one
+    mass (not yet supported), ``stiffnesses`` not one fewer than ``masses``."""
+    for name in overrides:
+        owner = layout_of_key(name, members)
+        if name == "damping_kind" and overrides[name] == "loss-factor":
+            owner = PUSHROD_ROCKER
+        if owner not in (None, train.layout):
+            raise ModelParameterError.at(
+                key_prefix + name,
+                f"is a key of layout {owner} but layout is {train.layout}: leave it out or "
+                f"set {key_prefix}layout: {owner}",
+                found=overrides[name],
+                expected=f"no {name} with layout {train.layout}",
+            )
+    if train.layout == DIRECT_ACTING:
+        train = train.replace(**direct_acting_chain(train, key_prefix))
+    if train.layout in CHAINS:
+        _check_chain(train, key_prefix)
+    return train
+
+
+def direct_acting_chain(train: Any, key_prefix: str = "") -> dict[str, tuple[float, ...]]:
+    """A bucket tappet on its valve as a two-mass chain: the tappet (with its shim) rides the
+    cam, the valve (with its retainer, keepers and the spring's share of mass) meets the seat,
+    and between them the tappet's contact on the stem tip and the stem in series,
+    k = 1/(1/k_contact + 1/k_stem)."""
+    values = [getattr(train, name) for name in DIRECT_ACTING_KEYS]
+    for name, value in zip(DIRECT_ACTING_KEYS, values, strict=True):
+        if not value > 0.0:  # NaN: not given
+            raise ModelParameterError.at(
+                key_prefix + name,
+                f"layout {DIRECT_ACTING} needs {name} (" + ", ".join(DIRECT_ACTING_KEYS) + ")",
+                found=None,
+                expected=f"a positive {name}",
+            )
+    tappet, valve, stem, contact = values
+    return {"masses": (tappet, valve), "stiffnesses": (1.0 / (1.0 / contact + 1.0 / stem),)}
+
+
+def _check_chain(train: Any, key_prefix: str) -> None:
+    n = len(train.masses)
+    if n < 2:
+        raise ModelParameterError.at(
+            key_prefix + "masses",
+            f"found {n} masses; a lumped chain needs two or more (the first on the cam, the "
+            "last the valve): one mass, a rigid follower with no free coordinate while it "
+            "rides the cam, is not yet supported",
+            found=train.masses,
+            expected="two or more masses",
+        )
+    if len(train.stiffnesses) != n - 1:
+        raise ModelParameterError.at(
+            key_prefix + "stiffnesses",
+            f"found {len(train.stiffnesses)} stiffnesses for {n} masses: give one fewer than "
+            "masses, the links between neighbours from the cam side",
+            found=train.stiffnesses,
+            expected=f"{n - 1} stiffnesses",
+        )

@@ -1,0 +1,105 @@
+"""A lumped chain (model.layout: lumped) through the command line: `campipe model` prints its
+modes, `campipe study` runs, archives and `campipe query` selects its cases."""
+
+import json
+import math
+
+import numpy as np
+import xarray as xr
+from click.testing import CliRunner
+from study_helpers import write_spec
+
+from campipe.cli import main
+
+M1, M2, LINK, RATE, PRELOAD = 0.05, 0.06, 20000e3, 40e3, 250.0
+MODEL = (
+    "{layout: lumped, masses: [0.05 kg, 0.06 kg], stiffnesses: [20000 N/mm], "
+    "spring_rate: 40 N/mm, spring_preload: 250 N, damping_ratios: [0.05, 0.05]}"
+)
+SETS = [
+    "--set", "layout=lumped",
+    "--set", "masses=[0.05 kg, 0.06 kg]",
+    "--set", "stiffnesses=[20000 N/mm]",
+    "--set", "spring_rate=40 N/mm",
+    "--set", "spring_preload=250 N",
+    "--set", "damping_ratios=[0.05, 0.05]",
+]  # fmt: skip
+
+
+def invoke(*args):
+    return CliRunner().invoke(main, list(args))
+
+
+def test_campipe_model_prints_the_chain_s_two_modes():
+    """The JSON's natural frequencies are the two-mass chain's closed form (every mass free:
+    the roots of m1·m2·ω⁴ − (m1·(k + ks) + m2·k)·ω² + k·ks), its coordinates the cam's mass
+    and the valve only (no placeholders), each mode damped 0.05; the text names the layout.
+    Fails on a copy that shows the placeholders' modes or the thesis's parameters."""
+    out = invoke("model", *SETS, "--json")
+    assert out.exit_code == 0, out.output
+    report = json.loads(out.output)
+    a, b, c = M1 * M2, -(M1 * (LINK + RATE) + M2 * LINK), LINK * RATE
+    roots = [(-b - s * math.sqrt(b * b - 4 * a * c)) / (2 * a) for s in (1, -1)]
+    np.testing.assert_allclose(report["natural_frequencies"], np.sqrt(roots), rtol=1e-10)
+    np.testing.assert_allclose(report["modal_damping_ratios"], [0.05, 0.05], rtol=1e-9)
+    assert [(x["symbol"], x["name"]) for x in report["coordinates"]] == [
+        ("q1", "cam_mass"),
+        ("q7", "valve"),
+    ]
+    assert report["layout"] == "lumped" and "pushrod_length" not in report["parameters"]
+    assert report["parameters"]["masses"]["value"] == [M1, M2]
+    text = invoke("model", *SETS).output
+    assert "layout lumped" in text and "pushrod_length" not in text
+    assert f"{math.sqrt(roots[0]):14.1f}" in text  # 602.9 rad/s
+
+
+def test_a_lumped_study_runs_archives_and_queries(tmp_path):
+    """The issue's chain over speeds and a seat: below its onset (about 10 400 rpm) it
+    follows the cam, at 16 000 rpm it leaves it; the archive's q holds the cam's mass and the
+    valve with NaN on the placeholders; the spring force is P + ks·q7 and the chain's single
+    link carries the pushrod's and the stem's force; the query selects by speed. Fails on a
+    copy that writes the placeholders' zeros, or measures the spring on the cam's side."""
+    spec = write_spec(
+        tmp_path,
+        f"""
+    name: lumped-chain
+    model: {MODEL}
+    profile: {{kind: harmonic, lift: 10 mm}}
+    speed: 3000 rpm
+    sweep: {{speed: [3000 rpm, 9000 rpm, 16000 rpm], seat: [none, 0 mm]}}
+    run: {{revolutions: 2, record: [q, member_loads, spring]}}
+    """,
+    )
+    archive = tmp_path / "chain.nc"
+    out = invoke("study", str(spec), "-o", str(archive), "--scheduler", "synchronous")
+    assert out.exit_code == 0, out.output
+    ds = xr.load_dataset(archive)
+    assert ds.sizes["case"] == 6 and (ds.status == 0).all()
+    speed = ds.speed_rpm.values
+    sep = ds.separation_deg.values
+    assert (sep[speed < 10000] == 0).all() and (sep[speed > 10000] > 100).all()
+    q = ds.q.values
+    assert np.isnan(q[:, :, 1:6]).all() and np.isfinite(q[:, :, [0, 6]]).all()
+    # valve lift from the valve's static position on the base circle, −P/(k + ks)
+    ref = -PRELOAD / (LINK + RATE)
+    np.testing.assert_allclose(ds.valve_lift.values, q[:, :, 6] - ref, atol=1e-12)
+    np.testing.assert_allclose(ds.spring_force.values, PRELOAD + RATE * q[:, :, 6], rtol=1e-12)
+    np.testing.assert_allclose(ds.pushrod_force, ds.stem_force, rtol=0)
+    link = LINK * (-q[:, :, 0] - q[:, :, 6])  # k·(x1 − x2), x1 = −q1
+    np.testing.assert_allclose(ds.pushrod_force.values, link, rtol=1e-9, atol=1e-6)
+    assert np.isnan(ds.rocker_moment.values).all()
+    lift = ds.valve_lift.values[speed == 3000].max()
+    assert abs(lift - 0.01 * LINK / (LINK + RATE)) < 2e-3 * 0.01  # dynamic within 0.2 %
+    table = invoke("query", str(archive), "--where", "speed_rpm > 5000", "--format", "json")
+    assert table.exit_code == 0, table.output
+    rows = json.loads(table.output)["cases"]
+    assert sorted(r["speed_rpm"] for r in rows) == [9000, 9000, 16000, 16000]
+
+
+def test_campipe_model_refuses_convergence_on_a_chain():
+    """--convergence refines the thesis's members, which a chain has none of: a usage error
+    naming the layout, not a table of unchanged frequencies. Fails on a copy that refines the
+    preset's members beside the chain."""
+    out = invoke("model", *SETS, "--convergence", "spring_elements")
+    assert out.exit_code == 2
+    assert "layout lumped has none" in out.output
