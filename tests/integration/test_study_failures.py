@@ -211,6 +211,27 @@ def test_a_cluster_without_workers_is_reported_at_once_and_stops_resumable(
     assert (report.computed, report.reused) == (3, 0)
 
 
+def test_a_parts_study_on_a_cluster_without_workers_stops_too(tmp_path, monkeypatch, caplog):
+    """The parts archive's path (workers write the parts, ``cluster.run_parts``) on a
+    scheduler with no worker: the same warning, the same stop after WORKER_TIMEOUT, nothing
+    computed. Broken copy, run_parts: its batches waited on with as_completed and no
+    timeout (as before): this test hangs."""
+    import logging
+
+    from distributed import LocalCluster
+
+    monkeypatch.setattr(workers, "WORKER_TIMEOUT", 2)
+    spec = write_spec(tmp_path, SPEC)
+    with LocalCluster(n_workers=0, processes=False, dashboard_address=":0") as cluster:
+        address = cluster.scheduler_address
+        with caplog.at_level(logging.WARNING, logger="campipe.study.run.workers"):
+            with pytest.raises(workers.SchedulerError, match="had no worker for 2 s"):
+                run_study(load_study(spec), tmp_path / "small.parts", scheduler=address,
+                          parts=True)  # fmt: skip
+    assert f"dask cluster at {address} has no worker: waiting up to 2 s" in caplog.text
+    assert not list((tmp_path / "small.parts").glob("*.nc"))
+
+
 def test_losing_every_worker_stops_the_study_resumable(tmp_path, monkeypatch, caplog):
     """The cluster's only worker retired after the first batch: reported, the study stops
     after WORKER_TIMEOUT, the first batch kept for the rerun. Broken copy, _Idle.check:

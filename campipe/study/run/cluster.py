@@ -181,7 +181,8 @@ def part_task(
 
 def run_parts(
     client,
-    as_completed,
+    wait,
+    idle,
     plans: Sequence[BatchPlan],
     storage: Storage,
     token_file: Path,
@@ -191,8 +192,10 @@ def run_parts(
     tag: str,
 ) -> None:
     """Every batch of ``plans`` as a part its worker writes, ``done`` called with each
-    :class:`PartCount` as it arrives (``as_completed``: distributed's). The workers are
-    probed first (:func:`check_workers`); the plans and storage go to the cluster once."""
+    :class:`PartCount` as it arrives (``wait``: distributed's). The workers are probed first
+    (:func:`check_workers`); the plans and storage go to the cluster once. While none
+    finishes, ``idle.poll`` seconds apart, ``idle.check()`` counts the workers (and stops a
+    study whose cluster has had none for too long)."""
     check_workers(client, storage.directory, token_file, token)
     # A task of its own, not scattered data: the scheduler keeps it and computes it again
     # on another worker if the one holding it dies.
@@ -209,10 +212,18 @@ def run_parts(
         key=[f"campipe-{p.key}-{tag}" for p in plans],
         pure=False,
     )
-    for _, result in as_completed(futures, with_results=True, loop=client.loop):
-        if isinstance(result, BaseException):  # a batch cancelled (its cluster lost)
-            raise result
-        done(result)
+    pending = list(futures)
+    while pending:
+        try:  # the first to finish, or none within the poll: then count the workers
+            finished = set(wait(pending, timeout=idle.poll, return_when="FIRST_COMPLETED")[0])
+        except TimeoutError:
+            idle.check()
+            continue
+        for future in [f for f in pending if f in finished]:
+            pending.remove(future)
+            result = future.result()  # raises for a batch cancelled (its cluster lost)
+            future.release()
+            done(result)
 
 
 def _shared(

@@ -278,7 +278,7 @@ def _run_distributed(
     workers_store: bool,
     stored: Callable[[Stored | BatchData | PartCount], None],
 ) -> None:
-    from distributed import as_completed, wait
+    from distributed import wait
 
     try:
         client = _connect(address)
@@ -304,8 +304,9 @@ def _run_distributed(
             if storage.parts and reach is not None:
                 tag, reached = token[:8], _reach_file(parts, reach)
                 run_parts(
-                    client, as_completed, plans, storage, reached, reach, compute_batch, stored, tag
-                )
+                    client, wait, _Idle(client), plans, storage, reached, reach, compute_batch,
+                    stored, tag,
+                )  # fmt: skip
             else:
                 _submit_all(client, wait, plans, token[:8], task, stored)
     except (SchedulerError, ArchiveWriteError, CampipeError):
@@ -399,6 +400,11 @@ class _Idle:
     def __init__(self, client) -> None:
         self.client = client
         self.since: float | None = None  # monotonic time the workers were first missed
+
+    @property
+    def poll(self) -> float:
+        """Seconds between the checks (:data:`WORKER_POLL`)."""
+        return WORKER_POLL
 
     def check(self) -> None:
         if self.client.nthreads():
