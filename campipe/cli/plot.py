@@ -8,7 +8,7 @@ from campipe.cli.base import Failure, InputFailure, SpecRefused, units_option, v
 
 #: The plot kinds (campipe.study.spec.plots.KINDS, repeated so --help needs no import of the study
 #: layer; tests/integration/test_plot.py checks they agree).
-PLOT_KINDS = ("histories", "metric", "map", "events", "pareto")
+PLOT_KINDS = ("histories", "metric", "map", "events", "pareto", "spectrum")
 
 
 @click.command()
@@ -106,6 +106,7 @@ def plot(
     map        a per-case value (--z) over two columns (--x, --y), its contour at --level
     events     each case's separations, landings and seatings on a cam angle × case chart
     pareto     a campipe design file's two objectives (--x, --y), its Pareto front
+    spectrum   the order spectrum of a history (--y; valve acceleration) over the last turn
     """
     from campipe.plot import plot_archive
     from campipe.study.spec.plots import PlotError, check_plot

@@ -45,6 +45,7 @@ def plot_archive(
         The file written and the figure.
     """
     from campipe.plot.figures import figure
+    from campipe.plot.spectrum import spectrum_figure
 
     archive = Path(archive)
     if output is None:
@@ -70,7 +71,7 @@ def plot_archive(
                 (archive.parent / spec if spec else None, "the archive's spec"),
             ],
         )
-        fig = figure(ds, request)
+        fig = (spectrum_figure if request.kind == "spectrum" else figure)(ds, request)
     return write(fig, output), fig
 
 

@@ -40,6 +40,8 @@ KINDS = {
     "events": "each case's events on a cam angle × case chart",
     "pareto": "a campipe design file's two objectives (x, y), the designs evaluated and their "
     "Pareto front",
+    "spectrum": "the order spectrum of a history (y; valve acceleration by default) over the "
+    "last recorded turn, the cases overlaid",
 }
 #: File types by the output's suffix.
 FORMATS = (".png", ".svg", ".pdf")
@@ -50,6 +52,7 @@ KIND_KEYS = {
     "map": ("x", "y", "z", "level"),
     "events": ("turn", "angle", "range"),
     "pareto": ("x", "y"),
+    "spectrum": ("y",),
 }
 #: The angles a histories or events figure may draw along x.
 ANGLES = ("cam", "crank")
@@ -70,7 +73,9 @@ class PlotRequest:
     units: str = "spec"  # unit system (SYSTEMS)
     output: str | None = None  # file to write (.png, .svg, .pdf)
     x: str | None = None  # column along x (metric, map)
-    y: str | None = None  # metric: the value plotted; map: the column along y
+    y: str | None = (
+        None  # metric: the value plotted; map: the column along y; spectrum: the history
+    )
     z: str | None = None  # map: the value coloured
     level: str | float | None = None  # map: the contour's level, a number in z's shown
     #                                   units or a quantity ("1 deg")
