@@ -7,7 +7,7 @@ import sys
 
 import click
 
-from campipe.cli.base import InputFailure, verify_option
+from campipe.cli.base import InputFailure, units_option, verify_option
 
 
 @click.command()
@@ -45,10 +45,12 @@ from campipe.cli.base import InputFailure, verify_option
     help="Factor on the sketch's deviations from the rigid-body motion.",
 )
 @verify_option
-def replay(archive, case_ids, where, output, overwrite, spawn, magnify, verify) -> None:
-    """Write a rerun recording of cases of ARCHIVE: lift, force and contact plots, events,
-    parameters and the moving mechanism, on the timelines cam_angle and time. All cases go
-    into one recording, each in its own cases/<case_id> subtree and blueprint tab."""
+@units_option
+def replay(archive, case_ids, where, output, overwrite, spawn, magnify, verify, units) -> None:
+    """Write a rerun recording of cases of ARCHIVE: lift, force and contact plots (in the
+    units query and plot show, --units), events, parameters and the moving mechanism (in mm),
+    on the timelines cam_angle and time. All cases go into one recording, each in its own
+    cases/<case_id> subtree and blueprint tab."""
     from campipe.replay.cases import ReplayError
     from campipe.replay.record import replay_archive
     from campipe.study.run.progress import Progress
@@ -79,6 +81,7 @@ def replay(archive, case_ids, where, output, overwrite, spawn, magnify, verify) 
             progress=bar,
             overwrite=overwrite,
             verify=verify,
+            units=units,
         )
     except QueryError as exc:
         raise click.UsageError(str(exc)) from None

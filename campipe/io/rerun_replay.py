@@ -60,17 +60,19 @@ NANOS = 1_000_000_000
 #: Sketch and lift units: millimetres per metre.
 MM = 1000.0
 
-#: Series: archive name → (entity under the case, label with units, factor from archive units,
-#: colour).
-SERIES: dict[str, tuple[str, str, float, tuple[int, int, int]]] = {
-    "cam_lift": ("lift/cam", "cam lift [mm]", MM, (150, 150, 150)),
-    "follower_lift": ("lift/follower", "follower lift [mm]", MM, (50, 110, 200)),
-    "valve_lift": ("lift/valve", "valve lift [mm]", MM, (40, 160, 80)),
-    "cam_force": ("force/cam", "cam contact force [N]", 1.0, (50, 110, 200)),
-    "seat_force": ("force/seat", "seat contact force [N]", 1.0, (160, 90, 40)),
+#: Series: archive name → (entity under the case, label, its default units, factor to them
+#: from the archive's, colour); a recording's own units replace the defaults
+#: (``CaseRecording.units``: ``campipe replay --units``).
+SERIES: dict[str, tuple[str, str, str, float, tuple[int, int, int]]] = {
+    "cam_lift": ("lift/cam", "cam lift", "mm", MM, (150, 150, 150)),
+    "follower_lift": ("lift/follower", "follower lift", "mm", MM, (50, 110, 200)),
+    "valve_lift": ("lift/valve", "valve lift", "mm", MM, (40, 160, 80)),
+    "cam_force": ("force/cam", "cam contact force", "N", 1.0, (50, 110, 200)),
+    "seat_force": ("force/seat", "seat contact force", "N", 1.0, (160, 90, 40)),
     "contact_state": (
         "contact_state",
         "contact state [1 I cam, 2 II free, 3 III cam+seat, 4 IV seat]",
+        "",
         1.0,
         (60, 60, 60),
     ),
@@ -136,6 +138,14 @@ class CaseRecording:
     events: Mapping[str, np.ndarray]  # event variables as the archive holds them
     parameters: str  # markdown document
     sketch: SketchFrames
+    #: SERIES name → (units shown, factor from the archive's units); missing: SERIES's own
+    units: Mapping[str, tuple[str, float]] = field(default_factory=dict)
+
+    def series(self, name: str) -> tuple[str, float]:
+        """The label with units and the factor from archive values of a SERIES history."""
+        _, words, units, factor, _ = SERIES[name]
+        units, factor = self.units.get(name, (units, factor))
+        return (f"{words} [{units}]" if units else words), factor
 
 
 def case_path(case_id: str) -> str:
@@ -181,7 +191,8 @@ def log_case(rec: rr.RecordingStream, case: CaseRecording, magnification: float)
     root = case_path(case.case_id)
     h = case.histories
     indexes = _indexes(case.cam_angle, h["time"])
-    for name, (path, label, factor, colour) in SERIES.items():
+    for name, (path, _, _, _, colour) in SERIES.items():
+        label, factor = case.series(name)
         style = rr.SeriesLines(
             names=label,
             colors=[colour],
@@ -311,8 +322,11 @@ def log_sketch(
 # -- recordings --------------------------------------------------------------------------------
 
 
-def case_view(case: Labelled, magnification: float) -> rrb.Container:
-    """The sketch beside the plots, events and parameters of one case."""
+def case_view(
+    case: Labelled, magnification: float, lift: str = "mm", force: str = "N"
+) -> rrb.Container:
+    """The sketch beside the plots (lifts in ``lift``, forces in ``force``), events and
+    parameters of one case."""
     import rerun.blueprint as rrb
 
     root = case_path(case.case_id)
@@ -321,8 +335,8 @@ def case_view(case: Labelled, magnification: float) -> rrb.Container:
             origin=f"{root}/sketch", name=f"mechanism [mm], deviations ×{magnification:g}"
         ),
         rrb.Vertical(
-            rrb.TimeSeriesView(origin=f"{root}/lift", name="lift [mm]"),
-            rrb.TimeSeriesView(origin=f"{root}/force", name="contact force [N]"),
+            rrb.TimeSeriesView(origin=f"{root}/lift", name=f"lift [{lift}]"),
+            rrb.TimeSeriesView(origin=f"{root}/force", name=f"contact force [{force}]"),
             rrb.TimeSeriesView(origin=f"{root}/contact_state", name="contact state"),
             rrb.Tabs(
                 rrb.TextLogView(origin=f"{root}/events", name="events"),
@@ -335,11 +349,19 @@ def case_view(case: Labelled, magnification: float) -> rrb.Container:
     )
 
 
-def blueprint(cases: Sequence[Labelled], magnification: float) -> rrb.Blueprint:
-    """One tab per case (the first active), the time panel on ``cam_angle``."""
+def blueprint(
+    cases: Sequence[Labelled],
+    magnification: float,
+    units: Mapping[str, tuple[str, float]] | None = None,
+) -> rrb.Blueprint:
+    """One tab per case (the first active), the time panel on ``cam_angle``; ``units`` as
+    ``CaseRecording.units``."""
     import rerun.blueprint as rrb
 
-    views = [case_view(c, magnification) for c in cases]
+    units = units or {}
+    lift = units.get("valve_lift", ("mm", MM))[0]
+    force = units.get("cam_force", ("N", 1.0))[0]
+    views = [case_view(c, magnification, lift, force) for c in cases]
     layout = views[0] if len(views) == 1 else rrb.Tabs(*views, active_tab=0)
     return rrb.Blueprint(layout, rrb.TimePanel(timeline=CAM_ANGLE), collapse_panels=False)
 
@@ -395,7 +417,7 @@ def write_recording(
         recording_id(key, [c.case_id for c in cases], magnification), f"{study} replay"
     )
     try:
-        rec.save(tmp, default_blueprint=blueprint(cases, magnification))
+        rec.save(tmp, default_blueprint=blueprint(cases, magnification, cases[0].units))
         for case in cases:
             log_case(rec, case, magnification)
             if progress is not None:
@@ -422,7 +444,7 @@ def spawn_viewer(
     rec = recording_stream(
         recording_id(key, [c.case_id for c in cases], magnification), f"{study} replay"
     )
-    rec.spawn(default_blueprint=blueprint(cases, magnification))
+    rec.spawn(default_blueprint=blueprint(cases, magnification, cases[0].units if cases else None))
     for case in cases:
         log_case(rec, case, magnification)
         if progress is not None:

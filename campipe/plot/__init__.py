@@ -45,6 +45,7 @@ def plot_archive(
         The file written and the figure.
     """
     from campipe.plot.figures import figure
+    from campipe.plot.pareto import pareto_figure
     from campipe.plot.spectrum import spectrum_figure
 
     archive = Path(archive)
@@ -71,7 +72,8 @@ def plot_archive(
                 (archive.parent / spec if spec else None, "the archive's spec"),
             ],
         )
-        fig = (spectrum_figure if request.kind == "spectrum" else figure)(ds, request)
+        draw = {"spectrum": spectrum_figure, "pareto": pareto_figure}.get(request.kind, figure)
+        fig = draw(ds, request)
     return write(fig, output), fig
 
 

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from matplotlib.colors import Normalize, SymLogNorm
 from matplotlib.figure import Figure
 
 from campipe.errors import did_you_mean, excerpt
@@ -48,6 +49,8 @@ from campipe.vocabulary import FAILURES
 
 #: Most cases overlaid in one history figure (beyond, lines cannot be told apart).
 MAX_OVERLAID = 10
+#: A map's positive values spanning more decades than this get a logarithmic colour scale.
+SPAN_DECADES = 2
 #: Most rows of an events chart, panels of a map.
 MAX_ROWS = 80
 MAX_PANELS = 12
@@ -88,7 +91,6 @@ def figure(ds, request: PlotRequest) -> Figure:
     """
     view = select_view(ds, request)
     draw = {"histories": histories, "metric": metric, "map": cell_map, "events": events}
-    draw["pareto"] = pareto
     return draw[request.kind](view, request)
 
 
@@ -187,12 +189,12 @@ def case_labels(view: View, names: Sequence[str]) -> list[str]:
     ]
 
 
-def _title(fig: Figure, view: View, what: str, where: str | None) -> None:
+def set_title(fig: Figure, view: View, what: str, where: str | None) -> None:
     selection = f" — where {where}" if where else ""
     fig.suptitle(f"{view.study}: {what}{selection}", fontsize=11)
 
 
-def _column(view: View, name: str | None, option: str, numeric: bool = True) -> np.ndarray:
+def column_values(view: View, name: str | None, option: str, numeric: bool = True) -> np.ndarray:
     """A per-case column as shown, or a PlotError naming the option and the columns."""
     columns = view.shown.columns
     usable = [k for k, v in columns.items() if v.ndim == 1 and v.dtype.kind in "iuf"]
@@ -305,7 +307,7 @@ def histories(view: View, request: PlotRequest) -> Figure:
         ncols=min(len(texts) + len(kinds), 4),
         fontsize=8,
     )
-    _title(fig, view, f"histories{turn_note}", request.where)
+    set_title(fig, view, f"histories{turn_note}", request.where)
     return fig
 
 
@@ -510,7 +512,7 @@ def _default_x(view: View) -> str:
 
 
 def _finite_axis(view: View, name: str, option: str) -> np.ndarray:
-    values = _column(view, name, option)
+    values = column_values(view, name, option)
     if not np.isfinite(values).all():
         raise PlotError.at(
             option,
@@ -535,7 +537,7 @@ def metric(view: View, request: PlotRequest) -> Figure:
     xname = request.x or _default_x(view)
     yname = request.y or "separation_deg_per_rev"
     x = _finite_axis(view, xname, "--x")
-    y = _column(view, yname, "--y").copy()
+    y = column_values(view, yname, "--y").copy()
     y[~_usable(view)] = np.nan
     others, grouped = groups(view, [xname])
     fig = Figure(figsize=(7.5, 4.8), layout="constrained")
@@ -567,7 +569,7 @@ def metric(view: View, request: PlotRequest) -> Figure:
     ax.grid(alpha=0.3)
     if others or ringed or request.limit:
         ax.legend(fontsize=8, loc="best")
-    _title(fig, view, f"{axis_words(yname)} against {axis_words(xname).lower()}", request.where)
+    set_title(fig, view, f"{axis_words(yname)} against {axis_words(xname).lower()}", request.where)
     return fig
 
 
@@ -628,6 +630,21 @@ def shown_value(value: str | float, view: View, name: str, key: str) -> float:
         ) from None
 
 
+def colour_norm(values: np.ndarray) -> Normalize:
+    """The map's colour scale: linear, or where the values are not negative and the positive
+    ones span more than SPAN_DECADES decades (no-follow from thousandths of a degree a turn to
+    tens) logarithmic above the least positive value and linear below it, so small values
+    read apart from zero and from each other."""
+    finite = values[np.isfinite(values)]
+    if not finite.size:
+        return Normalize(0.0, 1.0)
+    lo, hi = float(finite.min()), float(finite.max())
+    positive = finite[finite > 0.0]
+    if lo >= 0.0 and positive.size and hi > 10.0**SPAN_DECADES * float(positive.min()):
+        return SymLogNorm(float(positive.min()), vmin=lo, vmax=hi, base=10)
+    return Normalize(lo, hi)
+
+
 def cell_map(view: View, request: PlotRequest) -> Figure:
     """A per-case value (z) over two numeric columns as coloured cells, its contour at the
     level; one panel per group of the other varied columns."""
@@ -646,7 +663,7 @@ def cell_map(view: View, request: PlotRequest) -> Figure:
     zname = request.z or "separation_deg_per_rev"
     x = _finite_axis(view, xname, "--x")
     y = _finite_axis(view, yname, "--y")
-    z = _column(view, zname, "--z").copy()
+    z = column_values(view, zname, "--z").copy()
     z[~_usable(view)] = np.nan
     level = _level(request, view, zname)
     others, grouped = groups(view, [xname, yname])
@@ -661,8 +678,7 @@ def cell_map(view: View, request: PlotRequest) -> Figure:
     nrows = -(-len(grouped) // ncols)
     fig = Figure(figsize=(4.2 * ncols + 1.2, 3.6 * nrows + 0.8), layout="constrained")
     axes = fig.subplots(nrows, ncols, squeeze=False, sharex=True, sharey=True).ravel()
-    finite = z[np.isfinite(z)]
-    vmin, vmax = (float(finite.min()), float(finite.max())) if finite.size else (0.0, 1.0)
+    norm = colour_norm(z)
     mesh = None
     for ax, (key, members) in zip(axes, grouped.items(), strict=False):
         grid = np.full((ys.size, xs.size), np.nan)
@@ -676,7 +692,7 @@ def cell_map(view: View, request: PlotRequest) -> Figure:
                 )
             grid[iy, ix], filled[iy, ix] = z[i], True
         mesh = ax.pcolormesh(
-            _edges(xs), _edges(ys), np.ma.masked_invalid(grid), cmap=COLORMAP, vmin=vmin, vmax=vmax
+            _edges(xs), _edges(ys), np.ma.masked_invalid(grid), cmap=COLORMAP, norm=norm
         )
         if level is not None and xs.size > 1 and ys.size > 1 and np.isfinite(grid).any():
             lo, hi = np.nanmin(grid), np.nanmax(grid)
@@ -703,7 +719,7 @@ def cell_map(view: View, request: PlotRequest) -> Figure:
     if level is not None:
         what += f", contour at {level:g} {view.shown.units.get(zname, '')}".rstrip()
         bar.ax.axhline(level, color="black", linewidth=1.6)
-    _title(fig, view, what, request.where)
+    set_title(fig, view, what, request.where)
     return fig
 
 
@@ -756,39 +772,5 @@ def events(view: View, request: PlotRequest) -> Figure:
     ax.grid(axis="y", alpha=0.3)
     if ax.collections:
         fig.legend(loc="outside lower center", ncols=4, fontsize=8)
-    _title(fig, view, f"events{turn_note}", request.where)
-    return fig
-
-
-def pareto(view: View, request: PlotRequest) -> Figure:
-    """A design file's two objectives (``--x``, ``--y``; default its
-    ``design_objective_columns``): the designs evaluated, hollow where they fail a
-    requirement, filled where they meet them, the front (``chosen == "front"``) joined."""
-    import json
-
-    names = json.loads(str(view.ds.attrs.get("design_objective_columns", "[]")))
-    if "chosen" not in view.shown.columns or len(names) != 2 and not (request.x and request.y):
-        raise PlotError.at(
-            "ARCHIVE",
-            "not the file of a campipe design with two objectives (minimize and maximize, or "
-            "a list of two); give --x and --y to draw two columns of a design file",
-        )
-    xname = request.x or names[0]
-    yname = request.y or names[1]
-    x, y = _column(view, xname, "--x"), _column(view, yname, "--y")
-    chosen = view.shown.columns["chosen"]
-    feasible = view.shown.columns.get("feasible", np.full(view.shown.n, "yes")) == "yes"
-    front = np.flatnonzero(chosen == "front")
-    front = front[np.argsort(x[front], kind="stable")]
-    fig = Figure(figsize=(7.5, 4.8), layout="constrained")
-    ax = fig.add_subplot()
-    ax.plot(x[~feasible], y[~feasible], "o", mfc="none", color="0.6", label="fails a requirement")
-    ax.plot(x[feasible], y[feasible], "o", color="0.35", ms=4, label="meets the requirements")
-    if front.size:
-        ax.plot(x[front], y[front], "s-", color="black", ms=5, label="Pareto front")
-    ax.set_xlabel(axis_label(xname, view.shown.units.get(xname, "")))
-    ax.set_ylabel(axis_label(yname, view.shown.units.get(yname, "")))
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8, loc="best")
-    _title(fig, view, f"{front.size} designs on the Pareto front", request.where)
+    set_title(fig, view, f"events{turn_note}", request.where)
     return fig

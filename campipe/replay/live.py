@@ -22,14 +22,15 @@ import numpy as np
 
 from campipe.io import rerun_replay as rrio
 from campipe.replay.cases import ReplayCase, ReplayError, archive_cases, batch_cases, select_rows
-from campipe.replay.record import recording_case
+from campipe.replay.record import recording_case, series_units
 from campipe.replay.sketch import DEFAULT_MAGNIFICATION
 from campipe.study.archive.open import open_archive
 from campipe.study.query.tables import stored_units
-from campipe.study.run.keys import study_key
+from campipe.study.run.keys import study_attrs, study_key
 from campipe.study.run.results import BatchData, BatchPlan, compute_batch
 from campipe.study.spec.coordinates import coordinate_values
 from campipe.study.spec.expand import Study
+from campipe.study.spec.variables import VARIABLES
 from campipe.study.where import evaluate, parse_where
 
 if TYPE_CHECKING:
@@ -67,6 +68,10 @@ class StudyReplay:
         self._lock = threading.Lock()
         self._logged: dict[str, ReplayCase] = {}
         self._rec: rr.RecordingStream | None = None
+        # The series in the spec's units, as campipe replay and query show the archive.
+        stored = {n: str(VARIABLES[n].units or "") for n in rrio.SERIES}
+        stored = {n: u for n, u in stored.items() if u not in ("", "1")}
+        self.units = series_units(stored, study_attrs(study), "spec")
 
     def _log(self, cases: Sequence[ReplayCase]) -> None:
         """Log cases, opening the recording (its file) with the first."""
@@ -80,7 +85,9 @@ class StudyReplay:
                 self._rec.save(self.path)
             for case in cases:
                 rrio.log_case(
-                    self._rec, recording_case(case, self.magnification), self.magnification
+                    self._rec,
+                    recording_case(case, self.magnification, self.units),
+                    self.magnification,
                 )
                 self._logged[case.case_id] = case
 
@@ -122,7 +129,7 @@ class StudyReplay:
             return None
         cases = [self._logged[cid] for cid in ids]
         assert self._rec is not None  # opened by _log with the first case
-        self._rec.send_blueprint(rrio.blueprint(cases, self.magnification))
+        self._rec.send_blueprint(rrio.blueprint(cases, self.magnification, self.units))
         self._rec.flush()
         self._rec.disconnect()
         return self.path

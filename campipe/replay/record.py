@@ -10,7 +10,7 @@ viewer). The file format itself is :mod:`campipe.io.rerun_replay`'s.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -19,6 +19,7 @@ from campipe.io.archive import ArchiveDamagedError, unreadable
 from campipe.io.outputs import RECORDING, check_output
 from campipe.io.rerun_replay import (
     MM,
+    SERIES,
     CaseRecording,
     SketchFrames,
     spawn_viewer,
@@ -28,7 +29,9 @@ from campipe.model import PARAMETERS
 from campipe.replay import sketch
 from campipe.replay.cases import ReplayCase, ReplayError, archive_cases, select_rows
 from campipe.study.archive.open import open_archive
+from campipe.study.query.display import display_units
 from campipe.study.run.progress import Progress
+from campipe.units import convert
 
 #: Line radii of the sketch's parts drawn with no width of their own [m].
 HEAD_RADIUS = SPRING_RADIUS = 0.0005
@@ -129,10 +132,33 @@ def sketch_frames(case: ReplayCase, magnification: float) -> SketchFrames:
     )
 
 
+def series_units(
+    stored: Mapping[str, str], attrs: Mapping[str, object], system: str
+) -> dict[str, tuple[str, float]]:
+    """The recording's series (``rerun_replay.SERIES``) stored in ``stored`` units, shown in
+    the unit system ``system`` as query and plot show them (``display_units``, the spec
+    read from ``attrs``, an archive's attributes): name → (units, factor)."""
+    shown = display_units(stored, attrs, system)
+    return {name: (shown[name], convert(1.0, units, shown[name])) for name, units in stored.items()}
+
+
+def archive_series_units(ds, system: str) -> dict[str, tuple[str, float]]:
+    """:func:`series_units` of an archive's series."""
+    stored = {
+        name: str(ds[name].attrs.get("units", ""))
+        for name in SERIES
+        if name in ds.variables and ds[name].attrs.get("units", "") not in ("", "1")
+    }
+    return series_units(stored, ds.attrs, system)
+
+
 def recording_case(
-    case: ReplayCase, magnification: float = sketch.DEFAULT_MAGNIFICATION
+    case: ReplayCase,
+    magnification: float = sketch.DEFAULT_MAGNIFICATION,
+    units: Mapping[str, tuple[str, float]] | None = None,
 ) -> CaseRecording:
-    """What a recording shows of ``case``: its archive values, parameters and sketch."""
+    """What a recording shows of ``case``: its archive values (series in ``units``, as
+    :func:`series_units`; default mm and N), parameters and sketch."""
     return CaseRecording(
         case_id=case.case_id,
         label=case.label,
@@ -141,6 +167,7 @@ def recording_case(
         events=case.events,
         parameters=parameters_document(case, magnification),
         sketch=sketch_frames(case, magnification),
+        units=dict(units or {}),
     )
 
 
@@ -177,6 +204,7 @@ def replay_archive(
     progress: Callable[[int, str], Progress] | None = None,
     overwrite: bool = False,
     verify: bool = True,
+    units: str = "spec",
 ) -> tuple[Path | None, list[ReplayCase]]:
     """Replay an archive's cases chosen by id or by a ``--where`` expression.
 
@@ -187,6 +215,8 @@ def replay_archive(
     (``campipe.io.outputs``): it never replaces the archive or its spec, and replaces a file
     that is not a recording only with ``overwrite``. ``verify``: check the archive against
     its checksums first (``open_archive``; a damaged one raises ArchiveDamagedError).
+    ``units``: the unit system of the lifts and forces plotted (as ``campipe query`` and
+    ``plot``: spec, si, in-lbf, mm-deg); the sketch is drawn in mm.
 
     Returns
     -------
@@ -219,10 +249,11 @@ def replay_archive(
             raise ReplayError(f"{archive}: {exc}", key=exc.key, found=exc.found) from None
         cases = archive_cases(ds, rows, directories=[archive.parent, Path.cwd()])
         key = str(ds.attrs.get("study_key", ""))
+        shown = archive_series_units(ds, units)
     bar = progress(len(cases), "cases sketched") if progress else None
     contents = []
     for c in cases:
-        contents.append(recording_case(c, magnification))
+        contents.append(recording_case(c, magnification, shown))
         if bar is not None:
             bar.advance(1)
     if bar is not None:

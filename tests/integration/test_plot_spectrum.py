@@ -80,3 +80,20 @@ def test_the_command_draws_it_and_refuses_a_non_history(archive, tmp_path):
     with pytest.raises(PlotError) as info:
         plot_archive(archive, PlotRequest("spectrum", y="max_cam_force"), tmp_path / "b.png")
     assert info.value.key == "--y" and "valve_acceleration" in str(info.value)
+
+
+def test_a_map_s_colour_scale_reads_small_values():
+    """No-follow from 0 to 30° a turn with cells at 0.002 and 0.02: a logarithmic scale
+    (linear below the least positive value) puts them a fifth of the bar apart, where a
+    linear one puts them 0.0006 apart; a span of one decade stays linear. Broken copy:
+    colour_norm always linear: the two cells' colours are the same."""
+    from matplotlib.colors import SymLogNorm
+
+    from campipe.plot.figures import colour_norm
+
+    z = np.array([0.0, 0.002, 0.02, 0.5, 30.0, np.nan])
+    norm = colour_norm(z)
+    assert isinstance(norm, SymLogNorm)
+    assert norm(0.02) - norm(0.002) > 0.15 and norm(0.0) == 0.0 and norm(30.0) == 1.0
+    assert not isinstance(colour_norm(np.array([1.0, 5.0, 9.0])), SymLogNorm)
+    assert not isinstance(colour_norm(np.array([-1.0, 0.001, 9.0])), SymLogNorm)

@@ -67,6 +67,8 @@ def seated(archives):
         ds["case"].values[row],
         "-o",
         archives[0].with_name("seated.rrd"),
+        "--units",
+        "mm-deg",
     )
     assert out.exit_code == 0, out.output
     assert out.stdout.strip() == str(archives[0].with_name("seated.rrd"))
@@ -78,7 +80,8 @@ def test_replay_holds_every_series_exactly_at_every_cam_angle(seated):
     root = f"cases/{ds['case'].values[row]}"
     angle = ds["cam_angle"].values
     assert angle.size == 721
-    for name, (path, label, factor, _) in SERIES.items():
+    for name, (path, words, units, factor, _) in SERIES.items():
+        label = f"{words} [{units}]" if units else words
         e = rec[f"{root}/{path}"]
         assert e.static["SeriesLines:names"] == [label]
         # cam_angle: one nanosecond of the timeline per 1e-9 degree, the archive's own values
@@ -86,9 +89,33 @@ def test_replay_holds_every_series_exactly_at_every_cam_angle(seated):
         assert_array_equal(e.times["time"], nanos(ds["time"].values[row]))
         # exactly the archive's values, in the display units (mm = m × 1000, N, 1–4)
         assert_array_equal(e.scalars(), ds[name].values[row].astype(float) * factor)
-    assert SERIES["valve_lift"][1] == "valve lift [mm]" and SERIES["valve_lift"][2] == 1000.0
+    assert SERIES["valve_lift"][2] == "mm" and SERIES["valve_lift"][3] == 1000.0
     # the only timelines in the recording are the replay's own: no wall clock, no log tick
     assert {t for e in rec.values() for t in e.times} == {"cam_angle", "time"}
+
+
+def test_replay_shows_the_units_query_shows(archives, tmp_path):
+    """--units in-lbf: lifts in inches and forces in pounds-force, labelled so, equal to the
+    archive's SI values converted by the inch and the pound-force (exact definitions, an
+    independent conversion); --units si: the archive's values as stored. Broken copy: the
+    series always in mm and N (the recording before --units): off by 25.4 and 4.45."""
+    ds = xr.load_dataset(archives[0])
+    row = int(np.flatnonzero(ds["seat"].values > 0)[0])
+    case = ds["case"].values[row]
+    for system, lift, force, to_lift, to_force in (
+        ("in-lbf", "in", "lbf", 1 / 0.0254, 1 / 4.4482216152605),
+        ("si", "m", "N", 1.0, 1.0),
+    ):
+        path = tmp_path / f"{system}.rrd"
+        out = invoke("replay", archives[0], "--case", case, "-o", path, "--units", system)
+        assert out.exit_code == 0, out.output
+        rec = read_recording(path)
+        valve = rec[f"cases/{case}/lift/valve"]
+        assert valve.static["SeriesLines:names"] == [f"valve lift [{lift}]"]
+        assert_allclose(valve.scalars(), ds["valve_lift"].values[row] * to_lift, rtol=1e-12)
+        cam = rec[f"cases/{case}/force/cam"]
+        assert cam.static["SeriesLines:names"] == [f"cam contact force [{force}]"]
+        assert_allclose(cam.scalars(), ds["cam_force"].values[row] * to_force, rtol=1e-12)
 
 
 def test_replay_holds_the_events_at_their_angles(seated):
@@ -220,6 +247,8 @@ def test_an_archive_without_q_replays_by_running_its_cases_again(archives, seate
         ds["case"].values[row],
         "-o",
         archives[1].with_name("rerun.rrd"),
+        "--units",
+        "mm-deg",
     )
     assert out.exit_code == 0, out.output
     assert_same(read_recording(archives[1].with_name("rerun.rrd")), rec)
