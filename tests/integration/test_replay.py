@@ -343,7 +343,8 @@ def assert_same(a, b):
 @pytest.mark.slow
 def test_processes_scheduler_records_the_selection_from_the_archive(tmp_path):
     """Worker processes cannot log into this process's recording: the cases come from the
-    finished archive instead, q computed again."""
+    finished archive instead, q computed again; in the spec's units (the quickstart writes
+    inches), as campipe replay and query show it."""
     out = invoke(
         "study",
         STUDIES / "quickstart.yaml",
@@ -362,8 +363,9 @@ def test_processes_scheduler_records_the_selection_from_the_archive(tmp_path):
     rec = read_recording(tmp_path / "p.rrd")
     ds = xr.load_dataset(tmp_path / "p.nc")
     row = int(np.flatnonzero(ds["seat"].values > 0)[0])
-    valve = rec[f"cases/{ds['case'].values[row]}/lift/valve"].scalars()
-    assert_array_equal(valve, ds["valve_lift"].values[row] * 1000.0)
+    entity = rec[f"cases/{ds['case'].values[row]}/lift/valve"]
+    assert entity.static["SeriesLines:names"] == ["valve lift [in]"]
+    assert_allclose(entity.scalars(), ds["valve_lift"].values[row] / 0.0254, rtol=1e-12)
 
 
 def test_a_replay_of_several_cases_shows_its_progress(archives, tmp_path):
