@@ -23,11 +23,15 @@ and every ω in [a, b]
 
 d_kj² = (Re λ_j)² + dist(Im λ_j, [ka, kb])², the least of |ikω − λ_j|² over the interval
 (harmonics −k give the same sum). The first K harmonics are summed exactly (``spectrum``:
-each piece's integral in closed form, no sampling); beyond K, k|Y_k| ≤ T_m/K^m with T_m the
-total variation of y′ over 2π, and Σ_k 1/d_kj² is bounded by its largest terms and an
-integral (``_tail``). The least of F over the turn (the margin) then changes by at most the
-bound times the width: a margin positive at a and b with v_a + v_b ≥ L·(b − a) stays
-positive across [a, b]. The same holds for the valve's height above its seat.
+each piece's integral in closed form, no sampling); beyond K, k|Y_k| is bounded by the
+largest of the computed ones past K and, past those, by T_m/k^m (T_m the total variation of
+the lift's m-th derivative over 2π, m ≤ 3), and Σ_k 1/d_kj² is bounded by its largest terms
+and an integral (``_tail``). (For the summed harmonics the code bounds each one's
+|Σ_j ρ_j/(ikω − λ_j)²| over [a, b] more tightly than Σ_j |ρ_j|/d_kj²: the larger of its
+ends plus half the width times a bound of its derivative.) The least of F over the turn (the
+margin) then changes by at most the bound times the width: a margin positive at a and b with
+v_a + v_b ≥ L·(b − a) stays positive across [a, b]. The same holds for the valve's height
+above its seat.
 
 The bound is for configuration I's closed form, the margin the search reads, on profiles
 whose lift, rate and acceleration are continuous (``provable``); it does not cover a seated
@@ -64,8 +68,8 @@ ROUNDING = 1e-15
 #: Samples per piece for the profile's derivative bounds (each corrected by the next
 #: derivative's bound times half a spacing, so the bounds are proven).
 PIECE_SAMPLES = 512
-#: A step in lift [m] or in lift rate [m/rad] larger than this share of the largest lift
-#: (at least 1 mm) is a step (``has_steps``); smaller ones are the pieces' rounding.
+#: A step in lift [m] or in a derivative [m/rad^m] larger than this share of the largest lift
+#: (at least 1 mm) is a step (``provable``, ``_variations``); smaller ones are rounding.
 STEP = 1e-9
 
 
