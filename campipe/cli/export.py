@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from campipe.cli.base import units_option
+from campipe.cli.base import units_option, verify_option
 
 
 @click.command()
@@ -38,7 +38,8 @@ from campipe.cli.base import units_option
     help="Replace a file at the output path that campipe export did not write (never the "
     "archive or its spec).",
 )
-def export(archive, cases, where, units, fmt, output, overwrite) -> None:
+@verify_option
+def export(archive, cases, where, units, fmt, output, overwrite, verify) -> None:
     """Write the histories of cases of ARCHIVE as a table: one row per sample, one column
     per history (case, cam_angle, time, valve_lift, valve_velocity, ..., q1 ... q7), each
     header naming its units (valve_velocity [mm/deg])."""
@@ -53,7 +54,7 @@ def export(archive, cases, where, units, fmt, output, overwrite) -> None:
     if fmt == "parquet":
         pyarrow_parquet()
     archive = Path(archive)
-    with _open_archive(archive) as ds:
+    with _open_archive(archive, verify) as ds:
         spec = str(ds.attrs.get("spec_file") or "")
         check_output(
             output,

@@ -117,8 +117,9 @@ def test_fletcher32_finds_a_flipped_byte_in_a_chunk_even_unverified(archive, tmp
 
 def test_an_archive_edited_and_saved_again_is_refused_unless_no_verify(archive, tmp_path):
     """A value changed through netCDF4 and saved (HDF5's chunk checksums recomputed, so
-    only the stored SHA-256 knows) is refused naming the variable; --no-verify reads the
-    edited value. Broken copy, damaged: only read failures counted, not digests compared."""
+    only the stored SHA-256 knows) is refused naming the variable by query and export;
+    --no-verify reads the edited value. Broken copy, damaged: only read failures counted,
+    not digests compared."""
     shutil.copy(archive.parent / "spec.yaml", tmp_path / "spec.yaml")
     copy = tmp_path / archive.name
     shutil.copy(archive, copy)
@@ -135,6 +136,12 @@ def test_an_archive_edited_and_saved_again_is_refused_unless_no_verify(archive, 
     assert out.exit_code == 0 and "1000" in out.output.splitlines()[2], out.output
     with open_archive(copy, verify=False) as ds:
         assert ds["steps"].values[1] == 7
+    # campipe export likewise: refused, then written with --no-verify
+    table = tmp_path / "h.csv"
+    out = invoke("export", copy, "--where", "speed_rpm > 0", "-o", table)
+    assert out.exit_code == 1 and "max_cam_force, steps" in out.output and not table.exists()
+    out = invoke("export", copy, "--where", "speed_rpm > 0", "-o", table, "--no-verify")
+    assert out.exit_code == 0 and table.stat().st_size > 0, out.output
 
 
 def test_a_pipe_as_an_archive_is_refused_not_waited_on(tmp_path):
