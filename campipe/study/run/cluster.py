@@ -22,9 +22,10 @@ from __future__ import annotations
 
 import os
 import uuid
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -212,7 +213,20 @@ def run_parts(
         key=[f"campipe-{p.key}-{tag}" for p in plans],
         pure=False,
     )
-    pending = list(futures)
+
+    def counted(result: PartCount) -> tuple:
+        done(result)
+        return ()
+
+    collect(wait, list(futures), idle, counted)
+
+
+def collect(wait, pending: list, idle, done: Callable[[Any], Iterable]) -> None:
+    """Wait on the futures ``pending`` (``wait``: distributed's) and give each result to
+    ``done`` as it finishes, the future released once read; ``done`` returns futures to
+    wait on as well (the next batches), or none. While none finishes, ``idle.poll`` seconds
+    apart, ``idle.check()`` counts the workers (and stops a study whose cluster has had none
+    for too long). A future that failed or was cancelled (its cluster lost) raises."""
     while pending:
         try:  # the first to finish, or none within the poll: then count the workers
             finished = set(wait(pending, timeout=idle.poll, return_when="FIRST_COMPLETED")[0])
@@ -221,9 +235,9 @@ def run_parts(
             continue
         for future in [f for f in pending if f in finished]:
             pending.remove(future)
-            result = future.result()  # raises for a batch cancelled (its cluster lost)
+            result = future.result()
             future.release()
-            done(result)
+            pending.extend(done(result))
 
 
 def _shared(

@@ -34,7 +34,7 @@ from pathlib import Path
 from campipe.errors import CampipeError
 from campipe.io.archive import ArchiveWriteError, write_error
 from campipe.study.run.batches import BatchHook, SchedulerError, Storage, Stored
-from campipe.study.run.cluster import PartCount, run_parts
+from campipe.study.run.cluster import PartCount, collect, run_parts
 from campipe.study.run.results import BatchData, BatchPlan, compute_batch, numerics_fingerprint
 
 log = logging.getLogger(__name__)
@@ -368,28 +368,19 @@ def _reach_token(parts: Path, token: str) -> str:
 
 def _submit_all(client, wait, plans, token, task, stored) -> None:
     threads = max(sum(client.nthreads().values()), 1)
-    pending = iter(plans)
+    left = iter(plans)
 
     def submit(p: BatchPlan):
         return client.submit(task, p, key=f"campipe-{p.key}-{token}", pure=False)
 
+    def stored_then_next(result) -> list:
+        stored(result)
+        nxt = next(left, None)
+        return [] if nxt is None else [submit(nxt)]
+
     # Keep at most two batches per worker thread in flight: memory stays bounded.
-    in_flight = [submit(p) for p in itertools.islice(pending, 2 * threads)]
-    idle = _Idle(client)
-    while in_flight:
-        try:  # the first to finish, or none within the poll: then count the workers
-            done = set(wait(in_flight, timeout=WORKER_POLL, return_when="FIRST_COMPLETED")[0])
-        except TimeoutError:
-            idle.check()
-            continue
-        for future in [f for f in in_flight if f in done]:
-            in_flight.remove(future)
-            result = future.result()
-            future.release()
-            stored(result)
-            nxt = next(pending, None)
-            if nxt is not None:
-                in_flight.append(submit(nxt))
+    in_flight = [submit(p) for p in itertools.islice(left, 2 * threads)]
+    collect(wait, in_flight, _Idle(client), stored_then_next)
 
 
 class _Idle:
