@@ -21,7 +21,7 @@ or group in a distinct line style and marker as well as a shade (:mod:`campipe.p
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -369,24 +369,28 @@ def _kinematic_lines(ax, view: View, keep: np.ndarray, x: np.ndarray) -> None:
         np.asarray(ds["cam_lift"].values[view.rows][:, keep], float), ratios, seats
     )
     shown = to_display(lifts, stored, view.units.get("valve_lift", stored), _cam_speed(view))
-    seen: list[np.ndarray] = []
-    for lift in shown:
-        if not np.isfinite(lift).any():
-            continue
-        scale = 1e-9 * float(np.nanmax(np.abs(lift), initial=1.0))
-        if any(np.allclose(lift, s, rtol=0.0, atol=scale, equal_nan=True) for s in seen):
-            continue
-        seen.append(lift)
+    for k, lift in enumerate(_distinct(c for c in shown if np.isfinite(c).any())):
         ax.plot(
             x,
             lift,
             color="black",
             linestyle=(0, (4, 2)),
             linewidth=0.9,
-            label="kinematic lift" if len(seen) == 1 else None,
+            label="kinematic lift" if k == 0 else None,
             gid="kinematic",
             zorder=1,
         )
+
+
+def _distinct(curves: Iterable[np.ndarray]) -> Iterator[np.ndarray]:
+    """Each curve not equal to an earlier one to rounding (1e-9 of its largest value): one
+    cam, or one kinematic lift, for cases that differ only in speed (lift at angle = ω t)."""
+    seen: list[np.ndarray] = []
+    for curve in curves:
+        scale = 1e-9 * float(np.nanmax(np.abs(curve), initial=1.0))
+        if not any(np.allclose(curve, s, rtol=0.0, atol=scale, equal_nan=True) for s in seen):
+            seen.append(curve)
+            yield curve
 
 
 def _seat_bands(ax, view: View, lifts: np.ndarray) -> None:
@@ -421,20 +425,14 @@ def _cam_lines(ax, view: View, keep: np.ndarray, angle: np.ndarray) -> None:
         units,
         _cam_speed(view),
     )
-    seen: list[np.ndarray] = []
-    for lift in lifts:
-        # one cam for cases that differ in speed: equal to rounding (lift at angle = ω t)
-        scale = 1e-9 * float(np.nanmax(np.abs(lift), initial=1.0))
-        if any(np.allclose(lift, s, rtol=0.0, atol=scale, equal_nan=True) for s in seen):
-            continue
-        seen.append(lift)
+    for k, lift in enumerate(_distinct(lifts)):
         ax.plot(
             angle,
             lift,
             color="black",
             linestyle=":",
             linewidth=0.9,
-            label="cam lift" if len(seen) == 1 else None,
+            label="cam lift" if k == 0 else None,
         )
 
 
