@@ -221,16 +221,14 @@ class _Points:
         return (self.speed[rows, j], self.value[rows, j], self.kind[rows, j],
                 self.no_follow[rows, j], self.height[rows, j])  # fmt: skip
 
-    def _estimated(self, width: np.ndarray) -> np.ndarray:
+    def _estimated(self, width: np.ndarray, chord: np.ndarray) -> np.ndarray:
         """Intervals [a, top] free on the chords' estimate: v_a + v_b ≥ L·(b − a), L =
-        ONSET_SLOPE_FACTOR × the steepest of the chord, the chord certified before it and
-        the chord after it (of one kind)."""
+        ONSET_SLOPE_FACTOR × the steepest of the chord over [a, top] (``chord``), the chord
+        certified before it and the chord after it (of one kind)."""
         _, vb, kb, _, _ = self.top(1)
         c, vc, kc, _, _ = self.top(2)
         b = self.a + width
         with np.errstate(invalid="ignore", divide="ignore"):
-            # Equal values (form closure's +inf among them) make a flat chord.
-            chord = np.where(vb == self.a_value, 0.0, (vb - self.a_value) / width)
             after = np.where(vc == vb, 0.0, (vc - vb) / (c - b))
             after = np.where((self.depth > 1) & (kc == kb), after, np.nan)
             steep = np.fmax(np.fmax(np.abs(chord), np.abs(after)), np.abs(self.slope))
@@ -258,13 +256,14 @@ class _Points:
                     free[rows] = (self.a_value[rows] + vb[rows] >= lf * w) & (
                         self.a_height[rows] + hb[rows] >= lh * w
                     )
-            guess = wide & same & ~exact & self._estimated(width)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                # Equal values (form closure's +inf among them) make a flat chord.
+                chord = np.where(vb == self.a_value, 0.0, (vb - self.a_value) / width)
+            guess = wide & same & ~exact & self._estimated(width, chord)
             ok = live & ~nb & (free | guess | (width <= tolerance))
             if not ok.any():
                 return
             self.proven &= ~guess
-            with np.errstate(invalid="ignore", divide="ignore"):  # +inf − +inf: form closure
-                chord = np.where(vb == self.a_value, 0.0, (vb - self.a_value) / width)
             self.slope = np.where(ok, np.where(same, chord, np.nan), self.slope)
             self.a = np.where(ok, b, self.a)
             self.a_value = np.where(ok, vb, self.a_value)
