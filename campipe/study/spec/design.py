@@ -157,15 +157,33 @@ def check_design(value: object, problems: Problems) -> Design | None:
     return Design(vary, require, objectives, str(method), int(most))
 
 
-def _vary(value: object, problems: Problems) -> tuple[Vary, ...] | None:
+def _block(
+    value: object, key: str, missing: str, expected: str, empty: str, problems: Problems
+) -> Mapping | None:
+    """The mapping a section's ``key`` holds, or None with its problem noted: ``missing``
+    when absent, ``expected`` when not a mapping, ``empty`` when it holds nothing."""
     if value is None:
-        problems.add("design.vary", "missing: the keys to vary, {<key>: {from, to}}")
+        problems.add(key, f"missing: {missing}")
         return None
-    block = problems.check(as_mapping, value, "design.vary", "{<key>: {from, to}}")
+    block = problems.check(as_mapping, value, key, expected)
     if block is None:
         return None
     if not block:
-        problems.add("design.vary", "empty; expected at least one key → {from, to}")
+        problems.add(key, f"empty; expected {empty}")
+        return None
+    return block
+
+
+def _vary(value: object, problems: Problems) -> tuple[Vary, ...] | None:
+    block = _block(
+        value,
+        "design.vary",
+        "the keys to vary, {<key>: {from, to}}",
+        "{<key>: {from, to}}",
+        "at least one key → {from, to}",
+        problems,
+    )
+    if block is None:
         return None
     keys = tuple(k for k in sample_keys() if k != "speed")
     out = []
@@ -236,15 +254,15 @@ def _quantity(value: object, units: str, path: str, problems: Problems) -> float
 
 
 def _require(value: object, problems: Problems) -> tuple[Requirement, ...] | None:
-    if value is None:
-        problems.add("design.require", "missing: the bounds a design must meet, e.g. "
-                     "{onset_speed_rpm: {min: 9500 rpm}}")  # fmt: skip
-        return None
-    block = problems.check(as_mapping, value, "design.require", "{<requirement>: {min, max}}")
+    block = _block(
+        value,
+        "design.require",
+        "the bounds a design must meet, e.g. {onset_speed_rpm: {min: 9500 rpm}}",
+        "{<requirement>: {min, max}}",
+        "onset_speed_rpm or a metric",
+        problems,
+    )
     if block is None:
-        return None
-    if not block:
-        problems.add("design.require", "empty; expected onset_speed_rpm or a metric")
         return None
     units = metric_units()
     names = (ONSET, *units)
