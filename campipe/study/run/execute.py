@@ -188,17 +188,23 @@ def run_study(
         scratch = parts_directory(archive)
         if not keep_parts and scratch.is_dir():
             shutil.rmtree(scratch, ignore_errors=True)
-        return StudyReport(
-            archive,
-            total,
-            total - len(missing),
-            len(missing),
-            len(plans),
-            False,
-            time.monotonic() - started,
-            tuple(notes),
-            statuses,
-        )
+        return _ran(archive, total, missing, plans, started, notes, statuses)
+
+
+def _ran(archive, total, missing, plans, started, notes, statuses) -> StudyReport:
+    """The report of a run that computed the ``missing`` cases in ``plans`` (the others
+    reused), started at ``started`` (time.monotonic)."""
+    return StudyReport(
+        archive,
+        total,
+        total - len(missing),
+        len(missing),
+        len(plans),
+        False,
+        time.monotonic() - started,
+        tuple(notes),
+        statuses,
+    )
 
 
 def check_scheduler(scheduler: str) -> bool:
@@ -392,21 +398,10 @@ def _run_parts(
         for cid, name in found.statuses.items():
             log.warning("case %s: %s", cid, name)
         found.write_index(layout.attrs)
-        return StudyReport(
-            archive,
-            total,
-            total - len(missing),
-            len(missing),
-            len(plans),
-            False,
-            time.monotonic() - started,
-            tuple(notes),
-            {
-                c.case_id: found.statuses[c.case_id]
-                for c in study.cases
-                if c.case_id in found.statuses
-            },
-        )
+        statuses = {
+            c.case_id: found.statuses[c.case_id] for c in study.cases if c.case_id in found.statuses
+        }
+        return _ran(archive, total, missing, plans, started, notes, statuses)
 
 
 def _compute(
