@@ -334,6 +334,22 @@ def estimate_text(loaded, workers: int) -> str:
         f"run time: about {_seconds(e.seconds)} on {workers} "
         f"worker{'s' if workers != 1 else ''}: {', '.join(parts)} (timed on a run of {timed}; "
         f"{e.simulated:.3g} s simulated; the process's own start not included){replayed}"
+        f"{_step_cap(loaded)}"
+    )
+
+
+def _step_cap(loaded) -> str:
+    """``; each compliant case stops at ...``: the run-time cap on an adaptive integration's
+    steps, for a study with compliant cases (whose steps no spec-time bound covers)."""
+    from campipe.study.spec.resolve import distinct_but_speed
+
+    caps = {c.settings.max_steps for c in distinct_but_speed(loaded.cases)[0]
+            if c.settings.method == "compliant"}  # fmt: skip
+    if not caps:
+        return ""
+    return (
+        f"; each compliant case stops at {max(caps):.3g} steps (run.max_steps, --max-steps), "
+        "its status step_limit, the other cases unaffected"
     )
 
 
