@@ -287,6 +287,7 @@ def validate(
     samples = sample_count(loaded.revolutions, loaded.output_every)
     size = default_batch_size(len(loaded.cases), workers, samples)
     click.echo(f"batches: {count_batches(loaded.cases, size)} of up to {size} cases")
+    click.echo(memory_text(len(loaded.cases), workers, samples))
     if estimate:
         from campipe.engine.kernels import compile_notice
         from campipe.study.spec.resolve import distinct_but_speed
@@ -298,6 +299,20 @@ def validate(
     click.echo(
         f"archive: about {archive_bytes(loaded) / 1e6:.3g} MB before compression "
         f"(events not counted)"
+    )
+
+
+def memory_text(n_cases: int, workers: int, samples: int) -> str:
+    """``memory: ...``: the bound on what the batches in flight hold, with its basis."""
+    from campipe.study.run.sizing import BYTES_PER_SAMPLE, IN_FLIGHT_PER_WORKER, in_flight_memory
+
+    bound, batches, size = in_flight_memory(n_cases, workers, samples)
+    return (
+        f"memory: the batches in flight take at most about {bound / 1e6:.3g} MB, whatever the "
+        f"study's size ({batches} batch{'es' if batches != 1 else ''} of up to {size} cases: "
+        f"at most {IN_FLIGHT_PER_WORKER} a worker in flight, each case {samples} samples × "
+        f"{BYTES_PER_SAMPLE} bytes), beside the process's own (imports, kernels, the "
+        "study's cases); the bench measures it (docs/bench.md)"
     )
 
 
