@@ -294,7 +294,8 @@ def task_map(scheduler: str, workers: int) -> Iterator[Mapped]:
         return
     from distributed import wait as wait_futures
 
-    with _distributed_quiet(), _cluster(scheduler) as client, client.as_current():
+    kept = "nothing of this search is kept: rerun the command"
+    with _distributed_quiet(), _cluster(scheduler, kept) as client, client.as_current():
 
         def on_cluster(items: Sequence[Any], task: Callable[[Any], Any]) -> list[Any]:
             step = functools.partial(_indexed, task)
@@ -394,11 +395,16 @@ def _run_distributed(
             _reach_file(parts, reach).unlink(missing_ok=True)
 
 
+#: What a study keeps of a cluster that failed, in its message.
+KEPT = "the batches finished before it are stored: rerun the same command to resume"
+
+
 @contextmanager
-def _cluster(address: str) -> Iterator:
+def _cluster(address: str, kept: str = KEPT) -> Iterator:
     """A client of the dask.distributed scheduler at ``address`` for the block, closed after
     it; a SchedulerError if it cannot be reached within CONNECT_TIMEOUT seconds or the
-    cluster fails in the block (campipe's own errors pass as they are)."""
+    cluster fails in the block (campipe's own errors pass as they are; ``kept``: what is
+    kept of the work, in the message)."""
     try:
         client = _connect(address)
     except (OSError, TimeoutError, ValueError, TypeError, MemoryError) as exc:
@@ -420,8 +426,7 @@ def _cluster(address: str) -> Iterator:
     except Exception as exc:  # distributed raises many kinds when the cluster goes away
         raise SchedulerError.at(
             "--scheduler",
-            f"the dask cluster at {address} failed ({type(exc).__name__}: {_line(exc)}); "
-            "the batches finished before it are stored: rerun the same command to resume",
+            f"the dask cluster at {address} failed ({type(exc).__name__}: {_line(exc)}); " + kept,
             found=address,
         ) from None
 
