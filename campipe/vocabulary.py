@@ -108,17 +108,20 @@ N_EVENT_FIELDS = 6
 
 #: Status of a run: finished; its state became non-finite; more events than kept; events
 #: recurring without time advancing (chatter); its motion left physical bounds (a valve lift
-#: or a closing speed far beyond what the cam drives: a step too large for the integrator).
-OK, NONFINITE, EVENTS_TRUNCATED, CHATTER, UNBOUNDED = 0, 1, 2, 3, 4
+#: or a closing speed far beyond what the cam drives: a step too large for the integrator);
+#: stopped at ``run.max_steps`` steps (``--max-steps``: an adaptive integration, a stiff
+#: contact without damping, that would take longer than the cap allows).
+OK, NONFINITE, EVENTS_TRUNCATED, CHATTER, UNBOUNDED, STEP_LIMIT = 0, 1, 2, 3, 4, 5
 STATUS = {
     OK: "ok",
     NONFINITE: "nonfinite",
     EVENTS_TRUNCATED: "events_truncated",
     CHATTER: "chatter",
     UNBOUNDED: "unbounded",
+    STEP_LIMIT: "step_limit",
 }
 #: The statuses of a case whose results cannot be used.
-FAILURES = (NONFINITE, CHATTER, UNBOUNDED)
+FAILURES = (NONFINITE, CHATTER, UNBOUNDED, STEP_LIMIT)
 
 
 def flag_attributes(names: dict[int, str]) -> tuple[tuple[str, object], ...]:

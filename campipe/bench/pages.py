@@ -30,7 +30,7 @@ import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-from campipe.bench import cluster, gate, report, settling, sweep, verdict
+from campipe.bench import cluster, gate, memory, report, settling, sweep, verdict
 from campipe.bench.figures import finite, format_short
 from campipe.bench.run import (
     ACCURACY_DEFAULT_ERROR,
@@ -506,6 +506,18 @@ def cluster_block(bench: Bench) -> str:
     return "\n".join(lines) + "\n"
 
 
+def memory_block(bench: Bench) -> str:
+    """A study's peak memory against the bound campipe validate states."""
+    if not bench.memory:
+        return (
+            "Not measured in this run (`--no-scaling`, or a run from before the block): "
+            "`python -m campipe.bench.memory` runs it alone.\n"
+        )
+    lines = memory.notes(bench.memory) + [""]
+    lines += table(memory.HEADER, memory.table_rows(bench.memory))
+    return "\n".join(lines) + "\n"
+
+
 def settling_block(bench: Bench) -> str:
     """Automatic run length against a fixed 4 turns on a sweep through the onset."""
     return settling.markdown(bench.settling)
@@ -540,6 +552,7 @@ BLOCKS: dict[str, Callable[[Bench], str]] = {
     "bench-settling": settling_block,
     "bench-scaling": scaling_block,
     "bench-cluster": cluster_block,
+    "bench-memory": memory_block,
     "bench-sweep": sweep_block,
     "bench-regressions": regressions_block,
 }

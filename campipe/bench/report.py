@@ -16,7 +16,7 @@ from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Any
 
-from campipe.bench import cluster, gate, settling, sweep, verdict
+from campipe.bench import cluster, gate, memory, settling, sweep, verdict
 from campipe.bench.figures import finite
 from campipe.bench.run import FAMILIES, Bench
 from campipe.constants import INCH
@@ -396,6 +396,10 @@ def markdown(bench: Bench, with_plots: bool = True) -> str:
         lines += ["", "## A study on a dask cluster", ""]
         lines += cluster.notes(bench.cluster) + [""]
         lines += _table(cluster.HEADER, cluster.table_rows(bench.cluster))
+    if bench.memory:
+        lines += ["", "## A study's peak memory", ""]
+        lines += memory.notes(bench.memory) + [""]
+        lines += _table(memory.HEADER, memory.table_rows(bench.memory))
     lines += ["", "## Every run", ""]
     lines += _table(
         [c[1] or c[0] for c in COLUMNS],

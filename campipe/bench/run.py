@@ -19,7 +19,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from campipe.bench import cluster, measure, onset, scaling, settling, sweep
+from campipe.bench import cluster, measure, memory, onset, scaling, settling, sweep
 from campipe.bench.ivp import ChatterError
 from campipe.bench.suite import FULL, QUICK, Ladder, Scene, suite
 from campipe.constants import INCH
@@ -88,6 +88,8 @@ class Bench:
     scaling: list[dict] = field(default_factory=list)  # the engine's time against cases, workers
     #: a study with --parts on 1, 2, … worker processes: cases/s, the client's CPU
     cluster: list[dict] = field(default_factory=list)
+    #: a study's peak memory against the bound campipe validate states (campipe.bench.memory)
+    memory: dict = field(default_factory=dict)
     steady: list[dict] = field(default_factory=list)  # the steady-state path per scene
     onset: dict = field(default_factory=dict)  # the onset map against the time-domain grid
     settling: dict = field(default_factory=dict)  # automatic run length against 4 turns
@@ -485,6 +487,10 @@ def run_bench(
         say(f"scaling: engine on dask threads, {counts[0]}–{counts[-1]} cases")
         points = scaling.engine_scaling(counts)
         bench.scaling = [{**asdict(p), "per_case": p.per_case} for p in points]
+        n = memory.QUICK_MEMORY_CASES if quick else memory.MEMORY_CASES
+        say(f"memory: a study of {n} cases, its peak against the bound validate states")
+        with tempfile.TemporaryDirectory(prefix="campipe-memory-") as folder:
+            bench.memory = memory.as_dict(memory.study_memory(n, folder))
     if with_scaling if with_cluster is None else with_cluster:
         sizes, processes = (
             (cluster.QUICK_CLUSTER_COUNTS, cluster.QUICK_CLUSTER_WORKERS)

@@ -29,7 +29,20 @@ from campipe.cli.base import SET_HELP, Failure, InputFailure, load_spec
     is_flag=True,
     help="Replace a file at the output path that is not this spec's design file; never the spec.",
 )
-def design(spec, sets, fmt, output, overwrite) -> None:
+@click.option(
+    "--scheduler",
+    default="threads",
+    show_default=True,
+    help="Where the designs are computed, as campipe study's batches: threads, synchronous, "
+    "processes, or a dask.distributed scheduler address such as tcp://127.0.0.1:8786.",
+)
+@click.option(
+    "--workers",
+    type=click.IntRange(min=1),
+    help="Threads or processes of a local scheduler (default: the cores available); on a "
+    "dask cluster, its worker threads, for which the estimate is made.",
+)
+def design(spec, sets, fmt, output, overwrite, scheduler, workers) -> None:
     """The design SPEC's design: section asks for: the values of design.vary's keys, within
     their bounds, that meet design.require (the no-follow onset, metrics at stated speeds)
     with the least (minimize) or greatest (maximize) objective. One varied key that is the
@@ -38,9 +51,18 @@ def design(spec, sets, fmt, output, overwrite) -> None:
     Prints the chosen design first, then every other design evaluated, with the margin on
     each requirement and the one that binds; writes them to a netCDF file campipe query and
     campipe plot read. Exit status 1 when no design meets the requirements (the closest is
-    printed first, marked closest, with the requirement it fails)."""
+    printed first, marked closest, with the requirement it fails).
+
+    The designs of a batch (a root search's bounds and its scan, a global method's
+    generation, a Pareto sample) are computed side by side on the scheduler, as campipe
+    study's batches; an estimate and a progress line go to stderr."""
     from pathlib import Path
 
+    from campipe.study.run.execute import check_scheduler
+    from campipe.study.run.sizing import default_workers
+
+    check_scheduler(scheduler)
+    workers = workers or (1 if scheduler == "synchronous" else default_workers())
     loaded = load_spec(spec, sets)
     if loaded.spec.design is None:
         raise InputFailure(
@@ -49,7 +71,7 @@ def design(spec, sets, fmt, output, overwrite) -> None:
             "{onset_speed_rpm: {min: 9500 rpm}}, minimize: model.spring_preload}"
         )
     path = Path(output) if output else Path(spec).parent / f"{loaded.name}-design.nc"
-    _run(loaded, spec, path, fmt, overwrite)
+    _run(loaded, spec, path, fmt, overwrite, scheduler, workers)
 
 
 def _kind(study_name: str, spec_file: str):
@@ -68,13 +90,19 @@ def _kind(study_name: str, spec_file: str):
     return Kind("a design file of this spec", ours)
 
 
-def _search(loaded):
-    """The search, with campipe study's progress line on stderr (redrawn in a terminal,
-    every 2 s elsewhere) counting designs against the most the search may take."""
+def _search(loaded, scheduler: str, workers: int):
+    """The search on the scheduler, its estimate first, then campipe study's progress line on
+    stderr (redrawn in a terminal, every 2 s elsewhere) counting designs against the most
+    the search may take."""
     import sys
 
+    from campipe.study.design.estimate import estimate_design
     from campipe.study.design.search import most_evaluations, run_design
     from campipe.study.run.progress import Progress
+    from campipe.study.run.workers import task_map
+
+    def estimate(evaluate) -> None:
+        click.echo(f"campipe design: {estimate_design(evaluate, loaded, workers).text()}", err=True)
 
     stderr = sys.stderr
     progress = Progress(
@@ -85,16 +113,19 @@ def _search(loaded):
         then="writing the file",
     )
     try:
-        return run_design(
-            loaded,
-            notice=lambda text: click.echo(f"campipe design: {text}", err=True),
-            on_evaluation=lambda _: progress.advance(1),
-        )
+        with task_map(scheduler, workers) as mapped:
+            return run_design(
+                loaded,
+                notice=lambda text: click.echo(f"campipe design: {text}", err=True),
+                on_evaluation=lambda _: progress.advance(1),
+                mapped=mapped,
+                before=estimate,
+            )
     finally:
         progress.close()
 
 
-def _run(loaded, spec_path, path, fmt, overwrite) -> None:
+def _run(loaded, spec_path, path, fmt, overwrite, scheduler, workers) -> None:
     import os
     from pathlib import Path
 
@@ -117,7 +148,7 @@ def _run(loaded, spec_path, path, fmt, overwrite) -> None:
     inputs = [(spec_path, "the spec")]
     check_output(path, "-o", kind, overwrite=overwrite, inputs=inputs, describe=describe_netcdf)
     path.parent.mkdir(parents=True, exist_ok=True)
-    result = _search(loaded)
+    result = _search(loaded, scheduler, workers)
     table = design_table(result)
     sizes, variables, arrays, attrs = file_contents(result, table)
     with writing(path):

@@ -287,6 +287,7 @@ def validate(
     samples = sample_count(loaded.revolutions, loaded.output_every)
     size = default_batch_size(len(loaded.cases), workers, samples)
     click.echo(f"batches: {count_batches(loaded.cases, size)} of up to {size} cases")
+    click.echo(memory_text(len(loaded.cases), workers, samples))
     if estimate:
         from campipe.engine.kernels import compile_notice
         from campipe.study.spec.resolve import distinct_but_speed
@@ -298,6 +299,20 @@ def validate(
     click.echo(
         f"archive: about {archive_bytes(loaded) / 1e6:.3g} MB before compression "
         f"(events not counted)"
+    )
+
+
+def memory_text(n_cases: int, workers: int, samples: int) -> str:
+    """``memory: ...``: the bound on what the batches in flight hold, with its basis."""
+    from campipe.study.run.sizing import BYTES_PER_SAMPLE, IN_FLIGHT_PER_WORKER, in_flight_memory
+
+    bound, batches, size = in_flight_memory(n_cases, workers, samples)
+    return (
+        f"memory: the batches in flight take at most about {bound / 1e6:.3g} MB, whatever the "
+        f"study's size ({batches} batch{'es' if batches != 1 else ''} of up to {size} cases: "
+        f"at most {IN_FLIGHT_PER_WORKER} a worker in flight, each case {samples} samples × "
+        f"{BYTES_PER_SAMPLE} bytes), beside the process's own (imports, kernels, the "
+        "study's cases); the bench measures it (docs/bench.md)"
     )
 
 
@@ -334,6 +349,22 @@ def estimate_text(loaded, workers: int) -> str:
         f"run time: about {_seconds(e.seconds)} on {workers} "
         f"worker{'s' if workers != 1 else ''}: {', '.join(parts)} (timed on a run of {timed}; "
         f"{e.simulated:.3g} s simulated; the process's own start not included){replayed}"
+        f"{_step_cap(loaded)}"
+    )
+
+
+def _step_cap(loaded) -> str:
+    """``; each compliant case stops at ...``: the run-time cap on an adaptive integration's
+    steps, for a study with compliant cases (whose steps no spec-time bound covers)."""
+    from campipe.study.spec.resolve import distinct_but_speed
+
+    caps = {c.settings.max_steps for c in distinct_but_speed(loaded.cases)[0]
+            if c.settings.method == "compliant"}  # fmt: skip
+    if not caps:
+        return ""
+    return (
+        f"; each compliant case stops at {max(caps):.3g} steps (run.max_steps, --max-steps), "
+        "its status step_limit, the other cases unaffected"
     )
 
 

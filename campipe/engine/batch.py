@@ -83,6 +83,7 @@ from campipe.vocabulary import (
     NONFINITE,
     SEAT,
     SEATED,
+    STEP_LIMIT,
     UNBOUNDED,
     free_coordinates,
 )
@@ -685,6 +686,13 @@ def _failures(out, settings: RunSettings, on_failure, check_stability_limit, int
             f"cases {bad.tolist()}: the motion left its physical bounds ({how}): a valve lift "
             f"beyond {LIFT_BOUND:g}× the full lift or a speed beyond {SPEED_BOUND:g}× the cam's; "
             + why,
+            found=bad.tolist(),
+        )
+    bad = np.flatnonzero(status == STEP_LIMIT)
+    if bad.size and on_failure == "raise":
+        raise IntegrationError(
+            f"cases {bad.tolist()}: stopped at run.max_steps ({settings.max_steps:.6g} steps; "
+            "a stiff contact without damping): raise --max-steps, or damp the contact",
             found=bad.tolist(),
         )
     for i in np.flatnonzero(status == EVENTS_TRUNCATED):

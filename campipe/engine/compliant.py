@@ -70,6 +70,7 @@ from campipe.vocabulary import (
     SEAT,
     SEAT_IMPACT,
     SEAT_SEPARATION,
+    STEP_LIMIT,
     UNBOUNDED,
     configuration,
 )
@@ -318,13 +319,36 @@ class UnresolvedSwitch(CampipeError, RuntimeError):
     case with status NONFINITE, as a failed step does; the batch's other cases go on."""
 
 
-def _segment(run: _Run, t: float, t_stop: float, z: np.ndarray, exact: bool, atol: np.ndarray
-             ) -> tuple[Any, list[Any]]:  # fmt: skip
-    """One smooth segment from (t, z) to t_stop or its first switch: (its solution, its
-    events)."""
+class StepLimit(CampipeError, RuntimeError):
+    """A case past its ``run.max_steps`` steps: it ends with status STEP_LIMIT (a stiff
+    contact without damping takes steps without end); the batch's other cases go on."""
+
+
+def _step_counter(budget: float) -> Any:
+    """An event that never fires and counts the steps: solve_ivp (and the exact propagation)
+    calls each event once at a segment's start and once a step; past ``budget`` steps it
+    raises StepLimit, which stops the integration within the step, whatever its length."""
+    calls = [0]
+
+    def counter(t: float, z: np.ndarray) -> float:
+        calls[0] += 1
+        if calls[0] - 1 > budget:
+            raise StepLimit(f"more than {budget:.6g} steps", key="run.max_steps", found=budget)
+        return 1.0
+
+    counter.terminal = False  # type: ignore[attr-defined]
+    counter.direction = 0.0  # type: ignore[attr-defined]
+    counter.contact = -1  # type: ignore[attr-defined]
+    return counter
+
+
+def _segment(run: _Run, t: float, t_stop: float, z: np.ndarray, exact: bool, atol: np.ndarray,
+             budget: float = math.inf) -> tuple[Any, list[Any]]:  # fmt: skip
+    """One smooth segment from (t, z) to t_stop or its first switch, in at most ``budget``
+    steps (else StepLimit): (its solution, its events)."""
     from scipy.integrate import solve_ivp
 
-    events = run.monitors(t, z)
+    events = run.monitors(t, z) + [_step_counter(budget)]
     if exact:
         return exact_segment(run, t, t_stop, z, events, run.max_step), events
     sol = solve_ivp(
@@ -361,6 +385,7 @@ def integrate(
     *,
     rtol: float,
     max_step: float = math.inf,
+    max_steps: float = math.inf,
     capture: float = 1e-3,
     lift_bound: float = math.inf,
     valve_ref: float = 0.0,
@@ -382,6 +407,9 @@ def integrate(
         Relative tolerance; the absolute one is rtol × ``system.scale``.
     max_step : float
         Largest step [s].
+    max_steps : float
+        The most steps the case takes (``run.max_steps``); a case that needs more stops
+        there with status STEP_LIMIT, its samples after that point left as they were.
     capture : float
         A closing slower than this [m/s] is a touch: switched and recorded as an event, but
         not counted as an impact in the per-turn counts and closing velocities.
@@ -404,9 +432,12 @@ def integrate(
         t_stop = min(system.lift.break_after(run.piece, run.rev), t_end)
         if t_stop - t > 1e-15 * (1.0 + abs(t)):
             try:
-                sol, events = _segment(run, t, t_stop, z, exact, atol)
+                sol, events = _segment(run, t, t_stop, z, exact, atol, max_steps - out.steps)
             except UnresolvedSwitch:
                 out.status = NONFINITE
+                return out
+            except StepLimit:
+                out.steps, out.status = int(max_steps), STEP_LIMIT
                 return out
             out.steps += sol.t.size - 1
             if sol.status == -1 or not np.all(np.isfinite(sol.y[:, -1])):

@@ -109,6 +109,9 @@ class RunSettings:
     integrator: str = "default"  # "default" or a name in INTEGRATORS
     tolerance: float = 1e-12  # event-time tolerance of integrators that locate events [s]
     max_events: int = 4096  # events kept per case
+    #: the most steps of one case's adaptive integration (compliant); beyond, the case stops
+    #: with status STEP_LIMIT (``--max-steps``)
+    max_steps: int = 1_000_000_000
     fidelity: str = "full"  # a name in FIDELITIES
     #: a valve-lift error [m] the run accepts instead of a level: the cheapest level whose
     #: FIDELITY_ERRORS is within it (``level``); None: ``fidelity`` as named

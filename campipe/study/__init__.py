@@ -18,6 +18,7 @@ lies above them all. File formats live in :mod:`campipe.io`.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -54,7 +55,8 @@ def load_study(
         Dotted key → value applied over the spec first, e.g. ``{"run.revolutions": 1}``.
     limits : Limits, optional
         Bounds on cases, steps, samples, events and archive size (default: ``Limits()``),
-        checked from the spec before any case is built.
+        checked from the spec before any case is built; a ``steps`` other than the default
+        is also each case's ``run.max_steps``, the cap of an adaptive integration at run time.
 
     Raises
     ------
@@ -66,6 +68,8 @@ def load_study(
     path = Path(path)
     raw, text = read_spec(path)
     limits = limits or Limits()
+    if limits.steps != Limits().steps:  # --max-steps: also the run's cap (run.max_steps)
+        overrides = {**(overrides or {}), "run.max_steps": math.ceil(limits.steps)}
     spec = check_spec(raw, text, path.parent, str(path), overrides, max_axis=limits.cases)
     spec.path = path
     return expand(spec, str(path), limits)

@@ -533,3 +533,29 @@ def test_the_cluster_block_runs_a_parts_study_on_worker_processes(tmp_path):
     assert [(p.workers, p.n_cases, p.batches) for p in points] == [(1, 8, 2), (1, 16, 4)]
     assert all(p.client_cpu > 0 and p.seconds > 0 for p in points)
     assert len(read_index(tmp_path / "cluster-16-1.parts")["case"]) == 16
+
+
+def test_the_memory_block_measures_a_tiny_study_against_the_stated_bound(tmp_path):
+    """study_memory on 16 cases, in a process of its own: 3 turns at 1° are 1081 samples a
+    case; two threads cut 16 cases into batches of 4 (the least size), 4 of them in flight
+    (two a worker), so the stated bound is 4 × 4 × 1081 × 320 bytes; the peaks read in bytes
+    (a baseline of imports and kernels between 50 MB and 2 GB, the run's growth under 64 MB
+    for 16 cases), the archive holds the 16 cases, and the page's block shows the figures.
+    Broken copies it fails on: ru_maxrss read as bytes (kB: a baseline under 1 MB) or
+    scaled twice; the bound of every batch at once rather than those in flight."""
+    from types import SimpleNamespace
+
+    import xarray as xr
+
+    from campipe.bench import memory, pages
+
+    point = memory.study_memory(16, tmp_path)
+    assert (point.n_cases, point.samples, point.workers) == (16, 3 * 360 + 1, 2)
+    assert (point.in_flight, point.batch_size) == (4, 4)
+    assert point.bound == 4 * 4 * 1081 * 320
+    assert 50e6 < point.baseline < 2e9 and 0 <= point.growth < 64e6
+    with xr.open_dataset(tmp_path / "memory-16.nc") as ds:
+        assert ds.sizes["case"] == 16 and (ds["status"].values == 0).all()
+    text = pages.memory_block(SimpleNamespace(memory=memory.as_dict(point)))
+    assert f"{point.growth / 1e6:.0f} MB" in text and "| 16 | 1081 | 2 | 4 × 4 |" in text
+    assert ("within" if point.within else "beyond") in text

@@ -290,7 +290,7 @@ def test_the_output_json_csv_and_the_file_query_and_plot_read(tmp_path):
     assert lines[0].startswith("case,evaluation,chosen,spring_preload [lbf],onset_speed_rpm [rpm]")
     assert len(lines) == n + 1 and lines[1].split(",")[2] == "yes"
     again = invoke("design", path, "--format", "csv")  # its own file: replaced without asking
-    assert again.exit_code == 0 and again.output.splitlines()[0] == lines[0]
+    assert again.exit_code == 0 and again.stdout.splitlines()[0] == lines[0]
     figure = tmp_path / "preload.png"
     drawn = invoke("plot", "metric", archive, "--x", "spring_preload", "--y",
                    "onset_speed_rpm", "-o", figure)  # fmt: skip
@@ -376,3 +376,66 @@ def test_a_metric_the_model_does_not_define_is_refused_at_its_requirement(tmp_pa
     out = invoke("design", spec(tmp_path, design, "hertz"))
     assert out.exit_code == 2, out.output
     assert "design.require.max_cam_pressure: the run at 6000 rpm gives no value" in out.output
+
+
+WINDOW = """
+  vary: {model.spring_preload: {from: 80 lbf, to: 250 lbf, tolerance: 0.5 lbf}}
+  require: {onset_speed_rpm: {min: 9000 rpm, max: 9600 rpm}}
+  minimize: model.spring_preload
+"""
+
+
+@pytest.mark.parametrize(
+    "design", [WINDOW, TWO_KEYS.format(method="global") + "  max_evaluations: 36\n"]
+)
+def test_a_design_on_a_dask_cluster_is_the_synchronous_design(tmp_path, design):
+    """The search on a local dask cluster (in this process, over TCP, as a remote cluster is
+    reached) evaluates the same designs in the same order, each with the same onset and
+    metrics to the bit, and chooses the same design as on the synchronous scheduler: a root
+    search whose bounds both fail (an onset window: the bounds one batch, the scan the next)
+    and the global method (each generation one batch). Fails if a batch's results were
+    matched to the wrong designs (results arrive as they finish) or a batch were cut."""
+    from distributed import LocalCluster
+
+    from campipe.study.run.workers import task_map
+
+    study = load_study(spec(tmp_path, design))
+    alone = run_design(study)
+    with LocalCluster(
+        n_workers=1,
+        threads_per_worker=2,
+        processes=False,
+        protocol="tcp://",
+        host="127.0.0.1",
+        dashboard_address=":0",
+    ) as cluster:
+        with task_map(cluster.scheduler_address, 2) as mapped:
+            spread = run_design(study, mapped=mapped)
+    assert len(alone.evaluations) > 11  # more than the bounds and the scan
+    assert spread.chosen == alone.chosen and spread.feasible and alone.feasible
+    assert [tuple(e.x) for e in spread.evaluations] == [tuple(e.x) for e in alone.evaluations]
+    assert [e.onset for e in spread.evaluations] == [e.onset for e in alone.evaluations]
+    assert [e.metrics for e in spread.evaluations] == [e.metrics for e in alone.evaluations]
+    if design is WINDOW:  # the window's lower edge: its onset 9000 rpm or a little more
+        assert 9000 <= spread.best.onset <= 9600 and spread.best.x[0] > 80 * LBF
+
+
+def test_campipe_design_prints_its_estimate_and_runs_on_threads_as_synchronous(tmp_path):
+    """campipe design --scheduler threads --workers 2 prints, before its search, the estimate
+    with its basis (the method, the designs and rounds it takes at most: for the root search
+    with a 0.5 lbf tolerance over 170 lbf, 2 + 9 + 2·9 = 29 designs in 1 + 5 + 18 = 24
+    rounds of two workers, and one design's time), and answers as --scheduler synchronous.
+    Fails if the estimate were missing, or its rounds not the search's."""
+    path = spec(tmp_path, WINDOW)
+    rows = {}
+    for scheduler in ("synchronous", "threads"):
+        out = invoke("design", path, "--format", "json", "--scheduler", scheduler,
+                     "--workers", "2", "-o", tmp_path / f"{scheduler}.nc")  # fmt: skip
+        assert out.exit_code == 0, out.output
+        text = out.output
+        rows[scheduler] = json.loads(text[text.index("{") : text.rindex("}") + 1])["cases"]
+        line = next(t for t in text.splitlines() if t.startswith("campipe design: design time"))
+        assert "on 2 workers (root search: at most 29 designs in 24 rounds" in line
+        assert "one design timed here at" in line
+        assert text.index("design time") < text.index("{")
+    assert rows["threads"] == rows["synchronous"]

@@ -87,3 +87,30 @@ def test_the_replay_selection_is_counted_and_one_case_timed(tmp_path):
     spec.write_text(SPEC + 'replay: {where: "separation_deg_per_rev > 0"}\n')
     count, each = time_replay(load_study(spec), tmp_path)
     assert count is None and each > 0  # known only once the cases have run
+
+
+def test_validate_states_the_memory_bound_of_the_batches_in_flight(tmp_path):
+    """100 cases of 2 turns at 1° (721 samples) on 2 workers: batches of 13 cases (about four
+    a worker: ⌈100 / 8⌉), at most 2 a worker in flight, so validate states 4 × 13 × 721 × 320
+    bytes = 12.0 MB whatever the study's size; 10 cases (batches of 4, 3 of them) only 3
+    batches. Fails if the bound counted every batch of the study, or more in flight than
+    there are batches."""
+    spec = """
+name: mem
+model: {preset: thesis-1971}
+profile: {kind: harmonic, lift: 1 in}
+seat: none
+run: {revolutions: 2, output_every: 1 deg}
+sweep:
+  speed: {from: 3000 rpm, to: 9000 rpm, num: %d}
+"""
+    lines = {}
+    for n in (100, 10):
+        path = write_spec(tmp_path, spec % n, f"mem{n}.yaml")
+        out = CliRunner().invoke(main, ["validate", str(path), "--no-estimate", "--workers", "2"])
+        assert out.exit_code == 0, out.output
+        lines[n] = next(t for t in out.output.splitlines() if t.startswith("memory:"))
+    assert f"at most about {4 * 13 * 721 * 320 / 1e6:.3g} MB" in lines[100]
+    assert "(4 batches of up to 13 cases: at most 2 a worker in flight" in lines[100]
+    assert f"at most about {3 * 4 * 721 * 320 / 1e6:.3g} MB" in lines[10]
+    assert "each case 721 samples × 320 bytes" in lines[10]

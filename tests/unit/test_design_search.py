@@ -26,6 +26,7 @@ class Stub:
         self.evaluations = []
         self._seen = {}
         self.needs_onset = False
+        self.batches = []  # the designs of each call of many, as evaluated (new ones)
 
     def seen(self, x):
         return self._seen.get(np.array(x, float).tobytes())
@@ -40,6 +41,12 @@ class Stub:
         self.evaluations.append(e)
         self._seen[x.tobytes()] = e
         return e
+
+    def many(self, xs):
+        before = len(self.evaluations)
+        out = [self(x) for x in xs]
+        self.batches.append([float(e.x[0]) for e in self.evaluations[before:]])
+        return out
 
     def better(self, a, b):
         sign = 1.0 if self.design.sense == "minimize" else -1.0
@@ -79,16 +86,24 @@ def test_maximize_finds_the_largest_feasible_value():
 
 
 def test_a_better_bound_that_is_feasible_is_the_answer_at_once():
+    """Both bounds go out as one batch (the bracketing evaluations, side by side on the
+    workers) and the feasible better one is the answer with nothing more evaluated. Fails if
+    the bounds were evaluated one call at a time or the search went on."""
     result, stub = search(design(("model.k0", "minimize")), lambda x: 1.0)
-    assert result.best.x[0] == 0.0 and len(stub.evaluations) == 1
+    assert result.best.x[0] == 0.0 and len(stub.evaluations) == 2
+    assert stub.batches == [[0.0, 10.0]]
 
 
 def test_neither_bound_feasible_scans_and_searches_the_window():
     """Feasible only on [4, 6] (a requirement each way): the scan finds the window and the
     root search its lower edge. Fails without the scan (both bounds infeasible read as no
     answer)."""
-    result, _ = search(design(("model.k0", "minimize")), lambda x: 1.0 - abs(x[0] - 5.0))
+    result, stub = search(design(("model.k0", "minimize")), lambda x: 1.0 - abs(x[0] - 5.0))
     assert result.feasible and 4.0 <= result.best.x[0] <= 4.0 + 1e-3
+    # the bounds one batch, the scan's nine values (1, 2, ..., 9) the next, then one at a time
+    assert stub.batches[0] == [0.0, 10.0]
+    assert stub.batches[1] == pytest.approx(list(np.linspace(0.0, 10.0, 11)[1:-1]))
+    assert all(len(b) <= 1 for b in stub.batches[2:])
 
 
 def test_no_feasible_value_reports_the_closest():
@@ -141,3 +156,21 @@ def test_the_pareto_front_is_the_non_dominated_feasible_set():
     xs = [stub.evaluations[i].x[0] for i in result.front]
     assert xs == sorted(xs) and result.order[: len(expected)] == result.front
     assert pareto_front(stub.evaluations, d) == result.front
+
+
+def test_the_global_method_evaluates_each_generation_as_one_batch():
+    """differential_evolution's population (8 a key: 16 for two) goes to the workers as one
+    batch (SciPy's probe of the constraint's shape the one design before it), and each later
+    generation's trials too; COBYQA's steps one at a time. The answer
+    still reaches the optimum (3, 3). Fails if the population were evaluated one design a
+    call (every batch of one)."""
+    result, stub = search(
+        design(("model.k0", "minimize"), keys=2, method="global", most=400),
+        lambda x: x[0] * x[1] / 9.0 - 1.0,
+        lambda x: (float(x[0] + x[1]),),
+    )
+    sizes = [len(b) for b in stub.batches]
+    # SciPy probes the constraint's shape at one point first (a point of the population)
+    assert sizes[0] == 1 and sizes[0] + sizes[1] == 16
+    assert sum(s >= 15 for s in sizes) >= 5 and sizes[-1] == 1
+    assert result.feasible and result.best.objective == pytest.approx(6.0, rel=0.01)

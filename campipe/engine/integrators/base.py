@@ -38,6 +38,9 @@ class RunLike(Protocol):
     @property
     def method(self) -> str: ...  # the integrator's resolved name
 
+    @property
+    def max_steps(self) -> int: ...  # the most steps of one case (adaptive integrators)
+
 
 class Integrator(Protocol):
     """An integrator of a batch of cases."""

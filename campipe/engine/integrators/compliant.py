@@ -61,12 +61,12 @@ class Compliant:
 
     def prepare(self, batch: Any, run: RunLike) -> Any:
         rtol = max(float(run.tolerance), RTOL_FLOOR)
-        return batch.case_list, output_angles(run), rtol, run.step or math.inf
+        return batch.case_list, output_angles(run), rtol, run.step or math.inf, run.max_steps
 
     def run(self, prepared: Any, cases: Any, out: Any) -> None:
         from campipe.engine import compliant  # SciPy's integration, loaded when first run
 
-        case_list, angles, rtol, max_step = prepared
+        case_list, angles, rtol, max_step, max_steps = prepared
         c = cases
         for i, case in enumerate(case_list):
             seat = float(c.seat_q[i]) if case.has_seat else None
@@ -80,7 +80,7 @@ class Compliant:
             )  # fmt: skip
             compliant.integrate(
                 system, float(c.t0[i]), z0, held, angles / case.speed, one,
-                rtol=rtol, max_step=max_step, capture=float(c.capture[i]),
+                rtol=rtol, max_step=max_step, max_steps=max_steps, capture=float(c.capture[i]),
                 lift_bound=float(c.lift_bound[i]), valve_ref=float(c.valve_ref[i]),
             )  # fmt: skip
             out.n_events[i], out.status[i], out.steps[i] = one.n_events, one.status, one.steps

@@ -12,6 +12,7 @@ requirements by their *relative* margins (the margin over the bound, or over 1 f
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -25,6 +26,7 @@ from campipe.engine.metrics import archived_metrics
 from campipe.errors import CampipeError
 from campipe.study.spec.design import ONSET, Design, Requirement, onset_required
 from campipe.study.spec.expand import Study
+from campipe.study.spec.resolve import ResolvedCase
 from campipe.units import convert
 from campipe.vocabulary import FAILURES
 
@@ -103,6 +105,57 @@ class Evaluation:
         return self.relative >= 0.0
 
 
+@dataclass(frozen=True)
+class Computed:
+    """What a worker computes of a design (:func:`compute_design`); judged by this process."""
+
+    onset: float = math.nan  # the no-follow onset [rpm]; NaN: not asked for, or none
+    onset_status: str = ""  # engine.onset.Onset's status ("" not asked for)
+    #: (metric summary, speed [rad/s]) → its value (the archive's units); NaN: none
+    values: dict[tuple[str, float], float] = field(default_factory=dict)
+    failed: tuple[bool, ...] = ()  # the run at each speed failed (a failure status)
+
+
+def compute_design(
+    low: float,
+    high: float,
+    needs_onset: bool,
+    speeds: tuple[float, ...],
+    wanted: tuple[str, ...],
+    first: ResolvedCase,
+) -> Computed:
+    """A design's case evaluated (on a worker): its no-follow onset between ``low`` and
+    ``high`` [rad/s] if ``needs_onset``, and the metrics ``wanted`` (their summaries) of one
+    run of the case at each of ``speeds``, as a study's batch runs them."""
+    onset, status = math.nan, ""
+    if needs_onset:
+        on = engine_onset.onset_speeds([first.case], low, high)
+        onset, status = float(on.speed[0] / RPM), str(on.status[0])
+    if not speeds:
+        return Computed(onset, status)
+    metrics = {m.summary: m for m in archived_metrics()}
+    chosen = [metrics[w] for w in wanted]
+    cases = [dataclasses.replace(first.case, speed=s) for s in speeds]
+    result = engine.run_at_fidelity(
+        cases,
+        first.settings,
+        full_state=any(m.record for m in chosen),
+        on_failure="record",
+    )
+    failed = np.isin(np.asarray(result.status), FAILURES)
+    values = {}
+    for m in chosen:
+        summary = m.summarise(m.to_archive(result.metric_per_rev(m.key)), result.measured)
+        for i, s in enumerate(speeds):
+            values[m.summary, s] = float(summary[i])
+    return Computed(onset, status, values, tuple(bool(f) for f in failed))
+
+
+def _in_order(items: Sequence, task: Callable) -> list:
+    """The default map: each item in this thread."""
+    return [task(item) for item in items]
+
+
 class Evaluator:
     """Evaluates designs of a spec's ``design`` section.
 
@@ -115,6 +168,10 @@ class Evaluator:
         (``campipe.study.design.search.design_study``).
     on_evaluation : callable, optional
         Given each new evaluation (a progress line).
+    mapped : callable, optional
+        ``mapped(items, task)`` → the results in order: where the designs of a batch
+        (:meth:`many`) are computed (``campipe.study.run.workers.task_map``: a study's
+        scheduler); default: one after another in this thread.
     """
 
     def __init__(
@@ -122,6 +179,7 @@ class Evaluator:
         study: Study,
         cases_at: Callable[[np.ndarray], Study],
         on_evaluation: Callable[[Evaluation], None] | None = None,
+        mapped: Callable[[Sequence, Callable], list] | None = None,
     ) -> None:
         design = study.spec.design
         assert design is not None
@@ -145,57 +203,58 @@ class Evaluator:
             )
         self.metrics = {m.summary: m for m in archived_metrics()}
         self.speeds = sorted({s for r in design.require for s in r.speeds})
+        self.mapped = mapped or _in_order
+        wanted = tuple(dict.fromkeys(r.key for r in design.require if r.speeds))
+        #: what a worker runs for one design's case (picklable: processes, a cluster)
+        self.task = functools.partial(
+            compute_design, self.low, self.high, self.needs_onset, tuple(self.speeds), wanted
+        )
 
     def __call__(self, values: Sequence[float] | np.ndarray) -> Evaluation:
         """Evaluate the design ``x`` (kept in :attr:`evaluations`; a design evaluated
         before is not evaluated again)."""
-        x = np.array(values, float)
-        if x.tobytes() in self._seen:
-            return self._seen[x.tobytes()]
-        study = self.cases_at(x)
-        first = study.cases[0]
-        ev = Evaluation(x)
-        if self.needs_onset:
-            on = engine_onset.onset_speeds([first.case], self.low, self.high)
-            ev.onset = float(on.speed[0] / RPM)
-            ev.onset_status = str(on.status[0])
-        if self.speeds:
-            ev.metrics = self._metrics(first)
-        self._judge(ev)
-        self.evaluations.append(ev)
-        self._seen[x.tobytes()] = ev
-        if self.on_evaluation is not None:
-            self.on_evaluation(ev)
-        return ev
+        return self.many([values])[0]
+
+    def many(self, designs: Sequence[Sequence[float] | np.ndarray]) -> list[Evaluation]:
+        """Evaluate ``designs`` as one batch on the workers (those not evaluated before),
+        kept in :attr:`evaluations` in the order given; their evaluations in that order."""
+        xs = [np.array(values, float) for values in designs]
+        new: dict[bytes, np.ndarray] = {}
+        for x in xs:
+            if x.tobytes() not in self._seen:
+                new.setdefault(x.tobytes(), x)
+        firsts = [self.cases_at(x).cases[0] for x in new.values()]
+        computed = self.mapped(firsts, self.task) if firsts else []
+        for x, c in zip(new.values(), computed, strict=True):
+            ev = Evaluation(x, c.onset, c.onset_status)
+            ev.metrics = self._metrics(c)
+            self._judge(ev)
+            self.evaluations.append(ev)
+            self._seen[x.tobytes()] = ev
+            if self.on_evaluation is not None:
+                self.on_evaluation(ev)
+        return [self._seen[x.tobytes()] for x in xs]
 
     def seen(self, x: Sequence[float] | np.ndarray) -> Evaluation | None:
         """The evaluation of ``x`` if it was evaluated."""
         return self._seen.get(np.array(x, float).tobytes())
 
-    def _metrics(self, first) -> dict[tuple[str, float], float]:
-        wanted = [self.metrics[r.key] for r in self.design.require if r.speeds]
-        cases = [dataclasses.replace(first.case, speed=s) for s in self.speeds]
-        result = engine.run_at_fidelity(
-            cases,
-            first.settings,
-            full_state=any(m.record for m in wanted),
-            on_failure="record",
-        )
-        failed = np.isin(np.asarray(result.status), FAILURES)
+    def _metrics(self, c: Computed) -> dict[tuple[str, float], float]:
+        """A computed design's metrics, NaN where its run failed; a NaN of a run that did
+        not fail is a metric the model lacks: refused."""
         out = {}
-        for m in wanted:
-            values = m.summarise(m.to_archive(result.metric_per_rev(m.key)), result.measured)
-            for i, s in enumerate(self.speeds):
-                if not failed[i] and math.isnan(values[i]):
-                    raise DesignError.at(
-                        f"design.require.{m.summary}",
-                        f"the run at {s / RPM:g} rpm gives no value of {m.summary} (NaN): the "
-                        "model lacks what it needs (a Hertz pressure: the contact's radii "
-                        "and modulus, docs/model.md); require another metric",
-                        found="NaN",
-                        expected="a metric the model defines",
-                    )
-                out[m.summary, s] = math.nan if failed[i] else float(values[i])
+        for (summary, s), value in c.values.items():
+            failed = c.failed[self.speeds.index(s)]
+            if not failed and math.isnan(value):
+                raise DesignError.at(
+                    f"design.require.{summary}",
+                    f"the run at {s / RPM:g} rpm gives no value of {summary} (NaN): the "
+                    "model lacks what it needs (a Hertz pressure: the contact's radii "
+                    "and modulus, docs/model.md); require another metric",
+                    found="NaN",
+                    expected="a metric the model defines",
+                )
+            out[summary, s] = math.nan if failed else value
         return out
 
     def onset_value(self, ev: Evaluation) -> float:

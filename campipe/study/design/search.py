@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -40,6 +40,8 @@ from campipe.study.spec.expand import Study, expand
 
 #: Values across the bounds looked at when neither bound meets the requirements (one key).
 SCAN = 9
+#: differential_evolution's population for each varied key (``method: global``).
+GLOBAL_POPSIZE = 8
 
 
 class _Spent(CampipeError, RuntimeError):
@@ -115,6 +117,8 @@ def run_design(
     *,
     notice: Callable[[str], None] | None = None,
     on_evaluation: Callable[[Evaluation], None] | None = None,
+    mapped: Callable[[Sequence, Callable], list] | None = None,
+    before: Callable[[Evaluator], None] | None = None,
 ) -> DesignResult:
     """Search the design ``study.spec.design`` asks for (see the module's description).
 
@@ -131,13 +135,22 @@ def run_design(
         compiled first, as ``campipe onset`` does.
     on_evaluation : callable, optional
         Given each new evaluation (a progress line).
+    mapped : callable, optional
+        Where a batch of designs is computed (``campipe.study.run.workers.task_map``, a
+        study's scheduler); default: one after another in this thread. The search and its
+        answer are the same on every scheduler.
+    before : callable, optional
+        Given the evaluator once the kernels are compiled, before the search (the
+        estimate: :func:`campipe.study.design.estimate.estimate_design`).
     """
     design = study.spec.design
     if design is None:
         raise DesignError.at("design", "missing: the spec has no design section")
     if evaluate is None:
-        evaluate = Evaluator(study, design_study(study), on_evaluation)
+        evaluate = Evaluator(study, design_study(study), on_evaluation, mapped)
         _compile(study, evaluate, notice)
+    if before is not None:
+        before(evaluate)
     t0 = time.perf_counter()
     one = len(design.vary) == 1 and design.objective == design.vary[0].key
     method = "pareto" if design.pareto else "root" if one else design.method
@@ -186,9 +199,13 @@ def most_evaluations(design: Design) -> int:
     a bisection to the tolerance at worst (brentq takes fewer)."""
     if design.pareto or len(design.vary) > 1 or design.objective != design.vary[0].key:
         return design.max_evaluations
+    return min(design.max_evaluations, 2 + SCAN + 2 * root_halvings(design))
+
+
+def root_halvings(design: Design) -> int:
+    """The halvings of the one key's bounds down to its tolerance."""
     v = design.vary[0]
-    halvings = math.ceil(math.log2(max((v.high - v.low) / v.tolerance, 2.0)))
-    return min(design.max_evaluations, 2 + SCAN + 2 * halvings)
+    return math.ceil(math.log2(max((v.high - v.low) / v.tolerance, 2.0)))
 
 
 def pareto_front(evals: list[Evaluation], design: Design) -> list[int]:
@@ -209,21 +226,36 @@ def pareto_front(evals: list[Evaluation], design: Design) -> list[int]:
 def _sample(evaluate: Evaluator, design: Design) -> None:
     from scipy.stats import qmc
 
-    call = _budget(evaluate, design)
+    call = _budget_many(evaluate, design)
     low = np.array([v.low for v in design.vary])
     high = np.array([v.high for v in design.vary])
     points = qmc.LatinHypercube(d=len(design.vary), seed=0).random(design.max_evaluations)
-    for u in points:
-        call(low + u * (high - low))
+    call([low + u * (high - low) for u in points])  # one batch
+
+
+def _budget_many(
+    evaluate: Evaluator, design: Design
+) -> Callable[[Sequence[np.ndarray]], list[Evaluation]]:
+    """``evaluate.many`` within the budget: of a batch that would exceed it, the designs it
+    allows are evaluated, then the search stops (:class:`_Spent`)."""
+
+    def call(xs: Sequence[np.ndarray]) -> list[Evaluation]:
+        new = list(
+            {x.tobytes(): x for x in map(np.asarray, xs) if evaluate.seen(x) is None}.values()
+        )
+        room = design.max_evaluations - len(evaluate.evaluations)
+        if len(new) > room:
+            if room > 0:
+                evaluate.many(new[:room])
+            raise _Spent.at("design.max_evaluations", f"{design.max_evaluations} designs evaluated")
+        return evaluate.many(xs)
+
+    return call
 
 
 def _budget(evaluate: Evaluator, design: Design) -> Callable[[np.ndarray], Evaluation]:
-    def call(x: np.ndarray) -> Evaluation:
-        if evaluate.seen(x) is None and len(evaluate.evaluations) >= design.max_evaluations:
-            raise _Spent.at("design.max_evaluations", f"{design.max_evaluations} designs evaluated")
-        return evaluate(x)
-
-    return call
+    many = _budget_many(evaluate, design)
+    return lambda x: many([x])[0]
 
 
 # -- one key: a root search ----------------------------------------------------------------
@@ -233,16 +265,15 @@ def _root(evaluate: Evaluator, design: Design) -> None:
     from scipy.optimize import brentq
 
     v = design.vary[0]
+    many = _budget_many(evaluate, design)
     call = _budget(evaluate, design)
     good, far = (v.low, v.high) if design.sense == "minimize" else (v.high, v.low)
-    if call(np.array([good])).feasible:
+    at_good, at_far = many([np.array([good]), np.array([far])])  # one batch
+    if at_good.feasible:
         return
-    if not call(np.array([far])).feasible:
-        found = None
-        for x in np.linspace(good, far, SCAN + 2)[1:-1]:
-            if call(np.array([x])).feasible:
-                found = float(x)
-                break
+    if not at_far.feasible:
+        scan = many([np.array([x]) for x in np.linspace(good, far, SCAN + 2)[1:-1]])
+        found = next((float(e.x[0]) for e in scan if e.feasible), None)
         if found is None:
             return
         far = found
@@ -284,10 +315,11 @@ def _bracket(evaluate: Evaluator, good: float, far: float) -> tuple[float, float
 
 class _Scaled:
     """The design on [0, 1]ⁿ: the objective and the relative margins, one evaluation per
-    point (the optimisers ask for both)."""
+    point (the optimisers ask for both). Given the points as columns (N, S), as
+    ``differential_evolution(vectorized=True)`` does, they are evaluated as one batch."""
 
     def __init__(self, evaluate: Evaluator, design: Design) -> None:
-        self.call = _budget(evaluate, design)
+        self.many = _budget_many(evaluate, design)
         self.evaluate = evaluate
         self.low = np.array([v.low for v in design.vary])
         self.span = np.array([v.high - v.low for v in design.vary])
@@ -295,15 +327,22 @@ class _Scaled:
         self.cache: dict[bytes, Evaluation] = {}
         self.scale = math.nan
 
-    def at(self, u: np.ndarray) -> Evaluation:
-        u = np.clip(np.asarray(u, float), 0.0, 1.0)
-        k = u.tobytes()
-        if k not in self.cache:
-            self.cache[k] = self.call(self.low + u * self.span)
-        return self.cache[k]
+    def at(self, us: np.ndarray) -> list[Evaluation]:
+        """The evaluations of the points ``us`` (S, N), those not seen as one batch."""
+        us = np.clip(np.atleast_2d(np.asarray(us, float)), 0.0, 1.0)
+        missing = list({u.tobytes(): u for u in us if u.tobytes() not in self.cache}.values())
+        if missing:
+            evals = self.many([self.low + u * self.span for u in missing])
+            self.cache.update((u.tobytes(), e) for u, e in zip(missing, evals, strict=True))
+        return [self.cache[u.tobytes()] for u in us]
 
-    def objective(self, u: np.ndarray) -> float:
-        e = self.at(u)
+    def objective(self, u: np.ndarray) -> float | np.ndarray:
+        """The scaled objective of a point (N,), or of each column of (N, S)."""
+        u = np.asarray(u, float)
+        values = np.array([self._objective(e) for e in self.at(u.T if u.ndim == 2 else u)])
+        return values if u.ndim == 2 else float(values[0])
+
+    def _objective(self, e: Evaluation) -> float:
         if math.isnan(self.scale) and math.isfinite(e.objective):
             self.scale = abs(e.objective) or 1.0
         if not math.isfinite(e.objective):
@@ -311,9 +350,16 @@ class _Scaled:
         return self.sign * e.objective / self.scale
 
     def margins(self, u: np.ndarray) -> np.ndarray:
-        e = self.at(u)
-        out = np.array([b.relative(e.margins[b.name]) for b in self.evaluate.bounds])
-        return np.maximum(out, -1e6)
+        """The relative margins (M,) of a point (N,), or (M, S) of the columns of (N, S)."""
+        u = np.asarray(u, float)
+        out = np.array(
+            [
+                [b.relative(e.margins[b.name]) for b in self.evaluate.bounds]
+                for e in self.at(u.T if u.ndim == 2 else u)
+            ]
+        )
+        out = np.maximum(out, -1e6)
+        return out.T if u.ndim == 2 else out[0]
 
 
 def _constraints(scaled: _Scaled):
@@ -352,7 +398,7 @@ def _global(evaluate: Evaluator, design: Design) -> None:
 
     scaled = _Scaled(evaluate, design)
     n = len(design.vary)
-    popsize = 8
+    popsize = GLOBAL_POPSIZE
     rounds = max(1, (design.max_evaluations // 2) // (popsize * n) - 1)
     differential_evolution(
         scaled.objective,
@@ -363,6 +409,8 @@ def _global(evaluate: Evaluator, design: Design) -> None:
         seed=0,
         polish=False,
         tol=1e-6,
+        vectorized=True,  # each generation one batch of designs on the workers
+        updating="deferred",
     )
     evals = evaluate.evaluations
     feasible = [e for e in evals if e.feasible]

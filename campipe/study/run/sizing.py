@@ -51,3 +51,21 @@ def count_batches(cases: Sequence[ResolvedCase], batch_size: int) -> int:
     others, speeds = distinct_but_speed(cases)
     groups = Counter(c.settings for c in others)
     return sum(-(-n * speeds // batch_size) for n in groups.values())
+
+
+#: Batches a worker has in flight at most (``campipe.study.run.workers``): one computing, one
+#: queued; each future is dropped once its batch is stored.
+IN_FLIGHT_PER_WORKER = 2
+
+
+def in_flight_memory(
+    n_cases: int, workers: int, samples: int, batch_size: int | None = None
+) -> tuple[int, int, int]:
+    """The memory the batches in flight take at most [bytes], the batches in flight and their
+    size [cases]: IN_FLIGHT_PER_WORKER batches a worker (no more than there are), each of
+    ``batch_size`` cases (default: :func:`default_batch_size`) at BYTES_PER_SAMPLE a case
+    and sample. Whatever the study's size: the process's own memory (its imports, the
+    kernels, the study's cases) comes beside it."""
+    size = batch_size or default_batch_size(n_cases, workers, samples)
+    batches = min(IN_FLIGHT_PER_WORKER * max(workers, 1), max(-(-n_cases // size), 1))
+    return batches * size * max(samples, 1) * BYTES_PER_SAMPLE, batches, size

@@ -19,7 +19,7 @@ import sys
 import threading
 import time
 import uuid
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from concurrent.futures import (
     FIRST_COMPLETED,
     BrokenExecutor,
@@ -30,6 +30,7 @@ from concurrent.futures import (
 )
 from contextlib import contextmanager
 from pathlib import Path
+from typing import Any, TypeVar
 
 from campipe.errors import CampipeError
 from campipe.io.archive import ArchiveWriteError, write_error
@@ -38,6 +39,9 @@ from campipe.study.run.cluster import PartCount, collect, run_parts
 from campipe.study.run.results import BatchData, BatchPlan, compute_batch, numerics_fingerprint
 
 log = logging.getLogger(__name__)
+
+T = TypeVar("T")
+R = TypeVar("R")
 
 
 def stored_here(
@@ -174,33 +178,57 @@ def run_local(
         SAME_MACHINE if in_worker else None,
         on_batch if in_worker else None,
     )
+    pool = _local_pool(scheduler, workers)
+    try:
+        _bounded_local(pool, scheduler, workers, plans, task, stored, started)
+    finally:
+        if pool is not None:
+            pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _local_pool(scheduler: str, workers: int) -> Executor | None:
+    """The pool of a local scheduler: threads (the engine releases the GIL) or processes;
+    None for ``synchronous`` (this thread)."""
     if scheduler == "synchronous":
-        started()
-        for p in plans:
-            stored(task(p))
-        return
-    pool: Executor
+        return None
     if scheduler == "threads":
-        pool = ThreadPoolExecutor(
+        return ThreadPoolExecutor(
             workers, thread_name_prefix="campipe-batch", initializer=_yield_to_assembly
         )
-    else:
-        pool = ProcessPoolExecutor(
-            workers,
-            mp_context=multiprocessing.get_context("spawn"),
-            initializer=_yield_to_assembly,
-        )
+    return ProcessPoolExecutor(
+        workers,
+        mp_context=multiprocessing.get_context("spawn"),
+        initializer=_yield_to_assembly,
+    )
+
+
+def _bounded_local(
+    pool: Executor | None,
+    scheduler: str,
+    workers: int,
+    items: Iterable[T],
+    task: Callable[[T], R],
+    done: Callable[[R], None],
+    started: Callable[[], None] = lambda: None,
+) -> None:
+    """Each item through ``task`` on ``pool`` (in this thread for None), ``done`` called in
+    this thread with each result as it finishes; ``started`` once the first are under way."""
+    if pool is None:
+        started()
+        for p in items:
+            done(task(p))
+        return
     try:
-        # At most two batches per worker in flight, each future dropped once stored: a
+        # At most two items per worker in flight, each future dropped once done: a
         # finished future holds its batch's arrays, so submitting every batch at once kept
         # the whole study's results in memory until the end.
-        pending = iter(plans)
+        pending = iter(items)
         in_flight = {pool.submit(task, p) for p in itertools.islice(pending, 2 * workers)}
         started()
         while in_flight:
-            done, in_flight = wait(in_flight, return_when=FIRST_COMPLETED)
-            for future in done:
-                stored(future.result())
+            finished, in_flight = wait(in_flight, return_when=FIRST_COMPLETED)
+            for future in finished:
+                done(future.result())
                 nxt = next(pending, None)
                 if nxt is not None:
                     in_flight.add(pool.submit(task, nxt))
@@ -211,8 +239,73 @@ def run_local(
             "finished before it are stored: rerun the same command to resume",
             found=scheduler,
         ) from None
-    finally:
-        pool.shutdown(wait=True, cancel_futures=True)
+
+
+#: A map over a scheduler: ``mapped(items, task)`` → each item's result, in the items' order.
+Mapped = Callable[[Sequence[Any], Callable[[Any], Any]], list[Any]]
+
+
+def _indexed(task: Callable[[T], R], item: tuple[int, T]) -> tuple[int, R]:
+    """``task`` of an item numbered by its position (results arrive as they finish)."""
+    return item[0], task(item[1])
+
+
+@contextmanager
+def task_map(scheduler: str, workers: int) -> Iterator[Mapped]:
+    """A map on a study's scheduler, kept open for many calls (``campipe design``'s search:
+    a pool or a cluster's client for the whole search): ``mapped(items, task)`` runs each
+    item through ``task`` as a study runs its batches (the same pool, at most two items a
+    worker in flight; on a cluster the same connection checks, waits on a cluster without
+    workers and messages) and returns the results in the items' order. ``task`` and the
+    items are pickled for ``processes`` and a cluster.
+
+    Parameters
+    ----------
+    scheduler : str
+        ``threads``, ``synchronous``, ``processes`` or a dask.distributed address.
+    workers : int
+        Threads or processes of a local scheduler.
+    """
+
+    def gather(items: Sequence[Any], run: Callable[[list, Callable], None]) -> list:
+        results: list[Any] = [None] * len(items)
+
+        def done(pair: tuple[int, Any]) -> None:
+            results[pair[0]] = pair[1]
+
+        run(list(enumerate(items)), done)
+        return results
+
+    if "://" not in scheduler:
+        pool = _local_pool(scheduler, workers)
+
+        def mapped(items: Sequence[Any], task: Callable[[Any], Any]) -> list[Any]:
+            step = functools.partial(_indexed, task)
+            return gather(
+                items, lambda numbered, done: _bounded_local(
+                    pool, scheduler, workers, numbered, step, done)
+            )  # fmt: skip
+
+        try:
+            yield mapped
+        finally:
+            if pool is not None:
+                pool.shutdown(wait=True, cancel_futures=True)
+        return
+    from distributed import wait as wait_futures
+
+    kept = "nothing of this search is kept: rerun the command"
+    with _distributed_quiet(), _cluster(scheduler, kept) as client, client.as_current():
+
+        def on_cluster(items: Sequence[Any], task: Callable[[Any], Any]) -> list[Any]:
+            step = functools.partial(_indexed, task)
+            tag = uuid.uuid4().hex[:8]
+            return gather(
+                items, lambda numbered, done: _submit_all(
+                    client, wait_futures, numbered, tag, step, done, lambda p: str(p[0]))
+            )  # fmt: skip
+
+        yield on_cluster
 
 
 #: How long to wait for a dask.distributed scheduler to answer [s].
@@ -280,6 +373,38 @@ def _run_distributed(
 ) -> None:
     from distributed import wait
 
+    token = uuid.uuid4().hex
+    reach = None
+    parts = storage.directory
+    try:
+        with _cluster(address) as client:
+            if workers_store:
+                reach = _reach_token(parts, token)
+            task = functools.partial(_batch_task, compute_batch, storage, reach, None)
+            with client.as_current():  # distributed.wait takes the current client
+                if storage.parts and reach is not None:
+                    tag, reached = token[:8], _reach_file(parts, reach)
+                    run_parts(
+                        client, wait, _Idle(client), plans, storage, reached, reach,
+                        compute_batch, stored, tag,
+                    )  # fmt: skip
+                else:
+                    _submit_all(client, wait, plans, token[:8], task, stored)
+    finally:
+        if reach is not None:
+            _reach_file(parts, reach).unlink(missing_ok=True)
+
+
+#: What a study keeps of a cluster that failed, in its message.
+KEPT = "the batches finished before it are stored: rerun the same command to resume"
+
+
+@contextmanager
+def _cluster(address: str, kept: str = KEPT) -> Iterator:
+    """A client of the dask.distributed scheduler at ``address`` for the block, closed after
+    it; a SchedulerError if it cannot be reached within CONNECT_TIMEOUT seconds or the
+    cluster fails in the block (campipe's own errors pass as they are; ``kept``: what is
+    kept of the work, in the message)."""
     try:
         client = _connect(address)
     except (OSError, TimeoutError, ValueError, TypeError, MemoryError) as exc:
@@ -293,34 +418,17 @@ def _run_distributed(
             f"{address}) or run on this machine (--scheduler threads)",
             found=address,
         ) from None
-    token = uuid.uuid4().hex
-    reach = None
-    parts = storage.directory
     try:
-        if workers_store:
-            reach = _reach_token(parts, token)
-        task = functools.partial(_batch_task, compute_batch, storage, reach, None)
-        with client, client.as_current():  # distributed.wait takes the current client
-            if storage.parts and reach is not None:
-                tag, reached = token[:8], _reach_file(parts, reach)
-                run_parts(
-                    client, wait, _Idle(client), plans, storage, reached, reach, compute_batch,
-                    stored, tag,
-                )  # fmt: skip
-            else:
-                _submit_all(client, wait, plans, token[:8], task, stored)
+        with client:
+            yield client
     except (SchedulerError, ArchiveWriteError, CampipeError):
         raise
     except Exception as exc:  # distributed raises many kinds when the cluster goes away
         raise SchedulerError.at(
             "--scheduler",
-            f"the dask cluster at {address} failed ({type(exc).__name__}: {_line(exc)}); "
-            "the batches finished before it are stored: rerun the same command to resume",
+            f"the dask cluster at {address} failed ({type(exc).__name__}: {_line(exc)}); " + kept,
             found=address,
         ) from None
-    finally:
-        if reach is not None:
-            _reach_file(parts, reach).unlink(missing_ok=True)
 
 
 def _line(exc: BaseException) -> str:
@@ -366,12 +474,16 @@ def _reach_token(parts: Path, token: str) -> str:
     return token
 
 
-def _submit_all(client, wait, plans, token, task, stored) -> None:
+def _submit_all(client, wait, plans, token, task, stored, name=None) -> None:
+    """Each of ``plans`` through ``task`` on the cluster, at most two a worker thread in
+    flight, ``stored`` given each result as it finishes (``name``: a plan's part of its
+    task's key, default its batch key)."""
     threads = max(sum(client.nthreads().values()), 1)
     left = iter(plans)
+    named = name or (lambda p: p.key)
 
-    def submit(p: BatchPlan):
-        return client.submit(task, p, key=f"campipe-{p.key}-{token}", pure=False)
+    def submit(p):
+        return client.submit(task, p, key=f"campipe-{named(p)}-{token}", pure=False)
 
     def stored_then_next(result) -> list:
         stored(result)

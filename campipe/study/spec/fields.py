@@ -306,6 +306,17 @@ _RUN_METADATA: dict[str, Field] = {
             archive_name="max_events",
         ),
         Field(
+            "run.max_steps",
+            "integer",
+            "the most integration steps of one case at run time (the compliant integrator's "
+            "adaptive steps; the fixed-step integrators are bounded from the spec before the "
+            "run): a case that needs more stops there with status step_limit, the others go "
+            "on; campipe study and validate --max-steps set it",
+            minimum=1.0,
+            exclusive_minimum=False,
+            archive_name="max_steps",
+        ),
+        Field(
             "run.fidelity",
             "choice",
             "full: every case through its events with every mode; steady: a case that follows "
