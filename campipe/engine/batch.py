@@ -320,10 +320,12 @@ def _train_stack(trains: tuple[ValveTrain, ...], dt: float) -> TrainStack:
     )
 
 
-def _exact_runs(settings, dt_run, full_state, which, stack, omega, responses=True) -> ExactRuns:
+def _exact_runs(
+    settings, dt_run, full_state, which, stack, omega, seated, responses=True
+) -> ExactRuns:
     ns = stack.a_mat.shape[2]
     zeta = (
-        responses_of(stack.responses, which, omega, ns)
+        responses_of(stack.responses, which, omega, ns, seated)
         if responses
         else np.zeros((omega.size, 4, ns), np.complex128)
     )
@@ -390,7 +392,7 @@ def _prepare_batch(
         preps=list(stack.preps),
         packed=pack_cached([c.profile for c in cases]),
         modal_trains=modal_trains,
-        runs=_exact_runs(settings, dt_run, full_state, which, stack, omega, responses),
+        runs=_exact_runs(settings, dt_run, full_state, which, stack, omega, has_seat, responses),
         cases=Cases(
             omega=omega,
             seat_q=qref + seat,
