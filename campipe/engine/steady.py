@@ -39,6 +39,7 @@ from campipe.engine.closed_form import (
     eval_monitor,
     force_monitor,
     forcing,
+    harmonic_response,
     particular,
 )
 from campipe.engine.common import HELPER, JUMP, KERNEL, by_ref, classify_break, deref
@@ -199,43 +200,6 @@ def _margin_in_piece(ref, st, z_start, theta, z):
 
 
 @njit(inline="always", nogil=True)
-def _harmonic_response(trains, runs, ws, st):
-    """ζ of configuration I at the case's speed (``modal.harmonic_responses``), written to
-    ``runs.zeta[c, 0]``, through the block form: (iωI − A)⁻¹ = X (iωI − B)⁻¹ X⁻¹, and for a
-    block (sI − B_b)⁻¹ = ((s − λ̄)I + N_b) / ((s − λ̄)² − δ²) since N_b² = δ²I."""
-    tr, ci, ns, w = st.tr, st.cfg - 1, st.ns, st.w
-    y = ws.ZT  # scratch: particular() overwrites it
-    for j in range(ns):
-        acc = 0.0j
-        for s in range(ns):
-            r = (
-                -trains.b_in[tr, ci, s, 0, 0]
-                - 1j * w * trains.b_in[tr, ci, s, 1, 0]
-                + w * w * trains.b_in[tr, ci, s, 2, 0]
-            )
-            acc += trains.basis_inv[tr, ci, j, s] * r
-        y[j] = acc
-    for b in range(trains.n_blocks[tr, ci]):
-        i0 = trains.bstart[tr, ci, b]
-        sl = 1j * w - trains.lam_bar[tr, ci, b]
-        if trains.bdim[tr, ci, b] == 1:
-            y[i0] = y[i0] / sl
-        else:
-            n = trains.block_n
-            den = sl * sl - trains.delta2[tr, ci, b]
-            a0 = y[i0]
-            a1 = y[i0 + 1]
-            y[i0] = ((sl + n[tr, ci, i0, i0]) * a0 + n[tr, ci, i0, i0 + 1] * a1) / den
-            y[i0 + 1] = (n[tr, ci, i0 + 1, i0] * a0 + (sl + n[tr, ci, i0 + 1, i0 + 1]) * a1) / den
-    for s in range(runs.zeta.shape[2]):
-        acc = 0.0j
-        if s < ns:
-            for j in range(ns):
-                acc += trains.basis[tr, ci, s, j] * y[j]
-        runs.zeta[st.c, ci, s] = acc
-
-
-@njit(inline="always", nogil=True)
 def _begin_case(cases, trains, runs, st, c):
     """Point the scalars at case c in configuration I."""
     tr = runs.train[c]
@@ -335,6 +299,7 @@ def periodic_starts(cases, trains, profiles, runs, ws, state, snap, z_turn, t_st
     for c in range(cases.omega.shape[0]):
         _begin_case(cases, trains, runs, st, c)
         tr, ci = st.tr, st.cfg - 1
+        harmonic_response(trains, runs, ws, st, ci)
         _periodic_turn(ref, st, z_turn[c])
         # Where the run starts: θ = 0 (2π) if configuration I holds there, else the latest
         # earlier angle where it does.
@@ -734,7 +699,7 @@ def steady_extremes(cases, trains, profiles, runs, ws, state, z_turn, with_max, 
         if not active[c]:
             continue
         _begin_case(cases, trains, runs, st, c)
-        _harmonic_response(trains, runs, ws, st)
+        harmonic_response(trains, runs, ws, st, CAM_CONTACT - 1)
         _periodic_turn(ref, st, z_turn[c])
         out[c, MIN_FORCE] = np.inf
         out[c, MIN_FORCE_ANGLE] = np.nan

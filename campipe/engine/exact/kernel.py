@@ -26,6 +26,7 @@ from campipe.engine.closed_form import (
     W1_ABS,
     W2_ABS,
     block_basis,
+    harmonic_response,
 )
 from campipe.engine.common import (
     HELPER,
@@ -64,7 +65,16 @@ from campipe.engine.metrics import (
 )
 from campipe.engine.policy import release, strike, strike_at_break
 from campipe.profiles.packed import locate, piece_eval
-from campipe.vocabulary import CAM, CAM_CONTACT, CHATTER, EVENTS_TRUNCATED, NONFINITE, OK, SEAT
+from campipe.vocabulary import (
+    CAM,
+    CAM_AND_SEAT,
+    CAM_CONTACT,
+    CHATTER,
+    EVENTS_TRUNCATED,
+    NONFINITE,
+    OK,
+    SEAT,
+)
 
 # --------------------------------------------------------------------------- walk the grid
 
@@ -469,11 +479,15 @@ def _cross_break(ref, st):
 
 
 @njit(inline="always", nogil=True)
-def _start_case(cases, trains, profiles, ws, st, c, tr):
-    """Case c's run from its start state at t0 ≤ 0."""
+def _start_case(cases, trains, profiles, runs, ws, st, c, tr):
+    """Case c's run from its start state at t0 ≤ 0, with the harmonic responses of the
+    configurations that hold the cam (III only with a seat)."""
     st.c = c
     st.tr = tr
     st.w = cases.omega[c]
+    harmonic_response(trains, runs, ws, st, CAM_CONTACT - 1)
+    if cases.has_seat[c]:
+        harmonic_response(trains, runs, ws, st, CAM_AND_SEAT - 1)
     st.eps_force = 1e-9 * (abs(trains.load[tr, 3]) + 1.0)
     for i in range(trains.n_coordinates[tr]):
         ws.q[i] = cases.q0[c, i]
@@ -512,7 +526,7 @@ def modal_exact_batch(cases, trains, profiles, runs, out, ws, state):
     st = state[0]
     ref = by_ref((cases, trains, profiles, runs, out, ws))
     for c in range(cases.omega.shape[0]):
-        _start_case(cases, trains, profiles, ws, st, c, runs.train[c])
+        _start_case(cases, trains, profiles, runs, ws, st, c, runs.train[c])
         per_turn = _turn_samples(st.w, runs.t_sample[c], out.q.shape[1], out.per_rev.shape[1])
         while not st.done:
             _begin_segment(ref, st)
