@@ -36,7 +36,7 @@ from campipe.engine.contact import (
     static_position,
 )
 from campipe.engine.integrators.modal_exact import arguments
-from campipe.engine.modal import ModalData, modal_data, pad_stack, response_parts, responses_of
+from campipe.engine.modal import ModalData, modal_data, pad_stack
 from campipe.engine.result import BatchResult as BatchResult
 from campipe.engine.result import merge_results
 from campipe.engine.settings import CLOSURES as CLOSURES
@@ -246,12 +246,10 @@ def valve_reference(sm: SystemMatrices) -> float:
     return float(q[SEAT])
 
 
-def _modal_trains(trains, preps) -> tuple[ModalTrains, np.ndarray]:
-    """The distinct trains' closed-form data, indexed in the kernels by each case's train, and
-    their state matrices (for the harmonic responses)."""
+def _modal_trains(trains, preps) -> ModalTrains:
+    """The distinct trains' closed-form data, indexed in the kernels by each case's train."""
     data = [train_modal(t) for t in trains]
-    modal_trains = stack_trains(data, [p.matrices.preload for p in preps])
-    return modal_trains, pad_stack([d.a_mat for d in data])
+    return stack_trains(data, [p.matrices.preload for p in preps])
 
 
 class TrainStack(NamedTuple):
@@ -263,7 +261,6 @@ class TrainStack(NamedTuple):
     preps: tuple[Prepared, ...]
     modal: tuple[ModalData, ...]  # ``train_modal`` per train
     modal_trains: ModalTrains
-    a_mat: np.ndarray  # (n_trains, 4, ns, ns) the state matrices (harmonic responses)
     valve_ref: np.ndarray  # (n_trains,) ``Prepared.valve_reference``
     ratio: np.ndarray  # (n_trains,) |``Prepared.valve_ratio``|
     meff: np.ndarray  # (n_trains, 4) ``Prepared.impact_masses``
@@ -272,7 +269,6 @@ class TrainStack(NamedTuple):
     #: per train: configuration I's free coordinates and its free mass block M_ff
     free: tuple[np.ndarray, ...]
     mass_ff: tuple[np.ndarray, ...]
-    responses: tuple  # ``modal.response_parts`` per train
 
 
 #: The most distinct trains whose stack ``train_stack`` caches: the batches whose
@@ -303,13 +299,12 @@ def train_stack(trains: tuple[ValveTrain, ...], dt: float) -> TrainStack:
 def _train_stack(trains: tuple[ValveTrain, ...], dt: float) -> TrainStack:
     preps = tuple(prepare(t, dt) for t in trains)
     modal = [train_modal(t) for t in trains]
-    modal_trains, a_mat = _modal_trains(trains, preps)
+    modal_trains = _modal_trains(trains, preps)
     free = tuple(np.array(free_coordinates(CAM_CONTACT, p.matrices.mass.shape[0])) for p in preps)
     return TrainStack(
         preps=preps,
         modal=tuple(modal),
         modal_trains=modal_trains,
-        a_mat=a_mat,
         valve_ref=np.array([p.valve_reference for p in preps]),
         ratio=np.array([abs(p.valve_ratio) for p in preps]),
         meff=np.stack([p.impact_masses for p in preps]),
@@ -317,17 +312,13 @@ def _train_stack(trains: tuple[ValveTrain, ...], dt: float) -> TrainStack:
         restitution=np.array([[t.cam_restitution, t.seat_restitution] for t in trains]),
         free=free,
         mass_ff=tuple(p.matrices.mass[np.ix_(f, f)] for p, f in zip(preps, free, strict=True)),
-        responses=response_parts(modal_trains.n_free, a_mat, modal_trains.b_in),
     )
 
 
-def _exact_runs(settings, dt_run, full_state, which, stack, omega, responses=True) -> ExactRuns:
-    ns = stack.a_mat.shape[2]
-    zeta = (
-        responses_of(stack.responses, which, omega, ns)
-        if responses
-        else np.zeros((omega.size, 4, ns), np.complex128)
-    )
+def _exact_runs(settings, dt_run, full_state, which, omega, ns: int) -> ExactRuns:
+    """The run's scalars and arrays per case; the harmonic responses ζ (states of ``ns``
+    entries) are the kernels' to fill (``closed_form.harmonic_response``, at a case's start)."""
+    zeta = np.zeros((omega.size, 4, ns), np.complex128)
     return ExactRuns(
         train=which,
         t_sample=settings.output_every / omega,
@@ -364,14 +355,10 @@ class PreparedBatch:
     stack: TrainStack  # the distinct trains' cached data
 
 
-def _prepare_batch(
-    cases: Sequence[Case], settings: RunSettings, full_state: bool, responses: bool = True
-) -> PreparedBatch:
-    """What the batch's kernels take. Without ``responses`` the harmonic responses are left
-    zero, their kernel not run: for the types of the kernels' arguments
-    (:func:`integrator_types`), not for a run. What the trains and the profiles fix comes
-    from caches (``train_stack``, ``pack_cached``, ``_peaks``); only the per-case rows are
-    made here."""
+def _prepare_batch(cases: Sequence[Case], settings: RunSettings, full_state: bool) -> PreparedBatch:
+    """What the batch's kernels take. What the trains and the profiles fix comes from caches
+    (``train_stack``, ``pack_cached``, ``_peaks``); only the per-case rows are made here (the
+    harmonic responses in the kernels)."""
     dt_run = settings.step
     n = len(cases)
     trains, which = unique_trains(cases)
@@ -391,7 +378,7 @@ def _prepare_batch(
         preps=list(stack.preps),
         packed=pack_cached([c.profile for c in cases]),
         modal_trains=modal_trains,
-        runs=_exact_runs(settings, dt_run, full_state, which, stack, omega, responses),
+        runs=_exact_runs(settings, dt_run, full_state, which, omega, 2 * n_q),
         cases=Cases(
             omega=omega,
             seat_q=qref + seat,
@@ -456,8 +443,8 @@ def start_states(cases: Sequence[Case], settings: RunSettings) -> Start:
 def integrator_types(cases: Sequence[Case], settings: RunSettings, full_state: bool) -> tuple:
     """The numba types of modal-exact's arguments in ``run_batch`` for these cases: the
     signature to compile its kernel ahead for (``campipe.engine.kernels.compile_kernels``),
-    found without running a kernel (the start's, the harmonic responses' or another)."""
-    batch = _prepare_batch(cases, settings, full_state, responses=False)
+    found without running a kernel (the start's or another)."""
+    batch = _prepare_batch(cases, settings, full_state)
     modal_exact = integrators.get("modal-exact")
     prepared = modal_exact.prepare(batch, settings)
     args = arguments(prepared, batch.cases, _outputs(batch, settings))

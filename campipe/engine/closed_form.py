@@ -42,6 +42,7 @@ class ModalTrains(NamedTuple):
     n_coordinates: np.ndarray  # (n_trains,) int: each train's coordinates (7: the thesis's)
     n_free: np.ndarray
     free: np.ndarray
+    a_mat: np.ndarray
     a_inv: np.ndarray
     b_in: np.ndarray
     b_load: np.ndarray
@@ -122,6 +123,7 @@ class Workspace(NamedTuple):
     level: np.ndarray  # (2,) the level each monitor rises through at an event
     inp: np.ndarray  # (3, 2, 8) held coordinates' (q, q̇, q̈) polynomials in x
     inp_t: np.ndarray  # (3, 2) complex held coordinates' harmonic parts
+    cm: np.ndarray  # (ns, ns) complex (iωI − A), eliminated (``harmonic_response``)
 
 
 def _workspace_layout(n_coordinates: int) -> dict[str, tuple[tuple[int, ...], type]]:
@@ -135,7 +137,7 @@ def _workspace_layout(n_coordinates: int) -> dict[str, tuple[tuple[int, ...], ty
         "WC": ((N_WC, 2, ns), f8), "VY": ((2, ns, ns), f8), "gval": ((2,), f8),
         "dval": ((2,), f8), "gprev": ((2,), f8), "dprev": ((2,), f8), "G": ((2, 8), f8),
         "GT": ((2,), c16), "ready": ((2,), b1), "watch": ((2,), b1), "level": ((2,), f8),
-        "inp": ((3, 2, 8), f8), "inp_t": ((3, 2), c16),
+        "inp": ((3, 2, 8), f8), "inp_t": ((3, 2), c16), "cm": ((ns, ns), c16),
     }  # fmt: skip
     return {name: shapes[name] for name in Workspace._fields}
 
@@ -283,6 +285,46 @@ def forcing(cases, trains, profiles, ws, st):
                 deg = k
     st.kmax = kmax
     st.deg = deg
+
+
+@njit(inline="always", nogil=True)
+def harmonic_response(trains, runs, ws, st, ci):
+    """ζ of configuration ``ci`` (0: I, 2: III; the cam held) at case st.c's speed ω, written
+    to ``runs.zeta[c, ci]``: (iωI − A) ζ = −b_q − iω b_v + ω² b_a (``modal.harmonic_responses``,
+    the same equation through numpy), by Gaussian elimination with partial pivoting, as
+    LAPACK's zgesv (unblocked): 1e-14 of ζ on the thesis's train, where the block form
+    X (iωI − B)⁻¹ X⁻¹ loses 5e-12 to its basis. Uses ws.cm and ws.ZT as scratch."""
+    tr, w = st.tr, st.w
+    ns = 2 * trains.n_free[tr, ci]
+    m = ws.cm
+    y = ws.ZT
+    for i in range(ns):
+        for j in range(ns):
+            m[i, j] = -trains.a_mat[tr, ci, i, j]
+        m[i, i] += 1j * w
+        b = trains.b_in[tr, ci, i]
+        y[i] = -b[0, 0] - 1j * w * b[1, 0] + w * w * b[2, 0]
+    for k in range(ns):
+        p = k
+        for i in range(k + 1, ns):
+            if abs(m[i, k]) > abs(m[p, k]):
+                p = i
+        if p != k:
+            for j in range(ns):
+                m[k, j], m[p, j] = m[p, j], m[k, j]
+            y[k], y[p] = y[p], y[k]
+        for i in range(k + 1, ns):
+            f = m[i, k] / m[k, k]
+            for j in range(k + 1, ns):
+                m[i, j] -= f * m[k, j]
+            y[i] -= f * y[k]
+    for i in range(ns - 1, -1, -1):
+        acc = y[i]
+        for j in range(i + 1, ns):
+            acc -= m[i, j] * y[j]
+        y[i] = acc / m[i, i]
+    for s in range(runs.zeta.shape[2]):
+        runs.zeta[st.c, ci, s] = y[s] if s < ns else 0.0
 
 
 @njit(inline="always", nogil=True)

@@ -333,19 +333,25 @@ def response_parts(n_free, a_mat, b_in) -> tuple[tuple[ResponsePart, ...], ...]:
     return tuple(parts)
 
 
-def responses_of(parts, train, omega, ns_pad: int) -> np.ndarray:
-    """``harmonic_responses`` from the trains' ``response_parts`` (the same numbers)."""
+def responses_of(parts, train, omega, ns_pad: int, seated=None) -> np.ndarray:
+    """``harmonic_responses`` from the trains' ``response_parts`` (the same numbers). With
+    ``seated`` (n,) bool, configuration III's (cam and seat held) only for the cases that have
+    a seat, the others' left zero: they never hold the seat (each case's solve is its own, so
+    the numbers computed are the same)."""
     out = np.zeros((omega.shape[0], 4, ns_pad), np.complex128)
     single = len(parts) == 1
     for t, per_train in enumerate(parts):
-        cases = slice(None) if single else np.flatnonzero(train == t)
-        w = omega[cases][:, None]
-        m = w.shape[0]
-        if m == 0:
-            continue
-        iw = 1j * w
-        w2 = w * w
+        of_train = slice(None) if single else np.flatnonzero(train == t)
         for ci, ns, minus_a, b in per_train:
+            cases = of_train
+            if ci != 0 and seated is not None:
+                cases = np.flatnonzero(seated if single else seated & (train == t))
+            w = omega[cases][:, None]
+            m = w.shape[0]
+            if m == 0:
+                continue
+            iw = 1j * w
+            w2 = w * w
             mat = np.empty((m, ns, ns), np.complex128)
             mat[:] = minus_a
             mat.reshape(m, ns * ns)[:, :: ns + 1] += iw  # the diagonal

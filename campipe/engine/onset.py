@@ -361,7 +361,7 @@ def onset_speeds(
     the train's poles, over every angle and every speed of [a, b]), and the valve's height
     above a seat must pass the same test, so configuration I holds across the interval.
     Elsewhere (a seated steady state, whose no-follow has impacts and is not Lipschitz in
-    the speed; a profile with steps, whose closed form drops the steps' impulses) L is an
+    the speed; a profile with steps, whose lift has no Fourier tail bound) L is an
     *estimate*: ONSET_SLOPE_FACTOR × the steepest of the chord over [a, b], the chord
     certified before it and the chord after it (of the same kind of value); ``Onset.proven``
     says which a design's search needed. The first speed found with no-follow closes a

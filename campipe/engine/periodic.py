@@ -92,7 +92,13 @@ class SteadyBatch:
         return out
 
 
-def prepare_steady(cases: Sequence[Case], *, need_reference: bool = False) -> SteadyBatch:
+def prepare_steady(
+    cases: Sequence[Case], *, need_reference: bool = False, capture: float | None = None
+) -> SteadyBatch:
+    """The closed form's inputs for rigid ``cases`` at their speeds (the speeds may be set
+    again: ``SteadyBatch.extremes``). ``capture`` [m/s]: the capture velocity below which a
+    cam rate jump is no impact (``common.classify_break``; default the run's default), as in
+    the run the closed form stands for."""
     compliant = [i for i, c in enumerate(cases) if c.compliant]
     if compliant:
         raise CaseError.at(
@@ -128,7 +134,8 @@ def prepare_steady(cases: Sequence[Case], *, need_reference: bool = False) -> St
         form=np.array([c.closure == "form" for c in cases], dtype=np.bool_),
         t0=zeros, q0=np.zeros((n, n_q)), v0=np.zeros((n, n_q)), a0=np.zeros((n, n_q)),
         cfg0=np.full(n, CAM_CONTACT, np.int64), meff=np.zeros((n, 4)),
-        separation=np.zeros((n, 2)), capture=zeros,
+        separation=np.zeros((n, 2)),
+        capture=np.full(n, RunSettings().capture_velocity if capture is None else capture),
         restitution=np.zeros((n, 2)),
         valve_ref=qref, lift_bound=zeros, speed_bound=zeros,
     )  # fmt: skip
@@ -306,7 +313,7 @@ def steady_cases(cases: Sequence[Case], settings: RunSettings) -> np.ndarray:
     rigid = np.flatnonzero([not c.compliant for c in cases])
     if rigid.size:
         some = [cases[int(i)] for i in rigid]
-        batch = prepare_steady(some)
+        batch = prepare_steady(some, capture=settings.capture_velocity)
         ext = _as_extremes(batch.extremes(batch.cases.omega.copy()))
         take[rigid] = _steady_mask(some, ext, settings)
     return take
@@ -344,7 +351,7 @@ def run_at_fidelity(cases: Sequence[Case], settings: RunSettings, **options) -> 
     parts = []
     if rigid.size:
         some = [cases[int(i)] for i in rigid]
-        batch = prepare_steady(some, need_reference=True)
+        batch = prepare_steady(some, need_reference=True, capture=settings.capture_velocity)
         ext = _as_extremes(batch.extremes(batch.cases.omega.copy()))  # the probe
         mask = _steady_mask(some, ext, settings)
         take[rigid] = mask

@@ -369,7 +369,7 @@ def slope_bounds(tr: Transfer, sp: Spectrum, a: float, b: float) -> tuple[float,
 def provable(profile: Profile) -> bool:
     """The bound holds for the profile's closed form: its lift, lift rate and lift
     acceleration are continuous (no step beyond rounding). A velocity step (a
-    constant-velocity ramp's ends, a flat's edges) makes the closed form drop the step's
-    impulse, so it is not the Fourier series the bound is of; steps in the acceleration
-    leave the tail of the spectrum without the T₃ bound."""
+    constant-velocity ramp's ends, a flat's edges) or a step in the acceleration leaves the
+    tail of the spectrum without the T₃ bound (the closed form carries a velocity step's
+    impulse, and is the series as it converges)."""
     return math.isfinite(_variations(profile)[-1])

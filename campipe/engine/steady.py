@@ -39,9 +39,10 @@ from campipe.engine.closed_form import (
     eval_monitor,
     force_monitor,
     forcing,
+    harmonic_response,
     particular,
 )
-from campipe.engine.common import HELPER, KERNEL, by_ref, deref
+from campipe.engine.common import HELPER, JUMP, KERNEL, by_ref, classify_break, deref
 from campipe.profiles.packed import evaluate_packed, horner, piece_eval
 from campipe.vocabulary import CAM, CAM_CONTACT, SEAT
 
@@ -199,43 +200,6 @@ def _margin_in_piece(ref, st, z_start, theta, z):
 
 
 @njit(inline="always", nogil=True)
-def _harmonic_response(trains, runs, ws, st):
-    """ζ of configuration I at the case's speed (``modal.harmonic_responses``), written to
-    ``runs.zeta[c, 0]``, through the block form: (iωI − A)⁻¹ = X (iωI − B)⁻¹ X⁻¹, and for a
-    block (sI − B_b)⁻¹ = ((s − λ̄)I + N_b) / ((s − λ̄)² − δ²) since N_b² = δ²I."""
-    tr, ci, ns, w = st.tr, st.cfg - 1, st.ns, st.w
-    y = ws.ZT  # scratch: particular() overwrites it
-    for j in range(ns):
-        acc = 0.0j
-        for s in range(ns):
-            r = (
-                -trains.b_in[tr, ci, s, 0, 0]
-                - 1j * w * trains.b_in[tr, ci, s, 1, 0]
-                + w * w * trains.b_in[tr, ci, s, 2, 0]
-            )
-            acc += trains.basis_inv[tr, ci, j, s] * r
-        y[j] = acc
-    for b in range(trains.n_blocks[tr, ci]):
-        i0 = trains.bstart[tr, ci, b]
-        sl = 1j * w - trains.lam_bar[tr, ci, b]
-        if trains.bdim[tr, ci, b] == 1:
-            y[i0] = y[i0] / sl
-        else:
-            n = trains.block_n
-            den = sl * sl - trains.delta2[tr, ci, b]
-            a0 = y[i0]
-            a1 = y[i0 + 1]
-            y[i0] = ((sl + n[tr, ci, i0, i0]) * a0 + n[tr, ci, i0, i0 + 1] * a1) / den
-            y[i0 + 1] = (n[tr, ci, i0 + 1, i0] * a0 + (sl + n[tr, ci, i0 + 1, i0 + 1]) * a1) / den
-    for s in range(runs.zeta.shape[2]):
-        acc = 0.0j
-        if s < ns:
-            for j in range(ns):
-                acc += trains.basis[tr, ci, s, j] * y[j]
-        runs.zeta[st.c, ci, s] = acc
-
-
-@njit(inline="always", nogil=True)
 def _begin_case(cases, trains, runs, st, c):
     """Point the scalars at case c in configuration I."""
     tr = runs.train[c]
@@ -247,10 +211,33 @@ def _begin_case(cases, trains, runs, st, c):
     st.ns = 2 * st.nf
 
 
+@njit(inline="always", nogil=True)
+def _break_impulse(cases, trains, profiles, st, p, z):
+    """At the break that ends piece p (the last piece's: the turn's, to piece 0 of the next),
+    a cam rate jump into the held follower (``common.classify_break``'s JUMP, plastic: the
+    kernel's ``_cross_break``) changes the free velocities in z by the impulse's share
+    (``modal.ModalData.impulse``), as in a run; the turn's map stays affine. A jump that
+    throws the follower off (restitution) or a release leaves configuration I, where no
+    periodic state of it is defined: z is left as it is."""
+    c, tr, ci, nf = st.c, st.tr, st.cfg - 1, st.nf
+    last = p + 1 == profiles.n_pieces[c]
+    theta_b = profiles.breaks[c, p + 1]
+    l_left, dl_left, _ = piece_eval(profiles, c, p, 0, theta_b)
+    l_right, dl_right, _ = piece_eval(profiles, c, 0 if last else p + 1, 1 if last else 0, theta_b)
+    kind, jump = classify_break(
+        l_left, dl_left, l_right, dl_right, st.w, cases.form[c], cases.capture[c]
+    )
+    if kind != JUMP or (jump > 0.0 and cases.restitution[c, 0] > 0.0 and not cases.form[c]):
+        return
+    for k in range(nf):
+        z[nf + k] -= trains.impulse[tr, CAM_CONTACT - 1, 0, trains.free[tr, ci, k]] * jump
+
+
 @njit(**HELPER)
 def _periodic_turn(ref, st, zt):
     """The periodic state of configuration I at each break of the turn: zt (P + 1, ns), row P
-    (at 2π) the same as row 0. z(0) = (I − e^{AT})⁻¹ b, b the turn's response from rest."""
+    (at 2π) the same as row 0, each just after its break (a rate jump's impulse applied:
+    ``_break_impulse``). z(0) = (I − e^{AT})⁻¹ b, b the turn's response from rest."""
     cases, trains, profiles, runs, ws = deref(ref)
     tr, ci, ns = st.tr, st.cfg - 1, st.ns
     n_p = profiles.n_pieces[st.c]
@@ -260,6 +247,7 @@ def _periodic_turn(ref, st, zt):
         z[s] = 0.0
     for p in range(n_p):
         _advance_piece(ref, st, p, z)
+        _break_impulse(cases, trains, profiles, st, p, z)
     # z(0) = (I − e^{AT})⁻¹ b, block by block: u0 = (I − e^{BT})⁻¹ X⁻¹ b.
     _to_basis(trains, st, z, ws.u)
     for b in range(trains.n_blocks[tr, ci]):
@@ -283,6 +271,7 @@ def _periodic_turn(ref, st, zt):
         zt[0, s] = z[s]
     for p in range(n_p):
         _advance_piece(ref, st, p, z)
+        _break_impulse(cases, trains, profiles, st, p, z)
         for s in range(ns):
             zt[p + 1, s] = z[s]
 
@@ -310,14 +299,21 @@ def periodic_starts(cases, trains, profiles, runs, ws, state, snap, z_turn, t_st
     for c in range(cases.omega.shape[0]):
         _begin_case(cases, trains, runs, st, c)
         tr, ci = st.tr, st.cfg - 1
+        harmonic_response(trains, runs, ws, st, ci)
         _periodic_turn(ref, st, z_turn[c])
         # Where the run starts: θ = 0 (2π) if configuration I holds there, else the latest
         # earlier angle where it does.
         theta_s = _latest_hold(ref, st, z_turn, snap[c])
         t_start[c] = (theta_s - TWO_PI) / st.w if theta_s >= 0.0 else np.nan
-        if theta_s >= 0.0:
+        if theta_s >= TWO_PI:
+            # θ = 0: the state just after the turn's break (a rate jump's impulse there
+            # applied, as the cam's lift and rate are on piece 0), row P.
+            for s in range(st.ns):
+                z[s] = z_turn[c, profiles.n_pieces[c], s]
+        elif theta_s >= 0.0:
             p = _piece_of(profiles, c, theta_s)
             _state_in_piece(ref, st, p, z_turn[c, p], theta_s, z)
+        if theta_s >= 0.0:
             lift, dlift, _ = evaluate_packed(profiles, c, theta_s)
             for i in range(q.shape[1]):
                 q[c, i] = 0.0
@@ -578,6 +574,35 @@ def _monitor_value(ws, nb, st, theta_a, theta):
     )
 
 
+#: Samples a period of the fastest block that matters to a monitor on a piece
+#: (``_ringing_samples``): the sampled least value is then within 1 − cos(π/8), 8 %, of that
+#: block's amplitude of the least, before the refinement.
+RINGING_SAMPLES = 8
+#: A block matters to a monitor on a piece when its amplitude there is above this fraction
+#: of the monitor's particular part (0.01 N of a kilonewton force: about 0.02 rpm of an onset
+#: where the least force falls 0.4 N an rpm). A smooth polydyne's scan costs a quarter more
+#: (its fast modes are above it after the breaks), a ramped one's five times.
+RINGING_FLOOR = 1e-5
+
+
+@njit(inline="always", nogil=True)
+def _ringing_samples(trains, ws, st, width, nb):
+    """The samples a piece ``width`` [rad] wide needs for ``RINGING_SAMPLES`` a period of the
+    fastest block whose amplitude in the prepared monitor (``_piece_monitor``) is above
+    ``RINGING_FLOOR`` of its particular part: an impact at a rate jump (a ramp's) sets the
+    train's fast modes ringing, and a scan at a fixed spacing steps over their dips."""
+    scale = abs(ws.G[0, 0]) + abs(ws.GT[0])
+    duration = width / st.w
+    fastest = 0.0
+    for jj in range(nb):
+        d2 = ws.MC[DSQ, jj]
+        reach = min(duration, 1.0 / np.sqrt(abs(d2))) if d2 != 0.0 else duration
+        amp = abs(ws.WC[W1, 0, jj]) + abs(ws.WC[W2, 0, jj]) * reach
+        if amp > RINGING_FLOOR * scale:
+            fastest = max(fastest, trains.speed[st.tr, st.cfg - 1, jj])
+    return int(np.ceil(duration * fastest * RINGING_SAMPLES / TWO_PI))
+
+
 @njit(**HELPER)
 def _turn_minimum(ref, st, zt, which):
     """(θ, value) of the least value of ``which`` over the periodic turn: scanned at
@@ -595,9 +620,9 @@ def _turn_minimum(ref, st, zt, which):
     for p in range(profiles.n_pieces[c]):
         a = profiles.breaks[c, p]
         b = profiles.breaks[c, p + 1]
-        n = max(2, int(np.ceil((b - a) / d_theta)))
-        step = (b - a) / n
         _piece_monitor(ref, st, zt, p, which)
+        n = max(2, int(np.ceil((b - a) / d_theta)), _ringing_samples(trains, ws, st, b - a, nb))
+        step = (b - a) / n
         for jj in range(nb):
             ws.MC[F1, jj] = 1.0
             ws.MC[F2, jj] = 0.0
@@ -674,7 +699,7 @@ def steady_extremes(cases, trains, profiles, runs, ws, state, z_turn, with_max, 
         if not active[c]:
             continue
         _begin_case(cases, trains, runs, st, c)
-        _harmonic_response(trains, runs, ws, st)
+        harmonic_response(trains, runs, ws, st, CAM_CONTACT - 1)
         _periodic_turn(ref, st, z_turn[c])
         out[c, MIN_FORCE] = np.inf
         out[c, MIN_FORCE_ANGLE] = np.nan

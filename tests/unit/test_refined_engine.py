@@ -218,3 +218,43 @@ def test_harmonic_responses_solve_their_equation_for_trains_of_several_sizes():
             assert not zeta[c, ci, ns:].any()
         alone = harmonic_responses(train[c : c + 1], n_free, a_mat, b_in, omega[c : c + 1])
         assert_array_equal(alone[0], zeta[c])
+
+
+def test_the_kernels_harmonic_responses_are_numpy_s_solve():
+    """modal-exact computes each case's ζ at its start (``closed_form.harmonic_response``,
+    elimination with partial pivoting): for trains of two sizes, seated or not, at five
+    speeds, configuration I's and (seated) III's agree with numpy's LAPACK solve
+    (``modal.harmonic_responses``) to 1e-13 of ζ (the block form X (iωI − B)⁻¹ X⁻¹ is 5e-12
+    off). Fails with a sign of ω's term flipped, III left out, or the block form."""
+    from campipe.engine import batch as B
+    from campipe.engine import exact, integrators
+    from campipe.engine.integrators.modal_exact import arguments
+    from campipe.engine.modal import harmonic_responses, pad_stack
+
+    trains = [TRAIN, TRAIN.replace(spring_elements=4)]
+    speeds = rpm(np.array([300.0, 6000.0, 9000.0, 9524.0, 14000.0]))
+    cases = [
+        Case(trains[k % 2], CAM, w, seat=0.0 if k % 3 == 0 else math.nan)
+        for k, w in enumerate(speeds)
+    ]
+    settings = RunSettings(revolutions=1)
+    batch = B._prepare_batch(cases, settings, True)
+    start = B._starts(cases, settings, batch, in_run=True)
+    run = batch.cases._replace(**start._asdict())
+    method = integrators.get("modal-exact")
+    exact.modal_exact_batch(
+        *arguments(method.prepare(batch, settings), run, B._outputs(batch, settings))
+    )
+    data = [B.train_modal(t) for t in batch.trains]
+    expected = harmonic_responses(
+        batch.which,
+        np.stack([d.n_free for d in data]),
+        pad_stack([d.a_mat for d in data]),
+        pad_stack([d.b_in for d in data]),
+        speeds,
+    )
+    got = batch.runs.zeta
+    for c, case in enumerate(cases):
+        for ci in (0, 2) if case.has_seat else (0,):
+            scale = np.abs(expected[c, ci]).max()
+            assert scale > 0 and np.abs(got[c, ci] - expected[c, ci]).max() < 1e-13 * scale

@@ -76,8 +76,11 @@ def test_the_closed_form_is_the_fourier_series_the_bound_is_of():
     g₀ u + Σ_k Σ_j ρ_j U_k e^{ikθ}/(ikω − λ_j)) + constant, at three speeds on a smooth
     polydyne, to 1e-4 N of a force ranging over hundreds. Broken copy: a series without the
     negative harmonics (half of it) or the engine's force monitor with the rocker's damping
-    left out: off by tens of N. With ramps (velocity steps) the two differ by tens of N: the
-    closed form drops the steps' impulses, so such profiles are not ``provable``."""
+    left out: off by tens of N. With ramps (velocity steps) the closed form carries the steps'
+    impulses (``steady._break_impulse``) and is the series as it converges, slowly (the lift's
+    |Y_k| fall as 1/k²): under 1 N at the steps with 16384 harmonics, 0.01 N 2.5° away from
+    them; dropping the impulses, tens of N. Such profiles are still not ``provable``: the
+    bound's tail needs the lift's rate, acceleration and jerk of bounded variation."""
     train = thesis_train()
     tr = S.transfer(train_matrices(train))
     k = np.arange(1, 16385)
@@ -99,7 +102,9 @@ def test_the_closed_form_is_the_fourier_series_the_bound_is_of():
             if provable:
                 assert spread < 1e-4 and np.ptp(st.cam_force[0]) > 300.0
             else:
-                assert spread > 10.0
+                steps = np.radians([0, 30, 130, 150, 250, 280, 360])
+                away = np.min(np.abs(theta[:, None] - steps[None, :]), axis=1) > np.radians(2.5)
+                assert spread < 1.0 and np.ptp(gap[away]) < 0.01
 
 
 @pytest.mark.parametrize("name", ["thesis", "light damping"])

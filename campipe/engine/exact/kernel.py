@@ -26,6 +26,7 @@ from campipe.engine.closed_form import (
     W1_ABS,
     W2_ABS,
     block_basis,
+    harmonic_response,
 )
 from campipe.engine.common import (
     HELPER,
@@ -50,10 +51,12 @@ from campipe.engine.exact.state import (
     _keep_column,
     _monitor_at_grid,
     _off_cam,
+    _repeat_first_turn,
     _root,
     _sample,
     _slope_bound,
     _state_at,
+    _turn_samples,
 )
 from campipe.engine.metrics import (
     MAX_CAM_FORCE,
@@ -62,7 +65,16 @@ from campipe.engine.metrics import (
 )
 from campipe.engine.policy import release, strike, strike_at_break
 from campipe.profiles.packed import locate, piece_eval
-from campipe.vocabulary import CAM, CHATTER, EVENTS_TRUNCATED, NONFINITE, OK, SEAT
+from campipe.vocabulary import (
+    CAM,
+    CAM_AND_SEAT,
+    CAM_CONTACT,
+    CHATTER,
+    EVENTS_TRUNCATED,
+    NONFINITE,
+    OK,
+    SEAT,
+)
 
 # --------------------------------------------------------------------------- walk the grid
 
@@ -236,6 +248,7 @@ def _walk(ref, st):
         if watch[m] and gval[m] > level[m] and (held or dprev[m] > 0.0):
             _apply_event(ref, st, m, t_s)
             return
+    per_turn = _turn_samples(w, t_sample, n_out, n_rev)
     t_prev = t_s
     h = -1.0
     since_refresh = 0
@@ -329,7 +342,7 @@ def _walk(ref, st):
             continue
         if to_sample:
             _sample(ref, st, nact, w * t_n - th0, cth, sth)
-            if out.status[c] != 0:
+            if out.status[c] != 0 or _repeated(out, st, per_turn, trains.n_coordinates[st.tr]):
                 st.done = True
                 return
         if t_n >= t_end:
@@ -338,6 +351,20 @@ def _walk(ref, st):
             st.done = True
             return
         replan = True
+
+
+@njit(inline="always", nogil=True)
+def _repeated(out, st, per_turn, n_coord):
+    """The sample just written closes case st.c's first turn (``per_turn`` samples a turn,
+    0: turns not sampled alike), reached in configuration I with no event, and the first
+    turn repeats (``_repeat_first_turn``, which fills the later turns): the case is done."""
+    c = st.c
+    if per_turn == 0 or st.k_out != per_turn + 1 or st.cfg != CAM_CONTACT:
+        return False
+    if out.n_events[c] != 0 or not _repeat_first_turn(out, c, per_turn, n_coord):
+        return False
+    st.done = True
+    return True
 
 
 # --------------------------------------------------------------------------- events, breaks
@@ -452,11 +479,15 @@ def _cross_break(ref, st):
 
 
 @njit(inline="always", nogil=True)
-def _start_case(cases, trains, profiles, ws, st, c, tr):
-    """Case c's run from its start state at t0 ≤ 0."""
+def _start_case(cases, trains, profiles, runs, ws, st, c, tr):
+    """Case c's run from its start state at t0 ≤ 0, with the harmonic responses of the
+    configurations that hold the cam (III only with a seat)."""
     st.c = c
     st.tr = tr
     st.w = cases.omega[c]
+    harmonic_response(trains, runs, ws, st, CAM_CONTACT - 1)
+    if cases.has_seat[c]:
+        harmonic_response(trains, runs, ws, st, CAM_AND_SEAT - 1)
     st.eps_force = 1e-9 * (abs(trains.load[tr, 3]) + 1.0)
     for i in range(trains.n_coordinates[tr]):
         ws.q[i] = cases.q0[c, i]
@@ -495,10 +526,13 @@ def modal_exact_batch(cases, trains, profiles, runs, out, ws, state):
     st = state[0]
     ref = by_ref((cases, trains, profiles, runs, out, ws))
     for c in range(cases.omega.shape[0]):
-        _start_case(cases, trains, profiles, ws, st, c, runs.train[c])
+        _start_case(cases, trains, profiles, runs, ws, st, c, runs.train[c])
+        per_turn = _turn_samples(st.w, runs.t_sample[c], out.q.shape[1], out.per_rev.shape[1])
         while not st.done:
             _begin_segment(ref, st)
-            _walk(ref, st)
+            # (A segment may begin on the sample that closes the first turn.)
+            if not _repeated(out, st, per_turn, trains.n_coordinates[st.tr]):
+                _walk(ref, st)
             if out.status[c] != OK:
                 break
             if st.stalled > MAX_STALLED_EVENTS:

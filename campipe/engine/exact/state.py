@@ -300,6 +300,67 @@ def _sample(ref, st, nact, x, cth, sth):
         out.status[c] = UNBOUNDED
 
 
+#: A case repeats its first turn when its state at the turn's end equals its start to this
+#: many units in the last place of each coordinate's and velocity's largest value over the turn.
+REPEAT_ULPS = 64.0
+
+
+@njit(inline="always", nogil=True)
+def _turn_samples(w, t_sample, n_out, n_rev):
+    """The output samples a turn spans when a run of whole turns samples every turn alike
+    (the spacing divides the turn and the last sample closes the last turn), else 0."""
+    every = w * t_sample
+    per_turn = int(np.round(TWO_PI / every))
+    if n_rev < 2 or abs(per_turn * every - TWO_PI) > 1e-9 * TWO_PI:
+        return 0
+    return per_turn if per_turn * n_rev == n_out - 1 else 0
+
+
+@njit(inline="always", nogil=True)
+def _same_to_rounding(a, c, k0, k1, n):
+    """Rows k0 and k1 of a[c] equal to ``REPEAT_ULPS`` of each column's largest value over
+    rows k0 … k1 (columns NaN in both rows, not computed, count as equal)."""
+    for i in range(n):
+        x0 = a[c, k0, i]
+        x1 = a[c, k1, i]
+        if np.isnan(x0) and np.isnan(x1):
+            continue
+        scale = 0.0
+        for k in range(k0, k1 + 1):
+            scale = max(scale, abs(a[c, k, i]))
+        if not abs(x1 - x0) <= REPEAT_ULPS * 2.220446049250313e-16 * scale:
+            return False
+    return True
+
+
+@njit(**HELPER)
+def _repeat_first_turn(out, c, per_turn, n_coord):
+    """Case c's first turn, closed with no event in configuration I, repeats: its state at
+    the turn's end equals the start to rounding (a periodic start that follows the cam), so
+    every later turn is the first again. Copies the first turn's samples and metrics to the
+    others and returns True; False (nothing written) if the state did not repeat."""
+    if not (
+        _same_to_rounding(out.q, c, 0, per_turn, n_coord)
+        and _same_to_rounding(out.v, c, 0, per_turn, n_coord)
+    ):
+        return False
+    n_out = out.q.shape[1]
+    for k in range(per_turn + 1, n_out):
+        k0 = (k - 1) % per_turn + 1
+        for i in range(out.q.shape[2]):
+            out.q[c, k, i] = out.q[c, k0, i]
+            out.v[c, k, i] = out.v[c, k0, i]
+        for j in range(2):
+            out.force[c, k, j] = out.force[c, k0, j]
+            out.acc[c, k, j] = out.acc[c, k0, j]
+        out.cam[c, k] = out.cam[c, k0]
+        out.cfg[c, k] = out.cfg[c, k0]
+    for r in range(1, out.per_rev.shape[1]):
+        for j in range(out.per_rev.shape[2]):
+            out.per_rev[c, r, j] = out.per_rev[c, 0, j]
+    return True
+
+
 @njit(inline="always", nogil=True)
 def _advance(MC, nact, cth, sth, cwh, swh):
     """One grid step: the basis functions of the blocks 0 … nact − 1 by their addition
