@@ -3,7 +3,11 @@ and the caches leave every number of a run unchanged.
 
 ``MIXED_DIGEST`` was computed on main before the caches (commit 7a8cc9a): a mixed batch run
 as one call, again (its caches warm), and case by case, through modal-exact and
-newmark-linear, from the periodic and the quasi-static start.
+newmark-linear, from the periodic and the quasi-static start. Recomputed once since, where
+results changed on purpose (issue 34): a first turn that repeats is copied (fewer steps,
+later turns equal to the first to rounding) and the harmonic responses are solved in the
+kernels (1e-14 of ζ apart from numpy's). The test's point stands: one call, a warm second
+call and case-by-case calls give the same bits.
 """
 
 from __future__ import annotations
@@ -20,7 +24,7 @@ from campipe.model import thesis_train
 from campipe.profiles import harmonic, polydyne
 
 INCH = 0.0254
-MIXED_DIGEST = "c73001b6cbeb365de397be9ad9bc7525025ad9712bb53223729b414589bc12d6"
+MIXED_DIGEST = "8bb63d9e69b01bd946398d6f1d9ece626678d7011260ce4ae72fd2af2dd652e5"
 
 
 def _cases() -> list[Case]:
