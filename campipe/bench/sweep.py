@@ -224,10 +224,14 @@ def notes(s: dict) -> list[str]:
         f"cam: the thesis's loop and newmark-linear at 1 µs agree to "
         f"{format_short(s['thesis_vs_newmark_valve'] * inch, 2)} in of valve lift, the default "
         f"and newmark-linear to {format_short(s['default_vs_newmark_valve'] * inch, 2)} in "
-        "(newmark-linear's own error at 1 µs). From the periodic start those speeds repeat "
-        "their first turn: the default computes it and copies it to the others "
-        f"({s.get('repeated', 0)} of {s['cases']} cases here; docs/engine.md, modal-exact); "
-        "the others are integrated turn by turn.",
+        "(newmark-linear's own error at 1 µs)."
+        + (
+            f" From the periodic start {s['repeated']} of the {s['cases']} cases repeat their "
+            "first turn: the default computes it and copies it to the others (docs/engine.md, "
+            "modal-exact); the others are integrated turn by turn."
+            if "repeated" in s
+            else ""
+        ),
         "",
         f"The scalar loop here takes {format_short(s['seconds']['thesis'], 2)} s; the one issue "
         f"34 measured took {_earlier(lo_hi, 's')} s, against which the default is faster by "

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from campipe.constants import TWO_PI
-from campipe.engine import steady
+from campipe.engine import steady, steady_samples
 from campipe.engine.batch import (
     BatchResult,
     Case,
@@ -260,7 +260,7 @@ def _samples(
     v = np.full((n, n_out, n_q), np.nan)
     acc = np.empty((n, n_out, 2))
     force = np.empty((n, n_out))
-    steady.steady_samples(
+    steady_samples.steady_samples(
         batch.cases, batch.trains, batch.packed, batch.runs, make_workspace(n_q),
         np.zeros(1, STATE), batch.z_turn, angles, active, q, v, acc, force,
     )  # fmt: skip
