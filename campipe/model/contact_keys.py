@@ -8,8 +8,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from campipe.model.checks import ModelParameterError
-from campipe.model.declared import Parameter
+from campipe.model.declared import ModelParameterError, Parameter
 
 #: Contact laws at the cam–follower and valve–seat contacts: the thesis's rigid plastic
 #: impact, a linear spring and damper (no tension), Hertz's point contact with Hunt–Crossley

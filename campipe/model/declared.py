@@ -1,11 +1,19 @@
 """One model parameter's declaration (:class:`Parameter`): its name, units, bounds and
 default, declared once and read by the spec, the schema, ``campipe model --set`` and the
-archive (:data:`campipe.model.parameters.PARAMETERS` holds them all)."""
+archive (:data:`campipe.model.parameters.PARAMETERS` holds them all); and the error a
+parameter raises (:class:`ModelParameterError`)."""
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+
+from campipe.errors import CampipeError
+
+
+class ModelParameterError(CampipeError, ValueError):
+    """A model parameter that is unknown, badly typed or out of range; ``key`` is the key path
+    named in the message (``model.spring_rate``, ``damping_ratios[1]``)."""
 
 
 @dataclass(frozen=True)

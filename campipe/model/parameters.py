@@ -52,6 +52,7 @@ from campipe.model.contact_keys import (  # noqa: F401  (the contacts' names, re
     contact_parameters,
 )
 from campipe.model.declared import Parameter
+from campipe.model.levers import lever_parameters
 from campipe.units import QuantityError, parse_quantity
 
 ELEMENTS = ("pushrod", "rocker_pushrod_arm", "rocker_valve_arm", "spring", "valve_stem")
@@ -134,8 +135,10 @@ def _chain_list(name: str, what: str, units: str, shown: str) -> Parameter:
 
 
 def _direct(name: str, what: str, units: str, shown: str) -> Parameter:
+    shared = name in ("valve_mass", "stem_stiffness")
+    layouts = "layouts direct-acting and the levers" if shared else "layout direct-acting"
     return Parameter(
-        name, f"{what} (layout direct-acting)", units, shown, 0.0, allow_none=True,
+        name, f"{what} ({layouts})", units, shown, 0.0, allow_none=True,
         default="none",
     )  # fmt: skip
 
@@ -152,6 +155,7 @@ PARAMETERS: dict[str, Parameter] = {
         _direct("valve_mass", "valve's mass with retainer, keepers, spring share", "kg", "kg"),
         _direct("stem_stiffness", "valve stem's axial stiffness, tip to head", "N/m", "N/mm"),
         _direct("tappet_contact_stiffness", "tappet's contact on the stem tip", "N/m", "N/mm"),
+        *lever_parameters(),
         *_element_parameters(),
         Parameter("elastic_modulus", "elastic modulus of all members", "Pa", "lbf/in**2", 0.0),
         Parameter("specific_weight", "specific weight of all members", "N/m**3", "lbf/in**3", 0.0),
@@ -323,6 +327,14 @@ class ValveTrain:
     valve_mass: float = math.nan  # [kg] direct-acting: valve, retainer, keepers, spring share
     stem_stiffness: float = math.nan  # [N/m] direct-acting: the valve stem, tip to head
     tappet_contact_stiffness: float = math.nan  # [N/m] direct-acting: tappet on the stem tip
+    pivot_to_roller: float = math.nan  # [m] levers (campipe.model.levers): pivot to roller
+    pivot_to_pallet: float = math.nan  # [m] pivot to the pallet's centre of curvature
+    cam_base_radius: float = math.nan  # [m] the cam's base circle
+    lever_rest_angle: float = 0.0  # [rad] the pallet arm above the horizontal, valve closed
+    cam_offset: float = 0.0  # [m] cam centre from the roller's rest centre, towards the pallet
+    lever_inertia: float = math.nan  # [kg·m²] the lever about its pivot
+    roller_mass: float = 0.0  # [kg] the roller with its axle
+    lever_stiffness: float = math.nan  # [N/m] the lever at the pallet, along the valve
 
     def replace(self, **changes: Any) -> ValveTrain:
         """A copy with some values (SI) changed."""
