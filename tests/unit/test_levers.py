@@ -177,3 +177,20 @@ def test_a_lever_key_on_another_layout_is_refused():
     with pytest.raises(ModelParameterError, match="finger-follower") as info:
         valve_train("thesis-1971", {"pivot_to_roller": "30 mm"}, key_prefix="model.")
     assert info.value.key == "model.pivot_to_roller"
+
+
+def test_a_spec_s_seat_is_checked_against_the_kinematic_valve_lift():
+    """A finger's seat at 7 mm, above its cam's lift (6.5 mm) yet below its valve's (about
+    b/a = 1.5 times it), is a seat the valve leaves; 10 mm is refused at ``seat``, naming the
+    valve's full lift. Fails on a copy that compares the seat with the cam's lift (a chain's
+    ratio of 1)."""
+    from pathlib import Path
+
+    from campipe.study import SpecError, load_study
+
+    study = Path(__file__).parents[2] / "studies" / "finger-follower.yaml"
+    case = load_study(study, {"model.lash": "none", "seat": "7 mm"}).cases[0].case
+    assert case.seat == pytest.approx(0.007)
+    with pytest.raises(SpecError, match="full valve lift") as info:
+        load_study(study, {"model.lash": "none", "seat": "10 mm"})
+    assert [p.key for p in info.value.problems] == ["seat"]
