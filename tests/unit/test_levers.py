@@ -194,3 +194,19 @@ def test_a_spec_s_seat_is_checked_against_the_kinematic_valve_lift():
     with pytest.raises(SpecError, match="full valve lift") as info:
         load_study(study, {"model.lash": "none", "seat": "10 mm"})
     assert [p.key for p in info.value.problems] == ["seat"]
+
+
+def test_the_plot_s_kinematic_overlay_reads_a_chain_s_cam_lift_as_its_valve_s():
+    """The histories figure's kinematic lift multiplies the archive's cam lift by the train's
+    ratio: 1.5 for the thesis's rocker (1.5 in / 1.0 in), 1 for a finger (its archive's cam
+    lift is already the kinematic valve lift). Fails on a copy that reads a chain's ratio off
+    the thesis's rocker coordinate q4 (a placeholder: 0)."""
+    from pathlib import Path
+
+    from campipe.plot.kinematics import rocker_ratios
+
+    text = (Path(__file__).parents[2] / "studies" / "finger-follower.yaml").read_text()
+    columns = {"spring_rate": np.array([35e3, 40e3])}
+    assert_allclose(rocker_ratios({"spec": text}, columns), [1.0, 1.0])
+    thesis = rocker_ratios({"spec": "model: {preset: thesis-1971}"}, {"lash": np.array([0.0])})
+    assert thesis[0] == pytest.approx(1.5, rel=1e-9)
