@@ -27,7 +27,7 @@ CHAINS = (LUMPED, DIRECT_ACTING, *LEVERS)
 #: A direct-acting train's keys, in the order its chain takes them.
 DIRECT_ACTING_KEYS = ("tappet_mass", "valve_mass", "stem_stiffness", "tappet_contact_stiffness")
 #: The thesis's members' keys end so (with ``ELEMENTS``' names before).
-_MEMBER_ENDS = ("_length", "_diameter", "_elements", "_loss_factor")
+_MEMBER_ENDS = ("_length", "_diameter", "_elements", "_loss_factor", "_mass")
 
 
 #: Keys more than one layout reads.

@@ -92,6 +92,18 @@ def _element_parameters() -> list[Parameter]:
     for element, label in names.items():
         out.append(Parameter(f"{element}_length", f"{label} length", "m", "in", 0.0))
         out.append(Parameter(f"{element}_diameter", f"{label} diameter", "m", "in", 0.0))
+    for element, label in names.items():
+        out.append(
+            Parameter(
+                f"{element}_mass",
+                f"{label} mass given directly (none: from its geometry and specific_weight)",
+                "kg",
+                "lb",
+                0.0,
+                allow_none=True,
+                default="none",
+            )
+        )
     return out
 
 
@@ -300,6 +312,11 @@ class ValveTrain:
     rocker_valve_arm_loss_factor: float  # [-]
     spring_loss_factor: float  # [-]
     valve_stem_loss_factor: float  # [-]
+    pushrod_mass: float = math.nan  # [kg] each member's mass given directly; NaN: from ρ·A·L
+    rocker_pushrod_arm_mass: float = math.nan  # [kg]
+    rocker_valve_arm_mass: float = math.nan  # [kg]
+    spring_mass: float = math.nan  # [kg]
+    valve_stem_mass: float = math.nan  # [kg]
     lash_side: str = "valve"  # one of LASH_SIDES: where ``lash`` is measured
     cam_contact: str = "rigid"  # one of CONTACT_LAWS
     cam_contact_stiffness: float = 0.0  # [N/m] k; 0: from the line contact

@@ -210,3 +210,30 @@ def test_the_plot_s_kinematic_overlay_reads_a_chain_s_cam_lift_as_its_valve_s():
     assert_allclose(rocker_ratios({"spec": text}, columns), [1.0, 1.0])
     thesis = rocker_ratios({"spec": "model: {preset: thesis-1971}"}, {"lash": np.array([0.0])})
     assert thesis[0] == pytest.approx(1.5, rel=1e-9)
+
+
+def test_the_thesis_s_members_take_their_masses_given_directly():
+    """``pushrod_mass`` given as the thesis's own ρ·A·L (0.283 lbf/in³ × π·0.3²/4 in² × 9 in,
+    worked out here) leaves the matrices as they are; given at twice that, the pushrod's
+    consistent mass (m/6)·[[2, 1], [1, 2]] doubles and nothing else changes; on a chain it is
+    refused, naming the key. Fails on a copy that reads the given mass per member, not per
+    element, once the member is divided in two."""
+    from campipe.constants import INCH, LBF, STANDARD_GRAVITY
+    from campipe.model import thesis_train
+
+    rho_a_l = 0.283 * LBF / INCH**3 / STANDARD_GRAVITY * math.pi * (0.3 * INCH) ** 2 / 4 * 9 * INCH
+    base = system_matrices(thesis_train())
+    same = system_matrices(valve_train("thesis-1971", {"pushrod_mass": f"{rho_a_l!r} kg"}))
+    assert_allclose(same.mass, base.mass, rtol=1e-12, atol=1e-15)
+    double = system_matrices(valve_train("thesis-1971", {"pushrod_mass": f"{2 * rho_a_l!r} kg"}))
+    added = double.mass - base.mass
+    assert_allclose(added[:2, :2], rho_a_l / 6 * np.array([[2.0, -1.0], [-1.0, 2.0]]), rtol=1e-9)
+    added[:2, :2] = 0.0
+    assert np.abs(added).max() < 1e-15
+    halves = {"pushrod_mass": f"{rho_a_l!r} kg", "pushrod_elements": 2}
+    split = system_matrices(valve_train("thesis-1971", halves)).mass
+    plain = system_matrices(valve_train("thesis-1971", {"pushrod_elements": 2})).mass
+    assert_allclose(split, plain, rtol=1e-12, atol=1e-15)
+    with pytest.raises(ModelParameterError) as info:
+        valve_train("thesis-1971", {**FINGER, "pushrod_mass": "0.1 kg"}, key_prefix="model.")
+    assert info.value.key == "model.pushrod_mass"
