@@ -12,18 +12,19 @@ from __future__ import annotations
 
 import collections
 import math
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from campipe.constants import TWO_PI
-from campipe.model.levers import LEVERS, KinematicState, kinematic_state, lever_of
+from campipe.model.levers import LEVERS, KinematicState, Lever, kinematic_state, lever_of
 from campipe.profiles.pieces import Profile, evaluate
 from campipe.profiles.shapes import table
 
 #: The cam-angle spacing [rad] of the kinematic lift's samples.
 STEP = math.radians(0.5)
-#: A derived profile's label starts so (it is never derived again).
+#: A derived profile's label starts so.
 VALVE_SIDE = "valve side of "
 #: The most derived profiles kept (a study's cases share a few cams and trains).
 CACHED = 64
@@ -31,15 +32,38 @@ CACHED = 64
 _CACHE: collections.OrderedDict[tuple, Profile] = collections.OrderedDict()
 
 
+@dataclass(frozen=True, eq=False)
+class ValveSideProfile(Profile):
+    """A lever layout's kinematic valve lift (:func:`valve_side`), with the cam and the lever
+    it came from (for the lever ratio over the turn, :func:`lever_ratio`)."""
+
+    cam: Profile | None = None  # the cam's own lift
+    lever: Lever | None = None  # the lever's geometry
+
+
 def is_valve_side(profile: Profile) -> bool:
     """A profile :func:`valve_side` derived (the engine's excitation of a lever layout)."""
-    return profile.label.startswith(VALVE_SIDE)
+    return isinstance(profile, ValveSideProfile)
+
+
+def _kinematics(profile: Profile, lever: Lever, theta: np.ndarray) -> KinematicState:
+    return kinematic_state(lever, lambda s: evaluate(profile, s)[:2], theta)
 
 
 def cam_kinematics(profile: Profile, train: Any, theta: np.ndarray) -> KinematicState:
     """The lever's kinematic motion under ``profile`` (the cam's own lift) at cam angles
     ``theta`` [rad]."""
-    return kinematic_state(lever_of(train), lambda s: evaluate(profile, s)[:2], theta)
+    return _kinematics(profile, lever_of(train), theta)
+
+
+def lever_ratio(profile: Profile, theta: np.ndarray) -> np.ndarray:
+    """The lever ratio [-] at cam angles ``theta`` [rad] of the case whose excitation is
+    ``profile``: the roller's normal force on the cam per valve-side cam force (by virtual
+    work) for a lever layout's (:class:`ValveSideProfile`), 1 for any other."""
+    theta = np.asarray(theta, float)
+    if not isinstance(profile, ValveSideProfile) or profile.cam is None or profile.lever is None:
+        return np.ones_like(theta)
+    return _kinematics(profile.cam, profile.lever, theta).ratio.reshape(theta.shape)
 
 
 def valve_side(profile: Profile, train: Any) -> Profile:
@@ -55,11 +79,13 @@ def valve_side(profile: Profile, train: Any) -> Profile:
         theta = np.arange(round(TWO_PI / STEP)) * (TWO_PI / round(TWO_PI / STEP))
         lift = cam_kinematics(profile, train, theta).valve_lift
         derived = table(theta, lift)
-        found = Profile(
+        found = ValveSideProfile(
             derived.breaks,
             derived.poly,
             derived.trig,
             f"{VALVE_SIDE}{profile.label} ({train.layout})",
+            profile,
+            lever,
         )
         _CACHE[key] = found
         while len(_CACHE) > CACHED:
