@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from campipe.constants import TWO_PI
+from campipe.model.declared import ModelParameterError
 from campipe.model.levers import LEVERS, KinematicState, Lever, kinematic_state, lever_of
 from campipe.profiles.pieces import Profile, evaluate
 from campipe.profiles.shapes import table
@@ -26,6 +27,8 @@ from campipe.profiles.shapes import table
 STEP = math.radians(0.5)
 #: A derived profile's label starts so.
 VALVE_SIDE = "valve side of "
+#: The farthest [rad] the lever may swing from the horizontal over the cam's turn.
+MAX_SWING = math.radians(75.0)
 #: The most derived profiles kept (a study's cases share a few cams and trains).
 CACHED = 64
 
@@ -66,19 +69,42 @@ def lever_ratio(profile: Profile, theta: np.ndarray) -> np.ndarray:
     return _kinematics(profile.cam, profile.lever, theta).ratio.reshape(theta.shape)
 
 
+def _check_swing(state: KinematicState, profile: Profile) -> None:
+    """Refuse a cam that swings the lever past :data:`MAX_SWING` from the horizontal or past
+    where its ratio turns (the valve would close as the cam lifts), naming
+    ``pivot_to_roller``."""
+    worst = float(np.abs(state.angle).max())
+    if worst <= MAX_SWING and bool(np.all(state.ratio > 0.0)):
+        return
+    raise ModelParameterError.at(
+        "pivot_to_roller",
+        f"the cam ({profile.label}) swings the lever to {math.degrees(worst):.0f}° from the "
+        f"horizontal (at most {math.degrees(MAX_SWING):.0f}°, its lever ratio positive): give "
+        "a longer pivot_to_roller, or a cam of less lift",
+        found=None,
+        expected=f"a lever that stays within {math.degrees(MAX_SWING):.0f}° of the horizontal",
+    )
+
+
 def valve_side(profile: Profile, train: Any) -> Profile:
     """The excitation of ``train``'s chain: ``profile`` (the cam's lift) through the lever's
-    kinematics for a lever layout, else ``profile`` itself (as it is for one derived
-    already)."""
-    if train.layout not in LEVERS or is_valve_side(profile):
+    kinematics for a lever layout, else ``profile`` itself. A profile derived already is the
+    excitation of its own lever: kept for that lever, derived again from its cam for another
+    (a case copied with another train), its cam for a train that is no lever."""
+    if isinstance(profile, ValveSideProfile) and profile.cam is not None:
+        if train.layout in LEVERS and profile.lever == lever_of(train):
+            return profile
+        profile = profile.cam
+    if train.layout not in LEVERS:
         return profile
     lever = lever_of(train)
     key = (profile.breaks.tobytes(), profile.poly.tobytes(), profile.trig.tobytes(), lever)
     found = _CACHE.get(key)
     if found is None:
         theta = np.arange(round(TWO_PI / STEP)) * (TWO_PI / round(TWO_PI / STEP))
-        lift = cam_kinematics(profile, train, theta).valve_lift
-        derived = table(theta, lift)
+        state = _kinematics(profile, lever, theta)
+        _check_swing(state, profile)
+        derived = table(theta, state.valve_lift)
         found = ValveSideProfile(
             derived.breaks,
             derived.poly,

@@ -266,3 +266,43 @@ def test_the_recorded_cam_normal_force_is_the_cam_force_through_the_lever_ratio(
     force = ds["cam_force"].values[0]
     assert force.min() > 100.0  # it follows the cam
     assert_allclose(ds["cam_normal_force"].values[0], force * ratio, rtol=1e-6)
+
+
+def test_a_case_copied_with_another_train_drives_it_with_its_own_kinematics():
+    """A case's excitation follows its train: copied with another finger (a longer pallet
+    arm) it is that finger's kinematic lift, copied with the thesis's train the cam's own
+    lift. Fails on a copy that keeps the first finger's derived lift for any train."""
+    import dataclasses
+
+    from campipe.model import thesis_train
+
+    cam = harmonic(LIFT)
+    case = Case(lever(), cam, 100 * RPM)
+    longer = dataclasses.replace(case, train=lever(pivot_to_pallet="54 mm"))
+    theta = np.radians([200.0, 270.0])
+    lift = evaluate(longer.profile, theta)[0]
+    assert_allclose(lift, 54 / 45 * evaluate(case.profile, theta)[0], rtol=1e-9)
+    back = dataclasses.replace(case, train=thesis_train()).profile
+    assert not is_valve_side(back) and back.label == cam.label
+    assert_allclose(evaluate(back, theta)[0], evaluate(cam, theta)[0], rtol=0)
+
+
+def test_a_cam_that_swings_the_lever_past_75_degrees_is_refused():
+    """A 40 mm harmonic cam under a 30 mm finger arm would swing it past the vertical (its
+    valve lift turning back while the cam still lifts): a case refuses it, and a spec names
+    ``model.pivot_to_roller``; 25 mm (52° of swing) is a lever still. Fails on a copy that
+    follows the lever past the vertical, where b·(sin α₀ − sin α) no longer grows with the
+    cam."""
+    from pathlib import Path
+
+    from campipe.study import SpecError, load_study
+
+    level = lever(cam_offset="0 mm", lever_rest_angle="0 deg")
+    assert is_valve_side(Case(level, harmonic(0.025), 100 * RPM).profile)
+    with pytest.raises(ModelParameterError, match="swings the lever") as info:
+        Case(level, harmonic(0.040), 100 * RPM)
+    assert info.value.key == "pivot_to_roller"
+    study = Path(__file__).parents[2] / "studies" / "finger-follower.yaml"
+    with pytest.raises(SpecError) as refused:
+        load_study(study, {"profile.lift": "40 mm"})
+    assert [p.key for p in refused.value.problems] == ["model.pivot_to_roller"]

@@ -199,7 +199,10 @@ def valve_lift_ratio(train: ValveTrain, profile: Profile, full: float) -> float:
     rocker's arm ratio, 1 for a lumped chain, a lever layout's kinematic valve lift's top over
     the cam's (``campipe.profiles.levers``)."""
     if train.layout in LEVERS:
-        return max_lift(valve_side(profile, train)) / full
+        try:
+            return max_lift(valve_side(profile, train)) / full
+        except ModelParameterError as exc:  # a lever the cam swings too far
+            raise SpecProblem.from_error(exc, f"model.{exc.key}") from None
     if train.chain:
         return 1.0
     return train.rocker_valve_arm_length / train.rocker_pushrod_arm_length
