@@ -18,6 +18,7 @@ from campipe.model import (
     Coordinate,
     ModelParameterError,
     coordinates,
+    lash_ratio,
     modal_damping_ratios,
     newmark_linear_stability_limit,
     system_matrices,
@@ -31,9 +32,12 @@ from campipe.model.assembly import (
     normal_modes,
     observed_orders,
 )
-from campipe.model.checks import DIRECT_ACTING, LUMPED, PUSHROD_ROCKER, layout_of_key
+from campipe.model.checks import DIRECT_ACTING, LUMPED, PUSHROD_ROCKER, layouts_of_key
 from campipe.model.layouts import used_coordinates
-from campipe.units import convert, pint_without_dask
+from campipe.model.levers import LEVERS
+from campipe.profiles import evaluate, harmonic
+from campipe.profiles.levers import cam_kinematics
+from campipe.units import QuantityError, convert, parse_quantity, pint_without_dask
 from campipe.vocabulary import CONFIGURATIONS, ROMAN
 
 #: The parameters ``campipe model --convergence`` refines.
@@ -67,6 +71,21 @@ REFINEMENTS = tuple(f"{member}_elements" for member in ELEMENTS)
     + " elements.",
 )
 @click.option(
+    "--cam-lift",
+    default="6 mm",
+    show_default=True,
+    metavar="QUANTITY",
+    help="The harmonic cam's lift under which a lever layout's kinematic ratio is tabulated.",
+)
+@click.option(
+    "--ratio-step",
+    default=30.0,
+    show_default=True,
+    type=click.FloatRange(min=0.1, max=180.0),
+    metavar="DEG",
+    help="Cam-angle step [deg] of the kinematic ratio's table.",
+)
+@click.option(
     "--modes",
     default=6,
     show_default=True,
@@ -74,9 +93,16 @@ REFINEMENTS = tuple(f"{member}_elements" for member in ELEMENTS)
     help="Modes shown with --convergence.",
 )
 def model(
-    preset: str, sets: tuple[str, ...], as_json: bool, convergence: str | None, modes: int
+    preset: str,
+    sets: tuple[str, ...],
+    as_json: bool,
+    convergence: str | None,
+    cam_lift: str,
+    ratio_step: float,
+    modes: int,
 ) -> None:
-    """Print the model's matrices, natural frequencies, mode shapes and stability limits."""
+    """Print the model's matrices, natural frequencies, mode shapes, stability limits and
+    kinematic ratio over the cam turn."""
     pint_without_dask()  # this process is the command's own
     overrides = parse_overrides(sets)
     try:
@@ -98,10 +124,15 @@ def model(
     limits = {
         ROMAN[c]: newmark_linear_stability_limit(sm.mass, sm.stiffness, c) for c in CONFIGURATIONS
     }
+    try:
+        lift = parse_quantity(cam_lift, "m", "--cam-lift", "mm")
+    except QuantityError as exc:
+        raise click.UsageError(str(exc)) from None
+    table = ratio_table(train, sm, lift, math.radians(ratio_step))
     if as_json:
-        click.echo(json.dumps(model_report(train, sm, limits, preset), indent=1))
+        click.echo(json.dumps({**model_report(train, sm, limits, preset), **table}, indent=1))
     else:
-        click.echo(model_text(train, sm, limits, preset, overrides))
+        click.echo(model_text(train, sm, limits, preset, overrides) + ratio_text(table))
 
 
 def _json_value(value: object) -> object:
@@ -114,7 +145,11 @@ def _shown(train, sm) -> tuple[SystemMatrices, tuple[Coordinate, ...], list[str]
     without a lumped chain's placeholders (its modes the chain's own) or another layout's
     keys."""
     shown = (None, train.layout, LUMPED if train.chain else None)
-    names = [n for n in PARAMETERS if layout_of_key(n, ELEMENTS) in shown]
+    names = [
+        n
+        for n in PARAMETERS
+        if not layouts_of_key(n, ELEMENTS) or set(layouts_of_key(n, ELEMENTS)) & set(shown)
+    ]
     coords = coordinates(train)
     used = used_coordinates(train)
     if used.size == len(coords):
@@ -200,7 +235,51 @@ DISPLAY = {
     ),
     LUMPED: ((1.0, 1.0), ((1.0, "kg", "×1"), (1e6, "N/m", "×1e6"), (1.0, "N·s/m", "×1"))),
 }
-DISPLAY[DIRECT_ACTING] = DISPLAY[LUMPED]
+for _chain in (DIRECT_ACTING, *LEVERS):
+    DISPLAY[_chain] = DISPLAY[LUMPED]
+
+
+def ratio_table(train, sm, lift: float, step: float) -> dict[str, object]:
+    """The kinematic ratio over the cam turn (SI, JSON form): a lever layout's, valve lift and
+    lever ratio every ``step`` [rad] under the harmonic cam of ``lift`` [m]
+    (:mod:`campipe.model.levers`); another layout's, one constant (the thesis's rocker's
+    ``lash_ratio``, a chain's 1: its coordinates are the valve side's)."""
+    if train.layout not in LEVERS:
+        ratio = lash_ratio(sm) if train.layout == PUSHROD_ROCKER else 1.0
+        return {"kinematic_ratio": {"constant": ratio}}
+    if not lift > 0.0:
+        raise click.UsageError(f"--cam-lift: found {lift!r} m, expected a positive lift")
+    theta = np.arange(0.0, TWO_PI - 1e-12, step)
+    state = cam_kinematics(harmonic(lift), train, theta)
+    return {
+        "kinematic_ratio": {
+            "cam": f"harmonic, lift {lift:g} m",
+            "cam_angle": theta.tolist(),
+            "cam_lift": evaluate(harmonic(lift), theta)[0].tolist(),
+            "valve_lift": state.valve_lift.tolist(),
+            "ratio": state.ratio.tolist(),
+            "units": {"cam_angle": "rad", "cam_lift": "m", "valve_lift": "m", "ratio": "1"},
+        }
+    }
+
+
+def ratio_text(table: dict) -> str:
+    """The human form of :func:`ratio_table`."""
+    k = table["kinematic_ratio"]
+    if "constant" in k:
+        return f"\n\nKinematic ratio (valve travel per cam travel): {k['constant']:.6g}, constant"
+    lines = [
+        "",
+        "",
+        f"Kinematic ratio over the cam turn ({k['cam']}): the lever ratio is the valve's "
+        "travel per unit of the roller's along the contact normal (the cam force per valve-side "
+        "force)",
+        f"  {'cam deg':>8} {'cam lift mm':>12} {'valve lift mm':>14} {'ratio':>9}",
+    ]
+    for row in zip(k["cam_angle"], k["cam_lift"], k["valve_lift"], k["ratio"], strict=True):
+        a, h, v, r = row
+        lines.append(f"  {math.degrees(a):8.1f} {h * 1e3:12.4f} {v * 1e3:14.4f} {r:9.4f}")
+    return "\n".join(lines)
 
 
 def model_text(train, sm, limits, preset, overrides) -> str:

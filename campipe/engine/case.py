@@ -18,6 +18,7 @@ from campipe.errors import CampipeError
 from campipe.model import ValveTrain, system_matrices, train_lash_seat
 from campipe.model.assembly import configuration_frequencies
 from campipe.profiles import Profile
+from campipe.profiles.levers import valve_side
 from campipe.vocabulary import CAM_AND_SEAT, CAM_CONTACT, CONFIGURATIONS, FREE
 
 CLOSURES = ("force", "form")
@@ -86,7 +87,9 @@ class Case:
     """One run: a valve train, a cam and how it is driven."""
 
     train: ValveTrain  # model parameters [SI]
-    profile: Profile  # cam lift over one turn, defects applied
+    #: cam lift over one turn, defects applied; a lever layout's is its kinematic valve lift
+    #: (``campipe.profiles.levers.valve_side``, derived on construction)
+    profile: Profile
     speed: float  # cam speed [rad/s]
     #: seat position as a valve lift from the valve's static position on the base circle
     #: with no seat [m]; NaN: no seat. A train with lash places it (``lift_zero``).
@@ -94,6 +97,7 @@ class Case:
     closure: str = "force"  # "force": spring-held, may separate; "form": never leaves the cam
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "profile", valve_side(self.profile, self.train))
         lash = getattr(self.train, "lash", math.nan)
         if math.isnan(lash):
             return

@@ -95,6 +95,8 @@ PART_COLOURS = {
     "retainer": (90, 90, 90),
     "frame": (90, 90, 90),
     "seat": (120, 70, 40),
+    "mass": (50, 110, 200),  # a chain's masses (mass_1 …) and links (link_1 …)
+    "link": (150, 80, 190),
 }
 IN_CONTACT, OFF_CONTACT = (40, 180, 70), (220, 40, 40)
 
@@ -267,7 +269,7 @@ def log_sketch(
         rec.log(
             f"{root}/{name}",
             rr.LineStrips2D.from_fields(
-                colors=[PART_COLOURS[name]], radii=[sketch.radii[name] * MM]
+                colors=[PART_COLOURS[name.split("_")[0]]], radii=[sketch.radii[name] * MM]
             ),
             static=True,
         )

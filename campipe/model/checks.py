@@ -12,36 +12,54 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from campipe.errors import CampipeError
+from campipe.model.declared import ModelParameterError
+from campipe.model.levers import LEVER_KEYS, LEVERS, lever_chain
 
 #: Layouts (:mod:`campipe.model.layouts`): the thesis's train from its members' geometry; a
 #: chain of masses given directly; a bucket tappet on its valve from named masses and
 #: stiffnesses, built as a two-mass chain.
+#: The lever layouts (:mod:`campipe.model.levers`), from named geometry and masses, built as
+#: two-mass chains in valve-side coordinates driven by their kinematic valve lift.
 PUSHROD_ROCKER, LUMPED, DIRECT_ACTING = "pushrod-rocker", "lumped", "direct-acting"
-LAYOUTS = (PUSHROD_ROCKER, LUMPED, DIRECT_ACTING)
+LAYOUTS = (PUSHROD_ROCKER, LUMPED, DIRECT_ACTING, *LEVERS)
 #: The layouts that are chains of masses (the lumped chain's coordinates and numerics).
-CHAINS = (LUMPED, DIRECT_ACTING)
+CHAINS = (LUMPED, DIRECT_ACTING, *LEVERS)
 #: A direct-acting train's keys, in the order its chain takes them.
 DIRECT_ACTING_KEYS = ("tappet_mass", "valve_mass", "stem_stiffness", "tappet_contact_stiffness")
 #: The thesis's members' keys end so (with ``ELEMENTS``' names before).
-_MEMBER_ENDS = ("_length", "_diameter", "_elements", "_loss_factor")
+_MEMBER_ENDS = ("_length", "_diameter", "_elements", "_loss_factor", "_mass")
 
 
-class ModelParameterError(CampipeError, ValueError):
-    """A model parameter that is unknown, badly typed or out of range; ``key`` is the key path
-    named in the message (``model.spring_rate``, ``damping_ratios[1]``)."""
+#: Keys more than one layout reads.
+_SHARED = {
+    "valve_mass": (DIRECT_ACTING, *LEVERS),
+    "stem_stiffness": (DIRECT_ACTING, *LEVERS),
+}
+
+
+def layouts_of_key(name: str, members: tuple[str, ...]) -> tuple[str, ...]:
+    """The layouts a parameter belongs to (empty: every layout's): the thesis's ``members``'
+    geometry, refinement and loss factors and its material to pushrod-rocker, ``masses`` and
+    ``stiffnesses`` to lumped, :data:`DIRECT_ACTING_KEYS` to direct-acting, the levers' keys
+    (:data:`~campipe.model.levers.LEVER_KEYS`) to both lever layouts; ``valve_mass`` and
+    ``stem_stiffness`` to direct-acting and the levers."""
+    thesis = name.startswith(members) and name.endswith(_MEMBER_ENDS)
+    if thesis or name in ("elastic_modulus", "specific_weight"):
+        return (PUSHROD_ROCKER,)
+    if name in ("masses", "stiffnesses"):
+        return (LUMPED,)
+    if name in _SHARED:
+        return _SHARED[name]
+    if name in DIRECT_ACTING_KEYS:
+        return (DIRECT_ACTING,)
+    return LEVERS if name in LEVER_KEYS else ()
 
 
 def layout_of_key(name: str, members: tuple[str, ...]) -> str | None:
-    """The layout a parameter belongs to (None: every layout's): the thesis's ``members``'
-    geometry, refinement and loss factors and its material to pushrod-rocker,
-    ``masses`` and ``stiffnesses`` to lumped, :data:`DIRECT_ACTING_KEYS` to direct-acting."""
-    thesis = name.startswith(members) and name.endswith(_MEMBER_ENDS)
-    if thesis or name in ("elastic_modulus", "specific_weight"):
-        return PUSHROD_ROCKER
-    if name in ("masses", "stiffnesses"):
-        return LUMPED
-    return DIRECT_ACTING if name in DIRECT_ACTING_KEYS else None
+    """The first layout a parameter belongs to (None: every layout's; see
+    :func:`layouts_of_key`)."""
+    owners = layouts_of_key(name, members)
+    return owners[0] if owners else None
 
 
 def resolve_layout(
@@ -54,19 +72,22 @@ def resolve_layout(
     loss-factor`` on a chain: it needs members), a direct-acting key not given, a chain of one
     mass (not yet supported), ``stiffnesses`` not one fewer than ``masses``."""
     for name in overrides:
-        owner = layout_of_key(name, members)
+        owners = layouts_of_key(name, members)
         if name == "damping_kind" and overrides[name] == "loss-factor":
-            owner = PUSHROD_ROCKER
-        if owner not in (None, train.layout):
+            owners = (PUSHROD_ROCKER,)
+        if owners and train.layout not in owners:
+            owner = " or ".join(owners)
             raise ModelParameterError.at(
                 key_prefix + name,
                 f"is a key of layout {owner} but layout is {train.layout}: leave it out or "
-                f"set {key_prefix}layout: {owner}",
+                f"set {key_prefix}layout: {owners[0]}",
                 found=overrides[name],
                 expected=f"no {name} with layout {train.layout}",
             )
     if train.layout == DIRECT_ACTING:
         train = train.replace(**direct_acting_chain(train, key_prefix))
+    if train.layout in LEVERS:
+        train = train.replace(**lever_chain(train, key_prefix))
     if train.layout in CHAINS:
         _check_chain(train, key_prefix)
     return train

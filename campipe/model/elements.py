@@ -89,7 +89,8 @@ def member_matrices(train: ValveTrain, member: str) -> tuple[np.ndarray, np.ndar
     (thesis Eqs. 7–10 on a length L/n of mass m/n).
 
     A bar's stiffness is E·A·n/L, the spring's n·``spring_rate`` (n springs in series make
-    the rate); its mass is that of the equivalent wire, spread along the chain.
+    the rate); its mass is that of the equivalent wire, spread along the chain. A member's
+    mass given directly (``<member>_mass``) replaces ρ·A·L, spread the same way.
     """
     n = train.elements_of(member)
     density = train.specific_weight / STANDARD_GRAVITY
@@ -97,7 +98,8 @@ def member_matrices(train: ValveTrain, member: str) -> tuple[np.ndarray, np.ndar
     L = getattr(train, f"{member}_length") / n
     D = getattr(train, f"{member}_diameter")
     area = math.pi * D**2 / 4.0
-    m = density * area * L
+    given = getattr(train, f"{member}_mass")
+    m = density * area * L if math.isnan(given) else given / n
     if NODE_COORDINATES[member] == 2:
         inertia = math.pi * D**4 / 64.0
         return beam_stiffness(E * inertia, L), beam_mass(m, L)

@@ -45,6 +45,14 @@ from campipe.model.checks import (
     ModelParameterError,
     resolve_layout,
 )
+from campipe.model.contact_keys import (  # noqa: F401  (the contacts' names, re-exported)
+    CONTACT_CONSTANTS,
+    CONTACT_LAWS,
+    check_contacts,
+    contact_parameters,
+)
+from campipe.model.declared import Parameter
+from campipe.model.levers import lever_parameters
 from campipe.units import QuantityError, parse_quantity
 
 ELEMENTS = ("pushrod", "rocker_pushrod_arm", "rocker_valve_arm", "spring", "valve_stem")
@@ -68,36 +76,8 @@ MAX_ELEMENTS = 64
 LASH_SIDES = ("valve", "cam")
 #: Damping kinds: the thesis's modal damping, Rayleigh's, per-member loss factors.
 DAMPING_KINDS = ("modal", "rayleigh", "loss-factor")
-#: Contact laws at the cam–follower and valve–seat contacts: the thesis's rigid plastic
-#: impact, a linear spring and damper (no tension), Hertz's point contact with Hunt–Crossley
-#: damping (:mod:`campipe.model.contact`).
-CONTACT_LAWS = ("rigid", "kelvin-voigt", "hertz")
 MAX_MASSES = 64  # most masses of a lumped chain
 _LAYOUT = "valve-train layout: " + ", ".join(LAYOUTS) + " (campipe.model.layouts)"
-
-
-@dataclass(frozen=True)
-class Parameter:
-    """Metadata of one model parameter, declared once."""
-
-    name: str  # key in specs, --set and the archive
-    long_name: str  # CF long_name
-    units: str  # SI units of the numerics and the archive (pint spelling)
-    thesis_units: str  # units the thesis preset is written in (pint spelling)
-    minimum: float  # smallest allowed value in SI (exclusive when exclusive_minimum)
-    exclusive_minimum: bool = True
-    length: int = 0  # 0 for a scalar, else a list of one value or more (the thesis: this many)
-    integer: bool = False  # a whole number (a count)
-    choices: tuple[str, ...] = ()  # the words a choice takes (units then "")
-    default: object = None  # the value (spec form) where neither preset nor override gives one
-    maximum: float = math.inf  # largest allowed value (counts: the matrices stay small)
-    allow_none: bool = False  # "none" (or null) accepted, meaning absent: NaN in SI
-    min_length: int = 1  # fewest values of a list (0: an empty list, "not given")
-
-    @property
-    def continuous(self) -> bool:
-        """A scalar number or quantity: what a range {from, to, num} or a sample may vary."""
-        return not (self.length or self.integer or self.choices)
 
 
 def _element_parameters() -> list[Parameter]:
@@ -112,6 +92,18 @@ def _element_parameters() -> list[Parameter]:
     for element, label in names.items():
         out.append(Parameter(f"{element}_length", f"{label} length", "m", "in", 0.0))
         out.append(Parameter(f"{element}_diameter", f"{label} diameter", "m", "in", 0.0))
+    for element, label in names.items():
+        out.append(
+            Parameter(
+                f"{element}_mass",
+                f"{label} mass given directly (none: from its geometry and specific_weight)",
+                "kg",
+                "lb",
+                0.0,
+                allow_none=True,
+                default="none",
+            )
+        )
     return out
 
 
@@ -147,106 +139,6 @@ def _loss_factor_parameters() -> list[Parameter]:
     ]
 
 
-def _contact_parameters() -> list[Parameter]:
-    """Each contact's law and its constants (:mod:`campipe.model.contact`); 0 for a
-    constant means "not given" (a stiffness then comes from the geometry)."""
-
-    def zero(name, long_name, units, thesis_units):
-        return Parameter(
-            name, long_name, units, thesis_units, 0.0, exclusive_minimum=False,
-            default=f"0 {thesis_units}",
-        )  # fmt: skip
-
-    out = []
-    for contact, label in (("cam", "cam–follower"), ("seat", "valve–seat")):
-        out += [
-            Parameter(
-                f"{contact}_contact",
-                f"{label} contact law: " + ", ".join(CONTACT_LAWS),
-                "",
-                "",
-                0.0,
-                choices=CONTACT_LAWS,
-                default="rigid",
-            ),
-            zero(
-                f"{contact}_contact_stiffness",
-                f"{label} contact stiffness k (kelvin-voigt; 0: from the line contact)",
-                "N/m",
-                "lbf/in",
-            ),
-            zero(
-                f"{contact}_contact_damping",
-                f"{label} contact damping coefficient c (kelvin-voigt)",
-                "N*s/m",
-                "lbf*s/in",
-            ),
-            zero(
-                f"{contact}_hertz_constant",
-                f"{label} Hertz constant K of F = K·δ^(3/2) (hertz; 0: from the radius)",
-                "N/m**1.5",
-                "lbf/in**1.5",
-            ),
-            zero(
-                f"{contact}_hunt_crossley",
-                f"{label} Hunt–Crossley damping factor α of F = K·δ^(3/2)·(1 + α·dδ/dt) (hertz)",
-                "s/m",
-                "s/in",
-            ),
-            zero(
-                f"{contact}_contact_width",
-                f"{label} line contact length (0: not a line contact)",
-                "m",
-                "in",
-            ),
-            Parameter(
-                f"{contact}_restitution",
-                f"{label} coefficient of restitution of a rigid impact (0: the thesis's "
-                "plastic impact)",
-                "",
-                "",
-                0.0,
-                exclusive_minimum=False,
-                default=0,
-                maximum=1.0,
-            ),
-        ]
-    out += [
-        zero(
-            "cam_curvature_radius",
-            "cam's radius of curvature at the contact (0: not given)",
-            "m",
-            "in",
-        ),
-        zero("cam_roller_radius", "follower roller radius (0: a flat-faced follower)", "m", "in"),
-        zero(
-            "seat_contact_radius",
-            "relative radius of curvature at the valve–seat contact (0: not given)",
-            "m",
-            "in",
-        ),
-        Parameter(
-            "contact_modulus",
-            "elastic modulus of both bodies at the compliant contacts",
-            "Pa",
-            "lbf/in**2",
-            0.0,
-            default="30e6 lbf/in**2",
-        ),
-        Parameter(
-            "contact_poisson",
-            "Poisson's ratio of both bodies at the compliant contacts",
-            "",
-            "",
-            0.0,
-            exclusive_minimum=False,
-            default=0.3,
-            maximum=0.5,
-        ),
-    ]
-    return out
-
-
 def _chain_list(name: str, what: str, units: str, shown: str) -> Parameter:
     return Parameter(
         name, f"lumped chain's {what} (layout lumped)", units, shown, 0.0,
@@ -255,8 +147,10 @@ def _chain_list(name: str, what: str, units: str, shown: str) -> Parameter:
 
 
 def _direct(name: str, what: str, units: str, shown: str) -> Parameter:
+    shared = name in ("valve_mass", "stem_stiffness")
+    layouts = "layouts direct-acting and the levers" if shared else "layout direct-acting"
     return Parameter(
-        name, f"{what} (layout direct-acting)", units, shown, 0.0, allow_none=True,
+        name, f"{what} ({layouts})", units, shown, 0.0, allow_none=True,
         default="none",
     )  # fmt: skip
 
@@ -273,6 +167,7 @@ PARAMETERS: dict[str, Parameter] = {
         _direct("valve_mass", "valve's mass with retainer, keepers, spring share", "kg", "kg"),
         _direct("stem_stiffness", "valve stem's axial stiffness, tip to head", "N/m", "N/mm"),
         _direct("tappet_contact_stiffness", "tappet's contact on the stem tip", "N/m", "N/mm"),
+        *lever_parameters(),
         *_element_parameters(),
         Parameter("elastic_modulus", "elastic modulus of all members", "Pa", "lbf/in**2", 0.0),
         Parameter("specific_weight", "specific weight of all members", "N/m**3", "lbf/in**3", 0.0),
@@ -353,7 +248,7 @@ PARAMETERS: dict[str, Parameter] = {
             default="0 s",
         ),
         *_loss_factor_parameters(),
-        *_contact_parameters(),
+        *contact_parameters(),
     ]
 }
 
@@ -417,6 +312,11 @@ class ValveTrain:
     rocker_valve_arm_loss_factor: float  # [-]
     spring_loss_factor: float  # [-]
     valve_stem_loss_factor: float  # [-]
+    pushrod_mass: float = math.nan  # [kg] each member's mass given directly; NaN: from ρ·A·L
+    rocker_pushrod_arm_mass: float = math.nan  # [kg]
+    rocker_valve_arm_mass: float = math.nan  # [kg]
+    spring_mass: float = math.nan  # [kg]
+    valve_stem_mass: float = math.nan  # [kg]
     lash_side: str = "valve"  # one of LASH_SIDES: where ``lash`` is measured
     cam_contact: str = "rigid"  # one of CONTACT_LAWS
     cam_contact_stiffness: float = 0.0  # [N/m] k; 0: from the line contact
@@ -444,6 +344,14 @@ class ValveTrain:
     valve_mass: float = math.nan  # [kg] direct-acting: valve, retainer, keepers, spring share
     stem_stiffness: float = math.nan  # [N/m] direct-acting: the valve stem, tip to head
     tappet_contact_stiffness: float = math.nan  # [N/m] direct-acting: tappet on the stem tip
+    pivot_to_roller: float = math.nan  # [m] levers (campipe.model.levers): pivot to roller
+    pivot_to_pallet: float = math.nan  # [m] pivot to the pallet's centre of curvature
+    cam_base_radius: float = math.nan  # [m] the cam's base circle
+    lever_rest_angle: float = 0.0  # [rad] the pallet arm above the horizontal, valve closed
+    cam_offset: float = 0.0  # [m] cam centre from the roller's rest centre, towards the pallet
+    lever_inertia: float = math.nan  # [kg·m²] the lever about its pivot
+    roller_mass: float = 0.0  # [kg] the roller with its axle
+    lever_stiffness: float = math.nan  # [N/m] the lever at the pallet, along the valve
 
     def replace(self, **changes: Any) -> ValveTrain:
         """A copy with some values (SI) changed."""
@@ -690,87 +598,3 @@ def defining_values(train: ValveTrain) -> dict[str, object]:
         if name not in defaults or not _same(value, defaults[name]):
             out[name] = value
     return out
-
-
-#: Each law's own constants (name suffixes): a compliant law's, the stiffness first; the rigid
-#: law's coefficient of restitution (a compliant law's comes from its damping).
-CONTACT_CONSTANTS = {
-    "rigid": ("restitution",),
-    "kelvin-voigt": ("contact_stiffness", "contact_damping"),
-    "hertz": ("hertz_constant", "hunt_crossley"),
-}
-
-
-def _contact_geometry(train: ValveTrain, contact: str) -> tuple[float, float]:
-    """(line contact length [m], relative radius of curvature R' [m]) of a contact; 0 where
-    not given."""
-    width = getattr(train, f"{contact}_contact_width")
-    if contact == "seat":
-        return width, train.seat_contact_radius
-    rho, roller = train.cam_curvature_radius, train.cam_roller_radius
-    if rho <= 0.0:
-        return width, 0.0
-    return width, rho if roller <= 0.0 else rho * roller / (rho + roller)
-
-
-def check_contacts(train: ValveTrain, key_prefix: str = "") -> None:
-    """Refuse a contact law's constants that do not go together, naming the key and the fix:
-    another law's constants (a hertz constant under kelvin-voigt, a stiffness under rigid), a
-    compliant law with no stiffness (neither given nor from its geometry), a hertz law from a
-    line contact (its approach is linear in the force up to a logarithm: kelvin-voigt)."""
-    for contact in ("cam", "seat"):
-        law = getattr(train, f"{contact}_contact")
-        law_key = f"{key_prefix}{contact}_contact"
-        for other, names in CONTACT_CONSTANTS.items():
-            if other == law:
-                continue
-            for suffix in names:
-                name = f"{contact}_{suffix}"
-                if getattr(train, name) != 0.0:
-                    if law == "rigid":
-                        fix = f"set {law_key}: {other}, or leave {name} out"
-                    elif other == "rigid":
-                        fix = (
-                            f"a {law} contact's restitution comes from its damping "
-                            f"({contact}_{CONTACT_CONSTANTS[law][1]}); leave {name} out"
-                        )
-                    else:
-                        fix = (
-                            f"{law} takes {contact}_{CONTACT_CONSTANTS[law][0]} and "
-                            f"{contact}_{CONTACT_CONSTANTS[law][1]}; leave {name} out"
-                        )
-                    raise ModelParameterError.at(
-                        key_prefix + name,
-                        f"is {other}'s constant but {law_key} is {law}: {fix}",
-                        found=getattr(train, name),
-                        expected=f"0 (not given) with {contact}_contact {law}",
-                    )
-        if law == "rigid":
-            continue
-        width, radius = _contact_geometry(train, contact)
-        stiffness = getattr(train, f"{contact}_{CONTACT_CONSTANTS[law][0]}")
-        geometry = (
-            f"{contact}_contact_width (a line contact)"
-            if law == "kelvin-voigt"
-            else ("cam_curvature_radius" if contact == "cam" else "seat_contact_radius")
-            + " (a point contact)"
-        )
-        if law == "hertz" and stiffness == 0.0 and width > 0.0:
-            raise ModelParameterError.at(
-                key_prefix + f"{contact}_contact_width",
-                f"a line contact under {law_key}: hertz is Hertz's point contact "
-                "(F = K·δ^(3/2)); a line contact's approach is linear in its force up to a "
-                f"logarithm: set {law_key}: kelvin-voigt (its stiffness then comes from the "
-                f"width), or give {contact}_hertz_constant",
-                found=width,
-                expected=f"0 with {contact}_contact hertz",
-            )
-        has_geometry = width > 0.0 if law == "kelvin-voigt" else radius > 0.0
-        if stiffness == 0.0 and not has_geometry:
-            name = f"{contact}_{CONTACT_CONSTANTS[law][0]}"
-            raise ModelParameterError.at(
-                key_prefix + name,
-                f"{law_key} is {law} but no stiffness: give {name} or {geometry}",
-                found=0.0,
-                expected=f"a positive {name}, or {geometry}",
-            )

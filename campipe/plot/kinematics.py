@@ -1,6 +1,7 @@
 """The kinematic valve lift a histories figure overlays on the dynamic one: the lift a rigid
 train would give, the cam's lift times the rocker's geometric ratio
-(:func:`campipe.model.lash_ratio`), never below the seat (the valve rests there).
+(:func:`campipe.model.lash_ratio`; 1 for a chain of masses, whose cam lift is its valve
+side's, a lever layout's kinematic valve lift), never below the seat (the valve rests there).
 
 Each case's train is the archive's spec's ``model`` with the case's own model-parameter
 columns; a case whose train cannot be built (a spec campipe cannot read again) has no
@@ -65,7 +66,9 @@ def _ratio(preset: str, model: tuple, values: tuple) -> float:
         units = PARAMETERS[name].units
         overrides[name] = f"{value!r} {units}".strip() if units else value
     try:
-        return float(lash_ratio(system_matrices(valve_train(preset, overrides))))
+        train = valve_train(preset, overrides)
+        # a chain's cam lift is its valve side's (a lever layout's kinematic valve lift)
+        return 1.0 if train.chain else float(lash_ratio(system_matrices(train)))
     except (CampipeError, ValueError, ArithmeticError) as exc:
         log.info("no kinematic lift: the case's train cannot be built (%s)", exc)
         return float("nan")

@@ -26,7 +26,7 @@ from campipe.io.rerun_replay import (
     write_recording,
 )
 from campipe.model import PARAMETERS
-from campipe.replay import sketch
+from campipe.replay import chain_sketch, sketch
 from campipe.replay.cases import ReplayCase, ReplayError, archive_cases, select_rows
 from campipe.study.archive.open import open_archive
 from campipe.study.query.display import display_units
@@ -48,6 +48,11 @@ def _value(value: object) -> str:
 
 def case_geometry(case: ReplayCase) -> sketch.Geometry:
     return sketch.Geometry.from_train(case.train)
+
+
+def _base_radius(case: ReplayCase) -> float:
+    """The drawn cam's base-circle radius [m] (a drawing choice)."""
+    return chain_sketch.BASE_RADIUS if case.train.chain else case_geometry(case).base_radius
 
 
 def parameters_document(case: ReplayCase, magnification: float) -> str:
@@ -80,8 +85,14 @@ def parameters_document(case: ReplayCase, magnification: float) -> str:
         f"- Sketch, in mm: the rigid train the cam (and the seat) would carry, at true scale, "
         f"plus **×{magnification:g}** the computed deviation from it: the gap at the cam "
         "while the follower is off it, the valve's bounce off its seat, and the elastic "
-        "deflection of pushrod, rocker and valve stem. A contact that holds is drawn at its "
-        f"true place. Cam base-circle radius {case_geometry(case).base_radius * MM:g} mm "
+        + (
+            "deflection of the links (a chain of masses: boxes joined by springs, from the "
+            "cam's mass up to the valve and its spring). "
+            if case.train.chain
+            else "deflection of pushrod, rocker and valve stem. "
+        )
+        + "A contact that holds is drawn at its "
+        f"true place. Cam base-circle radius {_base_radius(case) * MM:g} mm "
         "(a drawing choice). The follower's dot is green on the cam, red off it; the valve's "
         "green on its seat, red off it.",
         "- Events: separations and impacts at their cam angles, with the closing velocity "
@@ -98,9 +109,13 @@ def turn_profile(case: ReplayCase) -> tuple[np.ndarray, np.ndarray]:
 
 
 def sketch_frames(case: ReplayCase, magnification: float) -> SketchFrames:
-    """The mechanism at every sample, moving with q (deviations magnified), the cam turning."""
+    """The mechanism at every sample, moving with q (deviations magnified), the cam turning:
+    the thesis's train as :mod:`~campipe.replay.sketch` draws it, a chain of masses as boxes
+    and springs (:mod:`~campipe.replay.chain_sketch`)."""
     if case.q is None:
         raise ReplayError(f"case {case.case_id}: no q to draw the mechanism from")
+    if case.train.chain:
+        return chain_frames(case, magnification)
     geom = case_geometry(case)
     state = np.asarray(case.histories["contact_state"])
     qd = sketch.displayed_coordinates(
@@ -127,6 +142,36 @@ def sketch_frames(case: ReplayCase, magnification: float) -> SketchFrames:
         frame=frame,
         note_at=(-geom.pushrod_arm, geom.pushrod_arm * 0.6),
         valve=None if seat is None else sketch.valve_position(qd, geom),
+        seated=None if seat is None else np.isin(state, sketch.SEAT_CONTACT),
+        seat=seat,
+    )
+
+
+def chain_frames(case: ReplayCase, magnification: float) -> SketchFrames:
+    """A chain of masses at every sample: boxes joined by springs on the turning cam."""
+    assert case.q is not None
+    state = np.asarray(case.histories["contact_state"])
+    xd = chain_sketch.displayed_displacements(
+        case.q, case.histories["cam_lift"], state, case.train, magnification, case.seat_q7
+    )
+    angle = np.radians(case.cam_angle)
+    phi, lift = turn_profile(case)
+    geom = chain_sketch.cam_geometry()
+    frame = chain_sketch.fixed_parts(xd.shape[1], case.seat_q7)
+    seat = frame.pop("seat", None)
+    moving = chain_sketch.moving_parts(xd)
+    return SketchFrames(
+        moving=moving,
+        radii={
+            name: RETAINER_RADIUS if name.startswith("mass") else SPRING_RADIUS for name in moving
+        },  # fmt: skip
+        cam_outline=sketch.cam_outline(phi, lift, angle, geom),
+        cam_mark=sketch.cam_mark(angle, geom),
+        follower=chain_sketch.follower_position(xd),
+        on_cam=np.isin(state, sketch.CAM_CONTACT),
+        frame=frame,
+        note_at=(-3 * chain_sketch.HALF_WIDTH, chain_sketch.spring_plate(xd.shape[1])),
+        valve=None if seat is None else chain_sketch.valve_position(xd),
         seated=None if seat is None else np.isin(state, sketch.SEAT_CONTACT),
         seat=seat,
     )

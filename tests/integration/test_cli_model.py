@@ -107,3 +107,44 @@ def test_the_model_page_shows_what_the_commands_print():
     script = runpy.run_path(str(Path(__file__).parents[2] / "docs" / "model_outputs.py"))
     page = script["PAGE"].read_text()
     assert script["rewritten"](page) == page, "run python docs/model_outputs.py"
+
+
+FINGER_SETS = [
+    "layout=finger-follower",
+    "pivot_to_roller=30 mm",
+    "pivot_to_pallet=45 mm",
+    "cam_base_radius=18 mm",
+    "cam_roller_radius=9 mm",
+    "lever_inertia=40 kg*mm**2",
+    "roller_mass=10 g",
+    "valve_mass=60 g",
+    "lever_stiffness=15 N/um",
+    "stem_stiffness=60 N/um",
+    "spring_rate=35 N/mm",
+    "spring_preload=220 N",
+    "damping_ratios=[0.05]",
+]
+
+
+def test_the_kinematic_ratio_table_of_a_finger_and_the_thesis_s_constant():
+    """A finger follower's table (every 45°, the harmonic cam of 6 mm): on the base circle
+    (90°, the cam straight above the roller, the lever level) the ratio is b/a = 45/30 and the
+    valve lift 0; its masses and Hz are the two-mass chain's ((J + m·a²)/b², the valve); the
+    thesis's rocker prints its constant arm ratio 1.5 in / 1.0 in. Fails on a copy that
+    tabulates the ratio as a/b, or leaves the lever's keys out of the parameters shown."""
+    args = [a for s in FINGER_SETS for a in ("--set", s)]
+    result = run(*args, "--ratio-step", "45", "--json")
+    assert result.exit_code == 0, result.output
+    out = json.loads(result.output)
+    k = out["kinematic_ratio"]
+    assert_allclose(np.degrees(k["cam_angle"]), np.arange(0, 360, 45.0))
+    assert k["ratio"][2] == pytest.approx(1.5, rel=1e-12)
+    assert k["valve_lift"][2] == pytest.approx(0.0, abs=1e-15)
+    assert max(k["valve_lift"]) == pytest.approx(1.5 * 0.006, rel=0.02)
+    m1 = (40e-6 + 0.010 * 0.030**2) / 0.045**2
+    assert_allclose(np.diag(out["mass_matrix"]), [m1, 0.060], rtol=1e-12)
+    assert {"pivot_to_roller", "valve_mass", "stem_stiffness"} <= set(out["parameters"])
+    text = run(*args).output
+    assert "Kinematic ratio over the cam turn" in text and " Hz " in text
+    thesis = json.loads(run("--json").output)["kinematic_ratio"]
+    assert thesis["constant"] == pytest.approx(1.5, rel=1e-9)

@@ -10,7 +10,8 @@ from typing import ClassVar
 
 import numpy as np
 
-from campipe.model.parameters import ValveTrain, _contact_geometry
+from campipe.model.contact_keys import _contact_geometry
+from campipe.model.parameters import ValveTrain
 
 
 def pair_modulus(modulus: float, poisson: float) -> float:

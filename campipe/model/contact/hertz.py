@@ -13,7 +13,7 @@ import math
 import numpy as np
 
 from campipe.model.contact.base import ContactLaw
-from campipe.model.parameters import CONTACT_CONSTANTS
+from campipe.model.contact_keys import CONTACT_CONSTANTS
 
 #: Hertz's point-contact exponent.
 HERTZ_EXPONENT = 1.5

@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 
 from campipe.model.contact.base import ContactLaw
-from campipe.model.parameters import CONTACT_CONSTANTS
+from campipe.model.contact_keys import CONTACT_CONSTANTS
 
 
 def line_contact_stiffness(pair: float, width: float) -> float:

@@ -10,7 +10,8 @@ from __future__ import annotations
 import math
 
 from campipe.model.contact.base import ContactLaw, pair_modulus
-from campipe.model.parameters import CONTACT_CONSTANTS, ValveTrain, _contact_geometry
+from campipe.model.contact_keys import CONTACT_CONSTANTS, _contact_geometry
+from campipe.model.parameters import ValveTrain
 
 
 class Rigid(ContactLaw):

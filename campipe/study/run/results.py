@@ -19,9 +19,10 @@ from campipe import engine
 from campipe.engine.loads import MEMBER_LOADS, SPRING_HISTORIES, member_loads
 from campipe.engine.metrics import archived_metrics
 from campipe.model.layouts import placeholders
+from campipe.profiles.levers import lever_ratio
 from campipe.sources import source_digest
 from campipe.study.spec.resolve import ResolvedCase
-from campipe.study.spec.variables import data_variables
+from campipe.study.spec.variables import CAM_NORMAL_FORCE, data_variables
 from campipe.vocabulary import (
     EV_FROM,
     EV_IMPULSE,
@@ -187,6 +188,10 @@ def batch_arrays(plan: BatchPlan, result: BatchResult) -> BatchData:
         for name in loads:
             arrays[name] = np.stack([p[name] for p in per_case])
     arrays.update(_spring_arrays(result, set(wanted)))
+    if CAM_NORMAL_FORCE in wanted:  # the roller's force through each case's lever ratio
+        arrays[CAM_NORMAL_FORCE] = result.cam_force * np.stack(
+            [lever_ratio(c.case.profile, result.cam_angle) for c in plan.cases]
+        )
     arrays.update(
         event_arrays(
             result.events,

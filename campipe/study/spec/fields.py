@@ -439,7 +439,8 @@ CASE_FIELDS: dict[str, Field] = {
             "(all member loads) or single member loads by name, spring (the spring's force, "
             "largest element force and coil-clash margin, and their per-revolution metrics) "
             "or single spring histories by name; contact_pressure: the peak Hertz pressure "
-            "at the cam and the seat per revolution",
+            "at the cam and the seat per revolution; cam_normal_force: a lever layout's "
+            "roller force on the cam (the cam force times the lever ratio)",
             choices=(
                 "q",
                 "member_loads",
@@ -447,6 +448,7 @@ CASE_FIELDS: dict[str, Field] = {
                 "spring",
                 *SPRING_HISTORIES,
                 "contact_pressure",
+                "cam_normal_force",
             ),  # fmt: skip
         ),
         Field(

@@ -40,6 +40,7 @@ from campipe.model import (
     train_lash_seat,
     valve_train,
 )
+from campipe.model.levers import LEVERS
 from campipe.profiles import (
     Profile,
     Ramp,
@@ -51,6 +52,7 @@ from campipe.profiles import (
     polydyne,
     table,
 )
+from campipe.profiles.levers import valve_side
 from campipe.study.spec.blocks import check_defects, check_profile
 from campipe.study.spec.fields import (
     CASE_FIELDS,
@@ -192,9 +194,15 @@ def _train(preset: str, overrides: tuple) -> ValveTrain:
     return train
 
 
-def valve_lift_ratio(train: ValveTrain) -> float:
-    """The valve's lift per unit cam lift as a rigid train: the rocker's arm ratio, 1 for a
-    lumped chain."""
+def valve_lift_ratio(train: ValveTrain, profile: Profile, full: float) -> float:
+    """The valve's full lift per unit of the cam's (``full`` [m]) as a rigid train: the
+    rocker's arm ratio, 1 for a lumped chain, a lever layout's kinematic valve lift's top over
+    the cam's (``campipe.profiles.levers``)."""
+    if train.layout in LEVERS:
+        try:
+            return max_lift(valve_side(profile, train)) / full
+        except ModelParameterError as exc:  # a lever the cam swings too far
+            raise SpecProblem.from_error(exc, f"model.{exc.key}") from None
     if train.chain:
         return 1.0
     return train.rocker_valve_arm_length / train.rocker_pushrod_arm_length
@@ -411,7 +419,7 @@ def resolve_canonical(raw: Mapping, index: int, directory: Path) -> tuple[Resolv
     speed = parse_value("speed", freeze(raw["speed"]), "speed")
     seat = parse_value("seat", freeze(raw["seat"]), "seat")
     closure = parse_value("closure", raw["closure"], "closure")
-    ratio = valve_lift_ratio(train)
+    ratio = valve_lift_ratio(train, profile, full)
     if not math.isnan(train.lash):
         seat = _lash_placed_seat(raw, model, train, seat)
     if seat is not None and seat >= full * ratio:

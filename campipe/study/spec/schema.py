@@ -159,12 +159,7 @@ def _range(key: str, with_num: bool) -> dict[str, object] | None:
         return _range_object({"type": "number"}, with_num)
     scalar = f is not None and (
         f.kind == "quantity"
-        or (
-            f.kind == "parameter"
-            and f.units
-            and "rad" not in f.units
-            and not f.key.endswith("damping_ratios")
-        )
+        or (f.kind == "parameter" and f.units and not f.key.endswith("damping_ratios"))
     )
     if not scalar:
         return None

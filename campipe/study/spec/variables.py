@@ -26,6 +26,9 @@ from campipe.study.spec.fields import CASE_FIELDS, Field, varied_fields
 from campipe.units import convert
 from campipe.vocabulary import CONTACT_FLAGS, EVENT_FLAGS, STATUS_FLAGS
 
+#: The recorded history of the cam's normal force (``run.record``).
+CAM_NORMAL_FORCE = "cam_normal_force"
+
 
 @dataclass(frozen=True)
 class Variable:
@@ -214,6 +217,14 @@ _AFTER_METRICS: dict[str, Variable] = {
         name: Variable(HISTORY, "f8", long_name, units, record=name)
         for name, (long_name, units) in SPRING_HISTORIES.items()
     },
+    CAM_NORMAL_FORCE: Variable(
+        HISTORY,
+        "f8",
+        "roller's normal force on the cam: a lever layout's cam force (at the pallet, along "
+        "the valve) times its lever ratio; the cam force for any other layout",
+        "N",
+        record=CAM_NORMAL_FORCE,
+    ),
 }
 
 
