@@ -222,8 +222,10 @@ def _break_impulse(cases, trains, profiles, st, p, z):
     c, tr, ci, nf = st.c, st.tr, st.cfg - 1, st.nf
     last = p + 1 == profiles.n_pieces[c]
     theta_b = profiles.breaks[c, p + 1]
-    l_left, dl_left, _ = piece_eval(profiles, c, p, 0, theta_b)
-    l_right, dl_right, _ = piece_eval(profiles, c, 0 if last else p + 1, 1 if last else 0, theta_b)
+    # (int64 turns, not literals: ``piece_eval`` is compiled once, ``steady_samples``'s.)
+    l_left, dl_left, _ = piece_eval(profiles, c, p, np.int64(0), theta_b)
+    nxt = np.int64(0) if last else np.int64(p + 1)
+    l_right, dl_right, _ = piece_eval(profiles, c, nxt, np.int64(1 if last else 0), theta_b)
     kind, jump = classify_break(
         l_left, dl_left, l_right, dl_right, st.w, cases.form[c], cases.capture[c]
     )
