@@ -52,7 +52,8 @@ def resolve_layout(
 
     Refuses, naming the key: another layout's keys given in ``overrides`` (``damping_kind:
     loss-factor`` on a chain: it needs members), a direct-acting key not given, a chain of one
-    mass (not yet supported), ``stiffnesses`` not one fewer than ``masses``."""
+    mass with lash (its seat and cam would hold one body), ``stiffnesses`` not one fewer than
+    ``masses``."""
     for name in overrides:
         owner = layout_of_key(name, members)
         if name == "damping_kind" and overrides[name] == "loss-factor":
@@ -92,14 +93,13 @@ def direct_acting_chain(train: Any, key_prefix: str = "") -> dict[str, tuple[flo
 
 def _check_chain(train: Any, key_prefix: str) -> None:
     n = len(train.masses)
-    if n < 2:
+    if n < 1:
         raise ModelParameterError.at(
             key_prefix + "masses",
-            f"found {n} masses; a lumped chain needs two or more (the first on the cam, the "
-            "last the valve): one mass, a rigid follower with no free coordinate while it "
-            "rides the cam, is not yet supported",
+            "found no masses; a lumped chain needs one or more (the first on the cam, the "
+            "last the valve; one mass is a rigid direct-acting follower)",
             found=train.masses,
-            expected="two or more masses",
+            expected="one or more masses",
         )
     if len(train.stiffnesses) != n - 1:
         raise ModelParameterError.at(
@@ -108,4 +108,12 @@ def _check_chain(train: Any, key_prefix: str) -> None:
             "masses, the links between neighbours from the cam side",
             found=train.stiffnesses,
             expected=f"{n - 1} stiffnesses",
+        )
+    if n == 1 and train.lash == train.lash:  # not NaN
+        raise ModelParameterError.at(
+            key_prefix + "lash",
+            "a one-mass chain (a rigid follower that is its valve) has no lash: its cam and "
+            "its seat would hold one body; leave lash out (it runs without a seat)",
+            found=train.lash,
+            expected="no lash with one mass",
         )
