@@ -67,6 +67,9 @@ class BatchResult:
     turns_run: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # (n_cases,)
     #: (n_cases,) the turn (from 0) its histories and events start at
     recorded_from: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    #: (n_cases, n_rev, 3) a run with a hydraulic lash adjuster (``engine.lash_adjuster``):
+    #: each turn's plunger extension at its start, leak-down and pump-up [m]; empty else
+    lash_adjuster: np.ndarray = field(default_factory=lambda: np.zeros(0))
     _derived: dict[str, object] = field(default_factory=dict, repr=False, compare=False)
 
     @property

@@ -13,6 +13,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from campipe.errors import CampipeError
+from campipe.model.hla import NEEDED as HLA_NEEDED
 
 #: Layouts (:mod:`campipe.model.layouts`): the thesis's train from its members' geometry; a
 #: chain of masses given directly; a bucket tappet on its valve from named masses and
@@ -70,7 +71,46 @@ def resolve_layout(
         train = train.replace(**direct_acting_chain(train, key_prefix))
     if train.layout in CHAINS:
         _check_chain(train, key_prefix)
+    _check_adjuster(train, key_prefix)
     return train
+
+
+def _check_adjuster(train: Any, key_prefix: str) -> None:
+    """A hydraulic lash adjuster (:mod:`campipe.model.hla`) sits in a chain's link next to
+    the cam (two masses or more), with all of its keys and the dry lash it takes up."""
+    given = [k for k in HLA_NEEDED if getattr(train, k) == getattr(train, k)]  # not NaN
+    if not given:
+        if train.hla_extension != 0.0:
+            given = ["hla_extension"]
+        else:
+            return
+    key = key_prefix + given[0]
+    if train.layout not in CHAINS or len(train.masses) < 2:
+        raise ModelParameterError.at(
+            key,
+            "a hydraulic lash adjuster sits in a chain's link next to the cam: give layout "
+            "lumped (two masses or more) or direct-acting",
+            found=train.layout,
+            expected="a chain of two masses or more",
+        )
+    for name in (*HLA_NEEDED, "lash"):
+        if getattr(train, name) != getattr(train, name):  # NaN: not given
+            raise ModelParameterError.at(
+                key_prefix + name,
+                f"a train with a hydraulic lash adjuster needs {name} ("
+                + ", ".join(HLA_NEEDED)
+                + ", and lash: the dry lash, the plunger bottomed)",
+                found=None,
+                expected=f"a value for {name}",
+            )
+    if train.hla_extension > train.hla_travel:
+        raise ModelParameterError.at(
+            key_prefix + "hla_extension",
+            f"the plunger's extension {train.hla_extension:.6g} m is beyond its travel "
+            f"{train.hla_travel:.6g} m",
+            found=train.hla_extension,
+            expected=f"0 to hla_travel ({train.hla_travel:.6g} m)",
+        )
 
 
 def direct_acting_chain(train: Any, key_prefix: str = "") -> dict[str, tuple[float, ...]]:

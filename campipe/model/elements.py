@@ -19,6 +19,11 @@ from campipe.model.layouts import chain_placement
 from campipe.model.parameters import ELEMENTS, NODE_COORDINATES, ValveTrain
 
 
+def adjuster_stiffness(train: ValveTrain) -> float:
+    """A chain's lash adjuster's stiffness [N/m] (NaN: none)."""
+    return float(getattr(train, "hla_stiffness", math.nan))
+
+
 def bar_stiffness(k: float) -> np.ndarray:
     """Axial bar stiffness, thesis Eq. 7 (with its lost sign restored): k·[[1, −1], [−1, 1]]."""
     return k * np.array([[1.0, -1.0], [-1.0, 1.0]])
@@ -128,7 +133,9 @@ def chain_elements(train: ValveTrain) -> list[Element]:
     each of its coordinates, a bar ``link`` (stiffness only) between neighbours, measured
     along the lift from the cam's side, and the valve ``spring`` from ground (its lower end)
     up to the valve: the valve's opening (+q7) compresses it, as the thesis's spring's
-    (its extension is −q7); a one-mass chain's on its follower (its extension +q1)."""
+    (its extension is −q7); a one-mass chain's on its follower (its extension +q1). A
+    hydraulic lash adjuster (``hla_stiffness``, :mod:`campipe.model.hla`) is in series with
+    the link next to the cam."""
     index, sign = chain_placement(len(train.masses))
     n_q = train.n_coordinates
     node = [(int(i), float(s)) for i, s in zip(index, sign, strict=True)]
@@ -138,7 +145,9 @@ def chain_elements(train: ValveTrain) -> list[Element]:
         for j, m in enumerate(train.masses)
     ]
     zero = np.zeros((2, 2))
+    hla = adjuster_stiffness(train)
     for j, k in enumerate(train.stiffnesses):
+        k = 1.0 / (1.0 / k + 1.0 / hla) if j == 0 and hla == hla else k  # in series
         out.append(Element("link", j, _selector(node[j : j + 2], n_q), bar_stiffness(k), zero))
     # the spring's upper end moves against the lift: −q7, or a one-mass chain's +q1
     spring = _selector([GROUND, (node[-1][0], -node[-1][1])], n_q)

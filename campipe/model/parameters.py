@@ -45,6 +45,7 @@ from campipe.model.checks import (
     ModelParameterError,
     resolve_layout,
 )
+from campipe.model.hla import HLA_KEYS
 from campipe.units import QuantityError, parse_quantity
 
 ELEMENTS = ("pushrod", "rocker_pushrod_arm", "rocker_valve_arm", "spring", "valve_stem")
@@ -254,6 +255,12 @@ def _chain_list(name: str, what: str, units: str, shown: str) -> Parameter:
     )  # fmt: skip
 
 
+def _hla(name: str, what: str, units: str, shown: str) -> Parameter:
+    zero = name == "hla_extension"  # (campipe.model.hla)
+    return Parameter(name, what, units, shown, 0.0, exclusive_minimum=not zero,
+                     allow_none=not zero, default="0 m" if zero else "none")  # fmt: skip
+
+
 def _direct(name: str, what: str, units: str, shown: str) -> Parameter:
     return Parameter(
         name, f"{what} (layout direct-acting)", units, shown, 0.0, allow_none=True,
@@ -273,6 +280,7 @@ PARAMETERS: dict[str, Parameter] = {
         _direct("valve_mass", "valve's mass with retainer, keepers, spring share", "kg", "kg"),
         _direct("stem_stiffness", "valve stem's axial stiffness, tip to head", "N/m", "N/mm"),
         _direct("tappet_contact_stiffness", "tappet's contact on the stem tip", "N/m", "N/mm"),
+        *(_hla(*row) for row in HLA_KEYS),
         *_element_parameters(),
         Parameter("elastic_modulus", "elastic modulus of all members", "Pa", "lbf/in**2", 0.0),
         Parameter("specific_weight", "specific weight of all members", "N/m**3", "lbf/in**3", 0.0),
@@ -444,6 +452,12 @@ class ValveTrain:
     valve_mass: float = math.nan  # [kg] direct-acting: valve, retainer, keepers, spring share
     stem_stiffness: float = math.nan  # [N/m] direct-acting: the valve stem, tip to head
     tappet_contact_stiffness: float = math.nan  # [N/m] direct-acting: tappet on the stem tip
+    hla_stiffness: float = math.nan  # [N/m] lash adjuster (campipe.model.hla); NaN: none
+    hla_leak_down: float = math.nan  # [N·s/m] leak-down coefficient c_L
+    hla_check_force: float = math.nan  # [N] check force F_c
+    hla_pump_up: float = math.nan  # [N·s/m] pump-up coefficient c_P
+    hla_travel: float = math.nan  # [m] plunger travel
+    hla_extension: float = 0.0  # [m] plunger extension at the start
 
     def replace(self, **changes: Any) -> ValveTrain:
         """A copy with some values (SI) changed."""

@@ -36,6 +36,7 @@ EXAMPLE_CASES = {
     "design-spring": 2,
     "design-spring-rate": 2,
     "bucket-tappet-lash": 18,
+    "lash-adjuster": 4,
 }
 
 

@@ -428,7 +428,8 @@ CASE_FIELDS: dict[str, Field] = {
             "(all member loads) or single member loads by name, spring (the spring's force, "
             "largest element force and coil-clash margin, and their per-revolution metrics) "
             "or single spring histories by name; contact_pressure: the peak Hertz pressure "
-            "at the cam and the seat per revolution",
+            "at the cam and the seat per revolution; lash_adjuster: a hydraulic lash "
+            "adjuster's extension, effective lash, leak-down and pump-up per revolution",
             choices=(
                 "q",
                 "member_loads",
@@ -436,6 +437,7 @@ CASE_FIELDS: dict[str, Field] = {
                 "spring",
                 *SPRING_HISTORIES,
                 "contact_pressure",
+                "lash_adjuster",
             ),  # fmt: skip
         ),
         Field(
