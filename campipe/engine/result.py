@@ -178,6 +178,9 @@ def merge_results(n: int, parts: Sequence[tuple[np.ndarray, BatchResult]]) -> Ba
     for f in dataclasses.fields(BatchResult):
         if f.name == "_derived":
             continue
+        if f.name == "lash_adjuster":  # a part without an adjuster has none: NaN
+            merged[f.name] = _merged_adjusters(n, parts)
+            continue
         value = getattr(first, f.name)
         if f.name in _SHARED:
             merged[f.name] = value
@@ -203,3 +206,15 @@ def merge_results(n: int, parts: Sequence[tuple[np.ndarray, BatchResult]]) -> Ba
                     array[index] = part_value
             merged[f.name] = array
     return BatchResult(**merged)  # type: ignore[arg-type]
+
+
+def _merged_adjusters(n: int, parts: Sequence[tuple[np.ndarray, BatchResult]]) -> np.ndarray:
+    """The parts' ``lash_adjuster`` tables as one, NaN for the cases of a part without one
+    (empty if no part has one)."""
+    tables = [(index, part.lash_adjuster) for index, part in parts if part.lash_adjuster.size]
+    if not tables:
+        return np.zeros(0)
+    out = np.full((n, *tables[0][1].shape[1:]), np.nan)
+    for index, table in tables:
+        out[index] = table
+    return out

@@ -22,8 +22,8 @@ LIFT = 0.01
 POLYDYNE = polydyne("4567", 9e-3, *np.radians([110, 20, 110]), ramp=Ramp(0.3e-3, 0.5))
 
 
-def train(**changes):
-    spec = {
+def _spec() -> dict:
+    return {
         "layout": "lumped",
         "masses": [f"{M1} kg", f"{M2} kg"],
         "stiffnesses": [f"{LINK / 1e3} N/mm"],
@@ -37,7 +37,10 @@ def train(**changes):
         "hla_pump_up": f"{PUMP / 1e3} N*s/mm",
         "hla_travel": f"{TRAVEL * 1e3} mm",
     }
-    return valve_train("thesis-1971", {**spec, **changes}, key_prefix="model.")
+
+
+def train(**changes):
+    return valve_train("thesis-1971", {**_spec(), **changes}, key_prefix="model.")
 
 
 def test_the_switch_s_integral_against_a_smooth_load():
@@ -161,3 +164,23 @@ def test_refusals_name_their_keys():
     free = LashAdjuster(HLA_K, LEAK, CHECK, 1.0, TRAVEL)  # a free feed: 25 m a second
     assert free.advance(0.9e-3, t, np.zeros(11), gap)[0] == TRAVEL
     assert hla.advance(1e-6, t, np.full(11, 1e4), gap)[0] == 0.0
+
+
+def test_the_steady_level_runs_an_adjuster_turn_by_turn():
+    """``run.fidelity: steady`` takes a plain case that follows from one turn's closed form,
+    never a case with an adjuster (its plunger moves turn by turn): the merged result keeps
+    the adjuster's table, NaN for the plain case, and the same values as a full run. Fails
+    on a copy whose steady level takes the adjuster's case (no table) or whose merge drops
+    it."""
+    from campipe.engine import run_at_fidelity
+    from campipe.engine.periodic import steady_cases
+
+    own = {k: v for k, v in _spec().items() if "hla" not in k and k != "lash"}
+    plain = Case(valve_train("thesis-1971", own), harmonic(LIFT), 1000 * RPM)
+    hla = Case(train(), POLYDYNE, 1000 * RPM)
+    settings = RunSettings(revolutions=3, output_every=math.radians(1), fidelity="steady")
+    assert list(steady_cases([plain, hla], settings)) == [True, False]
+    res = run_at_fidelity([plain, hla], settings)
+    full = run_batch([hla], RunSettings(revolutions=3, output_every=math.radians(1)))
+    assert np.all(np.isnan(res.lash_adjuster[0]))
+    np.testing.assert_array_equal(res.lash_adjuster[1], full.lash_adjuster[0])
