@@ -26,8 +26,9 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from campipe.constants import TWO_PI
-from campipe.engine.case import Case, RunSettingsError
+from campipe.engine.case import Case
 from campipe.engine.result import BatchResult
+from campipe.engine.settings import adjuster_turns
 from campipe.engine.settle import consistent_accelerations
 from campipe.model import system_matrices
 from campipe.model.elements import chain_elements
@@ -65,19 +66,6 @@ def link_force(case: Case, q: np.ndarray) -> np.ndarray:
     return k * (sign[0] * q[..., index[0]] - sign[1] * q[..., index[1]])
 
 
-def _check(settings) -> int:
-    turns = settings.revolutions
-    if turns is None or turns != math.floor(turns):
-        raise RunSettingsError.at(
-            "run.revolutions",
-            "a train with a hydraulic lash adjuster runs a whole number of turns (its "
-            "plunger advances at each turn's end)",
-            found=turns,
-            expected="a whole number of turns",
-        )
-    return int(turns)
-
-
 def run_adjusted(
     cases: Sequence[Case],
     settings,
@@ -89,7 +77,7 @@ def run_adjusted(
     with ``options`` (its own); cases without an adjuster run the same way with their
     extension 0. The result's ``lash_adjuster`` holds each turn's extension, leak-down and
     pump-up (NaN for a case without an adjuster)."""
-    turns = _check(settings)
+    turns = adjuster_turns(settings)
     options.pop("full_state", None)  # every coordinate: a turn's end is the next's start
     n = len(cases)
     one = dataclasses.replace(settings, revolutions=1.0, warmup=0)
