@@ -78,14 +78,16 @@ def run_adjusted(
     extension 0. The result's ``lash_adjuster`` holds each turn's extension, leak-down and
     pump-up (NaN for a case without an adjuster)."""
     turns = adjuster_turns(settings)
-    options.pop("full_state", None)  # every coordinate: a turn's end is the next's start
     n = len(cases)
-    one = dataclasses.replace(settings, revolutions=1.0, warmup=0)
     hlas: list[LashAdjuster | None] = [adjuster(c.train) for c in cases]
     inner = [
         dataclasses.replace(c, train=c.train.replace(hla_leak_down=math.nan)) if h else c
         for c, h in zip(cases, hlas, strict=True)
     ]
+    if not turns:  # a part of a turn (a kernel's warm-up): no turn ends, the plunger stays
+        return _part_of_a_turn(cases, inner, settings, run, options)
+    options.pop("full_state", None)  # every coordinate: a turn's end is the next's start
+    one = dataclasses.replace(settings, revolutions=1.0, warmup=0)
     sms = [system_matrices(c.train) for c in inner]
     pairs = zip(cases, hlas, strict=True)
     extension = np.array([c.train.hla_extension if h else 0.0 for c, h in pairs])
@@ -126,6 +128,22 @@ def run_adjusted(
         )
         start = (np.zeros(n), np.nan_to_num(q0), np.nan_to_num(v0), a0, cfg0)
     return _joined(parts, cases, settings, table, status)
+
+
+def _part_of_a_turn(cases, inner, settings, run, options) -> BatchResult:
+    """A run shorter than a turn: each case on its cam raised by its starting extension."""
+    raised_cases = [
+        dataclasses.replace(c, profile=raised(c.profile, o.train.hla_extension))
+        if adjuster(o.train)
+        else c
+        for c, o in zip(inner, cases, strict=True)
+    ]
+    part = run(raised_cases, settings, start=None, **options)
+    extension = np.array([o.train.hla_extension if adjuster(o.train) else 0.0 for o in cases])
+    part.q[:, :, CAM] += extension[:, None]
+    part.cam_lift[:] -= extension[:, None]
+    table = np.full((len(cases), part.per_rev.shape[1], 3), np.nan)
+    return dataclasses.replace(part, trains=[c.train for c in cases], lash_adjuster=table)
 
 
 def _move_follower(q0, v0, cfg0, change, cam, cases) -> None:

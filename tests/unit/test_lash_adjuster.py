@@ -155,6 +155,9 @@ def test_refusals_name_their_keys():
         with pytest.raises(RunSettingsError) as err:
             run_batch([case], RunSettings(revolutions=revolutions))
         assert err.value.key == "run.revolutions"
+    # a part of a turn (the estimate's warm-up) runs, its plunger where it starts
+    part = run_batch([case], RunSettings(revolutions=0.01))
+    assert part.status[0] == 0 and np.all(np.isnan(part.lash_adjuster))
     # the adjuster is in series with the link next to the cam
     assert system_matrices(train()).stiffness[0, 6] == pytest.approx(K, rel=1e-12)
     hla = LashAdjuster(HLA_K, LEAK, CHECK, PUMP, TRAVEL)
