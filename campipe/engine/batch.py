@@ -36,6 +36,7 @@ from campipe.engine.contact import (
     static_position,
 )
 from campipe.engine.integrators.modal_exact import arguments
+from campipe.engine.lash_adjuster import run_adjusted
 from campipe.engine.modal import ModalData, modal_data, pad_stack
 from campipe.engine.result import BatchResult as BatchResult
 from campipe.engine.result import merge_results
@@ -69,6 +70,7 @@ from campipe.engine.settings import visited_configurations as visited_configurat
 from campipe.engine.settle import run_settled
 from campipe.model import ValveTrain, system_matrices
 from campipe.model.assembly import SystemMatrices, configuration_frequencies
+from campipe.model.hla import adjuster
 from campipe.profiles import Profile, evaluate
 from campipe.profiles.packed import Keyed, PackedProfiles, evaluate_packed, keyed, pack, pack_cached
 from campipe.vocabulary import (
@@ -584,6 +586,9 @@ def run_batch(
     if on_failure not in ("raise", "record"):
         raise ValueError(f"on_failure: found {on_failure!r}, expected 'raise' or 'record'")
     check_run(cases, settings, check_stability_limit=check_stability_limit)
+    if any(adjuster(c.train) for c in cases):  # turn by turn, the plunger between turns
+        return run_adjusted(cases, settings, _run_turn, on_failure=on_failure,
+                            check_stability_limit=check_stability_limit)  # fmt: skip
     if settings.settle:
         return run_settled(
             cases,

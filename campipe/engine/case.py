@@ -17,6 +17,7 @@ from campipe.constants import TWO_PI
 from campipe.errors import CampipeError
 from campipe.model import ValveTrain, system_matrices, train_lash_seat
 from campipe.model.assembly import configuration_frequencies
+from campipe.model.layouts import mirror
 from campipe.profiles import Profile
 from campipe.profiles.levers import valve_side
 from campipe.vocabulary import CAM_AND_SEAT, CAM_CONTACT, CONFIGURATIONS, FREE
@@ -98,6 +99,14 @@ class Case:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "profile", valve_side(self.profile, self.train))
+        if not math.isnan(self.seat) and mirror(self.train):
+            raise CaseError.at(
+                "seat",
+                "a one-mass chain (a rigid follower that is its valve) runs without a seat: "
+                "its cam and its seat would hold one body",
+                found=self.seat,
+                expected="no seat (NaN) with one mass",
+            )
         lash = getattr(self.train, "lash", math.nan)
         if math.isnan(lash):
             return

@@ -66,12 +66,14 @@ def member_loads(train: ValveTrain, q: np.ndarray) -> dict[str, np.ndarray]:
         return q @ (e.stiffness @ e.beta).T  # (..., n_e): forces on the element's ends
 
     # Axial elements use (lower, upper) measured upward: the upper end force is the tension.
-    if "link" in members:  # a lumped chain: its links next to the cam and to the valve
+    if train.chain:  # its links next to the cam and to the valve (none: one mass)
+        none = np.full(q.shape[:-1], np.nan)
+        links = members.get("link")
         return {
-            "pushrod_force": -end_forces(members["link"][0])[..., 1],
-            "stem_force": -end_forces(members["link"][-1])[..., 1],
+            "pushrod_force": -end_forces(links[0])[..., 1] if links else none,
+            "stem_force": -end_forces(links[-1])[..., 1] if links else none,
             "spring_force": train.spring_preload - end_forces(members["spring"][-1])[..., 1],
-            "rocker_moment": np.full(q.shape[:-1], np.nan),
+            "rocker_moment": none,
         }
     return {
         "pushrod_force": -end_forces(members["pushrod"][-1])[..., 1],

@@ -114,6 +114,25 @@ def _spring(name: str, how: str) -> Callable[[Any, Any], np.ndarray]:
     return derive
 
 
+def _adjuster(column: int, less_lash: bool = False) -> Callable[[Any, Any], np.ndarray]:
+    def derive(result, trains) -> np.ndarray:
+        # a run with a hydraulic lash adjuster keeps them per turn (engine.lash_adjuster)
+        table = result.lash_adjuster
+        if not table.size:
+            return np.full(result.per_rev.shape[:2], np.nan)
+        values = table[:, :, column]
+        if less_lash:  # the effective lash: the dry lash less the plunger's extension
+            values = np.array([t.lash for t in trains])[:, None] - values
+        return values
+
+    return derive
+
+
+def _adjuster_metric(key: str, what: str, reduction: str, derive, label: str) -> Metric:
+    return Metric(key, key, f"{key}_by_rev", what, "m", reduction, record="lash_adjuster",
+                  source="derived", derive=derive, label=label)  # fmt: skip
+
+
 #: The metrics, in the engine's column order (those of source "engine" first).
 METRICS: list[Metric] = [
     Metric(
@@ -251,6 +270,35 @@ METRICS: list[Metric] = [
         derive=_spring("spring_clash_margin", "min"),
         label="Coil-clash margin",
     ),
+    _adjuster_metric(
+        "hla_extension",
+        "hydraulic lash adjuster's plunger extension from bottomed out at the turn's start",
+        "max",
+        _adjuster(0),
+        "Plunger extension",
+    ),  # fmt: skip
+    _adjuster_metric(
+        "hla_lash",
+        "effective lash at the turn's start: the dry lash less the lash adjuster's extension "
+        "(below 0: the valve held off its seat)",
+        "min",
+        _adjuster(0, less_lash=True),
+        "Effective lash",
+    ),  # fmt: skip
+    _adjuster_metric(
+        "hla_leak_down",
+        "hydraulic lash adjuster's leak-down over the turn (check valve closed)",
+        "sum",
+        _adjuster(1),
+        "Leak-down",
+    ),  # fmt: skip
+    _adjuster_metric(
+        "hla_pump_up",
+        "hydraulic lash adjuster's pump-up over the turn (check valve open)",
+        "sum",
+        _adjuster(2),
+        "Pump-up",
+    ),  # fmt: skip
 ]
 
 #: The engine's columns: every metric an integrator accumulates, in the table's order. Fixed

@@ -46,6 +46,7 @@ from campipe.engine.modal import ModalData
 from campipe.engine.settings import sample_count, turn_count
 from campipe.model import ValveTrain
 from campipe.model.assembly import preload_vector
+from campipe.model.hla import adjuster
 from campipe.profiles import Profile, pack
 from campipe.profiles.pieces import evaluate_pieces
 from campipe.vocabulary import CAM, CAM_CONTACT, N_EVENT_FIELDS, OK, SEAT
@@ -323,8 +324,10 @@ def _steady_mask(cases: Sequence[Case], ext: SteadyExtremes, settings: RunSettin
     """Which of the rigid ``cases`` (their extremes ``ext``) the steady level takes: those whose
     periodic state is configuration I's all turn (``SteadyExtremes.holds``: the least cam force
     above zero, the valve clear of its seat) and whose profile the follower crosses held
-    (no ``break_events``). The others have events every turn: the full engine runs them."""
-    holds = ext.holds
+    (no ``break_events``), without a hydraulic lash adjuster. The others have events every
+    turn, or a plunger that moves: the full engine runs them."""
+    # a hydraulic lash adjuster's plunger moves turn by turn: never one turn's closed form
+    holds = ext.holds & np.array([adjuster(c.train) is None for c in cases], np.bool_)
     if holds.any():
         idx = np.flatnonzero(holds)
         jumps = break_events([cases[int(i)] for i in idx], settings.capture_velocity)

@@ -67,6 +67,9 @@ class BatchResult:
     turns_run: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))  # (n_cases,)
     #: (n_cases,) the turn (from 0) its histories and events start at
     recorded_from: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    #: (n_cases, n_rev, 3) a run with a hydraulic lash adjuster (``engine.lash_adjuster``):
+    #: each turn's plunger extension at its start, leak-down and pump-up [m]; empty else
+    lash_adjuster: np.ndarray = field(default_factory=lambda: np.zeros(0))
     _derived: dict[str, object] = field(default_factory=dict, repr=False, compare=False)
 
     @property
@@ -175,6 +178,9 @@ def merge_results(n: int, parts: Sequence[tuple[np.ndarray, BatchResult]]) -> Ba
     for f in dataclasses.fields(BatchResult):
         if f.name == "_derived":
             continue
+        if f.name == "lash_adjuster":  # a part without an adjuster has none: NaN
+            merged[f.name] = _merged_adjusters(n, parts)
+            continue
         value = getattr(first, f.name)
         if f.name in _SHARED:
             merged[f.name] = value
@@ -200,3 +206,15 @@ def merge_results(n: int, parts: Sequence[tuple[np.ndarray, BatchResult]]) -> Ba
                     array[index] = part_value
             merged[f.name] = array
     return BatchResult(**merged)  # type: ignore[arg-type]
+
+
+def _merged_adjusters(n: int, parts: Sequence[tuple[np.ndarray, BatchResult]]) -> np.ndarray:
+    """The parts' ``lash_adjuster`` tables as one, NaN for the cases of a part without one
+    (empty if no part has one)."""
+    tables = [(index, part.lash_adjuster) for index, part in parts if part.lash_adjuster.size]
+    if not tables:
+        return np.zeros(0)
+    out = np.full((n, *tables[0][1].shape[1:]), np.nan)
+    for index, table in tables:
+        out[index] = table
+    return out

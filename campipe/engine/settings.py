@@ -28,6 +28,7 @@ from campipe.engine.case import sample_count as sample_count
 from campipe.engine.case import turn_count as turn_count
 from campipe.engine.case import visited_configurations as visited_configurations
 from campipe.model import ValveTrain
+from campipe.model.hla import adjuster
 from campipe.vocabulary import ROMAN
 
 #: The integrators of rigid contacts (the thesis's) by name (``campipe.engine.integrators``);
@@ -353,13 +354,33 @@ def check_stability(cases: Sequence[Case], settings: RunSettings) -> None:
             )
 
 
+def adjuster_turns(settings: RunSettings) -> int:
+    """The turns of a run of trains with a hydraulic lash adjuster (``engine.lash_adjuster``:
+    its plunger advances at each turn's end): 0 for a run shorter than a turn (no turn ends:
+    the plunger stays), refusing a run of automatic length or of a fraction of a turn beyond
+    the first at ``run.revolutions``."""
+    turns = settings.revolutions
+    if turns is not None and turns < 1.0:
+        return 0
+    if turns is None or turns != math.floor(turns):
+        raise RunSettingsError.at(
+            "run.revolutions",
+            "a train with a hydraulic lash adjuster runs a whole number of turns (its "
+            "plunger advances at each turn's end)",
+            found=turns,
+            expected="a whole number of turns",
+        )
+    return int(turns)
+
+
 def check_run(
     cases: Sequence[Case], settings: RunSettings, *, check_stability_limit: bool = True
 ) -> None:
     """Everything ``run_batch`` refuses, checked without running: an unknown integrator or
     fidelity, a non-positive step or tolerance, an unknown closure, a non-positive speed,
     newmark-linear on a train of refined members (more than seven coordinates) or with a
-    coefficient of restitution, a newmark-linear step beyond the stability limit.
+    coefficient of restitution, a newmark-linear step beyond the stability limit, a train
+    with a hydraulic lash adjuster on a run not of whole turns (``adjuster_turns``).
 
     Raises
     ------
@@ -387,6 +408,8 @@ def check_run(
             expected="> 0 s",
         )
     for i, case in enumerate(cases):
+        if adjuster(case.train) is not None:
+            adjuster_turns(settings)
         if case.closure not in CLOSURES:
             raise CaseError.at(
                 "closure",

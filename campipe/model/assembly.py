@@ -20,9 +20,16 @@ import numpy as np
 from campipe import disk_cache
 from campipe.model.coordinates import TRANSLATIONS, translations
 from campipe.model.elements import elements
-from campipe.model.layouts import placeholder_dynamics, placeholders, used_coordinates
+from campipe.model.layouts import (
+    chain_matrices,
+    mirror,
+    mirror_dynamics,
+    placeholder_dynamics,
+    placeholders,
+    used_coordinates,
+)
 from campipe.model.parameters import N_DOF, ValveTrain, mode_damping_ratios
-from campipe.vocabulary import CONFIGURATIONS, SEAT, free_coordinates
+from campipe.vocabulary import CAM, CONFIGURATIONS, SEAT, free_coordinates
 
 #: Newmark linear acceleration (β = 1/6, γ = 1/2) is stable for ω·Δt < √12 (= (√3/π)·T),
 #: whatever the damping (the γ = 1/2 family's limit does not depend on ζ).
@@ -55,7 +62,15 @@ def assemble(train: ValveTrain) -> tuple[np.ndarray, np.ndarray]:
         m, k, _ = placeholder_dynamics(train)
         M[spare, spare] = m
         K[spare, spare] = k
+    if mirror(train):  # a one-mass chain's valve, q7 = −q1 (campipe.model.layouts)
+        mu, kappa, _ = mirror_dynamics(train)
+        M[np.ix_(_PAIR, _PAIR)] += mu
+        K[np.ix_(_PAIR, _PAIR)] += kappa
     return M, K
+
+
+#: A one-mass chain's follower and its mirror, the valve.
+_PAIR = [CAM, SEAT]
 
 
 def normal_modes(
@@ -179,6 +194,8 @@ def chain_damping(train: ValveTrain, mass: np.ndarray, stiffness: np.ndarray) ->
     used = used_coordinates(train)
     chain = np.ix_(used, used)
     m, k = mass[chain], stiffness[chain]
+    if mirror(train):  # the follower's own, its mirror's share left out
+        m, k = chain_matrices(train)
     if train.damping_kind == "rayleigh":
         c = rayleigh_damping(m, k, train.rayleigh_alpha, train.rayleigh_beta)
     else:
@@ -188,6 +205,8 @@ def chain_damping(train: ValveTrain, mass: np.ndarray, stiffness: np.ndarray) ->
     out[chain] = c
     spare = placeholders(train)
     out[spare, spare] = placeholder_dynamics(train)[2]
+    if mirror(train):
+        out[np.ix_(_PAIR, _PAIR)] += mirror_dynamics(train)[2]
     return out
 
 
@@ -202,9 +221,12 @@ def modal_damping_ratios(
 def preload_vector(train: ValveTrain) -> np.ndarray:
     """The installed spring force as a constant load, (n,): it pushes the rocker valve end up
     (+q4). A refined spring carries the same force in every element, so its internal nodes
-    take none. A lumped chain's spring pushes its valve closed (−q7)."""
+    take none. A lumped chain's spring pushes its valve closed (−q7), a one-mass chain's its
+    follower onto the cam (+q1: the follower is the valve)."""
     f = np.zeros(train.n_coordinates)
-    if train.chain:
+    if mirror(train):
+        f[CAM] = train.spring_preload
+    elif train.chain:
         f[SEAT] = -train.spring_preload
     else:
         f[3] = train.spring_preload

@@ -13,6 +13,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from campipe.model.declared import ModelParameterError
+from campipe.model.hla import NEEDED as HLA_NEEDED
 from campipe.model.levers import LEVER_KEYS, LEVERS, lever_chain
 
 #: Layouts (:mod:`campipe.model.layouts`): the thesis's train from its members' geometry; a
@@ -70,7 +71,8 @@ def resolve_layout(
 
     Refuses, naming the key: another layout's keys given in ``overrides`` (``damping_kind:
     loss-factor`` on a chain: it needs members), a direct-acting key not given, a chain of one
-    mass (not yet supported), ``stiffnesses`` not one fewer than ``masses``."""
+    mass with lash (its seat and cam would hold one body), ``stiffnesses`` not one fewer than
+    ``masses``."""
     for name in overrides:
         owners = layouts_of_key(name, members)
         if name == "damping_kind" and overrides[name] == "loss-factor":
@@ -90,7 +92,46 @@ def resolve_layout(
         train = train.replace(**lever_chain(train, key_prefix))
     if train.layout in CHAINS:
         _check_chain(train, key_prefix)
+    _check_adjuster(train, key_prefix)
     return train
+
+
+def _check_adjuster(train: Any, key_prefix: str) -> None:
+    """A hydraulic lash adjuster (:mod:`campipe.model.hla`) sits in a chain's link next to
+    the cam (two masses or more), with all of its keys and the dry lash it takes up."""
+    given = [k for k in HLA_NEEDED if getattr(train, k) == getattr(train, k)]  # not NaN
+    if not given:
+        if train.hla_extension != 0.0:
+            given = ["hla_extension"]
+        else:
+            return
+    key = key_prefix + given[0]
+    if train.layout not in CHAINS or len(train.masses) < 2:
+        raise ModelParameterError.at(
+            key,
+            "a hydraulic lash adjuster sits in a chain's link next to the cam: give layout "
+            "lumped (two masses or more) or direct-acting",
+            found=train.layout,
+            expected="a chain of two masses or more",
+        )
+    for name in (*HLA_NEEDED, "lash"):
+        if getattr(train, name) != getattr(train, name):  # NaN: not given
+            raise ModelParameterError.at(
+                key_prefix + name,
+                f"a train with a hydraulic lash adjuster needs {name} ("
+                + ", ".join(HLA_NEEDED)
+                + ", and lash: the dry lash, the plunger bottomed)",
+                found=None,
+                expected=f"a value for {name}",
+            )
+    if train.hla_extension > train.hla_travel:
+        raise ModelParameterError.at(
+            key_prefix + "hla_extension",
+            f"the plunger's extension {train.hla_extension:.6g} m is beyond its travel "
+            f"{train.hla_travel:.6g} m",
+            found=train.hla_extension,
+            expected=f"0 to hla_travel ({train.hla_travel:.6g} m)",
+        )
 
 
 def direct_acting_chain(train: Any, key_prefix: str = "") -> dict[str, tuple[float, ...]]:
@@ -113,14 +154,13 @@ def direct_acting_chain(train: Any, key_prefix: str = "") -> dict[str, tuple[flo
 
 def _check_chain(train: Any, key_prefix: str) -> None:
     n = len(train.masses)
-    if n < 2:
+    if n < 1:
         raise ModelParameterError.at(
             key_prefix + "masses",
-            f"found {n} masses; a lumped chain needs two or more (the first on the cam, the "
-            "last the valve): one mass, a rigid follower with no free coordinate while it "
-            "rides the cam, is not yet supported",
+            "found no masses; a lumped chain needs one or more (the first on the cam, the "
+            "last the valve; one mass is a rigid direct-acting follower)",
             found=train.masses,
-            expected="two or more masses",
+            expected="one or more masses",
         )
     if len(train.stiffnesses) != n - 1:
         raise ModelParameterError.at(
@@ -129,4 +169,12 @@ def _check_chain(train: Any, key_prefix: str) -> None:
             "masses, the links between neighbours from the cam side",
             found=train.stiffnesses,
             expected=f"{n - 1} stiffnesses",
+        )
+    if n == 1 and train.lash == train.lash:  # not NaN
+        raise ModelParameterError.at(
+            key_prefix + "lash",
+            "a one-mass chain (a rigid follower that is its valve) has no lash: its cam and "
+            "its seat would hold one body; leave lash out (it runs without a seat)",
+            found=train.lash,
+            expected="no lash with one mass",
         )

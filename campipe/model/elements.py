@@ -17,7 +17,11 @@ from campipe.constants import STANDARD_GRAVITY
 from campipe.model.coordinates import GROUND, Dof, member_nodes
 from campipe.model.layouts import chain_placement
 from campipe.model.parameters import ELEMENTS, NODE_COORDINATES, ValveTrain
-from campipe.vocabulary import SEAT
+
+
+def adjuster_stiffness(train: ValveTrain) -> float:
+    """A chain's lash adjuster's stiffness [N/m] (NaN: none)."""
+    return float(getattr(train, "hla_stiffness", math.nan))
 
 
 def bar_stiffness(k: float) -> np.ndarray:
@@ -131,7 +135,9 @@ def chain_elements(train: ValveTrain) -> list[Element]:
     each of its coordinates, a bar ``link`` (stiffness only) between neighbours, measured
     along the lift from the cam's side, and the valve ``spring`` from ground (its lower end)
     up to the valve: the valve's opening (+q7) compresses it, as the thesis's spring's
-    (its extension is −q7)."""
+    (its extension is −q7); a one-mass chain's on its follower (its extension +q1). A
+    hydraulic lash adjuster (``hla_stiffness``, :mod:`campipe.model.hla`) is in series with
+    the link next to the cam."""
     index, sign = chain_placement(len(train.masses))
     n_q = train.n_coordinates
     node = [(int(i), float(s)) for i, s in zip(index, sign, strict=True)]
@@ -141,8 +147,11 @@ def chain_elements(train: ValveTrain) -> list[Element]:
         for j, m in enumerate(train.masses)
     ]
     zero = np.zeros((2, 2))
+    hla = adjuster_stiffness(train)
     for j, k in enumerate(train.stiffnesses):
+        k = 1.0 / (1.0 / k + 1.0 / hla) if j == 0 and hla == hla else k  # in series
         out.append(Element("link", j, _selector(node[j : j + 2], n_q), bar_stiffness(k), zero))
-    spring = _selector([GROUND, (SEAT, -1.0)], n_q)
+    # the spring's upper end moves against the lift: −q7, or a one-mass chain's +q1
+    spring = _selector([GROUND, (node[-1][0], -node[-1][1])], n_q)
     out.append(Element("spring", 0, spring, bar_stiffness(train.spring_rate), zero))
     return out

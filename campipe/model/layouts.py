@@ -26,6 +26,19 @@ and no contact reaches, so it stays at rest at zero in every configuration, and 
 need not know of layouts at all. The archive's ``q`` holds NaN there, ``campipe model`` leaves
 them out, and they are not the chain's modes (``damping_ratios`` are the chain's).
 
+A chain of one mass is a rigid direct-acting follower: the follower is the valve, so while it
+rides the cam nothing of the train is free and its cam force is algebraic,
+F = m·ẍ + c·ẋ + k·x + P. Its mass is q1; q7, the valve, is its *mirror*
+(:func:`mirror_dynamics`): a coordinate of its own mass μ, stiffness κ and damping γ on the
+relative motion y = q1 + q7 only (kinetic energy ½·m·q̇1² + ½·μ·ẏ², potential ½·k·q1² +
+½·κ·y²), so y is an oscillator decoupled from the follower, at rest at zero from any start at
+rest, and q7 = −q1 (the valve's lift is the follower's) in both configurations the train can
+visit, I and II, to round-off: with q1 held by the cam, the free coordinates (the mirror and the
+placeholders) leave the cam force exactly m·ẍ + c·ẋ + k·x + P (their Schur complement
+cancels), and the impact mass at the cam is m. The engine needs no configuration without a
+free coordinate. Both contacts on one body are beyond the model's two contacts, so such a
+chain runs without a seat and without lash (refused, naming the key).
+
 Signs, as the thesis's: q1 is positive *away from the lift* (towards the cam's centre: a cam
 lift h holds q1 = −h), every other mass positive *along the lift*, so q7 is the valve's
 opening (valve lift positive); the spring preload pushes the valve closed (a load −P on q7).
@@ -48,6 +61,8 @@ __all__ = [
     "chain_matrices",
     "chain_placement",
     "lumped_coordinates",
+    "mirror",
+    "mirror_dynamics",
     "placeholder_dynamics",
     "placeholders",
     "used_coordinates",
@@ -60,12 +75,15 @@ PLACEHOLDER_DAMPING = 0.5
 #: configurations): below every chain mode (they never set a stability limit or a step) and
 #: distinct from each other and from the chain's.
 PLACEHOLDER_FRACTIONS = (0.25, 0.3, 0.35, 0.4, 0.45)
+#: The one-mass chain's mirror (:func:`mirror_dynamics`): its frequency as a fraction of the
+#: follower's on its spring, distinct from the placeholders', damped as they are.
+MIRROR_FRACTION = 0.2
 
 
 def chain_index(mass: int, n_masses: int) -> int:
     """The coordinate (0-based) of a lumped chain's mass ``mass`` (0 the cam's, n − 1 the
-    valve)."""
-    if mass == n_masses - 1:
+    valve; a single mass the cam's, q1, its valve the mirror q7: :func:`mirror_dynamics`)."""
+    if mass == n_masses - 1 and n_masses > 1:
         return SEAT
     return mass if mass < SEAT else mass + 1
 
@@ -94,10 +112,26 @@ def used_coordinates(train: ValveTrain) -> np.ndarray:
     return np.sort(chain_placement(len(train.masses))[0])
 
 
+def mirror(train: ValveTrain) -> bool:
+    """A one-mass chain, whose valve q7 mirrors its follower q1 (:func:`mirror_dynamics`)."""
+    return train.chain and len(train.masses) == 1
+
+
 def placeholders(train: ValveTrain) -> np.ndarray:
     """The placeholder coordinates (0-based) of ``train``: none but a lumped chain's of fewer
-    than seven masses."""
-    return np.setdiff1d(np.arange(train.n_coordinates), used_coordinates(train))
+    than seven masses (a one-mass chain's q7 is its mirror, not a placeholder)."""
+    spare = np.setdiff1d(np.arange(train.n_coordinates), used_coordinates(train))
+    return spare[spare != SEAT] if mirror(train) else spare
+
+
+def mirror_dynamics(train: ValveTrain) -> tuple[float, float, float]:
+    """A one-mass chain's mirror: (μ [kg], κ [N/m], γ [N·s/m]) on y = q1 + q7, each entering
+    M, K and C as that value times [[1, 1], [1, 1]] on (q1, q7) (see the module): the
+    follower's mass, at :data:`MIRROR_FRACTION` of its frequency on the spring, damped by
+    :data:`PLACEHOLDER_DAMPING`."""
+    mass = float(train.masses[0])
+    omega = MIRROR_FRACTION * _lowest_frequency(*chain_matrices(train))
+    return mass, mass * omega**2, 2.0 * PLACEHOLDER_DAMPING * mass * omega
 
 
 def chain_matrices(train: ValveTrain) -> tuple[np.ndarray, np.ndarray]:
@@ -150,6 +184,10 @@ def lumped_coordinates(n_masses: int) -> list[tuple[int, str, str]]:
     index, _ = chain_placement(n_masses)
     n = n_coordinates(n_masses)
     out = [(i, "unused", "none: a placeholder, at rest") for i in range(n)]
+    if n_masses == 1:
+        out[CAM] = (CAM, "follower", "away from the lift, towards the cam")
+        out[SEAT] = (SEAT, "valve", "along the lift, valve opening: the follower, q7 = -q1")
+        return out
     for j, i in enumerate(index):
         if j == 0:
             out[i] = (i, "cam_mass", "away from the lift, towards the cam")

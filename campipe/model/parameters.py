@@ -52,6 +52,7 @@ from campipe.model.contact_keys import (  # noqa: F401  (the contacts' names, re
     contact_parameters,
 )
 from campipe.model.declared import Parameter
+from campipe.model.hla import HLA_KEYS
 from campipe.model.levers import lever_parameters
 from campipe.units import QuantityError, parse_quantity
 
@@ -146,6 +147,12 @@ def _chain_list(name: str, what: str, units: str, shown: str) -> Parameter:
     )  # fmt: skip
 
 
+def _hla(name: str, what: str, units: str, shown: str) -> Parameter:
+    zero = name == "hla_extension"  # (campipe.model.hla)
+    return Parameter(name, what, units, shown, 0.0, exclusive_minimum=not zero,
+                     allow_none=not zero, default="0 m" if zero else "none")  # fmt: skip
+
+
 def _direct(name: str, what: str, units: str, shown: str) -> Parameter:
     shared = name in ("valve_mass", "stem_stiffness")
     layouts = "layouts direct-acting and the levers" if shared else "layout direct-acting"
@@ -168,6 +175,7 @@ PARAMETERS: dict[str, Parameter] = {
         _direct("stem_stiffness", "valve stem's axial stiffness, tip to head", "N/m", "N/mm"),
         _direct("tappet_contact_stiffness", "tappet's contact on the stem tip", "N/m", "N/mm"),
         *lever_parameters(),
+        *(_hla(*row) for row in HLA_KEYS),
         *_element_parameters(),
         Parameter("elastic_modulus", "elastic modulus of all members", "Pa", "lbf/in**2", 0.0),
         Parameter("specific_weight", "specific weight of all members", "N/m**3", "lbf/in**3", 0.0),
@@ -352,6 +360,12 @@ class ValveTrain:
     lever_inertia: float = math.nan  # [kg·m²] the lever about its pivot
     roller_mass: float = 0.0  # [kg] the roller with its axle
     lever_stiffness: float = math.nan  # [N/m] the lever at the pallet, along the valve
+    hla_stiffness: float = math.nan  # [N/m] lash adjuster (campipe.model.hla); NaN: none
+    hla_leak_down: float = math.nan  # [N·s/m] leak-down coefficient c_L
+    hla_check_force: float = math.nan  # [N] check force F_c
+    hla_pump_up: float = math.nan  # [N·s/m] pump-up coefficient c_P
+    hla_travel: float = math.nan  # [m] plunger travel
+    hla_extension: float = 0.0  # [m] plunger extension at the start
 
     def replace(self, **changes: Any) -> ValveTrain:
         """A copy with some values (SI) changed."""

@@ -191,12 +191,12 @@ def test_placeholders_stay_at_rest_through_separation_and_seat_impacts():
 
 
 def test_lumped_refusals_name_their_keys():
-    """One mass, stiffnesses not one fewer, the thesis's members on a chain, a chain's masses
+    """No mass, stiffnesses not one fewer, the thesis's members on a chain, a chain's masses
     on the thesis's train, damping ratios for more modes than masses or none of its own (the
     preset's): each refused naming its key. Fails on a copy that pads missing stiffnesses or
-    runs a one-mass chain as two."""
+    runs an empty chain."""
     cases = [
-        ({"masses": ["0.05 kg"], "stiffnesses": []}, "model.masses", "not yet supported"),
+        ({"masses": [], "stiffnesses": []}, "model.masses", "one or more"),
         ({"stiffnesses": ["1 N/mm", "2 N/mm"]}, "model.stiffnesses", "one fewer"),
         ({"pushrod_length": "9 in"}, "model.pushrod_length", "layout pushrod-rocker"),
         ({"damping_ratios": [0.1, 0.1, 0.1]}, "model.damping_ratios", "2 modes"),

@@ -37,6 +37,7 @@ EXAMPLE_CASES = {
     "design-spring-rate": 2,
     "bucket-tappet-lash": 18,
     "finger-follower": 7,
+    "lash-adjuster": 4,
 }
 
 

@@ -440,7 +440,9 @@ CASE_FIELDS: dict[str, Field] = {
             "largest element force and coil-clash margin, and their per-revolution metrics) "
             "or single spring histories by name; contact_pressure: the peak Hertz pressure "
             "at the cam and the seat per revolution; cam_normal_force: a lever layout's "
-            "roller force on the cam (the cam force times the lever ratio)",
+            "roller force on the cam (the cam force times the lever ratio); lash_adjuster: "
+            "a hydraulic lash adjuster's extension, effective lash, leak-down and pump-up per "
+            "revolution",
             choices=(
                 "q",
                 "member_loads",
@@ -449,6 +451,7 @@ CASE_FIELDS: dict[str, Field] = {
                 *SPRING_HISTORIES,
                 "contact_pressure",
                 "cam_normal_force",
+                "lash_adjuster",
             ),  # fmt: skip
         ),
         Field(

@@ -1,0 +1,141 @@
+"""A hydraulic lash adjuster (HLA): plunger, high-pressure chamber, check valve, leak-down.
+
+The adjuster is a plunger in a body over a high-pressure chamber (HPC). A light plunger
+spring and the engine's oil supply push the plunger out; together they hold the *check
+force* F_c (plunger spring plus supply pressure × plunger area). The load F through the
+adjuster decides its check valve:
+
+- F > F_c, **check valve closed**: the HPC is sealed and the adjuster is stiff (the oil
+  column and the body, ``hla_stiffness``, in series with the member it sits in); oil leaks
+  out through the plunger's clearance at a rate proportional to the excess pressure, so
+  the plunger sinks (*leaks down*) at ``(F − F_c) / c_L``, c_L the leak-down coefficient
+  ``hla_leak_down`` [N·s/m] (a laminar annular leak: c_L = A²/G, A the plunger's area and G
+  the clearance's conductance; a leak-down test's load over its sinking speed);
+- F < F_c, **check valve open**: oil refills the HPC and the plunger extends (*pumps up*)
+  at ``(F_c − F) / c_P``, c_P the pump-up coefficient ``hla_pump_up`` [N·s/m] (the feed's
+  and the check valve's resistance), until the load it takes up reaches F_c and the valve
+  closes: it takes up lash (on the base circle, and into a gap the follower opens when it
+  leaves the cam: *pump-up*, holding the valve off its seat);
+- the plunger's extension e stays within its travel, 0 (bottomed: the dry lash) to
+  ``hla_travel``.
+
+**How the engine carries it.** The plunger's extension is a *slow state*: it moves microns
+a valve event while the train's dynamics take milliseconds. The switch between the two
+regimes is located on the force the turn gives (the roots of F − F_c on its piecewise-linear
+interpolant between the output samples) and the extension advanced once a turn by the
+leak-down and pump-up over that turn (:meth:`LashAdjuster.advance`). Between two turn
+boundaries the train runs with the extension fixed, exactly (the adjuster is then a linear
+spring in the chain, and an extension e a change of that member's rest length, which in a
+chain is exactly the cam's lift raised by e: ``campipe.engine.lash_adjuster``). What is
+approximated: the plunger's motion within a turn is applied at the turn's end (the load's
+error is k·Δe, the stiffness times one turn's leak-down or pump-up), and the integrals over
+the turn take the force as linear between samples (an error of order (Δθ)²·F″ a sample).
+
+Pure Python and numpy on floats and arrays; a layout places the adjuster (which member's
+force passes through it, how its extension moves the train): a chain's in series with its
+link next to the cam (:mod:`campipe.model.elements`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+#: The adjuster's model keys: (name, long name, SI units, display units, default), in the
+#: order ``campipe.model.parameters`` declares them (``none``: no adjuster).
+HLA_KEYS = (
+    ("hla_stiffness", "hydraulic lash adjuster's stiffness with its check valve closed (oil "
+     "column and body), in series with the chain's link next to the cam", "N/m", "N/mm"),
+    ("hla_leak_down", "hydraulic lash adjuster's leak-down coefficient: the load above the "
+     "check force per unit of the plunger's sinking speed", "N*s/m", "N*s/mm"),
+    ("hla_check_force", "hydraulic lash adjuster's check force (plunger spring plus supply "
+     "pressure times plunger area): below it the check valve opens", "N", "N"),
+    ("hla_pump_up", "hydraulic lash adjuster's pump-up coefficient: the load below the check "
+     "force per unit of the plunger's extending speed, check valve open", "N*s/m", "N*s/mm"),
+    ("hla_travel", "hydraulic lash adjuster's plunger travel from bottomed out", "m", "mm"),
+    ("hla_extension", "hydraulic lash adjuster's plunger extension at the run's start, from "
+     "bottomed out (0: leaked down, the dry lash)", "m", "mm"),
+)  # fmt: skip
+#: The keys an adjuster needs (``hla_extension`` defaults to 0).
+NEEDED = tuple(k[0] for k in HLA_KEYS[:-1])
+
+
+@dataclass(frozen=True)
+class LashAdjuster:
+    """One hydraulic lash adjuster (see the module)."""
+
+    stiffness: float  # [N/m] check valve closed, in series with its member
+    leak_down: float  # [N·s/m] c_L
+    check_force: float  # [N] F_c
+    pump_up: float  # [N·s/m] c_P
+    travel: float  # [m] the plunger's extension from bottomed out, at most
+
+    def series(self, stiffness: float) -> float:
+        """The stiffness [N/m] of a member of ``stiffness`` with the adjuster in series."""
+        return 1.0 / (1.0 / stiffness + 1.0 / self.stiffness)
+
+    def leak(self, time: np.ndarray, force: np.ndarray) -> float:
+        """The plunger's leak-down [m] over the samples (``time`` [s], ``force`` [N] through
+        the adjuster): ∫ (F − F_c)⁺ dt / c_L, the check valve closed where F > F_c."""
+        return excess_integral(time, force, self.check_force) / self.leak_down
+
+    def pump(self, time: np.ndarray, force: np.ndarray, gap: np.ndarray) -> float:
+        """The plunger's pump-up [m] over the samples: ∫ (F_c − F)⁺ dt / c_P while the check
+        valve is open, at most the extension that takes up the largest need while it is
+        open, the gap between cam and follower ``gap`` [m] plus the load it still lacks,
+        (F_c − F)/k (the check valve closes once the plunger has taken it up)."""
+        capacity = excess_integral(time, -force, -self.check_force) / self.pump_up
+        open_ = force < self.check_force
+        if not open_.any():
+            return 0.0
+        need = np.max(gap[open_] + (self.check_force - force[open_]) / self.stiffness)
+        return min(capacity, max(float(need), 0.0))
+
+    def advance(
+        self, extension: float, time: np.ndarray, force: np.ndarray, gap: np.ndarray
+    ) -> tuple[float, float, float]:
+        """(the extension after the turn [m], its leak-down [m], its pump-up [m]) from the
+        extension at its start and the turn's samples; within 0 … ``travel``."""
+        leak = self.leak(time, force)
+        pump = self.pump(time, force, gap)
+        return min(max(extension - leak + pump, 0.0), self.travel), leak, pump
+
+
+def excess_integral(time: np.ndarray, force: np.ndarray, level: float) -> float:
+    """∫ (F − level)⁺ dt over the piecewise-linear interpolant of the samples [N·s]: exact
+    for it, each crossing of the level located on its sample interval (the check valve's
+    switch, by the interpolant's root)."""
+    t = np.asarray(time, float)
+    d = np.asarray(force, float) - level
+    a, b, dt = d[:-1], d[1:], np.diff(t)
+    both = (a >= 0) & (b >= 0)
+    total = float(np.sum(0.5 * (a + b) * dt, where=both))
+    cross = (a > 0) != (b > 0)
+    cross &= ~both
+    with np.errstate(divide="ignore", invalid="ignore"):
+        # the positive part's triangle: base = its share of the interval, height = its end
+        top = np.maximum(a, b)
+        share = top / np.abs(b - a)
+        total += float(np.sum(0.5 * top * share * dt, where=cross & (top > 0)))
+    return total
+
+
+def adjuster(train) -> LashAdjuster | None:
+    """``train``'s lash adjuster, None if it has none (``hla_leak_down`` none)."""
+    if math.isnan(getattr(train, "hla_leak_down", math.nan)):
+        return None
+    return LashAdjuster(
+        train.hla_stiffness,
+        train.hla_leak_down,
+        train.hla_check_force,
+        train.hla_pump_up,
+        train.hla_travel,
+    )
+
+
+def has_adjuster(train) -> bool:
+    """A train with a hydraulic lash adjuster (its ``hla_stiffness`` given): the chain's link
+    next to the cam has it in series."""
+    return not math.isnan(getattr(train, "hla_stiffness", math.nan))
