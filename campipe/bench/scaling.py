@@ -63,8 +63,13 @@ def _run_threads(
 ) -> list:
     import dask
 
+    # Each batch wrapped untraversed: a call's arguments are searched for dask objects, into
+    # every Case (a dataclass) and its train and profile, which cost more than the engine
+    # (1000 cases on one worker 0.69-0.80 s, 0.28 s run as they are).
     tasks = [
-        dask.delayed(run_batch, pure=False)(cases[i : i + batch_size], settings)
+        dask.delayed(run_batch, pure=False)(
+            dask.delayed(cases[i : i + batch_size], traverse=False), settings
+        )
         for i in range(0, len(cases), batch_size)
     ]
     return list(dask.compute(*tasks, scheduler="threads", num_workers=workers))

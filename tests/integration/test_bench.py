@@ -4,6 +4,7 @@ assertions: times are measured by ``campipe bench``, never asserted)."""
 import csv
 import json
 import math
+import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -559,3 +560,16 @@ def test_the_memory_block_measures_a_tiny_study_against_the_stated_bound(tmp_pat
     text = pages.memory_block(SimpleNamespace(memory=memory.as_dict(point)))
     assert f"{point.growth / 1e6:.0f} MB" in text and "| 16 | 1081 | 2 | 4 × 4 |" in text
     assert ("within" if point.within else "beyond") in text
+
+
+def test_the_memory_block_reads_the_child_s_own_peak_not_its_parent_s():
+    """A process started by one that holds 400 MB reads its own peak with ``_max_rss``
+    (Linux's VmHWM: a fresh interpreter's, under 300 MB), not the 400 MB the kernel carries
+    into ``ru_maxrss`` across ``exec``: inside ``campipe bench`` (3.1 GB by the memory block)
+    ru_maxrss gave the study a baseline of 3127 MB and a growth of 0. Broken copy: ru_maxrss."""
+    import subprocess
+
+    held = np.ones(400 * 2**20 // 8)  # 400 MB resident in this process
+    code = "import campipe.bench.memory as m; print(m._max_rss())"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert held.sum() > 0 and int(out.stdout) < 300 * 2**20
