@@ -194,6 +194,7 @@ STATE = np.dtype(
         ("gdeg", "i8"),  # degree of the monitors' polynomials
         ("nact", "i8"),  # active block columns
         ("k_out", "i8"),  # the next output sample
+        ("per_turn", "i8"),  # samples a turn when every turn is sampled alike, else 0
         ("stalled", "i8"),  # events in a row without time advancing
         ("done", "?"),  # the run reached its end
         # Resting contact: a contact captured by a slow impact (``common.captured``), whose

@@ -33,7 +33,6 @@ Eqs. 26, 27 with ẍ eliminated through the equation of motion).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import NamedTuple
 
 import numpy as np
 
@@ -301,60 +300,23 @@ def harmonic_responses(train, n_free, a_mat, b_in, omega):
     The cam coordinate is q1 = −lift, so (q1, q̇1, q̈1) = Re(β (−1, −iω, ω²) e^{iθ}) and
     (iωI − A) ζ = −b_q − iω b_v + ω² b_a.  Arrays as ``ModalData`` with a leading train axis;
     case c runs train ``train[c]`` at speed ``omega[c]``. One LAPACK solve (zgesv) per case
-    and configuration, stacked by train: numpy's batched ``solve`` costs what a compiled loop
-    over them did (4 µs a case) without its 3 s of compile.
+    and configuration, stacked by train: the reference the kernels' own solve
+    (``closed_form.harmonic_response``, a case at its start) is tested against.
     """
-    parts = response_parts(n_free, a_mat, b_in)
-    return responses_of(parts, train, omega, a_mat.shape[2])
-
-
-class ResponsePart(NamedTuple):
-    """What one train's configuration fixes in ``harmonic_responses``: the configuration's
-    index, its state's size, −A (complex) and the input's rows b_q, b_v, b_a."""
-
-    ci: int
-    ns: int
-    minus_a: np.ndarray  # (ns, ns) complex −A
-    b: np.ndarray  # (ns, 3) the input's b_q, b_v, b_a for the cam
-
-
-def response_parts(n_free, a_mat, b_in) -> tuple[tuple[ResponsePart, ...], ...]:
-    """Per train (arrays as ``harmonic_responses``'), its configurations' ``ResponsePart``:
-    computed once per batch's trains (``batch.train_stack``)."""
-    parts = []
+    out = np.zeros((omega.shape[0], 4, a_mat.shape[2]), np.complex128)
     for t in range(a_mat.shape[0]):
-        per_train = []
+        cases = np.flatnonzero(train == t)
+        if cases.size == 0:
+            continue
+        w = omega[cases][:, None]
+        iw = 1j * w
+        w2 = w * w
         for ci in (0, 2):
             ns = int(2 * n_free[t, ci])
-            minus_a = np.zeros((ns, ns), np.complex128)
-            minus_a[:] = -a_mat[t, ci, :ns, :ns]
-            per_train.append(ResponsePart(ci, ns, minus_a, b_in[t, ci, :ns, :, 0]))
-        parts.append(tuple(per_train))
-    return tuple(parts)
-
-
-def responses_of(parts, train, omega, ns_pad: int, seated=None) -> np.ndarray:
-    """``harmonic_responses`` from the trains' ``response_parts`` (the same numbers). With
-    ``seated`` (n,) bool, configuration III's (cam and seat held) only for the cases that have
-    a seat, the others' left zero: they never hold the seat (each case's solve is its own, so
-    the numbers computed are the same)."""
-    out = np.zeros((omega.shape[0], 4, ns_pad), np.complex128)
-    single = len(parts) == 1
-    for t, per_train in enumerate(parts):
-        of_train = slice(None) if single else np.flatnonzero(train == t)
-        for ci, ns, minus_a, b in per_train:
-            cases = of_train
-            if ci != 0 and seated is not None:
-                cases = np.flatnonzero(seated if single else seated & (train == t))
-            w = omega[cases][:, None]
-            m = w.shape[0]
-            if m == 0:
-                continue
-            iw = 1j * w
-            w2 = w * w
-            mat = np.empty((m, ns, ns), np.complex128)
-            mat[:] = minus_a
-            mat.reshape(m, ns * ns)[:, :: ns + 1] += iw  # the diagonal
+            mat = np.empty((cases.size, ns, ns), np.complex128)
+            mat[:] = -a_mat[t, ci, :ns, :ns]
+            mat.reshape(cases.size, ns * ns)[:, :: ns + 1] += iw  # the diagonal
+            b = b_in[t, ci, :ns, :, 0]
             rhs = -b[:, 0] - iw * b[:, 1] + w2 * b[:, 2]
             out[cases, ci, :ns] = np.linalg.solve(mat, rhs[..., None])[..., 0]
     return out

@@ -248,7 +248,6 @@ def _walk(ref, st):
         if watch[m] and gval[m] > level[m] and (held or dprev[m] > 0.0):
             _apply_event(ref, st, m, t_s)
             return
-    per_turn = _turn_samples(w, t_sample, n_out, n_rev)
     t_prev = t_s
     h = -1.0
     since_refresh = 0
@@ -342,7 +341,7 @@ def _walk(ref, st):
             continue
         if to_sample:
             _sample(ref, st, nact, w * t_n - th0, cth, sth)
-            if out.status[c] != 0 or _repeated(out, st, per_turn, trains.n_coordinates[st.tr]):
+            if out.status[c] != 0 or _repeated(out, st, trains.n_coordinates[st.tr]):
                 st.done = True
                 return
         if t_n >= t_end:
@@ -354,11 +353,12 @@ def _walk(ref, st):
 
 
 @njit(inline="always", nogil=True)
-def _repeated(out, st, per_turn, n_coord):
-    """The sample just written closes case st.c's first turn (``per_turn`` samples a turn,
+def _repeated(out, st, n_coord):
+    """The sample just written closes case st.c's first turn (``st.per_turn`` samples a turn,
     0: turns not sampled alike), reached in configuration I with no event, and the first
     turn repeats (``_repeat_first_turn``, which fills the later turns): the case is done."""
     c = st.c
+    per_turn = st.per_turn
     if per_turn == 0 or st.k_out != per_turn + 1 or st.cfg != CAM_CONTACT:
         return False
     if out.n_events[c] != 0 or not _repeat_first_turn(out, c, per_turn, n_coord):
@@ -527,11 +527,11 @@ def modal_exact_batch(cases, trains, profiles, runs, out, ws, state):
     ref = by_ref((cases, trains, profiles, runs, out, ws))
     for c in range(cases.omega.shape[0]):
         _start_case(cases, trains, profiles, runs, ws, st, c, runs.train[c])
-        per_turn = _turn_samples(st.w, runs.t_sample[c], out.q.shape[1], out.per_rev.shape[1])
+        st.per_turn = _turn_samples(st.w, runs.t_sample[c], out.q.shape[1], out.per_rev.shape[1])
         while not st.done:
             _begin_segment(ref, st)
             # (A segment may begin on the sample that closes the first turn.)
-            if not _repeated(out, st, per_turn, trains.n_coordinates[st.tr]):
+            if not _repeated(out, st, trains.n_coordinates[st.tr]):
                 _walk(ref, st)
             if out.status[c] != OK:
                 break
