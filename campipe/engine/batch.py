@@ -650,43 +650,12 @@ def _run_turn(cases, settings, start=None, **options) -> BatchResult:
 def _failures(out, settings: RunSettings, on_failure, check_stability_limit, integrator) -> None:
     """Raise for the failed cases (``on_failure`` "raise"), warn of truncated events, and
     set a failed case's histories and metrics NaN."""
-    dt_run = settings.step
     status, n_events = out.status, out.n_events
-    bad = np.flatnonzero(status == NONFINITE)
-    if bad.size and on_failure == "raise":
-        how = f"{settings.method}, step {dt_run:g} s" if dt_run else settings.method
-        why = (
-            "the step is beyond the stability limit (the run was asked not to check it)"
-            if not check_stability_limit
-            else "this is a defect: please report it with the case"
-        )
-        raise IntegrationError(
-            f"cases {bad.tolist()} became non-finite ({how}); {why}", found=bad.tolist()
-        )
-    bad = np.flatnonzero(status == CHATTER)
-    if bad.size and on_failure == "raise":
-        raise IntegrationError(
-            f"cases {bad.tolist()}: contact events kept recurring at one instant (chatter); "
-            "integrate them with newmark-linear",
-            found=bad.tolist(),
-        )
-    bad = np.flatnonzero(status == UNBOUNDED)
-    if bad.size and on_failure == "raise":
-        how = f"{settings.method}, step {dt_run:g} s" if integrator.fixed_step else settings.method
-        why = integrator.unbounded_advice or "this is a defect: please report it with the case"
-        raise IntegrationError(
-            f"cases {bad.tolist()}: the motion left its physical bounds ({how}): a valve lift "
-            f"beyond {LIFT_BOUND:g}× the full lift or a speed beyond {SPEED_BOUND:g}× the cam's; "
-            + why,
-            found=bad.tolist(),
-        )
-    bad = np.flatnonzero(status == STEP_LIMIT)
-    if bad.size and on_failure == "raise":
-        raise IntegrationError(
-            f"cases {bad.tolist()}: stopped at run.max_steps ({settings.max_steps:.6g} steps; "
-            "a stiff contact without damping): raise --max-steps, or damp the contact",
-            found=bad.tolist(),
-        )
+    if on_failure == "raise":
+        for code, what in _failure_texts(settings, check_stability_limit, integrator).items():
+            bad = np.flatnonzero(status == code)
+            if bad.size:
+                raise IntegrationError(f"cases {bad.tolist()}{what}", found=bad.tolist())
     for i in np.flatnonzero(status == EVENTS_TRUNCATED):
         log.warning(
             "case %d: %d events, only the first %d kept (raise run.max_events)",
@@ -697,6 +666,32 @@ def _failures(out, settings: RunSettings, on_failure, check_stability_limit, int
     failed = np.flatnonzero(np.isin(status, FAILURES))
     for array in (out.q, out.v, out.acc, out.force, out.cam, out.per_rev):
         array[failed] = np.nan
+
+
+def _failure_texts(settings: RunSettings, check_stability_limit, integrator) -> dict[int, str]:
+    """What ``_failures`` says after "cases [...]" of each failed status, in the order it
+    looks for them."""
+
+    def how(stepped: bool) -> str:
+        return f"{settings.method}, step {settings.step:g} s" if stepped else settings.method
+
+    defect = "this is a defect: please report it with the case"
+    unstable = (
+        "the step is beyond the stability limit (the run was asked not to check it)"
+        if not check_stability_limit
+        else defect
+    )
+    return {
+        NONFINITE: f" became non-finite ({how(bool(settings.step))}); {unstable}",
+        CHATTER: ": contact events kept recurring at one instant (chatter); integrate them "
+        "with newmark-linear",
+        UNBOUNDED: f": the motion left its physical bounds "
+        f"({how(integrator.fixed_step)}): a valve lift beyond "
+        f"{LIFT_BOUND:g}× the full lift or a speed beyond {SPEED_BOUND:g}× the cam's; "
+        + (integrator.unbounded_advice or defect),
+        STEP_LIMIT: f": stopped at run.max_steps ({settings.max_steps:.6g} steps; a stiff "
+        "contact without damping): raise --max-steps, or damp the contact",
+    }
 
 
 def _run_by_contacts(

@@ -27,7 +27,7 @@ import numpy as np
 
 from campipe.constants import TWO_PI
 from campipe.engine.case import Case
-from campipe.engine.result import BatchResult
+from campipe.engine.result import BatchResult, blank_failures
 from campipe.engine.settings import adjuster_turns
 from campipe.engine.settle import consistent_accelerations
 from campipe.model import system_matrices
@@ -200,8 +200,4 @@ def _joined(parts: list[BatchResult], cases, settings, table, status) -> BatchRe
         start_time=first.start_time,
         lash_adjuster=table,
     )
-    failed = np.isin(status, FAILURES)
-    for name in ("q", "v", "acc", "cam_lift", "cam_force", "seat_force"):
-        getattr(result, name)[failed] = np.nan
-    result.per_rev[failed] = np.nan
-    return result
+    return blank_failures(result)

@@ -16,7 +16,7 @@ from campipe.constants import TWO_PI
 from campipe.engine import metrics
 from campipe.engine.loads import spring_histories
 from campipe.model import ValveTrain
-from campipe.vocabulary import CAM, N_EVENT_FIELDS, SEAT
+from campipe.vocabulary import CAM, FAILURES, N_EVENT_FIELDS, SEAT
 
 
 @dataclass
@@ -159,6 +159,19 @@ class BatchResult:
     def follower_acceleration(self) -> np.ndarray:
         """(n_cases, n_out) pushrod foot acceleration in the cam's lift coordinate [m/s²]."""
         return -self.acc[:, :, 0]
+
+
+#: What a failed case (``vocabulary.FAILURES``) of a result shows as NaN: its histories and
+#: its per-turn metrics.
+BLANKED = ("q", "v", "acc", "cam_lift", "cam_force", "seat_force", "per_rev")
+
+
+def blank_failures(result: BatchResult) -> BatchResult:
+    """``result`` with its failed cases' histories and per-turn metrics NaN (in place)."""
+    failed = np.isin(result.status, FAILURES)
+    for name in BLANKED:
+        getattr(result, name)[failed] = np.nan
+    return result
 
 
 #: Fields of a result shared by its parts (not per case).

@@ -34,7 +34,7 @@ import numpy as np
 from campipe.constants import TWO_PI
 from campipe.engine import metrics
 from campipe.engine.case import Case, sample_count
-from campipe.engine.result import BatchResult
+from campipe.engine.result import BatchResult, blank_failures
 from campipe.engine.settings import check_settling, whole_turns
 from campipe.model.assembly import SystemMatrices
 from campipe.profiles import evaluate
@@ -292,8 +292,4 @@ def _result(cases, settings, kept, per_rev, measured, period, settled, done, sta
         turns_run=done,
         recorded_from=recorded_from,
     )
-    failed = np.isin(status, FAILURES)
-    for name in ("q", "v", "acc", "cam_lift", "cam_force", "seat_force"):
-        getattr(result, name)[failed] = np.nan
-    result.per_rev[failed] = np.nan
-    return result
+    return blank_failures(result)
