@@ -262,6 +262,28 @@ SET_HELP = (
 UNIT_SYSTEMS = ("spec", "si", "in-lbf", "mm-deg")
 
 
+def scheduler_options(where: str, workers_for: str):
+    """``--scheduler`` and ``--workers``: where a command's computations run (``where``
+    begins the scheduler's help) and what a cluster's worker threads are counted for."""
+
+    def decorate(command):
+        command = click.option(
+            "--workers",
+            type=click.IntRange(min=1),
+            help="Threads or processes of a local scheduler (default: the cores available); "
+            f"on a dask cluster, its worker threads, {workers_for}.",
+        )(command)
+        return click.option(
+            "--scheduler",
+            default="threads",
+            show_default=True,
+            help=f"{where}threads, synchronous, processes, or a dask.distributed scheduler "
+            "address such as tcp://127.0.0.1:8786.",
+        )(command)
+
+    return decorate
+
+
 def verify_option(command):
     """``--no-verify``: read an archive without first checking it against its checksums."""
     return click.option(

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from campipe.cli.base import SET_HELP, Failure, InputFailure, load_spec
+from campipe.cli.base import SET_HELP, Failure, InputFailure, load_spec, scheduler_options
 
 
 @click.command()
@@ -29,18 +29,8 @@ from campipe.cli.base import SET_HELP, Failure, InputFailure, load_spec
     is_flag=True,
     help="Replace a file at the output path that is not this spec's design file; never the spec.",
 )
-@click.option(
-    "--scheduler",
-    default="threads",
-    show_default=True,
-    help="Where the designs are computed, as campipe study's batches: threads, synchronous, "
-    "processes, or a dask.distributed scheduler address such as tcp://127.0.0.1:8786.",
-)
-@click.option(
-    "--workers",
-    type=click.IntRange(min=1),
-    help="Threads or processes of a local scheduler (default: the cores available); on a "
-    "dask cluster, its worker threads, for which the estimate is made.",
+@scheduler_options(
+    "Where the designs are computed, as campipe study's batches: ", "for which the estimate is made"
 )
 def design(spec, sets, fmt, output, overwrite, scheduler, workers) -> None:
     """The design SPEC's design: section asks for: the values of design.vary's keys, within

@@ -15,6 +15,7 @@ from campipe.cli.base import (
     limits_given,
     load_spec,
     parse_overrides,
+    scheduler_options,
     units_option,
     verify_option,
 )
@@ -32,19 +33,7 @@ from campipe.cli.plot import check_spec_plots, write_plots
     "<name>.parts).",
 )
 @click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=SET_HELP)
-@click.option(
-    "--scheduler",
-    default="threads",
-    show_default=True,
-    help="threads, synchronous, processes, or a dask.distributed scheduler address "
-    "such as tcp://127.0.0.1:8786.",
-)
-@click.option(
-    "--workers",
-    type=click.IntRange(min=1),
-    help="Threads or processes of a local scheduler (default: the cores available); on a "
-    "dask cluster, its worker threads, for which the batches are sized.",
-)
+@scheduler_options("", "for which the batches are sized")
 @click.option(
     "--batch-size",
     type=click.IntRange(min=1),
