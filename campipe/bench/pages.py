@@ -501,9 +501,7 @@ def cluster_block(bench: Bench) -> str:
             "Not measured in this run (`--no-scaling` or `--no-cluster`, or a run from before "
             "the block): `python -m campipe.bench.cluster` runs it alone.\n"
         )
-    lines = cluster.notes(bench.cluster) + [""]
-    lines += table(cluster.HEADER, cluster.table_rows(bench.cluster))
-    return "\n".join(lines) + "\n"
+    return _notes_and_table(cluster, bench.cluster)
 
 
 def memory_block(bench: Bench) -> str:
@@ -513,8 +511,14 @@ def memory_block(bench: Bench) -> str:
             "Not measured in this run (`--no-scaling`, or a run from before the block): "
             "`python -m campipe.bench.memory` runs it alone.\n"
         )
-    lines = memory.notes(bench.memory) + [""]
-    lines += table(memory.HEADER, memory.table_rows(bench.memory))
+    return _notes_and_table(memory, bench.memory)
+
+
+def _notes_and_table(block, data) -> str:
+    """A measurement's block: its module's ``notes`` of ``data``, then its table
+    (``HEADER``, ``table_rows``)."""
+    lines = block.notes(data) + [""]
+    lines += table(block.HEADER, block.table_rows(data))
     return "\n".join(lines) + "\n"
 
 

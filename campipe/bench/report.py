@@ -80,6 +80,18 @@ def _table(header: list[str], rows: list[list[str]]) -> list[str]:
     return lines
 
 
+def _section(title: str, block, data) -> list[str]:
+    """A measurement's section: its title, its module's ``notes`` of ``data``, its table."""
+    return [
+        "",
+        f"## {title}",
+        "",
+        *block.notes(data),
+        "",
+        *_table(block.HEADER, block.table_rows(data)),
+    ]
+
+
 def _clean(obj):
     """JSON-safe: NaN and inf become null."""
     if isinstance(obj, float) and not math.isfinite(obj):
@@ -326,9 +338,8 @@ def markdown(bench: Bench, with_plots: bool = True) -> str:
                 f"{_num(a['ratio_contacts_only'])}."
             )
     if bench.sweep:
-        lines += ["", "## The speed sweep: the default against the thesis's algorithm", ""]
-        lines += sweep.notes(bench.sweep) + [""]
-        lines += _table(sweep.HEADER, sweep.table_rows(bench.sweep))
+        lines += _section("The speed sweep: the default against the thesis's algorithm", sweep,
+                          bench.sweep)  # fmt: skip
     if bench.throughput:
         lines += ["", "## Throughput: a 256-case batch", ""]
         lines += _table(
@@ -393,13 +404,9 @@ def markdown(bench: Bench, with_plots: bool = True) -> str:
             ],
         )
     if bench.cluster:
-        lines += ["", "## A study on a dask cluster", ""]
-        lines += cluster.notes(bench.cluster) + [""]
-        lines += _table(cluster.HEADER, cluster.table_rows(bench.cluster))
+        lines += _section("A study on a dask cluster", cluster, bench.cluster)
     if bench.memory:
-        lines += ["", "## A study's peak memory", ""]
-        lines += memory.notes(bench.memory) + [""]
-        lines += _table(memory.HEADER, memory.table_rows(bench.memory))
+        lines += _section("A study's peak memory", memory, bench.memory)
     lines += ["", "## Every run", ""]
     lines += _table(
         [c[1] or c[0] for c in COLUMNS],
