@@ -8,6 +8,7 @@ The vocabulary (configuration numbers, event kinds, status codes) is
 
 from __future__ import annotations
 
+import math
 import mmap
 from typing import NamedTuple
 
@@ -111,9 +112,10 @@ configuration = njit(inline="always")(vocabulary.configuration)
 holds_cam = njit(inline="always")(vocabulary.holds_cam)
 holds_seat = njit(inline="always")(vocabulary.holds_seat)
 
-#: A profile break whose lift rate jumps by less than this [m/s] (beyond 1e-9 relative) is
-#: smooth: rounding in re-expanded polynomial pieces, not a velocity jump.
+#: A profile break whose lift rate jumps by less than this [m/s] (beyond JUMP_RELATIVE of the
+#: rates either side) is smooth: rounding in re-expanded polynomial pieces, not a velocity jump.
 JUMP_FLOOR = 1e-9
+JUMP_RELATIVE = 1e-9
 #: A step down in lift larger than this [m] at a break is a drop (the engine refuses steps up).
 DROP_FLOOR = 1e-12
 #: A gap's level [m]: the penetration at which a contact closes (an impact), in both
@@ -299,7 +301,7 @@ def classify_break(l_left, dl_left, l_right, dl_right, w, form, capture):
       force-closed follower, which keeps its own velocity and leaves;
     - JUMP: the surface's rate jumps into the follower (or drags a form-closed one): an
       impact of the follower by the cam;
-    - SMOOTH: a rate jump within rounding (JUMP_FLOOR, and 1e-9 relative), or slower than the
+    - SMOOTH: a rate jump within rounding (JUMP_FLOOR, and JUMP_RELATIVE), or slower than the
       capture velocity ``capture`` [m/s]: the follower rests on the surface through it, as it
       would through an impact that slow (the rounding at a polydyne's piece joins, 6e-13 m/s,
       is no impact).
@@ -307,13 +309,25 @@ def classify_break(l_left, dl_left, l_right, dl_right, w, form, capture):
     Inlined: computed with the caller's floating-point flags.
     """
     jump = w * (dl_right - dl_left)
-    scale = max(1e-9 * (abs(w * dl_left) + abs(w * dl_right)) + JUMP_FLOOR, capture)
+    scale = max(JUMP_RELATIVE * (abs(w * dl_left) + abs(w * dl_right)) + JUMP_FLOOR, capture)
     drop = l_right < l_left - DROP_FLOOR
     if (jump < -scale or drop) and not form:
         return RELEASE, jump
     if abs(jump) > scale:
         return JUMP, jump
     return SMOOTH, jump
+
+
+def jump_speed(dl_left: float, dl_right: float, capture: float) -> float:
+    """The speed [rad/s] above which :func:`classify_break` takes a break whose lift rate
+    [m/rad] is ``dl_left`` and ``dl_right`` either side for a jump or a release (not SMOOTH):
+    w·|Δ| > max(JUMP_RELATIVE·w·(|dl_left| + |dl_right|) + JUMP_FLOOR, capture) for every w
+    above it and at no w at or below it; +inf for a jump within rounding at every speed."""
+    step = abs(dl_right - dl_left)
+    relative = step - JUMP_RELATIVE * (abs(dl_left) + abs(dl_right))
+    if relative <= 0.0:
+        return math.inf
+    return max(JUMP_FLOOR / relative, capture / step)
 
 
 @njit(inline="always")

@@ -26,7 +26,7 @@ import numpy as np
 from campipe.constants import RPM
 from campipe.engine import slope_bound, steady
 from campipe.engine.batch import Case, CaseError, RunSettings, check_run, run_batch, train_matrices
-from campipe.engine.periodic import prepare_steady
+from campipe.engine.periodic import leave_speeds, prepare_steady
 from campipe.model import ValveTrain
 
 #: Turns the engine integrates for a steady state with the valve seated on part of the turn
@@ -117,14 +117,16 @@ class Onset:
 _CLOSED, _TURN = 0, 1
 
 
-def _evaluate(designs, batch, speeds, todo, level):
+def _evaluate(designs, batch, speeds, todo, level, leave):
     """The steady state of the designs ``todo`` at speeds[i]: (value, kind, no-follow,
     margin, height). The value is positive where the design follows: the closed form's margin [N]
     where configuration I holds, or leaves the cam without a seat or at level 0; else (the
-    valve seats on part of the turn, or it leaves the cam and a level is asked for) the
+    valve seats on part of the turn, the follower leaves the cam at a break, above ``leave``
+    [rad/s]: ``periodic.leave_speeds``, or it leaves the cam and a level is asked for) the
     level less the seated steady state's no-follow per turn [rad]. The margin is the closed
-    form's, NaN where the valve seats; the height the closed form's least valve height above
-    the seat [m] (+inf without a seat) where the value is the closed form's, else NaN."""
+    form's, NaN where the valve seats or the follower leaves at a break; the height the
+    closed form's least valve height above the seat [m] (+inf without a seat) where the
+    value is the closed form's, else NaN."""
     n = len(designs)
     value = np.full(n, np.nan)
     kind = np.zeros(n, np.int8)
@@ -132,7 +134,8 @@ def _evaluate(designs, batch, speeds, todo, level):
     out = batch.extremes(np.where(todo, speeds, 1.0), with_max=False, active=todo)
     force = out[:, steady.MIN_FORCE]
     seats = todo & (out[:, steady.MIN_HEIGHT] < 0.0)
-    turn = seats | (todo & (force < 0.0) & (level > 0.0))
+    off = seats | (todo & (speeds > leave))  # configuration I is not the steady state
+    turn = off | (todo & (force < 0.0) & (level > 0.0))
     closed = todo & ~turn
     value[closed] = force[closed]
     no_follow[closed] = force[closed] < 0.0
@@ -142,7 +145,7 @@ def _evaluate(designs, batch, speeds, todo, level):
         kind[idx] = _TURN
         value[idx] = level[idx] - sep
         no_follow[idx] = np.where(level[idx] > 0.0, sep >= level[idx], sep > 0.0)
-    margin = np.where(todo & ~seats, force, np.nan)
+    margin = np.where(todo & ~off, force, np.nan)
     height = np.where(closed, out[:, steady.MIN_HEIGHT], np.nan)
     return value, kind, no_follow, margin, height
 
@@ -157,10 +160,12 @@ def _transfer(train: ValveTrain) -> slope_bound.Transfer | None:
 
 class _Proof:
     """The proven bound of the designs' configuration I (``slope_bound``), per train and
-    profile computed once, for designs whose profile is ``provable`` (no step in lift, lift
-    rate or lift acceleration) and whose train's transfer passes its check."""
+    profile computed once, for designs whose profile is ``provable`` (no step in lift) and
+    whose train's transfer passes its check, at speeds above ``held`` (where every velocity
+    step strikes the held follower, as the series' impulse: ``slope_bound.held_from`` at
+    the capture velocity ``capture`` [m/s])."""
 
-    def __init__(self, designs: Sequence[Case]) -> None:
+    def __init__(self, designs: Sequence[Case], capture: float) -> None:
         self.designs = designs
         profiles: dict[int, int] = {}
         self.profile = np.array([profiles.setdefault(id(d.profile), len(profiles))
@@ -171,6 +176,8 @@ class _Proof:
         self.provable = np.array(ok)[self.profile]
         for i in np.flatnonzero(self.provable):
             self.provable[i] = _transfer(designs[int(i)].train) is not None
+        held = [slope_bound.held_from(designs[i].profile, capture) for i in self._first]
+        self.held = np.array(held)[self.profile]
         self._spectra: dict[int, slope_bound.Spectrum] = {}
 
     def bounds(self, rows: np.ndarray, a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -245,7 +252,7 @@ class _Points:
             b, vb, kb, nb, hb = self.top(1)
             width = b - self.a
             same = self.a_kind == kb
-            exact = same & (kb == _CLOSED) & proof.provable
+            exact = same & (kb == _CLOSED) & proof.provable & (self.a > proof.held)
             wide = live & ~nb & (width > tolerance)
             free = np.zeros(width.size, np.bool_)
             rows = np.flatnonzero(wide & exact)
@@ -356,12 +363,13 @@ def onset_speeds(
     train leaves the cam), the level less the seated steady state's no-follow per turn.
     |v'| ≤ L on [a, b] gives v ≥ (v_a + v_b − L·(b − a))/2 there, so the interval is
     certified when v_a + v_b ≥ L·(b − a), or when b − a is no wider than the tolerance.
-    Where both ends are configuration I's and the profile has no lift or velocity step, L
-    is *proven* (``slope_bound.slope_bounds``: the Fourier series of the steady state and
-    the train's poles, over every angle and every speed of [a, b]), and the valve's height
-    above a seat must pass the same test, so configuration I holds across the interval.
-    Elsewhere (a seated steady state, whose no-follow has impacts and is not Lipschitz in
-    the speed; a profile with steps, whose lift has no Fourier tail bound) L is an
+    Where both ends are configuration I's and the profile's lift has no step, L is
+    *proven* (``slope_bound.slope_bounds``: the Fourier series of the steady state and the
+    train's poles, over every angle and every speed of [a, b]; a velocity step's impulse is
+    the series' as the closed form's, above ``slope_bound.held_from``), and the valve's
+    height above a seat must pass the same test, so configuration I holds across the
+    interval. Elsewhere (a seated steady state, whose no-follow has impacts and is not
+    Lipschitz in the speed; a profile whose lift steps, with no Fourier tail bound) L is an
     *estimate*: ONSET_SLOPE_FACTOR × the steepest of the chord over [a, b], the chord
     certified before it and the chord after it (of the same kind of value); ``Onset.proven``
     says which a design's search needed. The first speed found with no-follow closes a
@@ -418,6 +426,8 @@ def onset_speeds(
     n = len(designs)
     batch = prepare_steady(designs)
     levels = np.where(batch.cases.has_seat, float(level), 0.0)
+    capture = RunSettings().capture_velocity  # prepare_steady's, the runs'
+    leave = leave_speeds(designs, capture)
     grid = np.linspace(low, high, max(2, int(scan)))
     value = np.full((n, grid.size), np.nan)
     kind = np.zeros((n, grid.size), np.int8)
@@ -427,11 +437,11 @@ def onset_speeds(
     height = np.full((n, grid.size), np.nan)
     for k, s in enumerate(grid):
         value[:, k], kind[:, k], no_follow[:, k], margin[:, k], height[:, k] = _evaluate(
-            designs, batch, np.full(n, s), every, levels
+            designs, batch, np.full(n, s), every, levels, leave
         )
     evaluations = np.full(n, grid.size)
     pts = _start(grid, value, kind, no_follow, height)
-    proof = _Proof(designs)
+    proof = _Proof(designs, capture)
     status = np.where(no_follow[:, 0], "below", "none").astype(object)
     for _ in range(100_000):
         pts.certify(tolerance, proof)
@@ -443,7 +453,7 @@ def onset_speeds(
         if not pts.active.any():
             break
         x = pts.split(tolerance)
-        vx, kx, nx, _, hx = _evaluate(designs, batch, x, pts.active, levels)
+        vx, kx, nx, _, hx = _evaluate(designs, batch, x, pts.active, levels, leave)
         evaluations += pts.active
         pts.push(pts.active, x, vx, kx, nx, hx)
     b, _, kb, _, _ = pts.top(1)

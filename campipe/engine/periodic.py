@@ -40,7 +40,7 @@ from campipe.engine.batch import (
     valve_reference,
 )
 from campipe.engine.closed_form import STATE, ExactRuns, ModalTrains, make_workspace, stack_trains
-from campipe.engine.common import SMOOTH, Cases, classify_break
+from campipe.engine.common import DROP_FLOOR, SMOOTH, Cases, classify_break, jump_speed
 from campipe.engine.metrics import MAX_CAM_FORCE, N_ENGINE
 from campipe.engine.modal import ModalData
 from campipe.engine.settings import sample_count, turn_count
@@ -303,6 +303,31 @@ def break_events(cases: Sequence[Case], capture: float) -> np.ndarray:
             classify(l0, d0, l1, d1, case.speed, form, capture)[0] != SMOOTH
             for l0, d0, l1, d1 in zip(*limits[key], strict=True)
         )
+    return out
+
+
+def leave_speeds(cases: Sequence[Case], capture: float) -> np.ndarray:
+    """(n,) the speed [rad/s] above which a follower held on the case's cam leaves it at a
+    break (``common.classify_break`` as in ``break_events``; ``common.jump_speed``): a release
+    (the lift rate drops, or the lift steps down: at every speed), or a rate jump into a
+    force-closed follower that bounces off (a coefficient of restitution at the cam); +inf
+    where none does (form closure, a plastic follower on a rising step). The closed form
+    carries every other break (a plastic impact's impulse: ``steady``); above this speed the
+    follower leaves configuration I every turn."""
+    out = np.full(len(cases), np.inf)
+    limits: dict[int, tuple[np.ndarray, ...]] = {}
+    for i, case in enumerate(cases):
+        if case.closure == "form":
+            continue
+        key = id(case.profile)
+        if key not in limits:
+            limits[key] = _break_limits(case.profile)
+        bounces = case.train.cam_restitution > 0.0
+        for l0, d0, l1, d1 in zip(*limits[key], strict=True):
+            if l1 < l0 - DROP_FLOOR:
+                out[i] = 0.0
+            elif d1 < d0 or bounces:
+                out[i] = min(out[i], jump_speed(float(d0), float(d1), capture))
     return out
 
 

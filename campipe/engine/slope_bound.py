@@ -34,11 +34,18 @@ v_a + v_b ≥ L·(b − a) stays positive across [a, b]. The same holds for the 
 above its seat.
 
 The bound is for configuration I's closed form, the margin the search reads, on profiles
-whose lift, rate and acceleration are continuous (``provable``); it does not cover a seated
-steady state (impacts at the seat and the cam), whose no-follow is not Lipschitz in the
-speed. It bounds the change between speeds of the least force over the turn; at each speed
-that least is the closed form's own, found by ``steady.steady_extremes`` (sampled at
-``steady.EXTREME_SAMPLES`` a turn, the least sample refined by Newton's method).
+whose lift is continuous (``provable``). A velocity step (a constant-velocity ramp's ends, a
+flat's edges) makes u″ an impulse there: the series carries it (|Y_k| ≤ T₁/k², T₁ the
+variation of y′ with its steps, is all the tail takes), the bound's polynomial part is the
+pieces' one-sided y″ (the impulse's instant left out: the force on either side of it is
+bounded at every speed, the impulse itself a push, not the least force), and the closed form
+carries it as the run does where the follower is struck there (above ``held_from``: a
+plastic impact; a step the follower leaves at, a release, is not configuration I). It does
+not cover a seated steady state (impacts at the seat and the cam), whose no-follow is not
+Lipschitz in the speed. It bounds the change between speeds of the least force over the
+turn; at each speed that least is the closed form's own, found by
+``steady.steady_extremes`` (sampled at ``steady.EXTREME_SAMPLES`` a turn, the least sample
+refined by Newton's method).
 
 Pure numerics: arrays in, arrays out.
 """
@@ -51,6 +58,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from campipe.constants import TWO_PI
+from campipe.engine.common import jump_speed
 from campipe.model.assembly import SystemMatrices
 from campipe.profiles.pieces import N_COEFFS, Profile
 from campipe.vocabulary import CAM, SEAT
@@ -215,12 +223,18 @@ def _steps(profile: Profile, order: int) -> np.ndarray:
     return np.abs(left - right)
 
 
+def _scale(profile: Profile) -> float:
+    """The lift's scale [m]: its largest at the breaks, at least 1 mm (steps below STEP of it
+    are rounding)."""
+    lifts = _derivative(profile, 0, np.arange(profile.n_pieces), profile.breaks[:-1])
+    return max(float(np.max(np.abs(lifts))), 1e-3)
+
+
 def _variations(profile: Profile) -> tuple[float, ...]:
     """T_m = TV(y^(m))/2π, m = 1 … TAIL_ORDERS: the pieces' ∫|y^(m+1)| (bounded) and the
     steps of y^(m); +inf from the first m whose y^(m−1) steps."""
     width = np.diff(profile.breaks)
-    lifts = _derivative(profile, 0, np.arange(profile.n_pieces), profile.breaks[:-1])
-    scale = max(float(np.max(np.abs(lifts))), 1e-3)  # [m]: steps below STEP·scale are rounding
+    scale = _scale(profile)
     out: list[float] = []
     for m in range(1, TAIL_ORDERS + 1):
         if out and math.isinf(out[-1]) or np.any(_steps(profile, m - 1) > STEP * scale):
@@ -367,9 +381,27 @@ def slope_bounds(tr: Transfer, sp: Spectrum, a: float, b: float) -> tuple[float,
 
 
 def provable(profile: Profile) -> bool:
-    """The bound holds for the profile's closed form: its lift, lift rate and lift
-    acceleration are continuous (no step beyond rounding). A velocity step (a
-    constant-velocity ramp's ends, a flat's edges) or a step in the acceleration leaves the
-    tail of the spectrum without the T₃ bound (the closed form carries a velocity step's
-    impulse, and is the series as it converges)."""
-    return math.isfinite(_variations(profile)[-1])
+    """The bound holds for the profile's closed form: its lift is continuous (no step beyond
+    rounding). A velocity step (a constant-velocity ramp's ends, a flat's edges) leaves the
+    spectrum's tail T₁ (|Y_k| ≤ T₁/k²) and the pieces' one-sided y″, which is all the bound
+    takes; the step's impulse is the series' too, and the closed form carries it where the
+    follower is struck there (``held_from``)."""
+    return math.isfinite(_variations(profile)[0])
+
+
+def held_from(profile: Profile, capture: float) -> float:
+    """The speed [rad/s] above which every velocity step of ``profile`` beyond rounding (at
+    least STEP of the lift's scale) is an impact of the held follower or a release
+    (``common.jump_speed``: faster than the capture velocity ``capture`` [m/s]), not crossed
+    smoothly; 0 without such steps. Below it the closed form crosses a step without its
+    impulse, so it is not the Fourier series the bound is of; above it an impact is the
+    series' impulse (plastic) and a release leaves configuration I (``periodic``)."""
+    n = profile.n_pieces
+    left = _derivative(profile, 1, np.arange(n), profile.breaks[1:])
+    right = _derivative(profile, 1, np.arange(1, n + 1) % n, profile.breaks[1:] % TWO_PI)
+    real = np.abs(right - left) > STEP * _scale(profile)
+    speeds = [
+        jump_speed(float(a), float(b), capture)
+        for a, b in zip(left[real], right[real], strict=True)
+    ]
+    return max(speeds, default=0.0)

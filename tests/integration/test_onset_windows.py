@@ -19,7 +19,7 @@ from campipe.engine import Case, CaseError, RunSettings, run_batch
 from campipe.engine import onset as O
 from campipe.engine import periodic as P
 from campipe.model import thesis_train
-from campipe.profiles import Ramp, harmonic, polydyne
+from campipe.profiles import Ramp, flat, harmonic, polydyne
 
 TOL = O.DEFAULT_ONSET_TOLERANCE_RPM
 #: The polydyne with constant-velocity ramps of studies/lash-ramp.yaml (0.3 mm over 30°).
@@ -61,15 +61,19 @@ def test_the_onset_misses_no_window_of_the_margin(preload, width):
     """A window of no-follow 16 rpm wide (2.5 rpm at 90.35 lbf, near where it closes), far
     narrower than the first scan's step (187.5 rpm over 2000-8000 rpm): every range enclosing
     it gives its lower edge, the first root of a dense scan of the margin, to the tolerance.
-    Broken copy: the search without its certificate (the first sign change among the 33
-    scanned speeds, as before issue 32) steps over the window and gives the onset past it
-    (about 5190 rpm)."""
+    Each search is proven: the ramps' velocity steps are impulses of the closed form as of
+    the Fourier series the bound is of (tests/unit/test_slope_bound.py). Broken copy: the
+    search without its certificate (the first sign change among the 33 scanned speeds, as
+    before issue 32) steps over the window and gives the onset past it (about 5190 rpm);
+    ``_Proof`` with the ramped profile not provable (as before): not proven."""
     design = dataclasses.replace(WINDOW, train=WINDOW.train.replace(spring_preload=preload * LBF))
     root, changes = first_root_of_the_margin(design, 4000, 6000)
     assert len(changes) == 3 and changes[1] - changes[0] < width  # the window, then the onset
     for low, high in ((2000, 8000), (1000, 12000), (4000, 5000), (4500, 4650), (4560, 4575)):
-        speed, status = onset_rpm(design, low, high)
+        on = O.onset_speeds([design], low * RPM, high * RPM)
+        speed, status = on.speed[0] / RPM, on.status[0]
         assert status == "found" and abs(speed - root) <= 0.5 * TOL + 1e-3, (low, high, speed)
+        assert on.proven[0], (low, high)
     # A range that starts inside the follow band between the window and the onset.
     speed, _ = onset_rpm(design, 4600, 6000)
     assert abs(speed - changes[2]) < 0.5 + TOL
@@ -161,20 +165,46 @@ SMOOTH = Case(thesis_train().replace(damping_ratios=(0.02, 0.05), spring_preload
 def test_a_smooth_design_s_onset_is_proven_over_nested_ranges():
     """Every range enclosing the onset gives the first root of a dense scan of the margin (a
     second method: 0.5 rpm grid and Brent's method) to the tolerance, each search proven
-    (every interval certified by the proven bound); the ramped design's search is not proven
-    (its closed form drops the ramps' impulses), nor a seated one's. Broken copy: ``_Proof``
-    taking every design as provable marks the ramped search proven; the search certifying
-    on the bound without the valve's height, or with the bound's slope halved where it is
-    tight (1.3x), still finds this onset: the proof's soundness is the unit tests'."""
+    (every interval certified by the proven bound); a seated design's is not. Broken copy:
+    ``_Proof`` taking every design as provable marks the seated search proven; the search
+    certifying on the bound without the valve's height, or with the bound's slope halved
+    where it is tight (1.3x), still finds this onset: the proof's soundness is the unit
+    tests'."""
     root, _ = first_root_of_the_margin(SMOOTH, 4000, 7000)
     for low, high in ((1000, 12000), (2000, 8000), (5000, 6000), (root - 30, root + 5)):
         on = O.onset_speeds([SMOOTH], low * RPM, high * RPM)
         assert on.status[0] == "found" and on.proven[0]
         assert abs(on.speed[0] / RPM - root) <= 0.5 * TOL + 1e-3, (low, high)
-    assert not O.onset_speeds([WINDOW], 4000 * RPM, 6000 * RPM).proven[0]
     seated = dataclasses.replace(SMOOTH, seat=0.0)
     on = O.onset_speeds([seated], 4000 * RPM, 7000 * RPM)
     assert on.status[0] == "found" and not on.proven[0]
+
+
+#: The thesis's harmonic cam with its machining error, a flat across the nose (268-272°): the
+#: lift rate drops at both edges, so a force-closed follower leaves there every turn.
+FLAT = Case(thesis_train(), flat(harmonic(INCH), *np.radians([268, 272])), 1.0)
+
+
+@pytest.mark.parametrize(
+    "design", [FLAT, dataclasses.replace(WINDOW, train=WINDOW.train.replace(cam_restitution=0.3))],
+    ids=["flat", "ramps-with-restitution"],
+)  # fmt: skip
+def test_a_follower_that_leaves_at_a_break_has_no_follow_from_the_low_end(design):
+    """The flat's edges (a release) and the ramps' steps into a follower that bounces off the
+    cam (restitution 0.3) throw the follower off every turn at any speed above where the
+    steps exceed the capture velocity (21.5 and 16.7 rpm). Against the full engine (12 turns
+    from the periodic start, the last one's no-follow) at 2000 and 6000 rpm, which separates
+    on every turn, the onset over 1000-12000 rpm is below the range. Broken copy: the search
+    on the closed form's margin alone (``periodic.leave_speeds`` not asked: the closed form
+    smooths the release over, or strikes the ramps plastically) finds an onset at 9178 rpm
+    for the flat and 4564 rpm for the ramps, where the engine has separated for thousands of
+    rpm."""
+    on = O.onset_speeds([design], 1000 * RPM, 12000 * RPM)
+    assert on.status[0] == "below" and np.isnan(on.speed[0])
+    runs = [dataclasses.replace(design, speed=rpm * RPM) for rpm in (2000, 6000)]
+    res = run_batch(runs, RunSettings(revolutions=12, warmup=0))
+    assert np.all(res.separation_per_rev[:, 1:] > 0.0)
+    assert np.all(P.leave_speeds(runs, RunSettings().capture_velocity) < 25 * RPM)
 
 
 def test_the_onset_file_says_whether_the_search_is_proven(tmp_path):
