@@ -27,6 +27,7 @@ from campipe.engine.metrics import (
     N_ENGINE,
     SEAT_IMPACTS,
 )
+from campipe.profiles.packed import locate, next_break, piece_eval
 from campipe.vocabulary import (
     CAM_IMPACT,
     CAM_SEPARATION,
@@ -316,6 +317,56 @@ def classify_break(l_left, dl_left, l_right, dl_right, w, form, capture):
     if abs(jump) > scale:
         return JUMP, jump
     return SMOOTH, jump
+
+
+#: A break within this fraction of the run's end (or of its start angle) is at the end (the
+#: start): ``ends_on_a_break``, ``start_piece``.
+AT_BREAK = 1e-12
+
+
+@njit(inline="always")
+def held_break(profiles, c, p, rev, w, form, capture):
+    """The kind of the break that ends piece ``p`` of turn ``rev`` for a follower held on the
+    cam (:func:`classify_break`, its one-sided lift and rate from the pieces either side)."""
+    pn, revn, theta = next_break(profiles, c, p, rev)
+    l_left, dl_left, _ = piece_eval(profiles, c, p, rev, theta)
+    l_right, dl_right, _ = piece_eval(profiles, c, pn, revn, theta)
+    return classify_break(l_left, dl_left, l_right, dl_right, w, form, capture)[0]
+
+
+@njit(inline="always")
+def start_piece(profiles, c, theta, cfg, w, form, capture):
+    """(turn, piece) a run starting at cam angle ``theta`` [rad] in configuration ``cfg``
+    begins on. A start state is the state *before* anything at its instant: where ``theta``
+    is a break (to AT_BREAK) that a held follower cannot cross smoothly (an impact of the
+    cam's rate jump, a release), the run begins on the piece that ends there and crosses the
+    break first, as a run that reached it would; else on the piece holding ``theta``. So a
+    run continued from another's last state (which ends before a break at its end:
+    ``ends_on_a_break``) and a periodic start at a break (``steady.periodic_starts``) count
+    the break's event in the turn it starts."""
+    rev, p = locate(profiles, c, theta)
+    if not holds_cam(cfg):
+        return rev, p
+    th_b = rev * TWO_PI + profiles.breaks[c, p]
+    if abs(theta - th_b) > AT_BREAK * (1.0 + abs(theta)):
+        return rev, p
+    pl, revl = p - 1, rev
+    if pl < 0:
+        pl, revl = profiles.n_pieces[c] - 1, rev - 1
+    if held_break(profiles, c, pl, revl, w, form, capture) == SMOOTH:
+        return rev, p
+    return revl, pl
+
+
+@njit(inline="always")
+def ends_on_a_break(profiles, c, p, rev, t_break, t_end, cfg, w, form, capture):
+    """The break ending piece ``p`` of turn ``rev`` at ``t_break`` [s] is at the run's end
+    ``t_end`` [s] (to AT_BREAK) and a held follower cannot cross it smoothly: the run ends
+    before it, its last state the one before the break (the next run's start crosses it:
+    ``start_piece``)."""
+    if t_break < t_end * (1.0 - AT_BREAK) or not holds_cam(cfg):
+        return False
+    return held_break(profiles, c, p, rev, w, form, capture) != SMOOTH
 
 
 def jump_speed(dl_left: float, dl_right: float, capture: float) -> float:

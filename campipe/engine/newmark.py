@@ -49,11 +49,13 @@ from numba.extending import intrinsic
 
 from campipe.constants import TWO_PI
 from campipe.engine.common import (
+    AT_BREAK,
     GAP_LEVEL,
     HELPER,
     JUMP,
     KERNEL,
     RELEASE,
+    SMOOTH,
     TURN_GUARD,
     by_ref,
     classify_break,
@@ -61,6 +63,7 @@ from campipe.engine.common import (
     deref,
     holds_cam,
     holds_seat,
+    start_piece,
 )
 from campipe.engine.metrics import (
     MAX_CAM_FORCE,
@@ -72,6 +75,7 @@ from campipe.engine.metrics import (
 from campipe.engine.policy import release, strike, strike_at_break
 from campipe.profiles.packed import degree, evaluate_packed, horner, locate, next_break, piece_eval
 from campipe.vocabulary import (
+    CAM,
     EVENTS_TRUNCATED,
     N_COORDINATES,
     NONFINITE,
@@ -133,6 +137,7 @@ class NewmarkRuns(NamedTuple):
     dt: np.ndarray  # (n,) step [s]
     n_steps: np.ndarray  # (n,) int64 steps to take
     d_theta_out: float  # output spacing in cam angle [rad]
+    t_end: np.ndarray  # (n,) the run's end [s] (its last step may end after it)
 
 
 @njit(**HELPER, fastmath=FAST)
@@ -281,12 +286,14 @@ CONTACT_STATE = np.dtype(
 
 
 @njit(**HELPER, fastmath=FAST)
-def _cross_breaks(ref, ct, c, w, th1, cfg, p, rev, pn, revn, thb):
+def _cross_breaks(ref, ct, c, w, th1, th_end, cfg, p, rev, pn, revn, thb):
     """Move case c's piece cursor (piece p of turn rev; the next break thb [rad] starts piece
     pn of turn revn) up to the step end θ1 [rad], classifying each break crossed with the cam
     held (``common.classify_break``): a surface falling away releases the follower, one
     jumping into it is a cam impact (the seat, if held, releasing where it would separate).
-    Returns the configuration, whether that impact's impulse starts now, and the cursor."""
+    One of those at the run's end θ_end [rad] (to ``common.AT_BREAK``) is left to the next
+    run's start (``common.start_piece``). Returns the configuration, whether that impact's
+    impulse starts now, and the cursor."""
     cases, _, profiles, _, out = deref(ref)
     impulse_cam = False
     while th1 >= thb:
@@ -296,6 +303,8 @@ def _cross_breaks(ref, ct, c, w, th1, cfg, p, rev, pn, revn, thb):
             kind, jump = classify_break(
                 l_left, dl_left, l_right, dl_right, w, cases.form[c], cases.capture[c]
             )
+            if kind != SMOOTH and thb >= th_end * (1.0 - AT_BREAK):
+                break
             seat_held = holds_seat(cfg)
             if kind == RELEASE:
                 # The surface falls away: the follower keeps its velocity.
@@ -554,7 +563,15 @@ def newmark_linear_batch(cases, trains, profiles, runs, out, work, contact):
         quiet_seat = 0
         k_out = np.int64(0)  # not a literal: one compiled ``_write_samples`` (``common``)
         t_sample = 0.0
-        rev, p = locate(profiles, c, w * n0 * h)
+        rev, p = start_piece(profiles, c, w * n0 * h, cfg, w, form_c, cases.capture[c])
+        rev_at, p_at = locate(profiles, c, w * n0 * h)
+        if rev != rev_at or p != p_at:
+            # The run crosses the break it starts on: the held cam's coordinate is its value
+            # before the break, which the first step's impulse starts from (``_hold``).
+            l_s, dl_s, _ = piece_eval(profiles, c, p, rev, w * n0 * h)
+            x[X_Q + CAM] = -l_s
+            x[X_V + CAM] = -w * dl_s
+        th_end = w * runs.t_end[c]
         pdeg = degree(profiles, c, p)
         pn, revn, thb = next_break(profiles, c, p, rev)
         turn = 0  # the turn of the current step, and where the next begins [s]
@@ -576,7 +593,7 @@ def newmark_linear_batch(cases, trains, profiles, runs, out, work, contact):
             if th1 >= thb:
                 p_was = p
                 cfg, jumped, p, rev, pn, revn, thb = _cross_breaks(
-                    ref, ct, c, w, th1, cfg, p, rev, pn, revn, thb
+                    ref, ct, c, w, th1, th_end, cfg, p, rev, pn, revn, thb
                 )
                 impulse_cam = impulse_cam or jumped
                 if p != p_was:

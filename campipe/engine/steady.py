@@ -42,8 +42,16 @@ from campipe.engine.closed_form import (
     harmonic_response,
     particular,
 )
-from campipe.engine.common import HELPER, JUMP, KERNEL, by_ref, classify_break, deref
-from campipe.profiles.packed import evaluate_packed, horner, piece_eval
+from campipe.engine.common import (
+    HELPER,
+    JUMP,
+    KERNEL,
+    by_ref,
+    classify_break,
+    deref,
+    start_piece,
+)
+from campipe.profiles.packed import evaluate_packed, horner, locate, piece_eval
 from campipe.vocabulary import CAM, CAM_CONTACT, SEAT
 
 #: Samples per turn at which the start's search for an angle where configuration I holds
@@ -307,16 +315,30 @@ def periodic_starts(cases, trains, profiles, runs, ws, state, snap, z_turn, t_st
         # earlier angle where it does.
         theta_s = _latest_hold(ref, st, z_turn, snap[c])
         t_start[c] = (theta_s - TWO_PI) / st.w if theta_s >= 0.0 else np.nan
-        if theta_s >= TWO_PI:
-            # θ = 0: the state just after the turn's break (a rate jump's impulse there
-            # applied, as the cam's lift and rate are on piece 0), row P.
+        before = -1  # at a break the held follower cannot cross smoothly: the piece it ends
+        if theta_s >= 0.0:
+            th_run = theta_s - TWO_PI  # the run's angle there
+            rev_s, p_s = start_piece(profiles, c, th_run, CAM_CONTACT, st.w, cases.form[c],
+                                     cases.capture[c])  # fmt: skip
+            rev_l, p_l = locate(profiles, c, th_run)
+            if rev_s != rev_l or p_s != p_l:
+                before = p_s
+        if before >= 0:
+            # The state before the break (the run's start crosses it: common.start_piece),
+            # on the piece that ends there, as the cam's lift and rate.
+            _state_in_piece(ref, st, before, z_turn[c, before], theta_s, z)
+        elif theta_s >= TWO_PI:
+            # θ = 0: the state just after the turn's break, row P.
             for s in range(st.ns):
                 z[s] = z_turn[c, profiles.n_pieces[c], s]
         elif theta_s >= 0.0:
             p = _piece_of(profiles, c, theta_s)
             _state_in_piece(ref, st, p, z_turn[c, p], theta_s, z)
         if theta_s >= 0.0:
-            lift, dlift, _ = evaluate_packed(profiles, c, theta_s)
+            if before >= 0:
+                lift, dlift, _ = piece_eval(profiles, c, before, np.int64(0), theta_s)
+            else:
+                lift, dlift, _ = evaluate_packed(profiles, c, theta_s)
             for i in range(q.shape[1]):
                 q[c, i] = 0.0
                 v[c, i] = 0.0

@@ -160,8 +160,9 @@ def test_velocity_jumps_keep_their_hops_at_the_steady_level():
     """The flat and constant-velocity ramps with ``fidelity: steady`` equal the full engine
     (issue 32): the flat's release and landing, 0.336° of no-follow and two impacts at
     10.3 in/s a turn (the issue's figures), the ramps' two impacts a turn at the rate the cam
-    steps to, ω·height/duration = 9.449 in/s at 4000 rpm (a closed form; the first turn
-    starts past the opening ramp's step at θ = 0, so it has one). Their margin is positive
+    steps to, ω·height/duration = 9.449 in/s at 4000 rpm (a closed form), every turn (the
+    first turn starts before the opening ramp's step at θ = 0 and crosses it: before the
+    start convention of ``common.start_piece`` it had one). Their margin is positive
     (the closed form alone would take them), so only the profile's breaks send them to the
     full engine. Broken copy: ``run_at_fidelity`` deciding by ``SteadyExtremes.holds`` alone
     (the code before issue 32) gives 0 no-follow and 0 impacts for all three."""
@@ -182,7 +183,7 @@ def test_velocity_jumps_keep_their_hops_at_the_steady_level():
     assert np.abs(steady.cam_lift - full.cam_lift).max() < bound
     assert np.all(steady.steps > 0)
     np.testing.assert_allclose(np.degrees(steady.separation_per_rev[0]), 0.336, atol=5e-4)
-    assert steady.cam_impacts_per_rev.tolist() == [[2, 2, 2], [1, 2, 2], [1, 2, 2]]
+    assert steady.cam_impacts_per_rev.tolist() == [[2, 2, 2]] * 3
     np.testing.assert_allclose(steady.max_cam_impact_velocity_per_rev[0] / INCH, 10.3, atol=0.05)
     ramp = 4000 * RPM * RAMP.height / RAMP.duration
     np.testing.assert_allclose(steady.max_cam_impact_velocity_per_rev[1:], ramp, rtol=1e-9)

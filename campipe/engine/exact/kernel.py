@@ -39,6 +39,7 @@ from campipe.engine.common import (
     deref,
     holds_cam,
     holds_seat,
+    start_piece,
     turn_of,
 )
 from campipe.engine.exact.segment import _begin_segment
@@ -64,7 +65,7 @@ from campipe.engine.metrics import (
     THESIS_IMPACT_FORCE,
 )
 from campipe.engine.policy import release, strike, strike_at_break
-from campipe.profiles.packed import locate, piece_eval
+from campipe.profiles.packed import piece_eval
 from campipe.vocabulary import (
     CAM,
     CAM_AND_SEAT,
@@ -494,7 +495,7 @@ def _start_case(cases, trains, profiles, runs, ws, st, c, tr):
         ws.v[i] = cases.v0[c, i]
     st.cfg = cases.cfg0[c]
     st.t_s = cases.t0[c]
-    rev, p = locate(profiles, c, st.w * st.t_s)
+    rev, p = start_piece(profiles, c, st.w * st.t_s, st.cfg, st.w, cases.form[c], cases.capture[c])
     st.rev = rev
     st.p = p
     st.k_out = 0

@@ -44,6 +44,7 @@ from campipe.engine.common import (
     HELPER,
     RESTING_LEVEL,
     deref,
+    ends_on_a_break,
     holds_cam,
     holds_seat,
 )
@@ -255,6 +256,10 @@ def _begin_segment(ref, st):
     st.nb = nb
     st.revb = revb
     st.t_break = th_b / st.w
+    c = st.c
+    if ends_on_a_break(profiles, c, st.p, st.rev, st.t_break, runs.t_end[c], st.cfg, st.w,
+                       cases.form[c], cases.capture[c]):  # fmt: skip
+        st.t_break = np.inf  # the run ends before it: the next run's start crosses it
     st.pdeg = degree(profiles, st.c, st.p)
     _block_columns(cases, trains, runs, ws, st)
     for m in range(2):

@@ -88,8 +88,9 @@ class NewmarkLinear:
         )
         omega = batch.cases.omega
         dt = np.full(len(which), run.step)
-        n_steps = np.ceil(run.recorded_revolutions * TWO_PI / (omega * dt) - 1e-9)
-        runs = newmark.NewmarkRuns(dt, n_steps.astype(np.int64), float(run.output_every))
+        t_end = run.recorded_revolutions * TWO_PI / omega
+        n_steps = np.ceil(t_end / dt - 1e-9)
+        runs = newmark.NewmarkRuns(dt, n_steps.astype(np.int64), float(run.output_every), t_end)
         return trains, batch.packed, runs
 
     def run(self, prepared: Any, cases: Any, out: Any) -> None:
