@@ -490,8 +490,8 @@ def _find_periodic_starts(cases, modal_trains, runs, packed, snap, t0, q0, v0) -
     steady.periodic_starts(
         cases, modal_trains, packed, runs, make_workspace(n_q), state, snap, z_turn, t0, q0, v0
     )
-    bad = np.flatnonzero(np.isnan(t0))
-    if bad.size:
+    if np.isnan(t0).any():
+        bad = np.flatnonzero(np.isnan(t0))
         raise CaseError.at(
             "seat",
             f"cases {bad.tolist()}: the cam never drives the valve off its seat with the cam "
