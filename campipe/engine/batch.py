@@ -181,6 +181,8 @@ def initial_state(case: Case, sm: SystemMatrices, seat_q: float):
 
 def unique_trains(cases: Sequence[Case]) -> tuple[list[ValveTrain], np.ndarray]:
     """The distinct trains of a batch and each case's index into them."""
+    if len(cases) == 1:  # (a train's hash reads all its fields: a one-case call skips it)
+        return [cases[0].train], np.zeros(1, np.int64)
     index: dict[ValveTrain, int] = {}
     which = np.empty(len(cases), np.int64)
     for i, case in enumerate(cases):
@@ -371,8 +373,8 @@ def _prepare_batch(cases: Sequence[Case], settings: RunSettings, full_state: boo
     modal_trains = stack.modal_trains
     n_q = modal_trains.load.shape[1]
     profiles = [keyed(c.profile) for c in cases]
-    seat = np.where(has_seat, [c.seat for c in cases], 0.0)
-    lift_bound, speed_bound = _bounds(profiles, stack.ratio[which], omega, has_seat, seat)
+    seat = np.array([c.seat if c.has_seat else 0.0 for c in cases])
+    lift_bound, speed_bound = _bounds(profiles, stack.ratio[which], omega, seat)
     return PreparedBatch(
         case_list=cases,
         trains=trains,
@@ -390,10 +392,10 @@ def _prepare_batch(cases: Sequence[Case], settings: RunSettings, full_state: boo
             q0=np.zeros((n, n_q)),
             v0=np.zeros((n, n_q)),
             a0=np.zeros((n, n_q)),
-            cfg0=np.full(n, CAM_CONTACT, np.int64),
+            cfg0=np.array([CAM_CONTACT] * n, np.int64),
             meff=stack.meff[which],
             separation=stack.separation[which],
-            capture=np.full(n, float(settings.capture_velocity)),
+            capture=np.array([float(settings.capture_velocity)] * n),
             restitution=stack.restitution[which],
             valve_ref=qref,
             lift_bound=lift_bound,
@@ -472,13 +474,24 @@ def _periodic_starts(
     t0 = np.empty(n)
     q0 = np.empty((n, n_q))
     v0 = np.empty((n, n_q))
+    _find_periodic_starts(cases, modal_trains, runs, packed, snap, t0, q0, v0)
+    if not accelerations:
+        return t0, q0, v0, np.zeros_like(q0)
+    return t0, q0, v0, _start_accelerations(case_list, cases.omega, t0, q0, v0, stack, which)
+
+
+def _find_periodic_starts(cases, modal_trains, runs, packed, snap, t0, q0, v0) -> None:
+    """``steady.periodic_starts`` into t0, q0 and v0 (which may be ``cases``' own: the
+    kernel reads none of them); refuses a case where configuration I holds nowhere on the
+    turn."""
+    n, n_q = q0.shape
     z_turn = np.zeros((n, packed.n_pieces.max() + 1, 2 * n_q))
     state = np.zeros(1, STATE)
     steady.periodic_starts(
         cases, modal_trains, packed, runs, make_workspace(n_q), state, snap, z_turn, t0, q0, v0
     )
-    bad = np.flatnonzero(np.isnan(t0))
-    if bad.size:
+    if np.isnan(t0).any():
+        bad = np.flatnonzero(np.isnan(t0))
         raise CaseError.at(
             "seat",
             f"cases {bad.tolist()}: the cam never drives the valve off its seat with the cam "
@@ -487,9 +500,6 @@ def _periodic_starts(
             found=bad.tolist(),
             expected="a seat below the valve's full lift",
         )
-    if not accelerations:
-        return t0, q0, v0, np.zeros_like(q0)
-    return t0, q0, v0, _start_accelerations(case_list, cases.omega, t0, q0, v0, stack, which)
 
 
 def _start_accelerations(case_list, omega, t0, q0, v0, stack: TrainStack, which) -> np.ndarray:
@@ -532,9 +542,7 @@ def _peaks(profile: Keyed) -> tuple[float, float]:
     return float(np.max(np.abs(lifts))), float(np.max(np.abs(rates)))
 
 
-def _bounds(
-    profiles: Sequence[Keyed], ratio, omega, has_seat, seat
-) -> tuple[np.ndarray, np.ndarray]:
+def _bounds(profiles: Sequence[Keyed], ratio, omega, seat) -> tuple[np.ndarray, np.ndarray]:
     """Each case's bounds on valve lift [m] and on closing and valve speeds [m/s], from its
     profile's peaks, its train's |valve ratio| and its seat (0 where it has none)."""
     peaks = np.array([_peaks(p) for p in profiles]).reshape(len(profiles), 2)
@@ -609,9 +617,15 @@ def run_batch(
     angles = output_angles(settings)
     measured = settings.measured_turns(turn_count(settings.recorded_revolutions))
     batch = _prepare_batch(cases, settings, full_state)
-    if start is None:
-        start = _starts(cases, settings, batch, in_run=True)
-    cases_in = batch.cases._replace(**start._asdict())
+    if start is None and settings.start == "periodic" and settings.method in NO_START_ACCELERATIONS:
+        # The start written into the batch's own t0, q0 and v0 (a0 stays zero, cfg0 I).
+        cases_in = batch.cases
+        _find_periodic_starts(cases_in, batch.modal_trains, batch.runs, batch.packed,
+                              np.zeros(n), cases_in.t0, cases_in.q0, cases_in.v0)  # fmt: skip
+    else:
+        if start is None:
+            start = _starts(cases, settings, batch, in_run=True)
+        cases_in = batch.cases._replace(**start._asdict())
     omega, qref = cases_in.omega, cases_in.valve_ref
     out = _outputs(batch, settings)
     integrator = integrators.get(settings.method)

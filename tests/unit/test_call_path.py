@@ -1,0 +1,86 @@
+"""A call's own work (issue 34: per-call overhead): the outputs as views of one block, and
+modal-exact's periodic start written into the batch's own start arrays. Both must leave
+every number as the separate arrays and the separate start gave."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from campipe.engine import Case, CaseError, RunSettings, run_batch
+from campipe.engine import batch as batch_module
+from campipe.engine.common import make_outputs
+from campipe.model import thesis_train
+from campipe.profiles import harmonic, polydyne
+
+INCH = 0.0254
+
+
+def test_the_outputs_are_disjoint_zeroed_views_of_their_shapes():
+    """Every output array has its shape, is C-contiguous (the kernels' compiled types), starts
+    at zero and shares no element with another: each filled with its own number, each reads
+    only its own back. Fails on an offset off by one (two views overlapping by an element),
+    a view of the wrong length, or a block made with ``np.empty``."""
+    n, n_out, n_rev, n_q = 3, 11, 2, 9
+    out = make_outputs(n, n_out, n_rev, 5, n_q)
+    expected = {
+        "q": (n, n_out, n_q),
+        "v": (n, n_out, n_q),
+        "force": (n, n_out, 2),
+        "cam": (n, n_out),
+        "cfg": (n, n_out),
+        "acc": (n, n_out, 2),
+        "per_rev": (n, n_rev, 9),
+        "n_events": (n,),
+        "status": (n,),
+        "steps": (n,),
+    }
+    for name, shape in expected.items():
+        array = getattr(out, name)
+        assert array.shape == shape and array.flags.c_contiguous, name
+        assert not array.any(), name
+    for k, name in enumerate(expected):
+        getattr(out, name)[...] = k + 1
+    for k, name in enumerate(expected):
+        assert np.all(getattr(out, name) == k + 1), name
+    assert out.events.shape == (n, 5, 6)
+
+
+def _cases() -> list[Case]:
+    train = thesis_train()
+    poly = polydyne("345", 0.4 * INCH, math.radians(80), math.radians(20), math.radians(80))
+    return [
+        Case(train, harmonic(INCH), 300.0),
+        Case(train, poly, 900.0, seat=-0.001),
+        Case(train, harmonic(INCH), 1800.0, seat=-0.0005),
+    ]
+
+
+def test_modal_exact_from_its_periodic_start_matches_the_start_handed_to_it():
+    """``run_batch`` finds modal-exact's periodic start into the batch's own t0, q0, v0; the
+    same cases started from ``start_states`` (the start handed in, through the other path)
+    give the same bits: histories, metrics, steps and start times. Fails if the in-place start
+    skipped a case (its run from rest at t = 0), wrote q0 for v0, or left accelerations that
+    the handed start zeroes."""
+    settings = RunSettings(revolutions=2)
+    cases = _cases()
+    own = run_batch(cases, settings)
+    start = batch_module.start_states(cases, settings)
+    handed = run_batch(cases, settings, start=start._replace(a0=np.zeros_like(start.a0)))
+    assert own.start_time[2] < 0.0  # configuration I holds at θ = 0 for the others
+    for name in ("start_time", "q", "v", "acc", "cam_force", "seat_force", "per_rev", "steps"):
+        assert np.array_equal(getattr(own, name), getattr(handed, name), equal_nan=True), name
+    assert np.array_equal(own.start_time, start.t0)
+
+
+def test_a_case_without_a_periodic_start_is_refused_by_its_index():
+    """A seat far above the valve's full lift (configuration I holds nowhere on the turn):
+    the run refuses it as before the start moved, naming case 1 only. Fails if the in-place
+    start ran the case from a NaN start instead."""
+    cases = _cases()
+    cases[1] = Case(thesis_train(), harmonic(INCH), 900.0, seat=5 * INCH)
+    with pytest.raises(CaseError) as raised:
+        run_batch(cases, RunSettings(revolutions=1))
+    assert raised.value.key == "seat" and raised.value.found == [1]
