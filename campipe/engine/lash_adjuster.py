@@ -32,9 +32,10 @@ from campipe.engine.settings import adjuster_turns
 from campipe.engine.settle import consistent_accelerations
 from campipe.model import system_matrices
 from campipe.model.elements import chain_elements
-from campipe.model.hla import LashAdjuster, adjuster
+from campipe.model.hla import LashAdjuster, adjuster, on_pivot
 from campipe.model.layouts import chain_placement
 from campipe.profiles import Profile, evaluate
+from campipe.profiles.levers import ValveSideProfile, pivot_gains, pivot_raised
 from campipe.vocabulary import (
     CAM,
     CAM_AND_SEAT,
@@ -55,6 +56,37 @@ def raised(profile: Profile, height: float) -> Profile:
     poly = profile.poly.copy()
     poly[:, 0] += height
     return Profile(profile.breaks, poly, profile.trig, profile.label)
+
+
+def extended(case: Case, extension: float) -> Case:
+    """``case`` with its adjuster's plunger at ``extension`` [m] (the run's frame): a chain's
+    cam lift raised by it (:func:`raised`); a finger follower's excitation with its pivot
+    raised by it, derived exactly (:func:`campipe.profiles.levers.pivot_raised`)."""
+    if not extension:
+        return case
+    if on_pivot(case.train) and isinstance(case.profile, ValveSideProfile):
+        return dataclasses.replace(case, profile=pivot_raised(case.profile, extension))
+    return dataclasses.replace(case, profile=raised(case.profile, extension))
+
+
+def adjuster_load(case: Case, part: BatchResult, i: int) -> tuple[np.ndarray, np.ndarray]:
+    """The force [N] through case ``i``'s adjuster at the turn's samples and the gap [m] its
+    plunger would take up, in its own travel: a chain's, its link's force and the gap between
+    cam and follower; a finger's, the pivot's load g·F (F the pallet's force, the link's; g
+    the valve lift's change per unit of the pivot's rise at each sample's cam angle, which by
+    virtual work on the lever is the pivot's load per unit of F, the lever's own momentum left
+    out) and that gap over g (the extension that closes it)."""
+    force = link_force(case, part.q[i])
+    gap = -part.q[i, :, CAM] - part.cam_lift[i]
+    if on_pivot(case.train) and isinstance(case.profile, ValveSideProfile):
+        gain = pivot_gains(case.profile, part.cam_angle)
+        return gain * force, gap / gain
+    return force, gap
+
+
+def _lift_at_zero(cases: Sequence[Case]) -> np.ndarray:
+    """Each case's excitation at cam angle 0 (a turn's start) [m]."""
+    return np.array([float(evaluate(c.profile, np.zeros(1))[0][0]) for c in cases])
 
 
 def link_force(case: Case, q: np.ndarray) -> np.ndarray:
@@ -91,36 +123,37 @@ def run_adjusted(
     sms = [system_matrices(c.train) for c in inner]
     pairs = zip(cases, hlas, strict=True)
     extension = np.array([c.train.hla_extension if h else 0.0 for c, h in pairs])
+    # a chain's histories go back to the cam's own lift; a finger's stay (its pivot truly rises)
+    in_link = np.array([not on_pivot(c.train) for c in cases])
     table = np.full((n, turns, 3), np.nan)
     parts: list[BatchResult] = []
     status = np.zeros(n, np.int64)
     start = None
+    members = [extended(c, e) for c, e in zip(inner, extension, strict=True)]
     for k in range(turns):
-        members = [
-            dataclasses.replace(c, profile=raised(c.profile, e)) if e else c
-            for c, e in zip(inner, extension, strict=True)
-        ]
         part = run(members, one, start=start, full_state=True, **options)
         status = np.where(part.status != 0, part.status, status)
         change = np.zeros(n)
         for i, h in enumerate(hlas):
             if h is None or status[i] in FAILURES:
                 continue
-            t = part.time[i]
-            force = link_force(inner[i], part.q[i])
-            gap = -part.q[i, :, CAM] - part.cam_lift[i]
-            after, leak, pump = h.advance(float(extension[i]), t, force, gap)
+            force, gap = adjuster_load(members[i], part, i)
+            after, leak, pump = h.advance(float(extension[i]), part.time[i], force, gap)
             table[i, k] = (extension[i], leak, pump)
             change[i] = after - extension[i]
+        after_turn = [extended(c, e) if d else m for c, e, d, m in
+                      zip(inner, extension + change, change, members, strict=True)]  # fmt: skip
+        lift_change = np.where(in_link, change, _lift_at_zero(after_turn) - _lift_at_zero(members))
         q0, v0 = part.q[:, -1].copy(), part.v[:, -1].copy()
         cfg0 = part.contact_state[:, -1].astype(np.int64)
-        cam_end = part.cam_lift[:, -1] + change  # the cam's lift at the next turn's start
-        _move_follower(q0, v0, cfg0, change, cam_end, members)
-        # back to the cam's own lift (the histories of every turn in one frame)
-        part.q[:, :, CAM] += extension[:, None]
-        part.cam_lift[:] -= extension[:, None]
+        cam_end = part.cam_lift[:, -1] + lift_change  # the cam's lift at the next turn's start
+        _move_follower(q0, v0, cfg0, lift_change, cam_end, after_turn)
+        # a chain's back to the cam's own lift (the histories of every turn in one frame)
+        shift = np.where(in_link, extension, 0.0)
+        part.q[:, :, CAM] += shift[:, None]
+        part.cam_lift[:] -= shift[:, None]
         parts.append(part)
-        extension = extension + change
+        extension, members = extension + change, after_turn
         a0 = (
             np.zeros_like(q0)
             if settings.method == "modal-exact"
@@ -133,15 +166,15 @@ def run_adjusted(
 def _part_of_a_turn(cases, inner, settings, run, options) -> BatchResult:
     """A run shorter than a turn: each case on its cam raised by its starting extension."""
     raised_cases = [
-        dataclasses.replace(c, profile=raised(c.profile, o.train.hla_extension))
-        if adjuster(o.train)
-        else c
+        extended(c, o.train.hla_extension) if adjuster(o.train) else c
         for c, o in zip(inner, cases, strict=True)
     ]
     part = run(raised_cases, settings, start=None, **options)
-    extension = np.array([o.train.hla_extension if adjuster(o.train) else 0.0 for o in cases])
-    part.q[:, :, CAM] += extension[:, None]
-    part.cam_lift[:] -= extension[:, None]
+    # a chain's back to the cam's own lift; a finger's pivot stays raised (see run_adjusted)
+    shift = np.array([o.train.hla_extension if adjuster(o.train) else 0.0 for o in cases])
+    shift[[on_pivot(o.train) for o in cases]] = 0.0
+    part.q[:, :, CAM] += shift[:, None]
+    part.cam_lift[:] -= shift[:, None]
     table = np.full((len(cases), part.per_rev.shape[1], 3), np.nan)
     return dataclasses.replace(part, trains=[c.train for c in cases], lash_adjuster=table)
 
