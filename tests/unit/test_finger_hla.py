@@ -13,6 +13,7 @@ from scipy.integrate import quad
 from scipy.optimize import brentq
 
 from campipe.engine import Case, RunSettings, run_batch
+from campipe.engine.metrics import MAX_CAM_FORCE
 from campipe.model import ModelParameterError, system_matrices, valve_train
 from campipe.model.levers import base_take_up, kinematic_state, lever_of, pivot_gain
 from campipe.profiles import evaluate, harmonic
@@ -79,6 +80,20 @@ class Hand:
     def valve_lift(self, theta, e):
         """The pallet centre's fall from its rest (pivot at the origin, arm at α₀)."""
         return B * math.sin(self.alpha0) - e - B * math.sin(self.angle(theta, e))
+
+    def roller_force(self, theta, pallet, e=0.0):
+        """The cam's normal force N [N] on the roller under a pallet force ``pallet`` [N] by
+        the lever's moments about the pivot, and the normal n (see :meth:`pivot_load`)."""
+        alpha = self.angle(theta, e)
+        d = self._d(alpha, e)
+        phi = math.atan2(d[1], d[0])
+        h, dh, _ = evaluate(self.cam, self.psi0 + theta - phi)
+        e_r = np.array([math.cos(phi), math.sin(phi)])
+        e_phi = np.array([-math.sin(phi), math.cos(phi)])
+        n = (RB + RR + self.scale * h) * e_r + self.scale * dh * e_phi
+        n /= np.linalg.norm(n)
+        u = np.array([math.cos(alpha), math.sin(alpha)])
+        return -B * math.cos(alpha) * pallet / (A * (u[0] * n[1] - u[1] * n[0])), n
 
     def pivot_load(self, theta, e, pallet):
         """The adjuster's load [N] under a pallet force ``pallet`` [N] (up on the lever) by the
@@ -211,3 +226,57 @@ def test_a_centre_pivot_rocker_takes_no_adjuster():
     with pytest.raises(ModelParameterError) as info:
         finger(layout="centre-pivot-rocker")
     assert info.value.key == "model.hla_stiffness" and "finger-follower" in str(info.value)
+
+
+def test_a_lever_s_archived_cam_force_is_the_roller_s_force_on_the_cam(tmp_path):
+    """A finger's archive stores as ``cam_force`` the cam's normal force on the roller: the
+    engine's valve-side force F (the pallet's, driving the reduced lever) turned into the
+    roller's by the lever's moments about its pivot, worked out here (:meth:`Hand.roller_force`,
+    a tilted finger under an offset cam), at every sample; each turn's
+    ``max_cam_force_by_rev`` is the largest of them to the samples' resolution: at least the
+    samples' largest, at most the valve side's largest (the samples' or the engine's own)
+    times the largest ratio. The thesis's train keeps its own cam force. Fails on a copy
+    that keeps the valve-side force (2/3 of it) or scales only the histories (a maximum below
+    the samples')."""
+    import xarray as xr
+    import yaml
+
+    from campipe.study import load_study
+    from campipe.study.run.execute import run_study
+
+    own = {k: v for k, v in FINGER.items() if not k.startswith("hla") and k != "lash"}
+    model = {**own, "lever_rest_angle": "5 deg", "cam_offset": "4 mm"}
+    spec = {
+        "name": "finger-cam-force",
+        "model": model,
+        "profile": {"kind": "harmonic", "lift": "6 mm"},
+        "sweep": {"speed": ["1000 rpm", "4000 rpm"]},
+        "run": {"revolutions": 2, "output_every": "2 deg"},
+    }
+    path = tmp_path / "finger.yaml"
+    path.write_text(yaml.safe_dump(spec))
+    run_study(load_study(path), tmp_path / "finger.nc", scheduler="synchronous")
+    ds = xr.load_dataset(tmp_path / "finger.nc")
+    study = load_study(path)
+    hand = Hand(math.radians(5.0), 0.004)
+    theta = np.radians(ds["cam_angle"].values)
+    per_unit = np.array([hand.roller_force(t, 1.0)[0] for t in theta])
+    for i, resolved in enumerate(study.cases):
+        engine = run_batch([resolved.case], resolved.settings)
+        valve_side = engine.cam_force[0]
+        assert valve_side.min() > 50.0  # it follows the cam at both speeds
+        assert_allclose(ds["cam_force"].values[i], valve_side * per_unit, rtol=1e-6)
+        largest = ds["max_cam_force_by_rev"].values[i]
+        for k in range(2):
+            turn = (theta >= 2 * math.pi * k - 1e-9) & (theta <= 2 * math.pi * (k + 1) + 1e-9)
+            sampled = (valve_side * per_unit)[turn].max()
+            # the engine's own largest (the valve side's, on its steps' grid)
+            step = max(engine.per_rev[0, k, MAX_CAM_FORCE], valve_side[turn].max())
+            assert sampled * (1 - 1e-9) <= largest[k] <= step * per_unit.max() * (1 + 1e-9)
+            assert largest[k] > 1.4 * step  # the roller's, about b/a of the valve side's
+    thesis = run_batch([Case(valve_train("thesis-1971"), harmonic(LIFT), 1000 * RPM)],
+                       RunSettings(revolutions=1))  # fmt: skip
+    from campipe.engine.levers import at_the_cam
+
+    same = at_the_cam(thesis, [Case(valve_train("thesis-1971"), harmonic(LIFT), 1000 * RPM)])
+    assert same is thesis
