@@ -52,7 +52,8 @@ from campipe.model.levers import FINGER_FOLLOWER, base_take_up, lever_of, pivot_
 #: order ``campipe.model.parameters`` declares them (``none``: no adjuster).
 HLA_KEYS = (
     ("hla_stiffness", "hydraulic lash adjuster's stiffness with its check valve closed (oil "
-     "column and body), in series with the chain's link next to the cam", "N/m", "N/mm"),
+     "column and body), in series with the chain's link next to the cam or under a finger "
+     "follower's pivot", "N/m", "N/mm"),
     ("hla_leak_down", "hydraulic lash adjuster's leak-down coefficient: the load above the "
      "check force per unit of the plunger's sinking speed", "N*s/m", "N*s/mm"),
     ("hla_check_force", "hydraulic lash adjuster's check force (plunger spring plus supply "
