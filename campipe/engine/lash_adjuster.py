@@ -12,7 +12,14 @@ pump-up less its leak-down (``LashAdjuster.advance``), from the force through th
 (the link's, k·(x1' − x2)) and the gap between cam and follower at the output samples; the
 next turn starts where the last ended, the change applied there (``_move_follower``: a
 follower on the cam stays on it, the link's force changing by k·Δe; one off it stays put,
-its gap shrinking by Δe, and lands on the cam if that closes it).
+its gap shrinking by Δe, and lands on the cam if that closes it). A finger follower's adjuster
+is under its pivot: an extension raises the pivot, so a turn runs on the kinematic valve lift
+of the raised pivot (``campipe.profiles.levers.pivot_raised``), the load through it is the
+pivot's, g·F (``adjuster_load``), and its histories stay in that frame.
+
+One :class:`Plunger` carries the adjusters from turn to turn, for a run of whole turns
+(``run_adjusted``'s loop) and for one of automatic length (``engine.settle.run_settled``,
+the extension then part of the state it compares).
 
 Pure numerics: arrays in, arrays out.
 """
@@ -29,12 +36,13 @@ from campipe.constants import TWO_PI
 from campipe.engine.case import Case
 from campipe.engine.result import BatchResult, blank_failures
 from campipe.engine.settings import adjuster_turns
-from campipe.engine.settle import consistent_accelerations
+from campipe.engine.settle import consistent_accelerations, run_settled
 from campipe.model import system_matrices
 from campipe.model.elements import chain_elements
-from campipe.model.hla import LashAdjuster, adjuster
+from campipe.model.hla import LashAdjuster, adjuster, on_pivot
 from campipe.model.layouts import chain_placement
 from campipe.profiles import Profile, evaluate
+from campipe.profiles.levers import ValveSideProfile, pivot_gains, pivot_raised
 from campipe.vocabulary import (
     CAM,
     CAM_AND_SEAT,
@@ -57,6 +65,37 @@ def raised(profile: Profile, height: float) -> Profile:
     return Profile(profile.breaks, poly, profile.trig, profile.label)
 
 
+def extended(case: Case, extension: float) -> Case:
+    """``case`` with its adjuster's plunger at ``extension`` [m] (the run's frame): a chain's
+    cam lift raised by it (:func:`raised`); a finger follower's excitation with its pivot
+    raised by it, derived exactly (:func:`campipe.profiles.levers.pivot_raised`)."""
+    if not extension:
+        return case
+    if on_pivot(case.train) and isinstance(case.profile, ValveSideProfile):
+        return dataclasses.replace(case, profile=pivot_raised(case.profile, extension))
+    return dataclasses.replace(case, profile=raised(case.profile, extension))
+
+
+def adjuster_load(case: Case, part: BatchResult, i: int) -> tuple[np.ndarray, np.ndarray]:
+    """The force [N] through case ``i``'s adjuster at the turn's samples and the gap [m] its
+    plunger would take up, in its own travel: a chain's, its link's force and the gap between
+    cam and follower; a finger's, the pivot's load g·F (F the pallet's force, the link's; g
+    the valve lift's change per unit of the pivot's rise at each sample's cam angle, which by
+    virtual work on the lever is the pivot's load per unit of F, the lever's own momentum left
+    out) and that gap over g (the extension that closes it)."""
+    force = link_force(case, part.q[i])
+    gap = -part.q[i, :, CAM] - part.cam_lift[i]
+    if on_pivot(case.train) and isinstance(case.profile, ValveSideProfile):
+        gain = pivot_gains(case.profile, part.cam_angle)
+        return gain * force, gap / gain
+    return force, gap
+
+
+def _lift_at_zero(cases: Sequence[Case]) -> np.ndarray:
+    """Each case's excitation at cam angle 0 (a turn's start) [m]."""
+    return np.array([float(evaluate(c.profile, np.zeros(1))[0][0]) for c in cases])
+
+
 def link_force(case: Case, q: np.ndarray) -> np.ndarray:
     """(..., ) the compressive force [N] through the chain's link next to the cam (with its
     adjuster in series) for coordinates ``q`` (..., n) in the run's own frame."""
@@ -76,72 +115,155 @@ def run_adjusted(
     one turn from ``start``'s (t0, q0, v0, a0, cfg0) or, for the first, from the settings')
     with ``options`` (its own); cases without an adjuster run the same way with their
     extension 0. The result's ``lash_adjuster`` holds each turn's extension, leak-down and
-    pump-up (NaN for a case without an adjuster)."""
+    pump-up (NaN for a case without an adjuster). A run of automatic length
+    (``revolutions`` None) is ``engine.settle.run_settled``'s, each turn through the same
+    :class:`Plunger`, the extension part of the state it compares."""
     turns = adjuster_turns(settings)
     n = len(cases)
-    hlas: list[LashAdjuster | None] = [adjuster(c.train) for c in cases]
-    inner = [
-        dataclasses.replace(c, train=c.train.replace(hla_leak_down=math.nan)) if h else c
-        for c, h in zip(cases, hlas, strict=True)
-    ]
-    if not turns:  # a part of a turn (a kernel's warm-up): no turn ends, the plunger stays
-        return _part_of_a_turn(cases, inner, settings, run, options)
+    if turns == 0:  # a part of a turn (a kernel's warm-up): no turn ends, the plunger stays
+        return _part_of_a_turn(cases, settings, run, options)
     options.pop("full_state", None)  # every coordinate: a turn's end is the next's start
+    if turns is None:
+        plunger = Plunger(cases, settings, run, settings.max_revolutions, ledger=True)
+        matrices = [system_matrices(c.train) for c in plunger.inner]
+        result = run_settled(cases, settings, plunger, matrices, **options)
+        return plunger.settled(result)
+    plunger = Plunger(cases, settings, run, turns)
     one = dataclasses.replace(settings, revolutions=1.0, warmup=0)
-    sms = [system_matrices(c.train) for c in inner]
-    pairs = zip(cases, hlas, strict=True)
-    extension = np.array([c.train.hla_extension if h else 0.0 for c, h in pairs])
-    table = np.full((n, turns, 3), np.nan)
     parts: list[BatchResult] = []
     status = np.zeros(n, np.int64)
     start = None
-    for k in range(turns):
-        members = [
-            dataclasses.replace(c, profile=raised(c.profile, e)) if e else c
-            for c, e in zip(inner, extension, strict=True)
-        ]
-        part = run(members, one, start=start, full_state=True, **options)
+    for _ in range(turns):
+        part = plunger(cases, one, start=start, **options)
         status = np.where(part.status != 0, part.status, status)
-        change = np.zeros(n)
-        for i, h in enumerate(hlas):
-            if h is None or status[i] in FAILURES:
-                continue
-            t = part.time[i]
-            force = link_force(inner[i], part.q[i])
-            gap = -part.q[i, :, CAM] - part.cam_lift[i]
-            after, leak, pump = h.advance(float(extension[i]), t, force, gap)
-            table[i, k] = (extension[i], leak, pump)
-            change[i] = after - extension[i]
-        q0, v0 = part.q[:, -1].copy(), part.v[:, -1].copy()
-        cfg0 = part.contact_state[:, -1].astype(np.int64)
-        cam_end = part.cam_lift[:, -1] + change  # the cam's lift at the next turn's start
-        _move_follower(q0, v0, cfg0, change, cam_end, members)
-        # back to the cam's own lift (the histories of every turn in one frame)
-        part.q[:, :, CAM] += extension[:, None]
-        part.cam_lift[:] -= extension[:, None]
         parts.append(part)
-        extension = extension + change
-        a0 = (
-            np.zeros_like(q0)
-            if settings.method == "modal-exact"
-            else consistent_accelerations(members, sms, q0, v0, cfg0)
+        cfg0 = part.contact_state[:, -1].astype(np.int64)
+        start = (np.zeros(n), part.q[:, -1].copy(), part.v[:, -1].copy(), None, cfg0)
+    return _joined(parts, cases, settings, plunger.table, status)
+
+
+class Plunger:
+    """A batch's adjusters across its turns, one turn a call (``run_turn`` of
+    ``engine.settle.run_settled``, and :func:`run_adjusted`'s loop): each case run with its
+    plunger where the last turn left it (:func:`extended`), from the start the caller hands
+    back (the last turn's end, in the histories' frame: :meth:`_next_start` applies the
+    plunger's change there), its extension advanced by the turn's leak-down and pump-up
+    (``LashAdjuster.advance``) and the turn's histories brought to one frame (a chain's to
+    its cam's own lift). With ``ledger`` (a run of automatic length) each turn's coordinates
+    carry one more column, the plunger's extension at the turn's ends (between them
+    e₀ + (e₁ − e₀)·θ/2π + travel·sin²(θ/2), so that its range over a turn is about its
+    travel): ``run_settled`` compares it with the rest of the state at the turn boundaries,
+    so a case settles only once its plunger repeats to ``settle_tolerance`` of its travel
+    too; :meth:`settled` takes the column off again."""
+
+    def __init__(self, cases, settings, run, turns: int, ledger: bool = False) -> None:
+        self.hlas: list[LashAdjuster | None] = [adjuster(c.train) for c in cases]
+        self.inner = [
+            dataclasses.replace(c, train=c.train.replace(hla_leak_down=math.nan)) if h else c
+            for c, h in zip(cases, self.hlas, strict=True)
+        ]
+        pairs = zip(cases, self.hlas, strict=True)
+        self.extension = np.array([c.train.hla_extension if h else 0.0 for c, h in pairs])
+        self.members = [extended(c, e) for c, e in zip(self.inner, self.extension, strict=True)]
+        # a chain's histories go back to the cam's own lift; a finger's stay (its pivot rises)
+        self.in_link = np.array([not on_pivot(c.train) for c in cases])
+        self.index = {id(c): i for i, c in enumerate(cases)}
+        n = len(cases)
+        self.table = np.full((n, turns, 3), np.nan)
+        self.turn = np.zeros(n, np.int64)
+        self.status = np.zeros(n, np.int64)
+        self.shift = np.zeros(n)  # the frame shift of each case's last turn
+        self.change = np.zeros(n)  # the excitation's change at each case's next start [m]
+        self.travel = np.array([h.travel if h else 0.0 for h in self.hlas])
+        self.run, self.method, self.ledger = run, settings.method, ledger
+        self._matrices: dict[int, object] = {}
+
+    def __call__(self, members, one, start=None, full_state=True, **options) -> BatchResult:
+        rows = np.array([self.index[id(m)] for m in members], np.int64)
+        if start is not None:
+            start = self._next_start(rows, start)
+        run_cases = [self.members[i] for i in rows.tolist()]
+        part = self.run(run_cases, one, start=start, full_state=True, **options)
+        before = self.extension[rows].copy()
+        self._advance(rows, part)
+        shift = self.shift[rows] = np.where(self.in_link[rows], before, 0.0)
+        part.q[:, :, CAM] += shift[:, None]
+        part.cam_lift[:] -= shift[:, None]
+        if not self.ledger:
+            return part
+        theta = np.asarray(part.cam_angle, float)[None, :]
+        travel = self.travel[rows][:, None]
+        column = before[:, None] + (self.extension[rows] - before)[:, None] * theta / TWO_PI
+        column = column + travel * np.sin(theta / 2) ** 2
+        q = np.concatenate([part.q, column[:, :, None]], axis=2)
+        v = np.concatenate([part.v, np.zeros_like(column)[:, :, None]], axis=2)
+        return dataclasses.replace(part, q=q, v=v)
+
+    def _advance(self, rows: np.ndarray, part: BatchResult) -> None:
+        """Each case's extension by the turn's leak-down and pump-up, its turn in
+        :attr:`table`, its member for the next turn and the excitation's change there."""
+        old = [self.members[i] for i in rows.tolist()]
+        for j, i in enumerate(rows.tolist()):
+            self.status[i] = part.status[j] if part.status[j] != 0 else self.status[i]
+            h = self.hlas[i]
+            if h is None or self.status[i] in FAILURES:
+                continue
+            force, gap = adjuster_load(old[j], part, j)
+            e = float(self.extension[i])
+            after, leak, pump = h.advance(e, part.time[j], force, gap)
+            self.table[i, self.turn[i]] = (e, leak, pump)
+            if after != e:
+                self.extension[i] = after
+                self.members[i] = extended(self.inner[i], after)
+            self.change[i] = after - e
+        self.turn[rows] += 1
+        new = [self.members[i] for i in rows.tolist()]
+        moved = self.change[rows] != 0.0
+        lever = moved & ~self.in_link[rows]
+        if lever.any():  # a finger's excitation changes by its take-up at the start
+            valve_side = _lift_at_zero(new) - _lift_at_zero(old)
+            self.change[rows[lever]] = valve_side[lever]
+
+    def _next_start(self, rows: np.ndarray, start: tuple) -> tuple:
+        """The caller's start (the last turn's end, in the histories' frame) in the next
+        turn's run frame, the plunger's change applied (:func:`_move_follower`)."""
+        t0, q0, v0, _, cfg0 = start
+        width = q0.shape[1] - (1 if self.ledger else 0)
+        q0, v0 = np.array(q0[:, :width], float), np.array(v0[:, :width], float)
+        cfg0 = np.array(cfg0, np.int64)
+        q0[:, CAM] -= self.shift[rows]
+        run_cases = [self.members[i] for i in rows.tolist()]
+        change = self.change[rows]
+        _move_follower(q0, v0, cfg0, change, _lift_at_zero(run_cases), run_cases)
+        self.change[rows] = 0.0
+        q0, v0 = np.nan_to_num(q0), np.nan_to_num(v0)
+        if self.method == "modal-exact":
+            a0 = np.zeros_like(q0)
+        else:
+            sms = [self._matrix(i) for i in rows.tolist()]
+            a0 = consistent_accelerations(run_cases, sms, q0, v0, cfg0)
+        return (np.zeros(rows.size) if t0 is None else t0, q0, v0, a0, cfg0)
+
+    def _matrix(self, i: int):
+        if i not in self._matrices:
+            self._matrices[i] = system_matrices(self.inner[i].train)
+        return self._matrices[i]
+
+    def settled(self, result: BatchResult) -> BatchResult:
+        """``run_settled``'s result without the ledger's column, with the adjusters' table."""
+        return dataclasses.replace(
+            result, q=result.q[:, :, :-1], v=result.v[:, :, :-1], lash_adjuster=self.table
         )
-        start = (np.zeros(n), np.nan_to_num(q0), np.nan_to_num(v0), a0, cfg0)
-    return _joined(parts, cases, settings, table, status)
 
 
-def _part_of_a_turn(cases, inner, settings, run, options) -> BatchResult:
+def _part_of_a_turn(cases, settings, run, options) -> BatchResult:
     """A run shorter than a turn: each case on its cam raised by its starting extension."""
-    raised_cases = [
-        dataclasses.replace(c, profile=raised(c.profile, o.train.hla_extension))
-        if adjuster(o.train)
-        else c
-        for c, o in zip(inner, cases, strict=True)
-    ]
-    part = run(raised_cases, settings, start=None, **options)
-    extension = np.array([o.train.hla_extension if adjuster(o.train) else 0.0 for o in cases])
-    part.q[:, :, CAM] += extension[:, None]
-    part.cam_lift[:] -= extension[:, None]
+    part = run(Plunger(cases, settings, run, 0).members, settings, start=None, **options)
+    # a chain's back to the cam's own lift; a finger's pivot stays raised (see run_adjusted)
+    shift = np.array([o.train.hla_extension if adjuster(o.train) else 0.0 for o in cases])
+    shift[[on_pivot(o.train) for o in cases]] = 0.0
+    part.q[:, :, CAM] += shift[:, None]
+    part.cam_lift[:] -= shift[:, None]
     table = np.full((len(cases), part.per_rev.shape[1], 3), np.nan)
     return dataclasses.replace(part, trains=[c.train for c in cases], lash_adjuster=table)
 

@@ -31,6 +31,7 @@ import numpy as np
 
 from campipe.engine.loads import per_turn
 from campipe.model.contact import contact_law
+from campipe.model.hla import taken_up
 
 #: Reductions over a turn, and what the summary over the measured turns takes of them: an
 #: angle or a count accumulated over the turn reads as its mean per turn; an extreme as the
@@ -121,8 +122,9 @@ def _adjuster(column: int, less_lash: bool = False) -> Callable[[Any, Any], np.n
         if not table.size:
             return np.full(result.per_rev.shape[:2], np.nan)
         values = table[:, :, column]
-        if less_lash:  # the effective lash: the dry lash less the plunger's extension
-            values = np.array([t.lash for t in trains])[:, None] - values
+        if less_lash:  # the effective lash: the dry lash less what the plunger takes up
+            pairs = zip(trains, values, strict=True)
+            values = np.stack([t.lash - taken_up(t, v) for t, v in pairs])
         return values
 
     return derive
@@ -279,8 +281,8 @@ METRICS: list[Metric] = [
     ),  # fmt: skip
     _adjuster_metric(
         "hla_lash",
-        "effective lash at the turn's start: the dry lash less the lash adjuster's extension "
-        "(below 0: the valve held off its seat)",
+        "effective lash at the turn's start: the dry lash less what the lash adjuster's "
+        "extension takes up (below 0: the valve held off its seat)",
         "min",
         _adjuster(0, less_lash=True),
         "Effective lash",

@@ -95,6 +95,8 @@ class BatchResult:
         """A derived metric of a run of automatic length: its histories hold each case's last
         recorded turns only, so it is derived on those turns and placed at theirs (NaN at the
         others, which its summary then leaves out)."""
+        if metric.record == "lash_adjuster":  # a table of every turn run, not histories
+            return np.asarray(metric.derive(self, self.trains), float)
         recorded = int(round(self.cam_angle[-1] / TWO_PI))
         turns = self.recorded_from[:, None] + np.arange(recorded)
         window = dataclasses.replace(

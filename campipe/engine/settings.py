@@ -354,15 +354,17 @@ def check_stability(cases: Sequence[Case], settings: RunSettings) -> None:
             )
 
 
-def adjuster_turns(settings: RunSettings) -> int:
+def adjuster_turns(settings: RunSettings) -> int | None:
     """The turns of a run of trains with a hydraulic lash adjuster (``engine.lash_adjuster``:
     its plunger advances at each turn's end): 0 for a run shorter than a turn (no turn ends:
-    the plunger stays), refusing a run of automatic length or of a fraction of a turn beyond
-    the first at ``run.revolutions``."""
+    the plunger stays), None for a run of automatic length, refusing a fraction of a turn
+    beyond the first at ``run.revolutions``."""
     turns = settings.revolutions
-    if turns is not None and turns < 1.0:
+    if turns is None:
+        return None
+    if turns < 1.0:
         return 0
-    if turns is None or turns != math.floor(turns):
+    if turns != math.floor(turns):
         raise RunSettingsError.at(
             "run.revolutions",
             "a train with a hydraulic lash adjuster runs a whole number of turns (its "

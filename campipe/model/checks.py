@@ -14,7 +14,7 @@ from typing import Any
 
 from campipe.model.declared import ModelParameterError
 from campipe.model.hla import NEEDED as HLA_NEEDED
-from campipe.model.levers import LEVER_KEYS, LEVERS, lever_chain
+from campipe.model.levers import CENTRE_PIVOT_ROCKER, LEVER_KEYS, LEVERS, lever_chain
 
 #: Layouts (:mod:`campipe.model.layouts`): the thesis's train from its members' geometry; a
 #: chain of masses given directly; a bucket tappet on its valve from named masses and
@@ -98,7 +98,8 @@ def resolve_layout(
 
 def _check_adjuster(train: Any, key_prefix: str) -> None:
     """A hydraulic lash adjuster (:mod:`campipe.model.hla`) sits in a chain's link next to
-    the cam (two masses or more), with all of its keys and the dry lash it takes up."""
+    the cam (two masses or more) or under a finger follower's pivot (not a centre-pivot
+    rocker's: its pivot is a shaft), with all of its keys and the dry lash it takes up."""
     given = [k for k in HLA_NEEDED if getattr(train, k) == getattr(train, k)]  # not NaN
     if not given:
         if train.hla_extension != 0.0:
@@ -106,13 +107,14 @@ def _check_adjuster(train: Any, key_prefix: str) -> None:
         else:
             return
     key = key_prefix + given[0]
-    if train.layout not in CHAINS or len(train.masses) < 2:
+    if train.layout not in CHAINS or len(train.masses) < 2 or train.layout == CENTRE_PIVOT_ROCKER:
         raise ModelParameterError.at(
             key,
-            "a hydraulic lash adjuster sits in a chain's link next to the cam: give layout "
-            "lumped (two masses or more) or direct-acting",
+            "a hydraulic lash adjuster sits in a chain's link next to the cam or under a finger "
+            "follower's pivot: give layout lumped (two masses or more), direct-acting or "
+            "finger-follower",
             found=train.layout,
-            expected="a chain of two masses or more",
+            expected="a chain of two masses or more, or a finger follower",
         )
     for name in (*HLA_NEEDED, "lash"):
         if getattr(train, name) != getattr(train, name):  # NaN: not given

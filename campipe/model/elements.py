@@ -15,13 +15,15 @@ import numpy as np
 
 from campipe.constants import STANDARD_GRAVITY
 from campipe.model.coordinates import GROUND, Dof, member_nodes
+from campipe.model.hla import hla_series
 from campipe.model.layouts import chain_placement
 from campipe.model.parameters import ELEMENTS, NODE_COORDINATES, ValveTrain
 
 
 def adjuster_stiffness(train: ValveTrain) -> float:
-    """A chain's lash adjuster's stiffness [N/m] (NaN: none)."""
-    return float(getattr(train, "hla_stiffness", math.nan))
+    """A chain's lash adjuster's stiffness [N/m] (NaN: none), in series with its link next to
+    the cam; a finger follower's, under its pivot, seen at the pallet (``hla_series``)."""
+    return hla_series(train)
 
 
 def bar_stiffness(k: float) -> np.ndarray:

@@ -33,7 +33,10 @@ the turn take the force as linear between samples (an error of order (Δθ)²·F
 
 Pure Python and numpy on floats and arrays; a layout places the adjuster (which member's
 force passes through it, how its extension moves the train): a chain's in series with its
-link next to the cam (:mod:`campipe.model.elements`).
+link next to the cam (:mod:`campipe.model.elements`); a finger follower's under its pivot, its
+extension raising the pivot (the valve's kinematic lift changes by
+:func:`~campipe.model.levers.base_take_up`, about e·(b − a)/a) and its load the pivot's
+(:attr:`~campipe.model.levers.KinematicState.gain` times the pallet's force).
 """
 
 from __future__ import annotations
@@ -43,11 +46,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from campipe.model.levers import FINGER_FOLLOWER, base_take_up, lever_of, pivot_gain
+
 #: The adjuster's model keys: (name, long name, SI units, display units, default), in the
 #: order ``campipe.model.parameters`` declares them (``none``: no adjuster).
 HLA_KEYS = (
     ("hla_stiffness", "hydraulic lash adjuster's stiffness with its check valve closed (oil "
-     "column and body), in series with the chain's link next to the cam", "N/m", "N/mm"),
+     "column and body), in series with the chain's link next to the cam or under a finger "
+     "follower's pivot", "N/m", "N/mm"),
     ("hla_leak_down", "hydraulic lash adjuster's leak-down coefficient: the load above the "
      "check force per unit of the plunger's sinking speed", "N*s/m", "N*s/mm"),
     ("hla_check_force", "hydraulic lash adjuster's check force (plunger spring plus supply "
@@ -133,6 +139,32 @@ def adjuster(train) -> LashAdjuster | None:
         train.hla_pump_up,
         train.hla_travel,
     )
+
+
+def on_pivot(train) -> bool:
+    """A finger follower whose lash adjuster is under its pivot (``engine.lash_adjuster``)."""
+    return getattr(train, "layout", None) == FINGER_FOLLOWER and has_adjuster(train)
+
+
+def hla_series(train) -> float:
+    """The adjuster's stiffness [N/m] in series with the chain's link next to the cam (NaN:
+    none): its own in a chain's link; under a finger's pivot, seen at the pallet, k/g₀² (the
+    pivot's give R/k under the load R = g₀·F moves the pallet by g₀ times it, g₀ the rest
+    :func:`~campipe.model.levers.pivot_gain`; held at rest as the lever's reduced mass is)."""
+    k = float(getattr(train, "hla_stiffness", math.nan))
+    return k / pivot_gain(train) ** 2 if on_pivot(train) else k
+
+
+def taken_up(train, extension: np.ndarray) -> np.ndarray:
+    """The lash [m] the plunger's ``extension`` [m] takes up where ``lash`` is measured: the
+    extension itself in a chain's link; under a finger's pivot its take-up at the valve on the
+    base circle (:func:`~campipe.model.levers.base_take_up`, exact)."""
+    extension = np.asarray(extension, float)
+    if not on_pivot(train):
+        return extension
+    lever = lever_of(train)
+    flat = [base_take_up(lever, float(e)) if e == e else math.nan for e in extension.ravel()]
+    return np.reshape(flat, extension.shape)
 
 
 def has_adjuster(train) -> bool:

@@ -46,6 +46,7 @@ Pure Python and numpy; the cam's lift comes in as a function (this layer has no 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -143,26 +144,43 @@ class Lever:
     pitch_radius: float  # [m] R, base circle plus roller
     rest_angle: float  # [rad] α₀, pallet arm above the horizontal at rest
     offset: float  # [m] cam centre's horizontal offset from the roller's rest centre
+    pivot_height: float = 0.0  # [m] the pivot raised from its rest (a lash adjuster's e)
 
     @property
     def side(self) -> float:
         """+1: the roller on the pallet's arm (finger), −1: on the other (rocker)."""
         return 1.0 if self.kind == FINGER_FOLLOWER else -1.0
 
+    @property
+    def pivot(self) -> np.ndarray:
+        """(2,) the pivot's centre [m]: the origin raised by ``pivot_height``."""
+        return np.array([0.0, self.pivot_height])
+
     def roller_at(self, alpha: np.ndarray) -> np.ndarray:
         """(…, 2) the roller's centre [m] at pallet-arm angle ``alpha`` [rad]."""
-        return self.side * self.roller_arm * np.stack([np.cos(alpha), np.sin(alpha)], -1)
+        arm = self.side * self.roller_arm * np.stack([np.cos(alpha), np.sin(alpha)], -1)
+        return arm + self.pivot
+
+    @property
+    def rest_roller(self) -> np.ndarray:
+        """(2,) the roller's centre at rest [m], the pivot at the origin (the cam's place)."""
+        return self.side * self.roller_arm * np.array(_unit(self.rest_angle))
 
     @property
     def cam_centre(self) -> np.ndarray:
-        """(2,) the cam's centre [m]: above the roller (finger), below it (rocker)."""
-        rest = self.roller_at(np.asarray(self.rest_angle))
+        """(2,) the cam's centre [m]: above the roller (finger), below it (rocker); fixed
+        whatever the pivot's height."""
         rise = math.sqrt(self.pitch_radius**2 - self.offset**2)
-        return rest + np.array([self.offset, self.side * rise])
+        return self.rest_roller + np.array([self.offset, self.side * rise])
 
     def valve_lift(self, alpha: np.ndarray) -> np.ndarray:
-        """The valve lift [m] at pallet-arm angle ``alpha`` [rad]: the pallet centre's fall."""
-        return self.pallet_arm * (math.sin(self.rest_angle) - np.sin(alpha))
+        """The valve lift [m] at pallet-arm angle ``alpha`` [rad]: the pallet centre's fall
+        from its rest (the pivot at the origin, the arm at α₀)."""
+        return self.pallet_arm * (math.sin(self.rest_angle) - np.sin(alpha)) - self.pivot_height
+
+
+def _unit(angle: float) -> tuple[float, float]:
+    return math.cos(angle), math.sin(angle)
 
 
 def lever_of(train: Any) -> Lever:
@@ -178,11 +196,12 @@ def lever_of(train: Any) -> Lever:
 
 
 def _pitch_point(lever: Lever, lift: Lift, s: np.ndarray, theta: np.ndarray) -> np.ndarray:
+    """The pitch curve's point of profile angle ``s`` at cam angle ``theta``, from the pivot."""
     c = lever.cam_centre
-    psi0 = math.atan2(*(lever.roller_at(np.asarray(lever.rest_angle)) - c)[::-1])
+    psi0 = math.atan2(*(lever.rest_roller - c)[::-1])
     rho = lever.pitch_radius + lift(s)[0]
     phi = psi0 + theta - s
-    return c + rho[..., None] * np.stack([np.cos(phi), np.sin(phi)], -1)
+    return c - lever.pivot + rho[..., None] * np.stack([np.cos(phi), np.sin(phi)], -1)
 
 
 def _contact_angle(lever: Lever, lift: Lift, theta: np.ndarray) -> np.ndarray:
@@ -227,6 +246,7 @@ class KinematicState:
     angle: np.ndarray  # [rad] the pallet arm's angle α
     valve_lift: np.ndarray  # [m] b·(sin α₀ − sin α)
     ratio: np.ndarray  # [-] valve travel per roller travel along the contact normal
+    gain: np.ndarray  # [-] ∂(valve lift)/∂(pivot height), the roller held on the cam
 
 
 def kinematic_state(lever: Lever, lift: Lift, theta: np.ndarray) -> KinematicState:
@@ -238,7 +258,7 @@ def kinematic_state(lever: Lever, lift: Lift, theta: np.ndarray) -> KinematicSta
     alpha = np.arctan2(lever.side * centre[:, 1], lever.side * centre[:, 0])
     # the pitch curve's tangent along s, and the lever's direction of motion at the roller
     c = lever.cam_centre
-    psi0 = math.atan2(*(lever.roller_at(np.asarray(lever.rest_angle)) - c)[::-1])
+    psi0 = math.atan2(*(lever.rest_roller - c)[::-1])
     phi = psi0 + theta - s
     h, dh = lift(s)
     u = np.stack([np.cos(phi), np.sin(phi)], -1)
@@ -247,9 +267,57 @@ def kinematic_state(lever: Lever, lift: Lift, theta: np.ndarray) -> KinematicSta
     normal = np.stack([-tangent[:, 1], tangent[:, 0]], -1)
     normal /= np.linalg.norm(normal, axis=1)[:, None]
     motion = np.stack([-np.sin(alpha), np.cos(alpha)], -1)
-    along = np.abs(np.einsum("ij,ij->i", motion, normal))
-    ratio = lever.pallet_arm * np.cos(alpha) / (lever.roller_arm * along)
-    return KinematicState(theta, alpha, lever.valve_lift(alpha), ratio)
+    along = np.einsum("ij,ij->i", motion, normal)
+    ratio = lever.pallet_arm * np.cos(alpha) / (lever.roller_arm * np.abs(along))
+    gain = _gain(lever, alpha, normal[:, 1], along)
+    return KinematicState(theta, alpha, lever.valve_lift(alpha), ratio, gain)
+
+
+def _gain(lever: Lever, alpha: np.ndarray, normal_up: np.ndarray, along: np.ndarray):
+    """∂v/∂e, the valve lift's change per unit rise of the pivot with the roller held on the
+    pitch curve (see :func:`pivot_gain`): the roller's centre moves by e·ŷ + side·a·t·dα, t
+    the lever's direction of motion, and keeps on the curve, n·(e·ŷ + side·a·t·dα) = 0 (n its
+    normal, either orientation); v = b·sin α₀ − e − b·sin α, so
+    ∂v/∂e = b·cos α·n_y / (side·a·n·t) − 1."""
+    arm = lever.side * lever.roller_arm
+    return lever.pallet_arm * np.cos(alpha) * normal_up / (arm * along) - 1.0
+
+
+def pivot_gain(train: Any) -> float:
+    """The valve lift's change per unit rise of a lever's pivot [-] at rest (the roller on the
+    base circle, whose normal at the roller is the radius from the cam's centre):
+    b·cos α₀·n_y/(side·a·n·t) − 1; (b − a)/a for a level finger under its cam. By virtual
+    work it is also the pivot's load per unit of the pallet's force, the lever's own momentum
+    left out (``campipe.engine.lash_adjuster``)."""
+    lever = lever_of(train)
+    normal = (lever.rest_roller - lever.cam_centre) / lever.pitch_radius
+    motion = np.array([-math.sin(lever.rest_angle), math.cos(lever.rest_angle)])
+    along = np.array([float(normal @ motion)])
+    return float(_gain(lever, np.array([lever.rest_angle]), normal[1:], along)[0])
+
+
+def base_take_up(lever: Lever, height: float) -> float:
+    """The valve lift [m] on the base circle with the pivot raised by ``height`` [m] (a lash
+    adjuster's extension e): the lash it takes up at the valve, exactly. The roller's centre
+    X = P + side·a·u(α) sits on the pitch circle |X − c| = R, so with D = c − P (d = |D|, of
+    direction φ) side·a·d·cos(α − φ) = (a² + d² − R²)/2, the root nearest α₀; about
+    e·(b − a)/a for a level finger and a small e (:func:`pivot_gain`)."""
+    lifted = dataclasses.replace(lever, pivot_height=height)
+    D = lifted.cam_centre - lifted.pivot
+    d, phi = float(np.hypot(*D)), math.atan2(D[1], D[0])
+    a, R = lever.roller_arm, lever.pitch_radius
+    cosine = lever.side * (a * a + d * d - R * R) / (2.0 * a * d)
+    if not abs(cosine) <= 1.0:
+        raise ModelParameterError.at(
+            "hla_travel",
+            "the lash adjuster raises the pivot so far that the roller cannot reach the cam",
+            found=height,
+            expected="a plunger travel the lever's geometry takes",
+        )
+    roots = phi + np.array([1.0, -1.0]) * math.acos(cosine)
+    roots = np.angle(np.exp(1j * (roots - lever.rest_angle))) + lever.rest_angle
+    alpha = roots[np.argmin(np.abs(roots - lever.rest_angle))]
+    return float(lifted.valve_lift(np.asarray(alpha)))
 
 
 def reduced_mass(train: Any) -> float:

@@ -11,6 +11,7 @@ harmonic cam). Pure Python and numpy.
 from __future__ import annotations
 
 import collections
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -92,8 +93,9 @@ def valve_side(profile: Profile, train: Any) -> Profile:
     excitation of its own lever: kept for that lever, derived again from its cam for another
     (a case copied with another train), its cam for a train that is no lever."""
     if isinstance(profile, ValveSideProfile) and profile.cam is not None:
-        if train.layout in LEVERS and profile.lever == lever_of(train):
-            return profile
+        own = profile.lever and dataclasses.replace(profile.lever, pivot_height=0.0)
+        if train.layout in LEVERS and own == lever_of(train):
+            return profile  # its own lever's, the pivot where a lash adjuster holds it
         profile = profile.cam
     if train.layout not in LEVERS:
         return profile
@@ -101,20 +103,40 @@ def valve_side(profile: Profile, train: Any) -> Profile:
     key = (profile.breaks.tobytes(), profile.poly.tobytes(), profile.trig.tobytes(), lever)
     found = _CACHE.get(key)
     if found is None:
-        theta = np.arange(round(TWO_PI / STEP)) * (TWO_PI / round(TWO_PI / STEP))
-        state = _kinematics(profile, lever, theta)
-        _check_swing(state, profile)
-        derived = table(theta, state.valve_lift)
-        found = ValveSideProfile(
-            derived.breaks,
-            derived.poly,
-            derived.trig,
-            f"{VALVE_SIDE}{profile.label} ({train.layout})",
-            profile,
-            lever,
-        )
+        found = _derived(profile, lever)
         _CACHE[key] = found
         while len(_CACHE) > CACHED:
             _CACHE.popitem(last=False)
     _CACHE.move_to_end(key)
     return found
+
+
+def _derived(profile: Profile, lever: Lever) -> ValveSideProfile:
+    """``profile`` (the cam's lift) through ``lever``'s kinematics, sampled and splined."""
+    theta = np.arange(round(TWO_PI / STEP)) * (TWO_PI / round(TWO_PI / STEP))
+    state = _kinematics(profile, lever, theta)
+    _check_swing(state, profile)
+    derived = table(theta, state.valve_lift)
+    label = f"{VALVE_SIDE}{profile.label} ({lever.kind})"
+    return ValveSideProfile(derived.breaks, derived.poly, derived.trig, label, profile, lever)
+
+
+def pivot_raised(profile: ValveSideProfile, height: float) -> ValveSideProfile:
+    """A lever layout's excitation with its pivot raised ``height`` [m] from its rest (a lash
+    adjuster's plunger extension under the pivot): the kinematic valve lift of the same cam
+    and lever, the roller on the cam's pitch curve, derived exactly (not cached: the
+    extension moves every turn)."""
+    if profile.cam is None or profile.lever is None:
+        raise TypeError("pivot_raised takes a lever layout's derived profile (valve_side)")
+    return _derived(profile.cam, dataclasses.replace(profile.lever, pivot_height=height))
+
+
+def pivot_gains(profile: ValveSideProfile, theta: np.ndarray) -> np.ndarray:
+    """The valve lift's change per unit rise of the pivot [-] at cam angles ``theta`` [rad]
+    of a lever layout's derived profile (its pivot where it stands):
+    :attr:`~campipe.model.levers.KinematicState.gain`; by virtual work the adjuster's load per
+    unit of the pallet's force."""
+    if profile.cam is None or profile.lever is None:
+        raise TypeError("pivot_gains takes a lever layout's derived profile (valve_side)")
+    theta = np.asarray(theta, float)
+    return _kinematics(profile.cam, profile.lever, theta).gain.reshape(theta.shape)

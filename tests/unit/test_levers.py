@@ -241,9 +241,9 @@ def test_the_thesis_s_members_take_their_masses_given_directly():
 
 def test_the_recorded_cam_normal_force_is_the_cam_force_through_the_lever_ratio(tmp_path):
     """``run.record: [cam_normal_force]`` stores the roller's normal force on the cam: the
-    archive's cam force (the valve side's) times the lever ratio of the hand calculation at
-    each sample's cam angle. Fails on a copy that divides by the ratio, or records the
-    valve-side force unchanged."""
+    engine's valve-side cam force times the lever ratio of the hand calculation at each
+    sample's cam angle, which the archive's cam force now is too. Fails on a copy that
+    divides by the ratio, or records the valve-side force unchanged."""
     import xarray as xr
     import yaml
 
@@ -263,9 +263,11 @@ def test_the_recorded_cam_normal_force_is_the_cam_force_through_the_lever_ratio(
     ds = xr.load_dataset(tmp_path / "finger.nc")
     theta = np.radians(ds["cam_angle"].values)
     ratio = np.array([hand_kinematics(t)[1] for t in theta])
-    force = ds["cam_force"].values[0]
+    case = load_study(path).cases[0]
+    force = run_batch([case.case], case.settings).cam_force[0]  # the valve side's
     assert force.min() > 100.0  # it follows the cam
     assert_allclose(ds["cam_normal_force"].values[0], force * ratio, rtol=1e-6)
+    np.testing.assert_array_equal(ds["cam_force"].values, ds["cam_normal_force"].values)
 
 
 def test_a_case_copied_with_another_train_drives_it_with_its_own_kinematics():

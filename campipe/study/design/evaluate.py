@@ -22,6 +22,7 @@ import numpy as np
 from campipe import engine
 from campipe.constants import RPM
 from campipe.engine import onset as engine_onset
+from campipe.engine.levers import at_the_cam
 from campipe.engine.metrics import archived_metrics
 from campipe.errors import CampipeError
 from campipe.study.spec.design import ONSET, Design, Requirement, onset_required
@@ -142,6 +143,7 @@ def compute_design(
         full_state=any(m.record for m in chosen),
         on_failure="record",
     )
+    result = at_the_cam(result, cases)  # a lever layout's cam force at the cam, as archived
     failed = np.isin(np.asarray(result.status), FAILURES)
     values = {}
     for m in chosen:

@@ -16,10 +16,10 @@ import numpy as np
 
 import campipe
 from campipe import engine
+from campipe.engine.levers import at_the_cam
 from campipe.engine.loads import MEMBER_LOADS, SPRING_HISTORIES, member_loads
 from campipe.engine.metrics import archived_metrics
 from campipe.model.layouts import placeholders
-from campipe.profiles.levers import lever_ratio
 from campipe.sources import source_digest
 from campipe.study.spec.resolve import ResolvedCase
 from campipe.study.spec.variables import CAM_NORMAL_FORCE, data_variables
@@ -136,13 +136,9 @@ def compute_batch(plan: BatchPlan) -> BatchData:
     and metrics are NaN.
     """
     settings = plan.cases[0].settings
-    result = run_batch(
-        [c.case for c in plan.cases],
-        settings,
-        full_state=full_state(plan.record),
-        on_failure="record",
-    )
-    return batch_arrays(plan, result)
+    cases = [c.case for c in plan.cases]
+    result = run_batch(cases, settings, full_state=full_state(plan.record), on_failure="record")
+    return batch_arrays(plan, at_the_cam(result, cases))  # a lever's roller force at the cam
 
 
 def batch_arrays(plan: BatchPlan, result: BatchResult) -> BatchData:
@@ -188,10 +184,8 @@ def batch_arrays(plan: BatchPlan, result: BatchResult) -> BatchData:
         for name in loads:
             arrays[name] = np.stack([p[name] for p in per_case])
     arrays.update(_spring_arrays(result, set(wanted)))
-    if CAM_NORMAL_FORCE in wanted:  # the roller's force through each case's lever ratio
-        arrays[CAM_NORMAL_FORCE] = result.cam_force * np.stack(
-            [lever_ratio(c.case.profile, result.cam_angle) for c in plan.cases]
-        )
+    if CAM_NORMAL_FORCE in wanted:  # the roller's force on the cam: the cam force (at_the_cam)
+        arrays[CAM_NORMAL_FORCE] = result.cam_force
     arrays.update(
         event_arrays(
             result.events,

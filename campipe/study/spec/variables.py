@@ -220,8 +220,8 @@ _AFTER_METRICS: dict[str, Variable] = {
     CAM_NORMAL_FORCE: Variable(
         HISTORY,
         "f8",
-        "roller's normal force on the cam: a lever layout's cam force (at the pallet, along "
-        "the valve) times its lever ratio; the cam force for any other layout",
+        "roller's normal force on the cam: the cam force (a lever layout's the valve side's "
+        "force at the pallet times its lever ratio, as cam_force is)",
         "N",
         record=CAM_NORMAL_FORCE,
     ),
