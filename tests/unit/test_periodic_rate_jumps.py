@@ -55,8 +55,9 @@ def test_a_run_continued_turn_by_turn_keeps_the_impact_at_each_turn_s_start(inte
     1e-7 m: its impulses fall on differently placed steps), and every turn of both has the
     two ramp impacts. Broken copies: a run that starts on the piece holding its start angle
     (the break there not crossed: the state a turn ended in is the one before it) loses the
-    impact at θ = 0 of every turn, 1.4e-6 m off at 3000 rpm and one impact a turn; newmark-linear's start keeping the end sample's cam velocity (after the step):
-    no impulse, 2.5e-6 m off."""
+    impact at θ = 0 of every turn, 1.4e-6 m off at 3000 rpm and one impact a turn;
+    newmark-linear's start keeping the end sample's cam velocity (after the step): no
+    impulse, 2.5e-6 m off."""
     cases = [Case(thesis_train(), RAMPED, rpm * RPM) for rpm in (1000, 3000, 5000)]
     dt = 1e-6 if integrator == "newmark-linear" else None
     auto = run_batch(cases, RunSettings(revolutions=None, integrator=integrator, dt=dt))

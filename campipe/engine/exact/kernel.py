@@ -217,6 +217,16 @@ def _earliest_crossing(ref, st, nact, t_prev, t_eval):
 
 
 @njit(inline="always", nogil=True)
+def _force_maxima(per_rev, c, turn, cam_held, seat_held, gval):
+    """The held contacts' forces (monitors ``gval``) into the turn's force maxima."""
+    if 0 <= turn < per_rev.shape[1]:
+        if cam_held:
+            per_rev[c, turn, MAX_CAM_FORCE] = max(per_rev[c, turn, MAX_CAM_FORCE], -gval[0])
+        if seat_held:
+            per_rev[c, turn, MAX_SEAT_FORCE] = max(per_rev[c, turn, MAX_SEAT_FORCE], -gval[1])
+
+
+@njit(inline="always", nogil=True)
 def _walk(ref, st):
     """Walk the segment's grid from st.t_s until an event, a profile break or the run's end,
     and handle what ended it (``_apply_event``, ``_cross_break``, or st.done).
@@ -238,7 +248,6 @@ def _walk(ref, st):
     dt_cap = runs.dt_cap
     steps = out.steps
     per_rev = out.per_rev
-    n_rev = per_rev.shape[1]
     MC, WC, G, GT, act = ws.MC, ws.WC, ws.G, ws.GT, ws.act
     gval, dval, gprev, dprev = ws.gval, ws.dval, ws.gprev, ws.dprev
     watch, ready, level = ws.watch, ws.ready, ws.level
@@ -323,6 +332,9 @@ def _walk(ref, st):
                 _apply_event(ref, st, first, t_ev)
                 return
         if at_break:
+            # The break's point counts for the force maxima as a grid point does (a lift
+            # table breaks every half degree: its steps seldom reach a grid point).
+            _force_maxima(per_rev, c, turn_of(w, t_break), cam_held, seat_held, gval)
             st.nact = nact
             _cross_break(ref, st)
             return
@@ -330,12 +342,7 @@ def _walk(ref, st):
         for m in range(2):
             dprev[m] = dval[m]
             gprev[m] = gval[m]
-        turn = turn_of(w, t_n)
-        if 0 <= turn < n_rev:
-            if cam_held:
-                per_rev[c, turn, MAX_CAM_FORCE] = max(per_rev[c, turn, MAX_CAM_FORCE], -gval[0])
-            if seat_held:
-                per_rev[c, turn, MAX_SEAT_FORCE] = max(per_rev[c, turn, MAX_SEAT_FORCE], -gval[1])
+        _force_maxima(per_rev, c, turn_of(w, t_n), cam_held, seat_held, gval)
         t_prev = t_n
         if i_step < n_steps:
             cth, sth = _advance(MC, nact, cth, sth, cwh, swh)
