@@ -39,6 +39,11 @@ from campipe.model.hla import taken_up
 SUMMARY = {"sum": "mean", "count": "mean", "max": "max", "min": "min"}
 #: How an archive's long name says the summary.
 READS = {"mean": "per revolution, mean over", "max": "largest in", "min": "least in"}
+#: Contiguous batches a window of turns is split into for its mean's standard error
+#: (:func:`batch_means_error`).
+BATCHES = 4
+#: The suffix of the archive's name of a mean metric's uncertainty (``<summary>_uncertainty``).
+UNCERTAINTY = "_uncertainty"
 
 
 @dataclass(frozen=True)
@@ -64,6 +69,12 @@ class Metric:
     def summary_of_turns(self) -> str:
         """How the summary reads the measured turns: "mean", "max" or "min"."""
         return SUMMARY[self.reduction]
+
+    @property
+    def uncertainty(self) -> str | None:
+        """The archive's name of its summary's standard error where the response never
+        repeats (:func:`batch_means_error`): a mean's only; None for a max or a min."""
+        return self.summary + UNCERTAINTY if self.summary_of_turns == "mean" else None
 
     def to_archive(self, values: np.ndarray) -> np.ndarray:
         """SI per-turn values in the archive's units."""
@@ -93,6 +104,43 @@ class Metric:
         reduce = np.nanmean if how == "mean" else np.nanmax if how == "max" else np.nanmin
         out[some] = reduce(kept[some], axis=1)
         return out
+
+
+def batch_means_error(
+    values: np.ndarray, measured: np.ndarray, batches: int = BATCHES
+) -> np.ndarray:
+    """(n_cases,) the standard error of each case's mean of ``values`` over its ``measured``
+    turns, by batch means: the turns (those measured with a finite value, in order) split into
+    ``batches`` contiguous batches of as equal a length as they allow, the standard deviation
+    of the batch means (n − 1) over √batches. NaN for a case with fewer than two such turns
+    (fewer turns than batches: a batch per turn).
+
+    Successive turns of a response that never repeats are correlated (a turn starts where
+    the last ended), so the naive standard error of the mean, the turns' standard deviation
+    over √n, misstates it: by about √((1 + ρ)/(1 − ρ)) for a lag-one correlation ρ (too small
+    for ρ > 0). Batches several turns long are nearly independent of each other, and their
+    means' spread carries the correlation within them.
+
+    Parameters
+    ----------
+    values : (n_cases, n_turns) array
+        A metric per turn (NaN where a case did not run the turn).
+    measured : (n_turns,) or (n_cases, n_turns) bool array
+        The turns of each case's window.
+    batches : int
+        How many contiguous batches.
+    """
+    values = np.asarray(values, float)
+    window = np.broadcast_to(measured, values.shape) & np.isfinite(values)
+    out = np.full(values.shape[0], np.nan)
+    for i in range(values.shape[0]):
+        turns = values[i, window[i]]
+        k = min(batches, turns.size)
+        if k < 2:
+            continue
+        means = np.array([b.mean() for b in np.array_split(turns, k)])
+        out[i] = means.std(ddof=1) / np.sqrt(k)
+    return out
 
 
 def _pressure(side: int) -> Callable[[Any, Any], np.ndarray]:

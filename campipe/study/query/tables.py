@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from campipe.engine.metrics import UNCERTAINTY
 from campipe.errors import did_you_mean, excerpt
 from campipe.study.query.display import display_units, format_value, label, to_display
 from campipe.study.spec.coordinates import coordinate_values
@@ -55,7 +56,8 @@ class CaseTable:
 def case_table(ds) -> CaseTable:
     """Per-case columns of an archive (an ``xarray.Dataset``), as stored: its case coordinates
     (``case``, the ids, first), then its per-case data variables; the default columns are the
-    coordinates and the metrics."""
+    coordinates and the metrics, each mean followed by its uncertainty where the archive has
+    one (a run of automatic length: :func:`format_rows` shows the pair as ``145.9 ± 0.6``)."""
     columns: dict[str, np.ndarray] = {}
     units: dict[str, str] = {}
     coords = [k for k, v in ds.coords.items() if v.dims[:1] == ("case",) and v.ndim <= 2]
@@ -67,7 +69,13 @@ def case_table(ds) -> CaseTable:
             values = values.astype(object)
         columns[name] = values
         units[name] = str(v.attrs.get("units", ""))
-    metrics = [k for k in data if VARIABLES.get(k) is None or VARIABLES[k].role == "metric"]
+    metrics = [
+        k
+        for k in data
+        if VARIABLES.get(k) is None
+        or VARIABLES[k].role == "metric"
+        or (VARIABLES[k].role == "uncertainty" and k.removesuffix(UNCERTAINTY) in data)
+    ]
     name = str(ds.attrs.get("study_name", ""))
     return CaseTable(columns, units, coords + metrics, ds.sizes.get("case", 0), name)
 
@@ -190,6 +198,7 @@ def format_rows(table: CaseTable, rows: np.ndarray, names: Sequence[str], fmt: s
         return buf.getvalue().rstrip("\n")
     if fmt != "table":
         raise QueryError.at("--format", f"found {excerpt(fmt)}, expected table, csv or json")
+    names, cells = _with_uncertainties(table, rows, list(names), cells)
     text = [
         [", ".join(map(str, c)) if isinstance(c, list) else str(c) for c in row] for row in cells
     ]
@@ -209,6 +218,46 @@ def format_rows(table: CaseTable, rows: np.ndarray, names: Sequence[str], fmt: s
         )
     lines.append(f"({len(rows)} of {table.n} cases)")
     return "\n".join(lines)
+
+
+def plus_minus(value: float, error: float) -> str:
+    """``145.9 ± 0.6``: the error to one significant digit (two if the first is 1) and the
+    value to the same decimal place; the value alone (``format_value``) if the error is NaN."""
+    if not math.isfinite(error) or not math.isfinite(value):
+        return format_value(value)
+    if error == 0:
+        return f"{format_value(value)} ± 0"
+    exponent = math.floor(math.log10(error))
+    digits = 2 if f"{error:.1e}".startswith("1") else 1
+    places = max(digits - 1 - exponent, 0)
+    scale = 10.0 ** (exponent - digits + 1)
+    rounded = round(error / scale) * scale
+    return f"{value:.{places}f} ± {rounded:.{places}f}"
+
+
+def _with_uncertainties(
+    table: CaseTable, rows: np.ndarray, names: list[str], cells: list[list]
+) -> tuple[list[str], list[list]]:
+    """The table format's columns: a mean shown with its uncertainty (``<name>_uncertainty``,
+    also shown) reads ``145.9 ± 0.6`` in the mean's column, where the uncertainty is a
+    number, and the uncertainty's own column goes."""
+    pairs = {
+        j: names.index(n + UNCERTAINTY)
+        for j, n in enumerate(names)
+        if n + UNCERTAINTY in names and table.columns[n].ndim == 1
+    }
+    if not pairs:
+        return names, cells
+    dropped = set(pairs.values())
+    out = []
+    for r, row in zip(rows, cells, strict=True):
+        row = list(row)
+        for j, k in pairs.items():
+            row[j] = plus_minus(
+                float(table.columns[names[j]][r]), float(table.columns[names[k]][r])
+            )
+        out.append([c for j, c in enumerate(row) if j not in dropped])
+    return [n for j, n in enumerate(names) if j not in dropped], out
 
 
 # -- the summary -------------------------------------------------------------------------------
@@ -312,13 +361,28 @@ def settling_lines(table: CaseTable, cap: object) -> list[str]:
     never = np.flatnonzero(period == 0)
     if never.size:
         ids = table.columns.get("case", np.arange(table.n).astype(str))
-        shown = ", ".join(str(ids[i]) for i in never[:MAX_LISTED])
+        shown = ", ".join(f"{ids[i]}{_separation(table, i)}" for i in never[:MAX_LISTED])
         more = f" and {never.size - MAX_LISTED} more" if never.size > MAX_LISTED else ""
         out.append(
-            f"not repeating within {cap} revolutions: {shown}{more} (metrics: mean per turn "
-            "and largest over the run's second half)"
+            f"not repeating within {cap} revolutions (metrics: mean per turn ± its standard "
+            f"error, and largest, over the run's second half): {shown}{more}"
         )
     return out
+
+
+#: The metric the summary shows with its uncertainty for a case that never repeats.
+SEPARATION = "separation_deg_per_rev"
+
+
+def _separation(table: CaseTable, i: int) -> str:
+    """`` (separation_deg_per_rev 145.9 ± 0.6 deg)`` for case i, or "" without the columns."""
+    value = table.columns.get(SEPARATION)
+    error = table.columns.get(SEPARATION + UNCERTAINTY)
+    if value is None or error is None:
+        return ""
+    units = table.units.get(SEPARATION, "")
+    units = f" {units}" if units and units != "1" else ""
+    return f" ({SEPARATION} {plus_minus(float(value[i]), float(error[i]))}{units})"
 
 
 def _values_text(col: np.ndarray, units: str) -> str:

@@ -18,7 +18,7 @@ import campipe
 from campipe import engine
 from campipe.engine.levers import at_the_cam
 from campipe.engine.loads import MEMBER_LOADS, SPRING_HISTORIES, member_loads
-from campipe.engine.metrics import archived_metrics
+from campipe.engine.metrics import archived_metrics, batch_means_error
 from campipe.model.layouts import placeholders
 from campipe.sources import source_digest
 from campipe.study.spec.resolve import ResolvedCase
@@ -168,6 +168,10 @@ def batch_arrays(plan: BatchPlan, result: BatchResult) -> BatchData:
             continue
         values = metric.to_archive(result.metric_per_rev(metric.key))
         arrays[metric.summary] = metric.summarise(values, result.measured)
+        if metric.uncertainty in wanted:  # a mean of a run of automatic length
+            never = result.period_turns == 0  # a settled case's mean is exact: NaN
+            error = batch_means_error(values, result.measured)
+            arrays[metric.uncertainty] = np.where(never, error, np.nan)
         # A failed case's counts are NaN: its per-revolution integers are written as -1.
         arrays[metric.per_rev] = (
             np.where(np.isnan(values), -1, values).astype(metric.dtype)

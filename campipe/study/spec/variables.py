@@ -41,6 +41,7 @@ class Variable:
     role: str = "history"  # "axis", "parameter", "history", "metric", "count", "status",
     #                        "event"
     record: str | None = None  # the run.record item that stores it (None: always stored)
+    also: str | None = None  # a second run.record item it needs beside ``record`` (None: none)
     extra: tuple[tuple[str, object], ...] = ()  # further CF attributes
 
     def attrs(self) -> dict[str, object]:
@@ -63,10 +64,10 @@ SETTLING_RECORD = "settling"
 
 
 def metric_variables(metric: Metric) -> dict[str, Variable]:
-    """A metric's two variables (``campipe.engine.metrics``): per revolution, and its
-    summary over the measured ones."""
+    """A metric's variables (``campipe.engine.metrics``): per revolution, its summary over the
+    measured ones and, for a mean in a run of automatic length, that mean's uncertainty."""
     reads = READS[metric.summary_of_turns]
-    return {
+    out = {
         metric.summary: Variable(
             CASE,
             "f8",
@@ -84,6 +85,27 @@ def metric_variables(metric: Metric) -> dict[str, Variable]:
             record=metric.record,
         ),
     }
+    if metric.uncertainty is not None:
+        out[metric.uncertainty] = uncertainty_variable(metric)
+    return out
+
+
+def uncertainty_variable(metric: Metric) -> Variable:
+    """A mean metric's uncertainty (``<summary>_uncertainty``): the standard error of its
+    window mean by batch means (:func:`campipe.engine.metrics.batch_means_error`) for a case
+    whose response never repeats, NaN for one that settled. Stored by a run of automatic
+    length only (as ``period_turns`` is)."""
+    return Variable(
+        CASE,
+        "f8",
+        f"{metric.description}: standard error of the window mean by batch means of "
+        f"{metric.summary} (NaN where the response repeats: its mean is exact to "
+        "run.settle_tolerance)",
+        metric.units,
+        role="uncertainty",
+        record=SETTLING_RECORD,
+        also=metric.record,
+    )
 
 
 #: Variables every archive holds (member loads and q only when run.record asks), but the
@@ -286,7 +308,9 @@ def data_variables(record: Iterable[str]) -> dict[str, Variable]:
     return {
         name: v
         for name, v in VARIABLES.items()
-        if v.role not in ("axis", "parameter") and (v.record is None or v.record in wanted)
+        if v.role not in ("axis", "parameter")
+        and (v.record is None or v.record in wanted)
+        and (v.also is None or v.also in wanted)
     }
 
 
