@@ -97,10 +97,38 @@ def test_only_the_means_have_an_uncertainty():
         (313.9, 23.4, "314 ± 20"),
         (4.0, 0.0, "4 ± 0"),
         (52.825397, float("nan"), "52.8254"),
+        (9.8512e-07, 9.3e-09, "(9.85 ± 0.09)e-07"),
+        (2.5e7, 1.3e5, "(2.500 ± 0.013)e+07"),
     ],
 )
 def test_a_mean_reads_to_its_uncertainty_s_first_digit(value, error, shown):
     """The error to one significant digit (two when the first is 1), the value to the same
-    place; no error (NaN: a settled case) shows the value as the table always did. Fails on a
-    copy that prints every value with six digits and the error beside it."""
+    place (a very small or large value with a power of ten); no error (NaN: a settled case)
+    shows the value as the table always did. Fails on a copy that prints every value with six
+    digits and the error beside it."""
     assert plus_minus(value, error) == shown
+
+
+def test_a_study_records_them_with_its_settling_and_a_metric_s_own_record_item():
+    """Declared for runs of automatic length only (the ``settling`` item a study adds), and a
+    metric recorded by its own item (the lash adjuster's leak-down) needs that item too.
+    Fails on a copy that declares them always (a fixed run's archive, the digest's, would
+    change) and on one that ignores the metric's own item (a run without a lash adjuster
+    would have to store its leak-down's uncertainty, which it has no turns for)."""
+    from campipe.study.spec.variables import SETTLING_RECORD, data_variables
+
+    def uncertain(record):
+        return {n for n in data_variables(record) if n.endswith("_uncertainty")}
+
+    assert uncertain(()) == set()
+    assert uncertain((SETTLING_RECORD,)) == {
+        "separation_deg_per_rev_uncertainty",
+        "seated_off_cam_deg_per_rev_uncertainty",
+        "cam_impacts_uncertainty",
+        "seat_impacts_uncertainty",
+    }
+    assert uncertain((SETTLING_RECORD, "lash_adjuster")) - uncertain((SETTLING_RECORD,)) == {
+        "hla_leak_down_uncertainty",
+        "hla_pump_up_uncertainty",
+    }
+    assert uncertain(("lash_adjuster",)) == set()

@@ -222,11 +222,17 @@ def format_rows(table: CaseTable, rows: np.ndarray, names: Sequence[str], fmt: s
 
 def plus_minus(value: float, error: float) -> str:
     """``145.9 ± 0.6``: the error to one significant digit (two if the first is 1) and the
-    value to the same decimal place; the value alone (``format_value``) if the error is NaN."""
+    value to the same decimal place; the value alone (``format_value``) if the error is NaN.
+    A value below 1e-3 or from 1e6 up reads with a power of ten, ``(9.85 ± 0.09)e-07``."""
     if not math.isfinite(error) or not math.isfinite(value):
         return format_value(value)
     if error == 0:
         return f"{format_value(value)} ± 0"
+    size = abs(value) or error
+    if size < 1e-3 or size >= 1e6:
+        power = math.floor(math.log10(size))
+        scaled = plus_minus(value / 10.0**power, error / 10.0**power)
+        return f"({scaled})e{power:+03d}"
     exponent = math.floor(math.log10(error))
     digits = 2 if f"{error:.1e}".startswith("1") else 1
     places = max(digits - 1 - exponent, 0)
@@ -364,8 +370,8 @@ def settling_lines(table: CaseTable, cap: object) -> list[str]:
         shown = ", ".join(f"{ids[i]}{_separation(table, i)}" for i in never[:MAX_LISTED])
         more = f" and {never.size - MAX_LISTED} more" if never.size > MAX_LISTED else ""
         out.append(
-            f"not repeating within {cap} revolutions (metrics: mean per turn ± its standard "
-            f"error, and largest, over the run's second half): {shown}{more}"
+            f"not repeating within {cap} revolutions: {shown}{more} (metrics over the run's "
+            "second half: means ± standard error, largest)"
         )
     return out
 
