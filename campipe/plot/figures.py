@@ -29,6 +29,7 @@ import numpy as np
 from matplotlib.colors import Normalize, SymLogNorm
 from matplotlib.figure import Figure
 
+from campipe.engine.metrics import UNCERTAINTY
 from campipe.errors import did_you_mean, excerpt
 from campipe.plot.kinematics import kinematic_lift, rocker_ratios
 from campipe.plot.style import (
@@ -549,7 +550,7 @@ def metric(view: View, request: PlotRequest) -> Figure:
             describe(n, view.shown.columns[n][first], view.shown.units.get(n, "")) for n in others
         )
         ax.plot(x[idx], y[idx], label=text or "all cases", **style.kwargs())
-    ringed = _mark_unsettled(ax, view, x, y)
+    ringed = _mark_unsettled(ax, view, x, y, yname)
     units = view.shown.units.get(yname, "")
     for k, limit in enumerate(request.limit):
         at = shown_value(limit, view, yname, "--limit")
@@ -571,11 +572,16 @@ def metric(view: View, request: PlotRequest) -> Figure:
     return fig
 
 
-def _mark_unsettled(ax, view: View, x: np.ndarray, y: np.ndarray) -> bool:
+def _mark_unsettled(ax, view: View, x: np.ndarray, y: np.ndarray, yname: str) -> bool:
     """Ring the cases of a run of automatic length that did not repeat within its cap: their
-    values are statistics over a window (mean per turn, largest), not a settled response's."""
+    values are statistics over a window (mean per turn, largest), not a settled response's;
+    a mean with its standard error (``<yname>_uncertainty``) as a bar of ± 1 of it."""
     period = view.stored.columns.get("period_turns")
     never = np.zeros(x.size, bool) if period is None else np.asarray(period) == 0
+    error = view.shown.columns.get(yname + UNCERTAINTY)
+    if never.any() and error is not None:
+        ax.errorbar(x[never], y[never], yerr=error[never], fmt="none", ecolor="black",
+                    elinewidth=1.0, capsize=3, zorder=4, gid="uncertainty")  # fmt: skip
     if never.any():
         ax.scatter(
             x[never],
@@ -585,7 +591,8 @@ def _mark_unsettled(ax, view: View, x: np.ndarray, y: np.ndarray) -> bool:
             edgecolors="black",
             linewidths=1.0,
             zorder=4,
-            label="did not repeat: statistics over its window",
+            label="did not repeat: statistics over its window"
+            + (" (bar: ± standard error)" if error is not None else ""),
         )
     return bool(never.any())
 

@@ -154,3 +154,21 @@ def test_a_fixed_run_stores_no_uncertainty(tmp_path):
     with xr.open_dataset(path) as ds:
         assert not [n for n in ds.data_vars if n.endswith("_uncertainty")]
         assert "separation_deg_per_rev" in ds
+
+
+def test_plot_metric_bars_a_never_repeating_mean_with_its_uncertainty(runs):
+    """``campipe plot metric`` draws ± one standard error on each ringed case (and none on a
+    settled one). Fails on a copy that rings the cases without their bars."""
+    from campipe.plot.figures import figure
+    from campipe.study.spec.plots import PlotRequest
+
+    ds = runs[0]
+    fig = figure(ds, PlotRequest("metric"))
+    bars = [c for c in fig.axes[0].collections if c.get_gid() == "uncertainty"]
+    assert len(bars) == 1
+    segments = bars[0].get_segments()
+    never = ds.period_turns.values == 0
+    assert len(segments) == never.sum()
+    half = sorted((s[1, 1] - s[0, 1]) / 2 for s in segments)
+    expected = sorted(ds.separation_deg_per_rev_uncertainty.values[never])
+    np.testing.assert_allclose(half, expected, rtol=1e-9)
