@@ -4,7 +4,12 @@ every number as the separate arrays and the separate start gave."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
+import os
+import pickle
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -84,3 +89,45 @@ def test_a_case_without_a_periodic_start_is_refused_by_its_index():
     with pytest.raises(CaseError) as raised:
         run_batch(cases, RunSettings(revolutions=1))
     assert raised.value.key == "seat" and raised.value.found == [1]
+
+
+def _field_hash(train) -> int:
+    """The dataclass's own hash: of every field, in order (the cached one's definition)."""
+    return hash(tuple(getattr(train, f.name) for f in dataclasses.fields(train)))
+
+
+def test_a_trains_hash_is_its_fields_once_and_afresh_for_a_replaced_train():
+    """Equal trains hash equal; the hash is the fields' (the dataclass's definition, computed
+    here from the fields); a replaced train hashes as its own new fields, and the original
+    keeps its own. Fails on a hash cached per class instead of per train, one copied into
+    ``replace``'s train, or one left out of step with equality."""
+    train, same = thesis_train(), thesis_train().replace()
+    assert train == same and hash(train) == hash(same) == _field_hash(train)
+    stiffer = train.replace(spring_rate=2 * train.spring_rate)
+    assert hash(train) == _field_hash(train)  # read again, from the cache
+    assert stiffer != train and hash(stiffer) == _field_hash(stiffer) != hash(train)
+    assert hash(stiffer.replace(spring_rate=train.spring_rate)) == hash(train)
+
+
+HASH_IN_ANOTHER_PROCESS = """
+import pickle, sys
+train = pickle.loads(sys.stdin.buffer.read())
+print(hash(train) == hash(train.replace()), train == train.replace())
+"""
+
+
+def test_a_train_sent_to_another_process_is_hashed_there():
+    """A train hashed here and pickled is hashed afresh in a process with another string hash
+    seed: there it hashes as the trains equal to it (its ``replace()``). Fails if the pickle
+    carried this process's cached hash (its strings' hashes differ there)."""
+    train = thesis_train()
+    hash(train)
+    env = {**os.environ, "PYTHONHASHSEED": "12345"}
+    done = subprocess.run(
+        [sys.executable, "-c", HASH_IN_ANOTHER_PROCESS],
+        input=pickle.dumps(train),
+        capture_output=True,
+        env=env,
+        check=True,
+    )
+    assert done.stdout.split() == [b"True", b"True"]
