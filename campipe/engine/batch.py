@@ -344,8 +344,7 @@ class Start(NamedTuple):
     cfg0: np.ndarray  # (n,) int64 configuration
 
 
-@dataclass(frozen=True)
-class PreparedBatch:
+class PreparedBatch(NamedTuple):
     """What a batch's kernels take, but where it starts (``_prepare_batch``)."""
 
     case_list: Sequence[Case]  # the batch's cases
@@ -485,12 +484,12 @@ def _find_periodic_starts(cases, modal_trains, runs, packed, snap, t0, q0, v0) -
     kernel reads none of them); refuses a case where configuration I holds nowhere on the
     turn."""
     n, n_q = q0.shape
-    z_turn = np.zeros((n, packed.n_pieces.max() + 1, 2 * n_q))
+    z_turn = np.zeros((n, packed.breaks.shape[1], 2 * n_q))  # the most pieces + 1
     state = np.zeros(1, STATE)
     steady.periodic_starts(
         cases, modal_trains, packed, runs, make_workspace(n_q), state, snap, z_turn, t0, q0, v0
     )
-    if np.isnan(t0).any():
+    if np.count_nonzero(np.isnan(t0)):
         bad = np.flatnonzero(np.isnan(t0))
         raise CaseError.at(
             "seat",
@@ -631,7 +630,7 @@ def run_batch(
     integrator = integrators.get(settings.method)
     integrator.run(integrator.prepare(batch, settings), cases_in, out)
     status, n_events = out.status, out.n_events
-    if status.any():  # not every case OK
+    if np.count_nonzero(status):  # not every case OK
         _failures(out, settings, on_failure, check_stability_limit, integrator)
     kept = np.minimum(n_events, settings.max_events)
     return BatchResult(
