@@ -20,9 +20,9 @@ from numba import njit, typeof
 from campipe.constants import TWO_PI
 from campipe.engine import integrators, steady
 from campipe.engine.closed_form import (
-    STATE,
     ExactRuns,
     ModalTrains,
+    make_state,
     make_workspace,
     stack_trains,
 )
@@ -485,10 +485,8 @@ def _find_periodic_starts(cases, modal_trains, runs, packed, snap, t0, q0, v0) -
     turn."""
     n, n_q = q0.shape
     z_turn = np.zeros((n, packed.breaks.shape[1], 2 * n_q))  # the most pieces + 1
-    state = np.zeros(1, STATE)
-    steady.periodic_starts(
-        cases, modal_trains, packed, runs, make_workspace(n_q), state, snap, z_turn, t0, q0, v0
-    )
+    ws, state = make_workspace(n_q), make_state()
+    steady.periodic_starts(cases, modal_trains, packed, runs, ws, state, snap, z_turn, t0, q0, v0)
     if np.count_nonzero(np.isnan(t0)):
         bad = np.flatnonzero(np.isnan(t0))
         raise CaseError.at(
