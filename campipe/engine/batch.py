@@ -19,6 +19,7 @@ from numba import njit, typeof
 
 from campipe.constants import TWO_PI
 from campipe.engine import integrators, steady
+from campipe.engine.closed_form import STATE as STATE
 from campipe.engine.closed_form import (
     ExactRuns,
     ModalTrains,
@@ -260,7 +261,7 @@ class TrainStack(NamedTuple):
     """What a batch's distinct trains (in order) give its kernels, stacked along a leading
     train axis (``train_stack``). Cached and shared by the batches of these trains: the
     kernels only read these arrays, and a batch takes its per-case rows by fancy indexing
-    (copies)."""
+    (copies; a one-case batch takes the arrays themselves)."""
 
     preps: tuple[Prepared, ...]
     modal: tuple[ModalData, ...]  # ``train_modal`` per train
@@ -366,14 +367,20 @@ def _prepare_batch(cases: Sequence[Case], settings: RunSettings, full_state: boo
     n = len(cases)
     trains, which = unique_trains(cases)
     stack = train_stack(tuple(trains), dt_run or 0.0)
-    qref = stack.valve_ref[which]
+
+    def rows(of_trains: np.ndarray) -> np.ndarray:
+        # Each case's row of a per-train array: a one-case batch's is its train's own array
+        # (the kernels only read them), a larger batch's a copy by fancy indexing.
+        return of_trains if n == 1 else of_trains[which]
+
+    qref = rows(stack.valve_ref)
     has_seat = np.array([c.has_seat for c in cases], dtype=np.bool_)
     omega = np.array([c.speed for c in cases], dtype=float)
     modal_trains = stack.modal_trains
     n_q = modal_trains.load.shape[1]
     profiles = [keyed(c.profile) for c in cases]
     seat = np.array([c.seat if c.has_seat else 0.0 for c in cases])
-    lift_bound, speed_bound = _bounds(profiles, stack.ratio[which], omega, seat)
+    lift_bound, speed_bound = _bounds(profiles, rows(stack.ratio), omega, seat)
     return PreparedBatch(
         case_list=cases,
         trains=trains,
@@ -392,10 +399,10 @@ def _prepare_batch(cases: Sequence[Case], settings: RunSettings, full_state: boo
             v0=np.zeros((n, n_q)),
             a0=np.zeros((n, n_q)),
             cfg0=np.array([CAM_CONTACT] * n, np.int64),
-            meff=stack.meff[which],
-            separation=stack.separation[which],
+            meff=rows(stack.meff),
+            separation=rows(stack.separation),
             capture=np.array([float(settings.capture_velocity)] * n),
-            restitution=stack.restitution[which],
+            restitution=rows(stack.restitution),
             valve_ref=qref,
             lift_bound=lift_bound,
             speed_bound=speed_bound,
