@@ -1,6 +1,7 @@
-"""A call's own work (issue 34: per-call overhead): the outputs as views of one block, and
-modal-exact's periodic start written into the batch's own start arrays. Both must leave
-every number as the separate arrays and the separate start gave."""
+"""A call's own work (issue 34: per-call overhead): the outputs as views of one block,
+modal-exact's periodic start written into the batch's own start arrays, a train's hash computed
+once, a kernel's state record cleared rather than allocated, the output angles copied from a
+grid made once. Each must leave every number as before."""
 
 from __future__ import annotations
 
@@ -10,13 +11,16 @@ import os
 import pickle
 import subprocess
 import sys
+import threading
 
 import numpy as np
 import pytest
 
 from campipe.engine import Case, CaseError, RunSettings, run_batch
 from campipe.engine import batch as batch_module
+from campipe.engine.closed_form import STATE, make_state
 from campipe.engine.common import make_outputs
+from campipe.engine.settings import output_angles
 from campipe.model import thesis_train
 from campipe.profiles import harmonic, polydyne
 
@@ -131,3 +135,31 @@ def test_a_train_sent_to_another_process_is_hashed_there():
         check=True,
     )
     assert done.stdout.split() == [b"True", b"True"]
+
+
+def test_a_kernels_state_record_is_cleared_at_each_call_and_one_per_thread():
+    """``make_state`` hands a thread the same record each call, all its bytes zero again (as
+    ``np.zeros``) after a kernel wrote it; another thread gets its own. Fails on a record not
+    cleared (a case would start from the last call's segment), or one shared between threads
+    (two dask workers' kernels writing one record)."""
+    record = make_state()
+    record["w"], record["done"], record["bounced_cam"] = 5.0, True, -np.inf
+    again = make_state()
+    assert again is record and again.tobytes() == np.zeros(1, STATE).tobytes()
+    other: list[np.ndarray] = []
+    worker = threading.Thread(target=lambda: other.append(make_state()))
+    worker.start()
+    worker.join()
+    assert other[0] is not record and not np.shares_memory(other[0], record)
+
+
+def test_the_output_angles_are_a_fresh_array_each_call():
+    """``output_angles`` copies a grid made once: the angles are k·output_every to the bit
+    (as ``np.arange(n) * output_every``), and a caller writing into its copy leaves the next
+    call's unchanged. Fails if the cached grid itself were handed out."""
+    settings = RunSettings(revolutions=2.5, output_every=math.radians(0.7))
+    first = output_angles(settings)
+    n = int(math.floor(2.5 * 360 / 0.7 + 1e-9)) + 1
+    assert np.array_equal(first, np.arange(n) * math.radians(0.7))
+    first[:] = -1.0
+    assert np.array_equal(output_angles(settings), np.arange(n) * math.radians(0.7))
