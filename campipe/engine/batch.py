@@ -19,10 +19,11 @@ from numba import njit, typeof
 
 from campipe.constants import TWO_PI
 from campipe.engine import integrators, steady
+from campipe.engine.closed_form import STATE as STATE
 from campipe.engine.closed_form import (
-    STATE,
     ExactRuns,
     ModalTrains,
+    make_state,
     make_workspace,
     stack_trains,
 )
@@ -260,7 +261,7 @@ class TrainStack(NamedTuple):
     """What a batch's distinct trains (in order) give its kernels, stacked along a leading
     train axis (``train_stack``). Cached and shared by the batches of these trains: the
     kernels only read these arrays, and a batch takes its per-case rows by fancy indexing
-    (copies)."""
+    (copies; a one-case batch takes the arrays themselves)."""
 
     preps: tuple[Prepared, ...]
     modal: tuple[ModalData, ...]  # ``train_modal`` per train
@@ -344,8 +345,7 @@ class Start(NamedTuple):
     cfg0: np.ndarray  # (n,) int64 configuration
 
 
-@dataclass(frozen=True)
-class PreparedBatch:
+class PreparedBatch(NamedTuple):
     """What a batch's kernels take, but where it starts (``_prepare_batch``)."""
 
     case_list: Sequence[Case]  # the batch's cases
@@ -367,14 +367,20 @@ def _prepare_batch(cases: Sequence[Case], settings: RunSettings, full_state: boo
     n = len(cases)
     trains, which = unique_trains(cases)
     stack = train_stack(tuple(trains), dt_run or 0.0)
-    qref = stack.valve_ref[which]
+
+    def rows(of_trains: np.ndarray) -> np.ndarray:
+        # Each case's row of a per-train array: a one-case batch's is its train's own array
+        # (the kernels only read them), a larger batch's a copy by fancy indexing.
+        return of_trains if n == 1 else of_trains[which]
+
+    qref = rows(stack.valve_ref)
     has_seat = np.array([c.has_seat for c in cases], dtype=np.bool_)
     omega = np.array([c.speed for c in cases], dtype=float)
     modal_trains = stack.modal_trains
     n_q = modal_trains.load.shape[1]
     profiles = [keyed(c.profile) for c in cases]
     seat = np.array([c.seat if c.has_seat else 0.0 for c in cases])
-    lift_bound, speed_bound = _bounds(profiles, stack.ratio[which], omega, seat)
+    lift_bound, speed_bound = _bounds(profiles, rows(stack.ratio), omega, seat)
     return PreparedBatch(
         case_list=cases,
         trains=trains,
@@ -393,10 +399,10 @@ def _prepare_batch(cases: Sequence[Case], settings: RunSettings, full_state: boo
             v0=np.zeros((n, n_q)),
             a0=np.zeros((n, n_q)),
             cfg0=np.array([CAM_CONTACT] * n, np.int64),
-            meff=stack.meff[which],
-            separation=stack.separation[which],
+            meff=rows(stack.meff),
+            separation=rows(stack.separation),
             capture=np.array([float(settings.capture_velocity)] * n),
-            restitution=stack.restitution[which],
+            restitution=rows(stack.restitution),
             valve_ref=qref,
             lift_bound=lift_bound,
             speed_bound=speed_bound,
@@ -485,12 +491,10 @@ def _find_periodic_starts(cases, modal_trains, runs, packed, snap, t0, q0, v0) -
     kernel reads none of them); refuses a case where configuration I holds nowhere on the
     turn."""
     n, n_q = q0.shape
-    z_turn = np.zeros((n, packed.n_pieces.max() + 1, 2 * n_q))
-    state = np.zeros(1, STATE)
-    steady.periodic_starts(
-        cases, modal_trains, packed, runs, make_workspace(n_q), state, snap, z_turn, t0, q0, v0
-    )
-    if np.isnan(t0).any():
+    z_turn = np.zeros((n, packed.breaks.shape[1], 2 * n_q))  # the most pieces + 1
+    ws, state = make_workspace(n_q), make_state()
+    steady.periodic_starts(cases, modal_trains, packed, runs, ws, state, snap, z_turn, t0, q0, v0)
+    if np.count_nonzero(np.isnan(t0)):
         bad = np.flatnonzero(np.isnan(t0))
         raise CaseError.at(
             "seat",
@@ -631,7 +635,7 @@ def run_batch(
     integrator = integrators.get(settings.method)
     integrator.run(integrator.prepare(batch, settings), cases_in, out)
     status, n_events = out.status, out.n_events
-    if status.any():  # not every case OK
+    if np.count_nonzero(status):  # not every case OK
         _failures(out, settings, on_failure, check_stability_limit, integrator)
     kept = np.minimum(n_events, settings.max_events)
     return BatchResult(

@@ -39,7 +39,13 @@ from campipe.engine.batch import (
     unique_trains,
     valve_reference,
 )
-from campipe.engine.closed_form import STATE, ExactRuns, ModalTrains, make_workspace, stack_trains
+from campipe.engine.closed_form import (
+    ExactRuns,
+    ModalTrains,
+    make_state,
+    make_workspace,
+    stack_trains,
+)
 from campipe.engine.common import DROP_FLOOR, SMOOTH, Cases, classify_break, jump_speed
 from campipe.engine.metrics import MAX_CAM_FORCE, N_ENGINE
 from campipe.engine.modal import ModalData
@@ -87,7 +93,7 @@ class SteadyBatch:
             active = np.ones(omega.size, np.bool_)
         steady.steady_extremes(
             self.cases, self.trains, self.packed, self.runs,
-            make_workspace(self.trains.load.shape[1]), np.zeros(1, STATE), self.z_turn,
+            make_workspace(self.trains.load.shape[1]), make_state(), self.z_turn,
             with_max, active, out,
         )  # fmt: skip
         return out
@@ -263,7 +269,7 @@ def _samples(
     force = np.empty((n, n_out))
     steady_samples.steady_samples(
         batch.cases, batch.trains, batch.packed, batch.runs, make_workspace(n_q),
-        np.zeros(1, STATE), batch.z_turn, angles, active, q, v, acc, force,
+        make_state(), batch.z_turn, angles, active, q, v, acc, force,
     )  # fmt: skip
     return SteadyState(angles, q, v, acc, force, batch.cases.valve_ref.copy(), ext)
 

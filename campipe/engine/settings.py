@@ -435,10 +435,11 @@ def check_contacts(cases: Sequence[Case], settings: RunSettings) -> None:
     """Refuse a compliant case for an integrator of rigid contacts (or a rigid one for one of
     compliant contacts), then what the run's integrator refuses (its ``check``)."""
     integrator = integrators.get(settings.method)
+    compliant = [case.compliant for case in cases]
     for i, case in enumerate(cases):
-        if not (case.compliant or integrator.contacts == "compliant"):
+        if not (compliant[i] or integrator.contacts == "compliant"):
             continue
-        if not case.compliant:
+        if not compliant[i]:
             raise RunSettingsError.at(
                 "run.integrator",
                 f"{integrator.name} integrates compliant contacts, but case {i}'s are rigid: "
@@ -455,7 +456,7 @@ def check_contacts(cases: Sequence[Case], settings: RunSettings) -> None:
                 found=settings.integrator,
                 expected=f"default or {COMPLIANT}",
             )
-    if any(c.compliant for c in cases):
+    if any(compliant):
         integrators.get(COMPLIANT).check(cases, settings)
     if integrator.contacts != "compliant":
         integrator.check(cases, settings)

@@ -371,6 +371,21 @@ class ValveTrain:
         """A copy with some values (SI) changed."""
         return dataclasses.replace(self, **changes)
 
+    # The hash is the dataclass's (of every field, in order), computed once per train: the
+    # engine's per-train caches hash a train three times a call, and each hash read all its
+    # fields (1.6 µs). ``dataclasses.replace`` makes a new train, hashed afresh.
+    def __hash__(self) -> int:
+        return self._hash
+
+    @functools.cached_property
+    def _hash(self) -> int:
+        return hash(tuple(getattr(self, f.name) for f in dataclasses.fields(self)))
+
+    def __getstate__(self) -> dict[str, object]:
+        """The fields without the cached hash: a string's hash differs between processes
+        (``PYTHONHASHSEED``), so a train sent to another keeps none from this one."""
+        return {k: v for k, v in self.__dict__.items() if k != "_hash"}
+
     def as_dict(self) -> dict[str, object]:
         return dataclasses.asdict(self)
 

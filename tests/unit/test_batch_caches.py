@@ -132,6 +132,9 @@ def test_the_caches_are_bounded_and_no_run_writes_into_what_they_hold():
         batch_module.train_stack(trains, 0.0),
         batch_module.train_stack(trains, 3e-6),
         packed.pack_cached([c.profile for c in cases]),
+        # a one-case batch's, whose rows are the stack's own arrays
+        batch_module.train_stack(trains[1:], 0.0),
+        batch_module.train_stack(trains[1:], 3e-6),
     ]
     before = [a.tobytes() for a in _arrays(tuple(held))]
     assert len(before) > 40
@@ -141,6 +144,7 @@ def test_the_caches_are_bounded_and_no_run_writes_into_what_they_hold():
         RunSettings(revolutions=1, integrator="newmark-linear", dt=3e-6),
     ):
         run_batch(cases, settings)
+        run_batch(cases[1:2], settings)  # the stiff train, seated
     assert [a.tobytes() for a in _arrays(tuple(held))] == before
     assert batch_module.train_stack(trains, 0.0) is held[0]  # what the runs took
     assert packed.pack_cached([c.profile for c in cases]) is held[2]

@@ -1,17 +1,26 @@
-"""A call's own work (issue 34: per-call overhead): the outputs as views of one block, and
-modal-exact's periodic start written into the batch's own start arrays. Both must leave
-every number as the separate arrays and the separate start gave."""
+"""A call's own work (issue 34: per-call overhead): the outputs as views of one block,
+modal-exact's periodic start written into the batch's own start arrays, a train's hash computed
+once, a kernel's state record cleared rather than allocated, the output angles copied from a
+grid made once. Each must leave every number as before."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
+import os
+import pickle
+import subprocess
+import sys
+import threading
 
 import numpy as np
 import pytest
 
 from campipe.engine import Case, CaseError, RunSettings, run_batch
 from campipe.engine import batch as batch_module
+from campipe.engine.closed_form import STATE, make_state
 from campipe.engine.common import make_outputs
+from campipe.engine.settings import output_angles
 from campipe.model import thesis_train
 from campipe.profiles import harmonic, polydyne
 
@@ -84,3 +93,73 @@ def test_a_case_without_a_periodic_start_is_refused_by_its_index():
     with pytest.raises(CaseError) as raised:
         run_batch(cases, RunSettings(revolutions=1))
     assert raised.value.key == "seat" and raised.value.found == [1]
+
+
+def _field_hash(train) -> int:
+    """The dataclass's own hash: of every field, in order (the cached one's definition)."""
+    return hash(tuple(getattr(train, f.name) for f in dataclasses.fields(train)))
+
+
+def test_a_trains_hash_is_its_fields_once_and_afresh_for_a_replaced_train():
+    """Equal trains hash equal; the hash is the fields' (the dataclass's definition, computed
+    here from the fields); a replaced train hashes as its own new fields, and the original
+    keeps its own. Fails on a hash cached per class instead of per train, one copied into
+    ``replace``'s train, or one left out of step with equality."""
+    train, same = thesis_train(), thesis_train().replace()
+    assert train == same and hash(train) == hash(same) == _field_hash(train)
+    stiffer = train.replace(spring_rate=2 * train.spring_rate)
+    assert hash(train) == _field_hash(train)  # read again, from the cache
+    assert stiffer != train and hash(stiffer) == _field_hash(stiffer) != hash(train)
+    assert hash(stiffer.replace(spring_rate=train.spring_rate)) == hash(train)
+
+
+HASH_IN_ANOTHER_PROCESS = """
+import pickle, sys
+train = pickle.loads(sys.stdin.buffer.read())
+print(hash(train) == hash(train.replace()), train == train.replace())
+"""
+
+
+def test_a_train_sent_to_another_process_is_hashed_there():
+    """A train hashed here and pickled is hashed afresh in a process with another string hash
+    seed: there it hashes as the trains equal to it (its ``replace()``). Fails if the pickle
+    carried this process's cached hash (its strings' hashes differ there)."""
+    train = thesis_train()
+    hash(train)
+    env = {**os.environ, "PYTHONHASHSEED": "12345"}
+    done = subprocess.run(
+        [sys.executable, "-c", HASH_IN_ANOTHER_PROCESS],
+        input=pickle.dumps(train),
+        capture_output=True,
+        env=env,
+        check=True,
+    )
+    assert done.stdout.split() == [b"True", b"True"]
+
+
+def test_a_kernels_state_record_is_cleared_at_each_call_and_one_per_thread():
+    """``make_state`` hands a thread the same record each call, all its bytes zero again (as
+    ``np.zeros``) after a kernel wrote it; another thread gets its own. Fails on a record not
+    cleared (a case would start from the last call's segment), or one shared between threads
+    (two dask workers' kernels writing one record)."""
+    record = make_state()
+    record["w"], record["done"], record["bounced_cam"] = 5.0, True, -np.inf
+    again = make_state()
+    assert again is record and again.tobytes() == np.zeros(1, STATE).tobytes()
+    other: list[np.ndarray] = []
+    worker = threading.Thread(target=lambda: other.append(make_state()))
+    worker.start()
+    worker.join()
+    assert other[0] is not record and not np.shares_memory(other[0], record)
+
+
+def test_the_output_angles_are_a_fresh_array_each_call():
+    """``output_angles`` copies a grid made once: the angles are k·output_every to the bit
+    (as ``np.arange(n) * output_every``), and a caller writing into its copy leaves the next
+    call's unchanged. Fails if the cached grid itself were handed out."""
+    settings = RunSettings(revolutions=2.5, output_every=math.radians(0.7))
+    first = output_angles(settings)
+    n = int(math.floor(2.5 * 360 / 0.7 + 1e-9)) + 1
+    assert np.array_equal(first, np.arange(n) * math.radians(0.7))
+    first[:] = -1.0
+    assert np.array_equal(output_angles(settings), np.arange(n) * math.radians(0.7))

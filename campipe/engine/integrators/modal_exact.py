@@ -8,8 +8,6 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
-import numpy as np
-
 from campipe.engine.case import Case
 from campipe.engine.integrators.base import RunLike
 
@@ -45,8 +43,8 @@ class ModalExact:
 def arguments(prepared: Any, cases: Any, out: Any) -> tuple:
     """The kernel's arguments for a batch starting as ``cases`` says, with fresh work
     arrays."""
-    from campipe.engine.closed_form import STATE, make_workspace
+    from campipe.engine.closed_form import make_state, make_workspace
 
     modal_trains, packed, runs = prepared
     n_q = modal_trains.load.shape[1]
-    return (cases, modal_trains, packed, runs, out, make_workspace(n_q), np.zeros(1, STATE))
+    return (cases, modal_trains, packed, runs, out, make_workspace(n_q), make_state())
