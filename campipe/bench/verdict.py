@@ -237,7 +237,7 @@ def _sweep_goals(bench: Bench) -> list[Goal]:
     for key, what in whats:
         if key == "overhead":
             figure = (
-                f"{format_short(s['overhead'] * 1e3, 2)} ms, {format_short(s['calls_ratio'], 3)}×"
+                f"{format_short(s['overhead'] * 1e3, 3)} ms, {format_short(s['calls_ratio'], 3)}×"
             )
             reached = s["reached"]["overhead"] and s["reached"]["calls_ratio"]
         else:

@@ -377,12 +377,12 @@ def test_the_verdict_judges_the_speed_sweep_against_issue_34s_goals():
     assert judged(5e-3, 1.2, 55e-3, 7e-3) == [
         ("reached", "×240"),
         ("reached", "×11"),
-        ("reached", "0.065 ms, 1.4×"),
+        ("reached", "0.0645 ms, 1.4×"),
     ]
     assert judged(4.5e-3, 0.6, 40e-3, 7.3e-3) == [
         ("not reached", "×133"),
         ("not reached", "×8.89"),
-        ("not reached", "0.09 ms, 1.62×"),
+        ("not reached", "0.0903 ms, 1.62×"),
     ]
 
 
