@@ -348,26 +348,26 @@ def held_break(profiles, c, p, rev, w, form, capture):
 
 @njit(inline="always")
 def start_piece(profiles, c, theta, cfg, w, form, capture):
-    """(turn, piece) a run starting at cam angle ``theta`` [rad] in configuration ``cfg``
-    begins on. A start state is the state *before* anything at its instant: where ``theta``
-    is a break (to AT_BREAK) that a held follower cannot cross smoothly (an impact of the
-    cam's rate jump, a release), the run begins on the piece that ends there and crosses the
-    break first, as a run that reached it would; else on the piece holding ``theta``. So a
-    run continued from another's last state (which ends before a break at its end:
-    ``ends_on_a_break``) and a periodic start at a break (``steady.periodic_starts``) count
-    the break's event in the turn it starts."""
+    """(turn, piece, crosses): where a run starting at cam angle ``theta`` [rad] in
+    configuration ``cfg`` begins. A start state is the state *before* anything at its
+    instant: where ``theta`` is a break (to AT_BREAK) that a held follower cannot cross
+    smoothly (an impact of the cam's rate jump, a release), the run begins on the piece that
+    ends there and crosses the break first, as a run that reached it would (``crosses``
+    True); else on the piece holding ``theta``. So a run continued from another's last state
+    (which ends before a break at its end: ``ends_on_a_break``) and a periodic start at a
+    break (``steady.periodic_starts``) count the break's event in the turn it starts."""
     rev, p = locate(profiles, c, theta)
     if not holds_cam(cfg):
-        return rev, p
+        return rev, p, False
     th_b = rev * TWO_PI + profiles.breaks[c, p]
     if abs(theta - th_b) > AT_BREAK * (1.0 + abs(theta)):
-        return rev, p
+        return rev, p, False
     pl, revl = p - 1, rev
     if pl < 0:
         pl, revl = profiles.n_pieces[c] - 1, rev - 1
     if held_break(profiles, c, pl, revl, w, form, capture) == SMOOTH:
-        return rev, p
-    return revl, pl
+        return rev, p, False
+    return revl, pl, True
 
 
 @njit(inline="always")

@@ -73,7 +73,7 @@ from campipe.engine.metrics import (
     THESIS_IMPACT_FORCE,
 )
 from campipe.engine.policy import release, strike, strike_at_break
-from campipe.profiles.packed import degree, evaluate_packed, horner, locate, next_break, piece_eval
+from campipe.profiles.packed import degree, evaluate_packed, horner, next_break, piece_eval
 from campipe.vocabulary import (
     CAM,
     EVENTS_TRUNCATED,
@@ -563,9 +563,8 @@ def newmark_linear_batch(cases, trains, profiles, runs, out, work, contact):
         quiet_seat = 0
         k_out = np.int64(0)  # not a literal: one compiled ``_write_samples`` (``common``)
         t_sample = 0.0
-        rev, p = start_piece(profiles, c, w * n0 * h, cfg, w, form_c, cases.capture[c])
-        rev_at, p_at = locate(profiles, c, w * n0 * h)
-        if rev != rev_at or p != p_at:
+        rev, p, crosses = start_piece(profiles, c, w * n0 * h, cfg, w, form_c, cases.capture[c])
+        if crosses:
             # The run crosses the break it starts on: the held cam's coordinate is its value
             # before the break, which the first step's impulse starts from (``_hold``).
             l_s, dl_s, _ = piece_eval(profiles, c, p, rev, w * n0 * h)

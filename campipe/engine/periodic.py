@@ -287,6 +287,15 @@ def _break_limits(profile: Profile) -> tuple[np.ndarray, np.ndarray, np.ndarray,
     return left[0], left[1], right[0], right[1]
 
 
+def _cases_break_limits(cases: Sequence[Case]) -> list[tuple[np.ndarray, ...]]:
+    """Each case's ``_break_limits``, once per profile the cases share."""
+    limits: dict[int, tuple[np.ndarray, ...]] = {}
+    for case in cases:
+        if id(case.profile) not in limits:
+            limits[id(case.profile)] = _break_limits(case.profile)
+    return [limits[id(case.profile)] for case in cases]
+
+
 def break_events(cases: Sequence[Case], capture: float) -> np.ndarray:
     """(n,) bool: the case's profile has a break that a follower held on the cam cannot cross
     held at the case's speed (``common.classify_break``, the test the integrators apply: a lift
@@ -298,16 +307,12 @@ def break_events(cases: Sequence[Case], capture: float) -> np.ndarray:
     constant-velocity ramp's velocity steps. A rate jump within rounding or below the capture
     velocity is crossed held, as the integrators cross it."""
     classify = classify_break.py_func  # the compiled test's own Python (numba's public py_func)
-    limits: dict[int, tuple[np.ndarray, ...]] = {}
     out = np.zeros(len(cases), np.bool_)
-    for i, case in enumerate(cases):
-        key = id(case.profile)
-        if key not in limits:
-            limits[key] = _break_limits(case.profile)
+    for i, (case, limits) in enumerate(zip(cases, _cases_break_limits(cases), strict=True)):
         form = case.closure == "form"
         out[i] = any(
             classify(l0, d0, l1, d1, case.speed, form, capture)[0] != SMOOTH
-            for l0, d0, l1, d1 in zip(*limits[key], strict=True)
+            for l0, d0, l1, d1 in zip(*limits, strict=True)
         )
     return out
 
@@ -321,15 +326,11 @@ def leave_speeds(cases: Sequence[Case], capture: float) -> np.ndarray:
     carries every other break (a plastic impact's impulse: ``steady``); above this speed the
     follower leaves configuration I every turn."""
     out = np.full(len(cases), np.inf)
-    limits: dict[int, tuple[np.ndarray, ...]] = {}
-    for i, case in enumerate(cases):
+    for i, (case, limits) in enumerate(zip(cases, _cases_break_limits(cases), strict=True)):
         if case.closure == "form":
             continue
-        key = id(case.profile)
-        if key not in limits:
-            limits[key] = _break_limits(case.profile)
         bounces = case.train.cam_restitution > 0.0
-        for l0, d0, l1, d1 in zip(*limits[key], strict=True):
+        for l0, d0, l1, d1 in zip(*limits, strict=True):
             if l1 < l0 - DROP_FLOOR:
                 out[i] = 0.0
             elif d1 < d0 or bounces:

@@ -215,11 +215,17 @@ def _derivative_max(profile: Profile, order: int) -> np.ndarray:
     return np.max(np.abs(values), axis=1) + 0.5 * width / (PIECE_SAMPLES - 1) * nxt
 
 
-def _steps(profile: Profile, order: int) -> np.ndarray:
-    """(n,) |the step of y^(order)| at each break (break k ends piece k)."""
+def _one_sided(profile: Profile, order: int) -> tuple[np.ndarray, np.ndarray]:
+    """(n,) y^(order) either side of each break (break k ends piece k): left, right."""
     n = profile.n_pieces
     left = _derivative(profile, order, np.arange(n), profile.breaks[1:])
     right = _derivative(profile, order, np.arange(1, n + 1) % n, profile.breaks[1:] % TWO_PI)
+    return left, right
+
+
+def _steps(profile: Profile, order: int) -> np.ndarray:
+    """(n,) |the step of y^(order)| at each break (break k ends piece k)."""
+    left, right = _one_sided(profile, order)
     return np.abs(left - right)
 
 
@@ -396,9 +402,7 @@ def held_from(profile: Profile, capture: float) -> float:
     smoothly; 0 without such steps. Below it the closed form crosses a step without its
     impulse, so it is not the Fourier series the bound is of; above it an impact is the
     series' impulse (plastic) and a release leaves configuration I (``periodic``)."""
-    n = profile.n_pieces
-    left = _derivative(profile, 1, np.arange(n), profile.breaks[1:])
-    right = _derivative(profile, 1, np.arange(1, n + 1) % n, profile.breaks[1:] % TWO_PI)
+    left, right = _one_sided(profile, 1)
     real = np.abs(right - left) > STEP * _scale(profile)
     speeds = [
         jump_speed(float(a), float(b), capture)

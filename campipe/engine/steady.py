@@ -51,7 +51,7 @@ from campipe.engine.common import (
     deref,
     start_piece,
 )
-from campipe.profiles.packed import evaluate_packed, horner, locate, piece_eval
+from campipe.profiles.packed import evaluate_packed, horner, piece_eval
 from campipe.vocabulary import CAM, CAM_CONTACT, SEAT
 
 #: Samples per turn at which the start's search for an angle where configuration I holds
@@ -318,10 +318,9 @@ def periodic_starts(cases, trains, profiles, runs, ws, state, snap, z_turn, t_st
         before = -1  # at a break the held follower cannot cross smoothly: the piece it ends
         if theta_s >= 0.0:
             th_run = theta_s - TWO_PI  # the run's angle there
-            rev_s, p_s = start_piece(profiles, c, th_run, CAM_CONTACT, st.w, cases.form[c],
-                                     cases.capture[c])  # fmt: skip
-            rev_l, p_l = locate(profiles, c, th_run)
-            if rev_s != rev_l or p_s != p_l:
+            _, p_s, crosses = start_piece(profiles, c, th_run, CAM_CONTACT, st.w, cases.form[c],
+                                          cases.capture[c])  # fmt: skip
+            if crosses:
                 before = p_s
         if before >= 0:
             # The state before the break (the run's start crosses it: common.start_piece),

@@ -502,7 +502,9 @@ def _start_case(cases, trains, profiles, runs, ws, st, c, tr):
         ws.v[i] = cases.v0[c, i]
     st.cfg = cases.cfg0[c]
     st.t_s = cases.t0[c]
-    rev, p = start_piece(profiles, c, st.w * st.t_s, st.cfg, st.w, cases.form[c], cases.capture[c])
+    rev, p, _ = start_piece(
+        profiles, c, st.w * st.t_s, st.cfg, st.w, cases.form[c], cases.capture[c]
+    )
     st.rev = rev
     st.p = p
     st.k_out = 0
