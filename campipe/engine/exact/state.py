@@ -63,6 +63,31 @@ def _at(deriv, WC, MC, nact, G, GT, m, t_s, t, w, th0):
     return (dg, d2g) if deriv else (g, dg)
 
 
+@njit(inline="always", nogil=True)
+def _column(Z, s, x, deg):
+    """Σ_{k ≤ deg} Z[k, s]·x^k and its derivative in x: ``horner``'s first two on column s,
+    in its order of operations, indexing Z itself (a view ``Z[:, s]`` per call, and the
+    second derivative nobody reads, cost a sample a third of its time)."""
+    p0 = 0.0
+    p1 = 0.0
+    for k in range(deg, -1, -1):
+        p1 = p1 * x + p0
+        p0 = p0 * x + Z[k, s]
+    return p0, p1
+
+
+@njit(inline="always", nogil=True)
+def _two_columns(Z, s1, s2, x, deg):
+    """Σ_{k ≤ deg} Z[k, s]·x^k of columns s1 and s2 (``horner``'s value, in its order of
+    operations), in one loop."""
+    p = 0.0
+    r = 0.0
+    for k in range(deg, -1, -1):
+        p = p * x + Z[k, s1]
+        r = r * x + Z[k, s2]
+    return p, r
+
+
 @njit(**HELPER)
 def _root(
     deriv, sgn, WC, MC, nact, G, GT, m, t_s, ta, tb, level, w, th0, tolerance, known, fa, fb,
@@ -185,8 +210,9 @@ def _state_active(q, v, z, VY, MC, Z, ZT, free, c, ci, nf, nact, x, ct, sn, deg,
                 for jj in range(nact):
                     acc += VY[0, jj, s] * MC[F1, jj] + VY[1, jj, s] * MC[F2, jj]
                 z[s] = acc
-        q[coord] = z[k] + horner(Z[:, k], x, deg)[0]
-        v[coord] = z[k + nf] + horner(Z[:, k + nf], x, deg)[0]
+        pq, pv = _two_columns(Z, k, k + nf, x, deg)
+        q[coord] = z[k] + pq
+        v[coord] = z[k + nf] + pv
 
 
 @njit(inline="always", nogil=True)
@@ -221,7 +247,7 @@ def _free_acceleration(MC, r, Z, ZT, s, nact, x, cth, sth, w, deg):
     acc = 0.0
     for jj in range(nact):
         acc += MC[r, jj] * MC[F1, jj] + MC[r + 1, jj] * MC[F2, jj]
-    acc += w * horner(Z[:, s], x, deg)[1]
+    acc += w * _column(Z, s, x, deg)[1]
     return acc - w * (ZT[s].real * sth + ZT[s].imag * cth)
 
 
@@ -236,7 +262,13 @@ def _write_sample(
     gval, the contact coordinates' accelerations (a free one's acc1, acc7; a held one's from
     the cam or the seat), and the cam lift on piece p at local angle x, cam angle with cosine
     ct and sine sn, of degree ``pdeg`` (its leading zeros add exact zeros: skipped)."""
-    lift, dlift, ddlift = horner(poly[c, p], x, pdeg)
+    lift = 0.0  # horner(poly[c, p], x, pdeg), on poly itself (no view)
+    dlift = 0.0
+    ddlift = 0.0
+    for j in range(pdeg, -1, -1):
+        ddlift = ddlift * x + 2.0 * dlift
+        dlift = dlift * x + lift
+        lift = lift * x + poly[c, p, j]
     lift += trig[c, p, 0] * sn + trig[c, p, 1] * ct
     dlift += trig[c, p, 0] * ct - trig[c, p, 1] * sn
     ddlift -= trig[c, p, 0] * sn + trig[c, p, 1] * ct
@@ -385,7 +417,11 @@ def _monitor_at_grid(WC, MC, nact, G, GT, m, gdeg, w, x, cth, sth):
         f2 = MC[F2, jj]
         g += WC[W1, m, jj] * f1 + WC[W2, m, jj] * f2
         dg += WC[WL1, m, jj] * f1 + WC[WL2, m, jj] * f2
-    p0, p1, _ = horner(G[m], x, gdeg)
+    p0 = 0.0  # horner(G[m], x, gdeg)'s value and slope, on G itself (no view)
+    p1 = 0.0
+    for k in range(gdeg, -1, -1):
+        p1 = p1 * x + p0
+        p0 = p0 * x + G[m, k]
     g += p0 + GT[m].real * cth - GT[m].imag * sth
     dg += w * (p1 - GT[m].real * sth - GT[m].imag * cth)
     return g, dg
