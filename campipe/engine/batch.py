@@ -37,6 +37,7 @@ from campipe.engine.contact import (
     static_position,
 )
 from campipe.engine.integrators.modal_exact import arguments
+from campipe.engine.kernel_call import plain
 from campipe.engine.lash_adjuster import run_adjusted
 from campipe.engine.modal import ModalData, modal_data, pad_stack
 from campipe.engine.result import BatchResult as BatchResult
@@ -363,6 +364,8 @@ def _prepare_batch(cases: Sequence[Case], settings: RunSettings, full_state: boo
     """What the batch's kernels take. What the trains and the profiles fix comes from caches
     (``train_stack``, ``pack_cached``, ``_peaks``); only the per-case rows are made here (the
     harmonic responses in the kernels)."""
+    if len(cases) == 1:
+        return _prepare_one(cases[0], settings, full_state)
     dt_run = settings.step
     n = len(cases)
     trains, which = unique_trains(cases)
@@ -404,6 +407,76 @@ def _prepare_batch(cases: Sequence[Case], settings: RunSettings, full_state: boo
             capture=np.array([float(settings.capture_velocity)] * n),
             restitution=rows(stack.restitution),
             valve_ref=qref,
+            lift_bound=lift_bound,
+            speed_bound=speed_bound,
+        ),
+        stack=stack,
+    )
+
+
+def _prepare_one(case: Case, settings: RunSettings, full_state: bool) -> PreparedBatch:
+    """``_prepare_batch`` of a one-case batch, from scalars: the same numbers (each the same
+    IEEE operations in the same order as the vectorised path's, on one element), in a few
+    arrays and their views instead of some thirty numpy operations on one-element arrays."""
+    dt_run = settings.step
+    train = case.train
+    stack = train_stack((train,), dt_run or 0.0)
+    n_q = stack.modal_trains.load.shape[1]
+    speed = float(case.speed)
+    has_seat = case.has_seat
+    seat = case.seat if has_seat else 0.0
+    ratio = float(stack.ratio[0])
+    lift_peak, rate_peak = _peaks(keyed(case.profile))
+    floats = np.array(
+        [
+            speed,
+            stack.valve_ref[0] + seat,  # seat_q
+            float(settings.capture_velocity),
+            LIFT_BOUND * lift_peak * ratio + abs(seat),
+            SPEED_BOUND * speed * rate_peak * max(ratio, 1.0),
+            settings.output_every / speed,  # t_sample
+            settings.recorded_revolutions * TWO_PI / speed,  # t_end
+        ]
+    )
+    omega, seat_q, capture, lift_bound, speed_bound, t_sample, t_end = (
+        floats[i : i + 1] for i in range(7)
+    )
+    start = np.zeros((3, 1, n_q))  # q0, v0, a0
+    flags = np.array([has_seat, case.closure == "form"])
+    ints = np.array([0, CAM_CONTACT], np.int64)  # the train, the start's configuration
+    which = ints[0:1]
+    runs = ExactRuns(
+        train=which,
+        t_sample=t_sample,
+        t_end=t_end,
+        zeta=np.zeros((1, 4, 2 * n_q), np.complex128),
+        dt_cap=float(dt_run or 0.0),
+        tolerance=float(settings.tolerance),
+        full_state=bool(full_state),
+    )
+    return PreparedBatch(
+        case_list=[case],
+        trains=[train],
+        which=which,
+        preps=list(stack.preps),
+        packed=pack_cached([case.profile]),
+        modal_trains=stack.modal_trains,
+        runs=runs,
+        cases=Cases(
+            omega=omega,
+            seat_q=seat_q,
+            has_seat=flags[0:1],
+            form=flags[1:2],
+            t0=np.zeros(1),
+            q0=start[0],
+            v0=start[1],
+            a0=start[2],
+            cfg0=ints[1:2],
+            meff=stack.meff,
+            separation=stack.separation,
+            capture=capture,
+            restitution=stack.restitution,
+            valve_ref=stack.valve_ref,
             lift_bound=lift_bound,
             speed_bound=speed_bound,
         ),
@@ -493,7 +566,8 @@ def _find_periodic_starts(cases, modal_trains, runs, packed, snap, t0, q0, v0) -
     n, n_q = q0.shape
     z_turn = np.zeros((n, packed.breaks.shape[1], 2 * n_q))  # the most pieces + 1
     ws, state = make_workspace(n_q), make_state()
-    steady.periodic_starts(cases, modal_trains, packed, runs, ws, state, snap, z_turn, t0, q0, v0)
+    structures = plain(cases, modal_trains, packed, runs, ws)
+    steady.periodic_starts(*structures, state, snap, z_turn, t0, q0, v0)
     if np.count_nonzero(np.isnan(t0)):
         bad = np.flatnonzero(np.isnan(t0))
         raise CaseError.at(

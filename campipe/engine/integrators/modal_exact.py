@@ -42,9 +42,10 @@ class ModalExact:
 
 def arguments(prepared: Any, cases: Any, out: Any) -> tuple:
     """The kernel's arguments for a batch starting as ``cases`` says, with fresh work
-    arrays."""
+    arrays: its named structures as plain tuples (``campipe.engine.kernel_call``)."""
     from campipe.engine.closed_form import make_state, make_workspace
+    from campipe.engine.kernel_call import plain
 
     modal_trains, packed, runs = prepared
     n_q = modal_trains.load.shape[1]
-    return (cases, modal_trains, packed, runs, out, make_workspace(n_q), make_state())
+    return plain(cases, modal_trains, packed, runs, out, make_workspace(n_q), make_state())
