@@ -36,6 +36,7 @@ from campipe.engine.contact import (
     quasi_static_batch,
     static_position,
 )
+from campipe.engine.integrators import Integrator
 from campipe.engine.integrators.modal_exact import arguments
 from campipe.engine.kernel_call import plain
 from campipe.engine.lash_adjuster import run_adjusted
@@ -53,7 +54,6 @@ from campipe.engine.settings import (
     RunSettings,
     check_run,
     output_angles,
-    sample_count,
     turn_count,
 )
 from campipe.engine.settings import DEFAULT_CAPTURE_VELOCITY as DEFAULT_CAPTURE_VELOCITY
@@ -291,13 +291,10 @@ def train_stack(trains: tuple[ValveTrain, ...], dt: float) -> TrainStack:
     stack = _train_stack(trains, dt)
     # The per-train caches cleared (``prepare``, ``train_modal``: a test that swaps a
     # train's matrices) leave every stack made from them stale.
-    current = [(prepare(t, dt), train_modal(t)) for t in trains]
-    if any(
-        p is not sp or m is not sm
-        for (p, m), sp, sm in zip(current, stack.preps, stack.modal, strict=True)
-    ):
-        _train_stack.cache_clear()
-        stack = _train_stack(trains, dt)
+    for train, prep, modal in zip(trains, stack.preps, stack.modal, strict=True):
+        if prepare(train, dt) is not prep or train_modal(train) is not modal:
+            _train_stack.cache_clear()
+            return _train_stack(trains, dt)
     return stack
 
 
@@ -438,13 +435,11 @@ def _prepare_one(case: Case, settings: RunSettings, full_state: bool) -> Prepare
             settings.recorded_revolutions * TWO_PI / speed,  # t_end
         ]
     )
-    omega, seat_q, capture, lift_bound, speed_bound, t_sample, t_end = (
-        floats[i : i + 1] for i in range(7)
-    )
-    start = np.zeros((3, 1, n_q))  # q0, v0, a0
-    flags = np.array([has_seat, case.closure == "form"])
-    ints = np.array([0, CAM_CONTACT], np.int64)  # the train, the start's configuration
-    which = ints[0:1]
+    # Each a (1,) row of one array (C-contiguous views: the kernels' types).
+    omega, seat_q, capture, lift_bound, speed_bound, t_sample, t_end = floats.reshape(7, 1)
+    q0, v0, a0 = np.zeros((3, 1, n_q))
+    has_seat_, form = np.array([[has_seat], [case.closure == "form"]])
+    which, cfg0 = np.array([[0], [CAM_CONTACT]], np.int64)  # the train, the start's configuration
     runs = ExactRuns(
         train=which,
         t_sample=t_sample,
@@ -465,13 +460,13 @@ def _prepare_one(case: Case, settings: RunSettings, full_state: bool) -> Prepare
         cases=Cases(
             omega=omega,
             seat_q=seat_q,
-            has_seat=flags[0:1],
-            form=flags[1:2],
+            has_seat=has_seat_,
+            form=form,
             t0=np.zeros(1),
-            q0=start[0],
-            v0=start[1],
-            a0=start[2],
-            cfg0=ints[1:2],
+            q0=q0,
+            v0=v0,
+            a0=a0,
+            cfg0=cfg0,
             meff=stack.meff,
             separation=stack.separation,
             capture=capture,
@@ -534,12 +529,11 @@ def integrator_types(cases: Sequence[Case], settings: RunSettings, full_state: b
     return tuple(typeof(a) for a in args)  # as a call types them
 
 
-def _outputs(batch: PreparedBatch, settings: RunSettings):
+def _outputs(batch: PreparedBatch, settings: RunSettings, plan: _Plan | None = None):
     """The kernels' output arrays for a batch run with ``settings`` (``common.make_outputs``)."""
-    n_rev = turn_count(settings.recorded_revolutions)
-    n_out = sample_count(settings.recorded_revolutions, settings.output_every)
+    plan = _plan(settings) if plan is None else plan
     n_q = batch.modal_trains.load.shape[1]
-    return make_outputs(len(batch.which), n_out, n_rev, settings.max_events, n_q)
+    return make_outputs(len(batch.which), plan.n_out, plan.n_rev, settings.max_events, n_q)
 
 
 def _periodic_starts(
@@ -568,7 +562,7 @@ def _find_periodic_starts(cases, modal_trains, runs, packed, snap, t0, q0, v0) -
     ws, state = make_workspace(n_q), make_state()
     structures = plain(cases, modal_trains, packed, runs, ws)
     steady.periodic_starts(*structures, state, snap, z_turn, t0, q0, v0)
-    if np.count_nonzero(np.isnan(t0)):
+    if np.isnan(t0).any():
         bad = np.flatnonzero(np.isnan(t0))
         raise CaseError.at(
             "seat",
@@ -692,10 +686,9 @@ def run_batch(
         }
         return _run_by_contacts(cases, settings, options, start)
     n = len(cases)
-    angles = output_angles(settings)
-    measured = settings.measured_turns(turn_count(settings.recorded_revolutions))
+    plan = _plan(settings)
     batch = _prepare_batch(cases, settings, full_state)
-    if start is None and settings.start == "periodic" and settings.method in NO_START_ACCELERATIONS:
+    if start is None and plan.start_in_place:
         # The start written into the batch's own t0, q0 and v0 (a0 stays zero, cfg0 I).
         cases_in = batch.cases
         _find_periodic_starts(cases_in, batch.modal_trains, batch.runs, batch.packed,
@@ -704,14 +697,21 @@ def run_batch(
         if start is None:
             start = _starts(cases, settings, batch, in_run=True)
         cases_in = batch.cases._replace(**start._asdict())
-    omega, qref = cases_in.omega, cases_in.valve_ref
-    out = _outputs(batch, settings)
-    integrator = integrators.get(settings.method)
+    out = _outputs(batch, settings, plan)
+    integrator = plan.integrator
     integrator.run(integrator.prepare(batch, settings), cases_in, out)
     status, n_events = out.status, out.n_events
     if np.count_nonzero(status):  # not every case OK
         _failures(out, settings, on_failure, check_stability_limit, integrator)
-    kept = np.minimum(n_events, settings.max_events)
+    angles = plan.angles.copy()
+    omega, qref = cases_in.omega, cases_in.valve_ref
+    if n == 1:  # (the same numbers as below, without a loop's arrays)
+        lift_zero = cases[0].lift_zero
+        events = [out.events[0, : min(int(n_events[0]), settings.max_events)].copy()]
+    else:
+        lift_zero = np.array([c.lift_zero for c in cases])
+        kept = np.minimum(n_events, settings.max_events)
+        events = [out.events[i, : kept[i]].copy() for i in range(n)]
     return BatchResult(
         cam_angle=angles,
         time=angles[None, :] / omega[:, None],
@@ -722,14 +722,44 @@ def run_batch(
         cam_force=-out.force[:, :, 0],
         seat_force=out.force[:, :, 1],
         contact_state=out.cfg,
-        valve_reference=qref + np.array([c.lift_zero for c in cases]),  # 0 on a lash's seat
-        measured=measured,
+        valve_reference=qref + lift_zero,  # 0 on a lash's seat
+        measured=plan.measured.copy(),
         per_rev=out.per_rev,
         trains=[c.train for c in cases],
-        events=[out.events[i, : kept[i]].copy() for i in range(n)],
+        events=events,
         steps=out.steps,
         status=status,
         start_time=cases_in.t0,
+    )
+
+
+class _Plan(NamedTuple):
+    """What a run's settings fix for every call (``_plan``)."""
+
+    angles: np.ndarray  # (n_out,) the output angles (``output_angles``; copied per result)
+    measured: np.ndarray  # (n_rev,) the turns the summaries read (copied per result)
+    n_out: int  # output samples
+    n_rev: int  # turns, a partial last one included
+    integrator: Integrator
+    #: a periodic start written into the batch's own start arrays (``NO_START_ACCELERATIONS``)
+    start_in_place: bool
+
+
+@functools.lru_cache(maxsize=64)
+def _plan(settings: RunSettings) -> _Plan:
+    """The ``_Plan`` of settings ``check_run`` has passed, cached per settings."""
+    n_rev = turn_count(settings.recorded_revolutions)
+    angles = output_angles(settings)
+    angles.flags.writeable = False  # (a result takes a copy)
+    measured = settings.measured_turns(n_rev)
+    measured.flags.writeable = False
+    return _Plan(
+        angles=angles,
+        measured=measured,
+        n_out=angles.size,
+        n_rev=n_rev,
+        integrator=integrators.get(settings.method),
+        start_in_place=settings.start == "periodic" and settings.method in NO_START_ACCELERATIONS,
     )
 
 
