@@ -705,6 +705,7 @@ def run_batch(
         _failures(out, settings, on_failure, check_stability_limit, integrator)
     angles = plan.angles.copy()
     omega, qref = cases_in.omega, cases_in.valve_ref
+    lift_zero: float | np.ndarray  # where each case's valve lift reads 0
     if n == 1:  # (the same numbers as below, without a loop's arrays)
         lift_zero = cases[0].lift_zero
         events = [out.events[0, : min(int(n_events[0]), settings.max_events)].copy()]
