@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -18,7 +17,7 @@ import numpy as np
 from numba import njit, typeof
 
 from campipe.constants import TWO_PI
-from campipe.engine import integrators, steady
+from campipe.engine import failures, integrators, steady
 from campipe.engine.closed_form import STATE as STATE
 from campipe.engine.closed_form import (
     ExactRuns,
@@ -50,7 +49,6 @@ from campipe.engine.settings import (
     SPEED_BOUND,
     Case,
     CaseError,
-    IntegrationError,
     RunSettings,
     check_run,
     output_angles,
@@ -79,20 +77,12 @@ from campipe.vocabulary import (
     CAM,
     CAM_AND_SEAT,
     CAM_CONTACT,
-    CHATTER,
     CONFIGURATIONS,
-    EVENTS_TRUNCATED,
-    FAILURES,
     N_COORDINATES,
-    NONFINITE,
     SEAT,
     SEATED,
-    STEP_LIMIT,
-    UNBOUNDED,
     free_coordinates,
 )
-
-log = logging.getLogger(__name__)
 
 #: The configurations a quasi-static start can take (``initial_states``).
 START_CONFIGURATIONS = (CAM_CONTACT, CAM_AND_SEAT, SEATED)
@@ -702,7 +692,7 @@ def run_batch(
     integrator.run(integrator.prepare(batch, settings), cases_in, out)
     status, n_events = out.status, out.n_events
     if np.count_nonzero(status):  # not every case OK
-        _failures(out, settings, on_failure, check_stability_limit, integrator)
+        failures.raise_or_blank(out, settings, on_failure, check_stability_limit, integrator)
     angles = plan.angles.copy()
     omega, qref = cases_in.omega, cases_in.valve_ref
     lift_zero: float | np.ndarray  # where each case's valve lift reads 0
@@ -768,53 +758,6 @@ def _run_turn(cases, settings, start=None, **options) -> BatchResult:
     """One turn of a run of automatic length (``settle.run_settled``), from ``start``'s
     (t0, q0, v0, a0, cfg0) or, for the first, from ``settings.start``'s."""
     return run_batch(cases, settings, start=None if start is None else Start(*start), **options)
-
-
-def _failures(out, settings: RunSettings, on_failure, check_stability_limit, integrator) -> None:
-    """Raise for the failed cases (``on_failure`` "raise"), warn of truncated events, and
-    set a failed case's histories and metrics NaN."""
-    status, n_events = out.status, out.n_events
-    if on_failure == "raise":
-        for code, what in _failure_texts(settings, check_stability_limit, integrator).items():
-            bad = np.flatnonzero(status == code)
-            if bad.size:
-                raise IntegrationError(f"cases {bad.tolist()}{what}", found=bad.tolist())
-    for i in np.flatnonzero(status == EVENTS_TRUNCATED):
-        log.warning(
-            "case %d: %d events, only the first %d kept (raise run.max_events)",
-            i,
-            n_events[i],
-            settings.max_events,
-        )
-    failed = np.flatnonzero(np.isin(status, FAILURES))
-    for array in (out.q, out.v, out.acc, out.force, out.cam, out.per_rev):
-        array[failed] = np.nan
-
-
-def _failure_texts(settings: RunSettings, check_stability_limit, integrator) -> dict[int, str]:
-    """What ``_failures`` says after "cases [...]" of each failed status, in the order it
-    looks for them."""
-
-    def how(stepped: bool) -> str:
-        return f"{settings.method}, step {settings.step:g} s" if stepped else settings.method
-
-    defect = "this is a defect: please report it with the case"
-    unstable = (
-        "the step is beyond the stability limit (the run was asked not to check it)"
-        if not check_stability_limit
-        else defect
-    )
-    return {
-        NONFINITE: f" became non-finite ({how(bool(settings.step))}); {unstable}",
-        CHATTER: ": contact events kept recurring at one instant (chatter); integrate them "
-        "with newmark-linear",
-        UNBOUNDED: f": the motion left its physical bounds "
-        f"({how(integrator.fixed_step)}): a valve lift beyond "
-        f"{LIFT_BOUND:g}× the full lift or a speed beyond {SPEED_BOUND:g}× the cam's; "
-        + (integrator.unbounded_advice or defect),
-        STEP_LIMIT: f": stopped at run.max_steps ({settings.max_steps:.6g} steps; a stiff "
-        "contact without damping): raise --max-steps, or damp the contact",
-    }
 
 
 def _run_by_contacts(
