@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -18,7 +17,7 @@ import numpy as np
 from numba import njit, typeof
 
 from campipe.constants import TWO_PI
-from campipe.engine import integrators, steady
+from campipe.engine import failures, integrators, steady
 from campipe.engine.closed_form import STATE as STATE
 from campipe.engine.closed_form import (
     ExactRuns,
@@ -36,7 +35,9 @@ from campipe.engine.contact import (
     quasi_static_batch,
     static_position,
 )
+from campipe.engine.integrators import Integrator
 from campipe.engine.integrators.modal_exact import arguments
+from campipe.engine.kernel_call import plain
 from campipe.engine.lash_adjuster import run_adjusted
 from campipe.engine.modal import ModalData, modal_data, pad_stack
 from campipe.engine.result import BatchResult as BatchResult
@@ -48,11 +49,9 @@ from campipe.engine.settings import (
     SPEED_BOUND,
     Case,
     CaseError,
-    IntegrationError,
     RunSettings,
     check_run,
     output_angles,
-    sample_count,
     turn_count,
 )
 from campipe.engine.settings import DEFAULT_CAPTURE_VELOCITY as DEFAULT_CAPTURE_VELOCITY
@@ -78,20 +77,12 @@ from campipe.vocabulary import (
     CAM,
     CAM_AND_SEAT,
     CAM_CONTACT,
-    CHATTER,
     CONFIGURATIONS,
-    EVENTS_TRUNCATED,
-    FAILURES,
     N_COORDINATES,
-    NONFINITE,
     SEAT,
     SEATED,
-    STEP_LIMIT,
-    UNBOUNDED,
     free_coordinates,
 )
-
-log = logging.getLogger(__name__)
 
 #: The configurations a quasi-static start can take (``initial_states``).
 START_CONFIGURATIONS = (CAM_CONTACT, CAM_AND_SEAT, SEATED)
@@ -290,13 +281,10 @@ def train_stack(trains: tuple[ValveTrain, ...], dt: float) -> TrainStack:
     stack = _train_stack(trains, dt)
     # The per-train caches cleared (``prepare``, ``train_modal``: a test that swaps a
     # train's matrices) leave every stack made from them stale.
-    current = [(prepare(t, dt), train_modal(t)) for t in trains]
-    if any(
-        p is not sp or m is not sm
-        for (p, m), sp, sm in zip(current, stack.preps, stack.modal, strict=True)
-    ):
-        _train_stack.cache_clear()
-        stack = _train_stack(trains, dt)
+    for train, prep, modal in zip(trains, stack.preps, stack.modal, strict=True):
+        if prepare(train, dt) is not prep or train_modal(train) is not modal:
+            _train_stack.cache_clear()
+            return _train_stack(trains, dt)
     return stack
 
 
@@ -363,6 +351,8 @@ def _prepare_batch(cases: Sequence[Case], settings: RunSettings, full_state: boo
     """What the batch's kernels take. What the trains and the profiles fix comes from caches
     (``train_stack``, ``pack_cached``, ``_peaks``); only the per-case rows are made here (the
     harmonic responses in the kernels)."""
+    if len(cases) == 1:
+        return _prepare_one(cases[0], settings, full_state)
     dt_run = settings.step
     n = len(cases)
     trains, which = unique_trains(cases)
@@ -404,6 +394,74 @@ def _prepare_batch(cases: Sequence[Case], settings: RunSettings, full_state: boo
             capture=np.array([float(settings.capture_velocity)] * n),
             restitution=rows(stack.restitution),
             valve_ref=qref,
+            lift_bound=lift_bound,
+            speed_bound=speed_bound,
+        ),
+        stack=stack,
+    )
+
+
+def _prepare_one(case: Case, settings: RunSettings, full_state: bool) -> PreparedBatch:
+    """``_prepare_batch`` of a one-case batch, from scalars: the same numbers (each the same
+    IEEE operations in the same order as the vectorised path's, on one element), in a few
+    arrays and their views instead of some thirty numpy operations on one-element arrays."""
+    dt_run = settings.step
+    train = case.train
+    stack = train_stack((train,), dt_run or 0.0)
+    n_q = stack.modal_trains.load.shape[1]
+    speed = float(case.speed)
+    has_seat = case.has_seat
+    seat = case.seat if has_seat else 0.0
+    ratio = float(stack.ratio[0])
+    lift_peak, rate_peak = _peaks(keyed(case.profile))
+    floats = np.array(
+        [
+            speed,
+            stack.valve_ref[0] + seat,  # seat_q
+            float(settings.capture_velocity),
+            LIFT_BOUND * lift_peak * ratio + abs(seat),
+            SPEED_BOUND * speed * rate_peak * max(ratio, 1.0),
+            settings.output_every / speed,  # t_sample
+            settings.recorded_revolutions * TWO_PI / speed,  # t_end
+        ]
+    )
+    # Each a (1,) row of one array (C-contiguous views: the kernels' types).
+    omega, seat_q, capture, lift_bound, speed_bound, t_sample, t_end = floats.reshape(7, 1)
+    q0, v0, a0 = np.zeros((3, 1, n_q))
+    has_seat_, form = np.array([[has_seat], [case.closure == "form"]])
+    which, cfg0 = np.array([[0], [CAM_CONTACT]], np.int64)  # the train, the start's configuration
+    runs = ExactRuns(
+        train=which,
+        t_sample=t_sample,
+        t_end=t_end,
+        zeta=np.zeros((1, 4, 2 * n_q), np.complex128),
+        dt_cap=float(dt_run or 0.0),
+        tolerance=float(settings.tolerance),
+        full_state=bool(full_state),
+    )
+    return PreparedBatch(
+        case_list=[case],
+        trains=[train],
+        which=which,
+        preps=list(stack.preps),
+        packed=pack_cached([case.profile]),
+        modal_trains=stack.modal_trains,
+        runs=runs,
+        cases=Cases(
+            omega=omega,
+            seat_q=seat_q,
+            has_seat=has_seat_,
+            form=form,
+            t0=np.zeros(1),
+            q0=q0,
+            v0=v0,
+            a0=a0,
+            cfg0=cfg0,
+            meff=stack.meff,
+            separation=stack.separation,
+            capture=capture,
+            restitution=stack.restitution,
+            valve_ref=stack.valve_ref,
             lift_bound=lift_bound,
             speed_bound=speed_bound,
         ),
@@ -461,12 +519,11 @@ def integrator_types(cases: Sequence[Case], settings: RunSettings, full_state: b
     return tuple(typeof(a) for a in args)  # as a call types them
 
 
-def _outputs(batch: PreparedBatch, settings: RunSettings):
+def _outputs(batch: PreparedBatch, settings: RunSettings, plan: _Plan | None = None):
     """The kernels' output arrays for a batch run with ``settings`` (``common.make_outputs``)."""
-    n_rev = turn_count(settings.recorded_revolutions)
-    n_out = sample_count(settings.recorded_revolutions, settings.output_every)
+    plan = _plan(settings) if plan is None else plan
     n_q = batch.modal_trains.load.shape[1]
-    return make_outputs(len(batch.which), n_out, n_rev, settings.max_events, n_q)
+    return make_outputs(len(batch.which), plan.n_out, plan.n_rev, settings.max_events, n_q)
 
 
 def _periodic_starts(
@@ -493,8 +550,9 @@ def _find_periodic_starts(cases, modal_trains, runs, packed, snap, t0, q0, v0) -
     n, n_q = q0.shape
     z_turn = np.zeros((n, packed.breaks.shape[1], 2 * n_q))  # the most pieces + 1
     ws, state = make_workspace(n_q), make_state()
-    steady.periodic_starts(cases, modal_trains, packed, runs, ws, state, snap, z_turn, t0, q0, v0)
-    if np.count_nonzero(np.isnan(t0)):
+    structures = plain(cases, modal_trains, packed, runs, ws)
+    steady.periodic_starts(*structures, state, snap, z_turn, t0, q0, v0)
+    if np.isnan(t0).any():
         bad = np.flatnonzero(np.isnan(t0))
         raise CaseError.at(
             "seat",
@@ -618,10 +676,9 @@ def run_batch(
         }
         return _run_by_contacts(cases, settings, options, start)
     n = len(cases)
-    angles = output_angles(settings)
-    measured = settings.measured_turns(turn_count(settings.recorded_revolutions))
+    plan = _plan(settings)
     batch = _prepare_batch(cases, settings, full_state)
-    if start is None and settings.start == "periodic" and settings.method in NO_START_ACCELERATIONS:
+    if start is None and plan.start_in_place:
         # The start written into the batch's own t0, q0 and v0 (a0 stays zero, cfg0 I).
         cases_in = batch.cases
         _find_periodic_starts(cases_in, batch.modal_trains, batch.runs, batch.packed,
@@ -630,14 +687,22 @@ def run_batch(
         if start is None:
             start = _starts(cases, settings, batch, in_run=True)
         cases_in = batch.cases._replace(**start._asdict())
-    omega, qref = cases_in.omega, cases_in.valve_ref
-    out = _outputs(batch, settings)
-    integrator = integrators.get(settings.method)
+    out = _outputs(batch, settings, plan)
+    integrator = plan.integrator
     integrator.run(integrator.prepare(batch, settings), cases_in, out)
     status, n_events = out.status, out.n_events
     if np.count_nonzero(status):  # not every case OK
-        _failures(out, settings, on_failure, check_stability_limit, integrator)
-    kept = np.minimum(n_events, settings.max_events)
+        failures.raise_or_blank(out, settings, on_failure, check_stability_limit, integrator)
+    angles = plan.angles.copy()
+    omega, qref = cases_in.omega, cases_in.valve_ref
+    lift_zero: float | np.ndarray  # where each case's valve lift reads 0
+    if n == 1:  # (the same numbers as below, without a loop's arrays)
+        lift_zero = cases[0].lift_zero
+        events = [out.events[0, : min(int(n_events[0]), settings.max_events)].copy()]
+    else:
+        lift_zero = np.array([c.lift_zero for c in cases])
+        kept = np.minimum(n_events, settings.max_events)
+        events = [out.events[i, : kept[i]].copy() for i in range(n)]
     return BatchResult(
         cam_angle=angles,
         time=angles[None, :] / omega[:, None],
@@ -648,14 +713,44 @@ def run_batch(
         cam_force=-out.force[:, :, 0],
         seat_force=out.force[:, :, 1],
         contact_state=out.cfg,
-        valve_reference=qref + np.array([c.lift_zero for c in cases]),  # 0 on a lash's seat
-        measured=measured,
+        valve_reference=qref + lift_zero,  # 0 on a lash's seat
+        measured=plan.measured.copy(),
         per_rev=out.per_rev,
         trains=[c.train for c in cases],
-        events=[out.events[i, : kept[i]].copy() for i in range(n)],
+        events=events,
         steps=out.steps,
         status=status,
         start_time=cases_in.t0,
+    )
+
+
+class _Plan(NamedTuple):
+    """What a run's settings fix for every call (``_plan``)."""
+
+    angles: np.ndarray  # (n_out,) the output angles (``output_angles``; copied per result)
+    measured: np.ndarray  # (n_rev,) the turns the summaries read (copied per result)
+    n_out: int  # output samples
+    n_rev: int  # turns, a partial last one included
+    integrator: Integrator
+    #: a periodic start written into the batch's own start arrays (``NO_START_ACCELERATIONS``)
+    start_in_place: bool
+
+
+@functools.lru_cache(maxsize=64)
+def _plan(settings: RunSettings) -> _Plan:
+    """The ``_Plan`` of settings ``check_run`` has passed, cached per settings."""
+    n_rev = turn_count(settings.recorded_revolutions)
+    angles = output_angles(settings)
+    angles.flags.writeable = False  # (a result takes a copy)
+    measured = settings.measured_turns(n_rev)
+    measured.flags.writeable = False
+    return _Plan(
+        angles=angles,
+        measured=measured,
+        n_out=angles.size,
+        n_rev=n_rev,
+        integrator=integrators.get(settings.method),
+        start_in_place=settings.start == "periodic" and settings.method in NO_START_ACCELERATIONS,
     )
 
 
@@ -663,53 +758,6 @@ def _run_turn(cases, settings, start=None, **options) -> BatchResult:
     """One turn of a run of automatic length (``settle.run_settled``), from ``start``'s
     (t0, q0, v0, a0, cfg0) or, for the first, from ``settings.start``'s."""
     return run_batch(cases, settings, start=None if start is None else Start(*start), **options)
-
-
-def _failures(out, settings: RunSettings, on_failure, check_stability_limit, integrator) -> None:
-    """Raise for the failed cases (``on_failure`` "raise"), warn of truncated events, and
-    set a failed case's histories and metrics NaN."""
-    status, n_events = out.status, out.n_events
-    if on_failure == "raise":
-        for code, what in _failure_texts(settings, check_stability_limit, integrator).items():
-            bad = np.flatnonzero(status == code)
-            if bad.size:
-                raise IntegrationError(f"cases {bad.tolist()}{what}", found=bad.tolist())
-    for i in np.flatnonzero(status == EVENTS_TRUNCATED):
-        log.warning(
-            "case %d: %d events, only the first %d kept (raise run.max_events)",
-            i,
-            n_events[i],
-            settings.max_events,
-        )
-    failed = np.flatnonzero(np.isin(status, FAILURES))
-    for array in (out.q, out.v, out.acc, out.force, out.cam, out.per_rev):
-        array[failed] = np.nan
-
-
-def _failure_texts(settings: RunSettings, check_stability_limit, integrator) -> dict[int, str]:
-    """What ``_failures`` says after "cases [...]" of each failed status, in the order it
-    looks for them."""
-
-    def how(stepped: bool) -> str:
-        return f"{settings.method}, step {settings.step:g} s" if stepped else settings.method
-
-    defect = "this is a defect: please report it with the case"
-    unstable = (
-        "the step is beyond the stability limit (the run was asked not to check it)"
-        if not check_stability_limit
-        else defect
-    )
-    return {
-        NONFINITE: f" became non-finite ({how(bool(settings.step))}); {unstable}",
-        CHATTER: ": contact events kept recurring at one instant (chatter); integrate them "
-        "with newmark-linear",
-        UNBOUNDED: f": the motion left its physical bounds "
-        f"({how(integrator.fixed_step)}): a valve lift beyond "
-        f"{LIFT_BOUND:g}× the full lift or a speed beyond {SPEED_BOUND:g}× the cam's; "
-        + (integrator.unbounded_advice or defect),
-        STEP_LIMIT: f": stopped at run.max_steps ({settings.max_steps:.6g} steps; a stiff "
-        "contact without damping): raise --max-steps, or damp the contact",
-    }
 
 
 def _run_by_contacts(

@@ -51,6 +51,7 @@ from campipe.engine.common import (
     deref,
     start_piece,
 )
+from campipe.engine.kernel_call import start_structures
 from campipe.profiles.packed import evaluate_packed, horner, piece_eval
 from campipe.vocabulary import CAM, CAM_CONTACT, SEAT
 
@@ -293,7 +294,8 @@ def periodic_starts(cases, trains, profiles, runs, ws, state, snap, z_turn, t_st
     Parameters
     ----------
     cases, trains, profiles, runs, ws, state
-        As ``exact.modal_exact_batch``'s (``cases.t0``, ``q0``, ``v0`` are not read).
+        As ``exact.modal_exact_batch``'s, plain tuples named on entry (``cases.t0``, ``q0``,
+        ``v0`` are not read).
     snap : (n,) float
         A step [s] the start must be a whole number of (newmark-linear's), or 0.
     z_turn : (n, P + 1, ns)
@@ -303,6 +305,7 @@ def periodic_starts(cases, trains, profiles, runs, ws, state, snap, z_turn, t_st
     q, v : (n, n_coordinates)
         Out: the coordinates and velocities there [m, m/s, rad, rad/s].
     """
+    cases, trains, profiles, runs, ws = start_structures(cases, trains, profiles, runs, ws)
     st = state[0]
     ref = by_ref((cases, trains, profiles, runs, ws))
     z = ws.z

@@ -20,9 +20,10 @@ from campipe.engine import Case, CaseError, RunSettings, run_batch
 from campipe.engine import batch as batch_module
 from campipe.engine.closed_form import STATE, make_state
 from campipe.engine.common import make_outputs
-from campipe.engine.settings import output_angles
+from campipe.engine.settings import LIFT_BOUND, SPEED_BOUND, output_angles
 from campipe.model import thesis_train
 from campipe.profiles import harmonic, polydyne
+from campipe.profiles.packed import keyed
 
 INCH = 0.0254
 
@@ -163,3 +164,82 @@ def test_the_output_angles_are_a_fresh_array_each_call():
     assert np.array_equal(first, np.arange(n) * math.radians(0.7))
     first[:] = -1.0
     assert np.array_equal(output_angles(settings), np.arange(n) * math.radians(0.7))
+
+
+def _one_case_variety() -> list[Case]:
+    """Cases that differ in every number a one-case batch's preparation reads: seat or none,
+    form closure, a lash's seat, restitution and a capture velocity, refined members (more
+    coordinates), a rocker ratio above and below one, a fast and a slow speed."""
+    train = thesis_train()
+    short_arm = train.replace(rocker_valve_arm_length=0.7 * train.rocker_pushrod_arm_length)
+    poly = polydyne("345", 0.4 * INCH, math.radians(80), math.radians(20), math.radians(80))
+    return [
+        Case(train, harmonic(INCH), 300.0),
+        Case(train, poly, 1900.0, seat=-0.001),
+        Case(train, harmonic(INCH), 900.0, seat=0.0005, closure="form"),
+        Case(train.replace(lash=0.3e-3), poly, 700.0),
+        Case(train.replace(seat_restitution=0.4, spring_elements=3), harmonic(INCH), 1200.0),
+        Case(short_arm, poly, 450.0, seat=-0.0002),
+    ]
+
+
+@pytest.mark.parametrize("case", _one_case_variety())
+def test_a_one_case_batch_is_prepared_as_a_row_of_the_vectorised_batch(case):
+    """A one-case batch is prepared from scalars (``batch._prepare_one``); a batch of the case
+    twice takes the vectorised path. Every per-case array of the one is row 0 of the other's,
+    to the bit and of its dtype, C-contiguous and writeable (the kernels' compiled types), and
+    so are the run's times and the stack, profiles and train index. Fails on a speed bound
+    without the ratio's clamp at 1, a seat taken without its absolute value, a sample spacing
+    in turns instead of seconds, the seat and closure flags swapped, or a row that is a
+    strided view (another type: a second compile)."""
+    settings = RunSettings(revolutions=2.5, output_every=math.radians(0.7), capture_velocity=2e-3)
+    one = batch_module._prepare_batch([case], settings, True)
+    two = batch_module._prepare_batch([case, case], settings, True)
+    assert one.which.tolist() == [0] and two.which.tolist() == [0, 0]
+    for name in one.cases._fields:
+        mine, row = getattr(one.cases, name), getattr(two.cases, name)[:1]
+        assert mine.dtype == row.dtype and mine.shape == row.shape, name
+        assert mine.tobytes() == row.tobytes(), name
+        assert mine.flags.c_contiguous and mine.flags.writeable, name
+    for name in ("train", "t_sample", "t_end"):
+        mine, row = getattr(one.runs, name), getattr(two.runs, name)[:1]
+        assert mine.dtype == row.dtype and mine.tobytes() == row.tobytes(), name
+    assert one.runs.zeta.shape == (1, *two.runs.zeta.shape[1:]) and not one.runs.zeta.any()
+    assert one.runs[4:] == two.runs[4:]  # dt_cap, tolerance, full_state
+    assert one.stack is two.stack and one.modal_trains is two.modal_trains
+    assert one.packed.breaks.tobytes() == two.packed.breaks[:1].tobytes()
+    # The bounds, from the profile's peaks and the train's |ratio| as the docs state them.
+    ratio = abs(batch_module.prepare(case.train, 0.0).valve_ratio)
+    lift, rate = batch_module._peaks(keyed(case.profile))
+    seat = case.seat if case.has_seat else 0.0
+    assert one.cases.lift_bound[0] == LIFT_BOUND * lift * ratio + abs(seat)
+    assert one.cases.speed_bound[0] == SPEED_BOUND * case.speed * rate * max(ratio, 1.0)
+    assert one.runs.t_end[0] == 2.5 * 2 * math.pi / case.speed
+
+
+def test_the_run_kernels_structures_cross_as_plain_tuples_of_their_fields():
+    """``kernel_call.plain`` hands a kernel each named structure as the tuple of its fields
+    (the same arrays, in order) and everything else as it is; ``named_types`` gives back,
+    from those types, the named tuples' own (as numba types them), which
+    ``exact.ahead_signatures`` compiles the kernel's helpers for. Fails on a structure left
+    named, fields reordered, or ``RUN_STRUCTURES`` out of the kernel's argument order (the
+    helpers compiled for other types: a second compile at the run)."""
+    from numba import typeof
+
+    from campipe.engine.integrators.modal_exact import arguments
+    from campipe.engine.kernel_call import RUN_STRUCTURES, named_types
+
+    cases = _one_case_variety()[:2]
+    settings = RunSettings(revolutions=1)
+    b = batch_module._prepare_batch(cases, settings, True)
+    named = (b.cases, b.modal_trains, b.packed, b.runs, batch_module._outputs(b, settings))
+    args = arguments((b.modal_trains, b.packed, b.runs), b.cases, named[4])
+    assert len(args) == len(RUN_STRUCTURES) + 1 and isinstance(args[-1], np.ndarray)
+    for structure, crossed, cls in zip(named, args, RUN_STRUCTURES, strict=False):
+        assert type(structure) is cls and type(crossed) is tuple
+        assert len(crossed) == len(structure)
+        assert all(a is b for a, b in zip(crossed, structure, strict=True))
+    kernel_types = tuple(typeof(a) for a in args)
+    got = named_types(kernel_types)
+    assert got[:5] == tuple(typeof(s) for s in named)
+    assert got[5] == typeof(RUN_STRUCTURES[5](*args[5])) and got[6] == kernel_types[6]

@@ -14,6 +14,7 @@ from campipe.engine import Case, RunSettings, RunSettingsError, run_batch
 from campipe.engine import batch as engine_batch
 from campipe.engine.common import GAP_LEVEL, MICRO_FLIGHT, make_outputs
 from campipe.engine.exact import modal_exact_batch
+from campipe.engine.kernel_call import plain
 from campipe.model import ModelParameterError, thesis_train, valve_train
 from campipe.model.assembly import SystemMatrices
 from campipe.profiles import harmonic
@@ -127,7 +128,7 @@ def _bounce(e: float, capture: float):
     n_q = q0.shape[1]
     out = make_outputs(1, 2, 1, 256, n_q)
     ws = engine_batch.make_workspace(n_q)
-    modal_exact_batch(cases, b.modal_trains, b.packed, b.runs, out, ws,
+    modal_exact_batch(*plain(cases, b.modal_trains, b.packed, b.runs, out, ws),
                       np.zeros(1, engine_batch.STATE))  # fmt: skip
     assert out.status[0] == 0
     return out.events[0, : out.n_events[0]]

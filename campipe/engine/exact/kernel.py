@@ -59,6 +59,7 @@ from campipe.engine.exact.state import (
     _state_at,
     _turn_samples,
 )
+from campipe.engine.kernel_call import named_types, run_structures
 from campipe.engine.metrics import (
     MAX_CAM_FORCE,
     MAX_SEAT_FORCE,
@@ -522,6 +523,8 @@ def modal_exact_batch(cases, trains, profiles, runs, out, ws, state):
 
     Parameters
     ----------
+    cases, trains, profiles, runs, out, ws
+        Each as the plain tuple of its fields (``kernel_call.plain``), named on entry.
     cases : common.Cases
     trains : ModalTrains
         The distinct trains; case c runs train ``runs.train[c]``.
@@ -533,6 +536,7 @@ def modal_exact_batch(cases, trains, profiles, runs, out, ws, state):
     state : (1,) array of STATE
         The run's scalars.
     """
+    cases, trains, profiles, runs, out, ws = run_structures(cases, trains, profiles, runs, out, ws)
     st = state[0]
     ref = by_ref((cases, trains, profiles, runs, out, ws))
     for c in range(cases.omega.shape[0]):
@@ -571,7 +575,7 @@ def ahead_signatures(kernel_types: tuple) -> dict[Any, tuple]:
     second process has it (typing ``_begin_segment`` first), the others seconds after.
     ``_sample`` comes first: reached sooner, it would be compiled twice. Types that differ
     from the kernel's call would cost a second compile, not a wrong result."""
-    *tuples, state = kernel_types
+    *tuples, state = named_types(kernel_types)  # as the kernel names its plain tuples
     ref = types.CPointer(types.BaseTuple.from_types(tuples))  # the kernel's ``by_ref``
     st = state.dtype  # the kernel's ``state[0]``
     i8, f8 = types.int64, types.float64

@@ -4,6 +4,7 @@ search to the run's tolerance (``campipe.engine.exact``)."""
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from typing import Any
@@ -35,16 +36,26 @@ class ModalExact:
         return batch.modal_trains, batch.packed, batch.runs
 
     def run(self, prepared: Any, cases: Any, out: Any) -> None:
-        from campipe.engine import exact  # the compiled kernel, loaded when first run
+        _engine()[0].modal_exact_batch(*arguments(prepared, cases, out))
 
-        exact.modal_exact_batch(*arguments(prepared, cases, out))
+
+@functools.cache
+def _engine():
+    """The modules of the compiled kernel and its arguments, imported when first run (not
+    with the registry: a spec is checked without numba) and held (an import statement in
+    each call costs a one-case run a microsecond)."""
+    from campipe.engine import closed_form, exact, kernel_call
+
+    return exact, closed_form, kernel_call
 
 
 def arguments(prepared: Any, cases: Any, out: Any) -> tuple:
     """The kernel's arguments for a batch starting as ``cases`` says, with fresh work
-    arrays."""
-    from campipe.engine.closed_form import make_state, make_workspace
-
+    arrays: its named structures as plain tuples (``campipe.engine.kernel_call``)."""
+    _, closed_form, kernel_call = _engine()
     modal_trains, packed, runs = prepared
     n_q = modal_trains.load.shape[1]
-    return (cases, modal_trains, packed, runs, out, make_workspace(n_q), make_state())
+    return kernel_call.plain(
+        cases, modal_trains, packed, runs, out, closed_form.make_workspace(n_q),
+        closed_form.make_state(),
+    )  # fmt: skip
