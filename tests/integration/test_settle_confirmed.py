@@ -32,8 +32,7 @@ def test_the_quickstart_chaotic_case_is_not_reported_settled_over_96_turns():
     long fixed run (one piece of 400 turns, no restarts at turn boundaries; mean over turns
     101–400, 145.80°) within 3 % and within 3 standard errors of the two means (batch
     means). Fails on a copy with SETTLE_CONFIRM 0 (the single check: period 4 from turn 91,
-    146.86°, no uncertainty) and on one that confirms a repetition with AT_ONCE's margin
-    alone."""
+    146.86°, no uncertainty)."""
     case = seated_9524()
     auto = run_batch([case], RunSettings(revolutions=None, max_revolutions=96))
     assert auto.period_turns[0] == 0
@@ -66,9 +65,8 @@ def test_true_periods_are_still_found_and_agree_with_a_long_run(speed_rpm, perio
     """Without a seat, 11000 rpm repeats every turn and 12000 rpm every second turn: the
     confirmed rule finds these periods, and the settled window's no-follow per turn agrees
     with a fixed run of 60 turns' last 20 (in one piece) within 0.5 %, whose own per-turn
-    values repeat with the same period. Fails on a copy whose confirmation steps back one
-    turn per check instead of one period (12000 rpm: the odd turns' differences are not
-    small: it never settles)."""
+    values repeat with the same period. Fails on a copy that checks period 1 only (12000 rpm
+    then never repeats: period 0)."""
     case = Case(thesis_train(), harmonic(1.0 * INCH), speed_rpm * RPM)
     auto = run_batch([case], RunSettings(revolutions=None))
     assert auto.period_turns[0] == period

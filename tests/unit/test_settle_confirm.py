@@ -55,9 +55,8 @@ def test_a_passage_near_an_unstable_repetition_is_not_taken_for_one():
 def test_a_geometric_transient_settles_confirm_periods_after_it_first_repeats(r):
     """x_k = r^k (period 1; r < 0 alternates about its limit): the single check first holds
     at some turn k0; the confirmed check at k0 + SETTLE_CONFIRM, and there the distance left
-    (|x_k|, known here) is within the tolerance. Fails on a copy that confirms over turns
-    before the first check could hold (settled before k0 + SETTLE_CONFIRM) or one that waits
-    for more checks."""
+    (|x_k|, known here) is within the tolerance. Fails on a copy that makes one check fewer
+    than it states (``range(1, SETTLE_CONFIRM)``: settled at k0 + 1)."""
     states = r ** np.arange(400.0)
     k0 = first(repeats, states, 1)
     k = first(confirmed, states, 1)
