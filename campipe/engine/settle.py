@@ -104,6 +104,26 @@ def confirmed(boundary: Boundary, c, k: int, p: int, tolerance: float):
     return held
 
 
+def least_period(boundary: Boundary, c: int, k: int, p: int, tolerance: float) -> int:
+    """The period to report for case c, settled with period p after k turns: the least
+    divisor q of p whose differences q turns apart head to within the tolerance, else p. A
+    response that repeats every turn but whose transient alternates (a mode whose multiplier
+    per turn is near −1) has its differences 2 turns apart settle long before those 1 turn
+    apart; it is p-periodic to the tolerance, and q-periodic when the q-differences at turns
+    k − 2q, k − q, k fall to a limit within it, their Aitken extrapolation
+    d₂ − (d₂ − d₁)²/(d₂ − 2d₁ + d₀) (a difference that is already within it counts too)."""
+    for q in range(1, p):
+        if p % q or k < 3 * q:
+            continue
+        d0, d1, d2 = (float(boundary_difference(boundary, c, k - j * q, q)) for j in (2, 1, 0))
+        if d2 <= tolerance:
+            return q
+        curvature = d2 - 2.0 * d1 + d0
+        if d2 < d1 < d0 and curvature > 0 and d2 - (d2 - d1) ** 2 / curvature <= tolerance:
+            return q
+    return p
+
+
 def settled_from(boundary: Boundary, c: int, k: int, p: int, tolerance: float) -> int:
     """The first turn of case c's settled window after k turns with period p: back from k in
     whole periods while the states p apart still agree to the tolerance."""
@@ -240,7 +260,7 @@ def run_settled(
         for p in range(1, p_max + 1):
             hit = open_ & confirmed(boundary, active, k + 1, p, tol)
             for i in active[hit].tolist():
-                period[i] = p
+                period[i] = least_period(boundary, i, k + 1, p, tol)
                 settled[i] = settled_from(boundary, i, k + 1, p, tol)
             open_ &= ~hit
         # a settled case runs on until it has the turns it records

@@ -58,16 +58,20 @@ def test_the_quickstart_chaotic_case_is_not_reported_settled_over_96_turns():
 
 
 @pytest.mark.parametrize(
-    ("speed_rpm", "period"),
-    [(11000.0, 1), (12000.0, 2)],
+    ("speed_rpm", "seat_in", "period"),
+    [(11000.0, None, 1), (12000.0, None, 2), (12000.0, 0.1, 1), (13500.0, None, 1)],
 )
-def test_true_periods_are_still_found_and_agree_with_a_long_run(speed_rpm, period):
-    """Without a seat, 11000 rpm repeats every turn and 12000 rpm every second turn: the
-    confirmed rule finds these periods, and the settled window's no-follow per turn agrees
-    with a fixed run of 60 turns' last 20 (in one piece) within 0.5 %, whose own per-turn
-    values repeat with the same period. Fails on a copy that checks period 1 only (12000 rpm
-    then never repeats: period 0)."""
-    case = Case(thesis_train(), harmonic(1.0 * INCH), speed_rpm * RPM)
+def test_true_periods_are_found_and_agree_with_a_long_run(speed_rpm, seat_in, period):
+    """Without a seat, 11000 rpm repeats every turn and 12000 rpm every second turn; with the
+    seat at 0.1 in 12000 rpm repeats every turn, and so does 13500 rpm without one. The rule
+    finds these periods, and the settled window's no-follow per turn agrees with a fixed run
+    of 60 turns' last 20 (in one piece) within 0.5 %, whose own per-turn values repeat with
+    the same period. Fails on a copy that checks period 1 only (12000 rpm without a seat then
+    never repeats: period 0) and on one that reports the period it confirmed rather than its
+    least divisor that the response heads to (12000 rpm with the seat and 13500 rpm without:
+    period 2, their transients alternating)."""
+    seat = np.nan if seat_in is None else seat_in * INCH
+    case = Case(thesis_train(), harmonic(1.0 * INCH), speed_rpm * RPM, seat)
     auto = run_batch([case], RunSettings(revolutions=None))
     assert auto.period_turns[0] == period
     fixed = run_batch([case], RunSettings(revolutions=60, warmup=40))
