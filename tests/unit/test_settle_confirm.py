@@ -113,17 +113,19 @@ def test_a_period_one_response_with_an_alternating_transient_is_reported_period_
     """x_k = 0.95^k·(−1)^k: it heads to one state, but its differences two turns apart
     (1 − 0.95²)·0.95^(k−2) contract 0.9 a period and pass the check with p = 2 long before
     those one turn apart (1.95·0.95^(k−1), contracting 0.95 a turn) do with p = 1. Confirmed
-    with p = 2 at some turn k, the period reported is 1 (``least_period``), and a true period
-    of two (x_k = (−1)^k + 0.95^k) stays 2 however its transient decays. Fails on a copy that
-    reports the period confirmed (2) or one that takes any divisor whose differences
-    decrease (the true period of two: its one-turn differences approach 2 from above,
-    decreasing, so the Aitken limit is what tells them apart)."""
+    with p = 2 at some turn k, the period reported is 1 (``least_period``). A true period of
+    two, x_k = (−1)^k·(1 + 0.95^k), stays 2: its one-turn differences 2 + 1.95·0.95^(k−1)
+    decrease too, but toward 2. Fails on a copy of least_period that returns p (2 for the
+    first) or one that takes any divisor whose differences decrease (1 for the second: the
+    Aitken limit, 2 here, is what tells them apart)."""
     k = np.arange(600.0)
     alternating = (-0.95) ** k
     k2 = first(confirmed, alternating, 2)
     assert k2 is not None and (first(confirmed, alternating, 1) or 10**9) > k2
     assert least_period(boundary(alternating), 0, k2, 2, TOL) == 1
-    two = (-1.0) ** k + 0.95**k
+    two = (-1.0) ** k * (1.0 + 0.95**k)
     k2 = first(confirmed, two, 2)
     assert k2 is not None and first(confirmed, two, 1) is None
+    d = np.abs(np.diff(two))
+    assert np.all(np.diff(d) < 0) and d[-1] > 2.0  # decreasing toward 2
     assert least_period(boundary(two), 0, k2, 2, TOL) == 2
