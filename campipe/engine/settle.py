@@ -10,7 +10,8 @@ settled, each turn started from the state its last ended in), and after each tur
 state at the turn boundaries is compared with the one p turns before (p = 1 … max_period):
 
 - a case whose last turns repeat with a period p, to ``settle_tolerance`` (see
-  :func:`repeats`), has settled; its metrics are taken over the whole periods of its settled
+  :func:`repeats`), and have kept repeating for ``SETTLE_CONFIRM`` further periods (see
+  :func:`confirmed`), has settled; its metrics are taken over the whole periods of its settled
   window (``settled_turn`` on), and it runs no more once it has the turns it records;
 - a case that has not repeated within ``max_revolutions`` turns never settled
   (``period_turns`` 0): its metrics are statistics (mean per turn, largest) over the second
@@ -35,7 +36,7 @@ from campipe.constants import TWO_PI
 from campipe.engine import metrics
 from campipe.engine.case import Case, sample_count
 from campipe.engine.result import BatchResult, blank_failures
-from campipe.engine.settings import check_settling, whole_turns
+from campipe.engine.settings import SETTLE_CONFIRM, check_settling, whole_turns
 from campipe.model.assembly import SystemMatrices
 from campipe.profiles import evaluate
 from campipe.vocabulary import CAM, EV_TIME, FAILURES, N_EVENT_FIELDS, SEAT, holds_cam, holds_seat
@@ -80,6 +81,47 @@ def repeats(boundary: Boundary, c, k: int, p: int, tolerance: float):
         r = np.where(before > 0, d / before, 1.0)
         left = d * r / (1.0 - r)
     return at_once | ((d <= tolerance) & (r < 1.0) & (left <= tolerance))
+
+
+def confirmed(boundary: Boundary, c, k: int, p: int, tolerance: float):
+    """Has case c (or each of an array of cases), after k turns, settled with period p, its
+    repetition confirmed? :func:`repeats` holds at turn k and at each of the SETTLE_CONFIRM
+    checks a period apart before it (k − p, …, k − SETTLE_CONFIRM·p): the differences p
+    turns apart stay within the tolerance and keep contracting for SETTLE_CONFIRM periods
+    after they first pass. A chaotic response passing near an unstable periodic one has its
+    differences shrink for a turn or two and then grow again: one small difference with a
+    ratio below 1 does not show that they stay small. The exception is the first comparison
+    (k = p), with the run's start: a difference within AT_ONCE of the tolerance there is a
+    repetition at once (a case that follows the cam from the periodic start repeats it to
+    rounding in its first turn, and runs that one turn only)."""
+    if k < p:
+        return np.zeros(np.shape(c), np.bool_)[()]
+    if k == p:
+        return boundary_difference(boundary, c, k, p) <= AT_ONCE * tolerance
+    held = repeats(boundary, c, k, p, tolerance)
+    for j in range(1, SETTLE_CONFIRM + 1):
+        held = held & repeats(boundary, c, k - j * p, p, tolerance)
+    return held
+
+
+def least_period(boundary: Boundary, c: int, k: int, p: int, tolerance: float) -> int:
+    """The period to report for case c, settled with period p after k turns: the least
+    divisor q of p whose differences q turns apart head to within the tolerance, else p. A
+    response that repeats every turn but whose transient alternates (a mode whose multiplier
+    per turn is near −1) has its differences 2 turns apart settle long before those 1 turn
+    apart; it is p-periodic to the tolerance, and q-periodic when the q-differences at turns
+    k − 2q, k − q, k fall to a limit within it, their Aitken extrapolation
+    d₂ − (d₂ − d₁)²/(d₂ − 2d₁ + d₀) (a difference that is already within it counts too)."""
+    for q in range(1, p):
+        if p % q or k < 3 * q:
+            continue
+        d0, d1, d2 = (float(boundary_difference(boundary, c, k - j * q, q)) for j in (2, 1, 0))
+        if d2 <= tolerance:
+            return q
+        curvature = d2 - 2.0 * d1 + d0
+        if d2 < d1 < d0 and curvature > 0 and d2 - (d2 - d1) ** 2 / curvature <= tolerance:
+            return q
+    return p
 
 
 def settled_from(boundary: Boundary, c: int, k: int, p: int, tolerance: float) -> int:
@@ -216,9 +258,9 @@ def run_settled(
         # the least period each case not yet settled repeats with, all cases at once
         open_ = ~failed & (period[active] == 0)
         for p in range(1, p_max + 1):
-            hit = open_ & repeats(boundary, active, k + 1, p, tol)
+            hit = open_ & confirmed(boundary, active, k + 1, p, tol)
             for i in active[hit].tolist():
-                period[i] = p
+                period[i] = least_period(boundary, i, k + 1, p, tol)
                 settled[i] = settled_from(boundary, i, k + 1, p, tol)
             open_ &= ~hit
         # a settled case runs on until it has the turns it records

@@ -79,8 +79,8 @@ def test_it_covers_the_mean_of_a_run_twice_as_long(runs):
     """The same study with run.max_revolutions 96: its window (the second half, turns 49–96)
     follows the first run's (turns 25–48), a second estimate of the same mean. Each difference
     lies within COVERAGE standard errors of the two (a NaN, where the longer run settled,
-    counting as 0: 9524 rpm with the seat repeats every 4 turns at turns 92–95 there, 146.86°
-    against 145.90 ± 0.60°; a fixed run of 200 turns shows that pattern come and go). Fails
+    counting as 0; 9524 rpm with the seat, which the single settling check took for a period
+    of 4 at turns 92–95 there, now reads 146.04 ± 0.42° against 145.90 ± 0.60°). Fails
     on a copy that divides the batch means' spread by √turns instead of √batches (0.24° at
     9524 rpm: the 0.95° difference is 4 of them), or stores 0."""
     short, long, _ = runs
