@@ -137,7 +137,9 @@ def _meta(quick: bool, ladder: Ladder, scenes: Sequence[Scene]) -> dict:
         "ladder": asdict(ladder),
         "timing": (
             f"engine: per-case time of a batch of up to {ladder.copies} copies "
-            f"(about {measure.BATCH_SECONDS:g} s), best of {ladder.repeats}, kernels "
+            f"(about {measure.BATCH_SECONDS:g} s), best of {ladder.repeats} or more runs "
+            f"(up to {measure.MAX_REPEATS} while they take less than "
+            f"{measure.BATCH_SECONDS:g} s), kernels "
             f"loaded first; solve_ivp: one run, best of {ladder.ivp_repeats}"
         ),
     }

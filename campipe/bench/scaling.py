@@ -17,6 +17,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from campipe.bench.measure import best_time
 from campipe.bench.suite import OUTPUT_EVERY, rpm
 from campipe.constants import INCH
 from campipe.engine import Case, RunSettings, run_batch
@@ -82,18 +83,19 @@ def engine_scaling(
     repeats: int = 2,
 ) -> list[ScalingPoint]:
     """Wall time of the engine alone on n cases, batches of ``BATCH_SIZE`` as dask tasks on
-    the threaded scheduler; best of ``repeats`` (one repeat above 1000 cases)."""
+    the threaded scheduler; best of ``repeats`` or more (``measure.best_time``: a 1-case
+    point takes a millisecond, and a best of two moved by 2× between runs), one run above
+    1000 cases."""
     settings = settings or RunSettings(revolutions=SCALING_REVOLUTIONS, output_every=OUTPUT_EVERY)
     _run_threads(scaling_cases(4), settings, 2)  # kernels and caches loaded
     out = []
     for n in counts:
         cases = scaling_cases(n)
         for w in workers:
-            best = math.inf
-            for _ in range(repeats if n <= 1000 else 1):
-                t0 = time.perf_counter()
-                _run_threads(cases, settings, w)
-                best = min(best, time.perf_counter() - t0)
+            if n <= 1000:  # more runs than ``repeats`` where they are cheap (best_time)
+                best = best_time(lambda: _run_threads(cases, settings, w), repeats)  # noqa: B023
+            else:
+                best = best_time(lambda: _run_threads(cases, settings, w), 1, 0.0)  # noqa: B023
             out.append(ScalingPoint("engine", n, w, best, 0))
     return out
 

@@ -233,3 +233,29 @@ def test_the_committed_run_s_figures():
     assert len([k for k in found if k[0] in run["meta"]["scenes"]]) == len(engine) + 2 * len(
         applies
     )
+
+
+def test_a_cheap_setting_is_timed_more_often_than_an_expensive_one(monkeypatch):
+    """``measure.time_engine`` times a batch ``repeats`` times, and more (up to MAX_REPEATS)
+    while the repeats take less than ``batch_seconds``: a cheap setting's best is not a best of
+    three. Counted on a stand-in engine that returns the same result at once (no time is
+    asserted). Broken copy: ``for _ in range(repeats)`` (three runs for any setting) fails
+    the first count; a loop without MAX_REPEATS never ends."""
+    from campipe.bench import measure
+    from campipe.bench.suite import suite
+    from campipe.engine import RunSettings
+
+    scene = suite()[0]
+    result = measure.run_batch([scene.case], RunSettings(revolutions=scene.revolutions))
+    calls = []
+
+    def stand_in(cases, settings, full_state=True):
+        calls.append(len(cases))
+        return result
+
+    monkeypatch.setattr(measure, "run_batch", stand_in)
+    measure.time_engine(scene, RunSettings(), max_copies=4, repeats=3)
+    assert len(calls) == 1 + measure.MAX_REPEATS  # the untimed run, then the repeats
+    calls.clear()
+    measure.time_engine(scene, RunSettings(), max_copies=4, repeats=3, batch_seconds=0.0)
+    assert len(calls) == 1 + 3
