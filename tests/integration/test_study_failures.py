@@ -267,6 +267,55 @@ def test_losing_every_worker_stops_the_study_resumable(tmp_path, monkeypatch, ca
     assert report.reused >= 1 and report.reused + report.computed == 3
 
 
+def test_a_result_lost_with_its_worker_is_waited_for_with_the_idle_check():
+    """A batch that finished just before the cluster's last worker left: its result is gone
+    with the worker, and fetching it waits for a recompute that needs a worker. The study
+    fetches it ``idle.poll`` seconds at a time, counting the workers between (here a stand-in
+    that stops after three checks). Broken copy, ``collect`` calling ``future.result()``
+    without a timeout: the fetch never returns (the flaky hang of
+    test_losing_every_worker_stops_the_study_resumable, found by py-spy in a fresh clone's
+    run); the thread below is still alive after 60 s and the test fails."""
+    import threading
+
+    from distributed import Client, LocalCluster
+
+    from campipe.study.run.cluster import _result
+
+    class Idle:
+        poll = 0.2
+        checks = 0
+
+        def check(self):
+            self.checks += 1
+            if self.checks >= 3:
+                raise RuntimeError("no worker")
+
+    outcome = []
+    idle = Idle()
+    with LocalCluster(
+        n_workers=1, threads_per_worker=1, processes=False, dashboard_address=":0"
+    ) as cluster:
+        with Client(cluster, set_as_default=False) as client:
+            future = client.submit(sum, [40, 2], pure=False)
+            assert future.result() == 42
+            assert future.status == "finished"
+            for worker in list(cluster.workers.values()):
+                cluster.sync(worker.close)
+
+            def fetch():
+                try:
+                    outcome.append(_result(future, idle))
+                except RuntimeError as exc:
+                    outcome.append(exc)
+
+            fetching = threading.Thread(target=fetch, daemon=True)
+            fetching.start()
+            fetching.join(60)
+            assert not fetching.is_alive()
+            assert future.status == "lost"
+    assert isinstance(outcome[0], RuntimeError) and idle.checks == 3
+
+
 def test_a_worker_process_that_dies(tmp_path, monkeypatch):
     from study_helpers import die
 

@@ -226,7 +226,8 @@ def collect(wait, pending: list, idle, done: Callable[[Any], Iterable]) -> None:
     ``done`` as it finishes, the future released once read; ``done`` returns futures to
     wait on as well (the next batches), or none. While none finishes, ``idle.poll`` seconds
     apart, ``idle.check()`` counts the workers (and stops a study whose cluster has had none
-    for too long). A future that failed or was cancelled (its cluster lost) raises."""
+    for too long), also while a finished one's result is fetched (:func:`_result`). A future
+    that failed or was cancelled (its cluster lost) raises."""
     while pending:
         try:  # the first to finish, or none within the poll: then count the workers
             finished = set(wait(pending, timeout=idle.poll, return_when="FIRST_COMPLETED")[0])
@@ -235,9 +236,21 @@ def collect(wait, pending: list, idle, done: Callable[[Any], Iterable]) -> None:
             continue
         for future in [f for f in pending if f in finished]:
             pending.remove(future)
-            result = future.result()
+            result = _result(future, idle)
             future.release()
             pending.extend(done(result))
+
+
+def _result(future, idle):
+    """A finished future's result, ``idle.poll`` seconds at a time with ``idle.check()``
+    between: a result is fetched from the worker that holds it, and one that finished just
+    before its worker left is computed again, which waits for a worker (the study waited for
+    good when the cluster had none left)."""
+    while True:
+        try:
+            return future.result(timeout=idle.poll)
+        except TimeoutError:
+            idle.check()
 
 
 def _shared(
