@@ -357,20 +357,14 @@ def _prepare_batch(cases: Sequence[Case], settings: RunSettings, full_state: boo
     n = len(cases)
     trains, which = unique_trains(cases)
     stack = train_stack(tuple(trains), dt_run or 0.0)
-
-    def rows(of_trains: np.ndarray) -> np.ndarray:
-        # Each case's row of a per-train array: a one-case batch's is its train's own array
-        # (the kernels only read them), a larger batch's a copy by fancy indexing.
-        return of_trains if n == 1 else of_trains[which]
-
-    qref = rows(stack.valve_ref)
+    qref = stack.valve_ref[which]
     has_seat = np.array([c.has_seat for c in cases], dtype=np.bool_)
     omega = np.array([c.speed for c in cases], dtype=float)
     modal_trains = stack.modal_trains
     n_q = modal_trains.load.shape[1]
     profiles = [keyed(c.profile) for c in cases]
     seat = np.array([c.seat if c.has_seat else 0.0 for c in cases])
-    lift_bound, speed_bound = _bounds(profiles, rows(stack.ratio), omega, seat)
+    lift_bound, speed_bound = _bounds(profiles, stack.ratio[which], omega, seat)
     return PreparedBatch(
         case_list=cases,
         trains=trains,
@@ -389,10 +383,10 @@ def _prepare_batch(cases: Sequence[Case], settings: RunSettings, full_state: boo
             v0=np.zeros((n, n_q)),
             a0=np.zeros((n, n_q)),
             cfg0=np.array([CAM_CONTACT] * n, np.int64),
-            meff=rows(stack.meff),
-            separation=rows(stack.separation),
+            meff=stack.meff[which],
+            separation=stack.separation[which],
             capture=np.array([float(settings.capture_velocity)] * n),
-            restitution=rows(stack.restitution),
+            restitution=stack.restitution[which],
             valve_ref=qref,
             lift_bound=lift_bound,
             speed_bound=speed_bound,
