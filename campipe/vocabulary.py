@@ -95,11 +95,19 @@ def holds_seat(number: int) -> bool:
 
 #: Event kinds.
 CAM_SEPARATION, CAM_IMPACT, SEAT_SEPARATION, SEAT_IMPACT = 1, 2, 3, 4
+#: A hydraulic lash adjuster's switches, where its plunger is a state of the run
+#: (``campipe.engine.plunger``): its check valve opening or closing, its plunger reaching
+#: the bottom or the top of its travel.
+CHECK_VALVE_OPENS, CHECK_VALVE_CLOSES, PLUNGER_BOTTOMS, PLUNGER_TOPS = 5, 6, 7, 8
 EVENT_KINDS = {
     CAM_SEPARATION: "cam_separation",
     CAM_IMPACT: "cam_impact",
     SEAT_SEPARATION: "seat_separation",
     SEAT_IMPACT: "seat_impact",
+    CHECK_VALVE_OPENS: "check_valve_opens",
+    CHECK_VALVE_CLOSES: "check_valve_closes",
+    PLUNGER_BOTTOMS: "plunger_bottoms",
+    PLUNGER_TOPS: "plunger_tops",
 }
 #: Columns of a run's event records: time [s], kind, configuration before and after, the
 #: velocity jump or closing velocity [m/s], the impulse [N·s].

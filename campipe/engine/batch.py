@@ -40,8 +40,8 @@ from campipe.engine.integrators.modal_exact import arguments
 from campipe.engine.kernel_call import plain
 from campipe.engine.lash_adjuster import run_adjusted
 from campipe.engine.modal import ModalData, modal_data, pad_stack
+from campipe.engine.result import NO_TABLE, merge_results
 from campipe.engine.result import BatchResult as BatchResult
-from campipe.engine.result import merge_results
 from campipe.engine.settings import CLOSURES as CLOSURES
 from campipe.engine.settings import (
     COMPLIANT,
@@ -650,9 +650,33 @@ def run_batch(
     if on_failure not in ("raise", "record"):
         raise ValueError(f"on_failure: found {on_failure!r}, expected 'raise' or 'record'")
     check_run(cases, settings, check_stability_limit=check_stability_limit)
-    if any(adjuster(c.train) for c in cases):  # turn by turn, the plunger between turns
-        return run_adjusted(cases, settings, _run_turn, on_failure=on_failure,
+    if any(adjuster(c.train) for c in cases):  # the plunger carried, or moved between turns
+        return run_adjusted(cases, settings, _run_turn, carried_run=_run_carried,
+                            on_failure=on_failure,
                             check_stability_limit=check_stability_limit)  # fmt: skip
+    return _run_checked(cases, settings, full_state, check_stability_limit, on_failure, start)
+
+
+def _run_carried(cases, settings, start=None, **options) -> BatchResult:
+    """``run_batch`` of cases whose lash adjuster's plunger is a state of their run
+    (``engine.plunger``), each in its frame (``lash_adjuster.run_carried``)."""
+    options.setdefault("full_state", True)
+    options.setdefault("check_stability_limit", True)
+    options.setdefault("on_failure", "raise")
+    if start is not None:
+        start = Start(*start)
+    return _run_checked(cases, settings, start=start, **options)
+
+
+def _run_checked(
+    cases: Sequence[Case],
+    settings: RunSettings,
+    full_state: bool,
+    check_stability_limit: bool,
+    on_failure: str,
+    start: Start | None,
+) -> BatchResult:
+    """``run_batch`` past its checks and its lash adjusters."""
     if settings.settle:
         return run_settled(
             cases,
@@ -683,7 +707,8 @@ def run_batch(
         cases_in = batch.cases._replace(**start._asdict())
     out = _outputs(batch, settings, plan)
     integrator = plan.integrator
-    integrator.run(integrator.prepare(batch, settings), cases_in, out)
+    # (a table of the plunger's turns where the integrator carries it: ``engine.plunger``)
+    table = integrator.run(integrator.prepare(batch, settings), cases_in, out)
     status, n_events = out.status, out.n_events
     if np.count_nonzero(status):  # not every case OK
         failures.raise_or_blank(out, settings, on_failure, check_stability_limit, integrator)
@@ -715,6 +740,7 @@ def run_batch(
         steps=out.steps,
         status=status,
         start_time=cases_in.t0,
+        lash_adjuster=NO_TABLE if table is None else table,
     )
 
 

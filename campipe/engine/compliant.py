@@ -30,7 +30,9 @@ nonlinear in contact, goes through solve_ivp.
 Results go into the same :class:`~campipe.engine.common.Outputs` the compiled kernels fill,
 so ``run_batch`` returns the same ``BatchResult``: a closing is a cam (seat) impact event with
 its closing velocity δ̇ and no impulse (the force is finite), an opening a separation; the
-configuration number says which contacts are closed (thesis Table I).
+configuration number says which contacts are closed (thesis Table I). A chain's lash
+adjuster rides along as the state's last entry, its switches events too
+(:mod:`campipe.engine.plunger`).
 
 Pure numerics: arrays in, arrays out. SciPy is imported where it is used.
 """
@@ -55,6 +57,15 @@ from campipe.engine.metrics import (
     SEATED_OFF_CAM,
     SEPARATION,
     THESIS_IMPACT_FORCE,
+)
+from campipe.engine.plunger import (
+    BOTTOMED,
+    CLOSED,
+    SWITCHES,
+    TOPPED,
+    VALVE,
+    PlungerState,
+    plunger_state,
 )
 from campipe.errors import CampipeError
 from campipe.model import ValveTrain, coordinates, system_matrices
@@ -102,6 +113,8 @@ class CompliantSystem:
     scale: np.ndarray  # (2n,) each state component's scale (atol = rtol × scale)
     minv: np.ndarray = field(init=False)
     a_mat: np.ndarray = field(init=False)
+    #: a lash adjuster's plunger carried as the state's last entry (``engine.plunger``)
+    plunger: PlungerState | None = None
 
     def __post_init__(self) -> None:
         n = self.load.size
@@ -122,6 +135,7 @@ class _Run:
         self.rtol = rtol
         self.max_step = max_step
         self.closed = [False, False]  # cam, seat
+        self.valve = CLOSED  # the plunger's regime (``engine.plunger``), where there is one
         self.piece = 0
         self.rev = 0
         #: (closed, piece) → (grid step, propagator) of the exact kelvin-voigt propagation
@@ -146,34 +160,41 @@ class _Run:
         return fc, fs
 
     def rhs(self, t: float, z: np.ndarray) -> np.ndarray:
-        s, n = self.s, self.n
-        out = s.a_mat @ z
+        s, n, p = self.s, self.n, self.s.plunger
+        out = s.a_mat @ z[: 2 * n]
         out[n:] += s.accel0
         fc, fs = self.forces(t, z)
         if fc != 0.0:
             out[n:] -= s.minv[:, CAM] * fc
         if fs != 0.0:
             out[n:] += s.minv[:, SEAT] * fs
-        return out
+        if p is None:
+            return out
+        out[n:] -= p.push * z[2 * n]
+        return np.append(out, p.rate(z, self.valve))
 
     def jac(self, t: float, z: np.ndarray) -> np.ndarray:
-        s, n = self.s, self.n
-        j = s.a_mat.copy()
+        s, n, p = self.s, self.n, self.s.plunger
+        j = np.zeros((z.size, z.size))
+        j[: 2 * n, : 2 * n] = s.a_mat
         dc, rc, ds, rs = self.approaches(t, z)
         if self.closed[0]:
             kd, cd = s.cam.slopes(dc, rc)
-            j[n:, CAM] -= s.minv[:, CAM] * kd
-            j[n:, n + CAM] -= s.minv[:, CAM] * cd
+            j[n : 2 * n, CAM] -= s.minv[:, CAM] * kd
+            j[n : 2 * n, n + CAM] -= s.minv[:, CAM] * cd
         if self.closed[1] and s.seat is not None:
             kd, cd = s.seat.slopes(ds, rs)
-            j[n:, SEAT] -= s.minv[:, SEAT] * kd
-            j[n:, n + SEAT] -= s.minv[:, SEAT] * cd
+            j[n : 2 * n, SEAT] -= s.minv[:, SEAT] * kd
+            j[n : 2 * n, n + SEAT] -= s.minv[:, SEAT] * cd
+        if p is not None:
+            j[n : 2 * n, 2 * n] = -p.push
+            j[2 * n, :n], j[2 * n, 2 * n], _ = p.row(self.valve)
         return j
 
     def force_rates(self, t: float, z: np.ndarray) -> tuple[float, float]:
         """dF/dt of the cam and seat forces [N/s] (closed contacts)."""
         n = self.n
-        acc = self.rhs(t, z)[n:]
+        acc = self.rhs(t, z)[n : 2 * n]
         _, _, ddlift = self.s.lift.at(self.piece, self.rev, t)
         dc, rc, ds, rs = self.approaches(t, z)
         out = [0.0, 0.0]
@@ -211,6 +232,16 @@ class _Run:
             switch.direction = -1.0 if self.closed[i] else 1.0  # type: ignore[attr-defined]
             switch.contact = i  # type: ignore[attr-defined]
             out.append(switch)
+        if self.s.plunger is not None:  # the check valve's switch, the plunger's ends
+            for tag, direction, g in self.s.plunger.monitors(self.valve):
+
+                def limit(t, z, g=g):
+                    return g(z_guard if t < t_guard else z)
+
+                limit.terminal = True  # type: ignore[attr-defined]
+                limit.direction = direction  # type: ignore[attr-defined]
+                limit.contact = tag  # type: ignore[attr-defined]
+                out.append(limit)
         for i in (0, 1):
             if self.closed[i]:
 
@@ -236,6 +267,9 @@ class CaseOutputs:
     acc: np.ndarray  # (n_out, 2)
     per_rev: np.ndarray  # (n_rev, metrics.N_ENGINE) the engine's metrics per turn
     events: np.ndarray  # (max_events, 6)
+    #: (n_rev, 3) a carried plunger's extension at each turn's start, its leak-down and
+    #: pump-up over the turn [m] (``engine.plunger``); None without one
+    adjuster: np.ndarray | None = None
     n_events: int = 0
     status: int = 0
     steps: int = 0
@@ -291,11 +325,28 @@ class _Recorder:
             a = stop
             r += 1
 
+    def plunger(self, t: float, z: np.ndarray, t_seg: float, z_seg: np.ndarray) -> None:
+        """A carried plunger's motion from (t, z) to (t_seg, z_seg), within one turn: its
+        extension at the turn's start, what it leaked down or pumped up."""
+        table, p = self.out.adjuster, self.run.s.plunger
+        if table is not None and p is not None and t >= 0.0:
+            p.record(table[self.turn(t)], self.run.valve, z, z_seg)
+
     def switch(self, t: float, z: np.ndarray, hit: int, capture: float) -> None:
         """Switch contact ``hit`` (0 cam, 1 seat) at t and record it: a closing as an impact
         with its closing velocity (counted from ``capture`` [m/s]), an opening as a
-        separation."""
+        separation. A plunger's switch (``hit`` VALVE or TRAVEL) moves it to its next
+        regime, an event with its extension [m]; one to an end of its travel puts it there."""
         run, out = self.run, self.out
+        if hit >= VALVE:
+            p = run.s.plunger
+            assert p is not None
+            run.valve, kind = SWITCHES[(run.valve, hit)]
+            if run.valve in (BOTTOMED, TOPPED):
+                z[2 * run.n] = p.low if run.valve == BOTTOMED else p.high
+            here = configuration(*run.closed)
+            self.event(t, kind, here, here, 0.0)
+            return
         before = configuration(*run.closed)
         d = run.approaches(t, z)
         run.closed[hit] = not run.closed[hit]
@@ -398,7 +449,8 @@ def integrate(
     t0 : float
         Start time [s] (≤ t_out[0]; nothing before t = 0 is recorded).
     z0 : (2n,) array
-        Start state: coordinates, then velocities [SI].
+        Start state: coordinates, then velocities [SI]; then the plunger's u where the
+        system carries one.
     closed : (bool, bool)
         Cam and seat contacts closed at the start.
     t_out : (n_out,) array
@@ -421,6 +473,8 @@ def integrate(
     rec = _Recorder(run, out)
     t_end = float(t_out[-1])
     t, z = float(t0), np.asarray(z0, dtype=float).copy()
+    if system.plunger is not None:
+        run.valve = system.plunger.regime_at(z)
     run.piece, run.rev = system.lift.piece_at(t)
     k_out = 0
     stalled = 0
@@ -445,6 +499,7 @@ def integrate(
                 return out
             t_seg, z_seg, hit = _segment_end(sol, events, t_stop)
             rec.peaks(sol, events, t_seg)
+            rec.plunger(t, z, t_seg, z_seg)
             while k_out < t_out.size and t_out[k_out] <= t_seg * (1.0 + 1e-14):
                 zs = sol.sol(t_out[k_out])
                 _sample(run, t_out[k_out], zs, out, k_out)
@@ -507,9 +562,10 @@ def _augmented(run: _Run) -> np.ndarray:
     linear system ẇ = A w, w = (q, q̇, x⁰ … x⁷, sin ωt, cos ωt): the cam's lift on the piece is
     a polynomial in x = θ − the piece's start plus a harmonic, and each of those is itself
     the solution of a linear system, so e^{A·τ} propagates the state exactly."""
-    s, n = run.s, run.n
+    s, n, p = run.s, run.n, run.s.plunger
     w = s.lift.w
-    m = 2 * n + N_POLY + 2
+    n2 = 2 * n + (p is not None)  # (q, q̇) and a carried plunger's u
+    m = n2 + N_POLY + 2
     a = np.zeros((m, m))
     k_eff = s.stiffness.copy()
     c_eff = s.damping.copy()
@@ -531,10 +587,13 @@ def _augmented(run: _Run) -> np.ndarray:
     a[:n, n : 2 * n] = np.eye(n)
     a[n : 2 * n, :n] = -s.minv @ k_eff
     a[n : 2 * n, n : 2 * n] = -s.minv @ c_eff
-    a[n : 2 * n, 2 * n :] = -np.outer(s.minv[:, CAM], cam)
-    a[n : 2 * n, 2 * n] += s.minv @ force
+    a[n : 2 * n, n2:] = -np.outer(s.minv[:, CAM], cam)
+    a[n : 2 * n, n2] += s.minv @ force
+    if p is not None:
+        a[n : 2 * n, 2 * n] = -p.push
+        a[2 * n, :n], a[2 * n, 2 * n], a[2 * n, n2] = p.row(run.valve)
     for j in range(1, N_POLY):
-        a[2 * n + j, 2 * n + j - 1] = j * w
+        a[n2 + j, n2 + j - 1] = j * w
     a[m - 2, m - 1] = w
     a[m - 1, m - 2] = -w
     return a
@@ -601,7 +660,7 @@ def exact_segment(run: _Run, t_a: float, t_b: float, z_a: np.ndarray, events: li
     from scipy.optimize import brentq
 
     n2 = z_a.size
-    key = (tuple(run.closed), run.piece)
+    key = (tuple(run.closed), run.valve, run.piece)
     cache = run.exact_cache
     if key not in cache:
         a = _augmented(run)
@@ -638,6 +697,8 @@ def exact_segment(run: _Run, t_a: float, t_b: float, z_a: np.ndarray, events: li
                         t, t_new, xtol=EVENT_XTOL, rtol=EVENT_XTOL,
                     )  # fmt: skip
                 except (ValueError, RuntimeError) as exc:  # no bracket, or no convergence
+                    if not ev.terminal:  # a force's maximum where its rate is rounding:
+                        continue  # (a static force) no maximum to locate, nothing switches
                     raise UnresolvedSwitch(
                         f"a switch in [{t}, {t_new}] s: {exc}", key="compliant", found=(t, t_new)
                     ) from None
@@ -672,7 +733,7 @@ def exact_segment(run: _Run, t_a: float, t_b: float, z_a: np.ndarray, events: li
 def _sample(run: _Run, t: float, z: np.ndarray, out: CaseOutputs, k: int) -> None:
     n = run.n
     fc, fs = run.forces(t, z)
-    acc = run.rhs(t, z)[n:]
+    acc = run.rhs(t, z)[n : 2 * n]
     m = min(n, out.q.shape[1])
     out.q[k, :m] = z[:m]
     out.v[k, :m] = z[n : n + m]
@@ -693,7 +754,7 @@ def compliant_system(train: ValveTrain, profile: Profile, speed: float, seat_q: 
     scale = np.full(n, max(lift_max, 1e-6))
     rotations = [i for i, c in enumerate(coordinates(train)) if c.kind != "translation"]
     scale[rotations] /= train.rocker_pushrod_arm_length
-    return CompliantSystem(
+    system = CompliantSystem(
         sm.mass, sm.damping, sm.stiffness, sm.preload,
         contact_law(train, "cam"),
         None if seat_q is None else contact_law(train, "seat"),
@@ -701,6 +762,11 @@ def compliant_system(train: ValveTrain, profile: Profile, speed: float, seat_q: 
         lift,
         np.concatenate([scale, speed * scale]),
     )  # fmt: skip
+    system.plunger = plunger_state(train, system.minv)
+    if system.plunger is not None:
+        travel = system.plunger.high - system.plunger.low
+        system.scale = np.append(system.scale, max(travel, 1e-6))
+    return system
 
 
 def compliant_start(system: CompliantSystem, q: np.ndarray, v: np.ndarray, a: np.ndarray,

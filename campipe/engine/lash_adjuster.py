@@ -34,7 +34,8 @@ import numpy as np
 
 from campipe.constants import TWO_PI
 from campipe.engine.case import Case
-from campipe.engine.result import BatchResult, blank_failures
+from campipe.engine.plunger import EXTENSION, LEAK_DOWN, PUMP_UP, carried
+from campipe.engine.result import BatchResult, blank_failures, merge_results
 from campipe.engine.settings import adjuster_turns
 from campipe.engine.settle import consistent_accelerations, run_settled
 from campipe.model import system_matrices
@@ -52,10 +53,6 @@ from campipe.vocabulary import (
     holds_cam,
     holds_seat,
 )
-
-#: The columns of ``BatchResult.lash_adjuster``: the plunger's extension at each turn's
-#: start, the turn's leak-down and its pump-up [m].
-EXTENSION, LEAK_DOWN, PUMP_UP = 0, 1, 2
 
 
 def raised(profile: Profile, height: float) -> Profile:
@@ -109,6 +106,7 @@ def run_adjusted(
     cases: Sequence[Case],
     settings,
     run: Callable[..., BatchResult],
+    carried_run: Callable[..., BatchResult] | None = None,
     **options,
 ) -> BatchResult:
     """Run every case turn by turn (see the module), each turn by ``run`` (``run_batch`` of
@@ -117,7 +115,25 @@ def run_adjusted(
     extension 0. The result's ``lash_adjuster`` holds each turn's extension, leak-down and
     pump-up (NaN for a case without an adjuster). A run of automatic length
     (``revolutions`` None) is ``engine.settle.run_settled``'s, each turn through the same
-    :class:`Plunger`, the extension part of the state it compares."""
+    :class:`Plunger`, the extension part of the state it compares.
+
+    Cases whose integrator carries the plunger as a state (``engine.plunger.carried``:
+    compliant contacts, an adjuster in a chain) go instead through :func:`run_carried` with
+    ``carried_run`` (``run_batch`` past its adjusters)."""
+    flags = np.array([carried(c, settings.integrator) for c in cases], np.bool_)
+    if flags.any() and carried_run is not None:
+        pieces = []
+        for which in (flags, ~flags):
+            index = np.flatnonzero(which)
+            if not index.size:
+                continue
+            members = [cases[int(i)] for i in index]
+            if which is flags:
+                part = run_carried(members, settings, carried_run, **options)
+            else:
+                part = run_adjusted(members, settings, run, **options)
+            pieces.append((index, part))
+        return merge_results(len(cases), pieces)
     turns = adjuster_turns(settings)
     n = len(cases)
     if turns == 0:  # a part of a turn (a kernel's warm-up): no turn ends, the plunger stays
@@ -140,6 +156,89 @@ def run_adjusted(
         cfg0 = part.contact_state[:, -1].astype(np.int64)
         start = (np.zeros(n), part.q[:, -1].copy(), part.v[:, -1].copy(), None, cfg0)
     return _joined(parts, cases, settings, plunger.table, status)
+
+
+def run_carried(
+    cases: Sequence[Case], settings, run: Callable[..., BatchResult], **options
+) -> BatchResult:
+    """Run cases whose plunger is a state of their run (``engine.plunger``) by ``run`` under
+    the compliant integrator, each on its cam raised by its starting extension e₀ (the
+    frame the plunger's state u = e − e₀ is measured in, so the settings' start is the train's
+    with its plunger there), its histories brought back to the cam's own lift: a run of whole
+    or part turns in one piece, a run of automatic length turn by turn
+    (``engine.settle.run_settled`` through a :class:`Carried`, which starts each turn in the
+    frame of the extension the last ended with)."""
+    one_law = dataclasses.replace(settings, integrator="compliant")
+    if settings.settle:
+        carrier = Carried(cases, one_law, run, settings.max_revolutions)
+        matrices = [system_matrices(c.train) for c in cases]
+        result = run_settled(cases, one_law, carrier, matrices, **options)
+        return dataclasses.replace(
+            result, q=result.q[:, :, :-1], v=result.v[:, :, :-1], lash_adjuster=carrier.table
+        )
+    offset = np.array([c.train.hla_extension for c in cases])
+    members = [extended(c, e) for c, e in zip(cases, offset, strict=True)]
+    part = run(members, one_law, **options)
+    return _in_cam_frame(part, offset, cases)
+
+
+def _in_cam_frame(part: BatchResult, offset: np.ndarray, cases) -> BatchResult:
+    """``part`` (run on cams raised by ``offset`` [m]) with its histories on the cams' own
+    lifts (q1 + e₀, the cam's lift − e₀) and the cases' own trains."""
+    part.q[:, :, CAM] += offset[:, None]
+    part.cam_lift[:] -= offset[:, None]
+    return dataclasses.replace(part, trains=[c.train for c in cases])
+
+
+class Carried:
+    """A batch's carried plungers across the turns of a run of automatic length (the
+    ``run_turn`` of ``engine.settle.run_settled``): each turn run on the cam raised by the
+    extension the last one ended with (``train.hla_extension`` set to it: the plunger's
+    state starts at 0 in that frame), from the last turn's end moved into that frame; each
+    turn's coordinates carry one more column, the plunger's extension at the turn's ends
+    (between them as :class:`Plunger`'s ledger), so a case settles only once its plunger
+    repeats too."""
+
+    def __init__(self, cases, settings, run, turns: int) -> None:
+        self.cases = list(cases)
+        self.index = {id(c): i for i, c in enumerate(cases)}
+        self.extension = np.array([c.train.hla_extension for c in cases])
+        self.travel = np.array([c.train.hla_travel for c in cases])
+        self.table = np.full((len(cases), turns, 3), np.nan)
+        self.turn = np.zeros(len(cases), np.int64)
+        self.run = run
+
+    def __call__(self, members, one, start=None, full_state=True, **options) -> BatchResult:
+        rows = np.array([self.index[id(m)] for m in members], np.int64)
+        before = self.extension[rows].copy()
+        run_cases = []
+        for i, e in zip(rows.tolist(), before, strict=True):
+            case = self.cases[i]
+            train = case.train.replace(hla_extension=float(e))
+            run_cases.append(extended(dataclasses.replace(case, train=train), float(e)))
+        if start is not None:  # the last turn's end, in this turn's frame
+            t0, q0, v0, _, cfg0 = start
+            q0, v0 = np.array(q0[:, :-1], float), np.array(v0[:, :-1], float)
+            q0[:, CAM] -= before
+            cfg0 = np.array(cfg0, np.int64)
+            matrices = [system_matrices(c.train) for c in run_cases]
+            a0 = consistent_accelerations(run_cases, matrices, q0, v0, cfg0)
+            start = (t0, q0, v0, a0, cfg0)
+        part = self.run(run_cases, one, start=start, full_state=True, **options)
+        part = _in_cam_frame(part, before, [self.cases[i] for i in rows.tolist()])
+        turn = part.lash_adjuster[:, 0]  # (rows, 3): this turn's
+        after = np.clip(before - turn[:, LEAK_DOWN] + turn[:, PUMP_UP], 0.0, self.travel[rows])
+        done = np.isfinite(turn[:, EXTENSION])
+        self.table[rows[done], self.turn[rows[done]]] = turn[done]
+        self.extension[rows] = np.where(done, after, before)
+        self.turn[rows] += 1
+        theta = np.asarray(part.cam_angle, float)[None, :]
+        travel = self.travel[rows][:, None]
+        column = before[:, None] + (self.extension[rows] - before)[:, None] * theta / TWO_PI
+        column = column + travel * np.sin(theta / 2) ** 2
+        q = np.concatenate([part.q, column[:, :, None]], axis=2)
+        v = np.concatenate([part.v, np.zeros_like(column)[:, :, None]], axis=2)
+        return dataclasses.replace(part, q=q, v=v)
 
 
 class Plunger:

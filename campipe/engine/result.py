@@ -29,6 +29,8 @@ def _none(dtype) -> np.ndarray:
 #: lash adjuster), shared by every result: read-only, with no element to write (five
 #: allocations a call fewer; ``merge_results`` shares a part's empty fields likewise).
 _NONE_INT, _NONE_FLOAT = _none(np.int64), _none(np.float64)
+#: A run's ``lash_adjuster`` without one (shared: its size 0 says so, nothing writes to it).
+NO_TABLE = _NONE_FLOAT
 
 
 @dataclass

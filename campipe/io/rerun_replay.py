@@ -46,7 +46,17 @@ from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
-from campipe.vocabulary import CAM_IMPACT, CAM_SEPARATION, ROMAN, SEAT_IMPACT, SEAT_SEPARATION
+from campipe.vocabulary import (
+    CAM_IMPACT,
+    CAM_SEPARATION,
+    CHECK_VALVE_CLOSES,
+    CHECK_VALVE_OPENS,
+    PLUNGER_BOTTOMS,
+    PLUNGER_TOPS,
+    ROMAN,
+    SEAT_IMPACT,
+    SEAT_SEPARATION,
+)
 
 if TYPE_CHECKING:
     import rerun as rr
@@ -83,6 +93,10 @@ EVENT_KINDS = {
     CAM_IMPACT: ("cam impact", "WARN"),
     SEAT_SEPARATION: ("seat separation", "INFO"),
     SEAT_IMPACT: ("seat impact", "WARN"),
+    CHECK_VALVE_OPENS: ("lash adjuster's check valve opens", "INFO"),
+    CHECK_VALVE_CLOSES: ("lash adjuster's check valve closes", "INFO"),
+    PLUNGER_BOTTOMS: ("lash adjuster's plunger bottoms out", "WARN"),
+    PLUNGER_TOPS: ("lash adjuster's plunger fully out", "WARN"),
 }
 #: Sketch parts: name → colour.
 PART_COLOURS = {

@@ -103,29 +103,48 @@ class LashAdjuster:
         self, extension: float, time: np.ndarray, force: np.ndarray, gap: np.ndarray
     ) -> tuple[float, float, float]:
         """(the extension after the turn [m], its leak-down [m], its pump-up [m]) from the
-        extension at its start and the turn's samples; within 0 … ``travel``."""
-        leak = self.leak(time, force)
-        pump = self.pump(time, force, gap)
-        return min(max(extension - leak + pump, 0.0), self.travel), leak, pump
+        extension at its start and the turn's samples, interval by interval in the turn's
+        order, held within 0 … ``travel`` at each (a plunger bottomed out does not leak
+        down, one fully out does not pump up): the leak-down and pump-up are what it moved.
+        The pump-up's rate is scaled so that its total over the turn is :meth:`pump`'s."""
+        sinks = excess_parts(time, force, self.check_force) / self.leak_down
+        rises = excess_parts(time, -force, -self.check_force) / self.pump_up
+        capacity = float(rises.sum())
+        if capacity > 0.0:
+            rises *= self.pump(time, force, gap) / capacity
+        e, leak, pump = float(extension), 0.0, 0.0
+        for sink, rise in zip(sinks.tolist(), rises.tolist(), strict=True):
+            if sink:
+                moved = min(sink, e)
+                e, leak = e - moved, leak + moved
+            if rise:
+                moved = min(rise, self.travel - e)
+                e, pump = e + moved, pump + moved
+        return e, leak, pump
 
 
 def excess_integral(time: np.ndarray, force: np.ndarray, level: float) -> float:
     """∫ (F − level)⁺ dt over the piecewise-linear interpolant of the samples [N·s]: exact
     for it, each crossing of the level located on its sample interval (the check valve's
     switch, by the interpolant's root)."""
+    return float(excess_parts(time, force, level).sum())
+
+
+def excess_parts(time: np.ndarray, force: np.ndarray, level: float) -> np.ndarray:
+    """:func:`excess_integral` over each sample interval [N·s] (one fewer than the samples)."""
     t = np.asarray(time, float)
     d = np.asarray(force, float) - level
     a, b, dt = d[:-1], d[1:], np.diff(t)
     both = (a >= 0) & (b >= 0)
-    total = float(np.sum(0.5 * (a + b) * dt, where=both))
+    parts = np.where(both, 0.5 * (a + b) * dt, 0.0)
     cross = (a > 0) != (b > 0)
     cross &= ~both
     with np.errstate(divide="ignore", invalid="ignore"):
         # the positive part's triangle: base = its share of the interval, height = its end
         top = np.maximum(a, b)
         share = top / np.abs(b - a)
-        total += float(np.sum(0.5 * top * share * dt, where=cross & (top > 0)))
-    return total
+        parts += np.where(cross & (top > 0), 0.5 * top * share * dt, 0.0)
+    return parts
 
 
 def adjuster(train) -> LashAdjuster | None:

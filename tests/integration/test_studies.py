@@ -413,3 +413,31 @@ def test_lash_adjuster(tmp_path):
     assert np.all(np.diff(lash[slow][0]) < 0) and lash[slow][0, -1] > 0
     fast = lash[~slow][0]
     assert fast[-1] < -0.05e-3 and np.all(np.diff(fast) < np.diff(lash[slow][0]))
+
+
+def test_lash_adjuster_compliant(tmp_path):
+    """Quick variant (2000 and 6000 rpm, 8 turns) of the lash adjuster carried as a state.
+    At 2000 rpm, while the follower stands off the cam seated (the dry lash still open), the
+    load through the adjuster is 0 and the open check valve pumps the plunger up at F_c/c_P:
+    each turn's pump-up is at least F_c·t_IV/c_P (t_IV the turn's time seated off the cam,
+    a hand calculation from the check force) and at most 10 % more (the ramps' take-up,
+    the load still below F_c); the check valve's switches alternate, located as events (5
+    opens, 6 closes) within every turn. At 6000 rpm the plunger pumps up faster, past the
+    dry lash within the 8 turns (pump-up into the follower's flights). Fails on a copy that
+    pumps up at the leak-down's rate or that drops the check valve's events."""
+    ds = run(tmp_path, "lash-adjuster-compliant", **{"run.revolutions": 8})
+    assert ds.sizes["case"] == 2 and (ds.status == 0).all()
+    slow = ds.speed_rpm.values == 2000
+    omega = 2000 * math.pi / 30
+    off = np.radians(ds.seated_off_cam_deg.values[slow][0])
+    pump = ds.hla_pump_up_by_rev.values[slow][0]
+    floor = 25.0 * off / omega / 20e3  # F_c·t_IV/c_P
+    assert np.all((pump >= floor) & (pump <= 1.1 * floor))
+    case = ds.event_case.values
+    for i in range(2):
+        kinds = ds.event_kind.values[case == i]
+        valve = kinds[np.isin(kinds, (5, 6))]
+        turns = np.floor(ds.event_cam_angle.values[case == i][np.isin(kinds, (5, 6))] / 360)
+        assert np.all(valve[1:] != valve[:-1]) and set(turns) == set(range(8))
+    lash = ds.hla_lash_by_rev.values
+    assert lash[~slow][0, -1] < -0.05e-3 < lash[slow][0, -1]

@@ -38,6 +38,7 @@ EXAMPLE_CASES = {
     "bucket-tappet-lash": 18,
     "finger-follower": 7,
     "lash-adjuster": 4,
+    "lash-adjuster-compliant": 2,
     "finger-follower-hla": 5,
 }
 

@@ -11,6 +11,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any, Protocol
 
+import numpy as np
+
 from campipe.engine.case import Case
 
 
@@ -74,7 +76,9 @@ class Integrator(Protocol):
         (``campipe.engine.batch.PreparedBatch``)."""
         ...
 
-    def run(self, prepared: Any, cases: Any, out: Any) -> None:
+    def run(self, prepared: Any, cases: Any, out: Any) -> np.ndarray | None:
         """Advance every case from its start (``common.Cases``) and fill ``out``
-        (``common.Outputs``) in place."""
+        (``common.Outputs``) in place; return the table of the lash adjusters whose
+        plunger it carries as a state (``BatchResult.lash_adjuster``; only the compliant
+        integrator's, ``engine.plunger``), else None."""
         ...

@@ -8,6 +8,8 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
+import numpy as np
+
 from campipe.engine.case import Case, CaseError, output_angles
 from campipe.engine.integrators.base import RunLike
 from campipe.vocabulary import holds_cam, holds_seat
@@ -63,11 +65,14 @@ class Compliant:
         rtol = max(float(run.tolerance), RTOL_FLOOR)
         return batch.case_list, output_angles(run), rtol, run.step or math.inf, run.max_steps
 
-    def run(self, prepared: Any, cases: Any, out: Any) -> None:
+    def run(self, prepared: Any, cases: Any, out: Any) -> np.ndarray | None:
+        """As the protocol's; returns the carried plungers' table (``engine.plunger``:
+        (n, n_rev, 3), NaN for a case without one), None where no case carries one."""
         from campipe.engine import compliant  # SciPy's integration, loaded when first run
 
         case_list, angles, rtol, max_step, max_steps = prepared
         c = cases
+        table = None
         for i, case in enumerate(case_list):
             seat = float(c.seat_q[i]) if case.has_seat else None
             system = compliant.compliant_system(case.train, case.profile, case.speed, seat)
@@ -78,9 +83,16 @@ class Compliant:
                 out.q[i], out.v[i], out.force[i], out.cam[i], out.cfg[i], out.acc[i],
                 out.per_rev[i], out.events[i],
             )  # fmt: skip
+            if system.plunger is not None:  # its state starts at 0 in the run's frame
+                z0 = np.append(z0, 0.0)
+                if table is None:
+                    table = np.full((len(case_list), *out.per_rev.shape[1:2], 3), np.nan)
+                one.adjuster = table[i]
+                one.adjuster[:, 1:] = 0.0
             compliant.integrate(
                 system, float(c.t0[i]), z0, held, angles / case.speed, one,
                 rtol=rtol, max_step=max_step, max_steps=max_steps, capture=float(c.capture[i]),
                 lift_bound=float(c.lift_bound[i]), valve_ref=float(c.valve_ref[i]),
             )  # fmt: skip
             out.n_events[i], out.status[i], out.steps[i] = one.n_events, one.status, one.steps
+        return table
