@@ -220,10 +220,8 @@ class Carried:
             t0, q0, v0, _, cfg0 = start
             q0, v0 = np.array(q0[:, :-1], float), np.array(v0[:, :-1], float)
             q0[:, CAM] -= before
-            cfg0 = np.array(cfg0, np.int64)
-            matrices = [system_matrices(c.train) for c in run_cases]
-            a0 = consistent_accelerations(run_cases, matrices, q0, v0, cfg0)
-            start = (t0, q0, v0, a0, cfg0)
+            a0 = np.full_like(q0, np.nan)  # its compliant state as it is (``settle.run_settled``)
+            start = (t0, q0, v0, a0, np.array(cfg0, np.int64))
         part = self.run(run_cases, one, start=start, full_state=True, **options)
         part = _in_cam_frame(part, before, [self.cases[i] for i in rows.tolist()])
         turn = part.lash_adjuster[:, 0]  # (rows, 3): this turn's
@@ -341,6 +339,7 @@ class Plunger:
         else:
             sms = [self._matrix(i) for i in rows.tolist()]
             a0 = consistent_accelerations(run_cases, sms, q0, v0, cfg0)
+        a0[[c.compliant for c in run_cases]] = np.nan  # as it is (``settle.run_settled``)
         return (np.zeros(rows.size) if t0 is None else t0, q0, v0, a0, cfg0)
 
     def _matrix(self, i: int):

@@ -282,6 +282,10 @@ def run_settled(
                 cfg0,
             )
         )
+        # A compliant case's start is its compliant state, its contacts already compressed:
+        # NaN accelerations say so, and it is taken as it is (compressing its held contacts
+        # as a rigid start's, ``compliant.compliant_start``, would kick it every turn).
+        a0[[cases[i].compliant for i in active.tolist()]] = np.nan
         start = (np.zeros(active.size), q0, v0, a0, cfg0)
     never = period == 0
     settled[never] = done[never] // 2

@@ -16,6 +16,7 @@ from study_helpers import INCH, write_spec
 
 from campipe.constants import RPM
 from campipe.engine import Case, RunSettings, run_batch
+from campipe.engine.metrics import MAX_CAM_FORCE
 from campipe.engine.settings import RunSettingsError
 from campipe.model import thesis_train
 from campipe.profiles.shapes import harmonic
@@ -182,3 +183,28 @@ def test_newmark_linear_runs_until_settled_too():
     assert np.ptp(last) < 5e-3 * last.mean()  # the long run repeats every turn (its grid)
     assert r.period_turns[0] == 1
     assert abs(r.separation[0] / ref.separation[0] - 1) < 0.005
+
+
+@pytest.mark.parametrize("integrator", ["default", "compliant"])
+def test_a_compliant_case_runs_on_from_its_own_state_at_each_turn(integrator):
+    """A compliant case of automatic length goes turn by turn, each from the last one's end:
+    that end is its compliant state (contacts compressed), taken as it is. The recorded last
+    turn matches a continuous fixed run's same turn: the cam force at its first samples to
+    1e-6 (found: 3e-9), the turn's peak cam force to 1e-7. Fails on a copy that compresses
+    the contacts again at each turn's start as a rigid start's (the force there doubles:
+    2183 against 1091 N on this case)."""
+    train = thesis_train().replace(
+        cam_contact="kelvin-voigt", cam_contact_stiffness=1e6 / INCH * 4.4482216152605,
+        cam_contact_damping=10 * 4.4482216152605 / INCH,
+    )  # fmt: skip
+    case = Case(train, harmonic(1 * INCH), 6000 * RPM)
+    fixed = run_batch([case], RunSettings(revolutions=4, integrator=integrator))
+    auto = run_batch([case], RunSettings(revolutions=None, integrator=integrator))
+    turns = int(auto.turns_run[0])
+    assert 2 <= turns <= 4
+    start = 360 * (turns - 1)  # the recorded turn's first sample in the fixed run
+    np.testing.assert_allclose(
+        auto.cam_force[0, :4], fixed.cam_force[0, start : start + 4], rtol=1e-6
+    )
+    peak = auto.per_rev[0, turns - 1, MAX_CAM_FORCE]
+    assert peak == pytest.approx(fixed.per_rev[0, turns - 1, MAX_CAM_FORCE], rel=1e-7)
