@@ -151,8 +151,8 @@ class PlungerState:
 
 def plunger_state(train, mass_inverse: np.ndarray) -> PlungerState | None:
     """The compliant integrator's state of ``train``'s adjuster (None: none, or one under a
-    finger follower's pivot, whose load and take-up change with the cam angle: that one runs
-    turn by turn, :mod:`campipe.engine.lash_adjuster`)."""
+    finger follower's pivot: a finger takes rigid contacts only, and its adjuster runs turn
+    by turn, :mod:`campipe.engine.lash_adjuster`)."""
     hla = adjuster(train)
     if hla is None or on_pivot(train):
         return None
