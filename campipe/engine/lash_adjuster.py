@@ -19,7 +19,9 @@ pivot's, g·F (``adjuster_load``), and its histories stay in that frame.
 
 One :class:`Plunger` carries the adjusters from turn to turn, for a run of whole turns
 (``run_adjusted``'s loop) and for one of automatic length (``engine.settle.run_settled``,
-the extension then part of the state it compares).
+the extension then part of the state it compares). A case with compliant contacts and its
+adjuster in a chain has its plunger carried within the turn instead, as a state of the
+compliant integrator (``engine.plunger``, :func:`run_carried`).
 
 Pure numerics: arrays in, arrays out.
 """
