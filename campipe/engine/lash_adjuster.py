@@ -192,6 +192,19 @@ def _in_cam_frame(part: BatchResult, offset: np.ndarray, cases) -> BatchResult:
     return dataclasses.replace(part, trains=[c.train for c in cases])
 
 
+def with_ledger(part: BatchResult, before, after, travel) -> BatchResult:
+    """``part`` with one more coordinate, its plunger's extension: ``before`` and ``after``
+    [m] at the turn's ends, e₀ + (e₁ − e₀)·θ/2π + travel·sin²(θ/2) between them (its range
+    over the turn about its travel, so that ``run_settled`` compares it to
+    ``settle_tolerance`` of that; ``Plunger.settled`` and :func:`run_carried` take it off)."""
+    theta = np.asarray(part.cam_angle, float)[None, :]
+    column = before[:, None] + (after - before)[:, None] * theta / TWO_PI
+    column = column + travel[:, None] * np.sin(theta / 2) ** 2
+    q = np.concatenate([part.q, column[:, :, None]], axis=2)
+    v = np.concatenate([part.v, np.zeros_like(column)[:, :, None]], axis=2)
+    return dataclasses.replace(part, q=q, v=v)
+
+
 class Carried:
     """A batch's carried plungers across the turns of a run of automatic length (the
     ``run_turn`` of ``engine.settle.run_settled``): each turn run on the cam raised by the
@@ -232,13 +245,7 @@ class Carried:
         self.table[rows[done], self.turn[rows[done]]] = turn[done]
         self.extension[rows] = np.where(done, after, before)
         self.turn[rows] += 1
-        theta = np.asarray(part.cam_angle, float)[None, :]
-        travel = self.travel[rows][:, None]
-        column = before[:, None] + (self.extension[rows] - before)[:, None] * theta / TWO_PI
-        column = column + travel * np.sin(theta / 2) ** 2
-        q = np.concatenate([part.q, column[:, :, None]], axis=2)
-        v = np.concatenate([part.v, np.zeros_like(column)[:, :, None]], axis=2)
-        return dataclasses.replace(part, q=q, v=v)
+        return with_ledger(part, before, self.extension[rows], self.travel[rows])
 
 
 class Plunger:
@@ -290,13 +297,7 @@ class Plunger:
         part.cam_lift[:] -= shift[:, None]
         if not self.ledger:
             return part
-        theta = np.asarray(part.cam_angle, float)[None, :]
-        travel = self.travel[rows][:, None]
-        column = before[:, None] + (self.extension[rows] - before)[:, None] * theta / TWO_PI
-        column = column + travel * np.sin(theta / 2) ** 2
-        q = np.concatenate([part.q, column[:, :, None]], axis=2)
-        v = np.concatenate([part.v, np.zeros_like(column)[:, :, None]], axis=2)
-        return dataclasses.replace(part, q=q, v=v)
+        return with_ledger(part, before, self.extension[rows], self.travel[rows])
 
     def _advance(self, rows: np.ndarray, part: BatchResult) -> None:
         """Each case's extension by the turn's leak-down and pump-up, its turn in
