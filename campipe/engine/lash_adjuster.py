@@ -36,7 +36,13 @@ import numpy as np
 
 from campipe.constants import TWO_PI
 from campipe.engine.case import Case
-from campipe.engine.plunger import EXTENSION, LEAK_DOWN, PUMP_UP, carried
+from campipe.engine.plunger import (
+    EXTENSION,
+    LEAK_DOWN,
+    PUMP_UP,
+    carried,
+    interpolated_switches,
+)
 from campipe.engine.result import BatchResult, blank_failures, merge_results
 from campipe.engine.settings import adjuster_turns
 from campipe.engine.settle import consistent_accelerations, run_settled
@@ -309,6 +315,12 @@ class Plunger:
             if h is None or self.status[i] in FAILURES:
                 continue
             force, gap = adjuster_load(old[j], part, j)
+            switches = interpolated_switches(
+                part.time[j], force, h.check_force, part.contact_state[j]
+            )
+            if switches.size:  # among the turn's events, in time order
+                both = np.concatenate([part.events[j], switches])
+                part.events[j] = both[np.argsort(both[:, EV_TIME], kind="stable")]
             e = float(self.extension[i])
             after, leak, pump = h.advance(e, part.time[j], force, gap)
             self.table[i, self.turn[i]] = (e, leak, pump)

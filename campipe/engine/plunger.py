@@ -27,9 +27,9 @@ and pump-up of each turn are what the plunger moved in each regime
 and pump-up).
 
 What the per-turn model of the default integrator approximates (the plunger fixed within a
-turn, its motion applied at the turn's end, the switch on the samples' interpolant) this
-carries exactly; the two are compared in the tests (the error of the per-turn model
-stated there).
+turn, its motion applied at the turn's end, the switch on the samples' interpolant,
+:func:`interpolated_switches`) this carries exactly; the two are compared in the tests
+(the error of the per-turn model stated there).
 
 Pure numerics on floats and arrays.
 """
@@ -47,6 +47,7 @@ from campipe.model.layouts import chain_placement
 from campipe.vocabulary import (
     CHECK_VALVE_CLOSES,
     CHECK_VALVE_OPENS,
+    N_EVENT_FIELDS,
     PLUNGER_BOTTOMS,
     PLUNGER_TOPS,
 )
@@ -147,6 +148,33 @@ class PlungerState:
         elif regime == OPEN:
             out.append((TRAVEL, 1.0, lambda z: z[2 * n] - self.high))
         return out
+
+
+def interpolated_switches(
+    time: np.ndarray, force: np.ndarray, check_force: float, cfg: np.ndarray
+) -> np.ndarray:
+    """(m, N_EVENT_FIELDS) the check valve's switches of a turn the per-turn model runs
+    (``lash_adjuster.Plunger``): where the force through the adjuster at the samples
+    (``time`` [s], ``force`` [N]) crosses F_c on their linear interpolant, with the dead band
+    HYSTERESIS (the check valve opening where it falls to F_c·(1 − HYSTERESIS), closing where
+    it rises to F_c·(1 + HYSTERESIS)); each in the configuration ``cfg`` of the sample before
+    it, velocity 0."""
+    low, high = check_force * (1.0 - HYSTERESIS), check_force * (1.0 + HYSTERESIS)
+    f = np.asarray(force, float)
+    down = np.flatnonzero((f[:-1] > low) & (f[1:] <= low))
+    up = np.flatnonzero((f[:-1] < high) & (f[1:] >= high))
+    found = sorted([(i, CHECK_VALVE_OPENS, low) for i in down.tolist()]
+                   + [(i, CHECK_VALVE_CLOSES, high) for i in up.tolist()])  # fmt: skip
+    rows = []
+    closed = f[0] > check_force
+    for i, kind, level in found:
+        if (kind == CHECK_VALVE_OPENS) != closed:  # a second crossing of the same level
+            continue
+        share = (f[i] - level) / (f[i] - f[i + 1])
+        t = time[i] + share * (time[i + 1] - time[i])
+        rows.append((t, kind, cfg[i], cfg[i], 0.0, 0.0))
+        closed = not closed
+    return np.array(rows, float).reshape(len(rows), N_EVENT_FIELDS)
 
 
 def plunger_state(train, mass_inverse: np.ndarray) -> PlungerState | None:
