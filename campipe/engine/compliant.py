@@ -336,7 +336,7 @@ class _Recorder:
         """Switch contact ``hit`` (0 cam, 1 seat) at t and record it: a closing as an impact
         with its closing velocity (counted from ``capture`` [m/s]), an opening as a
         separation. A plunger's switch (``hit`` VALVE or TRAVEL) moves it to its next
-        regime, an event with its extension [m]; one to an end of its travel puts it there."""
+        regime, an event of velocity 0; one to an end of its travel puts it there."""
         run, out = self.run, self.out
         if hit >= VALVE:
             p = run.s.plunger

@@ -20,9 +20,9 @@ F < F_c. Each regime is linear, so a kelvin–voigt case keeps exact propagation
 row in its augmented system), and every switch between regimes is a terminal event on the
 solution, as a contact's is: the check valve opening or closing where F − F_c crosses zero
 (recorded as ``vocabulary.CHECK_VALVE_OPENS`` / ``CHECK_VALVE_CLOSES`` events, their
-velocity the plunger's extension there, e [m]), the plunger reaching an end of its travel
-(``PLUNGER_BOTTOMS`` / ``PLUNGER_TOPS``). Nothing is applied at a turn's end: the leak-down
-and pump-up of each turn are what the plunger moved in each regime
+velocity 0), the plunger reaching an end of its travel (``PLUNGER_BOTTOMS`` /
+``PLUNGER_TOPS``), with a dead band (HYSTERESIS) about F_c. Nothing is applied at a
+turn's end: the leak-down and pump-up of each turn are what the plunger moved in each regime
 (``BatchResult.lash_adjuster``: the extension at each turn's start, the turn's leak-down
 and pump-up).
 
