@@ -82,22 +82,16 @@ class LashAdjuster:
         """The stiffness [N/m] of a member of ``stiffness`` with the adjuster in series."""
         return 1.0 / (1.0 / stiffness + 1.0 / self.stiffness)
 
-    def leak(self, time: np.ndarray, force: np.ndarray) -> float:
-        """The plunger's leak-down [m] over the samples (``time`` [s], ``force`` [N] through
-        the adjuster): ∫ (F − F_c)⁺ dt / c_L, the check valve closed where F > F_c."""
-        return excess_integral(time, force, self.check_force) / self.leak_down
-
-    def pump(self, time: np.ndarray, force: np.ndarray, gap: np.ndarray) -> float:
-        """The plunger's pump-up [m] over the samples: ∫ (F_c − F)⁺ dt / c_P while the check
-        valve is open, at most the extension that takes up the largest need while it is
-        open, the gap between cam and follower ``gap`` [m] plus the load it still lacks,
-        (F_c − F)/k (the check valve closes once the plunger has taken it up)."""
-        capacity = excess_integral(time, -force, -self.check_force) / self.pump_up
+    def need(self, force: np.ndarray, gap: np.ndarray) -> float:
+        """The most the plunger pumps up over the samples [m] (``force`` [N] through the
+        adjuster, ``gap`` [m] between cam and follower): the largest need while the check
+        valve is open, the gap plus the load it still lacks, (F_c − F)/k (the check valve
+        closes once the plunger has taken it up); 0 where it never opens."""
         open_ = force < self.check_force
         if not open_.any():
             return 0.0
         need = np.max(gap[open_] + (self.check_force - force[open_]) / self.stiffness)
-        return min(capacity, max(float(need), 0.0))
+        return max(float(need), 0.0)
 
     def advance(
         self, extension: float, time: np.ndarray, force: np.ndarray, gap: np.ndarray
@@ -106,12 +100,15 @@ class LashAdjuster:
         extension at its start and the turn's samples, interval by interval in the turn's
         order, held within 0 … ``travel`` at each (a plunger bottomed out does not leak
         down, one fully out does not pump up): the leak-down and pump-up are what it moved.
-        The pump-up's rate is scaled so that its total over the turn is :meth:`pump`'s."""
+        The check valve closed where F > F_c, it sinks ∫ (F − F_c)⁺ dt / c_L; open, it rises
+        ∫ (F_c − F)⁺ dt / c_P, its rate scaled so that the turn's total is at most
+        :meth:`need`."""
         sinks = excess_parts(time, force, self.check_force) / self.leak_down
-        rises = excess_parts(time, -force, -self.check_force) / self.pump_up
-        capacity = float(rises.sum())
-        if capacity > 0.0:
-            rises *= self.pump(time, force, gap) / capacity
+        deficit = excess_parts(time, -force, -self.check_force)
+        rises = deficit / self.pump_up
+        total = float(rises.sum())
+        if total > 0.0:  # the turn's capacity ∫ (F_c − F)⁺ dt / c_P, at most the need
+            rises *= min(float(deficit.sum()) / self.pump_up, self.need(force, gap)) / total
         e, leak, pump = float(extension), 0.0, 0.0
         for sink, rise in zip(sinks.tolist(), rises.tolist(), strict=True):
             if sink:
