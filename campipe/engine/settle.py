@@ -73,10 +73,16 @@ def repeats(boundary: Boundary, c, k: int, p: int, tolerance: float):
     if k < p:
         return np.zeros(np.shape(c), np.bool_)[()]
     d = boundary_difference(boundary, c, k, p)
+    before = boundary_difference(boundary, c, k - p, p) if k >= 2 * p else None
+    return _repeats(d, before, tolerance)
+
+
+def _repeats(d, before, tolerance: float):
+    """:func:`repeats` from the difference ``d`` at a turn and ``before``, the one a period
+    earlier (None where that is not known yet)."""
     at_once = d <= AT_ONCE * tolerance
-    if k < 2 * p:
+    if before is None:
         return at_once
-    before = boundary_difference(boundary, c, k - p, p)
     with np.errstate(divide="ignore", invalid="ignore"):
         r = np.where(before > 0, d / before, 1.0)
         left = d * r / (1.0 - r)
@@ -98,9 +104,17 @@ def confirmed(boundary: Boundary, c, k: int, p: int, tolerance: float):
         return np.zeros(np.shape(c), np.bool_)[()]
     if k == p:
         return boundary_difference(boundary, c, k, p) <= AT_ONCE * tolerance
-    held = repeats(boundary, c, k, p, tolerance)
+    # The differences at turns k, k − p, …, k − (SETTLE_CONFIRM + 1)·p, each once (None
+    # before turn p): :func:`repeats` at turn k − j·p reads the j-th and the one after it.
+    d = [
+        boundary_difference(boundary, c, k - j * p, p) if k - j * p >= p else None
+        for j in range(SETTLE_CONFIRM + 2)
+    ]
+    held = _repeats(d[0], d[1], tolerance)
     for j in range(1, SETTLE_CONFIRM + 1):
-        held = held & repeats(boundary, c, k - j * p, p, tolerance)
+        if d[j] is None:  # before turn p: no repetition there
+            return held & np.zeros(np.shape(c), np.bool_)[()]
+        held = held & _repeats(d[j], d[j + 1], tolerance)
     return held
 
 
@@ -201,6 +215,7 @@ def run_settled(
     one = dataclasses.replace(settings, revolutions=1.0, warmup=0)
     per_turn = sample_count(1.0, settings.output_every) - 1
     omega = np.array([c.speed for c in cases])
+    compliant = np.array([c.compliant for c in cases], np.bool_)  # (their starts: below)
     period = np.zeros(n, np.int64)
     settled = np.zeros(n, np.int64)
     done = np.zeros(n, np.int64)  # turns run
@@ -285,7 +300,7 @@ def run_settled(
         # A compliant case's start is its compliant state, its contacts already compressed:
         # NaN accelerations say so, and it is taken as it is (compressing its held contacts
         # as a rigid start's, ``compliant.compliant_start``, would kick it every turn).
-        a0[[cases[i].compliant for i in active.tolist()]] = np.nan
+        a0[compliant[active]] = np.nan
         start = (np.zeros(active.size), q0, v0, a0, cfg0)
     never = period == 0
     settled[never] = done[never] // 2
