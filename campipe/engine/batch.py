@@ -660,21 +660,17 @@ def run_batch(
 def _run_carried(cases, settings, start=None, **options) -> BatchResult:
     """``run_batch`` of cases whose lash adjuster's plunger is a state of their run
     (``engine.plunger``), each in its frame (``lash_adjuster.run_carried``)."""
-    options.setdefault("full_state", True)
-    options.setdefault("check_stability_limit", True)
-    options.setdefault("on_failure", "raise")
-    if start is not None:
-        start = Start(*start)
-    return _run_checked(cases, settings, start=start, **options)
+    return _run_checked(cases, settings, start=None if start is None else Start(*start),
+                        **options)  # fmt: skip
 
 
 def _run_checked(
     cases: Sequence[Case],
     settings: RunSettings,
-    full_state: bool,
-    check_stability_limit: bool,
-    on_failure: str,
-    start: Start | None,
+    full_state: bool = True,
+    check_stability_limit: bool = True,
+    on_failure: str = "raise",
+    start: Start | None = None,
 ) -> BatchResult:
     """``run_batch`` past its checks and its lash adjusters."""
     if settings.settle:

@@ -181,9 +181,7 @@ def run_carried(
         carrier = Carried(cases, one_law, run, settings.max_revolutions)
         matrices = [system_matrices(c.train) for c in cases]
         result = run_settled(cases, one_law, carrier, matrices, **options)
-        return dataclasses.replace(
-            result, q=result.q[:, :, :-1], v=result.v[:, :, :-1], lash_adjuster=carrier.table
-        )
+        return without_ledger(result, carrier.table)
     offset = np.array([c.train.hla_extension for c in cases])
     members = [extended(c, e) for c, e in zip(cases, offset, strict=True)]
     part = run(members, one_law, **options)
@@ -192,17 +190,31 @@ def run_carried(
 
 def _in_cam_frame(part: BatchResult, offset: np.ndarray, cases) -> BatchResult:
     """``part`` (run on cams raised by ``offset`` [m]) with its histories on the cams' own
-    lifts (q1 + e₀, the cam's lift − e₀) and the cases' own trains."""
-    part.q[:, :, CAM] += offset[:, None]
-    part.cam_lift[:] -= offset[:, None]
+    lifts and the cases' own trains."""
+    _to_cam_lift(part, offset)
     return dataclasses.replace(part, trains=[c.train for c in cases])
+
+
+def _to_cam_lift(part: BatchResult, shift: np.ndarray) -> None:
+    """``part``'s histories, run on cams raised by ``shift`` [m] (each case's), back on the
+    cams' own lifts: q1 + shift, the cam's lift − shift (in place)."""
+    part.q[:, :, CAM] += shift[:, None]
+    part.cam_lift[:] -= shift[:, None]
+
+
+def without_ledger(result: BatchResult, table: np.ndarray) -> BatchResult:
+    """``run_settled``'s result without the ledger's column (:func:`with_ledger`), with the
+    adjusters' ``table``."""
+    return dataclasses.replace(
+        result, q=result.q[:, :, :-1], v=result.v[:, :, :-1], lash_adjuster=table
+    )
 
 
 def with_ledger(part: BatchResult, before, after, travel) -> BatchResult:
     """``part`` with one more coordinate, its plunger's extension: ``before`` and ``after``
     [m] at the turn's ends, e₀ + (e₁ − e₀)·θ/2π + travel·sin²(θ/2) between them (its range
     over the turn about its travel, so that ``run_settled`` compares it to
-    ``settle_tolerance`` of that; ``Plunger.settled`` and :func:`run_carried` take it off)."""
+    ``settle_tolerance`` of that; :func:`without_ledger` takes it off)."""
     theta = np.asarray(part.cam_angle, float)[None, :]
     column = before[:, None] + (after - before)[:, None] * theta / TWO_PI
     column = column + travel[:, None] * np.sin(theta / 2) ** 2
@@ -298,9 +310,8 @@ class Plunger:
         part = self.run(run_cases, one, start=start, full_state=True, **options)
         before = self.extension[rows].copy()
         self._advance(rows, part)
-        shift = self.shift[rows] = np.where(self.in_link[rows], before, 0.0)
-        part.q[:, :, CAM] += shift[:, None]
-        part.cam_lift[:] -= shift[:, None]
+        self.shift[rows] = np.where(self.in_link[rows], before, 0.0)
+        _to_cam_lift(part, self.shift[rows])
         if not self.ledger:
             return part
         return with_ledger(part, before, self.extension[rows], self.travel[rows])
@@ -364,9 +375,7 @@ class Plunger:
 
     def settled(self, result: BatchResult) -> BatchResult:
         """``run_settled``'s result without the ledger's column, with the adjusters' table."""
-        return dataclasses.replace(
-            result, q=result.q[:, :, :-1], v=result.v[:, :, :-1], lash_adjuster=self.table
-        )
+        return without_ledger(result, self.table)
 
 
 def _part_of_a_turn(cases, settings, run, options) -> BatchResult:
@@ -375,10 +384,8 @@ def _part_of_a_turn(cases, settings, run, options) -> BatchResult:
     # a chain's back to the cam's own lift; a finger's pivot stays raised (see run_adjusted)
     shift = np.array([o.train.hla_extension if adjuster(o.train) else 0.0 for o in cases])
     shift[[on_pivot(o.train) for o in cases]] = 0.0
-    part.q[:, :, CAM] += shift[:, None]
-    part.cam_lift[:] -= shift[:, None]
     table = np.full((len(cases), part.per_rev.shape[1], 3), np.nan)
-    return dataclasses.replace(part, trains=[c.train for c in cases], lash_adjuster=table)
+    return dataclasses.replace(_in_cam_frame(part, shift, cases), lash_adjuster=table)
 
 
 def _move_follower(q0, v0, cfg0, change, cam, cases) -> None:
