@@ -17,7 +17,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from campipe.bench.measure import best_time
+from campipe.bench.measure import BATCH_SECONDS, best_time
 from campipe.bench.suite import OUTPUT_EVERY, rpm
 from campipe.constants import INCH
 from campipe.engine import Case, RunSettings, run_batch
@@ -92,10 +92,12 @@ def engine_scaling(
     for n in counts:
         cases = scaling_cases(n)
         for w in workers:
-            if n <= 1000:  # more runs than ``repeats`` where they are cheap (best_time)
-                best = best_time(lambda: _run_threads(cases, settings, w), repeats)  # noqa: B023
-            else:
-                best = best_time(lambda: _run_threads(cases, settings, w), 1, 0.0)  # noqa: B023
+            cheap = n <= 1000  # more runs than ``repeats`` where they are cheap; one above
+            best = best_time(
+                lambda: _run_threads(cases, settings, w),  # noqa: B023
+                repeats if cheap else 1,
+                BATCH_SECONDS if cheap else 0.0,
+            )
             out.append(ScalingPoint("engine", n, w, best, 0))
     return out
 
