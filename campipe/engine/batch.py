@@ -657,20 +657,21 @@ def run_batch(
     return _run_checked(cases, settings, full_state, check_stability_limit, on_failure, start)
 
 
-def _run_carried(cases, settings, start=None, **options) -> BatchResult:
+def _run_carried(cases, settings, start=None, full_state=True, **options) -> BatchResult:
     """``run_batch`` of cases whose lash adjuster's plunger is a state of their run
-    (``engine.plunger``), each in its frame (``lash_adjuster.run_carried``)."""
-    return _run_checked(cases, settings, start=None if start is None else Start(*start),
-                        **options)  # fmt: skip
+    (``engine.plunger``), each in its frame (``lash_adjuster.run_carried``); ``options``
+    are run_batch's others, as ``run_adjusted`` hands them on."""
+    start = None if start is None else Start(*start)
+    return _run_checked(cases, settings, full_state, start=start, **options)
 
 
 def _run_checked(
     cases: Sequence[Case],
     settings: RunSettings,
-    full_state: bool = True,
-    check_stability_limit: bool = True,
-    on_failure: str = "raise",
-    start: Start | None = None,
+    full_state: bool,
+    check_stability_limit: bool,
+    on_failure: str,
+    start: Start | None,
 ) -> BatchResult:
     """``run_batch`` past its checks and its lash adjusters."""
     if settings.settle:
