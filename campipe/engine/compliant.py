@@ -62,6 +62,7 @@ from campipe.engine.metrics import (
 from campipe.engine.plunger import (
     BOTTOMED,
     CLOSED,
+    HELD,
     SWITCHES,
     TOPPED,
     VALVE,
@@ -72,6 +73,7 @@ from campipe.errors import CampipeError
 from campipe.model import ValveTrain, coordinates, system_matrices
 from campipe.model.contact import ContactLaw, contact_law
 from campipe.profiles import Lift, Profile
+from campipe.profiles.levers import is_valve_side, lever_tables
 from campipe.vocabulary import (
     CAM,
     CAM_IMPACT,
@@ -116,6 +118,9 @@ class CompliantSystem:
     a_mat: np.ndarray = field(init=False)
     #: a lash adjuster's plunger carried as the state's last entry (``engine.plunger``)
     plunger: PlungerState | None = None
+    #: a lever layout's ratio r(θ) over the turn (a ``Lift`` on the excitation's pieces):
+    #: its cam law acts at the roller (``_Run.at_roller``); None for a follower on the cam
+    ratio: Lift | None = None
 
     def __post_init__(self) -> None:
         n = self.load.size
@@ -144,20 +149,57 @@ class _Run:
 
     # -- the equations in the current contact state -----------------------------------------
 
-    def approaches(self, t: float, z: np.ndarray) -> tuple[float, float, float, float]:
-        """(δ_cam, δ̇_cam, δ_seat, δ̇_seat) [m, m/s]."""
+    def gain(self, t: float) -> tuple[float, float, float]:
+        """A pivot's plunger's gain g, ġ, g̈ at t (``engine.plunger``); (1, 0, 0) otherwise."""
+        p = self.s.plunger
+        if p is None or p.gains is None:
+            return 1.0, 0.0, 0.0
+        return p.gains.at(self.piece, self.rev, t)
+
+    def excitation(self, t: float, z: np.ndarray) -> tuple[float, float, float]:
+        """The cam mass's excitation at t [m, m/s, m/s²]: the cam's lift (a lever's kinematic
+        valve lift), with a pivot's plunger's g·u added (``engine.plunger``; its acceleration
+        from g̈·u + 2ġ·u̇ + g·ü, ü from the link force's rate)."""
+        lift, rate, acc = self.s.lift.at(self.piece, self.rev, t)
+        p = self.s.plunger
+        if p is None or p.gains is None:
+            return lift, rate, acc
         n = self.n
-        lift, rate, _ = self.s.lift.at(self.piece, self.rev, t)
+        g, dg, ddg = p.gains.at(self.piece, self.rev, t)
+        u = z[2 * n]
+        du = p.rate(z, self.valve, g)
+        c = p.damper(self.valve)
+        ddu = 0.0 if math.isinf(c) else -(dg * p.force(z) + g * p.k * (p.d @ z[n : 2 * n])) / c
+        return lift + g * u, rate + dg * u + g * du, acc + ddg * u + 2.0 * dg * du + g * ddu
+
+    def approaches(self, t: float, z: np.ndarray) -> tuple[float, float, float, float]:
+        """(δ_cam, δ̇_cam, δ_seat, δ̇_seat) [m, m/s], the cam's on the valve side."""
+        n = self.n
+        lift, rate, _ = self.excitation(t, z)
         dc, rc = z[CAM] + lift, z[n + CAM] + rate
         if self.s.seat is None:
             return dc, rc, -1.0, 0.0
         return dc, rc, self.s.seat_q - z[SEAT], -z[n + SEAT]
 
+    def at_roller(self, t: float, dc: float, rc: float) -> tuple[float, float, float, float]:
+        """A valve-side cam approach δ and rate δ̇ at the roller of a lever layout (its law
+        acts there): (δ/r, δ̇/r − δ·ṙ/r², r, ṙ), r(θ) the lever ratio; (δ, δ̇, 1, 0) for a
+        follower on the cam."""
+        if self.s.ratio is None:
+            return dc, rc, 1.0, 0.0
+        r, dr, _ = self.s.ratio.at(self.piece, self.rev, t)
+        return dc / r, rc / r - dc * dr / (r * r), r, dr
+
     def forces(self, t: float, z: np.ndarray) -> tuple[float, float]:
-        """Compressive cam and seat forces [N] in the current contact state."""
+        """Compressive cam (valve side) and seat forces [N] in the current contact state: a
+        lever's cam force is the roller's law over the lever ratio (virtual work)."""
         dc, rc, ds, rs = self.approaches(t, z)
-        fc = self.s.cam.force(dc, rc) if self.closed[0] else 0.0
-        fs = self.s.seat.force(ds, rs) if self.closed[1] and self.s.seat else 0.0
+        fc = fs = 0.0
+        if self.closed[0]:
+            dn, rn, r, _ = self.at_roller(t, dc, rc)
+            fc = self.s.cam.force(dn, rn) / r
+        if self.closed[1] and self.s.seat:
+            fs = self.s.seat.force(ds, rs)
         return fc, fs
 
     def rhs(self, t: float, z: np.ndarray) -> np.ndarray:
@@ -172,39 +214,49 @@ class _Run:
         if p is None:
             return out
         out[n:] -= p.push * z[2 * n]
-        return np.append(out, p.rate(z, self.valve))
+        return np.append(out, p.rate(z, self.valve, self.gain(t)[0]))
 
     def jac(self, t: float, z: np.ndarray) -> np.ndarray:
+        """The Jacobian (a pivot's plunger's ü in the cam's approach rate left out)."""
         s, n, p = self.s, self.n, self.s.plunger
         j = np.zeros((z.size, z.size))
         j[: 2 * n, : 2 * n] = s.a_mat
         dc, rc, ds, rs = self.approaches(t, z)
+        g, dg, _ = self.gain(t)
         if self.closed[0]:
-            kd, cd = s.cam.slopes(dc, rc)
+            dn, rn, r, dr = self.at_roller(t, dc, rc)
+            kd, cd = s.cam.slopes(dn, rn)
+            kd, cd = (kd / r - cd * dr / (r * r)) / r, cd / (r * r)  # per valve-side δ, δ̇
             j[n : 2 * n, CAM] -= s.minv[:, CAM] * kd
             j[n : 2 * n, n + CAM] -= s.minv[:, CAM] * cd
+            if p is not None and p.gains is not None:  # δ = q1 + lift + g·u
+                j[n : 2 * n, 2 * n] -= s.minv[:, CAM] * (kd * g + cd * dg)
         if self.closed[1] and s.seat is not None:
             kd, cd = s.seat.slopes(ds, rs)
             j[n : 2 * n, SEAT] -= s.minv[:, SEAT] * kd
             j[n : 2 * n, n + SEAT] -= s.minv[:, SEAT] * cd
         if p is not None:
-            j[n : 2 * n, 2 * n] = -p.push
-            j[2 * n, :n], j[2 * n, 2 * n], _ = p.row(self.valve)
+            j[n : 2 * n, 2 * n] -= p.push
+            j[2 * n, :n], j[2 * n, 2 * n], _ = p.row(self.valve, g)
         return j
 
     def force_rates(self, t: float, z: np.ndarray) -> tuple[float, float]:
-        """dF/dt of the cam and seat forces [N/s] (closed contacts)."""
+        """dF/dt of the cam (valve side) and seat forces [N/s] (closed contacts)."""
         n = self.n
         acc = self.rhs(t, z)[n : 2 * n]
-        _, _, ddlift = self.s.lift.at(self.piece, self.rev, t)
+        ddlift = self.excitation(t, z)[2]
         dc, rc, ds, rs = self.approaches(t, z)
         out = [0.0, 0.0]
-        for i, (law, d, r, a) in enumerate(
-            ((self.s.cam, dc, rc, acc[CAM] + ddlift), (self.s.seat, ds, rs, -acc[SEAT]))
-        ):
-            if law is not None and self.closed[i]:
-                kd, cd = law.slopes(d, r)
-                out[i] = kd * r + cd * a
+        if self.closed[0]:
+            dn, rn, r, dr = self.at_roller(t, dc, rc)
+            kd, cd = self.s.cam.slopes(dn, rn)
+            ddr = 0.0 if self.s.ratio is None else self.s.ratio.at(self.piece, self.rev, t)[2]
+            a = acc[CAM] + ddlift  # δ̈ on the valve side, then at the roller
+            an = a / r - 2.0 * rc * dr / r**2 - dc * ddr / r**2 + 2.0 * dc * dr * dr / r**3
+            out[0] = (kd * rn + cd * an) / r - self.s.cam.force(dn, rn) * dr / (r * r)
+        if self.s.seat is not None and self.closed[1]:
+            kd, cd = self.s.seat.slopes(ds, rs)
+            out[1] = kd * rs + cd * (-acc[SEAT])
         return out[0], out[1]
 
     def monitors(self, t_a: float, z_a: np.ndarray) -> list[Any]:
@@ -227,17 +279,20 @@ class _Run:
                 if t < t_guard:
                     t, z = t_guard, z_guard
                 d = self.approaches(t, z)
-                return law.monitor(d[2 * i], d[2 * i + 1])
+                if i == 0:  # a lever's law at its roller
+                    return law.monitor(*self.at_roller(t, d[0], d[1])[:2])
+                return law.monitor(d[2], d[3])
 
             switch.terminal = True  # type: ignore[attr-defined]
             switch.direction = -1.0 if self.closed[i] else 1.0  # type: ignore[attr-defined]
             switch.contact = i  # type: ignore[attr-defined]
             out.append(switch)
         if self.s.plunger is not None:  # the check valve's switch, the plunger's ends
-            for tag, direction, g in self.s.plunger.monitors(self.valve):
+            gain = self.gain
+            for tag, direction, g in self.s.plunger.monitors(self.valve, lambda t: gain(t)[0]):
 
                 def limit(t, z, g=g):
-                    return g(z_guard if t < t_guard else z)
+                    return g(t_guard, z_guard) if t < t_guard else g(t, z)
 
                 limit.terminal = True  # type: ignore[attr-defined]
                 limit.direction = direction  # type: ignore[attr-defined]
@@ -468,9 +523,10 @@ def integrate(
     rec = _Recorder(run, out)
     t_end = float(t_out[-1])
     t, z = float(t0), np.asarray(z0, dtype=float).copy()
-    if system.plunger is not None:
-        run.valve = system.plunger.regime_at(z)
     run.piece, run.rev = system.lift.piece_at(t)
+    _close_touching(run, t, z)
+    run.valve = HELD
+    _release_plunger(run, t, z)
     k_out = 0
     stalled = 0
     atol = rtol * system.scale
@@ -518,6 +574,7 @@ def integrate(
         if t >= t_end:
             break
         _next_piece(run)
+        _release_plunger(run, t, z)
     while k_out < t_out.size:  # the last sample, to rounding
         _sample(run, t_out[k_out], z, out, k_out)
         k_out += 1
@@ -526,10 +583,34 @@ def integrate(
     return out
 
 
+def _release_plunger(run: _Run, t: float, z: np.ndarray) -> None:
+    """A carried plunger held until t = 0 (``engine.plunger.HELD``: a periodic start's
+    warm-up, which ends on a piece's end, the turn's) takes the regime its load gives."""
+    p = run.s.plunger
+    if p is not None and run.valve == HELD and t >= 0.0:
+        run.valve = p.regime_at(z, run.gain(t)[0])
+
+
+def _close_touching(run: _Run, t: float, z: np.ndarray) -> None:
+    """Close each contact the start puts in touch though it is not held (its monitor
+    positive): a rigid start's held contact, compressed (``compliant_start``), moves the other
+    coordinates by its static response, and a periodic start just before the valve lands
+    then has it a micron into its seat, which no crossing would close."""
+    d = run.approaches(t, z)
+    for i, law in enumerate((run.s.cam, run.s.seat)):
+        if law is None or run.closed[i]:
+            continue
+        delta, rate = run.at_roller(t, d[0], d[1])[:2] if i == 0 else (d[2], d[3])
+        if delta > 0.0 and law.monitor(delta, rate) > 0.0:
+            run.closed[i] = True
+
+
 def is_linear(system: CompliantSystem) -> bool:
-    """Every contact the case can touch has a linear law (kelvin-voigt): linear in each
-    contact state, so propagated exactly (``exact_segment``)."""
-    return system.cam.linear and (system.seat is None or system.seat.linear)
+    """Every contact the case can touch has a linear law (kelvin-voigt) and no lever's ratio
+    or pivot's gain changes its coefficients with the cam angle: linear and time-invariant
+    in each contact state, so propagated exactly (``exact_segment``)."""
+    linear = system.cam.linear and (system.seat is None or system.seat.linear)
+    return linear and system.ratio is None
 
 
 def _sample(run: _Run, t: float, z: np.ndarray, out: CaseOutputs, k: int) -> None:
@@ -541,7 +622,7 @@ def _sample(run: _Run, t: float, z: np.ndarray, out: CaseOutputs, k: int) -> Non
     out.v[k, :m] = z[n : n + m]
     out.q[k, m:] = out.v[k, m:] = np.nan  # a batch's coordinates beyond this train's
     out.force[k] = (-fc, fs)
-    out.cam[k] = run.s.lift.at(run.piece, run.rev, t)[0]
+    out.cam[k] = run.excitation(t, z)[0]
     out.cfg[k] = configuration(*run.closed)
     out.acc[k] = (acc[CAM], acc[SEAT])
 
@@ -564,7 +645,11 @@ def compliant_system(train: ValveTrain, profile: Profile, speed: float, seat_q: 
         lift,
         np.concatenate([scale, speed * scale]),
     )  # fmt: skip
-    system.plunger = plunger_state(train, system.minv)
+    gains = None
+    if is_valve_side(profile):  # a lever's: its ratio and its pivot's gain over the turn
+        ratio, gain = lever_tables(profile)
+        system.ratio, gains = Lift(ratio, speed), Lift(gain, speed)
+    system.plunger = plunger_state(train, system.minv, gains)
     if system.plunger is not None:
         travel = system.plunger.high - system.plunger.low
         system.scale = np.append(system.scale, max(travel, 1e-6))
@@ -572,17 +657,20 @@ def compliant_system(train: ValveTrain, profile: Profile, speed: float, seat_q: 
 
 
 def compliant_start(system: CompliantSystem, q: np.ndarray, v: np.ndarray, a: np.ndarray,
-                    cam_held: bool, seat_held: bool) -> np.ndarray:  # fmt: skip
-    """The state z = (q, q̇) a compliant case starts from, from the rigid model's (q, v, a)
-    with the given contacts held: each held contact compressed by its static approach under
-    the rigid reaction, the other coordinates moved by their static response to it, so the
-    start carries no spurious contact transient (the difference is O(1/k) and damps out)."""
+                    cam_held: bool, seat_held: bool, t0: float = 0.0) -> np.ndarray:  # fmt: skip
+    """The state z = (q, q̇) a compliant case starts from at ``t0`` [s], from the rigid
+    model's (q, v, a) with the given contacts held: each held contact compressed by its static
+    approach under the rigid reaction (a lever's at its roller, under the reaction times the
+    ratio, r times that on the valve side), the other coordinates moved by their static
+    response to it, so the start carries no spurious contact transient (the difference is
+    O(1/k) and damps out)."""
     s = system
     reaction = s.mass @ a + s.damping @ v + s.stiffness @ q - s.load
     dq = np.zeros(q.size)
     moved: list[int] = []
     if cam_held:
-        dq[CAM] = s.cam.approach(-reaction[CAM])
+        r = 1.0 if s.ratio is None else s.ratio.at(*s.ratio.piece_at(t0), t0)[0]
+        dq[CAM] = r * s.cam.approach(-reaction[CAM] * r)
         moved.append(CAM)
     if seat_held and s.seat is not None:
         dq[SEAT] = -s.seat.approach(reaction[SEAT])

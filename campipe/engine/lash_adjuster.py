@@ -19,9 +19,9 @@ pivot's, g·F (``adjuster_load``), and its histories stay in that frame.
 
 One :class:`Plunger` carries the adjusters from turn to turn, for a run of whole turns
 (``run_adjusted``'s loop) and for one of automatic length (``engine.settle.run_settled``,
-the extension then part of the state it compares). A case with compliant contacts and its
-adjuster in a chain has its plunger carried within the turn instead, as a state of the
-compliant integrator (``engine.plunger``, :func:`run_carried`).
+the extension then part of the state it compares). A case with compliant contacts has its
+plunger carried within the turn instead, as a state of the compliant integrator
+(``engine.plunger``, :func:`run_carried`).
 
 Pure numerics: arrays in, arrays out.
 """
@@ -130,20 +130,12 @@ def run_adjusted(
     ``carried_run`` (``run_batch`` past its adjusters)."""
     flags = np.array([carried(c, settings.integrator) for c in cases], np.bool_)
     if flags.any() and carried_run is not None:
-        pieces = []
-        for which in (flags, ~flags):
-            index = np.flatnonzero(which)
-            if not index.size:
-                continue
-            members = [cases[int(i)] for i in index]
-            if which is flags:
-                part = run_carried(members, settings, carried_run, **options)
-            else:
-                part = run_adjusted(members, settings, run, **options)
-            pieces.append((index, part))
-        return merge_results(len(cases), pieces)
+        return _split(
+            cases, flags,
+            lambda members: run_carried(members, settings, carried_run, **options),
+            lambda members: run_adjusted(members, settings, run, **options),
+        )  # fmt: skip
     turns = adjuster_turns(settings)
-    n = len(cases)
     if turns == 0:  # a part of a turn (a kernel's warm-up): no turn ends, the plunger stays
         return _part_of_a_turn(cases, settings, run, options)
     options.pop("full_state", None)  # every coordinate: a turn's end is the next's start
@@ -152,18 +144,24 @@ def run_adjusted(
         matrices = [system_matrices(c.train) for c in plunger.inner]
         result = run_settled(cases, settings, plunger, matrices, **options)
         return plunger.settled(result)
-    plunger = Plunger(cases, settings, run, turns)
+    return _whole_turns(cases, settings, Plunger(cases, settings, run, turns), turns, options)
+
+
+def _whole_turns(cases, settings, carrier, turns: int, options) -> BatchResult:
+    """``turns`` whole turns of ``cases``, one turn a call of ``carrier`` (a :class:`Plunger`
+    or a :class:`Carried` without its ledger), each from the last one's end, joined."""
+    n = len(cases)
     one = dataclasses.replace(settings, revolutions=1.0, warmup=0)
     parts: list[BatchResult] = []
     status = np.zeros(n, np.int64)
     start = None
     for _ in range(turns):
-        part = plunger(cases, one, start=start, **options)
+        part = carrier(cases, one, start=start, **options)
         status = np.where(part.status != 0, part.status, status)
         parts.append(part)
         cfg0 = part.contact_state[:, -1].astype(np.int64)
         start = (np.zeros(n), part.q[:, -1].copy(), part.v[:, -1].copy(), None, cfg0)
-    return _joined(parts, cases, settings, plunger.table, status)
+    return _joined(parts, cases, settings, carrier.table, status)
 
 
 def run_carried(
@@ -172,20 +170,54 @@ def run_carried(
     """Run cases whose plunger is a state of their run (``engine.plunger``) by ``run`` under
     the compliant integrator, each on its cam raised by its starting extension e₀ (the
     frame the plunger's state u = e − e₀ is measured in, so the settings' start is the train's
-    with its plunger there), its histories brought back to the cam's own lift: a run of whole
-    or part turns in one piece, a run of automatic length turn by turn
-    (``engine.settle.run_settled`` through a :class:`Carried`, which starts each turn in the
-    frame of the extension the last ended with)."""
+    with its plunger there; a finger's on the kinematic lift with its pivot raised by e₀),
+    a chain's histories brought back to the cam's own lift: a chain's run of whole or part
+    turns in one piece; a finger's (its pivot's gain linearised about e₀) and a run of
+    automatic length turn by turn through a :class:`Carried` (``engine.settle.run_settled``
+    for the latter), which starts each turn in the frame of the extension the last ended
+    with."""
     one_law = dataclasses.replace(settings, integrator="compliant")
     if settings.settle:
-        carrier = Carried(cases, one_law, run, settings.max_revolutions)
+        carrier = Carried(cases, one_law, run, settings.max_revolutions, ledger=True)
         matrices = [system_matrices(c.train) for c in cases]
         result = run_settled(cases, one_law, carrier, matrices, **options)
         return without_ledger(result, carrier.table)
+    turns = adjuster_turns(settings)
+    pivots = np.array([on_pivot(c.train) for c in cases], np.bool_)
+    if not (turns and turns > 1 and pivots.any()):
+        return _in_one_piece(cases, one_law, run, options)
+    return _split(
+        cases, pivots,
+        lambda members: _whole_turns(
+            members, one_law, Carried(members, one_law, run, turns), turns, options
+        ),
+        lambda members: _in_one_piece(members, one_law, run, options),
+    )  # fmt: skip
+
+
+def _split(cases, which: np.ndarray, first, second) -> BatchResult:
+    """``first`` run on the cases ``which`` picks, ``second`` on the others, merged."""
+    pieces = []
+    for picked, part_of in ((which, first), (~which, second)):
+        index = np.flatnonzero(picked)
+        if index.size:
+            pieces.append((index, part_of([cases[int(i)] for i in index])))
+    return merge_results(len(cases), pieces)
+
+
+def _in_one_piece(cases, settings, run, options) -> BatchResult:
+    """A carried run of ``cases`` in one piece on their cams raised by their starting
+    extensions (a finger's pivot raised), a chain's histories back on its cam's own lift."""
     offset = np.array([c.train.hla_extension for c in cases])
     members = [extended(c, e) for c, e in zip(cases, offset, strict=True)]
-    part = run(members, one_law, **options)
-    return _in_cam_frame(part, offset, cases)
+    part = run(members, settings, **options)
+    return _in_cam_frame(part, np.where(_in_link(cases), offset, 0.0), cases)
+
+
+def _in_link(cases) -> np.ndarray:
+    """(n,) each case's adjuster lengthens a chain's link (its frame the cam's lift raised by
+    the extension), not a finger's pivot (its frame the lever's own)."""
+    return np.array([not on_pivot(c.train) for c in cases], np.bool_)
 
 
 def _in_cam_frame(part: BatchResult, offset: np.ndarray, cases) -> BatchResult:
@@ -224,26 +256,31 @@ def with_ledger(part: BatchResult, before, after, travel) -> BatchResult:
 
 
 class Carried:
-    """A batch's carried plungers across the turns of a run of automatic length (the
-    ``run_turn`` of ``engine.settle.run_settled``): each turn run on the cam raised by the
-    extension the last one ended with (``train.hla_extension`` set to it: the plunger's
-    state starts at 0 in that frame), from the last turn's end moved into that frame; each
-    turn's coordinates carry one more column, the plunger's extension at the turn's ends
-    (between them as :class:`Plunger`'s ledger), so a case settles only once its plunger
-    repeats too."""
+    """A batch's carried plungers turn by turn (the ``run_turn`` of
+    ``engine.settle.run_settled`` for a run of automatic length; a finger's run of whole
+    turns): each turn run on the cam raised by the extension the last one ended with
+    (``train.hla_extension`` set to it: the plunger's state starts at 0 in that frame; a
+    finger's kinematic lift with its pivot there), from the last turn's end moved into that
+    frame (a finger's coordinates are its own in every frame: the lift with the pivot at the
+    extension reached is, to the linearisation's 1e-5 of a turn's motion, the last frame's
+    with g·u). With ``ledger`` each turn's coordinates carry one more column, the plunger's
+    extension at the turn's ends (between them as :class:`Plunger`'s ledger), so a case
+    settles only once its plunger repeats too."""
 
-    def __init__(self, cases, settings, run, turns: int) -> None:
+    def __init__(self, cases, settings, run, turns: int, ledger: bool = False) -> None:
         self.cases = list(cases)
         self.index = {id(c): i for i, c in enumerate(cases)}
         self.extension = np.array([c.train.hla_extension for c in cases])
         self.travel = np.array([c.train.hla_travel for c in cases])
+        self.in_link = _in_link(cases)
         self.table = np.full((len(cases), turns, 3), np.nan)
         self.turn = np.zeros(len(cases), np.int64)
-        self.run = run
+        self.run, self.ledger = run, ledger
 
     def __call__(self, members, one, start=None, full_state=True, **options) -> BatchResult:
         rows = np.array([self.index[id(m)] for m in members], np.int64)
         before = self.extension[rows].copy()
+        shift = np.where(self.in_link[rows], before, 0.0)
         run_cases = []
         for i, e in zip(rows.tolist(), before, strict=True):
             case = self.cases[i]
@@ -251,18 +288,21 @@ class Carried:
             run_cases.append(extended(dataclasses.replace(case, train=train), float(e)))
         if start is not None:  # the last turn's end, in this turn's frame
             t0, q0, v0, _, cfg0 = start
-            q0, v0 = np.array(q0[:, :-1], float), np.array(v0[:, :-1], float)
-            q0[:, CAM] -= before
+            width = q0.shape[1] - (1 if self.ledger else 0)
+            q0, v0 = np.array(q0[:, :width], float), np.array(v0[:, :width], float)
+            q0[:, CAM] -= shift
             a0 = np.full_like(q0, np.nan)  # its compliant state as it is (``settle.run_settled``)
             start = (t0, q0, v0, a0, np.array(cfg0, np.int64))
         part = self.run(run_cases, one, start=start, full_state=True, **options)
-        part = _in_cam_frame(part, before, [self.cases[i] for i in rows.tolist()])
+        part = _in_cam_frame(part, shift, [self.cases[i] for i in rows.tolist()])
         turn = part.lash_adjuster[:, 0]  # (rows, 3): this turn's
         after = np.clip(before - turn[:, LEAK_DOWN] + turn[:, PUMP_UP], 0.0, self.travel[rows])
         done = np.isfinite(turn[:, EXTENSION])
         self.table[rows[done], self.turn[rows[done]]] = turn[done]
         self.extension[rows] = np.where(done, after, before)
         self.turn[rows] += 1
+        if not self.ledger:
+            return part
         return with_ledger(part, before, self.extension[rows], self.travel[rows])
 
 
@@ -290,7 +330,7 @@ class Plunger:
         self.extension = np.array([c.train.hla_extension if h else 0.0 for c, h in pairs])
         self.members = [extended(c, e) for c, e in zip(self.inner, self.extension, strict=True)]
         # a chain's histories go back to the cam's own lift; a finger's stay (its pivot rises)
-        self.in_link = np.array([not on_pivot(c.train) for c in cases])
+        self.in_link = _in_link(cases)
         self.index = {id(c): i for i, c in enumerate(cases)}
         n = len(cases)
         self.table = np.full((n, turns, 3), np.nan)
@@ -383,7 +423,7 @@ def _part_of_a_turn(cases, settings, run, options) -> BatchResult:
     part = run(Plunger(cases, settings, run, 0).members, settings, start=None, **options)
     # a chain's back to the cam's own lift; a finger's pivot stays raised (see run_adjusted)
     shift = np.array([o.train.hla_extension if adjuster(o.train) else 0.0 for o in cases])
-    shift[[on_pivot(o.train) for o in cases]] = 0.0
+    shift[~_in_link(cases)] = 0.0
     table = np.full((len(cases), part.per_rev.shape[1], 3), np.nan)
     return dataclasses.replace(_in_cam_frame(part, shift, cases), lash_adjuster=table)
 

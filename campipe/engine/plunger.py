@@ -1,8 +1,9 @@
 """A hydraulic lash adjuster's plunger as a state of the compliant integrator, its check
 valve's switch an event located on the solution (:mod:`campipe.engine.compliant`).
 
-The adjuster (:mod:`campipe.model.hla`) sits in series with a chain's link next to the cam.
-Its plunger's extension e lengthens that link, so the force through it is
+The adjuster (:mod:`campipe.model.hla`) sits in series with a chain's link next to the cam
+(under a finger follower's pivot: below). Its plunger's extension e lengthens that link, so
+the force through it is
 
     F = k·(d·q + u),     u = e − e₀,
 
@@ -26,6 +27,18 @@ turn's end: the leak-down and pump-up of each turn are what the plunger moved in
 (``BatchResult.lash_adjuster``: the extension at each turn's start, the turn's leak-down
 and pump-up).
 
+**Under a finger follower's pivot** the plunger raises the pivot: the lever turns about
+its roller and its pallet moves by g(θ)·u, g the pivot's gain
+(:func:`campipe.profiles.levers.pivot_gains`, which changes with the cam angle). The valve
+side's excitation is then the kinematic lift with the pivot at e₀ plus g·u (its linear part:
+the rest is 1e-5 of u for a micron of it), the coordinates stay the lever's and the valve's
+own, and the load through the adjuster is the pivot's, g·F, F the link's force k·d·q (by
+virtual work, as the per-turn model takes it); u̇ = −(g·F − F_c)/c. With g changing with the
+angle the equations are not time-invariant, so such a case goes through solve_ivp, not the
+exact propagation; and its run starts each turn in a new frame, the kinematic lift with the
+pivot at the extension reached (``lash_adjuster.Carried``), so that what is linearised is
+one turn's motion.
+
 What the per-turn model of the default integrator approximates (the plunger fixed within a
 turn, its motion applied at the turn's end, the switch on the samples' interpolant,
 :func:`interpolated_switches`) this carries exactly; the two are compared in the tests
@@ -37,7 +50,9 @@ Pure numerics on floats and arrays.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -53,8 +68,9 @@ from campipe.vocabulary import (
 )
 
 #: The plunger's regimes: check valve closed (leaking down), open (pumping up), bottomed
-#: out, fully out.
-CLOSED, OPEN, BOTTOMED, TOPPED = 0, 1, 2, 3
+#: out, fully out; and held where the settings' start puts it until t = 0 (a periodic start
+#: begins before the run's first turn: ``hla_extension`` is the extension at t = 0).
+CLOSED, OPEN, BOTTOMED, TOPPED, HELD = 0, 1, 2, 3, 4
 #: Monitor tags (``_Run.monitors``' ``contact``), beyond the contacts' 0–3.
 VALVE, TRAVEL = 4, 5
 #: The columns of ``BatchResult.lash_adjuster``: the plunger's extension at each turn's
@@ -79,7 +95,8 @@ SWITCHES = {
 
 @dataclass(frozen=True)
 class PlungerState:
-    """One case's adjuster as the compliant integrator carries it (see the module)."""
+    """One case's adjuster as the compliant integrator carries it (see the module): a chain's
+    in its link (``gains`` None), a finger follower's under its pivot (``gains`` its g(θ))."""
 
     d: np.ndarray  # (n,) the link's compression d·q [m] per coordinate
     k: float  # [N/m] the link with the adjuster in series
@@ -89,28 +106,34 @@ class PlungerState:
     low: float  # u at the bottom, −e₀ [m]
     high: float  # u fully out, travel − e₀ [m]
     offset: float  # e₀ [m]
-    push: np.ndarray  # (n,) M⁻¹·k·d: the accelerations a unit of u gives [1/s²]
+    push: np.ndarray  # (n,) M⁻¹·k·d: the accelerations a unit of u gives [1/s²] (0: a pivot's)
+    #: a pivot's gain g(θ) [-] over the turn (``profiles.levers.lever_tables``, a ``Lift``
+    #: on the excitation's pieces): the valve side's excitation rises by g·u, the load
+    #: through the adjuster is g·F; None: in the chain's link (g = 1, F = k·(d·q + u))
+    gains: Any = None
 
     def force(self, z: np.ndarray) -> float:
-        """The force through the adjuster [N] in state z = (q, q̇, u)."""
+        """The link's force [N] in state z = (q, q̇, u): k·(d·q + u) with the adjuster in the
+        link, k·d·q under a pivot."""
         n = self.d.size
-        return self.k * (float(self.d @ z[:n]) + z[2 * n])
+        return self.k * (float(self.d @ z[:n]) + (z[2 * n] if self.gains is None else 0.0))
 
     def damper(self, regime: int) -> float:
         """The dashpot's coefficient [N·s/m] in ``regime`` (inf: held at an end)."""
-        return (self.leak_down, self.pump_up, math.inf, math.inf)[regime]
+        return (self.leak_down, self.pump_up, math.inf, math.inf, math.inf)[regime]
 
-    def rate(self, z: np.ndarray, regime: int) -> float:
-        """u̇ [m/s] in ``regime``."""
+    def rate(self, z: np.ndarray, regime: int, gain: float = 1.0) -> float:
+        """u̇ [m/s] in ``regime``, the gain g at the instant (1 in a link)."""
         c = self.damper(regime)
-        return 0.0 if math.isinf(c) else -(self.force(z) - self.check_force) / c
+        return 0.0 if math.isinf(c) else -(gain * self.force(z) - self.check_force) / c
 
-    def row(self, regime: int) -> tuple[np.ndarray, float, float]:
-        """u̇ = a·q + b·u + f: (a (n,), b, f) in ``regime``."""
+    def row(self, regime: int, gain: float = 1.0) -> tuple[np.ndarray, float, float]:
+        """u̇ = a·q + b·u + f: (a (n,), b, f) in ``regime``, the gain g at the instant."""
         c = self.damper(regime)
         if math.isinf(c):
             return np.zeros(self.d.size), 0.0, 0.0
-        return -self.k / c * self.d, -self.k / c, self.check_force / c
+        b = -self.k / c if self.gains is None else 0.0
+        return -gain * self.k / c * self.d, b, self.check_force / c
 
     def record(self, turn: np.ndarray, regime: int, z: np.ndarray, z_end: np.ndarray) -> None:
         """Its motion from state z to z_end in ``regime`` into its turn's row of the table
@@ -124,29 +147,36 @@ class PlungerState:
         elif regime == OPEN:
             turn[PUMP_UP] += moved
 
-    def regime_at(self, z: np.ndarray) -> int:
-        """The regime a run starts in from state z."""
+    def regime_at(self, z: np.ndarray, gain: float = 1.0) -> int:
+        """The regime a run starts in from state z, the gain g there."""
         n = self.d.size
         u = z[2 * n]
-        if self.force(z) > self.check_force:
+        if gain * self.force(z) > self.check_force:
             return BOTTOMED if u <= self.low else CLOSED
         return TOPPED if u >= self.high else OPEN
 
-    def monitors(self, regime: int) -> list[tuple[int, float, object]]:
-        """(tag, direction, g(z)) of the switches out of ``regime``."""
+    def monitors(
+        self, regime: int, gain: Callable[[float], float]
+    ) -> list[tuple[int, float, Callable[[float, np.ndarray], float]]]:
+        """(tag, direction, g(t, z)) of the switches out of ``regime``; ``gain`` gives g at
+        an instant [s] (1 in a link)."""
         n = self.d.size
 
         closed = regime in (CLOSED, BOTTOMED)
         level = self.check_force * (1.0 - HYSTERESIS if closed else 1.0 + HYSTERESIS)
 
-        def valve(z: np.ndarray) -> float:
-            return self.force(z) - level
+        def valve(t: float, z: np.ndarray) -> float:
+            return gain(t) * self.force(z) - level
 
-        out: list[tuple[int, float, object]] = [(VALVE, -1.0 if closed else 1.0, valve)]
+        if regime == HELD:
+            return []
+        out: list[tuple[int, float, Callable[[float, np.ndarray], float]]] = [
+            (VALVE, -1.0 if closed else 1.0, valve)
+        ]
         if regime == CLOSED:
-            out.append((TRAVEL, -1.0, lambda z: z[2 * n] - self.low))
+            out.append((TRAVEL, -1.0, lambda t, z: z[2 * n] - self.low))
         elif regime == OPEN:
-            out.append((TRAVEL, 1.0, lambda z: z[2 * n] - self.high))
+            out.append((TRAVEL, 1.0, lambda t, z: z[2 * n] - self.high))
         return out
 
 
@@ -177,13 +207,16 @@ def interpolated_switches(
     return np.array(rows, float).reshape(len(rows), N_EVENT_FIELDS)
 
 
-def plunger_state(train, mass_inverse: np.ndarray) -> PlungerState | None:
-    """The compliant integrator's state of ``train``'s adjuster (None: none, or one under a
-    finger follower's pivot: a finger takes rigid contacts only, and its adjuster runs turn
-    by turn, :mod:`campipe.engine.lash_adjuster`)."""
+def plunger_state(train, mass_inverse: np.ndarray, gains: Any = None) -> PlungerState | None:
+    """The compliant integrator's state of ``train``'s adjuster (None: none): in a chain's
+    link, or under a finger follower's pivot with ``gains`` its g(θ) (a ``Lift``, see
+    :class:`PlungerState`)."""
     hla = adjuster(train)
-    if hla is None or on_pivot(train):
+    if hla is None:
         return None
+    pivot = on_pivot(train)
+    if pivot and gains is None:
+        raise TypeError("a pivot's plunger needs its gains over the turn (lever_tables)")
     n = mass_inverse.shape[0]
     index, sign = chain_placement(len(train.masses))
     d = np.zeros(n)
@@ -192,9 +225,10 @@ def plunger_state(train, mass_inverse: np.ndarray) -> PlungerState | None:
     link = next(e for e in chain_elements(train) if e.name == "link")
     k = float(link.stiffness[0, 0])
     e0 = float(train.hla_extension)
+    push = np.zeros(n) if pivot else mass_inverse @ d * k
     return PlungerState(
-        d, k, hla.check_force, hla.leak_down, hla.pump_up, -e0, hla.travel - e0, e0,
-        mass_inverse @ d * k,
+        d, k, hla.check_force, hla.leak_down, hla.pump_up, -e0, hla.travel - e0, e0, push,
+        gains if pivot else None,
     )  # fmt: skip
 
 
@@ -203,4 +237,4 @@ def carried(case, integrator: str) -> bool:
     ``integrator``), not moved turn by turn."""
     if integrator not in ("default", "compliant") or not case.compliant:
         return False
-    return adjuster(case.train) is not None and not on_pivot(case.train)
+    return adjuster(case.train) is not None

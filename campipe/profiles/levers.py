@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import collections
 import dataclasses
+import functools
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -111,9 +112,14 @@ def valve_side(profile: Profile, train: Any) -> Profile:
     return found
 
 
+def _grid() -> np.ndarray:
+    """The cam angles [rad] a derived profile is sampled at: every :data:`STEP` of a turn."""
+    return np.arange(round(TWO_PI / STEP)) * (TWO_PI / round(TWO_PI / STEP))
+
+
 def _derived(profile: Profile, lever: Lever) -> ValveSideProfile:
     """``profile`` (the cam's lift) through ``lever``'s kinematics, sampled and splined."""
-    theta = np.arange(round(TWO_PI / STEP)) * (TWO_PI / round(TWO_PI / STEP))
+    theta = _grid()
     state = _kinematics(profile, lever, theta)
     _check_swing(state, profile)
     derived = table(theta, state.valve_lift)
@@ -140,3 +146,16 @@ def pivot_gains(profile: ValveSideProfile, theta: np.ndarray) -> np.ndarray:
         raise TypeError("pivot_gains takes a lever layout's derived profile (valve_side)")
     theta = np.asarray(theta, float)
     return _kinematics(profile.cam, profile.lever, theta).gain.reshape(theta.shape)
+
+
+@functools.lru_cache(maxsize=CACHED)
+def lever_tables(profile: ValveSideProfile) -> tuple[Profile, Profile]:
+    """(the lever ratio r(θ), the pivot's gain g(θ)) [-] of a lever layout's derived profile,
+    each sampled on the profile's own grid and splined as it is (:func:`_derived`), so their
+    pieces are the profile's: the compliant integrator evaluates all three on the piece it is
+    on (``campipe.engine.compliant``)."""
+    if profile.cam is None or profile.lever is None:
+        raise TypeError("lever_tables takes a lever layout's derived profile (valve_side)")
+    theta = _grid()
+    state = _kinematics(profile.cam, profile.lever, theta)
+    return table(theta, state.ratio), table(theta, state.gain)

@@ -384,6 +384,35 @@ def test_finger_follower_hla(tmp_path):
     assert fast[-1] < -0.02e-3 and fast[-1] < lash[slow][0, -1] - 0.02e-3
 
 
+def test_finger_follower_hla_compliant(tmp_path):
+    """Quick variant (2000 rpm engine speed, 4 turns) of the finger's adjuster carried as a
+    state under its pivot. While the follower stands off the cam seated (the dry lash still
+    open) the pivot carries nothing and the open check valve pumps the plunger up at F_c/c_P:
+    each turn's pump-up is at least F_c·t_IV/c_P (t_IV the turn's time seated off the cam,
+    a hand calculation from the check force) and at most 10 % more; each turn's effective
+    lash falls by (b − a)/a = 14/22 of the plunger's net extension (to 1 %: the gain the
+    turn's take-up is linearised with); the check valve's switches alternate, located as
+    events (5 opens, 6 closes) within every turn. Fails on a copy that takes the pallet's
+    force as the pivot's load or that drops the check valve's events."""
+    ds = run(
+        tmp_path,
+        "finger-follower-hla-compliant",
+        **{"run.revolutions": 4, "sweep.engine_speed": ["2000 rpm"]},
+    )
+    assert ds.sizes["case"] == 1 and (ds.status == 0).all()
+    omega = 1000 * math.pi / 30  # the cam's
+    pump = ds.hla_pump_up_by_rev.values[0]
+    floor = 25.0 * np.radians(ds.seated_off_cam_deg.values[0]) / omega / 20e3
+    assert np.all((pump >= floor) & (pump <= 1.1 * floor))
+    lash = ds.hla_lash_by_rev.values[0]
+    net = pump - ds.hla_leak_down_by_rev.values[0]
+    assert_allclose(np.diff(lash), -(14 / 22) * net[:-1], rtol=0.01)
+    kinds = ds.event_kind.values
+    valve = kinds[np.isin(kinds, (5, 6))]
+    turns = np.floor(ds.event_cam_angle.values[np.isin(kinds, (5, 6))] / 360)
+    assert np.all(valve[1:] != valve[:-1]) and set(turns) == set(range(4))
+
+
 def _pumps_up_at_the_check_force(ds, slow):
     """At 2000 rpm each turn's pump-up is F_c·t_IV/c_P, t_IV the turn's time seated off the
     cam (F_c 25 N, c_P 20 N·s/mm), and at most 10 % more."""

@@ -133,11 +133,10 @@ def test_at_a_crawl_the_valve_follows_the_kinematic_lift():
 
 def test_the_rocker_is_the_finger_turned_half_a_turn():
     """A centre-pivot rocker with the finger's numbers, its cam offset the other way (the
-        offset runs towards the pallet, which the half turn puts on the other side), is the finger
-        turned by 180° about the pivot (cam under the roller, the valve under the other arm, the
-        cam still counter-clockwise): the same valve lift over the turn; and a rocker may have its
-    XX
-        cam above its roller."""
+    offset runs towards the pallet, which the half turn puts on the other side), is the finger
+    turned by 180° about the pivot (cam under the roller, the valve under the other arm, the
+    cam still counter-clockwise): the same valve lift over the turn; and a rocker may have its
+    cam above its roller."""
     theta = np.linspace(0.0, 2 * math.pi, 37)
     finger = cam_kinematics(harmonic(LIFT), lever(), theta)
     rocker = cam_kinematics(
@@ -158,13 +157,12 @@ def test_the_rocker_is_the_finger_turned_half_a_turn():
         ({"lever_rest_angle": "70 deg"}, "model.lever_rest_angle"),
         ({"cam_roller_radius": "0 mm"}, "model.cam_roller_radius"),
         ({"masses": ["1 kg", "1 kg"]}, "model.masses"),
-        ({"cam_contact": "kelvin-voigt", "cam_contact_stiffness": "1 N/um"}, "model.cam_contact"),
     ],
 )
 def test_lever_refusals_name_their_keys(changes, key):
     """Each refusal names its key: a needed key left out, a finger whose roller is beyond its
     pallet, a cam offset beyond the pitch circle, a rest angle beyond 60°, a flat follower, a
-    lumped chain's key, a compliant cam contact. Fails on a copy that builds the chain with a
+    lumped chain's key. Fails on a copy that builds the chain with a
     NaN mass."""
     with pytest.raises(ModelParameterError) as info:
         valve_train("thesis-1971", {**FINGER, **changes}, key_prefix="model.")

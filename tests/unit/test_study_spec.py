@@ -40,6 +40,7 @@ EXAMPLE_CASES = {
     "lash-adjuster": 4,
     "lash-adjuster-compliant": 2,
     "finger-follower-hla": 5,
+    "finger-follower-hla-compliant": 2,
 }
 
 

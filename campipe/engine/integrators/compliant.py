@@ -81,7 +81,9 @@ class Compliant:
             if np.isnan(c.a0[i, 0]):  # the end of its last turn (``settle.run_settled``)
                 z0 = np.concatenate([c.q0[i, :m], c.v0[i, :m]])
             else:  # a rigid start, its held contacts compressed
-                z0 = compliant.compliant_start(system, c.q0[i, :m], c.v0[i, :m], c.a0[i, :m], *held)
+                z0 = compliant.compliant_start(
+                    system, c.q0[i, :m], c.v0[i, :m], c.a0[i, :m], *held, float(c.t0[i])
+                )
             one = compliant.CaseOutputs(
                 out.q[i], out.v[i], out.force[i], out.cam[i], out.cfg[i], out.acc[i],
                 out.per_rev[i], out.events[i],
