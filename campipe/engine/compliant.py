@@ -250,10 +250,13 @@ class _Run:
         if self.closed[0]:
             dn, rn, r, dr = self.at_roller(t, dc, rc)
             kd, cd = self.s.cam.slopes(dn, rn)
-            ddr = 0.0 if self.s.ratio is None else self.s.ratio.at(self.piece, self.rev, t)[2]
-            a = acc[CAM] + ddlift  # δ̈ on the valve side, then at the roller
-            an = a / r - 2.0 * rc * dr / r**2 - dc * ddr / r**2 + 2.0 * dc * dr * dr / r**3
-            out[0] = (kd * rn + cd * an) / r - self.s.cam.force(dn, rn) * dr / (r * r)
+            a = acc[CAM] + ddlift  # δ̈ on the valve side
+            if self.s.ratio is None:
+                out[0] = kd * rn + cd * a
+            else:  # δ/r's second derivative at the roller, and the rate of F/r
+                ddr = self.s.ratio.at(self.piece, self.rev, t)[2]
+                an = a / r - 2.0 * rc * dr / r**2 - dc * ddr / r**2 + 2.0 * dc * dr * dr / r**3
+                out[0] = (kd * rn + cd * an) / r - self.s.cam.force(dn, rn) * dr / (r * r)
         if self.s.seat is not None and self.closed[1]:
             kd, cd = self.s.seat.slopes(ds, rs)
             out[1] = kd * rs + cd * (-acc[SEAT])
