@@ -194,8 +194,10 @@ def section_block(data: dict) -> str:
                     f"`{e['study']}`",
                     str(e["cases"]),
                     duration(e["estimate"]),
-                    duration(e["measured"]),
-                    f"{format_short(e['measured'] / e['estimate'], 2)}×",
+                    "–" if e["measured"] is None else duration(e["measured"]),
+                    "–"
+                    if e["measured"] is None
+                    else f"{format_short(e['measured'] / e['estimate'], 2)}×",
                 ]
                 for e in s["estimates"]
             ],

@@ -44,7 +44,9 @@ def test_the_quick_benchmark_measures_the_study_section(tmp_path):
     """``python -m benchmarks.study --quick``: each size end to end against the engine with
     its archive's bytes, the start-up latencies (a finished study answered "up to date",
     asserted where it is timed), the client's ceiling against each compression, 1/2/4 worker
-    processes; then its goals, the first run and validate at scale not shown (--quick)."""
+    processes, validate's estimate of each bundled study (those estimated within the quick
+    cap run beside it); then its goals, the first run and validate at scale not shown
+    (--quick)."""
     done = _benchmarks("benchmarks.study", "--quick", "--no-scaling", "-o", str(tmp_path))
     assert done.returncode == 0, done.stderr[-2000:]
     data = json.loads((tmp_path / "study.json").read_text())
@@ -67,6 +69,8 @@ def test_the_quick_benchmark_measures_the_study_section(tmp_path):
     assert c["compressions"]["zstd"]["bytes"] == c["compressed_bytes"]
     assert [r["workers"] for r in s["cluster"]] == [1, 2, 4]
     assert {e["study"] for e in s["estimates"]} == {p.name for p in study.STUDIES.glob("*.yaml")}
+    for e in s["estimates"]:  # --quick runs those estimated within its cap
+        assert (e["measured"] is None) == (e["estimate"] > study.QUICK_ESTIMATE_CAP)
     assert "first_run" not in s and "validate" not in s
     # stdout: the json's path, then the goals as benchmarks.goals judges them from it
     lines = done.stdout.splitlines()
