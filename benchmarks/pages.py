@@ -194,10 +194,8 @@ def section_block(data: dict) -> str:
                     f"`{e['study']}`",
                     str(e["cases"]),
                     duration(e["estimate"]),
-                    "–" if e["measured"] is None else duration(e["measured"]),
-                    "–"
-                    if e["measured"] is None
-                    else f"{format_short(e['measured'] / e['estimate'], 2)}×",
+                    duration(e["measured"]),
+                    f"{format_short(e['measured'] / e['estimate'], 2)}×",
                 ]
                 for e in s["estimates"]
             ],

@@ -4,8 +4,8 @@ The developer's benchmark of campipe's own latencies and study layer (``campipe 
 the package, is the user's speed against error). From the repository's root::
 
     python -m benchmarks.study -o docs/bench       # the full run: docs/bench/study.json
-    python -m benchmarks.study --quick -o DIR      # sizes up to 256 cases, no first run, the
-                                                   # bundled studies estimated within 5 s
+    python -m benchmarks.study --quick -o DIR      # sizes up to 256 cases, no first run nor
+                                                   # bundled studies' estimates
     python -m benchmarks.pages                     # docs/bench.md's study blocks from the json
 
 Everything a user waits for is timed as the user runs it, in a fresh ``python -m campipe``
@@ -65,9 +65,6 @@ from campipe.study.spec.variables import data_variables
 #: Case counts of the study section, and of --quick.
 COUNTS = (1, 32, 1000, 10000)
 QUICK_COUNTS = (1, 32, 256)
-#: A quick run measures only the bundled studies validate estimates at most this long [s]
-#: (the others are listed with their estimate: the full run measures them all).
-QUICK_ESTIMATE_CAP = 5.0
 #: The size the study-layer goal is judged at: wall ≤ GOAL_FACTOR × engine + GOAL_OFFSET.
 GOAL_CASES = 1000
 GOAL_FACTOR = 1.5
@@ -460,21 +457,18 @@ def validate_estimate(study: Study, workers: int) -> float:
     return estimate(study, workers).seconds
 
 
-def estimates(studies: Path, directory: Path, workers: int, cap: float = math.inf) -> list[dict]:
+def estimates(studies: Path, directory: Path, workers: int) -> list[dict]:
     """Each bundled study: validate's estimate beside the study's measured run
-    (``run_study`` in this process, kernels loaded, a new archive); a study estimated above
-    ``cap`` [s] is not run (``measured`` None: a quick run's bound)."""
+    (``run_study`` in this process, kernels loaded, a new archive)."""
     out = []
     for spec in sorted(studies.glob("*.yaml")):
         study = load_study(spec)
         estimate = validate_estimate(study, workers)
-        measured = None
-        if estimate <= cap:
-            archive = directory / f"estimate-{spec.stem}.nc"
-            archive.unlink(missing_ok=True)
-            t0 = time.perf_counter()
-            run_study(study, archive, scheduler="threads", workers=workers)
-            measured = time.perf_counter() - t0
+        archive = directory / f"estimate-{spec.stem}.nc"
+        archive.unlink(missing_ok=True)
+        t0 = time.perf_counter()
+        run_study(study, archive, scheduler="threads", workers=workers)
+        measured = time.perf_counter() - t0
         out.append(
             {
                 "study": spec.name,
@@ -575,10 +569,9 @@ def measure(
     m = QUICK_CLUSTER_CASES if quick else CLUSTER_CASES
     say(f"study: {m} cases on 1, 2, 4 local worker processes")
     out["cluster"] = cluster(directory, m)
-    if studies is not None and studies.is_dir():
+    if not quick and studies is not None and studies.is_dir():
         say("study: validate's estimates of the bundled studies against their runs")
-        cap = QUICK_ESTIMATE_CAP if quick else math.inf
-        out["estimates"] = estimates(studies, directory, workers, cap)
+        out["estimates"] = estimates(studies, directory, workers)
     if not quick and studies is not None:
         say("study: the quickstart as on a fresh install (numba compiles)")
         out["first_run"] = first_run(studies, directory)
@@ -664,8 +657,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         "--quick",
         action="store_true",
         help=f"sizes {', '.join(map(str, QUICK_COUNTS))}, {QUICK_CLUSTER_CASES} cases on the "
-        "worker processes, the bundled studies validate estimates within "
-        f"{QUICK_ESTIMATE_CAP:g} s, no first run nor validate at scale "
+        "worker processes, no first run, bundled studies' estimates nor validate at scale "
         "(a few minutes)",
     )
     parser.add_argument("--workers", type=int, help="worker threads (default: the study's)")
