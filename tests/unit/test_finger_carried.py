@@ -137,11 +137,9 @@ def test_leak_down_pump_up_and_switches_at_a_crawl_against_the_lever_s_statics()
 def test_the_per_turn_model_against_the_carried_plunger_on_a_finger():
     """The bundled finger on its adjuster (studies/finger-follower-hla.yaml) at 2000 rpm
     engine speed, pumping up from the dry lash: the carried plunger (compliant contacts,
-    stiff) against the per-turn model (rigid contacts) over turns 2 and 3, each turn's
-    leak-down and pump-up to 1 % (found: 0.2 %). The first turn differs by what the per-turn
-    model cannot see (its plunger bottomed through the event: 3 µm of 37 pumped up). Fails on
-    a copy that leaves the pivot's gain out of the excitation (the follower's gap never
-    closes by pump-up within the turn: its pump-up 2.5 times)."""
+    stiff) against the per-turn model (rigid contacts) over 3 turns, each turn's leak-down and
+    pump-up to 1 % (found: 0.08 %). Fails on a copy that takes the pallet's force as the
+    pivot's load (the leak-down 1.7 times)."""
     path = Path(__file__).parents[2] / "studies" / "finger-follower-hla.yaml"
     model = yaml.safe_load(path.read_text())["model"]
     case = load_study(path).cases[0].case  # 2000 rpm
@@ -154,7 +152,7 @@ def test_the_per_turn_model_against_the_carried_plunger_on_a_finger():
         assert run.status[0] == 0
         tables.append(run.lash_adjuster[0])
     per_turn, carried = tables
-    assert carried[1:, 1:] == pytest.approx(per_turn[1:, 1:], rel=0.01)
+    assert carried[:, 1:] == pytest.approx(per_turn[:, 1:], rel=0.01)
 
 
 def test_the_plunger_pumps_the_roller_onto_the_base_circle_at_the_hand_s_instant():
