@@ -85,7 +85,7 @@ def test_leak_down_pump_up_and_switches_at_a_crawl_against_the_lever_s_statics()
     ∫ (F_c − R)⁺ dt / c_P over each of two turns, to 2e-4, and its check valve opens and
     closes where R crosses F_c (Brent's roots) to 1e-4 rad of cam angle; the valve stands off
     its seat by the statics' amount, the roller's give r²·F/k_c included, to 1e-8 m. Fails on
-    a copy that reflects the contact at the rest ratio (the valve 0.7 µm off at full lift) or
+    a copy that reflects the contact at the rest ratio (the valve up to 0.19 µm off) or
     that takes the pallet's force as the pivot's load (the leak-down 2.3 times)."""
     omega, slow, start = 10 * RPM, 2e11, 0.1e-3
     hla = {"hla_leak_down": "2e8 N*s/mm", "hla_pump_up": "2e8 N*s/mm", "hla_extension": "0.1 mm"}
