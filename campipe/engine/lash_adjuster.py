@@ -183,7 +183,7 @@ def run_carried(
         result = run_settled(cases, one_law, carrier, matrices, **options)
         return without_ledger(result, carrier.table)
     turns = adjuster_turns(settings)
-    pivots = np.array([on_pivot(c.train) for c in cases], np.bool_)
+    pivots = ~_in_link(cases)
     if not (turns and turns > 1 and pivots.any()):
         return _in_one_piece(cases, one_law, run, options)
     return _split(

@@ -160,16 +160,15 @@ class PlungerState:
     ) -> list[tuple[int, float, Callable[[float, np.ndarray], float]]]:
         """(tag, direction, g(t, z)) of the switches out of ``regime``; ``gain`` gives g at
         an instant [s] (1 in a link)."""
+        if regime == HELD:
+            return []
         n = self.d.size
-
         closed = regime in (CLOSED, BOTTOMED)
         level = self.check_force * (1.0 - HYSTERESIS if closed else 1.0 + HYSTERESIS)
 
         def valve(t: float, z: np.ndarray) -> float:
             return gain(t) * self.force(z) - level
 
-        if regime == HELD:
-            return []
         out: list[tuple[int, float, Callable[[float, np.ndarray], float]]] = [
             (VALVE, -1.0 if closed else 1.0, valve)
         ]

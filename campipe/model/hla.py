@@ -104,11 +104,10 @@ class LashAdjuster:
         ∫ (F_c − F)⁺ dt / c_P, its rate scaled so that the turn's total is at most
         :meth:`need`."""
         sinks = excess_parts(time, force, self.check_force) / self.leak_down
-        deficit = excess_parts(time, -force, -self.check_force)
-        rises = deficit / self.pump_up
-        total = float(rises.sum())
-        if total > 0.0:  # the turn's capacity ∫ (F_c − F)⁺ dt / c_P, at most the need
-            rises *= min(float(deficit.sum()) / self.pump_up, self.need(force, gap)) / total
+        rises = excess_parts(time, -force, -self.check_force) / self.pump_up
+        capacity = float(rises.sum())  # the turn's ∫ (F_c − F)⁺ dt / c_P
+        if capacity > 0.0:  # at most the need
+            rises *= min(capacity, self.need(force, gap)) / capacity
         e, leak, pump = float(extension), 0.0, 0.0
         for sink, rise in zip(sinks.tolist(), rises.tolist(), strict=True):
             if sink:
