@@ -10,7 +10,6 @@ from pathlib import Path
 
 import pytest
 import yaml
-from scipy.integrate import quad
 from scipy.optimize import brentq
 
 from campipe.engine import Case, RunSettings, run_batch
@@ -36,7 +35,9 @@ from tests.unit.test_finger_hla import (
     RATE,
     RPM,
     Hand,
+    check_valve_turn,
     finger,
+    pallet_force,
 )
 from tests.unit.test_plunger_state import flat
 
@@ -52,31 +53,6 @@ COMPLIANT = {
     "seat_contact_stiffness": f"{KC / 1e3} N/mm",
     "seat_contact_damping": "20 N*s/m",
 }
-
-
-def _pallet_force(hand: Hand, e: float, k: float, contact: float):
-    """The pallet's force [N] at a crawl against the cam angle, with the roller's contact and
-    the seat's (each ``contact`` [N/m]) in series: the roller's seen at the valve k_c/r², r
-    the lever ratio of the hand's statics (the roller's force per pallet force), so the link
-    and the roller give k_e = 1/(1/k + r²/k_c). Seated, the valve sits in its seat by
-    p = (P₀ + k_s·ℓ − F)/k_c (the spring's load less the pallet's), which takes lash up:
-    F = k_e·(v − ℓ + p); off its seat by x > 0, where that reaches P₀ + k_s·ℓ,
-    F = k_e·(v − ℓ − x) = P₀ + k_s·(ℓ + x)."""
-    held = PRELOAD + RATE * DRY  # the spring's load on the seated valve
-
-    def force(theta):
-        v = hand.valve_lift(theta, e)
-        r = hand.roller_force(theta, 1.0, e)[0]
-        k_e = 1.0 / (1.0 / k + r * r / contact)
-        seated = k_e * (v - DRY + held / contact) / (1.0 + k_e / contact)
-        if seated <= 0.0:
-            return 0.0
-        if seated <= held:
-            return seated
-        x = (k_e * (v - DRY) - held) / (k_e + RATE)
-        return k_e * (v - DRY - x)
-
-    return force
 
 
 def test_leak_down_pump_up_and_switches_at_a_crawl_against_the_lever_s_statics():
@@ -101,25 +77,20 @@ def test_leak_down_pump_up_and_switches_at_a_crawl_against_the_lever_s_statics()
     closes = events[events[:, EV_KIND] == CHECK_VALVE_CLOSES, EV_TIME] * omega
     extension = start
     for turn in range(2):
-        pallet = _pallet_force(hand, extension, k, KC)
+        pallet = pallet_force(hand, extension, k, KC)
 
         def load(theta, pallet=pallet, e=extension):
             return hand.pivot_load(theta, e, pallet(theta))
 
-        t_open = brentq(lambda x: load(x) - CHECK, math.radians(95), math.radians(270))
-        t_close = brentq(lambda x: load(x) - CHECK, math.radians(270), math.radians(449))
-        above = quad(lambda x: load(x) - CHECK, t_open, t_close, limit=200, epsabs=1e-9)[0]
-        below = CHECK * (t_open - t_close + 2 * math.pi)
-        below -= quad(load, t_close - 2 * math.pi, t_open, limit=200)[0]
+        t_close, t_open, above, below = check_valve_turn(load)
         found = run.lash_adjuster[0, turn]
         assert found[0] == pytest.approx(extension, rel=1e-9)
         assert found[1] == pytest.approx(above / (omega * slow), rel=2e-4)
         assert found[2] == pytest.approx(below / (omega * slow), rel=2e-4)
-        # the check valve closes where the load rises through F_c, opens where it falls
-        # (the turn's opening before its closing: the last turn's fall, at t_close − 2π)
+        # the turn's opening before its closing: the last turn's fall, at t_open − 2π
         base = 2 * math.pi * turn
-        assert closes[turn] == pytest.approx(base + t_open, abs=1e-4)
-        assert opens[turn] == pytest.approx(base + t_close - 2 * math.pi, abs=1e-4)
+        assert closes[turn] == pytest.approx(base + t_close, abs=1e-4)
+        assert opens[turn] == pytest.approx(base + t_open - 2 * math.pi, abs=1e-4)
         extension = extension - found[1] + found[2]
     assert opens.size == closes.size == 2  # no other switch
     # the valve off its seat in the first turn, (k_e·(v − ℓ) − P₀ − k_s·ℓ)/(k_e + k_s), to
