@@ -36,6 +36,7 @@ Pure numerics: arrays in, arrays out.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -46,6 +47,16 @@ from scipy.integrate import solve_ivp
 from campipe.constants import TWO_PI
 from campipe.engine.batch import start_states
 from campipe.engine.common import MICRO_FLIGHT, RESTING_LEVEL
+from campipe.engine.plunger import (
+    BOTTOMED,
+    CLOSED,
+    HELD,
+    HYSTERESIS,
+    OPEN,
+    TOPPED,
+    PlungerState,
+    plunger_state,
+)
 from campipe.engine.settings import (
     DEFAULT_CAPTURE_VELOCITY,
     Case,
@@ -55,12 +66,17 @@ from campipe.engine.settings import (
 )
 from campipe.errors import CampipeError
 from campipe.model import system_matrices
+from campipe.model.hla import adjuster
 from campipe.profiles import Lift
 from campipe.vocabulary import (
     CAM,
     CAM_IMPACT,
     CAM_SEPARATION,
+    CHECK_VALVE_CLOSES,
+    CHECK_VALVE_OPENS,
     CONFIGURATIONS,
+    PLUNGER_BOTTOMS,
+    PLUNGER_TOPS,
     SEAT,
     SEAT_IMPACT,
     SEAT_SEPARATION,
@@ -114,6 +130,10 @@ class IvpResult:
     events: np.ndarray  # (n_ev, 6) as the engine's: time, kind, from, to, velocity, impulse
     nfev: int  # right-hand-side evaluations
     segments: int  # solve_ivp calls
+    #: a chain's lash adjuster: its plunger's u = e − e₀ at the samples [m], and each turn's
+    #: leak-down and pump-up [m] (zeros without one)
+    plunger: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))
+    plunger_ledger: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros((0, 2)))
 
     @property
     def valve_lift(self) -> np.ndarray:
@@ -210,6 +230,72 @@ class _Peer:
         self.segments = 0
         self.stalled = 0
         self.resting = {CAM: False, SEAT: False}  # captured by a slow impact (``impact``)
+        # A chain's lash adjuster: its plunger's u = e − e₀ the state's last entry, held until
+        # t = 0, then in the regime its load gives (see ``_plunger_rate``).
+        self.p = plunger_state(case.train, np.linalg.inv(self.M)) if adjuster(case.train) else None
+        self.u = 0.0
+        self.regime = HELD
+        self.push = {
+            c: (np.linalg.solve(self.M[np.ix_(g.free, g.free)], self.p.k * self.p.d[g.free])
+                if self.p is not None else None)
+            for c, g in self.configs.items()
+        }  # fmt: skip
+        self.u_out = np.zeros(n_out)
+        self.ledger = np.zeros((n_rev, 2))  # each turn's leak-down, pump-up [m]
+
+    # -- a chain's plunger (``plunger_state`` gives its parameters; its law written here) ----
+
+    @property
+    def law(self) -> PlungerState:
+        """The adjuster's parameters (a case with one)."""
+        assert self.p is not None
+        return self.p
+
+    def link_force(self, qq, u):
+        """The force through the adjuster [N]: the link's, k·(d·q + u)."""
+        return self.law.k * (float(self.law.d @ qq) + u)
+
+    def plunger_rate(self, tt, z):
+        """u̇ [m/s]: −(F − F_c)/c, c the leak-down's with the check valve closed and the
+        pump-up's with it open; 0 held at an end of its travel, or until t = 0."""
+        nf = self.configs[self.cfg].free.size
+        if self.regime not in (CLOSED, OPEN):
+            return 0.0
+        qq, _, _ = self.held_state(tt, z[:nf], z[nf : 2 * nf])
+        c = self.law.leak_down if self.regime == CLOSED else self.law.pump_up
+        return -(self.link_force(qq, z[2 * nf]) - self.law.check_force) / c
+
+    def plunger_monitors(self):
+        """(g, regime after, event kind) of the plunger's switches out of its regime, each
+        an event where g rises through 0 (the check valve with its dead band HYSTERESIS)."""
+        p, reg = self.p, self.regime
+        if p is None or reg == HELD:
+            return []
+        nf = self.configs[self.cfg].free.size
+
+        def force(tt, z):
+            qq, _, _ = self.held_state(tt, z[:nf], z[nf : 2 * nf])
+            return self.link_force(qq, z[2 * nf])
+
+        opens = (lambda tt, z: p.check_force * (1.0 - HYSTERESIS) - force(tt, z), OPEN,
+                 CHECK_VALVE_OPENS)  # fmt: skip
+        closes = (lambda tt, z: force(tt, z) - p.check_force * (1.0 + HYSTERESIS), CLOSED,
+                  CHECK_VALVE_CLOSES)  # fmt: skip
+        if reg == CLOSED:
+            return [opens, (lambda tt, z: p.low - z[2 * nf], BOTTOMED, PLUNGER_BOTTOMS)]
+        if reg == OPEN:
+            return [closes, (lambda tt, z: z[2 * nf] - p.high, TOPPED, PLUNGER_TOPS)]
+        return [opens] if reg == BOTTOMED else [closes]
+
+    def release_plunger(self):
+        """Held until t = 0: the regime the load there gives."""
+        if self.p is None or self.regime != HELD or self.t < 0.0:
+            return
+        closed = self.link_force(self.q, self.u) > self.p.check_force
+        if closed:
+            self.regime = BOTTOMED if self.u <= self.p.low else CLOSED
+        else:
+            self.regime = TOPPED if self.u >= self.p.high else OPEN
 
     # -- the equations in the current configuration ------------------------------------------
 
@@ -230,23 +316,29 @@ class _Peer:
     def rhs(self, tt, z):
         conf = self.configs[self.cfg]
         nf = conf.free.size
-        out = conf.a @ z
+        out = conf.a @ z[: 2 * nf]
         out[nf:] += conf.constant
         if holds_cam(self.cfg):
             lift, dlift, ddlift = self.cam.at(self.piece, self.rev, tt)
             out[nf:] += conf.cam_terms.T @ (-lift, -dlift, -ddlift)
-        return out
+        if self.p is None:
+            return out
+        out[nf:] -= self.push[self.cfg] * z[2 * nf]
+        return np.append(out, self.plunger_rate(tt, z))
 
     def force(self, tt, z, row):
         """Contact force at coordinate ``row``: row of M·q̈ + C·q̇ + K·q − f."""
         conf = self.configs[self.cfg]
         nf = conf.free.size
-        qq, vv, acam = self.held_state(tt, z[:nf], z[nf:])
+        qq, vv, acam = self.held_state(tt, z[:nf], z[nf : 2 * nf])
         acc = np.zeros(7)
-        acc[conf.free] = self.rhs(tt, z)[nf:]
+        acc[conf.free] = self.rhs(tt, z)[nf : 2 * nf]
         if holds_cam(self.cfg):
             acc[CAM] = acam
-        return self.M[row] @ acc + self.C[row] @ vv + self.K[row] @ qq - self.f[row]
+        out = self.M[row] @ acc + self.C[row] @ vv + self.K[row] @ qq - self.f[row]
+        if self.p is not None:
+            out += self.p.k * self.p.d[row] * z[2 * nf]
+        return out
 
     def monitors(self):
         """solve_ivp's events (terminal, upward), their kinds, and for a gap its closing
@@ -288,8 +380,14 @@ class _Peer:
         conf = self.configs[self.cfg]
         fr = conf.free
         nf = fr.size
-        monitors = self.monitors()
-        z0 = np.concatenate([self.q[fr], self.v[fr]])
+        self.release_plunger()
+        monitors = self.monitors() + [
+            (g, ("plunger", regime, kind), None) for g, regime, kind in self.plunger_monitors()
+        ]
+        for g, _, _ in monitors:
+            g.terminal = True
+            g.direction = 1.0
+        z0 = np.concatenate([self.q[fr], self.v[fr], [self.u] if self.p is not None else []])
         # A monitor already above its level at the segment start is an event here (a gap
         # only if it closes).
         for g, kind, closing in monitors:
@@ -302,7 +400,10 @@ class _Peer:
             self.t = t_stop
             return None, t_stop
         tol = self.atol_frac * np.concatenate([self.scale[fr], self.w * self.scale[fr]])
-        kw = {"jac": lambda tt, z, a=conf.a: a} if self.method in IMPLICIT else {}
+        if self.p is not None:
+            tol = np.append(tol, self.atol_frac * (self.p.high - self.p.low))
+        constant = self.method in IMPLICIT and self.p is None  # (a plunger's: left to solve_ivp)
+        kw = {"jac": lambda tt, z, a=conf.a: a} if constant else {}
         sol = solve_ivp(
             self.rhs, (self.t, t_stop), z0, method=self.method, rtol=self.rtol, atol=tol,
             events=[m[0] for m in monitors], dense_output=True, **kw,
@@ -333,14 +434,30 @@ class _Peer:
             z_end = sol.y[:, -1]
         while self.k_out < self.t_out.size and self.t_out[self.k_out] <= t_seg * (1.0 + 1e-14):
             zs = sol.sol(self.t_out[self.k_out])
-            qv = self.held_state(self.t_out[self.k_out], zs[:nf], zs[nf:])
+            qv = self.held_state(self.t_out[self.k_out], zs[:nf], zs[nf : 2 * nf])
             self.q_out[self.k_out], self.v_out[self.k_out] = qv[0], qv[1]
+            if self.p is not None:
+                self.u_out[self.k_out] = zs[2 * nf]
             self.k_out += 1
         if not holds_cam(self.cfg):
             self.add_off_cam(self.t, t_seg, self.cfg == 4)
-        self.q, self.v, _ = self.held_state(t_seg, z_end[:nf], z_end[nf:])
+        if self.p is not None:
+            self.add_plunger_motion(self.t, self.u, z_end[2 * nf])
+            self.u = float(z_end[2 * nf])
+        self.q, self.v, _ = self.held_state(t_seg, z_end[:nf], z_end[nf : 2 * nf])
         self.t = t_seg
         return kind, t_seg
+
+    def add_plunger_motion(self, ta: float, u_a: float, u_b: float) -> None:
+        """The plunger's motion over a segment (within one piece: one turn) from ta [s]:
+        leak-down where its check valve is closed, pump-up where open."""
+        r = int(math.floor(self.w * ta / TWO_PI + 1e-12))
+        if ta < 0.0 or r >= self.ledger.shape[0]:
+            return
+        if self.regime == CLOSED:
+            self.ledger[r, 0] += u_a - u_b
+        elif self.regime == OPEN:
+            self.ledger[r, 1] += u_b - u_a
 
     def add_off_cam(self, ta: float, tb: float, seat_held: bool) -> None:
         sums = self.off_cam[seat_held]
@@ -355,8 +472,18 @@ class _Peer:
     # -- events ------------------------------------------------------------------------------
 
     def apply(self, kind, t_ev):
-        """A monitor fired at t_ev: release the contact, or (a closing gap) the impact."""
+        """A monitor fired at t_ev: release the contact, or (a closing gap) the impact; a
+        plunger's: its next regime (held at an end, put there)."""
         cfg = self.cfg
+        if isinstance(kind, tuple):
+            _, self.regime, code = kind
+            if self.regime == BOTTOMED:
+                self.u = self.law.low
+            elif self.regime == TOPPED:
+                self.u = self.law.high
+            if t_ev >= 0.0:
+                self.events.append((t_ev, code, cfg, cfg, 0.0, 0.0))
+            return
         cam_held, seat_held = holds_cam(cfg), holds_seat(cfg)
         lift, dlift, _ = self.cam.at(self.piece, self.rev, t_ev)
         if kind in (CAM_SEPARATION, SEAT_SEPARATION):
@@ -485,6 +612,8 @@ class _Peer:
             events=np.array(events, dtype=float).reshape(-1, 6),
             nfev=self.nfev,
             segments=self.segments,
+            plunger=self.u_out[: self.k_out],
+            plunger_ledger=self.ledger,
         )
 
 

@@ -24,6 +24,7 @@ from campipe.engine.closed_form import (
     ModalTrains,
     make_state,
     make_workspace,
+    no_plungers,
     stack_trains,
 )
 from campipe.engine.common import Cases, make_outputs
@@ -40,6 +41,7 @@ from campipe.engine.integrators.modal_exact import arguments
 from campipe.engine.kernel_call import plain
 from campipe.engine.lash_adjuster import run_adjusted
 from campipe.engine.modal import ModalData, modal_data, pad_stack
+from campipe.engine.plunger_modes import Embedded, plunger_runs, regime_rows
 from campipe.engine.result import NO_TABLE, merge_results
 from campipe.engine.result import BatchResult as BatchResult
 from campipe.engine.settings import CLOSURES as CLOSURES
@@ -91,6 +93,8 @@ START_CONFIGURATIONS = (CAM_CONTACT, CAM_AND_SEAT, SEATED)
 @functools.lru_cache(maxsize=256)
 def train_matrices(train: ValveTrain) -> SystemMatrices:
     """The train's system matrices, cached per train (``cache_clear`` to time them)."""
+    if isinstance(train, Embedded):  # a carried plunger's train: its embedded ones
+        return train.matrices()
     return system_matrices(train)
 
 
@@ -114,8 +118,9 @@ class Prepared:
 @functools.lru_cache(maxsize=256)
 def prepare(train: ValveTrain, dt: float) -> Prepared:
     sm = train_matrices(train)
+    own = train_matrices(train.train) if isinstance(train, Embedded) else sm  # (symmetric)
     omega_max = np.array(
-        [configuration_frequencies(sm.mass, sm.stiffness, c).max() for c in CONFIGURATIONS]
+        [configuration_frequencies(own.mass, own.stiffness, c).max() for c in CONFIGURATIONS]
     )
     step_A: np.ndarray | None = None
     step_G: np.ndarray | None = None
@@ -242,12 +247,6 @@ def valve_reference(sm: SystemMatrices) -> float:
     return float(q[SEAT])
 
 
-def _modal_trains(trains, preps) -> ModalTrains:
-    """The distinct trains' closed-form data, indexed in the kernels by each case's train."""
-    data = [train_modal(t) for t in trains]
-    return stack_trains(data, [p.matrices.preload for p in preps])
-
-
 class TrainStack(NamedTuple):
     """What a batch's distinct trains (in order) give its kernels, stacked along a leading
     train axis (``train_stack``). Cached and shared by the batches of these trains: the
@@ -265,6 +264,9 @@ class TrainStack(NamedTuple):
     #: per train: configuration I's free coordinates and its free mass block M_ff
     free: tuple[np.ndarray, ...]
     mass_ff: tuple[np.ndarray, ...]
+    #: (n_trains, 5) a carried plunger's train's row in ``modal_trains`` per regime, the
+    #: others' appended (``plunger_modes.regime_rows``); −1 for any other train
+    regimes: np.ndarray
 
 
 #: The most distinct trains whose stack ``train_stack`` caches: the batches whose
@@ -292,7 +294,8 @@ def train_stack(trains: tuple[ValveTrain, ...], dt: float) -> TrainStack:
 def _train_stack(trains: tuple[ValveTrain, ...], dt: float) -> TrainStack:
     preps = tuple(prepare(t, dt) for t in trains)
     modal = [train_modal(t) for t in trains]
-    modal_trains = _modal_trains(trains, preps)
+    regimes, data, loads = regime_rows(trains, modal, preps, train_modal, train_matrices)
+    modal_trains = stack_trains(data, loads)
     free = tuple(np.array(free_coordinates(CAM_CONTACT, p.matrices.mass.shape[0])) for p in preps)
     return TrainStack(
         preps=preps,
@@ -305,10 +308,11 @@ def _train_stack(trains: tuple[ValveTrain, ...], dt: float) -> TrainStack:
         restitution=np.array([[t.cam_restitution, t.seat_restitution] for t in trains]),
         free=free,
         mass_ff=tuple(p.matrices.mass[np.ix_(f, f)] for p, f in zip(preps, free, strict=True)),
+        regimes=regimes,
     )
 
 
-def _exact_runs(settings, dt_run, full_state, which, omega, ns: int) -> ExactRuns:
+def _exact_runs(settings, dt_run, full_state, which, omega, ns: int, trains, stack) -> ExactRuns:
     """The run's scalars and arrays per case; the harmonic responses ζ (states of ``ns``
     entries) are the kernels' to fill (``closed_form.harmonic_response``, at a case's start)."""
     zeta = np.zeros((omega.size, 4, ns), np.complex128)
@@ -320,6 +324,7 @@ def _exact_runs(settings, dt_run, full_state, which, omega, ns: int) -> ExactRun
         dt_cap=float(dt_run or 0.0),
         tolerance=float(settings.tolerance),
         full_state=bool(full_state),
+        **plunger_runs(trains, which, stack.regimes, ns // 2),
     )
 
 
@@ -351,7 +356,7 @@ def _prepare_batch(cases: Sequence[Case], settings: RunSettings, full_state: boo
     """What the batch's kernels take. What the trains and the profiles fix comes from caches
     (``train_stack``, ``pack_cached``, ``_peaks``); only the per-case rows are made here (the
     harmonic responses in the kernels)."""
-    if len(cases) == 1:
+    if len(cases) == 1 and not isinstance(cases[0].train, Embedded):
         return _prepare_one(cases[0], settings, full_state)
     dt_run = settings.step
     n = len(cases)
@@ -372,7 +377,7 @@ def _prepare_batch(cases: Sequence[Case], settings: RunSettings, full_state: boo
         preps=list(stack.preps),
         packed=pack_cached([c.profile for c in cases]),
         modal_trains=modal_trains,
-        runs=_exact_runs(settings, dt_run, full_state, which, omega, 2 * n_q),
+        runs=_exact_runs(settings, dt_run, full_state, which, omega, 2 * n_q, trains, stack),
         cases=Cases(
             omega=omega,
             seat_q=qref + seat,
@@ -432,6 +437,7 @@ def _prepare_one(case: Case, settings: RunSettings, full_state: bool) -> Prepare
         dt_cap=float(dt_run or 0.0),
         tolerance=float(settings.tolerance),
         full_state=bool(full_state),
+        **no_plungers(1, n_q),
     )
     return PreparedBatch(
         case_list=[case],

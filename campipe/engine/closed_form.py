@@ -32,6 +32,15 @@ N_MC = 18
 # |WL1|, |WL2|.
 W1, W2, WL1, WL2, WLL1, WLL2, W1_ABS, W2_ABS, WL1_ABS, WL2_ABS = range(10)
 N_WC = 10
+#: Monitors: 0 the cam's, 1 the seat's; 2 and 3 a carried plunger's (its check valve, its
+#: travel), watched only where a case has one (``STATE.n_mon``).
+N_MON = 4
+#: Rows of the particular solution's polynomial Z (and of the monitors' G): degree up to
+#: Z_ROWS − 1, the forcing's 7 and a slow block's series (``particular``) beyond it.
+Z_ROWS = 33
+#: A slow block's series ends where a term over its piece is below this share of the
+#: largest (``_slow_series``).
+SERIES_EPS = 1e-18
 
 
 class ModalTrains(NamedTuple):
@@ -44,6 +53,8 @@ class ModalTrains(NamedTuple):
     free: np.ndarray
     a_mat: np.ndarray
     a_inv: np.ndarray
+    slow: np.ndarray
+    any_slow: np.ndarray
     b_in: np.ndarray
     b_load: np.ndarray
     rho: np.ndarray
@@ -92,6 +103,30 @@ class ExactRuns(NamedTuple):
     dt_cap: float  # largest step [s]; 0: none
     tolerance: float  # event-time tolerance [s]
     full_state: bool  # sample every coordinate (else q1 and q7 only)
+    #: A chain's lash adjuster's plunger carried as a coordinate (``plunger_modes``), per
+    #: case (−1 / 0 rows without one): its coordinate, the train row of each regime
+    #: (``plunger.CLOSED`` … ``HELD``), the force through it as a row over the coordinates
+    #: (F = row·q), its check force, its damper per regime (inf: held) and where each held
+    #: regime holds it (NaN: not held)
+    plunger_coord: np.ndarray  # (n,) int64
+    plunger_train: np.ndarray  # (n, 5) int64
+    plunger_force: np.ndarray  # (n, n_q) [N/m]
+    plunger_check: np.ndarray  # (n,) [N]
+    plunger_damper: np.ndarray  # (n, 5) [N·s/m]
+    plunger_end: np.ndarray  # (n, 5) [m]
+
+
+def no_plungers(n: int, n_q: int) -> dict[str, np.ndarray]:
+    """``ExactRuns``' plunger fields of ``n`` cases without a carried plunger (``n_q`` the
+    batch's most coordinates)."""
+    return {
+        "plunger_coord": np.full(n, -1, np.int64),
+        "plunger_train": np.full((n, 5), -1, np.int64),
+        "plunger_force": np.zeros((n, n_q)),
+        "plunger_check": np.zeros(n),
+        "plunger_damper": np.full((n, 5), np.inf),
+        "plunger_end": np.full((n, 5), np.nan),
+    }
 
 
 class Workspace(NamedTuple):
@@ -104,23 +139,26 @@ class Workspace(NamedTuple):
     z: np.ndarray  # (ns,) a state z
     zh: np.ndarray  # (ns,) the homogeneous part at the segment start
     zb: np.ndarray  # (ns,) scratch
-    Z: np.ndarray  # (9, ns) polynomial particular solution Z_k (row k)
+    Z: np.ndarray  # (Z_ROWS, ns) polynomial particular solution Z_k (row k)
     ZT: np.ndarray  # (ns,) complex harmonic particular solution Z_T
     bpoly: np.ndarray  # (8, ns) the forcing's polynomial coefficients b_k
     u: np.ndarray  # (ns,) the state's homogeneous part in the blocks' basis at t_s: X⁻¹ zh
     act: np.ndarray  # (ns,) int64 the block of each active column
     MC: np.ndarray  # (N_MC, ns) per-block work, rows F1 … ACC_SEAT2
-    WC: np.ndarray  # (N_WC, 2, ns) monitor coefficients per block, rows W1 … WL2_ABS
+    WC: np.ndarray  # (N_WC, N_MON, ns) monitor coefficients per block, rows W1 … WL2_ABS
     VY: np.ndarray  # (2, ns, ns) the state's coefficients of f1 and f2: X_b u_b, X_b N_b u_b
-    gval: np.ndarray  # (2,) monitors at the latest point
-    dval: np.ndarray  # (2,) their time derivatives
-    gprev: np.ndarray  # (2,) monitors at the previous grid point
-    dprev: np.ndarray  # (2,) their time derivatives
-    G: np.ndarray  # (2, 8) monitors' polynomial part G_mk
-    GT: np.ndarray  # (2,) complex monitors' harmonic part
-    ready: np.ndarray  # (2,) bool: monitor prepared (its value is computed)
-    watch: np.ndarray  # (2,) bool: monitor can end the segment
-    level: np.ndarray  # (2,) the level each monitor rises through at an event
+    gval: np.ndarray  # (N_MON,) monitors at the latest point
+    dval: np.ndarray  # (N_MON,) their time derivatives
+    gprev: np.ndarray  # (N_MON,) monitors at the previous grid point
+    dprev: np.ndarray  # (N_MON,) their time derivatives
+    G: np.ndarray  # (N_MON, Z_ROWS) monitors' polynomial part G_mk
+    GT: np.ndarray  # (N_MON,) complex monitors' harmonic part
+    ready: np.ndarray  # (N_MON,) bool: monitor prepared (its value is computed)
+    watch: np.ndarray  # (N_MON,) bool: monitor can end the segment
+    level: np.ndarray  # (N_MON,) the level each monitor rises through at an event
+    #: (2, n) a plunger's monitors (2: its check valve, 3: its travel) as rows over the
+    #: coordinates: g = row·q (``segment._plunger_monitors``)
+    prow: np.ndarray
     inp: np.ndarray  # (3, 2, 8) held coordinates' (q, q̇, q̈) polynomials in x
     inp_t: np.ndarray  # (3, 2) complex held coordinates' harmonic parts
     cm: np.ndarray  # (ns, ns) complex (iωI − A), eliminated (``harmonic_response``)
@@ -132,11 +170,12 @@ def _workspace_layout(n_coordinates: int) -> dict[str, tuple[tuple[int, ...], ty
     f8, c16, i8, b1 = np.float64, np.complex128, np.int64, np.bool_
     shapes = {
         "q": ((n,), f8), "v": ((n,), f8), "z": ((ns,), f8), "zh": ((ns,), f8),
-        "zb": ((ns,), f8), "Z": ((9, ns), f8), "ZT": ((ns,), c16), "bpoly": ((8, ns), f8),
+        "zb": ((ns,), f8), "Z": ((Z_ROWS, ns), f8), "ZT": ((ns,), c16), "bpoly": ((8, ns), f8),
         "u": ((ns,), f8), "act": ((ns,), i8), "MC": ((N_MC, ns), f8),
-        "WC": ((N_WC, 2, ns), f8), "VY": ((2, ns, ns), f8), "gval": ((2,), f8),
-        "dval": ((2,), f8), "gprev": ((2,), f8), "dprev": ((2,), f8), "G": ((2, 8), f8),
-        "GT": ((2,), c16), "ready": ((2,), b1), "watch": ((2,), b1), "level": ((2,), f8),
+        "WC": ((N_WC, N_MON, ns), f8), "VY": ((2, ns, ns), f8), "gval": ((N_MON,), f8),
+        "dval": ((N_MON,), f8), "gprev": ((N_MON,), f8), "dprev": ((N_MON,), f8),
+        "G": ((N_MON, Z_ROWS), f8), "GT": ((N_MON,), c16), "ready": ((N_MON,), b1),
+        "watch": ((N_MON,), b1), "level": ((N_MON,), f8), "prow": ((2, n), f8),
         "inp": ((3, 2, 8), f8), "inp_t": ((3, 2), c16), "cm": ((ns, ns), c16),
     }  # fmt: skip
     return {name: shapes[name] for name in Workspace._fields}
@@ -205,6 +244,8 @@ STATE = np.dtype(
         # −inf: not since the case began.
         ("bounced_cam", "f8"),
         ("bounced_seat", "f8"),
+        ("n_mon", "i8"),  # monitors the case watches: 2, or 4 with a carried plunger
+        ("reg", "i8"),  # a carried plunger's regime (``plunger.CLOSED`` …), −1 without one
     ],
     align=True,
 )
@@ -344,7 +385,9 @@ def harmonic_response(trains, runs, ws, st, ci):
 @njit(inline="always", nogil=True)
 def particular(trains, profiles, runs, ws, st):
     """Particular solutions: Z_k = A⁻¹(ω(k+1) Z_{k+1} − b_k) from the forcing's degree down;
-    the harmonic one Z_T = β·ζ (``modal.harmonic_responses``)."""
+    the harmonic one Z_T = β·ζ (``modal.harmonic_responses``). A slow block's part
+    (``modal.SLOW_RATE``; A⁻¹ then the fast blocks' inverse) is ``_slow_series``', which
+    raises st.deg."""
     tr, ci, ns, deg, w = st.tr, st.cfg - 1, st.ns, st.deg, st.w
     Z = ws.Z
     for k in range(deg + 1, 9):
@@ -358,6 +401,8 @@ def particular(trains, profiles, runs, ws, st):
             for j in range(ns):
                 acc += trains.a_inv[tr, ci, s, j] * ws.zb[j]
             Z[k, s] = acc
+    if trains.any_slow[tr, ci]:
+        _slow_series(trains, profiles, ws, st)
     c, p = st.c, st.p
     trig = profiles.trig
     has_trig = holds_cam(st.cfg) and (trig[c, p, 0] != 0.0 or trig[c, p, 1] != 0.0)
@@ -367,15 +412,71 @@ def particular(trains, profiles, runs, ws, st):
 
 
 @njit(inline="always", nogil=True)
+def _slow_series(trains, profiles, ws, st):
+    """The slow blocks' part of the particular solution, added to Z. In block b's
+    coordinates y (z = X_b·y + …) the forcing's share β_k = (X⁻¹ b_k)_b drives
+    ẏ = B_b·y + Σ β_k x^k (x = ωt − θ₀); with Y_0 = 0, Y_{k+1} = (B_b·Y_k + β_k)/(ω(k+1))
+    is a solution (the homogeneous part takes the rest of the start), a series whose terms
+    shrink as (|λ|·x/ω)^k/k! where A⁻¹'s recursion would grow as (ω/|λ|)^k: summed until a
+    term over the piece is below rounding (SERIES_EPS of the largest), to degree
+    Z_ROWS − 1 at most."""
+    tr, ci, ns, deg, w = st.tr, st.cfg - 1, st.ns, st.deg, st.w
+    Z = ws.Z
+    top = deg
+    span = profiles.breaks[st.c, st.p + 1] - profiles.breaks[st.c, st.p]
+    for k in range(deg + 1, Z.shape[0]):
+        for s in range(ns):
+            Z[k, s] = 0.0
+    for b in range(trains.n_blocks[tr, ci]):
+        if not trains.slow[tr, ci, b]:
+            continue
+        i0 = trains.bstart[tr, ci, b]
+        two = trains.bdim[tr, ci, b] == 2
+        i1 = i0 + 1 if two else i0
+        lbar = trains.lam_bar[tr, ci, b]
+        n00 = trains.block_n[tr, ci, i0, i0]
+        n01 = trains.block_n[tr, ci, i0, i1] if two else 0.0
+        n10 = trains.block_n[tr, ci, i1, i0] if two else 0.0
+        n11 = trains.block_n[tr, ci, i1, i1] if two else 0.0
+        y0 = 0.0
+        y1 = 0.0
+        largest = 0.0
+        for k in range(Z.shape[0] - 1):
+            b0 = 0.0
+            b1 = 0.0
+            if k <= deg:
+                for s in range(ns):
+                    b0 += trains.basis_inv[tr, ci, i0, s] * ws.bpoly[k, s]
+                    if two:
+                        b1 += trains.basis_inv[tr, ci, i1, s] * ws.bpoly[k, s]
+            f = 1.0 / (w * (k + 1))
+            y0, y1 = (
+                (lbar * y0 + n00 * y0 + n01 * y1 + b0) * f,
+                (lbar * y1 + n10 * y0 + n11 * y1 + b1) * f if two else 0.0,
+            )
+            term = (abs(y0) + abs(y1)) * span ** (k + 1)
+            largest = max(largest, term)
+            if k >= deg and term <= SERIES_EPS * largest:
+                break
+            for s in range(ns):
+                Z[k + 1, s] += trains.basis[tr, ci, s, i0] * y0
+                if two:
+                    Z[k + 1, s] += trains.basis[tr, ci, s, i1] * y1
+            top = max(top, k + 1)
+    st.deg = top
+
+
+@njit(inline="always", nogil=True)
 def block_derivative(w1, w2, lbar, d2):
     """The coefficients of f1 and f2 in d/dτ (w1·f1 + w2·f2): f1' = λ̄f1 + δ²f2, f2' = λ̄f2 + f1."""
     return lbar * w1 + w2, d2 * w1 + lbar * w2
 
 
 @njit(**HELPER)
-def eval_monitor(WC, MC, nact, G, GT, m, tau, w, x, th):
+def eval_monitor(WC, MC, nact, G, GT, m, tau, w, x, th, gdeg):
     """Monitor m and its first two time derivatives τ after the segment start (local angle x,
-    cam angle θ), exactly: the active blocks, the polynomial and the harmonic part."""
+    cam angle θ), exactly: the active blocks, the polynomial (of degree gdeg) and the harmonic
+    part."""
     g = 0.0
     dg = 0.0
     d2g = 0.0
@@ -384,7 +485,7 @@ def eval_monitor(WC, MC, nact, G, GT, m, tau, w, x, th):
         g += WC[W1, m, jj] * f1 + WC[W2, m, jj] * f2
         dg += WC[WL1, m, jj] * f1 + WC[WL2, m, jj] * f2
         d2g += WC[WLL1, m, jj] * f1 + WC[WLL2, m, jj] * f2
-    p0, p1, p2 = horner(G[m], x)
+    p0, p1, p2 = horner(G[m], x, gdeg)
     g += p0
     dg += w * p1
     d2g += w * w * p2
@@ -404,13 +505,14 @@ def force_monitor(trains, ws, st, m, sign, level):
     is ``exact._block_columns``')."""
     tr, ci, ns = st.tr, st.cfg - 1, st.ns
     ws.level[m] = level
-    for k in range(st.kmax + 1):
+    for k in range(max(st.kmax, st.deg) + 1):  # (a slow block's series beyond the inputs')
         acc = 0.0
         for s in range(ns):
             acc += trains.rho[tr, ci, m, s] * ws.Z[k, s]
-        for kind in range(3):
-            for hc in range(2):
-                acc += trains.sigma[tr, ci, m, kind, hc] * ws.inp[kind, hc, k]
+        if k <= st.kmax:
+            for kind in range(3):
+                for hc in range(2):
+                    acc += trains.sigma[tr, ci, m, kind, hc] * ws.inp[kind, hc, k]
         ws.G[m, k] = sign * acc
     ws.G[m, 0] += sign * trains.sigma0[tr, ci, m]
     acc_c = 0.0 + 0.0j

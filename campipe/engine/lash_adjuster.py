@@ -19,9 +19,11 @@ pivot's, g·F (``adjuster_load``), and its histories stay in that frame.
 
 One :class:`Plunger` carries the adjusters from turn to turn, for a run of whole turns
 (``run_adjusted``'s loop) and for one of automatic length (``engine.settle.run_settled``,
-the extension then part of the state it compares). A case with compliant contacts has its
-plunger carried within the turn instead, as a state of the compliant integrator
-(``engine.plunger``, :func:`run_carried`).
+the extension then part of the state it compares): under newmark-linear, and for a finger's
+pivot with rigid contacts. Elsewhere the plunger is carried within the turn instead
+(:func:`run_carried`): with compliant contacts as a state of the compliant integrator
+(``engine.plunger``), in a chain with rigid ones as a coordinate of modal-exact's train
+(``engine.plunger_modes``, :func:`in_kernel`).
 
 Pure numerics: arrays in, arrays out.
 """
@@ -43,6 +45,7 @@ from campipe.engine.plunger import (
     carried,
     interpolated_switches,
 )
+from campipe.engine.plunger_modes import Embedded
 from campipe.engine.result import BatchResult, blank_failures, merge_results
 from campipe.engine.settings import adjuster_turns
 from campipe.engine.settle import consistent_accelerations, run_settled
@@ -56,11 +59,20 @@ from campipe.vocabulary import (
     CAM,
     CAM_AND_SEAT,
     CAM_CONTACT,
+    CHECK_VALVE_CLOSES,
+    CHECK_VALVE_OPENS,
+    EV_IMPULSE,
+    EV_KIND,
     EV_TIME,
     FAILURES,
+    PLUNGER_BOTTOMS,
+    PLUNGER_TOPS,
     holds_cam,
     holds_seat,
 )
+
+#: The event kinds of a plunger's switches.
+PLUNGER_EVENTS = (CHECK_VALVE_OPENS, CHECK_VALVE_CLOSES, PLUNGER_BOTTOMS, PLUNGER_TOPS)
 
 
 def raised(profile: Profile, height: float) -> Profile:
@@ -167,8 +179,9 @@ def _whole_turns(cases, settings, carrier, turns: int, options) -> BatchResult:
 def run_carried(
     cases: Sequence[Case], settings, run: Callable[..., BatchResult], **options
 ) -> BatchResult:
-    """Run cases whose plunger is a state of their run (``engine.plunger``) by ``run`` under
-    the compliant integrator, each on its cam raised by its starting extension e₀ (the
+    """Run cases whose plunger is a state of their run by ``run``: with compliant contacts
+    under the compliant integrator (``engine.plunger``), with rigid ones (chains) by
+    modal-exact (:func:`in_kernel`); each on its cam raised by its starting extension e₀ (the
     frame the plunger's state u = e − e₀ is measured in, so the settings' start is the train's
     with its plunger there; a finger's on the kinematic lift with its pivot raised by e₀),
     a chain's histories brought back to the cam's own lift: a chain's run of whole or part
@@ -176,7 +189,17 @@ def run_carried(
     automatic length turn by turn through a :class:`Carried` (``engine.settle.run_settled``
     for the latter), which starts each turn in the frame of the extension the last ended
     with."""
-    one_law = dataclasses.replace(settings, integrator="compliant")
+    rigid = np.array([not c.compliant for c in cases], np.bool_)
+    if rigid.any() and not rigid.all():
+
+        def each(members):
+            return run_carried(members, settings, run, **options)
+
+        return _split(cases, rigid, each, each)
+    if rigid.all():  # modal-exact's, the plunger a coordinate of the chain's train
+        one_law, run = settings, in_kernel(run)
+    else:
+        one_law = dataclasses.replace(settings, integrator="compliant")
     if settings.settle:
         carrier = Carried(cases, one_law, run, settings.max_revolutions, ledger=True)
         matrices = [system_matrices(c.train) for c in cases]
@@ -212,6 +235,64 @@ def _in_one_piece(cases, settings, run, options) -> BatchResult:
     members = [extended(c, e) for c, e in zip(cases, offset, strict=True)]
     part = run(members, settings, **options)
     return _in_cam_frame(part, np.where(_in_link(cases), offset, 0.0), cases)
+
+
+def in_kernel(run: Callable[..., BatchResult]) -> Callable[..., BatchResult]:
+    """``run`` (``run_batch`` past its adjusters) of chains with rigid contacts, their
+    plungers carried by modal-exact: each case's train with its plunger as its last
+    coordinate u = e − e₀ (``plunger_modes.Embedded``; e₀ the train's ``hla_extension``, the
+    frame its cam is raised by), a start handed in taking u = 0 there. Returns the run with
+    u's column taken off the histories and made the turns' ledger (:func:`kernel_ledger`)."""
+
+    def carried_run(cases, settings, start=None, **options) -> BatchResult:
+        members = [dataclasses.replace(c, train=Embedded(c.train)) for c in cases]
+        if start is not None:  # the plunger at 0 in this frame: u's column
+            t0, q0, v0, a0, cfg0 = start
+            pad = np.zeros((len(cases), 1))
+            q0, v0 = np.hstack([q0, pad]), np.hstack([v0, pad])
+            a0 = None if a0 is None else np.hstack([a0, np.full_like(pad, np.nan)])
+            start = (t0, q0, v0, a0, cfg0)
+        part = run(members, settings, start=start, **options)
+        table = kernel_ledger(part, np.array([c.train.hla_extension for c in cases]))
+        for events in part.events:  # the kernel's u at each switch, read: cleared
+            events[np.isin(events[:, EV_KIND], PLUNGER_EVENTS), EV_IMPULSE] = 0.0
+        return dataclasses.replace(
+            part, q=part.q[:, :, :-1], v=part.v[:, :, :-1], lash_adjuster=table, _derived={}
+        )
+
+    return carried_run
+
+
+def kernel_ledger(part: BatchResult, offset: np.ndarray) -> np.ndarray:
+    """(n, n_turns, 3) each turn's extension at its start, leak-down and pump-up [m] of a
+    carried run by modal-exact (:func:`_in_kernel`): from u (the histories' last column,
+    from the start's extension ``offset``) at each turn's start and end, and at each of the
+    plunger's switches in between (the kernel's u there, in the event's impulse field).
+    Between two of these the plunger is in one regime, so u moves one way: what it falls is
+    leak-down, what it rises pump-up. Turns before the recorded window are NaN."""
+    n, n_turns = part.per_rev.shape[:2]
+    table = np.full((n, n_turns, 3), np.nan)
+    theta = np.asarray(part.cam_angle, float)
+    starts = np.searchsorted(theta, TWO_PI * np.arange(n_turns + 1) - 1e-9)
+    for i in range(n):
+        events = part.events[i]
+        switch = events[np.isin(events[:, EV_KIND], PLUNGER_EVENTS)]
+        u = part.q[i, :, -1]
+        first = int(part.recorded_from[i]) if part.recorded_from.size else 0
+        for k in range(n_turns - first):
+            a, b = starts[k], starts[k + 1]
+            if b >= u.size or not np.isfinite(u[a]) or not np.isfinite(u[b]):
+                continue
+            t_a, t_b = part.time[i, a], part.time[i, b]
+            inside = switch[(switch[:, EV_TIME] >= t_a) & (switch[:, EV_TIME] < t_b)]
+            path = np.concatenate([[u[a]], inside[:, EV_IMPULSE], [u[b]]])
+            moves = np.diff(path)
+            table[i, first + k] = (
+                offset[i] + u[a],
+                -moves[moves < 0.0].sum(),
+                moves[moves > 0.0].sum(),
+            )
+    return table
 
 
 def _in_link(cases) -> np.ndarray:

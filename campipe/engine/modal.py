@@ -57,6 +57,12 @@ NEAR = 1e-3
 #: A configuration whose scaled block basis is conditioned worse than this (three or more
 #: coinciding eigenvalues) is refused.
 MAX_CONDITION = 1e12
+#: A block whose eigenvalues are all slower than this [1/s] is slow: its particular solutions
+#: are not A⁻¹'s recursion, whose coefficients grow as (ω/|λ|)^k at cam speed ω, but a series
+#: that converges as (|λ|·x/ω)^k/k! (``closed_form.particular``). The train's own modes are
+#: far faster; a lash adjuster's plunger relaxing through its dashpot (``plunger_modes``),
+#: or drifting (an eigenvalue 0), is slow.
+SLOW_RATE = 20.0
 
 
 class DefectiveModesError(CampipeError, ValueError):
@@ -76,7 +82,11 @@ class ModalData:
     free: np.ndarray  # (4, n) int: the free coordinates in order, −1 padded
     eigenvalues: np.ndarray  # (4, NS) complex eigenvalues of A [1/s] (for reports)
     a_mat: np.ndarray  # (4, NS, NS) real state matrix A [1/s]
-    a_inv: np.ndarray  # (4, NS, NS) real A⁻¹ [s]
+    #: (4, NS, NS) real A⁻¹ [s]; with slow blocks (SLOW_RATE), the inverse on the others
+    #: only (X·blockdiag(B_b⁻¹, 0 for a slow one)·X⁻¹)
+    a_inv: np.ndarray
+    slow: np.ndarray  # (4, NS) bool: block b is slow (SLOW_RATE)
+    any_slow: np.ndarray  # (4,) bool: the configuration has a slow block
     b_in: np.ndarray  # (4, NS, 3, 2) B for (q, q̇, q̈) of the held (cam, seat) coordinates
     b_load: np.ndarray  # (4, NS) constant forcing from the preload
     rho: np.ndarray  # (4, 2, NS) contact-force rows on the state, for (q1, q7)
@@ -173,6 +183,22 @@ def _block_form(A: np.ndarray) -> list[np.ndarray]:
     return [np.hstack([cols[k] for k in order]), *[blocks[k] for k in order]]
 
 
+def _fast_inverse(X: np.ndarray, Xinv: np.ndarray, blocks: list[np.ndarray], slow: list[bool]
+                  ) -> np.ndarray:  # fmt: skip
+    """X·blockdiag(B_b⁻¹, or 0 for a slow block)·X⁻¹: A's inverse on its fast blocks (a slow
+    block may be singular: an eigenvalue 0, a drift)."""
+    inverse = [
+        np.zeros(B.shape) if s else np.linalg.inv(B) for B, s in zip(blocks, slow, strict=True)
+    ]
+    return X @ _block_diag(inverse) @ Xinv
+
+
+def _block_diag(blocks: list[np.ndarray]) -> np.ndarray:
+    import scipy.linalg
+
+    return scipy.linalg.block_diag(*blocks)
+
+
 def _block_numbers(B: np.ndarray) -> tuple[float, float]:
     """λ̄ and δ² of a block."""
     if B.shape[0] == 1:
@@ -204,6 +230,8 @@ def modal_data(sm: SystemMatrices) -> ModalData:
         "eigenvalues": np.zeros((4, size), complex),
         "a_mat": np.zeros((4, size, size)),
         "a_inv": np.zeros((4, size, size)),
+        "slow": np.zeros((4, size), np.bool_),
+        "any_slow": np.zeros(4, np.bool_),
         "b_in": np.zeros((4, size, 3, 2)),
         "b_load": np.zeros((4, size)),
         "rho": np.zeros((4, 2, size)),
@@ -245,7 +273,12 @@ def modal_data(sm: SystemMatrices) -> ModalData:
         out["free"][ci, :nf] = fr
         out["eigenvalues"][ci, :ns] = eig
         out["a_mat"][ci, :ns, :ns] = A
-        out["a_inv"][ci, :ns, :ns] = np.linalg.inv(A)
+        slow = [_block_speed(B) < SLOW_RATE for B in blocks]
+        out["slow"][ci, : len(blocks)] = slow
+        out["any_slow"][ci] = any(slow)
+        out["a_inv"][ci, :ns, :ns] = (
+            _fast_inverse(X, Xinv, blocks, slow) if any(slow) else (np.linalg.inv(A))
+        )
         out["b_load"][ci, nf:ns] = mff_inv @ f[fr]
         for hc, p in enumerate(CONTACTS):
             for kind, mat in enumerate((K, C, M)):  # q, q̇, q̈ of the held coordinate

@@ -44,6 +44,7 @@ from campipe.engine.closed_form import (
     ModalTrains,
     make_state,
     make_workspace,
+    no_plungers,
     stack_trains,
 )
 from campipe.engine.common import DROP_FLOOR, SMOOTH, Cases, classify_break, jump_speed
@@ -132,7 +133,7 @@ def prepare_steady(
     zeros = np.zeros(n)
     runs = ExactRuns(
         train=which, t_sample=zeros, t_end=zeros, zeta=np.zeros((n, 4, 2 * n_q), np.complex128),
-        dt_cap=0.0, tolerance=1e-12, full_state=True,
+        dt_cap=0.0, tolerance=1e-12, full_state=True, **no_plungers(n, n_q),
     )  # fmt: skip
     state = Cases(
         omega=np.array([c.speed for c in cases], dtype=float),

@@ -39,10 +39,12 @@ exact propagation; and its run starts each turn in a new frame, the kinematic li
 pivot at the extension reached (``lash_adjuster.Carried``), so that what is linearised is
 one turn's motion.
 
-What the per-turn model of the default integrator approximates (the plunger fixed within a
-turn, its motion applied at the turn's end, the switch on the samples' interpolant,
-:func:`interpolated_switches`) this carries exactly; the two are compared in the tests
-(the error of the per-turn model stated there).
+What the per-turn model approximates (the plunger fixed within a turn, its motion applied at
+the turn's end, the switch on the samples' interpolant, :func:`interpolated_switches`; left
+to newmark-linear and to a finger's pivot with rigid contacts) this carries exactly; the two
+are compared in the tests (the error of the per-turn model stated there). With rigid
+contacts modal-exact carries a chain's plunger the same way, as a coordinate of its train
+(:mod:`campipe.engine.plunger_modes`).
 
 Pure numerics on floats and arrays.
 """
@@ -232,8 +234,12 @@ def plunger_state(train, mass_inverse: np.ndarray, gains: Any = None) -> Plunger
 
 
 def carried(case, integrator: str) -> bool:
-    """``case``'s adjuster is a state of its run (the compliant integrator's, under
-    ``integrator``), not moved turn by turn."""
-    if integrator not in ("default", "compliant") or not case.compliant:
+    """``case``'s adjuster is a state of its run, not moved turn by turn: with compliant
+    contacts the compliant integrator's (under ``integrator`` default or compliant); with
+    rigid ones modal-exact's, in a chain's link (``plunger_modes``, under default or
+    modal-exact)."""
+    if adjuster(case.train) is None:
         return False
-    return adjuster(case.train) is not None
+    if case.compliant:
+        return integrator in ("default", "compliant")
+    return integrator in ("default", "modal-exact") and not on_pivot(case.train)

@@ -52,7 +52,7 @@ from campipe.engine.common import (
     start_piece,
 )
 from campipe.engine.kernel_call import start_structures
-from campipe.profiles.packed import evaluate_packed, horner, piece_eval
+from campipe.profiles.packed import N_COEFFS, evaluate_packed, horner, piece_eval
 from campipe.vocabulary import CAM, CAM_CONTACT, SEAT
 
 #: Samples per turn at which the start's search for an angle where configuration I holds
@@ -597,6 +597,7 @@ def _monitor_value(ws, nb, st, theta_a, theta):
         st.w,
         theta - theta_a,
         theta,
+        np.int64(N_COEFFS - 1),  # (its G: the piece's degree at most)
     )
 
 

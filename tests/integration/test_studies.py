@@ -430,15 +430,18 @@ def test_lash_adjuster(tmp_path):
     seated off the cam (a hand calculation from the check force), and at most 10 % more (the
     ramps' take-up, the load still below F_c), and the effective lash falls turn by turn; at
     6000 rpm (past the onset) it pumps up into the follower's flights, past the dry lash
-    within the 12 turns, faster than at 2000 rpm: the valve held off its seat. Fails on a
-    copy whose pump-up runs while the check valve is closed (the lash falls by the event's
-    load over c_P) or that leaves the flights' gaps out of the pump-up's need."""
+    within the 12 turns, faster than at 2000 rpm: the valve held off its seat. The plunger is
+    carried within each turn (modal-exact), its check valve's switches located as events
+    that alternate in every turn. Fails on a copy whose pump-up runs while the check valve
+    is closed (the lash falls by the event's load over c_P) or that leaves the flights' gaps
+    out of the pump-up's need."""
     ds = run(
         tmp_path,
         "lash-adjuster",
         **{"run.revolutions": 12, "sweep.speed": ["2000 rpm", "6000 rpm"]},
     )
     assert ds.sizes["case"] == 2 and (ds.status == 0).all()
+    _switches_alternate_every_turn(ds, 12)
     lash = ds.hla_lash_by_rev.values
     assert ds.hla_lash_by_rev.attrs["units"] == "m"
     assert "effective lash" in ds.hla_lash_by_rev.attrs["long_name"]
@@ -448,6 +451,17 @@ def test_lash_adjuster(tmp_path):
     assert np.all(np.diff(lash[slow][0]) < 0) and lash[slow][0, -1] > 0
     fast = lash[~slow][0]
     assert fast[-1] < -0.05e-3 and np.all(np.diff(fast) < np.diff(lash[slow][0]))
+
+
+def _switches_alternate_every_turn(ds, turns: int) -> None:
+    """Each case's check valve opens and closes in turn (event kinds 5, 6), located as events
+    within every one of its ``turns`` turns."""
+    case = ds.event_case.values
+    for i in range(ds.sizes["case"]):
+        kinds = ds.event_kind.values[case == i]
+        valve = kinds[np.isin(kinds, (5, 6))]
+        turn = np.floor(ds.event_cam_angle.values[case == i][np.isin(kinds, (5, 6))] / 360)
+        assert np.all(valve[1:] != valve[:-1]) and set(turn) == set(range(turns))
 
 
 def test_lash_adjuster_compliant(tmp_path):
@@ -464,11 +478,6 @@ def test_lash_adjuster_compliant(tmp_path):
     assert ds.sizes["case"] == 2 and (ds.status == 0).all()
     slow = ds.speed_rpm.values == 2000
     _pumps_up_at_the_check_force(ds, slow)
-    case = ds.event_case.values
-    for i in range(2):
-        kinds = ds.event_kind.values[case == i]
-        valve = kinds[np.isin(kinds, (5, 6))]
-        turns = np.floor(ds.event_cam_angle.values[case == i][np.isin(kinds, (5, 6))] / 360)
-        assert np.all(valve[1:] != valve[:-1]) and set(turns) == set(range(8))
+    _switches_alternate_every_turn(ds, 8)
     lash = ds.hla_lash_by_rev.values
     assert lash[~slow][0, -1] < -0.05e-3 < lash[slow][0, -1]

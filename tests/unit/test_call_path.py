@@ -18,7 +18,7 @@ import pytest
 
 from campipe.engine import Case, CaseError, RunSettings, run_batch
 from campipe.engine import batch as batch_module
-from campipe.engine.closed_form import STATE, make_state
+from campipe.engine.closed_form import STATE, ExactRuns, make_state
 from campipe.engine.common import make_outputs
 from campipe.engine.settings import LIFT_BOUND, SPEED_BOUND, output_angles
 from campipe.model import thesis_train
@@ -205,7 +205,10 @@ def test_a_one_case_batch_is_prepared_as_a_row_of_the_vectorised_batch(case):
         mine, row = getattr(one.runs, name), getattr(two.runs, name)[:1]
         assert mine.dtype == row.dtype and mine.tobytes() == row.tobytes(), name
     assert one.runs.zeta.shape == (1, *two.runs.zeta.shape[1:]) and not one.runs.zeta.any()
-    assert one.runs[4:] == two.runs[4:]  # dt_cap, tolerance, full_state
+    assert one.runs[4:7] == two.runs[4:7]  # dt_cap, tolerance, full_state
+    for name in ExactRuns._fields[7:]:  # a carried plunger's rows (none here)
+        mine, row = getattr(one.runs, name), getattr(two.runs, name)[:1]
+        assert mine.dtype == row.dtype and mine.tobytes() == row.tobytes(), name
     assert one.stack is two.stack and one.modal_trains is two.modal_trains
     assert one.packed.breaks.tobytes() == two.packed.breaks[:1].tobytes()
     # The bounds, from the profile's peaks and the train's |ratio| as the docs state them.

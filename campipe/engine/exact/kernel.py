@@ -39,10 +39,11 @@ from campipe.engine.common import (
     deref,
     holds_cam,
     holds_seat,
+    record_event,
     start_piece,
     turn_of,
 )
-from campipe.engine.exact.segment import _begin_segment
+from campipe.engine.exact.segment import _begin_segment, plunger_switch
 from campipe.engine.exact.state import (
     MAX_STALLED_EVENTS,
     MODE_FLOOR,
@@ -65,6 +66,7 @@ from campipe.engine.metrics import (
     MAX_SEAT_FORCE,
     THESIS_IMPACT_FORCE,
 )
+from campipe.engine.plunger import BOTTOMED, CLOSED, HELD, OPEN, TOPPED
 from campipe.engine.policy import release, strike, strike_at_break
 from campipe.profiles.packed import piece_eval
 from campipe.vocabulary import (
@@ -72,11 +74,19 @@ from campipe.vocabulary import (
     CAM_AND_SEAT,
     CAM_CONTACT,
     CHATTER,
+    CHECK_VALVE_CLOSES,
+    CHECK_VALVE_OPENS,
     EVENTS_TRUNCATED,
     NONFINITE,
     OK,
+    PLUNGER_BOTTOMS,
+    PLUNGER_TOPS,
     SEAT,
 )
+
+#: A carried plunger's event kinds, as NumPy scalars (``common``: one compile for all).
+CHECK_OPENS, CHECK_CLOSES = np.int64(CHECK_VALVE_OPENS), np.int64(CHECK_VALVE_CLOSES)
+BOTTOMS, TOPS = np.int64(PLUNGER_BOTTOMS), np.int64(PLUNGER_TOPS)
 
 # --------------------------------------------------------------------------- walk the grid
 
@@ -100,12 +110,16 @@ def _drop_decayed(MC, WC, VY, act, nact, ns, eps_force, tau):
 
 
 @njit(inline="always", nogil=True)
-def _fastest_needed(WC, MC, watch, level, gval, nact, tau):
-    """The first column whose block could bring a watched monitor to its level (nact if
-    none) up to τ after the segment start: the fastest blocks are skipped while their summed
-    amplitudes (which only decay) stay under half of every monitor's distance from its level."""
+def _fastest_needed(WC, MC, watch, level, gval, nact, tau, n_mon):
+    """The first column whose block could bring a watched monitor (of the first ``n_mon``)
+    to its level (nact if none) up to τ after the segment start: the fastest blocks are
+    skipped while their summed amplitudes (which only decay) stay under half of every
+    monitor's distance from its level."""
     margin = np.inf
     for m in range(2):
+        if watch[m]:
+            margin = min(margin, level[m] - gval[m])
+    for m in range(2, n_mon):  # (apart: the contacts' loop of a literal length, unrolled)
         if watch[m]:
             margin = min(margin, level[m] - gval[m])
     k = 0
@@ -116,6 +130,10 @@ def _fastest_needed(WC, MC, watch, level, gval, nact, tau):
         for m in range(2):
             if watch[m]:
                 amp = max(amp, (WC[W1_ABS, m, k] + WC[W2_ABS, m, k] * s2) * MC[EABS, k])
+        if n_mon > 2:
+            for m in range(2, n_mon):
+                if watch[m]:
+                    amp = max(amp, (WC[W1_ABS, m, k] + WC[W2_ABS, m, k] * s2) * MC[EABS, k])
         if spent + amp >= 0.5 * margin:
             break
         spent += amp
@@ -149,10 +167,27 @@ def _refresh(MC, nact, h, tau):
 
 @njit(inline="always", nogil=True)
 def _suspect(watch, level, gval, dval, dprev):
-    """A watched monitor above its level at the grid point, or past a maximum inside the
-    step (its derivative turned from + to −): ``_earliest_crossing`` must look."""
+    """A watched contact monitor above its level at the grid point, or past a maximum inside
+    the step (its derivative turned from + to −): ``_earliest_crossing`` must look."""
     for m in range(2):
         if watch[m] and (gval[m] > level[m] or (dprev[m] > 0.0 and dval[m] < 0.0)):
+            return True
+    return False
+
+
+@njit(**HELPER)
+def _plunger_at_grid(WC, MC, nact, G, GT, gdeg, w, x, cth, sth, ready, gval, dval):
+    """A carried plunger's monitors (2, 3) at the grid point (``state._monitor_at_grid``)."""
+    for m in range(2, 4):
+        if ready[m]:
+            gval[m], dval[m] = _monitor_at_grid(WC, MC, nact, G, GT, m, gdeg, w, x, cth, sth)
+
+
+@njit(**HELPER)
+def _plunger_suspect(ws):
+    """``_suspect`` for a carried plunger's monitors (2, 3)."""
+    for m in range(2, 4):
+        if ws.watch[m] and (ws.gval[m] > ws.level[m] or (ws.dprev[m] > 0.0 and ws.dval[m] < 0.0)):
             return True
     return False
 
@@ -169,7 +204,7 @@ def _earliest_crossing(ref, st, nact, t_prev, t_eval):
     WC, G, GT, MC = ws.WC, ws.G, ws.GT, ws.MC
     first = -1
     t_ev = t_eval
-    for m in range(2):
+    for m in range(st.n_mon):
         if not ws.watch[m]:
             continue
         level = ws.level[m]
@@ -200,16 +235,16 @@ def _earliest_crossing(ref, st, nact, t_prev, t_eval):
         ):
             t_max = _root(
                 np.bool_(True), -1.0, WC, MC, nact, G, GT, m, t_s, t_prev, t_eval, 0.0, w, th0,
-                tolerance, np.bool_(False), 0.0, 0.0, 0.0,
+                tolerance, np.bool_(False), 0.0, 0.0, 0.0, gdeg,
             )  # fmt: skip
-            g_hi, dg_hi = _at(False, WC, MC, nact, G, GT, m, t_s, t_max, w, th0)
+            g_hi, dg_hi = _at(False, WC, MC, nact, G, GT, m, t_s, t_max, w, th0, gdeg)
             if g_hi > level:
                 t_hi = t_max
         if not np.isnan(t_hi):
             # The value root starts from what the grid (or the maximum's search) has.
             te = _root(
                 np.bool_(False), 1.0, WC, MC, nact, G, GT, m, t_s, t_prev, t_hi, level, w, th0,
-                tolerance, np.bool_(True), ws.gprev[m] - level, g_hi - level, dg_hi,
+                tolerance, np.bool_(True), ws.gprev[m] - level, g_hi - level, dg_hi, gdeg,
             )  # fmt: skip
             if first < 0 or te < t_ev:
                 t_ev = te
@@ -239,7 +274,7 @@ def _walk(ref, st):
     """
     cases, trains, profiles, runs, out, ws = deref(ref)
     c, w, t_s, th0, t_break = st.c, st.w, st.t_s, st.th0, st.t_break
-    nact, ns, gdeg, eps_force = st.nact, st.ns, st.gdeg, st.eps_force
+    nact, ns, gdeg, eps_force, n_mon = st.nact, st.ns, st.gdeg, st.eps_force, st.n_mon
     speed_row = trains.speed[st.tr, st.cfg - 1]
     cam_held = holds_cam(st.cfg)
     seat_held = holds_seat(st.cfg)
@@ -254,8 +289,8 @@ def _walk(ref, st):
     watch, ready, level = ws.watch, ws.ready, ws.level
     # A monitor already above its level at the segment start (a contact that pulls the
     # instant after an impact; a gap that closes) is an event there.
-    for m in range(2):
-        held = cam_held if m == 0 else seat_held
+    for m in range(n_mon):
+        held = cam_held if m == 0 else (seat_held if m == 1 else True)  # (2, 3: a plunger's)
         if watch[m] and gval[m] > level[m] and (held or dprev[m] > 0.0):
             _apply_event(ref, st, m, t_s)
             return
@@ -285,7 +320,7 @@ def _walk(ref, st):
                 # cannot change the step (h_allow ≥ h_all below).
                 n_steps = 1
             else:
-                k = _fastest_needed(WC, MC, watch, level, gval, nact, t_next - t_s)
+                k = _fastest_needed(WC, MC, watch, level, gval, nact, t_next - t_s, n_mon)
                 fastest = speed_row[act[k]] if k < nact else 0.0
                 h_allow = RESOLUTION * np.pi / fastest if fastest > 0.0 else np.inf
                 if dt_cap > 0.0:
@@ -315,9 +350,11 @@ def _walk(ref, st):
         at_break = t_break <= t_n
         if at_break:
             t_eval = t_break
-            for m in range(2):
+            for m in range(n_mon):
                 if ready[m]:
-                    gval[m], dval[m] = _at(False, WC, MC, nact, G, GT, m, t_s, t_break, w, th0)
+                    gval[m], dval[m] = _at(
+                        False, WC, MC, nact, G, GT, m, t_s, t_break, w, th0, gdeg
+                    )
         else:
             t_eval = t_n
             x_n = w * t_n - th0
@@ -326,7 +363,11 @@ def _walk(ref, st):
                     gval[m], dval[m] = _monitor_at_grid(
                         WC, MC, nact, G, GT, m, gdeg, w, x_n, cth, sth
                     )
-        if t_eval > t_s and _suspect(watch, level, gval, dval, dprev):
+            if n_mon > 2:  # a carried plunger's (apart: the contacts' loop above is unrolled)
+                _plunger_at_grid(WC, MC, nact, G, GT, gdeg, w, x_n, cth, sth, ready, gval, dval)
+        if t_eval > t_s and (
+            _suspect(watch, level, gval, dval, dprev) or (n_mon > 2 and _plunger_suspect(ws))
+        ):
             first, t_ev = _earliest_crossing(ref, st, nact, t_prev, t_eval)
             if first >= 0:
                 st.nact = nact
@@ -343,6 +384,10 @@ def _walk(ref, st):
         for m in range(2):
             dprev[m] = dval[m]
             gprev[m] = gval[m]
+        if n_mon > 2:
+            for m in range(2, n_mon):
+                dprev[m] = dval[m]
+                gprev[m] = gval[m]
         _force_maxima(per_rev, c, turn_of(w, t_n), cam_held, seat_held, gval)
         t_prev = t_n
         if i_step < n_steps:
@@ -405,6 +450,27 @@ def _impact(cases, trains, out, ws, st, seat, closing, t, vcam, lift):
     return new
 
 
+@njit(inline="always", nogil=True)
+def _plunger_event(trains, runs, out, ws, st, valve, t_ev):
+    """A carried plunger's monitor rose at t_ev [s] (``valve``: its check valve's, else its
+    travel's): the regime it leads to (``engine.plunger.SWITCHES``), recorded as an event of
+    velocity 0 with the plunger's u there in the impulse field (which
+    ``lash_adjuster`` reads for each turn's leak-down and pump-up, and clears)."""
+    reg = st.reg
+    if reg == CLOSED:
+        new, kind = (OPEN, CHECK_OPENS) if valve else (BOTTOMED, BOTTOMS)
+    elif reg == OPEN:
+        new, kind = (CLOSED, CHECK_CLOSES) if valve else (TOPPED, TOPS)
+    elif reg == BOTTOMED:
+        new, kind = OPEN, CHECK_OPENS
+    else:
+        new, kind = CLOSED, CHECK_CLOSES
+    c = st.c
+    u = ws.q[runs.plunger_coord[c]]
+    record_event(out.events, out.n_events, c, t_ev, kind, st.cfg, st.cfg, 0.0, u)
+    plunger_switch(trains, runs, ws, st, new)
+
+
 @njit(**HELPER)
 def _apply_event(ref, st, first, t_ev):
     """Monitor ``first`` rose through its level at t_ev [s]: take the exact state there, and
@@ -427,7 +493,9 @@ def _apply_event(ref, st, first, t_ev):
         v[SEAT] = 0.0
     _off_cam(out, cfg, c, w, st.t_s, t_ev)
     new = cfg
-    if first == 0 and cam_held:
+    if first >= 2:
+        _plunger_event(trains, runs, out, ws, st, first == 2, t_ev)
+    elif first == 0 and cam_held:
         new = configuration(False, seat_held)
         release(out, st, c, t_ev, False, cfg, new, 0.0)
     elif first == 1 and seat_held:
@@ -494,6 +562,9 @@ def _start_case(cases, trains, profiles, runs, ws, st, c, tr):
     st.c = c
     st.tr = tr
     st.w = cases.omega[c]
+    carried = runs.plunger_coord[c] >= 0
+    st.n_mon = 4 if carried else 2
+    st.reg = HELD if carried else -1
     harmonic_response(trains, runs, ws, st, CAM_CONTACT - 1)
     if cases.has_seat[c]:
         harmonic_response(trains, runs, ws, st, CAM_AND_SEAT - 1)

@@ -37,6 +37,7 @@ from campipe.engine.closed_form import (
     eval_monitor,
     force_monitor,
     forcing,
+    harmonic_response,
     particular,
 )
 from campipe.engine.common import (
@@ -49,8 +50,9 @@ from campipe.engine.common import (
     holds_seat,
 )
 from campipe.engine.exact.state import _sample
+from campipe.engine.plunger import BOTTOMED, CLOSED, HELD, HYSTERESIS, OPEN, TOPPED
 from campipe.profiles.packed import degree, horner, next_break
-from campipe.vocabulary import CAM, SEAT
+from campipe.vocabulary import CAM, CAM_AND_SEAT, CAM_CONTACT, SEAT
 
 # --------------------------------------------------------------------------- begin a segment
 
@@ -98,7 +100,7 @@ def _gap_monitor(cases, trains, profiles, ws, st, m, sign):
     c, p = st.c, st.p
     ws.level[m] = GAP_LEVEL
     row = _row_of(trains, st, CAM if m == 0 else SEAT)
-    for k in range(8):
+    for k in range(max(st.deg, 7) + 1):
         ws.G[m, k] = sign * ws.Z[k, row]
     ws.GT[m] = sign * ws.ZT[row]
     if m == 0:
@@ -110,7 +112,95 @@ def _gap_monitor(cases, trains, profiles, ws, st, m, sign):
 
 
 @njit(inline="always", nogil=True)
-def _monitors(cases, trains, profiles, ws, st):
+def _plunger_monitors(trains, runs, ws, st):
+    """A carried plunger's monitors in its regime st.reg (``engine.plunger``'s, with its dead
+    band HYSTERESIS): 2, its check valve (closed, or bottomed: −F rising through
+    −F_c·(1 − HYSTERESIS), the valve opening; open, or topped: F through F_c·(1 + HYSTERESIS),
+    closing); 3, its travel (closed: −u rising through −u_bottom; open: u through u_top).
+    Each a row over the coordinates (ws.prow), its forced part from the particular solution
+    and the held coordinates' inputs (``forcing``'s ws.inp); none while held (HELD)."""
+    c, reg = st.c, st.reg
+    ws.ready[2] = ws.watch[2] = ws.ready[3] = ws.watch[3] = False
+    if reg == HELD:
+        return
+    closed = reg == CLOSED or reg == BOTTOMED
+    sign = -1.0 if closed else 1.0
+    for i in range(ws.prow.shape[1]):
+        ws.prow[0, i] = sign * runs.plunger_force[c, i]
+        ws.prow[1, i] = 0.0
+    band = 1.0 - HYSTERESIS if closed else 1.0 + HYSTERESIS
+    ws.level[2] = sign * runs.plunger_check[c] * band
+    ws.ready[2] = ws.watch[2] = True
+    if reg == CLOSED or reg == OPEN:
+        end = BOTTOMED if reg == CLOSED else TOPPED
+        ws.prow[1, runs.plunger_coord[c]] = sign
+        ws.level[3] = sign * runs.plunger_end[c, end]
+        ws.ready[3] = ws.watch[3] = True
+    tr, ci, nf = st.tr, st.cfg - 1, st.nf
+    top = max(st.deg, 7)
+    for m in range(2, 4):
+        if not ws.ready[m]:
+            continue
+        row = ws.prow[m - 2]
+        ws.GT[m] = 0.0
+        for k in range(top + 1):
+            ws.G[m, k] = 0.0
+        for j in range(nf):
+            r = row[trains.free[tr, ci, j]]
+            if r != 0.0:
+                for k in range(st.deg + 1):
+                    ws.G[m, k] += r * ws.Z[k, j]
+                ws.GT[m] += r * ws.ZT[j]
+        for hc in range(2):  # the held coordinates' inputs (zero where not held)
+            r = row[CAM if hc == 0 else SEAT]
+            for k in range(8):
+                ws.G[m, k] += r * ws.inp[0, hc, k]
+            ws.GT[m] += r * ws.inp_t[0, hc]
+
+
+@njit(inline="always", nogil=True)
+def _link_force(runs, ws, c):
+    """The force through case c's adjuster [N] at the coordinates ws.q: k·(d·q + u)."""
+    force = 0.0
+    for i in range(ws.prow.shape[1]):
+        force += runs.plunger_force[c, i] * ws.q[i]
+    return force
+
+
+@njit(inline="always", nogil=True)
+def plunger_switch(trains, runs, ws, st, reg):
+    """Case st.c's carried plunger into regime ``reg``: its train row, its velocity the one
+    its law gives there (held: 0, at the end it is held at), and the harmonic responses of
+    the configurations that hold the cam for that row."""
+    c = st.c
+    iu = runs.plunger_coord[c]
+    st.reg = reg
+    st.tr = runs.plunger_train[c, reg]
+    damper = runs.plunger_damper[c, reg]
+    if np.isinf(damper):
+        ws.q[iu] = runs.plunger_end[c, reg]
+        ws.v[iu] = 0.0
+    else:
+        ws.v[iu] = -(_link_force(runs, ws, c) - runs.plunger_check[c]) / damper
+    harmonic_response(trains, runs, ws, st, CAM_CONTACT - 1)
+    harmonic_response(trains, runs, ws, st, CAM_AND_SEAT - 1)
+
+
+@njit(inline="always", nogil=True)
+def _release_held(trains, runs, ws, st):
+    """A plunger held until t = 0 (``plunger.HELD``) takes the regime its load gives there
+    (``PlungerState.regime_at``)."""
+    c = st.c
+    u = ws.q[runs.plunger_coord[c]]
+    if _link_force(runs, ws, c) > runs.plunger_check[c]:
+        reg = BOTTOMED if u <= runs.plunger_end[c, BOTTOMED] else CLOSED
+    else:
+        reg = TOPPED if u >= runs.plunger_end[c, TOPPED] else OPEN
+    plunger_switch(trains, runs, ws, st, reg)
+
+
+@njit(inline="always", nogil=True)
+def _monitors(cases, trains, profiles, runs, ws, st):
     """The monitors' coefficients g_m(τ) = Re Σ_j W_mj e^{λ_j τ} + Σ_k G_mk x^k
     + Re(GT_m e^{iθ}), which of them can end the segment, and st.gdeg."""
     c = st.c
@@ -125,7 +215,7 @@ def _monitors(cases, trains, profiles, ws, st):
             continue
         held = cam_held if m == 0 else seat_held
         sign = 1.0 if m == 0 else -1.0  # F1, q1 + lift; −F7, q7_seat − q7
-        for k in range(8):
+        for k in range(max(st.deg, 7) + 1):
             ws.G[m, k] = 0.0
         if held:
             # A held contact releases where its force reaches zero: to the force level, a
@@ -135,13 +225,33 @@ def _monitors(cases, trains, profiles, ws, st):
             force_monitor(trains, ws, st, m, sign, level)
         else:
             _gap_monitor(cases, trains, profiles, ws, st, m, sign)
+    if st.n_mon > 2:
+        _plunger_monitors(trains, runs, ws, st)
     gdeg = 0
-    for m in range(2):
+    for m in range(st.n_mon):
         if ws.ready[m]:
-            for k in range(8):
+            for k in range(max(st.deg, 7) + 1):
                 if ws.G[m, k] != 0.0:
                     gdeg = max(gdeg, k)
     st.gdeg = gdeg
+
+
+@njit(inline="always", nogil=True)
+def _monitor_column(WC, m, jj, w1, w2, lbar, d2):
+    """Monitor m's coefficients of f1 and f2 in block column jj (w1, w2), of its first and
+    second time derivatives, and their magnitudes."""
+    wl1, wl2 = block_derivative(w1, w2, lbar, d2)
+    wll1, wll2 = block_derivative(wl1, wl2, lbar, d2)
+    WC[W1, m, jj] = w1
+    WC[W2, m, jj] = w2
+    WC[WL1, m, jj] = wl1
+    WC[WL2, m, jj] = wl2
+    WC[WLL1, m, jj] = wll1
+    WC[WLL2, m, jj] = wll2
+    WC[W1_ABS, m, jj] = abs(w1)
+    WC[W2_ABS, m, jj] = abs(w2)
+    WC[WL1_ABS, m, jj] = abs(wl1)
+    WC[WL2_ABS, m, jj] = abs(wl2)
 
 
 @njit(inline="always", nogil=True)
@@ -218,18 +328,17 @@ def _block_columns(cases, trains, runs, ws, st):
                 else:
                     w1 = sign * VY[0, jj, rows[m]]
                     w2 = sign * VY[1, jj, rows[m]]
-            wl1, wl2 = block_derivative(w1, w2, lbar, d2)
-            wll1, wll2 = block_derivative(wl1, wl2, lbar, d2)
-            WC[W1, m, jj] = w1
-            WC[W2, m, jj] = w2
-            WC[WL1, m, jj] = wl1
-            WC[WL2, m, jj] = wl2
-            WC[WLL1, m, jj] = wll1
-            WC[WLL2, m, jj] = wll2
-            WC[W1_ABS, m, jj] = abs(w1)
-            WC[W2_ABS, m, jj] = abs(w2)
-            WC[WL1_ABS, m, jj] = abs(wl1)
-            WC[WL2_ABS, m, jj] = abs(wl2)
+            _monitor_column(WC, m, jj, w1, w2, lbar, d2)
+        if st.n_mon > 2:  # a carried plunger's (apart: the contacts' loop above is unrolled)
+            for m in range(2, st.n_mon):
+                w1 = 0.0
+                w2 = 0.0
+                if ws.ready[m]:
+                    for j in range(st.nf):
+                        r = ws.prow[m - 2, trains.free[tr, ci, j]]
+                        w1 += r * VY[0, jj, j]
+                        w2 += r * VY[1, jj, j]
+                _monitor_column(WC, m, jj, w1, w2, lbar, d2)
     st.nact = nb
 
 
@@ -239,6 +348,8 @@ def _begin_segment(ref, st):
     ws.q, ws.v: forcing, particular solution, modal start, monitors, the break ahead, the mode
     pairs; the monitors' values there, and the sample due there, if any."""
     cases, trains, profiles, runs, out, ws = deref(ref)
+    if st.reg == HELD and st.t_s >= 0.0:
+        _release_held(trains, runs, ws, st)
     ci = st.cfg - 1
     st.nf = trains.n_free[st.tr, ci]
     st.ns = 2 * st.nf
@@ -250,7 +361,7 @@ def _begin_segment(ref, st):
     ct = np.cos(th_s)
     sn = np.sin(th_s)
     _modal_start(trains, ws, st, x_s, ct, sn)
-    _monitors(cases, trains, profiles, ws, st)
+    _monitors(cases, trains, profiles, runs, ws, st)
     # The segment ends at the next break of the profile at the latest.
     nb, revb, th_b = next_break(profiles, st.c, st.p, st.rev)
     st.nb = nb
@@ -262,10 +373,10 @@ def _begin_segment(ref, st):
         st.t_break = np.inf  # the run ends before it: the next run's start crosses it
     st.pdeg = degree(profiles, st.c, st.p)
     _block_columns(cases, trains, runs, ws, st)
-    for m in range(2):
+    for m in range(st.n_mon):
         if ws.ready[m]:
             ws.gval[m], ws.dprev[m], _ = eval_monitor(
-                ws.WC, ws.MC, st.nact, ws.G, ws.GT, m, 0.0, st.w, x_s, th_s
+                ws.WC, ws.MC, st.nact, ws.G, ws.GT, m, 0.0, st.w, x_s, th_s, st.gdeg
             )
             ws.gprev[m] = ws.gval[m]
     k_out = st.k_out

@@ -56,10 +56,10 @@ ROOT_ITERATIONS = 200
 
 
 @njit(inline="always", nogil=True)
-def _at(deriv, WC, MC, nact, G, GT, m, t_s, t, w, th0):
+def _at(deriv, WC, MC, nact, G, GT, m, t_s, t, w, th0, gdeg):
     """Monitor m (deriv False) or its time derivative (deriv True) at time t, and the next
-    derivative."""
-    g, dg, d2g = eval_monitor(WC, MC, nact, G, GT, m, t - t_s, w, w * t - th0, w * t)
+    derivative (its polynomial part of degree ``gdeg``)."""
+    g, dg, d2g = eval_monitor(WC, MC, nact, G, GT, m, t - t_s, w, w * t - th0, w * t, gdeg)
     return (dg, d2g) if deriv else (g, dg)
 
 
@@ -91,7 +91,7 @@ def _two_columns(Z, s1, s2, x, deg):
 @njit(**HELPER)
 def _root(
     deriv, sgn, WC, MC, nact, G, GT, m, t_s, ta, tb, level, w, th0, tolerance, known, fa, fb,
-    dfb,
+    dfb, gdeg,
 ):  # fmt: skip
     """Time in [ta, tb] where f = sgn·(monitor − level) (or, with deriv, sgn·its derivative)
     rises through zero: Newton steps from the latest point, kept inside the bracket, with
@@ -103,11 +103,11 @@ def _root(
     """
     lev = 0.0 if deriv else level
     if not known:
-        f, _ = _at(deriv, WC, MC, nact, G, GT, m, t_s, ta, w, th0)
+        f, _ = _at(deriv, WC, MC, nact, G, GT, m, t_s, ta, w, th0, gdeg)
         fa = sgn * (f - lev)
         if fa > 0.0:
             return ta
-        f, df = _at(deriv, WC, MC, nact, G, GT, m, t_s, tb, w, th0)
+        f, df = _at(deriv, WC, MC, nact, G, GT, m, t_s, tb, w, th0, gdeg)
         fb = sgn * (f - lev)
         dfb = sgn * df
     elif fa > 0.0:
@@ -133,7 +133,7 @@ def _root(
                 t = (ta * fb - tb * fa) / (fb - fa)
                 if not (ta < t < tb):
                     t = 0.5 * (ta + tb)
-        f, df = _at(deriv, WC, MC, nact, G, GT, m, t_s, t, w, th0)
+        f, df = _at(deriv, WC, MC, nact, G, GT, m, t_s, t, w, th0, gdeg)
         f = sgn * (f - lev)
         df = sgn * df
         if f > 0.0:
@@ -434,7 +434,7 @@ def _keep_column(MC, WC, VY, act, ns, src, dst):
     for r in range(MC.shape[0]):
         MC[r, dst] = MC[r, src]
     for r in range(WC.shape[0]):
-        for m in range(2):
+        for m in range(WC.shape[1]):
             WC[r, m, dst] = WC[r, m, src]
     for s in range(ns):
         VY[0, dst, s] = VY[0, src, s]
