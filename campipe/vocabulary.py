@@ -99,6 +99,7 @@ CAM_SEPARATION, CAM_IMPACT, SEAT_SEPARATION, SEAT_IMPACT = 1, 2, 3, 4
 #: (``campipe.engine.plunger``): its check valve opening or closing, its plunger reaching
 #: the bottom or the top of its travel.
 CHECK_VALVE_OPENS, CHECK_VALVE_CLOSES, PLUNGER_BOTTOMS, PLUNGER_TOPS = 5, 6, 7, 8
+ADJUSTER_EVENTS = (CHECK_VALVE_OPENS, CHECK_VALVE_CLOSES, PLUNGER_BOTTOMS, PLUNGER_TOPS)
 EVENT_KINDS = {
     CAM_SEPARATION: "cam_separation",
     CAM_IMPACT: "cam_impact",

@@ -31,6 +31,11 @@ zero, to ``common.RESTING_LEVEL`` of the force level), and a release it closes a
 is taken back. The run starts where the engine's does (``campipe.engine.start_states``): the
 scenario is the same, the integration independent.
 
+A chain's lash adjuster rides along (``campipe.model.hla``; its parameters from
+``engine.plunger.plunger_state``, its law written here): the plunger's u is the state's last
+entry, u̇ = −(F − F_c)/c in the regime its check valve gives, each switch of the check valve
+(with the engine's dead band) and each end of its travel a terminal event.
+
 Pure numerics: arrays in, arrays out.
 """
 
@@ -231,7 +236,7 @@ class _Peer:
         self.stalled = 0
         self.resting = {CAM: False, SEAT: False}  # captured by a slow impact (``impact``)
         # A chain's lash adjuster: its plunger's u = e − e₀ the state's last entry, held until
-        # t = 0, then in the regime its load gives (see ``_plunger_rate``).
+        # t = 0, then in the regime its load gives (see ``plunger_rate``).
         self.p = plunger_state(case.train, np.linalg.inv(self.M)) if adjuster(case.train) else None
         self.u = 0.0
         self.regime = HELD

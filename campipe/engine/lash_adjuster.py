@@ -56,23 +56,17 @@ from campipe.model.layouts import chain_placement
 from campipe.profiles import Profile, evaluate
 from campipe.profiles.levers import ValveSideProfile, pivot_gains, pivot_raised
 from campipe.vocabulary import (
+    ADJUSTER_EVENTS,
     CAM,
     CAM_AND_SEAT,
     CAM_CONTACT,
-    CHECK_VALVE_CLOSES,
-    CHECK_VALVE_OPENS,
     EV_IMPULSE,
     EV_KIND,
     EV_TIME,
     FAILURES,
-    PLUNGER_BOTTOMS,
-    PLUNGER_TOPS,
     holds_cam,
     holds_seat,
 )
-
-#: The event kinds of a plunger's switches.
-PLUNGER_EVENTS = (CHECK_VALVE_OPENS, CHECK_VALVE_CLOSES, PLUNGER_BOTTOMS, PLUNGER_TOPS)
 
 
 def raised(profile: Profile, height: float) -> Profile:
@@ -255,7 +249,7 @@ def in_kernel(run: Callable[..., BatchResult]) -> Callable[..., BatchResult]:
         part = run(members, settings, start=start, **options)
         table = kernel_ledger(part, np.array([c.train.hla_extension for c in cases]))
         for events in part.events:  # the kernel's u at each switch, read: cleared
-            events[np.isin(events[:, EV_KIND], PLUNGER_EVENTS), EV_IMPULSE] = 0.0
+            events[np.isin(events[:, EV_KIND], ADJUSTER_EVENTS), EV_IMPULSE] = 0.0
         return dataclasses.replace(
             part, q=part.q[:, :, :-1], v=part.v[:, :, :-1], lash_adjuster=table, _derived={}
         )
@@ -265,7 +259,7 @@ def in_kernel(run: Callable[..., BatchResult]) -> Callable[..., BatchResult]:
 
 def kernel_ledger(part: BatchResult, offset: np.ndarray) -> np.ndarray:
     """(n, n_turns, 3) each turn's extension at its start, leak-down and pump-up [m] of a
-    carried run by modal-exact (:func:`_in_kernel`): from u (the histories' last column,
+    carried run by modal-exact (:func:`in_kernel`): from u (the histories' last column,
     from the start's extension ``offset``) at each turn's start and end, and at each of the
     plunger's switches in between (the kernel's u there, in the event's impulse field).
     Between two of these the plunger is in one regime, so u moves one way: what it falls is
@@ -276,7 +270,7 @@ def kernel_ledger(part: BatchResult, offset: np.ndarray) -> np.ndarray:
     starts = np.searchsorted(theta, TWO_PI * np.arange(n_turns + 1) - 1e-9)
     for i in range(n):
         events = part.events[i]
-        switch = events[np.isin(events[:, EV_KIND], PLUNGER_EVENTS)]
+        switch = events[np.isin(events[:, EV_KIND], ADJUSTER_EVENTS)]
         u = part.q[i, :, -1]
         first = int(part.recorded_from[i]) if part.recorded_from.size else 0
         for k in range(n_turns - first):

@@ -13,13 +13,13 @@ velocity w = u̇ the other half of its state:
     ẇ = −(k/c)·(d·q̇ + w) − β·I,     I = w + (F − F_c)/c.
 
 I is the law's residual. Along any solution İ = −β·I, so a state that obeys the law
-(I = 0: w set from the state where a regime begins) obeys it for ever, exactly, and the
-term −β·I changes nothing on such a solution; without it (β = 0) I would be conserved, not
-zero, an eigenvalue 0 that the particular solutions' A⁻¹ (``modal``) cannot take. With it
-the regime's state matrix has the Maxwell element's own eigenvalue −k/c (the link relaxing
-through the dashpot) and −β besides, a mode that no consistent state excites. β is set well
-above the train's fastest natural frequency (BAUMGARTE_FACTOR), so that it never coincides
-with a mode of the train.
+(I = 0: w set from the state where a regime begins, ``PlungerState.rate``) obeys it for
+ever, exactly, and the term −β·I changes nothing on such a solution; without it (β = 0) I
+would be conserved, not zero, an eigenvalue 0 that the particular solutions' A⁻¹
+(``modal``) cannot take. With it the regime's state matrix has the Maxwell element's own
+eigenvalue −k/c (the link relaxing through the dashpot) and −β besides, a mode that no
+consistent state excites. β is set well above the train's fastest natural frequency
+(BAUMGARTE_FACTOR), so that it never coincides with a mode of the train.
 
 In one row, with the chain's n coordinates first and u last (index n):
 
@@ -121,15 +121,6 @@ def embedded(sm: SystemMatrices, p: PlungerState, regime: int, beta: float) -> S
         k[n, n] = beta * beta
         f[n] = beta * beta * end_of(p, regime)
     return SystemMatrices(m, k, c, sm.frequencies, sm.modes, f)
-
-
-def consistent_rate(p: PlungerState, regime: int, q: np.ndarray, u: float) -> float:
-    """The plunger's velocity u̇ [m/s] that obeys its law in ``regime`` at coordinates ``q``
-    and extension u (0 where it is held): what a regime's start sets w to."""
-    c = p.damper(regime)
-    if math.isinf(c):
-        return 0.0
-    return -(p.k * (float(p.d @ q[: p.d.size]) + u) - p.check_force) / c
 
 
 #: The regimes a carried plunger's run needs a train row for, in ``plunger``'s order.

@@ -14,12 +14,7 @@ from campipe.engine import Case, RunSettings, run_batch
 from campipe.engine.lash_adjuster import extended
 from campipe.model import valve_train
 from campipe.profiles import Ramp, polydyne
-from campipe.vocabulary import (
-    CHECK_VALVE_CLOSES,
-    CHECK_VALVE_OPENS,
-    PLUNGER_BOTTOMS,
-    PLUNGER_TOPS,
-)
+from campipe.vocabulary import ADJUSTER_EVENTS, PLUNGER_BOTTOMS
 
 RPM = 2.0 * math.pi / 60.0
 #: The bundled lash-adjuster study's bucket tappet (studies/lash-adjuster.yaml).
@@ -40,7 +35,6 @@ BUCKET = {
     "hla_travel": "1 mm",
 }
 CAM = polydyne("4567", 9e-3, *np.radians([110, 20, 110]), ramp=Ramp(0.3e-3, 30 / 110))
-PLUNGER = (CHECK_VALVE_OPENS, CHECK_VALVE_CLOSES, PLUNGER_BOTTOMS, PLUNGER_TOPS)
 
 
 def _both(rpm: float, turns: int, extension: str = "0 mm"):
@@ -69,7 +63,7 @@ def test_below_the_onset_every_switch_is_the_peer_s(extension):
     assert np.abs(ledger - peer.plunger_ledger).max() < 1e-8 * scale
     assert np.abs(engine.q[0, :, 6] - peer.q[:, 6]).max() < 1e-9
     ours, theirs = engine.events[0], peer.events
-    assert len(ours) == len(theirs) and np.isin(ours[:, 1], PLUNGER).sum() >= 9
+    assert len(ours) == len(theirs) and np.isin(ours[:, 1], ADJUSTER_EVENTS).sum() >= 9
     np.testing.assert_array_equal(ours[:, 1:4], theirs[:, 1:4])
     assert np.abs(ours[:, 0] - theirs[:, 0]).max() < 1e-9
     if extension == "0 mm":
@@ -89,8 +83,8 @@ def test_past_the_onset_the_pump_up_into_the_flights_is_the_peer_s():
     scale = np.abs(peer.plunger_ledger).max()
     assert np.abs(ledger - peer.plunger_ledger).max() < 1e-6 * scale
     assert np.abs(engine.q[0, :, 6] - peer.q[:, 6]).max() < 1e-8
-    ours = engine.events[0][~np.isin(engine.events[0][:, 1], PLUNGER)]
-    theirs = peer.events[~np.isin(peer.events[:, 1], PLUNGER)]
+    ours = engine.events[0][~np.isin(engine.events[0][:, 1], ADJUSTER_EVENTS)]
+    theirs = peer.events[~np.isin(peer.events[:, 1], ADJUSTER_EVENTS)]
     assert len(ours) == len(theirs) > 6
     np.testing.assert_array_equal(ours[:, 1:4], theirs[:, 1:4])
     assert np.abs(ours[:, 0] - theirs[:, 0]).max() < 1e-8
