@@ -238,6 +238,49 @@ def test_leak_down_and_pump_up_over_a_turn_at_a_crawl():
         extension = extension - found[1] + found[2]
 
 
+def test_a_lever_s_cam_impacts_are_the_roller_s_closing_on_the_cam():
+    """Past its onset (harmonic 6 mm at 12000 rpm cam speed, tilted and offset) the finger
+    leaves the cam and lands again, several times a turn. Each cam impact's closing velocity
+    at the cam is the valve side's over the lever ratio at the impact's angle (the hand's
+    roller force per unit pallet force, by the lever's moments: an independent statics), its
+    impulse r times the valve side's; each turn's max_cam_impact_velocity the largest of them
+    (of at least the capture velocity). The thesis's train keeps its own. Fails on a copy
+    that multiplies by r, or keeps the valve side's turn maxima."""
+    from campipe.engine.levers import at_the_cam
+    from campipe.engine.metrics import MAX_CAM_IMPACT_VELOCITY
+    from campipe.engine.settings import DEFAULT_CAPTURE_VELOCITY
+    from campipe.vocabulary import CAM_IMPACT, EV_IMPULSE, EV_KIND, EV_TIME, EV_VELOCITY
+
+    own = {k: v for k, v in FINGER.items() if not k.startswith("hla") and k != "lash"}
+    train = valve_train(
+        "thesis-1971", {**own, "lever_rest_angle": "5 deg", "cam_offset": "4 mm"},
+        key_prefix="model.",
+    )  # fmt: skip
+    case = Case(train, harmonic(LIFT), 12000 * RPM)
+    valve_side = run_batch([case], RunSettings(revolutions=3))
+    roller = at_the_cam(valve_side, [case])
+    before, after = valve_side.events[0], roller.events[0]
+    cam = before[:, EV_KIND] == CAM_IMPACT
+    assert cam.sum() >= 6  # it lands more than once a turn
+    hand = Hand(math.radians(5.0), 0.004)
+    angle = case.speed * before[cam, EV_TIME]
+    r = np.array([hand.roller_force(t % (2 * math.pi), 1.0)[0] for t in angle])
+    assert r.min() > 1.05 and np.ptp(r) > 0.05  # the ratio differs between the impacts
+    assert_allclose(after[cam, EV_VELOCITY], before[cam, EV_VELOCITY] / r, rtol=1e-7)
+    assert_allclose(after[cam, EV_IMPULSE], before[cam, EV_IMPULSE] * r, rtol=1e-7)
+    assert_allclose(after[~cam], before[~cam], rtol=0, atol=0)  # every other event as it was
+    turn = np.floor(angle / (2 * math.pi)).astype(int)
+    counted = before[cam, EV_VELOCITY] >= DEFAULT_CAPTURE_VELOCITY
+    for k in range(3):
+        here = (turn == k) & counted
+        expected = (before[cam, EV_VELOCITY] / r)[here].max() if here.any() else 0.0
+        assert roller.per_rev[0, k, MAX_CAM_IMPACT_VELOCITY] == pytest.approx(expected, rel=1e-7)
+    assert roller.max_cam_impact_velocity[0] < valve_side.max_cam_impact_velocity[0] / 1.05
+    thesis = Case(valve_train("thesis-1971"), harmonic(LIFT), 12000 * RPM)
+    kept = run_batch([thesis], RunSettings(revolutions=1))
+    assert at_the_cam(kept, [thesis]) is kept
+
+
 def test_a_centre_pivot_rocker_takes_no_adjuster():
     """A centre-pivot rocker's pivot is a shaft: its adjuster is refused naming the key.
     Fails on a copy that lets any lever take one."""

@@ -143,7 +143,8 @@ def compute_design(
         full_state=any(m.record for m in chosen),
         on_failure="record",
     )
-    result = at_the_cam(result, cases)  # a lever layout's cam force at the cam, as archived
+    # a lever layout's cam force and impacts at the cam, as archived
+    result = at_the_cam(result, cases, first.settings.capture_velocity)
     failed = np.isin(np.asarray(result.status), FAILURES)
     values = {}
     for m in chosen:

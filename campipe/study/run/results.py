@@ -138,7 +138,8 @@ def compute_batch(plan: BatchPlan) -> BatchData:
     settings = plan.cases[0].settings
     cases = [c.case for c in plan.cases]
     result = run_batch(cases, settings, full_state=full_state(plan.record), on_failure="record")
-    return batch_arrays(plan, at_the_cam(result, cases))  # a lever's roller force at the cam
+    # a lever's roller force and impacts at the cam
+    return batch_arrays(plan, at_the_cam(result, cases, settings.capture_velocity))
 
 
 def batch_arrays(plan: BatchPlan, result: BatchResult) -> BatchData:
