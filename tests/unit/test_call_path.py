@@ -237,7 +237,8 @@ def test_the_run_kernels_structures_cross_as_plain_tuples_of_their_fields():
     b = batch_module._prepare_batch(cases, settings, True)
     named = (b.cases, b.modal_trains, b.packed, b.runs, batch_module._outputs(b, settings))
     args = arguments((b.modal_trains, b.packed, b.runs), b.cases, named[4])
-    assert len(args) == len(RUN_STRUCTURES) + 1 and isinstance(args[-1], np.ndarray)
+    assert len(args) == len(RUN_STRUCTURES) + 2 and isinstance(args[-2], np.ndarray)
+    assert args[-1] is None  # no case carries a plunger: the kernel without its code
     for structure, crossed, cls in zip(named, args, RUN_STRUCTURES, strict=False):
         assert type(structure) is cls and type(crossed) is tuple
         assert len(crossed) == len(structure)
@@ -245,4 +246,4 @@ def test_the_run_kernels_structures_cross_as_plain_tuples_of_their_fields():
     kernel_types = tuple(typeof(a) for a in args)
     got = named_types(kernel_types)
     assert got[:5] == tuple(typeof(s) for s in named)
-    assert got[5] == typeof(RUN_STRUCTURES[5](*args[5])) and got[6] == kernel_types[6]
+    assert got[5] == typeof(RUN_STRUCTURES[5](*args[5])) and got[6:] == kernel_types[6:]

@@ -88,3 +88,31 @@ def test_past_the_onset_the_pump_up_into_the_flights_is_the_peer_s():
     assert len(ours) == len(theirs) > 6
     np.testing.assert_array_equal(ours[:, 1:4], theirs[:, 1:4])
     assert np.abs(ours[:, 0] - theirs[:, 0]).max() < 1e-8
+
+
+def test_a_batch_with_a_plunger_runs_its_other_cases_bit_for_bit():
+    """A batch that carries a plunger runs the kernel compiled with the plunger's code (its
+    last argument the cases' plunger coordinates); one that carries none, the kernel without
+    it (None: numba prunes every plunger branch, a quarter less to compile). A thesis case in
+    the first kind of batch, beside a bucket with its adjuster, gives its own batch's
+    histories, metrics and events to the bit. Fails on a copy whose two kernels differ in
+    the contacts' monitors (a plunger's monitor count or branch leaking into the other)."""
+    from campipe.engine import batch as batch_module
+    from campipe.engine.integrators.modal_exact import arguments
+    from campipe.engine.plunger_modes import Embedded
+
+    bucket = Case(Embedded(valve_train("thesis-1971", BUCKET)), CAM, 3000 * RPM)
+    thesis = Case(valve_train("thesis-1971"), CAM, 3000 * RPM)
+    settings = RunSettings(revolutions=2)
+    for cases, marker in (([bucket, thesis], [7, -1]), ([thesis], None)):
+        b = batch_module._prepare_batch(cases, settings, True)
+        args = arguments((b.modal_trains, b.packed, b.runs), b.cases,
+                         batch_module._outputs(b, settings))  # fmt: skip
+        assert (args[-1] is None) if marker is None else list(args[-1]) == marker
+    run = batch_module._run_carried
+    mixed = run([bucket, thesis], settings, check_stability_limit=True, on_failure="raise")
+    alone = run([thesis], settings, check_stability_limit=True, on_failure="raise")
+    assert list(mixed.status) == [0, 0] and len(alone.events[0]) >= 2
+    assert np.array_equal(mixed.q[1, :, :7], alone.q[0])
+    assert np.array_equal(mixed.per_rev[1], alone.per_rev[0])
+    assert np.array_equal(mixed.events[1], alone.events[0])

@@ -43,7 +43,7 @@ from campipe.engine.common import (
     start_piece,
     turn_of,
 )
-from campipe.engine.exact.segment import _begin_segment, plunger_switch
+from campipe.engine.exact.segment import _begin_segment, monitor_count, plunger_switch
 from campipe.engine.exact.state import (
     MAX_STALLED_EVENTS,
     MODE_FLOOR,
@@ -192,6 +192,25 @@ def _plunger_suspect(ws):
     return False
 
 
+@njit(inline="always", nogil=True)
+def _plunger_grid(WC, MC, nact, G, GT, gdeg, w, x, cth, sth, ready, gval, dval, n_mon, pl):
+    """``_plunger_at_grid`` where the batch carries a plunger (pl not None; see
+    ``_plunger_suspected``), for a case with one."""
+    if pl is not None:
+        if n_mon > 2:
+            _plunger_at_grid(WC, MC, nact, G, GT, gdeg, w, x, cth, sth, ready, gval, dval)
+
+
+@njit(inline="always", nogil=True)
+def _plunger_suspected(ws, n_mon, pl):
+    """``_plunger_suspect`` where the batch carries a plunger (pl not None) and the case has
+    one; with pl None no plunger code is compiled (numba prunes the branch on its type)."""
+    if pl is not None:
+        if n_mon > 2:
+            return _plunger_suspect(ws)
+    return False
+
+
 @njit(**HELPER)
 def _earliest_crossing(ref, st, nact, t_prev, t_eval):
     """The earliest monitor to rise through its level in (t_prev, t_eval] [s] and when,
@@ -263,7 +282,7 @@ def _force_maxima(per_rev, c, turn, cam_held, seat_held, gval):
 
 
 @njit(inline="always", nogil=True)
-def _walk(ref, st):
+def _walk(ref, st, pl):
     """Walk the segment's grid from st.t_s until an event, a profile break or the run's end,
     and handle what ended it (``_apply_event``, ``_cross_break``, or st.done).
 
@@ -274,7 +293,8 @@ def _walk(ref, st):
     """
     cases, trains, profiles, runs, out, ws = deref(ref)
     c, w, t_s, th0, t_break = st.c, st.w, st.t_s, st.th0, st.t_break
-    nact, ns, gdeg, eps_force, n_mon = st.nact, st.ns, st.gdeg, st.eps_force, st.n_mon
+    nact, ns, gdeg, eps_force = st.nact, st.ns, st.gdeg, st.eps_force
+    n_mon = monitor_count(st, pl)  # (2, a constant, where the batch carries no plunger)
     speed_row = trains.speed[st.tr, st.cfg - 1]
     cam_held = holds_cam(st.cfg)
     seat_held = holds_seat(st.cfg)
@@ -292,7 +312,7 @@ def _walk(ref, st):
     for m in range(n_mon):
         held = cam_held if m == 0 else (seat_held if m == 1 else True)  # (2, 3: a plunger's)
         if watch[m] and gval[m] > level[m] and (held or dprev[m] > 0.0):
-            _apply_event(ref, st, m, t_s)
+            _apply_event(ref, st, m, t_s, pl)
             return
     t_prev = t_s
     h = -1.0
@@ -363,15 +383,14 @@ def _walk(ref, st):
                     gval[m], dval[m] = _monitor_at_grid(
                         WC, MC, nact, G, GT, m, gdeg, w, x_n, cth, sth
                     )
-            if n_mon > 2:  # a carried plunger's (apart: the contacts' loop above is unrolled)
-                _plunger_at_grid(WC, MC, nact, G, GT, gdeg, w, x_n, cth, sth, ready, gval, dval)
+            _plunger_grid(WC, MC, nact, G, GT, gdeg, w, x_n, cth, sth, ready, gval, dval, n_mon, pl)
         if t_eval > t_s and (
-            _suspect(watch, level, gval, dval, dprev) or (n_mon > 2 and _plunger_suspect(ws))
+            _suspect(watch, level, gval, dval, dprev) or _plunger_suspected(ws, n_mon, pl)
         ):
             first, t_ev = _earliest_crossing(ref, st, nact, t_prev, t_eval)
             if first >= 0:
                 st.nact = nact
-                _apply_event(ref, st, first, t_ev)
+                _apply_event(ref, st, first, t_ev, pl)
                 return
         if at_break:
             # The break's point counts for the force maxima as a grid point does (a lift
@@ -384,10 +403,9 @@ def _walk(ref, st):
         for m in range(2):
             dprev[m] = dval[m]
             gprev[m] = gval[m]
-        if n_mon > 2:
-            for m in range(2, n_mon):
-                dprev[m] = dval[m]
-                gprev[m] = gval[m]
+        for m in range(2, n_mon):  # a carried plunger's (none where n_mon is the constant 2)
+            dprev[m] = dval[m]
+            gprev[m] = gval[m]
         _force_maxima(per_rev, c, turn_of(w, t_n), cam_held, seat_held, gval)
         t_prev = t_n
         if i_step < n_steps:
@@ -451,28 +469,30 @@ def _impact(cases, trains, out, ws, st, seat, closing, t, vcam, lift):
 
 
 @njit(inline="always", nogil=True)
-def _plunger_event(trains, runs, out, ws, st, valve, t_ev):
+def _plunger_event(trains, runs, out, ws, st, valve, t_ev, pl):
     """A carried plunger's monitor rose at t_ev [s] (``valve``: its check valve's, else its
     travel's): the regime it leads to (``engine.plunger.SWITCHES``), recorded as an event of
     velocity 0 with the plunger's u there in the impulse field (which
-    ``lash_adjuster`` reads for each turn's leak-down and pump-up, and clears)."""
-    reg = st.reg
-    if reg == CLOSED:
-        new, kind = (OPEN, CHECK_OPENS) if valve else (BOTTOMED, BOTTOMS)
-    elif reg == OPEN:
-        new, kind = (CLOSED, CHECK_CLOSES) if valve else (TOPPED, TOPS)
-    elif reg == BOTTOMED:
-        new, kind = OPEN, CHECK_OPENS
-    else:
-        new, kind = CLOSED, CHECK_CLOSES
-    c = st.c
-    u = ws.q[runs.plunger_coord[c]]
-    record_event(out.events, out.n_events, c, t_ev, kind, st.cfg, st.cfg, 0.0, u)
-    plunger_switch(trains, runs, ws, st, new)
+    ``lash_adjuster`` reads for each turn's leak-down and pump-up, and clears). Nothing
+    compiled for a batch with no carried plunger (pl None: numba prunes the branch)."""
+    if pl is not None:
+        reg = st.reg
+        if reg == CLOSED:
+            new, kind = (OPEN, CHECK_OPENS) if valve else (BOTTOMED, BOTTOMS)
+        elif reg == OPEN:
+            new, kind = (CLOSED, CHECK_CLOSES) if valve else (TOPPED, TOPS)
+        elif reg == BOTTOMED:
+            new, kind = OPEN, CHECK_OPENS
+        else:
+            new, kind = CLOSED, CHECK_CLOSES
+        c = st.c
+        u = ws.q[runs.plunger_coord[c]]
+        record_event(out.events, out.n_events, c, t_ev, kind, st.cfg, st.cfg, 0.0, u)
+        plunger_switch(trains, runs, ws, st, new)
 
 
 @njit(**HELPER)
-def _apply_event(ref, st, first, t_ev):
+def _apply_event(ref, st, first, t_ev, pl):
     """Monitor ``first`` rose through its level at t_ev [s]: take the exact state there, and
     release the contact (a force monitor) or, if the contact closes, apply the plastic impact
     (a gap monitor; ``_impact``): a touch that does not close is no event. Starts the next
@@ -494,7 +514,7 @@ def _apply_event(ref, st, first, t_ev):
     _off_cam(out, cfg, c, w, st.t_s, t_ev)
     new = cfg
     if first >= 2:
-        _plunger_event(trains, runs, out, ws, st, first == 2, t_ev)
+        _plunger_event(trains, runs, out, ws, st, first == 2, t_ev, pl)
     elif first == 0 and cam_held:
         new = configuration(False, seat_held)
         release(out, st, c, t_ev, False, cfg, new, 0.0)
@@ -589,7 +609,7 @@ def _start_case(cases, trains, profiles, runs, ws, st, c, tr):
 
 
 @njit(**KERNEL)
-def modal_exact_batch(cases, trains, profiles, runs, out, ws, state):
+def modal_exact_batch(cases, trains, profiles, runs, out, ws, state, pl):
     """Advance every case of a batch exactly between events; fill ``out`` in place.
 
     Parameters
@@ -606,6 +626,11 @@ def modal_exact_batch(cases, trains, profiles, runs, out, ws, state):
         Work arrays (``make_workspace``).
     state : (1,) array of STATE
         The run's scalars.
+    pl : (n,) int64 array or None
+        The cases' plunger coordinates (``runs.plunger_coord``) if any case carries a lash
+        adjuster's plunger (``engine.plunger_modes``); None otherwise, for which numba prunes
+        every branch of the plunger's code (``if pl is not None``) and compiles none of it:
+        the batches of every other train run a kernel without it.
     """
     cases, trains, profiles, runs, out, ws = run_structures(cases, trains, profiles, runs, out, ws)
     st = state[0]
@@ -614,10 +639,10 @@ def modal_exact_batch(cases, trains, profiles, runs, out, ws, state):
         _start_case(cases, trains, profiles, runs, ws, st, c, runs.train[c])
         st.per_turn = _turn_samples(st.w, runs.t_sample[c], out.q.shape[1], out.per_rev.shape[1])
         while not st.done:
-            _begin_segment(ref, st)
+            _begin_segment(ref, st, pl)
             # (A segment may begin on the sample that closes the first turn.)
             if not _repeated(out, st, trains.n_coordinates[st.tr]):
-                _walk(ref, st)
+                _walk(ref, st, pl)
             if out.status[c] != OK:
                 break
             if st.stalled > MAX_STALLED_EVENTS:
@@ -646,12 +671,12 @@ def ahead_signatures(kernel_types: tuple) -> dict[Any, tuple]:
     second process has it (typing ``_begin_segment`` first), the others seconds after.
     ``_sample`` comes first: reached sooner, it would be compiled twice. Types that differ
     from the kernel's call would cost a second compile, not a wrong result."""
-    *tuples, state = named_types(kernel_types)  # as the kernel names its plain tuples
+    *tuples, state, pl = named_types(kernel_types)  # as the kernel names its plain tuples
     ref = types.CPointer(types.BaseTuple.from_types(tuples))  # the kernel's ``by_ref``
     st = state.dtype  # the kernel's ``state[0]``
     i8, f8 = types.int64, types.float64
     return {
         _sample: (ref, st, i8, f8, f8, f8),
-        _apply_event: (ref, st, i8, f8),
+        _apply_event: (ref, st, i8, f8, pl),
         _earliest_crossing: (ref, st, i8, f8, f8),
     }

@@ -111,7 +111,7 @@ def _gap_monitor(cases, trains, profiles, ws, st, m, sign):
         ws.G[m, 0] += cases.seat_q[c]
 
 
-@njit(inline="always", nogil=True)
+@njit(**HELPER)
 def _plunger_monitors(trains, runs, ws, st):
     """A carried plunger's monitors in its regime st.reg (``engine.plunger``'s, with its dead
     band HYSTERESIS): 2, its check valve (closed, or bottomed: −F rising through
@@ -168,12 +168,33 @@ def _link_force(runs, ws, c):
 
 
 @njit(inline="always", nogil=True)
+def monitor_count(st, pl):
+    """The monitors case st.c watches (st.n_mon): the constant 2 in a batch with no carried
+    plunger (pl None), so that the compiled loops over them are the contacts' alone."""
+    if pl is not None:
+        return st.n_mon
+    return 2
+
+
+#: ``plunger_switch``'s regime for a plunger held until t = 0 (``plunger.HELD``): the one its
+#: load gives there (``PlungerState.regime_at``).
+RELEASED = -1
+
+
+@njit(**HELPER)
 def plunger_switch(trains, runs, ws, st, reg):
-    """Case st.c's carried plunger into regime ``reg``: its train row, its velocity the one
-    its law gives there (held: 0, at the end it is held at), and the harmonic responses of
-    the configurations that hold the cam for that row."""
+    """Case st.c's carried plunger into regime ``reg`` (RELEASED: the one its load gives):
+    its train row, its velocity the one its law gives there (held: 0, at the end it is held
+    at), and the harmonic responses of the configurations that hold the cam for that row.
+    (Compiled apart, the plunger's code once: only a case with one runs it.)"""
     c = st.c
     iu = runs.plunger_coord[c]
+    if reg == RELEASED:
+        u = ws.q[iu]
+        if _link_force(runs, ws, c) > runs.plunger_check[c]:
+            reg = BOTTOMED if u <= runs.plunger_end[c, BOTTOMED] else CLOSED
+        else:
+            reg = TOPPED if u >= runs.plunger_end[c, TOPPED] else OPEN
     st.reg = reg
     st.tr = runs.plunger_train[c, reg]
     damper = runs.plunger_damper[c, reg]
@@ -187,20 +208,7 @@ def plunger_switch(trains, runs, ws, st, reg):
 
 
 @njit(inline="always", nogil=True)
-def _release_held(trains, runs, ws, st):
-    """A plunger held until t = 0 (``plunger.HELD``) takes the regime its load gives there
-    (``PlungerState.regime_at``)."""
-    c = st.c
-    u = ws.q[runs.plunger_coord[c]]
-    if _link_force(runs, ws, c) > runs.plunger_check[c]:
-        reg = BOTTOMED if u <= runs.plunger_end[c, BOTTOMED] else CLOSED
-    else:
-        reg = TOPPED if u >= runs.plunger_end[c, TOPPED] else OPEN
-    plunger_switch(trains, runs, ws, st, reg)
-
-
-@njit(inline="always", nogil=True)
-def _monitors(cases, trains, profiles, runs, ws, st):
+def _monitors(cases, trains, profiles, runs, ws, st, pl):
     """The monitors' coefficients g_m(τ) = Re Σ_j W_mj e^{λ_j τ} + Σ_k G_mk x^k
     + Re(GT_m e^{iθ}), which of them can end the segment, and st.gdeg."""
     c = st.c
@@ -225,10 +233,11 @@ def _monitors(cases, trains, profiles, runs, ws, st):
             force_monitor(trains, ws, st, m, sign, level)
         else:
             _gap_monitor(cases, trains, profiles, ws, st, m, sign)
-    if st.n_mon > 2:
-        _plunger_monitors(trains, runs, ws, st)
+    if pl is not None:  # (None: a batch with no carried plunger compiles none of its code)
+        if st.n_mon > 2:
+            _plunger_monitors(trains, runs, ws, st)
     gdeg = 0
-    for m in range(st.n_mon):
+    for m in range(monitor_count(st, pl)):
         if ws.ready[m]:
             for k in range(max(st.deg, 7) + 1):
                 if ws.G[m, k] != 0.0:
@@ -255,7 +264,7 @@ def _monitor_column(WC, m, jj, w1, w2, lbar, d2):
 
 
 @njit(inline="always", nogil=True)
-def _block_columns(cases, trains, runs, ws, st):
+def _block_columns(cases, trains, runs, ws, st, pl):
     """One column per block, fastest first: the state's coefficients of f1 and f2 (VY), the
     monitors' (WC) and their derivatives', the block's shares of coordinates and forces (MC);
     sets st.nact."""
@@ -329,27 +338,38 @@ def _block_columns(cases, trains, runs, ws, st):
                     w1 = sign * VY[0, jj, rows[m]]
                     w2 = sign * VY[1, jj, rows[m]]
             _monitor_column(WC, m, jj, w1, w2, lbar, d2)
-        if st.n_mon > 2:  # a carried plunger's (apart: the contacts' loop above is unrolled)
-            for m in range(2, st.n_mon):
-                w1 = 0.0
-                w2 = 0.0
-                if ws.ready[m]:
-                    for j in range(st.nf):
-                        r = ws.prow[m - 2, trains.free[tr, ci, j]]
-                        w1 += r * VY[0, jj, j]
-                        w2 += r * VY[1, jj, j]
-                _monitor_column(WC, m, jj, w1, w2, lbar, d2)
+        if pl is not None:  # a carried plunger's (apart: the contacts' loop above is unrolled)
+            if st.n_mon > 2:
+                _plunger_columns(trains, ws, st, jj, lbar, d2)
     st.nact = nb
 
 
 @njit(**HELPER)
-def _begin_segment(ref, st):
+def _plunger_columns(trains, ws, st, jj, lbar, d2):
+    """``_block_columns``' block column jj of a carried plunger's monitors (2, 3): their
+    rows (ws.prow) over the state's coefficients VY (compiled apart: only such a case runs
+    it)."""
+    tr, ci = st.tr, st.cfg - 1
+    for m in range(2, st.n_mon):
+        w1 = 0.0
+        w2 = 0.0
+        if ws.ready[m]:
+            for j in range(st.nf):
+                r = ws.prow[m - 2, trains.free[tr, ci, j]]
+                w1 += r * ws.VY[0, jj, j]
+                w2 += r * ws.VY[1, jj, j]
+        _monitor_column(ws.WC, m, jj, w1, w2, lbar, d2)
+
+
+@njit(**HELPER)
+def _begin_segment(ref, st, pl):
     """Begin a segment at st.t_s in configuration st.cfg on piece st.p, from the state in
     ws.q, ws.v: forcing, particular solution, modal start, monitors, the break ahead, the mode
     pairs; the monitors' values there, and the sample due there, if any."""
     cases, trains, profiles, runs, out, ws = deref(ref)
-    if st.reg == HELD and st.t_s >= 0.0:
-        _release_held(trains, runs, ws, st)
+    if pl is not None:
+        if st.reg == HELD and st.t_s >= 0.0:
+            plunger_switch(trains, runs, ws, st, RELEASED)
     ci = st.cfg - 1
     st.nf = trains.n_free[st.tr, ci]
     st.ns = 2 * st.nf
@@ -361,7 +381,7 @@ def _begin_segment(ref, st):
     ct = np.cos(th_s)
     sn = np.sin(th_s)
     _modal_start(trains, ws, st, x_s, ct, sn)
-    _monitors(cases, trains, profiles, runs, ws, st)
+    _monitors(cases, trains, profiles, runs, ws, st, pl)
     # The segment ends at the next break of the profile at the latest.
     nb, revb, th_b = next_break(profiles, st.c, st.p, st.rev)
     st.nb = nb
@@ -372,8 +392,8 @@ def _begin_segment(ref, st):
                        cases.form[c], cases.capture[c]):  # fmt: skip
         st.t_break = np.inf  # the run ends before it: the next run's start crosses it
     st.pdeg = degree(profiles, st.c, st.p)
-    _block_columns(cases, trains, runs, ws, st)
-    for m in range(st.n_mon):
+    _block_columns(cases, trains, runs, ws, st, pl)
+    for m in range(monitor_count(st, pl)):
         if ws.ready[m]:
             ws.gval[m], ws.dprev[m], _ = eval_monitor(
                 ws.WC, ws.MC, st.nact, ws.G, ws.GT, m, 0.0, st.w, x_s, th_s, st.gdeg

@@ -55,7 +55,16 @@ def arguments(prepared: Any, cases: Any, out: Any) -> tuple:
     _, closed_form, kernel_call = _engine()
     modal_trains, packed, runs = prepared
     n_q = modal_trains.load.shape[1]
-    return kernel_call.plain(
+    args = kernel_call.plain(
         cases, modal_trains, packed, runs, out, closed_form.make_workspace(n_q),
         closed_form.make_state(),
     )  # fmt: skip
+    return (*args, carried_plungers(runs))
+
+
+def carried_plungers(runs: Any) -> Any:
+    """The kernel's last argument: the batch's plunger coordinates if a case carries one
+    (``plunger_modes``), else None, for which numba compiles a kernel without the plunger's
+    code (a second specialisation, compiled only when such a batch first runs)."""
+    coords = runs.plunger_coord
+    return coords if coords.size and int(coords.max()) >= 0 else None
