@@ -8,7 +8,8 @@ names what got slower"):
 - the steady-state path on each scene that follows the cam, its margin and one turn of it;
 - the throughput batches (the batch's time), the engine's scaling points, the onset map and
   the time-domain grid it replaces;
-- the speed sweep's default, quasi-static start, one-case calls and newmark-linear.
+- the speed sweep's default, quasi-static start, one-case calls and newmark-linear, and
+  the quickstart's first run from an empty kernel cache (its kernels compiled).
 
 :func:`compare` matches the new figures with the previous run's by scene, figure and cam
 turns, and names every one more than :data:`SLOWER` slower. Two runs are compared only when
@@ -46,6 +47,7 @@ SWEEP_FIGURES = (
     ("default_quasi_static", "default with the quasi-static start, 32 cases"),
     ("one_case_calls", "32 one-case calls"),
     ("newmark", "newmark-linear at 1 µs, 32 cases"),
+    ("first_run", "the quickstart's first run from an empty kernel cache"),
 )
 #: The families of rows whose time is campipe's own (solve_ivp's is the peer's).
 TIMED_FAMILIES = ("modal-exact", "modal-exact capped", "contacts only", "newmark-linear")

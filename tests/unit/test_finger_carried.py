@@ -8,6 +8,7 @@ roots and quadrature), and at speed against the per-turn model."""
 import math
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 from scipy.optimize import brentq
@@ -147,3 +148,31 @@ def test_the_plunger_pumps_the_roller_onto_the_base_circle_at_the_hand_s_instant
     assert events[0, EV_KIND] == CAM_IMPACT
     assert events[0, EV_TIME] == pytest.approx(pump * u / CHECK, rel=1e-4)
     assert CHECK_VALVE_OPENS not in events[:, EV_KIND]  # open from the start
+
+
+@pytest.mark.slow
+def test_the_per_turn_model_s_error_on_the_finger_past_its_onset():
+    """The bundled finger on its adjuster at 9000 rpm engine speed, past its onset (about 7900),
+    pumping up from the dry lash: the per-turn model (rigid contacts, the plunger moved at each
+    turn's end) against the carried plunger (compliant contacts, stiff) over 6 turns, the
+    stated error of the per-turn model on a finger (docs/model.md): each turn's net pump-up
+    differs by up to 32 % (found; bounded at 50 %), the extension after 5 turns by 15 % (76
+    against 90 µm; bounded at 25 %, and at least 5 %: the error is real, the per-turn model
+    moving the pivot only at the turn's end while the roller is in flight). Fails on a copy
+    whose per-turn model drops the pump-up into the flights (its net a few µm a turn)."""
+    path = Path(__file__).parents[2] / "studies" / "finger-follower-hla.yaml"
+    model = yaml.safe_load(path.read_text())["model"]
+    case = load_study(path).cases[-1].case  # 9000 rpm
+    stiff = {**COMPLIANT, "cam_contact_damping": "50 N*s/m", "seat_contact_damping": "50 N*s/m"}
+    settings = RunSettings(revolutions=6, output_every=math.radians(1.0), tolerance=1e-7)
+    tables = []
+    for extra in ({}, stiff):
+        train = valve_train("thesis-1971", {**model, **extra}, key_prefix="model.")
+        run = run_batch([Case(train, case.profile.cam, case.speed)], settings)
+        assert run.status[0] == 0
+        tables.append(run.lash_adjuster[0])
+    per_turn, carried = tables
+    net_p, net_c = np.diff(per_turn[:, 0]), np.diff(carried[:, 0])
+    assert net_c.min() > 10e-6  # it pumps up past the dry lash, into the flights
+    assert np.abs(net_p / net_c - 1.0).max() < 0.5
+    assert 0.05 < abs(per_turn[-1, 0] / carried[-1, 0] - 1.0) < 0.25

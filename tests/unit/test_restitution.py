@@ -128,8 +128,11 @@ def _bounce(e: float, capture: float):
     n_q = q0.shape[1]
     out = make_outputs(1, 2, 1, 256, n_q)
     ws = engine_batch.make_workspace(n_q)
-    modal_exact_batch(*plain(cases, b.modal_trains, b.packed, b.runs, out, ws),
-                      np.zeros(1, engine_batch.STATE))  # fmt: skip
+    modal_exact_batch(
+        *plain(cases, b.modal_trains, b.packed, b.runs, out, ws),
+        np.zeros(1, engine_batch.STATE),
+        None,  # no carried plunger
+    )
     assert out.status[0] == 0
     return out.events[0, : out.n_events[0]]
 
