@@ -411,7 +411,7 @@ def particular(trains, profiles, runs, ws, st):
         ws.ZT[s] = beta * runs.zeta[c, ci, s] if has_trig else 0.0
 
 
-@njit(**HELPER)
+@njit(inline="always", nogil=True)
 def _slow_series(trains, profiles, ws, st):
     """The slow blocks' part of the particular solution, added to Z. In block b's
     coordinates y (z = X_b·y + …) the forcing's share β_k = (X⁻¹ b_k)_b drives

@@ -19,8 +19,11 @@ import os
 from collections.abc import Callable, Iterable, Mapping
 from typing import Any
 
+from numba import types
+
 from campipe import kernel_cache
 from campipe.engine import batch, contact, exact, integrators, steady
+from campipe.engine.plunger import carried
 from campipe.engine.settings import Case, RunSettings
 
 log = logging.getLogger(__name__)
@@ -148,6 +151,8 @@ def compile_kernels(case: Case, settings: RunSettings, search: bool = False) -> 
         kernel_types = None
         if settings.method == "modal-exact":
             kernel_types = batch.integrator_types([case], settings, False)
+            if carried(case, settings.integrator):  # the kernel with a plunger's code
+                kernel_types = (*kernel_types[:-1], types.Array(types.int64, 1, "C"))
         handed = False
         if second is not None:
             try:

@@ -106,24 +106,31 @@ def test_leak_down_pump_up_and_switches_at_a_crawl_against_the_lever_s_statics()
         assert q7[degrees] - seat == pytest.approx(lifted / (k_e + RATE), abs=1e-8)
 
 
-def test_the_per_turn_model_against_the_carried_plunger_on_a_finger():
-    """The bundled finger on its adjuster (studies/finger-follower-hla.yaml) at 2000 rpm
-    engine speed, pumping up from the dry lash: the carried plunger (compliant contacts,
-    stiff) against the per-turn model (rigid contacts) over 3 turns, each turn's leak-down and
-    pump-up to 1 % (found: 0.08 %). Fails on a copy that takes the pallet's force as the
-    pivot's load (the leak-down 1.7 times)."""
+def _per_turn_and_carried(which: int, turns: int):
+    """The bundled finger on its adjuster (studies/finger-follower-hla.yaml), its case
+    ``which`` over ``turns`` turns: the per-turn model's lash-adjuster table (rigid contacts)
+    and the carried plunger's (compliant contacts, stiff, lightly damped)."""
     path = Path(__file__).parents[2] / "studies" / "finger-follower-hla.yaml"
     model = yaml.safe_load(path.read_text())["model"]
-    case = load_study(path).cases[0].case  # 2000 rpm
+    case = load_study(path).cases[which].case
     stiff = {**COMPLIANT, "cam_contact_damping": "50 N*s/m", "seat_contact_damping": "50 N*s/m"}
-    settings = RunSettings(revolutions=3, output_every=math.radians(1.0), tolerance=1e-7)
+    settings = RunSettings(revolutions=turns, output_every=math.radians(1.0), tolerance=1e-7)
     tables = []
     for extra in ({}, stiff):
         train = valve_train("thesis-1971", {**model, **extra}, key_prefix="model.")
         run = run_batch([Case(train, case.profile.cam, case.speed)], settings)
         assert run.status[0] == 0
         tables.append(run.lash_adjuster[0])
-    per_turn, carried = tables
+    return tables
+
+
+def test_the_per_turn_model_against_the_carried_plunger_on_a_finger():
+    """The bundled finger on its adjuster (studies/finger-follower-hla.yaml) at 2000 rpm
+    engine speed, pumping up from the dry lash: the carried plunger (compliant contacts,
+    stiff) against the per-turn model (rigid contacts) over 3 turns, each turn's leak-down and
+    pump-up to 1 % (found: 0.08 %). Fails on a copy that takes the pallet's force as the
+    pivot's load (the leak-down 1.7 times)."""
+    per_turn, carried = _per_turn_and_carried(0, 3)  # 2000 rpm
     assert carried[:, 1:] == pytest.approx(per_turn[:, 1:], rel=0.01)
 
 
@@ -160,18 +167,7 @@ def test_the_per_turn_model_s_error_on_the_finger_past_its_onset():
     against 90 µm; bounded at 25 %, and at least 5 %: the error is real, the per-turn model
     moving the pivot only at the turn's end while the roller is in flight). Fails on a copy
     whose per-turn model drops the pump-up into the flights (its net a few µm a turn)."""
-    path = Path(__file__).parents[2] / "studies" / "finger-follower-hla.yaml"
-    model = yaml.safe_load(path.read_text())["model"]
-    case = load_study(path).cases[-1].case  # 9000 rpm
-    stiff = {**COMPLIANT, "cam_contact_damping": "50 N*s/m", "seat_contact_damping": "50 N*s/m"}
-    settings = RunSettings(revolutions=6, output_every=math.radians(1.0), tolerance=1e-7)
-    tables = []
-    for extra in ({}, stiff):
-        train = valve_train("thesis-1971", {**model, **extra}, key_prefix="model.")
-        run = run_batch([Case(train, case.profile.cam, case.speed)], settings)
-        assert run.status[0] == 0
-        tables.append(run.lash_adjuster[0])
-    per_turn, carried = tables
+    per_turn, carried = _per_turn_and_carried(-1, 6)  # 9000 rpm
     net_p, net_c = np.diff(per_turn[:, 0]), np.diff(carried[:, 0])
     assert net_c.min() > 10e-6  # it pumps up past the dry lash, into the flights
     assert np.abs(net_p / net_c - 1.0).max() < 0.5

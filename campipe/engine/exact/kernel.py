@@ -183,7 +183,7 @@ def _plunger_at_grid(WC, MC, nact, G, GT, gdeg, w, x, cth, sth, ready, gval, dva
             gval[m], dval[m] = _monitor_at_grid(WC, MC, nact, G, GT, m, gdeg, w, x, cth, sth)
 
 
-@njit(**HELPER)
+@njit(inline="always", nogil=True)
 def _plunger_suspect(ws):
     """``_suspect`` for a carried plunger's monitors (2, 3)."""
     for m in range(2, 4):
@@ -469,13 +469,14 @@ def _impact(cases, trains, out, ws, st, seat, closing, t, vcam, lift):
 
 
 @njit(inline="always", nogil=True)
-def _plunger_event(trains, runs, out, ws, st, valve, t_ev, pl):
+def _plunger_event(ref, st, valve, t_ev, pl):
     """A carried plunger's monitor rose at t_ev [s] (``valve``: its check valve's, else its
     travel's): the regime it leads to (``engine.plunger.SWITCHES``), recorded as an event of
     velocity 0 with the plunger's u there in the impulse field (which
     ``lash_adjuster`` reads for each turn's leak-down and pump-up, and clears). Nothing
     compiled for a batch with no carried plunger (pl None: numba prunes the branch)."""
     if pl is not None:
+        _, _, _, runs, out, ws = deref(ref)
         reg = st.reg
         if reg == CLOSED:
             new, kind = (OPEN, CHECK_OPENS) if valve else (BOTTOMED, BOTTOMS)
@@ -488,7 +489,7 @@ def _plunger_event(trains, runs, out, ws, st, valve, t_ev, pl):
         c = st.c
         u = ws.q[runs.plunger_coord[c]]
         record_event(out.events, out.n_events, c, t_ev, kind, st.cfg, st.cfg, 0.0, u)
-        plunger_switch(trains, runs, ws, st, new)
+        plunger_switch(ref, st, new)
 
 
 @njit(**HELPER)
@@ -514,7 +515,7 @@ def _apply_event(ref, st, first, t_ev, pl):
     _off_cam(out, cfg, c, w, st.t_s, t_ev)
     new = cfg
     if first >= 2:
-        _plunger_event(trains, runs, out, ws, st, first == 2, t_ev, pl)
+        _plunger_event(ref, st, first == 2, t_ev, pl)
     elif first == 0 and cam_held:
         new = configuration(False, seat_held)
         release(out, st, c, t_ev, False, cfg, new, 0.0)

@@ -111,7 +111,7 @@ def _gap_monitor(cases, trains, profiles, ws, st, m, sign):
         ws.G[m, 0] += cases.seat_q[c]
 
 
-@njit(**HELPER)
+@njit(inline="always", nogil=True)
 def _plunger_monitors(trains, runs, ws, st):
     """A carried plunger's monitors in its regime st.reg (``engine.plunger``'s, with its dead
     band HYSTERESIS): 2, its check valve (closed, or bottomed: −F rising through
@@ -182,11 +182,13 @@ RELEASED = -1
 
 
 @njit(**HELPER)
-def plunger_switch(trains, runs, ws, st, reg):
+def plunger_switch(ref, st, reg):
     """Case st.c's carried plunger into regime ``reg`` (RELEASED: the one its load gives):
     its train row, its velocity the one its law gives there (held: 0, at the end it is held
     at), and the harmonic responses of the configurations that hold the cam for that row.
-    (Compiled apart, the plunger's code once: only a case with one runs it.)"""
+    (Compiled apart, the plunger's code once; the batch's structures by reference,
+    ``common.by_ref``.)"""
+    _, trains, _, runs, _, ws = deref(ref)
     c = st.c
     iu = runs.plunger_coord[c]
     if reg == RELEASED:
@@ -344,11 +346,10 @@ def _block_columns(cases, trains, runs, ws, st, pl):
     st.nact = nb
 
 
-@njit(**HELPER)
+@njit(inline="always", nogil=True)
 def _plunger_columns(trains, ws, st, jj, lbar, d2):
     """``_block_columns``' block column jj of a carried plunger's monitors (2, 3): their
-    rows (ws.prow) over the state's coefficients VY (compiled apart: only such a case runs
-    it)."""
+    rows (ws.prow) over the state's coefficients VY."""
     tr, ci = st.tr, st.cfg - 1
     for m in range(2, st.n_mon):
         w1 = 0.0
@@ -369,7 +370,7 @@ def _begin_segment(ref, st, pl):
     cases, trains, profiles, runs, out, ws = deref(ref)
     if pl is not None:
         if st.reg == HELD and st.t_s >= 0.0:
-            plunger_switch(trains, runs, ws, st, RELEASED)
+            plunger_switch(ref, st, RELEASED)
     ci = st.cfg - 1
     st.nf = trains.n_free[st.tr, ci]
     st.ns = 2 * st.nf
