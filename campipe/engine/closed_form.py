@@ -402,7 +402,12 @@ def particular(trains, profiles, runs, ws, st):
                 acc += trains.a_inv[tr, ci, s, j] * ws.zb[j]
             Z[k, s] = acc
     if trains.any_slow[tr, ci]:
-        _slow_series(trains, profiles, ws, st)
+        span = profiles.breaks[st.c, st.p + 1] - profiles.breaks[st.c, st.p]
+        _slow_series(
+            trains.slow[tr, ci], trains.bstart[tr, ci], trains.bdim[tr, ci],
+            trains.lam_bar[tr, ci], trains.block_n[tr, ci], trains.basis_inv[tr, ci],
+            trains.basis[tr, ci], trains.n_blocks[tr, ci], span, ws.Z, ws.bpoly, st,
+        )  # fmt: skip
     c, p = st.c, st.p
     trig = profiles.trig
     has_trig = holds_cam(st.cfg) and (trig[c, p, 0] != 0.0 or trig[c, p, 1] != 0.0)
@@ -411,33 +416,33 @@ def particular(trains, profiles, runs, ws, st):
         ws.ZT[s] = beta * runs.zeta[c, ci, s] if has_trig else 0.0
 
 
-@njit(inline="always", nogil=True)
-def _slow_series(trains, profiles, ws, st):
+@njit(**HELPER)
+def _slow_series(slow, bstart, bdim, lam_bar, block_n, basis_inv, basis, n_blocks, span, Z,
+                 bpoly, st):  # fmt: skip
     """The slow blocks' part of the particular solution, added to Z. In block b's
     coordinates y (z = X_b·y + …) the forcing's share β_k = (X⁻¹ b_k)_b drives
     ẏ = B_b·y + Σ β_k x^k (x = ωt − θ₀); with Y_0 = 0, Y_{k+1} = (B_b·Y_k + β_k)/(ω(k+1))
     is a solution (the homogeneous part takes the rest of the start), a series whose terms
     shrink as (|λ|·x/ω)^k/k! where A⁻¹'s recursion would grow as (ω/|λ|)^k: summed until a
-    term over the piece is below rounding (SERIES_EPS of the largest), to degree
-    Z_ROWS − 1 at most."""
-    tr, ci, ns, deg, w = st.tr, st.cfg - 1, st.ns, st.deg, st.w
-    Z = ws.Z
+    term over the piece (of ``span`` [rad]) is below rounding (SERIES_EPS of the largest),
+    to degree Z_ROWS − 1 at most. The train's blocks in its configuration as arrays (compiled
+    apart: only a slow block runs it, and no named tuple crosses by value)."""
+    ns, deg, w = st.ns, st.deg, st.w
     top = deg
-    span = profiles.breaks[st.c, st.p + 1] - profiles.breaks[st.c, st.p]
     for k in range(deg + 1, Z.shape[0]):
         for s in range(ns):
             Z[k, s] = 0.0
-    for b in range(trains.n_blocks[tr, ci]):
-        if not trains.slow[tr, ci, b]:
+    for b in range(n_blocks):
+        if not slow[b]:
             continue
-        i0 = trains.bstart[tr, ci, b]
-        two = trains.bdim[tr, ci, b] == 2
+        i0 = bstart[b]
+        two = bdim[b] == 2
         i1 = i0 + 1 if two else i0
-        lbar = trains.lam_bar[tr, ci, b]
-        n00 = trains.block_n[tr, ci, i0, i0]
-        n01 = trains.block_n[tr, ci, i0, i1] if two else 0.0
-        n10 = trains.block_n[tr, ci, i1, i0] if two else 0.0
-        n11 = trains.block_n[tr, ci, i1, i1] if two else 0.0
+        lbar = lam_bar[b]
+        n00 = block_n[i0, i0]
+        n01 = block_n[i0, i1] if two else 0.0
+        n10 = block_n[i1, i0] if two else 0.0
+        n11 = block_n[i1, i1] if two else 0.0
         y0 = 0.0
         y1 = 0.0
         largest = 0.0
@@ -446,9 +451,9 @@ def _slow_series(trains, profiles, ws, st):
             b1 = 0.0
             if k <= deg:
                 for s in range(ns):
-                    b0 += trains.basis_inv[tr, ci, i0, s] * ws.bpoly[k, s]
+                    b0 += basis_inv[i0, s] * bpoly[k, s]
                     if two:
-                        b1 += trains.basis_inv[tr, ci, i1, s] * ws.bpoly[k, s]
+                        b1 += basis_inv[i1, s] * bpoly[k, s]
             f = 1.0 / (w * (k + 1))
             y0, y1 = (
                 (lbar * y0 + n00 * y0 + n01 * y1 + b0) * f,
@@ -459,9 +464,9 @@ def _slow_series(trains, profiles, ws, st):
             if k >= deg and term <= SERIES_EPS * largest:
                 break
             for s in range(ns):
-                Z[k + 1, s] += trains.basis[tr, ci, s, i0] * y0
+                Z[k + 1, s] += basis[s, i0] * y0
                 if two:
-                    Z[k + 1, s] += trains.basis[tr, ci, s, i1] * y1
+                    Z[k + 1, s] += basis[s, i1] * y1
             top = max(top, k + 1)
     st.deg = top
 
