@@ -96,10 +96,15 @@ def impacts_at_the_cam(
     events[cam, EV_VELOCITY] = valve_side / r
     events[cam, EV_IMPULSE] *= r
     turn = np.floor(angle / TWO_PI + 1e-12).astype(np.int64)
-    widest = float(lever_ratio(profile, _TURN).max())
+    widest = None  # the turn's largest ratio, found only for a turn with none recorded
     for k in np.flatnonzero(out > 0.0):  # (NaN: a failed case's, kept)
         counted = (turn == k) & (angle >= 0.0) & (valve_side >= min(capture, out[k]) * (1 - 1e-12))
-        out[k] = (valve_side / r)[counted].max() if counted.any() else out[k] / widest
+        if counted.any():
+            out[k] = (valve_side / r)[counted].max()
+            continue
+        if widest is None:
+            widest = float(lever_ratio(profile, _TURN).max())
+        out[k] /= widest
     return events, out
 
 

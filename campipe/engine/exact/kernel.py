@@ -130,10 +130,9 @@ def _fastest_needed(WC, MC, watch, level, gval, nact, tau, n_mon):
         for m in range(2):
             if watch[m]:
                 amp = max(amp, (WC[W1_ABS, m, k] + WC[W2_ABS, m, k] * s2) * MC[EABS, k])
-        if n_mon > 2:
-            for m in range(2, n_mon):
-                if watch[m]:
-                    amp = max(amp, (WC[W1_ABS, m, k] + WC[W2_ABS, m, k] * s2) * MC[EABS, k])
+        for m in range(2, n_mon):  # (apart, as above)
+            if watch[m]:
+                amp = max(amp, (WC[W1_ABS, m, k] + WC[W2_ABS, m, k] * s2) * MC[EABS, k])
         if spent + amp >= 0.5 * margin:
             break
         spent += amp
@@ -166,49 +165,40 @@ def _refresh(MC, nact, h, tau):
 
 
 @njit(inline="always", nogil=True)
+def _rising(watch, level, gval, dval, dprev, m):
+    """Monitor m is watched and above its level at the grid point, or past a maximum inside
+    the step (its derivative turned from + to −)."""
+    return watch[m] and (gval[m] > level[m] or (dprev[m] > 0.0 and dval[m] < 0.0))
+
+
+@njit(inline="always", nogil=True)
 def _suspect(watch, level, gval, dval, dprev):
-    """A watched contact monitor above its level at the grid point, or past a maximum inside
-    the step (its derivative turned from + to −): ``_earliest_crossing`` must look."""
+    """A contact monitor is ``_rising``: ``_earliest_crossing`` must look."""
     for m in range(2):
-        if watch[m] and (gval[m] > level[m] or (dprev[m] > 0.0 and dval[m] < 0.0)):
+        if _rising(watch, level, gval, dval, dprev, m):
             return True
     return False
 
 
-@njit(**HELPER)
-def _plunger_at_grid(WC, MC, nact, G, GT, gdeg, w, x, cth, sth, ready, gval, dval):
-    """A carried plunger's monitors (2, 3) at the grid point (``state._monitor_at_grid``)."""
-    for m in range(2, 4):
-        if ready[m]:
-            gval[m], dval[m] = _monitor_at_grid(WC, MC, nact, G, GT, m, gdeg, w, x, cth, sth)
-
-
 @njit(inline="always", nogil=True)
-def _plunger_suspect(ws):
-    """``_suspect`` for a carried plunger's monitors (2, 3)."""
-    for m in range(2, 4):
-        if ws.watch[m] and (ws.gval[m] > ws.level[m] or (ws.dprev[m] > 0.0 and ws.dval[m] < 0.0)):
-            return True
+def _plunger_suspected(ws, n_mon, pl):
+    """``_suspect`` for a carried plunger's monitors (2, 3), where the batch carries one (pl
+    not None: with None numba prunes the branch on its type and compiles none of it)."""
+    if pl is not None:
+        for m in range(2, n_mon):
+            if _rising(ws.watch, ws.level, ws.gval, ws.dval, ws.dprev, m):
+                return True
     return False
 
 
 @njit(inline="always", nogil=True)
 def _plunger_grid(WC, MC, nact, G, GT, gdeg, w, x, cth, sth, ready, gval, dval, n_mon, pl):
-    """``_plunger_at_grid`` where the batch carries a plunger (pl not None; see
-    ``_plunger_suspected``), for a case with one."""
+    """A carried plunger's monitors (2, 3) at the grid point (``state._monitor_at_grid``),
+    where the batch carries one (see ``_plunger_suspected``)."""
     if pl is not None:
-        if n_mon > 2:
-            _plunger_at_grid(WC, MC, nact, G, GT, gdeg, w, x, cth, sth, ready, gval, dval)
-
-
-@njit(inline="always", nogil=True)
-def _plunger_suspected(ws, n_mon, pl):
-    """``_plunger_suspect`` where the batch carries a plunger (pl not None) and the case has
-    one; with pl None no plunger code is compiled (numba prunes the branch on its type)."""
-    if pl is not None:
-        if n_mon > 2:
-            return _plunger_suspect(ws)
-    return False
+        for m in range(2, n_mon):
+            if ready[m]:
+                gval[m], dval[m] = _monitor_at_grid(WC, MC, nact, G, GT, m, gdeg, w, x, cth, sth)
 
 
 @njit(**HELPER)
