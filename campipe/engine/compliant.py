@@ -204,17 +204,19 @@ class _Run:
 
     def rhs(self, t: float, z: np.ndarray) -> np.ndarray:
         s, n, p = self.s, self.n, self.s.plunger
-        out = s.a_mat @ z[: 2 * n]
-        out[n:] += s.accel0
+        out = np.empty(z.size)
+        np.dot(s.a_mat, z[: 2 * n], out=out[: 2 * n])
+        out[n : 2 * n] += s.accel0
         fc, fs = self.forces(t, z)
         if fc != 0.0:
-            out[n:] -= s.minv[:, CAM] * fc
+            out[n : 2 * n] -= s.minv[:, CAM] * fc
         if fs != 0.0:
-            out[n:] += s.minv[:, SEAT] * fs
+            out[n : 2 * n] += s.minv[:, SEAT] * fs
         if p is None:
             return out
-        out[n:] -= p.push * z[2 * n]
-        return np.append(out, p.rate(z, self.valve, self.gain(t)[0]))
+        out[n : 2 * n] -= p.push * z[2 * n]
+        out[2 * n] = p.rate(z, self.valve, self.gain(t)[0])
+        return out
 
     def jac(self, t: float, z: np.ndarray) -> np.ndarray:
         """The Jacobian (a pivot's plunger's ü in the cam's approach rate left out)."""

@@ -286,6 +286,11 @@ class Lift:
         self.poly = profile.poly
         self.trig = profile.trig
         self.w = speed
+        # Python floats: a NumPy scalar read costs several times a list's in this loop
+        self._starts = profile.breaks.tolist()
+        self._rows = profile.poly.tolist()
+        self._trigs = profile.trig.tolist()
+        self._last: tuple = (None, None)  # ((piece, rev, t), its value): asked again at once
 
     def piece_at(self, t: float) -> tuple[int, int]:
         """(piece, turn) holding time t, by its position on the turn."""
@@ -301,15 +306,20 @@ class Lift:
 
     def at(self, piece: int, rev: int, t: float) -> tuple[float, float, float]:
         """Lift [m], its rate [m/s] and acceleration [m/s²] on ``piece`` of turn ``rev``."""
+        key = (piece, rev, t)
+        if self._last[0] == key:  # an integrator's right-hand side and its events ask twice
+            return self._last[1]
         theta = self.w * t
-        x = theta - rev * TWO_PI - self.breaks[piece]
-        c = self.poly[piece]
+        x = theta - rev * TWO_PI - self._starts[piece]
+        c = self._rows[piece]
         p0 = p1 = p2 = 0.0
-        for k in range(7, -1, -1):
+        for k in range(len(c) - 1, -1, -1):
             p2 = p2 * x + 2.0 * p1
             p1 = p1 * x + p0
             p0 = p0 * x + c[k]
         s, co = math.sin(theta), math.cos(theta)
-        ta, tb = self.trig[piece]
+        ta, tb = self._trigs[piece]
         w = self.w
-        return (p0 + ta * s + tb * co, w * (p1 + ta * co - tb * s), w * w * (p2 - ta * s - tb * co))
+        out = (p0 + ta * s + tb * co, w * (p1 + ta * co - tb * s), w * w * (p2 - ta * s - tb * co))
+        self._last = (key, out)
+        return out
