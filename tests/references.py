@@ -27,3 +27,54 @@ def steady_state_cam_force(train, speed, lift, theta):
     static = K[0, fr] @ x0 + K[0, 0] * q1_mean - f[0]
     amp = dyn([0], fr)[0] @ x1 + dyn([0], [0])[0, 0] * q1_amp
     return static + np.real(amp * np.exp(1j * theta))
+
+
+def numerical_platform() -> str:
+    """The BLAS kernels this process's numpy and SciPy run on, as OpenBLAS names them
+    ("Haswell", "SkylakeX", …; "unknown" where it cannot be read): LAPACK's results (the
+    modes, the modal damping) differ in their last bits between them, and every number after
+    with them. A bit-identity digest holds per platform (``recorded_digests``)."""
+    import ctypes
+
+    names = []
+    try:
+        with open("/proc/self/maps") as maps:
+            paths = sorted({line.split()[-1] for line in maps if "openblas" in line.lower()})
+    except OSError:
+        paths = []
+    for path in paths:
+        lib = ctypes.CDLL(path)
+        for symbol in ("scipy_openblas_get_corename64_", "scipy_openblas_get_corename",
+                       "openblas_get_corename64_", "openblas_get_corename"):  # fmt: skip
+            function = getattr(lib, symbol, None)
+            if function is not None:
+                function.restype = ctypes.c_char_p
+                names.append(function().decode())
+                break
+    return "+".join(sorted(set(names))) or "unknown"
+
+
+def recorded_digests(path) -> dict[str, str]:
+    """The digests a file records, digest → the platform it was computed on: one line each,
+    ``<digest> <platform>`` (a bare digest: the platform it was first recorded on, not named)."""
+    out = {}
+    for line in path.read_text().splitlines():
+        if line.strip():
+            digest, *platform = line.split()
+            out[digest] = " ".join(platform) or "not named"
+    return out
+
+
+def record_digest(path, digest: str) -> None:
+    """Record ``digest`` as this platform's (``CAMPIPE_UPDATE_DIGEST=1``): it replaces every
+    digest recorded before, which a change of results leaves stale; another platform records
+    its own by running the test there with the same variable."""
+    path.write_text(f"{digest} {numerical_platform()}\n")
+
+
+def add_platform_digest(path, digest: str) -> None:
+    """Add ``digest`` as this platform's beside the others (``CAMPIPE_ADD_PLATFORM_DIGEST=1``),
+    for a platform whose LAPACK rounds differently, the code unchanged."""
+    kept = {d: p for d, p in recorded_digests(path).items() if p != numerical_platform()}
+    kept[digest] = numerical_platform()
+    path.write_text("".join(f"{d} {p}\n" for d, p in kept.items()))

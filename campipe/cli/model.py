@@ -33,6 +33,7 @@ from campipe.model.assembly import (
     observed_orders,
 )
 from campipe.model.checks import DIRECT_ACTING, LUMPED, PUSHROD_ROCKER, layouts_of_key
+from campipe.model.contact_modes import ContactMode, contact_modes
 from campipe.model.layouts import used_coordinates
 from campipe.model.levers import LEVERS
 from campipe.profiles import evaluate, harmonic
@@ -129,10 +130,13 @@ def model(
     except QuantityError as exc:
         raise click.UsageError(str(exc)) from None
     table = ratio_table(train, sm, lift, math.radians(ratio_step))
+    contacts = contact_modes(train, sm)
     if as_json:
-        click.echo(json.dumps({**model_report(train, sm, limits, preset), **table}, indent=1))
+        report = model_report(train, sm, limits, preset)
+        click.echo(json.dumps({**report, **table, **contact_report(contacts)}, indent=1))
     else:
-        click.echo(model_text(train, sm, limits, preset, overrides) + ratio_text(table))
+        text = model_text(train, sm, limits, preset, overrides) + ratio_text(table)
+        click.echo(text + contact_text(contacts))
 
 
 def _json_value(value: object) -> object:
@@ -282,6 +286,63 @@ def ratio_text(table: dict) -> str:
     return "\n".join(lines)
 
 
+def contact_report(contacts: list[ContactMode]) -> dict[str, object]:
+    """The compliant contacts linearised at their static loads (JSON form, SI;
+    :mod:`campipe.model.contact_modes`); none for rigid contacts."""
+    return {
+        "compliant_contacts": [
+            {
+                "contact": c.contact,
+                "law": c.law,
+                "static_load": c.load,
+                "stiffness": c.stiffness,
+                "damping": c.damping,
+                "ratio": c.ratio,
+                "valve_side_stiffness": c.valve_side_stiffness,
+                "valve_side_damping": c.valve_side_damping,
+                "natural_frequencies": c.frequencies.tolist(),
+                "natural_frequencies_hz": (c.frequencies / TWO_PI).tolist(),
+                "units": {
+                    "static_load": "N",
+                    "stiffness": "N/m",
+                    "damping": "N·s/m",
+                    "ratio": "1, the valve's travel per the contact's",
+                    "valve_side_stiffness": "N/m",
+                    "valve_side_damping": "N·s/m",
+                    "natural_frequencies": "rad/s",
+                },
+            }
+            for c in contacts
+        ]
+    }
+
+
+def contact_text(contacts: list[ContactMode]) -> str:
+    """The human form of :func:`contact_report`; empty for rigid contacts."""
+    if not contacts:
+        return ""
+    lines = [
+        "",
+        "",
+        "Compliant contacts, linearised at their static load (the spring's preload as the "
+        "valve leaves its seat, through the train to the cam); at the valve, k/r² and c/r² "
+        "(r the lever ratio at the cam, 1 elsewhere)",
+        f"  {'contact':<8} {'law':<13} {'load N':>9} {'k N/mm':>11} {'c N·s/m':>9} "
+        f"{'r':>7} {'k/r² N/mm':>11} {'c/r² N·s/m':>11}",
+    ]
+    for c in contacts:
+        lines.append(
+            f"  {c.contact:<8} {c.law:<13} {c.load:9.1f} {c.stiffness / 1e3:11.5g} "
+            f"{c.damping:9.4g} {c.ratio:7.4f} {c.valve_side_stiffness / 1e3:11.5g} "
+            f"{c.valve_side_damping:11.4g}"
+        )
+    for c in contacts:
+        hz = ", ".join(f"{f:.1f}" for f in c.frequencies / TWO_PI)
+        other = "seat" if c.contact == "cam" else "cam"
+        lines.append(f"  natural frequencies, the {c.contact} closed ({other} open) [Hz]: {hz}")
+    return "\n".join(lines)
+
+
 def model_text(train, sm, limits, preset, overrides) -> str:
     """The human form of ``campipe model``, in the thesis's units and layout (a lumped
     chain's in SI)."""
@@ -375,6 +436,7 @@ def convergence_text(report: dict, preset: str, overrides) -> str:
     """The human form of ``campipe model --convergence``."""
     parameter = report["parameter"]
     freqs = np.array(report["natural_frequencies"], dtype=float)
+    roundoff = np.array(report["roundoff"], dtype=float)
     orders = np.array(report["observed_orders"], dtype=float)
     counts = report["elements"]
     member = parameter.removesuffix("_elements").replace("_", " ")
@@ -388,10 +450,11 @@ def convergence_text(report: dict, preset: str, overrides) -> str:
         "",
         f"  {'n':>6}" + "".join(f"{'mode ' + str(j):>14}" for j in range(1, freqs.shape[1] + 1)),
     ]
-    for n, row in zip(counts, freqs, strict=True):
-        lines.append(f"  {n:>6}" + "".join(f"{v:14.7g}" if v == v else f"{'':>14}" for v in row))
+    for n, row, noise in zip(counts, freqs, roundoff, strict=True):
+        cells = (_resolved(v, e) if v == v else "" for v, e in zip(row, noise, strict=True))
+        lines.append(f"  {n:>6}" + "".join(f"{c:>14}" for c in cells))
     lines.append(
-        f"  {'order':>6}" + "".join(f"{v:14.2f}" if v == v else f"{'-':>14}" for v in orders)
+        f"  {'order':>6}" + "".join(f"{v:14.1f}" if v == v else f"{'-':>14}" for v in orders)
     )
     lines += [
         "",
@@ -399,8 +462,19 @@ def convergence_text(report: dict, preset: str, overrides) -> str:
         "(consistent mass: 2 for a bar, 4 for a beam);",
         "'-' where the column has not settled into one mode or has converged to the "
         "eigensolver's round-off.",
+        "Each frequency to the digits above ten times its round-off (about ε/2·(ω_max/ω)²·ω,",
+        "at most ten digits); each order to one decimal.",
     ]
     return "\n".join(lines)
+
+
+def _resolved(value: float, roundoff: float, digits: int = 10) -> str:
+    """``value`` to the decade above ten times its ``roundoff`` (at most ``digits``
+    significant): the digits the eigensolver resolves, none that another machine's LAPACK
+    would print differently."""
+    decade = math.ceil(math.log10(10.0 * roundoff)) if roundoff > 0.0 else -digits
+    decade = max(decade, math.floor(math.log10(abs(value))) + 1 - digits) if value else decade
+    return f"{round(value, -decade):.{max(-decade, 0)}f}"
 
 
 # -- starting without the repository -----------------------------------------------------------

@@ -289,6 +289,22 @@ def _gain(lever: Lever, alpha: np.ndarray, normal_up: np.ndarray, along: np.ndar
     return lever.pallet_arm * np.cos(alpha) * normal_up / (arm * along) - 1.0
 
 
+def _rest_normal(lever: Lever) -> tuple[np.ndarray, np.ndarray]:
+    """At rest, the contact's normal at the roller (the radius from the cam's centre: the
+    roller on the base circle) and its component along the lever's motion, each (1,)."""
+    normal = (lever.rest_roller - lever.cam_centre) / lever.pitch_radius
+    motion = np.array([-math.sin(lever.rest_angle), math.cos(lever.rest_angle)])
+    return normal[1:], np.array([float(normal @ motion)])
+
+
+def rest_ratio(train: Any) -> float:
+    """The lever ratio [-] at rest, the roller on the base circle: b·cos α₀/(a·|n·t|), as
+    :func:`kinematic_state` gives on the base circle; b/a for a level finger under its cam."""
+    lever = lever_of(train)
+    along = _rest_normal(lever)[1]
+    return float(lever.pallet_arm * math.cos(lever.rest_angle) / (lever.roller_arm * abs(along[0])))
+
+
 def pivot_gain(train: Any) -> float:
     """The valve lift's change per unit rise of a lever's pivot [-] at rest (the roller on the
     base circle, whose normal at the roller is the radius from the cam's centre):
@@ -296,10 +312,8 @@ def pivot_gain(train: Any) -> float:
     work it is also the pivot's load per unit of the pallet's force, the lever's own momentum
     left out (``campipe.engine.lash_adjuster``)."""
     lever = lever_of(train)
-    normal = (lever.rest_roller - lever.cam_centre) / lever.pitch_radius
-    motion = np.array([-math.sin(lever.rest_angle), math.cos(lever.rest_angle)])
-    along = np.array([float(normal @ motion)])
-    return float(_gain(lever, np.array([lever.rest_angle]), normal[1:], along)[0])
+    normal_up, along = _rest_normal(lever)
+    return float(_gain(lever, np.array([lever.rest_angle]), normal_up, along)[0])
 
 
 def base_take_up(lever: Lever, height: float) -> float:

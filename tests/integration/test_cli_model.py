@@ -148,3 +148,78 @@ def test_the_kinematic_ratio_table_of_a_finger_and_the_thesis_s_constant():
     assert "Kinematic ratio over the cam turn" in text and " Hz " in text
     thesis = json.loads(run("--json").output)["kinematic_ratio"]
     assert thesis["constant"] == pytest.approx(1.5, rel=1e-9)
+
+
+def _two_mass_frequencies(m1, m2, k, at1, at2):
+    """ω [rad/s] of two masses joined by k, with springs to ground at1 (on m1) and at2 (on
+    m2): the roots of det(K − ω²M) = 0, a quadratic in ω²."""
+    a, b, c = m1 * m2, -(m1 * (k + at2) + m2 * (k + at1)), (k + at1) * (k + at2) - k * k
+    root = np.sqrt(b * b - 4 * a * c)
+    return np.sqrt(np.array([(-b - root) / (2 * a), (-b + root) / (2 * a)]))
+
+
+def test_compliant_contacts_at_their_static_load_and_the_frequencies_they_close():
+    """A two-mass chain with a kelvin-voigt cam and a hertz seat: the cam carries the spring's
+    preload, k at the follower and the chain's frequencies with it a spring to ground at m1
+    (the seat open) the quadratic's; the seat's tangent stiffness at the preload is
+    1.5·K^(2/3)·F^(1/3), its frequencies with that spring at the valve (the cam open). A
+    rigid train lists none. Fails on a copy that puts the contact's spring on the other
+    mass or linearises hertz at δ for F = 1 N."""
+    m1, m2, k, ks, p, kc, kh = 0.05, 0.06, 2e7, 4e4, 250.0, 3e8, 1e10
+    sets = [
+        "layout=lumped",
+        f"masses=[{m1} kg, {m2} kg]",
+        f"stiffnesses=[{k} N/m]",
+        f"spring_rate={ks} N/m",
+        f"spring_preload={p} N",
+        "damping_ratios=[0.05, 0.05]",
+        "cam_contact=kelvin-voigt",
+        f"cam_contact_stiffness={kc} N/m",
+        "cam_contact_damping=30 N*s/m",
+        "seat_contact=hertz",
+        f"seat_hertz_constant={kh} N/m**1.5",
+    ]
+    result = run(*[a for s in sets for a in ("--set", s)], "--json")
+    assert result.exit_code == 0, result.output
+    cam, seat = json.loads(result.output)["compliant_contacts"]
+    assert (cam["contact"], cam["law"], seat["contact"], seat["law"]) == (
+        "cam", "kelvin-voigt", "seat", "hertz",
+    )  # fmt: skip
+    assert cam["static_load"] == pytest.approx(p, rel=1e-9)
+    assert (cam["stiffness"], cam["damping"], cam["ratio"]) == (kc, 30.0, 1.0)
+    assert_allclose(cam["natural_frequencies"], _two_mass_frequencies(m1, m2, k, kc, ks), rtol=1e-9)
+    tangent = 1.5 * kh ** (2 / 3) * p ** (1 / 3)
+    assert seat["static_load"] == pytest.approx(p, rel=1e-9)
+    assert seat["stiffness"] == pytest.approx(tangent, rel=1e-9)
+    assert_allclose(
+        seat["natural_frequencies"], _two_mass_frequencies(m1, m2, k, 0.0, ks + tangent), rtol=1e-9
+    )
+    text = run(*[a for s in sets for a in ("--set", s)]).output
+    assert "Compliant contacts, linearised at their static load" in text
+    assert "natural frequencies, the seat closed (cam open) [Hz]" in text
+    rigid = json.loads(run("--json").output)
+    assert rigid["compliant_contacts"] == [] and "Compliant contacts" not in run().output
+
+
+def test_a_finger_s_roller_contact_is_k_over_r_squared_at_the_valve():
+    """The level finger of FINGER_SETS (ratio b/a = 1.5 on the base circle, its kinematic
+    table's at 90°) with a kelvin-voigt roller: the roller carries the preload times 1.5, the
+    valve side feels k/1.5² (and c/1.5²), and the two-mass chain (the lever reduced to the
+    pallet, (J + m·a²)/b²; the lever and stem in series) rings with k/1.5² at its first mass.
+    Fails on a copy that reflects the contact's stiffness by r, not r², or takes the
+    preload as the roller's load."""
+    kc, c = 2e8, 50.0
+    sets = [*FINGER_SETS, "cam_contact=kelvin-voigt", f"cam_contact_stiffness={kc} N/m",
+            f"cam_contact_damping={c} N*s/m"]  # fmt: skip
+    out = json.loads(run(*[a for s in sets for a in ("--set", s)], "--json").output)
+    (cam,) = out["compliant_contacts"]
+    r = out["kinematic_ratio"]["ratio"][3]  # 90°, every 30°
+    assert r == pytest.approx(1.5, rel=1e-12)
+    assert cam["ratio"] == pytest.approx(1.5, rel=1e-12)
+    assert cam["static_load"] == pytest.approx(220.0 * 1.5, rel=1e-9)
+    assert cam["valve_side_stiffness"] == pytest.approx(kc / 2.25, rel=1e-12)
+    assert cam["valve_side_damping"] == pytest.approx(c / 2.25, rel=1e-12)
+    m1 = (40e-6 + 0.010 * 0.030**2) / 0.045**2
+    link = 1.0 / (1.0 / 15e6 + 1.0 / 60e6)
+    expected = _two_mass_frequencies(m1, 0.060, link, kc / 2.25, 35e3)
+    assert_allclose(cam["natural_frequencies"], expected, rtol=1e-9)

@@ -12,7 +12,6 @@ import sys
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from numpy.testing import assert_allclose
 from study_helpers import ROOT
 
 from campipe.bench import pages, report
@@ -209,12 +208,37 @@ def test_the_readme_analysis_prints_what_the_readme_shows(quickstart_archive, mo
     printed = out.getvalue().split()
     assert [t for t in printed if not NUMBER.match(t)] == [t for t in shown if not NUMBER.match(t)]
     values = [float(t) for t in printed if NUMBER.match(t)]
-    assert_allclose(values, [float(t) for t in shown if NUMBER.match(t)], rtol=1e-6)
     # the table: 4 speeds × (none, 0.1 in): no separation at 9000 rpm without a seat
     assert values[0] == 0.00254 and printed[:3] == ["seat", "none", "0.00254"]
     table = np.array(values[1:]).reshape(4, 3)
     assert table[:, 0].tolist() == [6000, 9000, 9524, 11000]
     assert table[1, 1] == 0 and 45 <= table[2, 1] <= 60 and np.all(table[:, 2] > 0)
+    expected = np.array([float(t) for t in shown if NUMBER.match(t)])
+    atol = np.zeros(expected.size)
+    for speed, seated, error in _never_repeating(quickstart_archive):
+        row = table[:, 0].tolist().index(speed)
+        atol[1 + 3 * row + (2 if seated else 1)] = 3.0 * np.sqrt(2.0) * error
+    assert np.all(np.abs(np.array(values) - expected) <= 1e-6 * np.abs(expected) + atol)
+
+
+def _never_repeating(archive) -> list[tuple[float, bool, float]]:
+    """(speed [rpm], seated, the standard error of its no-follow a turn [degree]) of each case
+    of the quickstart that never repeats: its statistics over a chaotic window, whose bits (and
+    so its mean, within its standard error) follow the platform's round-off
+    (tests/integration/test_digest.py), where a settled case's numbers agree to 1e-6."""
+    import xarray as xr
+
+    with xr.open_dataset(archive) as ds:
+        never = np.flatnonzero(ds["period_turns"].values == 0)
+        seat = ds["seat"].values
+        return [
+            (
+                float(ds["speed_rpm"].values[i]),
+                bool(np.isfinite(seat[i])),  # no seat: -inf
+                float(ds["separation_deg_per_rev_uncertainty"].values[i]),
+            )
+            for i in never
+        ]
 
 
 def test_the_readme_summary_is_what_campipe_query_prints(quickstart_archive):
@@ -223,7 +247,12 @@ def test_the_readme_summary_is_what_campipe_query_prints(quickstart_archive):
     archive = quickstart_archive
     result = CliRunner().invoke(main, ["query", str(archive), "--summary"])
     assert result.exit_code == 0, result.output
-    assert result.output == shown
+    # a never-repeating case's mean ± standard error follows the platform's round-off
+    # (_never_repeating): the same text, the means within three combined standard errors
+    pair = re.compile(r"(\d+\.?\d*) ± (\d+\.?\d*)")
+    assert pair.sub("…", result.output) == pair.sub("…", shown)
+    for (a, ea), (b, eb) in zip(pair.findall(result.output), pair.findall(shown), strict=True):
+        assert abs(float(a) - float(b)) <= 3.0 * np.hypot(float(ea), float(eb)), (a, ea, b, eb)
 
 
 def test_the_known_disagreement_is_explained_while_the_json_shows_it():

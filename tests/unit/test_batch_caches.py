@@ -22,9 +22,15 @@ from campipe.engine import Case, RunSettings, run_batch
 from campipe.engine import batch as batch_module
 from campipe.model import thesis_train
 from campipe.profiles import harmonic, polydyne
+from tests.references import numerical_platform
 
 INCH = 0.0254
-MIXED_DIGEST = "8bb63d9e69b01bd946398d6f1d9ece626678d7011260ce4ae72fd2af2dd652e5"
+#: One digest per platform whose LAPACK rounds differently (tests/integration/test_digest.py):
+#: digest → the platform (``tests.references.numerical_platform``).
+MIXED_DIGESTS = {
+    "8bb63d9e69b01bd946398d6f1d9ece626678d7011260ce4ae72fd2af2dd652e5": "not named",
+    "293d9a9de9271557f06e2acb104482010d9a8064e81b417af498fde8cfc2b698": "Haswell",
+}
 
 
 def _cases() -> list[Case]:
@@ -75,7 +81,7 @@ def mixed_digest() -> str:
 
 
 def test_a_mixed_batch_runs_bit_identical_to_before_the_caches():
-    assert mixed_digest() == MIXED_DIGEST
+    assert mixed_digest() in MIXED_DIGESTS, numerical_platform()
 
 
 def _arrays(value) -> list[np.ndarray]:

@@ -28,6 +28,7 @@ from campipe.model import (
 from campipe.model.assembly import assemble, frequency_convergence, observed_orders
 from campipe.model.elements import bar_mass, bar_stiffness, elements
 from campipe.vocabulary import CONFIGURATIONS, free_coordinates
+from tests.references import numerical_platform
 
 THESIS_MATRICES = Path(__file__).parents[1] / "data" / "thesis-matrices.sha256"
 COUNTS = (2, 4, 8, 16)
@@ -43,13 +44,18 @@ def test_the_thesis_model_is_the_one_element_case_unchanged_to_the_bit():
     (``tests/data/thesis-matrices.sha256``, written by commit 9a16481's ``system_matrices``).
     Fails if the refinement changes one operation of the one-element path: a mass m/n or a
     length L/n computed another way, another element order in the sums, the modes' signs, or
-    damping ratios extended or converted differently."""
-    stored = dict(line.split() for line in THESIS_MATRICES.read_text().splitlines())
+    damping ratios extended or converted differently. C comes from LAPACK's modes, whose last
+    bits are a platform's (tests/integration/test_digest.py): one digest per platform."""
+    stored: dict[str, set[str]] = {}
+    for line in THESIS_MATRICES.read_text().splitlines():
+        name, digest, *_platform = line.split()
+        stored.setdefault(name, set()).add(digest)
     sm = system_matrices(thesis_train())
     for name in ("mass", "stiffness", "damping"):
         array = getattr(sm, name)
         assert array.shape == (7, 7)
-        assert hashlib.sha256(array.tobytes()).hexdigest() == stored[name], name
+        digest = hashlib.sha256(array.tobytes()).hexdigest()
+        assert digest in stored[name], (name, numerical_platform())
     # The defaults are the thesis's: one element each, modal damping.
     train = thesis_train()
     assert [train.elements_of(m) for m in ELEMENTS] == [1] * 5
@@ -298,7 +304,11 @@ def test_one_loss_factor_on_every_member_damps_every_mode_by_half_of_it():
         )
         sm = system_matrices(train)
         zeta = modal_damping_ratios(sm.damping, sm.modes, sm.frequencies)
-        assert_allclose(zeta, eta / 2, rtol=1e-9)
+        # to the eigensolver's round-off, about ε·(ω_max/ωⱼ)² relative in mode j: 1e-8 in a
+        # refined train's first mode (seen 12 times ε·(ω_max/ω₁)² with one platform's LAPACK)
+        w = sm.frequencies
+        bound = 1e-12 + 100.0 * np.finfo(float).eps * (w[-1] / w) ** 2
+        assert np.all(np.abs(zeta / (eta / 2) - 1.0) <= bound)
 
 
 def test_a_short_list_of_damping_ratios_gives_its_last_value_to_the_modes_above():
