@@ -31,8 +31,9 @@ from campipe.bench.run import Bench
 #: A figure more than this fraction slower than the previous run's is named (0.1: 10 %).
 SLOWER = 0.10
 #: The fields of ``meta`` two runs must share to be compared: the machine (architecture,
-#: cores, system) and the versions of the two libraries the timed code runs on.
-SAME_MACHINE = ("machine", "numpy", "numba")
+#: cores, system), its processor's model and the versions of the two libraries the timed
+#: code runs on. A run recorded before the processor was (None) is compared with no other.
+SAME_MACHINE = ("machine", "processor", "numpy", "numba")
 #: How a comparison ended (``Bench.previous["status"]``).
 COMPARED = "compared"
 NO_PREVIOUS = "no previous run"

@@ -101,6 +101,19 @@ class Bench:
     regressions: list[dict] = field(default_factory=list)
 
 
+def processor() -> str:
+    """The CPU's model name (Linux's /proc/cpuinfo; else what ``platform`` knows): two machines
+    of one architecture and core count can differ by half in speed."""
+    try:
+        with open("/proc/cpuinfo") as info:
+            for line in info:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown"
+
+
 def machine() -> dict:
     """The machine, versions, date and load a run measures on (every bench records them)."""
     import numba
@@ -108,6 +121,7 @@ def machine() -> dict:
 
     return {
         "machine": f"{platform.machine()}, {os.cpu_count()} cores, {platform.system()}",
+        "processor": processor(),
         "python": platform.python_version(),
         "numpy": np.__version__,
         "scipy": scipy.__version__,

@@ -9,7 +9,12 @@ import pytest
 from campipe.bench import gate, pages, report, verdict
 from campipe.bench.run import Bench
 
-MACHINE = {"machine": "x86_64, 2 cores, Linux", "numpy": "2.4.6", "numba": "0.68.1"}
+MACHINE = {
+    "machine": "x86_64, 2 cores, Linux",
+    "processor": "AMD EPYC",
+    "numpy": "2.4.6",
+    "numba": "0.68.1",
+}
 COMMITTED = Path(__file__).parents[2] / "docs" / "bench" / "bench.json"
 
 
@@ -92,8 +97,8 @@ def test_regressions_are_listed_slowest_first_and_their_scenes_named():
     assert gate.slower_scenes(bench) == ["b", "a", "d"]
     assert gate.summary(bench) == (
         "Against the previous run (old/bench.json, then), on the same machine and versions "
-        "(machine, numpy, numba): 3 of 6 timed figures more than 10 % slower, on b, a, d "
-        "(0 more than 10 % faster)."
+        "(machine, processor, numpy, numba): 3 of 6 timed figures more than 10 % slower, on b, "
+        "a, d (0 more than 10 % faster)."
     )
     lines = gate.text(bench)
     assert lines[1] == "  slower  b: modal-exact, tol 1e-12 s: 1 ms → 1.5 ms (1.5×)"
@@ -115,6 +120,11 @@ def test_another_machine_names_none_and_says_why():
     assert (
         "machine x86_64, 2 cores, Linux then, arm64, 8 cores, Darwin now"
         in (gate.compare(other, PREVIOUS, "p")[0]["reason"])
+    )
+    # one architecture and core count, another processor: not the same machine either
+    intel = _new({"a": 2e-3}, processor="Intel Xeon")
+    assert (
+        "processor AMD EPYC then, Intel Xeon now" in gate.compare(intel, PREVIOUS, "p")[0]["reason"]
     )
 
 
