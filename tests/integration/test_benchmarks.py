@@ -46,7 +46,7 @@ def test_the_quick_benchmark_measures_the_study_section(tmp_path):
     asserted where it is timed), the client's ceiling against each compression, 1/2/4 worker
     processes; then its goals, the bundled studies' estimates, the first run and validate at
     scale not shown (--quick: the estimates run each bundled study whole, and validate's
-    estimate of a small study runs it twice, minutes for the compliant ones; the full run
+    estimate of a small study runs it once more, minutes for the compliant ones; the full run
     shows them, and tests/integration/test_estimate.py tests the estimate)."""
     done = _benchmarks("benchmarks.study", "--quick", "--no-scaling", "-o", str(tmp_path))
     assert done.returncode == 0, done.stderr[-2000:]

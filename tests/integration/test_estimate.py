@@ -1,11 +1,14 @@
 """campipe validate's estimate: a sample of the study run through run_study and scaled (how it
 compares with a run on the bundled studies is campipe bench's to show, not a timed test)."""
 
+from collections import Counter
+
 import numpy as np
 import pytest
 from click.testing import CliRunner
 from study_helpers import write_spec
 
+import campipe.engine
 import campipe.study.run.estimate as est
 from campipe.cli import main
 from campipe.study import load_study
@@ -39,8 +42,8 @@ def test_the_sample_is_one_batch_per_worker_spread_through_the_study(study):
 
 def test_the_estimate_scales_the_sample_beyond_the_fixed_cost(study, monkeypatch):
     """first: a one-case run in a fresh process; again: the same warm; the sample's run
-    beyond it scales with the cases (50 / 14)."""
-    runs = {1: [0.30, 0.10], 14: [0.80]}
+    beyond it scales with the cases (50 / 14), and so does its engine calls' time."""
+    runs = {1: [(0.30, 0.05), (0.10, 0.01)], 14: [(0.80, 0.14)]}
     calls = []
 
     def time_run(s, cases, workers, size=None):
@@ -48,24 +51,60 @@ def test_the_estimate_scales_the_sample_beyond_the_fixed_cost(study, monkeypatch
         return runs[len(cases)].pop(0)
 
     monkeypatch.setattr(est, "time_run", time_run)
-    monkeypatch.setattr(est, "time_engine", lambda cases: 0.01 * len(cases))
     monkeypatch.setattr(est, "warm_up", lambda s: 0.25)
     e = est.estimate(study, 2)
     assert calls == [(1, None), (1, None), (14, 7)]  # the sample in the study's batches
     assert e.seconds == pytest.approx(0.25 + 0.30 + (0.80 - 0.10) * 50 / 14)
-    assert e.engine == pytest.approx(0.01 * 14 / 2 * 50 / 14)  # two batches, two workers
+    assert e.engine == pytest.approx(0.14 / 2 * 50 / 14)  # two batches, two workers
     assert e.engine + e.layer + e.startup == pytest.approx(e.seconds)
     assert e.sample == 14 and e.workers == 2
 
 
-def test_a_small_study_is_timed_whole(tmp_path, monkeypatch):
+def case_key(case) -> tuple[float, bool]:
+    """A case of SPEC's studies by its axes: its speed and whether it has a seat."""
+    return case.speed, bool(np.isnan(case.seat))
+
+
+def counted_engine(monkeypatch) -> Counter:
+    """Case (:func:`case_key`) → times it ran through the engine at the run's fidelity
+    (``campipe.engine.run_at_fidelity``: what a study's batch calls)."""
+    ran: Counter = Counter()
+    engine = campipe.engine.run_at_fidelity
+
+    def run_at_fidelity(cases, settings, **options):
+        ran.update(case_key(c) for c in cases)
+        return engine(cases, settings, **options)
+
+    monkeypatch.setattr(campipe.engine, "run_at_fidelity", run_at_fidelity)
+    return ran
+
+
+def test_a_small_study_is_timed_whole_each_case_run_once(tmp_path, monkeypatch):
+    """The engine's share comes from the run itself: each case goes through the engine once.
+    Fails if the estimate ran the study again (or the engine alone) to split its time."""
     small = load_study(write_spec(tmp_path, SPEC.replace("num: 25", "num: 3")))
     monkeypatch.setattr(est, "warm_up", lambda s: 0.0)
+    ran = counted_engine(monkeypatch)
     e = est.estimate(small, 2)
+    assert ran == Counter(case_key(c.case) for c in small.cases)  # each case, once
     assert e.sample == len(small.cases) == 6
-    assert e.seconds > 0 and 0 <= e.engine <= e.seconds
+    assert 0 < e.engine <= e.seconds
     assert e.engine + e.layer == pytest.approx(e.seconds)
     assert not list(tmp_path.glob("*.nc"))  # the timed run wrote only in a temporary folder
+
+
+def test_a_large_study_runs_its_sample_once(study, monkeypatch):
+    """50 cases on 2 workers: the sample's 14 cases run once, its first case twice more (the
+    one-case runs, first and again), no other case. Fails if the sample ran again to time
+    the engine."""
+    monkeypatch.setattr(est, "warm_up", lambda s: 0.0)
+    ran = counted_engine(monkeypatch)
+    e = est.estimate(study, 2)
+    sample = est.sample_cases(study, 14)
+    assert ran == Counter(case_key(c.case) for c in sample + sample[:1] * 2)
+    assert e.sample == 14
+    assert 0 < e.engine <= e.seconds
+    assert e.engine + e.layer == pytest.approx(e.seconds)
 
 
 def test_validate_prints_the_estimate_with_its_parts(tmp_path):

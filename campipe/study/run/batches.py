@@ -64,6 +64,8 @@ class Stored:
     #: the batch's arrays, when it was stored in this process: the archive takes its rows
     #: from here instead of reading the file back (never sent between processes)
     data: BatchData | None = field(default=None, compare=False, repr=False)
+    #: wall time of the engine call that computed it (:attr:`BatchData.engine_seconds`) [s]
+    engine_seconds: float = field(default=0.0, compare=False)
 
     def __getstate__(self) -> dict:
         return {**self.__dict__, "data": None}

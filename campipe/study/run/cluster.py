@@ -54,6 +54,7 @@ class PartCount:
     event_counts: np.ndarray  # (n,) int32: events of each case, in the plan's order
     statuses: np.ndarray  # (n,) int8: status of each case (vocabulary.STATUS)
     numerics: str  # numerics_fingerprint() of the worker
+    engine_seconds: float = 0.0  # wall time of the batch's engine call [s]
 
     def stored(self, plan: BatchPlan, directory: Path) -> Stored:
         """The part as :class:`Stored`, its case ids from ``plan``."""
@@ -65,6 +66,7 @@ class PartCount:
             tuple(self.statuses.tolist()),
             self.numerics,
             self.checksum,
+            engine_seconds=self.engine_seconds,
         )
 
 
@@ -177,6 +179,7 @@ def part_task(
         np.asarray(data.arrays["event_count"], dtype=np.int32),
         np.asarray(data.arrays["status"], dtype=np.int8),
         data.numerics,
+        data.engine_seconds,
     )
 
 

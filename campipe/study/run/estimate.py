@@ -8,6 +8,9 @@ The run time is measured on this machine, through the code a study runs, not gue
   proportion -- is run through :func:`~campipe.study.run.execute.run_study` into a temporary
   folder: computing, storing the batches, assembling the compressed archive with its
   checksums. Scaled to the study's cases, it gives the run's time beyond its fixed cost;
+  its share the engine took is what its batches' engine calls took (each batch times its
+  own, :attr:`~campipe.study.run.resume.StudyReport.engine_seconds`), shared among the
+  workers they keep busy: no case runs twice to split the time;
 - **the fixed cost** (setting up a run, a first run's imports) is a one-case run's time;
 - **start-up**: loading each run-settings group's compiled kernel, which the first run in
   a process pays (:func:`measure_speeds`'s warm-up; a compilation is not counted, the study
@@ -110,30 +113,33 @@ def busy_workers(study: Study, cases: Sequence[ResolvedCase], workers: int) -> i
 
 def time_run(
     study: Study, cases: Sequence[ResolvedCase], workers: int, size: int | None = None
-) -> float:
-    """Wall time of :func:`run_study` on ``cases`` of ``study`` (batches of ``size``) into a
-    temporary folder [s]."""
+) -> tuple[float, float]:
+    """Time :func:`run_study` on ``cases`` of ``study`` into a temporary folder.
+
+    Parameters
+    ----------
+    study : Study
+        The expanded study.
+    cases : sequence of ResolvedCase
+        The cases to run (the study's, or a sample of them).
+    workers : int
+        Workers of the run.
+    size : int, optional
+        Cases per batch (default: the run's own for ``cases``).
+
+    Returns
+    -------
+    tuple of float
+        The run's wall time, and its batches' engine calls' wall time summed over the
+        batches (:attr:`~campipe.study.run.resume.StudyReport.engine_seconds`) [s].
+    """
     sample = replace(study, cases=list(cases))
     with tempfile.TemporaryDirectory(prefix="campipe-estimate-") as folder:
         t = time.perf_counter()
-        run_study(sample, Path(folder) / f"{study.name}.nc", workers=workers, batch_size=size)
-        return time.perf_counter() - t
-
-
-def time_engine(cases: Sequence[ResolvedCase]) -> float:
-    """Wall time of the engine on ``cases`` on one worker, one call per run-settings group,
-    as the study runs them (full runs, all events) [s]."""
-    from campipe.engine import run_at_fidelity
-
-    groups: dict[RunSettings, list[ResolvedCase]] = {}
-    for c in cases:
-        groups.setdefault(c.settings, []).append(c)
-    total = 0.0
-    for settings, members in groups.items():
-        t = time.perf_counter()
-        run_at_fidelity([c.case for c in members], settings, on_failure="record")
-        total += time.perf_counter() - t
-    return total
+        report = run_study(
+            sample, Path(folder) / f"{study.name}.nc", workers=workers, batch_size=size
+        )
+        return time.perf_counter() - t, report.engine_seconds
 
 
 def sample_cases(study: Study, k: int) -> list[ResolvedCase]:
@@ -171,20 +177,19 @@ def estimate(study: Study, workers: int) -> Estimate:
     n = len(study.cases)
     k = sample_size(study, workers)
     if n <= 2 * k:
-        engine = time_engine(study.cases) / busy_workers(study, study.cases, workers)
-        seconds = time_run(study, study.cases, workers)
-        engine = min(engine, seconds)
+        seconds, engine = time_run(study, study.cases, workers)
+        engine = min(engine / busy_workers(study, study.cases, workers), seconds)
         return Estimate(
             simulated, seconds + startup, workers, size, engine, seconds - engine, startup, n
         )
     sample = sample_cases(study, k)
     batch = batch_size(study, n, workers)  # the study's own batches, not the sample's
-    first = time_run(study, sample[:1], workers)  # pays what a process's first run pays
-    again = time_run(study, sample[:1], workers)
-    ran = time_run(study, sample, workers, batch)
+    first, _ = time_run(study, sample[:1], workers)  # pays what a process's first run pays
+    again, _ = time_run(study, sample[:1], workers)
+    ran, engine = time_run(study, sample, workers, batch)
     scale = n / len(sample)
     seconds = first + max(ran - again, 0.0) * scale
-    engine = min(time_engine(sample) / busy_workers(study, sample, workers) * scale, seconds)
+    engine = min(engine / busy_workers(study, sample, workers) * scale, seconds)
     return Estimate(
         simulated,
         seconds + startup,

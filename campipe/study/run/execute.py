@@ -184,16 +184,17 @@ def run_study(
         plans = _plan(study, missing, scheduler, workers, batch_size)
         run = _Run(scheduler, workers, on_batch, workers_store, notice, command)
         bar = progress(total, total - len(missing)) if progress else None
-        statuses = _compute_and_assemble(study, archive, found, plans, run, bar)
+        statuses, engine = _compute_and_assemble(study, archive, found, plans, run, bar)
         scratch = parts_directory(archive)
         if not keep_parts and scratch.is_dir():
             shutil.rmtree(scratch, ignore_errors=True)
-        return _ran(archive, total, missing, plans, started, notes, statuses)
+        return _ran(archive, total, missing, plans, started, notes, statuses, engine)
 
 
-def _ran(archive, total, missing, plans, started, notes, statuses) -> StudyReport:
+def _ran(archive, total, missing, plans, started, notes, statuses, engine) -> StudyReport:
     """The report of a run that computed the ``missing`` cases in ``plans`` (the others
-    reused), started at ``started`` (time.monotonic)."""
+    reused), started at ``started`` (time.monotonic), its batches' engine calls taking
+    ``engine`` seconds in all."""
     return StudyReport(
         archive,
         total,
@@ -204,6 +205,7 @@ def _ran(archive, total, missing, plans, started, notes, statuses) -> StudyRepor
         time.monotonic() - started,
         tuple(notes),
         statuses,
+        engine,
     )
 
 
@@ -289,18 +291,22 @@ def _compute_and_assemble(
     plans: list[BatchPlan],
     run: _Run,
     bar: Progress | None,
-) -> dict[str, str]:
+) -> tuple[dict[str, str], float]:
     """Compute ``plans`` and write the archive as their batches are stored; case id → status
-    name of the cases that did not finish cleanly."""
+    name of the cases that did not finish cleanly, and the seconds of the batches' engine
+    calls, summed."""
     storage = Storage(parts_directory(archive), study.record)
     by_id = {c.case_id: c for c in study.cases}
     by_key = {p.key: p for p in plans}
     sink = study_assembly(study, archive, found, run.command, spec_file(study, archive))
+    engine = 0.0
 
     def stored(result: Stored | BatchData | PartCount) -> None:
         """A finished batch: stored here if its worker did not, then its rows go into the
         archive as far as the cases before them allow."""
+        nonlocal engine
         s = stored_here(result, storage, run.on_batch, by_key)
+        engine += s.engine_seconds
         log.debug("batch %s stored (%d cases)", s.key, s.n_cases)
         sink.add(s)
         for cid, code in zip(s.case_ids, s.statuses, strict=True):
@@ -339,7 +345,7 @@ def _compute_and_assemble(
         sink.finish()
     finally:
         sink.abort()
-    return sink.statuses
+    return sink.statuses, engine
 
 
 def _run_parts(
@@ -387,9 +393,12 @@ def _run_parts(
         storage = Storage(archive, study.record, layout)
         bar = progress(total, total - len(missing)) if progress else None
         by_key = {p.key: p for p in plans}
+        engine = 0.0
 
         def stored(result: Stored | BatchData | PartCount) -> None:
+            nonlocal engine
             s = stored_here(result, storage, run.on_batch, by_key)
+            engine += s.engine_seconds
             found.add(s)
             if bar:
                 bar.advance(s.n_cases)
@@ -401,7 +410,7 @@ def _run_parts(
         statuses = {
             c.case_id: found.statuses[c.case_id] for c in study.cases if c.case_id in found.statuses
         }
-        return _ran(archive, total, missing, plans, started, notes, statuses)
+        return _ran(archive, total, missing, plans, started, notes, statuses, engine)
 
 
 def _compute(

@@ -7,6 +7,7 @@ files); the caller stores the :class:`BatchData` (:mod:`campipe.io.archive`).
 from __future__ import annotations
 
 import functools
+import time
 from collections.abc import Sequence
 from dataclasses import dataclass
 from importlib import metadata
@@ -93,6 +94,7 @@ class BatchData:
     cam_angle: np.ndarray  # (n_out,) [degree]
     n_revolutions: int  # length of the revolution axis
     numerics: str = ""  # numerics_fingerprint() of the process that computed it
+    engine_seconds: float = 0.0  # wall time of its engine call (run_batch) [s]
 
     @property
     def n_cases(self) -> int:
@@ -133,13 +135,18 @@ def compute_batch(plan: BatchPlan) -> BatchData:
 
     All cases of a plan share one :class:`~campipe.engine.RunSettings`. A case that fails
     (non-finite, chatter) does not stop the others: its ``status`` says so and its histories
-    and metrics are NaN.
+    and metrics are NaN. The engine call's wall time goes with the arrays
+    (:attr:`BatchData.engine_seconds`), wherever the batch ran.
     """
     settings = plan.cases[0].settings
     cases = [c.case for c in plan.cases]
+    t = time.perf_counter()
     result = run_batch(cases, settings, full_state=full_state(plan.record), on_failure="record")
+    seconds = time.perf_counter() - t
     # a lever's roller force and impacts at the cam
-    return batch_arrays(plan, at_the_cam(result, cases, settings.capture_velocity))
+    data = batch_arrays(plan, at_the_cam(result, cases, settings.capture_velocity))
+    data.engine_seconds = seconds
+    return data
 
 
 def batch_arrays(plan: BatchPlan, result: BatchResult) -> BatchData:

@@ -62,6 +62,9 @@ class StudyReport:
     notes: tuple[str, ...] = ()
     #: case id → status name of every case that did not finish cleanly (vocabulary.STATUS)
     statuses: dict[str, str] = field(default_factory=dict)
+    #: the computed batches' engine calls' wall time, summed over the batches (each on its
+    #: worker: on several workers the sum exceeds the share of ``seconds`` they took) [s]
+    engine_seconds: float = 0.0
 
     def summary(self) -> str:
         if self.up_to_date:

@@ -81,6 +81,7 @@ def _store(
         data.numerics,
         checksum,
         None if storage.parts else data,  # a part's rows are not assembled here
+        data.engine_seconds,
     )
 
 
