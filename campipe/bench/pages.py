@@ -100,11 +100,17 @@ def _ratio(bench: Bench, scene: str, peer: str) -> dict | None:
 # -- the blocks ---------------------------------------------------------------------------------
 
 
+def _machine(meta: dict) -> str:
+    """The machine a run measured on, its processor where recorded."""
+    processor = meta.get("processor")
+    return f"{meta['machine']}, {processor}" if processor else meta["machine"]
+
+
 def run_block(bench: Bench) -> str:
     """Which run the figures come from."""
     m = bench.meta
     return (
-        f"The {'`--quick`' if bench.quick else 'full'} run of {m['date']} on {m['machine']} "
+        f"The {'`--quick`' if bench.quick else 'full'} run of {m['date']} on {_machine(m)} "
         f"(Python {m['python']}, numpy {m['numpy']}, scipy {m['scipy']}, numba {m['numba']}): "
         f"{bench.seconds:.0f} s of wall time, load average "
         f"{format_short(m['load_average_at_start'], 2)} at the start and "

@@ -144,7 +144,8 @@ def markdown(bench: Bench, with_plots: bool = True) -> str:
     m = bench.meta
     lines = [f"# campipe bench{' --quick' if bench.quick else ''}", ""]
     lines.append(
-        f"{m['date']}; {m['machine']}; Python {m['python']}, numpy {m['numpy']}, "
+        f"{m['date']}; {m['machine']}, {m.get('processor', 'processor not recorded')}; "
+        f"Python {m['python']}, numpy {m['numpy']}, "
         f"scipy {m['scipy']}, numba {m['numba']}; bench wall time "
         f"{bench.seconds:.0f} s; load average {m['load_average_at_start']:.2f} at "
         f"the start, {m.get('load_average_at_end', math.nan):.2f} at the end (other "
