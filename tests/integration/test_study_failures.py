@@ -423,6 +423,21 @@ def test_sigterm_leaves_a_state_the_rerun_resumes(tmp_path):
     assert "reused" in rerun.stderr
 
 
+@pytest.fixture
+def ctrl_c_as_from_a_terminal():
+    """The processes the test starts get SIGINT's default disposition, as from a terminal.
+    A run of the tests started with SIGINT ignored (a background job of a shell without job
+    control: ``pytest ... &``, a script's ``cmd &``) passes that on to every child (exec keeps
+    an ignored signal and resets a caught one), and Python and campipe.cli leave an ignored
+    Ctrl-C ignored: the SIGINT a test sends did nothing (the full suite failed once so, exit
+    status 0 after the script's 30 s sleep, nothing on stderr). Caught here, reset in each
+    child."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, previous)
+
+
+@pytest.mark.usefixtures("ctrl_c_as_from_a_terminal")
 def test_ctrl_c_says_what_stays_and_the_rerun_resumes(tmp_path):
     """SIGINT once the first batch is stored: one line saying the batches are kept and how
     to resume, exit status 130, no traceback; the rerun reuses them. Broken copy,
@@ -455,10 +470,11 @@ def test_ctrl_c_says_what_stays_and_the_rerun_resumes(tmp_path):
     assert rerun.exit_code == 0 and "reused" in rerun.stderr, rerun.output
 
 
+@pytest.mark.usefixtures("ctrl_c_as_from_a_terminal")
 def test_ctrl_c_while_the_command_line_loads_is_a_line_not_a_traceback(tmp_path):
-    """The handler campipe.cli sets as it loads (its process only): one line, status 130.
-    Broken copy, campipe/cli/__init__.py: no handler: an import's KeyboardInterrupt
-    traceback."""
+    """The handler campipe.cli sets as it loads (its process only, and only where Ctrl-C is
+    Python's): one line, status 130. Broken copy, campipe/cli/__init__.py: no handler: an
+    import's KeyboardInterrupt traceback."""
     code = (
         "import campipe.cli, os, signal, time; os.kill(os.getpid(), signal.SIGINT); "
         "time.sleep(30)\n"
@@ -467,10 +483,16 @@ def test_ctrl_c_while_the_command_line_loads_is_a_line_not_a_traceback(tmp_path)
     (tmp_path / "campipe").write_text(code)  # a script named as the console script
     cmd = [sys.executable, str(tmp_path / "campipe")]
     done = subprocess.run(cmd, capture_output=True, text=True, env=env)
-    assert done.returncode == 130, done.stderr
-    assert done.stderr == "campipe: interrupted (Ctrl-C) while starting; nothing was done\n"
+    assert done.returncode == 130, done
+    assert done.stderr == "campipe: interrupted (Ctrl-C) while starting; nothing was done\n", done
     imported = "import campipe.cli, signal; print(signal.getsignal(signal.SIGINT).__name__)"
     other = subprocess.run(
         [sys.executable, "-c", imported], capture_output=True, text=True, env=env
     )
-    assert other.stdout.strip() == "default_int_handler"  # a program importing it keeps its own
+    assert other.stdout.strip() == "default_int_handler", other  # a program keeps its own
+    # campipe started with Ctrl-C ignored (a background job) leaves it ignored
+    ignored = "import campipe.cli, signal; print(signal.getsignal(signal.SIGINT) is signal.SIG_IGN)"
+    (tmp_path / "campipe").write_text(ignored)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the fixture puts the test's back
+    left = subprocess.run(cmd, capture_output=True, text=True, env=env)
+    assert left.stdout.strip() == "True", left
