@@ -274,9 +274,15 @@ def kinematic_state(lever: Lever, lift: Lift, theta: np.ndarray) -> KinematicSta
     normal /= np.linalg.norm(normal, axis=1)[:, None]
     motion = np.stack([-np.sin(alpha), np.cos(alpha)], -1)
     along = np.einsum("ij,ij->i", motion, normal)
-    ratio = lever.pallet_arm * np.cos(alpha) / (lever.roller_arm * np.abs(along))
+    ratio = _ratio(lever, alpha, along)
     gain = _gain(lever, alpha, normal[:, 1], along)
     return KinematicState(theta, alpha, lever.valve_lift(alpha), ratio, gain)
+
+
+def _ratio(lever: Lever, alpha: np.ndarray, along: np.ndarray) -> np.ndarray:
+    """The lever ratio b·cos α/(a·|n·t|): the valve's travel per unit of the roller's along
+    the contact normal n (``along`` = n·t, t the lever's direction of motion)."""
+    return lever.pallet_arm * np.cos(alpha) / (lever.roller_arm * np.abs(along))
 
 
 def _gain(lever: Lever, alpha: np.ndarray, normal_up: np.ndarray, along: np.ndarray):
@@ -301,8 +307,7 @@ def rest_ratio(train: Any) -> float:
     """The lever ratio [-] at rest, the roller on the base circle: b·cos α₀/(a·|n·t|), as
     :func:`kinematic_state` gives on the base circle; b/a for a level finger under its cam."""
     lever = lever_of(train)
-    along = _rest_normal(lever)[1]
-    return float(lever.pallet_arm * math.cos(lever.rest_angle) / (lever.roller_arm * abs(along[0])))
+    return float(_ratio(lever, np.array([lever.rest_angle]), _rest_normal(lever)[1])[0])
 
 
 def pivot_gain(train: Any) -> float:

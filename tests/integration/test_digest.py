@@ -8,8 +8,9 @@ The bits are a platform's: LAPACK's kernels (OpenBLAS picks them by CPU: Haswell
 round the modes differently in the last bit, and every number after follows. The file records
 one digest per platform (``tests.references.numerical_platform``), and the archive must be
 bit-identical to one of them. A platform not recorded yet adds its own with
-``CAMPIPE_ADD_PLATFORM_DIGEST=1``, the code unchanged (checked against a recorded one first);
-a change of results replaces them all with the platform's it was run on.
+``CAMPIPE_ADD_PLATFORM_DIGEST=1``, on code whose digest matches a recorded one on a recorded
+platform (nothing checks that: the commit says where it was); a change of results
+(``CAMPIPE_UPDATE_DIGEST=1``) replaces them all with the platform's it was run on.
 """
 
 import hashlib
