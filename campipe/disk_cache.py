@@ -6,7 +6,10 @@ so that a run of trains solved before never imports ``scipy.linalg`` (0.12 s).
 
 They are kept in this source's folder of the kernel cache (``campipe.kernel_cache``: one
 folder per version of the engine, the profiles, the model, numba and numpy, pruned with the
-kernels), one file per kind and key; the caller's key names what else the content depends on.
+kernels), one file per kind and key; the caller's key names what else the content depends on
+(LAPACK's results: the libraries' versions and :func:`processor_kind`, since OpenBLAS picks
+its kernels by the processor and their last bits differ: numba keys its kernels on the
+processor too, and a cache on a cluster's shared home is read by machines of many kinds).
 A file holds a SHA-256 of its kind and key and one of its content, and is read back only when
 both match: a file that is missing, damaged or another key's is a miss, and the caller
 computes. A folder that cannot be written keeps nothing, silently.
@@ -14,10 +17,12 @@ computes. A folder that cannot be written keeps nothing, silently.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import io
 import logging
 import os
+import platform
 import tempfile
 import threading
 from collections.abc import Callable, Sequence
@@ -35,6 +40,34 @@ KEEP = 8
 
 _written: dict[str, int] = {}  # files of each kind :func:`arrays` wrote in this process
 _written_lock = threading.Lock()
+
+
+def cpu_info() -> dict[str, str]:
+    """The first processor's fields in Linux's ``/proc/cpuinfo`` ("model name", "flags", …);
+    empty elsewhere."""
+    fields: dict[str, str] = {}
+    try:
+        with open("/proc/cpuinfo") as info:
+            for line in info:
+                if not line.strip():
+                    break  # the first processor's block ends
+                name, _, value = line.partition(":")
+                fields.setdefault(name.strip(), value.strip())
+    except OSError:
+        pass
+    return fields
+
+
+@functools.cache
+def processor_kind() -> str:
+    """What a LAPACK result's last bits depend on beyond the libraries' versions: the
+    processor's model and instruction sets (OpenBLAS picks its kernels by them: Haswell's and
+    SkylakeX's round differently) and an ``OPENBLAS_CORETYPE`` that overrides its choice."""
+    info = cpu_info()
+    features = info.get("flags", info.get("Features", ""))
+    model = info.get("model name", "") or platform.processor() or platform.machine()
+    flags = hashlib.sha256(" ".join(sorted(features.split())).encode()).hexdigest()[:16]
+    return f"{model}; flags {flags}; OPENBLAS_CORETYPE={os.environ.get('OPENBLAS_CORETYPE', '')}"
 
 
 def folder(kind: str) -> Path:

@@ -104,14 +104,9 @@ class Bench:
 def processor() -> str:
     """The CPU's model name (Linux's /proc/cpuinfo; else what ``platform`` knows): two machines
     of one architecture and core count can differ by half in speed."""
-    try:
-        with open("/proc/cpuinfo") as info:
-            for line in info:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
+    from campipe.disk_cache import cpu_info
+
+    return cpu_info().get("model name") or platform.processor() or "unknown"
 
 
 def machine() -> dict:

@@ -114,10 +114,11 @@ def _normal_modes(
 @functools.cache
 def lapack_version() -> str:
     """What the LAPACK results kept on disk (``campipe.disk_cache.arrays``) depend on beyond
-    their inputs: the numpy and SciPy that computed them (SciPy's LAPACK)."""
+    their inputs: the numpy and SciPy that computed them (SciPy's LAPACK) and the processor
+    they ran on (``disk_cache.processor_kind``)."""
     import scipy  # numba imports it too: its top level only, a few ms
 
-    return f"numpy {np.__version__}; scipy {scipy.__version__}"
+    return f"numpy {np.__version__}; scipy {scipy.__version__}; {disk_cache.processor_kind()}"
 
 
 def modal_damping(

@@ -300,3 +300,49 @@ def test_a_process_writes_few_arrays_of_a_kind(folder, monkeypatch):
         disk_cache.arrays("test", [np.array([float(i)])], "v1", lambda: [np.zeros(1)])
     assert len(list((folder / "test").iterdir())) == disk_cache.KEEP
     assert disk_cache._written["test"] == disk_cache.KEEP
+
+
+def test_modes_are_read_back_only_on_the_same_kind_of_processor(folder, monkeypatch):
+    """A train's modes kept on disk are read back by a process on the same processor; one on
+    another model, with other instruction sets, or with OpenBLAS told another core computes
+    them itself (LAPACK's last bits differ between OpenBLAS's kernels; a cache on a cluster's
+    shared home is read by every node)."""
+    from campipe.model import assembly
+
+    _arrays_kept(monkeypatch)
+    calls = []
+    solve = assembly._normal_modes
+
+    def counted(*args):
+        calls.append(1)
+        return solve(*args)
+
+    monkeypatch.setattr(assembly, "_normal_modes", counted)
+    mass, stiffness = np.diag([1.0, 2.0]), np.array([[3.0, -1.0], [-1.0, 1.0]])
+    here = {"model name": "Example CPU", "flags": "fpu sse2 avx2"}
+    others = [
+        ({"model name": "Example CPU v2", "flags": "fpu sse2 avx2"}, {}),
+        ({"model name": "Example CPU", "flags": "fpu sse2 avx2 avx512f"}, {}),
+        (here, {"OPENBLAS_CORETYPE": "Prescott"}),
+    ]
+
+    def on(info, env):
+        monkeypatch.setattr(disk_cache, "cpu_info", lambda: dict(info))
+        monkeypatch.delenv("OPENBLAS_CORETYPE", raising=False)
+        for name, value in env.items():
+            monkeypatch.setenv(name, value)
+        disk_cache.processor_kind.cache_clear()
+        assembly.lapack_version.cache_clear()
+        return assembly.normal_modes(mass, stiffness)
+
+    try:
+        first = on(here, {})
+        again = on({"flags": "avx2 sse2 fpu", "model name": "Example CPU"}, {})  # flags' order
+        assert len(calls) == 1
+        assert all(a.tobytes() == b.tobytes() for a, b in zip(first, again, strict=True))
+        for n, (info, env) in enumerate(others, start=2):
+            on(info, env)
+            assert len(calls) == n, (info, env)
+    finally:
+        disk_cache.processor_kind.cache_clear()
+        assembly.lapack_version.cache_clear()
