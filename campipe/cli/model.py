@@ -34,7 +34,7 @@ from campipe.model.assembly import (
 )
 from campipe.model.checks import DIRECT_ACTING, LUMPED, PUSHROD_ROCKER, layouts_of_key
 from campipe.model.contact_modes import ContactMode, contact_modes
-from campipe.model.layouts import used_coordinates
+from campipe.model.layouts import own_matrices, used_coordinates
 from campipe.model.levers import LEVERS
 from campipe.profiles import evaluate, harmonic
 from campipe.profiles.levers import cam_kinematics
@@ -158,11 +158,9 @@ def _shown(train, sm) -> tuple[SystemMatrices, tuple[Coordinate, ...], list[str]
     used = used_coordinates(train)
     if used.size == len(coords):
         return sm, coords, names
-    sub = np.ix_(used, used)
-    omega, phi = normal_modes(sm.mass[sub], sm.stiffness[sub], np.ones(used.size, bool))
-    view = SystemMatrices(
-        sm.mass[sub], sm.stiffness[sub], sm.damping[sub], omega, phi, sm.preload[used]
-    )
+    mass, stiffness, damping = own_matrices(train, sm.mass, sm.stiffness, sm.damping)
+    omega, phi = normal_modes(mass, stiffness, np.ones(used.size, bool))
+    view = SystemMatrices(mass, stiffness, damping, omega, phi, sm.preload[used])
     return view, tuple(coords[i] for i in used), names
 
 
@@ -302,6 +300,10 @@ def contact_report(contacts: list[ContactMode]) -> dict[str, object]:
                 "valve_side_damping": c.valve_side_damping,
                 "natural_frequencies": c.frequencies.tolist(),
                 "natural_frequencies_hz": (c.frequencies / TWO_PI).tolist(),
+                "damping_ratios": c.damping_ratios.tolist(),
+                "struck_mass": c.struck_mass,
+                "contact_damping_ratio": c.contact_damping_ratio,
+                "restitution": _json_value(c.restitution),
                 "units": {
                     "static_load": "N",
                     "stiffness": "N/m",
@@ -310,6 +312,11 @@ def contact_report(contacts: list[ContactMode]) -> dict[str, object]:
                     "valve_side_stiffness": "N/m",
                     "valve_side_damping": "N·s/m",
                     "natural_frequencies": "rad/s",
+                    "damping_ratios": "1, each mode's φᵀCφ/(2ω)",
+                    "struck_mass": "kg, at the contact's coordinate (a lever's cam: valve side)",
+                    "contact_damping_ratio": "1, c/(2·√(k·m)) of the struck mass",
+                    "restitution": "1, of the struck mass's landing (null: it depends on the "
+                    "speed, a damped hertz law)",
                 },
             }
             for c in contacts
@@ -337,9 +344,22 @@ def contact_text(contacts: list[ContactMode]) -> str:
             f"{c.valve_side_damping:11.4g}"
         )
     for c in contacts:
-        hz = ", ".join(f"{f:.1f}" for f in c.frequencies / TWO_PI)
+        hz = ", ".join(
+            f"{f:.1f} (ζ {z:.3g})"
+            for f, z in zip(c.frequencies / TWO_PI, c.damping_ratios, strict=True)
+        )
         other = "seat" if c.contact == "cam" else "cam"
         lines.append(f"  natural frequencies, the {c.contact} closed ({other} open) [Hz]: {hz}")
+    for c in contacts:
+        rebound = (
+            f"a landing rebounds with e = {c.restitution:.3f}"
+            if math.isfinite(c.restitution)
+            else "its restitution depends on the landing's speed v (e ≈ 1 − 2·α·v/3)"
+        )
+        lines.append(
+            f"  the {c.contact}'s landing: {c.struck_mass * 1e3:.4g} g struck at its coordinate,"
+            f" ζ = c/(2√(k·m)) = {c.contact_damping_ratio:.3g}: {rebound}"
+        )
     return "\n".join(lines)
 
 

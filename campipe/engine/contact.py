@@ -10,6 +10,7 @@ import numpy as np
 from numba import njit
 
 from campipe.engine.newmark import N_X, N_Z, X_A, X_Q, X_V
+from campipe.model.assembly import struck_mass
 from campipe.vocabulary import CAM, CONFIGURATIONS, N_COORDINATES, SEAT, free_coordinates
 
 #: HELD[c - 1, i]: coordinate i is prescribed in configuration c (the thesis's seven; a
@@ -91,14 +92,8 @@ def newmark_step_maps(mass, damping, stiffness, dt: float) -> tuple[np.ndarray, 
 
 def impact_mass(mass: np.ndarray, struck: int, configuration_after: int) -> float:
     """Effective mass [kg] at coordinate ``struck`` for an impulse there, the other held
-    coordinates of ``configuration_after`` fixed: M_pp − M_pf M_ff⁻¹ M_fp (Schur complement).
-
-    A perfectly plastic impact against an infinite mass that changes the struck coordinate's
-    velocity by Δv delivers the impulse m·Δv.
-    """
-    free = list(free_coordinates(configuration_after, mass.shape[0]))
-    mpf = mass[struck, free]
-    return float(mass[struck, struck] - mpf @ np.linalg.solve(mass[np.ix_(free, free)], mpf))
+    coordinates of ``configuration_after`` fixed (``model.assembly.struck_mass``)."""
+    return struck_mass(mass, struck, free_coordinates(configuration_after, mass.shape[0]))
 
 
 def impact_masses(mass: np.ndarray) -> np.ndarray:

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -119,6 +120,15 @@ def lapack_version() -> str:
     import scipy  # numba imports it too: its top level only, a few ms
 
     return f"numpy {np.__version__}; scipy {scipy.__version__}; {disk_cache.processor_kind()}"
+
+
+def struck_mass(mass: np.ndarray, struck: int, free: Sequence[int]) -> float:
+    """The mass [kg] an impulse at coordinate ``struck`` meets, the coordinates ``free`` free
+    and the rest held: M_pp − M_pf·M_ff⁻¹·M_fp (a Schur complement). A perfectly plastic
+    impact that changes the struck coordinate's velocity by Δv delivers the impulse m·Δv."""
+    free = list(free)
+    mpf = mass[struck, free]
+    return float(mass[struck, struck] - mpf @ np.linalg.solve(mass[np.ix_(free, free)], mpf))
 
 
 def modal_damping(

@@ -13,22 +13,33 @@ dF/dδ̇ at δ̇ = 0.
 
 The frequencies are the train's with that contact a spring to ground at its coordinate (q1
 for the cam, q7 for the seat) and the other contact open: the frequencies a run with the
-contact closed rings at, where the rigid model's are those of the train with q1 held.
+contact closed rings at, where the rigid model's are those of the train with q1 held. Each
+has its modal damping ratio, φᵀCφ/(2ω) with the contact's dashpot in C (the damping
+matrix's diagonal in those modes: exact for one mass, the usual estimate for more).
+
+How hard a landing rebounds: the contact's own damping ratio against the mass an impulse at
+its coordinate meets (the rest of the train free: M_pp − M_pf·M_ff⁻¹·M_fp, the rigid
+model's impact mass), ζ = c/(2·√(k·m)) on the valve side, and for a linear law the
+coefficient of restitution of that mass landing on it (:func:`released_restitution`: the
+contact releases where its force reaches zero, not where δ does). It estimates a landing
+whose contact is brief against the train's periods (a stiff contact: tens of µs); a hertz
+law's depends on the landing's speed (Hunt and Crossley: e ≈ 1 − 2·α·v/3) and is not given.
 
 Pure numerics: a train and its matrices in, numbers out.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from campipe.model.assembly import SystemMatrices, normal_modes
+from campipe.model.assembly import SystemMatrices, normal_modes, struck_mass
 from campipe.model.checks import PUSHROD_ROCKER
 from campipe.model.contact import contact_law
 from campipe.model.lash import lash_ratio
-from campipe.model.layouts import mirror, used_coordinates
+from campipe.model.layouts import mirror, own_matrices, used_coordinates
 from campipe.model.levers import LEVERS, rest_ratio
 from campipe.vocabulary import CAM, SEAT
 
@@ -44,6 +55,10 @@ class ContactMode:
     damping: float  # dF/dδ̇ there [N·s/m]
     ratio: float  # r: the valve's travel per the contact's (1 but for a lever's cam)
     frequencies: np.ndarray  # the train's with the contact closed, ascending [rad/s]
+    damping_ratios: np.ndarray  # their modal damping ratios, φᵀCφ/(2ω) [1]
+    #: the mass an impulse at the contact's coordinate meets (a lever's cam: valve side) [kg]
+    struck_mass: float
+    linear: bool  # the law is linear (its restitution a number)
 
     @property
     def valve_side_stiffness(self) -> float:
@@ -54,6 +69,40 @@ class ContactMode:
     def valve_side_damping(self) -> float:
         """c / r² [N·s/m]."""
         return self.damping / self.ratio**2
+
+    @property
+    def contact_damping_ratio(self) -> float:
+        """ζ = c/(2·√(k·m)) of the struck mass on the contact alone (at its coordinate: k/r²,
+        c/r² for a lever's cam)."""
+        return self.valve_side_damping / (
+            2.0 * math.sqrt(self.valve_side_stiffness * self.struck_mass)
+        )
+
+    @property
+    def restitution(self) -> float:
+        """The struck mass's coefficient of restitution on a linear law
+        (:func:`released_restitution`); on a nonlinear one 1 undamped, else NaN (it depends
+        on the landing's speed)."""
+        if self.linear:
+            return released_restitution(self.contact_damping_ratio)
+        return 1.0 if self.damping == 0.0 else math.nan
+
+
+def released_restitution(zeta: float) -> float:
+    """The coefficient of restitution of a mass landing on a spring k and dashpot c in
+    parallel (ζ = c/(2√(k·m))) that let go where their force k·δ + c·δ̇ reaches zero: with
+    δ = (v₀/ω_d)·e^(−ζωt)·sin(ω_d·t), the force vanishes at ω_d·t* = π − 2·asin ζ, where
+    δ̇ = −v₀·e^(−ζωt*), so e = exp(−ζ·(π − 2·asin ζ)/√(1 − ζ²)) (ζ < 1; e⁻² at ζ = 1, and
+    exp(−ζ·atanh(2ζ√(ζ² − 1)/(2ζ² − 1))/√(ζ² − 1)) beyond). Not the classic
+    exp(−πζ/√(1 − ζ²)), which holds the dashpot in tension until δ = 0."""
+    if not zeta >= 0.0:
+        raise ValueError(f"zeta: found {zeta!r}, expected ≥ 0")
+    if zeta < 1.0:
+        return math.exp(-zeta * (math.pi - 2.0 * math.asin(zeta)) / math.sqrt(1.0 - zeta * zeta))
+    if zeta == 1.0:
+        return math.exp(-2.0)
+    beta = math.sqrt(zeta * zeta - 1.0)
+    return math.exp(-zeta * math.atanh(2.0 * zeta * beta / (2.0 * zeta * zeta - 1.0)) / beta)
 
 
 def contact_modes(train, sm: SystemMatrices) -> list[ContactMode]:
@@ -75,9 +124,15 @@ def contact_modes(train, sm: SystemMatrices) -> list[ContactMode]:
             continue
         load = train.spring_preload * through
         k, c = law.slopes(law.approach(load), 0.0)
-        stiffness = sm.stiffness.copy()
-        stiffness[coordinate, coordinate] += k / ratio**2
-        sub = np.ix_(used, used)
-        omega, _ = normal_modes(sm.mass[sub], stiffness[sub], np.ones(used.size, bool))
-        out.append(ContactMode(contact, law.name, load, k, c, ratio, omega))
+        mass, stiffness, damping = own_matrices(train, sm.mass, sm.stiffness, sm.damping)
+        at = int(np.flatnonzero(used == coordinate)[0])
+        stiffness[at, at] += k / ratio**2
+        damping[at, at] += c / ratio**2
+        omega, phi = normal_modes(mass, stiffness, np.ones(used.size, bool))
+        zeta = np.einsum("ij,ik,kj->j", phi, damping, phi) / (2.0 * omega)
+        free = [j for j in range(used.size) if j != at]
+        struck = struck_mass(mass, at, free) if free else float(mass[at, at])
+        out.append(
+            ContactMode(contact, law.name, load, k, c, ratio, omega, zeta, struck, law.linear)
+        )
     return out

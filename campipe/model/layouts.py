@@ -63,6 +63,7 @@ __all__ = [
     "lumped_coordinates",
     "mirror",
     "mirror_dynamics",
+    "own_matrices",
     "placeholder_dynamics",
     "placeholders",
     "used_coordinates",
@@ -132,6 +133,23 @@ def mirror_dynamics(train: ValveTrain) -> tuple[float, float, float]:
     mass = float(train.masses[0])
     omega = MIRROR_FRACTION * _lowest_frequency(*chain_matrices(train))
     return mass, mass * omega**2, 2.0 * PLACEHOLDER_DAMPING * mass * omega
+
+
+def own_matrices(
+    train: ValveTrain, mass: np.ndarray, stiffness: np.ndarray, damping: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The train's own mass, stiffness and damping matrices, over its used coordinates
+    (:func:`used_coordinates`: a lumped chain's placeholders left out), a one-mass chain's
+    mirror taken out of q1: the follower alone on its spring, m·ẍ + c·ẋ + k·x."""
+    used = used_coordinates(train)
+    sub = np.ix_(used, used)
+    m, k, c = mass[sub].copy(), stiffness[sub].copy(), damping[sub].copy()
+    if mirror(train):
+        mu, kappa, gamma = mirror_dynamics(train)
+        m[0, 0] -= mu
+        k[0, 0] -= kappa
+        c[0, 0] -= gamma
+    return m, k, c
 
 
 def chain_matrices(train: ValveTrain) -> tuple[np.ndarray, np.ndarray]:

@@ -223,3 +223,77 @@ def test_a_finger_s_roller_contact_is_k_over_r_squared_at_the_valve():
     link = 1.0 / (1.0 / 15e6 + 1.0 / 60e6)
     expected = _two_mass_frequencies(m1, 0.060, link, kc / 2.25, 35e3)
     assert_allclose(cam["natural_frequencies"], expected, rtol=1e-9)
+    # the pallet's mass is struck, the valve free (a diagonal mass matrix): c/r² on k/r² and m1
+    assert cam["struck_mass"] == pytest.approx(m1, rel=1e-12)
+    zeta = (c / 2.25) / (2.0 * np.sqrt(kc / 2.25 * m1))
+    assert cam["contact_damping_ratio"] == pytest.approx(zeta, rel=1e-12)
+
+
+def _landing(zeta: float) -> float:
+    """A unit mass landing at 1 m/s on a spring (ω = 1) and dashpot (2ζ) that let go where
+    their force reaches zero, integrated by solve_ivp (DOP853): the rebound speed."""
+    from scipy.integrate import solve_ivp
+
+    def force(t, y):
+        return y[0] + 2.0 * zeta * y[1]
+
+    force.terminal, force.direction = True, -1.0
+    sol = solve_ivp(
+        lambda t, y: [y[1], -force(t, y)], (0.0, 50.0), [0.0, 1.0], method="DOP853",
+        rtol=1e-12, atol=1e-14, events=force,
+    )  # fmt: skip
+    (t,) = sol.t_events[0]
+    return -float(sol.y_events[0][0][1])
+
+
+@pytest.mark.parametrize("zeta", [0.0, 0.01, 0.3, 0.7, 0.99, 1.0, 1.5, 4.0])
+def test_the_restitution_of_a_released_contact_is_an_integrated_landing_s(zeta):
+    """``released_restitution`` against a landing integrated by solve_ivp, to 1e-8; it is not
+    the classic exp(−πζ/√(1 − ζ²)) (which holds the dashpot in tension until δ = 0): a copy
+    returning that fails at ζ = 0.3 (0.373 against 0.284)."""
+    from campipe.model.contact_modes import released_restitution
+
+    assert released_restitution(zeta) == pytest.approx(_landing(zeta), rel=1e-8, abs=1e-12)
+    if 0.3 <= zeta < 1.0:
+        assert abs(released_restitution(zeta) - np.exp(-np.pi * zeta / np.sqrt(1 - zeta**2))) > 1e-3
+
+
+def test_a_one_mass_chain_s_contact_damping_and_restitution_are_its_closed_forms():
+    """One mass on its spring (its damping ratio ζ₁ with the mass free: c₁ = 2ζ₁√(k_s·m)) on
+    a kelvin-voigt cam: closed, one mode at √((k_s + k)/m) with ζ = (c₁ + c)/(2√((k_s + k)·m));
+    the mass struck is m, the contact's own ζ = c/(2√(k·m)) and its restitution
+    ``released_restitution``'s. A damped hertz seat's restitution is null (it depends on the
+    speed); an undamped one's 1. The model shown is the follower's own, m, k_s and c₁ (its
+    valve's mirror, a coordinate of the engine's, taken out: shown with it, the mass was 2m).
+    Fails on a copy that leaves the contact's dashpot out of the modes' damping, or keeps the
+    mirror's share in the matrices shown."""
+    from campipe.model.contact_modes import released_restitution
+
+    m, ks, kc, c, z1 = 0.08, 40e3, 2e8, 400.0, 0.05
+    sets = [
+        "layout=lumped", f"masses=[{m} kg]", "stiffnesses=[]", f"spring_rate={ks} N/m",
+        "spring_preload=250 N", f"damping_ratios=[{z1}]", "cam_contact=kelvin-voigt",
+        f"cam_contact_stiffness={kc} N/m", f"cam_contact_damping={c} N*s/m",
+        "seat_contact=hertz", "seat_hertz_constant=1e10 N/m**1.5", "seat_hunt_crossley=0.2 s/m",
+    ]  # fmt: skip
+    result = run(*[a for s in sets for a in ("--set", s)], "--json")
+    assert result.exit_code == 0, result.output
+    cam, seat = json.loads(result.output)["compliant_contacts"]
+    c1 = 2.0 * z1 * np.sqrt(ks * m)
+    assert_allclose(cam["natural_frequencies"], [np.sqrt((ks + kc) / m)], rtol=1e-12)
+    assert_allclose(cam["damping_ratios"], [(c1 + c) / (2 * np.sqrt((ks + kc) * m))], rtol=1e-9)
+    assert cam["struck_mass"] == pytest.approx(m, rel=1e-15)
+    zeta = c / (2.0 * np.sqrt(kc * m))
+    assert cam["contact_damping_ratio"] == pytest.approx(zeta, rel=1e-12)
+    assert cam["restitution"] == pytest.approx(released_restitution(zeta), rel=1e-12)
+    assert seat["restitution"] is None
+    text = run(*[a for s in sets for a in ("--set", s)]).output
+    assert f"a landing rebounds with e = {released_restitution(zeta):.3f}" in text
+    assert "depends on the landing's speed" in text
+    undamped = [s for s in sets if not s.startswith("seat_hunt")]
+    out = json.loads(run(*[a for s in undamped for a in ("--set", s)], "--json").output)
+    assert out["compliant_contacts"][1]["restitution"] == 1.0
+    assert out["mass_matrix"] == [[m]]
+    assert_allclose(out["stiffness_matrix"], [[ks]], rtol=1e-12)
+    assert_allclose(out["damping_matrix"], [[c1]], rtol=1e-12)
+    assert_allclose(out["natural_frequencies"], [np.sqrt(ks / m)], rtol=1e-12)
