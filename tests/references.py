@@ -1,9 +1,23 @@
 """Independent references the tests compare the engine with, written from the model's
 matrices alone (never through the engine's own integrators)."""
 
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
 import numpy as np
 
+import campipe
+from campipe.disk_cache import cpu_info
 from campipe.engine.batch import train_matrices
+
+ROOT = Path(__file__).resolve().parents[1]
+#: OpenBLAS's kernels whose digests every digest file records: a platform whose own digest is
+#: not recorded computes it again on these (:func:`on_reference_kernels`), where the processor
+#: runs them (AVX2 and FMA: every x86 processor of the last decade).
+REFERENCE_KERNELS = "Haswell"
 
 
 def steady_state_cam_force(train, speed, lift, theta):
@@ -65,11 +79,16 @@ def recorded_digests(path) -> dict[str, str]:
     return out
 
 
-def record_digest(path, digest: str) -> None:
-    """Record ``digest`` as this platform's (``CAMPIPE_UPDATE_DIGEST=1``): it replaces every
-    digest recorded before, which a change of results leaves stale; another platform records
-    its own by running the test there with the same variable."""
-    path.write_text(f"{digest} {numerical_platform()}\n")
+def record_digest(path, digest: str, source: str, call: str) -> None:
+    """Record ``digest`` (``call``'s of the test file ``source``) as this platform's
+    (``CAMPIPE_UPDATE_DIGEST=1``), and the same computation's on the reference kernels
+    (:func:`on_reference_kernels`) where this platform's are others: they replace every digest
+    recorded before, which a change of results leaves stale."""
+    recorded = {digest: numerical_platform()}
+    again = on_reference_kernels(source, call)
+    if again is not None:
+        recorded[again] = REFERENCE_KERNELS
+    path.write_text("".join(f"{d} {p}\n" for d, p in recorded.items()))
 
 
 def add_platform_digest(path, digest: str) -> None:
@@ -78,3 +97,60 @@ def add_platform_digest(path, digest: str) -> None:
     kept = {d: p for d, p in recorded_digests(path).items() if p != numerical_platform()}
     kept[digest] = numerical_platform()
     path.write_text("".join(f"{d} {p}\n" for d, p in kept.items()))
+
+
+def on_reference_kernels(source: str, call: str) -> str | None:
+    """``call`` (a digest: "mixed_digest()") of the test file ``source``, computed in a new
+    process on OpenBLAS's :data:`REFERENCE_KERNELS`, which ``OPENBLAS_CORETYPE`` (OpenBLAS's
+    own override) selects, with this process's campipe. None where this process already runs
+    them or the processor cannot (no AVX2 or FMA)."""
+    if numerical_platform() == REFERENCE_KERNELS:
+        return None
+    if not {"avx2", "fma"} <= set(cpu_info().get("flags", "").split()):
+        return None
+    path = str(Path(source).resolve())
+    code = (
+        "import campipe, importlib.util, sys\n"  # this process's campipe, then the tests
+        f"sys.path.append({str(ROOT)!r})\n"
+        f"spec = importlib.util.spec_from_file_location('source', {path!r})\n"
+        "module = importlib.util.module_from_spec(spec)\n"
+        "spec.loader.exec_module(module)\n"
+        f"print(module.{call})"
+    )
+    env = {
+        **os.environ,
+        "OPENBLAS_CORETYPE": REFERENCE_KERNELS,
+        "PYTHONPATH": os.pathsep.join(
+            [str(Path(campipe.__file__).parents[1]), os.environ.get("PYTHONPATH", "")]
+        ),
+    }
+    with tempfile.TemporaryDirectory() as cwd:
+        done = subprocess.run(
+            [sys.executable, "-c", code], cwd=cwd, env=env, capture_output=True, text=True
+        )
+    assert done.returncode == 0, done
+    return done.stdout.split()[-1]
+
+
+def assert_recorded(digest: str, recorded: dict[str, str], source: str, call: str) -> None:
+    """``digest`` (``call``'s of the test file ``source``) is one of ``recorded`` (digest →
+    platform). On a platform whose own is not recorded, the same computation on the reference
+    kernels (:func:`on_reference_kernels`) must give a recorded one instead: the results did
+    not change, only their last bits with this platform's LAPACK."""
+    if digest in recorded:
+        return
+    platform = numerical_platform()
+    here = f"the digest {digest} on platform {platform}"
+    if platform in recorded.values():
+        raise AssertionError(f"{here} is not the one recorded for it: results changed")
+    again = on_reference_kernels(source, call)
+    if again is None:
+        raise AssertionError(
+            f"{here} is none of those recorded ({recorded}), and this processor cannot run the "
+            f"{REFERENCE_KERNELS} kernels they were recorded on: record this platform's with "
+            "CAMPIPE_ADD_PLATFORM_DIGEST=1 on code whose digest holds on a recorded platform"
+        )
+    assert again in recorded, (
+        f"{here} is not recorded, and on the {REFERENCE_KERNELS} kernels it is {again}, none "
+        f"of those recorded ({recorded}): results changed"
+    )

@@ -22,7 +22,7 @@ from campipe.engine import Case, RunSettings, run_batch
 from campipe.engine import batch as batch_module
 from campipe.model import thesis_train
 from campipe.profiles import harmonic, polydyne
-from tests.references import numerical_platform
+from tests.references import assert_recorded
 
 INCH = 0.0254
 #: One digest per platform whose LAPACK rounds differently (tests/integration/test_digest.py):
@@ -81,7 +81,7 @@ def mixed_digest() -> str:
 
 
 def test_a_mixed_batch_runs_bit_identical_to_before_the_caches():
-    assert mixed_digest() in MIXED_DIGESTS, numerical_platform()
+    assert_recorded(mixed_digest(), MIXED_DIGESTS, __file__, "mixed_digest()")
 
 
 def _arrays(value) -> list[np.ndarray]:
