@@ -79,7 +79,14 @@ def test_modal_exact_error_is_first_order_in_the_event_tolerance(
     runs = [run(case, integrator="modal-exact", tolerance=t) for t in tolerances]
     valve = np.array([valve_error(r, ref) for r in runs])
     events = np.array([event_angle_error(r, ref, case, first) for r in runs])
-    assert 0.8 < slope(tolerances, valve) < 1.5, valve
+    # An error at the round-off floor says nothing of the order: a thousand ulps of the
+    # valve's lift (3.5e-15 m), the reference's own round-off over its thousands of steps. A
+    # tolerance whose roots land on the reference's by luck (1.3e-15 m at 1e-10 on OpenBLAS's
+    # Sandybridge kernels) is left out of the slope, at least three points kept.
+    floor = 1000 * np.spacing(np.abs(ref.valve_lift).max())
+    above = valve > floor
+    assert above.sum() >= 3, valve
+    assert 0.8 < slope(np.array(tolerances)[above], valve[above]) < 1.5, valve
     assert slope(tolerances, events) > 0.8, events
     # Bounds: the valve moves at most ~v_closing·tolerance off per event, which later events
     # may amplify by a bounded factor; event angles within a hundred ω·tolerance.
