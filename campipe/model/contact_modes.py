@@ -21,8 +21,9 @@ How hard a landing rebounds: the contact's own damping ratio against the mass an
 its coordinate meets (the rest of the train free: M_pp − M_pf·M_ff⁻¹·M_fp, the rigid
 model's impact mass), ζ = c/(2·√(k·m)) on the valve side, and for a linear law the
 coefficient of restitution of that mass landing on it (:func:`released_restitution`: the
-contact releases where its force reaches zero, not where δ does). It estimates a landing
-whose contact is brief against the train's periods (a stiff contact: tens of µs); a hertz
+contact releases where its force reaches zero, not where δ does): the contact's own, as a
+contact model defines it, the links' and the spring's forces during the contact left out (a
+train's landing rebounds less where a preload acts over the contact's tens of µs); a hertz
 law's depends on the landing's speed (Hunt and Crossley: e ≈ 1 − 2·α·v/3) and is not given.
 
 Pure numerics: a train and its matrices in, numbers out.
