@@ -115,6 +115,7 @@ def contact_modes(train, sm: SystemMatrices) -> list[ContactMode]:
     cam_ratio = rest_ratio(train) if train.layout in LEVERS else 1.0
     arm = lash_ratio(sm) if train.layout == PUSHROD_ROCKER else cam_ratio
     seat = CAM if mirror(train) else SEAT
+    mass, own_stiffness, own_damping = own_matrices(train, sm.mass, sm.stiffness, sm.damping)
     out = []
     for contact, coordinate, ratio, through in (
         ("cam", CAM, cam_ratio, arm),
@@ -125,7 +126,7 @@ def contact_modes(train, sm: SystemMatrices) -> list[ContactMode]:
             continue
         load = train.spring_preload * through
         k, c = law.slopes(law.approach(load), 0.0)
-        mass, stiffness, damping = own_matrices(train, sm.mass, sm.stiffness, sm.damping)
+        stiffness, damping = own_stiffness.copy(), own_damping.copy()
         at = int(np.flatnonzero(used == coordinate)[0])
         stiffness[at, at] += k / ratio**2
         damping[at, at] += c / ratio**2
