@@ -367,7 +367,7 @@ def _seconds(seconds: float) -> str:
 def validate_text(loaded, spec_path) -> str:
     """The checked study in words: cases, axes (values as the spec wrote them), run."""
     from campipe.study.spec.coordinates import coordinate_values
-    from campipe.study.spec.resolve import distinct_but_speed
+    from campipe.study.spec.resolve import distinct_but_speed, per_turn_note
     from campipe.study.spec.variables import case_coordinates
 
     s = loaded.spec
@@ -414,6 +414,9 @@ def validate_text(loaded, spec_path) -> str:
     )
     if s.replay:
         lines.append(f"replay: {s.replay!r} (logged to <archive stem>.rrd as the study runs)")
+    note = per_turn_note(loaded.cases)
+    if note:
+        lines.append(f"lash adjuster: {note}")
     return "\n".join(lines)
 
 

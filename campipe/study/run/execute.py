@@ -74,7 +74,7 @@ from campipe.study.run.resume import (
 from campipe.study.run.sizing import default_batch_size, default_workers
 from campipe.study.run.workers import run_distributed, run_local, stored_here
 from campipe.study.spec.expand import Study
-from campipe.study.spec.resolve import ResolvedCase
+from campipe.study.spec.resolve import ResolvedCase, per_turn_note
 from campipe.vocabulary import OK, STATUS
 
 log = logging.getLogger(__name__)
@@ -180,6 +180,7 @@ def run_study(
         found, more = find_results(study, archive, archive_usable=not state.problems)
         notes += more
         missing = [c for c in study.cases if c.case_id not in found]
+        notes += _adjuster_notes(missing)
         workers = workers or (1 if scheduler == "synchronous" else default_workers())
         plans = _plan(study, missing, scheduler, workers, batch_size)
         run = _Run(scheduler, workers, on_batch, workers_store, notice, command)
@@ -228,6 +229,12 @@ def _check_replaceable(archive: Path, state: ArchiveState, overwrite: bool) -> N
     may overwrite it."""
     if not state.ours and not overwrite:
         raise refuse(archive, state)
+
+
+def _adjuster_notes(cases: list[ResolvedCase]) -> list[str]:
+    """The per-turn model's note on the cases computed (``resolve.per_turn_note``)."""
+    note = per_turn_note(cases)
+    return [] if note is None else [note]
 
 
 def _state_notes(archive: Path, state: ArchiveState) -> list[str]:
@@ -387,6 +394,7 @@ def _run_parts(
         found, more = find_parts(study, archive, layout)
         notes += more
         missing = [c for c in study.cases if c.case_id not in found.found]
+        notes += _adjuster_notes(missing)
         workers = run.workers or (1 if run.scheduler == "synchronous" else default_workers())
         run = dataclasses.replace(run, workers=workers)
         plans = _plan(study, missing, run.scheduler, workers, batch_size)

@@ -163,6 +163,31 @@ def distinct_but_speed(cases: Sequence[ResolvedCase]) -> tuple[Sequence[Resolved
     return cases, 1
 
 
+def per_turn_note(cases: Sequence[ResolvedCase]) -> str | None:
+    """A note on the cases whose lash adjuster's plunger is moved once a turn, not carried
+    within it (``engine.plunger.carried``: a finger's pivot with rigid contacts, or
+    newmark-linear), with the per-turn model's error as docs/model.md states it; None where
+    there are none."""
+    from campipe.engine.plunger import carried
+    from campipe.model.hla import adjuster
+
+    combinations, speeds = distinct_but_speed(cases)
+    n = speeds * sum(
+        adjuster(c.case.train) is not None and not carried(c.case, c.settings.integrator)
+        for c in combinations
+    )
+    if not n:
+        return None
+    return (
+        f"{n} case{'s' if n != 1 else ''} move{'' if n != 1 else 's'} the lash adjuster's "
+        "plunger once a turn (a finger's pivot with rigid contacts, or newmark-linear: the "
+        "per-turn model): below the onset within 1 % a turn of the plunger carried within the "
+        "turn; past it, where the plunger pumps up into the follower's flights, a turn's "
+        "pump-up may be off by a third or more (docs/model.md). Compliant contacts "
+        "(cam_contact, seat_contact) carry it within the turn"
+    )
+
+
 def freeze(value: object) -> object:
     if isinstance(value, Mapping):
         return tuple(sorted((k, freeze(v)) for k, v in value.items()))
