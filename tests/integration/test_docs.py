@@ -2,6 +2,7 @@
 and study.json hold, and the README's commands and analysis print what it shows."""
 
 import contextlib
+import functools
 import io
 import json
 import os
@@ -193,6 +194,19 @@ def _fenced_after(text: str, marker: str) -> str:
     return after.split("```", 2)[1].split("\n", 1)[1]
 
 
+@functools.cache
+def readme_outputs():
+    """``docs/readme_outputs.py`` as a module (the docs' script, not installed)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(
+        "readme_outputs", ROOT / "docs" / "readme_outputs.py"
+    )
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
 NUMBER = re.compile(r"^[-+]?(\d+\.?\d*(e[-+]?\d+)?|nan)$", re.IGNORECASE)
 
 
@@ -213,32 +227,8 @@ def test_the_readme_analysis_prints_what_the_readme_shows(quickstart_archive, mo
     table = np.array(values[1:]).reshape(4, 3)
     assert table[:, 0].tolist() == [6000, 9000, 9524, 11000]
     assert table[1, 1] == 0 and 45 <= table[2, 1] <= 60 and np.all(table[:, 2] > 0)
-    expected = np.array([float(t) for t in shown if NUMBER.match(t)])
-    atol = np.zeros(expected.size)
-    for speed, seated, error in _never_repeating(quickstart_archive):
-        row = table[:, 0].tolist().index(speed)
-        atol[1 + 3 * row + (2 if seated else 1)] = 3.0 * np.sqrt(2.0) * error
-    assert np.all(np.abs(np.array(values) - expected) <= 1e-6 * np.abs(expected) + atol)
-
-
-def _never_repeating(archive) -> list[tuple[float, bool, float]]:
-    """(speed [rpm], seated, the standard error of its no-follow a turn [degree]) of each case
-    of the quickstart that never repeats: its statistics over a chaotic window, whose bits (and
-    so its mean, within its standard error) follow the platform's round-off
-    (tests/integration/test_digest.py), where a settled case's numbers agree to 1e-6."""
-    import xarray as xr
-
-    with xr.open_dataset(archive) as ds:
-        never = np.flatnonzero(ds["period_turns"].values == 0)
-        seat = ds["seat"].values
-        return [
-            (
-                float(ds["speed_rpm"].values[i]),
-                bool(np.isfinite(seat[i])),  # no seat: -inf
-                float(ds["separation_deg_per_rev_uncertainty"].values[i]),
-            )
-            for i in never
-        ]
+    never = readme_outputs().never_repeating(quickstart_archive)
+    assert readme_outputs().analysis_differences(out.getvalue(), " ".join(shown), never) == []
 
 
 def test_the_readme_summary_is_what_campipe_query_prints(quickstart_archive):
@@ -248,11 +238,8 @@ def test_the_readme_summary_is_what_campipe_query_prints(quickstart_archive):
     result = CliRunner().invoke(main, ["query", str(archive), "--summary"])
     assert result.exit_code == 0, result.output
     # a never-repeating case's mean ± standard error follows the platform's round-off
-    # (_never_repeating): the same text, the means within three combined standard errors
-    pair = re.compile(r"(\d+\.?\d*) ± (\d+\.?\d*)")
-    assert pair.sub("…", result.output) == pair.sub("…", shown)
-    for (a, ea), (b, eb) in zip(pair.findall(result.output), pair.findall(shown), strict=True):
-        assert abs(float(a) - float(b)) <= 3.0 * np.hypot(float(ea), float(eb)), (a, ea, b, eb)
+    # (readme_outputs.never_repeating): the same text, the means within three standard errors
+    assert readme_outputs().summary_differences(result.output, shown) == []
 
 
 def test_the_known_disagreement_is_explained_while_the_json_shows_it():
@@ -271,13 +258,7 @@ def test_the_readme_damping_note_is_the_model_s():
     its dashpot is checked by hand: the first mode's generalised mass per unit valve motion
     times 2·ζ1·ω1 (modal damping's definition), and the drag at 9000 rpm is that dashpot
     times the valve's peak velocity, the rocker ratio times the cam's ω·h/2."""
-    import importlib.util
-
-    spec = importlib.util.spec_from_file_location(
-        "readme_outputs", ROOT / "docs" / "readme_outputs.py"
-    )
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    module = readme_outputs()
     note = module.damping_note()
     assert note in README.read_text()
     from campipe.constants import INCH, LBF
@@ -294,13 +275,7 @@ def test_the_readme_damping_note_is_the_model_s():
 def test_the_readme_figure_is_drawn_by_the_script_with_the_readmes_command():
     """docs/readme_outputs.py draws docs/quickstart-metric.png with `campipe plot metric`, the
     README's first plot command, on a fresh quickstart run (never by hand)."""
-    import importlib.util
-
-    spec = importlib.util.spec_from_file_location(
-        "readme_outputs", ROOT / "docs" / "readme_outputs.py"
-    )
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    module = readme_outputs()
     text = README.read_text()
     figure = module.FIGURE.relative_to(ROOT).as_posix()
     assert f"]({figure})" in text
