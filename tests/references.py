@@ -68,13 +68,19 @@ def numerical_platform() -> str:
     return "+".join(sorted(set(names))) or "unknown"
 
 
-def recorded_digests(path) -> dict[str, str]:
+def recorded_digests(path, name: str | None = None) -> dict[str, str]:
     """The digests a file records, digest → the platform it was computed on: one line each,
-    ``<digest> <platform>`` (a bare digest: the platform it was first recorded on, not named)."""
+    ``<digest> <platform>`` (a bare digest: the platform it was first recorded on, not named);
+    with ``name``, the lines ``<name> <digest> <platform>`` of that name only."""
     out = {}
     for line in path.read_text().splitlines():
-        if line.strip():
-            digest, *platform = line.split()
+        words = line.split()
+        if name is not None:
+            if not words or words[0] != name:
+                continue
+            words = words[1:]
+        if words:
+            digest, *platform = words
             out[digest] = " ".join(platform) or "not named"
     return out
 

@@ -132,8 +132,7 @@ def contact_modes(train, sm: SystemMatrices) -> list[ContactMode]:
         damping[at, at] += c / ratio**2
         omega, phi = normal_modes(mass, stiffness, np.ones(used.size, bool))
         zeta = np.einsum("ij,ik,kj->j", phi, damping, phi) / (2.0 * omega)
-        free = [j for j in range(used.size) if j != at]
-        struck = struck_mass(mass, at, free) if free else float(mass[at, at])
+        struck = struck_mass(mass, at, [j for j in range(used.size) if j != at])
         out.append(
             ContactMode(contact, law.name, load, k, c, ratio, omega, zeta, struck, law.linear)
         )

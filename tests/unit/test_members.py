@@ -28,7 +28,7 @@ from campipe.model import (
 from campipe.model.assembly import assemble, frequency_convergence, observed_orders
 from campipe.model.elements import bar_mass, bar_stiffness, elements
 from campipe.vocabulary import CONFIGURATIONS, free_coordinates
-from tests.references import assert_recorded
+from tests.references import assert_recorded, recorded_digests
 
 THESIS_MATRICES = Path(__file__).parents[1] / "data" / "thesis-matrices.sha256"
 COUNTS = (2, 4, 8, 16)
@@ -51,14 +51,11 @@ def test_the_thesis_model_is_the_one_element_case_unchanged_to_the_bit():
     length L/n computed another way, another element order in the sums, the modes' signs, or
     damping ratios extended or converted differently. C comes from LAPACK's modes, whose last
     bits are a platform's (tests/integration/test_digest.py): one digest per platform."""
-    stored: dict[str, dict[str, str]] = {}
-    for line in THESIS_MATRICES.read_text().splitlines():
-        name, digest, *platform = line.split()
-        stored.setdefault(name, {})[digest] = " ".join(platform) or "not named"
     for name in ("mass", "stiffness", "damping"):
         assert getattr(system_matrices(thesis_train()), name).shape == (7, 7)
+        recorded = recorded_digests(THESIS_MATRICES, name)
         digest = thesis_matrix_digest(name)
-        assert_recorded(digest, stored[name], __file__, f"thesis_matrix_digest({name!r})")
+        assert_recorded(digest, recorded, __file__, f"thesis_matrix_digest({name!r})")
     # The defaults are the thesis's: one element each, modal damping.
     train = thesis_train()
     assert [train.elements_of(m) for m in ELEMENTS] == [1] * 5
