@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import NamedTuple
@@ -426,9 +427,10 @@ def _prepare_one(case: Case, settings: RunSettings, full_state: bool) -> Prepare
     )
     # Each a (1,) row of one array (C-contiguous views: the kernels' types).
     omega, seat_q, capture, lift_bound, speed_bound, t_sample, t_end = floats.reshape(7, 1)
-    q0, v0, a0 = np.zeros((3, 1, n_q))
+    q0, v0 = np.zeros((2, 1, n_q))  # (a periodic start writes them)
     has_seat_, form = np.array([[has_seat], [case.closure == "form"]])
-    which, cfg0 = np.array([[0], [CAM_CONTACT]], np.int64)  # the train, the start's configuration
+    shared = _one_case(n_q)
+    which = shared.which
     runs = ExactRuns(
         train=which,
         t_sample=t_sample,
@@ -437,7 +439,7 @@ def _prepare_one(case: Case, settings: RunSettings, full_state: bool) -> Prepare
         dt_cap=float(dt_run or 0.0),
         tolerance=float(settings.tolerance),
         full_state=bool(full_state),
-        **no_plungers(1, n_q),
+        **shared.plungers,
     )
     return PreparedBatch(
         case_list=[case],
@@ -455,8 +457,8 @@ def _prepare_one(case: Case, settings: RunSettings, full_state: bool) -> Prepare
             t0=np.zeros(1),
             q0=q0,
             v0=v0,
-            a0=a0,
-            cfg0=cfg0,
+            a0=shared.a0,
+            cfg0=shared.cfg0,
             meff=stack.meff,
             separation=stack.separation,
             capture=capture,
@@ -468,6 +470,34 @@ def _prepare_one(case: Case, settings: RunSettings, full_state: bool) -> Prepare
         stack=stack,
     )
 
+
+class _OneCase(NamedTuple):
+    """What every one-case batch of trains of ``n_q`` coordinates shares (``_one_case``)."""
+
+    which: np.ndarray  # (1,) int64: the batch's one train
+    cfg0: np.ndarray  # (1,) int64: configuration I at the start
+    a0: np.ndarray  # (1, n_q): no start accelerations (modal-exact's periodic start)
+    plungers: dict[str, np.ndarray]  # ``ExactRuns``' plunger fields: none carried
+
+
+@functools.cache
+def _one_case(n_q: int) -> _OneCase:
+    """The arrays a one-case batch of trains of ``n_q`` coordinates shares with every other
+    (``_prepare_one``), made once: read, never written, by the kernels and by the run (a
+    start that is not the kernels' own replaces ``a0`` and ``cfg0``; a batch that carries a
+    plunger takes ``plunger_runs``' own fields). Each allocation saved is a microsecond or
+    two of a one-case call's fixed cost."""
+    return _OneCase(
+        which=np.zeros(1, np.int64),
+        cfg0=np.full(1, CAM_CONTACT, np.int64),
+        a0=np.zeros((1, n_q)),
+        plungers=no_plungers(1, n_q),
+    )
+
+
+#: A one-case periodic start's step to snap to: none (read, never written: shared by every
+#: call).
+ONE_ZERO = np.zeros(1)
 
 #: The integrators that start from q and v alone (modal-exact's closed form): ``run_batch``
 #: leaves their periodic start's accelerations zero instead of solving for them.
@@ -552,7 +582,7 @@ def _find_periodic_starts(cases, modal_trains, runs, packed, snap, t0, q0, v0) -
     ws, state = make_workspace(n_q), make_state()
     structures = plain(cases, modal_trains, packed, runs, ws)
     steady.periodic_starts(*structures, state, snap, z_turn, t0, q0, v0)
-    if np.isnan(t0).any():
+    if math.isnan(t0[0]) if n == 1 else np.isnan(t0).any():
         bad = np.flatnonzero(np.isnan(t0))
         raise CaseError.at(
             "seat",
@@ -702,8 +732,9 @@ def _run_checked(
     if start is None and plan.start_in_place:
         # The start written into the batch's own t0, q0 and v0 (a0 stays zero, cfg0 I).
         cases_in = batch.cases
+        snap = ONE_ZERO if n == 1 else np.zeros(n)  # no step to snap to
         _find_periodic_starts(cases_in, batch.modal_trains, batch.runs, batch.packed,
-                              np.zeros(n), cases_in.t0, cases_in.q0, cases_in.v0)  # fmt: skip
+                              snap, cases_in.t0, cases_in.q0, cases_in.v0)  # fmt: skip
     else:
         if start is None:
             start = _starts(cases, settings, batch, in_run=True)
@@ -713,7 +744,7 @@ def _run_checked(
     # (a table of the plunger's turns where the integrator carries it: ``engine.plunger``)
     table = integrator.run(integrator.prepare(batch, settings), cases_in, out)
     status, n_events = out.status, out.n_events
-    if np.count_nonzero(status):  # not every case OK
+    if status[0] if n == 1 else np.count_nonzero(status):  # not every case OK
         failures.raise_or_blank(out, settings, on_failure, check_stability_limit, integrator)
     angles = plan.angles.copy()
     omega, qref = cases_in.omega, cases_in.valve_ref

@@ -187,23 +187,25 @@ def make_outputs(
     """Outputs for n cases of up to ``n_coordinates`` coordinates, zeroed (events
     uninitialised past each case's count).
 
-    The float arrays are views of one zeroed block, and the counts rows of another: a few
-    allocations a call instead of eleven, and a block of 4 MB or more (about 19 cases of
-    a 4-turn run sampled every degree) comes in huge pages (numpy asks for them from 4 MB),
-    which the kernel's first writes fault in 2 MB at a time, not 4 kB (numpy's separate
-    arrays, each below 4 MB, cost a 32-case run a third of its time in page faults).
+    The float arrays are views of one zeroed block, the counts' rows and the configurations of
+    another: a few allocations a call instead of eleven, and a block of 4 MB or more (about
+    19 cases of a 4-turn run sampled every degree) comes in huge pages (numpy asks for them
+    from 4 MB), which the kernel's first writes fault in 2 MB at a time, not 4 kB (numpy's
+    separate arrays, each below 4 MB, cost a 32-case run a third of its time in page faults).
     """
     k = n * n_out
     nq = k * n_coordinates
     block = np.zeros(2 * nq + 5 * k + n * n_rev * N_ENGINE)
     at = 2 * nq + 5 * k  # q, v, force (2), cam, acc (2), then per_rev
-    counts = np.zeros((3, n), np.int64)
+    # The counts' rows (int64, 8-aligned at the block's start), then the configurations.
+    small = np.zeros(3 * n * 8 + k, np.int8)
+    counts = small[: 3 * n * 8].view(np.int64).reshape(3, n)
     return Outputs(
         q=block[:nq].reshape(n, n_out, n_coordinates),
         v=block[nq : 2 * nq].reshape(n, n_out, n_coordinates),
         force=block[2 * nq : 2 * nq + 2 * k].reshape(n, n_out, 2),
         cam=block[2 * nq + 2 * k : 2 * nq + 3 * k].reshape(n, n_out),
-        cfg=np.zeros((n, n_out), np.int8),
+        cfg=small[3 * n * 8 :].reshape(n, n_out),
         acc=block[2 * nq + 3 * k : at].reshape(n, n_out, 2),
         per_rev=block[at:].reshape(n, n_rev, N_ENGINE),
         events=sparse_empty((n, max_events, N_EVENT_FIELDS)),

@@ -8,6 +8,7 @@ them).
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -403,24 +404,7 @@ def check_run(
     CaseError
         For a case's closure or speed, its ``key`` ``closure`` or ``speed``.
     """
-    dt_run = settings.step  # also refuses an unknown integrator
-    settings.check_fidelity()
-    if settings.settle:
-        check_settling(settings)
-    if dt_run is not None and not (dt_run > 0 and math.isfinite(dt_run)):
-        raise RunSettingsError.at(
-            "run.dt",
-            f"found {dt_run!r} s, expected a positive step",
-            found=dt_run,
-            expected="> 0 s",
-        )
-    if not (settings.tolerance > 0 and math.isfinite(settings.tolerance)):
-        raise RunSettingsError.at(
-            "run.tolerance",
-            f"found {settings.tolerance!r} s, expected > 0",
-            found=settings.tolerance,
-            expected="> 0 s",
-        )
+    _check_settings(settings)
     for i, case in enumerate(cases):
         if adjuster(case.train) is not None:
             adjuster_turns(settings)
@@ -441,6 +425,30 @@ def check_run(
     check_contacts(cases, settings)
     if check_stability_limit:
         check_stability(cases, settings)
+
+
+@functools.lru_cache(maxsize=64)
+def _check_settings(settings: RunSettings) -> None:
+    """``check_run``'s checks of the settings alone, once per settings (a refusal is not
+    cached: it raises again at each call)."""
+    dt_run = settings.step  # also refuses an unknown integrator
+    settings.check_fidelity()
+    if settings.settle:
+        check_settling(settings)
+    if dt_run is not None and not (dt_run > 0 and math.isfinite(dt_run)):
+        raise RunSettingsError.at(
+            "run.dt",
+            f"found {dt_run!r} s, expected a positive step",
+            found=dt_run,
+            expected="> 0 s",
+        )
+    if not (settings.tolerance > 0 and math.isfinite(settings.tolerance)):
+        raise RunSettingsError.at(
+            "run.tolerance",
+            f"found {settings.tolerance!r} s, expected > 0",
+            found=settings.tolerance,
+            expected="> 0 s",
+        )
 
 
 def check_contacts(cases: Sequence[Case], settings: RunSettings) -> None:

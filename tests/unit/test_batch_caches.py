@@ -85,9 +85,11 @@ def test_a_mixed_batch_runs_bit_identical_to_before_the_caches():
 
 
 def _arrays(value) -> list[np.ndarray]:
-    """Every array in a (nested) named tuple or tuple."""
+    """Every array in a (nested) named tuple, tuple or dict."""
     if isinstance(value, np.ndarray):
         return [value]
+    if isinstance(value, dict):
+        value = tuple(value.values())
     if isinstance(value, tuple):
         return [a for item in value for a in _arrays(item)]
     return []
@@ -141,9 +143,13 @@ def test_the_caches_are_bounded_and_no_run_writes_into_what_they_hold():
         # a one-case batch's, whose rows are the stack's own arrays
         batch_module.train_stack(trains[1:], 0.0),
         batch_module.train_stack(trains[1:], 3e-6),
+        # what every one-case batch shares (its train index, start configuration and
+        # accelerations, no plunger, no step to snap its periodic start to)
+        batch_module._one_case(7),
+        batch_module.ONE_ZERO,
     ]
     before = [a.tobytes() for a in _arrays(tuple(held))]
-    assert len(before) > 40
+    assert len(before) > 50
     for settings in (
         RunSettings(revolutions=2),
         RunSettings(revolutions=1.5, start="quasi-static"),
@@ -151,6 +157,11 @@ def test_the_caches_are_bounded_and_no_run_writes_into_what_they_hold():
     ):
         run_batch(cases, settings)
         run_batch(cases[1:2], settings)  # the stiff train, seated
+        run_batch(cases[2:3], settings, full_state=False)  # separating, seated, at 1.2 ω
+    restitution = dataclasses.replace(cases[0].train, cam_restitution=0.5, seat_restitution=0.5)
+    run_batch(
+        [Case(restitution, cases[1].profile, 1000.0, seat=-0.001)], RunSettings(revolutions=2)
+    )
     assert [a.tobytes() for a in _arrays(tuple(held))] == before
     assert batch_module.train_stack(trains, 0.0) is held[0]  # what the runs took
     assert packed.pack_cached([c.profile for c in cases]) is held[2]

@@ -67,4 +67,6 @@ def carried_plungers(runs: Any) -> Any:
     (``plunger_modes``), else None, for which numba compiles a kernel without the plunger's
     code (a second specialisation, compiled only when such a batch first runs)."""
     coords = runs.plunger_coord
+    if coords.size == 1:  # (a one-case call: no reduction)
+        return coords if coords[0] >= 0 else None
     return coords if coords.size and int(coords.max()) >= 0 else None
