@@ -225,8 +225,8 @@ def test_prune_keeps_the_newest_and_those_in_use(tmp_path):
 
 def test_compiling_ahead_compiles_the_signatures_a_run_calls(monkeypatch):
     """A first run compiles modal-exact's kernel ahead from the types ``batch.integrator_types``
-    gives, found without running the start's kernels
-    (``kernels.compile_kernels``); the quasi-static kernel is called from the batch's starts
+    gives, found without running the start's kernels (``kernels.compile_kernels``); the
+    quasi-static kernel is called from the quasi-static start (``quasi_static.initial_states``)
     and from the trains' valve references. Each must be called with the types it was compiled
     for, or the run compiles it again (about 15 s for modal-exact). Checked here on the types
     of every call a run makes, over batches that differ in what could change a type: a seat,
@@ -236,7 +236,7 @@ def test_compiling_ahead_compiles_the_signatures_a_run_calls(monkeypatch):
     """
     from numba import typeof
 
-    from campipe.engine import contact, exact
+    from campipe.engine import contact, exact, quasi_static
     from campipe.engine.batch import Case, RunSettings, run_batch
     from campipe.model import thesis_train
     from campipe.profiles import harmonic
@@ -252,7 +252,7 @@ def test_compiling_ahead_compiles_the_signatures_a_run_calls(monkeypatch):
 
     monkeypatch.setattr(exact, "modal_exact_batch", recording("exact", exact.modal_exact_batch))
     monkeypatch.setattr(
-        batch, "quasi_static_batch", recording("quasi-static", contact.quasi_static_batch)
+        quasi_static, "quasi_static_batch", recording("quasi-static", contact.quasi_static_batch)
     )
     monkeypatch.setattr(
         contact, "quasi_static_batch", recording("quasi-static", contact.quasi_static_batch)
