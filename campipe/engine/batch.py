@@ -75,6 +75,7 @@ from campipe.engine.settings import visited_configurations as visited_configurat
 from campipe.engine.settle import run_settled
 from campipe.model import ValveTrain, system_matrices
 from campipe.model.assembly import SystemMatrices, configuration_frequencies
+from campipe.model.contact_keys import impact_restitution
 from campipe.model.hla import adjuster
 from campipe.profiles import Profile, evaluate
 from campipe.profiles.packed import Keyed, PackedProfiles, keyed, pack_cached
@@ -227,7 +228,9 @@ def _train_stack(trains: tuple[ValveTrain, ...], dt: float) -> TrainStack:
         ratio=np.array([abs(p.valve_ratio) for p in preps]),
         meff=np.stack([p.impact_masses for p in preps]),
         separation=np.stack([d.separation for d in modal]),
-        restitution=np.array([[t.cam_restitution, t.seat_restitution] for t in trains]),
+        restitution=np.array(
+            [[impact_restitution(t, "cam"), impact_restitution(t, "seat")] for t in trains]
+        ),
         free=free,
         mass_ff=tuple(p.matrices.mass[np.ix_(f, f)] for p, f in zip(preps, free, strict=True)),
         regimes=regimes,

@@ -53,6 +53,7 @@ from campipe.engine.modal import ModalData
 from campipe.engine.settings import sample_count, turn_count
 from campipe.model import ValveTrain
 from campipe.model.assembly import preload_vector
+from campipe.model.contact_keys import impact_restitution
 from campipe.model.hla import adjuster
 from campipe.profiles import Profile, pack
 from campipe.profiles.pieces import evaluate_pieces
@@ -330,7 +331,7 @@ def leave_speeds(cases: Sequence[Case], capture: float) -> np.ndarray:
     for i, (case, limits) in enumerate(zip(cases, _cases_break_limits(cases), strict=True)):
         if case.closure == "form":
             continue
-        bounces = case.train.cam_restitution > 0.0
+        bounces = impact_restitution(case.train, "cam") > 0.0
         for l0, d0, l1, d1 in zip(*limits, strict=True):
             if l1 < l0 - DROP_FLOOR:
                 out[i] = 0.0

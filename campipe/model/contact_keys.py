@@ -70,8 +70,9 @@ def contact_parameters() -> list[Parameter]:
             ),
             Parameter(
                 f"{contact}_restitution",
-                f"{label} coefficient of restitution of a rigid impact (0: the thesis's "
-                "plastic impact)",
+                f"{label} coefficient of restitution: of a rigid impact (0: the thesis's "
+                "plastic impact), or of a landing on a kelvin-voigt contact, its damping "
+                f"derived from it (0: {contact}_contact_damping's)",
                 "",
                 "",
                 0.0,
@@ -123,6 +124,9 @@ CONTACT_CONSTANTS = {
     "kelvin-voigt": ("contact_stiffness", "contact_damping"),
     "hertz": ("hertz_constant", "hunt_crossley"),
 }
+#: Another law's constant a law takes as well: kelvin-voigt's damping may be given as the
+#: coefficient of restitution of a landing on it instead (``contact.KelvinVoigt.from_train``).
+ALSO_TAKES = {"kelvin-voigt": ("restitution",)}
 
 
 def _contact_geometry(train: Any, contact: str) -> tuple[float, float]:
@@ -145,11 +149,14 @@ def check_contacts(train: Any, key_prefix: str = "") -> None:
     for contact in ("cam", "seat"):
         law = getattr(train, f"{contact}_contact")
         law_key = f"{key_prefix}{contact}_contact"
+        _check_restitution_damping(train, contact, law, key_prefix)
         for other, names in CONTACT_CONSTANTS.items():
             if other == law:
                 continue
             for suffix in names:
                 name = f"{contact}_{suffix}"
+                if suffix in ALSO_TAKES.get(law, ()):
+                    continue
                 if getattr(train, name) != 0.0:
                     if law == "rigid":
                         fix = f"set {law_key}: {other}, or leave {name} out"
@@ -198,3 +205,30 @@ def check_contacts(train: Any, key_prefix: str = "") -> None:
                 found=0.0,
                 expected=f"a positive {name}, or {geometry}",
             )
+
+
+def _check_restitution_damping(train: Any, contact: str, law: str, key_prefix: str) -> None:
+    """Refuse a kelvin-voigt contact given both its damping and its restitution (the one is
+    derived from the other)."""
+    if law != "kelvin-voigt":
+        return
+    restitution, damping = (
+        getattr(train, f"{contact}_{suffix}") for suffix in ("restitution", "contact_damping")
+    )
+    if restitution != 0.0 and damping != 0.0:
+        raise ModelParameterError.at(
+            f"{key_prefix}{contact}_restitution",
+            f"and {contact}_contact_damping both given: a kelvin-voigt contact's damping is "
+            f"its own c, or derived from the restitution of a landing on it; leave one out",
+            found=restitution,
+            expected=f"0 (not given) with {contact}_contact_damping {damping:g} N·s/m",
+        )
+
+
+def impact_restitution(train: Any, contact: str) -> float:
+    """The coefficient of restitution of a rigid impact at ``contact`` ("cam" or "seat"): the
+    train's ``*_restitution`` where the contact is rigid, 0 where it is compliant (whose
+    restitution, if given, sets its damping instead)."""
+    if getattr(train, f"{contact}_contact") != "rigid":
+        return 0.0
+    return float(getattr(train, f"{contact}_restitution"))

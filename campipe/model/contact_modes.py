@@ -31,12 +31,14 @@ Pure numerics: a train and its matrices in, numbers out.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.optimize import brentq
 
-from campipe.model.assembly import SystemMatrices, normal_modes, struck_mass
+from campipe.model.assembly import SystemMatrices, normal_modes, struck_mass, system_matrices
 from campipe.model.checks import PUSHROD_ROCKER
 from campipe.model.contact import contact_law
 from campipe.model.lash import lash_ratio
@@ -106,24 +108,68 @@ def released_restitution(zeta: float) -> float:
     return math.exp(-zeta * math.atanh(2.0 * zeta * beta / (2.0 * zeta * zeta - 1.0)) / beta)
 
 
+def restitution_damping_ratio(restitution: float) -> float:
+    """The ζ whose :func:`released_restitution` is ``restitution`` e (0 < e ≤ 1): e falls
+    from 1 at ζ = 0 towards 0 (as 1/(4ζ²) for large ζ); found by bisection (Brent's) on a
+    bracket doubled until it holds e, to ζ's rounding."""
+    if not 0.0 < restitution <= 1.0:
+        raise ValueError(f"restitution: found {restitution!r}, expected 0 < e ≤ 1")
+    if restitution == 1.0:
+        return 0.0
+    high = 1.0
+    while released_restitution(high) > restitution:
+        high *= 2.0
+    return float(
+        brentq(lambda z: released_restitution(z) - restitution, 0.0, high, xtol=1e-15, rtol=1e-15)
+    )
+
+
+def contact_point(train, contact: str) -> tuple[int, float]:
+    """A contact's coordinate (q1 for the cam, q7 for the seat, q1 for a one-mass chain's
+    seat: its valve is its follower) and the lever ratio r there (a lever's rest ratio at its
+    cam, else 1)."""
+    if contact == "cam":
+        return CAM, rest_ratio(train) if train.layout in LEVERS else 1.0
+    return (CAM if mirror(train) else SEAT), 1.0
+
+
+@functools.lru_cache(maxsize=256)
+def struck(train, contact: str) -> tuple[float, float]:
+    """(the mass an impulse at the contact's coordinate meets, the rest of the train free
+    [kg], the lever ratio r there): :func:`contact_modes`' struck mass of the train's own
+    matrices, once per train."""
+    sm = system_matrices(train)
+    mass = own_matrices(train, sm.mass, sm.stiffness, sm.damping)[0]
+    coordinate, ratio = contact_point(train, contact)
+    used = used_coordinates(train)
+    at = int(np.flatnonzero(used == coordinate)[0])
+    return struck_mass(mass, at, [j for j in range(used.size) if j != at]), ratio
+
+
+def landing_damping(train, contact: str, stiffness: float, restitution: float) -> float:
+    """The damping c [N·s/m] at a kelvin-voigt contact of stiffness k [N/m] on which the
+    struck mass m lands with coefficient of restitution e (``*_restitution``): on the valve
+    side k/r² and c/r², so c = 2·ζ(e)·r·√(k·m) (:func:`restitution_damping_ratio`)."""
+    mass, ratio = struck(train, contact)
+    return 2.0 * restitution_damping_ratio(restitution) * ratio * math.sqrt(stiffness * mass)
+
+
 def contact_modes(train, sm: SystemMatrices) -> list[ContactMode]:
     """Each compliant contact of ``train`` (none for rigid ones), linearised at its static
     load; a lever's cam contact at its roller, the lever ratio r the rest ratio
     (:func:`campipe.model.levers.rest_ratio`). A one-mass chain's valve is its follower: both
     contacts act on q1."""
     used = used_coordinates(train)
-    cam_ratio = rest_ratio(train) if train.layout in LEVERS else 1.0
-    arm = lash_ratio(sm) if train.layout == PUSHROD_ROCKER else cam_ratio
-    seat = CAM if mirror(train) else SEAT
     mass, own_stiffness, own_damping = own_matrices(train, sm.mass, sm.stiffness, sm.damping)
     out = []
-    for contact, coordinate, ratio, through in (
-        ("cam", CAM, cam_ratio, arm),
-        ("seat", seat, 1.0, 1.0),
-    ):
+    for contact in ("cam", "seat"):
         law = contact_law(train, contact)
         if not law.compliant:
             continue
+        coordinate, ratio = contact_point(train, contact)
+        through = 1.0
+        if contact == "cam":  # the preload at the cam: through the train's ratio
+            through = lash_ratio(sm) if train.layout == PUSHROD_ROCKER else ratio
         load = train.spring_preload * through
         k, c = law.slopes(law.approach(load), 0.0)
         stiffness, damping = own_stiffness.copy(), own_damping.copy()
@@ -132,8 +178,8 @@ def contact_modes(train, sm: SystemMatrices) -> list[ContactMode]:
         damping[at, at] += c / ratio**2
         omega, phi = normal_modes(mass, stiffness, np.ones(used.size, bool))
         zeta = np.einsum("ij,ik,kj->j", phi, damping, phi) / (2.0 * omega)
-        struck = struck_mass(mass, at, [j for j in range(used.size) if j != at])
+        struck_by = struck_mass(mass, at, [j for j in range(used.size) if j != at])
         out.append(
-            ContactMode(contact, law.name, load, k, c, ratio, omega, zeta, struck, law.linear)
+            ContactMode(contact, law.name, load, k, c, ratio, omega, zeta, struck_by, law.linear)
         )
     return out

@@ -332,7 +332,9 @@ class ValveTrain:
     cam_hertz_constant: float = 0.0  # [N/m^1.5] K; 0: from the radius
     cam_hunt_crossley: float = 0.0  # [s/m] α
     cam_contact_width: float = 0.0  # [m] line contact length; 0: none
-    cam_restitution: float = 0.0  # [-] e of a rigid impact; 0: plastic (the thesis's)
+    #: [-] e of a rigid impact (0: plastic, the thesis's), or of a landing on a kelvin-voigt
+    #: contact (its damping then derived from e: ``contact.KelvinVoigt.from_train``)
+    cam_restitution: float = 0.0
     seat_contact: str = "rigid"  # one of CONTACT_LAWS
     seat_contact_stiffness: float = 0.0  # [N/m]
     seat_contact_damping: float = 0.0  # [N·s/m]

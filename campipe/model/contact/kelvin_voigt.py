@@ -8,10 +8,12 @@ and Lin 1987)."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 from campipe.model.contact.base import ContactLaw
 from campipe.model.contact_keys import CONTACT_CONSTANTS
+from campipe.model.parameters import ValveTrain
 
 
 def line_contact_stiffness(pair: float, width: float) -> float:
@@ -23,6 +25,21 @@ class KelvinVoigt(ContactLaw):
     name = "kelvin-voigt"
     constants = CONTACT_CONSTANTS["kelvin-voigt"]  # k [N/m], c [N·s/m]
     linear = True
+
+    @classmethod
+    def from_train(cls, train: ValveTrain, contact: str) -> ContactLaw:
+        """The base's law; with the contact's ``*_restitution`` e given (its damping not),
+        the damping that lands the struck mass on it with e
+        (``contact_modes.landing_damping``: the contact's own restitution, the train's other
+        forces during the contact left out)."""
+        law = super().from_train(train, contact)
+        restitution = getattr(train, f"{contact}_restitution")
+        if restitution == 0.0:
+            return law
+        from campipe.model.contact_modes import landing_damping  # (it builds laws itself)
+
+        damping = landing_damping(train, contact, law.stiffness, restitution)
+        return dataclasses.replace(law, damping=damping)
 
     @staticmethod
     def geometric_stiffness(pair: float, width: float, radius: float) -> float:
