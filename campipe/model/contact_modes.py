@@ -31,20 +31,17 @@ Pure numerics: a train and its matrices in, numbers out.
 
 from __future__ import annotations
 
-import functools
 import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import brentq
 
-from campipe.model.assembly import SystemMatrices, normal_modes, struck_mass, system_matrices
+from campipe.model.assembly import SystemMatrices, normal_modes, struck_mass
 from campipe.model.checks import PUSHROD_ROCKER
 from campipe.model.contact import contact_law
+from campipe.model.landing import contact_point, released_restitution
 from campipe.model.lash import lash_ratio
-from campipe.model.layouts import mirror, own_matrices, used_coordinates
-from campipe.model.levers import LEVERS, rest_ratio
-from campipe.vocabulary import CAM, SEAT
+from campipe.model.layouts import own_matrices, used_coordinates
 
 
 @dataclass(frozen=True)
@@ -89,69 +86,6 @@ class ContactMode:
         if self.linear:
             return released_restitution(self.contact_damping_ratio)
         return 1.0 if self.damping == 0.0 else math.nan
-
-
-def released_restitution(zeta: float) -> float:
-    """The coefficient of restitution of a mass landing on a spring k and dashpot c in
-    parallel (ζ = c/(2√(k·m))) that let go where their force k·δ + c·δ̇ reaches zero: with
-    δ = (v₀/ω_d)·e^(−ζωt)·sin(ω_d·t), the force vanishes at ω_d·t* = π − 2·asin ζ, where
-    δ̇ = −v₀·e^(−ζωt*), so e = exp(−ζ·(π − 2·asin ζ)/√(1 − ζ²)) (ζ < 1; e⁻² at ζ = 1, and
-    exp(−ζ·atanh(2ζ√(ζ² − 1)/(2ζ² − 1))/√(ζ² − 1)) beyond). Not the classic
-    exp(−πζ/√(1 − ζ²)), which holds the dashpot in tension until δ = 0."""
-    if not zeta >= 0.0:
-        raise ValueError(f"zeta: found {zeta!r}, expected ≥ 0")
-    if zeta < 1.0:
-        return math.exp(-zeta * (math.pi - 2.0 * math.asin(zeta)) / math.sqrt(1.0 - zeta * zeta))
-    if zeta == 1.0:
-        return math.exp(-2.0)
-    beta = math.sqrt(zeta * zeta - 1.0)
-    return math.exp(-zeta * math.atanh(2.0 * zeta * beta / (2.0 * zeta * zeta - 1.0)) / beta)
-
-
-def restitution_damping_ratio(restitution: float) -> float:
-    """The ζ whose :func:`released_restitution` is ``restitution`` e (0 < e ≤ 1): e falls
-    from 1 at ζ = 0 towards 0 (as 1/(4ζ²) for large ζ); found by bisection (Brent's) on a
-    bracket doubled until it holds e, to ζ's rounding."""
-    if not 0.0 < restitution <= 1.0:
-        raise ValueError(f"restitution: found {restitution!r}, expected 0 < e ≤ 1")
-    if restitution == 1.0:
-        return 0.0
-    high = 1.0
-    while released_restitution(high) > restitution:
-        high *= 2.0
-    return float(
-        brentq(lambda z: released_restitution(z) - restitution, 0.0, high, xtol=1e-15, rtol=1e-15)
-    )
-
-
-def contact_point(train, contact: str) -> tuple[int, float]:
-    """A contact's coordinate (q1 for the cam, q7 for the seat, q1 for a one-mass chain's
-    seat: its valve is its follower) and the lever ratio r there (a lever's rest ratio at its
-    cam, else 1)."""
-    if contact == "cam":
-        return CAM, rest_ratio(train) if train.layout in LEVERS else 1.0
-    return (CAM if mirror(train) else SEAT), 1.0
-
-
-@functools.lru_cache(maxsize=256)
-def struck(train, contact: str) -> tuple[float, float]:
-    """(the mass an impulse at the contact's coordinate meets, the rest of the train free
-    [kg], the lever ratio r there): :func:`contact_modes`' struck mass of the train's own
-    matrices, once per train."""
-    sm = system_matrices(train)
-    mass = own_matrices(train, sm.mass, sm.stiffness, sm.damping)[0]
-    coordinate, ratio = contact_point(train, contact)
-    used = used_coordinates(train)
-    at = int(np.flatnonzero(used == coordinate)[0])
-    return struck_mass(mass, at, [j for j in range(used.size) if j != at]), ratio
-
-
-def landing_damping(train, contact: str, stiffness: float, restitution: float) -> float:
-    """The damping c [N·s/m] at a kelvin-voigt contact of stiffness k [N/m] on which the
-    struck mass m lands with coefficient of restitution e (``*_restitution``): on the valve
-    side k/r² and c/r², so c = 2·ζ(e)·r·√(k·m) (:func:`restitution_damping_ratio`)."""
-    mass, ratio = struck(train, contact)
-    return 2.0 * restitution_damping_ratio(restitution) * ratio * math.sqrt(stiffness * mass)
 
 
 def contact_modes(train, sm: SystemMatrices) -> list[ContactMode]:

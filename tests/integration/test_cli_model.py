@@ -251,7 +251,7 @@ def test_the_restitution_of_a_released_contact_is_an_integrated_landing_s(zeta):
     """``released_restitution`` against a landing integrated by solve_ivp, to 1e-8; it is not
     the classic exp(−πζ/√(1 − ζ²)) (which holds the dashpot in tension until δ = 0): a copy
     returning that fails at ζ = 0.3 (0.373 against 0.284)."""
-    from campipe.model.contact_modes import released_restitution
+    from campipe.model.landing import released_restitution
 
     assert released_restitution(zeta) == pytest.approx(_landing(zeta), rel=1e-8, abs=1e-12)
     if 0.3 <= zeta < 1.0:
@@ -267,7 +267,7 @@ def test_a_one_mass_chain_s_contact_damping_and_restitution_are_its_closed_forms
     valve's mirror, a coordinate of the engine's, taken out: shown with it, the mass was 2m).
     Fails on a copy that leaves the contact's dashpot out of the modes' damping, or keeps the
     mirror's share in the matrices shown."""
-    from campipe.model.contact_modes import released_restitution
+    from campipe.model.landing import released_restitution
 
     m, ks, kc, c, z1 = 0.08, 40e3, 2e8, 400.0, 0.05
     sets = [

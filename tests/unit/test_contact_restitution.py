@@ -15,11 +15,8 @@ from campipe.engine.batch import train_stack
 from campipe.model import ModelParameterError, system_matrices, valve_train
 from campipe.model.contact import contact_law
 from campipe.model.contact_keys import impact_restitution
-from campipe.model.contact_modes import (
-    contact_modes,
-    released_restitution,
-    restitution_damping_ratio,
-)
+from campipe.model.contact_modes import contact_modes
+from campipe.model.landing import released_restitution, restitution_damping_ratio
 from campipe.profiles import polydyne
 from campipe.vocabulary import CAM_IMPACT, EV_KIND, EV_TIME, EV_VELOCITY
 

@@ -13,6 +13,7 @@ import math
 
 from campipe.model.contact.base import ContactLaw
 from campipe.model.contact_keys import CONTACT_CONSTANTS
+from campipe.model.landing import landing_damping
 from campipe.model.parameters import ValveTrain
 
 
@@ -30,14 +31,12 @@ class KelvinVoigt(ContactLaw):
     def from_train(cls, train: ValveTrain, contact: str) -> ContactLaw:
         """The base's law; with the contact's ``*_restitution`` e given (its damping not),
         the damping that lands the struck mass on it with e
-        (``contact_modes.landing_damping``: the contact's own restitution, the train's other
+        (``landing.landing_damping``: the contact's own restitution, the train's other
         forces during the contact left out)."""
         law = super().from_train(train, contact)
         restitution = getattr(train, f"{contact}_restitution")
         if restitution == 0.0:
             return law
-        from campipe.model.contact_modes import landing_damping  # (it builds laws itself)
-
         damping = landing_damping(train, contact, law.stiffness, restitution)
         return dataclasses.replace(law, damping=damping)
 
