@@ -327,13 +327,9 @@ def check_settling(settings: RunSettings) -> None:
             found=settings.max_revolutions,
             expected=f"≥ {least}",
         )
-    if not (settings.settle_tolerance > 0 and math.isfinite(settings.settle_tolerance)):
-        raise RunSettingsError.at(
-            "run.settle_tolerance",
-            f"found {settings.settle_tolerance!r}, expected a relative tolerance above 0",
-            found=settings.settle_tolerance,
-            expected="> 0, e.g. 1e-5",
-        )
+    tol = settings.settle_tolerance
+    _positive(tol, "run.settle_tolerance", f"{tol!r}, expected a relative tolerance above 0",
+              "> 0, e.g. 1e-5")  # fmt: skip
 
 
 def stability_limit(case: Case, integrator: str = "newmark-linear") -> float:
@@ -435,20 +431,16 @@ def _check_settings(settings: RunSettings) -> None:
     settings.check_fidelity()
     if settings.settle:
         check_settling(settings)
-    if dt_run is not None and not (dt_run > 0 and math.isfinite(dt_run)):
-        raise RunSettingsError.at(
-            "run.dt",
-            f"found {dt_run!r} s, expected a positive step",
-            found=dt_run,
-            expected="> 0 s",
-        )
-    if not (settings.tolerance > 0 and math.isfinite(settings.tolerance)):
-        raise RunSettingsError.at(
-            "run.tolerance",
-            f"found {settings.tolerance!r} s, expected > 0",
-            found=settings.tolerance,
-            expected="> 0 s",
-        )
+    if dt_run is not None:
+        _positive(dt_run, "run.dt", f"{dt_run!r} s, expected a positive step", "> 0 s")
+    tol = settings.tolerance
+    _positive(tol, "run.tolerance", f"{tol!r} s, expected > 0", "> 0 s")
+
+
+def _positive(value: float, key: str, found: str, expected: str) -> None:
+    """Refuse a run setting that is not a finite positive number: "found <found>"."""
+    if not (value > 0 and math.isfinite(value)):
+        raise RunSettingsError.at(key, f"found {found}", found=value, expected=expected)
 
 
 def check_contacts(cases: Sequence[Case], settings: RunSettings) -> None:
