@@ -163,6 +163,21 @@ def unique_trains(cases: Sequence[Case]) -> tuple[list[ValveTrain], np.ndarray]:
     return list(index), which
 
 
+def valve_flight(sm: SystemMatrices, spring_rate: float) -> float:
+    """√(m/k) [s] of a train thrown off its cam: m = φᵀMφ, the mass the valve carries when
+    the whole train moves with it as it does quasi-statically (φ the static shape of the cam
+    lifting it, per unit of the valve's travel), k the valve spring's rate. A valve leaving
+    at speed v rises about v·√(m/k) against its spring (energy, one degree of freedom)."""
+    n = sm.mass.shape[0]
+    held = held_mask(CAM_CONTACT, n)
+    lifted = np.zeros(n)
+    lifted[CAM] = -1.0  # one metre of cam lift
+    shape = static_position(sm.mass, sm.stiffness, sm.preload, held, lifted)
+    shape -= static_position(sm.mass, sm.stiffness, sm.preload, held, np.zeros(n))
+    phi = shape / shape[SEAT]
+    return math.sqrt(float(phi @ sm.mass @ phi) / spring_rate)
+
+
 def valve_reference(sm: SystemMatrices) -> float:
     """q7 with the cam on its base circle, no seat, in static equilibrium [m]."""
     n = sm.mass.shape[0]
@@ -182,6 +197,9 @@ class TrainStack(NamedTuple):
     valve_ref: np.ndarray  # (n_trains,) ``Prepared.valve_reference``
     ratio: np.ndarray  # (n_trains,) |``Prepared.valve_ratio``|
     meff: np.ndarray  # (n_trains, 4) ``Prepared.impact_masses``
+    #: (n_trains,) ``valve_flight``: the height per unit speed [s] a valve thrown off its cam
+    #: rises against its spring (``_bounds``)
+    flight: np.ndarray
     separation: np.ndarray  # (n_trains, 2) ``ModalData.separation``
     restitution: np.ndarray  # (n_trains, 2) cam and seat coefficients of restitution
     #: per train: configuration I's free coordinates and its free mass block M_ff
@@ -227,6 +245,9 @@ def _train_stack(trains: tuple[ValveTrain, ...], dt: float) -> TrainStack:
         valve_ref=np.array([p.valve_reference for p in preps]),
         ratio=np.array([abs(p.valve_ratio) for p in preps]),
         meff=np.stack([p.impact_masses for p in preps]),
+        flight=np.array(
+            [valve_flight(p.matrices, t.spring_rate) for p, t in zip(preps, trains, strict=True)]
+        ),
         separation=np.stack([d.separation for d in modal]),
         restitution=np.array(
             [[impact_restitution(t, "cam"), impact_restitution(t, "seat")] for t in trains]
@@ -294,7 +315,9 @@ def _prepare_batch(cases: Sequence[Case], settings: RunSettings, full_state: boo
     n_q = modal_trains.load.shape[1]
     profiles = [keyed(c.profile) for c in cases]
     seat = np.array([c.seat if c.has_seat else 0.0 for c in cases])
-    lift_bound, speed_bound = _bounds(profiles, stack.ratio[which], omega, seat)
+    lift_bound, speed_bound = _bounds(
+        profiles, stack.ratio[which], omega, seat, stack.flight[which]
+    )
     return PreparedBatch(
         case_list=cases,
         trains=trains,
@@ -343,7 +366,8 @@ def _prepare_one(case: Case, settings: RunSettings, full_state: bool) -> Prepare
             speed,
             stack.valve_ref[0] + seat,  # seat_q
             float(settings.capture_velocity),
-            LIFT_BOUND * lift_peak * ratio + abs(seat),
+            LIFT_BOUND * max(lift_peak, speed * rate_peak * float(stack.flight[0])) * ratio
+            + abs(seat),
             SPEED_BOUND * speed * rate_peak * max(ratio, 1.0),
             settings.output_every / speed,  # t_sample
             settings.recorded_revolutions * TWO_PI / speed,  # t_end
@@ -558,11 +582,15 @@ def _peaks(profile: Keyed) -> tuple[float, float]:
     return float(np.max(np.abs(lifts))), float(np.max(np.abs(rates)))
 
 
-def _bounds(profiles: Sequence[Keyed], ratio, omega, seat) -> tuple[np.ndarray, np.ndarray]:
+def _bounds(profiles: Sequence[Keyed], ratio, omega, seat, flight) -> tuple[np.ndarray, np.ndarray]:
     """Each case's bounds on valve lift [m] and on closing and valve speeds [m/s], from its
-    profile's peaks, its train's |valve ratio| and its seat (0 where it has none)."""
+    profile's peaks, its train's |valve ratio|, its seat (0 where it has none) and its
+    ``TrainStack.flight``: ``LIFT_BOUND`` times the larger of the full lift and the height a
+    valve thrown at the cam's fastest valve speed rises against its spring, v·√(m/k) (an
+    energy bound of one mass: a train far past its onset is thrown beyond its lift)."""
     peaks = np.array([_peaks(p) for p in profiles]).reshape(len(profiles), 2)
-    lift = LIFT_BOUND * peaks[:, 0] * ratio + np.abs(seat)
+    thrown = np.maximum(peaks[:, 0], omega * peaks[:, 1] * flight)
+    lift = LIFT_BOUND * thrown * ratio + np.abs(seat)
     speed = SPEED_BOUND * omega * peaks[:, 1] * np.maximum(ratio, 1.0)
     return lift, speed
 

@@ -60,7 +60,7 @@ def failure_texts(settings: RunSettings, check_stability_limit, integrator) -> d
         return f"{settings.method}, step {settings.step:g} s" if stepped else settings.method
 
     defect = "this is a defect: please report it with the case"
-    # (a train far past its onset can be: a polydyne's valve at 19100 rpm reaches 3.8×)
+    # (a train bouncing off its cam far past its onset can gain more than one throw's height)
     thrown = (
         "a train whose spring is far too weak for the speed can truly be thrown that far "
         "(its onset far below: campipe onset)"
@@ -76,7 +76,8 @@ def failure_texts(settings: RunSettings, check_stability_limit, integrator) -> d
         "with newmark-linear",
         UNBOUNDED: f": the motion left its physical bounds "
         f"({how(integrator.fixed_step)}): a valve lift beyond "
-        f"{LIFT_BOUND:g}× the full lift or a speed beyond {SPEED_BOUND:g}× the cam's; "
+        f"{LIFT_BOUND:g}× the larger of the full lift and the height the cam's fastest valve "
+        f"speed throws it against its spring, or a speed beyond {SPEED_BOUND:g}× the cam's; "
         + (integrator.unbounded_advice or f"{thrown}; otherwise {defect}"),
         STEP_LIMIT: f": stopped at run.max_steps ({settings.max_steps:.6g} steps; a stiff "
         "contact without damping): raise --max-steps, or damp the contact",

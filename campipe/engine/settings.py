@@ -77,8 +77,10 @@ DEFAULT_WARMUP = {"periodic": 0, "quasi-static": 1}
 #: far above what the event location resolves (about 1e-8 m/s at 1e-12 s).
 DEFAULT_CAPTURE_VELOCITY = 1e-3
 #: Motion out of physical bounds ends a run (status UNBOUNDED): a valve lift beyond this many
-#: times the full valve lift (plus the seat's offset), a closing or valve speed beyond this
-#: many times the fastest the cam's surface moves (times the rocker ratio).
+#: times the larger of the full valve lift and the height a valve thrown off at the cam's
+#: fastest valve speed rises against its spring (``batch.valve_flight``; plus the seat's
+#: offset), a closing or valve speed beyond this many times the fastest the cam's surface
+#: moves (times the rocker ratio).
 LIFT_BOUND = 3.0
 SPEED_BOUND = 10.0
 
