@@ -167,13 +167,16 @@ def valve_flight(sm: SystemMatrices, spring_rate: float) -> float:
     """√(m/k) [s] of a train thrown off its cam: m = φᵀMφ, the mass the valve carries when
     the whole train moves with it as it does quasi-statically (φ the static shape of the cam
     lifting it, per unit of the valve's travel), k the valve spring's rate. A valve leaving
-    at speed v rises about v·√(m/k) against its spring (energy, one degree of freedom)."""
+    at speed v rises about v·√(m/k) against its spring (energy, one degree of freedom). 0
+    where the cam does not move the valve."""
     n = sm.mass.shape[0]
     held = held_mask(CAM_CONTACT, n)
     lifted = np.zeros(n)
     lifted[CAM] = -1.0  # one metre of cam lift
     shape = static_position(sm.mass, sm.stiffness, sm.preload, held, lifted)
     shape -= static_position(sm.mass, sm.stiffness, sm.preload, held, np.zeros(n))
+    if shape[SEAT] == 0.0:  # a valve the cam does not drive (a test's valve alone): no throw
+        return 0.0
     phi = shape / shape[SEAT]
     return math.sqrt(float(phi @ sm.mass @ phi) / spring_rate)
 
