@@ -112,6 +112,9 @@ class Prepared:
     omega_max: np.ndarray  # (4,) highest natural frequency per configuration [rad/s]
     start_inverses: np.ndarray  # (3, 2, n, n) see start_inverses
     valve_ratio: float  # static valve lift per unit cam lift (the rocker ratio) [-]
+    #: the height per unit speed [s] a valve thrown off its cam rises against its spring
+    #: (``valve_flight``, ``_bounds``)
+    flight: float
 
 
 @functools.lru_cache(maxsize=256)
@@ -125,25 +128,34 @@ def prepare(train: ValveTrain, dt: float) -> Prepared:
     step_G: np.ndarray | None = None
     if sm.mass.shape[0] == N_COORDINATES:
         step_A, step_G = newmark_step_maps(sm.mass, sm.damping, sm.stiffness, dt)
+    reference, shape = _static_lift(sm)
     return Prepared(
         sm,
         step_A,
         step_G,
         impact_masses(sm.mass),
-        valve_reference(sm),
+        float(reference[SEAT]),  # ``valve_reference``
         omega_max,
         start_inverses(sm),
-        valve_ratio(sm),
+        float(shape[SEAT]),  # ``valve_ratio``
+        valve_flight(sm.mass, shape, train.spring_rate),
     )
+
+
+def _static_lift(sm: SystemMatrices) -> tuple[np.ndarray, np.ndarray]:
+    """(the static positions with the cam on its base circle, their change per metre of cam
+    lift), configuration I, the members' give included."""
+    n = sm.mass.shape[0]
+    held = held_mask(CAM_CONTACT, n)
+    lifted = np.zeros(n)
+    lifted[CAM] = -1.0  # one metre of cam lift
+    reference = static_position(sm.mass, sm.stiffness, sm.preload, held, np.zeros(n))
+    return reference, static_position(sm.mass, sm.stiffness, sm.preload, held, lifted) - reference
 
 
 def valve_ratio(sm: SystemMatrices) -> float:
     """The static valve lift per unit cam lift: the rocker ratio with the members' give."""
-    n = sm.mass.shape[0]
-    lifted = np.zeros(n)
-    lifted[CAM] = -1.0  # one metre of cam lift
-    q = static_position(sm.mass, sm.stiffness, sm.preload, held_mask(CAM_CONTACT, n), lifted)
-    return float(q[SEAT] - valve_reference(sm))
+    return float(_static_lift(sm)[1][SEAT])
 
 
 @functools.lru_cache(maxsize=256)
@@ -163,22 +175,16 @@ def unique_trains(cases: Sequence[Case]) -> tuple[list[ValveTrain], np.ndarray]:
     return list(index), which
 
 
-def valve_flight(sm: SystemMatrices, spring_rate: float) -> float:
+def valve_flight(mass: np.ndarray, shape: np.ndarray, spring_rate: float) -> float:
     """√(m/k) [s] of a train thrown off its cam: m = φᵀMφ, the mass the valve carries when
-    the whole train moves with it as it does quasi-statically (φ the static shape of the cam
-    lifting it, per unit of the valve's travel), k the valve spring's rate. A valve leaving
-    at speed v rises about v·√(m/k) against its spring (energy, one degree of freedom). 0
-    where the cam does not move the valve."""
-    n = sm.mass.shape[0]
-    held = held_mask(CAM_CONTACT, n)
-    lifted = np.zeros(n)
-    lifted[CAM] = -1.0  # one metre of cam lift
-    shape = static_position(sm.mass, sm.stiffness, sm.preload, held, lifted)
-    shape -= static_position(sm.mass, sm.stiffness, sm.preload, held, np.zeros(n))
+    the whole train moves with it as it does quasi-statically (φ the static ``shape`` of the
+    cam lifting it, ``_static_lift``'s, per unit of the valve's travel), k the valve spring's
+    rate. A valve leaving at speed v rises about v·√(m/k) against its spring (energy, one
+    degree of freedom). 0 where the cam does not move the valve."""
     if shape[SEAT] == 0.0:  # a valve the cam does not drive (a test's valve alone): no throw
         return 0.0
     phi = shape / shape[SEAT]
-    return math.sqrt(float(phi @ sm.mass @ phi) / spring_rate)
+    return math.sqrt(float(phi @ mass @ phi) / spring_rate)
 
 
 def valve_reference(sm: SystemMatrices) -> float:
@@ -200,9 +206,7 @@ class TrainStack(NamedTuple):
     valve_ref: np.ndarray  # (n_trains,) ``Prepared.valve_reference``
     ratio: np.ndarray  # (n_trains,) |``Prepared.valve_ratio``|
     meff: np.ndarray  # (n_trains, 4) ``Prepared.impact_masses``
-    #: (n_trains,) ``valve_flight``: the height per unit speed [s] a valve thrown off its cam
-    #: rises against its spring (``_bounds``)
-    flight: np.ndarray
+    flight: np.ndarray  # (n_trains,) ``Prepared.flight``
     separation: np.ndarray  # (n_trains, 2) ``ModalData.separation``
     restitution: np.ndarray  # (n_trains, 2) cam and seat coefficients of restitution
     #: per train: configuration I's free coordinates and its free mass block M_ff
@@ -248,9 +252,7 @@ def _train_stack(trains: tuple[ValveTrain, ...], dt: float) -> TrainStack:
         valve_ref=np.array([p.valve_reference for p in preps]),
         ratio=np.array([abs(p.valve_ratio) for p in preps]),
         meff=np.stack([p.impact_masses for p in preps]),
-        flight=np.array(
-            [valve_flight(p.matrices, t.spring_rate) for p, t in zip(preps, trains, strict=True)]
-        ),
+        flight=np.array([p.flight for p in preps]),
         separation=np.stack([d.separation for d in modal]),
         restitution=np.array(
             [[impact_restitution(t, "cam"), impact_restitution(t, "seat")] for t in trains]

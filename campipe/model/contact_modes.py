@@ -36,10 +36,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from campipe.model.assembly import SystemMatrices, normal_modes, struck_mass
+from campipe.model.assembly import SystemMatrices, normal_modes
 from campipe.model.checks import PUSHROD_ROCKER
 from campipe.model.contact import contact_law
-from campipe.model.landing import contact_point, released_restitution
+from campipe.model.landing import released_restitution, struck_at
 from campipe.model.lash import lash_ratio
 from campipe.model.layouts import own_matrices, used_coordinates
 
@@ -100,19 +100,17 @@ def contact_modes(train, sm: SystemMatrices) -> list[ContactMode]:
         law = contact_law(train, contact)
         if not law.compliant:
             continue
-        coordinate, ratio = contact_point(train, contact)
+        struck_by, at, ratio = struck_at(train, mass, contact)
         through = 1.0
         if contact == "cam":  # the preload at the cam: through the train's ratio
             through = lash_ratio(sm) if train.layout == PUSHROD_ROCKER else ratio
         load = train.spring_preload * through
         k, c = law.slopes(law.approach(load), 0.0)
         stiffness, damping = own_stiffness.copy(), own_damping.copy()
-        at = int(np.flatnonzero(used == coordinate)[0])
         stiffness[at, at] += k / ratio**2
         damping[at, at] += c / ratio**2
         omega, phi = normal_modes(mass, stiffness, np.ones(used.size, bool))
         zeta = np.einsum("ij,ik,kj->j", phi, damping, phi) / (2.0 * omega)
-        struck_by = struck_mass(mass, at, [j for j in range(used.size) if j != at])
         out.append(
             ContactMode(contact, law.name, load, k, c, ratio, omega, zeta, struck_by, law.linear)
         )

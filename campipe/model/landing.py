@@ -65,17 +65,25 @@ def contact_point(train, contact: str) -> tuple[int, float]:
     return (CAM if mirror(train) else SEAT), 1.0
 
 
-@functools.lru_cache(maxsize=256)
-def struck(train, contact: str) -> tuple[float, float]:
+def struck_at(train, mass: np.ndarray, contact: str) -> tuple[float, int, float]:
     """(the mass an impulse at the contact's coordinate meets, the rest of the train free
-    [kg], the lever ratio r there): :func:`contact_modes`' struck mass of the train's own
-    matrices, once per train."""
-    sm = system_matrices(train)
-    mass = own_matrices(train, sm.mass, sm.stiffness, sm.damping)[0]
+    [kg]; that coordinate's row in the train's own ``mass`` (``layouts.own_matrices``); the
+    lever ratio r there)."""
     coordinate, ratio = contact_point(train, contact)
     used = used_coordinates(train)
     at = int(np.flatnonzero(used == coordinate)[0])
-    return struck_mass(mass, at, [j for j in range(used.size) if j != at]), ratio
+    return struck_mass(mass, at, [j for j in range(used.size) if j != at]), at, ratio
+
+
+@functools.lru_cache(maxsize=256)
+def struck(train, contact: str) -> tuple[float, float]:
+    """(the struck mass [kg], the lever ratio r) of :func:`struck_at` for the train's own
+    matrices, once per train."""
+    sm = system_matrices(train)
+    mass, _, ratio = struck_at(
+        train, own_matrices(train, sm.mass, sm.stiffness, sm.damping)[0], contact
+    )
+    return mass, ratio
 
 
 def landing_damping(train, contact: str, stiffness: float, restitution: float) -> float:

@@ -216,8 +216,7 @@ def test_a_one_case_batch_is_prepared_as_a_row_of_the_vectorised_batch(case):
     ratio = abs(batch_module.prepare(case.train, 0.0).valve_ratio)
     lift, rate = batch_module._peaks(keyed(case.profile))
     seat = case.seat if case.has_seat else 0.0
-    sm = batch_module.train_matrices(case.train)
-    thrown = case.speed * rate * batch_module.valve_flight(sm, case.train.spring_rate)
+    thrown = case.speed * rate * batch_module.prepare(case.train, 0.0).flight
     assert one.cases.lift_bound[0] == LIFT_BOUND * max(lift, thrown) * ratio + abs(seat)
     assert one.cases.speed_bound[0] == SPEED_BOUND * case.speed * rate * max(ratio, 1.0)
     assert one.runs.t_end[0] == 2.5 * 2 * math.pi / case.speed
