@@ -278,12 +278,14 @@ def validate(
     click.echo(f"batches: {count_batches(loaded.cases, size)} of up to {size} cases")
     click.echo(memory_text(len(loaded.cases), workers, samples))
     if estimate:
-        from campipe.engine.kernels import compile_notice
+        from campipe.engine.kernels import compile_first
         from campipe.study.spec.resolve import distinct_but_speed
 
-        text = compile_notice(c.settings for c in distinct_but_speed(loaded.cases)[0])
-        if text:
-            click.echo(f"campipe validate: {text}", err=True)
+        # compiled (and recorded as such) before the estimate's runs time them, as a study's
+        firsts: dict = {}
+        for c in distinct_but_speed(loaded.cases)[0]:
+            firsts.setdefault(c.settings, c.case)
+        compile_first(firsts, lambda text: click.echo(f"campipe validate: {text}", err=True))
         click.echo(estimate_text(loaded, workers))
     click.echo(
         f"archive: about {archive_bytes(loaded) / 1e6:.3g} MB before compression "

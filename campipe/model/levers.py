@@ -91,6 +91,9 @@ MAX_REST_ANGLE = math.radians(60.0)
 #: How far [rad] from s = θ the roller's contact on the pitch curve is looked for, and the
 #: bracketing grid's spacing.
 SEARCH_HALF_WIDTH, SEARCH_STEP = 1.0, 0.01
+#: The grid's points looked at first on either side of s = θ (the contact lies within a few
+#: hundredths of a radian of θ on the bundled levers); the rest only where these bracket none.
+SEARCH_NEAR = 5
 
 Lift = Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]  # θ [rad] → (h [m], dh/dθ [m/rad])
 
@@ -212,19 +215,33 @@ def _pitch_point(lever: Lever, lift: Lift, s: np.ndarray, theta: np.ndarray) -> 
 
 def _contact_angle(lever: Lever, lift: Lift, theta: np.ndarray) -> np.ndarray:
     """The profile angle s [rad] of the roller's contact at each cam angle: the root of
-    |pitch point|² − a² nearest s = θ, bracketed on a grid, then bisected to round-off."""
-    offsets = np.arange(-SEARCH_HALF_WIDTH, SEARCH_HALF_WIDTH + SEARCH_STEP / 2, SEARCH_STEP)
-    s = theta[:, None] + offsets[None, :]
+    |pitch point|² − a² nearest s = θ, bracketed on a grid, then bisected to round-off.
+
+    The grid's nearest :data:`SEARCH_NEAR` points on either side are searched first and the
+    whole grid only for the angles they bracket no root at: the nearest sign change of the
+    whole grid is then among them (every other interval lies farther from θ), so the bracket,
+    and the root, are the whole grid's. The bisection leaves a bracket at the first step that
+    does not move it (every later step would not either)."""
 
     def f(s_: np.ndarray, th: np.ndarray) -> np.ndarray:
         p = _pitch_point(lever, lift, s_, th)
         return np.einsum("...i,...i->...", p, p) - lever.roller_arm**2
 
-    g = f(s, np.broadcast_to(theta[:, None], s.shape))
-    change = np.sign(g[:, :-1]) * np.sign(g[:, 1:]) <= 0.0
-    distance = np.where(change, np.abs(offsets[:-1] + SEARCH_STEP / 2), np.inf)
-    j = np.argmin(distance, axis=1)
-    if not np.all(np.isfinite(distance[np.arange(theta.size), j])):
+    def nearest_change(offsets: np.ndarray, th: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        s = th[:, None] + offsets[None, :]
+        g = f(s, np.broadcast_to(th[:, None], s.shape))
+        change = np.sign(g[:, :-1]) * np.sign(g[:, 1:]) <= 0.0
+        distance = np.where(change, np.abs(offsets[:-1] + SEARCH_STEP / 2), np.inf)
+        j = np.argmin(distance, axis=1)
+        return offsets[j], np.isfinite(distance[np.arange(th.size), j])
+
+    offsets = np.arange(-SEARCH_HALF_WIDTH, SEARCH_HALF_WIDTH + SEARCH_STEP / 2, SEARCH_STEP)
+    middle = offsets.size // 2
+    near = offsets[middle - SEARCH_NEAR : middle + SEARCH_NEAR + 1]
+    start, found = nearest_change(near, theta)
+    if not found.all():
+        start[~found], found[~found] = nearest_change(offsets, theta[~found])
+    if not found.all():
         raise ModelParameterError.at(
             "pivot_to_roller",
             "the roller cannot reach the cam at some cam angle: the lever's geometry and the "
@@ -232,15 +249,20 @@ def _contact_angle(lever: Lever, lift: Lift, theta: np.ndarray) -> np.ndarray:
             found=lever.roller_arm,
             expected="a lever whose roller stays on the cam over the turn",
         )
-    lo = theta + offsets[j]
+    lo = theta + start
     hi = lo + SEARCH_STEP
     f_lo = f(lo, theta)
-    for _ in range(60):
-        mid = 0.5 * (lo + hi)
-        f_mid = f(mid, theta)
-        left = np.sign(f_mid) == np.sign(f_lo)
-        lo, f_lo = np.where(left, mid, lo), np.where(left, f_mid, f_lo)
-        hi = np.where(left, hi, mid)
+    moving = np.arange(theta.size)  # brackets the last step moved: a bracket a step left
+    for _ in range(60):  # as it was would stay so at every later step, and is done
+        a, b, f_a = lo[moving], hi[moving], f_lo[moving]
+        mid = 0.5 * (a + b)
+        f_mid = f(mid, theta[moving])
+        left = np.sign(f_mid) == np.sign(f_a)
+        new_a, new_b = np.where(left, mid, a), np.where(left, b, mid)
+        lo[moving], hi[moving], f_lo[moving] = new_a, new_b, np.where(left, f_mid, f_a)
+        moving = moving[(new_a != a) | (new_b != b)]
+        if not moving.size:
+            break
     return 0.5 * (lo + hi)
 
 

@@ -590,6 +590,24 @@ def test_the_first_run_says_what_it_compiles(tmp_path, monkeypatch):
     assert "compiling" not in result.stderr
 
 
+def test_validate_says_what_it_compiles_and_records_it_for_the_next_run(tmp_path):
+    """``campipe validate`` compiles the kernels its estimate runs as a study does, saying so
+    first, and records them as compiled, so that the next command says nothing. (Its own
+    cache folder, ``XDG_CACHE_HOME``, holds no record; the kernels themselves are in this
+    process's numba cache, ``NUMBA_CACHE_DIR``.)
+
+    Broken copy: the notice alone (``compile_notice``, as before): the estimate then loaded
+    the kernels in its own process, recorded nothing, and every later validate or first study
+    said again that it compiles."""
+    one = SMALL_SPEC.replace("[6000 rpm, 9524 rpm, 11000 rpm]", "[6000 rpm]")
+    spec = write_spec(tmp_path, one.replace("seat: [none, 0.1 in]", "seat: [none]"))
+    env = {"XDG_CACHE_HOME": str(tmp_path / "home")}
+    first, _ = _loaded_by(["validate", str(spec)], cwd=tmp_path, env=env)
+    assert "campipe validate: compiling" in first and "modal-exact" in first
+    again, _ = _loaded_by(["validate", str(spec)], cwd=tmp_path, env=env)
+    assert "compiling" not in again
+
+
 def test_no_seat_is_minus_inf_and_speed_rounds_to_whole_rpm(small_archive):
     ds = xr.open_dataset(small_archive.archive)
     assert (ds.seat.values[::2] == -np.inf).all()

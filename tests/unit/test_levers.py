@@ -93,6 +93,57 @@ def test_kinematic_lift_and_ratio_against_a_hand_calculation(side, layout):
     assert state.valve_lift.max() > 1.4 * LIFT  # about b/a of the cam's
 
 
+def _whole_grid_contact(lev, lift, theta: np.ndarray) -> np.ndarray:
+    """The roller's contact angle as first written: every point of the bracketing grid
+    looked at, sixty bisections."""
+    from campipe.model import levers
+
+    offsets = np.arange(-1.0, 1.0 + 0.005, 0.01)
+    s = theta[:, None] + offsets[None, :]
+
+    def f(s_, th):
+        p = levers._pitch_point(lev, lift, s_, th)
+        return np.einsum("...i,...i->...", p, p) - lev.roller_arm**2
+
+    g = f(s, np.broadcast_to(theta[:, None], s.shape))
+    change = np.sign(g[:, :-1]) * np.sign(g[:, 1:]) <= 0.0
+    j = np.argmin(np.where(change, np.abs(offsets[:-1] + 0.005), np.inf), axis=1)
+    lo = theta + offsets[j]
+    hi, f_lo = lo + 0.01, f(lo, theta)
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        f_mid = f(mid, theta)
+        left = np.sign(f_mid) == np.sign(f_lo)
+        lo, f_lo, hi = np.where(left, mid, lo), np.where(left, f_mid, f_lo), np.where(left, hi, mid)
+    return 0.5 * (lo + hi)
+
+
+@pytest.mark.parametrize("near", [1, 2, 5])
+@pytest.mark.parametrize("layout", ["finger-follower", "centre-pivot-rocker"])
+def test_the_contact_search_is_the_whole_grid_s_bit_for_bit(layout, near, monkeypatch):
+    """The contact's search looks at the grid's points nearest s = θ first and bisects each
+    bracket only while it moves (three times faster on a finger's turn, which a lash
+    adjuster derives again every turn): the contact angles over the turn, the pivot raised
+    too, are those of the whole grid and sixty bisections, bit for bit, however few points
+    are looked at first (one or two on either side: the whole grid at some angles).
+    Broken copies: the nearest change of the near points taken without the whole grid where
+    they bracket none (refused: "cannot reach the cam"); a bracket dropped from the
+    bisection while it still moves (differs from the first bits on)."""
+    import dataclasses
+
+    from campipe.model import levers
+
+    monkeypatch.setattr(levers, "SEARCH_NEAR", near)
+    cam = harmonic(LIFT)
+    lift = lambda s: evaluate(cam, s)[:2]  # noqa: E731
+    theta = np.linspace(0.0, 2.0 * math.pi, 2001)
+    for height in (0.0, 2e-4):
+        lev = dataclasses.replace(lever_of(lever(layout=layout)), pivot_height=height)
+        found = levers._contact_angle(lev, lift, theta)
+        assert np.array_equal(found, _whole_grid_contact(lev, lift, theta))
+    assert np.abs(found - theta).max() > 0.02  # beyond two points on either side: the fallback
+
+
 def test_the_lever_s_chain_is_its_reduced_mass_and_series_link():
     """The chain's masses are (J + m_r·a²)/(b·cos α₀)² and the valve's, its link the lever's
     and the stem's stiffness in series; its free frequencies are those of that two-mass chain
