@@ -336,9 +336,16 @@ def estimate_text(loaded, workers: int) -> str:
             )
     n = len(loaded.cases)
     timed = "the whole study" if e.sample >= n else f"{e.sample} of its {n} cases, scaled"
+    timed = f"a run of {timed}"
+    if e.turns is not None:
+        a, b = e.turns
+        timed = (
+            f"runs of {timed[9:]} for {a} and for {b} of its {loaded.revolutions:g} turns, the "
+            "turns beyond extrapolated"
+        )
     return (
         f"run time: about {_seconds(e.seconds)} on {workers} "
-        f"worker{'s' if workers != 1 else ''}: {', '.join(parts)} (timed on a run of {timed}; "
+        f"worker{'s' if workers != 1 else ''}: {', '.join(parts)} (timed on {timed}; "
         f"{e.simulated:.3g} s simulated; the process's own start not included){replayed}"
         f"{_step_cap(loaded)}"
     )

@@ -60,6 +60,42 @@ def test_the_estimate_scales_the_sample_beyond_the_fixed_cost(study, monkeypatch
     assert e.sample == 14 and e.workers == 2
 
 
+def test_a_long_study_is_timed_on_two_short_runs_and_extrapolated(tmp_path, monkeypatch):
+    """A study of 40 turns a case is timed on runs of 1 and of 3 turns (its warm-up 0), the 37
+    turns beyond extrapolated at the difference per turn: a run costing F + P·turns (here
+    made so) is estimated at F + 40·P, its engine likewise; validate says how it was timed.
+    Broken copies: the run timed for its 40 turns (the calls' turns), the extrapolation from
+    the longer run alone (3 → 40 turns scales F too)."""
+    spec = SPEC.replace("num: 25", "num: 3").replace("revolutions: 1,", "revolutions: 40,")
+    long = load_study(write_spec(tmp_path, spec))
+    turns = []
+
+    def time_run(s, cases, workers, size=None):
+        n = {c.settings.revolutions for c in cases} | {s.revolutions}
+        assert len(n) == 1 and len(cases) == len(s.cases)  # the study's and its cases' turns
+        turns.append(n.pop())
+        return 0.3 + 0.1 * turns[-1], 0.02 * turns[-1]
+
+    monkeypatch.setattr(est, "time_run", time_run)
+    monkeypatch.setattr(est, "warm_up", lambda s: 0.0)
+    e = est.estimate(long, 2)
+    assert turns == [1.0, 3.0] and e.turns == (1, 3)
+    assert e.seconds == pytest.approx(0.3 + 0.1 * 40)
+    assert e.engine == pytest.approx(0.02 * 40 / est.busy_workers(long, long.cases, 2))
+    for short in (1, 5):  # shorter than twice the longer run's 3 turns: timed as it is
+        text = spec.replace("revolutions: 40,", f"revolutions: {short},")
+        study_ = load_study(write_spec(tmp_path, text))
+        assert est.timed_turns(study_, study_.cases) is None
+
+
+def test_validate_says_a_long_study_s_turns_were_extrapolated(tmp_path):
+    spec = SPEC.replace("num: 25", "num: 2").replace("revolutions: 1,", "revolutions: 12,")
+    out = CliRunner().invoke(main, ["validate", str(write_spec(tmp_path, spec)), "--workers", "1"])
+    assert out.exit_code == 0, out.output
+    line = next(x for x in out.output.splitlines() if x.startswith("run time:"))
+    assert "(timed on runs of the whole study for 1 and for 3 of its 12 turns, the turns " in line
+
+
 def case_key(case) -> tuple[float, bool]:
     """A case of SPEC's studies by its axes: its speed and whether it has a seat."""
     return case.speed, bool(np.isnan(case.seat))

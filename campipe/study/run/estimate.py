@@ -16,7 +16,11 @@ The run time is measured on this machine, through the code a study runs, not gue
   a process pays (:func:`measure_speeds`'s warm-up; a compilation is not counted, the study
   finds the kernel in numba's cache).
 
-A study of at most twice the sample is run whole: its estimate is that run. Cases differ
+A study of at most twice the sample is run whole: its estimate is that run. A long study
+(a fixed run of at least twice :func:`timed_turns`' longer run) is timed on each of its timed
+runs' cases run for two numbers of turns, and the time beyond extrapolated linearly in the
+turns (:func:`time_turns`): a case's later turns cost about what the measured ones beyond the
+first do. Cases differ
 (events, impacts), so it is a rough figure: within a factor of two of the run on the bundled
 studies (the developer benchmark, ``benchmarks/study.py``, lists both). Not included: the
 process's own start (imports, about a second) and a spec's ``replay:`` recording.
@@ -59,6 +63,8 @@ class Estimate:
     sample: int = 0  # cases of the timed sample run (all of them: the study ran whole)
     replay: float = 0.0  # of `seconds`: logging the spec's replay selection (campipe
     #                      validate adds it: campipe.replay.live.time_replay) [s]
+    turns: tuple[int, int] | None = None  # a long study's cases timed for these turns
+    #                                       (timed_turns), None: for the study's own
 
 
 def simulated_seconds(study: Study) -> float:
@@ -142,6 +148,47 @@ def time_run(
         return time.perf_counter() - t, report.engine_seconds
 
 
+#: Turns between a long study's two timed runs (:func:`timed_turns`).
+TURNS_APART = 2
+
+
+def timed_turns(study: Study, cases: Sequence[ResolvedCase]) -> tuple[int, int] | None:
+    """The turns (a, b) ``cases`` of a long study are timed for: one after their warm-up, and
+    :data:`TURNS_APART` more; None when the study runs until settled or is shorter than 2·b
+    turns (timed as it is)."""
+    if study.settle:
+        return None
+    first = max(c.settings.warmup_turns for c in cases) + 1
+    last = first + TURNS_APART
+    return (first, last) if study.revolutions >= 2 * last else None
+
+
+def _turns_of(study: Study, cases: Sequence[ResolvedCase], turns: float) -> Study:
+    """``study`` of ``cases`` alone, each run for ``turns``."""
+    short = [replace(c, settings=replace(c.settings, revolutions=float(turns))) for c in cases]
+    return replace(study, cases=short, revolutions=float(turns))
+
+
+def time_turns(
+    study: Study, cases: Sequence[ResolvedCase], workers: int, size: int | None = None
+) -> tuple[float, float]:
+    """:func:`time_run` of ``cases`` for the study's turns: a long study's (:func:`timed_turns`
+    (a, b)) from runs of a and of b turns, the time and engine time beyond b extrapolated at
+    their difference per turn (none below 0); any other's, the run itself."""
+    turns = timed_turns(study, cases)
+    if turns is None:
+        return time_run(study, cases, workers, size)
+    a, b = turns
+    shorter, longer = _turns_of(study, cases, a), _turns_of(study, cases, b)
+    short, engine_short = time_run(shorter, shorter.cases, workers, size)
+    long, engine_long = time_run(longer, longer.cases, workers, size)
+    more = (study.revolutions - b) / (b - a)
+    return (
+        long + max(long - short, 0.0) * more,
+        engine_long + max(engine_long - engine_short, 0.0) * more,
+    )
+
+
 def sample_cases(study: Study, k: int) -> list[ResolvedCase]:
     """``k`` cases spread evenly through the study (its speeds, seats, ... in proportion)."""
     picks = np.unique(np.round(np.linspace(0, len(study.cases) - 1, k)).astype(int))
@@ -177,16 +224,24 @@ def estimate(study: Study, workers: int) -> Estimate:
     n = len(study.cases)
     k = sample_size(study, workers)
     if n <= 2 * k:
-        seconds, engine = time_run(study, study.cases, workers)
+        seconds, engine = time_turns(study, study.cases, workers)
         engine = min(engine / busy_workers(study, study.cases, workers), seconds)
         return Estimate(
-            simulated, seconds + startup, workers, size, engine, seconds - engine, startup, n
+            simulated,
+            seconds + startup,
+            workers,
+            size,
+            engine,
+            seconds - engine,
+            startup,
+            n,
+            turns=timed_turns(study, study.cases),
         )
     sample = sample_cases(study, k)
     batch = batch_size(study, n, workers)  # the study's own batches, not the sample's
-    first, _ = time_run(study, sample[:1], workers)  # pays what a process's first run pays
-    again, _ = time_run(study, sample[:1], workers)
-    ran, engine = time_run(study, sample, workers, batch)
+    first, _ = time_turns(study, sample[:1], workers)  # pays what a process's first run pays
+    again, _ = time_turns(study, sample[:1], workers)
+    ran, engine = time_turns(study, sample, workers, batch)
     scale = n / len(sample)
     seconds = first + max(ran - again, 0.0) * scale
     engine = min(engine / busy_workers(study, sample, workers) * scale, seconds)
@@ -199,4 +254,5 @@ def estimate(study: Study, workers: int) -> Estimate:
         seconds - engine,
         startup,
         len(sample),
+        turns=timed_turns(study, sample),
     )
