@@ -63,32 +63,39 @@ def test_the_estimate_scales_the_sample_beyond_the_fixed_cost(study, monkeypatch
 def test_a_long_study_is_timed_on_two_short_runs_and_extrapolated(tmp_path, monkeypatch):
     """A study of 40 turns a case is timed on runs of 1 and of 3 turns (its warm-up 0), the 37
     turns beyond extrapolated at the difference per turn: a run costing F + P·turns (here
-    made so) is estimated at F + 40·P, its engine likewise; validate says how it was timed.
+    made so) is estimated at F + 40·P, its engine likewise, each short run in the batches of
+    the study's 40 turns; run whole when its 3 turns scaled to 40 are cheap.
     Broken copies: the run timed for its 40 turns (the calls' turns), the extrapolation from
     the longer run alone (3 → 40 turns scales F too)."""
     spec = SPEC.replace("num: 25", "num: 3").replace("revolutions: 1,", "revolutions: 40,")
     long = load_study(write_spec(tmp_path, spec))
-    turns = []
+    turns, sizes = [], []
 
     def time_run(s, cases, workers, size=None):
         n = {c.settings.revolutions for c in cases} | {s.revolutions}
         assert len(n) == 1 and len(cases) == len(s.cases)  # the study's and its cases' turns
         turns.append(n.pop())
+        sizes.append(size)
         return 0.3 + 0.1 * turns[-1], 0.02 * turns[-1]
 
     monkeypatch.setattr(est, "time_run", time_run)
     monkeypatch.setattr(est, "warm_up", lambda s: 0.0)
     e = est.estimate(long, 2)
-    assert turns == [1.0, 3.0] and e.turns == (1, 3)
+    assert turns == [3.0, 1.0] and e.turns == (1, 3)
+    assert sizes == [est.batch_size(long, 6, 2)] * 2  # the 40 turns' batches, not 1 or 3's
     assert e.seconds == pytest.approx(0.3 + 0.1 * 40)
     assert e.engine == pytest.approx(0.02 * 40 / est.busy_workers(long, long.cases, 2))
+    turns.clear()  # cheap turns: 0.3 + 0.1·3 s scaled to 40 turns is 8 s
+    monkeypatch.setattr(est, "WHOLE_SECONDS", 8.5)
+    assert est.estimate(long, 2).turns is None and turns == [3.0, 40.0]  # then run whole
     for short in (1, 5):  # shorter than twice the longer run's 3 turns: timed as it is
         text = spec.replace("revolutions: 40,", f"revolutions: {short},")
         study_ = load_study(write_spec(tmp_path, text))
         assert est.timed_turns(study_, study_.cases) is None
 
 
-def test_validate_says_a_long_study_s_turns_were_extrapolated(tmp_path):
+def test_validate_says_a_long_study_s_turns_were_extrapolated(tmp_path, monkeypatch):
+    monkeypatch.setattr(est, "WHOLE_SECONDS", 0.0)  # (its cases are cheap: run whole)
     spec = SPEC.replace("num: 25", "num: 2").replace("revolutions: 1,", "revolutions: 12,")
     out = CliRunner().invoke(main, ["validate", str(write_spec(tmp_path, spec)), "--workers", "1"])
     assert out.exit_code == 0, out.output

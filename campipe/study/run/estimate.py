@@ -17,10 +17,10 @@ The run time is measured on this machine, through the code a study runs, not gue
   finds the kernel in numba's cache).
 
 A study of at most twice the sample is run whole: its estimate is that run. A long study
-(a fixed run of at least twice :func:`timed_turns`' longer run) is timed on each of its timed
-runs' cases run for two numbers of turns, and the time beyond extrapolated linearly in the
-turns (:func:`time_turns`): a case's later turns cost about what the measured ones beyond the
-first do. Cases differ
+(a fixed run of at least twice :func:`timed_turns`' longer run) whose cases take more than
+:data:`WHOLE_SECONDS` is timed on its timed runs' cases run for two numbers of turns, the
+time beyond extrapolated linearly in the turns (:func:`time_turns`): a case's later turns
+cost about what the measured ones beyond the first do. Cases differ
 (events, impacts), so it is a rough figure: within a factor of two of the run on the bundled
 studies (the developer benchmark, ``benchmarks/study.py``, lists both). Not included: the
 process's own start (imports, about a second) and a spec's ``replay:`` recording.
@@ -63,8 +63,8 @@ class Estimate:
     sample: int = 0  # cases of the timed sample run (all of them: the study ran whole)
     replay: float = 0.0  # of `seconds`: logging the spec's replay selection (campipe
     #                      validate adds it: campipe.replay.live.time_replay) [s]
-    turns: tuple[int, int] | None = None  # a long study's cases timed for these turns
-    #                                       (timed_turns), None: for the study's own
+    turns: tuple[int, int] | None = None  # a long study's cases timed for these turns and
+    #                                       extrapolated (time_turns), None: for its own
 
 
 def simulated_seconds(study: Study) -> float:
@@ -150,6 +150,10 @@ def time_run(
 
 #: Turns between a long study's two timed runs (:func:`timed_turns`).
 TURNS_APART = 2
+#: A long study's cases run whole all the same when their run of the longer number of turns,
+#: scaled to theirs, is at most this [s]: a cheap turn's time is within the timing's noise,
+#: which extrapolating over tens of turns would multiply.
+WHOLE_SECONDS = 5.0
 
 
 def timed_turns(study: Study, cases: Sequence[ResolvedCase]) -> tuple[int, int] | None:
@@ -171,21 +175,28 @@ def _turns_of(study: Study, cases: Sequence[ResolvedCase], turns: float) -> Stud
 
 def time_turns(
     study: Study, cases: Sequence[ResolvedCase], workers: int, size: int | None = None
-) -> tuple[float, float]:
-    """:func:`time_run` of ``cases`` for the study's turns: a long study's (:func:`timed_turns`
-    (a, b)) from runs of a and of b turns, the time and engine time beyond b extrapolated at
-    their difference per turn (none below 0); any other's, the run itself."""
+) -> tuple[float, float, tuple[int, int] | None]:
+    """:func:`time_run` of ``cases`` for the study's turns, and the turns (a, b) it was timed
+    on, or None. A long study's (:func:`timed_turns`) from runs of a and of b turns, the time
+    and engine time beyond b extrapolated at their difference per turn (none below 0), in the
+    batches the study's turns make; run whole when the run of b turns, scaled to the study's,
+    is at most :data:`WHOLE_SECONDS`, as any other study's."""
     turns = timed_turns(study, cases)
     if turns is None:
-        return time_run(study, cases, workers, size)
+        return (*time_run(study, cases, workers, size), None)
     a, b = turns
-    shorter, longer = _turns_of(study, cases, a), _turns_of(study, cases, b)
-    short, engine_short = time_run(shorter, shorter.cases, workers, size)
+    if size is None:  # the study's own batches (fewer turns would make them larger)
+        size = batch_size(study, len(cases), workers)
+    longer, shorter = _turns_of(study, cases, b), _turns_of(study, cases, a)
     long, engine_long = time_run(longer, longer.cases, workers, size)
+    if long * study.revolutions / b <= WHOLE_SECONDS:
+        return (*time_run(study, cases, workers, size), None)
+    short, engine_short = time_run(shorter, shorter.cases, workers, size)
     more = (study.revolutions - b) / (b - a)
     return (
         long + max(long - short, 0.0) * more,
         engine_long + max(engine_long - engine_short, 0.0) * more,
+        turns,
     )
 
 
@@ -224,7 +235,7 @@ def estimate(study: Study, workers: int) -> Estimate:
     n = len(study.cases)
     k = sample_size(study, workers)
     if n <= 2 * k:
-        seconds, engine = time_turns(study, study.cases, workers)
+        seconds, engine, turns = time_turns(study, study.cases, workers)
         engine = min(engine / busy_workers(study, study.cases, workers), seconds)
         return Estimate(
             simulated,
@@ -235,13 +246,13 @@ def estimate(study: Study, workers: int) -> Estimate:
             seconds - engine,
             startup,
             n,
-            turns=timed_turns(study, study.cases),
+            turns=turns,
         )
     sample = sample_cases(study, k)
     batch = batch_size(study, n, workers)  # the study's own batches, not the sample's
-    first, _ = time_turns(study, sample[:1], workers)  # pays what a process's first run pays
-    again, _ = time_turns(study, sample[:1], workers)
-    ran, engine = time_turns(study, sample, workers, batch)
+    first, _, _ = time_turns(study, sample[:1], workers)  # pays a process's first run's cost
+    again, _, _ = time_turns(study, sample[:1], workers)
+    ran, engine, turns = time_turns(study, sample, workers, batch)
     scale = n / len(sample)
     seconds = first + max(ran - again, 0.0) * scale
     engine = min(engine / busy_workers(study, sample, workers) * scale, seconds)
@@ -254,5 +265,5 @@ def estimate(study: Study, workers: int) -> Estimate:
         seconds - engine,
         startup,
         len(sample),
-        turns=timed_turns(study, sample),
+        turns=turns,
     )
