@@ -235,27 +235,19 @@ def estimate(study: Study, workers: int) -> Estimate:
     n = len(study.cases)
     k = sample_size(study, workers)
     if n <= 2 * k:
-        seconds, engine, turns = time_turns(study, study.cases, workers)
-        engine = min(engine / busy_workers(study, study.cases, workers), seconds)
-        return Estimate(
-            simulated,
-            seconds + startup,
-            workers,
-            size,
-            engine,
-            seconds - engine,
-            startup,
-            n,
-            turns=turns,
-        )
-    sample = sample_cases(study, k)
-    batch = batch_size(study, n, workers)  # the study's own batches, not the sample's
-    first, _, _ = time_turns(study, sample[:1], workers)  # pays a process's first run's cost
-    again, _, _ = time_turns(study, sample[:1], workers)
-    ran, engine, turns = time_turns(study, sample, workers, batch)
-    scale = n / len(sample)
-    seconds = first + max(ran - again, 0.0) * scale
-    engine = min(engine / busy_workers(study, sample, workers) * scale, seconds)
+        timed = list(study.cases)
+        seconds, engine, turns = time_turns(study, timed, workers)
+        engine /= busy_workers(study, timed, workers)
+    else:
+        timed = sample_cases(study, k)
+        batch = batch_size(study, n, workers)  # the study's own batches, not the sample's
+        first, _, _ = time_turns(study, timed[:1], workers)  # pays a process's first run's cost
+        again, _, _ = time_turns(study, timed[:1], workers)
+        ran, engine, turns = time_turns(study, timed, workers, batch)
+        scale = n / len(timed)
+        seconds = first + max(ran - again, 0.0) * scale
+        engine *= scale / busy_workers(study, timed, workers)
+    engine = min(engine, seconds)
     return Estimate(
         simulated,
         seconds + startup,
@@ -264,6 +256,6 @@ def estimate(study: Study, workers: int) -> Estimate:
         engine,
         seconds - engine,
         startup,
-        len(sample),
+        len(timed),
         turns=turns,
     )
