@@ -12,17 +12,19 @@ names what got slower"):
   the quickstart's first run from an empty kernel cache (its kernels compiled).
 
 :func:`compare` matches the new figures with the previous run's by scene, figure and cam
-turns, and names every one more than :data:`SLOWER` slower. Two runs are compared only when
-their machine and the versions of :data:`SAME_MACHINE` are the same, and both are full runs or
-both ``--quick``; otherwise nothing is named and the reason says why. Pure functions of plain
-dicts and a :class:`~campipe.bench.run.Bench`; ``campipe.bench.report`` reads the previous
-``bench.json`` and keeps the result in the new one (``Bench.previous``,
-``Bench.regressions``).
+turns, and names every one more than :data:`SLOWER` slower; :func:`confirm` times each named
+figure once more (``campipe.bench.retime``) and keeps named only those slower again. Two
+runs are compared only when their machine and the versions of :data:`SAME_MACHINE` are the
+same, and both are full runs or both ``--quick``; otherwise nothing is named and the reason
+says why. Pure functions of plain dicts and a :class:`~campipe.bench.run.Bench` (the timing
+again handed in); ``campipe.bench.report`` reads the previous ``bench.json`` and keeps the
+result in the new one (``Bench.previous``, ``Bench.regressions``).
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
+from dataclasses import replace
 from typing import Any
 
 from campipe.bench.figures import finite, format_short
@@ -64,6 +66,24 @@ def _workers(n: int) -> str:
     return f"{n} worker{'s' if n != 1 else ''}"
 
 
+def row_name(r: Mapping[str, Any]) -> str:
+    """A ladder row's figure: its family and setting."""
+    return f"{r['family']}, {r['setting']}"
+
+
+def throughput_name(t: Mapping[str, Any]) -> str:
+    """A throughput batch's figure."""
+    return (
+        f"{t['integrator']}, {t['n_cases']} cases × {format_short(t['revolutions'])} turns, "
+        f"{_workers(t['workers'])}"
+    )
+
+
+def scaling_name(p: Mapping[str, Any]) -> str:
+    """A scaling point's figure."""
+    return f"{p['layer']}, {p['n_cases']} cases, {_workers(p['workers'])}"
+
+
 def figures(run: Mapping[str, Any]) -> list[dict]:
     """Every timed figure of a run (a ``bench.json`` as a dict, or ``vars(bench)``): scene,
     figure, the scene's cam turns (None for the figures of no scene) and seconds."""
@@ -72,22 +92,16 @@ def figures(run: Mapping[str, Any]) -> list[dict]:
     out: list[dict] = []
     for r in run.get("rows") or ():
         if r.get("family") in TIMED_FAMILIES:
-            name = f"{r['family']}, {r['setting']}"
-            out += _figure(r["scene"], name, r.get("seconds"), turns.get(r["scene"]))
+            out += _figure(r["scene"], row_name(r), r.get("seconds"), turns.get(r["scene"]))
     for s in run.get("steady") or ():
         if s.get("applies"):
             at = turns.get(s["scene"])
             out += _figure(s["scene"], "steady state, its margin", s.get("margin_seconds"), at)
             out += _figure(s["scene"], "steady state, one turn", s.get("seconds"), at)
     for t in run.get("throughput") or ():
-        name = (
-            f"{t['integrator']}, {t['n_cases']} cases × {format_short(t['revolutions'])} turns, "
-            f"{_workers(t['workers'])}"
-        )
-        out += _figure("throughput", name, t.get("seconds"))
+        out += _figure("throughput", throughput_name(t), t.get("seconds"))
     for p in run.get("scaling") or ():
-        name = f"{p['layer']}, {p['n_cases']} cases, {_workers(p['workers'])}"
-        out += _figure("scaling", name, p.get("seconds"))
+        out += _figure("scaling", scaling_name(p), p.get("seconds"))
     sweep = run.get("sweep") or {}
     for key, name in SWEEP_FIGURES:
         out += _figure("speed sweep", name, (sweep.get("seconds") or {}).get(key))
@@ -195,6 +209,27 @@ def compare(
     return block, regressions
 
 
+def confirm(bench: Bench, retime: Callable[[dict], float | None]) -> Bench:
+    """``bench`` with each figure :func:`compare` named slower timed once more: ``retime``
+    (a regression → the figure's seconds measured again now, or None where it cannot be)
+    gives its time ``again``; a figure whose time again is within :data:`SLOWER` of the
+    previous run's is no longer named, and is listed in the previous block's ``not_again``
+    (scene, figure, turns, the run's and the second time). A timing moved by the machine for
+    a moment passes the second look; a slowdown of the code, which every timing shows, does
+    not. The run's own figures are kept as measured."""
+    if not bench.regressions:
+        return bench
+    named, passed = [], []
+    for r in bench.regressions:
+        again = retime(r)
+        r = {**r, "again": again}
+        if again is not None and again <= r["previous"] * (1 + SLOWER):
+            passed.append({k: r[k] for k in ("scene", "figure", "turns", "new", "again")})
+        else:
+            named.append(r)
+    return replace(bench, previous={**bench.previous, "not_again": passed}, regressions=named)
+
+
 def slower_scenes(bench: Bench) -> list[str]:
     """The scenes (or "throughput", "scaling", "onset map") with a figure named slower, in the
     order of their slowest figure."""
@@ -221,13 +256,29 @@ def summary(bench: Bench) -> str:
     if not bench.regressions:
         return (
             f"Against {was}, on {p['reason']}: none of {p['compared']} timed figures is more "
-            f"than {percent} slower ({p['faster']} more than {percent} faster){_load(bench)}."
+            f"than {percent} slower ({p['faster']} more than {percent} faster){_load(bench)}"
+            f"{_passed(bench)}."
         )
     scenes = slower_scenes(bench)
     return (
         f"Against {was}, on {p['reason']}: {len(bench.regressions)} of {p['compared']} timed "
         f"figures more than {percent} slower, on {', '.join(scenes)} ({p['faster']} more than "
-        f"{percent} faster){_load(bench)}."
+        f"{percent} faster){_load(bench)}{_passed(bench)}."
+    )
+
+
+def _passed(bench: Bench) -> str:
+    """The figures timed again (:func:`confirm`) and then within :data:`SLOWER`."""
+    passed = bench.previous.get("not_again") or ()
+    if not passed:
+        return ""
+    each = "; ".join(
+        f"{f['scene']}: {f['figure']} {_seconds(f['new'])}, again {_seconds(f['again'])}"
+        for f in passed
+    )
+    return (
+        f"; {len(passed)} more, more than {format_short(SLOWER * 100)} % slower in the run, "
+        f"were timed again and then were not ({each})"
     )
 
 
@@ -241,7 +292,8 @@ def _load(bench: Bench) -> str:
 
 
 def rows(bench: Bench) -> list[list[str]]:
-    """The regressions as table rows: scene, figure, previous, new, ratio."""
+    """The regressions as table rows: scene, figure, previous, new, ratio, and the time again
+    (:func:`confirm`; "–" where it was not)."""
     return [
         [
             r["scene"],
@@ -249,12 +301,13 @@ def rows(bench: Bench) -> list[list[str]]:
             _seconds(r["previous"]),
             _seconds(r["new"]),
             f"{format_short(r['ratio'])}×",
+            _seconds(r["again"]) if finite(r.get("again")) else "–",
         ]
         for r in bench.regressions
     ]
 
 
-HEADER = ["scene", "figure", "previous run", "this run", "ratio"]
+HEADER = ["scene", "figure", "previous run", "this run", "ratio", "timed again"]
 
 
 def markdown(bench: Bench) -> str:
@@ -271,5 +324,8 @@ def text(bench: Bench) -> list[str]:
     """The comparison as ``campipe bench``'s verdict prints it: a line, and one per figure
     named slower."""
     lines = [summary(bench)]
-    lines += [f"  slower  {s}: {f}: {p} → {n} ({r})" for s, f, p, n, r in rows(bench)]
+    lines += [
+        f"  slower  {s}: {f}: {p} → {n} ({r}){'' if a == '–' else f', timed again {a}'}"
+        for s, f, p, n, r, a in rows(bench)
+    ]
     return lines

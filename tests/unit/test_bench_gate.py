@@ -269,3 +269,70 @@ def test_a_cheap_setting_is_timed_more_often_than_an_expensive_one(monkeypatch):
     calls.clear()
     measure.time_engine(scene, RunSettings(), max_copies=4, repeats=3, batch_seconds=0.0)
     assert len(calls) == 1 + 3
+
+
+def test_a_figure_named_slower_is_timed_again_and_named_only_if_slower_again():
+    """``gate.confirm``: b (1.5×) timed again at 1.45 ms stays named, with that time; a
+    (1.2×) timed again at 1.05 ms, within 10 % of the previous 1 ms, is no longer named and is
+    listed as such; d (1.15×), which cannot be timed again (None), stays named on the run's
+    time. The run's own figures are unchanged. Broken copies: the second time compared with
+    the run's own (b's 1.45 ms within 10 % of its 1.5: no longer named); the least of the two
+    times written into the run's figures."""
+    new = _new({"a": 1.2e-3, "b": 1.5e-3, "c": 1e-3, "d": 2.3e-3})
+    block, regressions = gate.compare(new, PREVIOUS, "old/bench.json")
+    new.previous, new.regressions = block, regressions
+    again = {"a": 1.05e-3, "b": 1.45e-3, "d": None}
+    asked = []
+
+    def retime(r):
+        asked.append(r["scene"])
+        return again[r["scene"]]
+
+    confirmed = gate.confirm(new, retime)
+    assert asked == ["b", "a", "d"]
+    assert [(r["scene"], r["again"]) for r in confirmed.regressions] == [
+        ("b", 1.45e-3),
+        ("d", None),
+    ]
+    assert confirmed.previous["not_again"] == [
+        {"scene": "a", "figure": "modal-exact, tol 1e-12 s", "turns": 2, "new": 1.2e-3,
+         "again": 1.05e-3}
+    ]  # fmt: skip
+    assert [r["seconds"] for r in confirmed.rows][:4] == [1.2e-3, 1.5e-3, 1e-3, 2.3e-3]
+    lines = gate.text(confirmed)
+    assert (
+        lines[1]
+        == "  slower  b: modal-exact, tol 1e-12 s: 1 ms → 1.5 ms (1.5×), timed again 1.45 ms"
+    )
+    assert lines[2] == "  slower  d: modal-exact, tol 1e-12 s: 2 ms → 2.3 ms (1.15×)"
+    assert lines[0].endswith(
+        "; 1 more, more than 10 % slower in the run, were timed again and then were not "
+        "(a: modal-exact, tol 1e-12 s 1.2 ms, again 1.05 ms)."
+    )
+    assert "| b | modal-exact, tol 1e-12 s | 1 ms | 1.5 ms | 1.5× | 1.45 ms |" in gate.markdown(
+        confirmed
+    )
+    plain = _new({"a": 1e-3})
+    assert gate.confirm(plain, retime) is plain and len(asked) == 3  # none named: none asked
+
+
+def test_the_retimer_times_the_engine_s_figures_again_and_not_the_others():
+    """``campipe.bench.retime``: a scene's ladder row, a throughput batch and a scaling point
+    are timed again (a positive time); the speed sweep's, a scene of other turns and an unknown
+    figure are not (None)."""
+    from campipe.bench.retime import retimer
+
+    bench = _new({"smooth-9000": 1e-3})
+    bench.quick = True
+    bench.throughput[0].update(n_cases=4, revolutions=0.5)
+    bench.scaling[0].update(n_cases=2)
+    retime = retimer(bench)
+    row = {"scene": "smooth-9000", "figure": "modal-exact, tol 1e-12 s", "turns": 1.5}
+    assert retime(row) > 0
+    assert retime({**row, "turns": 7}) is None
+    figure = gate.throughput_name(bench.throughput[0])
+    assert retime({"scene": "throughput", "figure": figure}) > 0
+    figure = gate.scaling_name(bench.scaling[0])
+    assert retime({"scene": "scaling", "figure": figure}) > 0
+    assert retime({"scene": "speed sweep", "figure": "32 one-case calls"}) is None
+    assert retime({"scene": "smooth-9000", "figure": "modal-exact, tol 7 s"}) is None

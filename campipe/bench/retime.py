@@ -1,0 +1,62 @@
+"""The regression gate's second look (``campipe.bench.gate.confirm``): a figure the gate is
+about to name slower, timed once more now, the way the run timed it.
+
+Timed again: a scene's engine runs (``measure.time_engine`` at the row's setting), the
+throughput batches (``scaling.throughput``) and the engine's scaling points
+(``scaling.engine_scaling``). Not timed again (None: the gate names them on the run's timing
+alone): the steady-state path, the onset map, the speed sweep and the first run, each timed
+as a part of a whole that takes tens of seconds to a minute.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable
+
+from campipe.bench import gate, measure, scaling
+from campipe.bench.run import QUICK_REVOLUTIONS, Bench, _settings_rows
+from campipe.bench.suite import FULL, QUICK, Scene, suite
+
+
+def retimer(bench: Bench) -> Callable[[dict], float | None]:
+    """A function of one of ``bench``'s regressions (``gate.compare``) to its figure's
+    seconds timed again now, or None where the figure is not timed again (the module)."""
+    ladder = QUICK if bench.quick else FULL
+    scenes = {s.name: s for s in suite()}
+    settings = {
+        f"{family}, {label}": (s, full_state)
+        for family, label, s, full_state in _settings_rows(ladder)
+    }
+    repeats = 2 if bench.quick else 5  # as run_bench's
+    timers: dict[tuple[str, str], Callable[[], float]] = {}
+    for t in bench.throughput:
+        timers["throughput", gate.throughput_name(t)] = functools.partial(_throughput, t, repeats)
+    for p in bench.scaling:
+        if p["layer"] == "engine":
+            timers["scaling", gate.scaling_name(p)] = functools.partial(_scaling, p)
+
+    def retime(regression: dict) -> float | None:
+        scene, figure = regression["scene"], regression["figure"]
+        if (scene, figure) in timers:
+            return timers[scene, figure]()
+        if scene not in scenes or figure not in settings:
+            return None
+        s = scenes[scene]
+        turns = QUICK_REVOLUTIONS if bench.quick else s.revolutions
+        if regression.get("turns") not in (None, turns):
+            return None  # another kind of scene than this suite's
+        run, full_state = settings[figure]
+        one = Scene(s.name, s.description, s.case, turns)
+        return measure.time_engine(one, run, ladder.copies, ladder.repeats, full_state)[0]
+
+    return retime
+
+
+def _throughput(t: dict, repeats: int) -> float:
+    return scaling.throughput(
+        t["n_cases"], t["workers"], t["integrator"], t["revolutions"], repeats
+    ).seconds
+
+
+def _scaling(p: dict) -> float:
+    return scaling.engine_scaling([p["n_cases"]], [p["workers"]])[0].seconds
