@@ -14,7 +14,7 @@ import functools
 from collections.abc import Callable
 
 from campipe.bench import gate, measure, scaling
-from campipe.bench.run import QUICK_REVOLUTIONS, Bench, _settings_rows
+from campipe.bench.run import QUICK_REVOLUTIONS, Bench, settings_rows
 from campipe.bench.suite import FULL, QUICK, Scene, suite
 
 
@@ -25,7 +25,7 @@ def retimer(bench: Bench) -> Callable[[dict], float | None]:
     scenes = {s.name: s for s in suite()}
     settings = {
         f"{family}, {label}": (s, full_state)
-        for family, label, s, full_state in _settings_rows(ladder)
+        for family, label, s, full_state in settings_rows(ladder)
     }
     repeats = 2 if bench.quick else 5  # as run_bench's
     timers: dict[tuple[str, str], Callable[[], float]] = {}

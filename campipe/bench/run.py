@@ -154,7 +154,7 @@ def _meta(quick: bool, ladder: Ladder, scenes: Sequence[Scene]) -> dict:
     }
 
 
-def _settings_rows(ladder: Ladder) -> list[tuple[str, str, RunSettings, bool]]:
+def settings_rows(ladder: Ladder) -> list[tuple[str, str, RunSettings, bool]]:
     """(family, label, settings, full_state) of every engine run of a scene."""
     rows = [
         ("modal-exact", f"tol {t:g} s", RunSettings(tolerance=t), True)
@@ -419,7 +419,7 @@ def run_bench(
             }
         )
         say(f"{scene.name}: campipe and newmark-linear ladders")
-        for family, label, settings, full_state in _settings_rows(ladder):
+        for family, label, settings, full_state in settings_rows(ladder):
             seconds, out, steps = measure.time_engine(
                 scene, settings, ladder.copies, ladder.repeats, full_state=full_state
             )
