@@ -52,6 +52,8 @@ SWEEP_FIGURES = (
     ("newmark", "newmark-linear at 1 µs, 32 cases"),
     ("first_run", "the quickstart's first run from an empty kernel cache"),
 )
+#: The steady-state path's two timed figures on a scene.
+STEADY_MARGIN, STEADY_TURN = "steady state, its margin", "steady state, one turn"
 #: The families of rows whose time is campipe's own (solve_ivp's is the peer's).
 TIMED_FAMILIES = ("modal-exact", "modal-exact capped", "contacts only", "newmark-linear")
 
@@ -96,8 +98,8 @@ def figures(run: Mapping[str, Any]) -> list[dict]:
     for s in run.get("steady") or ():
         if s.get("applies"):
             at = turns.get(s["scene"])
-            out += _figure(s["scene"], "steady state, its margin", s.get("margin_seconds"), at)
-            out += _figure(s["scene"], "steady state, one turn", s.get("seconds"), at)
+            out += _figure(s["scene"], STEADY_MARGIN, s.get("margin_seconds"), at)
+            out += _figure(s["scene"], STEADY_TURN, s.get("seconds"), at)
     for t in run.get("throughput") or ():
         out += _figure("throughput", throughput_name(t), t.get("seconds"))
     for p in run.get("scaling") or ():

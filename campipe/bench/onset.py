@@ -62,17 +62,22 @@ def steady_scenes(scenes: Sequence[Scene], copies: int, repeats: int) -> list[di
             "seat_height": float(ext.min_seat_height[0]),
         }
         if ext.holds[0]:
-            many = [case] * copies
-            periodic.steady_state(many[:1], OUTPUT_EVERY)
             ss = periodic.steady_state([case], OUTPUT_EVERY)
             ref = reference(scene).valve_lift[-n_turn:]
             row["valve_lift"] = float(np.abs(ss.valve_lift[0] - ref).max())
-            row["margin_seconds"] = _best(lambda m=many: periodic.steady_extremes(m), repeats)
-            row["margin_seconds"] /= copies
-            row["seconds"] = _best(lambda m=many: periodic.steady_state(m, OUTPUT_EVERY), repeats)
-            row["seconds"] /= copies
+            row["margin_seconds"], row["seconds"] = steady_times(case, copies, repeats)
         rows.append(row)
     return rows
+
+
+def steady_times(case: Case, copies: int, repeats: int) -> tuple[float, float]:
+    """The per-case time [s] of the steady state's margin alone and of one turn's histories,
+    on a batch of ``copies`` of ``case``, each the least of ``repeats``."""
+    many = [case] * copies
+    periodic.steady_state(many[:1], OUTPUT_EVERY)
+    margin = _best(lambda: periodic.steady_extremes(many), repeats)
+    turn = _best(lambda: periodic.steady_state(many, OUTPUT_EVERY), repeats)
+    return margin / copies, turn / copies
 
 
 def map_designs(n_preloads: int | None = None, n_rates: int | None = None) -> list[Case]:

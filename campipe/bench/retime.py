@@ -1,11 +1,11 @@
 """The regression gate's second look (``campipe.bench.gate.confirm``): a figure the gate is
 about to name slower, timed once more now, the way the run timed it.
 
-Timed again: a scene's engine runs (``measure.time_engine`` at the row's setting), the
-throughput batches (``scaling.throughput``) and the engine's scaling points
-(``scaling.engine_scaling``). Not timed again (None: the gate names them on the run's timing
-alone): the steady-state path, the onset map, the speed sweep and the first run, each timed
-as a part of a whole that takes tens of seconds to a minute.
+Timed again: a scene's engine runs (``measure.time_engine`` at the row's setting), its
+steady-state path (``onset.steady_times``), the throughput batches (``scaling.throughput``)
+and the engine's scaling points (``scaling.engine_scaling``). Not timed again (None: the gate
+names them on the run's timing alone): the onset map, the speed sweep and the first run, each
+timed as a part of a whole that takes tens of seconds to a minute.
 """
 
 from __future__ import annotations
@@ -14,6 +14,7 @@ import functools
 from collections.abc import Callable
 
 from campipe.bench import gate, measure, scaling
+from campipe.bench.onset import steady_times
 from campipe.bench.run import QUICK_REVOLUTIONS, Bench, settings_rows
 from campipe.bench.suite import FULL, QUICK, Scene, suite
 
@@ -39,12 +40,16 @@ def retimer(bench: Bench) -> Callable[[dict], float | None]:
         scene, figure = regression["scene"], regression["figure"]
         if (scene, figure) in timers:
             return timers[scene, figure]()
-        if scene not in scenes or figure not in settings:
+        steady = figure in (gate.STEADY_MARGIN, gate.STEADY_TURN)
+        if scene not in scenes or not (steady or figure in settings):
             return None
         s = scenes[scene]
         turns = QUICK_REVOLUTIONS if bench.quick else s.revolutions
         if regression.get("turns") not in (None, turns):
             return None  # another kind of scene than this suite's
+        if steady:
+            margin, turn = steady_times(s.case, ladder.copies, ladder.repeats)
+            return margin if figure == gate.STEADY_MARGIN else turn
         run, full_state = settings[figure]
         one = Scene(s.name, s.description, s.case, turns)
         return measure.time_engine(one, run, ladder.copies, ladder.repeats, full_state)[0]

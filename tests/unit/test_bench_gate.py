@@ -317,8 +317,8 @@ def test_a_figure_named_slower_is_timed_again_and_named_only_if_slower_again():
 
 
 def test_the_retimer_times_the_engine_s_figures_again_and_not_the_others():
-    """``campipe.bench.retime``: a scene's ladder row, a throughput batch and a scaling point
-    are timed again (a positive time); the speed sweep's, a scene of other turns and an unknown
+    """``campipe.bench.retime``: a scene's ladder row and steady path, a throughput batch and
+    a scaling point are timed again (a positive time); the speed sweep's, a scene of other turns and an unknown
     figure are not (None)."""
     from campipe.bench.retime import retimer
 
@@ -330,6 +330,8 @@ def test_the_retimer_times_the_engine_s_figures_again_and_not_the_others():
     row = {"scene": "smooth-9000", "figure": "modal-exact, tol 1e-12 s", "turns": 1.5}
     assert retime(row) > 0
     assert retime({**row, "turns": 7}) is None
+    for figure in (gate.STEADY_MARGIN, gate.STEADY_TURN):  # the cam followed: a steady state
+        assert retime({**row, "figure": figure}) > 0
     figure = gate.throughput_name(bench.throughput[0])
     assert retime({"scene": "throughput", "figure": figure}) > 0
     figure = gate.scaling_name(bench.scaling[0])
