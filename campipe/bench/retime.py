@@ -52,7 +52,9 @@ def retimer(bench: Bench) -> Callable[[dict], float | None]:
             return margin if figure == gate.STEADY_MARGIN else turn
         run, full_state = settings[figure]
         one = Scene(s.name, s.description, s.case, turns)
-        return measure.time_engine(one, run, ladder.copies, ladder.repeats, full_state)[0]
+        return measure.time_engine(one, run, ladder.copies, ladder.repeats, full_state=full_state)[
+            0
+        ]
 
     return retime
 

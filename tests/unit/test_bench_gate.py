@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from campipe.bench import gate, pages, report, verdict
+from campipe.bench import gate, measure, pages, report, verdict
 from campipe.bench.run import Bench
 
 MACHINE = {
@@ -316,10 +316,13 @@ def test_a_figure_named_slower_is_timed_again_and_named_only_if_slower_again():
     assert gate.confirm(plain, retime) is plain and len(asked) == 3  # none named: none asked
 
 
-def test_the_retimer_times_the_engine_s_figures_again_and_not_the_others():
+def test_the_retimer_times_the_engine_s_figures_again_and_not_the_others(monkeypatch):
     """``campipe.bench.retime``: a scene's ladder row and steady path, a throughput batch and
-    a scaling point are timed again (a positive time); the speed sweep's, a scene of other turns and an unknown
-    figure are not (None)."""
+    a scaling point are timed again (a positive time); the speed sweep's, a scene of other
+    turns and an unknown figure are not (None). A ladder row is timed as the run timed it:
+    "contacts only" with the contact coordinates alone (broken copy: ``full_state`` handed in
+    as ``time_engine``'s fifth argument, its batch's seconds: the full state timed on one
+    copy, 1.7 times the run's time on flat-15000)."""
     from campipe.bench.retime import retimer
 
     bench = _new({"smooth-9000": 1e-3})
@@ -337,4 +340,14 @@ def test_the_retimer_times_the_engine_s_figures_again_and_not_the_others():
     figure = gate.scaling_name(bench.scaling[0])
     assert retime({"scene": "scaling", "figure": figure}) > 0
     assert retime({"scene": "speed sweep", "figure": "32 one-case calls"}) is None
+    timed = []
+
+    def time_engine(scene, settings, copies, repeats, batch_seconds=0.2, full_state=True):
+        timed.append((scene.revolutions, settings.method, batch_seconds, full_state))
+        return 1e-3, None, 0
+
+    monkeypatch.setattr(measure, "time_engine", time_engine)
+    assert retime({**row, "figure": "contacts only, full"}) == 1e-3
+    assert retime({**row, "figure": "newmark-linear, dt 1 µs"}) == 1e-3
+    assert timed == [(1.5, "modal-exact", 0.2, False), (1.5, "newmark-linear", 0.2, True)]
     assert retime({"scene": "smooth-9000", "figure": "modal-exact, tol 7 s"}) is None
