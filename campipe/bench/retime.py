@@ -52,9 +52,10 @@ def retimer(bench: Bench) -> Callable[[dict], float | None]:
             return margin if figure == gate.STEADY_MARGIN else turn
         run, full_state = settings[figure]
         one = Scene(s.name, s.description, s.case, turns)
-        return measure.time_engine(one, run, ladder.copies, ladder.repeats, full_state=full_state)[
-            0
-        ]
+        seconds, _, _ = measure.time_engine(
+            one, run, ladder.copies, ladder.repeats, full_state=full_state
+        )
+        return seconds
 
     return retime
 

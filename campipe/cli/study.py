@@ -279,12 +279,10 @@ def validate(
     click.echo(memory_text(len(loaded.cases), workers, samples))
     if estimate:
         from campipe.engine.kernels import compile_first
-        from campipe.study.spec.resolve import distinct_but_speed
+        from campipe.study.run.estimate import first_cases
 
         # compiled (and recorded as such) before the estimate's runs time them, as a study's
-        firsts: dict = {}
-        for c in distinct_but_speed(loaded.cases)[0]:
-            firsts.setdefault(c.settings, c.case)
+        firsts = {settings: c.case for settings, c in first_cases(loaded).items()}
         compile_first(firsts, lambda text: click.echo(f"campipe validate: {text}", err=True))
         click.echo(estimate_text(loaded, workers))
     click.echo(
@@ -335,12 +333,12 @@ def estimate_text(loaded, workers: int) -> str:
                 f"the replay's {count} case{'s' if count != 1 else ''} {_seconds(e.replay)}"
             )
     n = len(loaded.cases)
-    timed = "the whole study" if e.sample >= n else f"{e.sample} of its {n} cases, scaled"
-    timed = f"a run of {timed}"
+    what = "the whole study" if e.sample >= n else f"{e.sample} of its {n} cases, scaled"
+    timed = f"a run of {what}"
     if e.turns is not None:
         a, b = e.turns
         timed = (
-            f"runs of {timed[9:]} for {a} and for {b} of its {loaded.revolutions:g} turns, the "
+            f"runs of {what} for {a} and for {b} of its {loaded.revolutions:g} turns, the "
             "turns beyond extrapolated"
         )
     return (

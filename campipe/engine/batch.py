@@ -146,10 +146,10 @@ def _static_lift(sm: SystemMatrices) -> tuple[np.ndarray, np.ndarray]:
     """(the static positions with the cam on its base circle, their change per metre of cam
     lift), configuration I, the members' give included."""
     n = sm.mass.shape[0]
-    held = held_mask(CAM_CONTACT, n)
     lifted = np.zeros(n)
     lifted[CAM] = -1.0  # one metre of cam lift
-    reference = static_position(sm.mass, sm.stiffness, sm.preload, held, np.zeros(n))
+    reference = _base_circle_position(sm)
+    held = held_mask(CAM_CONTACT, n)
     return reference, static_position(sm.mass, sm.stiffness, sm.preload, held, lifted) - reference
 
 
@@ -187,11 +187,17 @@ def valve_flight(mass: np.ndarray, shape: np.ndarray, spring_rate: float) -> flo
     return math.sqrt(float(phi @ mass @ phi) / spring_rate)
 
 
+def _base_circle_position(sm: SystemMatrices) -> np.ndarray:
+    """The static positions with the cam on its base circle, no seat, configuration I [m]."""
+    n = sm.mass.shape[0]
+    return static_position(
+        sm.mass, sm.stiffness, sm.preload, held_mask(CAM_CONTACT, n), np.zeros(n)
+    )
+
+
 def valve_reference(sm: SystemMatrices) -> float:
     """q7 with the cam on its base circle, no seat, in static equilibrium [m]."""
-    n = sm.mass.shape[0]
-    q = static_position(sm.mass, sm.stiffness, sm.preload, held_mask(CAM_CONTACT, n), np.zeros(n))
-    return float(q[SEAT])
+    return float(_base_circle_position(sm)[SEAT])
 
 
 class TrainStack(NamedTuple):

@@ -85,17 +85,23 @@ def expected_turns(settings: RunSettings) -> float:
     return settings.revolutions
 
 
-def warm_up(study: Study) -> float:
-    """Load each run-settings group's kernel with a tiny run of its first case; the time it
-    took, each group's at most :data:`MAX_LOAD_SECONDS` [s]. (A speed sweep's group starts
-    with its first combination of the other axes, at the first speed.)"""
-    from campipe.engine import run_batch  # numba: not for validate --no-estimate
-
+def first_cases(study: Study) -> dict[RunSettings, ResolvedCase]:
+    """Each run-settings group's first case (a speed sweep's: its first combination of the
+    other axes, at the first speed)."""
     firsts: dict[RunSettings, ResolvedCase] = {}
     for c in distinct_but_speed(study.cases)[0]:
         firsts.setdefault(c.settings, c)
+    return firsts
+
+
+def warm_up(study: Study) -> float:
+    """Load each run-settings group's kernel with a tiny run of its first case
+    (:func:`first_cases`); the time it took, each group's at most :data:`MAX_LOAD_SECONDS`
+    [s]."""
+    from campipe.engine import run_batch  # numba: not for validate --no-estimate
+
     total = 0.0
-    for settings, c in firsts.items():
+    for settings, c in first_cases(study).items():
         t = time.perf_counter()
         run_batch(
             [c.case],
