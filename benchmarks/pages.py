@@ -72,8 +72,9 @@ def section_block(data: dict) -> str:
         f"Measured {s['date']} on {w} worker thread{'s' if w != 1 else ''}, load average "
         f"{format_short(s['load_average_at_start'], 2)} at the start and "
         f"{format_short(s['load_average_at_end'], 2)} at the end ({duration(s['seconds'])}). "
-        "End to end: `python -m campipe study SPEC` in a fresh process, best of 3 (one run "
-        "above 1000 cases); in process: `run_study` with the kernels loaded; engine: "
+        "End to end: `python -m campipe study SPEC` in a fresh process, best of "
+        f"{s['sizes'][0].get('repeats', 3)} (one run above 1000 cases); in process: "
+        "`run_study` with the kernels loaded; engine: "
         "`run_batch` on the same cases in the study's own batches, on as many threads.",
         "",
     ]

@@ -88,6 +88,12 @@ GOAL_VALIDATE_BYTES = 300e6
 CLUSTER_CASES = 4000
 QUICK_CLUSTER_CASES = 256
 CLUSTER_WORKERS = (1, 2, 4)
+#: Runs each figure is the best of: a fresh process's latencies, a size's end-to-end, in-process
+#: and engine times; --quick times each once (its figures are not published: it shows the
+#: benchmark runs).
+LATENCY_REPEATS = 5
+SIZE_REPEATS = 3
+QUICK_REPEATS = 1
 
 
 def _campipe(args: Sequence[str], cwd: Path) -> tuple[float, subprocess.CompletedProcess]:
@@ -151,7 +157,7 @@ def _engine_jobs(study: Study, size: int) -> list[tuple[list[Case], RunSettings,
     ]
 
 
-def latencies(directory: Path, workers: int, repeats: int = 5) -> dict:
+def latencies(directory: Path, workers: int, repeats: int = LATENCY_REPEATS) -> dict:
     """``campipe --help``, a one-case study (a new archive each time) and a finished
     1000-case study run again, each in a fresh process, best of ``repeats``."""
     one = write_spec(directory, 1)
@@ -199,7 +205,9 @@ def _in_process(study: Study, archive: Path, workers: int) -> float:
     return time.perf_counter() - t0
 
 
-def sizes(directory: Path, counts: Sequence[int], workers: int, repeats: int = 3) -> list[dict]:
+def sizes(
+    directory: Path, counts: Sequence[int], workers: int, repeats: int = SIZE_REPEATS
+) -> list[dict]:
     """For each count: ``campipe study`` end to end (best of ``repeats``; one run above 1000
     cases), the study in this process (``run_study``, process start left out), the engine
     alone, and the archive's size."""
@@ -223,6 +231,7 @@ def sizes(directory: Path, counts: Sequence[int], workers: int, repeats: int = 3
                 "archive_bytes": archive.stat().st_size,
                 "bytes_per_case": archive.stat().st_size / len(study.cases),
                 "goal": GOAL_FACTOR * engine + GOAL_OFFSET,
+                "repeats": r,
             }
         )
     return out
@@ -559,10 +568,10 @@ def measure(
         },
     }
     say("study: --help, a one-case study, a finished study (fresh processes)")
-    out["latencies"] = latencies(directory, workers)
+    out["latencies"] = latencies(directory, workers, QUICK_REPEATS if quick else LATENCY_REPEATS)
     counts = QUICK_COUNTS if quick else COUNTS
     say(f"study: {', '.join(map(str, counts))} cases end to end against the engine")
-    out["sizes"] = sizes(directory, counts, workers)
+    out["sizes"] = sizes(directory, counts, workers, QUICK_REPEATS if quick else SIZE_REPEATS)
     n = counts[-1]
     say(f"study: the client's ceiling, assembling {n} cases from stored batches")
     out["ceiling"] = ceiling(directory, n, workers)

@@ -54,6 +54,9 @@ def test_the_quick_benchmark_measures_the_study_section(tmp_path):
     assert data["meta"]["quick"] and data["scaling"] == []
     s = data["study"]
     assert [r["n_cases"] for r in s["sizes"]] == list(study.QUICK_COUNTS)
+    # --quick times each figure once (the full run: best of LATENCY_REPEATS, SIZE_REPEATS)
+    assert s["latencies"]["repeats"] == study.QUICK_REPEATS == 1
+    assert [r["repeats"] for r in s["sizes"]] == [study.QUICK_REPEATS] * len(study.QUICK_COUNTS)
     for r in s["sizes"]:
         assert r["wall"] > r["study"] > 0 and r["engine"] > 0 and r["archive_bytes"] > 0
         assert r["ratio"] == pytest.approx(r["wall"] / r["engine"])
