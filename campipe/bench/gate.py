@@ -109,15 +109,19 @@ def figures(run: Mapping[str, Any]) -> list[dict]:
         out += _figure("speed sweep", name, (sweep.get("seconds") or {}).get(key))
     o = run.get("onset") or {}
     if o:
-        out += _figure(
-            "onset map", f"{o['designs']} designs, {_workers(o['workers'])}", o.get("seconds")
-        )
-        out += _figure(
-            "onset map",
-            f"its time-domain grid, {o['grid_speeds']} speeds a design",
-            o.get("grid_seconds"),
-        )
+        out += _figure("onset map", map_name(o), o.get("seconds"))
+        out += _figure("onset map", grid_name(o), o.get("grid_seconds"))
     return out
+
+
+def map_name(o: Mapping[str, Any]) -> str:
+    """The figure name of a run's onset map (its ``onset``)."""
+    return f"{o['designs']} designs, {_workers(o['workers'])}"
+
+
+def grid_name(o: Mapping[str, Any]) -> str:
+    """The figure name of the time-domain grid an onset map replaces."""
+    return f"its time-domain grid, {o['grid_speeds']} speeds a design"
 
 
 def _key(f: Mapping[str, Any]) -> tuple:

@@ -99,15 +99,9 @@ def _clear_caches() -> None:
     batch.train_matrices.cache_clear()
 
 
-def onset_map(quick: bool = False, repeats: int = 3) -> dict:
-    """The onset map's cost and what the time-domain grid would cost for it.
-
-    The map is timed cold (the engine's per-train caches cleared, so each design's modes are
-    computed), best of ``repeats``, on GOAL_MAP_WORKERS threads. The grid's per-case cost is
-    ``run_batch`` at GRID_TURNS turns, contacts only, on a sample of design × speed cases; the
-    grid that fits in the map's time has ``map seconds / (designs × per-case)`` speeds.
-    """
-    designs = map_designs(*QUICK_MAP) if quick else map_designs()
+def map_seconds(designs: Sequence[Case], repeats: int) -> float:
+    """The onset map of ``designs`` timed cold (the engine's per-train caches cleared, so
+    each design's modes are computed), best of ``repeats``, on GOAL_MAP_WORKERS threads."""
     low, high = MAP_RANGE
     tol = onset.DEFAULT_ONSET_TOLERANCE_RPM * RPM
     search_designs(designs[:2], low, high, tol, GOAL_MAP_WORKERS)  # compiled kernels loaded
@@ -116,13 +110,13 @@ def onset_map(quick: bool = False, repeats: int = 3) -> dict:
         _clear_caches()
         return search_designs(designs, low, high, tol, GOAL_MAP_WORKERS)
 
-    seconds = _best(run, repeats)
-    found = run()
-    pick = np.unique(np.linspace(0, len(designs) - 1, MAP_CHECKED).round().astype(int))
-    below, above = onset.confirm_onsets([designs[i] for i in pick], found.speed[pick])
-    checked = np.isfinite(below)
-    agree = int(((below == 0) & (above > 0))[checked].sum())
-    # The time-domain grid's cost per case, on a sample of the map's design × speed cases.
+    return _best(run, repeats)
+
+
+def grid_per_case(designs: Sequence[Case], repeats: int) -> float:
+    """The time-domain grid's cost per case [s]: ``run_batch`` at GRID_TURNS turns, contacts
+    only, on a sample of 64 of ``designs`` × the grid's speeds, best of ``repeats``."""
+    low, high = MAP_RANGE
     grid = np.linspace(low, high, GRID_SPEEDS)
     sample = [
         Case(designs[i].train, designs[i].profile, float(grid[k % GRID_SPEEDS]))
@@ -132,10 +126,32 @@ def onset_map(quick: bool = False, repeats: int = 3) -> dict:
     # A design that flies off beyond the physical bounds at the top speeds ends early, as
     # the grid's own run of it would.
     run_batch(sample[:2], settings, full_state=False, on_failure="record")
-    per_case = _best(
+    seconds = _best(
         lambda: run_batch(sample, settings, full_state=False, on_failure="record"), repeats
     )
-    per_case /= len(sample)
+    return seconds / len(sample)
+
+
+def grid_seconds(n_designs: int, per_case: float) -> float:
+    """The time-domain grid's time [s] for ``n_designs`` at ``per_case`` seconds a case, on
+    GOAL_MAP_WORKERS workers."""
+    return n_designs * GRID_SPEEDS * per_case / GOAL_MAP_WORKERS
+
+
+def onset_map(quick: bool = False, repeats: int = 3) -> dict:
+    """The onset map's cost (:func:`map_seconds`) and what the time-domain grid would cost
+    for it (:func:`grid_per_case`): the grid that fits in the map's time has ``map seconds /
+    (designs × per-case)`` speeds."""
+    designs = map_designs(*QUICK_MAP) if quick else map_designs()
+    low, high = MAP_RANGE
+    tol = onset.DEFAULT_ONSET_TOLERANCE_RPM * RPM
+    seconds = map_seconds(designs, repeats)
+    found = search_designs(designs, low, high, tol, GOAL_MAP_WORKERS)
+    pick = np.unique(np.linspace(0, len(designs) - 1, MAP_CHECKED).round().astype(int))
+    below, above = onset.confirm_onsets([designs[i] for i in pick], found.speed[pick])
+    checked = np.isfinite(below)
+    agree = int(((below == 0) & (above > 0))[checked].sum())
+    per_case = grid_per_case(designs, repeats)
     n = len(designs)
     points = seconds / (n * per_case)
     return {
@@ -153,7 +169,7 @@ def onset_map(quick: bool = False, repeats: int = 3) -> dict:
         "grid_turns": GRID_TURNS,
         "grid_per_case": per_case,
         "grid_speeds": GRID_SPEEDS,
-        "grid_seconds": n * GRID_SPEEDS * per_case / GOAL_MAP_WORKERS,
+        "grid_seconds": grid_seconds(n, per_case),
         "grid_resolution_rpm": (high - low) / (GRID_SPEEDS - 1) / RPM,
         # Speeds a design the grid affords in the map's time on as many workers.
         "equal_time_speeds": points * GOAL_MAP_WORKERS,

@@ -2,10 +2,11 @@
 about to name slower, timed once more now, the way the run timed it.
 
 Timed again: a scene's engine runs (``measure.time_engine`` at the row's setting), its
-steady-state path (``onset.steady_times``), the throughput batches (``scaling.throughput``)
-and the engine's scaling points (``scaling.engine_scaling``). Not timed again (None: the gate
-names them on the run's timing alone): the onset map, the speed sweep and the first run, each
-timed as a part of a whole that takes tens of seconds to a minute.
+steady-state path (``onset.steady_times``), the throughput batches (``scaling.throughput``),
+the engine's scaling points (``scaling.engine_scaling``) and the onset map and its
+time-domain grid (``onset.map_seconds``, ``onset.grid_per_case``). Not timed again (None: the
+gate names them on the run's timing alone): the speed sweep and the first run, each timed as
+a part of a whole that takes tens of seconds to a minute.
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ from __future__ import annotations
 import functools
 from collections.abc import Callable
 
-from campipe.bench import gate, measure, scaling
+from campipe.bench import gate, measure, onset, scaling
 from campipe.bench.onset import steady_times
 from campipe.bench.run import QUICK_REVOLUTIONS, Bench, settings_rows
 from campipe.bench.suite import FULL, QUICK, Scene, suite
@@ -35,6 +36,12 @@ def retimer(bench: Bench) -> Callable[[dict], float | None]:
     for p in bench.scaling:
         if p["layer"] == "engine":
             timers["scaling", gate.scaling_name(p)] = functools.partial(_scaling, p)
+    if bench.onset:  # as run_bench's onset.onset_map
+        o = bench.onset
+        timers["onset map", gate.map_name(o)] = functools.partial(_map, bench.quick, ladder.repeats)
+        timers["onset map", gate.grid_name(o)] = functools.partial(
+            _grid, bench.quick, ladder.repeats
+        )
 
     def retime(regression: dict) -> float | None:
         scene, figure = regression["scene"], regression["figure"]
@@ -64,6 +71,19 @@ def _throughput(t: dict, repeats: int) -> float:
     return scaling.throughput(
         t["n_cases"], t["workers"], t["integrator"], t["revolutions"], repeats
     ).seconds
+
+
+def _map_designs(quick: bool) -> list:
+    return onset.map_designs(*onset.QUICK_MAP) if quick else onset.map_designs()
+
+
+def _map(quick: bool, repeats: int) -> float:
+    return onset.map_seconds(_map_designs(quick), repeats)
+
+
+def _grid(quick: bool, repeats: int) -> float:
+    designs = _map_designs(quick)
+    return onset.grid_seconds(len(designs), onset.grid_per_case(designs, repeats))
 
 
 def _scaling(p: dict) -> float:

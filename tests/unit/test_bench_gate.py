@@ -6,8 +6,9 @@ from pathlib import Path
 
 import pytest
 
-from campipe.bench import gate, measure, pages, report, verdict
+from campipe.bench import gate, measure, onset, pages, report, verdict
 from campipe.bench.run import Bench
+from campipe.bench.suite import QUICK
 
 MACHINE = {
     "machine": "x86_64, 2 cores, Linux",
@@ -317,9 +318,13 @@ def test_a_figure_named_slower_is_timed_again_and_named_only_if_slower_again():
 
 
 def test_the_retimer_times_the_engine_s_figures_again_and_not_the_others(monkeypatch):
-    """``campipe.bench.retime``: a scene's ladder row and steady path, a throughput batch and
-    a scaling point are timed again (a positive time); the speed sweep's, a scene of other
-    turns and an unknown figure are not (None). A ladder row is timed as the run timed it:
+    """``campipe.bench.retime``: a scene's ladder row and steady path, a throughput batch, a
+    scaling point and the onset map and its grid are timed again (a positive time); the speed
+    sweep's, a scene of other turns and an unknown figure are not (None). The onset map is
+    timed again on the run's designs, as many times as the run's ladder times it, and its
+    grid's figure is the designs × the grid's speeds × the time a case over the workers
+    (broken copies: the full map's 1000 designs for a quick run; the grid's time a case
+    given as its figure). A ladder row is timed as the run timed it:
     "contacts only" with the contact coordinates alone (broken copy: ``full_state`` handed in
     as ``time_engine``'s fifth argument, its batch's seconds: the full state timed on one
     copy, 1.7 times the run's time on flat-15000)."""
@@ -340,6 +345,21 @@ def test_the_retimer_times_the_engine_s_figures_again_and_not_the_others(monkeyp
     figure = gate.scaling_name(bench.scaling[0])
     assert retime({"scene": "scaling", "figure": figure}) > 0
     assert retime({"scene": "speed sweep", "figure": "32 one-case calls"}) is None
+    bench.onset = {"designs": 16, "workers": 2, "grid_speeds": onset.GRID_SPEEDS}
+    retime = retimer(bench)
+    map_figure = {"scene": "onset map", "figure": gate.map_name(bench.onset)}
+    grid_figure = {"scene": "onset map", "figure": gate.grid_name(bench.onset)}
+    assert retime(map_figure) > 0 and retime(grid_figure) > 0
+    asked = []
+
+    def map_seconds(designs, repeats):
+        asked.append((len(designs), repeats))
+        return 0.5
+
+    monkeypatch.setattr(onset, "map_seconds", map_seconds)
+    monkeypatch.setattr(onset, "grid_per_case", lambda designs, repeats: 1e-3)
+    assert retime(map_figure) == 0.5 and asked == [(16, QUICK.repeats)]
+    assert retime(grid_figure) == pytest.approx(16 * onset.GRID_SPEEDS * 1e-3 / 2)
     timed = []
 
     def time_engine(scene, settings, copies, repeats, batch_seconds=0.2, full_state=True):
