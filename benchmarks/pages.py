@@ -185,7 +185,12 @@ def section_block(data: dict) -> str:
         lines += [
             "",
             "`campipe validate`'s run-time estimate of each bundled study beside its run "
-            "(in process, kernels loaded):",
+            + (
+                "(each in a fresh process of its own, from after the spec's reading: both "
+                "load the engine, as a user's `campipe validate` and `campipe study` do):"
+                if s.get("estimates_fresh")
+                else "(in process, kernels loaded):"
+            ),
             "",
         ]
         lines += table(

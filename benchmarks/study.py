@@ -458,35 +458,16 @@ def first_run(studies: Path, directory: Path) -> dict:
     }
 
 
-def validate_estimate(study: Study, workers: int) -> float:
-    """``campipe validate``'s run-time estimate [s] of a study on ``workers`` workers: the
-    one place the benchmark asks for it."""
-    from campipe.study.run.estimate import estimate
-
-    return estimate(study, workers).seconds
-
-
 def estimates(studies: Path, directory: Path, workers: int) -> list[dict]:
-    """Each bundled study: validate's estimate beside the study's measured run
-    (``run_study`` in this process, kernels loaded, a new archive)."""
-    out = []
-    for spec in sorted(studies.glob("*.yaml")):
-        study = load_study(spec)
-        estimate = validate_estimate(study, workers)
-        archive = directory / f"estimate-{spec.stem}.nc"
-        archive.unlink(missing_ok=True)
-        t0 = time.perf_counter()
-        run_study(study, archive, scheduler="threads", workers=workers)
-        measured = time.perf_counter() - t0
-        out.append(
-            {
-                "study": spec.name,
-                "cases": len(study.cases),
-                "estimate": estimate,
-                "measured": measured,
-            }
-        )
-    return out
+    """Each bundled study: validate's estimate beside the study's measured run, each in a
+    fresh process of its own that loads the engine as a user's does
+    (:func:`benchmarks.fresh.estimate_and_run`)."""
+    from benchmarks.fresh import estimate_and_run
+
+    return [
+        estimate_and_run(spec, directory / f"estimate-{spec.stem}.nc", workers)
+        for spec in sorted(studies.glob("*.yaml"))
+    ]
 
 
 def validate_at_scale(directory: Path, n: int = VALIDATE_CASES) -> dict:
@@ -581,6 +562,7 @@ def measure(
     if not quick and studies is not None and studies.is_dir():
         say("study: validate's estimates of the bundled studies against their runs")
         out["estimates"] = estimates(studies, directory, workers)
+        out["estimates_fresh"] = True  # each figure in a fresh process (benchmarks.fresh)
     if not quick and studies is not None:
         say("study: the quickstart as on a fresh install (numba compiles)")
         out["first_run"] = first_run(studies, directory)

@@ -113,3 +113,18 @@ def test_the_goals_judge_the_stored_run_and_a_worse_one():
         f"the quickstart from a fresh install under {goals.format_short(s['goals']['first_run'])} s"
     )
     assert len(goals.goals(s)) == 6  # no second install without a first run
+
+
+def test_validate_s_estimate_and_the_run_each_in_a_fresh_process(tmp_path):
+    """``benchmarks.fresh``: a bundled study's estimate and its run, each timed in a process
+    of its own that loads the engine (the full run's table of estimates; --quick leaves it
+    out): both positive, the run's archive written, neither process this one."""
+    import campipe.engine.batch as batch
+    from benchmarks import fresh
+
+    spec = ROOT / "studies" / "thesis-member-loads.yaml"
+    before = batch.train_modal.cache_info().misses
+    row = fresh.estimate_and_run(spec, tmp_path / "a.nc", 2)
+    assert (row["study"], row["cases"]) == ("thesis-member-loads.yaml", 1)
+    assert row["estimate"] > 0 and row["measured"] > 0 and (tmp_path / "a.nc").exists()
+    assert batch.train_modal.cache_info().misses == before  # nothing ran here

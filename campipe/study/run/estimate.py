@@ -95,12 +95,14 @@ def first_cases(study: Study) -> dict[RunSettings, ResolvedCase]:
 
 
 def warm_up(study: Study) -> float:
-    """Load each run-settings group's kernel with a tiny run of its first case
-    (:func:`first_cases`); the time it took, each group's at most :data:`MAX_LOAD_SECONDS`
-    [s]."""
+    """Import the engine and load each run-settings group's kernel with a tiny run of its
+    first case (:func:`first_cases`); the time it took [s], each group's run at most
+    :data:`MAX_LOAD_SECONDS`. The import (numba's, a few tenths of a second where this
+    process has not made it yet) is counted: a study's process makes it too."""
+    t = time.perf_counter()
     from campipe.engine import run_batch  # numba: not for validate --no-estimate
 
-    total = 0.0
+    total = time.perf_counter() - t
     for settings, c in first_cases(study).items():
         t = time.perf_counter()
         run_batch(
