@@ -220,8 +220,9 @@ print(warm_up(study))
 def test_the_start_up_counts_the_engine_s_import(tmp_path):
     """A study's process imports the engine's batch module (and numba) before it loads a
     kernel, and validate's start-up counts it where its process has not imported it yet
-    (0.18 s here): with the import made 2 s longer, the start-up is 2 s or more. Broken copy: the import outside the
-    timing (the start-up then the tiny runs' alone, under 1 s a group)."""
+    (0.18 s here): with the import made 2 s longer, the start-up is 2 s or more. Broken
+    copy: the import outside the timing (the start-up then the tiny runs' alone, under 1 s a
+    group)."""
     import subprocess
     import sys
 
