@@ -278,8 +278,10 @@ def validate(
     click.echo(f"batches: {count_batches(loaded.cases, size)} of up to {size} cases")
     click.echo(memory_text(len(loaded.cases), workers, samples))
     if estimate:
+        from campipe.study.run.estimate import engine_import_seconds, first_cases
+
+        engine_import_seconds()  # timed, for the estimate's start-up, as a study pays it
         from campipe.engine.kernels import compile_first
-        from campipe.study.run.estimate import first_cases
 
         # compiled (and recorded as such) before the estimate's runs time them, as a study's
         firsts = {settings: c.case for settings, c in first_cases(loaded).items()}
