@@ -93,6 +93,11 @@ def map_designs(n_preloads: int | None = None, n_rates: int | None = None) -> li
     ]
 
 
+def run_designs(quick: bool) -> list[Case]:
+    """The designs a bench run maps: QUICK_MAP's for ``--quick``, else the whole map."""
+    return map_designs(*QUICK_MAP) if quick else map_designs()
+
+
 def _clear_caches() -> None:
     """The engine's per-train caches, so a timing includes each design's modes."""
     batch.train_modal.cache_clear()
@@ -142,7 +147,7 @@ def onset_map(quick: bool = False, repeats: int = 3) -> dict:
     """The onset map's cost (:func:`map_seconds`) and what the time-domain grid would cost
     for it (:func:`grid_per_case`): the grid that fits in the map's time has ``map seconds /
     (designs × per-case)`` speeds."""
-    designs = map_designs(*QUICK_MAP) if quick else map_designs()
+    designs = run_designs(quick)
     low, high = MAP_RANGE
     tol = onset.DEFAULT_ONSET_TOLERANCE_RPM * RPM
     seconds = map_seconds(designs, repeats)

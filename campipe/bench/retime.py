@@ -16,7 +16,7 @@ from collections.abc import Callable
 
 from campipe.bench import gate, measure, onset, scaling
 from campipe.bench.onset import steady_times
-from campipe.bench.run import QUICK_REVOLUTIONS, Bench, settings_rows
+from campipe.bench.run import QUICK_REVOLUTIONS, Bench, settings_rows, throughput_repeats
 from campipe.bench.suite import FULL, QUICK, Scene, suite
 
 
@@ -29,7 +29,7 @@ def retimer(bench: Bench) -> Callable[[dict], float | None]:
         f"{family}, {label}": (s, full_state)
         for family, label, s, full_state in settings_rows(ladder)
     }
-    repeats = 2 if bench.quick else 5  # as run_bench's
+    repeats = throughput_repeats(bench.quick)
     timers: dict[tuple[str, str], Callable[[], float]] = {}
     for t in bench.throughput:
         timers["throughput", gate.throughput_name(t)] = functools.partial(_throughput, t, repeats)
@@ -73,16 +73,12 @@ def _throughput(t: dict, repeats: int) -> float:
     ).seconds
 
 
-def _map_designs(quick: bool) -> list:
-    return onset.map_designs(*onset.QUICK_MAP) if quick else onset.map_designs()
-
-
 def _map(quick: bool, repeats: int) -> float:
-    return onset.map_seconds(_map_designs(quick), repeats)
+    return onset.map_seconds(onset.run_designs(quick), repeats)
 
 
 def _grid(quick: bool, repeats: int) -> float:
-    designs = _map_designs(quick)
+    designs = onset.run_designs(quick)
     return onset.grid_seconds(len(designs), onset.grid_per_case(designs, repeats))
 
 

@@ -154,6 +154,11 @@ def _meta(quick: bool, ladder: Ladder, scenes: Sequence[Scene]) -> dict:
     }
 
 
+def throughput_repeats(quick: bool) -> int:
+    """Runs a throughput batch is the least of (the run's and the gate's second look)."""
+    return 2 if quick else 5
+
+
 def settings_rows(ladder: Ladder) -> list[tuple[str, str, RunSettings, bool]]:
     """(family, label, settings, full_state) of every engine run of a scene."""
     rows = [
@@ -492,7 +497,7 @@ def run_bench(
             ("newmark-linear", 2),
             ("modal-exact", 2),
         ):
-            tp = scaling.throughput(256, workers, integrator, repeats=2 if quick else 5)
+            tp = scaling.throughput(256, workers, integrator, repeats=throughput_repeats(quick))
             bench.throughput.append({**asdict(tp), "rate": tp.rate})
         counts = QUICK_SCALING_COUNTS if quick else SCALING_COUNTS
         say(f"scaling: engine on dask threads, {counts[0]}–{counts[-1]} cases")
