@@ -512,7 +512,8 @@ def _outputs(batch: PreparedBatch, settings: RunSettings, plan: _Plan | None = N
     """The kernels' output arrays for a batch run with ``settings`` (``common.make_outputs``)."""
     plan = _plan(settings) if plan is None else plan
     n_q = batch.modal_trains.load.shape[1]
-    return make_outputs(len(batch.which), plan.n_out, plan.n_rev, settings.max_events, n_q)
+    cleared = not plan.integrator.fills_outputs
+    return make_outputs(len(batch.which), plan.n_out, plan.n_rev, settings.max_events, n_q, cleared)
 
 
 def _periodic_starts(

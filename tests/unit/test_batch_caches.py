@@ -169,6 +169,13 @@ def test_the_caches_are_bounded_and_no_run_writes_into_what_they_hold():
     many = [c.profile for c in cases] * 2
     assert len(many) > packed.CACHED_PROFILES
     assert packed.pack_cached(many) is not packed.pack_cached(many)
+    # Its rows gathered from its distinct profiles' packing: pack's arrays, to the bit, of
+    # pack's shapes, dtypes and layout (the kernels' compiled types).
+    assert len({packed.keyed(p) for p in many}) <= packed.CACHED_PROFILES
+    assert len({p.n_pieces for p in many}) > 1
+    for gathered, anew in zip(packed.pack_cached(many), packed.pack(many), strict=True):
+        assert gathered.dtype == anew.dtype and gathered.shape == anew.shape
+        assert gathered.flags.c_contiguous and gathered.tobytes() == anew.tobytes()
     more = tuple(
         dataclasses.replace(cases[0].train, spring_rate=(1 + i / 10) * cases[0].train.spring_rate)
         for i in range(batch_module.CACHED_TRAINS + 1)

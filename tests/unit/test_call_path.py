@@ -21,7 +21,7 @@ from campipe.engine import batch as batch_module
 from campipe.engine.closed_form import STATE, ExactRuns, make_state
 from campipe.engine.common import make_outputs
 from campipe.engine.settings import LIFT_BOUND, SPEED_BOUND, output_angles
-from campipe.model import thesis_train
+from campipe.model import thesis_train, valve_train
 from campipe.profiles import harmonic, polydyne
 from campipe.profiles.packed import keyed
 
@@ -83,6 +83,93 @@ def test_modal_exact_from_its_periodic_start_matches_the_start_handed_to_it():
     for name in ("start_time", "q", "v", "acc", "cam_force", "seat_force", "per_rev", "steps"):
         assert np.array_equal(getattr(own, name), getattr(handed, name), equal_nan=True), name
     assert np.array_equal(own.start_time, start.t0)
+
+
+#: What a kernel that fills its outputs must overwrite starts as this instead of zero.
+SENTINEL = 1.234e300
+#: A finger follower's model keys (the bundled study's).
+FINGER = {
+    "layout": "finger-follower",
+    "pivot_to_roller": "30 mm",
+    "pivot_to_pallet": "45 mm",
+    "cam_base_radius": "18 mm",
+    "cam_roller_radius": "9 mm",
+    "lever_inertia": "40 kg*mm**2",
+    "roller_mass": "10 g",
+    "valve_mass": "60 g",
+    "lever_stiffness": "15000 N/mm",
+    "stem_stiffness": "60000 N/mm",
+    "spring_rate": "35 N/mm",
+    "spring_preload": "220 N",
+    "damping_ratios": [0.05],
+    "lash": "0.15 mm",
+}
+
+
+def _filled_variety() -> list[tuple[list[Case], RunSettings]]:
+    """Batches whose samples the kernel reaches by every path: following (its first turn
+    repeated), thrown off the cam, seated with plastic and bouncing impacts, a lash, form
+    closure, trains of seven and of more coordinates in one batch (NaN beyond a train's own),
+    a rigid one-mass chain (nothing free on the cam), a finger follower, a partial last turn,
+    only the contacts' coordinates, and one case alone (``_prepare_one``)."""
+    train = thesis_train()
+    poly = polydyne("345", 0.4 * INCH, math.radians(80), math.radians(20), math.radians(80))
+    one_mass = valve_train(
+        "thesis-1971",
+        {"layout": "lumped", "masses": ["0.1 kg"], "stiffnesses": [],
+         "spring_rate": "40 N/mm", "spring_preload": "250 N", "damping_ratios": [0.05]},
+    )  # fmt: skip
+    finger = valve_train("thesis-1971", FINGER)
+    mixed = [
+        Case(train, harmonic(INCH), 300.0),
+        Case(train, harmonic(INCH), 1200.0),
+        Case(train, poly, 1000.0, seat=-0.001),
+        Case(train.replace(seat_restitution=0.4, spring_elements=3), harmonic(INCH), 1150.0),
+        Case(train.replace(lash=0.3e-3), poly, 700.0),
+        Case(train, harmonic(INCH), 900.0, seat=0.0005, closure="form"),
+    ]
+    lever = harmonic(0.006)
+    return [
+        (mixed, RunSettings(revolutions=3)),
+        (mixed, RunSettings(revolutions=2.5, output_every=math.radians(0.7))),
+        ([Case(one_mass, lever, 200.0), Case(one_mass, lever, 900.0)], RunSettings(revolutions=2)),
+        ([Case(finger, lever, 300.0), Case(finger, lever, 700.0)], RunSettings(revolutions=2)),
+        (mixed[1:2], RunSettings(revolutions=2)),
+        (mixed[3:4], RunSettings(revolutions=2)),
+    ]  # fmt: skip
+
+
+@pytest.mark.parametrize("full_state", [True, False])
+def test_modal_exact_writes_every_sample_of_the_outputs_it_is_handed_uncleared(
+    monkeypatch, full_state
+):
+    """modal-exact declares that its kernel writes every output sample (``fills_outputs``):
+    ``run_batch`` then hands it its histories uncleared. Handed them filled with a number
+    instead (poisoned through ``make_outputs``), every batch of :func:`_filled_variety` gives
+    the bits of the run whose histories start at zero: nothing unwritten is read back. Fails
+    if the kernel left a sample unwritten: its first turn repeated short of the last sample,
+    a last sample at the run's end skipped, a coordinate beyond a train's own left as it was."""
+    original = batch_module.make_outputs
+    handed: list[bool] = []
+
+    def poisoned(*args):
+        out = original(*args)
+        handed.append(args[-1])
+        if not args[-1]:
+            for history in (out.q, out.v, out.force, out.cam, out.acc):
+                history.fill(SENTINEL)
+        return out
+
+    for cases, settings in _filled_variety():
+        monkeypatch.setattr(batch_module, "make_outputs", original)
+        cleared = run_batch(cases, settings, full_state=full_state)
+        monkeypatch.setattr(batch_module, "make_outputs", poisoned)
+        filled = run_batch(cases, settings, full_state=full_state)
+        assert (cleared.status == 0).all()
+        for name in ("q", "v", "acc", "cam_lift", "cam_force", "seat_force", "per_rev"):
+            a, b = getattr(cleared, name), getattr(filled, name)
+            assert np.array_equal(a, b, equal_nan=True), (name, len(cases), settings)
+    assert handed and not any(handed)  # every run handed its histories uncleared
 
 
 def test_a_case_without_a_periodic_start_is_refused_by_its_index():

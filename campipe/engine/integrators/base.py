@@ -55,6 +55,9 @@ class Integrator(Protocol):
     fixed_step: bool
     #: what a case out of its physical bounds means for it (None: a defect, to be reported)
     unbounded_advice: str | None
+    #: its kernel writes every output sample of every case (a failed case is blanked after
+    #: it): the run's histories are handed to it uncleared (``common.make_outputs``)
+    fills_outputs: bool
 
     def check(self, cases: Sequence[Case], run: RunLike) -> None:
         """Refuse what it cannot run (``RunSettingsError`` at ``run.integrator``, or a

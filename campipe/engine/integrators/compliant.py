@@ -26,6 +26,7 @@ class Compliant:
     default_step: float | None = None
     fixed_step = False
     unbounded_advice: str | None = None
+    fills_outputs = False
 
     def check(self, cases: Sequence[Case], run: RunLike) -> None:
         """Refuse, for each compliant case, a rigid contact beside a compliant one, and form

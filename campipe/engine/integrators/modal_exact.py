@@ -20,6 +20,7 @@ class ModalExact:
     default_step: float | None = None
     fixed_step = False
     unbounded_advice: str | None = None
+    fills_outputs = True
 
     def check(self, cases: Sequence[Case], run: RunLike) -> None:
         """It runs every rigid case (refined members, restitution, form closure)."""

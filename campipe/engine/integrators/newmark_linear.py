@@ -29,6 +29,7 @@ class NewmarkLinear:
     unbounded_advice: str | None = (
         "the step is too large for this case (use a smaller run.dt or modal-exact)"
     )
+    fills_outputs = False
 
     def check(self, cases: Sequence[Case], run: RunLike) -> None:
         """Refuse, naming modal-exact, which runs both: a train of refined members
