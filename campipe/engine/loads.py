@@ -15,6 +15,7 @@ import numpy as np
 from campipe.constants import TWO_PI
 from campipe.model import ValveTrain, spring_clash_margin, spring_element_forces
 from campipe.model.elements import Element, elements
+from campipe.model.lash import reference_preload
 
 #: name → (long name, units)
 MEMBER_LOADS = {
@@ -72,13 +73,13 @@ def member_loads(train: ValveTrain, q: np.ndarray) -> dict[str, np.ndarray]:
         return {
             "pushrod_force": -end_forces(links[0])[..., 1] if links else none,
             "stem_force": -end_forces(links[-1])[..., 1] if links else none,
-            "spring_force": train.spring_preload - end_forces(members["spring"][-1])[..., 1],
+            "spring_force": reference_preload(train) - end_forces(members["spring"][-1])[..., 1],
             "rocker_moment": none,
         }
     return {
         "pushrod_force": -end_forces(members["pushrod"][-1])[..., 1],
         "stem_force": -end_forces(members["valve_stem"][-1])[..., 1],
-        "spring_force": train.spring_preload - end_forces(members["spring"][-1])[..., 1],
+        "spring_force": reference_preload(train) - end_forces(members["spring"][-1])[..., 1],
         # The rocker's valve arm starts at the pivot: its first element's θ1 end moment.
         "rocker_moment": end_forces(members["rocker_valve_arm"][0])[..., 2],
     }

@@ -55,6 +55,7 @@ from campipe.model import ValveTrain
 from campipe.model.assembly import preload_vector
 from campipe.model.contact_keys import impact_restitution
 from campipe.model.hla import adjuster
+from campipe.model.lash import installed_preload, reference_preload
 from campipe.profiles import Profile, pack
 from campipe.profiles.pieces import evaluate_pieces
 from campipe.vocabulary import CAM, CAM_CONTACT, N_EVENT_FIELDS, OK, SEAT
@@ -66,8 +67,8 @@ def _modal_at_preload(train: ValveTrain) -> ModalData:
     """The closed-form data of a train, its modes shared by every preload (``batch.train_modal``
     caches them): the preload only enters the constant forcing and the contact forces'
     constant part, linearly."""
-    unit = train_modal(train.replace(spring_preload=1.0))
-    p = train.spring_preload
+    unit = train_modal(train.replace(spring_preload=installed_preload(train, 1.0)))
+    p = reference_preload(train)
     return dataclasses.replace(unit, b_load=unit.b_load * p, sigma0=unit.sigma0 * p)
 
 

@@ -23,7 +23,13 @@ from campipe.model.coordinates import (
     n_coordinates,
     translations,
 )
-from campipe.model.lash import cam_gap, lash_ratio, lash_seat, train_lash_seat
+from campipe.model.lash import (
+    cam_gap,
+    lash_ratio,
+    lash_seat,
+    reference_preload,
+    train_lash_seat,
+)
 from campipe.model.layouts import LAYOUTS, placeholders, used_coordinates
 from campipe.model.parameters import (
     DAMPING_KINDS,
@@ -60,6 +66,7 @@ __all__ = [
     "cam_gap",
     "lash_ratio",
     "lash_seat",
+    "reference_preload",
     "defining_values",
     "loss_factor_damping",
     "modal_damping",

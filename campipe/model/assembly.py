@@ -229,19 +229,28 @@ def modal_damping_ratios(
     return np.einsum("ij,ik,kj->j", modes, damping, modes) / (2.0 * frequencies)
 
 
-def preload_vector(train: ValveTrain) -> np.ndarray:
-    """The installed spring force as a constant load, (n,): it pushes the rocker valve end up
-    (+q4). A refined spring carries the same force in every element, so its internal nodes
-    take none. A lumped chain's spring pushes its valve closed (−q7), a one-mass chain's its
-    follower onto the cam (+q1: the follower is the valve)."""
+def preload_direction(train: ValveTrain) -> np.ndarray:
+    """The spring's constant load per newton of its force, (n,): it pushes the rocker valve
+    end up (+q4). A refined spring carries the same force in every element, so its internal
+    nodes take none. A lumped chain's spring pushes its valve closed (−q7), a one-mass chain's
+    its follower onto the cam (+q1: the follower is the valve)."""
     f = np.zeros(train.n_coordinates)
     if mirror(train):
-        f[CAM] = train.spring_preload
+        f[CAM] = 1.0
     elif train.chain:
-        f[SEAT] = -train.spring_preload
+        f[SEAT] = -1.0
     else:
-        f[3] = train.spring_preload
+        f[3] = 1.0
     return f
+
+
+def preload_vector(train: ValveTrain) -> np.ndarray:
+    """The spring's force at the train's unstressed reference as a constant load, (n,)
+    (:func:`preload_direction`): ``spring_preload``, or with lash the force that leaves the
+    seated spring pushing with it (``campipe.model.lash.reference_preload``)."""
+    from campipe.model.lash import reference_preload  # (lash assembles through this module)
+
+    return reference_preload(train) * preload_direction(train)
 
 
 def system_matrices(train: ValveTrain) -> SystemMatrices:

@@ -16,13 +16,23 @@ engine's valve reference). Seated, the train sheds that load: it grows by the pr
 give, all but the stem's share, so the seat is the lash's valve travel plus that give. The
 engine reads valve lift from that seat in a train with lash (``Case.lift_zero``): 0 on the
 seat.
+
+``spring_preload`` is a designer's installed force: the spring's force with the valve closed
+on its seat. The model's constant load is the spring's force at the train's unstressed
+reference (``reference_preload``); the seat a lash places stands the lash's valve travel
+further open than that reference, so that with lash the reference force is
+``spring_preload`` less the spring's rate times that travel, and seated the spring pushes
+with ``spring_preload`` (without lash the two are one).
 """
 
 from __future__ import annotations
 
+import functools
+import math
+
 import numpy as np
 
-from campipe.model.assembly import SystemMatrices, static_state, system_matrices
+from campipe.model.assembly import SystemMatrices, assemble, static_state, system_matrices
 from campipe.model.coordinates import COORDINATES
 from campipe.model.parameters import LASH_SIDES, ModelParameterError, ValveTrain
 from campipe.vocabulary import CAM, SEAT
@@ -82,3 +92,45 @@ def train_lash_seat(train: ValveTrain) -> float:
     same measured at the valve or at the cam."""
     side = "cam" if train.chain else train.lash_side
     return lash_seat(system_matrices(train), train.lash, side)
+
+
+def _seated_force(train: ValveTrain, stiffness: np.ndarray, load: np.ndarray) -> float:
+    """The seat's reaction [N] (the spring's force: seated, nothing else loads the valve) with
+    the train under ``load``, its valve on the seat its lash places."""
+    reference = static_state(stiffness, load, {CAM: 0.0})[SEAT]
+    low, high = (static_state(stiffness, load, {SEAT: reference + s}) for s in (0, 1))
+    side = "cam" if train.chain else train.lash_side
+    s = (_gap(low, high, train.lash, side) + low[CAM]) / (low[CAM] - high[CAM])
+    q = static_state(stiffness, load, {SEAT: reference + s})
+    return float(abs((stiffness @ q - load)[SEAT]))
+
+
+@functools.lru_cache(maxsize=256)
+def _preload_line(train: ValveTrain) -> tuple[float, float]:
+    """(f0, slope): the seated spring force of ``train`` with lash is f0 + slope·P for a
+    reference preload P (it is linear in P: f0 the lash's travel times the spring's rate)."""
+    from campipe.model.assembly import preload_direction
+
+    stiffness = assemble(train)[1]
+    direction = preload_direction(train)
+    f0 = _seated_force(train, stiffness, 0.0 * direction)
+    return f0, _seated_force(train, stiffness, direction) - f0
+
+
+def reference_preload(train: ValveTrain) -> float:
+    """The spring's force [N] at the train's unstressed reference, the model's constant load:
+    ``spring_preload`` without lash; with lash, the force for which the spring pushes with
+    ``spring_preload`` on the seat the lash places (the module's text)."""
+    if math.isnan(train.lash):
+        return train.spring_preload
+    f0, slope = _preload_line(train)
+    return (train.spring_preload - f0) / slope
+
+
+def installed_preload(train: ValveTrain, reference: float) -> float:
+    """The ``spring_preload`` whose :func:`reference_preload` on ``train`` is ``reference``
+    [N] (the inverse: without lash the same number)."""
+    if math.isnan(train.lash):
+        return reference
+    f0, slope = _preload_line(train)
+    return f0 + slope * reference

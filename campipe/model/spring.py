@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from campipe.model.elements import elements
+from campipe.model.lash import reference_preload
 from campipe.model.parameters import ValveTrain
 
 
@@ -48,7 +49,7 @@ def spring_element_forces(train: ValveTrain, q: np.ndarray) -> np.ndarray:
     (..., n_s) array, element 0 on the cylinder head.
     """
     rate = train.spring_rate * train.spring_elements
-    return train.spring_preload - rate * spring_extensions(train, q)
+    return reference_preload(train) - rate * spring_extensions(train, q)
 
 
 def spring_clash_margin(train: ValveTrain, q: np.ndarray) -> np.ndarray:

@@ -94,15 +94,15 @@ def test_leak_down_pump_up_and_switches_at_a_crawl_against_the_lever_s_statics()
         assert opens[turn] == pytest.approx(base + t_open - 2 * math.pi, abs=1e-4)
         extension = extension - found[1] + found[2]
     assert opens.size == closes.size == 2  # no other switch
-    # the valve off its seat in the first turn, (k_e·(v − ℓ) − P₀ − k_s·ℓ)/(k_e + k_s), to
+    # the valve off its seat in the first turn, (k_e·(v − ℓ) − P₀)/(k_e + k_s), to
     # 1e-8 m (found: 3e-9); the seat where the valve sits at 90° less its give there
     q7 = run.q[0, :, SEAT]
-    seat = q7[90] + (PRELOAD + RATE * DRY) / KC
+    seat = q7[90] + PRELOAD / KC
     for degrees in range(110, 430, 10):
         theta = math.radians(degrees)
         r = hand.roller_force(theta, 1.0, start)[0]
         k_e = 1.0 / (1.0 / k + r * r / KC)
-        lifted = k_e * (hand.valve_lift(theta, start) - DRY) - PRELOAD - RATE * DRY
+        lifted = k_e * (hand.valve_lift(theta, start) - DRY) - PRELOAD
         assert q7[degrees] - seat == pytest.approx(lifted / (k_e + RATE), abs=1e-8)
 
 
@@ -138,7 +138,7 @@ def test_the_plunger_pumps_the_roller_onto_the_base_circle_at_the_hand_s_instant
     """On the base circle (a cam of no lift) with the dry lash not yet taken up, the follower
     stands off the cam, the pivot carries nothing and the plunger extends at F_c/c_P; the
     roller lands on the cam once the pivot has risen by what closes the gap: the hand's
-    geometry's u with take-up(e₀ + u) − take-up(e₀) = ℓ − take-up(e₀) − (P₀ + k_s·ℓ)/k_c (the
+    geometry's u with take-up(e₀ + u) − take-up(e₀) = ℓ − take-up(e₀) − P₀/k_c (the
     seat's give takes that much up), at t = c_P·u/F_c, to 1e-4 of it (found: 5e-5). Fails
     on a copy that leaves the pivot's gain out of the excitation (the roller never lands)."""
     e0, pump = 0.29e-3, 3.2e6
@@ -149,7 +149,7 @@ def test_the_plunger_pumps_the_roller_onto_the_base_circle_at_the_hand_s_instant
     )
     assert run.status[0] == 0
     base = Hand(lift=1e-30)  # its base circle
-    gap = DRY - base.valve_lift(0.0, e0) - (PRELOAD + RATE * DRY) / KC
+    gap = DRY - base.valve_lift(0.0, e0) - PRELOAD / KC
     u = brentq(lambda x: base.valve_lift(0.0, e0 + x) - base.valve_lift(0.0, e0) - gap, 0, 1e-3)
     events = run.events[0]
     assert events[0, EV_KIND] == CAM_IMPACT
@@ -163,12 +163,13 @@ def test_the_per_turn_model_s_error_on_the_finger_past_its_onset():
     pumping up from the dry lash: the per-turn model (rigid contacts, the plunger moved at each
     turn's end) against the carried plunger (compliant contacts, stiff) over 6 turns, the
     stated error of the per-turn model on a finger (docs/model.md): each turn's net pump-up
-    differs by up to 32 % (found; bounded at 50 %), the extension after 5 turns by 15 % (76
-    against 90 µm; bounded at 25 %, and at least 5 %: the error is real, the per-turn model
-    moving the pivot only at the turn's end while the roller is in flight). Fails on a copy
-    whose per-turn model drops the pump-up into the flights (its net a few µm a turn)."""
+    differs by up to 77 % (found: the first turn's, 16.0 against 9.0 µm; bounded at 100 %),
+    the extension after 5 turns by 10 % (80 against 73 µm; bounded at 25 %, and at least
+    5 %: the error is real, the per-turn model moving the pivot only at the turn's end while
+    the roller is in flight). Fails on a copy whose per-turn model drops the pump-up into the
+    flights (its net a few µm a turn)."""
     per_turn, carried = _per_turn_and_carried(-1, 6)  # 9000 rpm
     net_p, net_c = np.diff(per_turn[:, 0]), np.diff(carried[:, 0])
-    assert net_c.min() > 10e-6  # it pumps up past the dry lash, into the flights
-    assert np.abs(net_p / net_c - 1.0).max() < 0.5
+    assert net_c.min() > 5e-6  # it pumps up past the dry lash, into the flights (9-21 µm)
+    assert np.abs(net_p / net_c - 1.0).max() < 1.0
     assert 0.05 < abs(per_turn[-1, 0] / carried[-1, 0] - 1.0) < 0.25

@@ -170,11 +170,12 @@ def pallet_force(hand: Hand, e: float, k: float, contact: float = math.inf):
     roller's and the seat's contact stiffness ``contact`` [N/m] (inf: rigid) in series. The
     roller's seen at the valve is k_c/r², r the lever ratio of the hand's statics (the
     roller's force per pallet force), so the link and the roller give
-    k_e = 1/(1/k + r²/k_c). Seated, the valve sits in its seat by p = (P₀ + k_s·ℓ − F)/k_c
-    (the spring's load less the pallet's), which takes lash up: F = k_e·(v − ℓ + p); off its
-    seat by x > 0, where that reaches P₀ + k_s·ℓ, F = k_e·(v − ℓ − x) = P₀ + k_s·(ℓ + x)
-    (rigid: from the lift-off load on, the link and the spring in series)."""
-    held = PRELOAD + RATE * DRY  # the spring's load on the seated valve
+    k_e = 1/(1/k + r²/k_c). Seated, the valve sits in its seat by p = (P₀ − F)/k_c (the
+    spring's load, its installed force, less the pallet's), which takes lash up:
+    F = k_e·(v − ℓ + p); off its seat by x > 0, where that reaches P₀,
+    F = k_e·(v − ℓ − x) = P₀ + k_s·x (rigid: from the lift-off load on, the link and the
+    spring in series)."""
+    held = PRELOAD  # the spring's load on the seated valve: its installed force
 
     def force(theta):
         v = hand.valve_lift(theta, e)

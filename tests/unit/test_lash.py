@@ -10,15 +10,16 @@ from study_helpers import write_spec
 
 from campipe.engine import Case, CaseError, RunSettings, run_batch
 from campipe.model import lash_seat, system_matrices, thesis_train, valve_train
-from campipe.profiles import Ramp, evaluate, polydyne
+from campipe.profiles import Ramp, evaluate, harmonic, polydyne
 from campipe.study import load_study
 from campipe.study.spec.check import SpecError
-from campipe.vocabulary import CAM_IMPACT, EV_KIND, EV_TIME, EV_VELOCITY, SEAT_IMPACT
+from campipe.vocabulary import CAM_IMPACT, EV_KIND, EV_TIME, EV_VELOCITY, SEAT_IMPACT, SEATED
 
 INCH = 0.0254
 RAMP = Ramp(0.3e-3, math.radians(30))
 PROFILE = polydyne("4567", 0.3 * INCH, *np.radians([100, 20, 100]), ramp=RAMP)
 LASH = 0.2e-3
+RPM = math.pi / 30
 
 
 def test_the_lash_places_the_seat():
@@ -74,10 +75,49 @@ speed: 1000 rpm
 """
 
 
+BUCKET = {
+    "layout": "direct-acting",
+    "tappet_mass": "30 g",
+    "valve_mass": "50 g",
+    "tappet_contact_stiffness": "200 N/um",
+    "stem_stiffness": "100 N/um",
+    "spring_rate": "35 N/mm",
+    "spring_preload": "220 N",
+    "damping_ratios": [0.05, 0.05],
+}
+
+
+@pytest.mark.parametrize("lash_mm", [0.1, 0.25])
+def test_the_seated_spring_pushes_with_its_installed_force_whatever_the_lash(lash_mm):
+    """``spring_preload`` is the installed force, the valve closed on its seat. A bucket tappet
+    (35 N/mm, 220 N) at a crawl: resting on its seat off the cam (configuration IV) its seat
+    force is 220 N; at the cam's nose the cam force is 220 N plus the rate times the valve
+    lift, less the masses' deceleration (hand statics). Fails if the model's reference load
+    were ``spring_preload`` itself (the seat force 220 N + rate × lash: 223.5 N, 228.75 N)."""
+    train = valve_train("thesis-1971", {**BUCKET, "lash": f"{lash_mm} mm"})
+    rate, preload, mass = 35e3, 220.0, 0.08
+    w = 100.0 * RPM
+    run = run_batch([Case(train, harmonic(0.009), w)], RunSettings(revolutions=2))
+    # Seated from 78° to 102° of each turn (the base circle at 90°): from 85° on, the
+    # tappet's ring on its stem since it left the cam has decayed.
+    turn = np.degrees(run.cam_angle) % 360.0
+    rest = (turn >= 85.0) & (turn <= 100.0)
+    assert np.all(run.contact_state[0][rest] == SEATED) and rest.sum() == 32
+    np.testing.assert_allclose(run.seat_force[0][rest], preload, rtol=1e-6)
+    nose = int(np.argmax(run.cam_lift[0]))
+    lift = run.valve_lift[0, nose]
+    assert lift == pytest.approx(0.009 - lash_mm * 1e-3, rel=2e-3)  # less the link's give
+    # q at the nose: −ω²·h/2 of deceleration on both masses (the cam's and the valve's).
+    expected = preload + rate * lift - mass * w**2 * 0.009 / 2
+    assert run.cam_force[0, nose] == pytest.approx(expected, rel=1e-6)
+
+
 def test_a_spec_with_lash(tmp_path):
     study = load_study(write_spec(tmp_path, SPEC + "sweep: {model.lash: [0.1 mm, 0.2 mm]}\n"))
-    sm = system_matrices(thesis_train())
-    seats = [lash_seat(sm, 1e-4, "cam"), lash_seat(sm, 2e-4, "cam")]
+    seats = [
+        lash_seat(system_matrices(thesis_train().replace(lash=lash, lash_side="cam")), lash, "cam")
+        for lash in (1e-4, 2e-4)
+    ]
     assert [c.case.seat for c in study.cases] == pytest.approx(seats, rel=1e-12)
     assert seats[1] - seats[0] == pytest.approx(1.5e-4, rel=0.01)  # the rocker ratio
     assert [c.values["model.lash"] for c in study.cases] == pytest.approx([1e-4, 2e-4])

@@ -81,7 +81,7 @@ def _own_motion(extension: float, omega: float, slow: float) -> tuple[float, flo
     theta = np.linspace(0.0, 2.0 * math.pi, 400001)
     lift = LIFT / 2 * (1 - np.sin(theta))
     lash = DRY - extension
-    lift_off = lash + (PRELOAD + RATE * DRY) / K
+    lift_off = lash + PRELOAD / K
     k_v = K * RATE / (K + RATE)
     force = np.where(lift < lash, 0.0, K * (np.minimum(lift, lift_off) - lash))
     force = force + np.where(lift > lift_off, k_v * (lift - lift_off), 0.0)
@@ -100,8 +100,9 @@ def _own_motion(extension: float, omega: float, slow: float) -> tuple[float, flo
 def test_leak_down_over_a_closed_valve_interval_is_the_closed_form():
     """At 10 rpm (the train quasi-static: inertia and damping forces under 1e-3 N) the force
     through the adjuster is the static one: 0 off the cam, k·(L − ℓ) once the cam takes the
-    lash ℓ up (valve seated), from the lift-off load P₀ + k_s·ℓ on, k·(P₀ + k_s·(L + e))/(k +
-    k_s) (valve open; k the link in series with the adjuster). Over the turn the check valve
+    lash ℓ up (valve seated), from the lift-off load P₀ on (the installed force: seated, the
+    spring pushes with it), at the lift L_lo = ℓ + P₀/k, P₀ + k_v·(L − L_lo) (valve open; k
+    the link in series with the adjuster, k_v = k·k_s/(k + k_s)). Over the turn the check valve
     is closed where it exceeds F_c, and the plunger leaks down ∫ (F − F_c)⁺ dt / c_L, which
     is k·I(L_c) − (k − k_v)·I(L_lo) over ω·c_L with I(a) = ∫ (L − a)⁺ dθ in closed form; the
     check valve is open elsewhere and the plunger pumps up (2π·F_c − k·(I(ℓ) − I(L_c)))/(ω·c_P)
@@ -124,7 +125,7 @@ def test_leak_down_over_a_closed_valve_interval_is_the_closed_form():
     for turn in range(2):
         lash = DRY - extension
         l_c = lash + CHECK / K  # the check valve closes
-        l_lo = lash + (PRELOAD + RATE * DRY) / K  # the valve lifts off its seat
+        l_lo = lash + PRELOAD / K  # the valve lifts off its seat
         leak = (K * _excess_above(l_c, LIFT) - (K - k_v) * _excess_above(l_lo, LIFT)) / (
             omega * slow
         )

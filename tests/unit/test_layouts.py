@@ -271,12 +271,15 @@ def test_direct_acting_refusals_name_their_keys():
 def test_a_chain_s_lash_places_the_seat_at_the_lash_plus_the_preload_s_give(side):
     """Seated and off its cam, the chain sheds the preload that compressed its link: the
     seat is the lash plus P/(k + ks), on either side (a chain takes the gap up as a rigid
-    body); the valve then reads 0 on its seat and the follower stands off the cam on the base
-    circle (configuration IV). Fails on a copy that measures a chain's valve-side lash at the
+    body), P the spring's force at the unstressed reference, the installed force less ks
+    times the lash (seated, the spring pushes with the installed force); the valve then
+    reads 0 on its seat and the follower stands off the cam on the base circle
+    (configuration IV). Fails on a copy that measures a chain's valve-side lash at the
     thesis's rocker end (q4, a placeholder)."""
     train = chain(lash="0.2 mm", lash_side=side)
     seat = train_lash_seat(train)
-    assert seat == pytest.approx(0.2e-3 + PRELOAD / (LINK + RATE), rel=1e-12)
+    reference = PRELOAD - RATE * 0.2e-3
+    assert seat == pytest.approx(0.2e-3 + reference / (LINK + RATE), rel=1e-12)
     run = run_batch([Case(train, harmonic(LIFT), 3000 * RPM)], RunSettings(revolutions=2))
     assert run.status[0] == 0 and run.valve_lift[0].min() == 0.0
     assert np.any(run.contact_state[0] == SEATED)
