@@ -5,6 +5,7 @@ is of, and the bound against the margin's slopes on a fine grid of speeds."""
 
 import dataclasses
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -197,3 +198,19 @@ def test_a_transfer_that_disagrees_with_the_direct_solve_is_refused():
     assert S.checked(tr, sm)
     bad = dataclasses.replace(tr, force=tr.force * (1 + 1e-4))
     assert not S.checked(bad, sm)
+
+
+def test_an_undamped_train_s_transfer_is_checked_off_its_poles():
+    """Undamped, the train's poles lie on the imaginary axis; ``checked`` compares the two
+    forms right of it, so it passes the true transfer (without a division by zero) and
+    still refuses the perturbed one: the undamped train's onset can be proven. Broken copy:
+    the points on the axis (s = iω, the highest pole among them): a division by zero there,
+    and the train not provable."""
+    train = thesis_train().replace(damping_ratios=(0.0,) * 7)
+    sm = train_matrices(train)
+    tr = S.transfer(sm)
+    assert np.all(np.abs(tr.poles.real) < 1e-9 * np.abs(tr.poles))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert S.checked(tr, sm)
+        assert not S.checked(dataclasses.replace(tr, force=tr.force * (1 + 1e-4)), sm)
