@@ -181,7 +181,8 @@ def _what(path: Path, kind: Kind, describe: Callable[[Path], str] | None) -> str
         return words or "a netCDF or HDF5 file campipe did not write for this command"
     if path.suffix.lower() in MAGIC:
         return f"a file that is not {kind.what} (not a {path.suffix.lower()[1:]} file)"
-    return f"a file that is not {kind.what} campipe wrote"
+    wrote = "" if "campipe" in kind.what else " campipe wrote"  # (export's names itself)
+    return f"a file that is not {kind.what}{wrote}"
 
 
 def _refused(path: Path, key: str, what: str, overwrite_helps: bool) -> OutputExistsError:

@@ -18,6 +18,7 @@ from campipe.plot.figures import (
     View,
     case_labels,
     select_view,
+    set_title,
     varied_columns,
 )
 from campipe.plot.style import axis_label, line_styles
@@ -64,10 +65,10 @@ def spectrum_figure(ds, request: PlotRequest) -> Figure:
         raise PlotError.at(
             "--y", f"found {name!r}, expected a history of the archive: {', '.join(histories)}"
         )
-    return _draw(view, name)
+    return _draw(view, name, request.where)
 
 
-def _draw(view: View, name: str) -> Figure:
+def _draw(view: View, name: str, where: str | None) -> Figure:
     n = view.stored.n
     if n > MAX_OVERLAID:
         raise PlotError.at("--where", f"selects {n} cases; overlay at most {MAX_OVERLAID}")
@@ -94,8 +95,7 @@ def _draw(view: View, name: str) -> Figure:
                color=styles[i].kwargs().get("color"))  # fmt: skip
     ax.set_xlabel("Order of the cam's rotation [-]")
     ax.set_ylabel(axis_label(name, units) + " amplitude")
-    ax.set_title(f"{view.study}: order spectrum of {name.replace('_', ' ')}, last turn",
-                 fontsize=10)  # fmt: skip
+    set_title(fig, view, f"order spectrum of {name.replace('_', ' ')}, last turn", where)
     ax.grid(alpha=0.3, axis="y")
     if n > 1 or labels[0]:
         ax.legend(fontsize=8)

@@ -157,6 +157,9 @@ def test_the_output_rule_keeps_the_archive_the_spec_and_others_files(small_archi
     notes.write_text("my,own\n1,2\n")
     result = _export(small_archive.archive, "--case", cid, "-o", notes)
     assert result.exit_code == 2 and "--overwrite" in result.output
+    assert "is a file that is not a csv table campipe export wrote;" in " ".join(
+        result.output.split()
+    )
     assert notes.read_text() == "my,own\n1,2\n"
     assert _export(small_archive.archive, "--case", cid, "-o", notes, "--overwrite").exit_code == 0
     assert notes.read_text().startswith("case,cam_angle [deg]")

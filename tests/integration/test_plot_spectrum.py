@@ -68,6 +68,10 @@ def test_a_harmonic_cam_s_valve_acceleration_is_its_first_order(archive, tmp_pat
     assert first == pytest.approx(0.5 * np.ptp(acc), rel=1e-3)
     assert np.max(heights[np.abs(orders - 1) > 0.5]) < 1e-3 * first
     assert fig.axes[0].get_xlabel() == "Order of the cam's rotation [-]"
+    # titled as every figure: the study, what, and the selection
+    assert fig.get_suptitle().endswith(
+        "order spectrum of valve acceleration, last turn — where speed_rpm == 6000"
+    )
 
 
 def test_the_command_draws_it_and_refuses_a_non_history(archive, tmp_path):

@@ -230,6 +230,12 @@ def test_the_summary_gives_the_separation_onset_per_seat(archive):
         ]
     }
     assert onset == {"none": "9524", "0": "9000"}
+    # A selection's axes: how many of each axis's values it holds, and which ("none" alone
+    # without the seat's unit).
+    with xr.open_dataset(archive) as ds:
+        text = summary(ds, where="seat is none and speed_rpm <= 9000")
+    assert "speed_rpm                sweep   2 of 4 values: 6000, 9000 rpm" in text
+    assert "seat                     sweep   1 of 2 values: none\n" in text + "\n"
 
 
 def test_campipe_query_on_an_archive(archive):

@@ -20,7 +20,7 @@ from campipe.errors import did_you_mean, excerpt
 from campipe.study.query.display import display_units, format_value, label, to_display
 from campipe.study.spec.coordinates import coordinate_values
 from campipe.study.spec.drive import ENGINE_SPEED_NAME
-from campipe.study.spec.variables import VARIABLES, case_coordinates, data_variables
+from campipe.study.spec.variables import NONE_WORD, VARIABLES, case_coordinates, data_variables
 from campipe.study.where import QueryError, Where, evaluate, parse_where
 from campipe.vocabulary import EVENTS_TRUNCATED, FAILURES, STATUS
 
@@ -300,8 +300,11 @@ def summary(ds, where: str | None = None, system: str = "spec") -> str:
     lines.append("axes:" if axes else "axes: none (a single case)")
     for a in axes:
         col = table.columns.get(a["name"])
+        size = f"{a['size']} values"
+        if where is not None and col is not None and col.ndim == 1:  # the selection's values
+            size = f"{len(dict.fromkeys(_cell(v, 'table') for v in col))} of {size}"
         lines.append(
-            f"  {a['name']:<24} {a['kind']:<7} {a['size']} values"
+            f"  {a['name']:<24} {a['kind']:<7} {size}"
             + (f": {_values_text(col, table.units.get(a['name'], ''))}" if col is not None else "")
         )
     lines += status_lines(table)
@@ -395,7 +398,8 @@ def _values_text(col: np.ndarray, units: str) -> str:
     if col.ndim != 1:
         return f"{len({tuple(r) for r in col})} distinct"
     uniq = list(dict.fromkeys(_cell(v, "table") for v in col))
-    unit = f" {units}" if units and units != "1" else ""
+    numbers = any(u != NONE_WORD for u in uniq)  # ("none" alone takes no unit)
+    unit = f" {units}" if units and units != "1" and numbers else ""
     if col.dtype.kind in "iuf" and len(uniq) > 6:
         values = col.astype(float)
         finite = values[np.isfinite(values)]
