@@ -12,7 +12,6 @@ from campipe.model.assembly import (
     normal_modes,
     preload_vector,
     rayleigh_damping,
-    static_state,
     system_matrices,
     to_display_units,
 )
@@ -45,6 +44,7 @@ from campipe.model.parameters import (
     thesis_train,
     valve_train,
 )
+from campipe.model.seated import static_state
 from campipe.model.spring import spring_clash_margin, spring_element_forces
 
 __all__ = [

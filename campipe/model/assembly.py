@@ -30,6 +30,7 @@ from campipe.model.layouts import (
     used_coordinates,
 )
 from campipe.model.parameters import N_DOF, ValveTrain, mode_damping_ratios
+from campipe.model.seated import seated_force
 from campipe.vocabulary import CAM, CONFIGURATIONS, SEAT, free_coordinates
 
 #: Newmark linear acceleration (β = 1/6, γ = 1/2) is stable for ω·Δt < √12 (= (√3/π)·T),
@@ -247,10 +248,37 @@ def preload_direction(train: ValveTrain) -> np.ndarray:
 def preload_vector(train: ValveTrain) -> np.ndarray:
     """The spring's force at the train's unstressed reference as a constant load, (n,)
     (:func:`preload_direction`): ``spring_preload``, or with lash the force that leaves the
-    seated spring pushing with it (``campipe.model.lash.reference_preload``)."""
-    from campipe.model.lash import reference_preload  # (lash assembles through this module)
-
+    seated spring pushing with it (:func:`reference_preload`)."""
     return reference_preload(train) * preload_direction(train)
+
+
+@functools.lru_cache(maxsize=256)
+def _preload_line(train: ValveTrain) -> tuple[float, float]:
+    """(f0, slope): the seated spring force of ``train`` with lash is f0 + slope·P for a
+    reference preload P (it is linear in P: f0 the lash's travel times the spring's rate)."""
+    stiffness = assemble(train)[1]
+    direction = preload_direction(train)
+    f0 = seated_force(train, stiffness, 0.0 * direction)
+    return f0, seated_force(train, stiffness, direction) - f0
+
+
+def reference_preload(train: ValveTrain) -> float:
+    """The spring's force [N] at the train's unstressed reference, the model's constant load:
+    ``spring_preload`` without lash; with lash, the force for which the spring pushes with
+    ``spring_preload`` on the seat the lash places (``campipe.model.lash``'s text)."""
+    if math.isnan(train.lash):
+        return train.spring_preload
+    f0, slope = _preload_line(train)
+    return (train.spring_preload - f0) / slope
+
+
+def installed_preload(train: ValveTrain, reference: float) -> float:
+    """The ``spring_preload`` whose :func:`reference_preload` on ``train`` is ``reference``
+    [N] (the inverse: without lash the same number)."""
+    if math.isnan(train.lash):
+        return reference
+    f0, slope = _preload_line(train)
+    return f0 + slope * reference
 
 
 def system_matrices(train: ValveTrain) -> SystemMatrices:
@@ -259,18 +287,6 @@ def system_matrices(train: ValveTrain) -> SystemMatrices:
     omega, phi = normal_modes(M, K, translations(train))
     C = damping_matrix(train, M, K, omega, phi)
     return SystemMatrices(M, K, C, omega, phi, preload_vector(train))
-
-
-def static_state(stiffness: np.ndarray, load: np.ndarray, held: dict[int, float]) -> np.ndarray:
-    """The static displacement under ``load`` with the coordinates ``held`` (index → value)
-    prescribed: K_ff·q_f = f_f − K_fh·q_h."""
-    n = stiffness.shape[0]
-    h = np.array(sorted(held), dtype=int)
-    f = np.setdiff1d(np.arange(n), h)
-    q = np.zeros(n)
-    q[h] = [held[i] for i in h]
-    q[f] = np.linalg.solve(stiffness[np.ix_(f, f)], load[f] - stiffness[np.ix_(f, h)] @ q[h])
-    return q
 
 
 def configuration_frequencies(
