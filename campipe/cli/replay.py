@@ -85,8 +85,8 @@ def replay(archive, case_ids, where, output, overwrite, spawn, magnify, verify, 
         )
     except QueryError as exc:
         raise click.UsageError(str(exc)) from None
-    except ReplayError as exc:
-        raise click.ClickException(str(exc)) from None
+    except ReplayError as exc:  # the input's: a missing archive, an unknown case, none chosen
+        raise InputFailure(str(exc)) from None
     click.echo(
         f"campipe replay: {len(cases)} case{'s' if len(cases) != 1 else ''} ("
         + ", ".join(c.case_id for c in cases)

@@ -271,7 +271,7 @@ def test_two_replays_of_an_archive_are_identical(archives):
 def test_where_selecting_nothing_writes_nothing(archives):
     path = archives[0].with_name("nothing.rrd")
     out = invoke("replay", archives[0], "--where", "speed_rpm > 20000", "-o", path)
-    assert out.exit_code == 1
+    assert out.exit_code == 2  # a problem with the input (docs/studies.md)
     assert (
         "--where 'speed_rpm > 20000' selects none of the archive's 2 cases; nothing "
         "written" in out.output
@@ -282,9 +282,9 @@ def test_where_selecting_nothing_writes_nothing(archives):
 
 def test_missing_archive_unknown_case_and_bad_options_are_clear_errors(archives, tmp_path):
     out = invoke("replay", tmp_path / "none.nc", "--case", "abc", "-o", tmp_path / "x.rrd")
-    assert out.exit_code == 1 and f"{tmp_path / 'none.nc'}: no such archive" in out.output
+    assert out.exit_code == 2 and f"{tmp_path / 'none.nc'}: no such archive" in out.output
     out = invoke("replay", archives[0], "--case", "0123456789abcdef", "-o", tmp_path / "x.rrd")
-    assert out.exit_code == 1
+    assert out.exit_code == 2
     assert "--case 0123456789abcdef: no such case among the archive's 2 cases" in out.output
     out = invoke("replay", archives[0], "--where", "__import__('os')", "-o", tmp_path / "x.rrd")
     assert out.exit_code == 2 and "is not allowed" in out.output
