@@ -15,6 +15,7 @@ import threading
 
 import numpy as np
 import pytest
+from study_helpers import STUDIES
 
 from campipe.engine import Case, CaseError, RunSettings, run_batch
 from campipe.engine import batch as batch_module
@@ -24,6 +25,7 @@ from campipe.engine.settings import LIFT_BOUND, SPEED_BOUND, output_angles
 from campipe.model import thesis_train, valve_train
 from campipe.profiles import harmonic, polydyne
 from campipe.profiles.packed import keyed
+from campipe.study import load_study
 
 INCH = 0.0254
 
@@ -87,23 +89,6 @@ def test_modal_exact_from_its_periodic_start_matches_the_start_handed_to_it():
 
 #: What a kernel that fills its outputs must overwrite starts as this instead of zero.
 SENTINEL = 1.234e300
-#: A finger follower's model keys (the bundled study's).
-FINGER = {
-    "layout": "finger-follower",
-    "pivot_to_roller": "30 mm",
-    "pivot_to_pallet": "45 mm",
-    "cam_base_radius": "18 mm",
-    "cam_roller_radius": "9 mm",
-    "lever_inertia": "40 kg*mm**2",
-    "roller_mass": "10 g",
-    "valve_mass": "60 g",
-    "lever_stiffness": "15000 N/mm",
-    "stem_stiffness": "60000 N/mm",
-    "spring_rate": "35 N/mm",
-    "spring_preload": "220 N",
-    "damping_ratios": [0.05],
-    "lash": "0.15 mm",
-}
 
 
 def _filled_variety() -> list[tuple[list[Case], RunSettings]]:
@@ -119,7 +104,7 @@ def _filled_variety() -> list[tuple[list[Case], RunSettings]]:
         {"layout": "lumped", "masses": ["0.1 kg"], "stiffnesses": [],
          "spring_rate": "40 N/mm", "spring_preload": "250 N", "damping_ratios": [0.05]},
     )  # fmt: skip
-    finger = valve_train("thesis-1971", FINGER)
+    finger = load_study(STUDIES / "finger-follower.yaml").cases[0].case.train
     mixed = [
         Case(train, harmonic(INCH), 300.0),
         Case(train, harmonic(INCH), 1200.0),
