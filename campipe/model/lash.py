@@ -34,7 +34,13 @@ from campipe.model.assembly import (
     system_matrices,
 )
 from campipe.model.parameters import ValveTrain
-from campipe.model.seated import cam_side_gap, seat_lift, seated_states, valve_end_ratio
+from campipe.model.seated import (
+    cam_side_gap,
+    lash_seat_lift,
+    measured_side,
+    seated_states,
+    valve_end_ratio,
+)
 
 __all__ = [
     "cam_gap",
@@ -63,13 +69,11 @@ def lash_seat(sm: SystemMatrices, lash: float, side: str) -> float:
     """The seat, as a valve lift [m], at which the train with its valve seated and its cam on
     the base circle stands off its cam by the lash ``lash`` [m] measured on ``side``
     ("valve" or "cam", see the module)."""
-    low, high = seated_states(sm.stiffness, sm.preload)
-    return seat_lift(low, high, cam_side_gap(low, high, lash, side))
+    return lash_seat_lift(sm.stiffness, sm.preload, lash, side)
 
 
 def train_lash_seat(train: ValveTrain) -> float:
     """The seat ``train``'s lash places (:func:`lash_seat` on its ``lash_side``). A chain of
     masses (:mod:`campipe.model.layouts`) takes a gap up as a rigid body, so its lash is the
     same measured at the valve or at the cam."""
-    side = "cam" if train.chain else train.lash_side
-    return lash_seat(system_matrices(train), train.lash, side)
+    return lash_seat(system_matrices(train), train.lash, measured_side(train))

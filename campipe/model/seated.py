@@ -54,17 +54,25 @@ def cam_side_gap(low: np.ndarray, high: np.ndarray, lash: float, side: str) -> f
     return lash / valve_end_ratio(low, high) if side == "valve" else lash
 
 
-def seat_lift(low: np.ndarray, high: np.ndarray, gap: float) -> float:
-    """The seat [m of valve lift] at which the seated train stands ``gap`` off its cam."""
+def lash_seat_lift(stiffness: np.ndarray, load: np.ndarray, lash: float, side: str) -> float:
+    """The seat [m of valve lift, from the valve's static position on the base circle] at
+    which the train under ``load``, its valve seated, stands off its cam by ``lash`` [m]
+    measured on ``side``."""
+    low, high = seated_states(stiffness, load)
+    gap = cam_side_gap(low, high, lash, side)
     return float((gap + low[CAM]) / (low[CAM] - high[CAM]))
+
+
+def measured_side(train: ValveTrain) -> str:
+    """Where ``train``'s lash is measured: its ``lash_side``; "cam" for a chain of masses,
+    which takes a gap up as a rigid body (the same on either side)."""
+    return "cam" if train.chain else train.lash_side
 
 
 def seated_force(train: ValveTrain, stiffness: np.ndarray, load: np.ndarray) -> float:
     """The seat's reaction [N] (the spring's force: seated, nothing else loads the valve) with
     the train under ``load``, its valve on the seat its lash places."""
-    low, high = seated_states(stiffness, load)
-    side = "cam" if train.chain else train.lash_side
-    s = seat_lift(low, high, cam_side_gap(low, high, train.lash, side))
+    s = lash_seat_lift(stiffness, load, train.lash, measured_side(train))
     reference = static_state(stiffness, load, {CAM: 0.0})[SEAT]
     q = static_state(stiffness, load, {SEAT: reference + s})
     return float(abs((stiffness @ q - load)[SEAT]))
