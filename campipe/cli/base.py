@@ -119,6 +119,8 @@ class CampipeGroup(click.Group):
             raise Interrupted(f"campipe {name}: interrupted (Ctrl-C){after}") from None
         except (click.ClickException, click.exceptions.Exit, click.Abort):
             raise
+        except BrokenPipeError:
+            raise  # a reader such as `head` closed stdout: click's main exits quietly
         except Exception as exc:
             mapped = failure(exc)
             if mapped is None:

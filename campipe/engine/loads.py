@@ -85,6 +85,39 @@ def member_loads(train: ValveTrain, q: np.ndarray) -> dict[str, np.ndarray]:
     }
 
 
+def pushing_joints(train: ValveTrain, q: np.ndarray) -> np.ndarray:
+    """(..., n_joints) the forces [N], compressive positive, through the joints of ``train``
+    that in the hardware can only push, for coordinates ``q`` (..., n): a chain's links (a
+    tappet's, a finger's or a rocker's contact on the valve's tip, in series with what the
+    link lumps); the thesis train's pushrod at both ends (each sits in a cup) and its rocker
+    on the valve's tip (the valve arm's end force at q4, where the stem and the spring meet
+    it). The model's joints are two-sided: a value below 0 is a pull the hardware would not
+    give (docs/model.md, "Joints that pull"). Not the thesis's stem: it holds the valve's head
+    on its seat against the spring, in tension."""
+    q = _own(train, q)
+    members: dict[str, list[Element]] = {}
+    for e in elements(train):
+        members.setdefault(e.name, []).append(e)
+
+    def end_forces(e: Element) -> np.ndarray:
+        return q @ (e.stiffness @ e.beta).T
+
+    # Axial elements use (lower, upper) measured upward: the upper end force is the tension,
+    # the lower end's the compression.
+    if train.chain:
+        joints = [-end_forces(link)[..., 1] for link in members.get("link", [])]
+    else:
+        rod = members["pushrod"]
+        joints = [
+            end_forces(rod[0])[..., 0],
+            -end_forces(rod[-1])[..., 1],
+            end_forces(members["rocker_valve_arm"][-1])[..., 1],  # v at the valve end: down
+        ]
+    if not joints:  # a one-mass chain: its only contact is the cam's
+        return np.full((*q.shape[:-1], 0), np.nan)
+    return np.stack(joints, axis=-1)
+
+
 def spring_histories(train: ValveTrain, q: np.ndarray) -> dict[str, np.ndarray]:
     """The spring's largest element force [N] and its coil-clash margin [m]
     (``campipe.model.spring_element_forces``, ``spring_clash_margin``) for coordinates ``q``

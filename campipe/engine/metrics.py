@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from campipe.engine.loads import per_turn
+from campipe.engine.loads import per_turn, pushing_joints
 from campipe.model.contact import contact_law
 from campipe.model.hla import taken_up
 
@@ -161,6 +161,15 @@ def _spring(name: str, how: str) -> Callable[[Any, Any], np.ndarray]:
         return per_turn(histories[name], result.cam_angle, result.n_turns, how)
 
     return derive
+
+
+def _least_joint_force(result, trains) -> np.ndarray:
+    least = np.full(result.q.shape[:2], np.nan)
+    for i, train in enumerate(trains):
+        joints = pushing_joints(train, result.q[i])
+        if joints.shape[-1]:
+            least[i] = joints.min(axis=-1)
+    return per_turn(least, result.cam_angle, result.n_turns, "min")
 
 
 def _adjuster(column: int, less_lash: bool = False) -> Callable[[Any, Any], np.ndarray]:
@@ -319,6 +328,20 @@ METRICS: list[Metric] = [
         source="derived",
         derive=_spring("spring_clash_margin", "min"),
         label="Coil-clash margin",
+    ),
+    Metric(
+        "min_joint_force",
+        "min_joint_force",
+        "min_joint_force_by_rev",
+        "least force at the output angles through the joints that only push in the hardware "
+        "(a chain's links; the thesis train's pushrod ends and its rocker on the valve's "
+        "tip), compressive positive: below 0 the model's two-sided joint pulls",
+        "N",
+        "min",
+        record="member_loads",
+        source="derived",
+        derive=_least_joint_force,
+        label="Joint force",
     ),
     _adjuster_metric(
         "hla_extension",

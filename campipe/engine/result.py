@@ -14,7 +14,7 @@ import numpy as np
 
 from campipe.constants import TWO_PI
 from campipe.engine import metrics
-from campipe.engine.loads import spring_histories
+from campipe.engine.loads import member_loads, spring_histories
 from campipe.model import ValveTrain
 from campipe.vocabulary import CAM, FAILURES, N_EVENT_FIELDS, SEAT
 
@@ -132,10 +132,18 @@ class BatchResult:
     def spring_histories(self) -> dict[str, np.ndarray]:
         """The spring's histories (``engine.loads.SPRING_HISTORIES``) of each case's train,
         (n_cases, n_out) each, computed once from q."""
-        cached = self._derived.get("spring_histories")
+        return self._histories("spring_histories", spring_histories)
+
+    def member_loads(self) -> dict[str, np.ndarray]:
+        """The member loads (``engine.loads.MEMBER_LOADS``) of each case's train,
+        (n_cases, n_out) each, computed once from q."""
+        return self._histories("member_loads", member_loads)
+
+    def _histories(self, key: str, of) -> dict[str, np.ndarray]:
+        cached = self._derived.get(key)
         if cached is None:
-            per_case = [spring_histories(t, self.q[i]) for i, t in enumerate(self.trains)]
-            cached = self._derived["spring_histories"] = {
+            per_case = [of(t, self.q[i]) for i, t in enumerate(self.trains)]
+            cached = self._derived[key] = {
                 name: np.stack([p[name] for p in per_case]) for name in per_case[0]
             }
         return cached  # type: ignore[return-value]

@@ -126,3 +126,19 @@ def test_a_command_leaves_its_objects_to_the_operating_system_at_exit():
     counts = dict(line.split() for line in out.stderr.splitlines())
     assert int(counts["unfrozen"]) == 0 and int(counts["frozen"]) > 0
     assert out.stdout.startswith("{")  # the command's output, whole
+
+
+def test_a_reader_closing_the_output_early_ends_the_command_quietly():
+    """`campipe validate spec | head -2`: the reader closes the pipe and the command's next
+    write fails with EPIPE; the command stops without a message (click's own handling), as
+    `git log | head` does. Broken copy: the group mapping BrokenPipeError, an OSError, to
+    "Error: Broken pipe" on stderr."""
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "campipe", "schema"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    proc.stdout.close()  # before the interpreter has started: every write meets a closed pipe
+    err = proc.stderr.read()
+    assert proc.wait() == 1 and err == ""

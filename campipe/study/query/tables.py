@@ -309,6 +309,7 @@ def summary(ds, where: str | None = None, system: str = "spec") -> str:
         )
     lines += status_lines(table)
     lines += settling_lines(table, ds.attrs.get("max_revolutions", "?"))
+    lines += tension_lines(table)
     onset = onset_table(table)
     if onset:
         lines.append("")
@@ -377,6 +378,33 @@ def settling_lines(table: CaseTable, cap: object) -> list[str]:
             "second half: means ± standard error, largest)"
         )
     return out
+
+
+#: The least force through the joints that only push (``run.record: member_loads``).
+JOINT = "min_joint_force"
+
+
+def tension_lines(table: CaseTable) -> list[str]:
+    """The cases where a joint that only pushes in the hardware pulled (``min_joint_force``
+    below 0): the model's two-sided joint held what the hardware would let go (docs/model.md,
+    "Joints that pull")."""
+    force = table.columns.get(JOINT)
+    if force is None:
+        return []
+    force = np.asarray(force, float)
+    pulled = np.flatnonzero(force < 0)
+    if not pulled.size:
+        return []
+    ids = table.columns.get("case", np.arange(table.n).astype(str))
+    least = pulled[np.argmin(force[pulled])]
+    units = table.units.get(JOINT, "")
+    return [
+        f"a joint pulled ({JOINT} below 0) in {pulled.size} of {table.n} cases, least "
+        f"{_cell(force[least], 'table')} {units} ({ids[least]}): the hardware's (a pushrod in "
+        "its cups, a rocker, finger or tappet on the valve's tip) only push, the model's hold "
+        "on, so past the pull these cases' forces and bounces are the model's (docs/model.md, "
+        '"Joints that pull")'
+    ]
 
 
 #: The metric the summary shows with its uncertainty for a case that never repeats.

@@ -18,7 +18,7 @@ import numpy as np
 import campipe
 from campipe import engine
 from campipe.engine.levers import at_the_cam
-from campipe.engine.loads import MEMBER_LOADS, SPRING_HISTORIES, member_loads
+from campipe.engine.loads import MEMBER_LOADS, SPRING_HISTORIES
 from campipe.engine.metrics import archived_metrics, batch_means_error
 from campipe.model.layouts import placeholders
 from campipe.sources import source_digest
@@ -190,11 +190,8 @@ def batch_arrays(plan: BatchPlan, result: BatchResult) -> BatchData:
         arrays["q"] = result.q[:, :, :N_COORDINATES].copy()  # the dof axis: q1 … q7
         for i, c in enumerate(plan.cases):  # a short lumped chain's placeholders: NaN
             arrays["q"][i, :, placeholders(c.case.train)] = np.nan
-    loads = set(MEMBER_LOADS) & set(wanted)
-    if loads:
-        per_case = [member_loads(c.case.train, result.q[i]) for i, c in enumerate(plan.cases)]
-        for name in loads:
-            arrays[name] = np.stack([p[name] for p in per_case])
+    for name in set(MEMBER_LOADS) & set(wanted):
+        arrays[name] = result.member_loads()[name]
     arrays.update(_spring_arrays(result, set(wanted)))
     if CAM_NORMAL_FORCE in wanted:  # the roller's force on the cam: the cam force (at_the_cam)
         arrays[CAM_NORMAL_FORCE] = result.cam_force

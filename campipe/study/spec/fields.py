@@ -436,8 +436,10 @@ CASE_FIELDS: dict[str, Field] = {
             "run.record",
             "record",
             "optional histories to store: q (the thesis's seven coordinates), member_loads "
-            "(all member loads) or single member loads by name, spring (the spring's force, "
-            "largest element force and coil-clash margin, and their per-revolution metrics) "
+            "(all member loads, and the least force through the joints that only push, "
+            "min_joint_force, per revolution) or single member loads by name, spring (the "
+            "spring's force, largest element force and coil-clash margin, and their "
+            "per-revolution metrics) "
             "or single spring histories by name; contact_pressure: the peak Hertz pressure "
             "at the cam and the seat per revolution; cam_normal_force: a lever layout's "
             "roller force on the cam (the cam force times the lever ratio); lash_adjuster: "
