@@ -27,6 +27,7 @@ from campipe.constants import RPM
 from campipe.engine import slope_bound, steady
 from campipe.engine.batch import Case, CaseError, RunSettings, check_run, run_batch, train_matrices
 from campipe.engine.periodic import leave_speeds, prepare_steady
+from campipe.errors import CampipeError
 from campipe.model import ValveTrain
 
 #: Turns the engine integrates for a steady state with the valve seated on part of the turn
@@ -56,6 +57,11 @@ CONFIRM_WARMUP = 2
 
 
 # --------------------------------------------------------------------------- the onset
+
+
+class OnsetUnfinished(CampipeError, RuntimeError):
+    """A search still open after more steps than its range and tolerance can need: never
+    reported as "none" or "proven"."""
 
 
 def seated_no_follow(cases: Sequence[Case]) -> tuple[np.ndarray, np.ndarray]:
@@ -443,7 +449,9 @@ def onset_speeds(
     pts = _start(grid, value, kind, no_follow, height)
     proof = _Proof(designs, capture)
     status = np.where(no_follow[:, 0], "below", "none").astype(object)
-    for _ in range(100_000):
+    # Every step splits an interval wider than the tolerance or certifies one, so a search
+    # that walks the range at the tolerance (no bound certifies wider) ends within this.
+    for _ in range(4 * math.ceil((high - low) / tolerance) + 64 * grid.size):
         pts.certify(tolerance, proof)
         pts.active &= pts.depth > 0  # nothing left above a: follows across the range
         b, _, _, nb, _ = pts.top(1)
@@ -456,6 +464,11 @@ def onset_speeds(
         vx, kx, nx, _, hx = _evaluate(designs, batch, x, pts.active, levels, leave)
         evaluations += pts.active
         pts.push(pts.active, x, vx, kx, nx, hx)
+    else:
+        raise OnsetUnfinished(
+            f"the onset search of designs {np.flatnonzero(pts.active).tolist()} did not end "
+            f"within {int(evaluations.max())} steady states: a defect, please report it"
+        )
     b, _, kb, _, _ = pts.top(1)
     found = status == "found"
     speed = np.where(found, 0.5 * (pts.a + b), np.nan)

@@ -293,15 +293,39 @@ def _tail(poles: np.ndarray, a: np.ndarray, b: np.ndarray, K: int) -> np.ndarray
     """(r, p) a bound on Σ_{k>K} 1/d_kj² (module docstring) for each row's poles (r, p) over
     [a, b] (r,). Where every such harmonic lies above the pole (Ka ≥ |Im λ|) the terms fall
     with k: the integral from K. Else below the harmonics that can meet Im λ in [ka, kb] the
-    terms rise, above it they fall, each side bounded by its largest term and an integral,
-    and those that meet it are 1/(Re λ)² each."""
+    terms rise, above it they fall, each side bounded by its term nearest the pole and an
+    integral, and those that meet it are 1/(Re λ)² each. Finite for an undamped pole
+    (Re λ = 0) that no harmonic meets over [a, b]."""
     a = a[:, None]
     b = b[:, None]
     re = np.abs(poles.real)
     im = np.abs(poles.imag)
-    meeting = np.floor(im / a) - np.ceil(im / b) + 1  # k with ka ≤ Im λ ≤ kb
-    anywhere = (np.maximum(meeting, 0.0) + 2.0) / re**2 + math.pi / (a * re)
-    above = (0.5 * math.pi - np.arctan((K * a - im) / re)) / (a * re)
+    damped = re > 0.0  # Re λ = 0: a train without damping
+    safe = np.where(damped, re, 1.0)
+
+    def integral(d: np.ndarray, w: np.ndarray) -> np.ndarray:
+        # ∫ du / (w·((Re λ)² + u²)) over u ≥ d = (π/2 − arctan(d/Re λ)) / (w·Re λ), as arctan2
+        # so that it tends to its undamped limit 1/(w·d) (inf at d = 0).
+        undamped = np.where(d > 0.0, 1.0 / (w * np.where(d > 0.0, d, 1.0)), np.inf)
+        return np.where(damped, np.arctan2(re, d) / (w * safe), undamped)
+
+    # Every harmonic above the pole: the terms fall with k, the integral from K.
+    above = integral(K * a - im, a)
+    # Else the nearest harmonic each side of those that may meet the pole (k·b < Im λ below,
+    # k·a > Im λ above): its term and its side's integral; 1/(Re λ)² for each that may meet
+    # it (inf undamped: the interval is halved).
+    below_k = np.ceil(im / b) - 1.0
+    has_below = below_k >= K + 1
+    d_below = np.where(has_below, im - below_k * b, 1.0)
+    above_k = np.maximum(K + 1.0, np.floor(im / a) + 1.0)
+    d_above = above_k * a - im
+    meeting = np.maximum(np.floor(im / a) - np.maximum(K + 1.0, np.ceil(im / b)) + 1.0, 0.0)
+    anywhere = (
+        np.where(has_below, 1.0 / (re**2 + d_below**2) + integral(d_below, b), 0.0)
+        + 1.0 / (re**2 + d_above**2)
+        + integral(d_above, a)
+        + np.where(meeting > 0.0, np.where(damped, meeting / safe**2, np.inf), 0.0)
+    )
     return np.where(K * a >= im, above, anywhere)
 
 

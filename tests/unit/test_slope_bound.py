@@ -214,3 +214,27 @@ def test_an_undamped_train_s_transfer_is_checked_off_its_poles():
         warnings.simplefilter("error")
         assert S.checked(tr, sm)
         assert not S.checked(dataclasses.replace(tr, force=tr.force * (1 + 1e-4)), sm)
+
+
+def test_the_tail_bound_holds_undamped_and_is_finite_off_the_resonances():
+    """``_tail`` bounds Σ_{k>K} 1/d_k², d_k the least distance of the harmonic k·ω (ω over
+    [a, b]) from the pole λ: against the sum itself (to k = 10⁶, the rest below 1e-6 of it),
+    for an undamped pole (Re λ = 0) and a lightly damped one, with harmonics below and above
+    the pole. Undamped it is finite where no harmonic meets the pole over [a, b] (and within
+    3× of the sum: not vacuous), infinite where one does; damped it tends to the undamped
+    value. Broken copy: the terms nearest the pole bounded by 1/(Re λ)² (the copy before
+    2026-11-29): infinite for every interval of an undamped train."""
+    im = 18275.67
+    k = np.arange(1, 1_000_001, dtype=float)
+    for a, b, K in [(523.6, 524.6, 8), (523.6, 524.6, 40), (942.5, 952.9, 4), (1200.0, 1201.0, 1)]:
+        dist = np.maximum(0.0, np.maximum(k * a - im, im - k * b))
+        for re in (0.0, 1e-3 * im):
+            terms = 1.0 / (re**2 + dist**2)
+            exact = terms[K:].sum()
+            bound = S._tail(np.array([[complex(-re, im)]]), np.array([a]), np.array([b]), K)[0, 0]
+            assert exact <= bound <= 3.0 * exact, (a, b, K, re, exact, bound)
+        damped = S._tail(np.array([[complex(-1e-9 * im, im)]]), np.array([a]), np.array([b]), K)
+        undamped = S._tail(np.array([[complex(0.0, im)]]), np.array([a]), np.array([b]), K)
+        assert damped[0, 0] == pytest.approx(undamped[0, 0], rel=1e-6)
+    meets = S._tail(np.array([[18275.67j]]), np.array([522.0]), np.array([523.0]), 8)
+    assert meets[0, 0] == np.inf  # 35·ω passes the pole
