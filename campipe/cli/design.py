@@ -61,7 +61,18 @@ def design(spec, sets, fmt, output, overwrite, scheduler, workers) -> None:
             "{onset_speed_rpm: {min: 9500 rpm}}, minimize: model.spring_preload}"
         )
     path = Path(output) if output else Path(spec).parent / f"{loaded.name}-design.nc"
+    if loaded.spec.drive is not None:
+        click.echo(f"campipe design: {drive_note(loaded.spec.drive)}", err=True)
     _run(loaded, spec, path, fmt, overwrite, scheduler, workers)
+
+
+def drive_note(ratio: float) -> str:
+    """What a design's speeds are in a spec with a drive: the cam's, as onset_speed_rpm's."""
+    return (
+        f"with drive (cam_per_crank {ratio:g}) design's speeds are the cam's, as "
+        f"onset_speed_rpm's: the onset's bounds and each at: (an engine's 7000 rpm is the "
+        f"cam's {7000 * ratio:g} rpm)"
+    )
 
 
 def _kind(study_name: str, spec_file: str):

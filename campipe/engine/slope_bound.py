@@ -388,13 +388,18 @@ def slope_bounds_many(
     todo = np.arange(a.size)
     weights = np.abs(trs.residues)  # (r, 2, p)
     for K in HARMONIC_STEPS:
-        heads = _harmonic_sums(sp.amplitude[:K], trs.poles[todo], trs.residues[todo],
-                               a[todo], b[todo])  # fmt: skip
-        tails = _tail(trs.poles[todo], a[todo], b[todo], K) * (2.0 * sp.tail_weight(K))
-        total = direct[todo] + heads + np.einsum("rp,rcp->rc", tails, weights[todo])
-        # Done where the tail is a small share, or more harmonics gained little.
-        done = np.all((total - direct[todo] - heads <= TAIL_SHARE * total)
-                      | (total >= (1.0 - TAIL_SHARE) * best[todo]), axis=1)  # fmt: skip
+        # An undamped pole that a harmonic meets over [a, b] has no finite bound: inf (and
+        # inf − inf, NaN, taken as inf), so the search halves the interval.
+        with np.errstate(divide="ignore", invalid="ignore"):
+            heads = _harmonic_sums(sp.amplitude[:K], trs.poles[todo], trs.residues[todo],
+                                   a[todo], b[todo])  # fmt: skip
+            tails = _tail(trs.poles[todo], a[todo], b[todo], K) * (2.0 * sp.tail_weight(K))
+            total = direct[todo] + heads + np.einsum("rp,rcp->rc", tails, weights[todo])
+            heads = np.where(np.isnan(heads), np.inf, heads)
+            total = np.where(np.isnan(total), np.inf, total)
+            # Done where the tail is a small share, or more harmonics gained little.
+            done = np.all((total - direct[todo] - heads <= TAIL_SHARE * total)
+                          | (total >= (1.0 - TAIL_SHARE) * best[todo]), axis=1)  # fmt: skip
         best[todo] = np.minimum(best[todo], total)
         todo = todo[~done]
         if not todo.size:

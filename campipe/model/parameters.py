@@ -54,7 +54,7 @@ from campipe.model.contact_keys import (  # noqa: F401  (the contacts' names, re
 from campipe.model.declared import Parameter
 from campipe.model.hla import HLA_KEYS
 from campipe.model.levers import lever_parameters
-from campipe.units import QuantityError, parse_quantity
+from campipe.units import QuantityError, convert, parse_angular, parse_quantity
 
 ELEMENTS = ("pushrod", "rocker_pushrod_arm", "rocker_valve_arm", "spring", "valve_stem")
 #: Coordinates per node of each member: a bar's node moves along it, a beam's node translates
@@ -445,7 +445,10 @@ def parse_parameter(
     try:
         if p.length:
             return _list(p, value, key)
-        v = parse_quantity(value, p.units, key, p.thesis_units)
+        if p.units == "rad":  # pint's radian is dimensionless: a bare 0.1 is refused here
+            v = parse_angular(value, p.units, key, p.thesis_units)
+        else:
+            v = parse_quantity(value, p.units, key, p.thesis_units)
     except QuantityError as exc:
         raise ModelParameterError(
             str(exc), key=exc.key, found=exc.found, expected=exc.expected, reason=exc.reason
@@ -521,11 +524,16 @@ def _check_range(p: Parameter, v: float, key: str, raw: object) -> None:
     bad = v <= p.minimum if p.exclusive_minimum else v < p.minimum
     if bad or not math.isfinite(v) or v > p.maximum:
         relation = "greater than" if p.exclusive_minimum else "at least"
-        expected = f"a finite value {relation} {p.minimum:g}" + (
-            f" {p.thesis_units}" if p.thesis_units else ""
-        )
+
+        def shown(bound: float) -> str:  # a bound in the units the key is shown in
+            if not p.thesis_units:
+                return f"{bound:g}"
+            value = convert(bound, p.units, p.thesis_units) if math.isfinite(bound) else bound
+            return f"{value:g} {p.thesis_units}"
+
+        expected = f"a finite value {relation} {shown(p.minimum)}"
         if math.isfinite(p.maximum):
-            expected += f" and at most {p.maximum:g}"
+            expected += f" and at most {shown(p.maximum)}"
         raise ModelParameterError.at(
             key, f"found {raw!r}, expected {expected}", found=raw, expected=expected
         )

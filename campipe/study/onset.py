@@ -220,12 +220,20 @@ def file_contents(result: OnsetStudy) -> tuple[dict, list[VariableSpec], dict, d
         variables.append(VariableSpec(name, dims, dtype, attrs))
         arrays[name] = values
 
+    sizes = {"combination": n, "scan": on.scan_speed.size}
+    # a list per combination (masses, damping_ratios): one width for all, NaN beyond a list
+    width = max((c.shape[1] for c in t.columns.values() if c.ndim == 2), default=0)
     for name in t.columns:
         if name in ONSET_COLUMNS:
             continue
         col = t.columns[name]
         units = {"units": t.units[name]} if t.units[name] else {}
-        add(name, ("combination",), "str" if col.dtype == object else "f8", col, **units)
+        dims: tuple[str, ...] = ("combination",)
+        if col.ndim == 2:
+            padded = np.full((n, width), np.nan)
+            padded[:, : col.shape[1]] = col
+            col, dims, sizes["mode"] = padded, ("combination", "mode"), width
+        add(name, dims, "str" if col.dtype == object else "f8", col, **units)
     add("onset_speed_rpm", ("combination",), "f8", t.columns["onset_speed_rpm"], units="rpm",
         long_name="no-follow onset speed (steady state; NaN: none inside the speed range)",
         tolerance_rpm=on.tolerance / RPM)  # fmt: skip
@@ -268,7 +276,7 @@ def file_contents(result: OnsetStudy) -> tuple[dict, list[VariableSpec], dict, d
         "spec": result.spec_text,
         "spec_overrides": json.dumps(result.spec_overrides, default=str),
     }
-    return {"combination": n, "scan": on.scan_speed.size}, variables, arrays, attrs
+    return sizes, variables, arrays, attrs
 
 
 def summary_lines(result: OnsetStudy) -> list[str]:

@@ -442,3 +442,25 @@ def test_campipe_design_prints_its_estimate_and_runs_on_threads_as_synchronous(t
         assert "one design timed here at" in line
         assert text.index("design time") < text.index("{")
     assert rows["threads"] == rows["synchronous"]
+
+
+def test_a_design_with_a_drive_says_its_speeds_are_the_cam_s(tmp_path):
+    """A spec whose axis gives the engine's speed (drive: cam_per_crank 0.5): the design's
+    speeds are the cam's, and the command says so with the engine's example (a new user read
+    onset_speed_rpm as the engine's, silently). The same onset as the cam's spec.
+    Broken copy: the note left out."""
+    design = """
+      vary: {model.spring_preload: {from: 80 lbf, to: 250 lbf}}
+      require: {onset_speed_rpm: {min: 12000 rpm}}
+      minimize: model.spring_preload
+    """
+    text = BASE.format(name="e", design=design).replace(
+        "  speed: {from: 3000 rpm, to: 20000 rpm, num: 2}",
+        "  engine_speed: {from: 6000 rpm, to: 40000 rpm, num: 2}",
+    )
+    path = write_spec(tmp_path, "drive: {cam_per_crank: 0.5}\n" + text, "e.yaml")
+    out = invoke("design", path, "--format", "json")
+    assert out.exit_code == 1, out.output  # 12000 rpm of the cam: beyond 250 lbf's 10619
+    assert "design's speeds are the cam's, as onset_speed_rpm's" in out.output
+    assert "an engine's 7000 rpm is the cam's 3500 rpm" in out.output
+    assert "fails onset_speed_rpm ≥ 12000 rpm" in out.output

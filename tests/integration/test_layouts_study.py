@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import xarray as xr
+import pytest
 from click.testing import CliRunner
 from study_helpers import write_spec
 
@@ -103,3 +104,49 @@ def test_campipe_model_refuses_convergence_on_a_chain():
     out = invoke("model", *SETS, "--convergence", "spring_elements")
     assert out.exit_code == 2
     assert "layout lumped has none" in out.output
+
+
+MIXED = """\
+name: mixed-chains
+model: {layout: lumped, masses: [0.08 kg], stiffnesses: [], spring_rate: 40 N/mm,
+        spring_preload: 250 N, damping_ratios: [0.0]}
+profile: {kind: harmonic, lift: 8 mm}
+closure: force
+run: {revolutions: 1}
+sweep:
+  speed: [3000 rpm, 20000 rpm]
+cases:
+  - {}
+  - {model: {masses: [0.04 kg, 0.06 kg], stiffnesses: [20000 N/mm]}}
+"""
+
+
+def test_chains_of_different_lengths_share_a_study_and_an_onset_file(tmp_path):
+    """A one-mass and a two-mass chain in one spec: the archive's and the onset file's list
+    coordinates are as wide as the longest list, NaN beyond a shorter one, and query shows
+    each case's own list; the one-mass chain's onset is its closed form
+    ω² = 2(P₀ + k·h)/(m·h) (undamped) and the two-mass chain's the same as in a spec of its
+    own. Broken copies: the archive's list width taken from the last list coordinate (the
+    stiffnesses': a ValueError writing the masses), the onset file's lists along its
+    combinations only (a ValueError)."""
+    spec = write_spec(tmp_path, MIXED, "mixed.yaml")
+    out = invoke("study", str(spec), "-o", str(tmp_path / "mixed.nc"))
+    assert out.exit_code == 0, out.output
+    with xr.open_dataset(tmp_path / "mixed.nc") as ds:
+        masses = ds.masses.values
+    assert masses.shape == (4, 2) and np.isnan(masses[:2, 1]).all()
+    np.testing.assert_allclose(masses[2:], [[0.04, 0.06]] * 2)
+    shown = invoke("query", str(tmp_path / "mixed.nc"), "--columns", "masses,stiffnesses")
+    assert "nan" not in shown.output and "0.04, 0.06        20000" in shown.output
+    onset = invoke("onset", str(spec), "-o", str(tmp_path / "mixed-onset.nc"), "--format", "json")
+    assert onset.exit_code == 0, onset.output
+    rows = json.loads(onset.output[onset.output.index("{") : onset.output.rindex("}") + 1])
+    one, two = rows["cases"]
+    m, h = 0.08, 0.008
+    closed = math.sqrt(2 * (250.0 + 40e3 * h) / (m * h)) * 30 / math.pi
+    assert one["masses"] == [0.08] and one["onset_speed_rpm"] == pytest.approx(closed, abs=0.1)
+    alone = write_spec(tmp_path, MIXED.replace("  - {}\n", "").replace("cases:\n", "cases:\n"),
+                       "alone.yaml")  # fmt: skip
+    single = invoke("onset", str(alone), "-o", str(tmp_path / "alone.nc"), "--format", "json")
+    solo = json.loads(single.output[single.output.index("{") : single.output.rindex("}") + 1])
+    assert two["onset_speed_rpm"] == pytest.approx(solo["cases"][0]["onset_speed_rpm"], abs=0.1)

@@ -220,6 +220,21 @@ def test_lever_refusals_name_their_keys(changes, key):
     assert info.value.key == key
 
 
+@pytest.mark.parametrize("value", [0.1, "0.1", 10])
+def test_a_rest_angle_needs_an_angle_s_units(value):
+    """A bare number for ``lever_rest_angle`` is refused (pint's radian is dimensionless: it
+    was read as 0.1 rad, 5.7°), and a bound is named in degrees, the key's units (it read
+    "at most 1.0472 deg", radians). Broken copies: the angle parsed as any quantity; the
+    range's bounds shown in SI with the degree's name."""
+    with pytest.raises(ModelParameterError, match=r"found .*(0\.1|10).*deg") as info:
+        valve_train("thesis-1971", {**FINGER, "lever_rest_angle": value}, key_prefix="model.")
+    assert info.value.key == "model.lever_rest_angle"
+    with pytest.raises(ModelParameterError, match="at least -60 deg and at most 60 deg"):
+        valve_train("thesis-1971", {**FINGER, "lever_rest_angle": "70 deg"})
+    train = valve_train("thesis-1971", {**FINGER, "lever_rest_angle": "0.1 rad"})
+    assert train.lever_rest_angle == pytest.approx(0.1)
+
+
 def test_a_lever_key_on_another_layout_is_refused():
     """``pivot_to_roller`` on the thesis's train names the key and the layouts it belongs to.
     Fails on a copy that lets it through unread."""

@@ -105,9 +105,14 @@ def archive_layout(study: Study, n_events: int | None, cam_angle: np.ndarray, n_
     specs = [variable_spec(n, VARIABLES[n]) for n in axis_names(study.record)]
     specs.append(variable_spec(CASE_ID, VARIABLES[CASE_ID]))
     values = coordinate_values(study.cases, study)
+    lists = [name for name, var, _ in coords.values() if "mode" in var.dims]
+    if lists:  # one width for every list (masses, stiffnesses, damping_ratios): the longest
+        sizes["mode"] = width = max(values[name].shape[1] for name in lists)
+        for name in lists:
+            padded = np.full((values[name].shape[0], width), np.nan)
+            padded[:, : values[name].shape[1]] = values[name]
+            values[name] = padded
     for _key, (name, var, _) in coords.items():
-        if "mode" in var.dims:
-            sizes["mode"] = values[name].shape[1]
         specs.append(variable_spec(name, var))
     specs += data_specs(study.record, " ".join(coord_names))
     if study.settle:

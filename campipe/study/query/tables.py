@@ -149,6 +149,9 @@ def _order(values: np.ndarray, descending: bool) -> np.ndarray:
 
 def _cell(value, fmt: str) -> object:
     if isinstance(value, np.ndarray):
+        if value.dtype.kind == "f":  # a list padded to the longest of its column: its own
+            finite = np.flatnonzero(~np.isnan(value))
+            value = value[: finite[-1] + 1 if finite.size else 0]
         return [_cell(v, fmt) for v in value]
     if isinstance(value, np.integer | int) and not isinstance(value, bool):
         return int(value)
