@@ -5,8 +5,8 @@ import json
 import math
 
 import numpy as np
-import xarray as xr
 import pytest
+import xarray as xr
 from click.testing import CliRunner
 from study_helpers import write_spec
 
