@@ -164,9 +164,22 @@ def _shown(train, sm) -> tuple[SystemMatrices, tuple[Coordinate, ...], list[str]
     return view, tuple(coords[i] for i in used), names
 
 
+def on_the_cam(sm: SystemMatrices, coords: tuple[Coordinate, ...]) -> np.ndarray:
+    """The undamped natural frequencies [rad/s] with the follower held on the cam
+    (configuration I: q1, the first coordinate, prescribed), ascending; none for a one-mass
+    chain (nothing of it is free on the cam)."""
+    if len(coords) < 2:
+        return np.zeros(0)
+    free = slice(1, None)
+    trans = np.array([c.kind == "translation" for c in coords[free]])
+    omega, _ = normal_modes(sm.mass[free, free], sm.stiffness[free, free], trans)
+    return omega
+
+
 def model_report(train, sm, limits, preset) -> dict[str, object]:
     """The JSON form of ``campipe model``: SI units throughout."""
     sm, coords, names = _shown(train, sm)
+    held = on_the_cam(sm, coords)
     return {
         "preset": preset,
         "layout": train.layout,
@@ -191,6 +204,8 @@ def model_report(train, sm, limits, preset) -> dict[str, object]:
         "natural_frequencies_rpm": (sm.frequencies / RPM).tolist(),
         "natural_frequencies_hz": (sm.frequencies / TWO_PI).tolist(),
         "modal_damping_ratios": modal_damping_ratios(sm.damping, sm.modes, sm.frequencies).tolist(),
+        "natural_frequencies_on_the_cam": held.tolist(),
+        "natural_frequencies_on_the_cam_hz": (held / TWO_PI).tolist(),
         "mass_matrix": sm.mass.tolist(),
         "stiffness_matrix": sm.stiffness.tolist(),
         "damping_matrix": sm.damping.tolist(),
@@ -198,6 +213,7 @@ def model_report(train, sm, limits, preset) -> dict[str, object]:
         "stability_limit_s": limits,
         "units": {
             "natural_frequencies": "rad/s",
+            "natural_frequencies_on_the_cam": "rad/s, the follower held on the cam (q1)",
             "modal_damping_ratios": "1, (Φᵀ C Φ)ⱼⱼ / (2ωⱼ)",
             "mass_matrix": "kg (translation pairs), kg·m (mixed), kg·m² (rotation pairs)",
             "stiffness_matrix": "N/m (translation pairs), N (mixed), N·m (rotation pairs)",
@@ -411,6 +427,15 @@ def model_text(train, sm, limits, preset, overrides) -> str:
     zeta = modal_damping_ratios(sm.damping, sm.modes, sm.frequencies)
     for i, (w, z) in enumerate(zip(sm.frequencies, zeta, strict=True), 1):
         lines.append(f"  {i:>4} {w:14.1f} {w / TWO_PI:12.1f} {w / RPM:14.1f} {z:6.3f}")
+    lines.append("")
+    held = on_the_cam(sm, coords)
+    lines.append("Natural frequencies with the follower on the cam (configuration I: q1 held)")
+    if held.size:
+        lines.append(f"  {'mode':>4} {'rad/s':>14} {'Hz':>12} {'rpm':>14}")
+        for i, w in enumerate(held, 1):
+            lines.append(f"  {i:>4} {w:14.1f} {w / TWO_PI:12.1f} {w / RPM:14.1f}")
+    else:
+        lines.append("  none: nothing of the train is free on the cam (a rigid follower)")
     lines.append("")
     lines.append(
         "Mode shapes (Figure 14), one column a mode, scaled to a largest translation of 1"

@@ -1,6 +1,7 @@
 """`campipe model`: its JSON equals the numerics layer; its text shows the thesis layout."""
 
 import json
+import math
 import subprocess
 
 import numpy as np
@@ -9,7 +10,13 @@ from click.testing import CliRunner
 from numpy.testing import assert_allclose
 
 from campipe.cli import main
-from campipe.model import COORDINATES, newmark_linear_stability_limit, system_matrices, valve_train
+from campipe.model import (
+    COORDINATES,
+    newmark_linear_stability_limit,
+    system_matrices,
+    thesis_train,
+    valve_train,
+)
 
 
 def run(*args):
@@ -297,3 +304,39 @@ def test_a_one_mass_chain_s_contact_damping_and_restitution_are_its_closed_forms
     assert_allclose(out["stiffness_matrix"], [[ks]], rtol=1e-12)
     assert_allclose(out["damping_matrix"], [[c1]], rtol=1e-12)
     assert_allclose(out["natural_frequencies"], [np.sqrt(ks / m)], rtol=1e-12)
+
+
+def test_the_natural_frequencies_with_the_follower_on_the_cam():
+    """What a designer tunes a valve spring against: the train's frequencies with its
+    follower held on the cam (configuration I). A bucket tappet's is the valve on its stem
+    and spring, √((k_link + k_s)/m_valve), the link the stem and the tappet's contact in
+    series, to 1e-10; the thesis train's, the eigenvalues of the free partition's M⁻¹K
+    (numpy's general eigensolver, not the symmetric one campipe uses), to 1e-9; a one-mass
+    chain has none (a rigid follower). Broken copy: the free-free frequencies printed
+    under the name."""
+    bucket = [
+        "--set", "layout=direct-acting", "--set", "tappet_mass=45 g", "--set", "valve_mass=65 g",
+        "--set", "stem_stiffness=30000 N/mm", "--set", "tappet_contact_stiffness=60000 N/mm",
+        "--set", "spring_rate=35 N/mm", "--set", "spring_preload=220 N",
+        "--set", "damping_ratios=[0.05]",
+    ]  # fmt: skip
+    out = CliRunner().invoke(main, ["model", *bucket, "--json"])
+    assert out.exit_code == 0, out.output
+    link = 1.0 / (1.0 / 30000e3 + 1.0 / 60000e3)
+    held = json.loads(out.output)["natural_frequencies_on_the_cam"]
+    assert_allclose(held, [math.sqrt((link + 35e3) / 0.065)], rtol=1e-10)
+    text = CliRunner().invoke(main, ["model", *bucket]).output
+    assert "with the follower on the cam (configuration I: q1 held)" in text
+    assert "17556.5       2794.2" in text
+    thesis = json.loads(CliRunner().invoke(main, ["model", "--json"]).output)
+    sm = system_matrices(thesis_train())
+    free = slice(1, None)
+    roots = np.linalg.eigvals(np.linalg.solve(sm.mass[free, free], sm.stiffness[free, free]))
+    assert_allclose(thesis["natural_frequencies_on_the_cam"], np.sqrt(np.sort(roots.real)),
+                    rtol=1e-9)  # fmt: skip
+    one = ["--set", "layout=lumped", "--set", "masses=[0.08 kg]", "--set", "stiffnesses=[]",
+           "--set", "spring_rate=40 N/mm", "--set", "spring_preload=250 N",
+           "--set", "damping_ratios=[0.05]"]  # fmt: skip
+    rigid = CliRunner().invoke(main, ["model", *one, "--json"])
+    assert rigid.exit_code == 0, rigid.output
+    assert json.loads(rigid.output)["natural_frequencies_on_the_cam"] == []

@@ -439,7 +439,9 @@ def resolve_canonical(raw: Mapping, index: int, directory: Path) -> tuple[Resolv
     if "speed" not in raw:
         raise SpecProblem(
             "speed",
-            "missing; give the cam speed in the base, an axis or a case, e.g. speed: 9000 rpm",
+            "missing; give the cam speed in the base, an axis or a case, e.g. speed: 9000 rpm "
+            "(or the engine's, engine_speed: 18000 rpm, with drive: {cam_per_crank: 0.5}); a "
+            "spec for campipe design needs one too, whatever speeds its requirements give",
         )
     speed = parse_value("speed", freeze(raw["speed"]), "speed")
     seat = parse_value("seat", freeze(raw["seat"]), "seat")
