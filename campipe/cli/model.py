@@ -251,7 +251,7 @@ DISPLAY = {
         (INCH, LBF_IN),
         ((1e-5, "lbf·s²/in", "×1e-5"), (1e5, "lbf/in", "×1e5"), (1e-2, "lbf·s/in", "×1e-2")),
     ),
-    LUMPED: ((1.0, 1.0), ((1.0, "kg", "×1"), (1e6, "N/m", "×1e6"), (1.0, "N·s/m", "×1"))),
+    LUMPED: ((1.0, 1.0), ((1e-3, "kg", "×1e-3"), (1e6, "N/m", "×1e6"), (1.0, "N·s/m", "×1"))),
 }
 for _chain in (DIRECT_ACTING, *LEVERS):
     DISPLAY[_chain] = DISPLAY[LUMPED]
