@@ -232,16 +232,30 @@ def _matrix_text(a: np.ndarray, scale: float, coords: tuple[Coordinate, ...]) ->
     return rows
 
 
-def _parameter_text(p, value) -> str:
+#: A layout beyond the thesis's shows its parameters in the trade's metric units: the
+#: thesis's inch–pound units by their metric counterparts (others as they are).
+METRIC = {
+    "in": "mm",
+    "lbf": "N",
+    "lbf/in": "N/mm",
+    "lbf*s/in": "N*s/mm",
+    "lbf/in**1.5": "N/mm**1.5",
+    "s/in": "s/mm",
+    "lbf/in**2": "N/mm**2",
+}
+
+
+def _parameter_text(p, value, metric: bool = False) -> str:
+    shown = METRIC.get(p.thesis_units, p.thesis_units) if metric else p.thesis_units
     if p.length and p.units:
-        return ", ".join(f"{convert(x, p.units, p.thesis_units):g} {p.thesis_units}" for x in value)
+        return ", ".join(f"{convert(x, p.units, shown):g} {shown}" for x in value)
     if p.length:
         return ", ".join(f"{x:g}" for x in value)
     if p.allow_none and isinstance(value, float) and math.isnan(value):
         return "none"
     if p.choices or p.integer or not p.units:
         return f"{value:g}" if isinstance(value, float) else str(value)
-    return f"{convert(value, p.units, p.thesis_units):g} {p.thesis_units}"
+    return f"{convert(value, p.units, shown):g} {shown}"
 
 
 #: How ``campipe model`` shows each layout's matrices: (length, energy) of the display units
@@ -388,9 +402,11 @@ def model_text(train, sm, limits, preset, overrides) -> str:
     ]
     sm, coords, names = _shown(train, sm)
     lines.append("")
-    lines.append("Parameters (thesis units)")
+    metric = train.layout != PUSHROD_ROCKER
+    lines.append("Parameters (metric units)" if metric else "Parameters (thesis units)")
     for name in names:
-        lines.append(f"  {name:<30} {_parameter_text(PARAMETERS[name], getattr(train, name))}")
+        text = _parameter_text(PARAMETERS[name], getattr(train, name), metric)
+        lines.append(f"  {name:<30} {text}")
     trans = np.array([c.kind == "translation" for c in coords])
     lines.append("")
     lines.append(
@@ -439,7 +455,7 @@ def model_text(train, sm, limits, preset, overrides) -> str:
     lines.append("")
     lines.append(
         "Mode shapes (Figure 14), one column a mode, scaled to a largest translation of 1"
-        " (rotations in rad/in)"
+        + ("" if train.chain else " (rotations in rad/in)")
     )
     shapes = sm.modes / np.where(trans, length, 1.0)[:, None]
     shapes = shapes / np.abs(shapes[trans]).max(axis=0)

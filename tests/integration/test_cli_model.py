@@ -328,6 +328,11 @@ def test_the_natural_frequencies_with_the_follower_on_the_cam():
     text = CliRunner().invoke(main, ["model", *bucket]).output
     assert "with the follower on the cam (configuration I: q1 held)" in text
     assert "17556.5       2794.2" in text
+    # a layout beyond the thesis's reads in metric units (it read 199.855 lbf/in, 49.458 lbf)
+    assert "Parameters (metric units)" in text and "rad/in" not in text
+    assert "spring_rate                    35 N/mm" in text
+    assert "spring_preload                 220 N" in text
+    assert "Parameters (thesis units)" in CliRunner().invoke(main, ["model"]).output
     thesis = json.loads(CliRunner().invoke(main, ["model", "--json"]).output)
     sm = system_matrices(thesis_train())
     free = slice(1, None)
