@@ -375,6 +375,7 @@ def _seconds(seconds: float) -> str:
 
 def validate_text(loaded, spec_path) -> str:
     """The checked study in words: cases, axes (values as the spec wrote them), run."""
+    from campipe.constants import RPM
     from campipe.study.spec.coordinates import coordinate_values
     from campipe.study.spec.resolve import distinct_but_speed, per_turn_note
     from campipe.study.spec.variables import case_coordinates
@@ -406,6 +407,13 @@ def validate_text(loaded, spec_path) -> str:
         else:
             shown = [f"{len(s.cases)} entries"]
         text = ", ".join(shown) if len(shown) <= 6 else f"{shown[0]} … {shown[-1]}"
+        if a.key == "speed" and s.drive is not None:  # the engine's speeds beside the cam's
+            engine = sorted({float(f"{c.case.speed / s.drive / RPM:.9g}") for c in loaded.cases})
+            listed_engine = [f"{v:g}" for v in engine]
+            text += " (the engine's " + (
+                ", ".join(listed_engine) if len(engine) <= 6
+                else f"{listed_engine[0]} … {listed_engine[-1]}"
+            ) + " rpm)"  # fmt: skip
         name = coords[a.key][0] if a.key in coords else a.key
         lines.append(f"  {name:<22} {a.kind:<7} {a.size:>4} values: {text}")
     step = first.settings.step

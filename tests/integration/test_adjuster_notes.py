@@ -35,6 +35,8 @@ def test_validate_and_study_say_it(tmp_path):
     )
     assert result.exit_code == 0, result.output
     assert "lash adjuster: 5 cases move the lash adjuster's plunger once a turn" in result.output
+    # the spec's engine speeds beside the cam's (a new user saw only the cam's)
+    assert "(the engine's 2000, 4000, 6000, 7000, 9000 rpm)" in result.output
     quiet = CliRunner().invoke(
         main, ["validate", "--no-estimate", str(STUDIES / "lash-adjuster.yaml")]
     )
