@@ -373,6 +373,11 @@ def _seconds(seconds: float) -> str:
     return f"{seconds:.2g} s" if seconds < 10 else format_seconds(seconds)
 
 
+def _listed(values: list[str]) -> str:
+    """An axis's values: all of up to six, else the first … the last."""
+    return ", ".join(values) if len(values) <= 6 else f"{values[0]} … {values[-1]}"
+
+
 def validate_text(loaded, spec_path) -> str:
     """The checked study in words: cases, axes (values as the spec wrote them), run."""
     from campipe.constants import RPM
@@ -406,14 +411,10 @@ def validate_text(loaded, spec_path) -> str:
             ]
         else:
             shown = [f"{len(s.cases)} entries"]
-        text = ", ".join(shown) if len(shown) <= 6 else f"{shown[0]} … {shown[-1]}"
+        text = _listed(shown)
         if a.key == "speed" and s.drive is not None:  # the engine's speeds beside the cam's
             engine = sorted({float(f"{c.case.speed / s.drive / RPM:.9g}") for c in loaded.cases})
-            listed_engine = [f"{v:g}" for v in engine]
-            text += " (the engine's " + (
-                ", ".join(listed_engine) if len(engine) <= 6
-                else f"{listed_engine[0]} … {listed_engine[-1]}"
-            ) + " rpm)"  # fmt: skip
+            text += f" (the engine's {_listed([f'{v:g}' for v in engine])} rpm)"
         name = coords[a.key][0] if a.key in coords else a.key
         lines.append(f"  {name:<22} {a.kind:<7} {a.size:>4} values: {text}")
     step = first.settings.step

@@ -47,6 +47,19 @@ def _own(train: ValveTrain, q: np.ndarray) -> np.ndarray:
     return np.asarray(q, dtype=float)[..., : train.n_coordinates]
 
 
+def _members(train: ValveTrain) -> dict[str, list[Element]]:
+    """``train``'s elements by member, each member's in order from its first end."""
+    members: dict[str, list[Element]] = {}
+    for e in elements(train):
+        members.setdefault(e.name, []).append(e)
+    return members
+
+
+def _end_forces(q: np.ndarray, e: Element) -> np.ndarray:
+    """(..., n_e): the forces on element ``e``'s ends, Kₑ·β·q."""
+    return q @ (e.stiffness @ e.beta).T
+
+
 def member_loads(train: ValveTrain, q: np.ndarray) -> dict[str, np.ndarray]:
     """Member loads for coordinates ``q`` (..., n) [m, rad] of ``train`` (n ≥ its
     coordinates, any beyond them ignored).
@@ -59,12 +72,10 @@ def member_loads(train: ValveTrain, q: np.ndarray) -> dict[str, np.ndarray]:
         links' next to the cam and to the valve, and it has no rocker (NaN).
     """
     q = _own(train, q)
-    members: dict[str, list[Element]] = {}
-    for e in elements(train):
-        members.setdefault(e.name, []).append(e)
+    members = _members(train)
 
     def end_forces(e: Element) -> np.ndarray:
-        return q @ (e.stiffness @ e.beta).T  # (..., n_e): forces on the element's ends
+        return _end_forces(q, e)
 
     # Axial elements use (lower, upper) measured upward: the upper end force is the tension.
     if train.chain:  # its links next to the cam and to the valve (none: one mass)
@@ -95,12 +106,10 @@ def pushing_joints(train: ValveTrain, q: np.ndarray) -> np.ndarray:
     give (docs/model.md, "Joints that pull"). Not the thesis's stem: it holds the valve's head
     on its seat against the spring, in tension."""
     q = _own(train, q)
-    members: dict[str, list[Element]] = {}
-    for e in elements(train):
-        members.setdefault(e.name, []).append(e)
+    members = _members(train)
 
     def end_forces(e: Element) -> np.ndarray:
-        return q @ (e.stiffness @ e.beta).T
+        return _end_forces(q, e)
 
     # Axial elements use (lower, upper) measured upward: the upper end force is the tension,
     # the lower end's the compression.

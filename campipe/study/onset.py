@@ -22,7 +22,7 @@ from campipe.engine.kernels import compile_first, record_loaded, search_kernels
 from campipe.errors import CampipeError
 from campipe.io.archive import VariableSpec
 from campipe.study.query.tables import CaseTable
-from campipe.study.spec.coordinates import key_columns
+from campipe.study.spec.coordinates import key_columns, padded
 from campipe.study.spec.expand import Study
 from campipe.study.spec.variables import case_coordinates
 
@@ -230,9 +230,7 @@ def file_contents(result: OnsetStudy) -> tuple[dict, list[VariableSpec], dict, d
         units = {"units": t.units[name]} if t.units[name] else {}
         dims: tuple[str, ...] = ("combination",)
         if col.ndim == 2:
-            padded = np.full((n, width), np.nan)
-            padded[:, : col.shape[1]] = col
-            col, dims, sizes["mode"] = padded, ("combination", "mode"), width
+            col, dims, sizes["mode"] = padded(col, width), ("combination", "mode"), width
         add(name, dims, "str" if col.dtype == object else "f8", col, **units)
     add("onset_speed_rpm", ("combination",), "f8", t.columns["onset_speed_rpm"], units="rpm",
         long_name="no-follow onset speed (steady state; NaN: none inside the speed range)",

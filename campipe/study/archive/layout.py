@@ -11,7 +11,7 @@ from collections.abc import Iterable
 import numpy as np
 
 from campipe.io.archive import VariableSpec
-from campipe.study.spec.coordinates import CASE_ID, coordinate_values
+from campipe.study.spec.coordinates import CASE_ID, coordinate_values, padded
 from campipe.study.spec.drive import CRANK_ANGLE_NAME
 from campipe.study.spec.expand import Study
 from campipe.study.spec.variables import (
@@ -108,10 +108,7 @@ def archive_layout(study: Study, n_events: int | None, cam_angle: np.ndarray, n_
     lists = [name for name, var, _ in coords.values() if "mode" in var.dims]
     if lists:  # one width for every list (masses, stiffnesses, damping_ratios): the longest
         sizes["mode"] = width = max(values[name].shape[1] for name in lists)
-        for name in lists:
-            padded = np.full((values[name].shape[0], width), np.nan)
-            padded[:, : values[name].shape[1]] = values[name]
-            values[name] = padded
+        values.update({name: padded(values[name], width) for name in lists})
     for _key, (name, var, _) in coords.items():
         specs.append(variable_spec(name, var))
     specs += data_specs(study.record, " ".join(coord_names))

@@ -22,7 +22,7 @@ from campipe.io.parts import checksum_digest, part_name
 from campipe.study.archive.layout import archive_layout
 from campipe.study.run.keys import study_attrs
 from campipe.study.run.results import BatchData, BatchPlan, cam_angle_degrees
-from campipe.study.spec.coordinates import CASE_ID, key_columns
+from campipe.study.spec.coordinates import CASE_ID, key_columns, padded
 from campipe.study.spec.expand import Study
 from campipe.study.spec.variables import Variable, case_coordinates
 
@@ -71,9 +71,7 @@ def part_arrays(data: BatchData, plan: BatchPlan, layout: PartLayout) -> dict[st
     width = layout.sizes.get("mode")
     for name, values in coords.items():
         if values.ndim == 2 and width is not None and values.shape[1] < width:
-            padded = np.full((values.shape[0], int(width)), np.nan)
-            padded[:, : values.shape[1]] = values
-            coords[name] = padded
+            coords[name] = padded(values, int(width))
     return {**layout.axes, CASE_ID: data.case_ids, **coords, **data.arrays}
 
 

@@ -19,6 +19,14 @@ from campipe.study.spec.variables import NO_SEAT, Variable, case_coordinates
 CASE_ID = "case"
 
 
+def padded(values: np.ndarray, width: int) -> np.ndarray:
+    """(n, m) lists (a list per case: masses, damping_ratios) as (n, width), width ≥ m: NaN
+    beyond each list, as a column of lists of different lengths is stored."""
+    out = np.full((values.shape[0], width), np.nan)
+    out[:, : values.shape[1]] = values
+    return out
+
+
 def coordinate_values(cases: Sequence[ResolvedCase], study: Study) -> dict[str, np.ndarray]:
     """Per-case coordinate arrays in archive units, in study order: ``case`` (the ids), then
     each case coordinate (no seat as :data:`~campipe.study.spec.variables.NO_SEAT`)."""

@@ -280,8 +280,8 @@ class _Variables(Mapping[str, Variable]):
 VARIABLES: Mapping[str, Variable] = _Variables()
 
 #: Record items that store more than one variable (``member_loads``: the histories and the
-#: stem's least force; ``spring``: its force on the rocker, its histories and its metrics; the
-#: metrics are recorded under the item's own name).
+#: least force through the joints that only push; ``spring``: its force on the rocker, its
+#: histories and its metrics; the metrics are recorded under the item's own name).
 RECORD_GROUPS = {
     "member_loads": (*MEMBER_LOADS, "member_loads"),
     SPRING_RECORD: ("spring_force", *SPRING_HISTORIES, SPRING_RECORD),
