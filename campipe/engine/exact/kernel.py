@@ -26,6 +26,7 @@ from campipe.engine.closed_form import (
     W1_ABS,
     W2_ABS,
     block_basis,
+    eval_monitor,
     harmonic_response,
 )
 from campipe.engine.common import (
@@ -47,7 +48,9 @@ from campipe.engine.exact.segment import _begin_segment, monitor_count, plunger_
 from campipe.engine.exact.state import (
     MAX_STALLED_EVENTS,
     MODE_FLOOR,
+    PEAK_LEVEL,
     RESOLUTION,
+    ROOT_ITERATIONS,
     _advance,
     _at,
     _keep_column,
@@ -110,12 +113,13 @@ def _drop_decayed(MC, WC, VY, act, nact, ns, eps_force, tau):
 
 
 @njit(inline="always", nogil=True)
-def _fastest_needed(WC, MC, watch, level, gval, nact, tau, n_mon):
+def _fastest_needed(WC, MC, watch, level, gval, nact, tau, n_mon, near):
     """The first column whose block could bring a watched monitor (of the first ``n_mon``)
     to its level (nact if none) up to τ after the segment start: the fastest blocks are
     skipped while their summed amplitudes (which only decay) stay under half of every
-    monitor's distance from its level."""
-    margin = np.inf
+    monitor's distance from its level, and under half of ``near`` [N] (a held contact's
+    force near its turn's largest, ``_near_peak``; ∞ otherwise)."""
+    margin = near
     for m in range(2):
         if watch[m]:
             margin = min(margin, level[m] - gval[m])
@@ -272,6 +276,111 @@ def _force_maxima(per_rev, c, turn, cam_held, seat_held, gval):
 
 
 @njit(inline="always", nogil=True)
+def _ringing(WC, MC, nact, m, tau, back):
+    """The most the blocks 0 … nact − 1 add to monitor m up to τ after the segment start from
+    where their envelopes are (with ``back``, from a grid step before: the envelopes, which
+    only decay, divided by the step's decay)."""
+    amp = 0.0
+    for jj in range(nact):
+        s2 = min(tau, MC[INVD, jj])
+        a = (WC[W1_ABS, m, jj] + WC[W2_ABS, m, jj] * s2) * MC[EABS, jj]
+        amp += a / MC[DABS, jj] if back else a
+    return amp
+
+
+@njit(inline="always", nogil=True)
+def _so_far(per_rev, c, w, t_a, t_b, m):
+    """The least of the running maxima of held contact m's force (the cam's, the seat's) in
+    the turns holding t_a and t_b."""
+    col = MAX_CAM_FORCE if m == 0 else MAX_SEAT_FORCE
+    n_rev = per_rev.shape[1]
+    so_far = np.inf
+    for turn in (turn_of(w, t_a), turn_of(w, t_b)):
+        if 0 <= turn < n_rev:
+            so_far = min(so_far, per_rev[c, turn, col])
+    return so_far
+
+
+@njit(inline="always", nogil=True)
+def _above(f_a, f_b, ring, w, h, so_far):
+    """A held force ending an interval of length h [s] at f_a and f_b [N], its blocks adding
+    at most ``ring`` [N], may exceed ``so_far`` inside it: by at most twice the blocks'
+    amplitudes plus its forced part's bulge, taken as 8·(ωh)² of the force (a forced part up
+    to the cam's eighth harmonic)."""
+    end = max(f_a, f_b)
+    return end + 2.0 * ring + 8.0 * (w * h) ** 2 * abs(end) >= so_far
+
+
+@njit(inline="always", nogil=True)
+def _near_peak(WC, MC, G, GT, nact, per_rev, c, w, th0, gdeg, gval, m, t_s, t_from, t_next):
+    """Held contact m's force may exceed its turn's largest so far between the grid's plan
+    from t_from (its force −gval[m], the blocks' envelopes there) to t_next, where its forced
+    part ends at −(polynomial + harmonic), in the segment from t_s."""
+    x = w * t_next - th0
+    p = 0.0
+    for k in range(gdeg, -1, -1):
+        p = p * x + G[m, k]
+    p += GT[m].real * np.cos(w * t_next) - GT[m].imag * np.sin(w * t_next)
+    ring = _ringing(WC, MC, nact, m, t_next - t_s, False)
+    return _above(-gval[m], -p, ring, w, t_next - t_from,
+                  _so_far(per_rev, c, w, t_from, t_next, m))  # fmt: skip
+
+
+@njit(inline="always", nogil=True)
+def _peak(runs, out, ws, st, nact, m, ta, tb, da, db):
+    """Locate held contact m's force peak where its monitor's derivative rises through zero
+    in (ta, tb] (da < 0 < db its values there) and count it in its turn's maximum: Newton
+    steps on the derivative from the secant's point, kept inside the bracket (bisection
+    otherwise), to ``run.tolerance`` (the force's error is second order in the time's)."""
+    t_s, w, th0 = st.t_s, st.w, st.th0
+    t = ta - da * (tb - ta) / (db - da)
+    g = 0.0
+    for _ in range(ROOT_ITERATIONS):
+        g, dg, d2g = eval_monitor(ws.WC, ws.MC, nact, ws.G, ws.GT, m, t - t_s, w, w * t - th0,
+                                  w * t, st.gdeg)  # fmt: skip
+        if dg < 0.0:
+            ta = t
+        else:
+            tb = t
+        t_new = t - dg / d2g if d2g > 0.0 else np.nan
+        if not (ta < t_new < tb):
+            t_new = 0.5 * (ta + tb)
+        if abs(t_new - t) <= runs.tolerance or tb - ta <= runs.tolerance:
+            break
+        t = t_new
+    turn = turn_of(w, t)
+    col = MAX_CAM_FORCE if m == 0 else MAX_SEAT_FORCE
+    if 0 <= turn < out.per_rev.shape[1]:
+        out.per_rev[st.c, turn, col] = max(out.per_rev[st.c, turn, col], -g)
+
+
+@njit(**HELPER)
+def _force_peaks(ref, st, nact, t_prev, t_to, h, cam_held, seat_held, known):
+    """The held contacts' greatest forces inside (t_prev, t_to] (a grid step of length h [s]
+    from t_prev; with ``known``, ws.gval and ws.dval hold the monitors at t_to) into the
+    turn's force maxima: where a force's derivative turns from + to − across the step (its
+    monitor's from − to +), the peak is located (``_peak``), so that a ringing the grid
+    samples coarsely is read at its peak, if it may exceed the turn's largest so far
+    (``_above``). The grid resolves every block that could move a peak by more than the
+    peak tolerance (``_near_peak``)."""
+    _, _, _, runs, out, ws = deref(ref)
+    for m in range(2):
+        if not ((cam_held if m == 0 else seat_held) and ws.dprev[m] < 0.0):
+            continue
+        if known:
+            g_to, db = ws.gval[m], ws.dval[m]
+        else:
+            g_to, db = _at(False, ws.WC, ws.MC, nact, ws.G, ws.GT, m, st.t_s, t_to, st.w,
+                           st.th0, st.gdeg)  # fmt: skip
+        if not db > 0.0:
+            continue
+        ring = _ringing(ws.WC, ws.MC, nact, m, t_to - st.t_s, True)
+        so_far = _so_far(out.per_rev, st.c, st.w, t_prev, t_to, m)
+        if _above(-ws.gprev[m], -g_to, ring, st.w, h, so_far):
+            _peak(runs, out, ws, st, nact, m, t_prev, t_to, ws.dprev[m], db)
+
+
+@njit(inline="always", nogil=True)
 def _walk(ref, st, pl):
     """Walk the segment's grid from st.t_s until an event, a profile break or the run's end,
     and handle what ended it (``_apply_event``, ``_cross_break``, or st.done).
@@ -297,6 +406,7 @@ def _walk(ref, st, pl):
     MC, WC, G, GT, act = ws.MC, ws.WC, ws.G, ws.GT, ws.act
     gval, dval, gprev, dprev = ws.gval, ws.dval, ws.gprev, ws.dprev
     watch, ready, level = ws.watch, ws.ready, ws.level
+    peak_tol = PEAK_LEVEL * eps_force
     # A monitor already above its level at the segment start (a contact that pulls the
     # instant after an impact; a gap that closes) is an event there.
     for m in range(n_mon):
@@ -304,6 +414,9 @@ def _walk(ref, st, pl):
         if watch[m] and gval[m] > level[m] and (held or dprev[m] > 0.0):
             _apply_event(ref, st, m, t_s, pl)
             return
+    # The segment's start counts for the force maxima as a grid point does (after an impact
+    # the force may only fall).
+    _force_maxima(per_rev, c, turn_of(w, t_s), cam_held, seat_held, gval)
     t_prev = t_s
     h = -1.0
     since_refresh = 0
@@ -320,7 +433,7 @@ def _walk(ref, st, pl):
                 nact = _drop_decayed(MC, WC, ws.VY, act, nact, ns, eps_force, t_prev - t_s)
                 h_all = _shortest_allowed(speed_row, act, nact, dt_cap)
             # The step need only resolve the modes that could bring a watched monitor to its
-            # level.
+            # level, or move a held force's peak by the peak tolerance (near its largest).
             t_from = t_prev
             k_out = st.k_out
             to_sample = k_out < n_out and k_out * t_sample < t_end * (1.0 + 1e-13)
@@ -330,7 +443,14 @@ def _walk(ref, st, pl):
                 # cannot change the step (h_allow ≥ h_all below).
                 n_steps = 1
             else:
-                k = _fastest_needed(WC, MC, watch, level, gval, nact, t_next - t_s, n_mon)
+                near = np.inf
+                if (cam_held and _near_peak(WC, MC, G, GT, nact, per_rev, c, w, th0, gdeg, gval,
+                                            0, t_s, t_from, t_next)) or (
+                    seat_held and _near_peak(WC, MC, G, GT, nact, per_rev, c, w, th0, gdeg,
+                                             gval, 1, t_s, t_from, t_next)
+                ):  # fmt: skip
+                    near = peak_tol
+                k = _fastest_needed(WC, MC, watch, level, gval, nact, t_next - t_s, n_mon, near)
                 fastest = speed_row[act[k]] if k < nact else 0.0
                 h_allow = RESOLUTION * np.pi / fastest if fastest > 0.0 else np.inf
                 if dt_cap > 0.0:
@@ -379,9 +499,15 @@ def _walk(ref, st, pl):
         ):
             first, t_ev = _earliest_crossing(ref, st, nact, t_prev, t_eval)
             if first >= 0:
+                # (A held force's peak before the event is its turn's, as on the grid.)
+                _force_peaks(ref, st, nact, t_prev, t_ev, h, cam_held, seat_held, False)
                 st.nact = nact
                 _apply_event(ref, st, first, t_ev, pl)
                 return
+        if (cam_held and dprev[0] < 0.0 and dval[0] > 0.0) or (
+            seat_held and dprev[1] < 0.0 and dval[1] > 0.0
+        ):
+            _force_peaks(ref, st, nact, t_prev, t_eval, h, cam_held, seat_held, True)
         if at_break:
             # The break's point counts for the force maxima as a grid point does (a lift
             # table breaks every half degree: its steps seldom reach a grid point).
