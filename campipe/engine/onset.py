@@ -23,12 +23,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from campipe.constants import RPM
+from campipe.constants import RPM, TWO_PI
 from campipe.engine import slope_bound, steady
 from campipe.engine.batch import Case, CaseError, RunSettings, check_run, run_batch, train_matrices
 from campipe.engine.periodic import leave_speeds, prepare_steady
 from campipe.errors import CampipeError
 from campipe.model import ValveTrain
+from campipe.vocabulary import CAM_SEPARATION, EV_KIND, EV_TIME
 
 #: Turns the engine integrates for a steady state with the valve seated on part of the turn
 #: (from the periodic start of configuration I); the last is the steady state when it agrees
@@ -486,19 +487,23 @@ def confirm_settings(revolutions: float = CONFIRM_TURNS) -> RunSettings:
 def confirm_onsets(
     designs: Sequence[Case], onset: np.ndarray, offset: float = CONFIRM_OFFSET,
     revolutions: float = CONFIRM_TURNS,
-) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
     """The time-domain engine just below and just above each onset: no-follow per turn, the
     mean over the measured turns (``revolutions`` from the periodic start, the first
     CONFIRM_WARMUP left out: the study archive's ``separation_deg_per_rev``) at
-    onset·(1 ∓ offset). :func:`confirmed` says whether they agree with the onset.
+    onset·(1 ∓ offset), and where the train leaves the cam just above it.
+    :func:`confirmed` says whether they agree with the onset.
 
     Returns
     -------
     below, above : (n,) [rad]; NaN where there is no onset
+    where : (n,) [rad] the cam angle (0 … 2π) of the first separation from the cam in the
+        measured turns just above the onset; NaN where there is none (or no onset)
     """
     n = len(designs)
     below = np.full(n, np.nan)
     above = np.full(n, np.nan)
+    where = np.full(n, np.nan)
     idx = np.flatnonzero(np.isfinite(onset))
     if idx.size:
         cases = [
@@ -506,11 +511,27 @@ def confirm_onsets(
             for f in (1 - offset, 1 + offset)
             for i in idx
         ]
-        res = run_batch(cases, confirm_settings(revolutions), full_state=False,
-                        on_failure="record")  # fmt: skip
+        settings = confirm_settings(revolutions)
+        res = run_batch(cases, settings, full_state=False, on_failure="record")
         below[idx] = res.separation[: idx.size]
         above[idx] = res.separation[idx.size :]
-    return below, above
+        for k, i in enumerate(idx):
+            where[i] = first_separation(res.events[idx.size + k], cases[idx.size + k].speed,
+                                        settings.warmup or 0)  # fmt: skip
+    return below, above, where
+
+
+def first_separation(events: np.ndarray, speed: float, warmup: int = 0) -> float:
+    """The cam angle [rad] (0 … 2π) of the first of a case's ``events`` (rows as
+    ``BatchResult.events``') that leaves the cam from turn ``warmup`` on, at cam speed
+    ``speed`` [rad/s]; NaN if none does."""
+    if not len(events):
+        return np.nan
+    angle = speed * events[:, EV_TIME]
+    leaves = (events[:, EV_KIND] == CAM_SEPARATION) & (angle >= TWO_PI * warmup * (1 - 1e-12))
+    if not leaves.any():
+        return np.nan
+    return float(np.mod(angle[leaves][0], TWO_PI))
 
 
 def confirmed(below: np.ndarray, above: np.ndarray, level: np.ndarray | float = 0.0) -> np.ndarray:

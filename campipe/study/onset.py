@@ -27,7 +27,7 @@ from campipe.study.spec.expand import Study
 from campipe.study.spec.variables import case_coordinates
 
 #: The columns every onset table has after the varied parameters.
-ONSET_COLUMNS = ("onset_speed_rpm", "onset_status", "confirmed")
+ONSET_COLUMNS = ("onset_speed_rpm", "onset_status", "leaves_cam_at_deg", "confirmed")
 
 
 class OnsetError(CampipeError, ValueError):
@@ -46,6 +46,9 @@ class OnsetStudy:
     #: check's measured turns); NaN: unchecked
     below: np.ndarray
     above: np.ndarray  # (n,) likewise at onset·(1 + offset)
+    #: (n,) the cam angle [rad] where the engine first leaves the cam at onset·(1 + offset)
+    #: (``engine_onset.first_separation``); NaN: unchecked, or it did not
+    where: np.ndarray
     low: float  # the spec's speed range [rad/s]
     high: float
     search_seconds: float  # wall time of the search
@@ -175,17 +178,19 @@ def onset_study(
     record_loaded(search_kernels())  # the search's kernels, compiled ahead or not
     t1 = time.perf_counter()
     nan = np.full(len(designs), np.nan)
-    below, above = engine_onset.confirm_onsets(designs, onset.speed) if confirm else (nan, nan)
+    below, above, where = (
+        engine_onset.confirm_onsets(designs, onset.speed) if confirm else (nan, nan, nan)
+    )
     t2 = time.perf_counter()
-    table = _table(study, keys, firsts, onset, below, above)
+    table = _table(study, keys, firsts, onset, below, above, where)
     spec = study.spec
     return OnsetStudy(
-        study.name, keys, table, onset, below, above, low, high, t1 - t0, t2 - t1,
+        study.name, keys, table, onset, below, above, where, low, high, t1 - t0, t2 - t1,
         spec.text, dict(spec.overrides),
     )  # fmt: skip
 
 
-def _table(study, keys, firsts, onset, below, above) -> CaseTable:
+def _table(study, keys, firsts, onset, below, above, where) -> CaseTable:
     coords = case_coordinates(keys)
     columns = key_columns([study.cases[i] for i in firsts], {k: coords[k] for k in keys})
     units: dict[str, str] = {}
@@ -198,6 +203,8 @@ def _table(study, keys, firsts, onset, below, above) -> CaseTable:
     units["onset_speed_rpm"] = "rpm"
     columns["onset_status"] = onset.status.astype(object)
     units["onset_status"] = ""
+    columns["leaves_cam_at_deg"] = np.degrees(where)
+    units["leaves_cam_at_deg"] = "deg"
     columns["confirmed"] = np.where(checked, np.where(agrees, "yes", "NO"), "-").astype(object)
     units["confirmed"] = ""
     return CaseTable(columns, units, list(columns), len(firsts), study.name)
@@ -255,6 +262,11 @@ def file_contents(result: OnsetStudy) -> tuple[dict, list[VariableSpec], dict, d
             long_name=f"no-follow per turn, the mean over turns {engine_onset.CONFIRM_WARMUP + 1}"
             f"–{engine_onset.CONFIRM_TURNS} of the time-domain engine from the periodic start at "
             f"onset × ({side} {engine_onset.CONFIRM_OFFSET:g}); NaN: not checked")  # fmt: skip
+    add("leaves_cam_at_deg", ("combination",), "f8", np.degrees(result.where), units="degree",
+        long_name=f"cam angle where the time-domain engine first leaves the cam at onset × "
+        f"(1 + {engine_onset.CONFIRM_OFFSET:g}), in turns {engine_onset.CONFIRM_WARMUP + 1}–"
+        f"{engine_onset.CONFIRM_TURNS} (the events' angle within the turn); NaN: not checked, "
+        "or it did not leave")  # fmt: skip
     add("confirmed", ("combination",), "str", t.columns["confirmed"],
         long_name="the time-domain check agrees: yes (under the level below the onset, at "
         "or over it above), NO (it disagrees), - (not checked)")  # fmt: skip

@@ -11,6 +11,7 @@ from click.testing import CliRunner
 from study_helpers import write_spec
 
 from campipe.cli import main
+from campipe.engine.onset import CONFIRM_OFFSET
 
 M1, M2, LINK, RATE, PRELOAD = 0.05, 0.06, 20000e3, 40e3, 250.0
 MODEL = (
@@ -125,10 +126,11 @@ def test_chains_of_different_lengths_share_a_study_and_an_onset_file(tmp_path):
     """A one-mass and a two-mass chain in one spec: the archive's and the onset file's list
     coordinates are as wide as the longest list, NaN beyond a shorter one, and query shows
     each case's own list; the one-mass chain's onset is its closed form
-    ω² = 2(P₀ + k·h)/(m·h) (undamped) and the two-mass chain's the same as in a spec of its
-    own. Broken copies: the archive's list width taken from the last list coordinate (the
-    stiffnesses': a ValueError writing the masses), the onset file's lists along its
-    combinations only (a ValueError)."""
+    ω² = 2(P₀ + k·h)/(m·h) (undamped), and so is where it leaves the cam just above it, and
+    the two-mass chain's onset the same as in a spec of its own. Broken copies: the
+    archive's list width taken from the last list coordinate (the stiffnesses': a ValueError
+    writing the masses), the onset file's lists along its combinations only (a ValueError),
+    the first separation's angle not taken within its turn (980.5° for 260.5°)."""
     spec = write_spec(tmp_path, MIXED, "mixed.yaml")
     out = invoke("study", str(spec), "-o", str(tmp_path / "mixed.nc"))
     assert out.exit_code == 0, out.output
@@ -145,6 +147,13 @@ def test_chains_of_different_lengths_share_a_study_and_an_onset_file(tmp_path):
     m, h = 0.08, 0.008
     closed = math.sqrt(2 * (250.0 + 40e3 * h) / (m * h)) * 30 / math.pi
     assert one["masses"] == [0.08] and one["onset_speed_rpm"] == pytest.approx(closed, abs=0.1)
+    # Where it leaves the cam just above the onset: F = P₀ + k·h/2 + (h/2)(m·ω² − k)·sin θ on
+    # the lift h/2·(1 − sin θ) first reaches zero at θ = π + asin((P₀ + k·h/2)/((h/2)(mω² − k))),
+    # before the nose (270°); at the onset itself, the nose.
+    w = one["onset_speed_rpm"] * (1 + CONFIRM_OFFSET) * math.pi / 30
+    leaves = math.pi + math.asin((250.0 + 40e3 * h / 2) / (h / 2 * (m * w**2 - 40e3)))
+    assert one["leaves_cam_at_deg"] == pytest.approx(math.degrees(leaves), abs=1e-3)
+    assert 255.0 < one["leaves_cam_at_deg"] < 270.0
     alone = write_spec(tmp_path, MIXED.replace("  - {}\n", "").replace("cases:\n", "cases:\n"),
                        "alone.yaml")  # fmt: skip
     single = invoke("onset", str(alone), "-o", str(tmp_path / "alone.nc"), "--format", "json")
