@@ -61,6 +61,23 @@ REFINEMENTS = tuple(f"{member}_elements" for member in ELEMENTS)
     help="Override a model parameter, with units: --set spring_rate='260 lbf/in'. "
     "Repeatable. Names: " + ", ".join(PARAMETERS),
 )
+@click.option(
+    "--spec",
+    "spec_path",
+    type=click.Path(dir_okay=False),
+    metavar="SPEC",
+    help="Take the model from a study spec (its case --case's, where it varies model keys); "
+    "--set then sets the spec's model keys.",
+)
+@click.option(
+    "--case",
+    "case_index",
+    default=0,
+    show_default=True,
+    type=click.IntRange(min=0),
+    metavar="N",
+    help="With --spec, the case (from 0, in the archive's order) whose model is shown.",
+)
 @click.option("--json", "as_json", is_flag=True, help="Print one JSON object (SI units).")
 @click.option(
     "--convergence",
@@ -96,6 +113,8 @@ REFINEMENTS = tuple(f"{member}_elements" for member in ELEMENTS)
 def model(
     preset: str,
     sets: tuple[str, ...],
+    spec_path: str | None,
+    case_index: int,
     as_json: bool,
     convergence: str | None,
     cam_lift: str,
@@ -106,10 +125,15 @@ def model(
     kinematic ratio over the cam turn."""
     pint_without_dask()  # this process is the command's own
     overrides = parse_overrides(sets)
-    try:
-        train = valve_train(preset, overrides)
-    except ModelParameterError as exc:
-        raise click.UsageError(str(exc)) from None
+    if spec_path is None and case_index:
+        raise click.UsageError("--case chooses a case of --spec SPEC: give the spec")
+    if spec_path is not None:
+        train, preset = spec_model(spec_path, sets, case_index)
+    else:
+        try:
+            train = valve_train(preset, overrides)
+        except ModelParameterError as exc:
+            raise click.UsageError(str(exc)) from None
     if convergence is not None and train.chain:
         raise click.UsageError(
             f"--convergence refines the thesis's members; layout {train.layout} has none"
@@ -137,6 +161,42 @@ def model(
     else:
         text = model_text(train, sm, limits, preset, overrides) + ratio_text(table)
         click.echo(text + contact_text(contacts))
+
+
+def spec_model(spec_path: str, sets: tuple[str, ...], index: int):
+    """The train of a study spec's case ``index`` (each of ``sets``, NAME=VALUE, set as the
+    spec's ``model.NAME``) and the name it is shown under; where the spec varies model keys,
+    a line on stderr gives the case's values."""
+    from pathlib import Path
+
+    from campipe.cli.base import load_spec
+
+    study = load_spec(spec_path, tuple(f"model.{s.strip()}" for s in sets))
+    name = Path(spec_path).name
+    varied = [k for k in study.varied if k.startswith("model.")]
+    swept = sorted({f"model.{k}" for k in parse_overrides(sets)} & set(varied))
+    if swept:
+        raise click.UsageError(
+            f"{name} varies {', '.join(swept)} across its cases: --set does not choose among "
+            "them; choose a case with --case N"
+        )
+    n = len(study.cases)
+    if not 0 <= index < n:
+        raise click.BadParameter(f"{name} has cases 0 … {n - 1}", param_hint="--case")
+    case = study.cases[index]
+    train = case.case.train
+    if varied:
+        metric = train.layout != PUSHROD_ROCKER
+        keys = [k.removeprefix("model.") for k in varied]
+        shown = ", ".join(
+            f"{k} {_parameter_text(PARAMETERS[k], case.values['model.' + k], metric)}" for k in keys
+        )
+        click.echo(
+            f"campipe model: {name} varies {', '.join(varied)} across its {n} cases; shown: "
+            f"case {index}'s ({shown}); another with --case N",
+            err=True,
+        )
+    return train, f"{name} (case {index})"
 
 
 def _json_value(value: object) -> object:
@@ -393,11 +453,16 @@ def contact_text(contacts: list[ContactMode]) -> str:
     return "\n".join(lines)
 
 
+def _source(preset: str) -> str:
+    """The header's words for where the model came from: a preset, or a spec."""
+    return f"preset {preset}" if preset in PRESETS else f"spec {preset}"
+
+
 def model_text(train, sm, limits, preset, overrides) -> str:
     """The human form of ``campipe model``, in the thesis's units and layout (a lumped
     chain's in SI)."""
     lines = [
-        f"campipe model: preset {preset}, layout {train.layout}"
+        f"campipe model: {_source(preset)}, layout {train.layout}"
         + (f", overrides {', '.join(overrides)}" if overrides else "")
     ]
     sm, coords, names = _shown(train, sm)

@@ -345,3 +345,34 @@ def test_the_natural_frequencies_with_the_follower_on_the_cam():
     rigid = CliRunner().invoke(main, ["model", *one, "--json"])
     assert rigid.exit_code == 0, rigid.output
     assert json.loads(rigid.output)["natural_frequencies_on_the_cam"] == []
+
+
+def test_a_spec_s_model_and_its_case(tmp_path):
+    """`campipe model --spec`: the bundled bucket study's model without restating it (its
+    on-the-cam frequency the closed form √((k_link + k_s)/m_valve)), case --case N's lash
+    where the spec sweeps it (said on stderr), a model key set over the spec's, and refusals
+    naming --case and a swept key. Broken copies: the preset's train shown (the thesis
+    layout); the case's index ignored (the first case's 0.1 mm)."""
+    from study_helpers import STUDIES
+
+    spec = str(STUDIES / "bucket-tappet-lash.yaml")
+    out = CliRunner().invoke(main, ["model", "--spec", spec, "--case", "2", "--json"])
+    assert out.exit_code == 0, out.output
+    report = json.loads(out.output[out.output.index("{") :])
+    assert report["layout"] == "direct-acting"
+    assert report["parameters"]["lash"]["value"] == pytest.approx(0.25e-3)
+    link = 1.0 / (1.0 / 30000e3 + 1.0 / 60000e3)
+    assert_allclose(report["natural_frequencies_on_the_cam"], [math.sqrt((link + 35e3) / 0.065)],
+                    rtol=1e-10)  # fmt: skip
+    text = CliRunner().invoke(main, ["model", "--spec", spec, "--case", "2"])
+    assert "varies model.lash across its 18 cases; shown: case 2's (lash 0.25 mm)" in text.output
+    assert "spec bucket-tappet-lash.yaml (case 2), layout direct-acting" in text.output
+    rate = CliRunner().invoke(main, ["model", "--spec", spec, "--set", "spring_rate=40 N/mm"])
+    assert "spring_rate                    40 N/mm" in rate.output
+    swept = CliRunner().invoke(main, ["model", "--spec", spec, "--set", "lash=0.2 mm"])
+    assert swept.exit_code == 2 and "varies model.lash" in swept.output
+    assert "choose a case with --case N" in swept.output
+    beyond = CliRunner().invoke(main, ["model", "--spec", spec, "--case", "18"])
+    assert beyond.exit_code == 2 and "has cases 0 … 17" in beyond.output
+    alone = CliRunner().invoke(main, ["model", "--case", "1"])
+    assert alone.exit_code == 2 and "give the spec" in alone.output
