@@ -10,6 +10,7 @@ import click
 from campipe.cli.base import (
     SET_HELP,
     Failure,
+    InputFailure,
     archive_path,
     limit_options,
     limits_given,
@@ -486,7 +487,7 @@ def _open_archive(path, verify: bool = True, unread_dims: tuple[str, ...] = ()):
     """An archive (a file, or a parts archive's folder) as an xarray Dataset, or a Failure
     naming why it cannot be read."""
     from campipe.errors import CampipeError
-    from campipe.io.archive import unreadable
+    from campipe.io.archive import not_netcdf, unreadable
     from campipe.study.archive.open import open_archive
 
     try:
@@ -494,7 +495,8 @@ def _open_archive(path, verify: bool = True, unread_dims: tuple[str, ...] = ()):
     except CampipeError:
         raise
     except Exception as exc:
-        raise Failure(f"{path}: {unreadable(exc)}") from None
+        kind = InputFailure if not_netcdf(path) else Failure  # the user's path: exit status 2
+        raise kind(f"{path}: {unreadable(exc, path)}") from None
 
 
 @click.command()

@@ -86,6 +86,10 @@ class ArchiveFileError(CampipeError, RuntimeError):
     """A file that is not a campipe archive or batch file (``key`` the file)."""
 
 
+class NotNetcdfError(ArchiveFileError, ValueError):
+    """A path given as an archive that is not a netCDF file at all (the user's input)."""
+
+
 class ArchiveDamagedError(ArchiveFileError):
     """A file whose variables differ from the checksums stored when it was written, or
     cannot be read (``key`` the file, ``found`` the variables: ``attributes`` for the global
@@ -132,9 +136,27 @@ def missing_filter(exc: BaseException) -> str | None:
     )
 
 
-def unreadable(exc: BaseException) -> str:
+#: How a netCDF file begins: the classic formats' and netCDF-4's (HDF5's signature).
+NETCDF_MAGIC = (b"CDF\x01", b"CDF\x02", b"CDF\x05", b"\x89HDF\r\n\x1a\n")
+
+
+def not_netcdf(path: str | Path) -> bool:
+    """``path`` is a file that does not begin as a netCDF file does (a folder, a missing or
+    unreadable file: False, its reader says why)."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(8)
+    except OSError:
+        return False
+    return not head.startswith(NETCDF_MAGIC)
+
+
+def unreadable(exc: BaseException, path: str | Path | None = None) -> str:
     """Why a file cannot be read as an archive, from the exception its reader raised (not
-    netCDF, damaged, or a compression without its plugin: each reader fails its own way)."""
+    netCDF, damaged, or a compression without its plugin: each reader fails its own way);
+    given the file's ``path``, one that is not netCDF at all is said to be so."""
+    if path is not None and not_netcdf(path):
+        return "not a netCDF file (an archive campipe writes is one): check the path"
     why = f"cannot read as an archive ({type(exc).__name__}: {str(exc)[:200]})"
     plugin = missing_filter(exc)
     return why if plugin is None else f"{why}: {plugin}"

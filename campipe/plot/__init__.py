@@ -13,7 +13,13 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from campipe.io.archive import ArchiveDamagedError, ArchiveFileError, unreadable
+from campipe.io.archive import (
+    ArchiveDamagedError,
+    ArchiveFileError,
+    NotNetcdfError,
+    not_netcdf,
+    unreadable,
+)
 from campipe.io.outputs import FIGURE, check_output
 from campipe.study.archive.open import open_archive
 from campipe.study.spec.plots import PlotRequest
@@ -58,7 +64,8 @@ def plot_archive(
     except ArchiveDamagedError:
         raise
     except Exception as exc:
-        raise ArchiveFileError.at(str(archive), unreadable(exc)) from None
+        kind = NotNetcdfError if not_netcdf(archive) else ArchiveFileError
+        raise kind.at(str(archive), unreadable(exc, archive)) from None
     with ds:
         spec = str(ds.attrs.get("spec_file") or "")
         check_output(

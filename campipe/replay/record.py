@@ -284,7 +284,7 @@ def replay_archive(
     except ArchiveDamagedError:
         raise
     except (OSError, ValueError, RuntimeError) as exc:
-        raise ReplayError(f"{archive}: {unreadable(exc)}", key=str(archive)) from None
+        raise ReplayError(f"{archive}: {unreadable(exc, archive)}", key=str(archive)) from None
     with ds:
         if not spawn:
             check_recording(archive, ds.attrs, output, overwrite)

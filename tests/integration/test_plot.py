@@ -269,7 +269,9 @@ def test_every_format_by_its_suffix_and_errors_by_their_option(archive, tmp_path
     text = tmp_path / "notes.nc"
     text.write_text("not netCDF")
     result = runner.invoke(main, ["plot", "metric", str(text)])
-    assert result.exit_code == 1 and f"{text}: cannot read as an archive" in result.output
+    assert result.exit_code == 2 and f"{text}: not a netCDF file" in result.output
+    query = runner.invoke(main, ["query", str(text)])
+    assert query.exit_code == 2 and f"{text}: not a netCDF file" in query.output
     older = xr.load_dataset(archive).rename({"case": "case_id"})
     older.attrs["campipe_layout"] = "campipe-archive-2"
     older.to_netcdf(tmp_path / "older.nc")
