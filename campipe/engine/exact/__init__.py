@@ -53,7 +53,8 @@ coefficients of f1, f2 in a monitor and its derivatives, and their magnitudes),
 The kernel's steps, each a function below: begin a segment (``_begin_segment``: forcing,
 particular solution, modal start, monitors, mode pairs), walk the grid (``_walk``: plan the
 steps, advance, watch the monitors), locate an event (``_earliest_crossing``, ``_root``), apply
-it (``_apply_event``), cross a profile break (``_cross_break``).
+it (``_apply_event``), cross a profile break (``_cross_break``); the held forces' peaks between
+the grid's points are ``peaks``' (``_force_peaks``, and ``_near_peak`` for the step's plan).
 """
 
 from campipe.engine.exact.kernel import ahead_signatures, modal_exact_batch

@@ -1,0 +1,129 @@
+"""modal-exact's contact-force maxima: each turn's largest held force at the grid's points and
+at the peaks between them, located by Newton steps on the force's derivative where a peak may
+be the turn's largest, and the rule that keeps the grid fine enough there (docs/engine.md,
+"Force maxima are peaks, not samples")."""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from campipe.engine.closed_form import DABS, EABS, INVD, W1_ABS, W2_ABS, eval_monitor
+from campipe.engine.common import HELPER, deref, turn_of
+from campipe.engine.exact.state import ROOT_ITERATIONS, _at
+from campipe.engine.metrics import MAX_CAM_FORCE, MAX_SEAT_FORCE
+
+
+@njit(inline="always", nogil=True)
+def _force_maxima(per_rev, c, turn, cam_held, seat_held, gval):
+    """The held contacts' forces (monitors ``gval``) into the turn's force maxima."""
+    if 0 <= turn < per_rev.shape[1]:
+        if cam_held:
+            per_rev[c, turn, MAX_CAM_FORCE] = max(per_rev[c, turn, MAX_CAM_FORCE], -gval[0])
+        if seat_held:
+            per_rev[c, turn, MAX_SEAT_FORCE] = max(per_rev[c, turn, MAX_SEAT_FORCE], -gval[1])
+
+
+@njit(inline="always", nogil=True)
+def _ringing(WC, MC, nact, m, tau, back):
+    """The most the blocks 0 … nact − 1 add to monitor m up to τ after the segment start from
+    where their envelopes are (with ``back``, from a grid step before: the envelopes, which
+    only decay, divided by the step's decay)."""
+    amp = 0.0
+    for jj in range(nact):
+        s2 = min(tau, MC[INVD, jj])
+        a = (WC[W1_ABS, m, jj] + WC[W2_ABS, m, jj] * s2) * MC[EABS, jj]
+        amp += a / MC[DABS, jj] if back else a
+    return amp
+
+
+@njit(inline="always", nogil=True)
+def _so_far(per_rev, c, w, t_a, t_b, m):
+    """The least of the running maxima of held contact m's force (the cam's, the seat's) in
+    the turns holding t_a and t_b."""
+    col = MAX_CAM_FORCE if m == 0 else MAX_SEAT_FORCE
+    n_rev = per_rev.shape[1]
+    so_far = np.inf
+    for turn in (turn_of(w, t_a), turn_of(w, t_b)):
+        if 0 <= turn < n_rev:
+            so_far = min(so_far, per_rev[c, turn, col])
+    return so_far
+
+
+@njit(inline="always", nogil=True)
+def _above(f_a, f_b, ring, w, h, so_far):
+    """A held force ending an interval of length h [s] at f_a and f_b [N], its blocks adding
+    at most ``ring`` [N], may exceed ``so_far`` inside it: by at most twice the blocks'
+    amplitudes plus its forced part's bulge, taken as 8·(ωh)² of the force (a forced part up
+    to the cam's eighth harmonic)."""
+    end = max(f_a, f_b)
+    return end + 2.0 * ring + 8.0 * (w * h) ** 2 * abs(end) >= so_far
+
+
+@njit(inline="always", nogil=True)
+def _near_peak(WC, MC, G, GT, nact, per_rev, c, w, th0, gdeg, gval, m, t_s, t_from, t_next):
+    """Held contact m's force may exceed its turn's largest so far between the grid's plan
+    from t_from (its force −gval[m], the blocks' envelopes there) to t_next, where its forced
+    part ends at −(polynomial + harmonic), in the segment from t_s."""
+    x = w * t_next - th0
+    p = 0.0
+    for k in range(gdeg, -1, -1):
+        p = p * x + G[m, k]
+    p += GT[m].real * np.cos(w * t_next) - GT[m].imag * np.sin(w * t_next)
+    ring = _ringing(WC, MC, nact, m, t_next - t_s, False)
+    return _above(-gval[m], -p, ring, w, t_next - t_from,
+                  _so_far(per_rev, c, w, t_from, t_next, m))  # fmt: skip
+
+
+@njit(inline="always", nogil=True)
+def _peak(runs, out, ws, st, nact, m, ta, tb, da, db):
+    """Locate held contact m's force peak where its monitor's derivative rises through zero
+    in (ta, tb] (da < 0 < db its values there) and count it in its turn's maximum: Newton
+    steps on the derivative from the secant's point, kept inside the bracket (bisection
+    otherwise), to ``run.tolerance`` (the force's error is second order in the time's)."""
+    t_s, w, th0 = st.t_s, st.w, st.th0
+    t = ta - da * (tb - ta) / (db - da)
+    g = 0.0
+    for _ in range(ROOT_ITERATIONS):
+        g, dg, d2g = eval_monitor(ws.WC, ws.MC, nact, ws.G, ws.GT, m, t - t_s, w, w * t - th0,
+                                  w * t, st.gdeg)  # fmt: skip
+        if dg < 0.0:
+            ta = t
+        else:
+            tb = t
+        t_new = t - dg / d2g if d2g > 0.0 else np.nan
+        if not (ta < t_new < tb):
+            t_new = 0.5 * (ta + tb)
+        if abs(t_new - t) <= runs.tolerance or tb - ta <= runs.tolerance:
+            break
+        t = t_new
+    turn = turn_of(w, t)
+    col = MAX_CAM_FORCE if m == 0 else MAX_SEAT_FORCE
+    if 0 <= turn < out.per_rev.shape[1]:
+        out.per_rev[st.c, turn, col] = max(out.per_rev[st.c, turn, col], -g)
+
+
+@njit(**HELPER)
+def _force_peaks(ref, st, nact, t_prev, t_to, h, cam_held, seat_held, known):
+    """The held contacts' greatest forces inside (t_prev, t_to] (a grid step of length h [s]
+    from t_prev; with ``known``, ws.gval and ws.dval hold the monitors at t_to) into the
+    turn's force maxima: where a force's derivative turns from + to − across the step (its
+    monitor's from − to +), the peak is located (``_peak``), so that a ringing the grid
+    samples coarsely is read at its peak, if it may exceed the turn's largest so far
+    (``_above``). The grid resolves every block that could move a peak by more than the
+    peak tolerance (``_near_peak``)."""
+    _, _, _, runs, out, ws = deref(ref)
+    for m in range(2):
+        if not ((cam_held if m == 0 else seat_held) and ws.dprev[m] < 0.0):
+            continue
+        if known:
+            g_to, db = ws.gval[m], ws.dval[m]
+        else:
+            g_to, db = _at(False, ws.WC, ws.MC, nact, ws.G, ws.GT, m, st.t_s, t_to, st.w,
+                           st.th0, st.gdeg)  # fmt: skip
+        if not db > 0.0:
+            continue
+        ring = _ringing(ws.WC, ws.MC, nact, m, t_to - st.t_s, True)
+        so_far = _so_far(out.per_rev, st.c, st.w, t_prev, t_to, m)
+        if _above(-ws.gprev[m], -g_to, ring, st.w, h, so_far):
+            _peak(runs, out, ws, st, nact, m, t_prev, t_to, ws.dprev[m], db)
