@@ -127,8 +127,9 @@ def model(
     overrides = parse_overrides(sets)
     if spec_path is None and case_index:
         raise click.UsageError("--case chooses a case of --spec SPEC: give the spec")
+    cam = None
     if spec_path is not None:
-        train, preset = spec_model(spec_path, sets, case_index)
+        train, preset, cam = spec_model(spec_path, sets, case_index)
     else:
         try:
             train = valve_train(preset, overrides)
@@ -141,7 +142,7 @@ def model(
     if convergence is not None:
         report = convergence_report(train, convergence, modes)
         if as_json:
-            click.echo(json.dumps({"preset": preset, **report}, indent=1))
+            click.echo(json.dumps({**_source_json(preset), **report}, indent=1))
         else:
             click.echo(convergence_text(report, preset, overrides))
         return
@@ -153,7 +154,7 @@ def model(
         lift = parse_quantity(cam_lift, "m", "--cam-lift", "mm")
     except QuantityError as exc:
         raise click.UsageError(str(exc)) from None
-    table = ratio_table(train, sm, lift, math.radians(ratio_step))
+    table = ratio_table(train, sm, lift, math.radians(ratio_step), cam)
     contacts = contact_modes(train, sm)
     if as_json:
         report = model_report(train, sm, limits, preset)
@@ -196,7 +197,8 @@ def spec_model(spec_path: str, sets: tuple[str, ...], index: int):
             f"case {index}'s ({shown}); another with --case N",
             err=True,
         )
-    return train, f"{name} (case {index})"
+    cam = case.case.profile
+    return train, f"{name} (case {index})", getattr(cam, "cam", None) or cam
 
 
 def _json_value(value: object) -> object:
@@ -241,7 +243,7 @@ def model_report(train, sm, limits, preset) -> dict[str, object]:
     sm, coords, names = _shown(train, sm)
     held = on_the_cam(sm, coords)
     return {
-        "preset": preset,
+        **_source_json(preset),
         "layout": train.layout,
         "parameters": {
             name: {
@@ -331,23 +333,26 @@ for _chain in (DIRECT_ACTING, *LEVERS):
     DISPLAY[_chain] = DISPLAY[LUMPED]
 
 
-def ratio_table(train, sm, lift: float, step: float) -> dict[str, object]:
+def ratio_table(train, sm, lift: float, step: float, cam=None) -> dict[str, object]:
     """The kinematic ratio over the cam turn (SI, JSON form): a lever layout's, valve lift and
-    lever ratio every ``step`` [rad] under the harmonic cam of ``lift`` [m]
-    (:mod:`campipe.model.levers`); another layout's, one constant (the thesis's rocker's
-    ``lash_ratio``, a chain's 1: its coordinates are the valve side's)."""
+    lever ratio every ``step`` [rad] under the ``cam`` profile (a spec's), or else the harmonic
+    cam of ``lift`` [m] (:mod:`campipe.model.levers`); another layout's, one constant (the
+    thesis's rocker's ``lash_ratio``, a chain's 1: its coordinates are the valve side's)."""
     if train.layout not in LEVERS:
         ratio = lash_ratio(sm) if train.layout == PUSHROD_ROCKER else 1.0
         return {"kinematic_ratio": {"constant": ratio}}
-    if not lift > 0.0:
-        raise click.UsageError(f"--cam-lift: found {lift!r} m, expected a positive lift")
+    label = f"the spec's cam, {cam.label}" if cam is not None else f"harmonic, lift {lift:g} m"
+    if cam is None:
+        if not lift > 0.0:
+            raise click.UsageError(f"--cam-lift: found {lift!r} m, expected a positive lift")
+        cam = harmonic(lift)
     theta = np.arange(0.0, TWO_PI - 1e-12, step)
-    state = cam_kinematics(harmonic(lift), train, theta)
+    state = cam_kinematics(cam, train, theta)
     return {
         "kinematic_ratio": {
-            "cam": f"harmonic, lift {lift:g} m",
+            "cam": label,
             "cam_angle": theta.tolist(),
-            "cam_lift": evaluate(harmonic(lift), theta)[0].tolist(),
+            "cam_lift": evaluate(cam, theta)[0].tolist(),
             "valve_lift": state.valve_lift.tolist(),
             "ratio": state.ratio.tolist(),
             "units": {"cam_angle": "rad", "cam_lift": "m", "valve_lift": "m", "ratio": "1"},
@@ -451,6 +456,11 @@ def contact_text(contacts: list[ContactMode]) -> str:
             f" ζ = c/(2√(k·m)) = {c.contact_damping_ratio:.3g}: {rebound}"
         )
     return "\n".join(lines)
+
+
+def _source_json(preset: str) -> dict[str, str]:
+    """The JSON's key for where the model came from: ``preset``, or ``spec`` (its case)."""
+    return {"preset": preset} if preset in PRESETS else {"spec": preset}
 
 
 def _source(preset: str) -> str:
@@ -567,7 +577,7 @@ def convergence_text(report: dict, preset: str, overrides) -> str:
     counts = report["elements"]
     member = parameter.removesuffix("_elements").replace("_", " ")
     lines = [
-        f"campipe model --convergence {parameter}: preset {preset}"
+        f"campipe model --convergence {parameter}: {_source(preset)}"
         + (f", overrides {', '.join(overrides)}" if overrides else ""),
         "",
         f"Lowest natural frequencies [rad/s] with the {member} divided into n equal elements.",

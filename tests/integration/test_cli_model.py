@@ -351,15 +351,18 @@ def test_a_spec_s_model_and_its_case(tmp_path):
     """`campipe model --spec`: the bundled bucket study's model without restating it (its
     on-the-cam frequency the closed form √((k_link + k_s)/m_valve)), case --case N's lash
     where the spec sweeps it (said on stderr), a model key set over the spec's, and refusals
-    naming --case and a swept key. Broken copies: the preset's train shown (the thesis
-    layout); the case's index ignored (the first case's 0.1 mm)."""
+    naming --case and a swept key; a lever layout's ratio table under the spec's cam. Broken
+    copies: the preset's train shown (the thesis layout); the case's index ignored (the first
+    case's 0.1 mm); the table under --cam-lift's harmonic cam (its largest lift 6 mm)."""
     from study_helpers import STUDIES
 
     spec = str(STUDIES / "bucket-tappet-lash.yaml")
     out = CliRunner().invoke(main, ["model", "--spec", spec, "--case", "2", "--json"])
     assert out.exit_code == 0, out.output
     report = json.loads(out.output[out.output.index("{") :])
-    assert report["layout"] == "direct-acting"
+    assert (
+        report["layout"] == "direct-acting" and report["spec"] == "bucket-tappet-lash.yaml (case 2)"
+    )
     assert report["parameters"]["lash"]["value"] == pytest.approx(0.25e-3)
     link = 1.0 / (1.0 / 30000e3 + 1.0 / 60000e3)
     assert_allclose(report["natural_frequencies_on_the_cam"], [math.sqrt((link + 35e3) / 0.065)],
@@ -376,3 +379,12 @@ def test_a_spec_s_model_and_its_case(tmp_path):
     assert beyond.exit_code == 2 and "has cases 0 … 17" in beyond.output
     alone = CliRunner().invoke(main, ["model", "--case", "1"])
     assert alone.exit_code == 2 and "give the spec" in alone.output
+    # A lever layout's ratio table runs under the spec's cam, not --cam-lift's harmonic one:
+    # the finger's largest valve lift is the spec's 6.5 mm cam through its ratio (about 1.5).
+    finger = CliRunner().invoke(
+        main, ["model", "--spec", str(STUDIES / "finger-follower.yaml"), "--json"]
+    )
+    table = json.loads(finger.output[finger.output.index("{") :])["kinematic_ratio"]
+    assert table["cam"].startswith("the spec's cam, polydyne-4567")
+    assert max(table["cam_lift"]) == pytest.approx(6.5e-3, rel=1e-9)
+    assert 9.5e-3 < max(table["valve_lift"]) < 1.0e-2
