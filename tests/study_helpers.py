@@ -54,6 +54,20 @@ def changed(base: dict, **changes: object) -> dict:
 #: The small study the integration tests share (``small_archive`` in conftest.py): the thesis's
 #: harmonic cam at three speeds across the separation onset, without a seat and with one at
 #: 0.1 in (six cases, the speed outermost), two turns, with q and the member loads recorded.
+#: An undamped bucket tappet with 0.1 mm of lash on a polydyne cam's constant-velocity ramps:
+#: seated, its tappet swings on its stem (test_joint_tension, test_force_peaks: tappet 45 g,
+#: stem and contact 30000 and 60000 N/mm in series, seated spring 220 N, ramp 0.3 mm over
+#: 30°). A spec without its run and sweep.
+BUCKET_RING = """\
+name: bucket-ring
+model: {layout: direct-acting, tappet_mass: 0.045 kg, valve_mass: 0.065 kg,
+        stem_stiffness: 30000 N/mm, tappet_contact_stiffness: 60000 N/mm,
+        spring_rate: 35 N/mm, spring_preload: 220 N, damping_ratios: [0], lash: 0.1 mm}
+profile: {kind: polydyne-4567, lift: 9 mm, rise: 110 deg, dwell: 20 deg, fall: 110 deg,
+          ramp_height: 0.3 mm, ramp_duration: 30 deg, ramp_shape: constant-velocity}
+closure: force
+"""
+
 SMALL_SPEC = """
 name: small
 profile: {kind: harmonic, lift: 1 in}

@@ -129,7 +129,7 @@ def model(
         raise click.UsageError("--case chooses a case of --spec SPEC: give the spec")
     cam = None
     if spec_path is not None:
-        train, preset, cam = spec_model(spec_path, sets, case_index)
+        train, preset, cam = spec_model(spec_path, sets, overrides, case_index)
     else:
         try:
             train = valve_train(preset, overrides)
@@ -164,10 +164,10 @@ def model(
         click.echo(text + contact_text(contacts))
 
 
-def spec_model(spec_path: str, sets: tuple[str, ...], index: int):
+def spec_model(spec_path: str, sets: tuple[str, ...], overrides: dict, index: int):
     """The train of a study spec's case ``index`` (each of ``sets``, NAME=VALUE, set as the
-    spec's ``model.NAME``) and the name it is shown under; where the spec varies model keys,
-    a line on stderr gives the case's values."""
+    spec's ``model.NAME``; ``overrides`` the same parsed), the name it is shown under and its
+    cam; where the spec varies model keys, a line on stderr gives the case's values."""
     from pathlib import Path
 
     from campipe.cli.base import load_spec
@@ -175,7 +175,7 @@ def spec_model(spec_path: str, sets: tuple[str, ...], index: int):
     study = load_spec(spec_path, tuple(f"model.{s.strip()}" for s in sets))
     name = Path(spec_path).name
     varied = [k for k in study.varied if k.startswith("model.")]
-    swept = sorted({f"model.{k}" for k in parse_overrides(sets)} & set(varied))
+    swept = sorted({f"model.{k}" for k in overrides} & set(varied))
     if swept:
         raise click.UsageError(
             f"{name} varies {', '.join(swept)} across its cases: --set does not choose among "

@@ -10,7 +10,6 @@ import click
 from campipe.cli.base import (
     SET_HELP,
     Failure,
-    InputFailure,
     archive_path,
     limit_options,
     limits_given,
@@ -484,10 +483,10 @@ def query(archive, where, columns, sort, fmt, summary, units, verify) -> None:
 
 
 def _open_archive(path, verify: bool = True, unread_dims: tuple[str, ...] = ()):
-    """An archive (a file, or a parts archive's folder) as an xarray Dataset, or a Failure
-    naming why it cannot be read."""
+    """An archive (a file, or a parts archive's folder) as an xarray Dataset, or the error
+    naming why it cannot be read (``io.archive.unreadable_error``)."""
     from campipe.errors import CampipeError
-    from campipe.io.archive import not_netcdf, unreadable
+    from campipe.io.archive import unreadable_error
     from campipe.study.archive.open import open_archive
 
     try:
@@ -495,8 +494,7 @@ def _open_archive(path, verify: bool = True, unread_dims: tuple[str, ...] = ()):
     except CampipeError:
         raise
     except Exception as exc:
-        kind = InputFailure if not_netcdf(path) else Failure  # the user's path: exit status 2
-        raise kind(f"{path}: {unreadable(exc, path)}") from None
+        raise unreadable_error(path, exc) from None
 
 
 @click.command()

@@ -477,6 +477,13 @@ def block_derivative(w1, w2, lbar, d2):
     return lbar * w1 + w2, d2 * w1 + lbar * w2
 
 
+@njit(inline="always", nogil=True)
+def monitor_envelope(WC, MC, m, jj, tau):
+    """The most block column jj adds to monitor m from where its envelope ``MC[EABS]`` is, up
+    to τ after the segment start (a defective block's secular term grows until 1/δ)."""
+    return (WC[W1_ABS, m, jj] + WC[W2_ABS, m, jj] * min(tau, MC[INVD, jj])) * MC[EABS, jj]
+
+
 @njit(**HELPER)
 def eval_monitor(WC, MC, nact, G, GT, m, tau, w, x, th, gdeg):
     """Monitor m and its first two time derivatives τ after the segment start (local angle x,

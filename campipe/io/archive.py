@@ -151,15 +151,28 @@ def not_netcdf(path: str | Path) -> bool:
     return not head.startswith(NETCDF_MAGIC)
 
 
+#: What a file that is not netCDF at all is told.
+NOT_NETCDF = "not a netCDF file (an archive campipe writes is one): check the path"
+
+
 def unreadable(exc: BaseException, path: str | Path | None = None) -> str:
     """Why a file cannot be read as an archive, from the exception its reader raised (not
     netCDF, damaged, or a compression without its plugin: each reader fails its own way);
     given the file's ``path``, one that is not netCDF at all is said to be so."""
     if path is not None and not_netcdf(path):
-        return "not a netCDF file (an archive campipe writes is one): check the path"
+        return NOT_NETCDF
     why = f"cannot read as an archive ({type(exc).__name__}: {str(exc)[:200]})"
     plugin = missing_filter(exc)
     return why if plugin is None else f"{why}: {plugin}"
+
+
+def unreadable_error(path: str | Path, exc: BaseException) -> ArchiveFileError:
+    """The error for ``path``, which its reader refused with ``exc``: a NotNetcdfError (the
+    user's input) for a file that is not netCDF at all, else an ArchiveFileError saying why
+    (``unreadable``)."""
+    if not_netcdf(path):
+        return NotNetcdfError.at(str(path), NOT_NETCDF)
+    return ArchiveFileError.at(str(path), unreadable(exc))
 
 
 def write_error(path: Path, exc: BaseException) -> ArchiveWriteError:

@@ -13,13 +13,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from campipe.io.archive import (
-    ArchiveDamagedError,
-    ArchiveFileError,
-    NotNetcdfError,
-    not_netcdf,
-    unreadable,
-)
+from campipe.io.archive import ArchiveDamagedError, unreadable_error
 from campipe.io.outputs import FIGURE, check_output
 from campipe.study.archive.open import open_archive
 from campipe.study.spec.plots import PlotRequest
@@ -64,8 +58,7 @@ def plot_archive(
     except ArchiveDamagedError:
         raise
     except Exception as exc:
-        kind = NotNetcdfError if not_netcdf(archive) else ArchiveFileError
-        raise kind.at(str(archive), unreadable(exc, archive)) from None
+        raise unreadable_error(archive, exc) from None
     with ds:
         spec = str(ds.attrs.get("spec_file") or "")
         check_output(

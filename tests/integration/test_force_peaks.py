@@ -7,7 +7,7 @@ import math
 import numpy as np
 import xarray as xr
 from click.testing import CliRunner
-from study_helpers import write_spec
+from study_helpers import BUCKET_RING, write_spec
 
 from campipe.cli import main
 
@@ -34,19 +34,8 @@ def test_a_seated_bucket_s_seat_force_peaks_at_the_closed_form_between_coarse_sa
     read at the grid's points (273.95 N at 1000 rpm against the closed form's 276.92 N)."""
     ds = _run(
         tmp_path,
-        f"""\
-        name: bucket-ring
-        model: {{layout: direct-acting, tappet_mass: {TAPPET} kg, valve_mass: 0.065 kg,
-                stem_stiffness: 30000 N/mm, tappet_contact_stiffness: 60000 N/mm,
-                spring_rate: 35 N/mm, spring_preload: {PRELOAD} N, damping_ratios: [0],
-                lash: 0.1 mm}}
-        profile: {{kind: polydyne-4567, lift: 9 mm, rise: 110 deg, dwell: 20 deg,
-                  fall: 110 deg, ramp_height: 0.3 mm, ramp_duration: 30 deg,
-                  ramp_shape: constant-velocity}}
-        closure: force
-        run: {{revolutions: 2, output_every: 5 deg}}
-        sweep: {{speed: [1000 rpm, 3000 rpm]}}
-        """,
+        BUCKET_RING
+        + "run: {revolutions: 2, output_every: 5 deg}\nsweep: {speed: [1000 rpm, 3000 rpm]}\n",
         "ring",
     )
     k = 1.0 / (1.0 / STEM + 1.0 / CONTACT)

@@ -7,7 +7,7 @@ import math
 import xarray as xr
 from click.testing import CliRunner
 from numpy.testing import assert_allclose
-from study_helpers import write_spec
+from study_helpers import BUCKET_RING, write_spec
 
 from campipe.cli import main
 from campipe.engine import Case
@@ -47,19 +47,8 @@ def test_a_seated_bucket_s_tappet_rings_on_its_stem_with_the_closed_form_s_force
     (its first turn NaN); the summary's line missing."""
     spec = write_spec(
         tmp_path,
-        f"""\
-        name: bucket-ring
-        model: {{layout: direct-acting, tappet_mass: {TAPPET} kg, valve_mass: 0.065 kg,
-                stem_stiffness: 30000 N/mm, tappet_contact_stiffness: 60000 N/mm,
-                spring_rate: 35 N/mm, spring_preload: {PRELOAD} N, damping_ratios: [0],
-                lash: 0.1 mm}}
-        profile: {{kind: polydyne-4567, lift: 9 mm, rise: 110 deg, dwell: 20 deg,
-                  fall: 110 deg, ramp_height: 0.3 mm, ramp_duration: 30 deg,
-                  ramp_shape: constant-velocity}}
-        closure: force
-        run: {{revolutions: 2, output_every: 0.01 deg, record: [member_loads]}}
-        sweep: {{speed: [{RPM} rpm]}}
-        """,
+        BUCKET_RING + "run: {revolutions: 2, output_every: 0.01 deg, record: [member_loads]}\n"
+        f"sweep: {{speed: [{RPM} rpm]}}\n",
     )
     archive = tmp_path / "ring.nc"
     out = CliRunner().invoke(main, ["study", str(spec), "-o", str(archive)])

@@ -23,10 +23,9 @@ from campipe.engine.closed_form import (
     INVD,
     LBAR,
     RATE,
-    W1_ABS,
-    W2_ABS,
     block_basis,
     harmonic_response,
+    monitor_envelope,
 )
 from campipe.engine.common import (
     HELPER,
@@ -127,14 +126,13 @@ def _fastest_needed(WC, MC, watch, level, gval, nact, tau, n_mon, near):
     k = 0
     spent = 0.0
     while k < nact:
-        s2 = min(tau, MC[INVD, k])
         amp = 0.0
         for m in range(2):
             if watch[m]:
-                amp = max(amp, (WC[W1_ABS, m, k] + WC[W2_ABS, m, k] * s2) * MC[EABS, k])
+                amp = max(amp, monitor_envelope(WC, MC, m, k, tau))
         for m in range(2, n_mon):  # (apart, as above)
             if watch[m]:
-                amp = max(amp, (WC[W1_ABS, m, k] + WC[W2_ABS, m, k] * s2) * MC[EABS, k])
+                amp = max(amp, monitor_envelope(WC, MC, m, k, tau))
         if spent + amp >= 0.5 * margin:
             break
         spent += amp

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from campipe.engine.closed_form import DABS, EABS, INVD, W1_ABS, W2_ABS, eval_monitor
+from campipe.engine.closed_form import DABS, eval_monitor, monitor_envelope
 from campipe.engine.common import HELPER, deref, turn_of
 from campipe.engine.exact.state import ROOT_ITERATIONS, _at
 from campipe.engine.metrics import MAX_CAM_FORCE, MAX_SEAT_FORCE
@@ -31,8 +31,7 @@ def _ringing(WC, MC, nact, m, tau, back):
     only decay, divided by the step's decay)."""
     amp = 0.0
     for jj in range(nact):
-        s2 = min(tau, MC[INVD, jj])
-        a = (WC[W1_ABS, m, jj] + WC[W2_ABS, m, jj] * s2) * MC[EABS, jj]
+        a = monitor_envelope(WC, MC, m, jj, tau)
         amp += a / MC[DABS, jj] if back else a
     return amp
 
@@ -65,11 +64,9 @@ def _near_peak(WC, MC, G, GT, nact, per_rev, c, w, th0, gdeg, gval, m, t_s, t_fr
     """Held contact m's force may exceed its turn's largest so far between the grid's plan
     from t_from (its force −gval[m], the blocks' envelopes there) to t_next, where its forced
     part ends at −(polynomial + harmonic), in the segment from t_s."""
-    x = w * t_next - th0
-    p = 0.0
-    for k in range(gdeg, -1, -1):
-        p = p * x + G[m, k]
-    p += GT[m].real * np.cos(w * t_next) - GT[m].imag * np.sin(w * t_next)
+    # (no blocks: the monitor's forced part alone)
+    p, _, _ = eval_monitor(WC, MC, 0, G, GT, m, t_next - t_s, w, w * t_next - th0, w * t_next,
+                           gdeg)  # fmt: skip
     ring = _ringing(WC, MC, nact, m, t_next - t_s, False)
     return _above(-gval[m], -p, ring, w, t_next - t_from,
                   _so_far(per_rev, c, w, t_from, t_next, m))  # fmt: skip
@@ -80,7 +77,11 @@ def _peak(runs, out, ws, st, nact, m, ta, tb, da, db):
     """Locate held contact m's force peak where its monitor's derivative rises through zero
     in (ta, tb] (da < 0 < db its values there) and count it in its turn's maximum: Newton
     steps on the derivative from the secant's point, kept inside the bracket (bisection
-    otherwise), to ``run.tolerance`` (the force's error is second order in the time's)."""
+    otherwise), to ``run.tolerance`` (the force's error is second order in the time's). Not
+    ``state._root``: each of its steps here gives the force with the derivatives
+    (``eval_monitor``), the last one the peak's, where ``_root`` closes its bracket to the
+    tolerance and the force would take one evaluation more (a peak is located at every
+    turning of a ringing force that may be the turn's largest)."""
     t_s, w, th0 = st.t_s, st.w, st.th0
     t = ta - da * (tb - ta) / (db - da)
     g = 0.0
