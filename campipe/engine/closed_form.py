@@ -478,10 +478,11 @@ def block_derivative(w1, w2, lbar, d2):
 
 
 @njit(inline="always", nogil=True)
-def monitor_envelope(WC, MC, m, jj, tau):
+def monitor_envelope(WC, MC, m, jj, s2):
     """The most block column jj adds to monitor m from where its envelope ``MC[EABS]`` is, up
-    to τ after the segment start (a defective block's secular term grows until 1/δ)."""
-    return (WC[W1_ABS, m, jj] + WC[W2_ABS, m, jj] * min(tau, MC[INVD, jj])) * MC[EABS, jj]
+    to τ after the segment start, ``s2`` = min(τ, MC[INVD, jj]) (a defective block's secular
+    term grows until 1/δ)."""
+    return (WC[W1_ABS, m, jj] + WC[W2_ABS, m, jj] * s2) * MC[EABS, jj]
 
 
 @njit(**HELPER)

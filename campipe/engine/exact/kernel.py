@@ -126,13 +126,14 @@ def _fastest_needed(WC, MC, watch, level, gval, nact, tau, n_mon, near):
     k = 0
     spent = 0.0
     while k < nact:
+        s2 = min(tau, MC[INVD, k])
         amp = 0.0
         for m in range(2):
             if watch[m]:
-                amp = max(amp, monitor_envelope(WC, MC, m, k, tau))
+                amp = max(amp, monitor_envelope(WC, MC, m, k, s2))
         for m in range(2, n_mon):  # (apart, as above)
             if watch[m]:
-                amp = max(amp, monitor_envelope(WC, MC, m, k, tau))
+                amp = max(amp, monitor_envelope(WC, MC, m, k, s2))
         if spent + amp >= 0.5 * margin:
             break
         spent += amp

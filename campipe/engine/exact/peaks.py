@@ -8,10 +8,11 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from campipe.engine.closed_form import DABS, eval_monitor, monitor_envelope
+from campipe.engine.closed_form import DABS, INVD, eval_monitor, monitor_envelope
 from campipe.engine.common import HELPER, deref, turn_of
 from campipe.engine.exact.state import ROOT_ITERATIONS, _at
 from campipe.engine.metrics import MAX_CAM_FORCE, MAX_SEAT_FORCE
+from campipe.profiles.packed import horner
 
 
 @njit(inline="always", nogil=True)
@@ -31,7 +32,7 @@ def _ringing(WC, MC, nact, m, tau, back):
     only decay, divided by the step's decay)."""
     amp = 0.0
     for jj in range(nact):
-        a = monitor_envelope(WC, MC, m, jj, tau)
+        a = monitor_envelope(WC, MC, m, jj, min(tau, MC[INVD, jj]))
         amp += a / MC[DABS, jj] if back else a
     return amp
 
@@ -64,9 +65,8 @@ def _near_peak(WC, MC, G, GT, nact, per_rev, c, w, th0, gdeg, gval, m, t_s, t_fr
     """Held contact m's force may exceed its turn's largest so far between the grid's plan
     from t_from (its force −gval[m], the blocks' envelopes there) to t_next, where its forced
     part ends at −(polynomial + harmonic), in the segment from t_s."""
-    # (no blocks: the monitor's forced part alone)
-    p, _, _ = eval_monitor(WC, MC, 0, G, GT, m, t_next - t_s, w, w * t_next - th0, w * t_next,
-                           gdeg)  # fmt: skip
+    p = horner(G[m], w * t_next - th0, gdeg)[0]  # the monitor's forced part alone
+    p += GT[m].real * np.cos(w * t_next) - GT[m].imag * np.sin(w * t_next)
     ring = _ringing(WC, MC, nact, m, t_next - t_s, False)
     return _above(-gval[m], -p, ring, w, t_next - t_from,
                   _so_far(per_rev, c, w, t_from, t_next, m))  # fmt: skip
