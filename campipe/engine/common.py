@@ -26,6 +26,8 @@ from campipe.engine.metrics import (
     MAX_SEATING_VELOCITY,
     N_ENGINE,
     SEAT_IMPACTS,
+    SEATED_OFF_CAM,
+    SEPARATION,
 )
 from campipe.profiles.packed import locate, next_break, piece_eval
 from campipe.vocabulary import (
@@ -126,6 +128,9 @@ GAP_LEVEL = 1e-13
 #: the gap can have opened, a parabolic flight's height being v·t/4) never left its contact
 #: (``record_impact``): a nanometre, far below what a contact resolves.
 MICRO_FLIGHT = 1e-9
+#: An angle off the cam taken back (``count_angle``) leaves its turn's column at its rounding,
+#: a relative 1e-16 of what was added in pieces: below this fraction of the column it is 0.
+ANGLE_ROUNDING = 1e-9
 #: The tension [N] at which a resting contact releases (:func:`is_captured`), as a fraction of
 #: modal-exact's force level (``eps_force``: 1e-9 × (preload + 1 N), where the other held
 #: contacts release; their force falls through zero steeply, and that level moves their
@@ -280,6 +285,24 @@ def record_event(events, n_events, c, t, kind, c_from, c_to, velocity, impulse):
 
 
 @njit(**HELPER)
+def count_angle(per_rev, k, c, w, ta, tb, sign):
+    """Add (``sign`` 1) or take back (-1) the cam angle of [ta, tb] ∩ [0, ∞) [s] at speed w
+    to each of case c's turns it overlaps, in metric column k (an angle off the cam). What a
+    take-back leaves below ANGLE_ROUNDING of the column is rounding and reads 0."""
+    n_rev = per_rev.shape[1]
+    a = max(w * ta, 0.0)
+    b = w * tb
+    r = int(a / TWO_PI)
+    while a < b and r < n_rev:
+        end = min(b, (r + 1) * TWO_PI)
+        was = per_rev[c, r, k]
+        now = was + sign * (end - a)
+        per_rev[c, r, k] = 0.0 if now < ANGLE_ROUNDING * was else now
+        a = end
+        r += 1
+
+
+@njit(**HELPER)
 def record_impact(events, n_events, per_rev, meff, c, w, t, seat, other_held, c_from, c_to,
                   closing, capture, restitution):  # fmt: skip
     """Count an impact of case c at time t [s] (speed w) on the cam (``seat`` False) or the
@@ -291,8 +314,11 @@ def record_impact(events, n_events, per_rev, meff, c, w, t, seat, other_held, c_
     A contact that closes slower than the capture velocity ``capture`` [m/s] right after it
     released (its release the last event, the flight's closing velocity × duration below
     MICRO_FLIGHT) never really left: its gap stayed far below any length a contact resolves.
-    The release is taken back and the closing is no impact. A slow landing after a real
-    flight (a polydyne's valve returning to its seat) is an impact, counted."""
+    The release is taken back and the closing is no impact; so is the flight's angle, which
+    the integrator counted off the cam as it went (``count_angle``): a cam flight's from its
+    turn's no-follow (or seated-off-the-cam), a seat flight off the cam from no-follow to
+    seated-off-the-cam. A slow landing after a real flight (a polydyne's valve returning to
+    its seat) is an impact, counted."""
     if t < 0.0:
         return
     side = 1 if seat else 0
@@ -306,6 +332,13 @@ def record_impact(events, n_events, per_rev, meff, c, w, t, seat, other_held, c_
         and closing * (t - events[c, k, EV_TIME]) < MICRO_FLIGHT
     ):
         n_events[c] = k
+        t_left = events[c, k, EV_TIME]
+        if not seat:
+            flown = SEATED_OFF_CAM if holds_seat(c_from) else SEPARATION
+            count_angle(per_rev, flown, c, w, t_left, t, -1.0)
+        elif not holds_cam(c_from):
+            count_angle(per_rev, SEPARATION, c, w, t_left, t, -1.0)
+            count_angle(per_rev, SEATED_OFF_CAM, c, w, t_left, t, 1.0)
         return
     turn = turn_of(w, t)
     if turn < per_rev.shape[1]:

@@ -29,6 +29,7 @@ from campipe.engine.closed_form import (
 )
 from campipe.engine.common import (
     HELPER,
+    count_angle,
     deref,
     holds_cam,
     holds_seat,
@@ -450,19 +451,5 @@ def _keep_column(MC, WC, VY, act, ns, src, dst):
 def _off_cam(out, cfg, c, w, ta, tb):
     """Count [ta, tb] in configuration ``cfg``: no-follow (II) or seated off the cam (IV)."""
     if not holds_cam(cfg):
-        _separation(out.per_rev, SEATED_OFF_CAM if holds_seat(cfg) else SEPARATION, c, w, ta, tb)
-
-
-@njit(**HELPER)
-def _separation(per_rev, k, c, w, ta, tb):
-    """Add the cam angle of [ta, tb] ∩ [0, ∞) off the cam to each revolution it overlaps, in
-    metric column k."""
-    n_rev = per_rev.shape[1]
-    a = max(w * ta, 0.0)
-    b = w * tb
-    r = int(a / TWO_PI)
-    while a < b and r < n_rev:
-        end = min(b, (r + 1) * TWO_PI)
-        per_rev[c, r, k] += end - a
-        a = end
-        r += 1
+        k = SEATED_OFF_CAM if holds_seat(cfg) else SEPARATION
+        count_angle(out.per_rev, k, c, w, ta, tb, 1.0)
