@@ -464,13 +464,15 @@ class _Peer:
         elif self.regime == OPEN:
             self.ledger[r, 1] += u_b - u_a
 
-    def add_off_cam(self, ta: float, tb: float, seat_held: bool) -> None:
+    def add_off_cam(self, ta: float, tb: float, seat_held: bool, sign: float = 1.0) -> None:
+        """Add (``sign`` 1) or take back (-1) the cam angle of [ta, tb] ∩ [0, ∞) [s] off the
+        cam, seated or not, to each turn it overlaps."""
         sums = self.off_cam[seat_held]
         a, b = max(self.w * ta, 0.0), self.w * tb
         r = int(a / TWO_PI)
         while a < b and r < sums.size:
             end = min(b, (r + 1) * TWO_PI)
-            sums[r] += end - a
+            sums[r] = max(sums[r] + sign * (end - a), 0.0)
             a = end
             r += 1
 
@@ -511,8 +513,11 @@ class _Peer:
         """The impact at the cam or the seat, closing at ``closing`` > 0 [m/s]: plastic, or
         with a coefficient of restitution e > 0 a bounce that leaves at e·closing, unless it is
         slower than the capture velocity or its flight since the last bounce there stayed
-        below ``MICRO_FLIGHT`` (the series has converged): then plastic, and resting. Returns
-        the e it bounced with (0: plastic)."""
+        below ``MICRO_FLIGHT`` (the series has converged): then plastic, and resting. A
+        landing slower than the capture velocity right after its contact's release, closing ×
+        flight below ``MICRO_FLIGHT``, never left: the release, and its flight's angle off the
+        cam, are taken back (the engine's rule, ``common.record_impact``). Returns the e it
+        bounced with (0: plastic)."""
         cfg = self.cfg
         side, coord = (1, SEAT) if seat else (0, CAM)
         other_held = holds_cam(cfg) if seat else holds_seat(cfg)
@@ -539,9 +544,19 @@ class _Peer:
             self.resting[coord] = True
             last = self.events[-1] if self.events else None
             release = SEAT_SEPARATION if seat else CAM_SEPARATION
-            taken_back = last is not None and last[1] == release and last[3] == cfg
+            taken_back = (
+                last is not None
+                and last[1] == release
+                and last[3] == cfg
+                and closing * (t_ev - last[0]) < MICRO_FLIGHT
+            )
             if closing < self.capture and taken_back:
-                self.events.pop()  # it never really left: the release is taken back
+                t_left = self.events.pop()[0]  # it never really left: the release is taken
+                if not seat:  # back, and so is its flight's angle off the cam
+                    self.add_off_cam(t_left, t_ev, holds_seat(cfg), -1.0)
+                elif not holds_cam(cfg):  # a seat flight off the cam: seated all along
+                    self.add_off_cam(t_left, t_ev, False, -1.0)
+                    self.add_off_cam(t_left, t_ev, True)
                 return e
         if t_ev >= 0.0:
             self.v_max[side] = max(self.v_max[side], closing)

@@ -198,6 +198,19 @@ def blank_failures(result: BatchResult) -> BatchResult:
     return result
 
 
+#: A result's histories: one value per output sample (``cam_angle`` and these, per case).
+HISTORIES = ("time", "q", "v", "acc", "cam_lift", "cam_force", "seat_force", "contact_state")
+
+
+def thinned(result: BatchResult, every: int) -> BatchResult:
+    """``result`` with every ``every``-th of its output samples, from the first: the
+    histories of a run sampled ``every`` times finer than its output."""
+    if every == 1:
+        return result
+    kept = {name: getattr(result, name)[:, ::every] for name in HISTORIES}
+    return dataclasses.replace(result, cam_angle=result.cam_angle[::every], **kept, _derived={})
+
+
 #: Fields of a result shared by its parts (not per case).
 _SHARED = ("cam_angle",)
 #: Per-case fields held in lists.

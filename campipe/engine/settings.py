@@ -28,6 +28,7 @@ from campipe.engine.case import output_angles as output_angles
 from campipe.engine.case import sample_count as sample_count
 from campipe.engine.case import turn_count as turn_count
 from campipe.engine.case import visited_configurations as visited_configurations
+from campipe.engine.plunger import turn_by_turn
 from campipe.model import ValveTrain
 from campipe.model.hla import adjuster
 from campipe.vocabulary import ROMAN
@@ -288,6 +289,20 @@ def whole_turns(settings: RunSettings) -> int:
     return int(turns)
 
 
+def _samples_divide_a_turn(settings: RunSettings, why: str) -> None:
+    """Refuse an output spacing that does not divide a turn, for a run whose every turn starts
+    where the last ended, on a sample (``why``: which run)."""
+    per_turn = TWO_PI / settings.output_every
+    if abs(per_turn - round(per_turn)) > 1e-9 * per_turn:
+        raise RunSettingsError.at(
+            "run.output_every",
+            f"{math.degrees(settings.output_every):.6g} deg does not divide a turn: {why} "
+            "every turn starts on a sample (use e.g. 1 deg or 0.5 deg)",
+            found=math.degrees(settings.output_every),
+            expected="360 deg / a whole number",
+        )
+
+
 def check_settling(settings: RunSettings) -> None:
     """Refuse settling settings that cannot work, naming the key: a sample spacing that does
     not divide a turn (each turn starts where the last ended, on a sample), a cap below the
@@ -302,15 +317,7 @@ def check_settling(settings: RunSettings) -> None:
             found=settings.warmup,
             expected="default",
         )
-    per_turn = TWO_PI / settings.output_every
-    if abs(per_turn - round(per_turn)) > 1e-9 * per_turn:
-        raise RunSettingsError.at(
-            "run.output_every",
-            f"{math.degrees(settings.output_every):.6g} deg does not divide a turn: with "
-            "run.revolutions: auto every turn starts on a sample (use e.g. 1 deg or 0.5 deg)",
-            found=math.degrees(settings.output_every),
-            expected="360 deg / a whole number",
-        )
+    _samples_divide_a_turn(settings, "with run.revolutions: auto")
     if settings.max_period < 1:
         raise RunSettingsError.at(
             "run.max_period",
@@ -405,7 +412,9 @@ def check_run(
     _check_settings(settings)
     for i, case in enumerate(cases):
         if adjuster(case.train) is not None:
-            adjuster_turns(settings)
+            turns = adjuster_turns(settings)
+            if turns and turns > 1 and turn_by_turn(case, settings.integrator):
+                _samples_divide_a_turn(settings, f"case {i}'s lash adjuster runs turn by turn, and")
         if case.closure not in CLOSURES:
             raise CaseError.at(
                 "closure",

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import collections
 import dataclasses
-import functools
 import math
 from dataclasses import dataclass
 from typing import Any
@@ -44,6 +43,9 @@ class ValveSideProfile(Profile):
 
     cam: Profile | None = None  # the cam's own lift
     lever: Lever | None = None  # the lever's geometry
+    #: the lever ratio r(θ) and the pivot's gain g(θ) [-], sampled and splined on the
+    #: profile's own grid from the same kinematics (:func:`lever_tables`)
+    tables: tuple[Profile, Profile] | None = None
 
 
 def is_valve_side(profile: Profile) -> bool:
@@ -124,7 +126,10 @@ def _derived(profile: Profile, lever: Lever) -> ValveSideProfile:
     _check_swing(state, profile)
     derived = table(theta, state.valve_lift)
     label = f"{VALVE_SIDE}{profile.label} ({lever.kind})"
-    return ValveSideProfile(derived.breaks, derived.poly, derived.trig, label, profile, lever)
+    tables = (table(theta, state.ratio), table(theta, state.gain))
+    return ValveSideProfile(
+        derived.breaks, derived.poly, derived.trig, label, profile, lever, tables
+    )
 
 
 def pivot_raised(profile: ValveSideProfile, height: float) -> ValveSideProfile:
@@ -140,22 +145,18 @@ def pivot_raised(profile: ValveSideProfile, height: float) -> ValveSideProfile:
 def pivot_gains(profile: ValveSideProfile, theta: np.ndarray) -> np.ndarray:
     """The valve lift's change per unit rise of the pivot [-] at cam angles ``theta`` [rad]
     of a lever layout's derived profile (its pivot where it stands):
-    :attr:`~campipe.model.levers.KinematicState.gain`; by virtual work the adjuster's load per
-    unit of the pallet's force."""
-    if profile.cam is None or profile.lever is None:
-        raise TypeError("pivot_gains takes a lever layout's derived profile (valve_side)")
+    :attr:`~campipe.model.levers.KinematicState.gain` on the profile's grid, splined
+    (:func:`lever_tables`); by virtual work the adjuster's load per unit of the pallet's
+    force."""
     theta = np.asarray(theta, float)
-    return _kinematics(profile.cam, profile.lever, theta).gain.reshape(theta.shape)
+    return evaluate(lever_tables(profile)[1], theta.ravel())[0].reshape(theta.shape)
 
 
-@functools.lru_cache(maxsize=CACHED)
-def lever_tables(profile: ValveSideProfile) -> tuple[Profile, Profile]:
+def lever_tables(profile: Profile) -> tuple[Profile, Profile]:
     """(the lever ratio r(θ), the pivot's gain g(θ)) [-] of a lever layout's derived profile,
-    each sampled on the profile's own grid and splined as it is (:func:`_derived`), so their
-    pieces are the profile's: the compliant integrator evaluates all three on the piece it is
-    on (``campipe.engine.compliant``)."""
-    if profile.cam is None or profile.lever is None:
+    each sampled on the profile's own grid and splined as it is (:func:`_derived` makes them
+    with it), so their pieces are the profile's: the compliant integrator evaluates all three
+    on the piece it is on (``campipe.engine.compliant``)."""
+    if not isinstance(profile, ValveSideProfile) or profile.tables is None:
         raise TypeError("lever_tables takes a lever layout's derived profile (valve_side)")
-    theta = _grid()
-    state = _kinematics(profile.cam, profile.lever, theta)
-    return table(theta, state.ratio), table(theta, state.gain)
+    return profile.tables
