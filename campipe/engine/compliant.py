@@ -52,6 +52,7 @@ from campipe.engine.metrics import (
     CAM_IMPACTS,
     MAX_CAM_FORCE,
     MAX_CAM_IMPACT_VELOCITY,
+    MAX_ROLLER_FORCE,
     MAX_SEAT_FORCE,
     MAX_SEATING_VELOCITY,
     SEAT_IMPACTS,
@@ -99,6 +100,9 @@ STALL_WINDOW = 1e-12
 #: How long after a switch a monitor reads its value at the end of this interval [s]
 #: (``_Run.monitors``): far below any contact's time scale, far above rounding of t.
 SWITCH_GUARD = 1e-11
+#: The monitor tag of a lever's roller-force maxima (beyond the contacts' 0–3 and a plunger's
+#: 4, 5: ``engine.plunger``).
+ROLLER_PEAK = 6
 
 
 @dataclass
@@ -303,17 +307,30 @@ class _Run:
                 limit.direction = direction  # type: ignore[attr-defined]
                 limit.contact = tag  # type: ignore[attr-defined]
                 out.append(limit)
-        for i in (0, 1):
-            if self.closed[i]:
+        for i in (0, 1, 2):  # the cam's, the seat's, a lever's roller's (at the cam)
+            if self.closed[i % 2] and (i < 2 or self.s.ratio is not None):
 
                 def peak(t, z, i=i):
-                    return self.force_rates(t, z)[i]
+                    return self.roller_rate(t, z) if i == 2 else self.force_rates(t, z)[i]
 
                 peak.terminal = False  # type: ignore[attr-defined]
                 peak.direction = -1.0  # type: ignore[attr-defined]
-                peak.contact = i + 2  # type: ignore[attr-defined]
+                peak.contact = ROLLER_PEAK if i == 2 else i + 2  # type: ignore[attr-defined]
                 out.append(peak)
         return out
+
+    def roller_rate(self, t: float, z: np.ndarray) -> float:
+        """A lever's roller force's rate [N/s]: its law's at the roller (the cam closed)."""
+        n = self.n
+        acc = self.rhs(t, z)[n : 2 * n]
+        dc, rc, _, _ = self.approaches(t, z)
+        dn, rn, r, dr = self.at_roller(t, dc, rc)
+        assert self.s.ratio is not None
+        ddr = self.s.ratio.at(self.piece, self.rev, t)[2]
+        a = acc[CAM] + self.excitation(t, z)[2]  # δ̈ on the valve side, then at the roller
+        an = a / r - 2.0 * rc * dr / r**2 - dc * ddr / r**2 + 2.0 * dc * dr * dr / r**3
+        kd, cd = self.s.cam.slopes(dn, rn)
+        return kd * rn + cd * an
 
 
 @dataclass
@@ -356,6 +373,10 @@ class _Recorder:
         fc, fs = self.run.forces(tt, zz)
         r = self.turn(tt)
         out.per_rev[r, MAX_CAM_FORCE] = max(out.per_rev[r, MAX_CAM_FORCE], fc)
+        ratio = self.run.s.ratio
+        if ratio is not None and fc > 0.0:  # a lever's roller force, the cam's times r
+            roller = fc * ratio.at(self.run.piece, self.run.rev, tt)[0]
+            out.per_rev[r, MAX_ROLLER_FORCE] = max(out.per_rev[r, MAX_ROLLER_FORCE], roller)
         out.per_rev[r, THESIS_IMPACT_FORCE] = out.per_rev[r, MAX_CAM_FORCE]
         out.per_rev[r, MAX_SEAT_FORCE] = max(out.per_rev[r, MAX_SEAT_FORCE], fs)
 

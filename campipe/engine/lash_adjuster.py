@@ -396,14 +396,14 @@ class Plunger:
     plunger where the last turn left it (:func:`extended`), from the start the caller hands
     back (the last turn's end, in the histories' frame: :meth:`_next_start` applies the
     plunger's change there), its extension advanced by the turn's leak-down and pump-up
-    (``LashAdjuster.advance``, on samples at most :data:`ADJUSTER_EVERY` apart: the turn runs
-    on them, its histories thinned to the output's) and the turn's histories brought to one
-    frame (a chain's to its cam's own lift). With ``ledger`` (a run of automatic length) each turn's coordinates
-    carry one more column, the plunger's extension at the turn's ends (between them
-    e₀ + (e₁ − e₀)·θ/2π + travel·sin²(θ/2), so that its range over a turn is about its
-    travel): ``run_settled`` compares it with the rest of the state at the turn boundaries,
-    so a case settles only once its plunger repeats to ``settle_tolerance`` of its travel
-    too; :meth:`settled` takes the column off again."""
+    (``LashAdjuster.advance``, on samples at most :data:`ADJUSTER_EVERY` apart: the turn runs on
+    them, its histories thinned to the output's) and the turn's histories brought to one frame
+    (a chain's to its cam's own lift). With ``ledger`` (a run of automatic length) each turn's
+    coordinates carry one more column, the plunger's extension at the turn's ends (between them
+    e₀ + (e₁ − e₀)·θ/2π + travel·sin²(θ/2), so that its range over a turn is about its travel):
+    ``run_settled`` compares it with the rest of the state at the turn boundaries, so a case
+    settles only once its plunger repeats to ``settle_tolerance`` of its travel too;
+    :meth:`settled` takes the column off again."""
 
     def __init__(self, cases, settings, run, turns: int, ledger: bool = False) -> None:
         self.hlas: list[LashAdjuster | None] = [adjuster(c.train) for c in cases]
@@ -424,6 +424,7 @@ class Plunger:
         self.shift = np.zeros(n)  # the frame shift of each case's last turn
         self.change = np.zeros(n)  # the excitation's change at each case's next start [m]
         self.travel = np.array([h.travel if h else 0.0 for h in self.hlas])
+        self.closed: list[bool | None] = [None] * n  # each check valve as its last turn left it
         self.run, self.method, self.ledger = run, settings.method, ledger
         self._matrices: dict[int, object] = {}
 
@@ -455,8 +456,12 @@ class Plunger:
                 continue
             force, gap = adjuster_load(old[j], part, j)
             switches = interpolated_switches(
-                part.time[j], force, h.check_force, part.contact_state[j]
+                part.time[j], force, h.check_force, part.contact_state[j], self.closed[i]
             )
+            if self.closed[i] is None:
+                self.closed[i] = bool(force[0] > h.check_force)
+            if len(switches) % 2:  # the valve as the turn leaves it
+                self.closed[i] = not self.closed[i]
             if switches.size:  # among the turn's events, in time order
                 both = np.concatenate([part.events[j], switches])
                 part.events[j] = both[np.argsort(both[:, EV_TIME], kind="stable")]

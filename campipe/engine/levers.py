@@ -8,14 +8,15 @@ work, :func:`campipe.profiles.levers.lever_ratio`). :func:`at_the_cam` turns a r
 force into that normal force, for the histories and the per-turn ``max_cam_force``:
 
 - the histories: F·r at each output sample, exactly;
-- each turn's largest: the larger of the samples' largest F·r and the engine's largest
-  valve-side force (taken on its steps' grid, which may be finer or coarser than the
-  samples) times r at the sample of the largest sampled valve-side force. Between two output
-  samples r changes by at most |dr/dθ|·Δθ (a fraction of a per cent at 1°), and both
-  candidates are the normal force at some angle of the turn to that resolution, so the result
-  is the turn's largest normal force to it (from below).
-  A turn with no samples (the turns of a run of automatic length before its recorded
-  window) takes r at the recorded window's peak.
+- each turn's largest: the engine's own (``max_roller_force``, the integrators follow F·r:
+  modal-exact to its peaks, located between the grid's points, newmark-linear at its steps,
+  the compliant integrator at its located maxima of F·r and of F); where an engine gave none
+  (the steady state's closed form, ``run.fidelity: steady``), the larger of the samples'
+  largest F·r and the engine's largest valve-side force times r at the sample of the largest
+  sampled valve-side force (to the samples' resolution: r changes by |dr/dθ|·Δθ between
+  them, and the largest F·r may sit on another hump of F than F's largest). A turn with no
+  samples (the turns of a run of automatic length before its recorded window) takes r at
+  the recorded window's peak.
 
 Its cam impacts likewise (:func:`impacts_at_the_cam`): the roller closes on the cam along the
 contact normal at the valve side's closing velocity over r at the impact's cam angle (the
@@ -39,7 +40,7 @@ import numpy as np
 
 from campipe.constants import TWO_PI
 from campipe.engine.case import Case
-from campipe.engine.metrics import MAX_CAM_FORCE, MAX_CAM_IMPACT_VELOCITY
+from campipe.engine.metrics import MAX_CAM_FORCE, MAX_CAM_IMPACT_VELOCITY, MAX_ROLLER_FORCE
 from campipe.engine.result import BatchResult
 from campipe.engine.settings import DEFAULT_CAPTURE_VELOCITY
 from campipe.profiles import Profile
@@ -69,9 +70,11 @@ def at_the_cam(
         ratio = ratios.setdefault(id(profile), lever_ratio(profile, theta))
         force[i] = result.cam_force[i] * ratio
         first = int(result.recorded_from[i]) if result.recorded_from.size else 0
-        per_rev[i, :, MAX_CAM_FORCE] = turn_maxima(
+        sampled = turn_maxima(
             result.cam_force[i], ratio, theta, result.per_rev[i, :, MAX_CAM_FORCE], first
         )
+        followed = result.per_rev[i, :, MAX_ROLLER_FORCE]
+        per_rev[i, :, MAX_CAM_FORCE] = np.where(followed > 0.0, followed, sampled)
         if i < len(events):
             events[i], per_rev[i, :, MAX_CAM_IMPACT_VELOCITY] = impacts_at_the_cam(
                 events[i], result.per_rev[i, :, MAX_CAM_IMPACT_VELOCITY], profile,

@@ -282,6 +282,17 @@ METRICS: list[Metric] = [
         label="Cam force with impacts",
     ),
     Metric(
+        "max_roller_force",
+        "max_roller_force",
+        "max_roller_force_by_rev",
+        "a lever layout's largest normal force of its roller on the cam between impacts (0 for "
+        "any other; its max_cam_force in an archive: campipe.engine.levers)",
+        "N",
+        "max",
+        archived=False,
+        label="Roller force",
+    ),
+    Metric(
         "max_cam_pressure",
         "max_cam_pressure",
         "max_cam_pressure_by_rev",
@@ -394,6 +405,7 @@ MAX_SEATING_VELOCITY = column("max_seating_velocity")
 MAX_CAM_FORCE = column("max_cam_force")
 MAX_SEAT_FORCE = column("max_seat_force")
 THESIS_IMPACT_FORCE = column("thesis_impact_force")
+MAX_ROLLER_FORCE = column("max_roller_force")
 N_ENGINE = len(ENGINE)
 
 

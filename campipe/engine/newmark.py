@@ -67,13 +67,21 @@ from campipe.engine.common import (
 )
 from campipe.engine.metrics import (
     MAX_CAM_FORCE,
+    MAX_ROLLER_FORCE,
     MAX_SEAT_FORCE,
     SEATED_OFF_CAM,
     SEPARATION,
     THESIS_IMPACT_FORCE,
 )
 from campipe.engine.policy import release, strike, strike_at_break
-from campipe.profiles.packed import degree, evaluate_packed, horner, next_break, piece_eval
+from campipe.profiles.packed import (
+    degree,
+    evaluate_packed,
+    horner,
+    next_break,
+    piece_eval,
+    ratio_bound,
+)
 from campipe.vocabulary import (
     CAM,
     EVENTS_TRUNCATED,
@@ -486,10 +494,12 @@ def _held_forces(x, xn, z, cam_held, seat_held):
 
 
 @njit(inline="always")
-def _step_metrics(per_rev, c, turn, dtheta, cam_held, seat_held, cam_clean, seat_clean, f1, f7):
+def _step_metrics(per_rev, c, turn, dtheta, cam_held, seat_held, cam_clean, seat_clean, f1, f7,
+                  ratio):  # fmt: skip
     """A step's share of its turn's metrics: dtheta [rad] off the cam (no-follow, or seated),
     and the largest contact forces of the steps no impulse passes through (``cam_clean``,
-    ``seat_clean``); the thesis's impact force counts every step."""
+    ``seat_clean``), a lever's roller force too (−f1 times its ``ratio`` at the step's end;
+    0 for a case that is no lever's); the thesis's impact force counts every step."""
     if not cam_held:
         if seat_held:
             per_rev[c, turn, SEATED_OFF_CAM] += dtheta
@@ -497,6 +507,10 @@ def _step_metrics(per_rev, c, turn, dtheta, cam_held, seat_held, cam_clean, seat
             per_rev[c, turn, SEPARATION] += dtheta
     if cam_clean and cam_held:
         per_rev[c, turn, MAX_CAM_FORCE] = max(per_rev[c, turn, MAX_CAM_FORCE], -f1)
+        if ratio > 0.0:
+            per_rev[c, turn, MAX_ROLLER_FORCE] = max(
+                per_rev[c, turn, MAX_ROLLER_FORCE], -f1 * ratio
+            )
     if cam_held:
         per_rev[c, turn, THESIS_IMPACT_FORCE] = max(per_rev[c, turn, THESIS_IMPACT_FORCE], -f1)
     if seat_clean and seat_held:
@@ -573,6 +587,7 @@ def newmark_linear_batch(cases, trains, profiles, runs, out, work, contact):
         th_end = w * runs.t_end[c]
         pdeg = degree(profiles, c, p)
         pn, revn, thb = next_break(profiles, c, p, rev)
+        lever = ratio_bound(profiles, c) > 0.0  # its roller's force followed too
         turn = 0  # the turn of the current step, and where the next begins [s]
         t_turn = TWO_PI / w
         sd = np.sin(w * h)
@@ -617,8 +632,12 @@ def newmark_linear_batch(cases, trains, profiles, runs, out, work, contact):
                     turn += 1
                     t_turn = (turn + 1) * TWO_PI / w
                 if turn < n_rev:
+                    ratio = 0.0
+                    if lever and cam_held:
+                        x_p = th1 - rev * TWO_PI - profiles.breaks[c, p]
+                        ratio = horner(profiles.ratio[c, p], x_p, 3)[0]
                     _step_metrics(out.per_rev, c, turn, w * h, cam_held, seat_held,
-                                  quiet_cam == 0, quiet_seat == 0, f1, f7)  # fmt: skip
+                                  quiet_cam == 0, quiet_seat == 0, f1, f7, ratio)  # fmt: skip
             if quiet_cam > 0:
                 quiet_cam -= 1
             if quiet_seat > 0:

@@ -182,14 +182,19 @@ class PlungerState:
 
 
 def interpolated_switches(
-    time: np.ndarray, force: np.ndarray, check_force: float, cfg: np.ndarray
+    time: np.ndarray,
+    force: np.ndarray,
+    check_force: float,
+    cfg: np.ndarray,
+    closed: bool | None = None,
 ) -> np.ndarray:
     """(m, N_EVENT_FIELDS) the check valve's switches of a turn the per-turn model runs
     (``lash_adjuster.Plunger``): where the force through the adjuster at the samples
     (``time`` [s], ``force`` [N]) crosses F_c on their linear interpolant, with the dead band
     HYSTERESIS (the check valve opening where it falls to F_c·(1 − HYSTERESIS), closing where
     it rises to F_c·(1 + HYSTERESIS)); each in the configuration ``cfg`` of the sample before
-    it, velocity 0."""
+    it, velocity 0. The valve starts ``closed`` as the last turn left it (None: closed where
+    the first sample's force is above F_c), so a turn's switches go on from the last's."""
     low, high = check_force * (1.0 - HYSTERESIS), check_force * (1.0 + HYSTERESIS)
     f = np.asarray(force, float)
     down = np.flatnonzero((f[:-1] > low) & (f[1:] <= low))
@@ -197,7 +202,8 @@ def interpolated_switches(
     found = sorted([(i, CHECK_VALVE_OPENS, low) for i in down.tolist()]
                    + [(i, CHECK_VALVE_CLOSES, high) for i in up.tolist()])  # fmt: skip
     rows = []
-    closed = f[0] > check_force
+    if closed is None:
+        closed = bool(f[0] > check_force)
     for i, kind, level in found:
         if (kind == CHECK_VALVE_OPENS) != closed:  # a second crossing of the same level
             continue

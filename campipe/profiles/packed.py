@@ -33,6 +33,12 @@ class PackedProfiles(NamedTuple):
     poly: np.ndarray  # (n_cases, P, 8) polynomial coefficients, zero-padded [m/rad**k]
     trig: np.ndarray  # (n_cases, P, 2) sin θ and cos θ coefficients, zero-padded [m]
     n_pieces: np.ndarray  # (n_cases,) int64 number of real pieces of each case
+    #: (n_cases, P + 1, 4) a lever layout's ratio r(θ) [-] on each piece, a cubic in x as the
+    #: lift's (its roller's normal force on the cam per valve-side force:
+    #: ``campipe.profiles.levers.lever_tables``), and in the last row a bound on it over the
+    #: turn (:func:`ratio_bound`); zeros for any other case (one array, not two: each array
+    #: of a kernel's arguments costs every call its unboxing)
+    ratio: np.ndarray
 
 
 class Keyed:
@@ -107,12 +113,35 @@ def pack(profiles: Sequence[Profile]) -> PackedProfiles:
     breaks = np.full((n_cases, width + 1), np.inf)
     poly = np.zeros((n_cases, width, N_COEFFS))
     trig = np.zeros((n_cases, width, 2))
+    ratio = np.zeros((n_cases, width + 1, RATIO_COEFFS))
     for c, p in enumerate(profiles):
         n = p.n_pieces
         breaks[c, : n + 1] = p.breaks
         poly[c, :n] = p.poly
         trig[c, :n] = p.trig
-    return PackedProfiles(breaks, poly, trig, n_pieces)
+        ratio[c, width, 0] = _ratio(p, ratio[c, :n])
+    return PackedProfiles(breaks, poly, trig, n_pieces, ratio)
+
+
+#: The coefficients of a lever's ratio on a piece (a cubic spline's).
+RATIO_COEFFS = 4
+
+
+def _ratio(profile: Profile, out: np.ndarray) -> float:
+    """A lever layout's ratio on each of ``profile``'s pieces into ``out`` (its pieces are the
+    lift's, ``campipe.profiles.levers.lever_tables``), and a bound on it over the turn (its
+    largest at five points of each piece, and 1e-6 of it more); 0 for a profile that is no
+    lever's."""
+    tables = getattr(profile, "tables", None)
+    if tables is None:
+        return 0.0
+    table = tables[0]
+    if not np.array_equal(table.breaks, profile.breaks) or np.any(table.poly[:, RATIO_COEFFS:]):
+        raise ValueError("a lever's ratio table must be a cubic on the lift's own pieces")
+    out[:] = table.poly[:, :RATIO_COEFFS]
+    x = np.diff(profile.breaks)[None, :] * np.linspace(0.0, 1.0, 5)[:, None]  # (5, pieces)
+    values = np.polynomial.polynomial.polyval(x, out.T, tensor=False)
+    return float(values.max()) * (1.0 + 1e-6)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -131,6 +160,12 @@ def horner(coef, x, deg=N_COEFFS - 1):
         p1 = p1 * x + p0
         p0 = p0 * x + coef[k]
     return p0, p1, p2
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def ratio_bound(profiles, c):
+    """A bound on case c's lever ratio over the turn [-]; 0 for a case that is no lever's."""
+    return profiles.ratio[c, profiles.ratio.shape[1] - 1, 0]
 
 
 @numba.njit(cache=True, nogil=True)

@@ -40,7 +40,6 @@ from campipe.engine.common import (
     holds_seat,
     record_event,
     start_piece,
-    turn_of,
 )
 from campipe.engine.exact.peaks import _force_maxima, _force_peaks, _near_peak
 from campipe.engine.exact.segment import _begin_segment, monitor_count, plunger_switch
@@ -68,7 +67,7 @@ from campipe.engine.metrics import (
 )
 from campipe.engine.plunger import BOTTOMED, CLOSED, HELD, OPEN, TOPPED
 from campipe.engine.policy import release, strike, strike_at_break
-from campipe.profiles.packed import piece_eval
+from campipe.profiles.packed import piece_eval, ratio_bound
 from campipe.vocabulary import (
     CAM,
     CAM_AND_SEAT,
@@ -298,7 +297,12 @@ def _walk(ref, st, pl):
             return
     # The segment's start counts for the force maxima as a grid point does (after an impact
     # the force may only fall).
-    _force_maxima(per_rev, c, turn_of(w, t_s), cam_held, seat_held, gval)
+    # A lever's ratio on the piece (its bound 0: none), its roller force followed too.
+    ratio_max = ratio_bound(profiles, c)
+    r0, r1, r2, r3 = profiles.ratio[c, st.p, 0], profiles.ratio[c, st.p, 1], \
+        profiles.ratio[c, st.p, 2], profiles.ratio[c, st.p, 3]  # fmt: skip
+    roller = (ratio_max, r0, r1, r2, r3)
+    _force_maxima(per_rev, c, w, t_s, th0, cam_held, seat_held, gval, roller)
     t_prev = t_s
     h = -1.0
     since_refresh = 0
@@ -327,9 +331,9 @@ def _walk(ref, st, pl):
             else:
                 near = np.inf
                 if (cam_held and _near_peak(WC, MC, G, GT, nact, per_rev, c, w, th0, gdeg, gval,
-                                            0, t_s, t_from, t_next)) or (
+                                            0, t_s, t_from, t_next, ratio_max)) or (
                     seat_held and _near_peak(WC, MC, G, GT, nact, per_rev, c, w, th0, gdeg,
-                                             gval, 1, t_s, t_from, t_next)
+                                             gval, 1, t_s, t_from, t_next, 0.0)
                 ):  # fmt: skip
                     near = peak_tol
                 k = _fastest_needed(WC, MC, watch, level, gval, nact, t_next - t_s, n_mon, near)
@@ -386,14 +390,14 @@ def _walk(ref, st, pl):
                 st.nact = nact
                 _apply_event(ref, st, first, t_ev, pl)
                 return
-        if (cam_held and dprev[0] < 0.0 and dval[0] > 0.0) or (
+        if (cam_held and (ratio_max > 0.0 or (dprev[0] < 0.0 and dval[0] > 0.0))) or (
             seat_held and dprev[1] < 0.0 and dval[1] > 0.0
         ):
             _force_peaks(ref, st, nact, t_prev, t_eval, h, cam_held, seat_held, True)
         if at_break:
             # The break's point counts for the force maxima as a grid point does (a lift
             # table breaks every half degree: its steps seldom reach a grid point).
-            _force_maxima(per_rev, c, turn_of(w, t_break), cam_held, seat_held, gval)
+            _force_maxima(per_rev, c, w, t_break, th0, cam_held, seat_held, gval, roller)
             st.nact = nact
             _cross_break(ref, st)
             return
@@ -404,7 +408,7 @@ def _walk(ref, st, pl):
         for m in range(2, n_mon):  # a carried plunger's (none where n_mon is the constant 2)
             dprev[m] = dval[m]
             gprev[m] = gval[m]
-        _force_maxima(per_rev, c, turn_of(w, t_n), cam_held, seat_held, gval)
+        _force_maxima(per_rev, c, w, t_n, th0, cam_held, seat_held, gval, roller)
         t_prev = t_n
         if i_step < n_steps:
             cth, sth = _advance(MC, nact, cth, sth, cwh, swh)

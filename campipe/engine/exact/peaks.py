@@ -1,7 +1,9 @@
 """modal-exact's contact-force maxima: each turn's largest held force at the grid's points and
 at the peaks between them, located by Newton steps on the force's derivative where a peak may
 be the turn's largest, and the rule that keeps the grid fine enough there (docs/engine.md,
-"Force maxima are peaks, not samples")."""
+"Force maxima are peaks, not samples"). A lever layout's roller force on the cam, the cam's
+held force times the lever ratio r(θ) (``profiles.ratio``, a cubic on each piece), is
+followed the same way into its own column (``MAX_ROLLER_FORCE``)."""
 
 from __future__ import annotations
 
@@ -11,16 +13,25 @@ from numba import njit
 from campipe.engine.closed_form import DABS, INVD, eval_monitor, monitor_envelope
 from campipe.engine.common import HELPER, deref, turn_of
 from campipe.engine.exact.state import ROOT_ITERATIONS, _at
-from campipe.engine.metrics import MAX_CAM_FORCE, MAX_SEAT_FORCE
-from campipe.profiles.packed import horner
+from campipe.engine.metrics import MAX_CAM_FORCE, MAX_ROLLER_FORCE, MAX_SEAT_FORCE
+from campipe.profiles.packed import horner, ratio_bound
 
 
 @njit(inline="always", nogil=True)
-def _force_maxima(per_rev, c, turn, cam_held, seat_held, gval):
-    """The held contacts' forces (monitors ``gval``) into the turn's force maxima."""
+def _force_maxima(per_rev, c, w, t, th0, cam_held, seat_held, gval, roller):
+    """The held contacts' forces (monitors ``gval`` at t [s], on a piece from θ = th0) into
+    the turn's force maxima; with a lever's ``roller`` (its ratio's bound over the turn, 0
+    for none, and its cubic's four coefficients on the piece: scalars, so that the grid's
+    step hands no array over), the roller's force too."""
+    turn = turn_of(w, t)
     if 0 <= turn < per_rev.shape[1]:
         if cam_held:
             per_rev[c, turn, MAX_CAM_FORCE] = max(per_rev[c, turn, MAX_CAM_FORCE], -gval[0])
+            if roller[0] > 0.0:
+                x = w * t - th0
+                r = ((roller[4] * x + roller[3]) * x + roller[2]) * x + roller[1]
+                force = max(per_rev[c, turn, MAX_ROLLER_FORCE], -gval[0] * r)
+                per_rev[c, turn, MAX_ROLLER_FORCE] = force
         if seat_held:
             per_rev[c, turn, MAX_SEAT_FORCE] = max(per_rev[c, turn, MAX_SEAT_FORCE], -gval[1])
 
@@ -38,10 +49,9 @@ def _ringing(WC, MC, nact, m, tau, back):
 
 
 @njit(inline="always", nogil=True)
-def _so_far(per_rev, c, w, t_a, t_b, m):
-    """The least of the running maxima of held contact m's force (the cam's, the seat's) in
-    the turns holding t_a and t_b."""
-    col = MAX_CAM_FORCE if m == 0 else MAX_SEAT_FORCE
+def _so_far(per_rev, c, w, t_a, t_b, col):
+    """The least of the running maxima in per-turn column ``col`` (a held force's: the
+    cam's, the seat's, a lever's roller's) in the turns holding t_a and t_b."""
     n_rev = per_rev.shape[1]
     so_far = np.inf
     for turn in (turn_of(w, t_a), turn_of(w, t_b)):
@@ -61,19 +71,23 @@ def _above(f_a, f_b, ring, w, h, so_far):
 
 
 @njit(inline="always", nogil=True)
-def _near_peak(WC, MC, G, GT, nact, per_rev, c, w, th0, gdeg, gval, m, t_s, t_from, t_next):
+def _near_peak(WC, MC, G, GT, nact, per_rev, c, w, th0, gdeg, gval, m, t_s, t_from, t_next,
+               ratio_max):  # fmt: skip
     """Held contact m's force may exceed its turn's largest so far between the grid's plan
     from t_from (its force −gval[m], the blocks' envelopes there) to t_next, where its forced
-    part ends at −(polynomial + harmonic), in the segment from t_s."""
+    part ends at −(polynomial + harmonic), in the segment from t_s; or, the cam's on a lever
+    whose ratio is at most ``ratio_max`` (0: no lever), the roller's force its own largest."""
     p = horner(G[m], w * t_next - th0, gdeg)[0]  # the monitor's forced part alone
     p += GT[m].real * np.cos(w * t_next) - GT[m].imag * np.sin(w * t_next)
     ring = _ringing(WC, MC, nact, m, t_next - t_s, False)
-    return _above(-gval[m], -p, ring, w, t_next - t_from,
-                  _so_far(per_rev, c, w, t_from, t_next, m))  # fmt: skip
+    so_far = _so_far(per_rev, c, w, t_from, t_next, MAX_CAM_FORCE if m == 0 else MAX_SEAT_FORCE)
+    if m == 0 and ratio_max > 0.0:  # the roller's force is at most ratio_max times it
+        so_far = min(so_far, _so_far(per_rev, c, w, t_from, t_next, MAX_ROLLER_FORCE) / ratio_max)
+    return _above(-gval[m], -p, ring, w, t_next - t_from, so_far)
 
 
 @njit(inline="always", nogil=True)
-def _peak(runs, out, ws, st, nact, m, ta, tb, da, db):
+def _peak(runs, out, ws, st, ratio, nact, m, ta, tb, da, db):
     """Locate held contact m's force peak where its monitor's derivative rises through zero
     in (ta, tb] (da < 0 < db its values there) and count it in its turn's maximum: Newton
     steps on the derivative from the secant's point, kept inside the bracket (bisection
@@ -81,13 +95,22 @@ def _peak(runs, out, ws, st, nact, m, ta, tb, da, db):
     ``state._root``: each of its steps here gives the force with the derivatives
     (``eval_monitor``), the last one the peak's, where ``_root`` closes its bracket to the
     tolerance and the force would take one evaluation more (a peak is located at every
-    turning of a ringing force that may be the turn's largest)."""
+    turning of a ringing force that may be the turn's largest).
+
+    With a lever's ``ratio`` (its cubic on the segment's piece; None otherwise) the cam's
+    roller force −g·r is followed instead: da, db and the steps are (g·r)'s."""
     t_s, w, th0 = st.t_s, st.w, st.th0
     t = ta - da * (tb - ta) / (db - da)
-    g = 0.0
+    value = 0.0
     for _ in range(ROOT_ITERATIONS):
         g, dg, d2g = eval_monitor(ws.WC, ws.MC, nact, ws.G, ws.GT, m, t - t_s, w, w * t - th0,
                                   w * t, st.gdeg)  # fmt: skip
+        value = -g
+        if ratio is not None:
+            r, r1, r2 = horner(ratio, w * t - th0, 3)
+            value = -g * r
+            d2g = d2g * r + 2.0 * dg * r1 * w + g * r2 * w * w
+            dg = dg * r + g * r1 * w
         if dg < 0.0:
             ta = t
         else:
@@ -100,8 +123,10 @@ def _peak(runs, out, ws, st, nact, m, ta, tb, da, db):
         t = t_new
     turn = turn_of(w, t)
     col = MAX_CAM_FORCE if m == 0 else MAX_SEAT_FORCE
+    if ratio is not None:
+        col = MAX_ROLLER_FORCE
     if 0 <= turn < out.per_rev.shape[1]:
-        out.per_rev[st.c, turn, col] = max(out.per_rev[st.c, turn, col], -g)
+        out.per_rev[st.c, turn, col] = max(out.per_rev[st.c, turn, col], value)
 
 
 @njit(**HELPER)
@@ -112,19 +137,35 @@ def _force_peaks(ref, st, nact, t_prev, t_to, h, cam_held, seat_held, known):
     monitor's from − to +), the peak is located (``_peak``), so that a ringing the grid
     samples coarsely is read at its peak, if it may exceed the turn's largest so far
     (``_above``). The grid resolves every block that could move a peak by more than the
-    peak tolerance (``_near_peak``)."""
-    _, _, _, runs, out, ws = deref(ref)
+    peak tolerance (``_near_peak``). A lever's roller force the same way, its derivative's
+    turn located on (g·r)'."""
+    _, _, profiles, runs, out, ws = deref(ref)
+    c, w, th0 = st.c, st.w, st.th0
     for m in range(2):
-        if not ((cam_held if m == 0 else seat_held) and ws.dprev[m] < 0.0):
+        if not (cam_held if m == 0 else seat_held):
+            continue
+        lever = m == 0 and ratio_bound(profiles, c) > 0.0
+        if not (lever or ws.dprev[m] < 0.0):
             continue
         if known:
             g_to, db = ws.gval[m], ws.dval[m]
         else:
-            g_to, db = _at(False, ws.WC, ws.MC, nact, ws.G, ws.GT, m, st.t_s, t_to, st.w,
-                           st.th0, st.gdeg)  # fmt: skip
-        if not db > 0.0:
-            continue
+            g_to, db = _at(False, ws.WC, ws.MC, nact, ws.G, ws.GT, m, st.t_s, t_to, w, th0,
+                           st.gdeg)  # fmt: skip
         ring = _ringing(ws.WC, ws.MC, nact, m, t_to - st.t_s, True)
-        so_far = _so_far(out.per_rev, st.c, st.w, t_prev, t_to, m)
-        if _above(-ws.gprev[m], -g_to, ring, st.w, h, so_far):
-            _peak(runs, out, ws, st, nact, m, t_prev, t_to, ws.dprev[m], db)
+        if ws.dprev[m] < 0.0 and db > 0.0:
+            so_far = _so_far(out.per_rev, c, w, t_prev, t_to,
+                             MAX_CAM_FORCE if m == 0 else MAX_SEAT_FORCE)  # fmt: skip
+            if _above(-ws.gprev[m], -g_to, ring, w, h, so_far):
+                _peak(runs, out, ws, st, None, nact, m, t_prev, t_to, ws.dprev[m], db)
+        if lever:
+            ratio = profiles.ratio[c, st.p]
+            r_a, r1_a, _ = horner(ratio, w * t_prev - th0, 3)
+            r_b, r1_b, _ = horner(ratio, w * t_to - th0, 3)
+            da = ws.dprev[m] * r_a + ws.gprev[m] * r1_a * w
+            dr = db * r_b + g_to * r1_b * w
+            if da < 0.0 and dr > 0.0:
+                so_far = _so_far(out.per_rev, c, w, t_prev, t_to, MAX_ROLLER_FORCE)
+                ring_r = ring * ratio_bound(profiles, c)
+                if _above(-ws.gprev[m] * r_a, -g_to * r_b, ring_r, w, h, so_far):
+                    _peak(runs, out, ws, st, ratio, nact, m, t_prev, t_to, da, dr)
