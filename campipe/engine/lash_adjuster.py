@@ -383,11 +383,12 @@ class Carried:
 
 #: The per-turn model's integrals (a turn's leak-down and pump-up, its check valve's
 #: switches: ``LashAdjuster.advance``, ``plunger.interpolated_switches``) are taken on
-#: samples at most this far apart [rad], whatever ``run.output_every``: they converge as the
-#: spacing's square (the bundled finger on its adjuster at 9000 engine rpm, its effective
-#: lash after 8 turns: 87.57, 79.32, 75.45, 75.41 µm at 5°, 1°, 0.1°, 0.01°), and a turn's
-#: plunger must not move with the spacing its histories are stored at.
-ADJUSTER_EVERY = math.radians(0.1)
+#: samples this far apart [rad] where ``run.output_every`` is a multiple of it (1°, 0.5°,
+#: 0.25°, …: the same samples whatever the output), else on its largest divisor below it:
+#: they converge as the spacing's square (the bundled finger on its adjuster at 9000 engine
+#: rpm, its effective lash after 8 turns: 87.57, 79.32, 75.45, 75.41 µm at 5°, 1°, 0.1°,
+#: 0.01°), and a turn's plunger must not move with the spacing its histories are stored at.
+ADJUSTER_EVERY = math.radians(0.05)
 
 
 class Plunger:

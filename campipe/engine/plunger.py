@@ -239,15 +239,6 @@ def plunger_state(train, mass_inverse: np.ndarray, gains: Any = None) -> Plunger
     )  # fmt: skip
 
 
-def turn_by_turn(case, integrator: str) -> bool:
-    """``case``'s adjuster runs turn by turn, each turn from the last one's end (on a
-    sample): moved at each turn's end (not :func:`carried`), or carried under a finger's
-    pivot (``engine.lash_adjuster.Carried``, its gain linearised about each turn's start)."""
-    return adjuster(case.train) is not None and (
-        on_pivot(case.train) or not carried(case, integrator)
-    )
-
-
 def carried(case, integrator: str) -> bool:
     """``case``'s adjuster is a state of its run, not moved turn by turn: with compliant
     contacts the compliant integrator's (under ``integrator`` default or compliant); with

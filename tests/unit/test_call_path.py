@@ -21,6 +21,7 @@ from campipe.engine import Case, CaseError, RunSettings, run_batch
 from campipe.engine import batch as batch_module
 from campipe.engine.closed_form import STATE, ExactRuns, make_state
 from campipe.engine.common import make_outputs
+from campipe.engine.metrics import N_ENGINE
 from campipe.engine.settings import LIFT_BOUND, SPEED_BOUND, output_angles
 from campipe.model import thesis_train, valve_train
 from campipe.profiles import harmonic, polydyne
@@ -44,7 +45,7 @@ def test_the_outputs_are_disjoint_zeroed_views_of_their_shapes():
         "cam": (n, n_out),
         "cfg": (n, n_out),
         "acc": (n, n_out, 2),
-        "per_rev": (n, n_rev, 9),
+        "per_rev": (n, n_rev, N_ENGINE),
         "n_events": (n,),
         "status": (n,),
         "steps": (n,),

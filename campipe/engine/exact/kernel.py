@@ -41,7 +41,7 @@ from campipe.engine.common import (
     record_event,
     start_piece,
 )
-from campipe.engine.exact.peaks import _force_maxima, _force_peaks, _near_peak
+from campipe.engine.exact.peaks import _at_event, _force_maxima, _force_peaks, _near_peak
 from campipe.engine.exact.segment import _begin_segment, monitor_count, plunger_switch
 from campipe.engine.exact.state import (
     MAX_STALLED_EVENTS,
@@ -302,7 +302,7 @@ def _walk(ref, st, pl):
     r0, r1, r2, r3 = profiles.ratio[c, st.p, 0], profiles.ratio[c, st.p, 1], \
         profiles.ratio[c, st.p, 2], profiles.ratio[c, st.p, 3]  # fmt: skip
     roller = (ratio_max, r0, r1, r2, r3)
-    _force_maxima(per_rev, c, w, t_s, th0, cam_held, seat_held, gval, roller)
+    _force_maxima(per_rev, c, w, t_s, th0, cam_held, seat_held, gval[0], gval[1], roller)
     t_prev = t_s
     h = -1.0
     since_refresh = 0
@@ -387,6 +387,7 @@ def _walk(ref, st, pl):
             if first >= 0:
                 # (A held force's peak before the event is its turn's, as on the grid.)
                 _force_peaks(ref, st, nact, t_prev, t_ev, h, cam_held, seat_held, False)
+                _at_event(ref, st, nact, t_ev, cam_held, seat_held)
                 st.nact = nact
                 _apply_event(ref, st, first, t_ev, pl)
                 return
@@ -397,7 +398,8 @@ def _walk(ref, st, pl):
         if at_break:
             # The break's point counts for the force maxima as a grid point does (a lift
             # table breaks every half degree: its steps seldom reach a grid point).
-            _force_maxima(per_rev, c, w, t_break, th0, cam_held, seat_held, gval, roller)
+            _force_maxima(per_rev, c, w, t_break, th0, cam_held, seat_held, gval[0], gval[1],
+                          roller)  # fmt: skip
             st.nact = nact
             _cross_break(ref, st)
             return
@@ -408,7 +410,7 @@ def _walk(ref, st, pl):
         for m in range(2, n_mon):  # a carried plunger's (none where n_mon is the constant 2)
             dprev[m] = dval[m]
             gprev[m] = gval[m]
-        _force_maxima(per_rev, c, w, t_n, th0, cam_held, seat_held, gval, roller)
+        _force_maxima(per_rev, c, w, t_n, th0, cam_held, seat_held, gval[0], gval[1], roller)
         t_prev = t_n
         if i_step < n_steps:
             cth, sth = _advance(MC, nact, cth, sth, cwh, swh)

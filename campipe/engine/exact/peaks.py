@@ -18,22 +18,40 @@ from campipe.profiles.packed import horner, ratio_bound
 
 
 @njit(inline="always", nogil=True)
-def _force_maxima(per_rev, c, w, t, th0, cam_held, seat_held, gval, roller):
-    """The held contacts' forces (monitors ``gval`` at t [s], on a piece from θ = th0) into
+def _force_maxima(per_rev, c, w, t, th0, cam_held, seat_held, g0, g1, roller):
+    """The held contacts' forces (monitors g0, g1 at t [s], on a piece from θ = th0) into
     the turn's force maxima; with a lever's ``roller`` (its ratio's bound over the turn, 0
     for none, and its cubic's four coefficients on the piece: scalars, so that the grid's
     step hands no array over), the roller's force too."""
     turn = turn_of(w, t)
     if 0 <= turn < per_rev.shape[1]:
         if cam_held:
-            per_rev[c, turn, MAX_CAM_FORCE] = max(per_rev[c, turn, MAX_CAM_FORCE], -gval[0])
+            per_rev[c, turn, MAX_CAM_FORCE] = max(per_rev[c, turn, MAX_CAM_FORCE], -g0)
             if roller[0] > 0.0:
                 x = w * t - th0
                 r = ((roller[4] * x + roller[3]) * x + roller[2]) * x + roller[1]
-                force = max(per_rev[c, turn, MAX_ROLLER_FORCE], -gval[0] * r)
+                force = max(per_rev[c, turn, MAX_ROLLER_FORCE], -g0 * r)
                 per_rev[c, turn, MAX_ROLLER_FORCE] = force
         if seat_held:
-            per_rev[c, turn, MAX_SEAT_FORCE] = max(per_rev[c, turn, MAX_SEAT_FORCE], -gval[1])
+            per_rev[c, turn, MAX_SEAT_FORCE] = max(per_rev[c, turn, MAX_SEAT_FORCE], -g1)
+
+
+@njit(**HELPER)
+def _at_event(ref, st, nact, t_ev, cam_held, seat_held):
+    """The held contacts' forces at an event's instant t_ev [s], before it acts, into the
+    turn's force maxima: a force that rises until an impact elsewhere (the cam's as the
+    valve strikes its seat) is largest there, at its segment's end, where no turn of its
+    derivative marks a peak."""
+    _, _, profiles, _, out, ws = deref(ref)
+    c, w, th0, p = st.c, st.w, st.th0, st.p
+    g0 = g1 = 0.0
+    if cam_held:
+        g0 = _at(False, ws.WC, ws.MC, nact, ws.G, ws.GT, 0, st.t_s, t_ev, w, th0, st.gdeg)[0]
+    if seat_held:
+        g1 = _at(False, ws.WC, ws.MC, nact, ws.G, ws.GT, 1, st.t_s, t_ev, w, th0, st.gdeg)[0]
+    roller = (ratio_bound(profiles, c), profiles.ratio[c, p, 0], profiles.ratio[c, p, 1],
+              profiles.ratio[c, p, 2], profiles.ratio[c, p, 3])  # fmt: skip
+    _force_maxima(out.per_rev, c, w, t_ev, th0, cam_held, seat_held, g0, g1, roller)
 
 
 @njit(inline="always", nogil=True)
@@ -44,7 +62,9 @@ def _ringing(WC, MC, nact, m, tau, back):
     amp = 0.0
     for jj in range(nact):
         a = monitor_envelope(WC, MC, m, jj, min(tau, MC[INVD, jj]))
-        amp += a / MC[DABS, jj] if back else a
+        if back:  # (a block that decays past the floating point in a step: no bound)
+            a = a / MC[DABS, jj] if MC[DABS, jj] > 0.0 else np.inf
+        amp += a
     return amp
 
 
@@ -152,8 +172,8 @@ def _force_peaks(ref, st, nact, t_prev, t_to, h, cam_held, seat_held, known):
         else:
             g_to, db = _at(False, ws.WC, ws.MC, nact, ws.G, ws.GT, m, st.t_s, t_to, w, th0,
                            st.gdeg)  # fmt: skip
-        ring = _ringing(ws.WC, ws.MC, nact, m, t_to - st.t_s, True)
         if ws.dprev[m] < 0.0 and db > 0.0:
+            ring = _ringing(ws.WC, ws.MC, nact, m, t_to - st.t_s, True)
             so_far = _so_far(out.per_rev, c, w, t_prev, t_to,
                              MAX_CAM_FORCE if m == 0 else MAX_SEAT_FORCE)  # fmt: skip
             if _above(-ws.gprev[m], -g_to, ring, w, h, so_far):
@@ -166,6 +186,7 @@ def _force_peaks(ref, st, nact, t_prev, t_to, h, cam_held, seat_held, known):
             dr = db * r_b + g_to * r1_b * w
             if da < 0.0 and dr > 0.0:
                 so_far = _so_far(out.per_rev, c, w, t_prev, t_to, MAX_ROLLER_FORCE)
+                ring = _ringing(ws.WC, ws.MC, nact, m, t_to - st.t_s, True)
                 ring_r = ring * ratio_bound(profiles, c)
                 if _above(-ws.gprev[m] * r_a, -g_to * r_b, ring_r, w, h, so_far):
                     _peak(runs, out, ws, st, ratio, nact, m, t_prev, t_to, da, dr)
