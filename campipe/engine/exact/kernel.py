@@ -387,7 +387,7 @@ def _walk(ref, st, pl):
             if first >= 0:
                 # (A held force's peak before the event is its turn's, as on the grid.)
                 _force_peaks(ref, st, nact, t_prev, t_ev, h, cam_held, seat_held, False)
-                _at_event(ref, st, nact, t_ev, cam_held, seat_held)
+                _at_event(ref, st, nact, t_ev, first, cam_held, seat_held)
                 st.nact = nact
                 _apply_event(ref, st, first, t_ev, pl)
                 return

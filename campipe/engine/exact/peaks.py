@@ -37,11 +37,15 @@ def _force_maxima(per_rev, c, w, t, th0, cam_held, seat_held, g0, g1, roller):
 
 
 @njit(**HELPER)
-def _at_event(ref, st, nact, t_ev, cam_held, seat_held):
-    """The held contacts' forces at an event's instant t_ev [s], before it acts, into the
-    turn's force maxima: a force that rises until an impact elsewhere (the cam's as the
-    valve strikes its seat) is largest there, at its segment's end, where no turn of its
-    derivative marks a peak."""
+def _at_event(ref, st, nact, t_ev, first, cam_held, seat_held):
+    """The held contacts' forces at the instant t_ev [s] of monitor ``first``'s event, an
+    impact, before its impulse, into the turn's force maxima: a force that rises until an
+    impact elsewhere (the cam's as the valve strikes its seat) is largest there, at its
+    segment's end, where no turn of its derivative marks a peak. Nothing for any other event
+    (a release, a plunger's switch): the forces do not jump there, and the next segment's
+    start counts them."""
+    if not ((first == 0 and not cam_held) or (first == 1 and not seat_held)):
+        return
     _, _, profiles, _, out, ws = deref(ref)
     c, w, th0, p = st.c, st.w, st.th0, st.p
     g0 = g1 = 0.0
