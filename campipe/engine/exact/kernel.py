@@ -40,6 +40,7 @@ from campipe.engine.common import (
     holds_seat,
     record_event,
     start_piece,
+    turn_of,
 )
 from campipe.engine.exact.peaks import _at_event, _force_maxima, _force_peaks, _near_peak
 from campipe.engine.exact.segment import _begin_segment, monitor_count, plunger_switch
@@ -297,12 +298,10 @@ def _walk(ref, st, pl):
             return
     # The segment's start counts for the force maxima as a grid point does (after an impact
     # the force may only fall).
-    # A lever's ratio on the piece (its bound 0: none), its roller force followed too.
+    _force_maxima(per_rev, c, turn_of(w, t_s), cam_held, seat_held, gval)
+    # A lever's ratio's bound (0: none): its roller force followed too, each grid step's in
+    # ``_force_peaks``.
     ratio_max = ratio_bound(profiles, c)
-    r0, r1, r2, r3 = profiles.ratio[c, st.p, 0], profiles.ratio[c, st.p, 1], \
-        profiles.ratio[c, st.p, 2], profiles.ratio[c, st.p, 3]  # fmt: skip
-    roller = (ratio_max, r0, r1, r2, r3)
-    _force_maxima(per_rev, c, w, t_s, th0, cam_held, seat_held, gval[0], gval[1], roller)
     t_prev = t_s
     h = -1.0
     since_refresh = 0
@@ -398,8 +397,7 @@ def _walk(ref, st, pl):
         if at_break:
             # The break's point counts for the force maxima as a grid point does (a lift
             # table breaks every half degree: its steps seldom reach a grid point).
-            _force_maxima(per_rev, c, w, t_break, th0, cam_held, seat_held, gval[0], gval[1],
-                          roller)  # fmt: skip
+            _force_maxima(per_rev, c, turn_of(w, t_break), cam_held, seat_held, gval)
             st.nact = nact
             _cross_break(ref, st)
             return
@@ -410,7 +408,7 @@ def _walk(ref, st, pl):
         for m in range(2, n_mon):  # a carried plunger's (none where n_mon is the constant 2)
             dprev[m] = dval[m]
             gprev[m] = gval[m]
-        _force_maxima(per_rev, c, w, t_n, th0, cam_held, seat_held, gval[0], gval[1], roller)
+        _force_maxima(per_rev, c, turn_of(w, t_n), cam_held, seat_held, gval)
         t_prev = t_n
         if i_step < n_steps:
             cth, sth = _advance(MC, nact, cth, sth, cwh, swh)

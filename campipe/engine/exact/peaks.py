@@ -18,22 +18,22 @@ from campipe.profiles.packed import horner, ratio_bound
 
 
 @njit(inline="always", nogil=True)
-def _force_maxima(per_rev, c, w, t, th0, cam_held, seat_held, g0, g1, roller):
-    """The held contacts' forces (monitors g0, g1 at t [s], on a piece from θ = th0) into
-    the turn's force maxima; with a lever's ``roller`` (its ratio's bound over the turn, 0
-    for none, and its cubic's four coefficients on the piece: scalars, so that the grid's
-    step hands no array over), the roller's force too."""
-    turn = turn_of(w, t)
+def _force_maxima(per_rev, c, turn, cam_held, seat_held, gval):
+    """The held contacts' forces (monitors ``gval``) into the turn's force maxima (a lever's
+    roller force: ``_force_peaks``, off the grid's step)."""
     if 0 <= turn < per_rev.shape[1]:
         if cam_held:
-            per_rev[c, turn, MAX_CAM_FORCE] = max(per_rev[c, turn, MAX_CAM_FORCE], -g0)
-            if roller[0] > 0.0:
-                x = w * t - th0
-                r = ((roller[4] * x + roller[3]) * x + roller[2]) * x + roller[1]
-                force = max(per_rev[c, turn, MAX_ROLLER_FORCE], -g0 * r)
-                per_rev[c, turn, MAX_ROLLER_FORCE] = force
+            per_rev[c, turn, MAX_CAM_FORCE] = max(per_rev[c, turn, MAX_CAM_FORCE], -gval[0])
         if seat_held:
-            per_rev[c, turn, MAX_SEAT_FORCE] = max(per_rev[c, turn, MAX_SEAT_FORCE], -g1)
+            per_rev[c, turn, MAX_SEAT_FORCE] = max(per_rev[c, turn, MAX_SEAT_FORCE], -gval[1])
+
+
+@njit(inline="always", nogil=True)
+def _roller_maximum(per_rev, c, w, t, force):
+    """A lever's roller force [N] at t [s] into its turn's largest."""
+    turn = turn_of(w, t)
+    if 0 <= turn < per_rev.shape[1]:
+        per_rev[c, turn, MAX_ROLLER_FORCE] = max(per_rev[c, turn, MAX_ROLLER_FORCE], force)
 
 
 @njit(**HELPER)
@@ -47,15 +47,19 @@ def _at_event(ref, st, nact, t_ev, first, cam_held, seat_held):
     if not ((first == 0 and not cam_held) or (first == 1 and not seat_held)):
         return
     _, _, profiles, _, out, ws = deref(ref)
-    c, w, th0, p = st.c, st.w, st.th0, st.p
-    g0 = g1 = 0.0
-    if cam_held:
-        g0 = _at(False, ws.WC, ws.MC, nact, ws.G, ws.GT, 0, st.t_s, t_ev, w, th0, st.gdeg)[0]
-    if seat_held:
-        g1 = _at(False, ws.WC, ws.MC, nact, ws.G, ws.GT, 1, st.t_s, t_ev, w, th0, st.gdeg)[0]
-    roller = (ratio_bound(profiles, c), profiles.ratio[c, p, 0], profiles.ratio[c, p, 1],
-              profiles.ratio[c, p, 2], profiles.ratio[c, p, 3])  # fmt: skip
-    _force_maxima(out.per_rev, c, w, t_ev, th0, cam_held, seat_held, g0, g1, roller)
+    c, w, th0 = st.c, st.w, st.th0
+    turn = turn_of(w, t_ev)
+    if not 0 <= turn < out.per_rev.shape[1]:
+        return
+    for m in range(2):
+        if not (cam_held if m == 0 else seat_held):
+            continue
+        g = _at(False, ws.WC, ws.MC, nact, ws.G, ws.GT, m, st.t_s, t_ev, w, th0, st.gdeg)[0]
+        col = MAX_CAM_FORCE if m == 0 else MAX_SEAT_FORCE
+        out.per_rev[c, turn, col] = max(out.per_rev[c, turn, col], -g)
+        if m == 0 and ratio_bound(profiles, c) > 0.0:
+            r = horner(profiles.ratio[c, st.p], w * t_ev - th0, 3)[0]
+            _roller_maximum(out.per_rev, c, w, t_ev, -g * r)
 
 
 @njit(inline="always", nogil=True)
@@ -182,10 +186,12 @@ def _force_peaks(ref, st, nact, t_prev, t_to, h, cam_held, seat_held, known):
                              MAX_CAM_FORCE if m == 0 else MAX_SEAT_FORCE)  # fmt: skip
             if _above(-ws.gprev[m], -g_to, ring, w, h, so_far):
                 _peak(runs, out, ws, st, None, nact, m, t_prev, t_to, ws.dprev[m], db)
-        if lever:
+        if lever:  # its roller's force at both ends, and its peak between
             ratio = profiles.ratio[c, st.p]
             r_a, r1_a, _ = horner(ratio, w * t_prev - th0, 3)
             r_b, r1_b, _ = horner(ratio, w * t_to - th0, 3)
+            _roller_maximum(out.per_rev, c, w, t_prev, -ws.gprev[m] * r_a)
+            _roller_maximum(out.per_rev, c, w, t_to, -g_to * r_b)
             da = ws.dprev[m] * r_a + ws.gprev[m] * r1_a * w
             dr = db * r_b + g_to * r1_b * w
             if da < 0.0 and dr > 0.0:
