@@ -109,6 +109,8 @@ def deref(typingctx, pointer):
 #: once per value: numba types the constant as a literal. Such arguments are passed as NumPy
 #: scalars (``np.int64``, ``np.bool_``), one compile for all values; so are these event kinds.
 CAM_SEP, SEAT_SEP = np.int64(CAM_SEPARATION), np.int64(SEAT_SEPARATION)
+#: The off-the-cam angle columns, as :func:`count_angle` takes them from ``record_impact``.
+NO_FOLLOW, SEATED_OFF = np.int64(SEPARATION), np.int64(SEATED_OFF_CAM)
 
 #: The configuration arithmetic of :mod:`campipe.vocabulary`, compiled and inlined.
 configuration = njit(inline="always")(vocabulary.configuration)
@@ -334,11 +336,11 @@ def record_impact(events, n_events, per_rev, meff, c, w, t, seat, other_held, c_
         n_events[c] = k
         t_left = events[c, k, EV_TIME]
         if not seat:
-            flown = SEATED_OFF_CAM if holds_seat(c_from) else SEPARATION
+            flown = SEATED_OFF if holds_seat(c_from) else NO_FOLLOW
             count_angle(per_rev, flown, c, w, t_left, t, -1.0)
         elif not holds_cam(c_from):
-            count_angle(per_rev, SEPARATION, c, w, t_left, t, -1.0)
-            count_angle(per_rev, SEATED_OFF_CAM, c, w, t_left, t, 1.0)
+            count_angle(per_rev, NO_FOLLOW, c, w, t_left, t, -1.0)
+            count_angle(per_rev, SEATED_OFF, c, w, t_left, t, 1.0)
         return
     turn = turn_of(w, t)
     if turn < per_rev.shape[1]:
