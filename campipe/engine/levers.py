@@ -70,11 +70,14 @@ def at_the_cam(
         ratio = ratios.setdefault(id(profile), lever_ratio(profile, theta))
         force[i] = result.cam_force[i] * ratio
         first = int(result.recorded_from[i]) if result.recorded_from.size else 0
-        sampled = turn_maxima(
-            result.cam_force[i], ratio, theta, result.per_rev[i, :, MAX_CAM_FORCE], first
-        )
         followed = result.per_rev[i, :, MAX_ROLLER_FORCE]
-        per_rev[i, :, MAX_CAM_FORCE] = np.where(followed > 0.0, followed, sampled)
+        if np.all(followed > 0.0):  # the engine's own in every turn
+            per_rev[i, :, MAX_CAM_FORCE] = followed
+        else:  # the sampled rule where it gave none (the steady closed form; never on the cam)
+            sampled = turn_maxima(
+                result.cam_force[i], ratio, theta, result.per_rev[i, :, MAX_CAM_FORCE], first
+            )
+            per_rev[i, :, MAX_CAM_FORCE] = np.where(followed > 0.0, followed, sampled)
         if i < len(events):
             events[i], per_rev[i, :, MAX_CAM_IMPACT_VELOCITY] = impacts_at_the_cam(
                 events[i], result.per_rev[i, :, MAX_CAM_IMPACT_VELOCITY], profile,
