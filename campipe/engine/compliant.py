@@ -259,10 +259,8 @@ class _Run:
             a = acc[CAM] + ddlift  # δ̈ on the valve side
             if self.s.ratio is None:
                 out[0] = kd * rn + cd * a
-            else:  # δ/r's second derivative at the roller, and the rate of F/r
-                ddr = self.s.ratio.at(self.piece, self.rev, t)[2]
-                an = a / r - 2.0 * rc * dr / r**2 - dc * ddr / r**2 + 2.0 * dc * dr * dr / r**3
-                out[0] = (kd * rn + cd * an) / r - self.s.cam.force(dn, rn) * dr / (r * r)
+            else:  # the rate of F/r
+                out[0] = self.roller_rate(t, z, acc) / r - self.s.cam.force(dn, rn) * dr / (r * r)
         if self.s.seat is not None and self.closed[1]:
             kd, cd = self.s.seat.slopes(ds, rs)
             out[1] = kd * rs + cd * (-acc[SEAT])
@@ -319,10 +317,12 @@ class _Run:
                 out.append(peak)
         return out
 
-    def roller_rate(self, t: float, z: np.ndarray) -> float:
-        """A lever's roller force's rate [N/s]: its law's at the roller (the cam closed)."""
+    def roller_rate(self, t: float, z: np.ndarray, acc: np.ndarray | None = None) -> float:
+        """A lever's roller force's rate [N/s]: its law's at the roller (the cam closed), from
+        δ/r's second derivative; ``acc``: the coordinates' accelerations if already known."""
         n = self.n
-        acc = self.rhs(t, z)[n : 2 * n]
+        if acc is None:
+            acc = self.rhs(t, z)[n : 2 * n]
         dc, rc, _, _ = self.approaches(t, z)
         dn, rn, r, dr = self.at_roller(t, dc, rc)
         assert self.s.ratio is not None

@@ -392,6 +392,16 @@ def adjuster_turns(settings: RunSettings) -> int | None:
     return int(turns)
 
 
+def check_adjuster_run(case: Case, settings: RunSettings, who: str) -> None:
+    """Refuse, for a train with a hydraulic lash adjuster run more than a turn, an output
+    spacing that does not divide a turn (its plunger's state is read at each turn's end, on a
+    sample); ``who`` begins the reason ("case 3 has a lash adjuster, and")."""
+    if adjuster(case.train) is not None:
+        turns = adjuster_turns(settings)
+        if turns and turns > 1:
+            _samples_divide_a_turn(settings, who)
+
+
 def check_run(
     cases: Sequence[Case], settings: RunSettings, *, check_stability_limit: bool = True
 ) -> None:
@@ -410,10 +420,7 @@ def check_run(
     """
     _check_settings(settings)
     for i, case in enumerate(cases):
-        if adjuster(case.train) is not None:
-            turns = adjuster_turns(settings)
-            if turns and turns > 1:  # (its plunger's state is read at each turn's end)
-                _samples_divide_a_turn(settings, f"case {i} has a lash adjuster, and")
+        check_adjuster_run(case, settings, f"case {i} has a lash adjuster, and")
         if case.closure not in CLOSURES:
             raise CaseError.at(
                 "closure",

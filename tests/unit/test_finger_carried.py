@@ -17,6 +17,7 @@ from campipe.engine import Case, RunSettings, RunSettingsError, run_batch
 from campipe.model import valve_train
 from campipe.profiles import harmonic
 from campipe.study import load_study
+from campipe.study.spec.check import SpecError
 from campipe.vocabulary import (
     CAM_IMPACT,
     CHECK_VALVE_CLOSES,
@@ -203,10 +204,16 @@ def test_a_spacing_that_does_not_divide_a_turn_is_refused_with_an_adjuster():
     by turn; campipe before: `campipe study` stopped with a traceback, "other cam angles than
     the study's; a defect") and for a chain's (carried in one piece by modal-exact; campipe
     before: each turn's extension read at the first sample past its end, 17.63 µm against
-    16.79 µm at the second turn of lash-adjuster.yaml); one turn at 7° runs."""
+    16.79 µm at the second turn of lash-adjuster.yaml); one turn at 7° runs. The spec's own
+    check refuses it too, naming the key (campipe before: `campipe validate` said "valid" and
+    the run refused it naming the batch's "case 0")."""
     path = Path(__file__).parents[2] / "studies"
     every = RunSettings(revolutions=3, output_every=math.radians(7.0))
     for name in ("finger-follower-hla.yaml", "lash-adjuster.yaml"):
+        with pytest.raises(SpecError) as refused:
+            load_study(path / name, {"run.output_every": "7 deg", "run.revolutions": 3})
+        assert refused.value.paths == ["run.output_every"]
+        assert "does not divide a turn" in str(refused.value)
         case = load_study(path / name).cases[0].case
         with pytest.raises(RunSettingsError) as info:
             run_batch([case], every)

@@ -25,6 +25,7 @@ from campipe.constants import INCH
 from campipe.engine import Case, CaseError, RunSettings, RunSettingsError
 from campipe.engine.settings import (
     case_integrator,
+    check_adjuster_run,
     check_contacts,
     check_settling,
     check_stability,
@@ -477,6 +478,7 @@ def resolve_canonical(raw: Mapping, index: int, directory: Path) -> tuple[Resolv
     try:
         check_contacts([case], settings)
         check_stability([case], settings)
+        check_adjuster_run(case, settings, "the model has a lash adjuster, and")
     except RunSettingsError as exc:
         raise SpecProblem.from_error(exc) from None
     except CaseError as exc:  # a contact law's key is a model parameter
