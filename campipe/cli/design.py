@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import click
 
 from campipe.cli.base import SET_HELP, Failure, InputFailure, load_spec, scheduler_options
@@ -62,16 +64,27 @@ def design(spec, sets, fmt, output, overwrite, scheduler, workers) -> None:
         )
     path = Path(output) if output else Path(spec).parent / f"{loaded.name}-design.nc"
     if loaded.spec.drive is not None:
-        click.echo(f"campipe design: {drive_note(loaded.spec.drive)}", err=True)
+        note = drive_note(loaded.spec.drive, loaded.spec.design)
+        click.echo(f"campipe design: {note}", err=True)
     _run(loaded, spec, path, fmt, overwrite, scheduler, workers)
 
 
-def drive_note(ratio: float) -> str:
-    """What a design's speeds are in a spec with a drive: the cam's, as onset_speed_rpm's."""
+def drive_note(ratio: float, design) -> str:
+    """What a design's speeds are in a spec with a drive: the cam's, as onset_speed_rpm's,
+    with the engine's beside the spec's own onset bounds."""
+    from campipe.study.spec.design import ONSET
+
+    bounds = [
+        f"{ONSET} {sign} {value:g} rpm is the engine's {value / ratio:g} rpm"
+        for r in design.require
+        if r.key == ONSET
+        for sign, value in (("≥", r.minimum), ("≤", r.maximum))
+        if not math.isnan(value)
+    ]
+    example = "; ".join(bounds) or f"the engine's 7000 rpm is the cam's {7000 * ratio:g} rpm"
     return (
-        f"with drive (cam_per_crank {ratio:g}) design's speeds are the cam's, as "
-        f"onset_speed_rpm's: the onset's bounds and each at: (an engine's 7000 rpm is the "
-        f"cam's {7000 * ratio:g} rpm)"
+        f"with drive (cam_per_crank {ratio:g}), design's speeds (the onset's bounds, each "
+        f"metric's at:) are the cam's, as {ONSET}'s: {example}"
     )
 
 
@@ -141,8 +154,10 @@ def _run(loaded, spec_path, path, fmt, overwrite, scheduler, workers) -> None:
         file_contents,
         shown_units,
         summary_lines,
+        written_value,
     )
     from campipe.study.query.tables import displayed, format_rows
+    from campipe.study.spec.design import ONSET
 
     spec_file = os.path.relpath(Path(spec_path).resolve(), Path(path).parent.resolve())
     kind = _kind(loaded.name, spec_file)
@@ -173,6 +188,14 @@ def _run(loaded, spec_path, path, fmt, overwrite, scheduler, workers) -> None:
     lines = summary_lines(result)
     for line in lines:
         click.echo(line, err=True)
+    if result.feasible and not result.front and result.best.binding.startswith(ONSET):
+        sets = " ".join(f"--set {v.key}='{written_value(result.best.x[j], v.units, v.written)}'"
+                        for j, v in enumerate(result.design.vary))  # fmt: skip
+        click.echo(
+            f"where on the cam it loses contact at its onset (leaves_cam_at_deg: a ramp's "
+            f"take-up or the nose): campipe onset {spec_path} {sets}",
+            err=True,
+        )
     click.echo(f"wrote {path}", err=True)
     if not result.feasible:
         raise Failure(lines[0])

@@ -257,6 +257,32 @@ def test_an_infeasible_requirement_says_so_with_the_closest_design(tmp_path):
     assert all(r["feasible"] == "no" for r in rows)
 
 
+@pytest.mark.parametrize(
+    ("bound", "words"),
+    [("min: 21000 rpm", "above the top of the spec's speed range, 20000 rpm"),
+     ("max: 2500 rpm", "below the bottom of the spec's speed range, 3000 rpm")],
+)  # fmt: skip
+def test_an_onset_bound_outside_the_speed_range_is_refused_before_any_design(
+    tmp_path, bound, words
+):
+    """The onset is searched within the spec's speeds (3000–20000 rpm), so an onset above
+    21000 rpm or below 2500 rpm is met by no design: refused naming the bound's key, nothing
+    evaluated, no file written (campipe before: every design evaluated, then "infeasible …
+    the closest, the largest preload", as if more preload would reach it; found by a fresh
+    pair of eyes who typed the engine's speed for the cam's)."""
+    design = f"""
+      vary: {{model.spring_preload: {{from: 80 lbf, to: 250 lbf}}}}
+      require: {{onset_speed_rpm: {{{bound}}}}}
+      minimize: model.spring_preload
+    """
+    out = invoke("design", spec(tmp_path, design, "far"), "-o", tmp_path / "far.nc")
+    assert out.exit_code == 2, out.output
+    key = f"design.require.onset_speed_rpm.{bound[:3]}"
+    assert f"{key}: found {bound[5:]}, {words}" in out.output
+    assert "widen the speed range or move the bound" in out.output
+    assert "designs evaluated" not in out.output and not (tmp_path / "far.nc").exists()
+
+
 def test_the_output_json_csv_and_the_file_query_and_plot_read(tmp_path):
     """The chosen design first in the JSON (units: the spec's lbf), the CSV's header with
     units, and the netCDF file: SI with units attributes, read by campipe query and drawn
@@ -278,6 +304,10 @@ def test_the_output_json_csv_and_the_file_query_and_plot_read(tmp_path):
     assert first["onset_speed_rpm"] >= 9500
     assert all(r["chosen"] == "" for r in table["cases"][1:])
     assert first["evaluation"] > 1  # the answer is not the first evaluation
+    # where the chosen train loses contact: campipe onset's command for it (the table says
+    # only the onset; a fresh pair of eyes found a design bound by a ramp's take-up)
+    preload = f"{first['spring_preload']:.7g} lbf"
+    assert f"campipe onset {path} --set model.spring_preload='{preload}'" in out.output
     archive = tmp_path / "shown-design.nc"
     with xr.open_dataset(archive) as ds:
         assert ds.spring_preload.attrs["units"] == "N"
@@ -289,6 +319,14 @@ def test_the_output_json_csv_and_the_file_query_and_plot_read(tmp_path):
     lines = csv.output.splitlines()
     assert lines[0].startswith("case,evaluation,chosen,spring_preload [lbf],onset_speed_rpm [rpm]")
     assert len(lines) == n + 1 and lines[1].split(",")[2] == "yes"
+    # the summary names the design's outcome (campipe before: a KeyError's traceback)
+    summary = invoke("query", archive, "--summary", "--where", "feasible == 'yes'")
+    assert summary.exit_code == 0, summary.output
+    feasible = sum(r["feasible"] == "yes" for r in table["cases"])
+    assert f"shown: {feasible} designs evaluated by campipe design (of {n}, " in summary.output
+    assert f"spring_preload           varied  {feasible} of {n} values" in summary.output
+    assert "feasible yes; minimize model.spring_preload; binding onset_speed_rpm" in summary.output
+    assert f"chosen: {first['case']}" in summary.output
     again = invoke("design", path, "--format", "csv")  # its own file: replaced without asking
     assert again.exit_code == 0 and again.stdout.splitlines()[0] == lines[0]
     figure = tmp_path / "preload.png"
@@ -461,6 +499,6 @@ def test_a_design_with_a_drive_says_its_speeds_are_the_cam_s(tmp_path):
     path = write_spec(tmp_path, "drive: {cam_per_crank: 0.5}\n" + text, "e.yaml")
     out = invoke("design", path, "--format", "json")
     assert out.exit_code == 1, out.output  # 12000 rpm of the cam: beyond 250 lbf's 10619
-    assert "design's speeds are the cam's, as onset_speed_rpm's" in out.output
-    assert "an engine's 7000 rpm is the cam's 3500 rpm" in out.output
+    assert "design's speeds (the onset's bounds, each metric's at:) are the cam's" in out.output
+    assert "onset_speed_rpm ≥ 12000 rpm is the engine's 24000 rpm" in out.output
     assert "fails onset_speed_rpm ≥ 12000 rpm" in out.output

@@ -159,6 +159,30 @@ def _in_order(items: Sequence, task: Callable) -> list:
     return [task(item) for item in items]
 
 
+def _reachable(r: Requirement, low: float, high: float, drive: float | None) -> None:
+    """Refuse an onset bound no design can meet: the onset is searched within the spec's
+    speeds [``low``, ``high``] rpm (the cam's), so a ``min`` above their top or a ``max``
+    below their bottom is never met, whatever the design (``drive``: cam per crank)."""
+
+    def shown(rpm: float) -> str:
+        engine = f" (the engine's {rpm / drive:g} rpm)" if drive else ""
+        return f"{rpm:g} rpm{engine}"
+
+    for bound, value, edge, side in (("min", r.minimum, high, "top"), ("max", r.maximum, low,
+                                                                      "bottom")):  # fmt: skip
+        if math.isnan(value) or (value <= edge if bound == "min" else value >= edge):
+            continue
+        raise DesignError.at(
+            f"design.require.{ONSET}.{bound}",
+            f"found {value:g} rpm, {'above' if bound == 'min' else 'below'} the {side} of the "
+            f"spec's speed range, {shown(edge)}: the onset is searched within it (as campipe "
+            f"onset's), so no design can meet the bound; widen the speed range or move the "
+            f"bound (design's speeds are the cam's)",
+            found=value,
+            expected=f"{'≤' if bound == 'min' else '≥'} {edge:g} rpm",
+        )
+
+
 class Evaluator:
     """Evaluates designs of a spec's ``design`` section.
 
@@ -204,6 +228,9 @@ class Evaluator:
                 found=self.low,
                 expected="a speed range",
             )
+        for r in design.require if self.needs_onset else ():
+            if r.key == ONSET:
+                _reachable(r, self.low / RPM, self.high / RPM, study.spec.drive)
         self.metrics = {m.summary: m for m in archived_metrics()}
         self.speeds = sorted({s for r in design.require for s in r.speeds})
         self.mapped = mapped or _in_order

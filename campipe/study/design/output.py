@@ -151,7 +151,7 @@ def summary_lines(result: DesignResult) -> list[str]:
     design = result.design
     best = result.best
     n = len(result.evaluations)
-    values = ", ".join(f"{v.key} = {_value(best.x[j], v.units, v.written)}"
+    values = ", ".join(f"{v.key} = {written_value(best.x[j], v.units, v.written)}"
                        for j, v in enumerate(design.vary))  # fmt: skip
     lines = []
     if result.front:
@@ -181,7 +181,7 @@ def summary_lines(result: DesignResult) -> list[str]:
     return lines
 
 
-def _value(value: float, units: str, written: str) -> str:
+def written_value(value: float, units: str, written: str) -> str:
     """A varied key's value in the units its bounds were written in."""
     if units and written:
         return f"{convert(value, units, written):.7g} {written}"

@@ -296,6 +296,8 @@ def summary(ds, where: str | None = None, system: str = "spec") -> str:
     )
     record = ", ".join(r for r in str(ds.attrs.get("record", "")).split(", ") if r != "settling")
     lines = [f"{name}: {table.n} cases{selected}, {length}, record: {record or '-'}"]
+    if ds.attrs.get("campipe_file") == "design":  # no runs of a length, nothing recorded
+        lines = [f"{name}: {table.n} designs evaluated by campipe design{selected}"]
     try:
         axes = json.loads(ds.attrs.get("study_axes", "[]"))
     except json.JSONDecodeError:
@@ -303,13 +305,17 @@ def summary(ds, where: str | None = None, system: str = "spec") -> str:
     lines.append("axes:" if axes else "axes: none (a single case)")
     for a in axes:
         col = table.columns.get(a["name"])
-        size = f"{a['size']} values"
+        every = stored.columns.get(a["name"])
+        if "size" not in a and every is not None and every.ndim == 1:  # a design's varied key
+            a["size"] = len(dict.fromkeys(_cell(v, "table") for v in every))
+        size = f"{a.get('size', '?')} values"
         if where is not None and col is not None and col.ndim == 1:  # the selection's values
             size = f"{len(dict.fromkeys(_cell(v, 'table') for v in col))} of {size}"
         lines.append(
-            f"  {a['name']:<24} {a['kind']:<7} {size}"
+            f"  {a['name']:<24} {a.get('kind', 'varied'):<7} {size}"
             + (f": {_values_text(col, table.units.get(a['name'], ''))}" if col is not None else "")
         )
+    lines += design_lines(ds.attrs, table)
     lines += status_lines(table)
     lines += settling_lines(table, ds.attrs.get("max_revolutions", "?"))
     lines += tension_lines(table)
@@ -320,6 +326,21 @@ def summary(ds, where: str | None = None, system: str = "spec") -> str:
         lines.append(f"separation onset (first {which} with separation_deg_per_rev > 0):")
         lines += onset
     return "\n".join(lines)
+
+
+def design_lines(attrs, table: CaseTable) -> list[str]:
+    """A design file's outcome (``campipe design``'s attributes): whether a design meets the
+    requirements, what binds, the objective, the chosen design's case id; [] for a study."""
+    if attrs.get("campipe_file") != "design":
+        return []
+    chosen = table.columns.get("chosen")
+    ids = table.columns.get("case", np.arange(table.n).astype(str))
+    picked = [str(ids[i]) for i in range(table.n) if chosen is not None and chosen[i] == "yes"]
+    return [
+        f"design ({attrs.get('design_method', '?')}): feasible {attrs.get('design_feasible', '?')}"
+        f"; {attrs.get('design_objective', '-')}; binding {attrs.get('design_binding', '-')}",
+        f"chosen: {', '.join(picked) if picked else 'none among these cases'}",
+    ]
 
 
 def subset(table: CaseTable, rows: np.ndarray) -> CaseTable:
