@@ -54,7 +54,13 @@ from campipe.model.contact_keys import (  # noqa: F401  (the contacts' names, re
 from campipe.model.declared import Parameter
 from campipe.model.hla import HLA_KEYS
 from campipe.model.levers import lever_parameters
-from campipe.units import QuantityError, convert, parse_angular, parse_quantity
+from campipe.units import (
+    QuantityError,
+    convert,
+    parse_angular,
+    parse_quantity,
+    read_quantity,
+)
 
 ELEMENTS = ("pushrod", "rocker_pushrod_arm", "rocker_valve_arm", "spring", "valve_stem")
 #: Coordinates per node of each member: a bar's node moves along it, a beam's node translates
@@ -525,11 +531,13 @@ def _check_range(p: Parameter, v: float, key: str, raw: object) -> None:
     if bad or not math.isfinite(v) or v > p.maximum:
         relation = "greater than" if p.exclusive_minimum else "at least"
 
-        def shown(bound: float) -> str:  # a bound in the units the key is shown in
-            if not p.thesis_units:
+        written = _written_units(raw, p)
+
+        def shown(bound: float) -> str:  # a bound in the units the value was written in
+            if not written:
                 return f"{bound:g}"
-            value = convert(bound, p.units, p.thesis_units) if math.isfinite(bound) else bound
-            return f"{value:g} {p.thesis_units}"
+            value = convert(bound, p.units, written) if math.isfinite(bound) else bound
+            return f"{value:.6g} {written}"
 
         expected = f"a finite value {relation} {shown(p.minimum)}"
         if math.isfinite(p.maximum):
@@ -537,6 +545,21 @@ def _check_range(p: Parameter, v: float, key: str, raw: object) -> None:
         raise ModelParameterError.at(
             key, f"found {raw!r}, expected {expected}", found=raw, expected=expected
         )
+
+
+def _written_units(raw: object, p: Parameter) -> str:
+    """The units a refused value was written in ("-50 N": "N"), where they convert to the
+    parameter's; else the thesis's (its shown units); "" for a number without units."""
+    if not p.thesis_units:
+        return ""
+    if isinstance(raw, str):
+        try:
+            units = f"{read_quantity(raw, '').units:~}"
+            convert(1.0, units, p.units)
+        except Exception:  # text pint does not take as a quantity of these units
+            return p.thesis_units
+        return units
+    return p.thesis_units
 
 
 def valve_train(

@@ -95,6 +95,19 @@ def test_model_parameter_errors_carry_the_element_key():
     assert str(e) == f"{e.key}: {e.reason}"
 
 
+@pytest.mark.parametrize(
+    ("name", "raw", "bound"),
+    [("spring_preload", "-50 N", "at least 0 N"), ("spring_preload", "-5 lbf", "at least 0 lbf"),
+     ("valve_mass", "-5 g", "greater than 0 g"), ("valve_mass", "-5e-3 kg", "greater than 0 kg")],
+)  # fmt: skip
+def test_a_bound_is_shown_in_the_units_the_value_was_written_in(name, raw, bound):
+    """A refused value's bound in its own units (campipe before: '-50 N' was told "at least 0
+    lbf", the thesis's units, in an SI spec)."""
+    with pytest.raises(ModelParameterError) as info:
+        parse_parameter(name, raw, f"model.{name}")
+    assert info.value.expected == f"a finite value {bound}"
+
+
 def test_engine_errors_name_the_run_key_as_an_attribute():
     with pytest.raises(RunSettingsError) as info:
         resolve_integrator("euler")
