@@ -117,6 +117,7 @@ def _search(loaded, scheduler: str, workers: int):
 
     def estimate(evaluate) -> None:
         click.echo(f"campipe design: {estimate_design(evaluate, loaded, workers).text()}", err=True)
+        progress.restart()  # the kernels compiled: the rate counts the designs' time only
 
     stderr = sys.stderr
     progress = Progress(

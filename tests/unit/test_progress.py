@@ -102,6 +102,20 @@ def test_outside_a_terminal_a_line_every_interval_and_the_last():
     assert len(lines) == 3
 
 
+def test_a_restart_leaves_what_came_before_out_of_the_rate():
+    """campipe design draws its bar from before the kernels compile; restarted once they
+    are, 30 s of compiling is not in the rate (campipe before: a design of 1.2 s said "8 min
+    02 s left" after its first evaluation; found by a fresh pair of eyes)."""
+    lines, clock = [], Clock()
+    bar = Progress(33, lines.append, interval=0.0, clock=clock, unit="designs at most")
+    clock.t = 30.0  # compiled
+    bar.restart()
+    clock.t = 30.1
+    bar.advance(1)
+    assert lines[0].startswith("[#                       ] 1/33 designs at most  10 designs/s")
+    assert "3 s left" in lines[0]
+
+
 def test_a_study_already_done_says_what_follows():
     lines = []
     Progress(8, lines.append, done=8, then="")

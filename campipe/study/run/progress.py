@@ -82,6 +82,11 @@ class Progress:
         per = self.unit.split()[0] if self.unit else ""
         return f"{head}  {rate:.3g} {per}/s  {format_seconds(left)} left"
 
+    def restart(self) -> None:
+        """Start the clock again: what came before (compiling the kernels, an estimate's
+        timing) is not counted in the rate and the time left."""
+        self.started = self.clock()
+
     def advance(self, items: int) -> None:
         self.done += items
         self._draw()
