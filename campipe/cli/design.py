@@ -192,6 +192,9 @@ def _run(loaded, spec_path, path, fmt, overwrite, scheduler, workers) -> None:
     if result.feasible and not result.front and result.best.binding.startswith(ONSET):
         sets = " ".join(f"--set {v.key}='{written_value(result.best.x[j], v.units, v.written)}'"
                         for j, v in enumerate(result.design.vary))  # fmt: skip
+        level = next(r.level for r in result.design.require if r.key == ONSET)
+        if not math.isnan(level):
+            sets += f" --level '{math.degrees(level):g} deg'"
         click.echo(
             f"where on the cam it loses contact at its onset (leaves_cam_at_deg: a ramp's "
             f"take-up or the nose): campipe onset {spec_path} {sets}",

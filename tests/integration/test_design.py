@@ -15,6 +15,7 @@ from study_helpers import INCH, LBF, STUDIES, write_spec
 
 from campipe.cli import main
 from campipe.constants import RPM
+from campipe.engine import run_batch
 from campipe.model import system_matrices, thesis_train
 from campipe.study import load_study
 from campipe.study.design.evaluate import Evaluator
@@ -502,3 +503,52 @@ def test_a_design_with_a_drive_says_its_speeds_are_the_cam_s(tmp_path):
     assert "design's speeds (the onset's bounds, each metric's at:) are the cam's" in out.output
     assert "onset_speed_rpm ≥ 12000 rpm is the engine's 24000 rpm" in out.output
     assert "fails onset_speed_rpm ≥ 12000 rpm" in out.output
+
+
+BUCKET_DESIGN = """
+name: {name}
+model: {{layout: direct-acting, tappet_mass: 0.045 kg, valve_mass: 0.065 kg,
+        stem_stiffness: 30000 N/mm, tappet_contact_stiffness: 60000 N/mm,
+        spring_rate: 20 N/mm, spring_preload: 220 N, damping_ratios: [0.05], lash: 0.2 mm}}
+profile: {{kind: polydyne-4567, lift: 9 mm, rise: 110 deg, dwell: 20 deg, fall: 110 deg,
+          ramp_height: 0.3 mm, ramp_duration: 30 deg, ramp_shape: constant-velocity}}
+run: {{revolutions: auto, output_every: 1 deg}}
+sweep: {{speed: {{from: 1000 rpm, to: 7000 rpm, num: 2}}}}
+design:
+  vary: {{model.spring_preload: {{from: 50 N, to: 600 N, tolerance: 0.05 N}}}}
+  require: {{onset_speed_rpm: {{min: 4000 rpm{level}}}}}
+  minimize: model.spring_preload
+"""
+
+
+def test_the_onset_s_level_is_the_no_follow_a_designer_allows(tmp_path):
+    """A bucket tappet with lash (a seat: the onset at a level of no-follow a turn), the least
+    preload to follow the cam to 4000 rpm: with `level: 0 deg` the answer follows at 4000
+    rpm with no no-follow at all in its settled run of automatic length, and 0.1 N less
+    leaves the cam there (a second method: the time-domain run, not the onset's search);
+    with the default level (0.5° a turn) the answer is a lighter spring that leaves the cam
+    at 4000 rpm, under 0.5° a turn. Broken copy: the level read and not passed to the onset
+    (both answers the default's). A fresh pair of eyes found a "feasible" design lifting off
+    0.5° a turn at its target, with no way to ask for none."""
+    preloads = {}
+    for name, level in (("strict", ", level: 0 deg"), ("default", "")):
+        path = write_spec(tmp_path, BUCKET_DESIGN.format(name=name, level=level), f"{name}.yaml")
+        out = invoke("design", path, "--format", "json", "-o", tmp_path / f"{name}.nc")
+        assert out.exit_code == 0, out.output
+        text = out.output
+        first = json.loads(text[text.index("{") : text.rindex("}") + 1])["cases"][0]
+        assert first["chosen"] == "yes"
+        preloads[name] = first["spring_preload"]
+    assert preloads["default"] < preloads["strict"] - 0.2
+    no_follow = {}
+    for name, preload in (("strict", preloads["strict"]), ("less", preloads["strict"] - 0.1),
+                          ("default", preloads["default"])):  # fmt: skip
+        study = load_study(
+            tmp_path / "strict.yaml",
+            {"model.spring_preload": f"{preload!r} N", "sweep.speed": ["4000 rpm"]},
+        )
+        result = run_batch([study.cases[0].case], study.cases[0].settings)
+        no_follow[name] = math.degrees(result.metric("separation")[0])
+    assert no_follow["strict"] == 0.0
+    assert no_follow["less"] > 0.0
+    assert 0.0 < no_follow["default"] < 0.5

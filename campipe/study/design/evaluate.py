@@ -123,14 +123,17 @@ def compute_design(
     needs_onset: bool,
     speeds: tuple[float, ...],
     wanted: tuple[str, ...],
+    level: float,
     first: ResolvedCase,
 ) -> Computed:
     """A design's case evaluated (on a worker): its no-follow onset between ``low`` and
-    ``high`` [rad/s] if ``needs_onset``, and the metrics ``wanted`` (their summaries) of one
-    run of the case at each of ``speeds``, as a study's batch runs them."""
+    ``high`` [rad/s] if ``needs_onset`` (at ``level`` a turn with a seat; NaN: the onset's
+    default), and the metrics ``wanted`` (their summaries) of one run of the case at each
+    of ``speeds``, as a study's batch runs them."""
     onset, status = math.nan, ""
     if needs_onset:
-        on = engine_onset.onset_speeds([first.case], low, high)
+        at = engine_onset.DEFAULT_ONSET_LEVEL if math.isnan(level) else level
+        on = engine_onset.onset_speeds([first.case], low, high, level=at)
         onset, status = float(on.speed[0] / RPM), str(on.status[0])
     if not speeds:
         return Computed(onset, status)
@@ -236,9 +239,11 @@ class Evaluator:
         self.mapped = mapped or _in_order
         wanted = tuple(dict.fromkeys(r.key for r in design.require if r.speeds))
         #: what a worker runs for one design's case (picklable: processes, a cluster)
+        level = next((r.level for r in design.require if r.key == ONSET), math.nan)
         self.task = functools.partial(
-            compute_design, self.low, self.high, self.needs_onset, tuple(self.speeds), wanted
-        )
+            compute_design, self.low, self.high, self.needs_onset, tuple(self.speeds), wanted,
+            level,
+        )  # fmt: skip
 
     def __call__(self, values: Sequence[float] | np.ndarray) -> Evaluation:
         """Evaluate the design ``x`` (kept in :attr:`evaluations`; a design evaluated

@@ -7,7 +7,8 @@ Grammar::
     design:
       vary: {<key>: {from: <value>, to: <value>, tolerance: <value>}, ...}   # tolerance optional
       require:
-        onset_speed_rpm: {min: <speed>, max: <speed>}         # either bound or both
+        onset_speed_rpm: {min: <speed>, max: <speed>, level: <angle>}  # a bound or both;
+                                            # level: campipe onset's --level (with a seat)
         <metric>: {min: <value>, max: <value>, at: <speed> | [<speed>, ...]}
       minimize: <key> | maximize: <key>     # a varied key, onset_speed_rpm or a required metric
                                             # (two objectives: a list, or one of each: Pareto)
@@ -38,7 +39,8 @@ ONSET = "onset_speed_rpm"
 DESIGN_KEYS: dict[str, str] = {
     "vary": "keys to vary and their bounds: {<key>: {from, to, tolerance}} (tolerance: the "
     "root search's, one key; default 1e-4 of the range)",
-    "require": "bounds a design must meet: {onset_speed_rpm: {min, max}} and per-case metrics "
+    "require": "bounds a design must meet: {onset_speed_rpm: {min, max, level}} (level: the "
+    "no-follow a turn that counts with a seat, campipe onset's --level) and per-case metrics "
     "at stated speeds {<metric>: {min, max, at}}",
     "minimize": "a varied key, onset_speed_rpm or a required metric, made as small as the "
     "requirements allow; two (a list, or one here and one in maximize): the Pareto front",
@@ -77,6 +79,9 @@ class Requirement:
     units: str  # units of the bounds and the values (the archive's; rpm for the onset)
     speeds: tuple[float, ...] = ()  # a metric's speeds [rad/s] (the worst over them counts)
     written: str = ""  # the units the bounds were written in
+    #: the onset's level [rad of no-follow a turn, with a seat] (``campipe onset --level``);
+    #: NaN: its default
+    level: float = math.nan
 
     @property
     def bounded(self) -> bool:
@@ -282,7 +287,7 @@ def _requirement(
     key: str, value: object, units: str, path: str, problems: Problems
 ) -> Requirement | None:
     onset = key == ONSET
-    allowed = ("min", "max") if onset else ("min", "max", "at")
+    allowed = ("min", "max", "level") if onset else ("min", "max", "at")
     entry = problems.check(as_mapping, value, path, "{" + ", ".join(allowed) + "}")
     if entry is None:
         return None
@@ -303,11 +308,17 @@ def _requirement(
     speeds: tuple[float, ...] = ()
     if not onset:
         speeds = _speeds(entry.get("at"), f"{path}.at", problems)
+    level = math.nan
+    if "level" in entry:
+        got = _quantity(entry["level"], "rad", f"{path}.level", problems)
+        if got is not None and got < 0.0:
+            problems.add(f"{path}.level", f"found {show(entry['level'])}, expected ≥ 0 deg")
+        level = math.nan if got is None else got
     if len(problems.items) > before:
         return None
     written = _written(entry.get("min")) or _written(entry.get("max"))
     return Requirement(key, bounds["min"], bounds["max"], "rpm" if onset else units, speeds,
-                       written)  # fmt: skip
+                       written, level)  # fmt: skip
 
 
 def _speeds(value: object, path: str, problems: Problems) -> tuple[float, ...]:

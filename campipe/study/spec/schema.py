@@ -270,7 +270,7 @@ def _design() -> dict[str, object]:
     require: dict[str, object] = {
         ONSET: {
             "type": "object",
-            "properties": bounded,
+            "properties": {**bounded, "level": {"$ref": "#/$defs/quantity"}},
             "minProperties": 1,
             "additionalProperties": False,
         },  # fmt: skip
