@@ -291,6 +291,10 @@ def validate(
         f"archive: about {archive_bytes(loaded) / 1e6:.3g} MB before compression "
         f"(events not counted)"
     )
+    if loaded.spec.design is not None:
+        from campipe.study.spec.design import section_text
+
+        click.echo("\n".join(section_text(loaded.spec.design)))
 
 
 def memory_text(n_cases: int, workers: int, samples: int) -> str:

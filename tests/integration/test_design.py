@@ -552,3 +552,24 @@ def test_the_onset_s_level_is_the_no_follow_a_designer_allows(tmp_path):
     assert no_follow["strict"] == 0.0
     assert no_follow["less"] > 0.0
     assert 0.0 < no_follow["default"] < 0.5
+
+
+def test_validate_says_what_the_design_section_asks():
+    """`campipe validate` on a spec with a design section says what varies, what is
+    required (a metric's speeds, the onset's level) and which search campipe design runs
+    (campipe before: only the study's own cases, as if the spec were a study's). Broken
+    copy: the section left out, or a two-key search called a root search."""
+    one = invoke("validate", "--no-estimate", STUDIES / "design-spring.yaml")
+    assert one.exit_code == 0, one.output
+    tail = one.output.splitlines()[-3:]
+    assert (
+        tail[0] == "design: vary model.spring_preload from 50 lbf to 300 lbf (tolerance 0.01 lbf)"
+    )
+    assert tail[1].startswith("  require onset_speed_rpm ≥ 6000 rpm (the cam's speed; with a")
+    assert "0.5 deg a turn, the default); max_seating_velocity computed at 5000 rpm" in tail[1]
+    assert tail[2].startswith("  minimize model.spring_preload; a root search: campipe design")
+    two = invoke("validate", "--no-estimate", STUDIES / "design-spring-rate.yaml")
+    assert two.exit_code == 0, two.output
+    assert "max_seating_velocity ≤ 0.5 m/s at 5000 rpm" in two.output
+    assert "minimize max_cam_force; a local search" in two.output
+    assert "(tolerance" not in two.output

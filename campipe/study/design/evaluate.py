@@ -25,10 +25,9 @@ from campipe.engine import onset as engine_onset
 from campipe.engine.levers import at_the_cam
 from campipe.engine.metrics import archived_metrics
 from campipe.errors import CampipeError
-from campipe.study.spec.design import ONSET, Design, Requirement, onset_required
+from campipe.study.spec.design import ONSET, Design, Requirement, bound_label, onset_required
 from campipe.study.spec.expand import Study
 from campipe.study.spec.resolve import ResolvedCase
-from campipe.units import convert
 from campipe.vocabulary import FAILURES
 
 
@@ -55,12 +54,7 @@ class Bound:
 
     @property
     def label(self) -> str:
-        r = self.requirement
-        sign = "≥" if self.side == "min" else "≤"
-        value, units = self.value, r.units
-        if r.written and units and r.written != units:
-            value, units = convert(value, units, r.written), r.written
-        return f"{r.key} {sign} {value:.6g}{' ' + units if units else ''}"
+        return bound_label(self.requirement, self.side)
 
     def margin(self, value: float) -> float:
         """The margin of ``value`` (the requirement's units); -inf for a value not found."""

@@ -152,13 +152,12 @@ def run_design(
     if before is not None:
         before(evaluate)
     t0 = time.perf_counter()
-    one = len(design.vary) == 1 and design.objective == design.vary[0].key
-    method = "pareto" if design.pareto else "root" if one else design.method
+    method = design.search
     stopped = False
     try:
         if design.pareto:
             _sample(evaluate, design)
-        elif one:
+        elif method == "root":
             _root(evaluate, design)
         elif design.method == "global":
             _global(evaluate, design)
@@ -197,7 +196,7 @@ def _compile(study: Study, evaluate: Evaluator, notice: Callable[[str], None] | 
 def most_evaluations(design: Design) -> int:
     """The evaluations a search takes at most: the budget, or for a root search its scan and
     a bisection to the tolerance at worst (brentq takes fewer)."""
-    if design.pareto or len(design.vary) > 1 or design.objective != design.vary[0].key:
+    if design.search != "root":
         return design.max_evaluations
     return min(design.max_evaluations, 2 + SCAN + 2 * root_halvings(design))
 

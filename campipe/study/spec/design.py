@@ -27,11 +27,12 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
+from campipe.constants import RPM
 from campipe.engine.metrics import archived_metrics
 from campipe.errors import did_you_mean, excerpt
 from campipe.study.spec.blocks import Problems, as_mapping, show, unknown_key
 from campipe.study.spec.fields import CASE_FIELDS, SpecProblem, sample_keys, varied_fields
-from campipe.units import QuantityError, parse_quantity
+from campipe.units import QuantityError, convert, parse_quantity
 
 #: The requirement on the no-follow onset (``campipe onset``'s column, the value in rpm).
 ONSET = "onset_speed_rpm"
@@ -88,6 +89,51 @@ class Requirement:
         return not (math.isnan(self.minimum) and math.isnan(self.maximum))
 
 
+def bound_label(r: Requirement, side: str) -> str:
+    """One bound in words, in the units it was written in: ``onset_speed_rpm ≥ 9500 rpm``."""
+    sign, value = ("≥", r.minimum) if side == "min" else ("≤", r.maximum)
+    units = r.units
+    if r.written and units and r.written != units:
+        value, units = convert(value, units, r.written), r.written
+    return f"{r.key} {sign} {value:.6g}{' ' + units if units else ''}"
+
+
+def section_text(design: Design) -> list[str]:
+    """The checked section in words (``campipe validate``): what varies, what is required
+    (a metric's speeds, the onset's level), what is optimised, by which search."""
+    root = design.search == "root"  # the tolerance is the root search's
+    vary = "; ".join(
+        f"{v.key} from {_shown(v.low, v)} to {_shown(v.high, v)}"
+        + (f" (tolerance {_shown(v.tolerance, v)})" if root else "")
+        for v in design.vary
+    )
+    required = []
+    for r in design.require:
+        sides = [bound_label(r, side) for side, v in (("min", r.minimum), ("max", r.maximum))
+                 if not math.isnan(v)] or [f"{r.key} computed"]  # fmt: skip
+        at = f" at {', '.join(f'{s / RPM:g}' for s in r.speeds)} rpm" if r.speeds else ""
+        level = ""
+        if r.key == ONSET:
+            shown = f"{math.degrees(r.level):g} deg a turn"
+            if math.isnan(r.level):
+                shown = "0.5 deg a turn, the default"
+            level = f" (the cam's speed; with a seat, from no-follow of {shown})"
+        required.append(" and ".join(sides) + at + level)
+    goals = ", ".join(f"{sense} {key}" for key, sense in design.objectives)
+    return [
+        f"design: vary {vary}",
+        f"  require {'; '.join(required) or 'nothing'}",
+        f"  {goals}; a {design.search} search: campipe design runs it (the lines above are "
+        "campipe study's run of the spec's own cases)",
+    ]
+
+
+def _shown(value: float, v: Vary) -> str:
+    if v.written and v.units:
+        return f"{convert(value, v.units, v.written):.6g} {v.written}"
+    return f"{value:.6g}{' ' + v.units if v.units else ''}"
+
+
 @dataclass(frozen=True)
 class Design:
     """A checked ``design:`` section."""
@@ -112,6 +158,15 @@ class Design:
     @property
     def pareto(self) -> bool:
         return len(self.objectives) == 2
+
+    @property
+    def search(self) -> str:
+        """The search campipe design runs: "pareto" (two objectives), "root" (one varied key
+        that is the objective), else ``method``."""
+        if self.pareto:
+            return "pareto"
+        one = len(self.vary) == 1 and self.objective == self.vary[0].key
+        return "root" if one else self.method
 
 
 def metric_units() -> dict[str, str]:
