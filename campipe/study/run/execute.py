@@ -74,7 +74,7 @@ from campipe.study.run.resume import (
 from campipe.study.run.sizing import default_batch_size, default_workers
 from campipe.study.run.workers import run_distributed, run_local, stored_here
 from campipe.study.spec.expand import Study
-from campipe.study.spec.resolve import ResolvedCase, per_turn_note
+from campipe.study.spec.resolve import ResolvedCase, per_turn_note, ramp_note
 from campipe.vocabulary import OK, STATUS
 
 log = logging.getLogger(__name__)
@@ -232,9 +232,9 @@ def _check_replaceable(archive: Path, state: ArchiveState, overwrite: bool) -> N
 
 
 def _adjuster_notes(cases: list[ResolvedCase]) -> list[str]:
-    """The per-turn model's note on the cases computed (``resolve.per_turn_note``)."""
-    note = per_turn_note(cases)
-    return [] if note is None else [note]
+    """The per-turn model's note and the lash's beyond the ramps on the cases computed
+    (``resolve.per_turn_note``, ``resolve.ramp_note``)."""
+    return [note for note in (per_turn_note(cases), ramp_note(cases)) if note is not None]
 
 
 def _state_notes(archive: Path, state: ArchiveState) -> list[str]:

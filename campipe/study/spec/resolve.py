@@ -189,6 +189,60 @@ def per_turn_note(cases: Sequence[ResolvedCase]) -> str | None:
     )
 
 
+#: A lash the ramps do not take up is noted where the valve's kinematic landing velocity (the
+#: cam's where its lift crosses the seat) is this much above the ramp's (``ramp_note``).
+RAMP_EXCESS = 1.1
+
+
+def ramp_note(cases: Sequence[ResolvedCase]) -> str | None:
+    """A note on the cases whose lash the cam's ramps do not take up: the valve's seat (the
+    lash and the train's compression under the preload, as a valve lift) above the opening
+    ramp's top at the valve, so the follower lifts the valve off its seat, and sets it
+    down, on the flanks, at a kinematic velocity (the cam's where its lift crosses the seat)
+    more than RAMP_EXCESS × the ramp's. None where there are none (or no ramps)."""
+    combinations, speeds = distinct_but_speed(cases)
+    beyond = []
+    for c in combinations:
+        ramp = c.values.get("profile.ramp_duration")
+        if not isinstance(ramp, float) or math.isnan(getattr(c.case.train, "lash", math.nan)):
+            continue
+        excess = _landing_excess(c.case, ramp)
+        if excess > RAMP_EXCESS:
+            beyond.append((excess, c.case.seat))
+    if not beyond:
+        return None
+    n = speeds * len(beyond)
+    excess, seat = max(beyond)
+    return (
+        f"{n} case{'s' if n != 1 else ''} take{'' if n != 1 else 's'} up more lash than the "
+        f"cam's ramps: the valve leaves its seat, and lands on it, on the flanks, at up to "
+        f"{excess:.3g} times the ramp's velocity by the cam's kinematics (a seat at "
+        f"{seat * 1e3:.4g} mm of valve lift, the lash and the train's compression under the "
+        "preload); a ramp above the seat keeps the landing at its velocity"
+    )
+
+
+def _landing_excess(case: Case, ramp: float) -> float:
+    """The cam's velocity where its lift at the valve first crosses the case's seat, over
+    its velocity halfway up the opening ramp (``ramp`` [rad] long, from 0)."""
+    from campipe.profiles import evaluate
+
+    train = case.train  # a rocker's valve side is its ratio × the cam's lift
+    lever = train.layout in LEVERS or train.chain
+    scale = 1.0 if lever else valve_lift_ratio(train, case.profile, 1.0)
+    theta = np.linspace(0.0, math.pi, 4097)
+    lift = scale * evaluate(case.profile, theta)[0]
+    above = np.flatnonzero(lift >= case.seat)
+    if not above.size or above[0] == 0:
+        return math.nan
+    k = above[0]
+    at = theta[k - 1] + (case.seat - lift[k - 1]) / (lift[k] - lift[k - 1]) * (
+        theta[k] - theta[k - 1]
+    )
+    velocity = evaluate(case.profile, np.array([at, 0.5 * ramp]))[1]
+    return float(velocity[0] / velocity[1])
+
+
 def freeze(value: object) -> object:
     if isinstance(value, Mapping):
         return tuple(sorted((k, freeze(v)) for k, v in value.items()))
