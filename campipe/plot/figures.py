@@ -505,7 +505,9 @@ def _default_x(view: View) -> str:
     varied = [n for n in varied_columns(view) if view.shown.columns[n].dtype.kind in "iuf"]
     if "speed_rpm" in varied:
         return "speed_rpm"
-    if not varied:
+    if not varied:  # one case, or none varying: its point at its speed
+        if "speed_rpm" in view.shown.columns:
+            return "speed_rpm"
         raise PlotError.at("--x", "no numeric column varies among the selected cases")
     return varied[0]
 

@@ -203,6 +203,19 @@ def test_metric_seating_velocity_against_speed_in_chosen_units(ds):
     assert_allclose(ax.get_lines()[0].get_ydata(), ds.max_seating_velocity.values[rows])
 
 
+def test_metric_of_one_case_is_its_point_at_its_speed(ds):
+    """A selection of one case (a sweep's spec run for one case, its plots: drawn as the
+    study ends) is its point at its speed (campipe before: refused, "no numeric column
+    varies", and `campipe study` exited with an error after writing the archive)."""
+    where = "speed_rpm == 9524 rpm and seat is none and spring_preload == 120 lbf"
+    fig = figure(ds, PlotRequest("metric", where=where))
+    (line,) = fig.axes[0].get_lines()
+    assert fig.axes[0].get_xlabel() == "Cam speed [rpm]"
+    assert line.get_xdata().tolist() == [9524.0]
+    assert_allclose(line.get_ydata(), ds.separation_deg_per_rev.values[_rows(
+        ds, speed_rpm=9524.0, seat=-np.inf, spring_preload=120 * LBF)])  # fmt: skip
+
+
 def test_map_colours_one_cell_per_case_with_its_contour(archive, ds, tmp_path):
     request = PlotRequest("map", x="speed_rpm", y="spring_preload", level="1 deg")
     path, fig = plot_archive(archive, request, tmp_path / "map.png")
