@@ -38,6 +38,7 @@ from campipe.engine.case import Case, sample_count
 from campipe.engine.result import BatchResult, blank_failures
 from campipe.engine.settings import SETTLE_CONFIRM, check_settling, whole_turns
 from campipe.model.assembly import SystemMatrices
+from campipe.model.layouts import placeholders
 from campipe.profiles import evaluate
 from campipe.vocabulary import CAM, EV_TIME, FAILURES, N_EVENT_FIELDS, SEAT, holds_cam, holds_seat
 
@@ -236,6 +237,10 @@ def run_settled(
                 np.full((n, cap + 1, n_q), np.nan),
                 np.ones((n, 2, n_q)),
             )
+            # a short chain's placeholders (decoupled, at rest to rounding) compare as equal
+            spare = np.zeros((n, n_q), np.bool_)
+            for i, case in enumerate(cases):
+                spare[i, placeholders(case.train)] = True
             boundary.q[:, 0], boundary.v[:, 0] = part.q[:, 0], part.v[:, 0]
             first_start = part.start_time.copy()
             reference = part.valve_reference.copy()
@@ -258,7 +263,7 @@ def run_settled(
             np.array([1e-9, 1e-9])[None, :, None]
             * np.maximum(omega[active], 1.0)[:, None, None] ** np.array([0.0, 1.0])[None, :, None]
         )
-        boundary.scale[active] = np.fmax(ranges, floor)
+        boundary.scale[active] = np.where(spare[active, None, :], np.inf, np.fmax(ranges, floor))
         per_rev[active, k] = part.per_rev[:, 0]
         steps[active] += part.steps
         _keep(kept, active, np.full(active.size, k % turns), part)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import xarray as xr
-from study_helpers import INCH, write_spec
+from study_helpers import INCH, STUDIES, write_spec
 
 from campipe.constants import RPM
 from campipe.engine import Case, RunSettings, run_batch
@@ -208,3 +208,25 @@ def test_a_compliant_case_runs_on_from_its_own_state_at_each_turn(integrator):
     )
     peak = auto.per_rev[0, turns - 1, MAX_CAM_FORCE]
     assert peak == pytest.approx(fixed.per_rev[0, turns - 1, MAX_CAM_FORCE], rel=1e-7)
+
+
+def test_a_short_chain_s_placeholders_do_not_set_its_period():
+    """The bundled bucket (a two-mass chain: q2 … q6 are placeholders, at rest to rounding)
+    past its onset, 4032.9 rpm with 0.2 mm and 0.1 mm of lash: a fixed run of 6 turns from
+    the periodic start gives each turn the same no-follow (to 1e-8: its events located to
+    1e-12 s), cam force and seating velocity (to 1e-9; an independent long run agrees:
+    1.7181° a turn, every turn), so the response
+    repeats every turn: `period_turns` 1 for both. Broken copy: the placeholders' rounding
+    (1e-15 m/s against a floor of 4.2e-7 m/s) in the turn boundaries' comparison, 1.09e-8
+    of the tolerance's 1e-8 at once: period 2 at 0.2 mm (found by a fresh pair of eyes)."""
+    path = STUDIES / "bucket-tappet-lash.yaml"
+    sets = {"sweep.speed": ["4032.9 rpm"], "sweep.model.lash": ["0.1 mm", "0.2 mm"]}
+    cases = [c.case for c in load_study(path, sets).cases]
+    fixed = run_batch(cases, RunSettings(revolutions=6, warmup=0))
+    for key in ("separation", "max_cam_force", "max_seating_velocity"):
+        per_turn = fixed.metric_per_rev(key)
+        rtol = 1e-8 if key == "separation" else 1e-9
+        assert np.allclose(per_turn, per_turn[:, :1], rtol=rtol, atol=0), key
+    assert np.all(np.degrees(fixed.metric_per_rev("separation")) > 1.0)  # past the onset
+    auto = run_batch(cases, RunSettings(revolutions=None))
+    assert auto.period_turns.tolist() == [1, 1]
