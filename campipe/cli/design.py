@@ -184,7 +184,10 @@ def _run(loaded, spec_path, path, fmt, overwrite, scheduler, workers) -> None:
             },
             loaded.compression,
         )
-    shown = displayed(table, shown_units(result))
+    from campipe.cli.onset import with_engine_speed
+
+    # with a drive, the onset at the engine's speed beside the cam's, as campipe onset's
+    shown = displayed(with_engine_speed(table, loaded.spec.drive), shown_units(result))
     click.echo(format_rows(shown, np.arange(shown.n), shown.default, fmt))
     lines = summary_lines(result)
     for line in lines:

@@ -503,6 +503,14 @@ def test_a_design_with_a_drive_says_its_speeds_are_the_cam_s(tmp_path):
     assert "design's speeds (the onset's bounds, each metric's at:) are the cam's" in out.output
     assert "onset_speed_rpm ≥ 12000 rpm is the engine's 24000 rpm" in out.output
     assert "fails onset_speed_rpm ≥ 12000 rpm" in out.output
+    # the engine's onset beside the cam's, as campipe onset's table has it
+    text = out.output
+    rows = json.loads(text[text.index("{") : text.rindex("}") + 1])["cases"]
+    for row in rows:
+        assert row["onset_engine_speed_rpm"] == pytest.approx(
+            2 * row["onset_speed_rpm"], nan_ok=True
+        )
+    assert rows[0]["onset_engine_speed_rpm"] > 20000
 
 
 BUCKET_DESIGN = """

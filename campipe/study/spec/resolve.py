@@ -227,9 +227,9 @@ def _landing_excess(case: Case, ramp: float) -> float:
     its velocity halfway up the opening ramp (``ramp`` [rad] long, from 0)."""
     from campipe.profiles import evaluate
 
-    train = case.train  # a rocker's valve side is its ratio × the cam's lift
-    lever = train.layout in LEVERS or train.chain
-    scale = 1.0 if lever else valve_lift_ratio(train, case.profile, 1.0)
+    train = case.train  # a lever's and a chain's profile is the valve side's already
+    on_valve_side = train.layout in LEVERS or train.chain
+    scale = 1.0 if on_valve_side else valve_lift_ratio(train, case.profile, 1.0)  # a rocker's
     theta = np.linspace(0.0, math.pi, 4097)
     lift = scale * evaluate(case.profile, theta)[0]
     above = np.flatnonzero(lift >= case.seat)
