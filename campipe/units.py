@@ -184,11 +184,17 @@ def _parse(text: object, units: str, key: str, example_units: str | None) -> flo
         raise QuantityError.at(
             key,
             f"found {excerpt(text)} [{q.dimensionality}], expected a quantity convertible "
-            f"to {example} [{target.dimensionality}]",
+            f"to {example}{_also_si(example, target)} [{target.dimensionality}]",
             found=text,
             expected=expected,
         ) from None
     return _finite(value, text, key, expected)
+
+
+def _also_si(example: str, target) -> str:
+    """The SI units (``target``) after an example in others: " or N/m"; "" otherwise."""
+    si = "" if target.dimensionless else f"{target:~C}"
+    return f" or {si}" if si and si != example else ""
 
 
 def _finite(value: float, text: object, key: str, expected: str) -> float:

@@ -238,7 +238,8 @@ def test_preset_values_parse_from_thesis_units():
     ("name", "value", "message"),
     [
         ("spring_rate", 260, "bare number"),
-        ("spring_rate", "260 in", "expected a quantity convertible to lbf/in"),
+        ("spring_rate", "260 in", "expected a quantity convertible to lbf/in or N/m ["),
+        ("spring_preload", "20 N/mm", "expected a quantity convertible to lbf or N ["),
         ("spring_rat", "260 lbf/in", "did you mean 'spring_rate'"),
         ("pushrod_length", "-1 in", "greater than 0"),
         ("damping_ratios", [], "expected a list of numbers, lowest mode first"),
