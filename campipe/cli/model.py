@@ -127,9 +127,9 @@ def model(
     overrides = parse_overrides(sets)
     if spec_path is None and case_index:
         raise click.UsageError("--case chooses a case of --spec SPEC: give the spec")
-    cam = None
+    cam = drive = None
     if spec_path is not None:
-        train, preset, cam = spec_model(spec_path, sets, overrides, case_index)
+        train, preset, cam, drive = spec_model(spec_path, sets, overrides, case_index)
     else:
         try:
             train = valve_train(preset, overrides)
@@ -160,7 +160,7 @@ def model(
         report = model_report(train, sm, limits, preset)
         click.echo(json.dumps({**report, **table, **contact_report(contacts)}, indent=1))
     else:
-        text = model_text(train, sm, limits, preset, overrides) + ratio_text(table)
+        text = model_text(train, sm, limits, preset, overrides, drive) + ratio_text(table)
         click.echo(text + contact_text(contacts))
 
 
@@ -198,7 +198,7 @@ def spec_model(spec_path: str, sets: tuple[str, ...], overrides: dict, index: in
             err=True,
         )
     cam = case.case.profile
-    return train, f"{name} (case {index})", getattr(cam, "cam", None) or cam
+    return train, f"{name} (case {index})", getattr(cam, "cam", None) or cam, study.spec.drive
 
 
 def _json_value(value: object) -> object:
@@ -468,7 +468,7 @@ def _source(preset: str) -> str:
     return f"preset {preset}" if preset in PRESETS else f"spec {preset}"
 
 
-def model_text(train, sm, limits, preset, overrides) -> str:
+def model_text(train, sm, limits, preset, overrides, drive: float | None = None) -> str:
     """The human form of ``campipe model``, in the thesis's units and layout (a lumped
     chain's in SI)."""
     lines = [
@@ -514,17 +514,28 @@ def model_text(train, sm, limits, preset, overrides) -> str:
         lines += _matrix_text(to_display_units(a, length, energy, trans), scale, coords)
     lines.append("")
     lines.append("Natural frequencies (Figure 14), each mode's damping ratio (Φᵀ C Φ)ⱼⱼ / (2ωⱼ)")
-    lines.append(f"  {'mode':>4} {'rad/s':>14} {'Hz':>12} {'rpm':>14} {'ζ':>6}")
+    lines.append(
+        "  (cam rpm: the cam speed whose first order meets the mode, its frequency a minute"
+        + (f"; engine rpm: the crank's, by drive.cam_per_crank {drive:g})" if drive else ")")
+    )
+    engine = f" {'engine rpm':>14}" if drive else ""
+
+    def speeds(w: float) -> str:
+        return f"{w / TWO_PI:12.1f} {w / RPM:14.1f}" + (
+            f" {w / RPM / drive:14.1f}" if drive else ""
+        )
+
+    lines.append(f"  {'mode':>4} {'rad/s':>14} {'Hz':>12} {'cam rpm':>14}{engine} {'ζ':>6}")
     zeta = modal_damping_ratios(sm.damping, sm.modes, sm.frequencies)
     for i, (w, z) in enumerate(zip(sm.frequencies, zeta, strict=True), 1):
-        lines.append(f"  {i:>4} {w:14.1f} {w / TWO_PI:12.1f} {w / RPM:14.1f} {z:6.3f}")
+        lines.append(f"  {i:>4} {w:14.1f} {speeds(w)} {z:6.3f}")
     lines.append("")
     held = on_the_cam(sm, coords)
     lines.append("Natural frequencies with the follower on the cam (configuration I: q1 held)")
     if held.size:
-        lines.append(f"  {'mode':>4} {'rad/s':>14} {'Hz':>12} {'rpm':>14}")
+        lines.append(f"  {'mode':>4} {'rad/s':>14} {'Hz':>12} {'cam rpm':>14}{engine}")
         for i, w in enumerate(held, 1):
-            lines.append(f"  {i:>4} {w:14.1f} {w / TWO_PI:12.1f} {w / RPM:14.1f}")
+            lines.append(f"  {i:>4} {w:14.1f} {speeds(w)}")
     else:
         lines.append("  none: nothing of the train is free on the cam (a rigid follower)")
     lines.append("")

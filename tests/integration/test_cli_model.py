@@ -3,6 +3,7 @@
 import json
 import math
 import subprocess
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -59,6 +60,24 @@ def test_text_shows_the_thesis_layout():
     # the rad/s figure as Hz
     assert "679.1" in text and "108.1" in text and "6485.3" in text
     assert "  II     3.2364 µs" in text
+
+
+def test_a_spec_with_a_drive_shows_each_mode_at_the_engine_s_speed_too():
+    """The bundled finger with its lash adjuster (drive: cam_per_crank 0.5): each natural
+    frequency as the cam speed whose first order meets it (ω·60/2π) and the engine's, twice
+    that; a spec without a drive shows the cam's alone (a user read the rpm column as the
+    engine's). Broken copy: the engine's column the cam's."""
+    spec = Path(__file__).parents[2] / "studies" / "finger-follower-hla.yaml"
+    result = run("--spec", str(spec))
+    assert result.exit_code == 0, result.output
+    lines = result.output.splitlines()
+    head = lines.index("  mode          rad/s           Hz        cam rpm     engine rpm      ζ")
+    assert "engine rpm: the crank's, by drive.cam_per_crank 0.5" in lines[head - 1]
+    w, hz, cam, engine = (float(v) for v in lines[head + 1].split()[1:5])
+    assert hz == pytest.approx(w / (2 * math.pi), abs=0.06)
+    assert cam == pytest.approx(w * 60 / (2 * math.pi), abs=0.6)  # (w printed to 0.1)
+    assert engine == pytest.approx(2 * cam, abs=0.11)
+    assert "engine rpm" not in run().output
 
 
 def test_bad_override_is_a_usage_error_naming_the_key():
