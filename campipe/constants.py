@@ -19,3 +19,7 @@ LBF_IN = LBF * INCH
 STANDARD_GRAVITY = 9.80665
 #: rad/s per rpm.
 RPM = TWO_PI / 60.0
+#: ``campipe onset``'s default tolerance [rpm] and, with a seat, its default level [deg of
+#: no-follow a turn] (``engine.onset.onset_speeds``: why 0.5°); the design section's too.
+DEFAULT_ONSET_TOLERANCE_RPM = 0.1
+DEFAULT_ONSET_LEVEL_DEG = 0.5

@@ -6,6 +6,7 @@ import click
 import numpy as np
 
 from campipe.cli.base import SET_HELP, Failure, load_spec
+from campipe.constants import DEFAULT_ONSET_LEVEL_DEG, DEFAULT_ONSET_TOLERANCE_RPM
 
 
 @click.command()
@@ -13,14 +14,14 @@ from campipe.cli.base import SET_HELP, Failure, load_spec
 @click.option("--set", "sets", multiple=True, metavar="KEY=VALUE", help=SET_HELP)
 @click.option(
     "--tolerance",
-    default="0.1 rpm",
+    default=f"{DEFAULT_ONSET_TOLERANCE_RPM:g} rpm",
     show_default=True,
     metavar="SPEED",
     help="The onset's tolerance (the width of its final bracket).",
 )
 @click.option(
     "--level",
-    default="0.5 deg",  # engine.onset.DEFAULT_ONSET_LEVEL_DEG (not imported: numba loads)
+    default=f"{DEFAULT_ONSET_LEVEL_DEG:g} deg",
     show_default=True,
     metavar="ANGLE",
     help="With a seat, the no-follow a turn the onset reaches (0 deg: the first separation). "

@@ -23,7 +23,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from campipe.constants import RPM, TWO_PI
+from campipe.constants import (  # noqa: F401  (the defaults, re-exported)
+    DEFAULT_ONSET_LEVEL_DEG,
+    DEFAULT_ONSET_TOLERANCE_RPM,
+    RPM,
+    TWO_PI,
+)
 from campipe.engine import slope_bound, steady
 from campipe.engine.batch import Case, CaseError, RunSettings, check_run, run_batch, train_matrices
 from campipe.engine.periodic import leave_speeds, prepare_steady
@@ -45,10 +50,8 @@ SCAN_SPEEDS = 17
 #: of its margin is taken to be at most ONSET_SLOPE_FACTOR times the steepest of the chord
 #: between them and the chords either side (``onset_speeds``).
 ONSET_SLOPE_FACTOR = 2.0
-#: The onset's default tolerance [rpm]; with a seat, its default level [deg of no-follow a
-#: turn] (``onset_speeds``: why 0.5°).
-DEFAULT_ONSET_TOLERANCE_RPM = 0.1
-DEFAULT_ONSET_LEVEL_DEG = 0.5
+#: The onset's default level [rad of no-follow a turn, with a seat] (``onset_speeds``: why
+#: 0.5°); its tolerance's and the level's defaults in campipe.constants (read without numba).
 DEFAULT_ONSET_LEVEL = math.radians(DEFAULT_ONSET_LEVEL_DEG)  # [rad]
 #: The time-domain check: its offset either side of the onset, its turns from the periodic
 #: start and the first of them left out (``confirm_onsets``).

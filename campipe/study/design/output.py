@@ -18,9 +18,8 @@ from campipe.io.archive import VariableSpec
 from campipe.study.design.evaluate import bounds_of
 from campipe.study.design.search import DesignResult
 from campipe.study.query.tables import CaseTable
-from campipe.study.spec.design import ONSET
+from campipe.study.spec.design import ONSET, written_value
 from campipe.study.spec.fields import varied_fields
-from campipe.units import convert
 
 #: The ``campipe_file`` attribute of a design's file.
 DESIGN_FILE = "design"
@@ -179,10 +178,3 @@ def summary_lines(result: DesignResult) -> list[str]:
         f"{result.seconds:.3g} s"
     )
     return lines
-
-
-def written_value(value: float, units: str, written: str) -> str:
-    """A varied key's value in the units its bounds were written in."""
-    if units and written:
-        return f"{convert(value, units, written):.7g} {written}"
-    return f"{value:.7g}{' ' + units if units else ''}"

@@ -27,7 +27,7 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-from campipe.constants import RPM
+from campipe.constants import DEFAULT_ONSET_LEVEL_DEG, RPM
 from campipe.engine.metrics import archived_metrics
 from campipe.errors import did_you_mean, excerpt
 from campipe.study.spec.blocks import Problems, as_mapping, show, unknown_key
@@ -116,7 +116,7 @@ def section_text(design: Design) -> list[str]:
         if r.key == ONSET:
             shown = f"{math.degrees(r.level):g} deg a turn"
             if math.isnan(r.level):
-                shown = "0.5 deg a turn, the default"
+                shown = f"{DEFAULT_ONSET_LEVEL_DEG:g} deg a turn, the default"
             level = f" (the cam's speed; with a seat, from no-follow of {shown})"
         required.append(" and ".join(sides) + at + level)
     goals = ", ".join(f"{sense} {key}" for key, sense in design.objectives)
@@ -129,9 +129,14 @@ def section_text(design: Design) -> list[str]:
 
 
 def _shown(value: float, v: Vary) -> str:
-    if v.written and v.units:
-        return f"{convert(value, v.units, v.written):.6g} {v.written}"
-    return f"{value:.6g}{' ' + v.units if v.units else ''}"
+    return written_value(value, v.units, v.written)
+
+
+def written_value(value: float, units: str, written: str) -> str:
+    """A varied key's value in the units its bounds were written in."""
+    if units and written:
+        return f"{convert(value, units, written):.7g} {written}"
+    return f"{value:.7g}{' ' + units if units else ''}"
 
 
 @dataclass(frozen=True)
