@@ -309,6 +309,7 @@ def test_the_output_json_csv_and_the_file_query_and_plot_read(tmp_path):
     # only the onset; a fresh pair of eyes found a design bound by a ramp's take-up)
     preload = f"{first['spring_preload']:.7g} lbf"
     assert f"campipe onset {path} --set model.spring_preload='{preload}'" in out.output
+    assert "not proven" not in out.output  # no seat, a smooth cam: every search proven
     archive = tmp_path / "shown-design.nc"
     with xr.open_dataset(archive) as ds:
         assert ds.spring_preload.attrs["units"] == "N"
@@ -547,6 +548,8 @@ def test_the_onset_s_level_is_the_no_follow_a_designer_allows(tmp_path):
         first = json.loads(text[text.index("{") : text.rindex("}") + 1])["cases"][0]
         assert first["chosen"] == "yes"
         preloads[name] = first["spring_preload"]
+        # a seat: the onsets' searches are the chords' estimate, and the command says so
+        assert "designs' onsets searched past speeds on the chords' estimate, not proven" in text
     assert preloads["default"] < preloads["strict"] - 0.2
     no_follow = {}
     for name, preload in (("strict", preloads["strict"]), ("less", preloads["strict"] - 0.1),

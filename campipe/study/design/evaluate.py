@@ -82,6 +82,7 @@ class Evaluation:
     x: np.ndarray  # the varied keys' values (SI), in design.vary's order
     onset: float = math.nan  # the no-follow onset [rpm]; NaN: not asked for, or none
     onset_status: str = ""  # engine.onset.Onset's: found, below, none ("" not asked for)
+    onset_proven: bool = True  # its search proven (``Computed.onset_proven``)
     #: (metric, speed [rad/s]) → the metric's summary (the archive's units); NaN: failed run
     metrics: dict[tuple[str, float], float] = field(default_factory=dict)
     values: dict[str, float] = field(default_factory=dict)  # requirement → worst value
@@ -109,6 +110,9 @@ class Computed:
     #: (metric summary, speed [rad/s]) → its value (the archive's units); NaN: none
     values: dict[tuple[str, float], float] = field(default_factory=dict)
     failed: tuple[bool, ...] = ()  # the run at each speed failed (a failure status)
+    #: the onset's search proven free of missed windows (engine.onset.Onset.proven); False
+    #: where it passed speeds on the chords' estimate (a seated steady state, a lift's step)
+    onset_proven: bool = True
 
 
 def compute_design(
@@ -129,8 +133,11 @@ def compute_design(
         at = engine_onset.DEFAULT_ONSET_LEVEL if math.isnan(level) else level
         on = engine_onset.onset_speeds([first.case], low, high, level=at)
         onset, status = float(on.speed[0] / RPM), str(on.status[0])
+        proven = on.proven is None or bool(on.proven[0])
+    else:
+        proven = True
     if not speeds:
-        return Computed(onset, status)
+        return Computed(onset, status, onset_proven=proven)
     metrics = {m.summary: m for m in archived_metrics()}
     chosen = [metrics[w] for w in wanted]
     cases = [dataclasses.replace(first.case, speed=s) for s in speeds]
@@ -148,7 +155,7 @@ def compute_design(
         summary = m.summarise(m.to_archive(result.metric_per_rev(m.key)), result.measured)
         for i, s in enumerate(speeds):
             values[m.summary, s] = float(summary[i])
-    return Computed(onset, status, values, tuple(bool(f) for f in failed))
+    return Computed(onset, status, values, tuple(bool(f) for f in failed), proven)
 
 
 def _in_order(items: Sequence, task: Callable) -> list:
@@ -255,7 +262,7 @@ class Evaluator:
         firsts = [self.cases_at(x).cases[0] for x in new.values()]
         computed = self.mapped(firsts, self.task) if firsts else []
         for x, c in zip(new.values(), computed, strict=True):
-            ev = Evaluation(x, c.onset, c.onset_status)
+            ev = Evaluation(x, c.onset, c.onset_status, onset_proven=c.onset_proven)
             ev.metrics = self._metrics(c)
             self._judge(ev)
             self.evaluations.append(ev)

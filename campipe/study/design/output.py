@@ -172,6 +172,13 @@ def summary_lines(result: DesignResult) -> list[str]:
             f"the requirements; the closest, {values}, fails {best.binding} "
             f"(relative margin {best.relative:.3g})"
         )
+    estimated = sum(not e.onset_proven for e in result.evaluations)
+    if estimated:
+        lines.append(
+            f"{estimated} of the {n} designs' onsets searched past speeds on the chords' "
+            "estimate, not proven (a seated steady state or a profile with steps): a window of "
+            "no-follow narrower than the scan may be missed, as campipe onset says"
+        )
     lines.append(
         f"{n} design{'s' if n != 1 else ''} evaluated ({result.method}"
         f"{', stopped at design.max_evaluations' if result.stopped else ''}) in "
