@@ -180,7 +180,7 @@ def run_study(
         found, more = find_results(study, archive, archive_usable=not state.problems)
         notes += more
         missing = [c for c in study.cases if c.case_id not in found]
-        notes += _adjuster_notes(missing)
+        notes += _case_notes(missing)
         workers = workers or (1 if scheduler == "synchronous" else default_workers())
         plans = _plan(study, missing, scheduler, workers, batch_size)
         run = _Run(scheduler, workers, on_batch, workers_store, notice, command)
@@ -231,7 +231,7 @@ def _check_replaceable(archive: Path, state: ArchiveState, overwrite: bool) -> N
         raise refuse(archive, state)
 
 
-def _adjuster_notes(cases: list[ResolvedCase]) -> list[str]:
+def _case_notes(cases: list[ResolvedCase]) -> list[str]:
     """The per-turn model's note and the lash's beyond the ramps on the cases computed
     (``resolve.per_turn_note``, ``resolve.ramp_note``)."""
     return [note for note in (per_turn_note(cases), ramp_note(cases)) if note is not None]
@@ -394,7 +394,7 @@ def _run_parts(
         found, more = find_parts(study, archive, layout)
         notes += more
         missing = [c for c in study.cases if c.case_id not in found.found]
-        notes += _adjuster_notes(missing)
+        notes += _case_notes(missing)
         workers = run.workers or (1 if run.scheduler == "synchronous" else default_workers())
         run = dataclasses.replace(run, workers=workers)
         plans = _plan(study, missing, run.scheduler, workers, batch_size)

@@ -223,14 +223,18 @@ def ramp_note(cases: Sequence[ResolvedCase]) -> str | None:
 
 
 def _landing_excess(case: Case, ramp: float) -> float:
-    """The cam's velocity where its lift at the valve first crosses the case's seat, over
-    its velocity halfway up the opening ramp (``ramp`` [rad] long, from 0)."""
+    """For a case whose seat is above the opening ramp's top at the valve (``ramp`` [rad]
+    long, from 0), the cam's velocity where its lift at the valve first crosses the seat,
+    over its velocity halfway up the ramp; NaN where the ramp takes the seat up (a smooth
+    ramp's own velocity varies along it: that is no landing on the flank)."""
     from campipe.profiles import evaluate
 
     train = case.train  # a lever's and a chain's profile is the valve side's already
     on_valve_side = train.layout in LEVERS or train.chain
     scale = 1.0 if on_valve_side else valve_lift_ratio(train, case.profile, 1.0)  # a rocker's
-    theta = np.linspace(0.0, math.pi, 4097)
+    if case.seat <= scale * float(evaluate(case.profile, np.array([ramp]))[0][0]):
+        return math.nan
+    theta = np.linspace(ramp, math.pi, 4097)
     lift = scale * evaluate(case.profile, theta)[0]
     above = np.flatnonzero(lift >= case.seat)
     if not above.size or above[0] == 0:
