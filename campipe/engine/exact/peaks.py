@@ -48,18 +48,15 @@ def _at_event(ref, st, nact, t_ev, first, cam_held, seat_held):
         return
     _, _, profiles, _, out, ws = deref(ref)
     c, w, th0 = st.c, st.w, st.th0
-    turn = turn_of(w, t_ev)
-    if not 0 <= turn < out.per_rev.shape[1]:
-        return
-    for m in range(2):
-        if not (cam_held if m == 0 else seat_held):
-            continue
-        g = _at(False, ws.WC, ws.MC, nact, ws.G, ws.GT, m, st.t_s, t_ev, w, th0, st.gdeg)[0]
-        col = MAX_CAM_FORCE if m == 0 else MAX_SEAT_FORCE
-        out.per_rev[c, turn, col] = max(out.per_rev[c, turn, col], -g)
-        if m == 0 and ratio_bound(profiles, c) > 0.0:
-            r = horner(profiles.ratio[c, st.p], w * t_ev - th0, 3)[0]
-            _roller_maximum(out.per_rev, c, w, t_ev, -g * r)
+    g0 = g1 = 0.0
+    if cam_held:
+        g0 = _at(False, ws.WC, ws.MC, nact, ws.G, ws.GT, 0, st.t_s, t_ev, w, th0, st.gdeg)[0]
+    if seat_held:
+        g1 = _at(False, ws.WC, ws.MC, nact, ws.G, ws.GT, 1, st.t_s, t_ev, w, th0, st.gdeg)[0]
+    _force_maxima(out.per_rev, c, turn_of(w, t_ev), cam_held, seat_held, (g0, g1))
+    if cam_held and ratio_bound(profiles, c) > 0.0:
+        r = horner(profiles.ratio[c, st.p], w * t_ev - th0, 3)[0]
+        _roller_maximum(out.per_rev, c, w, t_ev, -g0 * r)
 
 
 @njit(inline="always", nogil=True)
