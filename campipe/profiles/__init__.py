@@ -17,9 +17,12 @@ from typing import TYPE_CHECKING
 from campipe import kernel_cache
 from campipe.profiles.defects import bump, flat
 from campipe.profiles.pieces import (
+    INCHES,
+    LengthUnit,
     Lift,
     Profile,
     evaluate,
+    format_length,
     max_lift,
     min_lift,
     shift_polynomial,
@@ -43,8 +46,10 @@ if TYPE_CHECKING:
 _PACKED = ("PackedProfiles", "evaluate_packed", "pack")
 
 __all__ = [
+    "INCHES",
     "POLYDYNE_POLYNOMIALS",
     "RAMP_SHAPES",
+    "LengthUnit",
     "Lift",
     "PackedProfiles",
     "Profile",
@@ -53,6 +58,7 @@ __all__ = [
     "evaluate",
     "evaluate_packed",
     "flat",
+    "format_length",
     "harmonic",
     "max_lift",
     "min_lift",

@@ -12,8 +12,10 @@ import math
 import numpy as np
 
 from campipe.profiles.pieces import (
+    INCHES,
     N_COEFFS,
     TWO_PI,
+    LengthUnit,
     Profile,
     evaluate,
     format_angle,
@@ -90,7 +92,9 @@ def bump_coefficients(height: float, width: float) -> np.ndarray:
     return height * c
 
 
-def bump(profile: Profile, center: float, height: float, width: float) -> Profile:
+def bump(
+    profile: Profile, center: float, height: float, width: float, unit: LengthUnit = INCHES
+) -> Profile:
     """A smooth local bump (or dent) added to the profile.
 
     Adds height·(1 − u²)³ with u = 2(θ − center)/width for |u| ≤ 1, zero outside: lift,
@@ -106,6 +110,8 @@ def bump(profile: Profile, center: float, height: float, width: float) -> Profil
         Height added at ``center`` [m]; negative for a dent.
     width : float
         Full width of the bump [rad], 0 < width < 2π; it may run through θ = 0.
+    unit : LengthUnit, optional
+        The unit the label writes the height in; inches by default.
 
     Raises
     ------
@@ -132,7 +138,7 @@ def bump(profile: Profile, center: float, height: float, width: float) -> Profil
     poly = out.poly.copy()
     poly[inside] += shift_polynomial(bump_coefficients(height, width), start + turn - center)
     label = (
-        f"{profile.label} + bump {format_length(height)} at {format_angle(center)} deg "
+        f"{profile.label} + bump {format_length(height, unit)} at {format_angle(center)} deg "
         f"over {format_angle(width)} deg"
     )
     return Profile(out.breaks, poly, out.trig, label)

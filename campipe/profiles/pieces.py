@@ -14,12 +14,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 import numpy.typing as npt
 
 # TWO_PI: one turn of the cam [rad], every profile's period; INCH: labels give lengths in the
-# thesis's inches [m/in].
+# thesis's inches [m/in] unless told another unit.
 from campipe.constants import INCH, TWO_PI
 
 #: Polynomial coefficients per piece (degree ≤ 7).
@@ -266,9 +267,20 @@ def min_lift(profile: Profile) -> float:
     return lift_range(profile)[0]
 
 
-def format_length(value: float) -> str:
-    """A length [m] in the thesis's inches, for labels."""
-    return f"{value / INCH:.4g} in"
+class LengthUnit(NamedTuple):
+    """The unit a label writes a length in: its symbol and its size [m]."""
+
+    symbol: str
+    metres: float
+
+
+#: The thesis's inches, every label's unit unless a caller (a spec written in mm) says another.
+INCHES = LengthUnit("in", INCH)
+
+
+def format_length(value: float, unit: LengthUnit = INCHES) -> str:
+    """A length [m] in ``unit`` (the thesis's inches by default), for labels."""
+    return f"{value / unit.metres:.4g} {unit.symbol}"
 
 
 def format_angle(value: float) -> str:

@@ -15,8 +15,10 @@ from numpy.polynomial import Polynomial
 
 from campipe.profiles.pieces import (
     BREAK_TOL,
+    INCHES,
     N_COEFFS,
     TWO_PI,
+    LengthUnit,
     Profile,
     format_angle,
     format_length,
@@ -102,7 +104,7 @@ def _finite(name: str, value: float) -> float:
     return value
 
 
-def harmonic(lift: float) -> Profile:
+def harmonic(lift: float, unit: LengthUnit = INCHES) -> Profile:
     """The thesis's harmonic cam: lift = h/2·(1 − sin θ).
 
     The thesis drives the pushrod foot with q1 = 0.5 sin ωt [in], q1 pointing down: mid-lift
@@ -114,19 +116,26 @@ def harmonic(lift: float) -> Profile:
     ----------
     lift : float
         Full lift h, peak to peak [m] (thesis: 1 in).
+    unit : LengthUnit, optional
+        The unit the label writes the lift in (``harmonic 1 in``); inches by default.
     """
     h = _finite("lift", lift)
     if h <= 0.0:
         raise ValueError(f"lift must be > 0, got {h!r} m")
     poly = np.zeros((1, N_COEFFS))
     poly[0, 0] = 0.5 * h
-    return Profile(
-        np.array([0.0, TWO_PI]), poly, np.array([[-0.5 * h, 0.0]]), f"harmonic {format_length(h)}"
-    )
+    label = f"harmonic {format_length(h, unit)}"
+    return Profile(np.array([0.0, TWO_PI]), poly, np.array([[-0.5 * h, 0.0]]), label)
 
 
 def polydyne(
-    kind: str, lift: float, rise: float, dwell: float, fall: float, ramp: Ramp | None = None
+    kind: str,
+    lift: float,
+    rise: float,
+    dwell: float,
+    fall: float,
+    ramp: Ramp | None = None,
+    unit: LengthUnit = INCHES,
 ) -> Profile:
     """A polydyne cam: rise, dwell at full lift, fall, dwell on the base circle.
 
@@ -150,6 +159,10 @@ def polydyne(
         Angle of the fall [rad], the ramp's excluded.
     ramp : Ramp, optional
         Opening and closing ramps.
+    unit : LengthUnit, optional
+        The unit the label writes the lift and the ramps' height in; inches by default. The
+        label reads ``polydyne-4567 1 in 90/90/90/90 deg``: the kind, the lift, then the rise,
+        the dwell, the fall and the base circle's dwell.
 
     Raises
     ------
@@ -230,12 +243,12 @@ def polydyne(
         breaks[-1] = TWO_PI
     poly = np.array(rows)
     label = (
-        f"polydyne-{kind} {format_length(h)} {format_angle(rise)}/{format_angle(dwell)}/"
+        f"polydyne-{kind} {format_length(h, unit)} {format_angle(rise)}/{format_angle(dwell)}/"
         f"{format_angle(fall)}/{format_angle(max(base, 0.0))} deg"
     )
     if ramp is not None:
         label += (
-            f", {ramp.shape} ramps {format_length(ramp.height)} over "
+            f", {ramp.shape} ramps {format_length(ramp.height, unit)} over "
             f"{format_angle(ramp.duration)} deg"
         )
     return Profile(np.array(breaks), poly, np.zeros((poly.shape[0], 2)), label)

@@ -8,7 +8,7 @@ from numpy.testing import assert_allclose
 from study_helpers import INCH, LBF, write_spec
 
 from campipe.model import thesis_train
-from campipe.study import check_spec, expand, load_study
+from campipe.study import SpecError, check_spec, expand, load_study
 from campipe.study.spec.expand import count_cases, deep_merge, raw_cases
 
 BASE = {
@@ -214,3 +214,33 @@ def test_a_lift_table_enters_the_id_by_its_values_not_its_path(tmp_path):
     assert ids["other.csv"].case_id != ids["cam.csv"].case_id
     assert ids["cam.csv"].values["profile"] == "table cam.csv (36 points)"
     assert ids["cam.csv"].case.profile.n_pieces == 36
+
+
+def test_labels_write_lengths_in_the_units_the_spec_wrote_them_in():
+    """A spec in millimetres reads its profiles in millimetres (they were 0.2559 in for
+    6.5 mm); each length in its own written unit, the angles as before; a spec in inches keeps
+    its labels (the mixed study's digest holds them)."""
+    s = study(
+        profile={
+            "kind": "polydyne-4567",
+            "lift": "6.5 mm",
+            "rise": "110 deg",
+            "dwell": "20 deg",
+            "fall": "110 deg",
+            "ramp_height": "0.2 mm",
+            "ramp_duration": "30 deg",
+        },
+        defects=[{"kind": "bump", "center": "200 deg", "height": "5 um", "width": "10 deg"}],
+        sweep={"profile.lift": ["6.5 mm", "0.3 in"]},
+    )
+    mm, inch = (c.values["profile"] for c in s.cases)
+    assert mm == (
+        "polydyne-4567 6.5 mm 110/20/110/60 deg, constant-velocity ramps 0.2 mm over 30 deg"
+    )
+    assert inch.startswith("polydyne-4567 0.3 in ") and "ramps 0.007874 in" in inch
+    assert s.cases[0].values["defects"] == "bump 5 µm at 200 deg over 10 deg"
+    harmonic = study(profile={"kind": "harmonic", "lift": "25.4 mm"}).cases[0]
+    assert harmonic.values["profile"] == "harmonic 25.4 mm"
+    # the refusals say the lift in the spec's units too
+    with pytest.raises(SpecError, match=r"full valve lift 38\.1 mm \(cam lift 25\.4 mm × rocker"):
+        study(profile={"kind": "harmonic", "lift": "25.4 mm"}, seat="40 mm")

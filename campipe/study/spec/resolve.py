@@ -21,7 +21,6 @@ from typing import Any, overload
 
 import numpy as np
 
-from campipe.constants import INCH
 from campipe.engine import Case, CaseError, RunSettings, RunSettingsError
 from campipe.engine.settings import (
     case_integrator,
@@ -43,10 +42,13 @@ from campipe.model import (
 )
 from campipe.model.levers import LEVERS
 from campipe.profiles import (
+    INCHES,
+    LengthUnit,
     Profile,
     Ramp,
     bump,
     flat,
+    format_length,
     harmonic,
     max_lift,
     min_lift,
@@ -326,9 +328,10 @@ def _profile(frozen: tuple, directory: Path) -> tuple[Profile, dict, dict[str, o
     kind = spec["kind"]
     values: dict[str, object] = {"profile.kind": kind}
     si = {k: PROFILE_FIELDS[k].parse(v, f"profile.{k}") for k, v in spec.items() if k != "kind"}
+    unit = _length_unit(spec.get("lift"))  # the label's, as the spec wrote the lift
     try:
         if kind == "harmonic":
-            profile = harmonic(si["lift"])
+            profile = harmonic(si["lift"], unit)
         elif kind.startswith("polydyne-"):
             ramp = None
             if "ramp_height" in si:
@@ -341,6 +344,7 @@ def _profile(frozen: tuple, directory: Path) -> tuple[Profile, dict, dict[str, o
                 si["dwell"],
                 si["fall"],
                 ramp=ramp,
+                unit=unit,
             )
         else:
             path = (directory / si["file"]).resolve()
@@ -387,11 +391,13 @@ def _with_defects(frozen_profile: tuple, frozen_defects: tuple, directory: Path)
             if d["kind"] == "flat":
                 out = flat(out, si["from"], si["to"])
             else:
-                out = bump(out, si["center"], si["height"], si["width"])
+                unit = _length_unit(d.get("height"))
+                out = bump(out, si["center"], si["height"], si["width"], unit)
         except ValueError as exc:
             raise SpecProblem(f"defects[{i}]", str(exc)) from None
         defects.append({"kind": d["kind"], **{k: clean_value(v) for k, v in si.items()}})
     label = out.label[len(profile.label) :].removeprefix(" + ") if defects else "none"
+    written = _thaw(frozen_profile).get("lift")
     low = min_lift(out)
     if low < -LIFT_TOLERANCE:
         where = (
@@ -399,7 +405,7 @@ def _with_defects(frozen_profile: tuple, frozen_defects: tuple, directory: Path)
         )
         raise SpecProblem(
             where,
-            f"the cam's lift falls to {low / INCH:.4g} in; expected a "
+            f"the cam's lift falls to {_in_units(low, written)}; expected a "
             "lift never below the base circle (0)",
         )
     high = max_lift(out)
@@ -407,7 +413,7 @@ def _with_defects(frozen_profile: tuple, frozen_defects: tuple, directory: Path)
         where = "profile.file" if "profile.file" in values else "profile"
         raise SpecProblem(
             where,
-            f"the cam's lift never rises above {high / INCH:.4g} in; expected a cam that "
+            f"the cam's lift never rises above {_in_units(high, written)}; expected a cam that "
             "lifts the follower",
         )
     return out, canonical, defects, values, label, high
@@ -513,8 +519,9 @@ def resolve_canonical(raw: Mapping, index: int, directory: Path) -> tuple[Resolv
             SpecProblem(
                 "seat",
                 f"found {excerpt(raw['seat'])}, expected a valve lift below "
-                f"the full valve lift {full * ratio / INCH:.4g} in (cam lift "
-                f"{full / INCH:.4g} in × rocker ratio {ratio:.4g}): above it "
+                f"the full valve lift {_in_units(full * ratio, raw['seat'], prof.get('lift'))} "
+                f"(cam lift {_in_units(full, prof.get('lift'))} × rocker ratio {ratio:.4g}): "
+                "above it "
                 "the valve never leaves its seat",
             )
             if math.isnan(train.lash)
@@ -610,9 +617,9 @@ def _lash_words(model: Mapping, train: ValveTrain) -> str:
     return f"{lash} on the {train.lash_side} side"
 
 
-def _in_units(value: float, *written: object) -> str:
-    """A length ``value`` [m] in the units of the first of the spec's values ``written``
-    that is a length with units (``0.2 mm``), else in inches."""
+def _length_unit(*written: object) -> LengthUnit:
+    """The unit of the first of the spec's values ``written`` that is a length with units
+    (``0.2 mm``: millimetres), else the thesis's inches."""
     for text in written:
         if isinstance(text, str):
             try:
@@ -620,8 +627,14 @@ def _in_units(value: float, *written: object) -> str:
             except QuantityError:
                 continue
             if q.check("[length]"):
-                return f"{convert(value, 'm', str(q.units)):.4g} {q.units:~}"
-    return f"{value / INCH:.4g} in"
+                return LengthUnit(f"{q.units:~}", convert(1.0, str(q.units), "m"))
+    return INCHES
+
+
+def _in_units(value: float, *written: object) -> str:
+    """A length ``value`` [m] in the units of the first of the spec's values ``written``
+    that is a length with units (``0.2 mm``), else in inches."""
+    return format_length(value, _length_unit(*written))
 
 
 def check_settings(settings: RunSettings) -> None:
