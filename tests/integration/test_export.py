@@ -86,6 +86,12 @@ def test_si_csv_holds_the_stored_values_to_the_bit(small_archive, tmp_path):
         contact = ds.contact_state.sel(case=cid).values
     assert np.array_equal(np.array(cols["valve_velocity [m/s]"], float), stored)
     assert [int(c) for c in cols["contact_state"]] == contact.tolist()
+    # a force out of contact is stored as -0.0 and written as 0.0, not "-0.0"
+    with xr.open_dataset(small_archive.archive) as ds:
+        force = ds.cam_force.sel(case=cid).values
+    assert np.any((force == 0) & np.signbit(force))
+    assert "-0.0" not in cols["cam_force [N]"]
+    assert np.array_equal(np.array(cols["cam_force [N]"], float), force)
 
 
 def test_mat_carries_the_csv_s_columns_and_units(small_archive, tmp_path):

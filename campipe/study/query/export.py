@@ -124,10 +124,13 @@ def history_table(ds, rows: np.ndarray, system: str = "spec") -> HistoryTable:
 
 def _shown(values: np.ndarray, stored: str, shown: str, speed: np.ndarray | None) -> np.ndarray:
     """(cases, samples) stored values as one column in the shown units, without the
-    conversion's noise."""
-    if stored == shown or values.dtype.kind != "f":
+    conversion's noise, and a zero without its sign (a contact force out of contact is
+    stored as -0.0, which a table would write as ``-0.0``)."""
+    if values.dtype.kind != "f":
         return values.reshape(-1)
-    return without_noise(to_display(values, stored, shown, speed)).reshape(-1)
+    if stored != shown:
+        values = without_noise(to_display(values, stored, shown, speed))
+    return values.reshape(-1) + 0.0
 
 
 def _dof_units(ds) -> dict[str, str]:
