@@ -277,6 +277,16 @@ def read_quantity(text: str, key: str) -> pint.Quantity:
     return q
 
 
+def written_units(value: object) -> str:
+    """The units a quantity's text was written in, as written (``"6.5 mm"``: ``"mm"``); ""
+    for a bare number, text that starts with no number, or anything else. Nothing is read
+    through pint."""
+    if not isinstance(value, str) or len(value) > MAX_QUANTITY_LENGTH:
+        return ""
+    m = _QUANTITY.match(value)
+    return m["units"] if m is not None and m["number"] is not None else ""
+
+
 def is_unit(name: str) -> bool:
     """``name`` alone is a unit pint knows (``in``, ``lbf``, ``rpm``), not a prefix or text."""
     try:

@@ -238,7 +238,7 @@ def test_labels_write_lengths_in_the_units_the_spec_wrote_them_in():
         "polydyne-4567 6.5 mm 110/20/110/60 deg, constant-velocity ramps 0.2 mm over 30 deg"
     )
     assert inch.startswith("polydyne-4567 0.3 in ") and "ramps 0.007874 in" in inch
-    assert s.cases[0].values["defects"] == "bump 5 µm at 200 deg over 10 deg"
+    assert s.cases[0].values["defects"] == "bump 5 um at 200 deg over 10 deg"
     harmonic = study(profile={"kind": "harmonic", "lift": "25.4 mm"}).cases[0]
     assert harmonic.values["profile"] == "harmonic 25.4 mm"
     # the refusals say the lift in the spec's units too

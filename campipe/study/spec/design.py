@@ -32,7 +32,7 @@ from campipe.engine.metrics import archived_metrics
 from campipe.errors import did_you_mean, excerpt
 from campipe.study.spec.blocks import Problems, as_mapping, show, unknown_key
 from campipe.study.spec.fields import CASE_FIELDS, SpecProblem, sample_keys, varied_fields
-from campipe.units import QuantityError, convert, parse_quantity
+from campipe.units import QuantityError, convert, parse_quantity, written_units
 
 #: The requirement on the no-follow onset (``campipe onset``'s column, the value in rpm).
 ONSET = "onset_speed_rpm"
@@ -179,19 +179,6 @@ def metric_units() -> dict[str, str]:
     return {m.summary: m.units or "" for m in archived_metrics()}
 
 
-def _written(value: object) -> str:
-    """The units a value was written in ("" for a bare number)."""
-    if isinstance(value, str):
-        parts = value.strip().split(maxsplit=1)
-        if len(parts) == 2:
-            try:
-                float(parts[0])
-            except ValueError:
-                return ""
-            return parts[1]
-    return ""
-
-
 def check_design(value: object, problems: Problems) -> Design | None:
     """``design:`` → a :class:`Design`, or None with its problems added."""
     block = problems.check(as_mapping, value, "design", "{vary, require, minimize | maximize}")
@@ -299,7 +286,7 @@ def _bounds(key: str, r: object, path: str, problems: Problems) -> Vary | None:
                          "value greater than 0 and less than the range")  # fmt: skip
             return None
         tolerance = t
-    written = _written(entry["from"]) or _written(entry["to"])
+    written = written_units(entry["from"]) or written_units(entry["to"])
     return Vary(key, low, high, tolerance, field.units, written)
 
 
@@ -376,7 +363,7 @@ def _requirement(
         level = math.nan if got is None else got
     if len(problems.items) > before:
         return None
-    written = _written(entry.get("min")) or _written(entry.get("max"))
+    written = written_units(entry.get("min")) or written_units(entry.get("max"))
     return Requirement(key, bounds["min"], bounds["max"], "rpm" if onset else units, speeds,
                        written, level)  # fmt: skip
 

@@ -65,7 +65,7 @@ from campipe.study.spec.fields import (
     SpecProblem,
     varied_fields,
 )
-from campipe.units import QuantityError, convert, read_quantity
+from campipe.units import QuantityError, parse_quantity, written_units
 
 #: Lift below the base circle tolerated as round-off [m].
 LIFT_TOLERANCE = 1e-12
@@ -619,15 +619,15 @@ def _lash_words(model: Mapping, train: ValveTrain) -> str:
 
 def _length_unit(*written: object) -> LengthUnit:
     """The unit of the first of the spec's values ``written`` that is a length with units
-    (``0.2 mm``: millimetres), else the thesis's inches."""
+    (``0.2 mm``: millimetres, as written), else the thesis's inches. Its size is read as a
+    quantity's value is, kept from run to run (pint stays unloaded on a warm run)."""
     for text in written:
-        if isinstance(text, str):
+        units = written_units(text)
+        if units:
             try:
-                q = read_quantity(text, "")
+                return LengthUnit(units, parse_quantity(f"1 {units}", "m", ""))
             except QuantityError:
                 continue
-            if q.check("[length]"):
-                return LengthUnit(f"{q.units:~}", convert(1.0, str(q.units), "m"))
     return INCHES
 
 
