@@ -77,46 +77,72 @@ class LashAdjuster:
     check_force: float  # [N] F_c
     pump_up: float  # [N·s/m] c_P
     travel: float  # [m] the plunger's extension from bottomed out, at most
+    seated: float  # [N/m] its load per unit of its extension, on the base circle (seated_stiffness)
 
     def series(self, stiffness: float) -> float:
         """The stiffness [N/m] of a member of ``stiffness`` with the adjuster in series."""
         return 1.0 / (1.0 / stiffness + 1.0 / self.stiffness)
 
-    def need(self, force: np.ndarray, gap: np.ndarray) -> float:
-        """The most the plunger pumps up over the samples [m] (``force`` [N] through the
-        adjuster, ``gap`` [m] between cam and follower): the largest need while the check
-        valve is open, the gap plus the load it still lacks, (F_c − F)/k (the check valve
-        closes once the plunger has taken it up); 0 where it never opens."""
-        open_ = force < self.check_force
-        if not open_.any():
-            return 0.0
-        need = np.max(gap[open_] + (self.check_force - force[open_]) / self.stiffness)
-        return max(float(need), 0.0)
-
     def advance(
         self, extension: float, time: np.ndarray, force: np.ndarray, gap: np.ndarray
     ) -> tuple[float, float, float]:
         """(the extension after the turn [m], its leak-down [m], its pump-up [m]) from the
-        extension at its start and the turn's samples, interval by interval in the turn's
-        order, held within 0 … ``travel`` at each (a plunger bottomed out does not leak
-        down, one fully out does not pump up): the leak-down and pump-up are what it moved.
-        The check valve closed where F > F_c, it sinks ∫ (F − F_c)⁺ dt / c_L; open, it rises
-        ∫ (F_c − F)⁺ dt / c_P, its rate scaled so that the turn's total is at most
-        :meth:`need`."""
+        extension at its start and the turn's samples (``force`` [N] through the adjuster,
+        ``gap`` [m] between cam and follower, of a run with the plunger held where it
+        started), interval by interval in the turn's order, held within 0 … ``travel`` at
+        each (a plunger bottomed out does not leak down, one fully out does not pump up): the
+        leak-down and pump-up are what it moved.
+
+        The check valve closed where F > F_c, it sinks ∫ (F − F_c)⁺ dt / c_L. Open, it rises
+        at (F_c − F')/c_P, F' its load with the plunger where it is: the run's load F and gap
+        g moved by what it rose or sank since the run's extension e₀ (:meth:`_rise`, k the
+        :attr:`seated` stiffness), until it reaches e₀ + g + (F_c − F)/k, where the check
+        valve closes (F and g each interval's mean over its open part). What it leaked down
+        earlier in the turn is pumped back on the base circle after it, as the carried
+        plunger does (a cap of the turn's gap alone left a finger's roller standing off its
+        base circle every turn by a turn's leak-down less F_c/k)."""
         sinks = excess_parts(time, force, self.check_force) / self.leak_down
-        rises = excess_parts(time, -force, -self.check_force) / self.pump_up
-        capacity = float(rises.sum())  # the turn's ∫ (F_c − F)⁺ dt / c_P
-        if capacity > 0.0:  # at most the need
-            rises *= min(capacity, self.need(force, gap)) / capacity
-        e, leak, pump = float(extension), 0.0, 0.0
-        for sink, rise in zip(sinks.tolist(), rises.tolist(), strict=True):
+        lacking = excess_parts(time, -force, -self.check_force)  # ∫ (F_c − F)⁺ dt [N·s]
+        open_time = open_parts(time, force, self.check_force)
+        is_open = np.asarray(force) < self.check_force
+        g = np.where(is_open, np.asarray(gap, float), 0.0)
+        ends = is_open[:-1].astype(float) + is_open[1:]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            gaps = np.where(ends > 0, (g[:-1] + g[1:]) / ends, 0.0)
+        start = float(extension)
+        e, leak, pump = start, 0.0, 0.0
+        rows = zip(sinks.tolist(), lacking.tolist(), open_time.tolist(), gaps.tolist(), strict=True)
+        for sink, short, dt, g_j in rows:
             if sink:
                 moved = min(sink, e)
                 e, leak = e - moved, leak + moved
-            if rise:
-                moved = min(rise, self.travel - e)
+            if short > 0.0 and dt > 0.0:
+                moved = self._rise(e - start, short / dt, dt, g_j)
+                moved = max(min(moved, self.travel - e), 0.0)
                 e, pump = e + moved, pump + moved
         return e, leak, pump
+
+    def _rise(self, raised: float, lacking: float, dt: float, gap: float) -> float:
+        """What the plunger rises [m] over ``dt`` [s] with its check valve open, ``raised``
+        [m] above the run's extension (below it after a leak-down), the run's load F short of
+        F_c by ``lacking`` [N] and its gap ``gap`` [m] (:meth:`advance`). Off the cam in the
+        run (g > 0) the plunger's load stays the link's own F until it has risen by g, then
+        gains k·(raised − g); on the cam (g = 0) it is F + k·raised, and where that is below
+        0 the follower stands off and the load is 0. Below that boundary it rises at
+        (F_c − load)/c_P; past it it approaches g + (F_c − F)/k as 1 − exp(−k·t/c_P)."""
+        k, force = self.seated, self.check_force - lacking
+        boundary, load = (gap, force) if gap > 0.0 else (-force / k, 0.0)
+        moved = 0.0
+        if raised < boundary:
+            rate = (self.check_force - load) / self.pump_up
+            if rate <= 0.0:
+                return 0.0
+            if rate * dt <= boundary - raised:
+                return rate * dt
+            moved = boundary - raised
+            dt -= moved / rate
+        target = gap + lacking / k - raised - moved
+        return moved + max(target, 0.0) * -math.expm1(-k * dt / self.pump_up)
 
 
 def excess_integral(time: np.ndarray, force: np.ndarray, level: float) -> float:
@@ -124,6 +150,16 @@ def excess_integral(time: np.ndarray, force: np.ndarray, level: float) -> float:
     for it, each crossing of the level located on its sample interval (the check valve's
     switch, by the interpolant's root)."""
     return float(excess_parts(time, force, level).sum())
+
+
+def open_parts(time: np.ndarray, force: np.ndarray, level: float) -> np.ndarray:
+    """The time [s] of each sample interval the piecewise-linear interpolant of ``force``
+    spends below ``level`` (one fewer than the samples)."""
+    d = np.asarray(force, float) - level
+    a, b, dt = d[:-1], d[1:], np.diff(np.asarray(time, float))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        share = np.where((a < 0) != (b < 0), -np.minimum(a, b) / np.abs(b - a), 0.0)
+    return np.where((a < 0) & (b < 0), dt, share * dt)
 
 
 def excess_parts(time: np.ndarray, force: np.ndarray, level: float) -> np.ndarray:
@@ -153,7 +189,19 @@ def adjuster(train) -> LashAdjuster | None:
         train.hla_check_force,
         train.hla_pump_up,
         train.hla_travel,
+        seated_stiffness(train),
     )
+
+
+def seated_stiffness(train) -> float:
+    """The load [N] through ``train``'s adjuster per unit of its extension [m] with the
+    follower on the base circle and the valve on its seat: the adjuster in series with every
+    link down to the valve (the spring, beside the seated valve, takes nothing of it); under
+    a finger's pivot that path at the pallet (the adjuster in it as :func:`hla_series`) seen
+    at the pivot, g₀² times it (the pivot's rise e moves the pallet by g₀·e, and its load is
+    g₀ times the pallet's)."""
+    flex = 1.0 / hla_series(train) + sum(1.0 / float(k) for k in train.stiffnesses)
+    return pivot_gain(train) ** 2 / flex if on_pivot(train) else 1.0 / flex
 
 
 def on_pivot(train) -> bool:

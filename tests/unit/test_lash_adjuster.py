@@ -191,11 +191,11 @@ def test_refusals_name_their_keys():
     assert part.status[0] == 0 and np.all(np.isnan(part.lash_adjuster))
     # the adjuster is in series with the link next to the cam
     assert system_matrices(train()).stiffness[0, 6] == pytest.approx(K, rel=1e-12)
-    hla = LashAdjuster(HLA_K, LEAK, CHECK, PUMP, TRAVEL)
+    hla = LashAdjuster(HLA_K, LEAK, CHECK, PUMP, TRAVEL, K)
     assert hla.series(LINK) == pytest.approx(K)
     # the plunger stays within its travel: a pump-up past it stops there, a leak-down at 0
     t, gap = np.linspace(0.0, 1.0, 11), np.full(11, 1.0)
-    free = LashAdjuster(HLA_K, LEAK, CHECK, 1.0, TRAVEL)  # a free feed: 25 m a second
+    free = LashAdjuster(HLA_K, LEAK, CHECK, 1.0, TRAVEL, K)  # a free feed: 25 m a second
     assert free.advance(0.9e-3, t, np.zeros(11), gap)[0] == TRAVEL
     assert hla.advance(1e-6, t, np.full(11, 1e4), gap)[0] == 0.0
 
