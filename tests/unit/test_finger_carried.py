@@ -167,7 +167,7 @@ def test_the_per_turn_model_holds_the_roller_on_its_base_circle_as_the_carried_p
     and its extension after 12 turns is the carried plunger's to 0.5 % (found 0.13 %: 244.30
     against 243.98 µm). Fails on a copy whose pump-up stops at the turn's gap, without what
     the turn leaked down before it (campipe before: 240.0 µm, still creeping up 0.8 µm a
-    turn, its lash a third of the carried's: the plunger held short of F_c on the base
+    turn, its lash half the carried's: the plunger held short of F_c on the base
     circle; on a softer finger the roller stood off it every turn)."""
     per_turn, carried = _per_turn_and_carried(0, 12, runs=True)
     for run in (per_turn, carried):
