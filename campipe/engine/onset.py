@@ -34,6 +34,7 @@ from campipe.engine.batch import Case, CaseError, RunSettings, check_run, run_ba
 from campipe.engine.periodic import leave_speeds, prepare_steady
 from campipe.errors import CampipeError
 from campipe.model import ValveTrain
+from campipe.model.hla import adjuster
 from campipe.vocabulary import CAM_SEPARATION, EV_KIND, EV_TIME
 
 #: Turns the engine integrates for a steady state with the valve seated on part of the turn
@@ -479,6 +480,28 @@ def onset_speeds(
     seated = found & ((pts.a_kind == _TURN) | (kb == _TURN))
     return Onset(speed, status.astype(str), grid, margin, no_follow, seated, float(tolerance),
                  evaluations, levels, pts.proven)  # fmt: skip
+
+
+#: The key an onset search with a lash adjuster is refused at (``adjuster_refusal``).
+ADJUSTER_KEY = "model.hla_leak_down"
+
+
+def adjuster_refusal(designs: Sequence[Case]) -> str | None:
+    """Why the onset of ``designs`` is not searched, or None: a hydraulic lash adjuster's
+    plunger moves turn by turn, so a design with one has no one-turn steady state for the
+    search to read (it would read the train with its plunger held where ``hla_extension``
+    puts it, and the time-domain check run another, its plunger pumping up)."""
+    n = sum(adjuster(c.train) is not None for c in designs)
+    if not n:
+        return None
+    return (
+        f"found a hydraulic lash adjuster (model.hla_*) in {n} of {len(designs)} design"
+        f"{'s' if len(designs) != 1 else ''}: the onset is searched on the steady state of a "
+        "train that repeats every turn, and an adjuster's plunger moves turn by turn; run the "
+        "speeds with campipe study (run.revolutions: auto) and read the onset in campipe "
+        "query --summary, or search the train the adjuster holds without it (its hla_* keys "
+        "and model.lash left out)"
+    )
 
 
 def confirm_settings(revolutions: float = CONFIRM_TURNS) -> RunSettings:

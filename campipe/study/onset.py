@@ -156,7 +156,8 @@ def onset_study(
     Raises
     ------
     OnsetError
-        (key ``speed``) when the spec's speeds do not span a range.
+        (key ``speed``) when the spec's speeds do not span a range; (key
+        ``model.hla_leak_down``) for a train with a lash adjuster (``adjuster_refusal``).
     """
     speeds = np.array([c.case.speed for c in study.cases])
     low, high = float(speeds.min()), float(speeds.max())
@@ -170,6 +171,9 @@ def onset_study(
         )
     keys, firsts = _combinations(study)
     designs = [study.cases[i].case for i in firsts]
+    refusal = engine_onset.adjuster_refusal(designs)
+    if refusal:
+        raise OnsetError.at(engine_onset.ADJUSTER_KEY, refusal, found="an adjuster")
     compile_first(
         {engine_onset.confirm_settings(): designs[0]} if confirm else {}, notice, search=True
     )

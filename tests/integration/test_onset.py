@@ -193,3 +193,37 @@ def test_the_onset_says_what_it_compiles_and_compiles_the_check_ahead(tmp_path, 
     monkeypatch.setattr(kernels, "_missing", lambda named: [])
     out = CliRunner().invoke(main, ["onset", str(path)])
     assert out.exit_code == 0 and "compiling" not in out.stderr
+
+
+def test_a_train_with_a_lash_adjuster_is_refused_before_any_search(tmp_path):
+    """A lash adjuster's plunger moves turn by turn, so its train has no one-turn steady state
+    to search: campipe onset and campipe design's onset requirement refuse it naming
+    model.hla_leak_down, at once and writing nothing (campipe before: a 93 s search read the
+    train with its plunger leaked down, gave 6143 engine rpm, and its time-domain check,
+    pumping up, said NO; found by a fresh pair of eyes)."""
+    from pathlib import Path
+
+    import yaml
+
+    bundled = Path(__file__).parents[2] / "studies" / "finger-follower-hla.yaml"
+    raw = yaml.safe_load(bundled.read_text())
+    raw["sweep"] = {"engine_speed": ["4000 rpm", "9000 rpm"]}
+    raw.pop("plots", None)
+    path = tmp_path / "hla.yaml"
+    path.write_text(yaml.safe_dump(raw))
+    out = CliRunner().invoke(main, ["onset", str(path), "-o", str(tmp_path / "on.nc")])
+    assert out.exit_code == 2, out.output
+    assert "model.hla_leak_down: found a hydraulic lash adjuster (model.hla_*) in 1 of 1" in (
+        out.output
+    )
+    assert "run.revolutions: auto" in out.output and not (tmp_path / "on.nc").exists()
+    raw["design"] = {
+        "vary": {"model.spring_preload": {"from": "150 N", "to": "300 N"}},
+        "require": {"onset_speed_rpm": {"min": "4000 rpm"}},
+        "minimize": "model.spring_preload",
+    }
+    path.write_text(yaml.safe_dump(raw))
+    out = CliRunner().invoke(main, ["design", str(path), "-o", str(tmp_path / "d.nc")])
+    assert out.exit_code == 2, out.output
+    assert "model.hla_leak_down: found a hydraulic lash adjuster" in out.output
+    assert not (tmp_path / "d.nc").exists()
