@@ -34,8 +34,9 @@ from campipe.model.assembly import (
 )
 from campipe.model.checks import DIRECT_ACTING, LUMPED, PUSHROD_ROCKER, layouts_of_key
 from campipe.model.contact_modes import ContactMode, contact_modes
+from campipe.model.hla import adjuster, hla_series, on_pivot, seated_stiffness
 from campipe.model.layouts import own_matrices, used_coordinates
-from campipe.model.levers import LEVERS
+from campipe.model.levers import LEVERS, pivot_gain
 from campipe.profiles import evaluate, harmonic
 from campipe.profiles.levers import cam_kinematics
 from campipe.units import QuantityError, convert, parse_quantity, pint_without_dask
@@ -273,6 +274,7 @@ def model_report(train, sm, limits, preset) -> dict[str, object]:
         "damping_matrix": sm.damping.tolist(),
         "mode_shapes": sm.modes.tolist(),
         "stability_limit_s": limits,
+        **_adjuster_json(train),
         "units": {
             "natural_frequencies": "rad/s",
             "natural_frequencies_on_the_cam": "rad/s, the follower held on the cam (q1)",
@@ -283,6 +285,39 @@ def model_report(train, sm, limits, preset) -> dict[str, object]:
             "mode_shapes": "mass-normalised (Φᵀ M Φ = I, SI)",
             "stability_limit_s": "s",
         },
+    }
+
+
+def _adjuster_lines(train) -> list[str]:
+    """What a lash adjuster does to the listed stiffnesses (the matrices hold the link with it
+    in series, not ``stiffnesses`` alone), in N/mm; [] without one."""
+    if adjuster(train) is None:
+        return []
+    k_link, k_hla = float(train.stiffnesses[0]), hla_series(train)
+    seen = ""
+    if on_pivot(train):
+        seen = f" at the pallet (hla_stiffness / g₀², the pivot's gain g₀ {pivot_gain(train):.4g})"
+    return [
+        f"  {'(link next to the cam)':<30} {1e-3 / (1 / k_link + 1 / k_hla):.6g} N/mm in the "
+        f"matrices: stiffnesses[0] {k_link * 1e-3:.6g} N/mm in series with the adjuster's "
+        f"{k_hla * 1e-3:.6g} N/mm{seen}",
+        f"  {'(adjuster, seated)':<30} {seated_stiffness(train) * 1e-3:.6g} N/mm: its load per "
+        "unit of its extension on the base circle, the valve seated",
+    ]
+
+
+def _adjuster_json(train) -> dict[str, object]:
+    """:func:`_adjuster_lines` in SI for the JSON form; {} without an adjuster."""
+    if adjuster(train) is None:
+        return {}
+    k_link, k_hla = float(train.stiffnesses[0]), hla_series(train)
+    return {
+        "adjuster": {
+            "link_stiffness": 1.0 / (1.0 / k_link + 1.0 / k_hla),
+            "adjuster_stiffness_in_the_link": k_hla,
+            "seated_stiffness": seated_stiffness(train),
+            "units": "N/m",
+        }
     }
 
 
@@ -482,6 +517,7 @@ def model_text(train, sm, limits, preset, overrides, drive: float | None = None)
     for name in names:
         text = _parameter_text(PARAMETERS[name], getattr(train, name), metric)
         lines.append(f"  {name:<30} {text}")
+    lines += _adjuster_lines(train)
     trans = np.array([c.kind == "translation" for c in coords])
     lines.append("")
     lines.append(

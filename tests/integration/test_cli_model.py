@@ -80,6 +80,28 @@ def test_a_spec_with_a_drive_shows_each_mode_at_the_engine_s_speed_too():
     assert "engine rpm" not in run().output
 
 
+def test_a_finger_s_adjuster_is_shown_in_the_link_it_stiffens():
+    """The bundled finger on its adjuster: the listed ``stiffnesses`` (the finger's and the
+    stem's) are not what the matrices hold, so the command shows the link with the adjuster
+    in series as seen at the pallet, 1/(1/k + g₀²/k_hla) with g₀ = (b − a)/a (the hand's, from
+    the spec's 10000 and 50000 N/mm in series, 20000 N/mm and arms of 22 and 36 mm), equal to
+    the stiffness matrix's (a user read 10000 N/mm where K held 8470); the JSON the same in
+    SI, with the adjuster's seated stiffness g₀²·(that link) in series with it. Broken copy:
+    the adjuster at the pallet without its g₀²."""
+    spec = Path(__file__).parents[2] / "studies" / "finger-follower-hla.yaml"
+    g0 = (36 - 22) / 22
+    link = 1.0 / (1.0 / 10000e3 + 1.0 / 50000e3)  # the finger and the stem [N/m]
+    hand = 1.0 / (1.0 / link + g0**2 / 20000e3)
+    text = run("--spec", str(spec)).output
+    row = next(line for line in text.splitlines() if "(link next to the cam)" in line)
+    assert float(row.split(")")[1].split()[0]) == pytest.approx(hand / 1e3, rel=1e-5)
+    report = json.loads(run("--spec", str(spec), "--json").output)
+    assert report["adjuster"]["link_stiffness"] == pytest.approx(hand, rel=1e-12)
+    assert report["stiffness_matrix"][0][0] == pytest.approx(hand, rel=1e-12)
+    seated = 1.0 / (1.0 / 20000e3 + 1.0 / (g0**2 * link))
+    assert report["adjuster"]["seated_stiffness"] == pytest.approx(seated, rel=1e-12)
+
+
 def test_bad_override_is_a_usage_error_naming_the_key():
     result = CliRunner().invoke(main, ["model", "--set", "spring_rate=260"])
     assert result.exit_code == 2
