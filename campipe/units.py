@@ -23,7 +23,7 @@ import math
 import re
 import sys
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from typing import TYPE_CHECKING
 
 from campipe.errors import CampipeError, excerpt
@@ -512,10 +512,22 @@ UNIT_SYSTEMS: dict[str, dict[str, str]] = {
         "N/m": "N/mm",
         "Pa": "MPa",
     },
+    # the same per degree of crank angle (degCA, at each case's engine speed: a spec with a
+    # drive); angles stay the cam's
+    "mm-degca": {
+        "m": "mm",
+        "m/s": "mm/degCA",
+        "m/s^2": "mm/degCA^2",
+        "N/m": "N/mm",
+        "Pa": "MPa",
+    },
 }
 #: Degrees of cam angle a second at 1 rpm (a turn a minute): 360/60.
 DEG_PER_S_PER_RPM = 6.0
-_PER_DEGREE = re.compile(r"^(?P<length>[A-Za-z]+)/deg(?:\^(?P<power>[12]))?$")
+_PER_DEGREE = re.compile(r"^(?P<length>[A-Za-z]+)/deg(?P<crank>CA)?(?:\^(?P<power>[12]))?$")
+#: The speed column a value shown per degree is converted at: the cam's, or for units per
+#: degree of crank angle (``mm/degCA``) the engine's.
+CAM_SPEED, ENGINE_SPEED = "speed_rpm", "engine_speed_rpm"
 
 
 class UnitSystemError(CampipeError, ValueError):
@@ -537,11 +549,22 @@ def system_units(system: str, key: str = "units") -> dict[str, str]:
 def per_degree(units: str) -> tuple[str, int]:
     """``mm/deg`` → (``mm``, 1), ``mm/deg^2`` → (``mm``, 2), other units → (units, 0): a
     length per degree of cam angle (or per degree squared), which a velocity [length/s] or an
-    acceleration [length/s²] becomes only at a cam speed."""
+    acceleration [length/s²] becomes only at a cam speed; ``mm/degCA`` the same per degree
+    of crank angle, at the engine's speed (:func:`degree_speed`)."""
     m = _PER_DEGREE.match(units.replace("**", "^").replace(" ", ""))
     if m is None:
         return units, 0
     return m["length"], int(m["power"] or 1)
+
+
+def degree_speed(units: Iterable[str]) -> str:
+    """The speed column [rpm] values shown in ``units`` are converted at: the engine's
+    (``engine_speed_rpm``) when one of them is per degree of crank angle, else the cam's."""
+    for u in units:
+        m = _PER_DEGREE.match(str(u).replace("**", "^").replace(" ", ""))
+        if m is not None and m["crank"]:
+            return ENGINE_SPEED
+    return CAM_SPEED
 
 
 def convert_values(values, from_units: str, to_units: str, cam_speed_rpm=None):
@@ -559,7 +582,8 @@ def convert_values(values, from_units: str, to_units: str, cam_speed_rpm=None):
         Pint spellings (``""`` for none: the values are returned as they are).
     cam_speed_rpm : array_like, optional
         The cam speed [rpm] of each value along the first axis of ``values`` (or one speed);
-        needed only for per-degree units.
+        needed only for per-degree units; for units per degree of crank angle (``mm/degCA``)
+        the engine's (:func:`degree_speed` names which).
 
     Raises
     ------
@@ -576,11 +600,16 @@ def convert_values(values, from_units: str, to_units: str, cam_speed_rpm=None):
     if not power:
         return values * convert(1.0, from_units, to_units)
     if cam_speed_rpm is None:
+        crank = degree_speed([to_units]) == ENGINE_SPEED
         raise UnitSystemError.at(
             "units",
-            f"{to_units} needs each case's cam speed (speed_rpm)",
+            f"{to_units} needs each case's engine speed (engine_speed_rpm), which an archive "
+            "has from a spec with a drive (drive: {cam_per_crank: 0.5}); without one use "
+            "mm-deg, per degree of cam angle"
+            if crank
+            else f"{to_units} needs each case's cam speed (speed_rpm)",
             found=to_units,
-            expected="a cam speed",
+            expected="an engine speed" if crank else "a cam speed",
         )
     per_second = f"{length}/s" if power == 1 else f"{length}/s^2"
     try:

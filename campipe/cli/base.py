@@ -261,7 +261,7 @@ SET_HELP = (
 
 #: The unit systems of --units (campipe.study.spec.plots.SYSTEMS, repeated so --help needs no
 #: import of the study layer; tests/integration/test_plot.py checks they agree).
-UNIT_SYSTEMS = ("spec", "si", "in-lbf", "mm-deg")
+UNIT_SYSTEMS = ("spec", "si", "in-lbf", "mm-deg", "mm-degca")
 
 
 def scheduler_options(where: str, workers_for: str):
@@ -300,7 +300,7 @@ def verify_option(command):
 
 
 def units_option(command):
-    """``--units spec|si|in-lbf|mm-deg``: the units values are shown in."""
+    """``--units spec|si|in-lbf|mm-deg|mm-degca``: the units values are shown in."""
     return click.option(
         "--units",
         type=click.Choice(UNIT_SYSTEMS),
@@ -309,5 +309,6 @@ def units_option(command):
         help="Show values in the units the spec wrote them in, with the rest in the spec's "
         "system (spec), in SI as stored (si), in inches, pounds-force and seconds (in-lbf), "
         "or in mm, mm/deg and mm/deg^2 of cam angle at each case's cam speed, N and MPa "
-        "(mm-deg).",
+        "(mm-deg), or the same per degree of crank angle at each case's engine speed "
+        "(mm-degca: mm/degCA, a spec with a drive; angles stay the cam's).",
     )(command)

@@ -45,7 +45,7 @@ from campipe.study.query.tables import CaseTable, case_table, displayed, select
 from campipe.study.spec.drive import ENGINE_SPEED_NAME
 from campipe.study.spec.plots import PlotError, PlotRequest, check_turn
 from campipe.study.spec.variables import VARIABLES
-from campipe.units import QuantityError, convert, read_quantity
+from campipe.units import QuantityError, convert, degree_speed, read_quantity
 from campipe.vocabulary import FAILURES
 
 #: Most cases overlaid in one history figure (beyond, lines cannot be told apart).
@@ -210,8 +210,9 @@ def column_values(view: View, name: str | None, option: str, numeric: bool = Tru
 
 
 def _cam_speed(view: View) -> np.ndarray | None:
-    """(n,) the selected cases' cam speeds [rpm], for values shown per degree."""
-    return view.stored.columns.get("speed_rpm")
+    """(n,) the selected cases' cam speeds [rpm], for values shown per degree (the engine's,
+    for values per degree of crank angle: ``--units mm-degca``)."""
+    return view.stored.columns.get(degree_speed(view.units.values()))
 
 
 def _usable(view: View) -> np.ndarray:

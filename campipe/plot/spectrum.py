@@ -24,6 +24,7 @@ from campipe.plot.figures import (
 from campipe.plot.style import axis_label, line_styles
 from campipe.study.query.display import to_display
 from campipe.study.spec.plots import PlotError, PlotRequest
+from campipe.units import degree_speed
 
 #: The history drawn without --y, and the orders shown (at most half a turn's samples).
 DEFAULT_HISTORY = "valve_acceleration"
@@ -79,7 +80,7 @@ def _draw(view: View, name: str, where: str | None) -> Figure:
         np.asarray(ds[name].values[view.rows][:, keep], float),
         str(ds[name].attrs.get("units", "")),
         units,
-        view.stored.columns.get("speed_rpm"),
+        view.stored.columns.get(degree_speed([units])),
     )
     amplitude = order_spectrum(values)
     orders = np.arange(amplitude.shape[1])

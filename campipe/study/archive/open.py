@@ -20,7 +20,7 @@ import numpy as np
 from campipe.io.archive import ArchiveDamagedError, ArchiveFileError, check
 from campipe.io.parts import INDEX, PartsIndexError, part_checksum, read_index
 from campipe.study.archive.layout import LAYOUT_VERSION
-from campipe.units import convert_values, per_degree, system_units
+from campipe.units import ENGINE_SPEED, convert_values, degree_speed, per_degree, system_units
 
 log = logging.getLogger(__name__)
 #: The name the rest of the study (zip rows, case entries, samples) goes by while the sweep
@@ -90,12 +90,15 @@ def in_units(ds, units: str):
     units take each case's cam speed (``speed_rpm``; an event's, its case's); lazy (dask)
     variables stay lazy."""
     system = system_units(units, "units")
-    speeds = {}  # dimension → the cam speed [rpm] along it
-    if "speed_rpm" in ds.variables and ds["speed_rpm"].dims == ("case",):
-        speeds["case"] = ds["speed_rpm"].variable
+    at = degree_speed(system.values())  # the cam's, or the engine's per degree of crank angle
+    if at == ENGINE_SPEED and at not in ds.variables:
+        convert_values(1.0, "m/s", system["m/s"])  # refused: no engine speed, naming the fix
+    speeds = {}  # dimension → that speed [rpm] along it
+    if at in ds.variables and ds[at].dims == ("case",):
+        speeds["case"] = ds[at].variable
         if "event_case" in ds.variables:
             rows = ds["event_case"].values
-            speeds["event"] = type(speeds["case"])("event", ds["speed_rpm"].values[rows])
+            speeds["event"] = type(speeds["case"])("event", ds[at].values[rows])
     out = ds.copy()
     for name, var in ds.variables.items():
         stored = str(var.attrs.get("units", ""))

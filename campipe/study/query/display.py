@@ -1,7 +1,7 @@
 """Units a designer reads: which units each archive value is shown in, and how it reads.
 
 The archive stores SI (with ``speed_rpm`` in rpm and angles in degrees); ``campipe query``,
-``campipe plot`` and ``campipe export`` show values in one of four unit systems (``--units``):
+``campipe plot`` and ``campipe export`` show values in one of five unit systems (``--units``):
 
 - ``spec`` (the default): each value the spec wrote with units in the units it wrote
   (``seat: [none, 0.1 in]`` shows in, ``spring_preload: 151 lbf`` in lbf), and every other
@@ -10,7 +10,9 @@ The archive stores SI (with ``speed_rpm`` in rpm and angles in degrees); ``campi
 - ``si``: the archive's own units;
 - ``in-lbf``: inches, pounds-force and seconds (the thesis's units), rpm and degrees;
 - ``mm-deg``: the designer's: lift in mm, velocity in mm/deg and acceleration in mm/deg² of
-  cam angle (each case's at its cam speed), forces in N, stresses in MPa, rpm and degrees.
+  cam angle (each case's at its cam speed), forces in N, stresses in MPa, rpm and degrees;
+- ``mm-degca``: the same per degree of crank angle (``mm/degCA``, each case's at its engine
+  speed: an archive of a spec with a drive), angles still the cam's.
 
 The systems but ``spec`` are :data:`campipe.units.UNIT_SYSTEMS`.
 

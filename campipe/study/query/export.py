@@ -19,6 +19,7 @@ import numpy as np
 from campipe.errors import CampipeError, did_you_mean, excerpt
 from campipe.study.query.display import display_units, to_display
 from campipe.study.query.tables import case_table, select, without_noise
+from campipe.units import degree_speed
 
 #: Units as an export's header writes them.
 SHORT_UNITS = {"degree": "deg", "1": ""}
@@ -97,7 +98,8 @@ def history_table(ds, rows: np.ndarray, system: str = "spec") -> HistoryTable:
     dof_units = _dof_units(ds) if "q" in names else {}
     stored.update(dof_units)
     shown = display_units(stored, ds.attrs, system, keys={})
-    speed = np.asarray(ds["speed_rpm"].values, float)[rows] if "speed_rpm" in ds else None
+    at = degree_speed(shown.values())  # the cam's, or the engine's per degree of crank angle
+    speed = np.asarray(ds[at].values, float)[rows] if at in ds else None
     angle = np.asarray(ds["cam_angle"].values, float)
     samples = angle.size
     ids = [str(c) for c in np.asarray(ds["case"].values)[rows]]

@@ -22,6 +22,7 @@ from campipe.study.spec.coordinates import coordinate_values
 from campipe.study.spec.drive import ENGINE_SPEED_NAME
 from campipe.study.spec.variables import NONE_WORD, VARIABLES, case_coordinates, data_variables
 from campipe.study.where import QueryError, Where, evaluate, parse_where
+from campipe.units import degree_speed
 from campipe.vocabulary import EVENTS_TRUNCATED, FAILURES, STATUS
 
 __all__ = [
@@ -83,7 +84,8 @@ def case_table(ds) -> CaseTable:
 def displayed(table: CaseTable, shown: dict[str, str]) -> CaseTable:
     """The table with each column in the units ``shown`` names (see
     :func:`campipe.study.query.display.display_units`); columns not named stay as they are."""
-    speed = table.columns.get("speed_rpm")  # the cam's, for units per degree
+    # the cam's speed for units per degree of cam angle, the engine's per degree of crank angle
+    speed = table.columns.get(degree_speed(shown.values()))
     columns = {
         k: without_noise(to_display(v, table.units[k], shown.get(k, table.units[k]), speed))
         if shown.get(k, table.units[k]) != table.units[k]

@@ -27,7 +27,7 @@ from campipe.study.where import QueryError, parse_where
 
 #: The unit systems of ``--units`` (a plot's ``units``; :mod:`campipe.study.query.display`
 #: converts to them).
-SYSTEMS = ("spec", "si", "in-lbf", "mm-deg")
+SYSTEMS = ("spec", "si", "in-lbf", "mm-deg", "mm-degca")
 
 #: Plot kinds and what each draws.
 KINDS = {
