@@ -90,6 +90,7 @@ def test_a_lumped_study_runs_archives_and_queries(tmp_path):
     link = LINK * (-q[:, :, 0] - q[:, :, 6])  # k·(x1 − x2), x1 = −q1
     np.testing.assert_allclose(ds.pushrod_force.values, link, rtol=1e-9, atol=1e-6)
     assert np.isnan(ds.rocker_moment.values).all()
+    assert "chain's first mass" in ds.follower_lift.attrs["long_name"]  # not the pushrod's
     lift = ds.valve_lift.values[speed == 3000].max()
     assert abs(lift - 0.01 * LINK / (LINK + RATE)) < 2e-3 * 0.01  # dynamic within 0.2 %
     table = invoke("query", str(archive), "--where", "speed_rpm > 5000", "--format", "json")

@@ -345,6 +345,9 @@ def test_finger_follower(tmp_path):
     assert np.all(ds.separation_deg_per_rev.values[slow] == 0)
     assert np.all(ds.separation_deg_per_rev.values[~slow] > 60)
     assert np.all(v[~slow] > ramp[~slow])  # (0.1 mm: 1.08x, 0.25 mm: 5.5x)
+    # its long names say so: the cam lift the valve side's, the cam force the roller's
+    assert ds.cam_lift.attrs["long_name"].startswith("kinematic valve lift")
+    assert ds.cam_force.attrs["long_name"].startswith("the roller's normal force")
     top = float(ds.cam_lift.max()) / 6.5e-3
     assert 1.45 < top < 1.55
 

@@ -11,9 +11,11 @@ from collections.abc import Iterable
 import numpy as np
 
 from campipe.io.archive import VariableSpec
+from campipe.model.levers import LEVERS
 from campipe.study.spec.coordinates import CASE_ID, coordinate_values, padded
 from campipe.study.spec.drive import CRANK_ANGLE_NAME
 from campipe.study.spec.expand import Study
+from campipe.study.spec.resolve import distinct_but_speed
 from campipe.study.spec.variables import (
     DOF_NAMES,
     DOF_UNITS,
@@ -88,6 +90,41 @@ def _from_recorded(spec: VariableSpec) -> VariableSpec:
     return dataclasses.replace(spec, attrs={**spec.attrs, "long_name": FROM_RECORDED[spec.name]})
 
 
+#: Long names of a lever layout's histories (docs/model.md, Lever layouts): its cam lift and
+#: follower are the valve side's, its cam force the roller's on the cam.
+LEVER_NAMES = {
+    "cam_lift": "kinematic valve lift: the cam's lift through the lever at each cam angle "
+    "(a lever layout's valve side; the cam's own lift is campipe model's --cam-lift)",
+    "follower_lift": "the lever's pallet height in the kinematic valve lift's coordinate "
+    "(valve side)",
+    "cam_force": "the roller's normal force on the cam, compressive positive, zero out of contact",
+}
+#: Long names of a lumped chain's (lumped, direct-acting): its first mass rides the cam.
+CHAIN_NAMES = {
+    "follower_lift": "the chain's first mass (the follower on the cam, q1) height in the "
+    "cam's lift coordinate",
+}
+
+
+def _named_for_layout(specs: list[VariableSpec], study: Study) -> list[VariableSpec]:
+    """The histories' long names for the study's layout where every case has one kind of
+    train: a lever layout's valve side (:data:`LEVER_NAMES`), a chain's follower
+    (:data:`CHAIN_NAMES`); the thesis's train's and a mix of kinds keep the thesis's."""
+    trains = [c.case.train for c in distinct_but_speed(study.cases)[0]]
+    if all(t.layout in LEVERS for t in trains):
+        names = LEVER_NAMES
+    elif all(t.chain and t.layout not in LEVERS for t in trains):
+        names = CHAIN_NAMES
+    else:
+        return specs
+    return [
+        dataclasses.replace(s, attrs={**s.attrs, "long_name": names[s.name]})
+        if s.name in names
+        else s
+        for s in specs
+    ]
+
+
 def archive_layout(study: Study, n_events: int | None, cam_angle: np.ndarray, n_revolutions: int):
     """(sizes, variables, static arrays) of the study's archive; the static arrays are the
     axes and the per-case coordinates, the rest streams in from batch files. ``n_events``
@@ -114,6 +151,7 @@ def archive_layout(study: Study, n_events: int | None, cam_angle: np.ndarray, n_
     specs += data_specs(study.record, " ".join(coord_names))
     if study.settle:
         specs = [_from_recorded(s) for s in specs]
+    specs = _named_for_layout(specs, study)
     static = {**axis_arrays(cam_angle, n_revolutions), **values}
     if study.spec.drive is not None:  # the crank angle beside the cam's
         specs = _with_crank_angle(specs, study.spec.drive, study.settle)
