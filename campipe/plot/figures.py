@@ -503,12 +503,15 @@ def _event_handle(kind: int):
 
 
 def _default_x(view: View) -> str:
+    """The speed (the engine's with a drive, as the cases' labels give it, else the cam's)
+    where it varies or no column does; else the first numeric column that varies."""
     varied = [n for n in varied_columns(view) if view.shown.columns[n].dtype.kind in "iuf"]
-    if "speed_rpm" in varied:
-        return "speed_rpm"
+    speed = ENGINE_SPEED_NAME if ENGINE_SPEED_NAME in view.shown.columns else "speed_rpm"
+    if {"speed_rpm", ENGINE_SPEED_NAME} & set(varied):
+        return speed
     if not varied:  # one case, or none varying: its point at its speed
-        if "speed_rpm" in view.shown.columns:
-            return "speed_rpm"
+        if speed in view.shown.columns:
+            return speed
         raise PlotError.at("--x", "no numeric column varies among the selected cases")
     return varied[0]
 

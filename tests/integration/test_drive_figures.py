@@ -152,6 +152,9 @@ def test_metric_against_engine_speed_with_limit_lines(ds):
     assert limits["limit-1"] == pytest.approx(1000 * 4.4482216152605, rel=1e-12)
     with pytest.raises(PlotError, match="--limit"):
         figure(ds, PlotRequest("metric", y="max_cam_force", limit=("3 in",)))
+    # without --x a drive's metric is drawn against the engine's speed, as its cases are named
+    default = figure(ds, check_plot({"kind": "metric", "y": "max_cam_force"})).axes[0]
+    assert default.get_xlabel() == "Engine speed [rpm]"
 
 
 def test_the_kinematic_lift_is_the_cam_s_times_the_rocker_ratio_floored_at_the_seat(ds):
