@@ -386,7 +386,12 @@ def validate_text(loaded, spec_path) -> str:
     """The checked study in words: cases, axes (values as the spec wrote them), run."""
     from campipe.constants import RPM
     from campipe.study.spec.coordinates import coordinate_values
-    from campipe.study.spec.resolve import distinct_but_speed, per_turn_note, ramp_note
+    from campipe.study.spec.resolve import (
+        distinct_but_speed,
+        per_turn_note,
+        ramp_note,
+        spring_note,
+    )
     from campipe.study.spec.variables import case_coordinates
 
     s = loaded.spec
@@ -442,6 +447,9 @@ def validate_text(loaded, spec_path) -> str:
     note = ramp_note(loaded.cases)
     if note:
         lines.append(f"lash: {note}")
+    note = spring_note(loaded.cases)
+    if note:
+        lines.append(f"spring: {note}")
     return "\n".join(lines)
 
 

@@ -95,3 +95,25 @@ def test_a_lash_the_ramps_do_not_take_up_is_noted_and_lands_on_the_flank(tmp_pat
          "--set", "sweep.model.lash=[0.1 mm, 0.5 mm]"],
     )  # fmt: skip
     assert "lash: 6 cases take up more lash than the cam's ramps" in shown.output
+
+
+def test_a_valve_spring_s_rate_in_the_wrong_unit_is_noted():
+    """A spring rate written in N/m for N/mm (the bundled finger's 30 N/mm as 30 N/m) holds
+    its 180 N preload at 6 m: campipe validate notes it with the deflection and the keys; no
+    bundled study is noted (their springs take their preloads over 6-16 mm). Fails on a copy
+    without the note, or one that notes the thesis's 16 mm."""
+    from campipe.study.spec.resolve import spring_note
+
+    for spec in sorted(STUDIES.glob("*.yaml")):
+        assert spring_note(load_study(spec).cases) is None, spec.name
+    slip = load_study(STUDIES / "finger-follower.yaml", {"model.spring_rate": "35 N/m"})
+    note = spring_note(slip.cases)
+    assert note.startswith(f"{len(slip.cases)} cases' valve springs hold their preload")
+    assert "220 N over 0.035 N/mm is 6286 mm" in note
+    result = CliRunner().invoke(
+        main,
+        ["validate", "--no-estimate", str(STUDIES / "finger-follower.yaml"), "--set",
+         "model.spring_rate=35 N/m"],
+    )  # fmt: skip
+    assert result.exit_code == 0, result.output
+    assert "spring: 7 cases' valve springs hold their preload" in result.output

@@ -74,7 +74,7 @@ from campipe.study.run.resume import (
 from campipe.study.run.sizing import default_batch_size, default_workers
 from campipe.study.run.workers import run_distributed, run_local, stored_here
 from campipe.study.spec.expand import Study
-from campipe.study.spec.resolve import ResolvedCase, per_turn_note, ramp_note
+from campipe.study.spec.resolve import ResolvedCase, per_turn_note, ramp_note, spring_note
 from campipe.vocabulary import OK, STATUS
 
 log = logging.getLogger(__name__)
@@ -232,9 +232,11 @@ def _check_replaceable(archive: Path, state: ArchiveState, overwrite: bool) -> N
 
 
 def _case_notes(cases: list[ResolvedCase]) -> list[str]:
-    """The per-turn model's note and the lash's beyond the ramps on the cases computed
-    (``resolve.per_turn_note``, ``resolve.ramp_note``)."""
-    return [note for note in (per_turn_note(cases), ramp_note(cases)) if note is not None]
+    """The per-turn model's note, the lash's beyond the ramps and a valve spring's odd
+    deflection on the cases computed (``resolve.per_turn_note``, ``resolve.ramp_note``,
+    ``resolve.spring_note``)."""
+    notes = (per_turn_note(cases), ramp_note(cases), spring_note(cases))
+    return [note for note in notes if note is not None]
 
 
 def _state_notes(archive: Path, state: ArchiveState) -> list[str]:

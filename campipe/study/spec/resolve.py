@@ -224,6 +224,39 @@ def ramp_note(cases: Sequence[ResolvedCase]) -> str | None:
     )
 
 
+#: The valve spring's deflection under its preload [m] a spec is noted outside of
+#: (``spring_note``): valve springs take their preload over millimetres (the thesis's 16 mm,
+#: the bundled bucket's 6 mm), so a rate or a preload in the wrong unit (N/m for N/mm) falls
+#: far outside.
+SPRING_DEFLECTION = (1e-4, 0.1)
+
+
+def spring_note(cases: Sequence[ResolvedCase]) -> str | None:
+    """A note on the cases whose valve spring holds its preload at a deflection (preload over
+    rate) outside :data:`SPRING_DEFLECTION`: a rate or a preload most likely written in the
+    wrong unit. None where there are none."""
+    combinations, speeds = distinct_but_speed(cases)
+    odd = []
+    for c in combinations:
+        t = c.case.train
+        if t.spring_preload > 0.0 and t.spring_rate > 0.0:
+            deflection = t.spring_preload / t.spring_rate
+            low, high = SPRING_DEFLECTION
+            if not low <= deflection <= high:
+                odd.append((abs(math.log(deflection / 0.01)), deflection, t))
+    if not odd:
+        return None
+    n = speeds * len(odd)
+    _, deflection, t = max(odd, key=lambda o: o[0])
+    whose = f"{n} cases' valve springs hold their" if n != 1 else "1 case's valve spring holds its"
+    return (
+        f"{whose} preload at a deflection far from a valve spring's millimetres: "
+        f"{t.spring_preload:.4g} N over {t.spring_rate / 1e3:.4g} N/mm is "
+        f"{deflection * 1e3:.4g} mm (model.spring_preload over model.spring_rate; a rate "
+        "written in N/m for N/mm gives that)"
+    )
+
+
 def _landing_excess(case: Case, ramp: float) -> float:
     """For a case whose seat is above the opening ramp's top at the valve (``ramp`` [rad]
     long, from 0), the cam's velocity where its lift at the valve first crosses the seat,
