@@ -235,8 +235,8 @@ class Evaluator:
         for r in design.require if self.needs_onset else ():
             if r.key == ONSET:
                 _reachable(r, self.low / RPM, self.high / RPM, study.spec.drive)
-        refusal = engine_onset.adjuster_refusal([study.cases[0].case])
-        if self.needs_onset and refusal:
+        refusal = self.needs_onset and engine_onset.adjuster_refusal([study.cases[0].case])
+        if refusal:
             raise DesignError.at(engine_onset.ADJUSTER_KEY, refusal, found="an adjuster")
         self.metrics = {m.summary: m for m in archived_metrics()}
         self.speeds = sorted({s for r in design.require for s in r.speeds})
