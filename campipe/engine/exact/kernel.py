@@ -262,10 +262,15 @@ def _earliest_crossing(ref, st, nact, t_prev, t_eval):
     return first, t_ev
 
 
-@njit(inline="always", nogil=True)
+@njit(**HELPER)
 def _walk(ref, st, pl):
     """Walk the segment's grid from st.t_s until an event, a profile break or the run's end,
     and handle what ended it (``_apply_event``, ``_cross_break``, or st.done).
+
+    A helper of its own, called once a segment: inlined in the kernel (numba's IR inlining
+    deep-copies an inlinee's IR block by block with its whole scope, for this helper's
+    thousands of variables some 9 s of a first run's compile), it cost more compile than
+    the rest of the kernel's inlining together.
 
     The grid step's work is inlined and makes no calls, on arrays and scalars held in locals:
     numba reference-counts a named tuple's arrays (or an array handed to an inlined helper)
