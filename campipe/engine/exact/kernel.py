@@ -390,7 +390,7 @@ def _walk(ref, st, pl):
             first, t_ev = _earliest_crossing(ref, st, nact, t_prev, t_eval)
             if first >= 0:
                 # (A held force's peak before the event is its turn's, as on the grid.)
-                _force_peaks(ref, st, nact, t_prev, t_ev, h, cam_held, seat_held, False)
+                _force_peaks(ref, st, nact, t_prev, t_ev, h, cam_held, seat_held, np.bool_(False))
                 _at_event(ref, st, nact, t_ev, first, cam_held, seat_held)
                 st.nact = nact
                 _apply_event(ref, st, first, t_ev, pl)
@@ -398,7 +398,7 @@ def _walk(ref, st, pl):
         if (cam_held and (ratio_max > 0.0 or (dprev[0] < 0.0 and dval[0] > 0.0))) or (
             seat_held and dprev[1] < 0.0 and dval[1] > 0.0
         ):
-            _force_peaks(ref, st, nact, t_prev, t_eval, h, cam_held, seat_held, True)
+            _force_peaks(ref, st, nact, t_prev, t_eval, h, cam_held, seat_held, np.bool_(True))
         if at_break:
             # The break's point counts for the force maxima as a grid point does (a lift
             # table breaks every half degree: its steps seldom reach a grid point).

@@ -50,9 +50,11 @@ def _at_event(ref, st, nact, t_ev, first, cam_held, seat_held):
     c, w, th0 = st.c, st.w, st.th0
     g0 = g1 = 0.0
     if cam_held:
-        g0 = _at(False, ws.WC, ws.MC, nact, ws.G, ws.GT, 0, st.t_s, t_ev, w, th0, st.gdeg)[0]
+        g0 = _at(False, ws.WC, ws.MC, nact, ws.G, ws.GT, np.int64(0), st.t_s, t_ev, w, th0,
+                 st.gdeg)[0]  # fmt: skip
     if seat_held:
-        g1 = _at(False, ws.WC, ws.MC, nact, ws.G, ws.GT, 1, st.t_s, t_ev, w, th0, st.gdeg)[0]
+        g1 = _at(False, ws.WC, ws.MC, nact, ws.G, ws.GT, np.int64(1), st.t_s, t_ev, w, th0,
+                 st.gdeg)[0]  # fmt: skip
     _force_maxima(out.per_rev, c, turn_of(w, t_ev), cam_held, seat_held, (g0, g1))
     if cam_held and ratio_bound(profiles, c) > 0.0:
         r = horner(profiles.ratio[c, st.p], w * t_ev - th0, 3)[0]
