@@ -288,6 +288,8 @@ import json, math
 import numba
 from campipe.engine import batch, contact, closed_form, common, exact, modal, newmark
 from campipe.engine import onset, periodic, steady
+from campipe.engine.exact import kernel as exact_kernel, peaks as exact_peaks
+from campipe.engine.exact import segment as exact_segment, state as exact_state
 from campipe.engine.batch import Case, RunSettings, run_batch
 from campipe.model import thesis_train
 from campipe.profiles import harmonic, packed
@@ -318,7 +320,8 @@ lobe = polydyne("4567", 9e-3, *[math.radians(d) for d in (110, 20, 110)], ramp=R
 run_batch([Case(bucket, lobe, 3000 * math.pi / 30)], RunSettings(revolutions=2))
 PLUNGER_ARG = {"none", "array(int64, 1d, C)"}
 many = {}
-for module in (batch, contact, closed_form, common, exact, modal, newmark, steady, packed):
+for module in (batch, contact, closed_form, common, exact, modal, newmark, steady, packed,
+               exact_kernel, exact_peaks, exact_segment, exact_state):
     for name, kernel in vars(module).items():
         if hasattr(kernel, "signatures") and len(kernel.signatures) > 1:
             sigs = kernel.signatures
@@ -355,7 +358,9 @@ def test_no_kernel_is_compiled_once_per_constant_it_is_called_with(tmp_path):
     dispatchers untouched), so this compiles every kernel on an empty cache, about a minute:
     ``slow``. The same compiles show every helper of its own taking no named tuple by value
     (``common.by_ref``). Broken copies, run: ``exact._drop_decayed`` counting from the
-    constant 0 again (``_keep_column`` gets two signatures); ``ahead_signatures`` giving
+    constant 0 again (``_keep_column`` gets two signatures); ``_walk`` calling
+    ``peaks._force_peaks`` with the constants True and False (two, a second of a first run:
+    modal-exact's own modules are scanned too); ``ahead_signatures`` giving
     ``first`` as int32 (``_apply_event`` gets two); ``closed_form.held_inputs`` taking the
     packed profiles' tuple again (listed). A chain's carried plunger runs too: its kernel
     differs only in the last argument (the plunger coordinates, None for every other batch),

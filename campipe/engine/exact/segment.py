@@ -370,7 +370,7 @@ def _begin_segment(ref, st, pl):
     cases, trains, profiles, runs, out, ws = deref(ref)
     if pl is not None:
         if st.reg == HELD and st.t_s >= 0.0:
-            plunger_switch(ref, st, RELEASED)
+            plunger_switch(ref, st, np.int64(RELEASED))  # int64, as the kernel passes
     ci = st.cfg - 1
     st.nf = trains.n_free[st.tr, ci]
     st.ns = 2 * st.nf
