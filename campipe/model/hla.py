@@ -27,9 +27,11 @@ leak-down and pump-up over that turn (:meth:`LashAdjuster.advance`). Between two
 boundaries the train runs with the extension fixed, exactly (the adjuster is then a linear
 spring in the chain, and an extension e a change of that member's rest length, which in a
 chain is exactly the cam's lift raised by e: ``campipe.engine.lash_adjuster``). What is
-approximated: the plunger's motion within a turn is applied at the turn's end (the load's
-error is k·Δe, the stiffness times one turn's leak-down or pump-up), and the integrals over
-the turn take the force as linear between samples (an error of order (Δθ)²·F″ a sample).
+approximated: the plunger's motion within a turn is applied to the train at the turn's end
+(the train's load is the fixed extension's, an error of k·Δe, the stiffness times one turn's
+leak-down or pump-up; the pump-up itself takes the load its own motion within the turn
+makes, with the seated stiffness, :func:`seated_stiffness`), and the integrals over the turn
+take the force as linear between samples (an error of order (Δθ)²·F″ a sample).
 
 Pure Python and numpy on floats and arrays; a layout places the adjuster (which member's
 force passes through it, how its extension moves the train): a chain's in series with its
