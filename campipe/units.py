@@ -551,20 +551,41 @@ def per_degree(units: str) -> tuple[str, int]:
     length per degree of cam angle (or per degree squared), which a velocity [length/s] or an
     acceleration [length/s²] becomes only at a cam speed; ``mm/degCA`` the same per degree
     of crank angle, at the engine's speed (:func:`degree_speed`)."""
-    m = _PER_DEGREE.match(units.replace("**", "^").replace(" ", ""))
+    m = _per_degree_match(units)
     if m is None:
         return units, 0
     return m["length"], int(m["power"] or 1)
 
 
+def _per_degree_match(units: str) -> re.Match[str] | None:
+    return _PER_DEGREE.match(str(units).replace("**", "^").replace(" ", ""))
+
+
 def degree_speed(units: Iterable[str]) -> str:
     """The speed column [rpm] values shown in ``units`` are converted at: the engine's
     (``engine_speed_rpm``) when one of them is per degree of crank angle, else the cam's."""
-    for u in units:
-        m = _PER_DEGREE.match(str(u).replace("**", "^").replace(" ", ""))
-        if m is not None and m["crank"]:
-            return ENGINE_SPEED
-    return CAM_SPEED
+    crank = any((m := _per_degree_match(u)) is not None and m["crank"] for u in units)
+    return ENGINE_SPEED if crank else CAM_SPEED
+
+
+def no_speed(to_units: str) -> UnitSystemError:
+    """The refusal of ``to_units`` (per degree) for values without the speed it is converted
+    at (:func:`degree_speed`): the engine's needs a drive, named as the fix."""
+    if degree_speed([to_units]) == ENGINE_SPEED:
+        return UnitSystemError.at(
+            "units",
+            f"{to_units} needs each case's engine speed (engine_speed_rpm), which an archive "
+            "has from a spec with a drive (drive: {cam_per_crank: 0.5}); without one use "
+            "mm-deg, per degree of cam angle",
+            found=to_units,
+            expected="an engine speed",
+        )
+    return UnitSystemError.at(
+        "units",
+        f"{to_units} needs each case's cam speed (speed_rpm)",
+        found=to_units,
+        expected="a cam speed",
+    )
 
 
 def convert_values(values, from_units: str, to_units: str, cam_speed_rpm=None):
@@ -600,17 +621,7 @@ def convert_values(values, from_units: str, to_units: str, cam_speed_rpm=None):
     if not power:
         return values * convert(1.0, from_units, to_units)
     if cam_speed_rpm is None:
-        crank = degree_speed([to_units]) == ENGINE_SPEED
-        raise UnitSystemError.at(
-            "units",
-            f"{to_units} needs each case's engine speed (engine_speed_rpm), which an archive "
-            "has from a spec with a drive (drive: {cam_per_crank: 0.5}); without one use "
-            "mm-deg, per degree of cam angle"
-            if crank
-            else f"{to_units} needs each case's cam speed (speed_rpm)",
-            found=to_units,
-            expected="an engine speed" if crank else "a cam speed",
-        )
+        raise no_speed(to_units)
     per_second = f"{length}/s" if power == 1 else f"{length}/s^2"
     try:
         scale = convert(1.0, from_units, per_second)

@@ -288,37 +288,42 @@ def model_report(train, sm, limits, preset) -> dict[str, object]:
     }
 
 
-def _adjuster_lines(train) -> list[str]:
-    """What a lash adjuster does to the listed stiffnesses (the matrices hold the link with it
-    in series, not ``stiffnesses`` alone), in N/mm; [] without one."""
+def _adjuster_stiffnesses(train) -> tuple[float, float, float] | None:
+    """(the link next to the cam as the matrices hold it, ``stiffnesses[0]`` in series with
+    the adjuster; the adjuster's stiffness in that link, :func:`~campipe.model.hla.hla_series`;
+    its seated stiffness) [N/m], or None without an adjuster."""
     if adjuster(train) is None:
-        return []
+        return None
     k_link, k_hla = float(train.stiffnesses[0]), hla_series(train)
+    return 1.0 / (1.0 / k_link + 1.0 / k_hla), k_hla, seated_stiffness(train)
+
+
+def _adjuster_lines(train) -> list[str]:
+    """:func:`_adjuster_stiffnesses` in words and N/mm: the listed stiffnesses are not what
+    the matrices hold; [] without an adjuster."""
+    found = _adjuster_stiffnesses(train)
+    if found is None:
+        return []
+    link, in_link, seated = (k * 1e-3 for k in found)
     seen = ""
     if on_pivot(train):
         seen = f" at the pallet (hla_stiffness / g₀², the pivot's gain g₀ {pivot_gain(train):.4g})"
     return [
-        f"  {'(link next to the cam)':<30} {1e-3 / (1 / k_link + 1 / k_hla):.6g} N/mm in the "
-        f"matrices: stiffnesses[0] {k_link * 1e-3:.6g} N/mm in series with the adjuster's "
-        f"{k_hla * 1e-3:.6g} N/mm{seen}",
-        f"  {'(adjuster, seated)':<30} {seated_stiffness(train) * 1e-3:.6g} N/mm: its load per "
-        "unit of its extension on the base circle, the valve seated",
+        f"  {'(link next to the cam)':<30} {link:.6g} N/mm in the matrices: stiffnesses[0] "
+        f"{float(train.stiffnesses[0]) * 1e-3:.6g} N/mm in series with the adjuster's "
+        f"{in_link:.6g} N/mm{seen}",
+        f"  {'(adjuster, seated)':<30} {seated:.6g} N/mm: its load per unit of its extension "
+        "on the base circle, the valve seated",
     ]
 
 
 def _adjuster_json(train) -> dict[str, object]:
-    """:func:`_adjuster_lines` in SI for the JSON form; {} without an adjuster."""
-    if adjuster(train) is None:
+    """:func:`_adjuster_stiffnesses` for the JSON form, in N/m; {} without an adjuster."""
+    found = _adjuster_stiffnesses(train)
+    if found is None:
         return {}
-    k_link, k_hla = float(train.stiffnesses[0]), hla_series(train)
-    return {
-        "adjuster": {
-            "link_stiffness": 1.0 / (1.0 / k_link + 1.0 / k_hla),
-            "adjuster_stiffness_in_the_link": k_hla,
-            "seated_stiffness": seated_stiffness(train),
-            "units": "N/m",
-        }
-    }
+    names = ("link_stiffness", "adjuster_stiffness_in_the_link", "seated_stiffness")
+    return {"adjuster": {**dict(zip(names, found, strict=True)), "units": "N/m"}}
 
 
 def _matrix_text(a: np.ndarray, scale: float, coords: tuple[Coordinate, ...]) -> list[str]:

@@ -20,7 +20,14 @@ import numpy as np
 from campipe.io.archive import ArchiveDamagedError, ArchiveFileError, check
 from campipe.io.parts import INDEX, PartsIndexError, part_checksum, read_index
 from campipe.study.archive.layout import LAYOUT_VERSION
-from campipe.units import ENGINE_SPEED, convert_values, degree_speed, per_degree, system_units
+from campipe.units import (
+    ENGINE_SPEED,
+    convert_values,
+    degree_speed,
+    no_speed,
+    per_degree,
+    system_units,
+)
 
 log = logging.getLogger(__name__)
 #: The name the rest of the study (zip rows, case entries, samples) goes by while the sweep
@@ -92,7 +99,7 @@ def in_units(ds, units: str):
     system = system_units(units, "units")
     at = degree_speed(system.values())  # the cam's, or the engine's per degree of crank angle
     if at == ENGINE_SPEED and at not in ds.variables:
-        convert_values(1.0, "m/s", system["m/s"])  # refused: no engine speed, naming the fix
+        raise no_speed(system["m/s"])  # an archive without a drive: no engine speed
     speeds = {}  # dimension → that speed [rpm] along it
     if at in ds.variables and ds[at].dims == ("case",):
         speeds["case"] = ds[at].variable
