@@ -85,41 +85,55 @@ def test_thesis_seat(tmp_path):
 
 
 def test_thesis_machining_error(tmp_path):
-    """Figure 33: the perfect cam holds the follower; the flat from 268° to 272° throws it
-    off at both edges, every turn, for a fraction of a degree (the thesis's plot, at 1°
-    intervals, cannot resolve it: "about 0.75°" is its spacing). The hop is checked against
-    the hand estimate 2·m·v/F: the follower leaves with the edge's velocity jump
-    v = ω·h/2·|cos 268°| and its own mass m at the cam, and the perfect cam's force F there
-    brings it back. Broken copy: a flat dropped from the profile (the flawed cam then holds
-    the follower like the perfect one) fails the separation check."""
+    """Figure 33: the perfect cam holds the follower; the flat from 268° to 272° throws it off at
+    both edges, every turn, for a fraction of a degree. Each hop is checked against the hand
+    estimate 2·m·v/F: the follower leaves with the edge's velocity jump v = ω·h/2·|cos 268°| and
+    its own mass m at the cam, and the perfect cam's force F there brings it back (within 35 %:
+    the edge at 272° at 9000 rpm, 0.58° against 0.82°, leaves where the force is not the one at
+    268°). The thesis gives no speed for the figure, and says the follower hops off "for a small
+    period of time, about .75 degrees" (between its plotted points, 1° apart): at 9000 rpm, its
+    fastest speed that follows the cam (Figures 15–16), each hop is that within a third (0.79°
+    and 0.58°); at 6000 rpm, a fifth of it. Broken copy: a flat dropped from the profile (the
+    flawed cam then holds the follower like the perfect one) fails the separation check."""
     ds = run(tmp_path, "thesis-machining-error", **{"run.revolutions": 2})
-    perfect, flawed = (
-        list(ds.defects.values).index("none"),
-        list(ds.defects.values).index("flat 268–272 deg"),
-    )
-    assert ds.cam_impacts.values[perfect] == 0
-    assert ds.cam_impacts.values[flawed] == 2  # per turn: the two edges
-    assert_array_equal(ds.cam_impacts_by_rev.values[flawed], [2, 2])
-    mine = ds.event_case.values == flawed
-    kinds, angles = ds.event_kind.values[mine], ds.event_cam_angle.values[mine]
-    assert_allclose(angles[kinds == CAM_SEPARATION] % 360, [268, 272, 268, 272], atol=1e-6)
-    hops = angles[kinds == CAM_IMPACT] - angles[kinds == CAM_SEPARATION]
-    omega = 6000 * math.pi / 30
-    v = omega * 0.0127 * abs(math.cos(math.radians(268)))
     m = impact_masses(system_matrices(thesis_train()).mass)[0]
-    force = ds.cam_force.values[perfect, 360 + 268]
-    estimate = math.degrees(omega * 2 * m * v / force)
-    assert_allclose(hops, estimate, rtol=0.25)
-    assert 0.1 < estimate < 0.25
+    hops = {}
+    for speed in (6000, 9000):
+        at = ds.speed_rpm.values == speed
+        labels = list(ds.defects.values)
+        perfect = next(i for i, d in enumerate(labels) if d == "none" and at[i])
+        flawed = next(i for i, d in enumerate(labels) if d == "flat 268–272 deg" and at[i])
+        assert ds.cam_impacts.values[perfect] == 0
+        assert ds.cam_impacts.values[flawed] == 2  # per turn: the two edges
+        assert_array_equal(ds.cam_impacts_by_rev.values[flawed], [2, 2])
+        mine = ds.event_case.values == flawed
+        kinds, angles = ds.event_kind.values[mine], ds.event_cam_angle.values[mine]
+        assert_allclose(angles[kinds == CAM_SEPARATION] % 360, [268, 272, 268, 272], atol=1e-6)
+        hops[speed] = angles[kinds == CAM_IMPACT] - angles[kinds == CAM_SEPARATION]
+        omega = speed * math.pi / 30
+        v = omega * 0.0127 * abs(math.cos(math.radians(268)))
+        force = ds.cam_force.values[perfect, 360 + 268]
+        estimate = math.degrees(omega * 2 * m * v / force)
+        assert_allclose(hops[speed], estimate, rtol=0.35)
+    assert np.all((hops[6000] > 0.1) & (hops[6000] < 0.25))
+    assert_allclose(hops[9000], 0.75, rtol=1 / 3)  # the thesis's "about .75 degrees"
 
 
 def test_thesis_undamped(tmp_path):
-    """Figure 34: undamped, at the fundamental the cam force swings about 10 lbf; off it the
-    spring's whole stroke shows."""
+    """Figure 34: undamped, at the fundamental "it takes very little force above the static
+    value", off it the spring's whole stroke shows. From the steady state (the periodic
+    start) the cam force at the fundamental barely swings (0.05 lbf: the spring carries the
+    train's inertia); from the thesis's own start (quasi-static, mid-lift) the undamped
+    transient never decays, and the force "oscillates about 10 pounds" (11.7 lbf) as in the
+    figure. Broken copy: damping left in the preset (the transient then decays) fails the
+    second check."""
     ds = run(tmp_path, "thesis-undamped")
     i = by_speed(ds)
     swing = np.ptp(ds.cam_force.values[:, 720:], axis=1) / 2 / LBF
-    assert swing[i[6485]] < 15 and swing[i[3000]] > 150
+    assert swing[i[6485]] < 0.5 and swing[i[3000]] > 150
+    ds = run(tmp_path, "thesis-undamped", **{"run.start": "quasi-static"})
+    swing = np.ptp(ds.cam_force.values[:, 720:], axis=1) / 2 / LBF
+    assert_allclose(swing[by_speed(ds)[6485]], 10, rtol=0.25)
 
 
 def test_thesis_polydyne(tmp_path):

@@ -24,7 +24,7 @@ EXAMPLE_CASES = {
     "quickstart": 8,
     "thesis-no-seat": 4,
     "thesis-seat": 5,
-    "thesis-machining-error": 2,
+    "thesis-machining-error": 4,
     "thesis-undamped": 2,
     "thesis-polydyne": 3,
     "thesis-member-loads": 1,
