@@ -705,8 +705,8 @@ def _run_checked(
         cases_in = batch.cases._replace(**start._asdict())
     out = _outputs(batch, settings, plan)
     integrator = plan.integrator
-    # (a table of the plunger's turns where the integrator carries it: ``engine.plunger``)
-    table = integrator.run(integrator.prepare(batch, settings), cases_in, out)
+    # (the plungers where the integrator carries them: ``engine.plunger``)
+    carried = integrator.run(integrator.prepare(batch, settings), cases_in, out)
     status, n_events = out.status, out.n_events
     if status[0] if n == 1 else np.count_nonzero(status):  # not every case OK
         failures.raise_or_blank(out, settings, on_failure, check_stability_limit, integrator)
@@ -738,7 +738,8 @@ def _run_checked(
         steps=out.steps,
         status=status,
         start_time=cases_in.t0,
-        lash_adjuster=NO_TABLE if table is None else table,
+        lash_adjuster=NO_TABLE if carried is None else carried.table,
+        extension=NO_TABLE if carried is None else carried.extension,
     )
 
 

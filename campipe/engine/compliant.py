@@ -348,6 +348,10 @@ class CaseOutputs:
     #: (n_rev, 3) a carried plunger's extension at each turn's start, its leak-down and
     #: pump-up over the turn [m] (``engine.plunger``); None without one
     adjuster: np.ndarray | None = None
+    #: (n_out,) a plunger's extension at each sample [m] where it lengthens a chain's link:
+    #: ``extension_start`` (the run's frame) plus its state u; None else
+    extension: np.ndarray | None = None
+    extension_start: float = 0.0
     n_events: int = 0
     status: int = 0
     steps: int = 0
@@ -651,6 +655,8 @@ def _sample(run: _Run, t: float, z: np.ndarray, out: CaseOutputs, k: int) -> Non
     out.cam[k] = run.excitation(t, z)[0]
     out.cfg[k] = configuration(*run.closed)
     out.acc[k] = (acc[CAM], acc[SEAT])
+    if out.extension is not None:
+        out.extension[k] = out.extension_start + z[2 * n]
 
 
 def compliant_system(train: ValveTrain, profile: Profile, speed: float, seat_q: float | None

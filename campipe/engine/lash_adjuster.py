@@ -247,11 +247,17 @@ def in_kernel(run: Callable[..., BatchResult]) -> Callable[..., BatchResult]:
             a0 = None if a0 is None else np.hstack([a0, np.full_like(pad, np.nan)])
             start = (t0, q0, v0, a0, cfg0)
         part = run(members, settings, start=start, **options)
-        table = kernel_ledger(part, np.array([c.train.hla_extension for c in cases]))
+        offset = np.array([c.train.hla_extension for c in cases])
+        table = kernel_ledger(part, offset)
         for events in part.events:  # the kernel's u at each switch, read: cleared
             events[np.isin(events[:, EV_KIND], ADJUSTER_EVENTS), EV_IMPULSE] = 0.0
         return dataclasses.replace(
-            part, q=part.q[:, :, :-1], v=part.v[:, :, :-1], lash_adjuster=table, _derived={}
+            part,
+            q=part.q[:, :, :-1],
+            v=part.v[:, :, :-1],
+            lash_adjuster=table,
+            extension=offset[:, None] + part.q[:, :, -1],
+            _derived={},
         )
 
     return carried_run
@@ -287,6 +293,13 @@ def kernel_ledger(part: BatchResult, offset: np.ndarray) -> np.ndarray:
                 moves[moves > 0.0].sum(),
             )
     return table
+
+
+def held_extension(part: BatchResult, extension: np.ndarray) -> BatchResult:
+    """``part`` with each case's adjuster's extension [m] held at ``extension`` (each case's;
+    NaN where it is not in a chain's link) over its samples (``BatchResult.extension``)."""
+    held = np.repeat(np.asarray(extension, float)[:, None], part.cam_angle.size, axis=1)
+    return dataclasses.replace(part, extension=held)
 
 
 def _in_link(cases) -> np.ndarray:
@@ -442,6 +455,7 @@ class Plunger:
         part = thinned(part, every)
         self.shift[rows] = np.where(self.in_link[rows], before, 0.0)
         _to_cam_lift(part, self.shift[rows])
+        part = held_extension(part, np.where(self.in_link[rows], before, np.nan))
         if not self.ledger:
             return part
         return with_ledger(part, before, self.extension[rows], self.travel[rows])
@@ -519,7 +533,8 @@ def _part_of_a_turn(cases, settings, run, options) -> BatchResult:
     shift = np.array([o.train.hla_extension if adjuster(o.train) else 0.0 for o in cases])
     shift[~_in_link(cases)] = 0.0
     table = np.full((len(cases), part.per_rev.shape[1], 3), np.nan)
-    return dataclasses.replace(_in_cam_frame(part, shift, cases), lash_adjuster=table)
+    part = dataclasses.replace(_in_cam_frame(part, shift, cases), lash_adjuster=table)
+    return held_extension(part, np.where(_in_link(cases), shift, np.nan))
 
 
 def _move_follower(q0, v0, cfg0, change, cam, cases) -> None:
@@ -575,5 +590,6 @@ def _joined(parts: list[BatchResult], cases, settings, table, status) -> BatchRe
         status=status,
         start_time=first.start_time,
         lash_adjuster=table,
+        extension=join("extension") if first.extension.size else first.extension,
     )
     return blank_failures(result)

@@ -60,9 +60,20 @@ def _end_forces(q: np.ndarray, e: Element) -> np.ndarray:
     return q @ (e.stiffness @ e.beta).T
 
 
-def member_loads(train: ValveTrain, q: np.ndarray) -> dict[str, np.ndarray]:
+def _link_forces(q: np.ndarray, links: list[Element], extension) -> list[np.ndarray]:
+    """A chain's links' compressive forces, its adjuster's plunger at ``extension`` [m] (each
+    sample's, or None): the adjuster in series with the link next to the cam lengthens it,
+    its force k·(x₁ − x₂ + e), k the link's stiffness with the adjuster's in series."""
+    forces = [-_end_forces(q, e)[..., 1] for e in links]
+    if extension is not None and links:
+        forces[0] = forces[0] + float(links[0].stiffness[0, 0]) * np.asarray(extension)
+    return forces
+
+
+def member_loads(train: ValveTrain, q: np.ndarray, extension=None) -> dict[str, np.ndarray]:
     """Member loads for coordinates ``q`` (..., n) [m, rad] of ``train`` (n ≥ its
-    coordinates, any beyond them ignored).
+    coordinates, any beyond them ignored), a chain's adjuster's plunger at ``extension`` [m]
+    (q's leading shape, or None: none in its link; ``BatchResult.extension``).
 
     Returns
     -------
@@ -80,10 +91,10 @@ def member_loads(train: ValveTrain, q: np.ndarray) -> dict[str, np.ndarray]:
     # Axial elements use (lower, upper) measured upward: the upper end force is the tension.
     if train.chain:  # its links next to the cam and to the valve (none: one mass)
         none = np.full(q.shape[:-1], np.nan)
-        links = members.get("link")
+        links = _link_forces(q, members.get("link", []), extension)
         return {
-            "pushrod_force": -end_forces(links[0])[..., 1] if links else none,
-            "stem_force": -end_forces(links[-1])[..., 1] if links else none,
+            "pushrod_force": links[0] if links else none,
+            "stem_force": links[-1] if links else none,
             "spring_force": reference_preload(train) - end_forces(members["spring"][-1])[..., 1],
             "rocker_moment": none,
         }
@@ -96,7 +107,7 @@ def member_loads(train: ValveTrain, q: np.ndarray) -> dict[str, np.ndarray]:
     }
 
 
-def pushing_joints(train: ValveTrain, q: np.ndarray) -> np.ndarray:
+def pushing_joints(train: ValveTrain, q: np.ndarray, extension=None) -> np.ndarray:
     """(..., n_joints) the forces [N], compressive positive, through the joints of ``train``
     that in the hardware can only push, for coordinates ``q`` (..., n): a chain's links (a
     tappet's, a finger's or a rocker's contact on the valve's tip, in series with what the
@@ -114,7 +125,7 @@ def pushing_joints(train: ValveTrain, q: np.ndarray) -> np.ndarray:
     # Axial elements use (lower, upper) measured upward: the upper end force is the tension,
     # the lower end's the compression.
     if train.chain:
-        joints = [-end_forces(link)[..., 1] for link in members.get("link", [])]
+        joints = _link_forces(q, members.get("link", []), extension)
     else:
         rod = members["pushrod"]
         joints = [

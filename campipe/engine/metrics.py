@@ -166,7 +166,7 @@ def _spring(name: str, how: str) -> Callable[[Any, Any], np.ndarray]:
 def _least_joint_force(result, trains) -> np.ndarray:
     least = np.full(result.q.shape[:2], np.nan)
     for i, train in enumerate(trains):
-        joints = pushing_joints(train, result.q[i])
+        joints = pushing_joints(train, result.q[i], result.extension_of(i))
         if joints.shape[-1]:
             least[i] = joints.min(axis=-1)
     return per_turn(least, result.cam_angle, result.n_turns, "min")

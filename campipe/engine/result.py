@@ -84,6 +84,11 @@ class BatchResult:
     #: (n_cases, n_rev, 3) a run with a hydraulic lash adjuster (``engine.lash_adjuster``):
     #: each turn's plunger extension at its start, leak-down and pump-up [m]; empty else
     lash_adjuster: np.ndarray = field(default_factory=lambda: _NONE_FLOAT)
+    #: (n_cases, n_out) a run with a hydraulic lash adjuster: its plunger's extension at each
+    #: sample [m] where it lengthens a chain's link (which its member loads need: the link's
+    #: force is k·(x₁ − x₂ + e)), NaN where it raises a finger's pivot or there is none;
+    #: empty else
+    extension: np.ndarray = field(default_factory=lambda: _NONE_FLOAT)
     _derived: dict[str, object] = field(default_factory=dict, repr=False, compare=False)
 
     @property
@@ -136,13 +141,23 @@ class BatchResult:
 
     def member_loads(self) -> dict[str, np.ndarray]:
         """The member loads (``engine.loads.MEMBER_LOADS``) of each case's train,
-        (n_cases, n_out) each, computed once from q."""
-        return self._histories("member_loads", member_loads)
+        (n_cases, n_out) each, computed once from q (and a chain's adjuster's extension)."""
+        return self._histories("member_loads", member_loads, self.extension_of)
 
-    def _histories(self, key: str, of) -> dict[str, np.ndarray]:
+    def extension_of(self, i: int) -> np.ndarray | None:
+        """Case ``i``'s adjuster's extension at each sample [m] where it lengthens a chain's
+        link (:attr:`extension`), else None."""
+        if not self.extension.size or not np.isfinite(self.extension[i]).any():
+            return None
+        return self.extension[i]
+
+    def _histories(self, key: str, of, extension=None) -> dict[str, np.ndarray]:
         cached = self._derived.get(key)
         if cached is None:
-            per_case = [of(t, self.q[i]) for i, t in enumerate(self.trains)]
+            per_case = [
+                of(t, self.q[i]) if extension is None else of(t, self.q[i], extension(i))
+                for i, t in enumerate(self.trains)
+            ]
             cached = self._derived[key] = {
                 name: np.stack([p[name] for p in per_case]) for name in per_case[0]
             }
@@ -195,6 +210,8 @@ def blank_failures(result: BatchResult) -> BatchResult:
     failed = np.isin(result.status, FAILURES)
     for name in BLANKED:
         getattr(result, name)[failed] = np.nan
+    if result.extension.size:
+        result.extension[failed] = np.nan
     return result
 
 
@@ -208,6 +225,8 @@ def thinned(result: BatchResult, every: int) -> BatchResult:
     if every == 1:
         return result
     kept = {name: getattr(result, name)[:, ::every] for name in HISTORIES}
+    if result.extension.size:
+        kept["extension"] = result.extension[:, ::every]
     return dataclasses.replace(result, cam_angle=result.cam_angle[::every], **kept, _derived={})
 
 
@@ -228,8 +247,8 @@ def merge_results(n: int, parts: Sequence[tuple[np.ndarray, BatchResult]]) -> Ba
     for f in dataclasses.fields(BatchResult):
         if f.name == "_derived":
             continue
-        if f.name == "lash_adjuster":  # a part without an adjuster has none: NaN
-            merged[f.name] = _merged_adjusters(n, parts)
+        if f.name in ("lash_adjuster", "extension"):  # a part without an adjuster: NaN
+            merged[f.name] = _merged_adjusters(n, parts, f.name)
             continue
         value = getattr(first, f.name)
         if f.name in _SHARED:
@@ -258,10 +277,12 @@ def merge_results(n: int, parts: Sequence[tuple[np.ndarray, BatchResult]]) -> Ba
     return BatchResult(**merged)  # type: ignore[arg-type]
 
 
-def _merged_adjusters(n: int, parts: Sequence[tuple[np.ndarray, BatchResult]]) -> np.ndarray:
-    """The parts' ``lash_adjuster`` tables as one, NaN for the cases of a part without one
-    (empty if no part has one)."""
-    tables = [(index, part.lash_adjuster) for index, part in parts if part.lash_adjuster.size]
+def _merged_adjusters(
+    n: int, parts: Sequence[tuple[np.ndarray, BatchResult]], name: str = "lash_adjuster"
+) -> np.ndarray:
+    """The parts' ``lash_adjuster`` tables (or ``extension`` histories) as one, NaN for the
+    cases of a part without one (empty if no part has one)."""
+    tables = [(index, getattr(part, name)) for index, part in parts if getattr(part, name).size]
     if not tables:
         return np.zeros(0)
     out = np.full((n, *tables[0][1].shape[1:]), np.nan)

@@ -181,6 +181,9 @@ class _Kept(NamedTuple):
     seat_force: np.ndarray
     cfg: np.ndarray  # int8
     events: list[list[np.ndarray]]  # per case, per slot: that turn's events (times absolute)
+    #: (n, turns, per_turn + 1) an adjuster's extension (``BatchResult.extension``); or
+    #: empty, where the turns have none
+    extension: np.ndarray
 
 
 def _keep(kept: _Kept, rows: np.ndarray, slot: np.ndarray, part: BatchResult) -> None:
@@ -191,6 +194,8 @@ def _keep(kept: _Kept, rows: np.ndarray, slot: np.ndarray, part: BatchResult) ->
     kept.cam_force[rows, slot] = part.cam_force
     kept.seat_force[rows, slot] = part.seat_force
     kept.cfg[rows, slot] = part.contact_state
+    if kept.extension.size:
+        kept.extension[rows, slot] = part.extension
 
 
 def run_settled(
@@ -254,6 +259,7 @@ def run_settled(
                 np.full(samples, np.nan),
                 np.zeros(samples, np.int8),
                 [[np.zeros((0, N_EVENT_FIELDS))] * turns for _ in range(n)],
+                np.full(samples if part.extension.size else (0, 0, 0), np.nan),
             )
         assert kept is not None
         boundary.q[active, k + 1] = part.q[:, -1]
@@ -357,5 +363,6 @@ def _result(cases, settings, kept, per_rev, measured, period, settled, done, sta
         settled_turn=settled,
         turns_run=done,
         recorded_from=recorded_from,
+        extension=join(kept.extension) if kept.extension.size else np.zeros(0),
     )
     return blank_failures(result)

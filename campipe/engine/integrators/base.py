@@ -9,11 +9,21 @@ plan) costs no compiled code.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any, Protocol
+from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 
 from campipe.engine.case import Case
+
+
+class CarriedPlungers(NamedTuple):
+    """The lash adjusters whose plunger an integrator carries as a state (``engine.plunger``):
+    each turn's extension at its start, leak-down and pump-up (``BatchResult.lash_adjuster``,
+    NaN for a case without one) and each sample's extension where it lengthens a chain's
+    link (``BatchResult.extension``, NaN elsewhere)."""
+
+    table: np.ndarray  # (n, n_rev, 3) [m]
+    extension: np.ndarray  # (n, n_out) [m]
 
 
 class RunLike(Protocol):
@@ -79,9 +89,8 @@ class Integrator(Protocol):
         (``campipe.engine.batch.PreparedBatch``)."""
         ...
 
-    def run(self, prepared: Any, cases: Any, out: Any) -> np.ndarray | None:
+    def run(self, prepared: Any, cases: Any, out: Any) -> CarriedPlungers | None:
         """Advance every case from its start (``common.Cases``) and fill ``out``
-        (``common.Outputs``) in place; return the table of the lash adjusters whose
-        plunger it carries as a state (``BatchResult.lash_adjuster``; only the compliant
-        integrator's, ``engine.plunger``), else None."""
+        (``common.Outputs``) in place; return the lash adjusters whose plunger it carries as
+        a state (only the compliant integrator's, ``engine.plunger``), else None."""
         ...

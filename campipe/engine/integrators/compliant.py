@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from campipe.engine.case import Case, CaseError, output_angles
-from campipe.engine.integrators.base import RunLike
+from campipe.engine.integrators.base import CarriedPlungers, RunLike
 from campipe.vocabulary import holds_cam, holds_seat
 
 #: Its relative tolerance is run.tolerance, but no finer than this (the default 1e-12,
@@ -66,14 +66,16 @@ class Compliant:
         rtol = max(float(run.tolerance), RTOL_FLOOR)
         return batch.case_list, output_angles(run), rtol, run.step or math.inf, run.max_steps
 
-    def run(self, prepared: Any, cases: Any, out: Any) -> np.ndarray | None:
-        """As the protocol's; returns the carried plungers' table (``engine.plunger``:
-        (n, n_rev, 3), NaN for a case without one), None where no case carries one."""
+    def run(self, prepared: Any, cases: Any, out: Any) -> CarriedPlungers | None:
+        """As the protocol's; returns the carried plungers (``engine.plunger``: their table,
+        NaN for a case without one, and their extension at the samples), None where no case
+        carries one."""
         from campipe.engine import compliant  # SciPy's integration, loaded when first run
 
         case_list, angles, rtol, max_step, max_steps = prepared
         c = cases
-        table = None
+        table: np.ndarray | None = None
+        extension = np.full(out.cam.shape, np.nan)  # filled where a plunger is in a link
         for i, case in enumerate(case_list):
             seat = float(c.seat_q[i]) if case.has_seat else None
             system = compliant.compliant_system(case.train, case.profile, case.speed, seat)
@@ -95,10 +97,12 @@ class Compliant:
                     table = np.full((len(case_list), *out.per_rev.shape[1:2], 3), np.nan)
                 one.adjuster = table[i]
                 one.adjuster[:, 1:] = 0.0
+                if system.plunger.gains is None:  # in a chain's link: e₀ + u at the samples
+                    one.extension, one.extension_start = extension[i], case.train.hla_extension
             compliant.integrate(
                 system, float(c.t0[i]), z0, held, angles / case.speed, one,
                 rtol=rtol, max_step=max_step, max_steps=max_steps, capture=float(c.capture[i]),
                 lift_bound=float(c.lift_bound[i]), valve_ref=float(c.valve_ref[i]),
             )  # fmt: skip
             out.n_events[i], out.status[i], out.steps[i] = one.n_events, one.status, one.steps
-        return table
+        return None if table is None else CarriedPlungers(table, extension)
