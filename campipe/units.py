@@ -557,6 +557,17 @@ def per_degree(units: str) -> tuple[str, int]:
     return m["length"], int(m["power"] or 1)
 
 
+def written_per_degree(text: str) -> tuple[str, str] | None:
+    """A quantity as written whose units are a length per degree (``0.2 mm/deg``,
+    ``5e-4 mm/deg**2``, ``0.1 mm/degCA``) as (its number, its units as :func:`per_degree`
+    reads them: ``mm/deg^2``); None for any other text. Pint knows no ``degCA``, and a value
+    per degree converts to one per second only at a speed: such a quantity is kept as
+    written."""
+    number, _, written = str(text).strip().partition(" ")
+    units = written.replace("**", "^").replace(" ", "")
+    return (number, units) if per_degree(units)[1] else None
+
+
 def _per_degree_match(units: str) -> re.Match[str] | None:
     return _PER_DEGREE.match(str(units).replace("**", "^").replace(" ", ""))
 

@@ -71,4 +71,10 @@ def export(archive, cases, where, units, fmt, output, overwrite, verify) -> None
     n = len(table.cases)
     rows = len(next(iter(table.columns.values())))
     click.echo(f"campipe export: {n} case{'s' if n != 1 else ''}, {rows} rows", err=True)
+    if table.left_out:
+        click.echo(
+            f"campipe export: left out, NaN in every row exported (not of this layout): "
+            f"{', '.join(table.left_out)}",
+            err=True,
+        )
     click.echo(str(path))

@@ -469,7 +469,8 @@ def validate_text(loaded, spec_path) -> str:
     type=click.Choice(["table", "csv", "json"]),
     default="table",
     show_default=True,
-    help="json: an array of row objects.",
+    help="json: an object with the study's name, each column's units and the cases as row "
+    'objects ({"study", "units", "cases"}).',
 )
 @click.option(
     "--summary",

@@ -186,17 +186,33 @@ def _indexes(cam_angle: np.ndarray, time: np.ndarray) -> list:
 # -- the content of one case ---------------------------------------------------------------------
 
 
+#: The events' velocity and impulse as the archive holds them: (units, factor).
+EVENT_SI = {"event_velocity": ("m/s", 1.0), "event_impulse": ("N*s", 1.0)}
+
+
 def event_text(
-    kind: int, angle: float, time: float, velocity: float, impulse: float, before: int, after: int
+    kind: int,
+    angle: float,
+    time: float,
+    velocity: float,
+    impulse: float,
+    before: int,
+    after: int,
+    units: Mapping[str, tuple[str, float]] = EVENT_SI,
 ) -> str:
-    """One event as a text-log line."""
+    """One event as a text-log line, its velocity and impulse (archive values) in ``units``
+    (name → (units, factor from the archive's))."""
     name = EVENT_KINDS.get(int(kind), (f"event {kind}", "INFO"))[0]
+    (v_units, v_factor), (j_units, j_factor) = (
+        units.get(n, EVENT_SI[n]) for n in ("event_velocity", "event_impulse")
+    )
     text = (
-        f"{name} at {angle:.4f}° (t = {time * 1e3:.4f} ms): velocity {velocity:.4g} m/s, "
+        f"{name} at {angle:.4f}° (t = {time * 1e3:.4f} ms): velocity "
+        f"{velocity * v_factor:.4g} {v_units}, "
         f"configuration {ROMAN.get(int(before), before)} → {ROMAN.get(int(after), after)}"
     )
     if int(kind) in (CAM_IMPACT, SEAT_IMPACT):
-        text += f", impulse {impulse:.4g} N·s"
+        text += f", impulse {impulse * j_factor:.4g} {j_units.replace('*', '·')}"
     return text
 
 
@@ -219,7 +235,7 @@ def log_case(rec: rr.RecordingStream, case: CaseRecording, magnification: float)
         rec.send_columns(
             f"{root}/{path}", indexes=indexes, columns=rr.Scalars.columns(scalars=values)
         )
-    log_events(rec, root, case.events)
+    log_events(rec, root, case.events, case.units)
     rec.log(
         f"{root}/parameters",
         rr.TextDocument(case.parameters, media_type=rr.MediaType.MARKDOWN),
@@ -228,15 +244,20 @@ def log_case(rec: rr.RecordingStream, case: CaseRecording, magnification: float)
     log_sketch(rec, f"{root}/sketch", case.sketch, indexes, magnification)
 
 
-def log_events(rec: rr.RecordingStream, root: str, ev: Mapping[str, np.ndarray]) -> None:
-    """A case's events as a text log at their cam angles and times."""
+def log_events(
+    rec: rr.RecordingStream,
+    root: str,
+    ev: Mapping[str, np.ndarray],
+    units: Mapping[str, tuple[str, float]] = EVENT_SI,
+) -> None:
+    """A case's events as a text log at their cam angles and times (velocity and impulse in
+    ``units``, as :func:`event_text`)."""
     import rerun as rr
 
     if not ev["event_kind"].size:
         return
-    texts = [
-        event_text(*row)
-        for row in zip(
+    rows = list(
+        zip(
             ev["event_kind"],
             ev["event_cam_angle"],
             ev["event_time"],
@@ -246,7 +267,8 @@ def log_events(rec: rr.RecordingStream, root: str, ev: Mapping[str, np.ndarray])
             ev["event_to"],
             strict=True,
         )
-    ]
+    )
+    texts = [event_text(k, a, t, v, j, b, c, units=units) for k, a, t, v, j, b, c in rows]
     levels = [EVENT_KINDS.get(int(k), ("", "INFO"))[1] for k in ev["event_kind"]]
     rec.send_columns(
         f"{root}/events",

@@ -41,11 +41,18 @@ from campipe.plot.style import (
     line_styles,
 )
 from campipe.study.query.display import display_units, format_value, to_display
-from campipe.study.query.tables import CaseTable, case_table, displayed, select
+from campipe.study.query.tables import OF_IMPACTS, CaseTable, case_table, displayed, select
 from campipe.study.spec.drive import ENGINE_SPEED_NAME
 from campipe.study.spec.plots import PlotError, PlotRequest, check_turn
 from campipe.study.spec.variables import VARIABLES
-from campipe.units import QuantityError, convert, degree_speed, read_quantity
+from campipe.units import (
+    QuantityError,
+    convert,
+    degree_speed,
+    per_degree,
+    read_quantity,
+    written_per_degree,
+)
 from campipe.vocabulary import FAILURES
 
 #: Most cases overlaid in one history figure (beyond, lines cannot be told apart).
@@ -557,6 +564,7 @@ def metric(view: View, request: PlotRequest) -> Figure:
         )
         ax.plot(x[idx], y[idx], label=text or "all cases", **style.kwargs())
     ringed = _mark_unsettled(ax, view, x, y, yname)
+    ringed |= _mark_no_impact(ax, x, y, yname)
     units = view.shown.units.get(yname, "")
     for k, limit in enumerate(request.limit):
         at = shown_value(limit, view, yname, "--limit")
@@ -603,6 +611,19 @@ def _mark_unsettled(ax, view: View, x: np.ndarray, y: np.ndarray, yname: str) ->
     return bool(never.any())
 
 
+def _mark_no_impact(ax, x: np.ndarray, y: np.ndarray, yname: str) -> bool:
+    """Mark at 0, apart from the line, the cases with no impact of the kind ``yname``
+    measures (its value none: ``tables.OF_IMPACTS``), which the line leaves out: a valve that
+    never seats has no seating velocity, and a line through 0 would read as a soft landing."""
+    none = np.isneginf(y) if yname in OF_IMPACTS else np.zeros(x.size, bool)
+    if none.any():
+        what = "seat" if OF_IMPACTS[yname] == "seat_impacts" else "cam"
+        ax.scatter(x[none], np.zeros(int(none.sum())), marker="x", s=60, color="black",
+                   zorder=4, label=f"no {what} impact (none), drawn at 0",
+                   gid="no-impact")  # fmt: skip
+    return bool(none.any())
+
+
 # -- map over two axes -------------------------------------------------------------------------
 
 
@@ -623,22 +644,45 @@ def _level(request: PlotRequest, view: View, zname: str) -> float | None:
 
 def shown_value(value: str | float, view: View, name: str, key: str) -> float:
     """A value of the column ``name`` in its shown units: a number as it is, a quantity
-    (``1 deg``, ``0.5 m/s``) converted; a PlotError naming ``key`` otherwise."""
+    (``1 deg``, ``0.5 m/s``, ``0.2 mm/deg``) converted; a PlotError naming ``key`` otherwise
+    (a length per degree against a column shown per second, or the other way: the one is a
+    different value of the other at each speed)."""
     if isinstance(value, int | float):
         return float(value)
     try:
         return float(value)
     except ValueError:
         pass
+    shown = view.shown.units.get(name) or ""
+    if written_per_degree(str(value)) or per_degree(shown)[1]:
+        return _per_degree_value(str(value).strip(), shown, name, key)
     try:
         q = read_quantity(str(value), key)
-        return convert(float(q.magnitude), str(q.units), view.shown.units.get(name) or "")
+        return convert(float(q.magnitude), str(q.units), shown)
     except Exception as exc:  # QuantityError, or pint's for units of another dimension
-        reason = exc.reason if isinstance(exc, QuantityError) else type(exc).__name__
+        reason = exc.reason if isinstance(exc, QuantityError) else "not of its kind"
         raise PlotError.at(
-            key,
-            f"cannot read {value!r} as a value of {name} [{view.shown.units.get(name)}] ({reason})",
+            key, f"cannot read {value!r} as a value of {name} [{shown}] ({reason})"
         ) from None
+
+
+def _per_degree_value(value: str, shown: str, name: str, key: str) -> float:
+    """``value`` (a number and its units) as a value of ``name`` shown in ``shown``, one of
+    the units a length per degree (``units.per_degree``): the other must be too, of the same
+    power and angle (the cam's, or the crank's)."""
+    number, given = written_per_degree(value) or ("", "")
+    (length, power), (to_length, to_power) = per_degree(given), per_degree(shown)
+    same = power and power == to_power and degree_speed([given]) == degree_speed([shown])
+    try:
+        if same:
+            return float(number) * convert(1.0, length, to_length)
+    except Exception:  # pint's, not a length; float's
+        pass
+    raise PlotError.at(
+        key,
+        f"cannot draw {value!r} on {name} [{shown}]: write it in {shown} (a value per "
+        "degree is a different one per second at each speed), or choose --units to match",
+    )
 
 
 def colour_norm(values: np.ndarray) -> Normalize:

@@ -31,7 +31,7 @@ from campipe.replay.cases import ReplayCase, ReplayError, archive_cases, select_
 from campipe.study.archive.open import open_archive
 from campipe.study.query.display import display_units
 from campipe.study.run.progress import Progress
-from campipe.units import convert
+from campipe.units import convert, convert_values, degree_speed, per_degree
 
 #: Line radii of the sketch's parts drawn with no width of their own [m].
 HEAD_RADIUS = SPRING_RADIUS = 0.0005
@@ -55,8 +55,18 @@ def _base_radius(case: ReplayCase) -> float:
     return chain_sketch.BASE_RADIUS if case.train.chain else case_geometry(case).base_radius
 
 
-def parameters_document(case: ReplayCase, magnification: float) -> str:
-    """The case as a markdown document: its columns, its model, how to read the replay."""
+def parameters_document(
+    case: ReplayCase, magnification: float, units: Mapping[str, tuple[str, float]] | None = None
+) -> str:
+    """The case as a markdown document: its columns, its model, how to read the replay (the
+    series and events in ``units``, :func:`series_units`'s)."""
+    defaults = {
+        "valve_lift": "mm",
+        "cam_force": "N",
+        "event_velocity": "m/s",
+        "event_impulse": "N*s",
+    }
+    shown = {name: (units or {}).get(name, (d, 1.0))[0] for name, d in defaults.items()}
     lines = [
         f"# {case.label}",
         "",
@@ -79,9 +89,9 @@ def parameters_document(case: ReplayCase, magnification: float) -> str:
         "",
         "- Timeline `cam_angle`: one second of this duration timeline stands for one degree "
         "(270° reads `+270s`). Timeline `time`: the time from the start of the run.",
-        "- Plots: lifts in mm (the archive's metres × 1000), contact forces in N, compressive "
-        "positive and zero out of contact; contact state 1 I cam contact, 2 II free, 3 III "
-        "cam and seat, 4 IV seat only (thesis Table I).",
+        f"- Plots: lifts in {shown['valve_lift']}, contact forces in {shown['cam_force']}, "
+        "compressive positive and zero out of contact; contact state 1 I cam contact, 2 II "
+        "free, 3 III cam and seat, 4 IV seat only (thesis Table I).",
         f"- Sketch, in mm: the rigid train the cam (and the seat) would carry, at true scale, "
         f"plus **×{magnification:g}** the computed deviation from it: the gap at the cam "
         "while the follower is off it, the valve's bounce off its seat, and the elastic "
@@ -96,7 +106,8 @@ def parameters_document(case: ReplayCase, magnification: float) -> str:
         "(a drawing choice). The follower's dot is green on the cam, red off it; the valve's "
         "green on its seat, red off it.",
         "- Events: separations and impacts at their cam angles, with the closing velocity "
-        "(impacts) or velocity jump and the impulse delivered (impacts).",
+        f"(impacts) or velocity jump in {shown['event_velocity']} and the impulse delivered "
+        f"(impacts) in {shown['event_impulse']}.",
     ]
     return "\n".join(lines)
 
@@ -177,14 +188,27 @@ def chain_frames(case: ReplayCase, magnification: float) -> SketchFrames:
     )
 
 
+#: The events' values the recording's text log gives, in the archive's units.
+EVENT_VALUES = {"event_velocity": "m/s", "event_impulse": "N*s"}
+
+
 def series_units(
     stored: Mapping[str, str], attrs: Mapping[str, object], system: str
 ) -> dict[str, tuple[str, float]]:
-    """The recording's series (``rerun_replay.SERIES``) stored in ``stored`` units, shown in
-    the unit system ``system`` as query and plot show them (``display_units``, the spec
-    read from ``attrs``, an archive's attributes): name → (units, factor)."""
+    """The recording's series (``rerun_replay.SERIES``) stored in ``stored`` units, and its
+    events' values (:data:`EVENT_VALUES`), shown in the unit system ``system`` as query and
+    plot show them (``display_units``, the spec read from ``attrs``, an archive's
+    attributes): name → (units, factor); a factor NaN for a value per degree, which
+    :func:`recording_case` takes at the case's speed."""
+    stored = {**stored, **EVENT_VALUES}
     shown = display_units(stored, attrs, system)
-    return {name: (shown[name], convert(1.0, units, shown[name])) for name, units in stored.items()}
+    return {
+        name: (
+            shown[name],
+            math.nan if per_degree(shown[name])[1] else convert(1.0, u, shown[name]),
+        )
+        for name, u in stored.items()
+    }
 
 
 def archive_series_units(ds, system: str) -> dict[str, tuple[str, float]]:
@@ -202,17 +226,23 @@ def recording_case(
     magnification: float = sketch.DEFAULT_MAGNIFICATION,
     units: Mapping[str, tuple[str, float]] | None = None,
 ) -> CaseRecording:
-    """What a recording shows of ``case``: its archive values (series in ``units``, as
-    :func:`series_units`; default mm and N), parameters and sketch."""
+    """What a recording shows of ``case``: its archive values (series and events in
+    ``units``, as :func:`series_units`; default mm, N and SI), parameters and sketch."""
+    units = dict(units or {})
+    for name, (shown, factor) in units.items():
+        if math.isnan(factor):  # per degree: at the case's speed (the cam's, or the engine's)
+            speed = case.columns.get(degree_speed([shown]), (None, ""))[0]
+            one = convert_values(np.ones(1), EVENT_VALUES[name], shown, speed)
+            units[name] = (shown, float(one[0]))
     return CaseRecording(
         case_id=case.case_id,
         label=case.label,
         cam_angle=case.cam_angle,
         histories=case.histories,
         events=case.events,
-        parameters=parameters_document(case, magnification),
+        parameters=parameters_document(case, magnification, units),
         sketch=sketch_frames(case, magnification),
-        units=dict(units or {}),
+        units=units,
     )
 
 

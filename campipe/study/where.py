@@ -10,6 +10,7 @@ parentheses::
     seat == 0.1 in
     seat is none                 # no seat (also: seat == none; is not none)
     profile in ["harmonic 1 in", "polydyne-4567 1 in 90/90/90/90 deg"]
+    defects == "flat 268-272 deg"   # a label's en dash (268–272) reads as a typed hyphen
 
 The text is parsed with Python's ``ast`` module and every node is checked against a short
 whitelist (comparisons, boolean operators, names of columns, numbers, strings, lists of
@@ -19,9 +20,13 @@ lambdas and names that are not columns are refused.
 A number followed by units (``150 lbf``, ``0.1 in``, ``245 lbf/in``) is a quantity, read by
 :func:`campipe.units.read_quantity` (after a number, ``in`` is the inch unless a list
 follows) and converted to the units of the column it is compared with; its dimension must
-match. A bare number compares in the column's stored units, and is accepted only where those
-are what a reader types: rpm, degrees, counts and ratios (or zero, in any units); a bare
-``0.00254`` against ``seat`` [m] is refused with the quantity to write instead.
+match. A length per degree (``0.2 mm/deg``, ``5e-4 mm/deg^2``; ``mm/degCA`` per degree of
+crank angle), as ``--units mm-deg`` and ``mm-degca`` show a velocity or an acceleration, is
+converted at each case's cam speed (the engine's for ``degCA``), so the one threshold is a
+different m/s in each case. A bare number compares in the column's stored units, and is
+accepted only where those are what a reader types: rpm, degrees, counts and ratios (or zero,
+in any units); a bare ``0.00254`` against ``seat`` [m] is refused with the quantity to write
+instead.
 
 Numbers compare equal within a relative :data:`EQUAL_RTOL` (1e-9), after conversion: so
 ``speed_rpm == 11000`` finds 11000 rpm however it was converted and ``seat == 0.1 in`` the
@@ -49,7 +54,19 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from campipe.errors import CampipeError, did_you_mean, excerpt
-from campipe.units import QuantityError, convert, is_unit, names_an_angle, read_quantity, registry
+from campipe.units import (
+    DEG_PER_S_PER_RPM,
+    QuantityError,
+    convert,
+    degree_speed,
+    is_unit,
+    names_an_angle,
+    no_speed,
+    per_degree,
+    read_quantity,
+    registry,
+    written_per_degree,
+)
 
 MAX_WHERE_LENGTH = 2000
 #: Relative tolerance of ``==`` between numbers (after converting a quantity).
@@ -83,8 +100,8 @@ _QUANTITY_NAME = "_quantity_"
 class Quantity:
     """A quantity written in a ``--where``: its number and units as written."""
 
-    value: float  # the number
-    units: str  # pint spelling of its units
+    value: float | np.ndarray  # the number (per case: a length per degree, in SI)
+    units: str  # pint spelling of its units (a length per degree: as ``units.per_degree`` reads)
     text: str  # as written, for messages
 
     def __neg__(self) -> Quantity:
@@ -269,16 +286,32 @@ def _read_quantities(text: str) -> tuple[str, dict[str, Quantity]]:
     last = 0
     for k, (a, b) in enumerate(spans):
         written = text[a:b]
-        try:
-            q = read_quantity(written, "--where")
-        except QuantityError as exc:
-            raise QueryError.at("--where", exc.reason) from None
         name = f"{_QUANTITY_NAME}{k}"
-        quantities[name] = Quantity(float(q.magnitude), str(q.units), written)
+        quantities[name] = _quantity(written)
         out += [text[last:a], name]
         last = b
     out.append(text[last:])
     return "".join(out), quantities
+
+
+def _quantity(written: str) -> Quantity:
+    """A quantity as written: a length per degree (``units.per_degree``) kept as written,
+    any other read by ``units.read_quantity``."""
+    per = written_per_degree(written)
+    if per is not None:
+        try:
+            return Quantity(float(per[0]), per[1], written)
+        except ValueError:
+            pass
+    try:
+        q = read_quantity(written, "--where")
+    except QuantityError as exc:
+        raise QueryError.at("--where", exc.reason) from None
+    return Quantity(float(q.magnitude), str(q.units), written)
+
+
+#: Unit names pint does not know that a per-degree quantity may use (``mm/degCA``).
+_DEGREE_WORDS = ("degCA",)
 
 
 def _is_unit_name(tokens: list[tokenize.TokenInfo], j: int, after_number: bool) -> bool:
@@ -292,7 +325,7 @@ def _is_unit_name(tokens: list[tokenize.TokenInfo], j: int, after_number: bool) 
         return not (after_number and nxt in ("[", "("))
     if keyword.iskeyword(tok.string) or tok.string.lower() in WORDS:
         return False
-    return is_unit(tok.string)
+    return tok.string in _DEGREE_WORDS or is_unit(tok.string)
 
 
 def _units_end(tokens: list[tokenize.TokenInfo], i: int) -> int:
@@ -305,7 +338,7 @@ def _units_end(tokens: list[tokenize.TokenInfo], i: int) -> int:
         op, nxt = tokens[end + 1], tokens[end + 2]
         if op.string in ("*", "/") and _is_unit_name(tokens, end + 2, False):
             end += 2
-        elif op.string == "**" and nxt.type == tokenize.NUMBER:
+        elif op.string in ("**", "^") and nxt.type == tokenize.NUMBER:
             end += 2
         else:
             break
@@ -442,7 +475,7 @@ class _Evaluation:
             return result
         if isinstance(node, ast.Name):
             if node.id in self.quantities:
-                return self.quantities[node.id]
+                return self._per_case(self.quantities[node.id])
             if node.id.lower() in WORDS:
                 return WORDS[node.id.lower()]
             col = self.cols[node.id]
@@ -457,6 +490,34 @@ class _Evaluation:
         if isinstance(node, ast.List | ast.Tuple):
             return [self.eval(e) for e in node.elts]
         raise QueryError.at("--where", f"{_describe(node)} is not allowed")
+
+    def _per_case(self, q: Quantity) -> Quantity:
+        """``q``, but a length per degree as each case's SI value [m/s or m/s²], at the
+        speed its degrees turn at (``units.degree_speed``: the cam's, or the engine's)."""
+        length, power = per_degree(q.units)
+        if not power:
+            return q
+        speed = degree_speed([q.units])
+        if speed not in self.cols:
+            raise QueryError.at("--where", f"{q.text}: {no_speed(q.units).reason}")
+        try:
+            scale = convert(1.0, length, "m")
+        except Exception:  # pint's: not a length
+            raise QueryError.at("--where", f"{q.text}: {length} is not a length") from None
+        rate = np.asarray(self.cols[speed], dtype=float) * DEG_PER_S_PER_RPM
+        units = "m/s" if power == 1 else "m/s^2"
+        return Quantity(q.value * scale * rate**power, units, q.text)
+
+
+#: Characters a label writes that a keyboard types otherwise: a range's en dash (``flat
+#: 268–272 deg``) reads as the hyphen typed for it.
+_TYPED = str.maketrans({"\u2013": "-", "\u2212": "-"})
+
+
+def _plain(text) -> np.ndarray:
+    """Text (one or an array of them) as typed (:data:`_TYPED`), for ``==`` and ``!=``."""
+    values = np.asarray(text, dtype=object)
+    return np.frompyfunc(lambda t: t.translate(_TYPED) if isinstance(t, str) else t, 1, 1)(values)
 
 
 def _is_text(v) -> bool:
@@ -519,7 +580,7 @@ def _in_units(v, units: str, column: _Column | None) -> np.ndarray:
     return value
 
 
-def _convert(q: Quantity, units: str, column: _Column | None) -> float:
+def _convert(q: Quantity, units: str, column: _Column | None) -> float | np.ndarray:
     """``q`` in the column's stored ``units``; its dimension must match (an angle for an
     angle or a speed, never a bare frequency)."""
     name = column.name if column is not None else "a number"
@@ -538,6 +599,8 @@ def _convert(q: Quantity, units: str, column: _Column | None) -> float:
             f"{units} or other units of an angle{' per time' if stored.dimensionality else ''}",
         )
     try:
+        if isinstance(q.value, np.ndarray):  # per case (a length per degree, in SI)
+            return q.value * convert(1.0, q.units, units)
         return convert(q.value, q.units, units)
     except Exception:  # pint's DimensionalityError and its kin
         raise QueryError.at(
@@ -586,7 +649,7 @@ def _compare(op: str, a, b, a_node, b_node) -> np.ndarray:
             )
         left = a.values if isinstance(a, _Column) else a
         right = b.values if isinstance(b, _Column) else b
-        eq = np.asarray(left, dtype=object) == np.asarray(right, dtype=object)
+        eq = _plain(left) == _plain(right)
         return eq if op == "==" else ~eq
     x, y = _numbers(a, b)
     if op in ("==", "!="):

@@ -16,6 +16,7 @@ from campipe.plot.figures import figure
 from campipe.study import load_study
 from campipe.study.run.execute import run_study
 from campipe.study.spec.plots import PlotError, PlotRequest, check_plot
+from campipe.units import degree_speed
 
 SPEC = """
 name: engine
@@ -61,13 +62,16 @@ def test_the_archive_carries_both_speeds_and_both_angles(ds):
 
 def test_where_reads_either_speed_and_the_summary_says_which(archive):
     """--where on engine_speed_rpm or speed_rpm (rev/min too) selects the same cases; the
-    summary's onset names the cam speed and gives the engine's beside it. Fails on a copy
-    whose onset groups the cases by engine speed (every group one speed: no onset)."""
+    summary's onset names the cam speed and gives the engine's beside it, as its speed axis
+    does. Fails on a copy whose onset groups the cases by engine speed (every group one
+    speed: no onset), or lists the axis in cam rpm alone."""
     by_engine = _query(archive, "--where", "engine_speed_rpm > 15000 rpm", "--columns", "case")
     by_cam = _query(archive, "--where", "speed_rpm >= 9524 rev/min", "--columns", "case")
     assert by_engine == by_cam and "(2 of 4 cases)" in by_engine
     summary = _query(archive, "--summary")
     assert "separation onset (first cam speed with" in summary
+    axis = next(line for line in summary.splitlines() if line.strip().startswith("speed_rpm"))
+    assert axis.endswith("12000, 19048 rpm") and "rpm (the cam's); engine " in axis
     lines = summary.splitlines()
     head = next(i for i, line in enumerate(lines) if "onset_rpm" in line)
     assert lines[head].split() == ["seat", "[in]", "onset_rpm", "onset_engine_rpm"]
@@ -229,9 +233,16 @@ def test_mm_degca_gives_velocities_per_degree_of_crank_angle(archive, ds, small_
     assert np.abs(integral - (lift - lift[0])).max() < 5e-3 * lift.max()
     table = _query(archive, "--units", "mm-degca", "--columns", "max_seating_velocity")
     assert "[mm/degCA]" in table
-    shown = [float(line.split()[-1]) for line in table.splitlines()[2:6]]
-    engine_deg_per_s = ds.engine_speed_rpm.values * 6.0
-    assert_allclose(shown, ds.max_seating_velocity.values * 1e3 / engine_deg_per_s, rtol=1e-6)
+    cells = [line.split()[-1] for line in table.splitlines()[2:6]]
+    seated = ds.seat_impacts.values > 0  # a case without a seat impact has none
+    assert [c == "none" for c in cells] == list(~seated)
+    shown = np.array([float(c) for c in np.array(cells)[seated]])
+    engine_deg_per_s = ds.engine_speed_rpm.values[seated] * 6.0
+    expected = ds.max_seating_velocity.values[seated] * 1e3 / engine_deg_per_s
+    assert_allclose(shown, expected, rtol=1e-6)
+    # the speed columns the conversions read are the archive's (units sits below the study
+    # layer and names them itself)
+    assert {degree_speed(["mm/degCA"]), degree_speed(["mm/deg"])} <= set(ds.variables)
     refused = CliRunner().invoke(main, ["query", str(small_archive.archive), "--units", "mm-degca"])
     assert refused.exit_code != 0
     assert "engine speed (engine_speed_rpm)" in refused.output and "drive" in refused.output

@@ -59,8 +59,12 @@ def test_a_lumped_study_runs_archives_and_queries(tmp_path):
     """The issue's chain over speeds and a seat: below its onset (about 10 400 rpm) it
     follows the cam, at 16 000 rpm it leaves it; the archive's q holds the cam's mass and the
     valve with NaN on the placeholders; the spring force is P + ks·q7 and the chain's single
-    link carries the pushrod's and the stem's force; the query selects by speed. Fails on a
-    copy that writes the placeholders' zeros, or measures the spring on the cam's side."""
+    link carries the pushrod's and the stem's force, each named for the chain's link (and its
+    q and dof_units for its coordinates, translations all), not the thesis's members; the
+    query selects by speed; the export leaves out what is NaN in every row (the placeholders,
+    the rocker's moment) and shows the mm spec's lengths in mm, its seating velocity in m/s.
+    Fails on a copy that writes the placeholders' zeros, or measures the spring on the cam's
+    side, or names the thesis's members and rotations on a chain."""
     spec = write_spec(
         tmp_path,
         f"""
@@ -91,12 +95,25 @@ def test_a_lumped_study_runs_archives_and_queries(tmp_path):
     np.testing.assert_allclose(ds.pushrod_force.values, link, rtol=1e-9, atol=1e-6)
     assert np.isnan(ds.rocker_moment.values).all()
     assert "chain's first mass" in ds.follower_lift.attrs["long_name"]  # not the pushrod's
+    assert "link next to the cam" in ds.pushrod_force.attrs["long_name"]
+    assert "link next to the valve" in ds.stem_force.attrs["long_name"]
+    assert "q1 cam_mass" in ds.q.attrs["comment"] and "q7 valve" in ds.q.attrs["comment"]
+    assert "rad" not in ds.q.attrs["comment"] and list(ds.dof_units.values) == ["m"] * 7
     lift = ds.valve_lift.values[speed == 3000].max()
     assert abs(lift - 0.01 * LINK / (LINK + RATE)) < 2e-3 * 0.01  # dynamic within 0.2 %
     table = invoke("query", str(archive), "--where", "speed_rpm > 5000", "--format", "json")
     assert table.exit_code == 0, table.output
     rows = json.loads(table.output)["cases"]
     assert sorted(r["speed_rpm"] for r in rows) == [9000, 9000, 16000, 16000]
+    out = invoke(
+        "export", str(archive), "--where", "speed_rpm > 5000", "-o", str(tmp_path / "e.csv")
+    )
+    assert out.exit_code == 0, out.output
+    assert "left out, NaN in every row exported" in out.output
+    assert "q2, q3, q4, q5, q6, rocker_moment" in out.output
+    header = (tmp_path / "e.csv").read_text().splitlines()[0].split(",")
+    assert "q1 [mm]" in header and "q7 [mm]" in header and "valve_lift [mm]" in header
+    assert "valve_velocity [m/s]" in header and not any(h.startswith("q2") for h in header)
 
 
 def test_campipe_model_refuses_convergence_on_a_chain():

@@ -116,9 +116,16 @@ def test_replay_shows_the_units_query_shows(archives, tmp_path):
         cam = rec[f"cases/{case}/force/cam"]
         assert cam.static["SeriesLines:names"] == [f"cam contact force [{force}]"]
         assert_allclose(cam.scalars(), ds["cam_force"].values[row] * to_force, rtol=1e-12)
+        doc = rec[f"cases/{case}/parameters"].static["TextDocument:text"][0]
+        assert f"lifts in {lift}, contact forces in {force}," in doc
+        texts = [t[0] for t in rec[f"cases/{case}/events"].columns["TextLog:text"]]
+        assert all(f" {lift}/s, " in t for t in texts)  # the velocities: in/s, m/s
 
 
 def test_replay_holds_the_events_at_their_angles(seated):
+    """Each event at its angle and time, its text in the units asked for (--units mm-deg:
+    the velocity per degree of the case's cam angle, v·1000/(6·rpm) mm/deg; the impulse in
+    N·s), as the parameters document says. Broken copy: the velocity always in m/s."""
     ds, row, rec = seated
     n = int(ds["event_count"].values[row])
     start = int(ds["event_count"].values[:row].sum())
@@ -138,10 +145,13 @@ def test_replay_holds_the_events_at_their_angles(seated):
         strict=True,
     ):
         assert text.startswith(f"{names[kind]} at {angle:.4f}°")
-        assert f"velocity {velocity:.4g} m/s" in text
+        per_degree = velocity * 1000 / (6 * ds["speed_rpm"].values[row])
+        assert f"velocity {per_degree:.4g} mm/deg" in text
         assert (f"impulse {impulse:.4g} N·s" in text) == (kind in (2, 4))
     levels = [t[0] for t in e.columns["TextLog:level"]]
     assert levels == ["WARN" if k in (2, 4) else "INFO" for k in ev["event_kind"].values]
+    doc = rec[f"cases/{ds['case'].values[row]}/parameters"].static["TextDocument:text"][0]
+    assert "lifts in mm, contact forces in N," in doc and "jump in mm/deg" in doc
 
 
 def test_replay_draws_the_mechanism_from_q(seated):

@@ -80,3 +80,81 @@ def test_per_degree_units_divide_by_the_cam_speed_in_degrees_per_second():
         convert_values(v, "m/s", "mm/deg")
     with pytest.raises(ValueError, match="not a mm/s"):
         convert_values(v, "N", "mm/deg", speeds)
+
+
+def test_a_where_per_degree_compares_at_each_case_s_own_speed():
+    """``max_seating_velocity > 0.2 mm/deg`` (as ``--units mm-deg`` shows it) keeps the cases
+    whose seating velocity over their own cam speed in degrees a second is above 0.2 mm/deg:
+    1 m/s is 0.0278 mm/deg at 6000 rpm (36000 deg/s) and 0.139 at 1200 rpm, so the one m/s
+    is kept at the slow speed only; ``mm/degCA`` at the engine's speed, ``mm/deg^2`` against
+    an acceleration; without the speed it needs, refused naming the drive. Fails on a copy
+    that converts at one speed for all, or reads degCA as a cam degree."""
+    import numpy as np
+
+    from campipe.study.where import QueryError
+
+    v = np.array([1.0, 1.0, 9.0])  # m/s
+    cols = {
+        "v": v,
+        "speed_rpm": np.array([6000.0, 1200.0, 6000.0]),
+        "engine_speed_rpm": np.array([12000.0, 2400.0, 12000.0]),
+        "a": np.array([1000.0, 1000.0, 1000.0]),  # m/s²
+    }
+    units = {"v": "m/s", "speed_rpm": "rpm", "engine_speed_rpm": "rpm", "a": "m/s^2"}
+
+    def kept(text, columns=cols):
+        return evaluate(parse_where(text), columns, 3, units).tolist()
+
+    # in mm/deg: 0.0278, 0.139, 0.25
+    assert kept("v > 0.1 mm/deg") == [False, True, True]
+    assert kept("v > 0.0002 m/deg") == kept("v > 0.2 mm/deg") == [False, False, True]
+    # per degree of crank angle, half as much: 0.0139, 0.0694, 0.125
+    assert kept("v > 0.1 mm/degCA") == [False, False, True]
+    assert kept("v > 0.05 mm/degCA") == [False, True, True]
+    # 1000 m/s² is 1e6/36000² = 7.7e-4 mm/deg² at 6000 rpm, 0.0193 at 1200 rpm
+    assert kept("a < 0.001 mm/deg^2") == [True, False, True]
+    assert kept("a < 0.001 mm/deg**2") == [True, False, True]
+    no_drive = {k: c for k, c in cols.items() if k != "engine_speed_rpm"}
+    with pytest.raises(QueryError, match="engine_speed_rpm"):
+        kept("v > 0.1 mm/degCA", no_drive)
+    with pytest.raises(QueryError, match="cannot be compared"):
+        kept("v > 0.1 mm/deg^2")
+
+
+def test_a_limit_line_per_degree_is_drawn_in_the_shown_units_or_refused():
+    """A metric's limit line in a length per degree is converted to the column's shown
+    per-degree units (0.0002 m/deg on a column in mm/deg: 0.2); against a column shown per
+    second (or per degree of the other angle) it is refused naming the units to write, not
+    with pint's bare error. Fails on a copy that draws 0.0002 as it is."""
+    from types import SimpleNamespace
+
+    from campipe.plot.figures import shown_value
+    from campipe.study.spec.plots import PlotError
+
+    def view(units):
+        return SimpleNamespace(shown=SimpleNamespace(units={"v": units}))
+
+    assert shown_value("0.0002 m/deg", view("mm/deg"), "v", "--limit") == pytest.approx(0.2)
+    assert shown_value("0.3 mm/degCA", view("mm/degCA"), "v", "--limit") == pytest.approx(0.3)
+    assert shown_value("0.5 m/s", view("mm/s"), "v", "--limit") == pytest.approx(500)
+    for value, units in [("0.5 m/s", "mm/deg"), ("0.2 mm/degCA", "mm/deg"), ("1 mm/deg", "m/s")]:
+        with pytest.raises(PlotError, match=f"write it in {units}"):
+            shown_value(value, view(units), "v", "--limit")
+
+
+def test_a_label_s_en_dash_matches_the_hyphen_a_designer_types():
+    """``defects == "flat 268-272 deg"`` (typed with a hyphen) selects the label campipe
+    writes with an en dash (``flat 268–272 deg``), and ``!=`` the others; other text still
+    compares exactly. Fails on a copy that compares the text as stored (0 rows, silently)."""
+    import numpy as np
+
+    cols = {"defects": np.array(["none", "flat 268–272 deg", "flat 268–270 deg"], dtype=object)}
+
+    def kept(text):
+        return evaluate(parse_where(text), cols, 3, {"defects": ""}).tolist()
+
+    assert kept('defects == "flat 268-272 deg"') == [False, True, False]
+    assert kept('defects == "flat 268–272 deg"') == [False, True, False]
+    assert kept('defects != "flat 268-272 deg"') == [True, False, True]
+    assert kept('defects in ["none", "flat 268-270 deg"]') == [True, False, True]
+    assert kept('defects == "flat 268 272 deg"') == [False, False, False]

@@ -11,6 +11,7 @@ from collections.abc import Iterable
 import numpy as np
 
 from campipe.io.archive import VariableSpec
+from campipe.model.coordinates import coordinates, translations
 from campipe.model.levers import LEVERS
 from campipe.study.spec.coordinates import CASE_ID, coordinate_values, padded
 from campipe.study.spec.drive import CRANK_ANGLE_NAME
@@ -104,31 +105,81 @@ CHAIN_NAMES = {
     "follower_lift": "the chain's first mass (the follower on the cam, q1) height in the "
     "cam's lift coordinate",
 }
+#: Long names of every chain's member loads (a lever layout's too, built as a chain): the
+#: thesis train's names are its members', which a chain does not have.
+CHAIN_LOADS = {
+    "pushrod_force": "force through the chain's link next to the cam (between its first mass "
+    "and the next), compressive positive",
+    "stem_force": "force through the chain's link next to the valve (between the valve and "
+    "the mass before it), compressive positive",
+    "spring_force": "valve spring force on the valve, compressive positive",
+    "rocker_moment": "rocker arm bending moment at the pivot: the thesis train's elastic "
+    "rocker's; NaN in a chain (a lever layout's lever is rigid)",
+}
 
 
-def _named_for_layout(specs: list[VariableSpec], study: Study) -> list[VariableSpec]:
-    """The histories' long names for the study's layout where every case has one kind of
-    train: a lever layout's valve side (:data:`LEVER_NAMES`), a chain's follower
-    (:data:`CHAIN_NAMES`); the thesis's train's and a mix of kinds keep the thesis's."""
-    trains = [c.case.train for c in distinct_but_speed(study.cases)[0]]
+def _chain_q(train) -> dict[str, str]:
+    """``q``'s long name and comment for a chain's coordinates (``coordinates``)."""
+    used = [c for c in coordinates(train) if c.name != "unused"]
+    return {
+        "long_name": "the chain's coordinates, q1 the mass on the cam and q7 the valve "
+        "(places the chain does not use hold NaN)",
+        "comment": "; ".join(f"{c.symbol} {c.name}, positive {c.positive}" for c in used)
+        + ": translations [m]; see dof_units",
+    }
+
+
+def _named_for_layout(specs: list[VariableSpec], trains: list) -> list[VariableSpec]:
+    """The histories' long names for ``trains`` (the study's, one per kind of case) where
+    all are of one kind: a lever layout's valve side (:data:`LEVER_NAMES`), a chain's
+    follower (:data:`CHAIN_NAMES`); a chain's member loads (:data:`CHAIN_LOADS`) and
+    coordinates (:func:`_chain_q`, where all have the same). The thesis's train's and a mix
+    of kinds keep the thesis's."""
     if all(t.layout in LEVERS for t in trains):
-        names = LEVER_NAMES
+        names = dict(LEVER_NAMES)
     elif all(t.chain and t.layout not in LEVERS for t in trains):
-        names = CHAIN_NAMES
+        names = dict(CHAIN_NAMES)
     else:
         return specs
-    return [
-        dataclasses.replace(s, attrs={**s.attrs, "long_name": names[s.name]})
-        if s.name in names
-        else s
-        for s in specs
-    ]
+    names.update(CHAIN_LOADS)
+    q = _chain_q(trains[0])
+    same_q = all(_chain_q(t) == q for t in trains)
+    out = []
+    for s in specs:
+        if s.name in names:
+            s = dataclasses.replace(s, attrs={**s.attrs, "long_name": names[s.name]})
+        elif s.name == "q" and same_q:
+            s = dataclasses.replace(s, attrs={**s.attrs, **q})
+        out.append(s)
+    return out
 
 
-def archive_layout(study: Study, n_events: int | None, cam_angle: np.ndarray, n_revolutions: int):
+def study_trains(study: Study) -> list:
+    """The study's trains, one per combination of its axes but a speed sweep's."""
+    return [c.case.train for c in distinct_but_speed(study.cases)[0]]
+
+
+def chain_dof_units(trains: list) -> np.ndarray | None:
+    """``dof_units`` for ``trains`` (the study's, one per kind of case) where all are chains:
+    every coordinate a translation [m] (None for the thesis's train or a mix: its units)."""
+    if not all(t.chain for t in trains):
+        return None
+    return np.array(
+        ["m" if t else "rad" for t in translations(trains[0])][: len(DOF_NAMES)], dtype=object
+    )
+
+
+def archive_layout(
+    study: Study,
+    n_events: int | None,
+    cam_angle: np.ndarray,
+    n_revolutions: int,
+    trains: list | None = None,
+):
     """(sizes, variables, static arrays) of the study's archive; the static arrays are the
     axes and the per-case coordinates, the rest streams in from batch files. ``n_events``
-    None makes ``event`` unlimited: the events are appended as the cases are written."""
+    None makes ``event`` unlimited: the events are appended as the cases are written.
+    ``trains``: the study's (``study_trains``) where ``study`` holds only some of its cases."""
     coords = case_coordinates(study.varied)
     coord_names = [name for name, _, _ in coords.values()]
     sizes: dict[str, int | None] = {
@@ -151,8 +202,12 @@ def archive_layout(study: Study, n_events: int | None, cam_angle: np.ndarray, n_
     specs += data_specs(study.record, " ".join(coord_names))
     if study.settle:
         specs = [_from_recorded(s) for s in specs]
-    specs = _named_for_layout(specs, study)
+    trains = trains or study_trains(study)
+    specs = _named_for_layout(specs, trains)
     static = {**axis_arrays(cam_angle, n_revolutions), **values}
+    dof_units = chain_dof_units(trains)
+    if dof_units is not None:
+        static["dof_units"] = dof_units
     if study.spec.drive is not None:  # the crank angle beside the cam's
         specs = _with_crank_angle(specs, study.spec.drive, study.settle)
         static[CRANK_ANGLE_NAME] = np.asarray(cam_angle, float) / study.spec.drive

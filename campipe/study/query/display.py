@@ -6,7 +6,8 @@ The archive stores SI (with ``speed_rpm`` in rpm and angles in degrees); ``campi
 - ``spec`` (the default): each value the spec wrote with units in the units it wrote
   (``seat: [none, 0.1 in]`` shows in, ``spring_preload: 151 lbf`` in lbf), and every other
   value in the system the spec writes its lengths and forces in (in-lbf for a spec that writes
-  ``in`` or ``lbf``, else SI);
+  ``in`` or ``lbf``; for one that writes ``mm``, lengths in mm, stiffnesses in N/mm and
+  stresses in MPa, velocities in m/s; else SI);
 - ``si``: the archive's own units;
 - ``in-lbf``: inches, pounds-force and seconds (the thesis's units), rpm and degrees;
 - ``mm-deg``: the designer's: lift in mm, velocity in mm/deg and acceleration in mm/deg² of
@@ -37,6 +38,11 @@ from campipe.units import UNIT_SYSTEMS, convert, convert_values
 IN_LBF = UNIT_SYSTEMS["in-lbf"]
 #: Units that mark a spec as written in inches and pounds.
 _IN_LBF_WORDS = {"in", "inch", "inches", "lbf", "lb", "ft", "foot", "feet", "thou", "mil"}
+#: Units that mark a spec as written in millimetres (where none marks it in inches), and what
+#: its other values show in: lengths, stiffnesses and stresses as a millimetre spec writes
+#: them, velocities (a seating velocity) and accelerations in SI as the trade quotes them.
+_MM_WORDS = {"mm", "millimeter", "millimeters", "millimetre", "millimetres"}
+SPEC_MM = {"m": "mm", "N/m": "N/mm", "Pa": "MPa"}
 _WRITTEN = re.compile(r"^\s*[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?\s*(?P<units>\S.*?)\s*$")
 
 
@@ -121,9 +127,16 @@ def _note(out: dict[str, str], key: str, value: object) -> None:
 
 
 def spec_system(written: Mapping[str, str]) -> str:
-    """``in-lbf`` for a spec that writes any length or force in inches or pounds, else ``si``."""
+    """``in-lbf`` for a spec that writes any length or force in inches or pounds, else ``mm``
+    for one that writes a length in millimetres, else ``si``."""
     words = {w for units in written.values() for w in re.findall(r"[A-Za-z]+", units)}
-    return "in-lbf" if words & _IN_LBF_WORDS else "si"
+    return "in-lbf" if words & _IN_LBF_WORDS else "mm" if words & _MM_WORDS else "si"
+
+
+def _spec_fallback(written: Mapping[str, str]) -> dict[str, str]:
+    """Stored units → those of the system the spec writes in (:func:`spec_system`)."""
+    system = spec_system(written)
+    return SPEC_MM if system == "mm" else UNIT_SYSTEMS[system]
 
 
 def display_units(
@@ -150,7 +163,7 @@ def display_units(
     if system == "si":
         return dict(stored)
     written = written_units(attrs) if system == "spec" else {}
-    fallback = UNIT_SYSTEMS[spec_system(written) if system == "spec" else system]
+    fallback = _spec_fallback(written) if system == "spec" else UNIT_SYSTEMS[system]
     names_to_keys = dict(keys) if keys is not None else column_keys(attrs)
     out = {}
     for name, units in stored.items():

@@ -3,7 +3,8 @@
 
 The columns: ``case`` (the case's id), ``cam_angle`` (and ``crank_angle``, for a spec with a
 drive), ``time``, then each history the
-archive holds along ``(case, cam_angle)`` in its order (``q`` as ``q1`` … ``q7``), each in
+archive holds along ``(case, cam_angle)`` in its order (``q`` as ``q1`` … ``q7``), but those
+NaN in every exported row (a chain's unused coordinates, its ``rocker_moment``), each in
 the units of the chosen system (:mod:`campipe.study.query.display`; velocities and
 accelerations per degree at each case's cam speed in ``mm-deg``). Several cases follow one
 another, each over all its samples.
@@ -37,6 +38,7 @@ class HistoryTable:
     units: dict[str, str]  # name → units as shown ("" for none)
     study: str  # the study's name
     cases: list[str]  # the cases' ids, in the order their rows come
+    left_out: list[str]  # histories NaN in every row (a chain's unused q, its rocker_moment)
 
 
 def pick_cases(ds, ids: Sequence[str] = (), where: str | None = None) -> np.ndarray:
@@ -108,20 +110,25 @@ def history_table(ds, rows: np.ndarray, system: str = "spec") -> HistoryTable:
         "cam_angle": np.tile(angle, rows.size),
     }
     units = {"case": "", "cam_angle": shown["cam_angle"]}
+    left_out: list[str] = []
     if "crank_angle" in ds.variables:  # a drive's: the crank angle beside the cam's
         columns["crank_angle"] = np.tile(np.asarray(ds["crank_angle"].values, float), rows.size)
         units["crank_angle"] = str(ds["crank_angle"].attrs.get("units", "degree"))
     for name in ["time", *(n for n in names if n != "time")] if "time" in names else names:
         values = np.asarray(ds[name].values)[rows]
-        if values.ndim == 3:  # q: a column per coordinate
-            for j, dof in enumerate(dof_units):
-                columns[dof] = _shown(values[:, :, j], dof_units[dof], shown[dof], speed)
-                units[dof] = shown[dof]
-            continue
-        columns[name] = _shown(values, stored[name], shown[name], speed)
-        units[name] = shown[name]
+        parts = (
+            [(dof, values[:, :, j], dof_units[dof]) for j, dof in enumerate(dof_units)]
+            if values.ndim == 3  # q: a column per coordinate
+            else [(name, values, stored[name])]
+        )
+        for column, part, unit in parts:
+            if part.dtype.kind == "f" and np.isnan(part).all():
+                left_out.append(column)
+                continue
+            columns[column] = _shown(part, unit, shown[column], speed)
+            units[column] = shown[column]
     units = {n: SHORT_UNITS.get(u, u) for n, u in units.items()}
-    return HistoryTable(columns, units, str(ds.attrs.get("study_name", "")), ids)
+    return HistoryTable(columns, units, str(ds.attrs.get("study_name", "")), ids, left_out)
 
 
 def _shown(values: np.ndarray, stored: str, shown: str, speed: np.ndarray | None) -> np.ndarray:

@@ -54,11 +54,18 @@ class CaseTable:
     study: str = ""  # the study's name
 
 
+#: An impact's metric → the count of those impacts: a case without one has no impact
+#: velocity, and reads ``none`` (as no seat does) where the archive stores 0.
+OF_IMPACTS = {"max_seating_velocity": "seat_impacts", "max_cam_impact_velocity": "cam_impacts"}
+
+
 def case_table(ds) -> CaseTable:
     """Per-case columns of an archive (an ``xarray.Dataset``), as stored: its case coordinates
     (``case``, the ids, first), then its per-case data variables; the default columns are the
     coordinates and the metrics, each mean followed by its uncertainty where the archive has
-    one (a run of automatic length: :func:`format_rows` shows the pair as ``145.9 ± 0.6``)."""
+    one (a run of automatic length: :func:`format_rows` shows the pair as ``145.9 ± 0.6``).
+    An impact's velocity where the case had no such impact is none (``-inf``,
+    :data:`OF_IMPACTS`): a valve that never seats has no seating velocity, not a soft one."""
     columns: dict[str, np.ndarray] = {}
     units: dict[str, str] = {}
     coords = [k for k, v in ds.coords.items() if v.dims[:1] == ("case",) and v.ndim <= 2]
@@ -70,6 +77,9 @@ def case_table(ds) -> CaseTable:
             values = values.astype(object)
         columns[name] = values
         units[name] = str(v.attrs.get("units", ""))
+    for name, count in OF_IMPACTS.items():
+        if name in columns and count in columns:
+            columns[name] = np.where(columns[count] == 0, -np.inf, columns[name])
     metrics = [
         k
         for k in data
@@ -313,9 +323,11 @@ def summary(ds, where: str | None = None, system: str = "spec") -> str:
         size = f"{a.get('size', '?')} values"
         if where is not None and col is not None and col.ndim == 1:  # the selection's values
             size = f"{len(dict.fromkeys(_cell(v, 'table') for v in col))} of {size}"
+        engine = table.columns.get(ENGINE_SPEED_NAME) if a["name"] == "speed_rpm" else None
         lines.append(
             f"  {a['name']:<24} {a.get('kind', 'varied'):<7} {size}"
             + (f": {_values_text(col, table.units.get(a['name'], ''))}" if col is not None else "")
+            + (f" (the cam's); engine {_values_text(engine, 'rpm')}" if engine is not None else "")
         )
     lines += design_lines(ds.attrs, table)
     lines += status_lines(table)

@@ -19,7 +19,7 @@ import numpy as np
 from campipe.engine.settings import output_angles
 from campipe.io.archive import NetCDFWriter, VariableSpec, provenance, write_error
 from campipe.io.parts import checksum_digest, part_name
-from campipe.study.archive.layout import archive_layout
+from campipe.study.archive.layout import archive_layout, study_trains
 from campipe.study.run.keys import study_attrs
 from campipe.study.run.results import BatchData, BatchPlan, cam_angle_degrees
 from campipe.study.spec.coordinates import CASE_ID, key_columns, padded
@@ -45,7 +45,9 @@ def part_layout(study: Study, command: str, spec: str) -> PartLayout:
     # Laid out on the first case: the case coordinates of the rest are the workers' to
     # compute (all of them here took 10 µs a case), but for a list's longest length.
     first = dataclasses.replace(study, cases=study.cases[:1])
-    sizes, specs, static = archive_layout(first, None, cam_angle, study.n_revolutions)
+    sizes, specs, static = archive_layout(
+        first, None, cam_angle, study.n_revolutions, study_trains(study)
+    )
     sizes = {**sizes, "case": len(study.cases)}
     if "mode" in sizes:
         lists = [k for k, (_, v, _) in case_coordinates(study.varied).items() if "mode" in v.dims]
