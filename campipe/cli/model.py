@@ -20,13 +20,13 @@ from campipe.model import (
     coordinates,
     lash_ratio,
     modal_damping_ratios,
-    newmark_linear_stability_limit,
     system_matrices,
     to_display_units,
     valve_train,
 )
 from campipe.model.assembly import (
     CONVERGENCE_ELEMENTS,
+    NEWMARK_LINEAR_OMEGA_DT,
     SystemMatrices,
     frequency_convergence,
     normal_modes,
@@ -35,12 +35,12 @@ from campipe.model.assembly import (
 from campipe.model.checks import DIRECT_ACTING, LUMPED, PUSHROD_ROCKER, layouts_of_key
 from campipe.model.contact_modes import ContactMode, contact_modes
 from campipe.model.hla import adjuster, hla_series, on_pivot, seated_stiffness
-from campipe.model.layouts import own_matrices, used_coordinates
+from campipe.model.layouts import mirror, own_matrices, used_coordinates
 from campipe.model.levers import LEVERS, pivot_gain
 from campipe.profiles import evaluate, harmonic
 from campipe.profiles.levers import cam_kinematics
 from campipe.units import QuantityError, convert, parse_quantity, pint_without_dask
-from campipe.vocabulary import CONFIGURATIONS, ROMAN
+from campipe.vocabulary import CONFIGURATIONS, ROMAN, free_coordinates
 
 #: The parameters ``campipe model --convergence`` refines.
 REFINEMENTS = tuple(f"{member}_elements" for member in ELEMENTS)
@@ -148,9 +148,7 @@ def model(
             click.echo(convergence_text(report, preset, overrides))
         return
     sm = system_matrices(train)
-    limits = {
-        ROMAN[c]: newmark_linear_stability_limit(sm.mass, sm.stiffness, c) for c in CONFIGURATIONS
-    }
+    limits = stability_limits(train, sm)
     try:
         lift = parse_quantity(cam_lift, "m", "--cam-lift", "mm")
     except QuantityError as exc:
@@ -225,6 +223,27 @@ def _shown(train, sm) -> tuple[SystemMatrices, tuple[Coordinate, ...], list[str]
     omega, phi = normal_modes(mass, stiffness, np.ones(used.size, bool))
     view = SystemMatrices(mass, stiffness, damping, omega, phi, sm.preload[used])
     return view, tuple(coords[i] for i in used), names
+
+
+def stability_limits(train, sm: SystemMatrices) -> dict[str, float | None]:
+    """newmark-linear's stability limit [s] in each configuration (√12/ω_max of what it
+    leaves free), on the train's own coordinates: a chain's placeholders, decoupled and below
+    every mode, set none; None where nothing is free (a two-mass chain's cam's mass and
+    valve both held, a one-mass chain's follower held at either end)."""
+    used = set(used_coordinates(train).tolist()) | (
+        {sm.mass.shape[0] - 1} if mirror(train) else set()
+    )
+    out: dict[str, float | None] = {}
+    for c in CONFIGURATIONS:
+        free = [i for i in free_coordinates(c, sm.mass.shape[0]) if i in used]
+        if mirror(train) and len(free) < 2:  # its one mass, q1 and its mirror q7
+            free = []
+        if not free:
+            out[ROMAN[c]] = None
+            continue
+        omega, _ = normal_modes(sm.mass[np.ix_(free, free)], sm.stiffness[np.ix_(free, free)])
+        out[ROMAN[c]] = NEWMARK_LINEAR_OMEGA_DT / float(omega.max())
+    return out
 
 
 def on_the_cam(sm: SystemMatrices, coords: tuple[Coordinate, ...]) -> np.ndarray:
@@ -592,7 +611,8 @@ def model_text(train, sm, limits, preset, overrides, drive: float | None = None)
     lines.append("")
     lines.append("Stability limit of newmark-linear (Δt < √12/ω_max of the held configuration)")
     for name, dt in limits.items():
-        lines.append(f"  {name:<4} {dt * 1e6:8.4f} µs")
+        shown = "    none: nothing is free" if dt is None else f"{dt * 1e6:8.4f} µs"
+        lines.append(f"  {name:<4} {shown}")
     return "\n".join(lines)
 
 

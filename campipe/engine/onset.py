@@ -35,7 +35,7 @@ from campipe.engine.periodic import leave_speeds, prepare_steady
 from campipe.errors import CampipeError
 from campipe.model import ValveTrain
 from campipe.model.hla import adjuster
-from campipe.vocabulary import CAM_SEPARATION, EV_KIND, EV_TIME
+from campipe.vocabulary import EV_TIME, EV_TO, FREE
 
 #: Turns the engine integrates for a steady state with the valve seated on part of the turn
 #: (from the periodic start of configuration I); the last is the steady state when it agrees
@@ -549,12 +549,15 @@ def confirm_onsets(
 
 def first_separation(events: np.ndarray, speed: float, warmup: int = 0) -> float:
     """The cam angle [rad] (0 … 2π) of the first of a case's ``events`` (rows as
-    ``BatchResult.events``') that leaves the cam from turn ``warmup`` on, at cam speed
-    ``speed`` [rad/s]; NaN if none does."""
+    ``BatchResult.events``') from turn ``warmup`` on, at cam speed ``speed`` [rad/s], that
+    starts no-follow: the train enters configuration II (follower off the cam, valve off its
+    seat), the follower leaving the cam or the valve bouncing off its seat while the follower
+    is off the cam; NaN if none does. Not the follower leaving the cam onto the lash with the
+    valve seated (III to IV), which a train with lash does every turn."""
     if not len(events):
         return np.nan
     angle = speed * events[:, EV_TIME]
-    leaves = (events[:, EV_KIND] == CAM_SEPARATION) & (angle >= TWO_PI * warmup * (1 - 1e-12))
+    leaves = (events[:, EV_TO] == FREE) & (angle >= TWO_PI * warmup * (1 - 1e-12))
     if not leaves.any():
         return np.nan
     return float(np.mod(angle[leaves][0], TWO_PI))

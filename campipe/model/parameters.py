@@ -188,7 +188,9 @@ PARAMETERS: dict[str, Parameter] = {
         Parameter("spring_rate", "valve spring rate", "N/m", "lbf/in", 0.0),
         Parameter(
             "spring_preload",
-            "installed valve spring force with the cam on its base circle",
+            "installed valve spring force: the valve on its seat (with lash); without lash, "
+            "the force with the train unstressed (on the base circle its give lowers it by "
+            "the spring's share, a fraction k_s/(k + k_s))",
             "N",
             "lbf",
             0.0,
@@ -309,7 +311,7 @@ class ValveTrain:
     elastic_modulus: float  # [Pa]
     specific_weight: float  # [N/m³]
     spring_rate: float  # [N/m]
-    spring_preload: float  # [N] installed force, cam on the base circle
+    spring_preload: float  # [N] installed force (seated with lash; unstressed train without)
     damping_ratios: tuple[float, ...]  # [-] lowest mode first, the last for the rest
     pushrod_elements: int  # [-] equal finite elements of each member; 1 is the thesis's
     rocker_pushrod_arm_elements: int  # [-]

@@ -297,8 +297,10 @@ def histories(view: View, request: PlotRequest) -> Figure:
         if name == "valve_lift":
             _kinematic_lines(ax, view, keep, x)
             _seat_bands(ax, view, values)
-        ax.set_title(title, fontsize=10)
-        ax.set_ylabel(axis_label(name, units))
+        ax.set_title(_panel_title(ds, name, title), fontsize=10)
+        per_cam_degree = per_degree(units)[1] and degree_speed([units]) == "speed_rpm"
+        crank = axis.name == "crank_angle" and per_cam_degree  # say whose degree it is
+        ax.set_ylabel(axis_label(name, units) + (" (per cam degree)" if crank else ""))
         ax.grid(alpha=0.3)
     for ax in axes[len(panels) :]:
         ax.set_visible(False)
@@ -318,6 +320,18 @@ def histories(view: View, request: PlotRequest) -> Figure:
     )
     set_title(fig, view, f"histories{turn_note}", request.where)
     return fig
+
+
+def _panel_title(ds, name: str, title: str) -> str:
+    """A history panel's title, the follower's in the layout's words: a lever layout's
+    follower and cam lift are the valve side's (the archive's ``long_name`` says so), a
+    chain's follower is its first mass."""
+    long_name = str(ds[name].attrs.get("long_name", "")) if name == "follower_lift" else ""
+    if "pallet" in long_name:
+        return "lever at the pallet, valve side (kinematic valve lift dotted)"
+    if "chain's first mass" in long_name:
+        return "first mass lift (cam lift dotted)"
+    return title
 
 
 @dataclass(frozen=True)

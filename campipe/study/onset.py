@@ -46,8 +46,8 @@ class OnsetStudy:
     #: check's measured turns); NaN: unchecked
     below: np.ndarray
     above: np.ndarray  # (n,) likewise at onset·(1 + offset)
-    #: (n,) the cam angle [rad] where the engine first leaves the cam at onset·(1 + offset)
-    #: (``engine_onset.first_separation``); NaN: unchecked, or it did not
+    #: (n,) the cam angle [rad] where the engine's no-follow first starts at onset·(1 +
+    #: offset) (``engine_onset.first_separation``); NaN: unchecked, or it did not
     where: np.ndarray
     low: float  # the spec's speed range [rad/s]
     high: float
@@ -267,10 +267,10 @@ def file_contents(result: OnsetStudy) -> tuple[dict, list[VariableSpec], dict, d
             f"–{engine_onset.CONFIRM_TURNS} of the time-domain engine from the periodic start at "
             f"onset × ({side} {engine_onset.CONFIRM_OFFSET:g}); NaN: not checked")  # fmt: skip
     add("leaves_cam_at_deg", ("combination",), "f8", np.degrees(result.where), units="degree",
-        long_name=f"cam angle where the time-domain engine first leaves the cam at onset × "
-        f"(1 + {engine_onset.CONFIRM_OFFSET:g}), in turns {engine_onset.CONFIRM_WARMUP + 1}–"
-        f"{engine_onset.CONFIRM_TURNS} (the events' angle within the turn); NaN: not checked, "
-        "or it did not leave")  # fmt: skip
+        long_name=f"cam angle where the time-domain engine's no-follow first starts (follower "
+        f"off the cam, valve off its seat) at onset × (1 + {engine_onset.CONFIRM_OFFSET:g}), in "
+        f"turns {engine_onset.CONFIRM_WARMUP + 1}–{engine_onset.CONFIRM_TURNS} (the events' "
+        "angle within the turn); NaN: not checked, or it did not leave")  # fmt: skip
     add("confirmed", ("combination",), "str", t.columns["confirmed"],
         long_name="the time-domain check agrees: yes (under the level below the onset, at "
         "or over it above), NO (it disagrees), - (not checked)")  # fmt: skip

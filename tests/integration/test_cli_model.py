@@ -429,3 +429,29 @@ def test_a_spec_s_model_and_its_case(tmp_path):
     assert table["cam"].startswith("the spec's cam, polydyne-4567")
     assert max(table["cam_lift"]) == pytest.approx(6.5e-3, rel=1e-9)
     assert 9.5e-3 < max(table["valve_lift"]) < 1.0e-2
+
+
+def test_stability_limits_of_a_chain_leave_its_placeholders_out():
+    """A chain's stability limits are its own masses' (the placeholders, decoupled and below
+    every mode, set none): a one-mass chain is free only in II, where √12/ω with ω = √(k/m)
+    of the mass on its spring; a two-mass chain held at both ends (III) has nothing free, and
+    in II its limit is √12 over its higher free frequency, the larger root of
+    m₁m₂ω⁴ − (m₁(k + k_s) + m₂k)ω² + k·k_s. Broken copy: the limits of the full seven coordinates
+    (III 0.45 of the chain's lowest frequency: a placeholder's, 13 ms)."""
+    one = run("--set", "layout=lumped", "--set", "masses=[100 g]", "--set", "stiffnesses=[]",
+              "--set", "spring_rate=40 N/mm", "--set", "spring_preload=250 N",
+              "--set", "damping_ratios=[0]", "--json")  # fmt: skip
+    assert one.exit_code == 0, one.output
+    limits = json.loads(one.output)["stability_limit_s"]
+    assert limits["I"] is None and limits["III"] is None and limits["IV"] is None
+    assert limits["II"] == pytest.approx(np.sqrt(12) / np.sqrt(40e3 / 0.1), rel=1e-12)
+    m1, m2, k, ks = 0.05, 0.06, 20000e3, 40e3
+    two = run("--set", "layout=lumped", "--set", "masses=[0.05 kg, 0.06 kg]",
+              "--set", "stiffnesses=[20000 N/mm]", "--set", "spring_rate=40 N/mm",
+              "--set", "spring_preload=250 N", "--set", "damping_ratios=[0.05, 0.05]")  # fmt: skip
+    assert two.exit_code == 0, two.output
+    assert "III      none: nothing is free" in two.output
+    a, b, c = m1 * m2, -(m1 * (k + ks) + m2 * k), k * ks
+    high = np.sqrt((-b + np.sqrt(b * b - 4 * a * c)) / (2 * a))
+    line = next(x for x in two.output.splitlines() if x.strip().startswith("II "))
+    assert float(line.split()[1]) == pytest.approx(np.sqrt(12) / high * 1e6, abs=1e-4)

@@ -76,3 +76,37 @@ def test_a_chain_s_onset_is_its_frequency_response(name):
     assert found.status[0] == "found"
     assert found.proven[0] and found.evaluations[0] < 2000  # stepped at 0.1 rpm: 180 000
     assert found.speed[0] / RPM == pytest.approx(expected / RPM, abs=0.1)  # the search tolerance
+
+
+def test_where_it_leaves_the_cam_is_where_no_follow_starts():
+    """``leaves_cam_at_deg`` (``first_separation``) is where the train enters configuration
+    II: on a rocker with 0.2 mm of lash just above its onset, the follower leaves the cam onto
+    the lash with the valve seated at 285.8° every turn (III to IV: not no-follow), and the
+    valve bounces off its seat at 296.35° (IV to II: the no-follow the onset counts). Events
+    before the warm-up turn do not count; the follower leaving the cam with no seat (I to II)
+    does. Broken copy: the first cam separation (285.8°)."""
+    import math
+
+    import numpy as np
+
+    from campipe.engine.onset import first_separation
+    from campipe.vocabulary import (
+        CAM_AND_SEAT,
+        CAM_CONTACT,
+        CAM_SEPARATION,
+        FREE,
+        SEAT_SEPARATION,
+        SEATED,
+    )
+
+    w = 2 * math.pi  # 1 rev/s: a time [s] is a fraction of a turn
+    rows = [  # time, kind, from, to, velocity, impulse
+        (296.0 / 360, SEAT_SEPARATION, SEATED, FREE, 0.0, 0.0),  # turn 0: warm-up
+        (1 + 285.8 / 360, CAM_SEPARATION, CAM_AND_SEAT, SEATED, 0.0, 0.0),
+        (1 + 296.35 / 360, SEAT_SEPARATION, SEATED, FREE, 0.0, 0.0),
+    ]
+    events = np.array(rows, float)
+    assert math.degrees(first_separation(events, w, warmup=1)) == pytest.approx(296.35)
+    free = np.array([(1.5, CAM_SEPARATION, CAM_CONTACT, FREE, 0.0, 0.0)], float)
+    assert math.degrees(first_separation(free, w, warmup=1)) == pytest.approx(180.0)
+    assert math.isnan(first_separation(events[1:2], w, warmup=1))
