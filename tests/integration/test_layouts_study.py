@@ -114,6 +114,11 @@ def test_a_lumped_study_runs_archives_and_queries(tmp_path):
     header = (tmp_path / "e.csv").read_text().splitlines()[0].split(",")
     assert "q1 [mm]" in header and "q7 [mm]" in header and "valve_lift [mm]" in header
     assert "valve_velocity [m/s]" in header and not any(h.startswith("q2") for h in header)
+    from campipe.plot.figures import figure
+    from campipe.study.spec.plots import check_plot
+
+    titles = [ax.get_title() for ax in figure(ds, check_plot({"kind": "histories"})).axes]
+    assert "first mass lift (cam lift dotted)" in titles  # not the thesis's pushrod foot
 
 
 def test_campipe_model_refuses_convergence_on_a_chain():

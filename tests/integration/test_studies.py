@@ -12,10 +12,12 @@ from campipe.constants import INCH, TWO_PI
 from campipe.engine import MEMBER_LOADS, Case, RunSettings, member_loads, run_batch
 from campipe.engine.contact import impact_masses
 from campipe.model import system_matrices, thesis_train
+from campipe.plot.figures import figure
 from campipe.profiles import harmonic
 from campipe.study import load_study
 from campipe.study.query.tables import case_table, onset_table
 from campipe.study.run.execute import run_study
+from campipe.study.spec.plots import check_plot
 from campipe.vocabulary import CAM_IMPACT, CAM_SEPARATION
 
 
@@ -362,6 +364,8 @@ def test_finger_follower(tmp_path):
     # its long names say so: the cam lift the valve side's, the cam force the roller's
     assert ds.cam_lift.attrs["long_name"].startswith("kinematic valve lift")
     assert ds.cam_force.attrs["long_name"].startswith("the roller's normal force")
+    titles = [ax.get_title() for ax in figure(ds, check_plot({"kind": "histories"})).axes]
+    assert "lever at the pallet, valve side (kinematic valve lift dotted)" in titles
     top = float(ds.cam_lift.max()) / 6.5e-3
     assert 1.45 < top < 1.55
 
