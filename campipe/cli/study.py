@@ -391,6 +391,7 @@ def validate_text(loaded, spec_path) -> str:
         per_turn_note,
         ramp_note,
         spring_note,
+        travel_note,
     )
     from campipe.study.spec.variables import case_coordinates
 
@@ -447,9 +448,9 @@ def validate_text(loaded, spec_path) -> str:
     note = ramp_note(loaded.cases)
     if note:
         lines.append(f"lash: {note}")
-    note = spring_note(loaded.cases)
-    if note:
-        lines.append(f"spring: {note}")
+    for note in (spring_note(loaded.cases), travel_note(loaded.cases, loaded.record)):
+        if note:
+            lines.append(f"spring: {note}")
     return "\n".join(lines)
 
 

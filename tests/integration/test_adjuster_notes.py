@@ -117,3 +117,31 @@ def test_a_valve_spring_s_rate_in_the_wrong_unit_is_noted():
     )  # fmt: skip
     assert result.exit_code == 0, result.output
     assert "spring: 7 cases' valve springs hold their preload" in result.output
+
+
+def test_a_chain_s_coil_clash_against_the_thesis_s_assumed_travel_is_noted(tmp_path):
+    """A chain's coil-clash margin (``record: [spring]``) taken against the thesis's assumed
+    spring travel to solid (40.64 mm, the key's default) is noted by validate and study,
+    naming the key; a travel given, the thesis's own train (whose travel it is) and a run
+    that does not record the spring are not. Fails on a copy without the note, or one that
+    notes the thesis's spring-surge study."""
+    from campipe.study.spec.resolve import travel_note
+
+    bucket = STUDIES / "bucket-tappet-lash.yaml"
+    record = {"run.record": ["spring"], "sweep.speed": ["2000 rpm"], "sweep.model.lash": ["0.2 mm"]}
+    study = load_study(bucket, record)
+    note = travel_note(study.cases, study.record)
+    assert note is not None and "layout direct-acting" in note and "40.64 mm" in note
+    given = load_study(bucket, {**record, "model.spring_travel_to_solid": "9 mm"})
+    assert travel_note(given.cases, given.record) is None
+    unrecorded = load_study(bucket, {k: v for k, v in record.items() if k != "run.record"})
+    assert travel_note(unrecorded.cases, unrecorded.record) is None
+    surge = load_study(STUDIES / "spring-surge.yaml")
+    assert "spring" in surge.record and travel_note(surge.cases, surge.record) is None
+    report = run_study(study, tmp_path / "bucket.nc", scheduler="synchronous")
+    assert note in report.notes
+    shown = CliRunner().invoke(
+        main,
+        ["validate", "--no-estimate", str(bucket), "--set", "run.record=[spring]"],
+    )  # fmt: skip
+    assert "spring: the coil-clash margin of layout direct-acting" in shown.output

@@ -74,7 +74,13 @@ from campipe.study.run.resume import (
 from campipe.study.run.sizing import default_batch_size, default_workers
 from campipe.study.run.workers import run_distributed, run_local, stored_here
 from campipe.study.spec.expand import Study
-from campipe.study.spec.resolve import ResolvedCase, per_turn_note, ramp_note, spring_note
+from campipe.study.spec.resolve import (
+    ResolvedCase,
+    per_turn_note,
+    ramp_note,
+    spring_note,
+    travel_note,
+)
 from campipe.vocabulary import OK, STATUS
 
 log = logging.getLogger(__name__)
@@ -180,7 +186,7 @@ def run_study(
         found, more = find_results(study, archive, archive_usable=not state.problems)
         notes += more
         missing = [c for c in study.cases if c.case_id not in found]
-        notes += _case_notes(missing)
+        notes += _case_notes(missing, study.record)
         workers = workers or (1 if scheduler == "synchronous" else default_workers())
         plans = _plan(study, missing, scheduler, workers, batch_size)
         run = _Run(scheduler, workers, on_batch, workers_store, notice, command)
@@ -231,11 +237,11 @@ def _check_replaceable(archive: Path, state: ArchiveState, overwrite: bool) -> N
         raise refuse(archive, state)
 
 
-def _case_notes(cases: list[ResolvedCase]) -> list[str]:
-    """The per-turn model's note, the lash's beyond the ramps and a valve spring's odd
-    deflection on the cases computed (``resolve.per_turn_note``, ``resolve.ramp_note``,
-    ``resolve.spring_note``)."""
-    notes = (per_turn_note(cases), ramp_note(cases), spring_note(cases))
+def _case_notes(cases: list[ResolvedCase], record: tuple[str, ...]) -> list[str]:
+    """The per-turn model's note, the lash's beyond the ramps, a valve spring's odd
+    deflection and its assumed travel to solid on the cases computed
+    (``resolve.per_turn_note``, ``ramp_note``, ``spring_note``, ``travel_note``)."""
+    notes = (per_turn_note(cases), ramp_note(cases), spring_note(cases), travel_note(cases, record))
     return [note for note in notes if note is not None]
 
 
@@ -396,7 +402,7 @@ def _run_parts(
         found, more = find_parts(study, archive, layout)
         notes += more
         missing = [c for c in study.cases if c.case_id not in found.found]
-        notes += _case_notes(missing)
+        notes += _case_notes(missing, study.record)
         workers = run.workers or (1 if run.scheduler == "synchronous" else default_workers())
         run = dataclasses.replace(run, workers=workers)
         plans = _plan(study, missing, run.scheduler, workers, batch_size)

@@ -257,6 +257,32 @@ def spring_note(cases: Sequence[ResolvedCase]) -> str | None:
     )
 
 
+#: What ``run.record`` names that stores the valve spring's coil-clash margin.
+CLASH_RECORDS = ("spring", "spring_clash_margin")
+
+
+def travel_note(cases: Sequence[ResolvedCase], record: Sequence[str]) -> str | None:
+    """A note on the cases of a layout other than the thesis's whose coil-clash margin (a
+    ``record`` of the spring's) is taken against the thesis's spring travel to solid, the
+    key's default: campipe assumes it for the thesis's train, which gives no spring geometry,
+    and a chain's or a lever's spring is not that one. None where there are none."""
+    if not set(record) & set(CLASH_RECORDS):
+        return None
+    combinations, speeds = distinct_but_speed(cases)
+    assumed = valve_train().spring_travel_to_solid
+    layouts = sorted(
+        {c.case.train.layout for c in combinations if c.case.train.chain
+         and c.case.train.spring_travel_to_solid == assumed}
+    )  # fmt: skip
+    if not layouts:
+        return None
+    return (
+        f"the coil-clash margin of layout {', '.join(layouts)} is taken against the thesis's "
+        f"assumed spring travel to solid, {assumed * 1e3:.4g} mm (1.6 in, "
+        "model.spring_travel_to_solid's default): give your spring's own"
+    )
+
+
 def _landing_excess(case: Case, ramp: float) -> float:
     """For a case whose seat is above the opening ramp's top at the valve (``ramp`` [rad]
     long, from 0), the cam's velocity where its lift at the valve first crosses the seat,
