@@ -197,9 +197,17 @@ def case_labels(view: View, names: Sequence[str]) -> list[str]:
     ]
 
 
+#: Characters of an 11-point title a figure's inch of width holds (a title wider than its
+#: figure is wrapped, not cut at both sides).
+TITLE_CHARS_PER_INCH = 11
+
+
 def set_title(fig: Figure, view: View, what: str, where: str | None) -> None:
+    import textwrap
+
     selection = f" — where {where}" if where else ""
-    fig.suptitle(f"{view.study}: {what}{selection}", fontsize=11)
+    width = max(int(fig.get_figwidth() * TITLE_CHARS_PER_INCH), 20)
+    fig.suptitle(textwrap.fill(f"{view.study}: {what}{selection}", width), fontsize=11)
 
 
 def column_values(view: View, name: str | None, option: str, numeric: bool = True) -> np.ndarray:

@@ -376,3 +376,21 @@ def test_a_request_is_checked_like_a_spec_entry():
     assert check_plot({"kind": "events", "turn": "2"}).turn == 2
     with pytest.raises(PlotError, match="x: not a key of a histories plot"):
         check_plot({"kind": "histories", "x": "speed_rpm"})
+
+
+def test_a_title_wider_than_its_figure_wraps():
+    """A one-panel map's title (6 in wide) of 100 characters is wrapped to the figure's width
+    in lines of whole words, not cut off at both sides. Fails on a copy that sets it as one
+    line."""
+    from types import SimpleNamespace
+
+    from matplotlib.figure import Figure
+
+    from campipe.plot.figures import TITLE_CHARS_PER_INCH, set_title
+
+    fig = Figure(figsize=(6, 4))
+    what = "separation_deg_per_rev over engine_speed_rpm and spring_preload, contour at 1 degree"
+    set_title(fig, SimpleNamespace(study="chain2"), what, None)
+    lines = fig.get_suptitle().splitlines()
+    assert len(lines) == 2 and all(len(line) <= 6 * TITLE_CHARS_PER_INCH for line in lines)
+    assert " ".join(lines) == f"chain2: {what}"
