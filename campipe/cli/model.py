@@ -156,7 +156,7 @@ def model(
     table = ratio_table(train, sm, lift, math.radians(ratio_step), cam)
     contacts = contact_modes(train, sm)
     if as_json:
-        report = model_report(train, sm, limits, preset)
+        report = model_report(train, sm, limits, preset, drive)
         click.echo(json.dumps({**report, **table, **contact_report(contacts)}, indent=1))
     else:
         text = model_text(train, sm, limits, preset, overrides, drive) + ratio_text(table)
@@ -258,8 +258,9 @@ def on_the_cam(sm: SystemMatrices, coords: tuple[Coordinate, ...]) -> np.ndarray
     return omega
 
 
-def model_report(train, sm, limits, preset) -> dict[str, object]:
-    """The JSON form of ``campipe model``: SI units throughout."""
+def model_report(train, sm, limits, preset, drive: float | None = None) -> dict[str, object]:
+    """The JSON form of ``campipe model``: SI units throughout (rpm the cam's, and with a
+    spec's ``drive``, cam turns per crank turn, the engine's beside)."""
     sm, coords, names = _shown(train, sm)
     held = on_the_cam(sm, coords)
     return {
@@ -284,6 +285,11 @@ def model_report(train, sm, limits, preset) -> dict[str, object]:
         ],
         "natural_frequencies": sm.frequencies.tolist(),
         "natural_frequencies_rpm": (sm.frequencies / RPM).tolist(),
+        **(
+            {"natural_frequencies_engine_rpm": (sm.frequencies / RPM / drive).tolist()}
+            if drive
+            else {}
+        ),
         "natural_frequencies_hz": (sm.frequencies / TWO_PI).tolist(),
         "modal_damping_ratios": modal_damping_ratios(sm.damping, sm.modes, sm.frequencies).tolist(),
         "natural_frequencies_on_the_cam": held.tolist(),
@@ -296,6 +302,10 @@ def model_report(train, sm, limits, preset) -> dict[str, object]:
         **_adjuster_json(train),
         "units": {
             "natural_frequencies": "rad/s",
+            "natural_frequencies_rpm": "rpm of the cam whose first order meets the mode",
+            "natural_frequencies_engine_rpm": "rpm of the engine (a spec's drive), the cam's "
+            "over drive.cam_per_crank",
+            "natural_frequencies_hz": "Hz",
             "natural_frequencies_on_the_cam": "rad/s, the follower held on the cam (q1)",
             "modal_damping_ratios": "1, (Φᵀ C Φ)ⱼⱼ / (2ωⱼ)",
             "mass_matrix": "kg (translation pairs), kg·m (mixed), kg·m² (rotation pairs)",

@@ -78,6 +78,13 @@ def test_a_spec_with_a_drive_shows_each_mode_at_the_engine_s_speed_too():
     assert cam == pytest.approx(w * 60 / (2 * math.pi), abs=0.6)  # (w printed to 0.1)
     assert engine == pytest.approx(2 * cam, abs=0.11)
     assert "engine rpm" not in run().output
+    # the JSON too, each list with its units named
+    report = json.loads(run("--spec", str(spec), "--json").output)
+    w = np.array(report["natural_frequencies"])
+    assert_allclose(report["natural_frequencies_rpm"], w * 60 / (2 * math.pi), rtol=1e-12)
+    assert_allclose(report["natural_frequencies_engine_rpm"], w * 120 / (2 * math.pi), rtol=1e-12)
+    assert "cam" in report["units"]["natural_frequencies_rpm"]
+    assert "natural_frequencies_engine_rpm" not in json.loads(run("--json").output)
 
 
 def test_a_finger_s_adjuster_is_shown_in_the_link_it_stiffens():
