@@ -26,7 +26,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from matplotlib.colors import Normalize, SymLogNorm
 from matplotlib.figure import Figure
 
 from campipe.engine.metrics import UNCERTAINTY
@@ -38,27 +37,20 @@ from campipe.plot.style import (
     SHORT_UNITS,
     axis_label,
     axis_words,
+    colour_norm,
     line_styles,
 )
+from campipe.plot.values import shown_value
 from campipe.study.query.display import display_units, format_value, to_display
 from campipe.study.query.tables import OF_IMPACTS, CaseTable, case_table, displayed, select
 from campipe.study.spec.drive import ENGINE_SPEED_NAME
 from campipe.study.spec.plots import PlotError, PlotRequest, check_turn
 from campipe.study.spec.variables import VARIABLES
-from campipe.units import (
-    QuantityError,
-    convert,
-    degree_speed,
-    per_degree,
-    read_quantity,
-    written_per_degree,
-)
+from campipe.units import degree_speed, per_degree
 from campipe.vocabulary import FAILURES
 
 #: Most cases overlaid in one history figure (beyond, lines cannot be told apart).
 MAX_OVERLAID = 10
-#: A map's positive values spanning more decades than this get a logarithmic colour scale.
-SPAN_DECADES = 2
 #: Most rows of an events chart, panels of a map.
 MAX_ROWS = 80
 MAX_PANELS = 12
@@ -662,64 +654,6 @@ def _level(request: PlotRequest, view: View, zname: str) -> float | None:
     if request.level is None:
         return None
     return shown_value(request.level, view, zname, "--level")
-
-
-def shown_value(value: str | float, view: View, name: str, key: str) -> float:
-    """A value of the column ``name`` in its shown units: a number as it is, a quantity
-    (``1 deg``, ``0.5 m/s``, ``0.2 mm/deg``) converted; a PlotError naming ``key`` otherwise
-    (a length per degree against a column shown per second, or the other way: the one is a
-    different value of the other at each speed)."""
-    if isinstance(value, int | float):
-        return float(value)
-    try:
-        return float(value)
-    except ValueError:
-        pass
-    shown = view.shown.units.get(name) or ""
-    if written_per_degree(str(value)) or per_degree(shown)[1]:
-        return _per_degree_value(str(value).strip(), shown, name, key)
-    try:
-        q = read_quantity(str(value), key)
-        return convert(float(q.magnitude), str(q.units), shown)
-    except Exception as exc:  # QuantityError, or pint's for units of another dimension
-        reason = exc.reason if isinstance(exc, QuantityError) else "not of its kind"
-        raise PlotError.at(
-            key, f"cannot read {value!r} as a value of {name} [{shown}] ({reason})"
-        ) from None
-
-
-def _per_degree_value(value: str, shown: str, name: str, key: str) -> float:
-    """``value`` (a number and its units) as a value of ``name`` shown in ``shown``, one of
-    the units a length per degree (``units.per_degree``): the other must be too, of the same
-    power and angle (the cam's, or the crank's)."""
-    number, given = written_per_degree(value) or ("", "")
-    (length, power), (to_length, to_power) = per_degree(given), per_degree(shown)
-    same = power and power == to_power and degree_speed([given]) == degree_speed([shown])
-    try:
-        if same:
-            return float(number) * convert(1.0, length, to_length)
-    except Exception:  # pint's, not a length; float's
-        pass
-    raise PlotError.at(
-        key,
-        f"cannot draw {value!r} on {name} [{shown}]: write it in {shown} (a value per "
-        "degree is a different one per second at each speed), or choose --units to match",
-    )
-
-
-def colour_norm(values: np.ndarray) -> Normalize:
-    """The map's colour scale: linear, or where the values are not negative and the positive
-    ones span more than SPAN_DECADES decades (no-follow from thousandths of a degree a turn to
-    tens) logarithmic above the least positive value and linear below it, so small values
-    read apart from zero and from each other."""
-    finite = values[np.isfinite(values)]
-    if not finite.size:
-        return Normalize(0.0, 1.0)
-    lo, hi = float(finite.min()), float(finite.max())
-    positive = finite[finite > 0.0]
-    if lo >= 0.0 and positive.size and hi > 10.0**SPAN_DECADES * float(positive.min()):
-        return SymLogNorm(float(positive.min()), vmin=lo, vmax=hi, base=10)
-    return Normalize(lo, hi)
 
 
 def cell_map(view: View, request: PlotRequest) -> Figure:

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from matplotlib.colors import Normalize, SymLogNorm
 
 from campipe.vocabulary import CAM_IMPACT, CAM_SEPARATION, SEAT_IMPACT, SEAT_SEPARATION
 
@@ -15,6 +16,8 @@ LINESTYLES = ("-", "--", "-.", ":")
 MARKERS = ("o", "s", "^", "D", "v", "P", "X")
 #: A sequential colour map whose lightness rises monotonically (it reads as a grey ramp).
 COLORMAP = "cividis"
+#: A map's positive values spanning more decades than this get a logarithmic colour scale.
+SPAN_DECADES = 2
 #: Each event kind's marker and whether it is filled: shape and fill tell them apart in grey.
 EVENT_MARKERS = {
     CAM_SEPARATION: ("^", False, "cam separation"),
@@ -98,3 +101,18 @@ def axis_label(name: str, units: str) -> str:
     if metric.summary_of_turns == "mean" and name == metric.summary:
         shown = f"{shown}/turn" if shown else "per turn"
     return f"{words} [{shown}]" if shown else words
+
+
+def colour_norm(values: np.ndarray) -> Normalize:
+    """The map's colour scale: linear, or where the values are not negative and the positive
+    ones span more than SPAN_DECADES decades (no-follow from thousandths of a degree a turn to
+    tens) logarithmic above the least positive value and linear below it, so small values
+    read apart from zero and from each other."""
+    finite = values[np.isfinite(values)]
+    if not finite.size:
+        return Normalize(0.0, 1.0)
+    lo, hi = float(finite.min()), float(finite.max())
+    positive = finite[finite > 0.0]
+    if lo >= 0.0 and positive.size and hi > 10.0**SPAN_DECADES * float(positive.min()):
+        return SymLogNorm(float(positive.min()), vmin=lo, vmax=hi, base=10)
+    return Normalize(lo, hi)

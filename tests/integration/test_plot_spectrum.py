@@ -93,7 +93,7 @@ def test_a_map_s_colour_scale_reads_small_values():
     colour_norm always linear: the two cells' colours are the same."""
     from matplotlib.colors import SymLogNorm
 
-    from campipe.plot.figures import colour_norm
+    from campipe.plot.style import colour_norm
 
     z = np.array([0.0, 0.002, 0.02, 0.5, 30.0, np.nan])
     norm = colour_norm(z)

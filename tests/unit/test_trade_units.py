@@ -128,7 +128,7 @@ def test_a_limit_line_per_degree_is_drawn_in_the_shown_units_or_refused():
     with pint's bare error. Fails on a copy that draws 0.0002 as it is."""
     from types import SimpleNamespace
 
-    from campipe.plot.figures import shown_value
+    from campipe.plot.values import shown_value
     from campipe.study.spec.plots import PlotError
 
     def view(units):
