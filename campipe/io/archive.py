@@ -624,7 +624,10 @@ def damaged(
     """
     with LOCK, open_dataset(path) as ds:
         ds.set_auto_mask(False)
-        attrs = ds.ncattrs()
+        try:
+            attrs = ds.ncattrs()
+        except Exception:  # HDF5 cannot open an attribute: the header is damaged
+            return ["attributes"]
         if CHECKSUM_ATTR not in attrs:
             log.info("%s holds no checksums (an older campipe wrote it): not verified", path)
             return []

@@ -4,6 +4,12 @@ A spec is plain data (mappings, lists, strings, numbers). The safe loader builds
 objects, so a tag such as ``!!python/object`` is refused; a key written twice in one mapping
 is refused too (PyYAML would otherwise keep the last one silently).
 
+Numbers and booleans are read as YAML 1.2 reads them (its core schema), not as PyYAML's
+YAML 1.1: ``1e-5`` is a number (YAML 1.1 wants ``1.0e-5`` and reads ``1e-5`` as text), ``010``
+is ten (not octal eight), ``1:30`` is text (not ninety, base 60), and only ``true`` and
+``false`` are booleans (``no``, ``off``, ``yes``, ``on`` are text, so ``seat: no`` is not
+``seat: false``).
+
 A few hundred bytes of YAML can describe an enormous document: aliases (``*a``) repeat what
 an anchor (``&a``) names, so nine lines of nine aliases each make a billion strings ("billion
 laughs"), and deep nesting exhausts the parser's recursion. Before anything is built, the
@@ -13,6 +19,7 @@ document's nesting depth (:data:`MAX_DEPTH`) and its size with every alias expan
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import yaml
@@ -112,6 +119,36 @@ def _construct_mapping(loader: _UniqueKeyLoader, node: yaml.MappingNode, deep: b
 
 
 _UniqueKeyLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
+
+#: YAML 1.2's core schema for plain scalars (https://yaml.org/spec/1.2.2/#1032-tag-resolution):
+#: tag → (pattern, the first characters it can start with).
+_BOOL, _INT, _FLOAT = (f"tag:yaml.org,2002:{t}" for t in ("bool", "int", "float"))
+_CORE = {
+    _BOOL: (r"^(?:true|True|TRUE|false|False|FALSE)$", "tTfF"),
+    _INT: (r"^(?:[-+]?[0-9]+|0o[0-7]+|0x[0-9a-fA-F]+)$", "-+0123456789"),
+    _FLOAT: (
+        r"^(?:[-+]?(?:\.[0-9]+|[0-9]+(?:\.[0-9]*)?)(?:[eE][-+]?[0-9]+)?"
+        r"|[-+]?\.(?:inf|Inf|INF)|\.(?:nan|NaN|NAN))$",
+        "-+.0123456789",
+    ),
+}
+_UniqueKeyLoader.yaml_implicit_resolvers = {
+    first: [(tag, rx) for tag, rx in resolvers if tag not in _CORE]
+    for first, resolvers in yaml.SafeLoader.yaml_implicit_resolvers.items()
+}
+for _tag, (_pattern, _first) in _CORE.items():
+    _UniqueKeyLoader.add_implicit_resolver(_tag, re.compile(_pattern), list(_first))
+
+
+def _construct_int(loader: _UniqueKeyLoader, node: yaml.ScalarNode) -> int:
+    """An integer as YAML 1.2 reads it: decimal (a leading 0 is not octal), 0o…, 0x…."""
+    text = str(loader.construct_scalar(node))
+    if text.startswith(("0o", "0x")):
+        return int(text[2:], 8 if text[1] == "o" else 16)
+    return int(text, 10)
+
+
+_UniqueKeyLoader.add_constructor(_INT, _construct_int)
 
 
 def parse_spec_text(text: str, source: str = "<spec>") -> object:

@@ -313,7 +313,7 @@ def replay_archive(
         ds = open_archive(archive, verify)  # a file, or a parts archive's folder
     except ArchiveDamagedError:
         raise
-    except (OSError, ValueError, RuntimeError) as exc:
+    except (OSError, ValueError, RuntimeError, AttributeError) as exc:  # netCDF4: an attribute
         raise ReplayError(f"{archive}: {unreadable(exc, archive)}", key=str(archive)) from None
     with ds:
         if not spawn:

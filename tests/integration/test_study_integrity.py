@@ -338,3 +338,27 @@ def test_an_archive_of_an_older_layout_is_refused_and_replaced_only_with_overwri
     assert archive.read_bytes() == before
     report = run_study(study, archive, scheduler="synchronous", overwrite=True)
     assert report.computed == 6 and read_attrs(archive)["campipe_layout"] == "campipe-archive-3"
+
+
+@pytest.mark.parametrize("target", ["spec", "lift-table"])
+def test_the_study_s_own_inputs_are_never_replaced_not_even_with_overwrite(tmp_path, target):
+    """`campipe study SPEC -o SPEC --overwrite` (or `-o` its lift table) is refused, naming
+    the file and that --overwrite does not replace it, and the file is left byte for byte: a
+    user who replaced the spec or the table with the archive lost them (the table's values
+    are stored nowhere else). Broken copy: --overwrite lets any file go."""
+    table = tmp_path / "cam.csv"
+    table.write_text("angle [deg],lift [in]\n0,0\n90,0.5\n180,1\n270,0.5\n")
+    spec = tmp_path / "spec.yaml"
+    spec.write_text(
+        "name: inputs\nmodel: {preset: thesis-1971}\nprofile: {kind: table, file: cam.csv}\n"
+        "speed: 6000 rpm\nrun: {revolutions: 1, output_every: 2 deg}\n"
+    )
+    victim = spec if target == "spec" else table
+    before = victim.read_bytes()
+    result = _study(tmp_path, victim, "--overwrite")
+    assert result.exit_code == 2, result.output
+    assert f"{victim}: exists and is" in result.stderr
+    assert "never replaced, not even with --overwrite" in result.stderr
+    assert "replace it with --overwrite" not in result.stderr
+    assert victim.read_bytes() == before
+    assert _study(tmp_path, tmp_path / "out.nc").exit_code == 0  # the inputs still serve

@@ -235,3 +235,23 @@ def test_long_histories_make_smaller_default_batches():
     assert default_batch_size(1000, 2, samples=1441) == 125  # 4 turns at 1 deg
     assert default_batch_size(1000, 2, samples=100_000) == 16  # 512 MiB / (1e5 × 320 B)
     assert default_batch_size(1000, 2, samples=10_000_000) == 1
+
+
+def test_numbers_and_booleans_read_as_yaml_1_2_reads_them():
+    """A spec's ``1e-5`` is a number (PyYAML's YAML 1.1 reads it as text, and
+    ``run.settle_tolerance: 1e-5`` was refused as "expected a number"), ``010`` is ten (not
+    octal eight), ``1:30`` is text (not ninety, base 60), and ``no``/``off`` are text (not
+    false: ``seat: no`` read as false); ``true``, hexadecimal and ``.inf`` still read.
+    Python's own float() and int() are the reference. Fails on a copy with PyYAML's
+    resolvers."""
+    from campipe.io.spec_yaml import parse_spec_text
+
+    got = parse_spec_text(
+        "a: 1e-5\nb: 010\nc: 1:30\nd: no\ne: off\nf: true\ng: 0x1F\nh: .inf\ni: -2.5E3\n"
+        "j: 9000 rpm\nk: [1e3, 2.]\n"
+    )
+    assert got == {
+        "a": float("1e-5"), "b": int("10"), "c": "1:30", "d": "no", "e": "off", "f": True,
+        "g": 31, "h": float("inf"), "i": float("-2.5E3"), "j": "9000 rpm", "k": [1000.0, 2.0],
+    }  # fmt: skip
+    assert isinstance(got["b"], int) and isinstance(got["a"], float)

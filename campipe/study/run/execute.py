@@ -233,7 +233,7 @@ def check_scheduler(scheduler: str) -> bool:
 def _check_replaceable(archive: Path, state: ArchiveState, overwrite: bool) -> None:
     """Refuse a file at the archive's path that is not this study's archive, unless the run
     may overwrite it."""
-    if not state.ours and not overwrite:
+    if not state.ours and (state.kept or not overwrite):
         raise refuse(archive, state)
 
 

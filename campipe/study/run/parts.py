@@ -72,7 +72,7 @@ def inspect_parts(study: Study, archive: Path) -> ArchiveState:
     except OSError as exc:
         return ArchiveState(True, False, f"a path that cannot be read ({exc.strerror})", False)
     if not stat.S_ISDIR(info.st_mode):
-        return ArchiveState(True, False, "a file (a parts archive is a folder)", False)
+        return ArchiveState(True, False, "a file (a parts archive is a folder)", False, kept=True)
     if not index_path(archive).exists():
         foreign = [
             p.name

@@ -97,6 +97,9 @@ class ArchiveState:
     up_to_date: bool  # it holds this study, by this engine, and its checksums verify
     problems: tuple[str, ...] = ()  # why its checksums failed, if they did
     attrs: dict | None = None  # its global attributes, where they could be read
+    #: it is the study's own input (its spec, a lift table it reads) or a folder: never
+    #: replaced, not even with --overwrite
+    kept: bool = False
 
 
 #: Where the cases some file already holds are: case id → (file, row, events).
@@ -229,11 +232,12 @@ def inspect_archive(study: Study, archive: Path) -> ArchiveState:
             ) from None
         return ArchiveState(True, False, f"a path that cannot be read ({exc.strerror})", False)
     if stat.S_ISDIR(info.st_mode):
-        return ArchiveState(True, False, "a folder", False)
+        return ArchiveState(True, False, "a folder", False, kept=True)
     if not stat.S_ISREG(info.st_mode):
         return ArchiveState(True, False, "not a regular file", False)
-    if study.spec.path is not None and archive.resolve() == Path(study.spec.path).resolve():
-        return ArchiveState(True, False, "the spec itself", False)
+    own = _inputs(study).get(archive.resolve())
+    if own is not None:
+        return ArchiveState(True, False, own, False, kept=True)
     try:
         attrs = read_attrs(archive)
     except ArchiveFileError:
@@ -292,11 +296,33 @@ def carries_key(path: Path, key: str) -> bool:
     return head.startswith(b"\x89HDF") and key.encode() in head
 
 
+def _inputs(study: Study) -> dict[Path, str]:
+    """The files the study reads, resolved → what each is, in words: its spec and the lift
+    tables its profiles read (``profile.file``, relative to the spec's folder)."""
+    from campipe.study.spec.resolve import distinct_but_speed
+
+    if study.spec.path is None:
+        return {}
+    spec = Path(study.spec.path).resolve()
+    out = {spec: "the spec itself"}
+    for case in distinct_but_speed(study.cases)[0]:
+        table = case.values.get("profile.file")
+        if table is not None:
+            out.setdefault((spec.parent / str(table)).resolve(), f"the lift table {table}, "
+                           "which the study reads (profile.file)")  # fmt: skip
+    return out
+
+
 def refuse(archive: Path, state: ArchiveState) -> ArchiveExistsError:
+    fix = (
+        "choose another archive path (-o): the study's own inputs and a folder are never "
+        "replaced, not even with --overwrite"
+        if state.kept
+        else "choose another archive path (-o), or replace it with --overwrite"
+    )
     return ArchiveExistsError.at(
         str(archive),
-        f"exists and is {state.what}, not this study's archive; choose another archive path "
-        "(-o), or replace it with --overwrite",
+        f"exists and is {state.what}, not this study's archive; {fix}",
         found=state.what,
         expected="no file, or this study's archive",
     )
