@@ -197,3 +197,23 @@ def test_query_leaves_the_histories_it_never_reads_unchecked(uncompressed, tmp_p
     assert out.exit_code == 1 and "damaged: valve_lift differs" in out.output, out.output
     with pytest.raises(ArchiveDamagedError, match="valve_lift"):
         campipe.open_study(copy)
+
+
+def test_an_archive_whose_attributes_hdf5_cannot_open_is_damaged(monkeypatch, tmp_path):
+    """A flipped byte in an archive's header can leave HDF5 unable to open its attributes
+    (netCDF4 raises AttributeError: "Can't open HDF5 attribute", as a helper's archive did):
+    ``damaged`` names its attributes, so every reader refuses it as damaged instead of
+    stopping with a traceback (campipe replay did). Broken copy: the AttributeError escapes."""
+    import contextlib
+
+    import campipe.io.archive as archive_io
+
+    class Header:
+        def set_auto_mask(self, flag):
+            pass
+
+        def ncattrs(self):
+            raise AttributeError("NetCDF: Can't open HDF5 attribute")
+
+    monkeypatch.setattr(archive_io, "open_dataset", lambda path: contextlib.nullcontext(Header()))
+    assert archive_io.damaged(tmp_path / "any.nc") == ["attributes"]
