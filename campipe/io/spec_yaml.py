@@ -182,7 +182,8 @@ def parse_spec_text(text: str, source: str = "<spec>") -> object:
             "(mappings, lists, strings, numbers)"
         ) from None
     except yaml.YAMLError as exc:
-        raise SpecFileError(f"{source}: not valid YAML ({exc})") from None
+        tabs = " (indent with spaces: YAML does not take tabs)" if "\t" in text else ""
+        raise SpecFileError(f"{source}: not valid YAML{tabs} ({exc})") from None
 
 
 def read_spec(path: str | Path) -> tuple[object, str]:

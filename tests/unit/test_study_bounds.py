@@ -255,3 +255,22 @@ def test_numbers_and_booleans_read_as_yaml_1_2_reads_them():
         "g": 31, "h": float("inf"), "i": float("-2.5E3"), "j": "9000 rpm", "k": [1000.0, 2.0],
     }  # fmt: skip
     assert isinstance(got["b"], int) and isinstance(got["a"], float)
+
+
+def test_an_empty_file_a_number_for_a_name_and_tabs_are_told_what_to_do(tmp_path):
+    """An empty (or comments-only) spec is told it is empty, not "found None"; a name YAML
+    reads as a number is told to quote it; a tab in the indentation is told to indent with
+    spaces. Fails on a copy with the bare messages."""
+    from campipe.study import load_study
+    from campipe.study.spec.check import SpecError
+
+    empty = tmp_path / "empty.yaml"
+    empty.write_text("# nothing yet\n")
+    with pytest.raises(SpecError, match="the file is empty, or only comments"):
+        load_study(empty)
+    number = tmp_path / "number.yaml"
+    number.write_text("name: 123\nprofile: {kind: harmonic, lift: 1 in}\nspeed: 9000 rpm\n")
+    with pytest.raises(SpecError, match="quote it, name: '123'"):
+        load_study(number)
+    with pytest.raises(SpecFileError, match="indent with spaces"):
+        parse_spec_text("name: t\nmodel:\n\tpreset: thesis-1971\n")

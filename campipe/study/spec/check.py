@@ -254,11 +254,11 @@ def check_spec(
             except SpecProblem as exc:
                 problems.items.append(exc)
     if not isinstance(raw, Mapping):
+        found = "nothing (the file is empty, or only comments)" if raw is None else show(raw)
         raise SpecError(
             [
                 SpecProblem(
-                    "",
-                    f"found {show(raw)}, expected a mapping of the keys: " + ", ".join(TOP_LEVEL),
+                    "", f"found {found}, expected a mapping of the keys: " + ", ".join(TOP_LEVEL)
                 )
             ],
             source,
@@ -273,10 +273,12 @@ def check_spec(
             "name", "missing; expected a study name such as 'separation-map' (it names the archive)"
         )
     elif not isinstance(name, str) or not re.match(NAME_PATTERN, name):
+        quote = f"; YAML read it as a number: quote it, name: '{name}'"
         problems.add(
             "name",
             f"found {show(name)}, expected letters, digits, '-', '_' or '.', "
-            "starting with a letter or digit (it names the archive file)",
+            "starting with a letter or digit (it names the archive file)"
+            + (quote if isinstance(name, int | float) and not isinstance(name, bool) else ""),
         )
     description = raw.get("description", "")
     if not isinstance(description, str):
