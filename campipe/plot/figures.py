@@ -41,6 +41,7 @@ from campipe.plot.style import (
     line_styles,
 )
 from campipe.plot.values import shown_value
+from campipe.study.archive.layout import CHAIN_NAMES, LEVER_NAMES
 from campipe.study.query.display import display_units, format_value, to_display
 from campipe.study.query.tables import OF_IMPACTS, CaseTable, case_table, displayed, select
 from campipe.study.spec.drive import ENGINE_SPEED_NAME
@@ -327,9 +328,9 @@ def _panel_title(ds, name: str, title: str) -> str:
     follower and cam lift are the valve side's (the archive's ``long_name`` says so), a
     chain's follower is its first mass."""
     long_name = str(ds[name].attrs.get("long_name", "")) if name == "follower_lift" else ""
-    if "pallet" in long_name:
+    if long_name == LEVER_NAMES["follower_lift"]:
         return "lever at the pallet, valve side (kinematic valve lift dotted)"
-    if "chain's first mass" in long_name:
+    if long_name == CHAIN_NAMES["follower_lift"]:
         return "first mass lift (cam lift dotted)"
     return title
 

@@ -18,6 +18,7 @@ import numpy as np
 from campipe.io.archive import ArchiveDamagedError, unreadable
 from campipe.io.outputs import RECORDING, check_output
 from campipe.io.rerun_replay import (
+    EVENT_SI,
     MM,
     SERIES,
     CaseRecording,
@@ -189,7 +190,7 @@ def chain_frames(case: ReplayCase, magnification: float) -> SketchFrames:
 
 
 #: The events' values the recording's text log gives, in the archive's units.
-EVENT_VALUES = {"event_velocity": "m/s", "event_impulse": "N*s"}
+EVENT_VALUES = {name: units for name, (units, _) in EVENT_SI.items()}
 
 
 def series_units(

@@ -55,9 +55,10 @@ import numpy as np
 
 from campipe.errors import CampipeError, did_you_mean, excerpt
 from campipe.units import (
-    DEG_PER_S_PER_RPM,
     QuantityError,
+    UnitSystemError,
     convert,
+    convert_values,
     degree_speed,
     is_unit,
     names_an_angle,
@@ -494,19 +495,20 @@ class _Evaluation:
     def _per_case(self, q: Quantity) -> Quantity:
         """``q``, but a length per degree as each case's SI value [m/s or m/s²], at the
         speed its degrees turn at (``units.degree_speed``: the cam's, or the engine's)."""
-        length, power = per_degree(q.units)
+        power = per_degree(q.units)[1]
         if not power:
             return q
         speed = degree_speed([q.units])
         if speed not in self.cols:
             raise QueryError.at("--where", f"{q.text}: {no_speed(q.units).reason}")
-        try:
-            scale = convert(1.0, length, "m")
-        except Exception:  # pint's: not a length
-            raise QueryError.at("--where", f"{q.text}: {length} is not a length") from None
-        rate = np.asarray(self.cols[speed], dtype=float) * DEG_PER_S_PER_RPM
         units = "m/s" if power == 1 else "m/s^2"
-        return Quantity(q.value * scale * rate**power, units, q.text)
+        try:  # q's units in one of SI's, at each case's speed
+            per_si = convert_values(
+                np.ones(len(self.cols[speed])), units, q.units, self.cols[speed]
+            )
+        except UnitSystemError:  # not a length per degree
+            raise QueryError.at("--where", f"{q.text}: not a length per degree") from None
+        return Quantity(q.value / per_si, units, q.text)
 
 
 #: Characters a label writes that a keyboard types otherwise: a range's en dash (``flat

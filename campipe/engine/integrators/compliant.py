@@ -74,8 +74,7 @@ class Compliant:
 
         case_list, angles, rtol, max_step, max_steps = prepared
         c = cases
-        table: np.ndarray | None = None
-        extension = np.full(out.cam.shape, np.nan)  # filled where a plunger is in a link
+        table = extension = None  # the carried plungers', where a case has one
         for i, case in enumerate(case_list):
             seat = float(c.seat_q[i]) if case.has_seat else None
             system = compliant.compliant_system(case.train, case.profile, case.speed, seat)
@@ -93,8 +92,9 @@ class Compliant:
             )  # fmt: skip
             if system.plunger is not None:  # its state starts at 0 in the run's frame
                 z0 = np.append(z0, 0.0)
-                if table is None:
+                if table is None or extension is None:
                     table = np.full((len(case_list), *out.per_rev.shape[1:2], 3), np.nan)
+                    extension = np.full(out.cam.shape, np.nan)  # where a plunger is in a link
                 one.adjuster = table[i]
                 one.adjuster[:, 1:] = 0.0
                 if system.plunger.gains is None:  # in a chain's link: e₀ + u at the samples
@@ -105,4 +105,4 @@ class Compliant:
                 lift_bound=float(c.lift_bound[i]), valve_ref=float(c.valve_ref[i]),
             )  # fmt: skip
             out.n_events[i], out.status[i], out.steps[i] = one.n_events, one.status, one.steps
-        return None if table is None else CarriedPlungers(table, extension)
+        return None if table is None or extension is None else CarriedPlungers(table, extension)
