@@ -8,6 +8,8 @@ import atexit
 import functools
 import gc
 import logging
+import os
+import sys
 
 import click
 
@@ -111,12 +113,18 @@ class CampipeGroup(click.Group):
     and Ctrl-C to a line saying what stays (not click's bare "Aborted!")."""
 
     def invoke(self, ctx: click.Context):
+        from campipe.io.watch import ReadStalled, stuck
+
         try:
             return super().invoke(ctx)
         except KeyboardInterrupt:
             name = ctx.invoked_subcommand or ""
             after = f"; {AFTER_INTERRUPT[name]}" if name in AFTER_INTERRUPT else ""
+            if reading := stuck():
+                after += f" (while reading {reading[0]}: if it never ended, the file is damaged)"
             raise Interrupted(f"campipe {name}: interrupted (Ctrl-C){after}") from None
+        except ReadStalled as exc:
+            raise Failure(str(exc)) from None
         except (click.ClickException, click.exceptions.Exit, click.Abort):
             raise
         except BrokenPipeError:
@@ -126,6 +134,21 @@ class CampipeGroup(click.Group):
             if mapped is None:
                 raise
             raise mapped from None
+
+    def main(self, *args, **kwargs):
+        """click's ``main``; after a read left inside HDF5 (:func:`campipe.io.watch.stuck`)
+        the process ends at once with the command's status: the interpreter's own exit would
+        tear the library down under that read (a segmentation fault)."""
+        from campipe.io.watch import stuck
+
+        try:
+            return super().main(*args, **kwargs)
+        except SystemExit as exc:
+            if stuck():
+                sys.stdout.flush()
+                sys.stderr.flush()
+                os._exit(exc.code if isinstance(exc.code, int) else 1)
+            raise
 
 
 @click.group(cls=CampipeGroup)

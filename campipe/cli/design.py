@@ -154,6 +154,7 @@ def _run(loaded, spec_path, path, fmt, overwrite, scheduler, workers) -> None:
         design_table,
         file_contents,
         shown_units,
+        bounds_reached,
         summary_lines,
         written_value,
     )
@@ -192,7 +193,12 @@ def _run(loaded, spec_path, path, fmt, overwrite, scheduler, workers) -> None:
     lines = summary_lines(result)
     for line in lines:
         click.echo(line, err=True)
-    if result.feasible and not result.front and result.best.binding.startswith(ONSET):
+    if (
+        result.feasible
+        and not result.front
+        and result.best.binding.startswith(ONSET)
+        and not bounds_reached(result)
+    ):
         sets = " ".join(f"--set {v.key}='{written_value(result.best.x[j], v.units, v.written)}'"
                         for j, v in enumerate(result.design.vary))  # fmt: skip
         level = next(r.level for r in result.design.require if r.key == ONSET)

@@ -42,6 +42,7 @@ from campipe import __version__
 from campipe.errors import CampipeError
 from campipe.io.compression import COMPRESSION, COMPRESSIONS
 from campipe.io.lock import ArchiveBusyError, lock_path, writing
+from campipe.io.watch import progress, watched
 
 __all__ = [
     "COMPRESSION",
@@ -569,6 +570,7 @@ def variable_digest(var) -> str:
     step = max(1, CHECKSUM_BLOCK // max(row, 1))
     for start in range(0, shape[0], step):
         h.update(_values_bytes(np.asarray(var[start : start + step])))
+        progress()
     return h.hexdigest()
 
 
@@ -582,6 +584,7 @@ def checksums(ds) -> dict[str, str]:
     return out
 
 
+@watched
 def verify(path: str | Path) -> list[str]:
     """Check a file against its stored checksums: ``[]`` if every variable and attribute is as
     written, else what differs (or why the file cannot be read). Reads the whole file."""
@@ -607,6 +610,7 @@ def verify(path: str | Path) -> list[str]:
     return [f"its checksums differ ({names}{more})"]
 
 
+@watched
 def damaged(
     path: str | Path,
     names: Iterable[str] | None = None,
@@ -686,12 +690,14 @@ def check(
     )
 
 
+@watched
 def read_attrs(path: str | Path) -> dict[str, object]:
 
     with LOCK, open_dataset(path) as ds:
         return {k: ds.getncattr(k) for k in ds.ncattrs()}
 
 
+@watched
 def read_index(
     path: str | Path, ids: str = "case"
 ) -> tuple[np.ndarray, np.ndarray, dict[str, object]]:
@@ -716,6 +722,7 @@ def read_index(
         raise ArchiveFileError(f"{path}: cannot read ({exc})", key=str(path)) from None
 
 
+@watched
 def read_variable(path: str | Path, name: str) -> np.ndarray:
     """One whole variable (an axis such as ``cam_angle``)."""
 
@@ -724,6 +731,7 @@ def read_variable(path: str | Path, name: str) -> np.ndarray:
         return np.asarray(ds.variables[name][:])
 
 
+@watched
 def read_rows(
     path: str | Path, rows: np.ndarray, case_names: Iterable[str], event_names: Iterable[str]
 ) -> dict[str, np.ndarray]:
@@ -751,6 +759,7 @@ def read_rows(
         local = rows - lo
         for name in case_names:
             out[name] = np.asarray(ds.variables[name][lo:hi])[local]
+            progress()
         counts = np.asarray(ds.variables["event_count"][:], dtype=np.int64)
         starts = np.concatenate([[0], np.cumsum(counts)])
         span = slice(int(starts[lo]), int(starts[hi]))

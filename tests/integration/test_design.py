@@ -584,3 +584,34 @@ def test_validate_says_what_the_design_section_asks():
     assert "max_seating_velocity ≤ 0.5 m/s at 5000 rpm" in two.output
     assert "minimize max_cam_force; a local search" in two.output
     assert "(tolerance" not in two.output
+
+
+def test_an_answer_at_a_bound_of_design_vary_names_the_bound_as_binding(tmp_path):
+    """The least preload whose onset is past 5000 rpm, searched from 150 lbf: the thesis's
+    151 lbf already reaches 9383 rpm (its frequency response, test_thesis), so the answer is
+    the search's lower bound and the requirement has 0.8 of its value to spare. The command
+    and the file's ``design_binding`` name the bound, not the onset, with the onset's margin
+    beside it. Broken copy (a fresh pair of eyes' run): "binding: onset_speed_rpm ≥ 5000 rpm
+    (relative margin 0.82)", which reads as the onset limiting the spring."""
+    path = spec(
+        tmp_path,
+        """
+  vary: {model.spring_preload: {from: 150 lbf, to: 250 lbf}}
+  require: {onset_speed_rpm: {min: 5000 rpm}}
+  minimize: model.spring_preload""",
+        "edge",
+    )
+    out = invoke("design", path)
+    assert out.exit_code == 0, out.output
+    assert (
+        "binding: design.vary.model.spring_preload's lower bound (150 lbf), not a requirement; "
+        "the least margin: onset_speed_rpm ≥ 5000 rpm (relative 0.8"
+    ) in out.output
+    assert "campipe onset" not in out.output  # the onset does not bind: no command for it
+    with xr.open_dataset(tmp_path / "edge-design.nc") as ds:
+        assert (
+            ds.attrs["design_binding"] == "design.vary.model.spring_preload's lower bound (150 lbf)"
+        )
+        chosen = int(np.flatnonzero(ds.chosen.values == "yes")[0])
+        assert_allclose(ds.spring_preload.values[chosen], 150 * LBF, rtol=1e-12)
+        assert ds.onset_speed_rpm.values[chosen] > 9000

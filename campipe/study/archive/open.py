@@ -19,6 +19,7 @@ import numpy as np
 
 from campipe.io.archive import ArchiveDamagedError, ArchiveFileError, check
 from campipe.io.parts import INDEX, PartsIndexError, part_checksum, read_index
+from campipe.io.watch import watched
 from campipe.study.archive.layout import LAYOUT_VERSION
 from campipe.units import (
     ENGINE_SPEED,
@@ -152,7 +153,6 @@ def open_archive(
         one would wait on it), a netCDF file campipe did not write, or a damaged archive
         (its subclass ArchiveDamagedError).
     """
-    import xarray as xr
 
     path = Path(path)
     if path.is_dir():
@@ -163,7 +163,7 @@ def open_archive(
         )
     if verify:
         check(path, layout=LAYOUT_VERSION, skip_dims=unread_dims)
-    ds = xr.open_dataset(path, **open_kwargs)
+    ds = _open_dataset(path, **open_kwargs)
     if "case" not in ds.variables and "campipe_layout" not in ds.attrs:
         ds.close()
         raise ArchiveFileError.at(
@@ -172,6 +172,15 @@ def open_archive(
             "attribute); campipe study writes one",
         )
     return ds
+
+
+@watched
+def _open_dataset(path: str | Path, **open_kwargs):
+    """:func:`xarray.open_dataset`, watched (:mod:`campipe.io.watch`): a damaged file whose
+    metadata sends HDF5 round a loop is given up, not waited on for ever."""
+    import xarray as xr
+
+    return xr.open_dataset(path, **open_kwargs)
 
 
 def open_parts(
@@ -187,14 +196,13 @@ def open_parts(
     campipe.io.parts.PartsIndexError
         If the folder holds no readable index (not a parts archive, or a run not finished).
     """
-    import xarray as xr
 
     path = Path(path)
     index = read_index(path)
     if verify:
         for p in index["parts"]:
             _check_part(path, p, unread_dims)
-    parts = [xr.open_dataset(path / str(p["file"]), **open_kwargs) for p in index["parts"]]
+    parts = [_open_dataset(path / str(p["file"]), **open_kwargs) for p in index["parts"]]
     try:
         ds = _combine(path, parts, [str(c) for c in index["case"]])
     except Exception:

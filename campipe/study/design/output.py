@@ -132,7 +132,7 @@ def file_contents(result: DesignResult, table: CaseTable) -> tuple[dict, list, d
         "study_name": result.study.name,
         "design_feasible": "yes" if result.feasible else "no",
         "design_method": result.method,
-        "design_binding": best.binding,
+        "design_binding": " and ".join(bounds_reached(result)) or best.binding,
         "design_objective": ", ".join(f"{s} {k}" for k, s in design.objectives),
         "design_objective_columns": json.dumps(objective_columns(result)),
         "study_axes": json.dumps(
@@ -142,6 +142,20 @@ def file_contents(result: DesignResult, table: CaseTable) -> tuple[dict, list, d
         "spec_overrides": json.dumps(spec.overrides, default=str),
     }
     return {"case": table.n}, variables, arrays, attrs
+
+
+def bounds_reached(result: DesignResult) -> list[str]:
+    """The varied keys the answer holds at a bound of ``design.vary`` (within the key's
+    tolerance), as "design.vary.KEY's lower bound (VALUE)": there the bound stops the search,
+    whatever margin the requirements have left."""
+    out = []
+    for j, v in enumerate(result.design.vary):
+        x = float(result.best.x[j])
+        for side, edge in (("lower", v.low), ("upper", v.high)):
+            if abs(x - edge) <= v.tolerance:
+                shown = written_value(edge, v.units, v.written)
+                out.append(f"design.vary.{v.key}'s {side} bound ({shown})")
+    return out
 
 
 def summary_lines(result: DesignResult) -> list[str]:
@@ -164,7 +178,13 @@ def summary_lines(result: DesignResult) -> list[str]:
                      f"from {span}")  # fmt: skip
     elif result.feasible:
         lines.append(f"{result.study.name}: {design.sense} {design.objective}: {values}")
-        if best.binding:
+        if edges := bounds_reached(result):
+            least = f"; the least margin: {best.binding} (relative {best.relative:.3g})"
+            lines.append(
+                f"binding: {' and '.join(edges)}, not a requirement"
+                f"{least if best.binding else ''}: widen design.vary to search past it"
+            )
+        elif best.binding:
             lines.append(f"binding: {best.binding} (relative margin {best.relative:.3g})")
     else:
         lines.append(

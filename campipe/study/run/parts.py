@@ -39,6 +39,7 @@ from campipe.io.parts import (
     read_index,
     write_index,
 )
+from campipe.io.watch import watched
 from campipe.study.archive.layout import LAYOUT_VERSION
 from campipe.study.run.assembly import Assembly, Layout
 from campipe.study.run.batches import Stored
@@ -227,6 +228,7 @@ def find_parts(study: Study, archive: Path, layout: PartLayout) -> tuple[Parts, 
     return out, notes
 
 
+@watched
 def _misfit(path: Path, layout: PartLayout) -> str | None:
     """Why a part's variables are not those of ``layout``'s parts (names, dimensions and
     their lengths, coordinates), or None if they are: only such parts read as one."""
@@ -246,6 +248,7 @@ def _misfit(path: Path, layout: PartLayout) -> str | None:
     return None
 
 
+@watched
 def _part_rows(path: Path) -> tuple[tuple[str, ...], tuple[int, ...], tuple[int, ...]]:
     """A part's case ids, event counts and statuses."""
     with LOCK, open_dataset(path) as ds:
@@ -332,6 +335,7 @@ def pack_inputs(archive: Path) -> list[tuple[Path, str]]:
     return [(p, f"a file of the parts archive {archive.name}") for p in files]
 
 
+@watched
 def _layout_of(part: Path, n_cases: int, attrs: dict, compression: str) -> Layout:
     """The single-file archive's layout, read from one of its parts: its dimensions (case the
     study's, event unlimited), variables and axes."""
