@@ -151,10 +151,10 @@ def _run(loaded, spec_path, path, fmt, overwrite, scheduler, workers) -> None:
     from campipe.io.outputs import check_output, describe_netcdf
     from campipe.study.design.output import (
         DESIGN_FILE,
+        bounds_reached,
         design_table,
         file_contents,
         shown_units,
-        bounds_reached,
         summary_lines,
         written_value,
     )

@@ -10,6 +10,7 @@ import click
 import numpy as np
 
 from campipe.cli.base import Failure, InputFailure, parse_overrides
+from campipe.cli.cam_shape import shape_report, shape_text
 from campipe.constants import INCH, LBF_IN, RPM, TWO_PI
 from campipe.model import (
     ELEMENTS,
@@ -94,7 +95,8 @@ REFINEMENTS = tuple(f"{member}_elements" for member in ELEMENTS)
     default="6 mm",
     show_default=True,
     metavar="QUANTITY",
-    help="The harmonic cam's lift under which a lever layout's kinematic ratio is tabulated.",
+    help="The harmonic cam's lift under which a lever layout's kinematic ratio is tabulated "
+    "and the cam's shape drawn (without --spec).",
 )
 @click.option(
     "--ratio-step",
@@ -155,12 +157,17 @@ def model(
         raise click.UsageError(str(exc)) from None
     table = ratio_table(train, sm, lift, math.radians(ratio_step), cam)
     contacts = contact_modes(train, sm)
+    shape = shape_report(
+        train,
+        cam if cam is not None else harmonic(lift) if lift > 0.0 else None,
+        f"the spec's cam, {cam.label}" if cam is not None else f"harmonic, lift {lift:g} m",
+    )
     if as_json:
         report = model_report(train, sm, limits, preset, drive)
-        click.echo(json.dumps({**report, **table, **contact_report(contacts)}, indent=1))
+        click.echo(json.dumps({**report, **table, **shape, **contact_report(contacts)}, indent=1))
     else:
         text = model_text(train, sm, limits, preset, overrides, drive) + ratio_text(table)
-        click.echo(text + contact_text(contacts))
+        click.echo(text + shape_text(shape) + contact_text(contacts))
 
 
 def spec_model(spec_path: str, sets: tuple[str, ...], overrides: dict, index: int):

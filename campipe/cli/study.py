@@ -387,6 +387,7 @@ def validate_text(loaded, spec_path) -> str:
     from campipe.constants import RPM
     from campipe.study.spec.coordinates import coordinate_values
     from campipe.study.spec.resolve import (
+        cam_note,
         distinct_but_speed,
         per_turn_note,
         ramp_note,
@@ -451,6 +452,9 @@ def validate_text(loaded, spec_path) -> str:
     for note in (spring_note(loaded.cases), travel_note(loaded.cases, loaded.record)):
         if note:
             lines.append(f"spring: {note}")
+    note = cam_note(loaded.cases)
+    if note:
+        lines.append(f"cam: {note}")
     return "\n".join(lines)
 
 

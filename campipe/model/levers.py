@@ -76,10 +76,9 @@ LEVER_NEEDS = (
     "lever_stiffness",
     "stem_stiffness",
 )
-LEVER_KEYS = (
+LEVER_KEYS = (  # cam_base_radius is needed here and read by any layout (the cam's shape)
     "pivot_to_roller",
     "pivot_to_pallet",
-    "cam_base_radius",
     "lever_rest_angle",
     "cam_offset",
     "lever_inertia",
@@ -111,7 +110,17 @@ def lever_parameters() -> list[Parameter]:
     return [
         _key("pivot_to_roller", "pivot's centre to the roller's centre", "m", "mm"),
         _key("pivot_to_pallet", "pivot's centre to the pallet's centre of curvature", "m", "mm"),
-        _key("cam_base_radius", "cam's base-circle radius", "m", "mm"),
+        Parameter(
+            "cam_base_radius",
+            "cam's base-circle radius (layouts finger-follower and centre-pivot-rocker need "
+            "it; on any layout it gives the cam's shape: campipe model's radius of curvature, "
+            "and a note where no cam makes the lift, undercut)",
+            "m",
+            "mm",
+            0.0,
+            default="none",
+            allow_none=True,
+        ),
         _key(
             "lever_rest_angle",
             "pallet arm's angle above the horizontal at rest (valve closed)",

@@ -283,6 +283,59 @@ def travel_note(cases: Sequence[ResolvedCase], record: Sequence[str]) -> str | N
     )
 
 
+def cam_note(cases: Sequence[ResolvedCase]) -> str | None:
+    """A note on the cases whose cam, given its base circle (``model.cam_base_radius``), is
+    undercut: no cam makes its lift under their follower (:mod:`campipe.profiles.curvature`);
+    the first such cam, where and how. None where there are none."""
+    combinations, _ = distinct_but_speed(cases)
+    seen: dict[tuple, str | None] = {}
+    found = []
+    for c in combinations:
+        train, profile = c.case.train, c.case.profile
+        cam = getattr(profile, "cam", None) or profile  # a lever's excitation keeps its cam
+        if not train.cam_base_radius > 0.0:  # NaN: not given
+            continue
+        key = (cam.breaks.tobytes(), cam.poly.tobytes(), cam.trig.tobytes(),
+               train.cam_base_radius, train.cam_roller_radius)  # fmt: skip
+        if key not in seen:
+            seen[key] = undercut_text(cam, train.cam_base_radius, train.cam_roller_radius)
+        if seen[key] is not None:
+            found.append(seen[key])
+    if not found:
+        return None
+    more = f" ({len(found) - 1} more cases' cams too)" if len(found) > 1 else ""
+    return f"{found[0]}{more}"
+
+
+def undercut_text(cam, base_radius: float, roller_radius: float) -> str | None:
+    """What an undercut cam (:func:`campipe.profiles.curvature.cam_shape`) is, in words, or
+    None where a cam makes the lift."""
+    from campipe.profiles.curvature import cam_shape
+
+    shape = cam_shape(cam, base_radius, roller_radius)
+    start = shape.first_undercut
+    if start is None:
+        return None
+    least, at = shape.least
+    if roller_radius > 0.0:
+        how = (
+            f"its pitch curve turns sharper than the roller ({roller_radius * 1e3:.4g} mm, "
+            f"cam_roller_radius) from {math.degrees(start):.1f}°, the cam's radius of "
+            f"curvature falling to {least * 1e3:.4g} mm at {math.degrees(at):.1f}°"
+        )
+    else:
+        how = (
+            f"under a flat face its radius of curvature (base radius + lift + d²lift/dθ²) is "
+            f"negative from {math.degrees(start):.1f}°, least {least * 1e3:.4g} mm at "
+            f"{math.degrees(at):.1f}°"
+        )
+    return (
+        f"the cam {cam.label} is undercut on a {base_radius * 1e3:.4g} mm base circle "
+        f"(cam_base_radius): {how}; no cam makes this lift: give a larger cam_base_radius or "
+        "a longer rise (the run computes the lift as given)"
+    )
+
+
 def _landing_excess(case: Case, ramp: float) -> float:
     """For a case whose seat is above the opening ramp's top at the valve (``ramp`` [rad]
     long, from 0), the cam's velocity where its lift at the valve first crosses the seat,
