@@ -10,7 +10,7 @@ import click
 import numpy as np
 
 from campipe.cli.base import Failure, InputFailure, parse_overrides
-from campipe.cli.cam_shape import shape_report, shape_text
+from campipe.cli.model_cam import ratio_table, ratio_text, shape_report, shape_text
 from campipe.constants import INCH, LBF_IN, RPM, TWO_PI
 from campipe.model import (
     ELEMENTS,
@@ -19,7 +19,6 @@ from campipe.model import (
     Coordinate,
     ModelParameterError,
     coordinates,
-    lash_ratio,
     modal_damping_ratios,
     system_matrices,
     to_display_units,
@@ -38,8 +37,7 @@ from campipe.model.contact_modes import ContactMode, contact_modes
 from campipe.model.hla import adjuster, hla_series, on_pivot, seated_stiffness
 from campipe.model.layouts import mirror, own_matrices, used_coordinates
 from campipe.model.levers import LEVERS, pivot_gain
-from campipe.profiles import evaluate, harmonic
-from campipe.profiles.levers import cam_kinematics
+from campipe.profiles import harmonic
 from campipe.units import QuantityError, convert, parse_quantity, pint_without_dask
 from campipe.vocabulary import CONFIGURATIONS, ROMAN, free_coordinates
 
@@ -131,8 +129,9 @@ def model(
     if spec_path is None and case_index:
         raise click.UsageError("--case chooses a case of --spec SPEC: give the spec")
     cam = drive = None
+    metric = False  # the thesis's train in the thesis's units, unless its spec writes mm
     if spec_path is not None:
-        train, preset, cam, drive = spec_model(spec_path, sets, overrides, case_index)
+        train, preset, cam, drive, metric = spec_model(spec_path, sets, overrides, case_index)
     else:
         try:
             train = valve_train(preset, overrides)
@@ -166,17 +165,20 @@ def model(
         report = model_report(train, sm, limits, preset, drive)
         click.echo(json.dumps({**report, **table, **shape, **contact_report(contacts)}, indent=1))
     else:
-        text = model_text(train, sm, limits, preset, overrides, drive) + ratio_text(table)
+        text = model_text(train, sm, limits, preset, overrides, drive, metric)
+        text += ratio_text(table)
         click.echo(text + shape_text(shape) + contact_text(contacts))
 
 
 def spec_model(spec_path: str, sets: tuple[str, ...], overrides: dict, index: int):
     """The train of a study spec's case ``index`` (each of ``sets``, NAME=VALUE, set as the
-    spec's ``model.NAME``; ``overrides`` the same parsed), the name it is shown under and its
-    cam; where the spec varies model keys, a line on stderr gives the case's values."""
+    spec's ``model.NAME``; ``overrides`` the same parsed), the name it is shown under, its
+    cam, its drive, and whether to show it in metric units (a spec written in mm); where the
+    spec varies model keys, a line on stderr gives the case's values."""
     from pathlib import Path
 
     from campipe.cli.base import load_spec
+    from campipe.study.query.display import spec_system, written_units
 
     study = load_spec(spec_path, tuple(f"model.{s.strip()}" for s in sets))
     name = Path(spec_path).name
@@ -192,8 +194,9 @@ def spec_model(spec_path: str, sets: tuple[str, ...], overrides: dict, index: in
         raise click.BadParameter(f"{name} has cases 0 … {n - 1}", param_hint="--case")
     case = study.cases[index]
     train = case.case.train
+    written = written_units({"spec": study.spec.text, "spec_overrides": json.dumps(overrides)})
+    metric = train.layout != PUSHROD_ROCKER or spec_system(written) == "mm"
     if varied:
-        metric = train.layout != PUSHROD_ROCKER
         keys = [k.removeprefix("model.") for k in varied]
         shown = ", ".join(
             f"{k} {_parameter_text(PARAMETERS[k], case.values['model.' + k], metric)}" for k in keys
@@ -204,7 +207,8 @@ def spec_model(spec_path: str, sets: tuple[str, ...], overrides: dict, index: in
             err=True,
         )
     cam = case.case.profile
-    return train, f"{name} (case {index})", getattr(cam, "cam", None) or cam, study.spec.drive
+    cam = getattr(cam, "cam", None) or cam  # a lever's excitation keeps its cam
+    return train, f"{name} (case {index})", cam, study.spec.drive, metric
 
 
 def _json_value(value: object) -> object:
@@ -409,52 +413,6 @@ for _chain in (DIRECT_ACTING, *LEVERS):
     DISPLAY[_chain] = DISPLAY[LUMPED]
 
 
-def ratio_table(train, sm, lift: float, step: float, cam=None) -> dict[str, object]:
-    """The kinematic ratio over the cam turn (SI, JSON form): a lever layout's, valve lift and
-    lever ratio every ``step`` [rad] under the ``cam`` profile (a spec's), or else the harmonic
-    cam of ``lift`` [m] (:mod:`campipe.model.levers`); another layout's, one constant (the
-    thesis's rocker's ``lash_ratio``, a chain's 1: its coordinates are the valve side's)."""
-    if train.layout not in LEVERS:
-        ratio = lash_ratio(sm) if train.layout == PUSHROD_ROCKER else 1.0
-        return {"kinematic_ratio": {"constant": ratio}}
-    label = f"the spec's cam, {cam.label}" if cam is not None else f"harmonic, lift {lift:g} m"
-    if cam is None:
-        if not lift > 0.0:
-            raise click.UsageError(f"--cam-lift: found {lift!r} m, expected a positive lift")
-        cam = harmonic(lift)
-    theta = np.arange(0.0, TWO_PI - 1e-12, step)
-    state = cam_kinematics(cam, train, theta)
-    return {
-        "kinematic_ratio": {
-            "cam": label,
-            "cam_angle": theta.tolist(),
-            "cam_lift": evaluate(cam, theta)[0].tolist(),
-            "valve_lift": state.valve_lift.tolist(),
-            "ratio": state.ratio.tolist(),
-            "units": {"cam_angle": "rad", "cam_lift": "m", "valve_lift": "m", "ratio": "1"},
-        }
-    }
-
-
-def ratio_text(table: dict) -> str:
-    """The human form of :func:`ratio_table`."""
-    k = table["kinematic_ratio"]
-    if "constant" in k:
-        return f"\n\nKinematic ratio (valve travel per cam travel): {k['constant']:.6g}, constant"
-    lines = [
-        "",
-        "",
-        f"Kinematic ratio over the cam turn ({k['cam']}): the lever ratio is the valve's "
-        "travel per unit of the roller's along the contact normal (the cam force per valve-side "
-        "force)",
-        f"  {'cam deg':>8} {'cam lift mm':>12} {'valve lift mm':>14} {'ratio':>9}",
-    ]
-    for row in zip(k["cam_angle"], k["cam_lift"], k["valve_lift"], k["ratio"], strict=True):
-        a, h, v, r = row
-        lines.append(f"  {math.degrees(a):8.1f} {h * 1e3:12.4f} {v * 1e3:14.4f} {r:9.4f}")
-    return "\n".join(lines)
-
-
 def contact_report(contacts: list[ContactMode]) -> dict[str, object]:
     """The compliant contacts linearised at their static loads (JSON form, SI;
     :mod:`campipe.model.contact_modes`); none for rigid contacts."""
@@ -544,16 +502,19 @@ def _source(preset: str) -> str:
     return f"preset {preset}" if preset in PRESETS else f"spec {preset}"
 
 
-def model_text(train, sm, limits, preset, overrides, drive: float | None = None) -> str:
+def model_text(
+    train, sm, limits, preset, overrides, drive: float | None = None, metric: bool = False
+) -> str:
     """The human form of ``campipe model``, in the thesis's units and layout (a lumped
-    chain's in SI)."""
+    chain's in SI); its parameters in the trade's metric units for a layout beyond the
+    thesis's or where ``metric``."""
     lines = [
         f"campipe model: {_source(preset)}, layout {train.layout}"
         + (f", overrides {', '.join(overrides)}" if overrides else "")
     ]
     sm, coords, names = _shown(train, sm)
     lines.append("")
-    metric = train.layout != PUSHROD_ROCKER
+    metric = metric or train.layout != PUSHROD_ROCKER
     lines.append("Parameters (metric units)" if metric else "Parameters (thesis units)")
     for name in names:
         text = _parameter_text(PARAMETERS[name], getattr(train, name), metric)

@@ -2,6 +2,7 @@
 
 import json
 import math
+import re
 import subprocess
 from pathlib import Path
 
@@ -462,3 +463,24 @@ def test_stability_limits_of_a_chain_leave_its_placeholders_out():
     high = np.sqrt((-b + np.sqrt(b * b - 4 * a * c)) / (2 * a))
     line = next(x for x in two.output.splitlines() if x.strip().startswith("II "))
     assert float(line.split()[1]) == pytest.approx(np.sqrt(12) / high * 1e6, abs=1e-4)
+
+
+def test_a_spec_written_in_mm_shows_the_thesis_s_train_in_metric_units(tmp_path):
+    """``campipe model --spec`` of the thesis's preset written in N and mm lists its
+    parameters in the trade's metric units (the pushrod's 9 in as 228.6 mm, the preload as
+    given, 600 N); written in inches and pounds, in the thesis's. A helper's spec in N and mm
+    was shown in lbf and in."""
+    body = "model: {preset: thesis-1971, spring_preload: %s}\nprofile: {kind: harmonic, lift: %s}\n"
+    metric = tmp_path / "metric.yaml"
+    metric.write_text("name: metric\n" + body % ("600 N", "7 mm") + "speed: 3000 rpm\n")
+    out = CliRunner().invoke(main, ["model", "--spec", str(metric)])
+    assert out.exit_code == 0, out.output
+    assert "Parameters (metric units)" in out.output
+    assert re.search(r"pushrod_length +228\.6 mm", out.output)
+    assert re.search(r"spring_preload +600 N", out.output)
+    thesis = tmp_path / "thesis.yaml"
+    thesis.write_text("name: thesis\n" + body % ("151 lbf", "1 in") + "speed: 3000 rpm\n")
+    out = CliRunner().invoke(main, ["model", "--spec", str(thesis)])
+    assert out.exit_code == 0, out.output
+    assert "Parameters (thesis units)" in out.output
+    assert re.search(r"pushrod_length +9 in", out.output)

@@ -1,15 +1,21 @@
-"""``campipe model``'s cam shape: the cam's radius of curvature over the turn from its base
-circle (``cam_base_radius``), and where no cam makes the lift (undercut), from
-:func:`campipe.profiles.curvature.cam_shape`."""
+"""``campipe model``'s reports over the cam turn: a lever layout's kinematic ratio, and the
+cam's shape from its base circle (``cam_base_radius``: its radius of curvature, and where no
+cam makes the lift, undercut, from :func:`campipe.profiles.curvature.cam_shape`)."""
 
 from __future__ import annotations
 
 import math
 
+import click
 import numpy as np
 
+from campipe.constants import TWO_PI
+from campipe.model import lash_ratio
+from campipe.model.checks import PUSHROD_ROCKER
 from campipe.model.levers import LEVERS
+from campipe.profiles import evaluate, harmonic
 from campipe.profiles.curvature import cam_shape
+from campipe.profiles.levers import cam_kinematics
 
 
 def shape_report(train, cam, label: str) -> dict[str, object]:
@@ -72,4 +78,50 @@ def shape_text(report: dict[str, object]) -> str:
             f"  UNDERCUT from {math.degrees(s['undercut_from']):.1f}°: no cam makes this lift "
             "under this follower; give a larger cam_base_radius or a longer rise"
         )
+    return "\n".join(lines)
+
+
+def ratio_table(train, sm, lift: float, step: float, cam=None) -> dict[str, object]:
+    """The kinematic ratio over the cam turn (SI, JSON form): a lever layout's, valve lift and
+    lever ratio every ``step`` [rad] under the ``cam`` profile (a spec's), or else the harmonic
+    cam of ``lift`` [m] (:mod:`campipe.model.levers`); another layout's, one constant (the
+    thesis's rocker's ``lash_ratio``, a chain's 1: its coordinates are the valve side's)."""
+    if train.layout not in LEVERS:
+        ratio = lash_ratio(sm) if train.layout == PUSHROD_ROCKER else 1.0
+        return {"kinematic_ratio": {"constant": ratio}}
+    label = f"the spec's cam, {cam.label}" if cam is not None else f"harmonic, lift {lift:g} m"
+    if cam is None:
+        if not lift > 0.0:
+            raise click.UsageError(f"--cam-lift: found {lift!r} m, expected a positive lift")
+        cam = harmonic(lift)
+    theta = np.arange(0.0, TWO_PI - 1e-12, step)
+    state = cam_kinematics(cam, train, theta)
+    return {
+        "kinematic_ratio": {
+            "cam": label,
+            "cam_angle": theta.tolist(),
+            "cam_lift": evaluate(cam, theta)[0].tolist(),
+            "valve_lift": state.valve_lift.tolist(),
+            "ratio": state.ratio.tolist(),
+            "units": {"cam_angle": "rad", "cam_lift": "m", "valve_lift": "m", "ratio": "1"},
+        }
+    }
+
+
+def ratio_text(table: dict) -> str:
+    """The human form of :func:`ratio_table`."""
+    k = table["kinematic_ratio"]
+    if "constant" in k:
+        return f"\n\nKinematic ratio (valve travel per cam travel): {k['constant']:.6g}, constant"
+    lines = [
+        "",
+        "",
+        f"Kinematic ratio over the cam turn ({k['cam']}): the lever ratio is the valve's "
+        "travel per unit of the roller's along the contact normal (the cam force per valve-side "
+        "force)",
+        f"  {'cam deg':>8} {'cam lift mm':>12} {'valve lift mm':>14} {'ratio':>9}",
+    ]
+    for row in zip(k["cam_angle"], k["cam_lift"], k["valve_lift"], k["ratio"], strict=True):
+        a, h, v, r = row
+        lines.append(f"  {math.degrees(a):8.1f} {h * 1e3:12.4f} {v * 1e3:14.4f} {r:9.4f}")
     return "\n".join(lines)
