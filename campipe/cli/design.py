@@ -77,14 +77,15 @@ def drive_note(ratio: float, design) -> str:
     bounds = [
         f"{ONSET} {sign} {value:g} rpm is the engine's {value / ratio:g} rpm"
         for r in design.require
-        if r.key == ONSET
+        if r.key == ONSET and math.isnan(r.engine)
         for sign, value in (("≥", r.minimum), ("≤", r.maximum))
         if not math.isnan(value)
     ]
     example = "; ".join(bounds) or f"the engine's 7000 rpm is the cam's {7000 * ratio:g} rpm"
     return (
         f"with drive (cam_per_crank {ratio:g}), design's speeds (the onset's bounds, each "
-        f"metric's at:) are the cam's, as {ONSET}'s: {example}"
+        f"metric's at:) are the cam's, as {ONSET}'s: {example} (onset_engine_speed_rpm and "
+        "at_engine take the engine's)"
     )
 
 
@@ -159,7 +160,7 @@ def _run(loaded, spec_path, path, fmt, overwrite, scheduler, workers) -> None:
         written_value,
     )
     from campipe.study.query.tables import displayed, format_rows
-    from campipe.study.spec.design import ONSET
+    from campipe.study.spec.design import ENGINE_ONSET, ONSET
 
     spec_file = os.path.relpath(Path(spec_path).resolve(), Path(path).parent.resolve())
     kind = _kind(loaded.name, spec_file)
@@ -196,7 +197,7 @@ def _run(loaded, spec_path, path, fmt, overwrite, scheduler, workers) -> None:
     if (
         result.feasible
         and not result.front
-        and result.best.binding.startswith(ONSET)
+        and result.best.binding.startswith((ONSET, ENGINE_ONSET))
         and not bounds_reached(result)
     ):
         sets = " ".join(f"--set {v.key}='{written_value(result.best.x[j], v.units, v.written)}'"

@@ -615,3 +615,69 @@ def test_an_answer_at_a_bound_of_design_vary_names_the_bound_as_binding(tmp_path
         chosen = int(np.flatnonzero(ds.chosen.values == "yes")[0])
         assert_allclose(ds.spring_preload.values[chosen], 150 * LBF, rtol=1e-12)
         assert ds.onset_speed_rpm.values[chosen] > 9000
+
+
+DRIVEN = """
+name: {name}
+model: {{preset: thesis-1971}}
+profile: {{kind: harmonic, lift: 1 in}}
+seat: none
+drive: {{cam_per_crank: 0.5}}
+run: {{revolutions: 2, fidelity: steady, output_every: 1 deg}}
+sweep:
+  engine_speed: {{from: 6000 rpm, to: 40000 rpm, num: 2}}
+design:
+  vary: {{model.spring_preload: {{from: 80 lbf, to: 250 lbf}}}}
+  require:
+{require}
+  minimize: model.spring_preload
+"""
+
+
+def test_a_spec_with_a_drive_requires_the_onset_and_runs_metrics_at_the_engine_s_speed(tmp_path):
+    """``onset_engine_speed_rpm: {min: 19000 rpm}`` and ``at_engine: 16000 rpm`` with
+    cam_per_crank 0.5 give the design the cam's spelling gives (onset ≥ 9500 rpm, at 8000
+    rpm): the same preload, the metric's column at the cam's 8000 rpm, the binding bound in
+    the engine's words. Without a drive, and with both spellings of the onset, each is
+    refused at its key. Broken copy (before): onset_engine_speed_rpm was an unknown key, and a
+    designer's engine speed written as the onset's bound was read as the cam's."""
+    engine = write_spec(tmp_path, DRIVEN.format(name="engine", require=(
+        "    onset_engine_speed_rpm: {min: 19000 rpm}\n"
+        "    max_cam_force: {max: 5000 lbf, at_engine: 16000 rpm}")), "engine.yaml")  # fmt: skip
+    cam = write_spec(tmp_path, DRIVEN.format(name="cam", require=(
+        "    onset_speed_rpm: {min: 9500 rpm}\n"
+        "    max_cam_force: {max: 5000 lbf, at: 8000 rpm}")), "cam.yaml")  # fmt: skip
+    by_engine = invoke("design", engine)
+    by_cam = invoke("design", cam)
+    assert by_engine.exit_code == 0 and by_cam.exit_code == 0, by_engine.output + by_cam.output
+    assert "binding: onset_engine_speed_rpm ≥ 19000 rpm (relative margin" in by_engine.output
+    assert "binding: onset_speed_rpm ≥ 9500 rpm (relative margin" in by_cam.output
+    with (
+        xr.open_dataset(tmp_path / "engine-design.nc") as e,
+        xr.open_dataset(tmp_path / "cam-design.nc") as c,
+    ):
+        assert "max_cam_force_at_8000rpm" in e.variables
+        pick = [int(np.flatnonzero(d.chosen.values == "yes")[0]) for d in (e, c)]
+        assert_allclose(e.spring_preload.values[pick[0]], c.spring_preload.values[pick[1]])
+        assert 9500 <= e.onset_speed_rpm.values[pick[0]] < 9500.5
+    undriven = (
+        engine.read_text()
+        .replace("drive: {cam_per_crank: 0.5}\n", "")
+        .replace("engine_speed:", "speed:")
+    )
+    (tmp_path / "undriven.yaml").write_text(undriven)
+    out = invoke("validate", tmp_path / "undriven.yaml")
+    assert out.exit_code == 2
+    assert "design.require.onset_engine_speed_rpm: the onset at the engine's speed needs a" in (
+        out.output
+    )
+    assert "design.require.max_cam_force.at_engine: speeds at the engine's need a drive" in (
+        out.output
+    )
+    both = engine.read_text().replace(
+        "    onset_engine_speed_rpm:",
+        "    onset_speed_rpm: {min: 9000 rpm}\n    onset_engine_speed_rpm:",
+    )
+    (tmp_path / "both.yaml").write_text(both)
+    out = invoke("validate", tmp_path / "both.yaml")
+    assert out.exit_code == 2 and "found onset_speed_rpm as well" in out.output

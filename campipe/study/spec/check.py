@@ -298,7 +298,7 @@ def check_spec(
     replay = check_replay(raw["replay"], problems) if "replay" in raw else None
     plots = check_plot_list(raw["plots"], problems) if "plots" in raw else []
     search = check_search(raw["search"], problems) if "search" in raw else None
-    design = check_design(raw["design"], problems) if "design" in raw else None
+    design = check_design(raw["design"], problems, drive) if "design" in raw else None
     spec = Spec(
         name=name if isinstance(name, str) else "",
         description=str(description),

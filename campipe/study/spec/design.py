@@ -36,6 +36,9 @@ from campipe.units import QuantityError, convert, parse_quantity, written_units
 
 #: The requirement on the no-follow onset (``campipe onset``'s column, the value in rpm).
 ONSET = "onset_speed_rpm"
+#: The onset at the engine's speed: a requirement or objective of a spec with a drive, read
+#: as the cam's onset (:data:`ONSET`) at the engine's speed times cam_per_crank.
+ENGINE_ONSET = "onset_engine_speed_rpm"
 #: The keys of ``design`` and what they hold.
 DESIGN_KEYS: dict[str, str] = {
     "vary": "keys to vary and their bounds: {<key>: {from, to, tolerance}} (tolerance: the "
@@ -83,6 +86,9 @@ class Requirement:
     #: the onset's level [rad of no-follow a turn, with a seat] (``campipe onset --level``);
     #: NaN: its default
     level: float = math.nan
+    #: the drive's cam_per_crank where the spec wrote the bounds or the speeds at the
+    #: engine's speed (``onset_engine_speed_rpm``, ``at_engine``); NaN: the cam's
+    engine: float = math.nan
 
     @property
     def bounded(self) -> bool:
@@ -93,9 +99,12 @@ def bound_label(r: Requirement, side: str) -> str:
     """One bound in words, in the units it was written in: ``onset_speed_rpm ≥ 9500 rpm``."""
     sign, value = ("≥", r.minimum) if side == "min" else ("≤", r.maximum)
     units = r.units
+    key = r.key
+    if r.key == ONSET and not math.isnan(r.engine):
+        key, value = ENGINE_ONSET, value / r.engine
     if r.written and units and r.written != units:
         value, units = convert(value, units, r.written), r.written
-    return f"{r.key} {sign} {value:.6g}{' ' + units if units else ''}"
+    return f"{key} {sign} {value:.6g}{' ' + units if units else ''}"
 
 
 def section_text(design: Design) -> list[str]:
@@ -179,8 +188,9 @@ def metric_units() -> dict[str, str]:
     return {m.summary: m.units or "" for m in archived_metrics()}
 
 
-def check_design(value: object, problems: Problems) -> Design | None:
-    """``design:`` → a :class:`Design`, or None with its problems added."""
+def check_design(value: object, problems: Problems, drive: float | None = None) -> Design | None:
+    """``design:`` → a :class:`Design`, or None with its problems added; ``drive`` the spec's
+    cam_per_crank (its speeds at the engine's then read too)."""
     block = problems.check(as_mapping, value, "design", "{vary, require, minimize | maximize}")
     if block is None:
         return None
@@ -189,8 +199,8 @@ def check_design(value: object, problems: Problems) -> Design | None:
         if k not in DESIGN_KEYS:
             problems.items.append(unknown_key("design", str(k), DESIGN_KEYS))
     vary = _vary(block.get("vary"), problems)
-    require = _require(block.get("require"), problems)
-    objectives = _objectives(block, vary, require, problems)
+    require = _require(block.get("require"), problems, drive)
+    objectives = _objectives(block, vary, require, problems, drive)
     method = block.get("method", "local")
     if method not in METHODS:
         problems.add(
@@ -305,7 +315,9 @@ def _quantity(value: object, units: str, path: str, problems: Problems) -> float
     return v
 
 
-def _require(value: object, problems: Problems) -> tuple[Requirement, ...] | None:
+def _require(
+    value: object, problems: Problems, drive: float | None = None
+) -> tuple[Requirement, ...] | None:
     block = _block(
         value,
         "design.require",
@@ -317,24 +329,32 @@ def _require(value: object, problems: Problems) -> tuple[Requirement, ...] | Non
     if block is None:
         return None
     units = metric_units()
-    names = (ONSET, *units)
+    names = (ONSET, ENGINE_ONSET, *units)
     out = []
     for key, entry in block.items():
         path = f"design.require.{key}"
         if key not in names:
             problems.items.append(unknown_key("design.require", str(key), names))
             continue
-        got = _requirement(str(key), entry, units.get(key, ""), path, problems)
+        if key == ENGINE_ONSET and ONSET in block:
+            problems.add(path, f"found {ONSET} as well: require the onset once, at the cam's "
+                         "speed or at the engine's")  # fmt: skip
+            continue
+        if key == ENGINE_ONSET and drive is None:
+            problems.add(path, f"the onset at the engine's speed needs a drive (drive: "
+                         f"{{cam_per_crank: 0.5}}); without one, require {ONSET}")  # fmt: skip
+            continue
+        got = _requirement(str(key), entry, units.get(key, ""), path, problems, drive)
         if got is not None:
             out.append(got)
     return tuple(out) if len(out) == len(block) else None
 
 
 def _requirement(
-    key: str, value: object, units: str, path: str, problems: Problems
+    key: str, value: object, units: str, path: str, problems: Problems, drive: float | None
 ) -> Requirement | None:
-    onset = key == ONSET
-    allowed = ("min", "max", "level") if onset else ("min", "max", "at")
+    onset = key in (ONSET, ENGINE_ONSET)
+    allowed = ("min", "max", "level") if onset else ("min", "max", "at", "at_engine")
     entry = problems.check(as_mapping, value, path, "{" + ", ".join(allowed) + "}")
     if entry is None:
         return None
@@ -353,7 +373,19 @@ def _requirement(
     if bounds["min"] > bounds["max"]:
         problems.add(path, f"found min {show(entry['min'])} above max {show(entry['max'])}")
     speeds: tuple[float, ...] = ()
-    if not onset:
+    engine = drive if key == ENGINE_ONSET else math.nan
+    if not onset and "at_engine" in entry:
+        if drive is None:
+            problems.add(f"{path}.at_engine", "speeds at the engine's need a drive (drive: "
+                         "{cam_per_crank: 0.5}); without one, give the cam's with at")  # fmt: skip
+        elif "at" in entry:
+            problems.add(path, "found at and at_engine: give the speeds once, the cam's (at) "
+                         "or the engine's (at_engine)")  # fmt: skip
+        else:
+            engine = drive
+            speeds = tuple(v * drive for v in _speeds(entry["at_engine"], f"{path}.at_engine",
+                                                      problems))  # fmt: skip
+    elif not onset:
         speeds = _speeds(entry.get("at"), f"{path}.at", problems)
     level = math.nan
     if "level" in entry:
@@ -364,8 +396,11 @@ def _requirement(
     if len(problems.items) > before:
         return None
     written = written_units(entry.get("min")) or written_units(entry.get("max"))
+    if key == ENGINE_ONSET:  # the cam's onset, its bounds at the cam's speed
+        key = ONSET
+        bounds = {k: v * engine for k, v in bounds.items()}
     return Requirement(key, bounds["min"], bounds["max"], "rpm" if onset else units, speeds,
-                       written, level)  # fmt: skip
+                       written, level, engine)  # fmt: skip
 
 
 def _speeds(value: object, path: str, problems: Problems) -> tuple[float, ...]:
@@ -386,9 +421,10 @@ def _objectives(
     vary: tuple[Vary, ...] | None,
     require: tuple[Requirement, ...] | None,
     problems: Problems,
+    drive: float | None = None,
 ) -> tuple[tuple[str, str], ...]:
     given = [
-        (sense, key)
+        (sense, ONSET if key == ENGINE_ONSET and drive is not None else key)
         for sense in ("minimize", "maximize")
         if sense in block
         for key in (block[sense] if isinstance(block[sense], list) else [block[sense]])

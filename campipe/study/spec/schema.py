@@ -16,7 +16,7 @@ import json
 from campipe.model import PARAMETERS
 from campipe.model.schema import QUANTITY_PATTERN, model_schema, parameter_schema
 from campipe.study.spec.check import NAME_PATTERN
-from campipe.study.spec.design import DESIGN_KEYS, METHODS, ONSET, metric_units
+from campipe.study.spec.design import DESIGN_KEYS, ENGINE_ONSET, METHODS, ONSET, metric_units
 from campipe.study.spec.drive import DRIVE_FIELDS
 from campipe.study.spec.fields import (
     CASE_FIELDS,
@@ -267,19 +267,21 @@ def _design() -> dict[str, object]:
     bounded = {"min": {"$ref": "#/$defs/quantity"}, "max": {"$ref": "#/$defs/quantity"}}
     speeds = {"oneOf": [{"$ref": "#/$defs/quantity"}, {"type": "array", "minItems": 1,
               "items": {"$ref": "#/$defs/quantity"}}]}  # fmt: skip
+    onset = {
+        "type": "object",
+        "properties": {**bounded, "level": {"$ref": "#/$defs/quantity"}},
+        "minProperties": 1,
+        "additionalProperties": False,
+    }
     require: dict[str, object] = {
-        ONSET: {
-            "type": "object",
-            "properties": {**bounded, "level": {"$ref": "#/$defs/quantity"}},
-            "minProperties": 1,
-            "additionalProperties": False,
-        },  # fmt: skip
+        ONSET: onset,
+        ENGINE_ONSET: {**onset, "description": "the onset at the engine's speed (a drive)"},
     }
     for name, units in metric_units().items():
         bound = {"$ref": "#/$defs/quantity"} if units else {"type": "number"}
-        props = {"min": bound, "max": bound, "at": speeds}
-        require[name] = {"type": "object", "properties": props, "required": ["at"],
-                         "additionalProperties": False}  # fmt: skip
+        props = {"min": bound, "max": bound, "at": speeds, "at_engine": speeds}
+        require[name] = {"type": "object", "properties": props, "additionalProperties": False,
+                         "oneOf": [{"required": ["at"]}, {"required": ["at_engine"]}]}  # fmt: skip
     one = {"type": "string", "minLength": 1}
     key = {"oneOf": [one, {"type": "array", "items": one, "minItems": 1, "maxItems": 2}]}
     return {
