@@ -37,14 +37,12 @@ def shape_report(train, cam, label: str) -> dict[str, object]:
     }
     units = {"base_radius": "m", "roller_radius": "m", "least_radius_of_curvature": "m",
              "least_at": "rad", "undercut_from": "rad"}  # fmt: skip
-    if roller > 0.0 and train.layout in LEVERS:
-        pass  # a lever's roller swings: its pressure angle is the lever's, not atan(r′/r)
-    elif roller > 0.0:
-        out["max_pressure_angle"] = float(np.abs(shape.pressure_angle).max())
-        units["max_pressure_angle"] = "rad"
-    else:
+    if roller == 0.0:
         out["max_contact_offset"] = float(np.abs(shape.offset).max())
         units["max_contact_offset"] = "m"
+    elif train.layout not in LEVERS:  # a lever's roller swings: its pressure angle is not this
+        out["max_pressure_angle"] = float(np.abs(shape.pressure_angle).max())
+        units["max_pressure_angle"] = "rad"
     return {"cam_shape": {**out, "units": units}}
 
 

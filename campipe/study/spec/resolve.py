@@ -299,11 +299,11 @@ def cam_note(cases: Sequence[ResolvedCase]) -> str | None:
                train.cam_base_radius, train.cam_roller_radius)  # fmt: skip
         if key not in seen:
             seen[key] = undercut_text(cam, train.cam_base_radius, train.cam_roller_radius)
-        if seen[key] is not None:
+        if seen[key] is not None and seen[key] not in found:
             found.append(seen[key])
     if not found:
         return None
-    more = f" ({len(found) - 1} more cases' cams too)" if len(found) > 1 else ""
+    more = f" ({len(found) - 1} more of the study's cams too)" if len(found) > 1 else ""
     return f"{found[0]}{more}"
 
 
