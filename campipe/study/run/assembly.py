@@ -70,6 +70,7 @@ def study_assembly(study: Study, archive: Path, found: Found, command: str, spec
         found,
         lambda: study_layout(study, command, spec),
         cam_angle_degrees(output_angles(study.cases[0].settings)),
+        np.array([c.case.train.spring_travel_to_solid for c in study.cases]),
     )
 
 
@@ -97,6 +98,7 @@ class Assembly:
         found: Found,
         layout: Callable[[], Layout],
         cam_angle: np.ndarray | None = None,
+        travel: np.ndarray | None = None,
     ):
         self.archive = archive
         self.found = found  # case id → (file, row, events); grows as batches are stored
@@ -105,6 +107,11 @@ class Assembly:
         self.cursor = 0  # cases written
         self.writer: NetCDFWriter | None = None
         self.statuses: dict[str, str] = {}  # case id → status name, cases not ok
+        #: each case's valve spring travel to solid [m], in study order (None: not checked)
+        self.travel = travel
+        #: case id → the highest valve lift [m] of a case that lifts past its spring's travel
+        #: to solid in its stored turns (the coils clash: the model has no stop there)
+        self.solid: dict[str, float] = {}
         self.block = CASE_CHUNK  # cases per write, set when the archive is created
         self.case_names: list[str] = []
         self.event_names: list[str] = []
@@ -315,4 +322,9 @@ class Assembly:
         for row in np.flatnonzero(block["status"] != OK).tolist():
             code = int(block["status"][row])
             self.statuses[self.ids[lo + row]] = STATUS.get(code, str(code))
+        if self.travel is not None and "valve_lift" in block:
+            lift = block["valve_lift"]
+            highest = np.where(np.isnan(lift), -np.inf, lift).max(axis=1)  # failed: -inf
+            for row in np.flatnonzero(highest > self.travel[lo:hi]).tolist():
+                self.solid[self.ids[lo + row]] = float(highest[row])
         self._release(by_file, hi)

@@ -37,9 +37,11 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from campipe.constants import RPM
 from campipe.engine.settings import sample_count
 from campipe.io.archive import write_error, writing
 from campipe.io.parts import index_path
+from campipe.model import valve_train
 from campipe.study.run.assembly import study_assembly
 from campipe.study.run.batches import (
     BatchHook,
@@ -192,7 +194,8 @@ def run_study(
         plans = _plan(study, missing, scheduler, workers, batch_size)
         run = _Run(scheduler, workers, on_batch, workers_store, notice, command)
         bar = progress(total, total - len(missing)) if progress else None
-        statuses, engine = _compute_and_assemble(study, archive, found, plans, run, bar)
+        statuses, engine, solid = _compute_and_assemble(study, archive, found, plans, run, bar)
+        notes += solid_note(study, solid)
         scratch = parts_directory(archive)
         if not keep_parts and scratch.is_dir():
             shutil.rmtree(scratch, ignore_errors=True)
@@ -368,7 +371,27 @@ def _compute_and_assemble(
         sink.finish()
     finally:
         sink.abort()
-    return sink.statuses, engine
+    return sink.statuses, engine, sink.solid
+
+
+def solid_note(study: Study, solid: dict[str, float]) -> list[str]:
+    """A note on the cases whose valve lifts past its spring's travel to solid
+    (``Assembly.solid``): the coils clash, and the model has no stop there."""
+    if not solid:
+        return []
+    by_id = {c.case_id: c for c in study.cases}
+    worst = max(solid, key=lambda cid: solid[cid] - by_id[cid].case.train.spring_travel_to_solid)
+    case = by_id[worst].case
+    travel = case.train.spring_travel_to_solid
+    assumed = travel == valve_train().spring_travel_to_solid
+    return [
+        f"the valve spring goes solid (coil bind) in {len(solid)} of {len(study.cases)} cases: "
+        f"case {worst} at {case.speed / RPM:.6g} cam rpm lifts its valve {solid[worst] * 1e3:.4g}"
+        f" mm, past the spring's {travel * 1e3:.4g} mm travel to solid "
+        f"(model.spring_travel_to_solid{', the default: the thesis gives none' if assumed else ''}"
+        "). The model has no stop at solid: past it their motion is not a real train's "
+        "(record: [spring] stores min_spring_clash_margin)"
+    ]
 
 
 def _run_parts(
