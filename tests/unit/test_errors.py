@@ -65,10 +65,20 @@ def campipe_exceptions() -> dict[str, type]:
     return found
 
 
+#: Not errors a caller handles but a stop, as KeyboardInterrupt is: a read left inside HDF5
+#: (``campipe.io.watch``) holds the library, so a handler that takes a damaged file as one to
+#: compute again (``except Exception``) must not catch it and go on to write netCDF. Checked
+#: below to stay outside Exception.
+STOPS = ("ReadStalled",)
+
+
 def test_every_campipe_exception_derives_from_campipe_error_and_its_builtin():
     classes = campipe_exceptions()
     assert set(BUILTINS) <= set(classes)
     for name, cls in classes.items():
+        if name in STOPS:
+            assert not issubclass(cls, Exception), name
+            continue
         assert issubclass(cls, CampipeError), name
         if name in BUILTINS:
             assert issubclass(cls, BUILTINS[name]), name
