@@ -388,6 +388,7 @@ def validate_text(loaded, spec_path) -> str:
     from campipe.study.spec.coordinates import coordinate_values
     from campipe.study.spec.resolve import (
         cam_note,
+        contact_note,
         distinct_but_speed,
         per_turn_note,
         ramp_note,
@@ -455,6 +456,9 @@ def validate_text(loaded, spec_path) -> str:
     note = cam_note(loaded.cases)
     if note:
         lines.append(f"cam: {note}")
+    note = contact_note(loaded.cases)
+    if note:
+        lines.append(f"contact: {note}")
     return "\n".join(lines)
 
 

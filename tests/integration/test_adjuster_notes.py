@@ -145,3 +145,24 @@ def test_a_chain_s_coil_clash_against_the_thesis_s_assumed_travel_is_noted(tmp_p
         ["validate", "--no-estimate", str(bucket), "--set", "run.record=[spring]"],
     )  # fmt: skip
     assert "spring: the coil-clash margin of layout direct-acting" in shown.output
+
+
+def test_a_contact_stiffness_far_beyond_a_valve_train_s_is_noted():
+    """The bundled compliant studies' contacts are within ten times the stiffest a valve
+    train's steel contact has ((π/2)·E*·w of a 100 mm line contact, 1.79e10 N/m, computed
+    here from the modulus; (4/3)·E*·√R' at R' = 1 m for Hertz), so none is noted; the
+    contact-stiffness study with a helper's 1e14 N/m is (a run of its turn took 92 s),
+    naming the key and the ratio. Fails on a copy without the note, or one that
+    notes the bundled studies."""
+    from campipe.study.spec.resolve import contact_note
+
+    for spec in sorted(STUDIES.glob("*.yaml")):
+        assert contact_note(load_study(spec).cases) is None, spec.name
+    pair = 30e6 * 4.4482216152605 / 0.0254**2 / (2 * (1 - 0.3**2))
+    line = math.pi / 2 * pair * 0.1
+    stiff = load_study(
+        STUDIES / "contact-stiffness.yaml", {"sweep.model.cam_contact_stiffness": ["1e14 N/m"]}
+    )
+    note = contact_note(stiff.cases)
+    assert note.startswith(f"model.cam_contact_stiffness 1e+14 N/m is {1e14 / line:.3g}×")
+    assert f"({line:.3g} N/m, from contact_modulus)" in note

@@ -79,6 +79,7 @@ from campipe.study.spec.expand import Study
 from campipe.study.spec.resolve import (
     ResolvedCase,
     cam_note,
+    contact_note,
     per_turn_note,
     ramp_note,
     spring_note,
@@ -245,13 +246,14 @@ def _case_notes(cases: list[ResolvedCase], record: tuple[str, ...]) -> list[str]
     """The per-turn model's note, the lash's beyond the ramps, a valve spring's odd
     deflection and its assumed travel to solid, an undercut cam, on the cases computed
     (``resolve.per_turn_note``, ``ramp_note``, ``spring_note``, ``travel_note``,
-    ``cam_note``)."""
+    ``cam_note``, ``contact_note``)."""
     notes = (
         per_turn_note(cases),
         ramp_note(cases),
         spring_note(cases),
         travel_note(cases, record),
         cam_note(cases),
+        contact_note(cases),
     )
     return [note for note in notes if note is not None]
 

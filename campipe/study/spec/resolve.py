@@ -257,6 +257,45 @@ def spring_note(cases: Sequence[ResolvedCase]) -> str | None:
     )
 
 
+#: The stiffest compliant contacts a valve train has, by its pair's modulus (E*): a steel
+#: line contact 100 mm long, (π/2)·E*·w [N/m], and a point contact of 1 m relative radius,
+#: (4/3)·E*·√R' [N/m^1.5]; a given constant beyond :data:`CONTACT_EXCESS` of it is noted.
+CONTACT_WIDEST, CONTACT_FLATTEST, CONTACT_EXCESS = 0.1, 1.0, 10.0
+
+
+def contact_note(cases: Sequence[ResolvedCase]) -> str | None:
+    """A note on a compliant contact's stiffness (``*_contact_stiffness``,
+    ``*_hertz_constant``) beyond :data:`CONTACT_EXCESS` times the stiffest a valve train's
+    contact of its material has: most likely written in the wrong unit, and a run takes steps
+    as its period, √(m/k), so it runs long. None where there are none."""
+    from campipe.model.contact import hertz_constant, line_contact_stiffness, pair_modulus
+
+    combinations, speeds = distinct_but_speed(cases)
+    worst = None
+    for c in combinations:
+        t = c.case.train
+        pair = pair_modulus(t.contact_modulus, t.contact_poisson)
+        for contact in ("cam", "seat"):
+            for name, most, units in (
+                (f"{contact}_contact_stiffness", line_contact_stiffness(pair, CONTACT_WIDEST),
+                 "N/m"),
+                (f"{contact}_hertz_constant", hertz_constant(pair, CONTACT_FLATTEST), "N/m^1.5"),
+            ):  # fmt: skip
+                value = getattr(t, name)
+                if value > CONTACT_EXCESS * most and (worst is None or value / most > worst[0]):
+                    worst = (value / most, name, value, most, units)
+    if worst is None:
+        return None
+    ratio, name, value, most, units = worst
+    what = "a steel line contact 100 mm long" if "stiffness" in name else (
+        "a steel point contact of 1 m relative radius")  # fmt: skip
+    return (
+        f"model.{name} {value:.3g} {units} is {ratio:.3g}× {what} ({most:.3g} {units}, "
+        "from contact_modulus): check its units; a compliant contact's run takes steps of its "
+        "period, √(m/k), so a stiffer one runs longer"
+    )
+
+
 #: What ``run.record`` names that stores the valve spring's coil-clash margin.
 CLASH_RECORDS = ("spring", "spring_clash_margin")
 
