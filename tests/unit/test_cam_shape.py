@@ -145,3 +145,19 @@ def test_validate_notes_an_undercut_cam_and_model_reports_its_shape(tmp_path):
     fine = write_spec(tmp_path, SPEC % "40 mm", "fine.yaml")
     out = CliRunner().invoke(main, ["validate", str(fine)])
     assert out.exit_code == 0 and "cam:" not in out.output, out.output
+
+
+def test_no_bundled_study_s_cam_is_undercut():
+    """The bundled lever studies give their cam's base circle; none is undercut (a copy that
+    notes every cam with a base circle fails)."""
+    from study_helpers import STUDIES
+
+    from campipe.study import load_study
+    from campipe.study.spec.resolve import cam_note
+
+    given = 0
+    for spec in sorted(STUDIES.glob("*.yaml")):
+        study = load_study(spec)
+        given += any(c.case.train.cam_base_radius > 0 for c in study.cases)
+        assert cam_note(study.cases) is None, spec.name
+    assert given >= 2
