@@ -386,15 +386,15 @@ def validate_text(loaded, spec_path) -> str:
     """The checked study in words: cases, axes (values as the spec wrote them), run."""
     from campipe.constants import RPM
     from campipe.study.spec.coordinates import coordinate_values
-    from campipe.study.spec.resolve import (
+    from campipe.study.spec.notes import (
         cam_note,
         contact_note,
-        distinct_but_speed,
         per_turn_note,
         ramp_note,
         spring_note,
         travel_note,
     )
+    from campipe.study.spec.resolve import distinct_but_speed
     from campipe.study.spec.variables import case_coordinates
 
     s = loaded.spec

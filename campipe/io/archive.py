@@ -42,7 +42,7 @@ from campipe import __version__
 from campipe.errors import CampipeError
 from campipe.io.compression import COMPRESSION, COMPRESSIONS
 from campipe.io.lock import ArchiveBusyError, lock_path, writing
-from campipe.io.watch import progress, watched
+from campipe.io.watch import NETCDF_LOCK, progress, watched
 
 __all__ = [
     "COMPRESSION",
@@ -57,8 +57,9 @@ __all__ = [
 
 log = logging.getLogger(__name__)
 
-#: Serialises netCDF4 calls from this process's threads.
-LOCK = threading.RLock()
+#: Serialises netCDF4 calls from this process's threads (``campipe.io.watch``'s, which a
+#: watched read holds while it reads).
+LOCK = NETCDF_LOCK
 #: Cases per chunk of a variable along case and samples (a history): eight cases' histories
 #: compress a third better than one case's alone and cost HDF5 an eighth of the chunks; reading
 #: one case decompresses eight cases' rows of a variable (46 kB of a 721-sample history).

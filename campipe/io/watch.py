@@ -7,12 +7,14 @@ does not reach it, and every command reading the file waits for ever.
 
 So campipe reads a file in a thread of its own (:func:`watched`) while the calling thread
 waits for it: Ctrl-C stops the wait (KeyboardInterrupt, as anywhere), and a read that has
-made no progress for :data:`STALL_SECONDS` raises :class:`ReadStalled`. A read marks its
-progress with :func:`progress` (each block it hashes or reads); opening a file and reading
-its attributes take milliseconds.
+made no progress for :data:`STALL_SECONDS` raises :class:`ReadStalled`. The read's thread
+first takes :data:`NETCDF_LOCK` (netCDF-C and HDF5 are not thread-safe: every netCDF call of
+campipe holds it), and its time starts then: a read waiting behind another thread's write or
+verification is not stalled. It marks its progress with :func:`progress` (each block it
+hashes or reads); opening a file and reading its attributes take milliseconds.
 
 The read's thread cannot be stopped: it stays inside HDF5, holding the library and
-``campipe.io.archive.LOCK``, until the process ends. Nothing can read or write netCDF in that
+:data:`NETCDF_LOCK`, until the process ends. Nothing can read or write netCDF in that
 process afterwards (a later watched read is refused at once), so :class:`ReadStalled` is a
 BaseException, as KeyboardInterrupt is: a handler that takes a damaged file as one to compute
 again (``except Exception``) would go on to write with the library held. The command line
@@ -38,6 +40,9 @@ STALL_SECONDS = 30.0
 POLL_SECONDS = 0.5
 
 log = logging.getLogger(__name__)
+
+#: Serialises netCDF4 calls from this process's threads (``campipe.io.archive.LOCK``).
+NETCDF_LOCK = threading.RLock()
 
 P = ParamSpec("P")
 R = TypeVar("R")
@@ -72,6 +77,7 @@ class _Read:
     def __init__(self, path: str) -> None:
         self.path = path
         self.done = threading.Event()
+        self.holding = False  # its thread holds NETCDF_LOCK: its time runs
         self.last = time.monotonic()
         self.value: object = None
         self.error: BaseException | None = None
@@ -114,7 +120,9 @@ def watched(fn: Callable[P, R]) -> Callable[P, R]:
         def body() -> None:
             _local.read = read
             try:
-                read.value = fn(*args, **kwargs)
+                with NETCDF_LOCK:
+                    read.last, read.holding = time.monotonic(), True
+                    read.value = fn(*args, **kwargs)
             except BaseException as exc:  # handed to the waiting thread, raised there
                 read.error = exc
             finally:
@@ -126,7 +134,7 @@ def watched(fn: Callable[P, R]) -> Callable[P, R]:
         try:
             while not read.done.wait(POLL_SECONDS):
                 idle = time.monotonic() - read.last
-                if idle > STALL_SECONDS:
+                if read.holding and idle > STALL_SECONDS:
                     raise ReadStalled(path, idle)
         except BaseException:  # stalled, or Ctrl-C: the thread is left where it is
             if not read.done.is_set():

@@ -13,7 +13,7 @@ from campipe.cli import main
 from campipe.constants import RPM
 from campipe.study import load_study
 from campipe.study.run.execute import run_study
-from campipe.study.spec.resolve import per_turn_note, ramp_note
+from campipe.study.spec.notes import per_turn_note, ramp_note
 
 NEWMARK = {"run.integrator": "newmark-linear", "run.dt": "1 us"}
 
@@ -102,7 +102,7 @@ def test_a_valve_spring_s_rate_in_the_wrong_unit_is_noted():
     its 180 N preload at 6 m: campipe validate notes it with the deflection and the keys; no
     bundled study is noted (their springs take their preloads over 6-16 mm). Fails on a copy
     without the note, or one that notes the thesis's 16 mm."""
-    from campipe.study.spec.resolve import spring_note
+    from campipe.study.spec.notes import spring_note
 
     for spec in sorted(STUDIES.glob("*.yaml")):
         assert spring_note(load_study(spec).cases) is None, spec.name
@@ -125,7 +125,7 @@ def test_a_chain_s_coil_clash_against_the_thesis_s_assumed_travel_is_noted(tmp_p
     naming the key; a travel given, the thesis's own train (whose travel it is) and a run
     that does not record the spring are not. Fails on a copy without the note, or one that
     notes the thesis's spring-surge study."""
-    from campipe.study.spec.resolve import travel_note
+    from campipe.study.spec.notes import travel_note
 
     bucket = STUDIES / "bucket-tappet-lash.yaml"
     record = {"run.record": ["spring"], "sweep.speed": ["2000 rpm"], "sweep.model.lash": ["0.2 mm"]}
@@ -154,7 +154,7 @@ def test_a_contact_stiffness_far_beyond_a_valve_train_s_is_noted():
     contact-stiffness study with a helper's 1e14 N/m is (a run of its turn took 92 s),
     naming the key and the ratio. Fails on a copy without the note, or one that
     notes the bundled studies."""
-    from campipe.study.spec.resolve import contact_note
+    from campipe.study.spec.notes import contact_note
 
     for spec in sorted(STUDIES.glob("*.yaml")):
         assert contact_note(load_study(spec).cases) is None, spec.name

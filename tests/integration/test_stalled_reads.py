@@ -217,6 +217,27 @@ def test_a_watched_read_that_progresses_runs_past_the_limit(quick):
     assert watch.stuck() == []
 
 
+def test_a_read_waiting_for_the_netcdf_lock_is_not_stalled(quick):
+    """A read waits while another thread holds the netCDF lock (a write, another file's
+    verification) for 1 s, over three times the 0.3 s limit: its time starts when it holds
+    the lock, so it returns its value. Broken copy: the time counted from the call."""
+    taken, release = threading.Event(), threading.Event()
+
+    def writer():
+        with watch.NETCDF_LOCK:
+            taken.set()
+            release.wait(5)
+
+    holder = threading.Thread(target=writer)
+    holder.start()
+    taken.wait(5)
+    threading.Timer(1.0, release.set).start()
+    started = time.monotonic()
+    assert watch.watched(lambda path: f"read {path}")("e.nc") == "read e.nc"
+    assert time.monotonic() - started >= 0.9
+    holder.join(5)
+
+
 def test_every_reader_of_netcdf_is_watched():
     """Every function of campipe that opens a netCDF file for reading does it inside a
     watched read (``open_dataset`` and ``xr.open_dataset`` are called only from functions

@@ -153,7 +153,7 @@ def test_no_bundled_study_s_cam_is_undercut():
     from study_helpers import STUDIES
 
     from campipe.study import load_study
-    from campipe.study.spec.resolve import cam_note
+    from campipe.study.spec.notes import cam_note
 
     given = 0
     for spec in sorted(STUDIES.glob("*.yaml")):

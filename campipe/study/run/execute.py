@@ -76,8 +76,7 @@ from campipe.study.run.resume import (
 from campipe.study.run.sizing import default_batch_size, default_workers
 from campipe.study.run.workers import run_distributed, run_local, stored_here
 from campipe.study.spec.expand import Study
-from campipe.study.spec.resolve import (
-    ResolvedCase,
+from campipe.study.spec.notes import (
     cam_note,
     contact_note,
     per_turn_note,
@@ -85,6 +84,7 @@ from campipe.study.spec.resolve import (
     spring_note,
     travel_note,
 )
+from campipe.study.spec.resolve import ResolvedCase
 from campipe.vocabulary import OK, STATUS
 
 log = logging.getLogger(__name__)
@@ -245,7 +245,7 @@ def _check_replaceable(archive: Path, state: ArchiveState, overwrite: bool) -> N
 def _case_notes(cases: list[ResolvedCase], record: tuple[str, ...]) -> list[str]:
     """The per-turn model's note, the lash's beyond the ramps, a valve spring's odd
     deflection and its assumed travel to solid, an undercut cam, on the cases computed
-    (``resolve.per_turn_note``, ``ramp_note``, ``spring_note``, ``travel_note``,
+    (``notes.per_turn_note``, ``ramp_note``, ``spring_note``, ``travel_note``,
     ``cam_note``, ``contact_note``)."""
     notes = (
         per_turn_note(cases),

@@ -1,0 +1,250 @@
+"""Notes on a study's cases that run but deserve a word (``campipe validate`` and
+``campipe study`` print them): a lash adjuster moved once a turn, lash the ramps do not take
+up, a valve spring's odd deflection or assumed travel to solid, an undercut cam, a contact
+stiffer than any valve train's. Each names its keys; none refuses a case."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from campipe.engine import Case
+from campipe.model import valve_train
+from campipe.model.levers import LEVERS
+from campipe.study.spec.resolve import ResolvedCase, distinct_but_speed, valve_lift_ratio
+
+
+def per_turn_note(cases: Sequence[ResolvedCase]) -> str | None:
+    """A note on the cases whose lash adjuster's plunger is moved once a turn, not carried
+    within it (``engine.plunger.carried``: a finger's pivot with rigid contacts, or
+    newmark-linear), with the per-turn model's error as docs/model.md states it; None where
+    there are none."""
+    from campipe.engine.plunger import carried
+    from campipe.model.hla import adjuster
+
+    combinations, speeds = distinct_but_speed(cases)
+    n = speeds * sum(
+        adjuster(c.case.train) is not None and not carried(c.case, c.settings.integrator)
+        for c in combinations
+    )
+    if not n:
+        return None
+    return (
+        f"{n} case{'s' if n != 1 else ''} move{'' if n != 1 else 's'} the lash adjuster's "
+        "plunger once a turn (a finger's pivot with rigid contacts, or newmark-linear: the "
+        "per-turn model): below the onset within 3 % a turn of the plunger carried within the "
+        "turn; past it, where the plunger pumps up into the follower's flights, a turn's "
+        "pump-up may be off by a third or more (docs/model.md). Compliant contacts "
+        "(cam_contact, seat_contact) carry it within the turn"
+    )
+
+
+#: A lash the ramps do not take up is noted where the valve's kinematic landing velocity (the
+#: cam's where its lift crosses the seat) is this much above the ramp's (``ramp_note``).
+RAMP_EXCESS = 1.1
+
+
+def ramp_note(cases: Sequence[ResolvedCase]) -> str | None:
+    """A note on the cases whose lash the cam's ramps do not take up: the valve's seat (the
+    lash and the train's compression under the preload, as a valve lift) above the opening
+    ramp's top at the valve, so the follower lifts the valve off its seat, and sets it
+    down, on the flanks, at a kinematic velocity (the cam's where its lift crosses the seat)
+    more than RAMP_EXCESS × the ramp's. None where there are none (or no ramps)."""
+    combinations, speeds = distinct_but_speed(cases)
+    beyond = []
+    for c in combinations:
+        ramp = c.values.get("profile.ramp_duration")
+        if not isinstance(ramp, float) or math.isnan(getattr(c.case.train, "lash", math.nan)):
+            continue
+        excess = _landing_excess(c.case, ramp)
+        if excess > RAMP_EXCESS:
+            beyond.append((excess, c.case.seat))
+    if not beyond:
+        return None
+    n = speeds * len(beyond)
+    excess, seat = max(beyond)
+    return (
+        f"{n} case{'s' if n != 1 else ''} take{'' if n != 1 else 's'} up more lash than the "
+        f"cam's ramps: the valve leaves its seat, and lands on it, on the flanks, at up to "
+        f"{excess:.3g} times the ramp's velocity by the cam's kinematics (a seat at "
+        f"{seat * 1e3:.4g} mm of valve lift, the lash and the train's compression under the "
+        "preload); a ramp above the seat keeps the landing at its velocity"
+    )
+
+
+#: The valve spring's deflection under its preload [m] a spec is noted outside of
+#: (``spring_note``): valve springs take their preload over millimetres (the thesis's 16 mm,
+#: the bundled bucket's 6 mm), so a rate or a preload in the wrong unit (N/m for N/mm) falls
+#: far outside.
+SPRING_DEFLECTION = (1e-4, 0.1)
+
+
+def spring_note(cases: Sequence[ResolvedCase]) -> str | None:
+    """A note on the cases whose valve spring holds its preload at a deflection (preload over
+    rate) outside :data:`SPRING_DEFLECTION`: a rate or a preload most likely written in the
+    wrong unit. None where there are none."""
+    combinations, speeds = distinct_but_speed(cases)
+    odd = []
+    for c in combinations:
+        t = c.case.train
+        if t.spring_preload > 0.0 and t.spring_rate > 0.0:
+            deflection = t.spring_preload / t.spring_rate
+            low, high = SPRING_DEFLECTION
+            if not low <= deflection <= high:
+                odd.append((abs(math.log(deflection / 0.01)), deflection, t))
+    if not odd:
+        return None
+    n = speeds * len(odd)
+    _, deflection, t = max(odd, key=lambda o: o[0])
+    whose = f"{n} cases' valve springs hold their" if n != 1 else "1 case's valve spring holds its"
+    return (
+        f"{whose} preload at a deflection far from a valve spring's millimetres: "
+        f"{t.spring_preload:.4g} N over {t.spring_rate / 1e3:.4g} N/mm is "
+        f"{deflection * 1e3:.4g} mm (model.spring_preload over model.spring_rate; a rate "
+        "written in N/m for N/mm gives that)"
+    )
+
+
+#: The stiffest compliant contacts a valve train has, by its pair's modulus (E*): a steel
+#: line contact 100 mm long, (π/2)·E*·w [N/m], and a point contact of 1 m relative radius,
+#: (4/3)·E*·√R' [N/m^1.5]; a given constant beyond :data:`CONTACT_EXCESS` of it is noted.
+CONTACT_WIDEST, CONTACT_FLATTEST, CONTACT_EXCESS = 0.1, 1.0, 10.0
+
+
+def contact_note(cases: Sequence[ResolvedCase]) -> str | None:
+    """A note on a compliant contact's stiffness (``*_contact_stiffness``,
+    ``*_hertz_constant``) beyond :data:`CONTACT_EXCESS` times the stiffest a valve train's
+    contact of its material has: most likely written in the wrong unit, and a run takes steps
+    as its period, √(m/k), so it runs long. None where there are none."""
+    from campipe.model.contact import hertz_constant, line_contact_stiffness, pair_modulus
+
+    combinations, speeds = distinct_but_speed(cases)
+    worst = None
+    for c in combinations:
+        t = c.case.train
+        pair = pair_modulus(t.contact_modulus, t.contact_poisson)
+        for contact in ("cam", "seat"):
+            for name, most, units in (
+                (f"{contact}_contact_stiffness", line_contact_stiffness(pair, CONTACT_WIDEST),
+                 "N/m"),
+                (f"{contact}_hertz_constant", hertz_constant(pair, CONTACT_FLATTEST), "N/m^1.5"),
+            ):  # fmt: skip
+                value = getattr(t, name)
+                if value > CONTACT_EXCESS * most and (worst is None or value / most > worst[0]):
+                    worst = (value / most, name, value, most, units)
+    if worst is None:
+        return None
+    ratio, name, value, most, units = worst
+    what = "a steel line contact 100 mm long" if "stiffness" in name else (
+        "a steel point contact of 1 m relative radius")  # fmt: skip
+    return (
+        f"model.{name} {value:.3g} {units} is {ratio:.3g}× {what} ({most:.3g} {units}, "
+        "from contact_modulus): check its units; a compliant contact's run takes steps of its "
+        "period, √(m/k), so a stiffer one runs longer"
+    )
+
+
+#: What ``run.record`` names that stores the valve spring's coil-clash margin.
+CLASH_RECORDS = ("spring", "spring_clash_margin")
+
+
+def travel_note(cases: Sequence[ResolvedCase], record: Sequence[str]) -> str | None:
+    """A note on the cases of a layout other than the thesis's whose coil-clash margin (a
+    ``record`` of the spring's) is taken against the thesis's spring travel to solid, the
+    key's default: campipe assumes it for the thesis's train, which gives no spring geometry,
+    and a chain's or a lever's spring is not that one. None where there are none."""
+    if not set(record) & set(CLASH_RECORDS):
+        return None
+    combinations, speeds = distinct_but_speed(cases)
+    assumed = valve_train().spring_travel_to_solid
+    layouts = sorted(
+        {c.case.train.layout for c in combinations if c.case.train.chain
+         and c.case.train.spring_travel_to_solid == assumed}
+    )  # fmt: skip
+    if not layouts:
+        return None
+    return (
+        f"the coil-clash margin of layout {', '.join(layouts)} is taken against the thesis's "
+        f"assumed spring travel to solid, {assumed * 1e3:.4g} mm (1.6 in, "
+        "model.spring_travel_to_solid's default): give your spring's own"
+    )
+
+
+def cam_note(cases: Sequence[ResolvedCase]) -> str | None:
+    """A note on the cases whose cam, given its base circle (``model.cam_base_radius``), is
+    undercut: no cam makes its lift under their follower (:mod:`campipe.profiles.curvature`);
+    the first such cam, where and how. None where there are none."""
+    combinations, _ = distinct_but_speed(cases)
+    seen: dict[tuple, str | None] = {}
+    found = []
+    for c in combinations:
+        train, profile = c.case.train, c.case.profile
+        cam = getattr(profile, "cam", None) or profile  # a lever's excitation keeps its cam
+        if not train.cam_base_radius > 0.0:  # NaN: not given
+            continue
+        key = (cam.breaks.tobytes(), cam.poly.tobytes(), cam.trig.tobytes(),
+               train.cam_base_radius, train.cam_roller_radius)  # fmt: skip
+        if key not in seen:
+            seen[key] = undercut_text(cam, train.cam_base_radius, train.cam_roller_radius)
+        if seen[key] is not None and seen[key] not in found:
+            found.append(seen[key])
+    if not found:
+        return None
+    more = f" ({len(found) - 1} more of the study's cams too)" if len(found) > 1 else ""
+    return f"{found[0]}{more}"
+
+
+def undercut_text(cam, base_radius: float, roller_radius: float) -> str | None:
+    """What an undercut cam (:func:`campipe.profiles.curvature.cam_shape`) is, in words, or
+    None where a cam makes the lift."""
+    from campipe.profiles.curvature import cam_shape
+
+    shape = cam_shape(cam, base_radius, roller_radius)
+    start = shape.first_undercut
+    if start is None:
+        return None
+    least, at = shape.least
+    if roller_radius > 0.0:
+        how = (
+            f"its pitch curve turns sharper than the roller ({roller_radius * 1e3:.4g} mm, "
+            f"cam_roller_radius) from {math.degrees(start):.1f}°, the cam's radius of "
+            f"curvature falling to {least * 1e3:.4g} mm at {math.degrees(at):.1f}°"
+        )
+    else:
+        how = (
+            f"under a flat face its radius of curvature (base radius + lift + d²lift/dθ²) is "
+            f"negative from {math.degrees(start):.1f}°, least {least * 1e3:.4g} mm at "
+            f"{math.degrees(at):.1f}°"
+        )
+    return (
+        f"the cam {cam.label} is undercut on a {base_radius * 1e3:.4g} mm base circle "
+        f"(cam_base_radius): {how}; no cam makes this lift: give a larger cam_base_radius or "
+        "a longer rise (the run computes the lift as given)"
+    )
+
+
+def _landing_excess(case: Case, ramp: float) -> float:
+    """For a case whose seat is above the opening ramp's top at the valve (``ramp`` [rad]
+    long, from 0), the cam's velocity where its lift at the valve first crosses the seat,
+    over its velocity halfway up the ramp; NaN where the ramp takes the seat up (a smooth
+    ramp's own velocity varies along it: that is no landing on the flank)."""
+    from campipe.profiles import evaluate
+
+    train = case.train  # a lever's and a chain's profile is the valve side's already
+    on_valve_side = train.layout in LEVERS or train.chain
+    scale = 1.0 if on_valve_side else valve_lift_ratio(train, case.profile, 1.0)  # a rocker's
+    if case.seat <= scale * float(evaluate(case.profile, np.array([ramp]))[0][0]):
+        return math.nan
+    theta = np.linspace(ramp, math.pi, 4097)
+    lift = scale * evaluate(case.profile, theta)[0]
+    above = np.flatnonzero(lift >= case.seat)
+    if not above.size or above[0] == 0:
+        return math.nan
+    k = above[0]
+    at = theta[k - 1] + (case.seat - lift[k - 1]) / (lift[k] - lift[k - 1]) * (
+        theta[k] - theta[k - 1]
+    )
+    velocity = evaluate(case.profile, np.array([at, 0.5 * ramp]))[1]
+    return float(velocity[0] / velocity[1])
