@@ -386,14 +386,7 @@ def validate_text(loaded, spec_path) -> str:
     """The checked study in words: cases, axes (values as the spec wrote them), run."""
     from campipe.constants import RPM
     from campipe.study.spec.coordinates import coordinate_values
-    from campipe.study.spec.notes import (
-        cam_note,
-        contact_note,
-        per_turn_note,
-        ramp_note,
-        spring_note,
-        travel_note,
-    )
+    from campipe.study.spec.notes import case_notes
     from campipe.study.spec.resolve import distinct_but_speed
     from campipe.study.spec.variables import case_coordinates
 
@@ -444,21 +437,7 @@ def validate_text(loaded, spec_path) -> str:
     )
     if s.replay:
         lines.append(f"replay: {s.replay!r} (logged to <archive stem>.rrd as the study runs)")
-    note = per_turn_note(loaded.cases)
-    if note:
-        lines.append(f"lash adjuster: {note}")
-    note = ramp_note(loaded.cases)
-    if note:
-        lines.append(f"lash: {note}")
-    for note in (spring_note(loaded.cases), travel_note(loaded.cases, loaded.record)):
-        if note:
-            lines.append(f"spring: {note}")
-    note = cam_note(loaded.cases)
-    if note:
-        lines.append(f"cam: {note}")
-    note = contact_note(loaded.cases)
-    if note:
-        lines.append(f"contact: {note}")
+    lines += [f"{topic}: {note}" for topic, note in case_notes(loaded.cases, loaded.record)]
     return "\n".join(lines)
 
 

@@ -471,16 +471,18 @@ def test_a_spec_written_in_mm_shows_the_thesis_s_train_in_metric_units(tmp_path)
     given, 600 N); written in inches and pounds, in the thesis's. A helper's spec in N and mm
     was shown in lbf and in."""
     body = "model: {preset: thesis-1971, spring_preload: %s}\nprofile: {kind: harmonic, lift: %s}\n"
-    metric = tmp_path / "metric.yaml"
-    metric.write_text("name: metric\n" + body % ("600 N", "7 mm") + "speed: 3000 rpm\n")
-    out = CliRunner().invoke(main, ["model", "--spec", str(metric)])
-    assert out.exit_code == 0, out.output
-    assert "Parameters (metric units)" in out.output
-    assert re.search(r"pushrod_length +228\.6 mm", out.output)
-    assert re.search(r"spring_preload +600 N", out.output)
-    thesis = tmp_path / "thesis.yaml"
-    thesis.write_text("name: thesis\n" + body % ("151 lbf", "1 in") + "speed: 3000 rpm\n")
-    out = CliRunner().invoke(main, ["model", "--spec", str(thesis)])
-    assert out.exit_code == 0, out.output
-    assert "Parameters (thesis units)" in out.output
-    assert re.search(r"pushrod_length +9 in", out.output)
+
+    def shown(name: str, preload: str, lift: str) -> str:
+        path = tmp_path / f"{name}.yaml"
+        path.write_text(f"name: {name}\n" + body % (preload, lift) + "speed: 3000 rpm\n")
+        out = CliRunner().invoke(main, ["model", "--spec", str(path)])
+        assert out.exit_code == 0, out.output
+        return out.output
+
+    metric = shown("metric", "600 N", "7 mm")
+    assert "Parameters (metric units)" in metric
+    assert re.search(r"pushrod_length +228\.6 mm", metric)
+    assert re.search(r"spring_preload +600 N", metric)
+    thesis = shown("thesis", "151 lbf", "1 in")
+    assert "Parameters (thesis units)" in thesis
+    assert re.search(r"pushrod_length +9 in", thesis)

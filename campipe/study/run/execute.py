@@ -76,14 +76,7 @@ from campipe.study.run.resume import (
 from campipe.study.run.sizing import default_batch_size, default_workers
 from campipe.study.run.workers import run_distributed, run_local, stored_here
 from campipe.study.spec.expand import Study
-from campipe.study.spec.notes import (
-    cam_note,
-    contact_note,
-    per_turn_note,
-    ramp_note,
-    spring_note,
-    travel_note,
-)
+from campipe.study.spec.notes import case_notes
 from campipe.study.spec.resolve import ResolvedCase
 from campipe.vocabulary import OK, STATUS
 
@@ -243,19 +236,8 @@ def _check_replaceable(archive: Path, state: ArchiveState, overwrite: bool) -> N
 
 
 def _case_notes(cases: list[ResolvedCase], record: tuple[str, ...]) -> list[str]:
-    """The per-turn model's note, the lash's beyond the ramps, a valve spring's odd
-    deflection and its assumed travel to solid, an undercut cam, on the cases computed
-    (``notes.per_turn_note``, ``ramp_note``, ``spring_note``, ``travel_note``,
-    ``cam_note``, ``contact_note``)."""
-    notes = (
-        per_turn_note(cases),
-        ramp_note(cases),
-        spring_note(cases),
-        travel_note(cases, record),
-        cam_note(cases),
-        contact_note(cases),
-    )
-    return [note for note in notes if note is not None]
+    """The notes on the cases computed (``campipe.study.spec.notes.case_notes``)."""
+    return [note for _, note in case_notes(cases, record)]
 
 
 def _state_notes(archive: Path, state: ArchiveState) -> list[str]:

@@ -248,3 +248,17 @@ def _landing_excess(case: Case, ramp: float) -> float:
     )
     velocity = evaluate(case.profile, np.array([at, 0.5 * ramp]))[1]
     return float(velocity[0] / velocity[1])
+
+
+def case_notes(cases: Sequence[ResolvedCase], record: Sequence[str]) -> list[tuple[str, str]]:
+    """(topic, note) of each note the cases (a study recording ``record``) deserve, in the
+    order ``campipe validate`` prints them."""
+    found = (
+        ("lash adjuster", per_turn_note(cases)),
+        ("lash", ramp_note(cases)),
+        ("spring", spring_note(cases)),
+        ("spring", travel_note(cases, record)),
+        ("cam", cam_note(cases)),
+        ("contact", contact_note(cases)),
+    )
+    return [(topic, note) for topic, note in found if note is not None]
