@@ -301,10 +301,10 @@ def _compute_and_assemble(
     plans: list[BatchPlan],
     run: _Run,
     bar: Progress | None,
-) -> tuple[dict[str, str], float]:
+) -> tuple[dict[str, str], float, dict[str, float]]:
     """Compute ``plans`` and write the archive as their batches are stored; case id → status
-    name of the cases that did not finish cleanly, and the seconds of the batches' engine
-    calls, summed."""
+    name of the cases that did not finish cleanly, the seconds of the batches' engine calls,
+    summed, and case id → valve lift of the cases whose spring went solid (``Assembly.solid``)."""
     storage = Storage(parts_directory(archive), study.record)
     by_id = {c.case_id: c for c in study.cases}
     by_key = {p.key: p for p in plans}

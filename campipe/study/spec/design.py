@@ -373,7 +373,7 @@ def _requirement(
     if bounds["min"] > bounds["max"]:
         problems.add(path, f"found min {show(entry['min'])} above max {show(entry['max'])}")
     speeds: tuple[float, ...] = ()
-    engine = drive if key == ENGINE_ONSET else math.nan
+    engine = drive if key == ENGINE_ONSET and drive is not None else math.nan
     if not onset and "at_engine" in entry:
         if drive is None:
             problems.add(f"{path}.at_engine", "speeds at the engine's need a drive (drive: "
