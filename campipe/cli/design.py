@@ -72,12 +72,14 @@ def design(spec, sets, fmt, output, overwrite, scheduler, workers) -> None:
 def drive_note(ratio: float, design) -> str:
     """What a design's speeds are in a spec with a drive: the cam's, as onset_speed_rpm's,
     with the engine's beside the spec's own onset bounds."""
-    from campipe.study.spec.design import ONSET
+    from campipe.study.spec.design import ENGINE_ONSET, ONSET
 
     bounds = [
         f"{ONSET} {sign} {value:g} rpm is the engine's {value / ratio:g} rpm"
+        if math.isnan(r.engine)
+        else f"{ENGINE_ONSET} {sign} {value / ratio:g} rpm is the cam's {value:g} rpm"
         for r in design.require
-        if r.key == ONSET and math.isnan(r.engine)
+        if r.key == ONSET
         for sign, value in (("≥", r.minimum), ("≤", r.maximum))
         if not math.isnan(value)
     ]

@@ -34,6 +34,7 @@ def shape_report(train, cam, label: str) -> dict[str, object]:
         "least_radius_of_curvature": least,
         "least_at": at,
         "undercut_from": start,
+        "constant": bool(np.ptp(shape.radius) <= 1e-9 * abs(least)),  # an eccentric disc's
     }
     units = {"base_radius": "m", "roller_radius": "m", "least_radius_of_curvature": "m",
              "least_at": "rad", "undercut_from": "rad"}  # fmt: skip
@@ -58,8 +59,8 @@ def shape_text(report: dict[str, object]) -> str:
         "",
         "",
         f"Cam shape ({s['cam']}; base circle {s['base_radius'] * 1e3:.4g} mm, {follower}):",
-        f"  least radius of curvature  {s['least_radius_of_curvature'] * 1e3:.4g} mm at "
-        f"{math.degrees(s['least_at']):.1f}°",
+        f"  least radius of curvature  {s['least_radius_of_curvature'] * 1e3:.4g} mm "
+        + ("(the same all round)" if s["constant"] else f"at {math.degrees(s['least_at']):.1f}°"),
     ]
     if "max_pressure_angle" in s:
         lines.append(

@@ -165,7 +165,12 @@ def unreadable(exc: BaseException, path: str | Path | None = None) -> str:
         return NOT_NETCDF
     why = f"cannot read as an archive ({type(exc).__name__}: {str(exc)[:200]})"
     plugin = missing_filter(exc)
-    return why if plugin is None else f"{why}: {plugin}"
+    if plugin is not None:
+        return f"{why}: {plugin}"
+    return (
+        f"{why}: its structure is damaged (a changed byte, a cut copy); restore it from a "
+        "copy, or run the study again to write it anew (campipe study)"
+    )
 
 
 def unreadable_error(path: str | Path, exc: BaseException) -> ArchiveFileError:

@@ -116,7 +116,7 @@ def lever_parameters() -> list[Parameter]:
             "it; on any layout it gives the cam's shape: campipe model's radius of curvature, "
             "and a note where no cam makes the lift, undercut)",
             "m",
-            "mm",
+            "in",
             0.0,
             default="none",
             allow_none=True,

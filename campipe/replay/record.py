@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from campipe.io.archive import ArchiveDamagedError, unreadable
+from campipe.io.archive import ArchiveDamagedError, unreadable_error
 from campipe.io.outputs import RECORDING, check_output
 from campipe.io.rerun_replay import (
     EVENT_SI,
@@ -315,7 +315,7 @@ def replay_archive(
     except ArchiveDamagedError:
         raise
     except (OSError, ValueError, RuntimeError, AttributeError) as exc:  # netCDF4: an attribute
-        raise ReplayError(f"{archive}: {unreadable(exc, archive)}", key=str(archive)) from None
+        raise unreadable_error(archive, exc) from None  # as query and plot: not netCDF is 2
     with ds:
         if not spawn:
             check_recording(archive, ds.attrs, output, overwrite)

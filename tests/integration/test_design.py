@@ -609,10 +609,10 @@ def test_an_answer_at_a_bound_of_design_vary_names_the_bound_as_binding(tmp_path
     ) in out.output
     assert "campipe onset" not in out.output  # the onset does not bind: no command for it
     with xr.open_dataset(tmp_path / "edge-design.nc") as ds:
-        assert (
-            ds.attrs["design_binding"] == "design.vary.model.spring_preload's lower bound (150 lbf)"
-        )
+        edge = "design.vary.model.spring_preload's lower bound (150 lbf)"
+        assert ds.attrs["design_binding"] == edge
         chosen = int(np.flatnonzero(ds.chosen.values == "yes")[0])
+        assert ds.binding.values[chosen] == edge  # the table's row too (a helper's finding)
         assert_allclose(ds.spring_preload.values[chosen], 150 * LBF, rtol=1e-12)
         assert ds.onset_speed_rpm.values[chosen] > 9000
 
@@ -660,6 +660,9 @@ def test_a_spec_with_a_drive_requires_the_onset_and_runs_metrics_at_the_engine_s
         pick = [int(np.flatnonzero(d.chosen.values == "yes")[0]) for d in (e, c)]
         assert_allclose(e.spring_preload.values[pick[0]], c.spring_preload.values[pick[1]])
         assert 9500 <= e.onset_speed_rpm.values[pick[0]] < 9500.5
+    shown = invoke("validate", engine)  # each speed named as the engine's or the cam's
+    assert "onset_engine_speed_rpm ≥ 19000 rpm (the engine's speed;" in shown.output
+    assert "at 8000 rpm (the cam's; the engine's 16000)" in shown.output
     undriven = (
         engine.read_text()
         .replace("drive: {cam_per_crank: 0.5}\n", "")

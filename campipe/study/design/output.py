@@ -68,7 +68,8 @@ def design_table(result: DesignResult) -> CaseTable:
             k = design.objectives.index((key, sense))
             add(name, [e.objectives[k] for e in evals], _units_of(result, key))
     add("feasible", ["yes" if e.feasible else "no" for e in evals])
-    add("binding", [e.binding or "-" for e in evals])
+    add("binding", [answer_binding(result) or "-" if i == 0 and not on_front
+                    else e.binding or "-" for i, e in enumerate(evals)])  # fmt: skip
     columns["evaluation"] = columns["evaluation"].astype(np.int64)
     return CaseTable(columns, units, list(columns), n, result.study.name)
 
@@ -125,14 +126,13 @@ def file_contents(result: DesignResult, table: CaseTable) -> tuple[dict, list, d
                                   "(a design's file keeps none)"}))  # fmt: skip
     arrays["event_count"] = np.zeros(table.n, np.int32)
     spec = result.study.spec
-    best = result.best
     design = result.design
     attrs = {
         "title": f"{result.study.name}: designs evaluated by campipe design",
         "study_name": result.study.name,
         "design_feasible": "yes" if result.feasible else "no",
         "design_method": result.method,
-        "design_binding": " and ".join(bounds_reached(result)) or best.binding,
+        "design_binding": answer_binding(result),
         "design_objective": ", ".join(f"{s} {k}" for k, s in design.objectives),
         "design_objective_columns": json.dumps(objective_columns(result)),
         "study_axes": json.dumps(
@@ -156,6 +156,13 @@ def bounds_reached(result: DesignResult) -> list[str]:
                 shown = written_value(edge, v.units, v.written)
                 out.append(f"design.vary.{v.key}'s {side} bound ({shown})")
     return out
+
+
+def answer_binding(result: DesignResult) -> str:
+    """What binds at the chosen design: a bound of ``design.vary`` it sits on (a feasible
+    answer's, :func:`bounds_reached`), else its requirement of least relative margin."""
+    edges = bounds_reached(result) if result.feasible and not result.front else []
+    return " and ".join(edges) or result.best.binding
 
 
 def summary_lines(result: DesignResult) -> list[str]:

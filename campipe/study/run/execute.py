@@ -247,7 +247,6 @@ def _state_notes(archive: Path, state: ArchiveState) -> list[str]:
         notes.append(
             f"{archive} failed its checks ({'; '.join(state.problems)}): it is written again"
         )
-        log.warning("%s", notes[-1])
     elif state.what:
         notes.append(f"{archive} was {state.what}: replaced (--overwrite)")
     return notes
@@ -368,10 +367,12 @@ def solid_note(study: Study, solid: dict[str, float]) -> list[str]:
     case = by_id[worst].case
     travel = case.train.spring_travel_to_solid
     assumed = travel == valve_train().spring_travel_to_solid
+    others = sorted(set(solid) - {worst}, key=lambda cid: -solid[cid])
+    also = f" (also {', '.join(others[:4])}{' …' if len(others) > 4 else ''})" if others else ""
     return [
-        f"the valve spring goes solid (coil bind) in {len(solid)} of {len(study.cases)} cases: "
-        f"case {worst} at {case.speed / RPM:.6g} cam rpm lifts its valve {solid[worst] * 1e3:.4g}"
-        f" mm, past the spring's {travel * 1e3:.4g} mm travel to solid "
+        f"the valve spring goes solid (coil bind) in {len(solid)} of {len(study.cases)} cases"
+        f"{also}: case {worst} at {case.speed / RPM:.6g} cam rpm lifts its valve "
+        f"{solid[worst] * 1e3:.4g} mm, past the spring's {travel * 1e3:.4g} mm travel to solid "
         f"(model.spring_travel_to_solid{', the default: the thesis gives none' if assumed else ''}"
         "). The model has no stop at solid: past it their motion is not a real train's "
         "(record: [spring] stores min_spring_clash_margin)"

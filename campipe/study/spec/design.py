@@ -120,13 +120,18 @@ def section_text(design: Design) -> list[str]:
     for r in design.require:
         sides = [bound_label(r, side) for side, v in (("min", r.minimum), ("max", r.maximum))
                  if not math.isnan(v)] or [f"{r.key} computed"]  # fmt: skip
+        engine = not math.isnan(r.engine)
         at = f" at {', '.join(f'{s / RPM:g}' for s in r.speeds)} rpm" if r.speeds else ""
+        if at and engine:
+            engine_at = ", ".join(f"{s / RPM / r.engine:g}" for s in r.speeds)
+            at += f" (the cam's; the engine's {engine_at})"
         level = ""
         if r.key == ONSET:
             shown = f"{math.degrees(r.level):g} deg a turn"
             if math.isnan(r.level):
                 shown = f"{DEFAULT_ONSET_LEVEL_DEG:g} deg a turn, the default"
-            level = f" (the cam's speed; with a seat, from no-follow of {shown})"
+            speed = "the engine's speed" if engine else "the cam's speed"
+            level = f" ({speed}; with a seat, from no-follow of {shown})"
         required.append(" and ".join(sides) + at + level)
     goals = ", ".join(f"{sense} {key}" for key, sense in design.objectives)
     return [
