@@ -217,3 +217,20 @@ def test_an_archive_whose_attributes_hdf5_cannot_open_is_damaged(monkeypatch, tm
 
     monkeypatch.setattr(archive_io, "open_dataset", lambda path: contextlib.nullcontext(Header()))
     assert archive_io.damaged(tmp_path / "any.nc") == ["attributes"]
+
+
+def test_an_archive_hdf5_cannot_open_is_told_damaged_alike_by_every_reader(archive, tmp_path):
+    """An archive cut to half its length: HDF5 cannot open it. query, plot and replay each
+    exit 1 (the environment's, not the input's) saying its structure is damaged and to restore
+    it or run the study again. Broken copy: replay exited 2, and each gave HDF5's bare error."""
+    cut = tmp_path / archive.name
+    data = archive.read_bytes()
+    cut.write_bytes(data[: len(data) // 2])
+    for args in (
+        ("query", cut),
+        ("plot", "metric", cut, "-o", tmp_path / "m.png"),
+        ("replay", cut, "--where", "speed_rpm > 0", "-o", tmp_path / "r.rrd"),
+    ):
+        out = invoke(*args)
+        assert out.exit_code == 1, (args, out.output)
+        assert "its structure is damaged" in out.output and "run the study again" in out.output
