@@ -166,3 +166,25 @@ def test_a_contact_stiffness_far_beyond_a_valve_train_s_is_noted():
     note = contact_note(stiff.cases)
     assert note.startswith(f"model.cam_contact_stiffness 1e+14 N/m is {1e14 / line:.3g}×")
     assert f"({line:.3g} N/m, from contact_modulus)" in note
+
+
+def test_a_cam_speed_beyond_any_valve_train_s_is_noted():
+    """``speed: 9000 rps`` (540 000 rpm, a unit slip for rpm) is noted by campipe validate,
+    counting the cases over a speed sweep without building them; no bundled study (the
+    thesis's fastest, 20 000 rpm) is. Fails on a copy without the note, or one that notes
+    the bundled studies."""
+    from campipe.study.spec.notes import speed_note
+
+    for spec in sorted(STUDIES.glob("*.yaml")):
+        assert speed_note(load_study(spec).cases) is None, spec.name
+    slip = load_study(STUDIES / "quickstart.yaml", {"sweep.speed": ["6000 rpm", "9000 rps"]})
+    note = speed_note(slip.cases)
+    assert note.startswith("2 cases turn the cam faster than 30000 rpm")  # 2 seats
+    assert "(the fastest 540000 rpm)" in note
+    result = CliRunner().invoke(
+        main,
+        ["validate", "--no-estimate", str(STUDIES / "quickstart.yaml"), "--set",
+         "sweep.speed=[6000 rpm, 9000 rps]"],
+    )  # fmt: skip
+    assert result.exit_code == 0, result.output
+    assert "speed: 2 cases turn the cam faster than 30000 rpm" in result.output

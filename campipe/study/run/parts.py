@@ -223,8 +223,6 @@ def find_parts(study: Study, archive: Path, layout: PartLayout) -> tuple[Parts, 
             continue
         checksum = checksum_digest(str(attrs.get(CHECKSUM_ATTR, "")))
         out.add(Stored("", path, ids, counts, statuses, "", checksum))
-    for note in notes:
-        log.warning("%s", note)
     return out, notes
 
 

@@ -201,8 +201,6 @@ def find_results(
             notes.append(f"{archive} failed its checks ({'; '.join(problems)}): not reused")
         else:
             _index_of(archive, found, wanted)
-    for note in notes:
-        log.warning("%s", note)
     return found, notes
 
 
