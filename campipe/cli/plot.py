@@ -127,25 +127,30 @@ def plot(
 DEFAULT_Z = "separation_deg_per_rev"
 
 
-def check_spec_plots(loaded) -> None:
-    """Refuse, before anything runs, a spec's ``plots:`` option that drawing would refuse
+def check_spec_plots(loaded, source: str = "spec") -> None:
+    """Refuse, before anything runs, a spec's ``plots:`` options that drawing would refuse
     once the archive is written: a ``turn`` past the turns the histories cover, a map's
     ``level`` in units of another dimension than its z's. ``campipe validate`` and
-    ``campipe study`` call it; a SpecRefused naming ``plots[i].<key>``."""
+    ``campipe study`` call it; a SpecRefused naming each ``plots[i].<key>``, as the spec's
+    other problems (``source`` the spec's file)."""
     import math
 
+    from campipe.study.spec.check import SpecError
+    from campipe.study.spec.fields import SpecProblem
     from campipe.units import QuantityError, convert, read_quantity
 
     turns = max(int(math.ceil(float(loaded.revolutions) - 1e-9)), 1)
     units = _column_units(loaded)
+    problems = []
     for i, request in enumerate(loaded.spec.plots):
         turn = request.turn
         if isinstance(turn, int) and turn > turns:
-            raise SpecRefused(
-                f"plots[{i}].turn: found {turn}, but the study's histories cover {turns} "
+            problems.append(SpecProblem(
+                f"plots[{i}].turn",
+                f"found {turn}, but the study's histories cover {turns} "
                 f"turn{'s' if turns != 1 else ''} (run.revolutions); expected 1 to {turns}, "
-                "last or all"
-            )
+                "last or all",
+            ))  # fmt: skip
         level = request.level
         zname = request.z or DEFAULT_Z
         if request.kind != "map" or not isinstance(level, str) or units.get(zname) is None:
@@ -157,13 +162,21 @@ def check_spec_plots(loaded) -> None:
             pass
         try:
             q = read_quantity(level, f"plots[{i}].level")
-            convert(1.0, str(q.units), str(units[zname]))
-        except Exception as exc:  # QuantityError, or pint's for another dimension
-            why = exc.reason if isinstance(exc, QuantityError) else type(exc).__name__
-            raise SpecRefused(
-                f"plots[{i}].level: cannot read {level!r} as a level of {zname} "
-                f"[{units[zname]}] ({why})"
-            ) from None
+        except QuantityError as exc:
+            why = exc.reason
+        else:
+            try:
+                convert(1.0, str(q.units), str(units[zname]))
+                continue
+            except Exception:  # pint's DimensionalityError: another dimension
+                why = (
+                    f"{q.units:~} is not of its dimension: write it in {units[zname]}, or as a "
+                    "number in the units shown"
+                )
+        problems.append(SpecProblem(f"plots[{i}].level", f"cannot read {level!r} as a level "
+                                    f"of {zname} [{units[zname]}]: {why}"))  # fmt: skip
+    if problems:
+        raise SpecRefused(str(SpecError(problems, source)))
 
 
 def _column_units(loaded) -> dict[str, str | None]:

@@ -119,7 +119,7 @@ def study(
             click.echo(str(done.archive))
             return
     loaded = load_spec(spec, sets, limits)
-    check_spec_plots(loaded)
+    check_spec_plots(loaded, spec)
     if parts_dir:
         from pathlib import Path
 
@@ -268,7 +268,7 @@ def validate(
     loaded = load_spec(
         spec, sets, limits_given(max_cases, max_steps, max_samples, max_events, max_archive_gb)
     )
-    check_spec_plots(loaded)
+    check_spec_plots(loaded, spec)
     workers = workers or default_workers()
     click.echo(validate_text(loaded, spec))
     from campipe.engine.settings import sample_count

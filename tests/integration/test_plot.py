@@ -362,6 +362,26 @@ def test_plot_options_drawing_would_refuse_are_refused_before_the_run(tmp_path, 
     assert not list(tmp_path.glob("*.nc"))
 
 
+def test_every_plot_option_drawing_would_refuse_is_named_at_once(tmp_path):
+    """Two refused plot options are both named, in the spec's problem list (its file and
+    count first), and a level of another dimension says what to write, not pint's bare
+    "DimensionalityError". Broken copy (a reliability helper's run): the first alone, as
+    "(DimensionalityError)"."""
+    plots = (
+        "plots:\n  - {kind: map, x: speed_rpm, y: seat, level: 1 kg}\n  - {kind: events, turn: 3}\n"
+    )
+    spec = write_spec(tmp_path, SPEC + plots)
+    result = CliRunner().invoke(main, ["validate", str(spec), "--no-estimate"])
+    assert result.exit_code == 2, result.output
+    assert f"{spec}: 2 problems" in result.output
+    assert (
+        "plots[0].level: cannot read '1 kg' as a level of separation_deg_per_rev [degree]: "
+        "kg is not of its dimension: write it in degree" in result.output
+    )
+    assert "plots[1].turn: found 3" in result.output
+    assert "DimensionalityError" not in result.output
+
+
 def test_plot_options_within_the_run_pass_validate(tmp_path):
     """The bounds are the run's: turn 2 of two turns and a level in degrees pass."""
     entries = "  - {kind: events, turn: 2}\n  - {kind: map, x: speed_rpm, y: seat, level: 1 deg}\n"
