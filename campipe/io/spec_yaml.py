@@ -102,9 +102,12 @@ def expanded_size(node: yaml.Node) -> int:
 
 
 def _construct_mapping(loader: _UniqueKeyLoader, node: yaml.MappingNode, deep: bool = False):
+    """A mapping whose own keys are each written once. A merge key's (``<<: *base``) are
+    not its own: a key written beside it overrides the merged one, as YAML's merge says."""
+    own = [k for k, _ in node.value if k.tag != "tag:yaml.org,2002:merge"]
     loader.flatten_mapping(node)
     seen: dict[object, int] = {}
-    for key_node, _ in node.value:
+    for key_node in own:
         key = loader.construct_object(key_node, deep=True)
         line = key_node.start_mark.line + 1
         if not isinstance(key, str | int | float | bool | None):
