@@ -470,3 +470,22 @@ def test_a_boolean_is_not_a_number_even_after_the_number_was_seen():
     expand(check_spec(with_(run__revolutions=1)))
     error = refused(with_(run__revolutions=True))
     assert error.paths == ["run.revolutions"] and "expected a number" in str(error)
+
+
+def test_a_ramp_as_high_as_the_lift_is_refused_at_its_key_in_its_units(tmp_path):
+    """``ramp_height: 2 in`` on a 1 in lift is refused at ``profile.ramp_height``, as
+    written, beside the lift. Broken copy (a reliability helper's spec): refused at
+    ``profile`` as "got 0.0508 m"."""
+    spec = write_spec(
+        tmp_path,
+        """
+        name: t
+        profile: {kind: polydyne-345, lift: 1 in, rise: 90 deg, dwell: 0 deg, fall: 90 deg,
+                  ramp_height: 2 in, ramp_duration: 30 deg}
+        speed: 3000 rpm
+        """,
+    )
+    with pytest.raises(SpecError) as caught:
+        load_study(spec)
+    assert caught.value.paths == ["profile.ramp_height"]
+    assert "found '2 in', expected a ramp below the lift ('1 in')" in str(caught.value)

@@ -252,6 +252,13 @@ def _profile(frozen: tuple, directory: Path) -> tuple[Profile, dict, dict[str, o
         elif kind.startswith("polydyne-"):
             ramp = None
             if "ramp_height" in si:
+                if not si["ramp_height"] < si["lift"]:
+                    raise SpecProblem(
+                        "profile.ramp_height",
+                        f"found {excerpt(spec['ramp_height'])}, expected a ramp below the "
+                        f"lift ({excerpt(spec['lift'])}): the ramps take the lash up, "
+                        "fractions of a millimetre",
+                    )
                 shape = str(si.get("ramp_shape", "constant-velocity"))
                 ramp = Ramp(float(si["ramp_height"]), float(si["ramp_duration"]), shape)
             profile = polydyne(
