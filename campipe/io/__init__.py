@@ -42,4 +42,11 @@ def read_text(path: Path, what: str, error: type[CampipeError], limit: int) -> s
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError:
-        raise error.at(str(path), "not UTF-8 text", expected="UTF-8 text") from None
+        netcdf = data.startswith((b"\x89HDF", b"CDF"))  # an archive, most likely
+        why = (
+            f"a netCDF file (an archive?), not {what}: a command that reads archives takes "
+            "it (campipe query, plot, export, replay)"
+            if netcdf
+            else f"not UTF-8 text; {what} is a text file"
+        )
+        raise error.at(str(path), why, expected="UTF-8 text") from None

@@ -489,3 +489,17 @@ def test_a_ramp_as_high_as_the_lift_is_refused_at_its_key_in_its_units(tmp_path)
         load_study(spec)
     assert caught.value.paths == ["profile.ramp_height"]
     assert "found '2 in', expected a ramp below the lift ('1 in')" in str(caught.value)
+
+
+def test_an_archive_given_as_the_spec_is_told_so(tmp_path):
+    """A netCDF file (HDF5's signature) given where a spec goes is told it looks like an
+    archive and which commands read one; other binary text is told it is not UTF-8 text.
+    Broken copy (a reliability helper's run): both "not UTF-8 text"."""
+    archive = tmp_path / "run.nc"
+    archive.write_bytes(b"\x89HDF\r\n\x1a\n" + bytes(range(128, 256)))
+    with pytest.raises(SpecFileError, match=r"a netCDF file \(an archive\?\), not the spec"):
+        read_spec(archive)
+    other = tmp_path / "other.yaml"
+    other.write_bytes(bytes(range(128, 256)))
+    with pytest.raises(SpecFileError, match="not UTF-8 text; the spec is a text file"):
+        read_spec(other)
