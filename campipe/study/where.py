@@ -593,8 +593,17 @@ def _convert(q: Quantity, units: str, column: _Column | None) -> float | np.ndar
             "--where", f"{q.text} has units, but {name} has none; compare it with a bare number"
         )
     ureg = registry()
-    stored, given = ureg.Quantity(1.0, units), ureg.Quantity(1.0, q.units)
-    if names_an_angle(stored) and not names_an_angle(given):
+    try:  # an archive's own attribute: edited by hand, it may not be units at all
+        stored = ureg.Quantity(1.0, units)
+        angle = names_an_angle(stored)
+    except Exception:  # pint's errors, and its AssertionError and OverflowError on odd text
+        raise QueryError.at(
+            "--where",
+            f"{name}'s units attribute in the archive, {excerpt(units)}, is not units campipe "
+            "writes (edited by hand?): run the study again to write the archive anew",
+        ) from None
+    given = ureg.Quantity(1.0, q.units)
+    if angle and not names_an_angle(given):
         raise QueryError.at(
             "--where",
             f"{q.text} names no angle, and {name} is stored in {units}: write it in "

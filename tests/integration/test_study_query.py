@@ -350,3 +350,27 @@ def test_any_text_either_selects_rows_or_is_refused(text):
     except QueryError:
         return
     assert rows.dtype.kind == "i" and set(rows.tolist()) <= {0, 1, 2, 3}
+
+
+@pytest.mark.parametrize("units", ["N**1000", "==", "1e400 N", "deg**99999"])
+def test_a_units_attribute_edited_by_hand_is_refused_not_a_traceback(archive, tmp_path, units):
+    """An archive whose ``max_cam_force`` units were edited (read with --no-verify: its
+    checksums would refuse it) is refused at --where naming the column and the attribute;
+    pint raised OverflowError, AssertionError or ValueError from inside (a reliability
+    helper's)."""
+    import shutil
+
+    import netCDF4
+
+    copy = tmp_path / "edited.nc"
+    shutil.copy(archive, copy)
+    with netCDF4.Dataset(copy, "a") as ds:
+        ds["max_cam_force"].units = units
+    out = CliRunner().invoke(
+        main, ["query", str(copy), "--no-verify", "--where", "max_cam_force > 1 N"]
+    )
+    assert out.exit_code == 2, out.output
+    assert f"max_cam_force's units attribute in the archive, {units!r}, is not units" in (
+        out.output
+    )
+    assert "Traceback" not in out.output
