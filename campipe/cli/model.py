@@ -159,7 +159,7 @@ def model(
     shape = shape_report(
         train,
         cam if cam is not None else harmonic(lift) if lift > 0.0 else None,
-        f"the spec's cam, {cam.label}" if cam is not None else f"harmonic, lift {lift:g} m",
+        f"the spec's cam, {cam.label}" if cam is not None else f"harmonic, lift {lift * 1e3:g} mm",
     )
     if as_json:
         report = model_report(train, sm, limits, preset, drive)

@@ -88,7 +88,9 @@ def ratio_table(train, sm, lift: float, step: float, cam=None) -> dict[str, obje
     if train.layout not in LEVERS:
         ratio = lash_ratio(sm) if train.layout == PUSHROD_ROCKER else 1.0
         return {"kinematic_ratio": {"constant": ratio}}
-    label = f"the spec's cam, {cam.label}" if cam is not None else f"harmonic, lift {lift:g} m"
+    label = (
+        f"the spec's cam, {cam.label}" if cam is not None else f"harmonic, lift {lift * 1e3:g} mm"
+    )
     if cam is None:
         if not lift > 0.0:
             raise click.UsageError(f"--cam-lift: found {lift!r} m, expected a positive lift")
