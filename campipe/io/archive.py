@@ -41,6 +41,14 @@ import numpy as np
 from campipe import __version__
 from campipe.errors import CampipeError
 from campipe.io.compression import COMPRESSION, COMPRESSIONS
+from campipe.io.digests import (
+    ATTRIBUTES_ENTRY,
+    CHECKSUM_ATTR,
+    RunningDigest,
+    attributes_digest,
+    checksums,
+    variable_digest,
+)
 from campipe.io.lock import ArchiveBusyError, lock_path, writing
 from campipe.io.watch import NETCDF_LOCK, progress, watched
 
@@ -101,14 +109,6 @@ class ArchiveDamagedError(ArchiveFileError):
 class ArchiveWriteError(CampipeError, RuntimeError):
     """A file that cannot be written: a full disk, a read-only folder (``key`` the file,
     ``found`` the errno where the system gave one)."""
-
-
-#: Global attribute holding the checksums of a file's variables and attributes (JSON).
-CHECKSUM_ATTR = "campipe_checksums"
-#: The checksum entry of the global attributes (no variable has this name).
-ATTRIBUTES_ENTRY = "/attributes"
-#: Bytes read at a time when a variable is checksummed.
-CHECKSUM_BLOCK = 8 * 2**20
 
 
 @contextmanager
@@ -254,7 +254,7 @@ class NetCDFWriter:
         #: the stored checksums' text (:data:`CHECKSUM_ATTR`), once committed
         self.checksum_text = ""
         #: name → the running checksum of a variable written in row order so far
-        self._digests: dict[str, _RunningDigest] = {}
+        self._digests: dict[str, RunningDigest] = {}
         #: the checksums' updates, computed in order on a thread of their own beside the
         #: writes (SHA-256 of an archive's rows is a tenth of what compressing them takes)
         self._hashing: ThreadPoolExecutor | None = None
@@ -309,7 +309,7 @@ class NetCDFWriter:
         if "flag_values" in attrs:
             attrs["flag_values"] = np.asarray(attrs["flag_values"], dtype=np.dtype(v.dtype))
         var.setncatts({k: _attr(val) for k, val in attrs.items()})
-        self._digests[v.name] = _RunningDigest(var)
+        self._digests[v.name] = RunningDigest(var)
 
     def write(self, name: str, values: np.ndarray, index: object = slice(None)) -> None:
         """Write ``values`` at ``index`` (a slice, an int, or a tuple of them). ``values``
@@ -394,7 +394,7 @@ class NetCDFWriter:
             else:
                 out[name] = variable_digest(var)
         h = hashlib.sha256()
-        _attributes_digest(self._ds, h)
+        attributes_digest(self._ds, h)
         out[ATTRIBUTES_ENTRY] = h.hexdigest()
         return out
 
@@ -510,86 +510,6 @@ def open_dataset(path: str | Path):
         return netCDF4.Dataset(str(path), "r", memory=f.read())
 
 
-# -- checksums -------------------------------------------------------------------------------
-
-
-def _attribute_bytes(value: object) -> bytes:
-    """An attribute's value as bytes that do not depend on numpy's repr."""
-    if isinstance(value, str):
-        return b"s" + value.encode("utf-8", "surrogatepass")
-    a = np.asarray(value)
-    return b"a" + f"{a.dtype.str}{a.shape}".encode() + a.tobytes()
-
-
-def _attributes_digest(owner, h) -> None:
-    for key in sorted(owner.ncattrs()):
-        if key == CHECKSUM_ATTR:
-            continue
-        h.update(key.encode() + b"=")
-        h.update(_attribute_bytes(owner.getncattr(key)))
-        h.update(b";")
-
-
-def _values_bytes(values: np.ndarray) -> bytes:
-    if values.dtype == object or values.dtype.kind in "US":
-        parts = [str(v).encode("utf-8", "surrogatepass") for v in values.ravel()]
-        return b"".join(len(p).to_bytes(8, "little") + p for p in parts)
-    return np.ascontiguousarray(values).tobytes()
-
-
-def _header_digest(var):
-    """A variable's checksum so far: its name, dimensions, type and attributes."""
-    h = hashlib.sha256()
-    h.update(f"{var.name}|{var.dimensions}|{var.dtype}|".encode())
-    _attributes_digest(var, h)
-    return h
-
-
-class _RunningDigest:
-    """:func:`variable_digest` of a variable computed from the values as they are written,
-    in row order: the same bytes the file gives back, without reading them."""
-
-    def __init__(self, var) -> None:
-        self.hash = _header_digest(var)
-        self.dtype = None if var.dtype is str else np.dtype(var.dtype)
-        self.rows = 0  # rows written so far, hashed or to be (``NetCDFWriter._track``)
-
-    def update(self, values) -> None:
-        """Hash the next rows (at least one dimension: a scalar is not rows)."""
-        a = np.asarray(values, dtype=object if self.dtype is None else self.dtype)
-        self.hash.update(_values_bytes(a))
-
-    def hexdigest(self) -> str:
-        return self.hash.hexdigest()
-
-
-def variable_digest(var) -> str:
-    """SHA-256 of a netCDF4 variable: name, dimensions, type, attributes and values (read a
-    block of rows at a time, so memory stays bounded)."""
-    h = _header_digest(var)
-    shape = var.shape
-    if not shape or shape[0] == 0:
-        h.update(_values_bytes(np.asarray(var[...])))
-        return h.hexdigest()
-    itemsize = 64 if var.dtype is str else np.dtype(var.dtype).itemsize
-    row = itemsize * int(np.prod(shape[1:], dtype=np.int64))
-    step = max(1, CHECKSUM_BLOCK // max(row, 1))
-    for start in range(0, shape[0], step):
-        h.update(_values_bytes(np.asarray(var[start : start + step])))
-        progress()
-    return h.hexdigest()
-
-
-def checksums(ds) -> dict[str, str]:
-    """Variable name → SHA-256 (:func:`variable_digest`) for an open netCDF4 Dataset, and the
-    digest of its global attributes under :data:`ATTRIBUTES_ENTRY`."""
-    out = {name: variable_digest(var) for name, var in ds.variables.items()}
-    h = hashlib.sha256()
-    _attributes_digest(ds, h)
-    out[ATTRIBUTES_ENTRY] = h.hexdigest()
-    return out
-
-
 @watched
 def verify(path: str | Path) -> list[str]:
     """Check a file against its stored checksums: ``[]`` if every variable and attribute is as
@@ -668,7 +588,7 @@ def damaged(
             if found is None or found != stored.get(name):
                 bad.append(name)
         h = hashlib.sha256()
-        _attributes_digest(ds, h)
+        attributes_digest(ds, h)
         if h.hexdigest() != stored.get(ATTRIBUTES_ENTRY):
             bad.append("attributes")
     return bad
