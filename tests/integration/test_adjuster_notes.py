@@ -97,6 +97,15 @@ def test_a_lash_the_ramps_do_not_take_up_is_noted_and_lands_on_the_flank(tmp_pat
     assert "lash: 6 cases take up more lash than the cam's ramps" in shown.output
 
 
+def validated(study: str, setting: str):
+    """``campipe validate --no-estimate`` of a bundled study with one ``--set``, passed."""
+    result = CliRunner().invoke(
+        main, ["validate", "--no-estimate", str(STUDIES / study), "--set", setting]
+    )
+    assert result.exit_code == 0, result.output
+    return result
+
+
 def test_a_valve_spring_s_rate_in_the_wrong_unit_is_noted():
     """A spring rate written in N/m for N/mm (the bundled finger's 30 N/mm as 30 N/m) holds
     its 180 N preload at 6 m: campipe validate notes it with the deflection and the keys; no
@@ -110,12 +119,7 @@ def test_a_valve_spring_s_rate_in_the_wrong_unit_is_noted():
     note = spring_note(slip.cases)
     assert note.startswith(f"{len(slip.cases)} cases' valve springs hold their preload")
     assert "220 N over 0.035 N/mm is 6286 mm" in note
-    result = CliRunner().invoke(
-        main,
-        ["validate", "--no-estimate", str(STUDIES / "finger-follower.yaml"), "--set",
-         "model.spring_rate=35 N/m"],
-    )  # fmt: skip
-    assert result.exit_code == 0, result.output
+    result = validated("finger-follower.yaml", "model.spring_rate=35 N/m")
     assert "spring: 7 cases' valve springs hold their preload" in result.output
 
 
@@ -181,10 +185,5 @@ def test_a_cam_speed_beyond_any_valve_train_s_is_noted():
     note = speed_note(slip.cases)
     assert note.startswith("2 cases turn the cam faster than 30000 rpm")  # 2 seats
     assert "(the fastest 540000 rpm)" in note
-    result = CliRunner().invoke(
-        main,
-        ["validate", "--no-estimate", str(STUDIES / "quickstart.yaml"), "--set",
-         "sweep.speed=[6000 rpm, 9000 rps]"],
-    )  # fmt: skip
-    assert result.exit_code == 0, result.output
+    result = validated("quickstart.yaml", "sweep.speed=[6000 rpm, 9000 rps]")
     assert "speed: 2 cases turn the cam faster than 30000 rpm" in result.output
