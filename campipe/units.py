@@ -368,9 +368,10 @@ def _angular(text: str, units: str, key: str, example_units: str) -> float:
     pint = _pint()
     q = _read(text, key, example_units)
     if not isinstance(q, pint.Quantity) or dict(q.to_base_units().unit_items()).get("radian") != 1:
+        read = f" (read as {q.units:~P})" if isinstance(q, pint.Quantity) else ""
         raise QuantityError.at(
             key,
-            f"found {excerpt(text)}, expected a quantity whose units name an angle, "
+            f"found {excerpt(text)}{read}, expected a quantity whose units name an angle, "
             f"such as '1 {example_units}'",
             found=text,
             expected=expected,

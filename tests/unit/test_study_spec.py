@@ -503,3 +503,11 @@ def test_an_archive_given_as_the_spec_is_told_so(tmp_path):
     other.write_bytes(bytes(range(128, 256)))
     with pytest.raises(SpecFileError, match="not UTF-8 text; the spec is a text file"):
         read_spec(other)
+
+
+def test_a_speed_with_its_units_twice_says_how_it_was_read(tmp_path):
+    """``speed: 9000 rpm rpm`` reads as rpm², which names no single angle: the refusal says
+    so (a reliability helper was told only that it "names no angle")."""
+    spec = write_spec(tmp_path, "name: t\nspeed: 9000 rpm rpm\n")
+    with pytest.raises(SpecError, match=r"speed: found '9000 rpm rpm' \(read as rpm²\)"):
+        load_study(spec)
