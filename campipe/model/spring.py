@@ -11,9 +11,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from campipe.model.assembly import system_matrices
 from campipe.model.elements import elements
 from campipe.model.lash import reference_preload
 from campipe.model.parameters import ValveTrain
+from campipe.model.seated import static_state
+from campipe.vocabulary import CAM
 
 
 def spring_extensions(train: ValveTrain, q: np.ndarray) -> np.ndarray:
@@ -72,3 +75,16 @@ def spring_clash_margin(train: ValveTrain, q: np.ndarray) -> np.ndarray:
     """
     extension = spring_extensions(train, q)
     return train.spring_travel_to_solid + train.spring_elements * extension.min(axis=-1)
+
+
+def base_circle_force(train: ValveTrain) -> float:
+    """The spring's force [N] on the valve (its element under the rocker or on the valve)
+    with the train at rest on the cam's base circle, off any seat: the static state under
+    the model's preload with the cam's coordinate held at 0. With lash it is the seated
+    train's business (``spring_preload`` is then the seated force); without, the train's
+    links give under the preload, so the spring pushes less than ``spring_preload``, the
+    force at the unstressed reference: by k/(k + k_spring), k the train's stiffness at the
+    valve (a two-link chain's in series)."""
+    sm = system_matrices(train)
+    q = static_state(sm.stiffness, sm.preload, {CAM: 0.0})
+    return float(spring_element_forces(train, q)[-1])

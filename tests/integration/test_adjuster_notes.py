@@ -5,6 +5,7 @@ they say nothing. And a lash the cam's ramps do not take up, said the same way."
 
 import math
 
+import pytest
 import xarray as xr
 from click.testing import CliRunner
 from study_helpers import STUDIES
@@ -187,3 +188,35 @@ def test_a_cam_speed_beyond_any_valve_train_s_is_noted():
     assert "(the fastest 540000 rpm)" in note
     result = validated("quickstart.yaml", "sweep.speed=[6000 rpm, 9000 rps]")
     assert "speed: 2 cases turn the cam faster than 30000 rpm" in result.output
+
+
+def test_a_spring_preload_a_soft_chain_gives_under_is_noted():
+    """Without lash, ``spring_preload`` is the spring's force at the train's unstressed
+    reference; on the base circle the chain's links give under it and the spring pushes
+    P₀·k/(k + k_s), k the links in series (closed form, here): 83.33 N for 250 N on links of
+    1e6 and 20 N/mm under a 40 N/mm spring (a helper's chain, read as 250 N installed). It
+    is noted with the preload that installs 250 N; the thesis's train (0.5 % less) and no
+    bundled study are. Fails on a copy without the note, or one that notes the thesis."""
+    from campipe.model import valve_train
+    from campipe.model.spring import base_circle_force
+    from campipe.study.spec.notes import preload_note
+
+    for spec in sorted(STUDIES.glob("*.yaml")):
+        assert preload_note(load_study(spec).cases) is None, spec.name
+    chain = valve_train("thesis-1971", {
+        "layout": "lumped", "masses": ["50 g", "1 g", "60 g"],
+        "stiffnesses": ["1e6 N/mm", "20 N/mm"], "spring_rate": "40 N/mm",
+        "spring_preload": "250 N", "damping_ratios": [0.05],
+    })  # fmt: skip
+    k = 1 / (1 / 1e9 + 1 / 2e4)  # N/m
+    assert base_circle_force(chain) == pytest.approx(250 * k / (k + 4e4), rel=1e-9)
+    thesis = valve_train()
+    assert 0.99 < base_circle_force(thesis) / thesis.spring_preload < 0.999
+    study = load_study(STUDIES / "quickstart.yaml", {
+        "model.layout": "lumped", "model.masses": ["50 g", "1 g", "60 g"],
+        "model.stiffnesses": ["1e6 N/mm", "20 N/mm"], "model.spring_rate": "40 N/mm",
+        "model.spring_preload": "250 N", "model.damping_ratios": [0.05],
+    })  # fmt: skip
+    note = preload_note(study.cases)
+    assert note is not None and "the spring pushes 83.33 N (66.7 % less)" in note
+    assert "for 250 N there give 750 N" in note

@@ -250,6 +250,43 @@ def _landing_excess(case: Case, ramp: float) -> float:
     return float(velocity[0] / velocity[1])
 
 
+#: The relative shortfall of the spring's force on the base circle from ``spring_preload``
+#: (a train without lash) above which it is noted.
+PRELOAD_SHORTFALL = 0.05
+
+
+def preload_note(cases: Sequence[ResolvedCase]) -> str | None:
+    """A note on cases without lash whose spring pushes on the base circle more than
+    :data:`PRELOAD_SHORTFALL` less than ``spring_preload`` (the force at the train's
+    unstressed reference; ``campipe.model.spring.base_circle_force``): a soft chain's links
+    give under it. None where there are none."""
+    from campipe.model.spring import base_circle_force
+
+    combinations, speeds = distinct_but_speed(cases)
+    worst, n = None, 0
+    for c in combinations:
+        t = c.case.train
+        if t.lash == t.lash or not t.spring_preload > 0.0:  # with lash: the seated force
+            continue
+        ratio = base_circle_force(t) / t.spring_preload
+        if ratio < 1.0 - PRELOAD_SHORTFALL:
+            n += speeds
+            if worst is None or ratio < worst[0]:
+                worst = (ratio, t)
+    if worst is None:
+        return None
+    ratio, t = worst
+    whose = f"{n} cases' springs push" if n != 1 else "1 case's spring pushes"
+    return (
+        f"{whose} on the base circle well below model.spring_preload: "
+        f"{t.spring_preload:.4g} N is the force at the train's unstressed reference, and "
+        f"without lash its links give under it, so the spring pushes "
+        f"{ratio * t.spring_preload:.4g} N ({(1 - ratio) * 100:.3g} % less); for "
+        f"{t.spring_preload:.4g} N there give {t.spring_preload / ratio:.4g} N, or set "
+        "model.lash (then spring_preload is the seated force)"
+    )
+
+
 #: A cam speed [rpm] beyond any valve train's (an engine at 20 000 rpm turns its cams at
 #: 10 000; the thesis's runs reach 20 000): a spec's speed above it is noted.
 FASTEST_CAM_RPM = 30_000.0
@@ -288,6 +325,7 @@ def case_notes(cases: Sequence[ResolvedCase], record: Sequence[str]) -> list[tup
         ("lash", ramp_note(cases)),
         ("spring", spring_note(cases)),
         ("spring", travel_note(cases, record)),
+        ("spring", preload_note(cases)),
         ("cam", cam_note(cases)),
         ("contact", contact_note(cases)),
         ("speed", speed_note(cases)),
