@@ -10,6 +10,9 @@ from pathlib import Path
 
 from campipe.errors import CampipeError
 
+#: How a netCDF file begins: netCDF-4's (HDF5's signature) and the classic formats'.
+NETCDF_MAGIC = (b"\x89HDF\r\n\x1a\n", b"CDF\x01", b"CDF\x02", b"CDF\x05")
+
 
 def read_text(path: Path, what: str, error: type[CampipeError], limit: int) -> str:
     """The UTF-8 text of ``path``, or ``error`` naming the file (its ``key``) and what it was
@@ -42,11 +45,10 @@ def read_text(path: Path, what: str, error: type[CampipeError], limit: int) -> s
     try:
         return data.decode("utf-8")
     except UnicodeDecodeError:
-        netcdf = data.startswith((b"\x89HDF", b"CDF"))  # an archive, most likely
         why = (
             f"a netCDF file (an archive?), not {what}: a command that reads archives takes "
             "it (campipe query, plot, export, replay)"
-            if netcdf
+            if data.startswith(NETCDF_MAGIC)
             else f"not UTF-8 text; {what} is a text file"
         )
         raise error.at(str(path), why, expected="UTF-8 text") from None

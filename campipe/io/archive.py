@@ -40,6 +40,7 @@ import numpy as np
 
 from campipe import __version__
 from campipe.errors import CampipeError
+from campipe.io import NETCDF_MAGIC
 from campipe.io.compression import COMPRESSION, COMPRESSIONS
 from campipe.io.digests import (
     ATTRIBUTES_ENTRY,
@@ -136,10 +137,6 @@ def missing_filter(exc: BaseException) -> str | None:
         "the plugins the netCDF4 package installs, or add their folder to it; for archives "
         "that need no plugin, set run.compression: zlib"
     )
-
-
-#: How a netCDF file begins: the classic formats' and netCDF-4's (HDF5's signature).
-NETCDF_MAGIC = (b"CDF\x01", b"CDF\x02", b"CDF\x05", b"\x89HDF\r\n\x1a\n")
 
 
 def not_netcdf(path: str | Path) -> bool:

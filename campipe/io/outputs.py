@@ -29,11 +29,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from campipe.errors import CampipeError
+from campipe.io import NETCDF_MAGIC
 
 #: Bytes read from the start of a file to tell its format.
 HEAD_BYTES = 64
-#: First bytes of an HDF5 (netCDF-4) and a classic netCDF file.
-NETCDF_MAGIC = (b"\x89HDF\r\n\x1a\n", b"CDF\x01", b"CDF\x02", b"CDF\x05")
 #: First bytes of the formats campipe writes beside an archive, by suffix.
 MAGIC = {
     ".png": (b"\x89PNG\r\n\x1a\n",),

@@ -74,7 +74,7 @@ class Compliant:
 
         case_list, angles, rtol, max_step, max_steps = prepared
         c = cases
-        table = extension = None  # the carried plungers', where a case has one
+        carried: CarriedPlungers | None = None  # made with the first case that has one
         for i, case in enumerate(case_list):
             seat = float(c.seat_q[i]) if case.has_seat else None
             system = compliant.compliant_system(case.train, case.profile, case.speed, seat)
@@ -92,17 +92,20 @@ class Compliant:
             )  # fmt: skip
             if system.plunger is not None:  # its state starts at 0 in the run's frame
                 z0 = np.append(z0, 0.0)
-                if table is None or extension is None:
-                    table = np.full((len(case_list), *out.per_rev.shape[1:2], 3), np.nan)
-                    extension = np.full(out.cam.shape, np.nan)  # where a plunger is in a link
-                one.adjuster = table[i]
+                if carried is None:  # NaN where a case has none, or none in a link
+                    carried = CarriedPlungers(
+                        np.full((len(case_list), *out.per_rev.shape[1:2], 3), np.nan),
+                        np.full(out.cam.shape, np.nan),
+                    )
+                one.adjuster = carried.table[i]
                 one.adjuster[:, 1:] = 0.0
                 if system.plunger.gains is None:  # in a chain's link: e₀ + u at the samples
-                    one.extension, one.extension_start = extension[i], case.train.hla_extension
+                    one.extension = carried.extension[i]
+                    one.extension_start = case.train.hla_extension
             compliant.integrate(
                 system, float(c.t0[i]), z0, held, angles / case.speed, one,
                 rtol=rtol, max_step=max_step, max_steps=max_steps, capture=float(c.capture[i]),
                 lift_bound=float(c.lift_bound[i]), valve_ref=float(c.valve_ref[i]),
             )  # fmt: skip
             out.n_events[i], out.status[i], out.steps[i] = one.n_events, one.status, one.steps
-        return None if table is None or extension is None else CarriedPlungers(table, extension)
+        return carried
