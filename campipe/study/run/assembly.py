@@ -64,13 +64,17 @@ def study_layout(study: Study, command: str, spec: str) -> Layout:
 
 def study_assembly(study: Study, archive: Path, found: Found, command: str, spec: str) -> Assembly:
     """The assembly of ``study``'s archive (its layout made when the archive is created)."""
+    ids, travel = [], []
+    for c in study.cases:  # one pass: a large speed sweep builds its cases on each
+        ids.append(c.case_id)
+        travel.append(c.case.train.spring_travel_to_solid)
     return Assembly(
-        [c.case_id for c in study.cases],
+        ids,
         archive,
         found,
         lambda: study_layout(study, command, spec),
         cam_angle_degrees(output_angles(study.cases[0].settings)),
-        np.array([c.case.train.spring_travel_to_solid for c in study.cases]),
+        np.array(travel),
     )
 
 
@@ -109,9 +113,10 @@ class Assembly:
         self.statuses: dict[str, str] = {}  # case id → status name, cases not ok
         #: each case's valve spring travel to solid [m], in study order (None: not checked)
         self.travel = travel
-        #: case id → the highest valve lift [m] of a case that lifts past its spring's travel
-        #: to solid in its stored turns (the coils clash: the model has no stop there)
-        self.solid: dict[str, float] = {}
+        #: study index → (the highest valve lift, its spring's travel to solid) [m] of a case
+        #: that lifts past that travel in its stored turns (the coils clash: the model has no
+        #: stop there)
+        self.solid: dict[int, tuple[float, float]] = {}
         self.block = CASE_CHUNK  # cases per write, set when the archive is created
         self.case_names: list[str] = []
         self.event_names: list[str] = []
@@ -326,5 +331,5 @@ class Assembly:
             lift = block["valve_lift"]
             highest = np.where(np.isnan(lift), -np.inf, lift).max(axis=1)  # failed: -inf
             for row in np.flatnonzero(highest > self.travel[lo:hi]).tolist():
-                self.solid[self.ids[lo + row]] = float(highest[row])
+                self.solid[lo + row] = (float(highest[row]), float(self.travel[lo + row]))
         self._release(by_file, hi)

@@ -300,10 +300,10 @@ def _compute_and_assemble(
     plans: list[BatchPlan],
     run: _Run,
     bar: Progress | None,
-) -> tuple[dict[str, str], float, dict[str, float]]:
+) -> tuple[dict[str, str], float, dict[int, tuple[float, float]]]:
     """Compute ``plans`` and write the archive as their batches are stored; case id → status
     name of the cases that did not finish cleanly, the seconds of the batches' engine calls,
-    summed, and case id → valve lift of the cases whose spring went solid (``Assembly.solid``)."""
+    summed, and the cases whose spring went solid (``Assembly.solid``)."""
     storage = Storage(parts_directory(archive), study.record)
     by_id = {c.case_id: c for c in study.cases}
     by_key = {p.key: p for p in plans}
@@ -357,22 +357,22 @@ def _compute_and_assemble(
     return sink.statuses, engine, sink.solid
 
 
-def solid_note(study: Study, solid: dict[str, float]) -> list[str]:
+def solid_note(study: Study, solid: dict[int, tuple[float, float]]) -> list[str]:
     """A note on the cases whose valve lifts past its spring's travel to solid
     (``Assembly.solid``): the coils clash, and the model has no stop there."""
     if not solid:
         return []
-    by_id = {c.case_id: c for c in study.cases}
-    worst = max(solid, key=lambda cid: solid[cid] - by_id[cid].case.train.spring_travel_to_solid)
-    case = by_id[worst].case
-    travel = case.train.spring_travel_to_solid
+    worst = max(solid, key=lambda k: solid[k][0] - solid[k][1])
+    lift, travel = solid[worst]
+    case = study.cases[worst]
     assumed = travel == valve_train().spring_travel_to_solid
-    others = sorted(set(solid) - {worst}, key=lambda cid: -solid[cid])
-    also = f" (also {', '.join(others[:4])}{' …' if len(others) > 4 else ''})" if others else ""
+    others = sorted(set(solid) - {worst}, key=lambda k: -solid[k][0])
+    shown = ", ".join(study.cases[k].case_id for k in others[:4])
+    also = f" (also {shown}{' …' if len(others) > 4 else ''})" if others else ""
     return [
         f"the valve spring goes solid (coil bind) in {len(solid)} of {len(study.cases)} cases"
-        f"{also}: case {worst} at {case.speed / RPM:.6g} cam rpm lifts its valve "
-        f"{solid[worst] * 1e3:.4g} mm, past the spring's {travel * 1e3:.4g} mm travel to solid "
+        f"{also}: case {case.case_id} at {case.case.speed / RPM:.6g} cam rpm lifts its valve "
+        f"{lift * 1e3:.4g} mm, past the spring's {travel * 1e3:.4g} mm travel to solid "
         f"(model.spring_travel_to_solid{', the default: the thesis gives none' if assumed else ''}"
         "). The model has no stop at solid: past it their motion is not a real train's "
         "(record: [spring] stores min_spring_clash_margin)"
