@@ -10,7 +10,13 @@ import click
 import numpy as np
 
 from campipe.cli.base import Failure, InputFailure, parse_overrides
-from campipe.cli.model_cam import ratio_table, ratio_text, shape_report, shape_text
+from campipe.cli.model_cam import (
+    ratio_table,
+    ratio_text,
+    shape_report,
+    shape_text,
+    shown_cam,
+)
 from campipe.constants import INCH, LBF_IN, RPM, TWO_PI
 from campipe.model import (
     ELEMENTS,
@@ -37,7 +43,6 @@ from campipe.model.contact_modes import ContactMode, contact_modes
 from campipe.model.hla import adjuster, hla_series, on_pivot, seated_stiffness
 from campipe.model.layouts import mirror, own_matrices, used_coordinates
 from campipe.model.levers import LEVERS, pivot_gain
-from campipe.profiles import harmonic
 from campipe.units import QuantityError, convert, parse_quantity, pint_without_dask
 from campipe.vocabulary import CONFIGURATIONS, ROMAN, free_coordinates
 
@@ -154,13 +159,10 @@ def model(
         lift = parse_quantity(cam_lift, "m", "--cam-lift", "mm")
     except QuantityError as exc:
         raise click.UsageError(str(exc)) from None
-    table = ratio_table(train, sm, lift, math.radians(ratio_step), cam)
+    cam, label = shown_cam(cam, lift)
+    table = ratio_table(train, sm, lift, math.radians(ratio_step), cam, label)
     contacts = contact_modes(train, sm)
-    shape = shape_report(
-        train,
-        cam if cam is not None else harmonic(lift) if lift > 0.0 else None,
-        f"the spec's cam, {cam.label}" if cam is not None else f"harmonic, lift {lift * 1e3:g} mm",
-    )
+    shape = shape_report(train, cam, label)
     if as_json:
         report = model_report(train, sm, limits, preset, drive)
         click.echo(json.dumps({**report, **table, **shape, **contact_report(contacts)}, indent=1))

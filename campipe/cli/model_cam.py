@@ -80,21 +80,25 @@ def shape_text(report: dict[str, object]) -> str:
     return "\n".join(lines)
 
 
-def ratio_table(train, sm, lift: float, step: float, cam=None) -> dict[str, object]:
+def shown_cam(cam, lift: float):
+    """The cam the reports over the turn draw, and its label: the spec's (``cam``), or else
+    the harmonic cam of ``lift`` [m] (--cam-lift; None where it is not positive)."""
+    if cam is not None:
+        return cam, f"the spec's cam, {cam.label}"
+    return (harmonic(lift) if lift > 0.0 else None), f"harmonic, lift {lift * 1e3:g} mm"
+
+
+def ratio_table(train, sm, lift: float, step: float, cam, label: str) -> dict[str, object]:
     """The kinematic ratio over the cam turn (SI, JSON form): a lever layout's, valve lift and
-    lever ratio every ``step`` [rad] under the ``cam`` profile (a spec's), or else the harmonic
-    cam of ``lift`` [m] (:mod:`campipe.model.levers`); another layout's, one constant (the
-    thesis's rocker's ``lash_ratio``, a chain's 1: its coordinates are the valve side's)."""
+    lever ratio every ``step`` [rad] under ``cam`` (:func:`shown_cam`, ``label``; None: the
+    harmonic cam of a ``lift`` [m] that is not positive, refused) (:mod:`campipe.model.levers`);
+    another layout's, one constant (the thesis's rocker's ``lash_ratio``, a chain's 1: its
+    coordinates are the valve side's)."""
     if train.layout not in LEVERS:
         ratio = lash_ratio(sm) if train.layout == PUSHROD_ROCKER else 1.0
         return {"kinematic_ratio": {"constant": ratio}}
-    label = (
-        f"the spec's cam, {cam.label}" if cam is not None else f"harmonic, lift {lift * 1e3:g} mm"
-    )
     if cam is None:
-        if not lift > 0.0:
-            raise click.UsageError(f"--cam-lift: found {lift!r} m, expected a positive lift")
-        cam = harmonic(lift)
+        raise click.UsageError(f"--cam-lift: found {lift!r} m, expected a positive lift")
     theta = np.arange(0.0, TWO_PI - 1e-12, step)
     state = cam_kinematics(cam, train, theta)
     return {
