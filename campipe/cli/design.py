@@ -72,15 +72,15 @@ def design(spec, sets, fmt, output, overwrite, scheduler, workers) -> None:
 def drive_note(ratio: float, design) -> str:
     """What a design's speeds are in a spec with a drive: the cam's, as onset_speed_rpm's,
     with the engine's beside the spec's own onset bounds."""
-    from campipe.study.spec.design import ENGINE_ONSET, ONSET
+    from campipe.study.spec.design import ONSET, bound_label
 
     bounds = [
-        f"{ONSET} {sign} {value:g} rpm is the engine's {value / ratio:g} rpm"
+        f"{bound_label(r, side)} is the engine's {value / ratio:g} rpm"
         if math.isnan(r.engine)
-        else f"{ENGINE_ONSET} {sign} {value / ratio:g} rpm is the cam's {value:g} rpm"
+        else f"{bound_label(r, side)} is the cam's {value:g} rpm"
         for r in design.require
         if r.key == ONSET
-        for sign, value in (("≥", r.minimum), ("≤", r.maximum))
+        for side, value in (("min", r.minimum), ("max", r.maximum))
         if not math.isnan(value)
     ]
     example = "; ".join(bounds) or f"the engine's 7000 rpm is the cam's {7000 * ratio:g} rpm"
@@ -154,7 +154,7 @@ def _run(loaded, spec_path, path, fmt, overwrite, scheduler, workers) -> None:
     from campipe.io.outputs import check_output, describe_netcdf
     from campipe.study.design.output import (
         DESIGN_FILE,
-        bounds_reached,
+        answer_binding,
         design_table,
         file_contents,
         shown_units,
@@ -196,12 +196,8 @@ def _run(loaded, spec_path, path, fmt, overwrite, scheduler, workers) -> None:
     lines = summary_lines(result)
     for line in lines:
         click.echo(line, err=True)
-    if (
-        result.feasible
-        and not result.front
-        and result.best.binding.startswith((ONSET, ENGINE_ONSET))
-        and not bounds_reached(result)
-    ):
+    binding = answer_binding(result)
+    if result.feasible and not result.front and binding.startswith((ONSET, ENGINE_ONSET)):
         sets = " ".join(f"--set {v.key}='{written_value(result.best.x[j], v.units, v.written)}'"
                         for j, v in enumerate(result.design.vary))  # fmt: skip
         level = next(r.level for r in result.design.require if r.key == ONSET)
