@@ -43,6 +43,7 @@ from campipe.model.contact_modes import ContactMode, contact_modes
 from campipe.model.hla import adjuster, hla_series, on_pivot, seated_stiffness
 from campipe.model.layouts import mirror, own_matrices, used_coordinates
 from campipe.model.levers import LEVERS, pivot_gain
+from campipe.profiles.levers import cam_of
 from campipe.units import QuantityError, convert, parse_quantity, pint_without_dask
 from campipe.vocabulary import CONFIGURATIONS, ROMAN, free_coordinates
 
@@ -208,9 +209,7 @@ def spec_model(spec_path: str, sets: tuple[str, ...], overrides: dict, index: in
             f"case {index}'s ({shown}); another with --case N",
             err=True,
         )
-    cam = case.case.profile
-    cam = getattr(cam, "cam", None) or cam  # a lever's excitation keeps its cam
-    return train, f"{name} (case {index})", cam, study.spec.drive, metric
+    return train, f"{name} (case {index})", cam_of(case.case.profile), study.spec.drive, metric
 
 
 def _json_value(value: object) -> object:

@@ -53,6 +53,13 @@ def is_valve_side(profile: Profile) -> bool:
     return isinstance(profile, ValveSideProfile)
 
 
+def cam_of(profile: Profile) -> Profile:
+    """The cam's own lift of a case whose excitation is ``profile``: a lever layout's cam
+    (:class:`ValveSideProfile`), else ``profile`` itself."""
+    cam = profile.cam if isinstance(profile, ValveSideProfile) else None
+    return cam if cam is not None else profile
+
+
 def _kinematics(profile: Profile, lever: Lever, theta: np.ndarray) -> KinematicState:
     return kinematic_state(lever, lambda s: evaluate(profile, s)[:2], theta)
 

@@ -13,6 +13,7 @@ import numpy as np
 from campipe.engine import Case
 from campipe.model import valve_train
 from campipe.model.levers import LEVERS
+from campipe.profiles.levers import cam_of
 from campipe.study.spec.resolve import ResolvedCase, distinct_but_speed, valve_lift_ratio
 
 
@@ -180,8 +181,7 @@ def cam_note(cases: Sequence[ResolvedCase]) -> str | None:
     seen: dict[tuple, str | None] = {}
     found = []
     for c in combinations:
-        train, profile = c.case.train, c.case.profile
-        cam = getattr(profile, "cam", None) or profile  # a lever's excitation keeps its cam
+        train, cam = c.case.train, cam_of(c.case.profile)
         if not train.cam_base_radius > 0.0:  # NaN: not given
             continue
         key = (cam.breaks.tobytes(), cam.poly.tobytes(), cam.trig.tobytes(),
