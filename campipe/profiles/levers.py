@@ -110,7 +110,7 @@ def valve_side(profile: Profile, train: Any) -> Profile:
     if train.layout not in LEVERS:
         return profile
     lever = lever_of(train)
-    key = (profile.breaks.tobytes(), profile.poly.tobytes(), profile.trig.tobytes(), lever)
+    key = (*profile.content_key, lever)
     found = _CACHE.get(key)
     if found is None:
         found = _derived(profile, lever)

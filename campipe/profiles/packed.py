@@ -51,7 +51,7 @@ class Keyed:
 
     def __init__(self, profile: Profile) -> None:
         self.profile = profile
-        self.key = (profile.breaks.tobytes(), profile.poly.tobytes(), profile.trig.tobytes())
+        self.key = profile.content_key
         self._hash = hash(self.key)
 
     def __hash__(self) -> int:

@@ -73,6 +73,12 @@ class Profile:
         """Number of pieces n."""
         return self.poly.shape[0]
 
+    @property
+    def content_key(self) -> tuple[bytes, bytes, bytes]:
+        """The pieces as a hashable key (their arrays' bytes; not the label): equal for
+        profiles that lift alike, for caches keyed by a profile."""
+        return self.breaks.tobytes(), self.poly.tobytes(), self.trig.tobytes()
+
 
 def _frozen(a) -> np.ndarray:
     out = np.array(a, dtype=float)

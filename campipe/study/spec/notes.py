@@ -184,8 +184,7 @@ def cam_note(cases: Sequence[ResolvedCase]) -> str | None:
         train, cam = c.case.train, cam_of(c.case.profile)
         if not train.cam_base_radius > 0.0:  # NaN: not given
             continue
-        key = (cam.breaks.tobytes(), cam.poly.tobytes(), cam.trig.tobytes(),
-               train.cam_base_radius, train.cam_roller_radius)  # fmt: skip
+        key = (*cam.content_key, train.cam_base_radius, train.cam_roller_radius)
         if key not in seen:
             seen[key] = undercut_text(cam, train.cam_base_radius, train.cam_roller_radius)
         if seen[key] is not None and seen[key] not in found:
