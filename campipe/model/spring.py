@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from campipe.model.assembly import system_matrices
+from campipe.model.assembly import assemble, preload_vector
 from campipe.model.elements import elements
 from campipe.model.lash import reference_preload
 from campipe.model.parameters import ValveTrain
@@ -85,6 +85,5 @@ def base_circle_force(train: ValveTrain) -> float:
     links give under the preload, so the spring pushes less than ``spring_preload``, the
     force at the unstressed reference: by k/(k + k_spring), k the train's stiffness at the
     valve (a two-link chain's in series)."""
-    sm = system_matrices(train)
-    q = static_state(sm.stiffness, sm.preload, {CAM: 0.0})
+    q = static_state(assemble(train)[1], preload_vector(train), {CAM: 0.0})  # no modes needed
     return float(spring_element_forces(train, q)[-1])
