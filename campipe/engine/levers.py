@@ -28,7 +28,15 @@ impacts were not recorded (before a recorded window, past a full event buffer) t
 valve-side largest over the turn's largest r (from below).
 
 Every other layout's result is returned as it is (the thesis's preset and the chains' runs
-bit for bit). Pure numerics on the result's arrays.
+bit for bit), but for the cam contact's radius: where a case's cam's shape is known (a line
+contact, ``cam_contact_width``, on a cam of given ``cam_base_radius``), :func:`contact_radii`
+gives the relative radius of curvature R' of cam and follower at each sample
+(:func:`campipe.profiles.curvature.contact_radius`; a lever's on its cam's own lift, where its
+swinging roller touches: ``profiles.levers.contact_angles``), which the
+Hertz pressure (``max_cam_pressure``) then takes in place of one ``cam_curvature_radius``:
+each turn's largest F/R' by the sampled rule above (the ratio 1/R').
+
+Pure numerics on the result's arrays.
 """
 
 from __future__ import annotations
@@ -40,11 +48,13 @@ import numpy as np
 
 from campipe.constants import TWO_PI
 from campipe.engine.case import Case
+from campipe.engine.loads import turn_maxima
 from campipe.engine.metrics import MAX_CAM_FORCE, MAX_CAM_IMPACT_VELOCITY, MAX_ROLLER_FORCE
 from campipe.engine.result import BatchResult
 from campipe.engine.settings import DEFAULT_CAPTURE_VELOCITY
 from campipe.profiles import Profile
-from campipe.profiles.levers import is_valve_side, lever_ratio
+from campipe.profiles.curvature import contact_radius
+from campipe.profiles.levers import cam_of, contact_angles, is_valve_side, lever_ratio
 from campipe.vocabulary import CAM_IMPACT, EV_IMPULSE, EV_KIND, EV_TIME, EV_VELOCITY
 
 #: The cam angles [rad] a turn's largest lever ratio is taken over (every 0.5°).
@@ -57,7 +67,11 @@ def at_the_cam(
     """``result`` with each lever layout's cam force (histories and ``max_cam_force`` per
     turn) the roller's normal force on the cam, and its cam impacts (events and
     ``max_cam_impact_velocity`` per turn) the roller's, for a run of capture velocity
-    ``capture`` [m/s] (see the module); ``result`` itself if no case is a lever layout's."""
+    ``capture`` [m/s] (see the module), and the cam contact's radius at the samples where
+    the cam's shape gives it (:func:`contact_radii`); ``result`` itself if neither."""
+    radius = contact_radii(np.asarray(result.cam_angle, float), cases)
+    if radius is not None:
+        result = dataclasses.replace(result, cam_contact_radius=radius, _derived={})
     levers = [i for i, c in enumerate(cases) if is_valve_side(c.profile)]
     if not levers:
         return result
@@ -86,6 +100,32 @@ def at_the_cam(
     return dataclasses.replace(result, cam_force=force, per_rev=per_rev, events=events, _derived={})
 
 
+def contact_radii(theta: np.ndarray, cases: Sequence[Case]) -> np.ndarray | None:
+    """(n_cases, n_out) the cam contact's relative radius of curvature R' [m] at cam angles
+    ``theta`` [rad] of each case whose cam's shape is known: a line contact
+    (``cam_contact_width``) on a cam of given ``cam_base_radius``, under a flat face or a
+    roller (``cam_roller_radius``), a lever's on its cam's own lift; NaN for the others, and
+    where the cam is undercut. None where no case's is known."""
+    out = None
+    known: dict[tuple, np.ndarray] = {}  # a study's cases share their cams
+    for i, case in enumerate(cases):
+        train = case.train
+        if not (train.cam_base_radius > 0.0 and train.cam_contact_width > 0.0):  # NaN: none
+            continue
+        key = (id(case.profile), train.cam_base_radius, train.cam_roller_radius)
+        if key not in known:  # a lever's roller touches where a radial one would at s(θ)
+            known[key] = contact_radius(
+                cam_of(case.profile),
+                float(train.cam_base_radius),
+                float(train.cam_roller_radius),
+                contact_angles(case.profile, theta),
+            )
+        if out is None:
+            out = np.full((len(cases), theta.size), np.nan)
+        out[i] = known[key]
+    return out
+
+
 def impacts_at_the_cam(
     events: np.ndarray, fastest: np.ndarray, profile: Profile, speed: float, capture: float
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -112,29 +152,3 @@ def impacts_at_the_cam(
             widest = float(lever_ratio(profile, _TURN).max())
         out[k] /= widest
     return events, out
-
-
-def turn_maxima(
-    force: np.ndarray, ratio: np.ndarray, theta: np.ndarray, largest: np.ndarray, first: int = 0
-) -> np.ndarray:
-    """(n_turns,) each turn's largest normal force [N] (see the module) from the valve-side
-    ``force`` [N] and the ``ratio`` [-] at the samples' cam angles ``theta`` [rad] (from the
-    recorded window's start, turn ``first``), and the engine's per-turn valve-side
-    ``largest`` [N]."""
-    out = np.asarray(largest, float).copy()
-    valid = np.isfinite(force)
-    if not valid.any():
-        return out
-    n_hist = max(int(np.ceil(theta[-1] / TWO_PI - 1e-9)), 1)
-    turn = first + np.minimum(np.floor(theta / TWO_PI + 1e-9).astype(np.int64), n_hist - 1)
-    overall = ratio[np.nanargmax(np.where(valid, force, -np.inf))]
-    for k in range(out.size):
-        if not out[k] > 0.0:  # never on the cam, or a failed case's NaN
-            continue
-        here = (turn == k) & valid
-        if not here.any():
-            out[k] = largest[k] * overall
-            continue
-        j = np.argmax(np.where(here, force, -np.inf))
-        out[k] = max(largest[k] * ratio[j], float(np.max((force * ratio)[here])))
-    return out

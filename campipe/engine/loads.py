@@ -162,3 +162,35 @@ def per_turn(history: np.ndarray, cam_angle: np.ndarray, n_rev: int, how: str) -
         if take.any():
             out[..., r] = reduce(history[..., take], axis=-1)
     return out
+
+
+def turn_maxima(
+    force: np.ndarray, ratio: np.ndarray, theta: np.ndarray, largest: np.ndarray, first: int = 0
+) -> np.ndarray:
+    """(n_turns,) each turn's largest force × ratio, a force [N] weighted by a ``ratio`` that
+    changes over the turn (a lever's ratio: the roller's normal force,
+    ``engine.levers.at_the_cam``; 1/R': the Hertz pressure's F/R'), to the samples'
+    resolution: the larger of the samples' largest ``force`` × ``ratio`` and the engine's
+    per-turn ``largest`` force (exact, between the samples) × the ratio at the sample of the
+    turn's largest sampled force. ``force`` and ``ratio`` at the samples' cam angles
+    ``theta`` [rad] from the recorded window's start, turn ``first``; a turn with no samples
+    takes the ratio at the window's largest force. The largest F·r may sit on another hump
+    of F than F's largest, and r changes by |dr/dθ|·Δθ between samples."""
+    out = np.asarray(largest, float).copy()
+    valid = np.isfinite(force)
+    if not valid.any():
+        return out
+    n_hist = max(int(np.ceil(theta[-1] / TWO_PI - 1e-9)), 1)
+    turn = first + np.minimum(np.floor(theta / TWO_PI + 1e-9).astype(np.int64), n_hist - 1)
+    overall = ratio[np.nanargmax(np.where(valid, force, -np.inf))]
+    for k in range(out.size):
+        if not out[k] > 0.0:  # never on the cam, or a failed case's NaN
+            continue
+        here = (turn == k) & valid
+        if not here.any():
+            out[k] = largest[k] * overall
+            continue
+        j = np.argmax(np.where(here, force, -np.inf))
+        # (NaN in a ratio carries: an undercut cam's pressure; the builtin max would drop it)
+        out[k] = np.maximum(largest[k] * ratio[j], np.max((force * ratio)[here]))
+    return out

@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from campipe.engine.loads import per_turn, pushing_joints
+from campipe.engine.loads import per_turn, pushing_joints, turn_maxima
 from campipe.model.contact import contact_law
 from campipe.model.hla import taken_up
 
@@ -145,12 +145,24 @@ def batch_means_error(
 
 def _pressure(side: int) -> Callable[[Any, Any], np.ndarray]:
     def derive(result, trains) -> np.ndarray:
-        # A pressure rises with its force: the turn's peak pressure is its peak force's.
+        # A pressure rises with its force: the turn's peak pressure is its peak force's, on
+        # one radius of curvature (``cam_curvature_radius``, ``seat_contact_radius``).
         force = result.max_cam_force_per_rev if side == 0 else result.max_seat_force_per_rev
         contact = ("cam", "seat")[side]
-        return np.stack(
+        out = np.stack(
             [contact_law(t, contact).pressure(force[i]) for i, t in enumerate(trains)]
         ).reshape(force.shape)
+        radius = result.cam_contact_radius if side == 0 else np.zeros((0, 0))
+        theta = np.asarray(result.cam_angle, float)
+        for i in range(radius.shape[0]):
+            # The cam's radius over the turn (``engine.levers.contact_radii``): each turn's
+            # largest F/R', the samples' and the exact peak's at its sample's radius.
+            if np.isnan(radius[i]).all():
+                continue
+            load = turn_maxima(np.maximum(result.cam_force[i], 0.0), 1.0 / radius[i], theta,
+                               force[i])  # fmt: skip
+            out[i] = contact_law(trains[i], contact).line_pressure(load)
+        return out
 
     return derive
 

@@ -89,6 +89,11 @@ class BatchResult:
     #: force is k·(x₁ − x₂ + e)), NaN where it raises a finger's pivot or there is none;
     #: empty else
     extension: np.ndarray = field(default_factory=lambda: _NONE_FLOAT)
+    #: (n_cases, n_out) the cam contact's relative radius of curvature R' at each sample [m]
+    #: where the cam's shape is known (a line contact on a cam of given ``cam_base_radius``:
+    #: ``engine.levers.at_the_cam``), NaN else; empty before that (the Hertz pressure then
+    #: takes ``cam_curvature_radius``)
+    cam_contact_radius: np.ndarray = field(default_factory=lambda: _NONE_FLOAT)
     _derived: dict[str, object] = field(default_factory=dict, repr=False, compare=False)
 
     @property

@@ -146,6 +146,20 @@ def check_contacts(train: Any, key_prefix: str = "") -> None:
     another law's constants (a hertz constant under kelvin-voigt, a stiffness under rigid), a
     compliant law with no stiffness (neither given nor from its geometry), a hertz law from a
     line contact (its approach is linear in the force up to a logarithm: kelvin-voigt)."""
+    if (
+        train.cam_contact_width > 0.0
+        and train.cam_base_radius > 0.0
+        and train.cam_curvature_radius > 0.0
+    ):
+        raise ModelParameterError.at(
+            key_prefix + "cam_curvature_radius",
+            "is one radius for the whole turn, for a cam whose shape is not known: with "
+            "cam_base_radius the line contact's Hertz pressure takes the cam's own radius of "
+            "curvature at every angle (campipe model shows its least); leave "
+            "cam_curvature_radius out",
+            found=train.cam_curvature_radius,
+            expected="0 (not given) with cam_base_radius and cam_contact_width",
+        )
     for contact in ("cam", "seat"):
         law = getattr(train, f"{contact}_contact")
         law_key = f"{key_prefix}{contact}_contact"

@@ -284,6 +284,9 @@ class KinematicState:
     valve_lift: np.ndarray  # [m] b·(sin α₀ − sin α)
     ratio: np.ndarray  # [-] valve travel per roller travel along the contact normal
     gain: np.ndarray  # [-] ∂(valve lift)/∂(pivot height), the roller held on the cam
+    #: [rad] the profile angle s of the roller's centre on the pitch curve: the cam touches
+    #: the roller where a radial roller would touch it at cam angle s
+    contact: np.ndarray
 
 
 def kinematic_state(lever: Lever, lift: Lift, theta: np.ndarray) -> KinematicState:
@@ -307,7 +310,7 @@ def kinematic_state(lever: Lever, lift: Lift, theta: np.ndarray) -> KinematicSta
     along = np.einsum("ij,ij->i", motion, normal)
     ratio = _ratio(lever, alpha, along)
     gain = _gain(lever, alpha, normal[:, 1], along)
-    return KinematicState(theta, alpha, lever.valve_lift(alpha), ratio, gain)
+    return KinematicState(theta, alpha, lever.valve_lift(alpha), ratio, gain, s)
 
 
 def _ratio(lever: Lever, alpha: np.ndarray, along: np.ndarray) -> np.ndarray:

@@ -17,6 +17,9 @@ is given so too, :mod:`campipe.model.levers`), from a base circle of radius r_b.
   would loop back on itself: *undercut*. A translating roller's pressure angle, between its
   travel and the contact normal, is atan(r′/r).
 
+The contact's relative radius of curvature R' (the Hertz pressure's, :func:`contact_radius`)
+is ρ under a flat face and ρ·r_r/(ρ + r_r) under a roller (ρ negative on a concave flank).
+
 Pure numpy, in SI (m, rad); :func:`cam_shape` samples a profile's turn.
 """
 
@@ -105,3 +108,23 @@ def cam_shape(
         )
     radius = flat_face_radius(base_radius, lift, acceleration)
     return CamShape(theta, radius, 0.0, velocity, np.zeros(theta.size), radius < 0.0)
+
+
+def contact_radius(
+    profile: Profile, base_radius: float, roller_radius: float, theta: np.ndarray
+) -> np.ndarray:
+    """The relative radius of curvature R' [m] of the cam and its follower at the contact, at
+    cam angles ``theta`` [rad] (any turn) under ``profile`` (the follower's lift): the cam's
+    radius of curvature ρ under a flat face, ρ·r_r/(ρ + r_r) under a roller of radius r_r;
+    NaN where the cam is undercut there (:class:`CamShape`)."""
+    angle = np.mod(np.asarray(theta, float), 2.0 * math.pi)
+    lift, velocity, acceleration = evaluate(profile, angle)
+    if roller_radius > 0.0:
+        pitch = pitch_radius(base_radius, roller_radius, lift, velocity, acceleration)
+        undercut = (pitch > 0.0) & (pitch < roller_radius)
+        # r_r·ρ/(ρ + r_r) with ρ = ρ_p − r_r: r_r·(1 − r_r/ρ_p), r_r where the curve is straight
+        radius = roller_radius * (1.0 - roller_radius / pitch)
+    else:
+        radius = flat_face_radius(base_radius, lift, acceleration)
+        undercut = radius < 0.0
+    return np.where(undercut, np.nan, radius)

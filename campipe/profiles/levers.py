@@ -80,6 +80,17 @@ def lever_ratio(profile: Profile, theta: np.ndarray) -> np.ndarray:
     return _kinematics(profile.cam, profile.lever, theta).ratio.reshape(theta.shape)
 
 
+def contact_angles(profile: Profile, theta: np.ndarray) -> np.ndarray:
+    """The profile angles [rad] of the cam's contact at cam angles ``theta`` [rad] of the case
+    whose excitation is ``profile``: for a lever layout's (:class:`ValveSideProfile`) where
+    its roller's centre sits on the pitch curve (``KinematicState.contact``: the point a
+    radial roller touches at that angle), ``theta`` itself for any other."""
+    theta = np.asarray(theta, float)
+    if not isinstance(profile, ValveSideProfile) or profile.cam is None or profile.lever is None:
+        return theta
+    return _kinematics(profile.cam, profile.lever, theta).contact.reshape(theta.shape)
+
+
 def _check_swing(state: KinematicState, profile: Profile) -> None:
     """Refuse a cam that swings the lever past :data:`MAX_SWING` from the horizontal or past
     where its ratio turns (the valve would close as the cam lifts), naming

@@ -87,6 +87,13 @@ class ContactLaw(ABC):
             return np.sqrt(f / self.width * self.modulus / (math.pi * self.radius))
         return self.point_pressure(f)
 
+    def line_pressure(self, load: np.ndarray) -> np.ndarray:
+        """Peak Hertz pressure [Pa] of the line contact (its width) under a compressive force
+        F over the relative radius of curvature R', ``load`` = F/R' [N/m]: √(F'·E*/(π·R')),
+        F' = F/w (:meth:`pressure` at a radius of its own)."""
+        load = np.maximum(np.asarray(load, dtype=float), 0.0)
+        return np.sqrt(load / self.width * self.modulus / math.pi)
+
     def point_pressure(self, force: np.ndarray) -> np.ndarray:
         """The peak pressure [Pa] of a contact that is not a line contact, under a
         compressive force [N]: NaN unless the law says."""
