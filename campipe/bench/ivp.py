@@ -33,8 +33,9 @@ scenario is the same, the integration independent.
 
 A chain's lash adjuster rides along (``campipe.model.hla``; its parameters from
 ``engine.plunger.plunger_state``, its law written here): the plunger's u is the state's last
-entry, u̇ = −(F − F_c)/c in the regime its check valve gives, each switch of the check valve
-(with the engine's dead band) and each end of its travel a terminal event.
+entry, u̇ = −(F − F_c)/c in the regime its check valve gives, F_c/c_P where the link would
+pull it (F < 0: it only pushes), each switch of the check valve and of its load through 0
+(with the engine's dead bands) and each end of its travel a terminal event.
 
 Pure numerics: arrays in, arrays out.
 """
@@ -59,6 +60,7 @@ from campipe.engine.plunger import (
     HYSTERESIS,
     OPEN,
     TOPPED,
+    UNLOADED,
     PlungerState,
     plunger_state,
 )
@@ -262,8 +264,11 @@ class _Peer:
 
     def plunger_rate(self, tt, z):
         """u̇ [m/s]: −(F − F_c)/c, c the leak-down's with the check valve closed and the
-        pump-up's with it open; 0 held at an end of its travel, or until t = 0."""
+        pump-up's with it open; F_c/c_P unloaded (the link pulling: no load on it); 0 held at
+        an end of its travel, or until t = 0."""
         nf = self.configs[self.cfg].free.size
+        if self.regime == UNLOADED:
+            return self.law.check_force / self.law.pump_up
         if self.regime not in (CLOSED, OPEN):
             return 0.0
         qq, _, _ = self.held_state(tt, z[:nf], z[nf : 2 * nf])
@@ -286,21 +291,27 @@ class _Peer:
                  CHECK_VALVE_OPENS)  # fmt: skip
         closes = (lambda tt, z: force(tt, z) - p.check_force * (1.0 + HYSTERESIS), CLOSED,
                   CHECK_VALVE_CLOSES)  # fmt: skip
+        tops = (lambda tt, z: z[2 * nf] - p.high, TOPPED, PLUNGER_TOPS)
+        band = p.check_force * HYSTERESIS
         if reg == CLOSED:
             return [opens, (lambda tt, z: p.low - z[2 * nf], BOTTOMED, PLUNGER_BOTTOMS)]
         if reg == OPEN:
-            return [closes, (lambda tt, z: z[2 * nf] - p.high, TOPPED, PLUNGER_TOPS)]
+            return [closes, tops, (lambda tt, z: -band - force(tt, z), UNLOADED, None)]
+        if reg == UNLOADED:
+            return [(lambda tt, z: force(tt, z) - band, OPEN, None), tops]
         return [opens] if reg == BOTTOMED else [closes]
 
     def release_plunger(self):
         """Held until t = 0: the regime the load there gives."""
         if self.p is None or self.regime != HELD or self.t < 0.0:
             return
-        closed = self.link_force(self.q, self.u) > self.p.check_force
-        if closed:
+        load = self.link_force(self.q, self.u)
+        if load > self.p.check_force:
             self.regime = BOTTOMED if self.u <= self.p.low else CLOSED
+        elif self.u >= self.p.high:
+            self.regime = TOPPED
         else:
-            self.regime = TOPPED if self.u >= self.p.high else OPEN
+            self.regime = UNLOADED if load < 0.0 else OPEN
 
     # -- the equations in the current configuration ------------------------------------------
 
@@ -461,7 +472,7 @@ class _Peer:
             return
         if self.regime == CLOSED:
             self.ledger[r, 0] += u_a - u_b
-        elif self.regime == OPEN:
+        elif self.regime in (OPEN, UNLOADED):
             self.ledger[r, 1] += u_b - u_a
 
     def add_off_cam(self, ta: float, tb: float, seat_held: bool, sign: float = 1.0) -> None:
@@ -488,7 +499,7 @@ class _Peer:
                 self.u = self.law.low
             elif self.regime == TOPPED:
                 self.u = self.law.high
-            if t_ev >= 0.0:
+            if t_ev >= 0.0 and code is not None:
                 self.events.append((t_ev, code, cfg, cfg, 0.0, 0.0))
             return
         cam_held, seat_held = holds_cam(cfg), holds_seat(cfg)

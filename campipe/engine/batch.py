@@ -218,7 +218,7 @@ class TrainStack(NamedTuple):
     #: per train: configuration I's free coordinates and its free mass block M_ff
     free: tuple[np.ndarray, ...]
     mass_ff: tuple[np.ndarray, ...]
-    #: (n_trains, 5) a carried plunger's train's row in ``modal_trains`` per regime, the
+    #: (n_trains, 6) a carried plunger's train's row in ``modal_trains`` per regime, the
     #: others' appended (``plunger_modes.regime_rows``); −1 for any other train
     regimes: np.ndarray
 

@@ -32,9 +32,12 @@ N_MC = 18
 # |WL1|, |WL2|.
 W1, W2, WL1, WL2, WLL1, WLL2, W1_ABS, W2_ABS, WL1_ABS, WL2_ABS = range(10)
 N_WC = 10
-#: Monitors: 0 the cam's, 1 the seat's; 2 and 3 a carried plunger's (its check valve, its
-#: travel), watched only where a case has one (``STATE.n_mon``).
-N_MON = 4
+#: Monitors: 0 the cam's, 1 the seat's; 2, 3 and 4 a carried plunger's (its check valve, or
+#: its load rising through 0 unloaded; its travel; its load falling through 0 open), watched
+#: only where a case has one (``STATE.n_mon``).
+N_MON = 5
+#: A carried plunger's regimes (``engine.plunger``: CLOSED … UNLOADED), a train row each.
+N_REGIMES = 6
 #: Rows of the particular solution's polynomial Z (and of the monitors' G): degree up to
 #: Z_ROWS − 1, the forcing's 7 and a slow block's series (``particular``) beyond it.
 Z_ROWS = 33
@@ -105,15 +108,15 @@ class ExactRuns(NamedTuple):
     full_state: bool  # sample every coordinate (else q1 and q7 only)
     #: A chain's lash adjuster's plunger carried as a coordinate (``plunger_modes``), per
     #: case (−1 / 0 rows without one): its coordinate, the train row of each regime
-    #: (``plunger.CLOSED`` … ``HELD``), the force through it as a row over the coordinates
+    #: (``plunger.CLOSED`` … ``UNLOADED``), the force through it as a row over the coordinates
     #: (F = row·q), its check force, its damper per regime (inf: held) and where each held
     #: regime holds it (NaN: not held)
     plunger_coord: np.ndarray  # (n,) int64
-    plunger_train: np.ndarray  # (n, 5) int64
+    plunger_train: np.ndarray  # (n, 6) int64
     plunger_force: np.ndarray  # (n, n_q) [N/m]
     plunger_check: np.ndarray  # (n,) [N]
-    plunger_damper: np.ndarray  # (n, 5) [N·s/m]
-    plunger_end: np.ndarray  # (n, 5) [m]
+    plunger_damper: np.ndarray  # (n, 6) [N·s/m]
+    plunger_end: np.ndarray  # (n, 6) [m]
 
 
 def no_plungers(n: int, n_q: int) -> dict[str, np.ndarray]:
@@ -121,11 +124,11 @@ def no_plungers(n: int, n_q: int) -> dict[str, np.ndarray]:
     batch's most coordinates)."""
     return {
         "plunger_coord": np.full(n, -1, np.int64),
-        "plunger_train": np.full((n, 5), -1, np.int64),
+        "plunger_train": np.full((n, N_REGIMES), -1, np.int64),
         "plunger_force": np.zeros((n, n_q)),
         "plunger_check": np.zeros(n),
-        "plunger_damper": np.full((n, 5), np.inf),
-        "plunger_end": np.full((n, 5), np.nan),
+        "plunger_damper": np.full((n, N_REGIMES), np.inf),
+        "plunger_end": np.full((n, N_REGIMES), np.nan),
     }
 
 
@@ -175,7 +178,7 @@ def _workspace_layout(n_coordinates: int) -> dict[str, tuple[tuple[int, ...], ty
         "WC": ((N_WC, N_MON, ns), f8), "VY": ((2, ns, ns), f8), "gval": ((N_MON,), f8),
         "dval": ((N_MON,), f8), "gprev": ((N_MON,), f8), "dprev": ((N_MON,), f8),
         "G": ((N_MON, Z_ROWS), f8), "GT": ((N_MON,), c16), "ready": ((N_MON,), b1),
-        "watch": ((N_MON,), b1), "level": ((N_MON,), f8), "prow": ((2, n), f8),
+        "watch": ((N_MON,), b1), "level": ((N_MON,), f8), "prow": ((3, n), f8),
         "inp": ((3, 2, 8), f8), "inp_t": ((3, 2), c16), "cm": ((ns, ns), c16),
     }  # fmt: skip
     return {name: shapes[name] for name in Workspace._fields}
@@ -244,7 +247,7 @@ STATE = np.dtype(
         # −inf: not since the case began.
         ("bounced_cam", "f8"),
         ("bounced_seat", "f8"),
-        ("n_mon", "i8"),  # monitors the case watches: 2, or 4 with a carried plunger
+        ("n_mon", "i8"),  # monitors the case watches: 2, or 5 with a carried plunger
         ("reg", "i8"),  # a carried plunger's regime (``plunger.CLOSED`` …), −1 without one
     ],
     align=True,

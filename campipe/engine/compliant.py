@@ -64,8 +64,11 @@ from campipe.engine.plunger import (
     BOTTOMED,
     CLOSED,
     HELD,
+    LOAD,
     SWITCHES,
     TOPPED,
+    TRAVEL,
+    UNLOADED,
     VALVE,
     PlungerState,
     plunger_state,
@@ -102,7 +105,7 @@ STALL_WINDOW = 1e-12
 SWITCH_GUARD = 1e-11
 #: The monitor tag of a lever's roller-force maxima (beyond the contacts' 0–3 and a plunger's
 #: 4, 5: ``engine.plunger``).
-ROLLER_PEAK = 6
+ROLLER_PEAK = 7
 
 
 @dataclass
@@ -173,7 +176,8 @@ class _Run:
         u = z[2 * n]
         du = p.rate(z, self.valve, g)
         c = p.damper(self.valve)
-        ddu = 0.0 if math.isinf(c) else -(dg * p.force(z) + g * p.k * (p.d @ z[n : 2 * n])) / c
+        still = math.isinf(c) or self.valve == UNLOADED  # (u̇ constant: F_c/c_P)
+        ddu = 0.0 if still else -(dg * p.force(z) + g * p.k * (p.d @ z[n : 2 * n])) / c
         return lift + g * u, rate + dg * u + g * du, acc + ddg * u + 2.0 * dg * du + g * ddu
 
     def approaches(self, t: float, z: np.ndarray) -> tuple[float, float, float, float]:
@@ -421,17 +425,18 @@ class _Recorder:
     def switch(self, t: float, z: np.ndarray, hit: int, capture: float) -> None:
         """Switch contact ``hit`` (0 cam, 1 seat) at t and record it: a closing as an impact
         with its closing velocity (counted from ``capture`` [m/s]), an opening as a
-        separation. A plunger's switch (``hit`` VALVE or TRAVEL) moves it to its next
+        separation. A plunger's switch (``hit`` VALVE, TRAVEL or LOAD) moves it to its next
         regime, an event of velocity 0; one to an end of its travel puts it there."""
         run, out = self.run, self.out
-        if hit >= VALVE:
+        if hit in (VALVE, TRAVEL, LOAD):
             p = run.s.plunger
             assert p is not None
             run.valve, kind = SWITCHES[(run.valve, hit)]
             if run.valve in (BOTTOMED, TOPPED):
                 z[2 * run.n] = p.low if run.valve == BOTTOMED else p.high
-            here = configuration(*run.closed)
-            self.event(t, kind, here, here, 0.0)
+            if kind is not None:  # (its load through 0 is not an event of the archive's)
+                here = configuration(*run.closed)
+                self.event(t, kind, here, here, 0.0)
             return
         before = configuration(*run.closed)
         d = run.approaches(t, z)

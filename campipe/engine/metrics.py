@@ -376,7 +376,9 @@ METRICS: list[Metric] = [
     _adjuster_metric(
         "hla_lash",
         "effective lash at the turn's start: the dry lash less what the lash adjuster's "
-        "extension takes up (below 0: the valve held off its seat)",
+        "extension takes up (a few µm below 0 once pumped up: its check force presses the "
+        "train; the valve is held off its seat only below minus the seated spring force "
+        "over the train's stiffness from the adjuster to the seat)",
         "min",
         _adjuster(0, less_lash=True),
         "Effective lash",

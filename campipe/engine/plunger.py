@@ -17,15 +17,19 @@ its oil: the spring k in series with a one-way dashpot,
                            c = c_P (open, F < F_c: pump-up),
 
 and held at its ends: bottomed out (e = 0) while F > F_c, fully out (e = travel) while
-F < F_c. Each regime is linear, so a kelvin–voigt case keeps exact propagation (one more
-row in its augmented system), and every switch between regimes is a terminal event on the
-solution, as a contact's is: the check valve opening or closing where F − F_c crosses zero
-(recorded as ``vocabulary.CHECK_VALVE_OPENS`` / ``CHECK_VALVE_CLOSES`` events, their
-velocity 0), the plunger reaching an end of its travel (``PLUNGER_BOTTOMS`` /
-``PLUNGER_TOPS``), with a dead band (HYSTERESIS) about F_c. Nothing is applied at a
-turn's end: the leak-down and pump-up of each turn are what the plunger moved in each regime
-(``BatchResult.lash_adjuster``: the extension at each turn's start, the turn's leak-down
-and pump-up).
+F < F_c. The plunger only pushes (so do the pushrod's cup, the stem's tip, the finger's
+socket on it): where the model's two-sided joints would pull it (F < 0, a link ringing
+after a landing, a follower in flight past the onset) it is *unloaded*, u̇ = F_c/c_P, its
+fastest pump-up. Each regime is linear, so a kelvin–voigt case keeps exact propagation
+(one more row in its augmented system), and every switch between regimes is a terminal
+event on the solution, as a contact's is: the check valve opening or closing where F − F_c
+crosses zero (recorded as ``vocabulary.CHECK_VALVE_OPENS`` / ``CHECK_VALVE_CLOSES``
+events, their velocity 0), the plunger reaching an end of its travel (``PLUNGER_BOTTOMS`` /
+``PLUNGER_TOPS``), with a dead band (HYSTERESIS) about F_c; and, not recorded, its load
+falling through 0 (unloaded) and rising through it again, with the same band about 0.
+Nothing is applied at a turn's end: the leak-down and pump-up of each turn are what the
+plunger moved in each regime (``BatchResult.lash_adjuster``: the extension at each turn's
+start, the turn's leak-down and pump-up).
 
 **Under a finger follower's pivot** the plunger raises the pivot: the lever turns about
 its roller and its pallet moves by g(θ)·u, g the pivot's gain
@@ -70,11 +74,13 @@ from campipe.vocabulary import (
 )
 
 #: The plunger's regimes: check valve closed (leaking down), open (pumping up), bottomed
-#: out, fully out; and held where the settings' start puts it until t = 0 (a periodic start
-#: begins before the run's first turn: ``hla_extension`` is the extension at t = 0).
-CLOSED, OPEN, BOTTOMED, TOPPED, HELD = 0, 1, 2, 3, 4
-#: Monitor tags (``_Run.monitors``' ``contact``), beyond the contacts' 0–3.
-VALVE, TRAVEL = 4, 5
+#: out, fully out; held where the settings' start puts it until t = 0 (a periodic start
+#: begins before the run's first turn: ``hla_extension`` is the extension at t = 0); and
+#: unloaded (open, the model's joints pulling on it: it pumps up at F_c/c_P).
+CLOSED, OPEN, BOTTOMED, TOPPED, HELD, UNLOADED = 0, 1, 2, 3, 4, 5
+#: Monitor tags (``_Run.monitors``' ``contact``), beyond the contacts' 0–3: the check valve,
+#: the travel's end, the load through 0.
+VALVE, TRAVEL, LOAD = 4, 5, 6
 #: The columns of ``BatchResult.lash_adjuster``: the plunger's extension at each turn's
 #: start, the turn's leak-down and its pump-up [m].
 EXTENSION, LEAK_DOWN, PUMP_UP = 0, 1, 2
@@ -92,6 +98,9 @@ SWITCHES = {
     (OPEN, TRAVEL): (TOPPED, PLUNGER_TOPS),
     (BOTTOMED, VALVE): (OPEN, CHECK_VALVE_OPENS),
     (TOPPED, VALVE): (CLOSED, CHECK_VALVE_CLOSES),
+    (OPEN, LOAD): (UNLOADED, None),
+    (UNLOADED, LOAD): (OPEN, None),
+    (UNLOADED, TRAVEL): (TOPPED, PLUNGER_TOPS),
 }
 
 
@@ -122,18 +131,24 @@ class PlungerState:
 
     def damper(self, regime: int) -> float:
         """The dashpot's coefficient [N·s/m] in ``regime`` (inf: held at an end)."""
-        return (self.leak_down, self.pump_up, math.inf, math.inf, math.inf)[regime]
+        return (self.leak_down, self.pump_up, math.inf, math.inf, math.inf, self.pump_up)[regime]
 
     def rate(self, z: np.ndarray, regime: int, gain: float = 1.0) -> float:
-        """u̇ [m/s] in ``regime``, the gain g at the instant (1 in a link)."""
+        """u̇ [m/s] in ``regime``, the gain g at the instant (1 in a link): −(g·F − F_c)/c,
+        F_c/c_P unloaded, 0 held."""
         c = self.damper(regime)
-        return 0.0 if math.isinf(c) else -(gain * self.force(z) - self.check_force) / c
+        if math.isinf(c):
+            return 0.0
+        load = 0.0 if regime == UNLOADED else gain * self.force(z)
+        return -(load - self.check_force) / c
 
     def row(self, regime: int, gain: float = 1.0) -> tuple[np.ndarray, float, float]:
         """u̇ = a·q + b·u + f: (a (n,), b, f) in ``regime``, the gain g at the instant."""
         c = self.damper(regime)
         if math.isinf(c):
             return np.zeros(self.d.size), 0.0, 0.0
+        if regime == UNLOADED:
+            return np.zeros(self.d.size), 0.0, self.check_force / c
         b = -self.k / c if self.gains is None else 0.0
         return -gain * self.k / c * self.d, b, self.check_force / c
 
@@ -146,16 +161,19 @@ class PlungerState:
         moved = z_end[u] - z[u]
         if regime == CLOSED:
             turn[LEAK_DOWN] -= moved
-        elif regime == OPEN:
+        elif regime in (OPEN, UNLOADED):
             turn[PUMP_UP] += moved
 
     def regime_at(self, z: np.ndarray, gain: float = 1.0) -> int:
         """The regime a run starts in from state z, the gain g there."""
         n = self.d.size
         u = z[2 * n]
-        if gain * self.force(z) > self.check_force:
+        load = gain * self.force(z)
+        if load > self.check_force:
             return BOTTOMED if u <= self.low else CLOSED
-        return TOPPED if u >= self.high else OPEN
+        if u >= self.high:
+            return TOPPED
+        return UNLOADED if load < 0.0 else OPEN
 
     def monitors(
         self, regime: int, gain: Callable[[float], float]
@@ -165,19 +183,25 @@ class PlungerState:
         if regime == HELD:
             return []
         n = self.d.size
+        band = HYSTERESIS * self.check_force
+
+        def load(level: float) -> Callable[[float, np.ndarray], float]:
+            return lambda t, z: gain(t) * self.force(z) - level
+
+        def top(t: float, z: np.ndarray) -> float:
+            return z[2 * n] - self.high
+
+        if regime == UNLOADED:  # loaded again (open), or fully out
+            return [(LOAD, 1.0, load(band)), (TRAVEL, 1.0, top)]
         closed = regime in (CLOSED, BOTTOMED)
-        level = self.check_force * (1.0 - HYSTERESIS if closed else 1.0 + HYSTERESIS)
-
-        def valve(t: float, z: np.ndarray) -> float:
-            return gain(t) * self.force(z) - level
-
+        level = self.check_force + (-band if closed else band)
         out: list[tuple[int, float, Callable[[float, np.ndarray], float]]] = [
-            (VALVE, -1.0 if closed else 1.0, valve)
+            (VALVE, -1.0 if closed else 1.0, load(level))
         ]
         if regime == CLOSED:
             out.append((TRAVEL, -1.0, lambda t, z: z[2 * n] - self.low))
         elif regime == OPEN:
-            out.append((TRAVEL, 1.0, lambda t, z: z[2 * n] - self.high))
+            out += [(TRAVEL, 1.0, top), (LOAD, -1.0, load(-band))]
         return out
 
 

@@ -46,13 +46,17 @@ row is ü + 2β·u̇ + β²·u = β²·u_end, decoupled from the chain, which fr
 stays there exactly (a double eigenvalue −β: one 2×2 block, ``modal``'s critically damped
 case); the link's rows still take k·d·u_end.
 
+Unloaded (the link pulling on it, ``plunger.UNLOADED``) it rises at F_c/c_P whatever the
+chain does: ü + β·u̇ = β·F_c/c_P, decoupled from the chain (an eigenvalue 0, a drift, and
+−β), the link's rows still taking k·d·u.
+
 **In modal-exact.** A case runs the train :class:`Embedded` in the regime ``HELD`` (its
 periodic start the train's with the plunger fixed at its start) and the batch's stack holds
 its other regimes' rows (:func:`regime_rows`); its run carries the plunger's rows
 (:func:`plunger_runs`): at t = 0 it takes the regime its load gives, and its check valve
-(with ``plunger.HYSTERESIS``) and its travel are two more monitors, each switch an event that
-changes the row (``exact.kernel._plunger_event``). ``lash_adjuster.in_kernel`` runs it and
-reads each turn's leak-down and pump-up from u.
+(with ``plunger.HYSTERESIS``), its travel and its load through 0 are three more monitors,
+each switch changes the row (``exact.kernel._plunger_event``), the first two's an event.
+``lash_adjuster.in_kernel`` runs it and reads each turn's leak-down and pump-up from u.
 
 Pure numerics: arrays in, arrays out.
 """
@@ -72,6 +76,7 @@ from campipe.engine.plunger import (
     HELD,
     OPEN,
     TOPPED,
+    UNLOADED,
     PlungerState,
     plunger_state,
 )
@@ -96,7 +101,8 @@ def end_of(p: PlungerState, regime: int) -> float:
 
 def embedded(sm: SystemMatrices, p: PlungerState, regime: int, beta: float) -> SystemMatrices:
     """The train of ``sm`` with its adjuster's plunger ``p`` as a coordinate n (see the
-    module) in ``regime`` (``plunger.CLOSED``, ``OPEN``, ``BOTTOMED``, ``TOPPED``, ``HELD``),
+    module) in ``regime`` (``plunger.CLOSED``, ``OPEN``, ``BOTTOMED``, ``TOPPED``, ``HELD``,
+    ``UNLOADED``),
     β = ``beta`` [1/s]. Its matrices are not symmetric; ``frequencies`` and ``modes`` are the
     chain's own (for reports), the plunger's row having none."""
     if p.gains is not None:
@@ -109,7 +115,10 @@ def embedded(sm: SystemMatrices, p: PlungerState, regime: int, beta: float) -> S
     m[:n, :n], c[:n, :n], k[:n, :n], f[:n] = sm.mass, sm.damping, sm.stiffness, sm.preload
     m[n, n] = 1.0
     k[:n, n] = p.k * p.d  # the link's force k·(d·q + u) on the chain
-    if regime in (CLOSED, OPEN):
+    if regime == UNLOADED:  # u̇ = F_c/c_P, whatever the link does: ü = −β·(u̇ − F_c/c_P)
+        c[n, n] = beta
+        f[n] = beta * p.check_force / p.damper(regime)
+    elif regime in (CLOSED, OPEN):
         rate = p.k / p.damper(regime)  # the Maxwell element's, k/c [1/s]
         c[n, :n] = rate * p.d
         c[n, n] = rate + beta
@@ -124,7 +133,7 @@ def embedded(sm: SystemMatrices, p: PlungerState, regime: int, beta: float) -> S
 
 
 #: The regimes a carried plunger's run needs a train row for, in ``plunger``'s order.
-REGIMES = (CLOSED, OPEN, BOTTOMED, TOPPED, HELD)
+REGIMES = (CLOSED, OPEN, BOTTOMED, TOPPED, HELD, UNLOADED)
 
 
 @dataclass(frozen=True)
@@ -161,7 +170,7 @@ class Embedded:
 def regime_rows(trains, data: list, preps, modal, matrices) -> tuple[np.ndarray, list, list]:
     """A batch's stack of ``trains``' closed-form ``data`` (``batch.train_modal`` per train)
     with each carried plunger's other regimes appended (by ``modal`` and ``matrices``:
-    ``batch.train_modal`` and ``batch.train_matrices``): ((n_trains, 5) each train's row per
+    ``batch.train_modal`` and ``batch.train_matrices``): ((n_trains, 6) each train's row per
     regime (``REGIMES``), −1 for any other train; the data; the preloads; ``preps`` the
     trains' ``batch.Prepared``)."""
     data = list(data)

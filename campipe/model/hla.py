@@ -102,7 +102,10 @@ class LashAdjuster:
         valve closes (F and g each interval's mean over its open part). What it leaked down
         earlier in the turn is pumped back on the base circle after it, as the carried
         plunger does (a cap of the turn's gap alone left a finger's roller standing off its
-        base circle every turn by a turn's leak-down less F_c/k)."""
+        base circle every turn by a turn's leak-down less F_c/k).
+
+        The load is never below 0 (:meth:`_rise`): the plunger and what sits on it (a
+        pushrod's cup, a stem's tip, a finger's socket) only push."""
         sinks = excess_parts(time, force, self.check_force) / self.leak_down
         lacking = excess_parts(time, -force, -self.check_force)  # ∫ (F_c − F)⁺ dt [N·s]
         open_time = open_parts(time, force, self.check_force)
@@ -131,9 +134,11 @@ class LashAdjuster:
         run (g > 0) the plunger's load stays the link's own F until it has risen by g, then
         gains k·(raised − g); on the cam (g = 0) it is F + k·raised, and where that is below
         0 the follower stands off and the load is 0. Below that boundary it rises at
-        (F_c − load)/c_P; past it it approaches g + (F_c − F)/k as 1 − exp(−k·t/c_P)."""
+        (F_c − load)/c_P, the load never below 0 (the plunger only pushes: where the run's
+        link pulls, off the cam, it is unloaded and rises at F_c/c_P); past it it approaches
+        g + (F_c − F)/k as 1 − exp(−k·t/c_P)."""
         k, force = self.seated, self.check_force - lacking
-        boundary, load = (gap, force) if gap > 0.0 else (-force / k, 0.0)
+        boundary, load = (gap, max(force, 0.0)) if gap > 0.0 else (-force / k, 0.0)
         moved = 0.0
         if raised < boundary:
             rate = (self.check_force - load) / self.pump_up

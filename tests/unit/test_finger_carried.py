@@ -180,20 +180,22 @@ def test_the_per_turn_model_holds_the_roller_on_its_base_circle_as_the_carried_p
 
 @pytest.mark.slow
 def test_the_per_turn_model_s_error_on_the_finger_past_its_onset():
-    """The bundled finger on its adjuster at 9000 rpm engine speed, past its onset (about 7900),
+    """The bundled finger on its adjuster at 9000 rpm engine speed, past its onset (7750),
     pumping up from the dry lash: the per-turn model (rigid contacts, the plunger moved at each
     turn's end) against the carried plunger (compliant contacts, stiff) over 6 turns, the
-    stated error of the per-turn model on a finger (docs/model.md): each turn's net pump-up
-    differs by up to 85 % (found: the first turn's, 16.7 against 9.0 µm; bounded at 100 %),
-    the extension after 5 turns by 16 % (84.3 against 72.6 µm; bounded at 25 %, and at least
-    5 %: the error is real, the per-turn model moving the pivot only at the turn's end while
-    the roller is in flight). Fails on a copy whose per-turn model drops the pump-up into the
-    flights (its net a few µm a turn)."""
+    difference stated in docs/model.md: each turn's net pump-up differs by up to 44 %
+    (found: the fourth turn's, 7.7 against 5.4 µm; bounded at 100 %), the extension after 5
+    turns by 22 % (39.1 against 32.1 µm; bounded at 35 %, and at least 5 %: the per-turn
+    model moves the pivot only at the turn's end while the roller is in flight). Not the
+    per-turn model's error alone: the compliant reference itself moves with its contacts'
+    stiffness (28.0 µm with contacts ten times stiffer), which docs/model.md says. Fails on a
+    copy whose per-turn model drops the pump-up into the flights (its net a few µm a
+    turn)."""
     per_turn, carried = _per_turn_and_carried(-1, 6)  # 9000 rpm
     net_p, net_c = np.diff(per_turn[:, 0]), np.diff(carried[:, 0])
-    assert net_c.min() > 5e-6  # it pumps up past the dry lash, into the flights (9-21 µm)
+    assert net_c.min() > 4e-6  # it pumps up into the flights (5.4-7.0 µm a turn)
     assert np.abs(net_p / net_c - 1.0).max() < 1.0
-    assert 0.05 < abs(per_turn[-1, 0] / carried[-1, 0] - 1.0) < 0.25
+    assert 0.05 < abs(per_turn[-1, 0] / carried[-1, 0] - 1.0) < 0.35
 
 
 def test_the_per_turn_model_does_not_move_with_the_output_spacing():
@@ -201,8 +203,8 @@ def test_the_per_turn_model_does_not_move_with_the_output_spacing():
     roller's flights pump the plunger up) over 4 turns, the per-turn model (rigid contacts):
     each turn's extension, leak-down and pump-up are the same at 5° and 1° output samples (to
     1e-12 m: a turn's integrals are taken on samples 0.05° apart whatever the output,
-    ``lash_adjuster.ADJUSTER_EVERY``) and within 1e-7 m of those at 0.02° (found 2.5e-8 m of
-    an extension of 49 µm: they converge as the spacing's square). Broken copy: the integrals
+    ``lash_adjuster.ADJUSTER_EVERY``) and within 1e-7 m of those at 0.02° (found 2e-8 m of
+    an extension of 24 µm: they converge as the spacing's square). Broken copy: the integrals
     on the output samples (campipe before: 4.9 µm apart at 5° and 1°, 2.5 µm at 1° and
     0.02°)."""
     path = Path(__file__).parents[2] / "studies" / "finger-follower-hla.yaml"
@@ -213,7 +215,7 @@ def test_the_per_turn_model_does_not_move_with_the_output_spacing():
         run = run_batch([case], RunSettings(revolutions=4, output_every=math.radians(degrees)))
         assert run.status[0] == 0
         tables[degrees] = run.lash_adjuster[0]
-    assert tables[1.0][-1, 0] > 40e-6  # pumped up into the flights
+    assert tables[1.0][-1, 0] > 20e-6  # pumped up into the flights
     np.testing.assert_allclose(tables[5.0], tables[1.0], rtol=0, atol=1e-12)
     np.testing.assert_allclose(tables[1.0], tables[0.02], rtol=0, atol=1e-7)
 

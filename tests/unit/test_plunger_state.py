@@ -159,21 +159,23 @@ def _bucket(**changes):
 CAM = polydyne("4567", 9e-3, *np.radians([110, 20, 110]), ramp=Ramp(0.3e-3, np.radians(30)))
 
 
-@pytest.mark.parametrize(("rpm", "per_turn", "total"), [(2000, 0.03, 0.03), (6000, 1.5, 0.5)])
+@pytest.mark.parametrize(("rpm", "per_turn", "total"), [(2000, 0.08, 0.08), (6000, 1.5, 0.5)])
 def test_the_per_turn_model_against_the_carried_plunger(rpm, per_turn, total):
     """The default integrator's per-turn model (the plunger fixed within a turn, moved at its
     end by the leak-down and pump-up of each sample interval in turn) against the carried
     plunger, on the bundled study's bucket tappet pumping up from the dry lash over 8 turns: the
-    stated error of the per-turn model. At 2000 rpm (the train follows the cam) each turn's
-    pump-up less leak-down agrees to 3 % (found: 1.7 %; 2.2 % before the pump-up saw the
-    plunger's own motion within the turn), the extension after 8 turns to 3 % (found: 1.6 %).
+    stated error of the per-turn model. At 2000 rpm (the train follows the cam; its link
+    rings in tension after the landing, where the plunger, unloaded, rises at F_c/c_P and so
+    lengthens the link within the turn, which the per-turn model applies only at its end)
+    each turn's pump-up less leak-down agrees to 8 % (found: 5.4 %; 1.7 % when both took the
+    link's pull as the plunger's load), the extension after 8 turns to 8 % (found: 4.8 %).
     At 6000 rpm, past the onset, where the plunger pumps up into the gaps the follower opens
     in flight (pump-up), the per-turn model moves it only at the turn's end, so the gap stays
-    open for the rest of the flight: its turns differ by up to 61 % and the extension after
-    8 turns by 21 % (found; a response that never repeats, the figure moving with the
-    integrals' spacing: 7 % before, 3 % with them on 1° samples, 26 % on 0.1°), bounded here
-    at 150 % and 50 %. At both, every check valve's switch alternates
-    (closing before a valve event, opening after), in the carried run located on the solution,
+    open for the rest of the flight: its turns differ by up to 54 % and the extension after
+    8 turns by 11 % (found; a response that never repeats, the figure moving with the
+    integrals' spacing), bounded here at 150 % and 50 %. At both, every check valve's switch
+    alternates (closing before a valve event, opening after), in the carried run located on
+    the solution,
     in the per-turn one on the samples' interpolant: at 2000 rpm the first closing and the first
     opening of each turn agree to 0.5° (found: 0.2°; the bounces' flutter between differs, the
     plunger moving in one and not the other). Fails at 2000 rpm on a copy that carries the

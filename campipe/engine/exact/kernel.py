@@ -66,7 +66,7 @@ from campipe.engine.metrics import (
     MAX_CAM_FORCE,
     THESIS_IMPACT_FORCE,
 )
-from campipe.engine.plunger import BOTTOMED, CLOSED, HELD, OPEN, TOPPED
+from campipe.engine.plunger import BOTTOMED, CLOSED, HELD, OPEN, TOPPED, UNLOADED
 from campipe.engine.policy import release, strike, strike_at_break
 from campipe.profiles.packed import piece_eval, ratio_bound
 from campipe.vocabulary import (
@@ -87,6 +87,8 @@ from campipe.vocabulary import (
 #: A carried plunger's event kinds, as NumPy scalars (``common``: one compile for all).
 CHECK_OPENS, CHECK_CLOSES = np.int64(CHECK_VALVE_OPENS), np.int64(CHECK_VALVE_CLOSES)
 BOTTOMS, TOPS = np.int64(PLUNGER_BOTTOMS), np.int64(PLUNGER_TOPS)
+#: No event recorded (a carried plunger's load through 0).
+NO_EVENT = np.int64(-1)
 
 # --------------------------------------------------------------------------- walk the grid
 
@@ -297,7 +299,7 @@ def _walk(ref, st, pl):
     # A monitor already above its level at the segment start (a contact that pulls the
     # instant after an impact; a gap that closes) is an event there.
     for m in range(n_mon):
-        held = cam_held if m == 0 else (seat_held if m == 1 else True)  # (2, 3: a plunger's)
+        held = cam_held if m == 0 else (seat_held if m == 1 else True)  # (2–4: a plunger's)
         if watch[m] and gval[m] > level[m] and (held or dprev[m] > 0.0):
             _apply_event(ref, st, m, t_s, pl)
             return
@@ -476,26 +478,38 @@ def _impact(cases, trains, out, ws, st, seat, closing, t, vcam, lift):
 
 
 @njit(inline="always", nogil=True)
-def _plunger_event(ref, st, valve, t_ev, pl):
-    """A carried plunger's monitor rose at t_ev [s] (``valve``: its check valve's, else its
-    travel's): the regime it leads to (``engine.plunger.SWITCHES``), recorded as an event of
-    velocity 0 with the plunger's u there in the impulse field (which
-    ``lash_adjuster`` reads for each turn's leak-down and pump-up, and clears). Nothing
-    compiled for a batch with no carried plunger (pl None: numba prunes the branch)."""
+def _plunger_event(ref, st, m, t_ev, pl):
+    """A carried plunger's monitor m rose at t_ev [s] (2: its check valve's, or unloaded its
+    load's; 3: its travel's; 4: open, its load falling through 0): the regime it leads to
+    (``engine.plunger.SWITCHES``), recorded as an event of velocity 0 with the plunger's u
+    there in the impulse field (which ``lash_adjuster`` reads for each turn's leak-down and
+    pump-up, and clears); the load's switches, through which the plunger keeps rising, are
+    not recorded. Nothing compiled for a batch with no carried plunger (pl None: numba prunes
+    the branch)."""
     if pl is not None:
         _, _, _, runs, out, ws = deref(ref)
         reg = st.reg
+        kind = NO_EVENT
         if reg == CLOSED:
-            new, kind = (OPEN, CHECK_OPENS) if valve else (BOTTOMED, BOTTOMS)
+            new, kind = (OPEN, CHECK_OPENS) if m == 2 else (BOTTOMED, BOTTOMS)
         elif reg == OPEN:
-            new, kind = (CLOSED, CHECK_CLOSES) if valve else (TOPPED, TOPS)
+            if m == 4:
+                new = UNLOADED
+            else:
+                new, kind = (CLOSED, CHECK_CLOSES) if m == 2 else (TOPPED, TOPS)
+        elif reg == UNLOADED:
+            if m == 2:
+                new = OPEN
+            else:
+                new, kind = TOPPED, TOPS
         elif reg == BOTTOMED:
             new, kind = OPEN, CHECK_OPENS
         else:
             new, kind = CLOSED, CHECK_CLOSES
-        c = st.c
-        u = ws.q[runs.plunger_coord[c]]
-        record_event(out.events, out.n_events, c, t_ev, kind, st.cfg, st.cfg, 0.0, u)
+        if kind != NO_EVENT:
+            c = st.c
+            u = ws.q[runs.plunger_coord[c]]
+            record_event(out.events, out.n_events, c, t_ev, kind, st.cfg, st.cfg, 0.0, u)
         plunger_switch(ref, st, new)
 
 
@@ -522,7 +536,7 @@ def _apply_event(ref, st, first, t_ev, pl):
     _off_cam(out, cfg, c, w, st.t_s, t_ev)
     new = cfg
     if first >= 2:
-        _plunger_event(ref, st, first == 2, t_ev, pl)
+        _plunger_event(ref, st, first, t_ev, pl)
     elif first == 0 and cam_held:
         new = configuration(False, seat_held)
         release(out, st, c, t_ev, False, cfg, new, 0.0)
@@ -591,7 +605,7 @@ def _start_case(cases, trains, profiles, runs, ws, st, c, tr):
     st.tr = tr
     st.w = cases.omega[c]
     carried = runs.plunger_coord[c] >= 0
-    st.n_mon = 4 if carried else 2
+    st.n_mon = 5 if carried else 2
     st.reg = HELD if carried else -1
     harmonic_response(trains, runs, ws, st, CAM_CONTACT - 1)
     if cases.has_seat[c]:

@@ -50,7 +50,7 @@ from campipe.engine.common import (
     holds_seat,
 )
 from campipe.engine.exact.state import _sample
-from campipe.engine.plunger import BOTTOMED, CLOSED, HELD, HYSTERESIS, OPEN, TOPPED
+from campipe.engine.plunger import BOTTOMED, CLOSED, HELD, HYSTERESIS, OPEN, TOPPED, UNLOADED
 from campipe.profiles.packed import degree, horner, next_break
 from campipe.vocabulary import CAM, CAM_AND_SEAT, CAM_CONTACT, SEAT
 
@@ -116,11 +116,14 @@ def _plunger_monitors(trains, runs, ws, st):
     """A carried plunger's monitors in its regime st.reg (``engine.plunger``'s, with its dead
     band HYSTERESIS): 2, its check valve (closed, or bottomed: −F rising through
     −F_c·(1 − HYSTERESIS), the valve opening; open, or topped: F through F_c·(1 + HYSTERESIS),
-    closing); 3, its travel (closed: −u rising through −u_bottom; open: u through u_top).
-    Each a row over the coordinates (ws.prow), its forced part from the particular solution
-    and the held coordinates' inputs (``forcing``'s ws.inp); none while held (HELD)."""
+    closing), or unloaded its load coming back (F through HYSTERESIS·F_c); 3, its travel
+    (closed: −u rising through −u_bottom; open or unloaded: u through u_top); 4, open, its
+    load falling through 0 (−F through HYSTERESIS·F_c: unloaded). Each a row over the
+    coordinates (ws.prow), its forced part from the particular solution and the held
+    coordinates' inputs (``forcing``'s ws.inp); none while held (HELD)."""
     c, reg = st.c, st.reg
-    ws.ready[2] = ws.watch[2] = ws.ready[3] = ws.watch[3] = False
+    for m in range(2, 5):
+        ws.ready[m] = ws.watch[m] = False
     if reg == HELD:
         return
     closed = reg == CLOSED or reg == BOTTOMED
@@ -128,17 +131,21 @@ def _plunger_monitors(trains, runs, ws, st):
     for i in range(ws.prow.shape[1]):
         ws.prow[0, i] = sign * runs.plunger_force[c, i]
         ws.prow[1, i] = 0.0
-    band = 1.0 - HYSTERESIS if closed else 1.0 + HYSTERESIS
-    ws.level[2] = sign * runs.plunger_check[c] * band
+        ws.prow[2, i] = -runs.plunger_force[c, i]
+    band = HYSTERESIS * runs.plunger_check[c]
+    ws.level[2] = band if reg == UNLOADED else sign * runs.plunger_check[c] + band
     ws.ready[2] = ws.watch[2] = True
-    if reg == CLOSED or reg == OPEN:
+    if reg == CLOSED or reg == OPEN or reg == UNLOADED:
         end = BOTTOMED if reg == CLOSED else TOPPED
         ws.prow[1, runs.plunger_coord[c]] = sign
         ws.level[3] = sign * runs.plunger_end[c, end]
         ws.ready[3] = ws.watch[3] = True
+    if reg == OPEN:
+        ws.level[4] = band
+        ws.ready[4] = ws.watch[4] = True
     tr, ci, nf = st.tr, st.cfg - 1, st.nf
     top = max(st.deg, 7)
-    for m in range(2, 4):
+    for m in range(2, 5):
         if not ws.ready[m]:
             continue
         row = ws.prow[m - 2]
@@ -193,10 +200,13 @@ def plunger_switch(ref, st, reg):
     iu = runs.plunger_coord[c]
     if reg == RELEASED:
         u = ws.q[iu]
-        if _link_force(runs, ws, c) > runs.plunger_check[c]:
+        load = _link_force(runs, ws, c)
+        if load > runs.plunger_check[c]:
             reg = BOTTOMED if u <= runs.plunger_end[c, BOTTOMED] else CLOSED
+        elif u >= runs.plunger_end[c, TOPPED]:
+            reg = TOPPED
         else:
-            reg = TOPPED if u >= runs.plunger_end[c, TOPPED] else OPEN
+            reg = UNLOADED if load < 0.0 else OPEN
     st.reg = reg
     st.tr = runs.plunger_train[c, reg]
     damper = runs.plunger_damper[c, reg]
@@ -204,7 +214,8 @@ def plunger_switch(ref, st, reg):
         ws.q[iu] = runs.plunger_end[c, reg]
         ws.v[iu] = 0.0
     else:
-        ws.v[iu] = -(_link_force(runs, ws, c) - runs.plunger_check[c]) / damper
+        load = 0.0 if reg == UNLOADED else _link_force(runs, ws, c)
+        ws.v[iu] = -(load - runs.plunger_check[c]) / damper
     harmonic_response(trains, runs, ws, st, CAM_CONTACT - 1)
     harmonic_response(trains, runs, ws, st, CAM_AND_SEAT - 1)
 
@@ -348,7 +359,7 @@ def _block_columns(cases, trains, runs, ws, st, pl):
 
 @njit(inline="always", nogil=True)
 def _plunger_columns(trains, ws, st, jj, lbar, d2):
-    """``_block_columns``' block column jj of a carried plunger's monitors (2, 3): their
+    """``_block_columns``' block column jj of a carried plunger's monitors (2–4): their
     rows (ws.prow) over the state's coefficients VY."""
     tr, ci = st.tr, st.cfg - 1
     for m in range(2, st.n_mon):
