@@ -23,15 +23,25 @@ def _interrupted_early(signum, frame) -> None:
     os._exit(128 + signal.SIGINT)
 
 
+def _terminated_early(signum, frame) -> None:
+    """SIGTERM (a batch system's time limit, ``kill``) while the command line loads: a line,
+    exit status 143, as for Ctrl-C."""
+    sys.stderr.write("campipe: terminated (SIGTERM) while starting; nothing was done\n")
+    os._exit(128 + signal.SIGTERM)
+
+
 # Only in campipe's own process (its console script, python -m campipe: read from the
 # interpreter's own arguments, which a spawned worker process does not share even where it
-# copies sys.argv), and where Ctrl-C is Python's (not ignored, as in a background job): a
-# program that imports the command line keeps its handler. main() puts Python's back.
-if signal.getsignal(signal.SIGINT) is signal.default_int_handler and (
-    os.path.basename(sys.orig_argv[1] if len(sys.orig_argv) > 1 else "") == "campipe"
-    or sys.orig_argv[1:3] == ["-m", "campipe"]
+# copies sys.argv), and where the signal is Python's (Ctrl-C not ignored, as in a background
+# job; SIGTERM at its default): a program that imports the command line keeps its handlers.
+# main() puts Python's Ctrl-C back, and makes SIGTERM end the command as Ctrl-C does.
+if os.path.basename(sys.orig_argv[1] if len(sys.orig_argv) > 1 else "") == "campipe" or (
+    sys.orig_argv[1:3] == ["-m", "campipe"]
 ):
-    signal.signal(signal.SIGINT, _interrupted_early)
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+        signal.signal(signal.SIGINT, _interrupted_early)
+    if signal.getsignal(signal.SIGTERM) is signal.SIG_DFL:
+        signal.signal(signal.SIGTERM, _terminated_early)
 
 from campipe.cli import bench, design, export, model, onset, plot, replay, study  # noqa: E402
 from campipe.cli.base import main  # noqa: E402

@@ -101,6 +101,18 @@ class Interrupted(Failure):
     exit_code = 128 + 2
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM in a running command (a batch system's time limit, ``kill``): raised as Ctrl-C
+    is, so that what a run does on Ctrl-C (its lock released, its batches kept) it does on
+    this too; the command ends with status 143 (:class:`TerminatedFailure`)."""
+
+
+class TerminatedFailure(Failure):
+    """SIGTERM: exit status 143, as a shell reports it."""
+
+    exit_code = 128 + 15
+
+
 #: What an interrupted command leaves, by command.
 AFTER_INTERRUPT = {
     "study": "the batches finished are kept: rerun the same command to resume",
@@ -117,11 +129,13 @@ class CampipeGroup(click.Group):
 
         try:
             return super().invoke(ctx)
-        except KeyboardInterrupt:
+        except KeyboardInterrupt as exc:
             name = ctx.invoked_subcommand or ""
             after = f"; {AFTER_INTERRUPT[name]}" if name in AFTER_INTERRUPT else ""
             if reading := stuck():
                 after += f" (while reading {reading[0]}: if it never ended, the file is damaged)"
+            if isinstance(exc, Terminated):
+                raise TerminatedFailure(f"campipe {name}: terminated (SIGTERM){after}") from None
             raise Interrupted(f"campipe {name}: interrupted (Ctrl-C){after}") from None
         except ReadStalled as exc:
             raise Failure(str(exc)) from None
@@ -164,11 +178,19 @@ def main(verbose: int) -> None:
 
 def _restore_interrupt() -> None:
     """Python's own Ctrl-C (KeyboardInterrupt, which :class:`CampipeGroup` maps) in place of
-    the handler ``campipe.cli`` sets while it loads."""
+    the handler ``campipe.cli`` sets while it loads, and SIGTERM raising :class:`Terminated`
+    (mapped likewise) in place of its."""
     import signal
 
     if getattr(signal.getsignal(signal.SIGINT), "__name__", "") == "_interrupted_early":
         signal.signal(signal.SIGINT, signal.default_int_handler)
+    if getattr(signal.getsignal(signal.SIGTERM), "__name__", "") == "_terminated_early":
+        signal.signal(signal.SIGTERM, _terminate)
+
+
+def _terminate(signum, frame) -> None:
+    """SIGTERM in a running command: :class:`Terminated`, raised where the command is."""
+    raise Terminated()
 
 
 @functools.cache

@@ -367,11 +367,19 @@ def _adjuster_json(train) -> dict[str, object]:
     return {"adjuster": {**dict(zip(names, found, strict=True)), "units": "N/m"}}
 
 
-def _matrix_text(a: np.ndarray, scale: float, coords: tuple[Coordinate, ...]) -> list[str]:
-    head = "      " + "".join(f"{c.symbol:>9}" for c in coords)
+def _matrix_text(
+    a: np.ndarray, scale: float, coords: tuple[Coordinate, ...], thesis: bool = True
+) -> list[str]:
+    """A matrix's rows over ``scale``: to two decimals as the thesis's figures print them, or
+    (``thesis`` False: a layout beyond it) to six significant digits. A chain's entries can
+    differ in the fourth (a finger's K: 12.035 beside 12.000 ×1e6 N/m, the spring's rate),
+    and its modes recomputed from two decimals were 7 % off (a valve-train engineer's check)."""
+    width = 9 if thesis else 12
+    head = "      " + "".join(f"{c.symbol:>{width}}" for c in coords)
     rows = [head]
     for c, row in zip(coords, a / scale, strict=True):
-        rows.append(f"  {c.symbol:<4}" + "".join(f"{v:9.2f}" for v in row))
+        cells = (f"{v:9.2f}" if thesis else f"{v:12.6g}" for v in row)
+        rows.append(f"  {c.symbol:<4}" + "".join(cells))
     return rows
 
 
@@ -550,7 +558,9 @@ def model_text(
     ):
         lines.append("")
         lines.append(f"{title}  {tag} {unit}{rot}")
-        lines += _matrix_text(to_display_units(a, length, energy, trans), scale, coords)
+        lines += _matrix_text(
+            to_display_units(a, length, energy, trans), scale, coords, not train.chain
+        )
     lines.append("")
     lines.append("Natural frequencies (Figure 14), each mode's damping ratio (Φᵀ C Φ)ⱼⱼ / (2ωⱼ)")
     lines.append(

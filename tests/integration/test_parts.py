@@ -220,6 +220,31 @@ def test_a_study_on_two_worker_processes_equals_the_local_run(mixed, tmp_path):
         xr.testing.assert_identical(_without_global_attrs(one), _without_global_attrs(many))
 
 
+def test_a_relative_archive_path_reaches_a_cluster_s_workers(tmp_path, monkeypatch, mixed):
+    """A parts archive given by a relative path, from a folder other than the one the
+    cluster's workers started in (a helper's cluster run: refused, "a worker does not see the
+    folder", everything on one machine): the workers resolve it in their own working folder,
+    so the run makes it absolute first, and the archive equals the local single-file run.
+    Broken copy it fails on: the path handed to the workers as given."""
+    from distributed import LocalCluster
+
+    study, directory, _, _ = mixed
+    with LocalCluster(
+        n_workers=1, threads_per_worker=1, processes=True, dashboard_address=":0"
+    ) as cluster:
+        (tmp_path / "here").mkdir()
+        monkeypatch.chdir(tmp_path / "here")  # the workers stay where they started
+        report = run_study(
+            study, Path("mixed.parts"), scheduler=cluster.scheduler_address, parts=True
+        )
+    assert report.computed == 10
+    with (
+        xr.open_dataset(directory / "mixed.nc") as one,
+        open_archive(tmp_path / "here" / "mixed.parts") as many,
+    ):
+        xr.testing.assert_identical(_without_global_attrs(one), _without_global_attrs(many))
+
+
 def test_the_command_line_writes_queries_and_packs_a_parts_archive(tmp_path):
     """``campipe study --parts`` writes ``<name>.parts``; ``campipe query`` reads the folder
     as it reads the file; ``campipe pack`` writes the single file under the output rule

@@ -156,7 +156,9 @@ def run_study(
     """
     started = time.monotonic()
     archive = Path(archive)
-    check_scheduler(scheduler)
+    if not check_scheduler(scheduler):
+        # A cluster's workers resolve a relative path in their own working folders.
+        archive = archive.absolute()
     run = _Run(scheduler, workers or 0, on_batch, workers_store, notice, command)
     if parts:
         return _run_parts(study, archive, run, batch_size, progress, started)
