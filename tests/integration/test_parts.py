@@ -170,6 +170,7 @@ def test_a_changed_study_keeps_only_its_own_cases_in_the_index(tmp_path):
     write_spec(tmp_path, SMALL_SPEC.replace("[6000 rpm, 9524 rpm, 11000 rpm]", "[6000 rpm]"))
     report = run_study(load_study(spec), archive, scheduler="synchronous", parts=True)
     assert (report.reused, report.computed) == (2, 0)
+    assert any("4 of the 6 cases it held are not in this run's spec" in n for n in report.notes)
     assert len(part_files(archive)) == 1
     with open_archive(archive) as ds:
         assert_array_equal(ds["speed_rpm"].values, [6000, 6000])

@@ -67,6 +67,8 @@ from campipe.study.run.resume import (
     Found,
     StudyReport,
     clean_temporaries,
+    dropped_note,
+    earlier_cases,
     find_results,
     inspect_archive,
     refuse,
@@ -181,6 +183,7 @@ def run_study(
             return up_to_date(archive, total, started)
         _check_replaceable(archive, state, overwrite)
         notes = _state_notes(archive, state)
+        before = earlier_cases(archive) if not state.what else []  # this study's, replaced
         clean_temporaries(archive)
         found, more = find_results(study, archive, archive_usable=not state.problems)
         notes += more
@@ -191,7 +194,7 @@ def run_study(
         run = _Run(scheduler, workers, on_batch, workers_store, notice, command)
         bar = progress(total, total - len(missing)) if progress else None
         statuses, engine, solid = _compute_and_assemble(study, archive, found, plans, run, bar)
-        notes += solid_note(study, solid)
+        notes += solid_note(study, solid) + dropped_note(archive, before, study)
         scratch = parts_directory(archive)
         if not keep_parts and scratch.is_dir():
             shutil.rmtree(scratch, ignore_errors=True)
@@ -415,6 +418,7 @@ def _run_parts(
             else []
         )
         clean_part_temporaries(archive)
+        before = earlier_cases(archive)
         index_path(archive).unlink(missing_ok=True)  # the parts change: no index meanwhile
         layout = part_layout(study, run.command, spec_file(study, archive))
         found, more = find_parts(study, archive, layout)
@@ -441,6 +445,7 @@ def _run_parts(
         for cid, name in found.statuses.items():
             log.warning("case %s: %s", cid, name)
         found.write_index(layout.attrs)
+        notes += dropped_note(archive, before, study)
         statuses = {
             c.case_id: found.statuses[c.case_id] for c in study.cases if c.case_id in found.statuses
         }

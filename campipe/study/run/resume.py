@@ -140,8 +140,9 @@ def checked_files(
     """The files among ``paths`` to reuse, each with its attributes (``read``): those of this
     layout, record and engine (:func:`mismatch`), fit (``misfit``, when given) and whose
     checksums verify (``check``). One that fails its checks or cannot be read is removed and
-    named in ``notes`` (its cases are computed again); the others are set aside, counted in
-    one note a reason (``what``: "batch file in <folder>", "part in <archive>")."""
+    named in ``notes`` (its cases are computed again); the others are not reused (and removed
+    with the run's scratch, or left out of the parts' index and removed), counted in one note
+    a reason (``what``: "batch file in <folder>", "part in <archive>")."""
     other: dict[str, int] = {}
     for path in paths:
         try:
@@ -163,7 +164,7 @@ def checked_files(
         yield path, attrs
     noun, _, where = what.partition(" in ")
     for why, n in other.items():
-        notes.append(f"{n} {noun}{'s' if n != 1 else ''} in {where} set aside: {why}")
+        notes.append(f"{n} {noun}{'s' if n != 1 else ''} in {where} not reused, removed: {why}")
 
 
 def find_results(
@@ -202,6 +203,36 @@ def find_results(
         else:
             _index_of(archive, found, wanted)
     return found, notes
+
+
+def earlier_cases(archive: Path) -> list[str]:
+    """The case ids an archive (a file, or a parts archive's index) at ``archive`` holds
+    before a run replaces it; [] where there is none or it cannot be read."""
+    try:
+        if archive.is_dir():
+            from campipe.io.parts import read_index as read_parts_index
+
+            return [str(c) for c in read_parts_index(archive).get("case", [])]
+        if archive.is_file():
+            return [str(c) for c in read_index(archive, CASE_ID)[0]]
+    except Exception:  # damaged, or not an archive: its checks say so
+        return []
+    return []
+
+
+def dropped_note(archive: Path, before: list[str], study: Study) -> list[str]:
+    """A note on the cases the archive held before this run (``before``, its case ids) that
+    it no longer holds: a narrower sweep or an edited key replaces them, and nothing else
+    keeps them (a helper lost 28 of 32 cluster cases to a rerun with one speed)."""
+    wanted = {c.case_id for c in study.cases}
+    dropped = [c for c in before if c not in wanted]
+    if not dropped:
+        return []
+    return [
+        f"{archive}: {len(dropped)} of the {len(before)} cases it held are not in this run's "
+        "spec (a narrower sweep, or an edited key) and are removed from it; write a run with "
+        "fewer cases to another path (-o) to keep an archive whole"
+    ]
 
 
 def spec_file(study: Study, archive: Path) -> str:
