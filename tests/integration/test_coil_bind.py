@@ -55,3 +55,32 @@ def test_a_valve_lifted_past_its_spring_s_travel_to_solid_is_noted(tmp_path):
         load_study(write_spec(roomy, SPEC % "5 in")), roomy / "solid.nc", scheduler="synchronous"
     )
     assert not [n for n in report.notes if "coil bind" in n], report.notes
+
+
+def test_query_summary_says_which_springs_clashed(tmp_path):
+    """``campipe query --summary`` of an archive that records the spring names the cases whose
+    coils clashed (min_spring_clash_margin below 0), parts archives too, where the run's own
+    note is not written (a helper's cluster runs: none; its query and plot said nothing
+    either). The 30 000 rpm case's margin, not the 9000 rpm one's. Broken copy: the summary
+    without ``clash_lines``."""
+    from click.testing import CliRunner
+
+    from campipe.cli import main
+
+    spec = write_spec(tmp_path, SPEC % "1.6 in")
+    path = tmp_path / "solid.parts"
+    run_study(load_study(spec), path, scheduler="synchronous", parts=True)
+    summary = CliRunner().invoke(main, ["query", str(path), "--summary"])
+    assert summary.exit_code == 0, summary.output
+    lines = [x for x in summary.output.splitlines() if "coils clashed" in x]
+    assert len(lines) == 1, summary.output
+    assert "(min_spring_clash_margin below 0) in 1 of 2 cases" in lines[0]
+    with _parts(path) as ds:
+        fast = str(ds.case.values[int(np.argmax(ds.speed_rpm.values))])
+    assert f"({fast})" in lines[0]
+
+
+def _parts(path):
+    from campipe.study.archive.open import open_archive
+
+    return open_archive(path)

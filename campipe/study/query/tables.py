@@ -333,6 +333,7 @@ def summary(ds, where: str | None = None, system: str = "spec") -> str:
     lines += status_lines(table)
     lines += settling_lines(table, ds.attrs.get("max_revolutions", "?"))
     lines += tension_lines(table)
+    lines += clash_lines(table)
     onset = onset_table(table)
     if onset:
         lines.append("")
@@ -442,6 +443,33 @@ def tension_lines(table: CaseTable) -> list[str]:
         "its cups, a rocker, finger or tappet on the valve's tip) only push, the model's hold "
         "on, so past the pull these cases' forces and bounces are the model's (docs/model.md, "
         '"Joints that pull")'
+    ]
+
+
+#: The spring's coil-clash margin (``record: [spring]``): below 0, coils went solid.
+CLASH = "min_spring_clash_margin"
+
+
+def clash_lines(table: CaseTable) -> list[str]:
+    """The cases whose valve spring's coils clashed (``min_spring_clash_margin`` below 0: an
+    element went solid, which the model has no stop for). The run notes the valve lifting past
+    the spring's travel only where it writes one file; this reads any archive that records the
+    spring, parts too, and sees an element of a surging spring go solid first."""
+    margin = table.columns.get(CLASH)
+    if margin is None:
+        return []
+    margin = np.asarray(margin, float)
+    solid = np.flatnonzero(margin < 0)
+    if not solid.size:
+        return []
+    ids = table.columns.get("case", np.arange(table.n).astype(str))
+    worst = solid[np.argmin(margin[solid])]
+    units = table.units.get(CLASH, "")
+    return [
+        f"the valve spring's coils clashed ({CLASH} below 0) in {solid.size} of {table.n} "
+        f"cases, least {_cell(margin[worst], 'table')} {units} ({ids[worst]}): the model has "
+        "no stop at solid, so past it these cases' motion is not a real train's "
+        "(model.spring_travel_to_solid)"
     ]
 
 
