@@ -427,23 +427,12 @@ def tension_lines(table: CaseTable) -> list[str]:
     """The cases where a joint that only pushes in the hardware pulled (``min_joint_force``
     below 0): the model's two-sided joint held what the hardware would let go (docs/model.md,
     "Joints that pull")."""
-    force = table.columns.get(JOINT)
-    if force is None:
-        return []
-    force = np.asarray(force, float)
-    pulled = np.flatnonzero(force < 0)
-    if not pulled.size:
-        return []
-    ids = table.columns.get("case", np.arange(table.n).astype(str))
-    least = pulled[np.argmin(force[pulled])]
-    units = table.units.get(JOINT, "")
-    return [
-        f"a joint pulled ({JOINT} below 0) in {pulled.size} of {table.n} cases, least "
-        f"{_cell(force[least], 'table')} {units} ({ids[least]}): the hardware's (a pushrod in "
-        "its cups, a rocker, finger or tappet on the valve's tip) only push, the model's hold "
-        "on, so past the pull these cases' forces and bounces are the model's (docs/model.md, "
-        '"Joints that pull")'
-    ]
+    return _below_zero(
+        table, JOINT, "a joint pulled",
+        "the hardware's (a pushrod in its cups, a rocker, finger or tappet on the valve's tip) "
+        "only push, the model's hold on, so past the pull these cases' forces and bounces are "
+        'the model\'s (docs/model.md, "Joints that pull")',
+    )  # fmt: skip
 
 
 #: The spring's coil-clash margin (``record: [spring]``): below 0, coils went solid.
@@ -455,21 +444,29 @@ def clash_lines(table: CaseTable) -> list[str]:
     element went solid, which the model has no stop for). The run notes the valve lifting past
     the spring's travel only where it writes one file; this reads any archive that records the
     spring, parts too, and sees an element of a surging spring go solid first."""
-    margin = table.columns.get(CLASH)
-    if margin is None:
+    return _below_zero(
+        table, CLASH, "the valve spring's coils clashed",
+        "the model has no stop at solid, so past it these cases' motion is not a real train's "
+        "(model.spring_travel_to_solid)",
+    )  # fmt: skip
+
+
+def _below_zero(table: CaseTable, column: str, what: str, why: str) -> list[str]:
+    """``<what> (<column> below 0) in n of N cases, least <v> <units> (<id>): <why>``, or
+    nothing where the column is absent or never below 0."""
+    values = table.columns.get(column)
+    if values is None:
         return []
-    margin = np.asarray(margin, float)
-    solid = np.flatnonzero(margin < 0)
-    if not solid.size:
+    values = np.asarray(values, float)
+    below = np.flatnonzero(values < 0)
+    if not below.size:
         return []
     ids = table.columns.get("case", np.arange(table.n).astype(str))
-    worst = solid[np.argmin(margin[solid])]
-    units = table.units.get(CLASH, "")
+    least = below[np.argmin(values[below])]
+    units = table.units.get(column, "")
     return [
-        f"the valve spring's coils clashed ({CLASH} below 0) in {solid.size} of {table.n} "
-        f"cases, least {_cell(margin[worst], 'table')} {units} ({ids[worst]}): the model has "
-        "no stop at solid, so past it these cases' motion is not a real train's "
-        "(model.spring_travel_to_solid)"
+        f"{what} ({column} below 0) in {below.size} of {table.n} cases, least "
+        f"{_cell(values[least], 'table')} {units} ({ids[least]}): {why}"
     ]
 
 
