@@ -325,7 +325,7 @@ def scheduler_options(where: str, workers_for: str):
             default="threads",
             show_default=True,
             help=f"{where}threads, synchronous, processes, or a dask.distributed scheduler "
-            "address such as tcp://127.0.0.1:8786.",
+            "address such as tcp://127.0.0.1:8786 (or 127.0.0.1:8786).",
         )(command)
 
     return decorate

@@ -4,6 +4,7 @@ import re
 import subprocess
 import sys
 
+import pytest
 import xarray as xr
 from click.testing import CliRunner
 from study_helpers import STUDIES, write_spec
@@ -109,6 +110,25 @@ def test_study_refuses_an_unknown_scheduler(tmp_path):
     )
     assert out.exit_code == 2 and "expected one of threads, synchronous, processes" in out.output
     assert not (tmp_path / "q.nc").exists()
+
+
+@pytest.mark.parametrize("address", ["tpc://127.0.0.1:8786", "http://127.0.0.1:8787"])
+def test_study_refuses_a_scheme_dask_does_not_speak(tmp_path, address):
+    """A typo'd or HTTP scheme is refused at once naming the schemes and the port (a helper's
+    ``tpc://`` and ``http://`` read 'cannot reach ... within 10 s (ValueError)'); nothing is
+    written. ``HOST:PORT`` without a scheme is an address, as dask reads it (it was refused as
+    a local scheduler's name). Broken copy: check_scheduler telling addresses by '://'."""
+    from campipe.study.run.execute import check_scheduler
+
+    out = invoke(
+        "study", str(STUDIES / "quickstart.yaml"), "-o", str(tmp_path / "q.nc"),
+        "--scheduler", address,
+    )  # fmt: skip
+    assert out.exit_code == 2, out.output
+    assert "dask.distributed speaks tcp, tls" in out.output and "tcp://HOST:PORT" in out.output
+    assert not (tmp_path / "q.nc").exists()
+    assert check_scheduler("127.0.0.1:8786") is False and check_scheduler("tcp://h:1") is False
+    assert check_scheduler("threads") is True
 
 
 def test_a_command_leaves_its_objects_to_the_operating_system_at_exit():

@@ -38,6 +38,10 @@ from campipe.study.spec.variables import DOF_NAMES, VARIABLES
 #: processes scheduler, whose workers cannot log into this process's recording.
 BatchHook = Callable[[BatchPlan, BatchData], None]
 
+#: Local dask schedulers by name; anything else is a dask.distributed address
+#: (``execute.check_scheduler``).
+LOCAL_SCHEDULERS = ("threads", "synchronous", "processes")
+
 
 class OptionError(CampipeError, ValueError):
     """An option of a run that is refused (``key`` the option, such as ``--scheduler``)."""

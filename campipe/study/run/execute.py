@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import re
 import shutil
 import stat
 import time
@@ -44,6 +45,7 @@ from campipe.io.parts import index_path
 from campipe.model import valve_train
 from campipe.study.run.assembly import study_assembly
 from campipe.study.run.batches import (
+    LOCAL_SCHEDULERS,
     BatchHook,
     OptionError,
     Storage,
@@ -83,9 +85,6 @@ from campipe.study.spec.resolve import ResolvedCase
 from campipe.vocabulary import OK, STATUS
 
 log = logging.getLogger(__name__)
-
-#: Local dask schedulers by name; anything with "://" is a dask.distributed address.
-LOCAL_SCHEDULERS = ("threads", "synchronous", "processes")
 
 
 def run_study(
@@ -219,18 +218,36 @@ def _ran(archive, total, missing, plans, started, notes, statuses, engine) -> St
     )
 
 
+#: The schemes of a dask.distributed scheduler's address (``distributed.comm``'s).
+SCHEMES = ("tcp", "tls", "inproc", "ucx", "ws", "wss")
+
+
 def check_scheduler(scheduler: str) -> bool:
-    """Whether ``scheduler`` runs on this machine (else it is a dask.distributed address);
-    a local name that is not one of LOCAL_SCHEDULERS is refused."""
-    local = "://" not in scheduler
-    if local and scheduler not in LOCAL_SCHEDULERS:
+    """Whether ``scheduler`` runs on this machine (else it is a dask.distributed address:
+    ``SCHEME://HOST:PORT``, or ``HOST:PORT`` as dask reads it, tcp); a local name that is not
+    one of LOCAL_SCHEDULERS, and a scheme dask does not speak, are refused (a helper's
+    ``tpc://`` and ``http://`` were 'cannot reach ... (ValueError)')."""
+    scheme, sep, _ = scheduler.partition("://")
+    if sep:
+        if scheme.lower() not in SCHEMES:
+            raise OptionError.at(
+                "--scheduler",
+                f"found {scheduler!r}: dask.distributed speaks {', '.join(SCHEMES)}, not "
+                f"{scheme!r}; a scheduler's address is tcp://HOST:PORT (8786 by default; the "
+                "dashboard's HTTP port, 8787, is not it)",
+                found=scheduler,
+            )
+        return False
+    if re.fullmatch(r"[\w.\-]+:\d+", scheduler):
+        return False  # HOST:PORT, tcp
+    if scheduler not in LOCAL_SCHEDULERS:
         raise OptionError.at(
             "--scheduler",
             f"found {scheduler!r}, expected one of {', '.join(LOCAL_SCHEDULERS)} or an "
             "address such as tcp://127.0.0.1:8786",
             found=scheduler,
         )
-    return local
+    return True
 
 
 def _check_replaceable(archive: Path, state: ArchiveState, overwrite: bool) -> None:
@@ -295,7 +312,7 @@ class _Run:
 
     @property
     def local(self) -> bool:
-        return "://" not in self.scheduler
+        return self.scheduler in LOCAL_SCHEDULERS
 
 
 def _compute_and_assemble(

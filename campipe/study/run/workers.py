@@ -34,7 +34,13 @@ from typing import Any, TypeVar
 
 from campipe.errors import CampipeError
 from campipe.io.archive import ArchiveWriteError, write_error
-from campipe.study.run.batches import BatchHook, SchedulerError, Storage, Stored
+from campipe.study.run.batches import (
+    LOCAL_SCHEDULERS,
+    BatchHook,
+    SchedulerError,
+    Storage,
+    Stored,
+)
 from campipe.study.run.cluster import PartCount, collect, run_parts
 from campipe.study.run.results import BatchData, BatchPlan, compute_batch, numerics_fingerprint
 
@@ -277,7 +283,7 @@ def task_map(scheduler: str, workers: int) -> Iterator[Mapped]:
         run(list(enumerate(items)), done)
         return results
 
-    if "://" not in scheduler:
+    if scheduler in LOCAL_SCHEDULERS:
         pool = _local_pool(scheduler, workers)
 
         def mapped(items: Sequence[Any], task: Callable[[Any], Any]) -> list[Any]:
