@@ -30,7 +30,7 @@ from matplotlib.figure import Figure
 
 from campipe.engine.metrics import UNCERTAINTY
 from campipe.errors import did_you_mean, excerpt
-from campipe.plot.kinematics import kinematic_lift, rocker_ratios
+from campipe.plot.kinematics import kinematic_lift, rocker_ratios, turn_extensions
 from campipe.plot.style import (
     COLORMAP,
     EVENT_MARKERS,
@@ -386,11 +386,14 @@ def _kinematic_lines(ax, view: View, keep: np.ndarray, x: np.ndarray) -> None:
     ds = view.ds
     if "cam_lift" not in ds.variables:
         return
-    ratios = rocker_ratios(ds.attrs, view.stored.columns)
+    ratios, lashes, in_link = rocker_ratios(ds.attrs, view.stored.columns)
     seats = view.stored.columns.get("seat", np.full(view.stored.n, -np.inf))
     stored = str(ds["cam_lift"].attrs.get("units", ""))
+    lash = np.repeat(lashes[:, None], int(keep.sum()), axis=1)
+    if in_link.any():  # a chain's lash adjuster takes its extension of lash up, turn by turn
+        lash[in_link] -= turn_extensions(view.ds, view.rows, keep)[in_link]
     lifts = kinematic_lift(
-        np.asarray(ds["cam_lift"].values[view.rows][:, keep], float), ratios, seats
+        np.asarray(ds["cam_lift"].values[view.rows][:, keep], float), ratios, seats, lash
     )
     shown = to_display(lifts, stored, view.units.get("valve_lift", stored), _cam_speed(view))
     for k, lift in enumerate(_distinct(c for c in shown if np.isfinite(c).any())):

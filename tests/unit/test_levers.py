@@ -271,8 +271,8 @@ def test_the_plot_s_kinematic_overlay_reads_a_chain_s_cam_lift_as_its_valve_s():
 
     text = (Path(__file__).parents[2] / "studies" / "finger-follower.yaml").read_text()
     columns = {"spring_rate": np.array([35e3, 40e3])}
-    assert_allclose(rocker_ratios({"spec": text}, columns), [1.0, 1.0])
-    thesis = rocker_ratios({"spec": "model: {preset: thesis-1971}"}, {"lash": np.array([0.0])})
+    assert_allclose(rocker_ratios({"spec": text}, columns)[0], [1.0, 1.0])
+    thesis = rocker_ratios({"spec": "model: {preset: thesis-1971}"}, {"lash": np.array([0.0])})[0]
     assert thesis[0] == pytest.approx(1.5, rel=1e-9)
 
 
