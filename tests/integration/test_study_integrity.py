@@ -278,7 +278,9 @@ def test_a_file_that_is_not_this_studys_archive_is_refused(small_archive, tmp_pa
         victim = tmp_path / "notes.txt"
         victim.write_text("my notes\n")
     else:  # a second spec with the same name, in the same folder: the same default archive
-        shutil.copy(small_archive.spec, tmp_path / "first.yaml")
+        # (another study: an identical one is the same study, moved or copied)
+        text = small_archive.spec.read_text()
+        (tmp_path / "first.yaml").write_text(text.replace(", 11000 rpm", ""))
         first = CliRunner().invoke(
             main, ["study", str(tmp_path / "first.yaml"), "--scheduler", "synchronous"]
         )
@@ -291,6 +293,29 @@ def test_a_file_that_is_not_this_studys_archive_is_refused(small_archive, tmp_pa
     assert "Traceback" not in result.output
     assert victim.read_bytes() == before
     assert not list(tmp_path.glob("*.lock")) and not list(tmp_path.glob("*.parts"))
+
+
+@pytest.mark.parametrize("parts", [False, True])
+def test_an_archive_moved_with_its_spec_is_still_this_study_s(small_archive, tmp_path, parts):
+    """An archive moved (or copied) to another folder with its spec, or run from a copy of
+    the spec beside it, is the same study (its study_key): up to date, or resumed, not
+    refused as another spec's because the spec's path relative to it changed (a helper's
+    moved cluster archive: "the parts archive of another spec", and --overwrite does not
+    apply to parts). Broken copy: the spec's relative path alone deciding."""
+    spec = tmp_path / "a" / "spec.yaml"
+    spec.parent.mkdir()
+    shutil.copy(small_archive.spec, spec)
+    first = tmp_path / "a" / ("small.parts" if parts else "small.nc")
+    run_study(load_study(spec), first, scheduler="synchronous", parts=parts)
+    moved = tmp_path / "b" / first.name
+    moved.parent.mkdir()
+    shutil.move(first, moved)
+    again = run_study(load_study(spec), moved, scheduler="synchronous", parts=parts)
+    assert again.up_to_date and again.computed == 0
+    beside = tmp_path / "b" / "spec.yaml"
+    shutil.copy(spec, beside)
+    third = run_study(load_study(beside), moved, scheduler="synchronous", parts=parts)
+    assert third.up_to_date and third.computed == 0
 
 
 def test_overwrite_replaces_another_studys_archive_reusing_the_cases_it_shares(

@@ -99,7 +99,8 @@ def inspect_parts(study: Study, archive: Path) -> ArchiveState:
         what = f"the parts archive of another study ({name!s:.60})"
         return ArchiveState(True, False, what, False, attrs=attrs)
     mine, theirs = spec_file(study, archive), str(attrs.get("spec_file", ""))
-    if mine and theirs and mine != theirs:
+    same = attrs.get("study_key") == study_key(study)  # moved or copied with its spec: ours
+    if mine and theirs and mine != theirs and not same:
         what = f"the parts archive of another spec named {name!s:.60} ({theirs:.200})"
         return ArchiveState(True, False, what, False, attrs=attrs)
     if attrs.get("study_key") != study_key(study):

@@ -296,7 +296,8 @@ def inspect_archive(study: Study, archive: Path) -> ArchiveState:
             True, False, f"the archive of another study ({name!s:.60})", False, attrs=attrs
         )
     mine, theirs = spec_file(study, archive), str(attrs.get("spec_file", ""))
-    if mine and theirs and mine != theirs:
+    same = attrs.get("study_key") == study_key(study)  # moved or copied with its spec: ours
+    if mine and theirs and mine != theirs and not same:
         return ArchiveState(
             True,
             False,
