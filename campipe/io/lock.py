@@ -61,8 +61,11 @@ class LockFileError(CampipeError, RuntimeError):
 
 
 def lock_path(archive: Path) -> Path:
-    """The lock a run holds while it writes ``archive``: ``<archive>.lock`` beside it."""
-    return archive.with_name(archive.name + ".lock")
+    """The lock a run holds while it writes ``archive``: ``<archive>.lock`` beside it, the
+    archive's path resolved (a symbolic link to it, or to its folder, gives the same lock:
+    two runs through two names of one archive both started, a helper found)."""
+    real = Path(archive).resolve()
+    return real.with_name(real.name + ".lock")
 
 
 def holder_record() -> dict[str, object]:

@@ -110,3 +110,19 @@ def test_a_lock_replaced_by_another_run_is_not_removed_at_release(tmp_path):
     with writing(archive) as lock:
         other = _stale(lock, 1)  # as if another run had (wrongly) taken it
     assert lock.read_text() == other
+
+
+def test_a_symbolic_link_to_the_archive_shares_its_lock(tmp_path):
+    """Two names of one archive (a symbolic link to it, or to its folder) hold one lock: the
+    second run through the link stops at once. Broken copy: the lock beside the link's name
+    (a helper's two runs both started, one failing mid-run)."""
+    (tmp_path / "real").mkdir()
+    (tmp_path / "link").symlink_to(tmp_path / "real")
+    (tmp_path / "real" / "a.nc").write_bytes(b"")
+    (tmp_path / "b.nc").symlink_to(tmp_path / "real" / "a.nc")
+    for other in (tmp_path / "link" / "a.nc", tmp_path / "b.nc"):
+        with writing(tmp_path / "real" / "a.nc"):
+            with pytest.raises(ArchiveBusyError):
+                with writing(other):
+                    pass
+    assert lock_path(tmp_path / "b.nc") == tmp_path / "real" / "a.nc.lock"
