@@ -67,9 +67,10 @@ def campipe_exceptions() -> dict[str, type]:
 
 #: Not errors a caller handles but a stop, as KeyboardInterrupt is: a read left inside HDF5
 #: (``campipe.io.watch``) holds the library, so a handler that takes a damaged file as one to
-#: compute again (``except Exception``) must not catch it and go on to write netCDF. Checked
-#: below to stay outside Exception.
-STOPS = ("ReadStalled",)
+#: compute again (``except Exception``) must not catch it and go on to write netCDF; and
+#: SIGTERM in a running command (``campipe.cli.base.Terminated``, a KeyboardInterrupt, so that
+#: a run does on it what it does on Ctrl-C). Checked below to stay outside Exception.
+STOPS = ("ReadStalled", "Terminated")
 
 
 def test_every_campipe_exception_derives_from_campipe_error_and_its_builtin():
