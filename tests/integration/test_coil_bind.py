@@ -84,3 +84,41 @@ def _parts(path):
     from campipe.study.archive.open import open_archive
 
     return open_archive(path)
+
+
+def test_a_cluster_s_parts_run_notes_the_coil_bind(tmp_path):
+    """On a dask.distributed cluster each worker writes its part and returns its counts: the
+    cases' highest lifts go with them (``cluster.PartCount.highest``), and the note is the
+    local run's. Broken copy: a PartCount without them."""
+    from distributed import LocalCluster
+
+    spec = write_spec(tmp_path, SPEC % "1.6 in")
+    with LocalCluster(
+        n_workers=1, threads_per_worker=1, processes=False, dashboard_address=":0"
+    ) as cluster:
+        report = run_study(
+            load_study(spec), tmp_path / "solid.parts", scheduler=cluster.scheduler_address,
+            parts=True,
+        )  # fmt: skip
+    notes = [n for n in report.notes if "coil bind" in n]
+    assert len(notes) == 1 and "in 1 of 2 cases: case" in notes[0], report.notes
+
+
+def test_a_parts_run_notes_the_coil_bind_of_the_cases_it_computed(tmp_path):
+    """A parts run (the cluster's route) notes the cases whose valve lifts past the spring's
+    travel as a single-file run does, from the batches it computed (a worker returns each
+    case's highest lift with its part's counts); a rerun that computes only some says of how
+    many. Broken copy: the parts run without the note (a helper's cluster runs: none)."""
+    spec = write_spec(tmp_path, SPEC % "1.6 in")
+    path = tmp_path / "solid.parts"
+    report = run_study(load_study(spec), path, scheduler="synchronous", parts=True)
+    notes = [n for n in report.notes if "coil bind" in n]
+    assert len(notes) == 1 and "in 1 of 2 cases: case" in notes[0], report.notes
+    assert "at 30000 cam rpm" in notes[0]
+    wider = SPEC.replace("[9000 rpm, 30000 rpm]", "[9000 rpm, 30000 rpm, 31000 rpm]")
+    report = run_study(
+        load_study(write_spec(tmp_path, wider % "1.6 in")), path, scheduler="synchronous",
+        parts=True,
+    )  # fmt: skip
+    notes = [n for n in report.notes if "coil bind" in n]
+    assert len(notes) == 1 and "in 1 of the 1 cases this run computed" in notes[0], notes

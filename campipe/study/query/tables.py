@@ -442,8 +442,8 @@ CLASH = "min_spring_clash_margin"
 def clash_lines(table: CaseTable) -> list[str]:
     """The cases whose valve spring's coils clashed (``min_spring_clash_margin`` below 0: an
     element went solid, which the model has no stop for). The run notes the valve lifting past
-    the spring's travel only where it writes one file; this reads any archive that records the
-    spring, parts too, and sees an element of a surging spring go solid first."""
+    the spring's travel as it computes the cases; this reads any archive that records the
+    spring, an up-to-date one too, and sees an element of a surging spring go solid first."""
     return _below_zero(
         table, CLASH, "the valve spring's coils clashed",
         "the model has no stop at solid, so past it these cases' motion is not a real train's "

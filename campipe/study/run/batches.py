@@ -13,6 +13,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
+
 from campipe.errors import CampipeError
 from campipe.io import batch_file
 from campipe.io.archive import write_error
@@ -70,6 +72,9 @@ class Stored:
     data: BatchData | None = field(default=None, compare=False, repr=False)
     #: wall time of the engine call that computed it (:attr:`BatchData.engine_seconds`) [s]
     engine_seconds: float = field(default=0.0, compare=False)
+    #: each case's highest valve lift at its samples [m] (the coil-bind note), where this run
+    #: computed it and the batch records the valve's lift; () else
+    highest: tuple[float, ...] = field(default=(), compare=False)
 
     def __getstate__(self) -> dict:
         return {**self.__dict__, "data": None}
@@ -163,3 +168,14 @@ def store_batch(data: BatchData, directory: Path, record: tuple[str, ...]) -> Pa
     # would cost as much again as the archive's own compression).
     path = directory / f"batch-{data.key}{batch_file.SUFFIX}"
     return batch_file.write(path, {k: a for k, a in arrays.items() if k in names}, attrs)
+
+
+def highest_lifts(data: BatchData) -> tuple[float, ...]:
+    """Each case's highest valve lift at its samples [m] of a computed batch (a failed case's:
+    −inf), or () where it records no valve lift: what the coil-bind note compares with each
+    spring's travel to solid (``execute.solid_note``)."""
+    lift = data.arrays.get("valve_lift")
+    if lift is None:
+        return ()
+    lift = np.asarray(lift, float)
+    return tuple(np.where(np.isnan(lift), -np.inf, lift).max(axis=1).tolist())

@@ -33,7 +33,7 @@ from campipe.engine.case import Case
 from campipe.engine.settings import RunSettings
 from campipe.errors import CampipeError
 from campipe.io.parts import part_name
-from campipe.study.run.batches import Storage, Stored
+from campipe.study.run.batches import Storage, Stored, highest_lifts
 from campipe.study.run.results import BatchData, BatchPlan
 from campipe.study.spec.resolve import ResolvedCase
 
@@ -55,6 +55,7 @@ class PartCount:
     statuses: np.ndarray  # (n,) int8: status of each case (vocabulary.STATUS)
     numerics: str  # numerics_fingerprint() of the worker
     engine_seconds: float = 0.0  # wall time of the batch's engine call [s]
+    highest: tuple[float, ...] = ()  # each case's highest valve lift [m] (``highest_lifts``)
 
     def stored(self, plan: BatchPlan, directory: Path) -> Stored:
         """The part as :class:`Stored`, its case ids from ``plan``."""
@@ -67,6 +68,7 @@ class PartCount:
             self.numerics,
             self.checksum,
             engine_seconds=self.engine_seconds,
+            highest=self.highest,
         )
 
 
@@ -180,6 +182,7 @@ def part_task(
         np.asarray(data.arrays["status"], dtype=np.int8),
         data.numerics,
         data.engine_seconds,
+        highest_lifts(data),
     )
 
 

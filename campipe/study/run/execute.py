@@ -379,9 +379,12 @@ def _compute_and_assemble(
     return sink.statuses, engine, sink.solid
 
 
-def solid_note(study: Study, solid: dict[int, tuple[float, float]]) -> list[str]:
+def solid_note(
+    study: Study, solid: dict[int, tuple[float, float]], checked: int | None = None
+) -> list[str]:
     """A note on the cases whose valve lifts past its spring's travel to solid
-    (``Assembly.solid``): the coils clash, and the model has no stop there."""
+    (``Assembly.solid``; a parts run's from its computed batches, ``checked`` of them where
+    it reused others): the coils clash, and the model has no stop there."""
     if not solid:
         return []
     worst = max(solid, key=lambda k: solid[k][0] - solid[k][1])
@@ -392,8 +395,13 @@ def solid_note(study: Study, solid: dict[int, tuple[float, float]]) -> list[str]
     shown = ", ".join(study.cases[k].case_id for k in others[:4])
     also = f" (also {shown}{' …' if len(others) > 4 else ''})" if others else ""
     return [
-        f"the valve spring goes solid (coil bind) in {len(solid)} of {len(study.cases)} cases"
-        f"{also}: case {case.case_id} at {case.case.speed / RPM:.6g} cam rpm lifts its valve "
+        f"the valve spring goes solid (coil bind) in {len(solid)} of "
+        + (
+            f"the {checked} cases this run computed"
+            if checked is not None
+            else f"{len(study.cases)} cases"
+        )  # fmt: skip
+        + f"{also}: case {case.case_id} at {case.case.speed / RPM:.6g} cam rpm lifts its valve "
         f"{lift * 1e3:.4g} mm, past the spring's {travel * 1e3:.4g} mm travel to solid "
         f"(model.spring_travel_to_solid{', the default: the thesis gives none' if assumed else ''}"
         "). The model has no stop at solid: past it their motion is not a real train's "
@@ -449,12 +457,19 @@ def _run_parts(
         bar = progress(total, total - len(missing)) if progress else None
         by_key = {p.key: p for p in plans}
         engine = 0.0
+        travel = {c.case_id: (i, c.case.train.spring_travel_to_solid) for i, c in
+                  enumerate(study.cases)}  # fmt: skip
+        solid: dict[int, tuple[float, float]] = {}
 
         def stored(result: Stored | BatchData | PartCount) -> None:
             nonlocal engine
             s = stored_here(result, storage, run.on_batch, by_key)
             engine += s.engine_seconds
             found.add(s)
+            for cid, lift in zip(s.case_ids, s.highest, strict=False):  # the coils' clash
+                i, limit = travel[cid]
+                if lift > limit:
+                    solid[i] = (lift, limit)
             if bar:
                 bar.advance(s.n_cases)
 
@@ -462,7 +477,8 @@ def _run_parts(
         for cid, name in found.statuses.items():
             log.warning("case %s: %s", cid, name)
         found.write_index(layout.attrs)
-        notes += dropped_note(archive, before, study)
+        checked = len(missing) if len(missing) < len(study.cases) else None
+        notes += solid_note(study, solid, checked) + dropped_note(archive, before, study)
         statuses = {
             c.case_id: found.statuses[c.case_id] for c in study.cases if c.case_id in found.statuses
         }

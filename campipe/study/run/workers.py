@@ -40,6 +40,7 @@ from campipe.study.run.batches import (
     SchedulerError,
     Storage,
     Stored,
+    highest_lifts,
 )
 from campipe.study.run.cluster import PartCount, collect, run_parts
 from campipe.study.run.results import BatchData, BatchPlan, compute_batch, numerics_fingerprint
@@ -88,6 +89,7 @@ def _store(
         checksum,
         None if storage.parts else data,  # a part's rows are not assembled here
         data.engine_seconds,
+        highest_lifts(data) if storage.parts else (),  # (a single file's: its assembly's)
     )
 
 
