@@ -51,6 +51,15 @@ def pitch_radius(base_radius: float, roller_radius: float, lift, velocity, accel
         return np.where(bend != 0.0, (r * r + dr * dr) ** 1.5 / bend, np.inf)
 
 
+def is_undercut(radius, roller_radius: float) -> np.ndarray:
+    """Where no cam makes the lift: a flat face's radius of curvature ``radius`` below 0, or
+    a roller's pitch curve (``radius`` its radius) convex and sharper than the roller."""
+    radius = np.asarray(radius)
+    if roller_radius > 0.0:
+        return (radius > 0.0) & (radius < roller_radius)
+    return radius < 0.0
+
+
 @dataclass(frozen=True)
 class CamShape:
     """A cam's shape over a turn (SI)."""
@@ -104,10 +113,10 @@ def cam_shape(
             roller_radius,
             np.full(theta.size, np.nan),
             np.arctan2(velocity, r),
-            (pitch > 0.0) & (pitch < roller_radius),
+            is_undercut(pitch, roller_radius),
         )
     radius = flat_face_radius(base_radius, lift, acceleration)
-    return CamShape(theta, radius, 0.0, velocity, np.zeros(theta.size), radius < 0.0)
+    return CamShape(theta, radius, 0.0, velocity, np.zeros(theta.size), is_undercut(radius, 0.0))
 
 
 def contact_radius(
@@ -121,10 +130,10 @@ def contact_radius(
     lift, velocity, acceleration = evaluate(profile, angle)
     if roller_radius > 0.0:
         pitch = pitch_radius(base_radius, roller_radius, lift, velocity, acceleration)
-        undercut = (pitch > 0.0) & (pitch < roller_radius)
+        cut = is_undercut(pitch, roller_radius)
         # r_r·ρ/(ρ + r_r) with ρ = ρ_p − r_r: r_r·(1 − r_r/ρ_p), r_r where the curve is straight
         radius = roller_radius * (1.0 - roller_radius / pitch)
     else:
         radius = flat_face_radius(base_radius, lift, acceleration)
-        undercut = radius < 0.0
-    return np.where(undercut, np.nan, radius)
+        cut = is_undercut(radius, 0.0)
+    return np.where(cut, np.nan, radius)
