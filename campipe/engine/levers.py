@@ -62,14 +62,19 @@ _TURN = np.linspace(0.0, TWO_PI, 721)
 
 
 def at_the_cam(
-    result: BatchResult, cases: Sequence[Case], capture: float = DEFAULT_CAPTURE_VELOCITY
+    result: BatchResult,
+    cases: Sequence[Case],
+    capture: float = DEFAULT_CAPTURE_VELOCITY,
+    pressure: bool = True,
 ) -> BatchResult:
     """``result`` with each lever layout's cam force (histories and ``max_cam_force`` per
     turn) the roller's normal force on the cam, and its cam impacts (events and
     ``max_cam_impact_velocity`` per turn) the roller's, for a run of capture velocity
-    ``capture`` [m/s] (see the module), and the cam contact's radius at the samples where
-    the cam's shape gives it (:func:`contact_radii`); ``result`` itself if neither."""
-    radius = contact_radii(np.asarray(result.cam_angle, float), cases)
+    ``capture`` [m/s] (see the module), and with ``pressure`` (the Hertz pressure wanted) the
+    cam contact's radius at the samples where the cam's shape gives it (:func:`contact_radii`:
+    a lever's takes its kinematics at every sample, 23 ms for a finger's three turns at 1°);
+    ``result`` itself if neither."""
+    radius = contact_radii(np.asarray(result.cam_angle, float), cases) if pressure else None
     if radius is not None:
         result = dataclasses.replace(result, cam_contact_radius=radius, _derived={})
     levers = [i for i, c in enumerate(cases) if is_valve_side(c.profile)]

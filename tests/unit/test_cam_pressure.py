@@ -187,3 +187,29 @@ def test_one_radius_with_the_cam_s_shape_is_refused():
              "cam_curvature_radius": "8 mm"},
         )  # fmt: skip
     assert info.value.key == "cam_curvature_radius"
+
+
+def test_a_study_s_archive_takes_the_pressure_over_the_turn(tmp_path):
+    """A study that records the pressure (``record: [contact_pressure]``) archives the same
+    turn's pressure as the engine's result read at the cam: the study asks for the cam's
+    radii only where the pressure is recorded (a finger's cost 23 ms a batch). Broken copy:
+    the study not asking (the one-radius rule: NaN without ``cam_curvature_radius``)."""
+    import xarray as xr
+
+    from campipe.study import load_study
+    from campipe.study.run.execute import run_study
+
+    spec = tmp_path / "p.yaml"
+    spec.write_text(
+        "name: p\nmodel: {preset: thesis-1971, cam_base_radius: 0.75 in, "
+        "cam_contact_width: 0.5 in}\n"
+        "profile: {kind: polydyne-4567, lift: 0.4 in, rise: 110 deg, dwell: 0 deg, "
+        "fall: 110 deg}\nspeed: 6000 rpm\n"
+        "run: {revolutions: 2, output_every: 1 deg, record: [contact_pressure]}\n"
+    )
+    study = load_study(spec)
+    run_study(study, tmp_path / "p.nc", scheduler="synchronous")
+    case = study.cases[0].case
+    direct = _run(case, COARSE).max_cam_pressure_per_rev[0]
+    with xr.open_dataset(tmp_path / "p.nc") as ds:
+        assert_allclose(ds.max_cam_pressure_by_rev.values[0], direct, rtol=1e-12)

@@ -147,8 +147,9 @@ def compute_design(
         full_state=any(m.record for m in chosen),
         on_failure="record",
     )
-    # a lever layout's cam force and impacts at the cam, as archived
-    result = at_the_cam(result, cases, first.settings.capture_velocity)
+    # a lever layout's cam force and impacts at the cam, as archived (and the cam's radius)
+    pressure = any(m.key == "max_cam_pressure" for m in chosen)
+    result = at_the_cam(result, cases, first.settings.capture_velocity, pressure)
     failed = np.isin(np.asarray(result.status), FAILURES)
     values = {}
     for m in chosen:

@@ -143,8 +143,9 @@ def compute_batch(plan: BatchPlan) -> BatchData:
     t = time.perf_counter()
     result = run_batch(cases, settings, full_state=full_state(plan.record), on_failure="record")
     seconds = time.perf_counter() - t
-    # a lever's roller force and impacts at the cam
-    data = batch_arrays(plan, at_the_cam(result, cases, settings.capture_velocity))
+    # a lever's roller force and impacts at the cam (and the cam's radius, for its pressure)
+    pressure = "max_cam_pressure" in data_variables(plan.record)
+    data = batch_arrays(plan, at_the_cam(result, cases, settings.capture_velocity, pressure))
     data.engine_seconds = seconds
     return data
 
