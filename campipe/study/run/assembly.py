@@ -16,7 +16,7 @@ from campipe.engine.settings import output_angles
 from campipe.io import batch_file
 from campipe.io.archive import CASE_CHUNK, NetCDFWriter, VariableSpec, provenance, read_rows
 from campipe.study.archive.layout import archive_layout
-from campipe.study.run.batches import Stored
+from campipe.study.run.batches import Stored, gone_solid, highest_lift, ids_and_travels
 from campipe.study.run.keys import study_attrs
 from campipe.study.run.results import cam_angle_degrees
 from campipe.study.run.resume import Found, spec_file
@@ -64,17 +64,14 @@ def study_layout(study: Study, command: str, spec: str) -> Layout:
 
 def study_assembly(study: Study, archive: Path, found: Found, command: str, spec: str) -> Assembly:
     """The assembly of ``study``'s archive (its layout made when the archive is created)."""
-    ids, travel = [], []
-    for c in study.cases:  # one pass: a large speed sweep builds its cases on each
-        ids.append(c.case_id)
-        travel.append(c.case.train.spring_travel_to_solid)
+    ids, travel = ids_and_travels(study)
     return Assembly(
         ids,
         archive,
         found,
         lambda: study_layout(study, command, spec),
         cam_angle_degrees(output_angles(study.cases[0].settings)),
-        np.array(travel),
+        travel,
     )
 
 
@@ -328,8 +325,6 @@ class Assembly:
             code = int(block["status"][row])
             self.statuses[self.ids[lo + row]] = STATUS.get(code, str(code))
         if self.travel is not None and "valve_lift" in block:
-            lift = block["valve_lift"]
-            highest = np.where(np.isnan(lift), -np.inf, lift).max(axis=1)  # failed: -inf
-            for row in np.flatnonzero(highest > self.travel[lo:hi]).tolist():
-                self.solid[lo + row] = (float(highest[row]), float(self.travel[lo + row]))
+            highest = highest_lift(block["valve_lift"])
+            self.solid.update(gone_solid(np.arange(lo, hi), highest, self.travel))
         self._release(by_file, hi)

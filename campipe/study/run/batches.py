@@ -170,12 +170,38 @@ def store_batch(data: BatchData, directory: Path, record: tuple[str, ...]) -> Pa
     return batch_file.write(path, {k: a for k, a in arrays.items() if k in names}, attrs)
 
 
-def highest_lifts(data: BatchData) -> tuple[float, ...]:
-    """Each case's highest valve lift at its samples [m] of a computed batch (a failed case's:
-    −inf), or () where it records no valve lift: what the coil-bind note compares with each
-    spring's travel to solid (``execute.solid_note``)."""
-    lift = data.arrays.get("valve_lift")
-    if lift is None:
-        return ()
+def highest_lift(lift: np.ndarray) -> np.ndarray:
+    """(n,) each case's highest valve lift [m] over its samples (``lift`` (n, samples); a
+    failed case's NaN: −inf)."""
     lift = np.asarray(lift, float)
-    return tuple(np.where(np.isnan(lift), -np.inf, lift).max(axis=1).tolist())
+    return np.where(np.isnan(lift), -np.inf, lift).max(axis=1)
+
+
+def highest_lifts(data: BatchData) -> tuple[float, ...]:
+    """:func:`highest_lift` of a computed batch, or () where it records no valve lift: what
+    the coil-bind note compares with each spring's travel to solid (:func:`gone_solid`)."""
+    lift = data.arrays.get("valve_lift")
+    return () if lift is None else tuple(highest_lift(lift).tolist())
+
+
+def gone_solid(
+    rows: np.ndarray, highest: np.ndarray, travel: np.ndarray
+) -> dict[int, tuple[float, float]]:
+    """Study index → (highest valve lift, travel to solid) [m] of the cases at study indices
+    ``rows`` whose ``highest`` lift passes their spring's ``travel`` to solid (each case's, in
+    study order): the coils clash, and the model has no stop there (``execute.solid_note``)."""
+    rows, highest = np.asarray(rows, np.int64), np.asarray(highest, float)
+    past = highest > travel[rows]
+    pairs = zip(rows[past].tolist(), highest[past].tolist(), strict=True)
+    return {r: (h, float(travel[r])) for r, h in pairs}
+
+
+def ids_and_travels(study) -> tuple[list[str], np.ndarray]:
+    """Each case's id and its valve spring's travel to solid [m] (:func:`gone_solid`), in
+    study order, in one pass over the study's cases (a large speed sweep builds them on each
+    pass)."""
+    ids, travel = [], []
+    for c in study.cases:
+        ids.append(c.case_id)
+        travel.append(c.case.train.spring_travel_to_solid)
+    return ids, np.array(travel)

@@ -38,6 +38,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from campipe.constants import RPM
 from campipe.engine.settings import sample_count
 from campipe.io.archive import write_error, writing
@@ -50,6 +52,8 @@ from campipe.study.run.batches import (
     OptionError,
     Storage,
     Stored,
+    gone_solid,
+    ids_and_travels,
     parts_directory,
     plan_batches,
 )
@@ -457,8 +461,8 @@ def _run_parts(
         bar = progress(total, total - len(missing)) if progress else None
         by_key = {p.key: p for p in plans}
         engine = 0.0
-        travel = {c.case_id: (i, c.case.train.spring_travel_to_solid) for i, c in
-                  enumerate(study.cases)}  # fmt: skip
+        ids, travel = ids_and_travels(study)
+        index = {cid: i for i, cid in enumerate(ids)}
         solid: dict[int, tuple[float, float]] = {}
 
         def stored(result: Stored | BatchData | PartCount) -> None:
@@ -466,10 +470,9 @@ def _run_parts(
             s = stored_here(result, storage, run.on_batch, by_key)
             engine += s.engine_seconds
             found.add(s)
-            for cid, lift in zip(s.case_ids, s.highest, strict=False):  # the coils' clash
-                i, limit = travel[cid]
-                if lift > limit:
-                    solid[i] = (lift, limit)
+            if s.highest:  # the coils' clash, of a batch this run computed
+                rows = np.array([index[cid] for cid in s.case_ids])
+                solid.update(gone_solid(rows, np.asarray(s.highest), travel))
             if bar:
                 bar.advance(s.n_cases)
 
