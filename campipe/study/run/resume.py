@@ -224,6 +224,8 @@ def dropped_note(archive: Path, before: list[str], study: Study) -> list[str]:
     """A note on the cases the archive held before this run (``before``, its case ids) that
     it no longer holds: a narrower sweep or an edited key replaces them, and nothing else
     keeps them (a helper lost 28 of 32 cluster cases to a rerun with one speed)."""
+    if not before:  # (a first run: no pass over the study's cases)
+        return []
     wanted = {c.case_id for c in study.cases}
     dropped = [c for c in before if c not in wanted]
     if not dropped:
