@@ -69,8 +69,10 @@ from campipe.cli.plot import check_spec_plots, write_plots
     "--overwrite",
     is_flag=True,
     help="Replace a file at the archive path that is not this study's archive (another "
-    "study's archive, any other file); cases it shares by id are reused. Also lets the "
-    "spec's plots and recording replace files campipe did not write (never the spec).",
+    "study's archive, any other file); cases it shares by id are reused. Lets a rerun remove "
+    "the cases its archive holds that the spec no longer makes (a narrower sweep, an edited "
+    "key). Also lets the spec's plots and recording replace files campipe did not write "
+    "(never the spec).",
 )
 @limit_options
 def study(

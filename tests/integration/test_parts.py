@@ -158,19 +158,26 @@ def test_a_damaged_or_missing_part_is_computed_again_and_the_rest_reused(mixed, 
 
 
 def test_a_changed_study_keeps_only_its_own_cases_in_the_index(tmp_path):
-    """A spec that drops a speed: the rerun reuses the parts, writes an index of the
-    remaining cases only (with the new spec's attributes: the next rerun finds it up to
-    date), and removes the part that holds none of them. Broken copies it fails on: an index
-    of every part in the folder (the dropped speed's cases would read back), or one whose
-    attributes are a reused part's (the old spec's study_key)."""
+    """A spec that drops a speed: refused without --overwrite, the parts and index left as
+    they were; with it the rerun reuses the parts, writes an index of the remaining cases
+    only (with the new spec's attributes: the next rerun finds it up to date), and removes
+    the part that holds none of them. Broken copies it fails on: an index of every part in
+    the folder (the dropped speed's cases would read back), or one whose attributes are a
+    reused part's (the old spec's study_key), or a rerun that removes cases unasked."""
     spec = write_spec(tmp_path, SMALL_SPEC)
     archive = tmp_path / "small.parts"
     run_study(load_study(spec), archive, scheduler="synchronous", batch_size=2, parts=True)
     assert len(part_files(archive)) == 3
     write_spec(tmp_path, SMALL_SPEC.replace("[6000 rpm, 9524 rpm, 11000 rpm]", "[6000 rpm]"))
-    report = run_study(load_study(spec), archive, scheduler="synchronous", parts=True)
+    files = {p: p.read_bytes() for p in archive.iterdir()}
+    with pytest.raises(ArchiveExistsError, match="4 of the 6 cases it holds are not in this"):
+        run_study(load_study(spec), archive, scheduler="synchronous", parts=True)
+    assert {p: p.read_bytes() for p in archive.iterdir()} == files  # the index too
+    report = run_study(
+        load_study(spec), archive, scheduler="synchronous", parts=True, overwrite=True
+    )
     assert (report.reused, report.computed) == (2, 0)
-    assert any("4 of the 6 cases it held are not in this run's spec" in n for n in report.notes)
+    assert any("4 of the 6 cases it holds" in n and "removed" in n for n in report.notes)
     assert len(part_files(archive)) == 1
     with open_archive(archive) as ds:
         assert_array_equal(ds["speed_rpm"].values, [6000, 6000])

@@ -335,12 +335,29 @@ def test_overwrite_replaces_another_studys_archive_reusing_the_cases_it_shares(
     xr.testing.assert_identical(load(tmp_path / "small.nc"), load(small_archive.archive))
 
 
-def test_an_edited_spec_may_replace_its_own_archive(small_archive_copy, tmp_path):
+def test_an_edited_spec_removes_its_archive_s_cases_only_with_overwrite(
+    small_archive_copy, tmp_path
+):
+    """A rerun of a narrower sweep would remove cases the archive holds: refused, naming how
+    many and the two ways on, the archive left byte for byte and nothing computed; with
+    --overwrite it replaces them and says so. Broken copy it fails on: the run that only
+    noted the cases it removed (a helper lost 28 of 32 cluster cases to it)."""
     assert _study(tmp_path).exit_code == 0
+    archive = tmp_path / "small.nc"
+    files = {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}
     (tmp_path / "spec.yaml").write_text(SMALL_SPEC.replace(", 11000 rpm", ""))
+    files[tmp_path / "spec.yaml"] = (tmp_path / "spec.yaml").read_bytes()
     result = _study(tmp_path)
+    assert result.exit_code == 2, result.output
+    assert f"{archive}: 2 of the 6 cases it holds are not in this run's spec" in result.stderr
+    assert "another path (-o)" in result.stderr and "with --overwrite" in result.stderr
+    assert "Traceback" not in result.output
+    assert {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()} == files
+    result = _study(tmp_path, None, "--overwrite")
     assert result.exit_code == 0, result.output
-    assert xr.load_dataset(tmp_path / "small.nc").sizes["case"] == 4
+    assert "2 of the 6 cases it holds are not in this run's spec" in result.stderr
+    assert "removed (--overwrite)" in result.stderr
+    assert xr.load_dataset(archive).sizes["case"] == 4
 
 
 def test_an_archive_of_an_older_layout_is_refused_and_replaced_only_with_overwrite(

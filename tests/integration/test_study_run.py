@@ -29,6 +29,7 @@ from campipe.io.spec_yaml import parse_spec_text
 from campipe.study import check_spec, expand, load_study
 from campipe.study.run.batches import parts_directory, plan_batches
 from campipe.study.run.execute import run_study
+from campipe.study.run.resume import ArchiveExistsError
 from campipe.study.spec.variables import VARIABLES
 
 
@@ -222,11 +223,15 @@ def test_a_changed_spec_reuses_only_the_unchanged_cases(tmp_path):
     assert fresh.computed == 6
     # a changed model parameter changes every id: nothing stale is reused
     stiffer = SMALL_SPEC.replace("name: small", "name: small\nmodel: {spring_preload: 160 lbf}")
-    changed = run_study(load_study(write_spec(tmp_path, stiffer)), archive, scheduler="synchronous")
+    edited = load_study(write_spec(tmp_path, stiffer))
+    with pytest.raises(ArchiveExistsError, match="6 of the 6 cases it holds are not in this"):
+        run_study(edited, archive, scheduler="synchronous")  # they would be removed
+    xr.testing.assert_identical(load(archive), load(tmp_path / "fresh.nc"))  # untouched
+    changed = run_study(edited, archive, scheduler="synchronous", overwrite=True)
     assert (changed.computed, changed.reused) == (6, 0)
     # the cases it replaced are named by count (a helper lost 28 of 32 cases so, silently)
-    assert any("6 of the 6 cases it held are not in this run's spec" in n for n in changed.notes)
-    assert not any("cases it held" in n for n in grown.notes)  # a grown sweep drops none
+    assert any("6 of the 6 cases it holds" in n and "--overwrite" in n for n in changed.notes)
+    assert not any("cases it holds" in n for n in grown.notes)  # a grown sweep drops none
     ds = xr.load_dataset(archive)
     assert not set(ds.case.values) & {c.case_id for c in study.cases}
 

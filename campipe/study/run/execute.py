@@ -73,7 +73,7 @@ from campipe.study.run.resume import (
     Found,
     StudyReport,
     clean_temporaries,
-    dropped_note,
+    dropped_cases,
     earlier_cases,
     find_results,
     inspect_archive,
@@ -131,7 +131,9 @@ def run_study(
     on_batch : callable, optional
         The replay hook, see :data:`BatchHook`.
     overwrite : bool
-        Replace a file at ``archive`` that is not this study's archive (default: refuse).
+        Replace a file at ``archive`` that is not this study's archive, and let a rerun
+        remove the cases this study's archive holds that its spec no longer makes (a
+        narrower sweep, an edited key) (default: refuse both, changing nothing).
     workers_store : bool
         On a dask.distributed cluster, workers that can reach the archive's folder write
         their batch files themselves (default); False: this process stores every batch, as
@@ -151,7 +153,8 @@ def run_study(
     Raises
     ------
     ArchiveExistsError
-        If ``archive`` is a file that is not this study's archive and ``overwrite`` is False.
+        If ``archive`` is a file that is not this study's archive, or this study's archive
+        holds cases the spec does not make, and ``overwrite`` is False.
     campipe.io.archive.ArchiveBusyError
         If another run is writing the same archive (its lock, ``<archive>.lock``, is held).
     campipe.io.archive.ArchiveWriteError
@@ -166,7 +169,7 @@ def run_study(
         archive = archive.absolute()
     run = _Run(scheduler, workers or 0, on_batch, workers_store, notice, command)
     if parts:
-        return _run_parts(study, archive, run, batch_size, progress, started)
+        return _run_parts(study, archive, run, batch_size, progress, started, overwrite)
     total = len(study.cases)
     # Checked before the lock, so a finished study in a read-only folder is still up to date.
     state = inspect_archive(study, archive)
@@ -187,6 +190,7 @@ def run_study(
         _check_replaceable(archive, state, overwrite)
         notes = _state_notes(archive, state)
         before = earlier_cases(archive) if not state.what else []  # this study's, replaced
+        dropped = dropped_cases(archive, before, study, overwrite)  # before anything changes
         clean_temporaries(archive)
         found, more = find_results(study, archive, archive_usable=not state.problems)
         notes += more
@@ -197,7 +201,7 @@ def run_study(
         run = _Run(scheduler, workers, on_batch, workers_store, notice, command)
         bar = progress(total, total - len(missing)) if progress else None
         statuses, engine, solid = _compute_and_assemble(study, archive, found, plans, run, bar)
-        notes += solid_note(study, solid) + dropped_note(archive, before, study)
+        notes += solid_note(study, solid) + dropped
         scratch = parts_directory(archive)
         if not keep_parts and scratch.is_dir():
             shutil.rmtree(scratch, ignore_errors=True)
@@ -420,6 +424,7 @@ def _run_parts(
     batch_size: int | None,
     progress: Callable[[int, int], Progress] | None,
     started: float,
+    overwrite: bool,
 ) -> StudyReport:
     """:func:`run_study` into a parts archive: the same checks, lock and resume; each batch a
     part its worker writes; the index written last."""
@@ -446,8 +451,9 @@ def _run_parts(
             if state.problems
             else []
         )
-        clean_part_temporaries(archive)
         before = earlier_cases(archive)
+        dropped = dropped_cases(archive, before, study, overwrite)  # before anything changes
+        clean_part_temporaries(archive)
         index_path(archive).unlink(missing_ok=True)  # the parts change: no index meanwhile
         layout = part_layout(study, run.command, spec_file(study, archive))
         found, more = find_parts(study, archive, layout)
@@ -481,7 +487,7 @@ def _run_parts(
             log.warning("case %s: %s", cid, name)
         found.write_index(layout.attrs)
         checked = len(missing) if len(missing) < len(study.cases) else None
-        notes += solid_note(study, solid, checked) + dropped_note(archive, before, study)
+        notes += solid_note(study, solid, checked) + dropped
         statuses = {
             c.case_id: found.statuses[c.case_id] for c in study.cases if c.case_id in found.statuses
         }

@@ -220,21 +220,34 @@ def earlier_cases(archive: Path) -> list[str]:
     return []
 
 
-def dropped_note(archive: Path, before: list[str], study: Study) -> list[str]:
-    """A note on the cases the archive held before this run (``before``, its case ids) that
-    it no longer holds: a narrower sweep or an edited key replaces them, and nothing else
-    keeps them (a helper lost 28 of 32 cluster cases to a rerun with one speed)."""
+def dropped_cases(archive: Path, before: list[str], study: Study, overwrite: bool) -> list[str]:
+    """Refuse a run that would remove cases the archive at ``archive`` held before it
+    (``before``, their ids) and this run's spec does not make, unless ``overwrite``; then the
+    note that says how many it removed. A narrower sweep or an edited key would replace them,
+    and nothing else keeps them (a helper lost 28 of 32 cluster cases to a rerun with one
+    speed while the run only noted it).
+
+    Raises
+    ------
+    ArchiveExistsError
+        If cases would be removed and ``overwrite`` is False; nothing has been changed.
+    """
     if not before:  # (a first run: no pass over the study's cases)
         return []
     wanted = {c.case_id for c in study.cases}
-    dropped = [c for c in before if c not in wanted]
+    dropped = sum(c not in wanted for c in before)
     if not dropped:
         return []
-    return [
-        f"{archive}: {len(dropped)} of the {len(before)} cases it held are not in this run's "
-        "spec (a narrower sweep, or an edited key) and are removed from it; write a run with "
-        "fewer cases to another path (-o) to keep an archive whole"
-    ]
+    held = f"{dropped} of the {len(before)} cases it holds are not in this run's spec"
+    if not overwrite:
+        raise ArchiveExistsError.at(
+            str(archive),
+            f"{held} (a narrower sweep, or an edited key), and this run would remove them; "
+            "write it to another path (-o) to keep them, or remove them with --overwrite",
+            found=f"{dropped} cases this spec does not make",
+            expected="an archive holding only this spec's cases",
+        )
+    return [f"{archive}: {held} (a narrower sweep, or an edited key): removed (--overwrite)"]
 
 
 def spec_file(study: Study, archive: Path) -> str:
