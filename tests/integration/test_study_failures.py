@@ -182,6 +182,16 @@ def test_a_scheduler_gone_is_one_message_without_distributed_s_tracebacks(tmp_pa
     assert len(lines) <= 3, err
 
 
+def test_a_long_cluster_error_is_cut_between_words():
+    """distributed's messages span lines and hundreds of characters: one line of at most
+    200, cut at a space with "..." (a helper read a killed scheduler's cut mid-word). Broken
+    copy: the plain [:200] slice."""
+    text = "in <TCP (closed) ConnectionPool.heartbeat_worker local=tcp://127.0.0.1:41234>:\n"
+    line = workers._line(OSError(text + "Stream is closed " * 20))
+    assert len(line) <= 200 and line.endswith(" is...")
+    assert workers._line(OSError("one\n  two")) == "one two"
+
+
 def test_a_cluster_without_workers_is_reported_at_once_and_stops_resumable(
     tmp_path, monkeypatch, caplog
 ):

@@ -440,9 +440,13 @@ def _cluster(address: str, kept: str = KEPT) -> Iterator:
         ) from None
 
 
-def _line(exc: BaseException) -> str:
-    """An exception's text on one line, at most 200 characters (distributed's span several)."""
-    return " ".join(str(exc).split())[:200]
+def _line(exc: BaseException, width: int = 200) -> str:
+    """An exception's text on one line, at most ``width`` characters (distributed's span
+    several): a longer one is cut at a space and ends in "...", not mid-word."""
+    text = " ".join(str(exc).split())
+    if len(text) <= width:
+        return text
+    return text[: width - 3].rsplit(" ", 1)[0] + "..."
 
 
 def _connect(address: str):
