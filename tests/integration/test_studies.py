@@ -22,9 +22,12 @@ from campipe.vocabulary import CAM_IMPACT, CAM_SEPARATION
 
 
 def run(tmp_path, name, **overrides) -> xr.Dataset:
+    """The bundled study ``name`` with ``overrides`` (``--set``), each run its own archive
+    (a rerun that leaves out the cases of the archive there is refused)."""
     study = load_study(STUDIES / f"{name}.yaml", overrides)
-    run_study(study, tmp_path / f"{name}.nc", scheduler="threads")
-    return xr.load_dataset(tmp_path / f"{name}.nc")
+    archive = tmp_path / f"{name}-{len(list(tmp_path.glob('*.nc')))}.nc"
+    run_study(study, archive, scheduler="threads")
+    return xr.load_dataset(archive)
 
 
 def by_speed(ds):
