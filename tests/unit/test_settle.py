@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from campipe.engine.settle import Boundary, repeats, settled_from
+from campipe.engine.settle import Boundary, metrics_repeat, repeats, settled_from
 
 TOL = 1e-5
 
@@ -59,3 +59,17 @@ def test_a_response_that_never_repeats_is_never_settled():
     for k in range(1, x.size):
         x[k] = 3.9 * x[k - 1] * (1 - x[k - 1])
     assert all(first_settled(x, p) is None for p in (1, 2, 3, 4))
+
+
+def test_the_window_starts_where_the_turns_metrics_repeat_too():
+    """States that repeat exactly from the start, and a first turn whose metric (its
+    no-follow) differs from the next's by 4e-3 of its largest: the window starts at turn 1,
+    not 0; metrics equal to the tolerance, or NaN in both turns, repeat; a count that
+    differs by one does not. Fails on a copy that walks back on the states alone."""
+    b = boundary(np.zeros(8))
+    per_rev = np.array([[6.068, 2.0, np.nan]] + [[6.0436, 2.0, np.nan]] * 7)
+    assert settled_from(b, 0, 7, 1, TOL) == 0  # the states alone: all of it
+    assert settled_from(b, 0, 7, 1, TOL, per_rev) == 1
+    assert metrics_repeat(per_rev, 1, 1, TOL)
+    assert not metrics_repeat(np.array([[6.0, 2.0], [6.0, 3.0]]), 0, 1, TOL)
+    assert metrics_repeat(np.array([[6.0, 2.0], [6.0 * (1 + 0.9 * TOL), 2.0]]), 0, 1, TOL)
