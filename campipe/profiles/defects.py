@@ -41,12 +41,55 @@ def _pieces_between(profile: Profile, start: float, end: float) -> np.ndarray:
     return (lo >= start) | (lo < end)
 
 
+def flat_step(profile: Profile, start: float, end: float) -> float:
+    """The step in the lift :func:`flat` makes at ``end`` [m]: the lift there less the lift
+    at ``start``, which the flat holds (0 for a flat whose ends are at equal lift: across a
+    symmetric nose, or on a dwell)."""
+    return float(evaluate(profile, end)[0]) - float(evaluate(profile, start)[0])
+
+
+def level_again(profile: Profile, start: float, tolerance: float = 1e-12) -> float | None:
+    """Where a flat from ``start`` [rad] can end: the first angle after it (start < θ <
+    start + 2π) where the lift, having risen more than ``tolerance`` [m] above its value at
+    ``start``, comes back down to it. None where the lift falls below that value first (a
+    flat from there would add metal) or never comes back."""
+    value = float(evaluate(profile, start)[0])
+    theta = start + np.linspace(0.0, TWO_PI, 36001)[1:-1]
+    off = evaluate(profile, theta)[0] - value
+    left = np.flatnonzero(np.abs(off) > tolerance)
+    if not left.size or off[left[0]] < 0.0:
+        return None
+    back = np.flatnonzero(off[left[0] :] <= 0.0)
+    if not back.size:
+        return None
+    j = left[0] + back[0]
+    if off[j] == 0.0:
+        return float(theta[j])
+    from scipy.optimize import brentq
+
+    def f(t: float) -> float:
+        return float(evaluate(profile, t)[0]) - value
+
+    return float(brentq(f, theta[j - 1], theta[j], xtol=1e-13, rtol=4 * np.finfo(float).eps))
+
+
+def flat_dip(profile: Profile, start: float, end: float) -> float:
+    """How far the lift falls below its value at ``start`` between ``start`` and ``end``
+    [m, ≥ 0], on samples 0.01° apart: where a flat holding that value would add metal."""
+    span = float(np.mod(end - start, TWO_PI)) or TWO_PI
+    theta = start + np.linspace(0.0, span, max(int(span / np.radians(0.01)), 2) + 1)
+    return max(0.0, float(evaluate(profile, start)[0] - evaluate(profile, theta)[0].min()))
+
+
 def flat(profile: Profile, start: float, end: float) -> Profile:
     """A flat ground on the cam: lift held at its value at ``start`` until ``end``.
 
     Velocity and acceleration are zero on the flat, so the velocity jumps at both edges. The
     thesis's machining error is a flat from 268° to 272° on the harmonic cam, 0.5·(1 − cos 2°)
-    = 0.0003 in deep at the nose.
+    = 0.0003 in deep at the nose. Where the lift at ``end`` is not the lift at ``start``
+    (:func:`flat_step`) the lift steps there, and where it falls below it in between
+    (:func:`flat_dip`) the flat adds metal, which no grinding can: a study refuses either and
+    names where the lift returns to its start's (:func:`level_again`).
 
     Parameters
     ----------

@@ -100,12 +100,42 @@ def test_an_all_zero_lift_table_is_refused(tmp_path):
 
 
 def test_a_flat_through_zero_is_written_past_360_degrees():
-    study = expand(check_spec(spec(defects=[{"kind": "flat", "from": "350 deg", "to": "370 deg"}])))
-    wrapped = flat(harmonic(0.0254), math.radians(350), math.radians(10))
+    """The harmonic cam's nose ground off from 170° through 0° to 10° (its ends at equal
+    lift: h/2·(1 − sin θ) is symmetric about the nose at 270°)."""
+    study = expand(check_spec(spec(defects=[{"kind": "flat", "from": "170 deg", "to": "370 deg"}])))
+    wrapped = flat(harmonic(0.0254), math.radians(170), math.radians(10))
     profile = study.cases[0].case.profile
     np.testing.assert_allclose(profile.breaks, wrapped.breaks, rtol=1e-14, atol=1e-14)
     np.testing.assert_allclose(profile.poly, wrapped.poly, rtol=1e-12, atol=1e-18)
-    assert study.cases[0].values["defects"] == "flat 350–10 deg"
+    assert study.cases[0].values["defects"] == "flat 170–10 deg"
+
+
+@pytest.mark.parametrize(
+    ("ends", "words"),
+    [
+        # on the harmonic cam, h/2·(1 − sin θ), h = 1 in: the lift at 370° is
+        # h/2·(sin 350° − sin 10°) = 0.17365 in below the lift at 350°
+        (("350 deg", "370 deg"), "(370 deg) is 0.1736 in lower: a step in the cam"),
+        # 0.5·(sin 267° − sin 272°) = 0.000380 in up; the lift comes back at 273° (symmetric
+        # about the nose at 270°)
+        (("267 deg", "272 deg"), "0.0003806 in higher: a step in the cam, which no grinding "
+         "makes; end it at 273 deg, where the lift comes back"),  # fmt: skip
+        # ends at equal lift across the base (90°): the lift dips h/2·(1 − sin 10°) below
+        (("10 deg", "170 deg"), "falls 0.4132 in below it within: it would add metal"),
+    ],
+)
+def test_a_flat_no_grinding_makes_is_refused_naming_where_it_can_end(ends, words):
+    """A flat whose ends are at unequal lift steps the cam (a helper's 350–370° dropped the
+    thesis's cam 0.174 in at once, 72.5° of no-follow; on a two-mass chain every case failed)
+    and one whose lift dips between its ends adds metal: each refused at its defect, with
+    the lifts in the spec's unit checked against the harmonic cam's closed form, and where
+    the lift comes back to the start's where it does. Broken copy: no check (each runs)."""
+    raw = spec(defects=[{"kind": "flat", "from": ends[0], "to": ends[1]}])
+    with pytest.raises(SpecError) as info:
+        expand(check_spec(raw))
+    problem = info.value.problems[0]
+    assert problem.path == "defects[0]"
+    assert words in problem.message, problem.message
 
 
 @pytest.mark.parametrize(

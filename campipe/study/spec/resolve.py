@@ -55,7 +55,9 @@ from campipe.profiles import (
     polydyne,
     table,
 )
+from campipe.profiles.defects import flat_dip, flat_step, level_again
 from campipe.profiles.levers import valve_side
+from campipe.profiles.pieces import format_angle
 from campipe.study.spec.blocks import check_defects, check_profile
 from campipe.study.spec.fields import (
     CASE_FIELDS,
@@ -311,6 +313,8 @@ def _with_defects(frozen_profile: tuple, frozen_defects: tuple, directory: Path)
         si = {
             k: DEFECT_FIELDS[k].parse(v, f"defects[{i}].{k}") for k, v in d.items() if k != "kind"
         }
+        if d["kind"] == "flat":
+            _check_flat(out, si["from"], si["to"], i, _thaw(frozen_profile).get("lift"))
         try:
             if d["kind"] == "flat":
                 out = flat(out, si["from"], si["to"])
@@ -553,6 +557,38 @@ def _length_unit(*written: object) -> LengthUnit:
             except QuantityError:
                 continue
     return INCHES
+
+
+#: A flat's step in the lift at its end tolerated as round-off [m] (a nanometre).
+FLAT_STEP = 1e-9
+
+
+def _check_flat(profile, start: float, end: float, i: int, written: object) -> None:
+    """Refuse defects[i], a flat from ``start`` to ``end`` [rad] on ``profile``, that no
+    grinding makes: its ends at unequal lift (a step in the lift at its end: a helper's flat
+    at 350–370° on the thesis's harmonic cam dropped it 0.174 in at once; one at 100–120°
+    raised it 0.059 in within a sample, 20 608 lbf), or the lift below its start's within it
+    (the flat would add metal)."""
+    step = flat_step(profile, start, end)
+    dip = flat_dip(profile, start, end)
+    if abs(step) <= FLAT_STEP and dip <= FLAT_STEP:
+        return
+    if abs(step) > FLAT_STEP:
+        what = (
+            f"the lift at its end ({format_angle(end)} deg) is "
+            f"{_in_units(abs(step), written)} {'higher' if step > 0 else 'lower'}: a step in "
+            "the cam"
+        )
+    else:
+        what = f"the lift falls {_in_units(dip, written)} below it within: it would add metal"
+    back = level_again(profile, start)
+    at = f"{math.degrees(back or 0.0):.6f}".rstrip("0").rstrip(".")
+    where = f"end it at {at} deg, where the lift comes back to it, or " if back else ""
+    raise SpecProblem(
+        f"defects[{i}]",
+        f"a flat holds the lift where it starts ({format_angle(start)} deg), and {what}, which "
+        f"no grinding makes; {where}place it across the nose or on a dwell",
+    )
 
 
 def _in_units(value: float, *written: object) -> str:
