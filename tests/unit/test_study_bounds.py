@@ -10,7 +10,8 @@ import pytest
 from study_helpers import changed, write_spec
 
 from campipe.io.spec_yaml import MAX_DEPTH, SpecFileError, parse_spec_text
-from campipe.profiles import flat, harmonic
+from campipe.profiles import evaluate as cam_lift
+from campipe.profiles import flat, harmonic, min_lift, polydyne
 from campipe.study import Limits, SpecError, check_spec, expand, load_study
 from campipe.study.spec.limits import case_count
 from campipe.study.where import QueryError, evaluate, parse_where
@@ -99,6 +100,32 @@ def test_an_all_zero_lift_table_is_refused(tmp_path):
     assert "never rises above 0 in" in info.value.problems[0].message
 
 
+def test_a_dwell_cam_s_table_is_read_where_its_spline_only_rings_below_the_base(tmp_path):
+    """A 9 mm polydyne-4567 with its base-circle dwell, tabulated every 1° and 2° (every
+    point ≥ 0): the periodic cubic spline through it rings nanometres below 0 beside the
+    dwell (a helper's measured-style tables were all refused); within 1e-6 of the lift it is
+    read, and its lift is the polydyne's at the table's points. A table whose points dip 1 µm
+    below the base circle is still refused. Broken copy: the round-off tolerance (1e-12 m)
+    for tables too."""
+    cam = polydyne("4567", 9e-3, *np.radians([110, 20, 110]))
+    for step in (1, 2):
+        angles = np.arange(0, 360, step)
+        lift = cam_lift(cam, np.radians(angles))[0]
+        rows = "".join(f"{a},{float(x) * 1e3!r}\n" for a, x in zip(angles, lift, strict=True))
+        (tmp_path / f"cam{step}.csv").write_text("angle [deg],lift [mm]\n" + rows)
+        raw = spec(profile={"kind": "table", "file": f"cam{step}.csv"})
+        profile = expand(check_spec(raw, directory=tmp_path)).cases[0].case.profile
+        assert min_lift(profile) < -1e-10  # it rings below: the round-off tolerance refused it
+        np.testing.assert_allclose(cam_lift(profile, np.radians(angles))[0], lift, atol=1e-15)
+    lift[150] = -1e-6  # at 300°, on the base circle
+    rows = "".join(f"{a},{float(x) * 1e3!r}\n" for a, x in zip(angles, lift, strict=True))
+    (tmp_path / "dip.csv").write_text("angle [deg],lift [mm]\n" + rows)
+    with pytest.raises(SpecError) as info:
+        expand(check_spec(spec(profile={"kind": "table", "file": "dip.csv"}), directory=tmp_path))
+    assert info.value.problems[0].path == "profile.file"
+    assert "never below the base circle" in info.value.problems[0].message
+
+
 def test_a_flat_through_zero_is_written_past_360_degrees():
     """The harmonic cam's nose ground off from 170° through 0° to 10° (its ends at equal
     lift: h/2·(1 − sin θ) is symmetric about the nose at 270°)."""
@@ -118,8 +145,11 @@ def test_a_flat_through_zero_is_written_past_360_degrees():
         (("350 deg", "370 deg"), "(370 deg) is 0.1736 in lower: a step in the cam"),
         # 0.5·(sin 267° − sin 272°) = 0.000380 in up; the lift comes back at 273° (symmetric
         # about the nose at 270°)
-        (("267 deg", "272 deg"), "0.0003806 in higher: a step in the cam, which no grinding "
-         "makes; end it at 273 deg, where the lift comes back"),  # fmt: skip
+        (
+            ("267 deg", "272 deg"),
+            "0.0003806 in higher: a step in the cam, which no grinding "
+            "makes; end it at 273 deg, where the lift comes back",
+        ),  # fmt: skip
         # ends at equal lift across the base (90°): the lift dips h/2·(1 − sin 10°) below
         (("10 deg", "170 deg"), "falls 0.4132 in below it within: it would add metal"),
     ],
