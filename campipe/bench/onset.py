@@ -153,7 +153,7 @@ def onset_map(quick: bool = False, repeats: int = 3) -> dict:
     seconds = map_seconds(designs, repeats)
     found = search_designs(designs, low, high, tol, GOAL_MAP_WORKERS)
     pick = np.unique(np.linspace(0, len(designs) - 1, MAP_CHECKED).round().astype(int))
-    below, above, _ = onset.confirm_onsets([designs[i] for i in pick], found.speed[pick])
+    below, above, _, _ = onset.confirm_onsets([designs[i] for i in pick], found.speed[pick])
     checked = np.isfinite(below)
     agree = int(((below == 0) & (above > 0))[checked].sum())
     per_case = grid_per_case(designs, repeats)

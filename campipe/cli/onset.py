@@ -53,7 +53,8 @@ from campipe.constants import DEFAULT_ONSET_LEVEL_DEG, DEFAULT_ONSET_TOLERANCE_R
     default=True,
     show_default=True,
     help="Run the time-domain engine 0.5 % below and above each onset (10 turns, the first "
-    "2 left out): below it must stay under the level, above reach it.",
+    "2 left out): below it must stay under the level, above reach it (nearer, down to "
+    "0.0625 %, where a window of no-follow is narrower).",
 )
 @click.option(
     "--workers",

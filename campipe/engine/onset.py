@@ -59,6 +59,11 @@ DEFAULT_ONSET_LEVEL = math.radians(DEFAULT_ONSET_LEVEL_DEG)  # [rad]
 CONFIRM_OFFSET = 0.005
 CONFIRM_TURNS = 10
 CONFIRM_WARMUP = 2
+#: The nearer offsets above the onset the check tries in turn where the engine's no-follow
+#: at onset·(1 + CONFIRM_OFFSET) does not reach the level: a window of no-follow narrower
+#: than that (a helper's two-mass chain on a polydyne: a proven onset at 4328.35 rpm whose
+#: window ends before 4350) is still seen (``confirm_onsets``).
+CONFIRM_NEARER = (0.0025, 0.00125, 0.000625)
 
 
 # --------------------------------------------------------------------------- the onset
@@ -512,39 +517,53 @@ def confirm_settings(revolutions: float = CONFIRM_TURNS) -> RunSettings:
 
 def confirm_onsets(
     designs: Sequence[Case], onset: np.ndarray, offset: float = CONFIRM_OFFSET,
-    revolutions: float = CONFIRM_TURNS,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
+    revolutions: float = CONFIRM_TURNS, level: np.ndarray | float = 0.0,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:  # fmt: skip
     """The time-domain engine just below and just above each onset: no-follow per turn, the
     mean over the measured turns (``revolutions`` from the periodic start, the first
     CONFIRM_WARMUP left out: the study archive's ``separation_deg_per_rev``) at
-    onset·(1 ∓ offset), and where the train leaves the cam just above it.
-    :func:`confirmed` says whether they agree with the onset.
+    onset·(1 − offset) and onset·(1 + offset), and where the train leaves the cam just above
+    it. Where the no-follow above does not reach ``level`` (at level 0: some), the check
+    above runs nearer, at each of CONFIRM_NEARER in turn, and keeps the first that does (a
+    window narrower than ``offset``); where none does, the first. :func:`confirmed` says
+    whether they agree with the onset.
 
     Returns
     -------
     below, above : (n,) [rad]; NaN where there is no onset
     where : (n,) [rad] the cam angle (0 … 2π) of the first separation from the cam in the
-        measured turns just above the onset; NaN where there is none (or no onset)
+        measured turns of the check above; NaN where there is none (or no onset)
+    above_speed : (n,) [rad/s] the speed the check above ran at; NaN where there is no onset
     """
     n = len(designs)
-    below = np.full(n, np.nan)
-    above = np.full(n, np.nan)
-    where = np.full(n, np.nan)
+    below, above, where, above_speed = (np.full(n, np.nan) for _ in range(4))
+    level = np.broadcast_to(np.asarray(level, float), (n,))
+    settings = confirm_settings(revolutions)
     idx = np.flatnonzero(np.isfinite(onset))
-    if idx.size:
-        cases = [
-            dataclasses.replace(designs[int(i)], speed=onset[i] * f)
-            for f in (1 - offset, 1 + offset)
-            for i in idx
-        ]
-        settings = confirm_settings(revolutions)
+    for k, f in enumerate((offset, *CONFIRM_NEARER) if idx.size else ()):
+        sides = (-offset, f) if k == 0 else (f,)
+        cases = [dataclasses.replace(designs[int(i)], speed=onset[i] * (1 + s))
+                 for s in sides for i in idx]  # fmt: skip
         res = run_batch(cases, settings, full_state=False, on_failure="record")
-        below[idx] = res.separation[: idx.size]
-        above[idx] = res.separation[idx.size :]
-        for k, i in enumerate(idx):
-            where[i] = first_separation(res.events[idx.size + k], cases[idx.size + k].speed,
-                                        settings.warmup or 0)  # fmt: skip
-    return below, above, where
+        if k == 0:
+            below[idx] = res.separation[: idx.size]
+        run = res.separation[-idx.size :]
+        take = np.isnan(above[idx]) | _reaches(run, level[idx])
+        for j in np.flatnonzero(take):
+            i, case = idx[j], cases[len(cases) - idx.size + j]
+            above[i], above_speed[i] = run[j], case.speed
+            events = res.events[len(cases) - idx.size + j]
+            where[i] = first_separation(events, case.speed, settings.warmup or 0)
+        idx = idx[~_reaches(above[idx], level[idx])]
+        if not idx.size:
+            break
+    return below, above, where, above_speed
+
+
+def _reaches(above: np.ndarray, level: np.ndarray) -> np.ndarray:
+    """Does the no-follow above the onset reach the level (at level 0: is there some)?"""
+    with np.errstate(invalid="ignore"):
+        return np.where(level > 0.0, above >= level, above > 0.0)
 
 
 def first_separation(events: np.ndarray, speed: float, warmup: int = 0) -> float:
@@ -570,5 +589,5 @@ def confirmed(below: np.ndarray, above: np.ndarray, level: np.ndarray | float = 
     level = np.broadcast_to(np.asarray(level, float), np.shape(below))
     with np.errstate(invalid="ignore"):
         under = np.where(level > 0.0, below < level, below == 0.0)
-        over = np.where(level > 0.0, above >= level, above > 0.0)
+    over = _reaches(above, level)
     return np.isfinite(below) & np.isfinite(above) & under & over

@@ -45,10 +45,13 @@ class OnsetStudy:
     #: (n,) the engine's no-follow per turn at onset·(1 − offset) [rad] (the mean over the
     #: check's measured turns); NaN: unchecked
     below: np.ndarray
-    above: np.ndarray  # (n,) likewise at onset·(1 + offset)
-    #: (n,) the cam angle [rad] where the engine's no-follow first starts at onset·(1 +
-    #: offset) (``engine_onset.first_separation``); NaN: unchecked, or it did not
+    #: (n,) likewise at onset·(1 + offset), or nearer where that did not reach the level
+    #: (``engine_onset.confirm_onsets``)
+    above: np.ndarray
+    #: (n,) the cam angle [rad] where the engine's no-follow first starts in the check above
+    #: (``engine_onset.first_separation``); NaN: unchecked, or it did not
     where: np.ndarray
+    above_speed: np.ndarray  # (n,) the speed the check above ran at [rad/s]; NaN: unchecked
     low: float  # the spec's speed range [rad/s]
     high: float
     search_seconds: float  # wall time of the search
@@ -182,14 +185,18 @@ def onset_study(
     record_loaded(search_kernels())  # the search's kernels, compiled ahead or not
     t1 = time.perf_counter()
     nan = np.full(len(designs), np.nan)
-    below, above, where = (
-        engine_onset.confirm_onsets(designs, onset.speed) if confirm else (nan, nan, nan)
+    levels = onset.level if onset.level is not None else 0.0
+    below, above, where, above_speed = (
+        engine_onset.confirm_onsets(designs, onset.speed, level=levels)
+        if confirm
+        else (nan, nan, nan, nan)
     )
     t2 = time.perf_counter()
     table = _table(study, keys, firsts, onset, below, above, where)
     spec = study.spec
     return OnsetStudy(
-        study.name, keys, table, onset, below, above, where, low, high, t1 - t0, t2 - t1,
+        study.name, keys, table, onset, below, above, where, above_speed, low, high, t1 - t0,
+        t2 - t1,
         spec.text, dict(spec.overrides),
     )  # fmt: skip
 
@@ -215,6 +222,12 @@ def _table(study, keys, firsts, onset, below, above, where) -> CaseTable:
 
 
 # --------------------------------------------------------------------------- the file
+
+#: How the check above the onset comes nearer (its long name's words).
+_NEARER = (
+    ", or where that does not reach the level the first of onset × (1 + "
+    f"{', '.join(f'{f:g}' for f in engine_onset.CONFIRM_NEARER)}) that does (check_above_rpm)"
+)
 
 
 def file_contents(result: OnsetStudy) -> tuple[dict, list[VariableSpec], dict, dict]:
@@ -265,10 +278,14 @@ def file_contents(result: OnsetStudy) -> tuple[dict, list[VariableSpec], dict, d
         add(name, ("combination",), "f8", np.degrees(values), units="degree",
             long_name=f"no-follow per turn, the mean over turns {engine_onset.CONFIRM_WARMUP + 1}"
             f"–{engine_onset.CONFIRM_TURNS} of the time-domain engine from the periodic start at "
-            f"onset × ({side} {engine_onset.CONFIRM_OFFSET:g}); NaN: not checked")  # fmt: skip
+            f"onset × ({side} {engine_onset.CONFIRM_OFFSET:g})"
+            f"{_NEARER if side == '1 +' else ''}; NaN: not checked")  # fmt: skip
+    add("check_above_rpm", ("combination",), "f8", result.above_speed / RPM, units="rpm",
+        long_name="the speed the check above the onset ran at (check_above_deg, "
+        "leaves_cam_at_deg); NaN: not checked")  # fmt: skip
     add("leaves_cam_at_deg", ("combination",), "f8", np.degrees(result.where), units="degree",
         long_name=f"cam angle where the time-domain engine's no-follow first starts (follower "
-        f"off the cam, valve off its seat) at onset × (1 + {engine_onset.CONFIRM_OFFSET:g}), in "
+        "off the cam, valve off its seat) in the check above the onset (check_above_rpm), in "
         f"turns {engine_onset.CONFIRM_WARMUP + 1}–{engine_onset.CONFIRM_TURNS} (the events' "
         "angle within the turn); NaN: not checked, or it did not leave")  # fmt: skip
     add("confirmed", ("combination",), "str", t.columns["confirmed"],

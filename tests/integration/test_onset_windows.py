@@ -20,6 +20,7 @@ from campipe.engine import onset as O
 from campipe.engine import periodic as P
 from campipe.model import thesis_train
 from campipe.profiles import Ramp, flat, harmonic, polydyne
+from campipe.study import load_study
 
 TOL = O.DEFAULT_ONSET_TOLERANCE_RPM
 #: The polydyne with constant-velocity ramps of studies/lash-ramp.yaml (0.3 mm over 30°).
@@ -143,6 +144,39 @@ def test_a_confirmation_that_fails(tmp_path, monkeypatch):
         assert ds.confirmed.values.tolist() == ["NO"]
         assert ds.check_below_deg.values[0] == 0.0 and ds.check_above_deg.values[0] == 0.0
         assert ds.onset_level_deg.values[0] == 0.0  # no seat: the first separation
+        # none of the nearer speeds leaves either: the first, 0.5 % above, is kept
+        assert ds.check_above_rpm.values[0] == pytest.approx(float(row[0]) * 1.005, rel=1e-9)
+
+
+NARROW = """
+name: narrow
+model: {layout: lumped, masses: [0.04 kg, 0.06 kg], stiffnesses: [2000 N/mm],
+        spring_rate: 40 N/mm, spring_preload: 266.8 N, damping_ratios: [0.03]}
+profile: {kind: polydyne-4567, lift: 8 mm, rise: 100 deg, dwell: 20 deg, fall: 100 deg}
+sweep:
+  speed: [1000 rpm, 20000 rpm]
+"""
+
+
+def test_the_check_above_comes_nearer_for_a_window_narrower_than_its_offset(tmp_path):
+    """A helper's two-mass chain on a polydyne: a proven onset at 4328.35 rpm whose window of
+    no-follow ends before 0.5 % above it, where the time-domain engine follows the cam
+    (checked here). The check above comes nearer and finds the window at 0.25 % above (the
+    engine leaves the cam there), so the proven onset is confirmed, not the NO and status 1
+    a helper got. Broken copy: CONFIRM_NEARER empty (the check at 0.5 % alone)."""
+    path = write_spec(tmp_path, NARROW)
+    out = CliRunner().invoke(main, ["onset", str(path), "-o", str(tmp_path / "n.nc")])
+    assert out.exit_code == 0, out.output
+    with xr.open_dataset(tmp_path / "n.nc") as ds:
+        onset = float(ds.onset_speed_rpm.values[0])
+        assert onset == pytest.approx(4328.35, abs=0.1)
+        assert ds.onset_proven.values[0] == 1 and ds.confirmed.values.tolist() == ["yes"]
+        assert ds.check_above_rpm.values[0] == pytest.approx(onset * 1.0025, rel=1e-9)
+        assert ds.check_above_deg.values[0] > 0.1
+    design = load_study(path).cases[0].case
+    at = dataclasses.replace(design, speed=onset * 1.005 * RPM)
+    far = run_batch([at], O.confirm_settings(O.CONFIRM_TURNS))
+    assert far.separation[0] == 0.0  # the window is narrower than 0.5 %
 
 
 def test_the_level_is_checked(tmp_path):
