@@ -68,21 +68,28 @@ def onset(spec, sets, tolerance, level, fmt, output, overwrite, check, workers) 
     time-domain engine either side. Exit status 1 when a check disagrees."""
     from pathlib import Path
 
-    from campipe.units import QuantityError, parse_quantity
+    from campipe.units import QuantityError, parse_angular
 
-    try:
-        tol = parse_quantity(tolerance, "rad/s", "--tolerance", "rpm")
+    try:  # a bare number is refused: it would be read as rad/s, or rad
+        tol = parse_angular(tolerance, "rad/s", "--tolerance", "rpm")
     except QuantityError as exc:
-        raise click.BadParameter(str(exc), param_hint="--tolerance") from None
+        raise click.BadParameter(exc.reason, param_hint="--tolerance") from None
+    if not tol > 0:
+        raise click.BadParameter(f"found {tolerance!r}, expected > 0 rpm", param_hint="--tolerance")
     try:
-        angle = parse_quantity(level, "rad", "--level", "deg")
+        angle = parse_angular(level, "rad", "--level", "deg")
     except QuantityError as exc:
-        raise click.BadParameter(str(exc), param_hint="--level") from None
-    if not angle >= 0:
-        raise click.BadParameter(f"found {level!r}, expected ≥ 0 deg", param_hint="--level")
+        raise click.BadParameter(exc.reason, param_hint="--level") from None
+    if not 0 <= angle < 2 * np.pi:  # no-follow a turn: at most the whole turn
+        raise click.BadParameter(
+            f"found {level!r}, expected ≥ 0 deg and below 360 deg (no-follow a turn)",
+            param_hint="--level",
+        )
     loaded = load_spec(spec, sets)
     path = Path(output) if output else Path(spec).parent / f"{loaded.name}-onset.nc"
-    run_onset(loaded, spec, path, tol, fmt, check, workers, overwrite=overwrite, level=angle)
+    given = click.get_current_context().get_parameter_source("level")
+    run_onset(loaded, spec, path, tol, fmt, check, workers, overwrite=overwrite, level=angle,
+              level_given=given is click.core.ParameterSource.COMMANDLINE)  # fmt: skip
 
 
 def run_onset(
@@ -96,6 +103,7 @@ def run_onset(
     command="onset",
     overwrite=False,
     level=None,
+    level_given=False,
 ) -> None:
     """``campipe onset``'s work (and ``campipe study``'s for a spec with ``search``): the
     output checked by the output rule (``campipe.io.outputs``) before the search, and
@@ -110,8 +118,9 @@ def run_onset(
     with writing(path):
         onset_output(loaded, spec_path, path, overwrite)  # another run may have written it
         _search_and_write(
-            loaded, spec_path, path, spec_file, tolerance, fmt, check, workers, command, level
-        )
+            loaded, spec_path, path, spec_file, tolerance, fmt, check, workers, command, level,
+            level_given,
+        )  # fmt: skip
 
 
 def onset_output(loaded, spec_path, path, overwrite) -> str:
@@ -136,8 +145,9 @@ def onset_output(loaded, spec_path, path, overwrite) -> str:
 
 
 def _search_and_write(
-    loaded, spec_path, path, spec_file, tolerance, fmt, check, workers, command, level
-):
+    loaded, spec_path, path, spec_file, tolerance, fmt, check, workers, command, level,
+    level_given=False,
+):  # fmt: skip
     from campipe.io.archive import provenance, write_file
     from campipe.io.outputs import ONSET_FILE
     from campipe.study.onset import file_contents, onset_study, summary_lines
@@ -178,6 +188,12 @@ def _search_and_write(
         )
     for line in summary_lines(result):
         click.echo(line, err=True)
+    if level_given and level and not (result.levels > 0).any():
+        click.echo(
+            "--level applies to a train with a seat, and no combination has one: each onset "
+            "is the first separation",
+            err=True,
+        )
     click.echo(f"wrote {path}", err=True)
     if result.disagreements.size:
         raise Failure(summary_lines(result)[-1])

@@ -323,12 +323,25 @@ def summary_lines(result: OnsetStudy) -> list[str]:
     ]
     if on.proven is not None:
         estimated = int(np.count_nonzero(~on.proven))
+        status = np.asarray(on.status)
+        where = [w for w, there in (("below each onset found", "found"), ("in a range that "
+                 "follows throughout", "none")) if (status == there).any()]  # fmt: skip
+        if estimated:
+            lines.append(
+                f"{estimated} combination{'s' if estimated != 1 else ''} searched past "
+                "speeds on the chords' estimate, not proven (a seated steady state or a profile "
+                "with steps): a window of no-follow narrower than the scan may be missed"
+            )
+        elif where:
+            lines.append(
+                f"no window of no-follow wider than the tolerance {' and '.join(where)}: proven"
+            )
+    below = int(np.count_nonzero(np.asarray(on.status) == "below"))
+    if below:
         lines.append(
-            "no window of no-follow wider than the tolerance below any onset: proven"
-            if not estimated
-            else f"{estimated} combination{'s' if estimated != 1 else ''} searched past "
-            "speeds on the chords' estimate, not proven (a seated steady state or a profile "
-            "with steps): a window of no-follow narrower than the scan may be missed"
+            f"{below} combination{'s leave' if below != 1 else ' leaves'} the cam already"
+            f" at the range's lowest speed, {result.low / RPM:g} rpm: start the range "
+            "lower to find the onset"
         )
     levels = np.degrees(result.levels)
     if (levels > 0).any():

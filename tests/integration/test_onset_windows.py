@@ -185,9 +185,30 @@ def test_the_level_is_checked(tmp_path):
         O.onset_speeds([Case(thesis_train(), harmonic(INCH), 1.0)], 6000 * RPM, 9000 * RPM,
                        level=-1e-3)  # fmt: skip
     assert info.value.key == "level"
-    for bad in ("-1 deg", "3 rpm"):
+    for bad in ("-1 deg", "3 rpm", "0.5", "400 deg"):  # a bare 0.5 was 28.6°, in radians
         out = CliRunner().invoke(main, ["onset", str(write_spec(tmp_path, SPEC)), "--level", bad])
         assert out.exit_code == 2 and "--level" in out.output
+    for bad in ("0 rpm", "0.1"):  # a bare 0.1 was rad/s
+        out = CliRunner().invoke(
+            main, ["onset", str(write_spec(tmp_path, SPEC)), "--tolerance", bad]
+        )
+        assert out.exit_code == 2 and "--tolerance" in out.output and "rad/s" not in out.output
+
+
+def test_what_the_onset_says_of_a_range_above_it_and_a_level_without_a_seat(tmp_path):
+    """A range whose lowest speed already leaves the cam says to start it lower (it said
+    "no window below any onset: proven" of no onset); --level given on a train without a
+    seat says it does not apply. The thesis's onset without a seat is 9383 rpm."""
+    path = write_spec(tmp_path, SPEC.replace("from: 6000 rpm", "from: 10000 rpm"))
+    out = CliRunner().invoke(main, ["onset", str(path), "--level", "1 deg"])
+    assert out.exit_code == 0, out.output
+    assert "1 combination leaves the cam already at the range's lowest speed, 10000 rpm" in (
+        out.stderr
+    )
+    assert "proven" not in out.stderr
+    assert "--level applies to a train with a seat" in out.stderr
+    out = CliRunner().invoke(main, ["onset", str(path)])
+    assert "--level applies" not in out.stderr  # its default says nothing
 
 
 #: A smooth polydyne (no ramps: lift, rate and acceleration continuous) on a lightly damped
