@@ -269,6 +269,8 @@ def test_the_onset_file_says_whether_the_search_is_proven(tmp_path):
     path = write_spec(tmp_path, SPEC)
     out = CliRunner().invoke(main, ["onset", str(path), "--format", "csv"])
     assert out.exit_code == 0, out.output
-    assert "no window of no-follow wider than the tolerance below any onset: proven" in out.stderr
+    assert "no window of no-follow wider than the tolerance below each onset found: proven" in (
+        out.stderr
+    )
     with xr.open_dataset(tmp_path / "onsets-onset.nc") as ds:
         assert ds.onset_proven.values.tolist() == [1]
