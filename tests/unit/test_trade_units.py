@@ -158,3 +158,21 @@ def test_a_label_s_en_dash_matches_the_hyphen_a_designer_types():
     assert kept('defects != "flat 268-272 deg"') == [True, False, True]
     assert kept('defects in ["none", "flat 268-270 deg"]') == [True, False, True]
     assert kept('defects == "flat 268 272 deg"') == [False, False, False]
+
+
+@pytest.mark.parametrize(
+    "sweep",
+    [
+        "  profile.lift: [0.9 in, 1 in]",
+        "  profile: [{kind: harmonic, lift: 0.9 in}, {kind: harmonic, lift: 1 in}]",
+        "  model: [{preset: thesis-1971, spring_preload: 151 lbf}]",
+    ],
+)
+def test_a_spec_writing_inches_only_in_a_sweep_of_whole_blocks_shows_in_inches(sweep):
+    """A spec whose only lengths are inches inside a sweep is an inch spec (`--units spec`
+    shows in-lbf), whether it sweeps a key or whole profiles (a helper's was shown in SI).
+    Broken copy: the sweep's list of mappings left unread."""
+    from campipe.study.query.display import spec_system, written_units
+
+    text = "name: s\nmodel: {preset: thesis-1971}\nspeed: 6000 rpm\nsweep:\n" + sweep + "\n"
+    assert spec_system(written_units({"spec": text})) == "in-lbf"

@@ -78,6 +78,9 @@ def written_units(attrs: Mapping[str, object]) -> dict[str, str]:
     for block in ("sweep", "zip"):
         for key, values in _mapping(raw.get(block)).items():
             _note(out, str(key), values)
+            for item in _blocks(values):  # a sweep of whole blocks: {kind: harmonic, lift: 1 in}
+                for k, v in _leaves({key: item}):
+                    _note(out, k, v)
     sample = _mapping(raw.get("sample"))
     for key, values in _mapping(sample.get("ranges")).items():
         _note(out, str(key), values)
@@ -95,6 +98,15 @@ def _axis_key(key: str) -> list[str]:
         if key.startswith(block):
             return [key[len(block) :]]
     return [key]
+
+
+def _blocks(values: object) -> Iterable[Mapping]:
+    """The mappings in a sweep's list of values, at any depth (a list of defect lists)."""
+    for v in values if isinstance(values, list) else []:
+        if isinstance(v, Mapping):
+            yield v
+        elif isinstance(v, list):
+            yield from _blocks(v)
 
 
 def _mapping(value: object) -> Mapping:
