@@ -59,8 +59,10 @@ def spring_clash_margin(train: ValveTrain, q: np.ndarray) -> np.ndarray:
     """Coil-clash margin [m]: how far the most compressed element is from solid, as a length
     of the whole spring, n·min_j(travel/n + extension_j) = travel + n·min_j extension_j.
 
-    With one element it is ``spring_travel_to_solid`` + q4, the travel left before the spring
-    goes solid; with n elements it is the travel left if every element were as compressed
+    With one element it is ``spring_travel_to_solid`` − (F − ``spring_preload``)/rate, F the
+    spring's force, the travel left before the spring goes solid from its installed length
+    (seated: with lash the valve on its seat, without the train's unstressed reference, q4 =
+    0); with n elements it is the travel left if every element were as compressed
     as the most compressed one, so a surging spring's local clash shows before the
     average compression reaches solid. Zero or below: the coils clash.
 
@@ -74,7 +76,10 @@ def spring_clash_margin(train: ValveTrain, q: np.ndarray) -> np.ndarray:
     array of q's leading shape
     """
     extension = spring_extensions(train, q)
-    return train.spring_travel_to_solid + train.spring_elements * extension.min(axis=-1)
+    # with lash, seated the spring stands compressed from the train's unstressed reference by
+    # (spring_preload − reference_preload)/rate: its travel is counted from there (installed)
+    seated = (train.spring_preload - reference_preload(train)) / train.spring_rate
+    return train.spring_travel_to_solid + seated + train.spring_elements * extension.min(axis=-1)
 
 
 def base_circle_force(train: ValveTrain) -> float:

@@ -140,3 +140,28 @@ def test_bad_lash_names_its_key(tmp_path, extra, key, words):
     with pytest.raises(SpecError) as exc:
         load_study(write_spec(tmp_path, text))
     assert key in str(exc.value) and words in str(exc.value)
+
+
+@pytest.mark.parametrize("lash", [0.1e-3, 0.5e-3])
+def test_the_coil_clash_margin_counts_from_the_installed_length_with_lash(lash):
+    """``spring_travel_to_solid`` is the installed length less the solid length, and with
+    lash the installed force (``spring_preload``) is the seated spring's: the margin is the
+    travel less the spring's compression from there, travel − (F − P)/k, at every sample of a
+    crawl over the lift (F the spring's force, tested against the seat force above), and the
+    travel itself on the seat. A helper read 9.9 and 9.5 mm on the seat of a 10 mm travel (the
+    lash's travel taken off). Broken copy: the margin counted from the unstressed reference."""
+    from campipe.model import spring_clash_margin, spring_element_forces
+
+    chain = {"layout": "lumped", "masses": ["0.05 kg", "0.06 kg"], "stiffnesses": ["20000 N/mm"],
+             "spring_rate": "40 N/mm", "spring_preload": "250 N", "damping_ratios": [0.05],
+             "spring_travel_to_solid": "10 mm", "lash": f"{lash * 1e3} mm"}  # fmt: skip
+    train = valve_train("thesis-1971", chain)
+    run = run_batch([Case(train, PROFILE, 10 * RPM)], RunSettings(revolutions=1))
+    q = run.q[0]
+    force = spring_element_forces(train, q)[:, -1]
+    margin = spring_clash_margin(train, q)
+    np.testing.assert_allclose(margin, 10e-3 - (force - 250.0) / 40e3, rtol=0, atol=1e-12)
+    seated = np.asarray(run.contact_state[0]) == SEATED
+    assert seated.any() and np.abs(force[seated] - 250.0).max() < 1e-6
+    np.testing.assert_allclose(margin[seated], 10e-3, rtol=0, atol=1e-10)
+    assert margin.min() < 10e-3 - 0.007  # the cam's 7.6 mm (0.3 in) lift, less the lash
