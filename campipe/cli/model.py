@@ -562,7 +562,8 @@ def model_text(
             to_display_units(a, length, energy, trans), scale, coords, not train.chain
         )
     lines.append("")
-    lines.append("Natural frequencies (Figure 14), each mode's damping ratio (Φᵀ C Φ)ⱼⱼ / (2ωⱼ)")
+    figure = " (Figure 14)" if train.n_coordinates == 7 and not train.chain else ""  # its 7
+    lines.append(f"Natural frequencies{figure}, each mode's damping ratio (Φᵀ C Φ)ⱼⱼ / (2ωⱼ)")
     lines.append(
         "  (cam rpm: the cam speed whose first order meets the mode, its frequency a minute"
         + (f"; engine rpm: the crank's, by drive.cam_per_crank {drive:g})" if drive else ")")
@@ -589,7 +590,7 @@ def model_text(
         lines.append("  none: nothing of the train is free on the cam (a rigid follower)")
     lines.append("")
     lines.append(
-        "Mode shapes (Figure 14), one column a mode, scaled to a largest translation of 1"
+        f"Mode shapes{figure}, one column a mode, scaled to a largest translation of 1"
         + ("" if train.chain else " (rotations in rad/in)")
     )
     shapes = sm.modes / np.where(trans, length, 1.0)[:, None]

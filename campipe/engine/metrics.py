@@ -338,7 +338,7 @@ METRICS: list[Metric] = [
         record="spring",
         source="derived",
         derive=_spring("max_spring_element_force", "max"),
-        label="Spring force",
+        label="Largest spring force",
     ),
     Metric(
         "min_spring_clash_margin",
