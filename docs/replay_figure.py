@@ -6,9 +6,13 @@ with ``rerun.chunk.RrdReader`` (:func:`campipe.io.rerun_replay.read_recording`) 
 matplotlib (``pip install 'campipe[plot]'``): the mechanism sketch at a few cam angles beside
 the lift, force and contact-state plots, with the events marked.
 
-    campipe study studies/quickstart.yaml -o /tmp/quickstart.nc --set run.record=[q]
+    campipe study studies/quickstart.yaml -o /tmp/quickstart.nc --set run.record=[q] \
+        --set run.revolutions=3
     campipe replay /tmp/quickstart.nc --where "speed_rpm == 11000 and seat > 0" -o /tmp/b.rrd
-    python docs/replay_figure.py /tmp/b.rrd -o docs/replay-bouncing.png
+    python docs/replay_figure.py /tmp/b.rrd -o docs/replay-bouncing.png \
+        --angle 770 --angle 793 --angle 825 --angle 862
+
+(three fixed turns, all recorded: a run of automatic length records its last turn only)
 """
 
 from __future__ import annotations
@@ -20,6 +24,12 @@ import numpy as np
 from campipe.io.rerun_replay import NANOS, read_recording
 
 PARTS = ("cam", "pushrod", "rocker", "stem", "head", "spring", "retainer")
+
+
+def _unit(rec, entity: str) -> str:
+    """The units a recorded series is in, from its name (``cam lift [in]``)."""
+    name = rec[entity].static["SeriesLines:names"][0]
+    return name[name.rfind("[") + 1 : name.rfind("]")] if name.endswith("]") else ""
 
 
 def _rgb(packed: int) -> tuple[float, float, float]:
@@ -127,8 +137,8 @@ def draw(
             ax.axvline(a, color="k", ls=":", lw=0.8)
     axes[0].legend(fontsize=8, loc="upper right")
     axes[1].legend(fontsize=8, loc="upper right")
-    axes[0].set_ylabel("lift [mm]")
-    axes[1].set_ylabel("N")
+    axes[0].set_ylabel(f"lift [{_unit(rec, f'{root}/lift/cam')}]")  # the recording's units
+    axes[1].set_ylabel(f"force [{_unit(rec, f'{root}/force/cam')}]")
     axes[2].set_xlabel("cam angle [°] (the recording's cam_angle timeline)")
     doc = rec[f"{root}/parameters"].static["TextDocument:text"][0]
     fig.suptitle(f"campipe replay: {doc.splitlines()[0].lstrip('# ')}", fontsize=12)
