@@ -33,7 +33,9 @@ PLOT_KINDS = ("histories", "metric", "map", "events", "pareto", "spectrum")
     "--x",
     "x",
     metavar="COLUMN",
-    help="metric, map: the column along x (default: speed_rpm); pareto: the first objective's.",
+    help="metric, map: the column along x (default: the speed where it varies, "
+    "engine_speed_rpm for an archive with a drive, else speed_rpm; else the first numeric "
+    "column that varies); pareto: the first objective's.",
 )
 @click.option(
     "--y",

@@ -304,6 +304,13 @@ def file_contents(result: OnsetStudy) -> tuple[dict, list[VariableSpec], dict, d
         "study_name": result.name,
         "speed_range_rpm": [result.low / RPM, result.high / RPM],
         "varied_keys": ", ".join(result.keys),
+        # each varied key's column, so that a reader shows it in the units the spec wrote
+        "study_axes": json.dumps(
+            [
+                {"name": name, "key": key}
+                for key, (name, *_) in case_coordinates(result.keys).items()
+            ]
+        ),
         "spec": result.spec_text,
         "spec_overrides": json.dumps(result.spec_overrides, default=str),
     }

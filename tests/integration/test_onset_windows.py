@@ -274,3 +274,20 @@ def test_the_onset_file_says_whether_the_search_is_proven(tmp_path):
     )
     with xr.open_dataset(tmp_path / "onsets-onset.nc") as ds:
         assert ds.onset_proven.values.tolist() == [1]
+
+
+def test_the_onset_table_shows_a_swept_profile_key_in_the_units_the_spec_wrote(tmp_path):
+    """The bundled lash-ramp spec writes its lift in inches and sweeps the ramp's height in
+    mm: the onset table shows that column in mm (0.25, 0.3, 0.4), as campipe query does (a helper
+    read 0.00984252 in). Broken copy: the onset file without study_axes."""
+    from study_helpers import STUDIES
+
+    out = CliRunner().invoke(
+        main,
+        ["onset", str(STUDIES / "lash-ramp.yaml"), "-o", str(tmp_path / "lr.nc"),
+         "--format", "csv", "--no-check"],
+    )  # fmt: skip
+    assert out.exit_code == 0, out.output
+    rows = out.stdout.splitlines()
+    assert rows[0].startswith("profile_ramp_height [mm],")
+    assert [r.split(",")[0] for r in rows[1:]] == ["0.25", "0.3", "0.4"]
