@@ -454,8 +454,9 @@ def other_releases(separation, capture, c, seat, dv):
 
 
 def is_captured(closing: float, capture: float) -> bool:
-    """An impact closing slower than the capture velocity [m/s] leaves its contact resting,
-    and is no impact in the per-turn counts. Every integrator asks this (the compiled ones
+    """An impact closing slower than the capture velocity [m/s] leaves its contact resting:
+    it does not bounce. It counts as an impact unless it ends a flight of under a nanometre
+    (``record_impact`` takes those back). Every integrator asks this (the compiled ones
     through :func:`captured`).
 
     A resting contact is held as any other: it releases where its force reaches zero (to
