@@ -284,6 +284,21 @@ def test_an_onset_bound_outside_the_speed_range_is_refused_before_any_design(
     assert "designs evaluated" not in out.output and not (tmp_path / "far.nc").exists()
 
 
+def test_an_engine_onset_bound_outside_the_range_is_refused_at_its_own_key(tmp_path):
+    """``onset_engine_speed_rpm: {min: 90000 rpm}`` with cam_per_crank 0.5, the engine's
+    range 6000–40000 rpm: refused at that key, its value and the range's top in the engine's
+    rpm as written, the cam's beside them (a helper read ``onset_speed_rpm.min: found 12500
+    rpm`` for its 25000). Broken copy: the cam's key and value."""
+    path = write_spec(tmp_path, DRIVEN.format(name="far", require=(
+        "    onset_engine_speed_rpm: {min: 90000 rpm}")), "far.yaml")  # fmt: skip
+    out = invoke("design", path)
+    assert out.exit_code == 2, out.output
+    assert (
+        "design.require.onset_engine_speed_rpm.min: found 90000 rpm (the cam's 45000 rpm), "
+        "above the top of the spec's speed range, 40000 rpm (the cam's 20000 rpm)"
+    ) in " ".join(out.output.split())
+
+
 def test_the_output_json_csv_and_the_file_query_and_plot_read(tmp_path):
     """The chosen design first in the JSON (units: the spec's lbf), the CSV's header with
     units, and the netCDF file: SI with units attributes, read by campipe query and drawn
@@ -660,6 +675,12 @@ def test_a_spec_with_a_drive_requires_the_onset_and_runs_metrics_at_the_engine_s
         pick = [int(np.flatnonzero(d.chosen.values == "yes")[0]) for d in (e, c)]
         assert_allclose(e.spring_preload.values[pick[0]], c.spring_preload.values[pick[1]])
         assert 9500 <= e.onset_speed_rpm.values[pick[0]] < 9500.5
+        # the margin in the units the bound was written in: the engine's rpm, twice the cam's
+        # (a helper read 0.0999 rpm of the cam's beside "onset_engine_speed_rpm ≥ 9900 rpm")
+        engine_margin = e["margin_onset_engine_speed_rpm_min"].values[pick[0]]
+        cam_margin = c["margin_onset_speed_rpm_min"].values[pick[1]]
+        assert engine_margin == pytest.approx(2 * cam_margin, rel=1e-9)
+        assert "margin_onset_speed_rpm_min" not in e.variables
     shown = invoke("validate", engine)  # each speed named as the engine's or the cam's
     assert "onset_engine_speed_rpm ≥ 19000 rpm (the engine's speed;" in shown.output
     assert "at 8000 rpm (the cam's; the engine's 16000)" in shown.output
