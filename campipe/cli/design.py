@@ -66,6 +66,13 @@ def design(spec, sets, fmt, output, overwrite, scheduler, workers) -> None:
     if loaded.spec.drive is not None:
         note = drive_note(loaded.spec.drive, loaded.spec.design)
         click.echo(f"campipe design: {note}", err=True)
+    if any(r.key == "min_spring_clash_margin" for r in loaded.spec.design.require):
+        from campipe.study.spec.notes import CLASH_RECORDS, travel_note
+
+        # a chain's or a lever's clash margin against the thesis's assumed travel, as
+        # campipe study notes it (a helper's finger met a 1 mm margin with 31 mm to spare)
+        if travel := travel_note(loaded.cases, CLASH_RECORDS):
+            click.echo(f"campipe design: {travel}", err=True)
     _run(loaded, spec, path, fmt, overwrite, scheduler, workers)
 
 

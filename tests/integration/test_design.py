@@ -705,3 +705,28 @@ def test_a_spec_with_a_drive_requires_the_onset_and_runs_metrics_at_the_engine_s
     (tmp_path / "both.yaml").write_text(both)
     out = invoke("validate", tmp_path / "both.yaml")
     assert out.exit_code == 2 and "found onset_speed_rpm as well" in out.output
+
+
+def test_a_clash_requirement_on_a_chain_notes_the_assumed_spring_travel(tmp_path):
+    """A lumped chain's min_spring_clash_margin requirement with spring_travel_to_solid at
+    its default (the thesis's assumed 40.64 mm) says so, as campipe study does for a
+    recorded spring; the thesis's own train says nothing (a helper's finger met a 1 mm
+    margin with 31 mm to spare, silently). Broken copy: no note."""
+    chain = BASE.replace(
+        "model: {{preset: thesis-1971}}",
+        "model: {{layout: lumped, masses: [0.05 kg, 0.06 kg], stiffnesses: [20000 N/mm],\n"
+        "        spring_rate: 40 N/mm, spring_preload: 250 N, damping_ratios: [0.05]}}",
+    ).replace("harmonic, lift: 1 in", "harmonic, lift: 8 mm")
+    design = """
+      vary: {model.spring_preload: {from: 200 N, to: 400 N, tolerance: 5 N}}
+      require: {min_spring_clash_margin: {min: 1 mm, at: 3000 rpm}}
+      minimize: model.spring_preload
+    """
+    path = write_spec(tmp_path, chain.format(name="c", design=design), "c.yaml")
+    out = invoke("design", path)
+    assert out.exit_code == 0, out.output
+    assert "taken against the thesis's assumed spring travel to solid, 40.64 mm" in out.output
+    thesis = invoke("design", spec(tmp_path, design.replace("200 N", "100 lbf").replace(
+        "400 N", "200 lbf").replace("5 N", "1 lbf"), "t"))  # fmt: skip
+    assert thesis.exit_code == 0, thesis.output
+    assert "assumed spring travel" not in thesis.output
