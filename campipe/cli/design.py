@@ -83,7 +83,7 @@ def drive_note(ratio: float, design) -> str:
 
     bounds = [
         f"{bound_label(r, side)} is the engine's {value / ratio:g} rpm"
-        if math.isnan(r.engine)
+        if not r.engine_onset
         else f"{bound_label(r, side)} is the cam's {value:g} rpm"
         for r in design.require
         if r.key == ONSET

@@ -547,13 +547,13 @@ def confirm_onsets(
         res = run_batch(cases, settings, full_state=False, on_failure="record")
         if k == 0:
             below[idx] = res.separation[: idx.size]
-        run = res.separation[-idx.size :]
+        first = len(cases) - idx.size  # the runs above the onset, last
+        run = res.separation[first:]
         take = np.isnan(above[idx]) | _reaches(run, level[idx])
         for j in np.flatnonzero(take):
-            i, case = idx[j], cases[len(cases) - idx.size + j]
+            i, case = idx[j], cases[first + j]
             above[i], above_speed[i] = run[j], case.speed
-            events = res.events[len(cases) - idx.size + j]
-            where[i] = first_separation(events, case.speed, settings.warmup or 0)
+            where[i] = first_separation(res.events[first + j], case.speed, settings.warmup or 0)
         idx = idx[~_reaches(above[idx], level[idx])]
         if not idx.size:
             break

@@ -328,9 +328,9 @@ def summary_lines(result: OnsetStudy) -> list[str]:
         f"({int(on.evaluations.sum())} steady states), time-domain check "
         f"{result.check_seconds:.3g} s",
     ]
+    status = np.asarray(on.status)
     if on.proven is not None:
         estimated = int(np.count_nonzero(~on.proven))
-        status = np.asarray(on.status)
         where = [w for w, there in (("below each onset found", "found"), ("in a range that "
                  "follows throughout", "none")) if (status == there).any()]  # fmt: skip
         if estimated:
@@ -343,7 +343,7 @@ def summary_lines(result: OnsetStudy) -> list[str]:
             lines.append(
                 f"no window of no-follow wider than the tolerance {' and '.join(where)}: proven"
             )
-    below = int(np.count_nonzero(np.asarray(on.status) == "below"))
+    below = int(np.count_nonzero(status == "below"))
     if below:
         lines.append(
             f"{below} combination{'s leave' if below != 1 else ' leaves'} the cam already"

@@ -25,14 +25,7 @@ from campipe.engine import onset as engine_onset
 from campipe.engine.levers import at_the_cam
 from campipe.engine.metrics import archived_metrics
 from campipe.errors import CampipeError
-from campipe.study.spec.design import (
-    ENGINE_ONSET,
-    ONSET,
-    Design,
-    Requirement,
-    bound_label,
-    onset_required,
-)
+from campipe.study.spec.design import ONSET, Design, Requirement, bound_label, onset_required
 from campipe.study.spec.expand import Study
 from campipe.study.spec.resolve import ResolvedCase
 from campipe.vocabulary import FAILURES
@@ -55,17 +48,10 @@ class Bound:
         return r.minimum if self.side == "min" else r.maximum
 
     @property
-    def engine(self) -> float:
-        """cam_per_crank where the bound was written at the engine's speed
-        (``onset_engine_speed_rpm``), else NaN: its margin is then the engine's rpm too."""
-        return self.requirement.engine if self.requirement.key == ONSET else math.nan
-
-    @property
     def name(self) -> str:
         """The margin's column: ``margin_onset_speed_rpm_min`` (with the bound written at
         the engine's speed, ``margin_onset_engine_speed_rpm_min``)."""
-        key = ENGINE_ONSET if not math.isnan(self.engine) else self.requirement.key
-        return f"margin_{key}_{self.side}"
+        return f"margin_{self.requirement.written_key}_{self.side}"
 
     @property
     def label(self) -> str:
@@ -76,11 +62,11 @@ class Bound:
         if math.isnan(value):
             return -math.inf
         margin = value - self.value if self.side == "min" else self.value - value
-        return margin if math.isnan(self.engine) else margin / self.engine  # the engine's rpm
+        return self.requirement.as_written(margin)  # an engine-speed onset's: the engine's rpm
 
     def relative(self, margin: float) -> float:
         """A :meth:`margin` over the bound, each in the units it was written in."""
-        value = self.value if math.isnan(self.engine) else self.value / self.engine
+        value = self.requirement.as_written(self.value)
         return margin / (abs(value) if value != 0 else 1.0)
 
 
@@ -188,26 +174,24 @@ def _reachable(r: Requirement, low: float, high: float, drive: float | None) -> 
     below their bottom is never met, whatever the design (``drive``: cam per crank). A bound
     written at the engine's speed (``onset_engine_speed_rpm``) is refused at that key, in the
     engine's rpm as written."""
-    engine = not math.isnan(r.engine)
+    engine = r.engine_onset
 
     def shown(rpm: float) -> str:
         if engine:
-            return f"{rpm / r.engine:g} rpm (the cam's {rpm:g} rpm)"
+            return f"{r.as_written(rpm):g} rpm (the cam's {rpm:g} rpm)"
         return f"{rpm:g} rpm" + (f" (the engine's {rpm / drive:g} rpm)" if drive else "")
 
-    key = ENGINE_ONSET if engine else ONSET
     for bound, value, edge, side in (("min", r.minimum, high, "top"), ("max", r.maximum, low,
                                                                       "bottom")):  # fmt: skip
         if math.isnan(value) or (value <= edge if bound == "min" else value >= edge):
             continue
-        written = value / r.engine if engine else value
         raise DesignError.at(
-            f"design.require.{key}.{bound}",
+            f"design.require.{r.written_key}.{bound}",
             f"found {shown(value)}, {'above' if bound == 'min' else 'below'} the {side} of "
             f"the spec's speed range, {shown(edge)}: the onset is searched within it (as "
             "campipe onset's), so no design can meet the bound; widen the speed range or "
             "move the bound" + ("" if engine else " (design's speeds are the cam's)"),
-            found=written,
+            found=r.as_written(value),
             expected=f"{'≤' if bound == 'min' else '≥'} {shown(edge)}",
         )
 

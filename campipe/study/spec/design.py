@@ -94,14 +94,27 @@ class Requirement:
     def bounded(self) -> bool:
         return not (math.isnan(self.minimum) and math.isnan(self.maximum))
 
+    @property
+    def engine_onset(self) -> bool:
+        """An onset bound the spec wrote at the engine's speed (``onset_engine_speed_rpm``)."""
+        return self.key == ONSET and not math.isnan(self.engine)
+
+    @property
+    def written_key(self) -> str:
+        """The key as the spec wrote it: ``onset_engine_speed_rpm`` for an engine-speed onset."""
+        return ENGINE_ONSET if self.engine_onset else self.key
+
+    def as_written(self, value: float) -> float:
+        """``value`` in the requirement's units (the cam's rpm for the onset) at the speed the
+        bound was written at: the engine's rpm for an engine-speed onset (a bound, a margin)."""
+        return value / self.engine if self.engine_onset else value
+
 
 def bound_label(r: Requirement, side: str) -> str:
     """One bound in words, in the units it was written in: ``onset_speed_rpm ≥ 9500 rpm``."""
     sign, value = ("≥", r.minimum) if side == "min" else ("≤", r.maximum)
     units = r.units
-    key = r.key
-    if r.key == ONSET and not math.isnan(r.engine):
-        key, value = ENGINE_ONSET, value / r.engine
+    key, value = r.written_key, r.as_written(value)
     if r.written and units and r.written != units:
         value, units = convert(value, units, r.written), r.written
     return f"{key} {sign} {value:.6g}{' ' + units if units else ''}"

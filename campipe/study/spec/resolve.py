@@ -311,6 +311,7 @@ def _profile(frozen: tuple, directory: Path) -> tuple[Profile, dict, dict[str, o
 @functools.lru_cache(maxsize=1024)
 def _with_defects(frozen_profile: tuple, frozen_defects: tuple, directory: Path):
     profile, canonical, values = _profile(frozen_profile, directory)
+    written = _thaw(frozen_profile).get("lift")
     out = profile
     defects = []
     for i, d in enumerate(_thaw_list(frozen_defects)):
@@ -318,7 +319,7 @@ def _with_defects(frozen_profile: tuple, frozen_defects: tuple, directory: Path)
             k: DEFECT_FIELDS[k].parse(v, f"defects[{i}].{k}") for k, v in d.items() if k != "kind"
         }
         if d["kind"] == "flat":
-            _check_flat(out, si["from"], si["to"], i, _thaw(frozen_profile).get("lift"))
+            _check_flat(out, si["from"], si["to"], i, written)
         try:
             if d["kind"] == "flat":
                 out = flat(out, si["from"], si["to"])
@@ -329,9 +330,8 @@ def _with_defects(frozen_profile: tuple, frozen_defects: tuple, directory: Path)
             raise SpecProblem(f"defects[{i}]", str(exc)) from None
         defects.append({"kind": d["kind"], **{k: clean_value(v) for k, v in si.items()}})
     label = out.label[len(profile.label) :].removeprefix(" + ") if defects else "none"
-    written = _thaw(frozen_profile).get("lift")
-    low = min_lift(out)
-    ring = TABLE_RING * max_lift(out) if "profile.file" in values else 0.0
+    low, high = min_lift(out), max_lift(out)
+    ring = TABLE_RING * high if "profile.file" in values else 0.0
     if low < -max(LIFT_TOLERANCE, ring):
         where = (
             "defects" if defects else ("profile.file" if "profile.file" in values else "profile")
@@ -341,7 +341,6 @@ def _with_defects(frozen_profile: tuple, frozen_defects: tuple, directory: Path)
             f"the cam's lift falls to {_in_units(low, written)}; expected a "
             "lift never below the base circle (0)",
         )
-    high = max_lift(out)
     if not high > LIFT_TOLERANCE:
         where = "profile.file" if "profile.file" in values else "profile"
         raise SpecProblem(
