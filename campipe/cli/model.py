@@ -258,23 +258,25 @@ def stability_limits(train, sm: SystemMatrices) -> dict[str, float | None]:
     return out
 
 
-def on_the_cam(sm: SystemMatrices, coords: tuple[Coordinate, ...]) -> np.ndarray:
+def on_the_cam(sm: SystemMatrices, coords: tuple[Coordinate, ...]) -> tuple[np.ndarray, np.ndarray]:
     """The undamped natural frequencies [rad/s] with the follower held on the cam
-    (configuration I: q1, the first coordinate, prescribed), ascending; none for a one-mass
-    chain (nothing of it is free on the cam)."""
+    (configuration I: q1, the first coordinate, prescribed), ascending, and each mode's
+    damping ratio (Φᵀ C Φ)ⱼⱼ / (2ωⱼ) with that configuration's C; none for a one-mass chain
+    (nothing of it is free on the cam)."""
     if len(coords) < 2:
-        return np.zeros(0)
+        return np.zeros(0), np.zeros(0)
     free = slice(1, None)
     trans = np.array([c.kind == "translation" for c in coords[free]])
-    omega, _ = normal_modes(sm.mass[free, free], sm.stiffness[free, free], trans)
-    return omega
+    omega, phi = normal_modes(sm.mass[free, free], sm.stiffness[free, free], trans)
+    damping = sm.damping[free, free]
+    return omega, modal_damping_ratios(damping, phi, omega)
 
 
 def model_report(train, sm, limits, preset, drive: float | None = None) -> dict[str, object]:
     """The JSON form of ``campipe model``: SI units throughout (rpm the cam's, and with a
     spec's ``drive``, cam turns per crank turn, the engine's beside)."""
     sm, coords, names = _shown(train, sm)
-    held = on_the_cam(sm, coords)
+    held, held_zeta = on_the_cam(sm, coords)
     return {
         **_source_json(preset),
         "layout": train.layout,
@@ -306,6 +308,7 @@ def model_report(train, sm, limits, preset, drive: float | None = None) -> dict[
         "modal_damping_ratios": modal_damping_ratios(sm.damping, sm.modes, sm.frequencies).tolist(),
         "natural_frequencies_on_the_cam": held.tolist(),
         "natural_frequencies_on_the_cam_hz": (held / TWO_PI).tolist(),
+        "modal_damping_ratios_on_the_cam": held_zeta.tolist(),
         "mass_matrix": sm.mass.tolist(),
         "stiffness_matrix": sm.stiffness.tolist(),
         "damping_matrix": sm.damping.tolist(),
@@ -320,6 +323,8 @@ def model_report(train, sm, limits, preset, drive: float | None = None) -> dict[
             "natural_frequencies_hz": "Hz",
             "natural_frequencies_on_the_cam": "rad/s, the follower held on the cam (q1)",
             "modal_damping_ratios": "1, (Φᵀ C Φ)ⱼⱼ / (2ωⱼ)",
+            "modal_damping_ratios_on_the_cam": "1, (Φᵀ C Φ)ⱼⱼ / (2ωⱼ) of the modes on the cam, "
+            "with the damping there",
             "mass_matrix": "kg (translation pairs), kg·m (mixed), kg·m² (rotation pairs)",
             "stiffness_matrix": "N/m (translation pairs), N (mixed), N·m (rotation pairs)",
             "damping_matrix": "N·s/m (translation pairs), N·s (mixed), N·m·s (rotation pairs)",
@@ -580,12 +585,15 @@ def model_text(
     for i, (w, z) in enumerate(zip(sm.frequencies, zeta, strict=True), 1):
         lines.append(f"  {i:>4} {w:14.1f} {speeds(w)} {z:6.3f}")
     lines.append("")
-    held = on_the_cam(sm, coords)
-    lines.append("Natural frequencies with the follower on the cam (configuration I: q1 held)")
+    held, held_zeta = on_the_cam(sm, coords)
+    lines.append(
+        "Natural frequencies with the follower on the cam (configuration I: q1 held), each "
+        "mode's damping ratio there"
+    )
     if held.size:
-        lines.append(f"  {'mode':>4} {'rad/s':>14} {'Hz':>12} {'cam rpm':>14}{engine}")
-        for i, w in enumerate(held, 1):
-            lines.append(f"  {i:>4} {w:14.1f} {speeds(w)}")
+        lines.append(f"  {'mode':>4} {'rad/s':>14} {'Hz':>12} {'cam rpm':>14}{engine} {'ζ':>6}")
+        for i, (w, z) in enumerate(zip(held, held_zeta, strict=True), 1):
+            lines.append(f"  {i:>4} {w:14.1f} {speeds(w)} {z:6.3f}")
     else:
         lines.append("  none: nothing of the train is free on the cam (a rigid follower)")
     lines.append("")
