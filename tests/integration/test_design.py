@@ -258,6 +258,33 @@ def test_an_infeasible_requirement_says_so_with_the_closest_design(tmp_path):
     assert all(r["feasible"] == "no" for r in rows)
 
 
+def test_an_infeasible_answer_names_every_requirement_its_closest_design_fails(tmp_path):
+    """Two requirements no preload in the bounds meets together (the onset wants more than
+    250 lbf, the cam force at 6000 rpm less than 80): the message names both bounds the
+    closest design fails, the worst first, each with its relative margin, which the JSON's
+    margins give. Fails if it named only the least margin's (campipe before: a designer read
+    one requirement to relax where two fail)."""
+    design = """
+      vary: {model.spring_preload: {from: 80 lbf, to: 250 lbf}}
+      require:
+        onset_speed_rpm: {min: 12000 rpm}
+        max_cam_force: {max: 300 lbf, at: 6000 rpm}
+      minimize: model.spring_preload
+    """
+    out = invoke("design", spec(tmp_path, design), "--format", "json")
+    assert out.exit_code == 1, out.output
+    text = out.output
+    first = json.loads(text[text.index("{") : text.rindex("}") + 1])["cases"][0]
+    assert first["chosen"] == "closest"
+    force = first["margin_max_cam_force_max"] / 300.0
+    onset = first["margin_onset_speed_rpm_min"] / 12000.0
+    assert force < onset < 0.0
+    assert (
+        f"fails max_cam_force ≤ 300 lbf (relative margin {force:.3g}) and "
+        f"onset_speed_rpm ≥ 12000 rpm (relative margin {onset:.3g})"
+    ) in text
+
+
 @pytest.mark.parametrize(
     ("bound", "words"),
     [("min: 21000 rpm", "above the top of the spec's speed range, 20000 rpm"),

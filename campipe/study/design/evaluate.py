@@ -93,6 +93,8 @@ class Evaluation:
     margins: dict[str, float] = field(default_factory=dict)  # Bound.name → margin
     relative: float = math.inf  # the least relative margin (inf: no bound)
     binding: str = ""  # the Bound.label of the least
+    #: every bound the design fails, (Bound.label, relative margin), the worst first
+    failing: tuple[tuple[str, float], ...] = ()
     objectives: tuple[float, ...] = ()  # each objective's value (its units; NaN: not found)
 
     @property
@@ -330,6 +332,9 @@ class Evaluator:
             rel = b.relative(ev.margins[b.name])
             if rel < ev.relative:
                 ev.relative, ev.binding = rel, b.label
+            if rel < 0.0:
+                ev.failing += ((b.label, rel),)
+        ev.failing = tuple(sorted(ev.failing, key=lambda f: f[1]))
         ev.objectives = tuple(self.objective_value(ev, k, s) for k, s in self.design.objectives)
 
     def objective_value(self, ev: Evaluation, key: str, sense: str) -> float:

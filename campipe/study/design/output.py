@@ -194,10 +194,10 @@ def summary_lines(result: DesignResult) -> list[str]:
         elif best.binding:
             lines.append(f"binding: {best.binding} (relative margin {best.relative:.3g})")
     else:
+        fails = " and ".join(f"{label} (relative margin {rel:.3g})" for label, rel in best.failing)
         lines.append(
             f"{result.study.name}: infeasible: no design within design.vary's bounds meets "
-            f"the requirements; the closest, {values}, fails {best.binding} "
-            f"(relative margin {best.relative:.3g})"
+            f"the requirements; the closest, {values}, fails {fails}"
         )
     estimated = sum(not e.onset_proven for e in result.evaluations)
     if estimated:
