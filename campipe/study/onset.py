@@ -257,7 +257,8 @@ def file_contents(result: OnsetStudy) -> tuple[dict, list[VariableSpec], dict, d
             col, dims, sizes["mode"] = padded(col, width), ("combination", "mode"), width
         add(name, dims, "str" if col.dtype == object else "f8", col, **units)
     add("onset_speed_rpm", ("combination",), "f8", t.columns["onset_speed_rpm"], units="rpm",
-        long_name="no-follow onset speed (steady state; NaN: none inside the speed range)",
+        long_name="no-follow onset speed of the cam (steady state; cam rpm; NaN: none inside "
+        "the speed range)",
         tolerance_rpm=on.tolerance / RPM)  # fmt: skip
     add("onset_status", ("combination",), "str", t.columns["onset_status"],
         long_name="found; below: no-follow at the range's lowest speed; none: follows across "

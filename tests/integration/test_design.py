@@ -357,6 +357,8 @@ def test_the_output_json_csv_and_the_file_query_and_plot_read(tmp_path):
         assert ds.spring_preload.attrs["units"] == "N"
         assert_allclose(ds.spring_preload.values[0], first["spring_preload"] * LBF, rtol=1e-12)
         assert ds.attrs["design_feasible"] == "yes"
+        # the cam's speed, said so (a designer with a drive reads engine rpm otherwise)
+        assert ds.onset_speed_rpm.attrs["long_name"].startswith("no-follow onset speed of the cam")
         n = ds.sizes["case"]
     csv = invoke("query", archive, "--format", "csv")
     assert csv.exit_code == 0, csv.output

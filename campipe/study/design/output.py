@@ -111,6 +111,14 @@ def shown_units(result: DesignResult) -> dict[str, str]:
     return out
 
 
+#: The design file's onset: the cam's speed, as campipe onset's (a drive's engine speed is
+#: onset_engine_speed_rpm there, and in design's table).
+ONSET_LONG_NAME = (
+    "no-follow onset speed of the cam (cam rpm; with a drive, the engine's is this over "
+    "drive.cam_per_crank; NaN: none inside the speed range)"
+)
+
+
 def file_contents(result: DesignResult, table: CaseTable) -> tuple[dict, list, dict, dict]:
     """(sizes, variables, arrays, attributes) of the design's netCDF file: ``table``'s
     columns along ``case`` (stored units), ``event_count`` 0 (no events are kept), the
@@ -120,6 +128,8 @@ def file_contents(result: DesignResult, table: CaseTable) -> tuple[dict, list, d
     for name, col in table.columns.items():
         kind = "str" if col.dtype == object else ("i4" if col.dtype.kind == "i" else "f8")
         attrs = {"units": table.units[name]} if table.units[name] else {}
+        if name == ONSET:
+            attrs["long_name"] = ONSET_LONG_NAME
         variables.append(VariableSpec(name, ("case",), kind, attrs))
         arrays[name] = col
     variables.append(VariableSpec("event_count", ("case",), "i4", {"long_name": "events kept "
