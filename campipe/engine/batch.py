@@ -727,7 +727,7 @@ def _run_checked(
         v=out.v,
         acc=out.acc,
         cam_lift=out.cam,
-        cam_force=-out.force[:, :, 0],
+        cam_force=0.0 - out.force[:, :, 0],  # (+0.0 off the cam, not −0.0)
         seat_force=out.force[:, :, 1],
         contact_state=out.cfg,
         valve_reference=qref + lift_zero,  # 0 on a lash's seat

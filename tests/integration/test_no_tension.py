@@ -68,6 +68,9 @@ def test_a_sweep_of_speeds_seats_and_restitutions_stores_no_pulling_contact():
     cam, seat = _least_held_forces(res)
     pulls = np.flatnonzero((cam < -1e-9) | (seat < -1e-9))
     assert pulls.size == 0, [(labels[i], cam[i], seat[i]) for i in pulls]
+    # Off the cam its force is stored as +0.0, not −0.0 (an export read "-0").
+    off = res.cam_force == 0.0
+    assert off.any() and not np.signbit(res.cam_force[off]).any()
     # The sweep holds both contacts, and rests the seat at zero force (seat at 0 in).
     assert np.isfinite(cam).sum() == len(cases) and np.isfinite(seat).sum() > len(cases) // 2
     assert np.min(seat) < 1e-3
