@@ -408,14 +408,9 @@ def validate_text(loaded, spec_path) -> str:
             shown = list(dict.fromkeys(values[a.key]))
         elif listed is not None:
             shown = [str(v) for v in listed]
-        elif a.kind == "sample":
-            lo, hi = s.sample.ranges[a.key]
-            units = coords[a.key][1].units if a.key in coords else ""
-            factor = coords[a.key][2] if a.key in coords else 1.0
-            shown = [
-                f"{s.sample.method} over {lo * factor:.6g} … {hi * factor:.6g} {units}, "
-                f"seed {s.sample.seed}"
-            ]
+        elif a.kind == "sample":  # the range as the spec wrote it
+            low, high = s.sample.written[a.key]
+            shown = [f"{s.sample.method} over {low} … {high}, seed {s.sample.seed}"]
         else:
             shown = [f"{len(s.cases)} entries"]
         text = _listed(shown)

@@ -42,6 +42,28 @@ def test_validate_prints_cases_axes_and_estimates():
     assert "replay: 'speed_rpm == 11000 and seat is none'" in text
 
 
+def test_validate_shows_a_sampled_range_as_the_spec_wrote_it(tmp_path):
+    """A sample's ranges read in the spec's own units (it showed 35025.4 … 52538.1 N/m for
+    a spec that wrote 200 lbf/in … 300 lbf/in, and metres for inches), as a sweep's values
+    do. Broken copy: the SI range."""
+    spec = write_spec(
+        tmp_path,
+        "name: s\nmodel: {preset: thesis-1971}\nprofile: {kind: harmonic, lift: 1 in}\n"
+        "seat: none\nrun: {revolutions: 2}\nspeed: 3000 rpm\n"
+        "sample:\n  method: latin-hypercube\n  n: 3\n  seed: 1\n  ranges:\n"
+        "    model.spring_rate: {from: 200 lbf/in, to: 300 lbf/in}\n"
+        "    profile.lift: {from: 0.3 in, to: 0.4 in}\n",
+        "s.yaml",
+    )
+    out = invoke("validate", str(spec))
+    assert out.exit_code == 0, out.output
+    assert re.search(
+        r"spring_rate\s+sample\s+3 values: latin-hypercube over 200 lbf/in … 300 lbf/in, seed 1",
+        out.output,
+    )
+    assert "latin-hypercube over 0.3 in … 0.4 in, seed 1" in out.output
+
+
 def test_validate_refuses_a_bad_spec_with_its_key_paths(tmp_path):
     path = write_spec(
         tmp_path,

@@ -8,7 +8,7 @@ import copy
 import math
 import re
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TypeVar
 
 import numpy as np
@@ -48,6 +48,8 @@ class Sample:
     n: int  # number of points
     seed: int  # seed of the generator: the same seed gives the same points
     ranges: dict[str, tuple[float, float]]  # key → (from, to) in SI
+    #: key → (from, to) as the spec wrote them ("200 lbf/in"), for the words that show them
+    written: dict[str, tuple[str, str]] = field(default_factory=dict)
 
 
 class Problems:
@@ -512,6 +514,7 @@ def check_sample(
         problems.add("sample.seed", f"found {excerpt(seed)}, expected an integer ≥ 0")
     ranges = problems.check(as_mapping, block["ranges"], "sample.ranges", "key → {from, to}")
     out: dict[str, tuple[float, float]] = {}
+    written: dict[str, tuple[str, str]] = {}
     if ranges is not None:
         if not ranges:
             problems.add("sample.ranges", "empty; expected at least one key → {from, to}")
@@ -526,9 +529,10 @@ def check_sample(
                 got = problems.check(expand_range, r, key, p, False)
                 if got is not None:
                     out[key] = (got[0], got[1])
+                    written[key] = (str(r["from"]).strip(), str(r["to"]).strip())
     if len(problems.items) > before:
         return None
-    return Sample(method, n, seed, out)
+    return Sample(method, n, seed, out, written)
 
 
 def leaf_keys(entry: Mapping, prefix: str = "") -> list[str]:
