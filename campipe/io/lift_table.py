@@ -45,7 +45,7 @@ class LiftTableError(CampipeError, ValueError):
     ``<file>:<line>``, or the file alone)."""
 
 
-def read_lift_table(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
+def read_lift_table(path: str | Path) -> tuple[np.ndarray, np.ndarray, str]:
     """Read a lift table CSV (format above).
 
     Parameters
@@ -59,6 +59,8 @@ def read_lift_table(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
         (m,) cam angles [rad].
     lifts : np.ndarray
         (m,) lifts [m].
+    lift_units : str
+        The lift column's units as its header writes them (``in``, ``mm``).
 
     Raises
     ------
@@ -86,7 +88,7 @@ def read_lift_table(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
             f"{len(rows) - 1} rows, expected at most {MAX_TABLE_ROWS}",
             expected=f"at most {MAX_TABLE_ROWS} rows",
         )
-    scale = _read_header(path, line, header)
+    *scale, lift_units = _read_header(path, line, header)
     values = np.empty((len(rows) - 1, 2))
     for k, (n, row) in enumerate(rows[1:]):
         if len(row) != 2:
@@ -109,7 +111,7 @@ def read_lift_table(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
                     expected="a finite number",
                 )
             values[k, j] = v * scale[j]
-    return values[:, 0].copy(), values[:, 1].copy()
+    return values[:, 0].copy(), values[:, 1].copy(), lift_units
 
 
 #: A cell quoted in a message: a short word, number or header cell. Anything else is not
@@ -125,7 +127,8 @@ def _shown(cell: str) -> str:
     return f"a value of {len(cell)} characters that is no number (not shown)"
 
 
-def _read_header(path: Path, line: int, header: list[str]) -> tuple[float, float]:
+def _read_header(path: Path, line: int, header: list[str]) -> tuple[float, float, str]:
+    """The angle's and the lift's scale to SI, and the lift's units as written."""
     expected = "expected a header such as 'angle [deg],lift [in]'"
     if len(header) != 2:
         shown = ",".join(header)
@@ -137,6 +140,7 @@ def _read_header(path: Path, line: int, header: list[str]) -> tuple[float, float
         )
         raise LiftTableError.at(f"{path}:{line}", f"found {what}, {expected}", found=len(header))
     scale = []
+    written = ""
     for cell, (name, (units, example)) in zip(header, COLUMNS.items(), strict=True):
         m = _HEADER.match(cell)
         if not m or m["name"].lower() != name:
@@ -145,6 +149,7 @@ def _read_header(path: Path, line: int, header: list[str]) -> tuple[float, float
                 f"found column {_shown(cell)} where '{name} [units]' belongs; " + expected,
                 found=cell.strip() if _SHOWN.match(cell) else None,
             )
+        written = m["units"].strip()  # the last column's: the lift's
         try:
             parse = parse_angular if name == "angle" else parse_quantity
             scale.append(parse(f"1 {m['units']}", units, f"{path}:{line}: {name}", example))
@@ -152,7 +157,7 @@ def _read_header(path: Path, line: int, header: list[str]) -> tuple[float, float
             raise LiftTableError(
                 str(exc), key=exc.key, found=exc.found, expected=exc.expected, reason=exc.reason
             ) from None
-    return scale[0], scale[1]
+    return scale[0], scale[1], written
 
 
 def table_digest(angles: np.ndarray, lifts: np.ndarray) -> str:

@@ -16,12 +16,14 @@ def write(tmp_path, text):
 
 def test_units_come_from_the_header(tmp_path):
     path = write(tmp_path, "# cam 17\n\nangle [deg],lift [in]\n0,0\n90,0.5\n180,1\n270,0.5\n")
-    angles, lifts = read_lift_table(path)
+    angles, lifts, units = read_lift_table(path)
     assert_allclose(angles, [0, math.pi / 2, math.pi, 3 * math.pi / 2], rtol=1e-15)
     assert_array_equal(lifts, [0, 0.5 * 0.0254, 0.0254, 0.5 * 0.0254])
-    angles, lifts = read_lift_table(write(tmp_path, "angle [rad], lift [mm]\n0,1\n1,2\n"))
+    assert units == "in"
+    angles, lifts, units = read_lift_table(write(tmp_path, "angle [rad], lift [mm]\n0,1\n1,2\n"))
     assert_array_equal(angles, [0, 1])
     assert_allclose(lifts, [1e-3, 2e-3], rtol=1e-15)
+    assert units == "mm"
 
 
 @pytest.mark.parametrize(

@@ -105,8 +105,8 @@ def test_a_dwell_cam_s_table_is_read_where_its_spline_only_rings_below_the_base(
     point ≥ 0): the periodic cubic spline through it rings nanometres below 0 beside the
     dwell (a helper's measured-style tables were all refused); within 1e-6 of the lift it is
     read, and its lift is the polydyne's at the table's points. A table whose points dip 1 µm
-    below the base circle is still refused. Broken copy: the round-off tolerance (1e-12 m)
-    for tables too."""
+    below the base circle is still refused, its dip in the table's units. Broken copies: the
+    round-off tolerance (1e-12 m) for tables too; the dip in inches."""
     cam = polydyne("4567", 9e-3, *np.radians([110, 20, 110]))
     for step in (1, 2):
         angles = np.arange(0, 360, step)
@@ -124,6 +124,8 @@ def test_a_dwell_cam_s_table_is_read_where_its_spline_only_rings_below_the_base(
         expand(check_spec(spec(profile={"kind": "table", "file": "dip.csv"}), directory=tmp_path))
     assert info.value.problems[0].path == "profile.file"
     assert "never below the base circle" in info.value.problems[0].message
+    # in the table's own units (it read -4.01e-05 in for a table in mm)
+    assert "lift falls to -0.001 mm" in info.value.problems[0].message
 
 
 def test_a_flat_through_zero_is_written_past_360_degrees():

@@ -236,12 +236,13 @@ def check_train(train: ValveTrain) -> None:
 
 
 @functools.lru_cache(maxsize=256)
-def _lift_table(path: Path, mtime_ns: int) -> tuple[np.ndarray, np.ndarray, str]:
+def _lift_table(path: Path, mtime_ns: int) -> tuple[np.ndarray, np.ndarray, str, str]:
+    """(angles, lifts, digest, the lift's units as the header writes them) of a table."""
     try:
-        angles, lifts = read_lift_table(path)
+        angles, lifts, units = read_lift_table(path)
     except LiftTableError as exc:
         raise SpecProblem("profile.file", str(exc)) from None
-    return angles, lifts, table_digest(angles, lifts)
+    return angles, lifts, table_digest(angles, lifts), units
 
 
 @functools.lru_cache(maxsize=1024)
@@ -287,7 +288,7 @@ def _profile(frozen: tuple, directory: Path) -> tuple[Profile, dict, dict[str, o
                     f"{path} ({exc.strerror}); the path is relative to the "
                     "spec",
                 ) from None
-            angles, lifts, digest = _lift_table(path, mtime)
+            angles, lifts, digest, _ = _lift_table(path, mtime)
             try:
                 profile = table(angles, lifts)
             except ValueError as exc:
@@ -312,6 +313,9 @@ def _profile(frozen: tuple, directory: Path) -> tuple[Profile, dict, dict[str, o
 def _with_defects(frozen_profile: tuple, frozen_defects: tuple, directory: Path):
     profile, canonical, values = _profile(frozen_profile, directory)
     written = _thaw(frozen_profile).get("lift")
+    if "profile.file" in values:  # a table's lift reads in its header's units
+        path = (directory / str(values["profile.file"])).resolve()
+        written = f"1 {_lift_table(path, path.stat().st_mtime_ns)[3]}"
     out = profile
     defects = []
     for i, d in enumerate(_thaw_list(frozen_defects)):
