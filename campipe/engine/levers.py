@@ -42,6 +42,7 @@ Pure numerics on the result's arrays.
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -50,11 +51,20 @@ from campipe.constants import TWO_PI
 from campipe.engine.case import Case
 from campipe.engine.loads import turn_maxima
 from campipe.engine.metrics import MAX_CAM_FORCE, MAX_CAM_IMPACT_VELOCITY, MAX_ROLLER_FORCE
+from campipe.engine.plunger import EXTENSION, carried
 from campipe.engine.result import BatchResult
 from campipe.engine.settings import DEFAULT_CAPTURE_VELOCITY
+from campipe.model.hla import on_pivot
 from campipe.profiles import Profile
 from campipe.profiles.curvature import contact_radius
-from campipe.profiles.levers import cam_of, contact_angles, is_valve_side, lever_ratio
+from campipe.profiles.levers import (
+    ValveSideProfile,
+    cam_of,
+    contact_angles,
+    is_valve_side,
+    lever_ratio,
+    pivot_raised,
+)
 from campipe.vocabulary import CAM_IMPACT, EV_IMPULSE, EV_KIND, EV_TIME, EV_VELOCITY
 
 #: The cam angles [rad] a turn's largest lever ratio is taken over (every 0.5°).
@@ -66,6 +76,7 @@ def at_the_cam(
     cases: Sequence[Case],
     capture: float = DEFAULT_CAPTURE_VELOCITY,
     pressure: bool = True,
+    integrator: str = "default",
 ) -> BatchResult:
     """``result`` with each lever layout's cam force (histories and ``max_cam_force`` per
     turn) the roller's normal force on the cam, and its cam impacts (events and
@@ -73,7 +84,10 @@ def at_the_cam(
     ``capture`` [m/s] (see the module), and with ``pressure`` (the Hertz pressure wanted) the
     cam contact's radius at the samples where the cam's shape gives it (:func:`contact_radii`:
     a lever's takes its kinematics at every sample, 23 ms for a finger's three turns at 1°);
-    ``result`` itself if neither."""
+    ``result`` itself if neither. A finger whose pivot's adjuster the run (under
+    ``integrator``) moved turn by turn ran each turn on its pivot raised by the turn's
+    extension (``engine.lash_adjuster.extended``): its ratio is that turn's
+    (:class:`TurnRatio`)."""
     radius = contact_radii(np.asarray(result.cam_angle, float), cases) if pressure else None
     if radius is not None:
         result = dataclasses.replace(result, cam_contact_radius=radius, _derived={})
@@ -86,9 +100,15 @@ def at_the_cam(
     ratios: dict[int, np.ndarray] = {}  # a study's cases share their derived profiles
     for i in levers:
         profile = cases[i].profile
-        ratio = ratios.setdefault(id(profile), lever_ratio(profile, theta))
-        force[i] = result.cam_force[i] * ratio
         first = int(result.recorded_from[i]) if result.recorded_from.size else 0
+        turns = TurnRatio(profile, _moved_extensions(result, cases[i], i, integrator))
+        if turns.extensions is None:
+            ratio = ratios.setdefault(id(profile), lever_ratio(profile, theta))
+        else:
+            n_hist = max(int(np.ceil(theta[-1] / TWO_PI - 1e-9)), 1)
+            turn = first + np.minimum(np.floor(theta / TWO_PI + 1e-9).astype(np.int64), n_hist - 1)
+            ratio = turns(theta, turn)
+        force[i] = result.cam_force[i] * ratio
         followed = result.per_rev[i, :, MAX_ROLLER_FORCE]
         if np.all(followed > 0.0):  # the engine's own in every turn
             per_rev[i, :, MAX_CAM_FORCE] = followed
@@ -100,9 +120,49 @@ def at_the_cam(
         if i < len(events):
             events[i], per_rev[i, :, MAX_CAM_IMPACT_VELOCITY] = impacts_at_the_cam(
                 events[i], result.per_rev[i, :, MAX_CAM_IMPACT_VELOCITY], profile,
-                cases[i].speed, capture,
+                cases[i].speed, capture, turns.extensions,
             )  # fmt: skip
     return dataclasses.replace(result, cam_force=force, per_rev=per_rev, events=events, _derived={})
+
+
+class TurnRatio:
+    """A lever layout's ratio r(θ) at cam angles of given turns: on its derived ``profile``,
+    or where a pivot's adjuster was moved turn by turn (``extensions``, each turn's at its
+    start [m]; None: never), turn k's on the pivot raised by ``extensions[k]``, the profile
+    that turn ran on (``engine.lash_adjuster.extended``, each extension's derived once)."""
+
+    def __init__(self, profile: Profile, extensions: np.ndarray | None) -> None:
+        self.profile, self.extensions = profile, extensions
+        self._raised: dict[float, Profile] = {}
+
+    def __call__(self, theta: np.ndarray, turn: np.ndarray) -> np.ndarray:
+        if self.extensions is None:
+            return lever_ratio(self.profile, theta)
+        out = np.empty(np.shape(theta))
+        last = self.extensions.size - 1
+        for k in np.unique(turn):
+            e = float(self.extensions[min(max(int(k), 0), last)])
+            e = e if math.isfinite(e) else 0.0  # (a failed case's turns: the nominal)
+            if e not in self._raised:
+                profile = self.profile
+                if e and isinstance(profile, ValveSideProfile):
+                    profile = pivot_raised(profile, e)
+                self._raised[e] = profile
+            here = turn == k
+            out[here] = lever_ratio(self._raised[e], theta[here])
+        return out
+
+
+def _moved_extensions(
+    result: BatchResult, case: Case, i: int, integrator: str
+) -> np.ndarray | None:
+    """Each turn's extension at its start [m] of case ``i``'s pivot adjuster where the run
+    moved it turn by turn (``engine.lash_adjuster``), else None."""
+    if not (result.lash_adjuster.size and on_pivot(case.train)):
+        return None
+    if carried(case, integrator):
+        return None
+    return np.asarray(result.lash_adjuster[i, :, EXTENSION], float)
 
 
 def contact_radii(theta: np.ndarray, cases: Sequence[Case]) -> np.ndarray | None:
@@ -132,21 +192,27 @@ def contact_radii(theta: np.ndarray, cases: Sequence[Case]) -> np.ndarray | None
 
 
 def impacts_at_the_cam(
-    events: np.ndarray, fastest: np.ndarray, profile: Profile, speed: float, capture: float
+    events: np.ndarray,
+    fastest: np.ndarray,
+    profile: Profile,
+    speed: float,
+    capture: float,
+    extensions: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """A lever layout's case's events (n_ev, 6) with each cam impact's closing velocity and
     impulse the roller's, and (n_turns,) each turn's largest closing velocity [m/s] from the
     valve side's ``fastest`` (see the module), at cam speed ``speed`` [rad/s] on the derived
-    ``profile``, impacts slower than ``capture`` [m/s] not counted."""
+    ``profile`` (each turn's pivot raised by ``extensions``: :class:`TurnRatio`), impacts
+    slower than ``capture`` [m/s] not counted."""
     events = np.array(events, float, copy=True)
     out = np.asarray(fastest, float).copy()
     cam = np.flatnonzero(events[:, EV_KIND] == CAM_IMPACT) if events.size else np.zeros(0, int)
     angle = speed * events[cam, EV_TIME]
     valve_side = events[cam, EV_VELOCITY].copy()
-    r = lever_ratio(profile, np.mod(angle, TWO_PI))
+    turn = np.floor(angle / TWO_PI + 1e-12).astype(np.int64)
+    r = TurnRatio(profile, extensions)(np.mod(angle, TWO_PI), turn)
     events[cam, EV_VELOCITY] = valve_side / r
     events[cam, EV_IMPULSE] *= r
-    turn = np.floor(angle / TWO_PI + 1e-12).astype(np.int64)
     widest = None  # the turn's largest ratio, found only for a turn with none recorded
     for k in np.flatnonzero(out > 0.0):  # (NaN: a failed case's, kept)
         counted = (turn == k) & (angle >= 0.0) & (valve_side >= min(capture, out[k]) * (1 - 1e-12))

@@ -342,3 +342,32 @@ def test_a_lever_s_archived_cam_force_is_the_roller_s_force_on_the_cam(tmp_path)
 
     same = at_the_cam(thesis, [Case(valve_train("thesis-1971"), harmonic(LIFT), 1000 * RPM)])
     assert same is thesis
+
+
+def test_a_pivot_moved_turn_by_turn_gives_the_roller_its_turn_s_ratio():
+    """With rigid contacts the pivot's adjuster moves once a turn, and each turn runs on the
+    pivot raised by its extension (0.3 mm at the start here, leaking down). The roller's
+    force at the cam is the pallet's times that turn's lever ratio: at samples on the cam,
+    the hand's geometry with the pivot raised by the turn's extension, to 1e-9; so no sample
+    of a turn's history exceeds the turn's max_cam_force (the engine's own maximum of the
+    roller's force). Broken copy: the ratio of the pivot at rest (0.06 % off here; a
+    helper's finger study read histories 0.38 N above their turn's maximum)."""
+    from campipe.engine.levers import at_the_cam
+    from campipe.engine.plunger import EXTENSION
+
+    case = Case(finger(hla_extension="0.3 mm"), harmonic(LIFT), 1000 * RPM)
+    valve_side = run_batch([case], RunSettings(revolutions=3))
+    roller = at_the_cam(valve_side, [case])
+    extension = valve_side.lash_adjuster[0, :, EXTENSION]
+    assert extension[0] == pytest.approx(3e-4) and np.all(np.diff(extension) < -1e-6)
+    theta = np.asarray(valve_side.cam_angle)
+    hand = Hand()
+    for k in range(3):
+        turn = (theta >= 2 * math.pi * k) & (theta <= 2 * math.pi * (k + 1))
+        for degrees in (200, 270):  # on the cam's flank and nose
+            j = 360 * k + degrees
+            assert valve_side.contact_state[0, j] == 1
+            ratio = roller.cam_force[0, j] / valve_side.cam_force[0, j]
+            expected = hand.roller_force(theta[j] % (2 * math.pi), 1.0, extension[k])[0]
+            assert ratio == pytest.approx(expected, rel=1e-9)
+        assert roller.cam_force[0, turn].max() <= roller.per_rev[0, k, MAX_CAM_FORCE]
