@@ -37,7 +37,9 @@ seat written as ``0.1 in``; zero equals only zero.
 seat, or NaN (a failed case's metric, ``dt`` chosen by the integrator); ``x == none`` and
 ``x in [none, ...]`` mean the same, ``is not none`` and ``!= none`` the opposite. ``is nan``
 is the older spelling of ``is none`` and means the same. A seat of none orders below every
-seat: ``seat < 0.05 in`` holds for it.
+seat: ``seat < 0.05 in`` holds for it. Any other column's none (an impact velocity where the
+case had no such impact, ``query.tables.OF_IMPACTS``) is no value, for which no ``<``, ``<=``,
+``>`` or ``>=`` holds: a valve that never seats has no seating velocity, not a slow one.
 """
 
 from __future__ import annotations
@@ -555,6 +557,22 @@ def _no_value(v) -> np.ndarray:
     return np.isnan(a) | np.isneginf(a)
 
 
+#: Columns whose none (-inf) orders below every value: no seat (see the module).
+ORDERED_NONE = frozenset({"seat"})
+
+
+def unordered_none(name: str, values: np.ndarray) -> np.ndarray:
+    """A column's values with none (-inf) as NaN where none is no value (every column but
+    :data:`ORDERED_NONE`): it then orders nowhere, and sorts last."""
+    if name in ORDERED_NONE or values.dtype.kind != "f":
+        return values
+    return np.where(np.isneginf(values), np.nan, values)
+
+
+def _unordered_none(v, x: np.ndarray) -> np.ndarray:
+    return unordered_none(v.name, x) if isinstance(v, _Column) else x
+
+
 def _numbers(a, b) -> tuple[np.ndarray, np.ndarray]:
     """Both sides as floats in the units of the column among them (see the module)."""
     column = a if isinstance(a, _Column) else b if isinstance(b, _Column) else None
@@ -663,6 +681,8 @@ def _compare(op: str, a, b, a_node, b_node) -> np.ndarray:
         eq = _plain(left) == _plain(right)
         return eq if op == "==" else ~eq
     x, y = _numbers(a, b)
+    if op not in ("==", "!="):  # no value (but no seat) orders nowhere
+        x, y = _unordered_none(a, x), _unordered_none(b, y)
     if op in ("==", "!="):
         eq = np.isclose(x, y, rtol=EQUAL_RTOL, atol=0.0) | ((x == y) & np.isinf(x))
         return eq if op == "==" else ~eq

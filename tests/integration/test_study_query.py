@@ -178,6 +178,28 @@ def test_sorting_is_stable_descending_with_minus_and_keeps_nan_last():
         select(t, sort="sped")
 
 
+def test_no_impact_is_no_value_where_no_seat_is_below_every_seat():
+    """An impact velocity where the case had none reads none (-inf in the table,
+    ``OF_IMPACTS``), as no seat does; but it is no value, not a slow impact: no order
+    comparison holds for it, and it sorts last either way. A helper's
+    ``max_seating_velocity < 1 m/s`` returned 115 cases that never seated beside the 7 that
+    landed slower. Broken copy: -inf ordered as a seat's none."""
+    t = toy()
+    t.columns["max_seating_velocity"] = np.array([-np.inf, 0.5, -np.inf, 9.0])
+    t.units["max_seating_velocity"] = "m/s"
+    assert select(t, "max_seating_velocity < 1 m/s").tolist() == [1]
+    assert select(t, "max_seating_velocity <= 1 m/s or max_seating_velocity > 5 m/s").tolist() == [
+        1,
+        3,
+    ]
+    assert select(t, "not max_seating_velocity >= 1 m/s").tolist() == [0, 1, 2]
+    assert select(t, "max_seating_velocity is none").tolist() == [0, 2]
+    assert select(t, "max_seating_velocity == none").tolist() == [0, 2]
+    assert select(t, sort="max_seating_velocity").tolist() == [1, 3, 0, 2]
+    assert select(t, sort="-max_seating_velocity").tolist() == [3, 1, 0, 2]
+    assert select(t, "seat < 0.05 in").tolist() == [0, 2, 3]  # no seat still orders below
+
+
 def test_formats_table_csv_json():
     t = toy()
     rows = np.array([2, 1])

@@ -21,7 +21,7 @@ from campipe.study.query.display import display_units, format_value, label, to_d
 from campipe.study.spec.coordinates import coordinate_values
 from campipe.study.spec.drive import ENGINE_SPEED_NAME
 from campipe.study.spec.variables import NONE_WORD, VARIABLES, case_coordinates, data_variables
-from campipe.study.where import QueryError, Where, evaluate, parse_where
+from campipe.study.where import QueryError, Where, evaluate, parse_where, unordered_none
 from campipe.units import degree_speed
 from campipe.vocabulary import EVENTS_TRUNCATED, FAILURES, STATUS
 
@@ -142,7 +142,7 @@ def select(table: CaseTable, where: str | None = None, sort: str | None = None) 
                 raise QueryError.at(
                     "--sort", f"unknown column {excerpt(name)}{did_you_mean(name, table.columns)}"
                 )
-            values = table.columns[name][rows]
+            values = unordered_none(name, table.columns[name][rows])  # (no impact: last)
             if values.ndim != 1:
                 raise QueryError.at("--sort", f"{name} holds several values per case")
             rows = rows[_order(values, descending)]
@@ -150,7 +150,8 @@ def select(table: CaseTable, where: str | None = None, sort: str | None = None) 
 
 
 def _order(values: np.ndarray, descending: bool) -> np.ndarray:
-    """Stable order; NaN last either way (no seat, -inf, first ascending)."""
+    """Stable order; NaN last either way (no seat, -inf, first ascending; another column's
+    none, no value, last: ``where.unordered_none``)."""
     if values.dtype.kind in "iuf":
         v = values.astype(float)
         key = -v if descending else v
