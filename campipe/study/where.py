@@ -157,6 +157,16 @@ class Where:
     quantities: dict[str, Quantity] = field(default_factory=dict)  # placeholder name → quantity
 
 
+def _has_comment(source: str) -> bool:
+    """Whether Python's tokenizer reads a comment in ``source`` (its syntax errors are the
+    parser's to report)."""
+    try:
+        tokens = tokenize.generate_tokens(io.StringIO(source).readline)
+        return any(t.type == tokenize.COMMENT for t in tokens)
+    except (tokenize.TokenError, SyntaxError):
+        return False
+
+
 def parse_where(text: str) -> Where:
     """Parse and check a ``--where`` expression.
 
@@ -172,7 +182,14 @@ def parse_where(text: str) -> Where:
         raise QueryError.at(
             "--where", f"{len(text)} characters, expected at most {MAX_WHERE_LENGTH}"
         )
+    text = " ".join(text.splitlines())  # a condition split over lines reads as one
     source, quantities = _read_quantities(text.strip())
+    if _has_comment(source):
+        raise QueryError.at(
+            "--where",
+            f"found '#' in {excerpt(text)}: it would start a comment and drop the rest of the "
+            "condition unread; remove it (a '#' inside a quoted string is text)",
+        )
     try:
         with warnings.catch_warnings():  # e.g. "invalid decimal literal": refused below anyway
             warnings.simplefilter("ignore", SyntaxWarning)

@@ -99,6 +99,8 @@ def toy() -> CaseTable:
         ("seat == -inf", [0, 2]),
         ("0.1 in is none", []),  # a quantity always has a value
         ("none == none", [0, 1, 2, 3]),
+        ("speed_rpm > 9000\nand seat is none", [2]),  # split over lines, as a shell may
+        ("closure == '#'", []),  # a '#' in a string is text
     ],
 )
 def test_where_selects_the_rows(where, rows):
@@ -154,6 +156,9 @@ def test_malicious_where_is_refused_and_nothing_runs(tmp_path, where):
         ("1 in == 2 in", "compare 1 in with a column"),
         ("closure == 1 in", "closure is text and 1 in is not"),
         ("speed_rpm > 1e400 rpm", "beyond the range of a float"),
+        # a '#' would drop the rest unread (a helper's 'speed_rpm > 9000 # and seat == 0.1
+        # in' selected the seatless cases too)
+        ("speed_rpm > 9000 # and seat == 0.1 in", "found '#'"),
     ],
 )
 def test_refusals_say_why(where, words):
