@@ -471,8 +471,9 @@ class Plunger:
                 continue
             force, gap = adjuster_load(old[j], part, j)
             switches = interpolated_switches(
-                part.time[j], force, h.check_force, part.contact_state[j], self.closed[i]
-            )
+                part.time[j], force, h.check_force, part.contact_state[j], self.closed[i],
+                part.events[j],
+            )  # fmt: skip
             if self.closed[i] is None:
                 self.closed[i] = bool(force[0] > h.check_force)
             if len(switches) % 2:  # the valve as the turn leaves it

@@ -66,12 +66,22 @@ from campipe.model.elements import chain_elements
 from campipe.model.hla import adjuster, on_pivot
 from campipe.model.layouts import chain_placement
 from campipe.vocabulary import (
+    CAM_IMPACT,
+    CAM_SEPARATION,
     CHECK_VALVE_CLOSES,
     CHECK_VALVE_OPENS,
+    EV_KIND,
+    EV_TIME,
+    EV_TO,
     N_EVENT_FIELDS,
     PLUNGER_BOTTOMS,
     PLUNGER_TOPS,
+    SEAT_IMPACT,
+    SEAT_SEPARATION,
 )
+
+#: The events that change the contacts' configuration.
+CONTACT_EVENTS = (CAM_SEPARATION, CAM_IMPACT, SEAT_SEPARATION, SEAT_IMPACT)
 
 #: The plunger's regimes: check valve closed (leaking down), open (pumping up), bottomed
 #: out, fully out; held where the settings' start puts it until t = 0 (a periodic start
@@ -211,14 +221,17 @@ def interpolated_switches(
     check_force: float,
     cfg: np.ndarray,
     closed: bool | None = None,
+    events: np.ndarray | None = None,
 ) -> np.ndarray:
     """(m, N_EVENT_FIELDS) the check valve's switches of a turn the per-turn model runs
     (``lash_adjuster.Plunger``): where the force through the adjuster at the samples
     (``time`` [s], ``force`` [N]) crosses F_c on their linear interpolant, with the dead band
     HYSTERESIS (the check valve opening where it falls to F_c·(1 − HYSTERESIS), closing where
-    it rises to F_c·(1 + HYSTERESIS)); each in the configuration ``cfg`` of the sample before
-    it, velocity 0. The valve starts ``closed`` as the last turn left it (None: closed where
-    the first sample's force is above F_c), so a turn's switches go on from the last's."""
+    it rises to F_c·(1 + HYSTERESIS)); each in the configuration the turn's contact
+    ``events`` before it leave (none before it: the configuration ``cfg`` of the first
+    sample; ``events`` None: of the sample before it), velocity 0. The valve starts
+    ``closed`` as the last turn left it (None: closed where the first sample's force is above
+    F_c), so a turn's switches go on from the last's."""
     low, high = check_force * (1.0 - HYSTERESIS), check_force * (1.0 + HYSTERESIS)
     f = np.asarray(force, float)
     down = np.flatnonzero((f[:-1] > low) & (f[1:] <= low))
@@ -233,9 +246,17 @@ def interpolated_switches(
             continue
         share = (f[i] - level) / (f[i] - f[i + 1])
         t = time[i] + share * (time[i + 1] - time[i])
-        rows.append((t, kind, cfg[i], cfg[i], 0.0, 0.0))
+        here = cfg[i] if events is None else _configuration_at(t, events, cfg[0])
+        rows.append((t, kind, here, here, 0.0, 0.0))
         closed = not closed
     return np.array(rows, float).reshape(len(rows), N_EVENT_FIELDS)
+
+
+def _configuration_at(t: float, events: np.ndarray, first: float) -> float:
+    """The configuration at time ``t`` [s]: the one the last contact event (separation or
+    impact) of ``events`` at or before it leaves, ``first`` before any."""
+    contact = np.isin(events[:, EV_KIND], CONTACT_EVENTS) & (events[:, EV_TIME] <= t)
+    return float(events[np.flatnonzero(contact)[-1], EV_TO]) if contact.any() else float(first)
 
 
 def plunger_state(train, mass_inverse: np.ndarray, gains: Any = None) -> PlungerState | None:
