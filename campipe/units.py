@@ -495,6 +495,7 @@ UNIT_SYSTEMS: dict[str, dict[str, str]] = {
     "si": {},
     # the thesis's units: inches, pounds-force and seconds
     "in-lbf": {
+        "Pa": "psi",  # (a contact pressure)
         "m": "in",
         "N": "lbf",
         "m/s": "in/s",

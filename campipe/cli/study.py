@@ -472,6 +472,11 @@ def query(archive, where, columns, sort, fmt, summary, units, verify) -> None:
     from campipe.study.query.tables import case_table, displayed, format_rows, select
     from campipe.study.query.tables import summary as summary_text
 
+    if summary and fmt != "table":
+        raise click.UsageError(
+            f"--summary prints text; --format {fmt} takes the cases' rows (query without "
+            "--summary, --columns and --where choosing them)"
+        )
     with _open_archive(archive, verify, ("cam_angle",)) as ds:  # query reads no history
         if summary:
             click.echo(summary_text(ds, where, units))

@@ -290,6 +290,9 @@ def test_campipe_query_on_an_archive(archive):
     assert out.exit_code == 2 and "'__import__' is not allowed" in out.output
     out = runner.invoke(main, ["query", str(archive), "--summary"])
     assert out.exit_code == 0 and "separation onset" in out.output
+    # the summary is text: a script asking for JSON is told, not given text with exit 0
+    out = runner.invoke(main, ["query", str(archive), "--summary", "--format", "json"])
+    assert out.exit_code == 2 and "--summary prints text" in out.output
     out = runner.invoke(main, ["query", str(archive)])
     assert out.exit_code == 0 and out.output.strip().endswith("(8 of 8 cases)")
 

@@ -76,6 +76,11 @@ def test_per_degree_units_divide_by_the_cam_speed_in_degrees_per_second():
     acc = convert_values(np.array([1.0]), "m/s^2", "mm/deg^2", 6000.0)
     assert acc[0] == pytest.approx(1000 / 36000**2, rel=1e-15)
     assert convert_values(np.array([2.5e6]), "Pa", "MPa")[0] == pytest.approx(2.5, rel=1e-15)
+    # the thesis's units give a contact pressure in psi (it stayed in Pa): 1 psi is
+    # 0.45359237 kg × 9.80665 m/s² over (0.0254 m)², by definition
+    assert UNIT_SYSTEMS["in-lbf"]["Pa"] == "psi"
+    psi = 0.45359237 * 9.80665 / 0.0254**2
+    assert convert_values(np.array([1e9]), "Pa", "psi")[0] == pytest.approx(1e9 / psi, rel=1e-12)
     with pytest.raises(ValueError, match="cam speed"):
         convert_values(v, "m/s", "mm/deg")
     with pytest.raises(ValueError, match="not a mm/s"):
