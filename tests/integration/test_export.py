@@ -86,10 +86,11 @@ def test_si_csv_holds_the_stored_values_to_the_bit(small_archive, tmp_path):
         contact = ds.contact_state.sel(case=cid).values
     assert np.array_equal(np.array(cols["valve_velocity [m/s]"], float), stored)
     assert [int(c) for c in cols["contact_state"]] == contact.tolist()
-    # a force out of contact is stored as -0.0 and written as 0.0, not "-0.0"
+    # a force out of contact is stored as +0.0 (the engine's negated zero was -0.0) and
+    # written as 0.0, not "-0.0"
     with xr.open_dataset(small_archive.archive) as ds:
         force = ds.cam_force.sel(case=cid).values
-    assert np.any((force == 0) & np.signbit(force))
+    assert np.any(force == 0) and not np.signbit(force[force == 0]).any()
     assert "-0.0" not in cols["cam_force [N]"]
     assert np.array_equal(np.array(cols["cam_force [N]"], float), force)
 
