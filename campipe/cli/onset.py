@@ -24,8 +24,9 @@ from campipe.constants import DEFAULT_ONSET_LEVEL_DEG, DEFAULT_ONSET_TOLERANCE_R
     default=f"{DEFAULT_ONSET_LEVEL_DEG:g} deg",
     show_default=True,
     metavar="ANGLE",
-    help="With a seat, the no-follow a turn the onset reaches (0 deg: the first separation). "
-    "Without a seat the onset is the first separation.",
+    help="With a seat, the no-follow a turn the onset reaches (0 deg: the first separation, "
+    "a flight the engine keeps: over a nanometre). Without a seat the onset is the first "
+    "separation.",
 )
 @click.option(
     "--format",

@@ -133,7 +133,10 @@ _BEFORE_METRICS: dict[str, Variable] = {
         HISTORY, "f8", "pushrod foot height in the cam's lift coordinate", "m"
     ),
     "valve_lift": Variable(
-        HISTORY, "f8", "valve opening from its base-circle static position", "m"
+        HISTORY,
+        "f8",
+        "valve opening from its base-circle static position, or from its seat in a train with lash",
+        "m",
     ),
     "cam_force": Variable(
         HISTORY, "f8", "cam contact force, compressive positive, zero out of contact", "N"
