@@ -42,19 +42,21 @@ def test_validate_prints_cases_axes_and_estimates():
     assert "replay: 'speed_rpm == 11000 and seat is none'" in text
 
 
+def _validated(tmp_path, rest: str):
+    """campipe validate of the thesis's train on its harmonic cam, no seat, and ``rest``."""
+    head = "name: v\nmodel: {preset: thesis-1971}\nprofile: {kind: harmonic, lift: 1 in}\n"
+    return invoke("validate", str(write_spec(tmp_path, head + "seat: none\n" + rest, "v.yaml")))
+
+
 def test_validate_estimates_a_quasi_static_start(tmp_path):
     """A spec with ``run.start: quasi-static`` (one warm-up turn by default) validates and
     gets its estimate: validate's kernel-loading run of a hundredth of a turn took the
     warm-up too and was refused (a helper's, and the quickstart's with the start changed),
     where campipe study runs the spec. Broken copy: the warm-up kept."""
-    spec = write_spec(
+    out = _validated(
         tmp_path,
-        "name: qs\nmodel: {preset: thesis-1971}\nprofile: {kind: harmonic, lift: 1 in}\n"
-        "seat: none\nrun: {revolutions: 3, start: quasi-static}\n"
-        "sweep: {speed: [3000 rpm, 6000 rpm]}\n",
-        "qs.yaml",
+        "run: {revolutions: 3, start: quasi-static}\nsweep: {speed: [3000 rpm, 6000 rpm]}\n",
     )
-    out = invoke("validate", str(spec))
     assert out.exit_code == 0, out.output
     assert "run time: about" in out.output
 
@@ -63,16 +65,13 @@ def test_validate_shows_a_sampled_range_as_the_spec_wrote_it(tmp_path):
     """A sample's ranges read in the spec's own units (it showed 35025.4 … 52538.1 N/m for
     a spec that wrote 200 lbf/in … 300 lbf/in, and metres for inches), as a sweep's values
     do. Broken copy: the SI range."""
-    spec = write_spec(
+    out = _validated(
         tmp_path,
-        "name: s\nmodel: {preset: thesis-1971}\nprofile: {kind: harmonic, lift: 1 in}\n"
-        "seat: none\nrun: {revolutions: 2}\nspeed: 3000 rpm\n"
+        "run: {revolutions: 2}\nspeed: 3000 rpm\n"
         "sample:\n  method: latin-hypercube\n  n: 3\n  seed: 1\n  ranges:\n"
         "    model.spring_rate: {from: 200 lbf/in, to: 300 lbf/in}\n"
         "    profile.lift: {from: 0.3 in, to: 0.4 in}\n",
-        "s.yaml",
     )
-    out = invoke("validate", str(spec))
     assert out.exit_code == 0, out.output
     assert re.search(
         r"spring_rate\s+sample\s+3 values: latin-hypercube over 200 lbf/in … 300 lbf/in, seed 1",
