@@ -49,7 +49,7 @@ import numpy as np
 
 from campipe.constants import TWO_PI
 from campipe.engine.case import Case
-from campipe.engine.loads import turn_maxima
+from campipe.engine.loads import sample_turns, turn_maxima
 from campipe.engine.metrics import MAX_CAM_FORCE, MAX_CAM_IMPACT_VELOCITY, MAX_ROLLER_FORCE
 from campipe.engine.plunger import EXTENSION, carried
 from campipe.engine.result import BatchResult
@@ -105,9 +105,7 @@ def at_the_cam(
         if turns.extensions is None:
             ratio = ratios.setdefault(id(profile), lever_ratio(profile, theta))
         else:
-            n_hist = max(int(np.ceil(theta[-1] / TWO_PI - 1e-9)), 1)
-            turn = first + np.minimum(np.floor(theta / TWO_PI + 1e-9).astype(np.int64), n_hist - 1)
-            ratio = turns(theta, turn)
+            ratio = turns(theta, sample_turns(theta, first))
         force[i] = result.cam_force[i] * ratio
         followed = result.per_rev[i, :, MAX_ROLLER_FORCE]
         if np.all(followed > 0.0):  # the engine's own in every turn

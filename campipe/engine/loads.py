@@ -164,6 +164,13 @@ def per_turn(history: np.ndarray, cam_angle: np.ndarray, n_rev: int, how: str) -
     return out
 
 
+def sample_turns(theta: np.ndarray, first: int = 0) -> np.ndarray:
+    """(n_out,) the turn (from 0) of each sample at cam angle ``theta`` [rad] from the recorded
+    window's start, turn ``first``: a turn's end sample is its own, not the next's."""
+    n_hist = max(int(np.ceil(theta[-1] / TWO_PI - 1e-9)), 1)
+    return first + np.minimum(np.floor(theta / TWO_PI + 1e-9).astype(np.int64), n_hist - 1)
+
+
 def turn_maxima(
     force: np.ndarray, ratio: np.ndarray, theta: np.ndarray, largest: np.ndarray, first: int = 0
 ) -> np.ndarray:
@@ -180,8 +187,7 @@ def turn_maxima(
     valid = np.isfinite(force)
     if not valid.any():
         return out
-    n_hist = max(int(np.ceil(theta[-1] / TWO_PI - 1e-9)), 1)
-    turn = first + np.minimum(np.floor(theta / TWO_PI + 1e-9).astype(np.int64), n_hist - 1)
+    turn = sample_turns(theta, first)
     overall = ratio[np.nanargmax(np.where(valid, force, -np.inf))]
     for k in range(out.size):
         if not out[k] > 0.0:  # never on the cam, or a failed case's NaN

@@ -698,11 +698,10 @@ def _compare(op: str, a, b, a_node, b_node) -> np.ndarray:
         eq = _plain(left) == _plain(right)
         return eq if op == "==" else ~eq
     x, y = _numbers(a, b)
-    if op not in ("==", "!="):  # no value (but no seat) orders nowhere
-        x, y = _unordered_none(a, x), _unordered_none(b, y)
     if op in ("==", "!="):
         eq = np.isclose(x, y, rtol=EQUAL_RTOL, atol=0.0) | ((x == y) & np.isinf(x))
         return eq if op == "==" else ~eq
+    x, y = _unordered_none(a, x), _unordered_none(b, y)  # no value (but no seat) orders nowhere
     with np.errstate(invalid="ignore"):
         return {"<": np.less, "<=": np.less_equal, ">": np.greater, ">=": np.greater_equal}[op](
             x, y

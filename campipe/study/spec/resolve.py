@@ -246,8 +246,10 @@ def _lift_table(path: Path, mtime_ns: int) -> tuple[np.ndarray, np.ndarray, str,
 
 
 @functools.lru_cache(maxsize=1024)
-def _profile(frozen: tuple, directory: Path) -> tuple[Profile, dict, dict[str, object]]:
-    """(profile, canonical form, archive values) of a checked profile mapping."""
+def _profile(frozen: tuple, directory: Path) -> tuple[Profile, dict, dict[str, object], object]:
+    """(profile, canonical form, archive values, its lift as written: the spec's ``lift``, a
+    table's "1 <its header's units>", for messages in those units) of a checked profile
+    mapping."""
     spec = _thaw(frozen)
     kind = spec["kind"]
     values: dict[str, object] = {"profile.kind": kind}
@@ -288,7 +290,7 @@ def _profile(frozen: tuple, directory: Path) -> tuple[Profile, dict, dict[str, o
                     f"{path} ({exc.strerror}); the path is relative to the "
                     "spec",
                 ) from None
-            angles, lifts, digest, _ = _lift_table(path, mtime)
+            angles, lifts, digest, lift_units = _lift_table(path, mtime)
             try:
                 profile = table(angles, lifts)
             except ValueError as exc:
@@ -298,7 +300,7 @@ def _profile(frozen: tuple, directory: Path) -> tuple[Profile, dict, dict[str, o
             )
             canonical = {"kind": kind, "table_sha256": digest}
             values.update({"profile.file": si["file"], "profile": profile.label})
-            return profile, canonical, values
+            return profile, canonical, values, f"1 {lift_units}"
     except SpecProblem:
         raise
     except ValueError as exc:
@@ -306,16 +308,12 @@ def _profile(frozen: tuple, directory: Path) -> tuple[Profile, dict, dict[str, o
     canonical = {"kind": kind, **{k: clean_value(v) for k, v in si.items()}}
     values.update({f"profile.{k}": v for k, v in si.items()})
     values["profile"] = profile.label
-    return profile, canonical, values
+    return profile, canonical, values, spec.get("lift")
 
 
 @functools.lru_cache(maxsize=1024)
 def _with_defects(frozen_profile: tuple, frozen_defects: tuple, directory: Path):
-    profile, canonical, values = _profile(frozen_profile, directory)
-    written = _thaw(frozen_profile).get("lift")
-    if "profile.file" in values:  # a table's lift reads in its header's units
-        path = (directory / str(values["profile.file"])).resolve()
-        written = f"1 {_lift_table(path, path.stat().st_mtime_ns)[3]}"
+    profile, canonical, values, written = _profile(frozen_profile, directory)
     out = profile
     defects = []
     for i, d in enumerate(_thaw_list(frozen_defects)):
