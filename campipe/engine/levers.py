@@ -44,6 +44,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Sequence
+from functools import partial
 
 import numpy as np
 
@@ -51,7 +52,7 @@ from campipe.constants import TWO_PI
 from campipe.engine.case import Case
 from campipe.engine.loads import sample_turns, turn_maxima
 from campipe.engine.metrics import MAX_CAM_FORCE, MAX_CAM_IMPACT_VELOCITY, MAX_ROLLER_FORCE
-from campipe.engine.plunger import EXTENSION, carried
+from campipe.engine.plunger import EXTENSION
 from campipe.engine.result import BatchResult
 from campipe.engine.settings import DEFAULT_CAPTURE_VELOCITY
 from campipe.model.hla import on_pivot
@@ -76,7 +77,6 @@ def at_the_cam(
     cases: Sequence[Case],
     capture: float = DEFAULT_CAPTURE_VELOCITY,
     pressure: bool = True,
-    integrator: str = "default",
 ) -> BatchResult:
     """``result`` with each lever layout's cam force (histories and ``max_cam_force`` per
     turn) the roller's normal force on the cam, and its cam impacts (events and
@@ -84,10 +84,9 @@ def at_the_cam(
     ``capture`` [m/s] (see the module), and with ``pressure`` (the Hertz pressure wanted) the
     cam contact's radius at the samples where the cam's shape gives it (:func:`contact_radii`:
     a lever's takes its kinematics at every sample, 23 ms for a finger's three turns at 1°);
-    ``result`` itself if neither. A finger whose pivot's adjuster the run (under
-    ``integrator``) moved turn by turn ran each turn on its pivot raised by the turn's
-    extension (``engine.lash_adjuster.extended``): its ratio is that turn's
-    (:class:`TurnRatio`)."""
+    ``result`` itself if neither. A finger whose pivot has an adjuster ran each turn on its
+    pivot raised by the turn's starting extension (``engine.lash_adjuster.extended``): its
+    ratio is that turn's (:class:`TurnRatio`)."""
     radius = contact_radii(np.asarray(result.cam_angle, float), cases) if pressure else None
     if radius is not None:
         result = dataclasses.replace(result, cam_contact_radius=radius, _derived={})
@@ -101,11 +100,14 @@ def at_the_cam(
     for i in levers:
         profile = cases[i].profile
         first = int(result.recorded_from[i]) if result.recorded_from.size else 0
-        turns = TurnRatio(profile, _moved_extensions(result, cases[i], i, integrator))
+        turns = TurnRatio(profile, _pivot_extensions(result, cases[i], i))
         if turns.extensions is None:
             ratio = ratios.setdefault(id(profile), lever_ratio(profile, theta))
         else:
-            ratio = turns(theta, sample_turns(theta, first))
+            turn = sample_turns(theta, first)
+            ratio = turns(theta, turn)
+            if radius is not None and np.isfinite(radius[i]).any():  # where the roller touches
+                radius[i] = turns.over(partial(_radius, cases[i].train), theta, turn)
         force[i] = result.cam_force[i] * ratio
         followed = result.per_rev[i, :, MAX_ROLLER_FORCE]
         if np.all(followed > 0.0):  # the engine's own in every turn
@@ -125,17 +127,22 @@ def at_the_cam(
 
 class TurnRatio:
     """A lever layout's ratio r(θ) at cam angles of given turns: on its derived ``profile``,
-    or where a pivot's adjuster was moved turn by turn (``extensions``, each turn's at its
-    start [m]; None: never), turn k's on the pivot raised by ``extensions[k]``, the profile
-    that turn ran on (``engine.lash_adjuster.extended``, each extension's derived once)."""
+    or where a pivot's adjuster ran turn by turn (``extensions``, each turn's at its start
+    [m]; None: none), turn k's on the pivot raised by ``extensions[k]``, the profile that
+    turn ran on (``engine.lash_adjuster.extended``, each extension's derived once)."""
 
     def __init__(self, profile: Profile, extensions: np.ndarray | None) -> None:
         self.profile, self.extensions = profile, extensions
         self._raised: dict[float, Profile] = {}
 
     def __call__(self, theta: np.ndarray, turn: np.ndarray) -> np.ndarray:
+        return self.over(lever_ratio, theta, turn)
+
+    def over(self, f, theta: np.ndarray, turn: np.ndarray) -> np.ndarray:
+        """f(profile, θ) at cam angles ``theta`` [rad] of turns ``turn``, each turn's on the
+        profile it ran on."""
         if self.extensions is None:
-            return lever_ratio(self.profile, theta)
+            return f(self.profile, theta)
         out = np.empty(np.shape(theta))
         last = self.extensions.size - 1
         for k in np.unique(turn):
@@ -147,20 +154,30 @@ class TurnRatio:
                     profile = pivot_raised(profile, e)
                 self._raised[e] = profile
             here = turn == k
-            out[here] = lever_ratio(self._raised[e], theta[here])
+            out[here] = f(self._raised[e], theta[here])
         return out
 
 
-def _moved_extensions(
-    result: BatchResult, case: Case, i: int, integrator: str
-) -> np.ndarray | None:
-    """Each turn's extension at its start [m] of case ``i``'s pivot adjuster where the run
-    moved it turn by turn (``engine.lash_adjuster``), else None."""
+def _pivot_extensions(result: BatchResult, case: Case, i: int) -> np.ndarray | None:
+    """Each turn's extension at its start [m] of case ``i``'s pivot adjuster, else None. A
+    finger's run is turn by turn whenever its pivot has an adjuster, each turn on the pivot
+    raised by the extension it starts with: moved once a turn with rigid contacts, or carried
+    (a compliant run, ``engine.lash_adjuster.Carried``) with the plunger's motion within the
+    turn on the pivot's gain linearised there."""
     if not (result.lash_adjuster.size and on_pivot(case.train)):
         return None
-    if carried(case, integrator):
-        return None
     return np.asarray(result.lash_adjuster[i, :, EXTENSION], float)
+
+
+def _radius(train, profile: Profile, theta: np.ndarray) -> np.ndarray:
+    """The cam contact's relative radius of curvature R' [m] at cam angles ``theta`` [rad] of
+    a case of known cam shape on ``train`` whose excitation is ``profile``."""
+    return contact_radius(
+        cam_of(profile),
+        float(train.cam_base_radius),
+        float(train.cam_roller_radius),
+        contact_angles(profile, theta),
+    )
 
 
 def contact_radii(theta: np.ndarray, cases: Sequence[Case]) -> np.ndarray | None:
@@ -177,12 +194,7 @@ def contact_radii(theta: np.ndarray, cases: Sequence[Case]) -> np.ndarray | None
             continue
         key = (id(case.profile), train.cam_base_radius, train.cam_roller_radius)
         if key not in known:  # a lever's roller touches where a radial one would at s(θ)
-            known[key] = contact_radius(
-                cam_of(case.profile),
-                float(train.cam_base_radius),
-                float(train.cam_roller_radius),
-                contact_angles(case.profile, theta),
-            )
+            known[key] = _radius(train, case.profile, theta)
         if out is None:
             out = np.full((len(cases), theta.size), np.nan)
         out[i] = known[key]

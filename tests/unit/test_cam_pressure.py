@@ -124,11 +124,12 @@ def test_a_roller_s_pressure_against_its_pitch_curve():
     assert_allclose(coarse.max_cam_pressure_per_rev[0], truth, rtol=2e-3)
 
 
-def _finger_contact(train, theta: float) -> float:
+def _finger_contact(train, theta: float, raised: float = 0.0) -> float:
     """The profile angle s of a finger's roller's centre at cam angle ``theta``, placed here:
-    the centre a from the pivot at lever angle α, s = ψ₀ + θ − (its direction from the cam's
-    centre), and α where its distance from the cam's centre is the pitch radius R + h(s)
-    (Brent's method about the rest angle)."""
+    the centre a from the pivot (at rest, or ``raised`` [m] above it) at lever angle α,
+    s = ψ₀ + θ − (its direction from the cam's centre, which stays where it is at rest), and
+    α where its distance from the cam's centre is the pitch radius R + h(s) (Brent's method
+    about the rest angle)."""
     a, alpha0, offset = train.pivot_to_roller, train.lever_rest_angle, train.cam_offset
     pitch = train.cam_base_radius + train.cam_roller_radius
     rest = a * np.array([math.cos(alpha0), math.sin(alpha0)])
@@ -136,7 +137,7 @@ def _finger_contact(train, theta: float) -> float:
     psi0 = math.atan2(rest[1] - c[1], rest[0] - c[0])
 
     def place(alpha: float) -> tuple[float, float]:
-        d = a * np.array([math.cos(alpha), math.sin(alpha)]) - c
+        d = np.array([a * math.cos(alpha), raised + a * math.sin(alpha)]) - c
         s = psi0 + theta - math.atan2(d[1], d[0])
         return float(np.hypot(*d) - pitch - evaluate(CAM, np.array([s % (2 * math.pi)]))[0][0]), s
 
@@ -165,6 +166,32 @@ def test_a_finger_s_pressure_where_its_roller_touches():
     assert_allclose(coarse.cam_contact_radius[0], radius(coarse.cam_angle), rtol=1e-6)
     truth = _dense_pressure(dense, train, radius(dense.cam_angle))
     assert_allclose(coarse.max_cam_pressure_per_rev[0], truth, rtol=2e-3)
+
+
+def test_a_finger_s_contact_radius_on_each_turn_s_raised_pivot():
+    """A finger whose pivot's lash adjuster starts 0.3 mm out (and moves) runs each turn on
+    its pivot raised by the turn's starting extension (``engine.lash_adjuster``): its roller
+    touches the cam where the raised pivot places it, and the radius at each sample is the
+    one placed here with the pivot raised by its turn's extension, to 1e-6. Fails on a copy
+    that places the roller with the pivot at rest (1.2e-3 off here)."""
+    from campipe.engine.plunger import EXTENSION
+
+    hla = {
+        "hla_stiffness": "20000 N/mm", "hla_leak_down": "2000 N*s/mm", "hla_check_force": "25 N",
+        "hla_pump_up": "20 N*s/mm", "hla_travel": "1 mm", "hla_extension": "0.3 mm",
+        "lash": "0.15 mm",
+    }  # fmt: skip
+    train = valve_train("thesis-1971", {**FINGER, "cam_contact_width": "10 mm", **hla})
+    roller, pitch = train.cam_roller_radius, train.cam_base_radius + train.cam_roller_radius
+    result = _run(Case(train, CAM, 1000 * RPM), 5.0, turns=3)
+    extension = result.lash_adjuster[0, :, EXTENSION]
+    assert extension[0] == pytest.approx(3e-4) and np.all(np.abs(np.diff(extension)) > 1e-6)
+    theta = np.asarray(result.cam_angle)
+    for k in range(3):
+        turn = (theta >= 2 * math.pi * k) & (theta < 2 * math.pi * (k + 1))
+        s = np.array([_finger_contact(train, t, extension[k]) for t in theta[turn]])
+        rho = _pitch_curvature_radius(pitch, s) - roller
+        assert_allclose(result.cam_contact_radius[0, turn], rho * roller / (rho + roller), 1e-6)
 
 
 def test_an_undercut_cam_has_no_pressure():

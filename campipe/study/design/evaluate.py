@@ -155,8 +155,7 @@ def compute_design(
     )
     # a lever layout's cam force and impacts at the cam, as archived (and the cam's radius)
     pressure = any(m.key == "max_cam_pressure" for m in chosen)
-    run = first.settings
-    result = at_the_cam(result, cases, run.capture_velocity, pressure, run.integrator)
+    result = at_the_cam(result, cases, first.settings.capture_velocity, pressure)
     failed = np.isin(np.asarray(result.status), FAILURES)
     values = {}
     for m in chosen:

@@ -145,8 +145,7 @@ def compute_batch(plan: BatchPlan) -> BatchData:
     seconds = time.perf_counter() - t
     # a lever's roller force and impacts at the cam (and the cam's radius, for its pressure)
     pressure = "max_cam_pressure" in data_variables(plan.record)
-    roller = at_the_cam(result, cases, settings.capture_velocity, pressure, settings.integrator)
-    data = batch_arrays(plan, roller)
+    data = batch_arrays(plan, at_the_cam(result, cases, settings.capture_velocity, pressure))
     data.engine_seconds = seconds
     return data
 
