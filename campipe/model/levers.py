@@ -15,7 +15,7 @@ pallet arm makes ``lever_rest_angle`` (α₀) with the horizontal at rest (valve
 on the base circle), positive when the pallet sits above the pivot. The cam's centre is
 ``cam_base_radius`` + ``cam_roller_radius`` (R) from the roller's centre at rest, above it
 (finger) or below it (rocker), ``cam_offset`` horizontally towards the pallet. The cam turns
-counter-clockwise.
+counter-clockwise, x pointing from the pivot towards the pallet and y up.
 
 **Kinematics** (exact). The cam's profile is the lift h(θ) a radial roller follower of the
 same roller would see, so the roller's centre runs on the cam's pitch curve: at cam angle θ,
@@ -410,8 +410,9 @@ def check_lever(train: Any, key_prefix: str = "") -> None:
     if not abs(train.cam_offset) < 0.9 * pitch:
         raise ModelParameterError.at(
             key_prefix + "cam_offset",
-            "the cam's centre is cam_base_radius + cam_roller_radius from the roller's centre: "
-            "its horizontal offset must stay within 0.9 of that",
+            f"the cam's centre is cam_base_radius + cam_roller_radius ({pitch * 1e3:g} mm) from "
+            f"the roller's centre: its horizontal offset ({train.cam_offset * 1e3:g} mm) must "
+            f"stay within 0.9 of that, ±{0.9 * pitch * 1e3:g} mm",
             found=train.cam_offset,
             expected=f"an offset within ±{0.9 * pitch:g} m",
         )

@@ -220,6 +220,14 @@ def test_lever_refusals_name_their_keys(changes, key):
     assert info.value.key == key
 
 
+def test_a_cam_offset_s_refusal_gives_the_offset_and_its_bound():
+    """The cam's offset beyond 0.9 of the pitch radius is refused with the offset found and
+    the bound, in mm: FINGER's 18 + 9 mm pitch radius bounds it at ±24.3 mm. Broken copy:
+    the message without numbers (a rocker engineer's refusal gave neither)."""
+    with pytest.raises(ModelParameterError, match=r"\(30 mm\).*±24\.3 mm"):
+        valve_train("thesis-1971", {**FINGER, "cam_offset": "30 mm"}, key_prefix="model.")
+
+
 @pytest.mark.parametrize("value", [0.1, "0.1", 10])
 def test_a_rest_angle_needs_an_angle_s_units(value):
     """A bare number for ``lever_rest_angle`` is refused (pint's radian is dimensionless: it
