@@ -12,7 +12,7 @@ import numpy as np
 from campipe.constants import TWO_PI
 from campipe.model import lash_ratio
 from campipe.model.checks import PUSHROD_ROCKER
-from campipe.model.levers import LEVERS
+from campipe.model.levers import LEVERS, lever_of, reduced_mass_factor
 from campipe.profiles import evaluate, harmonic
 from campipe.profiles.curvature import cam_shape
 from campipe.profiles.levers import cam_kinematics
@@ -101,6 +101,7 @@ def ratio_table(train, sm, lift: float, step: float, cam, label: str) -> dict[st
         raise click.UsageError(f"--cam-lift: found {lift!r} m, expected a positive lift")
     theta = np.arange(0.0, TWO_PI - 1e-12, step)
     state = cam_kinematics(cam, train, theta)
+    mass = reduced_mass_factor(lever_of(train), state.angle)
     return {
         "kinematic_ratio": {
             "cam": label,
@@ -108,9 +109,13 @@ def ratio_table(train, sm, lift: float, step: float, cam, label: str) -> dict[st
             "cam_lift": evaluate(cam, theta)[0].tolist(),
             "valve_lift": state.valve_lift.tolist(),
             "ratio": state.ratio.tolist(),
-            "units": {"cam_angle": "rad", "cam_lift": "m", "valve_lift": "m", "ratio": "1"},
+            "reduced_mass_factor": mass.tolist(),
+            "units": {
+                "cam_angle": "rad", "cam_lift": "m", "valve_lift": "m", "ratio": "1",
+                "reduced_mass_factor": "1",
+            },
         }
-    }
+    }  # fmt: skip
 
 
 def ratio_text(table: dict) -> str:
@@ -123,10 +128,11 @@ def ratio_text(table: dict) -> str:
         "",
         f"Kinematic ratio over the cam turn ({k['cam']}): the lever ratio is the valve's "
         "travel per unit of the roller's along the contact normal (the cam force per valve-side "
-        "force)",
-        f"  {'cam deg':>8} {'cam lift mm':>12} {'valve lift mm':>14} {'ratio':>9}",
+        "force); mass: the lever's mass reduced to the valve over its rest value, cos²α₀/cos²α "
+        "(held at its rest value in the dynamics)",
+        f"  {'cam deg':>8} {'cam lift mm':>12} {'valve lift mm':>14} {'ratio':>9} {'mass':>7}",
     ]
-    for row in zip(k["cam_angle"], k["cam_lift"], k["valve_lift"], k["ratio"], strict=True):
-        a, h, v, r = row
-        lines.append(f"  {math.degrees(a):8.1f} {h * 1e3:12.4f} {v * 1e3:14.4f} {r:9.4f}")
+    columns = ("cam_angle", "cam_lift", "valve_lift", "ratio", "reduced_mass_factor")
+    for a, h, v, r, m in zip(*(k[c] for c in columns), strict=True):
+        lines.append(f"  {math.degrees(a):8.1f} {h * 1e3:12.4f} {v * 1e3:14.4f} {r:9.4f} {m:7.4f}")
     return "\n".join(lines)

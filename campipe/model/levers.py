@@ -36,7 +36,8 @@ valve-side coordinates (:func:`lever_chain`): the lever (``lever_inertia`` about
 rides the kinematic valve lift; the valve (``valve_mass``) hangs on the lever's stiffness at
 the pallet (``lever_stiffness``) and the stem's (``stem_stiffness``) in series. What is
 linearised: the reduced mass is held at its rest value (the lever's angle changes it by
-cos²α₀/cos²α, a few per cent over a lift), and a deflection adds to the kinematic motion
+cos²α₀/cos²α, :func:`reduced_mass_factor`: a few per cent over a lift for a lever near
+level, more for a tilted one), and a deflection adds to the kinematic motion
 without changing the ratio. The engine drives the chain's cam mass with the kinematic lift
 (:func:`campipe.profiles.levers.valve_side`), so the archive's cam lift, cam force and cam
 contact are the valve side's: the cam force at the pallet, along the valve.
@@ -377,6 +378,13 @@ def base_take_up(lever: Lever, height: float) -> float:
     roots = np.angle(np.exp(1j * (roots - lever.rest_angle))) + lever.rest_angle
     alpha = roots[np.argmin(np.abs(roots - lever.rest_angle))]
     return float(lifted.valve_lift(np.asarray(alpha)))
+
+
+def reduced_mass_factor(lever: Lever, angle: np.ndarray) -> np.ndarray:
+    """cos²α₀/cos²α: how the lever's pallet-arm angle ``angle`` α [rad] changes its mass
+    reduced to the pallet, (J + m_r·a²)/(b·cos α)², from its rest value (:func:`reduced_mass`,
+    at α₀), which the dynamics hold (see the module)."""
+    return (math.cos(lever.rest_angle) / np.cos(np.asarray(angle, float))) ** 2
 
 
 def reduced_mass(train: Any) -> float:

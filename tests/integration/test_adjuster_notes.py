@@ -5,6 +5,7 @@ they say nothing. And a lash the cam's ramps do not take up, said the same way."
 
 import math
 
+import numpy as np
 import pytest
 import xarray as xr
 from click.testing import CliRunner
@@ -220,3 +221,51 @@ def test_a_spring_preload_a_soft_chain_gives_under_is_noted():
     note = preload_note(study.cases)
     assert note is not None and "the spring pushes 83.33 N (66.7 % less)" in note
     assert "for 250 N there give 750 N" in note
+
+
+def test_a_mass_in_the_wrong_unit_is_noted():
+    """A lever's inertia in kg·m² for kg·mm² (the bundled finger's 40 kg·mm² as 40 kg·m²)
+    reduces to the valve as (J + m_r·a²)/b², computed here: 19 750 kg; a bucket's valve mass
+    in kg for g; each noted naming the key; no bundled study is (their masses 8-60 g, the
+    thesis's derived from its members). Fails on a copy without the note, or one that notes
+    the bundled studies."""
+    from campipe.study.spec.notes import mass_note
+
+    for spec in sorted(STUDIES.glob("*.yaml")):
+        assert mass_note(load_study(spec).cases) is None, spec.name
+    slip = load_study(STUDIES / "finger-follower.yaml", {"model.lever_inertia": "40 kg*m**2"})
+    reduced = (40.0 + 0.010 * 0.030**2) / 0.045**2
+    note = mass_note(slip.cases)
+    assert note.startswith(f"{len(slip.cases)} cases have a mass far from a valve train's")
+    assert "model.lever_inertia gives the lever's mass reduced to the valve" in note
+    assert f" {reduced * 1e3:.4g} g (outside 0.1 g to 5 kg)" in note
+    bucket = load_study(STUDIES / "bucket-tappet-lash.yaml", {"model.valve_mass": "46 kg"})
+    assert "model.valve_mass 4.6e+04 g" in mass_note(bucket.cases)
+    result = validated("finger-follower.yaml", "model.lever_inertia=40 kg*m**2")
+    assert "mass: 7 cases have a mass far from a valve train's grams" in result.output
+
+
+def test_a_lever_whose_reduced_mass_moves_far_from_its_rest_value_is_noted():
+    """The dynamics hold a lever's mass reduced to the valve at its rest value; its angle α
+    moves it by cos²α₀/cos²α. The bundled finger tilted 10° down (α₀ = −10°): at the nose
+    the valve's lift v puts the pallet arm at sin α = sin α₀ − v/b, computed here from the
+    kinematics' largest lift (`campipe model`'s table), a factor beyond 1.1,
+    noted with it; the bundled studies are not (the level finger's 6.6 %). Fails on a copy
+    without the note, or one that notes the bundled studies."""
+    from campipe.model.levers import lever_of
+    from campipe.profiles.levers import cam_kinematics, cam_of
+    from campipe.study.spec.notes import lever_note
+
+    for spec in sorted(STUDIES.glob("*.yaml")):
+        assert lever_note(load_study(spec).cases) is None, spec.name
+    tilted = load_study(STUDIES / "finger-follower.yaml", {"model.lever_rest_angle": "-10 deg"})
+    case = tilted.cases[0].case
+    theta = np.radians(np.arange(0.0, 360.0, 0.5))
+    lift = cam_kinematics(cam_of(case.profile), case.train, theta).valve_lift.max()
+    b, rest = lever_of(case.train).pallet_arm, math.radians(-10)
+    factor = (math.cos(rest) / math.cos(math.asin(math.sin(rest) - lift / b))) ** 2
+    assert factor > 1.1
+    note = lever_note(tilted.cases)
+    assert note.startswith(f"{len(tilted.cases)} cases' levers turn enough")
+    assert f"by up to {factor - 1.0:+.1%} over the cam's turn" in note
+    assert "model.lever_rest_angle -10°" in note

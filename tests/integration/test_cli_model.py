@@ -187,7 +187,9 @@ def test_the_kinematic_ratio_table_of_a_finger_and_the_thesis_s_constant():
     (90°, the cam straight above the roller, the lever level) the ratio is b/a = 45/30 and the
     valve lift 0; its masses and Hz are the two-mass chain's ((J + m·a²)/b², the valve); the
     thesis's rocker prints its constant arm ratio 1.5 in / 1.0 in. Fails on a copy that
-    tabulates the ratio as a/b, or leaves the lever's keys out of the parameters shown."""
+    tabulates the ratio as a/b, or leaves the lever's keys out of the parameters shown. The
+    reduced mass's factor over the turn is cos²α₀/cos²α of the lever's angle at each lift.
+    """
     args = [a for s in FINGER_SETS for a in ("--set", s)]
     result = run(*args, "--ratio-step", "45", "--json")
     assert result.exit_code == 0, result.output
@@ -197,11 +199,14 @@ def test_the_kinematic_ratio_table_of_a_finger_and_the_thesis_s_constant():
     assert k["ratio"][2] == pytest.approx(1.5, rel=1e-12)
     assert k["valve_lift"][2] == pytest.approx(0.0, abs=1e-15)
     assert max(k["valve_lift"]) == pytest.approx(1.5 * 0.006, rel=0.02)
+    # the reduced mass's factor cos²α₀/cos²α: the level lever at sin α = −v/b
+    v = np.array(k["valve_lift"])
+    assert_allclose(k["reduced_mass_factor"], 1.0 / (1.0 - (v / 0.045) ** 2), rtol=1e-12)
     m1 = (40e-6 + 0.010 * 0.030**2) / 0.045**2
     assert_allclose(np.diag(out["mass_matrix"]), [m1, 0.060], rtol=1e-12)
     assert {"pivot_to_roller", "valve_mass", "stem_stiffness"} <= set(out["parameters"])
     text = run(*args).output
-    assert "Kinematic ratio over the cam turn" in text and " Hz " in text
+    assert "Kinematic ratio over the cam turn" in text and " Hz " in text and " mass\n" in text
     thesis = json.loads(run("--json").output)["kinematic_ratio"]
     assert thesis["constant"] == pytest.approx(1.5, rel=1e-9)
 
