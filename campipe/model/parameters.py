@@ -590,7 +590,10 @@ def valve_train(
     train = ValveTrain(**resolved)  # type: ignore[arg-type]
     train = resolve_layout(train, overrides or {}, ELEMENTS, key_prefix)
     modes = len(train.masses) if train.chain else train.n_coordinates
-    if train.chain and "damping_ratios" not in (overrides or {}):
+    given = "damping_ratios" in (overrides or {})
+    if train.chain and train.damping_kind == "rayleigh" and not given:
+        return _checked(train.replace(damping_ratios=()), key_prefix)  # (the thesis's unused)
+    if train.chain and not given:
         raise ModelParameterError.at(
             key_prefix + "damping_ratios",
             f"layout {train.layout} needs its own: the preset's are the thesis's train's; give "
@@ -599,6 +602,10 @@ def valve_train(
             expected=f"1 to {modes} damping ratios",
         )
     mode_damping_ratios(train.damping_ratios, modes, key_prefix + "damping_ratios")
+    return _checked(train, key_prefix)
+
+
+def _checked(train: ValveTrain, key_prefix: str) -> ValveTrain:
     check_contacts(train, key_prefix)
     return train
 

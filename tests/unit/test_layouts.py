@@ -253,6 +253,29 @@ def test_direct_acting_is_the_two_mass_chain_of_its_named_keys():
     assert [c.name for c in coordinates(train)][::6] == ["cam_mass", "valve"]
 
 
+def test_a_chain_with_rayleigh_damping_needs_no_ratios():
+    """Rayleigh damping on a chain takes α and β alone: a bucket tappet's without
+    damping_ratios builds (it was refused until ratios were given, which it then left
+    unused), holds no ratios (not the preset's seven), and damps mode j by α/(2ωⱼ) + β·ωⱼ/2
+    of its two-mass closed-form frequencies. Broken copy: the refusal of a chain without its
+    own ratios whatever its damping."""
+    alpha, beta = 40.0, 2e-6
+    own = {k: v for k, v in DIRECT.items() if k != "damping_ratios"}
+    rayleigh = {"damping_kind": "rayleigh", "rayleigh_alpha": "40 s**-1", "rayleigh_beta": "2 us"}
+    train = valve_train("thesis-1971", {**own, **rayleigh}, key_prefix="model.")
+    assert train.damping_ratios == ()
+    sm = system_matrices(train)
+    k, m1, m2 = LINK, M1, M2  # free-free chain with the spring on the valve
+    kv = 40e3
+    a, b, c = m1 * m2, -(m1 * (k + kv) + m2 * k), k * kv
+    w = np.sqrt((-b + np.array([-1.0, 1.0]) * np.sqrt(b * b - 4 * a * c)) / (2 * a))
+    chain_modes = [int(np.argmin(np.abs(sm.frequencies - x))) for x in w]  # (placeholders)
+    assert_allclose(sm.frequencies[chain_modes], w, rtol=1e-10)
+    phi = sm.modes[:, chain_modes]
+    ratios = np.diag(phi.T @ sm.damping @ phi) / (2 * w)
+    assert_allclose(ratios, alpha / (2 * w) + beta * w / 2, rtol=1e-8)
+
+
 def test_direct_acting_refusals_name_their_keys():
     """A direct-acting key left out, a lumped chain's masses on it, its keys on the thesis's
     train: each refused naming the key. Fails on a copy that defaults a missing mass."""
