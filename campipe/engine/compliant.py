@@ -444,7 +444,8 @@ class _Recorder:
         after = configuration(*run.closed)
         closing = run.closed[hit]
         kinds = ((CAM_SEPARATION, CAM_IMPACT), (SEAT_SEPARATION, SEAT_IMPACT))
-        velocity = d[2 * hit + 1] if closing else 0.0
+        # a closing's velocity is δ̇ (a damper's re-engagement in overlap, δ̇ < 0: 0, a touch)
+        velocity = max(d[2 * hit + 1], 0.0) if closing else 0.0
         self.event(t, kinds[hit][closing], before, after, velocity)
         if closing and t >= 0.0 and not is_captured(velocity, capture):
             r = self.turn(t)

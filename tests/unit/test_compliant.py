@@ -317,3 +317,35 @@ def test_a_refined_train_runs_with_compliant_contacts():
     assert both.q.shape[2] == 10 and np.isnan(both.q[1, :, 7:]).all()
     error = np.abs(both.valve_lift[0] - rigid.valve_lift[0]).max()
     assert error < 5e-6 * INCH
+
+
+def test_a_damper_s_re_engagement_in_overlap_is_a_touch():
+    """A damped kelvin-voigt contact opens where its force k·δ + c·δ̇ reaches zero, the
+    surfaces still overlapping, and closes again where the force turns compressive: there
+    F = 0 with δ > 0, so δ̇ = −k·δ/c < 0, and the contact did not approach. The thesis's train
+    at 11500 rpm on a 1e7 lbf/in cam contact damped at 10 lbf·s/in does that once (at 608.7°);
+    every cam impact's velocity is then at least 0, and each turn's count is the impacts
+    logged at the capture velocity or faster (10 and 10). Broken copy: the closing logged
+    with its δ̇ (−0.013 m/s)."""
+    train = valve_train(
+        "thesis-1971",
+        {"cam_contact": "kelvin-voigt", "cam_contact_damping": "10 lbf*s/in",
+         "cam_contact_stiffness": "1e7 lbf/in"},
+    )  # fmt: skip
+    speed = 11500 * RPM
+    run = run_batch(
+        [Case(train, harmonic(INCH), speed)],
+        RunSettings(revolutions=3, output_every=math.radians(1), tolerance=1e-8),
+    )
+    assert run.status[0] == 0
+    events = run.events[0]
+    impacts = events[events[:, EV_KIND] == CAM_IMPACT]
+    assert np.all(impacts[:, EV_VELOCITY] >= 0.0)
+    touches = impacts[impacts[:, EV_VELOCITY] < 1e-3]
+    assert len(touches) == 1 and math.degrees(touches[0, EV_TIME] * speed) == pytest.approx(
+        608.69, abs=0.01
+    )
+    turn = (impacts[:, EV_TIME] * speed / TWO_PI).astype(int)
+    counted = impacts[:, EV_VELOCITY] >= 1e-3
+    per_turn = [int(np.sum(counted & (turn == k))) for k in range(3)]
+    assert per_turn == [0, 10, 10] == list(run.cam_impacts_per_rev[0])
