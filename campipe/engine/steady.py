@@ -633,50 +633,23 @@ def _ringing_samples(trains, ws, st, width, nb):
     return int(np.ceil(duration * fastest * RINGING_SAMPLES / TWO_PI))
 
 
-@njit(**HELPER)
-def _turn_minimum(ref, st, zt, which):
-    """(θ, value) of the least value of ``which`` over the periodic turn: scanned at
-    EXTREME_SAMPLES a turn (the breaks included; the blocks and the harmonic advanced by their
-    step factors), then refined between the samples beside the least by Newton's method on
-    the derivative, kept inside that bracket by bisection."""
+@njit(inline="always", nogil=True)
+def _piece_samples(trains, ws, st, width, nb):
+    """The scan's samples on a piece ``width`` [rad] wide, its monitor prepared
+    (``_piece_monitor``): EXTREME_SAMPLES a turn, at least two, and its ringing's."""
+    by_turn = int(np.ceil(width / (TWO_PI / EXTREME_SAMPLES)))
+    return max(2, by_turn, _ringing_samples(trains, ws, st, width, nb))
+
+
+@njit(inline="always", nogil=True)
+def _refined(ref, st, zt, which, p, lo, hi):
+    """(θ, value) of the least of ``which`` on piece p between the samples lo and hi [rad]:
+    the least of the bracket's ends and the derivative's zero between them, by Newton's
+    method on the derivative kept inside the bracket by bisection."""
     cases, trains, profiles, runs, ws = deref(ref)
-    c = st.c
     nb = trains.n_blocks[st.tr, st.cfg - 1]
-    d_theta = TWO_PI / EXTREME_SAMPLES
-    best = np.inf
-    best_p = np.int64(0)  # not a literal: ``_on_piece`` is compiled for int64 pieces
-    lo = 0.0
-    hi = 0.0
-    for p in range(profiles.n_pieces[c]):
-        a = profiles.breaks[c, p]
-        b = profiles.breaks[c, p + 1]
-        _piece_monitor(ref, st, zt, p, which)
-        n = max(2, int(np.ceil((b - a) / d_theta)), _ringing_samples(trains, ws, st, b - a, nb))
-        step = (b - a) / n
-        for jj in range(nb):
-            ws.MC[F1, jj] = 1.0
-            ws.MC[F2, jj] = 0.0
-            ws.MC[D1, jj], ws.MC[D2, jj] = block_basis(ws.MC[LBAR, jj], ws.MC[DSQ, jj], step / st.w)
-        ct, sn = np.cos(a), np.sin(a)
-        ch, sh = np.cos(step), np.sin(step)
-        gt = ws.GT[0]
-        for i in range(n + 1):
-            g = horner(ws.G[0], step * i)[0] + gt.real * ct - gt.imag * sn
-            for jj in range(nb):
-                f1 = ws.MC[F1, jj]
-                f2 = ws.MC[F2, jj]
-                g += ws.WC[W1, 0, jj] * f1 + ws.WC[W2, 0, jj] * f2
-                ws.MC[F1, jj] = f1 * ws.MC[D1, jj] + ws.MC[DSQ, jj] * f2 * ws.MC[D2, jj]
-                ws.MC[F2, jj] = f1 * ws.MC[D2, jj] + f2 * ws.MC[D1, jj]
-            ct, sn = ct * ch - sn * sh, sn * ch + ct * sh
-            if g < best:
-                best = g
-                best_p = np.int64(p)
-                lo = a + step * max(i - 1, 0)
-                hi = a + step * min(i + 1, n)
-    # Refine: the least of the bracket's ends and the derivative's zero between them.
-    _piece_monitor(ref, st, zt, best_p, which)
-    a = profiles.breaks[c, best_p]
+    _piece_monitor(ref, st, zt, p, which)
+    a = profiles.breaks[st.c, p]
     g_lo, d_lo, _ = _monitor_value(ws, nb, st, a, lo)
     g_hi, _, _ = _monitor_value(ws, nb, st, a, hi)
     best, theta_best = (g_lo, lo) if g_lo <= g_hi else (g_hi, hi)
@@ -699,6 +672,66 @@ def _turn_minimum(ref, st, zt, which):
         g, _, _ = _monitor_value(ws, nb, st, a, x)
         if g < best:
             best, theta_best = g, x
+    return theta_best, best
+
+
+@njit(**HELPER)
+def _turn_minimum(ref, st, zt, which):
+    """(θ, value) of the least value of ``which`` over the periodic turn: scanned at
+    EXTREME_SAMPLES a turn (the breaks included; the blocks and the harmonic advanced by their
+    step factors), then refined between the samples beside the least (``_refined``). A least
+    sample on a break is refined on both its sides: the least may lie just before the break,
+    on the piece that ends there, where the scan's tie at the break took the next piece's
+    sample (a helper's bucket: a peak force 0.2° before the rise's end read at the end, 7e-5
+    low), or just before the turn's end where it took the turn's first."""
+    cases, trains, profiles, runs, ws = deref(ref)
+    c = st.c
+    nb = trains.n_blocks[st.tr, st.cfg - 1]
+    best = np.inf
+    best_p = np.int64(0)  # not a literal: ``_on_piece`` is compiled for int64 pieces
+    edge = 0  # the least sample at its piece's start (-1), its end (+1), inside (0)
+    lo = 0.0
+    hi = 0.0
+    n_pieces = profiles.n_pieces[c]
+    for p in range(n_pieces):
+        a = profiles.breaks[c, p]
+        b = profiles.breaks[c, p + 1]
+        _piece_monitor(ref, st, zt, p, which)
+        n = _piece_samples(trains, ws, st, b - a, nb)
+        step = (b - a) / n
+        for jj in range(nb):
+            ws.MC[F1, jj] = 1.0
+            ws.MC[F2, jj] = 0.0
+            ws.MC[D1, jj], ws.MC[D2, jj] = block_basis(ws.MC[LBAR, jj], ws.MC[DSQ, jj], step / st.w)
+        ct, sn = np.cos(a), np.sin(a)
+        ch, sh = np.cos(step), np.sin(step)
+        gt = ws.GT[0]
+        for i in range(n + 1):
+            g = horner(ws.G[0], step * i)[0] + gt.real * ct - gt.imag * sn
+            for jj in range(nb):
+                f1 = ws.MC[F1, jj]
+                f2 = ws.MC[F2, jj]
+                g += ws.WC[W1, 0, jj] * f1 + ws.WC[W2, 0, jj] * f2
+                ws.MC[F1, jj] = f1 * ws.MC[D1, jj] + ws.MC[DSQ, jj] * f2 * ws.MC[D2, jj]
+                ws.MC[F2, jj] = f1 * ws.MC[D2, jj] + f2 * ws.MC[D1, jj]
+            ct, sn = ct * ch - sn * sh, sn * ch + ct * sh
+            if g < best:
+                best = g
+                best_p = np.int64(p)
+                edge = -1 if i == 0 else (1 if i == n else 0)
+                lo = a + step * max(i - 1, 0)
+                hi = a + step * min(i + 1, n)
+    theta_best, best = _refined(ref, st, zt, which, best_p, lo, hi)
+    if edge != 0:  # the break's other side: the neighbouring piece's interval beside it
+        q = np.int64((best_p + edge) % n_pieces)
+        a = profiles.breaks[c, q]
+        b = profiles.breaks[c, q + 1]
+        _piece_monitor(ref, st, zt, q, which)
+        step = (b - a) / _piece_samples(trains, ws, st, b - a, nb)
+        lo, hi = (b - step, b) if edge < 0 else (a, a + step)
+        theta, g = _refined(ref, st, zt, which, q, lo, hi)
+        if g < best:
+            theta_best, best = theta, g
     return theta_best, best
 
 
