@@ -464,7 +464,7 @@ def markdown_table() -> str:
         if not m.archived:
             continue
         lines.append(
-            f"| `{m.summary}` | `{m.per_rev}` | {m.units or '1'} | {m.reduction} | "
+            f"| `{m.summary}` | `{m.per_rev}` | {m.units or '– (none)'} | {m.reduction} | "
             f"{m.summary_of_turns} | {m.record or 'always'} | {m.description} |"
         )
     return "\n".join(lines)

@@ -269,3 +269,27 @@ def test_a_lever_whose_reduced_mass_moves_far_from_its_rest_value_is_noted():
     assert note.startswith(f"{len(tilted.cases)} cases' levers turn enough")
     assert f"by up to {factor - 1.0:+.1%} over the cam's turn" in note
     assert "model.lever_rest_angle -10°" in note
+
+
+def test_an_adjuster_started_past_the_dry_lash_is_noted():
+    """The bundled bucket's plunger started 0.5 mm out on its 0.2 mm of lash (a chain
+    engineer's slip on theirs) takes up 0.3 mm more than the lash: the valve starts held off
+    its seat, which it is below −P·(1/k_hla + 1/k_stem + 1/k_contact) = −220 N × (1/20000 +
+    1/30000 + 1/60000) mm/N = −0.022 mm, computed here; noted with both. The bundled studies
+    are not, nor an extension the lash takes (0.2 mm: effective lash 0). Fails on a copy
+    without the note, or one that notes a pumped-up start."""
+    from campipe.study.spec.notes import extension_note
+
+    for spec in sorted(STUDIES.glob("*.yaml")):
+        assert extension_note(load_study(spec).cases) is None, spec.name
+    spec = STUDIES / "lash-adjuster.yaml"
+    held = -220.0 * (1 / 20000 + 1 / 30000 + 1 / 60000)  # mm
+    slip = load_study(spec, {"model.hla_extension": "0.5 mm"})
+    note = extension_note(slip.cases)
+    assert note is not None and note.startswith("4 cases start the lash adjuster extended")
+    assert "leaves an effective lash of -0.3 mm" in note
+    assert f"below the {held:.3g} mm at which the valve is held off its seat" in note
+    pumped = load_study(spec, {"model.hla_extension": "0.2 mm"})
+    assert extension_note(pumped.cases) is None
+    result = validated("lash-adjuster.yaml", "model.hla_extension=0.5 mm")
+    assert "lash adjuster: 4 cases start the lash adjuster extended past" in result.output

@@ -1,8 +1,9 @@
 """Notes on a study's cases that run but deserve a word (``campipe validate`` and
-``campipe study`` print them): a lash adjuster moved once a turn, lash the ramps do not take
-up, a valve spring's odd deflection or assumed travel to solid, a mass in the wrong unit, a
-lever whose reduced mass moves far from its rest value, an undercut cam, a contact stiffer
-than any valve train's. Each names its keys; none refuses a case."""
+``campipe study`` print them): a lash adjuster moved once a turn or started extended past
+the dry lash, lash the ramps do not take up, a valve spring's odd deflection or assumed
+travel to solid, a mass in the wrong unit, a lever whose reduced mass moves far from its rest
+value, an undercut cam, a contact stiffer than any valve train's. Each names its keys; none
+refuses a case."""
 
 from __future__ import annotations
 
@@ -42,6 +43,41 @@ def per_turn_note(cases: Sequence[ResolvedCase]) -> str | None:
         "flights, a turn's pump-up may be off by half, against a carried plunger that itself "
         "moves with its contacts' stiffness (docs/model.md). Compliant contacts (cam_contact, "
         "seat_contact) carry it within the turn"
+    )
+
+
+def extension_note(cases: Sequence[ResolvedCase]) -> str | None:
+    """A note on the cases whose lash adjuster starts extended past the dry lash by more than
+    holds the valve on its seat: its effective lash (``lash`` less what ``hla_extension``
+    takes up) below −P·(the train's flexibility from the adjuster to the seat), P the seated
+    spring force, so the valve starts held off its seat on the base circle until the plunger
+    leaks down; most likely an extension written for another lash. The farthest named; None
+    where there are none."""
+    from campipe.model.hla import has_adjuster, hla_series, taken_up
+
+    combinations, speeds = distinct_but_speed(cases)
+    worst, n = None, 0
+    for c in combinations:
+        t = c.case.train
+        if not has_adjuster(t):
+            continue
+        effective = t.lash - float(taken_up(t, np.array(t.hla_extension)))
+        flex = 1.0 / hla_series(t) + sum(1.0 / float(k) for k in t.stiffnesses)
+        held = -t.spring_preload * flex
+        if effective < held:
+            n += speeds
+            if worst is None or effective < worst[0]:
+                worst = (effective, held, t)
+    if worst is None:
+        return None
+    effective, held, t = worst
+    return (
+        f"{n} case{'s start' if n != 1 else ' starts'} the lash adjuster extended past the dry "
+        f"lash: model.hla_extension {t.hla_extension * 1e3:.4g} mm on model.lash "
+        f"{t.lash * 1e3:.4g} mm leaves an effective lash of {effective * 1e3:.4g} mm, below the "
+        f"{held * 1e3:.3g} mm at which the valve is held off its seat on the base circle: it "
+        "starts open and stays so until the plunger leaks down (docs/model.md, Hydraulic lash "
+        "adjuster); give the extension the lash takes"
     )
 
 
@@ -406,6 +442,7 @@ def case_notes(cases: Sequence[ResolvedCase], record: Sequence[str]) -> list[tup
     order ``campipe validate`` prints them."""
     found = (
         ("lash adjuster", per_turn_note(cases)),
+        ("lash adjuster", extension_note(cases)),
         ("lash", ramp_note(cases)),
         ("spring", spring_note(cases)),
         ("mass", mass_note(cases)),
