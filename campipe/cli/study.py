@@ -483,9 +483,21 @@ def query(archive, where, columns, sort, fmt, summary, units, verify) -> None:
             return
         table = case_table(ds)
         shown = display_units(table.units, ds.attrs, units)
-    names = [c.strip() for c in columns.split(",") if c.strip()] if columns else table.default
+    names = table.default if columns is None else _column_names(columns)
     rows = select(table, where, sort)
     click.echo(format_rows(displayed(table, shown), rows, names, fmt))
+
+
+def _column_names(columns: str) -> list[str]:
+    """``--columns``' names, each once in the order given; none is refused."""
+    names = list(dict.fromkeys(c.strip() for c in columns.split(",") if c.strip()))
+    if not names:
+        raise click.BadParameter(
+            f"found no column in {columns!r}; name them separated by commas, e.g. "
+            "speed_rpm,max_cam_force, or leave --columns out for the defaults",
+            param_hint="--columns",
+        )
+    return names
 
 
 def _open_archive(path, verify: bool = True, unread_dims: tuple[str, ...] = ()):

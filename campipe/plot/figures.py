@@ -125,6 +125,7 @@ def select_view(ds, request: PlotRequest) -> View:
         table.default,
         rows.size,
         table.study,
+        table.flags,
     )
     shown = displayed(picked, units)
     return View(ds, picked, shown, units, table.study or "study", rows)

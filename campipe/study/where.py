@@ -436,6 +436,7 @@ def evaluate(
     columns: Mapping[str, np.ndarray],
     n: int,
     units: Mapping[str, str] | None = None,
+    flags: Mapping[str, Mapping[str, int]] | None = None,
 ) -> np.ndarray:
     """(n,) bool: the rows where the expression holds.
 
@@ -447,28 +448,57 @@ def evaluate(
         Column name → its stored units (pint spelling, "" for none): quantities convert to
         them and bare numbers are checked against them (see the module). Without it every
         column is taken as unitless and a quantity is refused.
+    flags : mapping, optional
+        Column name → its CF flags (meaning → value, ``status``'s ``ok`` → 0): the column
+        compares with a flag's meaning as a quoted string as with its value.
     """
     check_names(where, list(columns))
-    out = _Evaluation(columns, dict(units or {}), where.quantities).eval(where.tree.body)
+    evaluation = _Evaluation(columns, dict(units or {}), where.quantities, dict(flags or {}))
+    out = evaluation.eval(where.tree.body)
     return np.broadcast_to(np.asarray(out, dtype=bool), (n,)).copy()
 
 
 @dataclass
 class _Column:
-    """A column's values with its name and stored units."""
+    """A column's values with its name, stored units and CF flags (meaning → value)."""
 
     name: str
     values: np.ndarray
     units: str
+    flags: Mapping[str, int] | None = None
+
+
+def _flag_values(a, b):
+    """(a, b) with a quoted flag meaning compared with a flagged column (``status == "ok"``,
+    ``status in ["ok", "step_limit"]``) read as its value; an unknown meaning is refused,
+    naming the flags."""
+    for column, other, first in ((a, b, True), (b, a, False)):
+        if not (isinstance(column, _Column) and column.flags):
+            continue
+        texts = other if isinstance(other, list) else [other]
+        if not any(isinstance(t, str) for t in texts):
+            continue
+        meanings = ", ".join(f"{k} ({v})" for k, v in column.flags.items())
+        values = []
+        for t in texts:
+            if isinstance(t, str) and t not in column.flags:
+                raise QueryError.at(
+                    "--where", f"{column.name} is one of {meanings}: found {excerpt(t)}"
+                )
+            values.append(column.flags[t] if isinstance(t, str) else t)
+        mapped = values if isinstance(other, list) else values[0]
+        return (column, mapped) if first else (mapped, column)
+    return a, b
 
 
 class _Evaluation:
     """One expression evaluated over columns."""
 
-    def __init__(self, cols, units, quantities) -> None:
+    def __init__(self, cols, units, quantities, flags) -> None:
         self.cols = cols
         self.units = units
         self.quantities = quantities
+        self.flags = flags
 
     def eval(self, node: ast.AST):
         if isinstance(node, ast.BoolOp):
@@ -489,7 +519,8 @@ class _Evaluation:
             left = self.eval(node.left)
             for op, right_node in zip(node.ops, node.comparators, strict=True):
                 right = self.eval(right_node)
-                one = _compare(_COMPARE[type(op)], left, right, node.left, right_node)
+                a, b = _flag_values(left, right)
+                one = _compare(_COMPARE[type(op)], a, b, node.left, right_node)
                 result = one if result is None else result & one
                 left = right
             return result
@@ -504,7 +535,7 @@ class _Evaluation:
                     "--where",
                     f"{node.id} holds {col.shape[1]} values per case and cannot be compared",
                 )
-            return _Column(node.id, col, self.units.get(node.id, ""))
+            return _Column(node.id, col, self.units.get(node.id, ""), self.flags.get(node.id))
         if isinstance(node, ast.Constant):
             return node.value
         if isinstance(node, ast.List | ast.Tuple):

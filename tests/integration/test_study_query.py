@@ -297,6 +297,33 @@ def test_campipe_query_on_an_archive(archive):
     assert out.exit_code == 0 and out.output.strip().endswith("(8 of 8 cases)")
 
 
+def test_status_by_its_flag_and_columns_and_sort_as_written(archive):
+    """``status`` (CF flags, 0 ok) compares with its flags' meanings as the docs name them
+    (``status == 'ok'``, ``in``), an unknown one refused naming the flags; ``--columns``
+    names a column once however often written, and none is refused, as is ``--sort`` with no
+    column or ``--x`` (two signs). Broken copies: 'ok' refused as text against a number;
+    the empty --columns taken as the defaults; "--speed_rpm" read as descending."""
+    runner = CliRunner()
+
+    def query(*args):
+        return runner.invoke(main, ["query", str(archive), *args])
+
+    for where in ("status == 'ok'", 'status in ["ok", "step_limit"]', "status == 0"):
+        out = query("--where", where)
+        assert out.exit_code == 0 and out.output.strip().endswith("(8 of 8 cases)"), where
+    out = query("--where", "status != 'ok'")
+    assert out.exit_code == 0 and out.output.strip().endswith("(0 of 8 cases)")
+    out = query("--where", "status == 'okk'")
+    assert out.exit_code == 2 and "status is one of ok (0), nonfinite (1)" in out.output
+    out = query("--columns", "speed_rpm,speed_rpm", "--format", "csv")
+    assert out.exit_code == 0 and out.output.splitlines()[0] == "speed_rpm [rpm]"
+    out = query("--columns", " , ")
+    assert out.exit_code == 2 and "found no column" in out.output
+    for sort, words in (("", "found no column"), ("--speed_rpm", "did you mean 'speed_rpm'")):
+        out = query("--sort", sort)
+        assert out.exit_code == 2 and words in out.output, sort
+
+
 def test_where_is_vectorised_over_the_whole_column():
     cols = {"x": np.arange(10_000.0)}
     mask = evaluate(parse_where("x >= 9990 or x < 2"), cols, 10_000)

@@ -11,7 +11,7 @@ import io
 import json
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -52,6 +52,8 @@ class CaseTable:
     default: list[str]  # columns printed when --columns is not given
     n: int  # cases
     study: str = ""  # the study's name
+    #: name → its CF flags, meaning → value (``status``: ok 0, …), for ``--where``
+    flags: dict[str, dict[str, int]] = field(default_factory=dict)
 
 
 #: An impact's metric → the count of those impacts: a case without one has no impact
@@ -68,6 +70,7 @@ def case_table(ds) -> CaseTable:
     :data:`OF_IMPACTS`): a valve that never seats has no seating velocity, not a soft one."""
     columns: dict[str, np.ndarray] = {}
     units: dict[str, str] = {}
+    flags: dict[str, dict[str, int]] = {}
     coords = [k for k, v in ds.coords.items() if v.dims[:1] == ("case",) and v.ndim <= 2]
     data = [k for k, v in ds.data_vars.items() if v.dims == ("case",)]
     for name in coords + data:
@@ -77,6 +80,10 @@ def case_table(ds) -> CaseTable:
             values = values.astype(object)
         columns[name] = values
         units[name] = str(v.attrs.get("units", ""))
+        if "flag_meanings" in v.attrs and "flag_values" in v.attrs:
+            meanings = str(v.attrs["flag_meanings"]).split()
+            values_ = np.atleast_1d(v.attrs["flag_values"]).tolist()
+            flags[name] = dict(zip(meanings, (int(x) for x in values_), strict=False))
     for name, count in OF_IMPACTS.items():
         if name in columns and count in columns:
             columns[name] = np.where(columns[count] == 0, -np.inf, columns[name])
@@ -88,7 +95,7 @@ def case_table(ds) -> CaseTable:
         or (VARIABLES[k].role == "uncertainty" and k.removesuffix(UNCERTAINTY) in data)
     ]
     name = str(ds.attrs.get("study_name", ""))
-    return CaseTable(columns, units, coords + metrics, ds.sizes.get("case", 0), name)
+    return CaseTable(columns, units, coords + metrics, ds.sizes.get("case", 0), name, flags)
 
 
 def displayed(table: CaseTable, shown: dict[str, str]) -> CaseTable:
@@ -103,7 +110,7 @@ def displayed(table: CaseTable, shown: dict[str, str]) -> CaseTable:
         for k, v in table.columns.items()
     }
     units = {k: shown.get(k, u) for k, u in table.units.items()}
-    return CaseTable(columns, units, table.default, table.n, table.study)
+    return CaseTable(columns, units, table.default, table.n, table.study, table.flags)
 
 
 #: Significant digits a converted value keeps: a double holds 15 to 17, and the last one or
@@ -133,11 +140,16 @@ def select(table: CaseTable, where: str | None = None, sort: str | None = None) 
     ``--where`` quantity is converted to each column's stored units."""
     rows = np.arange(table.n)
     if where is not None:
-        rows = rows[evaluate(parse_where(where), table.columns, table.n, table.units)]
-    if sort:
-        for key in reversed([k.strip() for k in sort.split(",") if k.strip()]):
+        rows = rows[evaluate(parse_where(where), table.columns, table.n, table.units, table.flags)]
+    if sort is not None:
+        keys = [k.strip() for k in sort.split(",") if k.strip()]
+        if not keys:
+            raise QueryError.at(
+                "--sort", f"found no column in {sort!r}; e.g. -max_cam_force (descending)"
+            )
+        for key in reversed(keys):
             descending = key.startswith("-")
-            name = key.lstrip("-+")
+            name = key[1:] if key[0] in "+-" else key  # one sign: "--x" names no column
             if name not in table.columns:
                 raise QueryError.at(
                     "--sort", f"unknown column {excerpt(name)}{did_you_mean(name, table.columns)}"
@@ -367,6 +379,7 @@ def subset(table: CaseTable, rows: np.ndarray) -> CaseTable:
         table.default,
         rows.size,
         table.study,
+        table.flags,
     )
 
 
