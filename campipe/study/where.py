@@ -537,6 +537,10 @@ class _Evaluation:
                 )
             return _Column(node.id, col, self.units.get(node.id, ""), self.flags.get(node.id))
         if isinstance(node, ast.Constant):
+            if isinstance(node.value, float) and not math.isfinite(node.value):
+                raise QueryError.at(
+                    "--where", "found a number beyond a double's range (about 1.8e308)"
+                )
             return node.value
         if isinstance(node, ast.List | ast.Tuple):
             return [self.eval(e) for e in node.elts]
@@ -593,14 +597,16 @@ def _name(node: ast.AST, value: object = None) -> str:
 
 
 def _no_value(v) -> np.ndarray:
-    """Where ``v`` has no value: none itself, no seat (-inf), NaN; text and a quantity
-    always have one."""
+    """Where ``v`` has no value: none itself, no seat (-inf), NaN, a text column's "none"
+    (``defects``' none, as the table shows it); a quantity and other text always have one."""
     if v is NONE:
         return np.ones((), dtype=bool)
     if isinstance(v, Quantity):
         return np.zeros((), dtype=bool)
     if _is_text(v):
-        return np.zeros(np.shape(v.values if isinstance(v, _Column) else v), dtype=bool)
+        if isinstance(v, _Column):
+            return np.asarray(_plain(v.values) == "none", dtype=bool)
+        return np.zeros(np.shape(v), dtype=bool)
     a = np.asarray(v.values if isinstance(v, _Column) else v, dtype=float)
     return np.isnan(a) | np.isneginf(a)
 

@@ -156,6 +156,7 @@ def test_malicious_where_is_refused_and_nothing_runs(tmp_path, where):
         ("1 in == 2 in", "compare 1 in with a column"),
         ("closure == 1 in", "closure is text and 1 in is not"),
         ("speed_rpm > 1e400 rpm", "beyond the range of a float"),
+        ("speed_rpm > 1e400", "a number beyond a double's range"),  # (it read as inf)
         # a '#' would drop the rest unread (a helper's 'speed_rpm > 9000 # and seat == 0.1
         # in' selected the seatless cases too)
         ("speed_rpm > 9000 # and seat == 0.1 in", "found '#'"),
@@ -301,8 +302,9 @@ def test_status_by_its_flag_and_columns_and_sort_as_written(archive):
     """``status`` (CF flags, 0 ok) compares with its flags' meanings as the docs name them
     (``status == 'ok'``, ``in``), an unknown one refused naming the flags; ``--columns``
     names a column once however often written, and none is refused, as is ``--sort`` with no
-    column or ``--x`` (two signs). Broken copies: 'ok' refused as text against a number;
-    the empty --columns taken as the defaults; "--speed_rpm" read as descending."""
+    column or ``--x`` (two signs); ``defects is none`` holds where the table shows none.
+    Broken copies: 'ok' refused as text against a number; the empty --columns taken as the
+    defaults; "--speed_rpm" read as descending; text never none."""
     runner = CliRunner()
 
     def query(*args):
@@ -313,6 +315,8 @@ def test_status_by_its_flag_and_columns_and_sort_as_written(archive):
         assert out.exit_code == 0 and out.output.strip().endswith("(8 of 8 cases)"), where
     out = query("--where", "status != 'ok'")
     assert out.exit_code == 0 and out.output.strip().endswith("(0 of 8 cases)")
+    out = query("--where", "defects is none")  # the table's none, stored as text
+    assert out.exit_code == 0 and out.output.strip().endswith("(8 of 8 cases)")
     out = query("--where", "status == 'okk'")
     assert out.exit_code == 2 and "status is one of ok (0), nonfinite (1)" in out.output
     out = query("--columns", "speed_rpm,speed_rpm", "--format", "csv")
