@@ -37,6 +37,7 @@ from tests.unit.test_finger_hla import (
     RATE,
     RPM,
     Hand,
+    assert_turn_ratios,
     check_valve_turn,
     finger,
     pallet_force,
@@ -253,23 +254,11 @@ def test_a_carried_plunger_gives_the_roller_its_turn_s_ratio():
     sample of a turn's history exceeds the turn's max_cam_force (the compliant integrator's
     own maximum of the roller's force). Broken copy: the ratio of the pivot at rest (the
     bundled compliant finger's histories read 0.67 N above their turn's maximum)."""
-    from campipe.engine.levers import at_the_cam
-    from campipe.engine.metrics import MAX_CAM_FORCE
     from campipe.engine.plunger import EXTENSION
 
     case = Case(finger(hla_extension="0.3 mm", **COMPLIANT), harmonic(LIFT), 1000 * RPM)
     valve_side = run_batch([case], RunSettings(revolutions=2, tolerance=1e-7))
     assert valve_side.status[0] == 0
-    roller = at_the_cam(valve_side, [case])
     extension = valve_side.lash_adjuster[0, :, EXTENSION]
     assert extension[0] == pytest.approx(3e-4) and extension[1] < extension[0] - 1e-6
-    theta = np.asarray(valve_side.cam_angle)
-    hand = Hand()
-    for k in range(2):
-        turn = (theta >= 2 * math.pi * k) & (theta <= 2 * math.pi * (k + 1))
-        for degrees in (200, 270):  # on the cam's flank and nose
-            j = 360 * k + degrees
-            ratio = roller.cam_force[0, j] / valve_side.cam_force[0, j]
-            expected = hand.roller_force(theta[j] % (2 * math.pi), 1.0, extension[k])[0]
-            assert ratio == pytest.approx(expected, rel=1e-9)
-        assert roller.cam_force[0, turn].max() <= roller.per_rev[0, k, MAX_CAM_FORCE]
+    assert_turn_ratios(valve_side, case, extension)

@@ -352,19 +352,27 @@ def test_a_pivot_moved_turn_by_turn_gives_the_roller_its_turn_s_ratio():
     of a turn's history exceeds the turn's max_cam_force (the engine's own maximum of the
     roller's force). Broken copy: the ratio of the pivot at rest (0.06 % off here; a
     helper's finger study read histories 0.38 N above their turn's maximum)."""
-    from campipe.engine.levers import at_the_cam
     from campipe.engine.plunger import EXTENSION
 
     case = Case(finger(hla_extension="0.3 mm"), harmonic(LIFT), 1000 * RPM)
     valve_side = run_batch([case], RunSettings(revolutions=3))
-    roller = at_the_cam(valve_side, [case])
     extension = valve_side.lash_adjuster[0, :, EXTENSION]
     assert extension[0] == pytest.approx(3e-4) and np.all(np.diff(extension) < -1e-6)
+    assert_turn_ratios(valve_side, case, extension)
+
+
+def assert_turn_ratios(valve_side, case, extension) -> None:
+    """Each turn k's roller force over the pallet's at samples on the cam's flank and nose
+    (200° and 270°) is the hand's ratio with the pivot raised by ``extension[k]``, to 1e-9,
+    and no sample of the turn's roller force exceeds its max_cam_force."""
+    from campipe.engine.levers import at_the_cam
+
+    roller = at_the_cam(valve_side, [case])
     theta = np.asarray(valve_side.cam_angle)
     hand = Hand()
-    for k in range(3):
+    for k in range(len(extension)):
         turn = (theta >= 2 * math.pi * k) & (theta <= 2 * math.pi * (k + 1))
-        for degrees in (200, 270):  # on the cam's flank and nose
+        for degrees in (200, 270):
             j = 360 * k + degrees
             assert valve_side.contact_state[0, j] == 1
             ratio = roller.cam_force[0, j] / valve_side.cam_force[0, j]
