@@ -377,8 +377,10 @@ def _prepare_one(case: Case, settings: RunSettings, full_state: bool) -> Prepare
             speed,
             stack.valve_ref[0] + seat,  # seat_q
             float(settings.capture_velocity),
-            LIFT_BOUND * max(lift_peak, speed * rate_peak * float(stack.flight[0])) * ratio
-            + abs(seat),
+            LIFT_BOUND
+            * max(lift_peak, speed * rate_peak * float(stack.flight[0]))
+            * max(ratio, 1.0)
+            + abs(seat),  # (``_bounds``' for one case)
             SPEED_BOUND * speed * rate_peak * max(ratio, 1.0),
             settings.output_every / speed,  # t_sample
             settings.recorded_revolutions * TWO_PI / speed,  # t_end
@@ -599,10 +601,13 @@ def _bounds(profiles: Sequence[Keyed], ratio, omega, seat, flight) -> tuple[np.n
     profile's peaks, its train's |valve ratio|, its seat (0 where it has none) and its
     ``TrainStack.flight``: ``LIFT_BOUND`` times the larger of the full lift and the height a
     valve thrown at the cam's fastest valve speed rises against its spring, v·√(m/k) (an
-    energy bound of one mass: a train far past its onset is thrown beyond its lift)."""
+    energy bound of one mass: a train far past its onset is thrown beyond its lift), at a
+    valve ratio of at least 1: the static ratio counts the links' give, which a valve on a
+    link as soft as its spring (a third for a helper's chain) overcomes near its resonance
+    while it follows the cam (8.4 mm of valve lift under an 8 mm cam read as unbounded)."""
     peaks = np.array([_peaks(p) for p in profiles]).reshape(len(profiles), 2)
     thrown = np.maximum(peaks[:, 0], omega * peaks[:, 1] * flight)
-    lift = LIFT_BOUND * thrown * ratio + np.abs(seat)
+    lift = LIFT_BOUND * thrown * np.maximum(ratio, 1.0) + np.abs(seat)
     speed = SPEED_BOUND * omega * peaks[:, 1] * np.maximum(ratio, 1.0)
     return lift, speed
 

@@ -67,6 +67,36 @@ def test_the_lift_bound_is_three_full_lifts_until_the_throw_outgrows_them():
         assert bound.cases.lift_bound[0] == pytest.approx(3.0 * omega * rate * flight * ratio)
 
 
+def test_a_valve_on_a_soft_link_near_its_resonance_is_not_out_of_bounds():
+    """A chain whose valve (60 g) hangs on a link as soft as half its spring (20 against
+    40 N/mm: a static valve ratio of a third) follows an 8 mm harmonic cam at 8939 rpm,
+    below its onset (8984 rpm), near the valve's resonance: its valve lifts 10.24 mm, beyond
+    three static lifts (8 mm). It runs (status ok) and its largest valve lift is the steady
+    closed form's (configuration I's periodic state, a second method) to 1e-9 m, alone and
+    in a batch. Broken copies: the bound at the static ratio in a batch's or in one case's
+    preparation (status unbounded, a helper's finding)."""
+    from campipe.engine import run_at_fidelity
+    from campipe.vocabulary import OK
+
+    train = valve_train(
+        "thesis-1971",
+        {"layout": "lumped", "masses": ["1 g", "1 g", "1 g", "60 g"],
+         "stiffnesses": ["1000000 N/mm", "1000000 N/mm", "20 N/mm"], "spring_rate": "40 N/mm",
+         "spring_preload": "250 N", "damping_ratios": [0.05]},
+    )  # fmt: skip
+    case = Case(train, harmonic(8e-3), 8939.3 * math.pi / 30)
+    stack = batch_module.train_stack((train,), 0.0)
+    assert float(stack.ratio[0]) == pytest.approx(1 / 3, rel=1e-3)
+    full = run_batch([case], RunSettings(revolutions=3), on_failure="record")
+    steady = run_at_fidelity([case], RunSettings(revolutions=3, fidelity="steady"))
+    assert full.status[0] == OK and np.all(steady.steps == 0)
+    pair = run_batch([case, case], RunSettings(revolutions=3), on_failure="record")
+    assert pair.status.tolist() == [OK, OK]  # (a batch's bounds, and one case's)
+    assert full.separation_per_rev[0].max() == 0.0
+    lift = full.valve_lift[0].max()
+    assert lift > 3 * 8e-3 / 3 and lift == pytest.approx(steady.valve_lift[0].max(), abs=1e-9)
+
+
 def test_the_thesis_train_thrown_past_three_lifts_runs_and_agrees_with_newmark():
     """The thesis's train on a 0.4 in polydyne at 2000 rad/s (19100 rpm): its valve is thrown
     to 3.1 times its full lift, which the fixed bound stopped as a defect; it now runs, and
