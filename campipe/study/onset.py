@@ -69,11 +69,17 @@ class OnsetStudy:
     @property
     def disagreements(self) -> np.ndarray:
         """Rows whose time-domain check does not bracket the onset (``engine_onset.confirmed``):
-        below it the engine reaches the level, or above it does not."""
-        checked = np.isfinite(self.below)
-        return np.flatnonzero(
-            checked & ~engine_onset.confirmed(self.below, self.above, self.levels)
-        )
+        below it the engine reaches the level, or above it does not, or a run of the check
+        failed (:attr:`failed_checks`)."""
+        found = np.isfinite(self.onset.speed)
+        return np.flatnonzero(found & ~engine_onset.confirmed(self.below, self.above, self.levels))
+
+    @property
+    def failed_checks(self) -> np.ndarray:
+        """Rows with an onset whose check could not tell: a run either side failed (its
+        status not ok: unbounded, a step limit, …), its no-follow NaN."""
+        found = np.isfinite(self.onset.speed)
+        return np.flatnonzero(found & ~(np.isfinite(self.below) & np.isfinite(self.above)))
 
 
 def _frozen(value: object) -> object:
@@ -208,7 +214,8 @@ def _table(study, keys, firsts, onset, below, above, where) -> CaseTable:
     for key in keys:
         name, var, _ = coords[key]
         units[name] = var.units if var.units and var.units != "1" else ""
-    checked = np.isfinite(below)
+    checked = np.isfinite(onset.speed)
+    failed = checked & ~(np.isfinite(below) & np.isfinite(above))
     agrees = engine_onset.confirmed(below, above, onset.level if onset.level is not None else 0.0)
     columns["onset_speed_rpm"] = onset.speed / RPM
     units["onset_speed_rpm"] = "rpm"
@@ -216,7 +223,8 @@ def _table(study, keys, firsts, onset, below, above, where) -> CaseTable:
     units["onset_status"] = ""
     columns["leaves_cam_at_deg"] = np.degrees(where)
     units["leaves_cam_at_deg"] = "deg"
-    columns["confirmed"] = np.where(checked, np.where(agrees, "yes", "NO"), "-").astype(object)
+    confirmed = np.where(failed, "failed", np.where(agrees, "yes", "NO"))
+    columns["confirmed"] = np.where(checked, confirmed, "-").astype(object)
     units["confirmed"] = ""
     return CaseTable(columns, units, list(columns), len(firsts), study.name)
 
@@ -357,7 +365,15 @@ def summary_lines(result: OnsetStudy) -> list[str]:
             f"with a seat the onset is where no-follow reaches {levels.max():g}° a turn "
             "(--level); without one, the first separation"
         )
-    bad = result.disagreements
+    failed = result.failed_checks
+    if failed.size:
+        lines.append(
+            f"the time-domain check failed on {failed.size} combination"
+            f"{'s' if failed.size != 1 else ''} (rows {', '.join(map(str, failed[:10].tolist()))}):"
+            " a run either side of the onset did not finish (unbounded, a step limit, …), so "
+            "nothing confirms it; run those speeds with campipe study to see its status"
+        )
+    bad = np.setdiff1d(result.disagreements, failed)
     if bad.size:
         lines.append(
             f"the time-domain check disagrees on {bad.size} combination"

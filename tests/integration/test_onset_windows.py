@@ -148,6 +148,24 @@ def test_a_confirmation_that_fails(tmp_path, monkeypatch):
         assert ds.check_above_rpm.values[0] == pytest.approx(float(row[0]) * 1.005, rel=1e-9)
 
 
+def test_a_confirmation_whose_runs_fail_says_so(tmp_path, monkeypatch):
+    """Where the check's runs fail (here every run leaves a lift bound made tiny, status
+    unbounded: a helper's soft-linked chain did so at its true bound), nothing confirms the
+    onset: the table and the file say failed, the command names the row and exits 1. Broken
+    copy: the check taken as not run (-, exit 0)."""
+    import campipe.engine.batch as batch_module
+
+    monkeypatch.setattr(batch_module, "LIFT_BOUND", 1e-6)
+    path = write_spec(tmp_path, SPEC)
+    out = CliRunner().invoke(main, ["onset", str(path), "--format", "csv"])
+    assert out.exit_code == 1
+    row = out.stdout.splitlines()[1].split(",")
+    assert float(row[0]) == pytest.approx(9383, abs=1.0) and row[-1] == "failed"
+    assert "the time-domain check failed on 1 combination (rows 0)" in out.stderr
+    with xr.open_dataset(tmp_path / "onsets-onset.nc") as ds:
+        assert ds.confirmed.values.tolist() == ["failed"]
+
+
 NARROW = """
 name: narrow
 model: {layout: lumped, masses: [0.04 kg, 0.06 kg], stiffnesses: [2000 N/mm],
