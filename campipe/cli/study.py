@@ -212,16 +212,33 @@ def study(
     click.echo(str(report.archive))
 
 
+#: What to do about a failed case's status, after ``campipe study`` names the cases.
+STATUS_ADVICE = {
+    "step_limit": "the run stopped at run.max_steps (a stiff contact with little damping "
+    "takes steps without end): raise it (--max-steps) or damp the contact",
+    "unbounded": "the motion left its physical bounds (docs/engine.md): a spring far too weak "
+    "for the speed, or a defect to report with the case",
+    "chatter": "contact events kept recurring at one instant: run it with "
+    "run.integrator: newmark-linear",
+    "nonfinite": "the run became non-finite: a defect to report with the case",
+}
+
+
 def _report_statuses(report) -> None:
     """Name the cases that failed or kept only part of their events, by case id."""
     failed = report.failures()
     if failed:
         shown = ", ".join(f"{cid} ({status})" for cid, status in list(failed.items())[:10])
         more = f" and {len(failed) - 10} more" if len(failed) > 10 else ""
+        advice = "".join(
+            f"; {status}: {STATUS_ADVICE[status]}"
+            for status in dict.fromkeys(failed.values())
+            if status in STATUS_ADVICE
+        )
         click.echo(
             f"campipe study: {len(failed)} case{'s' if len(failed) != 1 else ''} failed: "
             f"{shown}{more}; their histories and metrics are NaN (status in the archive; "
-            "campipe query ARCHIVE --summary lists them)",
+            f"campipe query ARCHIVE --summary lists them){advice}",
             err=True,
         )
     truncated = report.truncated()

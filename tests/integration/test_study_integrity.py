@@ -236,6 +236,9 @@ def test_a_failing_case_is_recorded_by_case_id_and_the_others_finish(tmp_path, m
     assert np.isfinite(ds.valve_lift.values[ds.status.values == OK]).all()
     assert np.isnan(ds.separation_deg_per_rev.values[ds.status.values == CHATTER]).all()
     assert f"2 cases failed: {failed[0]} (chatter), {failed[1]} (chatter)" in result.stderr
+    # what to do about it, once per status (a helper's step_limit said nothing)
+    assert result.stderr.count("chatter: contact events kept recurring at one instant") == 1
+    assert "run.integrator: newmark-linear" in result.stderr
     assert ds.status.attrs["flag_meanings"] == dict(STATUS_FLAGS)["flag_meanings"]
     summary = CliRunner().invoke(main, ["query", str(tmp_path / "small.nc"), "--summary"])
     assert f"failed: {failed[0]} (chatter), {failed[1]} (chatter)" in summary.output
