@@ -582,7 +582,8 @@ def test_the_onset_s_level_is_the_no_follow_a_designer_allows(tmp_path):
     with the default level (0.5° a turn) the answer is a lighter spring that leaves the cam
     at 4000 rpm, under 0.5° a turn. Broken copy: the level read and not passed to the onset
     (both answers the default's). A fresh pair of eyes found a "feasible" design lifting off
-    0.5° a turn at its target, with no way to ask for none."""
+    0.5° a turn at its target, with no way to ask for none; the answer says which level it
+    met (broken copy: no such line)."""
     preloads = {}
     for name, level in (("strict", ", level: 0 deg"), ("default", "")):
         path = write_spec(tmp_path, BUCKET_DESIGN.format(name=name, level=level), f"{name}.yaml")
@@ -594,6 +595,10 @@ def test_the_onset_s_level_is_the_no_follow_a_designer_allows(tmp_path):
         preloads[name] = first["spring_preload"]
         # a seat: the onsets' searches are the chords' estimate, and the command says so
         assert "designs' onsets searched past speeds on the chords' estimate, not proven" in text
+        # and it says which no-follow the onset is (a spring engineer read the default's
+        # 0.5° a turn nowhere in the answer)
+        shown = "0° a turn" if level else "0.5° a turn, the default"
+        assert f"the onset is where no-follow reaches {shown} (with a seat)" in text
     assert preloads["default"] < preloads["strict"] - 0.2
     no_follow = {}
     for name, preload in (("strict", preloads["strict"]), ("less", preloads["strict"] - 0.1),

@@ -18,7 +18,7 @@ from campipe.io.archive import VariableSpec
 from campipe.study.design.evaluate import bounds_of
 from campipe.study.design.search import DesignResult
 from campipe.study.query.tables import CaseTable
-from campipe.study.spec.design import ONSET, written_value
+from campipe.study.spec.design import DEFAULT_ONSET_LEVEL_DEG, ONSET, written_value
 from campipe.study.spec.fields import varied_fields
 
 #: The ``campipe_file`` attribute of a design's file.
@@ -175,6 +175,24 @@ def answer_binding(result: DesignResult) -> str:
     return " and ".join(edges) or result.best.binding
 
 
+def onset_level_text(result: DesignResult) -> str | None:
+    """What the onset requirement reads where the train has a seat: the speed where no-follow
+    reaches its level a turn (the default 0.5°, or ``level``), not its first flight; None
+    where there is no onset requirement or no seat."""
+    onset = next((r for r in result.design.require if r.key == ONSET), None)
+    if onset is None or not any(c.case.has_seat for c in result.study.cases):
+        return None
+    if math.isnan(onset.level):
+        shown = f"{DEFAULT_ONSET_LEVEL_DEG:g}° a turn, the default"
+    else:
+        shown = f"{math.degrees(onset.level):g}° a turn"
+    return (
+        f"the onset is where no-follow reaches {shown} (with a seat): the chosen design may "
+        "leave the cam by up to that much at it; level: 0 deg requires the first flight the "
+        "engine keeps"
+    )
+
+
 def summary_lines(result: DesignResult) -> list[str]:
     """What the command says after the table: the answer or its absence, what binds, the
     cost."""
@@ -209,6 +227,8 @@ def summary_lines(result: DesignResult) -> list[str]:
             f"{result.study.name}: infeasible: no design within design.vary's bounds meets "
             f"the requirements; the closest, {values}, fails {fails}"
         )
+    if level := onset_level_text(result):
+        lines.append(level)
     estimated = sum(not e.onset_proven for e in result.evaluations)
     if estimated:
         lines.append(
