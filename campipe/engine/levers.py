@@ -106,7 +106,7 @@ def at_the_cam(
         else:
             turn = sample_turns(theta, first)
             ratio = turns(theta, turn)
-            if radius is not None and np.isfinite(radius[i]).any():  # where the roller touches
+            if radius is not None and np.isfinite(radius[i]).any():  # (result's own array)
                 radius[i] = turns.over(partial(_radius, cases[i].train), theta, turn)
         force[i] = result.cam_force[i] * ratio
         followed = result.per_rev[i, :, MAX_ROLLER_FORCE]

@@ -81,9 +81,7 @@ def case_table(ds) -> CaseTable:
         columns[name] = values
         units[name] = str(v.attrs.get("units", ""))
         if "flag_meanings" in v.attrs and "flag_values" in v.attrs:
-            meanings = str(v.attrs["flag_meanings"]).split()
-            values_ = np.atleast_1d(v.attrs["flag_values"]).tolist()
-            flags[name] = dict(zip(meanings, (int(x) for x in values_), strict=False))
+            flags[name] = _flags(v.attrs["flag_meanings"], v.attrs["flag_values"])
     for name, count in OF_IMPACTS.items():
         if name in columns and count in columns:
             columns[name] = np.where(columns[count] == 0, -np.inf, columns[name])
@@ -96,6 +94,16 @@ def case_table(ds) -> CaseTable:
     ]
     name = str(ds.attrs.get("study_name", ""))
     return CaseTable(columns, units, coords + metrics, ds.sizes.get("case", 0), name, flags)
+
+
+def _flags(meanings, values) -> dict[str, int]:
+    """CF flags as meaning → value; none where the attributes do not read as words and whole
+    numbers (an archive edited by hand)."""
+    try:
+        numbers = [int(x) for x in np.atleast_1d(values).tolist()]
+    except (TypeError, ValueError, OverflowError):
+        return {}
+    return dict(zip(str(meanings).split(), numbers, strict=False))
 
 
 def displayed(table: CaseTable, shown: dict[str, str]) -> CaseTable:
