@@ -603,8 +603,7 @@ def _bounds(profiles: Sequence[Keyed], ratio, omega, seat, flight) -> tuple[np.n
     valve thrown at the cam's fastest valve speed rises against its spring, v·√(m/k) (an
     energy bound of one mass: a train far past its onset is thrown beyond its lift), at a
     valve ratio of at least 1: the static ratio counts the links' give, which a valve on a
-    link as soft as its spring (a third for a helper's chain) overcomes near its resonance
-    while it follows the cam (8.4 mm of valve lift under an 8 mm cam read as unbounded)."""
+    soft link overcomes near its resonance while it follows the cam (a helper's chain)."""
     peaks = np.array([_peaks(p) for p in profiles]).reshape(len(profiles), 2)
     thrown = np.maximum(peaks[:, 0], omega * peaks[:, 1] * flight)
     lift = LIFT_BOUND * thrown * np.maximum(ratio, 1.0) + np.abs(seat)

@@ -71,15 +71,22 @@ class OnsetStudy:
         """Rows whose time-domain check does not bracket the onset (``engine_onset.confirmed``):
         below it the engine reaches the level, or above it does not, or a run of the check
         failed (:attr:`failed_checks`)."""
-        found = np.isfinite(self.onset.speed)
-        return np.flatnonzero(found & ~engine_onset.confirmed(self.below, self.above, self.levels))
+        checked = np.isfinite(self.above_speed)
+        return np.flatnonzero(
+            checked & ~engine_onset.confirmed(self.below, self.above, self.levels)
+        )
 
     @property
     def failed_checks(self) -> np.ndarray:
-        """Rows with an onset whose check could not tell: a run either side failed (its
-        status not ok: unbounded, a step limit, …), its no-follow NaN."""
-        found = np.isfinite(self.onset.speed)
-        return np.flatnonzero(found & ~(np.isfinite(self.below) & np.isfinite(self.above)))
+        """Rows whose check ran and could not tell: a run either side failed (its status not
+        ok: unbounded, a step limit, …), its no-follow NaN."""
+        return np.flatnonzero(_failed(self.above_speed, self.below, self.above))
+
+
+def _failed(above_speed: np.ndarray, below: np.ndarray, above: np.ndarray) -> np.ndarray:
+    """(n,) bool: the check ran (the speed above is set wherever it did) and a run of it
+    failed (its no-follow NaN)."""
+    return np.isfinite(above_speed) & ~(np.isfinite(below) & np.isfinite(above))
 
 
 def _frozen(value: object) -> object:
@@ -198,7 +205,7 @@ def onset_study(
         else (nan, nan, nan, nan)
     )
     t2 = time.perf_counter()
-    table = _table(study, keys, firsts, onset, below, above, where)
+    table = _table(study, keys, firsts, onset, below, above, where, above_speed)
     spec = study.spec
     return OnsetStudy(
         study.name, keys, table, onset, below, above, where, above_speed, low, high, t1 - t0,
@@ -207,15 +214,15 @@ def onset_study(
     )  # fmt: skip
 
 
-def _table(study, keys, firsts, onset, below, above, where) -> CaseTable:
+def _table(study, keys, firsts, onset, below, above, where, above_speed) -> CaseTable:
     coords = case_coordinates(keys)
     columns = key_columns([study.cases[i] for i in firsts], {k: coords[k] for k in keys})
     units: dict[str, str] = {}
     for key in keys:
         name, var, _ = coords[key]
         units[name] = var.units if var.units and var.units != "1" else ""
-    checked = np.isfinite(onset.speed)
-    failed = checked & ~(np.isfinite(below) & np.isfinite(above))
+    checked = np.isfinite(above_speed)
+    failed = _failed(above_speed, below, above)
     agrees = engine_onset.confirmed(below, above, onset.level if onset.level is not None else 0.0)
     columns["onset_speed_rpm"] = onset.speed / RPM
     units["onset_speed_rpm"] = "rpm"

@@ -261,8 +261,8 @@ def test_a_one_case_batch_is_prepared_as_a_row_of_the_vectorised_batch(case):
     """A one-case batch is prepared from scalars (``batch._prepare_one``); a batch of the case
     twice takes the vectorised path. Every per-case array of the one is row 0 of the other's,
     to the bit and of its dtype, C-contiguous and writeable (the kernels' compiled types), and
-    so are the run's times and the stack, profiles and train index. Fails on a speed bound
-    without the ratio's clamp at 1, a seat taken without its absolute value, a sample spacing
+    so are the run's times and the stack, profiles and train index. Fails on a speed or lift
+    bound without the ratio's clamp at 1, a seat taken without its absolute value, a sample spacing
     in turns instead of seconds, the seat and closure flags swapped, or a row that is a
     strided view (another type: a second compile)."""
     settings = RunSettings(revolutions=2.5, output_every=math.radians(0.7), capture_velocity=2e-3)
@@ -290,7 +290,7 @@ def test_a_one_case_batch_is_prepared_as_a_row_of_the_vectorised_batch(case):
     lift, rate = batch_module._peaks(keyed(case.profile))
     seat = case.seat if case.has_seat else 0.0
     thrown = case.speed * rate * batch_module.prepare(case.train, 0.0).flight
-    assert one.cases.lift_bound[0] == LIFT_BOUND * max(lift, thrown) * ratio + abs(seat)
+    assert one.cases.lift_bound[0] == LIFT_BOUND * max(lift, thrown) * max(ratio, 1.0) + abs(seat)
     assert one.cases.speed_bound[0] == SPEED_BOUND * case.speed * rate * max(ratio, 1.0)
     assert one.runs.t_end[0] == 2.5 * 2 * math.pi / case.speed
 
