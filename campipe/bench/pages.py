@@ -111,7 +111,8 @@ def run_block(bench: Bench) -> str:
     m = bench.meta
     return (
         f"The {'`--quick`' if bench.quick else 'full'} run of {m['date']} on {_machine(m)} "
-        f"(Python {m['python']}, numpy {m['numpy']}, scipy {m['scipy']}, numba {m['numba']}): "
+        f"(campipe {m.get('campipe', 'of an unrecorded commit')}, Python {m['python']}, numpy "
+        f"{m['numpy']}, scipy {m['scipy']}, numba {m['numba']}): "
         f"{bench.seconds:.0f} s of wall time, load average "
         f"{format_short(m['load_average_at_start'], 2)} at the start and "
         f"{format_short(m.get('load_average_at_end', math.nan), 2)} at the end."
@@ -161,8 +162,11 @@ def setup_block(bench: Bench) -> str:
 
 
 def _point(r: dict | None) -> str:
-    """A run's time and valve-lift error."""
-    return f"{ms(r['seconds'])} ({_inch(r['valve_lift'])})" if r else "–"
+    """A run's time and valve-lift error ("≤": the reference's resolution bounds it)."""
+    if not r:
+        return "–"
+    bound = "≤" if "valve_lift" in r.get("at_resolution", ()) else ""
+    return f"{ms(r['seconds'])} ({bound}{_inch(r['valve_lift'])})"
 
 
 def _at_default(r: dict | None) -> str:
@@ -432,8 +436,10 @@ def onset_block(bench: Bench) -> str:
             f"- **Its check**: {o['agree']} of {o['checked']} onsets checked by the time-domain "
             "engine either side (0.5 % below: follows; 0.5 % above: leaves the cam) agree.",
             f"- **The time-domain grid it replaces**: {o['grid_speeds']} speeds a design, "
-            f"{o['grid_turns']} turns each ({format_short(o['grid_per_case'] * 1e3)} ms a run): "
-            f"**{format_short(o['grid_seconds'], 2)} s** on {o['workers']} workers for a "
+            f"{o['grid_turns']} turns each ({format_short(o['grid_per_case'] * 1e3)} ms a run, "
+            f"timed on 64 of them in one process): an estimated "
+            f"**{format_short(o['grid_seconds'], 2)} s** on {o['workers']} workers (its runs "
+            f"spread evenly) for a "
             f"resolution of {format_short(o['grid_resolution_rpm'])} rpm; in the map's time it "
             f"affords {speeds} speeds a design ({equal}).",
         ]

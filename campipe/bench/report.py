@@ -103,6 +103,12 @@ def _clean(obj):
     return obj
 
 
+def _bounded(row: dict, name: str, scale: float) -> str:
+    """A row's error, "≤" where the reference's resolution bounds it (``measure.resolved``)."""
+    text = _num(row[name], scale, ".2e")
+    return f"≤{text}" if name in row.get("at_resolution", ()) else text
+
+
 def summary_rows(bench: Bench) -> list[list[str]]:
     """Per scene: the default, the steady fidelity, the default with only the contact
     coordinates sampled, the thesis algorithm at 1 µs and the solve_ivp peer's most accurate
@@ -131,9 +137,9 @@ def summary_rows(bench: Bench) -> list[list[str]]:
                     name,
                     r["setting"],
                     _num(r["seconds"], 1e3),
-                    _num(r["valve_lift"], 1 / INCH, ".2e"),
-                    _num(r["separation_angle"], math.degrees(1.0), ".2e"),
-                    _num(r["seating_velocity"], 1 / INCH, ".2e"),
+                    _bounded(r, "valve_lift", 1 / INCH),
+                    _bounded(r, "separation_angle", math.degrees(1.0)),
+                    _bounded(r, "seating_velocity", 1 / INCH),
                 ]
             )
     return out
@@ -413,20 +419,28 @@ def markdown(bench: Bench, with_plots: bool = True) -> str:
         [c[1] or c[0] for c in COLUMNS],
         [
             [
-                _num(r.get(k), s, ".3g" if k in ("seconds",) else ".2e") if s else _num(r.get(k))
+                (_num(r.get(k), s, ".3g") if k == "seconds" else _bounded(r, k, s))
+                if s
+                else _num(r.get(k))
                 for k, _, s in COLUMNS
             ]
             for r in bench.rows
         ],
     )
+    lines += [
+        "",
+        "≤: an error below the reference's resolution, its difference from the second "
+        "reference (the check above), is reported as that bound.",
+    ]
     return "\n".join(lines) + "\n"
 
 
 def csv_text(bench: Bench) -> str:
-    """The rows, one per scene × setting, in the report's units, as CSV."""
+    """The rows, one per scene × setting, in the report's units, as CSV (the last column: the
+    errors at the reference's resolution, bounds: ``measure.resolved``)."""
     buf = io.StringIO()
     w = csv.writer(buf)
-    w.writerow([c[1] or c[0] for c in COLUMNS])
+    w.writerow([*(c[1] or c[0] for c in COLUMNS), "errors at the reference's resolution"])
     for r in bench.rows:
         w.writerow(
             [
@@ -439,6 +453,7 @@ def csv_text(bench: Bench) -> str:
                 )
                 for k, _, s in COLUMNS
             ]
+            + [" ".join(r.get("at_resolution", ()))]
         )
     return buf.getvalue()
 

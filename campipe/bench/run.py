@@ -16,6 +16,7 @@ import tempfile
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -123,7 +124,31 @@ def machine() -> dict:
         "numba": numba.__version__,
         "date": time.strftime("%Y-%m-%d %H:%M:%S %Z"),
         "load_average_at_start": os.getloadavg()[0],
+        "campipe": campipe_revision(),
     }
+
+
+def campipe_revision() -> str:
+    """campipe's version, and the commit of the tree it runs from where that is a git work
+    tree with git at hand ("+changes" where it differs from the commit): which code the
+    figures measure."""
+    import subprocess
+
+    import campipe
+
+    root = Path(campipe.__file__).resolve().parents[1]
+    try:
+        commit = subprocess.run(
+            ["git", "-C", str(root), "rev-parse", "--short", "HEAD"],
+            capture_output=True, text=True, timeout=10, check=True,
+        ).stdout.strip()  # fmt: skip
+        dirty = subprocess.run(
+            ["git", "-C", str(root), "status", "--porcelain", "--untracked-files=no"],
+            capture_output=True, text=True, timeout=10, check=True,
+        ).stdout.strip()  # fmt: skip
+    except (OSError, subprocess.SubprocessError):
+        return campipe.__version__
+    return f"{campipe.__version__}, commit {commit}{' +changes' if dirty else ''}"
 
 
 def _meta(quick: bool, ladder: Ladder, scenes: Sequence[Scene]) -> dict:
@@ -184,8 +209,12 @@ def settings_rows(ladder: Ladder) -> list[tuple[str, str, RunSettings, bool]]:
 
 
 def _row(
-    scene: Scene, family: str, label: str, seconds: float, cost: int, err: measure.Errors, **extra
-) -> dict:
+    scene: Scene, family: str, label: str, seconds: float, cost: int, err: measure.Errors,
+    check: measure.Errors, **extra,
+) -> dict:  # fmt: skip
+    """A ladder's row, its errors at least the reference's resolution (``check``, its
+    difference from the second reference: ``measure.resolved``; ``at_resolution`` names the
+    errors raised to it, shown as bounds, ≤)."""
     row = {
         "scene": scene.name,
         "family": family,
@@ -194,7 +223,9 @@ def _row(
         "cost": cost,
     }
     row.update(extra)
+    err, raised = measure.resolved(err, check)
     row.update(err.as_dict())
+    row["at_resolution"] = raised
     return row
 
 
@@ -376,7 +407,7 @@ def run_bench(
     Parameters
     ----------
     quick : bool
-        Small ladders, one cam turn per scene, scaling up to 256 cases (under a minute).
+        Small ladders, 1.5 cam turns per scene, scaling up to 256 cases (under a minute).
     scenes : sequence of str, optional
         Scene names to run (default: the whole suite).
     with_scaling : bool
@@ -436,6 +467,7 @@ def run_bench(
                     seconds,
                     steps,
                     measure.errors(out, ref),
+                    check.errors,
                     integrator=settings.method,
                     fidelity=settings.fidelity,
                     full_state=full_state,
@@ -472,6 +504,7 @@ def run_bench(
                     seconds,
                     nfev,
                     measure.errors(out, ref),
+                    check.errors,
                     integrator=f"solve_ivp {ladder.ivp_method}",
                     fidelity="full",
                     default=False,

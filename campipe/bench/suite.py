@@ -1,7 +1,10 @@
 """The bench's fixed suite: six scenes of the thesis model, and the ladders each method climbs.
 
-Every scene is the thesis preset (245 lbf/in, 151 lbf preload) on a 1 in cam, started at θ = 0
-in quasi-static equilibrium, sampled every degree of cam angle.
+Every scene is the thesis preset (245 lbf/in, 151 lbf preload) on a 1 in cam, started on its
+periodic steady state (the engine's default start, ``RunSettings.start``; every method
+compared starts there), sampled every degree of cam angle. A scene that follows the cam
+repeats its first turn: the default integrates it once and copies it to the other
+(docs/engine.md), where the peers integrate both, so about half of its ratio there is that.
 """
 
 from __future__ import annotations

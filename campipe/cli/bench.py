@@ -11,7 +11,7 @@ import click
 @click.option(
     "--quick",
     is_flag=True,
-    help="Small ladders, one cam turn per scene, scaling up to 256 cases (< 1 min).",
+    help="Small ladders, 1.5 cam turns per scene, scaling up to 256 cases (< 1 min).",
 )
 @click.option(
     "-o",

@@ -93,6 +93,29 @@ def test_errors_compare_events_by_kind_and_order(separation_reference):
     assert not measure.agrees(err)
 
 
+def test_an_error_below_the_references_resolution_is_reported_as_that_bound(
+    separation_reference,
+):
+    """An error smaller than the two references' difference is not measured: it is raised to
+    it and named (``at_resolution``), shown ``≤`` in the tables; an error above it, and one
+    that is not defined (NaN), stay as measured. Broken copy: the error as measured (an
+    auditor's bouncing-20000 read 1e-13 in where the references differ by 4e-11 in, and the
+    ratios 2e10-fold)."""
+    ref = separation_reference
+    close = replace(ref, valve_lift=ref.valve_lift + 1e-14)
+    far = replace(ref, valve_lift=ref.valve_lift + 1e-9)
+    check = replace(measure.errors(close, ref), valve_lift=4e-11, separation=1e-8)
+    err, raised = measure.resolved(measure.errors(close, ref), check)
+    assert err.valve_lift == 4e-11 and err.separation == 1e-8
+    assert raised == ["valve_lift", "separation"] and math.isnan(err.seating_velocity)
+    err, raised = measure.resolved(measure.errors(far, ref), check)
+    assert err.valve_lift == pytest.approx(1e-9, rel=1e-6) and "valve_lift" not in raised
+    row = run._row(SEPARATION, "modal-exact", "tol 1e-12 s", 1e-4, 10, measure.errors(close, ref),
+                   check)  # fmt: skip
+    assert row["at_resolution"] == ["valve_lift", "separation"]
+    assert report._bounded(row, "valve_lift", 1 / INCH) == f"≤{4e-11 / INCH:.2e}"
+
+
 def test_time_to_error_interpolates_and_extrapolates_in_log_log():
     # A first-order method: error = 1e-3 / time.
     times = np.array([1.0, 10.0, 100.0])
