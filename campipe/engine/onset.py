@@ -491,16 +491,17 @@ def onset_speeds(
 ADJUSTER_KEY = "model.hla_leak_down"
 
 
-def adjuster_refusal(designs: Sequence[Case]) -> str | None:
-    """Why the onset of ``designs`` is not searched, or None: a hydraulic lash adjuster's
-    plunger moves turn by turn, so a design with one has no one-turn steady state for the
-    search to read (it would read the train with its plunger held where ``hla_extension``
-    puts it, and the time-domain check run another, its plunger pumping up)."""
+def adjuster_refusal(designs: Sequence[Case], noun: str = "design") -> str | None:
+    """Why the onset of ``designs`` (each a ``noun``: campipe onset's combinations, campipe
+    design's designs) is not searched, or None: a hydraulic lash adjuster's plunger moves
+    turn by turn, so a design with one has no one-turn steady state for the search to read
+    (it would read the train with its plunger held where ``hla_extension`` puts it, and the
+    time-domain check run another, its plunger pumping up)."""
     n = sum(adjuster(c.train) is not None for c in designs)
     if not n:
         return None
     return (
-        f"found a hydraulic lash adjuster (model.hla_*) in {n} of {len(designs)} design"
+        f"found a hydraulic lash adjuster (model.hla_*) in {n} of {len(designs)} {noun}"
         f"{'s' if len(designs) != 1 else ''}: the onset is searched on the steady state of a "
         "train that repeats every turn, and an adjuster's plunger moves turn by turn; run the "
         "speeds with campipe study (run.revolutions: auto) and read the onset in campipe "

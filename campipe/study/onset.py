@@ -187,7 +187,7 @@ def onset_study(
         )
     keys, firsts = _combinations(study)
     designs = [study.cases[i].case for i in firsts]
-    refusal = engine_onset.adjuster_refusal(designs)
+    refusal = engine_onset.adjuster_refusal(designs, "combination")
     if refusal:
         raise OnsetError.at(engine_onset.ADJUSTER_KEY, refusal, found="an adjuster")
     compile_first(
