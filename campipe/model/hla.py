@@ -207,8 +207,15 @@ def seated_stiffness(train) -> float:
     a finger's pivot that path at the pallet (the adjuster in it as :func:`hla_series`) seen
     at the pivot, g₀² times it (the pivot's rise e moves the pallet by g₀·e, and its load is
     g₀ times the pallet's)."""
-    flex = 1.0 / hla_series(train) + sum(1.0 / float(k) for k in train.stiffnesses)
+    flex = seated_flexibility(train)
     return pivot_gain(train) ** 2 / flex if on_pivot(train) else 1.0 / flex
+
+
+def seated_flexibility(train) -> float:
+    """The give [m/N] at the valve of the path from ``train``'s adjuster to the seat, the
+    follower on the base circle and the valve seated: the adjuster (:func:`hla_series`) in
+    series with every link down to the valve."""
+    return 1.0 / hla_series(train) + sum(1.0 / float(k) for k in train.stiffnesses)
 
 
 def on_pivot(train) -> bool:

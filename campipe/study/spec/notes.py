@@ -14,6 +14,7 @@ import numpy as np
 
 from campipe.engine import Case
 from campipe.model import valve_train
+from campipe.model.checks import DIRECT_ACTING, LUMPED
 from campipe.model.levers import LEVERS
 from campipe.profiles.levers import cam_of
 from campipe.study.spec.resolve import ResolvedCase, distinct_but_speed, valve_lift_ratio
@@ -53,7 +54,7 @@ def extension_note(cases: Sequence[ResolvedCase]) -> str | None:
     spring force, so the valve starts held off its seat on the base circle until the plunger
     leaks down; most likely an extension written for another lash. The farthest named; None
     where there are none."""
-    from campipe.model.hla import has_adjuster, hla_series, taken_up
+    from campipe.model.hla import has_adjuster, seated_flexibility, taken_up
 
     combinations, speeds = distinct_but_speed(cases)
     worst, n = None, 0
@@ -62,8 +63,7 @@ def extension_note(cases: Sequence[ResolvedCase]) -> str | None:
         if not has_adjuster(t):
             continue
         effective = t.lash - float(taken_up(t, np.array(t.hla_extension)))
-        flex = 1.0 / hla_series(t) + sum(1.0 / float(k) for k in t.stiffnesses)
-        held = -t.spring_preload * flex
+        held = -t.spring_preload * seated_flexibility(t)
         if effective < held:
             n += speeds
             if worst is None or effective < worst[0]:
@@ -246,9 +246,9 @@ def _masses(train) -> list[tuple[str, str, float]]:
     if train.layout in LEVERS:
         what = "the lever's mass reduced to the valve, (J + m_r·a²)/(b·cos α₀)²,"
         return [("lever_inertia", what, train.masses[0]), ("valve_mass", "", train.valve_mass)]
-    if train.layout == "direct-acting":
+    if train.layout == DIRECT_ACTING:
         return [("tappet_mass", "", train.tappet_mass), ("valve_mass", "", train.valve_mass)]
-    if train.layout == "lumped":
+    if train.layout == LUMPED:
         return [(f"masses[{i}]", "", m) for i, m in enumerate(train.masses)]
     return []
 
